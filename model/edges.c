@@ -1,0 +1,2 @@
+// model/edges.c: placeholder while the module is being written.
+#include "model/model.h"

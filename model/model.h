@@ -1,0 +1,478 @@
+// model/model.h — the imaging model of refl (thesis ch. 3-5).
+//
+// Scenes (D3D, OBJ), cameras (mrcal .cameramodel), lamps, materials and their
+// reflection models, ray casting (Embree) into per-pixel pixel_info, the grey
+// value function with interreflection, the sensor stage, image files, and the
+// edge query.
+//
+// Conventions
+// - Lengths in mm, angles in degrees in files and radians inside. Frames are
+//   right-handed. The world frame is the rig frame (origin at the turntable top
+//   centre, z up along the rotation axis) and is mrcal's "ref" frame, so a
+//   camera model's rt_cam_ref is rt_cam_world.
+// - Pixel coordinates are mrcal's: the centre of the top-left pixel is (0,0),
+//   x to the right, y down.
+// - Errors: functions return bool (or NULL) and report "file:line: message"
+//   through model_error(); the message names the input file and line where
+//   there is one. model_last_error() returns the last message of this thread.
+// - Every model_*_free() accepts NULL.
+#pragma once
+
+#include <stdbool.h>
+#include <stddef.h>
+#include <stdint.h>
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+#define REFL_VERSION "0.1.0"
+
+typedef struct { double x, y, z; } model_vec3_t;
+
+// ---------------------------------------------------------------------------
+// Errors and small utilities (model/util.c)
+
+// Report an error. where_file may be NULL (then only the message is shown);
+// where_line <= 0 omits the line. The text goes to stderr unless quiet mode is
+// on, and is kept as this thread's last error either way.
+void model_error(const char *where_file, int where_line, const char *fmt, ...)
+    __attribute__((format(printf, 3, 4)));
+const char *model_last_error(void);
+void model_error_clear(void);
+// Quiet mode (for tests): errors are kept, not printed. Returns the old value.
+bool model_error_quiet(bool quiet);
+
+// Read a whole file into a NUL-terminated buffer (caller frees). *len may be
+// NULL. Reports "path: reason" on failure.
+char *model_read_file(const char *path, size_t *len);
+// Lower-case hex SHA-256 of a buffer / a file's contents.
+void model_sha256_hex(const void *data, size_t len, char out[65]);
+bool model_sha256_file(const char *path, char out[65]);
+// Strict number parsing: the whole string (leading/trailing blanks allowed)
+// must be one finite number.
+bool model_parse_double(const char *s, double *out);
+bool model_parse_int(const char *s, long *out);
+// Number of worker threads to use: REFL_THREADS if set, else the online CPUs.
+int model_default_threads(void);
+// Run fn(ctx, begin, end, thread_index) over [0,n) in chunks of `chunk` on
+// nthreads threads (dynamic scheduling). nthreads <= 1 runs inline.
+void model_parallel_for(int n, int chunk, int nthreads,
+                        void (*fn)(void *ctx, int begin, int end, int thread),
+                        void *ctx);
+// Monotonic wall clock in seconds.
+double model_now_s(void);
+
+// ---------------------------------------------------------------------------
+// INI files (model/ini.c): "[section]" or "[kind NAME]" headers, "key = value"
+// lines, '#' or ';' comments, blank lines. Keys before any section, a
+// duplicate key in one section, or a duplicate section header are errors.
+
+typedef struct {
+    const char *section;   // the text between the brackets, blanks trimmed
+    const char *key;
+    const char *value;     // trimmed; may be empty
+    int         line;      // 1-based line in the file
+} model_ini_entry_t;
+
+typedef struct {
+    char               *path;      // the name used in messages
+    int                 nentries;
+    model_ini_entry_t  *entries;
+    int                 nsections;
+    const char        **sections;  // in file order
+    int                *section_lines;
+    char               *storage_;  // private
+} model_ini_t;
+
+model_ini_t *model_ini_parse(const char *text, size_t len, const char *name);
+model_ini_t *model_ini_load(const char *path);
+void         model_ini_free(model_ini_t *ini);
+// The entry for (section, key), or NULL.
+const model_ini_entry_t *model_ini_get(const model_ini_t *ini, const char *section,
+                                       const char *key);
+
+// ---------------------------------------------------------------------------
+// Scenes (model/scene.c)
+//
+// D3D (Ammeraal 1988, the thesis's format):
+//     # comment
+//     1  0 0 0          numbered vertices: number x y z (mm)
+//     2  100 0 0
+//     ...
+//     Faces:
+//     @material steel   sets the material of the faces that follow
+//     1 2 3 4.          a face: its vertex numbers, ended by '.'
+//                       (may span lines; counter-clockwise seen from outside)
+// Wavefront OBJ: v, f (v, v/vt, v/vt/vn, v//vn, negative indices), usemtl;
+// vn, vt, o, g, s, mtllib, l are ignored; other statements are errors.
+// Faces without a material get the material "default".
+
+typedef struct {
+    int          nverts;
+    const int   *verts;      // indices into scene->vertices (0-based)
+    int          material;   // index into scene->material_names
+    model_vec3_t normal;     // unit normal (Newell), right-hand rule on vertex order
+    double       offset_mm;  // plane: normal . x = offset_mm
+    int          line;       // line of the face in the source file
+    int          number;     // 1-based face number in the file (for messages)
+} model_face_t;
+
+typedef struct {
+    int            nvertices;
+    model_vec3_t  *vertices;     // mm, world frame
+    int            nfaces;
+    model_face_t  *faces;
+    int            nmaterials;
+    char         **material_names;
+    char          *path;         // as given
+    char           sha256[65];   // of the file contents
+    int           *vert_storage_; // private
+} model_scene_t;
+
+typedef struct {
+    double planarity_tol_mm;     // max distance of a vertex from its face's plane (default 0.01)
+} model_scene_options_t;
+
+#define MODEL_SCENE_OPTIONS_DEFAULT ((model_scene_options_t){ .planarity_tol_mm = 0.01 })
+
+// Load by extension (.d3d or .obj, case-insensitive). opt may be NULL.
+model_scene_t *model_scene_load(const char *path, const model_scene_options_t *opt);
+model_scene_t *model_scene_parse_d3d(const char *text, size_t len, const char *name,
+                                     const model_scene_options_t *opt);
+model_scene_t *model_scene_parse_obj(const char *text, size_t len, const char *name,
+                                     const model_scene_options_t *opt);
+void           model_scene_free(model_scene_t *scene);
+// Index of a material name in the scene, or -1.
+int            model_scene_material_index(const model_scene_t *scene, const char *name);
+// A deep copy rotated by angle_deg about the world z axis (the turntable).
+model_scene_t *model_scene_rotated_z(const model_scene_t *scene, double angle_deg);
+
+// ---------------------------------------------------------------------------
+// Reflection models (model/brdf.c)
+//
+// R = f_r * (n.l), evaluated from the four cosines. One X-macro list is the
+// single source of the models, their names and parameters.
+// Conventions: in lambert, hall, torrance_sparrow and thesis_fit, kd is the
+// thesis's coefficient (albedo/pi absorbed: a Lambertian surface of albedo a
+// has kd = a/pi); in cook_torrance and ggx, kd is the albedo (they divide by pi).
+// alpha is the GGX alpha (not "perceptual roughness", alpha = r^2).
+//
+//   _(ENUM, name, nparams, param names...)
+#define MODEL_BRDF_LIST(_)                                           \
+    _(LAMBERT,          lambert,          1, "kd")                   \
+    _(HALL,             hall,             3, "kd", "ks", "ns")       \
+    _(TORRANCE_SPARROW, torrance_sparrow, 4, "kd", "ks", "ns", "F0") \
+    _(THESIS_FIT,       thesis_fit,       3, "ks", "ns", "kd")       \
+    _(COOK_TORRANCE,    cook_torrance,    4, "kd", "ks", "m", "F0")  \
+    _(GGX,              ggx,              4, "kd", "ks", "alpha", "F0")
+
+typedef enum {
+#define MODEL_BRDF_ENUM_(e, name, np, ...) MODEL_BRDF_##e,
+    MODEL_BRDF_LIST(MODEL_BRDF_ENUM_)
+#undef MODEL_BRDF_ENUM_
+    MODEL_BRDF_COUNT
+} model_brdf_t;
+
+#define MODEL_BRDF_MAX_PARAMS 4
+
+typedef struct {
+    double nl, nv, nh, vh;   // n.l, n.v, n.h, v.h
+} model_cosines_t;
+
+const char  *model_brdf_name(model_brdf_t m);
+int          model_brdf_from_name(const char *name);       // -1 if unknown
+int          model_brdf_nparams(model_brdf_t m);
+const char  *model_brdf_param_name(model_brdf_t m, int i);
+int          model_brdf_param_index(model_brdf_t m, const char *name); // -1 if none
+// Physical range of parameter i: lo <= p <= hi (hi may be INFINITY).
+void         model_brdf_param_range(model_brdf_t m, int i, double *lo, double *hi);
+// Default value of parameter i when a materials file omits it, or NAN when the
+// parameter is required.
+double       model_brdf_param_default(model_brdf_t m, int i);
+// One-line description of the convention of the model's parameters
+// ("kd: thesis coefficient ...; alpha: GGX alpha, not perceptual roughness").
+const char  *model_brdf_convention(model_brdf_t m);
+// True for the physically based models (energy conserving when kd+ks <= 1).
+bool         model_brdf_is_physical(model_brdf_t m);
+
+// Cosines from unit vectors n, l, v (h computed here). n is not flipped.
+model_cosines_t model_cosines(model_vec3_t n, model_vec3_t l, model_vec3_t v);
+
+// R = f_r(l,v) * (n.l). Exactly 0 (and dR_dp all 0) when n.l <= 0 or n.v <= 0.
+// dR_dp (out, may be NULL): model_brdf_nparams(m) derivatives.
+double model_brdf_eval(model_brdf_t m, const double *p, const model_cosines_t *c,
+                       double *dR_dp);
+
+// ---------------------------------------------------------------------------
+// Materials, lamps and sensor files (model/config.c)
+
+typedef struct {
+    char         name[64];
+    model_brdf_t model;
+    double       p[MODEL_BRDF_MAX_PARAMS];
+    int          line;        // of the [material NAME] header
+} model_material_t;
+
+typedef struct {
+    int               n;
+    model_material_t *materials;
+    char             *path;
+    char              sha256[65];
+} model_materials_t;
+
+// [material NAME] with model = lambert|hall|..., and that model's parameters by
+// name. Unknown keys, missing required parameters and out-of-range values are
+// errors naming file and line.
+model_materials_t *model_materials_load(const char *path);
+model_materials_t *model_materials_parse(const char *text, size_t len, const char *name);
+void               model_materials_free(model_materials_t *m);
+const model_material_t *model_materials_find(const model_materials_t *m, const char *name);
+
+typedef struct {
+    char         name[64];
+    model_vec3_t position_mm;   // world (rig) frame
+    double       intensity;     // I_i, in the units of the grey value per kc (see model_grey)
+    double       radius_mm;     // 0 = ideal point lamp
+    int          line;
+} model_lamp_t;
+
+typedef struct {
+    int           n;
+    model_lamp_t *lamps;
+    char         *path;
+    char          sha256[65];
+} model_lamps_t;
+
+// [lamp NAME] with position_mm = x y z, intensity = I (> 0), optional radius_mm (>= 0).
+model_lamps_t *model_lamps_load(const char *path);
+model_lamps_t *model_lamps_parse(const char *text, size_t len, const char *name);
+void           model_lamps_free(model_lamps_t *l);
+int            model_lamps_find(const model_lamps_t *l, const char *name); // -1 if none
+
+// The sensor stage's parameters ([sensor] section; units in the names).
+typedef struct {
+    int      bits;                   // 8, 12 or 16: output quantisation
+    double   system_gain_dn_per_e;   // K
+    double   full_well_e;            // saturation of the pixel well
+    double   read_noise_e;           // temporal, Gaussian
+    double   dark_offset_dn;         // mean dark level
+    double   dsnu_dn;                // std of the dark offset over pixels (fixed pattern)
+    double   prnu_pct;               // std of the pixel gain over pixels, % (fixed pattern)
+    double   dark_current_e_per_s;
+    double   exposure_us;            // for the dark current
+    double   vignetting;             // relative fall-off at the image corner (0 = none)
+    double   nonlinearity_pct;       // compression at full well, % (0 = linear)
+    uint64_t pattern_seed;           // fixed patterns (DSNU, PRNU)
+    uint64_t noise_seed;             // temporal noise of this frame
+} model_sensor_t;
+
+// Defaults: 12 bits, K 0.25 DN/e-, full well 16000 e-, read noise 6 e-,
+// dark offset 64 DN, DSNU 1.5 DN, PRNU 1 %, no dark current, vignetting 0.1,
+// non-linearity 2 %, seeds 1 and 1.
+model_sensor_t model_sensor_default(void);
+bool model_sensor_load(const char *path, model_sensor_t *out);
+bool model_sensor_parse(const char *text, size_t len, const char *name, model_sensor_t *out);
+
+// ---------------------------------------------------------------------------
+// Cameras (model/camera.c): an mrcal camera model plus a cached ray table.
+
+typedef struct model_camera model_camera_t;
+
+// Reads a .cameramodel with libmrcal. NULL and a message naming the file on error.
+model_camera_t *model_camera_load(const char *path);
+// From explicit parameters (lensmodel name as mrcal spells it, e.g.
+// "LENSMODEL_OPENCV8"; intrinsics fx fy cx cy + distortions; rt_cam_world = r(3) t(3), t in mm).
+model_camera_t *model_camera_new(const char *lensmodel, const double *intrinsics,
+                                 int width, int height, const double rt_cam_world[6]);
+bool            model_camera_save(const model_camera_t *cam, const char *path);
+void            model_camera_free(model_camera_t *cam);
+int             model_camera_width(const model_camera_t *cam);
+int             model_camera_height(const model_camera_t *cam);
+const char     *model_camera_lensmodel(const model_camera_t *cam);
+const char     *model_camera_sha256(const model_camera_t *cam);   // of the file, or of the parameters
+void            model_camera_rt_cam_world(const model_camera_t *cam, double rt[6]);
+model_vec3_t    model_camera_centre_world(const model_camera_t *cam);
+// Project world points to pixels. false on error.
+bool model_camera_project(const model_camera_t *cam, const model_vec3_t *p_world, int n,
+                          double *q_xy /* out: n*2 */);
+// Unit ray directions in the world frame through pixels q (exact mrcal_unproject).
+bool model_camera_unproject(const model_camera_t *cam, const double *q_xy, int n,
+                            model_vec3_t *dir_world /* out: n */);
+// The ray table: unit world-frame directions for every integer pixel (row-major,
+// width*height), made by unprojecting a coarse grid and interpolating, refined
+// until the reprojection error is below max_error_px (default 0.005 px; use
+// both cores). Computed once per camera and kept. The achieved bound is
+// returned through *err_px (may be NULL).
+const model_vec3_t *model_camera_ray_table(model_camera_t *cam, double *err_px);
+
+// ---------------------------------------------------------------------------
+// Ray casting (model/trace.c): Embree over the scene's faces.
+
+typedef struct model_tracer model_tracer_t;
+
+model_tracer_t *model_tracer_new(const model_scene_t *scene);
+void            model_tracer_free(model_tracer_t *t);
+
+// The thesis's pixel_info for one pixel (or sub-pixel position).
+typedef struct {
+    double       q[2];        // pixel coordinates
+    int32_t      face;        // index into scene->faces; -1: the ray missed the scene
+    int32_t      material;    // scene material index; -1 when missed
+    model_vec3_t p_mm;        // hit point, world
+    model_vec3_t n;           // unit face normal turned to face the camera
+    model_vec3_t v;           // unit vector from the point to the camera centre
+    double       range_mm;    // camera centre to hit point
+} model_pixel_info_t;
+
+// Per pixel and lamp: direction, distance, visibility.
+typedef struct {
+    model_vec3_t l;           // unit vector from the point to the lamp centre
+    double       d_mm;        // distance to the lamp centre
+    double       V;           // visibility: 0 shadowed, 1 lit (fraction for finite lamps)
+} model_lamp_sample_t;
+
+// Cast one primary ray: the nearest hit along (origin, unit dir), or face -1.
+// Fills face, material, p_mm, n (facing -dir) and range_mm; v = -dir.
+void model_tracer_cast(const model_tracer_t *t, model_vec3_t origin, model_vec3_t dir,
+                       model_pixel_info_t *out);
+// True when the segment from p to target is unobstructed (shadow ray; any hit stops it).
+bool model_tracer_visible(const model_tracer_t *t, model_vec3_t p, model_vec3_t target);
+
+// pixel_info for n pixel positions q (sparse list, sub-pixel allowed), with the
+// per-lamp samples (out lamp_out: n*lamps->n, may be NULL). Rays come from the
+// camera (exact unprojection). Uses nthreads (<= 0: model_default_threads()).
+bool model_pixel_info(const model_tracer_t *t, const model_camera_t *cam,
+                      const model_lamps_t *lamps, const double *q_xy, int n,
+                      model_pixel_info_t *out, model_lamp_sample_t *lamp_out, int nthreads);
+
+// ---------------------------------------------------------------------------
+// Grey values and rendering (model/shade.c)
+//
+//   P(x,y) = Pa + kc * g(x,y) * [ sum_i V_i I_i R_i / d_i^2  + interreflection ]
+//
+// The bracket is the radiance toward the camera in units of lamp intensity per
+// mm^2; kc converts it to grey value (DN).
+
+typedef enum {
+    MODEL_INTERREFLECTION_NONE,
+    MODEL_INTERREFLECTION_THESIS,   // one bounce, virtual point sources around the mirror direction
+    MODEL_INTERREFLECTION_MC,       // Monte Carlo, several bounces, finite lamp radius
+} model_interreflection_t;
+
+const char *model_interreflection_name(model_interreflection_t m);
+int         model_interreflection_from_name(const char *name);   // -1 if unknown
+
+typedef struct {
+    double kc;                  // camera parameter (DN per radiance unit)
+    double Pa;                  // offset, DN
+    const float *gain_map;      // g(x,y): width*height, mean 1; NULL = 1 everywhere
+    model_interreflection_t interreflection;
+    double rho;                 // thesis: weight of the virtual sources
+    int    thesis_samples;      // thesis: rays in the cone around the mirror direction
+    double thesis_cone_deg;     // thesis: half-angle of that cone
+    int    mc_samples;          // MC: paths per pixel
+    int    mc_bounces;          // MC: indirect bounces
+    bool   finite_lamps;        // MC: sample each lamp's sphere (radius_mm) for soft shadows
+    uint64_t seed;              // MC: reproducible for a given seed, whatever the thread count
+    int    nthreads;            // <= 0: model_default_threads()
+} model_shading_t;
+
+// Defaults: kc 1, Pa 0, no gain map, no interreflection, rho 0.05, 9 thesis
+// samples in a 10 deg cone, 16 MC samples, 2 bounces, finite lamps, seed 1.
+model_shading_t model_shading_default(void);
+
+// Materials resolved against the scene: mats[k] is the material of scene
+// material k. Fails naming the first scene material the file lacks.
+bool model_resolve_materials(const model_scene_t *scene, const model_materials_t *mats,
+                             const model_material_t **out /* scene->nmaterials */);
+
+// Direct term for one pixel_info: sum_i V_i I_i R_i / d_i^2 (no kc, no Pa).
+// dS_dp (out, may be NULL): derivatives with respect to the material's parameters.
+double model_direct_sum(const model_pixel_info_t *pi, const model_lamp_sample_t *ls,
+                        const model_lamps_t *lamps, const model_material_t *mat,
+                        double *dS_dp);
+
+// Render the full image: P per pixel (out, width*height floats, DN; Pa for
+// pixels whose ray misses the scene). face_out (may be NULL): face index or -1.
+// lit_out (may be NULL): lamps->n planes of width*height, 1 where lamp i lights
+// the pixel's point (V > 0.5), else 0.
+bool model_render(const model_tracer_t *t, model_camera_t *cam, const model_lamps_t *lamps,
+                  const model_material_t *const *mats, const model_shading_t *sh,
+                  float *P_out, int32_t *face_out, uint8_t *lit_out);
+
+// ---------------------------------------------------------------------------
+// Sensor stage (model/sensor.c): from the ideal grey value (DN, as the imaging
+// model gives it) to what a camera delivers. Separate from the physics.
+//   e = (P - dark_offset) / K * prnu(x,y) * vignetting(x,y) + dark current
+//   -> Poisson shot noise, Gaussian read noise -> non-linearity near full well
+//   -> * K + dark_offset + dsnu(x,y) -> quantised to `bits`, clipped to [0, 2^bits-1].
+
+// Fixed patterns of the sensor (ground truth): prnu gain map (mean 1) and dsnu
+// offset map (DN, mean 0). Either may be NULL.
+void model_sensor_patterns(const model_sensor_t *s, int width, int height,
+                           float *prnu_gain, float *dsnu_dn);
+// Apply to an image in place (width*height floats). Output values are integers
+// in [0, 2^bits - 1], stored as float.
+void model_sensor_apply(const model_sensor_t *s, int width, int height, float *img);
+
+// ---------------------------------------------------------------------------
+// Image files (model/image.c). Text metadata is a NULL-terminated list of
+// key, value, key, value, ..., NULL (may be NULL): PNG tEXt chunks, TIFF
+// ImageDescription (as "key: value" lines).
+
+bool model_png16_write(const char *path, int width, int height, const uint16_t *pix,
+                       const char *const *meta);
+// Reads 8- or 16-bit greyscale PNG into 16-bit values (8-bit values are kept as is).
+bool model_png_read(const char *path, int *width, int *height, uint16_t **pix);
+bool model_tiff_write_float(const char *path, int width, int height, const float *pix,
+                            const char *const *meta);
+// Multi-page TIFF: page 0 P (float32), page 1 face id (int32, -1 = background),
+// pages 2.. the lit mask of each lamp (uint8 0/1), each page named.
+bool model_tiff_write_info(const char *path, int width, int height, const float *P,
+                           const int32_t *face, const uint8_t *lit, int nlamps,
+                           const char *const *lamp_names, const char *const *meta);
+bool model_tiff_read_float(const char *path, int *width, int *height, float **pix);
+
+// ---------------------------------------------------------------------------
+// Edge query (model/edges.c; thesis 1.6, PREMIO)
+
+typedef struct {
+    double q0[2], q1[2];        // image end points, pixels
+    double length_px;
+    double P_side[2];           // predicted mean grey value on each side (DN)
+    double contrast;            // P_side[0] - P_side[1]
+    int    face_side[2];        // face seen on each side (-1 background)
+    uint32_t lit_side[2];       // bit i: lamp i lights that side
+} model_edge_segment_t;
+
+typedef struct {
+    int    v0, v1;              // scene vertex indices of the 3D edge
+    int    face_a, face_b;      // the faces sharing it (face_b -1 for a boundary edge)
+    double dihedral_deg;        // angle between the face normals (0 for a boundary edge)
+    int    nsegments;
+    model_edge_segment_t *segments;  // visible image segments
+} model_edge_t;
+
+typedef struct {
+    int           nedges;
+    model_edge_t *edges;
+} model_edges_t;
+
+// Scene edges (pairs of faces sharing two vertices, and boundary edges), their
+// visible image segments, lighting per side and predicted contrast.
+// feature_angle_deg: edges between faces closer to coplanar are skipped.
+model_edges_t *model_edges_predict(const model_tracer_t *t, model_camera_t *cam,
+                                   const model_lamps_t *lamps,
+                                   const model_material_t *const *mats,
+                                   const model_shading_t *sh, double feature_angle_deg);
+void model_edges_free(model_edges_t *e);
+
+// ---------------------------------------------------------------------------
+// Commands (model/cmd.c): argv[0] is the subcommand name. Return the exit code.
+int model_cmd_render(int argc, char **argv);
+int model_cmd_edges(int argc, char **argv);
+
+#ifdef __cplusplus
+}
+#endif

@@ -1,0 +1,2 @@
+// model/shade.c: placeholder while the module is being written.
+#include "model/model.h"

@@ -1,0 +1,2 @@
+// model/trace.c: placeholder while the module is being written.
+#include "model/model.h"

@@ -1,0 +1,192 @@
+// model/util.c — errors, files, hashes, number parsing, threads.
+#define _GNU_SOURCE
+#include <errno.h>
+#include <glib.h>
+#include <pthread.h>
+#include <stdarg.h>
+#include <stdatomic.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+#include <unistd.h>
+
+#include "model/internal.h"
+
+static _Thread_local char last_error[2048];
+static atomic_bool quiet_mode;
+
+void model_error(const char *where_file, int where_line, const char *fmt, ...)
+{
+    char msg[1536];
+    va_list ap;
+    va_start(ap, fmt);
+    vsnprintf(msg, sizeof msg, fmt, ap);
+    va_end(ap);
+    if (where_file && where_line > 0)
+        snprintf(last_error, sizeof last_error, "%s:%d: %s", where_file, where_line, msg);
+    else if (where_file)
+        snprintf(last_error, sizeof last_error, "%s: %s", where_file, msg);
+    else
+        snprintf(last_error, sizeof last_error, "%s", msg);
+    if (!atomic_load(&quiet_mode))
+        fprintf(stderr, "%s\n", last_error);
+}
+
+const char *model_last_error(void) { return last_error; }
+void model_error_clear(void) { last_error[0] = 0; }
+bool model_error_quiet(bool quiet) { return atomic_exchange(&quiet_mode, quiet); }
+
+char *model_read_file(const char *path, size_t *len)
+{
+    FILE *f = fopen(path, "rb");
+    if (!f) {
+        model_error(path, 0, "cannot open: %s", strerror(errno));
+        return NULL;
+    }
+    size_t cap = 1 << 16, n = 0;
+    char *buf = malloc(cap + 1);
+    if (!buf) {
+        fclose(f);
+        model_error(path, 0, "out of memory");
+        return NULL;
+    }
+    for (;;) {
+        size_t got = fread(buf + n, 1, cap - n, f);
+        n += got;
+        if (n < cap) break;
+        char *nb = realloc(buf, 2 * cap + 1);
+        if (!nb) {
+            free(buf);
+            fclose(f);
+            model_error(path, 0, "out of memory");
+            return NULL;
+        }
+        buf = nb;
+        cap *= 2;
+    }
+    if (ferror(f)) {
+        model_error(path, 0, "read error: %s", strerror(errno));
+        free(buf);
+        fclose(f);
+        return NULL;
+    }
+    fclose(f);
+    buf[n] = 0;
+    if (len) *len = n;
+    return buf;
+}
+
+void model_sha256_hex(const void *data, size_t len, char out[65])
+{
+    gchar *s = g_compute_checksum_for_data(G_CHECKSUM_SHA256, data, len);
+    memcpy(out, s, 64);
+    out[64] = 0;
+    g_free(s);
+}
+
+bool model_sha256_file(const char *path, char out[65])
+{
+    size_t len;
+    char *buf = model_read_file(path, &len);
+    if (!buf) return false;
+    model_sha256_hex(buf, len, out);
+    free(buf);
+    return true;
+}
+
+bool model_parse_double(const char *s, double *out)
+{
+    if (!s) return false;
+    while (*s == ' ' || *s == '\t') s++;
+    if (!*s) return false;
+    char *end;
+    errno = 0;
+    double v = strtod(s, &end);
+    if (end == s || errno == ERANGE || !isfinite(v)) return false;
+    while (*end == ' ' || *end == '\t' || *end == '\r' || *end == '\n') end++;
+    if (*end) return false;
+    *out = v;
+    return true;
+}
+
+bool model_parse_int(const char *s, long *out)
+{
+    if (!s) return false;
+    while (*s == ' ' || *s == '\t') s++;
+    if (!*s) return false;
+    char *end;
+    errno = 0;
+    long v = strtol(s, &end, 10);
+    if (end == s || errno == ERANGE) return false;
+    while (*end == ' ' || *end == '\t' || *end == '\r' || *end == '\n') end++;
+    if (*end) return false;
+    *out = v;
+    return true;
+}
+
+int model_default_threads(void)
+{
+    const char *e = getenv("REFL_THREADS");
+    long n;
+    if (e && model_parse_int(e, &n) && n >= 1 && n <= 256) return (int)n;
+    long c = sysconf(_SC_NPROCESSORS_ONLN);
+    return c >= 1 ? (int)(c > 64 ? 64 : c) : 1;
+}
+
+double model_now_s(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return ts.tv_sec + 1e-9 * ts.tv_nsec;
+}
+
+typedef struct {
+    atomic_int next;
+    int n, chunk;
+    void (*fn)(void *, int, int, int);
+    void *ctx;
+} pfor_t;
+
+typedef struct {
+    pfor_t *p;
+    int thread;
+} pfor_arg_t;
+
+static void *pfor_worker(void *arg)
+{
+    pfor_arg_t *a = arg;
+    pfor_t *p = a->p;
+    for (;;) {
+        int b = atomic_fetch_add(&p->next, p->chunk);
+        if (b >= p->n) break;
+        int e = b + p->chunk < p->n ? b + p->chunk : p->n;
+        p->fn(p->ctx, b, e, a->thread);
+    }
+    return NULL;
+}
+
+void model_parallel_for(int n, int chunk, int nthreads,
+                        void (*fn)(void *ctx, int begin, int end, int thread), void *ctx)
+{
+    if (n <= 0) return;
+    if (chunk < 1) chunk = 1;
+    if (nthreads <= 1 || n <= chunk) {
+        fn(ctx, 0, n, 0);
+        return;
+    }
+    if (nthreads > 64) nthreads = 64;
+    pfor_t p = { .n = n, .chunk = chunk, .fn = fn, .ctx = ctx };
+    atomic_init(&p.next, 0);
+    pthread_t th[64];
+    pfor_arg_t args[64];
+    int started = 0;
+    for (int i = 1; i < nthreads; i++) {
+        args[i] = (pfor_arg_t){ &p, i };
+        if (pthread_create(&th[i], NULL, pfor_worker, &args[i]) != 0) break;
+        started = i;
+    }
+    args[0] = (pfor_arg_t){ &p, 0 };
+    pfor_worker(&args[0]);
+    for (int i = 1; i <= started; i++) pthread_join(th[i], NULL);
+}

@@ -1,0 +1,45 @@
+// rig/main.c — bin/refl: the rig controller's command dispatcher.
+#include <stdio.h>
+#include <string.h>
+
+#include "model/model.h"
+
+typedef struct {
+    const char *name;
+    int (*run)(int argc, char **argv);
+    const char *summary;
+} command_t;
+
+static const command_t commands[] = {
+    { "render", model_cmd_render, "render a scene through the imaging model to a PNG/TIFF image" },
+    { "edges",  model_cmd_edges,  "list scene edges: visible image segments, lighting per side, contrast" },
+};
+
+static void usage(FILE *f)
+{
+    fprintf(f, "usage: refl COMMAND [ARGS...]   (refl COMMAND --help for its options)\n\ncommands:\n");
+    for (size_t i = 0; i < sizeof commands / sizeof commands[0]; i++)
+        fprintf(f, "  %-8s %s\n", commands[i].name, commands[i].summary);
+    fprintf(f, "\nrefl %s\n", REFL_VERSION);
+}
+
+int main(int argc, char **argv)
+{
+    if (argc < 2) {
+        usage(stderr);
+        return 2;
+    }
+    if (!strcmp(argv[1], "--help") || !strcmp(argv[1], "-h") || !strcmp(argv[1], "help")) {
+        usage(stdout);
+        return 0;
+    }
+    if (!strcmp(argv[1], "--version")) {
+        printf("refl %s\n", REFL_VERSION);
+        return 0;
+    }
+    for (size_t i = 0; i < sizeof commands / sizeof commands[0]; i++)
+        if (!strcmp(argv[1], commands[i].name)) return commands[i].run(argc - 1, argv + 1);
+    fprintf(stderr, "refl: unknown command '%s'\n", argv[1]);
+    usage(stderr);
+    return 2;
+}

@@ -1,0 +1,77 @@
+// tests/test.h — refl's small test harness.
+//
+//   TEST(name) { CHECK(x > 0); CHECK_NEAR(a, b, 1e-9); CHECK_REL(a, b, 1e-6);
+//                CHECK_CONTAINS(msg, "line 3"); }
+//
+// Tests register themselves; bin/refl-tests runs them all (or those whose name
+// contains argv[1]) and ends with the line "N passed, N failed". A test passes
+// when none of its checks failed. Each failed check prints file:line and the
+// values. Tests needing files use test_tmpdir(), which is removed afterwards.
+#pragma once
+
+#include <math.h>
+#include <stdbool.h>
+#include <stdio.h>
+#include <string.h>
+
+typedef void (*test_fn_t)(void);
+void test_register(const char *name, test_fn_t fn, const char *file);
+void test_fail(const char *file, int line, const char *fmt, ...)
+    __attribute__((format(printf, 3, 4)));
+
+#define TEST(name)                                                                 \
+    static void name(void);                                                        \
+    __attribute__((constructor)) static void test_reg_##name(void)                 \
+    {                                                                              \
+        test_register(#name, name, __FILE__);                                      \
+    }                                                                              \
+    static void name(void)
+
+#define CHECK(cond)                                                                \
+    do {                                                                           \
+        if (!(cond)) test_fail(__FILE__, __LINE__, "CHECK(%s)", #cond);            \
+    } while (0)
+
+#define CHECK_MSG(cond, ...)                                                       \
+    do {                                                                           \
+        if (!(cond)) test_fail(__FILE__, __LINE__, __VA_ARGS__);                   \
+    } while (0)
+
+#define CHECK_NEAR(a, b, tol)                                                      \
+    do {                                                                           \
+        double a_ = (a), b_ = (b), t_ = (tol);                                     \
+        if (!(fabs(a_ - b_) <= t_))                                                \
+            test_fail(__FILE__, __LINE__, "%s = %.12g, %s = %.12g, |diff| %.3g > %.3g", \
+                      #a, a_, #b, b_, fabs(a_ - b_), t_);                          \
+    } while (0)
+
+#define CHECK_REL(a, b, rel)                                                       \
+    do {                                                                           \
+        double a_ = (a), b_ = (b), r_ = (rel);                                     \
+        double s_ = fmax(fabs(a_), fabs(b_));                                      \
+        if (!(fabs(a_ - b_) <= r_ * s_))                                           \
+            test_fail(__FILE__, __LINE__, "%s = %.12g, %s = %.12g, rel diff %.3g > %.3g", \
+                      #a, a_, #b, b_, s_ > 0 ? fabs(a_ - b_) / s_ : 0.0, r_);      \
+    } while (0)
+
+#define CHECK_CONTAINS(hay, needle)                                                \
+    do {                                                                           \
+        const char *h_ = (hay), *n_ = (needle);                                    \
+        if (!h_ || !strstr(h_, n_))                                                \
+            test_fail(__FILE__, __LINE__, "expected \"%s\" in \"%s\"", n_, h_ ? h_ : "(null)"); \
+    } while (0)
+
+// A fresh temporary directory for this test (removed when the test ends).
+const char *test_tmpdir(void);
+// Path of a file in the test's temporary directory (static buffer per call slot).
+const char *test_path(const char *name);
+// Write text to a file in the temporary directory; returns its path.
+const char *test_write(const char *name, const char *text);
+// The source tree's top directory (for examples/ and tests/ data).
+const char *test_srcdir(void);
+// The refl binary ($REFL, default bin/refl).
+const char *test_refl(void);
+// Run a command (argv, NULL-terminated) with a time limit; capture stdout and
+// stderr (caller frees, may pass NULL). Returns the exit status, or -1 on
+// failure to run, 128+signal when killed, 124 on time-out.
+int test_run(const char *const *argv, double timeout_s, char **out, char **err);

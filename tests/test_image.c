@@ -1,0 +1,2 @@
+// tests/test_image.c: placeholder while the module is being written.
+#include "model/model.h"
