@@ -14,7 +14,9 @@ CXX   ?= c++
 
 # Libraries found through pkg-config; Embree 3 and mrcal ship no .pc file on
 # Debian 12, so they are linked by name (scripts/install-deps installs them).
-PKGS := glib-2.0 libpng libtiff-4 jansson
+PKGS := glib-2.0 libpng libtiff-4 jansson libftdi1 libusb-1.0 libgpiod
+# Only the tests link libumockdev (the simulated USB device of the APT tests).
+TEST_PKGS := umockdev-1.0
 LIBS_NOPC := -lembree3 -lmrcal
 
 ifeq ($(filter clean distclean,$(MAKECMDGOALS)),)
@@ -25,7 +27,9 @@ $(BUILD)/config.mk: Makefile scripts/install-deps
 	@mkdir -p $(@D)
 	@scripts/install-deps
 	@{ echo "PKG_CFLAGS := $$(pkg-config --cflags $(PKGS))"; \
-	   echo "PKG_LIBS := $$(pkg-config --libs $(PKGS))"; } > $@.tmp && mv $@.tmp $@
+	   echo "PKG_LIBS := $$(pkg-config --libs $(PKGS))"; \
+	   echo "TEST_PKG_CFLAGS := $$(pkg-config --cflags $(TEST_PKGS))"; \
+	   echo "TEST_PKG_LIBS := $$(pkg-config --libs $(TEST_PKGS))"; } > $@.tmp && mv $@.tmp $@
 
 WARN := -Wall -Wextra -Wshadow -Wno-unused-parameter
 ifeq ($(WERROR),1)
@@ -40,7 +44,7 @@ LDLIBS_ALL   = $(PKG_LIBS) $(LIBS_NOPC) -lm
 MODEL_SRC := model/util.c model/ini.c model/scene.c model/config.c model/brdf.c \
              model/camera.c model/trace.c model/shade.c model/sensor.c \
              model/image.c model/edges.c model/cmd.c
-RIG_SRC   :=
+RIG_SRC   := rig/rig.c rig/turntable_apt.c rig/turntable_sim.c rig/lamps.c
 CALIB_SRC :=
 FIT_SRC   :=
 LIB_SRC   := $(MODEL_SRC) $(RIG_SRC) $(CALIB_SRC) $(FIT_SRC)
@@ -48,7 +52,8 @@ LIB_SRC   := $(MODEL_SRC) $(RIG_SRC) $(CALIB_SRC) $(FIT_SRC)
 MAIN_SRC  := rig/main.c
 TEST_SRC  := tests/harness.c tests/test_brdf.c tests/test_scene.c tests/test_config.c \
              tests/test_camera.c tests/test_render.c tests/test_sensor.c \
-             tests/test_image.c tests/test_edges.c tests/test_cli.c tests/test_corpus.c
+             tests/test_image.c tests/test_edges.c tests/test_cli.c tests/test_corpus.c \
+             tests/test_turntable.c tests/apt_sim.c tests/test_lamps.c
 BENCH_SRC := tests/bench.c
 FUZZ_SRC  := tests/fuzz_parsers.c
 
@@ -75,12 +80,29 @@ $(BIN)/refl-tests: $(call obj,$(TEST_SRC)) $(LIB)
 	@mkdir -p $(@D)
 	$(CC) $(LDFLAGS_ALL) -o $@ $^ $(LDLIBS_ALL)
 
+$(BUILD)/tests/apt_sim.o: CFLAGS_ALL += $(TEST_PKG_CFLAGS)
+$(BIN)/refl-tests: LDLIBS_ALL += $(TEST_PKG_LIBS)
+
+# Helpers of tests/test_lamps.c: a fake libgpiod v1 for LD_PRELOAD (built
+# without sanitizers so it preloads into the asan build too) and a child
+# program that holds lamps on until a signal arrives.
+FAKE_GPIOD := $(BUILD)/tests/libfake_gpiod.so
+LAMP_CHILD := $(BUILD)/tests/lamp_child
+
+$(FAKE_GPIOD): tests/fake_gpiod.c | $(BUILD)/config.mk
+	@mkdir -p $(@D)
+	$(CC) -std=gnu11 -O2 -g $(WARN) -fPIC -shared $(PKG_CFLAGS) -o $@ $<
+
+$(LAMP_CHILD): $(call obj,tests/lamp_child.c) $(LIB)
+	@mkdir -p $(@D)
+	$(CC) $(LDFLAGS_ALL) -o $@ $^ $(LDLIBS_ALL)
+
 $(BIN)/refl-bench: $(call obj,$(BENCH_SRC)) $(LIB)
 	@mkdir -p $(@D)
 	$(CC) $(LDFLAGS_ALL) -o $@ $^ $(LDLIBS_ALL)
 
-check: $(BIN)/refl $(BIN)/refl-tests
-	REFL=$(BIN)/refl $(BIN)/refl-tests
+check: $(BIN)/refl $(BIN)/refl-tests $(FAKE_GPIOD) $(LAMP_CHILD)
+	REFL=$(BIN)/refl REFL_FAKE_GPIOD=$(FAKE_GPIOD) REFL_LAMP_CHILD=$(LAMP_CHILD) $(BIN)/refl-tests
 
 demo: $(BIN)/refl
 	scripts/demo $(BIN)/refl $(BUILD)/demo
@@ -97,9 +119,11 @@ FUZZ_SECONDS ?= 60
 fuzz: | $(BUILD)/config.mk
 	@mkdir -p $(BUILD)/fuzz/corpus
 	clang -std=gnu11 -O1 -g -I. $(PKG_CFLAGS) -fsanitize=fuzzer,address,undefined \
-	  -o $(BUILD)/fuzz/fuzz_parsers $(FUZZ_SRC) $(LIB_SRC) $(LDLIBS_ALL) -pthread
-	$(BUILD)/fuzz/fuzz_parsers -max_total_time=$(FUZZ_SECONDS) -max_len=4096 \
-	  $(BUILD)/fuzz/corpus tests/corpus/scene tests/corpus/obj tests/corpus/ini
+	  -fno-sanitize-recover=undefined -fno-omit-frame-pointer -o $(BUILD)/fuzz/fuzz_parsers \
+	  $(FUZZ_SRC) model/util.c model/ini.c model/scene.c model/config.c model/brdf.c \
+	  $(PKG_LIBS) -lm -pthread
+	$(BUILD)/fuzz/fuzz_parsers -max_total_time=$(FUZZ_SECONDS) -max_len=4096 -timeout=10 \
+	  -print_final_stats=1 -artifact_prefix=$(BUILD)/fuzz/ $(BUILD)/fuzz/corpus tests/corpus
 
 clean:
 	rm -rf build build-asan bin

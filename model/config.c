@@ -1,2 +1,492 @@
-// model/config.c: placeholder while the module is being written.
-#include "model/model.h"
+// model/config.c — materials, lamps and sensor files (INI, see model/ini.c).
+#define _GNU_SOURCE
+#include <errno.h>
+#include <stddef.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "model/internal.h"
+
+#define NAME_MAX_ 64   // size of the name fields, NUL included
+
+// Split a section header "kind NAME" (blanks already collapsed by the INI
+// reader). Copies the kind into kind[] and returns the name ("" if none).
+static const char *split_section(const char *sec, char *kind, size_t kind_size)
+{
+    const char *sp = strchr(sec, ' ');
+    size_t n = sp ? (size_t)(sp - sec) : strlen(sec);
+    if (n >= kind_size) n = kind_size - 1;
+    memcpy(kind, sec, n);
+    kind[n] = 0;
+    return sp ? sp + 1 : "";
+}
+
+// Check and copy "[kind NAME]"'s name. false with a message on error.
+static bool section_name(const model_ini_t *ini, int s, const char *want_kind, char out[NAME_MAX_])
+{
+    const char *sec = ini->sections[s];
+    int line = ini->section_lines[s];
+    char kind[32];
+    const char *name = split_section(sec, kind, sizeof kind);
+    if (strcmp(kind, want_kind)) {
+        model_error(ini->path, line, "section [%s] is not allowed here: this file holds only [%s NAME] sections",
+                    sec, want_kind);
+        return false;
+    }
+    if (!*name) {
+        model_error(ini->path, line, "[%s] needs a name: write [%s NAME]", sec, want_kind);
+        return false;
+    }
+    if (strchr(name, ' ')) {
+        model_error(ini->path, line, "%s name '%s' contains blanks; use one word (e.g. '_' instead of blanks)",
+                    want_kind, name);
+        return false;
+    }
+    if (strlen(name) >= NAME_MAX_) {
+        model_error(ini->path, line, "%s name '%s' is %zu characters long; the limit is %d",
+                    want_kind, name, strlen(name), NAME_MAX_ - 1);
+        return false;
+    }
+    strcpy(out, name);
+    return true;
+}
+
+// Parse an entry's value as a number, naming the key on error.
+static bool entry_double(const model_ini_t *ini, const model_ini_entry_t *e, double *out)
+{
+    if (!model_parse_double(e->value, out)) {
+        model_error(ini->path, e->line, "%s = '%s' is not a number", e->key, e->value);
+        return false;
+    }
+    return true;
+}
+
+// ---------------------------------------------------------------------------
+// Materials
+
+static void list_models(char *buf, size_t size)
+{
+    size_t n = 0;
+    buf[0] = 0;
+    for (int m = 0; m < MODEL_BRDF_COUNT && n < size; m++)
+        n += snprintf(buf + n, size - n, "%s%s", m ? ", " : "", model_brdf_name(m));
+}
+
+static void list_keys(model_brdf_t m, char *buf, size_t size)
+{
+    size_t n = snprintf(buf, size, "model");
+    for (int i = 0; i < model_brdf_nparams(m) && n < size; i++)
+        n += snprintf(buf + n, size - n, ", %s", model_brdf_param_name(m, i));
+}
+
+// Ranges as text: "[0, 0.31831]", "[0, inf)".
+static void format_range(double lo, double hi, char *buf, size_t size)
+{
+    if (isinf(hi))
+        snprintf(buf, size, "[%g, inf)", lo);
+    else
+        snprintf(buf, size, "[%g, %g]", lo, hi);
+}
+
+static bool parse_material(const model_ini_t *ini, int s, model_material_t *mat)
+{
+    memset(mat, 0, sizeof *mat);
+    mat->line = ini->section_lines[s];
+    if (!section_name(ini, s, "material", mat->name)) return false;
+    const char *sec = ini->sections[s];
+    char buf[256];
+
+    const model_ini_entry_t *me = model_ini_get(ini, sec, "model");
+    if (!me) {
+        list_models(buf, sizeof buf);
+        model_error(ini->path, mat->line, "material '%s' has no 'model = ...' line; models: %s", mat->name, buf);
+        return false;
+    }
+    int m = model_brdf_from_name(me->value);
+    if (m < 0) {
+        list_models(buf, sizeof buf);
+        model_error(ini->path, me->line, "unknown reflection model '%s' in material '%s'; models: %s",
+                    me->value, mat->name, buf);
+        return false;
+    }
+    mat->model = (model_brdf_t)m;
+    int np = model_brdf_nparams(mat->model);
+    bool have[MODEL_BRDF_MAX_PARAMS] = { false };
+
+    for (int k = 0; k < ini->nentries; k++) {
+        const model_ini_entry_t *e = &ini->entries[k];
+        if (e->section != sec || e == me) continue;
+        int i = model_brdf_param_index(mat->model, e->key);
+        if (i < 0) {
+            list_keys(mat->model, buf, sizeof buf);
+            model_error(ini->path, e->line, "unknown key '%s' in material '%s' (model %s); valid keys: %s",
+                        e->key, mat->name, model_brdf_name(mat->model), buf);
+            return false;
+        }
+        double v;
+        if (!entry_double(ini, e, &v)) return false;
+        double lo, hi;
+        model_brdf_param_range(mat->model, i, &lo, &hi);
+        if (!(v >= lo && v <= hi)) {
+            char r[64];
+            format_range(lo, hi, r, sizeof r);
+            model_error(ini->path, e->line, "%s = %g is out of range %s for model %s (%s)", e->key, v, r,
+                        model_brdf_name(mat->model), model_brdf_convention(mat->model));
+            return false;
+        }
+        mat->p[i] = v;
+        have[i] = true;
+    }
+    for (int i = 0; i < np; i++) {
+        if (have[i]) continue;
+        double d = model_brdf_param_default(mat->model, i);
+        if (isnan(d)) {
+            list_keys(mat->model, buf, sizeof buf);
+            model_error(ini->path, mat->line, "material '%s' (model %s) lacks parameter '%s'; it needs: %s",
+                        mat->name, model_brdf_name(mat->model), model_brdf_param_name(mat->model, i), buf);
+            return false;
+        }
+        mat->p[i] = d;
+    }
+    return true;
+}
+
+model_materials_t *model_materials_parse(const char *text, size_t len, const char *name)
+{
+    model_materials_t *out = NULL;
+    model_ini_t *ini = model_ini_parse(text, len, name);
+    if (!ini) goto done;
+    if (ini->nsections == 0) {
+        model_error(ini->path, 0, "no [material NAME] sections; add at least one");
+        goto done;
+    }
+    out = calloc(1, sizeof *out);
+    if (!out) goto oom;
+    out->materials = calloc(ini->nsections, sizeof *out->materials);
+    out->path = strdup(ini->path);
+    if (!out->materials || !out->path) goto oom;
+    for (int s = 0; s < ini->nsections; s++) {
+        if (!parse_material(ini, s, &out->materials[s])) goto fail;
+        out->n++;
+    }
+    model_sha256_hex(text ? text : "", text ? len : 0, out->sha256);
+    goto done;
+oom:
+    model_error(name, 0, "out of memory");
+fail:
+    model_materials_free(out);
+    out = NULL;
+done:
+    model_ini_free(ini);
+    return out;
+}
+
+model_materials_t *model_materials_load(const char *path)
+{
+    size_t len;
+    char *text = model_read_file(path, &len);
+    if (!text) return NULL;
+    model_materials_t *m = model_materials_parse(text, len, path);
+    free(text);
+    return m;
+}
+
+void model_materials_free(model_materials_t *m)
+{
+    if (!m) return;
+    free(m->materials);
+    free(m->path);
+    free(m);
+}
+
+const model_material_t *model_materials_find(const model_materials_t *m, const char *name)
+{
+    if (!m || !name) return NULL;
+    for (int i = 0; i < m->n; i++)
+        if (!strcmp(m->materials[i].name, name)) return &m->materials[i];
+    return NULL;
+}
+
+// ---------------------------------------------------------------------------
+// Lamps
+
+static bool parse_lamp(const model_ini_t *ini, int s, model_lamp_t *lamp)
+{
+    memset(lamp, 0, sizeof *lamp);
+    lamp->line = ini->section_lines[s];
+    if (!section_name(ini, s, "lamp", lamp->name)) return false;
+    const char *sec = ini->sections[s];
+    bool have_pos = false, have_int = false;
+    for (int k = 0; k < ini->nentries; k++) {
+        const model_ini_entry_t *e = &ini->entries[k];
+        if (e->section != sec) continue;
+        if (!strcmp(e->key, "position_mm")) {
+            double xyz[3];
+            int n = 0;
+            char *copy = strdup(e->value), *save = NULL;
+            if (!copy) {
+                model_error(ini->path, e->line, "out of memory");
+                return false;
+            }
+            bool ok = true;
+            for (char *t = strtok_r(copy, " \t,", &save); t; t = strtok_r(NULL, " \t,", &save)) {
+                if (n == 3 || !model_parse_double(t, &xyz[n])) {
+                    ok = false;
+                    break;
+                }
+                n++;
+            }
+            free(copy);
+            if (!ok || n != 3) {
+                model_error(ini->path, e->line,
+                            "position_mm = '%s' in lamp '%s': expected exactly 3 numbers 'x y z' (mm, rig frame)",
+                            e->value, lamp->name);
+                return false;
+            }
+            lamp->position_mm = v3(xyz[0], xyz[1], xyz[2]);
+            have_pos = true;
+        } else if (!strcmp(e->key, "intensity")) {
+            if (!entry_double(ini, e, &lamp->intensity)) return false;
+            if (!(lamp->intensity > 0)) {
+                model_error(ini->path, e->line, "intensity = %g in lamp '%s' must be > 0", lamp->intensity,
+                            lamp->name);
+                return false;
+            }
+            have_int = true;
+        } else if (!strcmp(e->key, "radius_mm")) {
+            if (!entry_double(ini, e, &lamp->radius_mm)) return false;
+            if (!(lamp->radius_mm >= 0)) {
+                model_error(ini->path, e->line, "radius_mm = %g in lamp '%s' must be >= 0 (0 = point lamp)",
+                            lamp->radius_mm, lamp->name);
+                return false;
+            }
+        } else {
+            model_error(ini->path, e->line,
+                        "unknown key '%s' in lamp '%s'; valid keys: position_mm, intensity, radius_mm", e->key,
+                        lamp->name);
+            return false;
+        }
+    }
+    if (!have_pos || !have_int) {
+        model_error(ini->path, lamp->line, "lamp '%s' lacks '%s'; it needs position_mm = x y z and intensity = I",
+                    lamp->name, have_pos ? "intensity" : "position_mm");
+        return false;
+    }
+    return true;
+}
+
+model_lamps_t *model_lamps_parse(const char *text, size_t len, const char *name)
+{
+    model_lamps_t *out = NULL;
+    model_ini_t *ini = model_ini_parse(text, len, name);
+    if (!ini) goto done;
+    if (ini->nsections == 0) {
+        model_error(ini->path, 0, "no [lamp NAME] sections; add at least one lamp");
+        goto done;
+    }
+    out = calloc(1, sizeof *out);
+    if (!out) goto oom;
+    out->lamps = calloc(ini->nsections, sizeof *out->lamps);
+    out->path = strdup(ini->path);
+    if (!out->lamps || !out->path) goto oom;
+    for (int s = 0; s < ini->nsections; s++) {
+        if (!parse_lamp(ini, s, &out->lamps[s])) goto fail;
+        out->n++;
+    }
+    model_sha256_hex(text ? text : "", text ? len : 0, out->sha256);
+    goto done;
+oom:
+    model_error(name, 0, "out of memory");
+fail:
+    model_lamps_free(out);
+    out = NULL;
+done:
+    model_ini_free(ini);
+    return out;
+}
+
+model_lamps_t *model_lamps_load(const char *path)
+{
+    size_t len;
+    char *text = model_read_file(path, &len);
+    if (!text) return NULL;
+    model_lamps_t *l = model_lamps_parse(text, len, path);
+    free(text);
+    return l;
+}
+
+void model_lamps_free(model_lamps_t *l)
+{
+    if (!l) return;
+    free(l->lamps);
+    free(l->path);
+    free(l);
+}
+
+int model_lamps_find(const model_lamps_t *l, const char *name)
+{
+    if (!l || !name) return -1;
+    for (int i = 0; i < l->n; i++)
+        if (!strcmp(l->lamps[i].name, name)) return i;
+    return -1;
+}
+
+// ---------------------------------------------------------------------------
+// Sensor
+
+model_sensor_t model_sensor_default(void)
+{
+    return (model_sensor_t){
+        .bits = 12,
+        .system_gain_dn_per_e = 0.25,
+        .full_well_e = 16000,
+        .read_noise_e = 6,
+        .dark_offset_dn = 64,
+        .dsnu_dn = 1.5,
+        .prnu_pct = 1,
+        .dark_current_e_per_s = 0,
+        .exposure_us = 0,
+        .vignetting = 0.1,
+        .nonlinearity_pct = 2,
+        .pattern_seed = 1,
+        .noise_seed = 1,
+    };
+}
+
+typedef enum { KEY_BITS, KEY_DOUBLE, KEY_SEED } key_type_t;
+
+// One row per field of model_sensor_t: the allowed range is lo (<= or <) v (<= or <) hi.
+typedef struct {
+    const char *name;
+    key_type_t  type;
+    size_t      offset;
+    double      lo, hi;
+    bool        lo_open, hi_open;
+} sensor_key_t;
+
+#define SK_(field, type, lo, hi, lo_open, hi_open) \
+    { #field, type, offsetof(model_sensor_t, field), lo, hi, lo_open, hi_open }
+static const sensor_key_t sensor_keys[] = {
+    SK_(bits, KEY_BITS, 8, 16, false, false),
+    SK_(system_gain_dn_per_e, KEY_DOUBLE, 0, INFINITY, true, false),
+    SK_(full_well_e, KEY_DOUBLE, 0, INFINITY, true, false),
+    SK_(read_noise_e, KEY_DOUBLE, 0, INFINITY, false, false),
+    SK_(dark_offset_dn, KEY_DOUBLE, 0, INFINITY, false, false),
+    SK_(dsnu_dn, KEY_DOUBLE, 0, INFINITY, false, false),
+    SK_(prnu_pct, KEY_DOUBLE, 0, 50, false, false),
+    SK_(dark_current_e_per_s, KEY_DOUBLE, 0, INFINITY, false, false),
+    SK_(exposure_us, KEY_DOUBLE, 0, INFINITY, false, false),
+    SK_(vignetting, KEY_DOUBLE, 0, 1, false, true),
+    SK_(nonlinearity_pct, KEY_DOUBLE, 0, 50, false, false),
+    SK_(pattern_seed, KEY_SEED, 0, 0, false, false),
+    SK_(noise_seed, KEY_SEED, 0, 0, false, false),
+};
+#undef SK_
+#define NSENSOR_KEYS ((int)(sizeof sensor_keys / sizeof sensor_keys[0]))
+
+// A non-negative decimal integer that fits in 64 bits.
+static bool parse_u64(const char *s, uint64_t *out)
+{
+    while (*s == ' ' || *s == '\t') s++;
+    if (*s < '0' || *s > '9') return false;
+    char *end;
+    errno = 0;
+    unsigned long long v = strtoull(s, &end, 10);
+    if (errno == ERANGE) return false;
+    while (*end == ' ' || *end == '\t') end++;
+    if (*end) return false;
+    *out = v;
+    return true;
+}
+
+static bool sensor_entry(const model_ini_t *ini, const model_ini_entry_t *e, model_sensor_t *s)
+{
+    const sensor_key_t *k = NULL;
+    for (int i = 0; i < NSENSOR_KEYS; i++)
+        if (!strcmp(sensor_keys[i].name, e->key)) k = &sensor_keys[i];
+    if (!k) {
+        char buf[512];
+        size_t n = 0;
+        buf[0] = 0;
+        for (int i = 0; i < NSENSOR_KEYS && n < sizeof buf; i++)
+            n += snprintf(buf + n, sizeof buf - n, "%s%s", i ? ", " : "", sensor_keys[i].name);
+        model_error(ini->path, e->line, "unknown key '%s' in [sensor]; valid keys: %s", e->key, buf);
+        return false;
+    }
+    char *field = (char *)s + k->offset;
+    switch (k->type) {
+    case KEY_BITS: {
+        long v;
+        if (!model_parse_int(e->value, &v) || (v != 8 && v != 12 && v != 16)) {
+            model_error(ini->path, e->line, "bits = '%s': must be 8, 12 or 16", e->value);
+            return false;
+        }
+        *(int *)field = (int)v;
+        return true;
+    }
+    case KEY_SEED: {
+        uint64_t v;
+        if (!parse_u64(e->value, &v)) {
+            model_error(ini->path, e->line, "%s = '%s': must be an integer >= 0 (at most 2^64-1)", e->key,
+                        e->value);
+            return false;
+        }
+        *(uint64_t *)field = v;
+        return true;
+    }
+    case KEY_DOUBLE: {
+        double v;
+        if (!entry_double(ini, e, &v)) return false;
+        bool ok = (k->lo_open ? v > k->lo : v >= k->lo) && (k->hi_open ? v < k->hi : v <= k->hi);
+        if (!ok) {
+            char r[64];
+            if (isinf(k->hi))
+                snprintf(r, sizeof r, "%s %g", k->lo_open ? ">" : ">=", k->lo);
+            else
+                snprintf(r, sizeof r, "in %c%g, %g%c", k->lo_open ? '(' : '[', k->lo, k->hi,
+                         k->hi_open ? ')' : ']');
+            model_error(ini->path, e->line, "%s = %g is out of range: must be %s", e->key, v, r);
+            return false;
+        }
+        *(double *)field = v;
+        return true;
+    }
+    }
+    return false;
+}
+
+bool model_sensor_parse(const char *text, size_t len, const char *name, model_sensor_t *out)
+{
+    bool ok = false;
+    model_sensor_t s = model_sensor_default();
+    model_ini_t *ini = model_ini_parse(text, len, name);
+    if (!ini) goto done;
+    for (int i = 0; i < ini->nsections; i++)
+        if (strcmp(ini->sections[i], "sensor")) {
+            model_error(ini->path, ini->section_lines[i],
+                        "section [%s] is not allowed here: a sensor file has one [sensor] section", ini->sections[i]);
+            goto done;
+        }
+    if (ini->nsections != 1) {
+        model_error(ini->path, 0, "no [sensor] section; a sensor file has one [sensor] section");
+        goto done;
+    }
+    for (int k = 0; k < ini->nentries; k++)
+        if (!sensor_entry(ini, &ini->entries[k], &s)) goto done;
+    *out = s;
+    ok = true;
+done:
+    model_ini_free(ini);
+    return ok;
+}
+
+bool model_sensor_load(const char *path, model_sensor_t *out)
+{
+    size_t len;
+    char *text = model_read_file(path, &len);
+    if (!text) return false;
+    bool ok = model_sensor_parse(text, len, path, out);
+    free(text);
+    return ok;
+}

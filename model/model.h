@@ -311,6 +311,11 @@ const model_vec3_t *model_camera_ray_table(model_camera_t *cam, double *err_px);
 
 typedef struct model_tracer model_tracer_t;
 
+// Each face is triangulated in its plane (ear clipping: non-convex faces are
+// fine; an outline that crosses itself is an error naming the face). The tracer
+// keeps no pointer to the scene. All queries are thread-safe (one committed
+// Embree scene, cast from many threads). Embree errors are reported with
+// Embree's message.
 model_tracer_t *model_tracer_new(const model_scene_t *scene);
 void            model_tracer_free(model_tracer_t *t);
 
@@ -333,18 +338,55 @@ typedef struct {
 } model_lamp_sample_t;
 
 // Cast one primary ray: the nearest hit along (origin, unit dir), or face -1.
-// Fills face, material, p_mm, n (facing -dir) and range_mm; v = -dir.
+// Fills face, material, p_mm, n (facing -dir) and range_mm; v = -dir. The hit
+// point is recomputed in double precision on the face's plane.
 void model_tracer_cast(const model_tracer_t *t, model_vec3_t origin, model_vec3_t dir,
                        model_pixel_info_t *out);
-// True when the segment from p to target is unobstructed (shadow ray; any hit stops it).
+// True when the segment from p to target is unobstructed (shadow ray; any hit
+// stops it); the ends are trimmed by model_tracer_epsilon_mm.
 bool model_tracer_visible(const model_tracer_t *t, model_vec3_t p, model_vec3_t target);
 
 // pixel_info for n pixel positions q (sparse list, sub-pixel allowed), with the
 // per-lamp samples (out lamp_out: n*lamps->n, may be NULL). Rays come from the
 // camera (exact unprojection). Uses nthreads (<= 0: model_default_threads()).
+// A pixel whose ray misses the scene gets face = material = -1, v = -dir,
+// p_mm = n = 0, range_mm = 0 and zero lamp samples. V is that of the lamp
+// centre (0 when n.l <= 0: the face itself hides the lamp).
 bool model_pixel_info(const model_tracer_t *t, const model_camera_t *cam,
                       const model_lamps_t *lamps, const double *q_xy, int n,
                       model_pixel_info_t *out, model_lamp_sample_t *lamp_out, int nthreads);
+
+// Offset (mm) used to keep secondary rays off the surface they start from
+// (relative to the scene's size: about 4e-6 x its extent and distance from the origin).
+double model_tracer_epsilon_mm(const model_tracer_t *t);
+// Packets (Embree ray packets of 16; faster than the one-ray calls for
+// coherent rays). n <= MODEL_TRACER_PACKET.
+#define MODEL_TRACER_PACKET 16
+// True when none of the n rays origin + s dirs[k] (s >= 0, unit dirs) can hit
+// the scene: a conservative test of their cone against the scene's bounding box
+// (false does not mean a hit).
+bool model_tracer_rays_miss(const model_tracer_t *t, model_vec3_t origin,
+                            const model_vec3_t *dirs, int n);
+// n primary rays from one origin: out[k] as model_tracer_cast(t, origin, dirs[k]).
+// Returns the number of rays that hit. A packet whose cone of rays cannot reach
+// the scene's bounding box is answered without Embree.
+int  model_tracer_cast_packet(const model_tracer_t *t, model_vec3_t origin,
+                              const model_vec3_t *dirs, int n, model_pixel_info_t *out);
+// A packet of shadow rays on segments, in the layout of Embree's packets:
+// lane k tests org + s dir, 0 <= s <= tfar (dir need not be unit; tfar in
+// units of |dir|) when active[k] is non-zero.
+typedef struct {
+    float org_x[MODEL_TRACER_PACKET], org_y[MODEL_TRACER_PACKET], org_z[MODEL_TRACER_PACKET];
+    float dir_x[MODEL_TRACER_PACKET], dir_y[MODEL_TRACER_PACKET], dir_z[MODEL_TRACER_PACKET];
+    float tfar[MODEL_TRACER_PACKET];
+    int   active[MODEL_TRACER_PACKET];
+} model_shadow_packet_t;
+// vis[k] = 1 when lane k's segment is unobstructed, 0 when blocked or inactive.
+void model_tracer_visible_packet(const model_tracer_t *t, const model_shadow_packet_t *sp,
+                                 uint8_t vis[MODEL_TRACER_PACKET]);
+// One shadow ray from a surface point p with unit normal nrm (on the side of target).
+bool model_tracer_visible_from(const model_tracer_t *t, model_vec3_t p, model_vec3_t nrm,
+                               model_vec3_t target);
 
 // ---------------------------------------------------------------------------
 // Grey values and rendering (model/shade.c)
@@ -368,7 +410,7 @@ typedef struct {
     double Pa;                  // offset, DN
     const float *gain_map;      // g(x,y): width*height, mean 1; NULL = 1 everywhere
     model_interreflection_t interreflection;
-    double rho;                 // thesis: weight of the virtual sources
+    double rho;                 // thesis: weight of the virtual sources (sr; see model_render)
     int    thesis_samples;      // thesis: rays in the cone around the mirror direction
     double thesis_cone_deg;     // thesis: half-angle of that cone
     int    mc_samples;          // MC: paths per pixel
@@ -397,6 +439,20 @@ double model_direct_sum(const model_pixel_info_t *pi, const model_lamp_sample_t 
 // pixels whose ray misses the scene). face_out (may be NULL): face index or -1.
 // lit_out (may be NULL): lamps->n planes of width*height, 1 where lamp i lights
 // the pixel's point (V > 0.5), else 0.
+// Primary rays come from model_camera_ray_table (pixel centres, no
+// anti-aliasing); lamps may be NULL (no lamps); mats as model_resolve_materials.
+// THESIS: sh->thesis_samples rays in a fixed pattern (centre + rings) within
+//   thesis_cone_deg of the mirror direction of v; each nearest hit y is a
+//   virtual point source (eq. 18) whose area weight grows with |y - x|^2 (the
+//   cone has a fixed solid angle), which adds
+//   rho / N * L(y -> x) R_x(toward y, v, n),  L(y -> x) = sum_i V_i I_i R_y / d_i^2.
+//   rho is thus a solid angle (sr) and the term stays finite where faces meet.
+// MC: mc_samples paths per pixel, direct light at every vertex, mc_bounces
+//   indirect bounces sampled from the cosine-weighted hemisphere. With
+//   finite_lamps a lamp of radius_mm > 0 is a sphere of uniform radiance
+//   I / (pi r^2) sampled by direction (soft shadows; lit_out: mean V > 0.5).
+//   Each pixel's random stream is model_rng(seed, pixel index): the image does
+//   not depend on the thread count.
 bool model_render(const model_tracer_t *t, model_camera_t *cam, const model_lamps_t *lamps,
                   const model_material_t *const *mats, const model_shading_t *sh,
                   float *P_out, int32_t *face_out, uint8_t *lit_out);
@@ -443,7 +499,7 @@ typedef struct {
     double P_side[2];           // predicted mean grey value on each side (DN)
     double contrast;            // P_side[0] - P_side[1]
     int    face_side[2];        // face seen on each side (-1 background)
-    uint32_t lit_side[2];       // bit i: lamp i lights that side
+    uint32_t lit_side[2];       // bit i: lamp i lights that side (V > 0.5 on at least half its points)
 } model_edge_segment_t;
 
 typedef struct {
@@ -462,7 +518,11 @@ typedef struct {
 // Scene edges (pairs of faces sharing two vertices, and boundary edges), their
 // visible image segments, lighting per side and predicted contrast.
 // feature_angle_deg: edges between faces closer to coplanar are skipped.
-model_edges_t *model_edges_predict(const model_tracer_t *t, model_camera_t *cam,
+// scene: the scene t was made from. Side 0 of a segment lies to the right of
+// q0 -> q1 in the displayed image (y down), 2 px off the segment; P_side is the
+// direct term only (Pa + kc * g * model_direct_sum), whatever sh->interreflection.
+model_edges_t *model_edges_predict(const model_scene_t *scene,
+                                   const model_tracer_t *t, model_camera_t *cam,
                                    const model_lamps_t *lamps,
                                    const model_material_t *const *mats,
                                    const model_shading_t *sh, double feature_angle_deg);

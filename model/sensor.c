@@ -1,2 +1,226 @@
-// model/sensor.c: placeholder while the module is being written.
-#include "model/model.h"
+// model/sensor.c — the sensor stage: from the ideal grey value P (DN) of the
+// imaging model to the integers a camera delivers (EMVA 1288 style model).
+//
+// Per pixel (x, y), with K = system_gain_dn_per_e and FW = full_well_e:
+//   mu    = max(0, P - dark_offset_dn) / K * prnu(x,y) * vig(x,y)
+//           + dark_current_e_per_s * exposure_us * 1e-6             (electrons)
+//   n     = Poisson(mu): exact (inversion for mu < 12, Hoermann's PTRS
+//           transformed rejection for 12 <= mu < 1e7), normal above 1e7
+//   e     = n + read_noise_e * N(0,1)
+//   e     = min(e, FW)                                  (the well saturates)
+//   e_nl  = e * (1 - c * e / FW),  c = nonlinearity_pct / 100
+//           (a quadratic compression: smooth, monotonic for c < 0.5, exactly
+//           c*100 % below linear at e = FW, 0 at e = 0)
+//   DN    = round(e_nl * K + dark_offset_dn + dsnu(x,y)), clipped to [0, 2^bits - 1]
+// Vignetting: vig(x,y) = 1 - vignetting * (r / r_corner)^2, r the distance from
+// the image centre ((width-1)/2, (height-1)/2) and r_corner that of pixel (0,0);
+// vignetting is the relative fall-off at the corners.
+// Non-finite P is treated as dark (P = dark offset); mu is capped at 1e15; a
+// negative gain (prnu_pct near its upper limit of 50) gives no signal.
+// Temporal noise: model_rng(noise_seed, pixel index) — reproducible and
+// independent of the number of threads.
+//
+// Fixed patterns (model_sensor_patterns), from pattern_seed: each map is
+// a standardised field z(x,y) (mean exactly 0, std exactly 1 over the image,
+// computed in double) made of a column component, a row component and white
+// noise, independent standard normal values mixed with these variance shares:
+//   PRNU  10 % columns,  5 % rows, 85 % white;  gain = 1 + prnu_pct/100 * z
+//   DSNU  30 % columns,  5 % rows, 65 % white;  dsnu = dsnu_dn * z
+// (column fixed-pattern noise dominates in CMOS sensors).
+#define _GNU_SOURCE
+#include <stdlib.h>
+#include <string.h>
+
+#include "model/internal.h"
+
+// model_sensor_default() lives with the sensor file parser in model/config.c.
+
+// ---------------------------------------------------------------------------
+// Fixed patterns
+
+// Random streams of the patterns (high byte; the low bits index pixel, column or row).
+enum { STREAM_PIXEL = 1, STREAM_COLUMN = 2, STREAM_ROW = 3 };
+#define STREAM(kind, i) (((uint64_t)(kind) << 56) | (uint64_t)(i))
+
+// Two independent standard normal values from one Box-Muller transform.
+static inline void gauss_pair(model_rng_t *r, double *a, double *b)
+{
+    double u1 = model_rng_uniform(r), u2 = model_rng_uniform(r);
+    if (u1 < 1e-300) u1 = 1e-300;
+    double m = sqrt(-2.0 * log(u1));
+    *a = m * cos(2.0 * M_PI * u2);
+    *b = m * sin(2.0 * M_PI * u2);
+}
+
+static const double prnu_col = 0.10, prnu_row = 0.05, prnu_white = 0.85;
+static const double dsnu_col = 0.30, dsnu_row = 0.05, dsnu_white = 0.65;
+
+typedef struct {
+    const model_sensor_t *s;
+    int     width, height;
+    const double *col, *row;   // per column / row: (prnu, dsnu) standard normal pairs
+    double *zp, *zd;           // raw fields (double), width*height
+    double *sums;              // per row: sum zp, sum zp^2, sum zd, sum zd^2
+} pattern_job_t;
+
+static void pattern_rows(void *ctx, int begin, int end, int thread)
+{
+    pattern_job_t *J = ctx;
+    const double ac = sqrt(prnu_col), ar = sqrt(prnu_row), aw = sqrt(prnu_white);
+    const double bc = sqrt(dsnu_col), br = sqrt(dsnu_row), bw = sqrt(dsnu_white);
+    for (int y = begin; y < end; y++) {
+        double s[4] = { 0, 0, 0, 0 };
+        for (int x = 0; x < J->width; x++) {
+            size_t i = (size_t)y * J->width + x;
+            model_rng_t r = model_rng(J->s->pattern_seed, STREAM(STREAM_PIXEL, i));
+            double gp, gd;
+            gauss_pair(&r, &gp, &gd);
+            double zp = ac * J->col[2 * x] + ar * J->row[2 * y] + aw * gp;
+            double zd = bc * J->col[2 * x + 1] + br * J->row[2 * y + 1] + bw * gd;
+            J->zp[i] = zp;
+            J->zd[i] = zd;
+            s[0] += zp;
+            s[1] += zp * zp;
+            s[2] += zd;
+            s[3] += zd * zd;
+        }
+        memcpy(J->sums + 4 * (size_t)y, s, sizeof s);
+    }
+}
+
+void model_sensor_patterns(const model_sensor_t *s, int width, int height,
+                           float *prnu_gain, float *dsnu_dn)
+{
+    if (width <= 0 || height <= 0 || (!prnu_gain && !dsnu_dn)) return;
+    size_t n = (size_t)width * height;
+    double *col = malloc((size_t)width * 2 * sizeof(double));
+    double *row = malloc((size_t)height * 2 * sizeof(double));
+    double *zp = malloc(n * sizeof(double)), *zd = malloc(n * sizeof(double));
+    double *sums = malloc((size_t)height * 4 * sizeof(double));
+    if (!col || !row || !zp || !zd || !sums) {
+        // No way to report from here; fall back to the ideal sensor.
+        MODEL_FAIL("out of memory for %dx%d sensor patterns; using flat patterns", width, height);
+        for (size_t i = 0; i < n; i++) {
+            if (prnu_gain) prnu_gain[i] = 1.0f;
+            if (dsnu_dn) dsnu_dn[i] = 0.0f;
+        }
+        goto done;
+    }
+    for (int x = 0; x < width; x++) {
+        model_rng_t r = model_rng(s->pattern_seed, STREAM(STREAM_COLUMN, x));
+        gauss_pair(&r, &col[2 * x], &col[2 * x + 1]);
+    }
+    for (int y = 0; y < height; y++) {
+        model_rng_t r = model_rng(s->pattern_seed, STREAM(STREAM_ROW, y));
+        gauss_pair(&r, &row[2 * y], &row[2 * y + 1]);
+    }
+    pattern_job_t J = { s, width, height, col, row, zp, zd, sums };
+    model_parallel_for(height, 16, model_default_threads(), pattern_rows, &J);
+    double t[4] = { 0, 0, 0, 0 };   // summed in row order: independent of the threads
+    for (int y = 0; y < height; y++)
+        for (int k = 0; k < 4; k++) t[k] += sums[4 * (size_t)y + k];
+    double mp = t[0] / n, md = t[2] / n;
+    double vp = t[1] / n - mp * mp, vd = t[3] / n - md * md;
+    double kp = vp > 0 ? s->prnu_pct / 100.0 / sqrt(vp) : 0;
+    double kd = vd > 0 ? s->dsnu_dn / sqrt(vd) : 0;
+    for (size_t i = 0; i < n; i++) {
+        if (prnu_gain) prnu_gain[i] = (float)(1.0 + kp * (zp[i] - mp));
+        if (dsnu_dn) dsnu_dn[i] = (float)(kd * (zd[i] - md));
+    }
+done:
+    free(col);
+    free(row);
+    free(zp);
+    free(zd);
+    free(sums);
+}
+
+// ---------------------------------------------------------------------------
+// Temporal noise and the response
+
+// Poisson variate with mean mu >= 0.
+static double poisson(double mu, model_rng_t *r)
+{
+    if (mu <= 0) return 0;
+    if (mu < 12) {   // inversion
+        double u = model_rng_uniform(r), p = exp(-mu), F = p;
+        int k = 0;
+        while (u > F && k < 200) {
+            k++;
+            p *= mu / k;
+            F += p;
+        }
+        return k;
+    }
+    if (mu < 1e7) {
+        // PTRS: W. Hoermann, "The transformed rejection method for generating
+        // Poisson random variables", Insurance: Mathematics and Economics 12 (1993).
+        double smu = sqrt(mu), lmu = log(mu);
+        double b = 0.931 + 2.53 * smu, a = -0.059 + 0.02483 * b;
+        double inv_alpha = 1.1239 + 1.1328 / (b - 3.4), v_r = 0.9277 - 3.6224 / (b - 2);
+        for (;;) {
+            double U = model_rng_uniform(r) - 0.5, V = model_rng_uniform(r);
+            double us = 0.5 - fabs(U);
+            double k = floor((2 * a / us + b) * U + mu + 0.43);
+            if (us >= 0.07 && V <= v_r) return k;
+            if (k < 0 || (us < 0.013 && V > us)) continue;
+            int sign;
+            if (log(V) + log(inv_alpha) - log(a / (us * us) + b) <= -mu + k * lmu - lgamma_r(k + 1, &sign))
+                return k;
+        }
+    }
+    return fmax(0.0, floor(mu + sqrt(mu) * model_rng_gauss(r) + 0.5));
+}
+
+typedef struct {
+    const model_sensor_t *s;
+    int          width, height;
+    float       *img;
+    const float *prnu, *dsnu;   // may be NULL (flat)
+} apply_job_t;
+
+static void apply_rows(void *ctx, int begin, int end, int thread)
+{
+    const apply_job_t *J = ctx;
+    const model_sensor_t *s = J->s;
+    const double K = s->system_gain_dn_per_e, FW = s->full_well_e;
+    const double c = s->nonlinearity_pct / 100.0;
+    const double dark_e = s->dark_current_e_per_s * s->exposure_us * 1e-6;
+    const double maxv = s->bits >= 1 && s->bits <= 16 ? (double)((1 << s->bits) - 1) : 65535.0;
+    const double cx = 0.5 * (J->width - 1), cy = 0.5 * (J->height - 1);
+    const double rc2 = cx * cx + cy * cy;
+    for (int y = begin; y < end; y++)
+        for (int x = 0; x < J->width; x++) {
+            size_t i = (size_t)y * J->width + x;
+            double sig = J->img[i] - s->dark_offset_dn;
+            if (!(sig > 0)) sig = 0;   // also NaN
+            double vig = rc2 > 0 ? 1.0 - s->vignetting * ((x - cx) * (x - cx) + (y - cy) * (y - cy)) / rc2 : 1.0;
+            double mu = sig / K * (J->prnu ? J->prnu[i] : 1.0) * vig + dark_e;
+            if (!(mu > 0)) mu = 0;
+            if (mu > 1e15) mu = 1e15;
+            model_rng_t r = model_rng(s->noise_seed, i);
+            double e = poisson(mu, &r);
+            if (s->read_noise_e > 0) e += s->read_noise_e * model_rng_gauss(&r);
+            if (e > FW) e = FW;
+            e *= 1.0 - c * e / FW;
+            double dn = floor(e * K + s->dark_offset_dn + (J->dsnu ? J->dsnu[i] : 0.0) + 0.5);
+            if (!(dn >= 0)) dn = 0;
+            if (dn > maxv) dn = maxv;
+            J->img[i] = (float)dn;
+        }
+}
+
+void model_sensor_apply(const model_sensor_t *s, int width, int height, float *img)
+{
+    if (width <= 0 || height <= 0 || !img) return;
+    size_t n = (size_t)width * height;
+    float *prnu = s->prnu_pct != 0 ? malloc(n * sizeof(float)) : NULL;
+    float *dsnu = s->dsnu_dn != 0 ? malloc(n * sizeof(float)) : NULL;
+    if ((s->prnu_pct != 0 && !prnu) || (s->dsnu_dn != 0 && !dsnu))
+        MODEL_FAIL("out of memory for %dx%d sensor patterns; applying flat patterns", width, height);
+    if (prnu || dsnu) model_sensor_patterns(s, width, height, prnu, dsnu);
+    apply_job_t J = { s, width, height, img, prnu, dsnu };
+    model_parallel_for(height, 8, model_default_threads(), apply_rows, &J);
+    free(prnu);
+    free(dsnu);
+}

@@ -1,2 +1,625 @@
-// model/trace.c: placeholder while the module is being written.
-#include "model/model.h"
+// model/trace.c — ray casting with Embree 3 over the scene's planar faces
+// (thesis ch. 4: Embree replaces the polygon inside/outside test and the
+// bounding spheres).
+//
+// Each face is triangulated in its own plane by ear clipping (non-convex faces
+// work); primID -> face index is kept. Hit points are recomputed in double
+// precision from the face's plane (Embree works in float), so a hit point lies
+// on its face's plane to double precision.
+#include <embree3/rtcore.h>
+#include <stdatomic.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "model/internal.h"
+
+struct model_tracer {
+    RTCDevice     device;
+    RTCScene      scene;
+    int           nfaces;
+    int           ntriangles;
+    int          *prim_face;     // triangle -> face index
+    model_vec3_t *face_normal;   // unit (Newell) normal of each face
+    double       *face_offset;   // plane: normal . x = offset
+    int32_t      *face_material;
+    double        eps_mm;
+    double        lo[3], hi[3];  // bounding box of the vertices (lo > hi: empty scene)
+};
+
+// ---------------------------------------------------------------------------
+// Embree errors
+
+static const char *rtc_error_name(enum RTCError e)
+{
+    switch (e) {
+    case RTC_ERROR_NONE: return "no error";
+    case RTC_ERROR_UNKNOWN: return "unknown error";
+    case RTC_ERROR_INVALID_ARGUMENT: return "invalid argument";
+    case RTC_ERROR_INVALID_OPERATION: return "invalid operation";
+    case RTC_ERROR_OUT_OF_MEMORY: return "out of memory";
+    case RTC_ERROR_UNSUPPORTED_CPU: return "unsupported CPU";
+    case RTC_ERROR_CANCELLED: return "cancelled";
+    }
+    return "unrecognised error";
+}
+
+static void rtc_error_cb(void *user, enum RTCError code, const char *str)
+{
+    (void)user;
+    model_error("embree", 0, "%s: %s", rtc_error_name(code), str ? str : "");
+}
+
+// True (and an error message naming `what`) when the device reports an error.
+static bool rtc_failed(RTCDevice dev, const char *what)
+{
+    enum RTCError e = rtcGetDeviceError(dev);
+    if (e == RTC_ERROR_NONE) return false;
+    model_error("embree", 0, "%s failed: %s (Embree 3, libembree3; check memory and CPU support)",
+                what, rtc_error_name(e));
+    return true;
+}
+
+// ---------------------------------------------------------------------------
+// Triangulation of one planar polygon by ear clipping in its plane.
+
+typedef struct { double u, w; } pt2_t;
+
+static double cross2(pt2_t a, pt2_t b, pt2_t c)   // (b-a) x (c-b)
+{
+    return (b.u - a.u) * (c.w - b.w) - (b.w - a.w) * (c.u - b.u);
+}
+
+// p inside or on the border of the counter-clockwise triangle abc.
+static bool in_triangle(pt2_t p, pt2_t a, pt2_t b, pt2_t c, double tol)
+{
+    double e0 = (b.u - a.u) * (p.w - a.w) - (b.w - a.w) * (p.u - a.u);
+    double e1 = (c.u - b.u) * (p.w - b.w) - (c.w - b.w) * (p.u - b.u);
+    double e2 = (a.u - c.u) * (p.w - c.w) - (a.w - c.w) * (p.u - c.u);
+    return e0 >= -tol && e1 >= -tol && e2 >= -tol;
+}
+
+static bool same_pt(pt2_t a, pt2_t b) { return a.u == b.u && a.w == b.w; }
+
+// Triangulates face f (m vertices) into tri (3*(m-2) scene vertex indices at
+// most). Returns the number of triangles, or -1 when the polygon has no ear
+// (self-intersecting).
+static int triangulate_face(const model_scene_t *s, const model_face_t *f, int *local,
+                            pt2_t *pts, unsigned *tri)
+{
+    int m = f->nverts;
+    model_vec3_t n = f->normal;
+    // An orthonormal basis (a, b) of the face's plane with a x b = n.
+    model_vec3_t helper = fabs(n.x) < 0.6 ? v3(1, 0, 0) : v3(0, 1, 0);
+    model_vec3_t a = v3_unit(v3_cross(helper, n));
+    model_vec3_t b = v3_cross(n, a);
+    double umin = INFINITY, umax = -INFINITY, wmin = INFINITY, wmax = -INFINITY;
+    for (int k = 0; k < m; k++) {
+        model_vec3_t x = s->vertices[f->verts[k]];
+        pts[k] = (pt2_t){ v3_dot(x, a), v3_dot(x, b) };
+        umin = fmin(umin, pts[k].u); umax = fmax(umax, pts[k].u);
+        wmin = fmin(wmin, pts[k].w); wmax = fmax(wmax, pts[k].w);
+    }
+    double ext = fmax(umax - umin, wmax - wmin);
+    double tol = 1e-12 * ext * ext;
+    // Orientation: make the local order counter-clockwise in (a, b).
+    double area2 = 0;
+    for (int k = 0; k < m; k++) {
+        pt2_t p = pts[k], q = pts[(k + 1) % m];
+        area2 += p.u * q.w - q.u * p.w;
+    }
+    for (int k = 0; k < m; k++) local[k] = area2 >= 0 ? k : m - 1 - k;
+    int count = m, ntri = 0;
+    while (count > 3) {
+        bool clipped = false;
+        for (int i = 0; i < count && !clipped; i++) {
+            int ia = local[(i + count - 1) % count], ib = local[i], ic = local[(i + 1) % count];
+            pt2_t pa = pts[ia], pb = pts[ib], pc = pts[ic];
+            if (cross2(pa, pb, pc) <= tol) continue;   // reflex or collinear
+            bool ear = true;
+            for (int j = 0; j < count && ear; j++) {
+                int ij = local[j];
+                if (ij == ia || ij == ib || ij == ic) continue;
+                pt2_t pj = pts[ij];
+                if (same_pt(pj, pa) || same_pt(pj, pb) || same_pt(pj, pc)) continue;
+                if (in_triangle(pj, pa, pb, pc, tol)) ear = false;
+            }
+            if (!ear) continue;
+            tri[3 * ntri + 0] = (unsigned)f->verts[ia];
+            tri[3 * ntri + 1] = (unsigned)f->verts[ib];
+            tri[3 * ntri + 2] = (unsigned)f->verts[ic];
+            ntri++;
+            memmove(&local[i], &local[i + 1], (size_t)(count - i - 1) * sizeof *local);
+            count--;
+            clipped = true;
+        }
+        if (clipped) continue;
+        // No ear: drop a collinear (zero-area) vertex if there is one.
+        for (int i = 0; i < count && !clipped; i++) {
+            int ia = local[(i + count - 1) % count], ib = local[i], ic = local[(i + 1) % count];
+            if (fabs(cross2(pts[ia], pts[ib], pts[ic])) <= tol) {
+                memmove(&local[i], &local[i + 1], (size_t)(count - i - 1) * sizeof *local);
+                count--;
+                clipped = true;
+            }
+        }
+        if (!clipped) return -1;
+    }
+    if (count == 3 && cross2(pts[local[0]], pts[local[1]], pts[local[2]]) > tol) {
+        tri[3 * ntri + 0] = (unsigned)f->verts[local[0]];
+        tri[3 * ntri + 1] = (unsigned)f->verts[local[1]];
+        tri[3 * ntri + 2] = (unsigned)f->verts[local[2]];
+        ntri++;
+    }
+    return ntri;
+}
+
+// ---------------------------------------------------------------------------
+
+model_tracer_t *model_tracer_new(const model_scene_t *scene)
+{
+    model_tracer_t *t = NULL;
+    int *local = NULL;
+    pt2_t *pts = NULL;
+    unsigned *tris = NULL;
+    RTCGeometry geom = NULL;
+    bool ok = false;
+    const char *where = scene && scene->path ? scene->path : "scene";
+
+    if (!scene || scene->nfaces < 0 || scene->nvertices < 0) {
+        MODEL_FAIL("model_tracer_new: no scene");
+        return NULL;
+    }
+    t = calloc(1, sizeof *t);
+    if (!t) goto oom;
+    t->nfaces = scene->nfaces;
+    int maxv = 3, maxtri = 0;
+    for (int i = 0; i < scene->nfaces; i++) {
+        const model_face_t *f = &scene->faces[i];
+        if (f->nverts < 3) {
+            model_error(where, f->line, "face %d has %d vertices; a face needs at least 3",
+                        f->number, f->nverts);
+            goto done;
+        }
+        for (int k = 0; k < f->nverts; k++)
+            if (f->verts[k] < 0 || f->verts[k] >= scene->nvertices) {
+                model_error(where, f->line, "face %d refers to vertex index %d, outside 0..%d",
+                            f->number, f->verts[k], scene->nvertices - 1);
+                goto done;
+            }
+        if (f->nverts > maxv) maxv = f->nverts;
+        maxtri += f->nverts - 2;
+    }
+    t->face_normal = malloc((size_t)(scene->nfaces + 1) * sizeof *t->face_normal);
+    t->face_offset = malloc((size_t)(scene->nfaces + 1) * sizeof *t->face_offset);
+    t->face_material = malloc((size_t)(scene->nfaces + 1) * sizeof *t->face_material);
+    t->prim_face = malloc((size_t)(maxtri + 1) * sizeof *t->prim_face);
+    tris = malloc((size_t)(3 * maxtri + 3) * sizeof *tris);
+    local = malloc((size_t)maxv * sizeof *local);
+    pts = malloc((size_t)maxv * sizeof *pts);
+    if (!t->face_normal || !t->face_offset || !t->face_material || !t->prim_face || !tris ||
+        !local || !pts)
+        goto oom;
+
+    // Scene size -> epsilon for secondary rays.
+    double lo[3] = { INFINITY, INFINITY, INFINITY }, hi[3] = { -INFINITY, -INFINITY, -INFINITY };
+    double maxabs = 0;
+    for (int i = 0; i < scene->nvertices; i++) {
+        model_vec3_t x = scene->vertices[i];
+        double c[3] = { x.x, x.y, x.z };
+        for (int k = 0; k < 3; k++) {
+            if (!isfinite(c[k])) {
+                model_error(where, 0, "vertex %d has a non-finite coordinate", i + 1);
+                goto done;
+            }
+            lo[k] = fmin(lo[k], c[k]);
+            hi[k] = fmax(hi[k], c[k]);
+            maxabs = fmax(maxabs, fabs(c[k]));
+        }
+    }
+    double diag = scene->nvertices ? sqrt((hi[0] - lo[0]) * (hi[0] - lo[0]) +
+                                          (hi[1] - lo[1]) * (hi[1] - lo[1]) +
+                                          (hi[2] - lo[2]) * (hi[2] - lo[2]))
+                                   : 1.0;
+    t->eps_mm = 4e-6 * (diag + maxabs) + 1e-9;
+    for (int k = 0; k < 3; k++) {
+        t->lo[k] = lo[k];
+        t->hi[k] = hi[k];
+    }
+
+    int ntri = 0;
+    for (int i = 0; i < scene->nfaces; i++) {
+        const model_face_t *f = &scene->faces[i];
+        t->face_normal[i] = f->normal;
+        t->face_offset[i] = f->offset_mm;
+        t->face_material[i] = f->material;
+        if (!(v3_norm(f->normal) > 0.5)) continue;   // degenerate (zero-area) face: nothing to hit
+        int k = triangulate_face(scene, f, local, pts, tris + 3 * ntri);
+        if (k < 0) {
+            model_error(where, f->line,
+                        "face %d cannot be triangulated (its outline crosses itself?); "
+                        "fix the order of its vertices", f->number);
+            goto done;
+        }
+        for (int j = 0; j < k; j++) t->prim_face[ntri + j] = i;
+        ntri += k;
+    }
+    t->ntriangles = ntri;
+
+    t->device = rtcNewDevice(NULL);
+    if (!t->device) {
+        model_error("embree", 0, "rtcNewDevice failed: %s (is libembree3 usable on this CPU?)",
+                    rtc_error_name(rtcGetDeviceError(NULL)));
+        goto done;
+    }
+    rtcSetDeviceErrorFunction(t->device, rtc_error_cb, NULL);
+    t->scene = rtcNewScene(t->device);
+    if (!t->scene || rtc_failed(t->device, "rtcNewScene")) goto done;
+    rtcSetSceneFlags(t->scene, RTC_SCENE_FLAG_ROBUST);
+    rtcSetSceneBuildQuality(t->scene, RTC_BUILD_QUALITY_HIGH);
+    if (ntri > 0) {
+        geom = rtcNewGeometry(t->device, RTC_GEOMETRY_TYPE_TRIANGLE);
+        if (!geom || rtc_failed(t->device, "rtcNewGeometry")) goto done;
+        float *vb = rtcSetNewGeometryBuffer(geom, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3,
+                                            3 * sizeof(float), (size_t)scene->nvertices);
+        unsigned *ib = rtcSetNewGeometryBuffer(geom, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3,
+                                               3 * sizeof(unsigned), (size_t)ntri);
+        if (!vb || !ib || rtc_failed(t->device, "rtcSetNewGeometryBuffer")) goto done;
+        for (int i = 0; i < scene->nvertices; i++) {
+            vb[3 * i + 0] = (float)scene->vertices[i].x;
+            vb[3 * i + 1] = (float)scene->vertices[i].y;
+            vb[3 * i + 2] = (float)scene->vertices[i].z;
+        }
+        memcpy(ib, tris, (size_t)ntri * 3 * sizeof *ib);
+        rtcCommitGeometry(geom);
+        rtcAttachGeometry(t->scene, geom);
+        rtcReleaseGeometry(geom);
+        geom = NULL;
+        if (rtc_failed(t->device, "building the triangle mesh")) goto done;
+    }
+    rtcCommitScene(t->scene);
+    if (rtc_failed(t->device, "rtcCommitScene")) goto done;
+    ok = true;
+    goto done;
+oom:
+    model_error(where, 0, "out of memory building the ray tracer");
+done:
+    if (geom) rtcReleaseGeometry(geom);
+    free(local);
+    free(pts);
+    free(tris);
+    if (!ok) {
+        model_tracer_free(t);
+        return NULL;
+    }
+    return t;
+}
+
+void model_tracer_free(model_tracer_t *t)
+{
+    if (!t) return;
+    if (t->scene) rtcReleaseScene(t->scene);
+    if (t->device) rtcReleaseDevice(t->device);
+    free(t->prim_face);
+    free(t->face_normal);
+    free(t->face_offset);
+    free(t->face_material);
+    free(t);
+}
+
+double model_tracer_epsilon_mm(const model_tracer_t *t) { return t->eps_mm; }
+
+// Fill out from a hit of face f at Embree distance tfar along (o, dir).
+static inline void fill_hit(const model_tracer_t *t, model_vec3_t o, model_vec3_t dir, int f,
+                            double tfar, model_pixel_info_t *out)
+{
+    model_vec3_t n = t->face_normal[f];
+    double den = v3_dot(n, dir);
+    double tt = tfar;
+    if (fabs(den) > 1e-9) {
+        double tp = (t->face_offset[f] - v3_dot(n, o)) / den;
+        if (tp > 0) tt = tp;
+    }
+    out->face = f;
+    out->material = t->face_material[f];
+    out->p_mm = v3_add(o, v3_scale(dir, tt));
+    out->n = den > 0 ? v3_scale(n, -1) : n;
+    out->v = v3_scale(dir, -1);
+    out->range_mm = tt;
+}
+
+static inline void fill_miss(model_vec3_t dir, model_pixel_info_t *out)
+{
+    out->face = -1;
+    out->material = -1;
+    out->p_mm = v3(0, 0, 0);
+    out->n = v3(0, 0, 0);
+    out->v = v3_scale(dir, -1);
+    out->range_mm = 0;
+}
+
+void model_tracer_cast(const model_tracer_t *t, model_vec3_t origin, model_vec3_t dir,
+                       model_pixel_info_t *out)
+{
+    struct RTCIntersectContext ctx;
+    rtcInitIntersectContext(&ctx);
+    struct RTCRayHit rh;
+    rh.ray.org_x = (float)origin.x;
+    rh.ray.org_y = (float)origin.y;
+    rh.ray.org_z = (float)origin.z;
+    rh.ray.dir_x = (float)dir.x;
+    rh.ray.dir_y = (float)dir.y;
+    rh.ray.dir_z = (float)dir.z;
+    rh.ray.tnear = 0.0f;
+    rh.ray.tfar = INFINITY;
+    rh.ray.time = 0.0f;
+    rh.ray.mask = 0xffffffffu;
+    rh.ray.id = 0;
+    rh.ray.flags = 0;
+    rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
+    rh.hit.primID = RTC_INVALID_GEOMETRY_ID;
+    rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
+    rtcIntersect1(t->scene, &ctx, &rh);
+    if (rh.hit.geomID == RTC_INVALID_GEOMETRY_ID || rh.hit.primID >= (unsigned)t->ntriangles)
+        fill_miss(dir, out);
+    else
+        fill_hit(t, origin, dir, t->prim_face[rh.hit.primID], rh.ray.tfar, out);
+}
+
+// Occlusion of the segment org + s*dir, s in [tnear, tfar].
+static bool occluded1(const model_tracer_t *t, model_vec3_t org, model_vec3_t dir, double tnear,
+                      double tfar)
+{
+    if (!(tfar > tnear)) return false;
+    struct RTCIntersectContext ctx;
+    rtcInitIntersectContext(&ctx);
+    struct RTCRay r;
+    r.org_x = (float)org.x;
+    r.org_y = (float)org.y;
+    r.org_z = (float)org.z;
+    r.dir_x = (float)dir.x;
+    r.dir_y = (float)dir.y;
+    r.dir_z = (float)dir.z;
+    r.tnear = (float)tnear;
+    r.tfar = (float)tfar;
+    r.time = 0.0f;
+    r.mask = 0xffffffffu;
+    r.id = 0;
+    r.flags = 0;
+    rtcOccluded1(t->scene, &ctx, &r);
+    return r.tfar == -INFINITY;
+}
+
+bool model_tracer_visible(const model_tracer_t *t, model_vec3_t p, model_vec3_t target)
+{
+    model_vec3_t d = v3_sub(target, p);
+    double len = v3_norm(d);
+    if (!(len > 2 * t->eps_mm)) return true;
+    return !occluded1(t, p, v3_scale(d, 1.0 / len), t->eps_mm, len - t->eps_mm);
+}
+
+bool model_tracer_visible_from(const model_tracer_t *t, model_vec3_t p, model_vec3_t nrm,
+                               model_vec3_t target)
+{
+    model_vec3_t o = v3_add(p, v3_scale(nrm, t->eps_mm));
+    model_vec3_t d = v3_sub(target, o);
+    double len = v3_norm(d);
+    if (!(len > t->eps_mm)) return true;
+    return !occluded1(t, o, v3_scale(d, 1.0 / len), 0.0, len - t->eps_mm);
+}
+
+// True when no ray origin + s dirs[k] (s >= 0, dirs unit) can reach the
+// bounding box. Conservative: with c the mean direction and chord = max |dirs[k] - c|,
+// ray k at distance s is within s * chord of the central ray's point at s, so
+// a ray that meets the box at s <= smax means the central ray meets the box
+// grown by smax * chord (smax: farthest box corner from the origin).
+bool model_tracer_rays_miss(const model_tracer_t *t, model_vec3_t o, const model_vec3_t *dirs,
+                            int n)
+{
+    if (!(t->lo[0] <= t->hi[0])) return true;   // empty scene
+    model_vec3_t c = v3(0, 0, 0);
+    for (int k = 0; k < n; k++) c = v3_add(c, dirs[k]);
+    double cn = v3_norm(c);
+    if (!(cn > 0.5 * n)) return false;   // rays too spread for the test
+    c = v3_scale(c, 1.0 / cn);
+    double chord2 = 0;
+    for (int k = 0; k < n; k++) {
+        model_vec3_t e = v3_sub(dirs[k], c);
+        double e2 = v3_dot(e, e);
+        if (e2 > chord2) chord2 = e2;
+    }
+    double oc[3] = { o.x, o.y, o.z }, dc[3] = { c.x, c.y, c.z };
+    double smax2 = 0;
+    for (int k = 0; k < 3; k++) {
+        double a = fmax(fabs(oc[k] - t->lo[k]), fabs(oc[k] - t->hi[k]));
+        smax2 += a * a;
+    }
+    double grow = sqrt(smax2 * chord2) * (1 + 1e-6) + t->eps_mm;
+    double s0 = 0, s1 = INFINITY;
+    for (int k = 0; k < 3; k++) {
+        double lo = t->lo[k] - grow, hi = t->hi[k] + grow;
+        if (dc[k] == 0) {
+            if (oc[k] < lo || oc[k] > hi) return true;
+            continue;
+        }
+        double a = (lo - oc[k]) / dc[k], b = (hi - oc[k]) / dc[k];
+        if (a > b) {
+            double tmp = a;
+            a = b;
+            b = tmp;
+        }
+        if (a > s0) s0 = a;
+        if (b < s1) s1 = b;
+        if (s0 > s1) return true;
+    }
+    return false;
+}
+
+int model_tracer_cast_packet(const model_tracer_t *t, model_vec3_t origin,
+                             const model_vec3_t *dirs, int n, model_pixel_info_t *out)
+{
+    if (n <= 0) return 0;
+    if (n > MODEL_TRACER_PACKET) n = MODEL_TRACER_PACKET;
+    if (model_tracer_rays_miss(t, origin, dirs, n)) {
+        for (int k = 0; k < n; k++) fill_miss(dirs[k], &out[k]);
+        return 0;
+    }
+    RTC_ALIGN(64) struct RTCRayHit16 rh;
+    RTC_ALIGN(64) int valid[16];
+    struct RTCIntersectContext ctx;
+    rtcInitIntersectContext(&ctx);
+    ctx.flags = RTC_INTERSECT_CONTEXT_FLAG_COHERENT;
+    float ox = (float)origin.x, oy = (float)origin.y, oz = (float)origin.z;
+    for (int k = 0; k < 16; k++) {
+        int kk = k < n ? k : 0;
+        valid[k] = k < n ? -1 : 0;
+        rh.ray.org_x[k] = ox;
+        rh.ray.org_y[k] = oy;
+        rh.ray.org_z[k] = oz;
+        rh.ray.dir_x[k] = (float)dirs[kk].x;
+        rh.ray.dir_y[k] = (float)dirs[kk].y;
+        rh.ray.dir_z[k] = (float)dirs[kk].z;
+        rh.ray.tnear[k] = 0.0f;
+        rh.ray.tfar[k] = INFINITY;
+        rh.ray.time[k] = 0.0f;
+        rh.ray.mask[k] = 0xffffffffu;
+        rh.ray.id[k] = (unsigned)k;
+        rh.ray.flags[k] = 0;
+        rh.hit.geomID[k] = RTC_INVALID_GEOMETRY_ID;
+        rh.hit.primID[k] = RTC_INVALID_GEOMETRY_ID;
+        rh.hit.instID[0][k] = RTC_INVALID_GEOMETRY_ID;
+    }
+    rtcIntersect16(valid, t->scene, &ctx, &rh);
+    int nhit = 0;
+    for (int k = 0; k < n; k++) {
+        if (rh.hit.geomID[k] == RTC_INVALID_GEOMETRY_ID || rh.hit.primID[k] >= (unsigned)t->ntriangles) {
+            fill_miss(dirs[k], &out[k]);
+        } else {
+            fill_hit(t, origin, dirs[k], t->prim_face[rh.hit.primID[k]], rh.ray.tfar[k], &out[k]);
+            nhit++;
+        }
+    }
+    return nhit;
+}
+
+void model_tracer_visible_packet(const model_tracer_t *t, const model_shadow_packet_t *sp,
+                                 uint8_t vis[MODEL_TRACER_PACKET])
+{
+    RTC_ALIGN(64) struct RTCRay16 r;
+    RTC_ALIGN(64) int valid[16];
+    struct RTCIntersectContext ctx;
+    rtcInitIntersectContext(&ctx);
+    ctx.flags = RTC_INTERSECT_CONTEXT_FLAG_COHERENT;
+    int nvalid = 0;
+    for (int k = 0; k < 16; k++) {
+        bool on = sp->active[k] && sp->tfar[k] > 0;
+        valid[k] = on ? -1 : 0;
+        nvalid += on;
+        r.org_x[k] = sp->org_x[k];
+        r.org_y[k] = sp->org_y[k];
+        r.org_z[k] = sp->org_z[k];
+        r.dir_x[k] = sp->dir_x[k];
+        r.dir_y[k] = sp->dir_y[k];
+        r.dir_z[k] = sp->dir_z[k];
+        r.tnear[k] = 0.0f;
+        r.tfar[k] = on ? sp->tfar[k] : -INFINITY;
+        r.time[k] = 0.0f;
+        r.mask[k] = 0xffffffffu;
+        r.id[k] = (unsigned)k;
+        r.flags[k] = 0;
+    }
+    if (nvalid) rtcOccluded16(valid, t->scene, &ctx, &r);
+    for (int k = 0; k < 16; k++) vis[k] = valid[k] && r.tfar[k] != -INFINITY;
+}
+
+// ---------------------------------------------------------------------------
+// pixel_info for a sparse list of pixel positions.
+
+typedef struct {
+    const model_tracer_t *t;
+    const model_camera_t *cam;
+    const model_lamps_t  *lamps;
+    const double         *q;
+    model_pixel_info_t   *out;
+    model_lamp_sample_t  *lamp_out;
+    model_vec3_t          centre;
+    atomic_bool           failed;
+    char                  err[1024];
+} pinfo_ctx_t;
+
+#define PINFO_CHUNK 256
+
+static void pinfo_worker(void *vctx, int begin, int end, int thread)
+{
+    pinfo_ctx_t *c = vctx;
+    (void)thread;
+    model_vec3_t dirs[PINFO_CHUNK];
+    int nl = c->lamps ? c->lamps->n : 0;
+    for (int b = begin; b < end; b += PINFO_CHUNK) {
+        int m = end - b < PINFO_CHUNK ? end - b : PINFO_CHUNK;
+        if (atomic_load(&c->failed)) return;
+        if (!model_camera_unproject(c->cam, c->q + 2 * (size_t)b, m, dirs)) {
+            if (!atomic_exchange(&c->failed, true))
+                snprintf(c->err, sizeof c->err, "%s", model_last_error());
+            return;
+        }
+        for (int k = 0; k < m; k++) {
+            int i = b + k;
+            model_pixel_info_t *pi = &c->out[i];
+            model_tracer_cast(c->t, c->centre, v3_unit(dirs[k]), pi);
+            pi->q[0] = c->q[2 * (size_t)i];
+            pi->q[1] = c->q[2 * (size_t)i + 1];
+            if (!c->lamp_out) continue;
+            for (int j = 0; j < nl; j++) {
+                model_lamp_sample_t *ls = &c->lamp_out[(size_t)i * nl + j];
+                if (pi->face < 0) {
+                    *ls = (model_lamp_sample_t){ v3(0, 0, 0), 0.0, 0.0 };
+                    continue;
+                }
+                model_vec3_t L = v3_sub(c->lamps->lamps[j].position_mm, pi->p_mm);
+                double d = v3_norm(L);
+                ls->d_mm = d;
+                ls->l = d > 0 ? v3_scale(L, 1.0 / d) : v3(0, 0, 0);
+                ls->V = v3_dot(ls->l, pi->n) > 0 &&
+                                model_tracer_visible_from(c->t, pi->p_mm, pi->n,
+                                                          c->lamps->lamps[j].position_mm)
+                            ? 1.0
+                            : 0.0;
+            }
+        }
+    }
+}
+
+bool model_pixel_info(const model_tracer_t *t, const model_camera_t *cam,
+                      const model_lamps_t *lamps, const double *q_xy, int n,
+                      model_pixel_info_t *out, model_lamp_sample_t *lamp_out, int nthreads)
+{
+    if (!t || !cam || (n > 0 && (!q_xy || !out)) || n < 0) {
+        MODEL_FAIL("model_pixel_info: missing tracer, camera, pixel list or output");
+        return false;
+    }
+    for (int i = 0; i < n; i++)
+        if (!isfinite(q_xy[2 * (size_t)i]) || !isfinite(q_xy[2 * (size_t)i + 1])) {
+            MODEL_FAIL("model_pixel_info: pixel %d has a non-finite coordinate", i);
+            return false;
+        }
+    pinfo_ctx_t *c = calloc(1, sizeof *c);
+    if (!c) {
+        MODEL_FAIL("out of memory");
+        return false;
+    }
+    c->t = t;
+    c->cam = cam;
+    c->lamps = lamps;
+    c->q = q_xy;
+    c->out = out;
+    c->lamp_out = lamp_out;
+    c->centre = model_camera_centre_world(cam);
+    atomic_init(&c->failed, false);
+    if (nthreads <= 0) nthreads = model_default_threads();
+    model_parallel_for(n, PINFO_CHUNK, nthreads, pinfo_worker, c);
+    bool ok = !atomic_load(&c->failed);
+    if (!ok) model_error(NULL, 0, "%s", c->err);
+    free(c);
+    return ok;
+}

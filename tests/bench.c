@@ -1,2 +1,341 @@
+// tests/bench.c — bin/refl-bench: performance figures of the imaging model,
+// one "NAME: VALUE UNIT" line each (run from the source top dir by `make bench`).
+//
+// Figures: ray table build, exact unprojection of all pixels, the renderer on
+// the T-stiffener example (1280x1024, 4 lamps, direct light + shadows) with a
+// warm and a cold ray table, a bare single-threaded Embree loop casting the
+// same primary and shadow rays (rays precomputed), their ratio, and the
+// pixel_info throughput for 5000 scattered pixels. Times are medians.
+#include <embree3/rtcore.h>
 #include <stdio.h>
-int main(void){return 0;}
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+
+#include "model/internal.h"
+
+#define NRUNS 7
+
+static int cmp_double(const void *a, const void *b)
+{
+    double x = *(const double *)a, y = *(const double *)b;
+    return x < y ? -1 : x > y;
+}
+
+static double median(double *v, int n)
+{
+    qsort(v, (size_t)n, sizeof *v, cmp_double);
+    return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
+}
+
+// CPU time of the calling thread (immune to other processes' load).
+static double thread_cpu_s(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
+    return ts.tv_sec + 1e-9 * ts.tv_nsec;
+}
+
+static const char *src_path(char *buf, size_t len, const char *rel)
+{
+    const char *top = getenv("REFL_SRCDIR");
+    snprintf(buf, len, "%s/%s", top && *top ? top : ".", rel);
+    return buf;
+}
+
+// The bare loop: an Embree scene of the same triangles (fan triangulation of
+// the faces, which are convex in the example) with the tracer's flags, and
+// precomputed rays.
+typedef struct {
+    RTCDevice dev;
+    RTCScene scene;
+} bare_t;
+
+static bool bare_new(bare_t *b, const model_scene_t *s)
+{
+    b->dev = rtcNewDevice(NULL);
+    if (!b->dev) return false;
+    b->scene = rtcNewScene(b->dev);
+    rtcSetSceneFlags(b->scene, RTC_SCENE_FLAG_ROBUST);
+    rtcSetSceneBuildQuality(b->scene, RTC_BUILD_QUALITY_HIGH);
+    int ntri = 0;
+    for (int i = 0; i < s->nfaces; i++) ntri += s->faces[i].nverts - 2;
+    RTCGeometry g = rtcNewGeometry(b->dev, RTC_GEOMETRY_TYPE_TRIANGLE);
+    float *vb = rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3,
+                                        3 * sizeof(float), (size_t)s->nvertices);
+    unsigned *ib = rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3,
+                                           3 * sizeof(unsigned), (size_t)ntri);
+    if (!vb || !ib) return false;
+    for (int i = 0; i < s->nvertices; i++) {
+        vb[3 * i] = (float)s->vertices[i].x;
+        vb[3 * i + 1] = (float)s->vertices[i].y;
+        vb[3 * i + 2] = (float)s->vertices[i].z;
+    }
+    int k = 0;
+    for (int i = 0; i < s->nfaces; i++)
+        for (int j = 1; j + 1 < s->faces[i].nverts; j++) {
+            ib[3 * k] = (unsigned)s->faces[i].verts[0];
+            ib[3 * k + 1] = (unsigned)s->faces[i].verts[j];
+            ib[3 * k + 2] = (unsigned)s->faces[i].verts[j + 1];
+            k++;
+        }
+    rtcCommitGeometry(g);
+    rtcAttachGeometry(b->scene, g);
+    rtcReleaseGeometry(g);
+    rtcCommitScene(b->scene);
+    return rtcGetDeviceError(b->dev) == RTC_ERROR_NONE;
+}
+
+static void bare_free(bare_t *b)
+{
+    if (b->scene) rtcReleaseScene(b->scene);
+    if (b->dev) rtcReleaseDevice(b->dev);
+}
+
+static void fill_ray(struct RTCRay *r, model_vec3_t o, model_vec3_t d, double tfar)
+{
+    r->org_x = (float)o.x;
+    r->org_y = (float)o.y;
+    r->org_z = (float)o.z;
+    r->dir_x = (float)d.x;
+    r->dir_y = (float)d.y;
+    r->dir_z = (float)d.z;
+    r->tnear = 0.0f;
+    r->tfar = (float)tfar;
+    r->time = 0.0f;
+    r->mask = 0xffffffffu;
+    r->id = 0;
+    r->flags = 0;
+}
+
+int main(void)
+{
+    char p_cam[1024], p_scene[1024], p_lamps[1024], p_mats[1024];
+    src_path(p_cam, sizeof p_cam, "examples/camera.cameramodel");
+    src_path(p_scene, sizeof p_scene, "examples/t_stiffener.d3d");
+    src_path(p_lamps, sizeof p_lamps, "examples/lamps.ini");
+    src_path(p_mats, sizeof p_mats, "examples/materials.ini");
+    int rc = 1;
+    double t[NRUNS];
+    model_camera_t *cam = model_camera_load(p_cam);
+    model_scene_t *scene = model_scene_load(p_scene, NULL);
+    model_lamps_t *lamps = model_lamps_load(p_lamps);
+    model_materials_t *mats = model_materials_load(p_mats);
+    if (!cam || !scene || !lamps || !mats) {
+        fprintf(stderr, "refl-bench: cannot load the examples (run from the source top dir)\n");
+        return 1;
+    }
+    int W = model_camera_width(cam), H = model_camera_height(cam);
+    size_t npix = (size_t)W * H;
+    int nthreads = model_default_threads();
+    printf("threads: %d count\n", nthreads);
+
+    // Ray table (cold, fresh camera objects).
+    double err_px = 0;
+    for (int r = 0; r < 3; r++) {
+        model_camera_t *c2 = model_camera_load(p_cam);
+        double t0 = model_now_s();
+        const model_vec3_t *tab = c2 ? model_camera_ray_table(c2, &err_px) : NULL;
+        t[r] = model_now_s() - t0;
+        model_camera_free(c2);
+        if (!tab) {
+            fprintf(stderr, "refl-bench: ray table failed: %s\n", model_last_error());
+            return 1;
+        }
+    }
+    printf("ray_table_build_1280x1024: %.4f s\n", median(t, 3));
+    printf("ray_table_error_bound: %.5f px\n", err_px);
+
+    // Exact unprojection (model_camera_unproject = mrcal_unproject + rotation),
+    // one thread, every 8th row, scaled to all pixels.
+    {
+        int rows = (H + 7) / 8;
+        double *q = malloc((size_t)rows * W * 2 * sizeof *q);
+        model_vec3_t *d = malloc((size_t)rows * W * sizeof *d);
+        int n = 0;
+        for (int y = 0; y < H; y += 8)
+            for (int x = 0; x < W; x++) {
+                q[2 * n] = x;
+                q[2 * n + 1] = y;
+                n++;
+            }
+        for (int r = 0; r < 3; r++) {
+            double t0 = model_now_s();
+            model_camera_unproject(cam, q, n, d);
+            t[r] = model_now_s() - t0;
+        }
+        printf("exact_unproject_all_pixels_1thread_scaled_from_every_8th_row: %.3f s\n",
+               median(t, 3) * (double)npix / n);
+        free(q);
+        free(d);
+    }
+
+    model_tracer_t *tr = model_tracer_new(scene);
+    const model_material_t **mres = calloc((size_t)scene->nmaterials + 1, sizeof *mres);
+    if (!tr || !model_resolve_materials(scene, mats, mres)) {
+        fprintf(stderr, "refl-bench: %s\n", model_last_error());
+        return 1;
+    }
+    float *P = malloc(npix * sizeof *P);
+    int32_t *face = malloc(npix * sizeof *face);
+    uint8_t *lit = malloc(npix * (size_t)lamps->n);
+    model_shading_t sh = model_shading_default();
+
+    // Render, cold ray table (a fresh camera object: table built inside).
+    for (int r = 0; r < 3; r++) {
+        model_camera_t *c2 = model_camera_load(p_cam);
+        double t0 = model_now_s();
+        bool ok = model_render(tr, c2, lamps, mres, &sh, P, NULL, NULL);
+        t[r] = model_now_s() - t0;
+        model_camera_free(c2);
+        if (!ok) {
+            fprintf(stderr, "refl-bench: render failed: %s\n", model_last_error());
+            return 1;
+        }
+    }
+    printf("render_t_stiffener_4lamps_cold_ray_table: %.4f s\n", median(t, 3));
+    const model_vec3_t *rays = model_camera_ray_table(cam, NULL);
+    sh.nthreads = 1;
+    double t_cpu[NRUNS];
+    for (int r = 0; r < NRUNS; r++) {
+        double t0 = model_now_s(), c0 = thread_cpu_s();
+        model_render(tr, cam, lamps, mres, &sh, P, NULL, NULL);
+        t[r] = model_now_s() - t0;
+        t_cpu[r] = thread_cpu_s() - c0;
+    }
+    printf("render_t_stiffener_4lamps_warm_1thread: %.4f s\n", median(t, NRUNS));
+    double t_render_cpu = median(t_cpu, NRUNS);
+    printf("render_t_stiffener_4lamps_warm_1thread_cpu: %.4f s\n", t_render_cpu);
+    sh.nthreads = 0;
+    for (int r = 0; r < 3; r++) {
+        double t0 = model_now_s();
+        model_render(tr, cam, lamps, mres, &sh, P, face, lit);
+        t[r] = model_now_s() - t0;
+    }
+    printf("render_t_stiffener_4lamps_warm_with_face_lit: %.4f s\n", median(t, 3));
+
+    // The bare loop over the same rays.
+    bare_t bare = { 0 };
+    if (!bare_new(&bare, scene)) {
+        fprintf(stderr, "refl-bench: embree scene failed\n");
+        return 1;
+    }
+    model_vec3_t o = model_camera_centre_world(cam);
+    double eps = model_tracer_epsilon_mm(tr);
+    struct RTCRay *prim = malloc(npix * sizeof *prim);
+    size_t nshadow_cap = npix * (size_t)lamps->n;
+    struct RTCRay *shad = malloc(nshadow_cap * sizeof *shad);
+    size_t nshadow = 0, nhit = 0;
+    for (size_t i = 0; i < npix; i++) {
+        fill_ray(&prim[i], o, rays[i], INFINITY);
+        struct RTCIntersectContext ctx;
+        rtcInitIntersectContext(&ctx);
+        struct RTCRayHit rh;
+        rh.ray = prim[i];
+        rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
+        rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
+        rtcIntersect1(bare.scene, &ctx, &rh);
+        if (rh.hit.geomID == RTC_INVALID_GEOMETRY_ID) continue;
+        nhit++;
+        model_vec3_t p = v3_add(o, v3_scale(rays[i], rh.ray.tfar));
+        model_vec3_t n = v3_unit(v3(rh.hit.Ng_x, rh.hit.Ng_y, rh.hit.Ng_z));
+        if (v3_dot(n, rays[i]) > 0) n = v3_scale(n, -1);
+        for (int j = 0; j < lamps->n; j++) {
+            model_vec3_t L = lamps->lamps[j].position_mm;
+            if (v3_dot(v3_sub(L, p), n) <= 0) continue;
+            model_vec3_t org = v3_add(p, v3_scale(n, eps));
+            model_vec3_t dl = v3_sub(L, org);
+            double len = v3_norm(dl);
+            fill_ray(&shad[nshadow++], org, v3_scale(dl, 1 / len), len - eps);
+        }
+    }
+    // Render (warm ray table, all threads) and the bare loop, interleaved so
+    // that both see the same machine load; medians of the times and of the ratios.
+    size_t noccl = 0;
+    double t_r[NRUNS], ratio[NRUNS];
+    sh.nthreads = 0;
+    for (int r = 0; r < NRUNS; r++) {
+        double t0 = model_now_s();
+        model_render(tr, cam, lamps, mres, &sh, P, NULL, NULL);
+        t_r[r] = model_now_s() - t0;
+        t0 = model_now_s();
+        double c0 = thread_cpu_s();
+        struct RTCIntersectContext ctx;
+        rtcInitIntersectContext(&ctx);
+        size_t hits = 0;
+        for (size_t i = 0; i < npix; i++) {
+            struct RTCRayHit rh;
+            rh.ray = prim[i];
+            rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
+            rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
+            rtcIntersect1(bare.scene, &ctx, &rh);
+            hits += rh.hit.geomID != RTC_INVALID_GEOMETRY_ID;
+        }
+        noccl = 0;
+        for (size_t i = 0; i < nshadow; i++) {
+            struct RTCRay ray = shad[i];
+            rtcOccluded1(bare.scene, &ctx, &ray);
+            noccl += ray.tfar == -INFINITY;
+        }
+        t[r] = model_now_s() - t0;
+        t_cpu[r] = thread_cpu_s() - c0;
+        ratio[r] = t_r[r] / t[r];
+        if (hits != nhit) fprintf(stderr, "refl-bench: bare loop hit count changed\n");
+    }
+    double t_render = median(t_r, NRUNS);
+    printf("render_t_stiffener_4lamps_warm_ray_table: %.4f s\n", t_render);
+    double t_bare = median(t, NRUNS);
+    printf("bare_embree_primary_rays: %zu rays\n", npix);
+    printf("bare_embree_primary_hits: %zu rays\n", nhit);
+    printf("bare_embree_shadow_rays: %zu rays\n", nshadow);
+    printf("bare_embree_shadow_rays_blocked: %zu rays\n", noccl);
+    printf("bare_embree_loop_1thread: %.4f s\n", t_bare);
+    printf("bare_embree_rate_1thread: %.2f Mrays/s\n", (npix + nshadow) / t_bare * 1e-6);
+    printf("render_vs_bare_embree: %.3f ratio\n", median(ratio, NRUNS));
+    // The same comparison in CPU time, render on one thread: the work ratio, free
+    // of other processes' load (with two idle cores the wall ratio nears half of it).
+    double t_bare_cpu = median(t_cpu, NRUNS);
+    printf("bare_embree_loop_1thread_cpu: %.4f s\n", t_bare_cpu);
+    printf("render_1thread_vs_bare_embree_cpu: %.3f ratio\n", t_render_cpu / t_bare_cpu);
+
+    // pixel_info for 5000 scattered sub-pixel positions (all lamps).
+    {
+        enum { NQ = 5000 };
+        double *q = malloc(2 * NQ * sizeof *q);
+        model_rng_t rng = model_rng(7, 0);
+        for (int i = 0; i < NQ; i++) {
+            q[2 * i] = model_rng_uniform(&rng) * (W - 1);
+            q[2 * i + 1] = model_rng_uniform(&rng) * (H - 1);
+        }
+        model_pixel_info_t *pi = malloc(NQ * sizeof *pi);
+        model_lamp_sample_t *ls = malloc((size_t)NQ * lamps->n * sizeof *ls);
+        for (int r = 0; r < NRUNS; r++) {
+            double t0 = model_now_s();
+            if (!model_pixel_info(tr, cam, lamps, q, NQ, pi, ls, 0)) {
+                fprintf(stderr, "refl-bench: pixel_info failed: %s\n", model_last_error());
+                return 1;
+            }
+            t[r] = model_now_s() - t0;
+        }
+        double tp = median(t, NRUNS);
+        printf("pixel_info_5000_points: %.3f ms\n", tp * 1e3);
+        printf("pixel_info_throughput: %.0f points/s\n", NQ / tp);
+        free(q);
+        free(pi);
+        free(ls);
+    }
+    rc = 0;
+    free(prim);
+    free(shad);
+    bare_free(&bare);
+    free(P);
+    free(face);
+    free(lit);
+    free(mres);
+    model_tracer_free(tr);
+    model_camera_free(cam);
+    model_scene_free(scene);
+    model_lamps_free(lamps);
+    model_materials_free(mats);
+    return rc;
+}

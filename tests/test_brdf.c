@@ -1,2 +1,335 @@
-// tests/test_brdf.c: placeholder while the module is being written.
-#include "model/model.h"
+// tests/test_brdf.c — reflection models: known values, gradients by finite
+// differences, zeros, reciprocity, energy, normalisation, tables.
+#include <stdint.h>
+#include <stdlib.h>
+
+#include "model/internal.h"
+#include "tests/test.h"
+
+static model_vec3_t dir_deg(double theta_deg, double phi_deg)
+{
+    double t = theta_deg * M_PI / 180, p = phi_deg * M_PI / 180;
+    return v3(sin(t) * cos(p), sin(t) * sin(p), cos(t));
+}
+
+static const model_vec3_t N = { 0, 0, 1 };
+
+// ---- known answers -----------------------------------------------------------
+
+// Values computed independently (mpmath, 30 digits) from the formulas in DESIGN.md
+// at two geometries: n = z, l and v given as (theta, phi) in degrees.
+TEST(brdf_known_values)
+{
+    static const struct {
+        double tl, pl, tv, pv;
+        double nl, nv, nh, vh;
+        double lambert, hall, ts, thesis, cook, ggx;
+    } k[] = {
+        // G = 0.78338 here (the n.v branch of the min is active)
+        { 50, 0, 70, 120, 0.64278760968653933, 0.34202014332566873, 0.75094242269695779,
+          0.65571455496903418, 0.12855752193730787, 0.065904694521690283, 0.065408609407145944,
+          0.035863508528179981, 0.08219839672655339, 0.10443319524080993 },
+        // near the mirror direction, G = 1
+        { 40, 0, 35, 180, 0.76604444311897804, 0.81915204428899179, 0.99904822158185776,
+          0.79335334029123516, 0.15320888862379561, 0.56717222946385161, 0.25642422012030697,
+          0.63717490833444364, 0.41589943747390794, 0.40131161508876116 },
+    };
+    for (size_t i = 0; i < sizeof k / sizeof k[0]; i++) {
+        model_cosines_t c = model_cosines(N, dir_deg(k[i].tl, k[i].pl), dir_deg(k[i].tv, k[i].pv));
+        CHECK_NEAR(c.nl, k[i].nl, 1e-14);
+        CHECK_NEAR(c.nv, k[i].nv, 1e-14);
+        CHECK_NEAR(c.nh, k[i].nh, 1e-14);
+        CHECK_NEAR(c.vh, k[i].vh, 1e-14);
+        const double lam[] = { 0.2 }, hall[] = { 0.1, 0.5, 20 }, ts[] = { 0.1, 0.5, 20, 0.3 },
+                     th[] = { 0.5, 20, 0.05 }, ct[] = { 0.4, 0.6, 0.3, 0.5 }, gg[] = { 0.4, 0.6, 0.3, 0.5 };
+        CHECK_REL(model_brdf_eval(MODEL_BRDF_LAMBERT, lam, &c, NULL), k[i].lambert, 1e-12);
+        CHECK_REL(model_brdf_eval(MODEL_BRDF_HALL, hall, &c, NULL), k[i].hall, 1e-12);
+        CHECK_REL(model_brdf_eval(MODEL_BRDF_TORRANCE_SPARROW, ts, &c, NULL), k[i].ts, 1e-12);
+        CHECK_REL(model_brdf_eval(MODEL_BRDF_THESIS_FIT, th, &c, NULL), k[i].thesis, 1e-12);
+        CHECK_REL(model_brdf_eval(MODEL_BRDF_COOK_TORRANCE, ct, &c, NULL), k[i].cook, 1e-12);
+        CHECK_REL(model_brdf_eval(MODEL_BRDF_GGX, gg, &c, NULL), k[i].ggx, 1e-12);
+    }
+}
+
+TEST(brdf_cosines_degenerate)
+{
+    // l = -v: the half vector is undefined; n.h = v.h = 0 by convention.
+    model_cosines_t c = model_cosines(N, v3(0, 0, 1), v3(0, 0, -1));
+    CHECK(c.nh == 0 && c.vh == 0);
+    CHECK(c.nl == 1 && c.nv == -1);
+    // l = v = n: everything 1.
+    c = model_cosines(N, N, N);
+    CHECK_NEAR(c.nh, 1, 1e-15);
+    CHECK_NEAR(c.vh, 1, 1e-15);
+}
+
+// ---- random valid parameters ---------------------------------------------------
+
+static void random_params(model_brdf_t m, model_rng_t *r, double *p)
+{
+    for (int i = 0; i < model_brdf_nparams(m); i++) {
+        const char *name = model_brdf_param_name(m, i);
+        double lo, hi;
+        model_brdf_param_range(m, i, &lo, &hi);
+        double u = model_rng_uniform(r);
+        if (!strcmp(name, "ns"))
+            p[i] = 0.5 + 200 * u;                       // the useful part of [0, 10000]
+        else if (!strcmp(name, "m") || !strcmp(name, "alpha"))
+            p[i] = 0.05 + 0.95 * u;                     // D is extremely peaked below
+        else if (isinf(hi))
+            p[i] = 0.01 + 5 * u;
+        else
+            p[i] = lo + (0.01 + 0.98 * u) * (hi - lo);
+    }
+}
+
+static model_vec3_t random_upper(model_rng_t *r)
+{
+    double ct = 0.03 + 0.97 * model_rng_uniform(r), ph = 2 * M_PI * model_rng_uniform(r);
+    double st = sqrt(1 - ct * ct);
+    return v3(st * cos(ph), st * sin(ph), ct);
+}
+
+// Distance of the geometry from a switch of the min() in the Torrance-Sparrow G.
+static double g_switch_distance(const model_cosines_t *c)
+{
+    double gv = 2 * c->nh * c->nv / c->vh, gl = 2 * c->nh * c->nl / c->vh;
+    return fmin(fmin(fabs(gv - 1), fabs(gl - 1)), fabs(gv - gl));
+}
+
+TEST(brdf_gradients_match_finite_differences)
+{
+    model_rng_t r = model_rng(42, 1);
+    for (int m = 0; m < MODEL_BRDF_COUNT; m++) {
+        int np = model_brdf_nparams(m), tested = 0, bad = 0;
+        double worst = 0;
+        while (tested < 250) {
+            double p[MODEL_BRDF_MAX_PARAMS], dR[MODEL_BRDF_MAX_PARAMS];
+            random_params(m, &r, p);
+            model_cosines_t c = model_cosines(N, random_upper(&r), random_upper(&r));
+            if (c.nh <= 0 || g_switch_distance(&c) < 1e-6) continue;
+            double R = model_brdf_eval(m, p, &c, dR);
+            CHECK(isfinite(R) && R >= 0);
+            for (int i = 0; i < np; i++) {
+                double h = 1e-5 * fmax(fabs(p[i]), 1e-2);
+                double pp[MODEL_BRDF_MAX_PARAMS], pm[MODEL_BRDF_MAX_PARAMS];
+                memcpy(pp, p, sizeof pp);
+                memcpy(pm, p, sizeof pm);
+                pp[i] += h;
+                pm[i] -= h;
+                double fd = (model_brdf_eval(m, pp, &c, NULL) - model_brdf_eval(m, pm, &c, NULL)) / (2 * h);
+                // relative 1e-6, with a floor for derivatives that happen to be ~0
+                double tol = 1e-6 * fmax(fabs(fd), fabs(dR[i])) + 1e-9 * (fabs(R) + 1e-3) / fmax(fabs(p[i]), 1e-2);
+                double err = fabs(fd - dR[i]);
+                if (err > tol) {
+                    if (bad++ < 5)
+                        test_fail(__FILE__, __LINE__, "%s dR/d%s: analytic %.12g, finite difference %.12g",
+                                  model_brdf_name(m), model_brdf_param_name(m, i), dR[i], fd);
+                }
+                double rel = err / fmax(fmax(fabs(fd), fabs(dR[i])), 1e-300);
+                // worst relative error among derivatives that matter (p dR/dp > 1e-4 R)
+                if (fabs(dR[i]) * fmax(fabs(p[i]), 1e-2) > 1e-4 * fabs(R) && rel > worst) worst = rel;
+            }
+            tested++;
+        }
+        CHECK_MSG(bad == 0, "%s: %d gradient mismatches", model_brdf_name(m), bad);
+        CHECK_MSG(worst < 1e-6, "%s: worst relative gradient error %.3g", model_brdf_name(m), worst);
+    }
+}
+
+TEST(brdf_zero_below_horizon)
+{
+    model_rng_t r = model_rng(7, 2);
+    for (int m = 0; m < MODEL_BRDF_COUNT; m++)
+        for (int k = 0; k < 50; k++) {
+            double p[MODEL_BRDF_MAX_PARAMS], dR[MODEL_BRDF_MAX_PARAMS];
+            random_params(m, &r, p);
+            model_vec3_t l = random_upper(&r), v = random_upper(&r);
+            model_vec3_t lb = v3(l.x, l.y, -l.z), vb = v3(v.x, v.y, -v.z);
+            const model_cosines_t cs[] = {
+                model_cosines(N, lb, v), model_cosines(N, l, vb), model_cosines(N, lb, vb),
+                { 0, 0.5, 0.8, 0.7 }, { 0.5, 0, 0.8, 0.7 }, { -0.0, 0.5, 0.8, 0.7 },
+            };
+            for (size_t j = 0; j < sizeof cs / sizeof cs[0]; j++) {
+                for (int i = 0; i < MODEL_BRDF_MAX_PARAMS; i++) dR[i] = 7;
+                double R = model_brdf_eval(m, p, &cs[j], dR);
+                CHECK_MSG(R == 0.0 && !signbit(R), "%s: R = %g below the horizon", model_brdf_name(m), R);
+                for (int i = 0; i < model_brdf_nparams(m); i++) CHECK(dR[i] == 0.0);
+            }
+        }
+    // Specular lobes vanish when n.h <= 0 (possible only with inconsistent cosines).
+    const model_cosines_t c = { 0.5, 0.5, -0.1, 0.7 };
+    const double hall[] = { 0, 1, 10 }, ct[] = { 0, 1, 0.3, 1 }, gg[] = { 0, 1, 0.3, 1 };
+    CHECK(model_brdf_eval(MODEL_BRDF_HALL, hall, &c, NULL) == 0);
+    CHECK(model_brdf_eval(MODEL_BRDF_COOK_TORRANCE, ct, &c, NULL) == 0);
+    CHECK(model_brdf_eval(MODEL_BRDF_GGX, gg, &c, NULL) == 0);
+}
+
+TEST(brdf_helmholtz_reciprocity)
+{
+    const model_brdf_t models[] = { MODEL_BRDF_LAMBERT, MODEL_BRDF_COOK_TORRANCE, MODEL_BRDF_GGX };
+    model_rng_t r = model_rng(3, 3);
+    for (size_t k = 0; k < 3; k++)
+        for (int j = 0; j < 200; j++) {
+            double p[MODEL_BRDF_MAX_PARAMS];
+            random_params(models[k], &r, p);
+            model_vec3_t l = random_upper(&r), v = random_upper(&r);
+            model_cosines_t a = model_cosines(N, l, v), b = model_cosines(N, v, l);
+            double fa = model_brdf_eval(models[k], p, &a, NULL) / a.nl;
+            double fb = model_brdf_eval(models[k], p, &b, NULL) / b.nl;
+            CHECK_REL(fa, fb, 1e-12);
+        }
+}
+
+// ---- energy ----------------------------------------------------------------------
+
+// Directional albedo: integral over the outgoing hemisphere of f_r(l,v) (n.v) dw_v,
+// f_r = R / (n.l). Midpoint rule in (theta_v, phi_v).
+static double albedo(model_brdf_t m, const double *p, double theta_l_deg, int nth, int nph)
+{
+    model_vec3_t l = dir_deg(theta_l_deg, 0);
+    double sum = 0, dth = M_PI / 2 / nth, dph = 2 * M_PI / nph;
+    for (int i = 0; i < nth; i++) {
+        double th = (i + 0.5) * dth, st = sin(th), ct = cos(th);
+        for (int j = 0; j < nph; j++) {
+            double ph = (j + 0.5) * dph;
+            model_vec3_t v = v3(st * cos(ph), st * sin(ph), ct);
+            model_cosines_t c = model_cosines(N, l, v);
+            sum += model_brdf_eval(m, p, &c, NULL) / c.nl * c.nv * st;
+        }
+    }
+    return sum * dth * dph;
+}
+
+TEST(brdf_albedo_lambertian_part_is_one)
+{
+    const double p[] = { 1, 0, 0.3, 0.5 };
+    for (double th = 0; th <= 80; th += 40) {
+        CHECK_NEAR(albedo(MODEL_BRDF_COOK_TORRANCE, p, th, 200, 64), 1.0, 1e-3);
+        CHECK_NEAR(albedo(MODEL_BRDF_GGX, p, th, 200, 64), 1.0, 1e-3);
+    }
+    // lambert's kd is albedo/pi
+    const double q[] = { 1 / M_PI };
+    CHECK_NEAR(albedo(MODEL_BRDF_LAMBERT, q, 30, 200, 64), 1.0, 1e-3);
+}
+
+TEST(brdf_albedo_at_most_one)
+{
+    const double rough[] = { 0.2, 0.5, 1.0 };
+    const double incid[] = { 0, 30, 60, 85 };
+    // kd, ks, F0 with kd + ks <= 1
+    const double mix[][3] = { { 0, 1, 1 }, { 0.5, 0.5, 0.04 }, { 0.3, 0.7, 1 } };
+    const model_brdf_t models[] = { MODEL_BRDF_COOK_TORRANCE, MODEL_BRDF_GGX };
+    double max_a = 0;
+    for (int k = 0; k < 2; k++)
+        for (int a = 0; a < 3; a++)
+            for (int t = 0; t < 4; t++)
+                for (int x = 0; x < 3; x++) {
+                    // the grey mixtures only at one roughness to keep the test fast
+                    if (x > 0 && a != 1) continue;
+                    const double p[] = { mix[x][0], mix[x][1], rough[a], mix[x][2] };
+                    double A = albedo(models[k], p, incid[t], 500, 720);
+                    if (A > max_a) max_a = A;
+                    CHECK_MSG(A <= 1 + 2e-3, "%s rough %g incidence %g deg kd %g ks %g F0 %g: albedo %.6f > 1",
+                              model_brdf_name(models[k]), rough[a], incid[t], p[0], p[1], p[3], A);
+                    // A white, smooth mirror-like surface keeps most of the energy
+                    // (catches lost factors of pi, 4, ...).
+                    if (x == 0 && a == 0 && t == 0)
+                        CHECK_MSG(A > 0.93, "%s: albedo %.4f at normal incidence, rough 0.2", model_brdf_name(models[k]), A);
+                }
+    CHECK(max_a > 0.9);
+}
+
+// The microfacet distributions are normalised: integral of D(h) (n.h) dw_h = 1.
+// D is read from R at the retro-reflection geometry l = v = h (then n.l = n.v =
+// n.h = c, v.h = 1, F = F0 = 1, kd = 0, ks = 1): R = D G / (4 c), with
+// G = min(1, 2c^2) (Torrance-Sparrow) or G2 = 1/sqrt(1 + alpha^2 tan^2) (GGX).
+TEST(brdf_distributions_normalised)
+{
+    const double ct[] = { 0, 1, 0.3, 1 }, gg[] = { 0, 1, 0.3, 1 };
+    int nth = 20000;
+    double sb = 0, sg = 0, dth = M_PI / 2 / nth;
+    for (int i = 0; i < nth; i++) {
+        double th = (i + 0.5) * dth, c = cos(th), t2 = tan(th) * tan(th);
+        model_cosines_t cs = { c, c, c, 1 };
+        double Db = 4 * c * model_brdf_eval(MODEL_BRDF_COOK_TORRANCE, ct, &cs, NULL) / fmin(1, 2 * c * c);
+        double Dg = 4 * c * model_brdf_eval(MODEL_BRDF_GGX, gg, &cs, NULL) * sqrt(1 + 0.09 * t2);
+        sb += Db * c * sin(th);
+        sg += Dg * c * sin(th);
+    }
+    CHECK_NEAR(sb * dth * 2 * M_PI, 1.0, 1e-6);
+    CHECK_NEAR(sg * dth * 2 * M_PI, 1.0, 1e-6);
+}
+
+// ---- tables ----------------------------------------------------------------------
+
+TEST(brdf_tables)
+{
+    CHECK(MODEL_BRDF_COUNT == 6);
+    for (int m = 0; m < MODEL_BRDF_COUNT; m++) {
+        const char *name = model_brdf_name(m);
+        CHECK(model_brdf_from_name(name) == m);
+        int np = model_brdf_nparams(m);
+        CHECK(np >= 1 && np <= MODEL_BRDF_MAX_PARAMS);
+        for (int i = 0; i < np; i++) {
+            const char *pn = model_brdf_param_name(m, i);
+            CHECK(pn != NULL);
+            CHECK(model_brdf_param_index(m, pn) == i);
+            double lo, hi;
+            model_brdf_param_range(m, i, &lo, &hi);
+            CHECK(lo < hi && lo >= 0);
+        }
+        CHECK(model_brdf_param_name(m, np) == NULL);
+        CHECK(model_brdf_param_index(m, "nonsense") == -1);
+        CHECK(strlen(model_brdf_convention(m)) > 20);
+        CHECK_CONTAINS(model_brdf_convention(m), name);
+    }
+    CHECK(model_brdf_from_name("Lambert") == -1);
+    CHECK(model_brdf_from_name("") == -1);
+    CHECK(model_brdf_from_name(NULL) == -1);
+    CHECK(!strcmp(model_brdf_name(MODEL_BRDF_TORRANCE_SPARROW), "torrance_sparrow"));
+    CHECK(!strcmp(model_brdf_name(MODEL_BRDF_THESIS_FIT), "thesis_fit"));
+    CHECK(model_brdf_nparams(MODEL_BRDF_LAMBERT) == 1);
+    CHECK(model_brdf_nparams(MODEL_BRDF_HALL) == 3);
+    CHECK(model_brdf_nparams(MODEL_BRDF_GGX) == 4);
+    CHECK(model_brdf_param_index(MODEL_BRDF_THESIS_FIT, "kd") == 2);
+    CHECK(model_brdf_param_index(MODEL_BRDF_GGX, "alpha") == 2);
+    CHECK(model_brdf_param_index(MODEL_BRDF_COOK_TORRANCE, "m") == 2);
+    CHECK(model_brdf_is_physical(MODEL_BRDF_COOK_TORRANCE) && model_brdf_is_physical(MODEL_BRDF_GGX));
+    CHECK(!model_brdf_is_physical(MODEL_BRDF_LAMBERT) && !model_brdf_is_physical(MODEL_BRDF_HALL));
+    CHECK_CONTAINS(model_brdf_convention(MODEL_BRDF_GGX), "not perceptual roughness");
+    CHECK_CONTAINS(model_brdf_convention(MODEL_BRDF_GGX), "alpha = perceptual_roughness^2");
+    CHECK_CONTAINS(model_brdf_convention(MODEL_BRDF_LAMBERT), "albedo/pi");
+    CHECK_CONTAINS(model_brdf_convention(MODEL_BRDF_COOK_TORRANCE), "Beckmann RMS slope");
+    CHECK_CONTAINS(model_brdf_convention(MODEL_BRDF_HALL), "Blinn exponent");
+}
+
+TEST(brdf_ranges_and_defaults)
+{
+    double lo, hi;
+    model_brdf_param_range(MODEL_BRDF_LAMBERT, 0, &lo, &hi);
+    CHECK(lo == 0 && fabs(hi - 1 / M_PI) < 1e-15);
+    model_brdf_param_range(MODEL_BRDF_GGX, 0, &lo, &hi);          // kd albedo
+    CHECK(lo == 0 && hi == 1);
+    model_brdf_param_range(MODEL_BRDF_HALL, 1, &lo, &hi);         // ks
+    CHECK(lo == 0 && isinf(hi));
+    model_brdf_param_range(MODEL_BRDF_COOK_TORRANCE, 1, &lo, &hi);
+    CHECK(lo == 0 && hi == 1);
+    model_brdf_param_range(MODEL_BRDF_TORRANCE_SPARROW, 2, &lo, &hi);  // ns
+    CHECK(lo == 0 && hi == 10000);
+    model_brdf_param_range(MODEL_BRDF_TORRANCE_SPARROW, 3, &lo, &hi);  // F0
+    CHECK(lo == 0 && hi == 1);
+    model_brdf_param_range(MODEL_BRDF_COOK_TORRANCE, 2, &lo, &hi);     // m
+    CHECK(lo == 0.001 && hi == 1);
+    model_brdf_param_range(MODEL_BRDF_GGX, 2, &lo, &hi);               // alpha
+    CHECK(lo == 0.001 && hi == 1);
+    model_brdf_param_range(MODEL_BRDF_THESIS_FIT, 2, &lo, &hi);        // kd
+    CHECK(lo == 0 && fabs(hi - 1 / M_PI) < 1e-15);
+    model_brdf_param_range(MODEL_BRDF_LAMBERT, 1, &lo, &hi);           // no such parameter
+    CHECK(isnan(lo) && isnan(hi));
+
+    CHECK(model_brdf_param_default(MODEL_BRDF_THESIS_FIT, 2) == 0);
+    for (int m = 0; m < MODEL_BRDF_COUNT; m++)
+        for (int i = 0; i < model_brdf_nparams(m); i++)
+            if (!(m == MODEL_BRDF_THESIS_FIT && i == 2)) CHECK(isnan(model_brdf_param_default(m, i)));
+}

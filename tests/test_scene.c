@@ -1,2 +1,427 @@
-// tests/test_scene.c: placeholder while the module is being written.
+// tests/test_scene.c — D3D and OBJ readers, face checks, rotation, loading.
+#include <stdlib.h>
+
 #include "model/model.h"
+#include "tests/test.h"
+
+// Unit cube, faces counter-clockwise seen from outside. Non-consecutive vertex
+// numbers, attached and separate '.', a face over two lines, comments, materials.
+static const char CUBE_D3D[] =
+    "# unit cube\n"
+    "10 0 0 0\n"            // line 2
+    "20 1 0 0\n"
+    "30 1 1 0   # comment\n"
+    "40 0 1 0\n"
+    "50 0 0 1\n"
+    "60 1 0 1\n"
+    "70 1 1 1\n"
+    "80 0 1 1\n"
+    "\n"
+    "faces:\n"              // line 11, case-insensitive
+    "10 40 30 20.\n"        // 1 bottom (default)
+    "@material steel\n"
+    "50 60 70 80 .\n"       // 3 -> face 2 top
+    "10 20\n"               // line 15: face 3 front, spans two lines
+    "  60 50.\n"
+    "@material paint.red-2\n"
+    "40 80 70 30.\n"        // face 4 back
+    "10 50 80 40.\n"        // face 5 left
+    "@material steel\n"
+    "20 30 70 60.  # right\n";  // face 6 right, line 21
+
+static model_scene_t *d3d(const char *text)
+{
+    model_error_clear();
+    return model_scene_parse_d3d(text, strlen(text), "cube.d3d", NULL);
+}
+
+static model_scene_t *obj(const char *text)
+{
+    model_error_clear();
+    return model_scene_parse_obj(text, strlen(text), "cube.obj", NULL);
+}
+
+static void check_cube(const model_scene_t *s)
+{
+    CHECK(s->nvertices == 8);
+    CHECK(s->nfaces == 6);
+    if (s->nfaces != 6) return;
+    // Expected outward normals and plane offsets of bottom, top, front, back, left, right.
+    const model_vec3_t n[6] = { { 0, 0, -1 }, { 0, 0, 1 }, { 0, -1, 0 },
+                                { 0, 1, 0 },  { -1, 0, 0 }, { 1, 0, 0 } };
+    const double off[6] = { 0, 1, 0, 1, 0, 1 };
+    for (int k = 0; k < 6; k++) {
+        const model_face_t *f = &s->faces[k];
+        CHECK(f->nverts == 4);
+        CHECK(f->number == k + 1);
+        CHECK_NEAR(f->normal.x, n[k].x, 1e-12);
+        CHECK_NEAR(f->normal.y, n[k].y, 1e-12);
+        CHECK_NEAR(f->normal.z, n[k].z, 1e-12);
+        CHECK_NEAR(f->offset_mm, off[k], 1e-12);
+        for (int i = 0; i < f->nverts; i++) {
+            CHECK(f->verts[i] >= 0 && f->verts[i] < s->nvertices);
+            // Every vertex lies on the face's plane.
+            model_vec3_t p = s->vertices[f->verts[i]];
+            CHECK_NEAR(p.x * f->normal.x + p.y * f->normal.y + p.z * f->normal.z, f->offset_mm, 1e-12);
+        }
+    }
+}
+
+TEST(scene_d3d_cube)
+{
+    model_scene_t *s = d3d(CUBE_D3D);
+    CHECK_MSG(s != NULL, "%s", model_last_error());
+    if (!s) return;
+    check_cube(s);
+    CHECK(strcmp(s->path, "cube.d3d") == 0);
+    // Vertices in file order, coordinates as written.
+    CHECK(s->vertices[1].x == 1 && s->vertices[1].y == 0 && s->vertices[1].z == 0);
+    CHECK(s->vertices[6].x == 1 && s->vertices[6].y == 1 && s->vertices[6].z == 1);
+    // Face 1 is "10 40 30 20": vertex indices 0 3 2 1.
+    CHECK(s->faces[0].verts[0] == 0 && s->faces[0].verts[1] == 3 && s->faces[0].verts[2] == 2 &&
+          s->faces[0].verts[3] == 1);
+    // Lines: where each face starts.
+    CHECK(s->faces[0].line == 12);
+    CHECK(s->faces[1].line == 14);
+    CHECK(s->faces[2].line == 15);
+    CHECK(s->faces[5].line == 21);
+    // Materials: default, steel, paint.red-2.
+    CHECK(s->nmaterials == 3);
+    int d = model_scene_material_index(s, "default"), st = model_scene_material_index(s, "steel"),
+        p = model_scene_material_index(s, "paint.red-2");
+    CHECK(d >= 0 && st >= 0 && p >= 0 && d != st && st != p && d != p);
+    CHECK(model_scene_material_index(s, "glass") == -1);
+    CHECK(s->faces[0].material == d);
+    CHECK(s->faces[1].material == st);
+    CHECK(s->faces[2].material == st);
+    CHECK(s->faces[3].material == p);
+    CHECK(s->faces[4].material == p);
+    CHECK(s->faces[5].material == st);
+    // sha256 of the text.
+    char h[65];
+    model_sha256_hex(CUBE_D3D, strlen(CUBE_D3D), h);
+    CHECK(strcmp(s->sha256, h) == 0);
+    model_scene_free(s);
+}
+
+TEST(scene_d3d_newell_normal_of_tilted_pentagon)
+{
+    // A regular pentagon of radius 10 in the plane z = x + 5 (non-axis normal),
+    // vertices counter-clockwise seen from +z: normal (-1, 0, 1)/sqrt(2).
+    char buf[512];
+    int o = 0;
+    for (int i = 0; i < 5; i++) {
+        double a = 2 * M_PI * i / 5, x = 10 * cos(a), y = 10 * sin(a);
+        o += snprintf(buf + o, sizeof buf - o, "%d %.17g %.17g %.17g\n", i + 1, x, y, x + 5);
+    }
+    snprintf(buf + o, sizeof buf - o, "Faces:\n1 2 3 4 5.\n");
+    model_scene_t *s = d3d(buf);
+    CHECK_MSG(s != NULL, "%s", model_last_error());
+    if (!s) return;
+    CHECK_NEAR(s->faces[0].normal.x, -sqrt(0.5), 1e-12);
+    CHECK_NEAR(s->faces[0].normal.y, 0, 1e-12);
+    CHECK_NEAR(s->faces[0].normal.z, sqrt(0.5), 1e-12);
+    // Plane through the centroid (0, 0, 5): n.x = 5/sqrt(2).
+    CHECK_NEAR(s->faces[0].offset_mm, 5 * sqrt(0.5), 1e-12);
+    model_scene_free(s);
+}
+
+// Expect a parse error containing each of the given fragments.
+static void expect_d3d_error(const char *text, const char *a, const char *b, int line)
+{
+    model_scene_t *s = d3d(text);
+    CHECK_MSG(s == NULL, "expected an error for line %d", line);
+    model_scene_free(s);
+    CHECK_CONTAINS(model_last_error(), a);
+    if (b) CHECK_CONTAINS(model_last_error(), b);
+}
+
+#define TRI "1 0 0 0\n2 10 0 0\n3 0 10 0\n"
+
+TEST(scene_d3d_errors)
+{
+    expect_d3d_error(TRI "4 1 x 0\nFaces:\n1 2 3.\n", "cube.d3d:4: ", "'x' does not parse", __LINE__);
+    expect_d3d_error(TRI "4 1 0\nFaces:\n1 2 3.\n", "cube.d3d:4: ", "4 fields (number x y z), this one has 3",
+                     __LINE__);
+    expect_d3d_error(TRI "x4 1 0 0\nFaces:\n1 2 3.\n", "cube.d3d:4: vertex number 'x4' does not parse",
+                     NULL, __LINE__);
+    expect_d3d_error(TRI "0 1 0 0\nFaces:\n1 2 3.\n", "cube.d3d:4: vertex number '0'", "positive", __LINE__);
+    expect_d3d_error(TRI "2 1 0 0\nFaces:\n1 2 3.\n", "cube.d3d:4: vertex 2 is defined twice (first on line 2)",
+                     NULL, __LINE__);
+    expect_d3d_error(TRI "Faces:\n1 2 3.\n1 2 9 .\n", "cube.d3d:6: face 2 refers to vertex 9, which does not exist",
+                     NULL, __LINE__);
+    expect_d3d_error(TRI "Faces:\n1 2 3.\n2 x 3.\n", "cube.d3d:6: face 2: 'x' is not a vertex number", NULL,
+                     __LINE__);
+    expect_d3d_error(TRI "Faces:\n1 2 3.\n1 2.\n", "cube.d3d:6: face 2 has 2 vertices; a face needs at least 3",
+                     NULL, __LINE__);
+    expect_d3d_error(TRI "Faces:\n.\n", "cube.d3d:5: face 1 has 0 vertices", NULL, __LINE__);
+    expect_d3d_error(TRI "Faces:\n1 2 3.\n1 2\n1 3 .\n", "cube.d3d:6: face 2 uses vertex 1 twice", NULL, __LINE__);
+    expect_d3d_error(TRI "4 20 0 0\nFaces:\n1 2 3.\n1 2 4.\n", "cube.d3d:7: face 2 is degenerate (zero area",
+                     NULL, __LINE__);
+    expect_d3d_error(TRI "Faces:\n1 2 3.\n1 1e0 3.\n", "face 2: '1e0' is not a vertex number", NULL, __LINE__);
+    expect_d3d_error(TRI, "cube.d3d: no 'Faces:' line", NULL, __LINE__);
+    expect_d3d_error("", "cube.d3d: no 'Faces:' line", NULL, __LINE__);
+    expect_d3d_error(TRI "Faces:\n# nothing\n", "cube.d3d: no faces after 'Faces:'", NULL, __LINE__);
+    expect_d3d_error(TRI "Faces:\n1 2 3.\n3 2\n 1\n", "cube.d3d:6: face 2 is not ended by '.'", NULL, __LINE__);
+    expect_d3d_error(TRI "Faces:\n1 2\n@material steel\n3.\n", "cube.d3d:6: face 1 (line 5) is not ended by '.' before @material",
+                     NULL, __LINE__);
+    expect_d3d_error(TRI "4 1e999 0 0\nFaces:\n1 2 3.\n", "cube.d3d:4: vertex 4: coordinate '1e999' is not a finite number",
+                     NULL, __LINE__);
+    expect_d3d_error(TRI "4 0 nan 0\nFaces:\n1 2 3.\n", "cube.d3d:4: vertex 4: coordinate 'nan' is not a finite number",
+                     NULL, __LINE__);
+    expect_d3d_error(TRI "4 0 0 -inf\nFaces:\n1 2 3.\n", "cube.d3d:4: vertex 4: coordinate '-inf' is not a finite",
+                     NULL, __LINE__);
+    expect_d3d_error(TRI "Faces:\n@material bad/name\n1 2 3.\n", "cube.d3d:5: invalid material name 'bad/name'",
+                     "1 to 63 characters", __LINE__);
+    expect_d3d_error(TRI "Faces:\n@material\n1 2 3.\n", "cube.d3d:5: '@material' takes one material name", NULL,
+                     __LINE__);
+    char longname[200];
+    snprintf(longname, sizeof longname, TRI "Faces:\n@material %064d\n1 2 3.\n", 0);
+    expect_d3d_error(longname, "cube.d3d:5: invalid material name", NULL, __LINE__);
+    expect_d3d_error(TRI "@material steel\nFaces:\n1 2 3.\n", "cube.d3d:4: @material belongs after the 'Faces:' line",
+                     NULL, __LINE__);
+    expect_d3d_error(TRI "Faces:\n@colour red\n1 2 3.\n", "cube.d3d:5: unknown directive '@colour'", NULL, __LINE__);
+    expect_d3d_error(TRI "Faces\n1 2 3.\n", "cube.d3d:4: ", "the faces start after a line 'Faces:'", __LINE__);
+    // Large but finite coordinates: an error, not a crash or a NaN normal.
+    expect_d3d_error("1 1e308 0 0\n2 -1e308 1e308 0\n3 1e308 1e308 1e308\nFaces:\n1 2 3.\n",
+                     "cube.d3d:5: face 1: its plane cannot be computed", NULL, __LINE__);
+    // Binary input.
+    const char nul[] = "1 0 0 0\n2 1 0\0 0\n";
+    model_error_clear();
+    CHECK(model_scene_parse_d3d(nul, sizeof nul - 1, "bin.d3d", NULL) == NULL);
+    CHECK_CONTAINS(model_last_error(), "bin.d3d:2: the line contains a NUL byte");
+    const char garbage[] = "\x01\xff\xfe 7\x80 \x1b[0m";
+    model_error_clear();
+    CHECK(model_scene_parse_d3d(garbage, sizeof garbage - 1, "bin.d3d", NULL) == NULL);
+    CHECK_CONTAINS(model_last_error(), "bin.d3d:1: a vertex line has 4 fields");
+    model_error_clear();
+    CHECK(model_scene_parse_d3d("1 0 0 0\n2 1 0 0\n3 0 1 0\nFaces:\n1 2 3 .\n", 0, "empty.d3d", NULL) == NULL);
+    CHECK_CONTAINS(model_last_error(), "empty.d3d: no 'Faces:' line");
+}
+
+// Face 1 a triangle; face 2 a twisted square (z = +-0.35 alternating), whose
+// Newell normal is +z through the centroid (5, 5, 0): every vertex 0.35 mm off.
+static const char TWISTED_D3D[] =
+    "1 0 0 0\n2 10 0 0\n3 0 10 0\n"
+    "12 0 0 0.35\n13 10 0 -0.35\n14 10 10 0.35\n15 0 10 -0.35\n"
+    "Faces:\n"
+    "1 2 3.\n"
+    "# the twisted one\n"
+    "12 13 14 15.\n";   // line 11
+
+TEST(scene_d3d_planarity_and_tolerance)
+{
+    expect_d3d_error(TWISTED_D3D,
+                     "cube.d3d:11: face 2 is not planar: vertex 12 is 0.35 mm from the face's plane "
+                     "(tolerance 0.01 mm)", "raise the planarity tolerance", __LINE__);
+    model_scene_options_t opt = { .planarity_tol_mm = 0.3 };
+    model_scene_t *s = model_scene_parse_d3d(TWISTED_D3D, strlen(TWISTED_D3D), "t.d3d", &opt);
+    CHECK(s == NULL);
+    CHECK_CONTAINS(model_last_error(), "(tolerance 0.3 mm)");
+    model_scene_free(s);
+    opt.planarity_tol_mm = 0.36;
+    s = model_scene_parse_d3d(TWISTED_D3D, strlen(TWISTED_D3D), "t.d3d", &opt);
+    CHECK_MSG(s != NULL, "%s", model_last_error());
+    if (s) {
+        CHECK(s->nfaces == 2);
+        CHECK_NEAR(s->faces[1].normal.z, 1, 1e-12);
+        CHECK_NEAR(s->faces[1].offset_mm, 0, 1e-12);
+    }
+    model_scene_free(s);
+    opt.planarity_tol_mm = NAN;
+    model_error_clear();
+    CHECK(model_scene_parse_d3d(TWISTED_D3D, strlen(TWISTED_D3D), "t.d3d", &opt) == NULL);
+    CHECK_CONTAINS(model_last_error(), "t.d3d: planarity tolerance nan mm is invalid");
+}
+
+static const char CUBE_OBJ[] =
+    "# unit cube\n"
+    "mtllib cube.mtl\n"
+    "o cube\n"
+    "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\n"
+    "v 0 0 1 1.0\nv 1 0 1\nv 1 1 1\nv 0 1 1\n"   // lines 8..11, one with w
+    "vt 0 0\nvt 1 0\nvn 0 0 -1\n"
+    "g all\ns off\n"
+    "f 1 4 3 2\n"                               // line 17, default
+    "usemtl steel\n"
+    "f 5/1 6/2 7/1 8/2\n"                       // v/vt
+    "f 1/1/1 2/2/1 6/1/1 5/2/1\n"               // v/vt/vn
+    "usemtl paint\n"
+    "f -5//1 -1//1 -2//1 -6//1\n"               // relative: 4 8 7 3
+    "f 1 5 8 4\n"
+    "l 1 2\n"
+    "usemtl steel\n"
+    "f 2 3 7 6   # right\n";
+
+TEST(scene_obj_cube)
+{
+    model_scene_t *s = obj(CUBE_OBJ);
+    CHECK_MSG(s != NULL, "%s", model_last_error());
+    if (!s) return;
+    check_cube(s);
+    CHECK(s->faces[0].line == 17);
+    CHECK(s->faces[3].verts[0] == 3 && s->faces[3].verts[1] == 7 && s->faces[3].verts[2] == 6 &&
+          s->faces[3].verts[3] == 2);
+    CHECK(s->nmaterials == 3);
+    int d = model_scene_material_index(s, "default"), st = model_scene_material_index(s, "steel"),
+        p = model_scene_material_index(s, "paint");
+    CHECK(s->faces[0].material == d && d >= 0);
+    CHECK(s->faces[1].material == st && s->faces[2].material == st && s->faces[5].material == st);
+    CHECK(s->faces[3].material == p && s->faces[4].material == p && p >= 0);
+    model_scene_free(s);
+}
+
+static void expect_obj_error(const char *text, const char *a, const char *b)
+{
+    model_scene_t *s = obj(text);
+    CHECK(s == NULL);
+    model_scene_free(s);
+    CHECK_CONTAINS(model_last_error(), a);
+    if (b) CHECK_CONTAINS(model_last_error(), b);
+}
+
+#define OTRI "v 0 0 0\nv 10 0 0\nv 0 10 0\n"
+
+TEST(scene_obj_errors)
+{
+    expect_obj_error(OTRI "vp 1 2\nf 1 2 3\n", "cube.obj:4: unsupported OBJ statement 'vp'", NULL);
+    expect_obj_error(OTRI "f 1 2 3\nf 1 2 9\n", "cube.obj:5: face 2 refers to vertex 9, which does not exist", NULL);
+    expect_obj_error(OTRI "f 1 2 -4\n", "cube.obj:4: face 1: vertex index -4 refers before the first vertex", NULL);
+    expect_obj_error(OTRI "f 1 2 0\n", "cube.obj:4: face 1: '0' is not a vertex reference", NULL);
+    expect_obj_error(OTRI "f 1 2/x 3\n", "cube.obj:4: face 1: '2/x' is not a vertex reference", NULL);
+    expect_obj_error(OTRI "f 1 2/1/1/1 3\n", "'2/1/1/1' is not a vertex reference", NULL);
+    expect_obj_error(OTRI "f 1 2\n", "cube.obj:4: face 1 has 2 vertices", NULL);
+    expect_obj_error(OTRI "f 1 2 3 -3\n", "cube.obj:4: face 1 uses vertex 1 twice", NULL);
+    expect_obj_error(OTRI "v 20 0 0\nf 1 2 4\n", "cube.obj:5: face 1 is degenerate", NULL);
+    expect_obj_error(OTRI "v 1 2\n", "cube.obj:4: 'v' takes 3 or 4 numbers", NULL);
+    expect_obj_error(OTRI "v 1 2 zz\n", "cube.obj:4: vertex 4: 'zz' does not parse", NULL);
+    expect_obj_error(OTRI "v 1 2 1e400\n", "cube.obj:4: vertex 4: '1e400' is not a finite number", NULL);
+    expect_obj_error(OTRI "usemtl a b\nf 1 2 3\n", "cube.obj:4: 'usemtl' takes one material name", NULL);
+    expect_obj_error(OTRI "usemtl \xc3\xa9t\xc3\xa9\nf 1 2 3\n", "cube.obj:4: invalid material name '\\xc3\\xa9t", NULL);
+    expect_obj_error(OTRI, "cube.obj: no faces", NULL);
+    expect_obj_error("v 0 0 0.35\nv 10 0 -0.35\nv 10 10 0.35\nv 0 10 -0.35\n\nf 1 2 3 4\n",
+                     "cube.obj:6: face 1 is not planar: vertex 1 is 0.35 mm from the face's plane "
+                     "(tolerance 0.01 mm)", NULL);
+    // Positive indices may refer to vertices defined later.
+    model_scene_t *s = obj("f 1 2 3\n" OTRI);
+    CHECK_MSG(s != NULL, "%s", model_last_error());
+    if (s) CHECK_NEAR(s->faces[0].normal.z, 1, 1e-15);
+    model_scene_free(s);
+}
+
+TEST(scene_rotated_z)
+{
+    model_scene_t *s = d3d(CUBE_D3D);
+    CHECK(s != NULL);
+    if (!s) return;
+    model_scene_t *r = model_scene_rotated_z(s, 90);
+    CHECK(r != NULL);
+    if (!r) {
+        model_scene_free(s);
+        return;
+    }
+    // Vertex 20 is (1,0,0) -> (0,1,0).
+    CHECK_NEAR(r->vertices[1].x, 0, 1e-15);
+    CHECK_NEAR(r->vertices[1].y, 1, 1e-15);
+    CHECK_NEAR(r->vertices[1].z, 0, 1e-15);
+    // The right face's normal (1,0,0) -> (0,1,0); front (0,-1,0) -> (1,0,0).
+    CHECK_NEAR(r->faces[5].normal.x, 0, 1e-15);
+    CHECK_NEAR(r->faces[5].normal.y, 1, 1e-15);
+    CHECK_NEAR(r->faces[2].normal.x, 1, 1e-15);
+    CHECK_NEAR(r->faces[2].normal.y, 0, 1e-15);
+    CHECK(strcmp(r->sha256, s->sha256) == 0);
+    CHECK(strcmp(r->path, s->path) == 0);
+    CHECK(r->path != s->path && r->vertices != s->vertices && r->faces[0].verts != s->faces[0].verts);
+    CHECK(r->nmaterials == s->nmaterials && strcmp(r->material_names[1], s->material_names[1]) == 0);
+    for (int k = 0; k < 6; k++) {
+        CHECK(r->faces[k].material == s->faces[k].material);
+        CHECK(r->faces[k].nverts == s->faces[k].nverts && r->faces[k].verts[2] == s->faces[k].verts[2]);
+        CHECK_NEAR(r->faces[k].offset_mm, s->faces[k].offset_mm, 1e-15);
+        // Still on the plane after rotation.
+        for (int i = 0; i < r->faces[k].nverts; i++) {
+            model_vec3_t p = r->vertices[r->faces[k].verts[i]], n = r->faces[k].normal;
+            CHECK_NEAR(p.x * n.x + p.y * n.y + p.z * n.z, r->faces[k].offset_mm, 1e-12);
+        }
+    }
+    // The original is untouched.
+    CHECK(s->vertices[1].x == 1 && s->vertices[1].y == 0);
+    // A general angle, and 4 x 90 deg back to the start.
+    model_scene_t *r30 = model_scene_rotated_z(s, -30);
+    CHECK(r30 != NULL);
+    if (r30) {
+        CHECK_NEAR(r30->vertices[1].x, cos(M_PI / 6), 1e-15);
+        CHECK_NEAR(r30->vertices[1].y, -0.5, 1e-15);
+    }
+    model_scene_free(r30);
+    model_scene_t *r450 = model_scene_rotated_z(s, 450);
+    CHECK(r450 && r450->vertices[6].x == -1 && r450->vertices[6].y == 1);
+    model_scene_free(r450);
+    model_scene_free(r);
+    model_scene_free(s);
+}
+
+TEST(scene_load_by_extension)
+{
+    const char *pd = test_write("cube.D3D", CUBE_D3D);
+    const char *po = test_write("cube.Obj", CUBE_OBJ);
+    const char *px = test_write("cube.stl", CUBE_D3D);
+    model_scene_t *a = model_scene_load(pd, NULL), *b = model_scene_load(po, NULL);
+    CHECK_MSG(a != NULL, "%s", model_last_error());
+    CHECK_MSG(b != NULL, "%s", model_last_error());
+    if (a && b) {
+        check_cube(a);
+        check_cube(b);
+        CHECK(strcmp(a->path, pd) == 0);
+        char h[65];
+        CHECK(model_sha256_file(pd, h) && strcmp(h, a->sha256) == 0);
+    }
+    model_scene_free(a);
+    model_scene_free(b);
+    model_error_clear();
+    CHECK(model_scene_load(px, NULL) == NULL);
+    CHECK_CONTAINS(model_last_error(), "cube.stl: unknown scene format '.stl'; name the file .d3d or .obj");
+    model_error_clear();
+    CHECK(model_scene_load(test_path("noext"), NULL) == NULL);
+    CHECK_CONTAINS(model_last_error(), "unknown scene format (no extension)");
+    model_error_clear();
+    CHECK(model_scene_load(test_path("missing.d3d"), NULL) == NULL);
+    CHECK_CONTAINS(model_last_error(), "missing.d3d: cannot open");
+    // Errors name the path as given.
+    const char *pbad = test_write("bad.d3d", TWISTED_D3D);
+    model_error_clear();
+    CHECK(model_scene_load(pbad, NULL) == NULL);
+    CHECK_CONTAINS(model_last_error(), "bad.d3d:11: face 2 is not planar");
+    model_scene_free(NULL);
+}
+
+TEST(scene_hostile_inputs)
+{
+    // Very long lines, huge numbers, many tokens: errors (or results), never a crash or hang.
+    size_t n = 1 << 20;
+    char *big = malloc(n + 64);
+    memset(big, '9', n);
+    memcpy(big + n, " 0 0 0\nFaces:\n", 15);
+    model_error_clear();
+    CHECK(model_scene_parse_d3d(big, n + 14, "big.d3d", NULL) == NULL);
+    CHECK_CONTAINS(model_last_error(), "big.d3d:1: vertex number '99999");
+    // A face with a million references to 3 vertices: repeated vertex, found fast.
+    size_t o = (size_t)sprintf(big, TRI "Faces:\n");
+    while (o + 8 < n) o += (size_t)sprintf(big + o, "1 2 3 ");
+    big[o++] = '.';
+    double t0 = model_now_s();
+    model_error_clear();
+    CHECK(model_scene_parse_d3d(big, o, "big.d3d", NULL) == NULL);
+    CHECK_CONTAINS(model_last_error(), "big.d3d:5: face 1 uses vertex 1 twice");
+    CHECK(model_now_s() - t0 < 2.0);
+    // Only whitespace, only comments, only a '#'.
+    const char *odd[] = { " \t\r\n\n", "####", "Faces:", "Faces: .", "1 0 0 0 Faces:", "f", "v", "." };
+    for (size_t i = 0; i < sizeof odd / sizeof odd[0]; i++) {
+        model_error_clear();
+        CHECK(model_scene_parse_d3d(odd[i], strlen(odd[i]), "odd.d3d", NULL) == NULL);
+        CHECK(model_last_error()[0] != 0);
+        model_error_clear();
+        CHECK(model_scene_parse_obj(odd[i], strlen(odd[i]), "odd.obj", NULL) == NULL);
+        CHECK(model_last_error()[0] != 0);
+    }
+    free(big);
+}

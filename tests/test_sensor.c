@@ -1,2 +1,326 @@
-// tests/test_sensor.c: placeholder while the module is being written.
-#include "model/model.h"
+// tests/test_sensor.c — the sensor stage: photon transfer (EMVA 1288), fixed
+// patterns, quantisation and clipping, Poisson statistics, non-linearity,
+// vignetting, reproducibility.
+#define _GNU_SOURCE
+#include <stdlib.h>
+
+#include "model/internal.h"
+#include "tests/test.h"
+
+#define W 512
+#define H 256
+#define N ((size_t)W * H)
+
+static float *filled(double P)
+{
+    float *img = malloc(N * sizeof *img);
+    for (size_t i = 0; i < N; i++) img[i] = (float)P;
+    return img;
+}
+
+static void mean_var(const float *a, double *mean, double *var)
+{
+    double s = 0, s2 = 0;
+    for (size_t i = 0; i < N; i++) s += a[i];
+    *mean = s / N;
+    for (size_t i = 0; i < N; i++) s2 += (a[i] - *mean) * (a[i] - *mean);
+    *var = s2 / (N - 1);
+}
+
+// A sensor without fixed patterns, vignetting or non-linearity, huge well:
+// K = 1 DN/e- and offset 0 make the output the electron count itself.
+static model_sensor_t counting_sensor(void)
+{
+    model_sensor_t s = model_sensor_default();
+    s.bits = 16;
+    s.system_gain_dn_per_e = 1;
+    s.full_well_e = 1e6;
+    s.read_noise_e = 0;
+    s.dark_offset_dn = 0;
+    s.dsnu_dn = 0;
+    s.prnu_pct = 0;
+    s.vignetting = 0;
+    s.nonlinearity_pct = 0;
+    return s;
+}
+
+// Photon transfer: two frames with different noise seeds; the temporal variance
+// var(A - B)/2 against K (mean - offset) + K^2 read^2 + 1/12 at several levels
+// (5 e- up to 12000 e-), and the mean against K mu + offset.
+TEST(sensor_photon_transfer)
+{
+    model_sensor_t s = model_sensor_default();
+    s.vignetting = 0;
+    s.nonlinearity_pct = 0;
+    const double K = s.system_gain_dn_per_e;
+    const double levels_e[] = { 5, 40, 300, 2500, 12000 };
+    for (size_t l = 0; l < sizeof levels_e / sizeof levels_e[0]; l++) {
+        double P = s.dark_offset_dn + levels_e[l] * K;
+        float *a = filled(P), *b = filled(P);
+        s.noise_seed = 11;
+        model_sensor_apply(&s, W, H, a);
+        s.noise_seed = 12;
+        model_sensor_apply(&s, W, H, b);
+        double sum = 0, sd = 0, sd2 = 0;
+        for (size_t i = 0; i < N; i++) {
+            sum += 0.5 * (a[i] + b[i]);
+            double d = a[i] - b[i];
+            sd += d;
+            sd2 += d * d;
+        }
+        double mean = sum / N;
+        double var = 0.5 * (sd2 / N - (sd / N) * (sd / N));
+        double expect_var = K * (mean - s.dark_offset_dn) + K * K * s.read_noise_e * s.read_noise_e + 1.0 / 12;
+        CHECK_REL(mean - s.dark_offset_dn, K * levels_e[l], 0.01);
+        CHECK_REL(var, expect_var, 0.03);
+        free(a);
+        free(b);
+    }
+}
+
+// Exact Poisson statistics (K = 1, no other noise): P(0) = e^-mu for mu = 2;
+// mean, variance and P(k = 30) for mu = 30 (the rejection sampler); mean and
+// variance for mu = 5000.
+TEST(sensor_poisson)
+{
+    model_sensor_t s = counting_sensor();
+    float *a = filled(2.0);
+    model_sensor_apply(&s, W, H, a);
+    double m, v;
+    mean_var(a, &m, &v);
+    size_t zeros = 0;
+    for (size_t i = 0; i < N; i++) zeros += a[i] == 0;
+    CHECK_NEAR(m, 2.0, 4 * sqrt(2.0 / N));
+    CHECK_REL(v, 2.0, 0.02);
+    double p0 = exp(-2.0);
+    CHECK_NEAR((double)zeros / N, p0, 4 * sqrt(p0 * (1 - p0) / N));
+    free(a);
+
+    a = filled(30.0);
+    model_sensor_apply(&s, W, H, a);
+    mean_var(a, &m, &v);
+    CHECK_NEAR(m, 30.0, 4 * sqrt(30.0 / N));
+    CHECK_REL(v, 30.0, 0.02);
+    for (int k = 20; k <= 40; k += 5) {
+        size_t c = 0;
+        for (size_t i = 0; i < N; i++) c += a[i] == k;
+        double pk = exp(-30.0 + k * log(30.0) - lgamma(k + 1.0));
+        CHECK_NEAR((double)c / N, pk, 4.5 * sqrt(pk * (1 - pk) / N));
+    }
+    free(a);
+
+    a = filled(5000.0);
+    model_sensor_apply(&s, W, H, a);
+    mean_var(a, &m, &v);
+    CHECK_NEAR(m, 5000.0, 4 * sqrt(5000.0 / N));
+    CHECK_REL(v, 5000.0, 0.02);
+    free(a);
+}
+
+TEST(sensor_fixed_patterns)
+{
+    model_sensor_t s = model_sensor_default();
+    s.prnu_pct = 1.7;
+    s.dsnu_dn = 2.5;
+    float *g = malloc(N * sizeof *g), *d = malloc(N * sizeof *d);
+    float *g2 = malloc(N * sizeof *g2), *d2 = malloc(N * sizeof *d2);
+    model_sensor_patterns(&s, W, H, g, d);
+    double m, v;
+    mean_var(g, &m, &v);
+    CHECK_NEAR(m, 1.0, 1e-6);
+    CHECK_REL(sqrt(v), 0.017, 1e-4);
+    mean_var(d, &m, &v);
+    CHECK_NEAR(m, 0.0, 1e-6);
+    CHECK_REL(sqrt(v), 2.5, 1e-4);
+    // documented structure: the column means carry 10 % (PRNU) and 30 % (DSNU)
+    // of the variance (plus the white part averaged over H rows)
+    for (int which = 0; which < 2; which++) {
+        const float *map = which ? d : g;
+        double ref = which ? 2.5 : 0.017, share = which ? 0.30 : 0.10, white = which ? 0.65 : 0.85;
+        double mm = which ? 0.0 : 1.0, cs2 = 0;
+        for (int x = 0; x < W; x++) {
+            double c = 0;
+            for (int y = 0; y < H; y++) c += map[(size_t)y * W + x];
+            c = c / H - mm;
+            cs2 += c * c;
+        }
+        double col_std = sqrt(cs2 / W), expect = ref * sqrt(share + white / H);
+        CHECK_REL(col_std, expect, 0.15);
+    }
+    // deterministic from pattern_seed, and the noise seed plays no part
+    s.noise_seed = 77;
+    model_sensor_patterns(&s, W, H, g2, d2);
+    CHECK(memcmp(g, g2, N * sizeof *g) == 0 && memcmp(d, d2, N * sizeof *d) == 0);
+    s.pattern_seed = 2;
+    model_sensor_patterns(&s, W, H, g2, NULL);
+    CHECK(memcmp(g, g2, N * sizeof *g) != 0);
+    // zero configured: flat
+    s.prnu_pct = 0;
+    s.dsnu_dn = 0;
+    model_sensor_patterns(&s, W, H, g2, d2);
+    bool flat = true;
+    for (size_t i = 0; i < N; i++) flat = flat && g2[i] == 1.0f && d2[i] == 0.0f;
+    CHECK(flat);
+    free(g);
+    free(d);
+    free(g2);
+    free(d2);
+}
+
+// Integers within [0, 2^bits - 1]; dark pixels clip at 0, saturated ones at the
+// top code, or at the full well's (compressed) level plus DSNU when below it.
+TEST(sensor_quantisation_and_saturation)
+{
+    const int bits[] = { 8, 12, 16 };
+    for (int b = 0; b < 3; b++) {
+        model_sensor_t s = model_sensor_default();
+        s.bits = bits[b];
+        s.dark_offset_dn = 0.5;   // half the dark pixels fall below 0
+        double maxv = (1 << bits[b]) - 1;
+        const double inputs[] = { 0.0, 500.0, 1e7, NAN, -1e9 };
+        for (int k = 0; k < 5; k++) {
+            float *a = filled(inputs[k]);
+            model_sensor_apply(&s, W, H, a);
+            bool ok = true;
+            double lo = 1e30, hi = -1e30;
+            for (size_t i = 0; i < N; i++) {
+                ok = ok && a[i] == floor(a[i]) && a[i] >= 0 && a[i] <= maxv;
+                lo = fmin(lo, a[i]);
+                hi = fmax(hi, a[i]);
+            }
+            CHECK_MSG(ok, "%d bits, input %g: values outside the integers of [0, %g]", bits[b],
+                      inputs[k], maxv);
+            if (k == 0 || k >= 3) CHECK(lo == 0);   // dark: the read noise reaches below 0
+            if (k == 2 && bits[b] == 8) CHECK(lo == 255 && hi == 255);
+            free(a);
+        }
+    }
+    // 12 bits, default gain: saturated pixels read f(FW) K + offset + dsnu(x,y)
+    model_sensor_t s = model_sensor_default();
+    float *a = filled(1e6), *d = malloc(N * sizeof *d);
+    model_sensor_apply(&s, W, H, a);
+    model_sensor_patterns(&s, W, H, NULL, d);
+    double e = s.full_well_e, c = s.nonlinearity_pct / 100;
+    e *= 1.0 - c * e / s.full_well_e;
+    size_t bad = 0;
+    for (size_t i = 0; i < N; i++)
+        bad += a[i] != floor(e * s.system_gain_dn_per_e + s.dark_offset_dn + d[i] + 0.5);
+    CHECK(bad == 0);
+    CHECK_NEAR(e * s.system_gain_dn_per_e + s.dark_offset_dn, 3984, 1e-9);
+    // K 0.5: the full well is beyond the 12-bit range, all pixels at 4095
+    s.system_gain_dn_per_e = 0.5;
+    for (size_t i = 0; i < N; i++) a[i] = 1e6f;
+    model_sensor_apply(&s, W, H, a);
+    bad = 0;
+    for (size_t i = 0; i < N; i++) bad += a[i] != 4095;
+    CHECK(bad == 0);
+    free(a);
+    free(d);
+}
+
+TEST(sensor_reproducible)
+{
+    model_sensor_t s = model_sensor_default();
+    float *a = filled(900), *b = filled(900), *c = filled(900);
+    model_sensor_apply(&s, W, H, a);
+    const char *old = getenv("REFL_THREADS");
+    char *saved = old ? strdup(old) : NULL;
+    setenv("REFL_THREADS", "1", 1);
+    model_sensor_apply(&s, W, H, b);   // same seeds, one thread
+    if (saved) setenv("REFL_THREADS", saved, 1);
+    else unsetenv("REFL_THREADS");
+    free(saved);
+    CHECK(memcmp(a, b, N * sizeof *a) == 0);
+    s.noise_seed = 2;
+    model_sensor_apply(&s, W, H, c);
+    CHECK(memcmp(a, c, N * sizeof *a) != 0);
+    free(a);
+    free(b);
+    free(c);
+}
+
+// A nearly noiseless sensor (1e8 e- signals, K 1e-5 DN/e-: shot noise 0.1 DN)
+// to see the deterministic parts.
+static model_sensor_t quiet_sensor(double full_well_e)
+{
+    model_sensor_t s = counting_sensor();
+    s.system_gain_dn_per_e = 1e-5;
+    s.full_well_e = full_well_e;
+    return s;
+}
+
+// vig = 1 - v (r / r_corner)^2 about the image centre
+TEST(sensor_vignetting)
+{
+    model_sensor_t s = quiet_sensor(1e12);
+    s.vignetting = 0.2;
+    float *a = filled(1000);
+    model_sensor_apply(&s, W, H, a);
+    double cx = 0.5 * (W - 1), cy = 0.5 * (H - 1), worst = 0;
+    for (int y = 0; y < H; y++)
+        for (int x = 0; x < W; x++) {
+            double r2 = ((x - cx) * (x - cx) + (y - cy) * (y - cy)) / (cx * cx + cy * cy);
+            worst = fmax(worst, fabs(a[(size_t)y * W + x] - 1000 * (1 - 0.2 * r2)));
+        }
+    CHECK(worst <= 1.0);   // rounding 0.5 + shot noise (0.1 DN std)
+    CHECK_NEAR(a[0], 800, 1.0);
+    CHECK_NEAR(a[N - 1], 800, 1.0);
+    CHECK_NEAR(a[(size_t)(H / 2) * W + W / 2], 1000, 1.0);
+    free(a);
+}
+
+// Response f(e) = e (1 - c e / FW): c below linear at full well, smooth and
+// monotonic below it.
+TEST(sensor_nonlinearity)
+{
+    model_sensor_t s = quiet_sensor(1e8);   // full well = 1000 DN linear
+    s.nonlinearity_pct = 5;
+    s.dsnu_dn = 1;   // dithers the rounding (mean 0), so the mean is unbiased
+    double prev = -1;
+    for (int k = 1; k <= 10; k++) {
+        double frac = k < 10 ? 0.1 * k : 0.9995;   // 5 sigma below saturation at k = 10
+        float *a = filled(1000 * frac);
+        model_sensor_apply(&s, W, H, a);
+        double m, v;
+        mean_var(a, &m, &v);
+        double f = frac * (1 - 0.05 * frac);
+        CHECK_NEAR(m, 1000 * f, 0.02);
+        CHECK(m > prev);
+        prev = m;
+        free(a);
+    }
+    // saturated: exactly 5 % below the linear full-well response (1000 DN)
+    s.dsnu_dn = 0;
+    float *a = filled(5000);
+    model_sensor_apply(&s, W, H, a);
+    size_t bad = 0;
+    for (size_t i = 0; i < N; i++) bad += a[i] != 950;
+    CHECK(bad == 0);
+    free(a);
+    // realistic sensor, 2 %: 90 % of the well reads 1.8 % below linear
+    model_sensor_t r = model_sensor_default();
+    r.vignetting = 0;
+    r.prnu_pct = 0;
+    double mu = 0.9 * r.full_well_e;
+    a = filled(r.dark_offset_dn + mu * r.system_gain_dn_per_e);
+    model_sensor_apply(&r, W, H, a);
+    double m, v;
+    mean_var(a, &m, &v);
+    CHECK_REL(m - r.dark_offset_dn, mu * r.system_gain_dn_per_e * (1 - 0.02 * 0.9), 5e-4);
+    free(a);
+}
+
+TEST(sensor_dark_current)
+{
+    model_sensor_t s = counting_sensor();
+    s.dark_current_e_per_s = 400;
+    s.exposure_us = 250000;   // 100 e-
+    s.dark_offset_dn = 10;
+    float *a = filled(10);   // no light
+    model_sensor_apply(&s, W, H, a);
+    double m, v;
+    mean_var(a, &m, &v);
+    CHECK_NEAR(m, 110, 4 * sqrt(100.0 / N));
+    CHECK_REL(v, 100, 0.02);   // K = 1: integer electrons, no quantisation noise
+    free(a);
+}

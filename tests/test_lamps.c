@@ -1,0 +1,473 @@
+// tests/test_lamps.c — lamps (rig/lamps.c): settle times and checks on the sim
+// backend in-process; the gpiod backend through tests/lamp_child.c run under
+// LD_PRELOAD of the fake libgpiod (tests/fake_gpiod.c), whose log records the
+// physical level of every request/set/release. `make check` passes the two
+// paths as REFL_LAMP_CHILD and REFL_FAKE_GPIOD.
+#define _GNU_SOURCE
+#include <errno.h>
+#include <fcntl.h>
+#include <limits.h>
+#include <poll.h>
+#include <signal.h>
+#include <stdlib.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include "model/model.h"
+#include "rig/rig.h"
+#include "tests/test.h"
+
+static rig_lamp_line_t lamp(const char *name, const char *chip, unsigned line, bool active_low,
+                            double warmup_ms, double settle_ms)
+{
+    rig_lamp_line_t a;
+    memset(&a, 0, sizeof a);
+    snprintf(a.name, sizeof a.name, "%s", name);
+    snprintf(a.chip, sizeof a.chip, "%s", chip);
+    a.line = line;
+    a.active_low = active_low;
+    a.warmup_ms = warmup_ms;
+    a.settle_ms = settle_ms;
+    return a;
+}
+
+// ---------------------------------------------------------------------------
+// Sim backend
+
+TEST(lamps_sim_settle_times)
+{
+    rig_lamp_line_t ls[3] = {
+        lamp("key", "", 0, false, 30, 5),
+        lamp("fill", "", 1, false, 10, 20),
+        lamp("led", "", 2, false, 0, 0),
+    };
+    rig_lamps_t *l = NULL;
+    CHECK(rig_lamps_open_sim(&l, ls, 3) == 0);
+    if (!l) return;
+    CHECK(l->n == 3 && l->on_mask == 0);
+    CHECK(!strcmp(l->ops->backend, "sim"));
+    CHECK_NEAR(rig_lamps_settle_s(l, 0, 0x3), 0.030, 1e-12);    // warm-ups 30, 10
+    CHECK_NEAR(rig_lamps_settle_s(l, 0x3, 0x2), 0.005, 1e-12);  // key off: settle 5
+    CHECK_NEAR(rig_lamps_settle_s(l, 0x3, 0x1), 0.020, 1e-12);  // fill off: settle 20
+    CHECK_NEAR(rig_lamps_settle_s(l, 0x1, 0x2), 0.010, 1e-12);  // max(fill on 10, key off 5)
+    CHECK_NEAR(rig_lamps_settle_s(l, 0x2, 0x1), 0.030, 1e-12);  // max(key on 30, fill off 20)
+    CHECK_NEAR(rig_lamps_settle_s(l, 0x3, 0x3), 0.0, 0);        // no change
+    CHECK_NEAR(rig_lamps_settle_s(l, 0x0, 0x4), 0.0, 0);        // led: instant
+    CHECK_NEAR(rig_lamps_settle_s(l, 0x0, 0x8), 0.0, 0);        // no lamp 3
+    CHECK_NEAR(rig_lamps_settle_s(NULL, 0, 1), 0.0, 0);
+    rig_lamps_close(l);
+}
+
+TEST(lamps_sim_set_sleeps_settle_time)
+{
+    rig_lamp_line_t ls[2] = { lamp("a", "", 0, false, 40, 15), lamp("b", "", 1, false, 0, 0) };
+    rig_lamps_t *l = NULL;
+    CHECK(rig_lamps_open_sim(&l, ls, 2) == 0);
+    if (!l) return;
+    double t0 = model_now_s();
+    CHECK(rig_lamps_set(l, 0x1) == 0);
+    double dt_on = model_now_s() - t0;
+    CHECK(l->on_mask == 0x1);
+    t0 = model_now_s();
+    CHECK(rig_lamps_set(l, 0x2) == 0);          // a off (15 ms), b on (0 ms)
+    double dt_swap = model_now_s() - t0;
+    CHECK(l->on_mask == 0x2);
+    t0 = model_now_s();
+    CHECK(rig_lamps_set(l, 0x2) == 0);          // no change, no wait
+    double dt_same = model_now_s() - t0;
+    CHECK(rig_lamps_all_off(l) == 0);
+    CHECK(l->on_mask == 0);
+    CHECK_MSG(dt_on >= 0.040 && dt_on < 0.040 + 0.25, "switch-on took %.4f s, want 0.040", dt_on);
+    CHECK_MSG(dt_swap >= 0.015 && dt_swap < 0.015 + 0.25, "swap took %.4f s, want 0.015", dt_swap);
+    CHECK_MSG(dt_same < 0.010, "no-op set took %.4f s", dt_same);
+    rig_lamps_close(l);
+}
+
+TEST(lamps_sim_errors)
+{
+    rig_lamp_line_t ls[3] = { lamp("a", "", 0, false, 0, 0), lamp("b", "", 1, false, 0, 0),
+                              lamp("c", "", 2, false, 0, 0) };
+    rig_lamps_t *l = NULL;
+    CHECK(rig_lamps_open_sim(&l, ls, 3) == 0);
+    if (l) {
+        CHECK(rig_lamps_set(l, 0x8) == RIG_ERR_INVALID);
+        CHECK_CONTAINS(rig_last_error(), "on_mask 0x8");
+        CHECK_CONTAINS(rig_last_error(), "3 configured");
+        CHECK(l->on_mask == 0);
+        CHECK(rig_lamps_find(l, "b") == 1);
+        CHECK(rig_lamps_find(l, "d") == -1);
+        CHECK(rig_lamps_find(l, NULL) == -1);
+        rig_lamps_close(l);
+    }
+    CHECK(rig_lamps_find(NULL, "a") == -1);
+    CHECK(rig_lamps_set(NULL, 0) == RIG_ERR_INVALID);
+    CHECK(rig_lamps_all_off(NULL) == RIG_ERR_INVALID);
+    rig_lamps_close(NULL);
+
+    rig_lamp_line_t dup[2] = { lamp("a", "", 0, false, 0, 0), lamp("a", "", 1, false, 0, 0) };
+    l = (rig_lamps_t *)1;
+    CHECK(rig_lamps_open_sim(&l, dup, 2) == RIG_ERR_INVALID);
+    CHECK(l == NULL);
+    CHECK_CONTAINS(rig_last_error(), "both named 'a'");
+
+    rig_lamp_line_t bad = lamp("key", "", 0, false, -1, 0);
+    CHECK(rig_lamps_open_sim(&l, &bad, 1) == RIG_ERR_INVALID);
+    CHECK_CONTAINS(rig_last_error(), "lamp 'key': warmup_ms -1");
+    bad = lamp("key", "", 0, false, 0, NAN);
+    CHECK(rig_lamps_open_sim(&l, &bad, 1) == RIG_ERR_INVALID);
+    CHECK_CONTAINS(rig_last_error(), "lamp 'key': settle_ms nan");
+    bad = lamp("", "", 0, false, 0, 0);
+    CHECK(rig_lamps_open_sim(&l, &bad, 1) == RIG_ERR_INVALID);
+    CHECK_CONTAINS(rig_last_error(), "lamp 0 has no name");
+    CHECK(rig_lamps_open_sim(&l, ls, 33) == RIG_ERR_INVALID);
+    CHECK_CONTAINS(rig_last_error(), "33 lamps given");
+    CHECK(rig_lamps_open_sim(NULL, ls, 1) == RIG_ERR_INVALID);
+    CHECK(rig_lamps_open_gpiod(&l, dup, 2) == RIG_ERR_INVALID);   // checked before any chip is opened
+    CHECK_CONTAINS(rig_last_error(), "both named 'a'");
+}
+
+TEST(lamps_sim_registry_full)
+{
+    // The safety registry holds 32 open sets; the 33rd open fails cleanly.
+    rig_lamp_line_t a = lamp("a", "", 0, false, 0, 0);
+    rig_lamps_t *sets[40] = { 0 };
+    int opened = 0, err = 0;
+    while (opened < 40 && !(err = rig_lamps_open_sim(&sets[opened], &a, 1))) opened++;
+    CHECK(opened >= 1 && opened <= 32);   // 32 unless another test left a set open
+    CHECK(err == RIG_ERR_NO_MEM);
+    CHECK_CONTAINS(rig_last_error(), "more than 32 lamp sets open");
+    for (int i = 0; i < opened; i++) rig_lamps_close(sets[i]);
+    rig_lamps_t *l = NULL;
+    CHECK(rig_lamps_open_sim(&l, &a, 1) == 0);   // slots freed on close
+    rig_lamps_close(l);
+}
+
+// ---------------------------------------------------------------------------
+// gpiod backend through the child program and the fake library
+
+static bool fake_paths(char lib[PATH_MAX], char child[PATH_MAX])
+{
+    const char *l = getenv("REFL_FAKE_GPIOD"), *c = getenv("REFL_LAMP_CHILD");
+    if (!l || !c || !realpath(l, lib) || !realpath(c, child)) {
+        test_fail(__FILE__, __LINE__, "REFL_FAKE_GPIOD (%s) and REFL_LAMP_CHILD (%s) must name the fake "
+                  "libgpiod and tests/lamp_child binaries (make check sets them)",
+                  l ? l : "unset", c ? c : "unset");
+        return false;
+    }
+    return true;
+}
+
+typedef struct {
+    char  lib[PATH_MAX], child[PATH_MAX];
+    char  env[6][PATH_MAX + 64];
+    const char *argv[64];
+    const char *log;
+} child_cmd_t;
+
+// argv: env LD_PRELOAD=... FAKE_GPIOCHIP=... FAKE_GPIO_LOG=... [extra] child MODE MASK LAMP...
+static bool child_cmd(child_cmd_t *c, const char *chips, const char *extra_env, const char *mode,
+                      const char *mask, const char *const *lamps)
+{
+    if (!fake_paths(c->lib, c->child)) return false;
+    c->log = test_path("gpio.log");
+    unlink(c->log);
+    int k = 0, e = 0;
+    c->argv[k++] = "env";
+    snprintf(c->env[e], sizeof c->env[e], "LD_PRELOAD=%s", c->lib);
+    c->argv[k++] = c->env[e++];
+    snprintf(c->env[e], sizeof c->env[e], "FAKE_GPIOCHIP=%s", chips);
+    c->argv[k++] = c->env[e++];
+    snprintf(c->env[e], sizeof c->env[e], "FAKE_GPIO_LOG=%s", c->log);
+    c->argv[k++] = c->env[e++];
+    // Under make asan the child is an ASan binary and the fake is preloaded first.
+    c->argv[k++] = "ASAN_OPTIONS=verify_asan_link_order=0:detect_leaks=0";
+    if (extra_env) c->argv[k++] = extra_env;
+    c->argv[k++] = c->child;
+    c->argv[k++] = mode;
+    c->argv[k++] = mask;
+    for (int i = 0; lamps[i] && k < 63; i++) c->argv[k++] = lamps[i];
+    c->argv[k] = NULL;
+    return true;
+}
+
+// The last physical level the log shows for a line, -1 if none.
+static int last_level(const char *log, const char *chip, unsigned offset)
+{
+    int level = -1;
+    for (const char *p = log; p && *p;) {
+        char op[16], ch[64];
+        unsigned off;
+        int lv;
+        if (sscanf(p, "%15s %63s %u=%d", op, ch, &off, &lv) == 4 && !strcmp(ch, chip) && off == offset)
+            level = lv;
+        p = strchr(p, '\n');
+        if (p) p++;
+    }
+    return level;
+}
+
+static int count_lines(const char *log, const char *prefix)
+{
+    int n = 0;
+    for (const char *p = log; p && *p;) {
+        if (!strncmp(p, prefix, strlen(prefix))) n++;
+        p = strchr(p, '\n');
+        if (p) p++;
+    }
+    return n;
+}
+
+static char *read_log(const char *path)
+{
+    bool q = model_error_quiet(true);
+    char *s = model_read_file(path, NULL);
+    model_error_quiet(q);
+    return s ? s : calloc(1, 1);
+}
+
+static const char *const three_lamps[] = { "key=gpiochip0:3", "fill=gpiochip0:5:low", "back=/dev/gpiochip1:2",
+                                           NULL };
+
+TEST(lamps_gpiod_switch_and_close)
+{
+    child_cmd_t c;
+    if (!child_cmd(&c, "gpiochip0:32,gpiochip1:8", NULL, "close", "0x3", three_lamps)) return;
+    char *out = NULL, *err = NULL;
+    int rc = test_run(c.argv, 20, &out, &err);
+    CHECK_MSG(rc == 0, "exit %d, stderr: %s", rc, err);
+    CHECK_CONTAINS(out, "closed");
+    char *log = read_log(c.log);
+    // Requested at the OFF level (active-low 'fill': high), consumer "refl".
+    CHECK_CONTAINS(log, "request gpiochip0 3=0 consumer=refl\n");
+    CHECK_CONTAINS(log, "request gpiochip0 5=1 consumer=refl\n");
+    CHECK_CONTAINS(log, "request gpiochip1 2=0 consumer=refl\n");
+    // key and fill on: key high, fill (active-low) low; back stays off.
+    CHECK_CONTAINS(log, "set gpiochip0 3=1\nset gpiochip0 5=0\nset gpiochip1 2=0\n");
+    // Closed: everything off and released.
+    CHECK(last_level(log, "gpiochip0", 3) == 0);
+    CHECK(last_level(log, "gpiochip0", 5) == 1);
+    CHECK(last_level(log, "gpiochip1", 2) == 0);
+    CHECK(count_lines(log, "request ") == 3);
+    CHECK(count_lines(log, "release ") == 3);
+    CHECK_CONTAINS(log, "release gpiochip0 5=1\n");
+    free(log);
+    free(out);
+    free(err);
+}
+
+TEST(lamps_gpiod_active_low_only)
+{
+    static const char *const lamps[] = { "ring=gpiochip0:7:low", NULL };
+    child_cmd_t c;
+    if (!child_cmd(&c, "gpiochip0:8", NULL, "close", "0x1", lamps)) return;
+    int rc = test_run(c.argv, 20, NULL, NULL);
+    CHECK(rc == 0);
+    char *log = read_log(c.log);
+    CHECK_CONTAINS(log, "request gpiochip0 7=1 consumer=refl\nset gpiochip0 7=0\nset gpiochip0 7=1\n");
+    CHECK(last_level(log, "gpiochip0", 7) == 1);
+    free(log);
+}
+
+// Start the child in hold mode, wait for "ready", check the lamps are on, send
+// sig, and check it died of sig with every line at its OFF level.
+static void check_signal(int sig)
+{
+    child_cmd_t c;
+    if (!child_cmd(&c, "gpiochip0:32,gpiochip1:8", NULL, "hold", "0x7", three_lamps)) return;
+    int p[2];
+    if (pipe2(p, O_CLOEXEC)) {
+        test_fail(__FILE__, __LINE__, "pipe: %s", strerror(errno));
+        return;
+    }
+    pid_t pid = fork();
+    if (pid == 0) {
+        dup2(p[1], 1);
+        execvp(c.argv[0], (char *const *)c.argv);
+        _exit(127);
+    }
+    close(p[1]);
+    if (pid < 0) {
+        close(p[0]);
+        test_fail(__FILE__, __LINE__, "fork: %s", strerror(errno));
+        return;
+    }
+    char buf[256] = { 0 };
+    size_t len = 0;
+    double t0 = model_now_s();
+    while (!strstr(buf, "ready") && model_now_s() - t0 < 10 && len + 1 < sizeof buf) {
+        struct pollfd pf = { p[0], POLLIN, 0 };
+        if (poll(&pf, 1, 100) <= 0) continue;
+        ssize_t n = read(p[0], buf + len, sizeof buf - 1 - len);
+        if (n <= 0) break;
+        len += (size_t)n;
+    }
+    close(p[0]);
+    bool ready = strstr(buf, "ready") != NULL;
+    CHECK_MSG(ready, "child never printed ready (got \"%s\")", buf);
+
+    char *log = read_log(c.log);
+    CHECK(last_level(log, "gpiochip0", 3) == 1);   // on before the signal
+    CHECK(last_level(log, "gpiochip0", 5) == 0);
+    CHECK(last_level(log, "gpiochip1", 2) == 1);
+    free(log);
+
+    kill(pid, ready ? sig : SIGKILL);
+    int status = 0;
+    t0 = model_now_s();
+    while (waitpid(pid, &status, WNOHANG) == 0) {
+        if (model_now_s() - t0 > 10) {
+            kill(pid, SIGKILL);
+            waitpid(pid, &status, 0);
+            test_fail(__FILE__, __LINE__, "child did not end after signal %d", sig);
+            break;
+        }
+        usleep(5000);
+    }
+    CHECK_MSG(WIFSIGNALED(status) && WTERMSIG(status) == sig, "child status 0x%x, want killed by %d",
+              status, sig);
+    log = read_log(c.log);
+    CHECK(last_level(log, "gpiochip0", 3) == 0);   // off after the signal
+    CHECK(last_level(log, "gpiochip0", 5) == 1);
+    CHECK(last_level(log, "gpiochip1", 2) == 0);
+    free(log);
+}
+
+TEST(lamps_gpiod_sigint_switches_off) { check_signal(SIGINT); }
+TEST(lamps_gpiod_sigterm_switches_off) { check_signal(SIGTERM); }
+TEST(lamps_gpiod_sighup_switches_off) { check_signal(SIGHUP); }
+
+TEST(lamps_gpiod_exit_switches_off)
+{
+    child_cmd_t c;
+    if (!child_cmd(&c, "gpiochip0:32,gpiochip1:8", NULL, "exit", "0x7", three_lamps)) return;
+    char *out = NULL;
+    int rc = test_run(c.argv, 20, &out, NULL);
+    CHECK(rc == 0);
+    CHECK_CONTAINS(out, "ready");
+    char *log = read_log(c.log);
+    CHECK_CONTAINS(log, "set gpiochip0 3=1\nset gpiochip0 5=0\nset gpiochip1 2=1\n");
+    CHECK(last_level(log, "gpiochip0", 3) == 0);
+    CHECK(last_level(log, "gpiochip0", 5) == 1);
+    CHECK(last_level(log, "gpiochip1", 2) == 0);
+    free(log);
+    free(out);
+}
+
+TEST(lamps_gpiod_set_failure_switches_all_off)
+{
+    // gpiochip0's lamps switch on, then gpiochip1 fails (unplugged): every
+    // lamp must end off and the error name the lamp and chip.
+    child_cmd_t c;
+    if (!child_cmd(&c, "gpiochip0:32,gpiochip1:8", "FAKE_GPIO_FAIL_SET=2", "close", "0x7", three_lamps))
+        return;
+    char *err = NULL;
+    int rc = test_run(c.argv, 20, NULL, &err);
+    CHECK(rc == 3);
+    CHECK_CONTAINS(err, "device disconnected");
+    CHECK_CONTAINS(err, "cannot switch lamp 'back' on GPIO chip '/dev/gpiochip1'");
+    CHECK_CONTAINS(err, "every lamp is switched off");
+    char *log = read_log(c.log);
+    CHECK_CONTAINS(log, "set gpiochip0 3=1\nset gpiochip0 5=0\nset gpiochip0 3=0\nset gpiochip0 5=1\n");
+    CHECK(last_level(log, "gpiochip0", 3) == 0);
+    CHECK(last_level(log, "gpiochip0", 5) == 1);
+    CHECK(last_level(log, "gpiochip1", 2) == 0);
+    CHECK(count_lines(log, "release ") == 3);
+    free(log);
+    free(err);
+}
+
+// Runs the child in "open" mode; returns its stderr (caller frees) and exit code.
+static char *open_error(const char *chips, const char *extra_env, const char *const *lamps, int *rc,
+                        char **log)
+{
+    child_cmd_t c;
+    char *err = NULL;
+    *rc = -1;
+    if (!child_cmd(&c, chips, extra_env, "open", "0", lamps)) return calloc(1, 1);
+    *rc = test_run(c.argv, 20, NULL, &err);
+    if (log) *log = read_log(c.log);
+    return err;
+}
+
+TEST(lamps_gpiod_error_missing_chip)
+{
+    static const char *const lamps[] = { "key=gpiochip3:1", NULL };
+    int rc;
+    char *err = open_error("gpiochip0:32", NULL, lamps, &rc, NULL);
+    CHECK(rc == 3);
+    CHECK_CONTAINS(err, "device not found");
+    CHECK_CONTAINS(err, "lamp 'key': no GPIO chip 'gpiochip3'; is the board connected? ls /dev/gpiochip*");
+    free(err);
+}
+
+TEST(lamps_gpiod_error_not_a_chip)
+{
+    char lamp_arg[PATH_MAX + 32];
+    snprintf(lamp_arg, sizeof lamp_arg, "key=%s:1", test_write("notachip", "x\n"));
+    const char *const lamps[] = { lamp_arg, NULL };
+    int rc;
+    char *err = open_error("gpiochip0:32", NULL, lamps, &rc, NULL);
+    CHECK(rc == 3);
+    CHECK_CONTAINS(err, "notachip' is not a GPIO chip");
+    CHECK_CONTAINS(err, "/dev/gpiochipN");
+    free(err);
+}
+
+TEST(lamps_gpiod_error_out_of_range_releases_others)
+{
+    // gpiochip0's line is requested first; the bad line on gpiochip1 must
+    // leave it off and released.
+    static const char *const lamps[] = { "key=gpiochip0:2", "back=gpiochip1:9", NULL };
+    int rc;
+    char *log = NULL;
+    char *err = open_error("gpiochip0:32,gpiochip1:8", NULL, lamps, &rc, &log);
+    CHECK(rc == 3);
+    CHECK_CONTAINS(err, "invalid argument");
+    CHECK_CONTAINS(err, "lamp 'back': line 9 is out of range on GPIO chip 'gpiochip1', which has 8 lines (0..7)");
+    CHECK_CONTAINS(log, "request gpiochip0 2=0 consumer=refl\n");
+    CHECK_CONTAINS(log, "release gpiochip0 2=0\n");
+    CHECK(last_level(log, "gpiochip0", 2) == 0);
+    CHECK(count_lines(log, "release ") == 1);
+    free(err);
+    free(log);
+}
+
+TEST(lamps_gpiod_error_busy_line)
+{
+    static const char *const lamps[] = { "key=gpiochip0:4", "fill=gpiochip0:5", NULL };
+    int rc;
+    char *log = NULL;
+    char *err = open_error("gpiochip0:32", "FAKE_GPIO_BUSY=5", lamps, &rc, &log);
+    CHECK(rc == 3);
+    CHECK_CONTAINS(err, "device busy");
+    CHECK_CONTAINS(err, "lamp 'fill' (GPIO chip 'gpiochip0' line 5) is busy: held by 'other-app'");
+    CHECK(count_lines(log, "request ") == 0);   // the bulk request is all or nothing
+    free(err);
+    free(log);
+}
+
+TEST(lamps_gpiod_error_permission)
+{
+    static const char *const lamps[] = { "key=gpiochip0:4", NULL };
+    int rc;
+    char *err = open_error("gpiochip0:32", "FAKE_GPIO_EACCES=1", lamps, &rc, NULL);
+    CHECK(rc == 3);
+    CHECK_CONTAINS(err, "permission denied");
+    CHECK_CONTAINS(err, "lamp 'key': permission denied opening GPIO chip 'gpiochip0'");
+    CHECK_CONTAINS(err, "usermod -aG gpio");
+    CHECK_CONTAINS(err, "udev rule");
+    free(err);
+}
+
+TEST(lamps_gpiod_error_same_line_twice)
+{
+    static const char *const lamps[] = { "key=gpiochip0:4", "fill=gpiochip0:4", NULL };
+    int rc;
+    char *log = NULL;
+    char *err = open_error("gpiochip0:32", NULL, lamps, &rc, &log);
+    CHECK(rc == 3);
+    CHECK_CONTAINS(err, "lamps 'key' and 'fill' both use line 4 of GPIO chip 'gpiochip0'");
+    CHECK(count_lines(log, "request ") == 0);
+    free(err);
+    free(log);
+}

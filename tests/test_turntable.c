@@ -1,0 +1,617 @@
+// tests/test_turntable.c — the turntable: errors, stage table, motion time,
+// the simulated stage, and the unmodified APT driver against a simulated
+// FTDI + APT controller (tests/apt_sim.c) under umockdev.
+//
+// The APT tests (apt_umock_*) need libumockdev-preload loaded at process
+// start, so turntable_apt_under_umockdev re-runs this test binary as
+// `umockdev-wrapper <self> apt_umock_`; run directly, the apt_umock_* tests
+// return at once.
+#define _GNU_SOURCE
+#include <stdlib.h>
+#include <time.h>
+#include <unistd.h>
+
+#include "model/model.h"
+#include "rig/rig.h"
+#include "tests/apt_sim.h"
+#include "tests/test.h"
+
+static void sleep_s(double s)
+{
+    struct timespec ts = { (time_t)s, (long)((s - (time_t)s) * 1e9) };
+    nanosleep(&ts, NULL);
+}
+
+// ---------------------------------------------------------------------------
+// Errors, stage models, motion time
+
+TEST(turntable_strerror_and_fail)
+{
+    CHECK(strcmp(rig_strerror(RIG_ERR_OK), "success") == 0);
+    CHECK(strcmp(rig_strerror(RIG_ERR_TIMEOUT), "timed out") == 0);
+    CHECK(strcmp(rig_strerror(RIG_ERR_DISCONNECTED), "device disconnected") == 0);
+    CHECK(strcmp(rig_strerror(-999), "unknown error") == 0);
+    CHECK(rig_fail(RIG_ERR_LIMIT, "stage %s at %d", "X", 3) == RIG_ERR_LIMIT);
+    CHECK(strcmp(rig_last_error(), "stage X at 3") == 0);
+    CHECK(strcmp(model_last_error(), "stage X at 3") == 0);
+}
+
+TEST(turntable_stage_models)
+{
+    int n = 0;
+    bool k10 = false, prm = false;
+    for (const rig_stage_model_t *m = rig_stage_models; m->model; m++, n++) {
+        CHECK(m->counts_per_deg > 0 && m->max_speed_deg_s > 0 && m->accel_deg_s2 > 0);
+        if (strcmp(m->model, "K10CR1") == 0) {
+            k10 = true;
+            CHECK_NEAR(m->counts_per_deg, 136533.33, 1e-9);
+            CHECK_NEAR(m->max_speed_deg_s, 10, 0);
+            CHECK_NEAR(m->accel_deg_s2, 10, 0);
+        }
+        if (strcmp(m->model, "PRM1-Z8") == 0) {
+            prm = true;
+            CHECK_NEAR(m->counts_per_deg, 1919.64, 1e-9);
+        }
+    }
+    CHECK(k10 && prm && n < 50);
+}
+
+TEST(turntable_motion_time)
+{
+    // trapezoid: 90 deg at 10 deg/s, 10 deg/s^2 -> 1 s up, 8 s cruise, 1 s down
+    CHECK_NEAR(rig_motion_time_s(90, 10, 10), 10.0, 1e-12);
+    CHECK_NEAR(rig_motion_time_s(-90, 10, 10), 10.0, 1e-12);
+    // triangle: 0.5 deg never reaches cruise: 2 sqrt(d/a)
+    CHECK_NEAR(rig_motion_time_s(0.5, 10, 10), 2 * sqrt(0.05), 1e-12);
+    // the two branches meet at d = v^2/a
+    CHECK_NEAR(rig_motion_time_s(10, 10, 10), 2.0, 1e-12);
+    CHECK_NEAR(rig_motion_time_s(10 - 1e-9, 10, 10), 2.0, 1e-6);
+    CHECK_NEAR(rig_motion_time_s(0, 10, 10), 0.0, 0);
+    CHECK(isnan(rig_motion_time_s(1, 0, 10)));
+    CHECK(isnan(rig_motion_time_s(1, 10, -1)));
+    CHECK(isnan(rig_motion_time_s(NAN, 10, 10)));
+}
+
+// ---------------------------------------------------------------------------
+// Simulated stage
+
+static rig_turntable_sim_params_t fast_sim(void)
+{
+    rig_turntable_sim_params_t p = rig_turntable_sim_defaults();
+    p.time_scale = 0.01;      // 10 s of stage time = 0.1 s
+    p.home_time_s = 5;
+    p.position_noise_deg = 0.001;
+    return p;
+}
+
+TEST(turntable_sim_home_move_timing)
+{
+    rig_turntable_sim_params_t p = fast_sim();
+    rig_turntable_t *t = NULL;
+    rig_turntable_status_t st;
+    rig_turntable_info_t info;
+    CHECK(rig_turntable_open_sim(&t, &p) == 0);
+    if (!t) return;
+    CHECK(rig_turntable_info(t, &info) == 0);
+    CHECK_NEAR(info.counts_per_deg, 136533.33, 1e-9);
+    CHECK(rig_turntable_status(t, &st) == 0 && !st.homed && !st.moving);
+    double t0 = model_now_s();
+    CHECK(rig_turntable_home(t, 1.0) == 0);
+    CHECK_NEAR(model_now_s() - t0, 5 * 0.01, 0.02);
+    CHECK(rig_turntable_status(t, &st) == 0 && st.homed && !st.moving);
+    CHECK_NEAR(st.angle_deg, 0, 0);
+
+    // 90 deg: rig_motion_time_s = 10 s of stage time = 0.1 s real
+    t0 = model_now_s();
+    CHECK(rig_turntable_move_abs_deg(t, 90, 1.0) == 0);
+    double dt = model_now_s() - t0;
+    CHECK_NEAR(dt, rig_motion_time_s(90, 10, 10) * 0.01, 0.02);
+    CHECK(rig_turntable_status(t, &st) == 0 && !st.moving && !st.motion_error);
+    CHECK_NEAR(st.angle_deg, 90, 5 * 0.001);
+
+    // status while moving is computed from the clock: back to 0, half way
+    // (5 s stage time) the stage is at 90 - (0.5*10*1^2 + 10*4) = 45 deg
+    CHECK(rig_turntable_start_move_abs_deg(t, 0) == 0);
+    t0 = model_now_s();
+    sleep_s(0.05);
+    double el = (model_now_s() - t0) / 0.01;
+    CHECK(rig_turntable_status(t, &st) == 0 && st.moving && st.homed);
+    double expect = 90 - (el <= 1 ? 5 * el * el : 5 + 10 * (el - 1));
+    CHECK_NEAR(st.angle_deg, expect, 2.0);
+    CHECK(rig_turntable_wait(t, 1.0) == 0);
+    CHECK(rig_turntable_status(t, &st) == 0 && !st.moving);
+    CHECK_NEAR(st.angle_deg, 0, 5 * 0.001);
+    rig_turntable_close(t);
+}
+
+TEST(turntable_sim_relative_and_stop)
+{
+    rig_turntable_sim_params_t p = fast_sim();
+    p.position_noise_deg = 0;
+    rig_turntable_t *t = NULL;
+    rig_turntable_status_t st;
+    CHECK(rig_turntable_open_sim(&t, &p) == 0);
+    if (!t) return;
+    CHECK(rig_turntable_home(t, 1.0) == 0);
+    CHECK(rig_turntable_move_abs_deg(t, 90, 1.0) == 0);
+    CHECK(rig_turntable_move_rel_deg(t, -30, 1.0) == 0);
+    CHECK(rig_turntable_status(t, &st) == 0);
+    CHECK_NEAR(st.angle_deg, 60, 1e-9);
+
+    // immediate stop: the stage stays where it was
+    CHECK(rig_turntable_start_move_abs_deg(t, 360) == 0);   // 30 s of stage time
+    sleep_s(0.05);
+    CHECK(rig_turntable_stop(t, true) == 0);
+    CHECK(rig_turntable_status(t, &st) == 0 && !st.moving);
+    double p1 = st.angle_deg;
+    CHECK(p1 > 60 + 20 && p1 < 360);
+    sleep_s(0.02);
+    CHECK(rig_turntable_status(t, &st) == 0);
+    CHECK_NEAR(st.angle_deg, p1, 0);
+    CHECK(rig_turntable_wait(t, 0.5) == 0);                  // nothing to wait for
+
+    // profiled stop at cruise (10 deg/s, 10 deg/s^2): v^2/(2a) = 5 deg further
+    CHECK(rig_turntable_start_move_abs_deg(t, p1 - 300) == 0);
+    sleep_s(0.05);                                           // 5 s: cruising
+    CHECK(rig_turntable_status(t, &st) == 0 && st.moving);
+    double at_stop = st.angle_deg;
+    double t0 = model_now_s();
+    CHECK(rig_turntable_stop(t, false) == 0);
+    CHECK_NEAR(model_now_s() - t0, 1.0 * 0.01, 0.01);        // v/a = 1 s of stage time
+    CHECK(rig_turntable_status(t, &st) == 0 && !st.moving);
+    CHECK_NEAR(st.angle_deg, at_stop - 5, 0.5);              // a few ms between status and stop
+    rig_turntable_close(t);
+}
+
+TEST(turntable_sim_faults)
+{
+    rig_turntable_sim_params_t p = fast_sim();
+    rig_turntable_t *t = NULL;
+    rig_turntable_status_t st;
+
+    // motion error on the 2nd move, half way
+    p.fault_after_moves = 1;
+    p.fault = RIG_ERR_MOTION;
+    CHECK(rig_turntable_open_sim(&t, &p) == 0);
+    if (!t) return;
+    CHECK(rig_turntable_home(t, 1.0) == 0);
+    CHECK(rig_turntable_move_abs_deg(t, 10, 1.0) == 0);
+    CHECK(rig_turntable_move_abs_deg(t, 100, 1.0) == RIG_ERR_MOTION);
+    CHECK_CONTAINS(rig_last_error(), "motion error");
+    CHECK_CONTAINS(rig_last_error(), "sim turntable");
+    CHECK(rig_turntable_status(t, &st) == 0 && st.motion_error && !st.moving);
+    CHECK_NEAR(st.angle_deg, 55, 1.0);                       // stopped half way (symmetric profile)
+    CHECK(rig_turntable_move_abs_deg(t, 0, 1.0) == 0);       // the fault fires once
+    CHECK(rig_turntable_status(t, &st) == 0 && !st.motion_error);
+    rig_turntable_close(t);
+
+    // stall: wait times out, without hanging
+    p.fault_after_moves = 1;
+    p.fault = RIG_ERR_TIMEOUT;
+    CHECK(rig_turntable_open_sim(&t, &p) == 0);
+    CHECK(rig_turntable_home(t, 1.0) == 0);
+    CHECK(rig_turntable_move_abs_deg(t, 10, 1.0) == 0);
+    double t0 = model_now_s();
+    CHECK(rig_turntable_move_abs_deg(t, 100, 0.3) == RIG_ERR_TIMEOUT);
+    CHECK_NEAR(model_now_s() - t0, 0.3, 0.05);
+    CHECK_CONTAINS(rig_last_error(), "did not finish within 0.30 s");
+    CHECK(rig_turntable_status(t, &st) == 0 && st.moving);
+    CHECK(rig_turntable_stop(t, true) == 0);
+    CHECK(rig_turntable_status(t, &st) == 0 && !st.moving);
+    rig_turntable_close(t);
+
+    // disconnection mid-move
+    p.fault_after_moves = 2;
+    p.fault = RIG_ERR_DISCONNECTED;
+    CHECK(rig_turntable_open_sim(&t, &p) == 0);
+    CHECK(rig_turntable_home(t, 1.0) == 0);
+    CHECK(rig_turntable_move_abs_deg(t, 10, 1.0) == 0);
+    CHECK(rig_turntable_move_abs_deg(t, 20, 1.0) == 0);
+    CHECK(rig_turntable_move_abs_deg(t, 30, 1.0) == RIG_ERR_DISCONNECTED);
+    CHECK_CONTAINS(rig_last_error(), "disconnected");
+    CHECK(rig_turntable_status(t, &st) == RIG_ERR_DISCONNECTED);
+    CHECK(rig_turntable_home(t, 1.0) == RIG_ERR_DISCONNECTED);
+    rig_turntable_close(t);
+}
+
+TEST(turntable_sim_bad_input)
+{
+    rig_turntable_sim_params_t p = fast_sim();
+    rig_turntable_t *t = NULL;
+    rig_turntable_status_t st;
+    p.time_scale = 0;
+    CHECK(rig_turntable_open_sim(&t, &p) == RIG_ERR_INVALID && t == NULL);
+    CHECK_CONTAINS(rig_last_error(), "time_scale");
+    p = fast_sim();
+    p.fault_after_moves = 1;
+    p.fault = RIG_ERR_IO;
+    CHECK(rig_turntable_open_sim(&t, &p) == RIG_ERR_INVALID);
+    CHECK_CONTAINS(rig_last_error(), "fault must be");
+    p = fast_sim();
+    CHECK(rig_turntable_open_sim(&t, &p) == 0);
+    if (!t) return;
+    CHECK(rig_turntable_move_abs_deg(t, 10, 1.0) == RIG_ERR_NOT_HOMED);
+    CHECK_CONTAINS(rig_last_error(), "home it first");
+    CHECK(rig_turntable_home(t, 1.0) == 0);
+    CHECK(rig_turntable_move_abs_deg(t, NAN, 1.0) == RIG_ERR_INVALID);
+    CHECK_CONTAINS(rig_last_error(), "not a finite angle");
+    CHECK(rig_turntable_move_abs_deg(t, 10, 0) == RIG_ERR_INVALID);
+    CHECK_CONTAINS(rig_last_error(), "time-out 0 s");
+    CHECK(rig_turntable_move_rel_deg(t, INFINITY, 1.0) == RIG_ERR_INVALID);
+    CHECK(rig_turntable_status(t, &st) == 0 && st.angle_deg == 0 && !st.moving);
+    CHECK(rig_turntable_status(NULL, &st) == RIG_ERR_INVALID);
+    CHECK(rig_turntable_status(t, NULL) == RIG_ERR_INVALID);
+    rig_turntable_close(t);
+    rig_turntable_close(NULL);
+
+    // an ops table without optional operations
+    static const rig_turntable_ops_t none = { .backend = "none" };
+    rig_turntable_t bare = { .ops = &none, .name = "bare stage" };
+    CHECK(rig_turntable_home(&bare, 1.0) == RIG_ERR_NOT_SUPPORTED);
+    CHECK_CONTAINS(rig_last_error(), "bare stage: homing is not supported by the none backend");
+    CHECK(rig_turntable_stop(&bare, true) == RIG_ERR_NOT_SUPPORTED);
+}
+
+// ---------------------------------------------------------------------------
+// The APT driver under umockdev
+
+// The number of apt_umock_* tests below (the outer test checks they all ran).
+enum { N_APT_UMOCK_TESTS = 13 };
+
+TEST(turntable_apt_under_umockdev)
+{
+    if (apt_sim_available()) return;   // we are the inner run
+    char self[4096];
+    ssize_t n = readlink("/proc/self/exe", self, sizeof self - 1);
+    CHECK(n > 0);
+    if (n <= 0) return;
+    self[n] = 0;
+    // ASan must come first in the library list; the preload would come before it.
+    char asan[1024];
+    const char *ao = getenv("ASAN_OPTIONS");
+    snprintf(asan, sizeof asan, "ASAN_OPTIONS=%s%sverify_asan_link_order=0", ao ? ao : "", ao && *ao ? ":" : "");
+    const char *argv[] = { "env", asan, "umockdev-wrapper", self, "apt_umock_", NULL };
+    char *out = NULL, *err = NULL;
+    int rc = test_run(argv, 60, &out, &err);
+    char want[64];
+    snprintf(want, sizeof want, "%d passed, 0 failed", N_APT_UMOCK_TESTS);
+    CHECK_MSG(rc == 0 && out && strstr(out, want),
+              "umockdev-wrapper %s apt_umock_: exit %d, expected \"%s\"\n--- stdout\n%s--- stderr\n%s", self, rc,
+              want, out ? out : "", err ? err : "");
+    free(out);
+    free(err);
+}
+
+static apt_sim_t *sim_start(const apt_sim_device_t *devs, int n)
+{
+    char path[1024], msg[256];
+    snprintf(path, sizeof path, "%s/tests/data/k10cr1.umockdev", test_srcdir());
+    apt_sim_t *s = apt_sim_new(path, devs, n, msg, sizeof msg);
+    CHECK_MSG(s != NULL, "apt_sim_new: %s", msg);
+    return s;
+}
+
+// Open the one simulated stage and home it.
+static rig_turntable_t *open_homed(void)
+{
+    rig_turntable_t *t = NULL;
+    CHECK(rig_turntable_open_apt(&t, NULL, NULL) == 0);
+    if (t) CHECK(rig_turntable_home(t, 2.0) == 0);
+    return t;
+}
+
+TEST(apt_umock_open_info)
+{
+    if (!apt_sim_available()) return;
+    apt_sim_device_t d = apt_sim_device_defaults();
+    apt_sim_t *s = sim_start(&d, 1);
+    rig_turntable_t *t = NULL;
+    rig_turntable_info_t info;
+    apt_sim_stats_t st;
+    CHECK(rig_turntable_open_apt(&t, NULL, NULL) == 0);
+    if (t) {
+        CHECK(rig_turntable_info(t, &info) == 0);
+        CHECK(strcmp(info.model, "K10CR1") == 0);
+        CHECK(strcmp(info.serial, "55000001") == 0);
+        CHECK(strcmp(info.firmware, "1.0.3") == 0);
+        CHECK_NEAR(info.counts_per_deg, 136533.33, 1e-9);
+        CHECK(strcmp(t->name, "apt K10CR1 serial 55000001") == 0);
+        apt_sim_stats(s, 0, &st);
+        CHECK(st.baud_divisor == 0x1a);       // 3 MHz / 115200 = 26 on an FT232R
+        CHECK(st.flow_ctrl == 0x01);          // RTS/CTS
+        CHECK(st.rts_on);
+        CHECK(st.latency_ms == 2);
+        CHECK(st.n_info == 1 && st.n_enable == 1);
+        CHECK(!st.updates_on);
+        rig_turntable_close(t);
+    }
+    // by serial, with the stage model given
+    t = NULL;
+    CHECK(rig_turntable_open_apt(&t, "55000001", "K10CR1") == 0);
+    rig_turntable_close(t);
+    t = NULL;
+    CHECK(rig_turntable_open_apt(&t, "55000001", "NO-SUCH-STAGE") == RIG_ERR_NOT_SUPPORTED && !t);
+    CHECK_CONTAINS(rig_last_error(), "unknown stage model \"NO-SUCH-STAGE\"");
+    CHECK_CONTAINS(rig_last_error(), "known: K10CR1");
+    apt_sim_free(s);
+}
+
+TEST(apt_umock_home_and_moves)
+{
+    if (!apt_sim_available()) return;
+    apt_sim_device_t d = apt_sim_device_defaults();
+    apt_sim_t *s = sim_start(&d, 1);
+    rig_turntable_t *t = NULL;
+    rig_turntable_status_t st;
+    apt_sim_stats_t ss;
+    CHECK(rig_turntable_open_apt(&t, NULL, NULL) == 0);
+    if (t) {
+        CHECK(rig_turntable_status(t, &st) == 0 && !st.homed);
+        CHECK(rig_turntable_move_abs_deg(t, 90, 2.0) == RIG_ERR_NOT_HOMED);
+        CHECK_CONTAINS(rig_last_error(), "apt K10CR1 serial 55000001: the stage is not homed");
+        CHECK(rig_turntable_home(t, 2.0) == 0);
+        CHECK(rig_turntable_status(t, &st) == 0 && st.homed && !st.homing && !st.moving);
+        CHECK_NEAR(st.angle_deg, 0, 0);
+        CHECK(rig_turntable_move_abs_deg(t, 90, 2.0) == 0);
+        apt_sim_stats(s, 0, &ss);
+        CHECK(ss.last_target == 12288000);     // round(90 * 136533.33)
+        CHECK(ss.position == 12288000);
+        CHECK(rig_turntable_status(t, &st) == 0 && !st.moving && st.homed);
+        CHECK_NEAR(st.angle_deg, 90, 1e-5);
+        CHECK(rig_turntable_move_rel_deg(t, -30, 2.0) == 0);
+        apt_sim_stats(s, 0, &ss);
+        CHECK(ss.n_move_rel == 1 && ss.n_move_abs == 1 && ss.n_home == 1);
+        CHECK(ss.position == 12288000 - 4096000);  // -round(30 * 136533.33)
+        CHECK(rig_turntable_status(t, &st) == 0);
+        CHECK_NEAR(st.angle_deg, 60, 1e-5);
+        CHECK(rig_turntable_move_abs_deg(t, -45.5, 2.0) == 0);
+        apt_sim_stats(s, 0, &ss);
+        CHECK(ss.position == -6212267);            // round(-45.5 * 136533.33)
+        rig_turntable_close(t);
+    }
+    apt_sim_free(s);
+}
+
+TEST(apt_umock_status_while_moving_and_keepalive)
+{
+    if (!apt_sim_available()) return;
+    apt_sim_device_t d = apt_sim_device_defaults();
+    d.speed_deg_s = 150;                  // 90 deg in ~0.7 s
+    d.accel_deg_s2 = 1500;
+    apt_sim_t *s = sim_start(&d, 1);
+    rig_turntable_t *t = open_homed();
+    rig_turntable_status_t st;
+    apt_sim_stats_t ss;
+    if (t) {
+        CHECK(rig_turntable_start_move_abs_deg(t, 90) == 0);
+        sleep_s(0.2);
+        CHECK(rig_turntable_status(t, &st) == 0 && st.moving && st.homed && !st.motion_error);
+        CHECK(st.angle_deg > 5 && st.angle_deg < 85);
+        // waiting turns updates on (every 10 ms); without an ACK every < 20
+        // updates the controller would stop sending them
+        CHECK(rig_turntable_wait(t, 3.0) == 0);
+        apt_sim_stats(s, 0, &ss);
+        CHECK_MSG(ss.n_ack >= 3, "acks %d", ss.n_ack);
+        CHECK_MSG(ss.n_updates_sent >= 30, "updates %d", ss.n_updates_sent);
+        CHECK(!ss.updates_starved);
+        CHECK(!ss.updates_on);            // switched off after the wait
+        CHECK(rig_turntable_status(t, &st) == 0 && !st.moving);
+        CHECK_NEAR(st.angle_deg, 90, 1e-5);
+        rig_turntable_close(t);
+    }
+    apt_sim_free(s);
+}
+
+TEST(apt_umock_stop)
+{
+    if (!apt_sim_available()) return;
+    apt_sim_device_t d = apt_sim_device_defaults();
+    d.speed_deg_s = 100;
+    d.accel_deg_s2 = 1000;
+    apt_sim_t *s = sim_start(&d, 1);
+    rig_turntable_t *t = open_homed();
+    rig_turntable_status_t st;
+    apt_sim_stats_t ss;
+    if (t) {
+        CHECK(rig_turntable_start_move_abs_deg(t, 90) == 0);
+        sleep_s(0.2);
+        CHECK(rig_turntable_stop(t, true) == 0);
+        apt_sim_stats(s, 0, &ss);
+        CHECK(ss.n_stop == 1 && ss.last_stop_mode == 1);
+        CHECK(rig_turntable_status(t, &st) == 0 && !st.moving);
+        CHECK(st.angle_deg > 5 && st.angle_deg < 85);
+        CHECK(rig_turntable_wait(t, 1.0) == 0);       // nothing left to wait for
+        double p1 = st.angle_deg;
+        CHECK(rig_turntable_start_move_abs_deg(t, p1 + 80) == 0);
+        sleep_s(0.3);                                 // cruising at 100 deg/s
+        CHECK(rig_turntable_stop(t, false) == 0);     // profiled: 100^2/(2*1000) = 5 deg more
+        apt_sim_stats(s, 0, &ss);
+        CHECK(ss.n_stop == 2 && ss.last_stop_mode == 2);
+        CHECK(rig_turntable_status(t, &st) == 0 && !st.moving);
+        CHECK(st.angle_deg > p1 + 20 && st.angle_deg < p1 + 80);
+        rig_turntable_close(t);
+    }
+    apt_sim_free(s);
+}
+
+TEST(apt_umock_wait_timeout)
+{
+    if (!apt_sim_available()) return;
+    apt_sim_device_t d = apt_sim_device_defaults();
+    d.speed_deg_s = 100;
+    d.accel_deg_s2 = 1000;
+    apt_sim_t *s = sim_start(&d, 1);
+    rig_turntable_t *t = open_homed();
+    if (t) {
+        double t0 = model_now_s();
+        CHECK(rig_turntable_move_abs_deg(t, 90, 0.2) == RIG_ERR_TIMEOUT);
+        CHECK_NEAR(model_now_s() - t0, 0.2, 0.1);
+        CHECK_CONTAINS(rig_last_error(), "apt K10CR1 serial 55000001: the move did not finish within 0.20 s");
+        CHECK(rig_turntable_wait(t, 2.0) == 0);       // it was still moving; now done
+        rig_turntable_status_t st;
+        CHECK(rig_turntable_status(t, &st) == 0);
+        CHECK_NEAR(st.angle_deg, 90, 1e-5);
+        rig_turntable_close(t);
+    }
+    apt_sim_free(s);
+}
+
+TEST(apt_umock_no_reply)
+{
+    if (!apt_sim_available()) return;
+    apt_sim_device_t d = apt_sim_device_defaults();
+    d.no_reply = true;
+    apt_sim_t *s = sim_start(&d, 1);
+    rig_turntable_t *t = NULL;
+    double t0 = model_now_s();
+    CHECK(rig_turntable_open_apt(&t, NULL, NULL) == RIG_ERR_TIMEOUT && !t);
+    double dt = model_now_s() - t0;
+    CHECK_MSG(dt > 0.9 && dt < 2.5, "open took %.2f s", dt);
+    CHECK_CONTAINS(rig_last_error(), "apt serial 55000001: no reply to HW_REQ_INFO after 1.0 s");
+    CHECK_CONTAINS(rig_last_error(), "powered");
+    apt_sim_free(s);
+}
+
+TEST(apt_umock_motion_error)
+{
+    if (!apt_sim_available()) return;
+    apt_sim_device_t d = apt_sim_device_defaults();
+    d.motion_error = true;
+    apt_sim_t *s = sim_start(&d, 1);
+    rig_turntable_t *t = open_homed();
+    rig_turntable_status_t st;
+    if (t) {
+        CHECK(rig_turntable_move_abs_deg(t, 90, 2.0) == RIG_ERR_MOTION);
+        CHECK_CONTAINS(rig_last_error(), "apt K10CR1 serial 55000001: motion error during the move");
+        CHECK_CONTAINS(rig_last_error(), "MOTION-ERROR");
+        CHECK(rig_turntable_status(t, &st) == 0 && st.motion_error && !st.moving);
+        CHECK(st.angle_deg > 10 && st.angle_deg < 80);
+        CHECK(rig_turntable_move_abs_deg(t, 0, 2.0) == 0);   // a new move clears it
+        CHECK(rig_turntable_status(t, &st) == 0 && !st.motion_error);
+        rig_turntable_close(t);
+    }
+    apt_sim_free(s);
+}
+
+TEST(apt_umock_unplugged_mid_move)
+{
+    if (!apt_sim_available()) return;
+    apt_sim_device_t d = apt_sim_device_defaults();
+    d.unplug_mid_move = true;
+    d.speed_deg_s = 300;
+    d.accel_deg_s2 = 3000;
+    apt_sim_t *s = sim_start(&d, 1);
+    rig_turntable_t *t = open_homed();
+    rig_turntable_status_t st;
+    if (t) {
+        double t0 = model_now_s();
+        CHECK(rig_turntable_move_abs_deg(t, 90, 3.0) == RIG_ERR_DISCONNECTED);
+        CHECK(model_now_s() - t0 < 1.5);
+        CHECK_CONTAINS(rig_last_error(), "apt K10CR1 serial 55000001: the device disconnected");
+        CHECK(rig_turntable_status(t, &st) == RIG_ERR_DISCONNECTED);
+        CHECK(rig_turntable_stop(t, true) == RIG_ERR_DISCONNECTED);
+        rig_turntable_close(t);
+    }
+    apt_sim_free(s);
+}
+
+TEST(apt_umock_permission_denied)
+{
+    if (!apt_sim_available()) return;
+    apt_sim_device_t d = apt_sim_device_defaults();
+    d.deny_access = true;
+    apt_sim_t *s = sim_start(&d, 1);
+    rig_turntable_t *t = NULL;
+    CHECK(rig_turntable_open_apt(&t, NULL, NULL) == RIG_ERR_ACCESS && !t);
+    CHECK_CONTAINS(rig_last_error(), "permission denied on /dev/bus/usb/001/002");
+    CHECK_CONTAINS(rig_last_error(), "udev rule");
+    CHECK(rig_turntable_open_apt(&t, "55000001", NULL) == RIG_ERR_ACCESS && !t);
+    CHECK_CONTAINS(rig_last_error(), "apt serial 55000001: permission denied");
+    apt_sim_free(s);
+}
+
+TEST(apt_umock_device_missing)
+{
+    if (!apt_sim_available()) return;
+    apt_sim_device_t d = apt_sim_device_defaults();
+    apt_sim_t *s = sim_start(&d, 1);
+    rig_turntable_t *t = NULL;
+    CHECK(rig_turntable_open_apt(&t, "99999999", NULL) == RIG_ERR_NO_DEVICE && !t);
+    CHECK_CONTAINS(rig_last_error(), "apt serial 99999999: not found");
+    CHECK_CONTAINS(rig_last_error(), "present: 55000001 (bus 1 device 2)");
+    apt_sim_free(s);
+    s = sim_start(NULL, 0);   // no device at all
+    CHECK(rig_turntable_open_apt(&t, NULL, NULL) == RIG_ERR_NO_DEVICE && !t);
+    CHECK_CONTAINS(rig_last_error(), "no Thorlabs APT controller (USB 0403:faf0) found");
+    apt_sim_free(s);
+}
+
+TEST(apt_umock_two_devices)
+{
+    if (!apt_sim_available()) return;
+    apt_sim_device_t d[2] = { apt_sim_device_defaults(), apt_sim_device_defaults() };
+    d[1].serial = "55000002";
+    apt_sim_t *s = sim_start(d, 2);
+    rig_turntable_t *t = NULL;
+    rig_turntable_info_t info;
+    CHECK(rig_turntable_open_apt(&t, NULL, NULL) == RIG_ERR_INVALID && !t);
+    CHECK_CONTAINS(rig_last_error(), "2 Thorlabs APT controllers found");
+    CHECK_CONTAINS(rig_last_error(), "55000001");
+    CHECK_CONTAINS(rig_last_error(), "55000002");
+    CHECK_CONTAINS(rig_last_error(), "give the serial");
+    CHECK(rig_turntable_open_apt(&t, "55000002", NULL) == 0);
+    if (t) {
+        CHECK(rig_turntable_info(t, &info) == 0 && strcmp(info.serial, "55000002") == 0);
+        CHECK(rig_turntable_home(t, 2.0) == 0);
+        CHECK(rig_turntable_move_abs_deg(t, 10, 2.0) == 0);
+        apt_sim_stats_t a, b;
+        apt_sim_stats(s, 0, &a);
+        apt_sim_stats(s, 1, &b);
+        CHECK(a.n_move_abs == 0 && b.n_move_abs == 1);
+        rig_turntable_close(t);
+    }
+    apt_sim_free(s);
+}
+
+TEST(apt_umock_partial_messages_and_garbage)
+{
+    if (!apt_sim_available()) return;
+    apt_sim_device_t d = apt_sim_device_defaults();
+    d.trickle_bytes = 5;                  // every message arrives in 5-byte pieces
+    d.garbage_before_info = true;         // and junk precedes the first reply
+    apt_sim_t *s = sim_start(&d, 1);
+    rig_turntable_t *t = NULL;
+    rig_turntable_info_t info;
+    rig_turntable_status_t st;
+    CHECK(rig_turntable_open_apt(&t, NULL, NULL) == 0);
+    if (t) {
+        CHECK(rig_turntable_info(t, &info) == 0);
+        CHECK(strcmp(info.model, "K10CR1") == 0 && strcmp(info.serial, "55000001") == 0);
+        CHECK(strcmp(info.firmware, "1.0.3") == 0);
+        CHECK(rig_turntable_home(t, 2.0) == 0);
+        CHECK(rig_turntable_move_abs_deg(t, 33.3, 2.0) == 0);
+        CHECK(rig_turntable_status(t, &st) == 0 && !st.moving && st.homed);
+        CHECK_NEAR(st.angle_deg, 33.3, 1e-5);
+        rig_turntable_close(t);
+    }
+    apt_sim_free(s);
+}
+
+TEST(apt_umock_limit_switch)
+{
+    if (!apt_sim_available()) return;
+    apt_sim_device_t d = apt_sim_device_defaults();
+    d.limit_mid_move = true;
+    apt_sim_t *s = sim_start(&d, 1);
+    rig_turntable_t *t = open_homed();
+    rig_turntable_status_t st;
+    if (t) {
+        CHECK(rig_turntable_move_abs_deg(t, 90, 2.0) == RIG_ERR_LIMIT);
+        CHECK_CONTAINS(rig_last_error(), "apt K10CR1 serial 55000001: the move stopped at a limit switch");
+        CHECK_CONTAINS(rig_last_error(), "fwd-limit");
+        CHECK(rig_turntable_status(t, &st) == 0 && st.limit_fwd && !st.limit_rev && !st.moving);
+        CHECK(!st.motion_error);
+        rig_turntable_close(t);
+    }
+    apt_sim_free(s);
+}
