@@ -482,6 +482,106 @@ done:
     model_lamps_free(l);
 }
 
+// (f') THESIS known answer: with a cone of 0 deg and one sample, the term at
+// a floor point x is rho * L(y -> x) * R_x(r), y the hit along the mirror
+// direction r, L(y -> x) = sum_i V_i(y) I_i R_y / d_i(y)^2 (all Lambertian
+// here, so L does not depend on the direction toward x). And on the
+// T-stiffener the term stays finite where the web meets the plate.
+
+TEST(render_thesis_known_answer_and_finite_at_joint)
+{
+    char *d3d = plane_d3d(2000, box_vertices, box_faces);
+    model_scene_t *s = scene_text(d3d);
+    model_materials_t *m = mats_text("[material plane]\nmodel = lambert\nkd = 0.2\n"
+                                     "[material box]\nmodel = lambert\nkd = 0.3\n");
+    model_lamps_t *l = lamps_text("[lamp a]\nposition_mm = -300 -200 400\nintensity = 1e6\n");
+    pinhole_t ph = { 0 };
+    CHECK(s && m && l && pinhole_look(&ph, 120, 96, 100, v3(-350, 40, 160), v3(-60, 0, 0)));
+    if (!s || !m || !l || !ph.cam) goto done;
+    model_tracer_t *t = model_tracer_new(s);
+    const model_material_t *mres[2];
+    CHECK(t && model_resolve_materials(s, m, mres));
+    int n = ph.W * ph.H;
+    float *Pn = malloc(sizeof(float) * n), *Pt = malloc(sizeof(float) * n);
+    model_shading_t sh = model_shading_default();
+    sh.kc = 3;
+    CHECK(model_render(t, ph.cam, l, mres, &sh, Pn, NULL, NULL));
+    sh.interreflection = MODEL_INTERREFLECTION_THESIS;
+    sh.thesis_samples = 1;
+    sh.thesis_cone_deg = 0;
+    sh.rho = 0.7;
+    CHECK(model_render(t, ph.cam, l, mres, &sh, Pt, NULL, NULL));
+    int checked = 0;
+    for (int py = 0; py < ph.H; py += 3)
+        for (int px = 0; px < ph.W; px += 3) {
+            double q[2] = { px, py };
+            model_pixel_info_t pi;
+            CHECK(model_pixel_info(t, ph.cam, NULL, q, 1, &pi, NULL, 1));
+            if (pi.face != 0) continue;                    // floor pixels only
+            model_vec3_t r = v3_sub(v3_scale(pi.n, 2 * v3_dot(pi.n, pi.v)), pi.v);
+            model_pixel_info_t y;
+            model_tracer_cast(t, v3_add(pi.p_mm, v3_scale(pi.n, 1e-3)), r, &y);
+            double expect = 0;
+            if (y.face > 0) {                               // the box
+                const model_lamp_t *L = &l->lamps[0];
+                model_vec3_t ly = v3_sub(L->position_mm, y.p_mm);
+                double d2 = v3_dot(ly, ly), nl = v3_dot(y.n, ly) / sqrt(d2);
+                bool vis = model_tracer_visible(t, v3_add(y.p_mm, v3_scale(y.n, 1e-3)), L->position_mm);
+                double Ly = vis && nl > 0 ? L->intensity * 0.3 * nl / d2 : 0;
+                expect = sh.kc * sh.rho * Ly * 0.2 * v3_dot(pi.n, r);
+                if (expect > 0) checked++;
+            }
+            CHECK_NEAR(Pt[py * ph.W + px] - Pn[py * ph.W + px], expect, 1e-4 * Pn[py * ph.W + px] + 1e-3);
+        }
+    CHECK_MSG(checked > 20, "only %d floor pixels see the box in the mirror direction", checked);
+    free(Pn);
+    free(Pt);
+    model_tracer_free(t);
+
+    // The T-stiffener: thesis interreflection adds a little, nowhere explodes.
+    char path[4][1024];
+    const char *names[4] = { "t_stiffener.d3d", "camera.cameramodel", "lamps.ini", "materials.ini" };
+    for (int i = 0; i < 4; i++) snprintf(path[i], sizeof path[i], "%s/examples/%s", test_srcdir(), names[i]);
+    model_scene_t *ts = model_scene_load(path[0], NULL);
+    model_camera_t *cam = model_camera_load(path[1]);
+    model_lamps_t *tl = model_lamps_load(path[2]);
+    model_materials_t *tm = model_materials_load(path[3]);
+    CHECK(ts && cam && tl && tm);
+    if (ts && cam && tl && tm) {
+        model_tracer_t *tt = model_tracer_new(ts);
+        const model_material_t *tmr[8];
+        CHECK(ts->nmaterials <= 8 && model_resolve_materials(ts, tm, tmr));
+        int N = model_camera_width(cam) * model_camera_height(cam);
+        float *A = malloc(sizeof(float) * N), *B = malloc(sizeof(float) * N);
+        model_shading_t s2 = model_shading_default();
+        CHECK(model_render(tt, cam, tl, tmr, &s2, A, NULL, NULL));
+        s2.interreflection = MODEL_INTERREFLECTION_THESIS;
+        CHECK(model_render(tt, cam, tl, tmr, &s2, B, NULL, NULL));
+        double maxA = 0, maxB = 0, sumd = 0;
+        for (int i = 0; i < N; i++) {
+            maxA = fmax(maxA, A[i]);
+            maxB = fmax(maxB, B[i]);
+            CHECK_MSG(B[i] >= A[i] - 1e-3f, "pixel %d: thesis %g < direct %g", i, B[i], A[i]);
+            sumd += B[i] - A[i];
+        }
+        CHECK_MSG(maxB <= 1.25 * maxA, "thesis max %g vs direct max %g", maxB, maxA);
+        CHECK(sumd > 0);
+        free(A);
+        free(B);
+        model_tracer_free(tt);
+    }
+    model_scene_free(ts);
+    model_camera_free(cam);
+    model_lamps_free(tl);
+    model_materials_free(tm);
+done:
+    free(d3d);
+    model_camera_free(ph.cam);
+    model_scene_free(s);
+    model_materials_free(m);
+    model_lamps_free(l);
+}
+
 // (g) MC on a single plane: no indirect light is possible, so MC equals the
 // direct term (exactly for point lamps, within the lamp-size effect for a
 // small sphere lamp).
