@@ -1,0 +1,625 @@
+// rig/camera_aravis.c — cameras through Aravis (GigE Vision, USB3 Vision), and
+// the rig_camera_* wrappers.
+//
+// One frame per software trigger: TriggerMode On, TriggerSource Software on the
+// FrameStart selector, AcquisitionMode Continuous; the stream (a small pool of
+// buffers) is started at the first capture and restarted after a change of
+// pixel format or region (the payload size changes). Exposure and gain are
+// read back after each change and recorded with every frame. A camera handle is
+// used by one thread at a time.
+//
+// Each capture attempt first recycles frames still queued (they answer earlier
+// triggers), then triggers and waits timeout_s. A frame that answers a timed-out
+// attempt but arrives during the next one would be taken for that one: choose
+// timeout_s well above exposure + transfer time (a lost frame never arrives).
+// Frame ids: GVSP 1.x block ids are 16 bits (1..65535, then 1 again); they are
+// unwrapped into a 64-bit count that keeps increasing.
+#define _GNU_SOURCE
+#include <arpa/inet.h>
+#include <arv.h>
+#include <math.h>
+#include <stdatomic.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+
+#include "rig/rig.h"
+
+#define N_BUFFERS 4
+
+typedef struct {
+    ArvCamera  *cam;
+    ArvDevice  *dev;                 // owned by cam
+    ArvStream  *stream;              // NULL until the first capture
+    gulong      lost_handler;
+    atomic_bool control_lost;        // set from Aravis's heartbeat thread
+    bool        disconnected;        // a request went unanswered: do not wait on it again
+    bool        acquiring;
+    char        id[64];
+    char        vendor[64], model[64], serial[64];
+    bool        has_temperature;
+    bool        has_gain;
+    double      exposure_us, gain;   // as read back from the camera
+    bool        have_last_id;
+    guint64     last_raw_id;
+    uint64_t    frame_id;
+} aravis_cam_t;
+
+static aravis_cam_t *impl_of(rig_camera_t *c) { return c->impl; }
+
+static double now_realtime_s(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_REALTIME, &ts);
+    return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
+}
+
+static bool is_ipv4_address(const char *id)
+{
+    struct in_addr a;
+    return inet_pton(AF_INET, id, &a) == 1;
+}
+
+// Report a GError (consumed) as a rig error naming the camera and what failed.
+static int fail_gerror(rig_camera_t *c, GError **e, const char *what)
+{
+    aravis_cam_t *a = impl_of(c);
+    int code = RIG_ERR_IO;
+    const char *hint = "";
+    const char *msg = (e && *e) ? (*e)->message : "unknown error";
+    if (atomic_load(&a->control_lost)) {
+        code = RIG_ERR_DISCONNECTED;
+        hint = "; the camera stopped answering heartbeats: check power, cable and network, then reopen it";
+    } else if (e && *e && (*e)->domain == ARV_DEVICE_ERROR) {
+        switch ((*e)->code) {
+        case ARV_DEVICE_ERROR_TIMEOUT:
+        case ARV_DEVICE_ERROR_NOT_CONNECTED:
+        case ARV_DEVICE_ERROR_TRANSFER_ERROR:
+            code = RIG_ERR_DISCONNECTED;
+            hint = "; the camera does not answer: check power, cable and network, then reopen it";
+            break;
+        case ARV_DEVICE_ERROR_NOT_CONTROLLER:
+        case ARV_DEVICE_ERROR_PROTOCOL_ERROR_ACCESS_DENIED:
+        case ARV_DEVICE_ERROR_PROTOCOL_ERROR_BUSY:
+            code = RIG_ERR_BUSY;
+            hint = "; another program may control the camera: close it";
+            break;
+        case ARV_DEVICE_ERROR_FEATURE_NOT_FOUND:
+        case ARV_DEVICE_ERROR_WRONG_FEATURE:
+            code = RIG_ERR_NOT_SUPPORTED;
+            break;
+        case ARV_DEVICE_ERROR_NOT_FOUND:
+            code = RIG_ERR_NO_DEVICE;
+            break;
+        case ARV_DEVICE_ERROR_INVALID_PARAMETER:
+            code = RIG_ERR_INVALID;
+            break;
+        default:
+            code = RIG_ERR_PROTOCOL;
+            break;
+        }
+    } else if (e && *e && (*e)->domain == ARV_GC_ERROR) {
+        code = (*e)->code == ARV_GC_ERROR_NODE_NOT_FOUND ? RIG_ERR_NOT_SUPPORTED : RIG_ERR_INVALID;
+    }
+    if (code == RIG_ERR_DISCONNECTED) a->disconnected = true;
+    int rc = rig_fail(code, "%s: %s failed: %s%s", c->name, what, msg, hint);
+    if (e) g_clear_error(e);
+    return rc;
+}
+
+static void on_control_lost(ArvDevice *dev, gpointer data)
+{
+    aravis_cam_t *a = data;
+    atomic_store(&a->control_lost, true);
+}
+
+static int check_connected(rig_camera_t *c)
+{
+    aravis_cam_t *a = impl_of(c);
+    if (atomic_load(&a->control_lost) || a->disconnected)
+        return rig_fail(RIG_ERR_DISCONNECTED, "%s: the camera was lost (it stopped answering); check power, cable "
+                        "and network, then reopen it", c->name);
+    return 0;
+}
+
+static void stop_stream(aravis_cam_t *a)
+{
+    if (a->acquiring && !a->disconnected && !atomic_load(&a->control_lost))
+        arv_camera_stop_acquisition(a->cam, NULL);
+    a->acquiring = false;
+    if (a->stream) {
+        g_object_unref(a->stream);   // joins the stream thread, frees the buffers
+        a->stream = NULL;
+    }
+}
+
+static int start_stream(rig_camera_t *c)
+{
+    aravis_cam_t *a = impl_of(c);
+    GError *e = NULL;
+    if (a->stream && a->acquiring) return 0;
+    stop_stream(a);
+    guint payload = arv_camera_get_payload(a->cam, &e);
+    if (e) return fail_gerror(c, &e, "reading PayloadSize");
+    if (!payload) return rig_fail(RIG_ERR_PROTOCOL, "%s: the camera reports a payload of 0 bytes", c->name);
+    a->stream = arv_camera_create_stream(a->cam, NULL, NULL, &e);
+    if (!a->stream) return fail_gerror(c, &e, "creating the stream");
+    if (ARV_IS_GV_STREAM(a->stream))   // socket buffer sized to the payload (no root needed)
+        g_object_set(a->stream, "socket-buffer", ARV_GV_STREAM_SOCKET_BUFFER_AUTO, NULL);
+    for (int i = 0; i < N_BUFFERS; i++) {
+        ArvBuffer *b = arv_buffer_new_allocate(payload);
+        if (!b) {
+            stop_stream(a);
+            return rig_fail(RIG_ERR_NO_MEM, "%s: out of memory for frame buffers of %u bytes", c->name, payload);
+        }
+        arv_stream_push_buffer(a->stream, b);
+    }
+    arv_camera_start_acquisition(a->cam, &e);
+    if (e) {
+        int rc = fail_gerror(c, &e, "AcquisitionStart");
+        stop_stream(a);
+        return rc;
+    }
+    a->acquiring = true;
+    return 0;
+}
+
+static int format_bits(ArvPixelFormat pf, const char **name)
+{
+    switch (pf) {
+    case ARV_PIXEL_FORMAT_MONO_8:  *name = "Mono8";  return 8;
+    case ARV_PIXEL_FORMAT_MONO_12: *name = "Mono12"; return 12;
+    case ARV_PIXEL_FORMAT_MONO_16: *name = "Mono16"; return 16;
+    default: *name = NULL; return 0;
+    }
+}
+
+static double read_temperature(aravis_cam_t *a)
+{
+    if (!a->has_temperature || a->disconnected) return NAN;
+    GError *e = NULL;
+    double t = arv_camera_get_float(a->cam, "DeviceTemperature", &e);
+    if (e) {
+        g_clear_error(&e);
+        return NAN;
+    }
+    return t;
+}
+
+static int read_exposure_gain(rig_camera_t *c)
+{
+    aravis_cam_t *a = impl_of(c);
+    GError *e = NULL;
+    a->exposure_us = arv_camera_get_exposure_time(a->cam, &e);
+    if (e) return fail_gerror(c, &e, "reading the exposure time");
+    a->gain = a->has_gain ? arv_camera_get_gain(a->cam, &e) : NAN;
+    if (e) return fail_gerror(c, &e, "reading the gain");
+    return 0;
+}
+
+// ---------------------------------------------------------------------------
+// ops
+
+static int op_settings(rig_camera_t *c, rig_frame_meta_t *m)
+{
+    aravis_cam_t *a = impl_of(c);
+    GError *e = NULL;
+    int rc = check_connected(c);
+    if (rc) return rc;
+    memset(m, 0, sizeof *m);
+    arv_camera_get_region(a->cam, &m->offset_x, &m->offset_y, &m->width, &m->height, &e);
+    if (e) return fail_gerror(c, &e, "reading the region");
+    ArvPixelFormat pf = arv_camera_get_pixel_format(a->cam, &e);
+    if (e) return fail_gerror(c, &e, "reading PixelFormat");
+    const char *name;
+    m->bits = format_bits(pf, &name);
+    if (name) snprintf(m->pixel_format, sizeof m->pixel_format, "%s", name);
+    else {
+        const char *s = arv_camera_get_pixel_format_as_string(a->cam, NULL);
+        snprintf(m->pixel_format, sizeof m->pixel_format, "%s", s ? s : "?");
+    }
+    if ((rc = read_exposure_gain(c))) return rc;
+    m->exposure_us = a->exposure_us;
+    m->gain = a->gain;
+    m->temperature_c = read_temperature(a);
+    m->system_time_s = now_realtime_s();
+    snprintf(m->vendor, sizeof m->vendor, "%s", a->vendor);
+    snprintf(m->model, sizeof m->model, "%s", a->model);
+    snprintf(m->serial, sizeof m->serial, "%s", a->serial);
+    return 0;
+}
+
+static int op_set_pixel_format(rig_camera_t *c, const char *format)
+{
+    aravis_cam_t *a = impl_of(c);
+    GError *e = NULL;
+    int rc = check_connected(c);
+    if (rc) return rc;
+    guint n = 0;
+    const char **avail = arv_camera_dup_available_pixel_formats_as_strings(a->cam, &n, &e);
+    if (e) {
+        g_free(avail);
+        return fail_gerror(c, &e, "listing the pixel formats");
+    }
+    bool found = false;
+    char list[512] = "";
+    for (guint i = 0; i < n; i++) {
+        if (avail[i] && !strcmp(avail[i], format)) found = true;
+        size_t len = strlen(list);
+        snprintf(list + len, sizeof list - len, "%s%s", i ? ", " : "", avail[i] ? avail[i] : "?");
+    }
+    g_free(avail);
+    if (strcmp(format, "Mono8") && strcmp(format, "Mono12") && strcmp(format, "Mono16"))
+        return rig_fail(RIG_ERR_INVALID, "%s: pixel format '%s' is not supported: refl records Mono8, Mono12 or "
+                        "Mono16 (the camera offers: %s)", c->name, format, n ? list : "none");
+    if (!found)
+        return rig_fail(RIG_ERR_NOT_SUPPORTED, "%s: the camera does not offer pixel format %s; it offers: %s",
+                        c->name, format, n ? list : "none");
+    stop_stream(a);
+    arv_camera_set_pixel_format_from_string(a->cam, format, &e);
+    if (e) return fail_gerror(c, &e, "setting PixelFormat");
+    const char *now = arv_camera_get_pixel_format_as_string(a->cam, &e);
+    if (e) return fail_gerror(c, &e, "reading PixelFormat");
+    if (!now || strcmp(now, format))
+        return rig_fail(RIG_ERR_PROTOCOL, "%s: PixelFormat reads %s after setting %s", c->name, now ? now : "?", format);
+    return 0;
+}
+
+static int op_set_exposure_us(rig_camera_t *c, double exposure_us)
+{
+    aravis_cam_t *a = impl_of(c);
+    GError *e = NULL;
+    int rc = check_connected(c);
+    if (rc) return rc;
+    double lo = 0, hi = 0;
+    arv_camera_get_exposure_time_bounds(a->cam, &lo, &hi, &e);
+    if (e) return fail_gerror(c, &e, "reading the exposure time range");
+    if (!isfinite(exposure_us) || exposure_us < lo || exposure_us > hi)
+        return rig_fail(RIG_ERR_INVALID, "%s: exposure %.10g us is outside the camera's range %.10g..%.10g us", c->name,
+                        exposure_us, lo, hi);
+    arv_camera_set_exposure_time(a->cam, exposure_us, &e);
+    if (e) return fail_gerror(c, &e, "setting the exposure time");
+    return read_exposure_gain(c);
+}
+
+static int op_set_gain(rig_camera_t *c, double gain)
+{
+    aravis_cam_t *a = impl_of(c);
+    GError *e = NULL;
+    int rc = check_connected(c);
+    if (rc) return rc;
+    if (!a->has_gain) return rig_fail(RIG_ERR_NOT_SUPPORTED, "%s: the camera has no gain control", c->name);
+    double lo = 0, hi = 0;
+    arv_camera_get_gain_bounds(a->cam, &lo, &hi, &e);
+    if (e) return fail_gerror(c, &e, "reading the gain range");
+    if (!isfinite(gain) || gain < lo || gain > hi)
+        return rig_fail(RIG_ERR_INVALID, "%s: gain %.10g is outside the camera's range %.10g..%.10g", c->name, gain, lo, hi);
+    arv_camera_set_gain(a->cam, gain, &e);
+    if (e) return fail_gerror(c, &e, "setting the gain");
+    return read_exposure_gain(c);
+}
+
+static int op_set_region(rig_camera_t *c, int x, int y, int width, int height)
+{
+    aravis_cam_t *a = impl_of(c);
+    GError *e = NULL;
+    int rc = check_connected(c);
+    if (rc) return rc;
+    int sw = 0, sh = 0;
+    arv_camera_get_sensor_size(a->cam, &sw, &sh, &e);
+    if (e) return fail_gerror(c, &e, "reading the sensor size");
+    if (x < 0 || y < 0 || width < 1 || height < 1 || x > sw - width || y > sh - height)
+        return rig_fail(RIG_ERR_INVALID, "%s: region %dx%d at (%d,%d) does not fit the %dx%d sensor", c->name,
+                        width, height, x, y, sw, sh);
+    const struct { const char *what; int value; gint inc; } chk[] = {
+        { "width", width, arv_camera_get_width_increment(a->cam, NULL) },
+        { "height", height, arv_camera_get_height_increment(a->cam, NULL) },
+        { "x offset", x, arv_camera_get_x_offset_increment(a->cam, NULL) },
+        { "y offset", y, arv_camera_get_y_offset_increment(a->cam, NULL) },
+    };
+    for (size_t i = 0; i < sizeof chk / sizeof chk[0]; i++)
+        if (chk[i].inc > 1 && chk[i].value % chk[i].inc)
+            return rig_fail(RIG_ERR_INVALID, "%s: region %s %d is not a multiple of %d, the camera's step", c->name,
+                            chk[i].what, chk[i].value, chk[i].inc);
+    stop_stream(a);
+    arv_camera_set_region(a->cam, x, y, width, height, &e);
+    if (e) return fail_gerror(c, &e, "setting the region");
+    int gx, gy, gw, gh;
+    arv_camera_get_region(a->cam, &gx, &gy, &gw, &gh, &e);
+    if (e) return fail_gerror(c, &e, "reading the region");
+    if (gx != x || gy != y || gw != width || gh != height)
+        return rig_fail(RIG_ERR_PROTOCOL, "%s: asked for region %dx%d at (%d,%d), the camera took %dx%d at (%d,%d)",
+                        c->name, width, height, x, y, gw, gh, gx, gy);
+    return 0;
+}
+
+static const char *status_name(ArvBufferStatus s)
+{
+    switch (s) {
+    case ARV_BUFFER_STATUS_SUCCESS:         return "success";
+    case ARV_BUFFER_STATUS_CLEARED:         return "cleared";
+    case ARV_BUFFER_STATUS_TIMEOUT:         return "timeout while receiving";
+    case ARV_BUFFER_STATUS_MISSING_PACKETS: return "missing packets";
+    case ARV_BUFFER_STATUS_WRONG_PACKET_ID: return "wrong packet id";
+    case ARV_BUFFER_STATUS_SIZE_MISMATCH:   return "size mismatch";
+    case ARV_BUFFER_STATUS_FILLING:         return "still filling";
+    case ARV_BUFFER_STATUS_ABORTED:         return "aborted";
+    default:                                return "unknown status";
+    }
+}
+
+// Copy a complete buffer into out (pix allocated here).
+static int take_frame(rig_camera_t *c, ArvBuffer *b, rig_frame_t *out)
+{
+    aravis_cam_t *a = impl_of(c);
+    rig_frame_meta_t *m = &out->meta;
+    const char *name;
+    ArvPixelFormat pf = arv_buffer_get_image_pixel_format(b);
+    int bits = format_bits(pf, &name);
+    if (!bits)
+        return rig_fail(RIG_ERR_PROTOCOL, "%s: the camera sent pixel format 0x%08x, not Mono8/Mono12/Mono16",
+                        c->name, (unsigned)pf);
+    int x = 0, y = 0, w = 0, h = 0;
+    arv_buffer_get_image_region(b, &x, &y, &w, &h);
+    size_t size = 0;
+    const uint8_t *d = arv_buffer_get_image_data(b, &size);
+    size_t n = (size_t)(w > 0 ? w : 0) * (size_t)(h > 0 ? h : 0);
+    size_t need = n * (bits == 8 ? 1 : 2);
+    if (!d || n == 0 || size < need)
+        return rig_fail(RIG_ERR_PROTOCOL, "%s: frame of %zu bytes for a %dx%d %s image (%zu bytes expected)",
+                        c->name, size, w, h, name, need);
+    out->pix = malloc(n * sizeof *out->pix);
+    if (!out->pix) return rig_fail(RIG_ERR_NO_MEM, "%s: out of memory for a %dx%d frame", c->name, w, h);
+    if (bits == 8)
+        for (size_t i = 0; i < n; i++) out->pix[i] = d[i];
+    else   // 16-bit little-endian containers (GigE Vision / USB3 Vision pixel data)
+        for (size_t i = 0; i < n; i++) out->pix[i] = (uint16_t)(d[2 * i] | (d[2 * i + 1] << 8));
+
+    guint64 raw = arv_buffer_get_frame_id(b);
+    if (!a->have_last_id) {
+        a->frame_id = raw;
+        a->have_last_id = true;
+    } else {
+        uint64_t delta = 1;
+        if (raw > a->last_raw_id) delta = raw - a->last_raw_id;
+        else if (raw < a->last_raw_id && a->last_raw_id <= 0xffff)   // 16-bit GVSP block id wrapped (0 is skipped)
+            delta = raw + 0xffff - a->last_raw_id;
+        a->frame_id += delta ? delta : 1;
+    }
+    a->last_raw_id = raw;
+
+    m->width = w;
+    m->height = h;
+    m->offset_x = x;
+    m->offset_y = y;
+    snprintf(m->pixel_format, sizeof m->pixel_format, "%s", name);
+    m->bits = bits;
+    m->exposure_us = a->exposure_us;
+    m->gain = a->gain;
+    m->frame_id = a->frame_id;
+    m->timestamp_ns = arv_buffer_get_timestamp(b);
+    guint64 sys_ns = arv_buffer_get_system_timestamp(b);
+    m->system_time_s = sys_ns ? 1e-9 * (double)sys_ns : now_realtime_s();
+    m->temperature_c = read_temperature(a);
+    snprintf(m->vendor, sizeof m->vendor, "%s", a->vendor);
+    snprintf(m->model, sizeof m->model, "%s", a->model);
+    snprintf(m->serial, sizeof m->serial, "%s", a->serial);
+    return 0;
+}
+
+static int op_capture(rig_camera_t *c, double timeout_s, int retries, rig_frame_t *out)
+{
+    aravis_cam_t *a = impl_of(c);
+    GError *e = NULL;
+    memset(out, 0, sizeof *out);
+    if (!(timeout_s > 0 && timeout_s <= 3600))
+        return rig_fail(RIG_ERR_INVALID, "%s: capture timeout %g s outside (0, 3600]", c->name, timeout_s);
+    if (retries < 0 || retries > 1000)
+        return rig_fail(RIG_ERR_INVALID, "%s: capture retries %d outside 0..1000", c->name, retries);
+    int rc = check_connected(c);
+    if (rc || (rc = start_stream(c))) return rc;
+
+    char problem[160] = "";
+    for (int attempt = 0; attempt <= retries; attempt++) {
+        // Frames still queued belong to earlier triggers: recycle them.
+        ArvBuffer *b;
+        while ((b = arv_stream_try_pop_buffer(a->stream))) arv_stream_push_buffer(a->stream, b);
+        arv_camera_software_trigger(a->cam, &e);
+        if (e) return fail_gerror(c, &e, "TriggerSoftware");
+        b = arv_stream_timeout_pop_buffer(a->stream, (guint64)(timeout_s * 1e6));
+        if (!b) {
+            snprintf(problem, sizeof problem, "no frame within %g s", timeout_s);
+            if (atomic_load(&a->control_lost)) break;
+            continue;
+        }
+        ArvBufferStatus st = arv_buffer_get_status(b);
+        if (st != ARV_BUFFER_STATUS_SUCCESS) {
+            snprintf(problem, sizeof problem, "frame %llu incomplete (%s)",
+                     (unsigned long long)arv_buffer_get_frame_id(b), status_name(st));
+            arv_stream_push_buffer(a->stream, b);
+            continue;
+        }
+        rc = take_frame(c, b, out);
+        arv_stream_push_buffer(a->stream, b);
+        if (rc) rig_frame_free(out);
+        return rc;
+    }
+    if (atomic_load(&a->control_lost)) {
+        a->disconnected = true;
+        return rig_fail(RIG_ERR_DISCONNECTED, "%s: camera lost during capture (%s); check power, cable and network, "
+                        "then reopen it", c->name, problem);
+    }
+    return rig_fail(RIG_ERR_TIMEOUT, "%s: no complete frame after %d software trigger%s (last: %s); check the "
+                    "exposure time (%g us) against the timeout, the network for packet loss, and the trigger settings",
+                    c->name, retries + 1, retries ? "s" : "", problem, a->exposure_us);
+}
+
+static void op_close(rig_camera_t *c)
+{
+    aravis_cam_t *a = impl_of(c);
+    if (!a) return;
+    stop_stream(a);
+    if (a->cam) {
+        if (a->dev && a->lost_handler) g_signal_handler_disconnect(a->dev, a->lost_handler);
+        g_object_unref(a->cam);   // GigE Vision: releases control of the camera
+    }
+    free(a);
+    c->impl = NULL;
+}
+
+static const rig_camera_ops_t aravis_ops = {
+    .backend = "aravis",
+    .set_pixel_format = op_set_pixel_format,
+    .set_exposure_us = op_set_exposure_us,
+    .set_gain = op_set_gain,
+    .set_region = op_set_region,
+    .settings = op_settings,
+    .capture = op_capture,
+    .close = op_close,
+};
+
+static void copy_string(char *dst, size_t size, const char *src)
+{
+    snprintf(dst, size, "%s", src && *src ? src : "?");
+}
+
+int rig_camera_open_aravis(rig_camera_t **out, const char *id)
+{
+    GError *e = NULL;
+    int rc = 0;
+    if (!out) return rig_fail(RIG_ERR_INVALID, "aravis: NULL camera pointer");
+    *out = NULL;
+    if (!id || !*id || strlen(id) >= 64)
+        return rig_fail(RIG_ERR_INVALID, "aravis: camera id must be an IP address, serial number or device name "
+                        "of 1 to 63 characters");
+    rig_camera_t *c = calloc(1, sizeof *c);
+    aravis_cam_t *a = calloc(1, sizeof *a);
+    if (!c || !a) {
+        free(c);
+        free(a);
+        return rig_fail(RIG_ERR_NO_MEM, "aravis: out of memory");
+    }
+    c->ops = &aravis_ops;
+    c->impl = a;
+    snprintf(a->id, sizeof a->id, "%s", id);
+    snprintf(c->name, sizeof c->name, "aravis camera %s", id);
+
+    // An IPv4 address is opened directly (unicast GVCP); anything else makes
+    // Aravis enumerate devices (GigE Vision discovery is a broadcast).
+    a->cam = arv_camera_new(id, &e);
+    if (!a->cam) {
+        rc = rig_fail(RIG_ERR_NO_DEVICE, "aravis: no camera at '%s' (%s); %s", id, e ? e->message : "not found",
+                      is_ipv4_address(id) ? "nothing answers GigE Vision control (UDP 3956) there: check the "
+                      "address, power and cable"
+                      : "check the serial number or name (`arv-tool-0.8` lists the cameras)");
+        g_clear_error(&e);
+        goto done;
+    }
+    a->dev = arv_camera_get_device(a->cam);
+    a->lost_handler = g_signal_connect(a->dev, "control-lost", G_CALLBACK(on_control_lost), a);
+
+    const char *s = arv_camera_get_vendor_name(a->cam, &e);
+    if (!e) copy_string(a->vendor, sizeof a->vendor, s);
+    if (!e) s = arv_camera_get_model_name(a->cam, &e);
+    if (!e) copy_string(a->model, sizeof a->model, s);
+    if (!e) s = arv_camera_get_device_serial_number(a->cam, &e);
+    if (!e) copy_string(a->serial, sizeof a->serial, s);
+    if (e) {
+        rc = fail_gerror(c, &e, "reading vendor, model and serial number");
+        goto done;
+    }
+    snprintf(c->name, sizeof c->name, "aravis %.24s %.32s serial %.24s at %.24s", a->vendor, a->model, a->serial, id);
+
+    a->has_temperature = arv_camera_is_feature_available(a->cam, "DeviceTemperature", NULL);
+    a->has_gain = arv_camera_is_gain_available(a->cam, NULL);
+    if (!arv_camera_is_software_trigger_supported(a->cam, &e)) {
+        rc = e ? fail_gerror(c, &e, "looking for TriggerSoftware")
+               : rig_fail(RIG_ERR_NOT_SUPPORTED, "%s: the camera has no software trigger (TriggerSoftware)", c->name);
+        goto done;
+    }
+    arv_camera_set_acquisition_mode(a->cam, ARV_ACQUISITION_MODE_CONTINUOUS, &e);
+    if (e) {
+        rc = fail_gerror(c, &e, "setting AcquisitionMode Continuous");
+        goto done;
+    }
+    arv_camera_set_trigger(a->cam, "Software", &e);   // TriggerMode On, TriggerSource Software (FrameStart)
+    if (e) {
+        rc = fail_gerror(c, &e, "setting TriggerMode On / TriggerSource Software");
+        goto done;
+    }
+    if ((rc = read_exposure_gain(c))) goto done;
+    *out = c;
+    return 0;
+done:
+    op_close(c);
+    free(c);
+    return rc;
+}
+
+// ---------------------------------------------------------------------------
+// Wrappers
+
+void rig_frame_free(rig_frame_t *f)
+{
+    if (!f) return;
+    free(f->pix);
+    f->pix = NULL;
+}
+
+static int check_cam(rig_camera_t *c, const char *what)
+{
+    if (!c || !c->ops) return rig_fail(RIG_ERR_INVALID, "camera %s: no camera (NULL)", what);
+    return 0;
+}
+
+#define CAMERA_OP(c, op, what, ...)                                                          \
+    do {                                                                                     \
+        int rc_ = check_cam(c, what);                                                        \
+        if (rc_) return rc_;                                                                 \
+        if (!(c)->ops->op)                                                                   \
+            return rig_fail(RIG_ERR_NOT_SUPPORTED, "%s: %s is not supported by the %s backend", \
+                            (c)->name, what, (c)->ops->backend);                             \
+        return (c)->ops->op(__VA_ARGS__);                                                    \
+    } while (0)
+
+int rig_camera_set_pixel_format(rig_camera_t *c, const char *format)
+{
+    if (!format) return rig_fail(RIG_ERR_INVALID, "%s: no pixel format given", c ? c->name : "camera");
+    CAMERA_OP(c, set_pixel_format, "setting the pixel format", c, format);
+}
+
+int rig_camera_set_exposure_us(rig_camera_t *c, double exposure_us)
+{
+    CAMERA_OP(c, set_exposure_us, "setting the exposure", c, exposure_us);
+}
+
+int rig_camera_set_gain(rig_camera_t *c, double gain)
+{
+    CAMERA_OP(c, set_gain, "setting the gain", c, gain);
+}
+
+int rig_camera_set_region(rig_camera_t *c, int x, int y, int width, int height)
+{
+    CAMERA_OP(c, set_region, "setting the region", c, x, y, width, height);
+}
+
+int rig_camera_settings(rig_camera_t *c, rig_frame_meta_t *out)
+{
+    if (!out) return rig_fail(RIG_ERR_INVALID, "%s: NULL settings output", c ? c->name : "camera");
+    CAMERA_OP(c, settings, "reading the settings", c, out);
+}
+
+int rig_camera_capture(rig_camera_t *c, double timeout_s, int retries, rig_frame_t *out)
+{
+    if (!out) return rig_fail(RIG_ERR_INVALID, "%s: NULL frame output", c ? c->name : "camera");
+    out->pix = NULL;
+    CAMERA_OP(c, capture, "capturing", c, timeout_s, retries, out);
+}
+
+void rig_camera_close(rig_camera_t *c)
+{
+    if (!c) return;
+    if (c->ops && c->ops->close) c->ops->close(c);
+    free(c);
+}

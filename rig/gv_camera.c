@@ -1,0 +1,725 @@
+// rig/gv_camera.c — a virtual GigE Vision camera: Aravis's ArvGvFakeCamera with
+// our GenICam XML and a render thread (see rig/gv_camera.h).
+//
+// Threads
+//   Aravis GV thread: answers GVCP, polls the real trigger register, calls
+//     fill_cb (with Aravis's fill mutex held) and sends GVSP packets.
+//   render thread:    watches our TriggerSoftware register (REG_TRIGGER), renders,
+//     packs to the wire format, publishes the frame as `front`, then writes the
+//     fake camera's own trigger register so the GV thread sends it.
+// `lock` guards front/stats; `render_lock` serialises calls of the render
+// callback (the GV thread renders itself only when no frame is ready).
+// Registers live in the fake camera's memory: the GV thread writes them on
+// GVCP requests, we read them with arv_fake_camera_read_* (4/8-byte copies).
+#define _GNU_SOURCE
+#include <arpa/inet.h>
+#include <arv.h>
+#include <errno.h>
+#include <fcntl.h>
+#include <math.h>
+#include <netinet/in.h>
+#include <stdatomic.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/file.h>
+#include <sys/socket.h>
+#include <time.h>
+#include <unistd.h>
+
+#include "rig/gv_camera.h"
+
+// GigE Vision bootstrap registers (GigE Vision 2.0, table 28).
+#define GVBS_MANUFACTURER_NAME 0x0048   // 32 bytes
+#define GVBS_MODEL_NAME        0x0068   // 32 bytes
+#define GVBS_STRING_SIZE       32
+#define GVBS_SCPS0             0x0d04   // stream channel 0 packet size (bits 0-15)
+#define GVSP_PACKET_SIZE       8192     // loopback has a 64 KiB MTU: jumbo packets
+#define GVCP_PORT              3956
+
+// Registers our XML adds (inside the fake camera's 64 KiB register memory).
+#define REG_TRIGGER            0xa000   // TriggerSoftware as the client sees it
+#define REG_EXPOSURE_US        0xa008   // float64 big-endian
+#define REG_GAIN_DB            0xa010   // float64 big-endian
+#define REG_TEMPERATURE_C      0xa018   // float64 big-endian, read-only to clients
+
+#define EXPOSURE_MIN_US 10.0
+#define EXPOSURE_MAX_US 10e6
+#define GAIN_MAX_DB     24.0
+
+struct rig_gv_camera {
+    rig_gv_camera_params_t p;
+    char address[64], serial[16], vendor[GVBS_STRING_SIZE], model[GVBS_STRING_SIZE];
+    ArvGvFakeCamera *gv;
+    ArvFakeCamera   *fake;
+    GThread         *thread;
+    atomic_bool      stop;
+    int              lock_fd;     // flock on the address's lock file, -1 when none
+
+    GMutex lock;                 // front frame, stats, drop counter, render_error
+    GCond  cond;
+    uint8_t *front;              // packed wire-format frame ready to send
+    size_t   front_cap, front_size;
+    int      front_w, front_h;
+    guint32  front_pf;
+    bool     front_ready;
+    rig_gv_camera_stats_t stats;
+    int      drop_triggers;
+    char     render_error[512];
+
+    GMutex    render_lock;       // the render callback and the scratch buffers below
+    uint16_t *pix;
+    size_t    pix_cap;
+    uint8_t  *back;
+    size_t    back_cap;
+    uint64_t  n_renders;
+};
+
+rig_gv_camera_params_t rig_gv_camera_defaults(void)
+{
+    return (rig_gv_camera_params_t){
+        .address = "127.0.0.1",
+        .serial = "REFL-GV01",
+        .vendor = "refl",
+        .model = "virtual camera",
+        .sensor_width = 1280,
+        .sensor_height = 1024,
+        .temperature_c = 35.0,
+        .trigger_poll_hz = 1000.0,
+    };
+}
+
+// ---------------------------------------------------------------------------
+// Registers
+
+static guint32 reg_get(rig_gv_camera_t *g, guint32 addr)
+{
+    guint32 v = 0;
+    arv_fake_camera_read_register(g->fake, addr, &v);
+    return v;
+}
+
+static double reg_get_double(rig_gv_camera_t *g, guint32 addr)
+{
+    guint64 be = 0;
+    arv_fake_camera_read_memory(g->fake, addr, sizeof be, &be);
+    guint64 u = GUINT64_FROM_BE(be);
+    double d;
+    memcpy(&d, &u, sizeof d);
+    return d;
+}
+
+static void reg_set_double(rig_gv_camera_t *g, guint32 addr, double d)
+{
+    guint64 u;
+    memcpy(&u, &d, sizeof u);
+    guint64 be = GUINT64_TO_BE(u);
+    arv_fake_camera_write_memory(g->fake, addr, sizeof be, &be);
+}
+
+static void reg_set_string(rig_gv_camera_t *g, guint32 addr, const char *s, size_t size)
+{
+    char buf[64] = { 0 };
+    snprintf(buf, size < sizeof buf ? size : sizeof buf, "%s", s);
+    arv_fake_camera_write_memory(g->fake, addr, (guint32)size, buf);
+}
+
+static int format_bits(guint32 pf)
+{
+    switch (pf) {
+    case ARV_PIXEL_FORMAT_MONO_8:  return 8;
+    case ARV_PIXEL_FORMAT_MONO_12: return 12;
+    case ARV_PIXEL_FORMAT_MONO_16: return 16;
+    default: return 0;
+    }
+}
+
+static double now_realtime_s(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_REALTIME, &ts);
+    return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
+}
+
+// The settings a frame is taken with, from the registers. false (and a message
+// in *err) when they are unusable.
+static bool snapshot_settings(rig_gv_camera_t *g, rig_frame_meta_t *m, guint32 *pf_out, char *err, size_t errsize)
+{
+    memset(m, 0, sizeof *m);
+    guint32 pf = reg_get(g, ARV_FAKE_CAMERA_REGISTER_PIXEL_FORMAT);
+    m->width = (int)reg_get(g, ARV_FAKE_CAMERA_REGISTER_WIDTH);
+    m->height = (int)reg_get(g, ARV_FAKE_CAMERA_REGISTER_HEIGHT);
+    m->offset_x = (int)reg_get(g, ARV_FAKE_CAMERA_REGISTER_X_OFFSET);
+    m->offset_y = (int)reg_get(g, ARV_FAKE_CAMERA_REGISTER_Y_OFFSET);
+    m->bits = format_bits(pf);
+    snprintf(m->pixel_format, sizeof m->pixel_format, "%s", m->bits == 8 ? "Mono8" : m->bits == 12 ? "Mono12" : "Mono16");
+    m->exposure_us = reg_get_double(g, REG_EXPOSURE_US);
+    m->gain = reg_get_double(g, REG_GAIN_DB);
+    m->temperature_c = reg_get_double(g, REG_TEMPERATURE_C);
+    m->system_time_s = now_realtime_s();
+    m->timestamp_ns = (uint64_t)(m->system_time_s * 1e9);
+    snprintf(m->vendor, sizeof m->vendor, "%s", g->vendor);
+    snprintf(m->model, sizeof m->model, "%s", g->model);
+    snprintf(m->serial, sizeof m->serial, "%s", g->serial);
+    *pf_out = pf;
+    if (!m->bits) {
+        snprintf(err, errsize, "pixel format register holds 0x%08x, not Mono8/Mono12/Mono16", pf);
+        return false;
+    }
+    if (m->width < 1 || m->height < 1 || m->offset_x < 0 || m->offset_y < 0 ||
+        m->offset_x + m->width > g->p.sensor_width || m->offset_y + m->height > g->p.sensor_height) {
+        snprintf(err, errsize, "region %dx%d at (%d,%d) does not fit the %dx%d sensor", m->width, m->height,
+                 m->offset_x, m->offset_y, g->p.sensor_width, g->p.sensor_height);
+        return false;
+    }
+    if (!isfinite(m->exposure_us) || m->exposure_us < EXPOSURE_MIN_US || m->exposure_us > EXPOSURE_MAX_US) {
+        snprintf(err, errsize, "ExposureTime %g us outside %g..%g us", m->exposure_us, EXPOSURE_MIN_US, EXPOSURE_MAX_US);
+        return false;
+    }
+    if (!isfinite(m->gain) || m->gain < 0 || m->gain > GAIN_MAX_DB) {
+        snprintf(err, errsize, "Gain %g dB outside 0..%g dB", m->gain, GAIN_MAX_DB);
+        return false;
+    }
+    return true;
+}
+
+static bool grow(void **buf, size_t *cap, size_t need)
+{
+    if (*cap >= need) return true;
+    void *nb = realloc(*buf, need);
+    if (!nb) return false;
+    *buf = nb;
+    *cap = need;
+    return true;
+}
+
+// Render with the callback (render_lock held) and pack into dst (size bytes).
+static int render_and_pack(rig_gv_camera_t *g, rig_frame_meta_t *m, uint8_t *dst)
+{
+    size_t n = (size_t)m->width * (size_t)m->height;
+    if (!grow((void **)&g->pix, &g->pix_cap, n * sizeof *g->pix))
+        return rig_fail(RIG_ERR_NO_MEM, "gv camera %s: out of memory for a %dx%d frame", g->serial, m->width, m->height);
+    m->frame_id = ++g->n_renders;
+    double t0 = now_realtime_s();
+    int rc = g->p.render(g->p.render_ctx, m, g->pix);
+    double dt = now_realtime_s() - t0;
+    g_mutex_lock(&g->lock);
+    g->stats.render_s_total += dt;
+    g_mutex_unlock(&g->lock);
+    if (rc < 0) return rc;
+    uint16_t maxv = m->bits == 8 ? 255 : m->bits == 12 ? 4095 : 65535;
+    if (m->bits == 8) {
+        for (size_t i = 0; i < n; i++) dst[i] = (uint8_t)(g->pix[i] > maxv ? maxv : g->pix[i]);
+    } else {
+        for (size_t i = 0; i < n; i++) {   // GVSP pixel data is little-endian
+            uint16_t v = g->pix[i] > maxv ? maxv : g->pix[i];
+            dst[2 * i] = (uint8_t)(v & 0xff);
+            dst[2 * i + 1] = (uint8_t)(v >> 8);
+        }
+    }
+    return 0;
+}
+
+static void note_render_error(rig_gv_camera_t *g, const char *msg)
+{
+    g_mutex_lock(&g->lock);
+    g->stats.render_errors++;
+    snprintf(g->render_error, sizeof g->render_error, "%s", msg);
+    g_mutex_unlock(&g->lock);
+}
+
+// ---------------------------------------------------------------------------
+// Aravis GV thread: copy the finished frame (fast path), or render now.
+
+static void fill_cb(ArvBuffer *buffer, void *data, guint32 exposure_us_int, guint32 gain_raw, ArvPixelFormat pf)
+{
+    rig_gv_camera_t *g = data;
+    int w = arv_buffer_get_image_width(buffer), h = arv_buffer_get_image_height(buffer);
+    int bits = format_bits(pf);
+    uint8_t *dst = (uint8_t *)arv_buffer_get_data(buffer, NULL);
+    // fill_buffer checked that the buffer holds the payload of the current registers.
+    size_t size = (size_t)w * (size_t)h * (bits == 8 ? 1 : 2);
+    if (!dst || !bits || w < 1 || h < 1) return;
+
+    g_mutex_lock(&g->lock);
+    if (g->front_ready && g->front_w == w && g->front_h == h && g->front_pf == (guint32)pf &&
+        g->front_size == size) {
+        memcpy(dst, g->front, size);
+        g->front_ready = false;
+        g->stats.frames_sent++;
+        g_cond_broadcast(&g->cond);
+        g_mutex_unlock(&g->lock);
+        return;
+    }
+    if (g->front_ready) {   // rendered for other settings: useless now
+        g->front_ready = false;
+        g_cond_broadcast(&g->cond);
+    }
+    g_mutex_unlock(&g->lock);
+
+    // No matching frame ready (free running faster than the renderer, or the
+    // settings changed since the trigger): render here.
+    rig_frame_meta_t m;
+    guint32 pf_reg;
+    char err[256] = "";
+    int rc = RIG_ERR_INVALID;
+    g_mutex_lock(&g->render_lock);
+    if (!snapshot_settings(g, &m, &pf_reg, err, sizeof err)) {
+        // err says why
+    } else if (m.width != w || m.height != h || pf_reg != (guint32)pf) {
+        snprintf(err, sizeof err, "settings changed while a frame was being sent");
+    } else {
+        rc = render_and_pack(g, &m, dst);
+        if (rc < 0) snprintf(err, sizeof err, "%s", rig_last_error());
+    }
+    g_mutex_unlock(&g->render_lock);
+    if (rc < 0) {
+        memset(dst, 0, size);
+        note_render_error(g, err);
+        return;
+    }
+    g_mutex_lock(&g->lock);
+    g->stats.late_frames++;
+    g->stats.frames_sent++;
+    g_mutex_unlock(&g->lock);
+}
+
+// ---------------------------------------------------------------------------
+// Render thread
+
+// Render a frame into `back`, then publish it as `front`. false on failure.
+static bool render_publish(rig_gv_camera_t *g)
+{
+    rig_frame_meta_t m;
+    guint32 pf;
+    char err[512];
+    if (!snapshot_settings(g, &m, &pf, err, sizeof err)) {
+        note_render_error(g, err);
+        return false;
+    }
+    size_t size = (size_t)m.width * (size_t)m.height * (m.bits == 8 ? 1 : 2);
+    g_mutex_lock(&g->render_lock);
+    int rc = grow((void **)&g->back, &g->back_cap, size) ? render_and_pack(g, &m, g->back)
+             : rig_fail(RIG_ERR_NO_MEM, "gv camera %s: out of memory", g->serial);
+    if (rc < 0) snprintf(err, sizeof err, "%s", rig_last_error());
+    g_mutex_unlock(&g->render_lock);
+    if (rc < 0) {
+        note_render_error(g, err);
+        return false;
+    }
+    g_mutex_lock(&g->lock);
+    // swap back and front (front is not in use: fill_cb copies under the lock)
+    uint8_t *t = g->front;
+    size_t tc = g->front_cap;
+    g->front = g->back;
+    g->front_cap = g->back_cap;
+    g->back = t;
+    g->back_cap = tc;
+    g->front_size = size;
+    g->front_w = m.width;
+    g->front_h = m.height;
+    g->front_pf = pf;
+    g->front_ready = true;
+    g->stats.frames_rendered++;
+    g_mutex_unlock(&g->lock);
+    return true;
+}
+
+static gpointer render_thread(gpointer data)
+{
+    rig_gv_camera_t *g = data;
+    gint64 period_us = (gint64)(1e6 / g->p.trigger_poll_hz);
+    if (period_us < 10) period_us = 10;
+    while (!atomic_load(&g->stop)) {
+        bool acquiring = arv_fake_camera_get_acquisition_status(g->fake) != 0;
+        bool triggered = arv_fake_camera_is_in_software_trigger_mode(g->fake);
+        bool free_running = arv_fake_camera_is_in_free_running_mode(g->fake);
+
+        g_mutex_lock(&g->lock);
+        bool ready = g->front_ready;
+        if (!acquiring && ready) {        // acquisition stopped before the frame went out
+            g->front_ready = false;
+            arv_fake_camera_write_register(g->fake, ARV_FAKE_CAMERA_REGISTER_TRIGGER_SOFTWARE, 0);
+            ready = false;
+        }
+        g_mutex_unlock(&g->lock);
+        if (!acquiring && reg_get(g, REG_TRIGGER) != 0)   // as a real camera: no acquisition, no frame
+            arv_fake_camera_write_register(g->fake, REG_TRIGGER, 0);
+
+        if (acquiring && triggered && !ready && reg_get(g, REG_TRIGGER) != 0) {
+            arv_fake_camera_write_register(g->fake, REG_TRIGGER, 0);
+    arv_fake_camera_write_register(g->fake, GVBS_SCPS0, GVSP_PACKET_SIZE);
+            g_mutex_lock(&g->lock);
+            g->stats.triggers++;
+            bool drop = g->drop_triggers > 0;
+            if (drop) {
+                g->drop_triggers--;
+                g->stats.dropped_triggers++;
+            }
+            g_mutex_unlock(&g->lock);
+            if (!drop && render_publish(g))   // hand the trigger on: the GV thread sends the frame
+                arv_fake_camera_write_register(g->fake, ARV_FAKE_CAMERA_REGISTER_TRIGGER_SOFTWARE, 1);
+            continue;
+        }
+        if (acquiring && free_running && !triggered && !ready) {
+            render_publish(g);
+            continue;
+        }
+        g_mutex_lock(&g->lock);
+        if (!atomic_load(&g->stop))
+            g_cond_wait_until(&g->cond, &g->lock, g_get_monotonic_time() + period_us);
+        g_mutex_unlock(&g->lock);
+    }
+    return NULL;
+}
+
+// ---------------------------------------------------------------------------
+// GenICam XML: Aravis's built-in fake camera description, edited.
+
+// Replace the first `find` after the first `after` (NULL: from the start).
+static bool xml_edit(GString *x, const char *after, const char *find, const char *repl)
+{
+    const char *from = x->str;
+    if (after) {
+        from = strstr(x->str, after);
+        if (!from) return false;
+    }
+    const char *at = strstr(from, find);
+    if (!at) return false;
+    gssize pos = at - x->str;
+    g_string_erase(x, pos, (gssize)strlen(find));
+    g_string_insert(x, pos, repl);
+    return true;
+}
+
+// Remove from `start` through the next `end`, plus the whitespace before start.
+static bool xml_cut(GString *x, const char *start, const char *end)
+{
+    const char *s = strstr(x->str, start);
+    if (!s) return false;
+    const char *e = strstr(s, end);
+    if (!e) return false;
+    while (s > x->str && (s[-1] == ' ' || s[-1] == '\t' || s[-1] == '\n')) s--;
+    g_string_erase(x, s - x->str, (e + strlen(end)) - s);
+    return true;
+}
+
+static const char xml_added[] =
+    "\n\t<!-- Added by refl rig/gv_camera.c -->\n"
+    "\t<StringReg Name=\"DeviceSerialNumber\" NameSpace=\"Standard\">\n"
+    "\t\t<DisplayName>Serial Number</DisplayName>\n"
+    "\t\t<Address>0xd8</Address>\n\t\t<Length>16</Length>\n\t\t<AccessMode>RO</AccessMode>\n"
+    "\t\t<pPort>Device</pPort>\n\t</StringReg>\n\n"
+    "\t<Float Name=\"DeviceTemperature\" NameSpace=\"Standard\">\n"
+    "\t\t<Description>Sensor temperature, degrees Celsius.</Description>\n"
+    "\t\t<pValue>DeviceTemperatureReg</pValue>\n\t\t<Unit>C</Unit>\n\t</Float>\n\n"
+    "\t<FloatReg Name=\"DeviceTemperatureReg\" NameSpace=\"Custom\">\n"
+    "\t\t<Address>0xa018</Address>\n\t\t<Length>8</Length>\n\t\t<AccessMode>RO</AccessMode>\n"
+    "\t\t<pPort>Device</pPort>\n\t\t<Endianess>BigEndian</Endianess>\n\t</FloatReg>\n\n"
+    "\t<Float Name=\"ExposureTime\" NameSpace=\"Standard\">\n"
+    "\t\t<Description>Exposure time, in microseconds.</Description>\n"
+    "\t\t<pValue>ExposureTimeReg</pValue>\n\t\t<Min>10.0</Min>\n\t\t<Max>10000000.0</Max>\n"
+    "\t\t<Unit>us</Unit>\n\t</Float>\n\n"
+    "\t<FloatReg Name=\"ExposureTimeReg\" NameSpace=\"Custom\">\n"
+    "\t\t<Address>0xa008</Address>\n\t\t<Length>8</Length>\n\t\t<AccessMode>RW</AccessMode>\n"
+    "\t\t<pPort>Device</pPort>\n\t\t<Endianess>BigEndian</Endianess>\n\t</FloatReg>\n\n"
+    "\t<Float Name=\"Gain\" NameSpace=\"Standard\">\n"
+    "\t\t<Description>Analog gain, in dB.</Description>\n"
+    "\t\t<pValue>GainReg</pValue>\n\t\t<Min>0.0</Min>\n\t\t<Max>24.0</Max>\n"
+    "\t\t<Unit>dB</Unit>\n\t</Float>\n\n"
+    "\t<FloatReg Name=\"GainReg\" NameSpace=\"Custom\">\n"
+    "\t\t<Address>0xa010</Address>\n\t\t<Length>8</Length>\n\t\t<AccessMode>RW</AccessMode>\n"
+    "\t\t<pPort>Device</pPort>\n\t\t<Endianess>BigEndian</Endianess>\n\t</FloatReg>\n\n";
+
+// Our XML as a new string, or NULL with a message.
+static char *make_genicam_xml(void)
+{
+    ArvFakeCamera *tmp = arv_fake_camera_new("REFL-XML");   // no network: just the built-in XML
+    size_t size = 0;
+    const char *base = tmp ? arv_fake_camera_get_genicam_xml(tmp, &size) : NULL;
+    if (!base || !size) {
+        if (tmp) g_object_unref(tmp);
+        rig_fail(RIG_ERR_IO, "gv camera: Aravis's built-in fake camera XML is not available");
+        return NULL;
+    }
+    GString *x = g_string_new_len(base, (gssize)size);
+    g_object_unref(tmp);
+
+    char mono12[160];
+    snprintf(mono12, sizeof mono12,
+             "</EnumEntry>\n\t\t<EnumEntry Name=\"Mono12\" NameSpace=\"Standard\">\n\t\t\t<Value>%u</Value>\n\t\t</EnumEntry>",
+             (unsigned)ARV_PIXEL_FORMAT_MONO_12);
+    const char *bad = NULL;
+    // Root: make sure AnalogControl is reachable (0.8.26 leaves it out).
+    {
+        const char *root = strstr(x->str, "<Category Name=\"Root\"");
+        const char *end = root ? strstr(root, "</Category>") : NULL;
+        if (!end) bad = "Root category";
+        else if (!g_strstr_len(root, end - root, "AnalogControl") &&
+                 !xml_edit(x, "<Category Name=\"Root\"", "<pFeature>TransportLayerControl</pFeature>",
+                           "<pFeature>AnalogControl</pFeature>\n\t\t<pFeature>TransportLayerControl</pFeature>"))
+            bad = "Root/TransportLayerControl";
+    }
+    if (!bad && !xml_edit(x, NULL, "<pFeature>DeviceID</pFeature>",
+                          "<pFeature>DeviceID</pFeature>\n\t\t<pFeature>DeviceSerialNumber</pFeature>"
+                          "\n\t\t<pFeature>DeviceTemperature</pFeature>"))
+        bad = "DeviceID feature";
+    // Binning is not simulated: do not advertise it.
+    if (!bad && !xml_cut(x, "<pFeature>BinningHorizontal</pFeature>", "</pFeature>")) bad = "BinningHorizontal";
+    if (!bad && !xml_cut(x, "<pFeature>BinningVertical</pFeature>", "</pFeature>")) bad = "BinningVertical";
+    // Monochrome formats only, plus Mono12 (unpacked).
+    static const char *const colour[] = { "BayerBG8", "BayerGB8", "BayerGR8", "BayerRG8", "RGB8" };
+    for (size_t i = 0; !bad && i < sizeof colour / sizeof colour[0]; i++) {
+        char start[64];
+        snprintf(start, sizeof start, "<EnumEntry Name=\"%s\"", colour[i]);
+        if (!xml_cut(x, start, "</EnumEntry>")) bad = colour[i];
+    }
+    if (!bad && !xml_edit(x, "<EnumEntry Name=\"Mono8\"", "</EnumEntry>", mono12)) bad = "Mono8 entry";
+    if (!bad && !strstr(x->str, "<EnumEntry Name=\"Mono16\"")) bad = "Mono16 entry";
+    // ExposureTime (float, us) replaces ExposureTimeAbs, which stays as an alias.
+    if (!bad && !xml_edit(x, "<Category Name=\"AcquisitionControl\"", "<pFeature>ExposureTimeAbs</pFeature>",
+                          "<pFeature>ExposureTime</pFeature>"))
+        bad = "AcquisitionControl/ExposureTimeAbs";
+    if (!bad && !xml_edit(x, "<Float Name=\"ExposureTimeAbs\"", "<pValue>ExposureTimeAbsConverter</pValue>",
+                          "<pValue>ExposureTimeReg</pValue>"))
+        bad = "ExposureTimeAbs";
+    // TriggerSoftware goes to our register; the render thread forwards it.
+    if (!bad && !xml_edit(x, "<IntReg Name=\"TriggerSoftwareCommandRegister\"", "<Address>0x30c</Address>",
+                          "<Address>0xa000</Address>"))
+        bad = "TriggerSoftwareCommandRegister";
+    // Gain (float, dB) replaces GainRaw in AnalogControl.
+    if (!bad && !xml_edit(x, "<Category Name=\"AnalogControl\"", "<pFeature>GainRaw</pFeature>",
+                          "<pFeature>Gain</pFeature>"))
+        bad = "AnalogControl/GainRaw";
+    const char *end = bad ? NULL : strstr(x->str, "</RegisterDescription>");
+    if (end) g_string_insert(x, end - x->str, xml_added);
+    else if (!bad) bad = "</RegisterDescription>";
+    if (bad) {
+        g_string_free(x, TRUE);
+        rig_fail(RIG_ERR_IO, "gv camera: Aravis %d.%d.%d's built-in fake camera XML has no %s where expected; "
+                 "rig/gv_camera.c needs updating for this Aravis version",
+                 arv_get_major_version(), arv_get_minor_version(), arv_get_micro_version(), bad);
+        return NULL;
+    }
+    return g_string_free(x, FALSE);
+}
+
+// ---------------------------------------------------------------------------
+
+// 0 when address:3956 is free, RIG_ERR_BUSY when taken, other codes on failure.
+// *err_no: errno of a failure.
+static int probe_port(const char *address, int *err_no)
+{
+    int fd = socket(AF_INET, SOCK_DGRAM | SOCK_CLOEXEC, 0);
+    *err_no = errno;
+    if (fd < 0) return RIG_ERR_IO;
+    struct sockaddr_in sa = { .sin_family = AF_INET, .sin_port = htons(GVCP_PORT) };
+    inet_pton(AF_INET, address, &sa.sin_addr);
+    int rc = 0;
+    if (bind(fd, (struct sockaddr *)&sa, sizeof sa) != 0) {
+        *err_no = errno;
+        rc = errno == EADDRINUSE ? RIG_ERR_BUSY : RIG_ERR_IO;
+    }
+    close(fd);
+    return rc;
+}
+
+int rig_gv_camera_start(rig_gv_camera_t **out, const rig_gv_camera_params_t *p)
+{
+    int rc = 0, lock_fd = -1;
+    char *xml = NULL, *xml_path = NULL;
+    rig_gv_camera_t *g = NULL;
+    if (!out || !p) return rig_fail(RIG_ERR_INVALID, "gv camera: NULL argument");
+    *out = NULL;
+    rig_gv_camera_params_t d = rig_gv_camera_defaults();
+    const char *address = p->address ? p->address : d.address;
+    const char *serial = p->serial ? p->serial : d.serial;
+    const char *vendor = p->vendor ? p->vendor : d.vendor;
+    const char *model = p->model ? p->model : d.model;
+    struct in_addr ia;
+    if (!p->render) return rig_fail(RIG_ERR_INVALID, "gv camera: no render callback given");
+    if (inet_pton(AF_INET, address, &ia) != 1 || (ntohl(ia.s_addr) >> 24) != 127)
+        return rig_fail(RIG_ERR_INVALID, "gv camera: address '%s' is not a loopback IPv4 address (127.x.y.z); "
+                        "the virtual camera only serves on loopback", address);
+    if (!*serial || strlen(serial) >= 16)
+        return rig_fail(RIG_ERR_INVALID, "gv camera: serial '%s' must have 1 to 15 characters", serial);
+    if (strlen(vendor) >= GVBS_STRING_SIZE || strlen(model) >= GVBS_STRING_SIZE)
+        return rig_fail(RIG_ERR_INVALID, "gv camera %s: vendor and model must be shorter than %d characters",
+                        serial, GVBS_STRING_SIZE);
+    if (p->sensor_width < 1 || p->sensor_width > 4096 || p->sensor_height < 1 || p->sensor_height > 4096)
+        return rig_fail(RIG_ERR_INVALID, "gv camera %s: sensor size %dx%d outside 1..4096", serial,
+                        p->sensor_width, p->sensor_height);
+    if (!(p->trigger_poll_hz > 0 && p->trigger_poll_hz <= 100000))
+        return rig_fail(RIG_ERR_INVALID, "gv camera %s: trigger_poll_hz %g outside (0, 100000]", serial, p->trigger_poll_hz);
+    if (!isfinite(p->temperature_c))
+        return rig_fail(RIG_ERR_INVALID, "gv camera %s: temperature is not finite", serial);
+    if (!(p->busy_wait_s >= 0 && p->busy_wait_s <= 3600))
+        return rig_fail(RIG_ERR_INVALID, "gv camera %s: busy_wait_s %g outside 0..3600", serial, p->busy_wait_s);
+
+    int err_no = 0;
+    // Take turns with other refl servers on this address.
+    char lock_path[512];
+    snprintf(lock_path, sizeof lock_path, "%s/refl-gvcam-%s.lock", g_get_tmp_dir(), address);
+    lock_fd = open(lock_path, O_RDONLY | O_CREAT | O_CLOEXEC, 0666);
+    if (lock_fd < 0)
+        return rig_fail(RIG_ERR_IO, "gv camera %s: cannot open %s: %s", serial, lock_path, strerror(errno));
+    for (double waited = 0;; waited += 0.05) {
+        if (flock(lock_fd, LOCK_EX | LOCK_NB) == 0) break;
+        if (errno != EWOULDBLOCK || waited >= p->busy_wait_s) {
+            rc = rig_fail(RIG_ERR_BUSY, "gv camera %s: another refl virtual camera serves on %s (lock %s%s); "
+                          "stop it first", serial, address, lock_path, p->busy_wait_s > 0 ? ", waited" : "");
+            goto done;
+        }
+        g_usleep(50000);
+    }
+    rc = probe_port(address, &err_no);
+    if (rc == RIG_ERR_BUSY) {
+        rig_fail(rc, "gv camera %s: %s:%d is already in use (another GigE Vision program?); stop it first",
+                 serial, address, GVCP_PORT);
+        goto done;
+    }
+    if (rc < 0) {
+        rig_fail(rc, "gv camera %s: cannot bind %s:%d: %s", serial, address, GVCP_PORT, strerror(err_no));
+        goto done;
+    }
+    if (!(xml = make_genicam_xml())) {
+        rc = RIG_ERR_IO;
+        goto done;
+    }
+    GError *gerr = NULL;
+    int fd = g_file_open_tmp("refl-gvcam-XXXXXX.xml", &xml_path, &gerr);
+    if (fd < 0) {
+        rc = rig_fail(RIG_ERR_IO, "gv camera %s: cannot write its GenICam XML: %s", serial, gerr->message);
+        g_error_free(gerr);
+        goto done;
+    }
+    close(fd);
+    if (!g_file_set_contents(xml_path, xml, -1, &gerr)) {
+        rc = rig_fail(RIG_ERR_IO, "gv camera %s: cannot write %s: %s", serial, xml_path, gerr->message);
+        g_error_free(gerr);
+        goto done;
+    }
+
+    g = calloc(1, sizeof *g);
+    if (!g) {
+        rc = rig_fail(RIG_ERR_NO_MEM, "gv camera %s: out of memory", serial);
+        goto done;
+    }
+    g->p = *p;
+    g->lock_fd = lock_fd;
+    lock_fd = -1;
+    snprintf(g->address, sizeof g->address, "%s", address);
+    snprintf(g->serial, sizeof g->serial, "%s", serial);
+    snprintf(g->vendor, sizeof g->vendor, "%s", vendor);
+    snprintf(g->model, sizeof g->model, "%s", model);
+    g->p.address = g->address;
+    g->p.serial = g->serial;
+    g->p.vendor = g->vendor;
+    g->p.model = g->model;
+    g_mutex_init(&g->lock);
+    g_mutex_init(&g->render_lock);
+    g_cond_init(&g->cond);
+
+    g->gv = arv_gv_fake_camera_new_full(address, serial, xml_path);   // reads the XML file now
+    if (!g->gv || !arv_gv_fake_camera_is_running(g->gv)) {
+        rc = rig_fail(RIG_ERR_IO, "gv camera %s: Aravis could not start a GigE Vision server on %s "
+                      "(no network interface with that address?)", serial, address);
+        goto done;
+    }
+    // Aravis reports running even when its bind failed: check the port is now taken.
+    if (probe_port(address, &err_no) != RIG_ERR_BUSY) {
+        rc = rig_fail(RIG_ERR_BUSY, "gv camera %s: Aravis did not get %s:%d (taken meanwhile?)", serial,
+                      address, GVCP_PORT);
+        goto done;
+    }
+    g->fake = arv_gv_fake_camera_get_fake_camera(g->gv);
+    reg_set_string(g, GVBS_MANUFACTURER_NAME, g->vendor, GVBS_STRING_SIZE);
+    reg_set_string(g, GVBS_MODEL_NAME, g->model, GVBS_STRING_SIZE);
+    arv_fake_camera_write_register(g->fake, ARV_FAKE_CAMERA_REGISTER_SENSOR_WIDTH, (guint32)p->sensor_width);
+    arv_fake_camera_write_register(g->fake, ARV_FAKE_CAMERA_REGISTER_SENSOR_HEIGHT, (guint32)p->sensor_height);
+    arv_fake_camera_write_register(g->fake, ARV_FAKE_CAMERA_REGISTER_WIDTH, (guint32)p->sensor_width);
+    arv_fake_camera_write_register(g->fake, ARV_FAKE_CAMERA_REGISTER_HEIGHT, (guint32)p->sensor_height);
+    arv_fake_camera_write_register(g->fake, REG_TRIGGER, 0);
+    arv_fake_camera_write_register(g->fake, GVBS_SCPS0, GVSP_PACKET_SIZE);
+    reg_set_double(g, REG_EXPOSURE_US, ARV_FAKE_CAMERA_EXPOSURE_TIME_US_DEFAULT);
+    reg_set_double(g, REG_GAIN_DB, 0.0);
+    reg_set_double(g, REG_TEMPERATURE_C, p->temperature_c);
+    // The GV thread checks its trigger register at this rate.
+    arv_fake_camera_set_trigger_frequency(g->fake, p->trigger_poll_hz);
+#if ARAVIS_CHECK_VERSION(0, 9, 1)
+    arv_fake_camera_set_fill_pattern(g->fake, fill_cb, g, NULL);
+#else
+    arv_fake_camera_set_fill_pattern(g->fake, fill_cb, g);
+#endif
+    g->thread = g_thread_try_new("refl-gvcam-render", render_thread, g, &gerr);
+    if (!g->thread) {
+        rc = rig_fail(RIG_ERR_IO, "gv camera %s: cannot start its render thread: %s", serial, gerr->message);
+        g_error_free(gerr);
+        goto done;
+    }
+    *out = g;
+    g = NULL;
+done:
+    if (xml_path) {
+        unlink(xml_path);
+        g_free(xml_path);
+    }
+    g_free(xml);
+    rig_gv_camera_stop(g);
+    if (lock_fd >= 0) close(lock_fd);   // releases the lock
+    return rc;
+}
+
+void rig_gv_camera_stop(rig_gv_camera_t *g)
+{
+    if (!g) return;
+    if (g->thread) {
+        atomic_store(&g->stop, true);
+        g_mutex_lock(&g->lock);
+        g_cond_broadcast(&g->cond);
+        g_mutex_unlock(&g->lock);
+        g_thread_join(g->thread);
+    }
+    if (g->gv) g_object_unref(g->gv);   // joins Aravis's thread, closes the sockets
+    g_mutex_clear(&g->lock);
+    g_mutex_clear(&g->render_lock);
+    g_cond_clear(&g->cond);
+    free(g->front);
+    free(g->back);
+    free(g->pix);
+    if (g->lock_fd >= 0) close(g->lock_fd);   // after the sockets are closed: the next server may start
+    free(g);
+}
+
+void rig_gv_camera_set_temperature(rig_gv_camera_t *g, double temperature_c)
+{
+    if (g && isfinite(temperature_c)) reg_set_double(g, REG_TEMPERATURE_C, temperature_c);
+}
+
+void rig_gv_camera_drop_triggers(rig_gv_camera_t *g, int n)
+{
+    if (!g) return;
+    g_mutex_lock(&g->lock);
+    g->drop_triggers = n > 0 ? n : 0;
+    g_mutex_unlock(&g->lock);
+}
+
+void rig_gv_camera_stats(rig_gv_camera_t *g, rig_gv_camera_stats_t *out)
+{
+    if (!out) return;
+    memset(out, 0, sizeof *out);
+    if (!g) return;
+    g_mutex_lock(&g->lock);
+    *out = g->stats;
+    g_mutex_unlock(&g->lock);
+}
+
+void rig_gv_camera_last_render_error(rig_gv_camera_t *g, char *buf, size_t size)
+{
+    if (!buf || !size) return;
+    buf[0] = 0;
+    if (!g) return;
+    g_mutex_lock(&g->lock);
+    snprintf(buf, size, "%s", g->render_error);
+    g_mutex_unlock(&g->lock);
+}
