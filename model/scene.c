@@ -164,13 +164,13 @@ typedef struct {
     model_vec3_t *v;
     int          *vnum;       // vertex number as the file names it (messages)
     int           nv;
-    size_t        cap_v;
+    size_t        cap_v, cap_vnum;
     int          *idx;        // face-vertex references, all faces
     size_t        nidx, cap_idx;
     model_face_t *f;
     size_t       *fstart;     // offset of each face's references in idx
     int           nf;
-    size_t        cap_f;
+    size_t        cap_f, cap_fstart;
     char        **mat;
     GHashTable   *mat_index;  // name (owned by mat) -> index + 1
     int           nmat;
@@ -209,12 +209,9 @@ static bool add_vertex(builder_t *b, int line, model_vec3_t p, int number)
         model_error(b->name, line, "too many vertices (more than %d)", MAX_ITEMS);
         return false;
     }
-    if (!grow((void **)&b->v, &b->cap_v, (size_t)b->nv + 1, sizeof *b->v)) goto oom;
-    size_t cap = b->cap_v;
-    // vnum follows v's capacity
-    int *nn = realloc(b->vnum, cap * sizeof *nn);
-    if (!nn) goto oom;
-    b->vnum = nn;
+    if (!grow((void **)&b->v, &b->cap_v, (size_t)b->nv + 1, sizeof *b->v) ||
+        !grow((void **)&b->vnum, &b->cap_vnum, (size_t)b->nv + 1, sizeof *b->vnum))
+        goto oom;
     b->v[b->nv] = p;
     b->vnum[b->nv] = number;
     b->nv++;
@@ -261,10 +258,9 @@ static bool begin_face(builder_t *b, int line)
         model_error(b->name, line, "too many faces (more than %d)", MAX_ITEMS);
         return false;
     }
-    if (!grow((void **)&b->f, &b->cap_f, (size_t)b->nf + 1, sizeof *b->f)) goto oom;
-    size_t *ns = realloc(b->fstart, b->cap_f * sizeof *ns);
-    if (!ns) goto oom;
-    b->fstart = ns;
+    if (!grow((void **)&b->f, &b->cap_f, (size_t)b->nf + 1, sizeof *b->f) ||
+        !grow((void **)&b->fstart, &b->cap_fstart, (size_t)b->nf + 1, sizeof *b->fstart))
+        goto oom;
     int m = b->cur_mat;
     if (m < 0 && (m = material_of(b, "default", line)) < 0) return false;
     b->f[b->nf] = (model_face_t){ .material = m, .line = line, .number = b->nf + 1 };

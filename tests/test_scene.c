@@ -425,3 +425,30 @@ TEST(scene_hostile_inputs)
     }
     free(big);
 }
+
+TEST(scene_large_inputs_in_linear_time)
+{
+    // 100k vertices, 50k faces each with its own material: well under a second
+    // (a quadratic step would take minutes, under ASan even more).
+    int nv = 100000, nf = 50000;
+    size_t cap = (size_t)nv * 40 + (size_t)nf * 60 + 64, o = 0;
+    char *t = malloc(cap);
+    for (int i = 1; i <= nv; i++) o += (size_t)sprintf(t + o, "%d %d %d 0\n", i, i % 1000, i / 1000);
+    o += (size_t)sprintf(t + o, "Faces:\n");
+    for (int k = 0; k < nf; k++) {
+        int a = 1 + k % (nv - 1001);   // a, a+1, a+1001: a triangle of the grid
+        o += (size_t)sprintf(t + o, "@material m%d\n%d %d %d.\n", k, a, a + 1, a + 1001);
+    }
+    double t0 = model_now_s();
+    model_error_clear();
+    model_scene_t *s = model_scene_parse_d3d(t, o, "big.d3d", NULL);
+    double dt = model_now_s() - t0;
+    CHECK_MSG(s != NULL, "%s", model_last_error());
+    CHECK_MSG(dt < 3.0, "parsing took %.2f s", dt);
+    if (s) {
+        CHECK(s->nvertices == nv && s->nfaces == nf && s->nmaterials == nf);
+        CHECK(model_scene_material_index(s, "m49999") == s->faces[nf - 1].material);
+    }
+    model_scene_free(s);
+    free(t);
+}
