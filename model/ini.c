@@ -5,6 +5,7 @@
 // every section, key and value is a NUL-terminated, trimmed substring.
 // Runs of blanks inside a section header are collapsed to one space, so
 // "[lamp   left]" and "[lamp left]" name the same section.
+#include <glib.h>
 #include <stdalign.h>
 #include <stdlib.h>
 #include <string.h>
@@ -93,7 +94,11 @@ model_ini_t *model_ini_parse(const char *text, size_t len, const char *name)
     buf[len] = 0;
 
     const char *section = NULL;
-    int section_first_entry = 0;   // entries of one section are contiguous
+    // Duplicate checks in constant time: section name -> index + 1, and the
+    // keys of the current section -> entry index + 1 (entries of one section
+    // are contiguous, so that table restarts at every header).
+    GHashTable *sections_seen = g_hash_table_new(g_str_hash, g_str_equal);
+    GHashTable *keys_seen = g_hash_table_new(g_str_hash, g_str_equal);
     char *p = buf;
     for (int line = 1; p; line++) {
         char *eol = strchr(p, '\n');
@@ -125,17 +130,18 @@ model_ini_t *model_ini_parse(const char *text, size_t len, const char *name)
                 model_error(name, line, "'[' inside the section header [%s]", sec);
                 goto fail;
             }
-            for (int i = 0; i < ini->nsections; i++)
-                if (!strcmp(ini->sections[i], sec)) {
-                    model_error(name, line, "duplicate section [%s] (first at line %d); merge them or rename one",
-                                sec, ini->section_lines[i]);
-                    goto fail;
-                }
+            int first = GPOINTER_TO_INT(g_hash_table_lookup(sections_seen, sec));
+            if (first) {
+                model_error(name, line, "duplicate section [%s] (first at line %d); merge them or rename one",
+                            sec, ini->section_lines[first - 1]);
+                goto fail;
+            }
             ini->sections[ini->nsections] = sec;
             ini->section_lines[ini->nsections] = line;
             ini->nsections++;
+            g_hash_table_insert(sections_seen, sec, GINT_TO_POINTER(ini->nsections));
+            g_hash_table_remove_all(keys_seen);
             section = sec;
-            section_first_entry = ini->nentries;
             continue;
         }
 
@@ -157,17 +163,22 @@ model_ini_t *model_ini_parse(const char *text, size_t len, const char *name)
             model_error(name, line, "key '%s' before any section; put it under a [section] header", key);
             goto fail;
         }
-        for (int i = section_first_entry; i < ini->nentries; i++)
-            if (!strcmp(ini->entries[i].key, key)) {
-                model_error(name, line, "duplicate key '%s' in [%s] (first at line %d); keep one",
-                            key, section, ini->entries[i].line);
-                goto fail;
-            }
+        int prev = GPOINTER_TO_INT(g_hash_table_lookup(keys_seen, key));
+        if (prev) {
+            model_error(name, line, "duplicate key '%s' in [%s] (first at line %d); keep one",
+                        key, section, ini->entries[prev - 1].line);
+            goto fail;
+        }
         ini->entries[ini->nentries++] = (model_ini_entry_t){ section, key, value, line };
+        g_hash_table_insert(keys_seen, key, GINT_TO_POINTER(ini->nentries));
     }
+    g_hash_table_destroy(sections_seen);
+    g_hash_table_destroy(keys_seen);
     return ini;
 
 fail:
+    g_hash_table_destroy(sections_seen);
+    g_hash_table_destroy(keys_seen);
     free(block);
     return NULL;
 }

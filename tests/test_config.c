@@ -376,3 +376,29 @@ TEST(sensor_errors)
     SENSOR_FAIL("[sensor]\nbits = 8\nbits = 12\n", "s.ini:3:", "duplicate key 'bits'");
     SENSOR_FAIL("[sensor]\nread_noise_e = lots\n", "s.ini:2:", "read_noise_e = 'lots' is not a number");
 }
+
+// Large files parse in linear time (duplicate checks are hashed): 100,000 keys
+// in one section and 100,000 sections, each well under a second.
+TEST(ini_large_files_linear_time)
+{
+    size_t cap = 4 << 20, n = 0;
+    char *buf = malloc(cap);
+    n += snprintf(buf + n, cap - n, "[s]\n");
+    for (int i = 0; i < 100000; i++) n += snprintf(buf + n, cap - n, "k%d = 1\n", i);
+    double t0 = model_now_s();
+    model_ini_t *ini = model_ini_parse(buf, n, "big_keys.ini");
+    double dt = model_now_s() - t0;
+    CHECK(ini && ini->nentries == 100000);
+    CHECK_MSG(dt < 1.0, "100k keys took %.2f s", dt);
+    model_ini_free(ini);
+    n = 0;
+    for (int i = 0; i < 100000; i++) n += snprintf(buf + n, cap - n, "[s%d]\nk = 1\n", i);
+    n += snprintf(buf + n, cap - n, "[s7]\n");
+    t0 = model_now_s();
+    ini = model_ini_parse(buf, n, "big_sections.ini");
+    dt = model_now_s() - t0;
+    CHECK(ini == NULL);
+    CHECK_CONTAINS(model_last_error(), "big_sections.ini:200001: duplicate section [s7] (first at line 15)");
+    CHECK_MSG(dt < 1.0, "100k sections took %.2f s", dt);
+    free(buf);
+}
