@@ -45,7 +45,7 @@ MODEL_SRC := model/util.c model/ini.c model/scene.c model/config.c model/brdf.c 
              model/camera.c model/trace.c model/shade.c model/sensor.c \
              model/image.c model/edges.c model/cmd.c
 RIG_SRC   := rig/rig.c rig/turntable_apt.c rig/turntable_sim.c rig/lamps.c \
-             rig/camera_aravis.c rig/gv_camera.c
+             rig/camera_aravis.c rig/gv_camera.c rig/virtual.c rig/config.c rig/cmd_rig.c
 CALIB_SRC :=
 FIT_SRC   :=
 LIB_SRC   := $(MODEL_SRC) $(RIG_SRC) $(CALIB_SRC) $(FIT_SRC)
@@ -55,7 +55,8 @@ TEST_SRC  := tests/harness.c tests/test_brdf.c tests/test_scene.c tests/test_con
              tests/test_camera.c tests/test_render.c tests/test_sensor.c \
              tests/test_image.c tests/test_edges.c tests/test_cli.c tests/test_corpus.c \
              tests/test_turntable.c tests/apt_sim.c tests/test_lamps.c \
-             tests/test_camera_aravis.c
+             tests/test_camera_aravis.c tests/test_virtual.c tests/test_rig_config.c \
+             tests/test_rig_cli.c
 BENCH_SRC := tests/bench.c
 FUZZ_SRC  := tests/fuzz_parsers.c
 

@@ -490,3 +490,94 @@ bool model_sensor_load(const char *path, model_sensor_t *out)
     free(text);
     return ok;
 }
+
+// ---------------------------------------------------------------------------
+// Sections of their kind from a file that holds other sections too (e.g. the
+// virtual rig's truth file). Duplicate section headers are already errors of
+// the INI reader, so names are unique.
+
+static int count_kind(const model_ini_t *ini, const char *kind)
+{
+    int n = 0;
+    for (int s = 0; s < ini->nsections; s++) {
+        char k[32];
+        split_section(ini->sections[s], k, sizeof k);
+        if (!strcmp(k, kind)) n++;
+    }
+    return n;
+}
+
+static bool is_kind(const model_ini_t *ini, int s, const char *kind)
+{
+    char k[32];
+    split_section(ini->sections[s], k, sizeof k);
+    return !strcmp(k, kind);
+}
+
+model_materials_t *model_materials_from_ini(const model_ini_t *ini)
+{
+    int n = count_kind(ini, "material");
+    if (n == 0) {
+        model_error(ini->path, 0, "no [material NAME] sections; add at least one");
+        return NULL;
+    }
+    model_materials_t *out = calloc(1, sizeof *out);
+    if (out) out->materials = calloc(n, sizeof *out->materials);
+    if (out) out->path = strdup(ini->path);
+    if (!out || !out->materials || !out->path) {
+        model_error(ini->path, 0, "out of memory");
+        model_materials_free(out);
+        return NULL;
+    }
+    for (int s = 0; s < ini->nsections; s++) {
+        if (!is_kind(ini, s, "material")) continue;
+        if (!parse_material(ini, s, &out->materials[out->n])) {
+            model_materials_free(out);
+            return NULL;
+        }
+        out->n++;
+    }
+    return out;
+}
+
+model_lamps_t *model_lamps_from_ini(const model_ini_t *ini)
+{
+    int n = count_kind(ini, "lamp");
+    if (n == 0) {
+        model_error(ini->path, 0, "no [lamp NAME] sections; add at least one lamp");
+        return NULL;
+    }
+    model_lamps_t *out = calloc(1, sizeof *out);
+    if (out) out->lamps = calloc(n, sizeof *out->lamps);
+    if (out) out->path = strdup(ini->path);
+    if (!out || !out->lamps || !out->path) {
+        model_error(ini->path, 0, "out of memory");
+        model_lamps_free(out);
+        return NULL;
+    }
+    for (int s = 0; s < ini->nsections; s++) {
+        if (!is_kind(ini, s, "lamp")) continue;
+        if (!parse_lamp(ini, s, &out->lamps[out->n])) {
+            model_lamps_free(out);
+            return NULL;
+        }
+        out->n++;
+    }
+    return out;
+}
+
+bool model_sensor_from_ini(const model_ini_t *ini, model_sensor_t *out)
+{
+    model_sensor_t s = model_sensor_default();
+    bool found = false;
+    for (int i = 0; i < ini->nsections; i++)
+        if (!strcmp(ini->sections[i], "sensor")) found = true;
+    if (!found) {
+        model_error(ini->path, 0, "no [sensor] section; add one (keys as in a sensor file)");
+        return false;
+    }
+    for (int k = 0; k < ini->nentries; k++)
+        if (!strcmp(ini->entries[k].section, "sensor") && !sensor_entry(ini, &ini->entries[k], &s)) return false;
+    *out = s;
+    return true;
+}

@@ -274,6 +274,15 @@ model_sensor_t model_sensor_default(void);
 bool model_sensor_load(const char *path, model_sensor_t *out);
 bool model_sensor_parse(const char *text, size_t len, const char *name, model_sensor_t *out);
 
+// From a file that holds other sections too (e.g. the virtual rig's truth
+// file): only the sections of the kind are read, the others are ignored; the
+// file's own rules (unknown keys, ranges) apply. sha256 is left empty (the
+// caller knows the file). NULL / false with "file:line: ..." on error, also
+// when there is no such section.
+model_materials_t *model_materials_from_ini(const model_ini_t *ini);   // [material NAME]
+model_lamps_t     *model_lamps_from_ini(const model_ini_t *ini);       // [lamp NAME]
+bool               model_sensor_from_ini(const model_ini_t *ini, model_sensor_t *out);  // [sensor]
+
 // ---------------------------------------------------------------------------
 // Cameras (model/camera.c): an mrcal camera model plus a cached ray table.
 
@@ -471,6 +480,15 @@ void model_sensor_patterns(const model_sensor_t *s, int width, int height,
 // Apply to an image in place (width*height floats). Output values are integers
 // in [0, 2^bits - 1], stored as float.
 void model_sensor_apply(const model_sensor_t *s, int width, int height, float *img);
+// The same with fixed patterns made once by model_sensor_patterns (for many
+// frames of one sensor; NULL = flat), so a frame costs only its noise.
+void model_sensor_apply_patterns(const model_sensor_t *s, int width, int height, const float *prnu_gain,
+                                 const float *dsnu_dn, float *img);
+// The noise-free mean response: the same chain without shot noise, read noise
+// and rounding (non-linearity, patterns, offset and clipping to the range of
+// `bits` kept). Values stay fractional.
+void model_sensor_mean(const model_sensor_t *s, int width, int height, const float *prnu_gain,
+                       const float *dsnu_dn, float *img);
 
 // ---------------------------------------------------------------------------
 // Image files (model/image.c). Text metadata is a NULL-terminated list of

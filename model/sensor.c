@@ -17,7 +17,8 @@
 // vignetting is the relative fall-off at the corners.
 // Non-finite P is treated as dark (P = dark offset); mu is capped at 1e15; a
 // negative gain (prnu_pct near its upper limit of 50) gives no signal.
-// Temporal noise: model_rng(noise_seed, pixel index) — reproducible and
+// Temporal noise: one stream per row, model_rng(noise_seed, row), drawn
+// along the row (normal values by the polar method) — reproducible and
 // independent of the number of threads.
 //
 // Fixed patterns (model_sensor_patterns), from pattern_seed: each map is
@@ -138,12 +139,45 @@ done:
 // ---------------------------------------------------------------------------
 // Temporal noise and the response
 
+// A row's random stream: uniforms, and standard normal values from the polar
+// method two at a time (no trigonometry).
+typedef struct {
+    model_rng_t r;
+    double      spare;
+    bool        have_spare;
+    double      exp_mu, exp_val;   // exp(-exp_mu): dark pixels share their mean
+} row_rng_t;
+
+static inline double row_uniform(row_rng_t *g) { return model_rng_uniform(&g->r); }
+
+static inline double row_gauss(row_rng_t *g)
+{
+    if (g->have_spare) {
+        g->have_spare = false;
+        return g->spare;
+    }
+    double u, v, q;
+    do {
+        u = 2.0 * model_rng_uniform(&g->r) - 1.0;
+        v = 2.0 * model_rng_uniform(&g->r) - 1.0;
+        q = u * u + v * v;
+    } while (q >= 1.0 || q == 0.0);
+    double f = sqrt(-2.0 * log(q) / q);
+    g->spare = v * f;
+    g->have_spare = true;
+    return u * f;
+}
+
 // Poisson variate with mean mu >= 0.
-static double poisson(double mu, model_rng_t *r)
+static double poisson(double mu, row_rng_t *r)
 {
     if (mu <= 0) return 0;
     if (mu < 12) {   // inversion
-        double u = model_rng_uniform(r), p = exp(-mu), F = p;
+        if (mu != r->exp_mu) {
+            r->exp_mu = mu;
+            r->exp_val = exp(-mu);
+        }
+        double u = row_uniform(r), p = r->exp_val, F = p;
         int k = 0;
         while (u > F && k < 200) {
             k++;
@@ -155,21 +189,23 @@ static double poisson(double mu, model_rng_t *r)
     if (mu < 1e7) {
         // PTRS: W. Hoermann, "The transformed rejection method for generating
         // Poisson random variables", Insurance: Mathematics and Economics 12 (1993).
-        double smu = sqrt(mu), lmu = log(mu);
+        // The constants of the slow path (log, inv_alpha) only when it is taken.
+        double smu = sqrt(mu);
         double b = 0.931 + 2.53 * smu, a = -0.059 + 0.02483 * b;
-        double inv_alpha = 1.1239 + 1.1328 / (b - 3.4), v_r = 0.9277 - 3.6224 / (b - 2);
+        double v_r = 0.9277 - 3.6224 / (b - 2);
         for (;;) {
-            double U = model_rng_uniform(r) - 0.5, V = model_rng_uniform(r);
+            double U = row_uniform(r) - 0.5, V = row_uniform(r);
             double us = 0.5 - fabs(U);
             double k = floor((2 * a / us + b) * U + mu + 0.43);
             if (us >= 0.07 && V <= v_r) return k;
             if (k < 0 || (us < 0.013 && V > us)) continue;
+            double inv_alpha = 1.1239 + 1.1328 / (b - 3.4);
             int sign;
-            if (log(V) + log(inv_alpha) - log(a / (us * us) + b) <= -mu + k * lmu - lgamma_r(k + 1, &sign))
+            if (log(V) + log(inv_alpha) - log(a / (us * us) + b) <= -mu + k * log(mu) - lgamma_r(k + 1, &sign))
                 return k;
         }
     }
-    return fmax(0.0, floor(mu + sqrt(mu) * model_rng_gauss(r) + 0.5));
+    return fmax(0.0, floor(mu + sqrt(mu) * row_gauss(r) + 0.5));
 }
 
 typedef struct {
@@ -177,6 +213,7 @@ typedef struct {
     int          width, height;
     float       *img;
     const float *prnu, *dsnu;   // may be NULL (flat)
+    bool         noise;         // false: the noise-free mean (model_sensor_mean)
 } apply_job_t;
 
 static void apply_rows(void *ctx, int begin, int end, int thread)
@@ -189,38 +226,70 @@ static void apply_rows(void *ctx, int begin, int end, int thread)
     const double maxv = s->bits >= 1 && s->bits <= 16 ? (double)((1 << s->bits) - 1) : 65535.0;
     const double cx = 0.5 * (J->width - 1), cy = 0.5 * (J->height - 1);
     const double rc2 = cx * cx + cy * cy;
-    for (int y = begin; y < end; y++)
+    const double inv_K = 1.0 / K, kvig = rc2 > 0 ? s->vignetting / rc2 : 0;
+    for (int y = begin; y < end; y++) {
+        const double dy2 = (y - cy) * (y - cy);
+        row_rng_t r = { model_rng(s->noise_seed, (uint64_t)y), 0, false, 0, 1 };
         for (int x = 0; x < J->width; x++) {
             size_t i = (size_t)y * J->width + x;
             double sig = J->img[i] - s->dark_offset_dn;
             if (!(sig > 0)) sig = 0;   // also NaN
-            double vig = rc2 > 0 ? 1.0 - s->vignetting * ((x - cx) * (x - cx) + (y - cy) * (y - cy)) / rc2 : 1.0;
-            double mu = sig / K * (J->prnu ? J->prnu[i] : 1.0) * vig + dark_e;
+            double vig = 1.0 - kvig * ((x - cx) * (x - cx) + dy2);
+            double mu = sig * inv_K * (J->prnu ? J->prnu[i] : 1.0) * vig + dark_e;
             if (!(mu > 0)) mu = 0;
             if (mu > 1e15) mu = 1e15;
-            model_rng_t r = model_rng(s->noise_seed, i);
-            double e = poisson(mu, &r);
-            if (s->read_noise_e > 0) e += s->read_noise_e * model_rng_gauss(&r);
+            double e = mu;
+            if (J->noise) {
+                e = poisson(mu, &r);
+                if (s->read_noise_e > 0) e += s->read_noise_e * row_gauss(&r);
+            }
             if (e > FW) e = FW;
             e *= 1.0 - c * e / FW;
-            double dn = floor(e * K + s->dark_offset_dn + (J->dsnu ? J->dsnu[i] : 0.0) + 0.5);
+            double dn = e * K + s->dark_offset_dn + (J->dsnu ? J->dsnu[i] : 0.0);
+            if (J->noise) dn = floor(dn + 0.5);
             if (!(dn >= 0)) dn = 0;
             if (dn > maxv) dn = maxv;
             J->img[i] = (float)dn;
         }
+    }
+}
+
+// make: compute the fixed patterns here (prnu_gain/dsnu_dn ignored); else
+// use the given ones (NULL = flat).
+static void apply(const model_sensor_t *s, int width, int height, const float *prnu_gain,
+                  const float *dsnu_dn, float *img, bool noise, bool make)
+{
+    if (width <= 0 || height <= 0 || !img) return;
+    size_t n = (size_t)width * height;
+    float *prnu = NULL, *dsnu = NULL;
+    if (make) {
+        prnu = s->prnu_pct != 0 ? malloc(n * sizeof(float)) : NULL;
+        dsnu = s->dsnu_dn != 0 ? malloc(n * sizeof(float)) : NULL;
+        if ((s->prnu_pct != 0 && !prnu) || (s->dsnu_dn != 0 && !dsnu))
+            MODEL_FAIL("out of memory for %dx%d sensor patterns; applying flat patterns", width, height);
+        if (prnu || dsnu) model_sensor_patterns(s, width, height, prnu, dsnu);
+        prnu_gain = prnu;
+        dsnu_dn = dsnu;
+    }
+    apply_job_t J = { s, width, height, img, prnu_gain, dsnu_dn, noise };
+    model_parallel_for(height, 8, model_default_threads(), apply_rows, &J);
+    free(prnu);
+    free(dsnu);
 }
 
 void model_sensor_apply(const model_sensor_t *s, int width, int height, float *img)
 {
-    if (width <= 0 || height <= 0 || !img) return;
-    size_t n = (size_t)width * height;
-    float *prnu = s->prnu_pct != 0 ? malloc(n * sizeof(float)) : NULL;
-    float *dsnu = s->dsnu_dn != 0 ? malloc(n * sizeof(float)) : NULL;
-    if ((s->prnu_pct != 0 && !prnu) || (s->dsnu_dn != 0 && !dsnu))
-        MODEL_FAIL("out of memory for %dx%d sensor patterns; applying flat patterns", width, height);
-    if (prnu || dsnu) model_sensor_patterns(s, width, height, prnu, dsnu);
-    apply_job_t J = { s, width, height, img, prnu, dsnu };
-    model_parallel_for(height, 8, model_default_threads(), apply_rows, &J);
-    free(prnu);
-    free(dsnu);
+    apply(s, width, height, NULL, NULL, img, true, true);
+}
+
+void model_sensor_apply_patterns(const model_sensor_t *s, int width, int height, const float *prnu_gain,
+                                 const float *dsnu_dn, float *img)
+{
+    apply(s, width, height, prnu_gain, dsnu_dn, img, true, false);
+}
+
+void model_sensor_mean(const model_sensor_t *s, int width, int height, const float *prnu_gain,
+                       const float *dsnu_dn, float *img)
+{
+    apply(s, width, height, prnu_gain, dsnu_dn, img, false, false);
 }

@@ -3,6 +3,7 @@
 #include <string.h>
 
 #include "model/model.h"
+#include "rig/rig.h"
 
 typedef struct {
     const char *name;
@@ -13,6 +14,7 @@ typedef struct {
 static const command_t commands[] = {
     { "render", model_cmd_render, "render a scene through the imaging model to a PNG/TIFF image" },
     { "edges",  model_cmd_edges,  "list scene edges: visible image segments, lighting per side, contrast" },
+    { "rig",    rig_cmd,          "drive the rig of a rig file: status, home, move, identify, snap, serve" },
 };
 
 static void usage(FILE *f)

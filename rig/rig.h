@@ -262,6 +262,99 @@ int  rig_camera_settings(rig_camera_t *c, rig_frame_meta_t *out);
 int  rig_camera_capture(rig_camera_t *c, double timeout_s, int retries, rig_frame_t *out);
 void rig_camera_close(rig_camera_t *c);
 
+// ---------------------------------------------------------------------------
+// The virtual rig (rig/virtual.c): a simulated turntable, simulated lamps and
+// a virtual GigE Vision camera (rig/gv_camera.h) on 127.0.0.1 whose frames are
+// rendered by model/ from the turntable angle, the lamps that are on, the
+// exposure and the gain, then passed through the sensor stage. Its ground truth
+// (camera model, lamps, sensor, kc, materials and the samples that can be put
+// on the table) lives in one truth file (see examples/virtual-truth.ini).
+
+typedef struct rig_virtual rig_virtual_t;
+
+typedef struct {
+    const char *address;        // where the camera serves (default "127.0.0.1")
+    const char *sample;         // the sample on the table (default: the truth file's `sample`)
+    double      time_scale;     // turntable and lamp timing: 1 real time, 0.01 = 100x faster
+    uint64_t    noise_seed;     // first frame's noise seed (default 1; +1 per frame)
+    double      busy_wait_s;    // wait this long for another camera server on the address to stop (default 0)
+} rig_virtual_options_t;
+
+rig_virtual_options_t rig_virtual_defaults(void);
+// Reads the truth file, starts the camera server, makes the simulated turntable
+// and lamps. Errors name the truth file and line.
+int  rig_virtual_open(rig_virtual_t **out, const char *truth_path, const rig_virtual_options_t *opt);
+void rig_virtual_close(rig_virtual_t *v);
+// The devices (owned by the virtual rig; do not close them yourself).
+rig_turntable_t *rig_virtual_turntable(rig_virtual_t *v);
+rig_lamps_t     *rig_virtual_lamps(rig_virtual_t *v);
+const char      *rig_virtual_camera_address(const rig_virtual_t *v);
+// Put another sample on the table (a [sample NAME] of the truth file).
+int  rig_virtual_set_sample(rig_virtual_t *v, const char *name);
+const char *rig_virtual_sample(const rig_virtual_t *v);
+const char *rig_virtual_truth_path(const rig_virtual_t *v);
+// The noise-free expected frame (DN of the camera's pixel format, before the
+// sensor's noise and quantisation but with its gain patterns, offsets and
+// non-linearity) for a state: for tests and for checking calibrations.
+// gain_db in dB; width x height: the region at the sensor's top-left corner
+// (the full sensor is the camera model's size); the sample is the current one.
+// The devices are owned by the rig: rig_virtual_close closes them (never
+// rig_lamps_close / rig_turntable_close them yourself).
+int  rig_virtual_expected(rig_virtual_t *v, double angle_deg, uint32_t lamp_mask,
+                          double exposure_us, double gain_db, const char *pixel_format,
+                          int width, int height, float *out);
+
+// ---------------------------------------------------------------------------
+// Rig description files (rig/config.c)
+//
+//   [camera]     backend = aravis; address = A (IPv4, opened directly) | serial = S | name = N
+//                (exactly one); optional camera settings applied at open:
+//                pixel_format = Mono8|Mono12|Mono16; exposure_us = ...; gain = ... (the camera's unit)
+//   [turntable]  backend = apt: serial (optional: the only stage), stage = K10CR1 (optional:
+//                from the controller; one of rig_stage_models)
+//                | sim: speed_deg_s, accel_deg_s2, home_time_s, position_noise_deg, time_scale,
+//                seed, fault_after_moves, fault = motion|timeout|disconnected (rig_turntable_sim_params_t)
+//   [lamp NAME]  backend = gpiod: chip, line (required), active_low (true/false), warmup_ms, settle_ms
+//                | sim: position_mm = x y z (nominal position, rig frame; checked, not used),
+//                warmup_ms, settle_ms. All lamps use one backend; NAME without ',' and not
+//                "all"/"none" (refl rig --lamps NAME,NAME|all|none); at most 32 lamps.
+// or, for the whole rig (no other section):
+//   [rig]        backend = virtual; truth = FILE (relative to the rig file's directory);
+//                address = 127.0.0.1; sample = NAME; time_scale = 1; noise_seed = 1;
+//                busy_wait_s = 0 (wait for another virtual camera on the address);
+//                pixel_format, exposure_us, gain (as in [camera])
+// Every section but [rig] is optional (a rig without [camera] moves and switches
+// lamps but takes no pictures). Unknown sections and keys, missing keys and bad
+// values are errors naming file and line and saying what to write instead.
+
+typedef struct {
+    char            *path;
+    char             sha256[65];
+    rig_camera_t    *camera;
+    rig_turntable_t *turntable;     // may be NULL when the file has no [turntable]
+    rig_lamps_t     *lamps;         // may be NULL when the file has no lamps
+    rig_virtual_t   *virt;          // non-NULL for backend = virtual
+    char             pixel_format[16];  // camera defaults from the file ("" = the camera's own),
+    double           exposure_us;       // applied by rig_open (NAN = not given)
+    double           gain;
+    // The turntable's motion profile, for time-outs: real seconds (a simulated
+    // stage's time_scale applied). Cruise speed, acceleration, longest homing.
+    double           speed_deg_s, accel_deg_s2, home_time_s;
+} rig_t;
+
+// Parse the rig file and open every device in it (lamps off): the turntable,
+// the lamps, then the camera (or, for [rig] backend = virtual, the virtual rig
+// and a camera opened at its address); installs rig_safety_install(). Errors
+// name the file and line (device errors: the section's line, then the
+// driver's message). A file without [camera] is allowed (no snapshots). On
+// error nothing stays open. rig_close: lamps off, then camera, lamps,
+// turntable (virtual rig) closed; accepts NULL.
+int  rig_open(rig_t **out, const char *path);
+void rig_close(rig_t *r);
+
+// `refl rig` (rig/cmd_rig.c).
+int rig_cmd(int argc, char **argv);
+
 #ifdef __cplusplus
 }
 #endif

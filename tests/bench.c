@@ -6,13 +6,25 @@
 // warm and a cold ray table, a bare single-threaded Embree loop casting the
 // same primary and shadow rays (rays precomputed), their ratio, and the
 // pixel_info throughput for 5000 scattered pixels. Times are medians.
+// The virtual rig (examples/virtual-truth.ini) over GigE Vision on 127.0.0.1
+// at 1280x1024 Mono16: frames per second with our rendering (a fixed state:
+// the cached radiance, new sensor noise per frame), the same with a trivial
+// pattern in the render callback, their ratio, and the latency of a frame of
+// a changed state (turntable moved to a new angle or another lamp switched on,
+// then software trigger until the frame is in hand; median).
 #include <embree3/rtcore.h>
+#include <fcntl.h>
+#include <glib.h>
+#include <sys/file.h>
+#include <unistd.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 #include <time.h>
 
 #include "model/internal.h"
+#include "rig/gv_camera.h"
+#include "rig/rig.h"
 
 #define NRUNS 7
 
@@ -106,6 +118,119 @@ static void fill_ray(struct RTCRay *r, model_vec3_t o, model_vec3_t d, double tf
     r->mask = 0xffffffffu;
     r->id = 0;
     r->flags = 0;
+}
+
+// ---------------------------------------------------------------------------
+// The virtual rig over GigE Vision on 127.0.0.1
+
+// Test runs and benches of several build trees take turns on 127.0.0.1:3956
+// (the lock of tests/test_camera_aravis.c).
+static int gige_session_begin(void)
+{
+    char path[512];
+    snprintf(path, sizeof path, "%s/%s", g_get_tmp_dir(), "refl-test-camera-aravis.lock");
+    int fd = open(path, O_RDONLY | O_CREAT | O_CLOEXEC, 0666);
+    if (fd < 0) return -1;
+    for (int i = 0; i < 6000; i++) {
+        if (flock(fd, LOCK_EX | LOCK_NB) == 0) return fd;
+        usleep(50000);
+    }
+    close(fd);
+    return -1;
+}
+
+static int trivial_pattern(void *ctx, const rig_frame_meta_t *m, uint16_t *pix)
+{
+    uint16_t base = (uint16_t)m->frame_id;
+    for (int y = 0; y < m->height; y++)
+        for (int x = 0; x < m->width; x++) pix[(size_t)y * m->width + x] = (uint16_t)(base + x + y);
+    return 0;
+}
+
+// Frames per second of n software-triggered captures.
+static double capture_fps(rig_camera_t *c, int n)
+{
+    rig_frame_t f;
+    if (rig_camera_capture(c, 10, 2, &f)) return NAN;   // warm up
+    rig_frame_free(&f);
+    double t0 = model_now_s();
+    for (int i = 0; i < n; i++) {
+        if (rig_camera_capture(c, 10, 2, &f)) return NAN;
+        rig_frame_free(&f);
+    }
+    return n / (model_now_s() - t0);
+}
+
+static int bench_virtual_rig(void)
+{
+    char truth[1024];
+    src_path(truth, sizeof truth, "examples/virtual-truth.ini");
+    int session = gige_session_begin();
+    int rc = 1;
+    rig_virtual_t *v = NULL;
+    rig_camera_t *c = NULL;
+    rig_gv_camera_t *g = NULL;
+    rig_virtual_options_t o = rig_virtual_defaults();
+    o.time_scale = 0.001;   // the stage's motion is not what is measured
+    o.busy_wait_s = 120;
+    if (rig_virtual_open(&v, truth, &o) || rig_camera_open_aravis(&c, rig_virtual_camera_address(v)) ||
+        rig_camera_set_pixel_format(c, "Mono16")) {
+        fprintf(stderr, "refl-bench: virtual rig: %s\n", rig_last_error());
+        goto done;
+    }
+    rig_turntable_t *tt = rig_virtual_turntable(v);
+    rig_lamps_t *lamps = rig_virtual_lamps(v);
+    if (rig_turntable_home(tt, 10) || rig_turntable_move_abs_deg(tt, 30, 10) || rig_lamps_set(lamps, 1)) {
+        fprintf(stderr, "refl-bench: virtual rig: %s\n", rig_last_error());
+        goto done;
+    }
+    enum { NFRAMES = 20, NCHANGES = 8 };
+    double fps_render = capture_fps(c, NFRAMES);
+    // Changed states: alternately a new angle (same lamps) and another lamp (same angle).
+    double lat[NCHANGES], lat_move[NCHANGES / 2], lat_lamp[NCHANGES / 2];
+    for (int k = 0; k < NCHANGES; k++) {
+        int e = k % 2 == 0 ? rig_turntable_move_abs_deg(tt, 40 + 7.5 * k, 10)
+                           : rig_lamps_set(lamps, 1u << ((k / 2 + 1) % 4));
+        rig_frame_t f;
+        double t0 = model_now_s();
+        if (e || rig_camera_capture(c, 10, 2, &f)) {
+            fprintf(stderr, "refl-bench: virtual rig: %s\n", rig_last_error());
+            goto done;
+        }
+        lat[k] = model_now_s() - t0;
+        if (k % 2) lat_lamp[k / 2] = lat[k];
+        else lat_move[k / 2] = lat[k];
+        rig_frame_free(&f);
+    }
+    double latency = median(lat, NCHANGES), latency_move = median(lat_move, NCHANGES / 2),
+           latency_lamp = median(lat_lamp, NCHANGES / 2);
+    rig_camera_close(c);
+    c = NULL;
+    rig_virtual_close(v);
+    v = NULL;
+
+    rig_gv_camera_params_t p = rig_gv_camera_defaults();
+    p.render = trivial_pattern;
+    p.busy_wait_s = 120;
+    if (rig_gv_camera_start(&g, &p) || rig_camera_open_aravis(&c, p.address) ||
+        rig_camera_set_pixel_format(c, "Mono16")) {
+        fprintf(stderr, "refl-bench: trivial camera: %s\n", rig_last_error());
+        goto done;
+    }
+    double fps_trivial = capture_fps(c, NFRAMES);
+    printf("virtual_rig_gige_fps_render_1280x1024_mono16: %.2f fps\n", fps_render);
+    printf("virtual_rig_gige_fps_trivial_pattern_1280x1024_mono16: %.2f fps\n", fps_trivial);
+    printf("virtual_rig_render_cost: %.3f ratio\n", fps_trivial / fps_render);
+    printf("virtual_rig_changed_state_latency: %.1f ms\n", latency * 1e3);
+    printf("virtual_rig_changed_state_latency_new_angle: %.1f ms\n", latency_move * 1e3);
+    printf("virtual_rig_changed_state_latency_other_lamp: %.1f ms\n", latency_lamp * 1e3);
+    rc = 0;
+done:
+    rig_camera_close(c);
+    rig_gv_camera_stop(g);
+    rig_virtual_close(v);
+    if (session >= 0) close(session);
+    return rc;
 }
 
 int main(void)
@@ -324,6 +449,7 @@ int main(void)
         free(pi);
         free(ls);
     }
+    if (bench_virtual_rig()) return 1;
     rc = 0;
     free(prim);
     free(shad);

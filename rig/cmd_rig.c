@@ -1,0 +1,692 @@
+// rig/cmd_rig.c — `refl rig`: drive the rig described by a rig file from the
+// command line: status, home, move, identify, snap, serve.
+//
+// Options are parsed strictly (unknown option, missing value, bad number,
+// option of another action, missing --rig: usage error, exit 2) before any
+// device is opened; device and file errors exit 1 with the driver's message
+// (already printed by rig_fail). Progress goes to stderr, results to stdout.
+// Lamps are off again when the command ends, whatever the way out (rig_close,
+// and rig_safety_install for signals).
+#define _GNU_SOURCE
+#include <ctype.h>
+#include <glib.h>
+#include <limits.h>
+#include <math.h>
+#include <pthread.h>
+#include <signal.h>
+#include <stdarg.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <strings.h>
+#include <time.h>
+
+#include "model/model.h"
+#include "rig/rig.h"
+
+#define CAPTURE_TIMEOUT_S 20.0     // beyond the exposure: render time of the virtual camera, transfer
+#define CAPTURE_RETRIES   1
+
+// ---------------------------------------------------------------------------
+// Options
+
+typedef struct {
+    const char *name;
+    const char *metavar;
+    const char *help;
+    const char *actions;    // space-separated actions that take it; NULL = all
+    const char *value;
+} ropt_t;
+
+static ropt_t opts_proto[] = {
+    { "--rig", "RIG.ini", "the rig description file (required)", NULL, NULL },
+    { "-o", "OUT.png", "snap: output image (16-bit grey PNG with metadata)", "snap", NULL },
+    { "--angle", "DEG", "snap: move the turntable to DEG first (homes it first when needed)", "snap", NULL },
+    { "--lamps", "NAMES", "snap: lamps on during the frame: NAME,NAME,... | all | none (default none)", "snap", NULL },
+    { "--exposure-us", "US", "snap: exposure time, us (default: the rig file's, else the camera's)", "snap", NULL },
+    { "--gain", "G", "snap: gain in the camera's unit, dB for GenICam Gain (default: rig file / camera)", "snap",
+      NULL },
+    { "--pixel-format", "F", "snap: Mono8 | Mono12 | Mono16 (default: rig file / camera)", "snap", NULL },
+    { "--sample", "NAME", "snap, serve (virtual rigs): put this sample of the truth file on the table",
+      "snap serve", NULL },
+};
+#define NOPTS ((int)(sizeof opts_proto / sizeof opts_proto[0]))
+
+typedef struct {
+    ropt_t      o[NOPTS];
+    const char *action;
+    const char *args[4];
+    int         nargs;
+    bool        help;
+} rcli_t;
+
+static void usage(FILE *f, bool full)
+{
+    fprintf(f, "usage: refl rig --rig RIG.ini status | home | move DEG | identify\n"
+               "       refl rig --rig RIG.ini snap -o OUT.png [--angle DEG] [--lamps NAMES|all|none]\n"
+               "                [--exposure-us US] [--gain G] [--pixel-format F] [--sample NAME]\n"
+               "       refl rig --rig RIG.ini serve [--sample NAME]\n");
+    if (!full) {
+        fprintf(f, "(refl rig --help for the options)\n");
+        return;
+    }
+    fprintf(f, "\nactions:\n"
+               "  status     every device with its identity and state\n"
+               "  home       home the turntable\n"
+               "  move DEG   move the turntable to DEG (absolute; homes it first when needed)\n"
+               "  identify   model, serial and firmware of every device\n"
+               "  snap       one camera frame to a PNG (lamps switched off again afterwards)\n"
+               "  serve      virtual rigs: keep the virtual camera up on its address until SIGINT/SIGTERM\n"
+               "\noptions:\n");
+    for (int i = 0; i < NOPTS; i++) {
+        char lhs[64];
+        snprintf(lhs, sizeof lhs, "%s %s", opts_proto[i].name, opts_proto[i].metavar);
+        fprintf(f, "  %-22s %s\n", lhs, opts_proto[i].help);
+    }
+    fprintf(f, "  %-22s %s\n", "-h, --help", "print this help");
+    fprintf(f, "\nRig files: [camera], [turntable], [lamp NAME] sections, or [rig] backend = virtual\n"
+               "(see rig/rig.h and examples/lab-rig.ini, examples/virtual-rig.ini).\n"
+               "Angles in degrees (turntable frame: 0 at home, counter-clockwise seen from above).\n"
+               "\nrefl %s\n", REFL_VERSION);
+}
+
+static int usage_error(const char *fmt, ...) __attribute__((format(printf, 1, 2)));
+static int usage_error(const char *fmt, ...)
+{
+    va_list ap;
+    va_start(ap, fmt);
+    fprintf(stderr, "refl rig: ");
+    vfprintf(stderr, fmt, ap);
+    fprintf(stderr, "\n");
+    va_end(ap);
+    usage(stderr, false);
+    return 2;
+}
+
+static ropt_t *find_opt(rcli_t *c, const char *name, size_t len)
+{
+    for (int i = 0; i < NOPTS; i++)
+        if (strlen(c->o[i].name) == len && !strncmp(c->o[i].name, name, len)) return &c->o[i];
+    return NULL;
+}
+
+static const char *optv(rcli_t *c, const char *name)
+{
+    ropt_t *o = find_opt(c, name, strlen(name));
+    return o ? o->value : NULL;
+}
+
+static bool word_in(const char *words, const char *w)
+{
+    size_t n = strlen(w);
+    for (const char *p = words; (p = strstr(p, w)); p += n)
+        if ((p == words || p[-1] == ' ') && (p[n] == 0 || p[n] == ' ')) return true;
+    return false;
+}
+
+static bool is_number(const char *s)
+{
+    double v;
+    return model_parse_double(s, &v);
+}
+
+static int parse_cli(rcli_t *c, int argc, char **argv)
+{
+    memcpy(c->o, opts_proto, sizeof c->o);
+    bool only_positional = false;
+    for (int i = 1; i < argc; i++) {
+        const char *a = argv[i];
+        if (!only_positional && (!strcmp(a, "--help") || !strcmp(a, "-h"))) {
+            c->help = true;
+            return 0;
+        }
+        if (!only_positional && !strcmp(a, "--")) {
+            only_positional = true;
+            continue;
+        }
+        // "-30" is an angle, not an option.
+        if (!only_positional && a[0] == '-' && a[1] != 0 && !is_number(a)) {
+            const char *eq = a[1] == '-' ? strchr(a, '=') : NULL;
+            size_t len = eq ? (size_t)(eq - a) : strlen(a);
+            ropt_t *o = find_opt(c, a, len);
+            if (!o) return usage_error("unknown option '%.*s'", (int)len, a);
+            if (o->value) return usage_error("option %s given twice", o->name);
+            if (eq) {
+                o->value = eq + 1;
+            } else {
+                if (i + 1 >= argc) return usage_error("option %s needs a value (%s)", o->name, o->metavar);
+                o->value = argv[++i];
+            }
+            if (!o->value[0]) return usage_error("option %s: empty value", o->name);
+            continue;
+        }
+        if (!c->action) {
+            c->action = a;
+        } else {
+            if (c->nargs >= (int)(sizeof c->args / sizeof c->args[0]))
+                return usage_error("too many arguments after '%s'", c->action);
+            c->args[c->nargs++] = a;
+        }
+    }
+    if (!optv(c, "--rig")) return usage_error("missing required option --rig RIG.ini");
+    if (!c->action) return usage_error("missing action: status, home, move DEG, identify, snap or serve");
+    static const char *const actions[] = { "status", "home", "move", "identify", "snap", "serve" };
+    bool known = false;
+    for (size_t i = 0; i < sizeof actions / sizeof actions[0]; i++) known |= !strcmp(c->action, actions[i]);
+    if (!known)
+        return usage_error("unknown action '%s': use status, home, move DEG, identify, snap or serve", c->action);
+    int want = !strcmp(c->action, "move") ? 1 : 0;
+    if (c->nargs < want) return usage_error("move needs the angle: refl rig --rig RIG move DEG");
+    if (c->nargs > want) return usage_error("unexpected argument '%s' after %s", c->args[want], c->action);
+    for (int i = 0; i < NOPTS; i++)
+        if (c->o[i].value && c->o[i].actions && !word_in(c->o[i].actions, c->action))
+            return usage_error("option %s is for %s only, not %s", c->o[i].name, c->o[i].actions, c->action);
+    if (!strcmp(c->action, "snap") && !optv(c, "-o")) return usage_error("snap needs -o OUT.png");
+    return 0;
+}
+
+// Angle: finite, within the wrappers' +-10000 deg.
+static int parse_angle(const char *what, const char *s, double *out)
+{
+    if (!model_parse_double(s, out))
+        return usage_error("%s: '%s' is not an angle in degrees", what, s);
+    if (!(fabs(*out) <= 1e4)) return usage_error("%s: %s deg is out of range (-10000..10000)", what, s);
+    return 0;
+}
+
+static int opt_double(rcli_t *c, const char *name, double *out, double lo, bool lo_open, double hi,
+                      const char *range_text)
+{
+    const char *s = optv(c, name);
+    if (!s) return 0;
+    double v;
+    if (!model_parse_double(s, &v)) return usage_error("option %s: '%s' is not a number", name, s);
+    if ((lo_open ? !(v > lo) : !(v >= lo)) || !(v <= hi))
+        return usage_error("option %s: %s is out of range (%s)", name, s, range_text);
+    *out = v;
+    return 0;
+}
+
+// ---------------------------------------------------------------------------
+// Helpers
+
+static char *command_line(int argc, char **argv)
+{
+    GString *s = g_string_new("refl");
+    for (int i = 0; i < argc; i++) {
+        g_string_append_c(s, ' ');
+        bool plain = argv[i][0] != 0;
+        for (const char *p = argv[i]; *p; p++)
+            if (!(isalnum((unsigned char)*p) || strchr("-_./=:,+@%", *p))) plain = false;
+        if (plain) {
+            g_string_append(s, argv[i]);
+        } else {
+            gchar *q = g_shell_quote(argv[i]);
+            g_string_append(s, q);
+            g_free(q);
+        }
+    }
+    return g_string_free(s, FALSE);
+}
+
+static void utc_text(double t_s, char out[40])
+{
+    time_t t = (time_t)floor(t_s);
+    struct tm tm;
+    gmtime_r(&t, &tm);
+    size_t n = strftime(out, 40, "%Y-%m-%dT%H:%M:%S", &tm);
+    snprintf(out + n, 40 - n, ".%03dZ", (int)floor((t_s - floor(t_s)) * 1000));
+}
+
+static double now_realtime_s(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_REALTIME, &ts);
+    return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
+}
+
+// Time-outs from the motion profile, with margin (50 % + 5 s).
+static double move_timeout_s(const rig_t *r, double delta_deg)
+{
+    double t = rig_motion_time_s(delta_deg, r->speed_deg_s, r->accel_deg_s2);
+    if (!isfinite(t)) t = 120;   // profile unknown (stage model not in rig_stage_models)
+    return 1.5 * t + 5;
+}
+
+static double home_timeout_s(const rig_t *r)
+{
+    double t = isfinite(r->home_time_s) ? r->home_time_s : 120;
+    return 1.5 * t + 5;
+}
+
+// Lamp names of a mask ("east,west", or "none").
+static void lamp_names(const rig_lamps_t *l, uint32_t mask, char *out, size_t size)
+{
+    size_t n = 0;
+    out[0] = 0;
+    for (int i = 0; l && i < l->n && n < size; i++)
+        if (mask & (1u << i)) n += (size_t)snprintf(out + n, size - n, "%s%s", n ? "," : "", l->lamps[i].name);
+    if (!out[0]) snprintf(out, size, "none");
+}
+
+// --lamps NAMES|all|none -> mask. Runtime error (exit 1) for names the rig does not have.
+static int lamps_mask(const rig_t *r, const char *spec, uint32_t *mask)
+{
+    *mask = 0;
+    if (!spec || !strcmp(spec, "none")) return 0;
+    const rig_lamps_t *l = r->lamps;
+    if (!strcmp(spec, "all")) {
+        *mask = !l ? 0 : l->n >= 32 ? 0xffffffffu : ((uint32_t)1 << l->n) - 1;
+        return 0;
+    }
+    char known[1024];
+    lamp_names(l, l ? (l->n >= 32 ? 0xffffffffu : ((uint32_t)1 << l->n) - 1) : 0, known, sizeof known);
+    gchar **names = g_strsplit(spec, ",", -1);
+    int rc = 0;
+    for (int i = 0; names[i]; i++) {
+        char *nm = g_strstrip(names[i]);
+        int k = rig_lamps_find(l, nm);
+        if (k < 0) {
+            rc = rig_fail(RIG_ERR_INVALID, "refl rig: --lamps: the rig %s has no lamp '%s' (its lamps: %s)",
+                          r->path, nm, known);
+            break;
+        }
+        *mask |= 1u << k;
+    }
+    g_strfreev(names);
+    return rc;
+}
+
+// The turntable at angle_deg, homing it first when needed.
+static int move_to(rig_t *r, double angle_deg)
+{
+    rig_turntable_status_t st;
+    int rc = rig_turntable_status(r->turntable, &st);
+    if (rc) return rc;
+    if (!st.homed) {
+        fprintf(stderr, "refl rig: %s is not homed: homing first\n", r->turntable->name);
+        if ((rc = rig_turntable_home(r->turntable, home_timeout_s(r)))) return rc;
+        if ((rc = rig_turntable_status(r->turntable, &st))) return rc;
+    }
+    fprintf(stderr, "refl rig: moving %s from %.3f to %.3f deg\n", r->turntable->name, st.angle_deg, angle_deg);
+    return rig_turntable_move_abs_deg(r->turntable, angle_deg, move_timeout_s(r, angle_deg - st.angle_deg));
+}
+
+static int need_turntable(const rig_t *r, const char *action)
+{
+    if (r->turntable) return 0;
+    return rig_fail(RIG_ERR_NO_DEVICE, "refl rig %s: the rig %s has no turntable: add a [turntable] section",
+                    action, r->path);
+}
+
+static const char *yes_no(bool b) { return b ? "yes" : "no"; }
+
+// ---------------------------------------------------------------------------
+// Actions
+
+static int do_status(rig_t *r)
+{
+    int rc = 0;
+    printf("rig_file: %s\nrig_sha256: %s\n", r->path, r->sha256);
+    if (r->virt)
+        printf("rig_backend: virtual (truth %s, sample %s)\n", rig_virtual_truth_path(r->virt),
+               rig_virtual_sample(r->virt));
+    else
+        printf("rig_backend: devices\n");
+    if (r->turntable) {
+        rig_turntable_status_t st;
+        if ((rc = rig_turntable_status(r->turntable, &st))) return rc;
+        printf("turntable: %s\nturntable_angle_deg: %.4f\nturntable_homed: %s\nturntable_moving: %s\n",
+               r->turntable->name, st.angle_deg, yes_no(st.homed), yes_no(st.moving || st.homing));
+        if (st.motion_error || st.limit_fwd || st.limit_rev)
+            printf("turntable_faults: %s%s%s\n", st.motion_error ? "motion-error " : "",
+                   st.limit_fwd ? "limit-forward " : "", st.limit_rev ? "limit-reverse" : "");
+    } else {
+        printf("turntable: none\n");
+    }
+    if (r->lamps && r->lamps->n > 0) {
+        for (int i = 0; i < r->lamps->n; i++)
+            printf("lamp %s: %s (%s)\n", r->lamps->lamps[i].name, (r->lamps->on_mask >> i) & 1 ? "on" : "off",
+                   r->lamps->ops->backend);
+    } else {
+        printf("lamps: none\n");
+    }
+    if (r->camera) {
+        rig_frame_meta_t m;
+        if ((rc = rig_camera_settings(r->camera, &m))) return rc;
+        printf("camera: %s\ncamera_vendor: %s\ncamera_model: %s\ncamera_serial: %s\n"
+               "camera_pixel_format: %s (%d bits)\ncamera_region: %d x %d at (%d, %d)\n"
+               "camera_exposure_us: %.6g\ncamera_gain: %.6g\n",
+               r->camera->name, m.vendor, m.model, m.serial, m.pixel_format, m.bits, m.width, m.height, m.offset_x,
+               m.offset_y, m.exposure_us, m.gain);
+        if (isfinite(m.temperature_c)) printf("camera_temperature_c: %.2f\n", m.temperature_c);
+        else printf("camera_temperature_c: none (the camera has no sensor)\n");
+    } else {
+        printf("camera: none\n");
+    }
+    return 0;
+}
+
+static int do_identify(rig_t *r)
+{
+    int rc = 0;
+    printf("rig_file: %s\nrig_sha256: %s\n", r->path, r->sha256);
+    if (r->turntable) {
+        rig_turntable_info_t in;
+        if ((rc = rig_turntable_info(r->turntable, &in))) return rc;
+        printf("turntable: %s\nturntable_backend: %s\nturntable_model: %s\nturntable_serial: %s\n"
+               "turntable_firmware: %s\nturntable_counts_per_deg: %.6g\n",
+               r->turntable->name, r->turntable->ops->backend, in.model, in.serial, in.firmware, in.counts_per_deg);
+    } else {
+        printf("turntable: none\n");
+    }
+    if (r->camera) {
+        rig_frame_meta_t m;
+        if ((rc = rig_camera_settings(r->camera, &m))) return rc;
+        printf("camera: %s\ncamera_backend: %s\ncamera_vendor: %s\ncamera_model: %s\ncamera_serial: %s\n"
+               "camera_sensor_region: %d x %d\n",
+               r->camera->name, r->camera->ops->backend, m.vendor, m.model, m.serial, m.width, m.height);
+    } else {
+        printf("camera: none\n");
+    }
+    if (r->lamps && r->lamps->n > 0) {
+        for (int i = 0; i < r->lamps->n; i++) {
+            const rig_lamp_line_t *a = &r->lamps->lamps[i];
+            if (!strcmp(r->lamps->ops->backend, "gpiod"))
+                printf("lamp %s: gpiod %s line %u %s, warm-up %g ms, settle %g ms\n", a->name, a->chip, a->line,
+                       a->active_low ? "active-low" : "active-high", a->warmup_ms, a->settle_ms);
+            else
+                printf("lamp %s: %s%s, warm-up %g ms, settle %g ms\n", a->name, r->lamps->ops->backend,
+                       r->virt ? " (virtual rig)" : "", a->warmup_ms, a->settle_ms);
+        }
+    } else {
+        printf("lamps: none\n");
+    }
+    if (r->virt)
+        printf("virtual_truth: %s\nvirtual_sample: %s\nvirtual_camera_address: %s\n",
+               rig_virtual_truth_path(r->virt), rig_virtual_sample(r->virt), rig_virtual_camera_address(r->virt));
+    return 0;
+}
+
+typedef struct {
+    GPtrArray   *kv;
+    const char **list;
+} meta_t;
+
+static void meta_add(meta_t *m, const char *key, const char *fmt, ...) __attribute__((format(printf, 3, 4)));
+static void meta_add(meta_t *m, const char *key, const char *fmt, ...)
+{
+    va_list ap;
+    va_start(ap, fmt);
+    g_ptr_array_add(m->kv, g_strdup(key));
+    g_ptr_array_add(m->kv, g_strdup_vprintf(fmt, ap));
+    va_end(ap);
+}
+
+static const char *const *meta_list(meta_t *m)
+{
+    const char **l = g_renew(const char *, m->list, m->kv->len + 1);
+    for (guint i = 0; i < m->kv->len; i++) l[i] = g_ptr_array_index(m->kv, i);
+    l[m->kv->len] = NULL;
+    m->list = l;
+    return l;
+}
+
+typedef struct {
+    bool        have_angle;
+    double      angle_deg;
+    const char *lamps;
+    double      exposure_us, gain;     // NAN: keep
+    const char *pixel_format;          // NULL: keep
+    const char *out;
+} snap_t;
+
+static int do_snap(rig_t *r, const snap_t *o, const char *cmdline)
+{
+    int rc = 0;
+    rig_frame_t f = { 0 };
+    meta_t meta = { g_ptr_array_new_with_free_func(g_free), NULL };
+    uint32_t mask = 0;
+    if (!r->camera) {
+        rc = rig_fail(RIG_ERR_NO_DEVICE, "refl rig snap: the rig %s has no camera: add a [camera] section (or use "
+                      "[rig] backend = virtual)", r->path);
+        goto done;
+    }
+    if ((rc = lamps_mask(r, o->lamps, &mask))) goto done;
+    if (mask && !r->lamps) {
+        rc = rig_fail(RIG_ERR_NO_DEVICE, "refl rig snap: the rig %s has no lamps", r->path);
+        goto done;
+    }
+    if (o->have_angle) {
+        if ((rc = need_turntable(r, "snap --angle")) || (rc = move_to(r, o->angle_deg))) goto done;
+    }
+    if (o->pixel_format && (rc = rig_camera_set_pixel_format(r->camera, o->pixel_format))) goto done;
+    if (isfinite(o->exposure_us) && (rc = rig_camera_set_exposure_us(r->camera, o->exposure_us))) goto done;
+    if (isfinite(o->gain) && (rc = rig_camera_set_gain(r->camera, o->gain))) goto done;
+    rig_frame_meta_t set;
+    if ((rc = rig_camera_settings(r->camera, &set))) goto done;
+
+    char on_names[1100];
+    lamp_names(r->lamps, mask, on_names, sizeof on_names);
+    if (r->lamps) {
+        fprintf(stderr, "refl rig: lamps on: %s\n", on_names);
+        if ((rc = rig_lamps_set(r->lamps, mask))) goto done;
+    }
+    fprintf(stderr, "refl rig: capturing (%s, exposure %.6g us, gain %.6g)\n", set.pixel_format, set.exposure_us,
+            set.gain);
+    rc = rig_camera_capture(r->camera, CAPTURE_TIMEOUT_S + 2e-6 * set.exposure_us, CAPTURE_RETRIES, &f);
+    int off_rc = r->lamps ? rig_lamps_all_off(r->lamps) : 0;
+    if (rc) goto done;
+    if ((rc = off_rc)) goto done;
+
+    rig_turntable_status_t st = { 0 };
+    if (r->turntable && (rc = rig_turntable_status(r->turntable, &st))) goto done;
+
+    // Metadata.
+    const rig_frame_meta_t *m = &f.meta;
+    char date[40], t_frame[40];
+    utc_text(now_realtime_s(), date);
+    utc_text(m->system_time_s, t_frame);
+    unsigned maxv = m->bits >= 16 ? 65535u : (1u << m->bits) - 1;
+    meta_add(&meta, "Software", "refl %s (refl rig snap)", REFL_VERSION);
+    meta_add(&meta, "units", "DN, the camera's pixel format: %s values 0..%u", m->pixel_format, maxv);
+    meta_add(&meta, "image", "one camera frame as delivered (no processing); 16-bit grey PNG holding the values "
+             "unscaled");
+    meta_add(&meta, "pixel_convention", "row-major, (0,0) is the top-left pixel of the region, x to the right, "
+             "y down");
+    meta_add(&meta, "camera", "%s", r->camera->name);
+    meta_add(&meta, "camera_vendor", "%s", m->vendor);
+    meta_add(&meta, "camera_model", "%s", m->model);
+    meta_add(&meta, "camera_serial", "%s", m->serial);
+    meta_add(&meta, "frame_id", "%llu", (unsigned long long)m->frame_id);
+    meta_add(&meta, "frame_timestamp_ns", "%llu (the camera's clock)", (unsigned long long)m->timestamp_ns);
+    meta_add(&meta, "frame_time_utc", "%s (host clock when the frame arrived)", t_frame);
+    meta_add(&meta, "exposure_us", "%.10g", m->exposure_us);
+    meta_add(&meta, "gain", "%.10g (the camera's unit; dB for GenICam Gain)", m->gain);
+    meta_add(&meta, "pixel_format", "%s (%d significant bits)", m->pixel_format, m->bits);
+    meta_add(&meta, "region", "%d x %d at (%d, %d) on the sensor", m->width, m->height, m->offset_x, m->offset_y);
+    if (isfinite(m->temperature_c)) meta_add(&meta, "temperature_c", "%.3f", m->temperature_c);
+    else meta_add(&meta, "temperature_c", "none (the camera has no temperature sensor)");
+    if (o->have_angle) meta_add(&meta, "turntable_commanded_deg", "%.10g", o->angle_deg);
+    else meta_add(&meta, "turntable_commanded_deg", "none (not moved by this command)");
+    if (r->turntable) meta_add(&meta, "turntable_measured_deg", "%.6f", st.angle_deg);
+    else meta_add(&meta, "turntable_measured_deg", "none (no turntable)");
+    meta_add(&meta, "turntable_frame", "degrees, 0 at home, positive counter-clockwise seen from above (about +z "
+             "of the rig frame)");
+    meta_add(&meta, "lamps_on", "%s", on_names);
+    meta_add(&meta, "rig_file", "%s", r->path);
+    meta_add(&meta, "rig_sha256", "%s", r->sha256);
+    if (r->virt) {
+        char sha[65] = "";
+        const char *truth = rig_virtual_truth_path(r->virt);
+        bool q = model_error_quiet(true);
+        if (!model_sha256_file(truth, sha)) snprintf(sha, sizeof sha, "unreadable");
+        model_error_quiet(q);
+        meta_add(&meta, "virtual_truth", "%s", truth);
+        meta_add(&meta, "virtual_truth_sha256", "%s", sha);
+        meta_add(&meta, "virtual_sample", "%s", rig_virtual_sample(r->virt));
+    }
+    meta_add(&meta, "refl_version", "%s", REFL_VERSION);
+    meta_add(&meta, "date_utc", "%s", date);
+    meta_add(&meta, "command_line", "%s", cmdline);
+
+    // model_png16_write writes a temporary file and renames it into place.
+    if (!model_png16_write(o->out, m->width, m->height, f.pix, meta_list(&meta))) {
+        rc = RIG_ERR_IO;
+        goto done;
+    }
+    size_t n = (size_t)m->width * (size_t)m->height;
+    double sum = 0;
+    unsigned lo = 65535, hi = 0;
+    for (size_t i = 0; i < n; i++) {
+        unsigned v = f.pix[i];
+        sum += v;
+        if (v < lo) lo = v;
+        if (v > hi) hi = v;
+    }
+    printf("refl rig snap: wrote %s\n", o->out);
+    printf("  frame %d x %d %s, id %llu, exposure %.6g us, gain %.6g\n", m->width, m->height, m->pixel_format,
+           (unsigned long long)m->frame_id, m->exposure_us, m->gain);
+    if (r->turntable) printf("  turntable %.4f deg", st.angle_deg);
+    else printf("  no turntable");
+    if (o->have_angle) printf(" (commanded %.6g)", o->angle_deg);
+    printf(", lamps on: %s\n", on_names);
+    printf("  pixels (DN): min %u  mean %.1f  max %u\n", lo, n ? sum / (double)n : 0.0, hi);
+done:
+    if (r->lamps && r->lamps->on_mask) {
+        bool q = model_error_quiet(true);
+        rig_lamps_all_off(r->lamps);
+        model_error_quiet(q);
+    }
+    rig_frame_free(&f);
+    g_ptr_array_free(meta.kv, TRUE);
+    g_free(meta.list);
+    return rc;
+}
+
+// True when the rig file is a virtual rig (a [rig] section); errors are left
+// to rig_open.
+static bool file_is_virtual(const char *path, bool *readable)
+{
+    bool q = model_error_quiet(true);
+    model_ini_t *ini = model_ini_load(path);
+    model_error_quiet(q);
+    *readable = ini != NULL;
+    bool v = false;
+    for (int i = 0; ini && i < ini->nsections; i++) v |= !strcmp(ini->sections[i], "rig");
+    model_ini_free(ini);
+    return v;
+}
+
+// ---------------------------------------------------------------------------
+
+int rig_cmd(int argc, char **argv)
+{
+    rcli_t c = { 0 };
+    int rc = parse_cli(&c, argc, argv);
+    if (rc) return rc;
+    if (c.help) {
+        usage(stdout, true);
+        return 0;
+    }
+    const char *rig_path = optv(&c, "--rig"), *action = c.action;
+    double move_deg = 0;
+    snap_t so = { .exposure_us = NAN, .gain = NAN };
+    if (!strcmp(action, "move") && (rc = parse_angle("move", c.args[0], &move_deg))) return rc;
+    if (!strcmp(action, "snap")) {
+        so.out = optv(&c, "-o");
+        so.lamps = optv(&c, "--lamps");
+        so.pixel_format = optv(&c, "--pixel-format");
+        size_t n = strlen(so.out);
+        if (n < 4 || strcasecmp(so.out + n - 4, ".png"))
+            return usage_error("option -o: '%s' must end in .png (16-bit grey PNG)", so.out);
+        if (optv(&c, "--angle")) {
+            so.have_angle = true;
+            if ((rc = parse_angle("option --angle", optv(&c, "--angle"), &so.angle_deg))) return rc;
+        }
+        if ((rc = opt_double(&c, "--exposure-us", &so.exposure_us, 0, true, 1e8, "0 < US <= 1e8")) ||
+            (rc = opt_double(&c, "--gain", &so.gain, -100, false, 100, "-100..100")))
+            return rc;
+        if (so.pixel_format && strcmp(so.pixel_format, "Mono8") && strcmp(so.pixel_format, "Mono12") &&
+            strcmp(so.pixel_format, "Mono16"))
+            return usage_error("option --pixel-format: '%s' is not Mono8, Mono12 or Mono16", so.pixel_format);
+        if (so.lamps) {
+            gchar **names = g_strsplit(so.lamps, ",", -1);
+            bool empty = false;
+            for (int i = 0; names[i]; i++) empty |= !*g_strstrip(names[i]);
+            g_strfreev(names);
+            if (empty) return usage_error("option --lamps: '%s' has an empty lamp name", so.lamps);
+        }
+    }
+    bool serve = !strcmp(action, "serve");
+    sigset_t stop_set;
+    sigemptyset(&stop_set);
+    if (serve) {
+        bool readable;
+        if (!file_is_virtual(rig_path, &readable) && readable) {
+            rig_fail(RIG_ERR_NOT_SUPPORTED, "refl rig serve: %s is not a virtual rig: serve keeps a virtual rig's "
+                     "camera up ([rig] backend = virtual, see examples/virtual-rig.ini); a real camera serves "
+                     "itself", rig_path);
+            return 1;
+        }
+        // Blocked in every thread (they inherit the mask): sigwait below takes them.
+        sigaddset(&stop_set, SIGINT);
+        sigaddset(&stop_set, SIGTERM);
+        sigaddset(&stop_set, SIGHUP);
+        pthread_sigmask(SIG_BLOCK, &stop_set, NULL);
+    }
+
+    char *cmdline = command_line(argc, argv);
+    rig_t *r = NULL;
+    fprintf(stderr, "refl rig: opening %s\n", rig_path);
+    if ((rc = rig_open(&r, rig_path))) goto done;
+    const char *sample = optv(&c, "--sample");
+    if (sample) {
+        if (!r->virt) {
+            rc = rig_fail(RIG_ERR_NOT_SUPPORTED, "refl rig: --sample: %s is not a virtual rig; put the sample on "
+                          "the table by hand", rig_path);
+            goto done;
+        }
+        if ((rc = rig_virtual_set_sample(r->virt, sample))) goto done;
+    }
+
+    if (!strcmp(action, "status")) {
+        rc = do_status(r);
+    } else if (!strcmp(action, "identify")) {
+        rc = do_identify(r);
+    } else if (!strcmp(action, "home")) {
+        if (!(rc = need_turntable(r, "home"))) {
+            fprintf(stderr, "refl rig: homing %s\n", r->turntable->name);
+            rc = rig_turntable_home(r->turntable, home_timeout_s(r));
+        }
+        rig_turntable_status_t st;
+        if (!rc && !(rc = rig_turntable_status(r->turntable, &st)))
+            printf("turntable_angle_deg: %.4f\nturntable_homed: %s\n", st.angle_deg, yes_no(st.homed));
+    } else if (!strcmp(action, "move")) {
+        rig_turntable_status_t st;
+        if (!(rc = need_turntable(r, "move")) && !(rc = move_to(r, move_deg)) &&
+            !(rc = rig_turntable_status(r->turntable, &st)))
+            printf("turntable_commanded_deg: %.10g\nturntable_angle_deg: %.4f\n", move_deg, st.angle_deg);
+    } else if (!strcmp(action, "snap")) {
+        rc = do_snap(r, &so, cmdline);
+    } else {   // serve
+        // The client connection rig_open made would hold the camera's control
+        // channel: let other clients have it.
+        rig_camera_close(r->camera);
+        r->camera = NULL;
+        printf("address: %s\nsample: %s\n", rig_virtual_camera_address(r->virt), rig_virtual_sample(r->virt));
+        fflush(stdout);
+        fprintf(stderr, "refl rig: serving the virtual camera at %s; stop with Ctrl-C (SIGINT) or SIGTERM\n",
+                rig_virtual_camera_address(r->virt));
+        int sig = 0;
+        while (sigwait(&stop_set, &sig) != 0) {
+        }
+        fprintf(stderr, "refl rig: %s: stopping\n", strsignal(sig));
+    }
+done:
+    rig_close(r);
+    g_free(cmdline);
+    if (rc) return 1;
+    fflush(stdout);
+    return 0;
+}

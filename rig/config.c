@@ -1,0 +1,630 @@
+// rig/config.c — rig description files: parse the INI (rig.h "Rig description
+// files"), check every section, key and value with file:line messages, then
+// open the devices (turntable, lamps, camera) or the virtual rig, undoing
+// everything on a later error.
+//
+// Parsing is complete before any device is touched: a typo in the last line
+// never leaves a stage half way through a homing.
+#define _GNU_SOURCE
+#include <arpa/inet.h>
+#include <glib.h>
+#include <math.h>
+#include <stdarg.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "model/model.h"
+#include "rig/rig.h"
+
+#define MAX_LAMPS 32
+
+// What the file asks for (filled by parse, used by the opener).
+typedef struct {
+    const char *path;                     // for messages
+    const model_ini_t *ini;
+    // [rig] backend = virtual
+    bool   virt;
+    int    rig_line;
+    char  *truth;                         // resolved against the rig file's directory (g_free)
+    char   address[64], sample[64];
+    double time_scale, busy_wait_s;
+    uint64_t noise_seed;
+    bool   have_noise_seed;
+    // [camera]
+    bool   have_camera;
+    int    camera_line;
+    char   camera_id[64];
+    // camera defaults ([camera], or [rig] for the virtual camera)
+    char   pixel_format[16];
+    double exposure_us, gain;
+    // [turntable]
+    bool   have_turntable;
+    int    turntable_line;
+    bool   turntable_apt;
+    char   apt_serial[32], apt_stage[32];
+    rig_turntable_sim_params_t sim;
+    // [lamp NAME]
+    int    nlamps;
+    bool   lamps_gpiod;
+    rig_lamp_line_t lamps[MAX_LAMPS];
+    int    lamp_line[MAX_LAMPS];
+} spec_t;
+
+// ---------------------------------------------------------------------------
+// Messages
+
+static int cfg_fail(const spec_t *s, int line, const char *fmt, ...) __attribute__((format(printf, 3, 4)));
+static int cfg_fail(const spec_t *s, int line, const char *fmt, ...)
+{
+    char msg[1200];
+    va_list ap;
+    va_start(ap, fmt);
+    vsnprintf(msg, sizeof msg, fmt, ap);
+    va_end(ap);
+    if (line > 0) return rig_fail(RIG_ERR_INVALID, "%s:%d: %s", s->path, line, msg);
+    return rig_fail(RIG_ERR_INVALID, "%s: %s", s->path, msg);
+}
+
+// A device error: "file:line: [section] driver message", printed once.
+static int device_fail(int rc, const spec_t *s, int line, const char *section)
+{
+    char msg[1200];
+    snprintf(msg, sizeof msg, "%s", rig_last_error());
+    return rig_fail(rc, "%s:%d: [%s]: %s", s->path, line, section, msg);
+}
+
+// ---------------------------------------------------------------------------
+// Keys and values
+
+typedef struct {
+    const char *kind;          // "camera", "turntable", "lamp", "rig"
+    const char *backend;
+    const char *keys;          // space-separated, "backend" included
+    const char *what;          // for the missing/unknown backend messages
+} backend_def_t;
+
+static const backend_def_t backends[] = {
+    { "camera", "aravis", "backend address serial name pixel_format exposure_us gain",
+      "aravis (GigE Vision / USB3 Vision camera)" },
+    { "turntable", "apt", "backend serial stage", "apt (Thorlabs APT stage, e.g. K10CR1)" },
+    { "turntable", "sim", "backend speed_deg_s accel_deg_s2 home_time_s position_noise_deg time_scale seed "
+      "fault_after_moves fault", "sim (simulated stage)" },
+    { "lamp", "gpiod", "backend chip line active_low warmup_ms settle_ms", "gpiod (a GPIO line)" },
+    { "lamp", "sim", "backend position_mm warmup_ms settle_ms", "sim (simulated lamp)" },
+    { "rig", "virtual", "backend truth address sample time_scale noise_seed busy_wait_s pixel_format exposure_us "
+      "gain",
+      "virtual (the whole rig simulated)" },
+};
+#define NBACKENDS ((int)(sizeof backends / sizeof backends[0]))
+
+static bool key_in(const char *keys, const char *key)
+{
+    size_t n = strlen(key);
+    for (const char *p = keys; *p;) {
+        const char *e = strchr(p, ' ');
+        size_t m = e ? (size_t)(e - p) : strlen(p);
+        if (m == n && !strncmp(p, key, n)) return true;
+        if (!e) break;
+        p = e + 1;
+    }
+    return false;
+}
+
+static void backend_choices(const char *kind, char *out, size_t size)
+{
+    size_t n = 0;
+    out[0] = 0;
+    for (int i = 0; i < NBACKENDS && n < size; i++)
+        if (!strcmp(backends[i].kind, kind))
+            n += (size_t)snprintf(out + n, size - n, "%s'backend = %s' for %s", n ? " or " : "",
+                                  backends[i].backend, backends[i].what);
+}
+
+static const char *kind_of(const char *section)
+{
+    if (!strcmp(section, "camera") || !strcmp(section, "turntable") || !strcmp(section, "rig")) return section;
+    if (!strncmp(section, "lamp ", 5) || !strcmp(section, "lamp")) return "lamp";
+    return NULL;
+}
+
+// Finds the backend of a section and checks every key of it.
+static int check_section(const spec_t *s, const char *section, int line, const backend_def_t **out)
+{
+    const char *kind = kind_of(section);
+    char choices[400];
+    backend_choices(kind, choices, sizeof choices);
+    const model_ini_entry_t *b = model_ini_get(s->ini, section, "backend");
+    if (!b) return cfg_fail(s, line, "[%s] has no backend: add %s", section, choices);
+    const backend_def_t *def = NULL;
+    for (int i = 0; i < NBACKENDS; i++)
+        if (!strcmp(backends[i].kind, kind) && !strcmp(backends[i].backend, b->value)) def = &backends[i];
+    if (!def) return cfg_fail(s, b->line, "[%s]: unknown backend '%s': use %s", section, b->value, choices);
+    for (int i = 0; i < s->ini->nentries; i++) {
+        const model_ini_entry_t *e = &s->ini->entries[i];
+        if (strcmp(e->section, section)) continue;
+        if (!key_in(def->keys, e->key))
+            return cfg_fail(s, e->line, "[%s]: unknown key '%s' for backend %s; known keys: %s", section, e->key,
+                            def->backend, def->keys);
+    }
+    *out = def;
+    return 0;
+}
+
+static const model_ini_entry_t *get(const spec_t *s, const char *section, const char *key)
+{
+    return model_ini_get(s->ini, section, key);
+}
+
+// Optional number in [lo, hi] (open ends where asked); absent keeps *out.
+static int get_double(const spec_t *s, const char *section, const char *key, double *out, double lo, bool lo_open,
+                      double hi, const char *range_text)
+{
+    const model_ini_entry_t *e = get(s, section, key);
+    if (!e) return 0;
+    double v;
+    if (!model_parse_double(e->value, &v))
+        return cfg_fail(s, e->line, "[%s] %s: '%s' is not a number (%s)", section, key, e->value, range_text);
+    if ((lo_open ? !(v > lo) : !(v >= lo)) || !(v <= hi))
+        return cfg_fail(s, e->line, "[%s] %s = %s is out of range (%s)", section, key, e->value, range_text);
+    *out = v;
+    return 0;
+}
+
+static int get_long(const spec_t *s, const char *section, const char *key, long *out, long lo, long hi)
+{
+    const model_ini_entry_t *e = get(s, section, key);
+    if (!e) return 0;
+    long v;
+    if (!model_parse_int(e->value, &v))
+        return cfg_fail(s, e->line, "[%s] %s: '%s' is not an integer (%ld..%ld)", section, key, e->value, lo, hi);
+    if (v < lo || v > hi)
+        return cfg_fail(s, e->line, "[%s] %s = %s is out of range (%ld..%ld)", section, key, e->value, lo, hi);
+    *out = v;
+    return 0;
+}
+
+static int get_bool(const spec_t *s, const char *section, const char *key, bool *out)
+{
+    const model_ini_entry_t *e = get(s, section, key);
+    if (!e) return 0;
+    const char *v = e->value;
+    if (!strcmp(v, "true") || !strcmp(v, "yes") || !strcmp(v, "1") || !strcmp(v, "on")) *out = true;
+    else if (!strcmp(v, "false") || !strcmp(v, "no") || !strcmp(v, "0") || !strcmp(v, "off")) *out = false;
+    else return cfg_fail(s, e->line, "[%s] %s: '%s' is not a truth value (true/false, yes/no, 1/0)", section, key, v);
+    return 0;
+}
+
+// Optional string that must fit size-1 characters and be non-empty.
+static int get_string(const spec_t *s, const char *section, const char *key, char *out, size_t size)
+{
+    const model_ini_entry_t *e = get(s, section, key);
+    if (!e) return 0;
+    if (!e->value[0]) return cfg_fail(s, e->line, "[%s] %s is empty: give a value or remove the line", section, key);
+    if (strlen(e->value) >= size)
+        return cfg_fail(s, e->line, "[%s] %s: '%s' is longer than %zu characters", section, key, e->value, size - 1);
+    snprintf(out, size, "%s", e->value);
+    return 0;
+}
+
+static int get_pixel_format(spec_t *s, const char *section)
+{
+    const model_ini_entry_t *e = get(s, section, "pixel_format");
+    if (!e) return 0;
+    if (strcmp(e->value, "Mono8") && strcmp(e->value, "Mono12") && strcmp(e->value, "Mono16"))
+        return cfg_fail(s, e->line, "[%s] pixel_format: '%s' is not Mono8, Mono12 or Mono16", section, e->value);
+    snprintf(s->pixel_format, sizeof s->pixel_format, "%s", e->value);
+    return 0;
+}
+
+static int get_camera_defaults(spec_t *s, const char *section)
+{
+    int rc;
+    if ((rc = get_pixel_format(s, section)) ||
+        (rc = get_double(s, section, "exposure_us", &s->exposure_us, 0, true, 1e8, "0 < exposure_us <= 1e8 us")) ||
+        (rc = get_double(s, section, "gain", &s->gain, -100, false, 100, "-100..100, in the camera's unit (dB)")))
+        return rc;
+    return 0;
+}
+
+static bool is_ipv4(const char *a)
+{
+    struct in_addr x;
+    return inet_pton(AF_INET, a, &x) == 1;
+}
+
+// ---------------------------------------------------------------------------
+// Sections
+
+static int parse_rig(spec_t *s, const char *sec, int line)
+{
+    int rc;
+    s->virt = true;
+    s->rig_line = line;
+    const model_ini_entry_t *t = get(s, sec, "truth");
+    if (!t || !t->value[0])
+        return cfg_fail(s, t ? t->line : line, "[rig] backend = virtual needs 'truth = FILE': the virtual rig's "
+                        "ground truth (see examples/virtual-truth.ini), relative to this file's directory");
+    if (t->value[0] == '/') {
+        s->truth = g_strdup(t->value);
+    } else {
+        char *dir = g_path_get_dirname(s->path);
+        s->truth = g_build_filename(dir, t->value, NULL);
+        g_free(dir);
+    }
+    snprintf(s->address, sizeof s->address, "127.0.0.1");
+    if ((rc = get_string(s, sec, "address", s->address, sizeof s->address))) return rc;
+    const model_ini_entry_t *a = get(s, sec, "address");
+    if (a && (!is_ipv4(s->address) || strncmp(s->address, "127.", 4)))
+        return cfg_fail(s, a->line, "[rig] address: '%s' is not a loopback IPv4 address: the virtual camera serves "
+                        "on 127.0.0.1 only", s->address);
+    if ((rc = get_string(s, sec, "sample", s->sample, sizeof s->sample))) return rc;
+    s->time_scale = 1;
+    if ((rc = get_double(s, sec, "time_scale", &s->time_scale, 0, true, 1e3, "0 < time_scale <= 1000; 1 is real "
+                         "time, 0.01 is 100x faster")))
+        return rc;
+    if ((rc = get_double(s, sec, "busy_wait_s", &s->busy_wait_s, 0, false, 3600, "0 <= busy_wait_s <= 3600: how "
+                         "long to wait for another virtual camera on the address to stop")))
+        return rc;
+    long seed = 1;
+    if ((rc = get_long(s, sec, "noise_seed", &seed, 0, LONG_MAX))) return rc;
+    s->noise_seed = (uint64_t)seed;
+    s->have_noise_seed = get(s, sec, "noise_seed") != NULL;
+    return get_camera_defaults(s, sec);
+}
+
+static int parse_camera(spec_t *s, const char *sec, int line)
+{
+    int rc;
+    s->have_camera = true;
+    s->camera_line = line;
+    static const char *const ids[] = { "address", "serial", "name" };
+    const model_ini_entry_t *id = NULL;
+    for (int i = 0; i < 3; i++) {
+        const model_ini_entry_t *e = get(s, sec, ids[i]);
+        if (!e) continue;
+        if (id)
+            return cfg_fail(s, e->line, "[camera]: both %s (line %d) and %s given: identify the camera by one of "
+                            "address, serial or name", id->key, id->line, e->key);
+        id = e;
+    }
+    if (!id)
+        return cfg_fail(s, line, "[camera] does not say which camera: add 'address = IP' (GigE Vision, opened "
+                        "directly), 'serial = S' or 'name = N'");
+    if ((rc = get_string(s, sec, id->key, s->camera_id, sizeof s->camera_id))) return rc;
+    if (!strcmp(id->key, "address") && !is_ipv4(id->value))
+        return cfg_fail(s, id->line, "[camera] address: '%s' is not an IPv4 address (a.b.c.d); identify the camera "
+                        "by 'serial =' or 'name =' otherwise", id->value);
+    return get_camera_defaults(s, sec);
+}
+
+static int parse_turntable(spec_t *s, const char *sec, int line, const backend_def_t *def)
+{
+    int rc;
+    s->have_turntable = true;
+    s->turntable_line = line;
+    if (!strcmp(def->backend, "apt")) {
+        s->turntable_apt = true;
+        if ((rc = get_string(s, sec, "serial", s->apt_serial, sizeof s->apt_serial))) return rc;
+        const model_ini_entry_t *st = get(s, sec, "stage");
+        if (st) {
+            bool known = false;
+            char list[256] = "";
+            size_t n = 0;
+            for (int i = 0; rig_stage_models[i].model; i++) {
+                if (!strcmp(rig_stage_models[i].model, st->value)) known = true;
+                n += (size_t)snprintf(list + n, n < sizeof list ? sizeof list - n : 0, "%s%s", i ? ", " : "",
+                                      rig_stage_models[i].model);
+            }
+            if (!known)
+                return cfg_fail(s, st->line, "[turntable] stage: '%s' is not a stage refl knows (%s); leave 'stage' "
+                                "out to take it from the controller", st->value, list);
+            snprintf(s->apt_stage, sizeof s->apt_stage, "%s", st->value);
+        }
+        return 0;
+    }
+    rig_turntable_sim_params_t *p = &s->sim;
+    *p = rig_turntable_sim_defaults();
+    long seed = (long)p->seed, after = 0;
+    if ((rc = get_double(s, sec, "speed_deg_s", &p->speed_deg_s, 0, true, 1e4, "0 < speed_deg_s <= 1e4")) ||
+        (rc = get_double(s, sec, "accel_deg_s2", &p->accel_deg_s2, 0, true, 1e6, "0 < accel_deg_s2 <= 1e6")) ||
+        (rc = get_double(s, sec, "home_time_s", &p->home_time_s, 0, false, 3600, "0 <= home_time_s <= 3600")) ||
+        (rc = get_double(s, sec, "position_noise_deg", &p->position_noise_deg, 0, false, 10,
+                         "0 <= position_noise_deg <= 10")) ||
+        (rc = get_double(s, sec, "time_scale", &p->time_scale, 0, true, 1e3, "0 < time_scale <= 1000; 1 is real "
+                         "time, 0.01 is 100x faster")) ||
+        (rc = get_long(s, sec, "seed", &seed, 0, LONG_MAX)) ||
+        (rc = get_long(s, sec, "fault_after_moves", &after, 0, 1000000)))
+        return rc;
+    p->seed = (uint64_t)seed;
+    p->fault_after_moves = (int)after;
+    const model_ini_entry_t *f = get(s, sec, "fault");
+    if (f) {
+        if (!strcmp(f->value, "motion")) p->fault = RIG_ERR_MOTION;
+        else if (!strcmp(f->value, "timeout")) p->fault = RIG_ERR_TIMEOUT;
+        else if (!strcmp(f->value, "disconnected")) p->fault = RIG_ERR_DISCONNECTED;
+        else return cfg_fail(s, f->line, "[turntable] fault: '%s' is not motion, timeout or disconnected", f->value);
+    }
+    if (after > 0 && !f)
+        return cfg_fail(s, get(s, sec, "fault_after_moves")->line, "[turntable] fault_after_moves needs "
+                        "'fault = motion|timeout|disconnected'");
+    return 0;
+}
+
+static int parse_lamp(spec_t *s, const char *sec, int line, const backend_def_t *def)
+{
+    int rc;
+    const char *name = sec + 4;
+    if (*name == ' ') name++;
+    if (!*name) return cfg_fail(s, line, "[lamp] needs a name: write [lamp NAME]");
+    if (strlen(name) >= sizeof s->lamps[0].name)
+        return cfg_fail(s, line, "[lamp %s]: the name is longer than %zu characters", name,
+                        sizeof s->lamps[0].name - 1);
+    if (strchr(name, ',') || !strcmp(name, "all") || !strcmp(name, "none"))
+        return cfg_fail(s, line, "[lamp %s]: lamp names may not contain ',' or be 'all' or 'none' (they are "
+                        "written as refl rig --lamps NAME,NAME|all|none); rename it", name);
+    if (s->nlamps >= MAX_LAMPS)
+        return cfg_fail(s, line, "[lamp %s]: more than %d lamps; a rig switches at most %d", name, MAX_LAMPS,
+                        MAX_LAMPS);
+    bool gpiod = !strcmp(def->backend, "gpiod");
+    if (s->nlamps > 0 && gpiod != s->lamps_gpiod)
+        return cfg_fail(s, get(s, sec, "backend")->line, "[lamp %s]: backend %s, but [lamp %s] (line %d) is %s: "
+                        "all lamps of a rig use one backend", name, def->backend, s->lamps[0].name, s->lamp_line[0],
+                        s->lamps_gpiod ? "gpiod" : "sim");
+    s->lamps_gpiod = gpiod;
+    rig_lamp_line_t *a = &s->lamps[s->nlamps];
+    memset(a, 0, sizeof *a);
+    snprintf(a->name, sizeof a->name, "%s", name);
+    if ((rc = get_double(s, sec, "warmup_ms", &a->warmup_ms, 0, false, 3.6e6, "0 <= warmup_ms <= 3.6e6")) ||
+        (rc = get_double(s, sec, "settle_ms", &a->settle_ms, 0, false, 3.6e6, "0 <= settle_ms <= 3.6e6")))
+        return rc;
+    if (gpiod) {
+        const model_ini_entry_t *c = get(s, sec, "chip"), *l = get(s, sec, "line");
+        if (!c || !l)
+            return cfg_fail(s, line, "[lamp %s]: backend gpiod needs 'chip = gpiochipN' (or a /dev path) and "
+                            "'line = OFFSET'", name);
+        if ((rc = get_string(s, sec, "chip", a->chip, sizeof a->chip))) return rc;
+        long off = 0;
+        if ((rc = get_long(s, sec, "line", &off, 0, 65535))) return rc;
+        a->line = (unsigned)off;
+        if ((rc = get_bool(s, sec, "active_low", &a->active_low))) return rc;
+        for (int j = 0; j < s->nlamps; j++)
+            if (!strcmp(s->lamps[j].chip, a->chip) && s->lamps[j].line == a->line)
+                return cfg_fail(s, l->line, "[lamp %s]: %s line %u is already lamp '%s' (line %d): one lamp per "
+                                "GPIO line", name, a->chip, a->line, s->lamps[j].name, s->lamp_line[j]);
+    } else {
+        const model_ini_entry_t *p = get(s, sec, "position_mm");
+        if (p) {
+            double x, y, z;
+            char extra;
+            if (sscanf(p->value, "%lf %lf %lf %c", &x, &y, &z, &extra) != 3 || !isfinite(x) || !isfinite(y) ||
+                !isfinite(z))
+                return cfg_fail(s, p->line, "[lamp %s] position_mm: '%s' is not three numbers x y z (mm, rig frame)",
+                                name, p->value);
+        }
+    }
+    s->lamp_line[s->nlamps++] = line;
+    return 0;
+}
+
+static int parse(spec_t *s)
+{
+    const model_ini_t *ini = s->ini;
+    int rc;
+    s->exposure_us = NAN;
+    s->gain = NAN;
+    int rig_sec = -1, other_sec = -1;
+    for (int i = 0; i < ini->nsections; i++) {
+        const char *sec = ini->sections[i];
+        if (!kind_of(sec))
+            return cfg_fail(s, ini->section_lines[i], "unknown section [%s]: a rig file has [camera], [turntable], "
+                            "[lamp NAME] sections, or one [rig] section (backend = virtual)", sec);
+        if (!strcmp(sec, "rig")) rig_sec = i;
+        else if (other_sec < 0) other_sec = i;
+    }
+    if (rig_sec >= 0 && other_sec >= 0) {
+        int l = ini->section_lines[rig_sec] > ini->section_lines[other_sec] ? rig_sec : other_sec;
+        return cfg_fail(s, ini->section_lines[l], "[%s] together with [%s]: [rig] backend = virtual makes its own "
+                        "camera, turntable and lamps; remove [rig] or the device sections", ini->sections[l],
+                        ini->sections[l == rig_sec ? other_sec : rig_sec]);
+    }
+    if (ini->nsections == 0)
+        return cfg_fail(s, 0, "no devices: add [camera], [turntable] and [lamp NAME] sections, or [rig] "
+                        "backend = virtual");
+    for (int i = 0; i < ini->nsections; i++) {
+        const char *sec = ini->sections[i], *kind = kind_of(sec);
+        int line = ini->section_lines[i];
+        const backend_def_t *def = NULL;
+        if ((rc = check_section(s, sec, line, &def))) return rc;
+        if (!strcmp(kind, "rig")) rc = parse_rig(s, sec, line);
+        else if (!strcmp(kind, "camera")) rc = parse_camera(s, sec, line);
+        else if (!strcmp(kind, "turntable")) rc = parse_turntable(s, sec, line, def);
+        else rc = parse_lamp(s, sec, line, def);
+        if (rc) return rc;
+    }
+    return 0;
+}
+
+// ---------------------------------------------------------------------------
+// Opening
+
+static void set_profile_from_stage(rig_t *r, const char *model)
+{
+    for (int i = 0; rig_stage_models[i].model; i++)
+        if (model && !strcmp(rig_stage_models[i].model, model)) {
+            r->speed_deg_s = rig_stage_models[i].max_speed_deg_s;
+            r->accel_deg_s2 = rig_stage_models[i].accel_deg_s2;
+            r->home_time_s = 2 * 360 / r->speed_deg_s;   // a full turn at cruise speed, twice
+            return;
+        }
+}
+
+static void set_profile_sim(rig_t *r, const rig_turntable_sim_params_t *p)
+{
+    double ts = p->time_scale;
+    r->speed_deg_s = p->speed_deg_s / ts;
+    r->accel_deg_s2 = p->accel_deg_s2 / (ts * ts);
+    r->home_time_s = p->home_time_s * ts;
+}
+
+// Runs a device call quietly (its message is repeated with the file and line).
+#define QUIET(call)                                                                                  \
+    do {                                                                                             \
+        bool q_ = model_error_quiet(true);                                                           \
+        rc = (call);                                                                                 \
+        model_error_quiet(q_);                                                                       \
+    } while (0)
+
+static int apply_camera_defaults(rig_t *r, const spec_t *s, int line, const char *section)
+{
+    int rc = 0;
+    if (!r->camera) return 0;
+    if (r->pixel_format[0]) QUIET(rig_camera_set_pixel_format(r->camera, r->pixel_format));
+    if (!rc && isfinite(r->exposure_us)) QUIET(rig_camera_set_exposure_us(r->camera, r->exposure_us));
+    if (!rc && isfinite(r->gain)) QUIET(rig_camera_set_gain(r->camera, r->gain));
+    return rc ? device_fail(rc, s, line, section) : 0;
+}
+
+static int open_devices(rig_t *r, spec_t *s)
+{
+    int rc = 0;
+    if (s->virt) {
+        rig_virtual_options_t o = rig_virtual_defaults();
+        o.address = s->address;
+        if (s->sample[0]) o.sample = s->sample;
+        o.time_scale = s->time_scale;
+        if (s->have_noise_seed) o.noise_seed = s->noise_seed;
+        o.busy_wait_s = s->busy_wait_s;
+        QUIET(rig_virtual_open(&r->virt, s->truth, &o));
+        if (rc) return device_fail(rc, s, s->rig_line, "rig");
+        r->turntable = rig_virtual_turntable(r->virt);
+        r->lamps = rig_virtual_lamps(r->virt);
+        // The stage's profile is the truth file's [turntable] (defaults of the sim stage otherwise).
+        rig_turntable_sim_params_t p = rig_turntable_sim_defaults();
+        bool q = model_error_quiet(true);
+        model_ini_t *truth = model_ini_load(s->truth);
+        model_error_quiet(q);
+        const model_ini_entry_t *e;
+        double v;
+        if ((e = model_ini_get(truth, "turntable", "speed_deg_s")) && model_parse_double(e->value, &v) && v > 0)
+            p.speed_deg_s = v;
+        if ((e = model_ini_get(truth, "turntable", "accel_deg_s2")) && model_parse_double(e->value, &v) && v > 0)
+            p.accel_deg_s2 = v;
+        if ((e = model_ini_get(truth, "turntable", "home_time_s")) && model_parse_double(e->value, &v) && v >= 0)
+            p.home_time_s = v;
+        model_ini_free(truth);
+        p.time_scale = s->time_scale;
+        set_profile_sim(r, &p);
+        QUIET(rig_camera_open_aravis(&r->camera, rig_virtual_camera_address(r->virt)));
+        if (rc) return device_fail(rc, s, s->rig_line, "rig");
+        return apply_camera_defaults(r, s, s->rig_line, "rig");
+    }
+    if (s->have_turntable) {
+        if (s->turntable_apt) {
+            QUIET(rig_turntable_open_apt(&r->turntable, s->apt_serial[0] ? s->apt_serial : NULL,
+                                         s->apt_stage[0] ? s->apt_stage : NULL));
+            if (!rc) {
+                rig_turntable_info_t info;
+                QUIET(rig_turntable_info(r->turntable, &info));
+                set_profile_from_stage(r, s->apt_stage[0] ? s->apt_stage : rc ? NULL : info.model);
+                rc = 0;
+            }
+        } else {
+            QUIET(rig_turntable_open_sim(&r->turntable, &s->sim));
+            set_profile_sim(r, &s->sim);
+        }
+        if (rc) return device_fail(rc, s, s->turntable_line, "turntable");
+    }
+    if (s->nlamps > 0) {
+        if (s->lamps_gpiod) QUIET(rig_lamps_open_gpiod(&r->lamps, s->lamps, s->nlamps));
+        else QUIET(rig_lamps_open_sim(&r->lamps, s->lamps, s->nlamps));
+        if (rc) {
+            char sec[80];
+            snprintf(sec, sizeof sec, "lamp %s", s->lamps[0].name);
+            return device_fail(rc, s, s->lamp_line[0], sec);
+        }
+    }
+    if (s->have_camera) {
+        QUIET(rig_camera_open_aravis(&r->camera, s->camera_id));
+        if (rc) return device_fail(rc, s, s->camera_line, "camera");
+        return apply_camera_defaults(r, s, s->camera_line, "camera");
+    }
+    return 0;
+}
+
+int rig_open(rig_t **out, const char *path)
+{
+    if (!out) return rig_fail(RIG_ERR_INVALID, "rig_open: NULL output");
+    *out = NULL;
+    if (!path || !*path) return rig_fail(RIG_ERR_INVALID, "rig_open: no rig file given");
+    rig_safety_install();
+    int rc = RIG_ERR_INVALID;
+    spec_t s = { .path = path };
+    rig_t *r = NULL;
+    size_t len = 0;
+    char *text = model_read_file(path, &len);
+    model_ini_t *ini = NULL;
+    if (!text) {
+        char msg[1200];
+        snprintf(msg, sizeof msg, "%s", model_last_error());
+        bool q = model_error_quiet(true);
+        rig_fail(RIG_ERR_NO_DEVICE, "%s (the rig description file)", msg);
+        model_error_quiet(q);
+        rc = RIG_ERR_NO_DEVICE;
+        goto done;
+    }
+    if (!(ini = model_ini_parse(text, len, path))) {
+        char msg[1200];
+        snprintf(msg, sizeof msg, "%s", model_last_error());
+        bool q = model_error_quiet(true);
+        rig_fail(RIG_ERR_INVALID, "%s", msg);
+        model_error_quiet(q);
+        goto done;
+    }
+    s.ini = ini;
+    if ((rc = parse(&s))) goto done;
+
+    r = calloc(1, sizeof *r);
+    if (!r || !(r->path = strdup(path))) {
+        rc = rig_fail(RIG_ERR_NO_MEM, "%s: out of memory", path);
+        goto done;
+    }
+    model_sha256_hex(text, len, r->sha256);
+    snprintf(r->pixel_format, sizeof r->pixel_format, "%s", s.pixel_format);
+    r->exposure_us = s.exposure_us;
+    r->gain = s.gain;
+    r->speed_deg_s = r->accel_deg_s2 = r->home_time_s = NAN;
+    if ((rc = open_devices(r, &s))) goto done;
+    *out = r;
+    r = NULL;
+done:
+    rig_close(r);
+    model_ini_free(ini);
+    free(text);
+    g_free(s.truth);
+    return rc;
+}
+
+void rig_close(rig_t *r)
+{
+    if (!r) return;
+    bool q = model_error_quiet(true);   // closing after an error must not overwrite its message
+    char keep[1536];
+    snprintf(keep, sizeof keep, "%s", rig_last_error());
+    if (r->lamps) rig_lamps_all_off(r->lamps);
+    if (r->turntable) {
+        rig_turntable_status_t st;
+        if (rig_turntable_status(r->turntable, &st) == 0 && st.moving) rig_turntable_stop(r->turntable, false);
+    }
+    rig_camera_close(r->camera);
+    if (r->virt) {
+        rig_virtual_close(r->virt);
+    } else {
+        rig_lamps_close(r->lamps);
+        rig_turntable_close(r->turntable);
+    }
+    rig_fail(RIG_ERR_OK, "%s", keep);
+    model_error_quiet(q);
+    free(r->path);
+    free(r);
+}

@@ -1,0 +1,1383 @@
+// rig/virtual.c — the virtual rig: a simulated turntable, simulated lamps and a
+// virtual GigE Vision camera (rig/gv_camera.h) on a loopback address whose
+// frames are rendered by model/ from the state of the simulated devices.
+//
+// Ground truth: one INI file (examples/virtual-truth.ini documents every key):
+//   [virtual]    sample (default sample), lamp_warmup_ms, lamp_settle_ms
+//   [camera]     model (mrcal .cameramodel, relative to the truth file),
+//                model_sha256 (checked), kc_per_us, serial, vendor, model_name,
+//                temperature_c
+//   [render]     interreflection = none|thesis|mc, direct_samples, mc_samples,
+//                mc_bounces, indirect_downsample, thesis_samples, thesis_cone_deg,
+//                rho_sr, finite_lamps, seed, prerender = 0|1|2
+//   [sensor]     model_sensor_t's keys (exposure_us and noise_seed are set per frame)
+//   [turntable]  speed_deg_s, accel_deg_s2, home_time_s, position_noise_deg, seed,
+//                fault_after_moves, fault = motion|stall|disconnect
+//   [lamp NAME]  position_mm, intensity, radius_mm
+//   [material NAME] model and parameters
+//   [texture MATERIAL] amplitude (0..0.5), scale_mm (> 0), seed: an albedo
+//                texture of that material (see texture_t)
+//   [sample NAME] kind = workpiece|chessboard|reference_white|material_coupon|mirror_sphere,
+//                scene (relative path); chessboard: square_mm, corners, corner0_mm;
+//                reference_white / material_coupon: material
+//
+// A frame (software trigger, in the camera server's render thread):
+//   angle   = the turntable's measured angle at the trigger (status)
+//   mask    = the lamps that are on at the trigger
+//   L_i     = the radiance image of lamp i alone (kc 1, Pa 0) of the sample
+//             rotated by angle about z; kept in a cache keyed by (sample,
+//             angle, lamp), as the bracket of the grey value is linear in the
+//             lamps. With interreflection = mc (the default of the example):
+//               direct   full resolution, MC with 0 bounces: each lamp a sphere
+//                        of radius_mm sampled direct_samples times per pixel
+//                        (soft shadows; the penumbra is dithered, per state)
+//               indirect mc_samples paths of mc_bounces bounces (point lamps at
+//                        the path vertices) rendered at 1/indirect_downsample
+//                        of the resolution with a camera of scaled intrinsics,
+//                        minus the direct term there (so only the
+//                        interreflection stays), and upsampled bilinearly from
+//                        the low-resolution pixels that see the same face
+//                        (edge-aware: no light leaks across silhouettes)
+//             Interreflection is smooth, so its low resolution costs little
+//             accuracy and keeps a new state's rendering near 100 ms on 2 cores.
+//             thesis / none: one full-resolution model_render.
+//             Textured materials multiply L at the first hit (see texture_t).
+//             The mirror sphere sample kind is accepted, but the model has no
+//             smooth sphere primitive yet (left for the lamp calibration).
+//   gf      = 10^(gain_db / 20)
+//   P       = dark_offset_dn + kc_per_us * exposure_us * gf * sum_{i in mask} L_i
+//   sensor  = the truth's sensor with system gain K * gf (the gain amplifies
+//             electrons: the electron count, hence the shot noise in
+//             electrons, does not depend on the gain), exposure_us (dark
+//             current) and noise_seed = the next frame seed
+//   DN      = model_sensor_apply_patterns (fixed patterns made once for the
+//             whole sensor), cropped to the region, then mapped to the pixel
+//             format from the sensor's `bits` b: Mono8 v >> (b - 8), Mono12
+//             v << (12 - b) or >> (b - 12), Mono16 v << (16 - b) (12-bit values
+//             << 4 in Mono16, >> 4 in Mono8).
+// The expected frame (rig_virtual_expected) is the same chain with
+// model_sensor_mean instead of the noisy sensor (a right shift becomes a
+// division by 2^s minus (2^s - 1) / 2^(s+1), the mean of the floor).
+// While the stage moves, a frame shows the angle at the trigger (no motion blur).
+#define _GNU_SOURCE
+#include <limits.h>
+#include <math.h>
+#include <pthread.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+
+#include <mrcal/mrcal.h>
+
+#include "model/model.h"
+#include "rig/gv_camera.h"
+#include "rig/rig.h"
+
+#define NPLANES  12   // cached radiance images (5 MB each at 1280x1024)
+#define NTRACERS 3    // cached (sample, angle) tracers
+
+// An albedo texture of a material (simulator only: the fitter's model has
+// none): R at the first hit is multiplied by 1 + amplitude * n(u, v), n a
+// smooth value noise in [-1, 1] (three octaves, quintic interpolation) of the
+// hit point's coordinates in its face's own frame (origin at the face's first
+// vertex, u along its first edge, v = normal x u; scaled by 1/scale_mm), seeded
+// by the seed and the face number: it moves with the sample.
+typedef struct {
+    char     material[64];
+    double   amplitude, scale_mm;
+    uint64_t seed;
+} texture_t;
+
+typedef struct {
+    char   name[64];
+    char   kind[32];
+    char  *scene_path;
+    int    line;
+    model_scene_t *scene;
+    const model_material_t **mats;    // scene->nmaterials
+    const texture_t **tex;            // scene->nmaterials, NULL = untextured
+    bool   textured;
+} sample_t;
+
+typedef struct {
+    float   *L;        // W*H radiance (kc 1, Pa 0); NULL = empty slot
+    int      sample, lamp;
+    double   angle_deg;
+    uint64_t used;
+} plane_t;
+
+typedef struct {
+    model_tracer_t *t;
+    model_scene_t  *rot;      // the rotated scene
+    float          *tex;      // W*H texture factors (textured samples; NULL until made)
+    int      sample;
+    double   angle_deg;
+    uint64_t used;
+} tracer_slot_t;
+
+struct rig_virtual {
+    char   *truth_path;
+    char    address[64];
+    model_camera_t    *cam;
+    char   *cam_path;
+    int     W, H;
+    double  kc_per_us;
+    model_sensor_t     sensor;
+    float  *prnu, *dsnu;              // fixed patterns of the whole sensor
+    model_shading_t    shading;
+    int     direct_samples;           // mc: finite-lamp samples of the direct light, full resolution
+    int     ds;                       // mc: the indirect light is rendered at 1/ds resolution (1: full)
+    model_camera_t    *cam_lr;        // that camera (NULL when ds = 1)
+    int     Wl, Hl;
+    int32_t *face, *face_lr;          // scratch of the renders (cache_lock)
+    float   *A_lr, *B_lr;
+    model_lamps_t     *lamps;
+    model_materials_t *mats;
+    texture_t         *textures;
+    int                ntextures;
+    sample_t *samples;
+    int       nsamples;
+
+    // state_lock guards: cur_sample, the inner turntable, next_seed.
+    pthread_mutex_t state_lock;
+    int       cur_sample;
+    uint64_t  next_seed;
+    double    last_angle_deg;         // the stage's last known angle (a disconnected stage keeps it)
+    bool      stage_gone;             // the stage disconnected: the camera and pre-render stop asking it
+    rig_turntable_t *tt_sim;          // the simulated stage
+    rig_turntable_t  tt;              // what users get: tt_sim behind state_lock
+    rig_lamps_t     *lamps_dev;
+
+    // cache_lock guards the caches and the frame buffer (held while rendering).
+    pthread_mutex_t cache_lock;
+    plane_t       planes[NPLANES];
+    tracer_slot_t tracers[NTRACERS];
+    uint64_t      tick;
+    float        *frame;              // W*H work image
+
+    rig_gv_camera_t *gv;
+
+    // Pre-rendering: a thread that renders the planes of the current state
+    // as soon as the stage stands still and the lamps are switched (before
+    // their warm-up ends), and with prerender = 2 then those of the other
+    // lamps (a lamp switch then finds its plane ready, but a trigger that
+    // comes at once may wait for a speculative rendering).
+    int       prerender;              // 0 off, 1 the lamps that are on, 2 all lamps
+    pthread_t pre_thread;
+    bool      pre_running;
+    int       pre_stop;               // atomic
+    int       waiting;                // atomic: frames waiting for cache_lock
+};
+
+rig_virtual_options_t rig_virtual_defaults(void)
+{
+    return (rig_virtual_options_t){
+        .address = "127.0.0.1",
+        .sample = NULL,
+        .time_scale = 1,
+        .noise_seed = 1,
+        .busy_wait_s = 0,
+    };
+}
+
+// ---------------------------------------------------------------------------
+// The turntable seen by users: the simulated stage behind state_lock, so the
+// render thread can read its angle at any time. wait polls the status (every
+// millisecond) instead of sleeping inside the stage with the lock held.
+
+static rig_virtual_t *TV(rig_turntable_t *t) { return t->impl; }
+
+static int vt_info(rig_turntable_t *t, rig_turntable_info_t *out)
+{
+    rig_virtual_t *v = TV(t);
+    pthread_mutex_lock(&v->state_lock);
+    int r = rig_turntable_info(v->tt_sim, out);
+    pthread_mutex_unlock(&v->state_lock);
+    return r;
+}
+
+static int vt_status(rig_turntable_t *t, rig_turntable_status_t *out)
+{
+    rig_virtual_t *v = TV(t);
+    pthread_mutex_lock(&v->state_lock);
+    int r = rig_turntable_status(v->tt_sim, out);
+    pthread_mutex_unlock(&v->state_lock);
+    return r;
+}
+
+static int vt_start_home(rig_turntable_t *t)
+{
+    rig_virtual_t *v = TV(t);
+    pthread_mutex_lock(&v->state_lock);
+    int r = v->tt_sim->ops->start_home(v->tt_sim);
+    pthread_mutex_unlock(&v->state_lock);
+    return r;
+}
+
+static int vt_start_move_abs(rig_turntable_t *t, double angle_deg)
+{
+    rig_virtual_t *v = TV(t);
+    pthread_mutex_lock(&v->state_lock);
+    int r = rig_turntable_start_move_abs_deg(v->tt_sim, angle_deg);
+    pthread_mutex_unlock(&v->state_lock);
+    return r;
+}
+
+static void sleep_s(double s)
+{
+    struct timespec ts = { (time_t)s, (long)((s - floor(s)) * 1e9) };
+    nanosleep(&ts, NULL);
+}
+
+static int vt_wait(rig_turntable_t *t, double timeout_s)
+{
+    rig_virtual_t *v = TV(t);
+    double deadline = model_now_s() + timeout_s;
+    for (;;) {
+        rig_turntable_status_t st;
+        int r = vt_status(t, &st);
+        if (r) return r;
+        if (!st.moving) {
+            if (st.motion_error)
+                return rig_fail(RIG_ERR_MOTION, "%s: motion error at %.3f deg (simulated fault): the stage "
+                                "stalled or lost position; check for obstructions, then home it again",
+                                t->name, st.angle_deg);
+            return 0;
+        }
+        double left = deadline - model_now_s();
+        if (left <= 0)
+            return rig_fail(RIG_ERR_TIMEOUT, "%s: %s did not finish within %.2f s (at %.3f deg): give it more "
+                            "time, or check that nothing blocks the stage; it may still be moving "
+                            "(rig_turntable_stop halts it)", t->name, st.homing ? "homing" : "the move",
+                            timeout_s, st.angle_deg);
+        sleep_s(fmin(left, 1e-3));
+    }
+    (void)v;
+}
+
+static int vt_stop(rig_turntable_t *t, bool immediate)
+{
+    rig_virtual_t *v = TV(t);
+    pthread_mutex_lock(&v->state_lock);
+    int r = rig_turntable_stop(v->tt_sim, immediate);
+    pthread_mutex_unlock(&v->state_lock);
+    return r;
+}
+
+static void vt_close(rig_turntable_t *t) { (void)t; }   // owned by the virtual rig
+
+static const rig_turntable_ops_t virtual_tt_ops = {
+    .backend = "sim",
+    .info = vt_info,
+    .status = vt_status,
+    .start_home = vt_start_home,
+    .start_move_abs_deg = vt_start_move_abs,
+    .start_move_rel_deg = NULL,
+    .wait = vt_wait,
+    .stop = vt_stop,
+    .close = vt_close,
+};
+
+// ---------------------------------------------------------------------------
+// Rendering
+
+static void slot_free(tracer_slot_t *s)
+{
+    model_tracer_free(s->t);
+    model_scene_free(s->rot);
+    free(s->tex);
+    memset(s, 0, sizeof *s);
+}
+
+// The cached tracer of (sample, angle); cache_lock held. NULL on error.
+static tracer_slot_t *tracer_for(rig_virtual_t *v, int sample, double angle_deg)
+{
+    tracer_slot_t *lru = &v->tracers[0];
+    for (int i = 0; i < NTRACERS; i++) {
+        tracer_slot_t *s = &v->tracers[i];
+        if (s->t && s->sample == sample && s->angle_deg == angle_deg) {
+            s->used = ++v->tick;
+            return s;
+        }
+        if (!s->t || (lru->t && s->used < lru->used)) lru = s;
+    }
+    model_scene_t *rot = model_scene_rotated_z(v->samples[sample].scene, angle_deg);
+    if (!rot) return NULL;
+    model_tracer_t *t = model_tracer_new(rot);
+    if (!t) {
+        model_scene_free(rot);
+        return NULL;
+    }
+    slot_free(lru);
+    *lru = (tracer_slot_t){ .t = t, .rot = rot, .tex = NULL, .sample = sample, .angle_deg = angle_deg,
+                            .used = ++v->tick };
+    return lru;
+}
+
+// ---------------------------------------------------------------------------
+// Texture
+
+static inline uint64_t mix64(uint64_t x)
+{
+    x += 0x9e3779b97f4a7c15ULL;
+    x = (x ^ (x >> 30)) * 0xbf58476d1ce4e5b9ULL;
+    x = (x ^ (x >> 27)) * 0x94d049bb133111ebULL;
+    return x ^ (x >> 31);
+}
+
+// Lattice value in [-1, 1).
+static inline double lattice(uint64_t seed, int64_t ix, int64_t iy)
+{
+    uint64_t h = mix64(seed ^ ((uint64_t)ix * 0x632be59bd9b4e019ULL) ^ ((uint64_t)iy * 0xd1b54a32d192ed03ULL));
+    return (double)(h >> 11) * 0x1.0p-52 - 1.0;
+}
+
+static inline double quintic(double t) { return t * t * t * (t * (6 * t - 15) + 10); }
+
+static double value_noise(uint64_t seed, double u, double w)
+{
+    double fu = floor(u), fw = floor(w);
+    int64_t iu = (int64_t)fu, iw = (int64_t)fw;
+    double su = quintic(u - fu), sw = quintic(w - fw);
+    double a = lattice(seed, iu, iw), b = lattice(seed, iu + 1, iw);
+    double c = lattice(seed, iu, iw + 1), d = lattice(seed, iu + 1, iw + 1);
+    return (a + su * (b - a)) + sw * ((c + su * (d - c)) - (a + su * (b - a)));
+}
+
+// The texture's noise n(u, w) in [-1, 1] (u, w in mm in the face's frame).
+static double texture_noise(const texture_t *tx, int face_number, double u, double w)
+{
+    double sum = 0, amp = 1, f = 1.0 / tx->scale_mm;
+    uint64_t seed = mix64(tx->seed ^ mix64((uint64_t)face_number));
+    for (int o = 0; o < 3; o++) {
+        sum += amp * value_noise(seed + (uint64_t)o, u * f, w * f);
+        amp *= 0.5;
+        f *= 2;
+    }
+    return sum / 1.75;
+}
+
+typedef struct {
+    rig_virtual_t       *v;
+    const tracer_slot_t *slot;
+    const int32_t       *face;
+    const model_vec3_t  *rays;
+    model_vec3_t         c;
+} tex_job_t;
+
+static void texture_rows(void *ctx, int begin, int end, int thread)
+{
+    const tex_job_t *J = ctx;
+    const rig_virtual_t *v = J->v;
+    const sample_t *sm = &v->samples[J->slot->sample];
+    const model_scene_t *sc = J->slot->rot;
+    const model_vec3_t c = J->c;
+    for (size_t i = (size_t)begin * v->W; i < (size_t)end * v->W; i++) {
+        float *out = &J->slot->tex[i];
+        *out = 1.0f;
+        int f = J->face[i];
+        if (f < 0 || f >= sc->nfaces) continue;
+        const model_face_t *F = &sc->faces[f];
+        const texture_t *tx = sm->tex[F->material];
+        if (!tx || F->nverts < 2) continue;
+        model_vec3_t nn = F->normal, d = J->rays[i];
+        double den = nn.x * d.x + nn.y * d.y + nn.z * d.z;
+        if (den == 0) continue;
+        double t = (F->offset_mm - (nn.x * c.x + nn.y * c.y + nn.z * c.z)) / den;
+        model_vec3_t p = { c.x + t * d.x, c.y + t * d.y, c.z + t * d.z };
+        model_vec3_t v0 = sc->vertices[F->verts[0]], v1 = sc->vertices[F->verts[1]];
+        model_vec3_t e1 = { v1.x - v0.x, v1.y - v0.y, v1.z - v0.z };
+        double l1 = sqrt(e1.x * e1.x + e1.y * e1.y + e1.z * e1.z);
+        if (!(l1 > 0)) continue;
+        e1 = (model_vec3_t){ e1.x / l1, e1.y / l1, e1.z / l1 };
+        model_vec3_t e2 = { nn.y * e1.z - nn.z * e1.y, nn.z * e1.x - nn.x * e1.z, nn.x * e1.y - nn.y * e1.x };
+        model_vec3_t q = { p.x - v0.x, p.y - v0.y, p.z - v0.z };
+        double u = q.x * e1.x + q.y * e1.y + q.z * e1.z, w = q.x * e2.x + q.y * e2.y + q.z * e2.z;
+        *out = (float)(1.0 + tx->amplitude * texture_noise(tx, F->number, u, w));
+    }
+}
+
+// The texture factors of a slot's view from the full-resolution face ids.
+static bool make_texture(rig_virtual_t *v, tracer_slot_t *slot, const int32_t *face)
+{
+    size_t n = (size_t)v->W * v->H;
+    slot->tex = malloc(n * sizeof *slot->tex);
+    if (!slot->tex) {
+        model_error(v->truth_path, 0, "out of memory for a texture image");
+        return false;
+    }
+    const model_vec3_t *rays = model_camera_ray_table(v->cam, NULL);
+    if (!rays) {
+        free(slot->tex);
+        slot->tex = NULL;
+        return false;
+    }
+    tex_job_t J = { v, slot, face, rays, model_camera_centre_world(v->cam) };
+    model_parallel_for(v->H, 16, model_default_threads(), texture_rows, &J);
+    return true;
+}
+
+// Add the low-resolution indirect term (A_lr - B_lr) to L, bilinearly from the
+// neighbours that see the pixel's face (the nearest such one in a 3x3 window
+// when none of the four does; nothing when none at all).
+typedef struct {
+    const rig_virtual_t *v;
+    float               *L;
+} ind_job_t;
+
+static void indirect_rows(void *ctx, int begin, int end, int thread)
+{
+    const ind_job_t *J = ctx;
+    const rig_virtual_t *v = J->v;
+    float *L = J->L;
+    const int f = v->ds, Wl = v->Wl, Hl = v->Hl;
+    for (int y = begin; y < end; y++) {
+        double fy = (y + 0.5) / f - 0.5;
+        int y0 = (int)floor(fy);
+        double wy = fy - y0;
+        for (int x = 0; x < v->W; x++) {
+            size_t i = (size_t)y * v->W + x;
+            int32_t face = v->face[i];
+            if (face < 0) continue;
+            double fx = (x + 0.5) / f - 0.5;
+            int x0 = (int)floor(fx);
+            double wx = fx - x0;
+            double sum = 0, wsum = 0;
+            for (int k = 0; k < 4; k++) {
+                int xx = x0 + (k & 1), yy = y0 + (k >> 1);
+                if (xx < 0 || yy < 0 || xx >= Wl || yy >= Hl) continue;
+                size_t j = (size_t)yy * Wl + xx;
+                if (v->face_lr[j] != face) continue;
+                double w = ((k & 1) ? wx : 1 - wx) * ((k >> 1) ? wy : 1 - wy) + 1e-9;
+                sum += w * (v->A_lr[j] - v->B_lr[j]);
+                wsum += w;
+            }
+            if (wsum == 0) {
+                double best = INFINITY;
+                for (int yy = y0 - 1; yy <= y0 + 2; yy++)
+                    for (int xx = x0 - 1; xx <= x0 + 2; xx++) {
+                        if (xx < 0 || yy < 0 || xx >= Wl || yy >= Hl) continue;
+                        size_t j = (size_t)yy * Wl + xx;
+                        double d2 = (xx - fx) * (xx - fx) + (yy - fy) * (yy - fy);
+                        if (v->face_lr[j] == face && d2 < best) {
+                            best = d2;
+                            sum = v->A_lr[j] - v->B_lr[j];
+                            wsum = 1;
+                        }
+                    }
+            }
+            if (wsum > 0) L[i] += (float)(sum / wsum);
+        }
+    }
+}
+
+// Render the radiance image of lamp `lamp` alone into L (cache_lock held).
+
+static void add_indirect(rig_virtual_t *v, float *L)
+{
+    ind_job_t J = { v, L };
+    model_parallel_for(v->H, 16, model_default_threads(), indirect_rows, &J);
+}
+
+static bool render_layers(rig_virtual_t *v, model_tracer_t *t, int sample, int lamp, float *L);
+
+static bool render_lamp(rig_virtual_t *v, tracer_slot_t *slot, int sample, int lamp, float *L)
+{
+    if (!render_layers(v, slot->t, sample, lamp, L)) return false;
+    if (!v->samples[sample].textured) return true;
+    if (!slot->tex && !make_texture(v, slot, v->face)) return false;
+    for (size_t i = 0; i < (size_t)v->W * v->H; i++) L[i] *= slot->tex[i];
+    return true;
+}
+
+// The layers of a rendering (direct, indirect), untextured, and the face ids
+// into v->face.
+static bool render_layers(rig_virtual_t *v, model_tracer_t *t, int sample, int lamp, float *L)
+{
+    model_lamps_t one = *v->lamps;
+    one.n = 1;
+    one.lamps = &v->lamps->lamps[lamp];
+    const model_material_t *const *mats = v->samples[sample].mats;
+    model_shading_t sh = v->shading;
+    sh.kc = 1;
+    sh.Pa = 0;
+    sh.gain_map = NULL;
+    sh.seed = v->shading.seed + 0x9e3779b97f4a7c15ULL * (uint64_t)(lamp + 1);
+    if (sh.interreflection != MODEL_INTERREFLECTION_MC || v->ds <= 1)
+        return model_render(t, v->cam, &one, mats, &sh, L, v->face, NULL);
+    model_shading_t direct = sh;
+    direct.mc_bounces = 0;
+    direct.mc_samples = v->direct_samples;
+    if (!model_render(t, v->cam, &one, mats, &direct, L, v->face, NULL)) return false;
+    if (sh.mc_bounces == 0) return true;
+    model_shading_t ind = sh, base = sh;
+    ind.finite_lamps = false;   // then MC's direct term at the first hit is the point lamps' (exact)
+    base.interreflection = MODEL_INTERREFLECTION_NONE;
+    if (!model_render(t, v->cam_lr, &one, mats, &ind, v->A_lr, NULL, NULL) ||
+        !model_render(t, v->cam_lr, &one, mats, &base, v->B_lr, v->face_lr, NULL))
+        return false;
+    add_indirect(v, L);
+    return true;
+}
+
+// The radiance image of one lamp; cache_lock held. NULL on error.
+static const float *plane_for(rig_virtual_t *v, int sample, double angle_deg, int lamp)
+{
+    plane_t *lru = &v->planes[0];
+    for (int i = 0; i < NPLANES; i++) {
+        plane_t *p = &v->planes[i];
+        if (p->L && p->sample == sample && p->lamp == lamp && p->angle_deg == angle_deg) {
+            p->used = ++v->tick;
+            return p->L;
+        }
+        if (!p->L || (lru->L && p->used < lru->used)) lru = p;
+    }
+    tracer_slot_t *slot = tracer_for(v, sample, angle_deg);
+    if (!slot) return NULL;
+    if (!lru->L) lru->L = malloc((size_t)v->W * v->H * sizeof(float));
+    if (!lru->L) {
+        model_error(v->truth_path, 0, "out of memory for a %dx%d rendering", v->W, v->H);
+        return NULL;
+    }
+    if (!render_lamp(v, slot, sample, lamp, lru->L)) {
+        free(lru->L);
+        lru->L = NULL;
+        return NULL;
+    }
+    lru->sample = sample;
+    lru->lamp = lamp;
+    lru->angle_deg = angle_deg;
+    lru->used = ++v->tick;
+    return lru->L;
+}
+
+static int format_bits(const char *pf)
+{
+    if (!pf) return 0;
+    if (!strcmp(pf, "Mono8")) return 8;
+    if (!strcmp(pf, "Mono12")) return 12;
+    if (!strcmp(pf, "Mono16")) return 16;
+    return 0;
+}
+
+// The ideal grey value P of the whole sensor into v->frame and the sensor of
+// that frame; cache_lock held.
+static int ideal_frame(rig_virtual_t *v, int sample, double angle_deg, uint32_t mask, double exposure_us,
+                       double gain_db, model_sensor_t *s_out)
+{
+    size_t n = (size_t)v->W * v->H;
+    double gf = pow(10.0, gain_db / 20.0);
+    double kc = v->kc_per_us * exposure_us * gf;
+    const double Pa = v->sensor.dark_offset_dn;
+    for (size_t i = 0; i < n; i++) v->frame[i] = (float)Pa;
+    for (int l = 0; l < v->lamps->n; l++) {
+        if (!((mask >> l) & 1)) continue;
+        const float *L = plane_for(v, sample, angle_deg, l);
+        if (!L) return rig_fail(RIG_ERR_IO, "virtual rig: rendering %s at %.4f deg with lamp %s failed: %s",
+                                v->samples[sample].name, angle_deg, v->lamps->lamps[l].name, model_last_error());
+        for (size_t i = 0; i < n; i++) v->frame[i] += (float)(kc * L[i]);
+    }
+    *s_out = v->sensor;
+    s_out->system_gain_dn_per_e *= gf;
+    s_out->exposure_us = exposure_us;
+    return 0;
+}
+
+// Value of a `bits`-bit sample in pixel format fb.
+static double to_format(double x, int bits, int fb, bool mean)
+{
+    if (fb >= bits) return ldexp(x, fb - bits);
+    int s = bits - fb;
+    if (!mean) return floor(ldexp(x, -s));
+    return ldexp(x, -s) - ldexp((double)((1 << s) - 1), -(s + 1));
+}
+
+// Is the plane cached? (cache_lock held)
+static bool plane_cached(const rig_virtual_t *v, int sample, double angle_deg, int lamp)
+{
+    for (int i = 0; i < NPLANES; i++) {
+        const plane_t *p = &v->planes[i];
+        if (p->L && p->sample == sample && p->lamp == lamp && p->angle_deg == angle_deg) return true;
+    }
+    return false;
+}
+
+static void *prerender_main(void *arg)
+{
+    rig_virtual_t *v = arg;
+    while (!__atomic_load_n(&v->pre_stop, __ATOMIC_ACQUIRE)) {
+        rig_turntable_status_t st;
+        pthread_mutex_lock(&v->state_lock);
+        int r = v->stage_gone ? RIG_ERR_DISCONNECTED : rig_turntable_status(v->tt_sim, &st);
+        if (r) v->stage_gone = true;
+        int sample = v->cur_sample;
+        pthread_mutex_unlock(&v->state_lock);
+        uint32_t mask = __atomic_load_n(&v->lamps_dev->on_mask, __ATOMIC_ACQUIRE);
+        int todo = -1;
+        if (!r && !st.moving && st.homed) {
+            pthread_mutex_lock(&v->cache_lock);
+            // lamps that are on first; the others only while no frame waits
+            for (int pass = 0; pass < 2 && todo < 0; pass++)
+                for (int l = 0; l < v->lamps->n && todo < 0; l++) {
+                    bool on = (mask >> l) & 1;
+                    if (on != (pass == 0)) continue;
+                    if (pass == 1 && (v->prerender < 2 || __atomic_load_n(&v->waiting, __ATOMIC_ACQUIRE) ||
+                                      v->lamps->n > NPLANES / 2))
+                        continue;
+                    if (!plane_cached(v, sample, st.angle_deg, l)) todo = l;
+                }
+            if (todo >= 0) plane_for(v, sample, st.angle_deg, todo);   // errors show at the trigger
+            pthread_mutex_unlock(&v->cache_lock);
+        }
+        if (todo < 0) sleep_s(2e-3);
+    }
+    return NULL;
+}
+
+static int render_cb(void *ctx, const rig_frame_meta_t *m, uint16_t *pix)
+{
+    rig_virtual_t *v = ctx;
+    rig_turntable_status_t st;
+    pthread_mutex_lock(&v->state_lock);
+    // A stage that disconnected leaves the sample where it was: the camera
+    // keeps seeing it at the last known angle.
+    if (!v->stage_gone) {
+        if (rig_turntable_status(v->tt_sim, &st) == 0) v->last_angle_deg = st.angle_deg;
+        else v->stage_gone = true;
+    }
+    st.angle_deg = v->last_angle_deg;
+    int sample = v->cur_sample;
+    uint64_t seed = v->next_seed++;
+    pthread_mutex_unlock(&v->state_lock);
+    uint32_t mask = __atomic_load_n(&v->lamps_dev->on_mask, __ATOMIC_ACQUIRE);
+    int fb = format_bits(m->pixel_format);
+    if (!fb || m->offset_x + m->width > v->W || m->offset_y + m->height > v->H)
+        return rig_fail(RIG_ERR_INVALID, "virtual rig: frame %s %dx%d at (%d,%d) does not fit the %dx%d sensor",
+                        m->pixel_format, m->width, m->height, m->offset_x, m->offset_y, v->W, v->H);
+    __atomic_add_fetch(&v->waiting, 1, __ATOMIC_ACQ_REL);
+    pthread_mutex_lock(&v->cache_lock);
+    __atomic_sub_fetch(&v->waiting, 1, __ATOMIC_ACQ_REL);
+    model_sensor_t s;
+    int r = ideal_frame(v, sample, st.angle_deg, mask, m->exposure_us, m->gain, &s);
+    if (!r) {
+        s.noise_seed = seed;
+        model_sensor_apply_patterns(&s, v->W, v->H, v->prnu, v->dsnu, v->frame);
+        // The sensor's values are integers in [0, 2^bits - 1]: shift them.
+        int up = fb >= s.bits ? fb - s.bits : 0, down = fb < s.bits ? s.bits - fb : 0;
+        for (int y = 0; y < m->height; y++) {
+            const float *row = v->frame + (size_t)(y + m->offset_y) * v->W + m->offset_x;
+            uint16_t *o = pix + (size_t)y * m->width;
+            for (int x = 0; x < m->width; x++) o[x] = (uint16_t)((((uint32_t)row[x]) >> down) << up);
+        }
+    }
+    pthread_mutex_unlock(&v->cache_lock);
+    return r;
+}
+
+int rig_virtual_expected(rig_virtual_t *v, double angle_deg, uint32_t lamp_mask, double exposure_us,
+                         double gain_db, const char *pixel_format, int width, int height, float *out)
+{
+    if (!v || !out) return rig_fail(RIG_ERR_INVALID, "virtual rig: expected frame: NULL argument");
+    int fb = format_bits(pixel_format);
+    if (!fb)
+        return rig_fail(RIG_ERR_INVALID, "virtual rig: pixel format '%s' is not Mono8, Mono12 or Mono16",
+                        pixel_format ? pixel_format : "(null)");
+    if (width < 1 || height < 1 || width > v->W || height > v->H)
+        return rig_fail(RIG_ERR_INVALID, "virtual rig: expected frame %dx%d does not fit the %dx%d sensor "
+                        "(the region starts at the top-left pixel)", width, height, v->W, v->H);
+    if (!(isfinite(angle_deg) && fabs(angle_deg) <= 1e4))
+        return rig_fail(RIG_ERR_INVALID, "virtual rig: angle %g deg is not within +-10000 deg", angle_deg);
+    if (!(isfinite(exposure_us) && exposure_us > 0) || !(isfinite(gain_db) && gain_db >= 0))
+        return rig_fail(RIG_ERR_INVALID, "virtual rig: exposure %g us must be > 0 and gain %g dB >= 0",
+                        exposure_us, gain_db);
+    if (v->lamps->n < 32 && (lamp_mask >> v->lamps->n))
+        return rig_fail(RIG_ERR_INVALID, "virtual rig: lamp mask 0x%x names lamps beyond the %d of the truth file",
+                        lamp_mask, v->lamps->n);
+    pthread_mutex_lock(&v->state_lock);
+    int sample = v->cur_sample;
+    pthread_mutex_unlock(&v->state_lock);
+    pthread_mutex_lock(&v->cache_lock);
+    model_sensor_t s;
+    int r = ideal_frame(v, sample, angle_deg, lamp_mask, exposure_us, gain_db, &s);
+    if (!r) {
+        model_sensor_mean(&s, v->W, v->H, v->prnu, v->dsnu, v->frame);
+        for (int y = 0; y < height; y++)
+            for (int x = 0; x < width; x++)
+                out[(size_t)y * width + x] = (float)to_format(v->frame[(size_t)y * v->W + x], s.bits, fb, true);
+    }
+    pthread_mutex_unlock(&v->cache_lock);
+    return r;
+}
+
+// ---------------------------------------------------------------------------
+// The truth file
+
+typedef struct {
+    const char *section;   // section kind ("lamp" for "[lamp NAME]")
+    const char *keys[16];
+} allowed_t;
+
+static const allowed_t allowed[] = {
+    { "virtual", { "sample", "lamp_warmup_ms", "lamp_settle_ms" } },
+    { "camera", { "model", "model_sha256", "kc_per_us", "serial", "vendor", "model_name", "temperature_c" } },
+    { "render", { "interreflection", "mc_samples", "mc_bounces", "thesis_samples", "thesis_cone_deg", "rho_sr",
+                  "finite_lamps", "seed", "direct_samples", "indirect_downsample", "prerender" } },
+    { "turntable", { "speed_deg_s", "accel_deg_s2", "home_time_s", "position_noise_deg", "seed",
+                     "fault_after_moves", "fault" } },
+    { "sample", { "kind", "scene", "square_mm", "corners", "corner0_mm", "material" } },
+    { "texture", { "amplitude", "scale_mm", "seed" } },
+    { "sensor", { NULL } },     // checked by model_sensor_from_ini
+    { "lamp", { NULL } },       // model_lamps_from_ini
+    { "material", { NULL } },   // model_materials_from_ini
+};
+
+static void section_kind(const char *sec, char kind[32], const char **name)
+{
+    const char *sp = strchr(sec, ' ');
+    size_t n = sp ? (size_t)(sp - sec) : strlen(sec);
+    if (n > 31) n = 31;
+    memcpy(kind, sec, n);
+    kind[n] = 0;
+    *name = sp ? sp + 1 : "";
+}
+
+static const allowed_t *find_allowed(const char *kind)
+{
+    for (size_t i = 0; i < sizeof allowed / sizeof allowed[0]; i++)
+        if (!strcmp(allowed[i].section, kind)) return &allowed[i];
+    return NULL;
+}
+
+static bool check_sections(const model_ini_t *ini)
+{
+    for (int s = 0; s < ini->nsections; s++) {
+        char kind[32];
+        const char *name;
+        section_kind(ini->sections[s], kind, &name);
+        const allowed_t *a = find_allowed(kind);
+        bool named = !strcmp(kind, "lamp") || !strcmp(kind, "material") || !strcmp(kind, "sample") ||
+                     !strcmp(kind, "texture");
+        if (!a) {
+            model_error(ini->path, ini->section_lines[s], "unknown section [%s]; a truth file has [virtual], "
+                        "[camera], [render], [sensor], [turntable], [lamp NAME], [material NAME], "
+                        "[texture MATERIAL] and [sample NAME]", ini->sections[s]);
+            return false;
+        }
+        if (named != (*name != 0)) {
+            model_error(ini->path, ini->section_lines[s], named ? "[%s] needs a name: write [%s NAME]"
+                        : "[%s] takes no name: write [%s]", ini->sections[s], kind);
+            return false;
+        }
+    }
+    for (int k = 0; k < ini->nentries; k++) {
+        const model_ini_entry_t *e = &ini->entries[k];
+        char kind[32];
+        const char *name;
+        section_kind(e->section, kind, &name);
+        const allowed_t *a = find_allowed(kind);
+        if (!a->keys[0]) continue;
+        bool ok = false;
+        char list[512] = "";
+        size_t len = 0;
+        for (int i = 0; i < 16 && a->keys[i]; i++) {
+            if (!strcmp(a->keys[i], e->key)) ok = true;
+            len += snprintf(list + len, sizeof list - len, "%s%s", i ? ", " : "", a->keys[i]);
+            if (len >= sizeof list) len = sizeof list - 1;
+        }
+        if (!ok) {
+            model_error(ini->path, e->line, "unknown key '%s' in [%s]; valid keys: %s", e->key, e->section, list);
+            return false;
+        }
+    }
+    return true;
+}
+
+static int ini_line(const model_ini_t *ini, const char *sec, const char *key)
+{
+    const model_ini_entry_t *e = model_ini_get(ini, sec, key);
+    if (e) return e->line;
+    for (int s = 0; s < ini->nsections; s++)
+        if (!strcmp(ini->sections[s], sec)) return ini->section_lines[s];
+    return 0;
+}
+
+static bool get_double(const model_ini_t *ini, const char *sec, const char *key, double lo, double hi,
+                       bool required, double *out)
+{
+    const model_ini_entry_t *e = model_ini_get(ini, sec, key);
+    if (!e) {
+        if (required)
+            model_error(ini->path, ini_line(ini, sec, key), "[%s] lacks '%s'; add it (see examples/virtual-truth.ini)",
+                        sec, key);
+        return !required;
+    }
+    double d;
+    if (!model_parse_double(e->value, &d)) {
+        model_error(ini->path, e->line, "%s = '%s' is not a number", key, e->value);
+        return false;
+    }
+    if (!(d >= lo && d <= hi)) {
+        model_error(ini->path, e->line, "%s = %g is out of range: must be in [%g, %g]", key, d, lo, hi);
+        return false;
+    }
+    *out = d;
+    return true;
+}
+
+static bool get_int(const model_ini_t *ini, const char *sec, const char *key, long lo, long hi, long *out)
+{
+    const model_ini_entry_t *e = model_ini_get(ini, sec, key);
+    if (!e) return true;
+    long d;
+    if (!model_parse_int(e->value, &d) || d < lo || d > hi) {
+        model_error(ini->path, e->line, "%s = '%s': must be an integer in [%ld, %ld]", key, e->value, lo, hi);
+        return false;
+    }
+    *out = d;
+    return true;
+}
+
+static const char *get_str(const model_ini_t *ini, const char *sec, const char *key, const char *def)
+{
+    const model_ini_entry_t *e = model_ini_get(ini, sec, key);
+    return e ? e->value : def;
+}
+
+
+// A path relative to the truth file's directory (malloc'ed).
+static char *rel_path(const char *truth, const char *p)
+{
+    char *out = NULL;
+    if (p[0] == '/') return strdup(p);
+    const char *slash = strrchr(truth, '/');
+    int dir = slash ? (int)(slash - truth) : 0;
+    if (asprintf(&out, "%.*s%s%s", dir, truth, slash ? "/" : "", p) < 0) return NULL;
+    return out;
+}
+
+static bool parse_textures(rig_virtual_t *v, const model_ini_t *ini)
+{
+    int n = 0;
+    for (int s = 0; s < ini->nsections; s++)
+        if (!strncmp(ini->sections[s], "texture ", 8)) n++;
+    if (n == 0) return true;
+    v->textures = calloc(n, sizeof *v->textures);
+    if (!v->textures) return false;
+    for (int s = 0; s < ini->nsections; s++) {
+        const char *sec = ini->sections[s];
+        if (strncmp(sec, "texture ", 8)) continue;
+        texture_t *tx = &v->textures[v->ntextures++];
+        const char *mat = sec + 8;
+        if (!model_materials_find(v->mats, mat)) {
+            model_error(ini->path, ini->section_lines[s], "[texture %s]: there is no [material %s]; a texture "
+                        "section is named after the material it textures", mat, mat);
+            return false;
+        }
+        snprintf(tx->material, sizeof tx->material, "%s", mat);
+        tx->amplitude = NAN;
+        tx->scale_mm = NAN;
+        if (!get_double(ini, sec, "amplitude", 0, 0.5, true, &tx->amplitude) ||
+            !get_double(ini, sec, "scale_mm", 1e-3, 1e6, true, &tx->scale_mm))
+            return false;
+        long seed = 1;
+        if (!get_int(ini, sec, "seed", 0, LONG_MAX, &seed)) return false;
+        tx->seed = (uint64_t)seed;
+    }
+    return true;
+}
+
+static const char *sample_kinds[] = { "workpiece", "chessboard", "reference_white", "material_coupon",
+                                      "mirror_sphere" };
+
+static bool parse_samples(rig_virtual_t *v, const model_ini_t *ini)
+{
+    int n = 0;
+    for (int s = 0; s < ini->nsections; s++)
+        if (!strncmp(ini->sections[s], "sample ", 7)) n++;
+    if (n == 0) {
+        model_error(ini->path, 0, "no [sample NAME] sections; add at least one (the workpiece on the table)");
+        return false;
+    }
+    v->samples = calloc(n, sizeof *v->samples);
+    if (!v->samples) return false;
+    for (int s = 0; s < ini->nsections; s++) {
+        const char *sec = ini->sections[s];
+        if (strncmp(sec, "sample ", 7)) continue;
+        sample_t *sm = &v->samples[v->nsamples++];
+        sm->line = ini->section_lines[s];
+        if (strlen(sec + 7) >= sizeof sm->name) {
+            model_error(ini->path, sm->line, "sample name '%s' is too long (limit %zu)", sec + 7, sizeof sm->name - 1);
+            return false;
+        }
+        strcpy(sm->name, sec + 7);
+        const char *kind = get_str(ini, sec, "kind", NULL), *scene = get_str(ini, sec, "scene", NULL);
+        if (!kind || !scene) {
+            model_error(ini->path, sm->line, "sample '%s' lacks '%s'; each sample needs kind and scene", sm->name,
+                        kind ? "scene" : "kind");
+            return false;
+        }
+        bool known = false;
+        for (size_t k = 0; k < sizeof sample_kinds / sizeof sample_kinds[0]; k++)
+            if (!strcmp(kind, sample_kinds[k])) known = true;
+        if (!known) {
+            model_error(ini->path, ini_line(ini, sec, "kind"), "sample '%s': kind = '%s' is unknown; use workpiece, "
+                        "chessboard, reference_white, material_coupon or mirror_sphere", sm->name, kind);
+            return false;
+        }
+        snprintf(sm->kind, sizeof sm->kind, "%s", kind);
+        bool chess = !strcmp(kind, "chessboard"), coupon = !strcmp(kind, "material_coupon") ||
+                                                          !strcmp(kind, "reference_white");
+        static const char *chess_keys[] = { "square_mm", "corners", "corner0_mm" };
+        for (int k = 0; k < 3; k++)
+            if (!chess && model_ini_get(ini, sec, chess_keys[k])) {
+                model_error(ini->path, ini_line(ini, sec, chess_keys[k]), "sample '%s': %s is a key of chessboards, "
+                            "not of kind %s", sm->name, chess_keys[k], kind);
+                return false;
+            }
+        if (chess) {
+            double sq;
+            if (!get_double(ini, sec, "square_mm", 1e-3, 1e4, true, &sq)) return false;
+            const char *c = get_str(ini, sec, "corners", NULL);
+            int cx, cy;
+            char extra;
+            if (!c || sscanf(c, "%d %d %c", &cx, &cy, &extra) != 2 || cx < 2 || cy < 2) {
+                model_error(ini->path, ini_line(ini, sec, "corners"), "sample '%s': corners = '%s': give the inner "
+                            "corners along x and y, two integers >= 2 (e.g. corners = 9 7)", sm->name, c ? c : "");
+                return false;
+            }
+        }
+        const char *mat = get_str(ini, sec, "material", NULL);
+        if (mat && !coupon) {
+            model_error(ini->path, ini_line(ini, sec, "material"), "sample '%s': material is a key of material "
+                        "coupons and reference whites, not of kind %s", sm->name, kind);
+            return false;
+        }
+        if (coupon && !mat) {
+            model_error(ini->path, sm->line, "sample '%s' (kind %s) lacks 'material': name its [material NAME]",
+                        sm->name, kind);
+            return false;
+        }
+        if (mat && !model_materials_find(v->mats, mat)) {
+            model_error(ini->path, ini_line(ini, sec, "material"), "sample '%s': material '%s' has no "
+                        "[material %s] section", sm->name, mat, mat);
+            return false;
+        }
+        sm->scene_path = rel_path(ini->path, scene);
+        if (!sm->scene_path) return false;
+        sm->scene = model_scene_load(sm->scene_path, NULL);
+        if (!sm->scene) {
+            char msg[1024];
+            snprintf(msg, sizeof msg, "%s", model_last_error());
+            model_error(ini->path, ini_line(ini, sec, "scene"), "sample '%s': scene %s: %s", sm->name,
+                        sm->scene_path, msg);
+            return false;
+        }
+        sm->mats = calloc(sm->scene->nmaterials ? sm->scene->nmaterials : 1, sizeof *sm->mats);
+        if (!sm->mats) return false;
+        if (!model_resolve_materials(sm->scene, v->mats, sm->mats)) {
+            char msg[1024];
+            snprintf(msg, sizeof msg, "%s", model_last_error());
+            model_error(ini->path, sm->line, "sample '%s': %s; add the material to the truth file", sm->name, msg);
+            return false;
+        }
+        sm->tex = calloc(sm->scene->nmaterials ? sm->scene->nmaterials : 1, sizeof *sm->tex);
+        if (!sm->tex) return false;
+        for (int k = 0; k < sm->scene->nmaterials; k++)
+            for (int j = 0; j < v->ntextures; j++)
+                if (!strcmp(v->textures[j].material, sm->scene->material_names[k]) && v->textures[j].amplitude > 0) {
+                    sm->tex[k] = &v->textures[j];
+                    sm->textured = true;
+                }
+        if (mat)
+            for (int k = 0; k < sm->scene->nmaterials; k++)
+                if (strcmp(sm->scene->material_names[k], mat)) {
+                    model_error(ini->path, ini_line(ini, sec, "material"), "sample '%s': material = %s, but its "
+                                "scene %s uses material '%s' too", sm->name, mat, sm->scene_path,
+                                sm->scene->material_names[k]);
+                    return false;
+                }
+    }
+    return true;
+}
+
+static int find_sample(const rig_virtual_t *v, const char *name)
+{
+    for (int i = 0; i < v->nsamples; i++)
+        if (!strcmp(v->samples[i].name, name)) return i;
+    return -1;
+}
+
+static void list_samples(const rig_virtual_t *v, char *buf, size_t size)
+{
+    size_t n = 0;
+    buf[0] = 0;
+    for (int i = 0; i < v->nsamples && n < size; i++)
+        n += snprintf(buf + n, size - n, "%s%s", i ? ", " : "", v->samples[i].name);
+}
+
+// Everything but the devices. false with a message naming file:line.
+static bool parse_truth(rig_virtual_t *v, const model_ini_t *ini, const char **default_sample,
+                        rig_turntable_sim_params_t *tp, double *warmup_ms, double *settle_ms,
+                        rig_gv_camera_params_t *gp)
+{
+    if (!check_sections(ini)) return false;
+    // camera
+    const char *cm = get_str(ini, "camera", "model", NULL);
+    if (!cm) {
+        model_error(ini->path, ini_line(ini, "camera", "model"), "[camera] lacks 'model': the path of the "
+                    "camera's .cameramodel (relative to this file)");
+        return false;
+    }
+    char *cpath = rel_path(ini->path, cm);
+    if (!cpath) return false;
+    char sha[65];
+    bool ok = model_sha256_file(cpath, sha);
+    if (ok) {
+        const char *want = get_str(ini, "camera", "model_sha256", NULL);
+        if (want && strcmp(want, sha)) {
+            model_error(ini->path, ini_line(ini, "camera", "model_sha256"), "camera model %s has sha256 %s, not "
+                        "the %s recorded here: the ground truth changed; record the new hash if that is intended",
+                        cpath, sha, want);
+            ok = false;
+        }
+    }
+    if (ok) v->cam = model_camera_load(cpath);
+    v->cam_path = cpath;
+    if (ok && !v->cam) {
+        char msg[1024];
+        snprintf(msg, sizeof msg, "%s", model_last_error());
+        model_error(ini->path, ini_line(ini, "camera", "model"), "camera model: %s", msg);
+        ok = false;
+    } else if (!ok && !strstr(model_last_error(), "sha256")) {
+        char msg[1024];
+        snprintf(msg, sizeof msg, "%s", model_last_error());
+        model_error(ini->path, ini_line(ini, "camera", "model"), "camera model: %s", msg);
+    }
+    if (!ok) return false;
+    v->W = model_camera_width(v->cam);
+    v->H = model_camera_height(v->cam);
+    if (v->W < 1 || v->H < 1 || v->W > 4096 || v->H > 4096) {
+        model_error(ini->path, ini_line(ini, "camera", "model"), "camera model of %dx%d pixels: the virtual "
+                    "camera serves 1..4096 x 1..4096", v->W, v->H);
+        return false;
+    }
+    if (!get_double(ini, "camera", "kc_per_us", 0, 1e6, true, &v->kc_per_us)) return false;
+    gp->serial = get_str(ini, "camera", "serial", gp->serial);
+    gp->vendor = get_str(ini, "camera", "vendor", gp->vendor);
+    gp->model = get_str(ini, "camera", "model_name", gp->model);
+    if (!get_double(ini, "camera", "temperature_c", -100, 200, false, &gp->temperature_c)) return false;
+    gp->sensor_width = v->W;
+    gp->sensor_height = v->H;
+    // render
+    v->shading = model_shading_default();
+    const char *ir = get_str(ini, "render", "interreflection", "thesis");
+    int m = model_interreflection_from_name(ir);
+    if (m < 0) {
+        model_error(ini->path, ini_line(ini, "render", "interreflection"), "interreflection = '%s' is unknown; "
+                    "use none, thesis or mc", ir);
+        return false;
+    }
+    v->shading.interreflection = m;
+    long li;
+    li = v->shading.mc_samples;
+    if (!get_int(ini, "render", "mc_samples", 1, 4096, &li)) return false;
+    v->shading.mc_samples = (int)li;
+    li = v->shading.mc_bounces;
+    if (!get_int(ini, "render", "mc_bounces", 0, 16, &li)) return false;
+    v->shading.mc_bounces = (int)li;
+    li = v->shading.thesis_samples;
+    if (!get_int(ini, "render", "thesis_samples", 1, 1024, &li)) return false;
+    v->shading.thesis_samples = (int)li;
+    li = v->shading.finite_lamps;
+    if (!get_int(ini, "render", "finite_lamps", 0, 1, &li)) return false;
+    v->shading.finite_lamps = li != 0;
+    li = 1;
+    if (!get_int(ini, "render", "direct_samples", 1, 4096, &li)) return false;
+    v->direct_samples = (int)li;
+    li = 1;
+    if (!get_int(ini, "render", "indirect_downsample", 1, 16, &li)) return false;
+    v->ds = (int)li;
+    li = 1;
+    if (!get_int(ini, "render", "prerender", 0, 2, &li)) return false;
+    v->prerender = (int)li;
+    li = 1;
+    if (!get_int(ini, "render", "seed", 0, LONG_MAX, &li)) return false;
+    v->shading.seed = (uint64_t)li;
+    if (!get_double(ini, "render", "thesis_cone_deg", 1e-3, 90, false, &v->shading.thesis_cone_deg) ||
+        !get_double(ini, "render", "rho_sr", 0, 4 * M_PI, false, &v->shading.rho))
+        return false;
+    // sensor, lamps, materials
+    if (!model_sensor_from_ini(ini, &v->sensor)) return false;
+    if (!(v->lamps = model_lamps_from_ini(ini))) return false;
+    if (v->lamps->n > 32) {
+        model_error(ini->path, v->lamps->lamps[32].line, "more than 32 lamps; the rig switches at most 32");
+        return false;
+    }
+    if (!(v->mats = model_materials_from_ini(ini))) return false;
+    // turntable
+    const char *tt = "turntable";
+    if (!get_double(ini, tt, "speed_deg_s", 1e-6, 1e4, false, &tp->speed_deg_s) ||
+        !get_double(ini, tt, "accel_deg_s2", 1e-6, 1e6, false, &tp->accel_deg_s2) ||
+        !get_double(ini, tt, "home_time_s", 0, 3600, false, &tp->home_time_s) ||
+        !get_double(ini, tt, "position_noise_deg", 0, 10, false, &tp->position_noise_deg))
+        return false;
+    li = (long)tp->seed;
+    if (!get_int(ini, tt, "seed", 0, LONG_MAX, &li)) return false;
+    tp->seed = (uint64_t)li;
+    li = 0;
+    if (!get_int(ini, tt, "fault_after_moves", 0, INT_MAX, &li)) return false;
+    tp->fault_after_moves = (int)li;
+    const char *f = get_str(ini, tt, "fault", NULL);
+    if (f) {
+        if (!strcmp(f, "motion")) tp->fault = RIG_ERR_MOTION;
+        else if (!strcmp(f, "stall")) tp->fault = RIG_ERR_TIMEOUT;
+        else if (!strcmp(f, "disconnect")) tp->fault = RIG_ERR_DISCONNECTED;
+        else {
+            model_error(ini->path, ini_line(ini, tt, "fault"), "fault = '%s' is unknown; use motion, stall or "
+                        "disconnect", f);
+            return false;
+        }
+    }
+    if ((tp->fault_after_moves > 0) != (f != NULL)) {
+        model_error(ini->path, ini_line(ini, tt, f ? "fault" : "fault_after_moves"), "fault injection needs both "
+                    "fault_after_moves (> 0) and fault");
+        return false;
+    }
+    // virtual
+    *warmup_ms = *settle_ms = 0;
+    if (!get_double(ini, "virtual", "lamp_warmup_ms", 0, 3.6e6, false, warmup_ms) ||
+        !get_double(ini, "virtual", "lamp_settle_ms", 0, 3.6e6, false, settle_ms))
+        return false;
+    *default_sample = get_str(ini, "virtual", "sample", NULL);
+    // textures, samples
+    if (!parse_textures(v, ini) || !parse_samples(v, ini)) return false;
+    if (*default_sample && find_sample(v, *default_sample) < 0) {
+        char list[512];
+        list_samples(v, list, sizeof list);
+        model_error(ini->path, ini_line(ini, "virtual", "sample"), "sample = '%s' has no [sample %s] section; "
+                    "samples: %s", *default_sample, *default_sample, list);
+        return false;
+    }
+    return true;
+}
+
+// ---------------------------------------------------------------------------
+// Open / close
+
+static int fail_model(int err)
+{
+    char msg[1024];
+    snprintf(msg, sizeof msg, "%s", model_last_error());
+    return rig_fail(err, "virtual rig: %s", msg);
+}
+
+// The camera of the low-resolution indirect term: intrinsics scaled by 1/ds
+// about pixel corners (fx/ds, fy/ds, (c + 0.5)/ds - 0.5), same distortion and
+// pose; and its scratch buffers.
+static int make_lowres(rig_virtual_t *v)
+{
+    int err = RIG_ERR_OK;
+    mrcal_cameramodel_t *m = mrcal_read_cameramodel_file(v->cam_path);
+    if (!m) return rig_fail(RIG_ERR_IO, "virtual rig: mrcal cannot read %s", v->cam_path);
+    mrcal_lensmodel_metadata_t meta = mrcal_lensmodel_metadata(&m->lensmodel);
+    int np = mrcal_lensmodel_num_params(&m->lensmodel);
+    if (!meta.has_core || np < 4 || np > 64) {
+        err = rig_fail(RIG_ERR_NOT_SUPPORTED, "virtual rig: %s: lens model %s has no fx fy cx cy core; set "
+                       "indirect_downsample = 1 in [render] of %s", v->cam_path, model_camera_lensmodel(v->cam),
+                       v->truth_path);
+        goto done;
+    }
+    double in[64], rt[6];
+    memcpy(in, m->intrinsics, (size_t)np * sizeof(double));
+    const double f = v->ds;
+    in[0] /= f;
+    in[1] /= f;
+    in[2] = (in[2] + 0.5) / f - 0.5;
+    in[3] = (in[3] + 0.5) / f - 0.5;
+    v->Wl = (v->W + v->ds - 1) / v->ds;
+    v->Hl = (v->H + v->ds - 1) / v->ds;
+    model_camera_rt_cam_world(v->cam, rt);
+    v->cam_lr = model_camera_new(model_camera_lensmodel(v->cam), in, v->Wl, v->Hl, rt);
+    if (!v->cam_lr) {
+        err = fail_model(RIG_ERR_IO);
+        goto done;
+    }
+    size_t nl = (size_t)v->Wl * v->Hl;
+    v->face_lr = malloc(nl * sizeof *v->face_lr);
+    v->A_lr = malloc(nl * sizeof *v->A_lr);
+    v->B_lr = malloc(nl * sizeof *v->B_lr);
+    if (!v->face_lr || !v->A_lr || !v->B_lr)
+        err = rig_fail(RIG_ERR_NO_MEM, "virtual rig: out of memory");
+done:
+    mrcal_free_cameramodel(&m);
+    return err;
+}
+
+
+int rig_virtual_open(rig_virtual_t **out, const char *truth_path, const rig_virtual_options_t *opt)
+{
+    if (!out) return rig_fail(RIG_ERR_INVALID, "virtual rig: NULL output handle");
+    *out = NULL;
+    if (!truth_path) return rig_fail(RIG_ERR_INVALID, "virtual rig: no truth file given");
+    rig_virtual_options_t o = opt ? *opt : rig_virtual_defaults();
+    if (!o.address) o.address = "127.0.0.1";
+    if (!(isfinite(o.time_scale) && o.time_scale > 0))
+        return rig_fail(RIG_ERR_INVALID, "virtual rig: time_scale %g must be > 0", o.time_scale);
+    if (strlen(o.address) >= 64)
+        return rig_fail(RIG_ERR_INVALID, "virtual rig: address '%s' is too long", o.address);
+    int err = RIG_ERR_OK;
+    model_ini_t *ini = NULL;
+    rig_virtual_t *v = calloc(1, sizeof *v);
+    if (!v) return rig_fail(RIG_ERR_NO_MEM, "virtual rig: out of memory");
+    pthread_mutex_init(&v->state_lock, NULL);
+    pthread_mutex_init(&v->cache_lock, NULL);
+    v->truth_path = strdup(truth_path);
+    snprintf(v->address, sizeof v->address, "%s", o.address);
+    v->next_seed = o.noise_seed;
+    if (!v->truth_path) {
+        err = rig_fail(RIG_ERR_NO_MEM, "virtual rig: out of memory");
+        goto fail;
+    }
+    ini = model_ini_load(truth_path);
+    if (!ini) {
+        err = fail_model(RIG_ERR_INVALID);
+        goto fail;
+    }
+    const char *def_sample = NULL;
+    rig_turntable_sim_params_t tp = rig_turntable_sim_defaults();
+    double warmup_ms, settle_ms;
+    rig_gv_camera_params_t gp = rig_gv_camera_defaults();
+    if (!parse_truth(v, ini, &def_sample, &tp, &warmup_ms, &settle_ms, &gp)) {
+        err = fail_model(RIG_ERR_INVALID);
+        goto fail;
+    }
+    const char *sample = o.sample ? o.sample : def_sample ? def_sample : v->samples[0].name;
+    v->cur_sample = find_sample(v, sample);
+    if (v->cur_sample < 0) {
+        char list[512];
+        list_samples(v, list, sizeof list);
+        err = rig_fail(RIG_ERR_INVALID, "virtual rig: %s has no sample '%s'; samples: %s", truth_path, sample, list);
+        goto fail;
+    }
+    if (v->shading.interreflection == MODEL_INTERREFLECTION_MC && v->ds > 1 && (err = make_lowres(v)))
+        goto fail;
+    // fixed patterns and buffers
+    size_t n = (size_t)v->W * v->H;
+    v->prnu = malloc(n * sizeof(float));
+    v->dsnu = malloc(n * sizeof(float));
+    v->frame = malloc(n * sizeof(float));
+    v->face = malloc(n * sizeof *v->face);
+    if (!v->prnu || !v->dsnu || !v->frame || !v->face) {
+        err = rig_fail(RIG_ERR_NO_MEM, "virtual rig: out of memory for %dx%d images", v->W, v->H);
+        goto fail;
+    }
+    model_sensor_patterns(&v->sensor, v->W, v->H, v->prnu, v->dsnu);
+    if (!model_camera_ray_table(v->cam, NULL)) {
+        err = fail_model(RIG_ERR_IO);
+        goto fail;
+    }
+    // devices
+    tp.time_scale = o.time_scale;
+    if ((err = rig_turntable_open_sim(&v->tt_sim, &tp))) goto fail;
+    v->tt.ops = &virtual_tt_ops;
+    v->tt.impl = v;
+    snprintf(v->tt.name, sizeof v->tt.name, "virtual turntable (sim, seed %llu)", (unsigned long long)tp.seed);
+    rig_lamp_line_t lines[32];
+    memset(lines, 0, sizeof lines);
+    for (int i = 0; i < v->lamps->n; i++) {
+        snprintf(lines[i].name, sizeof lines[i].name, "%s", v->lamps->lamps[i].name);
+        snprintf(lines[i].chip, sizeof lines[i].chip, "virtual");
+        lines[i].line = (unsigned)i;
+        lines[i].warmup_ms = warmup_ms * o.time_scale;
+        lines[i].settle_ms = settle_ms * o.time_scale;
+    }
+    if ((err = rig_lamps_open_sim(&v->lamps_dev, lines, v->lamps->n))) goto fail;
+    gp.address = v->address;
+    gp.busy_wait_s = o.busy_wait_s;
+    gp.render = render_cb;
+    gp.render_ctx = v;
+    if ((err = rig_gv_camera_start(&v->gv, &gp))) goto fail;
+    if (v->prerender) {
+        if (pthread_create(&v->pre_thread, NULL, prerender_main, v)) {
+            err = rig_fail(RIG_ERR_IO, "virtual rig: cannot start the pre-render thread");
+            goto fail;
+        }
+        v->pre_running = true;
+    }
+    model_ini_free(ini);
+    *out = v;
+    return 0;
+fail:
+    model_ini_free(ini);
+    rig_virtual_close(v);
+    return err ? err : RIG_ERR_IO;
+}
+
+void rig_virtual_close(rig_virtual_t *v)
+{
+    if (!v) return;
+    if (v->pre_running) {
+        __atomic_store_n(&v->pre_stop, 1, __ATOMIC_RELEASE);
+        pthread_join(v->pre_thread, NULL);
+    }
+    rig_gv_camera_stop(v->gv);   // no render runs after this
+    rig_lamps_close(v->lamps_dev);
+    rig_turntable_close(v->tt_sim);
+    for (int i = 0; i < NPLANES; i++) free(v->planes[i].L);
+    for (int i = 0; i < NTRACERS; i++) slot_free(&v->tracers[i]);
+    for (int i = 0; i < v->nsamples; i++) {
+        free(v->samples[i].scene_path);
+        model_scene_free(v->samples[i].scene);
+        free(v->samples[i].mats);
+        free(v->samples[i].tex);
+    }
+    free(v->samples);
+    model_lamps_free(v->lamps);
+    model_materials_free(v->mats);
+    free(v->textures);
+    model_camera_free(v->cam);
+    model_camera_free(v->cam_lr);
+    free(v->cam_path);
+    free(v->face);
+    free(v->face_lr);
+    free(v->A_lr);
+    free(v->B_lr);
+    free(v->prnu);
+    free(v->dsnu);
+    free(v->frame);
+    free(v->truth_path);
+    pthread_mutex_destroy(&v->state_lock);
+    pthread_mutex_destroy(&v->cache_lock);
+    free(v);
+}
+
+rig_turntable_t *rig_virtual_turntable(rig_virtual_t *v) { return v ? &v->tt : NULL; }
+rig_lamps_t *rig_virtual_lamps(rig_virtual_t *v) { return v ? v->lamps_dev : NULL; }
+const char *rig_virtual_camera_address(const rig_virtual_t *v) { return v ? v->address : NULL; }
+const char *rig_virtual_truth_path(const rig_virtual_t *v) { return v ? v->truth_path : NULL; }
+
+const char *rig_virtual_sample(const rig_virtual_t *v)
+{
+    if (!v) return NULL;
+    rig_virtual_t *w = (rig_virtual_t *)v;
+    pthread_mutex_lock(&w->state_lock);
+    const char *s = v->samples[v->cur_sample].name;
+    pthread_mutex_unlock(&w->state_lock);
+    return s;
+}
+
+int rig_virtual_set_sample(rig_virtual_t *v, const char *name)
+{
+    if (!v || !name) return rig_fail(RIG_ERR_INVALID, "virtual rig: set sample: NULL argument");
+    int i = find_sample(v, name);
+    if (i < 0) {
+        char list[512];
+        list_samples(v, list, sizeof list);
+        return rig_fail(RIG_ERR_INVALID, "virtual rig: %s has no sample '%s'; samples: %s", v->truth_path, name, list);
+    }
+    pthread_mutex_lock(&v->state_lock);
+    v->cur_sample = i;
+    pthread_mutex_unlock(&v->state_lock);
+    return 0;
+}
