@@ -189,21 +189,22 @@ static double direct_point(render_ctx_t *c, const model_material_t *mat, model_v
 // in every direction); a direction w is drawn uniformly in the cone of solid
 // angle Omega = 2 pi (1 - cos theta_max) the sphere subtends, and the estimate is
 //   V(p -> sphere point along w) * Le * Omega * R(w, v, n)
-// (-> I R / d^2 as r -> 0). *V gets the sample's visibility (0 or 1).
-static double lamp_sample(render_ctx_t *c, int i, const model_material_t *mat, model_vec3_t p,
-                          model_vec3_t n, model_vec3_t v, model_rng_t *rng, double *V)
+// (-> I R / d^2 as r -> 0).
+// lamp_draw draws the direction: it returns the weight (Le Omega, or I / d^2
+// for a point lamp or a point inside the sphere) and the unit direction w and
+// the point `target` the shadow ray goes to; 0 when nothing can arrive.
+static double lamp_draw(render_ctx_t *c, int i, model_vec3_t p, model_rng_t *rng,
+                        model_vec3_t *w_out, model_vec3_t *target)
 {
     const model_lamp_t *L = &c->lamps->lamps[i];
     model_vec3_t dl = v3_sub(L->position_mm, p);
     double d2 = v3_dot(dl, dl), d = sqrt(d2), r = L->radius_mm;
-    *V = 0;
     if (!(d > 0)) return 0;
     model_vec3_t axis = v3_scale(dl, 1.0 / d);
     if (!c->sh->finite_lamps || !(r > 0) || d <= r * (1 + 1e-9)) {
-        if (v3_dot(axis, n) <= 0) return 0;
-        if (!model_tracer_visible_from(c->t, p, n, L->position_mm)) return 0;
-        *V = 1;
-        return L->intensity * brdf(mat, n, axis, v) / d2;
+        *w_out = axis;
+        *target = L->position_mm;
+        return L->intensity / d2;
     }
     double s2max = r * r / d2;                          // sin^2 theta_max
     double one_m_cos = s2max / (1 + sqrt(1 - s2max));   // 1 - cos theta_max, stable
@@ -215,16 +216,27 @@ static double lamp_sample(render_ctx_t *c, int i, const model_material_t *mat, m
     frame_of(axis, &a, &b);
     model_vec3_t w = v3_add(v3_scale(axis, ct),
                             v3_add(v3_scale(a, st * cos(phi)), v3_scale(b, st * sin(phi))));
-    if (v3_dot(w, n) <= 0) return 0;
-    double R = brdf(mat, n, w, v);
     // distance to the sphere's near surface along w
     double disc = r * r - d2 * st * st;
     double tt = d * ct - sqrt(fmax(0.0, disc));
-    model_vec3_t target = v3_add(p, v3_scale(w, tt));
+    *w_out = w;
+    *target = v3_add(p, v3_scale(w, tt));
+    return L->intensity / (M_PI * r * r) * (2 * M_PI * one_m_cos);
+}
+
+// lamp_draw plus the shadow ray and R: one estimate; *V its visibility (0 or 1).
+static double lamp_sample(render_ctx_t *c, int i, const model_material_t *mat, model_vec3_t p,
+                          model_vec3_t n, model_vec3_t v, model_rng_t *rng, double *V)
+{
+    model_vec3_t w, target;
+    *V = 0;
+    double weight = lamp_draw(c, i, p, rng, &w, &target);
+    if (!(weight > 0) || v3_dot(w, n) <= 0) return 0;
+    double R = brdf(mat, n, w, v);
+    if (!(R > 0)) return 0;
     if (!model_tracer_visible_from(c->t, p, n, target)) return 0;
     *V = 1;
-    double omega = 2 * M_PI * one_m_cos;
-    return L->intensity / (M_PI * r * r) * omega * R;
+    return weight * R;
 }
 
 // Thesis interreflection at x = (p, n, v) (thesis 3.4 / 4.5, eq. 18):
@@ -264,28 +276,19 @@ static double thesis_term(render_ctx_t *c, const model_material_t *mat, model_ve
     return c->sh->rho / c->ncone * sum;
 }
 
-// MC estimate at the primary hit x0 = pi: sum over mc_samples paths of the
-// light of sampled (finite) lamps at x0 plus mc_bounces indirect bounces with
-// direct light at every vertex, divided by mc_samples. Point lamps' direct light
-// at x0 is exact and added by the caller. Vsum[i] gets the mean visibility of
-// the sampled lamps at x0.
+// MC indirect light at the primary hit x0 = pi: mc_samples paths of
+// mc_bounces indirect bounces with direct light at every vertex, divided by
+// mc_samples (the direct light at x0 itself is the caller's: point lamps exact,
+// finite lamps sampled in shadow packets). rng: the pixel's stream.
 //   Indirect: w from the cosine-weighted hemisphere about n, pdf = (n.w)/pi;
 //   throughput *= f_r (n.w) / pdf = R(w, v, n) pi / (n.w), f_r = R / (n.w).
 static double mc_term(render_ctx_t *c, const model_material_t *mat0,
-                      const model_pixel_info_t *pi, uint64_t pixel, double *Vmean)
+                      const model_pixel_info_t *pi, model_rng_t *rngp)
 {
     const model_shading_t *sh = c->sh;
-    model_rng_t rng = model_rng(sh->seed, pixel);
+    model_rng_t rng = *rngp;
     double sum = 0;
-    for (int i = 0; i < c->nl; i++) Vmean[i] = 0;
     for (int s = 0; s < sh->mc_samples; s++) {
-        if (c->mc_finite)
-            for (int i = 0; i < c->nl; i++) {
-                if (!(c->lamps->lamps[i].radius_mm > 0)) continue;
-                double V;
-                sum += lamp_sample(c, i, mat0, pi->p_mm, pi->n, pi->v, &rng, &V);
-                Vmean[i] += V;
-            }
         model_vec3_t p = pi->p_mm, n = pi->n, v = pi->v;
         const model_material_t *mat = mat0;
         double beta = 1;
@@ -317,7 +320,7 @@ static double mc_term(render_ctx_t *c, const model_material_t *mat0,
             sum += beta * D;
         }
     }
-    for (int i = 0; i < c->nl; i++) Vmean[i] /= sh->mc_samples;
+    *rngp = rng;
     return sum / sh->mc_samples;
 }
 
@@ -338,9 +341,10 @@ static void fill_background(render_ctx_t *c, int x0, int x1, int y0, int y1)
 // Scratch space of one packet (per thread, no allocation per pixel).
 typedef struct {
     model_vec3_t dirs[16], pts[16], nrm[16], l[16];
-    double nl[16], nv[16], w[16], S[16], Vm[64];
+    double nl[16], nv[16], w[16], S[16];
     model_shadow_packet_t sp;
     model_pixel_info_t pi[16];
+    model_rng_t rng[16];
     size_t pix[16];
     int hit[16];
     uint8_t vis[16];
@@ -427,6 +431,52 @@ static void render_packet(render_ctx_t *c, packet_t *pk, int bx, int by)
             pk->S[k] += pk->w[k] * brdf_value(pk->mat[k], &cs);
         }
     }
+    // Finite lamps (MC): mc_samples directions per lamp and pixel, drawn from
+    // the pixel's own random stream (model_rng(seed, pixel index)), shadow rays
+    // in packets.
+    if (sh->interreflection == MODEL_INTERREFLECTION_MC)
+        for (int k = 0; k < m; k++) pk->rng[k] = model_rng(sh->seed, pk->pix[k]);
+    for (int i = 0; c->mc_finite && nhit && i < nl; i++) {
+        if (!(c->lamps->lamps[i].radius_mm > 0)) continue;
+        model_shadow_packet_t *sp = &pk->sp;
+        int nvis[16] = { 0 };
+        const double inv_samples = 1.0 / sh->mc_samples;
+        for (int smp = 0; smp < sh->mc_samples; smp++) {
+            int nact = 0;
+            for (int k = 0; k < 16; k++) {
+                sp->active[k] = 0;
+                if (!pk->hit[k]) continue;
+                model_vec3_t w, target;
+                double wt = lamp_draw(c, i, pk->pts[k], &pk->rng[k], &w, &target);
+                double nw = v3_dot(pk->nrm[k], w);
+                if (!(wt > 0) || !(nw > 0)) continue;
+                model_cosines_t cs = cosines_fast(pk->nrm[k], w, pi[k].v, nw, pk->nv[k]);
+                double R = brdf_value(pk->mat[k], &cs);
+                if (!(R > 0)) continue;
+                pk->w[k] = wt * R * inv_samples;
+                model_vec3_t n = pk->nrm[k], dl = v3_sub(target, pk->pts[k]);
+                double inv = 1.0 / sqrt(v3_dot(dl, dl));
+                sp->org_x[k] = (float)(pk->pts[k].x + eps * n.x);
+                sp->org_y[k] = (float)(pk->pts[k].y + eps * n.y);
+                sp->org_z[k] = (float)(pk->pts[k].z + eps * n.z);
+                sp->dir_x[k] = (float)(dl.x - eps * n.x);
+                sp->dir_y[k] = (float)(dl.y - eps * n.y);
+                sp->dir_z[k] = (float)(dl.z - eps * n.z);
+                sp->tfar[k] = (float)(1 - eps * inv);
+                sp->active[k] = 1;
+                nact++;
+            }
+            if (!nact) continue;
+            model_tracer_visible_packet(c->t, sp, pk->vis);
+            for (int k = 0; k < m; k++)
+                if (sp->active[k] && pk->vis[k]) {
+                    pk->S[k] += pk->w[k];
+                    nvis[k]++;
+                }
+        }
+        if (c->lit)
+            for (int k = 0; k < m; k++) c->lit[i * npix + pk->pix[k]] = 2 * nvis[k] > sh->mc_samples;
+    }
     for (int k = 0; k < m; k++) {
         size_t i = pk->pix[k];
         if (!pk->mat[k]) {
@@ -438,11 +488,8 @@ static void render_packet(render_ctx_t *c, packet_t *pk, int bx, int by)
         double S = pk->S[k];
         if (sh->interreflection == MODEL_INTERREFLECTION_THESIS && sh->rho != 0) {
             S += thesis_term(c, pk->mat[k], pk->pts[k], pk->nrm[k], pi[k].v);
-        } else if (sh->interreflection == MODEL_INTERREFLECTION_MC) {
-            S += mc_term(c, pk->mat[k], &pi[k], i, pk->Vm);
-            if (c->lit && c->mc_finite)
-                for (int a = 0; a < nl; a++)
-                    if (c->lamps->lamps[a].radius_mm > 0) c->lit[a * npix + i] = pk->Vm[a] > 0.5;
+        } else if (sh->interreflection == MODEL_INTERREFLECTION_MC && sh->mc_bounces > 0) {
+            S += mc_term(c, pk->mat[k], &pi[k], &pk->rng[k]);
         }
         double g = sh->gain_map ? sh->gain_map[i] : 1.0;
         c->P[i] = (float)(sh->Pa + sh->kc * g * S);
