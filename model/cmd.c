@@ -536,7 +536,7 @@ int model_cmd_render(int argc, char **argv)
         }
         for (int i = 0; i < in.lamps->n; i++) names[i] = in.lamps->lamps[i].name;
         meta_add(&meta, "info", "page 0: P (float32, DN, %s); page 1: face id (int32, index into the scene's faces, "
-                 "0-based, -1 = background); pages 2..: lit mask per lamp (uint8, 1 where V > 0.5), in the "
+                 "0-based; nfaces + k for the scene's sphere k; -1 = background); pages 2..: lit mask per lamp (uint8, 1 where V > 0.5), in the "
                  "order of the lamps file", sensor_path ? "ideal, before the sensor stage" : "as in the output image");
         bool ok = model_tiff_write_info(info_path, W, H, P_ideal ? P_ideal : P, face, lit, in.lamps->n,
                                         (const char *const *)names, meta_list(&meta));

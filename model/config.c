@@ -25,8 +25,8 @@ static const char *split_section(const char *sec, char *kind, size_t kind_size)
 // Check and copy "[kind NAME]"'s name. false with a message on error.
 static bool section_name(const model_ini_t *ini, int s, const char *want_kind, char out[NAME_MAX_])
 {
-    const char *sec = ini->sections[s];
     int line = ini->section_lines[s];
+    const char *sec = ini->sections[s];
     char kind[32];
     const char *name = split_section(sec, kind, sizeof kind);
     if (strcmp(kind, want_kind)) {
@@ -94,10 +94,12 @@ static bool parse_material(const model_ini_t *ini, int s, model_material_t *mat)
     memset(mat, 0, sizeof *mat);
     mat->line = ini->section_lines[s];
     if (!section_name(ini, s, "material", mat->name)) return false;
-    const char *sec = ini->sections[s];
     char buf[256];
 
-    const model_ini_entry_t *me = model_ini_get(ini, sec, "model");
+    const model_ini_entry_t *me = NULL;
+    const int first = ini->section_first[s], end = first + ini->section_count[s];
+    for (int k = first; k < end && !me; k++)
+        if (!strcmp(ini->entries[k].key, "model")) me = &ini->entries[k];
     if (!me) {
         list_models(buf, sizeof buf);
         model_error(ini->path, mat->line, "material '%s' has no 'model = ...' line; models: %s", mat->name, buf);
@@ -114,9 +116,9 @@ static bool parse_material(const model_ini_t *ini, int s, model_material_t *mat)
     int np = model_brdf_nparams(mat->model);
     bool have[MODEL_BRDF_MAX_PARAMS] = { false };
 
-    for (int k = 0; k < ini->nentries; k++) {
+    for (int k = first; k < end; k++) {
         const model_ini_entry_t *e = &ini->entries[k];
-        if (e->section != sec || e == me) continue;
+        if (e == me) continue;
         int i = model_brdf_param_index(mat->model, e->key);
         if (i < 0) {
             list_keys(mat->model, buf, sizeof buf);
@@ -216,11 +218,9 @@ static bool parse_lamp(const model_ini_t *ini, int s, model_lamp_t *lamp)
     memset(lamp, 0, sizeof *lamp);
     lamp->line = ini->section_lines[s];
     if (!section_name(ini, s, "lamp", lamp->name)) return false;
-    const char *sec = ini->sections[s];
     bool have_pos = false, have_int = false;
-    for (int k = 0; k < ini->nentries; k++) {
+    for (int k = ini->section_first[s]; k < ini->section_first[s] + ini->section_count[s]; k++) {
         const model_ini_entry_t *e = &ini->entries[k];
-        if (e->section != sec) continue;
         if (!strcmp(e->key, "position_mm")) {
             double xyz[3];
             int n = 0;

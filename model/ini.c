@@ -72,7 +72,9 @@ model_ini_t *model_ini_parse(const char *text, size_t len, const char *name)
     size_t off_entries = align_up(sizeof(model_ini_t));
     size_t off_sections = align_up(off_entries + nlines * sizeof(model_ini_entry_t));
     size_t off_slines = align_up(off_sections + nlines * sizeof(const char *));
-    size_t off_name = off_slines + nlines * sizeof(int);
+    size_t off_sfirst = off_slines + nlines * sizeof(int);
+    size_t off_scount = off_sfirst + nlines * sizeof(int);
+    size_t off_name = off_scount + nlines * sizeof(int);
     size_t off_text = off_name + name_len + 1;
     size_t total = off_text + len + 1;
 
@@ -87,6 +89,8 @@ model_ini_t *model_ini_parse(const char *text, size_t len, const char *name)
     ini->entries = (model_ini_entry_t *)(block + off_entries);
     ini->sections = (const char **)(block + off_sections);
     ini->section_lines = (int *)(block + off_slines);
+    ini->section_first = (int *)(block + off_sfirst);
+    ini->section_count = (int *)(block + off_scount);
     ini->path = block + off_name;
     memcpy(ini->path, name, name_len + 1);
     char *buf = block + off_text;
@@ -138,6 +142,8 @@ model_ini_t *model_ini_parse(const char *text, size_t len, const char *name)
             }
             ini->sections[ini->nsections] = sec;
             ini->section_lines[ini->nsections] = line;
+            ini->section_first[ini->nsections] = ini->nentries;
+            ini->section_count[ini->nsections] = 0;
             ini->nsections++;
             g_hash_table_insert(sections_seen, sec, GINT_TO_POINTER(ini->nsections));
             g_hash_table_remove_all(keys_seen);
@@ -170,6 +176,7 @@ model_ini_t *model_ini_parse(const char *text, size_t len, const char *name)
             goto fail;
         }
         ini->entries[ini->nentries++] = (model_ini_entry_t){ section, key, value, line };
+        ini->section_count[ini->nsections - 1]++;
         g_hash_table_insert(keys_seen, key, GINT_TO_POINTER(ini->nentries));
     }
     g_hash_table_destroy(sections_seen);

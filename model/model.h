@@ -82,6 +82,8 @@ typedef struct {
     int                 nsections;
     const char        **sections;  // in file order
     int                *section_lines;
+    int                *section_first;   // entries of section i: entries[section_first[i] ..
+    int                *section_count;   //   section_first[i] + section_count[i] - 1] (contiguous)
     char               *storage_;  // private
 } model_ini_t;
 
@@ -104,6 +106,10 @@ const model_ini_entry_t *model_ini_get(const model_ini_t *ini, const char *secti
 //     @material steel   sets the material of the faces that follow
 //     1 2 3 4.          a face: its vertex numbers, ended by '.'
 //                       (may span lines; counter-clockwise seen from outside)
+//     @sphere cx cy cz r  extension: an exact sphere (centre, radius in mm,
+//                       r > 0) of the current material, on a line of its own
+//                       after 'Faces:'. A D3D file needs at least one face or
+//                       sphere. OBJ has no spheres.
 // Wavefront OBJ: v, f (v, v/vt, v/vt/vn, v//vn, negative indices), usemtl;
 // vn, vt, o, g, s, mtllib, l are ignored; other statements are errors.
 // Faces without a material get the material "default".
@@ -119,6 +125,13 @@ typedef struct {
 } model_face_t;
 
 typedef struct {
+    model_vec3_t centre_mm;  // world frame
+    double       radius_mm;  // > 0
+    int          material;   // index into scene->material_names
+    int          line;       // line of the @sphere in the source file
+} model_sphere_t;
+
+typedef struct {
     int            nvertices;
     model_vec3_t  *vertices;     // mm, world frame
     int            nfaces;
@@ -128,6 +141,8 @@ typedef struct {
     char          *path;         // as given
     char           sha256[65];   // of the file contents
     int           *vert_storage_; // private
+    int            nspheres;     // exact spheres (D3D @sphere); 0 for OBJ
+    model_sphere_t *spheres;     // sphere k is "face" nfaces + k in pixel_info
 } model_scene_t;
 
 typedef struct {
@@ -145,7 +160,8 @@ model_scene_t *model_scene_parse_obj(const char *text, size_t len, const char *n
 void           model_scene_free(model_scene_t *scene);
 // Index of a material name in the scene, or -1.
 int            model_scene_material_index(const model_scene_t *scene, const char *name);
-// A deep copy rotated by angle_deg about the world z axis (the turntable).
+// A deep copy rotated by angle_deg about the world z axis (the turntable);
+// sphere centres rotate with the vertices.
 model_scene_t *model_scene_rotated_z(const model_scene_t *scene, double angle_deg);
 
 // ---------------------------------------------------------------------------
@@ -316,7 +332,14 @@ bool model_camera_unproject(const model_camera_t *cam, const double *q_xy, int n
 const model_vec3_t *model_camera_ray_table(model_camera_t *cam, double *err_px);
 
 // ---------------------------------------------------------------------------
-// Ray casting (model/trace.c): Embree over the scene's faces.
+// Ray casting (model/trace.c): Embree over the scene's faces and spheres.
+//
+// Spheres are an Embree user geometry with an exact ray-sphere intersection;
+// a primary hit is recomputed in double precision from the ray and the
+// sphere (like a face's hit from its plane), and its normal is (p - c) / r.
+// Face ids (pixel_info.face, model_render's face_out, edges' face_side): 0 ..
+// nfaces-1 are scene->faces; nfaces + k is scene->spheres[k]; -1 is a miss.
+// Check face < scene->nfaces before indexing scene->faces.
 
 typedef struct model_tracer model_tracer_t;
 
@@ -331,7 +354,7 @@ void            model_tracer_free(model_tracer_t *t);
 // The thesis's pixel_info for one pixel (or sub-pixel position).
 typedef struct {
     double       q[2];        // pixel coordinates
-    int32_t      face;        // index into scene->faces; -1: the ray missed the scene
+    int32_t      face;        // index into scene->faces, nfaces + k for sphere k; -1: missed
     int32_t      material;    // scene material index; -1 when missed
     model_vec3_t p_mm;        // hit point, world
     model_vec3_t n;           // unit face normal turned to face the camera

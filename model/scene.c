@@ -6,7 +6,9 @@
 // builder. A face is checked when it is complete (D3D) or once all vertices are
 // known (OBJ, whose positive indices may refer forward): at least 3 vertices,
 // no vertex twice, non-zero area, every vertex within the planarity tolerance
-// of the face's plane (Newell normal through the centroid).
+// of the face's plane (Newell normal through the centroid). D3D also takes
+// exact spheres ('@sphere cx cy cz radius' after 'Faces:', of the current
+// material); their centres rotate with the vertices in model_scene_rotated_z.
 #define _GNU_SOURCE
 #include <errno.h>
 #include <limits.h>
@@ -177,6 +179,9 @@ typedef struct {
     size_t        cap_mat;
     int           cur_mat;    // material of the next faces; -1: "default"
     char          cur_mat_name[64];
+    model_sphere_t *sph;      // D3D @sphere
+    int           nsph;
+    size_t        cap_sph;
 } builder_t;
 
 static bool grow(void **p, size_t *cap, size_t need, size_t elem)
@@ -198,6 +203,7 @@ static void builder_free(builder_t *b)
     free(b->idx);
     free(b->f);
     free(b->fstart);
+    free(b->sph);
     if (b->mat_index) g_hash_table_destroy(b->mat_index);
     for (int i = 0; i < b->nmat; i++) free(b->mat[i]);
     free(b->mat);
@@ -393,6 +399,52 @@ static bool set_material(builder_t *b, const lexer_t *lx, const char *keyword)
     return b->cur_mat >= 0;
 }
 
+// "@sphere cx cy cz radius" (mm): a sphere of the current material.
+static bool add_sphere(builder_t *b, const lexer_t *lx)
+{
+    char q[200];
+    if (lx->ntoks != 5) {
+        model_error(b->name, lx->line, "'@sphere' takes 4 numbers (@sphere cx cy cz radius, in mm), "
+                    "got %zu", lx->ntoks - 1);
+        return false;
+    }
+    static const char *what[4] = { "centre x", "centre y", "centre z", "radius" };
+    double x[4];
+    for (int i = 0; i < 4; i++) {
+        num_status_t st = tok_double(lx->toks[1 + i], &x[i]);
+        if (st != NUM_OK) {
+            model_error(b->name, lx->line, "@sphere: %s %s %s", what[i], quote(lx->toks[1 + i], q),
+                        st == NUM_NONFINITE
+                            ? "is not a finite number; give it in mm as an ordinary number"
+                            : "does not parse as a number (@sphere cx cy cz radius, in mm)");
+            return false;
+        }
+    }
+    if (!(x[3] > 0)) {
+        model_error(b->name, lx->line, "@sphere: radius %g mm must be > 0", x[3]);
+        return false;
+    }
+    double big = fmax(fmax(fabs(x[0]), fabs(x[1])), fmax(fabs(x[2]), x[3]));
+    if (!(big < 1e150)) {
+        model_error(b->name, lx->line, "@sphere: coordinates up to %g are too large to trace "
+                    "(coordinates are in mm; check the units)", big);
+        return false;
+    }
+    if (b->nsph >= MAX_ITEMS) {
+        model_error(b->name, lx->line, "too many spheres (more than %d)", MAX_ITEMS);
+        return false;
+    }
+    int m = b->cur_mat;
+    if (m < 0 && (m = material_of(b, "default", lx->line)) < 0) return false;
+    if (!grow((void **)&b->sph, &b->cap_sph, (size_t)b->nsph + 1, sizeof *b->sph)) {
+        model_error(b->name, lx->line, "out of memory");
+        return false;
+    }
+    b->sph[b->nsph++] = (model_sphere_t){ .centre_mm = v3(x[0], x[1], x[2]), .radius_mm = x[3],
+                                          .material = m, .line = lx->line };
+    return true;
+}
+
 // Hand the builder's arrays over to a scene.
 static model_scene_t *finish(builder_t *b, const char *text, size_t len)
 {
@@ -409,6 +461,8 @@ static model_scene_t *finish(builder_t *b, const char *text, size_t len)
     s->nmaterials = b->nmat;
     s->material_names = b->mat;
     s->vert_storage_ = b->idx;
+    s->nspheres = b->nsph;
+    s->spheres = b->sph;
     for (int k = 0; k < b->nf; k++) s->faces[k].verts = b->idx + b->fstart[k];
     model_sha256_hex(text ? text : "", len, s->sha256);
     free(b->vnum);
@@ -466,6 +520,10 @@ model_scene_t *model_scene_parse_d3d(const char *text, size_t len, const char *n
                 model_error(nm, lx.line, "@material belongs after the 'Faces:' line (it sets the "
                             "material of the faces that follow it)");
                 goto done;
+            } else if (tok_is(lx.toks[0], "@sphere")) {
+                model_error(nm, lx.line, "@sphere belongs after the 'Faces:' line (a sphere is "
+                            "a primitive like a face, of the current material)");
+                goto done;
             } else if (lx.ntoks != 4) {
                 model_error(nm, lx.line,
                             "a vertex line has 4 fields (number x y z), this one has %zu%s", lx.ntoks,
@@ -509,22 +567,24 @@ model_scene_t *model_scene_parse_d3d(const char *text, size_t len, const char *n
         }
         // Faces section.
         if (lx.ntoks > t0 && lx.toks[t0].n > 0 && lx.toks[t0].p[0] == '@') {
-            if (!tok_is(lx.toks[t0], "@material")) {
-                model_error(nm, lx.line, "unknown directive %s; the only one is '@material NAME'",
-                            quote(lx.toks[t0], q));
+            bool sphere = tok_is(lx.toks[t0], "@sphere");
+            if (!sphere && !tok_is(lx.toks[t0], "@material")) {
+                model_error(nm, lx.line, "unknown directive %s; the directives are '@material NAME' "
+                            "and '@sphere cx cy cz radius'", quote(lx.toks[t0], q));
                 goto done;
             }
+            const char *dname = sphere ? "@sphere" : "@material";
             if (t0 != 0) {
-                model_error(nm, lx.line, "@material must be on a line of its own");
+                model_error(nm, lx.line, "%s must be on a line of its own", dname);
                 goto done;
             }
             if (open) {
                 model_error(nm, lx.line,
-                            "face %d (line %d) is not ended by '.' before @material; end each face "
-                            "with '.'", b.f[b.nf - 1].number, b.f[b.nf - 1].line);
+                            "face %d (line %d) is not ended by '.' before %s; end each face "
+                            "with '.'", b.f[b.nf - 1].number, b.f[b.nf - 1].line, dname);
                 goto done;
             }
-            if (!set_material(&b, &lx, "@material")) goto done;
+            if (sphere ? !add_sphere(&b, &lx) : !set_material(&b, &lx, "@material")) goto done;
             continue;
         }
         for (size_t t = t0; t < lx.ntoks; t++) {
@@ -536,7 +596,8 @@ model_scene_t *model_scene_parse_d3d(const char *text, size_t len, const char *n
             model_face_t *f = &b.f[b.nf - 1];
             if (vt.n > 0) {
                 if (vt.p[0] == '@') {
-                    model_error(nm, lx.line, "@material must be on a line of its own");
+                    model_error(nm, lx.line, "%s must be on a line of its own",
+                                tok_is(vt, "@sphere") ? "@sphere" : "@material");
                     goto done;
                 }
                 long num;
@@ -574,8 +635,9 @@ model_scene_t *model_scene_parse_d3d(const char *text, size_t len, const char *n
                     b.f[b.nf - 1].number);
         goto done;
     }
-    if (b.nf == 0) {
-        model_error(nm, 0, "no faces after 'Faces:'; list each face's vertex numbers ended by '.'");
+    if (b.nf == 0 && b.nsph == 0) {
+        model_error(nm, 0, "no faces after 'Faces:'; list each face's vertex numbers ended by '.' "
+                           "(or give a sphere: '@sphere cx cy cz radius')");
         goto done;
     }
     scene = finish(&b, text, len);
@@ -744,6 +806,7 @@ void model_scene_free(model_scene_t *scene)
     free(scene->material_names);
     free(scene->path);
     free(scene->vert_storage_);
+    free(scene->spheres);
     free(scene);
 }
 
@@ -796,7 +859,15 @@ model_scene_t *model_scene_rotated_z(const model_scene_t *scene, double angle_de
     r->vert_storage_ = malloc((nrefs + 1) * sizeof *r->vert_storage_);
     r->material_names = calloc((size_t)scene->nmaterials + 1, sizeof *r->material_names);
     r->path = strdup(scene->path ? scene->path : "");
-    if (!r->vertices || !r->faces || !r->vert_storage_ || !r->material_names || !r->path) goto oom;
+    r->spheres = malloc(((size_t)(scene->nspheres > 0 ? scene->nspheres : 0) + 1) * sizeof *r->spheres);
+    if (!r->vertices || !r->faces || !r->vert_storage_ || !r->material_names || !r->path ||
+        !r->spheres)
+        goto oom;
+    for (int k = 0; k < scene->nspheres; k++) {
+        r->spheres[k] = scene->spheres[k];
+        r->spheres[k].centre_mm = rot_z(scene->spheres[k].centre_mm, s, c);
+    }
+    r->nspheres = scene->nspheres > 0 ? scene->nspheres : 0;
     for (int i = 0; i < scene->nmaterials; i++) {
         if (!(r->material_names[i] = strdup(scene->material_names[i]))) goto oom;
         r->nmaterials = i + 1;

@@ -6,6 +6,12 @@
 // work); primID -> face index is kept. Hit points are recomputed in double
 // precision from the face's plane (Embree works in float), so a hit point lies
 // on its face's plane to double precision.
+//
+// Spheres (D3D @sphere) are one Embree user geometry: bounds, intersection and
+// occlusion callbacks solve the ray-sphere quadratic in double precision (in
+// the numerically stable form). A primary hit of a sphere is recomputed from
+// the double-precision ray, so the point lies on the sphere to rounding and the
+// normal is the exact (p - c) / r. A sphere hit reports face = nfaces + k.
 #include <embree3/rtcore.h>
 #include <stdatomic.h>
 #include <stdio.h>
@@ -14,11 +20,20 @@
 
 #include "model/internal.h"
 
+typedef struct {
+    double c[3];    // centre, mm
+    double r;       // radius, mm
+    int    material;
+} sphere_t;
+
 struct model_tracer {
     RTCDevice     device;
     RTCScene      scene;
     int           nfaces;
     int           ntriangles;
+    int           nspheres;
+    sphere_t     *spheres;
+    unsigned      tri_geom, sph_geom;   // Embree geometry ids (RTC_INVALID_GEOMETRY_ID: none)
     int          *prim_face;     // triangle -> face index
     model_vec3_t *face_normal;   // unit (Newell) normal of each face
     double       *face_offset;   // plane: normal . x = offset
@@ -155,6 +170,117 @@ static int triangulate_face(const model_scene_t *s, const model_face_t *f, int *
 }
 
 // ---------------------------------------------------------------------------
+// Spheres
+
+// The roots t0 <= t1 of |o + t d - c| = r (d need not be unit). False when the
+// line misses the sphere. Stable form: the discriminant from the distance of
+// the line to the centre, the far root from the product of the roots.
+static bool sphere_roots(const sphere_t *s, const double o[3], const double d[3], double *t0,
+                         double *t1)
+{
+    double oc[3] = { o[0] - s->c[0], o[1] - s->c[1], o[2] - s->c[2] };
+    double a = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
+    if (!(a > 0)) return false;
+    double b = oc[0] * d[0] + oc[1] * d[1] + oc[2] * d[2];
+    double l2 = 0, oc2 = 0;
+    for (int k = 0; k < 3; k++) {
+        double lk = oc[k] - (b / a) * d[k];   // from the centre to the closest point of the line
+        l2 += lk * lk;
+        oc2 += oc[k] * oc[k];
+    }
+    double h = s->r * s->r - l2;
+    if (!(h >= 0)) return false;
+    double sq = sqrt(a * h);
+    double q = -(b + copysign(sq, b));
+    if (q == 0) {
+        *t0 = *t1 = -b / a;
+        return true;
+    }
+    double ta = q / a, tb = (oc2 - s->r * s->r) / q;
+    *t0 = fmin(ta, tb);
+    *t1 = fmax(ta, tb);
+    return true;
+}
+
+// Accessors of Embree's ray packets of runtime size N (rtcore_ray.h's helpers
+// are C++ only): float slot `field` of lane i.
+#define RAYN_F(ray, N, field, i) (((float *)(ray))[(field) * (N) + (i)])
+#define RAYN_U(ray, N, field, i) (((unsigned *)(ray))[(field) * (N) + (i)])
+enum { RF_ORG = 0, RF_TNEAR = 3, RF_DIR = 4, RF_TFAR = 8 };
+enum { HF_NG = 0, HF_U = 3, HF_V = 4, HF_PRIM = 5, HF_GEOM = 6, HF_INST = 7 };
+
+static void sphere_bounds_cb(const struct RTCBoundsFunctionArguments *args)
+{
+    const model_tracer_t *t = args->geometryUserPtr;
+    const sphere_t *s = &t->spheres[args->primID];
+    float lo[3], hi[3];
+    for (int k = 0; k < 3; k++) {
+        lo[k] = nextafterf((float)(s->c[k] - s->r), -INFINITY);
+        hi[k] = nextafterf((float)(s->c[k] + s->r), INFINITY);
+    }
+    args->bounds_o->lower_x = lo[0];
+    args->bounds_o->lower_y = lo[1];
+    args->bounds_o->lower_z = lo[2];
+    args->bounds_o->upper_x = hi[0];
+    args->bounds_o->upper_y = hi[1];
+    args->bounds_o->upper_z = hi[2];
+}
+
+// The root of lane i's ray within [tnear, tfar], nearest first; false if none.
+static bool sphere_lane(const sphere_t *s, void *ray, unsigned N, unsigned i, double *t)
+{
+    double o[3], d[3];
+    for (int k = 0; k < 3; k++) {
+        o[k] = RAYN_F(ray, N, RF_ORG + k, i);
+        d[k] = RAYN_F(ray, N, RF_DIR + k, i);
+    }
+    double tn = RAYN_F(ray, N, RF_TNEAR, i), tf = RAYN_F(ray, N, RF_TFAR, i);
+    double t0, t1;
+    if (!sphere_roots(s, o, d, &t0, &t1)) return false;
+    if (t0 >= tn && t0 <= tf) *t = t0;
+    else if (t1 >= tn && t1 <= tf) *t = t1;
+    else return false;
+    return true;
+}
+
+static void sphere_intersect_cb(const struct RTCIntersectFunctionNArguments *args)
+{
+    const model_tracer_t *t = args->geometryUserPtr;
+    const sphere_t *s = &t->spheres[args->primID];
+    unsigned N = args->N;
+    void *ray = args->rayhit;
+    float *hit = (float *)args->rayhit + 12 * N;
+    for (unsigned i = 0; i < N; i++) {
+        if (!args->valid[i]) continue;
+        double tt;
+        if (!sphere_lane(s, ray, N, i, &tt)) continue;
+        float tf = (float)tt;
+        if (!(tf <= RAYN_F(ray, N, RF_TFAR, i))) continue;
+        RAYN_F(ray, N, RF_TFAR, i) = tf;
+        for (int k = 0; k < 3; k++)
+            RAYN_F(hit, N, HF_NG + k, i) =
+                (float)(RAYN_F(ray, N, RF_ORG + k, i) + tt * RAYN_F(ray, N, RF_DIR + k, i) - s->c[k]);
+        RAYN_F(hit, N, HF_U, i) = 0.0f;
+        RAYN_F(hit, N, HF_V, i) = 0.0f;
+        RAYN_U(hit, N, HF_PRIM, i) = args->primID;
+        RAYN_U(hit, N, HF_GEOM, i) = args->geomID;
+        RAYN_U(hit, N, HF_INST, i) = args->context->instID[0];
+    }
+}
+
+static void sphere_occluded_cb(const struct RTCOccludedFunctionNArguments *args)
+{
+    const model_tracer_t *t = args->geometryUserPtr;
+    const sphere_t *s = &t->spheres[args->primID];
+    unsigned N = args->N;
+    for (unsigned i = 0; i < N; i++) {
+        if (!args->valid[i]) continue;
+        double tt;
+        if (sphere_lane(s, args->ray, N, i, &tt)) RAYN_F(args->ray, N, RF_TFAR, i) = -INFINITY;
+    }
+}
+
+// ---------------------------------------------------------------------------
 
 model_tracer_t *model_tracer_new(const model_scene_t *scene)
 {
@@ -166,13 +292,33 @@ model_tracer_t *model_tracer_new(const model_scene_t *scene)
     bool ok = false;
     const char *where = scene && scene->path ? scene->path : "scene";
 
-    if (!scene || scene->nfaces < 0 || scene->nvertices < 0) {
+    if (!scene || scene->nfaces < 0 || scene->nvertices < 0 || scene->nspheres < 0 ||
+        (scene->nspheres > 0 && !scene->spheres)) {
         MODEL_FAIL("model_tracer_new: no scene");
         return NULL;
     }
     t = calloc(1, sizeof *t);
     if (!t) goto oom;
     t->nfaces = scene->nfaces;
+    t->tri_geom = t->sph_geom = RTC_INVALID_GEOMETRY_ID;
+    if (scene->nspheres > INT32_MAX - scene->nfaces) {
+        model_error(where, 0, "too many faces and spheres (%d + %d)", scene->nfaces, scene->nspheres);
+        goto done;
+    }
+    t->spheres = malloc((size_t)(scene->nspheres + 1) * sizeof *t->spheres);
+    if (!t->spheres) goto oom;
+    for (int i = 0; i < scene->nspheres; i++) {
+        const model_sphere_t *sp = &scene->spheres[i];
+        model_vec3_t c = sp->centre_mm;
+        if (!isfinite(c.x) || !isfinite(c.y) || !isfinite(c.z) || !isfinite(sp->radius_mm) ||
+            !(sp->radius_mm > 0)) {
+            model_error(where, sp->line, "sphere %d: centre (%g, %g, %g) mm, radius %g mm: give a "
+                        "finite centre and a radius > 0", i + 1, c.x, c.y, c.z, sp->radius_mm);
+            goto done;
+        }
+        t->spheres[i] = (sphere_t){ { c.x, c.y, c.z }, sp->radius_mm, sp->material };
+    }
+    t->nspheres = scene->nspheres;
     int maxv = 3, maxtri = 0;
     for (int i = 0; i < scene->nfaces; i++) {
         const model_face_t *f = &scene->faces[i];
@@ -217,7 +363,14 @@ model_tracer_t *model_tracer_new(const model_scene_t *scene)
             maxabs = fmax(maxabs, fabs(c[k]));
         }
     }
-    double diag = scene->nvertices ? sqrt((hi[0] - lo[0]) * (hi[0] - lo[0]) +
+    for (int i = 0; i < t->nspheres; i++)
+        for (int k = 0; k < 3; k++) {
+            const sphere_t *sp = &t->spheres[i];
+            lo[k] = fmin(lo[k], sp->c[k] - sp->r);
+            hi[k] = fmax(hi[k], sp->c[k] + sp->r);
+            maxabs = fmax(maxabs, fabs(sp->c[k]) + sp->r);
+        }
+    double diag = lo[0] <= hi[0] ? sqrt((hi[0] - lo[0]) * (hi[0] - lo[0]) +
                                           (hi[1] - lo[1]) * (hi[1] - lo[1]) +
                                           (hi[2] - lo[2]) * (hi[2] - lo[2]))
                                    : 1.0;
@@ -272,10 +425,24 @@ model_tracer_t *model_tracer_new(const model_scene_t *scene)
         }
         memcpy(ib, tris, (size_t)ntri * 3 * sizeof *ib);
         rtcCommitGeometry(geom);
-        rtcAttachGeometry(t->scene, geom);
+        t->tri_geom = rtcAttachGeometry(t->scene, geom);
         rtcReleaseGeometry(geom);
         geom = NULL;
         if (rtc_failed(t->device, "building the triangle mesh")) goto done;
+    }
+    if (t->nspheres > 0) {
+        geom = rtcNewGeometry(t->device, RTC_GEOMETRY_TYPE_USER);
+        if (!geom || rtc_failed(t->device, "rtcNewGeometry (spheres)")) goto done;
+        rtcSetGeometryUserPrimitiveCount(geom, (unsigned)t->nspheres);
+        rtcSetGeometryUserData(geom, t);
+        rtcSetGeometryBoundsFunction(geom, sphere_bounds_cb, NULL);
+        rtcSetGeometryIntersectFunction(geom, sphere_intersect_cb);
+        rtcSetGeometryOccludedFunction(geom, sphere_occluded_cb);
+        rtcCommitGeometry(geom);
+        t->sph_geom = rtcAttachGeometry(t->scene, geom);
+        rtcReleaseGeometry(geom);
+        geom = NULL;
+        if (rtc_failed(t->device, "building the spheres")) goto done;
     }
     rtcCommitScene(t->scene);
     if (rtc_failed(t->device, "rtcCommitScene")) goto done;
@@ -304,6 +471,7 @@ void model_tracer_free(model_tracer_t *t)
     free(t->face_normal);
     free(t->face_offset);
     free(t->face_material);
+    free(t->spheres);
     free(t);
 }
 
@@ -326,6 +494,51 @@ static inline void fill_hit(const model_tracer_t *t, model_vec3_t o, model_vec3_
     out->n = den > 0 ? v3_scale(n, -1) : n;
     out->v = v3_scale(dir, -1);
     out->range_mm = tt;
+}
+
+static inline void fill_miss(model_vec3_t dir, model_pixel_info_t *out);
+
+// Fill out from a hit of sphere k at Embree distance tfar along (o, dir): the
+// root of the double-precision ray nearest to Embree's (float) one.
+static void fill_sphere_hit(const model_tracer_t *t, model_vec3_t o, model_vec3_t dir, int k,
+                            double tfar, model_pixel_info_t *out)
+{
+    const sphere_t *s = &t->spheres[k];
+    double od[3] = { o.x, o.y, o.z }, dd[3] = { dir.x, dir.y, dir.z };
+    double t0, t1, tt = tfar;
+    model_vec3_t c = v3(s->c[0], s->c[1], s->c[2]);
+    model_vec3_t p;
+    if (sphere_roots(s, od, dd, &t0, &t1)) {
+        if (t0 >= 0 && (t1 < 0 || fabs(t0 - tfar) <= fabs(t1 - tfar))) tt = t0;
+        else if (t1 >= 0) tt = t1;
+        p = v3_add(o, v3_scale(dir, tt));
+    } else {
+        // Grazing: Embree's float ray touched the sphere, the double one passes by.
+        p = v3_add(c, v3_scale(v3_unit(v3_sub(v3_add(o, v3_scale(dir, tt)), c)), s->r));
+        tt = v3_dot(v3_sub(p, o), dir);
+    }
+    model_vec3_t n = v3_scale(v3_sub(p, c), 1.0 / s->r);
+    double nn = v3_norm(n);
+    if (nn > 0) n = v3_scale(n, 1.0 / nn);
+    out->face = t->nfaces + k;
+    out->material = s->material;
+    out->p_mm = p;
+    out->n = v3_dot(n, dir) > 0 ? v3_scale(n, -1) : n;
+    out->v = v3_scale(dir, -1);
+    out->range_mm = tt;
+}
+
+// Fill out from Embree's hit (geomID, primID) at distance tfar.
+static inline void fill_any(const model_tracer_t *t, model_vec3_t o, model_vec3_t dir,
+                            unsigned geom, unsigned prim, double tfar, model_pixel_info_t *out)
+{
+    if (geom == RTC_INVALID_GEOMETRY_ID) fill_miss(dir, out);
+    else if (geom == t->tri_geom && prim < (unsigned)t->ntriangles)
+        fill_hit(t, o, dir, t->prim_face[prim], tfar, out);
+    else if (geom == t->sph_geom && prim < (unsigned)t->nspheres)
+        fill_sphere_hit(t, o, dir, (int)prim, tfar, out);
+    else
+        fill_miss(dir, out);
 }
 
 static inline void fill_miss(model_vec3_t dir, model_pixel_info_t *out)
@@ -360,10 +573,7 @@ void model_tracer_cast(const model_tracer_t *t, model_vec3_t origin, model_vec3_
     rh.hit.primID = RTC_INVALID_GEOMETRY_ID;
     rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
     rtcIntersect1(t->scene, &ctx, &rh);
-    if (rh.hit.geomID == RTC_INVALID_GEOMETRY_ID || rh.hit.primID >= (unsigned)t->ntriangles)
-        fill_miss(dir, out);
-    else
-        fill_hit(t, origin, dir, t->prim_face[rh.hit.primID], rh.ray.tfar, out);
+    fill_any(t, origin, dir, rh.hit.geomID, rh.hit.primID, rh.ray.tfar, out);
 }
 
 // Occlusion of the segment org + s*dir, s in [tnear, tfar].
@@ -492,12 +702,8 @@ int model_tracer_cast_packet(const model_tracer_t *t, model_vec3_t origin,
     rtcIntersect16(valid, t->scene, &ctx, &rh);
     int nhit = 0;
     for (int k = 0; k < n; k++) {
-        if (rh.hit.geomID[k] == RTC_INVALID_GEOMETRY_ID || rh.hit.primID[k] >= (unsigned)t->ntriangles) {
-            fill_miss(dirs[k], &out[k]);
-        } else {
-            fill_hit(t, origin, dirs[k], t->prim_face[rh.hit.primID[k]], rh.ray.tfar[k], &out[k]);
-            nhit++;
-        }
+        fill_any(t, origin, dirs[k], rh.hit.geomID[k], rh.hit.primID[k], rh.ray.tfar[k], &out[k]);
+        if (out[k].face >= 0) nhit++;
     }
     return nhit;
 }

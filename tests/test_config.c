@@ -402,3 +402,29 @@ TEST(ini_large_files_linear_time)
     CHECK_MSG(dt < 1.0, "100k sections took %.2f s", dt);
     free(buf);
 }
+
+// Materials and lamps files with many sections parse in linear time (each
+// section reads only its own entries).
+TEST(materials_lamps_many_sections_linear_time)
+{
+    size_t cap = 8 << 20, n = 0;
+    char *buf = malloc(cap);
+    for (int i = 0; i < 50000; i++)
+        n += snprintf(buf + n, cap - n, "[material m%d]\nmodel = lambert\nkd = 0.2\n", i);
+    double t0 = model_now_s();
+    model_materials_t *m = model_materials_parse(buf, n, "many.ini");
+    double dt = model_now_s() - t0;
+    CHECK(m && m->n == 50000);
+    CHECK_MSG(dt < 1.0, "50k materials took %.2f s", dt);
+    model_materials_free(m);
+    n = 0;
+    for (int i = 0; i < 50000; i++)
+        n += snprintf(buf + n, cap - n, "[lamp l%d]\nposition_mm = %d 0 500\nintensity = 1e6\n", i, i);
+    t0 = model_now_s();
+    model_lamps_t *l = model_lamps_parse(buf, n, "many_lamps.ini");
+    dt = model_now_s() - t0;
+    CHECK(l && l->n == 50000);
+    CHECK_MSG(dt < 1.0, "50k lamps took %.2f s", dt);
+    model_lamps_free(l);
+    free(buf);
+}
