@@ -14,6 +14,12 @@
 // timeout_s well above exposure + transfer time (a lost frame never arrives).
 // Frame ids: GVSP 1.x block ids are 16 bits (1..65535, then 1 again); they are
 // unwrapped into a 64-bit count that keeps increasing.
+//
+// "inprocess:SERIAL" opens the in-process virtual camera of rig/gv_camera.h
+// (an ArvFakeDevice; arv_camera_new_with_device, no discovery, no network):
+// the same code path, except that Aravis reports a received size of 0 for
+// its buffers (the payload we allocated is used) and that a server that
+// stopped makes calls fail with RIG_ERR_DISCONNECTED.
 #define _GNU_SOURCE
 #include <arpa/inet.h>
 #include <arv.h>
@@ -24,6 +30,7 @@
 #include <string.h>
 #include <time.h>
 
+#include "rig/gv_camera.h"
 #include "rig/rig.h"
 
 #define N_BUFFERS 4
@@ -36,6 +43,8 @@ typedef struct {
     atomic_bool control_lost;        // set from Aravis's heartbeat thread
     bool        disconnected;        // a request went unanswered: do not wait on it again
     bool        acquiring;
+    const void *inprocess_dev;       // in-process: the server's device (identity only; cam holds it)
+    guint       payload;             // bytes per buffer of the current stream
     char        id[64];
     char        vendor[64], model[64], serial[64];
     bool        has_temperature;
@@ -120,6 +129,11 @@ static int check_connected(rig_camera_t *c)
     if (atomic_load(&a->control_lost) || a->disconnected)
         return rig_fail(RIG_ERR_DISCONNECTED, "%s: the camera was lost (it stopped answering); check power, cable "
                         "and network, then reopen it", c->name);
+    if (a->inprocess_dev && !rig_gv_camera_inprocess_alive(a->inprocess_dev)) {
+        a->disconnected = true;
+        return rig_fail(RIG_ERR_DISCONNECTED, "%s: the in-process camera stopped serving (its virtual rig was "
+                        "closed); close this camera before the virtual rig", c->name);
+    }
     return 0;
 }
 
@@ -143,6 +157,7 @@ static int start_stream(rig_camera_t *c)
     guint payload = arv_camera_get_payload(a->cam, &e);
     if (e) return fail_gerror(c, &e, "reading PayloadSize");
     if (!payload) return rig_fail(RIG_ERR_PROTOCOL, "%s: the camera reports a payload of 0 bytes", c->name);
+    a->payload = payload;
     a->stream = arv_camera_create_stream(a->cam, NULL, NULL, &e);
     if (!a->stream) return fail_gerror(c, &e, "creating the stream");
     if (ARV_IS_GV_STREAM(a->stream))   // socket buffer sized to the payload (no root needed)
@@ -366,6 +381,7 @@ static int take_frame(rig_camera_t *c, ArvBuffer *b, rig_frame_t *out)
     const uint8_t *d = arv_buffer_get_image_data(b, &size);
     size_t n = (size_t)(w > 0 ? w : 0) * (size_t)(h > 0 ? h : 0);
     size_t need = n * (bits == 8 ? 1 : 2);
+    if (a->inprocess_dev && size == 0) size = a->payload;   // Aravis's fake stream leaves it 0
     if (!d || n == 0 || size < need)
         return rig_fail(RIG_ERR_PROTOCOL, "%s: frame of %zu bytes for a %dx%d %s image (%zu bytes expected)",
                         c->name, size, w, h, name, need);
@@ -493,6 +509,8 @@ int rig_camera_open_aravis(rig_camera_t **out, const char *id)
     if (!id || !*id || strlen(id) >= 64)
         return rig_fail(RIG_ERR_INVALID, "aravis: camera id must be an IP address, serial number or device name "
                         "of 1 to 63 characters");
+    const size_t np = strlen(RIG_GV_INPROCESS_PREFIX);
+    bool inprocess = !strncmp(id, RIG_GV_INPROCESS_PREFIX, np);
     rig_camera_t *c = calloc(1, sizeof *c);
     aravis_cam_t *a = calloc(1, sizeof *a);
     if (!c || !a) {
@@ -505,9 +523,28 @@ int rig_camera_open_aravis(rig_camera_t **out, const char *id)
     snprintf(a->id, sizeof a->id, "%s", id);
     snprintf(c->name, sizeof c->name, "aravis camera %s", id);
 
-    // An IPv4 address is opened directly (unicast GVCP); anything else makes
-    // Aravis enumerate devices (GigE Vision discovery is a broadcast).
-    a->cam = arv_camera_new(id, &e);
+    // An IPv4 address is opened directly (unicast GVCP), an in-process camera
+    // through its device; anything else makes Aravis enumerate devices (GigE
+    // Vision discovery is a broadcast).
+    if (inprocess) {
+        ArvDevice *dev = rig_gv_camera_inprocess_device(id + np);
+        if (!dev) {
+            rc = rig_fail(RIG_ERR_NO_DEVICE, "aravis: no in-process camera with serial '%s' in this process; it "
+                          "exists while a virtual rig with serve = inprocess (or an in-process rig_gv_camera) runs",
+                          id + np);
+            goto done;
+        }
+        a->cam = arv_camera_new_with_device(dev, &e);   // takes its own reference
+        a->inprocess_dev = dev;
+        g_object_unref(dev);
+        if (!a->cam) {
+            rc = rig_fail(RIG_ERR_IO, "aravis: in-process camera '%s': %s", id + np, e ? e->message : "unknown error");
+            g_clear_error(&e);
+            goto done;
+        }
+    } else {
+        a->cam = arv_camera_new(id, &e);
+    }
     if (!a->cam) {
         rc = rig_fail(RIG_ERR_NO_DEVICE, "aravis: no camera at '%s' (%s); %s", id, e ? e->message : "not found",
                       is_ipv4_address(id) ? "nothing answers GigE Vision control (UDP 3956) there: check the "

@@ -669,6 +669,10 @@ int rig_cmd(int argc, char **argv)
             printf("turntable_commanded_deg: %.10g\nturntable_angle_deg: %.4f\n", move_deg, st.angle_deg);
     } else if (!strcmp(action, "snap")) {
         rc = do_snap(r, &so, cmdline);
+    } else if (!strncmp(rig_virtual_camera_address(r->virt), "inprocess:", 10)) {   // serve
+        rc = rig_fail(RIG_ERR_NOT_SUPPORTED, "refl rig serve: %s serves its camera in-process ([rig] serve = "
+                      "inprocess), where no other program can reach it; write serve = gige to serve it on 127.0.0.1",
+                      rig_path);
     } else {   // serve
         // The client connection rig_open made would hold the camera's control
         // channel: let other clients have it.

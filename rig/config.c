@@ -28,6 +28,7 @@ typedef struct {
     int    rig_line;
     char  *truth;                         // resolved against the rig file's directory (g_free)
     char   address[64], sample[64];
+    bool   inprocess;                     // serve = inprocess
     double time_scale, busy_wait_s;
     uint64_t noise_seed;
     bool   have_noise_seed;
@@ -92,8 +93,8 @@ static const backend_def_t backends[] = {
       "fault_after_moves fault", "sim (simulated stage)" },
     { "lamp", "gpiod", "backend chip line active_low warmup_ms settle_ms", "gpiod (a GPIO line)" },
     { "lamp", "sim", "backend position_mm warmup_ms settle_ms", "sim (simulated lamp)" },
-    { "rig", "virtual", "backend truth address sample time_scale noise_seed busy_wait_s pixel_format exposure_us "
-      "gain",
+    { "rig", "virtual", "backend truth serve address sample time_scale noise_seed busy_wait_s pixel_format "
+      "exposure_us gain",
       "virtual (the whole rig simulated)" },
 };
 #define NBACKENDS ((int)(sizeof backends / sizeof backends[0]))
@@ -252,6 +253,21 @@ static int parse_rig(spec_t *s, const char *sec, int line)
         s->truth = g_build_filename(dir, t->value, NULL);
         g_free(dir);
     }
+    const model_ini_entry_t *sv = get(s, sec, "serve");
+    if (sv) {
+        if (!strcmp(sv->value, "inprocess")) s->inprocess = true;
+        else if (strcmp(sv->value, "gige"))
+            return cfg_fail(s, sv->line, "[rig] serve: '%s' is not gige (GigE Vision on the address) or inprocess "
+                            "(an Aravis fake device inside refl, no network)", sv->value);
+    }
+    if (s->inprocess)
+        for (int k = 0; k < 2; k++) {
+            const char *key = k ? "busy_wait_s" : "address";
+            const model_ini_entry_t *e = get(s, sec, key);
+            if (e)
+                return cfg_fail(s, e->line, "[rig] %s applies to serve = gige only (serve = inprocess uses no "
+                                "network): remove it, or write serve = gige", key);
+        }
     snprintf(s->address, sizeof s->address, "127.0.0.1");
     if ((rc = get_string(s, sec, "address", s->address, sizeof s->address))) return rc;
     const model_ini_entry_t *a = get(s, sec, "address");
@@ -490,6 +506,7 @@ static int open_devices(rig_t *r, spec_t *s)
     int rc = 0;
     if (s->virt) {
         rig_virtual_options_t o = rig_virtual_defaults();
+        o.serve = s->inprocess ? RIG_VIRTUAL_SERVE_INPROCESS : RIG_VIRTUAL_SERVE_GIGE;
         o.address = s->address;
         if (s->sample[0]) o.sample = s->sample;
         o.time_scale = s->time_scale;

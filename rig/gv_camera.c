@@ -7,6 +7,8 @@
 //   render thread:    watches our TriggerSoftware register (REG_TRIGGER), renders,
 //     packs to the wire format, publishes the frame as `front`, then writes the
 //     fake camera's own trigger register so the GV thread sends it.
+// In-process (ArvFakeDevice): the client's ArvFakeStream thread calls fill_cb,
+//   which waits for the render thread's frame (fill_inprocess).
 // `lock` guards front/stats; `render_lock` serialises calls of the render
 // callback (the GV thread renders itself only when no frame is ready).
 // Registers live in the fake camera's memory: the GV thread writes them on
@@ -51,6 +53,7 @@ struct rig_gv_camera {
     rig_gv_camera_params_t p;
     char address[64], serial[16], vendor[GVBS_STRING_SIZE], model[GVBS_STRING_SIZE];
     ArvGvFakeCamera *gv;
+    ArvDevice       *dev;         // in-process: the ArvFakeDevice (our reference)
     ArvFakeCamera   *fake;
     GThread         *thread;
     atomic_bool      stop;
@@ -231,6 +234,37 @@ static void note_render_error(rig_gv_camera_t *g, const char *msg)
 // ---------------------------------------------------------------------------
 // Aravis GV thread: copy the finished frame (fast path), or render now.
 
+// In-process (ArvFakeStream thread, one buffer at a time): the stream offers
+// a buffer as soon as one is queued, whatever the trigger, so wait here for the
+// frame the render thread makes of the next trigger (or of free running), as a
+// triggered camera holds its buffers until a trigger comes. Give up when the
+// acquisition stops (the client closes its stream: Aravis joins this thread)
+// or the server stops; the buffer then holds zeros and nobody takes it.
+static void fill_inprocess(rig_gv_camera_t *g, uint8_t *dst, int w, int h, guint32 pf, size_t size)
+{
+    g_mutex_lock(&g->lock);
+    for (;;) {
+        if (g->front_ready && g->front_w == w && g->front_h == h && g->front_pf == pf && g->front_size == size) {
+            memcpy(dst, g->front, size);
+            g->front_ready = false;
+            g->stats.frames_sent++;
+            g_cond_broadcast(&g->cond);
+            break;
+        }
+        if (g->front_ready) {   // rendered for other settings: useless now
+            g->front_ready = false;
+            g_cond_broadcast(&g->cond);
+        }
+        if (atomic_load(&g->stop) || arv_fake_camera_get_acquisition_status(g->fake) == 0) {
+            memset(dst, 0, size);
+            break;
+        }
+        // Register writes do not signal: look again every 2 ms.
+        g_cond_wait_until(&g->cond, &g->lock, g_get_monotonic_time() + 2000);
+    }
+    g_mutex_unlock(&g->lock);
+}
+
 static void fill_cb(ArvBuffer *buffer, void *data, guint32 exposure_us_int, guint32 gain_raw, ArvPixelFormat pf)
 {
     rig_gv_camera_t *g = data;
@@ -240,6 +274,10 @@ static void fill_cb(ArvBuffer *buffer, void *data, guint32 exposure_us_int, guin
     // fill_buffer checked that the buffer holds the payload of the current registers.
     size_t size = (size_t)w * (size_t)h * (bits == 8 ? 1 : 2);
     if (!dst || !bits || w < 1 || h < 1) return;
+    if (g->p.inprocess) {
+        fill_inprocess(g, dst, w, h, (guint32)pf, size);
+        return;
+    }
 
     g_mutex_lock(&g->lock);
     if (g->front_ready && g->front_w == w && g->front_h == h && g->front_pf == (guint32)pf &&
@@ -321,6 +359,7 @@ static bool render_publish(rig_gv_camera_t *g)
     g->front_pf = pf;
     g->front_ready = true;
     g->stats.frames_rendered++;
+    g_cond_broadcast(&g->cond);   // an in-process fill waits for it
     g_mutex_unlock(&g->lock);
     return true;
 }
@@ -357,7 +396,9 @@ static gpointer render_thread(gpointer data)
                 g->stats.dropped_triggers++;
             }
             g_mutex_unlock(&g->lock);
-            if (!drop && render_publish(g))   // hand the trigger on: the GV thread sends the frame
+            // Hand the trigger on: the GV thread sends the frame (in-process, the
+            // waiting fill takes it).
+            if (!drop && render_publish(g) && !g->p.inprocess)
                 arv_fake_camera_write_register(g->fake, ARV_FAKE_CAMERA_REGISTER_TRIGGER_SOFTWARE, 1);
             continue;
         }
@@ -431,10 +472,16 @@ static const char xml_added[] =
     "\t\t<Address>0xa010</Address>\n\t\t<Length>8</Length>\n\t\t<AccessMode>RW</AccessMode>\n"
     "\t\t<pPort>Device</pPort>\n\t\t<Endianess>BigEndian</Endianess>\n\t</FloatReg>\n\n";
 
+// Guards Aravis's process-wide fake camera XML file name, which every new
+// ArvFakeCamera reads (arv_set_fake_camera_genicam_filename is not thread safe).
+static GMutex xml_name_lock;
+
 // Our XML as a new string, or NULL with a message.
 static char *make_genicam_xml(void)
 {
+    g_mutex_lock(&xml_name_lock);
     ArvFakeCamera *tmp = arv_fake_camera_new("REFL-XML");   // no network: just the built-in XML
+    g_mutex_unlock(&xml_name_lock);
     size_t size = 0;
     const char *base = tmp ? arv_fake_camera_get_genicam_xml(tmp, &size) : NULL;
     if (!base || !size) {
@@ -505,6 +552,88 @@ static char *make_genicam_xml(void)
 }
 
 // ---------------------------------------------------------------------------
+// In-process servers of this process, by serial (rig_camera_open_aravis
+// opens "inprocess:SERIAL" through rig_gv_camera_inprocess_device).
+
+#define MAX_INPROCESS 16
+
+static GMutex registry_lock;
+static rig_gv_camera_t *registry[MAX_INPROCESS];
+
+static rig_gv_camera_t *registry_find(const char *serial)   // registry_lock held
+{
+    for (int i = 0; i < MAX_INPROCESS; i++)
+        if (registry[i] && !strcmp(registry[i]->serial, serial)) return registry[i];
+    return NULL;
+}
+
+// 0, or RIG_ERR_BUSY (serial taken) / RIG_ERR_NO_MEM (registry full).
+static int registry_add(rig_gv_camera_t *g)
+{
+    int rc = RIG_ERR_NO_MEM;
+    g_mutex_lock(&registry_lock);
+    if (registry_find(g->serial)) {
+        rc = RIG_ERR_BUSY;
+    } else {
+        for (int i = 0; i < MAX_INPROCESS && rc; i++)
+            if (!registry[i]) {
+                registry[i] = g;
+                rc = 0;
+            }
+    }
+    g_mutex_unlock(&registry_lock);
+    return rc;
+}
+
+static void registry_remove(rig_gv_camera_t *g)
+{
+    g_mutex_lock(&registry_lock);
+    for (int i = 0; i < MAX_INPROCESS; i++)
+        if (registry[i] == g) registry[i] = NULL;
+    g_mutex_unlock(&registry_lock);
+}
+
+void *rig_gv_camera_inprocess_device(const char *serial)
+{
+    if (!serial) return NULL;
+    g_mutex_lock(&registry_lock);
+    rig_gv_camera_t *g = registry_find(serial);
+    ArvDevice *dev = g ? g_object_ref(g->dev) : NULL;
+    g_mutex_unlock(&registry_lock);
+    return dev;
+}
+
+bool rig_gv_camera_inprocess_alive(const void *device)
+{
+    bool alive = false;
+    g_mutex_lock(&registry_lock);
+    for (int i = 0; i < MAX_INPROCESS && device; i++)
+        if (registry[i] && (const void *)registry[i]->dev == device) alive = true;
+    g_mutex_unlock(&registry_lock);
+    return alive;
+}
+
+// After the server stopped, a client that still holds the device gets frames
+// from this (they stay as they are; rig_gv_camera_inprocess_alive says why).
+static void fill_gone(ArvBuffer *buffer, void *data, guint32 exposure_us_int, guint32 gain_raw, ArvPixelFormat pf)
+{
+}
+
+// The ArvFakeDevice of an in-process server, with our XML.
+static ArvDevice *new_fake_device(const char *serial, const char *xml_path, char *err, size_t errsize)
+{
+    GError *e = NULL;
+    g_mutex_lock(&xml_name_lock);
+    arv_set_fake_camera_genicam_filename(xml_path);   // read when the camera is made
+    ArvDevice *dev = arv_fake_device_new(serial, &e);
+    arv_set_fake_camera_genicam_filename(NULL);
+    g_mutex_unlock(&xml_name_lock);
+    if (!dev) snprintf(err, errsize, "%s", e ? e->message : "unknown error");
+    g_clear_error(&e);
+    return dev;
+}
+
+// ---------------------------------------------------------------------------
 
 // 0 when address:3956 is free, RIG_ERR_BUSY when taken, other codes on failure.
 // *err_no: errno of a failure.
@@ -538,7 +667,7 @@ int rig_gv_camera_start(rig_gv_camera_t **out, const rig_gv_camera_params_t *p)
     const char *model = p->model ? p->model : d.model;
     struct in_addr ia;
     if (!p->render) return rig_fail(RIG_ERR_INVALID, "gv camera: no render callback given");
-    if (inet_pton(AF_INET, address, &ia) != 1 || (ntohl(ia.s_addr) >> 24) != 127)
+    if (!p->inprocess && (inet_pton(AF_INET, address, &ia) != 1 || (ntohl(ia.s_addr) >> 24) != 127))
         return rig_fail(RIG_ERR_INVALID, "gv camera: address '%s' is not a loopback IPv4 address (127.x.y.z); "
                         "the virtual camera only serves on loopback", address);
     if (!*serial || strlen(serial) >= 16)
@@ -555,8 +684,18 @@ int rig_gv_camera_start(rig_gv_camera_t **out, const rig_gv_camera_params_t *p)
         return rig_fail(RIG_ERR_INVALID, "gv camera %s: temperature is not finite", serial);
     if (!(p->busy_wait_s >= 0 && p->busy_wait_s <= 3600))
         return rig_fail(RIG_ERR_INVALID, "gv camera %s: busy_wait_s %g outside 0..3600", serial, p->busy_wait_s);
+    if (p->inprocess) {
+        bool taken;
+        g_mutex_lock(&registry_lock);
+        taken = registry_find(serial) != NULL;
+        g_mutex_unlock(&registry_lock);
+        if (taken)
+            return rig_fail(RIG_ERR_BUSY, "gv camera %s: this process already serves an in-process camera with "
+                            "serial %s; stop it first or give this one another serial", serial, serial);
+    }
 
     int err_no = 0;
+    if (p->inprocess) goto make_xml;   // no socket, no lock file
     // Take turns with other refl servers on this address.
     char lock_path[512];
     snprintf(lock_path, sizeof lock_path, "%s/refl-gvcam-%s.lock", g_get_tmp_dir(), address);
@@ -582,6 +721,7 @@ int rig_gv_camera_start(rig_gv_camera_t **out, const rig_gv_camera_params_t *p)
         rig_fail(rc, "gv camera %s: cannot bind %s:%d: %s", serial, address, GVCP_PORT, strerror(err_no));
         goto done;
     }
+make_xml:
     if (!(xml = make_genicam_xml())) {
         rc = RIG_ERR_IO;
         goto done;
@@ -608,7 +748,8 @@ int rig_gv_camera_start(rig_gv_camera_t **out, const rig_gv_camera_params_t *p)
     g->p = *p;
     g->lock_fd = lock_fd;
     lock_fd = -1;
-    snprintf(g->address, sizeof g->address, "%s", address);
+    snprintf(g->address, sizeof g->address, "%s%s", p->inprocess ? RIG_GV_INPROCESS_PREFIX : "",
+             p->inprocess ? serial : address);
     snprintf(g->serial, sizeof g->serial, "%s", serial);
     snprintf(g->vendor, sizeof g->vendor, "%s", vendor);
     snprintf(g->model, sizeof g->model, "%s", model);
@@ -620,6 +761,15 @@ int rig_gv_camera_start(rig_gv_camera_t **out, const rig_gv_camera_params_t *p)
     g_mutex_init(&g->render_lock);
     g_cond_init(&g->cond);
 
+    if (p->inprocess) {
+        char msg[512];
+        if (!(g->dev = new_fake_device(serial, xml_path, msg, sizeof msg))) {
+            rc = rig_fail(RIG_ERR_IO, "gv camera %s: Aravis could not make an in-process fake device: %s", serial, msg);
+            goto done;
+        }
+        g->fake = arv_fake_device_get_fake_camera(ARV_FAKE_DEVICE(g->dev));
+        goto registers;
+    }
     g->gv = arv_gv_fake_camera_new_full(address, serial, xml_path);   // reads the XML file now
     if (!g->gv || !arv_gv_fake_camera_is_running(g->gv)) {
         rc = rig_fail(RIG_ERR_IO, "gv camera %s: Aravis could not start a GigE Vision server on %s "
@@ -633,6 +783,7 @@ int rig_gv_camera_start(rig_gv_camera_t **out, const rig_gv_camera_params_t *p)
         goto done;
     }
     g->fake = arv_gv_fake_camera_get_fake_camera(g->gv);
+registers:
     reg_set_string(g, GVBS_MANUFACTURER_NAME, g->vendor, GVBS_STRING_SIZE);
     reg_set_string(g, GVBS_MODEL_NAME, g->model, GVBS_STRING_SIZE);
     arv_fake_camera_write_register(g->fake, ARV_FAKE_CAMERA_REGISTER_SENSOR_WIDTH, (guint32)p->sensor_width);
@@ -644,7 +795,8 @@ int rig_gv_camera_start(rig_gv_camera_t **out, const rig_gv_camera_params_t *p)
     reg_set_double(g, REG_EXPOSURE_US, ARV_FAKE_CAMERA_EXPOSURE_TIME_US_DEFAULT);
     reg_set_double(g, REG_GAIN_DB, 0.0);
     reg_set_double(g, REG_TEMPERATURE_C, p->temperature_c);
-    // The GV thread checks its trigger register at this rate.
+    // The GV thread checks its trigger register at this rate (in-process: the
+    // stream thread looks for a queued buffer at this rate).
     arv_fake_camera_set_trigger_frequency(g->fake, p->trigger_poll_hz);
 #if ARAVIS_CHECK_VERSION(0, 9, 1)
     arv_fake_camera_set_fill_pattern(g->fake, fill_cb, g, NULL);
@@ -655,6 +807,11 @@ int rig_gv_camera_start(rig_gv_camera_t **out, const rig_gv_camera_params_t *p)
     if (!g->thread) {
         rc = rig_fail(RIG_ERR_IO, "gv camera %s: cannot start its render thread: %s", serial, gerr->message);
         g_error_free(gerr);
+        goto done;
+    }
+    if (p->inprocess && (rc = registry_add(g))) {
+        rig_fail(rc, "gv camera %s: %s", serial, rc == RIG_ERR_BUSY ? "another in-process camera of this process "
+                 "took the serial meanwhile" : "too many in-process cameras (16) in this process");
         goto done;
     }
     *out = g;
@@ -673,6 +830,7 @@ done:
 void rig_gv_camera_stop(rig_gv_camera_t *g)
 {
     if (!g) return;
+    if (g->dev) registry_remove(g);   // no new in-process opens; clients see it gone
     if (g->thread) {
         atomic_store(&g->stop, true);
         g_mutex_lock(&g->lock);
@@ -681,6 +839,20 @@ void rig_gv_camera_stop(rig_gv_camera_t *g)
         g_thread_join(g->thread);
     }
     if (g->gv) g_object_unref(g->gv);   // joins Aravis's thread, closes the sockets
+    if (g->dev) {
+        // Clients may hold the device longer: no more calls into g (taking the
+        // fill mutex waits for a fill in progress, released by stop).
+        atomic_store(&g->stop, true);
+        g_mutex_lock(&g->lock);
+        g_cond_broadcast(&g->cond);
+        g_mutex_unlock(&g->lock);
+#if ARAVIS_CHECK_VERSION(0, 9, 1)
+        arv_fake_camera_set_fill_pattern(g->fake, fill_gone, NULL, NULL);
+#else
+        arv_fake_camera_set_fill_pattern(g->fake, fill_gone, NULL);
+#endif
+        g_object_unref(g->dev);
+    }
     g_mutex_clear(&g->lock);
     g_mutex_clear(&g->render_lock);
     g_cond_clear(&g->cond);

@@ -32,6 +32,19 @@
 // second start on the same address waits (busy_wait_s) or fails with
 // RIG_ERR_BUSY. Serve on loopback addresses only (127.0.0.0/8 is enforced), and
 // Aravis serves only on an address a network interface has (here: 127.0.0.1).
+//
+// In-process (params.inprocess): the same camera (XML, registers, render
+// thread) as an Aravis ArvFakeDevice inside this process, without any socket
+// or lock file: rig_camera_open_aravis("inprocess:SERIAL") opens it through a
+// registry of this process, so the real Aravis camera code (GenICam features,
+// ArvCamera, ArvStream, buffers) runs without the network stack, and tests
+// may run in parallel. Aravis's in-process stream fills any queued buffer
+// regardless of triggers and acquisition; here a queued buffer waits in the
+// fill callback until the render thread has the frame of the next software
+// trigger (or of free running), so a client sees the same behaviour as over
+// GigE Vision: one frame per trigger, showing the world at the trigger. A
+// buffer still waiting is released (filled with zeros) when the acquisition
+// stops. One in-process server per serial in a process.
 #pragma once
 
 #include <stddef.h>
@@ -70,7 +83,12 @@ typedef struct {
     double      busy_wait_s;
     rig_gv_render_fn render;      // required
     void       *render_ctx;
+    // Serve in this process instead (see above): address and busy_wait_s are
+    // not used; the camera's id is RIG_GV_INPROCESS_PREFIX + serial.
+    bool        inprocess;
 } rig_gv_camera_params_t;
+
+#define RIG_GV_INPROCESS_PREFIX "inprocess:"
 
 typedef struct {
     uint64_t triggers;            // software triggers seen
@@ -102,6 +120,14 @@ void rig_gv_camera_drop_triggers(rig_gv_camera_t *g, int n);
 void rig_gv_camera_stats(rig_gv_camera_t *g, rig_gv_camera_stats_t *out);
 // The last error message of the render callback ("" when none).
 void rig_gv_camera_last_render_error(rig_gv_camera_t *g, char *buf, size_t size);
+
+// For rig/camera_aravis.c: the ArvDevice (as void *) of this process's
+// in-process server with that serial, as a new reference (g_object_unref it),
+// or NULL when there is none.
+void *rig_gv_camera_inprocess_device(const char *serial);
+// Is the in-process server of this device still serving? (false after
+// rig_gv_camera_stop: a client holding the device gets no more frames.)
+bool rig_gv_camera_inprocess_alive(const void *device);
 
 #ifdef __cplusplus
 }

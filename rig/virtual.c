@@ -19,7 +19,13 @@
 //                texture of that material (see texture_t)
 //   [sample NAME] kind = workpiece|chessboard|reference_white|material_coupon|mirror_sphere,
 //                scene (relative path); chessboard: square_mm, corners, corner0_mm;
-//                reference_white / material_coupon: material
+//                reference_white / material_coupon: material; mirror_sphere:
+//                sphere_centre_mm (x y z at angle 0) and sphere_radius_mm, the
+//                facts of the scene's '@sphere' (checked against it)
+//
+// The camera is served over GigE Vision on a loopback address, or in-process
+// (options.serve: an Aravis fake device in this process, rig/gv_camera.h);
+// both use the same server, render path and frames.
 //
 // A frame (software trigger, in the camera server's render thread):
 //   angle   = the turntable's measured angle at the trigger (status)
@@ -42,8 +48,8 @@
 //             accuracy and keeps a new state's rendering near 100 ms on 2 cores.
 //             thesis / none: one full-resolution model_render.
 //             Textured materials multiply L at the first hit (see texture_t).
-//             The mirror sphere sample kind is accepted, but the model has no
-//             smooth sphere primitive yet (left for the lamp calibration).
+//             Spheres (D3D '@sphere', the mirror sphere) are exact model
+//             primitives; their face id is nfaces + k (no texture).
 //   gf      = 10^(gain_db / 20)
 //   P       = dark_offset_dn + kc_per_us * exposure_us * gf * sum_{i in mask} L_i
 //   sensor  = the truth's sensor with system gain K * gf (the gain amplifies
@@ -173,6 +179,7 @@ struct rig_virtual {
 rig_virtual_options_t rig_virtual_defaults(void)
 {
     return (rig_virtual_options_t){
+        .serve = RIG_VIRTUAL_SERVE_GIGE,
         .address = "127.0.0.1",
         .sample = NULL,
         .time_scale = 1,
@@ -725,7 +732,8 @@ static const allowed_t allowed[] = {
                   "finite_lamps", "seed", "direct_samples", "indirect_downsample", "prerender" } },
     { "turntable", { "speed_deg_s", "accel_deg_s2", "home_time_s", "position_noise_deg", "seed",
                      "fault_after_moves", "fault" } },
-    { "sample", { "kind", "scene", "square_mm", "corners", "corner0_mm", "material" } },
+    { "sample", { "kind", "scene", "square_mm", "corners", "corner0_mm", "material", "sphere_centre_mm",
+                  "sphere_radius_mm" } },
     { "texture", { "amplitude", "scale_mm", "seed" } },
     { "sensor", { NULL } },     // checked by model_sensor_from_ini
     { "lamp", { NULL } },       // model_lamps_from_ini
@@ -890,6 +898,44 @@ static bool parse_textures(rig_virtual_t *v, const model_ini_t *ini)
 static const char *sample_kinds[] = { "workpiece", "chessboard", "reference_white", "material_coupon",
                                       "mirror_sphere" };
 
+// A mirror sphere's facts (sphere_centre_mm, sphere_radius_mm): required for
+// that kind, refused for the others, and one of the scene's spheres must have
+// them (to 1e-6 mm).
+static bool check_sphere_facts(const model_ini_t *ini, const char *sec, const sample_t *sm)
+{
+    bool mirror = !strcmp(sm->kind, "mirror_sphere");
+    static const char *keys[] = { "sphere_centre_mm", "sphere_radius_mm" };
+    for (int k = 0; k < 2; k++)
+        if (!mirror && model_ini_get(ini, sec, keys[k])) {
+            model_error(ini->path, ini_line(ini, sec, keys[k]), "sample '%s': %s is a key of mirror spheres, "
+                        "not of kind %s", sm->name, keys[k], sm->kind);
+            return false;
+        }
+    if (!mirror) return true;
+    double r;
+    if (!get_double(ini, sec, "sphere_radius_mm", 1e-3, 1e4, true, &r)) return false;
+    const char *cs = get_str(ini, sec, "sphere_centre_mm", NULL);
+    double c[3];
+    char extra;
+    if (!cs || sscanf(cs, "%lf %lf %lf %c", &c[0], &c[1], &c[2], &extra) != 3 || !isfinite(c[0]) ||
+        !isfinite(c[1]) || !isfinite(c[2])) {
+        model_error(ini->path, ini_line(ini, sec, "sphere_centre_mm"), "sample '%s': sphere_centre_mm = '%s': give "
+                    "the sphere's centre at angle 0 as three numbers x y z (mm, rig frame)", sm->name, cs ? cs : "");
+        return false;
+    }
+    for (int k = 0; k < sm->scene->nspheres; k++) {
+        const model_sphere_t *sp = &sm->scene->spheres[k];
+        if (fabs(sp->centre_mm.x - c[0]) <= 1e-6 && fabs(sp->centre_mm.y - c[1]) <= 1e-6 &&
+            fabs(sp->centre_mm.z - c[2]) <= 1e-6 && fabs(sp->radius_mm - r) <= 1e-6)
+            return true;
+    }
+    model_error(ini->path, ini_line(ini, sec, "sphere_centre_mm"), "sample '%s': its scene %s has no sphere of "
+                "centre (%g, %g, %g) mm and radius %g mm (it has %d '@sphere' line%s); make the facts and the "
+                "scene agree", sm->name, sm->scene_path, c[0], c[1], c[2], r, sm->scene->nspheres,
+                sm->scene->nspheres == 1 ? "" : "s");
+    return false;
+}
+
 static bool parse_samples(rig_virtual_t *v, const model_ini_t *ini)
 {
     int n = 0;
@@ -989,6 +1035,7 @@ static bool parse_samples(rig_virtual_t *v, const model_ini_t *ini)
                     sm->tex[k] = &v->textures[j];
                     sm->textured = true;
                 }
+        if (!check_sphere_facts(ini, sec, sm)) return false;
         if (mat)
             for (int k = 0; k < sm->scene->nmaterials; k++)
                 if (strcmp(sm->scene->material_names[k], mat)) {
@@ -1226,6 +1273,9 @@ int rig_virtual_open(rig_virtual_t **out, const char *truth_path, const rig_virt
         return rig_fail(RIG_ERR_INVALID, "virtual rig: time_scale %g must be > 0", o.time_scale);
     if (strlen(o.address) >= 64)
         return rig_fail(RIG_ERR_INVALID, "virtual rig: address '%s' is too long", o.address);
+    if (o.serve != RIG_VIRTUAL_SERVE_GIGE && o.serve != RIG_VIRTUAL_SERVE_INPROCESS)
+        return rig_fail(RIG_ERR_INVALID, "virtual rig: serve = %d is neither RIG_VIRTUAL_SERVE_GIGE nor "
+                        "RIG_VIRTUAL_SERVE_INPROCESS", (int)o.serve);
     int err = RIG_ERR_OK;
     model_ini_t *ini = NULL;
     rig_virtual_t *v = calloc(1, sizeof *v);
@@ -1297,6 +1347,9 @@ int rig_virtual_open(rig_virtual_t **out, const char *truth_path, const rig_virt
     gp.busy_wait_s = o.busy_wait_s;
     gp.render = render_cb;
     gp.render_ctx = v;
+    gp.inprocess = o.serve == RIG_VIRTUAL_SERVE_INPROCESS;
+    if (gp.inprocess)   // the id rig_camera_open_aravis takes
+        snprintf(v->address, sizeof v->address, "%s%s", RIG_GV_INPROCESS_PREFIX, gp.serial ? gp.serial : "");
     if ((err = rig_gv_camera_start(&v->gv, &gp))) goto fail;
     if (v->prerender) {
         if (pthread_create(&v->pre_thread, NULL, prerender_main, v)) {
@@ -1355,6 +1408,7 @@ void rig_virtual_close(rig_virtual_t *v)
 rig_turntable_t *rig_virtual_turntable(rig_virtual_t *v) { return v ? &v->tt : NULL; }
 rig_lamps_t *rig_virtual_lamps(rig_virtual_t *v) { return v ? v->lamps_dev : NULL; }
 const char *rig_virtual_camera_address(const rig_virtual_t *v) { return v ? v->address : NULL; }
+rig_gv_camera_t *rig_virtual_gv_camera(rig_virtual_t *v) { return v ? v->gv : NULL; }
 const char *rig_virtual_truth_path(const rig_virtual_t *v) { return v ? v->truth_path : NULL; }
 
 const char *rig_virtual_sample(const rig_virtual_t *v)

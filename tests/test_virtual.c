@@ -20,6 +20,7 @@
 #include "model/model.h"
 #include "rig/rig.h"
 #include "tests/test.h"
+#include "tests/virtual_stats.h"
 
 #define W 1280
 #define H 1024
@@ -60,35 +61,12 @@ static rig_virtual_t *open_rig(const char *sample)
     return v;
 }
 
-typedef struct {
-    long   n;          // lit pixels
-    double mean;       // mean of frame - expected
-    double se;         // its standard error under the noise model
-    double z2;         // mean of (frame - expected)^2 / var_model
-} cmp_t;
+typedef vstat_t cmp_t;
 
-// Compare a Mono12 frame with an expected frame over the pixels whose expected
-// value is at least `lit_dn` above the dark offset.
+// The shared statistic (tests/virtual_stats.h) over the whole frame.
 static cmp_t compare(const uint16_t *pix, const float *E, double lit_dn)
 {
-    const double K = 0.25, read_e = 6, offset = 64;   // the truth file's [sensor]
-    cmp_t c = { 0, 0, 0, 0 };
-    double sum = 0, sumvar = 0, z2 = 0;
-    for (size_t i = 0; i < (size_t)W * H; i++) {
-        if (!(E[i] - offset >= lit_dn)) continue;
-        double var = K * (E[i] - offset) + read_e * read_e * K * K + 1.0 / 12;
-        double d = pix[i] - E[i];
-        sum += d;
-        sumvar += var;
-        z2 += d * d / var;
-        c.n++;
-    }
-    if (c.n) {
-        c.mean = sum / c.n;
-        c.se = sqrt(sumvar) / c.n;
-        c.z2 = z2 / c.n;
-    }
-    return c;
+    return vstat_compare(pix, E, (size_t)W * H, lit_dn);
 }
 
 static int capture(rig_camera_t *c, rig_frame_t *f)
