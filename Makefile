@@ -14,7 +14,7 @@ CXX   ?= c++
 
 # Libraries found through pkg-config; Embree 3 and mrcal ship no .pc file on
 # Debian 12, so they are linked by name (scripts/install-deps installs them).
-PKGS := glib-2.0 libpng libtiff-4 jansson libftdi1 libusb-1.0 libgpiod aravis-0.8
+PKGS := glib-2.0 libpng libtiff-4 jansson libftdi1 libusb-1.0 libgpiod aravis-0.8 sqlite3 zlib
 # Only the tests link libumockdev (the simulated USB device of the APT tests).
 TEST_PKGS := umockdev-1.0
 LIBS_NOPC := -lembree3 -lmrcal
@@ -45,7 +45,8 @@ MODEL_SRC := model/util.c model/ini.c model/scene.c model/config.c model/brdf.c 
              model/camera.c model/trace.c model/shade.c model/sensor.c \
              model/image.c model/edges.c model/cmd.c
 RIG_SRC   := rig/rig.c rig/turntable_apt.c rig/turntable_sim.c rig/lamps.c \
-             rig/camera_aravis.c rig/gv_camera.c rig/virtual.c rig/config.c rig/cmd_rig.c
+             rig/camera_aravis.c rig/gv_camera.c rig/virtual.c rig/config.c rig/cmd_rig.c \
+             rig/plan.c rig/journal.c rig/capture.c rig/cmd_capture.c
 CALIB_SRC :=
 FIT_SRC   :=
 LIB_SRC   := $(MODEL_SRC) $(RIG_SRC) $(CALIB_SRC) $(FIT_SRC)
@@ -56,7 +57,8 @@ TEST_SRC  := tests/harness.c tests/test_brdf.c tests/test_scene.c tests/test_con
              tests/test_image.c tests/test_edges.c tests/test_cli.c tests/test_corpus.c \
              tests/test_turntable.c tests/apt_sim.c tests/test_lamps.c \
              tests/test_camera_aravis.c tests/test_virtual.c tests/test_rig_config.c \
-             tests/test_rig_cli.c
+             tests/test_rig_cli.c tests/test_sphere.c tests/test_virtual_inprocess.c \
+             tests/test_plan.c tests/test_capture.c
 BENCH_SRC := tests/bench.c
 FUZZ_SRC  := tests/fuzz_parsers.c
 

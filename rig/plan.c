@@ -1,0 +1,515 @@
+// rig/plan.c — capture plans: parse the plan file, build the step list, check
+// it against a rig, and the hardware floor of a step list (see rig/rig.h,
+// "Capture sessions").
+#define _GNU_SOURCE
+#include <glib.h>
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "model/model.h"
+#include "rig/rig.h"
+
+#define MAX_STEPS 1000000
+
+static const char *const sections[] = { "plan", "sample", "angles", "lamps", "exposure", "capture" };
+static const char *const keys[] = {
+    "plan: name operator notes", "sample: name kind", "angles: list range", "lamps: sets",
+    "exposure: mode list_us target_fraction roi gain pixel_format",
+    "capture: repeats dark_every settle_ms lamp_settle_ms frame_timeout_s retries",
+};
+static const char *const kinds[] = { "material_coupon", "reference_white", "chessboard", "mirror_sphere",
+                                     "workpiece" };
+
+static const model_ini_entry_t *get(const model_ini_t *ini, const char *sec, const char *key)
+{
+    return model_ini_get(ini, sec, key);
+}
+
+static int sec_line(const model_ini_t *ini, const char *sec)
+{
+    for (int i = 0; i < ini->nsections; i++)
+        if (!strcmp(ini->sections[i], sec)) return ini->section_lines[i];
+    return 0;
+}
+
+// Numbers of a list value; false (reported) on a bad one.
+static bool parse_numbers(const model_ini_t *ini, const model_ini_entry_t *e, double **out, int *n)
+{
+    gchar **w = g_strsplit_set(e->value, " \t,", -1);
+    int cap = 0;
+    for (int i = 0; w[i]; i++) cap++;
+    *out = calloc((size_t)cap + 1, sizeof **out);
+    *n = 0;
+    bool ok = true;
+    for (int i = 0; w[i] && ok; i++) {
+        if (!w[i][0]) continue;
+        if (!model_parse_double(w[i], &(*out)[*n])) {
+            model_error(ini->path, e->line, "[%s] %s: '%s' is not a number", e->section, e->key, w[i]);
+            ok = false;
+        }
+        (*n)++;
+    }
+    g_strfreev(w);
+    if (ok && *n == 0) {
+        model_error(ini->path, e->line, "[%s] %s is empty: give at least one value", e->section, e->key);
+        ok = false;
+    }
+    return ok;
+}
+
+static bool get_number(const model_ini_t *ini, const char *sec, const char *key, double *v, double lo,
+                       double hi, bool integer)
+{
+    const model_ini_entry_t *e = get(ini, sec, key);
+    if (!e) return true;
+    if (!model_parse_double(e->value, v) || (integer && *v != floor(*v))) {
+        model_error(ini->path, e->line, "[%s] %s = '%s' is not %s", sec, key, e->value,
+                    integer ? "a whole number" : "a number");
+        return false;
+    }
+    if (!(*v >= lo && *v <= hi)) {
+        model_error(ini->path, e->line, "[%s] %s = %s is out of range (%g .. %g)", sec, key, e->value, lo, hi);
+        return false;
+    }
+    return true;
+}
+
+static void copy_text(const model_ini_t *ini, const char *sec, const char *key, char *out, size_t size)
+{
+    const model_ini_entry_t *e = get(ini, sec, key);
+    snprintf(out, size, "%s", e ? e->value : "");
+}
+
+static int cmp_desc(const void *a, const void *b)
+{
+    double x = *(const double *)a, y = *(const double *)b;
+    return x > y ? -1 : x < y;
+}
+
+static bool check_keys(const model_ini_t *ini)
+{
+    for (int i = 0; i < ini->nsections; i++) {
+        bool known = false;
+        for (size_t k = 0; k < sizeof sections / sizeof sections[0]; k++) known |= !strcmp(ini->sections[i], sections[k]);
+        if (!known) {
+            model_error(ini->path, ini->section_lines[i], "unknown section [%s]: a plan has [plan], [sample], "
+                        "[angles], [lamps], [exposure], [capture]", ini->sections[i]);
+            return false;
+        }
+    }
+    for (int i = 0; i < ini->nentries; i++) {
+        const model_ini_entry_t *e = &ini->entries[i];
+        for (size_t k = 0; k < sizeof keys / sizeof keys[0]; k++) {
+            size_t n = strlen(e->section);
+            if (strncmp(keys[k], e->section, n) || keys[k][n] != ':') continue;
+            gchar **w = g_strsplit(keys[k] + n + 2, " ", -1);
+            bool ok = false;
+            for (int j = 0; w[j]; j++) ok |= !strcmp(w[j], e->key);
+            g_strfreev(w);
+            if (!ok) {
+                model_error(ini->path, e->line, "[%s]: unknown key '%s' (keys: %s)", e->section, e->key,
+                            keys[k] + n + 2);
+                return false;
+            }
+        }
+    }
+    return true;
+}
+
+static bool parse_lamp_sets(rig_plan_t *p, const model_ini_t *ini)
+{
+    const model_ini_entry_t *e = get(ini, "lamps", "sets");
+    if (!e) {
+        model_error(ini->path, sec_line(ini, "lamps"), "[lamps] needs sets = SET; SET; ... (a SET is "
+                    "NAME+NAME, all or none)");
+        return false;
+    }
+    p->lamp_sets_line = e->line;
+    gchar **w = g_strsplit(e->value, ";", -1);
+    int n = 0;
+    for (int i = 0; w[i]; i++) n++;
+    p->lamp_sets = calloc((size_t)n + 1, sizeof *p->lamp_sets);
+    bool ok = true;
+    for (int i = 0; w[i] && ok; i++) {
+        char *s = g_strstrip(w[i]);
+        if (!*s) {
+            model_error(ini->path, e->line, "[lamps] sets: empty lamp set (set %d); write none for all lamps off",
+                        i + 1);
+            ok = false;
+            break;
+        }
+        gchar **names = g_strsplit(s, "+", -1);
+        GString *norm = g_string_new("");
+        for (int k = 0; names[k] && ok; k++) {
+            char *nm = g_strstrip(names[k]);
+            if (!*nm || strchr(nm, ' ') || strchr(nm, ',')) {
+                model_error(ini->path, e->line, "[lamps] sets: bad lamp name '%s' in set '%s' (join names with +)",
+                            nm, s);
+                ok = false;
+            }
+            if ((!strcmp(nm, "all") || !strcmp(nm, "none")) && names[1]) {
+                model_error(ini->path, e->line, "[lamps] sets: '%s' cannot be combined with other lamps in '%s'",
+                            nm, s);
+                ok = false;
+            }
+            g_string_append_printf(norm, "%s%s", k ? "+" : "", nm);
+        }
+        if (ok && norm->len >= sizeof p->lamp_sets[0]) {
+            model_error(ini->path, e->line, "[lamps] sets: set '%s' is too long", s);
+            ok = false;
+        }
+        if (ok) snprintf(p->lamp_sets[p->nlamp_sets++], sizeof p->lamp_sets[0], "%s", norm->str);
+        g_string_free(norm, TRUE);
+        g_strfreev(names);
+    }
+    g_strfreev(w);
+    return ok;
+}
+
+static bool parse_angles(rig_plan_t *p, const model_ini_t *ini)
+{
+    const model_ini_entry_t *l = get(ini, "angles", "list"), *r = get(ini, "angles", "range");
+    if (!!l == !!r) {
+        model_error(ini->path, l && r ? r->line : sec_line(ini, "angles"),
+                    "[angles] needs exactly one of list = DEG DEG ... or range = START STOP STEP");
+        return false;
+    }
+    if (l) return parse_numbers(ini, l, &p->angles_deg, &p->nangles);
+    double *v = NULL;
+    int n = 0;
+    if (!parse_numbers(ini, r, &v, &n)) {
+        free(v);
+        return false;
+    }
+    bool ok = false;
+    if (n != 3) {
+        model_error(ini->path, r->line, "[angles] range = START STOP STEP: %d values given, 3 needed", n);
+    } else if (!(v[2] != 0) || (v[1] - v[0]) * v[2] < 0) {
+        model_error(ini->path, r->line, "[angles] range = %s: the step %g must be non-zero and go from %g towards "
+                    "%g", r->value, v[2], v[0], v[1]);
+    } else if (fabs((v[1] - v[0]) / v[2]) > 100000) {
+        model_error(ini->path, r->line, "[angles] range = %s: more than 100000 angles", r->value);
+    } else {
+        int cnt = (int)floor((v[1] - v[0]) / v[2] + 1e-9) + 1;
+        p->angles_deg = calloc((size_t)cnt, sizeof(double));
+        for (int i = 0; i < cnt; i++) p->angles_deg[i] = v[0] + i * v[2];
+        p->nangles = cnt;
+        ok = true;
+    }
+    free(v);
+    return ok;
+}
+
+static bool parse_exposure(rig_plan_t *p, const model_ini_t *ini)
+{
+    int sl = sec_line(ini, "exposure");
+    const model_ini_entry_t *m = get(ini, "exposure", "mode"), *l = get(ini, "exposure", "list_us");
+    if (!m || (strcmp(m->value, "fixed") && strcmp(m->value, "auto"))) {
+        model_error(ini->path, m ? m->line : sl, "[exposure] mode = %s: write mode = fixed (list_us) or mode = auto "
+                    "(bracketing over list_us)", m ? m->value : "(missing)");
+        return false;
+    }
+    p->auto_exposure = !strcmp(m->value, "auto");
+    if (!l) {
+        model_error(ini->path, sl, "[exposure] needs list_us = US US ... (exposure times in microseconds)");
+        return false;
+    }
+    p->exposure_line = l->line;
+    if (!parse_numbers(ini, l, &p->exposures_us, &p->nexposures)) return false;
+    for (int i = 0; i < p->nexposures; i++)
+        if (!(p->exposures_us[i] > 0 && p->exposures_us[i] <= 1e8)) {
+            model_error(ini->path, l->line, "[exposure] list_us: %g us is out of range (0 < us <= 1e8)",
+                        p->exposures_us[i]);
+            return false;
+        }
+    if (p->auto_exposure) qsort(p->exposures_us, (size_t)p->nexposures, sizeof(double), cmp_desc);
+    for (int i = 0; i + 1 < p->nexposures && p->auto_exposure; i++)
+        if (p->exposures_us[i] == p->exposures_us[i + 1]) {
+            model_error(ini->path, l->line, "[exposure] list_us: %g us given twice", p->exposures_us[i]);
+            return false;
+        }
+    p->target_fraction = 0.9;
+    if (!get_number(ini, "exposure", "target_fraction", &p->target_fraction, 1e-6, 1, false)) return false;
+    if (get(ini, "exposure", "target_fraction") && !p->auto_exposure) {
+        model_error(ini->path, get(ini, "exposure", "target_fraction")->line,
+                    "[exposure] target_fraction is for mode = auto only");
+        return false;
+    }
+    const model_ini_entry_t *roi = get(ini, "exposure", "roi");
+    if (roi) {
+        double *v = NULL;
+        int n = 0;
+        bool ok = parse_numbers(ini, roi, &v, &n);
+        if (ok && (n != 4 || v[0] < 0 || v[1] < 0 || v[2] < 1 || v[3] < 1 || v[0] != floor(v[0]) ||
+                   v[1] != floor(v[1]) || v[2] != floor(v[2]) || v[3] != floor(v[3]) || v[0] + v[2] > 65536 ||
+                   v[1] + v[3] > 65536)) {
+            model_error(ini->path, roi->line, "[exposure] roi = %s: write roi = X Y WIDTH HEIGHT (whole pixels, "
+                        "width and height >= 1)", roi->value);
+            ok = false;
+        }
+        for (int i = 0; ok && i < 4; i++) p->roi[i] = (int)v[i];
+        free(v);
+        if (!ok) return false;
+    }
+    if (!get_number(ini, "exposure", "gain", &p->gain, 0, 100, false)) return false;
+    copy_text(ini, "exposure", "pixel_format", p->pixel_format, sizeof p->pixel_format);
+    if (!p->pixel_format[0]) snprintf(p->pixel_format, sizeof p->pixel_format, "Mono12");
+    if (strcmp(p->pixel_format, "Mono8") && strcmp(p->pixel_format, "Mono12") && strcmp(p->pixel_format, "Mono16")) {
+        model_error(ini->path, get(ini, "exposure", "pixel_format")->line,
+                    "[exposure] pixel_format = %s: write Mono8, Mono12 or Mono16", p->pixel_format);
+        return false;
+    }
+    return true;
+}
+
+static bool build_steps(rig_plan_t *p, const model_ini_t *ini)
+{
+    double light = (double)p->nangles * p->nlamp_sets * p->nexposures * p->repeats;
+    double total = light + (p->dark_every ? floor(light / p->dark_every) : 0);
+    if (total > MAX_STEPS) {
+        model_error(ini->path, sec_line(ini, "angles"), "the plan has %.0f steps; at most %d fit one session: split "
+                    "it", total, MAX_STEPS);
+        return false;
+    }
+    p->steps = calloc((size_t)total + 1, sizeof *p->steps);
+    int n = 0, nlight = 0, group = 0;
+    for (int a = 0; a < p->nangles; a++)
+        for (int l = 0; l < p->nlamp_sets; l++)
+            for (int r = 0; r < p->repeats; r++, group++)
+                for (int e = 0; e < p->nexposures; e++) {
+                    rig_step_t *s = &p->steps[n++];
+                    s->kind = RIG_STEP_LIGHT;
+                    s->angle_index = a;
+                    s->lamp_set = l;
+                    s->exposure_index = e;
+                    s->repeat = r;
+                    s->group = group;
+                    s->angle_deg = p->angles_deg[a];
+                    snprintf(s->lamps, sizeof s->lamps, "%s", p->lamp_sets[l]);
+                    s->exposure_us = p->exposures_us[e];
+                    s->gain = p->gain;
+                    if (p->dark_every && ++nlight % p->dark_every == 0) {
+                        rig_step_t *d = &p->steps[n++];
+                        *d = *s;
+                        d->kind = RIG_STEP_DARK;
+                        d->group = -1;
+                        d->lamp_set = -1;
+                        snprintf(d->lamps, sizeof d->lamps, "none");
+                    }
+                }
+    // Order in the file: angle, lamp set, exposure, repeat; with repeats the
+    // bracket of one repeat is kept together (exposure inside repeat).
+    for (int i = 0; i < n; i++) p->steps[i].index = i;
+    p->nsteps = n;
+    return true;
+}
+
+rig_plan_t *rig_plan_parse(const char *text, size_t len, const char *name)
+{
+    model_ini_t *ini = model_ini_parse(text, len, name);
+    if (!ini) return NULL;
+    rig_plan_t *p = calloc(1, sizeof *p);
+    bool ok = false;
+    p->path = strdup(name);
+    p->text = g_strndup(text, len);
+    model_sha256_hex(text, len, p->sha256);
+    if (!check_keys(ini)) goto done;
+    for (size_t k = 0; k < 5; k++) {
+        static const char *const need[] = { "sample", "angles", "lamps", "exposure", NULL };
+        if (!need[k]) break;
+        if (!sec_line(ini, need[k])) {
+            model_error(ini->path, 0, "missing section [%s] (see examples/plans/)", need[k]);
+            goto done;
+        }
+    }
+    copy_text(ini, "plan", "name", p->name, sizeof p->name);
+    copy_text(ini, "plan", "operator", p->operator_name, sizeof p->operator_name);
+    copy_text(ini, "plan", "notes", p->notes, sizeof p->notes);
+    copy_text(ini, "sample", "name", p->sample, sizeof p->sample);
+    copy_text(ini, "sample", "kind", p->sample_kind, sizeof p->sample_kind);
+    if (!p->sample[0]) {
+        model_error(ini->path, sec_line(ini, "sample"), "[sample] needs name = NAME");
+        goto done;
+    }
+    bool kind_ok = false;
+    for (size_t k = 0; k < sizeof kinds / sizeof kinds[0]; k++) kind_ok |= !strcmp(p->sample_kind, kinds[k]);
+    if (!kind_ok) {
+        const model_ini_entry_t *e = get(ini, "sample", "kind");
+        model_error(ini->path, e ? e->line : sec_line(ini, "sample"), "[sample] kind = %s: write material_coupon, "
+                    "reference_white, chessboard, mirror_sphere or workpiece", e ? e->value : "(missing)");
+        goto done;
+    }
+    if (!parse_angles(p, ini) || !parse_lamp_sets(p, ini) || !parse_exposure(p, ini)) goto done;
+    double v = 1;
+    if (!get_number(ini, "capture", "repeats", &v, 1, 10000, true)) goto done;
+    p->repeats = (int)v;
+    v = 0;
+    if (!get_number(ini, "capture", "dark_every", &v, 0, 1e6, true)) goto done;
+    p->dark_every = (int)v;
+    if (!get_number(ini, "capture", "settle_ms", &p->settle_ms, 0, 3.6e6, false) ||
+        !get_number(ini, "capture", "lamp_settle_ms", &p->lamp_settle_ms, 0, 3.6e6, false))
+        goto done;
+    p->frame_timeout_s = 10;
+    v = 2;
+    if (!get_number(ini, "capture", "frame_timeout_s", &p->frame_timeout_s, 0.01, 3600, false) ||
+        !get_number(ini, "capture", "retries", &v, 0, 100, true))
+        goto done;
+    p->retries = (int)v;
+    for (int i = 0; i < p->nangles; i++)
+        if (!(fabs(p->angles_deg[i]) <= 1e4)) {
+            const model_ini_entry_t *e = get(ini, "angles", "list");
+            if (!e) e = get(ini, "angles", "range");
+            model_error(ini->path, e->line, "[angles]: %g deg is beyond the turntable's range (-10000 .. 10000)",
+                        p->angles_deg[i]);
+            goto done;
+        }
+    ok = build_steps(p, ini);
+done:
+    model_ini_free(ini);
+    if (!ok) {
+        rig_plan_free(p);
+        return NULL;
+    }
+    return p;
+}
+
+rig_plan_t *rig_plan_load(const char *path)
+{
+    size_t len = 0;
+    char *text = model_read_file(path, &len);
+    if (!text) return NULL;
+    rig_plan_t *p = rig_plan_parse(text, len, path);
+    free(text);
+    return p;
+}
+
+void rig_plan_free(rig_plan_t *p)
+{
+    if (!p) return;
+    free(p->path);
+    g_free(p->text);
+    free(p->angles_deg);
+    free(p->lamp_sets);
+    free(p->exposures_us);
+    free(p->steps);
+    free(p);
+}
+
+static uint32_t all_mask(const rig_lamps_t *l)
+{
+    return !l ? 0 : l->n >= 32 ? 0xffffffffu : ((uint32_t)1 << l->n) - 1;
+}
+
+int rig_plan_bind(rig_plan_t *p, rig_t *r)
+{
+    uint32_t *masks = calloc((size_t)p->nlamp_sets + 1, sizeof *masks);
+    int rc = 0;
+    for (int s = 0; s < p->nlamp_sets; s++) {
+        if (!strcmp(p->lamp_sets[s], "none")) continue;
+        if (!strcmp(p->lamp_sets[s], "all")) {
+            masks[s] = all_mask(r->lamps);
+            continue;
+        }
+        gchar **names = g_strsplit(p->lamp_sets[s], "+", -1);
+        for (int k = 0; names[k] && !rc; k++) {
+            int i = rig_lamps_find(r->lamps, names[k]);
+            if (i < 0) {
+                GString *known = g_string_new("");
+                for (int j = 0; r->lamps && j < r->lamps->n; j++)
+                    g_string_append_printf(known, "%s%s", j ? ", " : "", r->lamps->lamps[j].name);
+                model_error(p->path, p->lamp_sets_line, "[lamps] sets: the rig %s has no lamp '%s' (its lamps: %s)",
+                            r->path, names[k], known->len ? known->str : "none");
+                g_string_free(known, TRUE);
+                rc = RIG_ERR_INVALID;
+            }
+            masks[s] |= 1u << (i & 31);
+        }
+        g_strfreev(names);
+        if (rc) goto done;
+    }
+    for (int i = 0; i < p->nsteps; i++)
+        p->steps[i].lamp_mask = p->steps[i].lamp_set >= 0 ? masks[p->steps[i].lamp_set] : 0;
+    bool moves = false;
+    for (int i = 0; i < p->nangles; i++) moves |= p->angles_deg[i] != 0;
+    if (moves && !r->turntable) {
+        model_error(p->path, 0, "[angles]: the plan turns the sample but the rig %s has no turntable", r->path);
+        rc = RIG_ERR_NO_DEVICE;
+        goto done;
+    }
+    if (!r->camera) {
+        model_error(p->path, 0, "the rig %s has no camera: a capture needs one", r->path);
+        rc = RIG_ERR_NO_DEVICE;
+        goto done;
+    }
+    if (r->virt && strcmp(rig_virtual_sample(r->virt), p->sample)) {
+        bool q = model_error_quiet(true);
+        int e = rig_virtual_set_sample(r->virt, p->sample);
+        model_error_quiet(q);
+        if (e) {
+            model_error(p->path, 0, "[sample] name = %s: the virtual rig's truth file %s has no such sample",
+                        p->sample, rig_virtual_truth_path(r->virt));
+            rc = RIG_ERR_INVALID;
+            goto done;
+        }
+    }
+    // The camera: set every exposure, the gain and the format, read them back.
+    rig_frame_meta_t before, m;
+    bool q = model_error_quiet(true);
+    rc = rig_camera_settings(r->camera, &before);
+    if (!rc && (rc = rig_camera_set_pixel_format(r->camera, p->pixel_format)))
+        model_error(p->path, 0, "[exposure] pixel_format = %s: the camera refuses it (%s)", p->pixel_format,
+                    rig_last_error());
+    if (!rc && (rc = rig_camera_set_gain(r->camera, p->gain)))
+        model_error(p->path, 0, "[exposure] gain = %g: the camera refuses it (%s)", p->gain, rig_last_error());
+    for (int i = 0; !rc && i < p->nexposures; i++) {
+        double us = p->exposures_us[i];
+        if ((rc = rig_camera_set_exposure_us(r->camera, us)) == 0 && (rc = rig_camera_settings(r->camera, &m)) == 0 &&
+            !(fabs(m.exposure_us - us) <= 0.01 * us + 1)) {
+            rc = RIG_ERR_INVALID;
+        }
+        if (rc)
+            model_error(p->path, p->exposure_line, "[exposure] list_us: the camera %s does not accept %g us",
+                        r->camera->name, us);
+    }
+    if (!rc && !(rc = rig_camera_settings(r->camera, &m)) && p->roi[2] &&
+        (p->roi[0] + p->roi[2] > m.width || p->roi[1] + p->roi[3] > m.height)) {
+        model_error(p->path, 0, "[exposure] roi %d %d %d %d does not fit the %d x %d frame", p->roi[0], p->roi[1],
+                    p->roi[2], p->roi[3], m.width, m.height);
+        rc = RIG_ERR_INVALID;
+    }
+    model_error_quiet(q);
+    if (!rc) {
+        rig_camera_set_exposure_us(r->camera, before.exposure_us);
+    } else {
+        // re-report the plan error loudly unless the caller silenced errors
+        char msg[1024];
+        snprintf(msg, sizeof msg, "%s", model_last_error());
+        model_error(NULL, 0, "%s", msg);
+    }
+done:
+    free(masks);
+    return rc;
+}
+
+double rig_plan_floor_s(const rig_plan_t *p, const rig_t *r, int from_step)
+{
+    double t = 0, angle = NAN;
+    uint32_t mask = 0;
+    for (int i = from_step; i < p->nsteps; i++) {
+        const rig_step_t *s = &p->steps[i];
+        double motion = 0, settle = 0, lamp = 0;
+        if (r->turntable && !(s->angle_deg == angle)) {
+            if (isfinite(angle)) motion = rig_motion_time_s(s->angle_deg - angle, r->speed_deg_s, r->accel_deg_s2);
+            settle = 1e-3 * p->settle_ms;
+            angle = s->angle_deg;
+        }
+        if (s->lamp_mask != mask) {
+            lamp = (r->lamps ? rig_lamps_settle_s(r->lamps, mask, s->lamp_mask) : 0) + 1e-3 * p->lamp_settle_ms;
+            mask = s->lamp_mask;
+        }
+        t += (isfinite(motion) ? motion : 0) + fmax(settle, lamp) + 1e-6 * s->exposure_us;
+    }
+    return t;
+}

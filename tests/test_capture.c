@@ -1,0 +1,493 @@
+// tests/test_capture.c — `refl capture` and `refl session` on the virtual rig:
+// a session killed with SIGKILL at 10 random steps (fixed seed) and resumed
+// each time equals an uninterrupted one (same step rows, every hash valid, no
+// duplicate or missing frame; pixel values differ: the virtual camera's noise
+// seed counts frames per process); --dry-run; resume refusing a changed plan;
+// export; a full disk (a 3 MB tmpfs; skipped where mount is not allowed); a
+// camera that stops answering (in-process, triggers dropped through the
+// before_step hook); a stalled turntable (truth file with fault keys).
+//
+// Only one virtual camera serves 127.0.0.1 at a time: these tests hold the
+// lock of tests/test_camera_aravis.c throughout.
+#define _GNU_SOURCE
+#include <errno.h>
+#include <fcntl.h>
+#include <glib.h>
+#include <limits.h>
+#include <signal.h>
+#include <sqlite3.h>
+#include <stdarg.h>
+#include <stdlib.h>
+#include <sys/file.h>
+#include <sys/mount.h>
+#include <sys/stat.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include "model/model.h"
+#include "rig/gv_camera.h"
+#include "rig/rig.h"
+#include "tests/test.h"
+
+static int refl(char **out, char **err, ...)
+{
+    const char *argv[64];
+    int n = 0;
+    argv[n++] = test_refl();
+    va_list ap;
+    va_start(ap, err);
+    const char *a;
+    while ((a = va_arg(ap, const char *)) && n < 63) argv[n++] = a;
+    va_end(ap);
+    argv[n] = NULL;
+    return test_run(argv, 120, out, err);
+}
+
+static int camera_lock(void)
+{
+    char path[512];
+    snprintf(path, sizeof path, "%s/refl-test-camera-aravis.lock", g_get_tmp_dir());
+    int fd = open(path, O_RDONLY | O_CREAT | O_CLOEXEC, 0666);
+    for (int i = 0; fd >= 0 && i < 6000; i++) {
+        if (flock(fd, LOCK_EX | LOCK_NB) == 0) return fd;
+        usleep(50000);
+    }
+    if (fd >= 0) close(fd);
+    CHECK_MSG(false, "cannot lock refl-test-camera-aravis.lock");
+    return -1;
+}
+
+static void camera_unlock(int fd)
+{
+    if (fd >= 0) close(fd);
+}
+
+static const char *rig_file(const char *name, const char *truth)
+{
+    char top[PATH_MAX], text[3 * PATH_MAX];
+    if (!realpath(test_srcdir(), top)) snprintf(top, sizeof top, "%s", test_srcdir());
+    char t[PATH_MAX + 64];
+    if (truth) snprintf(t, sizeof t, "%s", truth);
+    else snprintf(t, sizeof t, "%s/examples/virtual-truth.ini", top);
+    snprintf(text, sizeof text, "[rig]\nbackend = virtual\ntruth = %s\ntime_scale = 0.01\nbusy_wait_s = 60\n", t);
+    return test_write(name, text);
+}
+
+#define SMALL_PLAN                                                                                     \
+    "[sample]\nname = coupon_matte_paint\nkind = material_coupon\n[angles]\nrange = 0 25 5\n"          \
+    "[lamps]\nsets = east; west\n[exposure]\nmode = fixed\nlist_us = 1000 4000\n[capture]\nsettle_ms = 5\n"
+
+static int count_frames(const char *dir)
+{
+    char db[4096];
+    snprintf(db, sizeof db, "%s/session.sqlite", dir);
+    sqlite3 *d = NULL;
+    int n = -1;
+    if (sqlite3_open_v2(db, &d, SQLITE_OPEN_READONLY, NULL) == SQLITE_OK) {
+        sqlite3_busy_timeout(d, 1000);
+        sqlite3_stmt *s = NULL;
+        if (sqlite3_prepare_v2(d, "SELECT count(*) FROM frames", -1, &s, NULL) == SQLITE_OK &&
+            sqlite3_step(s) == SQLITE_ROW)
+            n = sqlite3_column_int(s, 0);
+        sqlite3_finalize(s);
+    }
+    sqlite3_close(d);
+    return n;
+}
+
+// "idx kind angle lamps exposure status" of every step.
+static char *step_rows(const char *dir)
+{
+    char db[4096];
+    snprintf(db, sizeof db, "%s/session.sqlite", dir);
+    sqlite3 *d = NULL;
+    GString *g = g_string_new("");
+    if (sqlite3_open_v2(db, &d, SQLITE_OPEN_READONLY, NULL) == SQLITE_OK) {
+        sqlite3_stmt *s = NULL;
+        if (sqlite3_prepare_v2(d, "SELECT idx,kind,angle_deg,lamps,exposure_us,status FROM steps ORDER BY idx", -1,
+                               &s, NULL) == SQLITE_OK)
+            while (sqlite3_step(s) == SQLITE_ROW)
+                g_string_append_printf(g, "%d %s %g %s %g %s\n", sqlite3_column_int(s, 0), sqlite3_column_text(s, 1),
+                                       sqlite3_column_double(s, 2), sqlite3_column_text(s, 3),
+                                       sqlite3_column_double(s, 4), sqlite3_column_text(s, 5));
+        sqlite3_finalize(s);
+    }
+    sqlite3_close(d);
+    return g_string_free(g, FALSE);
+}
+
+static int count_events(const char *dir, const char *kind)
+{
+    char db[4096], sql[256];
+    snprintf(db, sizeof db, "%s/session.sqlite", dir);
+    snprintf(sql, sizeof sql, "SELECT count(*) FROM events WHERE kind='%s'", kind);
+    sqlite3 *d = NULL;
+    int n = -1;
+    if (sqlite3_open_v2(db, &d, SQLITE_OPEN_READONLY, NULL) == SQLITE_OK) {
+        sqlite3_stmt *s = NULL;
+        if (sqlite3_prepare_v2(d, sql, -1, &s, NULL) == SQLITE_OK && sqlite3_step(s) == SQLITE_ROW)
+            n = sqlite3_column_int(s, 0);
+        sqlite3_finalize(s);
+    }
+    sqlite3_close(d);
+    return n;
+}
+
+static int files_in(const char *dir, int *tmp)
+{
+    GDir *d = g_dir_open(dir, 0, NULL);
+    int n = 0;
+    *tmp = 0;
+    for (const char *e; d && (e = g_dir_read_name(d));) {
+        if (e[0] == '.') (*tmp)++;
+        else n++;
+    }
+    if (d) g_dir_close(d);
+    return n;
+}
+
+// Start refl capture; kill it with SIGKILL once `at` frames are committed
+// (at least one more than now, so every run gets going). Returns true when it
+// was killed (false: it finished first).
+static bool run_and_kill(const char *const *argv, const char *dir, int at)
+{
+    int now = count_frames(dir);
+    if (at <= now) at = now + 1;
+    pid_t pid = fork();
+    if (pid == 0) {
+        int null = open("/dev/null", O_WRONLY);
+        dup2(null, 1);
+        dup2(null, 2);
+        execv(argv[0], (char *const *)argv);
+        _exit(127);
+    }
+    bool killed = false;
+    for (int i = 0; i < 60000; i++) {
+        int st;
+        if (waitpid(pid, &st, WNOHANG) == pid) return false;
+        if (count_frames(dir) >= at) {
+            kill(pid, SIGKILL);
+            killed = true;
+            break;
+        }
+        usleep(2000);
+    }
+    if (!killed) kill(pid, SIGKILL);
+    int st;
+    waitpid(pid, &st, 0);
+    return killed;
+}
+
+TEST(capture_kill9_resume_equals_uninterrupted)
+{
+    int lk = camera_lock();
+    const char *rig = rig_file("rig.ini", NULL);
+    const char *plan = test_write("plan.ini", SMALL_PLAN);
+    char ref[4096], dir[4096];
+    snprintf(ref, sizeof ref, "%s/ref", test_tmpdir());
+    snprintf(dir, sizeof dir, "%s/killed", test_tmpdir());
+    char *out = NULL, *err = NULL;
+    int rc = refl(&out, &err, "capture", plan, "--rig", rig, "-o", ref, "--progress", "lines", NULL);
+    CHECK_MSG(rc == 0, "rc %d: %s", rc, err);
+    CHECK_CONTAINS(out, "frames: 24");
+    CHECK_CONTAINS(err, "step 24/24");
+    g_free(out);
+    g_free(err);
+
+    // 10 kill points at random steps (fixed seed), increasing
+    GRand *g = g_rand_new_with_seed(12345);
+    int at[10], n = 0;
+    while (n < 10) {
+        int v = g_rand_int_range(g, 1, 23);
+        bool dup = false;
+        for (int i = 0; i < n; i++) dup |= at[i] == v;
+        if (!dup) at[n++] = v;
+    }
+    g_rand_free(g);
+    for (int i = 0; i < 10; i++)
+        for (int k = i + 1; k < 10; k++)
+            if (at[k] < at[i]) {
+                int t = at[i];
+                at[i] = at[k];
+                at[k] = t;
+            }
+    const char *first[] = { test_refl(), "capture", plan, "--rig", rig, "-o", dir, NULL };
+    const char *resume[] = { test_refl(), "capture", "--resume", dir, NULL };
+    int kills = 0;
+    for (int i = 0; i < 10; i++) kills += run_and_kill(i ? resume : first, dir, at[i]);
+    CHECK_MSG(kills >= 8, "only %d of 10 runs were killed before finishing", kills);
+    rc = refl(&out, &err, "capture", "--resume", dir, NULL);
+    CHECK_MSG(rc == 0, "final resume rc %d: %s", rc, err);
+    g_free(out);
+    g_free(err);
+
+    char *a = step_rows(ref), *b = step_rows(dir);
+    CHECK(strlen(a) > 100);
+    CHECK_MSG(!strcmp(a, b), "step rows differ:\n%s\nvs\n%s", a, b);
+    g_free(a);
+    g_free(b);
+    CHECK(count_frames(dir) == 24);
+    CHECK(count_events(dir, "resume") == 10);
+    char fr[4200];
+    int tmp = 0;
+    snprintf(fr, sizeof fr, "%s/frames", dir);
+    CHECK(files_in(fr, &tmp) == 24);
+    CHECK(tmp == 0);
+    rc = refl(&out, &err, "session", "check", dir, NULL);
+    CHECK_MSG(rc == 0, "check rc %d: %s %s", rc, out, err);
+    CHECK_CONTAINS(out, "frames_verified: 24");
+    CHECK_CONTAINS(out, "frames_bad: 0");
+    CHECK_CONTAINS(out, "steps_missing: 0");
+    g_free(out);
+    g_free(err);
+
+    // a damaged frame is found
+    snprintf(fr, sizeof fr, "%s/frames/s000003.png", dir);
+    FILE *f = fopen(fr, "r+b");
+    if (f) {
+        fseek(f, 100, SEEK_SET);
+        fputc(0x55, f);
+        fputc(0xAA, f);
+        fclose(f);
+    }
+    rc = refl(&out, &err, "session", "check", dir, NULL);
+    CHECK(rc == 1);
+    CHECK_CONTAINS(out, "BAD HASH step 3");
+    g_free(out);
+    g_free(err);
+
+    // export
+    rc = refl(&out, &err, "session", "export", ref, "--format", "csv", NULL);
+    CHECK(rc == 0);
+    CHECK_CONTAINS(out, "step,file,sha256");
+    CHECK_CONTAINS(out, "23,frames/s000023.png,");
+    g_free(out);
+    g_free(err);
+    rc = refl(&out, &err, "session", "export", ref, "--format", "json", NULL);
+    CHECK(rc == 0);
+    CHECK_CONTAINS(out, "\"file\": \"frames/s000023.png\"");
+    g_free(out);
+    g_free(err);
+
+    // resume of a complete session: nothing to do; a changed plan is refused
+    rc = refl(&out, &err, "capture", "--resume", ref, NULL);
+    CHECK(rc == 0);
+    CHECK_CONTAINS(out, "complete");
+    g_free(out);
+    g_free(err);
+    camera_unlock(lk);
+}
+
+TEST(capture_dry_run_and_changed_plan)
+{
+    int lk = camera_lock();
+    const char *rig = rig_file("rig.ini", NULL);
+    const char *plan = test_write("plan.ini", SMALL_PLAN);
+    char *out = NULL, *err = NULL;
+    int rc = refl(&out, &err, "capture", plan, "--rig", rig, "--dry-run", NULL);
+    CHECK_MSG(rc == 0, "%s", err);
+    CHECK_CONTAINS(out, "steps: 24 (6 angles x 2 lamp sets x 2 exposures");
+    CHECK_CONTAINS(out, "estimated_duration_s:");
+    CHECK_CONTAINS(out, "estimated_disk_bytes: 62914560");
+    g_free(out);
+    g_free(err);
+    // a lamp the rig does not have: the line of sets
+    const char *bad = test_write("bad.ini", "[sample]\nname = coupon_matte_paint\nkind = material_coupon\n[angles]\n"
+                                 "list = 0\n[lamps]\nsets = east; skylight\n[exposure]\nmode = fixed\nlist_us = 100\n");
+    rc = refl(&out, &err, "capture", bad, "--rig", rig, "--dry-run", NULL);
+    CHECK(rc == 1);
+    CHECK_CONTAINS(err, "bad.ini:7");
+    CHECK_CONTAINS(err, "no lamp 'skylight'");
+    g_free(out);
+    g_free(err);
+    // an exposure the camera refuses (the virtual camera: 10 .. 10e6 us)
+    bad = test_write("bad2.ini", "[sample]\nname = coupon_matte_paint\nkind = material_coupon\n[angles]\n"
+                     "list = 0\n[lamps]\nsets = east\n[exposure]\nmode = fixed\nlist_us = 100 5e7\n");
+    rc = refl(&out, &err, "capture", bad, "--rig", rig, "--dry-run", NULL);
+    CHECK(rc == 1);
+    CHECK_CONTAINS(err, "bad2.ini:10");
+    CHECK_CONTAINS(err, "does not accept 5e+07 us");
+    g_free(out);
+    g_free(err);
+    // a paused session (SIGINT) then a changed plan: refused; --allow-changed continues
+    char dir[4096];
+    snprintf(dir, sizeof dir, "%s/s", test_tmpdir());
+    const char *argv[] = { test_refl(), "capture", plan, "--rig", rig, "-o", dir, NULL };
+    pid_t pid = fork();
+    if (pid == 0) {
+        int null = open("/dev/null", O_WRONLY);
+        dup2(null, 1);
+        dup2(null, 2);
+        execv(argv[0], (char *const *)argv);
+        _exit(127);
+    }
+    for (int i = 0; i < 20000 && count_frames(dir) < 3; i++) usleep(2000);
+    kill(pid, SIGINT);
+    int st = 0;
+    waitpid(pid, &st, 0);
+    CHECK_MSG(WIFEXITED(st) && WEXITSTATUS(st) == 3, "SIGINT: status %d", st);
+    CHECK(count_events(dir, "pause") == 1);
+    int done = count_frames(dir);
+    CHECK(done >= 3 && done < 24);
+    test_write("plan.ini", SMALL_PLAN "# changed\n");
+    rc = refl(&out, &err, "capture", "--resume", dir, NULL);
+    CHECK(rc == 1);
+    CHECK_CONTAINS(err, "changed since the session started");
+    CHECK_CONTAINS(err, "--allow-changed");
+    g_free(out);
+    g_free(err);
+    rc = refl(&out, &err, "capture", "--resume", dir, "--allow-changed", NULL);
+    CHECK_MSG(rc == 0, "%s", err);
+    g_free(out);
+    g_free(err);
+    CHECK(count_frames(dir) == 24);
+    // an existing session directory is not overwritten
+    rc = refl(&out, &err, "capture", plan, "--rig", rig, "-o", dir, NULL);
+    CHECK(rc == 1);
+    CHECK_CONTAINS(err, "already holds a session");
+    g_free(out);
+    g_free(err);
+    camera_unlock(lk);
+}
+
+TEST(capture_disk_full)
+{
+    char mnt[4096];
+    snprintf(mnt, sizeof mnt, "%s/mnt", test_tmpdir());
+    mkdir(mnt, 0777);
+    if (mount("tmpfs", mnt, "tmpfs", 0, "size=3m") != 0) {
+        fprintf(stderr, "capture_disk_full: skipped (cannot mount a tmpfs: %s)\n", strerror(errno));
+        return;
+    }
+    int lk = camera_lock();
+    const char *rig = rig_file("rig.ini", NULL);
+    const char *plan = test_write("plan.ini", SMALL_PLAN);
+    char dir[4200];
+    snprintf(dir, sizeof dir, "%s/s", mnt);
+    char *out = NULL, *err = NULL;
+    int rc = refl(&out, &err, "capture", plan, "--rig", rig, "-o", dir, NULL);
+    CHECK(rc == 1);
+    CHECK_CONTAINS(err, "disk full");
+    CHECK_CONTAINS(err, "refl capture --resume");
+    g_free(out);
+    g_free(err);
+    char fr[4300];
+    int tmp = 0;
+    snprintf(fr, sizeof fr, "%s/frames", dir);
+    int n = files_in(fr, &tmp);
+    CHECK(tmp == 0);
+    CHECK(n >= 1 && n < 24);
+    CHECK(n == count_frames(dir));
+    CHECK(count_events(dir, "fault") >= 1);
+    rc = refl(&out, &err, "session", "check", dir, NULL);
+    CHECK_MSG(rc == 0, "%s", out);
+    CHECK_CONTAINS(out, "frames_bad: 0");
+    g_free(out);
+    g_free(err);
+    umount2(mnt, MNT_DETACH);
+    camera_unlock(lk);
+}
+
+static void drop_at_step2(void *ctx, rig_t *r, int step)
+{
+    (void)ctx;
+    if (step == 2) rig_gv_camera_drop_triggers(rig_virtual_gv_camera(r->virt), 1000);
+}
+
+TEST(capture_camera_stops_answering)
+{
+    int lk = camera_lock();
+    const char *rig = rig_file("rig.ini", NULL);
+    const char *plan = test_write("plan.ini", "[sample]\nname = coupon_matte_paint\nkind = material_coupon\n"
+                                  "[angles]\nlist = 0 5\n[lamps]\nsets = east\n[exposure]\nmode = fixed\n"
+                                  "list_us = 1000 2000\n[capture]\nframe_timeout_s = 0.5\nretries = 2\n");
+    char dir[4096];
+    snprintf(dir, sizeof dir, "%s/s", test_tmpdir());
+    rig_capture_opts_t o = { .plan_path = plan, .rig_path = rig, .dir = dir, .progress = 0,
+                             .before_step = drop_at_step2 };
+    int rc = rig_capture_run(&o);
+    CHECK(rc == 3);
+    CHECK_CONTAINS(rig_last_error(), "did not answer at step 2 after 2 retries");
+    CHECK_CONTAINS(rig_last_error(), "refl capture --resume");
+    CHECK(count_frames(dir) == 2);
+    CHECK(count_events(dir, "retry") == 2);
+    CHECK(count_events(dir, "pause") == 1);
+    // the camera answers again: the session completes
+    o.resume = true;
+    o.before_step = NULL;
+    rc = rig_capture_run(&o);
+    CHECK(rc == 0);
+    CHECK(count_frames(dir) == 4);
+    camera_unlock(lk);
+}
+
+TEST(capture_turntable_stall)
+{
+    int lk = camera_lock();
+    char top[PATH_MAX];
+    if (!realpath(test_srcdir(), top)) snprintf(top, sizeof top, "%s", test_srcdir());
+    char src[PATH_MAX + 64];
+    snprintf(src, sizeof src, "%s/examples/virtual-truth.ini", top);
+    char *text = model_read_file(src, NULL);
+    CHECK(text != NULL);
+    if (!text) return;
+    char *t = strstr(text, "[turntable]\n");
+    CHECK(t != NULL);
+    GString *g = g_string_new_len(text, t ? t - text + 12 : 0);
+    g_string_append(g, "fault_after_moves = 2\nfault = stall\n");
+    if (t) g_string_append(g, t + 12);
+    const char *truth = test_write("truth.ini", g->str);
+    g_string_free(g, TRUE);
+    free(text);
+    const char *links[] = { "camera.cameramodel", "samples", "t_stiffener.d3d" };
+    for (int i = 0; i < 3; i++) {
+        char a[PATH_MAX + 64], b[4200];
+        snprintf(a, sizeof a, "%s/examples/%s", top, links[i]);
+        snprintf(b, sizeof b, "%s/%s", test_tmpdir(), links[i]);
+        CHECK(symlink(a, b) == 0);
+    }
+    const char *rig = rig_file("rig.ini", truth);
+    const char *plan = test_write("plan.ini", "[sample]\nname = coupon_matte_paint\nkind = material_coupon\n"
+                                  "[angles]\nlist = 0 5 10 15\n[lamps]\nsets = east\n[exposure]\nmode = fixed\n"
+                                  "list_us = 1000\n");
+    char dir[4096];
+    snprintf(dir, sizeof dir, "%s/s", test_tmpdir());
+    char *out = NULL, *err = NULL;
+    int rc = refl(&out, &err, "capture", plan, "--rig", rig, "-o", dir, NULL);
+    CHECK(rc == 1);
+    CHECK_CONTAINS(err, "turntable fault at step");
+    CHECK_CONTAINS(err, "lamps off");
+    g_free(out);
+    g_free(err);
+    CHECK(count_events(dir, "fault") == 1);
+    int n = count_frames(dir);
+    CHECK(n >= 1 && n < 4);
+    camera_unlock(lk);
+}
+
+TEST(capture_auto_bracketing_skips)
+{
+    int lk = camera_lock();
+    const char *rig = rig_file("rig.ini", NULL);
+    // matte coupon, east lamp: the brightest pixel near full scale (Mono12, 4095) at 64000 us, 16000 us stays below 90 %, so 4000 us is not needed
+    const char *plan = test_write("plan.ini", "[sample]\nname = coupon_matte_paint\nkind = material_coupon\n"
+                                  "[angles]\nlist = 0 10\n[lamps]\nsets = east\n[exposure]\nmode = auto\n"
+                                  "list_us = 4000 64000 16000\ntarget_fraction = 0.9\n");
+    char dir[4096];
+    snprintf(dir, sizeof dir, "%s/s", test_tmpdir());
+    char *out = NULL, *err = NULL;
+    int rc = refl(&out, &err, "capture", plan, "--rig", rig, "-o", dir, NULL);
+    CHECK_MSG(rc == 0, "%s", err);
+    g_free(out);
+    g_free(err);
+    char *rows = step_rows(dir);
+    CHECK_CONTAINS(rows, "0 light 0 east 64000 done\n1 light 0 east 16000 done\n2 light 0 east 4000 skipped\n");
+    CHECK_CONTAINS(rows, "3 light 10 east 64000 done\n4 light 10 east 16000 done\n5 light 10 east 4000 skipped\n");
+    g_free(rows);
+    rc = refl(&out, &err, "session", "export", dir, "--format", "csv", NULL);
+    CHECK(rc == 0);
+    CHECK_CONTAINS(out, ",east,64000,");   // brightest pixel above 90 % (the statuses above say so)
+    g_free(out);
+    g_free(err);
+    camera_unlock(lk);
+}
