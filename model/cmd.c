@@ -214,40 +214,16 @@ typedef struct {
     char        sha256[65];
 } input_t;
 
-typedef struct {
-    GPtrArray   *kv;     // owned strings: key, value, key, value, ...
-    const char **list;   // NULL-terminated copy handed to the writers
-} meta_t;
 
-static void meta_add(meta_t *m, const char *key, const char *fmt, ...) __attribute__((format(printf, 3, 4)));
-static void meta_add(meta_t *m, const char *key, const char *fmt, ...)
-{
-    va_list ap;
-    va_start(ap, fmt);
-    g_ptr_array_add(m->kv, g_strdup(key));
-    g_ptr_array_add(m->kv, g_strdup_vprintf(fmt, ap));
-    va_end(ap);
-}
-
-// NULL-terminated key/value list (valid until the next meta_add or meta_list).
-static const char *const *meta_list(meta_t *m)
-{
-    const char **l = g_renew(const char *, m->list, m->kv->len + 1);
-    for (guint i = 0; i < m->kv->len; i++) l[i] = g_ptr_array_index(m->kv, i);
-    l[m->kv->len] = NULL;
-    m->list = l;
-    return l;
-}
-
-static void meta_add_inputs(meta_t *m, const input_t *in, int nin)
+static void meta_add_inputs(model_meta_t *m, const input_t *in, int nin)
 {
     for (int i = 0; i < nin; i++) {
         if (!in[i].path) continue;
         char key[80];
         snprintf(key, sizeof key, "input_%s", in[i].role);
-        meta_add(m, key, "%s", in[i].path);
+        model_meta_add(m, key, "%s", in[i].path);
         snprintf(key, sizeof key, "input_%s_sha256", in[i].role);
-        meta_add(m, key, "%s", in[i].sha256);
+        model_meta_add(m, key, "%s", in[i].sha256);
     }
 }
 
@@ -399,7 +375,7 @@ int model_cmd_render(int argc, char **argv)
     uint8_t *lit = NULL;
     uint16_t *pix = NULL;
     char *cmdline = command_line(argc, argv), *conv = NULL, *optstr = NULL;
-    meta_t meta = { g_ptr_array_new_with_free_func(g_free), NULL };
+    model_meta_t *meta = model_meta_new();
     model_sensor_t sensor;
     const char *sensor_path = optv(&c, "--sensor"), *gain_path = optv(&c, "--gain-map");
     input_t inputs[] = {
@@ -467,21 +443,21 @@ int model_cmd_render(int argc, char **argv)
         sh.thesis_samples, sh.thesis_cone_deg, sh.mc_samples, sh.mc_bounces, sh.finite_lamps ? "yes" : "no",
         (unsigned long long)sh.seed, sensor_path ? sensor_path : "none", turntable_deg,
         threads > 0 ? optv(&c, "--threads") : "default", planarity);
-    meta_add(&meta, "Software", "refl %s (refl render)", REFL_VERSION);
-    meta_add(&meta, "units", "%s", UNITS_P);
-    meta_add(&meta, "image", "%s", sensor_path
+    model_meta_add(meta, "Software", "refl %s (refl render)", REFL_VERSION);
+    model_meta_add(meta, "units", "%s", UNITS_P);
+    model_meta_add(meta, "image", "%s", sensor_path
              ? "P after the sensor stage (shot/read noise, DSNU, PRNU, vignetting, non-linearity, quantisation)"
              : "P from the imaging model (ideal, no sensor noise)");
-    meta_add(&meta, "model", "P = Pa + kc * g(x,y) * [sum_i V_i I_i R_i / d_i^2 + interreflection]; "
+    model_meta_add(meta, "model", "P = Pa + kc * g(x,y) * [sum_i V_i I_i R_i / d_i^2 + interreflection]; "
              "pixels whose ray misses the scene get Pa");
-    meta_add(&meta, "pixel_convention", "%s", PIXEL_CONV);
-    meta_add(&meta, "frames", "%s", FRAMES_TEXT);
-    meta_add(&meta, "options", "%s", optstr);
-    meta_add(&meta, "materials", "%s", conv);
-    meta_add_inputs(&meta, inputs, ninputs);
-    meta_add(&meta, "refl_version", "%s", REFL_VERSION);
-    meta_add(&meta, "date_utc", "%s", date);
-    meta_add(&meta, "command_line", "%s", cmdline);
+    model_meta_add(meta, "pixel_convention", "%s", PIXEL_CONV);
+    model_meta_add(meta, "frames", "%s", FRAMES_TEXT);
+    model_meta_add(meta, "options", "%s", optstr);
+    model_meta_add(meta, "materials", "%s", conv);
+    meta_add_inputs(meta, inputs, ninputs);
+    model_meta_add(meta, "refl_version", "%s", REFL_VERSION);
+    model_meta_add(meta, "date_utc", "%s", date);
+    model_meta_add(meta, "command_line", "%s", cmdline);
 
     // Statistics of the output image.
     double pmin = INFINITY, pmax = -INFINITY, psum = 0;
@@ -521,12 +497,12 @@ int model_cmd_render(int argc, char **argv)
             fprintf(stderr, "refl render: warning: %zu pixels clipped to [0, 65535] in %s (%zu below 0, %zu above "
                     "65535, %zu not a number); write a .tiff to keep the float values\n",
                     nlo + nhi + nnan, out_path, nlo, nhi, nnan);
-        meta_add(&meta, "encoding", "16-bit grey PNG: P rounded to the nearest integer, clipped to [0, 65535]; "
+        model_meta_add(meta, "encoding", "16-bit grey PNG: P rounded to the nearest integer, clipped to [0, 65535]; "
                  "%zu pixels clipped", nlo + nhi + nnan);
-        if (!model_png16_write(out_path, W, H, pix, meta_list(&meta))) goto done;
+        if (!model_png16_write(out_path, W, H, pix, model_meta_list(meta))) goto done;
     } else {
-        meta_add(&meta, "encoding", "float32 TIFF: P in DN, not rounded or clipped");
-        if (!model_tiff_write_float(out_path, W, H, P, meta_list(&meta))) goto done;
+        model_meta_add(meta, "encoding", "float32 TIFF: P in DN, not rounded or clipped");
+        if (!model_tiff_write_float(out_path, W, H, P, model_meta_list(meta))) goto done;
     }
     if (info_path) {
         const char **names = malloc((size_t)(in.lamps->n > 0 ? in.lamps->n : 1) * sizeof *names);
@@ -535,11 +511,11 @@ int model_cmd_render(int argc, char **argv)
             goto done;
         }
         for (int i = 0; i < in.lamps->n; i++) names[i] = in.lamps->lamps[i].name;
-        meta_add(&meta, "info", "page 0: P (float32, DN, %s); page 1: face id (int32, index into the scene's faces, "
+        model_meta_add(meta, "info", "page 0: P (float32, DN, %s); page 1: face id (int32, index into the scene's faces, "
                  "0-based; nfaces + k for the scene's sphere k; -1 = background); pages 2..: lit mask per lamp (uint8, 1 where V > 0.5), in the "
                  "order of the lamps file", sensor_path ? "ideal, before the sensor stage" : "as in the output image");
         bool ok = model_tiff_write_info(info_path, W, H, P_ideal ? P_ideal : P, face, lit, in.lamps->n,
-                                        (const char *const *)names, meta_list(&meta));
+                                        (const char *const *)names, model_meta_list(meta));
         free(names);
         if (!ok) goto done;
     }
@@ -564,8 +540,7 @@ done:
     g_free(cmdline);
     g_free(conv);
     g_free(optstr);
-    g_ptr_array_free(meta.kv, TRUE);
-    g_free(meta.list);
+    model_meta_free(meta);
     return rc;
 }
 

@@ -100,37 +100,37 @@ static void png_warn_fn(png_structp png, png_const_charp msg) { (void)png; (void
 bool model_png16_write(const char *path, int width, int height, const uint16_t *pix,
                        const char *const *meta)
 {
-    if (!check_size(path, width, height) || !check_meta(path, meta, true)) return false;
-    if (!pix) {
-        MODEL_FAIL("model_png16_write: no pixels");
-        return false;
-    }
-    char *tmp = tmp_name(path);
-    FILE *f = tmp ? fopen(tmp, "wb") : NULL;
-    if (!f) {
-        model_error(path, 0, "cannot create %s: %s", tmp ? tmp : "a temporary file", strerror(errno));
-        free(tmp);
-        return false;
-    }
-    int ntext = 0;
+    return model_png16_write_opts(path, width, height, pix, meta, NULL);
+}
+
+// The PNG stream itself (libpng's longjmp lands here). false with *err set.
+static bool png16_stream(FILE *f, const char *path, int width, int height, const uint16_t *pix,
+                         const char *const *meta, int level, bool fast_filter, int *err)
+{
+    volatile int ntext = 0;   // read after setjmp()
     for (int i = 0; meta && meta[i]; i += 2) ntext++;
     png_ctx_t ctx = { "" };
     png_structp png = png_create_write_struct(PNG_LIBPNG_VER_STRING, &ctx, png_err_fn, png_warn_fn);
     png_infop info = png ? png_create_info_struct(png) : NULL;
     png_bytep row = malloc((size_t)width * 2);
     png_textp text = calloc((size_t)ntext + 1, sizeof *text);
-    bool ok = false;
+    volatile bool ok = false;
     if (!png || !info || !row || !text) {
+        *err = ENOMEM;
         model_error(path, 0, "out of memory writing PNG");
         goto done;
     }
+    errno = 0;
     if (setjmp(png_jmpbuf(png))) {
-        model_error(path, 0, "cannot write PNG: %s", ctx.msg);
+        *err = errno ? errno : EIO;   // the failing write's cause (ENOSPC for a full disk)
+        model_error(path, 0, "cannot write PNG: %s (%s)", ctx.msg, strerror(*err));
         goto done;
     }
     png_init_io(png, f);
     png_set_IHDR(png, info, (png_uint_32)width, (png_uint_32)height, 16, PNG_COLOR_TYPE_GRAY,
                  PNG_INTERLACE_NONE, PNG_COMPRESSION_TYPE_DEFAULT, PNG_FILTER_TYPE_DEFAULT);
+    if (level >= 0) png_set_compression_level(png, level);
+    if (fast_filter) png_set_filter(png, PNG_FILTER_TYPE_BASE, PNG_FILTER_SUB);
     for (int i = 0; i < ntext; i++) {
         text[i].compression = PNG_TEXT_COMPRESSION_NONE;
         text[i].key = (png_charp)meta[2 * i];
@@ -151,16 +151,58 @@ bool model_png16_write(const char *path, int width, int height, const uint16_t *
     ok = true;
 done:
     png_destroy_write_struct(&png, &info);
-    if (ferror(f)) ok = false;
-    if (fclose(f) != 0 && ok) {
-        model_error(path, 0, "write error: %s", strerror(errno));
-        ok = false;
-    }
-    if (ok) ok = commit(tmp, path);
-    else unlink(tmp);
-    free(tmp);
     free(row);
     free(text);
+    return ok;
+}
+
+bool model_png16_write_opts(const char *path, int width, int height, const uint16_t *pix,
+                            const char *const *meta, const model_png_options_t *opt)
+{
+    const model_png_options_t defaults = { .compression_level = -1 };
+    if (!opt) opt = &defaults;
+    bool was_quiet = model_error_quiet_thread(opt->quiet);
+    int err = 0;
+    bool ok = false;
+    char *tmp = NULL;
+    FILE *f = NULL;
+    if (!check_size(path, width, height) || !check_meta(path, meta, true)) {
+        err = EINVAL;
+        goto done;
+    }
+    if (!pix) {
+        MODEL_FAIL("model_png16_write: no pixels");
+        err = EINVAL;
+        goto done;
+    }
+    tmp = tmp_name(path);
+    f = tmp ? fopen(tmp, "wb") : NULL;
+    if (!f) {
+        err = tmp ? errno : ENOMEM;
+        model_error(path, 0, "cannot create %s: %s", tmp ? tmp : "a temporary file", strerror(err));
+        goto done;
+    }
+    ok = png16_stream(f, path, width, height, pix, meta, opt->compression_level, opt->fast_filter, &err);
+    if (ok && (fflush(f) != 0 || ferror(f) || (opt->fsync && fsync(fileno(f)) != 0))) {
+        err = errno ? errno : EIO;
+        model_error(path, 0, "write error: %s", strerror(err));
+        ok = false;
+    }
+    if (fclose(f) != 0 && ok) {
+        err = errno;
+        model_error(path, 0, "write error: %s", strerror(err));
+        ok = false;
+    }
+    if (ok) {
+        ok = commit(tmp, path);
+        if (!ok) err = errno;
+    } else {
+        unlink(tmp);
+    }
+done:
+    free(tmp);
+    model_error_quiet_thread(was_quiet);
+    if (!ok) errno = err ? err : EIO;
     return ok;
 }
 

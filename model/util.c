@@ -14,6 +14,7 @@
 #include "model/internal.h"
 
 static _Thread_local char last_error[2048];
+static _Thread_local bool quiet_thread;   // this thread's errors are kept, not printed
 static atomic_bool quiet_mode;
 
 void model_error(const char *where_file, int where_line, const char *fmt, ...)
@@ -29,13 +30,20 @@ void model_error(const char *where_file, int where_line, const char *fmt, ...)
         snprintf(last_error, sizeof last_error, "%s: %s", where_file, msg);
     else
         snprintf(last_error, sizeof last_error, "%s", msg);
-    if (!atomic_load(&quiet_mode))
+    if (!atomic_load(&quiet_mode) && !quiet_thread)
         fprintf(stderr, "%s\n", last_error);
 }
 
 const char *model_last_error(void) { return last_error; }
 void model_error_clear(void) { last_error[0] = 0; }
 bool model_error_quiet(bool quiet) { return atomic_exchange(&quiet_mode, quiet); }
+
+bool model_error_quiet_thread(bool quiet)
+{
+    bool old = quiet_thread;
+    quiet_thread = quiet;
+    return old;
+}
 
 char *model_read_file(const char *path, size_t *len)
 {
@@ -189,4 +197,45 @@ void model_parallel_for(int n, int chunk, int nthreads,
     args[0] = (pfor_arg_t){ &p, 0 };
     pfor_worker(&args[0]);
     for (int i = 1; i <= started; i++) pthread_join(th[i], NULL);
+}
+
+// ---------------------------------------------------------------------------
+// Metadata lists
+
+struct model_meta {
+    GPtrArray   *kv;     // owned strings: key, value, key, value, ...
+    const char **list;   // NULL-terminated view handed to the writers
+};
+
+model_meta_t *model_meta_new(void)
+{
+    model_meta_t *m = g_new0(model_meta_t, 1);
+    m->kv = g_ptr_array_new_with_free_func(g_free);
+    return m;
+}
+
+void model_meta_add(model_meta_t *m, const char *key, const char *fmt, ...)
+{
+    va_list ap;
+    va_start(ap, fmt);
+    g_ptr_array_add(m->kv, g_strdup(key));
+    g_ptr_array_add(m->kv, g_strdup_vprintf(fmt, ap));
+    va_end(ap);
+}
+
+const char *const *model_meta_list(model_meta_t *m)
+{
+    const char **l = g_renew(const char *, m->list, m->kv->len + 1);
+    for (guint i = 0; i < m->kv->len; i++) l[i] = g_ptr_array_index(m->kv, i);
+    l[m->kv->len] = NULL;
+    m->list = l;
+    return l;
+}
+
+void model_meta_free(model_meta_t *m)
+{
+    if (!m) return;
+    g_ptr_array_free(m->kv, TRUE);
+    g_free(m->list);
+    g_free(m);
 }

@@ -22,7 +22,6 @@
 #include <glib.h>
 #include <jansson.h>
 #include <math.h>
-#include <png.h>
 #include <pthread.h>
 #include <signal.h>
 #include <stdio.h>
@@ -134,116 +133,6 @@ static void frame_names(const char *dir, int step, char *rel, size_t rsize, char
     snprintf(part, size, "%s/frames/.s%06d.png.part", dir, step);
 }
 
-typedef struct {
-    GPtrArray   *kv;
-    const char **list;
-} meta_t;
-
-static void meta_add(meta_t *m, const char *key, const char *fmt, ...) __attribute__((format(printf, 3, 4)));
-static void meta_add(meta_t *m, const char *key, const char *fmt, ...)
-{
-    va_list ap;
-    va_start(ap, fmt);
-    g_ptr_array_add(m->kv, g_strdup(key));
-    g_ptr_array_add(m->kv, g_strdup_vprintf(fmt, ap));
-    va_end(ap);
-}
-
-static const char *const *meta_list(meta_t *m)
-{
-    const char **l = g_renew(const char *, m->list, m->kv->len + 1);
-    for (guint i = 0; i < m->kv->len; i++) l[i] = g_ptr_array_index(m->kv, i);
-    l[m->kv->len] = NULL;
-    m->list = l;
-    return l;
-}
-
-// The frame as a 16-bit grey PNG at `path` (created exclusively: a stale
-// temporary file of a crashed run is removed first by the caller), flushed to
-// the disk before returning. zlib level 1 with the Sub filter: about 4x
-// faster than the default level for sensor frames at a few % more bytes (the
-// writer thread must keep up with the camera). false with errno set (ENOSPC
-// for a full disk) and a message in msg.
-typedef struct {
-    char msg[256];
-} png_err_t;
-
-static void png_err(png_structp png, png_const_charp m)
-{
-    png_err_t *e = png_get_error_ptr(png);
-    snprintf(e->msg, sizeof e->msg, "%s", m);
-    png_longjmp(png, 1);
-}
-
-static void png_warn(png_structp png, png_const_charp m) { (void)png; (void)m; }
-
-static bool png16_write_flush(const char *path, int width, int height, const uint16_t *pix,
-                              const char *const *meta, char *msg, size_t msize)
-{
-    unlink(path);
-    int fd = open(path, O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0644);
-    FILE *f = fd >= 0 ? fdopen(fd, "wb") : NULL;
-    if (!f) {
-        int e = errno;
-        snprintf(msg, msize, "cannot create %s: %s", path, strerror(e));
-        if (fd >= 0) close(fd);
-        errno = e;
-        return false;
-    }
-    png_err_t pe = { "" };
-    int ntext = 0;
-    for (int i = 0; meta && meta[i]; i += 2) ntext++;
-    png_structp png = png_create_write_struct(PNG_LIBPNG_VER_STRING, &pe, png_err, png_warn);
-    png_infop info = png ? png_create_info_struct(png) : NULL;
-    png_textp text = calloc((size_t)ntext + 1, sizeof *text);
-    volatile bool ok = false;
-    int err = 0;
-    if (!png || !info || !text) {
-        snprintf(msg, msize, "out of memory writing %s", path);
-        err = ENOMEM;
-        goto done;
-    }
-    if (setjmp(png_jmpbuf(png))) {
-        err = errno ? errno : EIO;
-        snprintf(msg, msize, "cannot write %s: %s (%s)", path, pe.msg, strerror(err));
-        goto done;
-    }
-    png_init_io(png, f);
-    png_set_IHDR(png, info, (png_uint_32)width, (png_uint_32)height, 16, PNG_COLOR_TYPE_GRAY, PNG_INTERLACE_NONE,
-                 PNG_COMPRESSION_TYPE_DEFAULT, PNG_FILTER_TYPE_DEFAULT);
-    png_set_compression_level(png, 1);
-    png_set_filter(png, PNG_FILTER_TYPE_BASE, PNG_FILTER_SUB);
-    for (int i = 0; i < ntext; i++) {
-        text[i].compression = PNG_TEXT_COMPRESSION_NONE;
-        text[i].key = (png_charp)meta[2 * i];
-        text[i].text = (png_charp)meta[2 * i + 1];
-        text[i].text_length = strlen(meta[2 * i + 1]);
-    }
-    if (ntext) png_set_text(png, info, text, ntext);
-    png_write_info(png, info);
-    if (G_BYTE_ORDER == G_LITTLE_ENDIAN) png_set_swap(png);
-    for (int y = 0; y < height; y++) png_write_row(png, (png_const_bytep)(pix + (size_t)y * width));
-    png_write_end(png, info);
-    ok = true;
-done:
-    png_destroy_write_struct(&png, &info);
-    free(text);
-    if (ok && (fflush(f) != 0 || fsync(fileno(f)) != 0)) {
-        err = errno;
-        snprintf(msg, msize, "cannot write %s: %s", path, strerror(err));
-        ok = false;
-    }
-    if (fclose(f) != 0 && ok) {
-        err = errno;
-        snprintf(msg, msize, "cannot write %s: %s", path, strerror(err));
-        ok = false;
-    }
-    if (!ok) {
-        unlink(path);
-        errno = err;
-    }
-    return ok;
-}
 
 // Write one frame; 0 or RIG_ERR_*, message in w->msg.
 static int write_frame(writer_t *w, job_t *jb)
@@ -251,23 +140,23 @@ static int write_frame(writer_t *w, job_t *jb)
     char rel[64], fin[4096], part[4096];
     frame_names(w->dir, jb->step.index, rel, sizeof rel, fin, part, sizeof fin);
     const rig_frame_meta_t *m = &jb->f.meta;
-    meta_t meta = { g_ptr_array_new_with_free_func(g_free), NULL };
-    meta_add(&meta, "Software", "refl %s (refl capture)", REFL_VERSION);
-    meta_add(&meta, "units", "DN, the camera's pixel format %s (%d significant bits), unscaled", m->pixel_format,
+    model_meta_t *meta = model_meta_new();
+    model_meta_add(meta, "Software", "refl %s (refl capture)", REFL_VERSION);
+    model_meta_add(meta, "units", "DN, the camera's pixel format %s (%d significant bits), unscaled", m->pixel_format,
              m->bits);
-    meta_add(&meta, "session_step", "%d", jb->step.index);
-    meta_add(&meta, "step_kind", "%s", jb->step.kind == RIG_STEP_DARK ? "dark" : "light");
-    meta_add(&meta, "camera", "%s", w->rig->camera->name);
-    meta_add(&meta, "camera_serial", "%s", m->serial);
-    meta_add(&meta, "frame_id", "%llu", (unsigned long long)m->frame_id);
-    meta_add(&meta, "exposure_us", "%.10g", m->exposure_us);
-    meta_add(&meta, "gain", "%.10g", m->gain);
-    meta_add(&meta, "turntable_commanded_deg", "%.10g", jb->step.angle_deg);
-    meta_add(&meta, "turntable_measured_deg", "%.6f", jb->measured_deg);
-    meta_add(&meta, "lamps_on", "%s", jb->step.lamps);
-    meta_add(&meta, "sample", "%s (%s)", w->plan->sample, w->plan->sample_kind);
-    meta_add(&meta, "plan_sha256", "%s", w->plan->sha256);
-    meta_add(&meta, "rig_sha256", "%s", w->rig->sha256);
+    model_meta_add(meta, "session_step", "%d", jb->step.index);
+    model_meta_add(meta, "step_kind", "%s", jb->step.kind == RIG_STEP_DARK ? "dark" : "light");
+    model_meta_add(meta, "camera", "%s", w->rig->camera->name);
+    model_meta_add(meta, "camera_serial", "%s", m->serial);
+    model_meta_add(meta, "frame_id", "%llu", (unsigned long long)m->frame_id);
+    model_meta_add(meta, "exposure_us", "%.10g", m->exposure_us);
+    model_meta_add(meta, "gain", "%.10g", m->gain);
+    model_meta_add(meta, "turntable_commanded_deg", "%.10g", jb->step.angle_deg);
+    model_meta_add(meta, "turntable_measured_deg", "%.6f", jb->measured_deg);
+    model_meta_add(meta, "lamps_on", "%s", jb->step.lamps);
+    model_meta_add(meta, "sample", "%s (%s)", w->plan->sample, w->plan->sample_kind);
+    model_meta_add(meta, "plan_sha256", "%s", w->plan->sha256);
+    model_meta_add(meta, "rig_sha256", "%s", w->rig->sha256);
     int rc = 0;
     struct stat st;
     if (stat(fin, &st) == 0) {
@@ -276,14 +165,17 @@ static int write_frame(writer_t *w, job_t *jb)
         rc = RIG_ERR_IO;
         goto done;
     }
-    char pmsg[512];
-    if (!png16_write_flush(part, m->width, m->height, jb->f.pix, meta_list(&meta), pmsg, sizeof pmsg)) {
+    // zlib level 1 with the Sub filter: about 4x faster than libpng's default on
+    // sensor frames at a few % more bytes (the writer must keep up with the
+    // camera); flushed to the disk before the temporary name is renamed to part.
+    const model_png_options_t popt = { .compression_level = 1, .fast_filter = true, .fsync = true, .quiet = true };
+    if (!model_png16_write_opts(part, m->width, m->height, jb->f.pix, model_meta_list(meta), &popt)) {
         w->disk_full = errno == ENOSPC;
         if (w->disk_full)
             snprintf(w->msg, sizeof w->msg, "disk full writing step %d to %s (No space left on device): nothing "
                      "half-written is kept; free space, then refl capture --resume %s", jb->step.index, fin, w->dir);
         else
-            snprintf(w->msg, sizeof w->msg, "%s", pmsg);
+            snprintf(w->msg, sizeof w->msg, "%s", model_last_error());
         rc = RIG_ERR_IO;
         goto done;
     }
@@ -327,8 +219,7 @@ static int write_frame(writer_t *w, job_t *jb)
     snprintf(fdir, sizeof fdir, "%s/frames", w->dir);
     fsync_path(fdir, true);
 done:
-    g_ptr_array_free(meta.kv, TRUE);
-    g_free(meta.list);
+    model_meta_free(meta);
     return rc;
 }
 

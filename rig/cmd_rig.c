@@ -408,29 +408,6 @@ static int do_identify(rig_t *r)
     return 0;
 }
 
-typedef struct {
-    GPtrArray   *kv;
-    const char **list;
-} meta_t;
-
-static void meta_add(meta_t *m, const char *key, const char *fmt, ...) __attribute__((format(printf, 3, 4)));
-static void meta_add(meta_t *m, const char *key, const char *fmt, ...)
-{
-    va_list ap;
-    va_start(ap, fmt);
-    g_ptr_array_add(m->kv, g_strdup(key));
-    g_ptr_array_add(m->kv, g_strdup_vprintf(fmt, ap));
-    va_end(ap);
-}
-
-static const char *const *meta_list(meta_t *m)
-{
-    const char **l = g_renew(const char *, m->list, m->kv->len + 1);
-    for (guint i = 0; i < m->kv->len; i++) l[i] = g_ptr_array_index(m->kv, i);
-    l[m->kv->len] = NULL;
-    m->list = l;
-    return l;
-}
 
 typedef struct {
     bool        have_angle;
@@ -445,7 +422,7 @@ static int do_snap(rig_t *r, const snap_t *o, const char *cmdline)
 {
     int rc = 0;
     rig_frame_t f = { 0 };
-    meta_t meta = { g_ptr_array_new_with_free_func(g_free), NULL };
+    model_meta_t *meta = model_meta_new();
     uint32_t mask = 0;
     if (!r->camera) {
         rc = rig_fail(RIG_ERR_NO_DEVICE, "refl rig snap: the rig %s has no camera: add a [camera] section (or use "
@@ -488,50 +465,50 @@ static int do_snap(rig_t *r, const snap_t *o, const char *cmdline)
     utc_text(now_realtime_s(), date);
     utc_text(m->system_time_s, t_frame);
     unsigned maxv = m->bits >= 16 ? 65535u : (1u << m->bits) - 1;
-    meta_add(&meta, "Software", "refl %s (refl rig snap)", REFL_VERSION);
-    meta_add(&meta, "units", "DN, the camera's pixel format: %s values 0..%u", m->pixel_format, maxv);
-    meta_add(&meta, "image", "one camera frame as delivered (no processing); 16-bit grey PNG holding the values "
+    model_meta_add(meta, "Software", "refl %s (refl rig snap)", REFL_VERSION);
+    model_meta_add(meta, "units", "DN, the camera's pixel format: %s values 0..%u", m->pixel_format, maxv);
+    model_meta_add(meta, "image", "one camera frame as delivered (no processing); 16-bit grey PNG holding the values "
              "unscaled");
-    meta_add(&meta, "pixel_convention", "row-major, (0,0) is the top-left pixel of the region, x to the right, "
+    model_meta_add(meta, "pixel_convention", "row-major, (0,0) is the top-left pixel of the region, x to the right, "
              "y down");
-    meta_add(&meta, "camera", "%s", r->camera->name);
-    meta_add(&meta, "camera_vendor", "%s", m->vendor);
-    meta_add(&meta, "camera_model", "%s", m->model);
-    meta_add(&meta, "camera_serial", "%s", m->serial);
-    meta_add(&meta, "frame_id", "%llu", (unsigned long long)m->frame_id);
-    meta_add(&meta, "frame_timestamp_ns", "%llu (the camera's clock)", (unsigned long long)m->timestamp_ns);
-    meta_add(&meta, "frame_time_utc", "%s (host clock when the frame arrived)", t_frame);
-    meta_add(&meta, "exposure_us", "%.10g", m->exposure_us);
-    meta_add(&meta, "gain", "%.10g (the camera's unit; dB for GenICam Gain)", m->gain);
-    meta_add(&meta, "pixel_format", "%s (%d significant bits)", m->pixel_format, m->bits);
-    meta_add(&meta, "region", "%d x %d at (%d, %d) on the sensor", m->width, m->height, m->offset_x, m->offset_y);
-    if (isfinite(m->temperature_c)) meta_add(&meta, "temperature_c", "%.3f", m->temperature_c);
-    else meta_add(&meta, "temperature_c", "none (the camera has no temperature sensor)");
-    if (o->have_angle) meta_add(&meta, "turntable_commanded_deg", "%.10g", o->angle_deg);
-    else meta_add(&meta, "turntable_commanded_deg", "none (not moved by this command)");
-    if (r->turntable) meta_add(&meta, "turntable_measured_deg", "%.6f", st.angle_deg);
-    else meta_add(&meta, "turntable_measured_deg", "none (no turntable)");
-    meta_add(&meta, "turntable_frame", "degrees, 0 at home, positive counter-clockwise seen from above (about +z "
+    model_meta_add(meta, "camera", "%s", r->camera->name);
+    model_meta_add(meta, "camera_vendor", "%s", m->vendor);
+    model_meta_add(meta, "camera_model", "%s", m->model);
+    model_meta_add(meta, "camera_serial", "%s", m->serial);
+    model_meta_add(meta, "frame_id", "%llu", (unsigned long long)m->frame_id);
+    model_meta_add(meta, "frame_timestamp_ns", "%llu (the camera's clock)", (unsigned long long)m->timestamp_ns);
+    model_meta_add(meta, "frame_time_utc", "%s (host clock when the frame arrived)", t_frame);
+    model_meta_add(meta, "exposure_us", "%.10g", m->exposure_us);
+    model_meta_add(meta, "gain", "%.10g (the camera's unit; dB for GenICam Gain)", m->gain);
+    model_meta_add(meta, "pixel_format", "%s (%d significant bits)", m->pixel_format, m->bits);
+    model_meta_add(meta, "region", "%d x %d at (%d, %d) on the sensor", m->width, m->height, m->offset_x, m->offset_y);
+    if (isfinite(m->temperature_c)) model_meta_add(meta, "temperature_c", "%.3f", m->temperature_c);
+    else model_meta_add(meta, "temperature_c", "none (the camera has no temperature sensor)");
+    if (o->have_angle) model_meta_add(meta, "turntable_commanded_deg", "%.10g", o->angle_deg);
+    else model_meta_add(meta, "turntable_commanded_deg", "none (not moved by this command)");
+    if (r->turntable) model_meta_add(meta, "turntable_measured_deg", "%.6f", st.angle_deg);
+    else model_meta_add(meta, "turntable_measured_deg", "none (no turntable)");
+    model_meta_add(meta, "turntable_frame", "degrees, 0 at home, positive counter-clockwise seen from above (about +z "
              "of the rig frame)");
-    meta_add(&meta, "lamps_on", "%s", on_names);
-    meta_add(&meta, "rig_file", "%s", r->path);
-    meta_add(&meta, "rig_sha256", "%s", r->sha256);
+    model_meta_add(meta, "lamps_on", "%s", on_names);
+    model_meta_add(meta, "rig_file", "%s", r->path);
+    model_meta_add(meta, "rig_sha256", "%s", r->sha256);
     if (r->virt) {
         char sha[65] = "";
         const char *truth = rig_virtual_truth_path(r->virt);
         bool q = model_error_quiet(true);
         if (!model_sha256_file(truth, sha)) snprintf(sha, sizeof sha, "unreadable");
         model_error_quiet(q);
-        meta_add(&meta, "virtual_truth", "%s", truth);
-        meta_add(&meta, "virtual_truth_sha256", "%s", sha);
-        meta_add(&meta, "virtual_sample", "%s", rig_virtual_sample(r->virt));
+        model_meta_add(meta, "virtual_truth", "%s", truth);
+        model_meta_add(meta, "virtual_truth_sha256", "%s", sha);
+        model_meta_add(meta, "virtual_sample", "%s", rig_virtual_sample(r->virt));
     }
-    meta_add(&meta, "refl_version", "%s", REFL_VERSION);
-    meta_add(&meta, "date_utc", "%s", date);
-    meta_add(&meta, "command_line", "%s", cmdline);
+    model_meta_add(meta, "refl_version", "%s", REFL_VERSION);
+    model_meta_add(meta, "date_utc", "%s", date);
+    model_meta_add(meta, "command_line", "%s", cmdline);
 
     // model_png16_write writes a temporary file and renames it into place.
-    if (!model_png16_write(o->out, m->width, m->height, f.pix, meta_list(&meta))) {
+    if (!model_png16_write(o->out, m->width, m->height, f.pix, model_meta_list(meta))) {
         rc = RIG_ERR_IO;
         goto done;
     }
@@ -559,8 +536,7 @@ done:
         model_error_quiet(q);
     }
     rig_frame_free(&f);
-    g_ptr_array_free(meta.kv, TRUE);
-    g_free(meta.list);
+    model_meta_free(meta);
     return rc;
 }
 
