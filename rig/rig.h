@@ -1,6 +1,6 @@
-// rig/rig.h — the hardware layer of refl: turntable, lamps (and, to come,
-// cameras and the virtual rig). Each device kind is a small ops table with a
-// real driver and a simulated device behind it.
+// rig/rig.h — the hardware layer of refl: turntable, lamps, cameras, the
+// virtual rig, rig description files and capture sessions. Each device kind is
+// a small ops table with a real driver and a simulated device behind it.
 //
 // Conventions
 // - Functions return 0 or a negative RIG_ERR_* code; rig_strerror() names the
