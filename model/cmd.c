@@ -179,34 +179,6 @@ static bool is_tiff_name(const char *s) { return ends_with_ci(s, ".tif") || ends
 // ---------------------------------------------------------------------------
 // Provenance and metadata
 
-// The command line as one shell-readable string ("refl render ...").
-static char *command_line(int argc, char **argv)
-{
-    GString *s = g_string_new("refl");
-    for (int i = 0; i < argc; i++) {
-        g_string_append_c(s, ' ');
-        bool plain = argv[i][0] != 0;
-        for (const char *p = argv[i]; *p; p++)
-            if (!(isalnum((unsigned char)*p) || strchr("-_./=:,+@%", *p))) plain = false;
-        if (plain) {
-            g_string_append(s, argv[i]);
-        } else {
-            gchar *q = g_shell_quote(argv[i]);
-            g_string_append(s, q);
-            g_free(q);
-        }
-    }
-    return g_string_free(s, FALSE);
-}
-
-static void utc_now(char out[32])
-{
-    time_t t = time(NULL);
-    struct tm tm;
-    gmtime_r(&t, &tm);
-    strftime(out, 32, "%Y-%m-%dT%H:%M:%SZ", &tm);
-}
-
 // An input file: role, path and its sha256.
 typedef struct {
     const char *role;
@@ -374,7 +346,7 @@ int model_cmd_render(int argc, char **argv)
     int32_t *face = NULL;
     uint8_t *lit = NULL;
     uint16_t *pix = NULL;
-    char *cmdline = command_line(argc, argv), *conv = NULL, *optstr = NULL;
+    char *cmdline = model_command_line(argc, argv), *conv = NULL, *optstr = NULL;
     model_meta_t *meta = model_meta_new();
     model_sensor_t sensor;
     const char *sensor_path = optv(&c, "--sensor"), *gain_path = optv(&c, "--gain-map");
@@ -432,8 +404,8 @@ int model_cmd_render(int argc, char **argv)
     }
 
     // Metadata.
-    char date[32];
-    utc_now(date);
+    char date[40];
+    model_utc_text(model_realtime_s(), date);
     conv = material_conventions(in.scene, in.resolved);
     optstr = g_strdup_printf(
         "kc=%.9g offset_dn=%.9g gain_map=%s interreflection=%s rho=%.6g thesis_samples=%d thesis_cone_deg=%.6g "
@@ -614,7 +586,7 @@ int model_cmd_edges(int argc, char **argv)
     inputs_t in = { 0 };
     model_edges_t *E = NULL;
     json_t *root = NULL;
-    char *cmdline = command_line(argc, argv), *conv = NULL;
+    char *cmdline = model_command_line(argc, argv), *conv = NULL;
     input_t inputs[] = {
         { "scene", c.positional, "" }, { "camera", optv(&c, "--camera"), "" },
         { "lamps", optv(&c, "--lamps"), "" }, { "materials", optv(&c, "--materials"), "" },
@@ -657,8 +629,8 @@ int model_cmd_edges(int argc, char **argv)
     printf("%d edges, %d with visible segments, %d segments (%.2f s)\n", E->nedges, nvis, nseg, dt);
 
     if (json_path) {
-        char date[32];
-        utc_now(date);
+        char date[40];
+        model_utc_text(model_realtime_s(), date);
         conv = material_conventions(in.scene, in.resolved);
         json_t *prov = json_pack("{s:s, s:s, s:s, s:[]}", "refl_version", REFL_VERSION, "date_utc", date,
                                  "command_line", cmdline, "inputs");

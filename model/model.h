@@ -64,6 +64,13 @@ void model_parallel_for(int n, int chunk, int nthreads,
                         void *ctx);
 // Monotonic wall clock in seconds.
 double model_now_s(void);
+// Host real-time clock (CLOCK_REALTIME), seconds since 1970 UTC.
+double model_realtime_s(void);
+// t_s as ISO 8601 UTC with milliseconds: "2026-11-21T08:41:02.123Z".
+void   model_utc_text(double t_s, char out[40]);
+// The command line as one shell-readable string "refl ARG ..." (argv[0] is the
+// subcommand; arguments quoted where needed). Free with g_free().
+char  *model_command_line(int argc, char **argv);
 
 // ---------------------------------------------------------------------------
 // INI files (model/ini.c): "[section]" or "[kind NAME]" headers, "key = value"

@@ -239,3 +239,43 @@ void model_meta_free(model_meta_t *m)
     g_free(m->list);
     g_free(m);
 }
+
+// ---------------------------------------------------------------------------
+// Provenance helpers
+
+double model_realtime_s(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_REALTIME, &ts);
+    return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
+}
+
+void model_utc_text(double t_s, char out[40])
+{
+    double whole = floor(t_s);
+    time_t t = (time_t)whole;
+    struct tm tm;
+    gmtime_r(&t, &tm);
+    size_t n = strftime(out, 40, "%Y-%m-%dT%H:%M:%S", &tm);
+    int ms = (int)floor((t_s - whole) * 1000);
+    snprintf(out + n, 40 - n, ".%03dZ", ms > 999 ? 999 : ms);
+}
+
+char *model_command_line(int argc, char **argv)
+{
+    GString *s = g_string_new("refl");
+    for (int i = 0; i < argc; i++) {
+        g_string_append_c(s, ' ');
+        bool plain = argv[i][0] != 0;
+        for (const char *p = argv[i]; *p; p++)
+            if (!(g_ascii_isalnum(*p) || strchr("-_./=:,+@%", *p))) plain = false;
+        if (plain) {
+            g_string_append(s, argv[i]);
+        } else {
+            gchar *q = g_shell_quote(argv[i]);
+            g_string_append(s, q);
+            g_free(q);
+        }
+    }
+    return g_string_free(s, FALSE);
+}

@@ -210,41 +210,6 @@ static int opt_double(rcli_t *c, const char *name, double *out, double lo, bool 
 // ---------------------------------------------------------------------------
 // Helpers
 
-static char *command_line(int argc, char **argv)
-{
-    GString *s = g_string_new("refl");
-    for (int i = 0; i < argc; i++) {
-        g_string_append_c(s, ' ');
-        bool plain = argv[i][0] != 0;
-        for (const char *p = argv[i]; *p; p++)
-            if (!(isalnum((unsigned char)*p) || strchr("-_./=:,+@%", *p))) plain = false;
-        if (plain) {
-            g_string_append(s, argv[i]);
-        } else {
-            gchar *q = g_shell_quote(argv[i]);
-            g_string_append(s, q);
-            g_free(q);
-        }
-    }
-    return g_string_free(s, FALSE);
-}
-
-static void utc_text(double t_s, char out[40])
-{
-    time_t t = (time_t)floor(t_s);
-    struct tm tm;
-    gmtime_r(&t, &tm);
-    size_t n = strftime(out, 40, "%Y-%m-%dT%H:%M:%S", &tm);
-    snprintf(out + n, 40 - n, ".%03dZ", (int)floor((t_s - floor(t_s)) * 1000));
-}
-
-static double now_realtime_s(void)
-{
-    struct timespec ts;
-    clock_gettime(CLOCK_REALTIME, &ts);
-    return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
-}
-
 // Time-outs from the motion profile, with margin (50 % + 5 s).
 static double move_timeout_s(const rig_t *r, double delta_deg)
 {
@@ -462,8 +427,8 @@ static int do_snap(rig_t *r, const snap_t *o, const char *cmdline)
     // Metadata.
     const rig_frame_meta_t *m = &f.meta;
     char date[40], t_frame[40];
-    utc_text(now_realtime_s(), date);
-    utc_text(m->system_time_s, t_frame);
+    model_utc_text(model_realtime_s(), date);
+    model_utc_text(m->system_time_s, t_frame);
     unsigned maxv = m->bits >= 16 ? 65535u : (1u << m->bits) - 1;
     model_meta_add(meta, "Software", "refl %s (refl rig snap)", REFL_VERSION);
     model_meta_add(meta, "units", "DN, the camera's pixel format: %s values 0..%u", m->pixel_format, maxv);
@@ -612,7 +577,7 @@ int rig_cmd(int argc, char **argv)
         pthread_sigmask(SIG_BLOCK, &stop_set, NULL);
     }
 
-    char *cmdline = command_line(argc, argv);
+    char *cmdline = model_command_line(argc, argv);
     rig_t *r = NULL;
     fprintf(stderr, "refl rig: opening %s\n", rig_path);
     if ((rc = rig_open(&r, rig_path))) goto done;

@@ -50,17 +50,6 @@ static int jfail(rig_journal_t *j, const char *what)
                     full ? " (disk full: free space, then refl capture --resume)" : "");
 }
 
-static void utc_now(char out[40], double *t_s)
-{
-    struct timespec ts;
-    clock_gettime(CLOCK_REALTIME, &ts);
-    struct tm tm;
-    gmtime_r(&ts.tv_sec, &tm);
-    size_t n = strftime(out, 40, "%Y-%m-%dT%H:%M:%S", &tm);
-    snprintf(out + n, 40 - n, ".%03ldZ", ts.tv_nsec / 1000000);
-    if (t_s) *t_s = (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
-}
-
 static int open_db(rig_journal_t **out, const char *dir, bool create)
 {
     *out = NULL;
@@ -130,7 +119,7 @@ int rig_journal_create(rig_journal_t **out, const char *dir, const rig_plan_t *p
     if (rc) return rc;
     sqlite3_stmt *s = NULL;
     char now[40];
-    utc_now(now, NULL);
+    model_utc_text(model_realtime_s(), now);
     if (sqlite3_exec(j->db, "BEGIN", NULL, NULL, NULL) != SQLITE_OK ||
         sqlite3_exec(j->db, schema, NULL, NULL, NULL) != SQLITE_OK) {
         rc = jfail(j, "cannot create the tables");
@@ -331,22 +320,13 @@ int rig_journal_frames(rig_journal_t *j, rig_frame_row_t **rows, int *n)
     return 0;
 }
 
-static void utc_of(double t_s, char out[40])
-{
-    time_t t = (time_t)t_s;
-    struct tm tm;
-    gmtime_r(&t, &tm);
-    size_t n = strftime(out, 40, "%Y-%m-%dT%H:%M:%S", &tm);
-    snprintf(out + n, 40 - n, ".%03dZ", (int)((t_s - (double)t) * 1000));
-}
-
 int rig_journal_frame_done(rig_journal_t *j, const rig_frame_row_t *f)
 {
     sqlite3_stmt *s = NULL, *u = NULL;
     int rc = 0;
     char t0[40], t1[40];
-    utc_of(f->t_trigger_utc_s, t0);
-    utc_of(f->t_written_utc_s, t1);
+    model_utc_text(f->t_trigger_utc_s, t0);
+    model_utc_text(f->t_written_utc_s, t1);
     pthread_mutex_lock(&j->lock);
     if (sqlite3_exec(j->db, "BEGIN IMMEDIATE", NULL, NULL, NULL) != SQLITE_OK) {
         rc = jfail(j, "cannot begin a frame transaction");
@@ -429,7 +409,7 @@ int rig_journal_event(rig_journal_t *j, int step, const char *kind, const char *
     char *msg = g_strdup_vprintf(fmt, ap);
     va_end(ap);
     char now[40];
-    utc_now(now, NULL);
+    model_utc_text(model_realtime_s(), now);
     const char *t[] = { now, kind, msg };
     int rc = exec_bind(j, "INSERT INTO events(t_utc, kind, message, step) VALUES(?,?,?,?)", 1, &step, 3, t);
     g_free(msg);
