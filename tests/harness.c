@@ -3,6 +3,8 @@
 #include <errno.h>
 #include <fcntl.h>
 #include <ftw.h>
+#include <glib.h>
+#include <sys/file.h>
 #include <poll.h>
 #include <signal.h>
 #include <stdarg.h>
@@ -167,6 +169,39 @@ int test_run(const char *const *argv, double timeout_s, char **out, char **err)
     if (timed_out) return 124;
     if (WIFSIGNALED(status)) return 128 + WTERMSIG(status);
     return WEXITSTATUS(status);
+}
+
+int test_refl_run(double timeout_s, char **out, char **err, ...)
+{
+    const char *argv[64];
+    int n = 0;
+    argv[n++] = test_refl();
+    va_list ap;
+    va_start(ap, err);
+    const char *a;
+    while ((a = va_arg(ap, const char *)) && n < 63) argv[n++] = a;
+    va_end(ap);
+    argv[n] = NULL;
+    return test_run(argv, timeout_s, out, err);
+}
+
+int test_camera_lock(void)
+{
+    char path[512];
+    snprintf(path, sizeof path, "%s/refl-test-camera-aravis.lock", g_get_tmp_dir());
+    int fd = open(path, O_RDONLY | O_CREAT | O_CLOEXEC, 0666);
+    for (int i = 0; fd >= 0 && i < 6000; i++) {
+        if (flock(fd, LOCK_EX | LOCK_NB) == 0) return fd;
+        usleep(50000);
+    }
+    if (fd >= 0) close(fd);
+    test_fail(__FILE__, __LINE__, "cannot lock %s (another test run holds the virtual camera's address)", path);
+    return -1;
+}
+
+void test_camera_unlock(int fd)
+{
+    if (fd >= 0) close(fd);
 }
 
 int main(int argc, char **argv)

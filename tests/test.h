@@ -75,3 +75,11 @@ const char *test_refl(void);
 // stderr (caller frees, may pass NULL). Returns the exit status, or -1 on
 // failure to run, 128+signal when killed, 124 on time-out.
 int test_run(const char *const *argv, double timeout_s, char **out, char **err);
+// Run bin/refl with the given arguments (NULL-terminated), time limit timeout_s.
+int test_refl_run(double timeout_s, char **out, char **err, ...) __attribute__((sentinel));
+
+// The lock every test that serves a virtual camera on 127.0.0.1:3956 holds
+// throughout (one server per address): test runs of several build trees take
+// turns. Waits up to 300 s; a failed CHECK and -1 if it cannot be had.
+int  test_camera_lock(void);
+void test_camera_unlock(int fd);

@@ -131,26 +131,13 @@ static int lock_file(const char *name)
     return -1;
 }
 
-// Each test holds this lock throughout, so that test runs of several build
-// trees never overlap on 127.0.0.1:3956: a camera lost by one test must not
-// find the next test's server at its address.
-static int session_begin(void)
-{
-    int fd = lock_file("refl-test-camera-aravis.lock");
-    CHECK_MSG(fd >= 0, "cannot lock refl-test-camera-aravis.lock");
-    return fd;
-}
 
-static void session_end(int fd)
-{
-    if (fd >= 0) close(fd);
-}
 
 // ---------------------------------------------------------------------------
 
 TEST(aravis_gv_settings_pixels_metadata)
 {
-    int session = session_begin();
+    int session = test_camera_lock();
     render_ctx_t *ctx = new_ctx();
     rig_gv_camera_t *g = start_server(ctx);
     rig_camera_t *c = NULL;
@@ -252,12 +239,12 @@ done:
     rig_camera_close(c);
     rig_gv_camera_stop(g);
     free_ctx(ctx);
-    session_end(session);
+    test_camera_unlock(session);
 }
 
 TEST(aravis_gv_invalid_settings)
 {
-    int session = session_begin();
+    int session = test_camera_lock();
     render_ctx_t *ctx = new_ctx();
     rig_gv_camera_t *g = start_server(ctx);
     rig_camera_t *c = NULL;
@@ -297,7 +284,7 @@ done:
     rig_camera_close(c);
     rig_gv_camera_stop(g);
     free_ctx(ctx);
-    session_end(session);
+    test_camera_unlock(session);
 }
 
 // Frame ids keep increasing across the 16-bit GVSP block id wrap (the Aravis
@@ -305,7 +292,7 @@ done:
 // camera that sends nothing times out with a clear message.
 TEST(aravis_gv_frame_ids_retries)
 {
-    int session = session_begin();
+    int session = test_camera_lock();
     render_ctx_t *ctx = new_ctx();
     rig_gv_camera_t *g = start_server(ctx);
     rig_camera_t *c = NULL;
@@ -368,7 +355,7 @@ done:
     rig_camera_close(c);
     rig_gv_camera_stop(g);
     free_ctx(ctx);
-    session_end(session);
+    test_camera_unlock(session);
 }
 
 // An independent GenICam client (Aravis through Python GObject introspection,
@@ -393,7 +380,7 @@ static const char genicam_py[] =
 
 TEST(aravis_gv_genicam_features_external_client)
 {
-    int session = session_begin();
+    int session = test_camera_lock();
     render_ctx_t *ctx = new_ctx();
     rig_gv_camera_t *g = start_server(ctx);
     rig_camera_t *c = NULL;
@@ -448,7 +435,7 @@ done:
     rig_camera_close(c);
     rig_gv_camera_stop(g);
     free_ctx(ctx);
-    session_end(session);
+    test_camera_unlock(session);
 }
 
 #define ARV_TOOL "arv-tool-0.8"   // only ever run as: arv-tool-0.8 -a 127.0.0.1 ... (no discovery)
@@ -458,7 +445,7 @@ done:
 // own backend then reads back: the camera speaks GenICam as a real one does.
 TEST(aravis_gv_arv_tool_by_address)
 {
-    int session = session_begin();
+    int session = test_camera_lock();
     render_ctx_t *ctx = new_ctx();
     rig_gv_camera_t *g = start_server(ctx);
     rig_camera_t *c = NULL;
@@ -507,7 +494,7 @@ done:
     rig_camera_close(c);
     rig_gv_camera_stop(g);
     free_ctx(ctx);
-    session_end(session);
+    test_camera_unlock(session);
 }
 
 // Free running (TriggerMode Off, as a viewer would use it), by the same
@@ -539,7 +526,7 @@ static const char freerun_py[] =
 
 TEST(gv_camera_free_running_external_client)
 {
-    int session = session_begin();
+    int session = test_camera_lock();
     render_ctx_t *ctx = new_ctx();
     rig_gv_camera_t *g = start_server(ctx);
     char *out = NULL, *err = NULL;
@@ -562,7 +549,7 @@ done:
     free(err);
     rig_gv_camera_stop(g);
     free_ctx(ctx);
-    session_end(session);
+    test_camera_unlock(session);
 }
 
 // A slow render (an imaging model) happens in the server's render thread:
@@ -582,7 +569,7 @@ static void *capture_thread(void *arg)
 
 TEST(aravis_gv_responsive_during_slow_render)
 {
-    int session = session_begin();
+    int session = test_camera_lock();
     render_ctx_t *ctx = new_ctx();
     rig_gv_camera_t *g = start_server(ctx);
     rig_camera_t *c = NULL;
@@ -619,14 +606,14 @@ done:
     rig_camera_close(c);
     rig_gv_camera_stop(g);
     free_ctx(ctx);
-    session_end(session);
+    test_camera_unlock(session);
 }
 
 // The camera disappears in the middle of a session: clear errors naming the
 // camera, bounded time, no hang; closing is bounded too.
 TEST(aravis_gv_camera_disappears)
 {
-    int session = session_begin();
+    int session = test_camera_lock();
     render_ctx_t *ctx = new_ctx();
     rig_gv_camera_t *g = start_server(ctx);
     rig_camera_t *c = NULL;
@@ -666,12 +653,12 @@ done:
     rig_camera_close(c);
     rig_gv_camera_stop(g);
     free_ctx(ctx);
-    session_end(session);
+    test_camera_unlock(session);
 }
 
 TEST(aravis_open_nothing_there)
 {
-    int session = session_begin();
+    int session = test_camera_lock();
     // Also hold the lock of refl's servers on the address (rig/gv_camera.h):
     // no virtual camera of a demo may appear meanwhile.
     char name[64];
@@ -689,7 +676,7 @@ TEST(aravis_open_nothing_there)
     CHECK(rig_camera_open_aravis(&c, "") == RIG_ERR_INVALID);
     CHECK(rig_camera_open_aravis(NULL, ADDR) == RIG_ERR_INVALID);
     if (fd >= 0) close(fd);
-    session_end(session);
+    test_camera_unlock(session);
 }
 
 // The backend against Aravis's own fake camera, unmodified: ExposureTimeAbs
@@ -697,7 +684,7 @@ TEST(aravis_open_nothing_there)
 // formats and no Mono12, no DeviceTemperature, no DeviceSerialNumber.
 TEST(aravis_plain_aravis_fake_camera)
 {
-    int session = session_begin();
+    int session = test_camera_lock();
     char name[64];
     snprintf(name, sizeof name, "refl-gvcam-%s.lock", ADDR);   // the address is ours (rig/gv_camera.h)
     int fd = lock_file(name);
@@ -740,12 +727,12 @@ done:
     rig_camera_close(c);
     if (gv) g_object_unref(gv);
     if (fd >= 0) close(fd);
-    session_end(session);
+    test_camera_unlock(session);
 }
 
 TEST(gv_camera_server_params)
 {
-    int session = session_begin();
+    int session = test_camera_lock();
     render_ctx_t *ctx = new_ctx();
     rig_gv_camera_params_t p = rig_gv_camera_defaults();
     p.render = render_pattern;
@@ -778,5 +765,5 @@ TEST(gv_camera_server_params)
     rig_gv_camera_stop(g);
     rig_gv_camera_stop(NULL);
     free_ctx(ctx);
-    session_end(session);
+    test_camera_unlock(session);
 }

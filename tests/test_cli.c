@@ -17,20 +17,7 @@ static const char *ex(const char *name)
     return b;
 }
 
-// Run bin/refl with the given arguments (NULL-terminated); stdout/stderr returned.
-static int refl(char **out, char **err, ...)
-{
-    const char *argv[64];
-    int n = 0;
-    argv[n++] = test_refl();
-    va_list ap;
-    va_start(ap, err);
-    const char *a;
-    while ((a = va_arg(ap, const char *)) && n < 63) argv[n++] = a;
-    va_end(ap);
-    argv[n] = NULL;
-    return test_run(argv, 60, out, err);
-}
+#define refl(out, err, ...) test_refl_run(60, out, err, __VA_ARGS__)
 
 #define BASE_ARGS ex("t_stiffener.d3d"), "--camera", ex("camera.cameramodel"), "--lamps", ex("lamps.ini"), \
                   "--materials", ex("materials.ini"), "--threads", "2"

@@ -24,38 +24,9 @@
 #include "model/model.h"
 #include "tests/test.h"
 
-static int refl(char **out, char **err, ...)
-{
-    const char *argv[64];
-    int n = 0;
-    argv[n++] = test_refl();
-    va_list ap;
-    va_start(ap, err);
-    const char *a;
-    while ((a = va_arg(ap, const char *)) && n < 63) argv[n++] = a;
-    va_end(ap);
-    argv[n] = NULL;
-    return test_run(argv, 120, out, err);
-}
+#define refl(out, err, ...) test_refl_run(120, out, err, __VA_ARGS__)
 
-static int camera_session_begin(void)
-{
-    char path[512];
-    snprintf(path, sizeof path, "%s/refl-test-camera-aravis.lock", g_get_tmp_dir());
-    int fd = open(path, O_RDONLY | O_CREAT | O_CLOEXEC, 0666);
-    for (int i = 0; fd >= 0 && i < 6000; i++) {
-        if (flock(fd, LOCK_EX | LOCK_NB) == 0) return fd;
-        usleep(50000);
-    }
-    if (fd >= 0) close(fd);
-    CHECK_MSG(false, "cannot lock refl-test-camera-aravis.lock");
-    return -1;
-}
 
-static void camera_session_end(int fd)
-{
-    if (fd >= 0) close(fd);
-}
 
 // A virtual rig file in the temporary directory pointing at the example truth
 // file, 100x faster than real time.
@@ -262,7 +233,7 @@ static bool png_stats(const char *path, double *mean, double level, long *n_abov
 
 TEST(rigcli_virtual_rig)
 {
-    int session = camera_session_begin();
+    int session = test_camera_lock();
     const char *rig = virtual_rig();
     char sha[65];
     CHECK(model_sha256_file(rig, sha));
@@ -388,18 +359,18 @@ TEST(rigcli_virtual_rig)
     CHECK(access(nope, F_OK) != 0);
     free(out);
     free(err);
-    camera_session_end(session);
+    test_camera_unlock(session);
 }
 
 // `serve` in a child: prints the address, stops cleanly on SIGTERM.
 TEST(rigcli_serve_sigterm)
 {
-    int session = camera_session_begin();
+    int session = test_camera_lock();
     const char *rig = virtual_rig();
     int po[2];
     if (pipe2(po, O_CLOEXEC)) {
         CHECK(false);
-        camera_session_end(session);
+        test_camera_unlock(session);
         return;
     }
     const char *err_path = test_path("serve.err");
@@ -453,7 +424,7 @@ TEST(rigcli_serve_sigterm)
     CHECK_CONTAINS(e, "stopping");
     free(e);
     close(po[0]);
-    camera_session_end(session);
+    test_camera_unlock(session);
 }
 
 // gpiod lamps (fake libgpiod): every line requested off, and released at the

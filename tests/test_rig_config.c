@@ -14,27 +14,7 @@
 #include "rig/rig.h"
 #include "tests/test.h"
 
-// flock a file in $TMPDIR (waiting up to 300 s) so that virtual cameras of
-// several test runs never overlap on 127.0.0.1 (the same lock as
-// tests/test_camera_aravis.c); the fd, or -1.
-static int camera_session_begin(void)
-{
-    char path[512];
-    snprintf(path, sizeof path, "%s/refl-test-camera-aravis.lock", g_get_tmp_dir());
-    int fd = open(path, O_RDONLY | O_CREAT | O_CLOEXEC, 0666);
-    for (int i = 0; fd >= 0 && i < 6000; i++) {
-        if (flock(fd, LOCK_EX | LOCK_NB) == 0) return fd;
-        usleep(50000);
-    }
-    if (fd >= 0) close(fd);
-    CHECK_MSG(false, "cannot lock refl-test-camera-aravis.lock");
-    return -1;
-}
 
-static void camera_session_end(int fd)
-{
-    if (fd >= 0) close(fd);
-}
 
 // The example truth file, absolute (rig files in the temporary directory point to it).
 static const char *truth_path(void)
@@ -246,7 +226,7 @@ TEST(rigcfg_virtual_rig)
              "busy_wait_s = 120\nexposure_us = 5000\n",
              truth_path());
     const char *path = test_write("virtual.ini", text);
-    int session = camera_session_begin();
+    int session = test_camera_lock();
     rig_t *r = NULL;
     int rc = rig_open(&r, path);
     CHECK_MSG(rc == 0, "rig_open: %d %s", rc, rig_last_error());
@@ -286,5 +266,5 @@ TEST(rigcfg_virtual_rig)
     CHECK(rc != 0 && r == NULL);
     CHECK_CONTAINS(rig_last_error(), "virtual-sample.ini:1: [rig]: ");
     CHECK_CONTAINS(rig_last_error(), "unicorn");
-    camera_session_end(session);
+    test_camera_unlock(session);
 }
