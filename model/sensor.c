@@ -18,7 +18,7 @@
 // Non-finite P is treated as dark (P = dark offset); mu is capped at 1e15; a
 // negative gain (prnu_pct near its upper limit of 50) gives no signal.
 // Temporal noise: one stream per row, model_rng(noise_seed, row), drawn
-// along the row (normal values by the polar method) — reproducible and
+// along the row (normal values by a ziggurat) — reproducible and
 // independent of the number of threads.
 //
 // Fixed patterns (model_sensor_patterns), from pattern_seed: each map is
@@ -29,6 +29,7 @@
 //   DSNU  30 % columns,  5 % rows, 65 % white;  dsnu = dsnu_dn * z
 // (column fixed-pattern noise dominates in CMOS sensors).
 #define _GNU_SOURCE
+#include <pthread.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -139,33 +140,72 @@ done:
 // ---------------------------------------------------------------------------
 // Temporal noise and the response
 
-// A row's random stream: uniforms, and standard normal values from the polar
-// method two at a time (no trigonometry).
+// A row's random stream: uniforms, and standard normal values from a
+// ziggurat (G. Marsaglia and W. W. Tsang, "The ziggurat method for generating
+// random variables", J. Statistical Software 5 (2000)): 256 layers of equal
+// area under the half density f(x) = exp(-x^2/2); one 64-bit draw gives the
+// layer (low 8 bits), the sign (bit 8) and the position (high 53 bits, so
+// independent of the layer), and ~99 % of the values need nothing more than a
+// multiplication and a comparison. Exact: the rejection steps for the wedges
+// and the tail (x > r) make the distribution exactly normal.
 typedef struct {
     model_rng_t r;
-    double      spare;
-    bool        have_spare;
     double      exp_mu, exp_val;   // exp(-exp_mu): dark pixels share their mean
 } row_rng_t;
 
 static inline double row_uniform(row_rng_t *g) { return model_rng_uniform(&g->r); }
 
+enum { ZIG_N = 256 };
+static const double zig_r = 3.6541528853610088, zig_v = 0.00492867323399;
+static double zig_x[ZIG_N + 1], zig_f[ZIG_N + 1];   // layer i spans heights f(x[i])..f(x[i+1]), width x[i]
+static pthread_once_t zig_once = PTHREAD_ONCE_INIT;
+
+static void zig_init(void)
+{
+    zig_x[0] = zig_v / exp(-0.5 * zig_r * zig_r);
+    zig_x[1] = zig_r;
+    for (int i = 1; i < ZIG_N - 1; i++) {
+        double fi = exp(-0.5 * zig_x[i] * zig_x[i]);
+        zig_x[i + 1] = sqrt(-2.0 * log(fi + zig_v / zig_x[i]));
+    }
+    zig_x[ZIG_N] = 0;
+    for (int i = 0; i <= ZIG_N; i++) zig_f[i] = exp(-0.5 * zig_x[i] * zig_x[i]);
+}
+
+static double zig_slow(row_rng_t *g, int i, double z, bool neg);
+
 static inline double row_gauss(row_rng_t *g)
 {
-    if (g->have_spare) {
-        g->have_spare = false;
-        return g->spare;
+    uint64_t u = model_rng_u64(&g->r);
+    int i = (int)(u & (ZIG_N - 1));
+    bool neg = (u >> 8) & 1;
+    double z = (u >> 11) * 0x1.0p-53 * zig_x[i];
+    if (__builtin_expect(z < zig_x[i + 1], 1)) return neg ? -z : z;
+    return zig_slow(g, i, z, neg);
+}
+
+static double zig_slow(row_rng_t *g, int i, double z, bool neg)
+{
+    for (;;) {
+        if (i == 0) {   // the tail beyond r (Marsaglia's method)
+            double a, b;
+            do {
+                double u1 = row_uniform(g), u2 = row_uniform(g);
+                a = -log(1.0 - u1) / zig_r;
+                b = -log(1.0 - u2);
+            } while (b + b < a * a);
+            z = zig_r + a;
+            return neg ? -z : z;
+        }
+        // the wedge of layer i: accept under the density
+        double y = zig_f[i] + row_uniform(g) * (zig_f[i + 1] - zig_f[i]);
+        if (y < exp(-0.5 * z * z)) return neg ? -z : z;
+        uint64_t u = model_rng_u64(&g->r);
+        i = (int)(u & (ZIG_N - 1));
+        neg = (u >> 8) & 1;
+        z = (u >> 11) * 0x1.0p-53 * zig_x[i];
+        if (z < zig_x[i + 1]) return neg ? -z : z;
     }
-    double u, v, q;
-    do {
-        u = 2.0 * model_rng_uniform(&g->r) - 1.0;
-        v = 2.0 * model_rng_uniform(&g->r) - 1.0;
-        q = u * u + v * v;
-    } while (q >= 1.0 || q == 0.0);
-    double f = sqrt(-2.0 * log(q) / q);
-    g->spare = v * f;
-    g->have_spare = true;
-    return u * f;
 }
 
 // Poisson variate with mean mu >= 0.
@@ -221,35 +261,41 @@ static void apply_rows(void *ctx, int begin, int end, int thread)
     const apply_job_t *J = ctx;
     const model_sensor_t *s = J->s;
     const double K = s->system_gain_dn_per_e, FW = s->full_well_e;
-    const double c = s->nonlinearity_pct / 100.0;
+    const double c = s->nonlinearity_pct / 100.0, c_fw = c / FW;
     const double dark_e = s->dark_current_e_per_s * s->exposure_us * 1e-6;
     const double maxv = s->bits >= 1 && s->bits <= 16 ? (double)((1 << s->bits) - 1) : 65535.0;
     const double cx = 0.5 * (J->width - 1), cy = 0.5 * (J->height - 1);
     const double rc2 = cx * cx + cy * cy;
     const double inv_K = 1.0 / K, kvig = rc2 > 0 ? s->vignetting / rc2 : 0;
+    const double Pa = s->dark_offset_dn, sigma_r = s->read_noise_e;
+    const bool noise = J->noise;
+    const float *prnu = J->prnu, *dsnu = J->dsnu;
+    float *img = J->img;
     for (int y = begin; y < end; y++) {
         const double dy2 = (y - cy) * (y - cy);
-        row_rng_t r = { model_rng(s->noise_seed, (uint64_t)y), 0, false, 0, 1 };
+        row_rng_t r = { model_rng(s->noise_seed, (uint64_t)y), 0, 1 };
         for (int x = 0; x < J->width; x++) {
             size_t i = (size_t)y * J->width + x;
-            double sig = J->img[i] - s->dark_offset_dn;
-            if (!(sig > 0)) sig = 0;   // also NaN
-            double vig = 1.0 - kvig * ((x - cx) * (x - cx) + dy2);
-            double mu = sig * inv_K * (J->prnu ? J->prnu[i] : 1.0) * vig + dark_e;
+            double sig = img[i] - Pa;
+            double mu = dark_e;   // a dark pixel (sig 0, also NaN): the dark current only
+            if (sig > 0) {
+                double vig = 1.0 - kvig * ((x - cx) * (x - cx) + dy2);
+                mu = sig * inv_K * (prnu ? prnu[i] : 1.0) * vig + dark_e;
+            }
             if (!(mu > 0)) mu = 0;
             if (mu > 1e15) mu = 1e15;
             double e = mu;
-            if (J->noise) {
+            if (noise) {
                 e = poisson(mu, &r);
-                if (s->read_noise_e > 0) e += s->read_noise_e * row_gauss(&r);
+                if (sigma_r > 0) e += sigma_r * row_gauss(&r);
             }
             if (e > FW) e = FW;
-            e *= 1.0 - c * e / FW;
-            double dn = e * K + s->dark_offset_dn + (J->dsnu ? J->dsnu[i] : 0.0);
-            if (J->noise) dn = floor(dn + 0.5);
-            if (!(dn >= 0)) dn = 0;
+            e *= 1.0 - c_fw * e;
+            double dn = e * K + Pa + (dsnu ? dsnu[i] : 0.0);
+            if (!(dn >= 0)) dn = 0;   // clamping before rounding gives the same integers
             if (dn > maxv) dn = maxv;
-            J->img[i] = (float)dn;
+            if (noise) dn = (double)(int64_t)(dn + 0.5);   // floor(dn + 0.5), dn >= 0
+            img[i] = (float)dn;
         }
     }
 }
@@ -271,6 +317,7 @@ static void apply(const model_sensor_t *s, int width, int height, const float *p
         prnu_gain = prnu;
         dsnu_dn = dsnu;
     }
+    if (noise) pthread_once(&zig_once, zig_init);
     apply_job_t J = { s, width, height, img, prnu_gain, dsnu_dn, noise };
     model_parallel_for(height, 8, model_default_threads(), apply_rows, &J);
     free(prnu);

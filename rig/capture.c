@@ -34,7 +34,11 @@
 #include "model/model.h"
 #include "rig/rig.h"
 
-#define QUEUE_MAX 4
+// The writer's queue: at least QUEUE_MIN frames, more while their pixels stay
+// under QUEUE_BYTES (a burst of frames at one angle is then written during
+// the next motion instead of holding up the capture).
+#define QUEUE_MIN   4
+#define QUEUE_BYTES ((size_t)128 << 20)
 
 // ---------------------------------------------------------------------------
 // Signals
@@ -61,6 +65,8 @@ typedef struct job {
     rig_step_t   step;
     double       t_trigger_s, measured_deg;
     double       mean, max, roi_max, sat;
+    size_t       bytes;         // of the pixels (the writer's queue budget)
+    bool         stats_done;    // else the writer computes them (the main thread needs them only for auto bracketing)
     struct job  *next;
 } job_t;
 
@@ -69,6 +75,7 @@ typedef struct {
     pthread_cond_t  cv;
     job_t          *head, *tail;
     int             depth;
+    size_t          bytes;          // pixel bytes queued
     bool            closing;
     int             err;            // first write error (RIG_ERR_*), the writer stops at it
     char            msg[10000];
@@ -236,11 +243,14 @@ static void *writer_main(void *arg)
         }
         bool failed = w->err != 0;
         pthread_mutex_unlock(&w->m);
+        if (!failed && !jb->stats_done)
+            frame_stats(&jb->f, w->plan->roi, &jb->mean, &jb->max, &jb->roi_max, &jb->sat);
         int rc = failed ? 0 : write_frame(w, jb);
         pthread_mutex_lock(&w->m);
         w->head = jb->next;
         if (!w->head) w->tail = NULL;
         w->depth--;
+        w->bytes -= jb->bytes;
         if (rc && !w->err) w->err = rc;
         if (!rc && !failed) w->written++;
         pthread_cond_broadcast(&w->cv);
@@ -250,16 +260,18 @@ static void *writer_main(void *arg)
     }
 }
 
-// Queue a frame (waits while QUEUE_MAX are pending). Takes the frame's pixels.
+// Queue a frame (waits while the queue is full, see QUEUE_BYTES). Takes the frame's pixels.
 static void writer_push(writer_t *w, job_t *jb)
 {
     pthread_mutex_lock(&w->m);
-    while (w->depth >= QUEUE_MAX && !w->err) pthread_cond_wait(&w->cv, &w->m);
+    jb->bytes = (size_t)jb->f.meta.width * (size_t)jb->f.meta.height * sizeof *jb->f.pix;
+    while (w->depth >= QUEUE_MIN && w->bytes + jb->bytes > QUEUE_BYTES && !w->err) pthread_cond_wait(&w->cv, &w->m);
     jb->next = NULL;
     if (w->tail) w->tail->next = jb;
     else w->head = jb;
     w->tail = jb;
     w->depth++;
+    w->bytes += jb->bytes;
     pthread_cond_broadcast(&w->cv);
     pthread_mutex_unlock(&w->m);
 }
@@ -669,6 +681,11 @@ int rig_capture_run(const rig_capture_opts_t *o)
             angle = s->angle_deg;
             t_settle = model_now_s() + 1e-3 * p->settle_ms;
         }
+        // The exposure register now: its round trip overlaps the settles.
+        if (s->exposure_us != cur_exposure) {
+            if ((rc = rig_camera_set_exposure_us(r->camera, s->exposure_us))) goto fault_cam;
+            cur_exposure = s->exposure_us;
+        }
         double lamp_t = 0;
         if (r->lamps && s->lamp_mask != mask) {
             lamp_t = rig_lamps_settle_s(r->lamps, mask, s->lamp_mask) + 1e-3 * p->lamp_settle_ms;
@@ -683,10 +700,6 @@ int rig_capture_run(const rig_capture_opts_t *o)
         floor_s += fmax(t_settle > 0 ? 1e-3 * p->settle_ms : 0, lamp_t) + 1e-6 * s->exposure_us;
         double left = t_settle - model_now_s();
         if (t_settle > 0 && left > 0) g_usleep((gulong)(left * 1e6));
-        if (s->exposure_us != cur_exposure) {
-            if ((rc = rig_camera_set_exposure_us(r->camera, s->exposure_us))) goto fault_cam;
-            cur_exposure = s->exposure_us;
-        }
         double T_cap0 = model_now_s();
         // Capture, retrying a camera that does not answer.
         job_t *jb = calloc(1, sizeof *jb);
@@ -720,8 +733,11 @@ int rig_capture_run(const rig_capture_opts_t *o)
         rig_turntable_status_t st = { .angle_deg = NAN };
         if (r->turntable) rig_turntable_status(r->turntable, &st);
         jb->measured_deg = r->turntable ? st.angle_deg : NAN;
-        frame_stats(&jb->f, p->roi, &jb->mean, &jb->max, &jb->roi_max, &jb->sat);
-        if (p->auto_exposure && s->group >= 0 && jb->roi_max <= p->target_fraction * full) satisfied[s->group] = true;
+        if (p->auto_exposure && s->group >= 0) {
+            frame_stats(&jb->f, p->roi, &jb->mean, &jb->max, &jb->roi_max, &jb->sat);
+            jb->stats_done = true;
+            if (jb->roi_max <= p->target_fraction * full) satisfied[s->group] = true;
+        }
         double T_p0 = model_now_s();
         writer_push(&w, jb);
         T_push += model_now_s() - T_p0;

@@ -214,11 +214,20 @@ static int render_and_pack(rig_gv_camera_t *g, rig_frame_meta_t *m, uint8_t *dst
     if (m->bits == 8) {
         for (size_t i = 0; i < n; i++) dst[i] = (uint8_t)(g->pix[i] > maxv ? maxv : g->pix[i]);
     } else {
-        for (size_t i = 0; i < n; i++) {   // GVSP pixel data is little-endian
+        // GVSP pixel data is little-endian: on a little-endian host a clamped
+        // copy of whole samples (vectorised), else byte by byte.
+#if defined(__BYTE_ORDER__) && __BYTE_ORDER__ == __ORDER_LITTLE_ENDIAN__
+        for (size_t i = 0; i < n; i++) {
+            uint16_t v = g->pix[i] > maxv ? maxv : g->pix[i];
+            memcpy(dst + 2 * i, &v, sizeof v);
+        }
+#else
+        for (size_t i = 0; i < n; i++) {
             uint16_t v = g->pix[i] > maxv ? maxv : g->pix[i];
             dst[2 * i] = (uint8_t)(v & 0xff);
             dst[2 * i + 1] = (uint8_t)(v >> 8);
         }
+#endif
     }
     return 0;
 }
