@@ -125,8 +125,8 @@ fuzz: | $(BUILD)/config.mk
 	@mkdir -p $(BUILD)/fuzz/corpus
 	clang -std=gnu11 -O1 -g -I. $(PKG_CFLAGS) -fsanitize=fuzzer,address,undefined \
 	  -fno-sanitize-recover=undefined -fno-omit-frame-pointer -o $(BUILD)/fuzz/fuzz_parsers \
-	  $(FUZZ_SRC) model/util.c model/ini.c model/scene.c model/config.c model/brdf.c \
-	  $(PKG_LIBS) -lm -pthread
+	  -DREFL_FUZZ_EXAMPLES_DIR='"$(CURDIR)/examples"' $(FUZZ_SRC) $(MODEL_SRC) $(RIG_SRC) \
+	  $(PKG_LIBS) $(LIBS_NOPC) -lm -pthread
 	$(BUILD)/fuzz/fuzz_parsers -max_total_time=$(FUZZ_SECONDS) -max_len=4096 -timeout=10 \
 	  -print_final_stats=1 -artifact_prefix=$(BUILD)/fuzz/ $(BUILD)/fuzz/corpus tests/corpus
 

@@ -461,6 +461,34 @@ static int parse(spec_t *s)
     return 0;
 }
 
+// The INI text, then every section (s->path names it in messages). *ini is
+// set whenever the INI parsed (the caller frees it, and s->truth).
+static int parse_text(spec_t *s, const char *text, size_t len, model_ini_t **ini)
+{
+    *ini = model_ini_parse(text, len, s->path);
+    if (!*ini) {
+        char msg[1200];
+        snprintf(msg, sizeof msg, "%s", model_last_error());
+        bool q = model_error_quiet(true);
+        rig_fail(RIG_ERR_INVALID, "%s", msg);
+        model_error_quiet(q);
+        return RIG_ERR_INVALID;
+    }
+    s->ini = *ini;
+    return parse(s);
+}
+
+int rig_config_parse(const char *text, size_t len, const char *name)
+{
+    if (!text || !name || !*name) return rig_fail(RIG_ERR_INVALID, "rig_config_parse: NULL text or no name");
+    spec_t s = { .path = name };
+    model_ini_t *ini = NULL;
+    int rc = parse_text(&s, text, len, &ini);
+    model_ini_free(ini);
+    g_free(s.truth);
+    return rc;
+}
+
 // ---------------------------------------------------------------------------
 // Opening
 
@@ -590,16 +618,7 @@ int rig_open(rig_t **out, const char *path)
         rc = RIG_ERR_NO_DEVICE;
         goto done;
     }
-    if (!(ini = model_ini_parse(text, len, path))) {
-        char msg[1200];
-        snprintf(msg, sizeof msg, "%s", model_last_error());
-        bool q = model_error_quiet(true);
-        rig_fail(RIG_ERR_INVALID, "%s", msg);
-        model_error_quiet(q);
-        goto done;
-    }
-    s.ini = ini;
-    if ((rc = parse(&s))) goto done;
+    if ((rc = parse_text(&s, text, len, &ini))) goto done;
 
     r = calloc(1, sizeof *r);
     if (!r || !(r->path = strdup(path))) {

@@ -294,6 +294,12 @@ rig_virtual_options_t rig_virtual_defaults(void);
 // and lamps. Errors name the truth file and line.
 int  rig_virtual_open(rig_virtual_t **out, const char *truth_path, const rig_virtual_options_t *opt);
 void rig_virtual_close(rig_virtual_t *v);
+// Only the checks of the truth file rig_virtual_open makes (sections, keys,
+// values, the camera model and its sha256, the samples' scenes and materials),
+// of the truth file's text: name is its file name in base_dir, the directory
+// its relative paths (camera model, scenes) resolve against; messages name
+// base_dir/name and the line. Starts nothing. 0 or RIG_ERR_INVALID.
+int  rig_virtual_check_truth(const char *text, size_t len, const char *name, const char *base_dir);
 // The devices (owned by the virtual rig; do not close them yourself).
 rig_turntable_t *rig_virtual_turntable(rig_virtual_t *v);
 rig_lamps_t     *rig_virtual_lamps(rig_virtual_t *v);
@@ -368,6 +374,10 @@ typedef struct {
 // turntable (virtual rig) closed; accepts NULL.
 int  rig_open(rig_t **out, const char *path);
 void rig_close(rig_t *r);
+// Only the parsing and checking rig_open does, of a rig file's text (name: the
+// file's path, used in messages and to resolve [rig] truth, which is not read):
+// 0, or RIG_ERR_INVALID with the file:line message of rig_open. Opens nothing.
+int  rig_config_parse(const char *text, size_t len, const char *name);
 
 // `refl rig` (rig/cmd_rig.c).
 int rig_cmd(int argc, char **argv);

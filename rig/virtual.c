@@ -65,6 +65,14 @@
 // model_sensor_mean instead of the noisy sensor (a right shift becomes a
 // division by 2^s minus (2^s - 1) / 2^(s+1), the mean of the floor).
 // While the stage moves, a frame shows the angle at the trigger (no motion blur).
+// Speculation (prerender >= 1): while the stage stands still and no trigger
+// waits, the pre-render thread also computes the next frames of the current
+// state ahead of their triggers, with the exposures and gains the last state's
+// frames had (a plan repeats its exposure list in every state) and the noise
+// seeds those triggers will draw. A trigger whose state, exposure, gain and
+// seed are exactly those of such a frame takes it: the same values it would
+// compute (the frame is a function of these inputs only), but its sensor
+// noise then costs no time after the trigger. Others compute as above.
 #define _GNU_SOURCE
 #include <limits.h>
 #include <math.h>
@@ -82,6 +90,8 @@
 
 #define NPLANES  12   // cached radiance images (5 MB each at 1280x1024)
 #define NTRACERS 3    // cached (sample, angle) tracers
+#define NSPEC    4    // speculative frames (see spec_t)
+#define NSEQ     16   // exposures remembered per state
 
 // An albedo texture of a material (simulator only: the fitter's model has
 // none): R at the first hit is multiplied by 1 + amplitude * n(u, v), n a
@@ -112,6 +122,27 @@ typedef struct {
     double   angle_deg;
     uint64_t used;
 } plane_t;
+
+// A frame computed ahead of its trigger by the pre-render thread: the noisy
+// sensor values (DN of the sensor's bits, whole sensor) of a state, exposure,
+// gain and noise seed. A trigger with exactly these inputs (its state, its
+// registers and the seed it draws) takes it instead of computing the same
+// values again, so the frame is the one the trigger would have made; any
+// other trigger discards the speculative frames of seeds it used up.
+typedef struct {
+    float   *img;      // W*H; NULL until first used
+    bool     valid;
+    int      sample;
+    double   angle_deg;
+    uint32_t mask;
+    double   exposure_us, gain_db;
+    uint64_t seed;
+} spec_t;
+
+// One frame's settings, as the camera asked for them.
+typedef struct {
+    double exposure_us, gain_db;
+} shot_t;
 
 typedef struct {
     model_tracer_t *t;
@@ -161,6 +192,17 @@ struct rig_virtual {
     tracer_slot_t tracers[NTRACERS];
     uint64_t      tick;
     float        *frame;              // W*H work image
+    // Speculation (prerender >= 1): the exposures of the frames taken in the
+    // previous state (prev) and so far in the current one (cur, state key
+    // cur_*) predict those of the next frames: a plan repeats its exposure
+    // list in every state.
+    spec_t        spec[NSPEC];
+    shot_t        prev[NSEQ], cur[NSEQ];
+    int           nprev, ncur;
+    int           cur_key_sample;
+    double        cur_key_angle;
+    uint32_t      cur_key_mask;
+    bool          cur_key_set;
 
     rig_gv_camera_t *gv;
 
@@ -571,20 +613,27 @@ static int format_bits(const char *pf)
 // The ideal grey value P of the whole sensor into v->frame and the sensor of
 // that frame; cache_lock held.
 static int ideal_frame(rig_virtual_t *v, int sample, double angle_deg, uint32_t mask, double exposure_us,
-                       double gain_db, model_sensor_t *s_out)
+                       double gain_db, model_sensor_t *s_out, float *out)
 {
     size_t n = (size_t)v->W * v->H;
     double gf = pow(10.0, gain_db / 20.0);
     double kc = v->kc_per_us * exposure_us * gf;
     const double Pa = v->sensor.dark_offset_dn;
-    for (size_t i = 0; i < n; i++) v->frame[i] = (float)Pa;
+    bool first = true;
     for (int l = 0; l < v->lamps->n; l++) {
         if (!((mask >> l) & 1)) continue;
         const float *L = plane_for(v, sample, angle_deg, l);
         if (!L) return rig_fail(RIG_ERR_IO, "virtual rig: rendering %s at %.4f deg with lamp %s failed: %s",
                                 v->samples[sample].name, angle_deg, v->lamps->lamps[l].name, model_last_error());
-        for (size_t i = 0; i < n; i++) v->frame[i] += (float)(kc * L[i]);
+        // the same float arithmetic as Pa first, then each lamp added in turn
+        if (first)
+            for (size_t i = 0; i < n; i++) out[i] = (float)Pa + (float)(kc * L[i]);
+        else
+            for (size_t i = 0; i < n; i++) out[i] += (float)(kc * L[i]);
+        first = false;
     }
+    if (first)
+        for (size_t i = 0; i < n; i++) out[i] = (float)Pa;
     *s_out = v->sensor;
     s_out->system_gain_dn_per_e *= gf;
     s_out->exposure_us = exposure_us;
@@ -610,6 +659,70 @@ static bool plane_cached(const rig_virtual_t *v, int sample, double angle_deg, i
     return false;
 }
 
+// The noisy sensor values of a frame into out (cache_lock held).
+static int noisy_frame(rig_virtual_t *v, int sample, double angle_deg, uint32_t mask, double exposure_us,
+                       double gain_db, uint64_t seed, float *out)
+{
+    model_sensor_t s;
+    int r = ideal_frame(v, sample, angle_deg, mask, exposure_us, gain_db, &s, out);
+    if (r) return r;
+    s.noise_seed = seed;
+    model_sensor_apply_patterns(&s, v->W, v->H, v->prnu, v->dsnu, out);
+    return 0;
+}
+
+static bool spec_is(const spec_t *p, int sample, double angle_deg, uint32_t mask, double exposure_us,
+                    double gain_db, uint64_t seed)
+{
+    return p->valid && p->seed == seed && p->sample == sample && p->angle_deg == angle_deg && p->mask == mask &&
+           p->exposure_us == exposure_us && p->gain_db == gain_db;
+}
+
+// Compute one missing speculative frame of the state (the next frames'
+// exposures predicted from the last state's); cache_lock held. true when one
+// was computed.
+static bool speculate_one(rig_virtual_t *v, int sample, double angle_deg, uint32_t mask, uint64_t next_seed)
+{
+    const shot_t *seq = v->cur;   // a state without frames yet: as the last one
+    int nseq = v->ncur, pos = 0;
+    if (v->cur_key_set && v->cur_key_sample == sample && v->cur_key_angle == angle_deg && v->cur_key_mask == mask) {
+        seq = v->prev;            // frames taken in this state: continue as the previous state
+        nseq = v->nprev;
+        pos = v->ncur;
+    }
+    // Once this state has frames, go on only with a short sequence (a
+    // bracket): a long one is a stream of frames that may stop at any time.
+    if (pos > 0 && nseq > NSPEC) return false;
+    for (int j = pos; j < nseq && j < pos + NSPEC; j++) {
+        const shot_t *sh = &seq[j];
+        uint64_t seed = next_seed + (uint64_t)(j - pos);
+        spec_t *free_slot = NULL;
+        bool have = false;
+        for (int k = 0; k < NSPEC; k++) {
+            spec_t *p = &v->spec[k];
+            if (spec_is(p, sample, angle_deg, mask, sh->exposure_us, sh->gain_db, seed)) have = true;
+            else if (!free_slot && (!p->valid || p->seed < next_seed || p->sample != sample ||
+                                    p->angle_deg != angle_deg || p->mask != mask))
+                free_slot = p;
+        }
+        if (have) continue;
+        if (!free_slot) return false;
+        if (!free_slot->img) free_slot->img = malloc((size_t)v->W * v->H * sizeof(float));
+        if (!free_slot->img) return false;
+        free_slot->valid = false;
+        bool q = model_error_quiet(true);   // errors show at the trigger
+        int r = noisy_frame(v, sample, angle_deg, mask, sh->exposure_us, sh->gain_db, seed, free_slot->img);
+        model_error_quiet(q);
+        if (r) {   // no more speculation until the next frame (which reports the error)
+            v->ncur = v->nprev = 0;
+            return false;
+        }
+        *free_slot = (spec_t){ free_slot->img, true, sample, angle_deg, mask, sh->exposure_us, sh->gain_db, seed };
+        return true;
+    }
+    return false;
+}
+
 static void *prerender_main(void *arg)
 {
     rig_virtual_t *v = arg;
@@ -619,13 +732,19 @@ static void *prerender_main(void *arg)
         int r = v->stage_gone ? RIG_ERR_DISCONNECTED : rig_turntable_status(v->tt_sim, &st);
         if (r) v->stage_gone = true;
         int sample = v->cur_sample;
+        uint64_t next_seed = v->next_seed;
         pthread_mutex_unlock(&v->state_lock);
         uint32_t mask = __atomic_load_n(&v->lamps_dev->on_mask, __ATOMIC_ACQUIRE);
         int todo = -1;
+        bool specd = false;
         if (!r && !st.moving && st.homed) {
             pthread_mutex_lock(&v->cache_lock);
             // lamps that are on first; the others only while no frame waits
-            for (int pass = 0; pass < 2 && todo < 0; pass++)
+            for (int pass = 0; pass < 2 && todo < 0 && !specd; pass++) {
+                // between the passes: the next frames of this state
+                if (pass == 1 && !__atomic_load_n(&v->waiting, __ATOMIC_ACQUIRE))
+                    specd = speculate_one(v, sample, st.angle_deg, mask, next_seed);
+                if (specd) break;
                 for (int l = 0; l < v->lamps->n && todo < 0; l++) {
                     bool on = (mask >> l) & 1;
                     if (on != (pass == 0)) continue;
@@ -634,10 +753,11 @@ static void *prerender_main(void *arg)
                         continue;
                     if (!plane_cached(v, sample, st.angle_deg, l)) todo = l;
                 }
+            }
             if (todo >= 0) plane_for(v, sample, st.angle_deg, todo);   // errors show at the trigger
             pthread_mutex_unlock(&v->cache_lock);
         }
-        if (todo < 0) sleep_s(2e-3);
+        if (todo < 0 && !specd) sleep_s(2e-3);
     }
     return NULL;
 }
@@ -665,15 +785,40 @@ static int render_cb(void *ctx, const rig_frame_meta_t *m, uint16_t *pix)
     __atomic_add_fetch(&v->waiting, 1, __ATOMIC_ACQ_REL);
     pthread_mutex_lock(&v->cache_lock);
     __atomic_sub_fetch(&v->waiting, 1, __ATOMIC_ACQ_REL);
-    model_sensor_t s;
-    int r = ideal_frame(v, sample, st.angle_deg, mask, m->exposure_us, m->gain, &s);
+    // The exposures of this state so far (the prediction of speculate_one).
+    if (!(v->cur_key_set && v->cur_key_sample == sample && v->cur_key_angle == st.angle_deg &&
+          v->cur_key_mask == mask)) {
+        if (v->ncur > 0) {
+            memcpy(v->prev, v->cur, sizeof v->cur);
+            v->nprev = v->ncur;
+        }
+        v->ncur = 0;
+        v->cur_key_set = true;
+        v->cur_key_sample = sample;
+        v->cur_key_angle = st.angle_deg;
+        v->cur_key_mask = mask;
+    }
+    if (v->ncur < NSEQ) v->cur[v->ncur++] = (shot_t){ m->exposure_us, m->gain };
+    // A frame computed ahead for exactly these inputs, or compute it now.
+    const float *img = NULL;
+    int r = 0;
+    for (int k = 0; k < NSPEC; k++) {
+        spec_t *p = &v->spec[k];
+        if (spec_is(p, sample, st.angle_deg, mask, m->exposure_us, m->gain, seed)) img = p->img;
+        if (p->seed < seed) p->valid = false;   // its seed is used up
+    }
+    if (!img) {
+        r = noisy_frame(v, sample, st.angle_deg, mask, m->exposure_us, m->gain, seed, v->frame);
+        img = v->frame;
+    }
+    for (int k = 0; k < NSPEC; k++)
+        if (v->spec[k].seed == seed) v->spec[k].valid = false;   // taken (its buffer is read below, under cache_lock)
     if (!r) {
-        s.noise_seed = seed;
-        model_sensor_apply_patterns(&s, v->W, v->H, v->prnu, v->dsnu, v->frame);
         // The sensor's values are integers in [0, 2^bits - 1]: shift them.
-        int up = fb >= s.bits ? fb - s.bits : 0, down = fb < s.bits ? s.bits - fb : 0;
+        const int bits = v->sensor.bits;
+        int up = fb >= bits ? fb - bits : 0, down = fb < bits ? bits - fb : 0;
         for (int y = 0; y < m->height; y++) {
-            const float *row = v->frame + (size_t)(y + m->offset_y) * v->W + m->offset_x;
+            const float *row = img + (size_t)(y + m->offset_y) * v->W + m->offset_x;
             uint16_t *o = pix + (size_t)y * m->width;
             for (int x = 0; x < m->width; x++) o[x] = (uint16_t)((((uint32_t)row[x]) >> down) << up);
         }
@@ -706,7 +851,7 @@ int rig_virtual_expected(rig_virtual_t *v, double angle_deg, uint32_t lamp_mask,
     pthread_mutex_unlock(&v->state_lock);
     pthread_mutex_lock(&v->cache_lock);
     model_sensor_t s;
-    int r = ideal_frame(v, sample, angle_deg, lamp_mask, exposure_us, gain_db, &s);
+    int r = ideal_frame(v, sample, angle_deg, lamp_mask, exposure_us, gain_db, &s, v->frame);
     if (!r) {
         model_sensor_mean(&s, v->W, v->H, v->prnu, v->dsnu, v->frame);
         for (int y = 0; y < height; y++)
@@ -1219,6 +1364,39 @@ static int fail_model(int err)
     return rig_fail(err, "virtual rig: %s", msg);
 }
 
+// Parse-only check of a truth file's text (rig.h): parse_truth on a rig that
+// starts nothing (no camera server, stage, lamps or render thread).
+int rig_virtual_check_truth(const char *text, size_t len, const char *name, const char *base_dir)
+{
+    if (!text || !name || !base_dir) return rig_fail(RIG_ERR_INVALID, "virtual rig: check truth: NULL argument");
+    int err = RIG_ERR_INVALID;
+    char *path = NULL;
+    model_ini_t *ini = NULL;
+    rig_virtual_t *v = calloc(1, sizeof *v);
+    if (!v || asprintf(&path, "%s/%s", base_dir, name) < 0) {
+        path = NULL;
+        err = rig_fail(RIG_ERR_NO_MEM, "virtual rig: out of memory");
+        goto done;
+    }
+    pthread_mutex_init(&v->state_lock, NULL);
+    pthread_mutex_init(&v->cache_lock, NULL);
+    const char *def_sample = NULL;
+    rig_turntable_sim_params_t tp = rig_turntable_sim_defaults();
+    double warmup_ms, settle_ms;
+    rig_gv_camera_params_t gp = rig_gv_camera_defaults();
+    if (!(ini = model_ini_parse(text, len, path)) ||
+        !parse_truth(v, ini, &def_sample, &tp, &warmup_ms, &settle_ms, &gp)) {
+        err = fail_model(RIG_ERR_INVALID);
+        goto done;
+    }
+    err = RIG_ERR_OK;
+done:
+    model_ini_free(ini);
+    rig_virtual_close(v);
+    free(path);
+    return err;
+}
+
 // The camera of the low-resolution indirect term: intrinsics scaled by 1/ds
 // about pixel corners (fx/ds, fy/ds, (c + 0.5)/ds - 0.5), same distortion and
 // pose; and its scratch buffers.
@@ -1399,6 +1577,7 @@ void rig_virtual_close(rig_virtual_t *v)
     free(v->prnu);
     free(v->dsnu);
     free(v->frame);
+    for (int k = 0; k < NSPEC; k++) free(v->spec[k].img);
     free(v->truth_path);
     pthread_mutex_destroy(&v->state_lock);
     pthread_mutex_destroy(&v->cache_lock);

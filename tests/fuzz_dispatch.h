@@ -1,24 +1,54 @@
 // tests/fuzz_dispatch.h — one fuzz input through one of refl's text parsers.
 //
-// The first byte selects the parser (byte % 6): 0 D3D scene, 1 OBJ scene,
-// 2 INI, 3 materials, 4 lamps, 5 sensor; the rest of the input is the text
-// (not NUL-terminated, so reads past its end are caught by AddressSanitizer).
+// The first byte selects the parser: 'p' a capture plan (rig_plan_parse),
+// 'r' a rig description file (rig_config_parse), 'v' a virtual rig truth file
+// (rig_virtual_check_truth); any other byte b selects b % 6: 0 D3D scene,
+// 1 OBJ scene, 2 INI, 3 materials, 4 lamps, 5 sensor (seeds use '0'..'5'; the
+// corpus was written with that rule, which is why the newer parsers have
+// letters). The rest of the input is the text (not NUL-terminated, so reads
+// past its end are caught by AddressSanitizer).
+//
+// A truth file names its camera model and scenes relative to its directory:
+// the dispatcher checks it as "fuzz-truth.ini" in the directory
+// refl_fuzz_parse_in is given; refl_fuzz_parse uses $REFL_FUZZ_EXAMPLES when
+// set, else REFL_FUZZ_EXAMPLES_DIR (the fuzz target defines it as the repo's
+// examples/ directory), else "examples" (run from the repo's top directory).
+//
 // Used by the libFuzzer target (tests/fuzz_parsers.c) and by the corpus replay
 // test (tests/test_corpus.c).
 #pragma once
 
 #include <stddef.h>
 #include <stdint.h>
+#include <stdlib.h>
 
 #include "model/model.h"
+#include "rig/rig.h"
+
+#ifndef REFL_FUZZ_EXAMPLES_DIR
+#define REFL_FUZZ_EXAMPLES_DIR "examples"
+#endif
 
 enum { REFL_FUZZ_D3D, REFL_FUZZ_OBJ, REFL_FUZZ_INI, REFL_FUZZ_MATERIALS, REFL_FUZZ_LAMPS,
-       REFL_FUZZ_SENSOR, REFL_FUZZ_NPARSERS };
+       REFL_FUZZ_SENSOR, REFL_FUZZ_NMOD,   // selected by first byte % REFL_FUZZ_NMOD
+       REFL_FUZZ_PLAN = REFL_FUZZ_NMOD, REFL_FUZZ_RIG, REFL_FUZZ_TRUTH, REFL_FUZZ_NPARSERS };
 
-// Parse the input with the parser its first byte selects, free the result.
+// The parser a first byte selects (REFL_FUZZ_*).
+static inline int refl_fuzz_selector(uint8_t b)
+{
+    switch (b) {
+    case 'p': return REFL_FUZZ_PLAN;
+    case 'r': return REFL_FUZZ_RIG;
+    case 'v': return REFL_FUZZ_TRUTH;
+    default: return b % REFL_FUZZ_NMOD;
+    }
+}
+
+// Parse the input with the parser its first byte selects, free the result;
+// examples_dir: where a truth file's relative paths resolve.
 // Returns true when the parse succeeded; false (with model_last_error() set)
 // when the input was rejected, or false with an error for an empty input.
-static inline bool refl_fuzz_parse(const uint8_t *data, size_t len)
+static inline bool refl_fuzz_parse_in(const uint8_t *data, size_t len, const char *examples_dir)
 {
     if (len == 0) {
         model_error(NULL, 0, "empty fuzz input (the first byte selects the parser)");
@@ -26,7 +56,17 @@ static inline bool refl_fuzz_parse(const uint8_t *data, size_t len)
     }
     const char *text = (const char *)data + 1;
     size_t n = len - 1;
-    switch (data[0] % REFL_FUZZ_NPARSERS) {
+    switch (refl_fuzz_selector(data[0])) {
+    case REFL_FUZZ_PLAN: {
+        rig_plan_t *p = rig_plan_parse(text, n, "fuzz-plan.ini");
+        bool ok = p != NULL;
+        rig_plan_free(p);
+        return ok;
+    }
+    case REFL_FUZZ_RIG:
+        return rig_config_parse(text, n, "fuzz-rig.ini") == 0;
+    case REFL_FUZZ_TRUTH:
+        return rig_virtual_check_truth(text, n, "fuzz-truth.ini", examples_dir) == 0;
     case REFL_FUZZ_D3D: {
         model_scene_t *s = model_scene_parse_d3d(text, n, "fuzz.d3d", NULL);
         model_scene_free(s);
@@ -57,6 +97,12 @@ static inline bool refl_fuzz_parse(const uint8_t *data, size_t len)
         return model_sensor_parse(text, n, "fuzz-sensor.ini", &s);
     }
     }
+}
+
+static inline bool refl_fuzz_parse(const uint8_t *data, size_t len)
+{
+    const char *dir = getenv("REFL_FUZZ_EXAMPLES");
+    return refl_fuzz_parse_in(data, len, dir && *dir ? dir : REFL_FUZZ_EXAMPLES_DIR);
 }
 
 static inline void refl_fuzz_one(const uint8_t *data, size_t len)
