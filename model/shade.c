@@ -208,14 +208,22 @@ static double lamp_draw(render_ctx_t *c, int i, model_vec3_t p, model_rng_t *rng
     }
     double s2max = r * r / d2;                          // sin^2 theta_max
     double one_m_cos = s2max / (1 + sqrt(1 - s2max));   // 1 - cos theta_max, stable
-    double u1 = model_rng_uniform(rng), u2 = model_rng_uniform(rng);
+    double u1 = model_rng_uniform(rng);
     double one_m_ct = u1 * one_m_cos;
     double ct = 1 - one_m_ct, st = sqrt(fmax(0.0, one_m_ct * (2 - one_m_ct)));
-    double phi = 2 * M_PI * u2;
+    // a uniform direction (cos phi, sin phi) in the plane, by rejection from the
+    // square (no trigonometry: this is the renderer's inner loop)
+    double cx, cy, r2;
+    do {
+        cx = 2 * model_rng_uniform(rng) - 1;
+        cy = 2 * model_rng_uniform(rng) - 1;
+        r2 = cx * cx + cy * cy;
+    } while (r2 > 1 || r2 < 1e-12);
+    double inv_r = 1 / sqrt(r2);
     model_vec3_t a, b;
     frame_of(axis, &a, &b);
     model_vec3_t w = v3_add(v3_scale(axis, ct),
-                            v3_add(v3_scale(a, st * cos(phi)), v3_scale(b, st * sin(phi))));
+                            v3_add(v3_scale(a, st * cx * inv_r), v3_scale(b, st * cy * inv_r)));
     // distance to the sphere's near surface along w
     double disc = r * r - d2 * st * st;
     double tt = d * ct - sqrt(fmax(0.0, disc));
