@@ -41,6 +41,9 @@ void model_error(const char *where_file, int where_line, const char *fmt, ...)
 const char *model_last_error(void);
 void model_error_clear(void);
 // Quiet mode (for tests): errors are kept, not printed. Returns the old value.
+// Process-wide: set it once (the test harness does); code that silences its
+// own errors for a moment uses model_error_quiet_thread, since toggling the
+// process-wide flag from several threads can leave it stuck on.
 bool model_error_quiet(bool quiet);
 // The same for the calling thread only.
 bool model_error_quiet_thread(bool quiet);

@@ -339,9 +339,9 @@ static char *session_facts(rig_t *r, const rig_plan_t *p, const char *cmdline)
     if (r->virt) {
         json_t *v = json_object();
         char sha[65] = "";
-        bool q = model_error_quiet(true);
+        bool q = model_error_quiet_thread(true);
         if (!model_sha256_file(rig_virtual_truth_path(r->virt), sha)) snprintf(sha, sizeof sha, "unreadable");
-        model_error_quiet(q);
+        model_error_quiet_thread(q);
         json_object_set_new(v, "truth", json_string(rig_virtual_truth_path(r->virt)));
         json_object_set_new(v, "truth_sha256", json_string(sha));
         json_object_set_new(v, "sample", json_string(rig_virtual_sample(r->virt)));
@@ -457,9 +457,9 @@ static void print_dry_run(const rig_plan_t *p, const rig_t *r)
 
 static int fault_stop(rig_t *r, rig_journal_t *j, int step, const char *state, const char *kind, const char *msg)
 {
-    bool q = model_error_quiet(true);
+    bool q = model_error_quiet_thread(true);
     if (r->lamps) rig_lamps_all_off(r->lamps);
-    model_error_quiet(q);
+    model_error_quiet_thread(q);
     rig_journal_event(j, step, kind, "%s", msg);
     rig_journal_set_state(j, state);
     return 0;
@@ -491,9 +491,9 @@ static int mkdir_session(const char *dir)
 
 static bool file_sha(const char *path, char out[65])
 {
-    bool q = model_error_quiet(true);
+    bool q = model_error_quiet_thread(true);
     bool ok = model_sha256_file(path, out);
-    model_error_quiet(q);
+    model_error_quiet_thread(q);
     return ok;
 }
 
@@ -706,9 +706,9 @@ int rig_capture_run(const rig_capture_opts_t *o)
         int tries = 0;
         for (;;) {
             jb->t_trigger_s = realtime_s();
-            bool q = model_error_quiet(true);
+            bool q = model_error_quiet_thread(true);
             rc = rig_camera_capture(r->camera, p->frame_timeout_s + 2e-6 * s->exposure_us, 0, &jb->f);
-            model_error_quiet(q);
+            model_error_quiet_thread(q);
             if (!rc) break;
             if (rc != RIG_ERR_TIMEOUT || tries >= p->retries || g_sigint) break;
             tries++;
@@ -791,9 +791,9 @@ fault_tt:
     snprintf(msg, sizeof msg, "turntable fault at step %d: %s: session stopped, lamps off; after fixing the stage, "
              "refl capture --resume %s", step, rig_last_error(), o->dir);
     if (r && r->turntable) {
-        bool q = model_error_quiet(true);
+        bool q = model_error_quiet_thread(true);
         rig_turntable_stop(r->turntable, true);
-        model_error_quiet(q);
+        model_error_quiet_thread(q);
     }
     if (j) fault_stop(r, j, step, "fault", "fault", msg);
     rig_fail(rc, "refl capture: %s", msg);
@@ -813,9 +813,9 @@ done:
     }
     if (sig_installed) sigaction(SIGINT, &g_old_int, NULL);
     if (r && r->lamps && r->lamps->on_mask) {
-        bool q = model_error_quiet(true);
+        bool q = model_error_quiet_thread(true);
         rig_lamps_all_off(r->lamps);
-        model_error_quiet(q);
+        model_error_quiet_thread(q);
     }
     rig_close(r);
     rig_journal_close(j);

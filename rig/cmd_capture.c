@@ -133,9 +133,9 @@ static int session_check(const char *dir)
     for (int i = 0; i < nrows; i++) {
         char path[4200], sha[65];
         snprintf(path, sizeof path, "%s/%s", dir, rows[i].file);
-        bool q = model_error_quiet(true);
+        bool q = model_error_quiet_thread(true);
         bool ok = model_sha256_file(path, sha);
-        model_error_quiet(q);
+        model_error_quiet_thread(q);
         if (!ok) {
             printf("MISSING FILE step %d: %s (%s)\n", rows[i].step, rows[i].file, strerror(errno));
             bad++;

@@ -461,9 +461,9 @@ static int do_snap(rig_t *r, const snap_t *o, const char *cmdline)
     if (r->virt) {
         char sha[65] = "";
         const char *truth = rig_virtual_truth_path(r->virt);
-        bool q = model_error_quiet(true);
+        bool q = model_error_quiet_thread(true);
         if (!model_sha256_file(truth, sha)) snprintf(sha, sizeof sha, "unreadable");
-        model_error_quiet(q);
+        model_error_quiet_thread(q);
         model_meta_add(meta, "virtual_truth", "%s", truth);
         model_meta_add(meta, "virtual_truth_sha256", "%s", sha);
         model_meta_add(meta, "virtual_sample", "%s", rig_virtual_sample(r->virt));
@@ -496,9 +496,9 @@ static int do_snap(rig_t *r, const snap_t *o, const char *cmdline)
     printf("  pixels (DN): min %u  mean %.1f  max %u\n", lo, n ? sum / (double)n : 0.0, hi);
 done:
     if (r->lamps && r->lamps->on_mask) {
-        bool q = model_error_quiet(true);
+        bool q = model_error_quiet_thread(true);
         rig_lamps_all_off(r->lamps);
-        model_error_quiet(q);
+        model_error_quiet_thread(q);
     }
     rig_frame_free(&f);
     model_meta_free(meta);
@@ -509,9 +509,9 @@ done:
 // to rig_open.
 static bool file_is_virtual(const char *path, bool *readable)
 {
-    bool q = model_error_quiet(true);
+    bool q = model_error_quiet_thread(true);
     model_ini_t *ini = model_ini_load(path);
-    model_error_quiet(q);
+    model_error_quiet_thread(q);
     *readable = ini != NULL;
     bool v = false;
     for (int i = 0; ini && i < ini->nsections; i++) v |= !strcmp(ini->sections[i], "rig");

@@ -469,9 +469,9 @@ static int parse_text(spec_t *s, const char *text, size_t len, model_ini_t **ini
     if (!*ini) {
         char msg[1200];
         snprintf(msg, sizeof msg, "%s", model_last_error());
-        bool q = model_error_quiet(true);
+        bool q = model_error_quiet_thread(true);
         rig_fail(RIG_ERR_INVALID, "%s", msg);
-        model_error_quiet(q);
+        model_error_quiet_thread(q);
         return RIG_ERR_INVALID;
     }
     s->ini = *ini;
@@ -514,9 +514,9 @@ static void set_profile_sim(rig_t *r, const rig_turntable_sim_params_t *p)
 // Runs a device call quietly (its message is repeated with the file and line).
 #define QUIET(call)                                                                                  \
     do {                                                                                             \
-        bool q_ = model_error_quiet(true);                                                           \
+        bool q_ = model_error_quiet_thread(true);                                                           \
         rc = (call);                                                                                 \
-        model_error_quiet(q_);                                                                       \
+        model_error_quiet_thread(q_);                                                                       \
     } while (0)
 
 static int apply_camera_defaults(rig_t *r, const spec_t *s, int line, const char *section)
@@ -546,9 +546,9 @@ static int open_devices(rig_t *r, spec_t *s)
         r->lamps = rig_virtual_lamps(r->virt);
         // The stage's profile is the truth file's [turntable] (defaults of the sim stage otherwise).
         rig_turntable_sim_params_t p = rig_turntable_sim_defaults();
-        bool q = model_error_quiet(true);
+        bool q = model_error_quiet_thread(true);
         model_ini_t *truth = model_ini_load(s->truth);
-        model_error_quiet(q);
+        model_error_quiet_thread(q);
         const model_ini_entry_t *e;
         double v;
         if ((e = model_ini_get(truth, "turntable", "speed_deg_s")) && model_parse_double(e->value, &v) && v > 0)
@@ -612,9 +612,9 @@ int rig_open(rig_t **out, const char *path)
     if (!text) {
         char msg[1200];
         snprintf(msg, sizeof msg, "%s", model_last_error());
-        bool q = model_error_quiet(true);
+        bool q = model_error_quiet_thread(true);
         rig_fail(RIG_ERR_NO_DEVICE, "%s (the rig description file)", msg);
-        model_error_quiet(q);
+        model_error_quiet_thread(q);
         rc = RIG_ERR_NO_DEVICE;
         goto done;
     }
@@ -644,7 +644,7 @@ done:
 void rig_close(rig_t *r)
 {
     if (!r) return;
-    bool q = model_error_quiet(true);   // closing after an error must not overwrite its message
+    bool q = model_error_quiet_thread(true);   // closing after an error must not overwrite its message
     char keep[1536];
     snprintf(keep, sizeof keep, "%s", rig_last_error());
     if (r->lamps) rig_lamps_all_off(r->lamps);
@@ -660,7 +660,7 @@ void rig_close(rig_t *r)
         rig_turntable_close(r->turntable);
     }
     rig_fail(RIG_ERR_OK, "%s", keep);
-    model_error_quiet(q);
+    model_error_quiet_thread(q);
     free(r->path);
     free(r);
 }

@@ -1,6 +1,9 @@
 // rig/plan.c — capture plans: parse the plan file, build the step list, check
 // it against a rig, and the hardware floor of a step list (see rig/rig.h,
 // "Capture sessions").
+// Allocations go through GLib (g_malloc0_n, g_strdup): out of memory ends the
+// process with GLib's message rather than a NULL dereference; GLib allocates
+// with the system malloc, so the frees below are free().
 #define _GNU_SOURCE
 #include <glib.h>
 #include <math.h>
@@ -40,7 +43,7 @@ static bool parse_numbers(const model_ini_t *ini, const model_ini_entry_t *e, do
     gchar **w = g_strsplit_set(e->value, " \t,", -1);
     int cap = 0;
     for (int i = 0; w[i]; i++) cap++;
-    *out = calloc((size_t)cap + 1, sizeof **out);
+    *out = g_malloc0_n((size_t)cap + 1, sizeof **out);
     *n = 0;
     bool ok = true;
     for (int i = 0; w[i] && ok; i++) {
@@ -130,7 +133,7 @@ static bool parse_lamp_sets(rig_plan_t *p, const model_ini_t *ini)
     gchar **w = g_strsplit(e->value, ";", -1);
     int n = 0;
     for (int i = 0; w[i]; i++) n++;
-    p->lamp_sets = calloc((size_t)n + 1, sizeof *p->lamp_sets);
+    p->lamp_sets = g_malloc0_n((size_t)n + 1, sizeof *p->lamp_sets);
     bool ok = true;
     for (int i = 0; w[i] && ok; i++) {
         char *s = g_strstrip(w[i]);
@@ -193,7 +196,7 @@ static bool parse_angles(rig_plan_t *p, const model_ini_t *ini)
         model_error(ini->path, r->line, "[angles] range = %s: more than 100000 angles", r->value);
     } else {
         int cnt = (int)floor((v[1] - v[0]) / v[2] + 1e-9) + 1;
-        p->angles_deg = calloc((size_t)cnt, sizeof(double));
+        p->angles_deg = g_malloc0_n((size_t)cnt, sizeof(double));
         for (int i = 0; i < cnt; i++) p->angles_deg[i] = v[0] + i * v[2];
         p->nangles = cnt;
         ok = true;
@@ -273,7 +276,7 @@ static bool build_steps(rig_plan_t *p, const model_ini_t *ini)
                     "it", total, MAX_STEPS);
         return false;
     }
-    p->steps = calloc((size_t)total + 1, sizeof *p->steps);
+    p->steps = g_malloc0_n((size_t)total + 1, sizeof *p->steps);
     int n = 0, nlight = 0, group = 0;
     for (int a = 0; a < p->nangles; a++)
         for (int l = 0; l < p->nlamp_sets; l++)
@@ -310,9 +313,9 @@ rig_plan_t *rig_plan_parse(const char *text, size_t len, const char *name)
 {
     model_ini_t *ini = model_ini_parse(text, len, name);
     if (!ini) return NULL;
-    rig_plan_t *p = calloc(1, sizeof *p);
+    rig_plan_t *p = g_malloc0_n(1, sizeof *p);
     bool ok = false;
-    p->path = strdup(name);
+    p->path = g_strdup(name);
     p->text = g_strndup(text, len);
     model_sha256_hex(text, len, p->sha256);
     if (!check_keys(ini)) goto done;
@@ -404,7 +407,7 @@ static uint32_t all_mask(const rig_lamps_t *l)
 
 int rig_plan_bind(rig_plan_t *p, rig_t *r)
 {
-    uint32_t *masks = calloc((size_t)p->nlamp_sets + 1, sizeof *masks);
+    uint32_t *masks = g_malloc0_n((size_t)p->nlamp_sets + 1, sizeof *masks);
     int rc = 0;
     for (int s = 0; s < p->nlamp_sets; s++) {
         if (!strcmp(p->lamp_sets[s], "none")) continue;
@@ -444,9 +447,9 @@ int rig_plan_bind(rig_plan_t *p, rig_t *r)
         goto done;
     }
     if (r->virt && strcmp(rig_virtual_sample(r->virt), p->sample)) {
-        bool q = model_error_quiet(true);
+        bool q = model_error_quiet_thread(true);
         int e = rig_virtual_set_sample(r->virt, p->sample);
-        model_error_quiet(q);
+        model_error_quiet_thread(q);
         if (e) {
             model_error(p->path, 0, "[sample] name = %s: the virtual rig's truth file %s has no such sample",
                         p->sample, rig_virtual_truth_path(r->virt));
@@ -456,7 +459,7 @@ int rig_plan_bind(rig_plan_t *p, rig_t *r)
     }
     // The camera: set every exposure, the gain and the format, read them back.
     rig_frame_meta_t before, m;
-    bool q = model_error_quiet(true);
+    bool q = model_error_quiet_thread(true);
     rc = rig_camera_settings(r->camera, &before);
     if (!rc && (rc = rig_camera_set_pixel_format(r->camera, p->pixel_format)))
         model_error(p->path, 0, "[exposure] pixel_format = %s: the camera refuses it (%s)", p->pixel_format,
@@ -479,7 +482,7 @@ int rig_plan_bind(rig_plan_t *p, rig_t *r)
                     p->roi[2], p->roi[3], m.width, m.height);
         rc = RIG_ERR_INVALID;
     }
-    model_error_quiet(q);
+    model_error_quiet_thread(q);
     if (!rc) {
         rig_camera_set_exposure_us(r->camera, before.exposure_us);
     } else {

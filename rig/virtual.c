@@ -710,9 +710,9 @@ static bool speculate_one(rig_virtual_t *v, int sample, double angle_deg, uint32
         if (!free_slot->img) free_slot->img = malloc((size_t)v->W * v->H * sizeof(float));
         if (!free_slot->img) return false;
         free_slot->valid = false;
-        bool q = model_error_quiet(true);   // errors show at the trigger
+        bool q = model_error_quiet_thread(true);   // errors show at the trigger
         int r = noisy_frame(v, sample, angle_deg, mask, sh->exposure_us, sh->gain_db, seed, free_slot->img);
-        model_error_quiet(q);
+        model_error_quiet_thread(q);
         if (r) {   // no more speculation until the next frame (which reports the error)
             v->ncur = v->nprev = 0;
             return false;
