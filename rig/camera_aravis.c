@@ -162,6 +162,16 @@ static int start_stream(rig_camera_t *c)
     if (!a->stream) return fail_gerror(c, &e, "creating the stream");
     if (ARV_IS_GV_STREAM(a->stream))   // socket buffer sized to the payload (no root needed)
         g_object_set(a->stream, "socket-buffer", ARV_GV_STREAM_SOCKET_BUFFER_AUTO, NULL);
+    arv_camera_start_acquisition(a->cam, &e);
+    if (e) {
+        int rc = fail_gerror(c, &e, "AcquisitionStart");
+        stop_stream(a);
+        return rc;
+    }
+    a->acquiring = true;
+    // Buffers only once the acquisition runs: Aravis's in-process fake stream
+    // fills a buffer as soon as it has one, and one filled before AcquisitionStart
+    // would come back as an empty "frame" for a later trigger.
     for (int i = 0; i < N_BUFFERS; i++) {
         ArvBuffer *b = arv_buffer_new_allocate(payload);
         if (!b) {
@@ -170,13 +180,6 @@ static int start_stream(rig_camera_t *c)
         }
         arv_stream_push_buffer(a->stream, b);
     }
-    arv_camera_start_acquisition(a->cam, &e);
-    if (e) {
-        int rc = fail_gerror(c, &e, "AcquisitionStart");
-        stop_stream(a);
-        return rc;
-    }
-    a->acquiring = true;
     return 0;
 }
 
@@ -549,7 +552,7 @@ int rig_camera_open_aravis(rig_camera_t **out, const char *id)
         rc = rig_fail(RIG_ERR_NO_DEVICE, "aravis: no camera at '%s' (%s); %s", id, e ? e->message : "not found",
                       is_ipv4_address(id) ? "nothing answers GigE Vision control (UDP 3956) there: check the "
                       "address, power and cable"
-                      : "check the serial number or name (`arv-tool-0.8` lists the cameras)");
+                      : "check the serial number or name (Aravis's arv-tool lists the cameras it finds)");
         g_clear_error(&e);
         goto done;
     }
