@@ -29,38 +29,9 @@
 #include "rig/rig.h"
 #include "tests/test.h"
 
-static int refl(char **out, char **err, ...)
-{
-    const char *argv[64];
-    int n = 0;
-    argv[n++] = test_refl();
-    va_list ap;
-    va_start(ap, err);
-    const char *a;
-    while ((a = va_arg(ap, const char *)) && n < 63) argv[n++] = a;
-    va_end(ap);
-    argv[n] = NULL;
-    return test_run(argv, 120, out, err);
-}
+#define refl(out, err, ...) test_refl_run(120, out, err, __VA_ARGS__)
 
-static int camera_lock(void)
-{
-    char path[512];
-    snprintf(path, sizeof path, "%s/refl-test-camera-aravis.lock", g_get_tmp_dir());
-    int fd = open(path, O_RDONLY | O_CREAT | O_CLOEXEC, 0666);
-    for (int i = 0; fd >= 0 && i < 6000; i++) {
-        if (flock(fd, LOCK_EX | LOCK_NB) == 0) return fd;
-        usleep(50000);
-    }
-    if (fd >= 0) close(fd);
-    CHECK_MSG(false, "cannot lock refl-test-camera-aravis.lock");
-    return -1;
-}
 
-static void camera_unlock(int fd)
-{
-    if (fd >= 0) close(fd);
-}
 
 static const char *rig_file(const char *name, const char *truth)
 {
@@ -180,7 +151,7 @@ static bool run_and_kill(const char *const *argv, const char *dir, int at)
 
 TEST(capture_kill9_resume_equals_uninterrupted)
 {
-    int lk = camera_lock();
+    int lk = test_camera_lock();
     const char *rig = rig_file("rig.ini", NULL);
     const char *plan = test_write("plan.ini", SMALL_PLAN);
     char ref[4096], dir[4096];
@@ -275,12 +246,12 @@ TEST(capture_kill9_resume_equals_uninterrupted)
     CHECK_CONTAINS(out, "complete");
     g_free(out);
     g_free(err);
-    camera_unlock(lk);
+    test_camera_unlock(lk);
 }
 
 TEST(capture_dry_run_and_changed_plan)
 {
-    int lk = camera_lock();
+    int lk = test_camera_lock();
     const char *rig = rig_file("rig.ini", NULL);
     const char *plan = test_write("plan.ini", SMALL_PLAN);
     char *out = NULL, *err = NULL;
@@ -347,7 +318,7 @@ TEST(capture_dry_run_and_changed_plan)
     CHECK_CONTAINS(err, "already holds a session");
     g_free(out);
     g_free(err);
-    camera_unlock(lk);
+    test_camera_unlock(lk);
 }
 
 TEST(capture_disk_full)
@@ -359,7 +330,7 @@ TEST(capture_disk_full)
         fprintf(stderr, "capture_disk_full: skipped (cannot mount a tmpfs: %s)\n", strerror(errno));
         return;
     }
-    int lk = camera_lock();
+    int lk = test_camera_lock();
     const char *rig = rig_file("rig.ini", NULL);
     const char *plan = test_write("plan.ini", SMALL_PLAN);
     char dir[4200];
@@ -385,7 +356,7 @@ TEST(capture_disk_full)
     g_free(out);
     g_free(err);
     umount2(mnt, MNT_DETACH);
-    camera_unlock(lk);
+    test_camera_unlock(lk);
 }
 
 static void drop_at_step2(void *ctx, rig_t *r, int step)
@@ -396,7 +367,7 @@ static void drop_at_step2(void *ctx, rig_t *r, int step)
 
 TEST(capture_camera_stops_answering)
 {
-    int lk = camera_lock();
+    int lk = test_camera_lock();
     const char *rig = rig_file("rig.ini", NULL);
     const char *plan = test_write("plan.ini", "[sample]\nname = coupon_matte_paint\nkind = material_coupon\n"
                                   "[angles]\nlist = 0 5\n[lamps]\nsets = east\n[exposure]\nmode = fixed\n"
@@ -418,12 +389,12 @@ TEST(capture_camera_stops_answering)
     rc = rig_capture_run(&o);
     CHECK(rc == 0);
     CHECK(count_frames(dir) == 4);
-    camera_unlock(lk);
+    test_camera_unlock(lk);
 }
 
 TEST(capture_turntable_stall)
 {
-    int lk = camera_lock();
+    int lk = test_camera_lock();
     char top[PATH_MAX];
     if (!realpath(test_srcdir(), top)) snprintf(top, sizeof top, "%s", test_srcdir());
     char src[PATH_MAX + 64];
@@ -462,12 +433,12 @@ TEST(capture_turntable_stall)
     CHECK(count_events(dir, "fault") == 1);
     int n = count_frames(dir);
     CHECK(n >= 1 && n < 4);
-    camera_unlock(lk);
+    test_camera_unlock(lk);
 }
 
 TEST(capture_auto_bracketing_skips)
 {
-    int lk = camera_lock();
+    int lk = test_camera_lock();
     const char *rig = rig_file("rig.ini", NULL);
     // matte coupon, east lamp: the brightest pixel near full scale (Mono12, 4095) at 64000 us, 16000 us stays below 90 %, so 4000 us is not needed
     const char *plan = test_write("plan.ini", "[sample]\nname = coupon_matte_paint\nkind = material_coupon\n"
@@ -489,5 +460,5 @@ TEST(capture_auto_bracketing_skips)
     CHECK_CONTAINS(out, ",east,64000,");   // brightest pixel above 90 % (the statuses above say so)
     g_free(out);
     g_free(err);
-    camera_unlock(lk);
+    test_camera_unlock(lk);
 }

@@ -25,21 +25,6 @@
 #define W 1280
 #define H 1024
 
-// Same session lock as tests/test_camera_aravis.c: test runs of several build
-// trees never overlap on 127.0.0.1:3956.
-static int session_begin(void)
-{
-    char path[512];
-    snprintf(path, sizeof path, "%s/%s", g_get_tmp_dir(), "refl-test-camera-aravis.lock");
-    int fd = open(path, O_RDONLY | O_CREAT | O_CLOEXEC, 0666);
-    if (fd < 0) return -1;
-    for (int i = 0; i < 6000; i++) {
-        if (flock(fd, LOCK_EX | LOCK_NB) == 0) return fd;
-        usleep(50000);
-    }
-    close(fd);
-    return -1;
-}
 
 static const char *truth_path(void)
 {
@@ -78,7 +63,7 @@ static int capture(rig_camera_t *c, rig_frame_t *f)
 
 TEST(virtual_rig_frame_matches_model)
 {
-    int session = session_begin();
+    int session = test_camera_lock();
     CHECK(session >= 0);
     rig_virtual_t *v = open_rig(NULL);
     rig_camera_t *c = NULL;
@@ -223,7 +208,7 @@ done:
     rig_virtual_close(v);
     free(E);
     free(E2);
-    if (session >= 0) close(session);
+    test_camera_unlock(session);
 }
 
 // A truth file with one thing changed: `from` replaced by `to` in the example.
@@ -322,7 +307,7 @@ TEST(virtual_truth_errors)
 // the untextured painted steel; amplitude 0 is no texture at all.
 TEST(virtual_texture)
 {
-    int session = session_begin();
+    int session = test_camera_lock();
     CHECK(session >= 0);
     float *E1 = malloc((size_t)W * H * sizeof(float)), *E0 = malloc((size_t)W * H * sizeof(float));
     rig_virtual_t *v = open_rig(NULL);
@@ -370,7 +355,7 @@ done:
     rig_virtual_close(v);
     free(E1);
     free(E0);
-    if (session >= 0) close(session);
+    test_camera_unlock(session);
 }
 
 // Fault injection from the truth file: the second move fails half way with a
@@ -378,7 +363,7 @@ done:
 // after a disconnect the camera still delivers frames of the last angle.
 TEST(virtual_turntable_faults)
 {
-    int session = session_begin();
+    int session = test_camera_lock();
     CHECK(session >= 0);
     rig_virtual_options_t o = rig_virtual_defaults();
     o.time_scale = 0.01;
@@ -440,7 +425,7 @@ TEST(virtual_turntable_faults)
 done:
     rig_camera_close(c);
     rig_virtual_close(v);
-    if (session >= 0) close(session);
+    test_camera_unlock(session);
 }
 
 // The sensor helpers the virtual rig uses: model_sensor_apply_patterns with
