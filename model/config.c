@@ -154,32 +154,15 @@ static bool parse_material(const model_ini_t *ini, int s, model_material_t *mat)
     return true;
 }
 
+static model_materials_t *materials_build(const model_ini_t *ini, bool only_kind);
+
 model_materials_t *model_materials_parse(const char *text, size_t len, const char *name)
 {
-    model_materials_t *out = NULL;
     model_ini_t *ini = model_ini_parse(text, len, name);
-    if (!ini) goto done;
-    if (ini->nsections == 0) {
-        model_error(ini->path, 0, "no [material NAME] sections; add at least one");
-        goto done;
-    }
-    out = calloc(1, sizeof *out);
-    if (!out) goto oom;
-    out->materials = calloc(ini->nsections, sizeof *out->materials);
-    out->path = strdup(ini->path);
-    if (!out->materials || !out->path) goto oom;
-    for (int s = 0; s < ini->nsections; s++) {
-        if (!parse_material(ini, s, &out->materials[s])) goto fail;
-        out->n++;
-    }
-    model_sha256_hex(text ? text : "", text ? len : 0, out->sha256);
-    goto done;
-oom:
-    model_error(name, 0, "out of memory");
-fail:
-    model_materials_free(out);
-    out = NULL;
-done:
+    if (!ini) return NULL;
+    // every section must be a [material NAME]: parse_material says so otherwise
+    model_materials_t *out = materials_build(ini, false);
+    if (out) model_sha256_hex(text ? text : "", text ? len : 0, out->sha256);
     model_ini_free(ini);
     return out;
 }
@@ -276,32 +259,15 @@ static bool parse_lamp(const model_ini_t *ini, int s, model_lamp_t *lamp)
     return true;
 }
 
+static model_lamps_t *lamps_build(const model_ini_t *ini, bool only_kind);
+
 model_lamps_t *model_lamps_parse(const char *text, size_t len, const char *name)
 {
-    model_lamps_t *out = NULL;
     model_ini_t *ini = model_ini_parse(text, len, name);
-    if (!ini) goto done;
-    if (ini->nsections == 0) {
-        model_error(ini->path, 0, "no [lamp NAME] sections; add at least one lamp");
-        goto done;
-    }
-    out = calloc(1, sizeof *out);
-    if (!out) goto oom;
-    out->lamps = calloc(ini->nsections, sizeof *out->lamps);
-    out->path = strdup(ini->path);
-    if (!out->lamps || !out->path) goto oom;
-    for (int s = 0; s < ini->nsections; s++) {
-        if (!parse_lamp(ini, s, &out->lamps[s])) goto fail;
-        out->n++;
-    }
-    model_sha256_hex(text ? text : "", text ? len : 0, out->sha256);
-    goto done;
-oom:
-    model_error(name, 0, "out of memory");
-fail:
-    model_lamps_free(out);
-    out = NULL;
-done:
+    if (!ini) return NULL;
+    // every section must be a [lamp NAME]: parse_lamp says so otherwise
+    model_lamps_t *out = lamps_build(ini, false);
+    if (out) model_sha256_hex(text ? text : "", text ? len : 0, out->sha256);
     model_ini_free(ini);
     return out;
 }
@@ -514,9 +480,11 @@ static bool is_kind(const model_ini_t *ini, int s, const char *kind)
     return !strcmp(k, kind);
 }
 
-model_materials_t *model_materials_from_ini(const model_ini_t *ini)
+// The [material NAME] sections of ini (only_kind: skip other sections; else
+// every section must be one).
+static model_materials_t *materials_build(const model_ini_t *ini, bool only_kind)
 {
-    int n = count_kind(ini, "material");
+    int n = only_kind ? count_kind(ini, "material") : ini->nsections;
     if (n == 0) {
         model_error(ini->path, 0, "no [material NAME] sections; add at least one");
         return NULL;
@@ -530,7 +498,7 @@ model_materials_t *model_materials_from_ini(const model_ini_t *ini)
         return NULL;
     }
     for (int s = 0; s < ini->nsections; s++) {
-        if (!is_kind(ini, s, "material")) continue;
+        if (only_kind && !is_kind(ini, s, "material")) continue;
         if (!parse_material(ini, s, &out->materials[out->n])) {
             model_materials_free(out);
             return NULL;
@@ -540,9 +508,11 @@ model_materials_t *model_materials_from_ini(const model_ini_t *ini)
     return out;
 }
 
-model_lamps_t *model_lamps_from_ini(const model_ini_t *ini)
+// The [lamp NAME] sections of ini (only_kind: skip other sections; else every
+// section must be one).
+static model_lamps_t *lamps_build(const model_ini_t *ini, bool only_kind)
 {
-    int n = count_kind(ini, "lamp");
+    int n = only_kind ? count_kind(ini, "lamp") : ini->nsections;
     if (n == 0) {
         model_error(ini->path, 0, "no [lamp NAME] sections; add at least one lamp");
         return NULL;
@@ -556,7 +526,7 @@ model_lamps_t *model_lamps_from_ini(const model_ini_t *ini)
         return NULL;
     }
     for (int s = 0; s < ini->nsections; s++) {
-        if (!is_kind(ini, s, "lamp")) continue;
+        if (only_kind && !is_kind(ini, s, "lamp")) continue;
         if (!parse_lamp(ini, s, &out->lamps[out->n])) {
             model_lamps_free(out);
             return NULL;
@@ -565,6 +535,9 @@ model_lamps_t *model_lamps_from_ini(const model_ini_t *ini)
     }
     return out;
 }
+
+model_materials_t *model_materials_from_ini(const model_ini_t *ini) { return materials_build(ini, true); }
+model_lamps_t *model_lamps_from_ini(const model_ini_t *ini) { return lamps_build(ini, true); }
 
 bool model_sensor_from_ini(const model_ini_t *ini, model_sensor_t *out)
 {
