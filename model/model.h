@@ -175,6 +175,9 @@ int            model_scene_material_index(const model_scene_t *scene, const char
 // A deep copy rotated by angle_deg about the world z axis (the turntable);
 // sphere centres rotate with the vertices.
 model_scene_t *model_scene_rotated_z(const model_scene_t *scene, double angle_deg);
+// A deep copy moved rigidly: x' = R x + t (R row-major 3x3, a rotation; t in
+// mm); face normals and plane offsets, sphere centres move with the vertices.
+model_scene_t *model_scene_transformed(const model_scene_t *scene, const double R[9], const double t[3]);
 
 // ---------------------------------------------------------------------------
 // Reflection models (model/brdf.c)

@@ -834,20 +834,22 @@ static void sincos_deg(double deg, double *s, double *c)
     *c = cos(r * M_PI / 180.0);
 }
 
-static model_vec3_t rot_z(model_vec3_t p, double s, double c)
+static model_vec3_t rigid_apply(const double R[9], const double t[3], model_vec3_t p)
 {
-    return v3(c * p.x - s * p.y, s * p.x + c * p.y, p.z);
+    return v3(R[0] * p.x + R[1] * p.y + R[2] * p.z + t[0],
+              R[3] * p.x + R[4] * p.y + R[5] * p.z + t[1],
+              R[6] * p.x + R[7] * p.y + R[8] * p.z + t[2]);
 }
 
-model_scene_t *model_scene_rotated_z(const model_scene_t *scene, double angle_deg)
+model_scene_t *model_scene_transformed(const model_scene_t *scene, const double R[9], const double t[3])
 {
     if (!scene) return NULL;
-    if (!isfinite(angle_deg)) {
-        model_error(scene->path, 0, "rotation angle %g deg is not finite", angle_deg);
-        return NULL;
-    }
-    double s, c;
-    sincos_deg(angle_deg, &s, &c);
+    for (int i = 0; i < 9; i++)
+        if (!isfinite(R[i]) || (i < 3 && !isfinite(t[i]))) {
+            model_error(scene->path, 0, "scene transform has a non-finite entry");
+            return NULL;
+        }
+    static const double zero[3] = { 0, 0, 0 };
     size_t nrefs = 0;
     for (int k = 0; k < scene->nfaces; k++) nrefs += (size_t)scene->faces[k].nverts;
     model_scene_t *r = calloc(1, sizeof *r);
@@ -865,7 +867,7 @@ model_scene_t *model_scene_rotated_z(const model_scene_t *scene, double angle_de
         goto oom;
     for (int k = 0; k < scene->nspheres; k++) {
         r->spheres[k] = scene->spheres[k];
-        r->spheres[k].centre_mm = rot_z(scene->spheres[k].centre_mm, s, c);
+        r->spheres[k].centre_mm = rigid_apply(R, t, scene->spheres[k].centre_mm);
     }
     r->nspheres = scene->nspheres > 0 ? scene->nspheres : 0;
     for (int i = 0; i < scene->nmaterials; i++) {
@@ -873,14 +875,16 @@ model_scene_t *model_scene_rotated_z(const model_scene_t *scene, double angle_de
         r->nmaterials = i + 1;
     }
     memcpy(r->sha256, scene->sha256, sizeof r->sha256);
-    for (int i = 0; i < scene->nvertices; i++) r->vertices[i] = rot_z(scene->vertices[i], s, c);
+    for (int i = 0; i < scene->nvertices; i++) r->vertices[i] = rigid_apply(R, t, scene->vertices[i]);
     size_t o = 0;
     for (int k = 0; k < scene->nfaces; k++) {
         model_face_t f = scene->faces[k];
         memcpy(r->vert_storage_ + o, f.verts, (size_t)f.nverts * sizeof(int));
         f.verts = r->vert_storage_ + o;
         o += (size_t)f.nverts;
-        f.normal = rot_z(f.normal, s, c);   // offset_mm is unchanged: n.x is rotation invariant
+        f.normal = rigid_apply(R, zero, f.normal);
+        // n'.(R x + t) = n.x + n'.t
+        f.offset_mm += f.normal.x * t[0] + f.normal.y * t[1] + f.normal.z * t[2];
         r->faces[k] = f;
     }
     return r;
@@ -888,4 +892,17 @@ oom:
     model_scene_free(r);
     model_error(scene->path, 0, "out of memory");
     return NULL;
+}
+
+model_scene_t *model_scene_rotated_z(const model_scene_t *scene, double angle_deg)
+{
+    if (!scene) return NULL;
+    if (!isfinite(angle_deg)) {
+        model_error(scene->path, 0, "rotation angle %g deg is not finite", angle_deg);
+        return NULL;
+    }
+    double s, c;
+    sincos_deg(angle_deg, &s, &c);
+    const double R[9] = { c, -s, 0, s, c, 0, 0, 0, 1 }, t[3] = { 0, 0, 0 };
+    return model_scene_transformed(scene, R, t);
 }

@@ -162,6 +162,9 @@ static int write_frame(writer_t *w, job_t *jb)
     model_meta_add(meta, "turntable_measured_deg", "%.6f", jb->measured_deg);
     model_meta_add(meta, "lamps_on", "%s", jb->step.lamps);
     model_meta_add(meta, "sample", "%s (%s)", w->plan->sample, w->plan->sample_kind);
+    if (w->plan->tilt_deg != 0)
+        model_meta_add(meta, "sample_tilt_deg", "%.10g about the hinge at azimuth %.10g deg", w->plan->tilt_deg,
+                       w->plan->tilt_azimuth_deg);
     model_meta_add(meta, "plan_sha256", "%s", w->plan->sha256);
     model_meta_add(meta, "rig_sha256", "%s", w->rig->sha256);
     int rc = 0;
@@ -345,6 +348,10 @@ static char *session_facts(rig_t *r, const rig_plan_t *p, const char *cmdline)
         json_object_set_new(v, "truth", json_string(rig_virtual_truth_path(r->virt)));
         json_object_set_new(v, "truth_sha256", json_string(sha));
         json_object_set_new(v, "sample", json_string(rig_virtual_sample(r->virt)));
+        double tilt = 0, az = 0;
+        rig_virtual_sample_pose(r->virt, &tilt, &az, NULL, NULL);
+        json_object_set_new(v, "sample_tilt_deg", json_real(tilt));
+        json_object_set_new(v, "sample_tilt_azimuth_deg", json_real(az));
         json_object_set_new(o, "virtual_rig", v);
     }
     char *s = json_dumps(o, JSON_INDENT(1) | JSON_SORT_KEYS);

@@ -209,6 +209,21 @@ int rig_journal_source(rig_journal_t *j, const char *which, char **path, char **
     return rc;
 }
 
+int rig_journal_facts(rig_journal_t *j, char **json)
+{
+    sqlite3_stmt *s = NULL;
+    int rc = 0;
+    pthread_mutex_lock(&j->lock);
+    if (sqlite3_prepare_v2(j->db, "SELECT facts_json FROM session", -1, &s, NULL) != SQLITE_OK ||
+        sqlite3_step(s) != SQLITE_ROW)
+        rc = jfail(j, "cannot read the session");
+    else
+        *json = col_text(s, 0);
+    sqlite3_finalize(s);
+    pthread_mutex_unlock(&j->lock);
+    return rc;
+}
+
 int rig_journal_nsteps(rig_journal_t *j)
 {
     sqlite3_stmt *s = NULL;

@@ -18,12 +18,12 @@
 
 static const char *const sections[] = { "plan", "sample", "angles", "lamps", "exposure", "capture" };
 static const char *const keys[] = {
-    "plan: name operator notes", "sample: name kind", "angles: list range", "lamps: sets",
+    "plan: name operator notes", "sample: name kind tilt_deg tilt_azimuth_deg", "angles: list range", "lamps: sets",
     "exposure: mode list_us target_fraction roi gain pixel_format",
     "capture: repeats dark_every settle_ms lamp_settle_ms frame_timeout_s retries",
 };
 static const char *const kinds[] = { "material_coupon", "reference_white", "chessboard", "mirror_sphere",
-                                     "workpiece" };
+                                     "workpiece", "uniform_source" };
 
 static const model_ini_entry_t *get(const model_ini_t *ini, const char *sec, const char *key)
 {
@@ -341,9 +341,12 @@ rig_plan_t *rig_plan_parse(const char *text, size_t len, const char *name)
     if (!kind_ok) {
         const model_ini_entry_t *e = get(ini, "sample", "kind");
         model_error(ini->path, e ? e->line : sec_line(ini, "sample"), "[sample] kind = %s: write material_coupon, "
-                    "reference_white, chessboard, mirror_sphere or workpiece", e ? e->value : "(missing)");
+                    "reference_white, chessboard, mirror_sphere, workpiece or uniform_source", e ? e->value : "(missing)");
         goto done;
     }
+    if (!get_number(ini, "sample", "tilt_deg", &p->tilt_deg, -80, 80, false) ||
+        !get_number(ini, "sample", "tilt_azimuth_deg", &p->tilt_azimuth_deg, -360, 360, false))
+        goto done;
     if (!parse_angles(p, ini) || !parse_lamp_sets(p, ini) || !parse_exposure(p, ini)) goto done;
     double v = 1;
     if (!get_number(ini, "capture", "repeats", &v, 1, 10000, true)) goto done;
@@ -446,13 +449,13 @@ int rig_plan_bind(rig_plan_t *p, rig_t *r)
         rc = RIG_ERR_NO_DEVICE;
         goto done;
     }
-    if (r->virt && strcmp(rig_virtual_sample(r->virt), p->sample)) {
+    if (r->virt) {
         bool q = model_error_quiet_thread(true);
-        int e = rig_virtual_set_sample(r->virt, p->sample);
+        int e = rig_virtual_set_sample_pose(r->virt, p->sample, p->tilt_deg, p->tilt_azimuth_deg);
         model_error_quiet_thread(q);
         if (e) {
-            model_error(p->path, 0, "[sample] name = %s: the virtual rig's truth file %s has no such sample",
-                        p->sample, rig_virtual_truth_path(r->virt));
+            model_error(p->path, 0, "[sample] name = %s, tilt %g deg: the virtual rig (truth file %s) refuses it: %s",
+                        p->sample, p->tilt_deg, rig_virtual_truth_path(r->virt), rig_last_error());
             rc = RIG_ERR_INVALID;
             goto done;
         }

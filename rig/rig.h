@@ -311,6 +311,15 @@ const char      *rig_virtual_camera_address(const rig_virtual_t *v);
 struct rig_gv_camera *rig_virtual_gv_camera(rig_virtual_t *v);
 // Put another sample on the table (a [sample NAME] of the truth file).
 int  rig_virtual_set_sample(rig_virtual_t *v, const char *name);
+// The same sample on a wedge: rotated by tilt_deg (|tilt| <= 80) about the
+// horizontal hinge axis (cos az, sin az, 0) through the rig origin
+// (right-handed), then lifted along z so its lowest point stays at its height;
+// the turntable angle applies after this pose. Tilt 0 = rig_virtual_set_sample.
+// At most 32 distinct poses per open rig. A uniform_source cannot be tilted.
+int  rig_virtual_set_sample_pose(rig_virtual_t *v, const char *name, double tilt_deg, double tilt_azimuth_deg);
+// The current sample's pose (truth): x_table = R x_sample_file + t (R
+// row-major; identity and 0 at tilt 0). Any pointer may be NULL.
+int  rig_virtual_sample_pose(rig_virtual_t *v, double *tilt_deg, double *tilt_azimuth_deg, double R[9], double t[3]);
 const char *rig_virtual_sample(const rig_virtual_t *v);
 const char *rig_virtual_truth_path(const rig_virtual_t *v);
 // The noise-free expected frame (DN of the camera's pixel format, before the
@@ -389,7 +398,10 @@ int rig_cmd(int argc, char **argv);
 //   [plan]     name = TEXT; operator = TEXT; notes = TEXT (all optional)
 //   [sample]   name = NAME (on a virtual rig: a [sample NAME] of its truth file, put on the
 //              table); kind = material_coupon | reference_white | chessboard | mirror_sphere |
-//              workpiece
+//              workpiece | uniform_source; tilt_deg = the wedge the sample stands on (-80..80,
+//              default 0), tilt_azimuth_deg = the azimuth of the wedge's hinge axis (default
+//              0): a virtual rig poses the sample so (rig_virtual_set_sample_pose); on a real
+//              rig the operator sets it up, the journal records it
 //   [angles]   list = DEG DEG ... | range = START STOP STEP (STOP included when reached)
 //   [lamps]    sets = SET; SET; ...   a SET is NAME+NAME..., "all" or "none"
 //   [exposure] mode = fixed: list_us = US US ...
@@ -435,6 +447,7 @@ typedef struct {
     char     sha256[65];
     char     name[128], operator_name[128], notes[512];
     char     sample[64], sample_kind[32];
+    double   tilt_deg, tilt_azimuth_deg;   // the sample's wedge (see rig_virtual_set_sample_pose)
     int      nangles;
     double  *angles_deg;
     int      nlamp_sets;
@@ -501,6 +514,8 @@ void rig_journal_close(rig_journal_t *j);
 // Stored plan/rig: path, text, sha256 (caller frees with free()).
 int  rig_journal_source(rig_journal_t *j, const char *which, char **path, char **text, char **sha256);
 int  rig_journal_nsteps(rig_journal_t *j);
+// The session facts (JSON object text, as given at create). Caller frees.
+int  rig_journal_facts(rig_journal_t *j, char **json);
 // Steps (as stored) and their status: 'p'ending, 'd'one, 's'kipped. Caller frees both.
 int  rig_journal_steps(rig_journal_t *j, rig_step_t **steps, char **status, int *n);
 int  rig_journal_frames(rig_journal_t *j, rig_frame_row_t **rows, int *n);

@@ -22,6 +22,14 @@
 //                reference_white / material_coupon: material; mirror_sphere:
 //                sphere_centre_mm (x y z at angle 0) and sphere_radius_mm, the
 //                facts of the scene's '@sphere' (checked against it)
+//                | kind = uniform_source, radiance (no scene): a flat-field source
+//                filling the view (an integrating sphere's port in front of the
+//                lens) fed by the rig's lamps: each lamp that is on adds
+//                `radiance` at every pixel (EMVA 1288 sweeps, flat fields)
+//   Sample poses (rig_virtual_set_sample_pose): a sample on a wedge, rotated by
+//   tilt_deg about the horizontal hinge axis (cos az, sin az, 0) through the
+//   rig origin, then lifted along z so its lowest point stays at its height;
+//   the turntable angle applies after the pose.
 //
 // The camera is served over GigE Vision on a loopback address, or in-process
 // (options.serve: an Aravis fake device in this process, rig/gv_camera.h);
@@ -114,7 +122,18 @@ typedef struct {
     const model_material_t **mats;    // scene->nmaterials
     const texture_t **tex;            // scene->nmaterials, NULL = untextured
     bool   textured;
+    // uniform_source: no scene; every lamp that is on adds `radiance` at every pixel
+    bool   uniform;
+    double radiance;
+    // A posed copy of sample `base` (rig_virtual_set_sample_pose): its scene is
+    // the base scene moved by x' = R x + t; mats and tex are the base's (not owned).
+    bool   variant;
+    int    base;
+    double tilt_deg, tilt_azimuth_deg;
+    double R[9], t[3];
 } sample_t;
+
+#define MAX_POSES 32   // posed copies of samples one rig can hold
 
 typedef struct {
     float   *L;        // W*H radiance (kc 1, Pa 0); NULL = empty slot
@@ -174,7 +193,7 @@ struct rig_virtual {
     texture_t         *textures;
     int                ntextures;
     sample_t *samples;
-    int       nsamples;
+    int       nsamples, nbase_samples;   // base samples of the truth file, then posed copies
 
     // state_lock guards: cur_sample, the inner turntable, next_seed.
     pthread_mutex_t state_lock;
@@ -582,14 +601,17 @@ static const float *plane_for(rig_virtual_t *v, int sample, double angle_deg, in
         }
         if (!p->L || (lru->L && p->used < lru->used)) lru = p;
     }
-    tracer_slot_t *slot = tracer_for(v, sample, angle_deg);
-    if (!slot) return NULL;
+    const sample_t *sm = &v->samples[sample];
+    tracer_slot_t *slot = sm->uniform ? NULL : tracer_for(v, sample, angle_deg);
+    if (!slot && !sm->uniform) return NULL;
     if (!lru->L) lru->L = malloc((size_t)v->W * v->H * sizeof(float));
     if (!lru->L) {
         model_error(v->truth_path, 0, "out of memory for a %dx%d rendering", v->W, v->H);
         return NULL;
     }
-    if (!render_lamp(v, slot, sample, lamp, lru->L)) {
+    if (sm->uniform) {
+        for (size_t i = 0; i < (size_t)v->W * v->H; i++) lru->L[i] = (float)sm->radiance;
+    } else if (!render_lamp(v, slot, sample, lamp, lru->L)) {
         free(lru->L);
         lru->L = NULL;
         return NULL;
@@ -878,7 +900,7 @@ static const allowed_t allowed[] = {
     { "turntable", { "speed_deg_s", "accel_deg_s2", "home_time_s", "position_noise_deg", "seed",
                      "fault_after_moves", "fault" } },
     { "sample", { "kind", "scene", "square_mm", "corners", "corner0_mm", "material", "sphere_centre_mm",
-                  "sphere_radius_mm" } },
+                  "sphere_radius_mm", "radiance" } },
     { "texture", { "amplitude", "scale_mm", "seed" } },
     { "sensor", { NULL } },     // checked by model_sensor_from_ini
     { "lamp", { NULL } },       // model_lamps_from_ini
@@ -1041,7 +1063,7 @@ static bool parse_textures(rig_virtual_t *v, const model_ini_t *ini)
 }
 
 static const char *sample_kinds[] = { "workpiece", "chessboard", "reference_white", "material_coupon",
-                                      "mirror_sphere" };
+                                      "mirror_sphere", "uniform_source" };
 
 // A mirror sphere's facts (sphere_centre_mm, sphere_radius_mm): required for
 // that kind, refused for the others, and one of the scene's spheres must have
@@ -1090,7 +1112,7 @@ static bool parse_samples(rig_virtual_t *v, const model_ini_t *ini)
         model_error(ini->path, 0, "no [sample NAME] sections; add at least one (the workpiece on the table)");
         return false;
     }
-    v->samples = calloc(n, sizeof *v->samples);
+    v->samples = calloc((size_t)n + MAX_POSES, sizeof *v->samples);
     if (!v->samples) return false;
     for (int s = 0; s < ini->nsections; s++) {
         const char *sec = ini->sections[s];
@@ -1103,6 +1125,36 @@ static bool parse_samples(rig_virtual_t *v, const model_ini_t *ini)
         }
         strcpy(sm->name, sec + 7);
         const char *kind = get_str(ini, sec, "kind", NULL), *scene = get_str(ini, sec, "scene", NULL);
+        sm->R[0] = sm->R[4] = sm->R[8] = 1;
+        if (kind && !strcmp(kind, "uniform_source")) {
+            // a flat-field source filling the view (an integrating sphere's port
+            // in front of the lens), fed by the rig's lamps: no scene
+            if (scene) {
+                model_error(ini->path, ini_line(ini, sec, "scene"), "sample '%s': a uniform_source has no scene; "
+                            "remove 'scene' (give 'radiance' only)", sm->name);
+                return false;
+            }
+            static const char *other[] = { "square_mm", "corners", "corner0_mm", "material", "sphere_centre_mm",
+                                           "sphere_radius_mm" };
+            for (size_t k = 0; k < sizeof other / sizeof other[0]; k++)
+                if (model_ini_get(ini, sec, other[k])) {
+                    model_error(ini->path, ini_line(ini, sec, other[k]), "sample '%s': %s is not a key of "
+                                "uniform_source samples (only kind and radiance)", sm->name, other[k]);
+                    return false;
+                }
+            snprintf(sm->kind, sizeof sm->kind, "%s", kind);
+            sm->uniform = true;
+            if (!get_double(ini, sec, "radiance", 0, 1e12, true, &sm->radiance)) return false;
+            sm->mats = calloc(1, sizeof *sm->mats);
+            sm->tex = calloc(1, sizeof *sm->tex);
+            if (!sm->mats || !sm->tex) return false;
+            continue;
+        }
+        if (model_ini_get(ini, sec, "radiance")) {
+            model_error(ini->path, ini_line(ini, sec, "radiance"), "sample '%s': radiance is a key of "
+                        "uniform_source samples only", sm->name);
+            return false;
+        }
         if (!kind || !scene) {
             model_error(ini->path, sm->line, "sample '%s' lacks '%s'; each sample needs kind and scene", sm->name,
                         kind ? "scene" : "kind");
@@ -1113,7 +1165,7 @@ static bool parse_samples(rig_virtual_t *v, const model_ini_t *ini)
             if (!strcmp(kind, sample_kinds[k])) known = true;
         if (!known) {
             model_error(ini->path, ini_line(ini, sec, "kind"), "sample '%s': kind = '%s' is unknown; use workpiece, "
-                        "chessboard, reference_white, material_coupon or mirror_sphere", sm->name, kind);
+                        "chessboard, reference_white, material_coupon, mirror_sphere or uniform_source", sm->name, kind);
             return false;
         }
         snprintf(sm->kind, sizeof sm->kind, "%s", kind);
@@ -1196,7 +1248,7 @@ static bool parse_samples(rig_virtual_t *v, const model_ini_t *ini)
 static int find_sample(const rig_virtual_t *v, const char *name)
 {
     for (int i = 0; i < v->nsamples; i++)
-        if (!strcmp(v->samples[i].name, name)) return i;
+        if (!v->samples[i].variant && !strcmp(v->samples[i].name, name)) return i;
     return -1;
 }
 
@@ -1205,7 +1257,7 @@ static void list_samples(const rig_virtual_t *v, char *buf, size_t size)
     size_t n = 0;
     buf[0] = 0;
     for (int i = 0; i < v->nsamples && n < size; i++)
-        n += snprintf(buf + n, size - n, "%s%s", i ? ", " : "", v->samples[i].name);
+        if (!v->samples[i].variant) n += snprintf(buf + n, size - n, "%s%s", i ? ", " : "", v->samples[i].name);
 }
 
 // Everything but the devices. false with a message naming file:line.
@@ -1344,6 +1396,7 @@ static bool parse_truth(rig_virtual_t *v, const model_ini_t *ini, const char **d
     *default_sample = get_str(ini, "virtual", "sample", NULL);
     // textures, samples
     if (!parse_textures(v, ini) || !parse_samples(v, ini)) return false;
+    v->nbase_samples = v->nsamples;
     if (*default_sample && find_sample(v, *default_sample) < 0) {
         char list[512];
         list_samples(v, list, sizeof list);
@@ -1560,6 +1613,7 @@ void rig_virtual_close(rig_virtual_t *v)
     for (int i = 0; i < v->nsamples; i++) {
         free(v->samples[i].scene_path);
         model_scene_free(v->samples[i].scene);
+        if (v->samples[i].variant) continue;
         free(v->samples[i].mats);
         free(v->samples[i].tex);
     }
@@ -1600,7 +1654,33 @@ const char *rig_virtual_sample(const rig_virtual_t *v)
     return s;
 }
 
-int rig_virtual_set_sample(rig_virtual_t *v, const char *name)
+// The wedge: R = rotation by tilt about h = (cos az, sin az, 0) (right-handed),
+// t = (0, 0, lift) with lift = min z of the scene - min z of the rotated scene.
+static void wedge_pose(const model_scene_t *sc, double tilt_deg, double az_deg, double R[9], double t[3])
+{
+    double a = tilt_deg * M_PI / 180, b = az_deg * M_PI / 180;
+    double hx = cos(b), hy = sin(b), c = cos(a), s_ = sin(a), C = 1 - c;
+    double M[9] = { c + hx * hx * C, hx * hy * C, hy * s_,
+                    hx * hy * C, c + hy * hy * C, -hx * s_,
+                    -hy * s_, hx * s_, c };
+    memcpy(R, M, sizeof M);
+    double zmin0 = INFINITY, zmin1 = INFINITY;
+    for (int i = 0; i < sc->nvertices; i++) {
+        model_vec3_t p = sc->vertices[i];
+        zmin0 = fmin(zmin0, p.z);
+        zmin1 = fmin(zmin1, R[6] * p.x + R[7] * p.y + R[8] * p.z);
+    }
+    for (int k = 0; k < sc->nspheres; k++) {
+        model_vec3_t p = sc->spheres[k].centre_mm;
+        double r = sc->spheres[k].radius_mm;
+        zmin0 = fmin(zmin0, p.z - r);
+        zmin1 = fmin(zmin1, R[6] * p.x + R[7] * p.y + R[8] * p.z - r);
+    }
+    t[0] = t[1] = 0;
+    t[2] = isfinite(zmin0) && isfinite(zmin1) ? zmin0 - zmin1 : 0;
+}
+
+int rig_virtual_set_sample_pose(rig_virtual_t *v, const char *name, double tilt_deg, double tilt_azimuth_deg)
 {
     if (!v || !name) return rig_fail(RIG_ERR_INVALID, "virtual rig: set sample: NULL argument");
     int i = find_sample(v, name);
@@ -1609,8 +1689,62 @@ int rig_virtual_set_sample(rig_virtual_t *v, const char *name)
         list_samples(v, list, sizeof list);
         return rig_fail(RIG_ERR_INVALID, "virtual rig: %s has no sample '%s'; samples: %s", v->truth_path, name, list);
     }
+    if (!isfinite(tilt_deg) || fabs(tilt_deg) > 80 || !isfinite(tilt_azimuth_deg))
+        return rig_fail(RIG_ERR_INVALID, "virtual rig: sample '%s': tilt %g deg at azimuth %g deg; the tilt must be "
+                        "within +-80 deg and both finite", name, tilt_deg, tilt_azimuth_deg);
+    if (tilt_deg != 0 && v->samples[i].uniform)
+        return rig_fail(RIG_ERR_INVALID, "virtual rig: sample '%s' is a uniform source and cannot be tilted", name);
+    if (tilt_deg != 0) {
+        int j = -1;
+        for (int k = 0; k < v->nsamples; k++)
+            if (v->samples[k].variant && v->samples[k].base == i && v->samples[k].tilt_deg == tilt_deg &&
+                v->samples[k].tilt_azimuth_deg == tilt_azimuth_deg)
+                j = k;
+        if (j < 0) {
+            if (v->nsamples >= v->nbase_samples + MAX_POSES)
+                return rig_fail(RIG_ERR_INVALID, "virtual rig: more than %d sample poses in one rig session; "
+                                "close and open the rig", MAX_POSES);
+            sample_t *b = &v->samples[i], sm = *b;
+            sm.variant = true;
+            sm.base = i;
+            sm.tilt_deg = tilt_deg;
+            sm.tilt_azimuth_deg = tilt_azimuth_deg;
+            sm.scene_path = strdup(b->scene_path);
+            wedge_pose(b->scene, tilt_deg, tilt_azimuth_deg, sm.R, sm.t);
+            sm.scene = model_scene_transformed(b->scene, sm.R, sm.t);
+            if (!sm.scene || !sm.scene_path) {
+                model_scene_free(sm.scene);
+                free(sm.scene_path);
+                return rig_fail(RIG_ERR_NO_MEM, "virtual rig: sample '%s': out of memory for its tilted scene", name);
+            }
+            pthread_mutex_lock(&v->cache_lock);
+            j = v->nsamples;
+            v->samples[j] = sm;
+            v->nsamples = j + 1;
+            pthread_mutex_unlock(&v->cache_lock);
+        }
+        i = j;
+    }
     pthread_mutex_lock(&v->state_lock);
     v->cur_sample = i;
+    pthread_mutex_unlock(&v->state_lock);
+    return 0;
+}
+
+int rig_virtual_set_sample(rig_virtual_t *v, const char *name)
+{
+    return rig_virtual_set_sample_pose(v, name, 0, 0);
+}
+
+int rig_virtual_sample_pose(rig_virtual_t *v, double *tilt_deg, double *tilt_azimuth_deg, double R[9], double t[3])
+{
+    if (!v) return rig_fail(RIG_ERR_INVALID, "virtual rig: sample pose: NULL rig");
+    pthread_mutex_lock(&v->state_lock);
+    const sample_t *sm = &v->samples[v->cur_sample];
+    if (tilt_deg) *tilt_deg = sm->tilt_deg;
+    if (tilt_azimuth_deg) *tilt_azimuth_deg = sm->tilt_azimuth_deg;
+    if (R) memcpy(R, sm->R, sizeof sm->R);
+    if (t) memcpy(t, sm->t, sizeof sm->t);
     pthread_mutex_unlock(&v->state_lock);
     return 0;
 }
