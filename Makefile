@@ -92,11 +92,17 @@ $(BIN)/refl-tests: LDLIBS_ALL += $(TEST_PKG_LIBS)
 # without sanitizers so it preloads into the asan build too) and a child
 # program that holds lamps on until a signal arrives.
 FAKE_GPIOD := $(BUILD)/tests/libfake_gpiod.so
+ENOSPC_SHIM := $(BUILD)/tests/libenospc.so
 LAMP_CHILD := $(BUILD)/tests/lamp_child
 
 $(FAKE_GPIOD): tests/fake_gpiod.c | $(BUILD)/config.mk
 	@mkdir -p $(@D)
 	$(CC) -std=gnu11 -O2 -g $(WARN) -fPIC -shared $(PKG_CFLAGS) -o $@ $<
+
+# A full disk for LD_PRELOAD (tests/test_capture.c), where no tmpfs can be mounted.
+$(ENOSPC_SHIM): tests/enospc_shim.c | $(BUILD)/config.mk
+	@mkdir -p $(@D)
+	$(CC) -std=gnu11 -O2 -g $(WARN) -fPIC -shared -o $@ $< -ldl
 
 $(LAMP_CHILD): $(call obj,tests/lamp_child.c) $(LIB)
 	@mkdir -p $(@D)
@@ -106,8 +112,9 @@ $(BIN)/refl-bench: $(call obj,$(BENCH_SRC)) $(LIB)
 	@mkdir -p $(@D)
 	$(CC) $(LDFLAGS_ALL) -o $@ $^ $(LDLIBS_ALL)
 
-check: $(BIN)/refl $(BIN)/refl-tests $(FAKE_GPIOD) $(LAMP_CHILD)
-	REFL=$(BIN)/refl REFL_FAKE_GPIOD=$(FAKE_GPIOD) REFL_LAMP_CHILD=$(LAMP_CHILD) $(BIN)/refl-tests
+check: $(BIN)/refl $(BIN)/refl-tests $(FAKE_GPIOD) $(LAMP_CHILD) $(ENOSPC_SHIM)
+	REFL=$(BIN)/refl REFL_FAKE_GPIOD=$(FAKE_GPIOD) REFL_LAMP_CHILD=$(LAMP_CHILD) REFL_ENOSPC_SHIM=$(ENOSPC_SHIM) \
+	  REFL_SCRIPTS_DIR=$(CURDIR)/scripts $(BIN)/refl-tests
 
 demo: $(BIN)/refl
 	scripts/demo $(BIN)/refl $(BUILD)/demo

@@ -3,7 +3,8 @@
 // each time equals an uninterrupted one (same step rows, every hash valid, no
 // duplicate or missing frame; pixel values differ: the virtual camera's noise
 // seed counts frames per process); --dry-run; resume refusing a changed plan;
-// export; a full disk (a 3 MB tmpfs; skipped where mount is not allowed); a
+// export; a full disk (a 3 MB tmpfs where mount is allowed, and everywhere an
+// ENOSPC injected by tests/enospc_shim.c); a
 // camera that stops answering (in-process, triggers dropped through the
 // before_step hook); a stalled turntable (truth file with fault keys).
 //
@@ -321,22 +322,25 @@ TEST(capture_dry_run_and_changed_plan)
     test_camera_unlock(lk);
 }
 
-TEST(capture_disk_full)
+// A capture into dir that runs out of space (env: NULL-terminated extra
+// environment, e.g. the ENOSPC shim's) stops cleanly: no temporary file left,
+// every frame written is journalled and valid, the fault is in the event log.
+static void disk_full_body(const char *dir, const char *const *env)
 {
-    char mnt[4096];
-    snprintf(mnt, sizeof mnt, "%s/mnt", test_tmpdir());
-    mkdir(mnt, 0777);
-    if (mount("tmpfs", mnt, "tmpfs", 0, "size=3m") != 0) {
-        fprintf(stderr, "capture_disk_full: skipped (cannot mount a tmpfs: %s)\n", strerror(errno));
-        return;
-    }
     int lk = test_camera_lock();
     const char *rig = rig_file("rig.ini", NULL);
     const char *plan = test_write("plan.ini", SMALL_PLAN);
-    char dir[4200];
-    snprintf(dir, sizeof dir, "%s/s", mnt);
+    const char *argv[32];
+    int k = 0;
+    if (env) {
+        argv[k++] = "env";
+        while (*env) argv[k++] = *env++;
+    }
+    const char *rest[] = { test_refl(), "capture", plan, "--rig", rig, "-o", dir, NULL };
+    for (int i = 0; rest[i]; i++) argv[k++] = rest[i];
+    argv[k] = NULL;
     char *out = NULL, *err = NULL;
-    int rc = refl(&out, &err, "capture", plan, "--rig", rig, "-o", dir, NULL);
+    int rc = test_run(argv, 120, &out, &err);
     CHECK(rc == 1);
     CHECK_CONTAINS(err, "disk full");
     CHECK_CONTAINS(err, "refl capture --resume");
@@ -355,8 +359,43 @@ TEST(capture_disk_full)
     CHECK_CONTAINS(out, "frames_bad: 0");
     g_free(out);
     g_free(err);
-    umount2(mnt, MNT_DETACH);
     test_camera_unlock(lk);
+}
+
+// A real full file system: a 3 MB tmpfs where the machine allows the mount.
+TEST(capture_disk_full)
+{
+    char mnt[4096];
+    snprintf(mnt, sizeof mnt, "%s/mnt", test_tmpdir());
+    mkdir(mnt, 0777);
+    if (mount("tmpfs", mnt, "tmpfs", 0, "size=3m") != 0) {
+        fprintf(stderr, "capture_disk_full: no tmpfs here (%s); capture_disk_full_injected covers the disk-full "
+                "path with an injected ENOSPC\n", strerror(errno));
+        return;
+    }
+    char dir[4200];
+    snprintf(dir, sizeof dir, "%s/s", mnt);
+    disk_full_body(dir, NULL);
+    umount2(mnt, MNT_DETACH);
+}
+
+// Everywhere: ENOSPC injected by the LD_PRELOAD shim (tests/enospc_shim.c)
+// once the session directory has taken 3 MB.
+TEST(capture_disk_full_injected)
+{
+    const char *lib = getenv("REFL_ENOSPC_SHIM");
+    if (!lib || access(lib, R_OK) != 0) {
+        test_fail(__FILE__, __LINE__, "REFL_ENOSPC_SHIM (%s) must name the ENOSPC shim (make check sets it)",
+                  lib ? lib : "unset");
+        return;
+    }
+    char dir[4200], pre[4200], edir[4300];
+    snprintf(dir, sizeof dir, "%s/s", test_tmpdir());
+    snprintf(pre, sizeof pre, "LD_PRELOAD=%s", lib);
+    snprintf(edir, sizeof edir, "REFL_ENOSPC_DIR=%s", test_tmpdir());
+    const char *env[] = { pre, edir, "REFL_ENOSPC_BYTES=3000000", "ASAN_OPTIONS=verify_asan_link_order=0:detect_leaks=0",
+                          NULL };
+    disk_full_body(dir, env);
 }
 
 static void drop_at_step2(void *ctx, rig_t *r, int step)
