@@ -17,7 +17,9 @@ CXX   ?= c++
 PKGS := glib-2.0 libpng libtiff-4 jansson libftdi1 libusb-1.0 libgpiod aravis-0.8 sqlite3 zlib
 # Only the tests link libumockdev (the simulated USB device of the APT tests).
 TEST_PKGS := umockdev-1.0
-LIBS_NOPC := -lembree3 -lmrcal
+# Ceres Solver ships a CMake config only: its headers need Eigen's include path.
+LIBS_NOPC := -lembree3 -lmrcal -lceres -lglog -lstdc++
+CERES_CFLAGS := -I/usr/include/eigen3
 
 ifeq ($(filter clean distclean,$(MAKECMDGOALS)),)
 include $(BUILD)/config.mk
@@ -37,6 +39,7 @@ WARN += -Werror
 endif
 OPT ?= -O2 -g
 CFLAGS_ALL   = -std=gnu11 $(OPT) $(WARN) -pthread -MMD -MP -I. $(PKG_CFLAGS) $(EXTRA_CFLAGS)
+CXXFLAGS_ALL = -std=c++17 $(OPT) $(WARN) -pthread -MMD -MP -I. $(CERES_CFLAGS) $(EXTRA_CFLAGS)
 LDFLAGS_ALL  = -pthread $(EXTRA_LDFLAGS)
 LDLIBS_ALL   = $(PKG_LIBS) $(LIBS_NOPC) -lm
 
@@ -49,6 +52,7 @@ RIG_SRC   := rig/rig.c rig/turntable_apt.c rig/turntable_sim.c rig/lamps.c \
              rig/plan.c rig/journal.c rig/capture.c rig/cmd_capture.c
 CALIB_SRC :=
 FIT_SRC   :=
+FIT_CXX_SRC := fit/lsq.cc
 LIB_SRC   := $(MODEL_SRC) $(RIG_SRC) $(CALIB_SRC) $(FIT_SRC)
 
 MAIN_SRC  := rig/main.c
@@ -58,12 +62,12 @@ TEST_SRC  := tests/harness.c tests/test_brdf.c tests/test_scene.c tests/test_con
              tests/test_turntable.c tests/apt_sim.c tests/test_lamps.c \
              tests/test_camera_aravis.c tests/test_virtual.c tests/test_rig_config.c \
              tests/test_rig_cli.c tests/test_sphere.c tests/test_virtual_inprocess.c \
-             tests/test_plan.c tests/test_capture.c
+             tests/test_plan.c tests/test_capture.c tests/test_lsq.c
 BENCH_SRC := tests/bench.c
 FUZZ_SRC  := tests/fuzz_parsers.c
 
 obj = $(patsubst %.c,$(BUILD)/%.o,$(1))
-LIB_OBJ   := $(call obj,$(LIB_SRC))
+LIB_OBJ   := $(call obj,$(LIB_SRC)) $(patsubst %.cc,$(BUILD)/%.o,$(FIT_CXX_SRC))
 LIB       := $(BUILD)/librefl.a
 
 .PHONY: all check demo bench asan fuzz clean
@@ -72,6 +76,10 @@ all: $(BIN)/refl
 $(BUILD)/%.o: %.c | $(BUILD)/config.mk
 	@mkdir -p $(@D)
 	$(CC) $(CFLAGS_ALL) -c $< -o $@
+
+$(BUILD)/%.o: %.cc | $(BUILD)/config.mk
+	@mkdir -p $(@D)
+	$(CXX) $(CXXFLAGS_ALL) -c $< -o $@
 
 $(LIB): $(LIB_OBJ)
 	@rm -f $@
