@@ -3,6 +3,7 @@
 #include <string.h>
 
 #include "model/model.h"
+#include "fit/fit.h"
 #include "rig/rig.h"
 
 typedef struct {
@@ -17,6 +18,7 @@ static const command_t commands[] = {
     { "rig",    rig_cmd,          "drive the rig of a rig file: status, home, move, identify, snap, serve" },
     { "capture", rig_cmd_capture, "run a capture plan on the rig into a session directory (journal + frames)" },
     { "session", rig_cmd_session, "check a session's frames against their hashes, export its frame table" },
+    { "fit",     fit_cmd,         "fit reflection models to BRDF samples and write priors" },
 };
 
 static void usage(FILE *f)

@@ -24,6 +24,7 @@
 #include <string.h>
 #include <time.h>
 
+#include "fit/fit.h"
 #include "model/internal.h"
 #include "rig/gv_camera.h"
 #include "rig/rig.h"
@@ -266,9 +267,12 @@ done:
 }
 
 static int bench_capture(void);
+static int bench_fit_ggx(void);
 
-int main(void)
+int main(int argc, char **argv)
 {
+    // `refl-bench fit`: only the GGX fit comparison
+    if (argc > 1 && !strcmp(argv[1], "fit")) return bench_fit_ggx() ? 1 : 0;
     char p_cam[1024], p_scene[1024], p_lamps[1024], p_mats[1024];
     src_path(p_cam, sizeof p_cam, "examples/camera.cameramodel");
     src_path(p_scene, sizeof p_scene, "examples/t_stiffener.d3d");
@@ -486,6 +490,7 @@ int main(void)
     if (bench_virtual_rig()) return 1;
     if (bench_virtual_rig_inprocess()) return 1;
     if (bench_capture()) return 1;
+    if (bench_fit_ggx()) return 1;
     rc = 0;
     free(prim);
     free(shad);
@@ -569,4 +574,78 @@ static int bench_capture(void)
 {
     if (capture_run("72x4x3", "capture_wall_vs_hardware_floor", "0 355 5", 0.1, 3)) return 1;
     return capture_run("4x4x3", "capture_4x4x3_wall_vs_hardware_floor", "0 15 5", 1, 30);
+}
+
+// The GGX fit of 1,000,000 BRDF samples (a noisy GGX material on random
+// directions): refl's fit (fit/brdf_fit.c on Ceres, both cores, one start)
+// and, in the same run on the same samples from the same start, SciPy's
+// least_squares (scripts/bench_scipy_ggx.py, analytic Jacobian).
+static int bench_fit_ggx(void)
+{
+    enum { N = 1000000 };
+    const double truth[4] = { 0.35, 0.6, 0.12, 0.05 }, start[4] = { 0.3, 0.5, 0.15, 0.5 };
+    fit_samples_t *s = fit_samples_new();
+    model_rng_t rng = model_rng(42, 9);
+    while (s->n < N) {
+        // cosine-distributed l and v over the hemisphere
+        double u1 = model_rng_uniform(&rng), u2 = model_rng_uniform(&rng);
+        double u3 = model_rng_uniform(&rng), u4 = model_rng_uniform(&rng);
+        double r1 = sqrt(u1), r2 = sqrt(u3);
+        model_vec3_t l = v3(r1 * cos(2 * M_PI * u2), r1 * sin(2 * M_PI * u2), sqrt(1 - u1));
+        model_vec3_t v = v3(r2 * cos(2 * M_PI * u4), r2 * sin(2 * M_PI * u4), sqrt(1 - u3));
+        model_cosines_t c = model_cosines(v3(0, 0, 1), l, v);
+        double R = model_brdf_eval(MODEL_BRDF_GGX, truth, &c, NULL);
+        fit_samples_add(s, &c, R + 0.002 * model_rng_gauss(&rng), 1);
+    }
+    char path[] = "/tmp/refl-bench-ggx-XXXXXX";
+    int fd = mkstemp(path);
+    FILE *f = fd >= 0 ? fdopen(fd, "wb") : NULL;
+    if (!f) {
+        fprintf(stderr, "refl-bench: cannot write the GGX samples\n");
+        fit_samples_free(s);
+        return 1;
+    }
+    for (int i = 0; i < s->n; i++) {
+        double row[5] = { s->c[i].nl, s->c[i].nv, s->c[i].nh, s->c[i].vh, s->R[i] };
+        fwrite(row, sizeof row, 1, f);
+    }
+    fclose(f);
+    // refl: one start at the same point (fit_brdf's multi-start off)
+    fit_brdf_options_t o = fit_brdf_defaults();
+    o.starts = 1;
+    double t0 = model_now_s();
+    double p[4];
+    memcpy(p, start, sizeof p);
+    fit_brdf_result_t res;
+    bool ok = fit_brdf_from(s, MODEL_BRDF_GGX, &o, p, &res);
+    double t_refl = model_now_s() - t0;
+    if (!ok) {
+        fprintf(stderr, "refl-bench: GGX fit failed: %s\n", model_last_error());
+        unlink(path);
+        fit_samples_free(s);
+        return 1;
+    }
+    char src[1024], cmd[2048];
+    src_path(src, sizeof src, "scripts/bench_scipy_ggx.py");
+    snprintf(cmd, sizeof cmd, "/usr/bin/python3 %s %s %g %g %g %g", src, path, start[0], start[1], start[2], start[3]);
+    FILE *py = popen(cmd, "r");
+    double t_py = NAN, q[4] = { NAN, NAN, NAN, NAN };
+    char line[512];
+    while (py && fgets(line, sizeof line, py)) {
+        sscanf(line, "scipy_time_s %lf", &t_py);
+        sscanf(line, "scipy_params %lf %lf %lf %lf", &q[0], &q[1], &q[2], &q[3]);
+    }
+    int st = py ? pclose(py) : -1;
+    unlink(path);
+    fit_samples_free(s);
+    printf("fit_ggx_1M_samples_refl: %.3f s\n", t_refl);
+    printf("fit_ggx_1M_alpha_refl: %.5f (truth %.5f)\n", res.p[2], truth[2]);
+    if (st != 0 || !isfinite(t_py)) {
+        fprintf(stderr, "refl-bench: the SciPy fit failed (exit %d): is python3-scipy installed?\n", st);
+        return 1;
+    }
+    printf("fit_ggx_1M_samples_scipy: %.3f s\n", t_py);
+    printf("fit_ggx_1M_alpha_scipy: %.5f (truth %.5f)\n", q[2], truth[2]);
+    printf("fit_ggx_scipy_vs_refl: %.2f ratio\n", t_py / t_refl);
+    return 0;
 }

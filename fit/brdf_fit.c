@@ -1,0 +1,603 @@
+// fit/brdf_fit.c — BRDF samples (CSV, MERL), fitting the reflection models
+// of model/brdf.c to them with fit/lsq.h, and the priors entries.
+#define _GNU_SOURCE
+#include <errno.h>
+#include <math.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "fit/fit.h"
+#include "model/internal.h"
+
+// ---------------------------------------------------------------------------
+// Samples
+
+fit_samples_t *fit_samples_new(void)
+{
+    return calloc(1, sizeof(fit_samples_t));
+}
+
+void fit_samples_free(fit_samples_t *s)
+{
+    if (!s) return;
+    free(s->c);
+    free(s->R);
+    free(s->w);
+    free(s);
+}
+
+bool fit_samples_add(fit_samples_t *s, const model_cosines_t *c, double R, double weight)
+{
+    if (!(c->nl > 0) || !(c->nv > 0) || !isfinite(R) || !isfinite(weight) || !(weight > 0)) return false;
+    if (s->n == s->cap) {
+        int cap = s->cap ? 2 * s->cap : 1024;
+        model_cosines_t *nc = realloc(s->c, (size_t)cap * sizeof *nc);
+        if (nc) s->c = nc;
+        double *nR = realloc(s->R, (size_t)cap * sizeof *nR);
+        if (nR) s->R = nR;
+        double *nw = realloc(s->w, (size_t)cap * sizeof *nw);
+        if (nw) s->w = nw;
+        if (!nc || !nR || !nw) return false;
+        s->cap = cap;
+    }
+    s->c[s->n] = *c;
+    s->R[s->n] = R;
+    s->w[s->n] = weight;
+    s->n++;
+    return true;
+}
+
+static model_vec3_t dir_of(double theta, double phi)
+{
+    return v3(sin(theta) * cos(phi), sin(theta) * sin(phi), cos(theta));
+}
+
+bool fit_samples_add_angles(fit_samples_t *s, double theta_i, double phi_i, double theta_o, double phi_o, double f_r,
+                            double weight)
+{
+    model_cosines_t c = model_cosines(v3(0, 0, 1), dir_of(theta_i, phi_i), dir_of(theta_o, phi_o));
+    return fit_samples_add(s, &c, f_r * c.nl, weight);
+}
+
+// Split a CSV line into up to 8 numbers; -1 when a field is not a number.
+static int csv_numbers(char *line, double *v, int max, char **bad)
+{
+    int n = 0;
+    char *p = line;
+    for (;;) {
+        while (*p == ' ' || *p == '\t') p++;
+        char *e;
+        errno = 0;
+        double x = strtod(p, &e);
+        if (e == p) {
+            *bad = p;
+            return -1;
+        }
+        if (n < max) v[n] = x;
+        n++;
+        p = e;
+        while (*p == ' ' || *p == '\t' || *p == '\r') p++;
+        if (*p == ',') {
+            p++;
+            continue;
+        }
+        if (*p == 0 || *p == '\n') return n;
+        *bad = p;
+        return -1;
+    }
+}
+
+fit_samples_t *fit_samples_read_csv(const char *path)
+{
+    size_t len = 0;
+    char *text = model_read_file(path, &len);
+    if (!text) return NULL;
+    fit_samples_t *s = fit_samples_new();
+    if (!s) {
+        free(text);
+        model_error(path, 0, "out of memory");
+        return NULL;
+    }
+    snprintf(s->source, sizeof s->source, "%s", path);
+    model_sha256_hex(text, len, s->sha256);
+    int lineno = 0, data_lines = 0, skipped = 0;
+    bool ok = true;
+    for (char *line = text, *next; line && *line && ok; line = next) {
+        lineno++;
+        next = strchr(line, '\n');
+        if (next) *next++ = 0;
+        char *p = line;
+        while (*p == ' ' || *p == '\t') p++;
+        if (*p == 0 || *p == '\r' || *p == '#') continue;
+        double v[8];
+        char *bad = NULL;
+        int n = csv_numbers(p, v, 8, &bad);
+        if (n < 0) {
+            if (data_lines == 0 && s->n == 0 && !skipped) {   // the header line
+                data_lines++;
+                continue;
+            }
+            model_error(path, lineno, "not a number at '%.20s': each line is theta_i,phi_i,theta_o,phi_o,f_r[,weight] "
+                        "(degrees, 1/sr)", bad);
+            ok = false;
+            break;
+        }
+        data_lines++;
+        if (n != 5 && n != 6) {
+            model_error(path, lineno, "%d fields; each line is theta_i,phi_i,theta_o,phi_o,f_r[,weight]", n);
+            ok = false;
+            break;
+        }
+        for (int k = 0; k < n; k++)
+            if (!isfinite(v[k])) {
+                model_error(path, lineno, "field %d is not finite", k + 1);
+                ok = false;
+            }
+        if (!ok) break;
+        if (v[0] < 0 || v[0] > 90 || v[2] < 0 || v[2] > 90) {
+            model_error(path, lineno, "theta_i = %g, theta_o = %g: zenith angles are 0..90 degrees", v[0], v[2]);
+            ok = false;
+            break;
+        }
+        if (v[4] < 0) {
+            model_error(path, lineno, "f_r = %g is negative", v[4]);
+            ok = false;
+            break;
+        }
+        double w = n == 6 ? v[5] : 1;
+        if (!(w > 0)) {
+            model_error(path, lineno, "weight = %g: weights are > 0", w);
+            ok = false;
+            break;
+        }
+        const double d = M_PI / 180;
+        if (!fit_samples_add_angles(s, v[0] * d, v[1] * d, v[2] * d, v[3] * d, v[4], w)) {
+            if (v[0] < 90 && v[2] < 90) {
+                model_error(path, lineno, "out of memory");
+                ok = false;
+                break;
+            }
+            skipped++;   // grazing: no reflection to fit
+        }
+    }
+    free(text);
+    if (ok && s->n == 0) {
+        model_error(path, 0, "no samples (every line is a comment, the header or at 90 degrees)");
+        ok = false;
+    }
+    if (!ok) {
+        fit_samples_free(s);
+        return NULL;
+    }
+    return s;
+}
+
+enum { MERL_TH = 90, MERL_TD = 90, MERL_PD = 180 };
+
+static bool merl_header(const unsigned char *b, size_t len)
+{
+    if (len < 12) return false;
+    int32_t d[3];
+    memcpy(d, b, 12);
+    return d[0] == MERL_TH && d[1] == MERL_TD && d[2] == MERL_PD &&
+           len == 12 + 3 * (size_t)MERL_TH * MERL_TD * MERL_PD * sizeof(double);
+}
+
+fit_samples_t *fit_samples_read_merl(const char *path)
+{
+    size_t len = 0;
+    unsigned char *b = (unsigned char *)model_read_file(path, &len);
+    if (!b) return NULL;
+    if (!merl_header(b, len)) {
+        int32_t d[3] = { 0, 0, 0 };
+        if (len >= 12) memcpy(d, b, 12);
+        model_error(path, 0, "not a MERL BRDF file: dims %d %d %d and %zu bytes (expected 90 90 180 and %zu bytes)",
+                    d[0], d[1], d[2], len, 12 + 3 * (size_t)MERL_TH * MERL_TD * MERL_PD * sizeof(double));
+        free(b);
+        return NULL;
+    }
+    fit_samples_t *s = fit_samples_new();
+    if (!s) {
+        free(b);
+        model_error(path, 0, "out of memory");
+        return NULL;
+    }
+    snprintf(s->source, sizeof s->source, "%s", path);
+    model_sha256_hex(b, len, s->sha256);
+    const size_t N = (size_t)MERL_TH * MERL_TD * MERL_PD;
+    const double *v = (const double *)(b + 12);
+    const double scale[3] = { 1.0 / 1500, 1.15 / 1500, 1.66 / 1500 }, Y[3] = { 0.2126, 0.7152, 0.0722 };
+    bool ok = true;
+    for (int i = 0; i < MERL_TH && ok; i++) {
+        double th = (i + 0.5) / MERL_TH;
+        th = th * th * (M_PI / 2);
+        for (int j = 0; j < MERL_TD && ok; j++) {
+            double td = (j + 0.5) / MERL_TD * (M_PI / 2);
+            for (int k = 0; k < MERL_PD; k++) {
+                double pd = (k + 0.5) / MERL_PD * M_PI;
+                size_t idx = ((size_t)i * MERL_TD + j) * MERL_PD + k;
+                double rgb[3], f = 0;
+                bool missing = false;
+                for (int ch = 0; ch < 3; ch++) {
+                    memcpy(&rgb[ch], v + ch * N + idx, sizeof(double));
+                    if (!(rgb[ch] >= 0)) missing = true;
+                    f += Y[ch] * rgb[ch] * scale[ch];
+                }
+                if (missing) continue;
+                // l: the difference vector rotated by theta_h about the binormal;
+                // v: its mirror about h. Only the cosines matter.
+                double dx = sin(td) * cos(pd), dz = cos(td);
+                model_cosines_t c;
+                c.nl = -dx * sin(th) + dz * cos(th);
+                c.nv = 2 * cos(td) * cos(th) - c.nl;
+                c.nh = cos(th);
+                c.vh = cos(td);
+                if (!(c.nl > 0 && c.nv > 0)) continue;
+                if (!fit_samples_add(s, &c, f * c.nl, 1)) {
+                    model_error(path, 0, "out of memory");
+                    ok = false;
+                    break;
+                }
+            }
+        }
+    }
+    free(b);
+    if (!ok) {
+        fit_samples_free(s);
+        return NULL;
+    }
+    return s;
+}
+
+fit_samples_t *fit_samples_read(const char *path)
+{
+    FILE *f = fopen(path, "rb");
+    if (!f) {
+        model_error(path, 0, "cannot open: %s", strerror(errno));
+        return NULL;
+    }
+    unsigned char h[12];
+    size_t got = fread(h, 1, sizeof h, f);
+    long size = fseek(f, 0, SEEK_END) == 0 ? ftell(f) : -1;
+    fclose(f);
+    if (got == 12 && size > 0 && merl_header(h, (size_t)size)) return fit_samples_read_merl(path);
+    return fit_samples_read_csv(path);
+}
+
+// ---------------------------------------------------------------------------
+// Units and conventions
+
+const char *fit_param_unit(model_brdf_t m, int i)
+{
+    const char *p = model_brdf_param_name(m, i);
+    if (!p) return "";
+    bool phys = model_brdf_is_physical(m);
+    if (!strcmp(p, "kd")) return phys ? "1 (albedo)" : "1/sr (albedo/pi)";
+    if (!strcmp(p, "ks")) return phys ? "1" : "1/sr";
+    return "1";
+}
+
+const char *fit_param_convention(model_brdf_t m, int i)
+{
+    const char *p = model_brdf_param_name(m, i);
+    if (!p) return "";
+    bool phys = model_brdf_is_physical(m);
+    if (!strcmp(p, "kd"))
+        return phys ? "diffuse albedo (the model divides by pi)" : "thesis coefficient kd = albedo/pi";
+    if (!strcmp(p, "ks")) return "weight of the specular lobe";
+    if (!strcmp(p, "ns")) return "Blinn cosine exponent of (n.h)";
+    if (!strcmp(p, "F0")) return "Schlick Fresnel reflectance at normal incidence";
+    if (!strcmp(p, "m")) return "Beckmann rms microfacet slope";
+    if (!strcmp(p, "alpha")) return "GGX alpha (not perceptual roughness; alpha = r^2)";
+    return "";
+}
+
+// ---------------------------------------------------------------------------
+// Fitting
+
+enum { BLOCK = 2048 };
+
+typedef struct {
+    const fit_samples_t *s;
+    int                  off, cnt;
+    model_brdf_t         m;
+    int                  np;
+} block_t;
+
+static bool block_res(void *ctx, const double *const *p, double *r, double **J)
+{
+    const block_t *b = ctx;
+    double d[MODEL_BRDF_MAX_PARAMS];
+    for (int k = 0; k < b->cnt; k++) {
+        int i = b->off + k;
+        double sw = sqrt(b->s->w[i]);
+        double R = model_brdf_eval(b->m, p[0], &b->s->c[i], J && J[0] ? d : NULL);
+        if (!isfinite(R)) return false;
+        r[k] = sw * (R - b->s->R[i]);
+        if (J && J[0])
+            for (int j = 0; j < b->np; j++) J[0][k * b->np + j] = sw * d[j];
+    }
+    return true;
+}
+
+fit_brdf_options_t fit_brdf_defaults(void)
+{
+    return (fit_brdf_options_t){ .threads = 0, .starts = 3, .noise_sigma = 0, .verbose = false };
+}
+
+static int cmp_double(const void *a, const void *b)
+{
+    double x = *(const double *)a, y = *(const double *)b;
+    return (x > y) - (x < y);
+}
+
+// The diffuse level: the median of R / n.l away from the mirror direction.
+static double diffuse_level(const fit_samples_t *s)
+{
+    double *v = malloc((size_t)s->n * sizeof *v);
+    if (!v) return 0.1;
+    int k = 0;
+    for (int i = 0; i < s->n; i++)
+        if (s->c[i].nh < 0.9) v[k++] = s->R[i] / s->c[i].nl;
+    if (k < 10) {
+        k = 0;
+        for (int i = 0; i < s->n; i++) v[k++] = s->R[i] / s->c[i].nl;
+    }
+    qsort(v, (size_t)k, sizeof *v, cmp_double);
+    double med = k ? v[k / 2] : 0.1;
+    free(v);
+    return med;
+}
+
+static double clampd(double x, double lo, double hi) { return x < lo ? lo : x > hi ? hi : x; }
+
+// Starting point number `start` for model m.
+static void start_point(const fit_samples_t *s, model_brdf_t m, int start, double kd_thesis, double *p)
+{
+    static const double ns0[] = { 20, 200, 2000, 5 }, rough0[] = { 0.05, 0.15, 0.4, 0.8 };
+    int np = model_brdf_nparams(m);
+    double peak = 0;
+    for (int i = 0; i < s->n; i++) peak = fmax(peak, s->R[i] - kd_thesis * s->c[i].nl);
+    for (int j = 0; j < np; j++) {
+        const char *n = model_brdf_param_name(m, j);
+        double lo, hi, v = 0.5;
+        model_brdf_param_range(m, j, &lo, &hi);
+        if (!strcmp(n, "kd")) v = model_brdf_is_physical(m) ? kd_thesis * M_PI : kd_thesis;
+        else if (!strcmp(n, "ns")) v = ns0[start % 4];
+        else if (!strcmp(n, "m") || !strcmp(n, "alpha")) v = rough0[start % 4];
+        else if (!strcmp(n, "F0")) v = 0.5;
+        else if (!strcmp(n, "ks")) v = model_brdf_is_physical(m) ? 0.5 : fmax(peak, 1e-3);
+        double span = isfinite(hi) ? hi - lo : 1;
+        p[j] = clampd(v, lo + 1e-6 * span, isfinite(hi) ? hi - 1e-6 * span : v);
+    }
+}
+
+static bool solve_once(const fit_samples_t *s, model_brdf_t m, const fit_brdf_options_t *o, double *p,
+                       const bool *fixed, fit_summary_t *sum, fit_problem_t **keep, block_t **keep_blocks)
+{
+    int np = model_brdf_nparams(m);
+    int nb = (s->n + BLOCK - 1) / BLOCK;
+    block_t *blocks = calloc((size_t)nb, sizeof *blocks);
+    fit_problem_t *pr = fit_problem_new();
+    bool ok = blocks && pr && fit_add_parameters(pr, p, np);
+    for (int j = 0; ok && j < np; j++) {
+        double lo, hi;
+        model_brdf_param_range(m, j, &lo, &hi);
+        ok = fit_set_bounds(pr, p, j, lo, hi);
+    }
+    if (ok && fixed) {
+        bool any = false;
+        for (int j = 0; j < np; j++) any |= fixed[j];
+        if (any) ok = fit_set_fixed(pr, p, fixed);
+    }
+    double *bl[] = { p };
+    for (int b = 0; ok && b < nb; b++) {
+        blocks[b] = (block_t){ s, b * BLOCK, s->n - b * BLOCK < BLOCK ? s->n - b * BLOCK : BLOCK, m, np };
+        ok = fit_add_residual(pr, block_res, &blocks[b], blocks[b].cnt, 1, bl, FIT_LOSS_NONE, 0);
+    }
+    fit_options_t fo = fit_defaults();
+    fo.threads = o->threads;
+    fo.verbose = o->verbose;
+    if (ok) ok = fit_solve(pr, &fo, sum);
+    if (ok && keep) {
+        *keep = pr;
+        *keep_blocks = blocks;
+        return true;
+    }
+    fit_problem_free(pr);
+    free(blocks);
+    return ok;
+}
+
+bool fit_brdf(const fit_samples_t *s, model_brdf_t m, const fit_brdf_options_t *opt, fit_brdf_result_t *out)
+{
+    fit_brdf_options_t o = opt ? *opt : fit_brdf_defaults();
+    memset(out, 0, sizeof *out);
+    out->model = m;
+    int np = model_brdf_nparams(m);
+    out->nparams = np;
+    if (!s || s->n < np + 1) {
+        model_error(s ? s->source : "samples", 0, "%d samples: too few to fit %s (%d parameters)", s ? s->n : 0,
+                    model_brdf_name(m), np);
+        return false;
+    }
+    double kd0 = diffuse_level(s);
+    bool has_rough = false;
+    for (int j = 0; j < np; j++) {
+        const char *n = model_brdf_param_name(m, j);
+        has_rough |= !strcmp(n, "ns") || !strcmp(n, "m") || !strcmp(n, "alpha");
+    }
+    int starts = has_rough ? (o.starts > 0 ? o.starts : 1) : 1;
+    double best[MODEL_BRDF_MAX_PARAMS], best_cost = INFINITY;
+    fit_summary_t best_sum;
+    memset(&best_sum, 0, sizeof best_sum);
+    int iters = 0;
+    for (int st = 0; st < starts; st++) {
+        double p[MODEL_BRDF_MAX_PARAMS];
+        start_point(s, m, st, kd0, p);
+        fit_summary_t sum;
+        bool q = model_error_quiet_thread(true);
+        bool ok = solve_once(s, m, &o, p, NULL, &sum, NULL, NULL);
+        model_error_quiet_thread(q);
+        iters += sum.iterations;
+        if (ok && sum.final_cost < best_cost) {
+            best_cost = sum.final_cost;
+            memcpy(best, p, sizeof p);
+            best_sum = sum;
+        }
+    }
+    if (!isfinite(best_cost)) {
+        model_error(s->source, 0, "fitting %s failed from every starting point: %s", model_brdf_name(m),
+                    fit_last_error());
+        return false;
+    }
+    // Polish from the best start, keeping the problem for the covariance.
+    if (!fit_brdf_from(s, m, &o, best, out)) return false;
+    out->summary.iterations += iters;
+    return true;
+}
+
+bool fit_brdf_from(const fit_samples_t *s, model_brdf_t m, const fit_brdf_options_t *opt, const double *start,
+                   fit_brdf_result_t *out)
+{
+    fit_brdf_options_t o = opt ? *opt : fit_brdf_defaults();
+    memset(out, 0, sizeof *out);
+    out->model = m;
+    int np = model_brdf_nparams(m);
+    out->nparams = np;
+    if (!s || s->n < np + 1) {
+        model_error(s ? s->source : "samples", 0, "%d samples: too few to fit %s (%d parameters)", s ? s->n : 0,
+                    model_brdf_name(m), np);
+        return false;
+    }
+    fit_problem_t *pr = NULL;
+    block_t *blocks = NULL;
+    memcpy(out->p, start, (size_t)np * sizeof *start);
+    for (int j = 0; j < np; j++) {
+        double lo, hi;
+        model_brdf_param_range(m, j, &lo, &hi);
+        out->p[j] = clampd(out->p[j], lo, hi);
+    }
+    if (!solve_once(s, m, &o, out->p, NULL, &out->summary, &pr, &blocks)) {
+        model_error(s->source, 0, "fitting %s failed: %s", model_brdf_name(m), fit_last_error());
+        return false;
+    }
+    // figures
+    double sw = 0, rss = 0, rss_f = 0;
+    for (int i = 0; i < s->n; i++) {
+        double R = model_brdf_eval(m, out->p, &s->c[i], NULL), e = R - s->R[i];
+        sw += s->w[i];
+        rss += s->w[i] * e * e;
+        rss_f += s->w[i] * (e / s->c[i].nl) * (e / s->c[i].nl);
+    }
+    out->n = s->n;
+    out->rss = rss;
+    out->rms = sqrt(rss / sw);
+    out->ngan_error = out->rms;
+    out->rms_fr = sqrt(rss_f / sw);
+    double N = s->n, k = np;
+    double rn = fmax(rss / N * (N / sw), 1e-300);   // per-sample mean square (weights normalised)
+    out->aic = N * log(rn) + 2 * k;
+    out->bic = N * log(rn) + k * log(N);
+    // covariance; parameters the samples cannot separate are held (F0 first)
+    out->nfree = np;
+    bool q = model_error_quiet_thread(true);
+    bool cov_ok = fit_covariance(pr, out->p, out->cov);
+    for (int pass = 0; !cov_ok && pass < np; pass++) {
+        // hold the parameter with the largest |correlation| partner: F0, then roughness
+        const char *order[] = { "F0", "ks", "ns", "m", "alpha", "kd" };
+        for (size_t t = 0; t < sizeof order / sizeof order[0]; t++) {
+            int j = model_brdf_param_index(m, order[t]);
+            if (j >= 0 && !out->fixed[j]) {
+                out->fixed[j] = true;
+                break;
+            }
+        }
+        fit_set_fixed(pr, out->p, out->fixed);
+        cov_ok = fit_covariance(pr, out->p, out->cov);
+    }
+    model_error_quiet_thread(q);
+    for (int j = 0; j < np; j++) out->nfree -= out->fixed[j];
+    double dof = N - out->nfree;
+    double s2 = o.noise_sigma > 0 ? o.noise_sigma * o.noise_sigma : (dof > 0 ? rss / dof : 0);
+    out->sigma = sqrt(s2);
+    out->cov_ok = cov_ok;
+    for (int a = 0; a < np * np; a++) out->cov[a] = cov_ok ? out->cov[a] * s2 : NAN;
+    for (int j = 0; j < np; j++) out->std[j] = cov_ok ? sqrt(fmax(out->cov[j * np + j], 0)) : NAN;
+    fit_problem_free(pr);
+    free(blocks);
+    return true;
+}
+
+// ---------------------------------------------------------------------------
+// Priors
+
+json_t *fit_priors_material(const char *name, const fit_brdf_result_t *best, const fit_brdf_result_t *cand,
+                            int ncand, double k_sigma)
+{
+    model_brdf_t m = best->model;
+    int np = best->nparams;
+    json_t *o = json_object();
+    json_object_set_new(o, "name", json_string(name));
+    json_object_set_new(o, "model", json_string(model_brdf_name(m)));
+    json_object_set_new(o, "convention", json_string(model_brdf_convention(m)));
+    json_t *ps = json_array();
+    for (int j = 0; j < np; j++) {
+        json_t *p = json_object();
+        double lo, hi, mean = best->p[j], sd = best->fixed[j] ? 0 : best->std[j];
+        model_brdf_param_range(m, j, &lo, &hi);
+        double blo = isfinite(sd) ? fmax(lo, mean - k_sigma * sd) : lo;
+        double bhi = isfinite(sd) ? fmin(hi, mean + k_sigma * sd) : hi;
+        json_object_set_new(p, "name", json_string(model_brdf_param_name(m, j)));
+        json_object_set_new(p, "unit", json_string(fit_param_unit(m, j)));
+        json_object_set_new(p, "convention", json_string(fit_param_convention(m, j)));
+        json_object_set_new(p, "mean", json_real(mean));
+        json_object_set_new(p, "std", isfinite(sd) ? json_real(sd) : json_null());
+        json_object_set_new(p, "lo", json_real(blo));
+        json_object_set_new(p, "hi", isfinite(bhi) ? json_real(bhi) : json_null());
+        if (best->fixed[j])
+            json_object_set_new(p, "held", json_string("not separable from the other parameters by these samples; "
+                                                       "held at its best value (std 0)"));
+        json_array_append_new(ps, p);
+    }
+    json_object_set_new(o, "parameters", ps);
+    json_t *cov = json_array();
+    for (int a = 0; a < np; a++) {
+        json_t *row = json_array();
+        for (int b = 0; b < np; b++) {
+            double c = best->cov[a * np + b];
+            json_array_append_new(row, isfinite(c) ? json_real(c) : json_null());
+        }
+        json_array_append_new(cov, row);
+    }
+    json_object_set_new(o, "covariance", cov);
+    json_object_set_new(o, "bounds_k_sigma", json_real(k_sigma));
+    json_object_set_new(o, "rms", json_real(best->rms));
+    json_object_set_new(o, "rms_unit", json_string("1/sr, of R = f_r cos(theta_i)"));
+    json_object_set_new(o, "ngan_error", json_real(best->ngan_error));
+    json_object_set_new(o, "rms_fr", json_real(best->rms_fr));
+    json_object_set_new(o, "aic", json_real(best->aic));
+    json_object_set_new(o, "bic", json_real(best->bic));
+    json_object_set_new(o, "n_samples", json_integer(best->n));
+    json_object_set_new(o, "iterations", json_integer(best->summary.iterations));
+    json_object_set_new(o, "termination", json_string(best->summary.termination));
+    if (cand && ncand > 0) {
+        json_t *arr = json_array();
+        for (int c = 0; c < ncand; c++) {
+            json_t *e = json_object();
+            json_object_set_new(e, "model", json_string(model_brdf_name(cand[c].model)));
+            json_object_set_new(e, "rms", json_real(cand[c].rms));
+            json_object_set_new(e, "aic", json_real(cand[c].aic));
+            json_object_set_new(e, "bic", json_real(cand[c].bic));
+            json_t *pv = json_object();
+            for (int j = 0; j < cand[c].nparams; j++)
+                json_object_set_new(pv, model_brdf_param_name(cand[c].model, j), json_real(cand[c].p[j]));
+            json_object_set_new(e, "parameters", pv);
+            json_array_append_new(arr, e);
+        }
+        json_object_set_new(o, "candidates", arr);
+    }
+    return o;
+}

@@ -1,0 +1,101 @@
+// fit/fit.h — fitting reflection models to BRDF samples and writing priors.
+//
+// Samples: R = f_r * cos(theta_i) (1/sr; what model_brdf_eval returns) with
+// the four cosines (n.l, n.v, n.h, v.h) of their geometry, and a weight.
+// The fit minimises sum_k w_k (R_model,k - R_k)^2 (the cosine-weighted
+// error of Ngan et al. 2005 in R) with the models' physical bounds; the
+// covariance is scaled by the residual variance s^2 = RSS / (N - free).
+//
+// BRDF sample files (refl fit brdf):
+//   CSV: theta_i,phi_i,theta_o,phi_o,f_r[,weight] per line, angles in degrees
+//        (theta from the normal, phi about it), f_r in 1/sr; an optional header
+//        line (not starting with a number); lines starting with '#' and blank
+//        lines are comments. Errors name file and line.
+//   MERL binary (Matusik et al. 2003): int32 dims 90 90 180 (theta_h, theta_d,
+//        phi_d), then 3 x 1458000 little-endian doubles (R, G, B), scaled by
+//        1/1500, 1.15/1500, 1.66/1500; negative values are missing samples.
+//        refl fits the luminance Y = 0.2126 R + 0.7152 G + 0.0722 B at the
+//        centre of each bin (theta_h = ((i + 0.5)/90)^2 * 90 deg).
+#pragma once
+
+#include <jansson.h>
+#include <stdbool.h>
+
+#include "fit/lsq.h"
+#include "model/model.h"
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+typedef struct {
+    int              n, cap;
+    model_cosines_t *c;
+    double          *R;        // f_r * n.l, 1/sr
+    double          *w;        // weights (1 unless given)
+    char             source[512];
+    char             sha256[65];
+} fit_samples_t;
+
+fit_samples_t *fit_samples_new(void);
+void           fit_samples_free(fit_samples_t *s);
+// Add a sample from angles (radians) and f_r (1/sr); false for n.l <= 0 or
+// n.v <= 0 (skipped: no reflection there) or non-finite values.
+bool fit_samples_add_angles(fit_samples_t *s, double theta_i, double phi_i, double theta_o, double phi_o,
+                            double f_r, double weight);
+bool fit_samples_add(fit_samples_t *s, const model_cosines_t *c, double R, double weight);
+// Read a CSV or MERL file (by content: MERL when the header dims and the file
+// size agree). NULL with a message naming file (and line).
+fit_samples_t *fit_samples_read(const char *path);
+fit_samples_t *fit_samples_read_csv(const char *path);
+fit_samples_t *fit_samples_read_merl(const char *path);
+
+typedef struct {
+    int     threads;            // 0: all cores
+    int     starts;             // multi-start points for the roughness (default 3)
+    double  noise_sigma;        // known std of R; 0 = estimate from the residuals
+    bool    verbose;
+} fit_brdf_options_t;
+
+fit_brdf_options_t fit_brdf_defaults(void);
+
+typedef struct {
+    model_brdf_t  model;
+    int           nparams, nfree;
+    double        p[MODEL_BRDF_MAX_PARAMS];
+    double        std[MODEL_BRDF_MAX_PARAMS];
+    double        cov[MODEL_BRDF_MAX_PARAMS * MODEL_BRDF_MAX_PARAMS];
+    bool          fixed[MODEL_BRDF_MAX_PARAMS];   // not identifiable from the samples: held
+    bool          cov_ok;
+    int           n;                              // samples
+    double        rss;                            // sum w (R_model - R)^2
+    double        rms;                            // sqrt(rss / sum w), 1/sr
+    double        ngan_error;                     // sqrt(sum w ((f_model - f) cos th_i)^2 / sum w) = rms
+    double        rms_fr;                         // sqrt(sum w (f_model - f)^2 / sum w), 1/sr
+    double        sigma;                          // residual std used for the covariance
+    double        aic, bic;                       // N ln(RSS/N) + 2k, N ln(RSS/N) + k ln N
+    fit_summary_t summary;
+} fit_brdf_result_t;
+
+// Fit model m to the samples. false with a message when no usable fit.
+bool fit_brdf(const fit_samples_t *s, model_brdf_t m, const fit_brdf_options_t *opt, fit_brdf_result_t *out);
+// The same from one given starting point (no multi-start; clamped into the bounds).
+bool fit_brdf_from(const fit_samples_t *s, model_brdf_t m, const fit_brdf_options_t *opt, const double *start,
+                   fit_brdf_result_t *out);
+
+// Units and convention of parameter i of model m ("1/sr", "albedo", ...).
+const char *fit_param_unit(model_brdf_t m, int i);
+const char *fit_param_convention(model_brdf_t m, int i);
+
+// The priors entry of one material (see README, "Priors file"): bounds are
+// mean +- k_sigma * std clipped to the physical range; candidates (may be
+// NULL) are every model tried, for the comparison table.
+json_t *fit_priors_material(const char *name, const fit_brdf_result_t *best, const fit_brdf_result_t *candidates,
+                            int ncandidates, double k_sigma);
+
+// `refl fit brdf|material` (fit/cmd_fit.c).
+int fit_cmd(int argc, char **argv);
+
+#ifdef __cplusplus
+}
+#endif
