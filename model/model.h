@@ -178,6 +178,14 @@ model_scene_t *model_scene_rotated_z(const model_scene_t *scene, double angle_de
 // A deep copy moved rigidly: x' = R x + t (R row-major 3x3, a rotation; t in
 // mm); face normals and plane offsets, sphere centres move with the vertices.
 model_scene_t *model_scene_transformed(const model_scene_t *scene, const double R[9], const double t[3]);
+// The pose of a scene standing on a wedge (the sample fixture of capture
+// plans, [sample] tilt_deg / tilt_azimuth_deg): R = rotation by tilt_deg about
+// the horizontal hinge axis (cos az, sin az, 0) through the origin
+// (right-handed), t = (0, 0, lift) with lift = the scene's lowest z minus the
+// rotated scene's lowest z (its lowest point stays at its height). Apply with
+// model_scene_transformed; the turntable angle applies after.
+void model_scene_wedge_pose(const model_scene_t *scene, double tilt_deg, double tilt_azimuth_deg, double R[9],
+                            double t[3]);
 
 // ---------------------------------------------------------------------------
 // Reflection models (model/brdf.c)

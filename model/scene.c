@@ -894,6 +894,32 @@ oom:
     return NULL;
 }
 
+// The wedge: R = rotation by tilt about h = (cos az, sin az, 0) (right-handed),
+// t = (0, 0, lift) with lift = min z of the scene - min z of the rotated scene.
+void model_scene_wedge_pose(const model_scene_t *sc, double tilt_deg, double az_deg, double R[9], double t[3])
+{
+    double a = tilt_deg * M_PI / 180, b = az_deg * M_PI / 180;
+    double hx = cos(b), hy = sin(b), c = cos(a), s_ = sin(a), C = 1 - c;
+    double M[9] = { c + hx * hx * C, hx * hy * C, hy * s_,
+                    hx * hy * C, c + hy * hy * C, -hx * s_,
+                    -hy * s_, hx * s_, c };
+    memcpy(R, M, sizeof M);
+    double zmin0 = INFINITY, zmin1 = INFINITY;
+    for (int i = 0; i < sc->nvertices; i++) {
+        model_vec3_t p = sc->vertices[i];
+        zmin0 = fmin(zmin0, p.z);
+        zmin1 = fmin(zmin1, R[6] * p.x + R[7] * p.y + R[8] * p.z);
+    }
+    for (int k = 0; k < sc->nspheres; k++) {
+        model_vec3_t p = sc->spheres[k].centre_mm;
+        double r = sc->spheres[k].radius_mm;
+        zmin0 = fmin(zmin0, p.z - r);
+        zmin1 = fmin(zmin1, R[6] * p.x + R[7] * p.y + R[8] * p.z - r);
+    }
+    t[0] = t[1] = 0;
+    t[2] = isfinite(zmin0) && isfinite(zmin1) ? zmin0 - zmin1 : 0;
+}
+
 model_scene_t *model_scene_rotated_z(const model_scene_t *scene, double angle_deg)
 {
     if (!scene) return NULL;

@@ -1654,32 +1654,6 @@ const char *rig_virtual_sample(const rig_virtual_t *v)
     return s;
 }
 
-// The wedge: R = rotation by tilt about h = (cos az, sin az, 0) (right-handed),
-// t = (0, 0, lift) with lift = min z of the scene - min z of the rotated scene.
-static void wedge_pose(const model_scene_t *sc, double tilt_deg, double az_deg, double R[9], double t[3])
-{
-    double a = tilt_deg * M_PI / 180, b = az_deg * M_PI / 180;
-    double hx = cos(b), hy = sin(b), c = cos(a), s_ = sin(a), C = 1 - c;
-    double M[9] = { c + hx * hx * C, hx * hy * C, hy * s_,
-                    hx * hy * C, c + hy * hy * C, -hx * s_,
-                    -hy * s_, hx * s_, c };
-    memcpy(R, M, sizeof M);
-    double zmin0 = INFINITY, zmin1 = INFINITY;
-    for (int i = 0; i < sc->nvertices; i++) {
-        model_vec3_t p = sc->vertices[i];
-        zmin0 = fmin(zmin0, p.z);
-        zmin1 = fmin(zmin1, R[6] * p.x + R[7] * p.y + R[8] * p.z);
-    }
-    for (int k = 0; k < sc->nspheres; k++) {
-        model_vec3_t p = sc->spheres[k].centre_mm;
-        double r = sc->spheres[k].radius_mm;
-        zmin0 = fmin(zmin0, p.z - r);
-        zmin1 = fmin(zmin1, R[6] * p.x + R[7] * p.y + R[8] * p.z - r);
-    }
-    t[0] = t[1] = 0;
-    t[2] = isfinite(zmin0) && isfinite(zmin1) ? zmin0 - zmin1 : 0;
-}
-
 int rig_virtual_set_sample_pose(rig_virtual_t *v, const char *name, double tilt_deg, double tilt_azimuth_deg)
 {
     if (!v || !name) return rig_fail(RIG_ERR_INVALID, "virtual rig: set sample: NULL argument");
@@ -1710,7 +1684,7 @@ int rig_virtual_set_sample_pose(rig_virtual_t *v, const char *name, double tilt_
             sm.tilt_deg = tilt_deg;
             sm.tilt_azimuth_deg = tilt_azimuth_deg;
             sm.scene_path = strdup(b->scene_path);
-            wedge_pose(b->scene, tilt_deg, tilt_azimuth_deg, sm.R, sm.t);
+            model_scene_wedge_pose(b->scene, tilt_deg, tilt_azimuth_deg, sm.R, sm.t);
             sm.scene = model_scene_transformed(b->scene, sm.R, sm.t);
             if (!sm.scene || !sm.scene_path) {
                 model_scene_free(sm.scene);
