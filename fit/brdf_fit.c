@@ -484,6 +484,39 @@ bool fit_brdf_from(const fit_samples_t *s, model_brdf_t m, const fit_brdf_option
         model_error(s->source, 0, "fitting %s failed: %s", model_brdf_name(m), fit_last_error());
         return false;
     }
+    // Fresnel: where the samples' v.h stays far from grazing, F = F0 + (1-F0)(1-v.h)^5
+    // hardly changes and only the product ks*F0 is measured. Then hold F0 at
+    // max(0.04, ks*F0) (a dielectric's 0.04 unless the product needs more) and
+    // refit ks with it.
+    int jF = model_brdf_param_index(m, "F0"), jk = model_brdf_param_index(m, "ks");
+    if (jF >= 0 && jk >= 0) {
+        double var = 0;   // the largest relative change of F over the samples the lobe lights
+        for (int i = 0; i < s->n; i++) {
+            double f5 = pow(1 - s->c[i].vh, 5), F = out->p[jF] + (1 - out->p[jF]) * f5;
+            if (F > 0) var = fmax(var, (1 - out->p[jF]) * f5 / F);
+        }
+        out->fresnel_variation = var;
+        if (var < 0.05) {
+            double prod = out->p[jk] * out->p[jF], F0 = fmin(1, fmax(0.04, prod));
+            out->p[jF] = F0;
+            out->p[jk] = F0 > 0 ? prod / F0 : out->p[jk];
+            double lo, hi;
+            model_brdf_param_range(m, jk, &lo, &hi);
+            out->p[jk] = clampd(out->p[jk], lo, hi);
+            out->fixed[jF] = true;
+            fit_problem_free(pr);
+            free(blocks);
+            pr = NULL;
+            blocks = NULL;
+            fit_summary_t s2;
+            if (!solve_once(s, m, &o, out->p, out->fixed, &s2, &pr, &blocks)) {
+                model_error(s->source, 0, "fitting %s with F0 held failed: %s", model_brdf_name(m), fit_last_error());
+                return false;
+            }
+            s2.iterations += out->summary.iterations;
+            out->summary = s2;
+        }
+    }
     // figures
     double sw = 0, rss = 0, rss_f = 0;
     for (int i = 0; i < s->n; i++) {
@@ -504,6 +537,9 @@ bool fit_brdf_from(const fit_samples_t *s, model_brdf_t m, const fit_brdf_option
     // covariance; parameters the samples cannot separate are held (F0 first)
     out->nfree = np;
     bool q = model_error_quiet_thread(true);
+    bool anyfixed = false;
+    for (int j = 0; j < np; j++) anyfixed |= out->fixed[j];
+    if (anyfixed) fit_set_fixed(pr, out->p, out->fixed);
     bool cov_ok = fit_covariance(pr, out->p, out->cov);
     for (int pass = 0; !cov_ok && pass < np; pass++) {
         // hold the parameter with the largest |correlation| partner: F0, then roughness
@@ -557,7 +593,11 @@ json_t *fit_priors_material(const char *name, const fit_brdf_result_t *best, con
         json_object_set_new(p, "std", isfinite(sd) ? json_real(sd) : json_null());
         json_object_set_new(p, "lo", json_real(blo));
         json_object_set_new(p, "hi", isfinite(bhi) ? json_real(bhi) : json_null());
-        if (best->fixed[j])
+        if (best->fixed[j] && !strcmp(model_brdf_param_name(m, j), "F0"))
+            json_object_set_new(p, "held", json_string("the samples never come near grazing (Schlick F changes "
+                                                       "< 5 % over them): only ks*F0 is measured; F0 held at "
+                                                       "max(0.04, ks*F0), std 0"));
+        else if (best->fixed[j])
             json_object_set_new(p, "held", json_string("not separable from the other parameters by these samples; "
                                                        "held at its best value (std 0)"));
         json_array_append_new(ps, p);
@@ -574,6 +614,8 @@ json_t *fit_priors_material(const char *name, const fit_brdf_result_t *best, con
     }
     json_object_set_new(o, "covariance", cov);
     json_object_set_new(o, "bounds_k_sigma", json_real(k_sigma));
+    int jF = model_brdf_param_index(m, "F0"), jk = model_brdf_param_index(m, "ks");
+    if (jF >= 0 && jk >= 0) json_object_set_new(o, "ks_times_F0", json_real(best->p[jk] * best->p[jF]));
     json_object_set_new(o, "rms", json_real(best->rms));
     json_object_set_new(o, "rms_unit", json_string("1/sr, of R = f_r cos(theta_i)"));
     json_object_set_new(o, "ngan_error", json_real(best->ngan_error));

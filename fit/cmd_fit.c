@@ -9,6 +9,7 @@
 
 #include "calib/calib.h"
 #include "fit/fit.h"
+#include "fit/material.h"
 #include "model/model.h"
 
 static void brdf_usage(FILE *f)
@@ -136,10 +137,13 @@ int fit_cmd(int argc, char **argv)
 {
     if (argc < 2 || !strcmp(argv[1], "--help") || !strcmp(argv[1], "-h")) {
         FILE *f = argc < 2 ? stderr : stdout;
-        fprintf(f, "usage: refl fit brdf FILE ... -o PRIORS.json   (refl fit brdf --help)\n\nrefl %s\n", REFL_VERSION);
+        fprintf(f, "usage: refl fit brdf FILE ... -o PRIORS.json        (refl fit brdf --help)\n"
+                   "       refl fit material SESSION --calib DIR ... -o PRIORS.json   (refl fit material --help)\n"
+                   "\nrefl %s\n", REFL_VERSION);
         return argc < 2 ? 2 : 0;
     }
     if (!strcmp(argv[1], "brdf")) return cmd_brdf(argc - 1, argv + 1);
+    if (!strcmp(argv[1], "material")) return fit_cmd_material(argc - 1, argv + 1);
     fprintf(stderr, "refl fit: unknown fit '%s' (refl fit --help)\n", argv[1]);
     return 2;
 }

@@ -5,6 +5,9 @@
 // The fit minimises sum_k w_k (R_model,k - R_k)^2 (the cosine-weighted
 // error of Ngan et al. 2005 in R) with the models' physical bounds; the
 // covariance is scaled by the residual variance s^2 = RSS / (N - free).
+// Where the samples never come near grazing (the Schlick F changes < 5 %
+// over them) only ks*F0 is measured: F0 is then held at max(0.04, ks*F0) and
+// marked held (fixed[]).
 //
 // BRDF sample files (refl fit brdf):
 //   CSV: theta_i,phi_i,theta_o,phi_o,f_r[,weight] per line, angles in degrees
@@ -74,6 +77,8 @@ typedef struct {
     double        rms_fr;                         // sqrt(sum w (f_model - f)^2 / sum w), 1/sr
     double        sigma;                          // residual std used for the covariance
     double        aic, bic;                       // N ln(RSS/N) + 2k, N ln(RSS/N) + k ln N
+    double        fresnel_variation;              // largest relative change of F over the samples
+                                                  // (< 0.05: only ks*F0 is measured; F0 held)
     fit_summary_t summary;
 } fit_brdf_result_t;
 

@@ -3,6 +3,7 @@
 #include <string.h>
 
 #include "model/model.h"
+#include "calib/calib.h"
 #include "fit/fit.h"
 #include "rig/rig.h"
 
@@ -18,6 +19,7 @@ static const command_t commands[] = {
     { "rig",    rig_cmd,          "drive the rig of a rig file: status, home, move, identify, snap, serve" },
     { "capture", rig_cmd_capture, "run a capture plan on the rig into a session directory (journal + frames)" },
     { "session", rig_cmd_session, "check a session's frames against their hashes, export its frame table" },
+    { "calib",   calib_cmd,       "calibrate camera geometry and turntable axis, lamp positions, sensitivity" },
     { "fit",     fit_cmd,         "fit reflection models to BRDF samples and write priors" },
 };
 

@@ -1,0 +1,782 @@
+// fit/material.c — observations of a material in a capture session (see
+// fit/material.h), the reference white's kc*I per lamp (`refl calib white`)
+// and the material fit (`refl fit material`).
+#define _GNU_SOURCE
+#include <errno.h>
+#include <glib.h>
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <unistd.h>
+
+#include "calib/calib.h"
+#include "fit/material.h"
+#include "model/internal.h"
+#include "rig/rig.h"
+
+// ---------------------------------------------------------------------------
+// Calibration directory
+
+static char *find_in(const char *dir, const char *sub, const char *name)
+{
+    char *p = g_strdup_printf("%s/%s", dir, name);
+    if (access(p, R_OK) == 0) return p;
+    g_free(p);
+    p = g_strdup_printf("%s/%s/%s", dir, sub, name);
+    if (access(p, R_OK) == 0) return p;
+    g_free(p);
+    return NULL;
+}
+
+static bool add_input(fit_calib_t *c, const char *role, const char *path)
+{
+    char sha[65];
+    if (!model_sha256_file(path, sha)) return false;
+    json_t *o = json_object();
+    json_object_set_new(o, "role", json_string(role));
+    json_object_set_new(o, "path", json_string(path));
+    json_object_set_new(o, "sha256", json_string(sha));
+    json_array_append_new(c->inputs, o);
+    return true;
+}
+
+void fit_calib_free(fit_calib_t *c)
+{
+    if (!c) return;
+    model_camera_free(c->cam);
+    model_lamps_free(c->lamps);
+    free(c->offset_dn);
+    free(c->flat);
+    json_decref(c->inputs);
+    free(c);
+}
+
+static float *read_map(fit_calib_t *c, const char *path, const char *role)
+{
+    int w, h;
+    float *m = calib_image_read(path, &w, &h);
+    if (!m) return NULL;
+    if (w != c->W || h != c->H) {
+        model_error(path, 0, "%dx%d pixels, the camera model's imager is %dx%d", w, h, c->W, c->H);
+        free(m);
+        return NULL;
+    }
+    add_input(c, role, path);
+    return m;
+}
+
+fit_calib_t *fit_calib_load(const char *dir, bool need_white)
+{
+    fit_calib_t *c = calloc(1, sizeof *c);
+    char *cam = NULL, *lamps = NULL, *gain = NULL, *white = NULL, *off = NULL, *flat = NULL;
+    json_t *lj = NULL, *gj = NULL, *wj = NULL;
+    json_error_t je;
+    if (!c) return NULL;
+    c->inputs = json_array();
+    if (!(cam = find_in(dir, "geometry", "camera.cameramodel"))) {
+        model_error(dir, 0, "no camera.cameramodel (nor geometry/camera.cameramodel): run refl calib geometry first");
+        goto fail;
+    }
+    if (!(c->cam = model_camera_load(cam))) goto fail;
+    add_input(c, "camera", cam);
+    c->W = model_camera_width(c->cam);
+    c->H = model_camera_height(c->cam);
+    if (!(lamps = find_in(dir, "lamps", "lamps.json"))) {
+        model_error(dir, 0, "no lamps.json (nor lamps/lamps.json): run refl calib lamps first");
+        goto fail;
+    }
+    if (!(lj = json_load_file(lamps, 0, &je))) {
+        model_error(lamps, je.line, "not valid JSON: %s", je.text);
+        goto fail;
+    }
+    json_t *arr = json_object_get(lj, "lamps");
+    size_t nl = json_array_size(arr);
+    if (!nl || nl > 32) {
+        model_error(lamps, 0, "'lamps' must list 1 to 32 lamps (has %zu)", nl);
+        goto fail;
+    }
+    c->lamps = calloc(1, sizeof *c->lamps);
+    if (!c->lamps || !(c->lamps->lamps = calloc(nl, sizeof *c->lamps->lamps))) goto oom;
+    c->lamps->path = strdup(lamps);
+    for (size_t i = 0; i < nl; i++) {
+        json_t *e = json_array_get(arr, i), *p = json_object_get(e, "position_mm");
+        const char *name = json_string_value(json_object_get(e, "name"));
+        if (!name || json_array_size(p) != 3 || !json_is_number(json_array_get(p, 0)) ||
+            !json_is_number(json_array_get(p, 1)) || !json_is_number(json_array_get(p, 2))) {
+            model_error(lamps, 0, "lamps[%zu] needs a name and position_mm = [x, y, z]", i);
+            goto fail;
+        }
+        model_lamp_t *l = &c->lamps->lamps[i];
+        snprintf(l->name, sizeof l->name, "%s", name);
+        l->position_mm = v3(json_number_value(json_array_get(p, 0)), json_number_value(json_array_get(p, 1)),
+                            json_number_value(json_array_get(p, 2)));
+        l->intensity = 1;
+        c->lamps->n = (int)i + 1;
+    }
+    add_input(c, "lamps", lamps);
+    if ((gain = find_in(dir, "gain", "gain.json"))) {
+        if (!(gj = json_load_file(gain, 0, &je))) {
+            model_error(gain, je.line, "not valid JSON: %s", je.text);
+            goto fail;
+        }
+        add_input(c, "gain", gain);
+        json_t *sat = json_object_get(gj, "saturation_dn");
+        if (json_is_number(sat)) c->saturation_dn = json_number_value(sat);
+        char *gd = g_path_get_dirname(gain);
+        off = g_strdup_printf("%s/offset_dn.tiff", gd);
+        flat = g_strdup_printf("%s/flat_field.tiff", gd);
+        if (access(flat, R_OK) != 0) {
+            g_free(flat);
+            flat = g_strdup_printf("%s/prnu_gain.tiff", gd);
+        }
+        g_free(gd);
+        if (access(off, R_OK) == 0 && !(c->offset_dn = read_map(c, off, "offset map"))) goto fail;
+        if (access(flat, R_OK) == 0 && !(c->flat = read_map(c, flat, "flat field"))) goto fail;
+    }
+    if ((white = find_in(dir, "white", "white.json"))) {
+        if (!(wj = json_load_file(white, 0, &je))) {
+            model_error(white, je.line, "not valid JSON: %s", je.text);
+            goto fail;
+        }
+        json_t *wl = json_object_get(wj, "lamps");
+        for (int i = 0; i < c->lamps->n; i++) {
+            bool found = false;
+            for (size_t k = 0; k < json_array_size(wl); k++) {
+                json_t *e = json_array_get(wl, k);
+                const char *n = json_string_value(json_object_get(e, "name"));
+                json_t *v = json_object_get(e, "kc_I_per_us");
+                if (n && !strcmp(n, c->lamps->lamps[i].name) && json_is_number(v)) {
+                    c->kcI_per_us[i] = json_number_value(v);
+                    found = true;
+                }
+            }
+            if (!found) {
+                model_error(white, 0, "no kc_I_per_us for lamp '%s' (of %s): run refl calib white with that lamp",
+                            c->lamps->lamps[i].name, lamps);
+                goto fail;
+            }
+        }
+        c->have_white = true;
+        add_input(c, "white", white);
+    } else if (need_white) {
+        model_error(dir, 0, "no white.json (nor white/white.json): run refl calib white on a reference-white session");
+        goto fail;
+    }
+    g_free(cam);
+    g_free(lamps);
+    g_free(gain);
+    g_free(white);
+    g_free(off);
+    g_free(flat);
+    json_decref(lj);
+    json_decref(gj);
+    json_decref(wj);
+    return c;
+oom:
+    model_error(dir, 0, "out of memory");
+fail:
+    g_free(cam);
+    g_free(lamps);
+    g_free(gain);
+    g_free(white);
+    g_free(off);
+    g_free(flat);
+    json_decref(lj);
+    json_decref(gj);
+    json_decref(wj);
+    fit_calib_free(c);
+    return NULL;
+}
+
+// ---------------------------------------------------------------------------
+// Observations
+
+fit_observe_options_t fit_observe_defaults(void)
+{
+    return (fit_observe_options_t){ .window = 5, .step = 8, .min_signal_dn = 20 };
+}
+
+void fit_obs_free(fit_obs_set_t *s)
+{
+    if (!s) return;
+    free(s->o);
+    memset(s, 0, sizeof *s);
+}
+
+static bool obs_add(fit_obs_set_t *s, const fit_obs_t *o)
+{
+    if (s->n == s->cap) {
+        int cap = s->cap ? 2 * s->cap : 4096;
+        fit_obs_t *n = realloc(s->o, (size_t)cap * sizeof *n);
+        if (!n) return false;
+        s->o = n;
+        s->cap = cap;
+    }
+    s->o[s->n++] = *o;
+    return true;
+}
+
+// The sample's scene and material from the virtual rig's truth file (session facts).
+static bool truth_sample(const calib_session_t *s, const char *sample, char **scene, char *mat, size_t matlen)
+{
+    json_t *vr = s->facts ? json_object_get(s->facts, "virtual_rig") : NULL;
+    const char *truth = vr ? json_string_value(json_object_get(vr, "truth")) : NULL;
+    if (!truth) {
+        model_error(s->dir, 0, "the session was not captured on a virtual rig: give the sample's scene (--scene FILE) "
+                    "and its material (--material NAME)");
+        return false;
+    }
+    model_ini_t *ini = model_ini_load(truth);
+    if (!ini) return false;
+    char sec[128];
+    snprintf(sec, sizeof sec, "sample %s", sample);
+    const model_ini_entry_t *e = model_ini_get(ini, sec, "scene"), *m = model_ini_get(ini, sec, "material");
+    if (!e) {
+        model_error(truth, 0, "no [sample %s] with a scene (the session's sample)", sample);
+        model_ini_free(ini);
+        return false;
+    }
+    char *d = g_path_get_dirname(truth);
+    *scene = g_strdup_printf("%s/%s", d, e->value);
+    g_free(d);
+    if (m && mat && !mat[0]) snprintf(mat, matlen, "%s", m->value);
+    model_ini_free(ini);
+    return true;
+}
+
+typedef struct {
+    double q[2];
+    int    face;
+} window_t;
+
+static int cmp_exposure_desc(const void *a, const void *b, void *ctx)
+{
+    const rig_frame_row_t *r = ctx;
+    double x = r[*(const int *)a].exposure_us, y = r[*(const int *)b].exposure_us;
+    return (x < y) - (x > y);
+}
+
+static double bits_full(const char *pf)
+{
+    if (!strcmp(pf, "Mono8")) return 255;
+    if (!strcmp(pf, "Mono12")) return 4095;
+    return 65535;
+}
+
+bool fit_observe(const char *session_dir, const fit_calib_t *cal, const fit_observe_options_t *opt,
+                 fit_obs_set_t *out)
+{
+    fit_observe_options_t o = opt ? *opt : fit_observe_defaults();
+    memset(out, 0, sizeof *out);
+    bool ok = false;
+    calib_session_t *s = calib_session_open(session_dir);
+    rig_plan_t *plan = NULL;
+    model_scene_t *scene = NULL;
+    char *scene_path = NULL;
+    int *order = NULL;
+    window_t *win = NULL;
+    unsigned char *taken = NULL;
+    if (!s) return false;
+    if (!(plan = rig_plan_parse(s->plan_text, strlen(s->plan_text), session_dir))) goto done;
+    snprintf(out->sample, sizeof out->sample, "%s", plan->sample);
+    if (o.material) snprintf(out->material, sizeof out->material, "%s", o.material);
+    if (o.scene_path) scene_path = g_strdup(o.scene_path);
+    else if (!truth_sample(s, plan->sample, &scene_path, out->material, sizeof out->material)) goto done;
+    if (!(scene = model_scene_load(scene_path, NULL))) goto done;
+    int mat = -1;
+    if (out->material[0]) {
+        mat = model_scene_material_index(scene, out->material);
+        if (mat < 0) {
+            model_error(scene_path, 0, "the scene has no material '%s'", out->material);
+            goto done;
+        }
+    } else if (scene->nmaterials == 1) {
+        mat = 0;
+        snprintf(out->material, sizeof out->material, "%s", scene->material_names[0]);
+    } else {
+        model_error(scene_path, 0, "the scene has %d materials: say which one to observe (--material NAME)",
+                    scene->nmaterials);
+        goto done;
+    }
+    double R[9], t[3];
+    model_scene_wedge_pose(scene, plan->tilt_deg, plan->tilt_azimuth_deg, R, t);
+    model_scene_t *posed = model_scene_transformed(scene, R, t);
+    if (!posed) goto done;
+    model_scene_free(scene);
+    scene = posed;
+    // frames by angle
+    if (!(order = malloc((size_t)(s->n ? s->n : 1) * sizeof *order))) goto oom;
+    const int half = o.window / 2;
+    int nx = (cal->W - o.window) / o.step + 1, ny = (cal->H - o.window) / o.step + 1;
+    if (!(win = malloc((size_t)nx * ny * sizeof *win))) goto oom;
+    bool *done_row = calloc((size_t)(s->n ? s->n : 1), 1);
+    if (!done_row) goto oom;
+    for (int f0 = 0; f0 < s->n; f0++) {
+        if (done_row[f0]) continue;
+        const rig_frame_row_t *r0 = &s->rows[f0];
+        // this angle's frames (the same measured position), longest exposure first
+        int nf = 0;
+        for (int f = f0; f < s->n; f++)
+            if (!done_row[f] && s->rows[f].measured_deg == r0->measured_deg &&
+                s->rows[f].commanded_deg == r0->commanded_deg) {
+                order[nf++] = f;
+                done_row[f] = true;
+            }
+        qsort_r(order, (size_t)nf, sizeof *order, cmp_exposure_desc, s->rows);
+        model_scene_t *rot = model_scene_rotated_z(scene, r0->measured_deg);
+        model_tracer_t *tr = rot ? model_tracer_new(rot) : NULL;
+        if (!tr) {
+            model_scene_free(rot);
+            free(done_row);
+            goto done;
+        }
+        // windows on the material: the centre and four corners on one face
+        int nw = 0;
+        {
+            int nq = nx * ny * 5;
+            double *q = malloc((size_t)nq * 2 * sizeof *q);
+            model_pixel_info_t *pi = malloc((size_t)nq * sizeof *pi);
+            if (!q || !pi) {
+                free(q);
+                free(pi);
+                model_tracer_free(tr);
+                model_scene_free(rot);
+                free(done_row);
+                goto oom;
+            }
+            static const int dx[5] = { 0, -1, 1, -1, 1 }, dy[5] = { 0, -1, -1, 1, 1 };
+            int k = 0;
+            for (int j = 0; j < ny; j++)
+                for (int i = 0; i < nx; i++)
+                    for (int c = 0; c < 5; c++) {
+                        q[2 * k] = i * o.step + half + dx[c] * half;
+                        q[2 * k + 1] = j * o.step + half + dy[c] * half;
+                        k++;
+                    }
+            model_pixel_info(tr, cal->cam, NULL, q, nq, pi, NULL, 0);
+            for (int w = 0; w < nx * ny; w++) {
+                const model_pixel_info_t *p = &pi[5 * w];
+                if (p->face < 0 || p->material != mat) continue;
+                bool same = true;
+                for (int c = 1; c < 5; c++) same = same && pi[5 * w + c].face == p->face;
+                if (!same) continue;
+                win[nw].q[0] = q[10 * w];
+                win[nw].q[1] = q[10 * w + 1];
+                win[nw].face = p->face;
+                nw++;
+            }
+            free(q);
+            free(pi);
+        }
+        if (nw == 0) {
+            fprintf(stderr, "refl: %s: at %.3f deg no window of %dx%d pixels lies on material %s\n", session_dir,
+                    r0->measured_deg, o.window, o.window, out->material);
+            out->frames_skipped += nf;
+            model_tracer_free(tr);
+            model_scene_free(rot);
+            continue;
+        }
+        // geometry per window and lamp
+        double *qw = malloc((size_t)nw * 2 * sizeof *qw);
+        model_pixel_info_t *pw = malloc((size_t)nw * sizeof *pw);
+        model_lamp_sample_t *ls = malloc((size_t)nw * cal->lamps->n * sizeof *ls);
+        free(taken);
+        taken = calloc((size_t)nw * cal->lamps->n, 1);
+        if (!qw || !pw || !ls || !taken) {
+            free(qw);
+            free(pw);
+            free(ls);
+            model_tracer_free(tr);
+            model_scene_free(rot);
+            free(done_row);
+            goto oom;
+        }
+        for (int w = 0; w < nw; w++) {
+            qw[2 * w] = win[w].q[0];
+            qw[2 * w + 1] = win[w].q[1];
+        }
+        model_pixel_info(tr, cal->cam, cal->lamps, qw, nw, pw, ls, 0);
+        // dark frames of this angle by exposure (when there is no offset map)
+        bool fail = false;
+        for (int a = 0; a < nf && !fail; a++) {
+            const rig_frame_row_t *r = &s->rows[order[a]];
+            if (!strcmp(r->lamps, "none")) continue;
+            int lamp = model_lamps_find(cal->lamps, r->lamps);
+            if (lamp < 0) {
+                out->frames_skipped++;   // several lamps at once, or a lamp the calibration lacks
+                continue;
+            }
+            float *dark = NULL;
+            if (!cal->offset_dn) {
+                // the session's dark frame of this exposure nearest in steps
+                int best = -1;
+                for (int f = 0; f < s->n; f++)
+                    if (!strcmp(s->rows[f].lamps, "none") && s->rows[f].exposure_us == r->exposure_us &&
+                        s->rows[f].gain == r->gain &&
+                        (best < 0 || abs(s->rows[f].step - r->step) < abs(s->rows[best].step - r->step)))
+                        best = f;
+                if (best < 0) {
+                    model_error(session_dir, 0, "step %d (%s, %g us): no dark level: the calibration has no offset "
+                                "map and the session no dark frame at that exposure (add dark_every to the plan, or "
+                                "a gain calibration)", r->step, r->lamps, r->exposure_us);
+                    fail = true;
+                    break;
+                }
+                int dw, dh;
+                if (!(dark = calib_session_frame(s, best, &dw, &dh))) {
+                    fail = true;
+                    break;
+                }
+            }
+            int fw, fh;
+            float *img = calib_session_frame(s, order[a], &fw, &fh);
+            if (!img || fw != cal->W || fh != cal->H) {
+                if (img) model_error(session_dir, 0, "step %d: %dx%d frame, the camera model is %dx%d", r->step, fw,
+                                     fh, cal->W, cal->H);
+                free(img);
+                free(dark);
+                fail = true;
+                break;
+            }
+            double sat = 0.95 * (cal->saturation_dn > 0 ? cal->saturation_dn : bits_full(r->pixel_format));
+            double gf = pow(10.0, r->gain / 20);
+            for (int w = 0; w < nw; w++) {
+                if (taken[(size_t)w * cal->lamps->n + lamp]) continue;
+                const model_lamp_sample_t *L = &ls[(size_t)w * cal->lamps->n + lamp];
+                if (!(L->V > 0.999)) continue;
+                model_cosines_t c = model_cosines(pw[w].n, L->l, pw[w].v);
+                if (!(c.nl > 0 && c.nv > 0)) continue;
+                int x0 = (int)win[w].q[0] - half, y0 = (int)win[w].q[1] - half;
+                double sum = 0, mx = 0, sd = 0, sg = 0;
+                for (int y = y0; y < y0 + o.window; y++)
+                    for (int x = x0; x < x0 + o.window; x++) {
+                        size_t i = (size_t)y * cal->W + x;
+                        sum += img[i];
+                        mx = fmax(mx, img[i]);
+                        sd += cal->offset_dn ? cal->offset_dn[i] : dark[i];
+                        sg += cal->flat ? cal->flat[i] : 1;
+                    }
+                double n = (double)o.window * o.window;
+                if (mx >= sat) continue;   // a shorter exposure of the bracket takes it
+                double sig = (sum - sd) / n;
+                if (sig < o.min_signal_dn) continue;
+                fit_obs_t ob = { .lamp = lamp, .angle_deg = r->measured_deg, .exposure_us = r->exposure_us,
+                                 .gain_db = r->gain, .q = { win[w].q[0], win[w].q[1] }, .c = c, .d_mm = L->d_mm,
+                                 .s_dn_per_us = sig / (sg / n) / (r->exposure_us * gf), .step = r->step };
+                if (!obs_add(out, &ob)) {
+                    free(img);
+                    free(dark);
+                    fail = true;
+                    model_error(session_dir, 0, "out of memory");
+                    break;
+                }
+                taken[(size_t)w * cal->lamps->n + lamp] = 1;
+            }
+            out->frames_used++;
+            free(img);
+            free(dark);
+        }
+        free(qw);
+        free(pw);
+        free(ls);
+        model_tracer_free(tr);
+        model_scene_free(rot);
+        if (fail) {
+            free(done_row);
+            goto done;
+        }
+        if (o.verbose)
+            fprintf(stderr, "  %s: angle %.2f deg: %d windows, %d observations so far\n", session_dir,
+                    r0->measured_deg, nw, out->n);
+    }
+    free(done_row);
+    if (out->n == 0) {
+        model_error(session_dir, 0, "no usable observation of material %s (nothing lit, unsaturated and above %g DN "
+                    "on it)", out->material, o.min_signal_dn);
+        goto done;
+    }
+    ok = true;
+    goto done;
+oom:
+    model_error(session_dir, 0, "out of memory");
+done:
+    free(order);
+    free(win);
+    free(taken);
+    g_free(scene_path);
+    model_scene_free(scene);
+    rig_plan_free(plan);
+    calib_session_free(s);
+    if (!ok) fit_obs_free(out);
+    return ok;
+}
+
+// ---------------------------------------------------------------------------
+// Reference white
+
+static int cmp_d(const void *a, const void *b)
+{
+    double x = *(const double *)a, y = *(const double *)b;
+    return (x > y) - (x < y);
+}
+
+bool fit_white(const fit_obs_set_t *obs, const fit_calib_t *cal, double albedo, const char *out_json,
+               json_t *prov)
+{
+    double kd = albedo / M_PI;
+    json_t *top = json_object();
+    json_object_set_new(top, "calibration", json_string("reference white: kc*I per lamp"));
+    json_object_set_new(top, "units", json_string("kc_I_per_us: DN per microsecond of exposure at 0 dB gain per "
+                                                  "(R in 1/sr / d^2 in mm^2), so P - Pa = kc_I_per_us * t_us * "
+                                                  "10^(gain_dB/20) * g(x,y) * R / d^2"));
+    json_object_set_new(top, "albedo", json_real(albedo));
+    json_object_set_new(top, "sample", json_string(obs->sample));
+    json_t *arr = json_array();
+    double *v = malloc((size_t)obs->n * sizeof *v);
+    bool ok = v != NULL;
+    for (int l = 0; ok && l < cal->lamps->n; l++) {
+        int n = 0;
+        for (int i = 0; i < obs->n; i++)
+            if (obs->o[i].lamp == l) v[n++] = obs->o[i].s_dn_per_us * obs->o[i].d_mm * obs->o[i].d_mm / (kd * obs->o[i].c.nl);
+        if (n < 10) {
+            model_error(out_json, 0, "lamp %s: %d observations of the reference white (need 10): capture it with "
+                        "that lamp alone", cal->lamps->lamps[l].name, n);
+            ok = false;
+            break;
+        }
+        qsort(v, (size_t)n, sizeof *v, cmp_d);
+        double med = v[n / 2];
+        for (int i = 0; i < n; i++) v[i] = fabs(v[i] - med);
+        qsort(v, (size_t)n, sizeof *v, cmp_d);
+        double mad = 1.4826 * v[n / 2];
+        json_t *e = json_object();
+        json_object_set_new(e, "name", json_string(cal->lamps->lamps[l].name));
+        json_object_set_new(e, "kc_I_per_us", json_real(med));
+        json_object_set_new(e, "spread_rel", json_real(mad / med));
+        json_object_set_new(e, "std_of_median_rel", json_real(1.2533 * mad / med / sqrt(n)));
+        json_object_set_new(e, "n_observations", json_integer(n));
+        json_array_append_new(arr, e);
+        printf("  %-12s kc*I = %.6g DN/us per (1/sr)/mm^2  (spread %.2f %%, %d windows)\n", cal->lamps->lamps[l].name,
+               med, 100 * mad / med, n);
+    }
+    free(v);
+    json_object_set_new(top, "lamps", arr);
+    if (prov) json_object_set_new(top, "provenance", json_incref(prov));
+    if (ok) ok = calib_write_json(out_json, top);
+    json_decref(top);
+    return ok;
+}
+
+// ---------------------------------------------------------------------------
+// Commands
+
+typedef struct {
+    const char *session, *calib, *out, *scene, *material, *model, *name;
+    double      albedo, k_sigma;
+    bool        verbose;
+} mat_args_t;
+
+static int parse_args(const char *cmd, int argc, char **argv, mat_args_t *a, void (*usage)(FILE *))
+{
+    for (int i = 1; i < argc; i++) {
+        const char *s = argv[i];
+        if (!strcmp(s, "-h") || !strcmp(s, "--help")) {
+            usage(stdout);
+            return 0;
+        }
+        if (!strcmp(s, "-v") || !strcmp(s, "--verbose")) {
+            a->verbose = true;
+            continue;
+        }
+        const char **str = !strcmp(s, "-o") ? &a->out : !strcmp(s, "--calib") ? &a->calib
+                         : !strcmp(s, "--scene") ? &a->scene : !strcmp(s, "--material") ? &a->material
+                         : !strcmp(s, "--model") ? &a->model : !strcmp(s, "--name") ? &a->name : NULL;
+        double *num = !strcmp(s, "--albedo") ? &a->albedo : !strcmp(s, "--k-sigma") ? &a->k_sigma : NULL;
+        if (str || num) {
+            if (i + 1 >= argc) {
+                fprintf(stderr, "refl %s: missing value after %s\n", cmd, s);
+                return 2;
+            }
+            const char *v = argv[++i];
+            if (str) {
+                *str = v;
+            } else {
+                char *e;
+                *num = strtod(v, &e);
+                if (*e || !(*num > 0) || !isfinite(*num)) {
+                    fprintf(stderr, "refl %s: %s needs a number > 0, not '%s'\n", cmd, s, v);
+                    return 2;
+                }
+            }
+        } else if (s[0] == '-') {
+            fprintf(stderr, "refl %s: unknown option %s (refl %s --help)\n", cmd, s, cmd);
+            return 2;
+        } else if (!a->session) {
+            a->session = s;
+        } else {
+            fprintf(stderr, "refl %s: more than one session: %s\n", cmd, s);
+            return 2;
+        }
+    }
+    if (!a->session || !a->calib || !a->out) {
+        fprintf(stderr, "refl %s: give SESSION, --calib DIR and -o FILE (refl %s --help)\n", cmd, cmd);
+        return 2;
+    }
+    return -1;
+}
+
+static void white_usage(FILE *f)
+{
+    fprintf(f, "usage: refl calib white SESSION --calib DIR [--albedo A] [--scene FILE] [--material NAME] -o WHITE.json\n"
+               "\n"
+               "The absolute scale kc*I of each lamp from a session of the reference white (a Lambertian standard\n"
+               "of albedo A, default 0.99): every lit window of the standard gives (P - Pa) d^2 / (g t kd n.l),\n"
+               "kd = A/pi; the median per lamp is written. DIR holds the geometry (camera.cameramodel), the lamp\n"
+               "positions (lamps.json) and optionally the gain calibration (gain.json and its maps). Put WHITE.json\n"
+               "in DIR (or DIR/white/) for refl fit material.\n\nrefl %s\n", REFL_VERSION);
+}
+
+int fit_cmd_white(int argc, char **argv)
+{
+    mat_args_t a = { .albedo = 0.99 };
+    int rc = parse_args("calib white", argc, argv, &a, white_usage);
+    if (rc >= 0) return rc;
+    if (a.albedo > 1) {
+        fprintf(stderr, "refl calib white: --albedo %g: an albedo is at most 1\n", a.albedo);
+        return 2;
+    }
+    fit_calib_t *cal = fit_calib_load(a.calib, false);
+    if (!cal) {
+        fprintf(stderr, "refl calib white: %s\n", model_last_error());
+        return 1;
+    }
+    fit_observe_options_t o = fit_observe_defaults();
+    o.scene_path = a.scene;
+    o.material = a.material;
+    o.verbose = a.verbose;
+    fit_obs_set_t obs;
+    rc = 1;
+    if (!fit_observe(a.session, cal, &o, &obs)) {
+        fprintf(stderr, "refl calib white: %s\n", model_last_error());
+        goto done;
+    }
+    printf("refl calib white: %d observations of %s in %d frames (%d skipped)\n", obs.n, obs.material,
+           obs.frames_used, obs.frames_skipped);
+    json_t *prov = calib_provenance(argc + 1, argv - 1);
+    calib_provenance_input(prov, "session", a.session);
+    size_t i;
+    json_t *in;
+    json_array_foreach(cal->inputs, i, in) json_array_append(json_object_get(prov, "inputs"), in);
+    if (fit_white(&obs, cal, a.albedo, a.out, prov)) {
+        printf("%s\n", a.out);
+        rc = 0;
+    } else {
+        fprintf(stderr, "refl calib white: %s\n", model_last_error());
+    }
+    json_decref(prov);
+    fit_obs_free(&obs);
+done:
+    fit_calib_free(cal);
+    return rc;
+}
+
+static void material_usage(FILE *f)
+{
+    fprintf(f, "usage: refl fit material SESSION --calib DIR [--model all|lambert|hall|torrance_sparrow|thesis_fit|\n"
+               "                         cook_torrance|ggx] [--name NAME] [--scene FILE] [--material NAME]\n"
+               "                         [--k-sigma K] -o PRIORS.json\n"
+               "\n"
+               "BRDF samples of the session's sample material: every window of the material lit by one lamp, dark\n"
+               "and flat corrected, brackets merged to high dynamic range, scaled by the reference white's kc*I of\n"
+               "its lamp (DIR/white.json) with the geometry (DIR/camera.cameramodel) and lamp positions\n"
+               "(DIR/lamps.json); then every requested model is fitted (refl fit brdf) and the priors file written.\n"
+               "On a virtual rig the sample's scene and material come from the truth file's [sample]; elsewhere\n"
+               "give --scene and --material.\n\nrefl %s\n", REFL_VERSION);
+}
+
+int fit_cmd_material(int argc, char **argv)
+{
+    mat_args_t a = { .k_sigma = 3, .model = "all" };
+    int rc = parse_args("fit material", argc, argv, &a, material_usage);
+    if (rc >= 0) return rc;
+    int models[MODEL_BRDF_COUNT], nm = 0;
+    if (!strcmp(a.model, "all")) {
+        for (int m = 0; m < MODEL_BRDF_COUNT; m++) models[nm++] = m;
+    } else if ((models[0] = model_brdf_from_name(a.model)) >= 0) {
+        nm = 1;
+    } else {
+        fprintf(stderr, "refl fit material: --model: unknown model %s\n", a.model);
+        return 2;
+    }
+    fit_calib_t *cal = fit_calib_load(a.calib, true);
+    if (!cal) {
+        fprintf(stderr, "refl fit material: %s\n", model_last_error());
+        return 1;
+    }
+    fit_observe_options_t o = fit_observe_defaults();
+    o.scene_path = a.scene;
+    o.material = a.material;
+    o.verbose = a.verbose;
+    fit_obs_set_t obs;
+    fit_samples_t *smp = NULL;
+    rc = 1;
+    if (!fit_observe(a.session, cal, &o, &obs)) {
+        fprintf(stderr, "refl fit material: %s\n", model_last_error());
+        goto done;
+    }
+    smp = fit_samples_new();
+    snprintf(smp->source, sizeof smp->source, "%s", a.session);
+    for (int i = 0; i < obs.n; i++) {
+        const fit_obs_t *b = &obs.o[i];
+        fit_samples_add(smp, &b->c, b->s_dn_per_us * b->d_mm * b->d_mm / cal->kcI_per_us[b->lamp], 1);
+    }
+    printf("refl fit material: %s: %d BRDF samples from %d frames (%d skipped)\n", obs.material, smp->n,
+           obs.frames_used, obs.frames_skipped);
+    fit_brdf_result_t res[MODEL_BRDF_COUNT];
+    int nres = 0, best = -1;
+    for (int k = 0; k < nm; k++) {
+        if (!fit_brdf(smp, (model_brdf_t)models[k], NULL, &res[nres])) {
+            fprintf(stderr, "  %s: %s\n", model_brdf_name((model_brdf_t)models[k]), model_last_error());
+            continue;
+        }
+        printf("  %-16s rms %.4g 1/sr  BIC %.6g", model_brdf_name(res[nres].model), res[nres].rms, res[nres].bic);
+        for (int j = 0; j < res[nres].nparams; j++)
+            printf("  %s %.4g", model_brdf_param_name(res[nres].model, j), res[nres].p[j]);
+        printf("\n");
+        if (best < 0 || res[nres].bic < res[best].bic) best = nres;
+        nres++;
+    }
+    if (best < 0) {
+        fprintf(stderr, "refl fit material: no model could be fitted\n");
+        goto done;
+    }
+    json_t *top = json_object();
+    json_object_set_new(top, "format", json_string("refl priors 1"));
+    json_object_set_new(top, "units", json_string("R = f_r cos(theta_i) in 1/sr; parameter units per parameter"));
+    json_t *mats = json_array();
+    json_t *e = fit_priors_material(a.name ? a.name : obs.material, &res[best], res, nres, a.k_sigma);
+    json_object_set_new(e, "session", json_string(a.session));
+    json_object_set_new(e, "sample", json_string(obs.sample));
+    json_array_append_new(mats, e);
+    json_object_set_new(top, "materials", mats);
+    json_t *prov = calib_provenance(argc + 1, argv - 1);
+    calib_provenance_input(prov, "session", a.session);
+    size_t i;
+    json_t *in;
+    json_array_foreach(cal->inputs, i, in) json_array_append(json_object_get(prov, "inputs"), in);
+    json_object_set_new(top, "provenance", prov);
+    if (calib_write_json(a.out, top)) {
+        printf("%s: %s, model %s (lowest BIC of %d)\n", a.out, a.name ? a.name : obs.material,
+               model_brdf_name(res[best].model), nres);
+        rc = 0;
+    } else {
+        fprintf(stderr, "refl fit material: %s\n", model_last_error());
+    }
+    json_decref(top);
+done:
+    fit_samples_free(smp);
+    fit_obs_free(&obs);
+    fit_calib_free(cal);
+    return rc;
+}
