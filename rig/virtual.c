@@ -22,6 +22,9 @@
 //                reference_white / material_coupon: material; mirror_sphere:
 //                sphere_centre_mm (x y z at angle 0) and sphere_radius_mm, the
 //                facts of the scene's '@sphere' (checked against it)
+//                optional direct_samples: this sample's finite-lamp samples per pixel
+//                (overrides [render]; a mirror needs many: its highlights are images
+//                of the lamps, which one sample per pixel would dither)
 //                | kind = uniform_source, radiance (no scene): a flat-field source
 //                filling the view (an integrating sphere's port in front of the
 //                lens) fed by the rig's lamps: each lamp that is on adds
@@ -122,6 +125,7 @@ typedef struct {
     const model_material_t **mats;    // scene->nmaterials
     const texture_t **tex;            // scene->nmaterials, NULL = untextured
     bool   textured;
+    int    direct_samples;            // 0: the [render] value
     // uniform_source: no scene; every lamp that is on adds `radiance` at every pixel
     bool   uniform;
     double radiance;
@@ -576,7 +580,7 @@ static bool render_layers(rig_virtual_t *v, model_tracer_t *t, int sample, int l
         return model_render(t, v->cam, &one, mats, &sh, L, v->face, NULL);
     model_shading_t direct = sh;
     direct.mc_bounces = 0;
-    direct.mc_samples = v->direct_samples;
+    direct.mc_samples = v->samples[sample].direct_samples > 0 ? v->samples[sample].direct_samples : v->direct_samples;
     if (!model_render(t, v->cam, &one, mats, &direct, L, v->face, NULL)) return false;
     if (sh.mc_bounces == 0) return true;
     model_shading_t ind = sh, base = sh;
@@ -900,7 +904,7 @@ static const allowed_t allowed[] = {
     { "turntable", { "speed_deg_s", "accel_deg_s2", "home_time_s", "position_noise_deg", "seed",
                      "fault_after_moves", "fault" } },
     { "sample", { "kind", "scene", "square_mm", "corners", "corner0_mm", "material", "sphere_centre_mm",
-                  "sphere_radius_mm", "radiance" } },
+                  "sphere_radius_mm", "radiance", "direct_samples" } },
     { "texture", { "amplitude", "scale_mm", "seed" } },
     { "sensor", { NULL } },     // checked by model_sensor_from_ini
     { "lamp", { NULL } },       // model_lamps_from_ini
@@ -1149,6 +1153,11 @@ static bool parse_samples(rig_virtual_t *v, const model_ini_t *ini)
             sm->tex = calloc(1, sizeof *sm->tex);
             if (!sm->mats || !sm->tex) return false;
             continue;
+        }
+        if (model_ini_get(ini, sec, "direct_samples")) {
+            long ds;
+            if (!get_int(ini, sec, "direct_samples", 1, 4096, &ds)) return false;
+            sm->direct_samples = (int)ds;
         }
         if (model_ini_get(ini, sec, "radiance")) {
             model_error(ini->path, ini_line(ini, sec, "radiance"), "sample '%s': radiance is a key of "
