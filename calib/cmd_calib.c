@@ -12,12 +12,15 @@ static const struct {
     int (*run)(int argc, char **argv);
     const char *summary;
 } subs[] = {
+    { "geometry", calib_cmd_geometry, "camera model (mrgingham + mrcal) and turntable axis from chessboard views" },
+    { "lamps",    calib_cmd_lamps,    "lamp positions from mirror-sphere highlights, with uncertainty in mm" },
     { "white",    fit_cmd_white,      "kc*I per lamp from a reference-white session (fit/material.c)" },
+    { "gain",     calib_cmd_gain,     "sensitivity (EMVA 1288): dark, photon transfer, linearity, PRNU/DSNU maps" },
 };
 
 static void usage(FILE *f)
 {
-    fprintf(f, "usage: refl calib white [ARGS...]   (refl calib NAME --help for its options)\n\n");
+    fprintf(f, "usage: refl calib geometry|lamps|gain|white [ARGS...]   (refl calib NAME --help for its options)\n\n");
     for (size_t i = 0; i < sizeof subs / sizeof subs[0]; i++) fprintf(f, "  %-9s %s\n", subs[i].name, subs[i].summary);
     fprintf(f, "\nrefl %s\n", REFL_VERSION);
 }

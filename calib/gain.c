@@ -1,0 +1,1562 @@
+// calib/gain.c — `refl calib gain`: the camera's sensitivity, EMVA 1288 style.
+//
+// Input: frames of a uniform source (a flat field) at known exposures, light
+// (lamps on) and dark (lamps off), from
+//   --rig RIG          captured here: per gain a probe, an exposure sweep
+//                      (frame pairs, light and dark, up to beyond saturation),
+//                      at the first gain also long dark frames (dark current)
+//                      and a flat field (many frames at ~50 % of saturation)
+//   --session DIR      a session captured elsewhere (light = lamps on, dark = "none")
+//   --frames CSV       a manifest "file,exposure_us,kind" (kind dark|light)
+// Analysis per gain (EMVA 1288 definitions, see calib/gain.h): photon transfer
+// (K, read noise, saturation, SNR, dynamic range), linearity error, response
+// (DN/us and kc per us per unit radiance); at the first gain also the dark
+// current, the offset and DSNU maps and the PRNU map (flat field).
+// Output: DIR/gain.json, DIR/offset_dn.tiff, DIR/dsnu_dn.tiff,
+// DIR/prnu_gain.tiff (total: vignetting included, mean 1),
+// DIR/prnu_highpass.tiff (smooth part removed, mean 1), DIR/report.html + PNGs.
+#define _GNU_SOURCE
+#include <errno.h>
+#include <getopt.h>
+#include <glib.h>
+#include <math.h>
+#include <stdarg.h>
+#include <stdlib.h>
+#include <string.h>
+#include <unistd.h>
+
+#include "calib/calib.h"
+#include "calib/gain.h"
+#include "model/model.h"
+
+// ---------------------------------------------------------------------------
+// Numerics
+
+// Solve A x = b (n x n, row-major, both overwritten) by Gaussian elimination
+// with partial pivoting. false when singular.
+static bool solve(double *A, double *b, int n)
+{
+    for (int c = 0; c < n; c++) {
+        int p = c;
+        for (int r = c + 1; r < n; r++)
+            if (fabs(A[r * n + c]) > fabs(A[p * n + c])) p = r;
+        if (!(fabs(A[p * n + c]) > 1e-300)) return false;
+        if (p != c) {
+            for (int k = 0; k < n; k++) {
+                double t = A[c * n + k];
+                A[c * n + k] = A[p * n + k];
+                A[p * n + k] = t;
+            }
+            double t = b[c];
+            b[c] = b[p];
+            b[p] = t;
+        }
+        for (int r = c + 1; r < n; r++) {
+            double f = A[r * n + c] / A[c * n + c];
+            for (int k = c; k < n; k++) A[r * n + k] -= f * A[c * n + k];
+            b[r] -= f * b[c];
+        }
+    }
+    for (int r = n - 1; r >= 0; r--) {
+        double s = b[r];
+        for (int k = r + 1; k < n; k++) s -= A[r * n + k] * b[k];
+        b[r] = s / A[r * n + r];
+    }
+    return true;
+}
+
+bool calib_gain_polyfit(const double *x, const double *y, int n, int degree, double *c)
+{
+    if (degree < 1 || degree > 2 || n <= degree) return false;
+    int m = degree + 1;
+    // scale x for conditioning
+    double sx = 0;
+    for (int i = 0; i < n; i++) sx = fmax(sx, fabs(x[i]));
+    if (!(sx > 0)) return false;
+    double A[9] = { 0 }, b[3] = { 0 };
+    for (int i = 0; i < n; i++) {
+        double p[3] = { 1, x[i] / sx, (x[i] / sx) * (x[i] / sx) };
+        for (int r = 0; r < m; r++) {
+            b[r] += p[r] * y[i];
+            for (int k = 0; k < m; k++) A[r * m + k] += p[r] * p[k];
+        }
+    }
+    if (!solve(A, b, m)) return false;
+    c[0] = b[0];
+    c[1] = b[1] / sx;
+    if (degree == 2) c[2] = b[2] / (sx * sx);
+    return true;
+}
+
+double calib_gain_linearity(const double *t, const double *mu, int n, double sat_dn, double lo, double hi,
+                            double *slope, double *offset, int *nfit, double *dev_pct)
+{
+    double *x = malloc(sizeof(double) * (n + 1)), *y = malloc(sizeof(double) * (n + 1));
+    int m = 0;
+    for (int i = 0; i < n; i++)
+        if (mu[i] >= lo * sat_dn && mu[i] <= hi * sat_dn) {
+            x[m] = t[i];
+            y[m] = mu[i];
+            m++;
+        }
+    double c[3] = { NAN, NAN, NAN }, le = NAN;
+    if (m >= 3 && calib_gain_polyfit(x, y, m, 1, c)) {
+        double dmin = INFINITY, dmax = -INFINITY;
+        for (int i = 0; i < n; i++) {
+            double line = c[0] + c[1] * t[i];
+            double d = 100.0 * (mu[i] - line) / line;
+            bool in = mu[i] >= lo * sat_dn && mu[i] <= hi * sat_dn;
+            if (dev_pct) dev_pct[i] = in ? d : NAN;
+            if (in) {
+                dmin = fmin(dmin, d);
+                dmax = fmax(dmax, d);
+            }
+        }
+        le = 0.5 * (dmax - dmin);
+    } else if (dev_pct)
+        for (int i = 0; i < n; i++) dev_pct[i] = NAN;
+    if (slope) *slope = c[1];
+    if (offset) *offset = c[0];
+    if (nfit) *nfit = m;
+    free(x);
+    free(y);
+    return le;
+}
+
+bool calib_gain_ptc(const double *t, const double *mu, const double *var, const double *var_y, int n,
+                    double var_dark_dn2, double quant_dn, calib_gain_ptc_t *o)
+{
+    memset(o, 0, sizeof *o);
+    if (n < 6) {
+        model_error(NULL, 0, "photon transfer: %d exposure steps; at least 6 are needed", n);
+        return false;
+    }
+    int imax = 0;
+    for (int i = 1; i < n; i++)
+        if (var[i] > var[imax]) imax = i;
+    // saturation: the variance must drop after its maximum (EMVA 1288)
+    bool drop = false;
+    for (int i = imax + 1; i < n; i++)
+        if (var[i] < 0.9 * var[imax]) drop = true;
+    if (!drop) {
+        model_error(NULL, 0, "photon transfer: the variance does not drop after its maximum %.4g DN^2 at %.6g us "
+                    "(mean %.6g DN above dark, the longest exposure of %d is %.6g us): the sweep does not reach "
+                    "saturation; extend it to longer exposures", var[imax], t[imax], mu[imax], n, t[n - 1]);
+        return false;
+    }
+    o->i_sat = imax;
+    o->saturation_dn = mu[imax];
+    double *x = malloc(sizeof(double) * n), *y = malloc(sizeof(double) * n);
+    int m = 0;
+    for (int i = 0; i < n; i++)
+        if (mu[i] > 0 && mu[i] <= 0.7 * o->saturation_dn) {
+            x[m] = mu[i];
+            y[m] = var[i];
+            m++;
+        }
+    double c2[3], c1[3];
+    bool ok = m >= 5 && calib_gain_polyfit(x, y, m, 2, c2) && calib_gain_polyfit(x, y, m, 1, c1);
+    free(x);
+    free(y);
+    if (!ok || !(c2[1] > 0)) {
+        model_error(NULL, 0, "photon transfer: %d points below 70 %% of saturation (%.6g DN); the fit of the "
+                    "variance against the mean failed (at least 5 are needed, with a rising variance)",
+                    m, o->saturation_dn);
+        return false;
+    }
+    o->n_ptc_fit = m;
+    o->system_gain_dn_per_e = c2[1];
+    o->system_gain_linear_dn_per_e = c1[1];
+    double rd2 = var_dark_dn2 - quant_dn * quant_dn / 12.0;
+    o->read_noise_dn = rd2 > 0 ? sqrt(rd2) : 0;
+    o->read_noise_e = o->read_noise_dn / o->system_gain_dn_per_e;
+    o->saturation_capacity_e = o->saturation_dn / o->system_gain_dn_per_e;
+    o->dynamic_range = o->read_noise_e > 0 ? o->saturation_capacity_e / o->read_noise_e : NAN;
+    o->linearity_error_pct = calib_gain_linearity(t, mu, n, o->saturation_dn, 0.05, 0.95, &o->response_dn_per_us,
+                                                  &o->response_offset_dn, &o->n_lin_fit, NULL);
+    o->snr_max = 0;
+    for (int i = 0; i <= imax; i++) {
+        double vy = var_y ? var_y[i] : var[i];
+        if (vy > 0) o->snr_max = fmax(o->snr_max, mu[i] / sqrt(vy));
+    }
+    return true;
+}
+
+double calib_gain_correlation(const float *a, const float *b, long n)
+{
+    double sa = 0, sb = 0;
+    for (long i = 0; i < n; i++) {
+        sa += a[i];
+        sb += b[i];
+    }
+    double ma = sa / n, mb = sb / n, saa = 0, sbb = 0, sab = 0;
+    for (long i = 0; i < n; i++) {
+        double da = a[i] - ma, db = b[i] - mb;
+        saa += da * da;
+        sbb += db * db;
+        sab += da * db;
+    }
+    if (!(saa > 0 && sbb > 0)) return NAN;
+    return sab / sqrt(saa * sbb);
+}
+
+bool calib_gain_highpass(const float *in, int w, int h, float *out)
+{
+    double A[36] = { 0 }, b[6] = { 0 };
+    const double cx = 0.5 * (w - 1), cy = 0.5 * (h - 1);
+    const double sx = cx > 0 ? cx : 1, sy = cy > 0 ? cy : 1;
+    for (int y = 0; y < h; y++) {
+        double v = (y - cy) / sy;
+        // per row: sums over x of the x-dependent terms, then the outer product
+        double S[5] = { 0 }, T[3] = { 0 };   // sum u^k (k 0..4), sum u^k * in (k 0..2)
+        for (int x = 0; x < w; x++) {
+            double u = (x - cx) / sx, f = in[(size_t)y * w + x];
+            double u2 = u * u;
+            S[0] += 1;
+            S[1] += u;
+            S[2] += u2;
+            S[3] += u2 * u;
+            S[4] += u2 * u2;
+            T[0] += f;
+            T[1] += f * u;
+            T[2] += f * u2;
+        }
+        // basis: 1, u, v, u^2, u v, v^2  = u^a v^b
+        static const int pa[6] = { 0, 1, 0, 2, 1, 0 }, pb[6] = { 0, 0, 1, 0, 1, 2 };
+        for (int r = 0; r < 6; r++) {
+            b[r] += T[pa[r]] * pow(v, pb[r]);
+            for (int k = 0; k < 6; k++) A[r * 6 + k] += S[pa[r] + pa[k]] * pow(v, pb[r] + pb[k]);
+        }
+    }
+    if (!solve(A, b, 6)) return false;
+    for (int y = 0; y < h; y++) {
+        double v = (y - cy) / sy;
+        for (int x = 0; x < w; x++) {
+            double u = (x - cx) / sx;
+            double s = b[0] + b[1] * u + b[2] * v + b[3] * u * u + b[4] * u * v + b[5] * v * v;
+            size_t i = (size_t)y * w + x;
+            out[i] = s != 0 ? (float)(in[i] / s) : NAN;
+        }
+    }
+    return true;
+}
+
+// ---------------------------------------------------------------------------
+// Frames and groups
+
+enum { SET_ANY, SET_SWEEP, SET_DARK, SET_FLAT };
+
+typedef struct {
+    char  *path;          // full path
+    char   sha256[65];    // expected ("" = not checked: manifest)
+    char  *where;         // manifest path, or session directory
+    int    line;          // manifest line (0: a session frame)
+    int    step;          // session step
+    double exposure_us, gain_db;
+    bool   dark;
+    int    set;
+    int    max_dn;        // full scale of the frame's pixel format
+    int    nlamps;        // lamps on (session frames: from the lamp set; -1 unknown)
+} gframe_t;
+
+typedef struct {
+    double exposure_us, gain_db;
+    bool   dark;
+    int    set;
+    int   *idx;           // frames
+    int    n;
+    // pass 1
+    double mean_dn;       // spatial mean (ROI) of the frames' average
+    double var_dn2;       // temporal variance var(A - B) / 2 averaged over pairs (NAN: a single frame)
+    double sat_frac;      // fraction of ROI pixels at full scale (first frame)
+    int    width, height;
+    char  *error;
+} ggroup_t;
+
+typedef struct {
+    gframe_t *f;
+    int       nf;
+    ggroup_t *g;
+    int       ng;
+    int       roi[4];     // x y w h (w 0: whole frame)
+} gdata_t;
+
+static void gdata_free(gdata_t *d)
+{
+    for (int i = 0; i < d->nf; i++) {
+        free(d->f[i].path);
+        free(d->f[i].where);
+    }
+    for (int i = 0; i < d->ng; i++) {
+        free(d->g[i].idx);
+        free(d->g[i].error);
+    }
+    free(d->f);
+    free(d->g);
+}
+
+static void add_frame(gdata_t *d, const gframe_t *f)
+{
+    d->f = realloc(d->f, sizeof *d->f * (d->nf + 1));
+    d->f[d->nf++] = *f;
+}
+
+static const char *frame_name(const gframe_t *f, char *buf, size_t size)
+{
+    if (f->line > 0) snprintf(buf, size, "%s:%d (%s)", f->where, f->line, f->path);
+    else snprintf(buf, size, "%s (session %s, step %d)", f->path, f->where, f->step);
+    return buf;
+}
+
+// Load a frame; errors name the manifest line or the session step.
+static float *frame_load(const gframe_t *f, int *w, int *h)
+{
+    bool q = model_error_quiet_thread(true);
+    float *img = NULL;
+    char sha[65];
+    if (f->sha256[0]) {
+        if (!model_sha256_file(f->path, sha)) goto fail;
+        if (strcmp(sha, f->sha256)) {
+            model_error(f->path, 0, "sha256 %s differs from the journal's %s: the frame was changed or damaged",
+                        sha, f->sha256);
+            goto fail;
+        }
+    }
+    img = calib_image_read(f->path, w, h);
+    if (!img) goto fail;
+    model_error_quiet_thread(q);
+    return img;
+fail:;
+    char *why = g_strdup(model_last_error());
+    model_error_quiet_thread(q);
+    if (f->line > 0) model_error(f->where, f->line, "frame %s: %s", f->path, why);
+    else model_error(f->path, 0, "step %d of the session %s: %s", f->step, f->where, why);
+    g_free(why);
+    return NULL;
+}
+
+static void roi_of(const gdata_t *d, int w, int h, int r[4])
+{
+    if (d->roi[2] > 0) memcpy(r, d->roi, sizeof d->roi);
+    else {
+        r[0] = r[1] = 0;
+        r[2] = w;
+        r[3] = h;
+    }
+}
+
+static int group_find(gdata_t *d, double exposure_us, double gain_db, bool dark, int set)
+{
+    for (int i = 0; i < d->ng; i++) {
+        ggroup_t *g = &d->g[i];
+        if (g->exposure_us == exposure_us && g->gain_db == gain_db && g->dark == dark && g->set == set) return i;
+    }
+    d->g = realloc(d->g, sizeof *d->g * (d->ng + 1));
+    d->g[d->ng] = (ggroup_t){ .exposure_us = exposure_us, .gain_db = gain_db, .dark = dark, .set = set,
+                              .var_dn2 = NAN };
+    return d->ng++;
+}
+
+static void make_groups(gdata_t *d)
+{
+    for (int i = 0; i < d->nf; i++) {
+        const gframe_t *f = &d->f[i];
+        int set = f->set == SET_ANY ? SET_SWEEP : f->set;
+        int gi = group_find(d, f->exposure_us, f->gain_db, f->dark, set);
+        ggroup_t *g = &d->g[gi];
+        g->idx = realloc(g->idx, sizeof(int) * (g->n + 1));
+        g->idx[g->n++] = i;
+    }
+}
+
+typedef struct {
+    gdata_t *d;
+    int      done;
+    int      total;
+    double   t0;
+} pass1_t;
+
+static void pass1_rows(void *ctx, int begin, int end, int thread)
+{
+    (void)thread;
+    pass1_t *P = ctx;
+    gdata_t *d = P->d;
+    for (int gi = begin; gi < end; gi++) {
+        ggroup_t *g = &d->g[gi];
+        float *prev = NULL;
+        double sum_mean = 0, sum_var = 0;
+        int npairs = 0;
+        for (int k = 0; k < g->n && !g->error; k++) {
+            const gframe_t *f = &d->f[g->idx[k]];
+            int w, h;
+            float *img = frame_load(f, &w, &h);
+            if (!img) {
+                g->error = g_strdup(model_last_error());
+                break;
+            }
+            char nb[1024];
+            if (k == 0) {
+                g->width = w;
+                g->height = h;
+            } else if (w != g->width || h != g->height) {
+                g->error = g_strdup_printf("%s: %dx%d pixels, the other frames of this exposure are %dx%d",
+                                           frame_name(f, nb, sizeof nb), w, h, g->width, g->height);
+                free(img);
+                break;
+            }
+            int r[4];
+            roi_of(d, w, h, r);
+            if (r[0] + r[2] > w || r[1] + r[3] > h) {
+                g->error = g_strdup_printf("%s: the region %d,%d,%d,%d does not fit the %dx%d frame",
+                                           frame_name(f, nb, sizeof nb), r[0], r[1], r[2], r[3], w, h);
+                free(img);
+                break;
+            }
+            double s = 0, sd = 0, sdd = 0;
+            long nsat = 0, np = (long)r[2] * r[3];
+            for (int y = r[1]; y < r[1] + r[3]; y++) {
+                const float *row = img + (size_t)y * w;
+                const float *prow = prev ? prev + (size_t)y * w : NULL;
+                for (int x = r[0]; x < r[0] + r[2]; x++) {
+                    s += row[x];
+                    if (row[x] >= f->max_dn) nsat++;
+                    if (prow) {
+                        double dd = (double)row[x] - prow[x];
+                        sd += dd;
+                        sdd += dd * dd;
+                    }
+                }
+            }
+            sum_mean += s / np;
+            if (k == 0) g->sat_frac = (double)nsat / np;
+            if (prev) {
+                double md = sd / np;
+                sum_var += 0.5 * (sdd / np - md * md);
+                npairs++;
+                free(prev);
+                prev = NULL;
+                free(img);
+            } else
+                prev = img;
+        }
+        free(prev);
+        if (!g->error) {
+            g->mean_dn = sum_mean / g->n;
+            g->var_dn2 = npairs ? sum_var / npairs : NAN;
+        }
+        int done = __atomic_add_fetch(&P->done, g->n, __ATOMIC_ACQ_REL);
+        if (P->total > 100 && (done * 10 / P->total) != ((done - g->n) * 10 / P->total))
+            fprintf(stderr, "refl calib gain: read %d/%d frames (%.0f s)\n", done, P->total, model_now_s() - P->t0);
+    }
+}
+
+static bool pass1(gdata_t *d)
+{
+    pass1_t P = { d, 0, d->nf, model_now_s() };
+    model_parallel_for(d->ng, 1, model_default_threads(), pass1_rows, &P);
+    for (int i = 0; i < d->ng; i++)
+        if (d->g[i].error) {
+            model_error(NULL, 0, "%s", d->g[i].error);
+            return false;
+        }
+    // one frame size
+    for (int i = 1; i < d->ng; i++)
+        if (d->g[i].width != d->g[0].width || d->g[i].height != d->g[0].height) {
+            char nb[1024];
+            model_error(NULL, 0, "%s: %dx%d pixels, but %dx%d elsewhere in the input",
+                        frame_name(&d->f[d->g[i].idx[0]], nb, sizeof nb), d->g[i].width, d->g[i].height,
+                        d->g[0].width, d->g[0].height);
+            return false;
+        }
+    return true;
+}
+
+// ---------------------------------------------------------------------------
+// Analysis of one gain
+
+typedef struct {
+    double gain_db;
+    int    n;
+    double *t, *mu_y, *var_y, *mu_d, *var_d, *mu, *var, *dev_pct, *snr;
+    calib_gain_ptc_t ptc;
+    double var_dark_dn2;        // sigma^2_y.dark (intercept at exposure 0)
+    double dark_slope_dn_per_us, dark_intercept_dn;
+    double dark_t_min_us, dark_t_max_us;
+    int    ndark;               // dark exposures used for the dark current
+    double radiance;            // total radiance of the light frames (NAN unknown)
+    double kc_per_us;           // response / radiance
+    double response0_dn_per_us; // small-signal response: slope at 0 of a quadratic in exposure (0..70 % of sat)
+    double kc0_per_us;          // response0 / radiance
+} gain_an_t;
+
+static void gain_an_free(gain_an_t *a)
+{
+    free(a->t);
+    free(a->mu_y);
+    free(a->var_y);
+    free(a->mu_d);
+    free(a->var_d);
+    free(a->mu);
+    free(a->var);
+    free(a->dev_pct);
+    free(a->snr);
+}
+
+static int cmp_group_t(const void *a, const void *b)
+{
+    const ggroup_t *const *x = a, *const *y = b;
+    return ((*x)->exposure_us > (*y)->exposure_us) - ((*x)->exposure_us < (*y)->exposure_us);
+}
+
+static bool analyse_gain(gdata_t *d, double gain_db, int min_steps, double quant_dn, gain_an_t *a)
+{
+    memset(a, 0, sizeof *a);
+    a->gain_db = gain_db;
+    a->radiance = NAN;
+    a->kc_per_us = NAN;
+    // dark model: mean and variance against exposure (all dark groups of this gain)
+    int nd = 0, nl = 0;
+    double *dt = malloc(sizeof(double) * d->ng), *dm = malloc(sizeof(double) * d->ng),
+           *dv = malloc(sizeof(double) * d->ng);
+    int ndv = 0;
+    double *dtv = malloc(sizeof(double) * d->ng);
+    ggroup_t **light = malloc(sizeof *light * d->ng);
+    for (int i = 0; i < d->ng; i++) {
+        ggroup_t *g = &d->g[i];
+        if (g->gain_db != gain_db) continue;
+        if (g->dark) {
+            dt[nd] = g->exposure_us;
+            dm[nd] = g->mean_dn;
+            nd++;
+            if (isfinite(g->var_dn2)) {
+                dtv[ndv] = g->exposure_us;
+                dv[ndv] = g->var_dn2;
+                ndv++;
+            }
+        } else if (g->set == SET_SWEEP && g->n >= 2)
+            light[nl++] = g;
+    }
+    bool ok = false;
+    if (nd == 0 || ndv == 0) {
+        model_error(NULL, 0, "gain %g dB: no dark frame pairs (kind dark, at least two frames at an exposure); the "
+                    "dark level and temporal dark noise need them", gain_db);
+        goto done;
+    }
+    a->ndark = nd;
+    a->dark_t_min_us = INFINITY;
+    a->dark_t_max_us = -INFINITY;
+    for (int i = 0; i < nd; i++) {
+        a->dark_t_min_us = fmin(a->dark_t_min_us, dt[i]);
+        a->dark_t_max_us = fmax(a->dark_t_max_us, dt[i]);
+    }
+    double c[3];
+    if (a->dark_t_max_us > a->dark_t_min_us && calib_gain_polyfit(dt, dm, nd, 1, c)) {
+        a->dark_intercept_dn = c[0];
+        a->dark_slope_dn_per_us = c[1];
+    } else {
+        double s = 0;
+        for (int i = 0; i < nd; i++) s += dm[i];
+        a->dark_intercept_dn = s / nd;
+        a->dark_slope_dn_per_us = 0;
+    }
+    double dvc[3];
+    bool dv_fit = false;
+    {
+        double tmin = INFINITY, tmax = -INFINITY;
+        for (int i = 0; i < ndv; i++) {
+            tmin = fmin(tmin, dtv[i]);
+            tmax = fmax(tmax, dtv[i]);
+        }
+        dv_fit = ndv >= 3 && tmax > tmin && calib_gain_polyfit(dtv, dv, ndv, 1, dvc);
+        if (dv_fit) a->var_dark_dn2 = dvc[0];
+        else {
+            double s = 0;
+            for (int i = 0; i < ndv; i++) s += dv[i];
+            a->var_dark_dn2 = s / ndv;
+        }
+    }
+    if (nl < min_steps) {
+        model_error(NULL, 0, "gain %g dB: too few sweep steps: %d exposures with a pair of light frames, EMVA 1288 "
+                    "asks for at least %d (capture more exposures, e.g. --steps 50)", gain_db, nl, min_steps);
+        goto done;
+    }
+    qsort(light, nl, sizeof *light, cmp_group_t);
+    a->n = nl;
+#define ALLOC(p) a->p = calloc(nl, sizeof(double))
+    ALLOC(t); ALLOC(mu_y); ALLOC(var_y); ALLOC(mu_d); ALLOC(var_d); ALLOC(mu); ALLOC(var); ALLOC(dev_pct); ALLOC(snr);
+#undef ALLOC
+    for (int i = 0; i < nl; i++) {
+        ggroup_t *g = light[i];
+        a->t[i] = g->exposure_us;
+        a->mu_y[i] = g->mean_dn;
+        a->var_y[i] = g->var_dn2;
+        // the dark pair at the same exposure, else the dark model
+        ggroup_t *best = NULL;
+        for (int k = 0; k < d->ng; k++) {
+            ggroup_t *h = &d->g[k];
+            if (h->gain_db == gain_db && h->dark && h->exposure_us == g->exposure_us && isfinite(h->var_dn2) &&
+                (!best || h->n > best->n))
+                best = h;
+        }
+        if (best) {
+            a->mu_d[i] = best->mean_dn;
+            a->var_d[i] = best->var_dn2;
+        } else {
+            a->mu_d[i] = a->dark_intercept_dn + a->dark_slope_dn_per_us * g->exposure_us;
+            a->var_d[i] = dv_fit ? dvc[0] + dvc[1] * g->exposure_us : a->var_dark_dn2;
+        }
+        a->mu[i] = a->mu_y[i] - a->mu_d[i];
+        a->var[i] = a->var_y[i] - a->var_d[i];
+        a->snr[i] = a->var_y[i] > 0 ? a->mu[i] / sqrt(a->var_y[i]) : NAN;
+    }
+    if (!calib_gain_ptc(a->t, a->mu, a->var, a->var_y, nl, a->var_dark_dn2, quant_dn, &a->ptc)) {
+        char *m = g_strdup(model_last_error());
+        model_error(NULL, 0, "gain %g dB: %s", gain_db, m);
+        g_free(m);
+        goto done;
+    }
+    calib_gain_linearity(a->t, a->mu, nl, a->ptc.saturation_dn, 0.05, 0.95, NULL, NULL, NULL, a->dev_pct);
+    {
+        double *x = malloc(sizeof(double) * nl), *y = malloc(sizeof(double) * nl), q[3];
+        int m = 0;
+        for (int i = 0; i < nl; i++)
+            if (a->mu[i] <= 0.7 * a->ptc.saturation_dn) {
+                x[m] = a->t[i];
+                y[m] = a->mu[i];
+                m++;
+            }
+        a->response0_dn_per_us = m >= 4 && calib_gain_polyfit(x, y, m, 2, q) ? q[1] : NAN;
+        free(x);
+        free(y);
+    }
+    ok = true;
+done:
+    free(dt);
+    free(dm);
+    free(dv);
+    free(dtv);
+    free(light);
+    return ok;
+}
+
+// ---------------------------------------------------------------------------
+// Maps (flat field, dark)
+
+typedef struct {
+    int     w, h;
+    float  *offset, *dsnu, *prnu, *prnu_hp;
+    double  flat_exposure_us, flat_level_dn, flat_sat_frac;
+    int     flat_frames, dark_frames;
+    double  dark_exposure_us;
+    double  dsnu_dn, dsnu_total_raw_dn;
+    double  prnu_pct, prnu_total_pct;
+    double  flat_var_dn2, dark_var_dn2;
+    bool    dark_same_exposure;
+} maps_t;
+
+static void maps_free(maps_t *m)
+{
+    free(m->offset);
+    free(m->dsnu);
+    free(m->prnu);
+    free(m->prnu_hp);
+}
+
+// Average of a group's frames (full frame) into out (w*h doubles summed then divided).
+static bool group_average(const gdata_t *d, const ggroup_t *g, int w, int h, float *out)
+{
+    size_t n = (size_t)w * h;
+    double *sum = calloc(n, sizeof(double));
+    for (int k = 0; k < g->n; k++) {
+        int fw, fh;
+        float *img = frame_load(&d->f[g->idx[k]], &fw, &fh);
+        if (!img) {
+            free(sum);
+            return false;
+        }
+        for (size_t i = 0; i < n; i++) sum[i] += img[i];
+        free(img);
+    }
+    for (size_t i = 0; i < n; i++) out[i] = (float)(sum[i] / g->n);
+    free(sum);
+    return true;
+}
+
+static double roi_mean_var(const gdata_t *d, const float *m, int w, int h, double *var)
+{
+    int r[4];
+    roi_of(d, w, h, r);
+    double s = 0, ss = 0;
+    long np = (long)r[2] * r[3];
+    for (int y = r[1]; y < r[1] + r[3]; y++)
+        for (int x = r[0]; x < r[0] + r[2]; x++) {
+            double v = m[(size_t)y * w + x];
+            s += v;
+            ss += v * v;
+        }
+    double mean = s / np;
+    if (var) *var = ss / np - mean * mean;
+    return mean;
+}
+
+static bool make_maps(gdata_t *d, const gain_an_t *a, maps_t *m)
+{
+    memset(m, 0, sizeof *m);
+    const double sat = a->ptc.saturation_dn;
+    // the flat: the flat set's light group, else the sweep group with the most
+    // frames (ties: nearest 50 % of saturation) below saturation
+    ggroup_t *flat = NULL;
+    for (int i = 0; i < d->ng; i++) {
+        ggroup_t *g = &d->g[i];
+        if (g->gain_db == a->gain_db && !g->dark && g->set == SET_FLAT && (!flat || g->n > flat->n)) flat = g;
+    }
+    if (!flat)
+        for (int i = 0; i < d->ng; i++) {
+            ggroup_t *g = &d->g[i];
+            if (g->gain_db != a->gain_db || g->dark || g->n < 2) continue;
+            // the dark-subtracted level of this group
+            double lv = g->mean_dn - (a->dark_intercept_dn + a->dark_slope_dn_per_us * g->exposure_us);
+            if (lv > 0.9 * sat && g->n <= 2) continue;
+            double lf = flat ? flat->mean_dn - (a->dark_intercept_dn + a->dark_slope_dn_per_us * flat->exposure_us)
+                             : 0;
+            if (!flat || g->n > flat->n || (g->n == flat->n && fabs(lv - 0.5 * sat) < fabs(lf - 0.5 * sat)))
+                flat = g;
+        }
+    if (!flat) {
+        model_error(NULL, 0, "gain %g dB: no flat-field frames (light, at least two at one exposure)", a->gain_db);
+        return false;
+    }
+    // its dark: the same exposure (most frames), else the dark group with the most frames
+    ggroup_t *dark = NULL;
+    for (int i = 0; i < d->ng; i++) {
+        ggroup_t *g = &d->g[i];
+        if (g->gain_db == a->gain_db && g->dark && g->exposure_us == flat->exposure_us && (!dark || g->n > dark->n))
+            dark = g;
+    }
+    m->dark_same_exposure = dark != NULL;
+    if (!dark)
+        for (int i = 0; i < d->ng; i++) {
+            ggroup_t *g = &d->g[i];
+            if (g->gain_db == a->gain_db && g->dark && (!dark || g->n > dark->n)) dark = g;
+        }
+    char nb[1024];
+    double dark_level = a->dark_intercept_dn + a->dark_slope_dn_per_us * flat->exposure_us;
+    m->flat_level_dn = flat->mean_dn - dark_level;
+    m->flat_exposure_us = flat->exposure_us;
+    m->flat_sat_frac = flat->sat_frac;
+    m->flat_frames = flat->n;
+    // the exposure of 50 % of saturation, from the linearity line
+    const double t_half = (0.5 * sat - a->ptc.response_offset_dn) / a->ptc.response_dn_per_us;
+    if (flat->sat_frac > 1e-4 || m->flat_level_dn > 0.9 * sat) {
+        model_error(NULL, 0, "%s: the flat field (%d frames at %.6g us) is saturated: mean %.1f DN above dark (%.1f DN "
+                    "grey value), %.3f %% of its pixels at full scale; saturation is at %.1f DN above dark: use an "
+                    "exposure near %.0f %% of it (~%.6g us)", frame_name(&d->f[flat->idx[0]], nb, sizeof nb), flat->n,
+                    flat->exposure_us, m->flat_level_dn, flat->mean_dn, 100 * flat->sat_frac, sat, 50.0, t_half);
+        return false;
+    }
+    if (m->flat_level_dn < 0.1 * sat) {
+        model_error(NULL, 0, "%s: the flat field (%d frames at %.6g us) is too dark: mean %.2f DN above dark (%.1f DN "
+                    "grey value, dark %.1f DN), below 10 %% of saturation (%.1f DN above dark): use an exposure near "
+                    "50 %% of saturation (~%.6g us)", frame_name(&d->f[flat->idx[0]], nb, sizeof nb), flat->n,
+                    flat->exposure_us, m->flat_level_dn, flat->mean_dn, dark_level, sat, t_half);
+        return false;
+    }
+    int w = flat->width, h = flat->height;
+    size_t n = (size_t)w * h;
+    m->w = w;
+    m->h = h;
+    m->offset = malloc(n * sizeof(float));
+    m->dsnu = malloc(n * sizeof(float));
+    m->prnu = malloc(n * sizeof(float));
+    m->prnu_hp = malloc(n * sizeof(float));
+    fprintf(stderr, "refl calib gain: flat field: %d light frames at %.6g us (%.0f DN above dark, %.0f %% of "
+            "saturation), %d dark frames at %.6g us\n", flat->n, flat->exposure_us, m->flat_level_dn,
+            100 * m->flat_level_dn / sat, dark->n, dark->exposure_us);
+    if (!group_average(d, dark, w, h, m->offset) || !group_average(d, flat, w, h, m->prnu)) return false;
+    m->dark_frames = dark->n;
+    m->dark_exposure_us = dark->exposure_us;
+    // dark level at the flat's exposure
+    double dshift = m->dark_same_exposure ? 0 : a->dark_slope_dn_per_us * (flat->exposure_us - dark->exposure_us);
+    double dvar;
+    double dmean = roi_mean_var(d, m->offset, w, h, &dvar);
+    m->dark_var_dn2 = isfinite(dark->var_dn2) ? dark->var_dn2 : a->var_dark_dn2;
+    m->dsnu_total_raw_dn = sqrt(fmax(dvar, 0));
+    double d2 = dvar - m->dark_var_dn2 / dark->n;
+    m->dsnu_dn = sqrt(fmax(d2, 0));
+    for (size_t i = 0; i < n; i++) {
+        m->prnu[i] -= (float)(m->offset[i] + dshift);   // signal
+        m->dsnu[i] = (float)(m->offset[i] - dmean);
+    }
+    double svar, smean = roi_mean_var(d, m->prnu, w, h, &svar);
+    m->flat_var_dn2 = isfinite(flat->var_dn2) ? flat->var_dn2 : NAN;
+    double tvar = (isfinite(m->flat_var_dn2) ? m->flat_var_dn2 / flat->n : 0) + m->dark_var_dn2 / dark->n;
+    m->prnu_total_pct = 100 * sqrt(fmax(svar - tvar, 0)) / smean;
+    if (!calib_gain_highpass(m->prnu, w, h, m->prnu_hp)) {
+        model_error(NULL, 0, "flat field: the smooth-surface fit is singular (%dx%d frames)", w, h);
+        return false;
+    }
+    // spatial variance of the high-pass map, in DN^2 of the signal
+    double hvar;
+    roi_mean_var(d, m->prnu_hp, w, h, &hvar);
+    double hp2 = hvar - tvar / (smean * smean);
+    m->prnu_pct = 100 * sqrt(fmax(hp2, 0));
+    // the total map normalised to mean 1 (over the whole frame)
+    double s = 0;
+    for (size_t i = 0; i < n; i++) s += m->prnu[i];
+    s /= n;
+    for (size_t i = 0; i < n; i++) m->prnu[i] = (float)(m->prnu[i] / s);
+    return true;
+}
+
+// ---------------------------------------------------------------------------
+// Inputs
+
+static char *trim(char *s)
+{
+    while (*s == ' ' || *s == '\t') s++;
+    char *e = s + strlen(s);
+    while (e > s && (e[-1] == ' ' || e[-1] == '\t' || e[-1] == '\r' || e[-1] == '\n')) *--e = 0;
+    return s;
+}
+
+static bool read_manifest(const char *path, int max_dn, gdata_t *d)
+{
+    char *text = model_read_file(path, NULL);
+    if (!text) return false;
+    char *dir = g_path_get_dirname(path);
+    bool ok = false;
+    int line = 0, nframes = 0;
+    char *save = NULL;
+    for (char *l = text, *next; l; l = next) {
+        next = strchr(l, '\n');
+        if (next) *next++ = 0;
+        line++;
+        char *s = trim(l);
+        if (!*s || *s == '#') continue;
+        char *f[4] = { 0 };
+        int nf = 0;
+        for (char *p = strtok_r(s, ",", &save); p && nf < 4; p = strtok_r(NULL, ",", &save)) f[nf++] = trim(p);
+        if (nf == 3 && nframes == 0 && !strcmp(f[0], "file") && !strcmp(f[1], "exposure_us") && !strcmp(f[2], "kind"))
+            continue;   // the header
+        if (nf != 3) {
+            model_error(path, line, "expected 3 fields file,exposure_us,kind, found %d", nf);
+            goto done;
+        }
+        double e;
+        if (!model_parse_double(f[1], &e) || !(e > 0)) {
+            model_error(path, line, "exposure_us '%s' is not a positive number (microseconds)", f[1]);
+            goto done;
+        }
+        bool dark;
+        if (!strcmp(f[2], "dark")) dark = true;
+        else if (!strcmp(f[2], "light")) dark = false;
+        else {
+            model_error(path, line, "kind '%s' must be dark or light", f[2]);
+            goto done;
+        }
+        if (!*f[0]) {
+            model_error(path, line, "empty file name");
+            goto done;
+        }
+        gframe_t fr = { .path = f[0][0] == '/' ? g_strdup(f[0]) : g_build_filename(dir, f[0], NULL),
+                        .where = g_strdup(path), .line = line, .exposure_us = e, .gain_db = 0, .dark = dark,
+                        .set = SET_ANY, .max_dn = max_dn, .nlamps = -1 };
+        if (access(fr.path, R_OK) != 0) {
+            model_error(path, line, "frame %s: %s", fr.path, strerror(errno));
+            g_free(fr.path);
+            g_free(fr.where);
+            goto done;
+        }
+        add_frame(d, &fr);
+        nframes++;
+    }
+    if (!nframes) {
+        model_error(path, 0, "no frames listed (lines file,exposure_us,kind)");
+        goto done;
+    }
+    ok = true;
+done:
+    g_free(dir);
+    free(text);
+    return ok;
+}
+
+static int format_max(const char *pf)
+{
+    if (!strcmp(pf, "Mono8")) return 255;
+    if (!strcmp(pf, "Mono12")) return 4095;
+    return 65535;
+}
+
+static int lamps_on(const char *lamps, int nlamps_rig)
+{
+    if (!strcmp(lamps, "none")) return 0;
+    if (!strcmp(lamps, "all")) return nlamps_rig;
+    int n = 1;
+    for (const char *p = lamps; *p; p++) n += *p == '+';
+    return n;
+}
+
+// Frames of a session; set: the role of its frames (SET_ANY: by lamps).
+static bool add_session(gdata_t *d, const char *dir, int set, json_t **facts_out)
+{
+    calib_session_t *s = calib_session_open(dir);
+    if (!s) return false;
+    int nlr = -1;
+    json_t *lamps = s->facts ? json_object_get(s->facts, "lamps") : NULL;
+    if (json_is_array(lamps)) nlr = (int)json_array_size(lamps);
+    for (int i = 0; i < s->n; i++) {
+        const rig_frame_row_t *r = &s->rows[i];
+        int on = lamps_on(r->lamps, nlr);
+        gframe_t f = { .path = g_strdup_printf("%s/%s", dir, r->file), .where = g_strdup(dir), .line = 0,
+                       .step = r->step, .exposure_us = r->exposure_us, .gain_db = r->gain, .dark = on == 0,
+                       .set = set, .max_dn = format_max(r->pixel_format), .nlamps = on };
+        snprintf(f.sha256, sizeof f.sha256, "%s", r->sha256);
+        add_frame(d, &f);
+    }
+    if (facts_out && !*facts_out && s->facts) *facts_out = json_incref(s->facts);
+    calib_session_free(s);
+    return true;
+}
+
+// The flat field's radiance per lamp from a virtual rig's truth file (NAN: unknown).
+static double truth_radiance(json_t *facts, const char **truth_out)
+{
+    json_t *v = facts ? json_object_get(facts, "virtual_rig") : NULL;
+    const char *truth = json_string_value(json_object_get(v, "truth"));
+    const char *sample = json_string_value(json_object_get(v, "sample"));
+    if (truth_out) *truth_out = truth;
+    if (!truth || !sample) return NAN;
+    model_ini_t *ini = model_ini_load(truth);
+    if (!ini) return NAN;
+    char *sec = g_strdup_printf("sample %s", sample);
+    const model_ini_entry_t *e = model_ini_get(ini, sec, "radiance");
+    const model_ini_entry_t *k = model_ini_get(ini, sec, "kind");
+    double r = NAN;
+    if (e && k && !strcmp(k->value, "uniform_source") && !model_parse_double(e->value, &r)) r = NAN;
+    g_free(sec);
+    model_ini_free(ini);
+    return r;
+}
+
+// ---------------------------------------------------------------------------
+// Capture on a rig
+
+typedef struct {
+    const char *rig, *out, *sample, *lamps, *pixel_format;
+    int         steps, flat_frames, progress;
+    double      probe_us, max_us;
+    char       *dark_list;
+} capture_opts_t;
+
+static char *plan_text(const capture_opts_t *c, const char *name, const char *lamps, const char *list,
+                       double gain, int repeats)
+{
+    return g_strdup_printf("# refl calib gain: %s (written by refl; see rig/rig.h, Capture sessions)\n"
+                           "[plan]\nname = calib gain %s\n[sample]\nname = %s\nkind = uniform_source\n"
+                           "[angles]\nlist = 0\n[lamps]\nsets = %s\n[exposure]\nmode = fixed\nlist_us = %s\n"
+                           "gain = %g\npixel_format = %s\n[capture]\nrepeats = %d\n",
+                           name, name, c->sample, lamps, list, gain, c->pixel_format, repeats);
+}
+
+static int run_plan(const capture_opts_t *c, const char *name, const char *lamps, const char *list, double gain,
+                    int repeats)
+{
+    char *p = plan_text(c, name, lamps, list, gain, repeats);
+    fprintf(stderr, "refl calib gain: capturing %s (%s, lamps %s, %d repeats)\n", name, gain > 0 ? "gain" : "0 dB",
+            lamps, repeats);
+    int rc = calib_capture(c->rig, c->out, name, p, c->progress);
+    g_free(p);
+    return rc;
+}
+
+// Mean of a session's frames by kind (lamps on / off) at one exposure.
+static bool probe_levels(const char *dir, double *light, double *dark, double *max_dn)
+{
+    calib_session_t *s = calib_session_open(dir);
+    if (!s) return false;
+    *light = *dark = NAN;
+    for (int i = 0; i < s->n; i++) {
+        if (!strcmp(s->rows[i].lamps, "none")) *dark = s->rows[i].mean;
+        else *light = s->rows[i].mean;
+        *max_dn = format_max(s->rows[i].pixel_format);
+    }
+    calib_session_free(s);
+    if (!(isfinite(*light) && isfinite(*dark))) {
+        model_error(dir, 0, "the probe session has no light and dark frame");
+        return false;
+    }
+    return true;
+}
+
+static char *exposure_list(const double *t, int n)
+{
+    GString *g = g_string_new("");
+    for (int i = 0; i < n; i++) g_string_append_printf(g, "%s%.0f", i ? " " : "", t[i]);
+    return g_string_free(g, FALSE);
+}
+
+// Probe and sweep at one gain; *t_sat_us: the estimated exposure of full scale.
+static bool capture_sweep(const capture_opts_t *c, double gain, char **sweep_dir, double *t_sat_us)
+{
+    double probe = c->probe_us, t_full = NAN;
+    for (int attempt = 0; attempt < 8 && !isfinite(t_full); attempt++) {
+        char *name = g_strdup_printf("probe_g%g_%.0fus", gain, probe);
+        char *list = g_strdup_printf("%.0f", probe);
+        char *sets = g_strdup_printf("%s; none", c->lamps);
+        int rc = run_plan(c, name, sets, list, gain, 1);
+        g_free(sets);
+        char *dir = g_strdup_printf("%s/%s", c->out, name);
+        double l, dk, mx;
+        bool ok = rc == 0 && probe_levels(dir, &l, &dk, &mx);
+        g_free(list);
+        g_free(name);
+        g_free(dir);
+        if (!ok) return false;
+        double sig = l - dk;
+        fprintf(stderr, "refl calib gain: probe at %.0f us: light %.1f DN, dark %.1f DN\n", probe, l, dk);
+        if (l > 0.6 * mx) probe = fmax(10, floor(probe / 8));
+        else if (sig < 0.02 * mx) probe *= 8;
+        else t_full = probe * (mx - dk) / sig;
+        if (probe > 1e7) break;
+    }
+    if (!isfinite(t_full)) {
+        model_error(c->rig, 0, "gain %g dB: no exposure between 10 us and 10 s gives a usable level of the flat "
+                    "field (lamps %s): check the lamps and the source", gain, c->lamps);
+        return false;
+    }
+    double tmax = isfinite(c->max_us) ? c->max_us : 1.2 * t_full;
+    *t_sat_us = t_full;
+    double *t = malloc(sizeof(double) * c->steps);
+    for (int i = 0; i < c->steps; i++) t[i] = fmax(10, round(tmax * (i + 1) / c->steps));
+    char *list = exposure_list(t, c->steps);
+    char *name = g_strdup_printf("sweep_g%g", gain);
+    char *sets = g_strdup_printf("%s; none", c->lamps);
+    int rc = run_plan(c, name, sets, list, gain, 2);
+    g_free(sets);
+    free(t);
+    g_free(list);
+    if (rc) {
+        g_free(name);
+        return false;
+    }
+    *sweep_dir = g_strdup_printf("%s/%s", c->out, name);
+    g_free(name);
+    return true;
+}
+
+// ---------------------------------------------------------------------------
+// Output
+
+static json_t *jreal(double x) { return isfinite(x) ? json_real(x) : json_null(); }
+
+static json_t *jarray(const double *v, int n)
+{
+    json_t *a = json_array();
+    for (int i = 0; i < n; i++) json_array_append_new(a, jreal(v[i]));
+    return a;
+}
+
+static json_t *gain_json(const gain_an_t *a)
+{
+    json_t *o = json_object();
+    const calib_gain_ptc_t *p = &a->ptc;
+    json_object_set_new(o, "gain_db", json_real(a->gain_db));
+    json_object_set_new(o, "system_gain_dn_per_e", jreal(p->system_gain_dn_per_e));
+    json_object_set_new(o, "system_gain_linear_fit_dn_per_e", jreal(p->system_gain_linear_dn_per_e));
+    json_object_set_new(o, "read_noise_e", jreal(p->read_noise_e));
+    json_object_set_new(o, "read_noise_dn", jreal(p->read_noise_dn));
+    json_object_set_new(o, "dark_temporal_variance_dn2", jreal(a->var_dark_dn2));
+    json_object_set_new(o, "saturation_dn", jreal(p->saturation_dn));
+    json_object_set_new(o, "saturation_exposure_us", jreal(a->t[p->i_sat]));
+    json_object_set_new(o, "saturation_capacity_e", jreal(p->saturation_capacity_e));
+    json_object_set_new(o, "linearity_error_pct", jreal(p->linearity_error_pct));
+    json_object_set_new(o, "snr_max", jreal(p->snr_max));
+    json_object_set_new(o, "snr_max_db", jreal(20 * log10(p->snr_max)));
+    json_object_set_new(o, "dynamic_range", jreal(p->dynamic_range));
+    json_object_set_new(o, "dynamic_range_db", jreal(20 * log10(p->dynamic_range)));
+    json_object_set_new(o, "response_dn_per_us", jreal(p->response_dn_per_us));
+    json_object_set_new(o, "response_offset_dn", jreal(p->response_offset_dn));
+    json_object_set_new(o, "radiance", jreal(a->radiance));
+    json_object_set_new(o, "kc_per_us", jreal(a->kc_per_us));
+    json_object_set_new(o, "response_small_signal_dn_per_us", jreal(a->response0_dn_per_us));
+    json_object_set_new(o, "kc_small_signal_per_us", jreal(a->kc0_per_us));
+    json_object_set_new(o, "dark_current_dn_per_s", jreal(a->dark_slope_dn_per_us * 1e6));
+    json_object_set_new(o, "dark_current_e_per_s", jreal(a->dark_slope_dn_per_us * 1e6 / p->system_gain_dn_per_e));
+    json_object_set_new(o, "dark_level_dn", jreal(a->dark_intercept_dn));
+    json_object_set_new(o, "n_steps", json_integer(a->n));
+    json_object_set_new(o, "n_ptc_fit", json_integer(p->n_ptc_fit));
+    json_object_set_new(o, "n_linearity_fit", json_integer(p->n_lin_fit));
+    json_t *c = json_object();
+    json_object_set_new(c, "exposure_us", jarray(a->t, a->n));
+    json_object_set_new(c, "mean_dn", jarray(a->mu_y, a->n));
+    json_object_set_new(c, "dark_mean_dn", jarray(a->mu_d, a->n));
+    json_object_set_new(c, "signal_dn", jarray(a->mu, a->n));
+    json_object_set_new(c, "variance_dn2", jarray(a->var_y, a->n));
+    json_object_set_new(c, "dark_variance_dn2", jarray(a->var_d, a->n));
+    json_object_set_new(c, "signal_variance_dn2", jarray(a->var, a->n));
+    json_object_set_new(c, "snr", jarray(a->snr, a->n));
+    json_object_set_new(c, "linearity_deviation_pct", jarray(a->dev_pct, a->n));
+    double *kc = malloc(sizeof(double) * (a->n + 1));
+    for (int i = 0; i < a->n; i++) kc[i] = isfinite(a->radiance) ? a->mu[i] / a->radiance : NAN;
+    json_object_set_new(c, "kc", jarray(kc, a->n));
+    free(kc);
+    json_object_set_new(o, "curves", c);
+    return o;
+}
+
+static bool write_map(const char *dir, const char *name, const maps_t *m, const float *map, const char *what)
+{
+    char *path = g_build_filename(dir, name, NULL);
+    const char *meta[] = { "content", what, "software", "refl calib gain " REFL_VERSION, NULL };
+    bool ok = model_tiff_write_float(path, m->w, m->h, map, meta);
+    g_free(path);
+    return ok;
+}
+
+static void usage(FILE *f)
+{
+    fprintf(f,
+            "usage: refl calib gain --rig RIG -o DIR [options]\n"
+            "       refl calib gain --frames MANIFEST.csv -o DIR [options]\n"
+            "       refl calib gain --session DIR [--session DIR ...] -o DIR [options]\n\n"
+            "Sensitivity of a camera, EMVA 1288 style: photon transfer (system gain K, read noise, saturation,\n"
+            "SNR, dynamic range), linearity error, dark current, offset/DSNU and PRNU maps, and the response\n"
+            "kc per us per unit radiance at each gain. Writes DIR/gain.json, DIR/offset_dn.tiff, dsnu_dn.tiff,\n"
+            "prnu_gain.tiff (total flat field incl. vignetting, mean 1), prnu_highpass.tiff (smooth part\n"
+            "removed) and DIR/report.html.\n\n"
+            "Capture (--rig; the sample is a uniform source filling the view):\n"
+            "  --gains LIST             gains (camera unit, dB) to sweep, comma-separated (default 0); the first\n"
+            "                           is the reference (dark current, maps, top-level figures). With --frames:\n"
+            "                           one value, the gain the frames were taken at (a label)\n"
+            "  --steps N                exposure steps of each sweep (default 50, at least --min-steps)\n"
+            "  --sample NAME            the plan's sample (default flat_field)\n"
+            "  --lamps SET              lamps feeding the source (default all)\n"
+            "  --probe-exposure-us US   first probe exposure (default 1000)\n"
+            "  --max-exposure-us US     longest sweep exposure (default 1.2 x the probe's full-scale estimate)\n"
+            "  --flat-frames N          light and dark frames of the flat field (default 16)\n"
+            "  --dark-exposures-us LIST long dark exposures for the dark current (default 100000,500000,\n"
+            "                           1000000,2000000)\n"
+            "  --pixel-format F         Mono8|Mono12|Mono16 (default Mono12)\n"
+            "Manifest (--frames): lines file,exposure_us,kind (kind dark|light; optional header line; paths\n"
+            "relative to the manifest; 16-bit PNG or float TIFF). Light exposures need frame pairs.\n"
+            "Analysis:\n"
+            "  --min-steps N            fewest sweep steps accepted (default 50, EMVA 1288)\n"
+            "  --radiance R             radiance of the source with the lamps on (default: a virtual rig's truth)\n"
+            "  --roi X,Y,W,H            pixels of the statistics (default the whole frame; maps are whole)\n"
+            "  --max-dn N               full scale of manifest frames (default 65535)\n"
+            "  --quant-dn Q             quantisation step in DN (default 1; 16 for 12-bit data in Mono16)\n"
+            "  --no-report              skip the plots and report.html\n");
+}
+
+static bool parse_list(const char *s, double **out, int *n)
+{
+    *n = 0;
+    *out = NULL;
+    char *c = g_strdup(s), *save = NULL;
+    bool ok = true;
+    for (char *p = strtok_r(c, ", ", &save); p; p = strtok_r(NULL, ", ", &save)) {
+        double v;
+        if (!model_parse_double(p, &v)) {
+            ok = false;
+            break;
+        }
+        *out = realloc(*out, sizeof(double) * (*n + 1));
+        (*out)[(*n)++] = v;
+    }
+    g_free(c);
+    return ok && *n > 0;
+}
+
+int calib_cmd_gain(int argc, char **argv)
+{
+    capture_opts_t c = { .sample = "flat_field", .lamps = "all", .pixel_format = "Mono12", .steps = 50,
+                         .flat_frames = 16, .progress = -1, .probe_us = 1000, .max_us = NAN };
+    const char *manifest = NULL, *out = NULL, *gains_s = "0", *dark_s = "100000,500000,1000000,2000000";
+    const char *roi_s = NULL;
+    char **sessions = NULL;
+    int nsessions = 0, min_steps = 50, max_dn = 65535;
+    double radiance = NAN, quant = 1;
+    bool report = true;
+    enum { O_GAINS = 256, O_STEPS, O_SAMPLE, O_LAMPS, O_PROBE, O_MAXEXP, O_FLATN, O_DARKS, O_PF, O_MINSTEPS,
+           O_RAD, O_ROI, O_MAXDN, O_QUANT, O_NOREPORT, O_SESSION, O_FRAMES, O_RIG };
+    static const struct option lo[] = {
+        { "rig", required_argument, 0, O_RIG }, { "frames", required_argument, 0, O_FRAMES },
+        { "session", required_argument, 0, O_SESSION }, { "output", required_argument, 0, 'o' },
+        { "gains", required_argument, 0, O_GAINS }, { "steps", required_argument, 0, O_STEPS },
+        { "sample", required_argument, 0, O_SAMPLE }, { "lamps", required_argument, 0, O_LAMPS },
+        { "probe-exposure-us", required_argument, 0, O_PROBE }, { "max-exposure-us", required_argument, 0, O_MAXEXP },
+        { "flat-frames", required_argument, 0, O_FLATN }, { "dark-exposures-us", required_argument, 0, O_DARKS },
+        { "pixel-format", required_argument, 0, O_PF }, { "min-steps", required_argument, 0, O_MINSTEPS },
+        { "radiance", required_argument, 0, O_RAD }, { "roi", required_argument, 0, O_ROI },
+        { "max-dn", required_argument, 0, O_MAXDN }, { "quant-dn", required_argument, 0, O_QUANT },
+        { "no-report", no_argument, 0, O_NOREPORT }, { "help", no_argument, 0, 'h' }, { 0, 0, 0, 0 } };
+    optind = 1;
+    int opt;
+    long lv;
+    double dv;
+#define NUM_INT(var, lo_, what)                                                                                    \
+    do {                                                                                                           \
+        if (!model_parse_int(optarg, &lv) || lv < (lo_) || lv > 1000000) {                                         \
+            fprintf(stderr, "refl calib gain: %s '%s' must be an integer >= %d\n", what, optarg, (int)(lo_));      \
+            return 2;                                                                                              \
+        }                                                                                                          \
+        var = (int)lv;                                                                                             \
+    } while (0)
+#define NUM_POS(var, what)                                                                                         \
+    do {                                                                                                           \
+        if (!model_parse_double(optarg, &dv) || !(dv > 0)) {                                                       \
+            fprintf(stderr, "refl calib gain: %s '%s' must be a positive number\n", what, optarg);                 \
+            return 2;                                                                                              \
+        }                                                                                                          \
+        var = dv;                                                                                                  \
+    } while (0)
+    while ((opt = getopt_long(argc, argv, "o:h", lo, NULL)) != -1) {
+        switch (opt) {
+        case O_RIG: c.rig = optarg; break;
+        case O_FRAMES: manifest = optarg; break;
+        case O_SESSION:
+            sessions = realloc(sessions, sizeof(char *) * (nsessions + 1));
+            sessions[nsessions++] = optarg;
+            break;
+        case 'o': out = optarg; break;
+        case O_GAINS: gains_s = optarg; break;
+        case O_STEPS: NUM_INT(c.steps, 2, "--steps"); break;
+        case O_SAMPLE: c.sample = optarg; break;
+        case O_LAMPS: c.lamps = optarg; break;
+        case O_PROBE: NUM_POS(c.probe_us, "--probe-exposure-us"); break;
+        case O_MAXEXP: NUM_POS(c.max_us, "--max-exposure-us"); break;
+        case O_FLATN: NUM_INT(c.flat_frames, 2, "--flat-frames"); break;
+        case O_DARKS: dark_s = optarg; break;
+        case O_PF: c.pixel_format = optarg; break;
+        case O_MINSTEPS: NUM_INT(min_steps, 6, "--min-steps"); break;
+        case O_RAD: NUM_POS(radiance, "--radiance"); break;
+        case O_ROI: roi_s = optarg; break;
+        case O_MAXDN: NUM_INT(max_dn, 1, "--max-dn"); break;
+        case O_QUANT: NUM_POS(quant, "--quant-dn"); break;
+        case O_NOREPORT: report = false; break;
+        case 'h': usage(stdout); free(sessions); return 0;
+        default: usage(stderr); free(sessions); return 2;
+        }
+    }
+#undef NUM_INT
+#undef NUM_POS
+    int rc = 1;
+    gdata_t d = { 0 };
+    gain_an_t *an = NULL;
+    int ngains = 0;
+    double *gains = NULL, *darks = NULL;
+    int ndarks = 0;
+    maps_t maps = { 0 };
+    json_t *facts = NULL, *prov = NULL, *root = NULL;
+    char *sweep_dir = NULL;
+    if (optind < argc) {
+        fprintf(stderr, "refl calib gain: unexpected argument '%s'\n", argv[optind]);
+        usage(stderr);
+        goto out2;
+    }
+    if (!out || (!!c.rig + !!manifest + (nsessions > 0)) != 1) {
+        fprintf(stderr, "refl calib gain: give -o DIR and exactly one of --rig, --frames, --session\n");
+        usage(stderr);
+        goto out2;
+    }
+    if (roi_s && (sscanf(roi_s, "%d,%d,%d,%d", &d.roi[0], &d.roi[1], &d.roi[2], &d.roi[3]) != 4 || d.roi[0] < 0 ||
+                  d.roi[1] < 0 || d.roi[2] < 2 || d.roi[3] < 2)) {
+        fprintf(stderr, "refl calib gain: --roi '%s' must be X,Y,W,H (W, H >= 2)\n", roi_s);
+        goto out2;
+    }
+    if (!parse_list(gains_s, &gains, &ngains)) {
+        fprintf(stderr, "refl calib gain: --gains '%s' must be a comma-separated list of numbers (dB)\n", gains_s);
+        goto out2;
+    }
+    if (!parse_list(dark_s, &darks, &ndarks)) {
+        fprintf(stderr, "refl calib gain: --dark-exposures-us '%s' must be a comma-separated list of us\n", dark_s);
+        goto out2;
+    }
+    if (c.rig && c.steps < min_steps) {
+        fprintf(stderr, "refl calib gain: too few sweep steps: --steps %d, EMVA 1288 asks for at least %d "
+                "(--min-steps)\n", c.steps, min_steps);
+        goto out2;
+    }
+    if (!calib_mkdir_p(out)) goto out;
+    prov = calib_provenance(argc, argv);
+    double t_start = model_now_s();
+    if (c.rig) {
+        c.out = out;
+        c.dark_list = NULL;
+        if (!calib_provenance_input(prov, "rig", c.rig)) goto out;
+        // sweeps at every gain; the first gives the flat field's exposure
+        double t_sat0 = NAN;
+        for (int gi = 0; gi < ngains; gi++) {
+            double ts;
+            char *sd = NULL;
+            if (!capture_sweep(&c, gains[gi], &sd, &ts)) goto out;
+            if (gi == 0) t_sat0 = ts;
+            if (!add_session(&d, sd, SET_SWEEP, &facts) || !calib_provenance_input(prov, "sweep", sd)) {
+                g_free(sd);
+                goto out;
+            }
+            g_free(sd);
+        }
+        // the flat field near 50 % of full scale, its darks, and long darks
+        double t_flat = fmax(10, round(0.5 * t_sat0 * 0.95));
+        char *fl = g_strdup_printf("%.0f", t_flat);
+        char *sets = g_strdup_printf("%s; none", c.lamps);
+        int r1 = run_plan(&c, "flat", sets, fl, gains[0], c.flat_frames);
+        g_free(sets);
+        g_free(fl);
+        if (r1) goto out;
+        char *fd = g_strdup_printf("%s/flat", out);
+        bool ok = add_session(&d, fd, SET_FLAT, &facts) && calib_provenance_input(prov, "flat", fd);
+        g_free(fd);
+        if (!ok) goto out;
+        char *dl = exposure_list(darks, ndarks);
+        r1 = run_plan(&c, "dark", "none", dl, gains[0], 2);
+        g_free(dl);
+        if (r1) goto out;
+        fd = g_strdup_printf("%s/dark", out);
+        ok = add_session(&d, fd, SET_DARK, &facts) && calib_provenance_input(prov, "dark", fd);
+        g_free(fd);
+        if (!ok) goto out;
+        fprintf(stderr, "refl calib gain: capture done in %.1f s\n", model_now_s() - t_start);
+    } else if (manifest) {
+        if (!read_manifest(manifest, max_dn, &d) || !calib_provenance_input(prov, "manifest", manifest)) goto out;
+        if (ngains != 1) {
+            model_error(manifest, 0, "a manifest holds frames of one gain: give at most one --gains value (its label)");
+            goto out;
+        }
+        for (int i = 0; i < d.nf; i++) d.f[i].gain_db = gains[0];
+        // the frames themselves
+        for (int i = 0; i < d.nf; i++) {
+            char role[64];
+            snprintf(role, sizeof role, "frame line %d", d.f[i].line);
+            if (!calib_provenance_input(prov, role, d.f[i].path)) {
+                char *m = g_strdup(model_last_error());
+                model_error(manifest, d.f[i].line, "frame %s: %s", d.f[i].path, m);
+                g_free(m);
+                goto out;
+            }
+        }
+    } else {
+        for (int i = 0; i < nsessions; i++)
+            if (!add_session(&d, sessions[i], SET_ANY, &facts) || !calib_provenance_input(prov, "session", sessions[i]))
+                goto out;
+    }
+    make_groups(&d);
+    fprintf(stderr, "refl calib gain: analysing %d frames (%d exposure groups)\n", d.nf, d.ng);
+    if (!pass1(&d)) goto out;
+    // the gains present (rig: the order asked; else in order of appearance)
+    double *gl = malloc(sizeof(double) * (d.ng + ngains));
+    int ng = 0;
+    if (c.rig)
+        for (int i = 0; i < ngains; i++) gl[ng++] = gains[i];
+    else
+        for (int i = 0; i < d.ng; i++) {
+            bool seen = false;
+            for (int k = 0; k < ng; k++) seen |= gl[k] == d.g[i].gain_db;
+            if (!seen) gl[ng++] = d.g[i].gain_db;
+        }
+    const char *truth = NULL;
+    double rad1 = isfinite(radiance) ? NAN : truth_radiance(facts, &truth);
+    an = calloc(ng, sizeof *an);
+    int nan_ = 0;
+    for (int i = 0; i < ng; i++) {
+        if (!analyse_gain(&d, gl[i], min_steps, quant, &an[i])) {
+            nan_ = i + 1;
+            free(gl);
+            ngains = nan_;
+            goto out_an;
+        }
+        nan_ = i + 1;
+        // radiance of the light frames
+        int nl = -1;
+        for (int k = 0; k < d.nf; k++)
+            if (d.f[k].gain_db == gl[i] && !d.f[k].dark) nl = d.f[k].nlamps;
+        an[i].radiance = isfinite(radiance) ? radiance : (nl > 0 ? rad1 * nl : NAN);
+        an[i].kc_per_us = an[i].ptc.response_dn_per_us / an[i].radiance;
+        an[i].kc0_per_us = an[i].response0_dn_per_us / an[i].radiance;
+        fprintf(stderr, "refl calib gain: gain %g dB: K %.5g DN/e-, read noise %.4g e-, saturation %.1f DN, LE %.3f %%, "
+                "%d steps\n", gl[i], an[i].ptc.system_gain_dn_per_e, an[i].ptc.read_noise_e, an[i].ptc.saturation_dn,
+                an[i].ptc.linearity_error_pct, an[i].n);
+    }
+    free(gl);
+    ngains = nan_;
+    if (!make_maps(&d, &an[0], &maps)) goto out_an;
+    if (!write_map(out, "offset_dn.tiff", &maps, maps.offset, "dark level (offset) map, DN") ||
+        !write_map(out, "dsnu_dn.tiff", &maps, maps.dsnu, "dark signal non-uniformity: dark level minus its mean, DN") ||
+        !write_map(out, "prnu_gain.tiff", &maps, maps.prnu,
+                   "relative sensitivity g(x,y), mean 1: flat field minus dark, incl. vignetting") ||
+        !write_map(out, "prnu_highpass.tiff", &maps, maps.prnu_hp,
+                   "PRNU: flat field divided by its quadratic smooth surface (vignetting removed), mean ~1"))
+        goto out_an;
+    {
+        const gain_an_t *a = &an[0];
+        root = json_object();
+        json_object_set_new(root, "calibration", json_string("gain (EMVA 1288 style)"));
+        json_object_set_new(root, "gain_db", json_real(a->gain_db));
+        json_object_set_new(root, "system_gain_dn_per_e", jreal(a->ptc.system_gain_dn_per_e));
+        json_object_set_new(root, "read_noise_e", jreal(a->ptc.read_noise_e));
+        json_object_set_new(root, "saturation_dn", jreal(a->ptc.saturation_dn));
+        json_object_set_new(root, "linearity_error_pct", jreal(a->ptc.linearity_error_pct));
+        json_object_set_new(root, "dsnu_dn", jreal(maps.dsnu_dn));
+        json_object_set_new(root, "dsnu_e", jreal(maps.dsnu_dn / a->ptc.system_gain_dn_per_e));
+        json_object_set_new(root, "prnu_pct", jreal(maps.prnu_pct));
+        json_object_set_new(root, "prnu_total_pct", jreal(maps.prnu_total_pct));
+        json_object_set_new(root, "dark_current_e_per_s", jreal(a->dark_slope_dn_per_us * 1e6 / a->ptc.system_gain_dn_per_e));
+        json_object_set_new(root, "dark_current_dn_per_s", jreal(a->dark_slope_dn_per_us * 1e6));
+        json_object_set_new(root, "dark_level_dn", jreal(a->dark_intercept_dn));
+        json_object_set_new(root, "saturation_capacity_e", jreal(a->ptc.saturation_capacity_e));
+        json_object_set_new(root, "snr_max", jreal(a->ptc.snr_max));
+        json_object_set_new(root, "snr_max_db", jreal(20 * log10(a->ptc.snr_max)));
+        json_object_set_new(root, "dynamic_range", jreal(a->ptc.dynamic_range));
+        json_object_set_new(root, "dynamic_range_db", jreal(20 * log10(a->ptc.dynamic_range)));
+        json_object_set_new(root, "kc_per_us", jreal(a->kc_per_us));
+        json_object_set_new(root, "kc_small_signal_per_us", jreal(a->kc0_per_us));
+        json_object_set_new(root, "response_dn_per_us", jreal(a->ptc.response_dn_per_us));
+        json_t *f = json_object();
+        json_object_set_new(f, "exposure_us", json_real(maps.flat_exposure_us));
+        json_object_set_new(f, "level_dn", json_real(maps.flat_level_dn));
+        json_object_set_new(f, "level_of_saturation", jreal(maps.flat_level_dn / a->ptc.saturation_dn));
+        json_object_set_new(f, "light_frames", json_integer(maps.flat_frames));
+        json_object_set_new(f, "dark_frames", json_integer(maps.dark_frames));
+        json_object_set_new(f, "dark_exposure_us", json_real(maps.dark_exposure_us));
+        json_object_set_new(f, "width", json_integer(maps.w));
+        json_object_set_new(f, "height", json_integer(maps.h));
+        json_object_set_new(root, "flat_field", f);
+        json_t *maps_j = json_object();
+        json_object_set_new(maps_j, "offset_dn", json_string("offset_dn.tiff"));
+        json_object_set_new(maps_j, "dsnu_dn", json_string("dsnu_dn.tiff"));
+        json_object_set_new(maps_j, "prnu_gain", json_string("prnu_gain.tiff"));
+        json_object_set_new(maps_j, "prnu_highpass", json_string("prnu_highpass.tiff"));
+        json_object_set_new(root, "maps", maps_j);
+        json_t *pg = json_array();
+        for (int i = 0; i < ngains; i++) json_array_append_new(pg, gain_json(&an[i]));
+        json_object_set_new(root, "gains", pg);
+        json_t *cv = json_object();
+        json_object_set_new(cv, "grey_values", json_string("DN of the frames' pixel format (unscaled)"));
+        json_object_set_new(cv, "signal", json_string("mean grey value minus the mean dark grey value at the same "
+                                                      "exposure (EMVA 1288 mu_y - mu_y.dark)"));
+        json_object_set_new(cv, "temporal_variance", json_string("var(A - B) / 2 of a frame pair, minus its dark "
+                                                                 "counterpart"));
+        json_object_set_new(cv, "system_gain_dn_per_e", json_string(
+            "slope at zero signal of a quadratic least-squares fit of the variance against the signal over 0..70 % of "
+            "saturation (the small-signal K; system_gain_linear_fit_dn_per_e is EMVA 1288's straight line over the "
+            "same range)"));
+        json_object_set_new(cv, "read_noise_e", json_string("sqrt(sigma^2_y.dark - q^2/12) / K, sigma^2_y.dark the "
+                                                            "dark temporal variance extrapolated to exposure 0"));
+        json_object_set_new(cv, "saturation_dn", json_string("signal (above dark) where the temporal variance peaks"));
+        json_object_set_new(cv, "linearity_error_pct", json_string(
+            "EMVA 1288 release 3: least-squares line of signal against exposure between 5 % and 95 % of saturation; "
+            "(max - min of the relative deviations in %) / 2"));
+        json_object_set_new(cv, "prnu_pct", json_string(
+            "std of the flat field (light minus dark averages) divided by its quadratic smooth surface (vignetting "
+            "and illumination fall-off removed), temporal noise of the averages subtracted (EMVA 1288 variance "
+            "correction); prnu_total_pct: the same without removing the smooth part (vignetting included)"));
+        json_object_set_new(cv, "dsnu_dn", json_string("std of the averaged dark frame, temporal noise of the average "
+                                                       "subtracted"));
+        json_object_set_new(cv, "prnu_gain_map", json_string("g(x,y) of the imaging model: flat field minus dark, "
+                                                             "mean 1 over the frame, vignetting included"));
+        json_object_set_new(cv, "kc_per_us", json_string("response_dn_per_us (slope of the linearity line) / the "
+                                                         "source's radiance: kc per us at that gain for g of mean 1"));
+        json_object_set_new(cv, "kc_small_signal_per_us", json_string(
+            "slope at exposure 0 of a quadratic least-squares fit of the signal against exposure over 0..70 % of "
+            "saturation, per unit radiance (free of the non-linearity's compression)"));
+        json_object_set_new(cv, "dark_current", json_string("slope of the mean dark level against exposure"));
+        json_object_set_new(cv, "dynamic_range", json_string("saturation_capacity_e / read_noise_e"));
+        json_object_set_new(cv, "statistics_region", d.roi[2] > 0 ? json_pack("[iiii]", d.roi[0], d.roi[1], d.roi[2],
+                                                                               d.roi[3])
+                                                                  : json_string("whole frame"));
+        json_object_set_new(cv, "quantisation_step_dn", json_real(quant));
+        json_object_set_new(root, "conventions", cv);
+        if (truth) json_object_set_new(root, "virtual_truth", json_string(truth));
+        json_object_set_new(root, "provenance", json_incref(prov));
+        char *jp = g_build_filename(out, "gain.json", NULL);
+        bool ok = calib_write_json(jp, root);
+        g_free(jp);
+        if (!ok) goto out_an;
+    }
+    if (report) {
+        char *jp = g_build_filename(out, "gain.json", NULL);
+        fprintf(stderr, "refl calib gain: plotting\n");
+        int pr = calib_python("calib_gain_report.py", jp, out, NULL);
+        g_free(jp);
+        if (pr) goto out_an;
+        char *hp = g_build_filename(out, "report.html", NULL);
+        FILE *f = calib_html_begin(hp, "refl calib gain: camera sensitivity (EMVA 1288 style)", prov);
+        if (!f) {
+            g_free(hp);
+            goto out_an;
+        }
+        const gain_an_t *a = &an[0];
+        calib_html_heading(f, "Summary");
+        char *rows[24];
+        int nr = 0;
+        rows[nr++] = g_strdup_printf("system gain K|%.5g DN/e-|small-signal; straight-line fit %.5g",
+                                     a->ptc.system_gain_dn_per_e, a->ptc.system_gain_linear_dn_per_e);
+        rows[nr++] = g_strdup_printf("read noise|%.4g e- (%.4g DN)|", a->ptc.read_noise_e, a->ptc.read_noise_dn);
+        rows[nr++] = g_strdup_printf("saturation|%.1f DN above dark (%.0f e-)|at %.6g us", a->ptc.saturation_dn,
+                                     a->ptc.saturation_capacity_e, a->t[a->ptc.i_sat]);
+        rows[nr++] = g_strdup_printf("linearity error|%.3f %%|5..95 %% of saturation", a->ptc.linearity_error_pct);
+        rows[nr++] = g_strdup_printf("SNR max|%.1f (%.1f dB)|", a->ptc.snr_max, 20 * log10(a->ptc.snr_max));
+        rows[nr++] = g_strdup_printf("dynamic range|%.0f (%.1f dB)|", a->ptc.dynamic_range,
+                                     20 * log10(a->ptc.dynamic_range));
+        rows[nr++] = g_strdup_printf("dark current|%.3g e-/s (%.3g DN/s)|dark frames from %.6g us to %.6g us", a->dark_slope_dn_per_us * 1e6 /
+                                     a->ptc.system_gain_dn_per_e, a->dark_slope_dn_per_us * 1e6, a->dark_t_min_us,
+                                     a->dark_t_max_us);
+        rows[nr++] = g_strdup_printf("DSNU|%.3f DN (%.2f e-)|", maps.dsnu_dn, maps.dsnu_dn / a->ptc.system_gain_dn_per_e);
+        rows[nr++] = g_strdup_printf("PRNU (high-pass)|%.3f %%|smooth part (vignetting) removed", maps.prnu_pct);
+        rows[nr++] = g_strdup_printf("flat-field non-uniformity (total)|%.3f %%|vignetting included",
+                                     maps.prnu_total_pct);
+        for (int i = 0; i < ngains; i++)
+            rows[nr++] = g_strdup_printf("gain %g dB|K %.5g DN/e-, read noise %.4g e-, sat %.0f DN, LE %.3f %%|"
+                                         "response %.5g DN/us, kc %.4g per us (small-signal %.4g)", an[i].gain_db,
+                                         an[i].ptc.system_gain_dn_per_e, an[i].ptc.read_noise_e, an[i].ptc.saturation_dn,
+                                         an[i].ptc.linearity_error_pct, an[i].ptc.response_dn_per_us, an[i].kc_per_us,
+                                         an[i].kc0_per_us);
+        calib_html_table(f, "figure|value|notes", (const char *const *)rows, nr);
+        for (int i = 0; i < nr; i++) g_free(rows[i]);
+        calib_html_para(f, "Flat field: %d light frames at %.6g us (%.0f DN above dark, %.0f %% of saturation) and %d "
+                        "dark frames at %.6g us. Definitions: see \"conventions\" in gain.json.", maps.flat_frames,
+                        maps.flat_exposure_us, maps.flat_level_dn, 100 * maps.flat_level_dn / a->ptc.saturation_dn,
+                        maps.dark_frames, maps.dark_exposure_us);
+        calib_html_heading(f, "Photon transfer");
+        calib_html_figure(f, "ptc.png", "temporal variance against signal (dark subtracted), with the K fit");
+        calib_html_heading(f, "Linearity");
+        calib_html_figure(f, "linearity.png", "signal against exposure with the least-squares line, and the "
+                          "relative deviation from it (5..95 % of saturation)");
+        calib_html_heading(f, "SNR");
+        calib_html_figure(f, "snr.png", "signal-to-noise ratio against signal, with the ideal shot-noise limit");
+        calib_html_heading(f, "Response (kc) per gain");
+        calib_html_figure(f, "kc.png", "signal per unit radiance against exposure at each gain");
+        calib_html_heading(f, "PRNU");
+        calib_html_figure(f, "prnu_map.png", "relative sensitivity: total (incl. vignetting) and high-pass");
+        calib_html_figure(f, "prnu_hist.png", "histograms of the high-pass PRNU map and of the DSNU map");
+        calib_html_heading(f, "Dark signal");
+        calib_html_figure(f, "dark.png", "mean dark level against exposure (dark current) and dark temporal variance");
+        bool ok = calib_html_end(f, hp);
+        g_free(hp);
+        if (!ok) goto out_an;
+    }
+    fprintf(stderr, "refl calib gain: wrote %s/gain.json (%.1f s)\n", out, model_now_s() - t_start);
+    printf("system_gain_dn_per_e %.6g\nread_noise_e %.5g\nsaturation_dn %.2f\nlinearity_error_pct %.4f\n"
+           "dsnu_dn %.4f\nprnu_pct %.4f\n", an[0].ptc.system_gain_dn_per_e, an[0].ptc.read_noise_e,
+           an[0].ptc.saturation_dn, an[0].ptc.linearity_error_pct, maps.dsnu_dn, maps.prnu_pct);
+    rc = 0;
+out_an:
+out:
+    if (rc) fprintf(stderr, "refl calib gain: failed: %s\n", model_last_error());
+out2:
+    if (an)
+        for (int i = 0; i < ngains; i++) gain_an_free(&an[i]);
+    free(an);
+    maps_free(&maps);
+    gdata_free(&d);
+    json_decref(facts);
+    json_decref(prov);
+    json_decref(root);
+    free(gains);
+    free(darks);
+    free(sessions);
+    g_free(sweep_dir);
+    return rc;
+}

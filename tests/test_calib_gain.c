@@ -1,0 +1,551 @@
+// tests/test_calib_gain.c — `refl calib gain` (EMVA 1288 style sensitivity).
+//
+// calib_gain_virtual: the whole calibration on the in-process virtual rig
+// (examples/virtual-truth.ini, pattern seed 1, noise seeds from 1) at 0 and
+// 6 dB on the full 1280x1024 sensor: K within 2 %, read noise within 5 %, dark
+// current, DSNU and PRNU figures, the PRNU/DSNU maps correlated > 0.9 with the
+// sensor model's own patterns, kc per us against the truth, and the
+// linearity error against the noise-free expected frames of the truth (the
+// same analysis) and of the same truth made linear (nonlinearity_pct = 0).
+// calib_gain_manifest: frames made here by the sensor model (128x96 pixels),
+// listed in a manifest (--frames). calib_gain_bad_input: missing and corrupt
+// frames, too few steps, saturated and too dark flats. calib_gain_numerics:
+// the fits on noise-free data with known answers.
+#define _GNU_SOURCE
+#include <glib.h>
+#include <jansson.h>
+#include <limits.h>
+#include <stdlib.h>
+
+#include "calib/gain.h"
+#include "model/model.h"
+#include "rig/rig.h"
+#include "tests/test.h"
+
+static const char *truth_path(void)
+{
+    static char p[PATH_MAX + 64];
+    char top[PATH_MAX];
+    if (!realpath(test_srcdir(), top)) snprintf(top, sizeof top, "%s", test_srcdir());
+    snprintf(p, sizeof p, "%s/examples/virtual-truth.ini", top);
+    return p;
+}
+
+static bool truth_sensor(model_sensor_t *s)
+{
+    model_ini_t *ini = model_ini_load(truth_path());
+    bool ok = ini && model_sensor_from_ini(ini, s);
+    model_ini_free(ini);
+    return ok;
+}
+
+static double jnum(json_t *o, const char *key)
+{
+    json_t *v = json_object_get(o, key);
+    return json_is_number(v) ? json_number_value(v) : NAN;
+}
+
+static double *jvec(json_t *o, const char *key, int *n)
+{
+    json_t *a = json_object_get(o, key);
+    *n = (int)json_array_size(a);
+    double *v = malloc(sizeof(double) * (*n + 1));
+    for (int i = 0; i < *n; i++) {
+        json_t *x = json_array_get(a, i);
+        v[i] = json_is_number(x) ? json_number_value(x) : NAN;
+    }
+    return v;
+}
+
+static float *read_tiff(const char *dir, const char *name, int *w, int *h)
+{
+    char *p = g_build_filename(dir, name, NULL);
+    float *m = NULL;
+    if (!model_tiff_read_float(p, w, h, &m)) m = NULL;
+    g_free(p);
+    return m;
+}
+
+// Mean of the expected (noise-free) frame: lamps mask, minus the expected dark.
+static double expected_signal(rig_virtual_t *v, uint32_t mask, double t_us, double gain_db, float *buf, int w, int h)
+{
+    double s[2] = { 0, 0 };
+    for (int k = 0; k < 2; k++) {
+        int rc = rig_virtual_expected(v, 0, k ? 0 : mask, t_us, gain_db, "Mono12", w, h, buf);
+        CHECK_MSG(rc == 0, "rig_virtual_expected: %s", rig_last_error());
+        for (long i = 0; i < (long)w * h; i++) s[k] += buf[i];
+    }
+    return (s[0] - s[1]) / ((double)w * h);
+}
+
+static rig_virtual_t *open_truth(const char *path)
+{
+    rig_virtual_options_t o = rig_virtual_defaults();
+    o.serve = RIG_VIRTUAL_SERVE_INPROCESS;
+    o.time_scale = 0.001;
+    o.sample = "flat_field";
+    rig_virtual_t *v = NULL;
+    int rc = rig_virtual_open(&v, path, &o);
+    CHECK_MSG(rc == 0, "rig_virtual_open %s: %d %s", path, rc, rig_last_error());
+    return v;
+}
+
+// The truth file with nonlinearity_pct = 0 (and the camera model's path absolute).
+static const char *linear_truth(void)
+{
+    char *text = model_read_file(truth_path(), NULL);
+    if (!text) return NULL;
+    char *dir = g_path_get_dirname(truth_path());
+    char *abs_model = g_strdup_printf("model = %s/camera.cameramodel", dir);
+    GString *g = g_string_new("");
+    for (char *l = text, *next; l; l = next) {
+        next = strchr(l, '\n');
+        if (next) *next++ = 0;
+        if (!strncmp(l, "model = camera.cameramodel", 26)) g_string_append(g, abs_model);
+        else if (!strncmp(l, "scene = ", 8)) g_string_append_printf(g, "scene = %s/%s", dir, l + 8);
+        else if (!strncmp(l, "nonlinearity_pct", 16)) g_string_append(g, "nonlinearity_pct = 0");
+        else g_string_append(g, l);
+        g_string_append_c(g, '\n');
+    }
+    const char *p = test_write("linear-truth.ini", g->str);
+    g_string_free(g, TRUE);
+    g_free(abs_model);
+    g_free(dir);
+    free(text);
+    return p;
+}
+
+TEST(calib_gain_virtual)
+{
+    char top[PATH_MAX], rig[3 * PATH_MAX];
+    if (!realpath(test_srcdir(), top)) snprintf(top, sizeof top, "%s", test_srcdir());
+    snprintf(rig, sizeof rig, "[rig]\nbackend = virtual\ntruth = %s\nserve = inprocess\ntime_scale = 0.01\n"
+             "pixel_format = Mono12\n", truth_path());
+    const char *rig_path = test_write("rig.ini", rig);
+    const char *out = test_path("gain");
+    char *so = NULL, *se = NULL;
+    double t0 = model_now_s();
+    int rc = test_refl_run(300, &so, &se, "calib", "gain", "--rig", rig_path, "-o", out, "--gains", "0,6", NULL);
+    fprintf(stderr, "  calib gain --rig: %.1f s\n", model_now_s() - t0);
+    CHECK_MSG(rc == 0, "refl calib gain: %d\n%s", rc, se ? se : "");
+    free(so);
+    free(se);
+    if (rc) return;
+    char *jp = g_build_filename(out, "gain.json", NULL);
+    json_t *j = json_load_file(jp, 0, NULL);
+    g_free(jp);
+    CHECK(j != NULL);
+    if (!j) return;
+    model_sensor_t s;
+    CHECK(truth_sensor(&s));
+    fprintf(stderr, "  K %.5f DN/e- (6 dB: %.5f), read noise %.4f e-, dark current %.3f e-/s, DSNU %.4f DN, PRNU %.4f %%, "
+            "saturation %.1f DN, LE %.3f %%, kc %.5g per us\n", jnum(j, "system_gain_dn_per_e"),
+            jnum(json_array_get(json_object_get(j, "gains"), 1), "system_gain_dn_per_e"), jnum(j, "read_noise_e"),
+            jnum(j, "dark_current_e_per_s"), jnum(j, "dsnu_dn"), jnum(j, "prnu_pct"), jnum(j, "saturation_dn"),
+            jnum(j, "linearity_error_pct"), jnum(j, "kc_per_us"));
+    // photon transfer at 0 dB and 6 dB
+    CHECK_REL(jnum(j, "system_gain_dn_per_e"), s.system_gain_dn_per_e, 0.02);
+    CHECK_REL(jnum(j, "read_noise_e"), s.read_noise_e, 0.05);
+    json_t *g6 = json_array_get(json_object_get(j, "gains"), 1);
+    CHECK_NEAR(jnum(g6, "gain_db"), 6, 1e-9);
+    CHECK_REL(jnum(g6, "system_gain_dn_per_e"), s.system_gain_dn_per_e * pow(10, 6 / 20.0), 0.02);
+    CHECK_REL(jnum(g6, "read_noise_e"), s.read_noise_e, 0.05);
+    // saturation: the well (full_well_e, compressed by the non-linearity) at 0 dB, at most
+    double sat_truth = s.full_well_e * (1 - s.nonlinearity_pct / 100) * s.system_gain_dn_per_e;
+    CHECK(jnum(j, "saturation_dn") > 0.85 * sat_truth && jnum(j, "saturation_dn") <= sat_truth * 1.01);
+    // 6 dB: the 12-bit range clips first
+    CHECK(jnum(g6, "saturation_dn") > 0.85 * (4095 - s.dark_offset_dn) &&
+          jnum(g6, "saturation_dn") <= 4095 - s.dark_offset_dn);
+    CHECK_REL(jnum(j, "dark_current_e_per_s"), s.dark_current_e_per_s, 0.10);
+    CHECK_REL(jnum(j, "dsnu_dn"), s.dsnu_dn, 0.05);
+    CHECK_REL(jnum(j, "prnu_pct"), s.prnu_pct, 0.10);
+    CHECK(jnum(j, "prnu_total_pct") > 1.5 * jnum(j, "prnu_pct"));   // vignetting in the total
+    CHECK_REL(jnum(j, "dark_level_dn"), s.dark_offset_dn, 0.01);
+    CHECK(jnum(j, "snr_max") > 100 && jnum(j, "snr_max") < sqrt(s.full_well_e) * 1.05);
+
+    // maps against the sensor model's patterns (same pattern seed)
+    int w = 0, h = 0, w2 = 0, h2 = 0, w3 = 0, h3 = 0;
+    float *hp = read_tiff(out, "prnu_highpass.tiff", &w, &h);
+    float *tot = read_tiff(out, "prnu_gain.tiff", &w2, &h2);
+    float *dsnu = read_tiff(out, "dsnu_dn.tiff", &w3, &h3);
+    CHECK(hp && tot && dsnu && w == 1280 && h == 1024 && w2 == w && h2 == h && w3 == w && h3 == h);
+    if (hp && tot && dsnu && w == 1280 && h == 1024 && w2 == w && h2 == h && w3 == w && h3 == h) {
+        size_t n = (size_t)w * h;
+        float *tp = malloc(n * sizeof(float)), *td = malloc(n * sizeof(float));
+        model_sensor_patterns(&s, w, h, tp, td);
+        double r_hp = calib_gain_correlation(hp, tp, (long)n);
+        double r_d = calib_gain_correlation(dsnu, td, (long)n);
+        // the total map against prnu x vignetting (model/sensor.c)
+        double cx = 0.5 * (w - 1), cy = 0.5 * (h - 1), rc2 = cx * cx + cy * cy, mean = 0;
+        for (int y = 0; y < h; y++)
+            for (int x = 0; x < w; x++) {
+                size_t i = (size_t)y * w + x;
+                tp[i] *= (float)(1 - s.vignetting * ((x - cx) * (x - cx) + (y - cy) * (y - cy)) / rc2);
+            }
+        double r_tot = calib_gain_correlation(tot, tp, (long)n);
+        for (size_t i = 0; i < n; i++) mean += tot[i];
+        fprintf(stderr, "  correlation: PRNU high-pass %.4f, total map %.4f, DSNU %.4f\n", r_hp, r_tot, r_d);
+        CHECK(r_hp > 0.9);
+        CHECK(r_tot > 0.9);
+        CHECK(r_d > 0.9);
+        CHECK_NEAR(mean / n, 1.0, 1e-4);
+        // small-signal kc per us: kc_per_us of the truth times the mean of prnu x vignetting (g has mean 1)
+        double mg = 0;
+        for (size_t i = 0; i < n; i++) mg += tp[i];
+        mg /= n;
+        double kc_truth;
+        {
+            model_ini_t *ini = model_ini_load(truth_path());
+            const model_ini_entry_t *e = ini ? model_ini_get(ini, "camera", "kc_per_us") : NULL;
+            kc_truth = e ? atof(e->value) : NAN;
+            model_ini_free(ini);
+        }
+        fprintf(stderr, "  kc small-signal %.6g per us, truth %.6g x mean(g) %.5f = %.6g\n",
+                jnum(j, "kc_small_signal_per_us"), kc_truth, mg, kc_truth * mg);
+        CHECK_REL(jnum(j, "kc_small_signal_per_us"), kc_truth * mg, 0.01);
+        free(tp);
+        free(td);
+    }
+    free(hp);
+    free(tot);
+    free(dsnu);
+
+    // linearity: the same analysis on the noise-free truth curves (non-linear and linear)
+    json_t *g0 = json_array_get(json_object_get(j, "gains"), 0);
+    int n = 0, n2 = 0;
+    double *t = jvec(json_object_get(g0, "curves"), "exposure_us", &n);
+    double *mu = jvec(json_object_get(g0, "curves"), "signal_dn", &n2);
+    CHECK(n >= 50 && n2 == n);
+    double sat = jnum(j, "saturation_dn"), le = jnum(j, "linearity_error_pct");
+    if (n >= 50) {
+        float *buf = malloc(sizeof(float) * 1280 * 1024);
+        double *mt = malloc(sizeof(double) * n), *ml = malloc(sizeof(double) * n);
+        // one in-process camera per process at a time: the truth, then its linear twin
+        rig_virtual_t *v = open_truth(truth_path());
+        for (int i = 0; v && i < n; i++) mt[i] = expected_signal(v, 0xF, t[i], 0, buf, 1280, 1024);
+        rig_virtual_close(v);
+        const char *lt = linear_truth();
+        rig_virtual_t *vl = lt ? open_truth(lt) : NULL;
+        for (int i = 0; vl && i < n; i++) ml[i] = expected_signal(vl, 0xF, t[i], 0, buf, 1280, 1024);
+        rig_virtual_close(vl);
+        if (v && vl) {
+            // the measured signal follows the truth curve
+            double maxdev = 0;
+            for (int i = 0; i < n; i++)
+                if (mt[i] < sat) maxdev = fmax(maxdev, fabs(mu[i] - mt[i]) / mt[i]);
+            fprintf(stderr, "  measured signal vs the expected frames: max deviation %.3f %%\n", 100 * maxdev);
+            CHECK(maxdev < 0.005);
+            double kc_slope = 0;
+            double le_t = calib_gain_linearity(t, mt, n, sat, 0.05, 0.95, &kc_slope, NULL, NULL, NULL);
+            double le_l = calib_gain_linearity(t, ml, n, sat, 0.05, 0.95, NULL, NULL, NULL, NULL);
+            fprintf(stderr, "  linearity error: measured %.3f %%, truth curve %.3f %%, linear truth %.3f %%\n", le,
+                    le_t, le_l);
+            CHECK(le_t > 3 * le_l);
+            CHECK(le > 3 * le_l);
+            CHECK_NEAR(le, le_t, 0.15 * le_t);
+            // kc: the response slope per unit radiance (4 lamps x radiance 1000)
+            CHECK_REL(jnum(j, "kc_per_us"), kc_slope / 4000.0, 0.01);
+            CHECK_REL(jnum(j, "response_dn_per_us"), kc_slope, 0.01);
+        }
+        free(buf);
+        free(mt);
+        free(ml);
+    }
+    free(t);
+    free(mu);
+    // kc at 6 dB is 10^(6/20) times that at 0 dB
+    CHECK_REL(jnum(g6, "kc_per_us") / jnum(g0, "kc_per_us"), pow(10, 6 / 20.0), 0.01);
+    // the report
+    char *rp = g_build_filename(out, "report.html", NULL);
+    char *html = model_read_file(rp, NULL);
+    CHECK(html != NULL);
+    if (html) {
+        CHECK_CONTAINS(html, "ptc.png");
+        CHECK_CONTAINS(html, "prnu_hist.png");
+    }
+    free(html);
+    g_free(rp);
+    const char *pngs[] = { "ptc.png", "linearity.png", "snr.png", "prnu_map.png", "prnu_hist.png", "dark.png",
+                           "kc.png", "offset_dn.tiff" };
+    for (size_t i = 0; i < sizeof pngs / sizeof pngs[0]; i++) {
+        char *p = g_build_filename(out, pngs[i], NULL);
+        CHECK_MSG(g_file_test(p, G_FILE_TEST_EXISTS), "missing %s", p);
+        g_free(p);
+    }
+    // provenance lists the sessions with their hashes
+    json_t *in = json_object_get(json_object_get(j, "provenance"), "inputs");
+    CHECK(json_array_size(in) >= 5);
+    // --session: the 0 dB sweep session alone, analysed again (same frames: the same photon transfer;
+    // its flat field is a frame pair near 50 %, so PRNU is noisier)
+    char *sweep = g_build_filename(out, "sweep_g0", NULL);
+    const char *out2 = test_path("gain-session");
+    rc = test_refl_run(120, &so, &se, "calib", "gain", "--session", sweep, "-o", out2, "--no-report", NULL);
+    CHECK_MSG(rc == 0, "refl calib gain --session: %d\n%s", rc, se ? se : "");
+    free(so);
+    free(se);
+    g_free(sweep);
+    jp = g_build_filename(out2, "gain.json", NULL);
+    json_t *js = json_load_file(jp, 0, NULL);
+    g_free(jp);
+    CHECK(js != NULL);
+    if (js) {
+        CHECK_REL(jnum(js, "system_gain_dn_per_e"), jnum(j, "system_gain_dn_per_e"), 1e-9);
+        CHECK_REL(jnum(js, "read_noise_e"), jnum(j, "read_noise_e"), 0.01);
+        CHECK_REL(jnum(js, "kc_per_us"), jnum(j, "kc_per_us"), 1e-9);   // radiance from the session's truth
+        CHECK_NEAR(jnum(json_object_get(js, "flat_field"), "light_frames"), 2, 0);
+    }
+    json_decref(js);
+    json_decref(j);
+}
+
+// ---------------------------------------------------------------------------
+// Frames made here by the sensor model, listed in a manifest.
+
+typedef struct {
+    int    nsteps;        // sweep exposures (light pair + dark pair each)
+    double max_us;        // longest sweep exposure
+    double flat_us;       // flat-field exposure (0: none)
+    int    flat_n;
+    int    corrupt_line;  // 0 none; else this manifest line's file is garbage
+    int    missing_line;  // 0 none; else this line names a missing file
+    int    w, h;          // frame size (0: 128 x 96)
+} gen_t;
+
+static const double rate_dn_per_us = 0.4;   // at the centre, before PRNU/vignetting
+
+// Write frames and DIR/manifest.csv; returns the manifest path.
+static const char *gen_manifest(const char *sub, const gen_t *g)
+{
+    model_sensor_t s;
+    CHECK(truth_sensor(&s));
+    const int GW = g->w > 0 ? g->w : 128, GH = g->h > 0 ? g->h : 96;
+    char *dir = g_build_filename(test_tmpdir(), sub, NULL);
+    g_mkdir_with_parents(dir, 0755);
+    float *prnu = malloc(sizeof(float) * GW * GH), *dsnu = malloc(sizeof(float) * GW * GH);
+    model_sensor_patterns(&s, GW, GH, prnu, dsnu);
+    float *img = malloc(sizeof(float) * GW * GH);
+    uint16_t *pix = malloc(sizeof(uint16_t) * GW * GH);
+    GString *m = g_string_new("file,exposure_us,kind\n");
+    int line = 1, k = 0;
+    uint64_t seed = 1000;
+    int nflat = g->flat_us > 0 ? g->flat_n : 0;
+    for (int i = 0; i < g->nsteps + 1; i++) {
+        bool flat = i == g->nsteps;
+        if (flat && !nflat) break;
+        double t = flat ? g->flat_us : g->max_us * (i + 1) / g->nsteps;
+        int reps = flat ? nflat : 2;
+        for (int dark = 0; dark < 2; dark++)
+            for (int r = 0; r < reps; r++) {
+                for (int p = 0; p < GW * GH; p++) img[p] = (float)(s.dark_offset_dn + (dark ? 0 : rate_dn_per_us * t));
+                s.exposure_us = t;
+                s.noise_seed = seed++;
+                model_sensor_apply_patterns(&s, GW, GH, prnu, dsnu, img);
+                for (int p = 0; p < GW * GH; p++) pix[p] = (uint16_t)img[p];
+                char name[64];
+                snprintf(name, sizeof name, "f%05d.png", k++);
+                line++;
+                char *path = g_build_filename(dir, name, NULL);
+                if (line == g->corrupt_line) {
+                    FILE *f = fopen(path, "wb");
+                    if (f) {
+                        fputs("\x89PNG\r\n\x1a\nthis is not a PNG", f);
+                        fclose(f);
+                    }
+                } else if (line != g->missing_line)
+                    CHECK(model_png16_write(path, GW, GH, pix, NULL));
+                g_free(path);
+                g_string_append_printf(m, "%s,%.0f,%s\n", name, t, dark ? "dark" : "light");
+            }
+    }
+    char *mp = g_build_filename(dir, "manifest.csv", NULL);
+    FILE *f = fopen(mp, "w");
+    if (f) {
+        fputs(m->str, f);
+        fclose(f);
+    }
+    static char ret[4][1024];
+    static int slot;
+    char *r = ret[slot++ % 4];
+    snprintf(r, 1024, "%s", mp);
+    g_free(mp);
+    g_string_free(m, TRUE);
+    g_free(dir);
+    free(prnu);
+    free(dsnu);
+    free(img);
+    free(pix);
+    return r;
+}
+
+TEST(calib_gain_manifest)
+{
+    model_sensor_t s;
+    CHECK(truth_sensor(&s));
+    // saturation at ~16000 e- = 4000 DN / 0.4 DN/us = 10000 us; sweep to 12500 us
+    gen_t g = { .nsteps = 50, .max_us = 12500, .flat_us = 5100, .flat_n = 16 };
+    const char *m = gen_manifest("m1", &g);
+    const char *out = test_path("out-manifest");
+    char *so = NULL, *se = NULL;
+    int rc = test_refl_run(120, &so, &se, "calib", "gain", "--frames", m, "-o", out, "--no-report", "--max-dn",
+                           "4095", NULL);
+    CHECK_MSG(rc == 0, "refl calib gain --frames: %d\n%s", rc, se ? se : "");
+    CHECK_CONTAINS(so, "system_gain_dn_per_e");
+    free(so);
+    free(se);
+    char *jp = g_build_filename(out, "gain.json", NULL);
+    json_t *j = json_load_file(jp, 0, NULL);
+    g_free(jp);
+    CHECK(j != NULL);
+    if (!j) return;
+    CHECK_REL(jnum(j, "system_gain_dn_per_e"), s.system_gain_dn_per_e, 0.02);
+    CHECK_REL(jnum(j, "read_noise_e"), s.read_noise_e, 0.05);
+    CHECK_REL(jnum(j, "dsnu_dn"), s.dsnu_dn, 0.15);
+    CHECK_REL(jnum(j, "prnu_pct"), s.prnu_pct, 0.25);
+    CHECK(jnum(j, "linearity_error_pct") > 0.5);
+    CHECK(json_is_null(json_object_get(j, "kc_per_us")));   // radiance unknown
+    json_t *ff = json_object_get(j, "flat_field");
+    CHECK_NEAR(jnum(ff, "exposure_us"), 5100, 1e-9);
+    CHECK_NEAR(jnum(ff, "light_frames"), 16, 0);
+    // every frame is an input with its hash
+    CHECK(json_array_size(json_object_get(json_object_get(j, "provenance"), "inputs")) == (size_t)(1 + 50 * 4 + 32));
+    json_decref(j);
+    // the same frames with the radiance given: kc per us
+    const char *out2 = test_path("out-manifest2");
+    rc = test_refl_run(120, &so, &se, "calib", "gain", "--frames", m, "-o", out2, "--no-report", "--radiance", "4000",
+                       "--max-dn", "4095", NULL);
+    CHECK_MSG(rc == 0, "%s", se ? se : "");
+    free(so);
+    free(se);
+    jp = g_build_filename(out2, "gain.json", NULL);
+    j = json_load_file(jp, 0, NULL);
+    g_free(jp);
+    if (j) CHECK_REL(jnum(j, "kc_per_us") * 4000, jnum(j, "response_dn_per_us"), 1e-9);
+    json_decref(j);
+}
+
+static int expect_fail(char **err, ...) __attribute__((sentinel));
+static int expect_fail(char **err, ...)
+{
+    const char *argv[32];
+    int n = 0;
+    argv[n++] = test_refl();
+    va_list ap;
+    va_start(ap, err);
+    for (const char *a; n < 30 && (a = va_arg(ap, const char *));) argv[n++] = a;
+    va_end(ap);
+    argv[n] = NULL;
+    char *so = NULL;
+    int rc = test_run(argv, 120, &so, err);
+    free(so);
+    return rc;
+}
+
+TEST(calib_gain_bad_input)
+{
+    char *err = NULL, line[64];
+    // a missing frame: the manifest line
+    gen_t g = { .nsteps = 50, .max_us = 12500, .flat_us = 5100, .flat_n = 4, .missing_line = 7, .w = 48, .h = 32 };
+    const char *m = gen_manifest("missing", &g);
+    CHECK(expect_fail(&err, "calib", "gain", "--frames", m, "-o", test_path("o1"), "--no-report", NULL) == 1);
+    snprintf(line, sizeof line, "manifest.csv:7:");
+    CHECK_CONTAINS(err, line);
+    CHECK_CONTAINS(err, "f00005.png");
+    free(err);
+    // a corrupt frame: the file and the line
+    gen_t g2 = { .nsteps = 50, .max_us = 12500, .flat_us = 5100, .flat_n = 4, .corrupt_line = 12, .w = 48, .h = 32 };
+    m = gen_manifest("corrupt", &g2);
+    CHECK(expect_fail(&err, "calib", "gain", "--frames", m, "-o", test_path("o2"), "--no-report", NULL) == 1);
+    CHECK_CONTAINS(err, "manifest.csv:12:");
+    CHECK_CONTAINS(err, "f00010.png");
+    free(err);
+    // too few sweep steps
+    gen_t g3 = { .nsteps = 20, .max_us = 12500, .flat_us = 5100, .flat_n = 4, .w = 48, .h = 32 };
+    m = gen_manifest("few", &g3);
+    CHECK(expect_fail(&err, "calib", "gain", "--frames", m, "-o", test_path("o3"), "--no-report", NULL) == 1);
+    CHECK_CONTAINS(err, "too few sweep steps: 21 exposures");   // 20 + the flat's
+    free(err);
+    CHECK(expect_fail(&err, "calib", "gain", "--rig", test_path("none.ini"), "-o", test_path("o4"), "--steps", "10",
+                      NULL) == 1);
+    CHECK_CONTAINS(err, "too few sweep steps");
+    free(err);
+    // saturated flats: the measured levels
+    gen_t g4 = { .nsteps = 50, .max_us = 12500, .flat_us = 11000, .flat_n = 8, .w = 48, .h = 32 };
+    m = gen_manifest("sat", &g4);
+    CHECK(expect_fail(&err, "calib", "gain", "--frames", m, "-o", test_path("o5"), "--no-report", "--max-dn", "4095",
+                      NULL) == 1);
+    CHECK_CONTAINS(err, "is saturated: mean");
+    CHECK_CONTAINS(err, "DN above dark");
+    free(err);
+    // too dark flats
+    gen_t g5 = { .nsteps = 50, .max_us = 12500, .flat_us = 200, .flat_n = 8, .w = 48, .h = 32 };
+    m = gen_manifest("dark", &g5);
+    CHECK(expect_fail(&err, "calib", "gain", "--frames", m, "-o", test_path("o6"), "--no-report", NULL) == 1);
+    CHECK_CONTAINS(err, "is too dark: mean");
+    free(err);
+    // a sweep that does not reach saturation
+    gen_t g6 = { .nsteps = 50, .max_us = 6000, .flat_us = 3000, .flat_n = 4, .w = 48, .h = 32 };
+    m = gen_manifest("nosat", &g6);
+    CHECK(expect_fail(&err, "calib", "gain", "--frames", m, "-o", test_path("o7"), "--no-report", NULL) == 1);
+    CHECK_CONTAINS(err, "does not reach saturation");
+    free(err);
+    // a bad manifest line
+    const char *bad = test_write("bad.csv", "file,exposure_us,kind\na.png,12,bright\n");
+    CHECK(expect_fail(&err, "calib", "gain", "--frames", bad, "-o", test_path("o8"), NULL) == 1);
+    CHECK_CONTAINS(err, "bad.csv:2:");
+    CHECK_CONTAINS(err, "dark or light");
+    free(err);
+}
+
+TEST(calib_gain_numerics)
+{
+    // a linear sensor with K 0.3, read variance 4 DN^2: K, read noise, LE 0
+    enum { N = 60 };
+    double t[N], mu[N], var[N];
+    const double K = 0.3, sat = 3000;
+    for (int i = 0; i < N; i++) {
+        t[i] = 100.0 * (i + 1);
+        double m = 0.6 * t[i];
+        mu[i] = fmin(m, sat);
+        var[i] = m < sat ? K * m : K * sat * (1 - (m - sat) / 600);   // drops beyond saturation
+        if (var[i] < 0) var[i] = 0;
+    }
+    calib_gain_ptc_t p;
+    CHECK(calib_gain_ptc(t, mu, var, NULL, N, 4 + 1.0 / 12, 1, &p));
+    CHECK_REL(p.system_gain_dn_per_e, K, 1e-9);
+    CHECK_REL(p.system_gain_linear_dn_per_e, K, 1e-9);
+    CHECK_REL(p.read_noise_e, 2 / K, 1e-9);
+    CHECK_NEAR(p.saturation_dn, sat, 1e-9);
+    CHECK_NEAR(p.linearity_error_pct, 0, 1e-9);
+    CHECK_REL(p.response_dn_per_us, 0.6, 1e-9);
+    // a quadratic compression: the small-signal K survives, the straight line is low
+    for (int i = 0; i < N; i++) {
+        double e = 0.6 * t[i] / K;   // electrons
+        var[i] = mu[i] < sat ? K * K * e * pow(1 - 2 * 0.02 * e / 12000, 2) : var[i];
+        mu[i] = mu[i] < sat ? K * e * (1 - 0.02 * e / 12000) : mu[i];
+    }
+    CHECK(calib_gain_ptc(t, mu, var, NULL, N, 4, 1, &p));
+    CHECK_REL(p.system_gain_dn_per_e, K, 0.003);
+    CHECK(p.system_gain_linear_dn_per_e < 0.99 * K);
+    CHECK(p.linearity_error_pct > 0.3);
+    // no saturation in the data: an error
+    for (int i = 0; i < N; i++) var[i] = K * mu[i];
+    for (int i = 0; i < N; i++) mu[i] = 0.6 * t[i];
+    for (int i = 0; i < N; i++) var[i] = K * mu[i];
+    CHECK(!calib_gain_ptc(t, mu, var, NULL, N, 4, 1, &p));
+    CHECK_CONTAINS(model_last_error(), "does not reach saturation");
+    // the high-pass removes a quadratic surface exactly, keeps a pattern
+    enum { W = 40, H = 30 };
+    float in[W * H], out[W * H], pat[W * H];
+    for (int y = 0; y < H; y++)
+        for (int x = 0; x < W; x++) {
+            pat[y * W + x] = (float)(1 + 0.01 * (((x * 7 + y * 13) % 5) - 2));
+            in[y * W + x] = (float)((100 + 0.5 * x - 0.2 * y - 0.01 * x * x + 0.003 * x * y) * 1.0);
+        }
+    CHECK(calib_gain_highpass(in, W, H, out));
+    double md = 0;
+    for (int i = 0; i < W * H; i++) md = fmax(md, fabs(out[i] - 1));
+    CHECK(md < 1e-5);
+    for (int i = 0; i < W * H; i++) in[i] *= pat[i];
+    CHECK(calib_gain_highpass(in, W, H, out));
+    CHECK(calib_gain_correlation(out, pat, W * H) > 0.99);
+}
