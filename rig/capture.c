@@ -291,14 +291,50 @@ static int writer_error(writer_t *w, char *msg, size_t size)
 // ---------------------------------------------------------------------------
 // Session setup
 
-static char *session_facts(rig_t *r, const rig_plan_t *p, const char *cmdline)
+// The calibration files of a directory, by role: path and sha256. NULL with a
+// message when the directory holds none of them.
+static json_t *calibration_files(const char *dir)
+{
+    static const char *const files[][3] = {
+        { "camera geometry", "geometry", "camera.cameramodel" }, { "geometry summary", "geometry", "geometry.json" },
+        { "lamp positions", "lamps", "lamps.json" }, { "sensitivity", "gain", "gain.json" },
+        { "reference white", "white", "white.json" },
+    };
+    json_t *arr = json_array();
+    char *abs = realpath(dir, NULL);
+    for (size_t i = 0; abs && i < sizeof files / sizeof files[0]; i++) {
+        for (int sub = 0; sub < 2; sub++) {
+            char path[8192], sha[65];
+            if (sub) snprintf(path, sizeof path, "%s/%s/%s", abs, files[i][1], files[i][2]);
+            else snprintf(path, sizeof path, "%s/%s", abs, files[i][2]);
+            if (access(path, R_OK) != 0 || !model_sha256_file(path, sha)) continue;
+            json_t *e = json_object();
+            json_object_set_new(e, "role", json_string(files[i][0]));
+            json_object_set_new(e, "path", json_string(path));
+            json_object_set_new(e, "sha256", json_string(sha));
+            json_array_append_new(arr, e);
+            break;
+        }
+    }
+    free(abs);
+    if (json_array_size(arr) == 0) {
+        json_decref(arr);
+        rig_fail(RIG_ERR_INVALID, "--calib %s: no calibration files there (camera.cameramodel, lamps.json, gain.json, "
+                 "white.json, or geometry/, lamps/, gain/, white/ holding them)", dir);
+        return NULL;
+    }
+    return arr;
+}
+
+static char *session_facts(rig_t *r, const rig_plan_t *p, const char *cmdline, json_t *calibrations)
 {
     json_t *o = json_object();
     json_object_set_new(o, "refl_version", json_string(REFL_VERSION));
     json_object_set_new(o, "command_line", json_string(cmdline ? cmdline : ""));
     json_object_set_new(o, "operator", json_string(p->operator_name));
     json_object_set_new(o, "notes", json_string(p->notes));
-    json_object_set_new(o, "calibrations", json_array());   // none are applied while capturing raw frames
+    // the calibrations in use (by path and hash; frames are stored raw)
+    json_object_set_new(o, "calibrations", calibrations ? json_incref(calibrations) : json_array());
     rig_frame_meta_t m;
     if (r->camera && rig_camera_settings(r->camera, &m) == 0) {
         json_t *c = json_object();
@@ -580,7 +616,13 @@ int rig_capture_run(const rig_capture_opts_t *o)
         if ((rc = mkdir_session(o->dir))) goto done;
         if (o->operator_name) snprintf(p->operator_name, sizeof p->operator_name, "%s", o->operator_name);
         if (o->notes) snprintf(p->notes, sizeof p->notes, "%s", o->notes);
-        facts = session_facts(r, p, o->command_line);
+        json_t *cal = NULL;
+        if (o->calib_dir && !(cal = calibration_files(o->calib_dir))) {
+            rc = RIG_ERR_INVALID;
+            goto done;
+        }
+        facts = session_facts(r, p, o->command_line, cal);
+        json_decref(cal);
         if ((rc = rig_journal_create(&j, o->dir, p, rig_path, rig_text, r->sha256, facts))) goto done;
         rig_journal_event(j, -1, "start", "session started: %d steps, plan %s, rig %s", p->nsteps, p->path,
                           rig_path);

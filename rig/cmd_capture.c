@@ -15,14 +15,15 @@
 
 static void capture_usage(FILE *f)
 {
-    fprintf(f, "usage: refl capture PLAN.ini --rig RIG.ini -o DIR [--operator NAME] [--notes TEXT] [--progress "
-               "bar|lines]\n"
+    fprintf(f, "usage: refl capture PLAN.ini --rig RIG.ini -o DIR [--operator NAME] [--notes TEXT] [--calib DIR]\n"
+               "                    [--progress bar|lines]\n"
                "       refl capture PLAN.ini --rig RIG.ini --dry-run\n"
                "       refl capture --resume DIR [--rig RIG.ini] [--allow-changed]\n"
                "\n"
                "Runs the plan (see examples/plans/ and rig/rig.h) into the session directory DIR: a SQLite\n"
                "journal (session.sqlite) and 16-bit PNG frames (frames/). --dry-run prints the steps, the\n"
                "estimated duration and disk use and checks the plan against the rig; nothing moves.\n"
+               "--calib DIR records the calibrations in use (their paths and sha256) in the session.\n"
                "--resume continues a stopped session where it stopped; it refuses when the plan or the rig file\n"
                "changed since (--allow-changed continues the stored step list anyway).\n"
                "First Ctrl-C: finish the frame, lamps off, pause (exit 3); second: stop at once.\n"
@@ -71,6 +72,8 @@ int rig_cmd_capture(int argc, char **argv)
             val = &o.operator_name;
         } else if (!strcmp(a, "--notes")) {
             val = &o.notes;
+        } else if (!strcmp(a, "--calib")) {
+            val = &o.calib_dir;
         } else if (!strcmp(a, "--progress")) {
             if (i + 1 >= argc) return usage_error("capture", "option --progress needs bar or lines", NULL);
             const char *v = argv[++i];

@@ -535,6 +535,10 @@ typedef struct {
     bool        resume, allow_changed, dry_run;
     const char *operator_name, *notes;
     const char *command_line;
+    // A calibration directory (refl calib ... -o DIR, or one holding geometry/,
+    // lamps/, gain/, white/): its files are recorded in the session facts by
+    // path and sha256 (NULL: none). Frames stay raw.
+    const char *calib_dir;
     int         progress;           // -1 auto (bar on a TTY), 0 plain lines, 1 bar
     // Called before each step is carried out (after the rig is open): for
     // tests (fault injection) and instrumentation; may be NULL.

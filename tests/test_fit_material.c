@@ -5,7 +5,8 @@
 // material (kd within 5 %, alpha within 10 %; ks*F0 within 10 %: the rig never
 // sees the coupon near grazing, so F0 is held and said so). The calibrations
 // here are the truth's camera model and lamp positions (the calibrations'
-// own accuracy is tested in test_calib_*); bad calibration directories and
+// own accuracy is tested in test_calib_*); the sessions record the
+// calibrations in use (refl capture --calib); bad calibration directories and
 // sessions give errors naming the file.
 #include <math.h>
 #include <stdio.h>
@@ -16,6 +17,7 @@
 #include <jansson.h>
 
 #include "model/model.h"
+#include "rig/rig.h"
 #include "tests/test.h"
 
 // test_path/test_write reuse 8 buffers: keep copies.
@@ -70,8 +72,29 @@ TEST(fit_material_chain_virtual_rig)
                                                   "mode = fixed\nlist_us = 8000 500\n"));
     char *out = NULL, *err = NULL;
     char *ws = keep(test_path("w")), *gs = keep(test_path("g"));
-    int rc = test_refl_run(300, &out, &err, "capture", white, "--rig", rig, "-o", ws, "--progress", "lines", NULL);
+    int rc = test_refl_run(300, &out, &err, "capture", white, "--rig", rig, "-o", ws, "--progress", "lines",
+                           "--calib", cal, NULL);
     CHECK_MSG(rc == 0, "%s", err);
+    g_free(out);
+    g_free(err);
+    // the session records the calibrations in use by path and hash
+    rig_journal_t *j = NULL;
+    CHECK(rig_journal_open(&j, ws) == 0);
+    char *facts = NULL;
+    if (j && rig_journal_facts(j, &facts) == 0) {
+        char sha[65], lp[4200];
+        snprintf(lp, sizeof lp, "%s/lamps.json", cal);
+        CHECK(model_sha256_file(lp, sha));
+        CHECK_CONTAINS(facts, "lamp positions");
+        CHECK_CONTAINS(facts, "camera geometry");
+        CHECK_CONTAINS(facts, sha);
+    }
+    free(facts);
+    rig_journal_close(j);
+    rc = test_refl_run(60, &out, &err, "capture", white, "--rig", rig, "-o", test_path("w2"), "--calib",
+                       test_tmpdir(), NULL);
+    CHECK(rc == 1);
+    CHECK_CONTAINS(err, "no calibration files there");
     g_free(out);
     g_free(err);
     char wj[4200];
