@@ -571,7 +571,7 @@ bool fit_brdf_from(const fit_samples_t *s, model_brdf_t m, const fit_brdf_option
 // Priors
 
 json_t *fit_priors_material(const char *name, const fit_brdf_result_t *best, const fit_brdf_result_t *cand,
-                            int ncand, double k_sigma)
+                            int ncand, double k_sigma, double sys_rel)
 {
     model_brdf_t m = best->model;
     int np = best->nparams;
@@ -582,7 +582,8 @@ json_t *fit_priors_material(const char *name, const fit_brdf_result_t *best, con
     json_t *ps = json_array();
     for (int j = 0; j < np; j++) {
         json_t *p = json_object();
-        double lo, hi, mean = best->p[j], sd = best->fixed[j] ? 0 : best->std[j];
+        double lo, hi, mean = best->p[j], sd_stat = best->fixed[j] ? 0 : best->std[j];
+        double sd = best->fixed[j] ? 0 : sqrt(sd_stat * sd_stat + (sys_rel * mean) * (sys_rel * mean));
         model_brdf_param_range(m, j, &lo, &hi);
         double blo = isfinite(sd) ? fmax(lo, mean - k_sigma * sd) : lo;
         double bhi = isfinite(sd) ? fmin(hi, mean + k_sigma * sd) : hi;
@@ -591,6 +592,7 @@ json_t *fit_priors_material(const char *name, const fit_brdf_result_t *best, con
         json_object_set_new(p, "convention", json_string(fit_param_convention(m, j)));
         json_object_set_new(p, "mean", json_real(mean));
         json_object_set_new(p, "std", isfinite(sd) ? json_real(sd) : json_null());
+        json_object_set_new(p, "std_statistical", isfinite(sd_stat) ? json_real(sd_stat) : json_null());
         json_object_set_new(p, "lo", json_real(blo));
         json_object_set_new(p, "hi", isfinite(bhi) ? json_real(bhi) : json_null());
         if (best->fixed[j] && !strcmp(model_brdf_param_name(m, j), "F0"))
@@ -614,6 +616,7 @@ json_t *fit_priors_material(const char *name, const fit_brdf_result_t *best, con
     }
     json_object_set_new(o, "covariance", cov);
     json_object_set_new(o, "bounds_k_sigma", json_real(k_sigma));
+    json_object_set_new(o, "systematic_rel", json_real(sys_rel));
     int jF = model_brdf_param_index(m, "F0"), jk = model_brdf_param_index(m, "ks");
     if (jF >= 0 && jk >= 0) json_object_set_new(o, "ks_times_F0", json_real(best->p[jk] * best->p[jF]));
     json_object_set_new(o, "rms", json_real(best->rms));

@@ -15,13 +15,14 @@
 static void brdf_usage(FILE *f)
 {
     fprintf(f, "usage: refl fit brdf FILE [--model all|lambert|hall|torrance_sparrow|thesis_fit|cook_torrance|ggx]\n"
-               "                     [--name MATERIAL] [--k-sigma K] [--noise-sigma S] -o PRIORS.json\n"
+               "                     [--name MATERIAL] [--k-sigma K] [--noise-sigma S] [--systematic REL] -o PRIORS.json\n"
                "\n"
                "Fits reflection models to BRDF samples: a CSV (theta_i,phi_i,theta_o,phi_o,f_r[,weight], degrees,\n"
                "1/sr; optional header; '#' comments) or a MERL binary file (its luminance). With --model all\n"
                "(default) every model is fitted and the one with the lowest BIC is chosen. Errors are the RMS of\n"
                "R = f_r cos(theta_i) (the cosine-weighted metric of Ngan et al. 2005) and of f_r. Bounds are\n"
-               "mean +- K std (default 3) clipped to the physical range.\n\nrefl %s\n", REFL_VERSION);
+               "mean +- K std (default 3) clipped to the physical range; std includes REL * mean (default 0) for\n"
+               "systematic errors the samples share.\n\nrefl %s\n", REFL_VERSION);
 }
 
 static int usage_error(const char *msg, const char *arg)
@@ -34,7 +35,7 @@ static int usage_error(const char *msg, const char *arg)
 static int cmd_brdf(int argc, char **argv)
 {
     const char *file = NULL, *out = NULL, *model = "all", *name = NULL;
-    double k_sigma = 3, noise = 0;
+    double k_sigma = 3, noise = 0, sys_rel = 0;
     for (int i = 1; i < argc; i++) {
         const char *a = argv[i];
         if (!strcmp(a, "-h") || !strcmp(a, "--help")) {
@@ -43,7 +44,7 @@ static int cmd_brdf(int argc, char **argv)
         }
         bool has = i + 1 < argc;
         if (!strcmp(a, "-o") || !strcmp(a, "--model") || !strcmp(a, "--name") || !strcmp(a, "--k-sigma") ||
-            !strcmp(a, "--noise-sigma")) {
+            !strcmp(a, "--noise-sigma") || !strcmp(a, "--systematic")) {
             if (!has) return usage_error("missing value after", a);
             const char *v = argv[++i];
             char *e;
@@ -53,6 +54,9 @@ static int cmd_brdf(int argc, char **argv)
             else if (!strcmp(a, "--k-sigma")) {
                 k_sigma = strtod(v, &e);
                 if (*e || !(k_sigma > 0) || !isfinite(k_sigma)) return usage_error("--k-sigma needs a number > 0, not", v);
+            } else if (!strcmp(a, "--systematic")) {
+                sys_rel = strtod(v, &e);
+                if (*e || !(sys_rel >= 0) || !isfinite(sys_rel)) return usage_error("--systematic needs a number >= 0, not", v);
             } else {
                 noise = strtod(v, &e);
                 if (*e || !(noise >= 0) || !isfinite(noise)) return usage_error("--noise-sigma needs a number >= 0, not", v);
@@ -112,7 +116,7 @@ static int cmd_brdf(int argc, char **argv)
     json_object_set_new(top, "format", json_string("refl priors 1"));
     json_object_set_new(top, "units", json_string("R = f_r cos(theta_i) in 1/sr; parameter units per parameter"));
     json_t *mats = json_array();
-    json_t *entry = fit_priors_material(mat, &res[best], res, nres, k_sigma);
+    json_t *entry = fit_priors_material(mat, &res[best], res, nres, k_sigma, sys_rel);
     json_t *src = json_object();
     json_object_set_new(src, "path", json_string(file));
     json_object_set_new(src, "sha256", json_string(s->sha256));

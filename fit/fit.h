@@ -92,11 +92,13 @@ bool fit_brdf_from(const fit_samples_t *s, model_brdf_t m, const fit_brdf_option
 const char *fit_param_unit(model_brdf_t m, int i);
 const char *fit_param_convention(model_brdf_t m, int i);
 
-// The priors entry of one material (see README, "Priors file"): bounds are
-// mean +- k_sigma * std clipped to the physical range; candidates (may be
-// NULL) are every model tried, for the comparison table.
+// The priors entry of one material (see README, "Priors file"): std =
+// sqrt(std_statistical^2 + (sys_rel * mean)^2) (the statistical part alone
+// shrinks with the sample count; sys_rel covers the calibrations' systematic
+// errors, which every sample shares), bounds mean +- k_sigma * std clipped to
+// the physical range; candidates (may be NULL) are every model tried.
 json_t *fit_priors_material(const char *name, const fit_brdf_result_t *best, const fit_brdf_result_t *candidates,
-                            int ncandidates, double k_sigma);
+                            int ncandidates, double k_sigma, double sys_rel);
 
 // `refl fit brdf|material` (fit/cmd_fit.c).
 int fit_cmd(int argc, char **argv);

@@ -1,0 +1,166 @@
+#!/usr/bin/python3
+# scripts/demo_chain.py OUTDIR TRUTH.ini — the calibration and fitting chain of
+# `make demo` against the virtual rig's ground truth: writes OUTDIR/chain.html
+# (an HTML fragment: tables of calibrated vs true values) and OUTDIR/lobes.png
+# (the fitted material's in-plane lobes against the truth's, at several
+# incidence angles). Reads OUTDIR/calib/{geometry,lamps,gain,white}/*.json,
+# OUTDIR/priors_glossy.json and the truth file (INI).
+import configparser
+import html
+import json
+import math
+import os
+import sys
+
+import matplotlib
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt
+import numpy as np
+
+out, truth_path = sys.argv[1], sys.argv[2]
+cal = os.path.join(out, "calib")
+ini = configparser.ConfigParser(inline_comment_prefixes=None, strict=False)
+ini.read(truth_path)
+
+
+def load(*p):
+    with open(os.path.join(*p)) as f:
+        return json.load(f)
+
+
+def row(cells, head=False):
+    t = "th" if head else "td"
+    return "<tr>" + "".join(f"<{t}>{html.escape(str(c))}</{t}>" for c in cells) + "</tr>\n"
+
+
+def f(x, n=4):
+    return f"{x:.{n}g}" if isinstance(x, (int, float)) else str(x)
+
+
+parts = []
+# ---- geometry ---------------------------------------------------------------
+geo = load(cal, "geometry", "geometry.json")
+import mrcal  # noqa: E402  (python3-mrcal: the truth camera's centre)
+tm = mrcal.cameramodel(os.path.join(os.path.dirname(truth_path), ini["camera"]["model"]))
+Rt = tm.extrinsics_Rt_fromref()
+centre_true = -Rt[:3, :].T @ Rt[3, :]
+centre = np.array(geo["camera_centre_rig_mm"])
+it, im = tm.intrinsics()[1], np.array(geo["intrinsics"])
+parts.append("<h3>Camera geometry (refl calib geometry)</h3>\n<table>\n")
+parts.append(row(["figure", "calibrated", "truth", "difference"], True))
+for k, name in enumerate(["fx (px)", "fy (px)", "cx (px)", "cy (px)"]):
+    parts.append(row([name, f(im[k], 6), f(it[k], 6), f(im[k] - it[k], 3)]))
+parts.append(row(["camera centre, rig frame (mm)", np.round(centre, 2).tolist(), np.round(centre_true, 2).tolist(),
+                  f"{np.linalg.norm(centre - centre_true):.2f} mm"]))
+ax = geo["axis"]
+parts.append(row(["turntable axis direction (camera frame)", np.round(ax["direction_cam"], 5).tolist(),
+                  np.round(Rt[:3, :] @ np.array([0, 0, 1.0]), 5).tolist(),
+                  f"{math.degrees(math.acos(min(1, abs(np.dot(ax['direction_cam'], Rt[:3, :] @ [0, 0, 1.0]))))):.3f} deg"]))
+parts.append(row(["RMS reprojection residual (px)", f(geo["rms_residual_px"]), "", ""]))
+parts.append(row(["views with a board", f"{geo['views_used']} of {geo['views_total']}", "", ""]))
+pu = geo.get("projection_uncertainty", {})
+if pu:
+    parts.append(row([f"projection uncertainty at {pu.get('distance_mm')} mm (px)",
+                      f"median {f(pu.get('median_px'), 3)}, max {f(pu.get('max_px'), 3)}", "", ""]))
+parts.append("</table>\n")
+
+# ---- lamps -----------------------------------------------------------------
+lj = load(cal, "lamps", "lamps.json")
+parts.append("<h3>Lamp positions (refl calib lamps, with the calibrated camera)</h3>\n<table>\n")
+parts.append(row(["lamp", "calibrated (mm)", "std (mm)", "truth (mm)", "error (mm)"], True))
+errs = []
+for l in lj["lamps"]:
+    tp = [float(v) for v in ini["lamp " + l["name"]]["position_mm"].split()]
+    e = np.linalg.norm(np.array(l["position_mm"]) - tp)
+    errs.append(e)
+    parts.append(row([l["name"], np.round(l["position_mm"], 1).tolist(), np.round(l["std_mm"], 2).tolist(), tp,
+                      f"{e:.2f}"]))
+parts.append(row(["RMS", "", "", "", f"{math.sqrt(np.mean(np.square(errs))):.2f}"]))
+parts.append("</table>\n")
+
+# ---- gain ------------------------------------------------------------------
+gj = load(cal, "gain", "gain.json")
+s = ini["sensor"]
+parts.append("<h3>Sensitivity (refl calib gain, EMVA 1288 style)</h3>\n<table>\n")
+parts.append(row(["figure", "calibrated", "truth"], True))
+for key, tkey, unit in [("system_gain_dn_per_e", "system_gain_dn_per_e", "DN/e-"), ("read_noise_e", "read_noise_e", "e-"),
+                        ("dsnu_dn", "dsnu_dn", "DN"), ("prnu_pct", "prnu_pct", "%"),
+                        ("dark_current_e_per_s", "dark_current_e_per_s", "e-/s"),
+                        ("linearity_error_pct", "nonlinearity_pct", "% (truth: compression at full well)")]:
+    parts.append(row([f"{key} ({unit})", f(gj.get(key)), s.get(tkey, "")]))
+parts.append("</table>\n")
+
+# ---- reference white ---------------------------------------------------------
+wj = load(cal, "white", "white.json")
+kc = float(ini["camera"]["kc_per_us"])
+parts.append("<h3>Reference white: kc&middot;I per lamp (refl calib white)</h3>\n"
+             "<p>Relative to the flat field g(x,y) of the gain calibration (mean 1), so the truth column is "
+             "kc_per_us &middot; I &middot; mean(g) with mean(g) from the calibrated response.</p>\n<table>\n")
+parts.append(row(["lamp", "kc*I (DN/us per (1/sr)/mm^2)", "truth kc*I*mean(g)", "ratio"], True))
+gmean = gj.get("kc_small_signal_per_us", kc) / kc if gj.get("kc_small_signal_per_us") else 1.0
+for l in wj["lamps"]:
+    t = kc * float(ini["lamp " + l["name"]]["intensity"]) * gmean
+    parts.append(row([l["name"], f(l["kc_I_per_us"], 6), f(t, 6), f(l["kc_I_per_us"] / t, 4)]))
+parts.append("</table>\n")
+
+# ---- material ----------------------------------------------------------------
+pj = load(out, "priors_glossy.json")
+m = pj["materials"][0]
+tmat = ini["material " + m["name"]] if ("material " + m["name"]) in ini else None
+parts.append(f"<h3>Material: {html.escape(m['name'])} (refl fit material &rarr; priors_glossy.json)</h3>\n"
+             f"<p>Chosen model <b>{html.escape(m['model'])}</b> (lowest BIC of {len(m.get('candidates', []))}); "
+             f"RMS of R {f(m['rms'], 3)} 1/sr over {m['n_samples']} samples.</p>\n<table>\n")
+parts.append(row(["parameter", "fitted", "std", "prior bounds", "truth", "note"], True))
+for p in m["parameters"]:
+    tv = tmat.get(p["name"], "") if tmat is not None and tmat.get("model") == m["model"] else ""
+    parts.append(row([f"{p['name']} ({p['unit']})", f(p["mean"], 5), f(p["std"], 3),
+                      f"{f(p['lo'], 4)} .. {f(p['hi'], 4)}", tv, p.get("held", "")]))
+if "ks_times_F0" in m and tmat is not None and "ks" in tmat and "F0" in tmat:
+    parts.append(row(["ks*F0", f(m["ks_times_F0"], 5), "", "", f(float(tmat["ks"]) * float(tmat["F0"]), 5),
+                      "what the rig's geometry measures"]))
+parts.append("</table>\n<table>\n")
+parts.append(row(["model", "RMS (1/sr)", "BIC"], True))
+for c in m.get("candidates", []):
+    parts.append(row([c["model"], f(c["rms"], 4), f(c["bic"], 7)]))
+parts.append("</table>\n<img src=\"lobes.png\" alt=\"fitted vs true lobes\">\n")
+
+with open(os.path.join(out, "chain.html"), "w") as fh:
+    fh.write("".join(parts))
+
+
+# ---- lobes: GGX (the truth's model) in the plane of incidence -------------
+def ggx_R(p, ti, to):
+    kd, ks, a, F0 = p
+    l = np.array([math.sin(ti), 0, math.cos(ti)])
+    v = np.stack([np.sin(to), np.zeros_like(to), np.cos(to)], axis=1)
+    h = v + l
+    h /= np.linalg.norm(h, axis=1)[:, None]
+    nl, nv, nh, vh = l[2], v[:, 2], h[:, 2], h @ l
+    a2 = a * a
+    D = a2 / (np.pi * (nh * nh * (a2 - 1) + 1) ** 2)
+    lam = lambda c: (np.sqrt(1 + a2 * np.maximum(0, (1 - c * c) / (c * c))) - 1) / 2  # noqa: E731
+    G = 1 / (1 + lam(nl) + lam(nv))
+    F = F0 + (1 - F0) * (1 - vh) ** 5
+    return kd / np.pi * nl + ks * D * G * F / (4 * nv)
+
+
+if m["model"] == "ggx" and tmat is not None and tmat.get("model") == "ggx":
+    pf = [q["mean"] for q in m["parameters"]]
+    pt = [float(tmat[k]) for k in ("kd", "ks", "alpha", "F0")]
+    fig, axs = plt.subplots(1, 3, figsize=(13, 3.6))
+    to = np.radians(np.linspace(-85, 85, 681))
+    for ax_, ti_deg in zip(axs, (20, 40, 60)):
+        ti = math.radians(ti_deg)
+        # in-plane: viewing angle signed, the mirror direction at +ti
+        ax_.semilogy(np.degrees(to), ggx_R(pt, -ti, to), "k-", lw=2, label="truth")
+        ax_.semilogy(np.degrees(to), ggx_R(pf, -ti, to), "r--", lw=1.5, label="fitted (priors)")
+        ax_.set_title(f"incidence {ti_deg} deg")
+        ax_.set_xlabel("viewing angle in the plane of incidence (deg)")
+        ax_.set_ylim(1e-2, None)
+        ax_.grid(True, alpha=0.3)
+    axs[0].set_ylabel("R = f_r cos(theta_i) (1/sr)")
+    axs[0].legend()
+    fig.suptitle(f"{m['name']}: GGX lobes, fitted from the virtual rig vs the truth")
+    fig.tight_layout()
+    fig.savefig(os.path.join(out, "lobes.png"), dpi=90)
+print(os.path.join(out, "chain.html"))
