@@ -63,6 +63,8 @@ json_t *calib_provenance(int argc, char **argv);
 // Adds {role, path, sha256 of the file (a directory: of its session.sqlite)}.
 // false when the file cannot be read (message set).
 bool    calib_provenance_input(json_t *prov, const char *role, const char *path);
+// The same entry appended to an array of inputs.
+bool    calib_inputs_add(json_t *inputs, const char *role, const char *path);
 
 // Write JSON to path atomically (temporary name, fsync, rename). false + message.
 bool calib_write_json(const char *path, json_t *o);

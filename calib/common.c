@@ -262,7 +262,7 @@ json_t *calib_provenance(int argc, char **argv)
     return p;
 }
 
-bool calib_provenance_input(json_t *prov, const char *role, const char *path)
+bool calib_inputs_add(json_t *inputs, const char *role, const char *path)
 {
     struct stat st;
     char sha[65];
@@ -275,8 +275,13 @@ bool calib_provenance_input(json_t *prov, const char *role, const char *path)
     json_object_set_new(in, "role", json_string(role));
     json_object_set_new(in, "path", json_string(path));
     json_object_set_new(in, "sha256", json_string(sha));
-    json_array_append_new(json_object_get(prov, "inputs"), in);
+    json_array_append_new(inputs, in);
     return true;
+}
+
+bool calib_provenance_input(json_t *prov, const char *role, const char *path)
+{
+    return calib_inputs_add(json_object_get(prov, "inputs"), role, path);
 }
 
 // ---------------------------------------------------------------------------

@@ -32,38 +32,6 @@
 // ---------------------------------------------------------------------------
 // Numerics
 
-// Solve A x = b (n x n, row-major, both overwritten) by Gaussian elimination
-// with partial pivoting. false when singular.
-static bool solve(double *A, double *b, int n)
-{
-    for (int c = 0; c < n; c++) {
-        int p = c;
-        for (int r = c + 1; r < n; r++)
-            if (fabs(A[r * n + c]) > fabs(A[p * n + c])) p = r;
-        if (!(fabs(A[p * n + c]) > 1e-300)) return false;
-        if (p != c) {
-            for (int k = 0; k < n; k++) {
-                double t = A[c * n + k];
-                A[c * n + k] = A[p * n + k];
-                A[p * n + k] = t;
-            }
-            double t = b[c];
-            b[c] = b[p];
-            b[p] = t;
-        }
-        for (int r = c + 1; r < n; r++) {
-            double f = A[r * n + c] / A[c * n + c];
-            for (int k = c; k < n; k++) A[r * n + k] -= f * A[c * n + k];
-            b[r] -= f * b[c];
-        }
-    }
-    for (int r = n - 1; r >= 0; r--) {
-        double s = b[r];
-        for (int k = r + 1; k < n; k++) s -= A[r * n + k] * b[k];
-        b[r] = s / A[r * n + r];
-    }
-    return true;
-}
 
 bool calib_gain_polyfit(const double *x, const double *y, int n, int degree, double *c)
 {
@@ -81,7 +49,7 @@ bool calib_gain_polyfit(const double *x, const double *y, int n, int degree, dou
             for (int k = 0; k < m; k++) A[r * m + k] += p[r] * p[k];
         }
     }
-    if (!solve(A, b, m)) return false;
+    if (!model_solve_linear(A, b, m)) return false;
     c[0] = b[0];
     c[1] = b[1] / sx;
     if (degree == 2) c[2] = b[2] / (sx * sx);
@@ -228,7 +196,7 @@ bool calib_gain_highpass(const float *in, int w, int h, float *out)
             for (int k = 0; k < 6; k++) A[r * 6 + k] += S[pa[r] + pa[k]] * pow(v, pb[r] + pb[k]);
         }
     }
-    if (!solve(A, b, 6)) return false;
+    if (!model_solve_linear(A, b, 6)) return false;
     for (int y = 0; y < h; y++) {
         double v = (y - cy) / sy;
         for (int x = 0; x < w; x++) {

@@ -44,38 +44,6 @@ static model_vec3_t vadd(model_vec3_t a, model_vec3_t b) { return v3(a.x + b.x, 
 static model_vec3_t vscale(model_vec3_t a, double s) { return v3(a.x * s, a.y * s, a.z * s); }
 static double vdot(model_vec3_t a, model_vec3_t b) { return a.x * b.x + a.y * b.y + a.z * b.z; }
 
-// Solve A x = b (n x n, row-major, n <= 8) by Gaussian elimination with partial
-// pivoting; A and b are overwritten. false when singular.
-static bool solve(double *A, double *b, int n)
-{
-    for (int c = 0; c < n; c++) {
-        int piv = c;
-        for (int r = c + 1; r < n; r++)
-            if (fabs(A[r * n + c]) > fabs(A[piv * n + c])) piv = r;
-        if (!(fabs(A[piv * n + c]) > 1e-300)) return false;
-        if (piv != c) {
-            for (int k = 0; k < n; k++) {
-                double t = A[c * n + k];
-                A[c * n + k] = A[piv * n + k];
-                A[piv * n + k] = t;
-            }
-            double t = b[c];
-            b[c] = b[piv];
-            b[piv] = t;
-        }
-        for (int r = c + 1; r < n; r++) {
-            double f = A[r * n + c] / A[c * n + c];
-            for (int k = c; k < n; k++) A[r * n + k] -= f * A[c * n + k];
-            b[r] -= f * b[c];
-        }
-    }
-    for (int r = n - 1; r >= 0; r--) {
-        double s = b[r];
-        for (int k = r + 1; k < n; k++) s -= A[r * n + k] * b[k];
-        b[r] = s / A[r * n + r];
-    }
-    return true;
-}
 
 // Inverse of a 3x3 matrix; false when singular.
 static bool inv3(const double *m, double *out)
@@ -255,7 +223,7 @@ static bool gauss_fit(const double *xs, const double *ys, const double *v, int n
         }
         memcpy(JTJ, A, sizeof JTJ);
         for (int a = 0; a < 5; a++) A[a * 6] *= 1 + lambda;
-        if (!solve(A, b, 5)) return false;
+        if (!model_solve_linear(A, b, 5)) return false;
         double pn[5];
         for (int a = 0; a < 5; a++) pn[a] = p[a] + b[a];
         double cn = 0;
@@ -284,7 +252,7 @@ static bool gauss_fit(const double *xs, const double *ys, const double *v, int n
         memcpy(A, JTJ, sizeof A);
         double e[5] = { 0 };
         e[k] = 1;
-        if (!solve(A, e, 5)) return false;
+        if (!model_solve_linear(A, e, 5)) return false;
         var[k - 1] = s2 * e[k];
     }
     (void)I;
@@ -617,7 +585,7 @@ bool calib_lamps_fit_direction(const model_camera_t *cam, const calib_lamps_high
                     for (int l = 0; l < 4; l++) A[k * 4 + l] += f.wt[i] * J[i][k] * J[i][l];
                 }
             for (int k = 0; k < 4; k++) A[k * 5] *= 1 + lambda;
-            if (!solve(A, b, 4)) break;
+            if (!model_solve_linear(A, b, 4)) break;
             double pn[4] = { p[0] + b[0], p[1] + b[1], p[2] + b[2], p[3] + b[3] };
             if (!(pn[3] > 5e-4 && pn[0] > 0)) {
                 lambda *= 10;

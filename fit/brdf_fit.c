@@ -411,18 +411,25 @@ static bool solve_once(const fit_samples_t *s, model_brdf_t m, const fit_brdf_op
     return ok;
 }
 
+// Reset out for model m; false (message) when the samples are too few.
+static bool begin_result(const fit_samples_t *s, model_brdf_t m, fit_brdf_result_t *out)
+{
+    memset(out, 0, sizeof *out);
+    out->model = m;
+    out->nparams = model_brdf_nparams(m);
+    if (!s || s->n < out->nparams + 1) {
+        model_error(s ? s->source : "samples", 0, "%d samples: too few to fit %s (%d parameters)", s ? s->n : 0,
+                    model_brdf_name(m), out->nparams);
+        return false;
+    }
+    return true;
+}
+
 bool fit_brdf(const fit_samples_t *s, model_brdf_t m, const fit_brdf_options_t *opt, fit_brdf_result_t *out)
 {
     fit_brdf_options_t o = opt ? *opt : fit_brdf_defaults();
-    memset(out, 0, sizeof *out);
-    out->model = m;
-    int np = model_brdf_nparams(m);
-    out->nparams = np;
-    if (!s || s->n < np + 1) {
-        model_error(s ? s->source : "samples", 0, "%d samples: too few to fit %s (%d parameters)", s ? s->n : 0,
-                    model_brdf_name(m), np);
-        return false;
-    }
+    if (!begin_result(s, m, out)) return false;
+    int np = out->nparams;
     double kd0 = diffuse_level(s);
     bool has_rough = false;
     for (int j = 0; j < np; j++) {
@@ -463,15 +470,8 @@ bool fit_brdf_from(const fit_samples_t *s, model_brdf_t m, const fit_brdf_option
                    fit_brdf_result_t *out)
 {
     fit_brdf_options_t o = opt ? *opt : fit_brdf_defaults();
-    memset(out, 0, sizeof *out);
-    out->model = m;
-    int np = model_brdf_nparams(m);
-    out->nparams = np;
-    if (!s || s->n < np + 1) {
-        model_error(s ? s->source : "samples", 0, "%d samples: too few to fit %s (%d parameters)", s ? s->n : 0,
-                    model_brdf_name(m), np);
-        return false;
-    }
+    if (!begin_result(s, m, out)) return false;
+    int np = out->nparams;
     fit_problem_t *pr = NULL;
     block_t *blocks = NULL;
     memcpy(out->p, start, (size_t)np * sizeof *start);

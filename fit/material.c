@@ -31,14 +31,7 @@ static char *find_in(const char *dir, const char *sub, const char *name)
 
 static bool add_input(fit_calib_t *c, const char *role, const char *path)
 {
-    char sha[65];
-    if (!model_sha256_file(path, sha)) return false;
-    json_t *o = json_object();
-    json_object_set_new(o, "role", json_string(role));
-    json_object_set_new(o, "path", json_string(path));
-    json_object_set_new(o, "sha256", json_string(sha));
-    json_array_append_new(c->inputs, o);
-    return true;
+    return calib_inputs_add(c->inputs, role, path);
 }
 
 void fit_calib_free(fit_calib_t *c)
@@ -631,6 +624,39 @@ static int parse_args(const char *cmd, int argc, char **argv, mat_args_t *a, voi
     return -1;
 }
 
+// Both commands: the calibrations of --calib and the observations of the
+// session. false with the message printed (cmd names the command).
+static bool load_and_observe(const char *cmd, const mat_args_t *a, bool need_white, fit_calib_t **cal,
+                             fit_obs_set_t *obs)
+{
+    memset(obs, 0, sizeof *obs);
+    if (!(*cal = fit_calib_load(a->calib, need_white))) {
+        fprintf(stderr, "refl %s: %s\n", cmd, model_last_error());
+        return false;
+    }
+    fit_observe_options_t o = fit_observe_defaults();
+    o.scene_path = a->scene;
+    o.material = a->material;
+    o.verbose = a->verbose;
+    if (!fit_observe(a->session, *cal, &o, obs)) {
+        fprintf(stderr, "refl %s: %s\n", cmd, model_last_error());
+        return false;
+    }
+    return true;
+}
+
+// Provenance of a command's output: the command, the session and every
+// calibration file read.
+static json_t *provenance(int argc, char **argv, const mat_args_t *a, const fit_calib_t *cal)
+{
+    json_t *prov = calib_provenance(argc + 1, argv - 1);
+    calib_provenance_input(prov, "session", a->session);
+    size_t i;
+    json_t *in;
+    json_array_foreach(cal->inputs, i, in) json_array_append(json_object_get(prov, "inputs"), in);
+    return prov;
+}
+
 static void white_usage(FILE *f)
 {
     fprintf(f, "usage: refl calib white SESSION --calib DIR [--albedo A] [--scene FILE] [--material NAME] -o WHITE.json\n"
@@ -651,28 +677,13 @@ int fit_cmd_white(int argc, char **argv)
         fprintf(stderr, "refl calib white: --albedo %g: an albedo is at most 1\n", a.albedo);
         return 2;
     }
-    fit_calib_t *cal = fit_calib_load(a.calib, false);
-    if (!cal) {
-        fprintf(stderr, "refl calib white: %s\n", model_last_error());
-        return 1;
-    }
-    fit_observe_options_t o = fit_observe_defaults();
-    o.scene_path = a.scene;
-    o.material = a.material;
-    o.verbose = a.verbose;
+    fit_calib_t *cal = NULL;
     fit_obs_set_t obs;
     rc = 1;
-    if (!fit_observe(a.session, cal, &o, &obs)) {
-        fprintf(stderr, "refl calib white: %s\n", model_last_error());
-        goto done;
-    }
+    if (!load_and_observe("calib white", &a, false, &cal, &obs)) goto done;
     printf("refl calib white: %d observations of %s in %d frames (%d skipped)\n", obs.n, obs.material,
            obs.frames_used, obs.frames_skipped);
-    json_t *prov = calib_provenance(argc + 1, argv - 1);
-    calib_provenance_input(prov, "session", a.session);
-    size_t i;
-    json_t *in;
-    json_array_foreach(cal->inputs, i, in) json_array_append(json_object_get(prov, "inputs"), in);
+    json_t *prov = provenance(argc, argv, &a, cal);
     if (fit_white(&obs, cal, a.albedo, a.out, prov)) {
         printf("%s\n", a.out);
         rc = 0;
@@ -680,8 +691,8 @@ int fit_cmd_white(int argc, char **argv)
         fprintf(stderr, "refl calib white: %s\n", model_last_error());
     }
     json_decref(prov);
-    fit_obs_free(&obs);
 done:
+    fit_obs_free(&obs);
     fit_calib_free(cal);
     return rc;
 }
@@ -716,22 +727,11 @@ int fit_cmd_material(int argc, char **argv)
         fprintf(stderr, "refl fit material: --model: unknown model %s\n", a.model);
         return 2;
     }
-    fit_calib_t *cal = fit_calib_load(a.calib, true);
-    if (!cal) {
-        fprintf(stderr, "refl fit material: %s\n", model_last_error());
-        return 1;
-    }
-    fit_observe_options_t o = fit_observe_defaults();
-    o.scene_path = a.scene;
-    o.material = a.material;
-    o.verbose = a.verbose;
+    fit_calib_t *cal = NULL;
     fit_obs_set_t obs;
     fit_samples_t *smp = NULL;
     rc = 1;
-    if (!fit_observe(a.session, cal, &o, &obs)) {
-        fprintf(stderr, "refl fit material: %s\n", model_last_error());
-        goto done;
-    }
+    if (!load_and_observe("fit material", &a, true, &cal, &obs)) goto done;
     smp = fit_samples_new();
     snprintf(smp->source, sizeof smp->source, "%s", a.session);
     for (int i = 0; i < obs.n; i++) {
@@ -767,12 +767,7 @@ int fit_cmd_material(int argc, char **argv)
     json_object_set_new(e, "sample", json_string(obs.sample));
     json_array_append_new(mats, e);
     json_object_set_new(top, "materials", mats);
-    json_t *prov = calib_provenance(argc + 1, argv - 1);
-    calib_provenance_input(prov, "session", a.session);
-    size_t i;
-    json_t *in;
-    json_array_foreach(cal->inputs, i, in) json_array_append(json_object_get(prov, "inputs"), in);
-    json_object_set_new(top, "provenance", prov);
+    json_object_set_new(top, "provenance", provenance(argc, argv, &a, cal));
     char *od = g_path_get_dirname(a.out);
     bool made = calib_mkdir_p(od);
     g_free(od);

@@ -74,6 +74,9 @@ void   model_utc_text(double t_s, char out[40]);
 // The command line as one shell-readable string "refl ARG ..." (argv[0] is the
 // subcommand; arguments quoted where needed). Free with g_free().
 char  *model_command_line(int argc, char **argv);
+// Solve A x = b (n x n, row-major; A and b overwritten, x in b) by Gaussian
+// elimination with partial pivoting. false when A is singular.
+bool   model_solve_linear(double *A, double *b, int n);
 
 // ---------------------------------------------------------------------------
 // INI files (model/ini.c): "[section]" or "[kind NAME]" headers, "key = value"
