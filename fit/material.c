@@ -65,6 +65,7 @@ fit_calib_t *fit_calib_load(const char *dir, bool need_white)
     char *cam = NULL, *lamps = NULL, *gain = NULL, *white = NULL, *off = NULL, *flat = NULL;
     json_t *lj = NULL, *gj = NULL, *wj = NULL;
     json_error_t je;
+    bool ok = false;
     if (!c) return NULL;
     c->inputs = json_array();
     if (!(cam = find_in(dir, "geometry", "camera.cameramodel"))) {
@@ -156,19 +157,12 @@ fit_calib_t *fit_calib_load(const char *dir, bool need_white)
         model_error(dir, 0, "no white.json (nor white/white.json): run refl calib white on a reference-white session");
         goto fail;
     }
-    g_free(cam);
-    g_free(lamps);
-    g_free(gain);
-    g_free(white);
-    g_free(off);
-    g_free(flat);
-    json_decref(lj);
-    json_decref(gj);
-    json_decref(wj);
-    return c;
+    ok = true;
+    goto done;
 oom:
     model_error(dir, 0, "out of memory");
 fail:
+done:
     g_free(cam);
     g_free(lamps);
     g_free(gain);
@@ -178,6 +172,7 @@ fail:
     json_decref(lj);
     json_decref(gj);
     json_decref(wj);
+    if (ok) return c;
     fit_calib_free(c);
     return NULL;
 }
