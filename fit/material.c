@@ -397,17 +397,22 @@ bool fit_observe(const char *session_dir, const fit_calib_t *cal, const fit_obse
             }
             float *dark = NULL;
             if (!cal->offset_dn) {
-                // the session's dark frame of this exposure nearest in steps
+                // the session's dark frame at the same gain nearest in exposure, then
+                // in steps (the dark current is a small part of the dark level: an
+                // auto bracket of lamps off stops at its longest exposure)
                 int best = -1;
-                for (int f = 0; f < s->n; f++)
-                    if (!strcmp(s->rows[f].lamps, "none") && s->rows[f].exposure_us == r->exposure_us &&
-                        s->rows[f].gain == r->gain &&
-                        (best < 0 || abs(s->rows[f].step - r->step) < abs(s->rows[best].step - r->step)))
+                for (int f = 0; f < s->n; f++) {
+                    const rig_frame_row_t *q = &s->rows[f];
+                    if (strcmp(q->lamps, "none") || q->gain != r->gain) continue;
+                    double de = fabs(q->exposure_us - r->exposure_us);
+                    double db = best < 0 ? 0 : fabs(s->rows[best].exposure_us - r->exposure_us);
+                    if (best < 0 || de < db || (de == db && abs(q->step - r->step) < abs(s->rows[best].step - r->step)))
                         best = f;
+                }
                 if (best < 0) {
                     model_error(session_dir, 0, "step %d (%s, %g us): no dark level: the calibration has no offset "
-                                "map and the session no dark frame at that exposure (add dark_every to the plan, or "
-                                "a gain calibration)", r->step, r->lamps, r->exposure_us);
+                                "map and the session no dark frame (add the lamp set none or dark_every to the plan, "
+                                "or a gain calibration)", r->step, r->lamps, r->exposure_us);
                     fail = true;
                     break;
                 }
@@ -564,7 +569,7 @@ bool fit_white(const fit_obs_set_t *obs, const fit_calib_t *cal, double albedo, 
 // Commands
 
 typedef struct {
-    const char *session, *calib, *out, *scene, *material, *model, *name;
+    const char *session, *calib, *out, *scene, *material, *model, *name, *report;
     double      albedo, k_sigma, sys_rel;
     bool        verbose;
 } mat_args_t;
@@ -583,7 +588,8 @@ static int parse_args(const char *cmd, int argc, char **argv, mat_args_t *a, voi
         }
         const char **str = !strcmp(s, "-o") ? &a->out : !strcmp(s, "--calib") ? &a->calib
                          : !strcmp(s, "--scene") ? &a->scene : !strcmp(s, "--material") ? &a->material
-                         : !strcmp(s, "--model") ? &a->model : !strcmp(s, "--name") ? &a->name : NULL;
+                         : !strcmp(s, "--model") ? &a->model : !strcmp(s, "--name") ? &a->name
+                         : !strcmp(s, "--report") ? &a->report : NULL;
         double *num = !strcmp(s, "--albedo") ? &a->albedo : !strcmp(s, "--k-sigma") ? &a->k_sigma
                     : !strcmp(s, "--systematic") ? &a->sys_rel : NULL;
         if (str || num) {
@@ -692,11 +698,97 @@ done:
     return rc;
 }
 
+// The report of a material fit: DIR/samples.csv (every sample with its
+// geometry, measured and fitted R), plots by scripts/fit_material_report.py,
+// and DIR/report.html with the parameter table and the model comparison.
+static bool material_report(const char *dir, const fit_obs_set_t *obs, const fit_samples_t *smp,
+                            const fit_brdf_result_t *res, int nres, int best, const json_t *entry, const json_t *prov)
+{
+    if (!calib_mkdir_p(dir)) return false;
+    char *csv = g_strdup_printf("%s/samples.csv", dir), *html = g_strdup_printf("%s/report.html", dir);
+    bool ok = false;
+    FILE *f = fopen(csv, "w");
+    if (!f) {
+        model_error(csv, 0, "cannot write: %s", strerror(errno));
+        goto done;
+    }
+    fprintf(f, "# refl fit material samples: window centre (px), step, lamp, angles (deg: incidence, view, half "
+               "vector from the normal), R measured and fitted by %s (1/sr, R = f_r cos theta_i)\n",
+            model_brdf_name(res[best].model));
+    fprintf(f, "x_px,y_px,step,lamp,theta_i_deg,theta_o_deg,theta_h_deg,R_meas,R_fit\n");
+    const double d = 180 / M_PI;
+    for (int i = 0; i < smp->n; i++) {
+        const model_cosines_t *c = &smp->c[i];
+        fprintf(f, "%.1f,%.1f,%d,%d,%.4f,%.4f,%.4f,%.6g,%.6g\n", obs->o[i].q[0], obs->o[i].q[1], obs->o[i].step,
+                obs->o[i].lamp, acos(fmin(1, c->nl)) * d, acos(fmin(1, c->nv)) * d, acos(fmin(1, c->nh)) * d,
+                smp->R[i], model_brdf_eval(res[best].model, res[best].p, c, NULL));
+    }
+    if (fclose(f) != 0) {
+        model_error(csv, 0, "cannot write: %s", strerror(errno));
+        goto done;
+    }
+    char pbuf[256] = "";
+    size_t o = 0;
+    for (int j = 0; j < res[best].nparams; j++)
+        o += (size_t)snprintf(pbuf + o, sizeof pbuf - o, "%s%.6g", j ? "," : "", res[best].p[j]);
+    if (calib_python("fit_material_report.py", dir, model_brdf_name(res[best].model), pbuf, (char *)NULL) != 0)
+        goto done;
+    FILE *h = calib_html_begin(html, "refl fit material", prov);
+    if (!h) goto done;
+    calib_html_para(h, "Material %s of sample %s: %d BRDF samples (windows of %d frames lit by one lamp each). "
+                    "Chosen model: %s (lowest BIC). R = f_r cos(theta_i) in 1/sr.",
+                    json_string_value(json_object_get(entry, "name")), obs->sample, smp->n, obs->frames_used,
+                    model_brdf_name(res[best].model));
+    calib_html_heading(h, "Parameters");
+    json_t *ps = json_object_get(entry, "parameters");
+    char **rows = calloc(json_array_size(ps) + 1, sizeof *rows);
+    for (size_t j = 0; j < json_array_size(ps); j++) {
+        json_t *p = json_array_get(ps, j);
+        rows[j] = g_strdup_printf("%s|%s|%.6g|%.3g|%.3g|%.6g .. %.6g|%s|%s", json_string_value(json_object_get(p, "name")),
+                                  json_string_value(json_object_get(p, "unit")),
+                                  json_number_value(json_object_get(p, "mean")),
+                                  json_number_value(json_object_get(p, "std")),
+                                  json_number_value(json_object_get(p, "std_statistical")),
+                                  json_number_value(json_object_get(p, "lo")),
+                                  json_number_value(json_object_get(p, "hi")),
+                                  json_string_value(json_object_get(p, "convention")),
+                                  json_object_get(p, "held") ? json_string_value(json_object_get(p, "held")) : "");
+    }
+    calib_html_table(h, "parameter|unit|mean|std|std (statistical)|prior bounds|convention|note",
+                     (const char *const *)rows, (int)json_array_size(ps));
+    for (size_t j = 0; j < json_array_size(ps); j++) g_free(rows[j]);
+    free(rows);
+    calib_html_heading(h, "Measured vs fitted");
+    calib_html_figure(h, "lobes.png", "R against the half-vector angle, measured (dots, coloured by incidence) "
+                      "and fitted (the model at the same geometry), per lamp; and the fitted model's lobes in the "
+                      "plane of incidence");
+    calib_html_figure(h, "residual_maps.png", "residual R_meas - R_fit at each window, for four frames");
+    calib_html_heading(h, "Model comparison");
+    char **mr = calloc((size_t)nres + 1, sizeof *mr);
+    for (int k = 0; k < nres; k++) {
+        GString *g = g_string_new("");
+        g_string_append_printf(g, "%s%s|%.4g|%.4g|%.8g|%.8g|", model_brdf_name(res[k].model), k == best ? " (chosen)" : "",
+                               res[k].rms, res[k].rms_fr, res[k].aic, res[k].bic);
+        for (int j = 0; j < res[k].nparams; j++)
+            g_string_append_printf(g, "%s%s %.4g", j ? ", " : "", model_brdf_param_name(res[k].model, j), res[k].p[j]);
+        mr[k] = g_string_free(g, FALSE);
+    }
+    calib_html_table(h, "model|RMS of R (1/sr)|RMS of f_r (1/sr)|AIC|BIC|parameters", (const char *const *)mr, nres);
+    for (int k = 0; k < nres; k++) g_free(mr[k]);
+    free(mr);
+    calib_html_figure(h, "models.png", "residuals of the chosen model: histogram, and relative to R against the half-vector angle");
+    ok = calib_html_end(h, html);
+done:
+    g_free(csv);
+    g_free(html);
+    return ok;
+}
+
 static void material_usage(FILE *f)
 {
     fprintf(f, "usage: refl fit material SESSION --calib DIR [--model all|lambert|hall|torrance_sparrow|thesis_fit|\n"
                "                         cook_torrance|ggx] [--name NAME] [--scene FILE] [--material NAME]\n"
-               "                         [--k-sigma K] [--systematic REL] -o PRIORS.json\n"
+               "                         [--k-sigma K] [--systematic REL] [--report DIR] -o PRIORS.json\n"
                "\n"
                "BRDF samples of the session's sample material: every window of the material lit by one lamp, dark\n"
                "and flat corrected, brackets merged to high dynamic range, scaled by the reference white's kc*I of\n"
@@ -705,7 +797,9 @@ static void material_usage(FILE *f)
                "On a virtual rig the sample's scene and material come from the truth file's [sample]; elsewhere\n"
                "give --scene and --material. Each parameter's std adds REL * mean (default 0.03) to the statistical\n"
                "one, for the calibrations' shared errors (on the virtual rig kc*I comes out within ~3 %% and the lamp\n"
-               "positions within ~8 mm); the prior bounds are mean +- K std (default 3).\n\nrefl %s\n", REFL_VERSION);
+               "positions within ~8 mm); the prior bounds are mean +- K std (default 3). --report DIR writes an HTML\n"
+               "report there: measured vs fitted lobes, residual maps, the parameters and the model comparison.\n"
+               "\nrefl %s\n", REFL_VERSION);
 }
 
 int fit_cmd_material(int argc, char **argv)
@@ -731,7 +825,11 @@ int fit_cmd_material(int argc, char **argv)
     snprintf(smp->source, sizeof smp->source, "%s", a.session);
     for (int i = 0; i < obs.n; i++) {
         const fit_obs_t *b = &obs.o[i];
-        fit_samples_add(smp, &b->c, b->s_dn_per_us * b->d_mm * b->d_mm / cal->kcI_per_us[b->lamp], 1);
+        if (!fit_samples_add(smp, &b->c, b->s_dn_per_us * b->d_mm * b->d_mm / cal->kcI_per_us[b->lamp], 1)) {
+            fprintf(stderr, "refl fit material: observation %d (step %d) gives no usable sample (kc*I of lamp %s "
+                    "is %g)\n", i, b->step, cal->lamps->lamps[b->lamp].name, cal->kcI_per_us[b->lamp]);
+            goto done;
+        }
     }
     printf("refl fit material: %s: %d BRDF samples from %d frames (%d skipped)\n", obs.material, smp->n,
            obs.frames_used, obs.frames_skipped);
@@ -770,6 +868,14 @@ int fit_cmd_material(int argc, char **argv)
         printf("%s: %s, model %s (lowest BIC of %d)\n", a.out, a.name ? a.name : obs.material,
                model_brdf_name(res[best].model), nres);
         rc = 0;
+        if (a.report) {
+            if (material_report(a.report, &obs, smp, res, nres, best, e, json_object_get(top, "provenance"))) {
+                printf("%s/report.html\n", a.report);
+            } else {
+                fprintf(stderr, "refl fit material: the report: %s\n", model_last_error());
+                rc = 1;
+            }
+        }
     } else {
         fprintf(stderr, "refl fit material: %s\n", model_last_error());
     }
