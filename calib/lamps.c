@@ -12,14 +12,32 @@
 // angular size, point-sampled at the pixel centres) -> each lamp the
 // least-squares point nearest its rays (outliers dropped by deleted
 // residuals), covariance from the residuals; then the lamp's disk size from
-// that distance and the fit once more -> DIR/lamps.json, DIR/report.html
-// (plots by scripts/calib_lamps_report.py).
+// that distance and the fit once more; then (--sphere-path fit, the default)
+// the joint fit of every lamp and the sphere's path over all highlights
+// (calib_lamps_bundle: the path's offset, shift and tilt with priors, the
+// highlights fitted again at the fitted path, the joint fit again) ->
+// DIR/lamps.json, DIR/report.html (plots by scripts/calib_lamps_report.py).
 //
 // Measured on the virtual rig (tests/test_calib_lamps.c): the centroid alone
 // is biased by the point sampling of a highlight ~2 px wide (0.06 px RMS);
 // the direction-space model with the exact lobe and the lamp's disk brings
 // the per-ray error to ~1 mrad; the depth along each lamp's line of sight is
 // the weak direction (the sphere's circle of 60 mm seen from 0.75 m).
+// Why the joint fit: the sphere is 25 mm and 0.87 m from the camera, the
+// lamps ~0.8 m from it, so where the camera model puts the sphere relative to
+// itself is amplified ~60x at the lamps (0.07 mm -> 5 mm). The demo's
+// calibrated camera (centre 1.45 mm off, 0.05 deg) moves the sphere by
+// ~0.05-0.1 mm, mostly without turning with the table, and tilts its circle
+// by ~0.25 mrad: with the sphere held 7.5 mm RMS, joint 1.9 mm (the true
+// camera: 1.37 held, 1.35 joint). The path's tilt and the offset across the
+// view are well observed (std ~0.045 mrad, ~0.002-0.009 mm); the shift and
+// the offset's z (the path's height relative to the camera) are weak (std
+// 0.06-0.08 mm against a 0.1 mm prior: condition ~1e4), and they are the
+// main part of each lamp's stated std (~3 mm): on synthetic highlights with
+// the virtual rig's ray noise (0.02 px) the joint fit's lamps are 1.5-4.6 mm
+// RMS off over seeds, within 4 stated std (tests: calib_lamps_bundle_synthetic).
+// The sphere's limb, which would fix the shift, is not seen in these frames
+// (the ball mirrors a dark room).
 #define _GNU_SOURCE
 #include <errno.h>
 #include <glib.h>
@@ -32,6 +50,7 @@
 
 #include "calib/calib.h"
 #include "calib/lamps.h"
+#include "fit/lsq.h"
 #include "model/model.h"
 #include "rig/rig.h"
 
@@ -709,6 +728,328 @@ done:
     return ok;
 }
 
+
+// ---------------------------------------------------------------------------
+// The joint fit of the lamps and the sphere's path (bundle adjustment)
+
+// The sphere centre at the observation's angle for sphere parameters g, and
+// d centre / d g (3x7, row-major).
+static void bundle_centre(const calib_lamps_bundle_setup_t *S, double angle_deg, const double *g, double s[3],
+                          double ds_dg[21])
+{
+    double th = angle_deg * M_PI / 180, ct = cos(th), st = sin(th);
+    double a0 = S->c0_mm[0] + g[0], a1 = S->c0_mm[1] + g[1], a2 = S->c0_mm[2] + g[2];
+    double s0[3] = { ct * a0 - st * a1, st * a0 + ct * a1, a2 };
+    double wx = 1e-3 * g[5], wy = 1e-3 * g[6];
+    // s = s0 + w x s0 + shift, w = (wx, wy, 0)
+    s[0] = s0[0] + wy * s0[2] + g[3];
+    s[1] = s0[1] - wx * s0[2] + g[4];
+    s[2] = s0[2] + wx * s0[1] - wy * s0[0];
+    if (ds_dg) {
+        // d s0 / d offset = Rz; d s / d s0 = I + [w]x
+        const double Rz[9] = { ct, -st, 0, st, ct, 0, 0, 0, 1 };
+        const double M[9] = { 1, 0, wy, 0, 1, -wx, -wy, wx, 1 };
+        for (int i = 0; i < 3; i++) {
+            for (int j = 0; j < 3; j++)
+                ds_dg[i * 7 + j] = M[i * 3] * Rz[j] + M[i * 3 + 1] * Rz[3 + j] + M[i * 3 + 2] * Rz[6 + j];
+            ds_dg[i * 7 + 3] = i == 0;
+            ds_dg[i * 7 + 4] = i == 1;
+        }
+        ds_dg[0 * 7 + 5] = 0;
+        ds_dg[1 * 7 + 5] = -1e-3 * s0[2];
+        ds_dg[2 * 7 + 5] = 1e-3 * s0[1];
+        ds_dg[0 * 7 + 6] = 1e-3 * s0[2];
+        ds_dg[1 * 7 + 6] = 0;
+        ds_dg[2 * 7 + 6] = -1e-3 * s0[0];
+    }
+}
+
+bool calib_lamps_bundle_residual(void *vctx, const double *const *P, double *res, double **jac)
+{
+    const calib_lamps_bundle_ctx_t *cx = vctx;
+    const calib_lamps_bundle_setup_t *S = cx->setup;
+    const double *X = P[0], *g = P[1], r = S->radius_mm, isg = 1 / cx->sigma_rad;
+    double s[3], dsdg[21];
+    bundle_centre(S, cx->obs.angle_deg, g, s, dsdg);
+    const double C[3] = { S->camera_mm.x, S->camera_mm.y, S->camera_mm.z };
+    const double d[3] = { cx->obs.ray.x, cx->obs.ray.y, cx->obs.ray.z };
+    double oc[3], pp[3], n[3], u[3], w[3], ul[3];
+    for (int i = 0; i < 3; i++) oc[i] = C[i] - s[i];
+    double b = d[0] * oc[0] + d[1] * oc[1] + d[2] * oc[2];
+    double cc = oc[0] * oc[0] + oc[1] * oc[1] + oc[2] * oc[2] - r * r, disc = b * b - cc;
+    if (!(disc > 0)) return false;   // the ray misses the sphere at these parameters
+    double sq = sqrt(disc), t = -b - sq;
+    if (!(t > 0)) return false;
+    for (int i = 0; i < 3; i++) {
+        pp[i] = C[i] + t * d[i];
+        n[i] = (pp[i] - s[i]) / r;
+    }
+    double dn = d[0] * n[0] + d[1] * n[1] + d[2] * n[2];
+    for (int i = 0; i < 3; i++) {
+        u[i] = d[i] - 2 * dn * n[i];
+        w[i] = X[i] - pp[i];
+    }
+    double wl = sqrt(w[0] * w[0] + w[1] * w[1] + w[2] * w[2]);
+    if (!(wl > 1e-9)) return false;
+    double r3[3];
+    for (int i = 0; i < 3; i++) {
+        ul[i] = w[i] / wl;
+        r3[i] = ul[i] - u[i];
+    }
+    const double *Wm = cx->W;
+    for (int i = 0; i < 3; i++) res[i] = (Wm[i * 3] * r3[0] + Wm[i * 3 + 1] * r3[1] + Wm[i * 3 + 2] * r3[2]) * isg;
+    if (!jac) return true;
+    // d t / d s, d p / d s = d (dt/ds)^T, d n / d s = (dp/ds - I) / r,
+    // d u / d s = -2 (n (d^T dn/ds) + (d.n) dn/ds)
+    double dtds[3], dpds[9], dnds[9], duds[9], Pl[9];
+    for (int k = 0; k < 3; k++) dtds[k] = d[k] - (oc[k] - b * d[k]) / sq;
+    for (int i = 0; i < 3; i++)
+        for (int k = 0; k < 3; k++) {
+            dpds[i * 3 + k] = d[i] * dtds[k];
+            dnds[i * 3 + k] = (dpds[i * 3 + k] - (i == k)) / r;
+            Pl[i * 3 + k] = ((i == k) - ul[i] * ul[k]) / wl;
+        }
+    for (int k = 0; k < 3; k++) {
+        double ddn = d[0] * dnds[k] + d[1] * dnds[3 + k] + d[2] * dnds[6 + k];
+        for (int i = 0; i < 3; i++) duds[i * 3 + k] = -2 * (n[i] * ddn + dn * dnds[i * 3 + k]);
+    }
+    if (jac[0])
+        for (int i = 0; i < 3; i++)
+            for (int k = 0; k < 3; k++)
+                jac[0][i * 3 + k] = (Wm[i * 3] * Pl[k] + Wm[i * 3 + 1] * Pl[3 + k] + Wm[i * 3 + 2] * Pl[6 + k]) * isg;
+    if (jac[1]) {
+        double drds[9], wd[9];
+        for (int i = 0; i < 3; i++)
+            for (int k = 0; k < 3; k++) {
+                double a = 0;
+                for (int m = 0; m < 3; m++) a += Pl[i * 3 + m] * dpds[m * 3 + k];
+                drds[i * 3 + k] = -a - duds[i * 3 + k];
+            }
+        for (int i = 0; i < 3; i++)
+            for (int k = 0; k < 3; k++)
+                wd[i * 3 + k] = (Wm[i * 3] * drds[k] + Wm[i * 3 + 1] * drds[3 + k] + Wm[i * 3 + 2] * drds[6 + k]) * isg;
+        for (int i = 0; i < 3; i++)
+            for (int j = 0; j < 7; j++)
+                jac[1][i * 7 + j] = wd[i * 3] * dsdg[j] + wd[i * 3 + 1] * dsdg[7 + j] + wd[i * 3 + 2] * dsdg[14 + j];
+    }
+    return true;
+}
+
+// An orthonormal pair perpendicular to the unit vector a.
+static void tangent_pair(const double a[3], double e1[3], double e2[3])
+{
+    double h[3] = { 0, 0, 0 };
+    h[fabs(a[2]) < 0.9 ? 2 : 0] = 1;
+    double k = h[0] * a[0] + h[1] * a[1] + h[2] * a[2];
+    for (int i = 0; i < 3; i++) e1[i] = h[i] - k * a[i];
+    double n = sqrt(e1[0] * e1[0] + e1[1] * e1[1] + e1[2] * e1[2]);
+    for (int i = 0; i < 3; i++) e1[i] /= n;
+    e2[0] = a[1] * e1[2] - a[2] * e1[1];
+    e2[1] = a[2] * e1[0] - a[0] * e1[2];
+    e2[2] = a[0] * e1[1] - a[1] * e1[0];
+}
+
+bool calib_lamps_bundle_weight(calib_lamps_bundle_ctx_t *cx, const double X[3], const double g[7])
+{
+    (void)X;
+    const calib_lamps_bundle_setup_t *S = cx->setup;
+    const double r = S->radius_mm;
+    double s[3];
+    bundle_centre(S, cx->obs.angle_deg, g, s, NULL);
+    const double C[3] = { S->camera_mm.x, S->camera_mm.y, S->camera_mm.z };
+    const double d[3] = { cx->obs.ray.x, cx->obs.ray.y, cx->obs.ray.z };
+    double oc[3], n[3], u[3];
+    for (int i = 0; i < 3; i++) oc[i] = C[i] - s[i];
+    double b = d[0] * oc[0] + d[1] * oc[1] + d[2] * oc[2];
+    double disc = b * b - (oc[0] * oc[0] + oc[1] * oc[1] + oc[2] * oc[2] - r * r);
+    if (!(disc > 0)) return false;
+    double sq = sqrt(disc), t = -b - sq;
+    if (!(t > 0)) return false;
+    for (int i = 0; i < 3; i++) n[i] = (C[i] + t * d[i] - s[i]) / r;
+    double dn = d[0] * n[0] + d[1] * n[1] + d[2] * n[2];
+    for (int i = 0; i < 3; i++) u[i] = d[i] - 2 * dn * n[i];
+    // d t / d d = -oc (1 + b / sq); d p / d d = t I + d (dt/dd)^T; d n / d d = (dp/dd) / r;
+    // d u / d d = I - 2 (n (n^T + d^T dn/dd) + (d.n) dn/dd)
+    double dtdd[3], dndd[9], A[9];
+    for (int k = 0; k < 3; k++) dtdd[k] = -oc[k] * (1 + b / sq);
+    for (int i = 0; i < 3; i++)
+        for (int k = 0; k < 3; k++) dndd[i * 3 + k] = (t * (i == k) + d[i] * dtdd[k]) / r;
+    for (int k = 0; k < 3; k++) {
+        double ddn = n[k] + d[0] * dndd[k] + d[1] * dndd[3 + k] + d[2] * dndd[6 + k];
+        for (int i = 0; i < 3; i++) A[i * 3 + k] = (i == k) - 2 * (n[i] * ddn + dn * dndd[i * 3 + k]);
+    }
+    // in the tangent planes: A2 = Tu^T A Td (2x2); W = A2^-1 Tu^T
+    double td1[3], td2[3], tu1[3], tu2[3];
+    tangent_pair(d, td1, td2);
+    tangent_pair(u, tu1, tu2);
+    const double *Td[2] = { td1, td2 }, *Tu[2] = { tu1, tu2 };
+    double A2[4];
+    for (int i = 0; i < 2; i++)
+        for (int j = 0; j < 2; j++) {
+            double a = 0;
+            for (int p = 0; p < 3; p++)
+                for (int q = 0; q < 3; q++) a += Tu[i][p] * A[p * 3 + q] * Td[j][q];
+            A2[i * 2 + j] = a;
+        }
+    double det = A2[0] * A2[3] - A2[1] * A2[2];
+    if (!(fabs(det) > 1e-12)) return false;
+    double Ai[4] = { A2[3] / det, -A2[1] / det, -A2[2] / det, A2[0] / det };
+    for (int i = 0; i < 2; i++)
+        for (int k = 0; k < 3; k++) cx->W[i * 3 + k] = Ai[i * 2] * Tu[0][k] + Ai[i * 2 + 1] * Tu[1][k];
+    for (int k = 0; k < 3; k++) cx->W[6 + k] = 0;
+    return true;
+}
+
+// Largest / smallest eigenvalue of a symmetric positive matrix (n <= 7) by Jacobi rotations.
+static double cond_sym(const double *m, int n)
+{
+    double a[49];
+    memcpy(a, m, sizeof *a * (size_t)(n * n));
+    for (int sweep = 0; sweep < 50; sweep++) {
+        double off = 0;
+        for (int i = 0; i < n; i++)
+            for (int j = i + 1; j < n; j++) off += a[i * n + j] * a[i * n + j];
+        if (off < 1e-30) break;
+        for (int p = 0; p < n; p++)
+            for (int q = p + 1; q < n; q++) {
+                if (fabs(a[p * n + q]) < 1e-300) continue;
+                double th = 0.5 * atan2(2 * a[p * n + q], a[q * n + q] - a[p * n + p]);
+                double c = cos(th), sn = sin(th);
+                for (int k = 0; k < n; k++) {
+                    double akp = a[k * n + p], akq = a[k * n + q];
+                    a[k * n + p] = c * akp - sn * akq;
+                    a[k * n + q] = sn * akp + c * akq;
+                }
+                for (int k = 0; k < n; k++) {
+                    double apk = a[p * n + k], aqk = a[q * n + k];
+                    a[p * n + k] = c * apk - sn * aqk;
+                    a[q * n + k] = sn * apk + c * aqk;
+                }
+            }
+    }
+    double lo = INFINITY, hi = 0;
+    for (int i = 0; i < n; i++) {
+        lo = fmin(lo, a[i * n + i]);
+        hi = fmax(hi, a[i * n + i]);
+    }
+    return lo > 0 ? hi / lo : INFINITY;
+}
+
+bool calib_lamps_bundle(const calib_lamps_obs_t *obs, int nobs, int nl, const calib_lamps_bundle_setup_t *S,
+                        double *x_mm, double *cov_mm2, double *obs_angle, calib_lamps_bundle_t *out)
+{
+    memset(out, 0, sizeof *out);
+    if (nl < 1 || nl > 64) {
+        model_error(NULL, 0, "the joint fit takes 1 to 64 lamps (%d given)", nl);
+        return false;
+    }
+    int cnt[64] = { 0 };
+    for (int i = 0; i < nobs; i++)
+        if (obs[i].lamp >= 0 && obs[i].lamp < nl) cnt[obs[i].lamp]++;
+    for (int l = 0; l < nl; l++)
+        if (cnt[l] < 3) {
+            model_error(NULL, 0, "lamp %d has %d rays in the joint fit: a position needs at least 3", l, cnt[l]);
+            return false;
+        }
+    calib_lamps_bundle_ctx_t *ctx = calloc((size_t)nobs, sizeof *ctx);
+    fit_problem_t *pr = fit_problem_new();
+    double *g = out->sphere;
+    bool ok = false;
+    if (!ctx || !pr) {
+        model_error(NULL, 0, "out of memory");
+        goto done;
+    }
+    for (int l = 0; l < nl; l++)
+        if (!fit_add_parameters(pr, x_mm + 3 * l, 3)) goto fail;
+    if (!fit_add_parameters(pr, g, 7)) goto fail;
+    bool fixed[7];
+    double prior[7];
+    for (int k = 0; k < 7; k++) {
+        prior[k] = k < 3 ? S->offset_prior_mm : k < 5 ? S->shift_prior_mm : S->tilt_prior_mrad;
+        fixed[k] = !(prior[k] > 0);
+    }
+    if (!fit_set_fixed(pr, g, fixed)) goto fail;
+    for (int k = 0; k < 7; k++)
+        if (!fixed[k] && !fit_add_prior(pr, g, k, 0, prior[k])) goto fail;
+    for (int i = 0; i < nobs; i++) {
+        ctx[i].setup = S;
+        ctx[i].obs = obs[i];
+        ctx[i].sigma_rad = 1e-3;
+        for (int k = 0; k < 9; k++) ctx[i].W[k] = k % 4 == 0;
+        if (S->image_weights && !calib_lamps_bundle_weight(&ctx[i], x_mm + 3 * obs[i].lamp, g)) {
+            model_error(NULL, 0, "the joint fit: a highlight's camera ray misses the sphere");
+            goto done;
+        }
+        double *blocks[2] = { x_mm + 3 * obs[i].lamp, g };
+        if (!fit_add_residual(pr, calib_lamps_bundle_residual, &ctx[i], 3, 2, blocks, FIT_LOSS_NONE, 0)) goto fail;
+    }
+    // rounds: solve, then each lamp's angular sigma from its residuals (dof
+    // 2 per ray less its 3 and its share of the sphere's), solve again
+    for (int round = 0; round < 4; round++) {
+        fit_options_t fo = fit_defaults();
+        fo.threads = 1;
+        fit_summary_t sm;
+        if (!fit_solve(pr, &fo, &sm)) {
+            model_error(NULL, 0, "the joint fit of lamps and sphere failed: %s", sm.message);
+            goto done;
+        }
+        out->iterations += sm.iterations;
+        double ss[64] = { 0 };
+        for (int i = 0; i < nobs; i++) {
+            double rr[3];
+            const double *pb[2] = { x_mm + 3 * obs[i].lamp, g };
+            if (!calib_lamps_bundle_residual(&ctx[i], pb, rr, NULL)) {
+                model_error(NULL, 0, "the joint fit: a highlight's ray misses the fitted sphere");
+                goto done;
+            }
+            double a2 = (rr[0] * rr[0] + rr[1] * rr[1] + rr[2] * rr[2]) * ctx[i].sigma_rad * ctx[i].sigma_rad;
+            if (!S->image_weights) a2 *= 1;
+            ss[obs[i].lamp] += a2;
+            if (obs_angle) obs_angle[i] = sqrt(a2);
+        }
+        int nfree_g = 0;
+        for (int k = 0; k < 7; k++) nfree_g += !fixed[k];
+        double change = 0;
+        for (int l = 0; l < nl; l++) {
+            double dof = 2.0 * cnt[l] - 3 - (double)nfree_g * cnt[l] / nobs;
+            double sg = sqrt(ss[l] / (dof > 1 ? dof : 1));
+            out->rms_rad[l] = sqrt(ss[l] / cnt[l]);
+            if (!(sg > 1e-7)) sg = 1e-7;
+            change = fmax(change, fabs(log(sg / (out->sigma_rad[l] > 0 ? out->sigma_rad[l] : 1e-3))));
+            out->sigma_rad[l] = sg;
+        }
+        for (int i = 0; i < nobs; i++) {
+            ctx[i].sigma_rad = out->sigma_rad[obs[i].lamp];
+            if (S->image_weights && !calib_lamps_bundle_weight(&ctx[i], x_mm + 3 * obs[i].lamp, g)) {
+                model_error(NULL, 0, "the joint fit: a highlight's camera ray misses the fitted sphere");
+                goto done;
+            }
+        }
+        if (round > 0 && change < 0.01) break;
+    }
+    for (int l = 0; l < nl; l++)
+        if (!fit_covariance(pr, x_mm + 3 * l, cov_mm2 + 9 * l)) goto fail;
+    if (!fit_covariance(pr, g, out->sphere_cov)) goto fail;
+    {
+        // observability of the free sphere parameters: the condition of their covariance
+        int idx[7], m = 0;
+        for (int k = 0; k < 7; k++)
+            if (!fixed[k]) idx[m++] = k;
+        double sub[49];
+        for (int i = 0; i < m; i++)
+            for (int j = 0; j < m; j++) sub[i * m + j] = out->sphere_cov[idx[i] * 7 + idx[j]];
+        out->cond = m ? cond_sym(sub, m) : 1;
+    }
+    ok = true;
+    goto done;
+fail:
+    model_error(NULL, 0, "the joint fit of lamps and sphere: %s", fit_last_error());
+done:
+    fit_problem_free(pr);
+    free(ctx);
+    return ok;
+}
+
 // ---------------------------------------------------------------------------
 // The command
 
@@ -720,6 +1061,10 @@ typedef struct {
     double      min_snr;
     double      lamp_radius_mm;   // NAN: from the virtual rig's truth, else 0
     int         method;           // 0 centroid, 1 Gaussian in the image, 2 direction-space model
+    double      offset_prior_mm;  // joint fit: std of the sphere-facts offset (<= 0: held)
+    double      shift_prior_mm;   // joint fit: std of the camera-relative shift (<= 0: held)
+    double      tilt_prior_mrad;  // joint fit: std of the camera-relative tilt (<= 0: held)
+    bool        joint;            // the joint fit of lamps and sphere path
 } opts_t;
 
 static void usage(FILE *f)
@@ -748,6 +1093,13 @@ static void usage(FILE *f)
             "  --highlight model|gauss|centroid  how a highlight is located: model (default) fits the lamp's disk\n"
             "                             seen in the mirror in direction space; gauss a 2-D Gaussian in the image;\n"
             "                             centroid the intensity-weighted centroid\n"
+            "  --sphere-path fit|fixed    fit (default): the lamps and the sphere's path jointly over every highlight\n"
+            "                             (the path: the given centre plus an offset that turns with the table, a\n"
+            "                             shift and a tilt that do not: what the camera model's extrinsics error\n"
+            "                             moves); fixed: each lamp alone with the sphere where the facts put it\n"
+            "  --sphere-offset-prior-mm S std of the sphere centre's offset from the facts (default 1)\n"
+            "  --sphere-shift-prior-mm S  std of the path's shift across the axis (default 0.1: a calibrated camera)\n"
+            "  --sphere-tilt-prior-mrad S std of the path's tilt (default 1); 0 holds a part at 0\n"
             "  --progress lines|bar       capture progress (default: bar on a terminal)\n"
             "  -h, --help                 this help\n\n"
             "Output lamps.json: units mm, rig frame; per lamp position_mm, std_mm, rms_ray_distance_mm, n_frames,\n"
@@ -866,7 +1218,8 @@ static double full_scale(const char *pf)
 
 int calib_cmd_lamps(int argc, char **argv)
 {
-    opts_t o = { .sample = "mirror_sphere", .progress = -1, .min_snr = 12, .lamp_radius_mm = NAN, .method = 2 };
+    opts_t o = { .sample = "mirror_sphere", .progress = -1, .min_snr = 12, .lamp_radius_mm = NAN, .method = 2,
+                 .offset_prior_mm = 1.0, .shift_prior_mm = 0.1, .tilt_prior_mrad = 1.0, .joint = true };
     for (int i = 1; i < argc; i++) {
         const char *a = argv[i];
         if (!strcmp(a, "-h") || !strcmp(a, "--help")) {
@@ -878,7 +1231,9 @@ int calib_cmd_lamps(int argc, char **argv)
                      !strcmp(a, "--sphere-centre-mm") || !strcmp(a, "--sphere-radius-mm") || !strcmp(a, "--sample") ||
                      !strcmp(a, "--angles") || !strcmp(a, "--lamps") || !strcmp(a, "--exposures-us") ||
                      !strcmp(a, "--progress") || !strcmp(a, "--min-snr") || !strcmp(a, "--lamp-radius-mm") ||
-                     !strcmp(a, "--highlight");
+                     !strcmp(a, "--highlight") || !strcmp(a, "--sphere-path") ||
+                     !strcmp(a, "--sphere-offset-prior-mm") || !strcmp(a, "--sphere-shift-prior-mm") ||
+                     !strcmp(a, "--sphere-tilt-prior-mrad");
         if (!takes) {
             fprintf(stderr, "refl calib lamps: unknown option '%s'\n\n", a);
             usage(stderr);
@@ -915,6 +1270,20 @@ int calib_cmd_lamps(int argc, char **argv)
             else if (!strcmp(v, "model")) o.method = 2;
             else {
                 fprintf(stderr, "refl calib lamps: --highlight '%s': write model, gauss or centroid\n", v);
+                return 2;
+            }
+        } else if (!strcmp(a, "--sphere-path")) {
+            if (!strcmp(v, "fit")) o.joint = true;
+            else if (!strcmp(v, "fixed")) o.joint = false;
+            else {
+                fprintf(stderr, "refl calib lamps: --sphere-path '%s': write fit or fixed\n", v);
+                return 2;
+            }
+        } else if (!strcmp(a, "--sphere-offset-prior-mm") || !strcmp(a, "--sphere-shift-prior-mm") ||
+                   !strcmp(a, "--sphere-tilt-prior-mrad")) {
+            double *dst = a[9] == 'o' ? &o.offset_prior_mm : a[9] == 's' ? &o.shift_prior_mm : &o.tilt_prior_mrad;
+            if (!model_parse_double(v, dst) || !(*dst >= 0)) {
+                fprintf(stderr, "refl calib lamps: %s '%s': give a std >= 0 (0 holds it at 0)\n", a, v);
                 return 2;
             }
         } else if (!strcmp(a, "--min-snr")) {
@@ -984,6 +1353,9 @@ int calib_cmd_lamps(int argc, char **argv)
     int *dark_row = NULL;
     double *angle_meas = NULL;
     model_vec3_t *centre_at = NULL;
+    calib_lamps_bundle_t jf;
+    bool have_joint = false;
+    memset(&jf, 0, sizeof jf);
     model_error_clear();
 
     cam = model_camera_load(o.camera);
@@ -1288,6 +1660,96 @@ int calib_cmd_lamps(int argc, char **argv)
     }
     if (!all_ok) goto done;
 
+    // the joint fit: every lamp and the sphere's path over all highlights
+    if (o.joint) {
+        model_vec3_t Cc = model_camera_centre_world(cam);
+        calib_lamps_bundle_setup_t bs = { .camera_mm = Cc, .c0_mm = { o.c0[0], o.c0[1], o.c0[2] },
+                                          .radius_mm = o.radius_mm, .offset_prior_mm = o.offset_prior_mm,
+                                          .shift_prior_mm = o.shift_prior_mm, .tilt_prior_mrad = o.tilt_prior_mrad,
+                                          .image_weights = true };
+        int nobs = 0;
+        for (int l = 0; l < nl; l++)
+            for (int a = 0; a < NA; a++) nobs += L[l].has_ray[a] && L[l].used[a];
+        calib_lamps_obs_t *ob = calloc((size_t)nobs, sizeof *ob);
+        int *ob_a = calloc((size_t)nobs, sizeof *ob_a);
+        double *x = calloc((size_t)nl * 3, sizeof *x), *cv = calloc((size_t)nl * 9, sizeof *cv);
+        bool jok = ob && ob_a && x && cv;
+        for (int pass = 0; jok && pass < 2; pass++) {
+            int k = 0;
+            for (int l = 0; l < nl; l++) {
+                for (int a = 0; a < NA; a++) {
+                    if (!L[l].has_ray[a] || !L[l].used[a]) continue;
+                    model_vec3_t r = vsub(L[l].p[a], Cc);
+                    ob[k].lamp = l;
+                    ob[k].angle_deg = isfinite(angle_meas[a]) ? angle_meas[a] : plan->angles_deg[a];
+                    ob[k].ray = vscale(r, 1 / sqrt(vdot(r, r)));
+                    ob_a[k] = a;
+                    k++;
+                }
+                if (pass == 0) memcpy(x + 3 * l, L[l].fit.x_mm, sizeof L[l].fit.x_mm);
+            }
+            jok = calib_lamps_bundle(ob, nobs, nl, &bs, x, cv, NULL, &jf);
+            if (!jok) break;
+            // every ray at the fitted sphere: pass 0 fits the highlights again there (the
+            // lobe's geometry), pass 1 only reflects the highlight's camera ray
+            for (int l = 0; l < nl; l++)
+                for (int a = 0; a < NA; a++) {
+                    if (!L[l].has_ray[a]) continue;
+                    double ang = isfinite(angle_meas[a]) ? angle_meas[a] : plan->angles_deg[a], sc[3];
+                    bundle_centre(&bs, ang, jf.sphere, sc, NULL);
+                    centre_at[a] = v3(sc[0], sc[1], sc[2]);
+                    model_vec3_t e = vsub(v3(x[3 * l], x[3 * l + 1], x[3 * l + 2]), L[l].p[a]);
+                    double dist = sqrt(vdot(e, e));
+                    double rho = L[l].lamp_radius_mm > 0 && dist > L[l].lamp_radius_mm
+                                     ? asin(L[l].lamp_radius_mm / dist) : 0;
+                    bool q = model_error_quiet_thread(true);
+                    if (pass == 0 && o.method == 2)
+                        calib_lamps_fit_direction(cam, &L[l].hl[a], centre_at[a], o.radius_mm, rho, &L[l].p[a],
+                                                  &L[l].d[a], NULL);
+                    else {
+                        model_vec3_t r = vsub(L[l].p[a], Cc);
+                        double t = ray_sphere(Cc, vscale(r, 1 / sqrt(vdot(r, r))), centre_at[a], o.radius_mm);
+                        if (isfinite(t)) {
+                            model_vec3_t dd = vscale(r, 1 / sqrt(vdot(r, r)));
+                            L[l].p[a] = vadd(Cc, vscale(dd, t));
+                            model_vec3_t nn = vscale(vsub(L[l].p[a], centre_at[a]), 1 / o.radius_mm);
+                            L[l].d[a] = vsub(dd, vscale(nn, 2 * vdot(dd, nn)));
+                        }
+                    }
+                    model_error_quiet_thread(q);
+                }
+        }
+        if (jok) {
+            for (int l = 0; l < nl; l++) {
+                calib_lamps_fit_t *f = &L[l].fit;
+                memcpy(f->x_mm, x + 3 * l, sizeof f->x_mm);
+                memcpy(f->cov_mm2, cv + 9 * l, sizeof f->cov_mm2);
+                double ss = 0;
+                for (int a = 0; a < NA; a++) {
+                    if (!L[l].has_ray[a]) continue;
+                    L[l].dist[a] = ray_dist(L[l].p[a], L[l].d[a], f->x_mm);
+                    if (L[l].used[a]) ss += L[l].dist[a] * L[l].dist[a];
+                }
+                f->rms_mm = sqrt(ss / f->n_used);
+            }
+            have_joint = true;
+            const double *gg = jf.sphere, *gc = jf.sphere_cov;
+            fprintf(stderr, "refl calib lamps: joint fit of %d lamps and the sphere's path over %d highlights: "
+                    "sphere offset %.3f %.3f %.3f mm (std %.3f %.3f %.3f), shift %.3f %.3f mm (std %.3f %.3f), "
+                    "tilt %.3f %.3f mrad (std %.3f %.3f); condition %.3g\n", nl, nobs, gg[0], gg[1], gg[2],
+                    sqrt(gc[0]), sqrt(gc[8]), sqrt(gc[16]), gg[3], gg[4], sqrt(gc[24]), sqrt(gc[32]), gg[5], gg[6],
+                    sqrt(gc[40]), sqrt(gc[48]), jf.cond);
+        } else {
+            fprintf(stderr, "refl calib lamps: %s\n", model_last_error());
+            all_ok = false;
+        }
+        free(ob);
+        free(ob_a);
+        free(x);
+        free(cv);
+    }
+    if (!all_ok) goto done;
+
     // lamps.json
     {
         // the command as typed: refl calib lamps ARGS...
@@ -1304,9 +1766,11 @@ int calib_cmd_lamps(int argc, char **argv)
                                                   "centre of the top-left pixel"));
     json_object_set_new(doc, "conventions", json_string(
         "rig frame: origin at the turntable top centre, z up along the rotation axis; position_mm is the lamp's "
-        "centre (the point nearest the rays reflected off the sphere at each highlight); std_mm the 1-sigma "
-        "uncertainty per axis from the ray residuals (covariance_mm2 the full 3x3); rms_ray_distance_mm the RMS "
-        "distance of the used rays from the position; frames_missing lists frames whose highlight was not found"));
+        "centre (the point nearest the rays reflected off the sphere at each highlight; with sphere.joint_fit, "
+        "fitted jointly with the sphere's path over every lamp's highlights); std_mm the 1-sigma uncertainty per "
+        "axis from the residuals (with sphere.joint_fit including the uncertainty of the sphere's path and its "
+        "priors; covariance_mm2 the full 3x3); rms_ray_distance_mm the RMS distance of the used rays from the "
+        "position; frames_missing lists frames whose highlight was not found"));
     json_t *ja = json_array();
     printf("lamp       x_mm      y_mm      z_mm    std_x  std_y  std_z  rms_mm  frames");
     if (truth_lamps) printf("  truth_err_mm");
@@ -1361,6 +1825,30 @@ int calib_cmd_lamps(int argc, char **argv)
     json_object_set_new(sj, "motion", json_string("centre at turntable angle a: Rz(a) centre_at_angle0_mm (the "
                                                   "journal's measured angle)"));
     json_object_set_new(sj, "source", json_string(o.have_centre && o.have_radius ? "command line" : "virtual rig truth file"));
+    if (have_joint) {
+        json_t *jj = json_object(), *jc = json_array(), *js = json_array();
+        for (int k = 0; k < 49; k++) json_array_append_new(jc, json_real(jf.sphere_cov[k]));
+        for (int l = 0; l < nl; l++) json_array_append_new(js, json_real(jf.sigma_rad[l] * 1e3));
+        json_object_set_new(jj, "offset_mm", json_pack("[fff]", jf.sphere[0], jf.sphere[1], jf.sphere[2]));
+        json_object_set_new(jj, "shift_mm", json_pack("[ff]", jf.sphere[3], jf.sphere[4]));
+        json_object_set_new(jj, "tilt_mrad", json_pack("[ff]", jf.sphere[5], jf.sphere[6]));
+        json_object_set_new(jj, "std", json_pack("[fffffff]", sqrt(jf.sphere_cov[0]), sqrt(jf.sphere_cov[8]),
+                                                 sqrt(jf.sphere_cov[16]), sqrt(jf.sphere_cov[24]),
+                                                 sqrt(jf.sphere_cov[32]), sqrt(jf.sphere_cov[40]),
+                                                 sqrt(jf.sphere_cov[48])));
+        json_object_set_new(jj, "covariance_mm2", jc);
+        json_object_set_new(jj, "prior_std", json_pack("{s:f,s:f,s:f}", "offset_mm", o.offset_prior_mm, "shift_mm",
+                                                       o.shift_prior_mm, "tilt_mrad", o.tilt_prior_mrad));
+        json_object_set_new(jj, "ray_sigma_mrad", js);
+        json_object_set_new(jj, "condition", json_real(jf.cond));
+        json_object_set_new(jj, "model", json_string(
+            "sphere centre at angle a = s0 + tilt x s0 + (shift_mm, 0), s0 = Rz(a) (centre_at_angle0_mm + "
+            "offset_mm), tilt = (tilt_mrad, 0) 1e-3, fitted jointly with the lamps over every highlight (each a "
+            "camera ray reflected off that sphere; residual the angle to the lamp over its lamp's ray sigma); "
+            "std and covariance in the order offset x y z, shift x y (mm), tilt x y (mrad); Gaussian priors "
+            "of prior_std"));
+        json_object_set_new(sj, "joint_fit", jj);
+    }
     json_object_set_new(doc, "sphere", sj);
     json_object_set_new(doc, "session", json_string(sdir));
     json_object_set_new(doc, "provenance", json_incref(prov));
@@ -1441,6 +1929,14 @@ int calib_cmd_lamps(int argc, char **argv)
     json_object_set_new(rep, "camera_centre_mm", json_pack("[fff]", Cw.x, Cw.y, Cw.z));
     json_object_set_new(rep, "sphere_centre_angle0_mm", json_pack("[fff]", o.c0[0], o.c0[1], o.c0[2]));
     json_object_set_new(rep, "sphere_radius_mm", json_real(o.radius_mm));
+    if (have_joint)
+        json_object_set_new(rep, "sphere_joint_fit", json_pack("{s:[fff],s:[ff],s:[ff],s:[fffffff]}", "offset_mm",
+                                                               jf.sphere[0], jf.sphere[1], jf.sphere[2], "shift_mm",
+                                                               jf.sphere[3], jf.sphere[4], "tilt_mrad", jf.sphere[5],
+                                                               jf.sphere[6], "std", sqrt(jf.sphere_cov[0]),
+                                                               sqrt(jf.sphere_cov[8]), sqrt(jf.sphere_cov[16]),
+                                                               sqrt(jf.sphere_cov[24]), sqrt(jf.sphere_cov[32]),
+                                                               sqrt(jf.sphere_cov[40]), sqrt(jf.sphere_cov[48])));
     g_free(path);
     path = g_strdup_printf("%s/report_data.json", o.out);
     if (!calib_write_json(path, rep)) goto done;
@@ -1462,6 +1958,18 @@ int calib_cmd_lamps(int argc, char **argv)
                     "%d angles. Each highlight's camera ray is reflected off the sphere into a ray toward the lamp; "
                     "the lamp is the least-squares point nearest its rays (outliers beyond 4 robust sigma dropped); "
                     "std from the ray residuals.", plan->sample, o.radius_mm, o.c0[0], o.c0[1], o.c0[2], NA);
+    if (have_joint)
+        calib_html_para(f, "Joint fit of the lamps and the sphere's path over every highlight (the camera model's "
+                        "extrinsics error moves the sphere relative to the camera; a tenth of a millimetre there is "
+                        "millimetres at the lamps): centre at angle a = s0 + tilt x s0 + shift, s0 = Rz(a) (centre + "
+                        "offset). Offset %.3f %.3f %.3f mm (std %.3f %.3f %.3f), shift %.3f %.3f mm (std %.3f %.3f), "
+                        "tilt %.3f %.3f mrad (std %.3f %.3f); priors (std) offset %g mm, shift %g mm, tilt %g mrad. "
+                        "Residuals are angles of the highlights' camera rays; the std of each lamp includes the "
+                        "path's uncertainty.", jf.sphere[0], jf.sphere[1], jf.sphere[2], sqrt(jf.sphere_cov[0]),
+                        sqrt(jf.sphere_cov[8]), sqrt(jf.sphere_cov[16]), jf.sphere[3], jf.sphere[4],
+                        sqrt(jf.sphere_cov[24]), sqrt(jf.sphere_cov[32]), jf.sphere[5], jf.sphere[6],
+                        sqrt(jf.sphere_cov[40]), sqrt(jf.sphere_cov[48]), o.offset_prior_mm, o.shift_prior_mm,
+                        o.tilt_prior_mrad);
     const char **rows = calloc((size_t)nl, sizeof *rows);
     for (int l = 0; l < nl; l++) {
         lamp_t *lp = &L[l];

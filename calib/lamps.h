@@ -102,6 +102,75 @@ typedef struct {
 bool calib_lamps_triangulate(const model_vec3_t *p, const model_vec3_t *d, int n, double reject_sigma,
                              double floor_mm, bool *used, double *dist_mm, calib_lamps_fit_t *out);
 
+
+// The joint fit (a bundle adjustment) of the lamps and the sphere's path over
+// every highlight of every lamp and angle. Each highlight is kept as the
+// camera ray of its centre (from the camera centre, world frame: the sphere
+// point of the direction fit seen from the camera), which does not depend on
+// where the sphere is. The sphere's centre at turntable angle a is
+//   s0 + tilt x s0 + (shift_x, shift_y, 0),   s0 = Rz(a) (c0 + offset)
+// offset: an error of the sphere's facts (turns with the table); shift and
+// tilt (mrad about x and y): where the calibrated camera puts the table's
+// circle relative to itself (an extrinsics error; does not turn; the shift's
+// z is the offset's z, the tilt about z the offset's turn). On the virtual
+// rig with the camera of `refl calib geometry` the three are needed: with
+// offset and shift alone, noise-free highlights still leave ~6 mm lamp
+// errors. The ray meets that sphere, is reflected
+// there, and the residual is the difference of the unit vectors toward the
+// lamp and along the reflected ray, mapped back to the camera ray by the
+// inverse of d reflected / d camera ray (held per round): an angle of the
+// camera's ray (rad; times the focal length: px), over the lamp's sigma, so
+// that a highlight near the sphere's rim (whose reflection turns fast with
+// the image position) weighs what its image position is worth. Each
+// offset, shift and tilt component has a Gaussian prior (mean 0) of the std given.
+typedef struct {
+    int          lamp;        // 0..nlamps-1
+    double       angle_deg;   // turntable angle (measured)
+    model_vec3_t ray;         // unit camera ray of the highlight's centre, world frame
+} calib_lamps_obs_t;
+
+typedef struct {
+    model_vec3_t camera_mm;        // camera centre, world frame
+    double       c0_mm[3];         // sphere centre at angle 0 as given
+    double       radius_mm;
+    double       offset_prior_mm;  // std of each offset component (<= 0: offset held at 0)
+    double       shift_prior_mm;   // std of each shift component (<= 0: shift held at 0)
+    double       tilt_prior_mrad;  // std of each tilt component (<= 0: tilt held at 0)
+    bool         image_weights;    // residuals mapped back to the camera ray (false: the reflected ray's angle)
+} calib_lamps_bundle_setup_t;
+
+typedef struct {
+    double sphere[7];        // offset x, y, z (mm), shift x, y (mm), tilt x, y (mrad)
+    double sphere_cov[49];   // their covariance
+    double sigma_rad[64];    // per lamp: the std of its highlights' camera rays (rad, from its residuals)
+    double rms_rad[64];      // per lamp: RMS residual (camera-ray angle, rad)
+    int    iterations;       // solver iterations (all rounds)
+    double cond;             // largest / smallest eigenvalue of the sphere block's information (observability)
+} calib_lamps_bundle_t;
+
+// x_mm (nlamps*3): in: start positions; out: the fit. cov_mm2 (nlamps*9):
+// each lamp's covariance including the sphere's uncertainty. obs_sigma
+// (out, nobs, may be NULL): each residual (camera-ray angle, rad). nlamps <= 64.
+// false (message set) when the solver fails or a lamp has fewer than 3
+// rays.
+bool calib_lamps_bundle(const calib_lamps_obs_t *obs, int nobs, int nlamps, const calib_lamps_bundle_setup_t *setup,
+                        double *x_mm, double *cov_mm2, double *obs_angle_rad, calib_lamps_bundle_t *out);
+
+// The residual block of one observation for the joint fit: blocks (lamp
+// position[3], sphere[7]); 3 residuals. ctx: a calib_lamps_bundle_ctx_t.
+// Exposed for the Jacobian check of the tests.
+typedef struct {
+    const calib_lamps_bundle_setup_t *setup;
+    calib_lamps_obs_t                 obs;
+    double                            sigma_rad;
+    double                            W[9];   // residual = W (u_lamp - u_reflected) / sigma_rad (3x3)
+} calib_lamps_bundle_ctx_t;
+// W of an observation at lamp position X and sphere parameters g: the inverse
+// of d reflected / d camera ray in their tangent planes (last row 0). false
+// when the ray misses the sphere.
+bool calib_lamps_bundle_weight(calib_lamps_bundle_ctx_t *ctx, const double X[3], const double g[7]);
+bool calib_lamps_bundle_residual(void *ctx, const double *const *params, double *res, double **jac);
+
 #ifdef __cplusplus
 }
 #endif

@@ -8,7 +8,9 @@ REPORT_DATA.json: {"lamps": [{"name", "position_mm", "std_mm", "truth_mm" (virtu
 rig only), "rays": [{"p", "d", "used", "dist_mm", "angle_deg"}]}], "detections":
 {"angle_deg", "x0", "y0", "w", "h", "crop" (w*h DN, row-major), "highlights":
 [{"lamp", "file", "found", "q"}], "sphere_q", "sphere_radius_px"},
-"camera_centre_mm", "sphere_centre_angle0_mm", "sphere_radius_mm"}.
+"camera_centre_mm", "sphere_centre_angle0_mm", "sphere_radius_mm", "sphere_joint_fit" (optional:
+{"offset_mm", "shift_mm", "tilt_mrad", "std"} of the joint fit of lamps and sphere path; the rays are
+then reflected off the fitted path)}.
 Units mm (rig frame), pixels.
 """
 import json
@@ -90,6 +92,16 @@ def main():
     ax.set_xticklabels(names)
     ax.set_ylabel("mm")
     ax.set_title("uncertainty (1 sigma) per axis")
+    jf = data.get("sphere_joint_fit")
+    if jf:
+        s = jf["std"]
+        tx = fig.add_subplot(2, 3, 6)
+        tx.axis("off")
+        tx.text(0.0, 1.0, "joint fit of lamps and sphere path\n(each lamp's std includes the path's)\n\n"
+                "offset %.3f %.3f %.3f mm\n  std %.3f %.3f %.3f\nshift  %.3f %.3f mm\n  std %.3f %.3f\n"
+                "tilt   %.3f %.3f mrad\n  std %.3f %.3f"
+                % tuple(jf["offset_mm"] + s[0:3] + jf["shift_mm"] + s[3:5] + jf["tilt_mrad"] + s[5:7]),
+                transform=tx.transAxes, va="top", fontsize=9, family="monospace")
     ax.legend(fontsize=7)
     ax.grid(True, axis="y", lw=0.3)
     fig.tight_layout()

@@ -2,7 +2,11 @@
 // triangulation on synthetic rays with a known answer, the highlight finder
 // on a synthetic image, the whole calibration on the virtual rig against its
 // truth (fixed seeds), and the bad inputs: a lamp whose highlight is missing
-// (wrong sphere facts: every frame), bad arguments, a missing camera model.
+// (wrong sphere facts: every frame), bad arguments, a missing camera model;
+// the joint fit of lamps and sphere path on synthetic highlights with a known
+// answer (Jacobians, recovery, stated std), and the chain: the same session
+// analysed with a camera model whose extrinsics are moved like a calibration
+// error (mrcal writes it).
 //
 // The virtual rig of the accuracy test is the example truth as it is: its
 // mirror sphere renders with direct_samples = 64 (one sample per pixel of the
@@ -12,9 +16,12 @@
 #include <glib.h>
 #include <jansson.h>
 #include <limits.h>
+#include <mrcal/mrcal.h>
+#include <mrcal/poseutils.h>
 #include <stdlib.h>
 
 #include "calib/lamps.h"
+#include "fit/lsq.h"
 #include "model/model.h"
 #include "tests/test.h"
 
@@ -126,6 +133,158 @@ TEST(calib_lamps_triangulate_known_point)
 }
 
 // ---------------------------------------------------------------------------
+// The joint fit of lamps and sphere path on synthetic highlights: the example
+// camera's centre, the truth's four lamps, the sphere's path off the facts by
+// a known offset, shift and tilt, camera rays with known noise
+
+static const double LAMPS_TRUE[4][3] = {
+    { 488.6, 177.9, 600 }, { -52.3, -597.7, 480 }, { -526.2, -191.5, 520 }, { 98.4, 367.1, 700 }
+};
+
+// the sphere point whose reflection joins camera C and lamp X (sphere centre s, radius r)
+static model_vec3_t specular_point(const double C[3], const double s[3], double r, const double X[3])
+{
+    double p[3], cs = sqrt(pow(C[0] - s[0], 2) + pow(C[1] - s[1], 2) + pow(C[2] - s[2], 2));
+    for (int k = 0; k < 3; k++) p[k] = s[k] + r * (C[k] - s[k]) / cs;
+    for (int it = 0; it < 200; it++) {
+        double v[3], l[3], h[3], nv = 0, nl = 0, nh = 0;
+        for (int k = 0; k < 3; k++) {
+            v[k] = C[k] - p[k];
+            l[k] = X[k] - p[k];
+            nv += v[k] * v[k];
+            nl += l[k] * l[k];
+        }
+        for (int k = 0; k < 3; k++) {
+            h[k] = v[k] / sqrt(nv) + l[k] / sqrt(nl);
+            nh += h[k] * h[k];
+        }
+        for (int k = 0; k < 3; k++) p[k] = s[k] + r * h[k] / sqrt(nh);
+    }
+    return (model_vec3_t){ p[0], p[1], p[2] };
+}
+
+// a standard normal deviate (Box-Muller)
+static double gauss(GRand *r)
+{
+    double u = g_rand_double_range(r, 1e-12, 1), v = g_rand_double(r);
+    return sqrt(-2 * log(u)) * cos(2 * M_PI * v);
+}
+
+// the observations: 24 angles x 4 lamps, camera rays with Gaussian noise sigma (rad) per axis
+static int synth_obs(const calib_lamps_bundle_setup_t *S, const double g[7], double sigma, GRand *rnd,
+                     calib_lamps_obs_t *obs)
+{
+    const double C[3] = { S->camera_mm.x, S->camera_mm.y, S->camera_mm.z };
+    int n = 0;
+    for (int a = 0; a < 24; a++)
+        for (int l = 0; l < 4; l++) {
+            double th = a * 15 * M_PI / 180, c[3] = { S->c0_mm[0] + g[0], S->c0_mm[1] + g[1], S->c0_mm[2] + g[2] };
+            double s0[3] = { cos(th) * c[0] - sin(th) * c[1], sin(th) * c[0] + cos(th) * c[1], c[2] };
+            double wx = 1e-3 * g[5], wy = 1e-3 * g[6];
+            double s[3] = { s0[0] + wy * s0[2] + g[3], s0[1] - wx * s0[2] + g[4], s0[2] + wx * s0[1] - wy * s0[0] };
+            model_vec3_t p = specular_point(C, s, S->radius_mm, LAMPS_TRUE[l]);
+            double d[3] = { p.x - C[0], p.y - C[1], p.z - C[2] }, nd = 0;
+            for (int k = 0; k < 3; k++) nd += d[k] * d[k];
+            for (int k = 0; k < 3; k++) d[k] = d[k] / sqrt(nd) + sigma * gauss(rnd);
+            nd = sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
+            obs[n].lamp = l;
+            obs[n].angle_deg = a * 15;
+            obs[n].ray = (model_vec3_t){ d[0] / nd, d[1] / nd, d[2] / nd };
+            n++;
+        }
+    return n;
+}
+
+TEST(calib_lamps_bundle_synthetic)
+{
+    calib_lamps_bundle_setup_t S = { .camera_mm = { 422.862, -603.909, 556.219 }, .c0_mm = { 60, 0, 40 },
+                                     .radius_mm = 25, .offset_prior_mm = 1, .shift_prior_mm = 0.1,
+                                     .tilt_prior_mrad = 1, .image_weights = true };
+    // the path as a calibrated camera sees it: off the facts by these
+    const double g_true[7] = { 0.1, -0.05, 0.09, 0.06, -0.04, -0.25, 0.12 };
+    const double sigma = 1.2e-5;   // rad of the camera ray: 0.02 px at f = 1750 px (the virtual rig's)
+    GRand *rnd = g_rand_new_with_seed(11);
+    calib_lamps_obs_t obs[96];
+    int n = synth_obs(&S, g_true, sigma, rnd, obs);
+    g_rand_free(rnd);
+
+    // the analytic Jacobians against central differences, at a point off the solution
+    {
+        calib_lamps_bundle_ctx_t cx = { .setup = &S, .obs = obs[5], .sigma_rad = 1 };
+        double X[3] = { LAMPS_TRUE[1][0] + 3, LAMPS_TRUE[1][1] - 2, LAMPS_TRUE[1][2] + 1 };
+        double g[7] = { 0.2, 0.1, -0.1, 0.05, 0.02, 0.4, -0.3 };
+        CHECK(calib_lamps_bundle_weight(&cx, X, g));
+        double *blocks[2] = { X, g };
+        const int sizes[2] = { 3, 7 };
+        double err = 0;
+        CHECK_MSG(fit_check_jacobian(calib_lamps_bundle_residual, &cx, 3, 2, sizes, blocks, 1e-5, 1e-8, 1e-4, &err),
+                  "%s (largest error %.3g)", fit_last_error(), err);
+        for (int k = 0; k < 9; k++) cx.W[k] = k % 4 == 0;   // unweighted: the reflected ray's angle
+        CHECK_MSG(fit_check_jacobian(calib_lamps_bundle_residual, &cx, 3, 2, sizes, blocks, 1e-5, 1e-8, 1e-4, &err),
+                  "%s (largest error %.3g)", fit_last_error(), err);
+    }
+
+    // joint fit from the lamps' rough positions
+    double x[12], cov[36], ang[96];
+    for (int l = 0; l < 4; l++)
+        for (int k = 0; k < 3; k++) x[3 * l + k] = LAMPS_TRUE[l][k] + (k == 0 ? 20 : -15);
+    calib_lamps_bundle_t jf;
+    CHECK_MSG(calib_lamps_bundle(obs, n, 4, &S, x, cov, ang, &jf), "%s", model_last_error());
+    double se = 0;
+    for (int l = 0; l < 4; l++) {
+        double e[3], d2 = 0;
+        for (int k = 0; k < 3; k++) {
+            e[k] = x[3 * l + k] - LAMPS_TRUE[l][k];
+            d2 += e[k] * e[k];
+        }
+        double sd = sqrt(cov[9 * l] + cov[9 * l + 4] + cov[9 * l + 8]);
+        fprintf(stderr, "  joint: lamp %d error %.2f mm, stated std %.2f mm, ray sigma %.3g rad\n", l, sqrt(d2), sd,
+                jf.sigma_rad[l]);
+        CHECK_MSG(sqrt(d2) < 4 * sd, "lamp %d: error %.2f mm vs stated std %.2f mm", l, sqrt(d2), sd);
+        // the weak direction (a shift of the path across the camera's view against the lamps' directions,
+        // seen only through the parallax over the path's 120 mm) makes a few mm, not more
+        CHECK_MSG(sd < 6, "lamp %d: stated std %.2f mm", l, sd);
+        CHECK_MSG(jf.sigma_rad[l] > 0.6 * sigma && jf.sigma_rad[l] < 1.6 * sigma, "lamp %d: ray sigma %.3g (true %.3g)",
+                  l, jf.sigma_rad[l], sigma);
+        se += d2;
+    }
+    double rms_joint = sqrt(se / 4);
+    // the path recovered within its stated std (offset x, y and tilt are well observed)
+    const char *nm[7] = { "offset x", "offset y", "offset z", "shift x", "shift y", "tilt x", "tilt y" };
+    for (int k = 0; k < 7; k++) {
+        double sd = sqrt(jf.sphere_cov[8 * k]);
+        fprintf(stderr, "  joint: %s %.4f (true %.4f, std %.4f)\n", nm[k], jf.sphere[k], g_true[k], sd);
+        CHECK_MSG(fabs(jf.sphere[k] - g_true[k]) < 4 * sd, "%s: %.4f, true %.4f, std %.4f", nm[k], jf.sphere[k],
+                  g_true[k], sd);
+    }
+    CHECK(sqrt(jf.sphere_cov[0]) < 0.05 && sqrt(jf.sphere_cov[8]) < 0.05 && sqrt(jf.sphere_cov[40]) < 0.1);
+    CHECK(jf.cond > 1 && isfinite(jf.cond));
+
+    // the sphere held where the facts put it: the same highlights give lamps mm off
+    calib_lamps_bundle_setup_t H = S;
+    H.offset_prior_mm = H.shift_prior_mm = H.tilt_prior_mrad = 0;
+    for (int l = 0; l < 4; l++)
+        for (int k = 0; k < 3; k++) x[3 * l + k] = LAMPS_TRUE[l][k];
+    calib_lamps_bundle_t hf;
+    CHECK(calib_lamps_bundle(obs, n, 4, &H, x, cov, NULL, &hf));
+    se = 0;
+    for (int l = 0; l < 4; l++)
+        for (int k = 0; k < 3; k++) se += pow(x[3 * l + k] - LAMPS_TRUE[l][k], 2);
+    double rms_held = sqrt(se / 4);
+    fprintf(stderr, "  lamps RMS error: joint %.2f mm, sphere held %.2f mm\n", rms_joint, rms_held);
+    // (seeds 1-4 give 2.9-4.6 mm RMS, this one 1.5 mm: the weak direction is
+    // common to the lamps; each stays within 4 stated std, checked above)
+    CHECK_MSG(rms_joint < 6, "joint fit: RMS lamp error %.2f mm", rms_joint);
+    CHECK_MSG(rms_held > 4 * rms_joint, "held %.2f mm vs joint %.2f mm", rms_held, rms_joint);
+    CHECK(hf.sphere[0] == 0 && hf.sphere[6] == 0);
+
+    // too few rays for a lamp
+    model_error_clear();
+    CHECK(!calib_lamps_bundle(obs, 2, 4, &S, x, cov, NULL, &jf));
+    CHECK_CONTAINS(model_last_error(), "a position needs at least 3");
+}
+
+// ---------------------------------------------------------------------------
 // The highlight finder on a synthetic sphere image with a Gaussian spot
 
 TEST(calib_lamps_highlight_synthetic)
@@ -201,6 +360,81 @@ TEST(calib_lamps_highlight_synthetic)
 // The whole calibration on the virtual rig against its truth
 
 static double jnum(json_t *a, int i) { return json_number_value(json_array_get(a, (size_t)i)); }
+
+// A camera model moved like a calibration error: the true camera's pose
+// turned by rot_deg about an axis through the table's centre (x 1, y 0.6,
+// z 0.3: mostly a tilt of the table seen by the camera), moved back along
+// its view by back_mm and across by across_mm, the focal lengths scaled so
+// that the table keeps its size in the image (a calibration trades focal
+// length against distance). *centre_err_mm: how far the camera centre moved.
+static bool write_perturbed_camera(const char *in, const char *out, double rot_deg, double back_mm,
+                                   double across_mm, double *centre_err_mm)
+{
+    mrcal_cameramodel_t *m = mrcal_read_cameramodel_file(in);
+    if (!m) return false;
+    double R[9], C[3], view[3];
+    mrcal_R_from_r(R, NULL, m->rt_cam_ref);
+    for (int i = 0; i < 3; i++) {
+        C[i] = -(R[i] * m->rt_cam_ref[3] + R[3 + i] * m->rt_cam_ref[4] + R[6 + i] * m->rt_cam_ref[5]);
+        view[i] = R[6 + i];   // the camera's z axis in the rig frame
+    }
+    double ax[3] = { 1, 0.6, 0.3 }, na = sqrt(1 + 0.36 + 0.09), th = rot_deg * M_PI / 180;
+    // across: perpendicular to the view and to z
+    double ac[3] = { view[1], -view[0], 0 }, nac = hypot(view[0], view[1]);
+    double rt_T[6];
+    for (int i = 0; i < 3; i++) {
+        rt_T[i] = th * ax[i] / na;
+        rt_T[3 + i] = -back_mm * view[i] + across_mm * ac[i] / nac;
+    }
+    // the camera moved by T (x -> Q x + t): rt_cam_ref' = rt_cam_ref o T^-1
+    double Ti[6], rt[6];
+    mrcal_invert_rt(Ti, NULL, NULL, rt_T);
+    mrcal_compose_rt(rt, NULL, NULL, NULL, NULL, m->rt_cam_ref, Ti);
+    double dist = sqrt(C[0] * C[0] + C[1] * C[1] + (C[2] - 40) * (C[2] - 40));
+    memcpy(m->rt_cam_ref, rt, sizeof rt);
+    m->intrinsics[0] *= (dist + back_mm) / dist;
+    m->intrinsics[1] *= (dist + back_mm) / dist;
+    double R2[9], C2[3];
+    mrcal_R_from_r(R2, NULL, rt);
+    for (int i = 0; i < 3; i++) C2[i] = -(R2[i] * rt[3] + R2[3 + i] * rt[4] + R2[6 + i] * rt[5]);
+    *centre_err_mm = sqrt(pow(C2[0] - C[0], 2) + pow(C2[1] - C[1], 2) + pow(C2[2] - C[2], 2));
+    bool ok = mrcal_write_cameramodel_file(out, m);
+    mrcal_free_cameramodel(&m);
+    return ok;
+}
+
+// Each lamp of lamps.json against the truth: RMS error; false when a lamp is
+// missing. *worst_ratio: the largest error / (4 stated std + 0.5 mm).
+static bool lamps_vs_truth(const char *json_path, const model_lamps_t *tl, const char *what, double *rms,
+                           double *worst_ratio)
+{
+    json_error_t je;
+    json_t *doc = json_load_file(json_path, 0, &je);
+    if (!doc) return false;
+    json_t *lamps = json_object_get(doc, "lamps"), *l;
+    size_t i;
+    double se = 0;
+    int n = 0;
+    *worst_ratio = 0;
+    json_array_foreach(lamps, i, l) {
+        const char *name = json_string_value(json_object_get(l, "name"));
+        int k = model_lamps_find(tl, name ? name : "");
+        if (k < 0) continue;
+        json_t *x = json_object_get(l, "position_mm"), *sd = json_object_get(l, "std_mm");
+        model_vec3_t t = tl->lamps[k].position_mm;
+        double dx = jnum(x, 0) - t.x, dy = jnum(x, 1) - t.y, dz = jnum(x, 2) - t.z;
+        double err = sqrt(dx * dx + dy * dy + dz * dz);
+        double s = sqrt(pow(jnum(sd, 0), 2) + pow(jnum(sd, 1), 2) + pow(jnum(sd, 2), 2));
+        fprintf(stderr, "  %s: lamp %-6s error %.2f mm (%.2f %.2f %.2f), stated std %.2f mm\n", what, name, err, dx,
+                dy, dz, s);
+        se += err * err;
+        n++;
+        *worst_ratio = fmax(*worst_ratio, err / (4 * s + 0.5));
+    }
+    json_decref(doc);
+    *rms = n ? sqrt(se / n) : INFINITY;
+    return n == tl->n;
+}
 
 TEST(calib_lamps_virtual_rig_accuracy)
 {
@@ -297,6 +531,60 @@ TEST(calib_lamps_virtual_rig_accuracy)
     g_free(jp2);
     g_free(o);
     g_free(e);
+
+    // The chain: the same session analysed with a camera model moved like a
+    // calibration error (the demo's `refl calib geometry` camera: centre
+    // 1.45 mm off, 0.05 deg, focal length 0.17 % long; this one turned about
+    // the table's centre so that the table keeps its place in the image, as a
+    // calibration on boards there does). The sphere where the facts put it
+    // (--sphere-path fixed) gives lamps ~20 mm off; the joint fit of lamps
+    // and sphere path ~2.2 mm RMS (the demo's calibrated camera: 1.9 mm), the
+    // stated std covering. The limit is 2.5 mm, not 2: what is left is the
+    // weak direction of the joint fit (a shift of the path across the view
+    // against the lamps' directions, seen only through the parallax over the
+    // path's 120 mm: ~1.3 mm with the true camera too) and the turn of the
+    // camera's frame itself at the lamps (0.05 deg at 0.8 m: 0.7 mm).
+    {
+        double t1 = model_now_s(), cerr = 0;
+        char pcam[PATH_MAX + 32], out3[PATH_MAX + 16];
+        snprintf(pcam, sizeof pcam, "%s/perturbed.cameramodel", test_tmpdir());
+        CHECK(write_perturbed_camera(cam, pcam, 0.05, 1.4, 0.05, &cerr));
+        fprintf(stderr, "  perturbed camera: centre moved %.2f mm, turned 0.05 deg\n", cerr);
+        CHECK(cerr > 1.3 && cerr < 2.0);
+        model_ini_t *ti2 = model_ini_load(truth);
+        model_lamps_t *tl2 = ti2 ? model_lamps_from_ini(ti2) : NULL;
+        CHECK(tl2);
+        double rms_fit = INFINITY, rms_fixed = 0, worst = INFINITY, worst_fixed = 0;
+        snprintf(out3, sizeof out3, "%s/chain", test_tmpdir());
+        for (int k = 0; tl2 && k < 2; k++) {
+            rc = test_refl_run(120, &o, &e, "calib", "lamps", "--session", sess, "--camera", pcam, "-o", out3,
+                               "--sphere-path", k ? "fixed" : "fit", NULL);
+            CHECK_MSG(rc == 0, "rc %d\n%s", rc, e);
+            if (k == 0) CHECK_CONTAINS(e, "joint fit of 4 lamps and the sphere's path over");
+            g_free(o);
+            g_free(e);
+            char *jp3 = g_strdup_printf("%s/lamps.json", out3);
+            CHECK(lamps_vs_truth(jp3, tl2, k ? "perturbed camera, sphere fixed" : "perturbed camera, joint fit",
+                                 k ? &rms_fixed : &rms_fit, k ? &worst_fixed : &worst));
+            if (k == 0) {
+                json_t *d3 = json_load_file(jp3, 0, NULL);
+                json_t *jfit = json_object_get(json_object_get(d3, "sphere"), "joint_fit");
+                CHECK(json_array_size(json_object_get(jfit, "std")) == 7);
+                CHECK(json_array_size(json_object_get(jfit, "covariance_mm2")) == 49);
+                json_decref(d3);
+            }
+            g_free(jp3);
+        }
+        fprintf(stderr, "  perturbed camera: RMS lamp error %.2f mm joint fit, %.2f mm sphere fixed\n", rms_fit,
+                rms_fixed);
+        CHECK_MSG(rms_fit <= 2.5, "perturbed camera: RMS position error %.2f mm (limit 2.5 mm)", rms_fit);
+        CHECK_MSG(worst < 1, "perturbed camera: a lamp's error exceeds 4 stated std + 0.5 mm (ratio %.2f)", worst);
+        CHECK_MSG(rms_fixed > 4 * rms_fit, "the perturbation matters: fixed %.2f mm vs fit %.2f mm", rms_fixed,
+                  rms_fit);
+        model_lamps_free(tl2);
+        model_ini_free(ti2);
+        fprintf(stderr, "  calib_lamps_chain_perturbed_camera: %.1f s\n", model_now_s() - t1);
+    }
 
     // the dark frames (lamp set none) are not a lamp
     rc = test_refl_run(120, &o, &e, "calib", "lamps", "--session", sess, "--camera", cam, "-o", out2, "--lamps",
@@ -417,6 +705,8 @@ TEST(calib_lamps_bad_arguments)
         { { "--rig", "r", "--camera", "c", "-o", "x", "--frobnicate", NULL }, 2, "unknown option '--frobnicate'" },
         { { "--rig", "r", "--camera", "c", "-o", NULL }, 2, "-o needs a value" },
         { { "--rig", "r", "--camera", "c", "-o", "x", "--highlight", "best", NULL }, 2, "write model, gauss or centroid" },
+        { { "--rig", "r", "--camera", "c", "-o", "x", "--sphere-path", "free", NULL }, 2, "write fit or fixed" },
+        { { "--rig", "r", "--camera", "c", "-o", "x", "--sphere-shift-prior-mm", "-1", NULL }, 2, "give a std >= 0" },
     };
     for (size_t k = 0; k < sizeof cases / sizeof cases[0]; k++) {
         const char *argv[20] = { test_refl(), "calib", "lamps" };
@@ -457,6 +747,7 @@ TEST(calib_lamps_bad_arguments)
     rc = test_refl_run(30, &o, &e, "calib", "lamps", "--help", NULL);
     CHECK(rc == 0);
     CHECK_CONTAINS(o, "--sphere-centre-mm");
+    CHECK_CONTAINS(o, "--sphere-path fit|fixed");
     g_free(o);
     g_free(e);
 }
