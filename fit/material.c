@@ -760,8 +760,7 @@ static bool material_report(const char *dir, const fit_obs_set_t *obs, const fit
     free(rows);
     calib_html_heading(h, "Measured vs fitted");
     calib_html_figure(h, "lobes.png", "R against the half-vector angle, measured (dots, coloured by incidence) "
-                      "and fitted (the model at the same geometry), per lamp; and the fitted model's lobes in the "
-                      "plane of incidence");
+                      "and fitted (the model at the same geometry), per lamp");
     calib_html_figure(h, "residual_maps.png", "residual R_meas - R_fit at each window, for four frames");
     calib_html_heading(h, "Model comparison");
     char **mr = calloc((size_t)nres + 1, sizeof *mr);
