@@ -267,12 +267,15 @@ done:
 }
 
 static int bench_capture(void);
+static int bench_virtual_rig(void);
 static int bench_fit_ggx(void);
 
 int main(int argc, char **argv)
 {
     // `refl-bench fit`: only the GGX fit comparison
     if (argc > 1 && !strcmp(argv[1], "fit")) return bench_fit_ggx() ? 1 : 0;
+    // `refl-bench rig`: only the virtual rig's frame rates and changed-state latency
+    if (argc > 1 && !strcmp(argv[1], "rig")) return bench_virtual_rig() ? 1 : 0;
     char p_cam[1024], p_scene[1024], p_lamps[1024], p_mats[1024];
     src_path(p_cam, sizeof p_cam, "examples/camera.cameramodel");
     src_path(p_scene, sizeof p_scene, "examples/t_stiffener.d3d");
