@@ -511,6 +511,53 @@ static int group_views(const views_t *vs, int g, view_t ***out)
     return n;
 }
 
+// A pair of views of one group whose turntable angles differ by 5..175 deg:
+// the step d (rad), the relative rotation Rrel = Rj Ri^T and its rotation vector.
+typedef struct {
+    const view_t *vi, *vj;
+    double        d, Rrel[9], r[3];
+} view_pair_t;
+
+// Every such pair of every group (caller frees *out); *nviews: the views of
+// groups with two or more.
+static int view_pairs(const views_t *vs, view_pair_t **out, int *nviews)
+{
+    int np = 0, cap = 0;
+    view_pair_t *p = NULL;
+    for (int g = 0; g < vs->ngroups; g++) {
+        view_t **l;
+        int n = group_views(vs, g, &l);
+        for (int i = 0; i < n; i++)
+            for (int j = i + 1; j < n; j++) {
+                double d = wrap_deg(l[j]->angle_deg - l[i]->angle_deg) * DEG;
+                if (fabs(d) < 5 * DEG || fabs(d) > 175 * DEG) continue;
+                if (np == cap) {
+                    cap = cap ? 2 * cap : 64;
+                    view_pair_t *q = realloc(p, (size_t)cap * sizeof *q);
+                    if (!q) {
+                        free(l);
+                        *out = p;
+                        return np;
+                    }
+                    p = q;
+                }
+                double Ri[9], Rj[9];
+                pose_R(Ri, l[i]);
+                pose_R(Rj, l[j]);
+                view_pair_t *e = &p[np++];
+                e->vi = l[i];
+                e->vj = l[j];
+                e->d = d;
+                mat_mul_bt(e->Rrel, Rj, Ri);
+                r_from_R(e->r, e->Rrel);
+            }
+        if (n >= 2) *nviews += n;
+        free(l);
+    }
+    *out = p;
+    return np;
+}
+
 static bool fit_axis(views_t *vs, const opts_t *o, axis_t *ax)
 {
     memset(ax, 0, sizeof *ax);
@@ -549,60 +596,39 @@ static bool fit_axis(views_t *vs, const opts_t *o, axis_t *ax)
         free(l);
     }
     // 2. direction and point from all pairs
-    double S[3] = { 0 };
-    for (int g = 0; g < vs->ngroups; g++) {
-        view_t **l;
-        int n = group_views(vs, g, &l);
-        for (int i = 0; i < n; i++)
-            for (int j = i + 1; j < n; j++) {
-                double d = wrap_deg(l[j]->angle_deg - l[i]->angle_deg) * DEG;
-                if (fabs(d) < 5 * DEG || fabs(d) > 175 * DEG) continue;
-                double Ri[9], Rj[9], Rrel[9], r[3];
-                pose_R(Ri, l[i]);
-                pose_R(Rj, l[j]);
-                mat_mul_bt(Rrel, Rj, Ri);
-                r_from_R(r, Rrel);
-                for (int k = 0; k < 3; k++) S[k] += d * r[k];
-                ax->npairs++;
-            }
-        if (n >= 2) ax->nviews += n;
-        free(l);
+    view_pair_t *pairs = NULL;
+    ax->npairs = view_pairs(vs, &pairs, &ax->nviews);
+    if (ax->npairs == 0) {
+        free(pairs);
+        return false;
     }
-    if (ax->npairs == 0) return false;
+    double S[3] = { 0 };
+    for (int q = 0; q < ax->npairs; q++)
+        for (int k = 0; k < 3; k++) S[k] += pairs[q].d * pairs[q].r[k];
     double sn = norm3(S);
     for (int k = 0; k < 3; k++) ax->a[k] = S[k] / sn;
     double A[9] = { 0 }, b[3] = { 0 }, wsum = 0, dev2 = 0;
     for (int i = 0; i < 3; i++)
         for (int j = 0; j < 3; j++) A[i * 3 + j] = ax->a[i] * ax->a[j];
-    for (int g = 0; g < vs->ngroups; g++) {
-        view_t **l;
-        int n = group_views(vs, g, &l);
-        for (int i = 0; i < n; i++)
-            for (int j = i + 1; j < n; j++) {
-                double d = wrap_deg(l[j]->angle_deg - l[i]->angle_deg) * DEG;
-                if (fabs(d) < 5 * DEG || fabs(d) > 175 * DEG) continue;
-                double Ri[9], Rj[9], Rrel[9], r[3];
-                pose_R(Ri, l[i]);
-                pose_R(Rj, l[j]);
-                mat_mul_bt(Rrel, Rj, Ri);
-                r_from_R(r, Rrel);
-                double ap[3] = { r[0] / d, r[1] / d, r[2] / d }, an = norm3(ap);
-                double cs = dot3(ap, ax->a) / an;
-                double dv = acos(cs > 1 ? 1 : cs < -1 ? -1 : cs);
-                dev2 += d * d * dv * dv;
-                wsum += d * d;
-                double M[9], rhs[3], Rti[3];
-                for (int k = 0; k < 9; k++) M[k] = (k % 4 == 0 ? 1.0 : 0.0) - Rrel[k];
-                mat_vec(Rti, Rrel, &l[i]->rt_cam_board[3]);
-                for (int k = 0; k < 3; k++) rhs[k] = l[j]->rt_cam_board[3 + k] - Rti[k];
-                for (int p = 0; p < 3; p++) {
-                    for (int q = 0; q < 3; q++)
-                        for (int k = 0; k < 3; k++) A[p * 3 + q] += M[k * 3 + p] * M[k * 3 + q];
-                    for (int k = 0; k < 3; k++) b[p] += M[k * 3 + p] * rhs[k];
-                }
-            }
-        free(l);
+    for (int q = 0; q < ax->npairs; q++) {
+        const double d = pairs[q].d, *Rrel = pairs[q].Rrel, *r = pairs[q].r;
+        const view_t *vi = pairs[q].vi, *vj = pairs[q].vj;
+        double ap[3] = { r[0] / d, r[1] / d, r[2] / d }, an = norm3(ap);
+        double cs = dot3(ap, ax->a) / an;
+        double dv = acos(cs > 1 ? 1 : cs < -1 ? -1 : cs);
+        dev2 += d * d * dv * dv;
+        wsum += d * d;
+        double M[9], rhs[3], Rti[3];
+        for (int k = 0; k < 9; k++) M[k] = (k % 4 == 0 ? 1.0 : 0.0) - Rrel[k];
+        mat_vec(Rti, Rrel, &vi->rt_cam_board[3]);
+        for (int k = 0; k < 3; k++) rhs[k] = vj->rt_cam_board[3 + k] - Rti[k];
+        for (int p = 0; p < 3; p++) {
+            for (int c = 0; c < 3; c++)
+                for (int k = 0; k < 3; k++) A[p * 3 + c] += M[k * 3 + p] * M[k * 3 + c];
+            for (int k = 0; k < 3; k++) b[p] += M[k * 3 + p] * rhs[k];
+        }
     }
+    free(pairs);
     double Ai[9];
     if (!inv3(Ai, A)) return false;
     mat_vec(ax->c, Ai, b);
