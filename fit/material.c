@@ -117,6 +117,11 @@ fit_calib_t *fit_calib_load(const char *dir, bool need_white)
         add_input(c, "gain", gain);
         json_t *sat = json_object_get(gj, "saturation_dn");
         if (json_is_number(sat)) c->saturation_dn = json_number_value(sat);
+        json_t *K = json_object_get(gj, "system_gain_dn_per_e"), *rn = json_object_get(gj, "read_noise_e");
+        if (json_is_number(K) && json_is_number(rn)) {
+            c->gain_dn_per_e = json_number_value(K);
+            c->read_noise_e = json_number_value(rn);
+        }
         char *gd = g_path_get_dirname(gain);
         off = g_strdup_printf("%s/offset_dn.tiff", gd);
         flat = g_strdup_printf("%s/flat_field.tiff", gd);
@@ -457,6 +462,12 @@ bool fit_observe(const char *session_dir, const fit_calib_t *cal, const fit_obse
                 fit_obs_t ob = { .lamp = lamp, .angle_deg = r->measured_deg, .exposure_us = r->exposure_us,
                                  .gain_db = r->gain, .q = { win[w].q[0], win[w].q[1] }, .c = c, .d_mm = L->d_mm,
                                  .s_dn_per_us = sig / (sg / n) / (r->exposure_us * gf), .step = r->step };
+                if (cal->gain_dn_per_e > 0) {
+                    // per pixel: shot noise K*signal (K scales with the gain), read noise, quantisation
+                    double K = cal->gain_dn_per_e * gf, rd = K * cal->read_noise_e;
+                    double var = (K * sig + rd * rd + 1.0 / 12) / n;
+                    ob.s_std = sqrt(var) / (sg / n) / (r->exposure_us * gf);
+                }
                 if (!obs_add(out, &ob)) {
                     free(img);
                     free(dark);
@@ -832,6 +843,17 @@ int fit_cmd_material(int argc, char **argv)
     }
     printf("refl fit material: %s: %d BRDF samples from %d frames (%d skipped)\n", obs.material, smp->n,
            obs.frames_used, obs.frames_skipped);
+    // the residual RMS the sensor's temporal noise alone would give (with a gain calibration)
+    double noise_rms = NAN;
+    if (cal->gain_dn_per_e > 0) {
+        double v2 = 0;
+        for (int i = 0; i < obs.n; i++) {
+            double sr = obs.o[i].s_std * obs.o[i].d_mm * obs.o[i].d_mm / cal->kcI_per_us[obs.o[i].lamp];
+            v2 += sr * sr;
+        }
+        noise_rms = sqrt(v2 / obs.n);
+        printf("  expected residual RMS from the sensor's noise alone: %.4g 1/sr\n", noise_rms);
+    }
     fit_brdf_result_t res[MODEL_BRDF_COUNT];
     int nres = 0, best = -1;
     for (int k = 0; k < nm; k++) {
@@ -857,6 +879,8 @@ int fit_cmd_material(int argc, char **argv)
     json_t *e = fit_priors_material(a.name ? a.name : obs.material, &res[best], res, nres, a.k_sigma, a.sys_rel);
     json_object_set_new(e, "session", json_string(a.session));
     json_object_set_new(e, "sample", json_string(obs.sample));
+    json_object_set_new(e, "noise_rms_expected", isfinite(noise_rms) ? json_real(noise_rms) : json_null());
+    if (isfinite(noise_rms) && noise_rms > 0) json_object_set_new(e, "rms_over_noise", json_real(res[best].rms / noise_rms));
     json_array_append_new(mats, e);
     json_object_set_new(top, "materials", mats);
     json_object_set_new(top, "provenance", provenance(argc, argv, &a, cal));

@@ -32,6 +32,8 @@ typedef struct {
     float          *offset_dn;      // gain calibration: dark offset map (NULL: use dark frames)
     float          *flat;           // gain calibration: flat field g(x,y), mean 1 (NULL: 1)
     double          saturation_dn;  // 0: from the frame's bits
+    double          gain_dn_per_e;  // gain calibration's K at 0 dB (0: unknown)
+    double          read_noise_e;   // its read noise
     int             W, H;
     bool            have_white;
     double          kcI_per_us[32]; // white.json: kc I per lamp (DN/us at 0 dB per (1/sr)/mm^2)
@@ -53,6 +55,8 @@ typedef struct {
     model_cosines_t c;
     double          d_mm;
     double          s_dn_per_us;    // dark and flat corrected signal per us at 0 dB
+    double          s_std;          // its expected temporal noise (shot, read, quantisation of the
+                                    // window mean; dark level noise-free), same unit; 0 without K
     int             step;           // the session step of the frame
 } fit_obs_t;
 
