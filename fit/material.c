@@ -614,8 +614,10 @@ static int parse_args(const char *cmd, int argc, char **argv, mat_args_t *a, voi
             } else {
                 char *e;
                 *num = strtod(v, &e);
-                if (*e || !(*num > 0) || !isfinite(*num)) {
-                    fprintf(stderr, "refl %s: %s needs a number > 0, not '%s'\n", cmd, s, v);
+                // the systematic floor may be 0 (as refl fit brdf's); an albedo or K may not
+                bool zero_ok = num == &a->sys_rel;
+                if (*e || !(zero_ok ? *num >= 0 : *num > 0) || !isfinite(*num)) {
+                    fprintf(stderr, "refl %s: %s needs a number %s 0, not '%s'\n", cmd, s, zero_ok ? ">=" : ">", v);
                     return 2;
                 }
             }

@@ -177,6 +177,17 @@ TEST(fit_material_chain_virtual_rig)
     CHECK_CONTAINS(err, "not a capture session");
     g_free(out);
     g_free(err);
+    // --systematic 0 is allowed (statistical std only), a negative one is not
+    rc = test_refl_run(300, &out, &err, "fit", "material", gs, "--calib", cal, "--model", "ggx", "--systematic", "0",
+                       "-o", pj, NULL);
+    CHECK_MSG(rc == 0, "%s", err);
+    g_free(out);
+    g_free(err);
+    rc = test_refl_run(60, &out, &err, "fit", "material", gs, "--calib", cal, "--systematic", "-1", "-o", pj, NULL);
+    CHECK(rc == 2);
+    CHECK_CONTAINS(err, "--systematic needs a number >= 0");
+    g_free(out);
+    g_free(err);
     test_write("cal/lamps.json", "{\"lamps\": [{\"name\": \"east\"}]}");
     rc = test_refl_run(60, &out, &err, "fit", "material", gs, "--calib", cal, "-o", pj, NULL);
     CHECK(rc == 1);
