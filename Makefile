@@ -7,6 +7,7 @@
 #   make fuzz     fuzz the parsers with libFuzzer (FUZZ_SECONDS=60)
 # WERROR=1 turns warnings into errors (CI sets it).
 
+.DEFAULT_GOAL := all
 BUILD ?= build
 BIN   ?= bin
 CC    ?= cc
@@ -46,7 +47,7 @@ LDLIBS_ALL   = $(PKG_LIBS) $(LIBS_NOPC) -lm
 # ---- sources (explicit lists) ---------------------------------------------
 MODEL_SRC := model/util.c model/ini.c model/scene.c model/config.c model/brdf.c \
              model/camera.c model/trace.c model/shade.c model/sensor.c \
-             model/image.c model/edges.c model/cmd.c
+             model/image.c model/edges.c model/workpiece.c model/cmd.c
 RIG_SRC   := rig/rig.c rig/turntable_apt.c rig/turntable_sim.c rig/lamps.c \
              rig/camera_aravis.c rig/gv_camera.c rig/virtual.c rig/config.c rig/cmd_rig.c \
              rig/plan.c rig/journal.c rig/capture.c rig/cmd_capture.c

@@ -206,7 +206,7 @@ done:
     return ok;
 }
 
-bool model_png_read(const char *path, int *width, int *height, uint16_t **pix)
+static bool png_read_impl(const char *path, int *width, int *height, uint16_t **pix, model_meta_t *meta)
 {
     *pix = NULL;
     FILE *f = fopen(path, "rb");
@@ -273,7 +273,13 @@ bool model_png_read(const char *path, int *width, int *height, uint16_t **pix)
     }
     for (png_uint_32 y = 0; y < h; y++) rows[y] = data + y * rowbytes;
     png_read_image(png, rows);
-    png_read_end(png, NULL);
+    png_read_end(png, meta ? info : NULL);
+    if (meta) {
+        png_textp text = NULL;
+        int ntext = png_get_text(png, info, &text, NULL);
+        for (int i = 0; i < ntext; i++)
+            if (text[i].key && text[i].text) model_meta_add(meta, text[i].key, "%s", text[i].text);
+    }
     for (size_t i = 0; i < (size_t)w * h; i++)
         out[i] = bpp == 2 ? (uint16_t)(data[2 * i] << 8 | data[2 * i + 1]) : data[i];
     *width = (int)w;
@@ -288,6 +294,16 @@ done:
     free(rows);
     free(out);
     return ok;
+}
+
+bool model_png_read(const char *path, int *width, int *height, uint16_t **pix)
+{
+    return png_read_impl(path, width, height, pix, NULL);
+}
+
+bool model_png_read_meta(const char *path, int *width, int *height, uint16_t **pix, model_meta_t *meta)
+{
+    return png_read_impl(path, width, height, pix, meta);
 }
 
 // ---------------------------------------------------------------------------

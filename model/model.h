@@ -568,8 +568,12 @@ void          model_meta_add(model_meta_t *m, const char *key, const char *fmt, 
 // The NULL-terminated key, value, ... list (valid until the next add or free).
 const char *const *model_meta_list(model_meta_t *m);
 void          model_meta_free(model_meta_t *m);
+// The value of the first entry named key, or NULL.
+const char   *model_meta_get(const model_meta_t *m, const char *key);
 // Reads 8- or 16-bit greyscale PNG into 16-bit values (8-bit values are kept as is).
 bool model_png_read(const char *path, int *width, int *height, uint16_t **pix);
+// The same, also adding the PNG's text chunks (tEXt, zTXt, iTXt) to meta.
+bool model_png_read_meta(const char *path, int *width, int *height, uint16_t **pix, model_meta_t *meta);
 bool model_tiff_write_float(const char *path, int width, int height, const float *pix,
                             const char *const *meta);
 // Multi-page TIFF: page 0 P (float32), page 1 face id (int32, -1 = background),
@@ -618,9 +622,44 @@ model_edges_t *model_edges_predict(const model_scene_t *scene,
 void model_edges_free(model_edges_t *e);
 
 // ---------------------------------------------------------------------------
+// The reference workpiece (model/workpiece.c; thesis ch. 6): a base plate
+// with a welded stiffener, and the wrong descriptions verification is tested
+// with. Plate: x -px/2..px/2, y -py/2..py/2, z 0..pz. Stiffener along y,
+// centred on the plate, its top at pz + height_mm * height_scale; T: a web of
+// web_thickness_mm under a flange flange_width_mm x flange_thickness_mm; I: a
+// flat bar of web_thickness_mm; none: the plate alone. The stiffener is then
+// rotated by rotate_deg about z through its centre and shifted by shift_mm
+// (x, y). The defaults make examples/t_stiffener.d3d.
+
+typedef enum { MODEL_STIFFENER_T, MODEL_STIFFENER_I, MODEL_STIFFENER_NONE } model_stiffener_kind_t;
+
+typedef struct {
+    model_stiffener_kind_t kind;
+    double plate_mm[3];            // 400 300 10
+    double web_thickness_mm;       // 8
+    double length_mm;              // 260 (along y)
+    double height_mm;              // 88 (above the plate, flange included)
+    double flange_width_mm;        // 60
+    double flange_thickness_mm;    // 8
+    double shift_mm[2];            // 0 0
+    double rotate_deg;             // 0
+    double height_scale;           // 1
+    const char *plate_material;    // "plywood"
+    const char *stiffener_material;// "painted_steel"
+} model_stiffener_t;
+
+model_stiffener_t model_stiffener_default(void);
+const char *model_stiffener_kind_name(model_stiffener_kind_t k);   // "T", "I", "none"
+int         model_stiffener_kind_from_name(const char *s);         // -1 if unknown
+// The D3D text (caller frees), or NULL with a message for impossible sizes.
+char          *model_stiffener_d3d(const model_stiffener_t *p);
+model_scene_t *model_stiffener_scene(const model_stiffener_t *p, const char *name);
+
+// ---------------------------------------------------------------------------
 // Commands (model/cmd.c): argv[0] is the subcommand name. Return the exit code.
 int model_cmd_render(int argc, char **argv);
 int model_cmd_edges(int argc, char **argv);
+int model_cmd_workpiece(int argc, char **argv);
 
 #ifdef __cplusplus
 }

@@ -232,6 +232,13 @@ const char *const *model_meta_list(model_meta_t *m)
     return l;
 }
 
+const char *model_meta_get(const model_meta_t *m, const char *key)
+{
+    for (guint i = 0; i + 1 < m->kv->len; i += 2)
+        if (!strcmp(g_ptr_array_index(m->kv, i), key)) return g_ptr_array_index(m->kv, i + 1);
+    return NULL;
+}
+
 void model_meta_free(model_meta_t *m)
 {
     if (!m) return;
