@@ -17,6 +17,8 @@
 #include <stdbool.h>
 #include <stdint.h>
 
+#include "model/model.h"
+
 #ifdef __cplusplus
 extern "C" {
 #endif
@@ -332,6 +334,20 @@ const char *rig_virtual_truth_path(const rig_virtual_t *v);
 int  rig_virtual_expected(rig_virtual_t *v, double angle_deg, uint32_t lamp_mask,
                           double exposure_us, double gain_db, const char *pixel_format,
                           int width, int height, float *out);
+
+// The radiance plane of one lamp at an angle for the current sample (kc 1,
+// Pa 0: model units, as model_render's bracket; the whole sensor, W*H floats
+// into out): what the rig's frames are made of. Lamps add linearly.
+int  rig_virtual_radiance(rig_virtual_t *v, double angle_deg, int lamp, float *out);
+// The rig's sensor stage on an ideal frame img (whole sensor, DN of the
+// sensor's bits, dark offset included: Pa + kc L): its fixed patterns, the
+// temporal noise drawn from seed, quantisation, in place.
+int  rig_virtual_sensor_apply(rig_virtual_t *v, double exposure_us, double gain_db, uint64_t seed, float *img);
+// Truth: kc per us of exposure at 0 dB, the sensor, the camera, the lamps.
+double               rig_virtual_kc_per_us(const rig_virtual_t *v);
+model_sensor_t       rig_virtual_sensor_params(const rig_virtual_t *v);
+model_camera_t      *rig_virtual_camera_model(rig_virtual_t *v);
+const model_lamps_t *rig_virtual_lamps_truth(const rig_virtual_t *v);
 
 // ---------------------------------------------------------------------------
 // Rig description files (rig/config.c)

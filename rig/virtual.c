@@ -888,6 +888,46 @@ int rig_virtual_expected(rig_virtual_t *v, double angle_deg, uint32_t lamp_mask,
     return r;
 }
 
+int rig_virtual_radiance(rig_virtual_t *v, double angle_deg, int lamp, float *out)
+{
+    if (!v || !out) return rig_fail(RIG_ERR_INVALID, "virtual rig: radiance: NULL argument");
+    if (lamp < 0 || lamp >= v->lamps->n)
+        return rig_fail(RIG_ERR_INVALID, "virtual rig: lamp %d is not one of the %d of the truth file", lamp,
+                        v->lamps->n);
+    if (!(isfinite(angle_deg) && fabs(angle_deg) <= 1e4))
+        return rig_fail(RIG_ERR_INVALID, "virtual rig: angle %g deg is not within +-10000 deg", angle_deg);
+    pthread_mutex_lock(&v->state_lock);
+    int sample = v->cur_sample;
+    pthread_mutex_unlock(&v->state_lock);
+    pthread_mutex_lock(&v->cache_lock);
+    const float *L = plane_for(v, sample, angle_deg, lamp);
+    if (L) memcpy(out, L, (size_t)v->W * v->H * sizeof(float));
+    pthread_mutex_unlock(&v->cache_lock);
+    if (!L)
+        return rig_fail(RIG_ERR_IO, "virtual rig: rendering %s at %.4f deg with lamp %s failed: %s",
+                        v->samples[sample].name, angle_deg, v->lamps->lamps[lamp].name, model_last_error());
+    return 0;
+}
+
+int rig_virtual_sensor_apply(rig_virtual_t *v, double exposure_us, double gain_db, uint64_t seed, float *img)
+{
+    if (!v || !img) return rig_fail(RIG_ERR_INVALID, "virtual rig: sensor: NULL argument");
+    if (!(isfinite(exposure_us) && exposure_us > 0) || !(isfinite(gain_db) && gain_db >= 0))
+        return rig_fail(RIG_ERR_INVALID, "virtual rig: exposure %g us must be > 0 and gain %g dB >= 0", exposure_us,
+                        gain_db);
+    model_sensor_t s = v->sensor;
+    s.system_gain_dn_per_e *= pow(10.0, gain_db / 20.0);
+    s.exposure_us = exposure_us;
+    s.noise_seed = seed;
+    model_sensor_apply_patterns(&s, v->W, v->H, v->prnu, v->dsnu, img);
+    return 0;
+}
+
+double rig_virtual_kc_per_us(const rig_virtual_t *v) { return v ? v->kc_per_us : NAN; }
+model_sensor_t rig_virtual_sensor_params(const rig_virtual_t *v) { return v->sensor; }
+model_camera_t *rig_virtual_camera_model(rig_virtual_t *v) { return v ? v->cam : NULL; }
+const model_lamps_t *rig_virtual_lamps_truth(const rig_virtual_t *v) { return v ? v->lamps : NULL; }
+
 // ---------------------------------------------------------------------------
 // The truth file
 
