@@ -61,25 +61,58 @@ static float *read_map(fit_calib_t *c, const char *path, const char *role)
 
 fit_calib_t *fit_calib_load(const char *dir, bool need_white)
 {
+    char *cam = find_in(dir, "geometry", "camera.cameramodel"), *lamps = find_in(dir, "lamps", "lamps.json");
+    char *gain = find_in(dir, "gain", "gain.json"), *white = find_in(dir, "white", "white.json");
+    fit_calib_t *c = NULL;
+    if (!cam)
+        model_error(dir, 0, "no camera.cameramodel (nor geometry/camera.cameramodel): run refl calib geometry first");
+    else if (!lamps)
+        model_error(dir, 0, "no lamps.json (nor lamps/lamps.json): run refl calib lamps first");
+    else if (!white && need_white)
+        model_error(dir, 0, "no white.json (nor white/white.json): run refl calib white on a reference-white session");
+    else
+        c = fit_calib_load_files(cam, lamps, gain, white);
+    g_free(cam);
+    g_free(lamps);
+    g_free(gain);
+    g_free(white);
+    return c;
+}
+
+// The response compression a of S_m = S (1 - a S) from a gain calibration's
+// curves (signal against exposure, small-signal slope r0): least squares of
+// r0 t - S_m = a S_m^2 over the steps below 90 % of saturation; 0 when absent.
+static double nonlinearity_of(json_t *gj, double sat)
+{
+    json_t *cv = json_object_get(gj, "curves");
+    json_t *t = json_object_get(cv, "exposure_us"), *S = json_object_get(cv, "signal_dn");
+    json_t *r0j = json_object_get(gj, "response_small_signal_dn_per_us");
+    if (!json_is_number(r0j) || json_array_size(t) != json_array_size(S)) return 0;
+    double r0 = json_number_value(r0j), num = 0, den = 0;
+    for (size_t i = 0; i < json_array_size(t); i++) {
+        double ti = json_number_value(json_array_get(t, i)), si = json_number_value(json_array_get(S, i));
+        if (!(si > 0) || (sat > 0 && si > 0.9 * sat) || !isfinite(ti)) continue;
+        num += (r0 * ti - si) * si * si;
+        den += si * si * si * si;
+    }
+    double a = den > 0 ? num / den : 0;
+    return isfinite(a) && a > 0 && a < 1e-3 ? a : 0;
+}
+
+fit_calib_t *fit_calib_load_files(const char *cam, const char *lamps, const char *gain, const char *white)
+{
     fit_calib_t *c = calloc(1, sizeof *c);
-    char *cam = NULL, *lamps = NULL, *gain = NULL, *white = NULL, *off = NULL, *flat = NULL;
+    char *off = NULL, *flat = NULL;
     json_t *lj = NULL, *gj = NULL, *wj = NULL;
     json_error_t je;
     bool ok = false;
+    const char *dir = cam;
     if (!c) return NULL;
     c->inputs = json_array();
-    if (!(cam = find_in(dir, "geometry", "camera.cameramodel"))) {
-        model_error(dir, 0, "no camera.cameramodel (nor geometry/camera.cameramodel): run refl calib geometry first");
-        goto fail;
-    }
     if (!(c->cam = model_camera_load(cam))) goto fail;
     add_input(c, "camera", cam);
     c->W = model_camera_width(c->cam);
     c->H = model_camera_height(c->cam);
-    if (!(lamps = find_in(dir, "lamps", "lamps.json"))) {
-        model_error(dir, 0, "no lamps.json (nor lamps/lamps.json): run refl calib lamps first");
-        goto fail;
-    }
     if (!(lj = json_load_file(lamps, 0, &je))) {
         model_error(lamps, je.line, "not valid JSON: %s", je.text);
         goto fail;
@@ -109,7 +142,7 @@ fit_calib_t *fit_calib_load(const char *dir, bool need_white)
         c->lamps->n = (int)i + 1;
     }
     add_input(c, "lamps", lamps);
-    if ((gain = find_in(dir, "gain", "gain.json"))) {
+    if (gain) {
         if (!(gj = json_load_file(gain, 0, &je))) {
             model_error(gain, je.line, "not valid JSON: %s", je.text);
             goto fail;
@@ -122,6 +155,7 @@ fit_calib_t *fit_calib_load(const char *dir, bool need_white)
             c->gain_dn_per_e = json_number_value(K);
             c->read_noise_e = json_number_value(rn);
         }
+        c->nonlin_a_per_dn = nonlinearity_of(gj, c->saturation_dn);
         char *gd = g_path_get_dirname(gain);
         off = g_strdup_printf("%s/offset_dn.tiff", gd);
         flat = g_strdup_printf("%s/flat_field.tiff", gd);
@@ -133,7 +167,7 @@ fit_calib_t *fit_calib_load(const char *dir, bool need_white)
         if (access(off, R_OK) == 0 && !(c->offset_dn = read_map(c, off, "offset map"))) goto fail;
         if (access(flat, R_OK) == 0 && !(c->flat = read_map(c, flat, "flat field"))) goto fail;
     }
-    if ((white = find_in(dir, "white", "white.json"))) {
+    if (white) {
         if (!(wj = json_load_file(white, 0, &je))) {
             model_error(white, je.line, "not valid JSON: %s", je.text);
             goto fail;
@@ -158,9 +192,6 @@ fit_calib_t *fit_calib_load(const char *dir, bool need_white)
         }
         c->have_white = true;
         add_input(c, "white", white);
-    } else if (need_white) {
-        model_error(dir, 0, "no white.json (nor white/white.json): run refl calib white on a reference-white session");
-        goto fail;
     }
     ok = true;
     goto done;
@@ -168,10 +199,6 @@ oom:
     model_error(dir, 0, "out of memory");
 fail:
 done:
-    g_free(cam);
-    g_free(lamps);
-    g_free(gain);
-    g_free(white);
     g_free(off);
     g_free(flat);
     json_decref(lj);

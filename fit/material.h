@@ -34,6 +34,7 @@ typedef struct {
     double          saturation_dn;  // 0: from the frame's bits
     double          gain_dn_per_e;  // gain calibration's K at 0 dB (0: unknown)
     double          read_noise_e;   // its read noise
+    double          nonlin_a_per_dn;// response compression S_m = S (1 - a S) at 0 dB from its curves (0: none)
     int             W, H;
     bool            have_white;
     double          kcI_per_us[32]; // white.json: kc I per lamp (DN/us at 0 dB per (1/sr)/mm^2)
@@ -45,6 +46,10 @@ typedef struct {
 // flat_field.tiff or prnu_gain.tiff (or gain/...), and white.json (or
 // white/white.json). need_white: white.json is required. NULL + message.
 fit_calib_t *fit_calib_load(const char *dir, bool need_white);
+// The same from explicit files: camera model and lamps.json required, gain.json
+// (its maps beside it) and white.json optional (NULL).
+fit_calib_t *fit_calib_load_files(const char *camera, const char *lamps_json, const char *gain_json,
+                                  const char *white_json);
 void         fit_calib_free(fit_calib_t *c);
 
 typedef struct {
