@@ -5,6 +5,7 @@
 #include "model/model.h"
 #include "calib/calib.h"
 #include "fit/fit.h"
+#include "fit/verify.h"
 #include "rig/rig.h"
 
 typedef struct {
@@ -22,6 +23,7 @@ static const command_t commands[] = {
     { "session", rig_cmd_session, "check a session's frames against their hashes, export its frame table" },
     { "calib",   calib_cmd,       "calibrate camera geometry and turntable axis, lamp positions, sensitivity" },
     { "fit",     fit_cmd,         "fit reflection models to BRDF samples and write priors" },
+    { "verify",  verify_cmd,      "verify a scene description against images: fit within the priors, residue, changes, verdict" },
 };
 
 static void usage(FILE *f)

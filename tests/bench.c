@@ -25,6 +25,8 @@
 #include <time.h>
 
 #include "fit/fit.h"
+#include "fit/verify.h"
+#include "fit/verify_lab.h"
 #include "model/internal.h"
 #include "rig/gv_camera.h"
 #include "rig/rig.h"
@@ -269,6 +271,7 @@ done:
 static int bench_capture(void);
 static int bench_virtual_rig(void);
 static int bench_fit_ggx(void);
+static int bench_verify(void);
 
 int main(int argc, char **argv)
 {
@@ -276,6 +279,8 @@ int main(int argc, char **argv)
     if (argc > 1 && !strcmp(argv[1], "fit")) return bench_fit_ggx() ? 1 : 0;
     // `refl-bench rig`: only the virtual rig's frame rates and changed-state latency
     if (argc > 1 && !strcmp(argv[1], "rig")) return bench_virtual_rig() ? 1 : 0;
+    // `refl-bench verify`: one view of the verification fitter
+    if (argc > 1 && !strcmp(argv[1], "verify")) return bench_verify() ? 1 : 0;
     char p_cam[1024], p_scene[1024], p_lamps[1024], p_mats[1024];
     src_path(p_cam, sizeof p_cam, "examples/camera.cameramodel");
     src_path(p_scene, sizeof p_scene, "examples/t_stiffener.d3d");
@@ -494,6 +499,7 @@ int main(int argc, char **argv)
     if (bench_virtual_rig_inprocess()) return 1;
     if (bench_capture()) return 1;
     if (bench_fit_ggx()) return 1;
+    if (bench_verify()) return 1;
     rc = 0;
     free(prim);
     free(shad);
@@ -651,4 +657,69 @@ static int bench_fit_ggx(void)
     printf("fit_ggx_1M_alpha_scipy: %.5f (truth %.5f)\n", q[2], truth[2]);
     printf("fit_ggx_scipy_vs_refl: %.2f ratio\n", t_py / t_refl);
     return 0;
+}
+
+// One view of the T-stiffener on the virtual rig (all four lamps), a grid
+// spacing (6 px) that gives at least 5,000 reference points: the view (pixel_info of
+// the grid, predicted edges, window checks, interreflection basis) plus the
+// fit (with covariance), median of 5 runs on the images of one frame.
+static int bench_verify(void)
+{
+    char truth[1024];
+    src_path(truth, sizeof truth, "examples/virtual-truth.ini");
+    const double angle = 30;
+    verify_lab_t *L = verify_lab_open(truth, "t_stiffener", &angle, 1, 6000, 0, false);
+    if (!L) {
+        fprintf(stderr, "refl-bench verify: %s\n", model_last_error());
+        return 1;
+    }
+    int W = verify_lab_width(L), H = verify_lab_height(L);
+    float *img = malloc((size_t)W * H * sizeof(float));
+    verify_lab_image(L, 0, 0xf, NULL, 1, 7, img);
+    verify_image_t im = { .P = img, .W = W, .H = H, .camera = 0, .angle_deg = angle, .lamps_on = 0xf,
+                          .exposure_us = 6000 };
+    snprintf(im.name, sizeof im.name, "bench");
+    verify_priors_t pr = { 0 };
+    const model_materials_t *mm = verify_lab_materials(L);
+    const model_material_t *ply = model_materials_find(mm, "plywood"), *st = model_materials_find(mm, "painted_steel");
+    verify_priors_add(&pr, ply, 0.1, 1e-4, 3);
+    verify_priors_add(&pr, st, 0.1, 1e-4, 3);
+    model_stiffener_t d = model_stiffener_default();
+    model_scene_t *sc = model_stiffener_scene(&d, "t_stiffener");
+    const model_material_t *mats[2] = { ply, st };
+    verify_options_t opt = verify_defaults();
+    opt.spacing_px = 6;
+    double tv[5], tf[5], tt[5];
+    int npts = 0, rc = 0;
+    for (int k = 0; k < 5 && !rc; k++) {
+        double t0 = model_now_s();
+        verify_view_t *v = verify_view_new(sc, verify_lab_camera(L), angle, verify_lab_lamps(L), mats, &opt);
+        double t1 = model_now_s();
+        verify_result_t r;
+        bool ok = v && verify_run(sc, &pr, verify_lab_camera(L), 1, verify_lab_lamps(L), verify_lab_A(L), &im, 1, &v,
+                                  &opt, &r);
+        double t2 = model_now_s();
+        if (!ok) {
+            fprintf(stderr, "refl-bench verify: %s\n", model_last_error());
+            rc = 1;
+        } else {
+            npts = r.all.npoints;
+            verify_result_free(&r);
+        }
+        verify_view_free(v);
+        tv[k] = t1 - t0;
+        tf[k] = t2 - t1;
+        tt[k] = t2 - t0;
+    }
+    if (!rc) {
+        printf("verify_view_points: %d count\n", npts);
+        printf("verify_view_pixel_info_s: %.4f s\n", median(tv, 5));
+        printf("verify_view_fit_s: %.4f s\n", median(tf, 5));
+        printf("verify_view_total_s: %.4f s (target 0.100)\n", median(tt, 5));
+    }
+    model_scene_free(sc);
+    verify_priors_free(&pr);
+    free(img);
+    verify_lab_free(L);
+    return rc;
 }

@@ -1,0 +1,1388 @@
+// fit/verify.c — the verification fitter (see verify.h for the model).
+#define _GNU_SOURCE
+#include <errno.h>
+#include <math.h>
+#include <stdatomic.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "fit/fit.h"
+#include "fit/verify.h"
+#include "model/internal.h"
+
+#define MAX_LAMPS 32
+
+verify_options_t verify_defaults(void)
+{
+    return (verify_options_t){
+        .spacing_px = 8,
+        .window_px = 5,
+        .edge_margin_px = 2,
+        .boundary_margin_px = 4,
+        .edge_k = 3,
+        .edge_rel = 0.05,
+        .ir_samples = 16,
+        .use_priors = true,
+        .use_flat = true,
+        .model_rel = 0.04,
+        .lamp_sigma = 0.1,
+        .camera_sigma = 0.1,
+        .pa_sigma_dn = 5,
+        .robust_scale = 3,
+        .z_flag = 4,
+        .min_region = 3,
+        .score_threshold = 400,
+        .max_iterations = 100,
+    };
+}
+
+const char *verify_pt_status_name(verify_pt_status_t s)
+{
+    static const char *names[] = { "used", "background", "near_edge", "boundary", "saturated", "edge_measured" };
+    return (unsigned)s < VERIFY_PT_NSTATUS ? names[s] : "?";
+}
+
+// ---------------------------------------------------------------------------
+// Priors
+
+void verify_priors_free(verify_priors_t *pr)
+{
+    if (!pr) return;
+    free(pr->m);
+    pr->m = NULL;
+    pr->n = 0;
+}
+
+const verify_prior_t *verify_priors_find(const verify_priors_t *pr, const char *name)
+{
+    for (int i = 0; i < pr->n; i++)
+        if (!strcmp(pr->m[i].name, name)) return &pr->m[i];
+    return NULL;
+}
+
+static verify_prior_t *priors_push(verify_priors_t *pr)
+{
+    verify_prior_t *m = realloc(pr->m, (size_t)(pr->n + 1) * sizeof *m);
+    if (!m) return NULL;
+    pr->m = m;
+    memset(&m[pr->n], 0, sizeof *m);
+    return &m[pr->n++];
+}
+
+static double jnum(json_t *o, const char *key, double def)
+{
+    json_t *v = json_object_get(o, key);
+    return json_is_number(v) ? json_number_value(v) : def;
+}
+
+static bool priors_from_json(verify_priors_t *pr, json_t *root, const char *path, const char *sha);
+
+bool verify_priors_load(verify_priors_t *pr, const char *path)
+{
+    size_t len = 0;
+    char *text = model_read_file(path, &len);
+    if (!text) return false;
+    bool ok = verify_priors_parse(pr, text, len, path);
+    free(text);
+    return ok;
+}
+
+bool verify_priors_parse(verify_priors_t *pr, const char *text, size_t len, const char *path)
+{
+    json_error_t je;
+    json_t *root = json_loadb(text, len, 0, &je);
+    if (!root) {
+        model_error(path, je.line, "not a readable JSON priors file: %s", je.text);
+        return false;
+    }
+    char sha[65] = "";
+    model_sha256_hex(text, len, sha);
+    bool ok = priors_from_json(pr, root, path, sha);
+    json_decref(root);
+    return ok;
+}
+
+static bool priors_from_json(verify_priors_t *pr, json_t *root, const char *path, const char *sha)
+{
+    bool ok = false;
+    json_t *mats = json_object_get(root, "materials");
+    const char *fmt = json_string_value(json_object_get(root, "format"));
+    if (fmt && strcmp(fmt, "refl priors 1")) {
+        model_error(path, 0, "format '%s' is not 'refl priors 1'", fmt);
+        goto done;
+    }
+    if (!json_is_array(mats) || !json_array_size(mats)) {
+        model_error(path, 0, "no \"materials\" list: not a refl priors file (refl fit material / refl fit brdf "
+                    "write them)");
+        goto done;
+    }
+    for (size_t i = 0; i < json_array_size(mats); i++) {
+        json_t *m = json_array_get(mats, i);
+        const char *name = json_string_value(json_object_get(m, "name"));
+        const char *model = json_string_value(json_object_get(m, "model"));
+        json_t *ps = json_object_get(m, "parameters");
+        if (!name || !name[0] || strlen(name) >= 64 || !model || !json_is_array(ps)) {
+            model_error(path, 0, "materials[%zu]: needs \"name\" (under 64 characters), \"model\" and \"parameters\"",
+                        i);
+            goto done;
+        }
+        int mi = model_brdf_from_name(model);
+        if (mi < 0) {
+            model_error(path, 0, "material %s: unknown model '%s'", name, model);
+            goto done;
+        }
+        const verify_prior_t *old = verify_priors_find(pr, name);
+        if (old) {
+            model_error(path, 0, "material %s is also in %s: give each material's priors once", name, old->source);
+            goto done;
+        }
+        verify_prior_t *p = priors_push(pr);
+        if (!p) {
+            model_error(path, 0, "out of memory");
+            goto done;
+        }
+        snprintf(p->name, sizeof p->name, "%s", name);
+        snprintf(p->source, sizeof p->source, "%s", path);
+        snprintf(p->sha256, sizeof p->sha256, "%s", sha);
+        p->model = (model_brdf_t)mi;
+        p->np = model_brdf_nparams(p->model);
+        for (int j = 0; j < p->np; j++) {
+            const char *pn = model_brdf_param_name(p->model, j);
+            json_t *e = NULL;
+            for (size_t k = 0; k < json_array_size(ps); k++) {
+                const char *n = json_string_value(json_object_get(json_array_get(ps, k), "name"));
+                if (n && !strcmp(n, pn)) e = json_array_get(ps, k);
+            }
+            double lo, hi;
+            model_brdf_param_range(p->model, j, &lo, &hi);
+            if (!e || !json_is_number(json_object_get(e, "mean"))) {
+                model_error(path, 0, "material %s (%s): parameter %s is missing or has no \"mean\"", name, model, pn);
+                goto done;
+            }
+            double mean = jnum(e, "mean", NAN), sd = jnum(e, "std", INFINITY);
+            double blo = jnum(e, "lo", lo), bhi = jnum(e, "hi", hi);
+            if (!isfinite(mean) || mean < lo || mean > hi || !(sd >= 0) || !(blo <= mean && mean <= bhi)) {
+                model_error(path, 0, "material %s: parameter %s: mean %g must lie in its bounds [%g, %g] and the "
+                            "physical range [%g, %g], std %g >= 0", name, pn, mean, blo, bhi, lo, hi, sd);
+                goto done;
+            }
+            p->mean[j] = mean;
+            p->std[j] = sd;
+            p->lo[j] = fmax(blo, lo);
+            p->hi[j] = fmin(bhi, hi);
+            p->held[j] = sd == 0;
+        }
+    }
+    ok = true;
+done:
+    return ok;
+}
+
+bool verify_priors_add(verify_priors_t *pr, const model_material_t *mat, double rel, double abs_min, double k)
+{
+    if (verify_priors_find(pr, mat->name)) {
+        model_error(NULL, 0, "priors: material %s given twice", mat->name);
+        return false;
+    }
+    verify_prior_t *p = priors_push(pr);
+    if (!p) return false;
+    snprintf(p->name, sizeof p->name, "%s", mat->name);
+    snprintf(p->source, sizeof p->source, "(known values, std %g %%)", rel * 100);
+    p->model = mat->model;
+    p->np = model_brdf_nparams(mat->model);
+    for (int j = 0; j < p->np; j++) {
+        double lo, hi;
+        model_brdf_param_range(mat->model, j, &lo, &hi);
+        p->mean[j] = mat->p[j];
+        p->std[j] = fmax(rel * fabs(mat->p[j]), abs_min);
+        p->lo[j] = fmax(lo, mat->p[j] - k * p->std[j]);
+        p->hi[j] = fmin(hi, mat->p[j] + k * p->std[j]);
+    }
+    return true;
+}
+
+bool verify_match_priors(const model_scene_t *scene, const verify_priors_t *pr, const verify_prior_t **out)
+{
+    for (int k = 0; k < scene->nmaterials; k++) {
+        out[k] = verify_priors_find(pr, scene->material_names[k]);
+        if (!out[k]) {
+            char have[512] = "";
+            for (int i = 0; i < pr->n; i++)
+                snprintf(have + strlen(have), sizeof have - strlen(have), "%s%s", i ? ", " : "", pr->m[i].name);
+            model_error(scene->path, 0, "the description's material '%s' has no priors (the priors hold: %s); fit "
+                        "it with refl fit material, or name the faces' material as the priors do",
+                        scene->material_names[k], have[0] ? have : "none");
+            return false;
+        }
+    }
+    return true;
+}
+
+// ---------------------------------------------------------------------------
+// Views
+
+struct verify_view {
+    int W, H, gw, gh, sp, x0, y0, nl;
+    model_scene_t *rot;
+    model_tracer_t *t;
+    model_pixel_info_t *pi;     // gw*gh
+    model_lamp_sample_t *ls;    // gw*gh*nl
+    uint8_t *status;            // geometric status (USED, BACKGROUND, NEAR_EDGE, BOUNDARY)
+    float *B;                   // gw*gh*nl: interreflection basis per unit A_i
+    int nusable;
+    double time_s;
+};
+
+int    verify_view_npoints(const verify_view_t *v) { return v ? v->nusable : 0; }
+double verify_view_time_s(const verify_view_t *v) { return v ? v->time_s : 0; }
+
+void verify_view_free(verify_view_t *v)
+{
+    if (!v) return;
+    model_tracer_free(v->t);
+    model_scene_free(v->rot);
+    free(v->pi);
+    free(v->ls);
+    free(v->status);
+    free(v->B);
+    free(v);
+}
+
+static uint32_t lit_bits(const model_lamp_sample_t *ls, int nl)
+{
+    uint32_t b = 0;
+    for (int i = 0; i < nl; i++)
+        if (ls[i].V > 0.5) b |= 1u << i;
+    return b;
+}
+
+static double seg_dist(double px, double py, const double a[2], const double b[2])
+{
+    double dx = b[0] - a[0], dy = b[1] - a[1], L2 = dx * dx + dy * dy;
+    double t = L2 > 0 ? ((px - a[0]) * dx + (py - a[1]) * dy) / L2 : 0;
+    t = t < 0 ? 0 : t > 1 ? 1 : t;
+    double ex = a[0] + t * dx - px, ey = a[1] + t * dy - py;
+    return sqrt(ex * ex + ey * ey);
+}
+
+typedef struct {
+    verify_view_t *v;
+    const model_lamps_t *lamps;
+    const model_material_t *const *mats;
+    int N;
+    const int *idx;   // grid indices of the usable points
+} ir_ctx_t;
+
+static double radical_inverse2(uint32_t i)
+{
+    i = (i << 16) | (i >> 16);
+    i = ((i & 0x55555555u) << 1) | ((i & 0xAAAAAAAAu) >> 1);
+    i = ((i & 0x33333333u) << 2) | ((i & 0xCCCCCCCCu) >> 2);
+    i = ((i & 0x0F0F0F0Fu) << 4) | ((i & 0xF0F0F0F0u) >> 4);
+    i = ((i & 0x00FF00FFu) << 8) | ((i & 0xFF00FF00u) >> 8);
+    return i * 0x1p-32;
+}
+
+// B_ik = (pi / N) sum_j f_x(w_j, v) sum over lamp i: V_yi R_y(l_yi, -w_j) / d_yi^2, w_j cosine-weighted.
+static void ir_rows(void *vctx, int begin, int end, int thread)
+{
+    (void)thread;
+    ir_ctx_t *c = vctx;
+    verify_view_t *v = c->v;
+    const int nl = v->nl, N = c->N;
+    double eps = 4 * model_tracer_epsilon_mm(v->t);
+    for (int k = begin; k < end; k++) {
+        int g = c->idx[k];
+        const model_pixel_info_t *pi = &v->pi[g];
+        float *B = &v->B[(size_t)g * nl];
+        const model_material_t *mx = c->mats[pi->material];
+        model_vec3_t n = pi->n, a = fabs(n.x) < 0.9 ? v3(1, 0, 0) : v3(0, 1, 0);
+        a = v3_unit(v3_sub(a, v3_scale(n, v3_dot(a, n))));
+        model_vec3_t b = v3_cross(n, a);
+        model_rng_t rng = model_rng(0x1e5f, (uint64_t)g);
+        double rot = model_rng_uniform(&rng);
+        double acc[MAX_LAMPS] = { 0 };
+        model_vec3_t org = v3_add(pi->p_mm, v3_scale(n, eps));
+        for (int j = 0; j < N; j++) {
+            double u = (j + 0.5) / N, ph = 2 * M_PI * (radical_inverse2((uint32_t)j) + rot);
+            double r = sqrt(u), cz = sqrt(1 - u);
+            model_vec3_t w = v3_add(v3_add(v3_scale(a, r * cos(ph)), v3_scale(b, r * sin(ph))), v3_scale(n, cz));
+            model_pixel_info_t y;
+            model_tracer_cast(v->t, org, w, &y);
+            if (y.face < 0 || y.material < 0) continue;
+            model_cosines_t cx = model_cosines(n, w, pi->v);
+            if (cx.nl <= 0 || cx.nv <= 0) continue;
+            double fx = model_brdf_eval(mx->model, mx->p, &cx, NULL) / cx.nl;
+            const model_material_t *my = c->mats[y.material];
+            model_vec3_t vy = v3_scale(w, -1);
+            for (int i = 0; i < nl; i++) {
+                model_vec3_t d = v3_sub(c->lamps->lamps[i].position_mm, y.p_mm);
+                double dd = v3_norm(d);
+                model_vec3_t l = v3_scale(d, 1 / dd);
+                model_cosines_t cy = model_cosines(y.n, l, vy);
+                if (cy.nl <= 0 || cy.nv <= 0) continue;
+                if (!model_tracer_visible_from(v->t, y.p_mm, y.n, c->lamps->lamps[i].position_mm)) continue;
+                acc[i] += fx * model_brdf_eval(my->model, my->p, &cy, NULL) / (dd * dd);
+            }
+        }
+        for (int i = 0; i < nl; i++) B[i] = (float)(M_PI / N * acc[i]);
+    }
+}
+
+verify_view_t *verify_view_new(const model_scene_t *scene, const verify_camera_t *cam, double angle_deg,
+                               const model_lamps_t *lamps, const model_material_t *const *mats,
+                               const verify_options_t *opt)
+{
+    double t0 = model_now_s();
+    if (lamps->n > MAX_LAMPS) {
+        model_error(lamps->path, 0, "%d lamps: verification handles at most %d", lamps->n, MAX_LAMPS);
+        return NULL;
+    }
+    if (opt->window_px < 1 || opt->window_px % 2 == 0 || opt->spacing_px < 1) {
+        model_error(NULL, 0, "verify: the window (%d px) must be odd and >= 1, the spacing (%d px) >= 1",
+                    opt->window_px, opt->spacing_px);
+        return NULL;
+    }
+    verify_view_t *v = calloc(1, sizeof *v);
+    if (!v) return NULL;
+    v->W = model_camera_width(cam->cam);
+    v->H = model_camera_height(cam->cam);
+    v->sp = opt->spacing_px;
+    v->nl = lamps->n;
+    int h = opt->window_px / 2;
+    int c = h + (int)ceil(opt->boundary_margin_px);
+    v->x0 = v->y0 = c > v->sp / 2 ? c : v->sp / 2;
+    v->gw = v->W - 1 - c >= v->x0 ? (v->W - 1 - c - v->x0) / v->sp + 1 : 0;
+    v->gh = v->H - 1 - c >= v->y0 ? (v->H - 1 - c - v->y0) / v->sp + 1 : 0;
+    int n = v->gw * v->gh, nl = v->nl;
+    if (n <= 0) {
+        model_error(NULL, 0, "verify: a %dx%d image has no room for reference points", v->W, v->H);
+        free(v);
+        return NULL;
+    }
+    int threads = opt->threads > 0 ? opt->threads : model_default_threads();
+    v->rot = model_scene_rotated_z(scene, angle_deg);
+    v->t = v->rot ? model_tracer_new(v->rot) : NULL;
+    v->pi = malloc((size_t)n * sizeof *v->pi);
+    v->ls = malloc((size_t)n * (nl ? nl : 1) * sizeof *v->ls);
+    v->status = calloc((size_t)n, 1);
+    v->B = calloc((size_t)n * (nl ? nl : 1), sizeof *v->B);
+    double *q = malloc((size_t)n * 2 * sizeof *q);
+    if (!v->t || !v->pi || !v->ls || !v->status || !v->B || !q) {
+        if (v->t) model_error(NULL, 0, "out of memory for %d reference points", n);
+        free(q);
+        verify_view_free(v);
+        return NULL;
+    }
+    for (int j = 0; j < v->gh; j++)
+        for (int i = 0; i < v->gw; i++) {
+            q[2 * (j * v->gw + i)] = v->x0 + i * v->sp;
+            q[2 * (j * v->gw + i) + 1] = v->y0 + j * v->sp;
+        }
+    bool ok = model_pixel_info(v->t, cam->cam, lamps, q, n, v->pi, v->ls, threads);
+    if (!ok) goto fail;
+    for (int g = 0; g < n; g++)
+        if (v->pi[g].face < 0) v->status[g] = VERIFY_PT_BACKGROUND;
+    // predicted edges (the edge query)
+    model_shading_t sh = model_shading_default();
+    sh.nthreads = threads;
+    model_edges_t *ed = model_edges_predict(v->rot, v->t, cam->cam, lamps, mats, &sh, 1.0);
+    if (!ed) goto fail;
+    double reach = h * M_SQRT2 + opt->edge_margin_px;
+    for (int e = 0; e < ed->nedges; e++)
+        for (int s = 0; s < ed->edges[e].nsegments; s++) {
+            const model_edge_segment_t *sg = &ed->edges[e].segments[s];
+            double xa = fmin(sg->q0[0], sg->q1[0]) - reach, xb = fmax(sg->q0[0], sg->q1[0]) + reach;
+            double ya = fmin(sg->q0[1], sg->q1[1]) - reach, yb = fmax(sg->q0[1], sg->q1[1]) + reach;
+            int i0 = (int)floor((xa - v->x0) / v->sp), i1 = (int)ceil((xb - v->x0) / v->sp);
+            int j0 = (int)floor((ya - v->y0) / v->sp), j1 = (int)ceil((yb - v->y0) / v->sp);
+            if (i0 < 0) i0 = 0;
+            if (j0 < 0) j0 = 0;
+            if (i1 > v->gw - 1) i1 = v->gw - 1;
+            if (j1 > v->gh - 1) j1 = v->gh - 1;
+            for (int j = j0; j <= j1; j++)
+                for (int i = i0; i <= i1; i++) {
+                    int g = j * v->gw + i;
+                    if (v->status[g] == VERIFY_PT_USED &&
+                        seg_dist(q[2 * g], q[2 * g + 1], sg->q0, sg->q1) <= reach)
+                        v->status[g] = VERIFY_PT_NEAR_EDGE;
+                }
+        }
+    model_edges_free(ed);
+    // face or shadow changes within the window (+ margin): where a neighbour
+    // differs, look at the window's corners and edge midpoints
+    int *cand = malloc((size_t)n * sizeof *cand), ncand = 0;
+    if (!cand) goto fail;
+    for (int j = 0; j < v->gh; j++)
+        for (int i = 0; i < v->gw; i++) {
+            int g = j * v->gw + i;
+            if (v->status[g] != VERIFY_PT_USED) continue;
+            uint32_t bits = lit_bits(&v->ls[(size_t)g * nl], nl);
+            bool diff = false;
+            for (int dj = -1; dj <= 1 && !diff; dj++)
+                for (int di = -1; di <= 1 && !diff; di++) {
+                    int ii = i + di, jj = j + dj;
+                    if ((!di && !dj) || ii < 0 || jj < 0 || ii >= v->gw || jj >= v->gh) continue;
+                    int g2 = jj * v->gw + ii;
+                    diff = v->pi[g2].face != v->pi[g].face || lit_bits(&v->ls[(size_t)g2 * nl], nl) != bits;
+                }
+            if (diff) cand[ncand++] = g;
+        }
+    if (ncand) {
+        const int NC = 8;
+        double *qc = malloc((size_t)ncand * NC * 2 * sizeof *qc);
+        model_pixel_info_t *pc = malloc((size_t)ncand * NC * sizeof *pc);
+        model_lamp_sample_t *lc = malloc((size_t)ncand * NC * (nl ? nl : 1) * sizeof *lc);
+        ok = qc && pc && lc;
+        if (ok) {
+            static const int off[8][2] = { { -1, -1 }, { 1, -1 }, { -1, 1 }, { 1, 1 },
+                                           { 0, -1 }, { 0, 1 }, { -1, 0 }, { 1, 0 } };
+            for (int k = 0; k < ncand; k++)
+                for (int m = 0; m < NC; m++) {
+                    qc[2 * (k * NC + m)] = q[2 * cand[k]] + off[m][0] * c;
+                    qc[2 * (k * NC + m) + 1] = q[2 * cand[k] + 1] + off[m][1] * c;
+                }
+            ok = model_pixel_info(v->t, cam->cam, lamps, qc, ncand * NC, pc, lc, threads);
+        }
+        if (ok)
+            for (int k = 0; k < ncand; k++) {
+                int g = cand[k];
+                uint32_t bits = lit_bits(&v->ls[(size_t)g * nl], nl);
+                for (int m = 0; m < NC; m++) {
+                    int km = k * NC + m;
+                    if (pc[km].face != v->pi[g].face || lit_bits(&lc[(size_t)km * nl], nl) != bits) {
+                        v->status[g] = VERIFY_PT_BOUNDARY;
+                        break;
+                    }
+                }
+            }
+        free(qc);
+        free(pc);
+        free(lc);
+        if (!ok) {
+            free(cand);
+            goto fail;
+        }
+    }
+    // the interreflection basis at the usable points
+    ncand = 0;
+    for (int g = 0; g < n; g++)
+        if (v->status[g] == VERIFY_PT_USED) cand[ncand++] = g;
+    v->nusable = ncand;
+    if (opt->ir_samples > 0 && ncand && nl) {
+        ir_ctx_t ic = { v, lamps, mats, opt->ir_samples, cand };
+        model_parallel_for(ncand, 64, threads, ir_rows, &ic);
+    }
+    free(cand);
+    free(q);
+    v->time_s = model_now_s() - t0;
+    return v;
+fail:
+    free(q);
+    verify_view_free(v);
+    return NULL;
+}
+
+// ---------------------------------------------------------------------------
+// The fit
+
+typedef struct {
+    double meas, sigma, Eg;   // measured DN (after the offset map), sigma DN, E * g
+    int    mat;               // scene material
+    int    nl;                // lamps on
+    int    first;             // into the lamp arrays
+} pt_t;
+
+typedef struct {
+    const pt_t   *pt;
+    const model_cosines_t *cs;   // per (point, lamp on)
+    const double *w;             // A_i V / d^2
+    const double *b;             // A_i B_i
+    const int    *lamp;          // lamp index
+    model_brdf_t  model;         // of the point's material
+    int           np, nl_all;
+} res_ctx_t;
+
+typedef struct {
+    res_ctx_t *rc;
+    int        k;
+} res_item_t;
+
+// One point's residual and its Jacobian rows (each j may be NULL).
+// blocks: kc (1), s (nl_all), Pa (1), p (np), rho (1)
+static double point_eval(const res_ctx_t *rc, int k, const double *const *par, double *j0, double *j1, double *j2,
+                         double *j3, double *j4)
+{
+    const pt_t *p = &rc->pt[k];
+    double kc = par[0][0], Pa = par[2][0], rho = par[4][0];
+    const double *s = par[1], *mp = par[3];
+    double S = 0, T = 0, dS_dp[MODEL_BRDF_MAX_PARAMS] = { 0 }, dR[MODEL_BRDF_MAX_PARAMS];
+    double dS_ds[MAX_LAMPS] = { 0 };
+    for (int j = 0; j < p->nl; j++) {
+        int e = p->first + j, i = rc->lamp[e];
+        double R = model_brdf_eval(rc->model, mp, &rc->cs[e], j3 ? dR : NULL);
+        double wr = rc->w[e] * R;
+        S += s[i] * wr;
+        T += s[i] * rc->b[e];
+        dS_ds[i] = wr + rho * rc->b[e];
+        if (j3)
+            for (int q = 0; q < rc->np; q++) dS_dp[q] += s[i] * rc->w[e] * dR[q];
+    }
+    double inv = 1 / p->sigma, ec = p->Eg * kc;
+    if (j0) j0[0] = p->Eg * (S + rho * T) * inv;
+    if (j1)
+        for (int i = 0; i < rc->nl_all; i++) j1[i] = ec * dS_ds[i] * inv;
+    if (j2) j2[0] = inv;
+    if (j3)
+        for (int q = 0; q < rc->np; q++) j3[q] = ec * dS_dp[q] * inv;
+    if (j4) j4[0] = ec * T * inv;
+    return (Pa + ec * (S + rho * T) - p->meas) * inv;
+}
+
+static bool residual_fn(void *vctx, const double *const *par, double *res, double **jac)
+{
+    const res_item_t *it = vctx;
+    res[0] = point_eval(it->rc, it->k, par, jac ? jac[0] : NULL, jac ? jac[1] : NULL, jac ? jac[2] : NULL,
+                        jac ? jac[3] : NULL, jac ? jac[4] : NULL);
+    return isfinite(res[0]);
+}
+
+// A group of points of one image and material: one residual block. The
+// robust (Cauchy) loss is applied to each point's residual inside:
+// r' = sign(r) sqrt(b ln(1 + r^2/b)), so its Gauss-Newton step is the
+// loss's iteratively reweighted one (b = robust_scale^2; 0: plain).
+typedef struct {
+    res_ctx_t *rc;
+    const int *k;
+    int        n;
+    double     b;
+} res_group_t;
+
+static bool group_fn(void *vctx, const double *const *par, double *res, double **jac)
+{
+    const res_group_t *g = vctx;
+    const int nl = g->rc->nl_all, np = g->rc->np;
+    const int size[5] = { 1, nl, 1, np, 1 };
+    for (int t = 0; t < g->n; t++) {
+        double *row[5];
+        for (int b = 0; b < 5; b++) row[b] = jac && jac[b] ? jac[b] + (size_t)t * size[b] : NULL;
+        double r = point_eval(g->rc, g->k[t], par, row[0], row[1], row[2], row[3], row[4]);
+        if (!isfinite(r)) return false;
+        if (g->b > 0) {
+            double s2 = r * r, rr = copysign(sqrt(g->b * log1p(s2 / g->b)), r);
+            double f = fabs(r) > 1e-12 ? r / (1 + s2 / g->b) / rr : 1;
+            for (int b = 0; b < 5; b++)
+                if (row[b])
+                    for (int q = 0; q < size[b]; q++) row[b][q] *= f;
+            r = rr;
+        }
+        res[t] = r;
+    }
+    return true;
+}
+
+void verify_result_free(verify_result_t *r)
+{
+    if (!r) return;
+    free(r->points);
+    free(r->per_image);
+    free(r->regions);
+    free(r->params);
+    free(r->kc);
+    free(r->s);
+    free(r->Pa);
+    free(r->mats);
+    memset(r, 0, sizeof *r);
+}
+
+static int cmp_double(const void *a, const void *b)
+{
+    double x = *(const double *)a, y = *(const double *)b;
+    return x < y ? -1 : x > y;
+}
+
+static double median_of(double *v, int n)
+{
+    if (n <= 0) return NAN;
+    qsort(v, (size_t)n, sizeof *v, cmp_double);
+    return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
+}
+
+static void stats_of(const verify_point_t *pts, int n, int image, verify_stats_t *st)
+{
+    memset(st, 0, sizeof *st);
+    double *d = malloc((size_t)(n ? n : 1) * sizeof *d), *z = malloc((size_t)(n ? n : 1) * sizeof *z);
+    double s1 = 0, s2 = 0, zz = 0;
+    int m = 0;
+    for (int k = 0; k < n; k++) {
+        const verify_point_t *p = &pts[k];
+        if (p->status != VERIFY_PT_USED || (image >= 0 && p->image != image)) continue;
+        double diff = p->meas - p->model, a = fabs(diff);
+        if (d) d[m] = diff;
+        if (z) z[m] = fabs(p->z);
+        m++;
+        s1 += a;
+        s2 += a * a;
+        zz += (double)p->z * p->z;
+        if (a > st->max_abs) st->max_abs = a;
+    }
+    st->npoints = m;
+    if (m && d && z) {
+        st->mean_abs = s1 / m;
+        st->std_abs = sqrt(fmax(s2 / m - st->mean_abs * st->mean_abs, 0));
+        st->rms_z = sqrt(zz / m);
+        st->median_abs_z = median_of(z, m);
+        double med = median_of(d, m);
+        for (int k = 0; k < m; k++) d[k] = fabs(d[k] - med);
+        st->robust_sigma = 1.4826 * median_of(d, m);
+    }
+    free(d);
+    free(z);
+}
+
+typedef struct {
+    char   name[96];
+    double *x;
+    int    i;
+    double prior_mean, prior_std, lo, hi;
+    bool   fixed;
+} pdesc_t;
+
+bool verify_run(const model_scene_t *scene, const verify_priors_t *pr, const verify_camera_t *cams, int ncams,
+                const model_lamps_t *lamps, const double *A, const verify_image_t *imgs, int nimgs,
+                verify_view_t *const *views, const verify_options_t *opt, verify_result_t *out)
+{
+    memset(out, 0, sizeof *out);
+    double t0 = model_now_s();
+    const int nl = lamps->n, nm = scene->nmaterials;
+    if (nl > MAX_LAMPS) {
+        model_error(lamps->path, 0, "%d lamps: verification handles at most %d", nl, MAX_LAMPS);
+        return false;
+    }
+    const verify_prior_t **prior = calloc((size_t)(nm ? nm : 1), sizeof *prior);
+    if (!prior || !verify_match_priors(scene, pr, prior)) {
+        free(prior);
+        return false;
+    }
+    const int w = opt->window_px, h = w / 2;
+    // count the candidate points
+    int npts = 0;
+    for (int m = 0; m < nimgs; m++) {
+        const verify_view_t *v = views[m];
+        if (imgs[m].W != v->W || imgs[m].H != v->H || imgs[m].camera < 0 || imgs[m].camera >= ncams) {
+            model_error(imgs[m].name, 0, "the image is %dx%d but its camera model (%s) is %dx%d: give the camera "
+                        "model calibrated for this image size", imgs[m].W, imgs[m].H,
+                        imgs[m].camera >= 0 && imgs[m].camera < ncams ? cams[imgs[m].camera].name : "?", v->W, v->H);
+            free(prior);
+            return false;
+        }
+        if (imgs[m].lamps_on >> nl && nl < 32) {
+            model_error(imgs[m].name, 0, "lamp mask 0x%x names lamps beyond the %d given", imgs[m].lamps_on, nl);
+            free(prior);
+            return false;
+        }
+        npts += v->gw * v->gh;
+    }
+    out->points = calloc((size_t)(npts ? npts : 1), sizeof *out->points);
+    out->per_image = calloc((size_t)(nimgs ? nimgs : 1), sizeof *out->per_image);
+    out->nimages = nimgs;
+    out->kc = calloc((size_t)(ncams ? ncams : 1), sizeof(double));
+    out->s = calloc((size_t)(nl ? nl : 1), sizeof(double));
+    out->Pa = calloc((size_t)(nimgs ? nimgs : 1), sizeof(double));
+    out->mats = calloc((size_t)(nm ? nm : 1), sizeof *out->mats);
+    pt_t *pt = malloc((size_t)(npts ? npts : 1) * sizeof *pt);
+    int *ptidx = malloc((size_t)(npts ? npts : 1) * sizeof *ptidx);   // point -> index in out->points
+    size_t nle = 0;
+    for (int m = 0; m < nimgs; m++) nle += (size_t)views[m]->gw * views[m]->gh * (size_t)__builtin_popcount(imgs[m].lamps_on);
+    model_cosines_t *cs = malloc((nle ? nle : 1) * sizeof *cs);
+    double *wv = malloc((nle ? nle : 1) * sizeof *wv), *bv = malloc((nle ? nle : 1) * sizeof *bv);
+    int *lampv = malloc((nle ? nle : 1) * sizeof *lampv);
+    double *mp = calloc((size_t)(nm ? nm : 1) * MODEL_BRDF_MAX_PARAMS, sizeof *mp);
+    res_ctx_t *rcs = calloc((size_t)(nm ? nm : 1), sizeof *rcs);
+    res_item_t *items = malloc((size_t)(npts ? npts : 1) * sizeof *items);
+    res_group_t *groups = malloc((size_t)(npts ? npts : 1) * sizeof *groups);
+    int *gidx = malloc((size_t)(npts ? npts : 1) * sizeof *gidx);
+    pdesc_t *pd = calloc((size_t)(ncams + nl + nimgs + 1 + nm * MODEL_BRDF_MAX_PARAMS), sizeof *pd);
+    fit_problem_t *prob = fit_problem_new();
+    bool ok = false;
+    if (!out->points || !out->per_image || !out->kc || !out->s || !out->Pa || !out->mats || !pt || !ptidx || !cs ||
+        !wv || !bv || !lampv || !mp || !rcs || !items || !groups || !gidx || !pd || !prob) {
+        model_error(NULL, 0, "out of memory for %d reference points", npts);
+        goto done;
+    }
+    for (int c = 0; c < ncams; c++) out->kc[c] = 1;
+    for (int i = 0; i < nl; i++) out->s[i] = 1;
+    out->rho = opt->ir_samples > 0 ? 1 : 0;
+    for (int k = 0; k < nm; k++) {
+        snprintf(out->mats[k].name, sizeof out->mats[k].name, "%s", scene->material_names[k]);
+        out->mats[k].model = prior[k]->model;
+        memcpy(out->mats[k].p, prior[k]->mean, sizeof prior[k]->mean);
+        memcpy(&mp[k * MODEL_BRDF_MAX_PARAMS], prior[k]->mean, sizeof prior[k]->mean);
+    }
+    // measure the windows
+    int np = 0, nfit = 0;
+    size_t e = 0;
+    for (int m = 0; m < nimgs; m++) {
+        const verify_view_t *v = views[m];
+        const verify_image_t *im = &imgs[m];
+        const verify_camera_t *cm = &cams[im->camera];
+        const float *off = opt->use_flat ? cm->offset_dn : NULL, *flat = opt->use_flat ? cm->flat : NULL;
+        double gf = pow(10, im->gain_db / 20), E = im->exposure_us * gf, Kg = cm->K_dn_per_e * gf;
+        double sat = cm->saturation_dn > 0 ? cm->saturation_dn : INFINITY;
+        double a_nl = opt->use_flat && cm->nonlin_a_per_dn > 0 ? cm->nonlin_a_per_dn / gf : 0;
+        // Pa start: 0 with the offset map; else the median of the background windows, or the darkest window
+        double Pa0 = 0;
+        int first_pt = np;
+        double *tmp = malloc((size_t)v->gw * v->gh * sizeof *tmp);
+        int nt = 0;
+        if (!tmp) goto done;
+        for (int g = 0; g < v->gw * v->gh; g++) {
+            verify_point_t *p = &out->points[np++];
+            int gx = v->x0 + (g % v->gw) * v->sp, gy = v->y0 + (g / v->gw) * v->sp;
+            p->image = m;
+            p->q[0] = (float)gx;
+            p->q[1] = (float)gy;
+            p->face = v->pi[g].face;
+            p->status = v->status[g];
+            p->region = -1;
+            double s1 = 0, s2 = 0, gs = 0, mx = 0;
+            for (int y = gy - h; y <= gy + h; y++)
+                for (int x = gx - h; x <= gx + h; x++) {
+                    size_t o = (size_t)y * v->W + x;
+                    double P = im->P[o];
+                    if (P > mx) mx = P;
+                    if (off) P -= off[o];
+                    s1 += P;
+                    s2 += P * P;
+                    gs += flat ? flat[o] : 1;
+                }
+            double N = (double)w * w, mean = s1 / N;
+            if (a_nl > 0 && off) {
+                // linearise the window (mean and spread) with the inverse of S_m = S (1 - a S)
+                double disc = 1 - 4 * a_nl * mean;
+                if (mean > 0 && disc > 0) {
+                    double lin = (1 - sqrt(disc)) / (2 * a_nl), slope = 1 / sqrt(disc);
+                    double var = fmax(s2 / N - mean * mean, 0) * slope * slope;
+                    mean = lin;
+                    s1 = mean * N;
+                    s2 = (var + mean * mean) * N;
+                }
+            }
+            p->meas = (float)mean;
+            p->sigma = (float)sqrt(fmax(s2 / N - mean * mean, 0) * N / (N > 1 ? N - 1 : 1));   // window std for now
+            p->model = (float)(gs / N);   // g for now
+            if (p->status == VERIFY_PT_USED && mx >= sat - 0.5) p->status = VERIFY_PT_SATURATED;
+            if (!off && p->status == VERIFY_PT_BACKGROUND) tmp[nt++] = mean;
+        }
+        if (!off) {
+            if (nt >= 10) {
+                Pa0 = median_of(tmp, nt);
+            } else {
+                Pa0 = INFINITY;
+                for (int k = first_pt; k < np; k++)
+                    if (out->points[k].status == VERIFY_PT_USED) Pa0 = fmin(Pa0, out->points[k].meas);
+                if (!isfinite(Pa0)) Pa0 = 0;
+            }
+        }
+        out->Pa[m] = Pa0;
+        // the pixel noise without K: the median window variance of the usable points
+        double var_px_fallback = 0;
+        if (!(Kg > 0)) {
+            nt = 0;
+            for (int k = first_pt; k < np; k++)
+                if (out->points[k].status == VERIFY_PT_USED) tmp[nt++] = (double)out->points[k].sigma * out->points[k].sigma;
+            var_px_fallback = nt ? median_of(tmp, nt) : 1;
+            if (!(var_px_fallback > 0)) var_px_fallback = 1;
+        }
+        free(tmp);
+        for (int g = 0; g < v->gw * v->gh; g++) {
+            int k = first_pt + g;
+            verify_point_t *p = &out->points[k];
+            if (p->status != VERIFY_PT_USED) continue;
+            double S = fmax(p->meas - Pa0, 0), wstd = p->sigma, gmean = p->model;
+            double var_px = Kg > 0 ? Kg * S + Kg * Kg * cm->read_noise_e * cm->read_noise_e + 1.0 / 12
+                                   : var_px_fallback;
+            double thr2 = opt->edge_k * opt->edge_k * var_px + (opt->edge_rel * S) * (opt->edge_rel * S);
+            if (wstd * wstd > thr2) {
+                p->status = VERIFY_PT_EDGE_MEASURED;
+                p->z = (float)(opt->z_flag * wstd / sqrt(thr2));
+            }
+            double sig = sqrt(var_px / ((double)w * w) + (opt->model_rel * S) * (opt->model_rel * S));
+            p->sigma = (float)sig;
+            p->model = 0;
+            // the fit's point (edge-measured ones are predicted too, not fitted)
+            pt_t *q = &pt[nfit];
+            q->meas = p->meas;
+            q->sigma = sig;
+            q->Eg = E * gmean;
+            q->mat = v->pi[g].material;
+            q->first = (int)e;
+            q->nl = 0;
+            const model_lamp_sample_t *ls = &v->ls[(size_t)g * v->nl];
+            for (int i = 0; i < nl; i++) {
+                if (!((im->lamps_on >> i) & 1)) continue;
+                cs[e] = model_cosines(v->pi[g].n, ls[i].l, v->pi[g].v);
+                wv[e] = ls[i].d_mm > 0 ? A[i] * ls[i].V / (ls[i].d_mm * ls[i].d_mm) : 0;
+                bv[e] = A[i] * v->B[(size_t)g * v->nl + i];
+                lampv[e] = i;
+                e++;
+                q->nl++;
+            }
+            ptidx[nfit] = k;
+            nfit++;
+        }
+    }
+    // the problem
+    int npd = 0;
+    for (int c = 0; c < ncams; c++) {
+        pdesc_t *d = &pd[npd++];
+        snprintf(d->name, sizeof d->name, "kc[%s]", cams[c].name);
+        d->x = &out->kc[c];
+        d->prior_mean = 1;
+        d->prior_std = opt->use_priors ? opt->camera_sigma : 0;
+        d->lo = opt->use_priors ? fmax(0.2, 1 - 5 * opt->camera_sigma) : 0;
+        d->hi = opt->use_priors ? 1 + 5 * opt->camera_sigma : INFINITY;
+        d->fixed = opt->fix_cameras;
+        if (!fit_add_parameters(prob, d->x, 1)) goto fit_fail;
+    }
+    if (!fit_add_parameters(prob, out->s, nl ? nl : 1)) goto fit_fail;
+    for (int i = 0; i < nl; i++) {
+        pdesc_t *d = &pd[npd++];
+        snprintf(d->name, sizeof d->name, "lamp[%s]", lamps->lamps[i].name);
+        d->x = out->s;
+        d->i = i;
+        d->prior_mean = 1;
+        d->prior_std = opt->use_priors ? opt->lamp_sigma : 0;
+        d->lo = fmax(0.2, 1 - 5 * opt->lamp_sigma);
+        d->hi = 1 + 5 * opt->lamp_sigma;
+        d->fixed = opt->fix_lamps || !opt->use_priors;   // the thesis's fit: lamps fixed, kc free
+    }
+    for (int m = 0; m < nimgs; m++) {
+        pdesc_t *d = &pd[npd++];
+        snprintf(d->name, sizeof d->name, "Pa[%d]", m);
+        d->x = &out->Pa[m];
+        bool have_map = opt->use_flat && cams[imgs[m].camera].offset_dn;
+        d->prior_mean = out->Pa[m];
+        d->prior_std = opt->use_priors && have_map ? opt->pa_sigma_dn : 0;
+        d->lo = -INFINITY;
+        d->hi = INFINITY;
+        d->fixed = opt->fix_pa;
+        if (!fit_add_parameters(prob, d->x, 1)) goto fit_fail;
+    }
+    {
+        pdesc_t *d = &pd[npd++];
+        snprintf(d->name, sizeof d->name, "rho");
+        d->x = &out->rho;
+        d->prior_mean = 1;
+        d->prior_std = opt->use_priors ? 0.5 : 0;
+        d->lo = 0;
+        d->hi = opt->use_priors ? 3 : INFINITY;
+        d->fixed = opt->fix_rho || opt->ir_samples <= 0;
+        if (!fit_add_parameters(prob, d->x, 1)) goto fit_fail;
+    }
+    bool mat_used[256] = { 0 };
+    for (int k = 0; k < nfit; k++)
+        if (pt[k].mat >= 0 && pt[k].mat < 256) mat_used[pt[k].mat] = true;
+    for (int k = 0; k < nm; k++) {
+        const verify_prior_t *P = prior[k];
+        double *x = &mp[k * MODEL_BRDF_MAX_PARAMS];
+        if (!fit_add_parameters(prob, x, P->np)) goto fit_fail;
+        for (int j = 0; j < P->np; j++) {
+            pdesc_t *d = &pd[npd++];
+            snprintf(d->name, sizeof d->name, "%s.%s", P->name, model_brdf_param_name(P->model, j));
+            d->x = x;
+            d->i = j;
+            double lo, hi;
+            model_brdf_param_range(P->model, j, &lo, &hi);
+            d->prior_mean = P->mean[j];
+            d->prior_std = opt->use_priors && isfinite(P->std[j]) ? P->std[j] : 0;
+            d->lo = opt->use_priors ? P->lo[j] : lo;
+            d->hi = opt->use_priors ? P->hi[j] : hi;
+            d->fixed = opt->fix_materials || (opt->use_priors && P->held[j]) || !mat_used[k] ||
+                       (!opt->use_priors && !strcmp(model_brdf_param_name(P->model, j), "F0"));
+        }
+        rcs[k].pt = pt;
+        rcs[k].cs = cs;
+        rcs[k].w = wv;
+        rcs[k].b = bv;
+        rcs[k].lamp = lampv;
+        rcs[k].model = P->model;
+        rcs[k].np = P->np;
+        rcs[k].nl_all = nl ? nl : 1;
+    }
+    // bounds, masks and priors
+    for (int k = 0; k < npd; k++) {
+        pdesc_t *d = &pd[k];
+        if (d->fixed) continue;
+        if ((isfinite(d->lo) || isfinite(d->hi)) && !fit_set_bounds(prob, d->x, d->i, d->lo, d->hi)) goto fit_fail;
+        if (d->prior_std > 0 && !fit_add_prior(prob, d->x, d->i, d->prior_mean, d->prior_std)) goto fit_fail;
+    }
+    {
+        // masks per block
+        bool fx[MAX_LAMPS];
+        for (int i = 0; i < nl; i++) fx[i] = opt->fix_lamps || !opt->use_priors;
+        if (nl && !fit_set_fixed(prob, out->s, fx)) goto fit_fail;
+        if (!nl) fit_set_fixed(prob, out->s, NULL);
+        for (int k = 0; k < npd; k++) {
+            pdesc_t *d = &pd[k];
+            if (d->x == out->s) continue;
+            bool f[MODEL_BRDF_MAX_PARAMS] = { 0 };
+            int size = 1;
+            for (int q = 0; q < npd; q++)
+                if (pd[q].x == d->x) {
+                    f[pd[q].i] = pd[q].fixed;
+                    if (pd[q].i + 1 > size) size = pd[q].i + 1;
+                }
+            bool any = false;
+            for (int q = 0; q < size; q++) any |= f[q];
+            if (any && d->i == 0 && !fit_set_fixed(prob, d->x, f)) goto fit_fail;
+        }
+    }
+    int nused = 0, ngroups = 0, gpos = 0;
+    for (int k = 0; k < nfit; k++) {
+        items[k].rc = &rcs[pt[k].mat];
+        items[k].k = k;
+    }
+    // groups of up to 64 used points of one image and material
+    for (int m = 0; m < nimgs; m++)
+        for (int mat = 0; mat < nm; mat++) {
+            int cur = -1;
+            for (int k = 0; k < nfit; k++) {
+                const verify_point_t *p = &out->points[ptidx[k]];
+                if (p->image != m || pt[k].mat != mat || p->status != VERIFY_PT_USED) continue;
+                nused++;
+                if (cur < 0 || groups[cur].n == 64) {
+                    cur = ngroups++;
+                    groups[cur].rc = &rcs[mat];
+                    groups[cur].k = &gidx[gpos];
+                    groups[cur].n = 0;
+                    groups[cur].b = opt->robust_scale > 0 ? opt->robust_scale * opt->robust_scale : 0;
+                }
+                gidx[gpos++] = k;   // a group's indices are contiguous in gidx
+                groups[cur].n++;
+            }
+        }
+    for (int gi = 0; gi < ngroups; gi++) {
+        const verify_point_t *p = &out->points[ptidx[groups[gi].k[0]]];
+        int mat = pt[groups[gi].k[0]].mat;
+        double *blocks[5] = { &out->kc[imgs[p->image].camera], out->s, &out->Pa[p->image],
+                              &mp[mat * MODEL_BRDF_MAX_PARAMS], &out->rho };
+        if (!fit_add_residual(prob, group_fn, &groups[gi], groups[gi].n, 5, blocks, FIT_LOSS_NONE, 0))
+            goto fit_fail;
+    }
+    if (nused < 10) {
+        model_error(NULL, 0, "verify: only %d usable reference points in %d image(s): the description's surfaces "
+                    "are not in view, or the images are saturated", nused, nimgs);
+        goto done;
+    }
+    fit_options_t fo = fit_defaults();
+    fo.threads = opt->threads;
+    fo.max_iterations = opt->max_iterations > 0 ? opt->max_iterations : 100;
+    fo.function_tolerance = 1e-8;
+    fo.parameter_tolerance = 1e-8;
+    fo.verbose = opt->verbose;
+    if (!fit_solve(prob, &fo, &out->summary)) {
+        model_error(NULL, 0, "verify: the fit failed: %s (%s)", out->summary.termination, out->summary.message);
+        goto done;
+    }
+    // parameters
+    out->params = calloc((size_t)npd, sizeof *out->params);
+    if (!out->params) goto done;
+    out->nparams = npd;
+    for (int k = 0; k < npd; k++) {
+        pdesc_t *d = &pd[k];
+        verify_param_t *o = &out->params[k];
+        snprintf(o->name, sizeof o->name, "%s", d->name);
+        o->value = d->x[d->i];
+        o->std = NAN;
+        o->prior_mean = d->prior_mean;
+        o->prior_std = d->prior_std;
+        o->lo = d->lo;
+        o->hi = d->hi;
+        o->fixed = d->fixed;
+        if (!d->fixed && isfinite(d->lo) && isfinite(d->hi) && d->hi > d->lo) {
+            double tol = 1e-3 * (d->hi - d->lo);
+            o->pinned = o->value <= d->lo + tol || o->value >= d->hi - tol;
+        } else if (!d->fixed && isfinite(d->lo) && o->value <= d->lo + 1e-9 * fmax(1, fabs(d->lo)) &&
+                   d->lo > -INFINITY && opt->use_priors) {
+            o->pinned = true;
+        }
+        if (o->pinned) out->npinned++;
+    }
+    if (!opt->no_covariance) {
+        // the covariance: (J^T J + priors)^-1 over the free parameters at the
+        // solution, J of the loss-scaled residuals (as Ceres's)
+        int nf = 0, *col = malloc((size_t)npd * sizeof *col);
+        for (int k = 0; k < npd; k++) col[k] = pd[k].fixed ? -1 : nf++;
+        double *JtJ = calloc((size_t)nf * nf + 1, sizeof *JtJ), *inv = calloc((size_t)nf * nf + 1, sizeof *inv);
+        double *ev = malloc(((size_t)nf + 1) * sizeof *ev);
+        double *jb = malloc((size_t)64 * (3 + nl + MODEL_BRDF_MAX_PARAMS) * sizeof *jb), rbuf[64];
+        bool cok = col && JtJ && inv && ev && jb && nf > 0;
+        for (int gi = 0; gi < ngroups && cok; gi++) {
+            res_group_t *g = &groups[gi];
+            const verify_point_t *p = &out->points[ptidx[g->k[0]]];
+            int mat = pt[g->k[0]].mat;
+            double *blocks[5] = { &out->kc[imgs[p->image].camera], out->s, &out->Pa[p->image],
+                                  &mp[mat * MODEL_BRDF_MAX_PARAMS], &out->rho };
+            const int size[5] = { 1, nl ? nl : 1, 1, rcs[mat].np, 1 };
+            double *jac[5];
+            int off = 0, gcol[5][MAX_LAMPS];
+            for (int b = 0; b < 5; b++) {
+                jac[b] = jb + (size_t)off * 64;
+                off += size[b];
+                for (int q = 0; q < size[b]; q++) {
+                    gcol[b][q] = -1;
+                    for (int k = 0; k < npd; k++)
+                        if (pd[k].x == blocks[b] && pd[k].i == q) gcol[b][q] = col[k];
+                }
+            }
+            if (!group_fn(g, (const double *const *)blocks, rbuf, jac)) {
+                cok = false;
+                break;
+            }
+            for (int t = 0; t < g->n; t++) {
+                double row[64];
+                int rc_[64], nr = 0;
+                for (int b = 0; b < 5; b++)
+                    for (int q = 0; q < size[b]; q++)
+                        if (gcol[b][q] >= 0 && nr < 64) {
+                            row[nr] = jac[b][(size_t)t * size[b] + q];
+                            rc_[nr++] = gcol[b][q];
+                        }
+                for (int u = 0; u < nr; u++)
+                    for (int v2 = 0; v2 < nr; v2++) JtJ[(size_t)rc_[u] * nf + rc_[v2]] += row[u] * row[v2];
+            }
+        }
+        for (int k = 0; k < npd && cok; k++)
+            if (col[k] >= 0 && pd[k].prior_std > 0)
+                JtJ[(size_t)col[k] * nf + col[k]] += 1 / (pd[k].prior_std * pd[k].prior_std);
+        for (int c = 0; c < nf && cok; c++) {
+            double *A2 = malloc((size_t)nf * nf * sizeof *A2);
+            if (!A2) {
+                cok = false;
+                break;
+            }
+            memcpy(A2, JtJ, (size_t)nf * nf * sizeof *A2);
+            for (int q = 0; q < nf; q++) ev[q] = q == c;
+            cok = model_solve_linear(A2, ev, nf);
+            free(A2);
+            for (int q = 0; q < nf && cok; q++) inv[(size_t)q * nf + c] = ev[q];
+        }
+        if (cok)
+            for (int k = 0; k < npd; k++)
+                if (col[k] >= 0) out->params[k].std = sqrt(fmax(inv[(size_t)col[k] * nf + col[k]], 0));
+        free(col);
+        free(JtJ);
+        free(inv);
+        free(ev);
+        free(jb);
+    }
+    for (int k = 0; k < nm; k++) memcpy(out->mats[k].p, &mp[k * MODEL_BRDF_MAX_PARAMS], sizeof out->mats[k].p);
+    ok = true;
+done:
+    if (ok) {
+        // predictions at every measured point (used and edge-measured)
+        for (int k = 0; k < nfit; k++) {
+            verify_point_t *p = &out->points[ptidx[k]];
+            double r;
+            res_item_t it = { &rcs[pt[k].mat], k };
+            const double *blocks[5] = { &out->kc[imgs[p->image].camera], out->s, &out->Pa[p->image],
+                                        &mp[pt[k].mat * MODEL_BRDF_MAX_PARAMS], &out->rho };
+            residual_fn(&it, blocks, &r, NULL);
+            p->model = (float)(pt[k].meas + r * pt[k].sigma);
+            if (p->status == VERIFY_PT_USED) {
+                p->z = (float)-r;   // (measured - model) / sigma, the sign of the difference images
+                p->flag = fabs(r) > opt->z_flag;
+            } else {
+                p->flag = true;   // an unexpected edge: z holds z_flag * its std ratio
+            }
+        }
+        for (int k = 0; k < npts; k++) out->nstatus[out->points[k].status]++;
+        out->npoints = npts;
+        stats_of(out->points, npts, -1, &out->all);
+        for (int m = 0; m < nimgs; m++) stats_of(out->points, npts, m, &out->per_image[m]);
+        // regions: 8-connected flags on each image's grid
+        int base = 0, cap = 0;
+        int *stack = malloc((size_t)(npts ? npts : 1) * sizeof *stack);
+        for (int m = 0; m < nimgs && stack; m++) {
+            const verify_view_t *v = views[m];
+            int n = v->gw * v->gh;
+            for (int g0 = 0; g0 < n; g0++) {
+                verify_point_t *p0 = &out->points[base + g0];
+                if (!p0->flag || p0->region >= 0) continue;
+                if (out->nregions == cap) {
+                    cap = cap ? 2 * cap : 64;
+                    verify_region_t *nr = realloc(out->regions, (size_t)cap * sizeof *nr);
+                    if (!nr) break;
+                    out->regions = nr;
+                }
+                int rid = out->nregions++;
+                verify_region_t *R = &out->regions[rid];
+                memset(R, 0, sizeof *R);
+                R->image = m;
+                R->bbox[0] = R->bbox[1] = INFINITY;
+                R->bbox[2] = R->bbox[3] = -INFINITY;
+                int fc[64], fn[64], nf = 0;
+                int top = 0;
+                stack[top++] = g0;
+                p0->region = rid;
+                const double cap2 = 25 * opt->z_flag * opt->z_flag;
+                while (top) {
+                    int g = stack[--top];
+                    verify_point_t *p = &out->points[base + g];
+                    R->npoints++;
+                    double z2 = fmin((double)p->z * p->z, cap2);
+                    R->excess_chi2 += fmax(z2 - opt->z_flag * opt->z_flag, 0);
+                    R->max_abs_z = fmax(R->max_abs_z, fabs(p->z));
+                    R->bbox[0] = fmin(R->bbox[0], p->q[0] - v->sp / 2.0);
+                    R->bbox[1] = fmin(R->bbox[1], p->q[1] - v->sp / 2.0);
+                    R->bbox[2] = fmax(R->bbox[2], p->q[0] + v->sp / 2.0);
+                    R->bbox[3] = fmax(R->bbox[3], p->q[1] + v->sp / 2.0);
+                    int f;
+                    for (f = 0; f < nf; f++)
+                        if (fc[f] == p->face) break;
+                    if (f == nf && nf < 64) {
+                        fc[nf] = p->face;
+                        fn[nf++] = 0;
+                    }
+                    if (f < 64) fn[f]++;
+                    int gi = g % v->gw, gj = g / v->gw;
+                    for (int dj = -1; dj <= 1; dj++)
+                        for (int di = -1; di <= 1; di++) {
+                            int ii = gi + di, jj = gj + dj;
+                            if (ii < 0 || jj < 0 || ii >= v->gw || jj >= v->gh) continue;
+                            verify_point_t *q2 = &out->points[base + jj * v->gw + ii];
+                            if (q2->flag && q2->region < 0) {
+                                q2->region = rid;
+                                stack[top++] = jj * v->gw + ii;
+                            }
+                        }
+                }
+                R->area_px = (double)R->npoints * v->sp * v->sp;
+                R->counts = R->npoints >= opt->min_region;
+                for (int t = 0; t < 4; t++) {
+                    int best = -1;
+                    for (int f = 0; f < nf; f++)
+                        if (fn[f] > 0 && (best < 0 || fn[f] > fn[best])) best = f;
+                    R->faces[t] = best >= 0 ? fc[best] : -1;
+                    R->face_points[t] = best >= 0 ? fn[best] : 0;
+                    if (best >= 0) fn[best] = 0;
+                }
+                if (R->counts) out->score += R->excess_chi2;
+            }
+            base += n;
+        }
+        free(stack);
+        out->correct = out->score <= opt->score_threshold;
+        out->time_fit_s = model_now_s() - t0;
+    }
+    fit_problem_free(prob);
+    free(prior);
+    free(pt);
+    free(ptidx);
+    free(cs);
+    free(wv);
+    free(bv);
+    free(lampv);
+    free(mp);
+    free(rcs);
+    free(items);
+    free(groups);
+    free(gidx);
+    free(pd);
+    return ok;
+fit_fail:
+    model_error(NULL, 0, "verify: setting up the fit failed: %s", fit_last_error());
+    ok = false;
+    goto done;
+}
+
+// ---------------------------------------------------------------------------
+// JSON
+
+static json_t *jreal(double x) { return isfinite(x) ? json_real(x) : json_null(); }
+
+static json_t *stats_json(const verify_stats_t *s)
+{
+    json_t *o = json_object();
+    json_object_set_new(o, "n_points", json_integer(s->npoints));
+    json_object_set_new(o, "max_abs_diff_dn", jreal(s->max_abs));
+    json_object_set_new(o, "mean_abs_diff_dn", jreal(s->mean_abs));
+    json_object_set_new(o, "std_abs_diff_dn", jreal(s->std_abs));
+    json_object_set_new(o, "robust_sigma_dn", jreal(s->robust_sigma));
+    json_object_set_new(o, "rms_z", jreal(s->rms_z));
+    json_object_set_new(o, "median_abs_z", jreal(s->median_abs_z));
+    return o;
+}
+
+json_t *verify_result_json(const verify_result_t *r, const model_scene_t *scene, const verify_image_t *imgs,
+                           const model_lamps_t *lamps, const verify_options_t *opt)
+{
+    (void)lamps;
+    json_t *o = json_object();
+    json_object_set_new(o, "verdict", json_string(r->correct ? "correct" : "incorrect"));
+    json_object_set_new(o, "description_correct", json_boolean(r->correct));
+    json_object_set_new(o, "score", jreal(r->score));
+    json_object_set_new(o, "score_threshold", jreal(opt->score_threshold));
+    json_object_set_new(o, "score_definition",
+                        json_string("sum over change regions of at least min_region flagged grid points of "
+                                    "sum(min(z^2, (5 z_flag)^2) - z_flag^2); z = (measured - model)/sigma per "
+                                    "reference point; an unexpected edge counts as z_flag x its window-std ratio"));
+    json_object_set_new(o, "n_pinned_parameters", json_integer(r->npinned));
+    json_t *warn = json_array();
+    for (int k = 0; k < r->nparams; k++)
+        if (r->params[k].pinned) {
+            char buf[256];
+            snprintf(buf, sizeof buf, "%s = %.6g is pinned at its bound [%.6g, %.6g]: its prior may be wrong "
+                     "(swapped or mislabelled materials, a changed lamp or camera)", r->params[k].name,
+                     r->params[k].value, r->params[k].lo, r->params[k].hi);
+            json_array_append_new(warn, json_string(buf));
+        }
+    json_object_set_new(o, "warnings", warn);
+    json_object_set_new(o, "residue", stats_json(&r->all));
+    json_object_set_new(o, "residue_units", json_string("DN of the images' pixel format; difference = measured - "
+                                                        "model at each reference point (window mean)"));
+    json_t *pi = json_array();
+    for (int m = 0; m < r->nimages; m++) {
+        json_t *s = stats_json(&r->per_image[m]);
+        json_object_set_new(s, "image", json_string(imgs[m].name));
+        json_object_set_new(s, "turntable_deg", json_real(imgs[m].angle_deg));
+        json_array_append_new(pi, s);
+    }
+    json_object_set_new(o, "residue_per_image", pi);
+    json_t *st = json_object();
+    for (int s = 0; s < VERIFY_PT_NSTATUS; s++)
+        json_object_set_new(st, verify_pt_status_name((verify_pt_status_t)s), json_integer(r->nstatus[s]));
+    json_object_set_new(o, "reference_points", st);
+    json_t *rg = json_array();
+    for (int k = 0; k < r->nregions; k++) {
+        const verify_region_t *R = &r->regions[k];
+        if (!R->counts) continue;
+        json_t *e = json_object();
+        json_object_set_new(e, "index", json_integer(k));
+        json_object_set_new(e, "image", json_string(imgs[R->image].name));
+        json_object_set_new(e, "image_index", json_integer(R->image));
+        json_object_set_new(e, "n_points", json_integer(R->npoints));
+        json_object_set_new(e, "area_px", json_real(R->area_px));
+        json_object_set_new(e, "excess_chi2", json_real(R->excess_chi2));
+        json_object_set_new(e, "max_abs_z", json_real(R->max_abs_z));
+        json_object_set_new(e, "bbox_px", json_pack("[f,f,f,f]", R->bbox[0], R->bbox[1], R->bbox[2], R->bbox[3]));
+        json_t *fa = json_array();
+        for (int t = 0; t < 4; t++) {
+            if (R->face_points[t] <= 0) continue;
+            int f = R->faces[t];
+            json_t *fe = json_object();
+            if (f < 0) json_object_set_new(fe, "face", json_string("background"));
+            else if (f < scene->nfaces) {
+                json_object_set_new(fe, "face", json_integer(scene->faces[f].number));
+                json_object_set_new(fe, "line", json_integer(scene->faces[f].line));
+                json_object_set_new(fe, "material",
+                                    json_string(scene->material_names[scene->faces[f].material]));
+            } else {
+                json_object_set_new(fe, "sphere", json_integer(f - scene->nfaces));
+            }
+            json_object_set_new(fe, "n_points", json_integer(R->face_points[t]));
+            json_array_append_new(fa, fe);
+        }
+        json_object_set_new(e, "faces", fa);
+        json_array_append_new(rg, e);
+    }
+    json_object_set_new(o, "change_regions", rg);
+    json_t *ps = json_array();
+    for (int k = 0; k < r->nparams; k++) {
+        const verify_param_t *p = &r->params[k];
+        json_t *e = json_object();
+        json_object_set_new(e, "name", json_string(p->name));
+        json_object_set_new(e, "value", jreal(p->value));
+        json_object_set_new(e, "std", jreal(p->std));
+        json_object_set_new(e, "prior_mean", jreal(p->prior_mean));
+        json_object_set_new(e, "prior_std", p->prior_std > 0 ? json_real(p->prior_std) : json_null());
+        json_object_set_new(e, "lo", jreal(p->lo));
+        json_object_set_new(e, "hi", jreal(p->hi));
+        json_object_set_new(e, "fixed", json_boolean(p->fixed));
+        json_object_set_new(e, "pinned", json_boolean(p->pinned));
+        json_array_append_new(ps, e);
+    }
+    json_object_set_new(o, "parameters", ps);
+    json_object_set_new(o, "parameter_conventions",
+                        json_string("kc[camera]: the camera's sensitivity relative to the white calibration; "
+                                    "lamp[name]: the lamp's intensity relative to it; Pa[image]: offset left after "
+                                    "the offset map, DN (the dark level itself without one); rho: weight of the "
+                                    "one-bounce diffuse interreflection (1 = physical); material.parameter: see "
+                                    "the priors' conventions"));
+    json_t *fs = json_object();
+    json_object_set_new(fs, "iterations", json_integer(r->summary.iterations));
+    json_object_set_new(fs, "initial_cost", jreal(r->summary.initial_cost));
+    json_object_set_new(fs, "final_cost", jreal(r->summary.final_cost));
+    json_object_set_new(fs, "termination", json_string(r->summary.termination));
+    json_object_set_new(fs, "n_residuals", json_integer(r->summary.nresiduals));
+    json_object_set_new(fs, "n_free_parameters", json_integer(r->summary.nfree));
+    json_object_set_new(fs, "time_s", jreal(r->time_fit_s));
+    json_object_set_new(o, "fit", fs);
+    json_t *op = json_object();
+    json_object_set_new(op, "spacing_px", json_integer(opt->spacing_px));
+    json_object_set_new(op, "window_px", json_integer(opt->window_px));
+    json_object_set_new(op, "edge_margin_px", json_real(opt->edge_margin_px));
+    json_object_set_new(op, "boundary_margin_px", json_real(opt->boundary_margin_px));
+    json_object_set_new(op, "edge_k", json_real(opt->edge_k));
+    json_object_set_new(op, "edge_rel", json_real(opt->edge_rel));
+    json_object_set_new(op, "interreflection_samples", json_integer(opt->ir_samples));
+    json_object_set_new(op, "priors", json_boolean(opt->use_priors));
+    json_object_set_new(op, "gain_maps", json_boolean(opt->use_flat));
+    json_object_set_new(op, "model_rel", json_real(opt->model_rel));
+    json_object_set_new(op, "lamp_sigma", json_real(opt->lamp_sigma));
+    json_object_set_new(op, "camera_sigma", json_real(opt->camera_sigma));
+    json_object_set_new(op, "robust_scale", json_real(opt->robust_scale));
+    json_object_set_new(op, "z_flag", json_real(opt->z_flag));
+    json_object_set_new(op, "min_region", json_integer(opt->min_region));
+    json_object_set_new(o, "options", op);
+    return o;
+}
+
+// ---------------------------------------------------------------------------
+// Self check of the residual's Jacobian (tests)
+
+bool verify_check_jacobian(double *max_abs_err)
+{
+    model_rng_t rng = model_rng(77, 1);
+    bool ok = true;
+    if (max_abs_err) *max_abs_err = 0;
+    for (int m = 0; m < MODEL_BRDF_COUNT; m++) {
+        const int nl = 3;
+        pt_t p = { .meas = 900, .sigma = 3, .Eg = 6000 * 1.02, .mat = 0, .nl = nl, .first = 0 };
+        model_cosines_t cs[3];
+        double w[3], b[3];
+        int lamp[3] = { 0, 1, 2 };
+        for (int i = 0; i < nl; i++) {
+            model_vec3_t n = v3(0, 0, 1);
+            double a = 2 * M_PI * model_rng_uniform(&rng), t = 0.1 + 1.2 * model_rng_uniform(&rng);
+            model_vec3_t l = v3(sin(t) * cos(a), sin(t) * sin(a), cos(t)), v = v3_unit(v3(0.3, -0.2, 0.9));
+            cs[i] = model_cosines(n, l, v);
+            w[i] = 3e5 * 1e-6 * (0.5 + model_rng_uniform(&rng));
+            b[i] = 0.02 * model_rng_uniform(&rng);
+        }
+        res_ctx_t rc = { &p, cs, w, b, lamp, (model_brdf_t)m, model_brdf_nparams((model_brdf_t)m), nl };
+        int k[1] = { 0 };
+        res_group_t g = { &rc, k, 1, 9 };
+        double kc = 0.97, s[3] = { 1.02, 0.95, 1.1 }, Pa = 3, rho = 0.8, mp[MODEL_BRDF_MAX_PARAMS];
+        for (int j = 0; j < rc.np; j++) {
+            double lo, hi;
+            model_brdf_param_range((model_brdf_t)m, j, &lo, &hi);
+            double dflt = model_brdf_param_default((model_brdf_t)m, j);
+            mp[j] = isfinite(dflt) ? dflt : 0.3;
+            if (mp[j] <= lo) mp[j] = lo + 0.1;
+            if (!strcmp(model_brdf_param_name((model_brdf_t)m, j), "ns")) mp[j] = 12;
+            if (!strcmp(model_brdf_param_name((model_brdf_t)m, j), "alpha") ||
+                !strcmp(model_brdf_param_name((model_brdf_t)m, j), "m"))
+                mp[j] = 0.3;
+            if (!strcmp(model_brdf_param_name((model_brdf_t)m, j), "F0")) mp[j] = 0.05;
+        }
+        double *blocks[5] = { &kc, s, &Pa, mp, &rho };
+        int sizes[5] = { 1, nl, 1, rc.np, 1 };
+        double err = 0;
+        ok = fit_check_jacobian(group_fn, &g, 1, 5, sizes, blocks, 1e-6, 1e-6, 1e-4, &err) && ok;
+        if (max_abs_err && err > *max_abs_err) *max_abs_err = err;
+    }
+    return ok;
+}

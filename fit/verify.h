@@ -1,0 +1,239 @@
+// fit/verify.h — the verification fitter (thesis ch. 5-6): does a geometric
+// scene description match the images?
+//
+// Model of a reference point k (the mean of a w x w window) in image m, taken
+// by camera c with exposure E_m = t_m 10^(G_m/20) (us), lamps L_m on:
+//   P_k = Pa_m + E_m kc_c g_k [ sum_{i in L_m} s_i A_i V_ik R(p_mat; l_ik, v_k, n_k) / d_ik^2
+//                               + rho sum_{i in L_m} s_i A_i B_ik ]
+// A_i = the lamp's kc*I per us at 0 dB (the reference white's calibration,
+// DN/us per (1/sr)/mm^2), s_i its relative intensity (prior 1 +- lamp_sigma),
+// kc_c the camera's relative sensitivity (prior 1 +- camera_sigma), g_k the
+// flat field (gain calibration) and Pa_m the offset left after the offset map
+// (prior 0 +- pa_sigma_dn; free without an offset map). B_ik is one diffuse
+// bounce of lamp i's light (ir_samples cosine-weighted rays from the point,
+// each hit a virtual point source), made once with the priors' means; rho its
+// weight (prior 1 +- 0.5; 1 is physical). Material parameters: a Gaussian
+// prior (mean, std) and the bounds lo..hi of the priors file; parameters the
+// file holds (std 0) are fixed. Without priors (the thesis's fit): physical
+// ranges only, lamps fixed at s = 1, kc free.
+//
+// Residual (P_k - P_meas,k) / sigma_k (reported as z_k = (P_meas,k - P_k) /
+// sigma_k, the sign of the difference images) with sigma_k^2 = the window mean's
+// sensor noise (from the gain calibration's K and read noise; else from the
+// windows' own spread) + (model_rel * signal)^2. Fitted with a robust (Cauchy)
+// loss so that a region the description gets wrong does not bend the
+// parameters, then judged: points with |z| > z_flag, and windows that show an
+// edge the description does not predict, are flags; 8-connected flags on an
+// image's grid are regions; the score is the sum over regions of at least
+// min_region points of their flags' excess chi^2, sum (z^2 - z_flag^2), with an
+// unexpected edge counting as z = z_flag * its std ratio. Verdict: the
+// description is incorrect when score > score_threshold.
+#pragma once
+
+#include <jansson.h>
+#include <stdbool.h>
+#include <stdint.h>
+
+#include "fit/lsq.h"
+#include "model/model.h"
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+// ---------------------------------------------------------------------------
+// Priors ("refl priors 1", README)
+
+typedef struct {
+    char         name[64];
+    model_brdf_t model;
+    int          np;
+    double       mean[MODEL_BRDF_MAX_PARAMS], std[MODEL_BRDF_MAX_PARAMS];
+    double       lo[MODEL_BRDF_MAX_PARAMS], hi[MODEL_BRDF_MAX_PARAMS];
+    bool         held[MODEL_BRDF_MAX_PARAMS];   // std 0: fixed
+    char         source[512];
+    char         sha256[65];
+} verify_prior_t;
+
+typedef struct {
+    int             n;
+    verify_prior_t *m;
+} verify_priors_t;
+
+// Append the materials of a priors file (a material already present is an
+// error naming both files). false + "file: message".
+bool verify_priors_load(verify_priors_t *pr, const char *path);
+// The same from text (len bytes, not NUL-terminated; name for messages).
+bool verify_priors_parse(verify_priors_t *pr, const char *text, size_t len, const char *name);
+// A prior from known values (tests, studies): std = rel * |mean| (at least
+// abs_min), bounds mean +- k std within the physical range.
+bool verify_priors_add(verify_priors_t *pr, const model_material_t *mat, double rel, double abs_min, double k);
+const verify_prior_t *verify_priors_find(const verify_priors_t *pr, const char *name);
+void verify_priors_free(verify_priors_t *pr);
+
+// ---------------------------------------------------------------------------
+// Inputs
+
+typedef struct {
+    char            name[64];
+    model_camera_t *cam;            // geometry, rt_cam_world = rig frame (not owned)
+    const float    *offset_dn;      // gain calibration's dark offset map (W*H) or NULL
+    const float    *flat;           // its flat field g (mean 1) or NULL
+    double          K_dn_per_e;     // system gain at 0 dB (0: unknown)
+    double          read_noise_e;
+    double          saturation_dn;  // window maxima at or above are not used
+    double          nonlin_a_per_dn;// response compression at 0 dB: measured S_m = S (1 - a S), S the linear
+                                    // signal above the offset (DN); inverted before the fit (0: linear)
+} verify_camera_t;
+
+typedef struct {
+    char         name[256];
+    const float *P;                 // W*H grey values, DN (as the camera delivered them)
+    int          W, H;
+    int          camera;            // index into the cameras
+    double       angle_deg;         // turntable angle (the scene is rotated by it about z)
+    uint32_t     lamps_on;          // bit i: lamp i on
+    double       exposure_us, gain_db;
+} verify_image_t;
+
+typedef struct {
+    int    spacing_px;          // grid step of reference points (default 8)
+    int    window_px;           // window side, odd (default 5)
+    double edge_margin_px;      // skip windows this close to predicted edges (default 2)
+    double boundary_margin_px;  // and face/shadow changes this far beyond the window (default 4)
+    double edge_k;              // window std above sqrt(edge_k^2 var_noise + (edge_rel S)^2) says edge (3)
+    double edge_rel;            // (0.05)
+    int    ir_samples;          // interreflection rays per point (default 16; 0: none)
+    bool   use_priors;          // bounded by the priors (default true); false: the thesis's fit
+    bool   use_flat;            // use the cameras' flat fields and offset maps (default true)
+    double model_rel;           // relative model tolerance in sigma (default 0.04)
+    double lamp_sigma;          // prior std of s_i (default 0.1)
+    double camera_sigma;        // prior std of kc_c (default 0.1)
+    double pa_sigma_dn;         // prior std of Pa with an offset map (default 5; ambient light)
+    double robust_scale;        // Cauchy loss scale in z (default 3; 0: plain least squares)
+    double z_flag;              // (default 4)
+    int    min_region;          // (default 3)
+    double score_threshold;     // (default 400)
+    bool   fix_lamps, fix_cameras, fix_pa, fix_rho, fix_materials;   // masks (thesis 5.4)
+    int    threads;             // 0: REFL_THREADS or all
+    int    max_iterations;      // of the fit (default 100)
+    bool   no_covariance;       // skip the parameters' standard deviations (faster; studies)
+    bool   verbose;
+} verify_options_t;
+
+verify_options_t verify_defaults(void);
+
+// The geometry of one image under a description: the reference-point grid
+// with pixel_info, lamp samples, skip reasons and the interreflection basis.
+// Made once per (description, camera, angle); images of that view reuse it.
+typedef struct verify_view verify_view_t;
+
+// scene: the description at turntable angle 0 (rotated here); mats: the
+// materials for the interreflection basis (scene->nmaterials; the priors'
+// means); lamps: positions (rig frame). The basis is per unit kc*I.
+verify_view_t *verify_view_new(const model_scene_t *scene, const verify_camera_t *cam, double angle_deg,
+                               const model_lamps_t *lamps, const model_material_t *const *mats,
+                               const verify_options_t *opt);
+void verify_view_free(verify_view_t *v);
+int  verify_view_npoints(const verify_view_t *v);   // geometrically usable grid points
+double verify_view_time_s(const verify_view_t *v);
+
+// Status of a grid point.
+typedef enum {
+    VERIFY_PT_USED = 0,
+    VERIFY_PT_BACKGROUND,      // the ray misses the description
+    VERIFY_PT_NEAR_EDGE,       // within edge_margin_px of a predicted edge (model_edges_predict)
+    VERIFY_PT_BOUNDARY,        // the window's corners see another face or another shadow state
+    VERIFY_PT_SATURATED,
+    VERIFY_PT_EDGE_MEASURED,   // the window's spread says edge where none is predicted (a flag)
+    VERIFY_PT_NSTATUS
+} verify_pt_status_t;
+
+const char *verify_pt_status_name(verify_pt_status_t s);
+
+typedef struct {
+    int     image;
+    float   q[2];
+    int32_t face;          // face of the description (-1 background)
+    uint8_t status;        // verify_pt_status_t
+    bool    flag;
+    int     region;        // index into regions or -1
+    float   meas, model;   // DN (meas after the offset map)
+    float   sigma, z;      // z = (meas - model) / sigma
+    // region: index into the result's regions (those with counts false too;
+    // the JSON's change_regions give each region's index)
+} verify_point_t;
+
+typedef struct {
+    int    image;
+    int    npoints;        // flags in it
+    double area_px;        // npoints * spacing^2
+    double excess_chi2;    // sum (z^2 - z_flag^2) over its flags
+    double max_abs_z;
+    double bbox[4];        // x0 y0 x1 y1, px
+    int    faces[4], face_points[4];   // the faces it falls on, most points first (-1 background)
+    bool   counts;         // npoints >= min_region
+} verify_region_t;
+
+typedef struct {
+    char   name[96];       // "kc[camera]", "lamp[east]", "Pa[image]", "rho", "plywood.kd"
+    double value, std;     // std NAN when the covariance is not available
+    double prior_mean, prior_std, lo, hi;   // prior_std 0: none; lo/hi the bounds used
+    bool   fixed, pinned;  // pinned: at a bound (within 1e-3 of its range)
+} verify_param_t;
+
+typedef struct {
+    double max_abs, mean_abs, std_abs, robust_sigma;   // |difference|, DN (robust: 1.4826 MAD of the difference)
+    double rms_z, median_abs_z;
+    int    npoints;
+} verify_stats_t;
+
+typedef struct {
+    int              npoints;
+    verify_point_t  *points;
+    int              nstatus[VERIFY_PT_NSTATUS];
+    verify_stats_t   all;
+    verify_stats_t  *per_image;     // nimages
+    int              nimages;
+    int              nregions;
+    verify_region_t *regions;
+    int              nparams;
+    verify_param_t  *params;
+    int              npinned;
+    double           score;
+    bool             correct;
+    fit_summary_t    summary;
+    double           time_fit_s;
+    // the fitted values, for synthetic images
+    double          *kc;            // ncameras
+    double          *s;             // nlamps
+    double          *Pa;            // nimages
+    double           rho;
+    model_material_t *mats;         // scene->nmaterials, fitted
+} verify_result_t;
+
+// Fit and judge. views[m] is image m's view; scene: the description (for
+// material names; its materials must all have priors: pr). A: kc*I per us.
+bool verify_run(const model_scene_t *scene, const verify_priors_t *pr, const verify_camera_t *cams, int ncams,
+                const model_lamps_t *lamps, const double *A, const verify_image_t *imgs, int nimgs,
+                verify_view_t *const *views, const verify_options_t *opt, verify_result_t *out);
+void verify_result_free(verify_result_t *r);
+
+// The result as JSON (units and conventions named).
+json_t *verify_result_json(const verify_result_t *r, const model_scene_t *scene, const verify_image_t *imgs,
+                           const model_lamps_t *lamps, const verify_options_t *opt);
+
+// Scene material k -> its prior (NULL + message naming the material when the
+// priors lack one).
+bool verify_match_priors(const model_scene_t *scene, const verify_priors_t *pr, const verify_prior_t **out);
+
+// Tests: the fit's residual Jacobian (with the robust transform, every
+// reflection model) against central differences.
+bool verify_check_jacobian(double *max_abs_err);
+
+// `refl verify` (fit/cmd_verify.c).
+int verify_cmd(int argc, char **argv);
+
+#ifdef __cplusplus
+}
+#endif

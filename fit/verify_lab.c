@@ -1,0 +1,190 @@
+// fit/verify_lab.c — verification experiments on the virtual rig: images of
+// the workpiece at several turntable angles with drifted lamps and camera,
+// fresh sensor noise per case, and the calibrations a lab would have (the
+// truth's camera model, lamp positions and kc*I, an offset map and a flat
+// field measured noise-free from the rig's own dark and flat-field frames,
+// K and read noise). See fit/verify_lab.h.
+#define _GNU_SOURCE
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "fit/verify_lab.h"
+#include "rig/rig.h"
+
+struct verify_lab {
+    rig_virtual_t *v;
+    int W, H, nang, nl;
+    double *angles;
+    double exposure_us, gain_db, kc_per_us;
+    float **L;                 // nang * nl radiance planes
+    float *offset, *flat;
+    model_sensor_t sensor;
+    verify_camera_t cam;
+    model_lamps_t *lamps;      // a copy (truth positions, intensities)
+    double *A;                 // kc_per_us * I
+    model_materials_t *mats;   // the truth's materials
+    char truth[4096];
+};
+
+static int fail_rig(int r, const char *what)
+{
+    model_error(NULL, 0, "virtual rig: %s: %s", what, rig_strerror(r));
+    return r;
+}
+
+void verify_lab_free(verify_lab_t *L)
+{
+    if (!L) return;
+    if (L->L)
+        for (int k = 0; k < L->nang * L->nl; k++) free(L->L[k]);
+    free(L->L);
+    free(L->angles);
+    free(L->offset);
+    free(L->flat);
+    free(L->A);
+    model_lamps_free(L->lamps);
+    model_materials_free(L->mats);
+    rig_virtual_close(L->v);
+    free(L);
+}
+
+verify_lab_t *verify_lab_open(const char *truth_path, const char *sample, const double *angles, int nang,
+                              double exposure_us, double gain_db, bool verbose)
+{
+    verify_lab_t *L = calloc(1, sizeof *L);
+    if (!L) return NULL;
+    snprintf(L->truth, sizeof L->truth, "%s", truth_path);
+    rig_virtual_options_t o = rig_virtual_defaults();
+    o.serve = RIG_VIRTUAL_SERVE_INPROCESS;
+    o.time_scale = 0.001;
+    int r = rig_virtual_open(&L->v, truth_path, &o);
+    if (r) {
+        fail_rig(r, truth_path);
+        free(L);
+        return NULL;
+    }
+    model_camera_t *cam = rig_virtual_camera_model(L->v);
+    L->W = model_camera_width(cam);
+    L->H = model_camera_height(cam);
+    L->nang = nang;
+    L->exposure_us = exposure_us;
+    L->gain_db = gain_db;
+    L->kc_per_us = rig_virtual_kc_per_us(L->v);
+    L->sensor = rig_virtual_sensor_params(L->v);
+    const model_lamps_t *tl = rig_virtual_lamps_truth(L->v);
+    L->nl = tl->n;
+    size_t npx = (size_t)L->W * L->H;
+    L->angles = malloc((size_t)nang * sizeof *L->angles);
+    L->L = calloc((size_t)nang * L->nl, sizeof *L->L);
+    L->offset = malloc(npx * sizeof(float));
+    L->flat = malloc(npx * sizeof(float));
+    L->A = malloc((size_t)L->nl * sizeof *L->A);
+    model_ini_t *ini = model_ini_load(truth_path);
+    L->lamps = ini ? model_lamps_from_ini(ini) : NULL;
+    L->mats = ini ? model_materials_from_ini(ini) : NULL;
+    model_ini_free(ini);
+    if (!L->angles || !L->L || !L->offset || !L->flat || !L->A || !L->lamps || !L->mats) goto fail;
+    for (int i = 0; i < L->nl; i++) L->A[i] = L->kc_per_us * L->lamps->lamps[i].intensity;
+    memcpy(L->angles, angles, (size_t)nang * sizeof *angles);
+    // the flat field and the offset map, as a gain calibration measures them (noise-free here)
+    float *tmp = malloc(npx * sizeof(float));
+    if (!tmp) goto fail;
+    const double flat_us = 20000;
+    if ((r = rig_virtual_set_sample(L->v, "flat_field")) ||
+        (r = rig_virtual_expected(L->v, 0, 1, flat_us, 0, "Mono12", L->W, L->H, tmp)) ||
+        (r = rig_virtual_expected(L->v, 0, 0, flat_us, 0, "Mono12", L->W, L->H, L->flat))) {
+        fail_rig(r, "flat field");
+        free(tmp);
+        goto fail;
+    }
+    double sum = 0;
+    for (size_t i = 0; i < npx; i++) {
+        L->flat[i] = tmp[i] - L->flat[i];
+        sum += L->flat[i];
+    }
+    for (size_t i = 0; i < npx; i++) L->flat[i] = (float)(L->flat[i] / (sum / npx));
+    free(tmp);
+    // The flat field has mean 1; the sensor's gain pattern (PRNU x vignetting)
+    // does not: its mean goes into kc*I, as a white calibration through this
+    // flat field measures it (linearised as verify does).
+    double radiance = NAN;
+    model_ini_t *ti = model_ini_load(truth_path);
+    const model_ini_entry_t *re = ti ? model_ini_get(ti, "sample flat_field", "radiance") : NULL;
+    if (!re || !model_parse_double(re->value, &radiance) || !(radiance > 0)) {
+        model_error(truth_path, 0, "the verify lab needs [sample flat_field] radiance");
+        model_ini_free(ti);
+        goto fail;
+    }
+    model_ini_free(ti);
+    double a_nl = L->sensor.nonlinearity_pct / 100 / (L->sensor.system_gain_dn_per_e * L->sensor.full_well_e);
+    double Sm = sum / npx, S = a_nl > 0 ? (1 - sqrt(1 - 4 * a_nl * Sm)) / (2 * a_nl) : Sm;
+    double gmean = S / (L->kc_per_us * flat_us * radiance);
+    for (int i = 0; i < L->nl; i++) L->A[i] *= gmean;
+    if ((r = rig_virtual_set_sample(L->v, sample))) {
+        fail_rig(r, sample);
+        goto fail;
+    }
+    if ((r = rig_virtual_expected(L->v, angles[0], 0, exposure_us, gain_db, "Mono12", L->W, L->H, L->offset))) {
+        fail_rig(r, "dark frame");
+        goto fail;
+    }
+    for (int a = 0; a < nang; a++)
+        for (int i = 0; i < L->nl; i++) {
+            if (verbose) fprintf(stderr, "\rverify lab: rendering %s at %g deg, lamp %s (%d/%d)   ", sample, angles[a],
+                                 L->lamps->lamps[i].name, a * L->nl + i + 1, nang * L->nl);
+            float *P = malloc(npx * sizeof(float));
+            if (!P) goto fail;
+            L->L[a * L->nl + i] = P;
+            if ((r = rig_virtual_radiance(L->v, angles[a], i, P))) {
+                fail_rig(r, "rendering");
+                goto fail;
+            }
+        }
+    if (verbose) fprintf(stderr, "\n");
+    snprintf(L->cam.name, sizeof L->cam.name, "virtual");
+    L->cam.cam = cam;
+    L->cam.offset_dn = L->offset;
+    L->cam.flat = L->flat;
+    L->cam.K_dn_per_e = L->sensor.system_gain_dn_per_e;
+    L->cam.read_noise_e = L->sensor.read_noise_e;
+    L->cam.saturation_dn = (1 << L->sensor.bits) - 1;
+    L->cam.nonlin_a_per_dn = L->sensor.nonlinearity_pct / 100 / (L->sensor.system_gain_dn_per_e * L->sensor.full_well_e);
+    return L;
+fail:
+    verify_lab_free(L);
+    return NULL;
+}
+
+int                    verify_lab_nlamps(const verify_lab_t *L) { return L->nl; }
+const verify_camera_t *verify_lab_camera(const verify_lab_t *L) { return &L->cam; }
+const model_lamps_t   *verify_lab_lamps(const verify_lab_t *L) { return L->lamps; }
+const double          *verify_lab_A(const verify_lab_t *L) { return L->A; }
+const model_materials_t *verify_lab_materials(const verify_lab_t *L) { return L->mats; }
+int verify_lab_width(const verify_lab_t *L) { return L->W; }
+int verify_lab_height(const verify_lab_t *L) { return L->H; }
+
+bool verify_lab_image(verify_lab_t *L, int angle_index, uint32_t lamps_on, const double *lamp_scale,
+                      double kc_scale, uint64_t seed, float *out)
+{
+    if (angle_index < 0 || angle_index >= L->nang) {
+        model_error(NULL, 0, "verify lab: angle index %d out of range", angle_index);
+        return false;
+    }
+    size_t npx = (size_t)L->W * L->H;
+    double kc = L->kc_per_us * L->exposure_us * pow(10, L->gain_db / 20) * kc_scale;
+    for (size_t p = 0; p < npx; p++) out[p] = (float)L->sensor.dark_offset_dn;
+    for (int i = 0; i < L->nl; i++) {
+        if (!((lamps_on >> i) & 1)) continue;
+        const float *P = L->L[angle_index * L->nl + i];
+        float f = (float)(kc * (lamp_scale ? lamp_scale[i] : 1));
+        for (size_t p = 0; p < npx; p++) out[p] += f * P[p];
+    }
+    int r = rig_virtual_sensor_apply(L->v, L->exposure_us, L->gain_db, seed, out);
+    if (r) {
+        fail_rig(r, "sensor");
+        return false;
+    }
+    return true;
+}

@@ -1,0 +1,42 @@
+// fit/verify_lab.h — verification experiments on the virtual rig (in
+// process): the truth file's sample rendered at a few turntable angles, one
+// radiance plane per lamp (the rig's full physics: interreflections, finite
+// lamps, texture), then per case: lamp intensities and camera sensitivity
+// drifted, the rig's sensor stage with a fresh noise seed. Its calibrations
+// are what a lab would have: the truth's camera model, lamp positions and
+// kc*I per lamp, an offset map and flat field from the rig's own dark and
+// flat-field frames (noise-free), K and read noise of its sensor.
+#pragma once
+
+#include <stdbool.h>
+#include <stdint.h>
+
+#include "fit/verify.h"
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+typedef struct verify_lab verify_lab_t;
+
+verify_lab_t *verify_lab_open(const char *truth_path, const char *sample, const double *angles, int nang,
+                              double exposure_us, double gain_db, bool verbose);
+void verify_lab_free(verify_lab_t *L);
+
+int                      verify_lab_nlamps(const verify_lab_t *L);
+int                      verify_lab_width(const verify_lab_t *L);
+int                      verify_lab_height(const verify_lab_t *L);
+const verify_camera_t   *verify_lab_camera(const verify_lab_t *L);
+const model_lamps_t     *verify_lab_lamps(const verify_lab_t *L);   // truth positions
+const double            *verify_lab_A(const verify_lab_t *L);       // kc*I per us per lamp (truth)
+const model_materials_t *verify_lab_materials(const verify_lab_t *L);
+
+// A frame (W*H DN, 12-bit values) at angles[angle_index] with lamps_on,
+// each lamp's intensity times lamp_scale[i] (NULL: 1), the camera's
+// sensitivity times kc_scale, sensor noise from seed.
+bool verify_lab_image(verify_lab_t *L, int angle_index, uint32_t lamps_on, const double *lamp_scale,
+                      double kc_scale, uint64_t seed, float *out);
+
+#ifdef __cplusplus
+}
+#endif
