@@ -632,3 +632,52 @@ TEST(verify_model_matches_rig_at_truth)
     bias_bins(0, &plate, &steel);
     CHECK_MSG(steel > 0.2, "without interreflection the steel is only %.1f %% off", 100 * steel);
 }
+
+// Two cameras (the same geometry here, two sensors): one kc each. The
+// second camera's images are 8 % more sensitive; the fit finds the ratio.
+TEST(verify_two_cameras)
+{
+    verify_lab_t *L = get_lab();
+    int W = verify_lab_width(L), H = verify_lab_height(L);
+    images_t I;
+    images_make(&I, NULL, 1, 5);
+    // views 1 and 3 again, from "camera B" with kc x 1.08
+    float *b1 = malloc((size_t)W * H * sizeof(float)), *b3 = malloc((size_t)W * H * sizeof(float));
+    CHECK(verify_lab_image(L, 1, 0xf, NULL, 1.08, 501, b1));
+    CHECK(verify_lab_image(L, 3, 0xf, NULL, 1.08, 503, b3));
+    verify_image_t im[NANG];
+    memcpy(im, I.im, sizeof im);
+    im[1].P = b1;
+    im[1].camera = 1;
+    im[3].P = b3;
+    im[3].camera = 1;
+    verify_camera_t cams[2] = { *verify_lab_camera(L), *verify_lab_camera(L) };
+    snprintf(cams[1].name, sizeof cams[1].name, "B");
+    verify_priors_t pr = { 0 };
+    truth_priors(&pr);
+    verify_options_t opt = verify_defaults();
+    model_stiffener_t d0 = model_stiffener_default();
+    model_scene_t *sc = model_stiffener_scene(&d0, "t");
+    const model_materials_t *mm = verify_lab_materials(L);
+    const model_material_t *mats[2] = { model_materials_find(mm, "plywood"), model_materials_find(mm, "painted_steel") };
+    verify_view_t *views[NANG];
+    for (int a = 0; a < NANG; a++)
+        views[a] = verify_view_new(sc, &cams[im[a].camera], angles[a], verify_lab_lamps(L), mats, &opt);
+    verify_result_t r;
+    if (verify_run(sc, &pr, cams, 2, verify_lab_lamps(L), verify_lab_A(L), im, NANG, views, &opt, &r)) {
+        CHECK(r.correct);
+        CHECK_REL(r.kc[1] / r.kc[0], 1.08, 0.01);
+        bool named = false;
+        for (int k = 0; k < r.nparams; k++) named |= !strcmp(r.params[k].name, "kc[B]");
+        CHECK(named);
+        verify_result_free(&r);
+    } else {
+        CHECK_MSG(false, "verify_run: %s", model_last_error());
+    }
+    for (int a = 0; a < NANG; a++) verify_view_free(views[a]);
+    model_scene_free(sc);
+    verify_priors_free(&pr);
+    free(b1);
+    free(b3);
+    images_free(&I);
+}
