@@ -22,7 +22,6 @@ Writes into DIR: views.png (actual | synthetic | actual - synthetic per image),
 zmap.png (z at the reference points), residue.png (histogram of z) and
 index.html (verdict, tables, figures, provenance).
 """
-import csv
 import html
 import json
 import math
@@ -36,6 +35,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 from matplotlib.patches import Rectangle  # noqa: E402
 from PIL import Image  # noqa: E402
+from report_common import Bad, load_json, read_table, run_report  # noqa: E402
 
 PROG = "verify_report.py"
 STATUS_MEANING = {
@@ -53,14 +53,6 @@ DIFF_CLIP = 5.0
 BOX_COLOUR = "#00b000"
 NAN_SYNTH = "#3b7dd8"
 NAN_DIFF = "#b0b0b0"
-
-
-class Bad(Exception):
-    """An input problem: path and message, printed as 'verify_report.py: path: message'."""
-
-    def __init__(self, path, msg):
-        super().__init__(msg)
-        self.path, self.msg = path, msg
 
 
 # ---------------------------------------------------------------------------
@@ -130,16 +122,8 @@ STAT_KEYS = [("n_points", "int"), ("max_abs_diff_dn", "num|null"), ("mean_abs_di
 
 def load_verify(d):
     jpath = os.path.join(d, "verify.json")
-    try:
-        with open(jpath, encoding="utf-8") as f:
-            raw = json.load(f)
-    except OSError as e:
-        raise Bad(jpath, f"cannot read: {e.strerror or e}")
-    except (json.JSONDecodeError, UnicodeDecodeError) as e:
-        raise Bad(jpath, f"not valid JSON: {e}")
+    raw = load_json(jpath)
     c = Checker(jpath)
-    if not isinstance(raw, dict):
-        c.bad("", "expected a JSON object at the top")
     v = {"raw": raw}
     v["verdict"] = c.get(raw, "verdict", "", "str")
     if v["verdict"] not in ("correct", "incorrect"):
@@ -239,56 +223,34 @@ def load_verify(d):
 def load_points(d, nimages):
     ppath = os.path.join(d, "points.csv")
     cols = {k: [] for k in POINT_COLUMNS}
-    try:
-        with open(ppath, newline="", encoding="utf-8") as f:
-            rd = csv.reader(f)
-            header = next(rd, None)
-            if header is None:
-                raise Bad(ppath, "empty file (expected the header " + ",".join(POINT_COLUMNS) + ")")
-            header = [h.strip() for h in header]
-            missing = [k for k in POINT_COLUMNS if k not in header]
-            if missing:
-                raise Bad(ppath, "header lacks " + ", ".join(missing) + " (expected " + ",".join(POINT_COLUMNS) + ")")
-            pos = {k: header.index(k) for k in POINT_COLUMNS}
-            for row in rd:
-                line = rd.line_num
-                if not row or all(not x.strip() for x in row):
-                    continue
-                if len(row) != len(header):
-                    raise Bad(ppath, f"line {line}: {len(row)} fields, the header has {len(header)}")
-                val = {}
-                for k in POINT_COLUMNS:
-                    if k == "status":
-                        continue
-                    t = row[pos[k]].strip()
-                    if not t and k in ("measured_dn", "model_dn", "sigma_dn", "z"):
-                        val[k] = math.nan   # refl leaves them empty at points without a measurement
-                        continue
-                    try:
-                        val[k] = int(t) if k in ("image", "face", "flag", "region") else float(t)
-                    except ValueError:
-                        kind = "an integer" if k in ("image", "face", "flag", "region") else "a number"
-                        raise Bad(ppath, f"line {line}: {k} {t!r} is not {kind}")
-                img, x, y, flag = val["image"], val["x_px"], val["y_px"], val["flag"]
-                status = row[pos["status"]].strip()
-                if not 0 <= img < nimages:
-                    raise Bad(ppath, f"line {line}: image {img} is not an index into the {nimages} images of verify.json")
-                if status not in STATUS_MEANING:
-                    raise Bad(ppath, f"line {line}: unknown status {status!r} (expected one of "
-                              + ", ".join(STATUS_MEANING) + ")")
-                if flag not in (0, 1):
-                    raise Bad(ppath, f"line {line}: flag {flag} is not 0 or 1")
-                if not (math.isfinite(x) and math.isfinite(y)):
-                    raise Bad(ppath, f"line {line}: x_px, y_px must be finite")
-                val["status"] = status
-                for k in POINT_COLUMNS:
-                    cols[k].append(val[k])
-    except OSError as e:
-        raise Bad(ppath, f"cannot read: {e.strerror or e}")
-    except UnicodeDecodeError as e:
-        raise Bad(ppath, f"not UTF-8 text: {e}")
-    except csv.Error as e:
-        raise Bad(ppath, f"not valid CSV: {e}")
+    for line, row in read_table(ppath, POINT_COLUMNS):
+        val = {}
+        for k in POINT_COLUMNS:
+            if k == "status":
+                continue
+            t = row[k]
+            if not t and k in ("measured_dn", "model_dn", "sigma_dn", "z"):
+                val[k] = math.nan   # refl leaves them empty at points without a measurement
+                continue
+            try:
+                val[k] = int(t) if k in ("image", "face", "flag", "region") else float(t)
+            except ValueError:
+                kind = "an integer" if k in ("image", "face", "flag", "region") else "a number"
+                raise Bad(ppath, f"line {line}: {k} {t!r} is not {kind}")
+        img, x, y, flag = val["image"], val["x_px"], val["y_px"], val["flag"]
+        status = row["status"]
+        if not 0 <= img < nimages:
+            raise Bad(ppath, f"line {line}: image {img} is not an index into the {nimages} images of verify.json")
+        if status not in STATUS_MEANING:
+            raise Bad(ppath, f"line {line}: unknown status {status!r} (expected one of "
+                      + ", ".join(STATUS_MEANING) + ")")
+        if flag not in (0, 1):
+            raise Bad(ppath, f"line {line}: flag {flag} is not 0 or 1")
+        if not (math.isfinite(x) and math.isfinite(y)):
+            raise Bad(ppath, f"line {line}: x_px, y_px must be finite")
+        val["status"] = status
+        for k in POINT_COLUMNS:
+            cols[k].append(val[k])
     p = {k: np.array(cols[k], dtype=object if k == "status" else float) for k in POINT_COLUMNS}
     p["image"] = p["image"].astype(int)
     p["flag"] = p["flag"].astype(bool)
@@ -716,28 +678,17 @@ def write_html(d, v, p, info, nused):
     return out
 
 
+def report(d):
+    v = load_verify(d)
+    p = load_points(d, len(v["images"]))
+    info = fig_views(d, v)
+    fig_zmap(d, v, p, info)
+    nused = fig_residue(d, v, p)
+    return write_html(d, v, p, info, nused)
+
+
 def main():
-    if len(sys.argv) != 2 or sys.argv[1] in ("-h", "--help"):
-        sys.stderr.write(__doc__)
-        return 2
-    d = sys.argv[1]
-    try:
-        if not os.path.isdir(d):
-            raise Bad(d, "not a directory")
-        v = load_verify(d)
-        p = load_points(d, len(v["images"]))
-        info = fig_views(d, v)
-        fig_zmap(d, v, p, info)
-        nused = fig_residue(d, v, p)
-        out = write_html(d, v, p, info, nused)
-    except Bad as b:
-        sys.stderr.write(f"{PROG}: {b.path}: {b.msg}\n")
-        return 1
-    except OSError as x:
-        sys.stderr.write(f"{PROG}: {x.filename or d}: {x.strerror or x}\n")
-        return 1
-    print(out)
-    return 0
+    return run_report(PROG, __doc__, report)
 
 
 if __name__ == "__main__":

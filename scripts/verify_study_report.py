@@ -26,7 +26,6 @@ Rates are fractions in summary.csv and study.json, percent in the page.
 Writes DIR/summary.csv, DIR/roc.png, DIR/auc.png, DIR/index.html and rewrites
 DIR/study.json (atomically).
 """
-import csv
 import html
 import json
 import math
@@ -38,6 +37,7 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
+from report_common import Bad, load_json, read_table, run_report  # noqa: E402
 
 PROG = "verify_study_report.py"
 COLUMNS = ["config", "corruption", "case", "score", "verdict_correct", "seconds"]
@@ -54,68 +54,39 @@ RULE = ("Detection at 1 % false alarms: per configuration, the threshold is the 
         "the wrong descriptions flagged, false alarms = share of the correct ones flagged.")
 
 
-class Bad(Exception):
-    def __init__(self, path, msg):
-        super().__init__(msg)
-        self.path, self.msg = path, msg
-
-
 # ---------------------------------------------------------------------------
 # inputs
 
 def load_csv(path):
     rows = []
     seen = {}
-    try:
-        with open(path, newline="", encoding="utf-8") as f:
-            rd = csv.reader(f)
-            header = next(rd, None)
-            if header is None:
-                raise Bad(path, "empty file (expected the header " + ",".join(COLUMNS) + ")")
-            header = [h.strip() for h in header]
-            missing = [k for k in COLUMNS if k not in header]
-            if missing:
-                raise Bad(path, "header lacks " + ", ".join(missing) + " (expected " + ",".join(COLUMNS) + ")")
-            pos = {k: header.index(k) for k in COLUMNS}
-            for row in rd:
-                line = rd.line_num
-                if not row or all(not x.strip() for x in row):
-                    continue
-                if len(row) != len(header):
-                    raise Bad(path, f"line {line}: {len(row)} fields, the header has {len(header)}")
-                t = {k: row[pos[k]].strip() for k in COLUMNS}
-                if not t["config"]:
-                    raise Bad(path, f"line {line}: empty config")
-                if not t["corruption"]:
-                    raise Bad(path, f"line {line}: empty corruption")
-                try:
-                    case = int(t["case"])
-                except ValueError:
-                    raise Bad(path, f"line {line}: case {t['case']!r} is not an integer")
-                vals = {}
-                for k in ("score", "seconds"):
-                    try:
-                        vals[k] = float(t[k])
-                    except ValueError:
-                        raise Bad(path, f"line {line}: {k} {t[k]!r} is not a number")
-                    if not (math.isfinite(vals[k]) and vals[k] >= 0):
-                        raise Bad(path, f"line {line}: {k} {t[k]!r} is not a finite number >= 0")
-                if t["verdict_correct"] not in ("0", "1"):
-                    raise Bad(path, f"line {line}: verdict_correct {t['verdict_correct']!r} is not 0 or 1")
-                key = (t["config"], t["corruption"], case)
-                if key in seen:
-                    raise Bad(path, f"line {line}: config {key[0]!r}, corruption {key[1]!r}, case {case} "
-                              f"already on line {seen[key]}")
-                seen[key] = line
-                rows.append({"config": t["config"], "corruption": t["corruption"], "case": case,
-                             "score": vals["score"], "flagged": t["verdict_correct"] == "0",
-                             "seconds": vals["seconds"]})
-    except OSError as e:
-        raise Bad(path, f"cannot read: {e.strerror or e}")
-    except UnicodeDecodeError as e:
-        raise Bad(path, f"not UTF-8 text: {e}")
-    except csv.Error as e:
-        raise Bad(path, f"not valid CSV: {e}")
+    for line, t in read_table(path, COLUMNS):
+        if not t["config"]:
+            raise Bad(path, f"line {line}: empty config")
+        if not t["corruption"]:
+            raise Bad(path, f"line {line}: empty corruption")
+        try:
+            case = int(t["case"])
+        except ValueError:
+            raise Bad(path, f"line {line}: case {t['case']!r} is not an integer")
+        vals = {}
+        for k in ("score", "seconds"):
+            try:
+                vals[k] = float(t[k])
+            except ValueError:
+                raise Bad(path, f"line {line}: {k} {t[k]!r} is not a number")
+            if not (math.isfinite(vals[k]) and vals[k] >= 0):
+                raise Bad(path, f"line {line}: {k} {t[k]!r} is not a finite number >= 0")
+        if t["verdict_correct"] not in ("0", "1"):
+            raise Bad(path, f"line {line}: verdict_correct {t['verdict_correct']!r} is not 0 or 1")
+        key = (t["config"], t["corruption"], case)
+        if key in seen:
+            raise Bad(path, f"line {line}: config {key[0]!r}, corruption {key[1]!r}, case {case} "
+                      f"already on line {seen[key]}")
+        seen[key] = line
+        rows.append({"config": t["config"], "corruption": t["corruption"], "case": case,
+                     "score": vals["score"], "flagged": t["verdict_correct"] == "0",
+                     "seconds": vals["seconds"]})
     if not rows:
         raise Bad(path, "no data rows")
     if not any(r["corruption"] == NONE for r in rows):
@@ -123,19 +94,6 @@ def load_csv(path):
     if all(r["corruption"] == NONE for r in rows):
         raise Bad(path, "only rows with corruption \"none\": no wrong description to detect")
     return rows
-
-
-def load_json(path):
-    try:
-        with open(path, encoding="utf-8") as f:
-            doc = json.load(f)
-    except OSError as e:
-        raise Bad(path, f"cannot read: {e.strerror or e}")
-    except (json.JSONDecodeError, UnicodeDecodeError) as e:
-        raise Bad(path, f"not valid JSON: {e}")
-    if not isinstance(doc, dict):
-        raise Bad(path, "expected a JSON object at the top")
-    return doc
 
 
 def ordered(values):
@@ -435,32 +393,21 @@ def write_html(d, doc, rows, configs, corrs, summ):
     return out_path
 
 
+def report(d):
+    rows = load_csv(os.path.join(d, "study.csv"))
+    jpath = os.path.join(d, "study.json")
+    doc = load_json(jpath)
+    configs, corrs, summ = summarise(rows)
+    fig_roc(d, configs, corrs, summ)
+    fig_auc(d, configs, corrs, summ)
+    write_summary_csv(d, summ)
+    doc["summary"] = [{k: jnum(s[k]) for k in SUMMARY} for s in summ]
+    atomic_write(jpath, json.dumps(doc, indent=2, ensure_ascii=False, allow_nan=False) + "\n")
+    return write_html(d, doc, rows, configs, corrs, summ)
+
+
 def main():
-    if len(sys.argv) != 2 or sys.argv[1] in ("-h", "--help"):
-        sys.stderr.write(__doc__)
-        return 2
-    d = sys.argv[1]
-    try:
-        if not os.path.isdir(d):
-            raise Bad(d, "not a directory")
-        rows = load_csv(os.path.join(d, "study.csv"))
-        jpath = os.path.join(d, "study.json")
-        doc = load_json(jpath)
-        configs, corrs, summ = summarise(rows)
-        fig_roc(d, configs, corrs, summ)
-        fig_auc(d, configs, corrs, summ)
-        write_summary_csv(d, summ)
-        doc["summary"] = [{k: jnum(s[k]) for k in SUMMARY} for s in summ]
-        atomic_write(jpath, json.dumps(doc, indent=2, ensure_ascii=False, allow_nan=False) + "\n")
-        out = write_html(d, doc, rows, configs, corrs, summ)
-    except Bad as b:
-        sys.stderr.write(f"{PROG}: {b.path}: {b.msg}\n")
-        return 1
-    except OSError as x:
-        sys.stderr.write(f"{PROG}: {x.filename or d}: {x.strerror or x}\n")
-        return 1
-    print(out)
-    return 0
+    return run_report(PROG, __doc__, report)
 
 
 if __name__ == "__main__":
