@@ -267,11 +267,14 @@ static double seg_dist(double px, double py, const double a[2], const double b[2
 }
 
 typedef struct {
-    verify_view_t *v;
+    const model_tracer_t *t;
     const model_lamps_t *lamps;
     const model_material_t *const *mats;
     int N;
-    const int *idx;   // grid indices of the usable points
+    const model_pixel_info_t *pi;
+    const int *idx;   // indices into pi (NULL: 0..n-1)
+    float *B;         // per index into pi: nl values
+    uint64_t seed;
 } ir_ctx_t;
 
 static double radical_inverse2(uint32_t i)
@@ -289,18 +292,19 @@ static void ir_rows(void *vctx, int begin, int end, int thread)
 {
     (void)thread;
     ir_ctx_t *c = vctx;
-    verify_view_t *v = c->v;
-    const int nl = v->nl, N = c->N;
-    double eps = 4 * model_tracer_epsilon_mm(v->t);
+    const int nl = c->lamps->n, N = c->N;
+    double eps = 4 * model_tracer_epsilon_mm(c->t);
     for (int k = begin; k < end; k++) {
-        int g = c->idx[k];
-        const model_pixel_info_t *pi = &v->pi[g];
-        float *B = &v->B[(size_t)g * nl];
+        int g = c->idx ? c->idx[k] : k;
+        const model_pixel_info_t *pi = &c->pi[g];
+        float *B = &c->B[(size_t)g * nl];
+        for (int i = 0; i < nl; i++) B[i] = 0;
+        if (pi->face < 0 || pi->material < 0) continue;
         const model_material_t *mx = c->mats[pi->material];
         model_vec3_t n = pi->n, a = fabs(n.x) < 0.9 ? v3(1, 0, 0) : v3(0, 1, 0);
         a = v3_unit(v3_sub(a, v3_scale(n, v3_dot(a, n))));
         model_vec3_t b = v3_cross(n, a);
-        model_rng_t rng = model_rng(0x1e5f, (uint64_t)g);
+        model_rng_t rng = model_rng(c->seed, (uint64_t)g);
         double rot = model_rng_uniform(&rng);
         double acc[MAX_LAMPS] = { 0 };
         model_vec3_t org = v3_add(pi->p_mm, v3_scale(n, eps));
@@ -309,7 +313,7 @@ static void ir_rows(void *vctx, int begin, int end, int thread)
             double r = sqrt(u), cz = sqrt(1 - u);
             model_vec3_t w = v3_add(v3_add(v3_scale(a, r * cos(ph)), v3_scale(b, r * sin(ph))), v3_scale(n, cz));
             model_pixel_info_t y;
-            model_tracer_cast(v->t, org, w, &y);
+            model_tracer_cast(c->t, org, w, &y);
             if (y.face < 0 || y.material < 0) continue;
             model_cosines_t cx = model_cosines(n, w, pi->v);
             if (cx.nl <= 0 || cx.nv <= 0) continue;
@@ -322,12 +326,19 @@ static void ir_rows(void *vctx, int begin, int end, int thread)
                 model_vec3_t l = v3_scale(d, 1 / dd);
                 model_cosines_t cy = model_cosines(y.n, l, vy);
                 if (cy.nl <= 0 || cy.nv <= 0) continue;
-                if (!model_tracer_visible_from(v->t, y.p_mm, y.n, c->lamps->lamps[i].position_mm)) continue;
+                if (!model_tracer_visible_from(c->t, y.p_mm, y.n, c->lamps->lamps[i].position_mm)) continue;
                 acc[i] += fx * model_brdf_eval(my->model, my->p, &cy, NULL) / (dd * dd);
             }
         }
         for (int i = 0; i < nl; i++) B[i] = (float)(M_PI / N * acc[i]);
     }
+}
+
+void verify_interreflection(const model_tracer_t *t, const model_lamps_t *lamps, const model_material_t *const *mats,
+                            const model_pixel_info_t *pi, int n, int samples, int threads, float *B)
+{
+    ir_ctx_t ic = { t, lamps, mats, samples, pi, NULL, B, 0x1e5f };
+    model_parallel_for(n, 64, threads > 0 ? threads : model_default_threads(), ir_rows, &ic);
 }
 
 verify_view_t *verify_view_new(const model_scene_t *scene, const verify_camera_t *cam, double angle_deg,
@@ -471,7 +482,7 @@ verify_view_t *verify_view_new(const model_scene_t *scene, const verify_camera_t
         if (v->status[g] == VERIFY_PT_USED) cand[ncand++] = g;
     v->nusable = ncand;
     if (opt->ir_samples > 0 && ncand && nl) {
-        ir_ctx_t ic = { v, lamps, mats, opt->ir_samples, cand };
+        ir_ctx_t ic = { v->t, lamps, mats, opt->ir_samples, v->pi, cand, v->B, 0x1e5f };
         model_parallel_for(ncand, 64, threads, ir_rows, &ic);
     }
     free(cand);

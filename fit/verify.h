@@ -138,6 +138,13 @@ void verify_view_free(verify_view_t *v);
 int  verify_view_npoints(const verify_view_t *v);   // geometrically usable grid points
 double verify_view_time_s(const verify_view_t *v);
 
+// One diffuse bounce of each lamp's light at n points (B: n x lamps->n,
+// per unit kc*I; the model's interreflection term, see above): samples
+// cosine-weighted rays per point, each hit a virtual point source lit by the
+// lamps (shadow rays). Points with face < 0 get 0.
+void verify_interreflection(const model_tracer_t *t, const model_lamps_t *lamps, const model_material_t *const *mats,
+                            const model_pixel_info_t *pi, int n, int samples, int threads, float *B);
+
 // Status of a grid point.
 typedef enum {
     VERIFY_PT_USED = 0,

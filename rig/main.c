@@ -6,6 +6,7 @@
 #include "calib/calib.h"
 #include "fit/fit.h"
 #include "fit/verify.h"
+#include "fit/lightplan.h"
 #include "rig/rig.h"
 
 typedef struct {
@@ -24,6 +25,7 @@ static const command_t commands[] = {
     { "calib",   calib_cmd,       "calibrate camera geometry and turntable axis, lamp positions, sensitivity" },
     { "fit",     fit_cmd,         "fit reflection models to BRDF samples and write priors" },
     { "verify",  verify_cmd,      "verify a scene description against images: fit within the priors, residue, changes, verdict" },
+    { "plan",    lightplan_cmd,   "plan lamps: choose the lamp set and exposure for detectable edges, no glare or saturation" },
 };
 
 static void usage(FILE *f)

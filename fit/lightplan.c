@@ -1,0 +1,415 @@
+// fit/lightplan.c — model-based light placement (see lightplan.h).
+#define _GNU_SOURCE
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "fit/lightplan.h"
+#include "fit/verify.h"
+#include "model/internal.h"
+
+#define MAXL 16   // candidates (2^16 subsets at most)
+
+lightplan_options_t lightplan_defaults(void)
+{
+    return (lightplan_options_t){
+        .glare_cone_deg = 15,
+        .sobel_threshold = 250,
+        .floor_snr = 10,
+        .floor_dn = 20,
+        .saturation_frac = 0.95,
+        .max_bad_frac = 0.001,
+        .max_lamps = 0,
+        .spacing_px = 8,
+        .ir_samples = 64,
+    };
+}
+
+void lightplan_result_free(lightplan_result_t *r)
+{
+    if (!r) return;
+    free(r->configs);
+    free(r->segments);
+    free(r->faces);
+    free(r->predicted);
+    free(r->L);
+    free(r->face_id);
+    free(r->seg_first);
+    free(r->Sside);
+    memset(r, 0, sizeof *r);
+}
+
+static int cmp_d(const void *a, const void *b)
+{
+    double x = *(const double *)a, y = *(const double *)b;
+    return x < y ? -1 : x > y;
+}
+
+// Sobel magnitude of an ideal step edge of contrast 1 along direction theta.
+static double sobel_factor(const double q0[2], const double q1[2])
+{
+    double th = atan2(q1[1] - q0[1], q1[0] - q0[0]);
+    return 4.0 + 0.24 * fabs(sin(2 * th));
+}
+
+void lightplan_segments_for(const lightplan_result_t *r, uint32_t mask, double exposure_us,
+                            const lightplan_options_t *opt, lightplan_segment_t *segs)
+{
+    double *v = malloc((size_t)(r->npoints ? r->npoints : 1) * sizeof *v);
+    for (int s = 0; s < r->nsegments; s++) {
+        lightplan_segment_t *g = &segs[s];
+        *g = r->segments[s];
+        int a = r->seg_first[s], n = r->seg_first[s + 1] - a;
+        double f = sobel_factor(g->q0, g->q1), sum = 0;
+        for (int k = 0; k < n && v; k++) {
+            double d = 0;
+            for (int i = 0; i < r->nlamps; i++)
+                if ((mask >> i) & 1)
+                    d += r->Sside[((size_t)i * r->npoints + a + k) * 2] - r->Sside[((size_t)i * r->npoints + a + k) * 2 + 1];
+            v[k] = f * fabs(exposure_us * d);
+            sum += exposure_us * d;
+        }
+        g->dP = n ? sum / n : 0;
+        if (n && v) {
+            qsort(v, (size_t)n, sizeof *v, cmp_d);
+            g->gradient = n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
+        } else {
+            g->gradient = 0;
+        }
+        g->detectable = g->gradient >= opt->sobel_threshold;
+    }
+    free(v);
+}
+
+// The smallest signal with the wanted SNR: S^2 = snr^2 (K S + K^2 rn^2).
+static double signal_floor(const lightplan_sensor_t *s, const lightplan_options_t *o)
+{
+    double K = s->K_dn_per_e, rn = s->read_noise_e, q = o->floor_snr * o->floor_snr;
+    double S = K > 0 ? 0.5 * (q * K + sqrt(q * q * K * K + 4 * q * K * K * rn * rn)) : 0;
+    return fmax(S, o->floor_dn);
+}
+
+bool lightplan_run(const model_scene_t *scene, model_camera_t *cam, const model_lamps_t *cands, const double *A,
+                   const model_material_t *const *mats, const lightplan_sensor_t *sensor, const double *exposures,
+                   int nexp, const lightplan_options_t *opt, lightplan_result_t *out)
+{
+    memset(out, 0, sizeof *out);
+    double t0 = model_now_s();
+    const int nl = cands->n;
+    if (nl < 1 || nl > MAXL) {
+        model_error(cands->path, 0, "%d candidate lamps: give 1 to %d", nl, MAXL);
+        return false;
+    }
+    if (nexp < 1) {
+        model_error(NULL, 0, "light planning: no exposure to try");
+        return false;
+    }
+    const int W = model_camera_width(cam), H = model_camera_height(cam);
+    const size_t npx = (size_t)W * H;
+    out->W = W;
+    out->H = H;
+    out->nlamps = nl;
+    int threads = opt->threads > 0 ? opt->threads : model_default_threads();
+    model_tracer_t *t = model_tracer_new(scene);
+    out->L = malloc(npx * nl * sizeof(float));
+    out->face_id = malloc(npx * sizeof(int32_t));
+    out->predicted = malloc(npx * sizeof(float));
+    model_lamp_t one;
+    model_lamps_t single = { .n = 1, .lamps = &one, .path = cands->path };
+    model_edges_t *E0 = NULL;
+    bool ok = false;
+    // grid (step 2) for dynamic range and glare
+    const int gw = (W + 1) / 2, gh = (H + 1) / 2;
+    const size_t ng = (size_t)gw * gh;
+    double *q = malloc(ng * 2 * sizeof *q);
+    model_pixel_info_t *pi = malloc(ng * sizeof *pi);
+    model_lamp_sample_t *ls = malloc(ng * nl * sizeof *ls);
+    uint32_t *glare = calloc(ng, sizeof *glare);
+    if (!t || !out->L || !out->face_id || !out->predicted || !q || !pi || !ls || !glare) {
+        if (t) model_error(NULL, 0, "light planning: out of memory for a %dx%d view", W, H);
+        goto done;
+    }
+    model_shading_t sh = model_shading_default();
+    sh.nthreads = threads;
+    sh.gain_map = sensor->flat;
+    for (int i = 0; i < nl; i++) {
+        one = cands->lamps[i];
+        one.intensity = A[i];   // DN per us of exposure
+        one.radius_mm = 0;
+        if (!model_render(t, cam, &single, mats, &sh, out->L + (size_t)i * npx, i ? NULL : out->face_id, NULL))
+            goto done;
+    }
+    // the visible edge segments (the edge query), and points every 2 px along
+    // each (2 px kept from its ends; one point for segments under 8 px) with
+    // their two sides 2 px off: each lamp's signal per us there
+    E0 = model_edges_predict(scene, t, cam, cands, mats, &sh, 1.0);
+    if (!E0) goto done;
+    int ns = 0;
+    for (int e = 0; e < E0->nedges; e++) ns += E0->edges[e].nsegments;
+    out->nsegments = ns;
+    out->segments = calloc((size_t)(ns ? ns : 1), sizeof *out->segments);
+    out->seg_first = calloc((size_t)ns + 1, sizeof *out->seg_first);
+    if (!out->segments || !out->seg_first) goto done;
+    int np = 0, k = 0;
+    for (int e = 0; e < E0->nedges; e++)
+        for (int s2 = 0; s2 < E0->edges[e].nsegments; s2++, k++) {
+            const model_edge_segment_t *sg = &E0->edges[e].segments[s2];
+            lightplan_segment_t *g = &out->segments[k];
+            g->edge = e;
+            g->segment = s2;
+            memcpy(g->q0, sg->q0, sizeof g->q0);
+            memcpy(g->q1, sg->q1, sizeof g->q1);
+            g->length_px = sg->length_px;
+            g->face_side[0] = sg->face_side[0];
+            g->face_side[1] = sg->face_side[1];
+            double L = hypot(sg->q1[0] - sg->q0[0], sg->q1[1] - sg->q0[1]);
+            out->seg_first[k] = np;
+            np += L >= 8 ? (int)((L - 4) / 2) + 1 : 1;
+        }
+    out->seg_first[ns] = np;
+    out->npoints = np;
+    double *qs = malloc((size_t)(np ? np : 1) * 4 * sizeof *qs);
+    model_pixel_info_t *ps = malloc((size_t)(np ? np : 1) * 2 * sizeof *ps);
+    model_lamp_sample_t *lss = malloc((size_t)(np ? np : 1) * 2 * nl * sizeof *lss);
+    out->Sside = calloc((size_t)nl * (np ? np : 1) * 2, sizeof *out->Sside);
+    bool sok = qs && ps && lss && out->Sside;
+    for (k = 0; k < ns && sok; k++) {
+        const lightplan_segment_t *g = &out->segments[k];
+        double dx = g->q1[0] - g->q0[0], dy = g->q1[1] - g->q0[1], L = hypot(dx, dy);
+        double ux = L > 0 ? dx / L : 1, uy = L > 0 ? dy / L : 0, nx = -uy, ny = ux;
+        int a0 = out->seg_first[k], n = out->seg_first[k + 1] - a0;
+        for (int j = 0; j < n; j++) {
+            double tt = n == 1 ? L / 2 : 2 + 2.0 * j;
+            double x = g->q0[0] + ux * tt, y = g->q0[1] + uy * tt;
+            size_t o = (size_t)(a0 + j) * 4;
+            qs[o] = x + 2 * nx;
+            qs[o + 1] = y + 2 * ny;
+            qs[o + 2] = x - 2 * nx;
+            qs[o + 3] = y - 2 * ny;
+        }
+    }
+    sok = sok && model_pixel_info(t, cam, cands, qs, 2 * np, ps, lss, threads);
+    // the light one diffuse bounce adds (what lights a shadowed concave corner)
+    float *Bs = sok && opt->ir_samples > 0 ? malloc((size_t)(np ? np : 1) * 2 * nl * sizeof *Bs) : NULL;
+    if (Bs) verify_interreflection(t, cands, mats, ps, 2 * np, opt->ir_samples, threads, Bs);
+    for (int j = 0; j < 2 * np && sok; j++) {
+        const model_pixel_info_t *p = &ps[j];
+        if (p->face < 0 || p->material < 0) continue;
+        double gg = 1;
+        if (sensor->flat) {
+            long x = lround(p->q[0]), y = lround(p->q[1]);
+            if (x >= 0 && y >= 0 && x < W && y < H) gg = sensor->flat[y * (long)W + x];
+        }
+        for (int i = 0; i < nl; i++) {
+            one = cands->lamps[i];
+            one.intensity = A[i];
+            out->Sside[((size_t)i * np + j / 2) * 2 + j % 2] =
+                gg * (model_direct_sum(p, &lss[(size_t)j * nl + i], &single, mats[p->material], NULL) +
+                      (Bs ? A[i] * Bs[(size_t)j * nl + i] : 0));
+        }
+    }
+    free(Bs);
+    free(qs);
+    free(ps);
+    free(lss);
+    if (!sok) goto done;
+    // glare on the grid: a lit lamp within the cone around the mirror direction
+    for (int j = 0; j < gh; j++)
+        for (int i = 0; i < gw; i++) {
+            q[2 * ((size_t)j * gw + i)] = 2 * i;
+            q[2 * ((size_t)j * gw + i) + 1] = 2 * j;
+        }
+    if (!model_pixel_info(t, cam, cands, q, (int)ng, pi, ls, threads)) goto done;
+    double cosg = cos(opt->glare_cone_deg * M_PI / 180);
+    for (size_t g = 0; g < ng; g++) {
+        const model_pixel_info_t *p = &pi[g];
+        if (p->face < 0 || p->material < 0 || mats[p->material]->model == MODEL_BRDF_LAMBERT) continue;
+        double nv = v3_dot(p->n, p->v);
+        model_vec3_t r = v3_sub(v3_scale(p->n, 2 * nv), p->v);
+        for (int i = 0; i < nl; i++) {
+            const model_lamp_sample_t *s = &ls[g * nl + i];
+            if (s->V > 0.5 && v3_dot(r, s->l) >= cosg) glare[g] |= 1u << i;
+        }
+    }
+    // every configuration
+    const double sat = sensor->saturation_dn * opt->saturation_frac, floor_s = signal_floor(sensor, opt);
+    int nsets = 0;
+    for (uint32_t m = 1; m < (1u << nl); m++)
+        if (!opt->max_lamps || __builtin_popcount(m) <= opt->max_lamps) nsets++;
+    out->nconfigs = nsets * nexp;
+    out->configs = calloc((size_t)out->nconfigs, sizeof *out->configs);
+    lightplan_segment_t *tmp = malloc((size_t)(out->nsegments ? out->nsegments : 1) * sizeof *tmp);
+    if (!out->configs || !tmp) {
+        free(tmp);
+        goto done;
+    }
+    int c = 0, best = -1;
+    for (uint32_t m = 1; m < (1u << nl); m++) {
+        if (opt->max_lamps && __builtin_popcount(m) > opt->max_lamps) continue;
+        for (int x = 0; x < nexp; x++, c++) {
+            lightplan_config_t *cf = &out->configs[c];
+            cf->mask = m;
+            cf->exposure_us = exposures[x];
+            long usable = 0;
+            for (size_t g = 0; g < ng; g++) {
+                if (pi[g].face < 0) continue;
+                size_t px = (size_t)(2 * (g / gw)) * W + 2 * (g % gw);
+                double S = 0;
+                for (int i = 0; i < nl; i++)
+                    if ((m >> i) & 1) S += out->L[(size_t)i * npx + px];
+                S *= exposures[x];
+                double P = sensor->offset_dn + S;
+                cf->object_pix++;
+                bool bad = false;
+                if (P >= sat) {
+                    cf->saturated_pix++;
+                    bad = true;
+                }
+                if (glare[g] & m) {
+                    cf->glare_pix++;
+                    bad = true;
+                }
+                if (!bad && S >= floor_s) usable++;
+            }
+            cf->usable_points = usable * 4.0 / (opt->spacing_px * opt->spacing_px);
+            lightplan_segments_for(out, m, exposures[x], opt, tmp);
+            cf->n_segments = out->nsegments;
+            for (int s = 0; s < out->nsegments; s++)
+                if (tmp[s].detectable) {
+                    cf->n_detectable++;
+                    cf->detectable_length_px += tmp[s].length_px;
+                }
+            double limit = opt->max_bad_frac * cf->object_pix;
+            cf->feasible = cf->saturated_pix <= limit && cf->glare_pix <= limit;
+            if (best < 0) {
+                best = c;
+                continue;
+            }
+            const lightplan_config_t *b = &out->configs[best];
+            bool better;
+            if (cf->feasible != b->feasible) better = cf->feasible;
+            else if (!cf->feasible) better = cf->saturated_pix + cf->glare_pix < b->saturated_pix + b->glare_pix;
+            else if (fabs(cf->detectable_length_px - b->detectable_length_px) > 1e-9)
+                better = cf->detectable_length_px > b->detectable_length_px;
+            else better = cf->usable_points > b->usable_points;
+            if (better) best = c;
+        }
+    }
+    out->best = best;
+    out->best_feasible = out->configs[best].feasible;
+    const lightplan_config_t *b = &out->configs[best];
+    lightplan_segments_for(out, b->mask, b->exposure_us, opt, tmp);
+    memcpy(out->segments, tmp, (size_t)out->nsegments * sizeof *tmp);
+    free(tmp);
+    // the chosen configuration: predicted image, faces
+    for (size_t p = 0; p < npx; p++) {
+        double S = 0;
+        for (int i = 0; i < nl; i++)
+            if ((b->mask >> i) & 1) S += out->L[(size_t)i * npx + p];
+        out->predicted[p] = (float)fmin(sensor->offset_dn + b->exposure_us * S, sensor->saturation_dn);
+    }
+    int nf = scene->nfaces + scene->nspheres;
+    out->faces = calloc((size_t)(nf ? nf : 1), sizeof *out->faces);
+    double *vals = malloc(ng * sizeof *vals);
+    if (!out->faces || !vals) {
+        free(vals);
+        goto done;
+    }
+    out->nfaces = nf;
+    for (int f = 0; f < nf; f++) {
+        lightplan_face_t *F = &out->faces[f];
+        F->face = f;
+        F->P_min = INFINITY;
+        F->P_max = -INFINITY;
+        int nv = 0, nu = 0;
+        for (size_t g = 0; g < ng; g++) {
+            if (pi[g].face != f) continue;
+            size_t px = (size_t)(2 * (g / gw)) * W + 2 * (g % gw);
+            double P = out->predicted[px], S = P - sensor->offset_dn;
+            vals[nv++] = P;
+            F->P_min = fmin(F->P_min, P);
+            F->P_max = fmax(F->P_max, P);
+            if (P >= sat) F->saturated_pix++;
+            if (glare[g] & b->mask) F->glare_pix++;
+            if (P < sat && S >= floor_s) nu++;
+        }
+        F->npix = nv;
+        if (nv) {
+            qsort(vals, (size_t)nv, sizeof *vals, cmp_d);
+            F->P_median = nv % 2 ? vals[nv / 2] : 0.5 * (vals[nv / 2 - 1] + vals[nv / 2]);
+            F->usable_frac = (double)nu / nv;
+        } else {
+            F->P_min = F->P_max = F->P_median = NAN;
+        }
+    }
+    free(vals);
+    ok = true;
+done:
+    model_edges_free(E0);
+    model_tracer_free(t);
+    free(q);
+    free(pi);
+    free(ls);
+    free(glare);
+    out->time_s = model_now_s() - t0;
+    if (!ok) lightplan_result_free(out);
+    return ok;
+}
+
+static inline double px_at(const float *f, int W, int H, int x, int y)
+{
+    x = x < 0 ? 0 : x >= W ? W - 1 : x;
+    y = y < 0 ? 0 : y >= H ? H - 1 : y;
+    return f[(size_t)y * W + x];
+}
+
+static double sobel_at(const float *f, int W, int H, int x, int y)
+{
+    double gx = (px_at(f, W, H, x + 1, y - 1) + 2 * px_at(f, W, H, x + 1, y) + px_at(f, W, H, x + 1, y + 1)) -
+                (px_at(f, W, H, x - 1, y - 1) + 2 * px_at(f, W, H, x - 1, y) + px_at(f, W, H, x - 1, y + 1));
+    double gy = (px_at(f, W, H, x - 1, y + 1) + 2 * px_at(f, W, H, x, y + 1) + px_at(f, W, H, x + 1, y + 1)) -
+                (px_at(f, W, H, x - 1, y - 1) + 2 * px_at(f, W, H, x, y - 1) + px_at(f, W, H, x + 1, y - 1));
+    return sqrt(gx * gx + gy * gy);
+}
+
+
+double lightplan_sobel_check(const lightplan_segment_t *segs, int nseg, const float *frame, int W, int H,
+                             double threshold, bool *found, double *measured)
+{
+    int agree = 0, n = 0;
+    for (int s = 0; s < nseg; s++) {
+        const lightplan_segment_t *g = &segs[s];
+        double dx = g->q1[0] - g->q0[0], dy = g->q1[1] - g->q0[1], L = sqrt(dx * dx + dy * dy);
+        double med = 0;
+        if (L < 8) {   // too short for a median along it: not judged
+            if (found) found[s] = false;
+            if (measured) measured[s] = NAN;
+            continue;
+        }
+        {
+            double ux = dx / L, uy = dy / L, nx = -uy, ny = ux;
+            int m = (int)((L - 4) / 2) + 1;
+            double *v = malloc((size_t)m * sizeof *v);
+            if (!v) continue;
+            for (int k = 0; k < m; k++) {
+                double t = 2 + 2.0 * k;
+                double best = 0;
+                for (double o = -1.5; o <= 1.5; o += 0.5) {
+                    double x = g->q0[0] + ux * t + nx * o, y = g->q0[1] + uy * t + ny * o;
+                    best = fmax(best, sobel_at(frame, W, H, (int)lround(x), (int)lround(y)));
+                }
+                v[k] = best;
+            }
+            qsort(v, (size_t)m, sizeof *v, cmp_d);
+            med = m % 2 ? v[m / 2] : 0.5 * (v[m / 2 - 1] + v[m / 2]);
+            free(v);
+        }
+        bool f = med >= threshold;
+        if (found) found[s] = f;
+        if (measured) measured[s] = med;
+        agree += f == g->detectable;
+        n++;
+    }
+    return n ? (double)agree / n : NAN;
+}

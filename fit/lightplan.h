@@ -1,0 +1,139 @@
+// fit/lightplan.h — model-based light placement (seed 001, PREMIO): which
+// lamps and exposure make a workpiece's edges detectable and give the
+// verification fitter the most usable reference points, without glare or
+// saturation?
+//
+// For one view (scene at a turntable angle, camera, candidate lamps with
+// their kc*I, materials, the camera's usable range) the predictor renders each
+// candidate lamp's direct light once (P is linear in the lamps), then for every
+// lamp set (non-empty subsets of the candidates, at most max_lamps lamps) and
+// exposure in the list:
+// - dynamic range: per face, the share of its pixels whose signal lies above
+//   the noise floor (floor_snr x the temporal noise, at least floor_dn) and
+//   below saturation_frac x saturation;
+// - specular glare: pixels of non-Lambertian faces where a lit lamp lies within
+//   glare_cone_deg of the mirror direction of the view ray;
+// - edge contrast: for every visible image segment of a scene edge (the edge
+//   query, model_edges_predict), dP across it at points every 2 px along it
+//   (the signal 2 px to either side: direct light plus one diffuse bounce,
+//   which lights shadowed concave corners) and whether a Sobel detector with
+//   threshold sobel_threshold fires: the median along the segment of
+//   f(theta) |dP|, f = 4.0 for an axis-aligned edge, 4.24 for a diagonal one
+//   (4 + 0.24 |sin 2 theta|), reaches it;
+// and chooses the feasible configuration (saturated and glare pixels at most
+// max_bad_frac of the object's pixels) with the longest detectable edge
+// length, then the most usable reference points (usable pixels off glare, per
+// verification grid cell of spacing_px^2). When none is feasible, the one with
+// the fewest bad pixels is chosen and said so.
+#pragma once
+
+#include <jansson.h>
+#include <stdbool.h>
+#include <stdint.h>
+
+#include "model/model.h"
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+typedef struct {
+    double glare_cone_deg;      // 15
+    double sobel_threshold;     // DN of gradient magnitude (default 250: above the detector's noise
+                                // response, about 9 sigma = 140 DN at 1000 DN on a 12-bit camera)
+    double floor_snr;           // 10
+    double floor_dn;            // 20
+    double saturation_frac;     // 0.95
+    double max_bad_frac;        // 0.001
+    int    max_lamps;           // 0: all candidates
+    int    spacing_px;          // 8: verification grid, for the usable reference points
+    int    ir_samples;          // 64: rays of one diffuse bounce at the edge points (0: direct light only)
+    int    threads;
+} lightplan_options_t;
+
+lightplan_options_t lightplan_defaults(void);
+
+typedef struct {
+    double offset_dn;           // dark level (mean; 0 with an offset map subtracted)
+    double K_dn_per_e;          // temporal noise: K and read noise (0: floor_dn only)
+    double read_noise_e;
+    double saturation_dn;
+    const float *flat;          // g(x,y) or NULL
+} lightplan_sensor_t;
+
+typedef struct {
+    int      face;              // scene face (or nfaces + k for sphere k)
+    int      npix;              // pixels of the face in view (step-2 grid)
+    double   P_min, P_median, P_max;   // DN
+    double   usable_frac;       // inside the usable range
+    int      glare_pix;         // with glare
+    int      saturated_pix;
+} lightplan_face_t;
+
+typedef struct {
+    uint32_t mask;              // lamp set
+    double   exposure_us;
+    double   detectable_length_px;
+    int      n_detectable, n_segments;
+    double   usable_points;     // per spacing_px^2 cell
+    int      glare_pix, saturated_pix, object_pix;
+    bool     feasible;
+} lightplan_config_t;
+
+typedef struct {
+    int    edge, segment;       // indices in the edge query's result
+    double q0[2], q1[2], length_px;
+    double dP;                  // predicted contrast, DN (mean along the segment; chosen configuration)
+    double gradient;            // predicted Sobel response, DN (median along the segment)
+    bool   detectable;
+    int    face_side[2];
+} lightplan_segment_t;
+
+typedef struct {
+    int                  nconfigs;
+    lightplan_config_t  *configs;
+    int                  best;          // index into configs
+    bool                 best_feasible;
+    int                  nsegments;
+    lightplan_segment_t *segments;      // for the chosen configuration
+    int                  nfaces;
+    lightplan_face_t    *faces;         // for the chosen configuration
+    float               *predicted;     // W*H DN, chosen configuration (direct light)
+    float               *L;             // nlamps planes W*H: each lamp's signal per us of exposure (DN/us, with g)
+    int32_t             *face_id;       // W*H
+    int                  npoints;       // sample points along the segments
+    int                 *seg_first;     // nsegments + 1: segment s has points seg_first[s] .. seg_first[s+1]-1
+    double              *Sside;         // nlamps x npoints x 2: each lamp's signal per us 2 px to each side
+    int                  W, H, nlamps;
+    double               time_s;
+} lightplan_result_t;
+
+// scene: at the view's turntable angle already (model_scene_rotated_z);
+// A: kc*I per us of exposure for each candidate (DN/us at 0 dB per radiance
+// unit); exposures: the list to try.
+bool lightplan_run(const model_scene_t *scene, model_camera_t *cam, const model_lamps_t *cands, const double *A,
+                   const model_material_t *const *mats, const lightplan_sensor_t *sensor, const double *exposures,
+                   int nexp, const lightplan_options_t *opt, lightplan_result_t *out);
+void lightplan_result_free(lightplan_result_t *r);
+
+// Per-segment Sobel check of a camera frame (W*H DN) against the predicted
+// detectability of the configuration the frame was taken with: for each
+// segment, the median over points every 2 px along it (2 px kept from its ends)
+// of the largest Sobel magnitude within 1.5 px across; found when it reaches
+// the threshold. Segments shorter than 8 px are not judged. found and
+// measured (out, nsegments) may be NULL. Returns the agreement rate (found ==
+// predicted) over the judged segments, or NAN when there are none.
+double lightplan_sobel_check(const lightplan_segment_t *segs, int nseg, const float *frame, int W, int H,
+                             double threshold, bool *found, double *measured);
+// The segments' predicted contrast and detectability for any configuration
+// (mask, exposure) of the same run (segs: r->nsegments, geometry copied from
+// r->segments).
+void lightplan_segments_for(const lightplan_result_t *r, uint32_t mask, double exposure_us,
+                            const lightplan_options_t *opt, lightplan_segment_t *segs);
+
+// `refl plan lamps` (fit/lightplan.c).
+int lightplan_cmd(int argc, char **argv);
+
+#ifdef __cplusplus
+}
+#endif

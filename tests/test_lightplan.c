@@ -1,0 +1,179 @@
+// tests/test_lightplan.c — light planning (fit/lightplan.h): the Sobel
+// response of known steps, glare and saturation steering the choice, and the
+// prediction against a Sobel detector on the virtual rig's frames.
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include <glib.h>
+#include <jansson.h>
+
+#include "fit/lightplan.h"
+#include "fit/verify_lab.h"
+#include "model/model.h"
+#include "tests/test.h"
+
+// An ideal step of 50 DN: the detector's median response is 4.0 x 50 along an
+// axis-aligned edge and 4.24 x 50 along a diagonal one (sampled on the pixel
+// grid the diagonal step is not ideal: 3 % tolerance).
+TEST(lightplan_sobel_known_steps)
+{
+    const int W = 200, H = 200;
+    float *f = malloc(sizeof(float) * W * H);
+    for (int y = 0; y < H; y++)
+        for (int x = 0; x < W; x++) f[y * W + x] = x < 100 ? 100 : 150;   // step between x = 99 and 100
+    lightplan_segment_t s = { .q0 = { 99.5, 20 }, .q1 = { 99.5, 180 }, .length_px = 160, .detectable = true };
+    double m;
+    bool found;
+    CHECK_NEAR(lightplan_sobel_check(&s, 1, f, W, H, 199, &found, &m), 1, 0);
+    CHECK_NEAR(m, 200, 1e-9);
+    CHECK(found);
+    CHECK_NEAR(lightplan_sobel_check(&s, 1, f, W, H, 201, &found, &m), 0, 0);   // below the threshold: disagrees
+    for (int y = 0; y < H; y++)
+        for (int x = 0; x < W; x++) f[y * W + x] = x + y < 200 ? 100 : 150;
+    lightplan_segment_t d = { .q0 = { 30, 170 }, .q1 = { 170, 30 }, .length_px = 198, .detectable = true };
+    lightplan_sobel_check(&d, 1, f, W, H, 0, &found, &m);
+    CHECK_REL(m, 4.24 * 50, 0.03);
+    // too short to judge
+    lightplan_segment_t t = { .q0 = { 99.5, 20 }, .q1 = { 99.5, 25 }, .length_px = 5 };
+    CHECK(isnan(lightplan_sobel_check(&t, 1, f, W, H, 0, &found, &m)));
+    free(f);
+}
+
+// A glossy plate seen by the camera, one candidate lamp at the camera's
+// mirror position (glare on the plate), another off to the side: the plan
+// counts the glare and chooses the other lamp; the longest exposure
+// saturates and is not chosen.
+TEST(lightplan_glare_and_saturation_steer_the_choice)
+{
+    char path[4096];
+    snprintf(path, sizeof path, "%s/examples/camera.cameramodel", test_srcdir());
+    model_camera_t *cam = model_camera_load(path);
+    model_vec3_t c = model_camera_centre_world(cam);
+    const char *scene_txt = "1 -150 -150 0\n2 150 -150 0\n3 150 150 0\n4 -150 150 0\nFaces:\n@material gloss\n1 2 3 4.\n";
+    model_scene_t *sc = model_scene_parse_d3d(scene_txt, strlen(scene_txt), "plate.d3d", NULL);
+    const char *mt = "[material gloss]\nmodel = ggx\nkd = 0.3\nks = 0.5\nalpha = 0.1\nF0 = 0.04\n";
+    model_materials_t *mm = model_materials_parse(mt, strlen(mt), "m.ini");
+    char lt[512];
+    snprintf(lt, sizeof lt, "[lamp mirror]\nposition_mm = %.3f %.3f %.3f\nintensity = 3e9\n"
+             "[lamp side]\nposition_mm = %.3f %.3f %.3f\nintensity = 3e9\n", -c.x, -c.y, c.z, c.y, -c.x, c.z);
+    model_lamps_t *l = model_lamps_parse(lt, strlen(lt), "l.ini");
+    CHECK(cam && sc && mm && l);
+    if (!(cam && sc && mm && l)) return;
+    const model_material_t *mats[1];
+    CHECK(model_resolve_materials(sc, mm, mats));
+    double A[2] = { 1e-4 * 3e9, 1e-4 * 3e9 }, exps[3] = { 1000, 4000, 400000 };
+    lightplan_sensor_t s = { .offset_dn = 64, .saturation_dn = 4095, .K_dn_per_e = 0.25, .read_noise_e = 6 };
+    lightplan_options_t o = lightplan_defaults();
+    lightplan_result_t r;
+    CHECK(lightplan_run(sc, cam, l, A, mats, &s, exps, 3, &o, &r));
+    if (r.nconfigs) {
+        const lightplan_config_t *b = &r.configs[r.best];
+        CHECK(b->feasible);
+        CHECK(b->mask == 2);            // the side lamp alone
+        CHECK(b->exposure_us < 400000);
+        CHECK(b->glare_pix == 0 && b->saturated_pix == 0);
+        bool mirror_glare = false, long_saturates = false;
+        for (int k = 0; k < r.nconfigs; k++) {
+            if ((r.configs[k].mask & 1) && r.configs[k].glare_pix > 100) mirror_glare = true;
+            if (r.configs[k].exposure_us == 400000 && r.configs[k].saturated_pix > 0) long_saturates = true;
+        }
+        CHECK(mirror_glare);
+        CHECK(long_saturates);
+        CHECK(r.nfaces == 1 && r.faces[0].npix > 1000 && r.faces[0].usable_frac > 0.9);
+        // the plate's boundary is an edge against the background: detectable when lit
+        CHECK(b->n_detectable >= 3);
+    }
+    lightplan_result_free(&r);
+    model_lamps_free(l);
+    model_materials_free(mm);
+    model_scene_free(sc);
+    model_camera_free(cam);
+}
+
+// The T-stiffener on the virtual rig: the chosen configuration is free of
+// glare and saturation, and a Sobel detector on the rig's frames (the chosen
+// set and each single lamp, richer physics than the prediction) agrees with
+// the predicted detectability on at least 95 % of the segments (the
+// disagreements are printed).
+TEST(lightplan_virtual_rig_agreement)
+{
+    char scene[4096], cam[4096], lamps[4096], mats[4096], truth[4096];
+    snprintf(scene, sizeof scene, "%s/examples/t_stiffener.d3d", test_srcdir());
+    snprintf(cam, sizeof cam, "%s/examples/camera.cameramodel", test_srcdir());
+    snprintf(lamps, sizeof lamps, "%s/examples/lamps.ini", test_srcdir());
+    snprintf(mats, sizeof mats, "%s/examples/materials.ini", test_srcdir());
+    snprintf(truth, sizeof truth, "%s/examples/virtual-truth.ini", test_srcdir());
+    // the gain calibration a lab would have (the rig's own maps, noise-free)
+    const double a0 = 0;
+    verify_lab_t *L = verify_lab_open(truth, "t_stiffener", &a0, 1, 1000, 0, false);
+    CHECK(L != NULL);
+    if (!L) return;
+    const verify_camera_t *vc = verify_lab_camera(L);
+    int W = verify_lab_width(L), H = verify_lab_height(L);
+    char *gdir = g_strdup(test_path("gain"));
+    g_mkdir_with_parents(gdir, 0755);
+    char buf[256], kc[64];
+    snprintf(buf, sizeof buf, "{\"system_gain_dn_per_e\": %.10g, \"read_noise_e\": %.10g, \"saturation_dn\": %.10g}",
+             vc->K_dn_per_e, vc->read_noise_e, vc->saturation_dn);
+    test_write("gain/gain.json", buf);
+    CHECK(model_tiff_write_float(test_path("gain/offset_dn.tiff"), W, H, vc->offset_dn, NULL));
+    CHECK(model_tiff_write_float(test_path("gain/prnu_gain.tiff"), W, H, vc->flat, NULL));
+    // kc*I as a white calibration through this flat field measures it
+    snprintf(kc, sizeof kc, "%.12g", verify_lab_A(L)[0] / verify_lab_lamps(L)->lamps[0].intensity);
+    verify_lab_free(L);
+    const char *dir = test_path("plan");
+    char *out = NULL, *err = NULL;
+    int rc = test_refl_run(300, &out, &err, "plan", "lamps", scene, "--camera", cam, "--lamps", lamps, "--kc-per-us",
+                           kc, "--materials", mats, "--gain-calib", gdir, "--check-virtual", truth, "--no-report",
+                           "-o", dir, NULL);
+    g_free(gdir);
+    CHECK_MSG(rc == 0, "rc %d: %s", rc, err);
+    CHECK_CONTAINS(out, "chosen lamps");
+    g_free(out);
+    g_free(err);
+    char *jp = g_strdup_printf("%s/plan.json", dir);
+    json_t *j = json_load_file(jp, 0, NULL);
+    g_free(jp);
+    CHECK(j != NULL);
+    if (!j) return;
+    json_t *ch = json_object_get(j, "chosen");
+    CHECK(json_is_true(json_object_get(ch, "feasible")));
+    CHECK(json_integer_value(json_object_get(ch, "n_detectable")) >= 15);
+    json_t *chk = json_object_get(j, "virtual_rig_check");
+    double ag = json_number_value(json_object_get(chk, "agreement"));
+    CHECK_MSG(ag >= 0.95, "agreement %.3f", ag);
+    printf("  agreement %.1f %% (target 95 %%)\n", 100 * ag);
+    if (ag < 0.95 || getenv("REFL_TEST_VERBOSE")) {
+        json_t *cs = json_object_get(chk, "configurations");
+        for (size_t c = 0; c < json_array_size(cs); c++) {
+            json_t *sgs = json_object_get(json_array_get(cs, c), "segments");
+            for (size_t k = 0; k < json_array_size(sgs); k++) {
+                json_t *g = json_array_get(sgs, k), *fd = json_object_get(g, "found");
+                if (json_is_boolean(fd) && json_is_true(fd) != json_is_true(json_object_get(g, "detectable")))
+                    printf("  disagreement: lamps %s segment %zu (faces %s/%s, %.0f px): predicted %.1f measured %.1f DN\n",
+                           json_string_value(json_object_get(json_array_get(cs, c), "lamps")), k,
+                           json_string_value(json_object_get(g, "face_side0")),
+                           json_string_value(json_object_get(g, "face_side1")),
+                           json_number_value(json_object_get(g, "length_px")),
+                           json_number_value(json_object_get(g, "sobel_predicted_dn")),
+                           json_number_value(json_object_get(g, "sobel_measured_dn")));
+            }
+        }
+    }
+    CHECK(json_array_size(json_object_get(chk, "configurations")) >= 4);
+    CHECK(json_array_size(json_object_get(j, "faces")) >= 6);
+    json_decref(j);
+    // usage errors
+    CHECK(test_refl_run(30, &out, &err, "plan", "lamps", scene, "--camera", cam, "--lamps", lamps, "--materials",
+                        mats, "-o", dir, NULL) == 2);
+    CHECK_CONTAINS(err, "--kc-per-us");
+    g_free(out);
+    g_free(err);
+    CHECK(test_refl_run(30, &out, &err, "plan", "lamps", scene, "--camera", cam, "--lamps", lamps, "--kc-per-us",
+                        "1e-4", "--materials", mats, "--exposures-us", "100,x", "-o", dir, NULL) == 2);
+    CHECK_CONTAINS(err, "--exposures-us");
+    g_free(out);
+    g_free(err);
+}
