@@ -258,21 +258,31 @@ bool fit_solve(fit_problem_t *p, const fit_options_t *opt, fit_summary_t *s)
         std::vector<double> grad;
         bool any = false;
         std::map<double *, std::vector<int>> active;
-        if (p->problem.Evaluate(eo, &cost, nullptr, &grad, nullptr)) {
+        // The gradient is in the blocks' tangent coordinates: a block with
+        // fixed parameters (a subset manifold) has one entry per free
+        // parameter, in order.
+        size_t total = 0;
+        for (double *x : order) total += (size_t)p->problem.ParameterBlockTangentSize(x);
+        if (p->problem.Evaluate(eo, &cost, nullptr, &grad, nullptr) && grad.size() == total) {
             size_t off = 0;
             for (double *x : order) {
-                int n = p->sizes[x];
-                if (!p->problem.IsParameterBlockConstant(x))
+                int n = p->sizes[x], tn = p->problem.ParameterBlockTangentSize(x);
+                if (!p->problem.IsParameterBlockConstant(x)) {
+                    int j = 0;
                     for (int i = 0; i < n; i++) {
-                        if (p->fixed[x][i]) continue;
+                        bool fixed_i = tn < n && p->fixed[x][i];
+                        if (fixed_i) continue;
+                        int gi = tn < n ? j++ : i;
+                        if (p->fixed[x][i] || gi >= tn) continue;
                         double lo = p->problem.GetParameterLowerBound(x, i), hi = p->problem.GetParameterUpperBound(x, i);
-                        double g = grad[off + i], tol = 1e-12 * std::fmax(1.0, std::fabs(x[i]));
+                        double g = grad[off + (size_t)gi], tol = 1e-12 * std::fmax(1.0, std::fabs(x[i]));
                         if ((x[i] <= lo + tol && g > 0) || (x[i] >= hi - tol && g < 0)) {
                             active[x].push_back(i);
                             any = true;
                         }
                     }
-                off += (size_t)n;
+                }
+                off += (size_t)tn;
             }
         }
         if (any) {
