@@ -6,6 +6,7 @@
 // K and read noise). See fit/verify_lab.h.
 #define _GNU_SOURCE
 #include <math.h>
+#include <stdatomic.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -56,8 +57,13 @@ verify_lab_t *verify_lab_open(const char *truth_path, const char *sample, const 
     verify_lab_t *L = calloc(1, sizeof *L);
     if (!L) return NULL;
     snprintf(L->truth, sizeof L->truth, "%s", truth_path);
+    // several labs may live in one process: each camera its own serial
+    static atomic_int count;
+    char serial[32];
+    snprintf(serial, sizeof serial, "REFL-LAB%d", atomic_fetch_add(&count, 1) + 1);
     rig_virtual_options_t o = rig_virtual_defaults();
     o.serve = RIG_VIRTUAL_SERVE_INPROCESS;
+    o.serial = serial;
     o.time_scale = 0.001;
     int r = rig_virtual_open(&L->v, truth_path, &o);
     if (r) {

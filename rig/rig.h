@@ -289,6 +289,8 @@ typedef struct {
     double      time_scale;     // turntable and lamp timing: 1 real time, 0.01 = 100x faster
     uint64_t    noise_seed;     // first frame's noise seed (default 1; +1 per frame)
     double      busy_wait_s;    // wait this long for another camera server on the address to stop (default 0; GigE only)
+    const char *serial;         // the camera's serial instead of the truth file's (NULL: the file's); a process
+                                // serves one in-process camera per serial
 } rig_virtual_options_t;
 
 rig_virtual_options_t rig_virtual_defaults(void);

@@ -1582,6 +1582,7 @@ int rig_virtual_open(rig_virtual_t **out, const char *truth_path, const rig_virt
         err = fail_model(RIG_ERR_INVALID);
         goto fail;
     }
+    if (o.serial) gp.serial = o.serial;
     const char *sample = o.sample ? o.sample : def_sample ? def_sample : v->samples[0].name;
     v->cur_sample = find_sample(v, sample);
     if (v->cur_sample < 0) {

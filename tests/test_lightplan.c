@@ -108,7 +108,7 @@ TEST(lightplan_virtual_rig_agreement)
     // the gain calibration a lab would have (the rig's own maps, noise-free)
     const double a0 = 0;
     verify_lab_t *L = verify_lab_open(truth, "t_stiffener", &a0, 1, 1000, 0, false);
-    CHECK(L != NULL);
+    CHECK_MSG(L != NULL, "verify lab: %s", model_last_error());
     if (!L) return;
     const verify_camera_t *vc = verify_lab_camera(L);
     int W = verify_lab_width(L), H = verify_lab_height(L);
