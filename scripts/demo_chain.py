@@ -148,6 +148,27 @@ for fname in ("priors_plywood.json", "priors_painted_steel.json"):
                               f"{f(wp['lo'], 4)} .. {f(wp['hi'], 4)}", tv, ratio]))
         parts.append("</table>\n")
 
+# ---- light planning ------------------------------------------------------------
+pp = os.path.join(out, "plan_lamps", "plan.json")
+if os.path.exists(pp):
+    pl = load(pp)
+    c = pl["chosen"]
+    chk = pl.get("virtual_rig_check") or {}
+    parts.append("<h3>Light planning for the workpiece (refl plan lamps, "
+                 "<a href=\"plan_lamps/index.html\">report</a>)</h3>\n"
+                 f"<p>With the calibrated camera, lamps, white and gain and the fitted priors, at turntable "
+                 f"{f(pl['turntable_deg'], 4)}&deg;: every set of the four lamps at six exposures. Chosen: "
+                 f"<b>{html.escape(c['lamps'])}</b> at <b>{f(c['exposure_us'], 6)} &micro;s</b> "
+                 f"({'free of glare and saturation' if c['feasible'] else 'not free of glare and saturation'}): "
+                 f"{c['n_detectable']} of {c['n_segments']} visible edge segments predicted detectable by a Sobel "
+                 f"detector ({f(c['detectable_length_px'], 5)} px), {f(c['usable_points'], 5)} usable reference "
+                 f"points.")
+    if chk.get("agreement") is not None:
+        parts.append(f" On the virtual rig's own frames (the chosen set and each lamp) a Sobel detector agrees "
+                     f"with the prediction on <b>{100 * chk['agreement']:.1f} %</b> of the judged segments "
+                     f"(target {100 * chk.get('target', 0.95):.0f} %).")
+    parts.append("</p>\n")
+
 # ---- verification --------------------------------------------------------------
 ver = [("verify_t", "T-stiffener (the correct description)", True),
        ("verify_i", "I-stiffener (wrong)", False),
