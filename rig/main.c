@@ -1,6 +1,8 @@
 // rig/main.c — bin/refl: the rig controller's command dispatcher.
 #include <stdio.h>
+#include <errno.h>
 #include <string.h>
+#include <unistd.h>
 
 #include "model/model.h"
 #include "calib/calib.h"
@@ -15,6 +17,8 @@ typedef struct {
     const char *summary;
 } command_t;
 
+static int demo_cmd(int argc, char **argv);
+
 static const command_t commands[] = {
     { "render", model_cmd_render, "render a scene through the imaging model to a PNG/TIFF image" },
     { "edges",  model_cmd_edges,  "list scene edges: visible image segments, lighting per side, contrast" },
@@ -25,6 +29,7 @@ static const command_t commands[] = {
     { "calib",   calib_cmd,       "calibrate camera geometry and turntable axis, lamp positions, sensitivity" },
     { "fit",     fit_cmd,         "fit reflection models to BRDF samples and write priors" },
     { "verify",  verify_cmd,      "verify a scene description against images: fit within the priors, residue, changes, verdict" },
+    { "demo",    demo_cmd,        "the whole lab day on the virtual rig: calibrations, materials, light planning, verification" },
     { "plan",    lightplan_cmd,   "plan lamps: choose the lamp set and exposure for detectable edges, no glare or saturation" },
 };
 
@@ -34,6 +39,55 @@ static void usage(FILE *f)
     for (size_t i = 0; i < sizeof commands / sizeof commands[0]; i++)
         fprintf(f, "  %-8s %s\n", commands[i].name, commands[i].summary);
     fprintf(f, "\nrefl %s\n", REFL_VERSION);
+}
+
+// `refl demo [-o DIR]`: scripts/demo with this binary (the scripts beside it:
+// $REFL_SCRIPTS_DIR, else ../scripts or ../../scripts of the executable).
+static int demo_cmd(int argc, char **argv)
+{
+    const char *out = "refl-demo";
+    for (int i = 1; i < argc; i++) {
+        if (!strcmp(argv[i], "-h") || !strcmp(argv[i], "--help")) {
+            printf("usage: refl demo [-o DIR]\n\nRuns the whole lab day on the virtual rig (scripts/demo): geometry, "
+                   "lamp and gain\ncalibrations, the reference white, three material sessions and their fits, light "
+                   "planning\nfor the workpiece and its verification against the correct and wrong descriptions, "
+                   "each\nresult next to the rig's truth; prints the path of DIR/index.html (default DIR: "
+                   "refl-demo).\n\nrefl %s\n", REFL_VERSION);
+            return 0;
+        }
+        if (!strcmp(argv[i], "-o") && i + 1 < argc) {
+            out = argv[++i];
+            continue;
+        }
+        fprintf(stderr, "refl demo: unexpected argument '%s' (refl demo --help)\n", argv[i]);
+        return 2;
+    }
+    char exe[4096];
+    ssize_t n = readlink("/proc/self/exe", exe, sizeof exe - 1);
+    if (n <= 0) {
+        fprintf(stderr, "refl demo: cannot find this executable (/proc/self/exe)\n");
+        return 1;
+    }
+    exe[n] = 0;
+    char dir[4096], script[4200];
+    snprintf(dir, sizeof dir, "%s", exe);
+    char *slash = strrchr(dir, '/');
+    if (slash) *slash = 0;
+    const char *env = getenv("REFL_SCRIPTS_DIR");
+    const char *cands[3] = { env, "/../scripts", "/../../scripts" };
+    for (int k = 0; k < 3; k++) {
+        if (!cands[k]) continue;
+        if (k == 0) snprintf(script, sizeof script, "%s/demo", cands[k]);
+        else snprintf(script, sizeof script, "%s%s/demo", dir, cands[k]);
+        if (access(script, R_OK) == 0) {
+            char *args[] = { (char *)"/bin/bash", script, exe, (char *)out, NULL };
+            execv("/bin/bash", args);
+            fprintf(stderr, "refl demo: cannot run /bin/bash %s: %s\n", script, strerror(errno));
+            return 1;
+        }
+    }
+    fprintf(stderr, "refl demo: scripts/demo not found beside %s (set REFL_SCRIPTS_DIR to refl's scripts/)\n", exe);
+    return 1;
 }
 
 int main(int argc, char **argv)

@@ -177,3 +177,18 @@ TEST(lightplan_virtual_rig_agreement)
     g_free(out);
     g_free(err);
 }
+
+// `refl demo` runs scripts/demo (the whole lab day; make demo runs it): its
+// usage and its refusal of stray arguments (the run itself is make demo's).
+TEST(demo_command_usage)
+{
+    char *out = NULL, *err = NULL;
+    CHECK(test_refl_run(30, &out, &err, "demo", "--help", NULL) == 0);
+    CHECK_CONTAINS(out, "refl demo [-o DIR]");
+    g_free(out);
+    g_free(err);
+    CHECK(test_refl_run(30, &out, &err, "demo", "stray", NULL) == 2);
+    CHECK_CONTAINS(err, "stray");
+    g_free(out);
+    g_free(err);
+}
