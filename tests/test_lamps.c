@@ -281,6 +281,15 @@ static void check_signal(int sig)
     }
     pid_t pid = fork();
     if (pid == 0) {
+        // The lamp code leaves signals the parent ignores ignored (nohup, or a
+        // background job of a non-interactive shell ignores SIGHUP/SIGINT):
+        // the child starts from the defaults, as from a terminal.
+        signal(SIGINT, SIG_DFL);
+        signal(SIGTERM, SIG_DFL);
+        signal(SIGHUP, SIG_DFL);
+        sigset_t none;
+        sigemptyset(&none);
+        sigprocmask(SIG_SETMASK, &none, NULL);
         dup2(p[1], 1);
         execvp(c.argv[0], (char *const *)c.argv);
         _exit(127);
