@@ -327,12 +327,6 @@ fit_brdf_options_t fit_brdf_defaults(void)
     return (fit_brdf_options_t){ .threads = 0, .starts = 3, .noise_sigma = 0, .verbose = false };
 }
 
-static int cmp_double(const void *a, const void *b)
-{
-    double x = *(const double *)a, y = *(const double *)b;
-    return (x > y) - (x < y);
-}
-
 // The diffuse level: the median of R / n.l away from the mirror direction.
 static double diffuse_level(const fit_samples_t *s)
 {
@@ -345,7 +339,7 @@ static double diffuse_level(const fit_samples_t *s)
         k = 0;
         for (int i = 0; i < s->n; i++) v[k++] = s->R[i] / s->c[i].nl;
     }
-    qsort(v, (size_t)k, sizeof *v, cmp_double);
+    qsort(v, (size_t)k, sizeof *v, model_cmp_double);
     double med = k ? v[k / 2] : 0.1;
     free(v);
     return med;

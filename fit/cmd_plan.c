@@ -146,12 +146,6 @@ static int parse(int argc, char **argv, pa_t *a)
     return 0;
 }
 
-static int cmp_dbl(const void *x, const void *y)
-{
-    double a = *(const double *)x, b = *(const double *)y;
-    return a < b ? -1 : a > b;
-}
-
 static const char *face_name(const model_scene_t *s, int f, char *buf, size_t n)
 {
     if (f < 0) snprintf(buf, n, "background");
@@ -437,7 +431,7 @@ int lightplan_cmd(int argc, char **argv)
             if (res.face_id[p] >= 0) sv[n++] = res.predicted[p] - sensor.offset_dn;
         double med = 0;
         if (n) {
-            qsort(sv, (size_t)n, sizeof *sv, cmp_dbl);
+            qsort(sv, (size_t)n, sizeof *sv, model_cmp_double);
             med = sv[n / 2];
         }
         free(sv);

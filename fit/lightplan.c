@@ -40,12 +40,6 @@ void lightplan_result_free(lightplan_result_t *r)
     memset(r, 0, sizeof *r);
 }
 
-static int cmp_d(const void *a, const void *b)
-{
-    double x = *(const double *)a, y = *(const double *)b;
-    return x < y ? -1 : x > y;
-}
-
 // Sobel magnitude of an ideal step edge of contrast 1 along direction theta.
 static double sobel_factor(const double q0[2], const double q1[2])
 {
@@ -72,7 +66,7 @@ void lightplan_segments_for(const lightplan_result_t *r, uint32_t mask, double e
         }
         g->dP = n ? sum / n : 0;
         if (n && v) {
-            qsort(v, (size_t)n, sizeof *v, cmp_d);
+            qsort(v, (size_t)n, sizeof *v, model_cmp_double);
             g->gradient = n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
         } else {
             g->gradient = 0;
@@ -336,7 +330,7 @@ bool lightplan_run(const model_scene_t *scene, model_camera_t *cam, const model_
         }
         F->npix = nv;
         if (nv) {
-            qsort(vals, (size_t)nv, sizeof *vals, cmp_d);
+            qsort(vals, (size_t)nv, sizeof *vals, model_cmp_double);
             F->P_median = nv % 2 ? vals[nv / 2] : 0.5 * (vals[nv / 2 - 1] + vals[nv / 2]);
             F->usable_frac = (double)nu / nv;
         } else {
@@ -401,7 +395,7 @@ double lightplan_sobel_check(const lightplan_segment_t *segs, int nseg, const fl
                 }
                 v[k] = best;
             }
-            qsort(v, (size_t)m, sizeof *v, cmp_d);
+            qsort(v, (size_t)m, sizeof *v, model_cmp_double);
             med = m % 2 ? v[m / 2] : 0.5 * (v[m / 2 - 1] + v[m / 2]);
             free(v);
         }

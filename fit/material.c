@@ -546,12 +546,6 @@ done:
 // ---------------------------------------------------------------------------
 // Reference white
 
-static int cmp_d(const void *a, const void *b)
-{
-    double x = *(const double *)a, y = *(const double *)b;
-    return (x > y) - (x < y);
-}
-
 bool fit_white(const fit_obs_set_t *obs, const fit_calib_t *cal, double albedo, const char *out_json,
                json_t *prov)
 {
@@ -576,10 +570,10 @@ bool fit_white(const fit_obs_set_t *obs, const fit_calib_t *cal, double albedo, 
             ok = false;
             break;
         }
-        qsort(v, (size_t)n, sizeof *v, cmp_d);
+        qsort(v, (size_t)n, sizeof *v, model_cmp_double);
         double med = v[n / 2];
         for (int i = 0; i < n; i++) v[i] = fabs(v[i] - med);
-        qsort(v, (size_t)n, sizeof *v, cmp_d);
+        qsort(v, (size_t)n, sizeof *v, model_cmp_double);
         double mad = 1.4826 * v[n / 2];
         json_t *e = json_object();
         json_object_set_new(e, "name", json_string(cal->lamps->lamps[l].name));

@@ -65,6 +65,8 @@ int model_default_threads(void);
 void model_parallel_for(int n, int chunk, int nthreads,
                         void (*fn)(void *ctx, int begin, int end, int thread),
                         void *ctx);
+// qsort comparator of doubles, ascending (NaN last).
+int model_cmp_double(const void *a, const void *b);
 // Monotonic wall clock in seconds.
 double model_now_s(void);
 // Host real-time clock (CLOCK_REALTIME), seconds since 1970 UTC.
