@@ -2,6 +2,7 @@
 #   make          build bin/refl (installs missing Debian packages first)
 #   make check    fast tests (prints "N passed, N failed")
 #   make demo     the main job on the virtual rig
+#   make study    the verification detection study on the virtual rig (about 45 min)
 #   make bench    performance figures, one "NAME: VALUE UNIT" line each
 #   make asan     the tests under AddressSanitizer + UndefinedBehaviorSanitizer
 #   make fuzz     fuzz the parsers with libFuzzer (FUZZ_SECONDS=60)
@@ -74,7 +75,7 @@ obj = $(patsubst %.c,$(BUILD)/%.o,$(1))
 LIB_OBJ   := $(call obj,$(LIB_SRC)) $(patsubst %.cc,$(BUILD)/%.o,$(FIT_CXX_SRC))
 LIB       := $(BUILD)/librefl.a
 
-.PHONY: all check demo bench asan fuzz clean
+.PHONY: all check demo study bench asan fuzz clean
 all: $(BIN)/refl
 
 $(BUILD)/%.o: %.c | $(BUILD)/config.mk
@@ -130,6 +131,10 @@ check: $(BIN)/refl $(BIN)/refl-tests $(FAKE_GPIOD) $(LAMP_CHILD) $(ENOSPC_SHIM)
 
 demo: $(BIN)/refl
 	scripts/demo $(BIN)/refl $(BUILD)/demo
+
+# the verification detection study on the virtual rig (about 45 min on 2 cores; README: refl verify)
+study: $(BIN)/refl
+	REFL_SCRIPTS_DIR=$(CURDIR)/scripts $(BIN)/refl verify --study -o $(BUILD)/study --cases 200
 
 bench: $(BIN)/refl $(BIN)/refl-bench
 	REFL=$(BIN)/refl $(BIN)/refl-bench
