@@ -44,7 +44,8 @@ static void usage(FILE *f)
             "  --sample NAME            the virtual rig's sample for the check (t_stiffener)\n"
             "  --threads N, --no-report\n"
             "\nOutputs in DIR: plan.json (every configuration, the chosen one, faces, edge segments; the check),\n"
-            "predicted.tiff (DN, direct light), index.html (scripts/plan_lamps_report.py).\n"
+            "predicted.tiff (DN, direct light), glare.tiff (where each candidate would glare), index.html\n"
+            "(scripts/plan_lamps_report.py).\n"
             "\nrefl %s\n", REFL_VERSION);
 }
 
@@ -460,6 +461,13 @@ int lightplan_cmd(int argc, char **argv)
                                             k->saturated_pix));
     }
     json_object_set_new(doc, "configurations", cf);
+    json_t *gl = json_array();
+    for (int i = 0; i < lamps->n; i++) {
+        long n = 0;
+        for (size_t p = 0; p < (size_t)res.W * res.H; p += 1) n += (res.glare[p] >> i) & 1;
+        json_array_append_new(gl, json_pack("{s:s,s:I}", "lamp", lamps->lamps[i].name, "glare_pixels", (json_int_t)n));
+    }
+    json_object_set_new(doc, "glare_per_lamp", gl);
     json_t *fa = json_array();
     char fb[32];
     for (int f = 0; f < res.nfaces; f++) {
@@ -497,6 +505,22 @@ int lightplan_cmd(int argc, char **argv)
     wok = wok && model_tiff_write_float(tp, res.W, res.H, res.predicted, model_meta_list(mt));
     model_meta_free(mt);
     g_free(tp);
+    // where each candidate would glare: bit i of the value for lamp i (file order)
+    float *gm = wok ? malloc((size_t)res.W * res.H * sizeof *gm) : NULL;
+    if (gm) {
+        for (size_t p = 0; p < (size_t)res.W * res.H; p++) gm[p] = (float)res.glare[p];
+        char *gp = g_strdup_printf("%s/glare.tiff", a.out);
+        model_meta_t *gmt = model_meta_new();
+        char order[512];
+        mask_names(lamps, lamps->n >= 32 ? 0xffffffffu : (1u << lamps->n) - 1, order, sizeof order);
+        model_meta_add(gmt, "units", "bit mask as a number: bit i set where candidate lamp i (order: %s) lies within "
+                       "%g deg of the mirror direction of the view ray on a non-Lambertian face (specular glare)",
+                       order, a.opt.glare_cone_deg);
+        wok = model_tiff_write_float(gp, res.W, res.H, gm, model_meta_list(gmt));
+        model_meta_free(gmt);
+        g_free(gp);
+        free(gm);
+    }
     if (!wok) goto done;
     printf("refl plan lamps: %s: chosen lamps %s at %g us%s: %d of %d edge segments detectable (%.0f px), "
            "%.0f usable reference points, %d glare and %d saturated pixels (step-2 grid)\n",

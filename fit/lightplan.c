@@ -35,6 +35,7 @@ void lightplan_result_free(lightplan_result_t *r)
     free(r->predicted);
     free(r->L);
     free(r->face_id);
+    free(r->glare);
     free(r->seg_first);
     free(r->Sside);
     memset(r, 0, sizeof *r);
@@ -338,6 +339,14 @@ bool lightplan_run(const model_scene_t *scene, model_camera_t *cam, const model_
         }
     }
     free(vals);
+    // the glare of every candidate at full resolution (nearest grid point)
+    out->glare = malloc(npx * sizeof *out->glare);
+    if (!out->glare) goto done;
+    for (int y = 0; y < H; y++)
+        for (int x = 0; x < W; x++) {
+            int gx = (x + 1) / 2 < gw ? (x + 1) / 2 : gw - 1, gy = (y + 1) / 2 < gh ? (y + 1) / 2 : gh - 1;
+            out->glare[(size_t)y * W + x] = glare[(size_t)gy * gw + gx];
+        }
     ok = true;
 done:
     model_edges_free(E0);

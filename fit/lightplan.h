@@ -101,6 +101,7 @@ typedef struct {
     float               *predicted;     // W*H DN, chosen configuration (direct light)
     float               *L;             // nlamps planes W*H: each lamp's signal per us of exposure (DN/us, with g)
     int32_t             *face_id;       // W*H
+    uint32_t            *glare;         // W*H: bit i set where lamp i would glare (nearest point of the step-2 grid)
     int                  npoints;       // sample points along the segments
     int                 *seg_first;     // nsegments + 1: segment s has points seg_first[s] .. seg_first[s+1]-1
     double              *Sside;         // nlamps x npoints x 2: each lamp's signal per us 2 px to each side

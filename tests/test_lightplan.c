@@ -80,6 +80,13 @@ TEST(lightplan_glare_and_saturation_steer_the_choice)
             if (r.configs[k].exposure_us == 400000 && r.configs[k].saturated_pix > 0) long_saturates = true;
         }
         CHECK(mirror_glare);
+        // the glare map: the mirror lamp (bit 0) glares on the plate, the side lamp (bit 1) nowhere
+        long g0 = 0, g1 = 0;
+        for (size_t p = 0; p < (size_t)r.W * r.H; p++) {
+            g0 += r.glare[p] & 1;
+            g1 += (r.glare[p] >> 1) & 1;
+        }
+        CHECK(g0 > 400 && g1 == 0);
         CHECK(long_saturates);
         CHECK(r.nfaces == 1 && r.faces[0].npix > 1000 && r.faces[0].usable_frac > 0.9);
         // the plate's boundary is an edge against the background: detectable when lit
