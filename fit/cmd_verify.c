@@ -589,12 +589,13 @@ int verify_cmd(int argc, char **argv)
         sh.Pa = res.Pa[m];
         sh.gain_map = maps ? vc->flat : NULL;
         sh.nthreads = a.opt.threads;
-        const model_material_t *fm[256];
-        for (int k = 0; k < scene->nmaterials && k < 256; k++) fm[k] = &res.mats[k];
+        const model_material_t **fm = calloc((size_t)scene->nmaterials + 1, sizeof *fm);
+        for (int k = 0; fm && k < scene->nmaterials; k++) fm[k] = &res.mats[k];
         model_scene_t *rot = model_scene_rotated_z(scene, im->angle_deg);
         model_tracer_t *t = rot ? model_tracer_new(rot) : NULL;
         int32_t *face = malloc(npx * sizeof *face);
-        bool rok = t && face && model_render(t, vc->cam, &L, fm, &sh, synth, face, NULL);
+        bool rok = t && face && fm && model_render(t, vc->cam, &L, fm, &sh, synth, face, NULL);
+        free(fm);
         if (rok)
             for (size_t q = 0; q < npx; q++)
                 if (face[q] < 0) synth[q] = NAN;   // no surface of the description: nothing predicted

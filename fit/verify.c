@@ -710,6 +710,7 @@ bool verify_run(const model_scene_t *scene, const verify_priors_t *pr, const ver
     int *gidx = malloc((size_t)(npts ? npts : 1) * sizeof *gidx);
     pdesc_t *pd = calloc((size_t)(ncams + nl + nimgs + 1 + nm * MODEL_BRDF_MAX_PARAMS), sizeof *pd);
     fit_problem_t *prob = fit_problem_new();
+    bool *mat_used = NULL;
     bool ok = false;
     if (!out->points || !out->per_image || !out->kc || !out->s || !out->Pa || !out->mats || !pt || !ptidx || !cs ||
         !wv || !bv || !lampv || !mp || !rcs || !items || !groups || !gidx || !pd || !prob) {
@@ -886,9 +887,10 @@ bool verify_run(const model_scene_t *scene, const verify_priors_t *pr, const ver
         d->fixed = opt->fix_rho || opt->ir_samples <= 0;
         if (!fit_add_parameters(prob, d->x, 1)) goto fit_fail;
     }
-    bool mat_used[256] = { 0 };
+    mat_used = calloc((size_t)nm + 1, sizeof *mat_used);
+    if (!mat_used) goto fit_fail;
     for (int k = 0; k < nfit; k++)
-        if (pt[k].mat >= 0 && pt[k].mat < 256) mat_used[pt[k].mat] = true;
+        if (pt[k].mat >= 0 && pt[k].mat < nm && out->points[ptidx[k]].status == VERIFY_PT_USED) mat_used[pt[k].mat] = true;
     for (int k = 0; k < nm; k++) {
         const verify_prior_t *P = prior[k];
         double *x = &mp[k * MODEL_BRDF_MAX_PARAMS];
@@ -1196,6 +1198,7 @@ done:
     free(groups);
     free(gidx);
     free(pd);
+    free(mat_used);
     return ok;
 fit_fail:
     model_error(NULL, 0, "verify: setting up the fit failed: %s", fit_last_error());
