@@ -224,6 +224,7 @@ int lightplan_cmd(int argc, char **argv)
             double v;
             if (nexp >= 64 || !model_parse_double(t, &v) || !(v > 0)) {
                 free(dup);
+                json_decref(prov);
                 return uerr("--exposures-us: '%s' is not a list of up to 64 positive exposures in us", ex);
             }
             exps[nexp++] = v;
