@@ -31,7 +31,6 @@ response; a check.png left by an earlier run is removed when there is no
 check), configs.png (detectable edge length and usable reference points
 against exposure per lamp set) and index.html.
 """
-import html
 import json
 import math
 import os
@@ -43,8 +42,8 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 from matplotlib.lines import Line2D  # noqa: E402
-from PIL import Image  # noqa: E402
-from report_common import Bad, load_json, run_report  # noqa: E402
+from report_common import (Bad, dict_table, e, fmt, is_num, load_json, provenance_head,  # noqa: E402
+                           provenance_section, read_float_tiff, run_report, table, write_page)
 
 PROG = "plan_lamps_report.py"
 TOP_N = 15
@@ -65,10 +64,6 @@ MARKERS = ["o", "s", "^", "D", "v", "P", "X", "<", ">", "h", "*", "p"]
 
 # ---------------------------------------------------------------------------
 # inputs
-
-def is_num(v):
-    return isinstance(v, (int, float)) and not isinstance(v, bool)
-
 
 class Plan:
     """Typed reads of plan.json: a value of the wrong type is a Bad naming the key's path in the JSON."""
@@ -218,20 +213,6 @@ def load_plan(d):
     return p
 
 
-def read_tiff(path, why):
-    try:
-        with Image.open(path) as im:
-            im.seek(0)
-            a = np.array(im, dtype=np.float32)
-    except FileNotFoundError:
-        raise Bad(path, f"missing ({why})")
-    except (OSError, ValueError) as x:
-        raise Bad(path, f"cannot read as a TIFF: {x}")
-    if a.ndim != 2 or not a.size:
-        raise Bad(path, f"expected one grey channel, got an array of shape {a.shape}")
-    return a
-
-
 # ---------------------------------------------------------------------------
 # derived figures
 
@@ -266,16 +247,6 @@ def grey_limits(a):
 
 # ---------------------------------------------------------------------------
 # formatting
-
-def e(s):
-    return html.escape(str(s), quote=True)
-
-
-def fmt(x, spec=".4g", none="n/a"):
-    if x is None or (isinstance(x, float) and not math.isfinite(x)):
-        return none
-    return format(x, spec)
-
 
 def us(x):
     return f"{x:g} µs"
@@ -499,25 +470,6 @@ CSS = ("body{font-family:sans-serif;max-width:1250px;margin:1em auto;padding:0 1
        "width:2px;height:16px;background:#222}")
 
 
-def table(header, rows, classes=None, numeric=None):
-    """header: plain text (escaped here); rows: lists of HTML cell contents; classes: per row; numeric: per
-    column, True for a number (right-aligned), "l" for text kept on one line."""
-    def td(j, c):
-        k = numeric[j] if numeric else False
-        return f'<td class="{"n" if k is True else k}">{c}</td>' if k else f"<td>{c}</td>"
-
-    out = ["<table>", "<tr>" + "".join(f"<th>{e(h)}</th>" for h in header) + "</tr>"]
-    for i, r in enumerate(rows):
-        cls = f' class="{classes[i]}"' if classes and classes[i] else ""
-        out.append(f"<tr{cls}>" + "".join(td(j, c) for j, c in enumerate(r)) + "</tr>")
-    out.append("</table>")
-    return "\n".join(out)
-
-
-def dict_table(o):
-    return table(["key", "value"], [[e(k), e(v if isinstance(v, str) else json.dumps(v))] for k, v in o.items()])
-
-
 def swatch(colour, dashed=False):
     style = (f"background:repeating-linear-gradient(90deg,{colour} 0 6px,transparent 6px 9px)" if dashed
              else f"background:{colour}")
@@ -550,10 +502,9 @@ def write_html(d, p, have):
     L = [f'<!DOCTYPE html>\n<html><head><meta charset="utf-8"><title>{e(title)}</title>\n'
          f"<style>{CSS}</style>\n</head><body>\n<h1>{e(title)}</h1>"]
     prov = raw.get("provenance")
-    if isinstance(prov, dict) and isinstance(prov.get("command"), str):
-        head = ", ".join(e(x) for x in (("refl " + str(prov["refl_version"])) if prov.get("refl_version") else "",
-                                         str(prov.get("date_utc") or "")) if x)
-        L.append(f"<p>{head + '<br>' if head else ''}<code>{e(prov['command'])}</code></p>")
+    head = provenance_head(prov)
+    if head:
+        L.append(head)
     L.append(f"<p>Turntable at {fmt(p['turntable_deg'], 'g')} deg; {len(p['configs'])} configurations tried "
              f'(lamp sets &times; exposures). Data: <a href="plan.json">plan.json</a>, '
              f'<a href="predicted.tiff">predicted.tiff</a>'
@@ -773,26 +724,17 @@ def write_html(d, p, have):
     L.append('<h2 id="sensor">Sensor</h2>' + dict_table(p["sensor"]))
     L.append('<h2 id="units">Units and conventions</h2>')
     L.append(f"<p>{e(p['units'])}</p>" if p["units"] else "<p>plan.json states none.</p>")
-    L.append('<h2 id="provenance">Provenance</h2>')
-    if prov is None:
-        L.append("<p>plan.json has no provenance.</p>")
-    else:
-        L.append(f"<pre>{e(json.dumps(prov, indent=2, ensure_ascii=False))}</pre>")
+    L.append(provenance_section(prov, "plan.json"))
     L.append("</body></html>\n")
-    out = os.path.join(d, "index.html")
-    tmp = out + ".part"
-    with open(tmp, "w", encoding="utf-8") as f:
-        f.write("\n".join(L))
-    os.replace(tmp, out)
-    return out
+    return write_page(d, L)
 
 
 def report(d):
     p = load_plan(d)
-    img = read_tiff(os.path.join(d, "predicted.tiff"), "refl plan lamps writes it with plan.json")
+    img = read_float_tiff(os.path.join(d, "predicted.tiff"), "refl plan lamps writes it with plan.json")[0]
     have = {}
     if p["check"]:
-        frame = read_tiff(os.path.join(d, "check_frame.tiff"), "plan.json has a virtual_rig_check")
+        frame = read_float_tiff(os.path.join(d, "check_frame.tiff"), "plan.json has a virtual_rig_check")[0]
         if frame.shape != img.shape:
             raise Bad(os.path.join(d, "check_frame.tiff"), f"{frame.shape[1]} x {frame.shape[0]} px, predicted.tiff "
                       f"is {img.shape[1]} x {img.shape[0]}")

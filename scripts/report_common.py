@@ -1,13 +1,19 @@
-"""What the report scripts verify_report.py and verify_study_report.py share: the
-input error, the readers of their CSV table and JSON object, and main's frame.
+"""What the report scripts verify_report.py, plan_lamps_report.py and verify_study_report.py share: the
+input error, the readers of their CSV table, JSON object and float TIFF, the HTML helpers of their pages
+(escape, number format, tables, the provenance lines, the page's atomic write) and main's frame.
 
 The scripts import it from their own directory (python puts the script's
 directory on sys.path).
 """
 import csv
+import html
 import json
+import math
 import os
 import sys
+
+import numpy as np
+from PIL import Image
 
 
 class Bad(Exception):
@@ -61,6 +67,99 @@ def load_json(path):
         raise Bad(path, "expected a JSON object at the top")
     return doc
 
+
+def is_num(v):
+    """A JSON number: int or float, not bool."""
+    return isinstance(v, (int, float)) and not isinstance(v, bool)
+
+
+def read_float_tiff(path, why, empty_ok=False):
+    """The first page of the TIFF at path as a 2-D float32 array and its ImageDescription ("" without one).
+    A missing file is a Bad 'missing (why)'; an unreadable one, one not a single grey channel or (unless
+    empty_ok) one without pixels, a Bad naming path."""
+    try:
+        with Image.open(path) as im:
+            im.seek(0)
+            a = np.array(im, dtype=np.float32)
+            desc = getattr(im, "tag_v2", {}).get(270)   # ImageDescription
+    except FileNotFoundError:
+        raise Bad(path, f"missing ({why})")
+    except (OSError, ValueError) as x:
+        raise Bad(path, f"cannot read as a TIFF: {x}")
+    if a.ndim != 2 or not (a.size or empty_ok):
+        raise Bad(path, f"expected one grey channel, got an array of shape {a.shape}")
+    return a, desc if isinstance(desc, str) else ""
+
+
+# ---------------------------------------------------------------------------
+# the page
+
+def e(s):
+    """s as HTML text (quotes escaped too)."""
+    return html.escape(str(s), quote=True)
+
+
+def fmt(x, spec=".4g", none="n/a"):
+    """x formatted by spec; none for None, NaN and the infinities."""
+    if x is None or (isinstance(x, float) and not math.isfinite(x)):
+        return none
+    return format(x, spec)
+
+
+def table(header, rows, classes=None, numeric=None):
+    """An HTML table. header: plain text (escaped here); rows: lists of HTML cell contents; classes: per row;
+    numeric: per column, True for a number (right-aligned, class "n"), a string for that class (e.g. "l":
+    text kept on one line), false for none."""
+    def td(j, c):
+        k = numeric[j] if numeric else False
+        return f'<td class="{"n" if k is True else k}">{c}</td>' if k else f"<td>{c}</td>"
+
+    out = ["<table>", "<tr>" + "".join(f"<th>{e(h)}</th>" for h in header) + "</tr>"]
+    for i, r in enumerate(rows):
+        cls = f' class="{classes[i]}"' if classes and classes[i] else ""
+        out.append(f"<tr{cls}>" + "".join(td(j, c) for j, c in enumerate(r)) + "</tr>")
+    out.append("</table>")
+    return "\n".join(out)
+
+
+def dict_table(o):
+    """A key | value table of the JSON object o (strings as they are, other values as JSON)."""
+    return table(["key", "value"], [[e(k), e(v if isinstance(v, str) else json.dumps(v))] for k, v in o.items()])
+
+
+def provenance_head(prov):
+    """The line under the title: refl's version and the date, and the command, from the JSON provenance
+    prov; None when prov is not an object with a "command" string."""
+    if not (isinstance(prov, dict) and isinstance(prov.get("command"), str)):
+        return None
+    head = ", ".join(e(x) for x in (("refl " + str(prov["refl_version"])) if prov.get("refl_version") else "",
+                                     str(prov.get("date_utc") or "")) if x)
+    return f"<p>{head + '<br>' if head else ''}<code>{e(prov['command'])}</code></p>"
+
+
+def provenance_section(prov, name):
+    """The page's Provenance section: prov (JSON) as indented JSON, or a sentence that the file name has
+    none when prov is None."""
+    if prov is None:
+        body = f"<p>{e(name)} has no provenance.</p>"
+    else:
+        body = f"<pre>{e(json.dumps(prov, indent=2, ensure_ascii=False))}</pre>"
+    return '<h2 id="provenance">Provenance</h2>\n' + body
+
+
+def write_page(d, lines):
+    """Writes the lines, joined by newlines, to DIR/index.html by way of index.html.part (replaced
+    atomically); returns the page's path."""
+    out = os.path.join(d, "index.html")
+    tmp = out + ".part"
+    with open(tmp, "w", encoding="utf-8") as f:
+        f.write("\n".join(lines))
+    os.replace(tmp, out)
+    return out
+
+
+# ---------------------------------------------------------------------------
+# main
 
 def run_report(prog, usage, make):
     """A report script's main, `prog DIR`: make(DIR) writes the report and returns the page's path, printed

@@ -22,7 +22,6 @@ Writes into DIR: views.png (actual | synthetic | actual - synthetic per image),
 zmap.png (z at the reference points), residue.png (histogram of z) and
 index.html (verdict, tables, figures, provenance).
 """
-import html
 import json
 import math
 import os
@@ -34,8 +33,8 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 from matplotlib.patches import Rectangle  # noqa: E402
-from PIL import Image  # noqa: E402
-from report_common import Bad, load_json, read_table, run_report  # noqa: E402
+from report_common import (Bad, dict_table, e, fmt, is_num, load_json, provenance_head,  # noqa: E402
+                           provenance_section, read_float_tiff, read_table, run_report, table, write_page)
 
 PROG = "verify_report.py"
 STATUS_MEANING = {
@@ -57,10 +56,6 @@ NAN_DIFF = "#b0b0b0"
 
 # ---------------------------------------------------------------------------
 # inputs
-
-def is_num(v):
-    return isinstance(v, (int, float)) and not isinstance(v, bool)
-
 
 class Checker:
     """Typed access to verify.json; any mismatch is a Bad naming the JSON path."""
@@ -259,21 +254,11 @@ def load_points(d, nimages):
 
 
 def read_tiff(path, want_desc=False):
-    try:
-        with Image.open(path) as im:
-            im.seek(0)
-            a = np.array(im, dtype=np.float32)
-            desc = getattr(im, "tag_v2", {}).get(270)   # ImageDescription
-    except FileNotFoundError:
-        raise Bad(path, "missing (named in verify.json \"images\")")
-    except (OSError, ValueError) as e:
-        raise Bad(path, f"cannot read as a TIFF: {e}")
-    if a.ndim != 2:
-        raise Bad(path, f"expected one grey channel, got an array of shape {a.shape}")
+    a, desc = read_float_tiff(path, 'named in verify.json "images"', empty_ok=True)
     if want_desc:
         # refl's TIFF metadata: "key: value" lines; "image:" says what the pixels are
         what = ""
-        for line in (desc if isinstance(desc, str) else "").splitlines():
+        for line in desc.splitlines():
             if line.startswith("image:"):
                 what = line[len("image:"):].strip()
         return a, what
@@ -282,16 +267,6 @@ def read_tiff(path, want_desc=False):
 
 # ---------------------------------------------------------------------------
 # formatting
-
-def fmt(x, spec=".4g", none="n/a"):
-    if x is None or (isinstance(x, float) and not math.isfinite(x)):
-        return none
-    return format(x, spec)
-
-
-def e(s):
-    return html.escape(str(s), quote=True)
-
 
 def robust_sigma(a):
     a = a[np.isfinite(a)]
@@ -481,18 +456,6 @@ CSS = ("body{font-family:sans-serif;max-width:1200px;margin:1em auto;padding:0 1
        ".correct{background:#1e8e3e}.incorrect{background:#c5221f}ul.warn li{color:#8a4b00}.note{color:#555}")
 
 
-def table(header, rows, classes=None, numeric=None):
-    """header: list of str (escaped here); rows: list of lists of HTML cell contents."""
-    out = ["<table>", "<tr>" + "".join(f"<th>{e(h)}</th>" for h in header) + "</tr>"]
-    for i, r in enumerate(rows):
-        cls = f' class="{classes[i]}"' if classes and classes[i] else ""
-        cells = "".join(f'<td class="n">{c}</td>' if numeric and numeric[j] else f"<td>{c}</td>"
-                        for j, c in enumerate(r))
-        out.append(f"<tr{cls}>{cells}</tr>")
-    out.append("</table>")
-    return "\n".join(out)
-
-
 def pm(a, b, spec=".6g"):
     if not (isinstance(a, float) and math.isfinite(a)):
         return "n/a"
@@ -514,11 +477,6 @@ def face_text(fe):
     return s + (f" ({', '.join(extra)})" if extra else "") + n
 
 
-def dict_table(o):
-    rows = [[e(k), e(json.dumps(val) if not isinstance(val, str) else val)] for k, val in o.items()]
-    return table(["key", "value"], rows)
-
-
 def write_html(d, v, p, info, nused):
     raw = v["raw"]
     L = []
@@ -526,10 +484,9 @@ def write_html(d, v, p, info, nused):
     L.append(f'<!DOCTYPE html>\n<html><head><meta charset="utf-8"><title>{e(title)}</title>\n'
              f"<style>{CSS}</style>\n</head><body>\n<h1>{e(title)}</h1>")
     prov = raw.get("provenance")
-    if isinstance(prov, dict) and isinstance(prov.get("command"), str):
-        head = ", ".join(e(x) for x in (("refl " + str(prov["refl_version"])) if prov.get("refl_version") else "",
-                                         prov.get("date_utc") or "") if x)
-        L.append(f"<p>{head + '<br>' if head else ''}<code>{e(prov['command'])}</code></p>")
+    head = provenance_head(prov)
+    if head:
+        L.append(head)
     score, thr = v["score"], v["score_threshold"]
     cmp = "&gt;" if score > thr else "&le;"
     word = "CORRECT" if v["verdict"] == "correct" else "INCORRECT"
@@ -664,18 +621,9 @@ def write_html(d, v, p, info, nused):
 
     if isinstance(raw.get("options"), dict):
         L.append('<h2 id="options">Options</h2>' + dict_table(raw["options"]))
-    L.append('<h2 id="provenance">Provenance</h2>')
-    if prov is None:
-        L.append("<p>verify.json has no provenance.</p>")
-    else:
-        L.append(f"<pre>{e(json.dumps(prov, indent=2, ensure_ascii=False))}</pre>")
+    L.append(provenance_section(prov, "verify.json"))
     L.append("</body></html>\n")
-    out = os.path.join(d, "index.html")
-    tmp = out + ".part"
-    with open(tmp, "w", encoding="utf-8") as f:
-        f.write("\n".join(L))
-    os.replace(tmp, out)
-    return out
+    return write_page(d, L)
 
 
 def report(d):

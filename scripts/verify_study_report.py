@@ -26,7 +26,6 @@ Rates are fractions in summary.csv and study.json, percent in the page.
 Writes DIR/summary.csv, DIR/roc.png, DIR/auc.png, DIR/index.html and rewrites
 DIR/study.json (atomically).
 """
-import html
 import json
 import math
 import os
@@ -37,7 +36,7 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
-from report_common import Bad, load_json, read_table, run_report  # noqa: E402
+from report_common import Bad, e, load_json, provenance_head, read_table, run_report  # noqa: E402
 
 PROG = "verify_study_report.py"
 COLUMNS = ["config", "corruption", "case", "score", "verdict_correct", "seconds"]
@@ -288,10 +287,6 @@ CSS = ("body{font-family:sans-serif;max-width:1200px;margin:1em auto;padding:0 1
        "padding:0.6em;overflow-x:auto;font-size:85%;white-space:pre-wrap}.note{color:#555}")
 
 
-def e(s):
-    return html.escape(str(s), quote=True)
-
-
 def pct(x):
     return "n/a" if not math.isfinite(x) else f"{100 * x:.1f} %"
 
@@ -300,11 +295,9 @@ def write_html(d, doc, rows, configs, corrs, summ):
     title = "refl verify --study"
     L = [f'<!DOCTYPE html>\n<html><head><meta charset="utf-8"><title>{e(title)}: {e(os.path.basename(os.path.abspath(d)))}'
          f"</title>\n<style>{CSS}</style>\n</head><body>\n<h1>{e(title)}</h1>"]
-    prov = doc.get("provenance")
-    if isinstance(prov, dict) and isinstance(prov.get("command"), str):
-        head = ", ".join(e(x) for x in (("refl " + str(prov["refl_version"])) if prov.get("refl_version") else "",
-                                         prov.get("date_utc") or "") if x)
-        L.append(f"<p>{head + '<br>' if head else ''}<code>{e(prov['command'])}</code></p>")
+    head = provenance_head(doc.get("provenance"))
+    if head:
+        L.append(head)
     L.append('<h2 id="conditions">Conditions</h2>')
     cond = doc.get("conditions")
     if isinstance(cond, str):
