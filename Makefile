@@ -46,7 +46,7 @@ LDFLAGS_ALL  = -pthread $(EXTRA_LDFLAGS)
 LDLIBS_ALL   = $(PKG_LIBS) $(LIBS_NOPC) -lm
 
 # ---- sources (explicit lists) ---------------------------------------------
-MODEL_SRC := model/util.c model/ini.c model/scene.c model/config.c model/brdf.c \
+MODEL_SRC := model/util.c model/ini.c model/scene.c model/config.c model/brdf.c model/brdf_batch.c \
              model/camera.c model/trace.c model/shade.c model/sensor.c \
              model/image.c model/edges.c model/workpiece.c model/cmd.c
 RIG_SRC   := rig/rig.c rig/turntable_apt.c rig/turntable_sim.c rig/lamps.c \
@@ -99,6 +99,8 @@ $(BIN)/refl-tests: $(call obj,$(TEST_SRC)) $(LIB)
 	$(CC) $(LDFLAGS_ALL) -o $@ $^ $(LDLIBS_ALL)
 
 $(BUILD)/tests/apt_sim.o: CFLAGS_ALL += $(TEST_PKG_CFLAGS)
+# model_brdf_eval_n's GGX loop vectorises (sqrt and selects; model/brdf_batch.c)
+$(BUILD)/model/brdf_batch.o: CFLAGS_ALL += -ftree-loop-vectorize -fvect-cost-model=dynamic -fno-math-errno -fno-trapping-math
 $(BIN)/refl-tests: LDLIBS_ALL += $(TEST_PKG_LIBS)
 
 # Helpers of tests/test_lamps.c: a fake libgpiod v1 for LD_PRELOAD (built

@@ -309,15 +309,15 @@ typedef struct {
 static bool block_res(void *ctx, const double *const *p, double *r, double **J)
 {
     const block_t *b = ctx;
-    double d[MODEL_BRDF_MAX_PARAMS];
+    double *jac = J && J[0] ? J[0] : NULL;
+    model_brdf_eval_n(b->m, p[0], b->s->c + b->off, b->cnt, r, jac);
     for (int k = 0; k < b->cnt; k++) {
         int i = b->off + k;
-        double sw = sqrt(b->s->w[i]);
-        double R = model_brdf_eval(b->m, p[0], &b->s->c[i], J && J[0] ? d : NULL);
-        if (!isfinite(R)) return false;
-        r[k] = sw * (R - b->s->R[i]);
-        if (J && J[0])
-            for (int j = 0; j < b->np; j++) J[0][k * b->np + j] = sw * d[j];
+        if (!isfinite(r[k])) return false;
+        double sw = b->s->w[i] == 1 ? 1 : sqrt(b->s->w[i]);
+        r[k] = sw * (r[k] - b->s->R[i]);
+        if (jac && sw != 1)
+            for (int j = 0; j < b->np; j++) jac[k * b->np + j] *= sw;
     }
     return true;
 }
@@ -389,7 +389,7 @@ static bool solve_once(const fit_samples_t *s, model_brdf_t m, const fit_brdf_op
     double *bl[] = { p };
     for (int b = 0; ok && b < nb; b++) {
         blocks[b] = (block_t){ s, b * BLOCK, s->n - b * BLOCK < BLOCK ? s->n - b * BLOCK : BLOCK, m, np };
-        ok = fit_add_residual(pr, block_res, &blocks[b], blocks[b].cnt, 1, bl, FIT_LOSS_NONE, 0);
+        ok = fit_add_residual_folded(pr, block_res, &blocks[b], blocks[b].cnt, 1, bl);
     }
     fit_options_t fo = fit_defaults();
     fo.threads = o->threads;
@@ -484,11 +484,12 @@ bool fit_brdf_from(const fit_samples_t *s, model_brdf_t m, const fit_brdf_option
     // refit ks with it.
     int jF = model_brdf_param_index(m, "F0"), jk = model_brdf_param_index(m, "ks");
     if (jF >= 0 && jk >= 0) {
-        double var = 0;   // the largest relative change of F over the samples the lobe lights
-        for (int i = 0; i < s->n; i++) {
-            double f5 = pow(1 - s->c[i].vh, 5), F = out->p[jF] + (1 - out->p[jF]) * f5;
-            if (F > 0) var = fmax(var, (1 - out->p[jF]) * f5 / F);
-        }
+        // the largest relative change of F over the samples: (1-F0) f5 / F
+        // grows with f5 = (1-v.h)^5, so it is the one at the smallest v.h
+        double vh_min = 1;
+        for (int i = 0; i < s->n; i++) vh_min = fmin(vh_min, s->c[i].vh);
+        double x = 1 - vh_min, f5 = x * x * x * x * x, F = out->p[jF] + (1 - out->p[jF]) * f5;
+        double var = F > 0 ? (1 - out->p[jF]) * f5 / F : 0;
         out->fresnel_variation = var;
         if (var < 0.05) {
             double prod = out->p[jk] * out->p[jF], F0 = fmin(1, fmax(0.04, prod));
@@ -512,12 +513,17 @@ bool fit_brdf_from(const fit_samples_t *s, model_brdf_t m, const fit_brdf_option
         }
     }
     // figures
-    double sw = 0, rss = 0, rss_f = 0;
-    for (int i = 0; i < s->n; i++) {
-        double R = model_brdf_eval(m, out->p, &s->c[i], NULL), e = R - s->R[i];
-        sw += s->w[i];
-        rss += s->w[i] * e * e;
-        rss_f += s->w[i] * (e / s->c[i].nl) * (e / s->c[i].nl);
+    double sw = 0, rss = 0, rss_f = 0, Rb[256];
+    for (int i0 = 0; i0 < s->n; i0 += 256) {
+        int cnt = s->n - i0 < 256 ? s->n - i0 : 256;
+        model_brdf_eval_n(m, out->p, s->c + i0, cnt, Rb, NULL);
+        for (int k = 0; k < cnt; k++) {
+            int i = i0 + k;
+            double e = Rb[k] - s->R[i];
+            sw += s->w[i];
+            rss += s->w[i] * e * e;
+            rss_f += s->w[i] * (e / s->c[i].nl) * (e / s->c[i].nl);
+        }
     }
     out->n = s->n;
     out->rss = rss;

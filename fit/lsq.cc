@@ -1,10 +1,12 @@
 // fit/lsq.cc — fit/lsq.h on Ceres Solver (2.x): C callbacks become
 // ceres::CostFunction objects, masks become SubsetManifolds, priors are
-// one-residual blocks, the covariance comes from ceres::Covariance.
+// one-residual blocks, the covariance is ceres::Covariance's (computed
+// densely here up to 1000 parameters).
 #include "fit/lsq.h"
 
 #include <ceres/ceres.h>
 #include <glog/logging.h>
+#include <Eigen/Dense>
 
 #include <algorithm>
 #include <cmath>
@@ -46,6 +48,81 @@ public:
 private:
     fit_residual_fn fn_;
     void *ctx_;
+};
+
+// A block of m residuals r(x) with Jacobian J (m x n, n = the parameters it
+// reads) shown to Ceres through J's QR factorisation J = Q R: n + 1
+// residuals [Q^T r; |(I - Q Q^T) r|] with Jacobian [R; 0]. At every point
+// this has the same cost, gradient J^T r and Gauss-Newton matrix J^T J as
+// the block itself, so the trust-region steps and the covariance are the
+// block's; Ceres's work no longer grows with m. Without Jacobians (a cost
+// evaluation) it returns [0 ... 0; |r|], the same cost.
+class FoldedCost : public ceres::CostFunction {
+public:
+    FoldedCost(fit_residual_fn fn, void *ctx, int m, const std::vector<int> &sizes)
+        : fn_(fn), ctx_(ctx), m_(m), sizes_(sizes)
+    {
+        n_ = 0;
+        for (int s : sizes) {
+            mutable_parameter_block_sizes()->push_back(s);
+            n_ += s;
+        }
+        set_num_residuals(n_ + 1);
+    }
+    bool Evaluate(double const *const *params, double *residuals, double **jacobians) const override
+    {
+        thread_local std::vector<double> r, jac;
+        thread_local std::vector<double *> jp;
+        r.resize((size_t)m_);
+        if (!jacobians) {
+            if (!fn_(ctx_, params, r.data(), nullptr)) return false;
+            double ss = 0;
+            for (double v : r) ss += v * v;
+            std::fill(residuals, residuals + n_, 0.0);
+            residuals[n_] = std::sqrt(ss);
+            return true;
+        }
+        // every block's columns (Q spans them all, so any subset Ceres asks for is exact)
+        jac.resize((size_t)m_ * n_);
+        jp.resize(sizes_.size());
+        size_t off = 0;
+        for (size_t b = 0; b < sizes_.size(); b++) {
+            jp[b] = jac.data() + off;
+            off += (size_t)m_ * sizes_[b];
+        }
+        if (!fn_(ctx_, params, r.data(), jp.data())) return false;
+        // QR of [J r]: its last column holds Q^T r over J's columns, then +-|(I - Q Q^T) r|
+        thread_local Eigen::MatrixXd A;
+        A.resize(m_, n_ + 1);
+        int c0 = 0;
+        for (size_t b = 0; b < sizes_.size(); b++) {
+            Eigen::Map<const Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>> Jb(jp[b], m_,
+                                                                                                     sizes_[b]);
+            A.middleCols(c0, sizes_[b]) = Jb;
+            c0 += sizes_[b];
+        }
+        A.col(n_) = Eigen::Map<const Eigen::VectorXd>(r.data(), m_);
+        Eigen::HouseholderQR<Eigen::Ref<Eigen::MatrixXd>> qr(A);
+        int k = std::min(m_, n_);
+        for (int i = 0; i < n_; i++) residuals[i] = i < k ? A(i, n_) : 0.0;
+        residuals[n_] = m_ > n_ ? std::fabs(A(n_, n_)) : 0.0;
+        c0 = 0;
+        for (size_t b = 0; b < sizes_.size(); b++) {
+            int sb = sizes_[b];
+            if (jacobians[b])
+                for (int i = 0; i <= n_; i++)
+                    for (int j = 0; j < sb; j++)
+                        jacobians[b][(size_t)i * sb + j] = (i < k && i <= c0 + j) ? A(i, c0 + j) : 0.0;
+            c0 += sb;
+        }
+        return std::isfinite(residuals[n_]);
+    }
+
+private:
+    fit_residual_fn fn_;
+    void *ctx_;
+    int m_, n_;
+    std::vector<int> sizes_;
 };
 
 class PriorCost : public ceres::CostFunction {
@@ -186,6 +263,23 @@ bool fit_add_residual(fit_problem_t *p, fit_residual_fn fn, void *ctx, int nres,
     return true;
 }
 
+bool fit_add_residual_folded(fit_problem_t *p, fit_residual_fn fn, void *ctx, int nres, int nblocks,
+                             double *const *blocks)
+{
+    if (!p || !fn || nres < 1 || nblocks < 1 || !blocks)
+        return fail("fit_add_residual_folded: NULL problem or callback, %d residuals, %d blocks", nres, nblocks);
+    std::vector<int> sizes;
+    std::vector<double *> bl;
+    for (int k = 0; k < nblocks; k++) {
+        if (!known(p, blocks[k], "fit_add_residual_folded")) return false;
+        sizes.push_back(p->sizes[blocks[k]]);
+        bl.push_back(blocks[k]);
+    }
+    p->problem.AddResidualBlock(new FoldedCost(fn, ctx, nres, sizes), nullptr, bl);
+    p->nresiduals += nres;
+    return true;
+}
+
 bool fit_add_prior(fit_problem_t *p, double *x, int i, double mean, double sigma)
 {
     if (!known(p, x, "fit_add_prior")) return false;
@@ -233,6 +327,7 @@ bool fit_solve(fit_problem_t *p, const fit_options_t *opt, fit_summary_t *s)
     std::string why;
     if (!so.IsValid(&why)) so.linear_solver_type = ceres::DENSE_QR;
     so.max_num_iterations = o.max_iterations;
+    so.max_num_line_search_step_size_iterations = 0;
     so.function_tolerance = o.function_tolerance;
     so.parameter_tolerance = o.parameter_tolerance;
     so.gradient_tolerance = o.gradient_tolerance;
@@ -242,6 +337,7 @@ bool fit_solve(fit_problem_t *p, const fit_options_t *opt, fit_summary_t *s)
     ceres::Solver::Summary sum;
     try {
         ceres::Solve(so, &p->problem, &sum);
+        if (o.verbose) fprintf(stderr, "%s\n", sum.FullReport().c_str());
     } catch (const std::exception &e) {
         if (s) *s = out;
         return fail("fit_solve: %s", e.what());
@@ -249,7 +345,18 @@ bool fit_solve(fit_problem_t *p, const fit_options_t *opt, fit_summary_t *s)
     // Ceres projects steps onto the bounds, which stalls the free parameters
     // while one sits at an active bound. Fix the parameters at an active
     // bound (the cost falls outward), solve the rest again, then free them.
-    if (sum.IsSolutionUsable()) {
+    // The gradient is only needed when a free parameter sits at a bound.
+    bool at_bound = false;
+    for (auto &kv : p->sizes) {
+        double *x = kv.first;
+        if (p->problem.IsParameterBlockConstant(x)) continue;
+        for (int i = 0; i < kv.second; i++) {
+            double lo = p->problem.GetParameterLowerBound(x, i), hi = p->problem.GetParameterUpperBound(x, i);
+            double tol = 1e-12 * std::fmax(1.0, std::fabs(x[i]));
+            at_bound |= !p->fixed[x][i] && (x[i] <= lo + tol || x[i] >= hi - tol);
+        }
+    }
+    if (sum.IsSolutionUsable() && at_bound) {
         std::vector<double *> order;
         for (auto &kv : p->sizes) order.push_back(kv.first);
         ceres::Problem::EvaluateOptions eo;
@@ -345,13 +452,79 @@ bool fit_solve(fit_problem_t *p, const fit_options_t *opt, fit_summary_t *s)
     return true;
 }
 
-bool fit_covariance_cross(fit_problem_t *p, double *x, double *y, double *cov)
+// The covariance as ceres::Covariance's DENSE_SVD computes it (J from
+// Problem::Evaluate with the loss applied, in the free blocks' tangent
+// coordinates; rank deficient when sigma_min / sigma_max of J is below
+// sqrt(1e-14); the inverse of J^T J mapped to the ambient space by each
+// block's PlusJacobian; zero for constant blocks), without forming J
+// densely: J's rows are folded into an n x n triangular factor R (J = Q R)
+// by Householder QR one chunk of rows at a time, and the SVD is R's.
+// Ceres's own DENSE_SVD takes the SVD of the whole m x n Jacobian, which
+// dominates a fit with a million residuals.
+static bool covariance_dense(fit_problem_t *p, double *x, double *y, double *cov)
 {
-    if (!known(p, x, "fit_covariance") || !known(p, y, "fit_covariance")) return false;
+    std::vector<double *> order;
+    std::map<double *, int> col;
+    int n = 0;
+    for (auto &kv : p->sizes) {
+        if (p->problem.IsParameterBlockConstant(kv.first)) continue;
+        col[kv.first] = n;
+        order.push_back(kv.first);
+        n += p->problem.ParameterBlockTangentSize(kv.first);
+    }
+    int nx = p->sizes[x], ny = p->sizes[y];
+    std::fill(cov, cov + (size_t)nx * ny, 0.0);
+    if (!col.count(x) || !col.count(y)) return true;   // a constant block has no covariance
+    ceres::Problem::EvaluateOptions eo;
+    eo.parameter_blocks = order;
+    eo.num_threads = cores();
+    ceres::CRSMatrix J;
+    if (!p->problem.Evaluate(eo, nullptr, nullptr, nullptr, &J))
+        return fail("fit_covariance: the residuals could not be evaluated at the solution");
+    const int chunk = std::max(4096, 4 * n);
+    Eigen::MatrixXd R = Eigen::MatrixXd::Zero(n, n), A(n + chunk, n);
+    for (int r0 = 0; r0 < J.num_rows; r0 += chunk) {
+        int m = std::min(chunk, J.num_rows - r0);
+        A.topRows(n + m).setZero();
+        A.topRows(n) = R;
+        for (int r = 0; r < m; r++)
+            for (int k = J.rows[r0 + r]; k < J.rows[r0 + r + 1]; k++) A(n + r, J.cols[k]) = J.values[k];
+        Eigen::HouseholderQR<Eigen::MatrixXd> qr(A.topRows(n + m));
+        R = qr.matrixQR().topRows(n).triangularView<Eigen::Upper>();
+    }
+    Eigen::JacobiSVD<Eigen::MatrixXd> svd(R, Eigen::ComputeFullV);
+    const Eigen::VectorXd &sv = svd.singularValues();
+    if (!(sv(0) > 0) || !(sv(n - 1) / sv(0) >= std::sqrt(1e-14)))
+        return fail("fit_covariance: J^T J is rank deficient or ill-conditioned in the free parameters "
+                    "(a parameter the data do not constrain: fix it or add a prior)");
+    Eigen::MatrixXd V = svd.matrixV();
+    Eigen::MatrixXd C = V * sv.array().square().inverse().matrix().asDiagonal() * V.transpose();
+    // ambient = P_x C_xy P_y^T with P the blocks' PlusJacobians (identity without a manifold)
+    auto plus_jacobian = [&](double *b, int na) {
+        int nt = p->problem.ParameterBlockTangentSize(b);
+        Eigen::MatrixXd P = Eigen::MatrixXd::Identity(na, nt);
+        const ceres::Manifold *mf = p->problem.GetManifold(b);
+        if (mf) {
+            std::vector<double> pj((size_t)na * nt);
+            mf->PlusJacobian(b, pj.data());
+            for (int i = 0; i < na; i++)
+                for (int j = 0; j < nt; j++) P(i, j) = pj[(size_t)i * nt + j];
+        }
+        return P;
+    };
+    Eigen::MatrixXd Px = plus_jacobian(x, nx), Py = plus_jacobian(y, ny);
+    Eigen::MatrixXd Cxy = Px * C.block(col[x], col[y], Px.cols(), Py.cols()) * Py.transpose();
+    for (int i = 0; i < nx; i++)
+        for (int j = 0; j < ny; j++) cov[(size_t)i * ny + j] = Cxy(i, j);
+    return true;
+}
+
+// ceres::Covariance itself (SPARSE_QR above 1000 parameters; DENSE_SVD is
+// what covariance_dense computes).
+static bool covariance_ceres(fit_problem_t *p, double *x, double *y, double *cov, bool dense)
+{
     ceres::Covariance::Options co;
-    int nparam = 0;
-    for (auto &kv : p->sizes) nparam += kv.second;
-    co.algorithm_type = nparam <= 1000 ? ceres::DENSE_SVD : ceres::SPARSE_QR;
+    co.algorithm_type = dense ? ceres::DENSE_SVD : ceres::SPARSE_QR;
     co.null_space_rank = 0;
     co.min_reciprocal_condition_number = 1e-14;
     co.num_threads = cores();
@@ -368,6 +541,24 @@ bool fit_covariance_cross(fit_problem_t *p, double *x, double *y, double *cov)
                     "(a parameter the data do not constrain: fix it or add a prior)");
     if (!c.GetCovarianceBlock(x, y, cov)) return fail("fit_covariance: the covariance block is not available");
     return true;
+}
+
+bool fit_covariance_cross(fit_problem_t *p, double *x, double *y, double *cov)
+{
+    if (!known(p, x, "fit_covariance") || !known(p, y, "fit_covariance")) return false;
+    int nparam = 0;
+    for (auto &kv : p->sizes) nparam += kv.second;
+    try {
+        return nparam <= 1000 ? covariance_dense(p, x, y, cov) : covariance_ceres(p, x, y, cov, false);
+    } catch (const std::exception &e) {
+        return fail("fit_covariance: %s", e.what());
+    }
+}
+
+bool fit_covariance_reference(fit_problem_t *p, double *x, double *y, double *cov)
+{
+    if (!known(p, x, "fit_covariance") || !known(p, y, "fit_covariance")) return false;
+    return covariance_ceres(p, x, y, cov, true);
 }
 
 bool fit_covariance(fit_problem_t *p, double *x, double *cov) { return fit_covariance_cross(p, x, x, cov); }

@@ -52,6 +52,14 @@ bool fit_set_fixed(fit_problem_t *p, double *x, const bool *fixed);
 // starts, ignored for FIT_LOSS_NONE). ctx is passed to fn as it is.
 bool fit_add_residual(fit_problem_t *p, fit_residual_fn fn, void *ctx, int nres, int nblocks, double *const *blocks,
                       fit_loss_t loss, double scale);
+// The same without a loss, for blocks of many residuals (a few thousand
+// samples of a material): Ceres sees the block through the QR factor of its
+// Jacobian (sum of block sizes + 1 residuals), which has the block's cost,
+// gradient, J^T J and so its steps and covariance. Fits of a million
+// residuals cost Ceres a few thousand rows. Residuals are only meaningful
+// through the cost (fit_solve's summary); the covariance is unchanged.
+bool fit_add_residual_folded(fit_problem_t *p, fit_residual_fn fn, void *ctx, int nres, int nblocks,
+                             double *const *blocks);
 // A Gaussian prior on parameter i of block x: one residual (x[i] - mean) / sigma.
 bool fit_add_prior(fit_problem_t *p, double *x, int i, double mean, double sigma);
 
@@ -85,6 +93,9 @@ bool fit_solve(fit_problem_t *p, const fit_options_t *opt, fit_summary_t *summar
 bool fit_covariance(fit_problem_t *p, double *x, double *cov);
 // Covariance between blocks x (n) and y (m): n x m row-major.
 bool fit_covariance_cross(fit_problem_t *p, double *x, double *y, double *cov);
+// The same from ceres::Covariance (DENSE_SVD of the whole Jacobian), which
+// fit_covariance_cross reproduces faster: for checking it.
+bool fit_covariance_reference(fit_problem_t *p, double *x, double *y, double *cov);
 
 // Compare the Jacobians of fn at blocks against central differences (step
 // h_rel * max(|x|, 1)): max_abs_err (may be NULL) = the largest

@@ -247,6 +247,11 @@ model_cosines_t model_cosines(model_vec3_t n, model_vec3_t l, model_vec3_t v);
 // dR_dp (out, may be NULL): model_brdf_nparams(m) derivatives.
 double model_brdf_eval(model_brdf_t m, const double *p, const model_cosines_t *c,
                        double *dR_dp);
+// The same for n cosines (model/brdf_batch.c): R[i], and dR_dp (may be
+// NULL) n x nparams row-major. Equal to model_brdf_eval sample by sample to
+// rounding (1e-9 relative); GGX, the fitters' inner loop, is vectorised.
+void model_brdf_eval_n(model_brdf_t m, const double *p, const model_cosines_t *c, int n, double *R,
+                       double *dR_dp);
 
 // ---------------------------------------------------------------------------
 // Materials, lamps and sensor files (model/config.c)

@@ -58,5 +58,5 @@ r = least_squares(resid, x0, jac=jac, bounds=([0, 0, 0.001, 0], [1, 1, 1, 1]), m
                   xtol=1e-10, ftol=1e-10, gtol=1e-12)
 t = time.perf_counter() - t0
 print(f"scipy_time_s {t:.4f}")
-print("scipy_params " + " ".join(f"{v:.8g}" for v in r.x))
+print("scipy_params " + " ".join(f"{v:.12g}" for v in r.x))
 print(f"scipy_nfev {r.nfev}")

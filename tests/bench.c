@@ -650,6 +650,10 @@ static int bench_fit_ggx(void)
     printf("fit_ggx_1M_samples_scipy: %.3f s\n", t_py);
     printf("fit_ggx_1M_alpha_scipy: %.5f (truth %.5f)\n", q[2], truth[2]);
     printf("fit_ggx_scipy_vs_refl: %.2f ratio\n", t_py / t_refl);
+    // the same parameters: the largest relative difference over kd, ks, alpha, F0 (target 1e-4)
+    double worst = 0;
+    for (int j = 0; j < 4; j++) worst = fmax(worst, fabs(res.p[j] - q[j]) / fmax(fabs(q[j]), 1e-12));
+    printf("fit_ggx_refl_vs_scipy_max_param_diff: %.2e relative\n", worst);
     return 0;
 }
 

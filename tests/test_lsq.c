@@ -348,3 +348,154 @@ TEST(lsq_callback_failure_shrinks_step)
     CHECK_NEAR(x[0], 2.25, 1e-8);
     fit_problem_free(p);
 }
+
+// ---- folded residual blocks and the dense covariance ------------------------
+
+// y = A exp(-k t) + c sin(3 t): blocks {A, k} and {c}; residuals / sigma.
+typedef struct {
+    const double *t, *y;
+    int           n;
+    double        sigma;
+} two_t;
+
+static bool two_res(void *ctx, const double *const *p, double *r, double **J)
+{
+    const two_t *d = ctx;
+    double A = p[0][0], k = p[0][1], c = p[1][0];
+    for (int i = 0; i < d->n; i++) {
+        double e = exp(-k * d->t[i]), s = sin(3 * d->t[i]);
+        r[i] = (A * e + c * s - d->y[i]) / d->sigma;
+        if (J && J[0]) {
+            J[0][2 * i] = e / d->sigma;
+            J[0][2 * i + 1] = -A * d->t[i] * e / d->sigma;
+        }
+        if (J && J[1]) J[1][i] = s / d->sigma;
+    }
+    return true;
+}
+
+enum { TWO_N = 3002, TWO_BLOCK = 500 };
+
+typedef struct {
+    double t[TWO_N], y[TWO_N];
+    two_t  blk[TWO_N / TWO_BLOCK + 1];
+    int    nblk;
+} two_data_t;
+
+static void two_data(two_data_t *D)
+{
+    model_rng_t rng = model_rng(11, 3);
+    for (int i = 0; i < TWO_N; i++) {
+        D->t[i] = 4.0 * i / (TWO_N - 1);
+        D->y[i] = 2.5 * exp(-0.8 * D->t[i]) + 0.3 * sin(3 * D->t[i]) + 0.02 * model_rng_gauss(&rng);
+    }
+    // blocks of 500 and a last one of 2 residuals (fewer than the 3 parameters it reads)
+    D->nblk = 0;
+    for (int o = 0; o < TWO_N; o += TWO_BLOCK) {
+        int n = TWO_N - o < TWO_BLOCK ? TWO_N - o : TWO_BLOCK;
+        D->blk[D->nblk++] = (two_t){ D->t + o, D->y + o, n, 0.02 };
+    }
+}
+
+// Build and solve the problem, folded or plain; options: a prior on c, k held.
+static fit_problem_t *two_problem(two_data_t *D, double *Ak, double *c, bool folded, bool hold_k, bool prior,
+                                  fit_summary_t *s)
+{
+    Ak[0] = 1;
+    Ak[1] = 0.3;
+    c[0] = 0;
+    if (hold_k) Ak[1] = 0.8;
+    fit_problem_t *p = fit_problem_new();
+    if (!fit_add_parameters(p, Ak, 2) || !fit_add_parameters(p, c, 1)) return p;
+    fit_set_bounds(p, Ak, 1, 0.01, 10);
+    if (hold_k) fit_set_fixed(p, Ak, (bool[]){ false, true });
+    double *b[] = { Ak, c };
+    for (int k = 0; k < D->nblk; k++) {
+        if (folded) fit_add_residual_folded(p, two_res, &D->blk[k], D->blk[k].n, 2, b);
+        else fit_add_residual(p, two_res, &D->blk[k], D->blk[k].n, 2, b, FIT_LOSS_NONE, 0);
+    }
+    if (prior) fit_add_prior(p, c, 0, 0.25, 0.01);
+    fit_solve(p, NULL, s);
+    return p;
+}
+
+TEST(lsq_folded_blocks_match_plain)
+{
+    static two_data_t D;
+    two_data(&D);
+    for (int variant = 0; variant < 3; variant++) {
+        bool hold_k = variant == 1, prior = variant == 2;
+        double Ak0[2], c0[1], Ak1[2], c1[1];
+        fit_summary_t s0, s1;
+        fit_problem_t *p0 = two_problem(&D, Ak0, c0, false, hold_k, prior, &s0);
+        fit_problem_t *p1 = two_problem(&D, Ak1, c1, true, hold_k, prior, &s1);
+        CHECK(s0.usable && s1.usable);
+        CHECK(s1.nresiduals == s0.nresiduals);   // the block's residuals, not the folded rows
+        // the same steps: the same solution and cost to rounding
+        CHECK_REL(Ak1[0], Ak0[0], 1e-9);
+        CHECK_REL(Ak1[1], Ak0[1], 1e-9);
+        CHECK_REL(c1[0], c0[0], 1e-9);
+        CHECK_REL(s1.final_cost, s0.final_cost, 1e-9);
+        CHECK_REL(s1.initial_cost, s0.initial_cost, 1e-12);
+        if (!hold_k && !prior) {
+            CHECK_NEAR(Ak1[0], 2.5, 0.01);
+            CHECK_NEAR(Ak1[1], 0.8, 0.01);
+            CHECK_NEAR(c1[0], 0.3, 0.01);
+            CHECK(fabs(s1.final_cost / (0.5 * TWO_N) - 1) < 0.1);   // residuals at the noise
+        }
+        // and the same covariance (J^T J is the block's)
+        double cA0[4], cA1[4], cx0[2], cx1[2], cc0, cc1;
+        CHECK(fit_covariance(p0, Ak0, cA0) && fit_covariance(p1, Ak1, cA1));
+        CHECK(fit_covariance_cross(p0, Ak0, c0, cx0) && fit_covariance_cross(p1, Ak1, c1, cx1));
+        CHECK(fit_covariance(p0, c0, &cc0) && fit_covariance(p1, c1, &cc1));
+        for (int i = 0; i < 4; i++) CHECK_NEAR(cA1[i], cA0[i], 1e-8 * fabs(cA0[0]) + 1e-300);
+        for (int i = 0; i < 2; i++) CHECK_NEAR(cx1[i], cx0[i], 1e-8 * sqrt(fabs(cA0[0] * cc0)));
+        CHECK_REL(cc1, cc0, 1e-8);
+        if (hold_k) CHECK(cA1[3] == 0 && cA1[1] == 0);   // the held parameter has no variance
+        if (prior) CHECK(cc1 < 0.01 * 0.01);             // the prior tightens c
+        fit_problem_free(p0);
+        fit_problem_free(p1);
+    }
+    // errors name the call
+    double x[1] = { 0 };
+    fit_problem_t *p = fit_problem_new();
+    double *b[] = { x };
+    CHECK(!fit_add_residual_folded(p, two_res, &D.blk[0], 10, 1, b));
+    CHECK_CONTAINS(fit_last_error(), "fit_add_residual_folded");
+    fit_problem_free(p);
+}
+
+TEST(lsq_covariance_equals_ceres_dense_svd)
+{
+    // fit_covariance folds J into R by chunks of rows; ceres::Covariance
+    // (DENSE_SVD) takes the SVD of the whole J. Masks, priors, a robust loss,
+    // cross blocks and a constant block must all agree.
+    static two_data_t D;
+    two_data(&D);
+    for (int variant = 0; variant < 4; variant++) {
+        double Ak[2] = { 1, 0.3 }, c[1] = { 0 }, z[2] = { 1, 2 };
+        fit_problem_t *p = fit_problem_new();
+        CHECK(fit_add_parameters(p, Ak, 2) && fit_add_parameters(p, c, 1) && fit_add_parameters(p, z, 2));
+        CHECK(fit_set_fixed(p, z, NULL));   // constant: no covariance
+        if (variant == 1) CHECK(fit_set_fixed(p, Ak, (bool[]){ true, false }));
+        double *b[] = { Ak, c };
+        for (int k = 0; k < D.nblk; k++)
+            CHECK(fit_add_residual(p, two_res, &D.blk[k], D.blk[k].n, 2, b, variant == 3 ? FIT_LOSS_CAUCHY : FIT_LOSS_NONE,
+                                   1.5));
+        if (variant == 2) CHECK(fit_add_prior(p, c, 0, 0.25, 0.01));
+        fit_summary_t s;
+        CHECK(fit_solve(p, NULL, &s));
+        double *blk[] = { Ak, c, z };
+        int n[] = { 2, 1, 2 };
+        for (int a = 0; a < 3; a++)
+            for (int bb = 0; bb < 3; bb++) {
+                double mine[4], ref[4];
+                CHECK(fit_covariance_cross(p, blk[a], blk[bb], mine));
+                CHECK(fit_covariance_reference(p, blk[a], blk[bb], ref));
+                for (int i = 0; i < n[a] * n[bb]; i++) CHECK_NEAR(mine[i], ref[i], 1e-7 * fabs(ref[i]) + 1e-16);
+                if (a == 2 || bb == 2)
+                    for (int i = 0; i < n[a] * n[bb]; i++) CHECK(mine[i] == 0);
+            }
+        fit_problem_free(p);
+    }
+}
