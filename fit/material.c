@@ -79,24 +79,51 @@ fit_calib_t *fit_calib_load(const char *dir, bool need_white)
     return c;
 }
 
-// The response compression a of S_m = S (1 - a S) from a gain calibration's
-// curves (signal against exposure, small-signal slope r0): least squares of
-// r0 t - S_m = a S_m^2 over the steps below 90 % of saturation; 0 when absent.
+// The response compression a (per DN at 0 dB) of S_m = S (1 - a S), S the
+// linear signal, from a gain calibration's photon-transfer curves (gain.json:
+// gains[] at 0 dB, curves.exposure_us and curves.signal_dn): linear least
+// squares of S_m = u t + v - a S_m^2 over the steps below 90 % of saturation
+// (S_m^2 stands for S^2: the error is second order in a). 0 when the curves
+// are absent or say no compression.
 static double nonlinearity_of(json_t *gj, double sat)
 {
-    json_t *cv = json_object_get(gj, "curves");
+    json_t *gains = json_object_get(gj, "gains"), *g0 = NULL;
+    for (size_t k = 0; k < json_array_size(gains); k++) {
+        json_t *e = json_array_get(gains, k);
+        if (fabs(json_number_value(json_object_get(e, "gain_db"))) < 1e-9) g0 = e;
+    }
+    json_t *cv = json_object_get(g0 ? g0 : gj, "curves");
     json_t *t = json_object_get(cv, "exposure_us"), *S = json_object_get(cv, "signal_dn");
-    json_t *r0j = json_object_get(gj, "response_small_signal_dn_per_us");
-    if (!json_is_number(r0j) || json_array_size(t) != json_array_size(S)) return 0;
-    double r0 = json_number_value(r0j), num = 0, den = 0;
+    if (json_array_size(t) != json_array_size(S) || json_array_size(t) < 5) return 0;
+    double A[9] = { 0 }, b[3] = { 0 }, ts = 0, ss = 0;   // column scales
+    for (size_t i = 0; i < json_array_size(t); i++) {
+        ts = fmax(ts, fabs(json_number_value(json_array_get(t, i))));
+        ss = fmax(ss, fabs(json_number_value(json_array_get(S, i))));
+    }
+    if (!(ts > 0) || !(ss > 0)) return 0;
+    int n = 0;
     for (size_t i = 0; i < json_array_size(t); i++) {
         double ti = json_number_value(json_array_get(t, i)), si = json_number_value(json_array_get(S, i));
         if (!(si > 0) || (sat > 0 && si > 0.9 * sat) || !isfinite(ti)) continue;
-        num += (r0 * ti - si) * si * si;
-        den += si * si * si * si;
+        double x[3] = { ti / ts, 1, -si * si / (ss * ss) };
+        for (int r = 0; r < 3; r++) {
+            for (int c = 0; c < 3; c++) A[3 * r + c] += x[r] * x[c];
+            b[r] += x[r] * si;
+        }
+        n++;
     }
-    double a = den > 0 ? num / den : 0;
+    if (n < 5 || !model_solve_linear(A, b, 3)) return 0;
+    double a = b[2] / (ss * ss);
     return isfinite(a) && a > 0 && a < 1e-3 ? a : 0;
+}
+
+// The linear signal S of a measured S_m = S (1 - a S) (the root that goes to
+// S_m as a -> 0); S_m as it is without a compression or where it has no root.
+static double linear_signal(double s_m, double a)
+{
+    if (!(a > 0) || !(s_m > 0)) return s_m;
+    double disc = 1 - 4 * a * s_m;
+    return disc > 0 ? 2 * s_m / (1 + sqrt(disc)) : s_m;
 }
 
 fit_calib_t *fit_calib_load_files(const char *cam, const char *lamps, const char *gain, const char *white)
@@ -466,6 +493,9 @@ bool fit_observe(const char *session_dir, const fit_calib_t *cal, const fit_obse
             }
             double sat = 0.95 * (cal->saturation_dn > 0 ? cal->saturation_dn : bits_full(r->pixel_format));
             double gf = pow(10.0, r->gain / 20);
+            // the gain calibration's response compression S_m = S (1 - a S) at this gain
+            // (a is per DN at 0 dB; the signal in DN scales with the gain)
+            double a_nl = cal->nonlin_a_per_dn > 0 ? cal->nonlin_a_per_dn / gf : 0;
             for (int w = 0; w < nw; w++) {
                 if (taken[(size_t)w * cal->lamps->n + lamp]) continue;
                 const model_lamp_sample_t *L = &ls[(size_t)w * cal->lamps->n + lamp];
@@ -473,18 +503,17 @@ bool fit_observe(const char *session_dir, const fit_calib_t *cal, const fit_obse
                 model_cosines_t c = model_cosines(pw[w].n, L->l, pw[w].v);
                 if (!(c.nl > 0 && c.nv > 0)) continue;
                 int x0 = (int)win[w].q[0] - half, y0 = (int)win[w].q[1] - half;
-                double sum = 0, mx = 0, sd = 0, sg = 0;
+                double sum = 0, mx = 0, sg = 0;
                 for (int y = y0; y < y0 + o.window; y++)
                     for (int x = x0; x < x0 + o.window; x++) {
                         size_t i = (size_t)y * cal->W + x;
-                        sum += img[i];
+                        sum += linear_signal(img[i] - (cal->offset_dn ? cal->offset_dn[i] : dark[i]), a_nl);
                         mx = fmax(mx, img[i]);
-                        sd += cal->offset_dn ? cal->offset_dn[i] : dark[i];
                         sg += cal->flat ? cal->flat[i] : 1;
                     }
                 double n = (double)o.window * o.window;
                 if (mx >= sat) continue;   // a shorter exposure of the bracket takes it
-                double sig = (sum - sd) / n;
+                double sig = sum / n;
                 if (sig < o.min_signal_dn) continue;
                 fit_obs_t ob = { .lamp = lamp, .angle_deg = r->measured_deg, .exposure_us = r->exposure_us,
                                  .gain_db = r->gain, .q = { win[w].q[0], win[w].q[1] }, .c = c, .d_mm = L->d_mm,
@@ -876,6 +905,8 @@ int fit_cmd_material(int argc, char **argv)
         }
         noise_rms = sqrt(v2 / obs.n);
         printf("  expected residual RMS from the sensor's noise alone: %.4g 1/sr\n", noise_rms);
+        printf("  response compression corrected: S_m = S (1 - a S), a = %.4g per DN at 0 dB%s\n", cal->nonlin_a_per_dn,
+               cal->nonlin_a_per_dn > 0 ? "" : " (none in the gain calibration)");
     }
     fit_brdf_result_t res[MODEL_BRDF_COUNT];
     int nres = 0, best = -1;
