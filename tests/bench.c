@@ -266,6 +266,7 @@ static int bench_capture(void);
 static int bench_virtual_rig(void);
 static int bench_fit_ggx(void);
 static int bench_verify(void);
+static int bench_capture(void);
 
 int main(int argc, char **argv)
 {
@@ -275,6 +276,8 @@ int main(int argc, char **argv)
     if (argc > 1 && !strcmp(argv[1], "rig")) return bench_virtual_rig() ? 1 : 0;
     // `refl-bench verify`: one view of the verification fitter
     if (argc > 1 && !strcmp(argv[1], "verify")) return bench_verify() ? 1 : 0;
+    // `refl-bench capture`: only the capture sessions' wall time against the hardware floor
+    if (argc > 1 && !strcmp(argv[1], "capture")) return bench_capture() ? 1 : 0;
     char p_cam[1024], p_scene[1024], p_lamps[1024], p_mats[1024];
     src_path(p_cam, sizeof p_cam, "examples/camera.cameramodel");
     src_path(p_scene, sizeof p_scene, "examples/t_stiffener.d3d");
