@@ -129,6 +129,11 @@ typedef struct {
 
 rig_turntable_sim_params_t rig_turntable_sim_defaults(void);   // K10CR1-like, real time
 int rig_turntable_open_sim(rig_turntable_t **out, const rig_turntable_sim_params_t *p);
+// A simulated stage in a plain move (no fault armed): true and the angle it
+// will stand at when the move ends (its position noise is drawn as the move
+// starts), so a simulator can prepare that state while the stage moves.
+// false for other backends, when idle, homing, stopping or faulting.
+bool rig_turntable_sim_destination(rig_turntable_t *t, double *angle_deg);
 
 // Wrappers over the ops (check arguments, fill rig_last_error with the device name).
 int  rig_turntable_info(rig_turntable_t *t, rig_turntable_info_t *out);
@@ -291,6 +296,7 @@ typedef struct {
     double      busy_wait_s;    // wait this long for another camera server on the address to stop (default 0; GigE only)
     const char *serial;         // the camera's serial instead of the truth file's (NULL: the file's); a process
                                 // serves one in-process camera per serial
+    int         prerender;      // [render] prerender instead of the truth file's (0, 1, 2; -1 = the file's, default)
 } rig_virtual_options_t;
 
 rig_virtual_options_t rig_virtual_defaults(void);
@@ -350,6 +356,11 @@ double               rig_virtual_kc_per_us(const rig_virtual_t *v);
 model_sensor_t       rig_virtual_sensor_params(const rig_virtual_t *v);
 model_camera_t      *rig_virtual_camera_model(rig_virtual_t *v);
 const model_lamps_t *rig_virtual_lamps_truth(const rig_virtual_t *v);
+// Frames the camera handed out that the pre-render thread had computed ahead
+// of their triggers (speculation; see rig/virtual.c), since the rig opened.
+long                 rig_virtual_frames_ahead(rig_virtual_t *v);
+// rig_turntable_sim_destination of the rig's simulated stage.
+bool                 rig_virtual_destination(rig_virtual_t *v, double *angle_deg);
 
 // ---------------------------------------------------------------------------
 // Rig description files (rig/config.c)

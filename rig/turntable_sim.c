@@ -25,6 +25,7 @@ typedef struct {
     double dist, dir, dur;      // move: length, sign, duration (sim s)
     double v0;                  // deceleration: starting speed
     double target;              // move: end position (before noise)
+    double final_pos;           // move: where it will stand (target + noise, drawn at the start)
     double pos;                 // measured position when idle
     bool homed, motion_error, disconnected, stalled;
     int completed_moves;
@@ -126,7 +127,7 @@ static int advance(sim_t *s, double t)
     if (s->stalled) return 0;
     if (s->motion == MOTION_MOVE && t >= s->t0 + s->dur) {
         s->motion = MOTION_IDLE;
-        s->pos = s->target + s->p.position_noise_deg * gauss(s);
+        s->pos = s->final_pos;
         s->completed_moves++;
     } else if (s->motion == MOTION_HOME && t >= s->t0 + s->dur) {
         s->motion = MOTION_IDLE;
@@ -199,6 +200,7 @@ static int sim_start_move_abs(rig_turntable_t *t, double angle_deg)
     double p = s->motion == MOTION_IDLE || s->stalled ? s->pos : motion_pos(s, now);
     s->p0 = p;
     s->target = angle_deg;
+    s->final_pos = angle_deg + s->p.position_noise_deg * gauss(s);
     s->dist = fabs(angle_deg - p);
     s->dir = angle_deg >= p ? 1 : -1;
     s->t0 = now;
@@ -333,4 +335,14 @@ int rig_turntable_open_sim(rig_turntable_t **out, const rig_turntable_sim_params
     snprintf(t->name, sizeof t->name, "sim turntable (seed %llu)", (unsigned long long)d.seed);
     *out = t;
     return 0;
+}
+
+bool rig_turntable_sim_destination(rig_turntable_t *t, double *angle_deg)
+{
+    if (!t || !t->ops || strcmp(t->ops->backend, "sim") || !t->impl) return false;
+    sim_t *s = S(t);
+    advance(s, sim_now(s));
+    if (s->disconnected || s->motion != MOTION_MOVE || s->stalled || s->fault_at >= 0) return false;
+    if (angle_deg) *angle_deg = s->final_pos;
+    return true;
 }

@@ -84,6 +84,13 @@
 // seed are exactly those of such a frame takes it: the same values it would
 // compute (the frame is a function of these inputs only), but its sensor
 // noise then costs no time after the trigger. Others compute as above.
+// Ahead of an angle: a plan repeats its lamp sets and exposures at every
+// angle, so while the stage moves to a new angle (the simulated stage knows
+// where it will stand, noise included, rig_turntable_sim_destination) the
+// pre-render thread computes the frames the last angle's sequence predicts
+// there (lamps, exposure, gain, and the seeds in order), and at an angle whose
+// frames so far follow the last angle's, the rest of that sequence. A trigger
+// that matches one takes it, as above; the motion's idle time pays for them.
 #define _GNU_SOURCE
 #include <limits.h>
 #include <math.h>
@@ -101,8 +108,9 @@
 
 #define NPLANES  12   // cached radiance images (5 MB each at 1280x1024)
 #define NTRACERS 3    // cached (sample, angle) tracers
-#define NSPEC    4    // speculative frames (see spec_t)
+#define NSPEC    16   // speculative frames (see spec_t; 5 MB each at 1280x1024, made when first used)
 #define NSEQ     16   // exposures remembered per state
+#define NASEQ    64   // frames remembered per angle (lamps and exposures)
 
 // An albedo texture of a material (simulator only: the fitter's model has
 // none): R at the first hit is multiplied by 1 + amplitude * n(u, v), n a
@@ -167,6 +175,12 @@ typedef struct {
     double exposure_us, gain_db;
 } shot_t;
 
+// One frame of an angle's sequence: its lamps and settings.
+typedef struct {
+    uint32_t mask;
+    double   exposure_us, gain_db;
+} ashot_t;
+
 typedef struct {
     model_tracer_t *t;
     model_scene_t  *rot;      // the rotated scene
@@ -226,6 +240,15 @@ struct rig_virtual {
     double        cur_key_angle;
     uint32_t      cur_key_mask;
     bool          cur_key_set;
+    // The frames (lamps, exposure, gain) taken at the previous angle (aprev)
+    // and so far at the current one (acur, key akey_*) predict those at the
+    // next angle: a plan repeats its lamp sets and exposures at every angle.
+    // nacur > NASEQ: too many to repeat (no prediction).
+    ashot_t       aprev[NASEQ], acur[NASEQ];
+    int           naprev, nacur;
+    int           akey_sample;
+    double        akey_angle;
+    bool          akey_set;
 
     rig_gv_camera_t *gv;
 
@@ -239,6 +262,7 @@ struct rig_virtual {
     bool      pre_running;
     int       pre_stop;               // atomic
     int       waiting;                // atomic: frames waiting for cache_lock
+    long      frames_ahead;           // frames taken from speculation (cache_lock)
 };
 
 rig_virtual_options_t rig_virtual_defaults(void)
@@ -250,6 +274,7 @@ rig_virtual_options_t rig_virtual_defaults(void)
         .time_scale = 1,
         .noise_seed = 1,
         .busy_wait_s = 0,
+        .prerender = -1,
     };
 }
 
@@ -749,6 +774,75 @@ static bool speculate_one(rig_virtual_t *v, int sample, double angle_deg, uint32
     return false;
 }
 
+// The frames predicted at (sample, angle) from the angle sequences, next
+// first: at most NSPEC of them, with the seeds they will draw from next_seed
+// on; 0 when there is no prediction (cache_lock held).
+static int predict_angle(const rig_virtual_t *v, int sample, double angle_deg, ashot_t *out)
+{
+    if (!v->akey_set || v->akey_sample != sample || v->nacur > NASEQ) return 0;
+    const ashot_t *seq = v->acur;   // a new angle: as the last one
+    int n = v->nacur, pos = 0;
+    if (v->akey_angle == angle_deg) {   // frames at this angle: go on as the previous angle if they follow it
+        if (v->naprev > NASEQ || v->nacur > v->naprev) return 0;
+        for (int i = 0; i < v->nacur; i++)
+            if (v->acur[i].mask != v->aprev[i].mask || v->acur[i].exposure_us != v->aprev[i].exposure_us ||
+                v->acur[i].gain_db != v->aprev[i].gain_db)
+                return 0;
+        seq = v->aprev;
+        n = v->naprev;
+        pos = v->nacur;
+    }
+    int k = 0;
+    for (int j = pos; j < n && k < NSPEC; j++) out[k++] = seq[j];
+    return k;
+}
+
+// Compute one missing frame of the angle's prediction (cache_lock held):
+// 1 computed, 0 all there (or no room), -1 no prediction.
+static int speculate_angle(rig_virtual_t *v, int sample, double angle_deg, uint64_t next_seed)
+{
+    ashot_t pred[NSPEC];
+    int np = predict_angle(v, sample, angle_deg, pred);
+    if (np == 0) return -1;
+    for (int j = 0; j < np; j++) {
+        uint64_t seed = next_seed + (uint64_t)j;
+        bool have = false;
+        spec_t *free_slot = NULL;
+        for (int k = 0; k < NSPEC && !have; k++) {
+            spec_t *p = &v->spec[k];
+            if (spec_is(p, sample, angle_deg, pred[j].mask, pred[j].exposure_us, pred[j].gain_db, seed)) {
+                have = true;
+                break;
+            }
+            // free: invalid, used up, elsewhere, or a frame this prediction does not have
+            bool wanted = false;
+            if (p->valid && p->seed >= next_seed && p->seed < next_seed + (uint64_t)np && p->sample == sample &&
+                p->angle_deg == angle_deg) {
+                const ashot_t *q = &pred[p->seed - next_seed];
+                wanted = p->mask == q->mask && p->exposure_us == q->exposure_us && p->gain_db == q->gain_db;
+            }
+            if (!wanted && !free_slot) free_slot = p;
+        }
+        if (have) continue;
+        if (!free_slot) return 0;
+        if (!free_slot->img) free_slot->img = malloc((size_t)v->W * v->H * sizeof(float));
+        if (!free_slot->img) return 0;
+        free_slot->valid = false;
+        bool q = model_error_quiet_thread(true);   // errors show at the trigger
+        int r = noisy_frame(v, sample, angle_deg, pred[j].mask, pred[j].exposure_us, pred[j].gain_db, seed,
+                            free_slot->img);
+        model_error_quiet_thread(q);
+        if (r) {   // no more speculation until the next frame (which reports the error)
+            v->nacur = v->naprev = NASEQ + 1;
+            return 0;
+        }
+        *free_slot = (spec_t){ free_slot->img, true, sample, angle_deg, pred[j].mask, pred[j].exposure_us,
+                               pred[j].gain_db, seed };
+        return 1;
+    }
+    return 0;
+}
+
 static void *prerender_main(void *arg)
 {
     rig_virtual_t *v = arg;
@@ -757,19 +851,29 @@ static void *prerender_main(void *arg)
         pthread_mutex_lock(&v->state_lock);
         int r = v->stage_gone ? RIG_ERR_DISCONNECTED : rig_turntable_status(v->tt_sim, &st);
         if (r) v->stage_gone = true;
+        double dest = NAN;
+        bool to_dest = !r && st.moving && st.homed && rig_turntable_sim_destination(v->tt_sim, &dest);
         int sample = v->cur_sample;
         uint64_t next_seed = v->next_seed;
         pthread_mutex_unlock(&v->state_lock);
         uint32_t mask = __atomic_load_n(&v->lamps_dev->on_mask, __ATOMIC_ACQUIRE);
         int todo = -1;
         bool specd = false;
+        if (to_dest && !__atomic_load_n(&v->waiting, __ATOMIC_ACQUIRE)) {
+            // the frames of the angle the stage is moving to
+            pthread_mutex_lock(&v->cache_lock);
+            specd = speculate_angle(v, sample, dest, next_seed) == 1;
+            pthread_mutex_unlock(&v->cache_lock);
+        }
         if (!r && !st.moving && st.homed) {
             pthread_mutex_lock(&v->cache_lock);
             // lamps that are on first; the others only while no frame waits
             for (int pass = 0; pass < 2 && todo < 0 && !specd; pass++) {
                 // between the passes: the next frames of this state
-                if (pass == 1 && !__atomic_load_n(&v->waiting, __ATOMIC_ACQUIRE))
-                    specd = speculate_one(v, sample, st.angle_deg, mask, next_seed);
+                if (pass == 1 && !__atomic_load_n(&v->waiting, __ATOMIC_ACQUIRE)) {
+                    int a = speculate_angle(v, sample, st.angle_deg, next_seed);
+                    specd = a == 1 || (a < 0 && speculate_one(v, sample, st.angle_deg, mask, next_seed));
+                }
                 if (specd) break;
                 for (int l = 0; l < v->lamps->n && todo < 0; l++) {
                     bool on = (mask >> l) & 1;
@@ -825,6 +929,18 @@ static int render_cb(void *ctx, const rig_frame_meta_t *m, uint16_t *pix)
         v->cur_key_mask = mask;
     }
     if (v->ncur < NSEQ) v->cur[v->ncur++] = (shot_t){ m->exposure_us, m->gain };
+    // ... and of this angle
+    if (!(v->akey_set && v->akey_sample == sample && v->akey_angle == st.angle_deg)) {
+        memcpy(v->aprev, v->acur, sizeof v->acur);
+        v->naprev = v->nacur;
+        v->nacur = 0;
+        if (!v->akey_set || v->akey_sample != sample) v->naprev = NASEQ + 1;   // another sample: no history
+        v->akey_set = true;
+        v->akey_sample = sample;
+        v->akey_angle = st.angle_deg;
+    }
+    if (v->nacur < NASEQ) v->acur[v->nacur++] = (ashot_t){ mask, m->exposure_us, m->gain };
+    else v->nacur = NASEQ + 1;
     // A frame computed ahead for exactly these inputs, or compute it now.
     const float *img = NULL;
     int r = 0;
@@ -833,6 +949,7 @@ static int render_cb(void *ctx, const rig_frame_meta_t *m, uint16_t *pix)
         if (spec_is(p, sample, st.angle_deg, mask, m->exposure_us, m->gain, seed)) img = p->img;
         if (p->seed < seed) p->valid = false;   // its seed is used up
     }
+    if (img) v->frames_ahead++;
     if (!img) {
         r = noisy_frame(v, sample, st.angle_deg, mask, m->exposure_us, m->gain, seed, v->frame);
         img = v->frame;
@@ -1582,6 +1699,13 @@ int rig_virtual_open(rig_virtual_t **out, const char *truth_path, const rig_virt
         err = fail_model(RIG_ERR_INVALID);
         goto fail;
     }
+    if (o.prerender >= 0) {
+        if (o.prerender > 2) {
+            err = rig_fail(RIG_ERR_INVALID, "virtual rig: prerender %d outside 0..2", o.prerender);
+            goto fail;
+        }
+        v->prerender = o.prerender;
+    }
     if (o.serial) gp.serial = o.serial;
     const char *sample = o.sample ? o.sample : def_sample ? def_sample : v->samples[0].name;
     v->cur_sample = find_sample(v, sample);
@@ -1771,4 +1895,22 @@ int rig_virtual_sample_pose(rig_virtual_t *v, double *tilt_deg, double *tilt_azi
     if (t) memcpy(t, sm->t, sizeof sm->t);
     pthread_mutex_unlock(&v->state_lock);
     return 0;
+}
+
+long rig_virtual_frames_ahead(rig_virtual_t *v)
+{
+    if (!v) return 0;
+    pthread_mutex_lock(&v->cache_lock);
+    long n = v->frames_ahead;
+    pthread_mutex_unlock(&v->cache_lock);
+    return n;
+}
+
+bool rig_virtual_destination(rig_virtual_t *v, double *angle_deg)
+{
+    if (!v) return false;
+    pthread_mutex_lock(&v->state_lock);
+    bool ok = !v->stage_gone && rig_turntable_sim_destination(v->tt_sim, angle_deg);
+    pthread_mutex_unlock(&v->state_lock);
+    return ok;
 }
