@@ -88,8 +88,9 @@
 // angle, so while the stage moves to a new angle (the simulated stage knows
 // where it will stand, noise included, rig_turntable_sim_destination) the
 // pre-render thread computes the frames the last angle's sequence predicts
-// there (lamps, exposure, gain, and the seeds in order), and at an angle whose
-// frames so far follow the last angle's, the rest of that sequence. A trigger
+// there (lamps, exposure, gain, and the seeds in order) once the last two
+// angles had the same sequence, and at an angle whose frames so far follow
+// the last angle's, the rest of that sequence. A trigger
 // that matches one takes it, as above; the motion's idle time pays for them.
 #define _GNU_SOURCE
 #include <limits.h>
@@ -240,12 +241,15 @@ struct rig_virtual {
     double        cur_key_angle;
     uint32_t      cur_key_mask;
     bool          cur_key_set;
-    // The frames (lamps, exposure, gain) taken at the previous angle (aprev)
-    // and so far at the current one (acur, key akey_*) predict those at the
-    // next angle: a plan repeats its lamp sets and exposures at every angle.
-    // nacur > NASEQ: too many to repeat (no prediction).
-    ashot_t       aprev[NASEQ], acur[NASEQ];
-    int           naprev, nacur;
+    // The frames (lamps, exposure, gain) taken at the angle before the
+    // previous one (aprev2), at the previous angle (aprev) and so far at the
+    // current one (acur, key akey_*) predict those at the next angle: a plan
+    // repeats its lamp sets and exposures at every angle. A sequence is only
+    // repeated once it has repeated (two angles alike), so that a client that
+    // does something else each time costs no speculation. n > NASEQ: too
+    // many to repeat (no prediction).
+    ashot_t       aprev2[NASEQ], aprev[NASEQ], acur[NASEQ];
+    int           naprev2, naprev, nacur;
     int           akey_sample;
     double        akey_angle;
     bool          akey_set;
@@ -777,20 +781,34 @@ static bool speculate_one(rig_virtual_t *v, int sample, double angle_deg, uint32
 // The frames predicted at (sample, angle) from the angle sequences, next
 // first: at most NSPEC of them, with the seeds they will draw from next_seed
 // on; 0 when there is no prediction (cache_lock held).
+static bool ashot_eq(const ashot_t *a, const ashot_t *b)
+{
+    return a->mask == b->mask && a->exposure_us == b->exposure_us && a->gain_db == b->gain_db;
+}
+
+// The first n frames of a and b alike (na, nb: their lengths; n <= both).
+static bool aseq_prefix(const ashot_t *a, int na, const ashot_t *b, int nb, int n)
+{
+    if (na > NASEQ || nb > NASEQ || n > na || n > nb) return false;
+    for (int i = 0; i < n; i++)
+        if (!ashot_eq(&a[i], &b[i])) return false;
+    return true;
+}
+
 static int predict_angle(const rig_virtual_t *v, int sample, double angle_deg, ashot_t *out)
 {
     if (!v->akey_set || v->akey_sample != sample || v->nacur > NASEQ) return 0;
-    const ashot_t *seq = v->acur;   // a new angle: as the last one
+    const ashot_t *seq = v->acur;   // a new angle: as the last one, if it repeated the one before
     int n = v->nacur, pos = 0;
     if (v->akey_angle == angle_deg) {   // frames at this angle: go on as the previous angle if they follow it
-        if (v->naprev > NASEQ || v->nacur > v->naprev) return 0;
-        for (int i = 0; i < v->nacur; i++)
-            if (v->acur[i].mask != v->aprev[i].mask || v->acur[i].exposure_us != v->aprev[i].exposure_us ||
-                v->acur[i].gain_db != v->aprev[i].gain_db)
-                return 0;
+        if (v->naprev != v->naprev2 || !aseq_prefix(v->aprev, v->naprev, v->aprev2, v->naprev2, v->naprev) ||
+            !aseq_prefix(v->acur, v->nacur, v->aprev, v->naprev, v->nacur))
+            return 0;
         seq = v->aprev;
         n = v->naprev;
         pos = v->nacur;
+    } else if (v->nacur != v->naprev || !aseq_prefix(v->acur, v->nacur, v->aprev, v->naprev, v->nacur)) {
+        return 0;
     }
     int k = 0;
     for (int j = pos; j < n && k < NSPEC; j++) out[k++] = seq[j];
@@ -833,7 +851,7 @@ static int speculate_angle(rig_virtual_t *v, int sample, double angle_deg, uint6
                             free_slot->img);
         model_error_quiet_thread(q);
         if (r) {   // no more speculation until the next frame (which reports the error)
-            v->nacur = v->naprev = NASEQ + 1;
+            v->nacur = v->naprev = v->naprev2 = NASEQ + 1;
             return 0;
         }
         *free_slot = (spec_t){ free_slot->img, true, sample, angle_deg, pred[j].mask, pred[j].exposure_us,
@@ -931,10 +949,12 @@ static int render_cb(void *ctx, const rig_frame_meta_t *m, uint16_t *pix)
     if (v->ncur < NSEQ) v->cur[v->ncur++] = (shot_t){ m->exposure_us, m->gain };
     // ... and of this angle
     if (!(v->akey_set && v->akey_sample == sample && v->akey_angle == st.angle_deg)) {
+        memcpy(v->aprev2, v->aprev, sizeof v->aprev);
+        v->naprev2 = v->naprev;
         memcpy(v->aprev, v->acur, sizeof v->acur);
         v->naprev = v->nacur;
         v->nacur = 0;
-        if (!v->akey_set || v->akey_sample != sample) v->naprev = NASEQ + 1;   // another sample: no history
+        if (!v->akey_set || v->akey_sample != sample) v->naprev = v->naprev2 = NASEQ + 1;   // another sample
         v->akey_set = true;
         v->akey_sample = sample;
         v->akey_angle = st.angle_deg;
