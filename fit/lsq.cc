@@ -236,18 +236,26 @@ bool fit_set_fixed(fit_problem_t *p, double *x, const bool *fixed)
     return true;
 }
 
-bool fit_add_residual(fit_problem_t *p, fit_residual_fn fn, void *ctx, int nres, int nblocks, double *const *blocks,
-                      fit_loss_t loss, double scale)
+// The checks of a residual block's arguments; its blocks and their sizes.
+static bool residual_args(fit_problem_t *p, fit_residual_fn fn, int nres, int nblocks, double *const *blocks,
+                          const char *what, std::vector<int> &sizes, std::vector<double *> &bl)
 {
     if (!p || !fn || nres < 1 || nblocks < 1 || !blocks)
-        return fail("fit_add_residual: NULL problem or callback, %d residuals, %d blocks", nres, nblocks);
-    std::vector<int> sizes;
-    std::vector<double *> bl;
+        return fail("%s: NULL problem or callback, %d residuals, %d blocks", what, nres, nblocks);
     for (int k = 0; k < nblocks; k++) {
-        if (!known(p, blocks[k], "fit_add_residual")) return false;
+        if (!known(p, blocks[k], what)) return false;
         sizes.push_back(p->sizes[blocks[k]]);
         bl.push_back(blocks[k]);
     }
+    return true;
+}
+
+bool fit_add_residual(fit_problem_t *p, fit_residual_fn fn, void *ctx, int nres, int nblocks, double *const *blocks,
+                      fit_loss_t loss, double scale)
+{
+    std::vector<int> sizes;
+    std::vector<double *> bl;
+    if (!residual_args(p, fn, nres, nblocks, blocks, "fit_add_residual", sizes, bl)) return false;
     ceres::LossFunction *lf = nullptr;
     if (loss != FIT_LOSS_NONE && !(scale > 0 && std::isfinite(scale)))
         return fail("fit_add_residual: robust loss scale %g must be > 0", scale);
@@ -266,15 +274,9 @@ bool fit_add_residual(fit_problem_t *p, fit_residual_fn fn, void *ctx, int nres,
 bool fit_add_residual_folded(fit_problem_t *p, fit_residual_fn fn, void *ctx, int nres, int nblocks,
                              double *const *blocks)
 {
-    if (!p || !fn || nres < 1 || nblocks < 1 || !blocks)
-        return fail("fit_add_residual_folded: NULL problem or callback, %d residuals, %d blocks", nres, nblocks);
     std::vector<int> sizes;
     std::vector<double *> bl;
-    for (int k = 0; k < nblocks; k++) {
-        if (!known(p, blocks[k], "fit_add_residual_folded")) return false;
-        sizes.push_back(p->sizes[blocks[k]]);
-        bl.push_back(blocks[k]);
-    }
+    if (!residual_args(p, fn, nres, nblocks, blocks, "fit_add_residual_folded", sizes, bl)) return false;
     p->problem.AddResidualBlock(new FoldedCost(fn, ctx, nres, sizes), nullptr, bl);
     p->nresiduals += nres;
     return true;
