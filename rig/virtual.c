@@ -90,8 +90,8 @@
 // pre-render thread computes the frames the last angle's sequence predicts
 // there (lamps, exposure, gain, and the seeds in order) once the last two
 // angles had the same sequence, and at an angle whose frames so far follow
-// the last angle's, the rest of that sequence. A trigger
-// that matches one takes it, as above; the motion's idle time pays for them.
+// the last angle's, the rest of that sequence. A trigger that matches one
+// takes it, as above; the motion's idle time pays for them.
 #define _GNU_SOURCE
 #include <limits.h>
 #include <math.h>
@@ -778,9 +778,6 @@ static bool speculate_one(rig_virtual_t *v, int sample, double angle_deg, uint32
     return false;
 }
 
-// The frames predicted at (sample, angle) from the angle sequences, next
-// first: at most NSPEC of them, with the seeds they will draw from next_seed
-// on; 0 when there is no prediction (cache_lock held).
 static bool ashot_eq(const ashot_t *a, const ashot_t *b)
 {
     return a->mask == b->mask && a->exposure_us == b->exposure_us && a->gain_db == b->gain_db;
@@ -795,6 +792,9 @@ static bool aseq_prefix(const ashot_t *a, int na, const ashot_t *b, int nb, int 
     return true;
 }
 
+// The frames predicted at (sample, angle) from the angle sequences, next
+// first: at most NSPEC of them, with the seeds they will draw from next_seed
+// on; 0 when there is no prediction (cache_lock held).
 static int predict_angle(const rig_virtual_t *v, int sample, double angle_deg, ashot_t *out)
 {
     if (!v->akey_set || v->akey_sample != sample || v->nacur > NASEQ) return 0;
