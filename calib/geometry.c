@@ -1090,10 +1090,7 @@ static json_t *solve_mrcal(const opts_t *o, const char *cornpath, const char *im
 
 static int usage_error(const char *fmt, const char *arg)
 {
-    fprintf(stderr, "refl calib geometry: ");
-    fprintf(stderr, fmt, arg);
-    fprintf(stderr, "\n(refl calib geometry --help for the options)\n");
-    return 2;
+    return model_usage_error("calib geometry", fmt, arg);
 }
 
 int calib_cmd_geometry(int argc, char **argv)

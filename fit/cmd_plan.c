@@ -49,17 +49,7 @@ static void usage(FILE *f)
             "\nrefl %s\n", REFL_VERSION);
 }
 
-static int uerr(const char *fmt, ...) __attribute__((format(printf, 1, 2)));
-static int uerr(const char *fmt, ...)
-{
-    va_list ap;
-    va_start(ap, fmt);
-    fprintf(stderr, "refl plan lamps: ");
-    vfprintf(stderr, fmt, ap);
-    fprintf(stderr, "\n(refl plan lamps --help for the options)\n");
-    va_end(ap);
-    return 2;
-}
+#define uerr(...) model_usage_error("plan lamps", __VA_ARGS__)
 
 typedef struct {
     const char *scene, *camera, *lamps, *materials, *gain, *white, *out, *truth, *sample, *exposures;

@@ -88,17 +88,7 @@ static void usage(FILE *f)
             "\nrefl %s\n", REFL_VERSION);
 }
 
-static int uerr(const char *fmt, ...) __attribute__((format(printf, 1, 2)));
-static int uerr(const char *fmt, ...)
-{
-    va_list ap;
-    va_start(ap, fmt);
-    fprintf(stderr, "refl verify: ");
-    vfprintf(stderr, fmt, ap);
-    fprintf(stderr, "\n(refl verify --help for the options)\n");
-    va_end(ap);
-    return 2;
-}
+#define uerr(...) model_usage_error("verify", __VA_ARGS__)
 
 static bool num(const char *s, double lo, double hi, double *out)
 {
