@@ -2,11 +2,21 @@
 // our GenICam XML and a render thread (see rig/gv_camera.h).
 //
 // Threads
-//   Aravis GV thread: answers GVCP, polls the real trigger register, calls
-//     fill_cb (with Aravis's fill mutex held) and sends GVSP packets.
+//   Aravis GV thread: answers GVCP; in free running it calls fill_cb (with
+//     Aravis's fill mutex held) at the frame rate and sends the GVSP packets.
 //   render thread:    watches our TriggerSoftware register (REG_TRIGGER), renders,
-//     packs to the wire format, publishes the frame as `front`, then writes the
-//     fake camera's own trigger register so the GV thread sends it.
+//     packs to the wire format, publishes the frame as `front`; over GigE Vision
+//     it then sends that frame's GVSP packets itself (send_gvsp), at once.
+// Why not hand triggered frames to the GV thread (write the fake camera's own
+// trigger register): it looks for them only once per period of its trigger
+// frequency, polling its sockets with a timeout in whole milliseconds, so it
+// spins through the last millisecond of every period. At a 1 kHz check that is
+// a whole core spinning while frames render on the others; at a lower rate
+// each frame waits up to a period. Its tick is now GV_TICK_HZ (it only answers
+// GVCP and free running), and a triggered frame leaves as soon as it is made.
+// Block ids (16-bit, 0 invalid) are ours for every frame (fill_cb sets them on
+// Aravis's free-running frames too), so a client sees one increasing sequence;
+// they start at 65400, so clients meet the 16-bit wrap within their first frames.
 // In-process (ArvFakeDevice): the client's ArvFakeStream thread calls fill_cb,
 //   which waits for the render thread's frame (fill_inprocess).
 // `lock` guards front/stats; `render_lock` serialises calls of the render
@@ -38,6 +48,7 @@
 #define GVBS_SCPS0             0x0d04   // stream channel 0 packet size (bits 0-15)
 #define GVSP_PACKET_SIZE       8192     // loopback has a 64 KiB MTU: jumbo packets
 #define GVCP_PORT              3956
+#define GV_TICK_HZ             10.0     // Aravis's GV thread's trigger check (see above)
 
 // Registers our XML adds (inside the fake camera's 64 KiB register memory).
 #define REG_TRIGGER            0xa000   // TriggerSoftware as the client sees it
@@ -58,6 +69,7 @@ struct rig_gv_camera {
     GThread         *thread;
     atomic_bool      stop;
     int              lock_fd;     // flock on the address's lock file, -1 when none
+    int              gvsp_fd;     // our GVSP sender (UDP, bound to address:0); -1 in-process
 
     GMutex lock;                 // front frame, stats, drop counter, render_error
     GCond  cond;
@@ -67,6 +79,7 @@ struct rig_gv_camera {
     guint32  front_pf;
     bool     front_ready;
     rig_gv_camera_stats_t stats;
+    guint16  block_id;           // of the last frame sent (GVSP)
     int      drop_triggers;
     char     render_error[512];
 
@@ -274,6 +287,13 @@ static void fill_inprocess(rig_gv_camera_t *g, uint8_t *dst, int w, int h, guint
     g_mutex_unlock(&g->lock);
 }
 
+// The next GVSP block id (g->lock held): 1, 2, ... 65535, 1, ...
+static guint16 next_block_id(rig_gv_camera_t *g)
+{
+    g->block_id = (guint16)(g->block_id == 65535 ? 1 : g->block_id + 1);
+    return g->block_id;
+}
+
 static void fill_cb(ArvBuffer *buffer, void *data, guint32 exposure_us_int, guint32 gain_raw, ArvPixelFormat pf)
 {
     rig_gv_camera_t *g = data;
@@ -289,6 +309,7 @@ static void fill_cb(ArvBuffer *buffer, void *data, guint32 exposure_us_int, guin
     }
 
     g_mutex_lock(&g->lock);
+    arv_buffer_set_frame_id(buffer, next_block_id(g));   // the GV thread sends it with this id
     if (g->front_ready && g->front_w == w && g->front_h == h && g->front_pf == (guint32)pf &&
         g->front_size == size) {
         memcpy(dst, g->front, size);
@@ -332,10 +353,146 @@ static void fill_cb(ArvBuffer *buffer, void *data, guint32 exposure_us_int, guin
 }
 
 // ---------------------------------------------------------------------------
+// GVSP sender (GigE Vision 2.0 stream protocol, standard 16-bit block ids)
+//
+// Every packet starts with: status (u16, 0 = success), block id (u16),
+// packet format << 24 | packet id (u32). Then
+//   leader  (format 1, packet id 0): reserved (u16), payload type (u16, 1 =
+//           image), timestamp (u64 as two u32: ns, the trigger time),
+//           pixel format, width, height, x offset, y offset (u32 each),
+//           x padding, y padding (u16 each);
+//   data    (format 3, packet ids 1..n): the payload in order, each packet as
+//           long as the stream channel's packet size (SCPS0) allows: that
+//           size counts the IP (20), UDP (8) and GVSP (8) headers too;
+//   trailer (format 2, packet id n + 1): reserved (u16), payload type (u16),
+//           the image height (u32).
+// All fields big-endian. Sent from our own UDP socket bound to the camera's
+// address (clients filter by the device's address, not its port).
+
+enum { GVSP_LEADER = 1, GVSP_TRAILER = 2, GVSP_DATA = 3, GVSP_HEADER = 8, GVSP_IP_UDP = 28, GVSP_BATCH = 64 };
+
+static void be16(uint8_t *p, unsigned v)
+{
+    p[0] = (uint8_t)(v >> 8);
+    p[1] = (uint8_t)v;
+}
+
+static void be32(uint8_t *p, uint32_t v)
+{
+    be16(p, v >> 16);
+    be16(p + 2, v & 0xffff);
+}
+
+static void gvsp_header(uint8_t *p, guint16 block, unsigned format, uint32_t packet_id)
+{
+    be16(p, 0);
+    be16(p + 2, block);
+    be32(p + 4, (uint32_t)format << 24 | (packet_id & 0xffffff));
+}
+
+// Send `data` (size bytes, the frame of m) as GVSP block `block` to the client's
+// stream channel. false with a message in err on failure.
+static bool send_gvsp(rig_gv_camera_t *g, guint16 block, const rig_frame_meta_t *m, guint32 pf,
+                      const uint8_t *data, size_t size, char *err, size_t errsize)
+{
+    struct sockaddr_in to;
+    GSocketAddress *sa = arv_fake_camera_get_stream_address(g->fake);
+    bool have = sa && g_socket_address_to_native(sa, &to, sizeof to, NULL);
+    if (sa) g_object_unref(sa);
+    if (!have || to.sin_family != AF_INET || to.sin_port == 0) {
+        snprintf(err, errsize, "no stream channel is open (the client set no stream destination)");
+        return false;
+    }
+    guint32 scps = reg_get(g, GVBS_SCPS0) & 0xffff;
+    size_t chunk = scps > GVSP_IP_UDP + GVSP_HEADER + 64 ? scps - GVSP_IP_UDP - GVSP_HEADER : 512;
+    size_t ndata = (size + chunk - 1) / chunk;
+    if (ndata + 1 > 0xffffff) {
+        snprintf(err, errsize, "a %zu-byte frame needs more than 2^24 packets of %zu bytes", size, chunk);
+        return false;
+    }
+    uint8_t leader[GVSP_HEADER + 36], trailer[GVSP_HEADER + 8];
+    gvsp_header(leader, block, GVSP_LEADER, 0);
+    uint8_t *b = leader + GVSP_HEADER;
+    be16(b, 0);
+    be16(b + 2, 1);
+    be32(b + 4, (uint32_t)(m->timestamp_ns >> 32));
+    be32(b + 8, (uint32_t)m->timestamp_ns);
+    be32(b + 12, pf);
+    be32(b + 16, (uint32_t)m->width);
+    be32(b + 20, (uint32_t)m->height);
+    be32(b + 24, (uint32_t)m->offset_x);
+    be32(b + 28, (uint32_t)m->offset_y);
+    be16(b + 32, 0);
+    be16(b + 34, 0);
+    gvsp_header(trailer, block, GVSP_TRAILER, (uint32_t)ndata + 1);
+    be16(trailer + GVSP_HEADER, 0);
+    be16(trailer + GVSP_HEADER + 2, 1);
+    be32(trailer + GVSP_HEADER + 4, (uint32_t)m->height);
+
+    // packets 0 .. ndata + 1 in batches of sendmmsg
+    uint8_t hdr[GVSP_BATCH][GVSP_HEADER];
+    struct iovec iov[GVSP_BATCH][2];
+    struct mmsghdr msg[GVSP_BATCH];
+    size_t total = ndata + 2;
+    for (size_t first = 0; first < total;) {
+        unsigned n = 0;
+        for (size_t k = first; k < total && n < GVSP_BATCH; k++, n++) {
+            int nio = 1;
+            if (k == 0) {
+                iov[n][0] = (struct iovec){ leader, sizeof leader };
+            } else if (k == total - 1) {
+                iov[n][0] = (struct iovec){ trailer, sizeof trailer };
+            } else {
+                size_t off = (k - 1) * chunk, len = size - off < chunk ? size - off : chunk;
+                gvsp_header(hdr[n], block, GVSP_DATA, (uint32_t)k);
+                iov[n][0] = (struct iovec){ hdr[n], GVSP_HEADER };
+                iov[n][1] = (struct iovec){ (void *)(data + off), len };
+                nio = 2;
+            }
+            msg[n] = (struct mmsghdr){ .msg_hdr = { .msg_name = &to, .msg_namelen = sizeof to,
+                                                    .msg_iov = iov[n], .msg_iovlen = (size_t)nio } };
+        }
+        int sent = sendmmsg(g->gvsp_fd, msg, n, 0);
+        if (sent < 0 && errno == EINTR) continue;
+        if (sent <= 0) {
+            snprintf(err, errsize, "sending GVSP packet %zu of %zu to %s:%u failed: %s", first, total,
+                     inet_ntoa(to.sin_addr), ntohs(to.sin_port), sent < 0 ? strerror(errno) : "nothing sent");
+            return false;
+        }
+        first += (size_t)sent;
+    }
+    return true;
+}
+
+// Send the published frame (render thread): it leaves `front` at once.
+static void send_front(rig_gv_camera_t *g, const rig_frame_meta_t *m, guint32 pf)
+{
+    g_mutex_lock(&g->lock);
+    if (!g->front_ready) {   // taken meanwhile (free running started)
+        g_mutex_unlock(&g->lock);
+        return;
+    }
+    g->front_ready = false;   // only this thread swaps front and back: it stays ours
+    guint16 block = next_block_id(g);
+    g_mutex_unlock(&g->lock);
+    char err[400];
+    bool ok = send_gvsp(g, block, m, pf, g->front, g->front_size, err, sizeof err);
+    g_mutex_lock(&g->lock);
+    if (ok) g->stats.frames_sent++;
+    else {
+        g->stats.send_errors++;
+        snprintf(g->render_error, sizeof g->render_error, "frame %u: %s", (unsigned)block, err);
+    }
+    g_cond_broadcast(&g->cond);
+    g_mutex_unlock(&g->lock);
+}
+
+// ---------------------------------------------------------------------------
 // Render thread
 
-// Render a frame into `back`, then publish it as `front`. false on failure.
-static bool render_publish(rig_gv_camera_t *g)
+// Render a frame into `back`, then publish it as `front` (its settings in *m,
+// its pixel format in *pf). false on failure.
+static bool render_publish(rig_gv_camera_t *g, rig_frame_meta_t *mp, guint32 *pfp)
 {
     rig_frame_meta_t m;
     guint32 pf;
@@ -370,6 +527,8 @@ static bool render_publish(rig_gv_camera_t *g)
     g->stats.frames_rendered++;
     g_cond_broadcast(&g->cond);   // an in-process fill waits for it
     g_mutex_unlock(&g->lock);
+    if (mp) *mp = m;
+    if (pfp) *pfp = pf;
     return true;
 }
 
@@ -387,7 +546,6 @@ static gpointer render_thread(gpointer data)
         bool ready = g->front_ready;
         if (!acquiring && ready) {        // acquisition stopped before the frame went out
             g->front_ready = false;
-            arv_fake_camera_write_register(g->fake, ARV_FAKE_CAMERA_REGISTER_TRIGGER_SOFTWARE, 0);
             ready = false;
         }
         g_mutex_unlock(&g->lock);
@@ -396,7 +554,9 @@ static gpointer render_thread(gpointer data)
 
         if (acquiring && triggered && !ready && reg_get(g, REG_TRIGGER) != 0) {
             arv_fake_camera_write_register(g->fake, REG_TRIGGER, 0);
-    arv_fake_camera_write_register(g->fake, GVBS_SCPS0, GVSP_PACKET_SIZE);
+            // jumbo packets on loopback, whatever the client set: larger
+            // packets than it expects only make fewer of them
+            arv_fake_camera_write_register(g->fake, GVBS_SCPS0, GVSP_PACKET_SIZE);
             g_mutex_lock(&g->lock);
             g->stats.triggers++;
             bool drop = g->drop_triggers > 0;
@@ -405,14 +565,14 @@ static gpointer render_thread(gpointer data)
                 g->stats.dropped_triggers++;
             }
             g_mutex_unlock(&g->lock);
-            // Hand the trigger on: the GV thread sends the frame (in-process, the
-            // waiting fill takes it).
-            if (!drop && render_publish(g) && !g->p.inprocess)
-                arv_fake_camera_write_register(g->fake, ARV_FAKE_CAMERA_REGISTER_TRIGGER_SOFTWARE, 1);
+            // Send the frame now (in-process, the waiting fill takes it).
+            rig_frame_meta_t m;
+            guint32 pf;
+            if (!drop && render_publish(g, &m, &pf) && !g->p.inprocess) send_front(g, &m, pf);
             continue;
         }
         if (acquiring && free_running && !triggered && !ready) {
-            render_publish(g);
+            render_publish(g, NULL, NULL);
             continue;
         }
         g_mutex_lock(&g->lock);
@@ -662,6 +822,23 @@ static int probe_port(const char *address, int *err_no)
     return rc;
 }
 
+// Our GVSP socket: UDP from address:0, a send buffer for whole frames.
+static int open_gvsp_socket(rig_gv_camera_t *g, const struct in_addr *ia)
+{
+    int fd = socket(AF_INET, SOCK_DGRAM | SOCK_CLOEXEC, 0);
+    struct sockaddr_in sa = { .sin_family = AF_INET, .sin_port = 0, .sin_addr = *ia };
+    if (fd < 0 || bind(fd, (struct sockaddr *)&sa, sizeof sa) != 0) {
+        int e = errno;
+        if (fd >= 0) close(fd);
+        return rig_fail(RIG_ERR_IO, "gv camera %s: cannot open its stream socket on %s: %s", g->serial,
+                        g->address, strerror(e));
+    }
+    int buf = 4 << 20;   // the kernel caps it (net.core.wmem_max); sends then block briefly
+    setsockopt(fd, SOL_SOCKET, SO_SNDBUF, &buf, sizeof buf);
+    g->gvsp_fd = fd;
+    return 0;
+}
+
 int rig_gv_camera_start(rig_gv_camera_t **out, const rig_gv_camera_params_t *p)
 {
     int rc = 0, lock_fd = -1;
@@ -755,6 +932,8 @@ make_xml:
         goto done;
     }
     g->p = *p;
+    g->gvsp_fd = -1;
+    g->block_id = 65399;   // the first frame is 65400, as Aravis's fake camera's: clients meet the wrap early
     g->lock_fd = lock_fd;
     lock_fd = -1;
     snprintf(g->address, sizeof g->address, "%s%s", p->inprocess ? RIG_GV_INPROCESS_PREFIX : "",
@@ -792,6 +971,7 @@ make_xml:
         goto done;
     }
     g->fake = arv_gv_fake_camera_get_fake_camera(g->gv);
+    if ((rc = open_gvsp_socket(g, &ia))) goto done;
 registers:
     reg_set_string(g, GVBS_MANUFACTURER_NAME, g->vendor, GVBS_STRING_SIZE);
     reg_set_string(g, GVBS_MODEL_NAME, g->model, GVBS_STRING_SIZE);
@@ -804,9 +984,9 @@ registers:
     reg_set_double(g, REG_EXPOSURE_US, ARV_FAKE_CAMERA_EXPOSURE_TIME_US_DEFAULT);
     reg_set_double(g, REG_GAIN_DB, 0.0);
     reg_set_double(g, REG_TEMPERATURE_C, p->temperature_c);
-    // The GV thread checks its trigger register at this rate (in-process: the
-    // stream thread looks for a queued buffer at this rate).
-    arv_fake_camera_set_trigger_frequency(g->fake, p->trigger_poll_hz);
+    // In-process, the stream thread looks for a queued buffer at this rate;
+    // over GigE Vision the GV thread's trigger check is not used (see the top).
+    arv_fake_camera_set_trigger_frequency(g->fake, p->inprocess ? p->trigger_poll_hz : GV_TICK_HZ);
 #if ARAVIS_CHECK_VERSION(0, 9, 1)
     arv_fake_camera_set_fill_pattern(g->fake, fill_cb, g, NULL);
 #else
@@ -865,6 +1045,7 @@ void rig_gv_camera_stop(rig_gv_camera_t *g)
     g_mutex_clear(&g->lock);
     g_mutex_clear(&g->render_lock);
     g_cond_clear(&g->cond);
+    if (g->gvsp_fd >= 0) close(g->gvsp_fd);
     free(g->front);
     free(g->back);
     free(g->pix);

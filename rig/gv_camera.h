@@ -19,10 +19,10 @@
 // requests and heartbeats however long a render takes:
 //   - software trigger: the TriggerSoftware register the client writes is
 //     watched by the render thread; on a trigger it snapshots the settings,
-//     renders, packs the pixels to the wire format and only then hands the
-//     trigger on to Aravis, whose fill callback just copies the finished frame.
-//     A frame therefore shows the state of the world (turntable, lamps) at the
-//     time the trigger arrived, plus the render time.
+//     renders, packs the pixels to the wire format and sends the frame's GVSP
+//     packets at once from the render thread (in-process: hands it to the
+//     waiting fill callback). A frame therefore shows the state of the world
+//     (turntable, lamps) at the time the trigger arrived, plus the render time.
 //   - free running (TriggerMode Off): the render thread renders a new frame as
 //     soon as the previous one was sent; Aravis sends the newest finished one.
 //     (The first frame after AcquisitionStart may find none ready and is then
@@ -93,7 +93,8 @@ typedef struct {
 typedef struct {
     uint64_t triggers;            // software triggers seen
     uint64_t frames_rendered;     // successful renders
-    uint64_t frames_sent;         // frames handed to Aravis's sender
+    uint64_t frames_sent;         // frames sent (GVSP), or handed to Aravis (free running, in-process)
+    uint64_t send_errors;         // triggered frames whose GVSP packets could not be sent
     uint64_t render_errors;       // renders that returned an error (no frame sent)
     uint64_t dropped_triggers;    // triggers dropped on purpose (rig_gv_camera_drop_triggers)
     uint64_t late_frames;         // frames rendered inside Aravis's thread (no frame ready in time)
