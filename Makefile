@@ -101,6 +101,7 @@ $(BIN)/refl-tests: $(call obj,$(TEST_SRC)) $(LIB)
 $(BUILD)/tests/apt_sim.o: CFLAGS_ALL += $(TEST_PKG_CFLAGS)
 # model_brdf_eval_n's GGX loop vectorises (sqrt and selects; model/brdf_batch.c)
 $(BUILD)/model/brdf_batch.o: CFLAGS_ALL += -ftree-loop-vectorize -fvect-cost-model=dynamic -fno-math-errno -fno-trapping-math
+$(BUILD)/model/sensor.o: CFLAGS_ALL += -ftree-loop-vectorize -fvect-cost-model=dynamic -fno-math-errno -fno-trapping-math -ffp-contract=off
 $(BIN)/refl-tests: LDLIBS_ALL += $(TEST_PKG_LIBS)
 
 # Helpers of tests/test_lamps.c: a fake libgpiod v1 for LD_PRELOAD (built

@@ -5,7 +5,10 @@
 //   mu    = max(0, P - dark_offset_dn) / K * prnu(x,y) * vig(x,y)
 //           + dark_current_e_per_s * exposure_us * 1e-6             (electrons)
 //   n     = Poisson(mu): exact (inversion for mu < 12, Hoermann's PTRS
-//           transformed rejection for 12 <= mu < 1e7), normal above 1e7
+//           transformed rejection for 12 <= mu < 1e7, W. Hoermann, "The
+//           transformed rejection method for generating Poisson random
+//           variables", Insurance: Mathematics and Economics 12 (1993)),
+//           normal above 1e7
 //   e     = n + read_noise_e * N(0,1)
 //   e     = min(e, FW)                                  (the well saturates)
 //   e_nl  = e * (1 - c * e / FW),  c = nonlinearity_pct / 100
@@ -17,9 +20,10 @@
 // vignetting is the relative fall-off at the corners.
 // Non-finite P is treated as dark (P = dark offset); mu is capped at 1e15; a
 // negative gain (prnu_pct near its upper limit of 50) gives no signal.
-// Temporal noise: one stream per row, model_rng(noise_seed, row), drawn
-// along the row (normal values by a ziggurat) — reproducible and
-// independent of the number of threads.
+// Temporal noise: per row, counter-based draws of model_rng(noise_seed, row),
+// three per pixel at fixed positions, and a second stream for the few pixels
+// that need more (see row_draw); normal values by a ziggurat. Reproducible,
+// independent of the number of threads and of the instruction set.
 //
 // Fixed patterns (model_sensor_patterns), from pattern_seed: each map is
 // a standardised field z(x,y) (mean exactly 0, std exactly 1 over the image,
@@ -231,18 +235,22 @@ static inline double log_factorial(double k)
     return (n - 0.5) * log(n) - n + 0.91893853320467274178 + r * (1.0 / 12 - r2 * (1.0 / 360 - r2 / 1260));
 }
 
-// Poisson variate with mean mu >= 0.
-static double poisson(double mu, row_rng_t *r)
+// Poisson variate with mean mu >= 0 whose first draws were taken by the
+// vectorised pass (row_draw) and did not settle it: u0 (the first uniform)
+// for the inversion below 12; for PTRS the first pair (U = u0 - 0.5, V) is
+// tested in full, then r gives new pairs; above 1e7 the normal approximation
+// draws from r.
+static double poisson_rest(double mu, double u0, double V, row_rng_t *r)
 {
     if (mu <= 0) return 0;
-    if (mu < 12) {   // inversion
+    if (mu < 12) {   // inversion with the first uniform
         if (mu != r->exp_mu) {
             r->exp_mu = mu;
             r->exp_val = exp(-mu);
         }
-        double u = row_uniform(r), p = r->exp_val, F = p;
+        double p = r->exp_val, F = p;
         int k = 0;
-        while (u > F && k < 200) {
+        while (u0 > F && k < 200) {
             k++;
             p *= mu / k;
             F += p;
@@ -250,24 +258,26 @@ static double poisson(double mu, row_rng_t *r)
         return k;
     }
     if (mu < 1e7) {
-        // PTRS: W. Hoermann, "The transformed rejection method for generating
-        // Poisson random variables", Insurance: Mathematics and Economics 12 (1993).
-        // The constants of the slow path (log, inv_alpha) only when it is taken.
         double smu = sqrt(mu);
         double b = 0.931 + 2.53 * smu, a = -0.059 + 0.02483 * b;
         double v_r = 0.9277 - 3.6224 / (b - 2);
+        double U = u0 - 0.5;
         for (;;) {
-            double U = row_uniform(r) - 0.5, V = row_uniform(r);
             double us = 0.5 - fabs(U);
             double k = floor((2 * a / us + b) * U + mu + 0.43);
             if (us >= 0.07 && V <= v_r) return k;
-            if (k < 0 || (us < 0.013 && V > us)) continue;
-            double inv_alpha = 1.1239 + 1.1328 / (b - 3.4);
-            if (log(V * inv_alpha / (a / (us * us) + b)) <= -mu + k * log(mu) - log_factorial(k)) return k;
+            if (!(k < 0 || (us < 0.013 && V > us))) {
+                double inv_alpha = 1.1239 + 1.1328 / (b - 3.4);
+                if (log(V * inv_alpha / (a / (us * us) + b)) <= -mu + k * log(mu) - log_factorial(k)) return k;
+            }
+            U = row_uniform(r) - 0.5;
+            V = row_uniform(r);
         }
     }
     return fmax(0.0, floor(mu + sqrt(mu) * row_gauss(r) + 0.5));
 }
+
+enum { NDARK = 8 };
 
 typedef struct {
     const model_sensor_t *s;
@@ -275,50 +285,191 @@ typedef struct {
     float       *img;
     const float *prnu, *dsnu;   // may be NULL (flat)
     bool         noise;         // false: the noise-free mean (model_sensor_mean)
+    // Poisson by inversion at the dark mean (pixels without signal):
+    // dark_F[j] = P(n <= j) for j < n_dark, 2 (above any uniform) after;
+    // dark_mu < 0 when not used
+    double       dark_mu, dark_F[NDARK];
+    int          n_dark;
 } apply_job_t;
+
+// The sensor stage runs by rows in three passes, the first and last
+// vectorised (clones for AVX-512 and AVX2 where the compiler supports them;
+// sensor.c is compiled without FMA contraction, so every clone gives the same
+// values):
+//   row_mu    mu of every pixel (electrons);
+//   row_draw  the first try of each pixel's draws: pixel x of row y takes
+//             draws 3x+1, 3x+2, 3x+3 of the row's stream (counter-based:
+//             draw n = mix64(s_y + n * gamma), s_y = model_rng(noise_seed, y)):
+//             u0 and V for the Poisson variate (PTRS's first pair, or u0 for
+//             the inversion at the dark mean), the third for the read noise
+//             (the ziggurat's fast path); flags what that did not settle;
+//   (scalar)  the flagged pixels in order, continuing from their first draws
+//             with the row's second stream model_rng(noise_seed ^ OVERFLOW, y)
+//             (rejection steps, the inversion at other means below 12, the
+//             ziggurat's slow path, means above 1e7);
+//   row_dn    electrons to digital numbers.
+// Rejection methods need only independent uniforms, so the distributions are
+// exact, as in a purely sequential stream.
+#define ROW_GAMMA 0x9e3779b97f4a7c15ULL
+#define OVERFLOW_STREAM 0x5bd1e9955bd1e995ULL
+
+#if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__) && !defined(__SANITIZE_ADDRESS__)
+#define SENSOR_CLONES __attribute__((target_clones("arch=x86-64-v4", "arch=x86-64-v3", "default")))
+#else
+#define SENSOR_CLONES
+#endif
+
+// flat: a row of ones (for a NULL prnu)
+SENSOR_CLONES
+static void row_mu(const apply_job_t *J, int y, const float *restrict flat, double *restrict mu)
+{
+    const model_sensor_t *s = J->s;
+    const int W = J->width;
+    const double K = s->system_gain_dn_per_e;
+    const double dark_e = s->dark_current_e_per_s * s->exposure_us * 1e-6;
+    const double cx = 0.5 * (W - 1), cy = 0.5 * (J->height - 1);
+    const double rc2 = cx * cx + cy * cy;
+    const double inv_K = 1.0 / K, kvig = rc2 > 0 ? s->vignetting / rc2 : 0;
+    const double Pa = s->dark_offset_dn, dy2 = (y - cy) * (y - cy);
+    const float *restrict img = J->img + (size_t)y * W;
+    const float *restrict prnu = J->prnu ? J->prnu + (size_t)y * W : flat;
+    for (int x = 0; x < W; x++) {
+        double sig = img[x] - Pa;
+        double vig = 1.0 - kvig * ((x - cx) * (x - cx) + dy2);
+        double g = prnu[x];
+        // a dark pixel (sig 0, also NaN): the dark current only
+        double m = sig > 0 ? sig * inv_K * g * vig + dark_e : dark_e;
+        m = m > 0 ? m : 0;
+        mu[x] = m < 1e15 ? m : 1e15;
+    }
+}
+
+static inline uint64_t row_draw_u64(uint64_t base, uint64_t n) { return model_mix64(base + n * ROW_GAMMA); }
+
+SENSOR_CLONES
+static void row_draw(const apply_job_t *J, uint64_t base, const double *restrict mu, double *restrict kout,
+                     double *restrict zout, uint8_t *restrict slow)
+{
+    const int W = J->width;
+    const bool read_noise = J->s->read_noise_e > 0;
+    const double dark_mu = J->dark_mu, dark_last = J->dark_F[J->n_dark - 1];
+    double F[NDARK];
+    memcpy(F, J->dark_F, sizeof F);
+    for (int x = 0; x < W; x++) {
+        uint64_t n = 3 * (uint64_t)x;
+        uint64_t d0 = row_draw_u64(base, n + 1), d1 = row_draw_u64(base, n + 2), d2 = row_draw_u64(base, n + 3);
+        double m = mu[x];
+        double u0 = (double)(d0 >> 11) * 0x1.0p-53, V = (double)(d1 >> 11) * 0x1.0p-53;
+        // PTRS's fast acceptance (see poisson_rest)
+        double U = u0 - 0.5, smu = sqrt(m);
+        double b = 0.931 + 2.53 * smu, a = -0.059 + 0.02483 * b;
+        double v_r = 0.9277 - 3.6224 / (b - 2);
+        double us = 0.5 - fabs(U);
+        double kp = floor((2 * a / us + b) * U + m + 0.43);
+        int ok_p = (m >= 12) & (m < 1e7) & (us >= 0.07) & (V <= v_r);
+        // inversion at the dark mean: the number of F_j below u0
+        double kd = 0;
+#pragma GCC unroll 8
+        for (int j = 0; j < NDARK; j++) kd += u0 > F[j] ? 1.0 : 0.0;
+        int ok_d = (m == dark_mu) & (u0 <= dark_last);
+        // the ziggurat's fast path (see row_gauss)
+        int64_t zi = (int64_t)(d2 & (ZIG_N - 1));
+        double z = (double)(d2 >> 11) * 0x1.0p-53 * zig_x[zi];
+        int ok_z = !read_noise | (z < zig_x[zi + 1]);
+        kout[x] = ok_d ? kd : kp;
+        zout[x] = (d2 >> 8) & 1 ? -z : z;
+        slow[x] = (uint8_t)(((ok_p | ok_d) ^ 1) | ((ok_z ^ 1) << 1));
+    }
+}
+
+// The flagged pixels of a row (see above), in order.
+static void row_slow(const apply_job_t *J, int y, uint64_t base, const double *mu, double *k, double *z,
+                     const uint8_t *slow)
+{
+    row_rng_t r = { model_rng(J->s->noise_seed ^ OVERFLOW_STREAM, (uint64_t)y), -1, 0 };
+    for (int x = 0; x < J->width; x++) {
+        if (!slow[x]) continue;
+        uint64_t n = 3 * (uint64_t)x;
+        if (slow[x] & 1) {
+            uint64_t d0 = row_draw_u64(base, n + 1), d1 = row_draw_u64(base, n + 2);
+            k[x] = poisson_rest(mu[x], (double)(d0 >> 11) * 0x1.0p-53, (double)(d1 >> 11) * 0x1.0p-53, &r);
+        }
+        if (slow[x] & 2) {
+            uint64_t d2 = row_draw_u64(base, n + 3);
+            int zi = (int)(d2 & (ZIG_N - 1));
+            z[x] = zig_slow(&r, zi, (double)(d2 >> 11) * 0x1.0p-53 * zig_x[zi], (d2 >> 8) & 1);
+        }
+    }
+}
+
+// k, z: the Poisson and normal variates (noise), or mu and zeros (the mean);
+// zero: a row of zeros (for a NULL dsnu)
+SENSOR_CLONES
+static void row_dn(const apply_job_t *J, int y, const float *restrict zero, const double *restrict k,
+                   const double *restrict z)
+{
+    const model_sensor_t *s = J->s;
+    const int W = J->width;
+    const double K = s->system_gain_dn_per_e, FW = s->full_well_e;
+    const double c = s->nonlinearity_pct / 100.0, c_fw = c / FW;
+    const double maxv = s->bits >= 1 && s->bits <= 16 ? (double)((1 << s->bits) - 1) : 65535.0;
+    const double Pa = s->dark_offset_dn, sigma_r = J->noise && s->read_noise_e > 0 ? s->read_noise_e : 0;
+    const bool noise = J->noise;
+    float *restrict img = J->img + (size_t)y * W;
+    const float *restrict dsnu = J->dsnu ? J->dsnu + (size_t)y * W : zero;
+#define DN_LOOP(ROUND)                                                                   \
+    for (int x = 0; x < W; x++) {                                                        \
+        double e = k[x] + sigma_r * z[x];                                                \
+        e = e < FW ? e : FW;                                                             \
+        e *= 1.0 - c_fw * e;                                                             \
+        double dn = e * K + Pa + dsnu[x];                                                \
+        dn = dn >= 0 ? dn : 0; /* clamped before rounding (the same integers); NaN -> 0 */ \
+        dn = dn < maxv ? dn : maxv;                                                      \
+        img[x] = (float)ROUND(dn);                                                       \
+    }
+#define DN_ROUND(dn) floor((dn) + 0.5)
+#define DN_KEEP(dn)  (dn)
+    if (noise) {
+        DN_LOOP(DN_ROUND)
+    } else {
+        DN_LOOP(DN_KEEP)
+    }
+#undef DN_LOOP
+#undef DN_ROUND
+#undef DN_KEEP
+}
 
 static void apply_rows(void *ctx, int begin, int end, int thread)
 {
+    (void)thread;
     const apply_job_t *J = ctx;
-    const model_sensor_t *s = J->s;
-    const double K = s->system_gain_dn_per_e, FW = s->full_well_e;
-    const double c = s->nonlinearity_pct / 100.0, c_fw = c / FW;
-    const double dark_e = s->dark_current_e_per_s * s->exposure_us * 1e-6;
-    const double maxv = s->bits >= 1 && s->bits <= 16 ? (double)((1 << s->bits) - 1) : 65535.0;
-    const double cx = 0.5 * (J->width - 1), cy = 0.5 * (J->height - 1);
-    const double rc2 = cx * cx + cy * cy;
-    const double inv_K = 1.0 / K, kvig = rc2 > 0 ? s->vignetting / rc2 : 0;
-    const double Pa = s->dark_offset_dn, sigma_r = s->read_noise_e;
-    const bool noise = J->noise;
-    const float *prnu = J->prnu, *dsnu = J->dsnu;
-    float *img = J->img;
+    const int W = J->width;
+    // row scratch: mu, k, z (doubles), ones, zeros (floats), flags
+    double *buf = malloc((size_t)W * (3 * sizeof(double) + 2 * sizeof(float) + 1));
+    if (!buf) {   // no way to report from a worker: leave these rows as they are
+        MODEL_FAIL("out of memory for the sensor stage's row buffers (%d pixels)", W);
+        return;
+    }
+    double *mu = buf, *k = buf + W, *z = buf + 2 * (size_t)W;
+    float *ones = (float *)(buf + 3 * (size_t)W), *zeros = ones + W;
+    uint8_t *slow = (uint8_t *)(zeros + W);
+    for (int x = 0; x < W; x++) {
+        ones[x] = 1.0f;
+        zeros[x] = 0.0f;
+    }
     for (int y = begin; y < end; y++) {
-        const double dy2 = (y - cy) * (y - cy);
-        row_rng_t r = { model_rng(s->noise_seed, (uint64_t)y), 0, 1 };
-        for (int x = 0; x < J->width; x++) {
-            size_t i = (size_t)y * J->width + x;
-            double sig = img[i] - Pa;
-            double mu = dark_e;   // a dark pixel (sig 0, also NaN): the dark current only
-            if (sig > 0) {
-                double vig = 1.0 - kvig * ((x - cx) * (x - cx) + dy2);
-                mu = sig * inv_K * (prnu ? prnu[i] : 1.0) * vig + dark_e;
-            }
-            if (!(mu > 0)) mu = 0;
-            if (mu > 1e15) mu = 1e15;
-            double e = mu;
-            if (noise) {
-                e = poisson(mu, &r);
-                if (sigma_r > 0) e += sigma_r * row_gauss(&r);
-            }
-            if (e > FW) e = FW;
-            e *= 1.0 - c_fw * e;
-            double dn = e * K + Pa + (dsnu ? dsnu[i] : 0.0);
-            if (!(dn >= 0)) dn = 0;   // clamping before rounding gives the same integers
-            if (dn > maxv) dn = maxv;
-            if (noise) dn = (double)(int64_t)(dn + 0.5);   // floor(dn + 0.5), dn >= 0
-            img[i] = (float)dn;
+        row_mu(J, y, ones, mu);
+        if (J->noise) {
+            uint64_t base = model_rng(J->s->noise_seed, (uint64_t)y).s;
+            row_draw(J, base, mu, k, z, slow);
+            row_slow(J, y, base, mu, k, z, slow);
+            row_dn(J, y, zeros, k, z);
+        } else {
+            memset(z, 0, (size_t)W * sizeof *z);
+            row_dn(J, y, zeros, mu, z);
         }
     }
+    free(buf);
 }
 
 // make: compute the fixed patterns here (prnu_gain/dsnu_dn ignored); else
@@ -342,7 +493,22 @@ static void apply(const model_sensor_t *s, int width, int height, const float *p
         pthread_once(&zig_once, zig_init);
         pthread_once(&logfact_once, logfact_init);
     }
-    apply_job_t J = { s, width, height, img, prnu_gain, dsnu_dn, noise };
+    apply_job_t J = { s, width, height, img, prnu_gain, dsnu_dn, noise, -1, { 0 }, 1 };
+    // P(n <= j) at the dark mean, as the inversion sums it (poisson_rest), up
+    // to 1 - 1e-6 or NDARK terms; the rest of the tail goes the scalar way
+    for (int j = 0; j < NDARK; j++) J.dark_F[j] = 2;
+    const double dark_e = s->dark_current_e_per_s * s->exposure_us * 1e-6;
+    if (noise && dark_e >= 0 && dark_e < 12) {
+        double p = exp(-dark_e), F = p;
+        J.dark_mu = dark_e;
+        J.dark_F[0] = F;
+        J.n_dark = 1;
+        for (int j = 1; j < NDARK && F < 1 - 1e-6; j++) {
+            p *= dark_e / j;
+            F += p;
+            J.dark_F[J.n_dark++] = F;
+        }
+    }
     model_parallel_for(height, 8, model_default_threads(), apply_rows, &J);
     free(prnu);
     free(dsnu);

@@ -117,6 +117,43 @@ TEST(sensor_poisson)
     free(a);
 }
 
+// Pixels without signal (the dark current only) take the inversion at the
+// dark mean of the vectorised pass, their tail beyond its table (8 terms)
+// the scalar way: the counts follow Poisson(4) for k = 0..14. Read noise alone (round
+// of sigma z, sigma 3): variance sigma^2 + 1/12, and the fraction beyond 3.5
+// sigma as the normal's (the ziggurat's tail and wedges are the scalar way).
+TEST(sensor_dark_counts_and_read_noise_tails)
+{
+    model_sensor_t s = counting_sensor();
+    s.dark_current_e_per_s = 4e4;
+    s.exposure_us = 100;   // 4 e- of dark current
+    float *a = filled(0.0);
+    model_sensor_apply(&s, W, H, a);
+    for (int k = 0; k <= 14; k++) {
+        size_t c = 0;
+        for (size_t i = 0; i < N; i++) c += a[i] == k;
+        double pk = exp(-4.0 + k * log(4.0) - lgamma(k + 1.0));
+        double tol = 4.5 * sqrt(pk * (1 - pk) / N) + 1.0 / N;
+        CHECK_MSG(fabs((double)c / N - pk) <= tol, "P(%d) = %.6f, Poisson %.6f", k, (double)c / N, pk);
+    }
+    free(a);
+
+    s = counting_sensor();
+    s.read_noise_e = 3;
+    s.dark_offset_dn = 100;   // room below for negative values
+    a = filled(100.0);
+    model_sensor_apply(&s, W, H, a);
+    double m, v;
+    mean_var(a, &m, &v);
+    CHECK_NEAR(m, 100.0, 4 * sqrt(9.0 / N));
+    CHECK_REL(v, 9.0 + 1.0 / 12, 0.02);
+    size_t far = 0;
+    for (size_t i = 0; i < N; i++) far += fabs(a[i] - 100.0) > 10.5;   // |round(3z)| >= 11: |z| > 3.5
+    double p_far = erfc(3.5 / sqrt(2.0));
+    CHECK_NEAR((double)far / N, p_far, 4.5 * sqrt(p_far / N));
+    free(a);
+}
+
 TEST(sensor_fixed_patterns)
 {
     model_sensor_t s = model_sensor_default();
