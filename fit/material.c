@@ -517,7 +517,15 @@ bool fit_observe(const char *session_dir, const fit_calib_t *cal, const fit_obse
                 if (sig < o.min_signal_dn) continue;
                 fit_obs_t ob = { .lamp = lamp, .angle_deg = r->measured_deg, .exposure_us = r->exposure_us,
                                  .gain_db = r->gain, .q = { win[w].q[0], win[w].q[1] }, .c = c, .d_mm = L->d_mm,
-                                 .s_dn_per_us = sig / (sg / n) / (r->exposure_us * gf), .step = r->step };
+                                 .s_dn_per_us = sig / (sg / n) / (r->exposure_us * gf), .step = r->step,
+                                 .face = pw[w].face };
+                {   // the point at angle 0: turned back about the table's axis (z)
+                    double ca = cos(-r->measured_deg * M_PI / 180), sa = sin(-r->measured_deg * M_PI / 180);
+                    model_vec3_t pp = pw[w].p_mm;
+                    ob.p0_mm[0] = ca * pp.x - sa * pp.y;
+                    ob.p0_mm[1] = sa * pp.x + ca * pp.y;
+                    ob.p0_mm[2] = pp.z;
+                }
                 if (cal->gain_dn_per_e > 0) {
                     // per pixel: shot noise K*signal (K scales with the gain), read noise, quantisation
                     double K = cal->gain_dn_per_e * gf, rd = K * cal->read_noise_e;
@@ -631,7 +639,8 @@ bool fit_white(const fit_obs_set_t *obs, const fit_calib_t *cal, double albedo, 
 
 typedef struct {
     const char *session, *calib, *out, *scene, *material, *model, *name, *report;
-    double      albedo, k_sigma, sys_rel;
+    double      albedo, k_sigma, sys_rel, cell_mm;
+    int         window, step;   // 0: fit_observe's defaults
     bool        verbose;
 } mat_args_t;
 
@@ -647,12 +656,24 @@ static int parse_args(const char *cmd, int argc, char **argv, mat_args_t *a, voi
             a->verbose = true;
             continue;
         }
+        if (!strcmp(s, "--window") || !strcmp(s, "--step")) {
+            char *e = NULL;
+            long v = i + 1 < argc ? strtol(argv[i + 1], &e, 10) : 0;
+            if (i + 1 >= argc || *e || v < 1 || v > 64) {
+                fprintf(stderr, "refl %s: %s needs a whole number of pixels 1..64%s%s%s\n", cmd, s,
+                        i + 1 < argc ? ", not '" : "", i + 1 < argc ? argv[i + 1] : "", i + 1 < argc ? "'" : "");
+                return 2;
+            }
+            *(!strcmp(s, "--window") ? &a->window : &a->step) = (int)v;
+            i++;
+            continue;
+        }
         const char **str = !strcmp(s, "-o") ? &a->out : !strcmp(s, "--calib") ? &a->calib
                          : !strcmp(s, "--scene") ? &a->scene : !strcmp(s, "--material") ? &a->material
                          : !strcmp(s, "--model") ? &a->model : !strcmp(s, "--name") ? &a->name
                          : !strcmp(s, "--report") ? &a->report : NULL;
         double *num = !strcmp(s, "--albedo") ? &a->albedo : !strcmp(s, "--k-sigma") ? &a->k_sigma
-                    : !strcmp(s, "--systematic") ? &a->sys_rel : NULL;
+                    : !strcmp(s, "--systematic") ? &a->sys_rel : !strcmp(s, "--albedo-cells") ? &a->cell_mm : NULL;
         if (str || num) {
             if (i + 1 >= argc) {
                 fprintf(stderr, "refl %s: missing value after %s\n", cmd, s);
@@ -664,8 +685,9 @@ static int parse_args(const char *cmd, int argc, char **argv, mat_args_t *a, voi
             } else {
                 char *e;
                 *num = strtod(v, &e);
-                // the systematic floor may be 0 (as refl fit brdf's); an albedo or K may not
-                bool zero_ok = num == &a->sys_rel;
+                // the systematic floor may be 0 (as refl fit brdf's), and the cells (off);
+                // an albedo or K may not
+                bool zero_ok = num == &a->sys_rel || num == &a->cell_mm;
                 if (*e || !(zero_ok ? *num >= 0 : *num > 0) || !isfinite(*num)) {
                     fprintf(stderr, "refl %s: %s needs a number %s 0, not '%s'\n", cmd, s, zero_ok ? ">=" : ">", v);
                     return 2;
@@ -702,6 +724,8 @@ static bool load_and_observe(const char *cmd, const mat_args_t *a, bool need_whi
     o.scene_path = a->scene;
     o.material = a->material;
     o.verbose = a->verbose;
+    if (a->window > 0) o.window = a->window;
+    if (a->step > 0) o.step = a->step;
     if (!fit_observe(a->session, *cal, &o, obs)) {
         fprintf(stderr, "refl %s: %s\n", cmd, model_last_error());
         return false;
@@ -723,13 +747,15 @@ static json_t *provenance(int argc, char **argv, const mat_args_t *a, const fit_
 
 static void white_usage(FILE *f)
 {
-    fprintf(f, "usage: refl calib white SESSION --calib DIR [--albedo A] [--scene FILE] [--material NAME] -o WHITE.json\n"
+    fprintf(f, "usage: refl calib white SESSION --calib DIR [--albedo A] [--scene FILE] [--material NAME]\n"
+               "                        [--window N] [--step N] -o WHITE.json\n"
                "\n"
                "The absolute scale kc*I of each lamp from a session of the reference white (a Lambertian standard\n"
                "of albedo A, default 0.99): every lit window of the standard gives (P - Pa) d^2 / (g t kd n.l),\n"
                "kd = A/pi; the median per lamp is written. DIR holds the geometry (camera.cameramodel), the lamp\n"
                "positions (lamps.json) and optionally the gain calibration (gain.json and its maps). Put WHITE.json\n"
-               "in DIR (or DIR/white/) for refl fit material.\n\nrefl %s\n", REFL_VERSION);
+               "in DIR (or DIR/white/) for refl fit material. Windows are N x N pixels (--window, default 5) on a\n"
+               "grid of N pixels (--step, default 8), each wholly on one face of the material.\n\nrefl %s\n", REFL_VERSION);
 }
 
 int fit_cmd_white(int argc, char **argv)
@@ -739,6 +765,10 @@ int fit_cmd_white(int argc, char **argv)
     if (rc >= 0) return rc;
     if (a.albedo > 1) {
         fprintf(stderr, "refl calib white: --albedo %g: an albedo is at most 1\n", a.albedo);
+        return 2;
+    }
+    if (a.cell_mm > 0) {
+        fprintf(stderr, "refl calib white: --albedo-cells is an option of refl fit material\n");
         return 2;
     }
     fit_calib_t *cal = NULL;
@@ -846,11 +876,192 @@ done:
     return ok;
 }
 
+// ---------------------------------------------------------------------------
+// Albedo cells (--albedo-cells MM): a textured material (wood, a painted
+// surface) varies its albedo from place to place, which one set of BRDF
+// parameters cannot follow. The sample's surface is cut into cells of MM mm
+// (by the observations' points at angle 0, which turn with the table, and
+// their faces); each cell with at least CELL_MIN_OBS observations gets a
+// factor c_j on its whole reflectance (the virtual rig's texture multiplies
+// it so), and the fit becomes R_k = c_j(k) R(theta; geometry_k):
+//   1. theta from the samples as they are (the model with the lowest BIC);
+//   2. c_j = sum R_k f_k / sum f_k^2 over the cell (f = the model's R),
+//      then the factors scaled to mean 1 over the observations (so kd & co
+//      are the sample's mean);
+//   3. theta again from R_k / c_j with weights c_j^2 (the same residuals
+//      R_k - c_j f_k); repeat 2-3 until no factor moves by 1e-4 (at most 20).
+// Every model is then fitted to the corrected samples. The residual's
+// degrees of freedom lose one per cell (rms_over_noise uses N - k - cells).
+enum { CELL_MIN_OBS = 4 };
+
+typedef struct {
+    int     n_cells, n_obs_in, iterations;
+    int    *cell;       // per observation: its cell, -1 when its cell has too few
+    double *factor;     // per cell
+    double  rel_std;    // std of the factors over the observations (their mean is 1)
+} albedo_cells_t;
+
+static void cells_free(albedo_cells_t *ac)
+{
+    free(ac->cell);
+    free(ac->factor);
+    memset(ac, 0, sizeof *ac);
+}
+
+static bool cells_assign(const fit_obs_set_t *obs, double cell_mm, albedo_cells_t *ac)
+{
+    memset(ac, 0, sizeof *ac);
+    GHashTable *h = g_hash_table_new_full(g_str_hash, g_str_equal, g_free, NULL);
+    int *raw = malloc((size_t)(obs->n ? obs->n : 1) * sizeof *raw), nraw = 0;
+    ac->cell = malloc((size_t)(obs->n ? obs->n : 1) * sizeof *ac->cell);
+    if (!h || !raw || !ac->cell) goto oom;
+    for (int i = 0; i < obs->n; i++) {
+        const fit_obs_t *o = &obs->o[i];
+        char key[96];
+        snprintf(key, sizeof key, "%d:%.0f:%.0f:%.0f", o->face, floor(o->p0_mm[0] / cell_mm),
+                 floor(o->p0_mm[1] / cell_mm), floor(o->p0_mm[2] / cell_mm));
+        gpointer v;
+        if (g_hash_table_lookup_extended(h, key, NULL, &v)) {
+            raw[i] = GPOINTER_TO_INT(v);
+        } else {
+            raw[i] = nraw;
+            g_hash_table_insert(h, g_strdup(key), GINT_TO_POINTER(nraw));
+            nraw++;
+        }
+    }
+    int *count = calloc((size_t)(nraw ? nraw : 1), sizeof *count), *index = malloc((size_t)(nraw ? nraw : 1) * sizeof *index);
+    if (!count || !index) {
+        free(count);
+        free(index);
+        goto oom;
+    }
+    for (int i = 0; i < obs->n; i++) count[raw[i]]++;
+    for (int j = 0; j < nraw; j++) index[j] = count[j] >= CELL_MIN_OBS ? ac->n_cells++ : -1;
+    for (int i = 0; i < obs->n; i++) {
+        ac->cell[i] = index[raw[i]];
+        ac->n_obs_in += ac->cell[i] >= 0;
+    }
+    free(count);
+    free(index);
+    ac->factor = malloc((size_t)(ac->n_cells ? ac->n_cells : 1) * sizeof *ac->factor);
+    if (!ac->factor) goto oom;
+    for (int j = 0; j < ac->n_cells; j++) ac->factor[j] = 1;
+    free(raw);
+    g_hash_table_destroy(h);
+    return true;
+oom:
+    free(raw);
+    if (h) g_hash_table_destroy(h);
+    cells_free(ac);
+    model_error(NULL, 0, "out of memory for the albedo cells");
+    return false;
+}
+
+// The samples corrected by the cells' factors: R_k / c, weight c^2.
+static fit_samples_t *cells_samples(const fit_samples_t *smp, const albedo_cells_t *ac)
+{
+    fit_samples_t *out = fit_samples_new();
+    if (!out) return NULL;
+    snprintf(out->source, sizeof out->source, "%s", smp->source);
+    for (int i = 0; i < smp->n; i++) {
+        double c = ac->cell[i] >= 0 ? ac->factor[ac->cell[i]] : 1;
+        if (!fit_samples_add(out, &smp->c[i], smp->R[i] / c, c * c)) {
+            fit_samples_free(out);
+            model_error(NULL, 0, "sample %d: albedo factor %g gives no usable sample", i, c);
+            return NULL;
+        }
+    }
+    return out;
+}
+
+// Steps 2-3 above from the fit *r (its model and parameters); *r is updated.
+static bool cells_fit(const fit_samples_t *smp, albedo_cells_t *ac, fit_brdf_result_t *r)
+{
+    double *num = calloc((size_t)(ac->n_cells ? ac->n_cells : 1), sizeof *num);
+    double *den = calloc((size_t)(ac->n_cells ? ac->n_cells : 1), sizeof *den);
+    bool ok = num && den;
+    for (ac->iterations = 0; ok && ac->iterations < 20; ac->iterations++) {
+        memset(num, 0, (size_t)ac->n_cells * sizeof *num);
+        memset(den, 0, (size_t)ac->n_cells * sizeof *den);
+        for (int i = 0; i < smp->n; i++) {
+            int j = ac->cell[i];
+            if (j < 0) continue;
+            double f = model_brdf_eval(r->model, r->p, &smp->c[i], NULL);
+            num[j] += smp->R[i] * f;
+            den[j] += f * f;
+        }
+        double sum = 0, moved = 0;
+        int n = 0;
+        for (int i = 0; i < smp->n; i++) {
+            int j = ac->cell[i];
+            if (j >= 0 && den[j] > 0) {
+                sum += num[j] / den[j];
+                n++;
+            }
+        }
+        double mean = n ? sum / n : 1;
+        for (int j = 0; j < ac->n_cells; j++) {
+            double c = den[j] > 0 && mean > 0 ? num[j] / den[j] / mean : 1;
+            if (!(c > 0) || !isfinite(c)) c = 1;
+            moved = fmax(moved, fabs(c - ac->factor[j]));
+            ac->factor[j] = c;
+        }
+        fit_samples_t *cs = cells_samples(smp, ac);
+        fit_brdf_result_t nr;
+        double start[MODEL_BRDF_MAX_PARAMS];
+        memcpy(start, r->p, sizeof start);
+        ok = cs && fit_brdf_from(cs, r->model, NULL, start, &nr);
+        fit_samples_free(cs);
+        if (!ok) break;
+        // alternating least squares: the residual only falls; stop when it
+        // no longer does (or nothing moves)
+        double before = r->rss;
+        *r = nr;
+        if (moved < 1e-4 || (ac->iterations > 0 && before - nr.rss <= 1e-6 * before)) break;
+    }
+    if (ok) {
+        double s1 = 0, s2 = 0;
+        for (int i = 0; i < smp->n; i++)
+            if (ac->cell[i] >= 0) {
+                double c = ac->factor[ac->cell[i]];
+                s1 += c;
+                s2 += c * c;
+            }
+        int n = ac->n_obs_in;
+        ac->rel_std = n > 1 ? sqrt(fmax(0.0, (s2 - s1 * s1 / n) / (n - 1))) : 0;
+    }
+    free(num);
+    free(den);
+    return ok;
+}
+
+// Fit every model of models[] to smp into res (printing a line each); the
+// index of the lowest BIC, -1 when none could be fitted.
+static int fit_models(const fit_samples_t *smp, const int *models, int nm, fit_brdf_result_t *res, int *nres)
+{
+    int best = -1;
+    *nres = 0;
+    for (int k = 0; k < nm; k++) {
+        fit_brdf_result_t *r = &res[*nres];
+        if (!fit_brdf(smp, (model_brdf_t)models[k], NULL, r)) {
+            fprintf(stderr, "  %s: %s\n", model_brdf_name((model_brdf_t)models[k]), model_last_error());
+            continue;
+        }
+        printf("  %-16s rms %.4g 1/sr  BIC %.6g", model_brdf_name(r->model), r->rms, r->bic);
+        for (int j = 0; j < r->nparams; j++) printf("  %s %.4g", model_brdf_param_name(r->model, j), r->p[j]);
+        printf("\n");
+        if (best < 0 || r->bic < res[best].bic) best = *nres;
+        (*nres)++;
+    }
+    return best;
+}
+
 static void material_usage(FILE *f)
 {
     fprintf(f, "usage: refl fit material SESSION --calib DIR [--model all|lambert|hall|torrance_sparrow|thesis_fit|\n"
                "                         cook_torrance|ggx] [--name NAME] [--scene FILE] [--material NAME]\n"
-               "                         [--k-sigma K] [--systematic REL] [--report DIR] -o PRIORS.json\n"
+               "                         [--k-sigma K] [--systematic REL] [--albedo-cells MM] [--window N]\n"
+               "                         [--step N] [--report DIR] -o PRIORS.json\n"
                "\n"
                "BRDF samples of the session's sample material: every window of the material lit by one lamp, dark\n"
                "and flat corrected, brackets merged to high dynamic range, scaled by the reference white's kc*I of\n"
@@ -861,6 +1072,10 @@ static void material_usage(FILE *f)
                "one, for the calibrations' shared errors (on the virtual rig kc*I comes out within ~3 %% and the lamp\n"
                "positions within ~8 mm); the prior bounds are mean +- K std (default 3). --report DIR writes an HTML\n"
                "report there: measured vs fitted lobes, residual maps, the parameters and the model comparison.\n"
+               "--albedo-cells MM (textured materials: wood, paint): the sample's surface is cut into cells of MM mm,\n"
+               "each with its own albedo factor on the whole reflectance (mean 1 over the observations), fitted\n"
+               "together with the parameters; the priors then hold the mean material and the factors' spread.\n"
+               "Observations are windows of N x N pixels (--window, default 5) on a grid of N pixels (--step, 8).\n"
                "\nrefl %s\n", REFL_VERSION);
 }
 
@@ -880,7 +1095,8 @@ int fit_cmd_material(int argc, char **argv)
     }
     fit_calib_t *cal = NULL;
     fit_obs_set_t obs;
-    fit_samples_t *smp = NULL;
+    fit_samples_t *smp = NULL, *csmp = NULL;
+    albedo_cells_t ac = { 0 };
     rc = 1;
     if (!load_and_observe("fit material", &a, true, &cal, &obs)) goto done;
     smp = fit_samples_new();
@@ -909,22 +1125,24 @@ int fit_cmd_material(int argc, char **argv)
                cal->nonlin_a_per_dn > 0 ? "" : " (none in the gain calibration)");
     }
     fit_brdf_result_t res[MODEL_BRDF_COUNT];
-    int nres = 0, best = -1;
-    for (int k = 0; k < nm; k++) {
-        if (!fit_brdf(smp, (model_brdf_t)models[k], NULL, &res[nres])) {
-            fprintf(stderr, "  %s: %s\n", model_brdf_name((model_brdf_t)models[k]), model_last_error());
-            continue;
-        }
-        printf("  %-16s rms %.4g 1/sr  BIC %.6g", model_brdf_name(res[nres].model), res[nres].rms, res[nres].bic);
-        for (int j = 0; j < res[nres].nparams; j++)
-            printf("  %s %.4g", model_brdf_param_name(res[nres].model, j), res[nres].p[j]);
-        printf("\n");
-        if (best < 0 || res[nres].bic < res[best].bic) best = nres;
-        nres++;
-    }
+    int nres = 0, best = fit_models(smp, models, nm, res, &nres);
     if (best < 0) {
         fprintf(stderr, "refl fit material: no model could be fitted\n");
         goto done;
+    }
+    if (a.cell_mm > 0) {
+        fit_brdf_result_t r = res[best];
+        if (!cells_assign(&obs, a.cell_mm, &ac) || !cells_fit(smp, &ac, &r) || !(csmp = cells_samples(smp, &ac))) {
+            fprintf(stderr, "refl fit material: albedo cells: %s\n", model_last_error());
+            goto done;
+        }
+        printf("  albedo cells of %g mm: %d cells hold %d of %d observations; factors' std %.4f (%d iterations "
+               "with %s); every model again:\n", a.cell_mm, ac.n_cells, ac.n_obs_in, obs.n, ac.rel_std,
+               ac.iterations + 1, model_brdf_name(r.model));
+        if ((best = fit_models(csmp, models, nm, res, &nres)) < 0) {
+            fprintf(stderr, "refl fit material: no model could be fitted to the samples with albedo cells\n");
+            goto done;
+        }
     }
     json_t *top = json_object();
     json_object_set_new(top, "format", json_string("refl priors 1"));
@@ -934,7 +1152,27 @@ int fit_cmd_material(int argc, char **argv)
     json_object_set_new(e, "session", json_string(a.session));
     json_object_set_new(e, "sample", json_string(obs.sample));
     json_object_set_new(e, "noise_rms_expected", isfinite(noise_rms) ? json_real(noise_rms) : json_null());
-    if (isfinite(noise_rms) && noise_rms > 0) json_object_set_new(e, "rms_over_noise", json_real(res[best].rms / noise_rms));
+    // the residual per degree of freedom (the cells' factors take one each)
+    double dof = (double)res[best].n - res[best].nfree - ac.n_cells;
+    double rms_dof = dof > 0 ? sqrt(res[best].rss / dof) : NAN;
+    if (isfinite(noise_rms) && noise_rms > 0 && isfinite(rms_dof)) {
+        json_object_set_new(e, "rms_over_noise", json_real(rms_dof / noise_rms));
+        printf("  residual per degree of freedom over the noise: %.3f\n", rms_dof / noise_rms);
+    }
+    if (a.cell_mm > 0) {
+        json_t *jc = json_object();
+        json_object_set_new(jc, "cell_mm", json_real(a.cell_mm));
+        json_object_set_new(jc, "cells", json_integer(ac.n_cells));
+        json_object_set_new(jc, "observations_in_cells", json_integer(ac.n_obs_in));
+        json_object_set_new(jc, "observations", json_integer(obs.n));
+        json_object_set_new(jc, "factor_rel_std", json_real(ac.rel_std));
+        json_object_set_new(jc, "iterations", json_integer(ac.iterations + 1));
+        json_object_set_new(jc, "convention", json_string(
+            "each cell (MM mm of the sample's surface at angle 0, per face) scales the whole reflectance by its "
+            "factor; the factors' mean over the observations is 1, so the parameters describe the mean material; "
+            "factor_rel_std is the spread of the albedo from place to place"));
+        json_object_set_new(e, "albedo_cells", jc);
+    }
     json_array_append_new(mats, e);
     json_object_set_new(top, "materials", mats);
     json_object_set_new(top, "provenance", provenance(argc, argv, &a, cal));
@@ -946,7 +1184,8 @@ int fit_cmd_material(int argc, char **argv)
                model_brdf_name(res[best].model), nres);
         rc = 0;
         if (a.report) {
-            if (material_report(a.report, &obs, smp, res, nres, best, e, json_object_get(top, "provenance"))) {
+            if (material_report(a.report, &obs, csmp ? csmp : smp, res, nres, best, e,
+                                json_object_get(top, "provenance"))) {
                 printf("%s/report.html\n", a.report);
             } else {
                 fprintf(stderr, "refl fit material: the report: %s\n", model_last_error());
@@ -959,6 +1198,8 @@ int fit_cmd_material(int argc, char **argv)
     json_decref(top);
 done:
     fit_samples_free(smp);
+    fit_samples_free(csmp);
+    cells_free(&ac);
     fit_obs_free(&obs);
     fit_calib_free(cal);
     return rc;

@@ -63,6 +63,9 @@ typedef struct {
     double          s_std;          // its expected temporal noise (shot, read, quantisation of the
                                     // window mean; dark level noise-free), same unit; 0 without K
     int             step;           // the session step of the frame
+    int             face;           // the scene face the window lies on
+    double          p0_mm[3];       // the window centre's surface point, rig frame at angle 0 (it
+                                    // turns with the table: the same point of the sample at every angle)
 } fit_obs_t;
 
 typedef struct {
