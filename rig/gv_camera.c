@@ -455,8 +455,10 @@ static bool send_gvsp(rig_gv_camera_t *g, guint16 block, const rig_frame_meta_t 
         int sent = sendmmsg(g->gvsp_fd, msg, n, 0);
         if (sent < 0 && errno == EINTR) continue;
         if (sent <= 0) {
-            snprintf(err, errsize, "sending GVSP packet %zu of %zu to %s:%u failed: %s", first, total,
-                     inet_ntoa(to.sin_addr), ntohs(to.sin_port), sent < 0 ? strerror(errno) : "nothing sent");
+            char host[INET_ADDRSTRLEN] = "?";
+            inet_ntop(AF_INET, &to.sin_addr, host, sizeof host);
+            snprintf(err, errsize, "sending GVSP packet %zu of %zu to %s:%u failed: %s", first, total, host,
+                     ntohs(to.sin_port), sent < 0 ? strerror(errno) : "nothing sent");
             return false;
         }
         first += (size_t)sent;
