@@ -1097,7 +1097,8 @@ static void usage(FILE *f)
             "  --progress lines|bar       capture progress (default: bar on a terminal)\n"
             "  -h, --help                 this help\n\n"
             "Output lamps.json: units mm, rig frame; per lamp position_mm, std_mm, rms_ray_distance_mm, n_frames,\n"
-            "frames_missing. A lamp whose highlight is missing in some frames is named with those frames and fitted\n"
+            "frames_missing, radius_mm (the emitting radius the highlights were modelled with). A lamp whose\n"
+            "highlight is missing in some frames is named with those frames and fitted\n"
             "from the rest (>= 3 needed, else an error).\n");
 }
 
@@ -1782,6 +1783,7 @@ int calib_cmd_lamps(int argc, char **argv)
         for (int k = 0; k < 9; k++) json_array_append_new(cj, json_real(cv[k]));
         json_object_set_new(j, "covariance_mm2", cj);
         json_object_set_new(j, "rms_ray_distance_mm", json_real(lp->fit.rms_mm));
+        json_object_set_new(j, "radius_mm", json_real(lp->lamp_radius_mm));
         json_object_set_new(j, "n_frames", json_integer(lp->fit.n_used));
         int nout = 0;
         for (int a = 0; a < NA; a++) nout += lp->has_ray[a] && !lp->used[a];

@@ -112,8 +112,7 @@ parts.append(f"<h3>Material: {html.escape(m['name'])} (refl fit material &rarr; 
              f"RMS of R {f(m['rms'], 3)} 1/sr over {m['n_samples']} samples"
              + (f"; the sensor's noise alone would give {f(m['noise_rms_expected'], 3)} 1/sr "
                 f"(ratio {f(m['rms_over_noise'], 3)}: the narrow lobe is sensitive to the calibrated camera and "
-                f"lamp positions, {math.sqrt(np.mean(np.square(errs))):.1f} mm RMS off here; with the truth's it is 1.2 in the tests, the rest being what "
-                f"the fitter's model lacks: finite lamps and interreflection)" if m.get("noise_rms_expected") else "") + ".</p>\n<table>\n")
+                f"lamp positions, {math.sqrt(np.mean(np.square(errs))):.1f} mm RMS off here; with the truth's camera and lamps it is 1.0 in the tests)" if m.get("noise_rms_expected") else "") + ".</p>\n<table>\n")
 parts.append(row(["parameter", "fitted", "std", "prior bounds", "truth", "note"], True))
 for p in m["parameters"]:
     tv = tmat.get(p["name"], "") if tmat is not None and tmat.get("model") == m["model"] else ""

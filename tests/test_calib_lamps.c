@@ -488,6 +488,7 @@ TEST(calib_lamps_virtual_rig_accuracy)
             CHECK_MSG(err < 5, "lamp %s: %.2f mm from the truth", name, err);
             CHECK_MSG(err < 4 * s + 0.5, "lamp %s: error %.2f mm vs stated std %.2f mm", name, err, s);
             CHECK(json_integer_value(json_object_get(l, "n_frames")) >= 20);
+            CHECK_NEAR(json_number_value(json_object_get(l, "radius_mm")), 15, 1e-9);   // the truth's, modelled
             CHECK(json_array_size(json_object_get(l, "frames_missing")) == 0);
         }
         // The error depends on the noise draw (0.9-2.6 mm RMS over the rig's

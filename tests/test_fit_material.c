@@ -306,13 +306,14 @@ static void check_noise(json_t *m, double lo, double hi)
 // std of the truth. The response compression is measured (a within 10 % of
 // the truth's) and corrected: uncorrected, the metal's tiny diffuse part came
 // out 9 % high. Residuals: the glossy plastic's is at the sensor's noise
-// (within 1.5x), and so are the textured paint's (2 % albedo texture) and
-// plywood's (8 %) with albedo cells of 2 mm on 3x3-pixel windows (without
-// them: 1.8x and 5.4x; with cells on 5x5 windows the plywood's stays at 2x,
-// a window's footprint turning with the table over the texture); the cells'
-// factors spread as the textures' amplitudes do (4x). What the fitter does
-// not model stays above the noise and is bounded here: the metal's lobe
-// under 15 mm lamps and its interreflection.
+// (within 1.5x), and so is the metal's (the truth renders these two coupons
+// with 16 samples of each 15 mm lamp per pixel, as a pixel integrates the
+// whole lamp; with one, that Monte Carlo noise left the metal at 1.9x), the
+// textured paint's (2 % albedo texture) and the plywood's (8 %) with albedo
+// cells of 2 mm on 3x3-pixel windows (without them: 1.8x and 5.4x; with cells
+// on 5x5 windows the plywood's stays at 2x, a window's footprint turning with
+// the table over the texture); the cells' factors spread as the textures'
+// amplitudes do (4x).
 TEST(fit_material_coupons_virtual_rig)
 {
     char *rig = rig_file(), *cal = calib_dir();
@@ -371,7 +372,7 @@ TEST(fit_material_coupons_virtual_rig)
         check_param(m, "m", 0.25, 0.10, true);
         double prod = param(m, "ks", NULL) * param(m, "F0", NULL);
         CHECK_MSG(fabs(prod / (0.9 * 0.8) - 1) < 0.05, "metal ks*F0 %.4g vs truth 0.72", prod);
-        check_noise(m, 1.5, 2.5);
+        check_noise(m, 0.9, 1.5);
     }
     json_decref(doc);
     if ((m = fit_coupon(rig, cal, "coupon_glossy_plastic", false, &doc))) {
