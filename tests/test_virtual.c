@@ -282,8 +282,8 @@ TEST(virtual_truth_errors)
     expect_error("home_time_s = 15", "home_time_s = fifteen", "home_time_s", "not a number");
     expect_error("model_sha256 = 6783", "model_sha256 = 0783", "model_sha256", "sha256");
     expect_error("material = metal", "material = unobtainium", "unobtainium", "no [material unobtainium]");
-    expect_error("material = metal", "material = plywood", "material = plywood\n\n[sample coupon_plywood]",
-                 "uses material 'metal'");
+    expect_error("material = metal", "material = plywood",
+                 "material = plywood\ndirect_samples = 16\n\n[sample coupon_plywood]", "uses material 'metal'");
     expect_error("scene = samples/coupon_metal.d3d", "scene = samples/coupon_steel.d3d", "coupon_steel",
                  "coupon_steel.d3d");
     expect_error("kind = workpiece", "kind = gadget", "gadget", "kind = 'gadget' is unknown");
