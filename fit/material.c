@@ -980,7 +980,9 @@ static bool cells_fit(const fit_samples_t *smp, albedo_cells_t *ac, fit_brdf_res
     double *num = calloc((size_t)(ac->n_cells ? ac->n_cells : 1), sizeof *num);
     double *den = calloc((size_t)(ac->n_cells ? ac->n_cells : 1), sizeof *den);
     bool ok = num && den;
-    for (ac->iterations = 0; ok && ac->iterations < 20; ac->iterations++) {
+    ac->iterations = 0;
+    for (int it = 0; ok && it < 20; it++) {
+        ac->iterations = it + 1;   // rounds done (reported)
         memset(num, 0, (size_t)ac->n_cells * sizeof *num);
         memset(den, 0, (size_t)ac->n_cells * sizeof *den);
         for (int i = 0; i < smp->n; i++) {
@@ -1017,7 +1019,7 @@ static bool cells_fit(const fit_samples_t *smp, albedo_cells_t *ac, fit_brdf_res
         // no longer does (or nothing moves)
         double before = r->rss;
         *r = nr;
-        if (moved < 1e-4 || (ac->iterations > 0 && before - nr.rss <= 1e-6 * before)) break;
+        if (moved < 1e-4 || (it > 0 && before - nr.rss <= 1e-6 * before)) break;
     }
     if (ok) {
         double s1 = 0, s2 = 0;
@@ -1138,7 +1140,7 @@ int fit_cmd_material(int argc, char **argv)
         }
         printf("  albedo cells of %g mm: %d cells hold %d of %d observations; factors' std %.4f (%d iterations "
                "with %s); every model again:\n", a.cell_mm, ac.n_cells, ac.n_obs_in, obs.n, ac.rel_std,
-               ac.iterations + 1, model_brdf_name(r.model));
+               ac.iterations, model_brdf_name(r.model));
         if ((best = fit_models(csmp, models, nm, res, &nres)) < 0) {
             fprintf(stderr, "refl fit material: no model could be fitted to the samples with albedo cells\n");
             goto done;
@@ -1166,7 +1168,7 @@ int fit_cmd_material(int argc, char **argv)
         json_object_set_new(jc, "observations_in_cells", json_integer(ac.n_obs_in));
         json_object_set_new(jc, "observations", json_integer(obs.n));
         json_object_set_new(jc, "factor_rel_std", json_real(ac.rel_std));
-        json_object_set_new(jc, "iterations", json_integer(ac.iterations + 1));
+        json_object_set_new(jc, "iterations", json_integer(ac.iterations));
         json_object_set_new(jc, "convention", json_string(
             "each cell (MM mm of the sample's surface at angle 0, per face) scales the whole reflectance by its "
             "factor; the factors' mean over the observations is 1, so the parameters describe the mean material; "
