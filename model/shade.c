@@ -193,7 +193,14 @@ static double direct_point(render_ctx_t *c, const model_material_t *mat, model_v
 // lamp_draw draws the direction: it returns the weight (Le Omega, or I / d^2
 // for a point lamp or a point inside the sphere) and the unit direction w and
 // the point `target` the shadow ray goes to; 0 when nothing can arrive.
-static double lamp_draw(render_ctx_t *c, int i, model_vec3_t p, model_rng_t *rng,
+// Stratified when a pixel takes several (ns > 1, this is draw k of them): the
+// cone is cut into nr x (ns / nr) cells of equal solid angle (nr = the largest
+// divisor of ns up to sqrt(ns); 1 - cos theta by nr, the azimuth by ns / nr),
+// one jittered draw in cell k. The estimate stays unbiased, and a narrow lobe's
+// value over the lamp's disc (a smooth integrand) is integrated with far less
+// noise than by independent draws (16 independent draws of a 15 mm lamp left
+// a glossy coupon's highlight at grazing ~1 % noisy per 5x5-pixel window).
+static double lamp_draw(render_ctx_t *c, int i, model_vec3_t p, model_rng_t *rng, int k, int ns,
                         model_vec3_t *w_out, model_vec3_t *target)
 {
     const model_lamp_t *L = &c->lamps->lamps[i];
@@ -208,18 +215,29 @@ static double lamp_draw(render_ctx_t *c, int i, model_vec3_t p, model_rng_t *rng
     }
     double s2max = r * r / d2;                          // sin^2 theta_max
     double one_m_cos = s2max / (1 + sqrt(1 - s2max));   // 1 - cos theta_max, stable
-    double u1 = model_rng_uniform(rng);
+    double u1 = model_rng_uniform(rng), cx, cy, inv_r = 1;
+    if (ns > 1) {
+        int nr = 1;
+        for (int q = 1; q * q <= ns; q++)
+            if (ns % q == 0) nr = q;
+        int na = ns / nr, kr = (k % ns) / na, ka = (k % ns) % na;
+        u1 = (kr + u1) / nr;
+        double phi = 2 * M_PI * (ka + model_rng_uniform(rng)) / na;
+        cx = cos(phi);
+        cy = sin(phi);
+    } else {
+        // a uniform direction (cos phi, sin phi) in the plane, by rejection from
+        // the square (no trigonometry: this is the renderer's inner loop)
+        double r2;
+        do {
+            cx = 2 * model_rng_uniform(rng) - 1;
+            cy = 2 * model_rng_uniform(rng) - 1;
+            r2 = cx * cx + cy * cy;
+        } while (r2 > 1 || r2 < 1e-12);
+        inv_r = 1 / sqrt(r2);
+    }
     double one_m_ct = u1 * one_m_cos;
     double ct = 1 - one_m_ct, st = sqrt(fmax(0.0, one_m_ct * (2 - one_m_ct)));
-    // a uniform direction (cos phi, sin phi) in the plane, by rejection from the
-    // square (no trigonometry: this is the renderer's inner loop)
-    double cx, cy, r2;
-    do {
-        cx = 2 * model_rng_uniform(rng) - 1;
-        cy = 2 * model_rng_uniform(rng) - 1;
-        r2 = cx * cx + cy * cy;
-    } while (r2 > 1 || r2 < 1e-12);
-    double inv_r = 1 / sqrt(r2);
     model_vec3_t a, b;
     frame_of(axis, &a, &b);
     model_vec3_t w = v3_add(v3_scale(axis, ct),
@@ -238,7 +256,7 @@ static double lamp_sample(render_ctx_t *c, int i, const model_material_t *mat, m
 {
     model_vec3_t w, target;
     *V = 0;
-    double weight = lamp_draw(c, i, p, rng, &w, &target);
+    double weight = lamp_draw(c, i, p, rng, 0, 1, &w, &target);
     if (!(weight > 0) || v3_dot(w, n) <= 0) return 0;
     double R = brdf(mat, n, w, v);
     if (!(R > 0)) return 0;
@@ -455,7 +473,7 @@ static void render_packet(render_ctx_t *c, packet_t *pk, int bx, int by)
                 sp->active[k] = 0;
                 if (!pk->hit[k]) continue;
                 model_vec3_t w, target;
-                double wt = lamp_draw(c, i, pk->pts[k], &pk->rng[k], &w, &target);
+                double wt = lamp_draw(c, i, pk->pts[k], &pk->rng[k], smp, sh->mc_samples, &w, &target);
                 double nw = v3_dot(pk->nrm[k], w);
                 if (!(wt > 0) || !(nw > 0)) continue;
                 model_cosines_t cs = cosines_fast(pk->nrm[k], w, pi[k].v, nw, pk->nv[k]);
