@@ -25,6 +25,8 @@ void fit_samples_free(fit_samples_t *s)
     free(s->c);
     free(s->R);
     free(s->w);
+    free(s->disc_at);
+    free(s->disc);
     free(s);
 }
 
@@ -42,11 +44,87 @@ bool fit_samples_add(fit_samples_t *s, const model_cosines_t *c, double R, doubl
         if (!nc || !nR || !nw) return false;
         s->cap = cap;
     }
+    if (s->disc_at && s->n >= s->disc_cap) {
+        int *na = realloc(s->disc_at, (size_t)s->cap * sizeof *na);
+        if (!na) return false;
+        s->disc_at = na;
+        for (int i = s->disc_cap; i < s->cap; i++) s->disc_at[i] = -1;
+        s->disc_cap = s->cap;
+    }
     s->c[s->n] = *c;
     s->R[s->n] = R;
     s->w[s->n] = weight;
+    if (s->disc_at) s->disc_at[s->n] = -1;
     s->n++;
     return true;
+}
+
+bool fit_samples_add_disc(fit_samples_t *s, const model_cosines_t *c, const model_cosines_t *disc, double R,
+                          double weight)
+{
+    if (!disc) return fit_samples_add(s, c, R, weight);
+    if (!s->disc_at) {   // the first finite lamp: every earlier sample is a point lamp's
+        int cap = s->cap > s->n ? s->cap : s->n + 1;
+        if (!(s->disc_at = malloc((size_t)cap * sizeof *s->disc_at))) return false;
+        for (int i = 0; i < cap; i++) s->disc_at[i] = -1;
+        s->disc_cap = cap;
+    }
+    if (!fit_samples_add(s, c, R, weight)) return false;
+    model_cosines_t *nd = realloc(s->disc, (size_t)(s->ndisc + 4) * sizeof *nd);
+    if (!nd) {
+        s->n--;
+        return false;
+    }
+    s->disc = nd;
+    memcpy(s->disc + s->ndisc, disc, 4 * sizeof *disc);
+    s->disc_at[s->n - 1] = s->ndisc;
+    s->ndisc += 4;
+    return true;
+}
+
+bool fit_lamp_disc_dirs(model_vec3_t l, double d_mm, double radius_mm, model_vec3_t out[4])
+{
+    if (!(radius_mm > 0) || !(d_mm > radius_mm)) return false;
+    double t = tan(asin(radius_mm / d_mm) / sqrt(2));
+    // two unit vectors across l
+    model_vec3_t a = fabs(l.z) < 0.9 ? v3(0, 0, 1) : v3(1, 0, 0);
+    model_vec3_t e1 = v3(a.y * l.z - a.z * l.y, a.z * l.x - a.x * l.z, a.x * l.y - a.y * l.x);
+    double n1 = sqrt(e1.x * e1.x + e1.y * e1.y + e1.z * e1.z);
+    e1 = v3(e1.x / n1, e1.y / n1, e1.z / n1);
+    model_vec3_t e2 = v3(l.y * e1.z - l.z * e1.y, l.z * e1.x - l.x * e1.z, l.x * e1.y - l.y * e1.x);
+    const double sg[4][2] = { { 1, 0 }, { -1, 0 }, { 0, 1 }, { 0, -1 } };
+    for (int k = 0; k < 4; k++) {
+        model_vec3_t q = v3(l.x + t * (sg[k][0] * e1.x + sg[k][1] * e2.x), l.y + t * (sg[k][0] * e1.y + sg[k][1] * e2.y),
+                            l.z + t * (sg[k][0] * e1.z + sg[k][1] * e2.z));
+        double nq = sqrt(q.x * q.x + q.y * q.y + q.z * q.z);
+        out[k] = v3(q.x / nq, q.y / nq, q.z / nq);
+    }
+    return true;
+}
+
+void fit_samples_eval_n(const fit_samples_t *s, model_brdf_t m, const double *p, int off, int cnt, double *R,
+                        double *dR)
+{
+    model_brdf_eval_n(m, p, s->c + off, cnt, R, dR);
+    if (!s->disc_at) return;
+    int np = model_brdf_nparams(m);
+    for (int k = 0; k < cnt; k++) {
+        int at = s->disc_at[off + k];
+        if (at < 0) continue;
+        double r4[4], j4[4 * MODEL_BRDF_MAX_PARAMS];
+        model_brdf_eval_n(m, p, s->disc + at, 4, r4, dR ? j4 : NULL);
+        R[k] = 0.25 * (r4[0] + r4[1] + r4[2] + r4[3]);
+        if (dR)
+            for (int j = 0; j < np; j++)
+                dR[k * np + j] = 0.25 * (j4[j] + j4[np + j] + j4[2 * np + j] + j4[3 * np + j]);
+    }
+}
+
+double fit_samples_eval(const fit_samples_t *s, model_brdf_t m, const double *p, int i)
+{
+    double r;
+    fit_samples_eval_n(s, m, p, i, 1, &r, NULL);
+    return r;
 }
 
 static model_vec3_t dir_of(double theta, double phi)
@@ -310,7 +388,7 @@ static bool block_res(void *ctx, const double *const *p, double *r, double **J)
 {
     const block_t *b = ctx;
     double *jac = J && J[0] ? J[0] : NULL;
-    model_brdf_eval_n(b->m, p[0], b->s->c + b->off, b->cnt, r, jac);
+    fit_samples_eval_n(b->s, b->m, p[0], b->off, b->cnt, r, jac);
     for (int k = 0; k < b->cnt; k++) {
         int i = b->off + k;
         if (!isfinite(r[k])) return false;
@@ -460,63 +538,62 @@ bool fit_brdf(const fit_samples_t *s, model_brdf_t m, const fit_brdf_options_t *
     return true;
 }
 
-bool fit_brdf_from(const fit_samples_t *s, model_brdf_t m, const fit_brdf_options_t *opt, const double *start,
-                   fit_brdf_result_t *out)
+// F0 the samples cannot measure: only the product P = ks*F0 is. With ks at
+// most ks_hi, F0 lies in [max(F0_lo, P / ks_hi), F0_hi]; *a, *b that interval.
+static void f0_interval(model_brdf_t m, int jk, int jF, const double *p, double *a, double *b)
 {
-    fit_brdf_options_t o = opt ? *opt : fit_brdf_defaults();
-    if (!begin_result(s, m, out)) return false;
-    int np = out->nparams;
-    fit_problem_t *pr = NULL;
-    block_t *blocks = NULL;
-    memcpy(out->p, start, (size_t)np * sizeof *start);
-    for (int j = 0; j < np; j++) {
-        double lo, hi;
-        model_brdf_param_range(m, j, &lo, &hi);
-        out->p[j] = clampd(out->p[j], lo, hi);
-    }
-    if (!solve_once(s, m, &o, out->p, NULL, &out->summary, &pr, &blocks)) {
-        model_error(s->source, 0, "fitting %s failed: %s", model_brdf_name(m), fit_last_error());
+    double klo, khi, flo, fhi;
+    model_brdf_param_range(m, jk, &klo, &khi);
+    model_brdf_param_range(m, jF, &flo, &fhi);
+    double prod = p[jk] * p[jF];
+    *a = isfinite(khi) && khi > 0 ? fmax(flo, prod / khi) : flo;
+    *b = fhi;
+    if (*a > *b) *a = *b;
+}
+
+// Hold F0 at the middle of its interval (the mean of a uniform over it) with
+// ks = P / F0, and fit the other parameters again with it.
+static bool hold_f0(const fit_samples_t *s, model_brdf_t m, const fit_brdf_options_t *o, fit_brdf_result_t *out,
+                    fit_problem_t **pr, block_t **blocks)
+{
+    int jF = model_brdf_param_index(m, "F0"), jk = model_brdf_param_index(m, "ks");
+    double a, b, lo, hi, prod = out->p[jk] * out->p[jF];
+    f0_interval(m, jk, jF, out->p, &a, &b);
+    out->f0_unmeasured = true;
+    out->f0_lo = a;
+    out->f0_hi = b;
+    out->p[jF] = 0.5 * (a + b);
+    out->p[jk] = out->p[jF] > 0 ? prod / out->p[jF] : out->p[jk];
+    model_brdf_param_range(m, jk, &lo, &hi);
+    out->p[jk] = clampd(out->p[jk], lo, hi);
+    for (int j = 0; j < out->nparams; j++) out->fixed[j] = false;
+    out->fixed[jF] = true;
+    fit_problem_free(*pr);
+    free(*blocks);
+    *pr = NULL;
+    *blocks = NULL;
+    fit_summary_t s2;
+    if (!solve_once(s, m, o, out->p, out->fixed, &s2, pr, blocks)) {
+        model_error(s->source, 0, "fitting %s with F0 held failed: %s", model_brdf_name(m), fit_last_error());
         return false;
     }
-    // Fresnel: where the samples' v.h stays far from grazing, F = F0 + (1-F0)(1-v.h)^5
-    // hardly changes and only the product ks*F0 is measured. Then hold F0 at
-    // max(0.04, ks*F0) (a dielectric's 0.04 unless the product needs more) and
-    // refit ks with it.
-    int jF = model_brdf_param_index(m, "F0"), jk = model_brdf_param_index(m, "ks");
-    if (jF >= 0 && jk >= 0) {
-        // the largest relative change of F over the samples: (1-F0) f5 / F
-        // grows with f5 = (1-v.h)^5, so it is the one at the smallest v.h
-        double vh_min = 1;
-        for (int i = 0; i < s->n; i++) vh_min = fmin(vh_min, s->c[i].vh);
-        double x = 1 - vh_min, f5 = x * x * x * x * x, F = out->p[jF] + (1 - out->p[jF]) * f5;
-        double var = F > 0 ? (1 - out->p[jF]) * f5 / F : 0;
-        out->fresnel_variation = var;
-        if (var < 0.05) {
-            double prod = out->p[jk] * out->p[jF], F0 = fmin(1, fmax(0.04, prod));
-            out->p[jF] = F0;
-            out->p[jk] = F0 > 0 ? prod / F0 : out->p[jk];
-            double lo, hi;
-            model_brdf_param_range(m, jk, &lo, &hi);
-            out->p[jk] = clampd(out->p[jk], lo, hi);
-            out->fixed[jF] = true;
-            fit_problem_free(pr);
-            free(blocks);
-            pr = NULL;
-            blocks = NULL;
-            fit_summary_t s2;
-            if (!solve_once(s, m, &o, out->p, out->fixed, &s2, &pr, &blocks)) {
-                model_error(s->source, 0, "fitting %s with F0 held failed: %s", model_brdf_name(m), fit_last_error());
-                return false;
-            }
-            s2.iterations += out->summary.iterations;
-            out->summary = s2;
-        }
-    }
-    // figures
+    s2.iterations += out->summary.iterations;
+    out->summary = s2;
+    return true;
+}
+
+// The fit's figures and covariance at out->p (pr: the solved problem).
+// Parameters the samples cannot separate are held (F0 first). With F0
+// unmeasured, the covariance gets its interval's uniform along the line
+// ks*F0 = const: J J^T var_u with J = d(params)/dF0 = (ks: -ks/F0, F0: 1).
+static void finish(const fit_samples_t *s, model_brdf_t m, const fit_brdf_options_t *o, fit_brdf_result_t *out,
+                   fit_problem_t *pr)
+{
+    int np = out->nparams;
     double sw = 0, rss = 0, rss_f = 0, Rb[256];
     for (int i0 = 0; i0 < s->n; i0 += 256) {
         int cnt = s->n - i0 < 256 ? s->n - i0 : 256;
-        model_brdf_eval_n(m, out->p, s->c + i0, cnt, Rb, NULL);
+        fit_samples_eval_n(s, m, out->p, i0, cnt, Rb, NULL);
         for (int k = 0; k < cnt; k++) {
             int i = i0 + k;
             double e = Rb[k] - s->R[i];
@@ -534,8 +611,6 @@ bool fit_brdf_from(const fit_samples_t *s, model_brdf_t m, const fit_brdf_option
     double rn = fmax(rss / N * (N / sw), 1e-300);   // per-sample mean square (weights normalised)
     out->aic = N * log(rn) + 2 * k;
     out->bic = N * log(rn) + k * log(N);
-    // covariance; parameters the samples cannot separate are held (F0 first)
-    out->nfree = np;
     bool q = model_error_quiet_thread(true);
     bool anyfixed = false;
     for (int j = 0; j < np; j++) anyfixed |= out->fixed[j];
@@ -555,18 +630,74 @@ bool fit_brdf_from(const fit_samples_t *s, model_brdf_t m, const fit_brdf_option
         cov_ok = fit_covariance(pr, out->p, out->cov);
     }
     model_error_quiet_thread(q);
+    out->nfree = np;
     for (int j = 0; j < np; j++) out->nfree -= out->fixed[j];
     double dof = N - out->nfree;
-    double s2 = o.noise_sigma > 0 ? o.noise_sigma * o.noise_sigma : (dof > 0 ? rss / dof : 0);
+    double s2 = o->noise_sigma > 0 ? o->noise_sigma * o->noise_sigma : (dof > 0 ? rss / dof : 0);
     out->sigma = sqrt(s2);
     out->cov_ok = cov_ok;
     for (int a = 0; a < np * np; a++) out->cov[a] = cov_ok ? out->cov[a] * s2 : NAN;
+    int jF = model_brdf_param_index(m, "F0"), jk = model_brdf_param_index(m, "ks");
+    if (cov_ok && out->f0_unmeasured && jF >= 0 && jk >= 0 && out->p[jF] > 0) {
+        double J[MODEL_BRDF_MAX_PARAMS] = { 0 }, w = out->f0_hi - out->f0_lo, var_u = w * w / 12;
+        J[jF] = 1;
+        J[jk] = -out->p[jk] / out->p[jF];
+        for (int a = 0; a < np; a++) out->cov[a * np + jF] = out->cov[jF * np + a] = 0;
+        for (int a = 0; a < np; a++)
+            for (int b = 0; b < np; b++) out->cov[a * np + b] += J[a] * J[b] * var_u;
+    }
     for (int j = 0; j < np; j++) out->std[j] = cov_ok ? sqrt(fmax(out->cov[j * np + j], 0)) : NAN;
-    fit_problem_free(pr);
-    free(blocks);
-    return true;
 }
 
+bool fit_brdf_from(const fit_samples_t *s, model_brdf_t m, const fit_brdf_options_t *opt, const double *start,
+                   fit_brdf_result_t *out)
+{
+    fit_brdf_options_t o = opt ? *opt : fit_brdf_defaults();
+    if (!begin_result(s, m, out)) return false;
+    int np = out->nparams;
+    fit_problem_t *pr = NULL;
+    block_t *blocks = NULL;
+    memcpy(out->p, start, (size_t)np * sizeof *start);
+    for (int j = 0; j < np; j++) {
+        double lo, hi;
+        model_brdf_param_range(m, j, &lo, &hi);
+        out->p[j] = clampd(out->p[j], lo, hi);
+    }
+    if (!solve_once(s, m, &o, out->p, NULL, &out->summary, &pr, &blocks)) {
+        model_error(s->source, 0, "fitting %s failed: %s", model_brdf_name(m), fit_last_error());
+        return false;
+    }
+    // Fresnel: where the samples' v.h stays far from grazing, F = F0 + (1-F0)(1-v.h)^5
+    // hardly changes and only the product ks*F0 is measured. F0 is then only
+    // known to lie in an interval (f0_interval): it is held at its middle,
+    // with the std of a uniform over it, and ks = ks*F0 / F0.
+    int jF = model_brdf_param_index(m, "F0"), jk = model_brdf_param_index(m, "ks");
+    bool ok = true;
+    if (jF >= 0 && jk >= 0) {
+        // the largest relative change of F over the samples: (1-F0) f5 / F
+        // grows with f5 = (1-v.h)^5, so it is the one at the smallest v.h
+        double vh_min = 1;
+        for (int i = 0; i < s->n; i++) vh_min = fmin(vh_min, s->c[i].vh);
+        double x = 1 - vh_min, f5 = x * x * x * x * x, F = out->p[jF] + (1 - out->p[jF]) * f5;
+        double var = F > 0 ? (1 - out->p[jF]) * f5 / F : 0;
+        out->fresnel_variation = var;
+        if (var < 0.05) ok = hold_f0(s, m, &o, out, &pr, &blocks);
+    }
+    if (ok) finish(s, m, &o, out, pr);
+    // F0 fitted free: measured only if the samples say more about it than its
+    // interval does (a std below the uniform's), else held as above
+    if (ok && jF >= 0 && jk >= 0 && !out->f0_unmeasured) {
+        double a, b;
+        f0_interval(m, jk, jF, out->p, &a, &b);
+        if (out->fixed[jF] || !(out->std[jF] < (b - a) / sqrt(12))) {
+            ok = hold_f0(s, m, &o, out, &pr, &blocks);
+            if (ok) finish(s, m, &o, out, pr);
+        }
+    }
+    fit_problem_free(pr);
+    free(blocks);
+    return ok;
+}
 // ---------------------------------------------------------------------------
 // Priors
 
@@ -582,9 +713,12 @@ json_t *fit_priors_material(const char *name, const fit_brdf_result_t *best, con
     json_t *ps = json_array();
     for (int j = 0; j < np; j++) {
         json_t *p = json_object();
-        double lo, hi, mean = best->p[j], sd_stat = best->fixed[j] ? 0 : best->std[j];
-        double sd = best->fixed[j] ? 0 : sqrt(sd_stat * sd_stat + (sys_rel * mean) * (sys_rel * mean));
+        bool f0u = best->f0_unmeasured && !strcmp(model_brdf_param_name(m, j), "F0");
+        double lo, hi, mean = best->p[j], sd_stat = best->fixed[j] && !f0u ? 0 : best->std[j];
+        double sd = f0u ? sd_stat
+                  : best->fixed[j] ? 0 : sqrt(sd_stat * sd_stat + (sys_rel * mean) * (sys_rel * mean));
         model_brdf_param_range(m, j, &lo, &hi);
+        if (f0u) lo = best->f0_lo, hi = best->f0_hi;
         double blo = isfinite(sd) ? fmax(lo, mean - k_sigma * sd) : lo;
         double bhi = isfinite(sd) ? fmin(hi, mean + k_sigma * sd) : hi;
         json_object_set_new(p, "name", json_string(model_brdf_param_name(m, j)));
@@ -595,10 +729,12 @@ json_t *fit_priors_material(const char *name, const fit_brdf_result_t *best, con
         json_object_set_new(p, "std_statistical", isfinite(sd_stat) ? json_real(sd_stat) : json_null());
         json_object_set_new(p, "lo", json_real(blo));
         json_object_set_new(p, "hi", isfinite(bhi) ? json_real(bhi) : json_null());
-        if (best->fixed[j] && !strcmp(model_brdf_param_name(m, j), "F0"))
-            json_object_set_new(p, "held", json_string("the samples never come near grazing (Schlick F changes "
-                                                       "< 5 % over them): only ks*F0 is measured; F0 held at "
-                                                       "max(0.04, ks*F0), std 0"));
+        if (f0u)
+            json_object_set_new(p, "held", json_string("not measured: the samples never see Schlick's F change "
+                                                       "enough (too far from grazing) and only ks*F0 is measured; "
+                                                       "F0 lies in [lo, hi] (ks at most its maximum), mean and "
+                                                       "std are a uniform's over it, ks = ks*F0 / F0; a fitter "
+                                                       "holds it at mean"));
         else if (best->fixed[j])
             json_object_set_new(p, "held", json_string("not separable from the other parameters by these samples; "
                                                        "held at its best value (std 0)"));

@@ -6,8 +6,11 @@
 // error of Ngan et al. 2005 in R) with the models' physical bounds; the
 // covariance is scaled by the residual variance s^2 = RSS / (N - free).
 // Where the samples never come near grazing (the Schlick F changes < 5 %
-// over them) only ks*F0 is measured: F0 is then held at max(0.04, ks*F0) and
-// marked held (fixed[]).
+// over them), or the free fit's std of F0 is no smaller than what follows,
+// only ks*F0 is measured: F0 is then only known to lie in [ks*F0 / ks_max, 1],
+// and is held (fixed[], f0_unmeasured) at that interval's middle with a
+// uniform's std, ks = ks*F0 / F0, the covariance spread along ks*F0 = const.
+// Samples lit by finite lamps may carry their lamp's disc (fit_samples_t).
 //
 // BRDF sample files (refl fit brdf):
 //   CSV: theta_i,phi_i,theta_o,phi_o,f_r[,weight] per line, angles in degrees
@@ -36,6 +39,14 @@ typedef struct {
     model_cosines_t *c;
     double          *R;        // f_r * n.l, 1/sr
     double          *w;        // weights (1 unless given)
+    // Finite lamps (optional, NULL when no sample has one): a sample lit by a
+    // lamp of angular radius r is modelled as the mean of R over 4 lamp
+    // directions at r/sqrt(2) from the centre's (a quadrature of the uniform
+    // disc exact to its 2nd and the axes' 4th moments): disc_at[i] >= 0 is the
+    // first of sample i's 4 cosines in disc, -1 a point lamp (c[i] alone).
+    int             *disc_at;
+    model_cosines_t *disc;
+    int              ndisc, disc_cap;
     char             source[512];
     char             sha256[65];
 } fit_samples_t;
@@ -47,6 +58,19 @@ void           fit_samples_free(fit_samples_t *s);
 bool fit_samples_add_angles(fit_samples_t *s, double theta_i, double phi_i, double theta_o, double phi_o,
                             double f_r, double weight);
 bool fit_samples_add(fit_samples_t *s, const model_cosines_t *c, double R, double weight);
+// The same for a sample lit by a finite lamp: disc = the cosines at its 4
+// quadrature directions (fit_lamp_disc_dirs), NULL = a point lamp.
+bool fit_samples_add_disc(fit_samples_t *s, const model_cosines_t *c, const model_cosines_t *disc, double R,
+                          double weight);
+// The 4 quadrature directions of a spherical lamp of radius radius_mm seen at
+// distance d_mm in unit direction l (see fit_samples_t); false when the lamp
+// is a point (radius 0) or the point lies inside it.
+bool fit_lamp_disc_dirs(model_vec3_t l, double d_mm, double radius_mm, model_vec3_t out[4]);
+// The model's R of samples off..off+cnt-1 (lamp discs averaged) and, when
+// dR != NULL, dR/dp (cnt x nparams, row-major).
+void fit_samples_eval_n(const fit_samples_t *s, model_brdf_t m, const double *p, int off, int cnt, double *R,
+                        double *dR);
+double fit_samples_eval(const fit_samples_t *s, model_brdf_t m, const double *p, int i);
 // Read a CSV or MERL file (by content: MERL when the header dims and the file
 // size agree). NULL with a message naming file (and line).
 fit_samples_t *fit_samples_read(const char *path);
@@ -79,6 +103,9 @@ typedef struct {
     double        aic, bic;                       // N ln(RSS/N) + 2k, N ln(RSS/N) + k ln N
     double        fresnel_variation;              // largest relative change of F over the samples
                                                   // (< 0.05: only ks*F0 is measured; F0 held)
+    bool          f0_unmeasured;                  // F0 held at the middle of [f0_lo, f0_hi], where
+    double        f0_lo, f0_hi;                   // ks*F0 and the ranges put it; std[F0] = the
+                                                  // uniform's, in cov along ks*F0 = const
     fit_summary_t summary;
 } fit_brdf_result_t;
 

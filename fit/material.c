@@ -166,6 +166,14 @@ fit_calib_t *fit_calib_load_files(const char *cam, const char *lamps, const char
         l->position_mm = v3(json_number_value(json_array_get(p, 0)), json_number_value(json_array_get(p, 1)),
                             json_number_value(json_array_get(p, 2)));
         l->intensity = 1;
+        // the emitting radius (refl calib lamps writes the one its highlight
+        // model used): the fit averages R over the lamp's disc
+        json_t *rad = json_object_get(e, "radius_mm");
+        if (rad && !(json_is_number(rad) && json_number_value(rad) >= 0 && json_number_value(rad) < 1000)) {
+            model_error(lamps, 0, "lamps[%zu] (%s): radius_mm must be a number of mm in [0, 1000)", i, name);
+            goto fail;
+        }
+        c->lamp_radius_mm[i] = rad ? json_number_value(rad) : 0;
         c->lamps->n = (int)i + 1;
     }
     add_input(c, "lamps", lamps);
@@ -502,6 +510,11 @@ bool fit_observe(const char *session_dir, const fit_calib_t *cal, const fit_obse
                 if (!(L->V > 0.999)) continue;
                 model_cosines_t c = model_cosines(pw[w].n, L->l, pw[w].v);
                 if (!(c.nl > 0 && c.nv > 0)) continue;
+                // a finite lamp near the mirror direction (within 20 deg: where a
+                // narrow lobe changes over the lamp's disc) gets its disc's cosines
+                model_vec3_t dl[4];
+                bool has_disc = c.nh > cos(20 * M_PI / 180) &&
+                                fit_lamp_disc_dirs(L->l, L->d_mm, cal->lamp_radius_mm[lamp], dl);
                 int x0 = (int)win[w].q[0] - half, y0 = (int)win[w].q[1] - half;
                 double sum = 0, mx = 0, sg = 0;
                 for (int y = y0; y < y0 + o.window; y++)
@@ -518,7 +531,8 @@ bool fit_observe(const char *session_dir, const fit_calib_t *cal, const fit_obse
                 fit_obs_t ob = { .lamp = lamp, .angle_deg = r->measured_deg, .exposure_us = r->exposure_us,
                                  .gain_db = r->gain, .q = { win[w].q[0], win[w].q[1] }, .c = c, .d_mm = L->d_mm,
                                  .s_dn_per_us = sig / (sg / n) / (r->exposure_us * gf), .step = r->step,
-                                 .face = pw[w].face };
+                                 .face = pw[w].face, .has_disc = has_disc };
+                for (int k = 0; has_disc && k < 4; k++) ob.disc[k] = model_cosines(pw[w].n, dl[k], pw[w].v);
                 {   // the point at angle 0: turned back about the table's axis (z)
                     double ca = cos(-r->measured_deg * M_PI / 180), sa = sin(-r->measured_deg * M_PI / 180);
                     model_vec3_t pp = pw[w].p_mm;
@@ -814,7 +828,7 @@ static bool material_report(const char *dir, const fit_obs_set_t *obs, const fit
         const model_cosines_t *c = &smp->c[i];
         fprintf(f, "%.1f,%.1f,%d,%d,%.4f,%.4f,%.4f,%.6g,%.6g\n", obs->o[i].q[0], obs->o[i].q[1], obs->o[i].step,
                 obs->o[i].lamp, acos(fmin(1, c->nl)) * d, acos(fmin(1, c->nv)) * d, acos(fmin(1, c->nh)) * d,
-                smp->R[i], model_brdf_eval(res[best].model, res[best].p, c, NULL));
+                smp->R[i], fit_samples_eval(smp, res[best].model, res[best].p, i));
     }
     if (fclose(f) != 0) {
         model_error(csv, 0, "cannot write: %s", strerror(errno));
@@ -965,7 +979,8 @@ static fit_samples_t *cells_samples(const fit_samples_t *smp, const albedo_cells
     snprintf(out->source, sizeof out->source, "%s", smp->source);
     for (int i = 0; i < smp->n; i++) {
         double c = ac->cell[i] >= 0 ? ac->factor[ac->cell[i]] : 1;
-        if (!fit_samples_add(out, &smp->c[i], smp->R[i] / c, c * c)) {
+        const model_cosines_t *disc = smp->disc_at && smp->disc_at[i] >= 0 ? smp->disc + smp->disc_at[i] : NULL;
+        if (!fit_samples_add_disc(out, &smp->c[i], disc, smp->R[i] / c, c * c)) {
             fit_samples_free(out);
             model_error(NULL, 0, "sample %d: albedo factor %g gives no usable sample", i, c);
             return NULL;
@@ -988,7 +1003,7 @@ static bool cells_fit(const fit_samples_t *smp, albedo_cells_t *ac, fit_brdf_res
         for (int i = 0; i < smp->n; i++) {
             int j = ac->cell[i];
             if (j < 0) continue;
-            double f = model_brdf_eval(r->model, r->p, &smp->c[i], NULL);
+            double f = fit_samples_eval(smp, r->model, r->p, i);
             num[j] += smp->R[i] * f;
             den[j] += f * f;
         }
@@ -1105,7 +1120,8 @@ int fit_cmd_material(int argc, char **argv)
     snprintf(smp->source, sizeof smp->source, "%s", a.session);
     for (int i = 0; i < obs.n; i++) {
         const fit_obs_t *b = &obs.o[i];
-        if (!fit_samples_add(smp, &b->c, b->s_dn_per_us * b->d_mm * b->d_mm / cal->kcI_per_us[b->lamp], 1)) {
+        if (!fit_samples_add_disc(smp, &b->c, b->has_disc ? b->disc : NULL,
+                                  b->s_dn_per_us * b->d_mm * b->d_mm / cal->kcI_per_us[b->lamp], 1)) {
             fprintf(stderr, "refl fit material: observation %d (step %d) gives no usable sample (kc*I of lamp %s "
                     "is %g)\n", i, b->step, cal->lamps->lamps[b->lamp].name, cal->kcI_per_us[b->lamp]);
             goto done;

@@ -38,6 +38,7 @@ typedef struct {
     int             W, H;
     bool            have_white;
     double          kcI_per_us[32]; // white.json: kc I per lamp (DN/us at 0 dB per (1/sr)/mm^2)
+    double          lamp_radius_mm[32]; // lamps.json radius_mm per lamp (0 absent: a point lamp)
     json_t         *inputs;         // [{role, path, sha256}] of every file read
 } fit_calib_t;
 
@@ -58,6 +59,8 @@ typedef struct {
     double          exposure_us, gain_db;
     double          q[2];           // window centre, pixels
     model_cosines_t c;
+    bool            has_disc;       // lit by a finite lamp near the mirror direction: disc holds the
+    model_cosines_t disc[4];        // cosines of its 4 quadrature directions (fit_samples_t)
     double          d_mm;
     double          s_dn_per_us;    // dark and flat corrected signal per us at 0 dB
     double          s_std;          // its expected temporal noise (shot, read, quantisation of the

@@ -171,7 +171,9 @@ static bool priors_from_json(verify_priors_t *pr, json_t *root, const char *path
             p->std[j] = sd;
             p->lo[j] = fmax(blo, lo);
             p->hi[j] = fmin(bhi, hi);
-            p->held[j] = sd == 0;
+            // held: std 0, or a "held" note (a parameter the material's samples
+            // could not measure, e.g. F0 known only to lie in [lo, hi])
+            p->held[j] = sd == 0 || json_is_string(json_object_get(e, "held"));
         }
     }
     ok = true;

@@ -270,3 +270,127 @@ TEST(fit_brdf_merl_file)
     CHECK(b == NULL);
     CHECK_CONTAINS(model_last_error(), "not a MERL BRDF file");
 }
+
+// Samples of a GGX material seen only at v.h >= vh_min (the mirror direction
+// of each within 30 deg of the normal), noise-free.
+static fit_samples_t *synth_vh(const double *p, double vh_min)
+{
+    fit_samples_t *s = fit_samples_new();
+    const double d = M_PI / 180;
+    for (int ti = 0; ti < 85; ti += 3)
+        for (int to = 0; to < 85; to += 3)
+            for (int po = 0; po < 360; po += 6) {
+                model_cosines_t c = model_cosines(v3(0, 0, 1), v3(sin(ti * d), 0, cos(ti * d)),
+                                                  v3(sin(to * d) * cos(po * d), sin(to * d) * sin(po * d), cos(to * d)));
+                if (!(c.nl > 0 && c.nv > 0) || c.vh < vh_min) continue;
+                fit_samples_add(s, &c, model_brdf_eval(MODEL_BRDF_GGX, p, &c, NULL), 1);
+            }
+    return s;
+}
+
+// F0 apart from ks: where the samples never come near grazing only ks*F0 is
+// measured, and F0 is known only to lie in [ks*F0 / ks_max, 1]: held at that
+// interval's middle with a uniform's std, ks = ks*F0 / F0, and the covariance
+// along ks*F0 = const (ks and F0 anticorrelated). A metal-like material (ks*F0
+// 0.72: F0 in [0.72, 1]) has its truth within 2 std of both; a dielectric's
+// interval is wide (ks = ks*F0 / F0 spans a factor 37 over it), so its
+// interval is checked but not its mean. With grazing samples F0 is measured.
+TEST(fit_brdf_f0_interval_when_not_measured)
+{
+    const double metal[4] = { 0.03, 0.9, 0.08, 0.8 }, plastic[4] = { 0.35, 0.6, 0.08, 0.045 };   // kd, ks, alpha, F0
+    for (int k = 0; k < 2; k++) {
+        const double *truth = k ? plastic : metal;
+        fit_samples_t *s = synth_vh(truth, 0.9);
+        fit_brdf_result_t r;
+        CHECK(fit_brdf(s, MODEL_BRDF_GGX, NULL, &r));
+        double prod = truth[1] * truth[3];
+        printf("  %s, v.h >= 0.9: F0 %.4f +- %.4f in [%.4f, %.4f], ks %.4f +- %.4f, ks*F0 %.5f\n", k ? "plastic" : "metal",
+               r.p[3], r.std[3], r.f0_lo, r.f0_hi, r.p[1], r.std[1], r.p[1] * r.p[3]);
+        CHECK(r.fixed[3] && r.f0_unmeasured && r.fresnel_variation < 0.05);
+        CHECK_NEAR(r.f0_lo, prod, 1e-4);
+        CHECK_NEAR(r.f0_hi, 1, 0);
+        CHECK_NEAR(r.p[3], 0.5 * (r.f0_lo + r.f0_hi), 1e-12);
+        CHECK_NEAR(r.std[3], (r.f0_hi - r.f0_lo) / sqrt(12), 1e-9);
+        CHECK_NEAR(r.p[1] * r.p[3], prod, 1e-4 * prod / 0.027);
+        CHECK_NEAR(r.p[0], truth[0], 1e-4);
+        CHECK_NEAR(r.p[2], 0.08, 1e-4);
+        CHECK(r.cov_ok && r.cov[1 * 4 + 3] < 0);
+        if (!k) CHECK(fabs(r.p[3] - truth[3]) < 2 * r.std[3] && fabs(r.p[1] - truth[1]) < 2 * r.std[1]);
+        json_t *o = fit_priors_material("m", &r, NULL, 0, 3, 0.03);
+        json_t *f0 = json_array_get(json_object_get(o, "parameters"), 3);
+        CHECK(json_is_string(json_object_get(f0, "held")));
+        CHECK_NEAR(json_number_value(json_object_get(f0, "lo")), r.f0_lo, 1e-12);   // the interval, not mean - 3 std
+        CHECK_NEAR(json_number_value(json_object_get(f0, "std")), r.std[3], 1e-12);
+        json_decref(o);
+        fit_samples_free(s);
+    }
+    // grazing samples (v.h down to 0.3): F0 measured
+    fit_samples_t *s = synth_vh(plastic, 0.3);
+    fit_brdf_result_t r;
+    CHECK(fit_brdf(s, MODEL_BRDF_GGX, NULL, &r));
+    printf("  plastic, v.h >= 0.3: F0 %.5f +- %.2g, ks %.5f\n", r.p[3], r.std[3], r.p[1]);
+    CHECK(!r.fixed[3] && !r.f0_unmeasured);
+    CHECK_NEAR(r.p[3], 0.045, 1e-4);
+    CHECK_NEAR(r.p[1], 0.6, 1e-3);
+    fit_samples_free(s);
+}
+
+// A finite lamp: the 4-direction quadrature of the lamp's disc against a
+// dense average over the disc (a polar grid, equal solid angle per cell) for
+// a narrow GGX lobe near the mirror direction at v.h = cos 55 deg (the rim
+// lamp's highlight on the glossy coupon): the point lamp is off by several %,
+// the quadrature within a tenth of that; the fit's Jacobian is the average's.
+TEST(fit_lamp_disc_quadrature)
+{
+    const double p[4] = { 0.35, 0.6, 0.05, 0.045 };
+    const double d_mm = 650, r_mm = 15, d = M_PI / 180;
+    model_vec3_t n = v3(0, 0, 1), v = v3(sin(55 * d), 0, cos(55 * d));
+    double worst_point = 0, worst_quad = 0;
+    for (int off = 0; off <= 4; off++) {   // lamp 0..2 deg off the mirror direction
+        double a = (55 + 0.5 * off) * d;
+        model_vec3_t l = v3(-sin(a), 0, cos(a));
+        model_vec3_t q[4];
+        CHECK(fit_lamp_disc_dirs(l, d_mm, r_mm, q));
+        model_cosines_t c = model_cosines(n, l, v), cq[4];
+        for (int k = 0; k < 4; k++) cq[k] = model_cosines(n, q[k], v);
+        fit_samples_t *s = fit_samples_new();
+        CHECK(fit_samples_add_disc(s, &c, cq, 1, 1));
+        double quad = fit_samples_eval(s, MODEL_BRDF_GGX, p, 0), point = model_brdf_eval(MODEL_BRDF_GGX, p, &c, NULL);
+        // dense: 200 rings x 200 azimuths over the cone of the lamp
+        double tmax = asin(r_mm / d_mm), omc = 1 - cos(tmax), sum = 0;
+        model_vec3_t e1 = v3(cos(a), 0, sin(a)), e2 = v3(0, 1, 0);
+        for (int i = 0; i < 200; i++)
+            for (int j = 0; j < 200; j++) {
+                double ct = 1 - (i + 0.5) / 200 * omc, st = sqrt(1 - ct * ct), ph = 2 * M_PI * (j + 0.5) / 200;
+                model_vec3_t w = v3(ct * l.x + st * (cos(ph) * e1.x + sin(ph) * e2.x),
+                                    ct * l.y + st * (cos(ph) * e1.y + sin(ph) * e2.y),
+                                    ct * l.z + st * (cos(ph) * e1.z + sin(ph) * e2.z));
+                model_cosines_t cw = model_cosines(n, w, v);
+                sum += model_brdf_eval(MODEL_BRDF_GGX, p, &cw, NULL);
+            }
+        double dense = sum / (200 * 200);
+        printf("  %.1f deg off: dense %.5f, point %+.2f %%, quadrature %+.3f %%\n", 0.5 * off, dense,
+               100 * (point / dense - 1), 100 * (quad / dense - 1));
+        worst_point = fmax(worst_point, fabs(point / dense - 1));
+        worst_quad = fmax(worst_quad, fabs(quad / dense - 1));
+        // Jacobian: the average of the 4 directions' (central differences of the sample's R)
+        double J[4], R0;
+        fit_samples_eval_n(s, MODEL_BRDF_GGX, p, 0, 1, &R0, J);
+        for (int j = 0; j < 4; j++) {
+            double pp[4], pm[4], h = 1e-6 * fmax(1, fabs(p[j]));
+            memcpy(pp, p, sizeof pp);
+            memcpy(pm, p, sizeof pm);
+            pp[j] += h;
+            pm[j] -= h;
+            double fd = (fit_samples_eval(s, MODEL_BRDF_GGX, pp, 0) - fit_samples_eval(s, MODEL_BRDF_GGX, pm, 0)) / (2 * h);
+            CHECK_MSG(fabs(J[j] - fd) <= 1e-5 * fmax(1, fabs(fd)), "dR/dp%d %g vs %g", j, J[j], fd);
+        }
+        fit_samples_free(s);
+    }
+    CHECK_MSG(worst_point > 0.03, "point lamp off by only %.2f %%", 100 * worst_point);
+    CHECK_MSG(worst_quad < 0.1 * worst_point, "quadrature off by %.3f %% (point %.2f %%)", 100 * worst_quad,
+              100 * worst_point);
+    model_vec3_t q[4];
+    CHECK(!fit_lamp_disc_dirs(v3(0, 0, 1), 650, 0, q));   // a point lamp
+    CHECK(!fit_lamp_disc_dirs(v3(0, 0, 1), 10, 15, q));   // inside the lamp
+}
