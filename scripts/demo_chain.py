@@ -112,7 +112,7 @@ parts.append(f"<h3>Material: {html.escape(m['name'])} (refl fit material &rarr; 
              f"RMS of R {f(m['rms'], 3)} 1/sr over {m['n_samples']} samples"
              + (f"; the sensor's noise alone would give {f(m['noise_rms_expected'], 3)} 1/sr "
                 f"(ratio {f(m['rms_over_noise'], 3)}: the narrow lobe is sensitive to the calibrated camera and "
-                f"lamp positions, {math.sqrt(np.mean(np.square(errs))):.1f} mm RMS off here; with the truth's camera and lamps it is 1.0 in the tests)" if m.get("noise_rms_expected") else "") + ".</p>\n<table>\n")
+                f"lamp positions, {math.sqrt(np.mean(np.square(errs))):.1f} mm RMS off here; with the truth's camera and lamps it is 1.1 in the tests)" if m.get("noise_rms_expected") else "") + ".</p>\n<table>\n")
 parts.append(row(["parameter", "fitted", "std", "prior bounds", "truth", "note"], True))
 for p in m["parameters"]:
     tv = tmat.get(p["name"], "") if tmat is not None and tmat.get("model") == m["model"] else ""
@@ -120,7 +120,7 @@ for p in m["parameters"]:
                       f"{f(p['lo'], 4)} .. {f(p['hi'], 4)}", tv, p.get("held", "")]))
 if "ks_times_F0" in m and tmat is not None and "ks" in tmat and "F0" in tmat:
     parts.append(row(["ks*F0", f(m["ks_times_F0"], 5), "", "", f(float(tmat["ks"]) * float(tmat["F0"]), 5),
-                      "what the rig's geometry measures"]))
+                      "the product; F0 apart from ks needs a highlight nearer grazing (the rim lamp's, v.h = cos 55 deg)"]))
 parts.append("</table>\n<table>\n")
 parts.append(row(["model", "RMS (1/sr)", "BIC"], True))
 for c in m.get("candidates", []):
@@ -167,7 +167,7 @@ if os.path.exists(pp):
     parts.append("<h3>Light planning for the workpiece (refl plan lamps, "
                  "<a href=\"plan_lamps/index.html\">report</a>)</h3>\n"
                  f"<p>With the calibrated camera, lamps, white and gain and the fitted priors, at turntable "
-                 f"{f(pl['turntable_deg'], 4)}&deg;: every set of the four lamps at six exposures. Chosen: "
+                 f"{f(pl['turntable_deg'], 4)}&deg;: every set of the calibrated lamps at six exposures. Chosen: "
                  f"<b>{html.escape(c['lamps'])}</b> at <b>{f(c['exposure_us'], 6)} &micro;s</b> "
                  f"({'free of glare and saturation' if c['feasible'] else 'not free of glare and saturation'}): "
                  f"{c['n_detectable']} of {c['n_segments']} visible edge segments predicted detectable by a Sobel "

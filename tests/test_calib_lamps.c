@@ -462,12 +462,12 @@ TEST(calib_lamps_virtual_rig_accuracy)
     CHECK_MSG(doc, "%s: %s", jp, je.text);
     model_ini_t *ti = model_ini_load(truth);
     model_lamps_t *tl = ti ? model_lamps_from_ini(ti) : NULL;
-    CHECK(tl && tl->n == 4);
+    CHECK(tl && tl->n == 5);
     if (doc && tl) {
         CHECK_CONTAINS(json_string_value(json_object_get(doc, "units")), "mm");
         CHECK_CONTAINS(json_string_value(json_object_get(doc, "conventions")), "rig frame");
         json_t *lamps = json_object_get(doc, "lamps");
-        CHECK(json_array_size(lamps) == 4);
+        CHECK(json_array_size(lamps) == 5);
         double se = 0, ss = 0;
         size_t i;
         json_t *l;
@@ -494,8 +494,8 @@ TEST(calib_lamps_virtual_rig_accuracy)
         // The error depends on the noise draw (0.9-2.6 mm RMS over the rig's
         // noise seeds 11, 22, 33 and the default): checked against the stated
         // uncertainty, which must cover it.
-        double rms = sqrt(se / 4), rms_std = sqrt(ss / 4);
-        fprintf(stderr, "  RMS position error over the 4 lamps: %.2f mm (stated std %.2f mm RMS)\n", rms, rms_std);
+        double rms = sqrt(se / 5), rms_std = sqrt(ss / 5);
+        fprintf(stderr, "  RMS position error over the 5 lamps: %.2f mm (stated std %.2f mm RMS)\n", rms, rms_std);
         CHECK_MSG(rms < 1.25 * rms_std && rms < 4.0, "RMS position error %.2f mm (limits 1.25 x the stated %.2f mm, "
                   "and 4 mm)", rms, rms_std);
         json_t *camj = json_object_get(doc, "camera");
@@ -571,7 +571,7 @@ TEST(calib_lamps_virtual_rig_accuracy)
             rc = test_refl_run(120, &o, &e, "calib", "lamps", "--session", sess, "--camera", pcam, "-o", out3,
                                "--sphere-path", k ? "fixed" : "fit", NULL);
             CHECK_MSG(rc == 0, "rc %d\n%s", rc, e);
-            if (k == 0) CHECK_CONTAINS(e, "joint fit of 4 lamps and the sphere's path over");
+            if (k == 0) CHECK_CONTAINS(e, "joint fit of 5 lamps and the sphere's path over");
             g_free(o);
             g_free(e);
             char *jp3 = g_strdup_printf("%s/lamps.json", out3);

@@ -349,7 +349,7 @@ TEST(rigcli_virtual_rig)
     const char *nope = test_path("nope.png");
     rc = refl(&out, &err, "rig", "--rig", rig, "snap", "-o", nope, "--lamps", "east,nope", NULL);
     CHECK(rc == 1);
-    CHECK_CONTAINS(err, "has no lamp 'nope' (its lamps: east,south,west,north)");
+    CHECK_CONTAINS(err, "has no lamp 'nope' (its lamps: east,south,west,north,rim)");
     CHECK(access(nope, F_OK) != 0);
     free(out);
     free(err);

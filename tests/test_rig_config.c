@@ -234,7 +234,7 @@ TEST(rigcfg_virtual_rig)
         CHECK(r->virt && r->camera && r->turntable && r->lamps);
         CHECK(r->turntable == rig_virtual_turntable(r->virt));
         CHECK(r->lamps == rig_virtual_lamps(r->virt));
-        CHECK(r->lamps->n == 4 && r->lamps->on_mask == 0);
+        CHECK(r->lamps->n == 5 && r->lamps->on_mask == 0);
         CHECK(rig_lamps_find(r->lamps, "east") >= 0 && rig_lamps_find(r->lamps, "north") >= 0);
         CHECK_CONTAINS(r->camera->name, "127.0.0.1");
         rig_frame_meta_t m;

@@ -470,7 +470,7 @@ TEST(sphere_virtual_rig_mirror_sphere_highlights)
     model_lamps_t *lamps = ini ? model_lamps_from_ini(ini) : NULL;
     int W = cam ? model_camera_width(cam) : 0, H = cam ? model_camera_height(cam) : 0;
     float *E = malloc((size_t)(W > 0 ? W : 1) * (H > 0 ? H : 1) * sizeof *E);
-    CHECK(cam && lamps && lamps->n == 4 && E);
+    CHECK(cam && lamps && lamps->n == 5 && E);
     if (rc || !cam || !lamps || !E) goto done;
     model_vec3_t C = model_camera_centre_world(cam);
     double worst = 0;
@@ -521,7 +521,7 @@ TEST(sphere_virtual_rig_mirror_sphere_highlights)
             CHECK_MSG(err < 1.0, "angle %g lamp %d: highlight centroid %.2f px from the mirror point", ang, i, err);
         }
     }
-    printf("  mirror sphere on the virtual rig: 8 highlights within %.2f px of the mirror points\n", worst);
+    printf("  mirror sphere on the virtual rig: %d highlights within %.2f px of the mirror points\n", 2 * lamps->n, worst);
 done:
     free(E);
     model_lamps_free(lamps);

@@ -75,7 +75,7 @@ TEST(virtual_rig_frame_matches_model)
     CHECK_CONTAINS(rig_virtual_truth_path(v), "virtual-truth.ini");
     rig_turntable_t *tt = rig_virtual_turntable(v);
     rig_lamps_t *lamps = rig_virtual_lamps(v);
-    CHECK(lamps->n == 4);
+    CHECK(lamps->n == 5);
     int rc = rig_camera_open_aravis(&c, rig_virtual_camera_address(v));
     CHECK_MSG(rc == 0, "open: %d %s", rc, rig_last_error());
     if (rc) goto done;
