@@ -2,7 +2,7 @@
 // separate right from wrong descriptions on the virtual rig?
 //
 // Images: the T-stiffener of the truth file from four turntable angles (0, 90,
-// 180, 270 deg), all four lamps on, 6 ms. Each case draws its own sensor noise,
+// 180, 270 deg), every lamp of the truth on, 6 ms. Each case draws its own sensor noise,
 // lamp intensities (each lamp x U(0.9, 1.1): drift of +-10 %) and camera
 // sensitivity (x U(0.95, 1.05): gain drift), and is verified against the
 // correct description and every corruption: I-stiffener, stiffener missing,
@@ -147,7 +147,7 @@ int verify_study_cmd(const char *out, const char *truth, int cases, const verify
     pthread_mutex_init(&S.lock, NULL);
     S.cases = cases;
     if (!calib_mkdir_p(out)) goto done;
-    fprintf(stderr, "refl verify --study: rendering the T-stiffener at 4 angles x 4 lamps on the virtual rig (%s)\n",
+    fprintf(stderr, "refl verify --study: rendering the T-stiffener at 4 angles x each lamp on the virtual rig (%s)\n",
             truth_path);
     S.lab = verify_lab_open(truth_path, "t_stiffener", angles, NANG, 6000, 0, true);
     if (!S.lab) goto done;
@@ -248,7 +248,7 @@ int verify_study_cmd(const char *out, const char *truth, int cases, const verify
     json_t *doc = json_object();
     json_object_set_new(doc, "conditions",
                         json_string("virtual rig (truth file in provenance): T-stiffener, turntable 0/90/180/270 deg, "
-                                    "all four lamps on, 6000 us, 0 dB, 12-bit sensor with its noise; per case: each "
+                                    "every lamp on, 6000 us, 0 dB, 12-bit sensor with its noise; per case: each "
                                     "lamp's intensity x U(0.9, 1.1), the camera's sensitivity x U(0.95, 1.05), new "
                                     "sensor noise; priors: the truth's material parameters +- 10 % (bounds 3 sigma); "
                                     "no-priors: the thesis's fit (physical bounds only, lamps fixed, kc free); "
