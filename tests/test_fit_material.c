@@ -216,6 +216,12 @@ TEST(fit_material_chain_virtual_rig)
     CHECK_CONTAINS(err, "position_mm");
     g_free(out);
     g_free(err);
+    test_write("cal/lamps.json", "{\"lamps\": [{\"name\": \"east\", \"position_mm\": [0, 0, 1], \"radius_mm\": -2}]}");
+    rc = test_refl_run(60, &out, &err, "fit", "material", gs, "--calib", cal, "-o", pj, NULL);
+    CHECK(rc == 1);
+    CHECK_CONTAINS(err, "lamps[0] (east): radius_mm must be a number of mm in [0, 1000)");
+    g_free(out);
+    g_free(err);
     g_free(rig);
     g_free(cal);
     g_free(white);
