@@ -69,13 +69,14 @@ bool fit_samples_add_disc(fit_samples_t *s, const model_cosines_t *c, const mode
         for (int i = 0; i < cap; i++) s->disc_at[i] = -1;
         s->disc_cap = cap;
     }
-    if (!fit_samples_add(s, c, R, weight)) return false;
-    model_cosines_t *nd = realloc(s->disc, (size_t)(s->ndisc + 4) * sizeof *nd);
-    if (!nd) {
-        s->n--;
-        return false;
+    if (s->ndisc + 4 > s->disc_alloc) {
+        int cap = s->disc_alloc ? 2 * s->disc_alloc : 4096;
+        model_cosines_t *nd = realloc(s->disc, (size_t)cap * sizeof *nd);
+        if (!nd) return false;
+        s->disc = nd;
+        s->disc_alloc = cap;
     }
-    s->disc = nd;
+    if (!fit_samples_add(s, c, R, weight)) return false;
     memcpy(s->disc + s->ndisc, disc, 4 * sizeof *disc);
     s->disc_at[s->n - 1] = s->ndisc;
     s->ndisc += 4;

@@ -46,7 +46,7 @@ typedef struct {
     // first of sample i's 4 cosines in disc, -1 a point lamp (c[i] alone).
     int             *disc_at;
     model_cosines_t *disc;
-    int              ndisc, disc_cap;
+    int              ndisc, disc_cap, disc_alloc;   // cosines in disc; disc_at's and disc's capacities
     char             source[512];
     char             sha256[65];
 } fit_samples_t;
