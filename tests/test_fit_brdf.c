@@ -15,23 +15,29 @@
 #include "model/internal.h"
 #include "tests/test.h"
 
-// Samples of model m with parameters p on a grid of directions, with
-// Gaussian noise of std sigma on R (seeded).
-static fit_samples_t *synth(model_brdf_t m, const double *p, double sigma, uint64_t seed)
+// Samples of model m with parameters p on a grid of directions (incidence and
+// view every step deg, view azimuth every 2 step), those with v.h >= vh_min,
+// with Gaussian noise of std sigma on R (seeded).
+static fit_samples_t *synth_grid(model_brdf_t m, const double *p, double sigma, uint64_t seed, int step, double vh_min)
 {
     fit_samples_t *s = fit_samples_new();
     model_rng_t rng = model_rng(seed, 3);
     const double d = M_PI / 180;
-    for (int ti = 0; ti < 85; ti += 5)
-        for (int to = 0; to < 85; to += 5)
-            for (int po = 0; po < 360; po += 10) {
+    for (int ti = 0; ti < 85; ti += step)
+        for (int to = 0; to < 85; to += step)
+            for (int po = 0; po < 360; po += 2 * step) {
                 model_cosines_t c = model_cosines(v3(0, 0, 1), v3(sin(ti * d), 0, cos(ti * d)),
                                                   v3(sin(to * d) * cos(po * d), sin(to * d) * sin(po * d), cos(to * d)));
-                if (!(c.nl > 0 && c.nv > 0)) continue;
-                double R = model_brdf_eval(m, p, &c, NULL) + sigma * model_rng_gauss(&rng);
+                if (!(c.nl > 0 && c.nv > 0) || c.vh < vh_min) continue;
+                double R = model_brdf_eval(m, p, &c, NULL) + (sigma > 0 ? sigma * model_rng_gauss(&rng) : 0);
                 fit_samples_add(s, &c, R, 1);
             }
     return s;
+}
+
+static fit_samples_t *synth(model_brdf_t m, const double *p, double sigma, uint64_t seed)
+{
+    return synth_grid(m, p, sigma, seed, 5, -1);
 }
 
 static void check_recovery(model_brdf_t m, const double *truth, double sigma)
@@ -271,21 +277,10 @@ TEST(fit_brdf_merl_file)
     CHECK_CONTAINS(model_last_error(), "not a MERL BRDF file");
 }
 
-// Samples of a GGX material seen only at v.h >= vh_min (the mirror direction
-// of each within 30 deg of the normal), noise-free.
+// Noise-free GGX samples seen only at v.h >= vh_min.
 static fit_samples_t *synth_vh(const double *p, double vh_min)
 {
-    fit_samples_t *s = fit_samples_new();
-    const double d = M_PI / 180;
-    for (int ti = 0; ti < 85; ti += 3)
-        for (int to = 0; to < 85; to += 3)
-            for (int po = 0; po < 360; po += 6) {
-                model_cosines_t c = model_cosines(v3(0, 0, 1), v3(sin(ti * d), 0, cos(ti * d)),
-                                                  v3(sin(to * d) * cos(po * d), sin(to * d) * sin(po * d), cos(to * d)));
-                if (!(c.nl > 0 && c.nv > 0) || c.vh < vh_min) continue;
-                fit_samples_add(s, &c, model_brdf_eval(MODEL_BRDF_GGX, p, &c, NULL), 1);
-            }
-    return s;
+    return synth_grid(MODEL_BRDF_GGX, p, 0, 1, 3, vh_min);
 }
 
 // F0 apart from ks: where the samples never come near grazing only ks*F0 is
