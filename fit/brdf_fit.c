@@ -87,19 +87,10 @@ bool fit_lamp_disc_dirs(model_vec3_t l, double d_mm, double radius_mm, model_vec
 {
     if (!(radius_mm > 0) || !(d_mm > radius_mm)) return false;
     double t = tan(asin(radius_mm / d_mm) / sqrt(2));
-    // two unit vectors across l
-    model_vec3_t a = fabs(l.z) < 0.9 ? v3(0, 0, 1) : v3(1, 0, 0);
-    model_vec3_t e1 = v3(a.y * l.z - a.z * l.y, a.z * l.x - a.x * l.z, a.x * l.y - a.y * l.x);
-    double n1 = sqrt(e1.x * e1.x + e1.y * e1.y + e1.z * e1.z);
-    e1 = v3(e1.x / n1, e1.y / n1, e1.z / n1);
-    model_vec3_t e2 = v3(l.y * e1.z - l.z * e1.y, l.z * e1.x - l.x * e1.z, l.x * e1.y - l.y * e1.x);
-    const double sg[4][2] = { { 1, 0 }, { -1, 0 }, { 0, 1 }, { 0, -1 } };
-    for (int k = 0; k < 4; k++) {
-        model_vec3_t q = v3(l.x + t * (sg[k][0] * e1.x + sg[k][1] * e2.x), l.y + t * (sg[k][0] * e1.y + sg[k][1] * e2.y),
-                            l.z + t * (sg[k][0] * e1.z + sg[k][1] * e2.z));
-        double nq = sqrt(q.x * q.x + q.y * q.y + q.z * q.z);
-        out[k] = v3(q.x / nq, q.y / nq, q.z / nq);
-    }
+    model_vec3_t e[2];
+    frame_of(l, &e[0], &e[1]);
+    for (int k = 0; k < 4; k++)
+        out[k] = v3_unit(v3_add(l, v3_scale(e[k / 2], k % 2 ? -t : t)));
     return true;
 }
 

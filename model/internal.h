@@ -19,6 +19,13 @@ static inline model_vec3_t v3_unit(model_vec3_t a)
     double n = v3_norm(a);
     return n > 0 ? v3_scale(a, 1.0 / n) : a;
 }
+// Two unit vectors a, b completing the unit vector n to an orthonormal frame.
+static inline void frame_of(model_vec3_t n, model_vec3_t *a, model_vec3_t *b)
+{
+    model_vec3_t h = fabs(n.x) < 0.6 ? v3(1, 0, 0) : v3(0, 1, 0);
+    *a = v3_unit(v3_cross(h, n));
+    *b = v3_cross(n, *a);
+}
 
 // Counter-based random numbers (splitmix64): reproducible per (seed, stream,
 // index) whatever the thread schedule.

@@ -120,13 +120,6 @@ typedef struct {
 #define TILE 8   // tiles of TILE x TILE pixels (culled as a whole)
 
 // An orthonormal frame (a, b, n) around the unit vector n.
-static inline void frame_of(model_vec3_t n, model_vec3_t *a, model_vec3_t *b)
-{
-    model_vec3_t h = fabs(n.x) < 0.6 ? v3(1, 0, 0) : v3(0, 1, 0);
-    *a = v3_unit(v3_cross(h, n));
-    *b = v3_cross(n, *a);
-}
-
 static inline const model_material_t *material_of(render_ctx_t *c, int32_t m)
 {
     const model_material_t *mat = m >= 0 ? c->mats[m] : NULL;
