@@ -48,16 +48,16 @@ LDLIBS_ALL   = $(PKG_LIBS) $(LIBS_NOPC) -lm
 # ---- sources (explicit lists) ---------------------------------------------
 MODEL_SRC := model/util.c model/ini.c model/scene.c model/config.c model/brdf.c model/brdf_batch.c \
              model/camera.c model/trace.c model/shade.c model/sensor.c \
-             model/image.c model/edges.c model/workpiece.c model/cmd.c
+             model/image.c model/edges.c model/workpiece.c model/report.c model/opts.c model/cmd.c
 RIG_SRC   := rig/rig.c rig/turntable_apt.c rig/turntable_sim.c rig/lamps.c \
              rig/camera_aravis.c rig/gv_camera.c rig/virtual.c rig/config.c rig/cmd_rig.c \
-             rig/plan.c rig/journal.c rig/capture.c rig/cmd_capture.c
-CALIB_SRC := calib/common.c calib/cmd_calib.c calib/geometry.c calib/lamps.c calib/gain.c
+             rig/plan.c rig/journal.c rig/session.c rig/capture.c rig/cmd_capture.c
+CALIB_SRC := calib/capture.c calib/cmd_calib.c calib/geometry.c calib/lamps.c calib/gain.c
 FIT_SRC   := fit/brdf_fit.c fit/material.c fit/cmd_fit.c fit/verify.c fit/verify_lab.c fit/verify_study.c fit/cmd_verify.c fit/lightplan.c fit/cmd_plan.c
-FIT_CXX_SRC := fit/lsq.cc
+MODEL_CXX_SRC := model/lsq.cc
 LIB_SRC   := $(MODEL_SRC) $(RIG_SRC) $(CALIB_SRC) $(FIT_SRC)
 
-MAIN_SRC  := rig/main.c
+MAIN_SRC  := fit/main.c
 TEST_SRC  := tests/harness.c tests/test_brdf.c tests/test_scene.c tests/test_config.c \
              tests/test_camera.c tests/test_render.c tests/test_sensor.c \
              tests/test_image.c tests/test_edges.c tests/test_cli.c tests/test_corpus.c \
@@ -72,7 +72,7 @@ BENCH_SRC := tests/bench.c
 FUZZ_SRC  := tests/fuzz_parsers.c
 
 obj = $(patsubst %.c,$(BUILD)/%.o,$(1))
-LIB_OBJ   := $(call obj,$(LIB_SRC)) $(patsubst %.cc,$(BUILD)/%.o,$(FIT_CXX_SRC))
+LIB_OBJ   := $(call obj,$(LIB_SRC)) $(patsubst %.cc,$(BUILD)/%.o,$(MODEL_CXX_SRC))
 LIB       := $(BUILD)/librefl.a
 
 .PHONY: all check demo study bench asan fuzz clean
@@ -129,6 +129,7 @@ $(BIN)/refl-bench: $(call obj,$(BENCH_SRC)) $(LIB)
 	$(CC) $(LDFLAGS_ALL) -o $@ $^ $(LDLIBS_ALL)
 
 check: $(BIN)/refl $(BIN)/refl-tests $(FAKE_GPIOD) $(LAMP_CHILD) $(ENOSPC_SHIM)
+	scripts/check-layers
 	REFL=$(BIN)/refl REFL_FAKE_GPIOD=$(FAKE_GPIOD) REFL_LAMP_CHILD=$(LAMP_CHILD) REFL_ENOSPC_SHIM=$(ENOSPC_SHIM) \
 	  REFL_SCRIPTS_DIR=$(CURDIR)/scripts $(BIN)/refl-tests
 

@@ -28,6 +28,7 @@
 #include "calib/calib.h"
 #include "calib/gain.h"
 #include "model/model.h"
+#include "model/report.h"
 
 // ---------------------------------------------------------------------------
 // Numerics
@@ -290,7 +291,7 @@ static float *frame_load(const gframe_t *f, int *w, int *h)
             goto fail;
         }
     }
-    img = calib_image_read(f->path, w, h);
+    img = model_image_read_float(f->path, w, h);
     if (!img) goto fail;
     model_error_quiet_thread(q);
     return img;
@@ -868,7 +869,7 @@ static int lamps_on(const char *lamps, int nlamps_rig)
 // Frames of a session; set: the role of its frames (SET_ANY: by lamps).
 static bool add_session(gdata_t *d, const char *dir, int set, json_t **facts_out)
 {
-    calib_session_t *s = calib_session_open(dir);
+    rig_session_t *s = rig_session_open(dir);
     if (!s) return false;
     int nlr = -1;
     json_t *lamps = s->facts ? json_object_get(s->facts, "lamps") : NULL;
@@ -883,7 +884,7 @@ static bool add_session(gdata_t *d, const char *dir, int set, json_t **facts_out
         add_frame(d, &f);
     }
     if (facts_out && !*facts_out && s->facts) *facts_out = json_incref(s->facts);
-    calib_session_free(s);
+    rig_session_free(s);
     return true;
 }
 
@@ -941,7 +942,7 @@ static int run_plan(const capture_opts_t *c, const char *name, const char *lamps
 // Mean of a session's frames by kind (lamps on / off) at one exposure.
 static bool probe_levels(const char *dir, double *light, double *dark, double *max_dn)
 {
-    calib_session_t *s = calib_session_open(dir);
+    rig_session_t *s = rig_session_open(dir);
     if (!s) return false;
     *light = *dark = NAN;
     for (int i = 0; i < s->n; i++) {
@@ -949,7 +950,7 @@ static bool probe_levels(const char *dir, double *light, double *dark, double *m
         else *light = s->rows[i].mean;
         *max_dn = format_max(s->rows[i].pixel_format);
     }
-    calib_session_free(s);
+    rig_session_free(s);
     if (!(isfinite(*light) && isfinite(*dark))) {
         model_error(dir, 0, "the probe session has no light and dark frame");
         return false;
@@ -1246,13 +1247,13 @@ int calib_cmd_gain(int argc, char **argv)
                 "(--min-steps)\n", c.steps, min_steps);
         goto out2;
     }
-    if (!calib_mkdir_p(out)) goto out;
-    prov = calib_provenance(argc, argv);
+    if (!model_mkdir_p(out)) goto out;
+    prov = model_provenance(argc, argv);
     double t_start = model_now_s();
     if (c.rig) {
         c.out = out;
         c.dark_list = NULL;
-        if (!calib_provenance_input(prov, "rig", c.rig)) goto out;
+        if (!model_provenance_input(prov, "rig", c.rig)) goto out;
         // sweeps at every gain; the first gives the flat field's exposure
         double t_sat0 = NAN;
         for (int gi = 0; gi < ngains; gi++) {
@@ -1260,7 +1261,7 @@ int calib_cmd_gain(int argc, char **argv)
             char *sd = NULL;
             if (!capture_sweep(&c, gains[gi], &sd, &ts)) goto out;
             if (gi == 0) t_sat0 = ts;
-            if (!add_session(&d, sd, SET_SWEEP, &facts) || !calib_provenance_input(prov, "sweep", sd)) {
+            if (!add_session(&d, sd, SET_SWEEP, &facts) || !model_provenance_input(prov, "sweep", sd)) {
                 g_free(sd);
                 goto out;
             }
@@ -1275,7 +1276,7 @@ int calib_cmd_gain(int argc, char **argv)
         g_free(fl);
         if (r1) goto out;
         char *fd = g_strdup_printf("%s/flat", out);
-        bool ok = add_session(&d, fd, SET_FLAT, &facts) && calib_provenance_input(prov, "flat", fd);
+        bool ok = add_session(&d, fd, SET_FLAT, &facts) && model_provenance_input(prov, "flat", fd);
         g_free(fd);
         if (!ok) goto out;
         char *dl = exposure_list(darks, ndarks);
@@ -1283,12 +1284,12 @@ int calib_cmd_gain(int argc, char **argv)
         g_free(dl);
         if (r1) goto out;
         fd = g_strdup_printf("%s/dark", out);
-        ok = add_session(&d, fd, SET_DARK, &facts) && calib_provenance_input(prov, "dark", fd);
+        ok = add_session(&d, fd, SET_DARK, &facts) && model_provenance_input(prov, "dark", fd);
         g_free(fd);
         if (!ok) goto out;
         fprintf(stderr, "refl calib gain: capture done in %.1f s\n", model_now_s() - t_start);
     } else if (manifest) {
-        if (!read_manifest(manifest, max_dn, &d) || !calib_provenance_input(prov, "manifest", manifest)) goto out;
+        if (!read_manifest(manifest, max_dn, &d) || !model_provenance_input(prov, "manifest", manifest)) goto out;
         if (ngains != 1) {
             model_error(manifest, 0, "a manifest holds frames of one gain: give at most one --gains value (its label)");
             goto out;
@@ -1298,7 +1299,7 @@ int calib_cmd_gain(int argc, char **argv)
         for (int i = 0; i < d.nf; i++) {
             char role[64];
             snprintf(role, sizeof role, "frame line %d", d.f[i].line);
-            if (!calib_provenance_input(prov, role, d.f[i].path)) {
+            if (!model_provenance_input(prov, role, d.f[i].path)) {
                 char *m = g_strdup(model_last_error());
                 model_error(manifest, d.f[i].line, "frame %s: %s", d.f[i].path, m);
                 g_free(m);
@@ -1307,7 +1308,7 @@ int calib_cmd_gain(int argc, char **argv)
         }
     } else {
         for (int i = 0; i < nsessions; i++)
-            if (!add_session(&d, sessions[i], SET_ANY, &facts) || !calib_provenance_input(prov, "session", sessions[i]))
+            if (!add_session(&d, sessions[i], SET_ANY, &facts) || !model_provenance_input(prov, "session", sessions[i]))
                 goto out;
     }
     make_groups(&d);
@@ -1439,24 +1440,24 @@ int calib_cmd_gain(int argc, char **argv)
         if (truth) json_object_set_new(root, "virtual_truth", json_string(truth));
         json_object_set_new(root, "provenance", json_incref(prov));
         char *jp = g_build_filename(out, "gain.json", NULL);
-        bool ok = calib_write_json(jp, root);
+        bool ok = model_write_json(jp, root);
         g_free(jp);
         if (!ok) goto out_an;
     }
     if (report) {
         char *jp = g_build_filename(out, "gain.json", NULL);
         fprintf(stderr, "refl calib gain: plotting\n");
-        int pr = calib_python("calib_gain_report.py", jp, out, NULL);
+        int pr = model_run_script("calib_gain_report.py", jp, out, NULL);
         g_free(jp);
         if (pr) goto out_an;
         char *hp = g_build_filename(out, "report.html", NULL);
-        FILE *f = calib_html_begin(hp, "refl calib gain: camera sensitivity (EMVA 1288 style)", prov);
+        FILE *f = model_html_begin(hp, "refl calib gain: camera sensitivity (EMVA 1288 style)", prov);
         if (!f) {
             g_free(hp);
             goto out_an;
         }
         const gain_an_t *a = &an[0];
-        calib_html_heading(f, "Summary");
+        model_html_heading(f, "Summary");
         char *rows[24];
         int nr = 0;
         rows[nr++] = g_strdup_printf("system gain K|%.5g DN/e-|small-signal; straight-line fit %.5g",
@@ -1481,27 +1482,27 @@ int calib_cmd_gain(int argc, char **argv)
                                          an[i].ptc.system_gain_dn_per_e, an[i].ptc.read_noise_e, an[i].ptc.saturation_dn,
                                          an[i].ptc.linearity_error_pct, an[i].ptc.response_dn_per_us, an[i].kc_per_us,
                                          an[i].kc0_per_us);
-        calib_html_table(f, "figure|value|notes", (const char *const *)rows, nr);
+        model_html_table(f, "figure|value|notes", (const char *const *)rows, nr);
         for (int i = 0; i < nr; i++) g_free(rows[i]);
-        calib_html_para(f, "Flat field: %d light frames at %.6g us (%.0f DN above dark, %.0f %% of saturation) and %d "
+        model_html_para(f, "Flat field: %d light frames at %.6g us (%.0f DN above dark, %.0f %% of saturation) and %d "
                         "dark frames at %.6g us. Definitions: see \"conventions\" in gain.json.", maps.flat_frames,
                         maps.flat_exposure_us, maps.flat_level_dn, 100 * maps.flat_level_dn / a->ptc.saturation_dn,
                         maps.dark_frames, maps.dark_exposure_us);
-        calib_html_heading(f, "Photon transfer");
-        calib_html_figure(f, "ptc.png", "temporal variance against signal (dark subtracted), with the K fit");
-        calib_html_heading(f, "Linearity");
-        calib_html_figure(f, "linearity.png", "signal against exposure with the least-squares line, and the "
+        model_html_heading(f, "Photon transfer");
+        model_html_figure(f, "ptc.png", "temporal variance against signal (dark subtracted), with the K fit");
+        model_html_heading(f, "Linearity");
+        model_html_figure(f, "linearity.png", "signal against exposure with the least-squares line, and the "
                           "relative deviation from it (5..95 % of saturation)");
-        calib_html_heading(f, "SNR");
-        calib_html_figure(f, "snr.png", "signal-to-noise ratio against signal, with the ideal shot-noise limit");
-        calib_html_heading(f, "Response (kc) per gain");
-        calib_html_figure(f, "kc.png", "signal per unit radiance against exposure at each gain");
-        calib_html_heading(f, "PRNU");
-        calib_html_figure(f, "prnu_map.png", "relative sensitivity: total (incl. vignetting) and high-pass");
-        calib_html_figure(f, "prnu_hist.png", "histograms of the high-pass PRNU map and of the DSNU map");
-        calib_html_heading(f, "Dark signal");
-        calib_html_figure(f, "dark.png", "mean dark level against exposure (dark current) and dark temporal variance");
-        bool ok = calib_html_end(f, hp);
+        model_html_heading(f, "SNR");
+        model_html_figure(f, "snr.png", "signal-to-noise ratio against signal, with the ideal shot-noise limit");
+        model_html_heading(f, "Response (kc) per gain");
+        model_html_figure(f, "kc.png", "signal per unit radiance against exposure at each gain");
+        model_html_heading(f, "PRNU");
+        model_html_figure(f, "prnu_map.png", "relative sensitivity: total (incl. vignetting) and high-pass");
+        model_html_figure(f, "prnu_hist.png", "histograms of the high-pass PRNU map and of the DSNU map");
+        model_html_heading(f, "Dark signal");
+        model_html_figure(f, "dark.png", "mean dark level against exposure (dark current) and dark temporal variance");
+        bool ok = model_html_end(f, hp);
         g_free(hp);
         if (!ok) goto out_an;
     }

@@ -43,6 +43,7 @@
 
 #include "calib/calib.h"
 #include "model/model.h"
+#include "model/report.h"
 
 #define DEG (M_PI / 180.0)
 
@@ -307,11 +308,11 @@ static view_t *view_find(views_t *vs, const char *name)
 // A session's frames → 8-bit images and views.
 static bool add_session(views_t *vs, const char *sdir, const char *imgdir, int *w, int *h)
 {
-    calib_session_t *s = calib_session_open(sdir);
+    rig_session_t *s = rig_session_open(sdir);
     if (!s) return false;
     rig_plan_t *p = rig_plan_parse(s->plan_text, strlen(s->plan_text), sdir);
     if (!p) {
-        calib_session_free(s);
+        rig_session_free(s);
         return false;
     }
     int g = vs->ngroups++;
@@ -325,7 +326,7 @@ static bool add_session(views_t *vs, const char *sdir, const char *imgdir, int *
     for (int i = 0; i < s->n && ok; i++) {
         const rig_frame_row_t *r = &s->rows[i];
         int fw = 0, fh = 0;
-        float *img = calib_session_frame(s, i, &fw, &fh);
+        float *img = rig_session_frame(s, i, &fw, &fh);
         if (!img) {
             ok = false;
             break;
@@ -353,7 +354,7 @@ static bool add_session(views_t *vs, const char *sdir, const char *imgdir, int *
     }
     g_free(base);
     rig_plan_free(p);
-    calib_session_free(s);
+    rig_session_free(s);
     return ok;
 }
 
@@ -370,7 +371,7 @@ static bool add_images(views_t *vs, const char *pattern, const char *imgdir, int
     for (size_t i = 0; i < gl.gl_pathc && ok; i++) {
         const char *src = gl.gl_pathv[i];
         int fw = 0, fh = 0;
-        float *img = calib_image_read(src, &fw, &fh);
+        float *img = model_image_read_float(src, &fw, &fh);
         if (!img) {
             ok = false;
             break;
@@ -963,7 +964,7 @@ static bool find_corners(const opts_t *o, views_t *vs, const char *outdir, const
 {
     *cornpath = g_strdup_printf("%s/corners.vnl", outdir);
     if (o->corners) {
-        if (!calib_provenance_input(prov, "corners", o->corners)) return false;
+        if (!model_provenance_input(prov, "corners", o->corners)) return false;
         char *text = NULL;
         GError *err = NULL;
         if (!g_file_get_contents(o->corners, &text, NULL, &err)) {
@@ -1071,7 +1072,7 @@ static json_t *solve_mrcal(const opts_t *o, const char *cornpath, const char *im
     char *solpath = g_strdup_printf("%s/solution.json", mdir), dist[32];
     snprintf(dist, sizeof dist, "%g", o->distance_mm);
     fprintf(stderr, "refl calib geometry: residuals and projection uncertainty (mrcal)\n");
-    e = calib_python("calib_geometry_report.py", "solution", model0, solpath, dist, NULL);
+    e = model_run_script("calib_geometry_report.py", "solution", model0, solpath, dist, NULL);
     g_free(model0);
     if (e != 0) {
         g_free(solpath);
@@ -1227,17 +1228,17 @@ int calib_cmd_geometry(int argc, char **argv)
     if (!o.min_views) o.min_views = default_min_views(o.lensmodel);
 
     rc = 1;
-    prov = calib_provenance(argc, argv);
-    if (!calib_mkdir_p(o.out)) goto done;
+    prov = model_provenance(argc, argv);
+    if (!model_mkdir_p(o.out)) goto done;
     outdir = realpath(o.out, NULL);
     imgdir = g_strdup_printf("%s/images", outdir);
     mdir = g_strdup_printf("%s/mrcal", outdir);
-    if (!calib_mkdir_p(imgdir) || !calib_mkdir_p(mdir)) goto done;
+    if (!model_mkdir_p(imgdir) || !model_mkdir_p(mdir)) goto done;
 
     // 1. views
     int W = o.imager_w, H = o.imager_h;
     if (o.rig) {
-        if (!calib_provenance_input(prov, "rig", o.rig)) goto done;
+        if (!model_provenance_input(prov, "rig", o.rig)) goto done;
         // every plan first: a bad --tilts fails before anything moves
         char **specs = g_strsplit(o.tilts, " ", -1);
         GPtrArray *plans = g_ptr_array_new_with_free_func(g_free), *names = g_ptr_array_new_with_free_func(g_free);
@@ -1275,14 +1276,14 @@ int calib_cmd_geometry(int argc, char **argv)
     for (guint k = 0; k < o.sessions->len; k++) {
         const char *sd = g_ptr_array_index(o.sessions, k);
         fprintf(stderr, "refl calib geometry: reading the frames of %s\n", sd);
-        if (!add_session(&vs, sd, imgdir, &W, &H) || !calib_provenance_input(prov, "session", sd)) goto done;
+        if (!add_session(&vs, sd, imgdir, &W, &H) || !model_provenance_input(prov, "session", sd)) goto done;
     }
     if (o.images) {
         fprintf(stderr, "refl calib geometry: reading the images %s\n", o.images);
         if (!add_images(&vs, o.images, imgdir, &W, &H)) goto done;
         for (guint k = 0; k < vs.v->len; k++) {
             view_t *v = g_ptr_array_index(vs.v, k);
-            if (!calib_provenance_input(prov, "image", v->source)) goto done;
+            if (!model_provenance_input(prov, "image", v->source)) goto done;
         }
     }
     if (o.imager_w && (W != o.imager_w || H != o.imager_h)) {
@@ -1443,63 +1444,63 @@ int calib_cmd_geometry(int argc, char **argv)
     }
     json_object_set_new(out, "images", ims);
     json_object_set_new(out, "images_without_board", missing);
-    calib_provenance_input(prov, "mrcal solution", campath);
+    model_provenance_input(prov, "mrcal solution", campath);
     json_object_set_new(out, "provenance", json_incref(prov));
     char *jpath = g_strdup_printf("%s/geometry.json", outdir);
-    ok = calib_write_json(jpath, out);
+    ok = model_write_json(jpath, out);
 
     // 6. report
     if (ok) {
         char *solpath = g_strdup_printf("%s/solution.json", mdir), *hpath = g_strdup_printf("%s/report.html", outdir);
         fprintf(stderr, "refl calib geometry: plots\n");
-        ok = calib_python("calib_geometry_report.py", "plots", jpath, solpath, outdir, NULL) == 0;
-        FILE *f = ok ? calib_html_begin(hpath, "refl calib geometry", prov) : NULL;
+        ok = model_run_script("calib_geometry_report.py", "plots", jpath, solpath, outdir, NULL) == 0;
+        FILE *f = ok ? model_html_begin(hpath, "refl calib geometry", prov) : NULL;
         if (f) {
-            calib_html_heading(f, "Camera model");
-            calib_html_para(f, "%s, %dx%d px; %zu of %u views used; RMS reprojection residual %.4f px; %d outliers "
+            model_html_heading(f, "Camera model");
+            model_html_para(f, "%s, %dx%d px; %zu of %u views used; RMS reprojection residual %.4f px; %d outliers "
                             "of %d points.", o.lensmodel, W, H, json_array_size(jimgs), vs.v->len, rms,
                             (int)json_integer_value(json_object_get(sol, "outliers")),
                             (int)json_integer_value(json_object_get(sol, "points")) +
                                 (int)json_integer_value(json_object_get(sol, "outliers")));
-            calib_html_para(f, "Intrinsics fx, fy, cx, cy: %.3f, %.3f, %.3f, %.3f px.",
+            model_html_para(f, "Intrinsics fx, fy, cx, cy: %.3f, %.3f, %.3f, %.3f px.",
                             json_real_value(json_array_get(intr, 0)), json_real_value(json_array_get(intr, 1)),
                             json_real_value(json_array_get(intr, 2)), json_real_value(json_array_get(intr, 3)));
-            calib_html_figure(f, "residuals_vectors.png", "Reprojection residuals over the imager");
-            calib_html_figure(f, "residuals_histogram.png", "Distribution of the residuals");
-            calib_html_figure(f, "residuals_per_image.png", "RMS residual per image");
+            model_html_figure(f, "residuals_vectors.png", "Reprojection residuals over the imager");
+            model_html_figure(f, "residuals_histogram.png", "Distribution of the residuals");
+            model_html_figure(f, "residuals_per_image.png", "RMS residual per image");
             json_t *u = json_object_get(sol, "uncertainty");
             if (json_object_get(u, "max_px")) {
-                calib_html_heading(f, "Projection uncertainty");
-                calib_html_para(f, "mrcal.projection_uncertainty (worst direction, 1 sigma) at %g mm: centre %.4f px, "
+                model_html_heading(f, "Projection uncertainty");
+                model_html_para(f, "mrcal.projection_uncertainty (worst direction, 1 sigma) at %g mm: centre %.4f px, "
                                 "median %.4f px, max %.4f px over the imager.", o.distance_mm,
                                 json_real_value(json_object_get(u, "centre_px")),
                                 json_real_value(json_object_get(u, "median_px")),
                                 json_real_value(json_object_get(u, "max_px")));
-                calib_html_figure(f, "uncertainty.png", "Projection uncertainty (dots: observed corners)");
+                model_html_figure(f, "uncertainty.png", "Projection uncertainty (dots: observed corners)");
             }
-            calib_html_heading(f, "Turntable axis and rig frame");
+            model_html_heading(f, "Turntable axis and rig frame");
             if (ax.ok) {
-                calib_html_para(f, "Axis direction (camera frame) %.6f %.6f %.6f, +- %.4f deg (approximate); point "
+                model_html_para(f, "Axis direction (camera frame) %.6f %.6f %.6f, +- %.4f deg (approximate); point "
                                 "%.2f %.2f %.2f mm +- %.3f mm; %d pose pairs; off-axis rotation RMS %.4f deg.",
                                 ax.a[0], ax.a[1], ax.a[2], ax.dir_unc_deg, ax.c[0], ax.c[1], ax.c[2], ax.point_unc_mm,
                                 ax.npairs, ax.off_axis_rms_deg);
-                calib_html_figure(f, "axis_fit.png", "Board rotation about the fitted axis against the turntable angle");
+                model_html_figure(f, "axis_fit.png", "Board rotation about the fitted axis against the turntable angle");
             } else {
-                calib_html_para(f, "No axis: %s.", rigwhy);
+                model_html_para(f, "No axis: %s.", rigwhy);
             }
-            calib_html_para(f, "Rig frame: %s.", json_string_value(json_object_get(out, "rig_frame")));
-            calib_html_heading(f, "Images without a board");
+            model_html_para(f, "Rig frame: %s.", json_string_value(json_object_get(out, "rig_frame")));
+            model_html_heading(f, "Images without a board");
             GPtrArray *rows = g_ptr_array_new_with_free_func(g_free);
             for (guint k = 0; k < vs.v->len; k++) {
                 view_t *v = g_ptr_array_index(vs.v, k);
                 if (!v->found) g_ptr_array_add(rows, g_strdup_printf("%s|%s|%s", v->name, v->source, v->why));
             }
             if (rows->len)
-                calib_html_table(f, "image|source|why", (const char *const *)rows->pdata, (int)rows->len);
+                model_html_table(f, "image|source|why", (const char *const *)rows->pdata, (int)rows->len);
             else
-                calib_html_para(f, "none: the board was found in every image.");
+                model_html_para(f, "none: the board was found in every image.");
             g_ptr_array_free(rows, TRUE);
-            ok = calib_html_end(f, hpath);
+            ok = model_html_end(f, hpath);
         } else {
             ok = false;
         }

@@ -50,8 +50,9 @@
 
 #include "calib/calib.h"
 #include "calib/lamps.h"
-#include "fit/lsq.h"
+#include "model/lsq.h"
 #include "model/model.h"
+#include "model/report.h"
 #include "rig/rig.h"
 
 // ---------------------------------------------------------------------------
@@ -946,7 +947,7 @@ bool calib_lamps_bundle(const calib_lamps_obs_t *obs, int nobs, int nl, const ca
             return false;
         }
     calib_lamps_bundle_ctx_t *ctx = calloc((size_t)nobs, sizeof *ctx);
-    fit_problem_t *pr = fit_problem_new();
+    lsq_problem_t *pr = lsq_problem_new();
     double *g = out->sphere;
     bool ok = false;
     if (!ctx || !pr) {
@@ -954,17 +955,17 @@ bool calib_lamps_bundle(const calib_lamps_obs_t *obs, int nobs, int nl, const ca
         goto done;
     }
     for (int l = 0; l < nl; l++)
-        if (!fit_add_parameters(pr, x_mm + 3 * l, 3)) goto fail;
-    if (!fit_add_parameters(pr, g, 7)) goto fail;
+        if (!lsq_add_parameters(pr, x_mm + 3 * l, 3)) goto fail;
+    if (!lsq_add_parameters(pr, g, 7)) goto fail;
     bool fixed[7];
     double prior[7];
     for (int k = 0; k < 7; k++) {
         prior[k] = k < 3 ? S->offset_prior_mm : k < 5 ? S->shift_prior_mm : S->tilt_prior_mrad;
         fixed[k] = !(prior[k] > 0);
     }
-    if (!fit_set_fixed(pr, g, fixed)) goto fail;
+    if (!lsq_set_fixed(pr, g, fixed)) goto fail;
     for (int k = 0; k < 7; k++)
-        if (!fixed[k] && !fit_add_prior(pr, g, k, 0, prior[k])) goto fail;
+        if (!fixed[k] && !lsq_add_prior(pr, g, k, 0, prior[k])) goto fail;
     for (int i = 0; i < nobs; i++) {
         ctx[i].setup = S;
         ctx[i].obs = obs[i];
@@ -975,15 +976,15 @@ bool calib_lamps_bundle(const calib_lamps_obs_t *obs, int nobs, int nl, const ca
             goto done;
         }
         double *blocks[2] = { x_mm + 3 * obs[i].lamp, g };
-        if (!fit_add_residual(pr, calib_lamps_bundle_residual, &ctx[i], 3, 2, blocks, FIT_LOSS_NONE, 0)) goto fail;
+        if (!lsq_add_residual(pr, calib_lamps_bundle_residual, &ctx[i], 3, 2, blocks, LSQ_LOSS_NONE, 0)) goto fail;
     }
     // rounds: solve, then each lamp's angular sigma from its residuals (dof
     // 2 per ray less its 3 and its share of the sphere's), solve again
     for (int round = 0; round < 4; round++) {
-        fit_options_t fo = fit_defaults();
+        lsq_options_t fo = lsq_defaults();
         fo.threads = 1;
-        fit_summary_t sm;
-        if (!fit_solve(pr, &fo, &sm)) {
+        lsq_summary_t sm;
+        if (!lsq_solve(pr, &fo, &sm)) {
             model_error(NULL, 0, "the joint fit of lamps and sphere failed: %s", sm.message);
             goto done;
         }
@@ -1022,8 +1023,8 @@ bool calib_lamps_bundle(const calib_lamps_obs_t *obs, int nobs, int nl, const ca
         if (round > 0 && change < 0.01) break;
     }
     for (int l = 0; l < nl; l++)
-        if (!fit_covariance(pr, x_mm + 3 * l, cov_mm2 + 9 * l)) goto fail;
-    if (!fit_covariance(pr, g, out->sphere_cov)) goto fail;
+        if (!lsq_covariance(pr, x_mm + 3 * l, cov_mm2 + 9 * l)) goto fail;
+    if (!lsq_covariance(pr, g, out->sphere_cov)) goto fail;
     {
         // observability of the free sphere parameters: the condition of their covariance
         int idx[7], m = 0;
@@ -1037,9 +1038,9 @@ bool calib_lamps_bundle(const calib_lamps_obs_t *obs, int nobs, int nl, const ca
     ok = true;
     goto done;
 fail:
-    model_error(NULL, 0, "the joint fit of lamps and sphere: %s", fit_last_error());
+    model_error(NULL, 0, "the joint fit of lamps and sphere: %s", model_last_error());
 done:
-    fit_problem_free(pr);
+    lsq_problem_free(pr);
     free(ctx);
     return ok;
 }
@@ -1335,7 +1336,7 @@ int calib_cmd_lamps(int argc, char **argv)
 
     int rc = 1;
     model_camera_t *cam = NULL;
-    calib_session_t *s = NULL;
+    rig_session_t *s = NULL;
     rig_plan_t *plan = NULL;
     GPtrArray *names = g_ptr_array_new_with_free_func(g_free);
     char *truth = NULL, *sdir = NULL;
@@ -1355,7 +1356,7 @@ int calib_cmd_lamps(int argc, char **argv)
 
     cam = model_camera_load(o.camera);
     if (!cam) goto done;
-    if (!calib_mkdir_p(o.out)) goto done;
+    if (!model_mkdir_p(o.out)) goto done;
 
     if (o.rig) {
         if (!rig_file_facts(o.rig, names, &truth)) goto done;
@@ -1401,7 +1402,7 @@ int calib_cmd_lamps(int argc, char **argv)
     } else {
         sdir = g_strdup(o.session);
     }
-    s = calib_session_open(sdir);
+    s = rig_session_open(sdir);
     if (!s) goto done;
     plan = rig_plan_parse(s->plan_text, strlen(s->plan_text), "session plan");
     if (!plan) goto done;
@@ -1534,7 +1535,7 @@ int calib_cmd_lamps(int argc, char **argv)
         }
         int w = 0, h = 0;
         if (dark_row[a] >= 0) {
-            dark[a] = calib_session_frame(s, dark_row[a], &w, &h);
+            dark[a] = rig_session_frame(s, dark_row[a], &w, &h);
             if (!dark[a]) {
                 calib_lamps_sphere_image_free(sph);
                 goto done;
@@ -1553,7 +1554,7 @@ int calib_cmd_lamps(int argc, char **argv)
             if (fr < 0) {
                 snprintf(hl->why, sizeof hl->why, "no frame of this lamp at this angle in the session");
             } else {
-                float *img = calib_session_frame(s, fr, &w, &h);
+                float *img = rig_session_frame(s, fr, &w, &h);
                 if (!img) {
                     calib_lamps_sphere_image_free(sph);
                     goto done;
@@ -1751,11 +1752,11 @@ int calib_cmd_lamps(int argc, char **argv)
         char **full = calloc((size_t)argc + 2, sizeof *full);
         full[0] = (char *)"calib";
         for (int i = 0; i < argc; i++) full[i + 1] = argv[i];
-        prov = calib_provenance(argc + 1, full);
+        prov = model_provenance(argc + 1, full);
         free(full);
     }
-    if (!calib_provenance_input(prov, "camera", o.camera) || !calib_provenance_input(prov, "session", sdir)) goto done;
-    if (o.rig) calib_provenance_input(prov, "rig", o.rig);
+    if (!model_provenance_input(prov, "camera", o.camera) || !model_provenance_input(prov, "session", sdir)) goto done;
+    if (o.rig) model_provenance_input(prov, "rig", o.rig);
     doc = json_object();
     json_object_set_new(doc, "units", json_string("lengths in mm; angles in degrees; pixels with (0,0) at the "
                                                   "centre of the top-left pixel"));
@@ -1849,7 +1850,7 @@ int calib_cmd_lamps(int argc, char **argv)
     json_object_set_new(doc, "session", json_string(sdir));
     json_object_set_new(doc, "provenance", json_incref(prov));
     path = g_strdup_printf("%s/lamps.json", o.out);
-    if (!calib_write_json(path, doc)) goto done;
+    if (!model_write_json(path, doc)) goto done;
     fprintf(stderr, "refl calib lamps: wrote %s\n", path);
 
     // report data for the plotting script: rays, fits, one angle's detections
@@ -1896,7 +1897,7 @@ int calib_cmd_lamps(int argc, char **argv)
             for (int l = 0; acc && l < nl; l++) {
                 int fr = L[l].frame[a], w = 0, h = 0;
                 if (fr < 0) continue;
-                float *img = calib_session_frame(s, fr, &w, &h);
+                float *img = rig_session_frame(s, fr, &w, &h);
                 if (!img) continue;
                 for (int y = 0; y < sph->h; y++)
                     for (int x = 0; x < sph->w; x++) {
@@ -1935,11 +1936,11 @@ int calib_cmd_lamps(int argc, char **argv)
                                                                sqrt(jf.sphere_cov[40]), sqrt(jf.sphere_cov[48])));
     g_free(path);
     path = g_strdup_printf("%s/report_data.json", o.out);
-    if (!calib_write_json(path, rep)) goto done;
+    if (!model_write_json(path, rep)) goto done;
     char *png1 = g_strdup_printf("%s/lamps_triangulation.png", o.out);
     char *png2 = g_strdup_printf("%s/lamps_detections.png", o.out);
     fprintf(stderr, "refl calib lamps: plotting\n");
-    int prc = calib_python("calib_lamps_report.py", path, png1, png2, NULL);
+    int prc = model_run_script("calib_lamps_report.py", path, png1, png2, NULL);
     g_free(png1);
     g_free(png2);
     if (prc) goto done;
@@ -1947,15 +1948,15 @@ int calib_cmd_lamps(int argc, char **argv)
     // report.html
     g_free(path);
     path = g_strdup_printf("%s/report.html", o.out);
-    FILE *f = calib_html_begin(path, "refl calib lamps: lamp positions", prov);
+    FILE *f = model_html_begin(path, "refl calib lamps: lamp positions", prov);
     if (!f) goto done;
-    calib_html_heading(f, "Lamp positions");
-    calib_html_para(f, "Mirror sphere '%s': radius %g mm, centre (%g, %g, %g) mm at turntable angle 0 (rig frame); "
+    model_html_heading(f, "Lamp positions");
+    model_html_para(f, "Mirror sphere '%s': radius %g mm, centre (%g, %g, %g) mm at turntable angle 0 (rig frame); "
                     "%d angles. Each highlight's camera ray is reflected off the sphere into a ray toward the lamp; "
                     "the lamp is the least-squares point nearest its rays (outliers beyond 4 robust sigma dropped); "
                     "std from the ray residuals.", plan->sample, o.radius_mm, o.c0[0], o.c0[1], o.c0[2], NA);
     if (have_joint)
-        calib_html_para(f, "Joint fit of the lamps and the sphere's path over every highlight (the camera model's "
+        model_html_para(f, "Joint fit of the lamps and the sphere's path over every highlight (the camera model's "
                         "extrinsics error moves the sphere relative to the camera; a tenth of a millimetre there is "
                         "millimetres at the lamps): centre at angle a = s0 + tilt x s0 + shift, s0 = Rz(a) (centre + "
                         "offset). Offset %.3f %.3f %.3f mm (std %.3f %.3f %.3f), shift %.3f %.3f mm (std %.3f %.3f), "
@@ -1981,19 +1982,19 @@ int calib_cmd_lamps(int argc, char **argv)
                                   x[2], sqrt(cv[0]), sqrt(cv[4]), sqrt(cv[8]), lp->fit.rms_mm, lp->fit.n_used, NA,
                                   (int)json_array_size(lp->frames_missing), te);
     }
-    calib_html_table(f, "lamp|x mm|y mm|z mm|std x / y / z mm|RMS ray distance mm|rays used|frames missing|"
+    model_html_table(f, "lamp|x mm|y mm|z mm|std x / y / z mm|RMS ray distance mm|rays used|frames missing|"
                         "error vs virtual truth mm", rows, nl);
     for (int l = 0; l < nl; l++) g_free((char *)rows[l]);
     free(rows);
     for (int l = 0; l < nl; l++)
-        if (L[l].missing->len) calib_html_para(f, "Lamp %s: no highlight in:\n%s", L[l].name, L[l].missing->str);
-    calib_html_figure(f, "lamps_triangulation.png", "Triangulation: the rays reflected off the sphere (one per "
+        if (L[l].missing->len) model_html_para(f, "Lamp %s: no highlight in:\n%s", L[l].name, L[l].missing->str);
+    model_html_figure(f, "lamps_triangulation.png", "Triangulation: the rays reflected off the sphere (one per "
                       "turntable angle; grey: left out as outliers) and the fitted lamp positions (x; + virtual "
                       "truth where known), top (x-y) and side (x-z, y-z) views, mm, rig frame; ray residuals");
-    calib_html_figure(f, "lamps_detections.png", "Highlight detections at the first angle: the per-pixel maximum "
+    model_html_figure(f, "lamps_detections.png", "Highlight detections at the first angle: the per-pixel maximum "
                       "of every lamp's frame minus dark around the sphere's predicted image (circle), the found "
                       "highlights marked");
-    if (!calib_html_end(f, path)) goto done;
+    if (!model_html_end(f, path)) goto done;
     fprintf(stderr, "refl calib lamps: wrote %s\n", path);
     rc = 0;
 done:
@@ -2025,7 +2026,7 @@ done:
     json_decref(rep);
     model_lamps_free(truth_lamps);
     rig_plan_free(plan);
-    calib_session_free(s);
+    rig_session_free(s);
     model_camera_free(cam);
     g_ptr_array_free(names, TRUE);
     g_free(truth);

@@ -1,5 +1,5 @@
 // fit/brdf_fit.c — BRDF samples (CSV, MERL), fitting the reflection models
-// of model/brdf.c to them with fit/lsq.h, and the priors entries.
+// of model/brdf.c to them with model/lsq.h, and the priors entries.
 #define _GNU_SOURCE
 #include <errno.h>
 #include <math.h>
@@ -9,7 +9,7 @@
 #include <string.h>
 
 #include "fit/fit.h"
-#include "model/internal.h"
+#include "model/vec.h"
 
 // ---------------------------------------------------------------------------
 // Samples
@@ -439,38 +439,38 @@ static void start_point(const fit_samples_t *s, model_brdf_t m, int start, doubl
 }
 
 static bool solve_once(const fit_samples_t *s, model_brdf_t m, const fit_brdf_options_t *o, double *p,
-                       const bool *fixed, fit_summary_t *sum, fit_problem_t **keep, block_t **keep_blocks)
+                       const bool *fixed, lsq_summary_t *sum, lsq_problem_t **keep, block_t **keep_blocks)
 {
     int np = model_brdf_nparams(m);
     int nb = (s->n + BLOCK - 1) / BLOCK;
     block_t *blocks = calloc((size_t)nb, sizeof *blocks);
-    fit_problem_t *pr = fit_problem_new();
-    bool ok = blocks && pr && fit_add_parameters(pr, p, np);
+    lsq_problem_t *pr = lsq_problem_new();
+    bool ok = blocks && pr && lsq_add_parameters(pr, p, np);
     for (int j = 0; ok && j < np; j++) {
         double lo, hi;
         model_brdf_param_range(m, j, &lo, &hi);
-        ok = fit_set_bounds(pr, p, j, lo, hi);
+        ok = lsq_set_bounds(pr, p, j, lo, hi);
     }
     if (ok && fixed) {
         bool any = false;
         for (int j = 0; j < np; j++) any |= fixed[j];
-        if (any) ok = fit_set_fixed(pr, p, fixed);
+        if (any) ok = lsq_set_fixed(pr, p, fixed);
     }
     double *bl[] = { p };
     for (int b = 0; ok && b < nb; b++) {
         blocks[b] = (block_t){ s, b * BLOCK, s->n - b * BLOCK < BLOCK ? s->n - b * BLOCK : BLOCK, m, np };
-        ok = fit_add_residual_folded(pr, block_res, &blocks[b], blocks[b].cnt, 1, bl);
+        ok = lsq_add_residual_folded(pr, block_res, &blocks[b], blocks[b].cnt, 1, bl);
     }
-    fit_options_t fo = fit_defaults();
+    lsq_options_t fo = lsq_defaults();
     fo.threads = o->threads;
     fo.verbose = o->verbose;
-    if (ok) ok = fit_solve(pr, &fo, sum);
+    if (ok) ok = lsq_solve(pr, &fo, sum);
     if (ok && keep) {
         *keep = pr;
         *keep_blocks = blocks;
         return true;
     }
-    fit_problem_free(pr);
+    lsq_problem_free(pr);
     free(blocks);
     return ok;
 }
@@ -502,13 +502,13 @@ bool fit_brdf(const fit_samples_t *s, model_brdf_t m, const fit_brdf_options_t *
     }
     int starts = has_rough ? (o.starts > 0 ? o.starts : 1) : 1;
     double best[MODEL_BRDF_MAX_PARAMS], best_cost = INFINITY;
-    fit_summary_t best_sum;
+    lsq_summary_t best_sum;
     memset(&best_sum, 0, sizeof best_sum);
     int iters = 0;
     for (int st = 0; st < starts; st++) {
         double p[MODEL_BRDF_MAX_PARAMS];
         start_point(s, m, st, kd0, p);
-        fit_summary_t sum;
+        lsq_summary_t sum;
         bool q = model_error_quiet_thread(true);
         bool ok = solve_once(s, m, &o, p, NULL, &sum, NULL, NULL);
         model_error_quiet_thread(q);
@@ -521,7 +521,7 @@ bool fit_brdf(const fit_samples_t *s, model_brdf_t m, const fit_brdf_options_t *
     }
     if (!isfinite(best_cost)) {
         model_error(s->source, 0, "fitting %s failed from every starting point: %s", model_brdf_name(m),
-                    fit_last_error());
+                    model_last_error());
         return false;
     }
     // Polish from the best start, keeping the problem for the covariance.
@@ -546,7 +546,7 @@ static void f0_interval(model_brdf_t m, int jk, int jF, const double *p, double 
 // Hold F0 at the middle of its interval (the mean of a uniform over it) with
 // ks = P / F0, and fit the other parameters again with it.
 static bool hold_f0(const fit_samples_t *s, model_brdf_t m, const fit_brdf_options_t *o, fit_brdf_result_t *out,
-                    fit_problem_t **pr, block_t **blocks)
+                    lsq_problem_t **pr, block_t **blocks)
 {
     int jF = model_brdf_param_index(m, "F0"), jk = model_brdf_param_index(m, "ks");
     double a, b, lo, hi, prod = out->p[jk] * out->p[jF];
@@ -560,13 +560,13 @@ static bool hold_f0(const fit_samples_t *s, model_brdf_t m, const fit_brdf_optio
     out->p[jk] = clampd(out->p[jk], lo, hi);
     for (int j = 0; j < out->nparams; j++) out->fixed[j] = false;
     out->fixed[jF] = true;
-    fit_problem_free(*pr);
+    lsq_problem_free(*pr);
     free(*blocks);
     *pr = NULL;
     *blocks = NULL;
-    fit_summary_t s2;
+    lsq_summary_t s2;
     if (!solve_once(s, m, o, out->p, out->fixed, &s2, pr, blocks)) {
-        model_error(s->source, 0, "fitting %s with F0 held failed: %s", model_brdf_name(m), fit_last_error());
+        model_error(s->source, 0, "fitting %s with F0 held failed: %s", model_brdf_name(m), model_last_error());
         return false;
     }
     s2.iterations += out->summary.iterations;
@@ -579,7 +579,7 @@ static bool hold_f0(const fit_samples_t *s, model_brdf_t m, const fit_brdf_optio
 // unmeasured, the covariance gets its interval's uniform along the line
 // ks*F0 = const: J J^T var_u with J = d(params)/dF0 = (ks: -ks/F0, F0: 1).
 static void finish(const fit_samples_t *s, model_brdf_t m, const fit_brdf_options_t *o, fit_brdf_result_t *out,
-                   fit_problem_t *pr)
+                   lsq_problem_t *pr)
 {
     int np = out->nparams;
     double sw = 0, rss = 0, rss_f = 0, Rb[256];
@@ -606,8 +606,8 @@ static void finish(const fit_samples_t *s, model_brdf_t m, const fit_brdf_option
     bool q = model_error_quiet_thread(true);
     bool anyfixed = false;
     for (int j = 0; j < np; j++) anyfixed |= out->fixed[j];
-    if (anyfixed) fit_set_fixed(pr, out->p, out->fixed);
-    bool cov_ok = fit_covariance(pr, out->p, out->cov);
+    if (anyfixed) lsq_set_fixed(pr, out->p, out->fixed);
+    bool cov_ok = lsq_covariance(pr, out->p, out->cov);
     for (int pass = 0; !cov_ok && pass < np; pass++) {
         // hold the parameter with the largest |correlation| partner: F0, then roughness
         const char *order[] = { "F0", "ks", "ns", "m", "alpha", "kd" };
@@ -618,8 +618,8 @@ static void finish(const fit_samples_t *s, model_brdf_t m, const fit_brdf_option
                 break;
             }
         }
-        fit_set_fixed(pr, out->p, out->fixed);
-        cov_ok = fit_covariance(pr, out->p, out->cov);
+        lsq_set_fixed(pr, out->p, out->fixed);
+        cov_ok = lsq_covariance(pr, out->p, out->cov);
     }
     model_error_quiet_thread(q);
     out->nfree = np;
@@ -647,7 +647,7 @@ bool fit_brdf_from(const fit_samples_t *s, model_brdf_t m, const fit_brdf_option
     fit_brdf_options_t o = opt ? *opt : fit_brdf_defaults();
     if (!begin_result(s, m, out)) return false;
     int np = out->nparams;
-    fit_problem_t *pr = NULL;
+    lsq_problem_t *pr = NULL;
     block_t *blocks = NULL;
     memcpy(out->p, start, (size_t)np * sizeof *start);
     for (int j = 0; j < np; j++) {
@@ -656,7 +656,7 @@ bool fit_brdf_from(const fit_samples_t *s, model_brdf_t m, const fit_brdf_option
         out->p[j] = clampd(out->p[j], lo, hi);
     }
     if (!solve_once(s, m, &o, out->p, NULL, &out->summary, &pr, &blocks)) {
-        model_error(s->source, 0, "fitting %s failed: %s", model_brdf_name(m), fit_last_error());
+        model_error(s->source, 0, "fitting %s failed: %s", model_brdf_name(m), model_last_error());
         return false;
     }
     // Fresnel: where the samples' v.h stays far from grazing, F = F0 + (1-F0)(1-v.h)^5
@@ -686,7 +686,7 @@ bool fit_brdf_from(const fit_samples_t *s, model_brdf_t m, const fit_brdf_option
             if (ok) finish(s, m, &o, out, pr);
         }
     }
-    fit_problem_free(pr);
+    lsq_problem_free(pr);
     free(blocks);
     return ok;
 }

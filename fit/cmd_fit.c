@@ -11,6 +11,7 @@
 #include "fit/fit.h"
 #include "fit/material.h"
 #include "model/model.h"
+#include "model/report.h"
 
 static void brdf_usage(FILE *f)
 {
@@ -123,10 +124,10 @@ static int cmd_brdf(int argc, char **argv)
     json_object_set_new(entry, "samples", src);
     json_array_append_new(mats, entry);
     json_object_set_new(top, "materials", mats);
-    json_t *prov = calib_provenance(argc + 1, argv - 1);
-    calib_provenance_input(prov, "brdf_samples", file);
+    json_t *prov = model_provenance(argc + 1, argv - 1);
+    model_provenance_input(prov, "brdf_samples", file);
     json_object_set_new(top, "provenance", prov);
-    if (calib_write_json(out, top)) {
+    if (model_write_json(out, top)) {
         printf("%s: %s, model %s (lowest BIC of %d), rms %.4g 1/sr\n", out, mat, model_brdf_name(res[best].model),
                nres, res[best].rms);
         rc = 0;

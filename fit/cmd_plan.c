@@ -14,7 +14,8 @@
 #include "fit/material.h"
 #include "fit/verify.h"
 #include "fit/verify_lab.h"
-#include "model/internal.h"
+#include "model/report.h"
+#include "model/vec.h"
 
 static void usage(FILE *f)
 {
@@ -190,7 +191,7 @@ int lightplan_cmd(int argc, char **argv)
     int rc = parse(argc, argv, &a);
     if (rc) return rc < 0 ? 0 : rc;
     int exit_code = 1;
-    json_t *prov = calib_provenance(argc, argv);
+    json_t *prov = model_provenance(argc, argv);
     model_scene_t *scene = NULL, *rot = NULL;
     model_camera_t *cam = NULL;
     model_lamps_t *lamps = NULL;
@@ -222,8 +223,8 @@ int lightplan_cmd(int argc, char **argv)
         free(dup);
     }
     if (!(scene = model_scene_load(a.scene, NULL)) || !(cam = model_camera_load(a.camera))) goto done;
-    calib_provenance_input(prov, "scene", a.scene);
-    calib_provenance_input(prov, "camera", a.camera);
+    model_provenance_input(prov, "scene", a.scene);
+    model_provenance_input(prov, "camera", a.camera);
     if (g_str_has_suffix(a.lamps, ".json")) {
         if (!a.white) {
             model_error(a.lamps, 0, "a lamps.json has positions only: give --white WHITE.json for kc*I");
@@ -232,7 +233,7 @@ int lightplan_cmd(int argc, char **argv)
         if (!(wc = fit_calib_load_files(a.camera, a.lamps, NULL, a.white))) goto done;
         lamps = wc->lamps;
         for (int i = 0; i < lamps->n && i < 16; i++) A[i] = wc->kcI_per_us[i];
-        calib_provenance_input(prov, "white", a.white);
+        model_provenance_input(prov, "white", a.white);
     } else {
         if (!(lamps = model_lamps_load(a.lamps))) goto done;
         if (!(a.kc_per_us > 0)) {
@@ -241,7 +242,7 @@ int lightplan_cmd(int argc, char **argv)
         }
         for (int i = 0; i < lamps->n && i < 16; i++) A[i] = a.kc_per_us * lamps->lamps[i].intensity;
     }
-    calib_provenance_input(prov, "lamps", a.lamps);
+    model_provenance_input(prov, "lamps", a.lamps);
     if (lamps->n > 16) {
         model_error(a.lamps, 0, "%d candidate lamps: at most 16", lamps->n);
         goto done;
@@ -253,7 +254,7 @@ int lightplan_cmd(int argc, char **argv)
     if (g_str_has_suffix(a.materials, ".json")) {
         for (int k = 0; k < a.nmat; k++) {
             if (!verify_priors_load(&pr, a.matfiles[k])) goto done;
-            calib_provenance_input(prov, "materials", a.matfiles[k]);
+            model_provenance_input(prov, "materials", a.matfiles[k]);
         }
         for (int k = 0; k < scene->nmaterials; k++) {
             const verify_prior_t *p = verify_priors_find(&pr, scene->material_names[k]);
@@ -273,21 +274,21 @@ int lightplan_cmd(int argc, char **argv)
         }
         if (!(mfile = model_materials_load(a.materials))) goto done;
         if (!model_resolve_materials(scene, mfile, mats)) goto done;
-        calib_provenance_input(prov, "materials", a.materials);
+        model_provenance_input(prov, "materials", a.materials);
     }
     lightplan_sensor_t sensor = { .offset_dn = a.offset_dn, .saturation_dn = a.saturation_dn };
     if (a.gain) {
         char *gj = g_strdup_printf("%s/gain.json", a.gain);
         // the loader wants lamps.json: a minimal one
-        calib_mkdir_p(a.out);
+        model_mkdir_p(a.out);
         char *tl = g_strdup_printf("%s/.lamps.json", a.out);
         json_t *lj = json_pack("{s:[{s:s,s:[f,f,f]}]}", "lamps", "name", "x", "position_mm", 0.0, 0.0, 1000.0);
-        calib_write_json(tl, lj);
+        model_write_json(tl, lj);
         json_decref(lj);
         gc = fit_calib_load_files(a.camera, tl, gj, NULL);
         unlink(tl);
         g_free(tl);
-        if (gc) calib_provenance_input(prov, "gain", gj);
+        if (gc) model_provenance_input(prov, "gain", gj);
         g_free(gj);
         if (!gc) goto done;
         sensor.K_dn_per_e = gc->gain_dn_per_e;
@@ -361,7 +362,7 @@ int lightplan_cmd(int argc, char **argv)
             json_object_set_new(e, "segments", segments_json(sg, ns, scene, found, meas));
             if (c < 0) {
                 char *fp = g_strdup_printf("%s/check_frame.tiff", a.out);
-                calib_mkdir_p(a.out);
+                model_mkdir_p(a.out);
                 model_meta_t *mt = model_meta_new();
                 model_meta_add(mt, "units", "DN (12-bit sensor values as float)");
                 model_meta_add(mt, "image", "the virtual rig's frame of the chosen configuration (lamps %s, %g us)", nm,
@@ -389,11 +390,11 @@ int lightplan_cmd(int argc, char **argv)
                                         "reaches the threshold; segments under 8 px are not judged; agreement = "
                                         "found == predicted detectable"));
         json_object_set_new(check, "truth", json_string(a.truth));
-        calib_provenance_input(prov, "virtual_rig_truth", a.truth);
+        model_provenance_input(prov, "virtual_rig_truth", a.truth);
         printf("check: agreement %.1f %% over %ld segments (target 95 %%)\n", 100 * overall, judged);
     }
     // outputs
-    if (!calib_mkdir_p(a.out)) goto done;
+    if (!model_mkdir_p(a.out)) goto done;
     json_t *doc = json_object();
     json_object_set_new(doc, "scene", json_string(a.scene));
     json_object_set_new(doc, "turntable_deg", json_real(a.angle_deg));
@@ -486,7 +487,7 @@ int lightplan_cmd(int argc, char **argv)
                                                  sensor.flat != NULL));
     json_object_set_new(doc, "provenance", json_incref(prov));
     char *jp = g_strdup_printf("%s/plan.json", a.out);
-    bool wok = calib_write_json(jp, doc);
+    bool wok = model_write_json(jp, doc);
     g_free(jp);
     json_decref(doc);
     char *tp = g_strdup_printf("%s/predicted.tiff", a.out);
@@ -518,7 +519,7 @@ int lightplan_cmd(int argc, char **argv)
            a.scene, names, b->exposure_us, b->feasible ? "" : " (no configuration is free of glare and saturation)",
            b->n_detectable, b->n_segments, b->detectable_length_px, b->usable_points, b->glare_pix, b->saturated_pix);
     if (!a.no_report) {
-        if (calib_python("plan_lamps_report.py", a.out, NULL) != 0) goto done;
+        if (model_run_script("plan_lamps_report.py", a.out, NULL) != 0) goto done;
         printf("report: %s/index.html\n", a.out);
     }
     exit_code = 0;

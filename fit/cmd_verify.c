@@ -22,7 +22,8 @@
 #include "calib/calib.h"
 #include "fit/material.h"
 #include "fit/verify.h"
-#include "model/internal.h"
+#include "model/report.h"
+#include "model/vec.h"
 
 #define MAXN 64
 
@@ -273,7 +274,7 @@ int verify_cmd(int argc, char **argv)
     verify_view_t *views[MAXN] = { 0 };
     memset(imgs, 0, sizeof imgs);
     verify_result_t res = { 0 };
-    json_t *prov = calib_provenance(argc, argv);
+    json_t *prov = model_provenance(argc, argv);
     double A[32] = { 0 };
     const model_lamps_t *lamps = NULL;
     model_material_t *mean_mats = NULL;
@@ -282,10 +283,10 @@ int verify_cmd(int argc, char **argv)
     float *synth = NULL, *act = NULL;
 
     if (!(scene = model_scene_load(a.scene, NULL))) goto done;
-    calib_provenance_input(prov, "scene", a.scene);
+    model_provenance_input(prov, "scene", a.scene);
     for (int k = 0; k < a.npriors; k++) {
         if (!verify_priors_load(&pr, a.priors[k])) goto done;
-        calib_provenance_input(prov, "priors", a.priors[k]);
+        model_provenance_input(prov, "priors", a.priors[k]);
     }
     pp = calloc((size_t)scene->nmaterials + 1, sizeof *pp);
     if (!pp || !verify_match_priors(scene, &pr, pp)) goto done;
@@ -316,7 +317,7 @@ int verify_cmd(int argc, char **argv)
             goto done;
         }
         lamps = ini_lamps;
-        calib_provenance_input(prov, "lamps", a.lamps);
+        model_provenance_input(prov, "lamps", a.lamps);
     } else {
         lamps = base->lamps;
     }
@@ -349,7 +350,7 @@ int verify_cmd(int argc, char **argv)
             A[i] = j >= 0 ? wc->kcI_per_us[j] : 0;
         }
         fit_calib_free(wc);
-        calib_provenance_input(prov, "white", a.white);
+        model_provenance_input(prov, "white", a.white);
     } else if (a.kc_per_us > 0) {
         for (int i = 0; i < lamps->n && i < 32; i++) A[i] = a.kc_per_us * lamps->lamps[i].intensity;
     } else if (base && base->have_white && lamps == base->lamps) {
@@ -385,7 +386,7 @@ int verify_cmd(int argc, char **argv)
                                        : g_strdup(json_string_value(json_object_get(json_array_get(base->inputs, 0), "path")));
             // lamps.json is required by the loader: a minimal one from the lamps in use
             char *tmpl = g_strdup_printf("%s/.lamps-%d.json", a.out, c);
-            calib_mkdir_p(a.out);
+            model_mkdir_p(a.out);
             json_t *lj = json_object(), *arr = json_array();
             for (int i = 0; i < lamps->n; i++) {
                 const model_lamp_t *l = &lamps->lamps[i];
@@ -393,14 +394,14 @@ int verify_cmd(int argc, char **argv)
                                                      l->position_mm.y, l->position_mm.z));
             }
             json_object_set_new(lj, "lamps", arr);
-            calib_write_json(tmpl, lj);
+            model_write_json(tmpl, lj);
             json_decref(lj);
             cm->cal = fit_calib_load_files(campath, tmpl, gj, NULL);
             unlink(tmpl);
             g_free(tmpl);
             if (cm->cal) {
-                calib_provenance_input(prov, "camera", campath);
-                if (gj) calib_provenance_input(prov, "gain", gj);
+                model_provenance_input(prov, "camera", campath);
+                if (gj) model_provenance_input(prov, "gain", gj);
             }
             g_free(campath);
         } else {
@@ -425,7 +426,7 @@ int verify_cmd(int argc, char **argv)
     if (base) {
         for (size_t k = 0; k < json_array_size(base->inputs); k++) {
             json_t *e = json_array_get(base->inputs, k);
-            calib_provenance_input(prov, json_string_value(json_object_get(e, "role")),
+            model_provenance_input(prov, json_string_value(json_object_get(e, "role")),
                                    json_string_value(json_object_get(e, "path")));
         }
     }
@@ -458,7 +459,7 @@ int verify_cmd(int argc, char **argv)
             }
             for (size_t p = 0; p < (size_t)W * H; p++) imgs_px[m][p] = pix[p];
             free(pix);
-        } else if (!(imgs_px[m] = calib_image_read(path, &W, &H))) {
+        } else if (!(imgs_px[m] = model_image_read_float(path, &W, &H))) {
             model_meta_free(meta);
             goto done;
         }
@@ -504,7 +505,7 @@ int verify_cmd(int argc, char **argv)
         }
         model_meta_free(meta);
         if (!ok) goto done;
-        if (!calib_provenance_input(prov, "image", path)) goto done;
+        if (!model_provenance_input(prov, "image", path)) goto done;
         if (im->lamps_on == 0) {
             model_error(path, 0, "no lamp was on: such an image has nothing to verify with (a dark frame?)");
             goto done;
@@ -542,7 +543,7 @@ int verify_cmd(int argc, char **argv)
     fprintf(stderr, "refl verify: fitting %d images (views %.2f s)\n", a.nimages, model_now_s() - t0);
     if (!verify_run(scene, &pr, vcs, ncams, lamps, A, imgs, a.nimages, views, &a.opt, &res)) goto done;
     // outputs
-    if (!calib_mkdir_p(a.out)) goto done;
+    if (!model_mkdir_p(a.out)) goto done;
     json_t *doc = verify_result_json(&res, scene, imgs, lamps, &a.opt);
     json_object_set_new(doc, "scene", json_string(a.scene));
     json_object_set_new(doc, "units_and_conventions",
@@ -615,7 +616,7 @@ int verify_cmd(int argc, char **argv)
     json_object_set_new(doc, "images", ja);
     json_object_set_new(doc, "provenance", json_incref(prov));
     char *jp = g_strdup_printf("%s/verify.json", a.out);
-    bool wok = calib_write_json(jp, doc);
+    bool wok = model_write_json(jp, doc);
     g_free(jp);
     json_decref(doc);
     if (!wok) goto done;
@@ -667,7 +668,7 @@ int verify_cmd(int argc, char **argv)
     printf("verdict: description %s (score %.1f, threshold %.1f)\n", res.correct ? "CORRECT" : "INCORRECT", res.score,
            a.opt.score_threshold);
     if (!a.no_report) {
-        if (calib_python("verify_report.py", a.out, NULL) != 0) {
+        if (model_run_script("verify_report.py", a.out, NULL) != 0) {
             fprintf(stderr, "refl verify: the report failed: %s (the JSON, CSV and TIFF outputs are written)\n",
                     model_last_error());
             goto done;

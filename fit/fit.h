@@ -27,7 +27,7 @@
 #include <jansson.h>
 #include <stdbool.h>
 
-#include "fit/lsq.h"
+#include "model/lsq.h"
 #include "model/model.h"
 
 #ifdef __cplusplus
@@ -106,7 +106,7 @@ typedef struct {
     bool          f0_unmeasured;                  // F0 held at the middle of [f0_lo, f0_hi], where
     double        f0_lo, f0_hi;                   // ks*F0 and the ranges put it; std[F0] = the
                                                   // uniform's, in cov along ks*F0 = const
-    fit_summary_t summary;
+    lsq_summary_t summary;
 } fit_brdf_result_t;
 
 // Fit model m to the samples. false with a message when no usable fit.

@@ -7,7 +7,7 @@
 
 #include "fit/lightplan.h"
 #include "fit/verify.h"
-#include "model/internal.h"
+#include "model/vec.h"
 
 #define MAXL 16   // candidates (2^16 subsets at most)
 

@@ -12,7 +12,8 @@
 
 #include "calib/calib.h"
 #include "fit/material.h"
-#include "model/internal.h"
+#include "model/report.h"
+#include "model/vec.h"
 #include "rig/rig.h"
 
 // ---------------------------------------------------------------------------
@@ -31,7 +32,7 @@ static char *find_in(const char *dir, const char *sub, const char *name)
 
 static bool add_input(fit_calib_t *c, const char *role, const char *path)
 {
-    return calib_inputs_add(c->inputs, role, path);
+    return model_inputs_add(c->inputs, role, path);
 }
 
 void fit_calib_free(fit_calib_t *c)
@@ -48,7 +49,7 @@ void fit_calib_free(fit_calib_t *c)
 static float *read_map(fit_calib_t *c, const char *path, const char *role)
 {
     int w, h;
-    float *m = calib_image_read(path, &w, &h);
+    float *m = model_image_read_float(path, &w, &h);
     if (!m) return NULL;
     if (w != c->W || h != c->H) {
         model_error(path, 0, "%dx%d pixels, the camera model's imager is %dx%d", w, h, c->W, c->H);
@@ -273,7 +274,7 @@ static bool obs_add(fit_obs_set_t *s, const fit_obs_t *o)
 }
 
 // The sample's scene and material from the virtual rig's truth file (session facts).
-static bool truth_sample(const calib_session_t *s, const char *sample, char **scene, char *mat, size_t matlen)
+static bool truth_sample(const rig_session_t *s, const char *sample, char **scene, char *mat, size_t matlen)
 {
     json_t *vr = s->facts ? json_object_get(s->facts, "virtual_rig") : NULL;
     const char *truth = vr ? json_string_value(json_object_get(vr, "truth")) : NULL;
@@ -325,7 +326,7 @@ bool fit_observe(const char *session_dir, const fit_calib_t *cal, const fit_obse
     fit_observe_options_t o = opt ? *opt : fit_observe_defaults();
     memset(out, 0, sizeof *out);
     bool ok = false;
-    calib_session_t *s = calib_session_open(session_dir);
+    rig_session_t *s = rig_session_open(session_dir);
     rig_plan_t *plan = NULL;
     model_scene_t *scene = NULL;
     char *scene_path = NULL;
@@ -484,13 +485,13 @@ bool fit_observe(const char *session_dir, const fit_calib_t *cal, const fit_obse
                     break;
                 }
                 int dw, dh;
-                if (!(dark = calib_session_frame(s, best, &dw, &dh))) {
+                if (!(dark = rig_session_frame(s, best, &dw, &dh))) {
                     fail = true;
                     break;
                 }
             }
             int fw, fh;
-            float *img = calib_session_frame(s, order[a], &fw, &fh);
+            float *img = rig_session_frame(s, order[a], &fw, &fh);
             if (!img || fw != cal->W || fh != cal->H) {
                 if (img) model_error(session_dir, 0, "step %d: %dx%d frame, the camera model is %dx%d", r->step, fw,
                                      fh, cal->W, cal->H);
@@ -589,7 +590,7 @@ done:
     g_free(scene_path);
     model_scene_free(scene);
     rig_plan_free(plan);
-    calib_session_free(s);
+    rig_session_free(s);
     if (!ok) fit_obs_free(out);
     return ok;
 }
@@ -641,7 +642,7 @@ bool fit_white(const fit_obs_set_t *obs, const fit_calib_t *cal, double albedo, 
     if (prov) json_object_set_new(top, "provenance", json_incref(prov));
     if (ok) {
         char *d = g_path_get_dirname(out_json);
-        ok = calib_mkdir_p(d) && calib_write_json(out_json, top);
+        ok = model_mkdir_p(d) && model_write_json(out_json, top);
         g_free(d);
     }
     json_decref(top);
@@ -751,8 +752,8 @@ static bool load_and_observe(const char *cmd, const mat_args_t *a, bool need_whi
 // calibration file read.
 static json_t *provenance(int argc, char **argv, const mat_args_t *a, const fit_calib_t *cal)
 {
-    json_t *prov = calib_provenance(argc + 1, argv - 1);
-    calib_provenance_input(prov, "session", a->session);
+    json_t *prov = model_provenance(argc + 1, argv - 1);
+    model_provenance_input(prov, "session", a->session);
     size_t i;
     json_t *in;
     json_array_foreach(cal->inputs, i, in) json_array_append(json_object_get(prov, "inputs"), in);
@@ -811,7 +812,7 @@ done:
 static bool material_report(const char *dir, const fit_obs_set_t *obs, const fit_samples_t *smp,
                             const fit_brdf_result_t *res, int nres, int best, const json_t *entry, const json_t *prov)
 {
-    if (!calib_mkdir_p(dir)) return false;
+    if (!model_mkdir_p(dir)) return false;
     char *csv = g_strdup_printf("%s/samples.csv", dir), *html = g_strdup_printf("%s/report.html", dir);
     bool ok = false;
     FILE *f = fopen(csv, "w");
@@ -838,15 +839,15 @@ static bool material_report(const char *dir, const fit_obs_set_t *obs, const fit
     size_t o = 0;
     for (int j = 0; j < res[best].nparams; j++)
         o += (size_t)snprintf(pbuf + o, sizeof pbuf - o, "%s%.6g", j ? "," : "", res[best].p[j]);
-    if (calib_python("fit_material_report.py", dir, model_brdf_name(res[best].model), pbuf, (char *)NULL) != 0)
+    if (model_run_script("fit_material_report.py", dir, model_brdf_name(res[best].model), pbuf, (char *)NULL) != 0)
         goto done;
-    FILE *h = calib_html_begin(html, "refl fit material", prov);
+    FILE *h = model_html_begin(html, "refl fit material", prov);
     if (!h) goto done;
-    calib_html_para(h, "Material %s of sample %s: %d BRDF samples (windows of %d frames lit by one lamp each). "
+    model_html_para(h, "Material %s of sample %s: %d BRDF samples (windows of %d frames lit by one lamp each). "
                     "Chosen model: %s (lowest BIC). R = f_r cos(theta_i) in 1/sr.",
                     json_string_value(json_object_get(entry, "name")), obs->sample, smp->n, obs->frames_used,
                     model_brdf_name(res[best].model));
-    calib_html_heading(h, "Parameters");
+    model_html_heading(h, "Parameters");
     json_t *ps = json_object_get(entry, "parameters");
     char **rows = calloc(json_array_size(ps) + 1, sizeof *rows);
     for (size_t j = 0; j < json_array_size(ps); j++) {
@@ -861,15 +862,15 @@ static bool material_report(const char *dir, const fit_obs_set_t *obs, const fit
                                   json_string_value(json_object_get(p, "convention")),
                                   json_object_get(p, "held") ? json_string_value(json_object_get(p, "held")) : "");
     }
-    calib_html_table(h, "parameter|unit|mean|std|std (statistical)|prior bounds|convention|note",
+    model_html_table(h, "parameter|unit|mean|std|std (statistical)|prior bounds|convention|note",
                      (const char *const *)rows, (int)json_array_size(ps));
     for (size_t j = 0; j < json_array_size(ps); j++) g_free(rows[j]);
     free(rows);
-    calib_html_heading(h, "Measured vs fitted");
-    calib_html_figure(h, "lobes.png", "R against the half-vector angle, measured (dots, coloured by incidence) "
+    model_html_heading(h, "Measured vs fitted");
+    model_html_figure(h, "lobes.png", "R against the half-vector angle, measured (dots, coloured by incidence) "
                       "and fitted (the model at the same geometry), per lamp");
-    calib_html_figure(h, "residual_maps.png", "residual R_meas - R_fit at each window, for four frames");
-    calib_html_heading(h, "Model comparison");
+    model_html_figure(h, "residual_maps.png", "residual R_meas - R_fit at each window, for four frames");
+    model_html_heading(h, "Model comparison");
     char **mr = calloc((size_t)nres + 1, sizeof *mr);
     for (int k = 0; k < nres; k++) {
         GString *g = g_string_new("");
@@ -879,11 +880,11 @@ static bool material_report(const char *dir, const fit_obs_set_t *obs, const fit
             g_string_append_printf(g, "%s%s %.4g", j ? ", " : "", model_brdf_param_name(res[k].model, j), res[k].p[j]);
         mr[k] = g_string_free(g, FALSE);
     }
-    calib_html_table(h, "model|RMS of R (1/sr)|RMS of f_r (1/sr)|AIC|BIC|parameters", (const char *const *)mr, nres);
+    model_html_table(h, "model|RMS of R (1/sr)|RMS of f_r (1/sr)|AIC|BIC|parameters", (const char *const *)mr, nres);
     for (int k = 0; k < nres; k++) g_free(mr[k]);
     free(mr);
-    calib_html_figure(h, "models.png", "residuals of the chosen model: histogram, and relative to R against the half-vector angle");
-    ok = calib_html_end(h, html);
+    model_html_figure(h, "models.png", "residuals of the chosen model: histogram, and relative to R against the half-vector angle");
+    ok = model_html_end(h, html);
 done:
     g_free(csv);
     g_free(html);
@@ -1195,9 +1196,9 @@ int fit_cmd_material(int argc, char **argv)
     json_object_set_new(top, "materials", mats);
     json_object_set_new(top, "provenance", provenance(argc, argv, &a, cal));
     char *od = g_path_get_dirname(a.out);
-    bool made = calib_mkdir_p(od);
+    bool made = model_mkdir_p(od);
     g_free(od);
-    if (made && calib_write_json(a.out, top)) {
+    if (made && model_write_json(a.out, top)) {
         printf("%s: %s, model %s (lowest BIC of %d)\n", a.out, a.name ? a.name : obs.material,
                model_brdf_name(res[best].model), nres);
         rc = 0;

@@ -2,7 +2,7 @@
 // radiometric observations of one material, the reference white's kc*I per
 // lamp, and BRDF samples for the material fit.
 //
-// The grey value model (DESIGN.md): P = Pa + kc g(x,y) sum_i V_i I_i R_i / d_i^2.
+// The grey value model (model/model.h): P = Pa + kc g(x,y) sum_i V_i I_i R_i / d_i^2.
 // An observation is a window (w x w pixels, all on one face of the material,
 // lit by the frame's single lamp) in one frame: its mean grey value minus the
 // dark level (the gain calibration's offset map, else the session's dark frame

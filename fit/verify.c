@@ -9,7 +9,7 @@
 
 #include "fit/fit.h"
 #include "fit/verify.h"
-#include "model/internal.h"
+#include "model/vec.h"
 
 #define MAX_LAMPS 32
 
@@ -711,7 +711,7 @@ bool verify_run(const model_scene_t *scene, const verify_priors_t *pr, const ver
     res_group_t *groups = malloc((size_t)(npts ? npts : 1) * sizeof *groups);
     int *gidx = malloc((size_t)(npts ? npts : 1) * sizeof *gidx);
     pdesc_t *pd = calloc((size_t)(ncams + nl + nimgs + 1 + nm * MODEL_BRDF_MAX_PARAMS), sizeof *pd);
-    fit_problem_t *prob = fit_problem_new();
+    lsq_problem_t *prob = lsq_problem_new();
     bool *mat_used = NULL;
     bool ok = false;
     if (!out->points || !out->per_image || !out->kc || !out->s || !out->Pa || !out->mats || !pt || !ptidx || !cs ||
@@ -852,9 +852,9 @@ bool verify_run(const model_scene_t *scene, const verify_priors_t *pr, const ver
         d->lo = opt->use_priors ? fmax(0.2, 1 - 5 * opt->camera_sigma) : 0;
         d->hi = opt->use_priors ? 1 + 5 * opt->camera_sigma : INFINITY;
         d->fixed = opt->fix_cameras;
-        if (!fit_add_parameters(prob, d->x, 1)) goto fit_fail;
+        if (!lsq_add_parameters(prob, d->x, 1)) goto fit_fail;
     }
-    if (!fit_add_parameters(prob, out->s, nl ? nl : 1)) goto fit_fail;
+    if (!lsq_add_parameters(prob, out->s, nl ? nl : 1)) goto fit_fail;
     for (int i = 0; i < nl; i++) {
         pdesc_t *d = &pd[npd++];
         snprintf(d->name, sizeof d->name, "lamp[%s]", lamps->lamps[i].name);
@@ -876,7 +876,7 @@ bool verify_run(const model_scene_t *scene, const verify_priors_t *pr, const ver
         d->lo = -INFINITY;
         d->hi = INFINITY;
         d->fixed = opt->fix_pa;
-        if (!fit_add_parameters(prob, d->x, 1)) goto fit_fail;
+        if (!lsq_add_parameters(prob, d->x, 1)) goto fit_fail;
     }
     {
         pdesc_t *d = &pd[npd++];
@@ -887,7 +887,7 @@ bool verify_run(const model_scene_t *scene, const verify_priors_t *pr, const ver
         d->lo = 0;
         d->hi = opt->use_priors ? 3 : INFINITY;
         d->fixed = opt->fix_rho || opt->ir_samples <= 0;
-        if (!fit_add_parameters(prob, d->x, 1)) goto fit_fail;
+        if (!lsq_add_parameters(prob, d->x, 1)) goto fit_fail;
     }
     mat_used = calloc((size_t)nm + 1, sizeof *mat_used);
     if (!mat_used) goto fit_fail;
@@ -896,7 +896,7 @@ bool verify_run(const model_scene_t *scene, const verify_priors_t *pr, const ver
     for (int k = 0; k < nm; k++) {
         const verify_prior_t *P = prior[k];
         double *x = &mp[k * MODEL_BRDF_MAX_PARAMS];
-        if (!fit_add_parameters(prob, x, P->np)) goto fit_fail;
+        if (!lsq_add_parameters(prob, x, P->np)) goto fit_fail;
         for (int j = 0; j < P->np; j++) {
             pdesc_t *d = &pd[npd++];
             snprintf(d->name, sizeof d->name, "%s.%s", P->name, model_brdf_param_name(P->model, j));
@@ -924,15 +924,15 @@ bool verify_run(const model_scene_t *scene, const verify_priors_t *pr, const ver
     for (int k = 0; k < npd; k++) {
         pdesc_t *d = &pd[k];
         if (d->fixed) continue;
-        if ((isfinite(d->lo) || isfinite(d->hi)) && !fit_set_bounds(prob, d->x, d->i, d->lo, d->hi)) goto fit_fail;
-        if (d->prior_std > 0 && !fit_add_prior(prob, d->x, d->i, d->prior_mean, d->prior_std)) goto fit_fail;
+        if ((isfinite(d->lo) || isfinite(d->hi)) && !lsq_set_bounds(prob, d->x, d->i, d->lo, d->hi)) goto fit_fail;
+        if (d->prior_std > 0 && !lsq_add_prior(prob, d->x, d->i, d->prior_mean, d->prior_std)) goto fit_fail;
     }
     {
         // masks per block
         bool fx[MAX_LAMPS];
         for (int i = 0; i < nl; i++) fx[i] = opt->fix_lamps || !opt->use_priors;
-        if (nl && !fit_set_fixed(prob, out->s, fx)) goto fit_fail;
-        if (!nl) fit_set_fixed(prob, out->s, NULL);
+        if (nl && !lsq_set_fixed(prob, out->s, fx)) goto fit_fail;
+        if (!nl) lsq_set_fixed(prob, out->s, NULL);
         for (int k = 0; k < npd; k++) {
             pdesc_t *d = &pd[k];
             if (d->x == out->s) continue;
@@ -945,7 +945,7 @@ bool verify_run(const model_scene_t *scene, const verify_priors_t *pr, const ver
                 }
             bool any = false;
             for (int q = 0; q < size; q++) any |= f[q];
-            if (any && d->i == 0 && !fit_set_fixed(prob, d->x, f)) goto fit_fail;
+            if (any && d->i == 0 && !lsq_set_fixed(prob, d->x, f)) goto fit_fail;
         }
     }
     int nused = 0, ngroups = 0, gpos = 0;
@@ -977,7 +977,7 @@ bool verify_run(const model_scene_t *scene, const verify_priors_t *pr, const ver
         int mat = pt[groups[gi].k[0]].mat;
         double *blocks[5] = { &out->kc[imgs[p->image].camera], out->s, &out->Pa[p->image],
                               &mp[mat * MODEL_BRDF_MAX_PARAMS], &out->rho };
-        if (!fit_add_residual(prob, group_fn, &groups[gi], groups[gi].n, 5, blocks, FIT_LOSS_NONE, 0))
+        if (!lsq_add_residual(prob, group_fn, &groups[gi], groups[gi].n, 5, blocks, LSQ_LOSS_NONE, 0))
             goto fit_fail;
     }
     if (nused < 10) {
@@ -985,13 +985,13 @@ bool verify_run(const model_scene_t *scene, const verify_priors_t *pr, const ver
                     "are not in view, or the images are saturated", nused, nimgs);
         goto done;
     }
-    fit_options_t fo = fit_defaults();
+    lsq_options_t fo = lsq_defaults();
     fo.threads = opt->threads;
     fo.max_iterations = opt->max_iterations > 0 ? opt->max_iterations : 100;
     fo.function_tolerance = 1e-8;
     fo.parameter_tolerance = 1e-8;
     fo.verbose = opt->verbose;
-    if (!fit_solve(prob, &fo, &out->summary)) {
+    if (!lsq_solve(prob, &fo, &out->summary)) {
         model_error(NULL, 0, "verify: the fit failed: %s (%s)", out->summary.termination, out->summary.message);
         goto done;
     }
@@ -1186,7 +1186,7 @@ done:
         out->correct = out->score <= opt->score_threshold;
         out->time_fit_s = model_now_s() - t0;
     }
-    fit_problem_free(prob);
+    lsq_problem_free(prob);
     free(prior);
     free(pt);
     free(ptidx);
@@ -1203,7 +1203,7 @@ done:
     free(mat_used);
     return ok;
 fit_fail:
-    model_error(NULL, 0, "verify: setting up the fit failed: %s", fit_last_error());
+    model_error(NULL, 0, "verify: setting up the fit failed: %s", model_last_error());
     ok = false;
     goto done;
 }
@@ -1391,7 +1391,7 @@ bool verify_check_jacobian(double *max_abs_err)
         double *blocks[5] = { &kc, s, &Pa, mp, &rho };
         int sizes[5] = { 1, nl, 1, rc.np, 1 };
         double err = 0;
-        ok = fit_check_jacobian(group_fn, &g, 1, 5, sizes, blocks, 1e-6, 1e-6, 1e-4, &err) && ok;
+        ok = lsq_check_jacobian(group_fn, &g, 1, 5, sizes, blocks, 1e-6, 1e-6, 1e-4, &err) && ok;
         if (max_abs_err && err > *max_abs_err) *max_abs_err = err;
     }
     return ok;

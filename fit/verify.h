@@ -34,7 +34,7 @@
 #include <stdbool.h>
 #include <stdint.h>
 
-#include "fit/lsq.h"
+#include "model/lsq.h"
 #include "model/model.h"
 
 #ifdef __cplusplus
@@ -209,7 +209,7 @@ typedef struct {
     int              npinned;
     double           score;
     bool             correct;
-    fit_summary_t    summary;
+    lsq_summary_t    summary;
     double           time_fit_s;
     // the fitted values, for synthetic images
     double          *kc;            // ncameras

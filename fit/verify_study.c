@@ -24,7 +24,8 @@
 #include "calib/calib.h"
 #include "fit/verify.h"
 #include "fit/verify_lab.h"
-#include "model/internal.h"
+#include "model/report.h"
+#include "model/vec.h"
 
 #define NANG 4
 #define NCONF 4
@@ -146,7 +147,7 @@ int verify_study_cmd(const char *out, const char *truth, int cases, const verify
     int rc = 1;
     pthread_mutex_init(&S.lock, NULL);
     S.cases = cases;
-    if (!calib_mkdir_p(out)) goto done;
+    if (!model_mkdir_p(out)) goto done;
     fprintf(stderr, "refl verify --study: rendering the T-stiffener at 4 angles x each lamp on the virtual rig (%s)\n",
             truth_path);
     S.lab = verify_lab_open(truth_path, "t_stiffener", angles, NANG, 6000, 0, true);
@@ -255,15 +256,15 @@ int verify_study_cmd(const char *out, const char *truth, int cases, const verify
                                     "+maps: the offset map, flat field and linearisation of the gain calibration"));
     json_object_set_new(doc, "cases_per_condition", json_integer(cases));
     json_object_set_new(doc, "score_threshold", json_real(opt->score_threshold));
-    json_t *prov = calib_provenance(argc, argv);
-    calib_provenance_input(prov, "truth", truth_path);
+    json_t *prov = model_provenance(argc, argv);
+    model_provenance_input(prov, "truth", truth_path);
     json_object_set_new(doc, "provenance", prov);
     char *jp = g_strdup_printf("%s/study.json", out);
-    ok = calib_write_json(jp, doc);
+    ok = model_write_json(jp, doc);
     g_free(jp);
     json_decref(doc);
     if (!ok) goto done;
-    if (calib_python("verify_study_report.py", out, NULL) != 0) goto done;
+    if (model_run_script("verify_study_report.py", out, NULL) != 0) goto done;
     printf("refl verify --study: %d cases x %d descriptions x %d configurations; report: %s/index.html\n", cases, nd,
            NCONF, out);
     rc = 0;

@@ -1,5 +1,5 @@
 // model/brdf.c — reflection models R = f_r * (n.l) with analytic parameter
-// derivatives (DESIGN.md, "The imaging model").
+// derivatives (the imaging model in model/model.h and the README).
 //
 // Pieces, each with its derivative:
 //   D_blinn    = (n.h)^ns                                  (0 when n.h <= 0)

@@ -20,155 +20,13 @@
 #include <time.h>
 
 #include "model/internal.h"
+#include "model/opts.h"
 
 #define UNITS_P        "P: grey value, DN"
 #define PIXEL_CONV     "mrcal: (0,0) is the centre of the top-left pixel, x to the right, y down"
 #define FRAMES_TEXT    "world = rig frame (origin at the turntable top centre, z up along the rotation axis, " \
                        "right-handed), mm; the camera model's rt_cam_ref is rt_cam_world; the scene is " \
                        "rotated by the turntable angle about world z before rendering"
-
-// ---------------------------------------------------------------------------
-// Option parsing
-
-typedef struct {
-    const char *name;      // "--camera"
-    const char *metavar;   // NULL: a flag without value
-    const char *help;
-    bool        required;
-    const char *value;     // filled by the parser ("" for a given flag)
-} opt_t;
-
-typedef struct {
-    const char *cmd;       // "render"
-    const char *synopsis;  // positional part, e.g. "SCENE"
-    opt_t      *opts;
-    int         nopts;
-    const char *positional; // the scene
-    bool        help;
-} cli_t;
-
-static void print_usage(const cli_t *c, FILE *f, bool full)
-{
-    fprintf(f, "usage: refl %s %s", c->cmd, c->synopsis);
-    for (int i = 0; i < c->nopts; i++) {
-        const opt_t *o = &c->opts[i];
-        fprintf(f, o->required ? " %s%s%s" : " [%s%s%s]", o->name, o->metavar ? " " : "",
-                o->metavar ? o->metavar : "");
-    }
-    fprintf(f, "\n");
-    if (!full) {
-        fprintf(f, "(refl %s --help for the options)\n", c->cmd);
-        return;
-    }
-    fprintf(f, "\noptions:\n");
-    for (int i = 0; i < c->nopts; i++) {
-        const opt_t *o = &c->opts[i];
-        char lhs[64];
-        snprintf(lhs, sizeof lhs, "%s%s%s", o->name, o->metavar ? " " : "", o->metavar ? o->metavar : "");
-        fprintf(f, "  %-26s %s%s\n", lhs, o->help, o->required ? " (required)" : "");
-    }
-    fprintf(f, "  %-26s %s\n", "-h, --help", "print this help");
-    fprintf(f, "\nrefl %s\n", REFL_VERSION);
-}
-
-static int usage_error(const cli_t *c, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
-static int usage_error(const cli_t *c, const char *fmt, ...)
-{
-    va_list ap;
-    va_start(ap, fmt);
-    fprintf(stderr, "refl %s: ", c->cmd);
-    vfprintf(stderr, fmt, ap);
-    fprintf(stderr, "\n");
-    va_end(ap);
-    print_usage(c, stderr, false);
-    return 2;
-}
-
-static opt_t *find_opt(cli_t *c, const char *name, size_t len)
-{
-    for (int i = 0; i < c->nopts; i++)
-        if (strlen(c->opts[i].name) == len && !strncmp(c->opts[i].name, name, len)) return &c->opts[i];
-    return NULL;
-}
-
-// Returns 0 on success, else the exit code (2) after printing the usage error.
-static int parse_cli(cli_t *c, int argc, char **argv)
-{
-    bool only_positional = false;
-    for (int i = 1; i < argc; i++) {
-        const char *a = argv[i];
-        if (!only_positional && (!strcmp(a, "--help") || !strcmp(a, "-h"))) {
-            c->help = true;
-            return 0;
-        }
-        if (!only_positional && !strcmp(a, "--")) {
-            only_positional = true;
-            continue;
-        }
-        if (!only_positional && a[0] == '-' && a[1] != 0) {
-            const char *eq = a[1] == '-' ? strchr(a, '=') : NULL;
-            size_t len = eq ? (size_t)(eq - a) : strlen(a);
-            opt_t *o = find_opt(c, a, len);
-            if (!o) return usage_error(c, "unknown option '%.*s'", (int)len, a);
-            if (o->value) return usage_error(c, "option %s given twice", o->name);
-            if (!o->metavar) {
-                if (eq) return usage_error(c, "option %s takes no value", o->name);
-                o->value = "";
-                continue;
-            }
-            if (eq) {
-                o->value = eq + 1;
-            } else {
-                if (i + 1 >= argc) return usage_error(c, "option %s needs a value (%s)", o->name, o->metavar);
-                o->value = argv[++i];
-            }
-            if (!o->value[0]) return usage_error(c, "option %s: empty value", o->name);
-            continue;
-        }
-        if (c->positional) return usage_error(c, "unexpected argument '%s' (one %s only)", a, c->synopsis);
-        c->positional = a;
-    }
-    if (!c->positional) return usage_error(c, "missing %s", c->synopsis);
-    for (int i = 0; i < c->nopts; i++)
-        if (c->opts[i].required && !c->opts[i].value)
-            return usage_error(c, "missing required option %s %s", c->opts[i].name, c->opts[i].metavar);
-    return 0;
-}
-
-static const char *optv(cli_t *c, const char *name)
-{
-    opt_t *o = find_opt(c, name, strlen(name));
-    return o ? o->value : NULL;
-}
-
-// Number options: absent -> keep *out; bad -> usage error. lo/hi inclusive
-// unless the _open flags say otherwise.
-static int opt_double(cli_t *c, const char *name, double *out, double lo, bool lo_open, double hi,
-                      const char *range_text)
-{
-    const char *s = optv(c, name);
-    if (!s) return 0;
-    double v;
-    if (!model_parse_double(s, &v))
-        return usage_error(c, "option %s: '%s' is not a number", name, s);
-    if ((lo_open ? !(v > lo) : !(v >= lo)) || !(v <= hi))
-        return usage_error(c, "option %s: %s is out of range (%s)", name, s, range_text);
-    *out = v;
-    return 0;
-}
-
-static int opt_long(cli_t *c, const char *name, long *out, long lo, long hi)
-{
-    const char *s = optv(c, name);
-    if (!s) return 0;
-    long v;
-    if (!model_parse_int(s, &v))
-        return usage_error(c, "option %s: '%s' is not an integer", name, s);
-    if (v < lo || v > hi)
-        return usage_error(c, "option %s: %s is out of range (%ld..%ld)", name, s, lo, hi);
-    *out = v;
-    return 0;
-}
 
 static bool ends_with_ci(const char *s, const char *suffix)
 {
@@ -277,63 +135,59 @@ static bool hash_inputs(input_t *in, int n)
 
 int model_cmd_render(int argc, char **argv)
 {
-    opt_t opts[] = {
-        { "--camera", "CAM.cameramodel", "camera model (mrcal); its extrinsics place it in the rig frame", true, NULL },
-        { "--lamps", "LAMPS.ini", "lamps: [lamp NAME] position_mm, intensity, radius_mm", true, NULL },
-        { "--materials", "MATS.ini", "materials: [material NAME] model and parameters", true, NULL },
-        { "-o", "OUT", "output image: .png (16-bit, P rounded and clipped to 0..65535) or .tif/.tiff (float32 P)", true, NULL },
-        { "--kc", "K", "camera parameter kc, DN per radiance unit (default 1)", false, NULL },
-        { "--offset", "PA", "offset Pa, DN (default 0)", false, NULL },
-        { "--gain-map", "G.tiff", "per-pixel relative sensitivity g(x,y) (float TIFF, camera size, mean 1)", false, NULL },
-        { "--interreflection", "MODE", "none | thesis | mc (default none)", false, NULL },
-        { "--rho", "R", "thesis interreflection: weight of the virtual sources (default 0.05)", false, NULL },
-        { "--mc-samples", "N", "mc: paths per pixel (default 16)", false, NULL },
-        { "--mc-bounces", "N", "mc: indirect bounces (default 2)", false, NULL },
-        { "--seed", "N", "mc: random seed (default 1)", false, NULL },
-        { "--sensor", "SENSOR.ini", "apply the sensor stage (noise, quantisation) after the physics", false, NULL },
-        { "--turntable-deg", "A", "turntable angle: the scene is rotated by A deg about the rig's z axis (default 0)", false, NULL },
-        { "--threads", "N", "worker threads (default: REFL_THREADS or the online CPUs)", false, NULL },
-        { "--planarity-tol-mm", "T", "max distance of a face's vertex from its plane, mm (default 0.01)", false, NULL },
-        { "--info", "INFO.tiff", "multi-page TIFF: ideal P (float32), face id (int32), lit mask per lamp (uint8)", false, NULL },
+    model_opt_t opts[] = {
+        MODEL_OPT_VALUE("--camera", "CAM.cameramodel", "camera model (mrcal); its extrinsics place it in the rig frame", true),
+        MODEL_OPT_VALUE("--lamps", "LAMPS.ini", "lamps: [lamp NAME] position_mm, intensity, radius_mm", true),
+        MODEL_OPT_VALUE("--materials", "MATS.ini", "materials: [material NAME] model and parameters", true),
+        MODEL_OPT_VALUE("-o", "OUT", "output image: .png (16-bit, P rounded and clipped to 0..65535) or .tif/.tiff (float32 P)", true),
+        MODEL_OPT_VALUE("--kc", "K", "camera parameter kc, DN per radiance unit (default 1)", false),
+        MODEL_OPT_VALUE("--offset", "PA", "offset Pa, DN (default 0)", false),
+        MODEL_OPT_VALUE("--gain-map", "G.tiff", "per-pixel relative sensitivity g(x,y) (float TIFF, camera size, mean 1)", false),
+        MODEL_OPT_VALUE("--interreflection", "MODE", "none | thesis | mc (default none)", false),
+        MODEL_OPT_VALUE("--rho", "R", "thesis interreflection: weight of the virtual sources (default 0.05)", false),
+        MODEL_OPT_VALUE("--mc-samples", "N", "mc: paths per pixel (default 16)", false),
+        MODEL_OPT_VALUE("--mc-bounces", "N", "mc: indirect bounces (default 2)", false),
+        MODEL_OPT_VALUE("--seed", "N", "mc: random seed (default 1)", false),
+        MODEL_OPT_VALUE("--sensor", "SENSOR.ini", "apply the sensor stage (noise, quantisation) after the physics", false),
+        MODEL_OPT_VALUE("--turntable-deg", "A", "turntable angle: the scene is rotated by A deg about the rig's z axis (default 0)", false),
+        MODEL_OPT_VALUE("--threads", "N", "worker threads (default: REFL_THREADS or the online CPUs)", false),
+        MODEL_OPT_VALUE("--planarity-tol-mm", "T", "max distance of a face's vertex from its plane, mm (default 0.01)", false),
+        MODEL_OPT_VALUE("--info", "INFO.tiff", "multi-page TIFF: ideal P (float32), face id (int32), lit mask per lamp (uint8)", false),
     };
-    cli_t c = { .cmd = "render", .synopsis = "SCENE", .opts = opts, .nopts = (int)(sizeof opts / sizeof opts[0]) };
-    int rc = parse_cli(&c, argc, argv);
-    if (rc) return rc;
-    if (c.help) {
-        print_usage(&c, stdout, true);
-        printf("\nP = Pa + kc * g(x,y) * [sum_i V_i I_i R_i / d_i^2 + interreflection], in DN.\n"
-               "Pixel convention: %s.\n", PIXEL_CONV);
-        return 0;
-    }
+    model_cli_t c = { .cmd = "render", .synopsis = "SCENE", .opts = opts, .nopts = MODEL_NOPTS(opts), .min_positional = 1, .max_positional = 1 };
+    c.epilog = "P = Pa + kc * g(x,y) * [sum_i V_i I_i R_i / d_i^2 + interreflection], in DN.\n"
+               "Pixel convention: " PIXEL_CONV ".";
+    int rc = model_cli_parse(&c, argc, argv);
+    if (rc != MODEL_CLI_OK) return rc;
 
     model_shading_t sh = model_shading_default();
     double planarity = MODEL_SCENE_OPTIONS_DEFAULT.planarity_tol_mm, turntable_deg = 0;
     long mc_samples = sh.mc_samples, mc_bounces = sh.mc_bounces, seed = (long)sh.seed, threads = 0;
-    if ((rc = opt_double(&c, "--kc", &sh.kc, 0, false, INFINITY, "kc >= 0")) ||
-        (rc = opt_double(&c, "--offset", &sh.Pa, -INFINITY, false, INFINITY, "finite")) ||
-        (rc = opt_double(&c, "--rho", &sh.rho, 0, false, 1, "0 <= rho <= 1")) ||
-        (rc = opt_long(&c, "--mc-samples", &mc_samples, 1, 1000000)) ||
-        (rc = opt_long(&c, "--mc-bounces", &mc_bounces, 0, 64)) ||
-        (rc = opt_long(&c, "--seed", &seed, 0, LONG_MAX)) ||
-        (rc = opt_long(&c, "--threads", &threads, 1, 256)) ||
-        (rc = opt_double(&c, "--turntable-deg", &turntable_deg, -1e6, false, 1e6, "|A| <= 1e6 deg")) ||
-        (rc = opt_double(&c, "--planarity-tol-mm", &planarity, 0, false, INFINITY, "T >= 0")))
+    if ((rc = model_cli_double(&c, "--kc", &sh.kc, 0, false, INFINITY, "kc >= 0")) ||
+        (rc = model_cli_double(&c, "--offset", &sh.Pa, -INFINITY, false, INFINITY, "finite")) ||
+        (rc = model_cli_double(&c, "--rho", &sh.rho, 0, false, 1, "0 <= rho <= 1")) ||
+        (rc = model_cli_long(&c, "--mc-samples", &mc_samples, 1, 1000000)) ||
+        (rc = model_cli_long(&c, "--mc-bounces", &mc_bounces, 0, 64)) ||
+        (rc = model_cli_long(&c, "--seed", &seed, 0, LONG_MAX)) ||
+        (rc = model_cli_long(&c, "--threads", &threads, 1, 256)) ||
+        (rc = model_cli_double(&c, "--turntable-deg", &turntable_deg, -1e6, false, 1e6, "|A| <= 1e6 deg")) ||
+        (rc = model_cli_double(&c, "--planarity-tol-mm", &planarity, 0, false, INFINITY, "T >= 0")))
         return rc;
-    const char *ir = optv(&c, "--interreflection");
+    const char *ir = model_cli_value(&c, "--interreflection");
     if (ir) {
         int m = model_interreflection_from_name(ir);
-        if (m < 0) return usage_error(&c, "option --interreflection: unknown value '%s' (use none, thesis or mc)", ir);
+        if (m < 0) return model_cli_error(&c, "option --interreflection: unknown value '%s' (use none, thesis or mc)", ir);
         sh.interreflection = (model_interreflection_t)m;
     }
     sh.mc_samples = (int)mc_samples;
     sh.mc_bounces = (int)mc_bounces;
     sh.seed = (uint64_t)seed;
-    const char *out_path = optv(&c, "-o"), *info_path = optv(&c, "--info");
+    const char *out_path = model_cli_value(&c, "-o"), *info_path = model_cli_value(&c, "--info");
     bool out_png = ends_with_ci(out_path, ".png");
     if (!out_png && !is_tiff_name(out_path))
-        return usage_error(&c, "option -o: '%s' must end in .png, .tif or .tiff", out_path);
+        return model_cli_error(&c, "option -o: '%s' must end in .png, .tif or .tiff", out_path);
     if (info_path && !is_tiff_name(info_path))
-        return usage_error(&c, "option --info: '%s' must end in .tif or .tiff", info_path);
+        return model_cli_error(&c, "option --info: '%s' must end in .tif or .tiff", info_path);
     if (threads > 0) {
         char buf[24];
         snprintf(buf, sizeof buf, "%ld", threads);
@@ -351,15 +205,15 @@ int model_cmd_render(int argc, char **argv)
     char *cmdline = model_command_line(argc, argv), *conv = NULL, *optstr = NULL;
     model_meta_t *meta = model_meta_new();
     model_sensor_t sensor;
-    const char *sensor_path = optv(&c, "--sensor"), *gain_path = optv(&c, "--gain-map");
+    const char *sensor_path = model_cli_value(&c, "--sensor"), *gain_path = model_cli_value(&c, "--gain-map");
     input_t inputs[] = {
-        { "scene", c.positional, "" }, { "camera", optv(&c, "--camera"), "" },
-        { "lamps", optv(&c, "--lamps"), "" }, { "materials", optv(&c, "--materials"), "" },
+        { "scene", c.positional[0], "" }, { "camera", model_cli_value(&c, "--camera"), "" },
+        { "lamps", model_cli_value(&c, "--lamps"), "" }, { "materials", model_cli_value(&c, "--materials"), "" },
         { "gain_map", gain_path, "" }, { "sensor", sensor_path, "" },
     };
     const int ninputs = (int)(sizeof inputs / sizeof inputs[0]);
 
-    if (!inputs_load(&in, c.positional, optv(&c, "--camera"), optv(&c, "--lamps"), optv(&c, "--materials"),
+    if (!inputs_load(&in, c.positional[0], model_cli_value(&c, "--camera"), model_cli_value(&c, "--lamps"), model_cli_value(&c, "--materials"),
                      planarity, turntable_deg))
         goto done;
     if (sensor_path && !model_sensor_load(sensor_path, &sensor)) goto done;
@@ -370,7 +224,7 @@ int model_cmd_render(int argc, char **argv)
         if (!model_tiff_read_float(gain_path, &gw, &gh, &gain)) goto done;
         if (gw != W || gh != H) {
             model_error(gain_path, 0, "gain map is %d x %d pixels but the camera %s is %d x %d: "
-                        "use the gain map calibrated for this camera", gw, gh, optv(&c, "--camera"), W, H);
+                        "use the gain map calibrated for this camera", gw, gh, model_cli_value(&c, "--camera"), W, H);
             goto done;
         }
         for (size_t i = 0; i < npix; i++)
@@ -416,7 +270,7 @@ int model_cmd_render(int argc, char **argv)
         sh.kc, sh.Pa, gain_path ? gain_path : "none", model_interreflection_name(sh.interreflection), sh.rho,
         sh.thesis_samples, sh.thesis_cone_deg, sh.mc_samples, sh.mc_bounces, sh.finite_lamps ? "yes" : "no",
         (unsigned long long)sh.seed, sensor_path ? sensor_path : "none", turntable_deg,
-        threads > 0 ? optv(&c, "--threads") : "default", planarity);
+        threads > 0 ? model_cli_value(&c, "--threads") : "default", planarity);
     model_meta_add(meta, "Software", "refl %s (refl render)", REFL_VERSION);
     model_meta_add(meta, "units", "%s", UNITS_P);
     model_meta_add(meta, "image", "%s", sensor_path
@@ -494,7 +348,7 @@ int model_cmd_render(int argc, char **argv)
         if (!ok) goto done;
     }
 
-    printf("refl render: %s -> %s\n", c.positional, out_path);
+    printf("refl render: %s -> %s\n", c.positional[0], out_path);
     printf("  image %d x %d px, %d faces, %d lamps, interreflection %s%s\n", W, H, in.scene->nfaces, in.lamps->n,
            model_interreflection_name(sh.interreflection), sensor_path ? ", sensor stage applied" : "");
     printf("  time %.2f s (render %.2f s)\n", model_now_s() - t_start, t_render);
@@ -543,38 +397,34 @@ static void lamp_letters(const model_lamps_t *lamps, uint32_t bits, char *out, s
 
 int model_cmd_edges(int argc, char **argv)
 {
-    opt_t opts[] = {
-        { "--camera", "CAM.cameramodel", "camera model (mrcal); its extrinsics place it in the rig frame", true, NULL },
-        { "--lamps", "LAMPS.ini", "lamps: [lamp NAME] position_mm, intensity, radius_mm", true, NULL },
-        { "--materials", "MATS.ini", "materials: [material NAME] model and parameters", true, NULL },
-        { "--kc", "K", "camera parameter kc, DN per radiance unit (default 1)", false, NULL },
-        { "--offset", "PA", "offset Pa, DN (default 0)", false, NULL },
-        { "--feature-angle-deg", "A", "skip edges between faces whose normals differ by A deg or less (default 1)", false, NULL },
-        { "--turntable-deg", "A", "turntable angle: the scene is rotated by A deg about the rig's z axis (default 0)", false, NULL },
-        { "--threads", "N", "worker threads (default: REFL_THREADS or the online CPUs)", false, NULL },
-        { "--planarity-tol-mm", "T", "max distance of a face's vertex from its plane, mm (default 0.01)", false, NULL },
-        { "--json", "OUT.json", "write the edges, units and provenance as JSON", false, NULL },
+    model_opt_t opts[] = {
+        MODEL_OPT_VALUE("--camera", "CAM.cameramodel", "camera model (mrcal); its extrinsics place it in the rig frame", true),
+        MODEL_OPT_VALUE("--lamps", "LAMPS.ini", "lamps: [lamp NAME] position_mm, intensity, radius_mm", true),
+        MODEL_OPT_VALUE("--materials", "MATS.ini", "materials: [material NAME] model and parameters", true),
+        MODEL_OPT_VALUE("--kc", "K", "camera parameter kc, DN per radiance unit (default 1)", false),
+        MODEL_OPT_VALUE("--offset", "PA", "offset Pa, DN (default 0)", false),
+        MODEL_OPT_VALUE("--feature-angle-deg", "A", "skip edges between faces whose normals differ by A deg or less (default 1)", false),
+        MODEL_OPT_VALUE("--turntable-deg", "A", "turntable angle: the scene is rotated by A deg about the rig's z axis (default 0)", false),
+        MODEL_OPT_VALUE("--threads", "N", "worker threads (default: REFL_THREADS or the online CPUs)", false),
+        MODEL_OPT_VALUE("--planarity-tol-mm", "T", "max distance of a face's vertex from its plane, mm (default 0.01)", false),
+        MODEL_OPT_VALUE("--json", "OUT.json", "write the edges, units and provenance as JSON", false),
     };
-    cli_t c = { .cmd = "edges", .synopsis = "SCENE", .opts = opts, .nopts = (int)(sizeof opts / sizeof opts[0]) };
-    int rc = parse_cli(&c, argc, argv);
-    if (rc) return rc;
-    if (c.help) {
-        print_usage(&c, stdout, true);
-        printf("\nOne line per visible image segment of a scene edge: its 3D end points (mm, rig frame), faces,\n"
-               "image end points (px, %s),\nlength, lamps lighting each side (one character per lamp in file order: "
-               "1 lit, . not), the\npredicted grey value 2 px to each side (DN; direct term only) and the contrast "
-               "P0 - P1.\nSide 0 lies to the right of q0 -> q1 in the displayed image (y down).\n", PIXEL_CONV);
-        return 0;
-    }
+    model_cli_t c = { .cmd = "edges", .synopsis = "SCENE", .opts = opts, .nopts = MODEL_NOPTS(opts), .min_positional = 1, .max_positional = 1 };
+    c.epilog = "One line per visible image segment of a scene edge: its 3D end points (mm, rig frame), faces,\n"
+               "image end points (px, " PIXEL_CONV "),\nlength, lamps lighting each side (one character per lamp in "
+               "file order: 1 lit, . not), the\npredicted grey value 2 px to each side (DN; direct term only) and the "
+               "contrast P0 - P1.\nSide 0 lies to the right of q0 -> q1 in the displayed image (y down).";
+    int rc = model_cli_parse(&c, argc, argv);
+    if (rc != MODEL_CLI_OK) return rc;
     model_shading_t sh = model_shading_default();
     double planarity = MODEL_SCENE_OPTIONS_DEFAULT.planarity_tol_mm, turntable_deg = 0, feature_deg = 1;
     long threads = 0;
-    if ((rc = opt_double(&c, "--kc", &sh.kc, 0, false, INFINITY, "kc >= 0")) ||
-        (rc = opt_double(&c, "--offset", &sh.Pa, -INFINITY, false, INFINITY, "finite")) ||
-        (rc = opt_double(&c, "--feature-angle-deg", &feature_deg, 0, false, 179.999, "0 <= A < 180")) ||
-        (rc = opt_double(&c, "--turntable-deg", &turntable_deg, -1e6, false, 1e6, "|A| <= 1e6 deg")) ||
-        (rc = opt_long(&c, "--threads", &threads, 1, 256)) ||
-        (rc = opt_double(&c, "--planarity-tol-mm", &planarity, 0, false, INFINITY, "T >= 0")))
+    if ((rc = model_cli_double(&c, "--kc", &sh.kc, 0, false, INFINITY, "kc >= 0")) ||
+        (rc = model_cli_double(&c, "--offset", &sh.Pa, -INFINITY, false, INFINITY, "finite")) ||
+        (rc = model_cli_double(&c, "--feature-angle-deg", &feature_deg, 0, false, 179.999, "0 <= A < 180")) ||
+        (rc = model_cli_double(&c, "--turntable-deg", &turntable_deg, -1e6, false, 1e6, "|A| <= 1e6 deg")) ||
+        (rc = model_cli_long(&c, "--threads", &threads, 1, 256)) ||
+        (rc = model_cli_double(&c, "--planarity-tol-mm", &planarity, 0, false, INFINITY, "T >= 0")))
         return rc;
     if (threads > 0) {
         char buf[24];
@@ -582,7 +432,7 @@ int model_cmd_edges(int argc, char **argv)
         setenv("REFL_THREADS", buf, 1);
         sh.nthreads = (int)threads;
     }
-    const char *json_path = optv(&c, "--json");
+    const char *json_path = model_cli_value(&c, "--json");
 
     rc = 1;
     inputs_t in = { 0 };
@@ -590,11 +440,11 @@ int model_cmd_edges(int argc, char **argv)
     json_t *root = NULL;
     char *cmdline = model_command_line(argc, argv), *conv = NULL;
     input_t inputs[] = {
-        { "scene", c.positional, "" }, { "camera", optv(&c, "--camera"), "" },
-        { "lamps", optv(&c, "--lamps"), "" }, { "materials", optv(&c, "--materials"), "" },
+        { "scene", c.positional[0], "" }, { "camera", model_cli_value(&c, "--camera"), "" },
+        { "lamps", model_cli_value(&c, "--lamps"), "" }, { "materials", model_cli_value(&c, "--materials"), "" },
     };
     const int ninputs = (int)(sizeof inputs / sizeof inputs[0]);
-    if (!inputs_load(&in, c.positional, optv(&c, "--camera"), optv(&c, "--lamps"), optv(&c, "--materials"),
+    if (!inputs_load(&in, c.positional[0], model_cli_value(&c, "--camera"), model_cli_value(&c, "--lamps"), model_cli_value(&c, "--materials"),
                      planarity, turntable_deg))
         goto done;
     if (!hash_inputs(inputs, ninputs)) goto done;
@@ -605,7 +455,7 @@ int model_cmd_edges(int argc, char **argv)
 
     const model_vec3_t *V = in.scene->vertices;
     int nseg = 0, nvis = 0;
-    printf("refl edges: %s, camera %s, %d lamps (", c.positional, optv(&c, "--camera"), in.lamps->n);
+    printf("refl edges: %s, camera %s, %d lamps (", c.positional[0], model_cli_value(&c, "--camera"), in.lamps->n);
     for (int i = 0; i < in.lamps->n; i++) printf("%s%s", i ? " " : "", in.lamps->lamps[i].name);
     printf(")\n");
     printf("%4s %-38s %-9s %-29s %7s %-9s %8s %8s %8s\n", "edge", "3D end points (mm, rig frame)", "faces",
@@ -706,33 +556,29 @@ done:
 
 int model_cmd_workpiece(int argc, char **argv)
 {
-    opt_t opts[] = {
-        { "--kind", "T|I|none", "stiffener: T (web and flange), I (flat bar) or none (plate only); default T", false, NULL },
-        { "--shift-mm", "DX,DY", "shift the stiffener by DX, DY mm (default 0,0)", false, NULL },
-        { "--rotate-deg", "A", "rotate the stiffener by A deg about z through its centre (default 0)", false, NULL },
-        { "--height-scale", "S", "scale the stiffener's height above the plate by S (default 1)", false, NULL },
-        { "--plate-material", "NAME", "material of the plate (default plywood)", false, NULL },
-        { "--stiffener-material", "NAME", "material of the stiffener (default painted_steel)", false, NULL },
+    model_opt_t opts[] = {
+        MODEL_OPT_VALUE("--kind", "T|I|none", "stiffener: T (web and flange), I (flat bar) or none (plate only); default T", false),
+        MODEL_OPT_VALUE("--shift-mm", "DX,DY", "shift the stiffener by DX, DY mm (default 0,0)", false),
+        MODEL_OPT_VALUE("--rotate-deg", "A", "rotate the stiffener by A deg about z through its centre (default 0)", false),
+        MODEL_OPT_VALUE("--height-scale", "S", "scale the stiffener's height above the plate by S (default 1)", false),
+        MODEL_OPT_VALUE("--plate-material", "NAME", "material of the plate (default plywood)", false),
+        MODEL_OPT_VALUE("--stiffener-material", "NAME", "material of the stiffener (default painted_steel)", false),
     };
-    cli_t c = { .cmd = "workpiece", .synopsis = "OUT.d3d", .opts = opts, .nopts = (int)(sizeof opts / sizeof opts[0]) };
-    int rc = parse_cli(&c, argc, argv);
-    if (rc) return rc;
-    if (c.help) {
-        print_usage(&c, stdout, true);
-        printf("\nWrites the reference workpiece of thesis ch. 6 as a D3D scene: a 400 x 300 x 10 mm plate with\n"
-               "a stiffener 88 mm high and 260 mm long along y (T: 8 mm web under a 60 x 8 mm flange). The\n"
-               "defaults give examples/t_stiffener.d3d; the options make the wrong descriptions the\n"
-               "verification is tested with (I-stiffener, none, shifted, rotated, wrong height).\n");
-        return 0;
-    }
+    model_cli_t c = { .cmd = "workpiece", .synopsis = "OUT.d3d", .opts = opts, .nopts = MODEL_NOPTS(opts), .min_positional = 1, .max_positional = 1 };
+    c.about = "Writes the reference workpiece of thesis ch. 6 as a D3D scene: a 400 x 300 x 10 mm plate with\n"
+              "a stiffener 88 mm high and 260 mm long along y (T: 8 mm web under a 60 x 8 mm flange). The\n"
+              "defaults give examples/t_stiffener.d3d; the options make the wrong descriptions the\n"
+              "verification is tested with (I-stiffener, none, shifted, rotated, wrong height).";
+    int rc = model_cli_parse(&c, argc, argv);
+    if (rc != MODEL_CLI_OK) return rc;
     model_stiffener_t p = model_stiffener_default();
-    const char *k = optv(&c, "--kind");
+    const char *k = model_cli_value(&c, "--kind");
     if (k) {
         int kind = model_stiffener_kind_from_name(k);
-        if (kind < 0) return usage_error(&c, "option --kind: '%s' is not T, I or none", k);
+        if (kind < 0) return model_cli_error(&c, "option --kind: '%s' is not T, I or none", k);
         p.kind = (model_stiffener_kind_t)kind;
     }
-    const char *sh = optv(&c, "--shift-mm");
+    const char *sh = model_cli_value(&c, "--shift-mm");
     if (sh) {
         char *comma = strchr(sh, ',');
         char a[64] = "", b[64] = "";
@@ -742,35 +588,35 @@ int model_cmd_workpiece(int argc, char **argv)
         }
         if (!comma || !model_parse_double(a, &p.shift_mm[0]) || !model_parse_double(b, &p.shift_mm[1]) ||
             fabs(p.shift_mm[0]) > 1000 || fabs(p.shift_mm[1]) > 1000)
-            return usage_error(&c, "option --shift-mm: '%s' is not DX,DY in mm (each within +-1000)", sh);
+            return model_cli_error(&c, "option --shift-mm: '%s' is not DX,DY in mm (each within +-1000)", sh);
     }
-    if ((rc = opt_double(&c, "--rotate-deg", &p.rotate_deg, -360, false, 360, "-360..360")) ||
-        (rc = opt_double(&c, "--height-scale", &p.height_scale, 0, true, 10, "0 < S <= 10")))
+    if ((rc = model_cli_double(&c, "--rotate-deg", &p.rotate_deg, -360, false, 360, "-360..360")) ||
+        (rc = model_cli_double(&c, "--height-scale", &p.height_scale, 0, true, 10, "0 < S <= 10")))
         return rc;
-    if (optv(&c, "--plate-material")) p.plate_material = optv(&c, "--plate-material");
-    if (optv(&c, "--stiffener-material")) p.stiffener_material = optv(&c, "--stiffener-material");
+    if (model_cli_value(&c, "--plate-material")) p.plate_material = model_cli_value(&c, "--plate-material");
+    if (model_cli_value(&c, "--stiffener-material")) p.stiffener_material = model_cli_value(&c, "--stiffener-material");
     char *text = model_stiffener_d3d(&p);
     if (!text) return 1;
     // check that it loads (planarity, outlines) before writing it
-    model_scene_t *sc = model_scene_parse_d3d(text, strlen(text), c.positional, NULL);
+    model_scene_t *sc = model_scene_parse_d3d(text, strlen(text), c.positional[0], NULL);
     if (!sc) {
         free(text);
         return 1;
     }
     model_scene_free(sc);
     char tmp[4096];
-    snprintf(tmp, sizeof tmp, "%s.tmp", c.positional);
+    snprintf(tmp, sizeof tmp, "%s.tmp", c.positional[0]);
     FILE *f = fopen(tmp, "w");
     bool ok = f && fputs(text, f) >= 0;
     if (f && fclose(f) != 0) ok = false;
-    if (ok && rename(tmp, c.positional) != 0) ok = false;
+    if (ok && rename(tmp, c.positional[0]) != 0) ok = false;
     if (!ok) {
-        fprintf(stderr, "refl workpiece: cannot write %s: %s\n", c.positional, strerror(errno));
+        fprintf(stderr, "refl workpiece: cannot write %s: %s\n", c.positional[0], strerror(errno));
         unlink(tmp);
         free(text);
         return 1;
     }
     free(text);
-    printf("%s: %s-stiffener workpiece\n", c.positional, model_stiffener_kind_name(p.kind));
+    printf("%s: %s-stiffener workpiece\n", c.positional[0], model_stiffener_kind_name(p.kind));
     return 0;
 }

@@ -570,3 +570,36 @@ done:
     free(out);
     return ok;
 }
+
+float *model_image_read_float(const char *path, int *width, int *height)
+{
+    FILE *f = fopen(path, "rb");
+    if (!f) {
+        model_error(path, 0, "cannot open: %s", strerror(errno));
+        return NULL;
+    }
+    unsigned char sig[4] = { 0 };
+    size_t got = fread(sig, 1, 4, f);
+    fclose(f);
+    if (got == 4 && sig[0] == 0x89 && sig[1] == 'P' && sig[2] == 'N' && sig[3] == 'G') {
+        uint16_t *pix = NULL;
+        if (!model_png_read(path, width, height, &pix)) return NULL;
+        size_t n = (size_t)*width * *height;
+        float *out = malloc(n * sizeof *out);
+        if (!out) {
+            free(pix);
+            model_error(path, 0, "out of memory");
+            return NULL;
+        }
+        for (size_t i = 0; i < n; i++) out[i] = pix[i];
+        free(pix);
+        return out;
+    }
+    if (got == 4 && ((sig[0] == 'I' && sig[1] == 'I') || (sig[0] == 'M' && sig[1] == 'M'))) {
+        float *out = NULL;
+        if (!model_tiff_read_float(path, width, height, &out)) return NULL;
+        return out;
+    }
+    model_error(path, 0, "neither a PNG nor a TIFF image (first bytes)");
+    return NULL;
+}

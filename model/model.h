@@ -38,6 +38,10 @@ typedef struct { double x, y, z; } model_vec3_t;
 // on, and is kept as this thread's last error either way.
 void model_error(const char *where_file, int where_line, const char *fmt, ...)
     __attribute__((format(printf, 3, 4)));
+// The same, but only kept (never printed): for code whose caller adds context
+// and reports the message itself (the least-squares solver, model/lsq.h).
+void model_error_set(const char *where_file, int where_line, const char *fmt, ...)
+    __attribute__((format(printf, 3, 4)));
 const char *model_last_error(void);
 void model_error_clear(void);
 // Quiet mode (for tests): errors are kept, not printed. Returns the old value.
@@ -592,6 +596,8 @@ bool model_tiff_write_info(const char *path, int width, int height, const float 
                            const int32_t *face, const uint8_t *lit, int nlamps,
                            const char *const *lamp_names, const char *const *meta);
 bool model_tiff_read_float(const char *path, int *width, int *height, float **pix);
+// A 16-bit PNG or a float TIFF (told apart by content) as float. NULL on error.
+float *model_image_read_float(const char *path, int *width, int *height);
 
 // ---------------------------------------------------------------------------
 // Edge query (model/edges.c; thesis 1.6, PREMIO)

@@ -18,21 +18,34 @@ static _Thread_local char last_error[2048];
 static _Thread_local bool quiet_thread;   // this thread's errors are kept, not printed
 static atomic_bool quiet_mode;
 
-void model_error(const char *where_file, int where_line, const char *fmt, ...)
+static void error_keep(const char *where_file, int where_line, const char *fmt, va_list ap)
 {
     char msg[1536];
-    va_list ap;
-    va_start(ap, fmt);
     vsnprintf(msg, sizeof msg, fmt, ap);
-    va_end(ap);
     if (where_file && where_line > 0)
         snprintf(last_error, sizeof last_error, "%s:%d: %s", where_file, where_line, msg);
     else if (where_file)
         snprintf(last_error, sizeof last_error, "%s: %s", where_file, msg);
     else
         snprintf(last_error, sizeof last_error, "%s", msg);
+}
+
+void model_error(const char *where_file, int where_line, const char *fmt, ...)
+{
+    va_list ap;
+    va_start(ap, fmt);
+    error_keep(where_file, where_line, fmt, ap);
+    va_end(ap);
     if (!atomic_load(&quiet_mode) && !quiet_thread)
         fprintf(stderr, "%s\n", last_error);
+}
+
+void model_error_set(const char *where_file, int where_line, const char *fmt, ...)
+{
+    va_list ap;
+    va_start(ap, fmt);
+    error_keep(where_file, where_line, fmt, ap);
+    va_end(ap);
 }
 
 const char *model_last_error(void) { return last_error; }

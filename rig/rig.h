@@ -17,6 +17,8 @@
 #include <stdbool.h>
 #include <stdint.h>
 
+#include <jansson.h>
+
 #include "model/model.h"
 
 #ifdef __cplusplus
@@ -556,6 +558,25 @@ int  rig_journal_event(rig_journal_t *j, int step, const char *kind, const char 
     __attribute__((format(printf, 4, 5)));
 int  rig_journal_set_state(rig_journal_t *j, const char *state);   // running paused stopped fault complete
 int  rig_journal_state(rig_journal_t *j, char *out, size_t size);
+
+// Reading a finished (or paused) session for the analyses (rig/session.c).
+// A session's frames (in step order) and its facts, for the analyses.
+typedef struct {
+    char            *dir;
+    rig_frame_row_t *rows;
+    int              n;
+    char             plan_sha256[65], rig_sha256[65];
+    char            *plan_text;        // the stored plan
+    json_t          *facts;            // session facts (camera, virtual rig, ...); may be NULL
+} rig_session_t;
+
+// NULL on error (model_last_error names the directory).
+rig_session_t *rig_session_open(const char *dir);
+void             rig_session_free(rig_session_t *s);
+// Frame i as float DN (its pixel format's values); checks the file's sha256
+// against the journal first. NULL on error (names the file). Caller frees.
+float           *rig_session_frame(const rig_session_t *s, int i, int *width, int *height);
+
 
 // Run (or continue) a session. Exit codes of refl capture: 0 complete, 1 error
 // or fault (stopped), 3 paused (SIGINT or camera not answering: resume later).

@@ -17,7 +17,7 @@ static const model_vec3_t N = { 0, 0, 1 };
 
 // ---- known answers -----------------------------------------------------------
 
-// Values computed independently (mpmath, 30 digits) from the formulas in DESIGN.md
+// Values computed independently (mpmath, 30 digits) from the formulas in model/model.h
 // at two geometries: n = z, l and v given as (theta, phi) in degrees.
 TEST(brdf_known_values)
 {

@@ -21,7 +21,7 @@
 #include <stdlib.h>
 
 #include "calib/lamps.h"
-#include "fit/lsq.h"
+#include "model/lsq.h"
 #include "model/model.h"
 #include "tests/test.h"
 
@@ -217,11 +217,11 @@ TEST(calib_lamps_bundle_synthetic)
         double *blocks[2] = { X, g };
         const int sizes[2] = { 3, 7 };
         double err = 0;
-        CHECK_MSG(fit_check_jacobian(calib_lamps_bundle_residual, &cx, 3, 2, sizes, blocks, 1e-5, 1e-8, 1e-4, &err),
-                  "%s (largest error %.3g)", fit_last_error(), err);
+        CHECK_MSG(lsq_check_jacobian(calib_lamps_bundle_residual, &cx, 3, 2, sizes, blocks, 1e-5, 1e-8, 1e-4, &err),
+                  "%s (largest error %.3g)", model_last_error(), err);
         for (int k = 0; k < 9; k++) cx.W[k] = k % 4 == 0;   // unweighted: the reflected ray's angle
-        CHECK_MSG(fit_check_jacobian(calib_lamps_bundle_residual, &cx, 3, 2, sizes, blocks, 1e-5, 1e-8, 1e-4, &err),
-                  "%s (largest error %.3g)", fit_last_error(), err);
+        CHECK_MSG(lsq_check_jacobian(calib_lamps_bundle_residual, &cx, 3, 2, sizes, blocks, 1e-5, 1e-8, 1e-4, &err),
+                  "%s (largest error %.3g)", model_last_error(), err);
     }
 
     // joint fit from the lamps' rough positions

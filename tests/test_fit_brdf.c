@@ -136,8 +136,8 @@ TEST(fit_brdf_jacobians_match_central_differences)
         double *b[] = { p };
         int sizes[] = { np };
         double err;
-        bool ok = fit_check_jacobian(jac_res, &J, 16, 1, sizes, b, 1e-6, 1e-7, 1e-5, &err);
-        CHECK_MSG(ok, "%s: %s", model_brdf_name((model_brdf_t)m), fit_last_error());
+        bool ok = lsq_check_jacobian(jac_res, &J, 16, 1, sizes, b, 1e-6, 1e-7, 1e-5, &err);
+        CHECK_MSG(ok, "%s: %s", model_brdf_name((model_brdf_t)m), model_last_error());
     }
 }
 

@@ -1,4 +1,4 @@
-// tests/test_lsq.c — fit/lsq.h (Ceres behind a C header) on problems with
+// tests/test_lsq.c — model/lsq.h (Ceres behind a C header) on problems with
 // known answers: a straight line (exact solution and its textbook
 // covariance), an exponential decay, bounds, fixed parameters, Gaussian
 // priors (the precision-weighted mean), a robust loss against an outlier,
@@ -7,7 +7,7 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "fit/lsq.h"
+#include "model/lsq.h"
 #include "model/internal.h"
 #include "tests/test.h"
 
@@ -54,12 +54,12 @@ TEST(lsq_line_exact_and_covariance)
     }
     line_t L = { x, y, N, sigma };
     double ab[2] = { 0, 0 };
-    fit_problem_t *p = fit_problem_new();
-    CHECK(fit_add_parameters(p, ab, 2));
+    lsq_problem_t *p = lsq_problem_new();
+    CHECK(lsq_add_parameters(p, ab, 2));
     double *blocks[] = { ab };
-    CHECK(fit_add_residual(p, line_res, &L, N, 1, blocks, FIT_LOSS_NONE, 0));
-    fit_summary_t s;
-    CHECK(fit_solve(p, NULL, &s));
+    CHECK(lsq_add_residual(p, line_res, &L, N, 1, blocks, LSQ_LOSS_NONE, 0));
+    lsq_summary_t s;
+    CHECK(lsq_solve(p, NULL, &s));
     CHECK(s.converged);
     CHECK(s.nresiduals == N && s.nparameters == 2 && s.nfree == 2);
     CHECK(s.final_cost < s.initial_cost);
@@ -76,13 +76,13 @@ TEST(lsq_line_exact_and_covariance)
     CHECK_NEAR(ab[0], a, 1e-7);   // sigma_a ~ 0.01: far below the noise
     CHECK_NEAR(ab[1], b, 1e-7);
     double cov[4];
-    CHECK(fit_covariance(p, ab, cov));
+    CHECK(lsq_covariance(p, ab, cov));
     // sigma^2 (X^T X)^-1
     CHECK_REL(cov[0], sigma * sigma * N / det, 1e-6);
     CHECK_REL(cov[3], sigma * sigma * Sxx / det, 1e-6);
     CHECK_REL(cov[1], -sigma * sigma * Sx / det, 1e-6);
     CHECK_REL(cov[1], cov[2], 1e-12);
-    fit_problem_free(p);
+    lsq_problem_free(p);
 }
 
 // ---- y = A exp(-k t) -------------------------------------------------------
@@ -117,17 +117,17 @@ TEST(lsq_exponential_recovers_truth)
     }
     decay_t D = { t, y, N };
     double Ak[2] = { 1, 0.1 };
-    fit_problem_t *p = fit_problem_new();
-    CHECK(fit_add_parameters(p, Ak, 2));
+    lsq_problem_t *p = lsq_problem_new();
+    CHECK(lsq_add_parameters(p, Ak, 2));
     double *blocks[] = { Ak };
-    CHECK(fit_add_residual(p, decay_res, &D, N, 1, blocks, FIT_LOSS_NONE, 0));
-    fit_summary_t s;
-    CHECK(fit_solve(p, NULL, &s));
+    CHECK(lsq_add_residual(p, decay_res, &D, N, 1, blocks, LSQ_LOSS_NONE, 0));
+    lsq_summary_t s;
+    CHECK(lsq_solve(p, NULL, &s));
     CHECK_NEAR(Ak[0], 3.0, 1e-8);
     CHECK_NEAR(Ak[1], 0.7, 1e-8);
     CHECK(s.iterations > 1);
     CHECK(s.final_cost < 1e-15);
-    fit_problem_free(p);
+    lsq_problem_free(p);
 }
 
 TEST(lsq_jacobian_checker)
@@ -139,7 +139,7 @@ TEST(lsq_jacobian_checker)
     double *blocks[] = { Ak };
     int sizes[] = { 2 };
     double err = -1;
-    CHECK(fit_check_jacobian(decay_res, &D, N, 1, sizes, blocks, 1e-6, 1e-7, 1e-6, &err));
+    CHECK(lsq_check_jacobian(decay_res, &D, N, 1, sizes, blocks, 1e-6, 1e-7, 1e-6, &err));
     CHECK(err >= 0 && err < 1e-7);
     CHECK_NEAR(Ak[0], 2, 0);   // restored
     // a wrong Jacobian is caught and named
@@ -147,9 +147,9 @@ TEST(lsq_jacobian_checker)
     line_t L = { x, yy, 3, 0.5 };
     double ab[2] = { 1, 1 };
     double *lb[] = { ab };
-    CHECK(fit_check_jacobian(line_res, &L, 3, 1, sizes, lb, 1e-6, 1e-7, 1e-6, NULL));
-    CHECK(!fit_check_jacobian(bad_line_res, &L, 3, 1, sizes, lb, 1e-6, 1e-7, 1e-6, &err));
-    CHECK_CONTAINS(fit_last_error(), "d r[0] / d block 0[0]");
+    CHECK(lsq_check_jacobian(line_res, &L, 3, 1, sizes, lb, 1e-6, 1e-7, 1e-6, NULL));
+    CHECK(!lsq_check_jacobian(bad_line_res, &L, 3, 1, sizes, lb, 1e-6, 1e-7, 1e-6, &err));
+    CHECK_CONTAINS(model_last_error(), "d r[0] / d block 0[0]");
     CHECK(err > 0.1);
 }
 
@@ -175,34 +175,34 @@ TEST(lsq_bounds_and_masks)
 {
     target3_t q = { { 3, -1, 5 } };
     double x[3] = { 0, 0, 0 };
-    fit_problem_t *p = fit_problem_new();
-    CHECK(fit_add_parameters(p, x, 3));
-    CHECK(fit_set_bounds(p, x, 0, -10, 2));       // the optimum 3 is beyond: stops at 2
+    lsq_problem_t *p = lsq_problem_new();
+    CHECK(lsq_add_parameters(p, x, 3));
+    CHECK(lsq_set_bounds(p, x, 0, -10, 2));       // the optimum 3 is beyond: stops at 2
     bool fixed[3] = { false, false, true };        // x[2] stays at 0
-    CHECK(fit_set_fixed(p, x, fixed));
+    CHECK(lsq_set_fixed(p, x, fixed));
     double *b[] = { x };
-    CHECK(fit_add_residual(p, quad_res, &q, 3, 1, b, FIT_LOSS_NONE, 0));
-    fit_summary_t s;
-    CHECK(fit_solve(p, NULL, &s));
+    CHECK(lsq_add_residual(p, quad_res, &q, 3, 1, b, LSQ_LOSS_NONE, 0));
+    lsq_summary_t s;
+    CHECK(lsq_solve(p, NULL, &s));
     CHECK_NEAR(x[0], 2, 1e-9);
     CHECK_NEAR(x[1], -1, 1e-7);   // not stalled by the active bound (1e-4 without the active-set pass)
     CHECK_NEAR(x[2], 0, 0);
     CHECK(s.nfree == 2);
     double cov[9];
-    CHECK(fit_covariance(p, x, cov));
+    CHECK(lsq_covariance(p, x, cov));
     CHECK_NEAR(cov[4], 1, 1e-9);    // d r / d x1 = 1, sigma 1
     CHECK_NEAR(cov[8], 0, 0);       // fixed: no variance
     // errors: bounds that exclude the start, unknown blocks, bad sizes
     double other[1] = { 0 };
-    CHECK(!fit_set_bounds(p, x, 1, 0, 1));
-    CHECK_CONTAINS(fit_last_error(), "outside");
-    CHECK(!fit_set_bounds(p, other, 0, 0, 1));
-    CHECK_CONTAINS(fit_last_error(), "was not added");
-    CHECK(!fit_add_parameters(p, x, 3));
-    CHECK_CONTAINS(fit_last_error(), "twice");
-    CHECK(!fit_add_prior(p, x, 0, 1, 0));
-    CHECK_CONTAINS(fit_last_error(), "sigma");
-    fit_problem_free(p);
+    CHECK(!lsq_set_bounds(p, x, 1, 0, 1));
+    CHECK_CONTAINS(model_last_error(), "outside");
+    CHECK(!lsq_set_bounds(p, other, 0, 0, 1));
+    CHECK_CONTAINS(model_last_error(), "was not added");
+    CHECK(!lsq_add_parameters(p, x, 3));
+    CHECK_CONTAINS(model_last_error(), "twice");
+    CHECK(!lsq_add_prior(p, x, 0, 1, 0));
+    CHECK_CONTAINS(model_last_error(), "sigma");
+    lsq_problem_free(p);
 }
 
 // ---- priors: data x ~ N(m1, s1) and a prior N(m2, s2) -> precision-weighted --
@@ -223,19 +223,19 @@ TEST(lsq_gaussian_prior)
 {
     one_t data = { 4.0, 0.5 };
     double x[1] = { 0 };
-    fit_problem_t *p = fit_problem_new();
-    CHECK(fit_add_parameters(p, x, 1));
+    lsq_problem_t *p = lsq_problem_new();
+    CHECK(lsq_add_parameters(p, x, 1));
     double *b[] = { x };
-    CHECK(fit_add_residual(p, one_res, &data, 1, 1, b, FIT_LOSS_NONE, 0));
-    CHECK(fit_add_prior(p, x, 0, 1.0, 1.0));
-    fit_summary_t s;
-    CHECK(fit_solve(p, NULL, &s));
+    CHECK(lsq_add_residual(p, one_res, &data, 1, 1, b, LSQ_LOSS_NONE, 0));
+    CHECK(lsq_add_prior(p, x, 0, 1.0, 1.0));
+    lsq_summary_t s;
+    CHECK(lsq_solve(p, NULL, &s));
     double w1 = 1 / 0.25, w2 = 1.0;
     CHECK_NEAR(x[0], (w1 * 4.0 + w2 * 1.0) / (w1 + w2), 1e-7);
     double cov;
-    CHECK(fit_covariance(p, x, &cov));
+    CHECK(lsq_covariance(p, x, &cov));
     CHECK_REL(cov, 1 / (w1 + w2), 1e-9);
-    fit_problem_free(p);
+    lsq_problem_free(p);
 }
 
 // ---- robust loss: one gross outlier among 20 points of a constant ----------
@@ -256,20 +256,20 @@ static bool const_res(void *ctx, const double *const *p, double *r, double **J)
 }
 
 // Each point its own residual block, so the loss acts per point.
-static double fit_constant(const double *v, int n, fit_loss_t loss)
+static double fit_constant(const double *v, int n, lsq_loss_t loss)
 {
     double c[1] = { 0 };
-    fit_problem_t *p = fit_problem_new();
-    fit_add_parameters(p, c, 1);
+    lsq_problem_t *p = lsq_problem_new();
+    lsq_add_parameters(p, c, 1);
     double *b[] = { c };
     const_t *pts = calloc((size_t)n, sizeof *pts);
     for (int i = 0; i < n; i++) {
         pts[i] = (const_t){ v + i, 1 };
-        fit_add_residual(p, const_res, &pts[i], 1, 1, b, loss, 0.1);
+        lsq_add_residual(p, const_res, &pts[i], 1, 1, b, loss, 0.1);
     }
-    fit_summary_t s;
-    fit_solve(p, NULL, &s);
-    fit_problem_free(p);
+    lsq_summary_t s;
+    lsq_solve(p, NULL, &s);
+    lsq_problem_free(p);
     free(pts);
     return c[0];
 }
@@ -279,9 +279,9 @@ TEST(lsq_robust_loss_resists_outlier)
     double v[20];
     for (int i = 0; i < 20; i++) v[i] = 1.0 + 0.01 * ((i % 5) - 2);
     v[7] = 100;
-    double plain = fit_constant(v, 20, FIT_LOSS_NONE);
-    double huber = fit_constant(v, 20, FIT_LOSS_HUBER);
-    double cauchy = fit_constant(v, 20, FIT_LOSS_CAUCHY);
+    double plain = fit_constant(v, 20, LSQ_LOSS_NONE);
+    double huber = fit_constant(v, 20, LSQ_LOSS_HUBER);
+    double cauchy = fit_constant(v, 20, LSQ_LOSS_CAUCHY);
     CHECK(plain > 5);                      // the mean: dragged to ~6
     CHECK_NEAR(huber, 1.0, 0.02);
     CHECK_NEAR(cauchy, 1.0, 0.01);
@@ -306,23 +306,23 @@ static bool sum_res(void *ctx, const double *const *p, double *r, double **J)
 TEST(lsq_rank_deficient_covariance_fails_clearly)
 {
     double ab[2] = { 0.3, 0.2 };
-    fit_problem_t *p = fit_problem_new();
-    CHECK(fit_add_parameters(p, ab, 2));
+    lsq_problem_t *p = lsq_problem_new();
+    CHECK(lsq_add_parameters(p, ab, 2));
     double *b[] = { ab };
-    CHECK(fit_add_residual(p, sum_res, NULL, 4, 1, b, FIT_LOSS_NONE, 0));
-    fit_summary_t s;
-    CHECK(fit_solve(p, NULL, &s));
+    CHECK(lsq_add_residual(p, sum_res, NULL, 4, 1, b, LSQ_LOSS_NONE, 0));
+    lsq_summary_t s;
+    CHECK(lsq_solve(p, NULL, &s));
     CHECK_NEAR(ab[0] + ab[1], 2, 1e-8);
     double cov[4];
-    CHECK(!fit_covariance(p, ab, cov));
-    CHECK_CONTAINS(fit_last_error(), "rank deficient");
+    CHECK(!lsq_covariance(p, ab, cov));
+    CHECK_CONTAINS(model_last_error(), "rank deficient");
     // a prior on one of them makes it well posed
-    CHECK(fit_add_prior(p, ab, 0, 1.0, 0.1));
-    CHECK(fit_solve(p, NULL, &s));
-    CHECK(fit_covariance(p, ab, cov));
+    CHECK(lsq_add_prior(p, ab, 0, 1.0, 0.1));
+    CHECK(lsq_solve(p, NULL, &s));
+    CHECK(lsq_covariance(p, ab, cov));
     CHECK_NEAR(ab[0], 1.0, 1e-6);
     CHECK_NEAR(ab[1], 1.0, 1e-6);
-    fit_problem_free(p);
+    lsq_problem_free(p);
 }
 
 // ---- a failing callback far from the data is survived -----------------------
@@ -339,14 +339,14 @@ static bool sqrt_res(void *ctx, const double *const *p, double *r, double **J)
 TEST(lsq_callback_failure_shrinks_step)
 {
     double x[1] = { 0.01 };
-    fit_problem_t *p = fit_problem_new();
-    CHECK(fit_add_parameters(p, x, 1));
+    lsq_problem_t *p = lsq_problem_new();
+    CHECK(lsq_add_parameters(p, x, 1));
     double *b[] = { x };
-    CHECK(fit_add_residual(p, sqrt_res, NULL, 1, 1, b, FIT_LOSS_NONE, 0));
-    fit_summary_t s;
-    CHECK(fit_solve(p, NULL, &s));
+    CHECK(lsq_add_residual(p, sqrt_res, NULL, 1, 1, b, LSQ_LOSS_NONE, 0));
+    lsq_summary_t s;
+    CHECK(lsq_solve(p, NULL, &s));
     CHECK_NEAR(x[0], 2.25, 1e-8);
-    fit_problem_free(p);
+    lsq_problem_free(p);
 }
 
 // ---- folded residual blocks and the dense covariance ------------------------
@@ -398,24 +398,24 @@ static void two_data(two_data_t *D)
 }
 
 // Build and solve the problem, folded or plain; options: a prior on c, k held.
-static fit_problem_t *two_problem(two_data_t *D, double *Ak, double *c, bool folded, bool hold_k, bool prior,
-                                  fit_summary_t *s)
+static lsq_problem_t *two_problem(two_data_t *D, double *Ak, double *c, bool folded, bool hold_k, bool prior,
+                                  lsq_summary_t *s)
 {
     Ak[0] = 1;
     Ak[1] = 0.3;
     c[0] = 0;
     if (hold_k) Ak[1] = 0.8;
-    fit_problem_t *p = fit_problem_new();
-    if (!fit_add_parameters(p, Ak, 2) || !fit_add_parameters(p, c, 1)) return p;
-    fit_set_bounds(p, Ak, 1, 0.01, 10);
-    if (hold_k) fit_set_fixed(p, Ak, (bool[]){ false, true });
+    lsq_problem_t *p = lsq_problem_new();
+    if (!lsq_add_parameters(p, Ak, 2) || !lsq_add_parameters(p, c, 1)) return p;
+    lsq_set_bounds(p, Ak, 1, 0.01, 10);
+    if (hold_k) lsq_set_fixed(p, Ak, (bool[]){ false, true });
     double *b[] = { Ak, c };
     for (int k = 0; k < D->nblk; k++) {
-        if (folded) fit_add_residual_folded(p, two_res, &D->blk[k], D->blk[k].n, 2, b);
-        else fit_add_residual(p, two_res, &D->blk[k], D->blk[k].n, 2, b, FIT_LOSS_NONE, 0);
+        if (folded) lsq_add_residual_folded(p, two_res, &D->blk[k], D->blk[k].n, 2, b);
+        else lsq_add_residual(p, two_res, &D->blk[k], D->blk[k].n, 2, b, LSQ_LOSS_NONE, 0);
     }
-    if (prior) fit_add_prior(p, c, 0, 0.25, 0.01);
-    fit_solve(p, NULL, s);
+    if (prior) lsq_add_prior(p, c, 0, 0.25, 0.01);
+    lsq_solve(p, NULL, s);
     return p;
 }
 
@@ -426,9 +426,9 @@ TEST(lsq_folded_blocks_match_plain)
     for (int variant = 0; variant < 3; variant++) {
         bool hold_k = variant == 1, prior = variant == 2;
         double Ak0[2], c0[1], Ak1[2], c1[1];
-        fit_summary_t s0, s1;
-        fit_problem_t *p0 = two_problem(&D, Ak0, c0, false, hold_k, prior, &s0);
-        fit_problem_t *p1 = two_problem(&D, Ak1, c1, true, hold_k, prior, &s1);
+        lsq_summary_t s0, s1;
+        lsq_problem_t *p0 = two_problem(&D, Ak0, c0, false, hold_k, prior, &s0);
+        lsq_problem_t *p1 = two_problem(&D, Ak1, c1, true, hold_k, prior, &s1);
         CHECK(s0.usable && s1.usable);
         CHECK(s1.nresiduals == s0.nresiduals);   // the block's residuals, not the folded rows
         // the same steps: the same solution and cost to rounding
@@ -445,57 +445,57 @@ TEST(lsq_folded_blocks_match_plain)
         }
         // and the same covariance (J^T J is the block's)
         double cA0[4], cA1[4], cx0[2], cx1[2], cc0, cc1;
-        CHECK(fit_covariance(p0, Ak0, cA0) && fit_covariance(p1, Ak1, cA1));
-        CHECK(fit_covariance_cross(p0, Ak0, c0, cx0) && fit_covariance_cross(p1, Ak1, c1, cx1));
-        CHECK(fit_covariance(p0, c0, &cc0) && fit_covariance(p1, c1, &cc1));
+        CHECK(lsq_covariance(p0, Ak0, cA0) && lsq_covariance(p1, Ak1, cA1));
+        CHECK(lsq_covariance_cross(p0, Ak0, c0, cx0) && lsq_covariance_cross(p1, Ak1, c1, cx1));
+        CHECK(lsq_covariance(p0, c0, &cc0) && lsq_covariance(p1, c1, &cc1));
         for (int i = 0; i < 4; i++) CHECK_NEAR(cA1[i], cA0[i], 1e-8 * fabs(cA0[0]) + 1e-300);
         for (int i = 0; i < 2; i++) CHECK_NEAR(cx1[i], cx0[i], 1e-8 * sqrt(fabs(cA0[0] * cc0)));
         CHECK_REL(cc1, cc0, 1e-8);
         if (hold_k) CHECK(cA1[3] == 0 && cA1[1] == 0);   // the held parameter has no variance
         if (prior) CHECK(cc1 < 0.01 * 0.01);             // the prior tightens c
-        fit_problem_free(p0);
-        fit_problem_free(p1);
+        lsq_problem_free(p0);
+        lsq_problem_free(p1);
     }
     // errors name the call
     double x[1] = { 0 };
-    fit_problem_t *p = fit_problem_new();
+    lsq_problem_t *p = lsq_problem_new();
     double *b[] = { x };
-    CHECK(!fit_add_residual_folded(p, two_res, &D.blk[0], 10, 1, b));
-    CHECK_CONTAINS(fit_last_error(), "fit_add_residual_folded");
-    fit_problem_free(p);
+    CHECK(!lsq_add_residual_folded(p, two_res, &D.blk[0], 10, 1, b));
+    CHECK_CONTAINS(model_last_error(), "lsq_add_residual_folded");
+    lsq_problem_free(p);
 }
 
 TEST(lsq_covariance_equals_ceres_dense_svd)
 {
-    // fit_covariance folds J into R by chunks of rows; ceres::Covariance
+    // lsq_covariance folds J into R by chunks of rows; ceres::Covariance
     // (DENSE_SVD) takes the SVD of the whole J. Masks, priors, a robust loss,
     // cross blocks and a constant block must all agree.
     static two_data_t D;
     two_data(&D);
     for (int variant = 0; variant < 4; variant++) {
         double Ak[2] = { 1, 0.3 }, c[1] = { 0 }, z[2] = { 1, 2 };
-        fit_problem_t *p = fit_problem_new();
-        CHECK(fit_add_parameters(p, Ak, 2) && fit_add_parameters(p, c, 1) && fit_add_parameters(p, z, 2));
-        CHECK(fit_set_fixed(p, z, NULL));   // constant: no covariance
-        if (variant == 1) CHECK(fit_set_fixed(p, Ak, (bool[]){ true, false }));
+        lsq_problem_t *p = lsq_problem_new();
+        CHECK(lsq_add_parameters(p, Ak, 2) && lsq_add_parameters(p, c, 1) && lsq_add_parameters(p, z, 2));
+        CHECK(lsq_set_fixed(p, z, NULL));   // constant: no covariance
+        if (variant == 1) CHECK(lsq_set_fixed(p, Ak, (bool[]){ true, false }));
         double *b[] = { Ak, c };
         for (int k = 0; k < D.nblk; k++)
-            CHECK(fit_add_residual(p, two_res, &D.blk[k], D.blk[k].n, 2, b, variant == 3 ? FIT_LOSS_CAUCHY : FIT_LOSS_NONE,
+            CHECK(lsq_add_residual(p, two_res, &D.blk[k], D.blk[k].n, 2, b, variant == 3 ? LSQ_LOSS_CAUCHY : LSQ_LOSS_NONE,
                                    1.5));
-        if (variant == 2) CHECK(fit_add_prior(p, c, 0, 0.25, 0.01));
-        fit_summary_t s;
-        CHECK(fit_solve(p, NULL, &s));
+        if (variant == 2) CHECK(lsq_add_prior(p, c, 0, 0.25, 0.01));
+        lsq_summary_t s;
+        CHECK(lsq_solve(p, NULL, &s));
         double *blk[] = { Ak, c, z };
         int n[] = { 2, 1, 2 };
         for (int a = 0; a < 3; a++)
             for (int bb = 0; bb < 3; bb++) {
                 double mine[4], ref[4];
-                CHECK(fit_covariance_cross(p, blk[a], blk[bb], mine));
-                CHECK(fit_covariance_reference(p, blk[a], blk[bb], ref));
+                CHECK(lsq_covariance_cross(p, blk[a], blk[bb], mine));
+                CHECK(lsq_covariance_reference(p, blk[a], blk[bb], ref));
                 for (int i = 0; i < n[a] * n[bb]; i++) CHECK_NEAR(mine[i], ref[i], 1e-7 * fabs(ref[i]) + 1e-16);
                 if (a == 2 || bb == 2)
                     for (int i = 0; i < n[a] * n[bb]; i++) CHECK(mine[i] == 0);
             }
-        fit_problem_free(p);
+        lsq_problem_free(p);
     }
 }

@@ -1,4 +1,6 @@
-// rig/main.c — bin/refl: the rig controller's command dispatcher.
+// fit/main.c — bin/refl: the command dispatcher, above every layer (fit is the
+// top floor, so the dispatcher lives in its folder: it includes every layer and
+// none includes it).
 #include <stdio.h>
 #include <errno.h>
 #include <string.h>

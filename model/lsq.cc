@@ -1,8 +1,9 @@
-// fit/lsq.cc — fit/lsq.h on Ceres Solver (2.x): C callbacks become
+// model/lsq.cc — model/lsq.h on Ceres Solver (2.x): C callbacks become
 // ceres::CostFunction objects, masks become SubsetManifolds, priors are
 // one-residual blocks, the covariance is ceres::Covariance's (computed
 // densely here up to 1000 parameters).
-#include "fit/lsq.h"
+#include "model/lsq.h"
+#include "model/model.h"
 
 #include <ceres/ceres.h>
 #include <glog/logging.h>
@@ -21,21 +22,21 @@
 
 namespace {
 
-thread_local char last_error[1024] = "";
-
 bool fail(const char *fmt, ...) __attribute__((format(printf, 1, 2)));
 bool fail(const char *fmt, ...)
 {
     va_list ap;
     va_start(ap, fmt);
-    vsnprintf(last_error, sizeof last_error, fmt, ap);
+    char msg[1024];
+    vsnprintf(msg, sizeof msg, fmt, ap);
+    model_error_set(nullptr, 0, "%s", msg);
     va_end(ap);
     return false;
 }
 
 class CallbackCost : public ceres::CostFunction {
 public:
-    CallbackCost(fit_residual_fn fn, void *ctx, int nres, const std::vector<int> &sizes) : fn_(fn), ctx_(ctx)
+    CallbackCost(lsq_residual_fn fn, void *ctx, int nres, const std::vector<int> &sizes) : fn_(fn), ctx_(ctx)
     {
         set_num_residuals(nres);
         for (int s : sizes) mutable_parameter_block_sizes()->push_back(s);
@@ -46,7 +47,7 @@ public:
     }
 
 private:
-    fit_residual_fn fn_;
+    lsq_residual_fn fn_;
     void *ctx_;
 };
 
@@ -59,7 +60,7 @@ private:
 // evaluation) it returns [0 ... 0; |r|], the same cost.
 class FoldedCost : public ceres::CostFunction {
 public:
-    FoldedCost(fit_residual_fn fn, void *ctx, int m, const std::vector<int> &sizes)
+    FoldedCost(lsq_residual_fn fn, void *ctx, int m, const std::vector<int> &sizes)
         : fn_(fn), ctx_(ctx), m_(m), sizes_(sizes)
     {
         n_ = 0;
@@ -119,7 +120,7 @@ public:
     }
 
 private:
-    fit_residual_fn fn_;
+    lsq_residual_fn fn_;
     void *ctx_;
     int m_, n_;
     std::vector<int> sizes_;
@@ -150,7 +151,7 @@ private:
 }  // namespace
 
 // Ceres logs through glog: keep it quiet (errors reach the caller through
-// fit_last_error; fit_options_t.verbose shows the iterations).
+// model_last_error; lsq_options_t.verbose shows the iterations).
 static void quiet_logging(void)
 {
     static std::once_flag once;
@@ -161,7 +162,7 @@ static void quiet_logging(void)
     });
 }
 
-struct fit_problem {
+struct lsq_problem {
     ceres::Problem problem;
     std::map<double *, int> sizes;          // registered blocks
     std::map<double *, std::vector<bool>> fixed;
@@ -170,56 +171,55 @@ struct fit_problem {
 
 extern "C" {
 
-const char *fit_last_error(void) { return last_error; }
 
-fit_problem_t *fit_problem_new(void)
+lsq_problem_t *lsq_problem_new(void)
 {
     quiet_logging();
     try {
-        return new fit_problem;
+        return new lsq_problem;
     } catch (...) {
         fail("out of memory");
         return nullptr;
     }
 }
 
-void fit_problem_free(fit_problem_t *p) { delete p; }
+void lsq_problem_free(lsq_problem_t *p) { delete p; }
 
-static bool known(fit_problem_t *p, double *x, const char *what)
+static bool known(lsq_problem_t *p, double *x, const char *what)
 {
     if (!p || !x) return fail("%s: NULL problem or parameter block", what);
-    if (!p->sizes.count(x)) return fail("%s: the parameter block %p was not added (fit_add_parameters)", what, (void *)x);
+    if (!p->sizes.count(x)) return fail("%s: the parameter block %p was not added (lsq_add_parameters)", what, (void *)x);
     return true;
 }
 
-bool fit_add_parameters(fit_problem_t *p, double *x, int n)
+bool lsq_add_parameters(lsq_problem_t *p, double *x, int n)
 {
-    if (!p || !x || n < 1) return fail("fit_add_parameters: NULL block or size %d < 1", n);
-    if (p->sizes.count(x)) return fail("fit_add_parameters: block %p added twice", (void *)x);
+    if (!p || !x || n < 1) return fail("lsq_add_parameters: NULL block or size %d < 1", n);
+    if (p->sizes.count(x)) return fail("lsq_add_parameters: block %p added twice", (void *)x);
     for (int i = 0; i < n; i++)
-        if (!std::isfinite(x[i])) return fail("fit_add_parameters: starting value %d of the block is %g", i, x[i]);
+        if (!std::isfinite(x[i])) return fail("lsq_add_parameters: starting value %d of the block is %g", i, x[i]);
     p->problem.AddParameterBlock(x, n);
     p->sizes[x] = n;
     p->fixed[x] = std::vector<bool>(n, false);
     return true;
 }
 
-bool fit_set_bounds(fit_problem_t *p, double *x, int i, double lo, double hi)
+bool lsq_set_bounds(lsq_problem_t *p, double *x, int i, double lo, double hi)
 {
-    if (!known(p, x, "fit_set_bounds")) return false;
+    if (!known(p, x, "lsq_set_bounds")) return false;
     int n = p->sizes[x];
-    if (i < 0 || i >= n) return fail("fit_set_bounds: parameter %d of a block of %d", i, n);
-    if (std::isnan(lo) || std::isnan(hi) || !(lo <= hi)) return fail("fit_set_bounds: bounds [%g, %g]", lo, hi);
+    if (i < 0 || i >= n) return fail("lsq_set_bounds: parameter %d of a block of %d", i, n);
+    if (std::isnan(lo) || std::isnan(hi) || !(lo <= hi)) return fail("lsq_set_bounds: bounds [%g, %g]", lo, hi);
     if (x[i] < lo || x[i] > hi)
-        return fail("fit_set_bounds: starting value %g of parameter %d is outside [%g, %g]", x[i], i, lo, hi);
+        return fail("lsq_set_bounds: starting value %g of parameter %d is outside [%g, %g]", x[i], i, lo, hi);
     if (std::isfinite(lo)) p->problem.SetParameterLowerBound(x, i, lo);
     if (std::isfinite(hi)) p->problem.SetParameterUpperBound(x, i, hi);
     return true;
 }
 
-bool fit_set_fixed(fit_problem_t *p, double *x, const bool *fixed)
+bool lsq_set_fixed(lsq_problem_t *p, double *x, const bool *fixed)
 {
-    if (!known(p, x, "fit_set_fixed")) return false;
+    if (!known(p, x, "lsq_set_fixed")) return false;
     int n = p->sizes[x];
     std::vector<int> idx;
     for (int i = 0; i < n; i++) {
@@ -237,7 +237,7 @@ bool fit_set_fixed(fit_problem_t *p, double *x, const bool *fixed)
 }
 
 // The checks of a residual block's arguments; its blocks and their sizes.
-static bool residual_args(fit_problem_t *p, fit_residual_fn fn, int nres, int nblocks, double *const *blocks,
+static bool residual_args(lsq_problem_t *p, lsq_residual_fn fn, int nres, int nblocks, double *const *blocks,
                           const char *what, std::vector<int> &sizes, std::vector<double *> &bl)
 {
     if (!p || !fn || nres < 1 || nblocks < 1 || !blocks)
@@ -250,54 +250,54 @@ static bool residual_args(fit_problem_t *p, fit_residual_fn fn, int nres, int nb
     return true;
 }
 
-bool fit_add_residual(fit_problem_t *p, fit_residual_fn fn, void *ctx, int nres, int nblocks, double *const *blocks,
-                      fit_loss_t loss, double scale)
+bool lsq_add_residual(lsq_problem_t *p, lsq_residual_fn fn, void *ctx, int nres, int nblocks, double *const *blocks,
+                      lsq_loss_t loss, double scale)
 {
     std::vector<int> sizes;
     std::vector<double *> bl;
-    if (!residual_args(p, fn, nres, nblocks, blocks, "fit_add_residual", sizes, bl)) return false;
+    if (!residual_args(p, fn, nres, nblocks, blocks, "lsq_add_residual", sizes, bl)) return false;
     ceres::LossFunction *lf = nullptr;
-    if (loss != FIT_LOSS_NONE && !(scale > 0 && std::isfinite(scale)))
-        return fail("fit_add_residual: robust loss scale %g must be > 0", scale);
+    if (loss != LSQ_LOSS_NONE && !(scale > 0 && std::isfinite(scale)))
+        return fail("lsq_add_residual: robust loss scale %g must be > 0", scale);
     switch (loss) {
-    case FIT_LOSS_NONE: break;
-    case FIT_LOSS_HUBER: lf = new ceres::HuberLoss(scale); break;
-    case FIT_LOSS_CAUCHY: lf = new ceres::CauchyLoss(scale); break;
-    case FIT_LOSS_SOFT_L1: lf = new ceres::SoftLOneLoss(scale); break;
-    default: return fail("fit_add_residual: unknown loss %d", (int)loss);
+    case LSQ_LOSS_NONE: break;
+    case LSQ_LOSS_HUBER: lf = new ceres::HuberLoss(scale); break;
+    case LSQ_LOSS_CAUCHY: lf = new ceres::CauchyLoss(scale); break;
+    case LSQ_LOSS_SOFT_L1: lf = new ceres::SoftLOneLoss(scale); break;
+    default: return fail("lsq_add_residual: unknown loss %d", (int)loss);
     }
     p->problem.AddResidualBlock(new CallbackCost(fn, ctx, nres, sizes), lf, bl);
     p->nresiduals += nres;
     return true;
 }
 
-bool fit_add_residual_folded(fit_problem_t *p, fit_residual_fn fn, void *ctx, int nres, int nblocks,
+bool lsq_add_residual_folded(lsq_problem_t *p, lsq_residual_fn fn, void *ctx, int nres, int nblocks,
                              double *const *blocks)
 {
     std::vector<int> sizes;
     std::vector<double *> bl;
-    if (!residual_args(p, fn, nres, nblocks, blocks, "fit_add_residual_folded", sizes, bl)) return false;
+    if (!residual_args(p, fn, nres, nblocks, blocks, "lsq_add_residual_folded", sizes, bl)) return false;
     p->problem.AddResidualBlock(new FoldedCost(fn, ctx, nres, sizes), nullptr, bl);
     p->nresiduals += nres;
     return true;
 }
 
-bool fit_add_prior(fit_problem_t *p, double *x, int i, double mean, double sigma)
+bool lsq_add_prior(lsq_problem_t *p, double *x, int i, double mean, double sigma)
 {
-    if (!known(p, x, "fit_add_prior")) return false;
+    if (!known(p, x, "lsq_add_prior")) return false;
     int n = p->sizes[x];
-    if (i < 0 || i >= n) return fail("fit_add_prior: parameter %d of a block of %d", i, n);
+    if (i < 0 || i >= n) return fail("lsq_add_prior: parameter %d of a block of %d", i, n);
     if (!std::isfinite(mean) || !(sigma > 0) || !std::isfinite(sigma))
-        return fail("fit_add_prior: mean %g, sigma %g (sigma must be > 0 and finite)", mean, sigma);
+        return fail("lsq_add_prior: mean %g, sigma %g (sigma must be > 0 and finite)", mean, sigma);
     std::vector<double *> bl{ x };
     p->problem.AddResidualBlock(new PriorCost(n, i, mean, sigma), nullptr, bl);
     p->nresiduals += 1;
     return true;
 }
 
-fit_options_t fit_defaults(void)
+lsq_options_t lsq_defaults(void)
 {
-    fit_options_t o;
+    lsq_options_t o;
     o.max_iterations = 200;
     o.function_tolerance = 1e-10;
     o.parameter_tolerance = 1e-10;
@@ -313,14 +313,14 @@ static int cores(void)
     return n > 0 ? (int)n : 1;
 }
 
-bool fit_solve(fit_problem_t *p, const fit_options_t *opt, fit_summary_t *s)
+bool lsq_solve(lsq_problem_t *p, const lsq_options_t *opt, lsq_summary_t *s)
 {
-    fit_options_t o = opt ? *opt : fit_defaults();
-    fit_summary_t out;
+    lsq_options_t o = opt ? *opt : lsq_defaults();
+    lsq_summary_t out;
     memset(&out, 0, sizeof out);
     if (!p) {
         if (s) *s = out;
-        return fail("fit_solve: NULL problem");
+        return fail("lsq_solve: NULL problem");
     }
     ceres::Solver::Options so;
     int nparam = 0;
@@ -342,7 +342,7 @@ bool fit_solve(fit_problem_t *p, const fit_options_t *opt, fit_summary_t *s)
         if (o.verbose) fprintf(stderr, "%s\n", sum.FullReport().c_str());
     } catch (const std::exception &e) {
         if (s) *s = out;
-        return fail("fit_solve: %s", e.what());
+        return fail("lsq_solve: %s", e.what());
     }
     // Ceres projects steps onto the bounds, which stalls the free parameters
     // while one sits at an active bound. Fix the parameters at an active
@@ -410,7 +410,7 @@ bool fit_solve(fit_problem_t *p, const fit_options_t *opt, fit_summary_t *s)
                 ceres::Solve(so, &p->problem, &sum2);
             } catch (const std::exception &e) {
                 if (s) *s = out;
-                return fail("fit_solve: %s", e.what());
+                return fail("lsq_solve: %s", e.what());
             }
             for (auto &kv : active) {   // restore the caller's masks
                 double *x = kv.first;
@@ -450,7 +450,7 @@ bool fit_solve(fit_problem_t *p, const fit_options_t *opt, fit_summary_t *s)
     snprintf(out.message, sizeof out.message, "%s", sum.message.c_str());
     out.time_s = sum.total_time_in_seconds;
     if (s) *s = out;
-    if (!out.usable) return fail("fit_solve: no usable solution (%s: %s)", out.termination, out.message);
+    if (!out.usable) return fail("lsq_solve: no usable solution (%s: %s)", out.termination, out.message);
     return true;
 }
 
@@ -463,7 +463,7 @@ bool fit_solve(fit_problem_t *p, const fit_options_t *opt, fit_summary_t *s)
 // by Householder QR one chunk of rows at a time, and the SVD is R's.
 // Ceres's own DENSE_SVD takes the SVD of the whole m x n Jacobian, which
 // dominates a fit with a million residuals.
-static bool covariance_dense(fit_problem_t *p, double *x, double *y, double *cov)
+static bool covariance_dense(lsq_problem_t *p, double *x, double *y, double *cov)
 {
     std::vector<double *> order;
     std::map<double *, int> col;
@@ -482,7 +482,7 @@ static bool covariance_dense(fit_problem_t *p, double *x, double *y, double *cov
     eo.num_threads = cores();
     ceres::CRSMatrix J;
     if (!p->problem.Evaluate(eo, nullptr, nullptr, nullptr, &J))
-        return fail("fit_covariance: the residuals could not be evaluated at the solution");
+        return fail("lsq_covariance: the residuals could not be evaluated at the solution");
     const int chunk = std::max(4096, 4 * n);
     Eigen::MatrixXd R = Eigen::MatrixXd::Zero(n, n), A(n + chunk, n);
     for (int r0 = 0; r0 < J.num_rows; r0 += chunk) {
@@ -497,7 +497,7 @@ static bool covariance_dense(fit_problem_t *p, double *x, double *y, double *cov
     Eigen::JacobiSVD<Eigen::MatrixXd> svd(R, Eigen::ComputeFullV);
     const Eigen::VectorXd &sv = svd.singularValues();
     if (!(sv(0) > 0) || !(sv(n - 1) / sv(0) >= std::sqrt(1e-14)))
-        return fail("fit_covariance: J^T J is rank deficient or ill-conditioned in the free parameters "
+        return fail("lsq_covariance: J^T J is rank deficient or ill-conditioned in the free parameters "
                     "(a parameter the data do not constrain: fix it or add a prior)");
     Eigen::MatrixXd V = svd.matrixV();
     Eigen::MatrixXd C = V * sv.array().square().inverse().matrix().asDiagonal() * V.transpose();
@@ -523,7 +523,7 @@ static bool covariance_dense(fit_problem_t *p, double *x, double *y, double *cov
 
 // ceres::Covariance itself (SPARSE_QR above 1000 parameters; DENSE_SVD is
 // what covariance_dense computes).
-static bool covariance_ceres(fit_problem_t *p, double *x, double *y, double *cov, bool dense)
+static bool covariance_ceres(lsq_problem_t *p, double *x, double *y, double *cov, bool dense)
 {
     ceres::Covariance::Options co;
     co.algorithm_type = dense ? ceres::DENSE_SVD : ceres::SPARSE_QR;
@@ -536,36 +536,36 @@ static bool covariance_ceres(fit_problem_t *p, double *x, double *y, double *cov
     try {
         ok = c.Compute(pairs, &p->problem);
     } catch (const std::exception &e) {
-        return fail("fit_covariance: %s", e.what());
+        return fail("lsq_covariance: %s", e.what());
     }
     if (!ok)
-        return fail("fit_covariance: J^T J is rank deficient or ill-conditioned in the free parameters "
+        return fail("lsq_covariance: J^T J is rank deficient or ill-conditioned in the free parameters "
                     "(a parameter the data do not constrain: fix it or add a prior)");
-    if (!c.GetCovarianceBlock(x, y, cov)) return fail("fit_covariance: the covariance block is not available");
+    if (!c.GetCovarianceBlock(x, y, cov)) return fail("lsq_covariance: the covariance block is not available");
     return true;
 }
 
-bool fit_covariance_cross(fit_problem_t *p, double *x, double *y, double *cov)
+bool lsq_covariance_cross(lsq_problem_t *p, double *x, double *y, double *cov)
 {
-    if (!known(p, x, "fit_covariance") || !known(p, y, "fit_covariance")) return false;
+    if (!known(p, x, "lsq_covariance") || !known(p, y, "lsq_covariance")) return false;
     int nparam = 0;
     for (auto &kv : p->sizes) nparam += kv.second;
     try {
         return nparam <= 1000 ? covariance_dense(p, x, y, cov) : covariance_ceres(p, x, y, cov, false);
     } catch (const std::exception &e) {
-        return fail("fit_covariance: %s", e.what());
+        return fail("lsq_covariance: %s", e.what());
     }
 }
 
-bool fit_covariance_reference(fit_problem_t *p, double *x, double *y, double *cov)
+bool lsq_covariance_reference(lsq_problem_t *p, double *x, double *y, double *cov)
 {
-    if (!known(p, x, "fit_covariance") || !known(p, y, "fit_covariance")) return false;
+    if (!known(p, x, "lsq_covariance") || !known(p, y, "lsq_covariance")) return false;
     return covariance_ceres(p, x, y, cov, true);
 }
 
-bool fit_covariance(fit_problem_t *p, double *x, double *cov) { return fit_covariance_cross(p, x, x, cov); }
+bool lsq_covariance(lsq_problem_t *p, double *x, double *cov) { return lsq_covariance_cross(p, x, x, cov); }
 
-bool fit_check_jacobian(fit_residual_fn fn, void *ctx, int nres, int nblocks, const int *sizes, double *const *blocks,
+bool lsq_check_jacobian(lsq_residual_fn fn, void *ctx, int nres, int nblocks, const int *sizes, double *const *blocks,
                         double h_rel, double tol_abs, double tol_rel, double *max_abs_err)
 {
     std::vector<double> r0(nres), rp(nres), rm(nres);
@@ -576,7 +576,7 @@ bool fit_check_jacobian(fit_residual_fn fn, void *ctx, int nres, int nblocks, co
         jp[k] = J[k].data();
     }
     const double *const *params = blocks;
-    if (!fn(ctx, params, r0.data(), jp.data())) return fail("fit_check_jacobian: the residual callback failed");
+    if (!fn(ctx, params, r0.data(), jp.data())) return fail("lsq_check_jacobian: the residual callback failed");
     bool ok = true;
     double worst = 0;
     for (int k = 0; k < nblocks; k++) {
@@ -587,14 +587,14 @@ bool fit_check_jacobian(fit_residual_fn fn, void *ctx, int nres, int nblocks, co
             blocks[k][i] = x0 - h;
             bool b = fn(ctx, params, rm.data(), nullptr);
             blocks[k][i] = x0;
-            if (!a || !b) return fail("fit_check_jacobian: the residual callback failed at a step of block %d[%d]", k, i);
+            if (!a || !b) return fail("lsq_check_jacobian: the residual callback failed at a step of block %d[%d]", k, i);
             for (int r = 0; r < nres; r++) {
                 double num = (rp[r] - rm[r]) / (2 * h), an = J[k][(size_t)r * sizes[k] + i];
                 double e = std::fabs(an - num);
                 worst = std::fmax(worst, e);
                 if (!(e <= tol_abs + tol_rel * std::fabs(num))) {
                     if (ok)
-                        fail("fit_check_jacobian: d r[%d] / d block %d[%d]: analytic %.9g, central difference %.9g", r,
+                        fail("lsq_check_jacobian: d r[%d] / d block %d[%d]: analytic %.9g, central difference %.9g", r,
                              k, i, an, num);
                     ok = false;
                 }

@@ -1,6 +1,5 @@
-// calib/common.c — what every calibration shares: running a capture plan
-// into a session, reading a session's frames, provenance, atomic JSON, the
-// plotting scripts and the HTML report pages.
+// model/report.c — the output files every layer writes: directories,
+// atomic files and JSON, provenance, the plotting scripts and HTML report pages.
 #define _GNU_SOURCE
 #include <errno.h>
 #include <fcntl.h>
@@ -12,10 +11,10 @@
 #include <time.h>
 #include <unistd.h>
 
-#include "calib/calib.h"
+#include "model/report.h"
 #include "model/model.h"
 
-bool calib_mkdir_p(const char *path)
+bool model_mkdir_p(const char *path)
 {
     if (g_mkdir_with_parents(path, 0755) != 0) {
         model_error(path, 0, "cannot make the directory: %s", strerror(errno));
@@ -24,7 +23,7 @@ bool calib_mkdir_p(const char *path)
     return true;
 }
 
-static bool write_file_atomic(const char *path, const char *text)
+bool model_write_file_atomic(const char *path, const char *text)
 {
     char *tmp = g_strdup_printf("%s.part", path);
     int fd = open(tmp, O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
@@ -54,7 +53,7 @@ static bool write_file_atomic(const char *path, const char *text)
     return ok;
 }
 
-bool calib_write_json(const char *path, json_t *o)
+bool model_write_json(const char *path, json_t *o)
 {
     char *s = json_dumps(o, JSON_INDENT(2) | JSON_PRESERVE_ORDER | JSON_REAL_PRECISION(10));
     if (!s) {
@@ -72,183 +71,15 @@ bool calib_write_json(const char *path, json_t *o)
     t[n] = '\n';
     t[n + 1] = 0;
     free(s);
-    bool ok = write_file_atomic(path, t);
+    bool ok = model_write_file_atomic(path, t);
     free(t);
     return ok;
 }
 
 // ---------------------------------------------------------------------------
-// Capture
-
-int calib_capture(const char *rig_path, const char *dir, const char *name, const char *plan_text, int progress)
-{
-    if (!calib_mkdir_p(dir)) return -1;
-    char *plan_path = g_strdup_printf("%s/%s.plan.ini", dir, name);
-    char *sdir = g_strdup_printf("%s/%s", dir, name);
-    char *db = g_strdup_printf("%s/session.sqlite", sdir);
-    int rc = -1;
-    char sha[65];
-    model_sha256_hex(plan_text, strlen(plan_text), sha);
-    bool exists = access(db, F_OK) == 0;
-    if (exists) {
-        // the same plan? then reuse or resume it
-        rig_journal_t *j = NULL;
-        char *ptext = NULL, *psha = NULL, state[32] = "";
-        if (rig_journal_open(&j, sdir)) {
-            model_error(sdir, 0, "an earlier session is here but its journal cannot be read (%s); move it away",
-                        rig_last_error());
-            goto done;
-        }
-        rig_journal_source(j, "plan", NULL, &ptext, &psha);
-        rig_journal_state(j, state, sizeof state);
-        rig_journal_close(j);
-        bool same = psha && !strcmp(psha, sha);
-        free(ptext);
-        free(psha);
-        if (!same) {
-            model_error(sdir, 0, "an earlier session with another plan is here; choose another output directory "
-                        "or move it away");
-            goto done;
-        }
-        if (!strcmp(state, "complete")) {
-            fprintf(stderr, "refl calib: %s is complete; using its frames\n", sdir);
-            rc = 0;
-            goto done;
-        }
-        fprintf(stderr, "refl calib: resuming the %s session %s\n", state, sdir);
-    } else if (!write_file_atomic(plan_path, plan_text)) {
-        goto done;
-    }
-    rig_capture_opts_t o = { .plan_path = plan_path, .rig_path = rig_path, .dir = sdir, .resume = exists,
-                             .progress = progress, .command_line = "refl calib" };
-    int ec = rig_capture_run(&o);
-    if (ec == 0) rc = 0;
-    else if (ec == 3)
-        model_error(sdir, 0, "the capture paused (interrupted, or the camera stopped answering); run the same "
-                    "command again to resume it");
-    else
-        model_error(sdir, 0, "the capture failed: %s", rig_last_error());
-done:
-    g_free(plan_path);
-    g_free(sdir);
-    g_free(db);
-    return rc;
-}
-
-// ---------------------------------------------------------------------------
-// Sessions
-
-void calib_session_free(calib_session_t *s)
-{
-    if (!s) return;
-    free(s->dir);
-    free(s->rows);
-    free(s->plan_text);
-    json_decref(s->facts);
-    free(s);
-}
-
-calib_session_t *calib_session_open(const char *dir)
-{
-    calib_session_t *s = calloc(1, sizeof *s);
-    rig_journal_t *j = NULL;
-    char *psha = NULL, *rsha = NULL, *facts = NULL;
-    if (!s || !(s->dir = strdup(dir))) goto oom;
-    bool q = model_error_quiet_thread(true);
-    int e = rig_journal_open(&j, dir);
-    model_error_quiet_thread(q);
-    if (e) {
-        model_error(dir, 0, "not a capture session (no readable session.sqlite): %s", rig_last_error());
-        goto fail;
-    }
-    if (rig_journal_source(j, "plan", NULL, &s->plan_text, &psha) ||
-        rig_journal_source(j, "rig", NULL, NULL, &rsha) || rig_journal_frames(j, &s->rows, &s->n)) {
-        model_error(dir, 0, "cannot read the session's journal: %s", rig_last_error());
-        goto fail;
-    }
-    snprintf(s->plan_sha256, sizeof s->plan_sha256, "%s", psha);
-    snprintf(s->rig_sha256, sizeof s->rig_sha256, "%s", rsha);
-    if (!rig_journal_facts(j, &facts) && facts[0]) s->facts = json_loads(facts, 0, NULL);
-    free(psha);
-    free(rsha);
-    free(facts);
-    rig_journal_close(j);
-    return s;
-oom:
-    model_error(dir, 0, "out of memory");
-fail:
-    free(psha);
-    free(rsha);
-    free(facts);
-    rig_journal_close(j);
-    calib_session_free(s);
-    return NULL;
-}
-
-float *calib_image_read(const char *path, int *width, int *height)
-{
-    FILE *f = fopen(path, "rb");
-    if (!f) {
-        model_error(path, 0, "cannot open: %s", strerror(errno));
-        return NULL;
-    }
-    unsigned char sig[4] = { 0 };
-    size_t got = fread(sig, 1, 4, f);
-    fclose(f);
-    if (got == 4 && sig[0] == 0x89 && sig[1] == 'P' && sig[2] == 'N' && sig[3] == 'G') {
-        uint16_t *pix = NULL;
-        if (!model_png_read(path, width, height, &pix)) return NULL;
-        size_t n = (size_t)*width * *height;
-        float *out = malloc(n * sizeof *out);
-        if (!out) {
-            free(pix);
-            model_error(path, 0, "out of memory");
-            return NULL;
-        }
-        for (size_t i = 0; i < n; i++) out[i] = pix[i];
-        free(pix);
-        return out;
-    }
-    if (got == 4 && ((sig[0] == 'I' && sig[1] == 'I') || (sig[0] == 'M' && sig[1] == 'M'))) {
-        float *out = NULL;
-        if (!model_tiff_read_float(path, width, height, &out)) return NULL;
-        return out;
-    }
-    model_error(path, 0, "neither a PNG nor a TIFF image (first bytes)");
-    return NULL;
-}
-
-float *calib_session_frame(const calib_session_t *s, int i, int *width, int *height)
-{
-    if (i < 0 || i >= s->n) {
-        model_error(s->dir, 0, "frame %d of %d does not exist", i, s->n);
-        return NULL;
-    }
-    const rig_frame_row_t *r = &s->rows[i];
-    char *path = g_strdup_printf("%s/%s", s->dir, r->file);
-    char sha[65];
-    float *out = NULL;
-    if (!model_sha256_file(path, sha)) goto done;
-    if (strcmp(sha, r->sha256)) {
-        model_error(path, 0, "sha256 %s differs from the journal's %s (step %d): the frame was changed or "
-                    "damaged; refl session check %s", sha, r->sha256, r->step, s->dir);
-        goto done;
-    }
-    out = calib_image_read(path, width, height);
-    if (out && (*width != r->width || *height != r->height)) {
-        model_error(path, 0, "%dx%d pixels, the journal says %dx%d", *width, *height, r->width, r->height);
-        free(out);
-        out = NULL;
-    }
-done:
-    g_free(path);
-    return out;
-}
-
-// ---------------------------------------------------------------------------
 // Provenance
 
-json_t *calib_provenance(int argc, char **argv)
+json_t *model_provenance(int argc, char **argv)
 {
     json_t *p = json_object();
     char date[40];
@@ -262,7 +93,7 @@ json_t *calib_provenance(int argc, char **argv)
     return p;
 }
 
-bool calib_inputs_add(json_t *inputs, const char *role, const char *path)
+bool model_inputs_add(json_t *inputs, const char *role, const char *path)
 {
     struct stat st;
     char sha[65];
@@ -279,9 +110,9 @@ bool calib_inputs_add(json_t *inputs, const char *role, const char *path)
     return true;
 }
 
-bool calib_provenance_input(json_t *prov, const char *role, const char *path)
+bool model_provenance_input(json_t *prov, const char *role, const char *path)
 {
-    return calib_inputs_add(json_object_get(prov, "inputs"), role, path);
+    return model_inputs_add(json_object_get(prov, "inputs"), role, path);
 }
 
 // ---------------------------------------------------------------------------
@@ -310,7 +141,7 @@ static char *script_path(const char *name)
     return p;
 }
 
-int calib_python(const char *script, ...)
+int model_run_script(const char *script, ...)
 {
     char *path = script_path(script);
     if (access(path, R_OK) != 0) {
@@ -362,7 +193,7 @@ static void esc(FILE *f, const char *s)
     }
 }
 
-FILE *calib_html_begin(const char *path, const char *title, const json_t *prov)
+FILE *model_html_begin(const char *path, const char *title, const json_t *prov)
 {
     char *tmp = g_strdup_printf("%s.part", path);
     FILE *f = fopen(tmp, "w");
@@ -404,14 +235,14 @@ FILE *calib_html_begin(const char *path, const char *title, const json_t *prov)
     return f;
 }
 
-void calib_html_heading(FILE *f, const char *text)
+void model_html_heading(FILE *f, const char *text)
 {
     fputs("<h2>", f);
     esc(f, text);
     fputs("</h2>\n", f);
 }
 
-void calib_html_para(FILE *f, const char *fmt, ...)
+void model_html_para(FILE *f, const char *fmt, ...)
 {
     va_list ap;
     va_start(ap, fmt);
@@ -423,7 +254,7 @@ void calib_html_para(FILE *f, const char *fmt, ...)
     g_free(s);
 }
 
-void calib_html_figure(FILE *f, const char *src, const char *caption)
+void model_html_figure(FILE *f, const char *src, const char *caption)
 {
     fputs("<figure><img src=\"", f);
     esc(f, src);
@@ -452,7 +283,7 @@ static void cells(FILE *f, const char *row, const char *tag)
     fputs("</tr>\n", f);
 }
 
-void calib_html_table(FILE *f, const char *header, const char *const *rows, int nrows)
+void model_html_table(FILE *f, const char *header, const char *const *rows, int nrows)
 {
     fputs("<table>\n", f);
     if (header) cells(f, header, "th");
@@ -460,7 +291,7 @@ void calib_html_table(FILE *f, const char *header, const char *const *rows, int 
     fputs("</table>\n", f);
 }
 
-bool calib_html_end(FILE *f, const char *path)
+bool model_html_end(FILE *f, const char *path)
 {
     fputs("</body></html>\n", f);
     bool ok = fflush(f) == 0 && fsync(fileno(f)) == 0;
