@@ -1,11 +1,12 @@
-// calib/cmd_calib.c — `refl calib geometry|lamps|gain`: dispatches to the
-// calibrations (calib/geometry.c, calib/lamps.c, calib/gain.c).
+// calib/cmd_calib.c — `refl calib geometry|lamps|gain|white`: dispatches to the
+// calibrations (calib/geometry.c, calib/lamps.c, calib/gain.c, calib/white.c).
+#include <math.h>
 #include <stdio.h>
 #include <string.h>
 
 #include "calib/calib.h"
-#include "fit/material.h"
 #include "model/model.h"
+#include "model/opts.h"
 
 static const struct {
     const char *name;
@@ -14,7 +15,7 @@ static const struct {
 } subs[] = {
     { "geometry", calib_cmd_geometry, "camera model (mrgingham + mrcal) and turntable axis from chessboard views" },
     { "lamps",    calib_cmd_lamps,    "lamp positions from mirror-sphere highlights, with uncertainty in mm" },
-    { "white",    fit_cmd_white,      "kc*I per lamp from a reference-white session (fit/material.c)" },
+    { "white",    calib_cmd_white,      "kc*I per lamp from a reference-white session" },
     { "gain",     calib_cmd_gain,     "sensitivity (EMVA 1288): dark, photon transfer, linearity, PRNU/DSNU maps" },
 };
 
@@ -40,4 +41,75 @@ int calib_cmd(int argc, char **argv)
     fprintf(stderr, "refl calib: unknown calibration '%s'\n", argv[1]);
     usage(stderr);
     return 2;
+}
+
+// ---------------------------------------------------------------------------
+// refl calib white
+
+int calib_cmd_white(int argc, char **argv)
+{
+    const char *calib_dir = NULL, *out = NULL;
+    calib_observe_options_t o = calib_observe_defaults();
+    double albedo = 0.99;
+    model_opt_t opts[] = {
+        MODEL_OPT_STRING("--calib", "DIR", "the calibrations: camera.cameramodel, lamps.json, optionally gain.json "
+                         "and its maps (DIR or DIR/geometry, DIR/lamps, DIR/gain)", &calib_dir, true),
+        MODEL_OPT_STRING("-o", "WHITE.json", "the output (put it in DIR or DIR/white/ for refl fit material)", &out,
+                         true),
+        MODEL_OPT_VALUE("--albedo", "A", "the standard's albedo (default 0.99)", false),
+        MODEL_OPT_STRING("--scene", "FILE", "the standard's scene (default: the session's sample)", &o.scene_path,
+                         false),
+        MODEL_OPT_STRING("--material", "NAME", "its material in the scene (default: the scene's only material)",
+                         &o.material, false),
+        MODEL_OPT_VALUE("--window", "N", "windows of N x N pixels (default 5)", false),
+        MODEL_OPT_VALUE("--step", "N", "on a grid of N pixels (default 8)", false),
+        MODEL_OPT_VALUE("--albedo-cells", "MM", "(an option of refl fit material)", false),
+        MODEL_OPT_FLAG("-v", "--verbose", "print every frame", &o.verbose),
+    };
+    model_cli_t cli = {
+        .cmd = "calib white", .synopsis = "SESSION", .opts = opts, .nopts = MODEL_NOPTS(opts),
+        .min_positional = 1, .max_positional = 1,
+        .about = "The absolute scale kc*I of each lamp from a session of the reference white (a Lambertian standard\n"
+                 "of albedo A, default 0.99): every lit window of the standard gives (P - Pa) d^2 / (g t kd n.l),\n"
+                 "kd = A/pi; the median per lamp is written. Windows lie wholly on one face of the material.",
+    };
+    int rc = model_cli_parse(&cli, argc, argv);
+    if (rc != MODEL_CLI_OK) return rc;
+    if (model_cli_value(&cli, "--albedo-cells"))
+        return model_cli_error(&cli, "--albedo-cells is an option of refl fit material");
+    static const char *const px[] = { "--window", "--step" };
+    for (int k = 0; k < 2; k++) {
+        const char *v = model_cli_value(&cli, px[k]);
+        long n;
+        if (v && (!model_parse_int(v, &n) || n < 1 || n > 64))
+            return model_cli_error(&cli, "%s needs a whole number of pixels 1..64, not '%s'", px[k], v);
+        if (v) *(k ? &o.step : &o.window) = (int)n;
+    }
+    const char *av = model_cli_value(&cli, "--albedo");
+    if (av && !(model_parse_double(av, &albedo) && albedo > 0))
+        return model_cli_error(&cli, "--albedo needs a number > 0, not '%s'", av);
+    if (albedo > 1) return model_cli_error(&cli, "--albedo %g: an albedo is at most 1", albedo);
+
+    const char *session = cli.positional[0];
+    calib_set_t *cal = NULL;
+    calib_obs_set_t obs;
+    rc = 1;
+    if (!calib_observe_session(session, calib_dir, false, &o, &cal, &obs)) {
+        fprintf(stderr, "refl calib white: %s\n", model_last_error());
+        goto done;
+    }
+    printf("refl calib white: %d observations of %s in %d frames (%d skipped)\n", obs.n, obs.material,
+           obs.frames_used, obs.frames_skipped);
+    json_t *prov = calib_observe_provenance(argc + 1, argv - 1, session, cal);
+    if (calib_white(&obs, cal, albedo, out, prov)) {
+        printf("%s\n", out);
+        rc = 0;
+    } else {
+        fprintf(stderr, "refl calib white: %s\n", model_last_error());
+    }
+    json_decref(prov);
+done:
+    calib_obs_free(&obs);
+    calib_set_free(cal);
+    return rc;
 }

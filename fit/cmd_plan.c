@@ -198,7 +198,7 @@ int lightplan_cmd(int argc, char **argv)
     model_materials_t *mfile = NULL;
     model_material_t *mm = NULL;
     const model_material_t **mats = NULL;
-    fit_calib_t *gc = NULL, *wc = NULL;
+    calib_set_t *gc = NULL, *wc = NULL;
     verify_priors_t pr = { 0 };
     lightplan_result_t res = { 0 };
     verify_lab_t *lab = NULL;
@@ -230,7 +230,7 @@ int lightplan_cmd(int argc, char **argv)
             model_error(a.lamps, 0, "a lamps.json has positions only: give --white WHITE.json for kc*I");
             goto done;
         }
-        if (!(wc = fit_calib_load_files(a.camera, a.lamps, NULL, a.white))) goto done;
+        if (!(wc = calib_set_load_files(a.camera, a.lamps, NULL, a.white))) goto done;
         lamps = wc->lamps;
         for (int i = 0; i < lamps->n && i < 16; i++) A[i] = wc->kcI_per_us[i];
         model_provenance_input(prov, "white", a.white);
@@ -285,7 +285,7 @@ int lightplan_cmd(int argc, char **argv)
         json_t *lj = json_pack("{s:[{s:s,s:[f,f,f]}]}", "lamps", "name", "x", "position_mm", 0.0, 0.0, 1000.0);
         model_write_json(tl, lj);
         json_decref(lj);
-        gc = fit_calib_load_files(a.camera, tl, gj, NULL);
+        gc = calib_set_load_files(a.camera, tl, gj, NULL);
         unlink(tl);
         g_free(tl);
         if (gc) model_provenance_input(prov, "gain", gj);
@@ -534,9 +534,9 @@ done:
     free(mm);
     free(mats);
     model_materials_free(mfile);
-    if (wc) fit_calib_free(wc);
+    if (wc) calib_set_free(wc);
     else model_lamps_free(lamps);
-    fit_calib_free(gc);
+    calib_set_free(gc);
     model_scene_free(rot);
     model_scene_free(scene);
     model_camera_free(cam);

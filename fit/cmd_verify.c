@@ -235,7 +235,7 @@ static bool lamp_mask(const char *s, const model_lamps_t *lamps, uint32_t *mask,
 }
 
 typedef struct {
-    fit_calib_t *cal;            // camera, gain maps (per camera)
+    calib_set_t *cal;            // camera, gain maps (per camera)
     verify_camera_t vc;
 } cam_t;
 
@@ -264,7 +264,7 @@ int verify_cmd(int argc, char **argv)
     int exit_code = 1;
     model_scene_t *scene = NULL;
     verify_priors_t pr = { 0 };
-    fit_calib_t *base = NULL;
+    calib_set_t *base = NULL;
     model_lamps_t *ini_lamps = NULL;
     cam_t cams[MAXN];
     int ncams = 0;
@@ -298,21 +298,21 @@ int verify_cmd(int argc, char **argv)
             goto done;
         }
     // calibrations: the base directory, then the overrides
-    if (a.calib && !(base = fit_calib_load(a.calib, false))) goto done;
+    if (a.calib && !(base = calib_set_load(a.calib, false))) goto done;
     if (a.lamps) {
         if (g_str_has_suffix(a.lamps, ".json")) {
-            fit_calib_t *lc = NULL;
+            calib_set_t *lc = NULL;
             char *cam0 = a.ncameras ? g_strdup(a.cameras[0]) : NULL;
             if (!cam0 && base) {
                 json_t *in = json_array_get(base->inputs, 0);
                 cam0 = g_strdup(json_string_value(json_object_get(in, "path")));
             }
-            lc = cam0 ? fit_calib_load_files(cam0, a.lamps, NULL, NULL) : NULL;
+            lc = cam0 ? calib_set_load_files(cam0, a.lamps, NULL, NULL) : NULL;
             g_free(cam0);
             if (!lc) goto done;
             ini_lamps = lc->lamps;
             lc->lamps = NULL;
-            fit_calib_free(lc);
+            calib_set_free(lc);
         } else if (!(ini_lamps = model_lamps_load(a.lamps))) {
             goto done;
         }
@@ -323,7 +323,7 @@ int verify_cmd(int argc, char **argv)
     }
     // kc*I per lamp: the white calibration, else kc_per_us * intensity
     if (a.white) {
-        fit_calib_t *wc = NULL;
+        calib_set_t *wc = NULL;
         char *cam0 = a.ncameras ? g_strdup(a.cameras[0]) : NULL;
         if (!cam0 && base) cam0 = g_strdup(json_string_value(json_object_get(json_array_get(base->inputs, 0), "path")));
         // the white file names lamps: read it against the lamps in use
@@ -341,7 +341,7 @@ int verify_cmd(int argc, char **argv)
             g_free(cam0);
             goto done;
         }
-        wc = cam0 ? fit_calib_load_files(cam0, lj, NULL, a.white) : NULL;
+        wc = cam0 ? calib_set_load_files(cam0, lj, NULL, a.white) : NULL;
         g_free(cam0);
         g_free(lj);
         if (!wc) goto done;
@@ -349,7 +349,7 @@ int verify_cmd(int argc, char **argv)
             int j = model_lamps_find(wc->lamps, lamps->lamps[i].name);
             A[i] = j >= 0 ? wc->kcI_per_us[j] : 0;
         }
-        fit_calib_free(wc);
+        calib_set_free(wc);
         model_provenance_input(prov, "white", a.white);
     } else if (a.kc_per_us > 0) {
         for (int i = 0; i < lamps->n && i < 32; i++) A[i] = a.kc_per_us * lamps->lamps[i].intensity;
@@ -396,7 +396,7 @@ int verify_cmd(int argc, char **argv)
             json_object_set_new(lj, "lamps", arr);
             model_write_json(tmpl, lj);
             json_decref(lj);
-            cm->cal = fit_calib_load_files(campath, tmpl, gj, NULL);
+            cm->cal = calib_set_load_files(campath, tmpl, gj, NULL);
             unlink(tmpl);
             g_free(tmpl);
             if (cm->cal) {
@@ -409,9 +409,9 @@ int verify_cmd(int argc, char **argv)
         }
         g_free(gj);
         if (!cm->cal) goto done;
-        fit_calib_t *cal = cm->cal;
+        calib_set_t *cal = cm->cal;
         // without --gain-calib, the base directory's gain calibration applies to the given camera too
-        const fit_calib_t *g = a.ngain ? cal : base ? base : cal;
+        const calib_set_t *g = a.ngain ? cal : base ? base : cal;
         snprintf(cm->vc.name, sizeof cm->vc.name, "%d", c);
         cm->vc.cam = cal->cam;
         bool same_size = g->W == cal->W && g->H == cal->H;
@@ -684,8 +684,8 @@ done:
         free(imgs_px[m]);
     }
     for (int c = 0; c < ncams; c++)
-        if (cams[c].cal != base) fit_calib_free(cams[c].cal);
-    fit_calib_free(base);
+        if (cams[c].cal != base) calib_set_free(cams[c].cal);
+    calib_set_free(base);
     model_lamps_free(ini_lamps);
     verify_result_free(&res);
     verify_priors_free(&pr);

@@ -59,13 +59,9 @@ bool fit_samples_add_angles(fit_samples_t *s, double theta_i, double phi_i, doub
                             double f_r, double weight);
 bool fit_samples_add(fit_samples_t *s, const model_cosines_t *c, double R, double weight);
 // The same for a sample lit by a finite lamp: disc = the cosines at its 4
-// quadrature directions (fit_lamp_disc_dirs), NULL = a point lamp.
+// quadrature directions (model_lamp_disc_dirs), NULL = a point lamp.
 bool fit_samples_add_disc(fit_samples_t *s, const model_cosines_t *c, const model_cosines_t *disc, double R,
                           double weight);
-// The 4 quadrature directions of a spherical lamp of radius radius_mm seen at
-// distance d_mm in unit direction l (see fit_samples_t); false when the lamp
-// is a point (radius 0) or the point lies inside it.
-bool fit_lamp_disc_dirs(model_vec3_t l, double d_mm, double radius_mm, model_vec3_t out[4]);
 // The model's R of samples off..off+cnt-1 (lamp discs averaged) and, when
 // dR != NULL, dR/dp (cnt x nparams, row-major).
 void fit_samples_eval_n(const fit_samples_t *s, model_brdf_t m, const double *p, int off, int cnt, double *R,

@@ -1,6 +1,5 @@
-// fit/material.c — observations of a material in a capture session (see
-// fit/material.h), the reference white's kc*I per lamp (`refl calib white`)
-// and the material fit (`refl fit material`).
+// fit/material.c — the material fit (`refl fit material`): calibrated
+// observations (calib_observe) to BRDF samples, every model fitted, priors.
 #define _GNU_SOURCE
 #include <errno.h>
 #include <glib.h>
@@ -17,645 +16,12 @@
 #include "rig/rig.h"
 
 // ---------------------------------------------------------------------------
-// Calibration directory
-
-static char *find_in(const char *dir, const char *sub, const char *name)
-{
-    char *p = g_strdup_printf("%s/%s", dir, name);
-    if (access(p, R_OK) == 0) return p;
-    g_free(p);
-    p = g_strdup_printf("%s/%s/%s", dir, sub, name);
-    if (access(p, R_OK) == 0) return p;
-    g_free(p);
-    return NULL;
-}
-
-static bool add_input(fit_calib_t *c, const char *role, const char *path)
-{
-    return model_inputs_add(c->inputs, role, path);
-}
-
-void fit_calib_free(fit_calib_t *c)
-{
-    if (!c) return;
-    model_camera_free(c->cam);
-    model_lamps_free(c->lamps);
-    free(c->offset_dn);
-    free(c->flat);
-    json_decref(c->inputs);
-    free(c);
-}
-
-static float *read_map(fit_calib_t *c, const char *path, const char *role)
-{
-    int w, h;
-    float *m = model_image_read_float(path, &w, &h);
-    if (!m) return NULL;
-    if (w != c->W || h != c->H) {
-        model_error(path, 0, "%dx%d pixels, the camera model's imager is %dx%d", w, h, c->W, c->H);
-        free(m);
-        return NULL;
-    }
-    add_input(c, role, path);
-    return m;
-}
-
-fit_calib_t *fit_calib_load(const char *dir, bool need_white)
-{
-    char *cam = find_in(dir, "geometry", "camera.cameramodel"), *lamps = find_in(dir, "lamps", "lamps.json");
-    char *gain = find_in(dir, "gain", "gain.json"), *white = find_in(dir, "white", "white.json");
-    fit_calib_t *c = NULL;
-    if (!cam)
-        model_error(dir, 0, "no camera.cameramodel (nor geometry/camera.cameramodel): run refl calib geometry first");
-    else if (!lamps)
-        model_error(dir, 0, "no lamps.json (nor lamps/lamps.json): run refl calib lamps first");
-    else if (!white && need_white)
-        model_error(dir, 0, "no white.json (nor white/white.json): run refl calib white on a reference-white session");
-    else
-        c = fit_calib_load_files(cam, lamps, gain, white);
-    g_free(cam);
-    g_free(lamps);
-    g_free(gain);
-    g_free(white);
-    return c;
-}
-
-// The response compression a (per DN at 0 dB) of S_m = S (1 - a S), S the
-// linear signal, from a gain calibration's photon-transfer curves (gain.json:
-// gains[] at 0 dB, curves.exposure_us and curves.signal_dn): linear least
-// squares of S_m = u t + v - a S_m^2 over the steps below 90 % of saturation
-// (S_m^2 stands for S^2: the error is second order in a). 0 when the curves
-// are absent or say no compression.
-static double nonlinearity_of(json_t *gj, double sat)
-{
-    json_t *gains = json_object_get(gj, "gains"), *g0 = NULL;
-    for (size_t k = 0; k < json_array_size(gains); k++) {
-        json_t *e = json_array_get(gains, k);
-        if (fabs(json_number_value(json_object_get(e, "gain_db"))) < 1e-9) g0 = e;
-    }
-    json_t *cv = json_object_get(g0 ? g0 : gj, "curves");
-    json_t *t = json_object_get(cv, "exposure_us"), *S = json_object_get(cv, "signal_dn");
-    if (json_array_size(t) != json_array_size(S) || json_array_size(t) < 5) return 0;
-    double A[9] = { 0 }, b[3] = { 0 }, ts = 0, ss = 0;   // column scales
-    for (size_t i = 0; i < json_array_size(t); i++) {
-        ts = fmax(ts, fabs(json_number_value(json_array_get(t, i))));
-        ss = fmax(ss, fabs(json_number_value(json_array_get(S, i))));
-    }
-    if (!(ts > 0) || !(ss > 0)) return 0;
-    int n = 0;
-    for (size_t i = 0; i < json_array_size(t); i++) {
-        double ti = json_number_value(json_array_get(t, i)), si = json_number_value(json_array_get(S, i));
-        if (!(si > 0) || (sat > 0 && si > 0.9 * sat) || !isfinite(ti)) continue;
-        double x[3] = { ti / ts, 1, -si * si / (ss * ss) };
-        for (int r = 0; r < 3; r++) {
-            for (int c = 0; c < 3; c++) A[3 * r + c] += x[r] * x[c];
-            b[r] += x[r] * si;
-        }
-        n++;
-    }
-    if (n < 5 || !model_solve_linear(A, b, 3)) return 0;
-    double a = b[2] / (ss * ss);
-    return isfinite(a) && a > 0 && a < 1e-3 ? a : 0;
-}
-
-// The linear signal S of a measured S_m = S (1 - a S) (the root that goes to
-// S_m as a -> 0); S_m as it is without a compression or where it has no root.
-static double linear_signal(double s_m, double a)
-{
-    if (!(a > 0) || !(s_m > 0)) return s_m;
-    double disc = 1 - 4 * a * s_m;
-    return disc > 0 ? 2 * s_m / (1 + sqrt(disc)) : s_m;
-}
-
-fit_calib_t *fit_calib_load_files(const char *cam, const char *lamps, const char *gain, const char *white)
-{
-    fit_calib_t *c = calloc(1, sizeof *c);
-    char *off = NULL, *flat = NULL;
-    json_t *lj = NULL, *gj = NULL, *wj = NULL;
-    json_error_t je;
-    bool ok = false;
-    const char *dir = cam;
-    if (!c) return NULL;
-    c->inputs = json_array();
-    if (!(c->cam = model_camera_load(cam))) goto fail;
-    add_input(c, "camera", cam);
-    c->W = model_camera_width(c->cam);
-    c->H = model_camera_height(c->cam);
-    if (!(lj = json_load_file(lamps, 0, &je))) {
-        model_error(lamps, je.line, "not valid JSON: %s", je.text);
-        goto fail;
-    }
-    json_t *arr = json_object_get(lj, "lamps");
-    size_t nl = json_array_size(arr);
-    if (!nl || nl > 32) {
-        model_error(lamps, 0, "'lamps' must list 1 to 32 lamps (has %zu)", nl);
-        goto fail;
-    }
-    c->lamps = calloc(1, sizeof *c->lamps);
-    if (!c->lamps || !(c->lamps->lamps = calloc(nl, sizeof *c->lamps->lamps))) goto oom;
-    c->lamps->path = strdup(lamps);
-    for (size_t i = 0; i < nl; i++) {
-        json_t *e = json_array_get(arr, i), *p = json_object_get(e, "position_mm");
-        const char *name = json_string_value(json_object_get(e, "name"));
-        if (!name || json_array_size(p) != 3 || !json_is_number(json_array_get(p, 0)) ||
-            !json_is_number(json_array_get(p, 1)) || !json_is_number(json_array_get(p, 2))) {
-            model_error(lamps, 0, "lamps[%zu] needs a name and position_mm = [x, y, z]", i);
-            goto fail;
-        }
-        model_lamp_t *l = &c->lamps->lamps[i];
-        snprintf(l->name, sizeof l->name, "%s", name);
-        l->position_mm = v3(json_number_value(json_array_get(p, 0)), json_number_value(json_array_get(p, 1)),
-                            json_number_value(json_array_get(p, 2)));
-        l->intensity = 1;
-        // the emitting radius (refl calib lamps writes the one its highlight
-        // model used): the fit averages R over the lamp's disc
-        json_t *rad = json_object_get(e, "radius_mm");
-        if (rad && !(json_is_number(rad) && json_number_value(rad) >= 0 && json_number_value(rad) < 1000)) {
-            model_error(lamps, 0, "lamps[%zu] (%s): radius_mm must be a number of mm in [0, 1000)", i, name);
-            goto fail;
-        }
-        c->lamp_radius_mm[i] = rad ? json_number_value(rad) : 0;
-        c->lamps->n = (int)i + 1;
-    }
-    add_input(c, "lamps", lamps);
-    if (gain) {
-        if (!(gj = json_load_file(gain, 0, &je))) {
-            model_error(gain, je.line, "not valid JSON: %s", je.text);
-            goto fail;
-        }
-        add_input(c, "gain", gain);
-        json_t *sat = json_object_get(gj, "saturation_dn");
-        if (json_is_number(sat)) c->saturation_dn = json_number_value(sat);
-        json_t *K = json_object_get(gj, "system_gain_dn_per_e"), *rn = json_object_get(gj, "read_noise_e");
-        if (json_is_number(K) && json_is_number(rn)) {
-            c->gain_dn_per_e = json_number_value(K);
-            c->read_noise_e = json_number_value(rn);
-        }
-        c->nonlin_a_per_dn = nonlinearity_of(gj, c->saturation_dn);
-        char *gd = g_path_get_dirname(gain);
-        off = g_strdup_printf("%s/offset_dn.tiff", gd);
-        flat = g_strdup_printf("%s/flat_field.tiff", gd);
-        if (access(flat, R_OK) != 0) {
-            g_free(flat);
-            flat = g_strdup_printf("%s/prnu_gain.tiff", gd);
-        }
-        g_free(gd);
-        if (access(off, R_OK) == 0 && !(c->offset_dn = read_map(c, off, "offset map"))) goto fail;
-        if (access(flat, R_OK) == 0 && !(c->flat = read_map(c, flat, "flat field"))) goto fail;
-    }
-    if (white) {
-        if (!(wj = json_load_file(white, 0, &je))) {
-            model_error(white, je.line, "not valid JSON: %s", je.text);
-            goto fail;
-        }
-        json_t *wl = json_object_get(wj, "lamps");
-        for (int i = 0; i < c->lamps->n; i++) {
-            bool found = false;
-            for (size_t k = 0; k < json_array_size(wl); k++) {
-                json_t *e = json_array_get(wl, k);
-                const char *n = json_string_value(json_object_get(e, "name"));
-                json_t *v = json_object_get(e, "kc_I_per_us");
-                if (n && !strcmp(n, c->lamps->lamps[i].name) && json_is_number(v)) {
-                    c->kcI_per_us[i] = json_number_value(v);
-                    found = true;
-                }
-            }
-            if (!found) {
-                model_error(white, 0, "no kc_I_per_us for lamp '%s' (of %s): run refl calib white with that lamp",
-                            c->lamps->lamps[i].name, lamps);
-                goto fail;
-            }
-        }
-        c->have_white = true;
-        add_input(c, "white", white);
-    }
-    ok = true;
-    goto done;
-oom:
-    model_error(dir, 0, "out of memory");
-fail:
-done:
-    g_free(off);
-    g_free(flat);
-    json_decref(lj);
-    json_decref(gj);
-    json_decref(wj);
-    if (ok) return c;
-    fit_calib_free(c);
-    return NULL;
-}
-
-// ---------------------------------------------------------------------------
-// Observations
-
-fit_observe_options_t fit_observe_defaults(void)
-{
-    return (fit_observe_options_t){ .window = 5, .step = 8, .min_signal_dn = 20 };
-}
-
-void fit_obs_free(fit_obs_set_t *s)
-{
-    if (!s) return;
-    free(s->o);
-    memset(s, 0, sizeof *s);
-}
-
-static bool obs_add(fit_obs_set_t *s, const fit_obs_t *o)
-{
-    if (s->n == s->cap) {
-        int cap = s->cap ? 2 * s->cap : 4096;
-        fit_obs_t *n = realloc(s->o, (size_t)cap * sizeof *n);
-        if (!n) return false;
-        s->o = n;
-        s->cap = cap;
-    }
-    s->o[s->n++] = *o;
-    return true;
-}
-
-// The sample's scene and material from the virtual rig's truth file (session facts).
-static bool truth_sample(const rig_session_t *s, const char *sample, char **scene, char *mat, size_t matlen)
-{
-    json_t *vr = s->facts ? json_object_get(s->facts, "virtual_rig") : NULL;
-    const char *truth = vr ? json_string_value(json_object_get(vr, "truth")) : NULL;
-    if (!truth) {
-        model_error(s->dir, 0, "the session was not captured on a virtual rig: give the sample's scene (--scene FILE) "
-                    "and its material (--material NAME)");
-        return false;
-    }
-    model_ini_t *ini = model_ini_load(truth);
-    if (!ini) return false;
-    char sec[128];
-    snprintf(sec, sizeof sec, "sample %s", sample);
-    const model_ini_entry_t *e = model_ini_get(ini, sec, "scene"), *m = model_ini_get(ini, sec, "material");
-    if (!e) {
-        model_error(truth, 0, "no [sample %s] with a scene (the session's sample)", sample);
-        model_ini_free(ini);
-        return false;
-    }
-    char *d = g_path_get_dirname(truth);
-    *scene = g_strdup_printf("%s/%s", d, e->value);
-    g_free(d);
-    if (m && mat && !mat[0]) snprintf(mat, matlen, "%s", m->value);
-    model_ini_free(ini);
-    return true;
-}
-
-typedef struct {
-    double q[2];
-    int    face;
-} window_t;
-
-static int cmp_exposure_desc(const void *a, const void *b, void *ctx)
-{
-    const rig_frame_row_t *r = ctx;
-    double x = r[*(const int *)a].exposure_us, y = r[*(const int *)b].exposure_us;
-    return (x < y) - (x > y);
-}
-
-static double bits_full(const char *pf)
-{
-    if (!strcmp(pf, "Mono8")) return 255;
-    if (!strcmp(pf, "Mono12")) return 4095;
-    return 65535;
-}
-
-bool fit_observe(const char *session_dir, const fit_calib_t *cal, const fit_observe_options_t *opt,
-                 fit_obs_set_t *out)
-{
-    fit_observe_options_t o = opt ? *opt : fit_observe_defaults();
-    memset(out, 0, sizeof *out);
-    bool ok = false;
-    rig_session_t *s = rig_session_open(session_dir);
-    rig_plan_t *plan = NULL;
-    model_scene_t *scene = NULL;
-    char *scene_path = NULL;
-    int *order = NULL;
-    window_t *win = NULL;
-    unsigned char *taken = NULL;
-    if (!s) return false;
-    if (!(plan = rig_plan_parse(s->plan_text, strlen(s->plan_text), session_dir))) goto done;
-    snprintf(out->sample, sizeof out->sample, "%s", plan->sample);
-    if (o.material) snprintf(out->material, sizeof out->material, "%s", o.material);
-    if (o.scene_path) scene_path = g_strdup(o.scene_path);
-    else if (!truth_sample(s, plan->sample, &scene_path, out->material, sizeof out->material)) goto done;
-    if (!(scene = model_scene_load(scene_path, NULL))) goto done;
-    int mat = -1;
-    if (out->material[0]) {
-        mat = model_scene_material_index(scene, out->material);
-        if (mat < 0) {
-            model_error(scene_path, 0, "the scene has no material '%s'", out->material);
-            goto done;
-        }
-    } else if (scene->nmaterials == 1) {
-        mat = 0;
-        snprintf(out->material, sizeof out->material, "%s", scene->material_names[0]);
-    } else {
-        model_error(scene_path, 0, "the scene has %d materials: say which one to observe (--material NAME)",
-                    scene->nmaterials);
-        goto done;
-    }
-    double R[9], t[3];
-    model_scene_wedge_pose(scene, plan->tilt_deg, plan->tilt_azimuth_deg, R, t);
-    model_scene_t *posed = model_scene_transformed(scene, R, t);
-    if (!posed) goto done;
-    model_scene_free(scene);
-    scene = posed;
-    // frames by angle
-    if (!(order = malloc((size_t)(s->n ? s->n : 1) * sizeof *order))) goto oom;
-    const int half = o.window / 2;
-    int nx = (cal->W - o.window) / o.step + 1, ny = (cal->H - o.window) / o.step + 1;
-    if (!(win = malloc((size_t)nx * ny * sizeof *win))) goto oom;
-    bool *done_row = calloc((size_t)(s->n ? s->n : 1), 1);
-    if (!done_row) goto oom;
-    for (int f0 = 0; f0 < s->n; f0++) {
-        if (done_row[f0]) continue;
-        const rig_frame_row_t *r0 = &s->rows[f0];
-        // this angle's frames (the same measured position), longest exposure first
-        int nf = 0;
-        for (int f = f0; f < s->n; f++)
-            if (!done_row[f] && s->rows[f].measured_deg == r0->measured_deg &&
-                s->rows[f].commanded_deg == r0->commanded_deg) {
-                order[nf++] = f;
-                done_row[f] = true;
-            }
-        qsort_r(order, (size_t)nf, sizeof *order, cmp_exposure_desc, s->rows);
-        model_scene_t *rot = model_scene_rotated_z(scene, r0->measured_deg);
-        model_tracer_t *tr = rot ? model_tracer_new(rot) : NULL;
-        if (!tr) {
-            model_scene_free(rot);
-            free(done_row);
-            goto done;
-        }
-        // windows on the material: the centre and four corners on one face
-        int nw = 0;
-        {
-            int nq = nx * ny * 5;
-            double *q = malloc((size_t)nq * 2 * sizeof *q);
-            model_pixel_info_t *pi = malloc((size_t)nq * sizeof *pi);
-            if (!q || !pi) {
-                free(q);
-                free(pi);
-                model_tracer_free(tr);
-                model_scene_free(rot);
-                free(done_row);
-                goto oom;
-            }
-            static const int dx[5] = { 0, -1, 1, -1, 1 }, dy[5] = { 0, -1, -1, 1, 1 };
-            int k = 0;
-            for (int j = 0; j < ny; j++)
-                for (int i = 0; i < nx; i++)
-                    for (int c = 0; c < 5; c++) {
-                        q[2 * k] = i * o.step + half + dx[c] * half;
-                        q[2 * k + 1] = j * o.step + half + dy[c] * half;
-                        k++;
-                    }
-            model_pixel_info(tr, cal->cam, NULL, q, nq, pi, NULL, 0);
-            for (int w = 0; w < nx * ny; w++) {
-                const model_pixel_info_t *p = &pi[5 * w];
-                if (p->face < 0 || p->material != mat) continue;
-                bool same = true;
-                for (int c = 1; c < 5; c++) same = same && pi[5 * w + c].face == p->face;
-                if (!same) continue;
-                win[nw].q[0] = q[10 * w];
-                win[nw].q[1] = q[10 * w + 1];
-                win[nw].face = p->face;
-                nw++;
-            }
-            free(q);
-            free(pi);
-        }
-        if (nw == 0) {
-            fprintf(stderr, "refl: %s: at %.3f deg no window of %dx%d pixels lies on material %s\n", session_dir,
-                    r0->measured_deg, o.window, o.window, out->material);
-            out->frames_skipped += nf;
-            model_tracer_free(tr);
-            model_scene_free(rot);
-            continue;
-        }
-        // geometry per window and lamp
-        double *qw = malloc((size_t)nw * 2 * sizeof *qw);
-        model_pixel_info_t *pw = malloc((size_t)nw * sizeof *pw);
-        model_lamp_sample_t *ls = malloc((size_t)nw * cal->lamps->n * sizeof *ls);
-        free(taken);
-        taken = calloc((size_t)nw * cal->lamps->n, 1);
-        if (!qw || !pw || !ls || !taken) {
-            free(qw);
-            free(pw);
-            free(ls);
-            model_tracer_free(tr);
-            model_scene_free(rot);
-            free(done_row);
-            goto oom;
-        }
-        for (int w = 0; w < nw; w++) {
-            qw[2 * w] = win[w].q[0];
-            qw[2 * w + 1] = win[w].q[1];
-        }
-        model_pixel_info(tr, cal->cam, cal->lamps, qw, nw, pw, ls, 0);
-        // dark frames of this angle by exposure (when there is no offset map)
-        bool fail = false;
-        for (int a = 0; a < nf && !fail; a++) {
-            const rig_frame_row_t *r = &s->rows[order[a]];
-            if (!strcmp(r->lamps, "none")) continue;
-            int lamp = model_lamps_find(cal->lamps, r->lamps);
-            if (lamp < 0) {
-                out->frames_skipped++;   // several lamps at once, or a lamp the calibration lacks
-                continue;
-            }
-            float *dark = NULL;
-            if (!cal->offset_dn) {
-                // the session's dark frame at the same gain nearest in exposure, then
-                // in steps (the dark current is a small part of the dark level: an
-                // auto bracket of lamps off stops at its longest exposure)
-                int best = -1;
-                for (int f = 0; f < s->n; f++) {
-                    const rig_frame_row_t *q = &s->rows[f];
-                    if (strcmp(q->lamps, "none") || q->gain != r->gain) continue;
-                    double de = fabs(q->exposure_us - r->exposure_us);
-                    double db = best < 0 ? 0 : fabs(s->rows[best].exposure_us - r->exposure_us);
-                    if (best < 0 || de < db || (de == db && abs(q->step - r->step) < abs(s->rows[best].step - r->step)))
-                        best = f;
-                }
-                if (best < 0) {
-                    model_error(session_dir, 0, "step %d (%s, %g us): no dark level: the calibration has no offset "
-                                "map and the session no dark frame (add the lamp set none or dark_every to the plan, "
-                                "or a gain calibration)", r->step, r->lamps, r->exposure_us);
-                    fail = true;
-                    break;
-                }
-                int dw, dh;
-                if (!(dark = rig_session_frame(s, best, &dw, &dh))) {
-                    fail = true;
-                    break;
-                }
-            }
-            int fw, fh;
-            float *img = rig_session_frame(s, order[a], &fw, &fh);
-            if (!img || fw != cal->W || fh != cal->H) {
-                if (img) model_error(session_dir, 0, "step %d: %dx%d frame, the camera model is %dx%d", r->step, fw,
-                                     fh, cal->W, cal->H);
-                free(img);
-                free(dark);
-                fail = true;
-                break;
-            }
-            double sat = 0.95 * (cal->saturation_dn > 0 ? cal->saturation_dn : bits_full(r->pixel_format));
-            double gf = pow(10.0, r->gain / 20);
-            // the gain calibration's response compression S_m = S (1 - a S) at this gain
-            // (a is per DN at 0 dB; the signal in DN scales with the gain)
-            double a_nl = cal->nonlin_a_per_dn > 0 ? cal->nonlin_a_per_dn / gf : 0;
-            for (int w = 0; w < nw; w++) {
-                if (taken[(size_t)w * cal->lamps->n + lamp]) continue;
-                const model_lamp_sample_t *L = &ls[(size_t)w * cal->lamps->n + lamp];
-                if (!(L->V > 0.999)) continue;
-                model_cosines_t c = model_cosines(pw[w].n, L->l, pw[w].v);
-                if (!(c.nl > 0 && c.nv > 0)) continue;
-                // a finite lamp near the mirror direction (within 20 deg: where a
-                // narrow lobe changes over the lamp's disc) gets its disc's cosines
-                model_vec3_t dl[4];
-                bool has_disc = c.nh > cos(20 * M_PI / 180) &&
-                                fit_lamp_disc_dirs(L->l, L->d_mm, cal->lamp_radius_mm[lamp], dl);
-                int x0 = (int)win[w].q[0] - half, y0 = (int)win[w].q[1] - half;
-                double sum = 0, mx = 0, sg = 0;
-                for (int y = y0; y < y0 + o.window; y++)
-                    for (int x = x0; x < x0 + o.window; x++) {
-                        size_t i = (size_t)y * cal->W + x;
-                        sum += linear_signal(img[i] - (cal->offset_dn ? cal->offset_dn[i] : dark[i]), a_nl);
-                        mx = fmax(mx, img[i]);
-                        sg += cal->flat ? cal->flat[i] : 1;
-                    }
-                double n = (double)o.window * o.window;
-                if (mx >= sat) continue;   // a shorter exposure of the bracket takes it
-                double sig = sum / n;
-                if (sig < o.min_signal_dn) continue;
-                fit_obs_t ob = { .lamp = lamp, .angle_deg = r->measured_deg, .exposure_us = r->exposure_us,
-                                 .gain_db = r->gain, .q = { win[w].q[0], win[w].q[1] }, .c = c, .d_mm = L->d_mm,
-                                 .s_dn_per_us = sig / (sg / n) / (r->exposure_us * gf), .step = r->step,
-                                 .face = pw[w].face, .has_disc = has_disc };
-                for (int k = 0; has_disc && k < 4; k++) ob.disc[k] = model_cosines(pw[w].n, dl[k], pw[w].v);
-                {   // the point at angle 0: turned back about the table's axis (z)
-                    double ca = cos(-r->measured_deg * M_PI / 180), sa = sin(-r->measured_deg * M_PI / 180);
-                    model_vec3_t pp = pw[w].p_mm;
-                    ob.p0_mm[0] = ca * pp.x - sa * pp.y;
-                    ob.p0_mm[1] = sa * pp.x + ca * pp.y;
-                    ob.p0_mm[2] = pp.z;
-                }
-                if (cal->gain_dn_per_e > 0) {
-                    // per pixel: shot noise K*signal (K scales with the gain), read noise, quantisation
-                    double K = cal->gain_dn_per_e * gf, rd = K * cal->read_noise_e;
-                    double var = (K * sig + rd * rd + 1.0 / 12) / n;
-                    ob.s_std = sqrt(var) / (sg / n) / (r->exposure_us * gf);
-                }
-                if (!obs_add(out, &ob)) {
-                    free(img);
-                    free(dark);
-                    fail = true;
-                    model_error(session_dir, 0, "out of memory");
-                    break;
-                }
-                taken[(size_t)w * cal->lamps->n + lamp] = 1;
-            }
-            out->frames_used++;
-            free(img);
-            free(dark);
-        }
-        free(qw);
-        free(pw);
-        free(ls);
-        model_tracer_free(tr);
-        model_scene_free(rot);
-        if (fail) {
-            free(done_row);
-            goto done;
-        }
-        if (o.verbose)
-            fprintf(stderr, "  %s: angle %.2f deg: %d windows, %d observations so far\n", session_dir,
-                    r0->measured_deg, nw, out->n);
-    }
-    free(done_row);
-    if (out->n == 0) {
-        model_error(session_dir, 0, "no usable observation of material %s (nothing lit, unsaturated and above %g DN "
-                    "on it)", out->material, o.min_signal_dn);
-        goto done;
-    }
-    ok = true;
-    goto done;
-oom:
-    model_error(session_dir, 0, "out of memory");
-done:
-    free(order);
-    free(win);
-    free(taken);
-    g_free(scene_path);
-    model_scene_free(scene);
-    rig_plan_free(plan);
-    rig_session_free(s);
-    if (!ok) fit_obs_free(out);
-    return ok;
-}
-
-// ---------------------------------------------------------------------------
-// Reference white
-
-bool fit_white(const fit_obs_set_t *obs, const fit_calib_t *cal, double albedo, const char *out_json,
-               json_t *prov)
-{
-    double kd = albedo / M_PI;
-    json_t *top = json_object();
-    json_object_set_new(top, "calibration", json_string("reference white: kc*I per lamp"));
-    json_object_set_new(top, "units", json_string("kc_I_per_us: DN per microsecond of exposure at 0 dB gain per "
-                                                  "(R in 1/sr / d^2 in mm^2), so P - Pa = kc_I_per_us * t_us * "
-                                                  "10^(gain_dB/20) * g(x,y) * R / d^2"));
-    json_object_set_new(top, "albedo", json_real(albedo));
-    json_object_set_new(top, "sample", json_string(obs->sample));
-    json_t *arr = json_array();
-    double *v = malloc((size_t)obs->n * sizeof *v);
-    bool ok = v != NULL;
-    for (int l = 0; ok && l < cal->lamps->n; l++) {
-        int n = 0;
-        for (int i = 0; i < obs->n; i++)
-            if (obs->o[i].lamp == l) v[n++] = obs->o[i].s_dn_per_us * obs->o[i].d_mm * obs->o[i].d_mm / (kd * obs->o[i].c.nl);
-        if (n < 10) {
-            model_error(out_json, 0, "lamp %s: %d observations of the reference white (need 10): capture it with "
-                        "that lamp alone", cal->lamps->lamps[l].name, n);
-            ok = false;
-            break;
-        }
-        qsort(v, (size_t)n, sizeof *v, model_cmp_double);
-        double med = v[n / 2];
-        for (int i = 0; i < n; i++) v[i] = fabs(v[i] - med);
-        qsort(v, (size_t)n, sizeof *v, model_cmp_double);
-        double mad = 1.4826 * v[n / 2];
-        json_t *e = json_object();
-        json_object_set_new(e, "name", json_string(cal->lamps->lamps[l].name));
-        json_object_set_new(e, "kc_I_per_us", json_real(med));
-        json_object_set_new(e, "spread_rel", json_real(mad / med));
-        json_object_set_new(e, "std_of_median_rel", json_real(1.2533 * mad / med / sqrt(n)));
-        json_object_set_new(e, "n_observations", json_integer(n));
-        json_array_append_new(arr, e);
-        printf("  %-12s kc*I = %.6g DN/us per (1/sr)/mm^2  (spread %.2f %%, %d windows)\n", cal->lamps->lamps[l].name,
-               med, 100 * mad / med, n);
-    }
-    free(v);
-    json_object_set_new(top, "lamps", arr);
-    if (prov) json_object_set_new(top, "provenance", json_incref(prov));
-    if (ok) {
-        char *d = g_path_get_dirname(out_json);
-        ok = model_mkdir_p(d) && model_write_json(out_json, top);
-        g_free(d);
-    }
-    json_decref(top);
-    return ok;
-}
-
-// ---------------------------------------------------------------------------
 // Commands
 
 typedef struct {
     const char *session, *calib, *out, *scene, *material, *model, *name, *report;
     double      albedo, k_sigma, sys_rel, cell_mm;
-    int         window, step;   // 0: fit_observe's defaults
+    int         window, step;   // 0: calib_observe's defaults
     bool        verbose;
 } mat_args_t;
 
@@ -725,91 +91,28 @@ static int parse_args(const char *cmd, int argc, char **argv, mat_args_t *a, voi
     return -1;
 }
 
-// Both commands: the calibrations of --calib and the observations of the
-// session. false with the message printed (cmd names the command).
-static bool load_and_observe(const char *cmd, const mat_args_t *a, bool need_white, fit_calib_t **cal,
-                             fit_obs_set_t *obs)
+// The calibrations of --calib and the observations of the session. false with
+// the message printed (cmd names the command).
+static bool load_and_observe(const char *cmd, const mat_args_t *a, bool need_white, calib_set_t **cal,
+                             calib_obs_set_t *obs)
 {
-    memset(obs, 0, sizeof *obs);
-    if (!(*cal = fit_calib_load(a->calib, need_white))) {
-        fprintf(stderr, "refl %s: %s\n", cmd, model_last_error());
-        return false;
-    }
-    fit_observe_options_t o = fit_observe_defaults();
+    calib_observe_options_t o = calib_observe_defaults();
     o.scene_path = a->scene;
     o.material = a->material;
     o.verbose = a->verbose;
     if (a->window > 0) o.window = a->window;
     if (a->step > 0) o.step = a->step;
-    if (!fit_observe(a->session, *cal, &o, obs)) {
+    if (!calib_observe_session(a->session, a->calib, need_white, &o, cal, obs)) {
         fprintf(stderr, "refl %s: %s\n", cmd, model_last_error());
         return false;
     }
     return true;
 }
 
-// Provenance of a command's output: the command, the session and every
-// calibration file read.
-static json_t *provenance(int argc, char **argv, const mat_args_t *a, const fit_calib_t *cal)
-{
-    json_t *prov = model_provenance(argc + 1, argv - 1);
-    model_provenance_input(prov, "session", a->session);
-    size_t i;
-    json_t *in;
-    json_array_foreach(cal->inputs, i, in) json_array_append(json_object_get(prov, "inputs"), in);
-    return prov;
-}
-
-static void white_usage(FILE *f)
-{
-    fprintf(f, "usage: refl calib white SESSION --calib DIR [--albedo A] [--scene FILE] [--material NAME]\n"
-               "                        [--window N] [--step N] -o WHITE.json\n"
-               "\n"
-               "The absolute scale kc*I of each lamp from a session of the reference white (a Lambertian standard\n"
-               "of albedo A, default 0.99): every lit window of the standard gives (P - Pa) d^2 / (g t kd n.l),\n"
-               "kd = A/pi; the median per lamp is written. DIR holds the geometry (camera.cameramodel), the lamp\n"
-               "positions (lamps.json) and optionally the gain calibration (gain.json and its maps). Put WHITE.json\n"
-               "in DIR (or DIR/white/) for refl fit material. Windows are N x N pixels (--window, default 5) on a\n"
-               "grid of N pixels (--step, default 8), each wholly on one face of the material.\n\nrefl %s\n", REFL_VERSION);
-}
-
-int fit_cmd_white(int argc, char **argv)
-{
-    mat_args_t a = { .albedo = 0.99 };
-    int rc = parse_args("calib white", argc, argv, &a, white_usage);
-    if (rc >= 0) return rc;
-    if (a.albedo > 1) {
-        fprintf(stderr, "refl calib white: --albedo %g: an albedo is at most 1\n", a.albedo);
-        return 2;
-    }
-    if (a.cell_mm > 0) {
-        fprintf(stderr, "refl calib white: --albedo-cells is an option of refl fit material\n");
-        return 2;
-    }
-    fit_calib_t *cal = NULL;
-    fit_obs_set_t obs;
-    rc = 1;
-    if (!load_and_observe("calib white", &a, false, &cal, &obs)) goto done;
-    printf("refl calib white: %d observations of %s in %d frames (%d skipped)\n", obs.n, obs.material,
-           obs.frames_used, obs.frames_skipped);
-    json_t *prov = provenance(argc, argv, &a, cal);
-    if (fit_white(&obs, cal, a.albedo, a.out, prov)) {
-        printf("%s\n", a.out);
-        rc = 0;
-    } else {
-        fprintf(stderr, "refl calib white: %s\n", model_last_error());
-    }
-    json_decref(prov);
-done:
-    fit_obs_free(&obs);
-    fit_calib_free(cal);
-    return rc;
-}
-
 // The report of a material fit: DIR/samples.csv (every sample with its
 // geometry, measured and fitted R), plots by scripts/fit_material_report.py,
 // and DIR/report.html with the parameter table and the model comparison.
-static bool material_report(const char *dir, const fit_obs_set_t *obs, const fit_samples_t *smp,
+static bool material_report(const char *dir, const calib_obs_set_t *obs, const fit_samples_t *smp,
                             const fit_brdf_result_t *res, int nres, int best, const json_t *entry, const json_t *prov)
 {
     if (!model_mkdir_p(dir)) return false;
@@ -923,7 +226,7 @@ static void cells_free(albedo_cells_t *ac)
     memset(ac, 0, sizeof *ac);
 }
 
-static bool cells_assign(const fit_obs_set_t *obs, double cell_mm, albedo_cells_t *ac)
+static bool cells_assign(const calib_obs_set_t *obs, double cell_mm, albedo_cells_t *ac)
 {
     memset(ac, 0, sizeof *ac);
     GHashTable *h = g_hash_table_new_full(g_str_hash, g_str_equal, g_free, NULL);
@@ -931,7 +234,7 @@ static bool cells_assign(const fit_obs_set_t *obs, double cell_mm, albedo_cells_
     ac->cell = malloc((size_t)(obs->n ? obs->n : 1) * sizeof *ac->cell);
     if (!h || !raw || !ac->cell) goto oom;
     for (int i = 0; i < obs->n; i++) {
-        const fit_obs_t *o = &obs->o[i];
+        const calib_obs_t *o = &obs->o[i];
         char key[96];
         snprintf(key, sizeof key, "%d:%.0f:%.0f:%.0f", o->face, floor(o->p0_mm[0] / cell_mm),
                  floor(o->p0_mm[1] / cell_mm), floor(o->p0_mm[2] / cell_mm));
@@ -1111,8 +414,8 @@ int fit_cmd_material(int argc, char **argv)
         fprintf(stderr, "refl fit material: --model: unknown model %s\n", a.model);
         return 2;
     }
-    fit_calib_t *cal = NULL;
-    fit_obs_set_t obs;
+    calib_set_t *cal = NULL;
+    calib_obs_set_t obs;
     fit_samples_t *smp = NULL, *csmp = NULL;
     albedo_cells_t ac = { 0 };
     rc = 1;
@@ -1120,7 +423,7 @@ int fit_cmd_material(int argc, char **argv)
     smp = fit_samples_new();
     snprintf(smp->source, sizeof smp->source, "%s", a.session);
     for (int i = 0; i < obs.n; i++) {
-        const fit_obs_t *b = &obs.o[i];
+        const calib_obs_t *b = &obs.o[i];
         if (!fit_samples_add_disc(smp, &b->c, b->has_disc ? b->disc : NULL,
                                   b->s_dn_per_us * b->d_mm * b->d_mm / cal->kcI_per_us[b->lamp], 1)) {
             fprintf(stderr, "refl fit material: observation %d (step %d) gives no usable sample (kc*I of lamp %s "
@@ -1194,7 +497,7 @@ int fit_cmd_material(int argc, char **argv)
     }
     json_array_append_new(mats, e);
     json_object_set_new(top, "materials", mats);
-    json_object_set_new(top, "provenance", provenance(argc, argv, &a, cal));
+    json_object_set_new(top, "provenance", calib_observe_provenance(argc + 1, argv - 1, a.session, cal));
     char *od = g_path_get_dirname(a.out);
     bool made = model_mkdir_p(od);
     g_free(od);
@@ -1219,7 +522,7 @@ done:
     fit_samples_free(smp);
     fit_samples_free(csmp);
     cells_free(&ac);
-    fit_obs_free(&obs);
-    fit_calib_free(cal);
+    calib_obs_free(&obs);
+    calib_set_free(cal);
     return rc;
 }

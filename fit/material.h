@@ -1,18 +1,6 @@
-// fit/material.h — from a capture session and the calibrations to
-// radiometric observations of one material, the reference white's kc*I per
-// lamp, and BRDF samples for the material fit.
-//
-// The grey value model (model/model.h): P = Pa + kc g(x,y) sum_i V_i I_i R_i / d_i^2.
-// An observation is a window (w x w pixels, all on one face of the material,
-// lit by the frame's single lamp) in one frame: its mean grey value minus the
-// dark level (the gain calibration's offset map, else the session's dark frame
-// of that exposure), divided by the flat field g (the gain calibration's map,
-// when given), per microsecond of exposure and at 0 dB: s = (P - Pa) / (g t 10^(G/20))
-// in DN/us. Exposure brackets are merged to high dynamic range by keeping, per
-// window, angle and lamp, the longest exposure whose window stays below 95 % of
-// saturation.
-//   reference white of albedo a (Lambertian, kd = a/pi): kcI_i = s d^2 / (kd n.l)
-//   a material: R = s d^2 / kcI_i  (f_r cos theta_i, 1/sr)
+// fit/material.h — the material fit: from calibrated observations of a
+// material (calib_observe, calib/calib.h) to BRDF samples, fitted models and
+// priors.
 #pragma once
 
 #include <jansson.h>
@@ -25,82 +13,8 @@
 extern "C" {
 #endif
 
-// The calibrations a fit uses (loaded from a calibration directory).
-typedef struct {
-    model_camera_t *cam;            // geometry: camera.cameramodel (extrinsics in the rig frame)
-    model_lamps_t  *lamps;          // lamps.json positions (intensity 1, point lamps)
-    float          *offset_dn;      // gain calibration: dark offset map (NULL: use dark frames)
-    float          *flat;           // gain calibration: flat field g(x,y), mean 1 (NULL: 1)
-    double          saturation_dn;  // 0: from the frame's bits
-    double          gain_dn_per_e;  // gain calibration's K at 0 dB (0: unknown)
-    double          read_noise_e;   // its read noise
-    double          nonlin_a_per_dn;// response compression S_m = S (1 - a S) at 0 dB from its curves (0: none)
-    int             W, H;
-    bool            have_white;
-    double          kcI_per_us[32]; // white.json: kc I per lamp (DN/us at 0 dB per (1/sr)/mm^2)
-    double          lamp_radius_mm[32]; // lamps.json radius_mm per lamp (0 absent: a point lamp)
-    json_t         *inputs;         // [{role, path, sha256}] of every file read
-} fit_calib_t;
-
-// Load DIR: camera.cameramodel (or geometry/camera.cameramodel), lamps.json
-// (or lamps/lamps.json), optionally gain.json with offset_dn.tiff and
-// flat_field.tiff or prnu_gain.tiff (or gain/...), and white.json (or
-// white/white.json). need_white: white.json is required. NULL + message.
-fit_calib_t *fit_calib_load(const char *dir, bool need_white);
-// The same from explicit files: camera model and lamps.json required, gain.json
-// (its maps beside it) and white.json optional (NULL).
-fit_calib_t *fit_calib_load_files(const char *camera, const char *lamps_json, const char *gain_json,
-                                  const char *white_json);
-void         fit_calib_free(fit_calib_t *c);
-
-typedef struct {
-    int             lamp;           // index in calib lamps
-    double          angle_deg;      // measured turntable angle
-    double          exposure_us, gain_db;
-    double          q[2];           // window centre, pixels
-    model_cosines_t c;
-    bool            has_disc;       // lit by a finite lamp near the mirror direction: disc holds the
-    model_cosines_t disc[4];        // cosines of its 4 quadrature directions (fit_samples_t)
-    double          d_mm;
-    double          s_dn_per_us;    // dark and flat corrected signal per us at 0 dB
-    double          s_std;          // its expected temporal noise (shot, read, quantisation of the
-                                    // window mean; dark level noise-free), same unit; 0 without K
-    int             step;           // the session step of the frame
-    int             face;           // the scene face the window lies on
-    double          p0_mm[3];       // the window centre's surface point, rig frame at angle 0 (it
-                                    // turns with the table: the same point of the sample at every angle)
-} fit_obs_t;
-
-typedef struct {
-    int        n, cap;
-    fit_obs_t *o;
-    int        frames_used, frames_skipped;
-    char       sample[64], material[64];
-} fit_obs_set_t;
-
-typedef struct {
-    const char *scene_path;     // NULL: the virtual rig's truth file names it (session facts)
-    const char *material;       // NULL: the sample's material (truth) or the scene's only material
-    int         window;         // window size, pixels (default 5)
-    int         step;           // grid step between windows, pixels (default 8)
-    double      min_signal_dn;  // windows below this (after dark) are dropped (default 20)
-    bool        verbose;
-} fit_observe_options_t;
-
-fit_observe_options_t fit_observe_defaults(void);
-// Observations of the session's sample material. false + message (names the
-// session, file or frame).
-bool fit_observe(const char *session_dir, const fit_calib_t *cal, const fit_observe_options_t *opt,
-                 fit_obs_set_t *out);
-void fit_obs_free(fit_obs_set_t *s);
-
-// Reference white: kc*I per lamp (median over its observations) and the
-// relative spread; writes DIR/white.json. albedo: the standard's (e.g. 0.99).
-bool fit_white(const fit_obs_set_t *obs, const fit_calib_t *cal, double albedo, const char *out_json,
-               json_t *provenance);
-
-// `refl calib white` and `refl fit material` (fit/material.c).
-int fit_cmd_white(int argc, char **argv);
+// `refl fit material` (fit/material.c); its observations come from
+// calib_observe (calib/calib.h).
 int fit_cmd_material(int argc, char **argv);
 
 #ifdef __cplusplus

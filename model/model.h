@@ -337,6 +337,12 @@ bool model_sensor_parse(const char *text, size_t len, const char *name, model_se
 // when there is no such section.
 model_materials_t *model_materials_from_ini(const model_ini_t *ini);   // [material NAME]
 model_lamps_t     *model_lamps_from_ini(const model_ini_t *ini);       // [lamp NAME]
+// The 4 quadrature directions of a spherical lamp of radius radius_mm seen at
+// distance d_mm in unit direction l: the mean of R over them is R averaged over
+// the lamp's disc to its second moments (at r/sqrt(2) from the centre along
+// two orthogonal axes; the material fit's finite lamps). false when the lamp
+// is a point (radius 0) or the point lies inside it (model/shade.c).
+bool model_lamp_disc_dirs(model_vec3_t l, double d_mm, double radius_mm, model_vec3_t out[4]);
 bool               model_sensor_from_ini(const model_ini_t *ini, model_sensor_t *out);  // [sensor]
 
 // ---------------------------------------------------------------------------

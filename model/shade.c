@@ -676,3 +676,14 @@ done:
     free(c);
     return ok;
 }
+
+bool model_lamp_disc_dirs(model_vec3_t l, double d_mm, double radius_mm, model_vec3_t out[4])
+{
+    if (!(radius_mm > 0) || !(d_mm > radius_mm)) return false;
+    double t = tan(asin(radius_mm / d_mm) / sqrt(2));
+    model_vec3_t e[2];
+    frame_of(l, &e[0], &e[1]);
+    for (int k = 0; k < 4; k++)
+        out[k] = v3_unit(v3_add(l, v3_scale(e[k / 2], k % 2 ? -t : t)));
+    return true;
+}

@@ -345,7 +345,7 @@ TEST(fit_lamp_disc_quadrature)
         double a = (55 + 0.5 * off) * d;
         model_vec3_t l = v3(-sin(a), 0, cos(a));
         model_vec3_t q[4];
-        CHECK(fit_lamp_disc_dirs(l, d_mm, r_mm, q));
+        CHECK(model_lamp_disc_dirs(l, d_mm, r_mm, q));
         model_cosines_t c = model_cosines(n, l, v), cq[4];
         for (int k = 0; k < 4; k++) cq[k] = model_cosines(n, q[k], v);
         fit_samples_t *s = fit_samples_new();
@@ -386,6 +386,6 @@ TEST(fit_lamp_disc_quadrature)
     CHECK_MSG(worst_quad < 0.1 * worst_point, "quadrature off by %.3f %% (point %.2f %%)", 100 * worst_quad,
               100 * worst_point);
     model_vec3_t q[4];
-    CHECK(!fit_lamp_disc_dirs(v3(0, 0, 1), 650, 0, q));   // a point lamp
-    CHECK(!fit_lamp_disc_dirs(v3(0, 0, 1), 10, 15, q));   // inside the lamp
+    CHECK(!model_lamp_disc_dirs(v3(0, 0, 1), 650, 0, q));   // a point lamp
+    CHECK(!model_lamp_disc_dirs(v3(0, 0, 1), 10, 15, q));   // inside the lamp
 }

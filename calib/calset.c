@@ -1,0 +1,236 @@
+// calib/calset.c — the calibration set a measurement uses: a calibration
+// directory's camera model, lamps.json, gain calibration (and its maps) and
+// the reference white, read into one calib_set_t (calib/calib.h).
+#define _GNU_SOURCE
+#include <errno.h>
+#include <glib.h>
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <unistd.h>
+
+#include "calib/calib.h"
+#include "model/report.h"
+#include "model/vec.h"
+#include "rig/rig.h"
+
+
+static char *find_in(const char *dir, const char *sub, const char *name)
+{
+    char *p = g_strdup_printf("%s/%s", dir, name);
+    if (access(p, R_OK) == 0) return p;
+    g_free(p);
+    p = g_strdup_printf("%s/%s/%s", dir, sub, name);
+    if (access(p, R_OK) == 0) return p;
+    g_free(p);
+    return NULL;
+}
+
+static bool add_input(calib_set_t *c, const char *role, const char *path)
+{
+    return model_inputs_add(c->inputs, role, path);
+}
+
+void calib_set_free(calib_set_t *c)
+{
+    if (!c) return;
+    model_camera_free(c->cam);
+    model_lamps_free(c->lamps);
+    free(c->offset_dn);
+    free(c->flat);
+    json_decref(c->inputs);
+    free(c);
+}
+
+static float *read_map(calib_set_t *c, const char *path, const char *role)
+{
+    int w, h;
+    float *m = model_image_read_float(path, &w, &h);
+    if (!m) return NULL;
+    if (w != c->W || h != c->H) {
+        model_error(path, 0, "%dx%d pixels, the camera model's imager is %dx%d", w, h, c->W, c->H);
+        free(m);
+        return NULL;
+    }
+    add_input(c, role, path);
+    return m;
+}
+
+calib_set_t *calib_set_load(const char *dir, bool need_white)
+{
+    char *cam = find_in(dir, "geometry", "camera.cameramodel"), *lamps = find_in(dir, "lamps", "lamps.json");
+    char *gain = find_in(dir, "gain", "gain.json"), *white = find_in(dir, "white", "white.json");
+    calib_set_t *c = NULL;
+    if (!cam)
+        model_error(dir, 0, "no camera.cameramodel (nor geometry/camera.cameramodel): run refl calib geometry first");
+    else if (!lamps)
+        model_error(dir, 0, "no lamps.json (nor lamps/lamps.json): run refl calib lamps first");
+    else if (!white && need_white)
+        model_error(dir, 0, "no white.json (nor white/white.json): run refl calib white on a reference-white session");
+    else
+        c = calib_set_load_files(cam, lamps, gain, white);
+    g_free(cam);
+    g_free(lamps);
+    g_free(gain);
+    g_free(white);
+    return c;
+}
+
+// The response compression a (per DN at 0 dB) of S_m = S (1 - a S), S the
+// linear signal, from a gain calibration's photon-transfer curves (gain.json:
+// gains[] at 0 dB, curves.exposure_us and curves.signal_dn): linear least
+// squares of S_m = u t + v - a S_m^2 over the steps below 90 % of saturation
+// (S_m^2 stands for S^2: the error is second order in a). 0 when the curves
+// are absent or say no compression.
+static double nonlinearity_of(json_t *gj, double sat)
+{
+    json_t *gains = json_object_get(gj, "gains"), *g0 = NULL;
+    for (size_t k = 0; k < json_array_size(gains); k++) {
+        json_t *e = json_array_get(gains, k);
+        if (fabs(json_number_value(json_object_get(e, "gain_db"))) < 1e-9) g0 = e;
+    }
+    json_t *cv = json_object_get(g0 ? g0 : gj, "curves");
+    json_t *t = json_object_get(cv, "exposure_us"), *S = json_object_get(cv, "signal_dn");
+    if (json_array_size(t) != json_array_size(S) || json_array_size(t) < 5) return 0;
+    double A[9] = { 0 }, b[3] = { 0 }, ts = 0, ss = 0;   // column scales
+    for (size_t i = 0; i < json_array_size(t); i++) {
+        ts = fmax(ts, fabs(json_number_value(json_array_get(t, i))));
+        ss = fmax(ss, fabs(json_number_value(json_array_get(S, i))));
+    }
+    if (!(ts > 0) || !(ss > 0)) return 0;
+    int n = 0;
+    for (size_t i = 0; i < json_array_size(t); i++) {
+        double ti = json_number_value(json_array_get(t, i)), si = json_number_value(json_array_get(S, i));
+        if (!(si > 0) || (sat > 0 && si > 0.9 * sat) || !isfinite(ti)) continue;
+        double x[3] = { ti / ts, 1, -si * si / (ss * ss) };
+        for (int r = 0; r < 3; r++) {
+            for (int c = 0; c < 3; c++) A[3 * r + c] += x[r] * x[c];
+            b[r] += x[r] * si;
+        }
+        n++;
+    }
+    if (n < 5 || !model_solve_linear(A, b, 3)) return 0;
+    double a = b[2] / (ss * ss);
+    return isfinite(a) && a > 0 && a < 1e-3 ? a : 0;
+}
+
+
+calib_set_t *calib_set_load_files(const char *cam, const char *lamps, const char *gain, const char *white)
+{
+    calib_set_t *c = calloc(1, sizeof *c);
+    char *off = NULL, *flat = NULL;
+    json_t *lj = NULL, *gj = NULL, *wj = NULL;
+    json_error_t je;
+    bool ok = false;
+    const char *dir = cam;
+    if (!c) return NULL;
+    c->inputs = json_array();
+    if (!(c->cam = model_camera_load(cam))) goto fail;
+    add_input(c, "camera", cam);
+    c->W = model_camera_width(c->cam);
+    c->H = model_camera_height(c->cam);
+    if (!(lj = json_load_file(lamps, 0, &je))) {
+        model_error(lamps, je.line, "not valid JSON: %s", je.text);
+        goto fail;
+    }
+    json_t *arr = json_object_get(lj, "lamps");
+    size_t nl = json_array_size(arr);
+    if (!nl || nl > 32) {
+        model_error(lamps, 0, "'lamps' must list 1 to 32 lamps (has %zu)", nl);
+        goto fail;
+    }
+    c->lamps = calloc(1, sizeof *c->lamps);
+    if (!c->lamps || !(c->lamps->lamps = calloc(nl, sizeof *c->lamps->lamps))) goto oom;
+    c->lamps->path = strdup(lamps);
+    for (size_t i = 0; i < nl; i++) {
+        json_t *e = json_array_get(arr, i), *p = json_object_get(e, "position_mm");
+        const char *name = json_string_value(json_object_get(e, "name"));
+        if (!name || json_array_size(p) != 3 || !json_is_number(json_array_get(p, 0)) ||
+            !json_is_number(json_array_get(p, 1)) || !json_is_number(json_array_get(p, 2))) {
+            model_error(lamps, 0, "lamps[%zu] needs a name and position_mm = [x, y, z]", i);
+            goto fail;
+        }
+        model_lamp_t *l = &c->lamps->lamps[i];
+        snprintf(l->name, sizeof l->name, "%s", name);
+        l->position_mm = v3(json_number_value(json_array_get(p, 0)), json_number_value(json_array_get(p, 1)),
+                            json_number_value(json_array_get(p, 2)));
+        l->intensity = 1;
+        // the emitting radius (refl calib lamps writes the one its highlight
+        // model used): the fit averages R over the lamp's disc
+        json_t *rad = json_object_get(e, "radius_mm");
+        if (rad && !(json_is_number(rad) && json_number_value(rad) >= 0 && json_number_value(rad) < 1000)) {
+            model_error(lamps, 0, "lamps[%zu] (%s): radius_mm must be a number of mm in [0, 1000)", i, name);
+            goto fail;
+        }
+        c->lamp_radius_mm[i] = rad ? json_number_value(rad) : 0;
+        c->lamps->n = (int)i + 1;
+    }
+    add_input(c, "lamps", lamps);
+    if (gain) {
+        if (!(gj = json_load_file(gain, 0, &je))) {
+            model_error(gain, je.line, "not valid JSON: %s", je.text);
+            goto fail;
+        }
+        add_input(c, "gain", gain);
+        json_t *sat = json_object_get(gj, "saturation_dn");
+        if (json_is_number(sat)) c->saturation_dn = json_number_value(sat);
+        json_t *K = json_object_get(gj, "system_gain_dn_per_e"), *rn = json_object_get(gj, "read_noise_e");
+        if (json_is_number(K) && json_is_number(rn)) {
+            c->gain_dn_per_e = json_number_value(K);
+            c->read_noise_e = json_number_value(rn);
+        }
+        c->nonlin_a_per_dn = nonlinearity_of(gj, c->saturation_dn);
+        char *gd = g_path_get_dirname(gain);
+        off = g_strdup_printf("%s/offset_dn.tiff", gd);
+        flat = g_strdup_printf("%s/flat_field.tiff", gd);
+        if (access(flat, R_OK) != 0) {
+            g_free(flat);
+            flat = g_strdup_printf("%s/prnu_gain.tiff", gd);
+        }
+        g_free(gd);
+        if (access(off, R_OK) == 0 && !(c->offset_dn = read_map(c, off, "offset map"))) goto fail;
+        if (access(flat, R_OK) == 0 && !(c->flat = read_map(c, flat, "flat field"))) goto fail;
+    }
+    if (white) {
+        if (!(wj = json_load_file(white, 0, &je))) {
+            model_error(white, je.line, "not valid JSON: %s", je.text);
+            goto fail;
+        }
+        json_t *wl = json_object_get(wj, "lamps");
+        for (int i = 0; i < c->lamps->n; i++) {
+            bool found = false;
+            for (size_t k = 0; k < json_array_size(wl); k++) {
+                json_t *e = json_array_get(wl, k);
+                const char *n = json_string_value(json_object_get(e, "name"));
+                json_t *v = json_object_get(e, "kc_I_per_us");
+                if (n && !strcmp(n, c->lamps->lamps[i].name) && json_is_number(v)) {
+                    c->kcI_per_us[i] = json_number_value(v);
+                    found = true;
+                }
+            }
+            if (!found) {
+                model_error(white, 0, "no kc_I_per_us for lamp '%s' (of %s): run refl calib white with that lamp",
+                            c->lamps->lamps[i].name, lamps);
+                goto fail;
+            }
+        }
+        c->have_white = true;
+        add_input(c, "white", white);
+    }
+    ok = true;
+    goto done;
+oom:
+    model_error(dir, 0, "out of memory");
+fail:
+done:
+    g_free(off);
+    g_free(flat);
+    json_decref(lj);
+    json_decref(gj);
+    json_decref(wj);
+    if (ok) return c;
+    calib_set_free(c);
+    return NULL;
+}
+
