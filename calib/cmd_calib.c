@@ -93,22 +93,19 @@ int calib_cmd_white(int argc, char **argv)
     const char *session = cli.positional[0];
     calib_set_t *cal = NULL;
     calib_obs_set_t obs;
-    rc = 1;
-    if (!calib_observe_session(session, calib_dir, false, &o, &cal, &obs)) {
-        fprintf(stderr, "refl calib white: %s\n", model_last_error());
-        goto done;
+    json_t *prov = NULL;
+    bool q = model_error_quiet_thread(true);
+    bool ok = calib_observe_session(session, calib_dir, false, &o, &cal, &obs);
+    if (ok) {
+        printf("refl calib white: %d observations of %s in %d frames (%d skipped)\n", obs.n, obs.material,
+               obs.frames_used, obs.frames_skipped);
+        prov = calib_observe_provenance(argc + 1, argv - 1, session, cal);
+        ok = calib_white(&obs, cal, albedo, out, prov);
     }
-    printf("refl calib white: %d observations of %s in %d frames (%d skipped)\n", obs.n, obs.material,
-           obs.frames_used, obs.frames_skipped);
-    json_t *prov = calib_observe_provenance(argc + 1, argv - 1, session, cal);
-    if (calib_white(&obs, cal, albedo, out, prov)) {
-        printf("%s\n", out);
-        rc = 0;
-    } else {
-        fprintf(stderr, "refl calib white: %s\n", model_last_error());
-    }
+    model_error_quiet_thread(q);
+    if (ok) printf("%s\n", out);
+    rc = ok ? 0 : model_error_report("calib white");
     json_decref(prov);
-done:
     calib_obs_free(&obs);
     calib_set_free(cal);
     return rc;

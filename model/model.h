@@ -44,6 +44,10 @@ void model_error_set(const char *where_file, int where_line, const char *fmt, ..
     __attribute__((format(printf, 3, 4)));
 const char *model_last_error(void);
 void model_error_clear(void);
+// For commands, which own what reaches stderr: run the library quietly
+// (model_error_quiet_thread(true)) and print its one message once,
+// "refl CMD: <message>". Returns 1, the exit status of an error.
+int model_error_report(const char *cmd);
 // Quiet mode (for tests): errors are kept, not printed. Returns the old value.
 // Process-wide: set it once (the test harness does); code that silences its
 // own errors for a moment uses model_error_quiet_thread, since toggling the

@@ -49,6 +49,12 @@ void model_error_set(const char *where_file, int where_line, const char *fmt, ..
 }
 
 const char *model_last_error(void) { return last_error; }
+
+int model_error_report(const char *cmd)
+{
+    if (!atomic_load(&quiet_mode)) fprintf(stderr, "refl %s: %s\n", cmd, last_error[0] ? last_error : "failed");
+    return 1;
+}
 void model_error_clear(void) { last_error[0] = 0; }
 bool model_error_quiet(bool quiet) { return atomic_exchange(&quiet_mode, quiet); }
 
