@@ -130,18 +130,32 @@ static bool hash_inputs(input_t *in, int n)
     return true;
 }
 
+// Options render and edges share: the scene's inputs, the grey value's
+// offset and scale, and the view (rows of a model_opt_t table).
+#define SCENE_INPUT_OPTS                                                                                           \
+    MODEL_OPT_VALUE("--camera", "CAM.cameramodel", "camera model (mrcal); its extrinsics place it in the rig frame", \
+                    true),                                                                                         \
+    MODEL_OPT_VALUE("--lamps", "LAMPS.ini", "lamps: [lamp NAME] position_mm, intensity, radius_mm", true),         \
+    MODEL_OPT_VALUE("--materials", "MATS.ini", "materials: [material NAME] model and parameters", true)
+#define SHADING_OPTS                                                                                               \
+    MODEL_OPT_VALUE("--kc", "K", "camera parameter kc, DN per radiance unit (default 1)", false),                  \
+    MODEL_OPT_VALUE("--offset", "PA", "offset Pa, DN (default 0)", false)
+#define VIEW_OPTS                                                                                                  \
+    MODEL_OPT_VALUE("--turntable-deg", "A",                                                                        \
+                    "turntable angle: the scene is rotated by A deg about the rig's z axis (default 0)", false),   \
+    MODEL_OPT_VALUE("--threads", "N", "worker threads (default: REFL_THREADS or the online CPUs)", false),         \
+    MODEL_OPT_VALUE("--planarity-tol-mm", "T", "max distance of a face's vertex from its plane, mm (default 0.01)", \
+                    false)
+
 // ---------------------------------------------------------------------------
 // refl render
 
 int model_cmd_render(int argc, char **argv)
 {
     model_opt_t opts[] = {
-        MODEL_OPT_VALUE("--camera", "CAM.cameramodel", "camera model (mrcal); its extrinsics place it in the rig frame", true),
-        MODEL_OPT_VALUE("--lamps", "LAMPS.ini", "lamps: [lamp NAME] position_mm, intensity, radius_mm", true),
-        MODEL_OPT_VALUE("--materials", "MATS.ini", "materials: [material NAME] model and parameters", true),
+        SCENE_INPUT_OPTS,
         MODEL_OPT_VALUE("-o", "OUT", "output image: .png (16-bit, P rounded and clipped to 0..65535) or .tif/.tiff (float32 P)", true),
-        MODEL_OPT_VALUE("--kc", "K", "camera parameter kc, DN per radiance unit (default 1)", false),
-        MODEL_OPT_VALUE("--offset", "PA", "offset Pa, DN (default 0)", false),
+        SHADING_OPTS,
         MODEL_OPT_VALUE("--gain-map", "G.tiff", "per-pixel relative sensitivity g(x,y) (float TIFF, camera size, mean 1)", false),
         MODEL_OPT_VALUE("--interreflection", "MODE", "none | thesis | mc (default none)", false),
         MODEL_OPT_VALUE("--rho", "R", "thesis interreflection: weight of the virtual sources (default 0.05)", false),
@@ -149,9 +163,7 @@ int model_cmd_render(int argc, char **argv)
         MODEL_OPT_VALUE("--mc-bounces", "N", "mc: indirect bounces (default 2)", false),
         MODEL_OPT_VALUE("--seed", "N", "mc: random seed (default 1)", false),
         MODEL_OPT_VALUE("--sensor", "SENSOR.ini", "apply the sensor stage (noise, quantisation) after the physics", false),
-        MODEL_OPT_VALUE("--turntable-deg", "A", "turntable angle: the scene is rotated by A deg about the rig's z axis (default 0)", false),
-        MODEL_OPT_VALUE("--threads", "N", "worker threads (default: REFL_THREADS or the online CPUs)", false),
-        MODEL_OPT_VALUE("--planarity-tol-mm", "T", "max distance of a face's vertex from its plane, mm (default 0.01)", false),
+        VIEW_OPTS,
         MODEL_OPT_VALUE("--info", "INFO.tiff", "multi-page TIFF: ideal P (float32), face id (int32), lit mask per lamp (uint8)", false),
     };
     model_cli_t c = { .cmd = "render", .synopsis = "SCENE", .opts = opts, .nopts = MODEL_NOPTS(opts), .min_positional = 1, .max_positional = 1 };
@@ -398,15 +410,10 @@ static void lamp_letters(const model_lamps_t *lamps, uint32_t bits, char *out, s
 int model_cmd_edges(int argc, char **argv)
 {
     model_opt_t opts[] = {
-        MODEL_OPT_VALUE("--camera", "CAM.cameramodel", "camera model (mrcal); its extrinsics place it in the rig frame", true),
-        MODEL_OPT_VALUE("--lamps", "LAMPS.ini", "lamps: [lamp NAME] position_mm, intensity, radius_mm", true),
-        MODEL_OPT_VALUE("--materials", "MATS.ini", "materials: [material NAME] model and parameters", true),
-        MODEL_OPT_VALUE("--kc", "K", "camera parameter kc, DN per radiance unit (default 1)", false),
-        MODEL_OPT_VALUE("--offset", "PA", "offset Pa, DN (default 0)", false),
+        SCENE_INPUT_OPTS,
+        SHADING_OPTS,
         MODEL_OPT_VALUE("--feature-angle-deg", "A", "skip edges between faces whose normals differ by A deg or less (default 1)", false),
-        MODEL_OPT_VALUE("--turntable-deg", "A", "turntable angle: the scene is rotated by A deg about the rig's z axis (default 0)", false),
-        MODEL_OPT_VALUE("--threads", "N", "worker threads (default: REFL_THREADS or the online CPUs)", false),
-        MODEL_OPT_VALUE("--planarity-tol-mm", "T", "max distance of a face's vertex from its plane, mm (default 0.01)", false),
+        VIEW_OPTS,
         MODEL_OPT_VALUE("--json", "OUT.json", "write the edges, units and provenance as JSON", false),
     };
     model_cli_t c = { .cmd = "edges", .synopsis = "SCENE", .opts = opts, .nopts = MODEL_NOPTS(opts), .min_positional = 1, .max_positional = 1 };
