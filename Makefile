@@ -51,7 +51,7 @@ MODEL_SRC := model/util.c model/ini.c model/scene.c model/config.c model/brdf.c 
              model/image.c model/edges.c model/workpiece.c model/report.c model/opts.c model/cmd.c
 RIG_SRC   := rig/rig.c rig/turntable_apt.c rig/turntable_sim.c rig/lamps.c \
              rig/camera_aravis.c rig/gv_camera.c rig/virtual.c rig/config.c rig/cmd_rig.c \
-             rig/plan.c rig/journal.c rig/session.c rig/truth.c rig/capture.c rig/cmd_capture.c
+             rig/plan.c rig/journal.c rig/session.c rig/truth.c rig/pixfmt.c rig/capture.c rig/cmd_capture.c
 CALIB_SRC := calib/capture.c calib/calset.c calib/observe.c calib/white.c calib/cmd_calib.c calib/geometry.c calib/lamps.c calib/gain.c
 FIT_SRC   := fit/brdf_fit.c fit/material.c fit/cmd_fit.c fit/verify.c fit/verify_lab.c fit/verify_study.c fit/cmd_verify.c fit/lightplan.c fit/cmd_plan.c
 MODEL_CXX_SRC := model/lsq.cc
@@ -67,7 +67,7 @@ TEST_SRC  := tests/harness.c tests/test_brdf.c tests/test_scene.c tests/test_con
              tests/test_plan.c tests/test_capture.c tests/test_lsq.c tests/test_fit_brdf.c \
              tests/test_fit_material.c tests/test_calib_geometry.c tests/test_calib_lamps.c \
              tests/test_calib_gain.c tests/test_verify.c \
-             tests/test_lightplan.c
+             tests/test_lightplan.c tests/test_rig_pixfmt.c
 BENCH_SRC := tests/bench.c
 FUZZ_SRC  := tests/fuzz_parsers.c
 
