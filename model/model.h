@@ -85,7 +85,9 @@ void   model_utc_text(double t_s, char out[40]);
 // subcommand; arguments quoted where needed). Free with g_free().
 char  *model_command_line(int argc, char **argv);
 // A command-line usage error: "refl CMD: <message>" and "(refl CMD --help for
-// the options)" on stderr; returns 2, the exit status of a usage error.
+// the options)" on stderr; returns 2, the exit status of a usage error. The
+// same printer as model_cli_error (model/opts.c), for errors found without the
+// command's option table at hand.
 int    model_usage_error(const char *cmd, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
 // Solve A x = b (n x n, row-major; A and b overwritten, x in b) by Gaussian
 // elimination with partial pivoting. false when A is singular.

@@ -12,14 +12,42 @@ static void opt_lhs(const model_opt_t *o, char *buf, size_t n)
              o->metavar ? o->metavar : "");
 }
 
-void model_cli_usage(const model_cli_t *c, FILE *f)
+// The usage line: "usage: refl CMD SYNOPSIS [--opt V]..."
+static void usage_line(const model_cli_t *c, FILE *f)
 {
     fprintf(f, "usage: refl %s%s%s", c->cmd, c->synopsis && c->synopsis[0] ? " " : "", c->synopsis ? c->synopsis : "");
     for (int i = 0; i < c->nopts; i++) {
         const model_opt_t *o = &c->opts[i];
         fprintf(f, o->required ? " %s%s%s" : " [%s%s%s]", o->name, o->metavar ? " " : "", o->metavar ? o->metavar : "");
     }
-    fprintf(f, "\n(refl %s --help for the options)\n", c->cmd);
+    fprintf(f, "\n");
+}
+
+void model_cli_usage(const model_cli_t *c, FILE *f)
+{
+    usage_line(c, f);
+    fprintf(f, "(refl %s --help for the options)\n", c->cmd);
+}
+
+// The one usage-error printer: "refl CMD: message", the usage line when the
+// command's table is at hand, and the --help hint. Returns 2.
+static int usage_error_v(const char *cmd, const model_cli_t *c, const char *fmt, va_list ap)
+{
+    fprintf(stderr, "refl %s: ", cmd);
+    vfprintf(stderr, fmt, ap);
+    fprintf(stderr, "\n");
+    if (c) usage_line(c, stderr);
+    fprintf(stderr, "(refl %s --help for the options)\n", cmd);
+    return MODEL_CLI_USAGE;
+}
+
+int model_usage_error(const char *cmd, const char *fmt, ...)
+{
+    va_list ap;
+    va_start(ap, fmt);
+    int rc = usage_error_v(cmd, NULL, fmt, ap);
+    va_end(ap);
+    return rc;
 }
 
 void model_cli_help(const model_cli_t *c, FILE *f)
@@ -44,12 +72,9 @@ int model_cli_error(const model_cli_t *c, const char *fmt, ...)
 {
     va_list ap;
     va_start(ap, fmt);
-    fprintf(stderr, "refl %s: ", c->cmd);
-    vfprintf(stderr, fmt, ap);
-    fprintf(stderr, "\n");
+    int rc = usage_error_v(c->cmd, c, fmt, ap);
     va_end(ap);
-    model_cli_usage(c, stderr);
-    return MODEL_CLI_USAGE;
+    return rc;
 }
 
 static model_opt_t *find_opt(model_cli_t *c, const char *name, size_t len)

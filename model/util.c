@@ -345,13 +345,3 @@ int model_cmp_double(const void *a, const void *b)
     return x < y ? -1 : x > y;
 }
 
-int model_usage_error(const char *cmd, const char *fmt, ...)
-{
-    va_list ap;
-    va_start(ap, fmt);
-    fprintf(stderr, "refl %s: ", cmd);
-    vfprintf(stderr, fmt, ap);
-    fprintf(stderr, "\n(refl %s --help for the options)\n", cmd);
-    va_end(ap);
-    return 2;
-}
