@@ -1,4 +1,4 @@
-// tests/test_render.c — ray casting (model/trace.c) and grey values /
+// tests/test_model_render.c — ray casting (model/trace.c) and grey values /
 // rendering (model/shade.c) against analytic answers.
 #include <mrcal/poseutils.h>
 #include <stdio.h>

@@ -1,4 +1,4 @@
-// tests/test_sphere.c — the exact sphere primitive: D3D '@sphere' (model/scene.c),
+// tests/test_model_sphere.c — the exact sphere primitive: D3D '@sphere' (model/scene.c),
 // ray casting, shadows and highlights (model/trace.c, model/shade.c) against
 // analytic answers.
 #define _GNU_SOURCE

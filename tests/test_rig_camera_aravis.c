@@ -1,4 +1,4 @@
-// tests/test_camera_aravis.c — the Aravis camera backend over the real GigE
+// tests/test_rig_camera_aravis.c — the Aravis camera backend over the real GigE
 // Vision path on 127.0.0.1, against the virtual camera of rig/gv_camera.c
 // served by this process: settings, pixel values, metadata, frame ids, lost
 // frames, a camera that disappears, no camera at all, the GenICam features and

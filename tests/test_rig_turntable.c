@@ -1,4 +1,4 @@
-// tests/test_turntable.c — the turntable: errors, stage table, motion time,
+// tests/test_rig_turntable.c — the turntable: errors, stage table, motion time,
 // the simulated stage, and the unmodified APT driver against a simulated
 // FTDI + APT controller (tests/apt_sim.c) under umockdev.
 //
