@@ -5,7 +5,7 @@
 // The APT tests (apt_umock_*) need libumockdev-preload loaded at process
 // start, so turntable_apt_under_umockdev re-runs this test binary as
 // `umockdev-wrapper <self> apt_umock_`; run directly, the apt_umock_* tests
-// return at once.
+// are skipped.
 #define _GNU_SOURCE
 #include <stdlib.h>
 #include <time.h>
@@ -302,7 +302,7 @@ static rig_turntable_t *open_homed(void)
 
 TEST(apt_umock_open_info)
 {
-    if (!apt_sim_available()) return;
+    if (!apt_sim_available()) SKIP("runs under umockdev-wrapper, from turntable_apt_under_umockdev");
     apt_sim_device_t d = apt_sim_device_defaults();
     apt_sim_t *s = sim_start(&d, 1);
     rig_turntable_t *t = NULL;
@@ -338,7 +338,7 @@ TEST(apt_umock_open_info)
 
 TEST(apt_umock_home_and_moves)
 {
-    if (!apt_sim_available()) return;
+    if (!apt_sim_available()) SKIP("runs under umockdev-wrapper, from turntable_apt_under_umockdev");
     apt_sim_device_t d = apt_sim_device_defaults();
     apt_sim_t *s = sim_start(&d, 1);
     rig_turntable_t *t = NULL;
@@ -374,7 +374,7 @@ TEST(apt_umock_home_and_moves)
 
 TEST(apt_umock_status_while_moving_and_keepalive)
 {
-    if (!apt_sim_available()) return;
+    if (!apt_sim_available()) SKIP("runs under umockdev-wrapper, from turntable_apt_under_umockdev");
     apt_sim_device_t d = apt_sim_device_defaults();
     d.speed_deg_s = 150;                  // 90 deg in ~0.7 s
     d.accel_deg_s2 = 1500;
@@ -404,7 +404,7 @@ TEST(apt_umock_status_while_moving_and_keepalive)
 
 TEST(apt_umock_stop)
 {
-    if (!apt_sim_available()) return;
+    if (!apt_sim_available()) SKIP("runs under umockdev-wrapper, from turntable_apt_under_umockdev");
     apt_sim_device_t d = apt_sim_device_defaults();
     d.speed_deg_s = 100;
     d.accel_deg_s2 = 1000;
@@ -436,7 +436,7 @@ TEST(apt_umock_stop)
 
 TEST(apt_umock_wait_timeout)
 {
-    if (!apt_sim_available()) return;
+    if (!apt_sim_available()) SKIP("runs under umockdev-wrapper, from turntable_apt_under_umockdev");
     apt_sim_device_t d = apt_sim_device_defaults();
     d.speed_deg_s = 100;
     d.accel_deg_s2 = 1000;
@@ -458,7 +458,7 @@ TEST(apt_umock_wait_timeout)
 
 TEST(apt_umock_no_reply)
 {
-    if (!apt_sim_available()) return;
+    if (!apt_sim_available()) SKIP("runs under umockdev-wrapper, from turntable_apt_under_umockdev");
     apt_sim_device_t d = apt_sim_device_defaults();
     d.no_reply = true;
     apt_sim_t *s = sim_start(&d, 1);
@@ -474,7 +474,7 @@ TEST(apt_umock_no_reply)
 
 TEST(apt_umock_motion_error)
 {
-    if (!apt_sim_available()) return;
+    if (!apt_sim_available()) SKIP("runs under umockdev-wrapper, from turntable_apt_under_umockdev");
     apt_sim_device_t d = apt_sim_device_defaults();
     d.motion_error = true;
     apt_sim_t *s = sim_start(&d, 1);
@@ -495,7 +495,7 @@ TEST(apt_umock_motion_error)
 
 TEST(apt_umock_unplugged_mid_move)
 {
-    if (!apt_sim_available()) return;
+    if (!apt_sim_available()) SKIP("runs under umockdev-wrapper, from turntable_apt_under_umockdev");
     apt_sim_device_t d = apt_sim_device_defaults();
     d.unplug_mid_move = true;
     d.speed_deg_s = 300;
@@ -517,7 +517,7 @@ TEST(apt_umock_unplugged_mid_move)
 
 TEST(apt_umock_permission_denied)
 {
-    if (!apt_sim_available()) return;
+    if (!apt_sim_available()) SKIP("runs under umockdev-wrapper, from turntable_apt_under_umockdev");
     apt_sim_device_t d = apt_sim_device_defaults();
     d.deny_access = true;
     apt_sim_t *s = sim_start(&d, 1);
@@ -532,7 +532,7 @@ TEST(apt_umock_permission_denied)
 
 TEST(apt_umock_device_missing)
 {
-    if (!apt_sim_available()) return;
+    if (!apt_sim_available()) SKIP("runs under umockdev-wrapper, from turntable_apt_under_umockdev");
     apt_sim_device_t d = apt_sim_device_defaults();
     apt_sim_t *s = sim_start(&d, 1);
     rig_turntable_t *t = NULL;
@@ -548,7 +548,7 @@ TEST(apt_umock_device_missing)
 
 TEST(apt_umock_two_devices)
 {
-    if (!apt_sim_available()) return;
+    if (!apt_sim_available()) SKIP("runs under umockdev-wrapper, from turntable_apt_under_umockdev");
     apt_sim_device_t d[2] = { apt_sim_device_defaults(), apt_sim_device_defaults() };
     d[1].serial = "55000002";
     apt_sim_t *s = sim_start(d, 2);
@@ -575,7 +575,7 @@ TEST(apt_umock_two_devices)
 
 TEST(apt_umock_partial_messages_and_garbage)
 {
-    if (!apt_sim_available()) return;
+    if (!apt_sim_available()) SKIP("runs under umockdev-wrapper, from turntable_apt_under_umockdev");
     apt_sim_device_t d = apt_sim_device_defaults();
     d.trickle_bytes = 5;                  // every message arrives in 5-byte pieces
     d.garbage_before_info = true;         // and junk precedes the first reply
@@ -599,7 +599,7 @@ TEST(apt_umock_partial_messages_and_garbage)
 
 TEST(apt_umock_limit_switch)
 {
-    if (!apt_sim_available()) return;
+    if (!apt_sim_available()) SKIP("runs under umockdev-wrapper, from turntable_apt_under_umockdev");
     apt_sim_device_t d = apt_sim_device_defaults();
     d.limit_mid_move = true;
     apt_sim_t *s = sim_start(&d, 1);
