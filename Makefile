@@ -58,16 +58,18 @@ MODEL_CXX_SRC := model/lsq.cc
 LIB_SRC   := $(MODEL_SRC) $(RIG_SRC) $(CALIB_SRC) $(FIT_SRC)
 
 MAIN_SRC  := fit/main.c
-TEST_SRC  := tests/harness.c tests/test_brdf.c tests/test_scene.c tests/test_config.c \
-             tests/test_camera.c tests/test_render.c tests/test_sensor.c \
-             tests/test_image.c tests/test_edges.c tests/test_cli.c tests/test_corpus.c \
-             tests/test_turntable.c tests/apt_sim.c tests/test_lamps.c \
-             tests/test_camera_aravis.c tests/test_virtual.c tests/test_rig_config.c \
-             tests/test_rig_cli.c tests/test_sphere.c tests/test_virtual_inprocess.c \
-             tests/test_plan.c tests/test_capture.c tests/test_lsq.c tests/test_fit_brdf.c \
-             tests/test_fit_material.c tests/test_calib_geometry.c tests/test_calib_lamps.c \
-             tests/test_calib_gain.c tests/test_verify.c \
-             tests/test_lightplan.c tests/test_rig_pixfmt.c
+TEST_SRC  := tests/harness.c tests/fixtures.c \
+             tests/test_model_brdf.c tests/test_model_scene.c tests/test_model_config.c \
+             tests/test_model_camera.c tests/test_model_render.c tests/test_model_sensor.c \
+             tests/test_model_image.c tests/test_model_edges.c tests/test_model_cli.c \
+             tests/test_model_corpus.c tests/test_model_lsq.c tests/test_model_sphere.c \
+             tests/apt_sim.c tests/test_rig_turntable.c tests/test_rig_lamps.c \
+             tests/test_rig_camera_aravis.c tests/test_rig_virtual.c tests/test_rig_config.c \
+             tests/test_rig_cli.c tests/test_rig_virtual_inprocess.c \
+             tests/test_rig_plan.c tests/test_rig_capture.c \
+             tests/test_calib_geometry.c tests/test_calib_lamps.c tests/test_calib_gain.c \
+             tests/test_fit_brdf.c tests/test_fit_material.c tests/test_fit_verify.c \
+             tests/test_fit_lightplan.c tests/test_rig_pixfmt.c
 BENCH_SRC := tests/bench.c
 FUZZ_SRC  := tests/fuzz_parsers.c
 
@@ -104,7 +106,7 @@ $(BUILD)/model/brdf_batch.o: CFLAGS_ALL += -ftree-loop-vectorize -fvect-cost-mod
 $(BUILD)/model/sensor.o: CFLAGS_ALL += -ftree-loop-vectorize -fvect-cost-model=dynamic -fno-math-errno -fno-trapping-math -ffp-contract=off
 $(BIN)/refl-tests: LDLIBS_ALL += $(TEST_PKG_LIBS)
 
-# Helpers of tests/test_lamps.c: a fake libgpiod v1 for LD_PRELOAD (built
+# Helpers of tests/test_rig_lamps.c: a fake libgpiod v1 for LD_PRELOAD (built
 # without sanitizers so it preloads into the asan build too) and a child
 # program that holds lamps on until a signal arrives.
 FAKE_GPIOD := $(BUILD)/tests/libfake_gpiod.so
@@ -115,7 +117,7 @@ $(FAKE_GPIOD): tests/fake_gpiod.c | $(BUILD)/config.mk
 	@mkdir -p $(@D)
 	$(CC) -std=gnu11 -O2 -g $(WARN) -fPIC -shared $(PKG_CFLAGS) -o $@ $<
 
-# A full disk for LD_PRELOAD (tests/test_capture.c), where no tmpfs can be mounted.
+# A full disk for LD_PRELOAD (tests/test_rig_capture.c), where no tmpfs can be mounted.
 $(ENOSPC_SHIM): tests/enospc_shim.c | $(BUILD)/config.mk
 	@mkdir -p $(@D)
 	$(CC) -std=gnu11 -O2 -g $(WARN) -fPIC -shared -o $@ $< -ldl

@@ -123,7 +123,7 @@ static void fill_ray(struct RTCRay *r, model_vec3_t o, model_vec3_t d, double tf
 // The virtual rig over GigE Vision on 127.0.0.1
 
 // Test runs and benches of several build trees take turns on 127.0.0.1:3956
-// (the lock of tests/test_camera_aravis.c).
+// (the lock of tests/test_rig_camera_aravis.c).
 static int gige_session_begin(void)
 {
     char path[512];

@@ -4,7 +4,7 @@
 // as a full file system does (a write that does not fit writes what fits).
 // Covers the calls refl's writers reach through the PLT: fwrite (libpng and
 // refl's own stdio), write/pwrite/pwrite64 (SQLite, plain files). Only for
-// tests (tests/test_capture.c); the product is unchanged.
+// tests (tests/test_rig_capture.c); the product is unchanged.
 #define _GNU_SOURCE
 #include <dlfcn.h>
 #include <errno.h>

@@ -15,7 +15,7 @@
 // examples/ directory), else "examples" (run from the repo's top directory).
 //
 // Used by the libFuzzer target (tests/fuzz_parsers.c) and by the corpus replay
-// test (tests/test_corpus.c).
+// test (tests/test_model_corpus.c).
 #pragma once
 
 #include <stddef.h>

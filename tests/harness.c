@@ -1,10 +1,18 @@
 // tests/harness.c — the runner behind tests/test.h.
+//
+// Each test runs in its own child process (fork), in a process group of its
+// own: a crash, an abort or a signal fails that test, with the signal named,
+// and not the run; a test still running after $REFL_TEST_TIMEOUT seconds
+// (default 600) is killed with its group and fails. The child reports its
+// failed checks, a skip and its reason, and its temporary directory through a
+// shared page; the parent removes the directory after the child has ended.
 #define _GNU_SOURCE
 #include <errno.h>
 #include <fcntl.h>
 #include <ftw.h>
 #include <glib.h>
 #include <sys/file.h>
+#include <sys/mman.h>
 #include <poll.h>
 #include <signal.h>
 #include <stdarg.h>
@@ -23,7 +31,17 @@ typedef struct {
 
 static test_t tests[1024];
 static int ntests;
-static int cur_failures;
+
+// What the child running a test tells the parent (a shared anonymous page).
+typedef struct {
+    int failures;
+    bool finished;       // the test function returned (or skipped)
+    bool skipped;
+    char reason[512];    // of the skip
+    char tmpdir[512];    // made by test_tmpdir(), removed by the parent
+} test_result_t;
+
+static test_result_t *cur;
 static char tmpdir[512];
 
 void test_register(const char *name, test_fn_t fn, const char *file)
@@ -40,7 +58,18 @@ void test_fail(const char *file, int line, const char *fmt, ...)
     vfprintf(stderr, fmt, ap);
     fprintf(stderr, "\n");
     va_end(ap);
-    cur_failures++;
+    __atomic_add_fetch(&cur->failures, 1, __ATOMIC_SEQ_CST);
+}
+
+void test_skip(const char *fmt, ...)
+{
+    va_list ap;
+    va_start(ap, fmt);
+    vsnprintf(cur->reason, sizeof cur->reason, fmt, ap);
+    va_end(ap);
+    cur->skipped = true;
+    cur->finished = true;
+    exit(0);
 }
 
 const char *test_tmpdir(void)
@@ -52,6 +81,7 @@ const char *test_tmpdir(void)
             perror("mkdtemp");
             exit(2);
         }
+        snprintf(cur->tmpdir, sizeof cur->tmpdir, "%s", tmpdir);
     }
     return tmpdir;
 }
@@ -96,12 +126,9 @@ static int rm_cb(const char *p, const struct stat *sb, int flag, struct FTW *ftw
     return remove(p);
 }
 
-static void tmp_cleanup(void)
+static void tmp_cleanup(const char *dir)
 {
-    if (tmpdir[0]) {
-        nftw(tmpdir, rm_cb, 16, FTW_DEPTH | FTW_PHYS);
-        tmpdir[0] = 0;
-    }
+    if (dir[0]) nftw(dir, rm_cb, 16, FTW_DEPTH | FTW_PHYS);
 }
 
 static void append(char **buf, size_t *len, const char *data, size_t n)
@@ -204,28 +231,141 @@ void test_camera_unlock(int fd)
     if (fd >= 0) close(fd);
 }
 
+// The test being run by the parent: its process group, killed with it when
+// the run is interrupted.
+static volatile sig_atomic_t child_pgid;
+
+static void on_interrupt(int sig)
+{
+    if (child_pgid > 0) kill(-child_pgid, SIGKILL);
+    signal(sig, SIG_DFL);
+    raise(sig);
+}
+
+static double timeout_s(void)
+{
+    const char *s = getenv("REFL_TEST_TIMEOUT");
+    char *end;
+    double t = s && *s ? strtod(s, &end) : 0;
+    return s && *s && *end == 0 && t > 0 ? t : 600;
+}
+
+// Run one test in a child process, which fills *r. how: what fails the test
+// whatever its checks said (a signal, the time-out, an exit status), else "".
+static void run_child(const test_t *t, test_result_t *r, double limit_s, char *how, size_t how_len)
+{
+    memset(r, 0, sizeof *r);
+    how[0] = 0;
+    fflush(NULL);
+    sigset_t chld, old;
+    sigemptyset(&chld);
+    sigaddset(&chld, SIGCHLD);
+    sigprocmask(SIG_BLOCK, &chld, &old);
+    pid_t pid = fork();
+    if (pid < 0) {
+        snprintf(how, how_len, "fork: %s", strerror(errno));
+        sigprocmask(SIG_SETMASK, &old, NULL);
+        return;
+    }
+    if (pid == 0) {
+        setpgid(0, 0);
+        signal(SIGINT, SIG_DFL);
+        signal(SIGTERM, SIG_DFL);
+        signal(SIGHUP, SIG_DFL);
+        sigprocmask(SIG_SETMASK, &old, NULL);
+        int devnull = open("/dev/null", O_RDONLY);
+        if (devnull >= 0) dup2(devnull, 0);
+        cur = r;
+        t->fn();
+        r->finished = true;
+        exit(0);
+    }
+    setpgid(pid, pid);
+    child_pgid = pid;
+    double t0 = model_now_s();
+    int status = 0;
+    bool timed_out = false;
+    for (;;) {
+        pid_t w = waitpid(pid, &status, WNOHANG);
+        if (w == pid) break;
+        if (w < 0 && errno != EINTR) {
+            snprintf(how, how_len, "waitpid: %s", strerror(errno));
+            break;
+        }
+        double left = limit_s - (model_now_s() - t0);
+        if (left <= 0) {
+            timed_out = true;
+            kill(-pid, SIGKILL);
+            waitpid(pid, &status, 0);
+            break;
+        }
+        if (left > 1) left = 1;
+        struct timespec ts = { (time_t)left, (long)((left - (time_t)left) * 1e9) };
+        sigtimedwait(&chld, NULL, &ts);
+    }
+    // Whatever the test left running in its group ends with it.
+    kill(-pid, SIGKILL);
+    child_pgid = 0;
+    sigprocmask(SIG_SETMASK, &old, NULL);
+    if (how[0])
+        return;
+    if (timed_out)
+        snprintf(how, how_len, "timed out after %g s", limit_s);
+    else if (WIFSIGNALED(status)) {
+        int sig = WTERMSIG(status);
+        const char *abbrev = sigabbrev_np(sig);
+        snprintf(how, how_len, "killed by signal SIG%s (%s)%s", abbrev ? abbrev : "?", strsignal(sig),
+                 WCOREDUMP(status) ? ", core dumped" : "");
+    } else if (WIFEXITED(status) && WEXITSTATUS(status) != 0)
+        snprintf(how, how_len, "exited with status %d%s", WEXITSTATUS(status),
+                 r->finished ? "" : " before the test ended");
+    else if (!r->finished)
+        snprintf(how, how_len, "exited before the test ended");
+}
+
 int main(int argc, char **argv)
 {
     const char *filter = argc > 1 ? argv[1] : NULL;
-    int passed = 0, failed = 0;
+    int passed = 0, failed = 0, skipped = 0;
+    double limit_s = timeout_s();
     model_error_quiet(true);
+    test_result_t *r = mmap(NULL, sizeof *r, PROT_READ | PROT_WRITE, MAP_SHARED | MAP_ANONYMOUS, -1, 0);
+    if (r == MAP_FAILED) {
+        perror("mmap");
+        return 2;
+    }
+    struct sigaction sa = { .sa_handler = on_interrupt };
+    sigaction(SIGINT, &sa, NULL);
+    sigaction(SIGTERM, &sa, NULL);
+    sigaction(SIGHUP, &sa, NULL);
     double t_all = model_now_s();
     for (int i = 0; i < ntests; i++) {
         if (filter && !strstr(tests[i].name, filter) && !strstr(tests[i].file, filter)) continue;
-        cur_failures = 0;
+        char how[256];
         double t0 = model_now_s();
-        tests[i].fn();
-        tmp_cleanup();
+        run_child(&tests[i], r, limit_s, how, sizeof how);
+        tmp_cleanup(r->tmpdir);
         double dt = model_now_s() - t0;
-        if (cur_failures) {
+        if (r->failures || how[0]) {
             failed++;
-            printf("FAIL %s (%s, %.2f s)\n", tests[i].name, tests[i].file, dt);
+            if (how[0] && r->failures)
+                printf("FAIL %s (%s, %s after %d failed check%s, %.2f s)\n", tests[i].name, tests[i].file, how,
+                       r->failures, r->failures == 1 ? "" : "s", dt);
+            else if (how[0])
+                printf("FAIL %s (%s, %s, %.2f s)\n", tests[i].name, tests[i].file, how, dt);
+            else
+                printf("FAIL %s (%s, %.2f s)\n", tests[i].name, tests[i].file, dt);
+        } else if (r->skipped) {
+            skipped++;
+            printf("skip %s (%s, %.2f s)\n", tests[i].name, r->reason, dt);
         } else {
             passed++;
             printf("ok   %s (%.2f s)\n", tests[i].name, dt);
         }
         fflush(stdout);
     }
-    printf("(%.1f s)\n%d passed, %d failed\n", model_now_s() - t_all, passed, failed);
+    printf("(%.1f s)\n%d passed, %d failed", model_now_s() - t_all, passed, failed);
+    if (skipped) printf(", %d skipped", skipped);
+    printf("\n");
     return failed ? 1 : 0;
 }

@@ -1,4 +1,4 @@
-// tests/lamp_child.c — a small program for tests/test_lamps.c: opens lamps on
+// tests/lamp_child.c — a small program for tests/test_rig_lamps.c: opens lamps on
 // the gpiod backend (run it under LD_PRELOAD=libfake_gpiod.so), switches some
 // on and then ends in the way MODE says.
 //

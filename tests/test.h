@@ -4,9 +4,14 @@
 //                CHECK_CONTAINS(msg, "line 3"); }
 //
 // Tests register themselves; bin/refl-tests runs them all (or those whose name
-// contains argv[1]) and ends with the line "N passed, N failed". A test passes
-// when none of its checks failed. Each failed check prints file:line and the
-// values. Tests needing files use test_tmpdir(), which is removed afterwards.
+// or file contains argv[1]), each in its own child process, and ends with the
+// line "N passed, N failed" (", N skipped" appended when tests were skipped).
+// A test passes when none of its checks failed; a test that crashes, aborts or
+// is killed by a signal fails with the signal named, and so does one that runs
+// longer than $REFL_TEST_TIMEOUT seconds (default 600). Each failed check
+// prints file:line and the values. SKIP("why") ends a test as skipped when
+// something it needs is not available here. Tests needing files use
+// test_tmpdir(), which is removed afterwards.
 #pragma once
 
 #include <math.h>
@@ -18,6 +23,10 @@ typedef void (*test_fn_t)(void);
 void test_register(const char *name, test_fn_t fn, const char *file);
 void test_fail(const char *file, int line, const char *fmt, ...)
     __attribute__((format(printf, 3, 4)));
+// End the running test as skipped, with the reason (printf-style). A test that
+// had failed checks before stays failed.
+void test_skip(const char *fmt, ...) __attribute__((format(printf, 1, 2), noreturn));
+#define SKIP(...) test_skip(__VA_ARGS__)
 
 #define TEST(name)                                                                 \
     static void name(void);                                                        \

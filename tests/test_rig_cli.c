@@ -5,7 +5,7 @@
 // through the fake libgpiod of tests/fake_gpiod.c).
 //
 // Only one virtual camera serves 127.0.0.1 at a time: the virtual-rig tests
-// hold the lock of tests/test_camera_aravis.c throughout, and run one refl at
+// hold the lock of tests/test_rig_camera_aravis.c throughout, and run one refl at
 // a time.
 #define _GNU_SOURCE
 #include <errno.h>

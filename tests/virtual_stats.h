@@ -1,6 +1,6 @@
 // tests/virtual_stats.h — the statistic that compares a frame of the virtual
 // rig with its noise-free expectation (rig_virtual_expected), shared by
-// tests/test_virtual.c (GigE Vision) and tests/test_virtual_inprocess.c.
+// tests/test_rig_virtual.c (GigE Vision) and tests/test_rig_virtual_inprocess.c.
 //
 // Over the pixels whose expected value E is at least lit_dn above the dark
 // offset, d = frame - E has mean ~0 (within a few standard errors) and the

@@ -1,4 +1,4 @@
-// tests/test_corpus.c — replays the fuzz corpus (tests/corpus/) through every
+// tests/test_model_corpus.c — replays the fuzz corpus (tests/corpus/) through every
 // parser, so `make asan` catches regressions of crashes found by fuzzing.
 #define _GNU_SOURCE
 #include <dirent.h>

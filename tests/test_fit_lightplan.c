@@ -1,4 +1,4 @@
-// tests/test_lightplan.c — light planning (fit/lightplan.h): the Sobel
+// tests/test_fit_lightplan.c — light planning (fit/lightplan.h): the Sobel
 // response of known steps, glare and saturation steering the choice, and the
 // prediction against a Sobel detector on the virtual rig's frames.
 #include <math.h>

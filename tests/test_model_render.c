@@ -1,104 +1,15 @@
-// tests/test_render.c — ray casting (model/trace.c) and grey values /
+// tests/test_model_render.c — ray casting (model/trace.c) and grey values /
 // rendering (model/shade.c) against analytic answers.
-#include <mrcal/poseutils.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
 #include "model/internal.h"
+#include "tests/fixtures.h"
 #include "tests/test.h"
 
 // ---------------------------------------------------------------------------
-// Helpers
-
-static model_scene_t *scene_text(const char *d3d)
-{
-    model_scene_t *s = model_scene_parse_d3d(d3d, strlen(d3d), "test.d3d", NULL);
-    if (!s) fprintf(stderr, "  scene: %s\n", model_last_error());
-    return s;
-}
-
-static model_materials_t *mats_text(const char *ini)
-{
-    model_materials_t *m = model_materials_parse(ini, strlen(ini), "test_materials.ini");
-    if (!m) fprintf(stderr, "  materials: %s\n", model_last_error());
-    return m;
-}
-
-static model_lamps_t *lamps_text(const char *ini)
-{
-    model_lamps_t *l = model_lamps_parse(ini, strlen(ini), "test_lamps.ini");
-    if (!l) fprintf(stderr, "  lamps: %s\n", model_last_error());
-    return l;
-}
-
-// A pinhole camera at C looking at target (image y down, world z up), focal f px,
-// principal point at the image centre. R (world -> camera rows) out.
-typedef struct {
-    model_camera_t *cam;
-    double R[9];
-    model_vec3_t C;
-    double f, cx, cy;
-    int W, H;
-} pinhole_t;
-
-static bool pinhole_look(pinhole_t *p, int W, int H, double f, model_vec3_t C, model_vec3_t target)
-{
-    model_vec3_t z = v3_unit(v3_sub(target, C));
-    model_vec3_t up = fabs(z.z) > 0.99 ? v3(0, 1, 0) : v3(0, 0, 1);
-    model_vec3_t x = v3_unit(v3_cross(z, up));
-    model_vec3_t y = v3_cross(z, x);
-    double R[9] = { x.x, x.y, x.z, y.x, y.y, y.z, z.x, z.y, z.z };
-    double rt[6];
-    mrcal_r_from_R(rt, NULL, R);
-    for (int i = 0; i < 3; i++)
-        rt[3 + i] = -(R[3 * i] * C.x + R[3 * i + 1] * C.y + R[3 * i + 2] * C.z);
-    memcpy(p->R, R, sizeof R);
-    p->C = C;
-    p->f = f;
-    p->cx = (W - 1) / 2.0;
-    p->cy = (H - 1) / 2.0;
-    p->W = W;
-    p->H = H;
-    double intr[4] = { f, f, p->cx, p->cy };
-    p->cam = model_camera_new("LENSMODEL_PINHOLE", intr, W, H, rt);
-    if (!p->cam) fprintf(stderr, "  camera: %s\n", model_last_error());
-    return p->cam != NULL;
-}
-
-// Analytic unit world ray of pixel (x, y).
-static model_vec3_t pinhole_ray(const pinhole_t *p, double x, double y)
-{
-    double a = (x - p->cx) / p->f, b = (y - p->cy) / p->f;
-    const double *R = p->R;
-    model_vec3_t d = v3(R[0] * a + R[3] * b + R[6], R[1] * a + R[4] * b + R[7],
-                        R[2] * a + R[5] * b + R[8]);
-    return v3_unit(d);
-}
-
-// A square plane z = 0 of half-size h (face 1), material "plane".
-static char *plane_d3d(double h, const char *extra_vertices, const char *extra_faces)
-{
-    char *buf = malloc(8192);
-    snprintf(buf, 8192,
-             "1 %g %g 0\n2 %g %g 0\n3 %g %g 0\n4 %g %g 0\n%s"
-             "Faces:\n@material plane\n1 2 3 4.\n%s",
-             -h, -h, h, -h, h, h, -h, h, extra_vertices ? extra_vertices : "",
-             extra_faces ? extra_faces : "");
-    return buf;
-}
-
-// A box [x0,x1] x [y0,y1] x [0,zh] without bottom, vertices 5..12, material "box".
-static const char *box_vertices =
-    "5 -50 -50 0\n6 50 -50 0\n7 50 50 0\n8 -50 50 0\n"
-    "9 -50 -50 80\n10 50 -50 80\n11 50 50 80\n12 -50 50 80\n";
-static const char *box_faces =
-    "@material box\n"
-    "9 10 11 12.\n"      // top
-    "5 6 10 9.\n"        // y = -50
-    "6 7 11 10.\n"       // x = 50
-    "7 8 12 11.\n"       // y = 50
-    "8 5 9 12.\n";       // x = -50
+// Helpers (the scene, camera and lamp fixtures are in tests/fixtures.h)
 
 // Segment a -> b meets the box [-50,50]^2 x [0,80] (slab test, open at a).
 static bool segment_hits_box(model_vec3_t a, model_vec3_t b)
@@ -125,16 +36,16 @@ static bool segment_hits_box(model_vec3_t a, model_vec3_t b)
 
 TEST(render_lambert_plane_every_pixel)
 {
-    char *d3d = plane_d3d(5000, NULL, NULL);
-    model_scene_t *s = scene_text(d3d);
-    model_materials_t *m = mats_text("[material plane]\nmodel = lambert\nkd = 0.2\n");
-    model_lamps_t *l = lamps_text("[lamp a]\nposition_mm = 30 -20 400\nintensity = 1e6\n");
-    pinhole_t ph = { 0 };
-    CHECK(s && m && l && pinhole_look(&ph, 160, 120, 150, v3(100, -300, 500), v3(0, 0, 0)));
-    if (!s || !m || !l || !ph.cam) goto done;
-    model_tracer_t *t = model_tracer_new(s);
-    const model_material_t *mres[1];
-    CHECK(t && model_resolve_materials(s, m, mres));
+    fx_render_t F;
+    if (!fx_render_open(&F, fx_plane_d3d(5000, NULL, NULL),
+                        "[material plane]\nmodel = lambert\nkd = 0.2\n",
+                        "[lamp a]\nposition_mm = 30 -20 400\nintensity = 1e6\n",
+                        160, 120, 150, v3(100, -300, 500), v3(0, 0, 0)))
+        goto done;
+    model_lamps_t *l = F.l;
+    fx_pinhole_t ph = F.ph;
+    model_tracer_t *t = F.t;
+    const model_material_t **mres = F.mres;
     int W = ph.W, H = ph.H;
     float *P = malloc(sizeof(float) * W * H), *g = malloc(sizeof(float) * W * H);
     int32_t *face = malloc(sizeof(int32_t) * W * H);
@@ -151,7 +62,7 @@ TEST(render_lambert_plane_every_pixel)
     for (int y = 0; y < H; y++)
         for (int x = 0; x < W; x++) {
             int i = y * W + x;
-            model_vec3_t d = pinhole_ray(&ph, x, y);
+            model_vec3_t d = fx_pinhole_ray(&ph, x, y);
             double tt = -ph.C.z / d.z;
             model_vec3_t p = v3_add(ph.C, v3_scale(d, tt));
             model_vec3_t dl = v3_sub(L, p);
@@ -168,29 +79,24 @@ TEST(render_lambert_plane_every_pixel)
     free(g);
     free(face);
     free(lit);
-    model_tracer_free(t);
 done:
-    free(d3d);
-    model_camera_free(ph.cam);
-    model_scene_free(s);
-    model_materials_free(m);
-    model_lamps_free(l);
+    fx_render_close(&F);
 }
 
 // (b) inverse square law: the point under the lamp at heights h and 2h.
 
 TEST(render_inverse_square_law)
 {
-    char *d3d = plane_d3d(5000, NULL, NULL);
-    model_scene_t *s = scene_text(d3d);
-    model_materials_t *m = mats_text("[material plane]\nmodel = lambert\nkd = 0.1\n");
-    model_lamps_t *l = lamps_text("[lamp a]\nposition_mm = 10 20 300\nintensity = 5e5\n");
-    pinhole_t ph = { 0 };
-    CHECK(s && m && l && pinhole_look(&ph, 64, 48, 60, v3(200, -100, 600), v3(0, 0, 0)));
-    if (!s || !m || !l || !ph.cam) goto done;
-    model_tracer_t *t = model_tracer_new(s);
-    const model_material_t *mres[1];
-    CHECK(t && model_resolve_materials(s, m, mres));
+    fx_render_t F;
+    if (!fx_render_open(&F, fx_plane_d3d(5000, NULL, NULL),
+                        "[material plane]\nmodel = lambert\nkd = 0.1\n",
+                        "[lamp a]\nposition_mm = 10 20 300\nintensity = 5e5\n",
+                        64, 48, 60, v3(200, -100, 600), v3(0, 0, 0)))
+        goto done;
+    model_lamps_t *l = F.l;
+    fx_pinhole_t ph = F.ph;
+    model_tracer_t *t = F.t;
+    const model_material_t **mres = F.mres;
     model_vec3_t ground = v3(10, 20, 0);
     double q[2];
     CHECK(model_camera_project(ph.cam, &ground, 1, q));
@@ -210,13 +116,8 @@ TEST(render_inverse_square_law)
         CHECK_REL(S[k], 0.1 * 5e5 / (h * h), 1e-9);
     }
     CHECK_REL(S[0] / S[1], 4.0, 1e-9);
-    model_tracer_free(t);
 done:
-    free(d3d);
-    model_camera_free(ph.cam);
-    model_scene_free(s);
-    model_materials_free(m);
-    model_lamps_free(l);
+    fx_render_close(&F);
 }
 
 // (c) a box on the plane under an oblique lamp: the lit mask is the analytic
@@ -224,17 +125,18 @@ done:
 
 TEST(render_box_shadow_analytic)
 {
-    char *d3d = plane_d3d(2000, box_vertices, box_faces);
-    model_scene_t *s = scene_text(d3d);
-    model_materials_t *m = mats_text("[material plane]\nmodel = lambert\nkd = 0.2\n"
-                                     "[material box]\nmodel = lambert\nkd = 0.1\n");
-    model_lamps_t *l = lamps_text("[lamp a]\nposition_mm = 300 100 250\nintensity = 1e6\n");
-    pinhole_t ph = { 0 };
-    CHECK(s && m && l && pinhole_look(&ph, 200, 160, 160, v3(-150, -350, 450), v3(-60, 0, 0)));
-    if (!s || !m || !l || !ph.cam) goto done;
-    model_tracer_t *t = model_tracer_new(s);
-    const model_material_t *mres[2];
-    CHECK(t && model_resolve_materials(s, m, mres));
+    fx_render_t F;
+    if (!fx_render_open(&F, fx_plane_d3d(2000, fx_box_vertices, fx_box_faces),
+                        "[material plane]\nmodel = lambert\nkd = 0.2\n"
+                        "[material box]\nmodel = lambert\nkd = 0.1\n",
+                        "[lamp a]\nposition_mm = 300 100 250\nintensity = 1e6\n",
+                        200, 160, 160, v3(-150, -350, 450), v3(-60, 0, 0)))
+        goto done;
+    model_scene_t *s = F.s;
+    model_lamps_t *l = F.l;
+    fx_pinhole_t ph = F.ph;
+    model_tracer_t *t = F.t;
+    const model_material_t **mres = F.mres;
     int W = ph.W, H = ph.H, n = W * H;
     float *P = malloc(sizeof(float) * n);
     int32_t *face = malloc(sizeof(int32_t) * n);
@@ -245,7 +147,7 @@ TEST(render_box_shadow_analytic)
     // analytic lit state of the plane point of every pixel (2: not a plane pixel)
     for (int y = 0; y < H; y++)
         for (int x = 0; x < W; x++) {
-            model_vec3_t d = pinhole_ray(&ph, x, y);
+            model_vec3_t d = fx_pinhole_ray(&ph, x, y);
             model_vec3_t p = v3_add(ph.C, v3_scale(d, -ph.C.z / d.z));
             bool hidden = segment_hits_box(ph.C, p);   // the box hides the plane point
             expect[y * W + x] = hidden ? 2 : !segment_hits_box(p, L);
@@ -257,7 +159,7 @@ TEST(render_box_shadow_analytic)
             if (expect[i] == 2) {
                 if (face[i] >= 1) {   // a box face: lit iff it faces the lamp
                     const model_face_t *f = &s->faces[face[i]];
-                    model_vec3_t d = pinhole_ray(&ph, x, y);
+                    model_vec3_t d = fx_pinhole_ray(&ph, x, y);
                     bool cam_side = v3_dot(f->normal, d) < 0;   // normal's side sees the camera
                     model_vec3_t c = s->vertices[f->verts[0]];
                     bool lamp_side = v3_dot(f->normal, v3_sub(L, c)) > 0;
@@ -287,13 +189,8 @@ TEST(render_box_shadow_analytic)
     free(face);
     free(lit);
     free(expect);
-    model_tracer_free(t);
 done:
-    free(d3d);
-    model_camera_free(ph.cam);
-    model_scene_free(s);
-    model_materials_free(m);
-    model_lamps_free(l);
+    fx_render_close(&F);
 }
 
 // (d) model_pixel_info on a sparse list equals the full render (face, lit, and
@@ -301,8 +198,6 @@ done:
 
 TEST(render_pixel_info_matches_render)
 {
-    char *d3d = plane_d3d(2000, box_vertices, box_faces);
-    model_scene_t *s = scene_text(d3d);
     static const char *models[] = {
         "model = lambert\nkd = 0.2\n",
         "model = hall\nkd = 0.1\nks = 0.3\nns = 12.5\n",
@@ -311,14 +206,18 @@ TEST(render_pixel_info_matches_render)
         "model = cook_torrance\nkd = 0.4\nks = 0.5\nm = 0.3\nF0 = 0.04\n",
         "model = ggx\nkd = 0.35\nks = 0.25\nalpha = 0.15\nF0 = 0.04\n",
     };
-    model_lamps_t *l = lamps_text("[lamp a]\nposition_mm = 300 100 250\nintensity = 1e6\n"
-                                  "[lamp b]\nposition_mm = -200 -300 400\nintensity = 2e6\n"
-                                  "[lamp c]\nposition_mm = 0 10 120\nintensity = 1e5\n");
-    pinhole_t ph = { 0 };
-    CHECK(s && l && pinhole_look(&ph, 160, 128, 130, v3(-150, -350, 450), v3(-60, 0, 0)));
-    if (!s || !l || !ph.cam) goto done;
-    model_tracer_t *t = model_tracer_new(s);
-    CHECK(t != NULL);
+    fx_render_t F;
+    if (!fx_render_open(&F, fx_plane_d3d(2000, fx_box_vertices, fx_box_faces),
+                        NULL,
+                        "[lamp a]\nposition_mm = 300 100 250\nintensity = 1e6\n"
+                        "[lamp b]\nposition_mm = -200 -300 400\nintensity = 2e6\n"
+                        "[lamp c]\nposition_mm = 0 10 120\nintensity = 1e5\n",
+                        160, 128, 130, v3(-150, -350, 450), v3(-60, 0, 0)))
+        goto done;
+    model_scene_t *s = F.s;
+    model_lamps_t *l = F.l;
+    fx_pinhole_t ph = F.ph;
+    model_tracer_t *t = F.t;
     int W = ph.W, H = ph.H, n = W * H, nl = l->n;
     float *P = malloc(sizeof(float) * n);
     int32_t *face = malloc(sizeof(int32_t) * n);
@@ -337,7 +236,7 @@ TEST(render_pixel_info_matches_render)
         char text[512];
         snprintf(text, sizeof text, "[material plane]\n%s[material box]\n%s", models[k],
                  models[(k + 1) % 6]);
-        model_materials_t *m = mats_text(text);
+        model_materials_t *m = fx_materials_text(text);
         const model_material_t *mres[2];
         CHECK(m && model_resolve_materials(s, m, mres));
         if (!m) continue;
@@ -369,21 +268,17 @@ TEST(render_pixel_info_matches_render)
     free(q);
     free(pi);
     free(ls);
-    model_tracer_free(t);
 done:
-    free(d3d);
-    model_camera_free(ph.cam);
-    model_scene_free(s);
-    model_lamps_free(l);
+    fx_render_close(&F);
 }
 
 // (e) dS/dp of model_direct_sum against central differences.
 
 TEST(render_direct_sum_derivatives)
 {
-    model_lamps_t *l = lamps_text("[lamp a]\nposition_mm = 300 100 250\nintensity = 1e6\n"
-                                  "[lamp b]\nposition_mm = -200 -300 400\nintensity = 2e6\n");
-    model_materials_t *m = mats_text(
+    model_lamps_t *l = fx_lamps_text("[lamp a]\nposition_mm = 300 100 250\nintensity = 1e6\n"
+                                     "[lamp b]\nposition_mm = -200 -300 400\nintensity = 2e6\n");
+    model_materials_t *m = fx_materials_text(
         "[material a]\nmodel = torrance_sparrow\nkd = 0.1\nks = 0.4\nns = 20\nF0 = 0.05\n"
         "[material b]\nmodel = ggx\nkd = 0.35\nks = 0.25\nalpha = 0.15\nF0 = 0.04\n"
         "[material c]\nmodel = hall\nkd = 0.1\nks = 0.3\nns = 12.5\n");
@@ -429,17 +324,17 @@ done:
 
 TEST(render_thesis_interreflection)
 {
-    char *d3d = plane_d3d(2000, box_vertices, box_faces);
-    model_scene_t *s = scene_text(d3d);
-    model_materials_t *m = mats_text("[material plane]\nmodel = hall\nkd = 0.1\nks = 0.3\nns = 10\n"
-                                     "[material box]\nmodel = lambert\nkd = 0.25\n");
-    model_lamps_t *l = lamps_text("[lamp a]\nposition_mm = -100 -400 300\nintensity = 1e6\n");
-    pinhole_t ph = { 0 };
-    CHECK(s && m && l && pinhole_look(&ph, 120, 96, 100, v3(-150, -350, 450), v3(-60, 0, 0)));
-    if (!s || !m || !l || !ph.cam) goto done;
-    model_tracer_t *t = model_tracer_new(s);
-    const model_material_t *mres[2];
-    CHECK(t && model_resolve_materials(s, m, mres));
+    fx_render_t F;
+    if (!fx_render_open(&F, fx_plane_d3d(2000, fx_box_vertices, fx_box_faces),
+                        "[material plane]\nmodel = hall\nkd = 0.1\nks = 0.3\nns = 10\n"
+                        "[material box]\nmodel = lambert\nkd = 0.25\n",
+                        "[lamp a]\nposition_mm = -100 -400 300\nintensity = 1e6\n",
+                        120, 96, 100, v3(-150, -350, 450), v3(-60, 0, 0)))
+        goto done;
+    model_lamps_t *l = F.l;
+    fx_pinhole_t ph = F.ph;
+    model_tracer_t *t = F.t;
+    const model_material_t **mres = F.mres;
     int n = ph.W * ph.H;
     float *P0 = malloc(sizeof(float) * n), *P1 = malloc(sizeof(float) * n);
     float *P2 = malloc(sizeof(float) * n), *Pn = malloc(sizeof(float) * n);
@@ -473,13 +368,8 @@ TEST(render_thesis_interreflection)
     free(P1);
     free(P2);
     free(Pn);
-    model_tracer_free(t);
 done:
-    free(d3d);
-    model_camera_free(ph.cam);
-    model_scene_free(s);
-    model_materials_free(m);
-    model_lamps_free(l);
+    fx_render_close(&F);
 }
 
 // (f') THESIS known answer: with a cone of 0 deg and one sample, the term at
@@ -490,17 +380,17 @@ done:
 
 TEST(render_thesis_known_answer_and_finite_at_joint)
 {
-    char *d3d = plane_d3d(2000, box_vertices, box_faces);
-    model_scene_t *s = scene_text(d3d);
-    model_materials_t *m = mats_text("[material plane]\nmodel = lambert\nkd = 0.2\n"
-                                     "[material box]\nmodel = lambert\nkd = 0.3\n");
-    model_lamps_t *l = lamps_text("[lamp a]\nposition_mm = -300 -200 400\nintensity = 1e6\n");
-    pinhole_t ph = { 0 };
-    CHECK(s && m && l && pinhole_look(&ph, 120, 96, 100, v3(-350, 40, 160), v3(-60, 0, 0)));
-    if (!s || !m || !l || !ph.cam) goto done;
-    model_tracer_t *t = model_tracer_new(s);
-    const model_material_t *mres[2];
-    CHECK(t && model_resolve_materials(s, m, mres));
+    fx_render_t F;
+    if (!fx_render_open(&F, fx_plane_d3d(2000, fx_box_vertices, fx_box_faces),
+                        "[material plane]\nmodel = lambert\nkd = 0.2\n"
+                        "[material box]\nmodel = lambert\nkd = 0.3\n",
+                        "[lamp a]\nposition_mm = -300 -200 400\nintensity = 1e6\n",
+                        120, 96, 100, v3(-350, 40, 160), v3(-60, 0, 0)))
+        goto done;
+    model_lamps_t *l = F.l;
+    fx_pinhole_t ph = F.ph;
+    model_tracer_t *t = F.t;
+    const model_material_t **mres = F.mres;
     int n = ph.W * ph.H;
     float *Pn = malloc(sizeof(float) * n), *Pt = malloc(sizeof(float) * n);
     model_shading_t sh = model_shading_default();
@@ -536,7 +426,6 @@ TEST(render_thesis_known_answer_and_finite_at_joint)
     CHECK_MSG(checked > 20, "only %d floor pixels see the box in the mirror direction", checked);
     free(Pn);
     free(Pt);
-    model_tracer_free(t);
 
     // The T-stiffener: thesis interreflection adds a little, nowhere explodes.
     char path[4][1024];
@@ -575,11 +464,7 @@ TEST(render_thesis_known_answer_and_finite_at_joint)
     model_lamps_free(tl);
     model_materials_free(tm);
 done:
-    free(d3d);
-    model_camera_free(ph.cam);
-    model_scene_free(s);
-    model_materials_free(m);
-    model_lamps_free(l);
+    fx_render_close(&F);
 }
 
 // (g) MC on a single plane: no indirect light is possible, so MC equals the
@@ -588,19 +473,19 @@ done:
 
 TEST(render_mc_plane_equals_direct)
 {
-    char *d3d = plane_d3d(5000, NULL, NULL);
-    model_scene_t *s = scene_text(d3d);
-    model_materials_t *m = mats_text("[material plane]\nmodel = ggx\nkd = 0.5\nks = 0.3\n"
-                                     "alpha = 0.3\nF0 = 0.04\n");
-    model_lamps_t *l = lamps_text("[lamp a]\nposition_mm = 30 -20 400\nintensity = 1e6\n"
-                                  "radius_mm = 4\n"
-                                  "[lamp b]\nposition_mm = -300 100 300\nintensity = 1e6\n");
-    pinhole_t ph = { 0 };
-    CHECK(s && m && l && pinhole_look(&ph, 64, 48, 60, v3(100, -300, 500), v3(0, 0, 0)));
-    if (!s || !m || !l || !ph.cam) goto done;
-    model_tracer_t *t = model_tracer_new(s);
-    const model_material_t *mres[1];
-    CHECK(t && model_resolve_materials(s, m, mres));
+    fx_render_t F;
+    if (!fx_render_open(&F, fx_plane_d3d(5000, NULL, NULL),
+                        "[material plane]\nmodel = ggx\nkd = 0.5\nks = 0.3\n"
+                        "alpha = 0.3\nF0 = 0.04\n",
+                        "[lamp a]\nposition_mm = 30 -20 400\nintensity = 1e6\n"
+                        "radius_mm = 4\n"
+                        "[lamp b]\nposition_mm = -300 100 300\nintensity = 1e6\n",
+                        64, 48, 60, v3(100, -300, 500), v3(0, 0, 0)))
+        goto done;
+    model_lamps_t *l = F.l;
+    fx_pinhole_t ph = F.ph;
+    model_tracer_t *t = F.t;
+    const model_material_t **mres = F.mres;
     int n = ph.W * ph.H;
     float *Pd = malloc(sizeof(float) * n), *Pm = malloc(sizeof(float) * n);
     model_shading_t sh = model_shading_default();
@@ -625,13 +510,8 @@ TEST(render_mc_plane_equals_direct)
     CHECK(sum_rel / n < 1e-3);
     free(Pd);
     free(Pm);
-    model_tracer_free(t);
 done:
-    free(d3d);
-    model_camera_free(ph.cam);
-    model_scene_free(s);
-    model_materials_free(m);
-    model_lamps_free(l);
+    fx_render_close(&F);
 }
 
 // (h) MC energy check: a point lamp at the centre of a closed sphere of
@@ -694,18 +574,18 @@ static double mean_std(const float *P, int n, double expect, double *std)
 TEST(render_mc_energy_sphere)
 {
     const double r = 100, I = 1e4, a = 0.5, kd = a / M_PI;
-    char *d3d = sphere_d3d(r, 4);
-    model_scene_t *s = scene_text(d3d);
     char mt[128];
     snprintf(mt, sizeof mt, "[material wall]\nmodel = lambert\nkd = %.17g\n", kd);
-    model_materials_t *m = mats_text(mt);
-    model_lamps_t *l = lamps_text("[lamp c]\nposition_mm = 0 0 0\nintensity = 1e4\n");
-    pinhole_t ph = { 0 };
-    CHECK(s && m && l && pinhole_look(&ph, 48, 40, 30, v3(10, -20, 30), v3(40, 30, -50)));
-    if (!s || !m || !l || !ph.cam) goto done;
-    model_tracer_t *t = model_tracer_new(s);
-    const model_material_t *mres[1];
-    CHECK(t && model_resolve_materials(s, m, mres));
+    fx_render_t F;
+    if (!fx_render_open(&F, sphere_d3d(r, 4),
+                        mt,
+                        "[lamp c]\nposition_mm = 0 0 0\nintensity = 1e4\n",
+                        48, 40, 30, v3(10, -20, 30), v3(40, 30, -50)))
+        goto done;
+    model_lamps_t *l = F.l;
+    fx_pinhole_t ph = F.ph;
+    model_tracer_t *t = F.t;
+    const model_material_t **mres = F.mres;
     int n = ph.W * ph.H;
     float *P = malloc(sizeof(float) * n), *P2 = malloc(sizeof(float) * n);
     int32_t *face = malloc(sizeof(int32_t) * n);
@@ -755,31 +635,26 @@ TEST(render_mc_energy_sphere)
     free(P);
     free(P2);
     free(face);
-    model_tracer_free(t);
 done:
-    free(d3d);
-    model_camera_free(ph.cam);
-    model_scene_free(s);
-    model_materials_free(m);
-    model_lamps_free(l);
+    fx_render_close(&F);
 }
 
 // MC with finite lamps gives soft shadows: pixels in the penumbra get a
 // fractional visibility (P strictly between umbra and full light).
 TEST(render_mc_soft_shadow)
 {
-    char *d3d = plane_d3d(2000, box_vertices, box_faces);
-    model_scene_t *s = scene_text(d3d);
-    model_materials_t *m = mats_text("[material plane]\nmodel = lambert\nkd = 0.2\n"
-                                     "[material box]\nmodel = lambert\nkd = 0.1\n");
-    model_lamps_t *l = lamps_text("[lamp a]\nposition_mm = 300 100 250\nintensity = 1e6\n"
-                                  "radius_mm = 40\n");
-    pinhole_t ph = { 0 };
-    CHECK(s && m && l && pinhole_look(&ph, 100, 80, 80, v3(-150, -350, 450), v3(-60, 0, 0)));
-    if (!s || !m || !l || !ph.cam) goto done;
-    model_tracer_t *t = model_tracer_new(s);
-    const model_material_t *mres[2];
-    CHECK(t && model_resolve_materials(s, m, mres));
+    fx_render_t F;
+    if (!fx_render_open(&F, fx_plane_d3d(2000, fx_box_vertices, fx_box_faces),
+                        "[material plane]\nmodel = lambert\nkd = 0.2\n"
+                        "[material box]\nmodel = lambert\nkd = 0.1\n",
+                        "[lamp a]\nposition_mm = 300 100 250\nintensity = 1e6\n"
+                        "radius_mm = 40\n",
+                        100, 80, 80, v3(-150, -350, 450), v3(-60, 0, 0)))
+        goto done;
+    model_lamps_t *l = F.l;
+    fx_pinhole_t ph = F.ph;
+    model_tracer_t *t = F.t;
+    const model_material_t **mres = F.mres;
     int n = ph.W * ph.H;
     float *Pd = malloc(sizeof(float) * n), *Pm = malloc(sizeof(float) * n);
     int32_t *face = malloc(sizeof(int32_t) * n);
@@ -800,13 +675,8 @@ TEST(render_mc_soft_shadow)
     free(Pd);
     free(Pm);
     free(face);
-    model_tracer_free(t);
 done:
-    free(d3d);
-    model_camera_free(ph.cam);
-    model_scene_free(s);
-    model_materials_free(m);
-    model_lamps_free(l);
+    fx_render_close(&F);
 }
 
 // Ray casting: exact hit points, normals facing the ray, non-convex faces.
@@ -815,7 +685,7 @@ TEST(trace_cast_nonconvex_face)
     // An L-shaped face in z = 5: [0,100]x[0,100] minus [50,100]x[50,100].
     const char *d3d = "1 0 0 5\n2 100 0 5\n3 100 50 5\n4 50 50 5\n5 50 100 5\n6 0 100 5\n"
                       "Faces:\n1 2 3 4 5 6.\n";
-    model_scene_t *s = scene_text(d3d);
+    model_scene_t *s = fx_scene_text(d3d);
     CHECK(s != NULL);
     if (!s) return;
     model_tracer_t *t = model_tracer_new(s);
@@ -858,8 +728,8 @@ TEST(trace_cast_nonconvex_face)
 TEST(render_errors)
 {
     const char *d3d = "1 0 0 0\n2 10 0 0\n3 10 10 0\nFaces:\n@material steel\n1 2 3.\n";
-    model_scene_t *s = scene_text(d3d);
-    model_materials_t *m = mats_text("[material plywood]\nmodel = lambert\nkd = 0.2\n");
+    model_scene_t *s = fx_scene_text(d3d);
+    model_materials_t *m = fx_materials_text("[material plywood]\nmodel = lambert\nkd = 0.2\n");
     CHECK(s && m);
     if (!s || !m) goto done;
     const model_material_t *mres[1];
@@ -877,8 +747,8 @@ TEST(render_errors)
           sh.finite_lamps && sh.seed == 1);
     // an unresolved material in render
     model_tracer_t *t = model_tracer_new(s);
-    pinhole_t ph = { 0 };
-    CHECK(t && pinhole_look(&ph, 16, 16, 20, v3(5, 3, 50), v3(5, 3, 0)));
+    fx_pinhole_t ph = { 0 };
+    CHECK(t && fx_pinhole_look(&ph, 16, 16, 20, v3(5, 3, 50), v3(5, 3, 0)));
     if (t && ph.cam) {
         const model_material_t *none[1] = { NULL };
         float P[256];

@@ -1,4 +1,4 @@
-// tests/test_camera.c — cameras: projection round trips, the ray table and its
+// tests/test_model_camera.c — cameras: projection round trips, the ray table and its
 // error bound, camera centre, .cameramodel save/load, error messages.
 #define _GNU_SOURCE
 #include <mrcal/mrcal.h>

@@ -1,4 +1,4 @@
-// tests/test_config.c — the INI reader, materials, lamps and sensor files.
+// tests/test_model_config.c — the INI reader, materials, lamps and sensor files.
 #include <stdlib.h>
 
 #include "model/internal.h"

@@ -1,4 +1,4 @@
-// tests/test_brdf.c — reflection models: known values, gradients by finite
+// tests/test_model_brdf.c — reflection models: known values, gradients by finite
 // differences, zeros, reciprocity, energy, normalisation, tables.
 #include <stdint.h>
 #include <stdlib.h>

@@ -1,4 +1,4 @@
-// tests/test_verify.c — the verification fitter on fixed-seed virtual-rig
+// tests/test_fit_verify.c — the verification fitter on fixed-seed virtual-rig
 // images of the T-stiffener (fit/verify_lab.h): the correct description
 // passes, each kind of wrong description fails, a wrong material prior is
 // flagged as pinned, and malformed inputs give clear errors.

@@ -1,4 +1,4 @@
-// tests/test_cli.c — `refl render` and `refl edges` end to end (bin/refl on the examples).
+// tests/test_model_cli.c — `refl render` and `refl edges` end to end (bin/refl on the examples).
 #define _GNU_SOURCE
 #include <jansson.h>
 #include <stdarg.h>

@@ -1,4 +1,4 @@
-// tests/test_image.c — image files: PNG and TIFF round trips with metadata,
+// tests/test_model_image.c — image files: PNG and TIFF round trips with metadata,
 // the multi-page info TIFF, other sample types, and clean errors on damaged
 // files.
 #define _GNU_SOURCE

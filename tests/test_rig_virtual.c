@@ -1,4 +1,4 @@
-// tests/test_virtual.c — the virtual rig end to end over GigE Vision on
+// tests/test_rig_virtual.c — the virtual rig end to end over GigE Vision on
 // 127.0.0.1: the simulated turntable and lamps set a state, the real Aravis
 // capture path takes the frame, and the frame is compared with the model's
 // noise-free rendering of that state (rig_virtual_expected) by its statistics:

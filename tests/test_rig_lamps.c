@@ -1,4 +1,4 @@
-// tests/test_lamps.c — lamps (rig/lamps.c): settle times and checks on the sim
+// tests/test_rig_lamps.c — lamps (rig/lamps.c): settle times and checks on the sim
 // backend in-process; the gpiod backend through tests/lamp_child.c run under
 // LD_PRELOAD of the fake libgpiod (tests/fake_gpiod.c), whose log records the
 // physical level of every request/set/release. `make check` passes the two

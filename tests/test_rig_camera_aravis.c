@@ -1,4 +1,4 @@
-// tests/test_camera_aravis.c — the Aravis camera backend over the real GigE
+// tests/test_rig_camera_aravis.c — the Aravis camera backend over the real GigE
 // Vision path on 127.0.0.1, against the virtual camera of rig/gv_camera.c
 // served by this process: settings, pixel values, metadata, frame ids, lost
 // frames, a camera that disappears, no camera at all, the GenICam features and
@@ -24,89 +24,12 @@
 #include "model/model.h"
 #include "rig/gv_camera.h"
 #include "rig/rig.h"
+#include "tests/fixtures.h"
 #include "tests/test.h"
 
 #define ADDR "127.0.0.1"
 
-// ---------------------------------------------------------------------------
-// The test pattern: depends on the sensor position, exposure and gain.
-
-static uint16_t pattern(int sx, int sy, double exposure_us, double gain_db, int bits)
-{
-    double v = (double)((sx * 3 + sy * 5) % 97 + 1) * (exposure_us / 100.0) * pow(10.0, gain_db / 20.0);
-    double maxv = (double)((1 << bits) - 1);
-    return (uint16_t)(v >= maxv ? maxv : floor(v));
-}
-
-typedef struct {
-    pthread_mutex_t  lock;
-    rig_frame_meta_t last;        // settings of the last render
-    int              n;           // renders
-    atomic_int       fail;        // >0: the next renders fail
-    atomic_int       sleep_ms;    // emulate an expensive imaging model
-} render_ctx_t;
-
-static int render_pattern(void *vctx, const rig_frame_meta_t *m, uint16_t *pix)
-{
-    render_ctx_t *ctx = vctx;
-    if (atomic_load(&ctx->fail) > 0) {
-        atomic_fetch_sub(&ctx->fail, 1);
-        return rig_fail(RIG_ERR_IO, "test renderer: injected failure");
-    }
-    int ms = atomic_load(&ctx->sleep_ms);
-    if (ms > 0) usleep((useconds_t)ms * 1000);
-    // Saturate by hand in the 16-bit case too: the server would do the same.
-    for (int y = 0; y < m->height; y++)
-        for (int x = 0; x < m->width; x++)
-            pix[(size_t)y * m->width + x] = pattern(x + m->offset_x, y + m->offset_y, m->exposure_us, m->gain, m->bits);
-    pthread_mutex_lock(&ctx->lock);
-    ctx->last = *m;
-    ctx->n++;
-    pthread_mutex_unlock(&ctx->lock);
-    return 0;
-}
-
-static render_ctx_t *new_ctx(void)
-{
-    render_ctx_t *ctx = calloc(1, sizeof *ctx);
-    pthread_mutex_init(&ctx->lock, NULL);
-    return ctx;
-}
-
-static void free_ctx(render_ctx_t *ctx)
-{
-    if (!ctx) return;
-    pthread_mutex_destroy(&ctx->lock);
-    free(ctx);
-}
-
-static rig_gv_camera_t *start_server(render_ctx_t *ctx)
-{
-    rig_gv_camera_params_t p = rig_gv_camera_defaults();
-    p.serial = "TEST-0042";
-    p.vendor = "refl-test";
-    p.model = "pattern cam";
-    p.render = render_pattern;
-    p.render_ctx = ctx;
-    p.busy_wait_s = 120;   // another tree's tests may hold 127.0.0.1:3956
-    rig_gv_camera_t *g = NULL;
-    int rc = rig_gv_camera_start(&g, &p);
-    CHECK_MSG(rc == 0, "rig_gv_camera_start: %d %s", rc, rig_last_error());
-    return g;
-}
-
-// Every pixel of f equals the pattern for its settings; returns the number of mismatches.
-static long pattern_mismatches(const rig_frame_t *f)
-{
-    long bad = 0;
-    const rig_frame_meta_t *m = &f->meta;
-    for (int y = 0; y < m->height; y++)
-        for (int x = 0; x < m->width; x++)
-            if (f->pix[(size_t)y * m->width + x] !=
-                pattern(x + m->offset_x, y + m->offset_y, m->exposure_us, m->gain, m->bits))
-                bad++;
-    return bad;
-}
+// The test pattern, its renderer and the server serving it: tests/fixtures.h.
 
 static double now_s(void) { return model_now_s(); }
 
@@ -138,14 +61,12 @@ static int lock_file(const char *name)
 
 TEST(aravis_gv_settings_pixels_metadata)
 {
-    int session = test_camera_lock();
-    render_ctx_t *ctx = new_ctx();
-    rig_gv_camera_t *g = start_server(ctx);
-    rig_camera_t *c = NULL;
-    if (!g) goto done;
-    int rc = rig_camera_open_aravis(&c, ADDR);
-    CHECK_MSG(rc == 0, "open: %d %s", rc, rig_last_error());
-    if (rc) goto done;
+    fx_gv_t F;
+    if (!fx_gv_open(&F, true)) goto done;
+    fx_pattern_ctx_t *ctx = F.ctx;
+    rig_gv_camera_t *g = F.g;
+    rig_camera_t *c = F.c;
+    int rc;
     CHECK(!strcmp(c->ops->backend, "aravis"));
     CHECK_CONTAINS(c->name, "TEST-0042");
     CHECK_CONTAINS(c->name, "pattern cam");
@@ -195,7 +116,7 @@ TEST(aravis_gv_settings_pixels_metadata)
         }
         prev_id = m->frame_id;
         prev_ts = m->timestamp_ns;
-        long bad = pattern_mismatches(&f);
+        long bad = fx_pattern_mismatches(&f);
         CHECK_MSG(bad == 0, "%ld pixels differ from the pattern", bad);
         // A value in the middle, computed by hand: sensor (64+10, 32+20): (222+260)%97+1 = 95,
         // 95 * 12.345 * 10^(6.5/20) = 2478.6 -> 2478.
@@ -225,7 +146,7 @@ TEST(aravis_gv_settings_pixels_metadata)
         CHECK(!strcmp(f.meta.pixel_format, fmts[k]) && f.meta.bits == bits[k]);
         CHECK(f.meta.width == 1280 && f.meta.height == 1024);
         CHECK_NEAR(f.meta.temperature_c, 41.25, 1e-12);
-        long bad = pattern_mismatches(&f);
+        long bad = fx_pattern_mismatches(&f);
         CHECK_MSG(bad == 0, "%s: %ld pixels differ from the pattern", fmts[k], bad);
         uint16_t maxv = 0;
         for (size_t i = 0; i < (size_t)1280 * 1024; i++) maxv = f.pix[i] > maxv ? f.pix[i] : maxv;
@@ -237,22 +158,14 @@ TEST(aravis_gv_settings_pixels_metadata)
     CHECK(st.triggers == 5 && st.frames_rendered == 5 && st.frames_sent == 5);
     CHECK(st.late_frames == 0 && st.render_errors == 0);
 done:
-    rig_camera_close(c);
-    rig_gv_camera_stop(g);
-    free_ctx(ctx);
-    test_camera_unlock(session);
+    fx_gv_close(&F);
 }
 
 TEST(aravis_gv_invalid_settings)
 {
-    int session = test_camera_lock();
-    render_ctx_t *ctx = new_ctx();
-    rig_gv_camera_t *g = start_server(ctx);
-    rig_camera_t *c = NULL;
-    if (!g) goto done;
-    int rc = rig_camera_open_aravis(&c, ADDR);
-    CHECK_MSG(rc == 0, "open: %d %s", rc, rig_last_error());
-    if (rc) goto done;
+    fx_gv_t F;
+    if (!fx_gv_open(&F, true)) goto done;
+    rig_camera_t *c = F.c;
     // Not a format refl records: names the camera's formats.
     CHECK(rig_camera_set_pixel_format(c, "RGB8") == RIG_ERR_INVALID);
     CHECK_CONTAINS(rig_last_error(), "RGB8");
@@ -282,10 +195,7 @@ TEST(aravis_gv_invalid_settings)
     rig_frame_free(NULL);
     rig_camera_close(NULL);
 done:
-    rig_camera_close(c);
-    rig_gv_camera_stop(g);
-    free_ctx(ctx);
-    test_camera_unlock(session);
+    fx_gv_close(&F);
 }
 
 // Frame ids keep increasing across the 16-bit GVSP block id wrap (the Aravis
@@ -293,14 +203,12 @@ done:
 // camera that sends nothing times out with a clear message.
 TEST(aravis_gv_frame_ids_retries)
 {
-    int session = test_camera_lock();
-    render_ctx_t *ctx = new_ctx();
-    rig_gv_camera_t *g = start_server(ctx);
-    rig_camera_t *c = NULL;
-    if (!g) goto done;
-    int rc = rig_camera_open_aravis(&c, ADDR);
-    CHECK_MSG(rc == 0, "open: %d %s", rc, rig_last_error());
-    if (rc) goto done;
+    fx_gv_t F;
+    if (!fx_gv_open(&F, true)) goto done;
+    fx_pattern_ctx_t *ctx = F.ctx;
+    rig_gv_camera_t *g = F.g;
+    rig_camera_t *c = F.c;
+    int rc;
     CHECK(rig_camera_set_region(c, 0, 0, 64, 48) == 0);
     uint64_t prev = 0;
     int n_ok = 0;
@@ -314,7 +222,7 @@ TEST(aravis_gv_frame_ids_retries)
         if (i > 0 && f.meta.frame_id != prev + 1)
             CHECK_MSG(0, "frame %d: id %llu after %llu", i, (unsigned long long)f.meta.frame_id, (unsigned long long)prev);
         prev = f.meta.frame_id;
-        n_ok += pattern_mismatches(&f) == 0;
+        n_ok += fx_pattern_mismatches(&f) == 0;
         rig_frame_free(&f);
     }
     CHECK(n_ok == 150);
@@ -327,7 +235,7 @@ TEST(aravis_gv_frame_ids_retries)
     rc = rig_camera_capture(c, 0.2, 2, &f);
     CHECK_MSG(rc == 0, "capture with retries: %d %s", rc, rig_last_error());
     CHECK(now_s() - t0 >= 0.39 && now_s() - t0 < 2.0);
-    if (!rc) CHECK(f.meta.frame_id == prev + 1 && pattern_mismatches(&f) == 0);   // dropped triggers send nothing
+    if (!rc) CHECK(f.meta.frame_id == prev + 1 && fx_pattern_mismatches(&f) == 0);   // dropped triggers send nothing
     rig_frame_free(&f);
 
     // More losses than retries: RIG_ERR_TIMEOUT naming the camera and what happened.
@@ -353,10 +261,7 @@ TEST(aravis_gv_frame_ids_retries)
     rig_gv_camera_last_render_error(g, msg, sizeof msg);
     CHECK_CONTAINS(msg, "injected failure");
 done:
-    rig_camera_close(c);
-    rig_gv_camera_stop(g);
-    free_ctx(ctx);
-    test_camera_unlock(session);
+    fx_gv_close(&F);
 }
 
 // An independent GenICam client (Aravis through Python GObject introspection,
@@ -381,22 +286,18 @@ static const char genicam_py[] =
 
 TEST(aravis_gv_genicam_features_external_client)
 {
-    int session = test_camera_lock();
-    render_ctx_t *ctx = new_ctx();
-    rig_gv_camera_t *g = start_server(ctx);
-    rig_camera_t *c = NULL;
     char *out = NULL, *err = NULL;
-    if (!g) goto done;
-    int rc = rig_camera_open_aravis(&c, ADDR);
-    CHECK_MSG(rc == 0, "open: %d %s", rc, rig_last_error());
-    if (rc) goto done;
+    fx_gv_t F;
+    if (!fx_gv_open(&F, true)) goto done;
+    rig_gv_camera_t *g = F.g;
+    rig_camera_t *c = F.c;
     CHECK(rig_camera_set_pixel_format(c, "Mono12") == 0);
     CHECK(rig_camera_set_exposure_us(c, 2500.25) == 0);
     CHECK(rig_camera_set_gain(c, 3.5) == 0);
     CHECK(rig_camera_set_region(c, 16, 8, 640, 480) == 0);
     rig_gv_camera_set_temperature(g, 38.5);
     rig_camera_close(c);   // release control (the client could read while we hold it too)
-    c = NULL;
+    c = F.c = NULL;
 
     const char *script = test_write("genicam_read.py", genicam_py);
     const char *argv[] = { "/usr/bin/python3", script, ADDR, "ExposureTime", "ExposureTimeAbs", "Gain",
@@ -433,10 +334,7 @@ TEST(aravis_gv_genicam_features_external_client)
 done:
     free(out);
     free(err);
-    rig_camera_close(c);
-    rig_gv_camera_stop(g);
-    free_ctx(ctx);
-    test_camera_unlock(session);
+    fx_gv_close(&F);
 }
 
 #define ARV_TOOL "arv-tool-0.8"   // only ever run as: arv-tool-0.8 -a 127.0.0.1 ... (no discovery)
@@ -446,12 +344,9 @@ done:
 // own backend then reads back: the camera speaks GenICam as a real one does.
 TEST(aravis_gv_arv_tool_by_address)
 {
-    int session = test_camera_lock();
-    render_ctx_t *ctx = new_ctx();
-    rig_gv_camera_t *g = start_server(ctx);
-    rig_camera_t *c = NULL;
     char *out = NULL, *err = NULL;
-    if (!g) goto done;
+    fx_gv_t F;
+    if (!fx_gv_open(&F, false)) goto done;
     const char *features[] = { ARV_TOOL, "-a", ADDR, "features", NULL };
     int st = test_run(features, 30, &out, &err);
     CHECK_MSG(st == 0, "arv-tool features exited %d: %s", st, err ? err : "");
@@ -481,21 +376,18 @@ TEST(aravis_gv_arv_tool_by_address)
     CHECK_CONTAINS(out, "DeviceVendorName = refl-test");
     CHECK_CONTAINS(out, "SensorWidth = 1280");
     // What arv-tool wrote, our backend reads.
-    int rc = rig_camera_open_aravis(&c, ADDR);
+    int rc = rig_camera_open_aravis(&F.c, ADDR);
     CHECK_MSG(rc == 0, "open: %d %s", rc, rig_last_error());
     if (rc) goto done;
     rig_frame_meta_t m;
-    CHECK(rig_camera_settings(c, &m) == 0);
+    CHECK(rig_camera_settings(F.c, &m) == 0);
     CHECK_NEAR(m.exposure_us, 4321.5, 1e-6);
     CHECK_NEAR(m.gain, 2.5, 1e-9);
     CHECK(!strcmp(m.pixel_format, "Mono16"));
 done:
     free(out);
     free(err);
-    rig_camera_close(c);
-    rig_gv_camera_stop(g);
-    free_ctx(ctx);
-    test_camera_unlock(session);
+    fx_gv_close(&F);
 }
 
 // Free running (TriggerMode Off, as a viewer would use it), by the same
@@ -527,11 +419,10 @@ static const char freerun_py[] =
 
 TEST(gv_camera_free_running_external_client)
 {
-    int session = test_camera_lock();
-    render_ctx_t *ctx = new_ctx();
-    rig_gv_camera_t *g = start_server(ctx);
     char *out = NULL, *err = NULL;
-    if (!g) goto done;
+    fx_gv_t F;
+    if (!fx_gv_open(&F, false)) goto done;
+    rig_gv_camera_t *g = F.g;
     const char *script = test_write("freerun.py", freerun_py);
     const char *argv[] = { "/usr/bin/python3", script, ADDR, NULL };
     double t0 = now_s();
@@ -548,9 +439,7 @@ TEST(gv_camera_free_running_external_client)
 done:
     free(out);
     free(err);
-    rig_gv_camera_stop(g);
-    free_ctx(ctx);
-    test_camera_unlock(session);
+    fx_gv_close(&F);
 }
 
 // A slow render (an imaging model) happens in the server's render thread:
@@ -577,14 +466,11 @@ static double process_cpu_s(void)
 
 TEST(aravis_gv_responsive_during_slow_render)
 {
-    int session = test_camera_lock();
-    render_ctx_t *ctx = new_ctx();
-    rig_gv_camera_t *g = start_server(ctx);
-    rig_camera_t *c = NULL;
-    if (!g) goto done;
-    int rc = rig_camera_open_aravis(&c, ADDR);
-    CHECK_MSG(rc == 0, "open: %d %s", rc, rig_last_error());
-    if (rc) goto done;
+    fx_gv_t F;
+    if (!fx_gv_open(&F, true)) goto done;
+    fx_pattern_ctx_t *ctx = F.ctx;
+    rig_camera_t *c = F.c;
+    int rc;
     CHECK(rig_camera_set_region(c, 0, 0, 256, 256) == 0);
     rig_frame_t f;
     CHECK(rig_camera_capture(c, 2.0, 1, &f) == 0);   // stream started
@@ -612,35 +498,29 @@ TEST(aravis_gv_responsive_during_slow_render)
     // client spins meanwhile (Aravis's GV thread did, at a 1 kHz trigger check).
     printf("  %.2f s CPU in a %.2f s wait for a slow render\n", cpu, total);
     CHECK_MSG(cpu < 0.25 * total, "%.2f s CPU in a %.2f s wait for a slow render", cpu, total);
-    if (!job.rc) CHECK(pattern_mismatches(&job.f) == 0);
+    if (!job.rc) CHECK(fx_pattern_mismatches(&job.f) == 0);
     rig_frame_free(&job.f);
     atomic_store(&ctx->sleep_ms, 0);
 done:
-    rig_camera_close(c);
-    rig_gv_camera_stop(g);
-    free_ctx(ctx);
-    test_camera_unlock(session);
+    fx_gv_close(&F);
 }
 
 // The camera disappears in the middle of a session: clear errors naming the
 // camera, bounded time, no hang; closing is bounded too.
 TEST(aravis_gv_camera_disappears)
 {
-    int session = test_camera_lock();
-    render_ctx_t *ctx = new_ctx();
-    rig_gv_camera_t *g = start_server(ctx);
-    rig_camera_t *c = NULL;
-    if (!g) goto done;
-    int rc = rig_camera_open_aravis(&c, ADDR);
-    CHECK_MSG(rc == 0, "open: %d %s", rc, rig_last_error());
-    if (rc) goto done;
+    fx_gv_t F;
+    if (!fx_gv_open(&F, true)) goto done;
+    rig_gv_camera_t *g = F.g;
+    rig_camera_t *c = F.c;
+    int rc;
     CHECK(rig_camera_set_region(c, 0, 0, 128, 128) == 0);
     rig_frame_t f;
     CHECK(rig_camera_capture(c, 1.0, 1, &f) == 0);
     rig_frame_free(&f);
 
     rig_gv_camera_stop(g);   // the camera is gone
-    g = NULL;
+    g = F.g = NULL;
     double t0 = now_s();
     rc = rig_camera_capture(c, 0.5, 1, &f);
     double dt = now_s() - t0;
@@ -659,14 +539,11 @@ TEST(aravis_gv_camera_disappears)
     CHECK(now_s() - t0 < 4.0);
     t0 = now_s();
     rig_camera_close(c);
-    c = NULL;
+    c = F.c = NULL;
     // Aravis 0.8 waits 5 x 500 ms per unanswered request; closing makes up to four.
     CHECK_MSG(now_s() - t0 < 12.0, "close of a lost camera took %.1f s", now_s() - t0);
 done:
-    rig_camera_close(c);
-    rig_gv_camera_stop(g);
-    free_ctx(ctx);
-    test_camera_unlock(session);
+    fx_gv_close(&F);
 }
 
 TEST(aravis_open_nothing_there)
@@ -746,9 +623,9 @@ done:
 TEST(gv_camera_server_params)
 {
     int session = test_camera_lock();
-    render_ctx_t *ctx = new_ctx();
+    fx_pattern_ctx_t *ctx = fx_pattern_ctx_new();
     rig_gv_camera_params_t p = rig_gv_camera_defaults();
-    p.render = render_pattern;
+    p.render = fx_render_pattern;
     p.render_ctx = ctx;
     rig_gv_camera_t *g = (rig_gv_camera_t *)&g;
     p.address = "192.168.1.20";
@@ -758,7 +635,7 @@ TEST(gv_camera_server_params)
     p.render = NULL;
     CHECK(rig_gv_camera_start(&g, &p) == RIG_ERR_INVALID);
     CHECK_CONTAINS(rig_last_error(), "render callback");
-    p.render = render_pattern;
+    p.render = fx_render_pattern;
     p.serial = "A-SERIAL-THAT-IS-TOO-LONG";
     CHECK(rig_gv_camera_start(&g, &p) == RIG_ERR_INVALID);
     p.serial = NULL;
@@ -777,6 +654,6 @@ TEST(gv_camera_server_params)
     CHECK_CONTAINS(rig_last_error(), "127.0.0.1");
     rig_gv_camera_stop(g);
     rig_gv_camera_stop(NULL);
-    free_ctx(ctx);
+    fx_pattern_ctx_free(ctx);
     test_camera_unlock(session);
 }

@@ -1,4 +1,4 @@
-// tests/test_scene.c — D3D and OBJ readers, face checks, rotation, loading.
+// tests/test_model_scene.c — D3D and OBJ readers, face checks, rotation, loading.
 #include <stdlib.h>
 
 #include "model/model.h"

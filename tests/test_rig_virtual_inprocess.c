@@ -1,4 +1,4 @@
-// tests/test_virtual_inprocess.c — the virtual rig with its camera served
+// tests/test_rig_virtual_inprocess.c — the virtual rig with its camera served
 // in-process (rig_virtual_options_t.serve = RIG_VIRTUAL_SERVE_INPROCESS; rig
 // files: [rig] serve = inprocess): an Aravis fake device inside this process,
 // opened by rig_camera_open_aravis("inprocess:SERIAL") and driven by the same
@@ -6,7 +6,7 @@
 // no lock on 127.0.0.1 and may run beside the GigE Vision tests.
 //
 // The frames are checked against the model's noise-free rendering with the
-// statistic of tests/test_virtual.c (tests/virtual_stats.h): mean difference
+// statistic of tests/test_rig_virtual.c (tests/virtual_stats.h): mean difference
 // ~0 within a few standard errors, mean (d^2 / var) ~1; a wrong state is
 // rejected. Each frame shows the state at its trigger (a changed state is seen
 // by the next capture), and the metadata are the camera's settings.

@@ -1,4 +1,4 @@
-// tests/test_sensor.c — the sensor stage: photon transfer (EMVA 1288), fixed
+// tests/test_model_sensor.c — the sensor stage: photon transfer (EMVA 1288), fixed
 // patterns, quantisation and clipping, Poisson statistics, non-linearity,
 // vignetting, reproducibility.
 #define _GNU_SOURCE

@@ -1,4 +1,4 @@
-// tests/test_lsq.c — model/lsq.h (Ceres behind a C header) on problems with
+// tests/test_model_lsq.c — model/lsq.h (Ceres behind a C header) on problems with
 // known answers: a straight line (exact solution and its textbook
 // covariance), an exponential decay, bounds, fixed parameters, Gaussian
 // priors (the precision-weighted mean), a robust loss against an outlier,

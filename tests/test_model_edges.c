@@ -1,4 +1,4 @@
-// tests/test_edges.c — the edge query on a box standing on a floor, seen
+// tests/test_model_edges.c — the edge query on a box standing on a floor, seen
 // obliquely by a pinhole camera with one lamp.
 #include <stdlib.h>
 

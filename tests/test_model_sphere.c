@@ -1,14 +1,14 @@
-// tests/test_sphere.c — the exact sphere primitive: D3D '@sphere' (model/scene.c),
+// tests/test_model_sphere.c — the exact sphere primitive: D3D '@sphere' (model/scene.c),
 // ray casting, shadows and highlights (model/trace.c, model/shade.c) against
 // analytic answers.
 #define _GNU_SOURCE
 #include <glib.h>
-#include <mrcal/poseutils.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
 #include "model/internal.h"
+#include "tests/fixtures.h"
 #include "tests/test.h"
 
 static model_scene_t *sph_scene(const char *d3d)
@@ -18,23 +18,7 @@ static model_scene_t *sph_scene(const char *d3d)
     return s;
 }
 
-// A pinhole camera at C looking at target (image y down, world z up).
-static model_camera_t *sph_camera(int W, int H, double f, model_vec3_t C, model_vec3_t target)
-{
-    model_vec3_t z = v3_unit(v3_sub(target, C));
-    model_vec3_t up = fabs(z.z) > 0.99 ? v3(0, 1, 0) : v3(0, 0, 1);
-    model_vec3_t x = v3_unit(v3_cross(z, up));
-    model_vec3_t y = v3_cross(z, x);
-    double R[9] = { x.x, x.y, x.z, y.x, y.y, y.z, z.x, z.y, z.z };
-    double rt[6];
-    mrcal_r_from_R(rt, NULL, R);
-    for (int i = 0; i < 3; i++)
-        rt[3 + i] = -(R[3 * i] * C.x + R[3 * i + 1] * C.y + R[3 * i + 2] * C.z);
-    double intr[4] = { f, f, (W - 1) / 2.0, (H - 1) / 2.0 };
-    model_camera_t *cam = model_camera_new("LENSMODEL_PINHOLE", intr, W, H, rt);
-    if (!cam) fprintf(stderr, "  camera: %s\n", model_last_error());
-    return cam;
-}
+// The pinhole camera looking at a target: fx_pinhole_camera() (tests/fixtures.h).
 
 // ---------------------------------------------------------------------------
 // Scenes
@@ -332,7 +316,7 @@ TEST(sphere_highlight_at_the_mirror_point)
     const char *mt = "[material chrome]\nmodel = ggx\nkd = 0\nks = 1\nalpha = 0.02\nF0 = 0.9\n";
     model_materials_t *m = model_materials_parse(mt, strlen(mt), "m.ini");
     int W = 320, H = 320;
-    model_camera_t *cam = sph_camera(W, H, 3000, C, c);
+    model_camera_t *cam = fx_pinhole_camera(W, H, 3000, C, c);
     model_tracer_t *t = s ? model_tracer_new(s) : NULL;
     const model_material_t *mats[1] = { NULL };
     CHECK(s && m && cam && t && model_resolve_materials(s, m, mats));
@@ -401,7 +385,7 @@ TEST(sphere_face_ids_in_edges_and_render)
     const char *lt = "[lamp a]\nposition_mm = 100 200 500\nintensity = 1e6\n";
     model_materials_t *m = model_materials_parse(mt, strlen(mt), "m.ini");
     model_lamps_t *lamps = model_lamps_parse(lt, strlen(lt), "l.ini");
-    model_camera_t *cam = sph_camera(200, 160, 300, v3(300, -200, 400), v3(0, 0, 0));
+    model_camera_t *cam = fx_pinhole_camera(200, 160, 300, v3(300, -200, 400), v3(0, 0, 0));
     model_tracer_t *t = s ? model_tracer_new(s) : NULL;
     const model_material_t *mats[2] = { NULL, NULL };
     CHECK(s && m && lamps && cam && t && model_resolve_materials(s, m, mats));

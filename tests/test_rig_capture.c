@@ -1,4 +1,4 @@
-// tests/test_capture.c — `refl capture` and `refl session` on the virtual rig:
+// tests/test_rig_capture.c — `refl capture` and `refl session` on the virtual rig:
 // a session killed with SIGKILL at 10 random steps (fixed seed) and resumed
 // each time equals an uninterrupted one (same step rows, every hash valid, no
 // duplicate or missing frame; pixel values differ: the virtual camera's noise
@@ -9,7 +9,7 @@
 // before_step hook); a stalled turntable (truth file with fault keys).
 //
 // Only one virtual camera serves 127.0.0.1 at a time: these tests hold the
-// lock of tests/test_camera_aravis.c throughout.
+// lock of tests/test_rig_camera_aravis.c throughout.
 #define _GNU_SOURCE
 #include <errno.h>
 #include <fcntl.h>
@@ -368,11 +368,9 @@ TEST(capture_disk_full)
     char mnt[4096];
     snprintf(mnt, sizeof mnt, "%s/mnt", test_tmpdir());
     mkdir(mnt, 0777);
-    if (mount("tmpfs", mnt, "tmpfs", 0, "size=3m") != 0) {
-        fprintf(stderr, "capture_disk_full: no tmpfs here (%s); capture_disk_full_injected covers the disk-full "
-                "path with an injected ENOSPC\n", strerror(errno));
-        return;
-    }
+    if (mount("tmpfs", mnt, "tmpfs", 0, "size=3m") != 0)
+        SKIP("no tmpfs here (%s); capture_disk_full_injected covers the disk-full "
+             "path with an injected ENOSPC", strerror(errno));
     char dir[4200];
     snprintf(dir, sizeof dir, "%s/s", mnt);
     disk_full_body(dir, NULL);

@@ -1,11 +1,11 @@
-// tests/test_turntable.c — the turntable: errors, stage table, motion time,
+// tests/test_rig_turntable.c — the turntable: errors, stage table, motion time,
 // the simulated stage, and the unmodified APT driver against a simulated
 // FTDI + APT controller (tests/apt_sim.c) under umockdev.
 //
 // The APT tests (apt_umock_*) need libumockdev-preload loaded at process
 // start, so turntable_apt_under_umockdev re-runs this test binary as
 // `umockdev-wrapper <self> apt_umock_`; run directly, the apt_umock_* tests
-// return at once.
+// are skipped.
 #define _GNU_SOURCE
 #include <stdlib.h>
 #include <time.h>
@@ -14,6 +14,7 @@
 #include "model/model.h"
 #include "rig/rig.h"
 #include "tests/apt_sim.h"
+#include "tests/fixtures.h"
 #include "tests/test.h"
 
 static void sleep_s(double s)
@@ -75,18 +76,11 @@ TEST(turntable_motion_time)
 // ---------------------------------------------------------------------------
 // Simulated stage
 
-static rig_turntable_sim_params_t fast_sim(void)
-{
-    rig_turntable_sim_params_t p = rig_turntable_sim_defaults();
-    p.time_scale = 0.01;      // 10 s of stage time = 0.1 s
-    p.home_time_s = 5;
-    p.position_noise_deg = 0.001;
-    return p;
-}
+// fx_fast_sim() (tests/fixtures.h): 10 s of stage time = 0.1 s.
 
 TEST(turntable_sim_home_move_timing)
 {
-    rig_turntable_sim_params_t p = fast_sim();
+    rig_turntable_sim_params_t p = fx_fast_sim();
     rig_turntable_t *t = NULL;
     rig_turntable_status_t st;
     rig_turntable_info_t info;
@@ -126,7 +120,7 @@ TEST(turntable_sim_home_move_timing)
 
 TEST(turntable_sim_relative_and_stop)
 {
-    rig_turntable_sim_params_t p = fast_sim();
+    rig_turntable_sim_params_t p = fx_fast_sim();
     p.position_noise_deg = 0;
     rig_turntable_t *t = NULL;
     rig_turntable_status_t st;
@@ -165,7 +159,7 @@ TEST(turntable_sim_relative_and_stop)
 
 TEST(turntable_sim_faults)
 {
-    rig_turntable_sim_params_t p = fast_sim();
+    rig_turntable_sim_params_t p = fx_fast_sim();
     rig_turntable_t *t = NULL;
     rig_turntable_status_t st;
 
@@ -216,18 +210,18 @@ TEST(turntable_sim_faults)
 
 TEST(turntable_sim_bad_input)
 {
-    rig_turntable_sim_params_t p = fast_sim();
+    rig_turntable_sim_params_t p = fx_fast_sim();
     rig_turntable_t *t = NULL;
     rig_turntable_status_t st;
     p.time_scale = 0;
     CHECK(rig_turntable_open_sim(&t, &p) == RIG_ERR_INVALID && t == NULL);
     CHECK_CONTAINS(rig_last_error(), "time_scale");
-    p = fast_sim();
+    p = fx_fast_sim();
     p.fault_after_moves = 1;
     p.fault = RIG_ERR_IO;
     CHECK(rig_turntable_open_sim(&t, &p) == RIG_ERR_INVALID);
     CHECK_CONTAINS(rig_last_error(), "fault must be");
-    p = fast_sim();
+    p = fx_fast_sim();
     CHECK(rig_turntable_open_sim(&t, &p) == 0);
     if (!t) return;
     CHECK(rig_turntable_move_abs_deg(t, 10, 1.0) == RIG_ERR_NOT_HOMED);
@@ -282,29 +276,14 @@ TEST(turntable_apt_under_umockdev)
     free(err);
 }
 
-static apt_sim_t *sim_start(const apt_sim_device_t *devs, int n)
-{
-    char path[1024], msg[256];
-    snprintf(path, sizeof path, "%s/tests/data/k10cr1.umockdev", test_srcdir());
-    apt_sim_t *s = apt_sim_new(path, devs, n, msg, sizeof msg);
-    CHECK_MSG(s != NULL, "apt_sim_new: %s", msg);
-    return s;
-}
-
-// Open the one simulated stage and home it.
-static rig_turntable_t *open_homed(void)
-{
-    rig_turntable_t *t = NULL;
-    CHECK(rig_turntable_open_apt(&t, NULL, NULL) == 0);
-    if (t) CHECK(rig_turntable_home(t, 2.0) == 0);
-    return t;
-}
+// The simulated controller and the homed stage: fx_apt_sim_start() and
+// fx_apt_open_homed() (tests/fixtures.h).
 
 TEST(apt_umock_open_info)
 {
-    if (!apt_sim_available()) return;
+    if (!apt_sim_available()) SKIP("runs under umockdev-wrapper, from turntable_apt_under_umockdev");
     apt_sim_device_t d = apt_sim_device_defaults();
-    apt_sim_t *s = sim_start(&d, 1);
+    apt_sim_t *s = fx_apt_sim_start(&d, 1);
     rig_turntable_t *t = NULL;
     rig_turntable_info_t info;
     apt_sim_stats_t st;
@@ -338,9 +317,9 @@ TEST(apt_umock_open_info)
 
 TEST(apt_umock_home_and_moves)
 {
-    if (!apt_sim_available()) return;
+    if (!apt_sim_available()) SKIP("runs under umockdev-wrapper, from turntable_apt_under_umockdev");
     apt_sim_device_t d = apt_sim_device_defaults();
-    apt_sim_t *s = sim_start(&d, 1);
+    apt_sim_t *s = fx_apt_sim_start(&d, 1);
     rig_turntable_t *t = NULL;
     rig_turntable_status_t st;
     apt_sim_stats_t ss;
@@ -374,12 +353,12 @@ TEST(apt_umock_home_and_moves)
 
 TEST(apt_umock_status_while_moving_and_keepalive)
 {
-    if (!apt_sim_available()) return;
+    if (!apt_sim_available()) SKIP("runs under umockdev-wrapper, from turntable_apt_under_umockdev");
     apt_sim_device_t d = apt_sim_device_defaults();
     d.speed_deg_s = 150;                  // 90 deg in ~0.7 s
     d.accel_deg_s2 = 1500;
-    apt_sim_t *s = sim_start(&d, 1);
-    rig_turntable_t *t = open_homed();
+    apt_sim_t *s = fx_apt_sim_start(&d, 1);
+    rig_turntable_t *t = fx_apt_open_homed();
     rig_turntable_status_t st;
     apt_sim_stats_t ss;
     if (t) {
@@ -404,12 +383,12 @@ TEST(apt_umock_status_while_moving_and_keepalive)
 
 TEST(apt_umock_stop)
 {
-    if (!apt_sim_available()) return;
+    if (!apt_sim_available()) SKIP("runs under umockdev-wrapper, from turntable_apt_under_umockdev");
     apt_sim_device_t d = apt_sim_device_defaults();
     d.speed_deg_s = 100;
     d.accel_deg_s2 = 1000;
-    apt_sim_t *s = sim_start(&d, 1);
-    rig_turntable_t *t = open_homed();
+    apt_sim_t *s = fx_apt_sim_start(&d, 1);
+    rig_turntable_t *t = fx_apt_open_homed();
     rig_turntable_status_t st;
     apt_sim_stats_t ss;
     if (t) {
@@ -436,12 +415,12 @@ TEST(apt_umock_stop)
 
 TEST(apt_umock_wait_timeout)
 {
-    if (!apt_sim_available()) return;
+    if (!apt_sim_available()) SKIP("runs under umockdev-wrapper, from turntable_apt_under_umockdev");
     apt_sim_device_t d = apt_sim_device_defaults();
     d.speed_deg_s = 100;
     d.accel_deg_s2 = 1000;
-    apt_sim_t *s = sim_start(&d, 1);
-    rig_turntable_t *t = open_homed();
+    apt_sim_t *s = fx_apt_sim_start(&d, 1);
+    rig_turntable_t *t = fx_apt_open_homed();
     if (t) {
         double t0 = model_now_s();
         CHECK(rig_turntable_move_abs_deg(t, 90, 0.2) == RIG_ERR_TIMEOUT);
@@ -458,10 +437,10 @@ TEST(apt_umock_wait_timeout)
 
 TEST(apt_umock_no_reply)
 {
-    if (!apt_sim_available()) return;
+    if (!apt_sim_available()) SKIP("runs under umockdev-wrapper, from turntable_apt_under_umockdev");
     apt_sim_device_t d = apt_sim_device_defaults();
     d.no_reply = true;
-    apt_sim_t *s = sim_start(&d, 1);
+    apt_sim_t *s = fx_apt_sim_start(&d, 1);
     rig_turntable_t *t = NULL;
     double t0 = model_now_s();
     CHECK(rig_turntable_open_apt(&t, NULL, NULL) == RIG_ERR_TIMEOUT && !t);
@@ -474,11 +453,11 @@ TEST(apt_umock_no_reply)
 
 TEST(apt_umock_motion_error)
 {
-    if (!apt_sim_available()) return;
+    if (!apt_sim_available()) SKIP("runs under umockdev-wrapper, from turntable_apt_under_umockdev");
     apt_sim_device_t d = apt_sim_device_defaults();
     d.motion_error = true;
-    apt_sim_t *s = sim_start(&d, 1);
-    rig_turntable_t *t = open_homed();
+    apt_sim_t *s = fx_apt_sim_start(&d, 1);
+    rig_turntable_t *t = fx_apt_open_homed();
     rig_turntable_status_t st;
     if (t) {
         CHECK(rig_turntable_move_abs_deg(t, 90, 2.0) == RIG_ERR_MOTION);
@@ -495,13 +474,13 @@ TEST(apt_umock_motion_error)
 
 TEST(apt_umock_unplugged_mid_move)
 {
-    if (!apt_sim_available()) return;
+    if (!apt_sim_available()) SKIP("runs under umockdev-wrapper, from turntable_apt_under_umockdev");
     apt_sim_device_t d = apt_sim_device_defaults();
     d.unplug_mid_move = true;
     d.speed_deg_s = 300;
     d.accel_deg_s2 = 3000;
-    apt_sim_t *s = sim_start(&d, 1);
-    rig_turntable_t *t = open_homed();
+    apt_sim_t *s = fx_apt_sim_start(&d, 1);
+    rig_turntable_t *t = fx_apt_open_homed();
     rig_turntable_status_t st;
     if (t) {
         double t0 = model_now_s();
@@ -517,10 +496,10 @@ TEST(apt_umock_unplugged_mid_move)
 
 TEST(apt_umock_permission_denied)
 {
-    if (!apt_sim_available()) return;
+    if (!apt_sim_available()) SKIP("runs under umockdev-wrapper, from turntable_apt_under_umockdev");
     apt_sim_device_t d = apt_sim_device_defaults();
     d.deny_access = true;
-    apt_sim_t *s = sim_start(&d, 1);
+    apt_sim_t *s = fx_apt_sim_start(&d, 1);
     rig_turntable_t *t = NULL;
     CHECK(rig_turntable_open_apt(&t, NULL, NULL) == RIG_ERR_ACCESS && !t);
     CHECK_CONTAINS(rig_last_error(), "permission denied on /dev/bus/usb/001/002");
@@ -532,15 +511,15 @@ TEST(apt_umock_permission_denied)
 
 TEST(apt_umock_device_missing)
 {
-    if (!apt_sim_available()) return;
+    if (!apt_sim_available()) SKIP("runs under umockdev-wrapper, from turntable_apt_under_umockdev");
     apt_sim_device_t d = apt_sim_device_defaults();
-    apt_sim_t *s = sim_start(&d, 1);
+    apt_sim_t *s = fx_apt_sim_start(&d, 1);
     rig_turntable_t *t = NULL;
     CHECK(rig_turntable_open_apt(&t, "99999999", NULL) == RIG_ERR_NO_DEVICE && !t);
     CHECK_CONTAINS(rig_last_error(), "apt serial 99999999: not found");
     CHECK_CONTAINS(rig_last_error(), "present: 55000001 (bus 1 device 2)");
     apt_sim_free(s);
-    s = sim_start(NULL, 0);   // no device at all
+    s = fx_apt_sim_start(NULL, 0);   // no device at all
     CHECK(rig_turntable_open_apt(&t, NULL, NULL) == RIG_ERR_NO_DEVICE && !t);
     CHECK_CONTAINS(rig_last_error(), "no Thorlabs APT controller (USB 0403:faf0) found");
     apt_sim_free(s);
@@ -548,10 +527,10 @@ TEST(apt_umock_device_missing)
 
 TEST(apt_umock_two_devices)
 {
-    if (!apt_sim_available()) return;
+    if (!apt_sim_available()) SKIP("runs under umockdev-wrapper, from turntable_apt_under_umockdev");
     apt_sim_device_t d[2] = { apt_sim_device_defaults(), apt_sim_device_defaults() };
     d[1].serial = "55000002";
-    apt_sim_t *s = sim_start(d, 2);
+    apt_sim_t *s = fx_apt_sim_start(d, 2);
     rig_turntable_t *t = NULL;
     rig_turntable_info_t info;
     CHECK(rig_turntable_open_apt(&t, NULL, NULL) == RIG_ERR_INVALID && !t);
@@ -575,11 +554,11 @@ TEST(apt_umock_two_devices)
 
 TEST(apt_umock_partial_messages_and_garbage)
 {
-    if (!apt_sim_available()) return;
+    if (!apt_sim_available()) SKIP("runs under umockdev-wrapper, from turntable_apt_under_umockdev");
     apt_sim_device_t d = apt_sim_device_defaults();
     d.trickle_bytes = 5;                  // every message arrives in 5-byte pieces
     d.garbage_before_info = true;         // and junk precedes the first reply
-    apt_sim_t *s = sim_start(&d, 1);
+    apt_sim_t *s = fx_apt_sim_start(&d, 1);
     rig_turntable_t *t = NULL;
     rig_turntable_info_t info;
     rig_turntable_status_t st;
@@ -599,11 +578,11 @@ TEST(apt_umock_partial_messages_and_garbage)
 
 TEST(apt_umock_limit_switch)
 {
-    if (!apt_sim_available()) return;
+    if (!apt_sim_available()) SKIP("runs under umockdev-wrapper, from turntable_apt_under_umockdev");
     apt_sim_device_t d = apt_sim_device_defaults();
     d.limit_mid_move = true;
-    apt_sim_t *s = sim_start(&d, 1);
-    rig_turntable_t *t = open_homed();
+    apt_sim_t *s = fx_apt_sim_start(&d, 1);
+    rig_turntable_t *t = fx_apt_open_homed();
     rig_turntable_status_t st;
     if (t) {
         CHECK(rig_turntable_move_abs_deg(t, 90, 2.0) == RIG_ERR_LIMIT);
