@@ -553,3 +553,23 @@ TEST(calib_gain_numerics)
     CHECK(calib_gain_highpass(in, W, H, out));
     CHECK(calib_gain_correlation(out, pat, W * H) > 0.99);
 }
+
+// calib_gain_truth_radiance, the comparison's only reader of the truth: the
+// flat-field source's radiance per lamp from a virtual rig's session facts;
+// nothing without them.
+TEST(calib_gain_truth_radiance_stage)
+{
+    json_t *facts = json_pack("{s:{s:s, s:s}}", "virtual_rig", "truth", truth_path(), "sample", "flat_field");
+    const char *tp = NULL;
+    double r = 0;
+    CHECK(calib_gain_truth_radiance(facts, &tp, &r));
+    CHECK_NEAR(r, 1000, 1e-9);
+    CHECK(tp && !strcmp(tp, truth_path()));
+    json_decref(facts);
+    facts = json_pack("{s:{s:s, s:s}}", "virtual_rig", "truth", truth_path(), "sample", "calib_board");
+    CHECK(!calib_gain_truth_radiance(facts, NULL, &r));   // not a uniform source
+    CHECK(isnan(r));
+    json_decref(facts);
+    CHECK(!calib_gain_truth_radiance(NULL, &tp, &r));
+    CHECK(tp == NULL && isnan(r));
+}
