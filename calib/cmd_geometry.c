@@ -1,6 +1,7 @@
 // calib/cmd_geometry.c — `refl calib geometry`: parses the options
 // (model/opts.h), runs calib_geometry_run (calib/geometry.h) and prints the
-// outputs. Exit: 0 done, 1 error (printed once by the library), 2 usage.
+// outputs. Exit: 0 done, 1 error (the library's message, printed once here),
+// 2 usage.
 #include <math.h>
 #include <mrcal/mrcal.h>
 #include <stdio.h>
@@ -77,7 +78,8 @@ static int check_options(model_cli_t *c, int argc, char **argv, calib_geometry_o
     int nsrc = (o->rig != NULL) + (o->nsessions > 0) + (o->images != NULL) + (o->corners != NULL);
     if (nsrc != 1)
         return model_cli_error(c, "%s", nsrc ? "give only one of --rig, --session, --images, --corners"
-                                             : "say where the views come from: --rig, --session, --images or --corners");
+                                             : "say where the views come from: --rig, --session, --images or "
+                                               "--corners");
     if (!o->out) return model_cli_error(c, "give the output directory: -o DIR");
     if (o->corners && !o->imager_w)
         return model_cli_error(c, "--corners needs --imagersize W H (no images to read it from)");
@@ -138,13 +140,17 @@ int calib_cmd_geometry(int argc, char **argv)
         return rc;
     }
     calib_geometry_result_t r;
-    rc = 1;
-    if (calib_geometry_run(&o, &r)) {
+    bool q = model_error_quiet_thread(true);   // the library's message is printed once, here
+    bool ok = calib_geometry_run(&o, &r);
+    model_error_quiet_thread(q);
+    if (ok) {
         printf("refl calib geometry: %s (RMS %.4f px), %s/geometry.json, %s/report.html\n", r.camera_model, r.rms_px,
                r.outdir, r.outdir);
         rc = 0;
-    } else if (r.usage) {
-        rc = 2;
+    } else {
+        fprintf(stderr, "refl calib geometry: %s\n", model_last_error());
+        if (r.usage) model_cli_usage(&cli, stderr);
+        rc = r.usage ? 2 : 1;
     }
     calib_geometry_result_free(&r);
     free(sessions);

@@ -111,8 +111,8 @@ bool calib_gain_ptc(const double *t, const double *mu, const double *var, const 
         if (var[i] < 0.9 * var[imax]) drop = true;
     if (!drop) {
         model_error_set(NULL, 0, "photon transfer: the variance does not drop after its maximum %.4g DN^2 at %.6g us "
-                    "(mean %.6g DN above dark, the longest exposure of %d is %.6g us): the sweep does not reach "
-                    "saturation; extend it to longer exposures", var[imax], t[imax], mu[imax], n, t[n - 1]);
+                        "(mean %.6g DN above dark, the longest exposure of %d is %.6g us): the sweep does not reach "
+                        "saturation; extend it to longer exposures", var[imax], t[imax], mu[imax], n, t[n - 1]);
         return false;
     }
     o->i_sat = imax;
@@ -131,8 +131,8 @@ bool calib_gain_ptc(const double *t, const double *mu, const double *var, const 
     free(y);
     if (!ok || !(c2[1] > 0)) {
         model_error_set(NULL, 0, "photon transfer: %d points below 70 %% of saturation (%.6g DN); the fit of the "
-                    "variance against the mean failed (at least 5 are needed, with a rising variance)",
-                    m, o->saturation_dn);
+                        "variance against the mean failed (at least 5 are needed, with a rising variance)",
+                        m, o->saturation_dn);
         return false;
     }
     o->n_ptc_fit = m;
@@ -252,7 +252,7 @@ static float *frame_load(const calib_gain_frame_t *f, int *w, int *h)
         if (!model_sha256_file(f->path, sha)) goto fail;
         if (strcmp(sha, f->sha256)) {
             model_error_set(f->path, 0, "sha256 %s differs from the journal's %s: the frame was changed or damaged",
-                        sha, f->sha256);
+                            sha, f->sha256);
             goto fail;
         }
     }
@@ -398,8 +398,8 @@ bool calib_gain_frame_stats(calib_gain_data_t *d)
         if (d->g[i].width != d->g[0].width || d->g[i].height != d->g[0].height) {
             char nb[1024];
             model_error_set(NULL, 0, "%s: %dx%d pixels, but %dx%d elsewhere in the input",
-                        frame_name(&d->f[d->g[i].idx[0]], nb, sizeof nb), d->g[i].width, d->g[i].height,
-                        d->g[0].width, d->g[0].height);
+                            frame_name(&d->f[d->g[i].idx[0]], nb, sizeof nb), d->g[i].width, d->g[i].height,
+                            d->g[0].width, d->g[0].height);
             return false;
         }
     return true;
@@ -451,7 +451,7 @@ bool calib_gain_analyse(calib_gain_data_t *d, double gain_db, int min_steps, dou
     bool ok = false;
     if (nd == 0 || ndv == 0) {
         model_error_set(NULL, 0, "gain %g dB: no dark frame pairs (kind dark, at least two frames at an exposure); the "
-                    "dark level and temporal dark noise need them", gain_db);
+                        "dark level and temporal dark noise need them", gain_db);
         goto done;
     }
     a->ndark = nd;
@@ -489,7 +489,7 @@ bool calib_gain_analyse(calib_gain_data_t *d, double gain_db, int min_steps, dou
     }
     if (nl < min_steps) {
         model_error_set(NULL, 0, "gain %g dB: too few sweep steps: %d exposures with a pair of light frames, EMVA 1288 "
-                    "asks for at least %d (capture more exposures, e.g. --steps 50)", gain_db, nl, min_steps);
+                        "asks for at least %d (capture more exposures, e.g. --steps 50)", gain_db, nl, min_steps);
         goto done;
     }
     qsort(light, nl, sizeof *light, cmp_group_t);
@@ -608,7 +608,8 @@ bool calib_gain_make_maps(calib_gain_data_t *d, const calib_gain_an_t *a, calib_
     calib_gain_group_t *flat = NULL;
     for (int i = 0; i < d->ng; i++) {
         calib_gain_group_t *g = &d->g[i];
-        if (g->gain_db == a->gain_db && !g->dark && g->set == CALIB_GAIN_SET_FLAT && (!flat || g->n > flat->n)) flat = g;
+        if (g->gain_db == a->gain_db && !g->dark && g->set == CALIB_GAIN_SET_FLAT && (!flat || g->n > flat->n))
+            flat = g;
     }
     if (!flat)
         for (int i = 0; i < d->ng; i++) {
@@ -648,17 +649,18 @@ bool calib_gain_make_maps(calib_gain_data_t *d, const calib_gain_an_t *a, calib_
     // the exposure of 50 % of saturation, from the linearity line
     const double t_half = (0.5 * sat - a->ptc.response_offset_dn) / a->ptc.response_dn_per_us;
     if (flat->sat_frac > 1e-4 || m->flat_level_dn > 0.9 * sat) {
-        model_error_set(NULL, 0, "%s: the flat field (%d frames at %.6g us) is saturated: mean %.1f DN above dark (%.1f DN "
-                    "grey value), %.3f %% of its pixels at full scale; saturation is at %.1f DN above dark: use an "
-                    "exposure near %.0f %% of it (~%.6g us)", frame_name(&d->f[flat->idx[0]], nb, sizeof nb), flat->n,
-                    flat->exposure_us, m->flat_level_dn, flat->mean_dn, 100 * flat->sat_frac, sat, 50.0, t_half);
+        model_error_set(NULL, 0, "%s: the flat field (%d frames at %.6g us) is saturated: mean %.1f DN above dark "
+                        "(%.1f DN grey value), %.3f %% of its pixels at full scale; saturation is at %.1f DN above "
+                        "dark: use an exposure near %.0f %% of it (~%.6g us)",
+                        frame_name(&d->f[flat->idx[0]], nb, sizeof nb), flat->n, flat->exposure_us, m->flat_level_dn,
+                        flat->mean_dn, 100 * flat->sat_frac, sat, 50.0, t_half);
         return false;
     }
     if (m->flat_level_dn < 0.1 * sat) {
-        model_error_set(NULL, 0, "%s: the flat field (%d frames at %.6g us) is too dark: mean %.2f DN above dark (%.1f DN "
-                    "grey value, dark %.1f DN), below 10 %% of saturation (%.1f DN above dark): use an exposure near "
-                    "50 %% of saturation (~%.6g us)", frame_name(&d->f[flat->idx[0]], nb, sizeof nb), flat->n,
-                    flat->exposure_us, m->flat_level_dn, flat->mean_dn, dark_level, sat, t_half);
+        model_error_set(NULL, 0, "%s: the flat field (%d frames at %.6g us) is too dark: mean %.2f DN above dark "
+                        "(%.1f DN grey value, dark %.1f DN), below 10 %% of saturation (%.1f DN above dark): use an "
+                        "exposure near 50 %% of saturation (~%.6g us)", frame_name(&d->f[flat->idx[0]], nb, sizeof nb),
+                        flat->n, flat->exposure_us, m->flat_level_dn, flat->mean_dn, dark_level, sat, t_half);
         return false;
     }
     int w = flat->width, h = flat->height;
@@ -912,7 +914,7 @@ static bool capture_sweep(const calib_gain_opts_t *c, double gain, char **sweep_
     }
     if (!isfinite(t_full)) {
         model_error_set(c->rig, 0, "gain %g dB: no exposure between 10 us and 10 s gives a usable level of the flat "
-                    "field (lamps %s): check the lamps and the source", gain, c->lamps);
+                        "field (lamps %s): check the lamps and the source", gain, c->lamps);
         return false;
     }
     double tmax = isfinite(c->max_us) ? c->max_us : 1.2 * t_full;

@@ -103,7 +103,7 @@ static bool png8_write(const char *path, int w, int h, const unsigned char *pix)
 {
     FILE *f = fopen(path, "wb");
     if (!f) {
-        model_error(path, 0, "cannot create: %s", strerror(errno));
+        model_error_set(path, 0, "cannot create: %s", strerror(errno));
         return false;
     }
     png_structp p = png_create_write_struct(PNG_LIBPNG_VER_STRING, NULL, NULL, NULL);
@@ -122,7 +122,7 @@ static bool png8_write(const char *path, int w, int h, const unsigned char *pix)
 done:
     png_destroy_write_struct(&p, &info);
     if (fclose(f) != 0) ok = false;
-    if (!ok) model_error(path, 0, "cannot write the 8-bit PNG");
+    if (!ok) model_error_set(path, 0, "cannot write the 8-bit PNG");
     return ok;
 }
 
@@ -131,7 +131,7 @@ static bool write_8bit(const char *path, const float *img, int w, int h, double 
 {
     unsigned char *b = malloc((size_t)w * h);
     if (!b) {
-        model_error(path, 0, "out of memory");
+        model_error_set(path, 0, "out of memory");
         return false;
     }
     for (size_t i = 0; i < (size_t)w * h; i++) {
@@ -155,8 +155,8 @@ static int run_tool(const char *cwd, char **argv, const char *log_path, char **o
     gint status = 0;
     fflush(stderr);
     if (!g_spawn_sync(cwd, argv, NULL, G_SPAWN_SEARCH_PATH, NULL, NULL, &so, &se, &status, &err)) {
-        model_error(argv[0], 0, "cannot run: %s (is it installed? Debian: apt install mrgingham mrcal)",
-                    err ? err->message : "?");
+        model_error_set(argv[0], 0, "cannot run: %s (is it installed? Debian: apt install mrgingham mrcal)",
+                        err ? err->message : "?");
         if (err) g_error_free(err);
         return -1;
     }
@@ -184,7 +184,8 @@ static int run_tool(const char *cwd, char **argv, const char *log_path, char **o
 // ---------------------------------------------------------------------------
 // Views
 
-static calib_geometry_view_t *view_add(calib_geometry_views_t *vs, const char *name, const char *source, const char *session, int group,
+static calib_geometry_view_t *view_add(calib_geometry_views_t *vs, const char *name, const char *source,
+                                       const char *session, int group,
                         double angle, double tilt, double az)
 {
     calib_geometry_view_t *v = calloc(1, sizeof *v);
@@ -273,8 +274,9 @@ bool calib_geometry_add_session(calib_geometry_views_t *vs, const char *sdir, co
         char *src = g_strdup_printf("%s/%s", sdir, r->file);
         double full = !strcmp(r->pixel_format, "Mono8") ? 255 : !strcmp(r->pixel_format, "Mono16") ? 65535 : 4095;
         if (*w && (fw != *w || fh != *h)) {
-            model_error(src, 0, "%dx%d pixels, the other frames are %dx%d: one camera and one region per calibration",
-                        fw, fh, *w, *h);
+            model_error_set(src, 0, "%dx%d pixels, the other frames are %dx%d: one camera and one region per "
+                            "calibration",
+                            fw, fh, *w, *h);
             ok = false;
         } else {
             *w = fw;
@@ -299,7 +301,7 @@ bool calib_geometry_add_images(calib_geometry_views_t *vs, const char *pattern, 
     glob_t gl;
     int e = glob(pattern, 0, NULL, &gl);
     if (e != 0 || gl.gl_pathc == 0) {
-        model_error(pattern, 0, "--images: the pattern matches no file");
+        model_error_set(pattern, 0, "--images: the pattern matches no file");
         if (e == 0) globfree(&gl);
         return false;
     }
@@ -313,8 +315,9 @@ bool calib_geometry_add_images(calib_geometry_views_t *vs, const char *pattern, 
             break;
         }
         if (*w && (fw != *w || fh != *h)) {
-            model_error(src, 0, "%dx%d pixels, the other images are %dx%d: one camera and one region per calibration",
-                        fw, fh, *w, *h);
+            model_error_set(src, 0, "%dx%d pixels, the other images are %dx%d: one camera and one region per "
+                            "calibration",
+                            fw, fh, *w, *h);
             free(img);
             ok = false;
             break;
@@ -341,7 +344,8 @@ bool calib_geometry_add_images(calib_geometry_views_t *vs, const char *pattern, 
 }
 
 // Parse mrgingham's output (name x y [level]; "name - -" when no board).
-bool calib_geometry_parse_corners(calib_geometry_views_t *vs, const char *text, const char *path, int gridn, bool create)
+bool calib_geometry_parse_corners(calib_geometry_views_t *vs, const char *text, const char *path, int gridn,
+                                  bool create)
 {
     int N = gridn * gridn;
     char **lines = g_strsplit(text, "\n", -1);
@@ -353,7 +357,7 @@ bool calib_geometry_parse_corners(calib_geometry_views_t *vs, const char *text, 
         if (!*l || *l == '#') continue;
         char name[1024], xs[64], ys[64];
         if (sscanf(l, "%1023s %63s %63s", name, xs, ys) != 3) {
-            model_error(path, li + 1, "expected 'FILENAME X Y [LEVEL]' (mrgingham's output), got '%s'", l);
+            model_error_set(path, li + 1, "expected 'FILENAME X Y [LEVEL]' (mrgingham's output), got '%s'", l);
             ok = false;
             break;
         }
@@ -368,14 +372,14 @@ bool calib_geometry_parse_corners(calib_geometry_views_t *vs, const char *text, 
         char *e1, *e2;
         double x = strtod(xs, &e1), y = strtod(ys, &e2);
         if (*e1 || *e2 || !isfinite(x) || !isfinite(y)) {
-            model_error(path, li + 1, "'%s %s' is not a pixel position", xs, ys);
+            model_error_set(path, li + 1, "'%s %s' is not a pixel position", xs, ys);
             ok = false;
             break;
         }
         if (!v->q) v->q = calloc((size_t)N * 2, sizeof(double));
         if (ncur >= N) {
-            model_error(path, li + 1, "%s: more than %d corners: is the board %dx%d (--gridn %d)?", name, N, gridn,
-                        gridn, gridn);
+            model_error_set(path, li + 1, "%s: more than %d corners: is the board %dx%d (--gridn %d)?", name, N, gridn,
+                            gridn, gridn);
             ok = false;
             break;
         }
@@ -794,7 +798,7 @@ bool calib_geometry_write_cameramodel(const char *path, const char *lensmodel, j
     char *tmp = g_strdup_printf("%s.part", path);
     FILE *f = fopen(tmp, "w");
     if (!f) {
-        model_error(path, 0, "cannot create: %s", strerror(errno));
+        model_error_set(path, 0, "cannot create: %s", strerror(errno));
         g_free(tmp);
         return false;
     }
@@ -816,7 +820,7 @@ bool calib_geometry_write_cameramodel(const char *path, const char *lensmodel, j
     if (fclose(f) != 0) ok = false;
     if (ok && rename(tmp, path) != 0) ok = false;
     if (!ok) {
-        model_error(path, 0, "cannot write: %s", strerror(errno));
+        model_error_set(path, 0, "cannot write: %s", strerror(errno));
         unlink(tmp);
     }
     g_free(tmp);
@@ -844,8 +848,8 @@ char *calib_geometry_tilt_plan(const char *spec, const calib_geometry_opts_t *o,
     double tilt = 0, az = 0;
     if ((at = strchr(s, '@'))) *at++ = 0;
     if (!parse_num(s, -80, 80, &tilt) || (at && !parse_num(at, -360, 360, &az))) {
-        model_error("--tilts", 0, "'%s': write TILT[@AZIMUTH][:ANGLE,ANGLE,...] in degrees, tilt -80..80 "
-                    "(e.g. 30@90:0,20,40)", spec);
+        model_error_set("--tilts", 0, "'%s': write TILT[@AZIMUTH][:ANGLE,ANGLE,...] in degrees, tilt -80..80 "
+                        "(e.g. 30@90:0,20,40)", spec);
         g_free(s);
         return NULL;
     }
@@ -857,7 +861,8 @@ char *calib_geometry_tilt_plan(const char *spec, const calib_geometry_opts_t *o,
         if (!*parts[i]) continue;
         double a;
         if (!parse_num(parts[i], -10000, 10000, &a)) {
-            model_error(angles ? "--tilts" : "--angles", 0, "'%s' in '%s' is not an angle in degrees", parts[i], src);
+            model_error_set(angles ? "--tilts" : "--angles", 0, "'%s' in '%s' is not an angle in degrees", parts[i],
+                            src);
             g_strfreev(parts);
             g_string_free(al, TRUE);
             g_free(s);
@@ -868,7 +873,7 @@ char *calib_geometry_tilt_plan(const char *spec, const calib_geometry_opts_t *o,
     }
     g_strfreev(parts);
     if (na == 0) {
-        model_error(angles ? "--tilts" : "--angles", 0, "'%s': no angles", spec);
+        model_error_set(angles ? "--tilts" : "--angles", 0, "'%s': no angles", spec);
         g_string_free(al, TRUE);
         g_free(s);
         return NULL;
@@ -895,7 +900,7 @@ static bool corners_from_file(const calib_geometry_opts_t *o, calib_geometry_sta
     char *text = NULL;
     GError *err = NULL;
     if (!g_file_get_contents(o->corners, &text, NULL, &err)) {
-        model_error(o->corners, 0, "cannot read: %s", err->message);
+        model_error_set(o->corners, 0, "cannot read: %s", err->message);
         g_error_free(err);
         return false;
     }
@@ -913,7 +918,7 @@ static bool corners_mrgingham(const calib_geometry_opts_t *o, calib_geometry_sta
 {
     calib_geometry_views_t *vs = &s->views;
     if (vs->v->len == 0) {
-        model_error(o->out, 0, "no frames or images to calibrate from");
+        model_error_set(o->out, 0, "no frames or images to calibrate from");
         return false;
     }
     fprintf(stderr, "refl calib geometry: finding the %dx%d corners of %u images (mrgingham)\n", o->gridn, o->gridn,
@@ -934,8 +939,12 @@ static bool corners_mrgingham(const calib_geometry_opts_t *o, calib_geometry_sta
     g_ptr_array_free(args, TRUE);
     g_free(log);
     if (e != 0) {
-        model_error(s->imgdir, 0, "mrgingham failed (exit status %d) on the images here; see %s/mrgingham.log", e,
-                    s->mdir);
+        if (e < 0) {    // did not run: run_tool's message says why
+            g_free(text);
+            return false;
+        }
+        model_error_set(s->imgdir, 0, "mrgingham failed (exit status %d) on the images here; see %s/mrgingham.log", e,
+                        s->mdir);
         g_free(text);
         return false;
     }
@@ -944,7 +953,7 @@ static bool corners_mrgingham(const calib_geometry_opts_t *o, calib_geometry_sta
         FILE *f = fopen(s->cornpath, "w");
         ok = f && fputs(text, f) >= 0;
         if (f && fclose(f) != 0) ok = false;
-        if (!ok) model_error(s->cornpath, 0, "cannot write: %s", strerror(errno));
+        if (!ok) model_error_set(s->cornpath, 0, "cannot write: %s", strerror(errno));
     }
     g_free(text);
     return ok;
@@ -965,10 +974,10 @@ bool calib_geometry_find_corners(const calib_geometry_opts_t *o, calib_geometry_
     fprintf(stderr, "refl calib geometry: the board was found in %d of %u images\n", s->nfound, vs->v->len);
     int min_views = o->min_views ? o->min_views : calib_geometry_default_min_views(o->lensmodel);
     if (s->nfound < min_views) {
-        model_error(o->corners ? o->corners : o->out, 0, "too few views for %s: the board was found in %d of %u "
-                    "images, the solve needs at least %d (%d more views; tilt the board and turn the table so the "
-                    "corners cover the imager)", o->lensmodel, s->nfound, vs->v->len, min_views,
-                    min_views - s->nfound);
+        model_error_set(o->corners ? o->corners : o->out, 0, "too few views for %s: the board was found in %d of %u "
+                        "images, the solve needs at least %d (%d more views; tilt the board and turn the table so the "
+                        "corners cover the imager)", o->lensmodel, s->nfound, vs->v->len, min_views,
+                        min_views - s->nfound);
         for (guint k = 0; k < vs->v->len; k++) {
             calib_geometry_view_t *v = g_ptr_array_index(vs->v, k);
             if (!v->found) fprintf(stderr, "  %s (%s): %s\n", v->name, v->source, v->why);
@@ -999,8 +1008,9 @@ bool calib_geometry_solve(const calib_geometry_opts_t *o, calib_geometry_state_t
     int e = run_tool(cwd, argv_m, log, NULL);
     g_free(cwd);
     if (e != 0 || access(model0, R_OK) != 0) {
-        model_error(s->mdir, 0, "mrcal-calibrate-cameras failed (exit status %d) on %s; see %s (a bad seed? give "
-                    "--focal-px)", e, s->cornpath, log);
+        if (e >= 0)
+            model_error_set(s->mdir, 0, "mrcal-calibrate-cameras failed (exit status %d) on %s; see %s (a bad seed? "
+                            "give --focal-px)", e, s->cornpath, log);
         g_free(log);
         g_free(model0);
         return false;
@@ -1014,7 +1024,7 @@ bool calib_geometry_solve(const calib_geometry_opts_t *o, calib_geometry_state_t
     if (e == 0) {
         json_error_t je;
         s->sol = json_load_file(solpath, 0, &je);
-        if (!s->sol) model_error(solpath, je.line, "cannot read: %s", je.text);
+        if (!s->sol) model_error_set(solpath, je.line, "cannot read: %s", je.text);
     }
     g_free(solpath);
     return s->sol != NULL;
@@ -1065,7 +1075,7 @@ bool calib_geometry_capture(const calib_geometry_opts_t *o, calib_geometry_state
     }
     g_strfreev(specs);
     if (ok && plans->len == 0) {
-        model_error("--tilts", 0, "'%s': no tilts", o->tilts);
+        model_error_set("--tilts", 0, "'%s': no tilts", o->tilts);
         ok = false;
     }
     *usage = !ok;
@@ -1106,7 +1116,8 @@ static bool collect_views(const calib_geometry_opts_t *o, calib_geometry_state_t
         }
     }
     if (o->imager_w && (s->W != o->imager_w || s->H != o->imager_h)) {
-        model_error(o->out, 0, "the frames are %dx%d, --imagersize says %dx%d", s->W, s->H, o->imager_w, o->imager_h);
+        model_error_set(o->out, 0, "the frames are %dx%d, --imagersize says %dx%d", s->W, s->H, o->imager_w,
+                        o->imager_h);
         return false;
     }
     return true;

@@ -21,8 +21,9 @@
 // Units: lengths mm, angles deg (rotation vectors r in rad), pixels px with
 // (0, 0) the centre of the top-left pixel. Poses are mrcal's rt (r: rotation
 // vector, rad; t: mm); rt_a_b maps coordinates in frame b to frame a.
-// Errors: false / NULL with the message printed and kept by model_error
-// (model_last_error); progress goes to stderr ("refl calib geometry: ...").
+// Errors: false / NULL with the message kept by model_error_set
+// (model_last_error), not printed: the caller prints it once. Progress and
+// the views without a board go to stderr ("refl calib geometry: ...").
 #pragma once
 
 #include <glib.h>
