@@ -1,4 +1,5 @@
-// calib/gain.c — `refl calib gain`: the camera's sensitivity, EMVA 1288 style.
+// calib/gain.c — the library of `refl calib gain` (calib/gain.h; the command
+// is calib/cmd_gain.c): the camera's sensitivity, EMVA 1288 style.
 //
 // Input: frames of a uniform source (a flat field) at known exposures, light
 // (lamps on) and dark (lamps off), from
@@ -10,17 +11,17 @@
 //   --frames CSV       a manifest "file,exposure_us,kind" (kind dark|light)
 // Analysis per gain (EMVA 1288 definitions, see calib/gain.h): photon transfer
 // (K, read noise, saturation, SNR, dynamic range), linearity error, response
-// (DN/us and kc per us per unit radiance); at the first gain also the dark
+// (DN/us, and kc per us per unit radiance when the source's radiance is
+// given: a virtual rig's truth of it is only recorded beside it, for
+// comparison, never used in its place); at the first gain also the dark
 // current, the offset and DSNU maps and the PRNU map (flat field).
 // Output: DIR/gain.json, DIR/offset_dn.tiff, DIR/dsnu_dn.tiff,
 // DIR/prnu_gain.tiff (total: vignetting included, mean 1),
 // DIR/prnu_highpass.tiff (smooth part removed, mean 1), DIR/report.html + PNGs.
 #define _GNU_SOURCE
 #include <errno.h>
-#include <getopt.h>
 #include <glib.h>
 #include <math.h>
-#include <stdarg.h>
 #include <stdlib.h>
 #include <string.h>
 #include <unistd.h>
@@ -29,6 +30,7 @@
 #include "calib/gain.h"
 #include "model/model.h"
 #include "model/report.h"
+#include "rig/truth.h"
 
 // ---------------------------------------------------------------------------
 // Numerics
@@ -97,7 +99,7 @@ bool calib_gain_ptc(const double *t, const double *mu, const double *var, const 
 {
     memset(o, 0, sizeof *o);
     if (n < 6) {
-        model_error(NULL, 0, "photon transfer: %d exposure steps; at least 6 are needed", n);
+        model_error_set(NULL, 0, "photon transfer: %d exposure steps; at least 6 are needed", n);
         return false;
     }
     int imax = 0;
@@ -108,9 +110,9 @@ bool calib_gain_ptc(const double *t, const double *mu, const double *var, const 
     for (int i = imax + 1; i < n; i++)
         if (var[i] < 0.9 * var[imax]) drop = true;
     if (!drop) {
-        model_error(NULL, 0, "photon transfer: the variance does not drop after its maximum %.4g DN^2 at %.6g us "
-                    "(mean %.6g DN above dark, the longest exposure of %d is %.6g us): the sweep does not reach "
-                    "saturation; extend it to longer exposures", var[imax], t[imax], mu[imax], n, t[n - 1]);
+        model_error_set(NULL, 0, "photon transfer: the variance does not drop after its maximum %.4g DN^2 at %.6g us "
+                        "(mean %.6g DN above dark, the longest exposure of %d is %.6g us): the sweep does not reach "
+                        "saturation; extend it to longer exposures", var[imax], t[imax], mu[imax], n, t[n - 1]);
         return false;
     }
     o->i_sat = imax;
@@ -128,9 +130,9 @@ bool calib_gain_ptc(const double *t, const double *mu, const double *var, const 
     free(x);
     free(y);
     if (!ok || !(c2[1] > 0)) {
-        model_error(NULL, 0, "photon transfer: %d points below 70 %% of saturation (%.6g DN); the fit of the "
-                    "variance against the mean failed (at least 5 are needed, with a rising variance)",
-                    m, o->saturation_dn);
+        model_error_set(NULL, 0, "photon transfer: %d points below 70 %% of saturation (%.6g DN); the fit of the "
+                        "variance against the mean failed (at least 5 are needed, with a rising variance)",
+                        m, o->saturation_dn);
         return false;
     }
     o->n_ptc_fit = m;
@@ -213,44 +215,7 @@ bool calib_gain_highpass(const float *in, int w, int h, float *out)
 // ---------------------------------------------------------------------------
 // Frames and groups
 
-enum { SET_ANY, SET_SWEEP, SET_DARK, SET_FLAT };
-
-typedef struct {
-    char  *path;          // full path
-    char   sha256[65];    // expected ("" = not checked: manifest)
-    char  *where;         // manifest path, or session directory
-    int    line;          // manifest line (0: a session frame)
-    int    step;          // session step
-    double exposure_us, gain_db;
-    bool   dark;
-    int    set;
-    int    max_dn;        // full scale of the frame's pixel format
-    int    nlamps;        // lamps on (session frames: from the lamp set; -1 unknown)
-} gframe_t;
-
-typedef struct {
-    double exposure_us, gain_db;
-    bool   dark;
-    int    set;
-    int   *idx;           // frames
-    int    n;
-    // pass 1
-    double mean_dn;       // spatial mean (ROI) of the frames' average
-    double var_dn2;       // temporal variance var(A - B) / 2 averaged over pairs (NAN: a single frame)
-    double sat_frac;      // fraction of ROI pixels at full scale (first frame)
-    int    width, height;
-    char  *error;
-} ggroup_t;
-
-typedef struct {
-    gframe_t *f;
-    int       nf;
-    ggroup_t *g;
-    int       ng;
-    int       roi[4];     // x y w h (w 0: whole frame)
-} gdata_t;
-
-static void gdata_free(gdata_t *d)
+void calib_gain_data_free(calib_gain_data_t *d)
 {
     for (int i = 0; i < d->nf; i++) {
         free(d->f[i].path);
@@ -264,13 +229,13 @@ static void gdata_free(gdata_t *d)
     free(d->g);
 }
 
-static void add_frame(gdata_t *d, const gframe_t *f)
+static void add_frame(calib_gain_data_t *d, const calib_gain_frame_t *f)
 {
     d->f = realloc(d->f, sizeof *d->f * (d->nf + 1));
     d->f[d->nf++] = *f;
 }
 
-static const char *frame_name(const gframe_t *f, char *buf, size_t size)
+static const char *frame_name(const calib_gain_frame_t *f, char *buf, size_t size)
 {
     if (f->line > 0) snprintf(buf, size, "%s:%d (%s)", f->where, f->line, f->path);
     else snprintf(buf, size, "%s (session %s, step %d)", f->path, f->where, f->step);
@@ -278,7 +243,7 @@ static const char *frame_name(const gframe_t *f, char *buf, size_t size)
 }
 
 // Load a frame; errors name the manifest line or the session step.
-static float *frame_load(const gframe_t *f, int *w, int *h)
+static float *frame_load(const calib_gain_frame_t *f, int *w, int *h)
 {
     bool q = model_error_quiet_thread(true);
     float *img = NULL;
@@ -286,8 +251,8 @@ static float *frame_load(const gframe_t *f, int *w, int *h)
     if (f->sha256[0]) {
         if (!model_sha256_file(f->path, sha)) goto fail;
         if (strcmp(sha, f->sha256)) {
-            model_error(f->path, 0, "sha256 %s differs from the journal's %s: the frame was changed or damaged",
-                        sha, f->sha256);
+            model_error_set(f->path, 0, "sha256 %s differs from the journal's %s: the frame was changed or damaged",
+                            sha, f->sha256);
             goto fail;
         }
     }
@@ -298,13 +263,13 @@ static float *frame_load(const gframe_t *f, int *w, int *h)
 fail:;
     char *why = g_strdup(model_last_error());
     model_error_quiet_thread(q);
-    if (f->line > 0) model_error(f->where, f->line, "frame %s: %s", f->path, why);
-    else model_error(f->path, 0, "step %d of the session %s: %s", f->step, f->where, why);
+    if (f->line > 0) model_error_set(f->where, f->line, "frame %s: %s", f->path, why);
+    else model_error_set(f->path, 0, "step %d of the session %s: %s", f->step, f->where, why);
     g_free(why);
     return NULL;
 }
 
-static void roi_of(const gdata_t *d, int w, int h, int r[4])
+static void roi_of(const calib_gain_data_t *d, int w, int h, int r[4])
 {
     if (d->roi[2] > 0) memcpy(r, d->roi, sizeof d->roi);
     else {
@@ -314,32 +279,32 @@ static void roi_of(const gdata_t *d, int w, int h, int r[4])
     }
 }
 
-static int group_find(gdata_t *d, double exposure_us, double gain_db, bool dark, int set)
+static int group_find(calib_gain_data_t *d, double exposure_us, double gain_db, bool dark, int set)
 {
     for (int i = 0; i < d->ng; i++) {
-        ggroup_t *g = &d->g[i];
+        calib_gain_group_t *g = &d->g[i];
         if (g->exposure_us == exposure_us && g->gain_db == gain_db && g->dark == dark && g->set == set) return i;
     }
     d->g = realloc(d->g, sizeof *d->g * (d->ng + 1));
-    d->g[d->ng] = (ggroup_t){ .exposure_us = exposure_us, .gain_db = gain_db, .dark = dark, .set = set,
+    d->g[d->ng] = (calib_gain_group_t){ .exposure_us = exposure_us, .gain_db = gain_db, .dark = dark, .set = set,
                               .var_dn2 = NAN };
     return d->ng++;
 }
 
-static void make_groups(gdata_t *d)
+void calib_gain_make_groups(calib_gain_data_t *d)
 {
     for (int i = 0; i < d->nf; i++) {
-        const gframe_t *f = &d->f[i];
-        int set = f->set == SET_ANY ? SET_SWEEP : f->set;
+        const calib_gain_frame_t *f = &d->f[i];
+        int set = f->set == CALIB_GAIN_SET_ANY ? CALIB_GAIN_SET_SWEEP : f->set;
         int gi = group_find(d, f->exposure_us, f->gain_db, f->dark, set);
-        ggroup_t *g = &d->g[gi];
+        calib_gain_group_t *g = &d->g[gi];
         g->idx = realloc(g->idx, sizeof(int) * (g->n + 1));
         g->idx[g->n++] = i;
     }
 }
 
 typedef struct {
-    gdata_t *d;
+    calib_gain_data_t *d;
     int      done;
     int      total;
     double   t0;
@@ -349,14 +314,14 @@ static void pass1_rows(void *ctx, int begin, int end, int thread)
 {
     (void)thread;
     pass1_t *P = ctx;
-    gdata_t *d = P->d;
+    calib_gain_data_t *d = P->d;
     for (int gi = begin; gi < end; gi++) {
-        ggroup_t *g = &d->g[gi];
+        calib_gain_group_t *g = &d->g[gi];
         float *prev = NULL;
         double sum_mean = 0, sum_var = 0;
         int npairs = 0;
         for (int k = 0; k < g->n && !g->error; k++) {
-            const gframe_t *f = &d->f[g->idx[k]];
+            const calib_gain_frame_t *f = &d->f[g->idx[k]];
             int w, h;
             float *img = frame_load(f, &w, &h);
             if (!img) {
@@ -419,22 +384,22 @@ static void pass1_rows(void *ctx, int begin, int end, int thread)
     }
 }
 
-static bool pass1(gdata_t *d)
+bool calib_gain_frame_stats(calib_gain_data_t *d)
 {
     pass1_t P = { d, 0, d->nf, model_now_s() };
     model_parallel_for(d->ng, 1, model_default_threads(), pass1_rows, &P);
     for (int i = 0; i < d->ng; i++)
         if (d->g[i].error) {
-            model_error(NULL, 0, "%s", d->g[i].error);
+            model_error_set(NULL, 0, "%s", d->g[i].error);
             return false;
         }
     // one frame size
     for (int i = 1; i < d->ng; i++)
         if (d->g[i].width != d->g[0].width || d->g[i].height != d->g[0].height) {
             char nb[1024];
-            model_error(NULL, 0, "%s: %dx%d pixels, but %dx%d elsewhere in the input",
-                        frame_name(&d->f[d->g[i].idx[0]], nb, sizeof nb), d->g[i].width, d->g[i].height,
-                        d->g[0].width, d->g[0].height);
+            model_error_set(NULL, 0, "%s: %dx%d pixels, but %dx%d elsewhere in the input",
+                            frame_name(&d->f[d->g[i].idx[0]], nb, sizeof nb), d->g[i].width, d->g[i].height,
+                            d->g[0].width, d->g[0].height);
             return false;
         }
     return true;
@@ -443,41 +408,19 @@ static bool pass1(gdata_t *d)
 // ---------------------------------------------------------------------------
 // Analysis of one gain
 
-typedef struct {
-    double gain_db;
-    int    n;
-    double *t, *mu_y, *var_y, *mu_d, *var_d, *mu, *var, *dev_pct, *snr;
-    calib_gain_ptc_t ptc;
-    double var_dark_dn2;        // sigma^2_y.dark (intercept at exposure 0)
-    double dark_slope_dn_per_us, dark_intercept_dn;
-    double dark_t_min_us, dark_t_max_us;
-    int    ndark;               // dark exposures used for the dark current
-    double radiance;            // total radiance of the light frames (NAN unknown)
-    double kc_per_us;           // response / radiance
-    double response0_dn_per_us; // small-signal response: slope at 0 of a quadratic in exposure (0..70 % of sat)
-    double kc0_per_us;          // response0 / radiance
-} gain_an_t;
-
-static void gain_an_free(gain_an_t *a)
+void calib_gain_an_free(calib_gain_an_t *a)
 {
-    free(a->t);
-    free(a->mu_y);
-    free(a->var_y);
-    free(a->mu_d);
-    free(a->var_d);
-    free(a->mu);
-    free(a->var);
-    free(a->dev_pct);
-    free(a->snr);
+    double *arrays[] = { a->t, a->mu_y, a->var_y, a->mu_d, a->var_d, a->mu, a->var, a->dev_pct, a->snr };
+    for (size_t i = 0; i < sizeof arrays / sizeof arrays[0]; i++) free(arrays[i]);
 }
 
 static int cmp_group_t(const void *a, const void *b)
 {
-    const ggroup_t *const *x = a, *const *y = b;
+    const calib_gain_group_t *const *x = a, *const *y = b;
     return ((*x)->exposure_us > (*y)->exposure_us) - ((*x)->exposure_us < (*y)->exposure_us);
 }
 
-static bool analyse_gain(gdata_t *d, double gain_db, int min_steps, double quant_dn, gain_an_t *a)
+bool calib_gain_analyse(calib_gain_data_t *d, double gain_db, int min_steps, double quant_dn, calib_gain_an_t *a)
 {
     memset(a, 0, sizeof *a);
     a->gain_db = gain_db;
@@ -489,9 +432,9 @@ static bool analyse_gain(gdata_t *d, double gain_db, int min_steps, double quant
            *dv = malloc(sizeof(double) * d->ng);
     int ndv = 0;
     double *dtv = malloc(sizeof(double) * d->ng);
-    ggroup_t **light = malloc(sizeof *light * d->ng);
+    calib_gain_group_t **light = malloc(sizeof *light * d->ng);
     for (int i = 0; i < d->ng; i++) {
-        ggroup_t *g = &d->g[i];
+        calib_gain_group_t *g = &d->g[i];
         if (g->gain_db != gain_db) continue;
         if (g->dark) {
             dt[nd] = g->exposure_us;
@@ -502,13 +445,13 @@ static bool analyse_gain(gdata_t *d, double gain_db, int min_steps, double quant
                 dv[ndv] = g->var_dn2;
                 ndv++;
             }
-        } else if (g->set == SET_SWEEP && g->n >= 2)
+        } else if (g->set == CALIB_GAIN_SET_SWEEP && g->n >= 2)
             light[nl++] = g;
     }
     bool ok = false;
     if (nd == 0 || ndv == 0) {
-        model_error(NULL, 0, "gain %g dB: no dark frame pairs (kind dark, at least two frames at an exposure); the "
-                    "dark level and temporal dark noise need them", gain_db);
+        model_error_set(NULL, 0, "gain %g dB: no dark frame pairs (kind dark, at least two frames at an exposure); the "
+                        "dark level and temporal dark noise need them", gain_db);
         goto done;
     }
     a->ndark = nd;
@@ -545,8 +488,8 @@ static bool analyse_gain(gdata_t *d, double gain_db, int min_steps, double quant
         }
     }
     if (nl < min_steps) {
-        model_error(NULL, 0, "gain %g dB: too few sweep steps: %d exposures with a pair of light frames, EMVA 1288 "
-                    "asks for at least %d (capture more exposures, e.g. --steps 50)", gain_db, nl, min_steps);
+        model_error_set(NULL, 0, "gain %g dB: too few sweep steps: %d exposures with a pair of light frames, EMVA 1288 "
+                        "asks for at least %d (capture more exposures, e.g. --steps 50)", gain_db, nl, min_steps);
         goto done;
     }
     qsort(light, nl, sizeof *light, cmp_group_t);
@@ -555,14 +498,14 @@ static bool analyse_gain(gdata_t *d, double gain_db, int min_steps, double quant
     ALLOC(t); ALLOC(mu_y); ALLOC(var_y); ALLOC(mu_d); ALLOC(var_d); ALLOC(mu); ALLOC(var); ALLOC(dev_pct); ALLOC(snr);
 #undef ALLOC
     for (int i = 0; i < nl; i++) {
-        ggroup_t *g = light[i];
+        calib_gain_group_t *g = light[i];
         a->t[i] = g->exposure_us;
         a->mu_y[i] = g->mean_dn;
         a->var_y[i] = g->var_dn2;
         // the dark pair at the same exposure, else the dark model
-        ggroup_t *best = NULL;
+        calib_gain_group_t *best = NULL;
         for (int k = 0; k < d->ng; k++) {
-            ggroup_t *h = &d->g[k];
+            calib_gain_group_t *h = &d->g[k];
             if (h->gain_db == gain_db && h->dark && h->exposure_us == g->exposure_us && isfinite(h->var_dn2) &&
                 (!best || h->n > best->n))
                 best = h;
@@ -580,7 +523,7 @@ static bool analyse_gain(gdata_t *d, double gain_db, int min_steps, double quant
     }
     if (!calib_gain_ptc(a->t, a->mu, a->var, a->var_y, nl, a->var_dark_dn2, quant_dn, &a->ptc)) {
         char *m = g_strdup(model_last_error());
-        model_error(NULL, 0, "gain %g dB: %s", gain_db, m);
+        model_error_set(NULL, 0, "gain %g dB: %s", gain_db, m);
         g_free(m);
         goto done;
     }
@@ -611,19 +554,7 @@ done:
 // ---------------------------------------------------------------------------
 // Maps (flat field, dark)
 
-typedef struct {
-    int     w, h;
-    float  *offset, *dsnu, *prnu, *prnu_hp;
-    double  flat_exposure_us, flat_level_dn, flat_sat_frac;
-    int     flat_frames, dark_frames;
-    double  dark_exposure_us;
-    double  dsnu_dn, dsnu_total_raw_dn;
-    double  prnu_pct, prnu_total_pct;
-    double  flat_var_dn2, dark_var_dn2;
-    bool    dark_same_exposure;
-} maps_t;
-
-static void maps_free(maps_t *m)
+void calib_gain_maps_free(calib_gain_maps_t *m)
 {
     free(m->offset);
     free(m->dsnu);
@@ -632,7 +563,7 @@ static void maps_free(maps_t *m)
 }
 
 // Average of a group's frames (full frame) into out (w*h doubles summed then divided).
-static bool group_average(const gdata_t *d, const ggroup_t *g, int w, int h, float *out)
+static bool group_average(const calib_gain_data_t *d, const calib_gain_group_t *g, int w, int h, float *out)
 {
     size_t n = (size_t)w * h;
     double *sum = calloc(n, sizeof(double));
@@ -651,7 +582,7 @@ static bool group_average(const gdata_t *d, const ggroup_t *g, int w, int h, flo
     return true;
 }
 
-static double roi_mean_var(const gdata_t *d, const float *m, int w, int h, double *var)
+static double roi_mean_var(const calib_gain_data_t *d, const float *m, int w, int h, double *var)
 {
     int r[4];
     roi_of(d, w, h, r);
@@ -668,20 +599,21 @@ static double roi_mean_var(const gdata_t *d, const float *m, int w, int h, doubl
     return mean;
 }
 
-static bool make_maps(gdata_t *d, const gain_an_t *a, maps_t *m)
+bool calib_gain_make_maps(calib_gain_data_t *d, const calib_gain_an_t *a, calib_gain_maps_t *m)
 {
     memset(m, 0, sizeof *m);
     const double sat = a->ptc.saturation_dn;
     // the flat: the flat set's light group, else the sweep group with the most
     // frames (ties: nearest 50 % of saturation) below saturation
-    ggroup_t *flat = NULL;
+    calib_gain_group_t *flat = NULL;
     for (int i = 0; i < d->ng; i++) {
-        ggroup_t *g = &d->g[i];
-        if (g->gain_db == a->gain_db && !g->dark && g->set == SET_FLAT && (!flat || g->n > flat->n)) flat = g;
+        calib_gain_group_t *g = &d->g[i];
+        if (g->gain_db == a->gain_db && !g->dark && g->set == CALIB_GAIN_SET_FLAT && (!flat || g->n > flat->n))
+            flat = g;
     }
     if (!flat)
         for (int i = 0; i < d->ng; i++) {
-            ggroup_t *g = &d->g[i];
+            calib_gain_group_t *g = &d->g[i];
             if (g->gain_db != a->gain_db || g->dark || g->n < 2) continue;
             // the dark-subtracted level of this group
             double lv = g->mean_dn - (a->dark_intercept_dn + a->dark_slope_dn_per_us * g->exposure_us);
@@ -692,20 +624,20 @@ static bool make_maps(gdata_t *d, const gain_an_t *a, maps_t *m)
                 flat = g;
         }
     if (!flat) {
-        model_error(NULL, 0, "gain %g dB: no flat-field frames (light, at least two at one exposure)", a->gain_db);
+        model_error_set(NULL, 0, "gain %g dB: no flat-field frames (light, at least two at one exposure)", a->gain_db);
         return false;
     }
     // its dark: the same exposure (most frames), else the dark group with the most frames
-    ggroup_t *dark = NULL;
+    calib_gain_group_t *dark = NULL;
     for (int i = 0; i < d->ng; i++) {
-        ggroup_t *g = &d->g[i];
+        calib_gain_group_t *g = &d->g[i];
         if (g->gain_db == a->gain_db && g->dark && g->exposure_us == flat->exposure_us && (!dark || g->n > dark->n))
             dark = g;
     }
     m->dark_same_exposure = dark != NULL;
     if (!dark)
         for (int i = 0; i < d->ng; i++) {
-            ggroup_t *g = &d->g[i];
+            calib_gain_group_t *g = &d->g[i];
             if (g->gain_db == a->gain_db && g->dark && (!dark || g->n > dark->n)) dark = g;
         }
     char nb[1024];
@@ -717,17 +649,18 @@ static bool make_maps(gdata_t *d, const gain_an_t *a, maps_t *m)
     // the exposure of 50 % of saturation, from the linearity line
     const double t_half = (0.5 * sat - a->ptc.response_offset_dn) / a->ptc.response_dn_per_us;
     if (flat->sat_frac > 1e-4 || m->flat_level_dn > 0.9 * sat) {
-        model_error(NULL, 0, "%s: the flat field (%d frames at %.6g us) is saturated: mean %.1f DN above dark (%.1f DN "
-                    "grey value), %.3f %% of its pixels at full scale; saturation is at %.1f DN above dark: use an "
-                    "exposure near %.0f %% of it (~%.6g us)", frame_name(&d->f[flat->idx[0]], nb, sizeof nb), flat->n,
-                    flat->exposure_us, m->flat_level_dn, flat->mean_dn, 100 * flat->sat_frac, sat, 50.0, t_half);
+        model_error_set(NULL, 0, "%s: the flat field (%d frames at %.6g us) is saturated: mean %.1f DN above dark "
+                        "(%.1f DN grey value), %.3f %% of its pixels at full scale; saturation is at %.1f DN above "
+                        "dark: use an exposure near %.0f %% of it (~%.6g us)",
+                        frame_name(&d->f[flat->idx[0]], nb, sizeof nb), flat->n, flat->exposure_us, m->flat_level_dn,
+                        flat->mean_dn, 100 * flat->sat_frac, sat, 50.0, t_half);
         return false;
     }
     if (m->flat_level_dn < 0.1 * sat) {
-        model_error(NULL, 0, "%s: the flat field (%d frames at %.6g us) is too dark: mean %.2f DN above dark (%.1f DN "
-                    "grey value, dark %.1f DN), below 10 %% of saturation (%.1f DN above dark): use an exposure near "
-                    "50 %% of saturation (~%.6g us)", frame_name(&d->f[flat->idx[0]], nb, sizeof nb), flat->n,
-                    flat->exposure_us, m->flat_level_dn, flat->mean_dn, dark_level, sat, t_half);
+        model_error_set(NULL, 0, "%s: the flat field (%d frames at %.6g us) is too dark: mean %.2f DN above dark "
+                        "(%.1f DN grey value, dark %.1f DN), below 10 %% of saturation (%.1f DN above dark): use an "
+                        "exposure near 50 %% of saturation (~%.6g us)", frame_name(&d->f[flat->idx[0]], nb, sizeof nb),
+                        flat->n, flat->exposure_us, m->flat_level_dn, flat->mean_dn, dark_level, sat, t_half);
         return false;
     }
     int w = flat->width, h = flat->height;
@@ -761,7 +694,7 @@ static bool make_maps(gdata_t *d, const gain_an_t *a, maps_t *m)
     double tvar = (isfinite(m->flat_var_dn2) ? m->flat_var_dn2 / flat->n : 0) + m->dark_var_dn2 / dark->n;
     m->prnu_total_pct = 100 * sqrt(fmax(svar - tvar, 0)) / smean;
     if (!calib_gain_highpass(m->prnu, w, h, m->prnu_hp)) {
-        model_error(NULL, 0, "flat field: the smooth-surface fit is singular (%dx%d frames)", w, h);
+        model_error_set(NULL, 0, "flat field: the smooth-surface fit is singular (%dx%d frames)", w, h);
         return false;
     }
     // spatial variance of the high-pass map, in DN^2 of the signal
@@ -788,7 +721,7 @@ static char *trim(char *s)
     return s;
 }
 
-static bool read_manifest(const char *path, int max_dn, gdata_t *d)
+bool calib_gain_read_manifest(const char *path, int max_dn, calib_gain_data_t *d)
 {
     char *text = model_read_file(path, NULL);
     if (!text) return false;
@@ -808,30 +741,30 @@ static bool read_manifest(const char *path, int max_dn, gdata_t *d)
         if (nf == 3 && nframes == 0 && !strcmp(f[0], "file") && !strcmp(f[1], "exposure_us") && !strcmp(f[2], "kind"))
             continue;   // the header
         if (nf != 3) {
-            model_error(path, line, "expected 3 fields file,exposure_us,kind, found %d", nf);
+            model_error_set(path, line, "expected 3 fields file,exposure_us,kind, found %d", nf);
             goto done;
         }
         double e;
         if (!model_parse_double(f[1], &e) || !(e > 0)) {
-            model_error(path, line, "exposure_us '%s' is not a positive number (microseconds)", f[1]);
+            model_error_set(path, line, "exposure_us '%s' is not a positive number (microseconds)", f[1]);
             goto done;
         }
         bool dark;
         if (!strcmp(f[2], "dark")) dark = true;
         else if (!strcmp(f[2], "light")) dark = false;
         else {
-            model_error(path, line, "kind '%s' must be dark or light", f[2]);
+            model_error_set(path, line, "kind '%s' must be dark or light", f[2]);
             goto done;
         }
         if (!*f[0]) {
-            model_error(path, line, "empty file name");
+            model_error_set(path, line, "empty file name");
             goto done;
         }
-        gframe_t fr = { .path = f[0][0] == '/' ? g_strdup(f[0]) : g_build_filename(dir, f[0], NULL),
+        calib_gain_frame_t fr = { .path = f[0][0] == '/' ? g_strdup(f[0]) : g_build_filename(dir, f[0], NULL),
                         .where = g_strdup(path), .line = line, .exposure_us = e, .gain_db = 0, .dark = dark,
-                        .set = SET_ANY, .max_dn = max_dn, .nlamps = -1 };
+                        .set = CALIB_GAIN_SET_ANY, .max_dn = max_dn, .nlamps = -1 };
         if (access(fr.path, R_OK) != 0) {
-            model_error(path, line, "frame %s: %s", fr.path, strerror(errno));
+            model_error_set(path, line, "frame %s: %s", fr.path, strerror(errno));
             g_free(fr.path);
             g_free(fr.where);
             goto done;
@@ -840,7 +773,7 @@ static bool read_manifest(const char *path, int max_dn, gdata_t *d)
         nframes++;
     }
     if (!nframes) {
-        model_error(path, 0, "no frames listed (lines file,exposure_us,kind)");
+        model_error_set(path, 0, "no frames listed (lines file,exposure_us,kind)");
         goto done;
     }
     ok = true;
@@ -866,8 +799,8 @@ static int lamps_on(const char *lamps, int nlamps_rig)
     return n;
 }
 
-// Frames of a session; set: the role of its frames (SET_ANY: by lamps).
-static bool add_session(gdata_t *d, const char *dir, int set, json_t **facts_out)
+// Frames of a session; set: the role of its frames (CALIB_GAIN_SET_ANY: by lamps).
+bool calib_gain_add_session(calib_gain_data_t *d, const char *dir, int set, json_t **facts_out)
 {
     rig_session_t *s = rig_session_open(dir);
     if (!s) return false;
@@ -877,7 +810,7 @@ static bool add_session(gdata_t *d, const char *dir, int set, json_t **facts_out
     for (int i = 0; i < s->n; i++) {
         const rig_frame_row_t *r = &s->rows[i];
         int on = lamps_on(r->lamps, nlr);
-        gframe_t f = { .path = g_strdup_printf("%s/%s", dir, r->file), .where = g_strdup(dir), .line = 0,
+        calib_gain_frame_t f = { .path = g_strdup_printf("%s/%s", dir, r->file), .where = g_strdup(dir), .line = 0,
                        .step = r->step, .exposure_us = r->exposure_us, .gain_db = r->gain, .dark = on == 0,
                        .set = set, .max_dn = format_max(r->pixel_format), .nlamps = on };
         snprintf(f.sha256, sizeof f.sha256, "%s", r->sha256);
@@ -888,37 +821,27 @@ static bool add_session(gdata_t *d, const char *dir, int set, json_t **facts_out
     return true;
 }
 
-// The flat field's radiance per lamp from a virtual rig's truth file (NAN: unknown).
-static double truth_radiance(json_t *facts, const char **truth_out)
+bool calib_gain_truth_radiance(json_t *facts, const char **truth_path, double *radiance_per_lamp)
 {
     json_t *v = facts ? json_object_get(facts, "virtual_rig") : NULL;
     const char *truth = json_string_value(json_object_get(v, "truth"));
     const char *sample = json_string_value(json_object_get(v, "sample"));
-    if (truth_out) *truth_out = truth;
-    if (!truth || !sample) return NAN;
-    model_ini_t *ini = model_ini_load(truth);
-    if (!ini) return NAN;
-    char *sec = g_strdup_printf("sample %s", sample);
-    const model_ini_entry_t *e = model_ini_get(ini, sec, "radiance");
-    const model_ini_entry_t *k = model_ini_get(ini, sec, "kind");
-    double r = NAN;
-    if (e && k && !strcmp(k->value, "uniform_source") && !model_parse_double(e->value, &r)) r = NAN;
-    g_free(sec);
-    model_ini_free(ini);
-    return r;
+    if (truth_path) *truth_path = truth;
+    *radiance_per_lamp = NAN;
+    if (!truth || !sample) return false;
+    bool q = model_error_quiet_thread(true);   // a comparison: no truth, no column
+    rig_truth_t *t = rig_truth_load(truth);
+    bool ok = t && rig_truth_uniform_radiance(t, sample, radiance_per_lamp);
+    rig_truth_free(t);
+    model_error_quiet_thread(q);
+    if (!ok) *radiance_per_lamp = NAN;
+    return ok;
 }
 
 // ---------------------------------------------------------------------------
 // Capture on a rig
 
-typedef struct {
-    const char *rig, *out, *sample, *lamps, *pixel_format;
-    int         steps, flat_frames, progress;
-    double      probe_us, max_us;
-    char       *dark_list;
-} capture_opts_t;
-
-static char *plan_text(const capture_opts_t *c, const char *name, const char *lamps, const char *list,
+static char *plan_text(const calib_gain_opts_t *c, const char *name, const char *lamps, const char *list,
                        double gain, int repeats)
 {
     return g_strdup_printf("# refl calib gain: %s (written by refl; see rig/rig.h, Capture sessions)\n"
@@ -928,7 +851,7 @@ static char *plan_text(const capture_opts_t *c, const char *name, const char *la
                            name, name, c->sample, lamps, list, gain, c->pixel_format, repeats);
 }
 
-static int run_plan(const capture_opts_t *c, const char *name, const char *lamps, const char *list, double gain,
+static int run_plan(const calib_gain_opts_t *c, const char *name, const char *lamps, const char *list, double gain,
                     int repeats)
 {
     char *p = plan_text(c, name, lamps, list, gain, repeats);
@@ -952,7 +875,7 @@ static bool probe_levels(const char *dir, double *light, double *dark, double *m
     }
     rig_session_free(s);
     if (!(isfinite(*light) && isfinite(*dark))) {
-        model_error(dir, 0, "the probe session has no light and dark frame");
+        model_error_set(dir, 0, "the probe session has no light and dark frame");
         return false;
     }
     return true;
@@ -966,7 +889,7 @@ static char *exposure_list(const double *t, int n)
 }
 
 // Probe and sweep at one gain; *t_sat_us: the estimated exposure of full scale.
-static bool capture_sweep(const capture_opts_t *c, double gain, char **sweep_dir, double *t_sat_us)
+static bool capture_sweep(const calib_gain_opts_t *c, double gain, char **sweep_dir, double *t_sat_us)
 {
     double probe = c->probe_us, t_full = NAN;
     for (int attempt = 0; attempt < 8 && !isfinite(t_full); attempt++) {
@@ -990,8 +913,8 @@ static bool capture_sweep(const capture_opts_t *c, double gain, char **sweep_dir
         if (probe > 1e7) break;
     }
     if (!isfinite(t_full)) {
-        model_error(c->rig, 0, "gain %g dB: no exposure between 10 us and 10 s gives a usable level of the flat "
-                    "field (lamps %s): check the lamps and the source", gain, c->lamps);
+        model_error_set(c->rig, 0, "gain %g dB: no exposure between 10 us and 10 s gives a usable level of the flat "
+                        "field (lamps %s): check the lamps and the source", gain, c->lamps);
         return false;
     }
     double tmax = isfinite(c->max_us) ? c->max_us : 1.2 * t_full;
@@ -1026,7 +949,7 @@ static json_t *jarray(const double *v, int n)
     return a;
 }
 
-static json_t *gain_json(const gain_an_t *a)
+static json_t *gain_json(const calib_gain_an_t *a)
 {
     json_t *o = json_object();
     const calib_gain_ptc_t *p = &a->ptc;
@@ -1047,6 +970,7 @@ static json_t *gain_json(const gain_an_t *a)
     json_object_set_new(o, "response_dn_per_us", jreal(p->response_dn_per_us));
     json_object_set_new(o, "response_offset_dn", jreal(p->response_offset_dn));
     json_object_set_new(o, "radiance", jreal(a->radiance));
+    if (isfinite(a->radiance_truth)) json_object_set_new(o, "radiance_truth", json_real(a->radiance_truth));
     json_object_set_new(o, "kc_per_us", jreal(a->kc_per_us));
     json_object_set_new(o, "response_small_signal_dn_per_us", jreal(a->response0_dn_per_us));
     json_object_set_new(o, "kc_small_signal_per_us", jreal(a->kc0_per_us));
@@ -1074,7 +998,7 @@ static json_t *gain_json(const gain_an_t *a)
     return o;
 }
 
-static bool write_map(const char *dir, const char *name, const maps_t *m, const float *map, const char *what)
+static bool write_map(const char *dir, const char *name, const calib_gain_maps_t *m, const float *map, const char *what)
 {
     char *path = g_build_filename(dir, name, NULL);
     const char *meta[] = { "content", what, "software", "refl calib gain " REFL_VERSION, NULL };
@@ -1083,449 +1007,352 @@ static bool write_map(const char *dir, const char *name, const maps_t *m, const 
     return ok;
 }
 
-static void usage(FILE *f)
+
+bool calib_gain_write_maps(const char *dir, const calib_gain_maps_t *m)
 {
-    fprintf(f,
-            "usage: refl calib gain --rig RIG -o DIR [options]\n"
-            "       refl calib gain --frames MANIFEST.csv -o DIR [options]\n"
-            "       refl calib gain --session DIR [--session DIR ...] -o DIR [options]\n\n"
-            "Sensitivity of a camera, EMVA 1288 style: photon transfer (system gain K, read noise, saturation,\n"
-            "SNR, dynamic range), linearity error, dark current, offset/DSNU and PRNU maps, and the response\n"
-            "kc per us per unit radiance at each gain. Writes DIR/gain.json, DIR/offset_dn.tiff, dsnu_dn.tiff,\n"
-            "prnu_gain.tiff (total flat field incl. vignetting, mean 1), prnu_highpass.tiff (smooth part\n"
-            "removed) and DIR/report.html.\n\n"
-            "Capture (--rig; the sample is a uniform source filling the view):\n"
-            "  --gains LIST             gains (camera unit, dB) to sweep, comma-separated (default 0); the first\n"
-            "                           is the reference (dark current, maps, top-level figures). With --frames:\n"
-            "                           one value, the gain the frames were taken at (a label)\n"
-            "  --steps N                exposure steps of each sweep (default 50, at least --min-steps)\n"
-            "  --sample NAME            the plan's sample (default flat_field)\n"
-            "  --lamps SET              lamps feeding the source (default all)\n"
-            "  --probe-exposure-us US   first probe exposure (default 1000)\n"
-            "  --max-exposure-us US     longest sweep exposure (default 1.2 x the probe's full-scale estimate)\n"
-            "  --flat-frames N          light and dark frames of the flat field (default 16)\n"
-            "  --dark-exposures-us LIST long dark exposures for the dark current (default 100000,500000,\n"
-            "                           1000000,2000000)\n"
-            "  --pixel-format F         Mono8|Mono12|Mono16 (default Mono12)\n"
-            "Manifest (--frames): lines file,exposure_us,kind (kind dark|light; optional header line; paths\n"
-            "relative to the manifest; 16-bit PNG or float TIFF). Light exposures need frame pairs.\n"
-            "Analysis:\n"
-            "  --min-steps N            fewest sweep steps accepted (default 50, EMVA 1288)\n"
-            "  --radiance R             radiance of the source with the lamps on (default: a virtual rig's truth)\n"
-            "  --roi X,Y,W,H            pixels of the statistics (default the whole frame; maps are whole)\n"
-            "  --max-dn N               full scale of manifest frames (default 65535)\n"
-            "  --quant-dn Q             quantisation step in DN (default 1; 16 for 12-bit data in Mono16)\n"
-            "  --no-report              skip the plots and report.html\n");
+    return write_map(dir, "offset_dn.tiff", m, m->offset, "dark level (offset) map, DN") &&
+           write_map(dir, "dsnu_dn.tiff", m, m->dsnu, "dark signal non-uniformity: dark level minus its mean, DN") &&
+           write_map(dir, "prnu_gain.tiff", m, m->prnu,
+                     "relative sensitivity g(x,y), mean 1: flat field minus dark, incl. vignetting") &&
+           write_map(dir, "prnu_highpass.tiff", m, m->prnu_hp,
+                     "PRNU: flat field divided by its quadratic smooth surface (vignetting removed), mean ~1");
 }
 
-static bool parse_list(const char *s, double **out, int *n)
+// A session of the capture into d and the provenance (role), its directory o->out/name.
+static bool add_captured(const calib_gain_opts_t *o, calib_gain_data_t *d, json_t *prov, json_t **facts,
+                         const char *name, int set, const char *role)
 {
-    *n = 0;
-    *out = NULL;
-    char *c = g_strdup(s), *save = NULL;
-    bool ok = true;
-    for (char *p = strtok_r(c, ", ", &save); p; p = strtok_r(NULL, ", ", &save)) {
-        double v;
-        if (!model_parse_double(p, &v)) {
-            ok = false;
-            break;
-        }
-        *out = realloc(*out, sizeof(double) * (*n + 1));
-        (*out)[(*n)++] = v;
-    }
-    g_free(c);
-    return ok && *n > 0;
+    char *dir = g_strdup_printf("%s/%s", o->out, name);
+    bool ok = calib_gain_add_session(d, dir, set, facts) && model_provenance_input(prov, role, dir);
+    g_free(dir);
+    return ok;
 }
 
-int calib_cmd_gain(int argc, char **argv)
+bool calib_gain_capture(const calib_gain_opts_t *o, calib_gain_data_t *d, json_t *prov, json_t **facts)
 {
-    capture_opts_t c = { .sample = "flat_field", .lamps = "all", .pixel_format = "Mono12", .steps = 50,
-                         .flat_frames = 16, .progress = -1, .probe_us = 1000, .max_us = NAN };
-    const char *manifest = NULL, *out = NULL, *gains_s = "0", *dark_s = "100000,500000,1000000,2000000";
-    const char *roi_s = NULL;
-    char **sessions = NULL;
-    int nsessions = 0, min_steps = 50, max_dn = 65535;
-    double radiance = NAN, quant = 1;
-    bool report = true;
-    enum { O_GAINS = 256, O_STEPS, O_SAMPLE, O_LAMPS, O_PROBE, O_MAXEXP, O_FLATN, O_DARKS, O_PF, O_MINSTEPS,
-           O_RAD, O_ROI, O_MAXDN, O_QUANT, O_NOREPORT, O_SESSION, O_FRAMES, O_RIG };
-    static const struct option lo[] = {
-        { "rig", required_argument, 0, O_RIG }, { "frames", required_argument, 0, O_FRAMES },
-        { "session", required_argument, 0, O_SESSION }, { "output", required_argument, 0, 'o' },
-        { "gains", required_argument, 0, O_GAINS }, { "steps", required_argument, 0, O_STEPS },
-        { "sample", required_argument, 0, O_SAMPLE }, { "lamps", required_argument, 0, O_LAMPS },
-        { "probe-exposure-us", required_argument, 0, O_PROBE }, { "max-exposure-us", required_argument, 0, O_MAXEXP },
-        { "flat-frames", required_argument, 0, O_FLATN }, { "dark-exposures-us", required_argument, 0, O_DARKS },
-        { "pixel-format", required_argument, 0, O_PF }, { "min-steps", required_argument, 0, O_MINSTEPS },
-        { "radiance", required_argument, 0, O_RAD }, { "roi", required_argument, 0, O_ROI },
-        { "max-dn", required_argument, 0, O_MAXDN }, { "quant-dn", required_argument, 0, O_QUANT },
-        { "no-report", no_argument, 0, O_NOREPORT }, { "help", no_argument, 0, 'h' }, { 0, 0, 0, 0 } };
-    optind = 1;
-    int opt;
-    long lv;
-    double dv;
-#define NUM_INT(var, lo_, what)                                                                                    \
-    do {                                                                                                           \
-        if (!model_parse_int(optarg, &lv) || lv < (lo_) || lv > 1000000) {                                         \
-            fprintf(stderr, "refl calib gain: %s '%s' must be an integer >= %d\n", what, optarg, (int)(lo_));      \
-            return 2;                                                                                              \
-        }                                                                                                          \
-        var = (int)lv;                                                                                             \
-    } while (0)
-#define NUM_POS(var, what)                                                                                         \
-    do {                                                                                                           \
-        if (!model_parse_double(optarg, &dv) || !(dv > 0)) {                                                       \
-            fprintf(stderr, "refl calib gain: %s '%s' must be a positive number\n", what, optarg);                 \
-            return 2;                                                                                              \
-        }                                                                                                          \
-        var = dv;                                                                                                  \
-    } while (0)
-    while ((opt = getopt_long(argc, argv, "o:h", lo, NULL)) != -1) {
-        switch (opt) {
-        case O_RIG: c.rig = optarg; break;
-        case O_FRAMES: manifest = optarg; break;
-        case O_SESSION:
-            sessions = realloc(sessions, sizeof(char *) * (nsessions + 1));
-            sessions[nsessions++] = optarg;
-            break;
-        case 'o': out = optarg; break;
-        case O_GAINS: gains_s = optarg; break;
-        case O_STEPS: NUM_INT(c.steps, 2, "--steps"); break;
-        case O_SAMPLE: c.sample = optarg; break;
-        case O_LAMPS: c.lamps = optarg; break;
-        case O_PROBE: NUM_POS(c.probe_us, "--probe-exposure-us"); break;
-        case O_MAXEXP: NUM_POS(c.max_us, "--max-exposure-us"); break;
-        case O_FLATN: NUM_INT(c.flat_frames, 2, "--flat-frames"); break;
-        case O_DARKS: dark_s = optarg; break;
-        case O_PF: c.pixel_format = optarg; break;
-        case O_MINSTEPS: NUM_INT(min_steps, 6, "--min-steps"); break;
-        case O_RAD: NUM_POS(radiance, "--radiance"); break;
-        case O_ROI: roi_s = optarg; break;
-        case O_MAXDN: NUM_INT(max_dn, 1, "--max-dn"); break;
-        case O_QUANT: NUM_POS(quant, "--quant-dn"); break;
-        case O_NOREPORT: report = false; break;
-        case 'h': usage(stdout); free(sessions); return 0;
-        default: usage(stderr); free(sessions); return 2;
-        }
-    }
-#undef NUM_INT
-#undef NUM_POS
-    int rc = 1;
-    gdata_t d = { 0 };
-    gain_an_t *an = NULL;
-    int ngains = 0;
-    double *gains = NULL, *darks = NULL;
-    int ndarks = 0;
-    maps_t maps = { 0 };
-    json_t *facts = NULL, *prov = NULL, *root = NULL;
-    char *sweep_dir = NULL;
-    if (optind < argc) {
-        fprintf(stderr, "refl calib gain: unexpected argument '%s'\n", argv[optind]);
-        usage(stderr);
-        goto out2;
-    }
-    if (!out || (!!c.rig + !!manifest + (nsessions > 0)) != 1) {
-        fprintf(stderr, "refl calib gain: give -o DIR and exactly one of --rig, --frames, --session\n");
-        usage(stderr);
-        goto out2;
-    }
-    if (roi_s && (sscanf(roi_s, "%d,%d,%d,%d", &d.roi[0], &d.roi[1], &d.roi[2], &d.roi[3]) != 4 || d.roi[0] < 0 ||
-                  d.roi[1] < 0 || d.roi[2] < 2 || d.roi[3] < 2)) {
-        fprintf(stderr, "refl calib gain: --roi '%s' must be X,Y,W,H (W, H >= 2)\n", roi_s);
-        goto out2;
-    }
-    if (!parse_list(gains_s, &gains, &ngains)) {
-        fprintf(stderr, "refl calib gain: --gains '%s' must be a comma-separated list of numbers (dB)\n", gains_s);
-        goto out2;
-    }
-    if (!parse_list(dark_s, &darks, &ndarks)) {
-        fprintf(stderr, "refl calib gain: --dark-exposures-us '%s' must be a comma-separated list of us\n", dark_s);
-        goto out2;
-    }
-    if (c.rig && c.steps < min_steps) {
-        fprintf(stderr, "refl calib gain: too few sweep steps: --steps %d, EMVA 1288 asks for at least %d "
-                "(--min-steps)\n", c.steps, min_steps);
-        goto out2;
-    }
-    if (!model_mkdir_p(out)) goto out;
-    prov = model_provenance(argc, argv);
     double t_start = model_now_s();
-    if (c.rig) {
-        c.out = out;
-        c.dark_list = NULL;
-        if (!model_provenance_input(prov, "rig", c.rig)) goto out;
-        // sweeps at every gain; the first gives the flat field's exposure
-        double t_sat0 = NAN;
-        for (int gi = 0; gi < ngains; gi++) {
-            double ts;
-            char *sd = NULL;
-            if (!capture_sweep(&c, gains[gi], &sd, &ts)) goto out;
-            if (gi == 0) t_sat0 = ts;
-            if (!add_session(&d, sd, SET_SWEEP, &facts) || !model_provenance_input(prov, "sweep", sd)) {
-                g_free(sd);
-                goto out;
-            }
-            g_free(sd);
-        }
-        // the flat field near 50 % of full scale, its darks, and long darks
-        double t_flat = fmax(10, round(0.5 * t_sat0 * 0.95));
-        char *fl = g_strdup_printf("%.0f", t_flat);
-        char *sets = g_strdup_printf("%s; none", c.lamps);
-        int r1 = run_plan(&c, "flat", sets, fl, gains[0], c.flat_frames);
-        g_free(sets);
-        g_free(fl);
-        if (r1) goto out;
-        char *fd = g_strdup_printf("%s/flat", out);
-        bool ok = add_session(&d, fd, SET_FLAT, &facts) && model_provenance_input(prov, "flat", fd);
-        g_free(fd);
-        if (!ok) goto out;
-        char *dl = exposure_list(darks, ndarks);
-        r1 = run_plan(&c, "dark", "none", dl, gains[0], 2);
-        g_free(dl);
-        if (r1) goto out;
-        fd = g_strdup_printf("%s/dark", out);
-        ok = add_session(&d, fd, SET_DARK, &facts) && model_provenance_input(prov, "dark", fd);
-        g_free(fd);
-        if (!ok) goto out;
-        fprintf(stderr, "refl calib gain: capture done in %.1f s\n", model_now_s() - t_start);
-    } else if (manifest) {
-        if (!read_manifest(manifest, max_dn, &d) || !model_provenance_input(prov, "manifest", manifest)) goto out;
-        if (ngains != 1) {
-            model_error(manifest, 0, "a manifest holds frames of one gain: give at most one --gains value (its label)");
-            goto out;
-        }
-        for (int i = 0; i < d.nf; i++) d.f[i].gain_db = gains[0];
-        // the frames themselves
-        for (int i = 0; i < d.nf; i++) {
-            char role[64];
-            snprintf(role, sizeof role, "frame line %d", d.f[i].line);
-            if (!model_provenance_input(prov, role, d.f[i].path)) {
-                char *m = g_strdup(model_last_error());
-                model_error(manifest, d.f[i].line, "frame %s: %s", d.f[i].path, m);
-                g_free(m);
-                goto out;
-            }
-        }
-    } else {
-        for (int i = 0; i < nsessions; i++)
-            if (!add_session(&d, sessions[i], SET_ANY, &facts) || !model_provenance_input(prov, "session", sessions[i]))
-                goto out;
+    if (!model_provenance_input(prov, "rig", o->rig)) return false;
+    // sweeps at every gain; the first gives the flat field's exposure
+    double t_sat0 = NAN;
+    for (int gi = 0; gi < o->ngains; gi++) {
+        double ts;
+        char *sd = NULL;
+        if (!capture_sweep(o, o->gains_db[gi], &sd, &ts)) return false;
+        if (gi == 0) t_sat0 = ts;
+        char *name = g_path_get_basename(sd);
+        bool ok = add_captured(o, d, prov, facts, name, CALIB_GAIN_SET_SWEEP, "sweep");
+        g_free(name);
+        g_free(sd);
+        if (!ok) return false;
     }
-    make_groups(&d);
-    fprintf(stderr, "refl calib gain: analysing %d frames (%d exposure groups)\n", d.nf, d.ng);
-    if (!pass1(&d)) goto out;
-    // the gains present (rig: the order asked; else in order of appearance)
-    double *gl = malloc(sizeof(double) * (d.ng + ngains));
+    // the flat field near 50 % of full scale, its darks, and long darks
+    double t_flat = fmax(10, round(0.5 * t_sat0 * 0.95));
+    char *fl = g_strdup_printf("%.0f", t_flat);
+    char *sets = g_strdup_printf("%s; none", o->lamps);
+    int r1 = run_plan(o, "flat", sets, fl, o->gains_db[0], o->flat_frames);
+    g_free(sets);
+    g_free(fl);
+    if (r1 || !add_captured(o, d, prov, facts, "flat", CALIB_GAIN_SET_FLAT, "flat")) return false;
+    char *dl = exposure_list(o->dark_exposures_us, o->ndark_exposures);
+    r1 = run_plan(o, "dark", "none", dl, o->gains_db[0], 2);
+    g_free(dl);
+    if (r1 || !add_captured(o, d, prov, facts, "dark", CALIB_GAIN_SET_DARK, "dark")) return false;
+    fprintf(stderr, "refl calib gain: capture done in %.1f s\n", model_now_s() - t_start);
+    return true;
+}
+
+// gain.json: the definitions of its figures.
+static json_t *conventions_json(const calib_gain_opts_t *o, const calib_gain_data_t *d)
+{
+    json_t *cv = json_object();
+    json_object_set_new(cv, "grey_values", json_string("DN of the frames' pixel format (unscaled)"));
+    json_object_set_new(cv, "signal", json_string("mean grey value minus the mean dark grey value at the same "
+                                                  "exposure (EMVA 1288 mu_y - mu_y.dark)"));
+    json_object_set_new(cv, "temporal_variance", json_string("var(A - B) / 2 of a frame pair, minus its dark "
+                                                             "counterpart"));
+    json_object_set_new(cv, "system_gain_dn_per_e", json_string(
+        "slope at zero signal of a quadratic least-squares fit of the variance against the signal over 0..70 % of "
+        "saturation (the small-signal K; system_gain_linear_fit_dn_per_e is EMVA 1288's straight line over the "
+        "same range)"));
+    json_object_set_new(cv, "read_noise_e", json_string("sqrt(sigma^2_y.dark - q^2/12) / K, sigma^2_y.dark the "
+                                                        "dark temporal variance extrapolated to exposure 0"));
+    json_object_set_new(cv, "saturation_dn", json_string("signal (above dark) where the temporal variance peaks"));
+    json_object_set_new(cv, "linearity_error_pct", json_string(
+        "EMVA 1288 release 3: least-squares line of signal against exposure between 5 % and 95 % of saturation; "
+        "(max - min of the relative deviations in %) / 2"));
+    json_object_set_new(cv, "prnu_pct", json_string(
+        "std of the flat field (light minus dark averages) divided by its quadratic smooth surface (vignetting "
+        "and illumination fall-off removed), temporal noise of the averages subtracted (EMVA 1288 variance "
+        "correction); prnu_total_pct: the same without removing the smooth part (vignetting included)"));
+    json_object_set_new(cv, "dsnu_dn", json_string("std of the averaged dark frame, temporal noise of the average "
+                                                   "subtracted"));
+    json_object_set_new(cv, "prnu_gain_map", json_string("g(x,y) of the imaging model: flat field minus dark, "
+                                                         "mean 1 over the frame, vignetting included"));
+    json_object_set_new(cv, "kc_per_us", json_string("response_dn_per_us (slope of the linearity line) / the "
+                                                     "source's radiance (--radiance): kc per us at that gain for g "
+                                                     "of mean 1"));
+    json_object_set_new(cv, "kc_small_signal_per_us", json_string(
+        "slope at exposure 0 of a quadratic least-squares fit of the signal against exposure over 0..70 % of "
+        "saturation, per unit radiance (free of the non-linearity's compression)"));
+    json_object_set_new(cv, "radiance_truth", json_string("the virtual rig's truth of the radiance, for comparison "
+                                                          "only (not used in the figures)"));
+    json_object_set_new(cv, "dark_current", json_string("slope of the mean dark level against exposure"));
+    json_object_set_new(cv, "dynamic_range", json_string("saturation_capacity_e / read_noise_e"));
+    json_object_set_new(cv, "statistics_region", d->roi[2] > 0 ? json_pack("[iiii]", d->roi[0], d->roi[1], d->roi[2],
+                                                                           d->roi[3])
+                                                               : json_string("whole frame"));
+    json_object_set_new(cv, "quantisation_step_dn", json_real(o->quant_dn));
+    return cv;
+}
+
+json_t *calib_gain_json(const calib_gain_opts_t *o, const calib_gain_data_t *d, const calib_gain_an_t *an, int ngains,
+                        const calib_gain_maps_t *maps, const char *truth, json_t *prov)
+{
+    const calib_gain_an_t *a = &an[0];
+    const double K = a->ptc.system_gain_dn_per_e;
+    json_t *root = json_object();
+    json_object_set_new(root, "calibration", json_string("gain (EMVA 1288 style)"));
+    json_object_set_new(root, "gain_db", json_real(a->gain_db));
+    json_object_set_new(root, "system_gain_dn_per_e", jreal(K));
+    json_object_set_new(root, "read_noise_e", jreal(a->ptc.read_noise_e));
+    json_object_set_new(root, "saturation_dn", jreal(a->ptc.saturation_dn));
+    json_object_set_new(root, "linearity_error_pct", jreal(a->ptc.linearity_error_pct));
+    json_object_set_new(root, "dsnu_dn", jreal(maps->dsnu_dn));
+    json_object_set_new(root, "dsnu_e", jreal(maps->dsnu_dn / K));
+    json_object_set_new(root, "prnu_pct", jreal(maps->prnu_pct));
+    json_object_set_new(root, "prnu_total_pct", jreal(maps->prnu_total_pct));
+    json_object_set_new(root, "dark_current_e_per_s", jreal(a->dark_slope_dn_per_us * 1e6 / K));
+    json_object_set_new(root, "dark_current_dn_per_s", jreal(a->dark_slope_dn_per_us * 1e6));
+    json_object_set_new(root, "dark_level_dn", jreal(a->dark_intercept_dn));
+    json_object_set_new(root, "saturation_capacity_e", jreal(a->ptc.saturation_capacity_e));
+    json_object_set_new(root, "snr_max", jreal(a->ptc.snr_max));
+    json_object_set_new(root, "snr_max_db", jreal(20 * log10(a->ptc.snr_max)));
+    json_object_set_new(root, "dynamic_range", jreal(a->ptc.dynamic_range));
+    json_object_set_new(root, "dynamic_range_db", jreal(20 * log10(a->ptc.dynamic_range)));
+    json_object_set_new(root, "kc_per_us", jreal(a->kc_per_us));
+    json_object_set_new(root, "kc_small_signal_per_us", jreal(a->kc0_per_us));
+    json_object_set_new(root, "response_dn_per_us", jreal(a->ptc.response_dn_per_us));
+    json_t *f = json_object();
+    json_object_set_new(f, "exposure_us", json_real(maps->flat_exposure_us));
+    json_object_set_new(f, "level_dn", json_real(maps->flat_level_dn));
+    json_object_set_new(f, "level_of_saturation", jreal(maps->flat_level_dn / a->ptc.saturation_dn));
+    json_object_set_new(f, "light_frames", json_integer(maps->flat_frames));
+    json_object_set_new(f, "dark_frames", json_integer(maps->dark_frames));
+    json_object_set_new(f, "dark_exposure_us", json_real(maps->dark_exposure_us));
+    json_object_set_new(f, "width", json_integer(maps->w));
+    json_object_set_new(f, "height", json_integer(maps->h));
+    json_object_set_new(root, "flat_field", f);
+    json_object_set_new(root, "maps", json_pack("{s:s, s:s, s:s, s:s}", "offset_dn", "offset_dn.tiff", "dsnu_dn",
+                                                "dsnu_dn.tiff", "prnu_gain", "prnu_gain.tiff", "prnu_highpass",
+                                                "prnu_highpass.tiff"));
+    json_t *pg = json_array();
+    for (int i = 0; i < ngains; i++) json_array_append_new(pg, gain_json(&an[i]));
+    json_object_set_new(root, "gains", pg);
+    json_object_set_new(root, "conventions", conventions_json(o, d));
+    if (truth) json_object_set_new(root, "virtual_truth", json_string(truth));
+    json_object_set_new(root, "provenance", json_incref(prov));
+    return root;
+}
+
+// report.html: the summary table's rows (g_free each), returns their count (at most max).
+static int summary_rows(const calib_gain_an_t *an, int ngains, const calib_gain_maps_t *maps, char **rows, int max)
+{
+    const calib_gain_an_t *a = &an[0];
+    const double K = a->ptc.system_gain_dn_per_e;
+    int nr = 0;
+    rows[nr++] = g_strdup_printf("system gain K|%.5g DN/e-|small-signal; straight-line fit %.5g", K,
+                                 a->ptc.system_gain_linear_dn_per_e);
+    rows[nr++] = g_strdup_printf("read noise|%.4g e- (%.4g DN)|", a->ptc.read_noise_e, a->ptc.read_noise_dn);
+    rows[nr++] = g_strdup_printf("saturation|%.1f DN above dark (%.0f e-)|at %.6g us", a->ptc.saturation_dn,
+                                 a->ptc.saturation_capacity_e, a->t[a->ptc.i_sat]);
+    rows[nr++] = g_strdup_printf("linearity error|%.3f %%|5..95 %% of saturation", a->ptc.linearity_error_pct);
+    rows[nr++] = g_strdup_printf("SNR max|%.1f (%.1f dB)|", a->ptc.snr_max, 20 * log10(a->ptc.snr_max));
+    rows[nr++] = g_strdup_printf("dynamic range|%.0f (%.1f dB)|", a->ptc.dynamic_range,
+                                 20 * log10(a->ptc.dynamic_range));
+    rows[nr++] = g_strdup_printf("dark current|%.3g e-/s (%.3g DN/s)|dark frames from %.6g us to %.6g us",
+                                 a->dark_slope_dn_per_us * 1e6 / K, a->dark_slope_dn_per_us * 1e6, a->dark_t_min_us,
+                                 a->dark_t_max_us);
+    rows[nr++] = g_strdup_printf("DSNU|%.3f DN (%.2f e-)|", maps->dsnu_dn, maps->dsnu_dn / K);
+    rows[nr++] = g_strdup_printf("PRNU (high-pass)|%.3f %%|smooth part (vignetting) removed", maps->prnu_pct);
+    rows[nr++] = g_strdup_printf("flat-field non-uniformity (total)|%.3f %%|vignetting included",
+                                 maps->prnu_total_pct);
+    for (int i = 0; i < ngains && nr < max; i++)
+        rows[nr++] = g_strdup_printf("gain %g dB|K %.5g DN/e-, read noise %.4g e-, sat %.0f DN, LE %.3f %%|"
+                                     "response %.5g DN/us, kc %.4g per us (small-signal %.4g)", an[i].gain_db,
+                                     an[i].ptc.system_gain_dn_per_e, an[i].ptc.read_noise_e, an[i].ptc.saturation_dn,
+                                     an[i].ptc.linearity_error_pct, an[i].ptc.response_dn_per_us, an[i].kc_per_us,
+                                     an[i].kc0_per_us);
+    if (nr < max && isfinite(a->radiance_truth))
+        rows[nr++] = g_strdup_printf("radiance (comparison)|%.6g given|the virtual rig's truth: %.6g", a->radiance,
+                                     a->radiance_truth);
+    return nr;
+}
+
+bool calib_gain_report(const char *dir, const calib_gain_an_t *an, int ngains, const calib_gain_maps_t *maps,
+                       json_t *prov)
+{
+    char *jp = g_build_filename(dir, "gain.json", NULL);
+    fprintf(stderr, "refl calib gain: plotting\n");
+    int pr = model_run_script("calib_gain_report.py", jp, dir, NULL);
+    g_free(jp);
+    if (pr) return false;
+    char *hp = g_build_filename(dir, "report.html", NULL);
+    FILE *f = model_html_begin(hp, "refl calib gain: camera sensitivity (EMVA 1288 style)", prov);
+    if (!f) {
+        g_free(hp);
+        return false;
+    }
+    const calib_gain_an_t *a = &an[0];
+    model_html_heading(f, "Summary");
+    char *rows[32];
+    int nr = summary_rows(an, ngains, maps, rows, 32);
+    model_html_table(f, "figure|value|notes", (const char *const *)rows, nr);
+    for (int i = 0; i < nr; i++) g_free(rows[i]);
+    model_html_para(f, "Flat field: %d light frames at %.6g us (%.0f DN above dark, %.0f %% of saturation) and %d "
+                    "dark frames at %.6g us. Definitions: see \"conventions\" in gain.json.", maps->flat_frames,
+                    maps->flat_exposure_us, maps->flat_level_dn, 100 * maps->flat_level_dn / a->ptc.saturation_dn,
+                    maps->dark_frames, maps->dark_exposure_us);
+    model_html_heading(f, "Photon transfer");
+    model_html_figure(f, "ptc.png", "temporal variance against signal (dark subtracted), with the K fit");
+    model_html_heading(f, "Linearity");
+    model_html_figure(f, "linearity.png", "signal against exposure with the least-squares line, and the "
+                      "relative deviation from it (5..95 % of saturation)");
+    model_html_heading(f, "SNR");
+    model_html_figure(f, "snr.png", "signal-to-noise ratio against signal, with the ideal shot-noise limit");
+    model_html_heading(f, "Response (kc) per gain");
+    model_html_figure(f, "kc.png", "signal per unit radiance against exposure at each gain");
+    model_html_heading(f, "PRNU");
+    model_html_figure(f, "prnu_map.png", "relative sensitivity: total (incl. vignetting) and high-pass");
+    model_html_figure(f, "prnu_hist.png", "histograms of the high-pass PRNU map and of the DSNU map");
+    model_html_heading(f, "Dark signal");
+    model_html_figure(f, "dark.png", "mean dark level against exposure (dark current) and dark temporal variance");
+    bool ok = model_html_end(f, hp);
+    g_free(hp);
+    return ok;
+}
+
+calib_gain_opts_t calib_gain_defaults(void)
+{
+    static const double gains[] = { 0 }, darks[] = { 100000, 500000, 1000000, 2000000 };
+    return (calib_gain_opts_t){ .gains_db = gains, .ngains = 1, .dark_exposures_us = darks, .ndark_exposures = 4,
+                                .sample = "flat_field", .lamps = "all", .pixel_format = "Mono12", .steps = 50,
+                                .flat_frames = 16, .progress = -1, .probe_us = 1000, .max_us = NAN,
+                                .min_steps = 50, .radiance = NAN, .max_dn = 65535, .quant_dn = 1, .report = true };
+}
+
+// The frames of the run's source into d (and the provenance).
+static bool gather_frames(const calib_gain_opts_t *o, calib_gain_data_t *d, json_t *prov, json_t **facts)
+{
+    if (o->rig) return calib_gain_capture(o, d, prov, facts);
+    if (!o->frames) {
+        for (int i = 0; i < o->nsessions; i++)
+            if (!calib_gain_add_session(d, o->sessions[i], CALIB_GAIN_SET_ANY, facts) ||
+                !model_provenance_input(prov, "session", o->sessions[i]))
+                return false;
+        return true;
+    }
+    if (!calib_gain_read_manifest(o->frames, o->max_dn, d) || !model_provenance_input(prov, "manifest", o->frames))
+        return false;
+    if (o->ngains != 1) {
+        model_error_set(o->frames, 0, "a manifest holds frames of one gain: give at most one --gains value (its "
+                        "label)");
+        return false;
+    }
+    for (int i = 0; i < d->nf; i++) d->f[i].gain_db = o->gains_db[0];
+    // the frames themselves
+    for (int i = 0; i < d->nf; i++) {
+        char role[64];
+        snprintf(role, sizeof role, "frame line %d", d->f[i].line);
+        if (!model_provenance_input(prov, role, d->f[i].path)) {
+            char *m = g_strdup(model_last_error());
+            model_error_set(o->frames, d->f[i].line, "frame %s: %s", d->f[i].path, m);
+            g_free(m);
+            return false;
+        }
+    }
+    return true;
+}
+
+// Every gain present (rig: in the order asked; else in order of appearance):
+// *an gets *ngains analyses (even on failure: the ones made).
+static bool analyse_all(const calib_gain_opts_t *o, calib_gain_data_t *d, json_t *facts, calib_gain_an_t **an,
+                        int *ngains)
+{
+    double *gl = malloc(sizeof(double) * (d->ng + o->ngains));
     int ng = 0;
-    if (c.rig)
-        for (int i = 0; i < ngains; i++) gl[ng++] = gains[i];
+    if (o->rig)
+        for (int i = 0; i < o->ngains; i++) gl[ng++] = o->gains_db[i];
     else
-        for (int i = 0; i < d.ng; i++) {
+        for (int i = 0; i < d->ng; i++) {
             bool seen = false;
-            for (int k = 0; k < ng; k++) seen |= gl[k] == d.g[i].gain_db;
-            if (!seen) gl[ng++] = d.g[i].gain_db;
+            for (int k = 0; k < ng; k++) seen |= gl[k] == d->g[i].gain_db;
+            if (!seen) gl[ng++] = d->g[i].gain_db;
         }
-    const char *truth = NULL;
-    double rad1 = isfinite(radiance) ? NAN : truth_radiance(facts, &truth);
-    an = calloc(ng, sizeof *an);
-    int nan_ = 0;
-    for (int i = 0; i < ng; i++) {
-        if (!analyse_gain(&d, gl[i], min_steps, quant, &an[i])) {
-            nan_ = i + 1;
-            free(gl);
-            ngains = nan_;
-            goto out_an;
-        }
-        nan_ = i + 1;
-        // radiance of the light frames
+    double truth_per_lamp;
+    calib_gain_truth_radiance(facts, NULL, &truth_per_lamp);
+    *an = calloc(ng, sizeof **an);
+    bool ok = true;
+    for (int i = 0; i < ng && ok; i++) {
+        calib_gain_an_t *a = &(*an)[i];
+        *ngains = i + 1;
+        if (!(ok = calib_gain_analyse(d, gl[i], o->min_steps, o->quant_dn, a))) break;
+        // radiance of the light frames: given; the truth's for the comparison
         int nl = -1;
-        for (int k = 0; k < d.nf; k++)
-            if (d.f[k].gain_db == gl[i] && !d.f[k].dark) nl = d.f[k].nlamps;
-        an[i].radiance = isfinite(radiance) ? radiance : (nl > 0 ? rad1 * nl : NAN);
-        an[i].kc_per_us = an[i].ptc.response_dn_per_us / an[i].radiance;
-        an[i].kc0_per_us = an[i].response0_dn_per_us / an[i].radiance;
-        fprintf(stderr, "refl calib gain: gain %g dB: K %.5g DN/e-, read noise %.4g e-, saturation %.1f DN, LE %.3f %%, "
-                "%d steps\n", gl[i], an[i].ptc.system_gain_dn_per_e, an[i].ptc.read_noise_e, an[i].ptc.saturation_dn,
-                an[i].ptc.linearity_error_pct, an[i].n);
+        for (int k = 0; k < d->nf; k++)
+            if (d->f[k].gain_db == gl[i] && !d->f[k].dark) nl = d->f[k].nlamps;
+        a->radiance = o->radiance;
+        a->radiance_truth = nl > 0 ? truth_per_lamp * nl : NAN;
+        a->kc_per_us = a->ptc.response_dn_per_us / a->radiance;
+        a->kc0_per_us = a->response0_dn_per_us / a->radiance;
+        fprintf(stderr, "refl calib gain: gain %g dB: K %.5g DN/e-, read noise %.4g e-, saturation %.1f DN, LE %.3f "
+                "%%, %d steps\n", gl[i], a->ptc.system_gain_dn_per_e, a->ptc.read_noise_e, a->ptc.saturation_dn,
+                a->ptc.linearity_error_pct, a->n);
     }
     free(gl);
-    ngains = nan_;
-    if (!make_maps(&d, &an[0], &maps)) goto out_an;
-    if (!write_map(out, "offset_dn.tiff", &maps, maps.offset, "dark level (offset) map, DN") ||
-        !write_map(out, "dsnu_dn.tiff", &maps, maps.dsnu, "dark signal non-uniformity: dark level minus its mean, DN") ||
-        !write_map(out, "prnu_gain.tiff", &maps, maps.prnu,
-                   "relative sensitivity g(x,y), mean 1: flat field minus dark, incl. vignetting") ||
-        !write_map(out, "prnu_highpass.tiff", &maps, maps.prnu_hp,
-                   "PRNU: flat field divided by its quadratic smooth surface (vignetting removed), mean ~1"))
-        goto out_an;
-    {
-        const gain_an_t *a = &an[0];
-        root = json_object();
-        json_object_set_new(root, "calibration", json_string("gain (EMVA 1288 style)"));
-        json_object_set_new(root, "gain_db", json_real(a->gain_db));
-        json_object_set_new(root, "system_gain_dn_per_e", jreal(a->ptc.system_gain_dn_per_e));
-        json_object_set_new(root, "read_noise_e", jreal(a->ptc.read_noise_e));
-        json_object_set_new(root, "saturation_dn", jreal(a->ptc.saturation_dn));
-        json_object_set_new(root, "linearity_error_pct", jreal(a->ptc.linearity_error_pct));
-        json_object_set_new(root, "dsnu_dn", jreal(maps.dsnu_dn));
-        json_object_set_new(root, "dsnu_e", jreal(maps.dsnu_dn / a->ptc.system_gain_dn_per_e));
-        json_object_set_new(root, "prnu_pct", jreal(maps.prnu_pct));
-        json_object_set_new(root, "prnu_total_pct", jreal(maps.prnu_total_pct));
-        json_object_set_new(root, "dark_current_e_per_s", jreal(a->dark_slope_dn_per_us * 1e6 / a->ptc.system_gain_dn_per_e));
-        json_object_set_new(root, "dark_current_dn_per_s", jreal(a->dark_slope_dn_per_us * 1e6));
-        json_object_set_new(root, "dark_level_dn", jreal(a->dark_intercept_dn));
-        json_object_set_new(root, "saturation_capacity_e", jreal(a->ptc.saturation_capacity_e));
-        json_object_set_new(root, "snr_max", jreal(a->ptc.snr_max));
-        json_object_set_new(root, "snr_max_db", jreal(20 * log10(a->ptc.snr_max)));
-        json_object_set_new(root, "dynamic_range", jreal(a->ptc.dynamic_range));
-        json_object_set_new(root, "dynamic_range_db", jreal(20 * log10(a->ptc.dynamic_range)));
-        json_object_set_new(root, "kc_per_us", jreal(a->kc_per_us));
-        json_object_set_new(root, "kc_small_signal_per_us", jreal(a->kc0_per_us));
-        json_object_set_new(root, "response_dn_per_us", jreal(a->ptc.response_dn_per_us));
-        json_t *f = json_object();
-        json_object_set_new(f, "exposure_us", json_real(maps.flat_exposure_us));
-        json_object_set_new(f, "level_dn", json_real(maps.flat_level_dn));
-        json_object_set_new(f, "level_of_saturation", jreal(maps.flat_level_dn / a->ptc.saturation_dn));
-        json_object_set_new(f, "light_frames", json_integer(maps.flat_frames));
-        json_object_set_new(f, "dark_frames", json_integer(maps.dark_frames));
-        json_object_set_new(f, "dark_exposure_us", json_real(maps.dark_exposure_us));
-        json_object_set_new(f, "width", json_integer(maps.w));
-        json_object_set_new(f, "height", json_integer(maps.h));
-        json_object_set_new(root, "flat_field", f);
-        json_t *maps_j = json_object();
-        json_object_set_new(maps_j, "offset_dn", json_string("offset_dn.tiff"));
-        json_object_set_new(maps_j, "dsnu_dn", json_string("dsnu_dn.tiff"));
-        json_object_set_new(maps_j, "prnu_gain", json_string("prnu_gain.tiff"));
-        json_object_set_new(maps_j, "prnu_highpass", json_string("prnu_highpass.tiff"));
-        json_object_set_new(root, "maps", maps_j);
-        json_t *pg = json_array();
-        for (int i = 0; i < ngains; i++) json_array_append_new(pg, gain_json(&an[i]));
-        json_object_set_new(root, "gains", pg);
-        json_t *cv = json_object();
-        json_object_set_new(cv, "grey_values", json_string("DN of the frames' pixel format (unscaled)"));
-        json_object_set_new(cv, "signal", json_string("mean grey value minus the mean dark grey value at the same "
-                                                      "exposure (EMVA 1288 mu_y - mu_y.dark)"));
-        json_object_set_new(cv, "temporal_variance", json_string("var(A - B) / 2 of a frame pair, minus its dark "
-                                                                 "counterpart"));
-        json_object_set_new(cv, "system_gain_dn_per_e", json_string(
-            "slope at zero signal of a quadratic least-squares fit of the variance against the signal over 0..70 % of "
-            "saturation (the small-signal K; system_gain_linear_fit_dn_per_e is EMVA 1288's straight line over the "
-            "same range)"));
-        json_object_set_new(cv, "read_noise_e", json_string("sqrt(sigma^2_y.dark - q^2/12) / K, sigma^2_y.dark the "
-                                                            "dark temporal variance extrapolated to exposure 0"));
-        json_object_set_new(cv, "saturation_dn", json_string("signal (above dark) where the temporal variance peaks"));
-        json_object_set_new(cv, "linearity_error_pct", json_string(
-            "EMVA 1288 release 3: least-squares line of signal against exposure between 5 % and 95 % of saturation; "
-            "(max - min of the relative deviations in %) / 2"));
-        json_object_set_new(cv, "prnu_pct", json_string(
-            "std of the flat field (light minus dark averages) divided by its quadratic smooth surface (vignetting "
-            "and illumination fall-off removed), temporal noise of the averages subtracted (EMVA 1288 variance "
-            "correction); prnu_total_pct: the same without removing the smooth part (vignetting included)"));
-        json_object_set_new(cv, "dsnu_dn", json_string("std of the averaged dark frame, temporal noise of the average "
-                                                       "subtracted"));
-        json_object_set_new(cv, "prnu_gain_map", json_string("g(x,y) of the imaging model: flat field minus dark, "
-                                                             "mean 1 over the frame, vignetting included"));
-        json_object_set_new(cv, "kc_per_us", json_string("response_dn_per_us (slope of the linearity line) / the "
-                                                         "source's radiance: kc per us at that gain for g of mean 1"));
-        json_object_set_new(cv, "kc_small_signal_per_us", json_string(
-            "slope at exposure 0 of a quadratic least-squares fit of the signal against exposure over 0..70 % of "
-            "saturation, per unit radiance (free of the non-linearity's compression)"));
-        json_object_set_new(cv, "dark_current", json_string("slope of the mean dark level against exposure"));
-        json_object_set_new(cv, "dynamic_range", json_string("saturation_capacity_e / read_noise_e"));
-        json_object_set_new(cv, "statistics_region", d.roi[2] > 0 ? json_pack("[iiii]", d.roi[0], d.roi[1], d.roi[2],
-                                                                               d.roi[3])
-                                                                  : json_string("whole frame"));
-        json_object_set_new(cv, "quantisation_step_dn", json_real(quant));
-        json_object_set_new(root, "conventions", cv);
-        if (truth) json_object_set_new(root, "virtual_truth", json_string(truth));
-        json_object_set_new(root, "provenance", json_incref(prov));
-        char *jp = g_build_filename(out, "gain.json", NULL);
-        bool ok = model_write_json(jp, root);
-        g_free(jp);
-        if (!ok) goto out_an;
+    return ok;
+}
+
+bool calib_gain_run(const calib_gain_opts_t *o, calib_gain_result_t *r)
+{
+    memset(r, 0, sizeof *r);
+    if (o->rig && o->steps < o->min_steps) {
+        model_error_set(NULL, 0, "too few sweep steps: --steps %d, EMVA 1288 asks for at least %d (--min-steps)",
+                        o->steps, o->min_steps);
+        return false;
     }
-    if (report) {
-        char *jp = g_build_filename(out, "gain.json", NULL);
-        fprintf(stderr, "refl calib gain: plotting\n");
-        int pr = model_run_script("calib_gain_report.py", jp, out, NULL);
-        g_free(jp);
-        if (pr) goto out_an;
-        char *hp = g_build_filename(out, "report.html", NULL);
-        FILE *f = model_html_begin(hp, "refl calib gain: camera sensitivity (EMVA 1288 style)", prov);
-        if (!f) {
-            g_free(hp);
-            goto out_an;
-        }
-        const gain_an_t *a = &an[0];
-        model_html_heading(f, "Summary");
-        char *rows[24];
-        int nr = 0;
-        rows[nr++] = g_strdup_printf("system gain K|%.5g DN/e-|small-signal; straight-line fit %.5g",
-                                     a->ptc.system_gain_dn_per_e, a->ptc.system_gain_linear_dn_per_e);
-        rows[nr++] = g_strdup_printf("read noise|%.4g e- (%.4g DN)|", a->ptc.read_noise_e, a->ptc.read_noise_dn);
-        rows[nr++] = g_strdup_printf("saturation|%.1f DN above dark (%.0f e-)|at %.6g us", a->ptc.saturation_dn,
-                                     a->ptc.saturation_capacity_e, a->t[a->ptc.i_sat]);
-        rows[nr++] = g_strdup_printf("linearity error|%.3f %%|5..95 %% of saturation", a->ptc.linearity_error_pct);
-        rows[nr++] = g_strdup_printf("SNR max|%.1f (%.1f dB)|", a->ptc.snr_max, 20 * log10(a->ptc.snr_max));
-        rows[nr++] = g_strdup_printf("dynamic range|%.0f (%.1f dB)|", a->ptc.dynamic_range,
-                                     20 * log10(a->ptc.dynamic_range));
-        rows[nr++] = g_strdup_printf("dark current|%.3g e-/s (%.3g DN/s)|dark frames from %.6g us to %.6g us", a->dark_slope_dn_per_us * 1e6 /
-                                     a->ptc.system_gain_dn_per_e, a->dark_slope_dn_per_us * 1e6, a->dark_t_min_us,
-                                     a->dark_t_max_us);
-        rows[nr++] = g_strdup_printf("DSNU|%.3f DN (%.2f e-)|", maps.dsnu_dn, maps.dsnu_dn / a->ptc.system_gain_dn_per_e);
-        rows[nr++] = g_strdup_printf("PRNU (high-pass)|%.3f %%|smooth part (vignetting) removed", maps.prnu_pct);
-        rows[nr++] = g_strdup_printf("flat-field non-uniformity (total)|%.3f %%|vignetting included",
-                                     maps.prnu_total_pct);
-        for (int i = 0; i < ngains; i++)
-            rows[nr++] = g_strdup_printf("gain %g dB|K %.5g DN/e-, read noise %.4g e-, sat %.0f DN, LE %.3f %%|"
-                                         "response %.5g DN/us, kc %.4g per us (small-signal %.4g)", an[i].gain_db,
-                                         an[i].ptc.system_gain_dn_per_e, an[i].ptc.read_noise_e, an[i].ptc.saturation_dn,
-                                         an[i].ptc.linearity_error_pct, an[i].ptc.response_dn_per_us, an[i].kc_per_us,
-                                         an[i].kc0_per_us);
-        model_html_table(f, "figure|value|notes", (const char *const *)rows, nr);
-        for (int i = 0; i < nr; i++) g_free(rows[i]);
-        model_html_para(f, "Flat field: %d light frames at %.6g us (%.0f DN above dark, %.0f %% of saturation) and %d "
-                        "dark frames at %.6g us. Definitions: see \"conventions\" in gain.json.", maps.flat_frames,
-                        maps.flat_exposure_us, maps.flat_level_dn, 100 * maps.flat_level_dn / a->ptc.saturation_dn,
-                        maps.dark_frames, maps.dark_exposure_us);
-        model_html_heading(f, "Photon transfer");
-        model_html_figure(f, "ptc.png", "temporal variance against signal (dark subtracted), with the K fit");
-        model_html_heading(f, "Linearity");
-        model_html_figure(f, "linearity.png", "signal against exposure with the least-squares line, and the "
-                          "relative deviation from it (5..95 % of saturation)");
-        model_html_heading(f, "SNR");
-        model_html_figure(f, "snr.png", "signal-to-noise ratio against signal, with the ideal shot-noise limit");
-        model_html_heading(f, "Response (kc) per gain");
-        model_html_figure(f, "kc.png", "signal per unit radiance against exposure at each gain");
-        model_html_heading(f, "PRNU");
-        model_html_figure(f, "prnu_map.png", "relative sensitivity: total (incl. vignetting) and high-pass");
-        model_html_figure(f, "prnu_hist.png", "histograms of the high-pass PRNU map and of the DSNU map");
-        model_html_heading(f, "Dark signal");
-        model_html_figure(f, "dark.png", "mean dark level against exposure (dark current) and dark temporal variance");
-        bool ok = model_html_end(f, hp);
-        g_free(hp);
-        if (!ok) goto out_an;
-    }
-    fprintf(stderr, "refl calib gain: wrote %s/gain.json (%.1f s)\n", out, model_now_s() - t_start);
-    printf("system_gain_dn_per_e %.6g\nread_noise_e %.5g\nsaturation_dn %.2f\nlinearity_error_pct %.4f\n"
-           "dsnu_dn %.4f\nprnu_pct %.4f\n", an[0].ptc.system_gain_dn_per_e, an[0].ptc.read_noise_e,
-           an[0].ptc.saturation_dn, an[0].ptc.linearity_error_pct, maps.dsnu_dn, maps.prnu_pct);
-    rc = 0;
-out_an:
-out:
-    if (rc) fprintf(stderr, "refl calib gain: failed: %s\n", model_last_error());
-out2:
-    if (an)
-        for (int i = 0; i < ngains; i++) gain_an_free(&an[i]);
+    calib_gain_data_t d = { 0 };
+    memcpy(d.roi, o->roi, sizeof d.roi);
+    calib_gain_an_t *an = NULL;
+    int ngains = 0;
+    calib_gain_maps_t maps = { 0 };
+    json_t *facts = NULL, *prov = NULL, *root = NULL;
+    bool ok = false;
+    const char *truth = NULL;
+    double t_start = model_now_s(), truth_per_lamp;
+    if (!model_mkdir_p(o->out)) goto done;
+    prov = model_provenance(o->argc, o->argv);
+    if (!gather_frames(o, &d, prov, &facts)) goto done;
+    calib_gain_make_groups(&d);
+    fprintf(stderr, "refl calib gain: analysing %d frames (%d exposure groups)\n", d.nf, d.ng);
+    if (!calib_gain_frame_stats(&d) || !analyse_all(o, &d, facts, &an, &ngains)) goto done;
+    if (!calib_gain_make_maps(&d, &an[0], &maps) || !calib_gain_write_maps(o->out, &maps)) goto done;
+    calib_gain_truth_radiance(facts, &truth, &truth_per_lamp);
+    root = calib_gain_json(o, &d, an, ngains, &maps, truth, prov);
+    char *jp = g_build_filename(o->out, "gain.json", NULL);
+    ok = model_write_json(jp, root);
+    g_free(jp);
+    if (ok && o->report) ok = calib_gain_report(o->out, an, ngains, &maps, prov);
+    if (!ok) goto done;
+    fprintf(stderr, "refl calib gain: wrote %s/gain.json (%.1f s)\n", o->out, model_now_s() - t_start);
+    *r = (calib_gain_result_t){ an[0].ptc.system_gain_dn_per_e, an[0].ptc.read_noise_e, an[0].ptc.saturation_dn,
+                                an[0].ptc.linearity_error_pct, maps.dsnu_dn, maps.prnu_pct };
+done:
+    for (int i = 0; an && i < ngains; i++) calib_gain_an_free(&an[i]);
     free(an);
-    maps_free(&maps);
-    gdata_free(&d);
+    calib_gain_maps_free(&maps);
+    calib_gain_data_free(&d);
     json_decref(facts);
     json_decref(prov);
     json_decref(root);
-    free(gains);
-    free(darks);
-    free(sessions);
-    g_free(sweep_dir);
-    return rc;
+    return ok;
 }

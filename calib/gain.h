@@ -1,6 +1,18 @@
-// calib/gain.h — the numerics of `refl calib gain` (EMVA 1288 style), public
-// within calib/ and to the tests. The command itself is calib_cmd_gain
-// (calib/calib.h).
+// calib/gain.h — `refl calib gain` (EMVA 1288 style) as a library, public
+// within calib/ and to the tests: the numerics, the stages of a run and
+// calib_gain_run. The command (argument parsing, calib/cmd_gain.c) is
+// calib_cmd_gain (calib/calib.h).
+//
+// A run, in order: frames (calib_gain_capture on a rig, calib_gain_add_session,
+// calib_gain_read_manifest) → calib_gain_make_groups (one group per exposure,
+// gain, dark/light and role) → calib_gain_frame_stats (each group's mean and
+// temporal variance) → per gain calib_gain_analyse (dark model, photon
+// transfer, linearity, response) → calib_gain_make_maps (offset, DSNU, PRNU
+// of the flat field at the first gain) → calib_gain_write_maps,
+// calib_gain_json (gain.json), calib_gain_report (plots, report.html).
+// Errors: false / NULL with the message kept by model_error_set
+// (model_last_error), not printed: the caller prints it once. Progress lines
+// go to stderr ("refl calib gain: ...").
 //
 // Units: grey values in DN of the frames' pixel format, exposures in us,
 // variances in DN^2, electrons e-. "mu" is always the mean grey value minus
@@ -9,6 +21,7 @@
 // counterpart (sigma^2_y - sigma^2_y.dark).
 #pragma once
 
+#include <jansson.h>
 #include <stdbool.h>
 
 #ifdef __cplusplus
@@ -63,6 +76,159 @@ double calib_gain_correlation(const float *a, const float *b, long n);
 // column and row patterns): out = in / surface (mean ~1). in == out allowed.
 // false when the fit is singular.
 bool calib_gain_highpass(const float *in, int w, int h, float *out);
+
+
+// ---------------------------------------------------------------------------
+// A run
+
+// Options of calib_gain_run: exactly one source of frames (rig, frames, sessions).
+typedef struct {
+    const char  *rig;                // capture on this rig file, or NULL
+    const char  *frames;             // a manifest "file,exposure_us,kind" (kind dark|light), or NULL
+    const char *const *sessions;     // capture sessions made elsewhere (nsessions), or NULL
+    int          nsessions;
+    const char  *out;                // the output directory (created)
+    const double *gains_db;          // rig: the gains to sweep, the first the reference; frames: its one label
+    int          ngains;
+    const double *dark_exposures_us; // rig: the long dark exposures (dark current)
+    int          ndark_exposures;
+    const char  *sample, *lamps, *pixel_format;   // rig: the plan's sample, lamp set, pixel format
+    int          steps;              // rig: exposure steps of each sweep
+    int          flat_frames;        // rig: light and dark frames of the flat field
+    int          progress;           // calib_capture's progress mode
+    double       probe_us;           // rig: first probe exposure
+    double       max_us;             // rig: longest sweep exposure; NAN: 1.2 x the probe's full-scale estimate
+    int          min_steps;          // fewest sweep steps accepted
+    double       radiance;           // the source's radiance with the lamps on; NAN unknown (no kc)
+    int          roi[4];             // x y w h of the statistics, px (w 0: the whole frame)
+    int          max_dn;             // full scale of manifest frames, DN
+    double       quant_dn;           // quantisation step, DN
+    bool         report;             // the plots and report.html
+    int          argc;               // the command line, for the provenance (may be 0)
+    char       **argv;
+} calib_gain_opts_t;
+
+// Gains {0}, dark exposures 1e5, 5e5, 1e6, 2e6 us, sample flat_field, lamps
+// all, Mono12, 50 steps, 16 flat frames, probe 1000 us, min_steps 50, radiance
+// NAN, max_dn 65535, quant_dn 1, report.
+calib_gain_opts_t calib_gain_defaults(void);
+
+// The reference gain's figures (the first of the run).
+typedef struct {
+    double system_gain_dn_per_e, read_noise_e, saturation_dn, linearity_error_pct, dsnu_dn, prnu_pct;
+} calib_gain_result_t;
+
+// The whole calibration: DIR/gain.json, the maps, the report. false + message.
+bool calib_gain_run(const calib_gain_opts_t *o, calib_gain_result_t *r);
+
+// ---------------------------------------------------------------------------
+// Stages
+
+// The role of a session's frames.
+enum { CALIB_GAIN_SET_ANY, CALIB_GAIN_SET_SWEEP, CALIB_GAIN_SET_DARK, CALIB_GAIN_SET_FLAT };
+
+// One frame of the input.
+typedef struct {
+    char  *path;          // full path
+    char   sha256[65];    // expected ("" = not checked: manifest)
+    char  *where;         // manifest path, or session directory
+    int    line;          // manifest line (0: a session frame)
+    int    step;          // session step
+    double exposure_us, gain_db;
+    bool   dark;
+    int    set;           // CALIB_GAIN_SET_*
+    int    max_dn;        // full scale of the frame's pixel format
+    int    nlamps;        // lamps on (session frames: from the lamp set; -1 unknown)
+} calib_gain_frame_t;
+
+// The frames of one exposure, gain, kind and role.
+typedef struct {
+    double exposure_us, gain_db;
+    bool   dark;
+    int    set;
+    int   *idx;           // frames (indices into calib_gain_data_t.f)
+    int    n;
+    // calib_gain_frame_stats
+    double mean_dn;       // spatial mean (ROI) of the frames' average
+    double var_dn2;       // temporal variance var(A - B) / 2 averaged over pairs (NAN: a single frame)
+    double sat_frac;      // fraction of ROI pixels at full scale (first frame)
+    int    width, height;
+    char  *error;
+} calib_gain_group_t;
+
+typedef struct {
+    calib_gain_frame_t *f;
+    int                 nf;
+    calib_gain_group_t *g;
+    int                 ng;
+    int                 roi[4];     // x y w h (w 0: whole frame)
+} calib_gain_data_t;
+
+void calib_gain_data_free(calib_gain_data_t *d);
+// Frames of a manifest (gain 0; max_dn their full scale). false + message (file:line).
+bool calib_gain_read_manifest(const char *path, int max_dn, calib_gain_data_t *d);
+// Frames of a session; set: their role (CALIB_GAIN_SET_ANY: dark = no lamp
+// on). *facts_out (may be NULL) gets the first session's facts (a reference).
+bool calib_gain_add_session(calib_gain_data_t *d, const char *dir, int set, json_t **facts_out);
+// Capture on o->rig: per gain a probe and a sweep, then at the first gain the
+// flat field and long darks, into o->out; their frames into d, the sessions
+// into prov. false + message.
+bool calib_gain_capture(const calib_gain_opts_t *o, calib_gain_data_t *d, json_t *prov, json_t **facts);
+// Group the frames (exposure, gain, dark, role).
+void calib_gain_make_groups(calib_gain_data_t *d);
+// Every group's mean and temporal variance (reads every frame, in threads).
+bool calib_gain_frame_stats(calib_gain_data_t *d);
+
+// The analysis of one gain (arrays of n sweep steps, sorted by exposure).
+typedef struct {
+    double gain_db;
+    int    n;
+    double *t, *mu_y, *var_y, *mu_d, *var_d, *mu, *var, *dev_pct, *snr;   // us, DN, DN^2, %, 1
+    calib_gain_ptc_t ptc;
+    double var_dark_dn2;        // sigma^2_y.dark (intercept at exposure 0)
+    double dark_slope_dn_per_us, dark_intercept_dn;
+    double dark_t_min_us, dark_t_max_us;
+    int    ndark;               // dark exposures used for the dark current
+    double radiance;            // total radiance of the light frames (NAN unknown)
+    double radiance_truth;      // the virtual rig's truth of it, for comparison (NAN unknown)
+    double kc_per_us;           // response / radiance
+    double response0_dn_per_us; // small-signal response: slope at 0 of a quadratic in exposure (0..70 % of sat)
+    double kc0_per_us;          // response0 / radiance
+} calib_gain_an_t;
+
+void calib_gain_an_free(calib_gain_an_t *a);
+// Dark model, photon transfer, linearity and small-signal response of gain_db.
+bool calib_gain_analyse(calib_gain_data_t *d, double gain_db, int min_steps, double quant_dn, calib_gain_an_t *a);
+
+// The maps of the reference gain (w x h floats each).
+typedef struct {
+    int     w, h;
+    float  *offset, *dsnu, *prnu, *prnu_hp;   // DN, DN, 1 (mean 1), 1 (mean ~1)
+    double  flat_exposure_us, flat_level_dn, flat_sat_frac;
+    int     flat_frames, dark_frames;
+    double  dark_exposure_us;
+    double  dsnu_dn, dsnu_total_raw_dn;
+    double  prnu_pct, prnu_total_pct;
+    double  flat_var_dn2, dark_var_dn2;
+    bool    dark_same_exposure;
+} calib_gain_maps_t;
+
+void calib_gain_maps_free(calib_gain_maps_t *m);
+// The flat field (and its dark) of a's gain → offset, DSNU and PRNU maps.
+// false + message when the flat is missing, saturated or too dark.
+bool calib_gain_make_maps(calib_gain_data_t *d, const calib_gain_an_t *a, calib_gain_maps_t *m);
+// DIR/offset_dn.tiff, dsnu_dn.tiff, prnu_gain.tiff, prnu_highpass.tiff.
+bool calib_gain_write_maps(const char *dir, const calib_gain_maps_t *m);
+// The radiance per lamp of the sample of a virtual rig's session facts
+// (virtual_rig.truth, .sample), for the comparison with the truth only: false
+// when there is none. *truth_path (may be NULL) points into facts.
+bool calib_gain_truth_radiance(json_t *facts, const char **truth_path, double *radiance_per_lamp);
+// gain.json's document (new reference): an[0] the reference gain, then every gain.
+json_t *calib_gain_json(const calib_gain_opts_t *o, const calib_gain_data_t *d, const calib_gain_an_t *an, int ngains,
+                        const calib_gain_maps_t *maps, const char *truth, json_t *prov);
+// The plots (scripts/calib_gain_report.py) and DIR/report.html.
+bool calib_gain_report(const char *dir, const calib_gain_an_t *an, int ngains, const calib_gain_maps_t *maps,
+                       json_t *prov);
 
 #ifdef __cplusplus
 }

@@ -1,6 +1,7 @@
-// calib/geometry.c — `refl calib geometry`: the camera model (mrgingham
-// corners, mrcal solve), the turntable axis from the board poses, and the
-// camera's extrinsics in the rig frame.
+// calib/geometry.c — the library of `refl calib geometry` (calib/geometry.h;
+// the command is calib/cmd_geometry.c): the camera model (mrgingham corners,
+// mrcal solve), the turntable axis from the board poses, and the camera's
+// extrinsics in the rig frame.
 //
 // Flow: capture (one session per board tilt, all lamps on) or sessions /
 // images / a corners file captured elsewhere → 8-bit copies of the frames in
@@ -11,7 +12,7 @@
 // the rig frame here → DIR/camera.cameramodel, DIR/geometry.json,
 // DIR/report.html.
 //
-// The rig frame recovered (see the usage text): z along the fitted turntable
+// The rig frame recovered (see the help text): z along the fitted turntable
 // axis (sign: counter-clockwise positive turntable angles, seen from +z);
 // origin on the axis, board_height_mm below the board's corner plane at tilt 0
 // (the table top); x the one of the board's four grid directions at angle 0,
@@ -42,84 +43,11 @@
 #include <unistd.h>
 
 #include "calib/calib.h"
+#include "calib/geometry.h"
 #include "model/model.h"
 #include "model/report.h"
 
 #define DEG (M_PI / 180.0)
-
-// Default tilts and angles: tuned for the example rig (camera ~900 mm away,
-// 35 deg above the table, board calib_board 130 mm off the axis): chosen
-// greedily for imager coverage among the poses where the whole board is in
-// view at < 45 deg obliquity (mrgingham loses boards beyond ~45 deg), plus
-// two flat views (tilt 0) for the rig frame's origin and x.
-#define DEFAULT_TILTS                                                                                           \
-    "0:40,240 20@0:0,10,40,340 20@90:290,300,320,350 20@180:210,240,260,270 35@0:10,20,40 "                     \
-    "35@180:210,230,240 50@0:20,30,40 50@180:210,220,230,240"
-#define DEFAULT_ANGLES "0 40 80 120 160 200 240 280 320"
-
-typedef struct {
-    char   *name;            // image name in DIR/images (and in the corners file)
-    char   *source;          // the original frame or image path
-    char   *session;         // session directory, NULL for images/corners
-    int     group;           // tilt group (session index), -1 none
-    double  angle_deg;       // turntable angle (measured), NAN unknown
-    double  tilt_deg, tilt_azimuth_deg;
-    bool    found;           // mrgingham found the N x N board
-    char    why[320];        // why not found / not used
-    double *q;               // N*N*2 corners (found)
-    bool    solved;          // mrcal has a pose for it
-    double  rt_cam_board[6]; // mrcal's pose (corner order as mrgingham's), then quarter-turn corrected
-    int     quarter_turns;
-    double  rms_px;
-    int     outliers;
-} view_t;
-
-typedef struct {
-    const char *rig, *out, *lensmodel, *corners, *images, *tilts, *angles, *sample;
-    GPtrArray  *sessions;
-    int         gridn;
-    double      square_mm, board_height_mm, exposure_us, focal_px, distance_mm;
-    int         imager_w, imager_h, min_views, progress;
-} opts_t;
-
-static void usage(FILE *f)
-{
-    fprintf(f,
-            "usage: refl calib geometry --rig RIG.ini -o DIR [options]\n"
-            "       refl calib geometry --session DIR1 [--session DIR2 ...] -o DIR [options]\n"
-            "       refl calib geometry --images 'GLOB' -o DIR [options]\n"
-            "       refl calib geometry --corners CORNERS.vnl --imagersize W H -o DIR [options]\n"
-            "\n"
-            "Camera model by mrgingham (corners) and mrcal (mrcal-calibrate-cameras), the turntable axis\n"
-            "from the board poses across angles, and the extrinsics in the rig frame. Writes\n"
-            "DIR/camera.cameramodel, DIR/geometry.json, DIR/report.html (and DIR/capture/, DIR/images/,\n"
-            "DIR/corners.vnl, DIR/mrcal/).\n"
-            "\n"
-            "  --rig RIG.ini        capture: one session per tilt (DIR/capture/tiltT_azA), all lamps on\n"
-            "  --tilts SPEC         tilts for --rig: 'T[@AZ][:A,A,...] ...' (tilt deg, hinge azimuth deg,\n"
-            "                       turntable angles deg; default: the example rig's\n"
-            "                       '" DEFAULT_TILTS "')\n"
-            "  --angles 'A A ...'   angles for tilts given without their own (default '" DEFAULT_ANGLES "')\n"
-            "  --sample NAME        the board sample (default calib_board); --exposure-us US (default 6000)\n"
-            "  --session DIR        use a capture session (angles from its journal, tilt from its plan)\n"
-            "  --images 'GLOB'      use images captured elsewhere (no angles: no axis, no rig frame)\n"
-            "  --corners FILE.vnl   use mrgingham's corners (no images needed; needs --imagersize)\n"
-            "  --lensmodel NAME     LENSMODEL_OPENCV8 (default), LENSMODEL_OPENCV4, ...,\n"
-            "                       LENSMODEL_SPLINED_STEREOGRAPHIC_order=3_Nx=16_Ny=12_fov_x_deg=50\n"
-            "  --gridn N            inner corners per side (mrgingham --gridn; default 10)\n"
-            "  --square-mm S        corner spacing (default 30)\n"
-            "  --board-height-mm H  height of the corner plane above the table top at tilt 0 (default 5)\n"
-            "  --focal-px F         seed focal length for mrcal (default 1.4 x imager width)\n"
-            "  --imagersize W H     imager size (needed with --corners)\n"
-            "  --distance-mm D      distance of the projection-uncertainty figure (default 900)\n"
-            "  --min-views N        views with a board the solve needs (default by lens model)\n"
-            "\n"
-            "Rig frame: z along the fitted turntable axis (counter-clockwise angles positive seen from\n"
-            "+z); origin on the axis at the table top (--board-height-mm below the board's corner plane\n"
-            "at tilt 0); x: the board grid direction at angle 0, tilt 0 closest to the image's +x\n"
-            "(lay the board square to the turntable's home orientation). Units mm, deg, px.\n"
-            "Exit: 0 done, 1 error, 2 usage.\n");
-}
 
 // ---------------------------------------------------------------------------
 // Small vector helpers (3-vectors, row-major 3x3)
@@ -175,7 +103,7 @@ static bool png8_write(const char *path, int w, int h, const unsigned char *pix)
 {
     FILE *f = fopen(path, "wb");
     if (!f) {
-        model_error(path, 0, "cannot create: %s", strerror(errno));
+        model_error_set(path, 0, "cannot create: %s", strerror(errno));
         return false;
     }
     png_structp p = png_create_write_struct(PNG_LIBPNG_VER_STRING, NULL, NULL, NULL);
@@ -194,7 +122,7 @@ static bool png8_write(const char *path, int w, int h, const unsigned char *pix)
 done:
     png_destroy_write_struct(&p, &info);
     if (fclose(f) != 0) ok = false;
-    if (!ok) model_error(path, 0, "cannot write the 8-bit PNG");
+    if (!ok) model_error_set(path, 0, "cannot write the 8-bit PNG");
     return ok;
 }
 
@@ -203,7 +131,7 @@ static bool write_8bit(const char *path, const float *img, int w, int h, double 
 {
     unsigned char *b = malloc((size_t)w * h);
     if (!b) {
-        model_error(path, 0, "out of memory");
+        model_error_set(path, 0, "out of memory");
         return false;
     }
     for (size_t i = 0; i < (size_t)w * h; i++) {
@@ -227,8 +155,8 @@ static int run_tool(const char *cwd, char **argv, const char *log_path, char **o
     gint status = 0;
     fflush(stderr);
     if (!g_spawn_sync(cwd, argv, NULL, G_SPAWN_SEARCH_PATH, NULL, NULL, &so, &se, &status, &err)) {
-        model_error(argv[0], 0, "cannot run: %s (is it installed? Debian: apt install mrgingham mrcal)",
-                    err ? err->message : "?");
+        model_error_set(argv[0], 0, "cannot run: %s (is it installed? Debian: apt install mrgingham mrcal)",
+                        err ? err->message : "?");
         if (err) g_error_free(err);
         return -1;
     }
@@ -256,16 +184,11 @@ static int run_tool(const char *cwd, char **argv, const char *log_path, char **o
 // ---------------------------------------------------------------------------
 // Views
 
-typedef struct {
-    GPtrArray *v;        // view_t*
-    int        ngroups;
-    double    *group_tilt, *group_az;
-} views_t;
-
-static view_t *view_add(views_t *vs, const char *name, const char *source, const char *session, int group,
+static calib_geometry_view_t *view_add(calib_geometry_views_t *vs, const char *name, const char *source,
+                                       const char *session, int group,
                         double angle, double tilt, double az)
 {
-    view_t *v = calloc(1, sizeof *v);
+    calib_geometry_view_t *v = calloc(1, sizeof *v);
     v->name = g_strdup(name);
     v->source = g_strdup(source);
     v->session = g_strdup(session);
@@ -280,7 +203,7 @@ static view_t *view_add(views_t *vs, const char *name, const char *source, const
 
 static void view_free(gpointer p)
 {
-    view_t *v = p;
+    calib_geometry_view_t *v = p;
     g_free(v->name);
     g_free(v->source);
     g_free(v->session);
@@ -288,16 +211,30 @@ static void view_free(gpointer p)
     free(v);
 }
 
-static view_t *view_find(views_t *vs, const char *name)
+void calib_geometry_views_init(calib_geometry_views_t *vs)
+{
+    memset(vs, 0, sizeof *vs);
+    vs->v = g_ptr_array_new_with_free_func(view_free);
+}
+
+void calib_geometry_views_free(calib_geometry_views_t *vs)
+{
+    if (vs->v) g_ptr_array_free(vs->v, TRUE);
+    free(vs->group_tilt);
+    free(vs->group_az);
+    memset(vs, 0, sizeof *vs);
+}
+
+calib_geometry_view_t *calib_geometry_view_find(calib_geometry_views_t *vs, const char *name)
 {
     const char *b = strrchr(name, '/');
     b = b ? b + 1 : name;
     for (guint i = 0; i < vs->v->len; i++) {
-        view_t *v = g_ptr_array_index(vs->v, i);
+        calib_geometry_view_t *v = g_ptr_array_index(vs->v, i);
         if (!strcmp(v->name, name)) return v;
     }
     for (guint i = 0; i < vs->v->len; i++) {
-        view_t *v = g_ptr_array_index(vs->v, i);
+        calib_geometry_view_t *v = g_ptr_array_index(vs->v, i);
         const char *vb = strrchr(v->name, '/');
         vb = vb ? vb + 1 : v->name;
         if (!strcmp(vb, b)) return v;
@@ -306,7 +243,7 @@ static view_t *view_find(views_t *vs, const char *name)
 }
 
 // A session's frames → 8-bit images and views.
-static bool add_session(views_t *vs, const char *sdir, const char *imgdir, int *w, int *h)
+bool calib_geometry_add_session(calib_geometry_views_t *vs, const char *sdir, const char *imgdir, int *w, int *h)
 {
     rig_session_t *s = rig_session_open(sdir);
     if (!s) return false;
@@ -337,8 +274,9 @@ static bool add_session(views_t *vs, const char *sdir, const char *imgdir, int *
         char *src = g_strdup_printf("%s/%s", sdir, r->file);
         double full = !strcmp(r->pixel_format, "Mono8") ? 255 : !strcmp(r->pixel_format, "Mono16") ? 65535 : 4095;
         if (*w && (fw != *w || fh != *h)) {
-            model_error(src, 0, "%dx%d pixels, the other frames are %dx%d: one camera and one region per calibration",
-                        fw, fh, *w, *h);
+            model_error_set(src, 0, "%dx%d pixels, the other frames are %dx%d: one camera and one region per "
+                            "calibration",
+                            fw, fh, *w, *h);
             ok = false;
         } else {
             *w = fw;
@@ -358,12 +296,12 @@ static bool add_session(views_t *vs, const char *sdir, const char *imgdir, int *
     return ok;
 }
 
-static bool add_images(views_t *vs, const char *pattern, const char *imgdir, int *w, int *h)
+bool calib_geometry_add_images(calib_geometry_views_t *vs, const char *pattern, const char *imgdir, int *w, int *h)
 {
     glob_t gl;
     int e = glob(pattern, 0, NULL, &gl);
     if (e != 0 || gl.gl_pathc == 0) {
-        model_error(pattern, 0, "--images: the pattern matches no file");
+        model_error_set(pattern, 0, "--images: the pattern matches no file");
         if (e == 0) globfree(&gl);
         return false;
     }
@@ -377,8 +315,9 @@ static bool add_images(views_t *vs, const char *pattern, const char *imgdir, int
             break;
         }
         if (*w && (fw != *w || fh != *h)) {
-            model_error(src, 0, "%dx%d pixels, the other images are %dx%d: one camera and one region per calibration",
-                        fw, fh, *w, *h);
+            model_error_set(src, 0, "%dx%d pixels, the other images are %dx%d: one camera and one region per "
+                            "calibration",
+                            fw, fh, *w, *h);
             free(img);
             ok = false;
             break;
@@ -405,23 +344,24 @@ static bool add_images(views_t *vs, const char *pattern, const char *imgdir, int
 }
 
 // Parse mrgingham's output (name x y [level]; "name - -" when no board).
-static bool parse_corners(views_t *vs, const char *text, const char *path, int gridn, bool create)
+bool calib_geometry_parse_corners(calib_geometry_views_t *vs, const char *text, const char *path, int gridn,
+                                  bool create)
 {
     int N = gridn * gridn;
     char **lines = g_strsplit(text, "\n", -1);
     bool ok = true;
-    view_t *cur = NULL;
+    calib_geometry_view_t *cur = NULL;
     int ncur = 0;
     for (int li = 0; lines[li] && ok; li++) {
         char *l = g_strstrip(lines[li]);
         if (!*l || *l == '#') continue;
         char name[1024], xs[64], ys[64];
         if (sscanf(l, "%1023s %63s %63s", name, xs, ys) != 3) {
-            model_error(path, li + 1, "expected 'FILENAME X Y [LEVEL]' (mrgingham's output), got '%s'", l);
+            model_error_set(path, li + 1, "expected 'FILENAME X Y [LEVEL]' (mrgingham's output), got '%s'", l);
             ok = false;
             break;
         }
-        view_t *v = view_find(vs, name);
+        calib_geometry_view_t *v = calib_geometry_view_find(vs, name);
         if (!v && create) v = view_add(vs, name, name, NULL, -1, NAN, NAN, NAN);
         if (!v) continue;     // not one of ours
         if (v != cur) {
@@ -432,14 +372,14 @@ static bool parse_corners(views_t *vs, const char *text, const char *path, int g
         char *e1, *e2;
         double x = strtod(xs, &e1), y = strtod(ys, &e2);
         if (*e1 || *e2 || !isfinite(x) || !isfinite(y)) {
-            model_error(path, li + 1, "'%s %s' is not a pixel position", xs, ys);
+            model_error_set(path, li + 1, "'%s %s' is not a pixel position", xs, ys);
             ok = false;
             break;
         }
         if (!v->q) v->q = calloc((size_t)N * 2, sizeof(double));
         if (ncur >= N) {
-            model_error(path, li + 1, "%s: more than %d corners: is the board %dx%d (--gridn %d)?", name, N, gridn,
-                        gridn, gridn);
+            model_error_set(path, li + 1, "%s: more than %d corners: is the board %dx%d (--gridn %d)?", name, N, gridn,
+                            gridn, gridn);
             ok = false;
             break;
         }
@@ -453,7 +393,7 @@ static bool parse_corners(views_t *vs, const char *text, const char *path, int g
 }
 
 // Views a lens model needs (a rule of thumb, stated in the error message).
-static int default_min_views(const char *lensmodel)
+int calib_geometry_default_min_views(const char *lensmodel)
 {
     if (!strncmp(lensmodel, "LENSMODEL_SPLINED", 17)) return 20;
     if (!strcmp(lensmodel, "LENSMODEL_PINHOLE") || !strcmp(lensmodel, "LENSMODEL_STEREOGRAPHIC")) return 4;
@@ -465,7 +405,7 @@ static int default_min_views(const char *lensmodel)
 // ---------------------------------------------------------------------------
 // Poses, axis, rig frame
 
-static void pose_R(double R[9], const view_t *v) { R_from_r(R, v->rt_cam_board); }
+static void pose_R(double R[9], const calib_geometry_view_t *v) { R_from_r(R, v->rt_cam_board); }
 
 // Turn a pose's board frame a quarter turn k times about the grid centre.
 static void quarter_turn(double rt[6], int k, int gridn, double square_mm)
@@ -484,27 +424,19 @@ static void quarter_turn(double rt[6], int k, int gridn, double square_mm)
     for (int i = 0; i < 3; i++) rt[3 + i] += Rd[i];
 }
 
-typedef struct {
-    bool   ok;
-    double a[3], c[3];              // direction (unit) and a point, camera frame, mm
-    double dir_unc_deg, point_unc_mm, off_axis_rms_deg, point_rms_mm;
-    int    npairs, nviews;
-    json_t *fit;                    // per group: angle_deg[], rotation_about_axis_deg[]
-} axis_t;
-
 static int cmp_angle(const void *a, const void *b)
 {
-    const view_t *x = *(view_t *const *)a, *y = *(view_t *const *)b;
+    const calib_geometry_view_t *x = *(calib_geometry_view_t *const *)a, *y = *(calib_geometry_view_t *const *)b;
     return (x->angle_deg > y->angle_deg) - (x->angle_deg < y->angle_deg);
 }
 
 // The views of group g with a pose, sorted by angle; returns the count.
-static int group_views(const views_t *vs, int g, view_t ***out)
+static int group_views(const calib_geometry_views_t *vs, int g, calib_geometry_view_t ***out)
 {
-    view_t **l = malloc(vs->v->len * sizeof *l + 1);
+    calib_geometry_view_t **l = malloc(vs->v->len * sizeof *l + 1);
     int n = 0;
     for (guint i = 0; i < vs->v->len; i++) {
-        view_t *v = g_ptr_array_index(vs->v, i);
+        calib_geometry_view_t *v = g_ptr_array_index(vs->v, i);
         if (v->group == g && v->solved && isfinite(v->angle_deg)) l[n++] = v;
     }
     qsort(l, n, sizeof *l, cmp_angle);
@@ -515,18 +447,18 @@ static int group_views(const views_t *vs, int g, view_t ***out)
 // A pair of views of one group whose turntable angles differ by 5..175 deg:
 // the step d (rad), the relative rotation Rrel = Rj Ri^T and its rotation vector.
 typedef struct {
-    const view_t *vi, *vj;
+    const calib_geometry_view_t *vi, *vj;
     double        d, Rrel[9], r[3];
 } view_pair_t;
 
 // Every such pair of every group (caller frees *out); *nviews: the views of
 // groups with two or more.
-static int view_pairs(const views_t *vs, view_pair_t **out, int *nviews)
+static int view_pairs(const calib_geometry_views_t *vs, view_pair_t **out, int *nviews)
 {
     int np = 0, cap = 0;
     view_pair_t *p = NULL;
     for (int g = 0; g < vs->ngroups; g++) {
-        view_t **l;
+        calib_geometry_view_t **l;
         int n = group_views(vs, g, &l);
         for (int i = 0; i < n; i++)
             for (int j = i + 1; j < n; j++) {
@@ -559,12 +491,12 @@ static int view_pairs(const views_t *vs, view_pair_t **out, int *nviews)
     return np;
 }
 
-static bool fit_axis(views_t *vs, const opts_t *o, axis_t *ax)
+bool calib_geometry_fit_axis(calib_geometry_views_t *vs, int gridn, double square_mm, calib_geometry_axis_t *ax)
 {
     memset(ax, 0, sizeof *ax);
     // 1. quarter turns within each group
     for (int g = 0; g < vs->ngroups; g++) {
-        view_t **l;
+        calib_geometry_view_t **l;
         int n = group_views(vs, g, &l);
         double Rref[9];
         if (n > 0) pose_R(Rref, l[0]);
@@ -574,7 +506,7 @@ static bool fit_axis(views_t *vs, const opts_t *o, axis_t *ax)
             for (int k = 0; k < 4; k++) {
                 double rt[6];
                 memcpy(rt, l[m]->rt_cam_board, sizeof rt);
-                quarter_turn(rt, k, o->gridn, o->square_mm);
+                quarter_turn(rt, k, gridn, square_mm);
                 double R[9], Rrel[9], r[3];
                 R_from_r(R, rt);
                 mat_mul_bt(Rrel, R, Rref);
@@ -585,7 +517,7 @@ static bool fit_axis(views_t *vs, const opts_t *o, axis_t *ax)
                     bk = k;
                 }
             }
-            quarter_turn(l[m]->rt_cam_board, bk, o->gridn, o->square_mm);
+            quarter_turn(l[m]->rt_cam_board, bk, gridn, square_mm);
             l[m]->quarter_turns = bk;
             if (best > 2.0) {
                 fprintf(stderr, "refl calib geometry: %s: its pose turns %.2f deg more or less than the turntable "
@@ -613,7 +545,7 @@ static bool fit_axis(views_t *vs, const opts_t *o, axis_t *ax)
         for (int j = 0; j < 3; j++) A[i * 3 + j] = ax->a[i] * ax->a[j];
     for (int q = 0; q < ax->npairs; q++) {
         const double d = pairs[q].d, *Rrel = pairs[q].Rrel, *r = pairs[q].r;
-        const view_t *vi = pairs[q].vi, *vj = pairs[q].vj;
+        const calib_geometry_view_t *vi = pairs[q].vi, *vj = pairs[q].vj;
         double ap[3] = { r[0] / d, r[1] / d, r[2] / d }, an = norm3(ap);
         double cs = dot3(ap, ax->a) / an;
         double dv = acos(cs > 1 ? 1 : cs < -1 ? -1 : cs);
@@ -640,7 +572,7 @@ static bool fit_axis(views_t *vs, const opts_t *o, axis_t *ax)
     int noff = 0;
     ax->fit = json_array();
     for (int g = 0; g < vs->ngroups; g++) {
-        view_t **l;
+        calib_geometry_view_t **l;
         int n = group_views(vs, g, &l);
         json_t *ang = json_array(), *rot = json_array();
         double Rref[9];
@@ -694,7 +626,8 @@ static bool fit_axis(views_t *vs, const opts_t *o, axis_t *ax)
 }
 
 // rt_cam_rig from the axis and the tilt-0 group's first pose; false + why.
-static bool rig_frame(views_t *vs, const opts_t *o, const axis_t *ax, double rt_cam_rig[6], char *why, size_t whyn)
+bool calib_geometry_rig_frame(calib_geometry_views_t *vs, double board_height_mm, const calib_geometry_axis_t *ax,
+                              double rt_cam_rig[6], char *why, size_t whyn)
 {
     int g0 = -1;
     for (int g = 0; g < vs->ngroups && g0 < 0; g++)
@@ -704,20 +637,20 @@ static bool rig_frame(views_t *vs, const opts_t *o, const axis_t *ax, double rt_
                  "and x)");
         return false;
     }
-    view_t **l;
+    calib_geometry_view_t **l;
     int n = group_views(vs, g0, &l);
     if (n == 0) {
         free(l);
         snprintf(why, whyn, "no board found at tilt 0");
         return false;
     }
-    view_t *v = l[0];
+    calib_geometry_view_t *v = l[0];
     free(l);
     double R[9];
     pose_R(R, v);
     const double *t = &v->rt_cam_board[3];
     double d[3] = { t[0] - ax->c[0], t[1] - ax->c[1], t[2] - ax->c[2] };
-    double s = dot3(ax->a, d) - o->board_height_mm;
+    double s = dot3(ax->a, d) - board_height_mm;
     double O[3] = { ax->c[0] + s * ax->a[0], ax->c[1] + s * ax->a[1], ax->c[2] + s * ax->a[2] };
     // board grid directions at angle 0
     double rb[3] = { -v->angle_deg * DEG * ax->a[0], -v->angle_deg * DEG * ax->a[1], -v->angle_deg * DEG * ax->a[2] };
@@ -773,33 +706,34 @@ static void invert(double out[6], const double rt[6])
 
 // Why a view in a group with poses has no board: predict the board's pose from
 // the group's first pose turned about the axis, and look at it.
-static void explain_missing(views_t *vs, const opts_t *o, const axis_t *ax, model_camera_t *cam, int W, int H)
+void calib_geometry_explain_missing(calib_geometry_views_t *vs, int gridn, double square_mm,
+                                    const calib_geometry_axis_t *ax, model_camera_t *cam, int W, int H)
 {
     // the sign of normal . (to camera) on the found views
     double sgn = 0;
     for (guint i = 0; i < vs->v->len && sgn == 0; i++) {
-        view_t *v = g_ptr_array_index(vs->v, i);
+        calib_geometry_view_t *v = g_ptr_array_index(vs->v, i);
         if (!v->solved) continue;
         double R[9];
         pose_R(R, v);
         double n[3] = { R[2], R[5], R[8] };
-        double c[3] = { (o->gridn - 1) * o->square_mm / 2, (o->gridn - 1) * o->square_mm / 2, 0 }, p[3];
+        double c[3] = { (gridn - 1) * square_mm / 2, (gridn - 1) * square_mm / 2, 0 }, p[3];
         mat_vec(p, R, c);
         for (int k = 0; k < 3; k++) p[k] = -(p[k] + v->rt_cam_board[3 + k]);
         sgn = dot3(n, p) > 0 ? 1 : -1;
     }
     for (guint i = 0; i < vs->v->len; i++) {
-        view_t *v = g_ptr_array_index(vs->v, i);
+        calib_geometry_view_t *v = g_ptr_array_index(vs->v, i);
         if (v->found) continue;
-        snprintf(v->why, sizeof v->why, "mrgingham found no %dx%d board", o->gridn, o->gridn);
+        snprintf(v->why, sizeof v->why, "mrgingham found no %dx%d board", gridn, gridn);
         if (!ax || !ax->ok || v->group < 0 || !isfinite(v->angle_deg)) continue;
-        view_t **l;
+        calib_geometry_view_t **l;
         int n = group_views(vs, v->group, &l);
         if (n == 0) {
             free(l);
             continue;
         }
-        view_t *ref = l[0];
+        calib_geometry_view_t *ref = l[0];
         free(l);
         double d = wrap_deg(v->angle_deg - ref->angle_deg) * DEG;
         double r[3] = { d * ax->a[0], d * ax->a[1], d * ax->a[2] }, Rrot[9], Rref[9], R[9], t[3], tc[3];
@@ -810,12 +744,12 @@ static void explain_missing(views_t *vs, const opts_t *o, const axis_t *ax, mode
         mat_vec(t, Rrot, tc);
         for (int k = 0; k < 3; k++) t[k] += ax->c[k];
         // the squares' corners, outer edge included (mrgingham needs every square)
-        int ne = o->gridn + 2, M = ne * ne;
+        int ne = gridn + 2, M = ne * ne;
         model_vec3_t *p = malloc(M * sizeof *p);
         double *q = malloc(2 * M * sizeof *q);
         for (int jj = 0; jj < ne; jj++)
             for (int ii = 0; ii < ne; ii++) {
-                double b[3] = { (ii - 1) * o->square_mm, (jj - 1) * o->square_mm, 0 }, x[3];
+                double b[3] = { (ii - 1) * square_mm, (jj - 1) * square_mm, 0 }, x[3];
                 mat_vec(x, R, b);
                 p[jj * ne + ii] = (model_vec3_t){ x[0] + t[0], x[1] + t[1], x[2] + t[2] };
             }
@@ -825,8 +759,8 @@ static void explain_missing(views_t *vs, const opts_t *o, const axis_t *ax, mode
         if (!behind && model_camera_project(cam, p, M, q))
             for (int k = 0; k < M; k++)
                 if (!(q[2 * k] >= 0 && q[2 * k] <= W - 1 && q[2 * k + 1] >= 0 && q[2 * k + 1] <= H - 1)) outside++;
-        double nb[3] = { R[2], R[5], R[8] }, cc[3] = { (o->gridn - 1) * o->square_mm / 2,
-                                                       (o->gridn - 1) * o->square_mm / 2, 0 }, pc[3];
+        double nb[3] = { R[2], R[5], R[8] }, cc[3] = { (gridn - 1) * square_mm / 2,
+                                                       (gridn - 1) * square_mm / 2, 0 }, pc[3];
         mat_vec(pc, R, cc);
         for (int k = 0; k < 3; k++) pc[k] = -(pc[k] + t[k]);
         double cs = sgn * dot3(nb, pc) / norm3(pc);
@@ -858,13 +792,13 @@ static json_t *jarr(const double *x, int n)
     return a;
 }
 
-static bool write_cameramodel(const char *path, const char *lensmodel, json_t *intr, int W, int H,
+bool calib_geometry_write_cameramodel(const char *path, const char *lensmodel, json_t *intr, int W, int H,
                               const double rt[6], bool rig, double rms)
 {
     char *tmp = g_strdup_printf("%s.part", path);
     FILE *f = fopen(tmp, "w");
     if (!f) {
-        model_error(path, 0, "cannot create: %s", strerror(errno));
+        model_error_set(path, 0, "cannot create: %s", strerror(errno));
         g_free(tmp);
         return false;
     }
@@ -886,7 +820,7 @@ static bool write_cameramodel(const char *path, const char *lensmodel, json_t *i
     if (fclose(f) != 0) ok = false;
     if (ok && rename(tmp, path) != 0) ok = false;
     if (!ok) {
-        model_error(path, 0, "cannot write: %s", strerror(errno));
+        model_error_set(path, 0, "cannot write: %s", strerror(errno));
         unlink(tmp);
     }
     g_free(tmp);
@@ -907,15 +841,15 @@ static bool parse_num(const char *s, double lo, double hi, double *out)
 }
 
 // "T[@AZ][:A,A,...]" → plan text; NULL + message.
-static char *tilt_plan(const char *spec, const opts_t *o, char *name, size_t namen)
+char *calib_geometry_tilt_plan(const char *spec, const calib_geometry_opts_t *o, char *name, size_t namen)
 {
     char *s = g_strdup(spec), *angles = strchr(s, ':'), *at;
     if (angles) *angles++ = 0;
     double tilt = 0, az = 0;
     if ((at = strchr(s, '@'))) *at++ = 0;
     if (!parse_num(s, -80, 80, &tilt) || (at && !parse_num(at, -360, 360, &az))) {
-        model_error("--tilts", 0, "'%s': write TILT[@AZIMUTH][:ANGLE,ANGLE,...] in degrees, tilt -80..80 "
-                    "(e.g. 30@90:0,20,40)", spec);
+        model_error_set("--tilts", 0, "'%s': write TILT[@AZIMUTH][:ANGLE,ANGLE,...] in degrees, tilt -80..80 "
+                        "(e.g. 30@90:0,20,40)", spec);
         g_free(s);
         return NULL;
     }
@@ -927,7 +861,8 @@ static char *tilt_plan(const char *spec, const opts_t *o, char *name, size_t nam
         if (!*parts[i]) continue;
         double a;
         if (!parse_num(parts[i], -10000, 10000, &a)) {
-            model_error(angles ? "--tilts" : "--angles", 0, "'%s' in '%s' is not an angle in degrees", parts[i], src);
+            model_error_set(angles ? "--tilts" : "--angles", 0, "'%s' in '%s' is not an angle in degrees", parts[i],
+                            src);
             g_strfreev(parts);
             g_string_free(al, TRUE);
             g_free(s);
@@ -938,7 +873,7 @@ static char *tilt_plan(const char *spec, const opts_t *o, char *name, size_t nam
     }
     g_strfreev(parts);
     if (na == 0) {
-        model_error(angles ? "--tilts" : "--angles", 0, "'%s': no angles", spec);
+        model_error_set(angles ? "--tilts" : "--angles", 0, "'%s': no angles", spec);
         g_string_free(al, TRUE);
         g_free(s);
         return NULL;
@@ -957,578 +892,507 @@ static char *tilt_plan(const char *spec, const opts_t *o, char *name, size_t nam
 }
 
 // The corners: from --corners, or mrgingham on the 8-bit images (kept as
-// DIR/corners.vnl, *cornpath; the caller frees it). Marks the views without a
-// board and fails when fewer than the lens model needs were found.
-static bool find_corners(const opts_t *o, views_t *vs, const char *outdir, const char *imgdir, const char *mdir,
-                         json_t *prov, char **cornpath, int *nfound)
+// DIR/corners.vnl). Marks the views without a board and fails when fewer than
+// the lens model needs were found.
+static bool corners_from_file(const calib_geometry_opts_t *o, calib_geometry_state_t *s)
 {
-    *cornpath = g_strdup_printf("%s/corners.vnl", outdir);
-    if (o->corners) {
-        if (!model_provenance_input(prov, "corners", o->corners)) return false;
-        char *text = NULL;
-        GError *err = NULL;
-        if (!g_file_get_contents(o->corners, &text, NULL, &err)) {
-            model_error(o->corners, 0, "cannot read: %s", err->message);
-            g_error_free(err);
-            return false;
-        }
-        bool ok = parse_corners(vs, text, o->corners, o->gridn, true);
-        g_free(text);
-        if (!ok) return false;
-        char *abs = realpath(o->corners, NULL);
-        g_free(*cornpath);
-        *cornpath = g_strdup(abs);
-        free(abs);
-    } else {
-        if (vs->v->len == 0) {
-            model_error(o->out, 0, "no frames or images to calibrate from");
-            return false;
-        }
-        fprintf(stderr, "refl calib geometry: finding the %dx%d corners of %u images (mrgingham)\n", o->gridn, o->gridn,
-                vs->v->len);
-        GPtrArray *args = g_ptr_array_new();
-        char gn[16];
-        snprintf(gn, sizeof gn, "%d", o->gridn);
-        g_ptr_array_add(args, "mrgingham");
-        g_ptr_array_add(args, "--gridn");
-        g_ptr_array_add(args, gn);
-        g_ptr_array_add(args, "--jobs");
-        g_ptr_array_add(args, "2");
-        for (guint k = 0; k < vs->v->len; k++) g_ptr_array_add(args, ((view_t *)g_ptr_array_index(vs->v, k))->name);
-        g_ptr_array_add(args, NULL);
-        char *text = NULL, *log = g_strdup_printf("%s/mrgingham.log", mdir);
-        int e = run_tool(imgdir, (char **)args->pdata, log, &text);
-        g_ptr_array_free(args, TRUE);
-        g_free(log);
-        if (e != 0) {
-            model_error(imgdir, 0, "mrgingham failed (exit status %d) on the images here; see %s/mrgingham.log", e,
-                        mdir);
+    if (!model_provenance_input(s->prov, "corners", o->corners)) return false;
+    char *text = NULL;
+    GError *err = NULL;
+    if (!g_file_get_contents(o->corners, &text, NULL, &err)) {
+        model_error_set(o->corners, 0, "cannot read: %s", err->message);
+        g_error_free(err);
+        return false;
+    }
+    bool ok = calib_geometry_parse_corners(&s->views, text, o->corners, o->gridn, true);
+    g_free(text);
+    if (!ok) return false;
+    char *abs = realpath(o->corners, NULL);
+    g_free(s->cornpath);
+    s->cornpath = g_strdup(abs);
+    free(abs);
+    return true;
+}
+
+static bool corners_mrgingham(const calib_geometry_opts_t *o, calib_geometry_state_t *s)
+{
+    calib_geometry_views_t *vs = &s->views;
+    if (vs->v->len == 0) {
+        model_error_set(o->out, 0, "no frames or images to calibrate from");
+        return false;
+    }
+    fprintf(stderr, "refl calib geometry: finding the %dx%d corners of %u images (mrgingham)\n", o->gridn, o->gridn,
+            vs->v->len);
+    GPtrArray *args = g_ptr_array_new();
+    char gn[16];
+    snprintf(gn, sizeof gn, "%d", o->gridn);
+    g_ptr_array_add(args, "mrgingham");
+    g_ptr_array_add(args, "--gridn");
+    g_ptr_array_add(args, gn);
+    g_ptr_array_add(args, "--jobs");
+    g_ptr_array_add(args, "2");
+    for (guint k = 0; k < vs->v->len; k++)
+        g_ptr_array_add(args, ((calib_geometry_view_t *)g_ptr_array_index(vs->v, k))->name);
+    g_ptr_array_add(args, NULL);
+    char *text = NULL, *log = g_strdup_printf("%s/mrgingham.log", s->mdir);
+    int e = run_tool(s->imgdir, (char **)args->pdata, log, &text);
+    g_ptr_array_free(args, TRUE);
+    g_free(log);
+    if (e != 0) {
+        if (e < 0) {    // did not run: run_tool's message says why
             g_free(text);
             return false;
         }
-        bool ok = parse_corners(vs, text, *cornpath, o->gridn, false);
-        if (ok) {
-            FILE *f = fopen(*cornpath, "w");
-            ok = f && fputs(text, f) >= 0;
-            if (f && fclose(f) != 0) ok = false;
-            if (!ok) model_error(*cornpath, 0, "cannot write: %s", strerror(errno));
-        }
+        model_error_set(s->imgdir, 0, "mrgingham failed (exit status %d) on the images here; see %s/mrgingham.log", e,
+                        s->mdir);
         g_free(text);
-        if (!ok) return false;
+        return false;
     }
-    *nfound = 0;
+    bool ok = calib_geometry_parse_corners(vs, text, s->cornpath, o->gridn, false);
+    if (ok) {
+        FILE *f = fopen(s->cornpath, "w");
+        ok = f && fputs(text, f) >= 0;
+        if (f && fclose(f) != 0) ok = false;
+        if (!ok) model_error_set(s->cornpath, 0, "cannot write: %s", strerror(errno));
+    }
+    g_free(text);
+    return ok;
+}
+
+bool calib_geometry_find_corners(const calib_geometry_opts_t *o, calib_geometry_state_t *s)
+{
+    calib_geometry_views_t *vs = &s->views;
+    g_free(s->cornpath);
+    s->cornpath = g_strdup_printf("%s/corners.vnl", s->outdir);
+    if (!(o->corners ? corners_from_file(o, s) : corners_mrgingham(o, s))) return false;
+    s->nfound = 0;
     for (guint k = 0; k < vs->v->len; k++) {
-        view_t *v = g_ptr_array_index(vs->v, k);
-        if (v->found) (*nfound)++;
+        calib_geometry_view_t *v = g_ptr_array_index(vs->v, k);
+        if (v->found) s->nfound++;
         else snprintf(v->why, sizeof v->why, "mrgingham found no %dx%d board", o->gridn, o->gridn);
     }
-    fprintf(stderr, "refl calib geometry: the board was found in %d of %u images\n", *nfound, vs->v->len);
-    if (*nfound < o->min_views) {
-        model_error(o->corners ? o->corners : o->out, 0, "too few views for %s: the board was found in %d of %u images, "
-                    "the solve needs at least %d (%d more views; tilt the board and turn the table so the corners "
-                    "cover the imager)", o->lensmodel, *nfound, vs->v->len, o->min_views, o->min_views - *nfound);
+    fprintf(stderr, "refl calib geometry: the board was found in %d of %u images\n", s->nfound, vs->v->len);
+    int min_views = o->min_views ? o->min_views : calib_geometry_default_min_views(o->lensmodel);
+    if (s->nfound < min_views) {
+        model_error_set(o->corners ? o->corners : o->out, 0, "too few views for %s: the board was found in %d of %u "
+                        "images, the solve needs at least %d (%d more views; tilt the board and turn the table so the "
+                        "corners cover the imager)", o->lensmodel, s->nfound, vs->v->len, min_views,
+                        min_views - s->nfound);
         for (guint k = 0; k < vs->v->len; k++) {
-            view_t *v = g_ptr_array_index(vs->v, k);
+            calib_geometry_view_t *v = g_ptr_array_index(vs->v, k);
             if (!v->found) fprintf(stderr, "  %s (%s): %s\n", v->name, v->source, v->why);
         }
         return false;
     }
-
     return true;
 }
 
-// mrcal-calibrate-cameras on the corners (its model and log in mrcal/), then
-// scripts/calib_geometry_report.py solution: mrcal's board poses, residuals
-// and projection uncertainty as JSON. NULL + message.
-static json_t *solve_mrcal(const opts_t *o, const char *cornpath, const char *imgdir, const char *mdir, int nfound,
-                           int W, int H)
+bool calib_geometry_solve(const calib_geometry_opts_t *o, calib_geometry_state_t *s)
 {
     char focal[32], spacing[32], wn[16], ws[16], hs[16];
-    snprintf(focal, sizeof focal, "%.6g", isfinite(o->focal_px) ? o->focal_px : 1.4 * W);
+    snprintf(focal, sizeof focal, "%.6g", isfinite(o->focal_px) ? o->focal_px : 1.4 * s->W);
     snprintf(spacing, sizeof spacing, "%.9g", o->square_mm);
     snprintf(wn, sizeof wn, "%d", o->gridn);
-    snprintf(ws, sizeof ws, "%d", W);
-    snprintf(hs, sizeof hs, "%d", H);
-    char *cwd = o->corners ? g_path_get_dirname(cornpath) : g_strdup(imgdir);
-    char *argv_m[] = { "mrcal-calibrate-cameras", "--corners-cache", (char *)cornpath, "--lensmodel",
+    snprintf(ws, sizeof ws, "%d", s->W);
+    snprintf(hs, sizeof hs, "%d", s->H);
+    char *cwd = o->corners ? g_path_get_dirname(s->cornpath) : g_strdup(s->imgdir);
+    char *argv_m[] = { "mrcal-calibrate-cameras", "--corners-cache", s->cornpath, "--lensmodel",
                        (char *)o->lensmodel, "--focal", focal, "--object-spacing", spacing, "--object-width-n", wn,
-                       "--imagersize", ws, hs, "--outdir", (char *)mdir, "*", NULL };
+                       "--imagersize", ws, hs, "--outdir", s->mdir, "*", NULL };
     // mrcal-calibrate-cameras runs under Debian's Python (its shebang)
     fprintf(stderr, "refl calib geometry: solving %s from %d views (mrcal-calibrate-cameras)\n", o->lensmodel,
-            nfound);
-    char *log = g_strdup_printf("%s/mrcal-calibrate-cameras.log", mdir);
-    char *model0 = g_strdup_printf("%s/camera-0.cameramodel", mdir);
+            s->nfound);
+    char *log = g_strdup_printf("%s/mrcal-calibrate-cameras.log", s->mdir);
+    char *model0 = g_strdup_printf("%s/camera-0.cameramodel", s->mdir);
     unlink(model0);
     int e = run_tool(cwd, argv_m, log, NULL);
     g_free(cwd);
     if (e != 0 || access(model0, R_OK) != 0) {
-        model_error(mdir, 0, "mrcal-calibrate-cameras failed (exit status %d) on %s; see %s (a bad seed? give "
-                    "--focal-px)", e, cornpath, log);
+        if (e >= 0)
+            model_error_set(s->mdir, 0, "mrcal-calibrate-cameras failed (exit status %d) on %s; see %s (a bad seed? "
+                            "give --focal-px)", e, s->cornpath, log);
         g_free(log);
         g_free(model0);
-        return NULL;
+        return false;
     }
     g_free(log);
-    char *solpath = g_strdup_printf("%s/solution.json", mdir), dist[32];
+    char *solpath = g_strdup_printf("%s/solution.json", s->mdir), dist[32];
     snprintf(dist, sizeof dist, "%g", o->distance_mm);
     fprintf(stderr, "refl calib geometry: residuals and projection uncertainty (mrcal)\n");
     e = model_run_script("calib_geometry_report.py", "solution", model0, solpath, dist, NULL);
     g_free(model0);
-    if (e != 0) {
-        g_free(solpath);
-        return NULL;
-    }
-    json_error_t je;
-    json_t *sol = json_load_file(solpath, 0, &je);
-    if (!sol) {
-        model_error(solpath, je.line, "cannot read: %s", je.text);
-        g_free(solpath);
-        return NULL;
+    if (e == 0) {
+        json_error_t je;
+        s->sol = json_load_file(solpath, 0, &je);
+        if (!s->sol) model_error_set(solpath, je.line, "cannot read: %s", je.text);
     }
     g_free(solpath);
-    return sol;
+    return s->sol != NULL;
 }
 
-static int usage_error(const char *fmt, const char *arg)
+bool calib_geometry_apply_solution(const calib_geometry_opts_t *o, calib_geometry_state_t *s)
 {
-    return model_usage_error("calib geometry", fmt, arg);
-}
-
-int calib_cmd_geometry(int argc, char **argv)
-{
-    opts_t o = { .lensmodel = "LENSMODEL_OPENCV8", .tilts = DEFAULT_TILTS, .angles = DEFAULT_ANGLES,
-                 .sample = "calib_board", .gridn = 10, .square_mm = 30, .board_height_mm = 5, .exposure_us = 6000,
-                 .focal_px = NAN, .distance_mm = 900, .progress = 0 };
-    o.sessions = g_ptr_array_new();
-    guint user_sessions = 0;
-    int rc = 2;
-    views_t vs = { .v = g_ptr_array_new_with_free_func(view_free) };
-    json_t *prov = NULL, *sol = NULL, *out = NULL;
-    model_camera_t *cam = NULL, *final = NULL;
-    char *outdir = NULL, *imgdir = NULL, *cornpath = NULL, *mdir = NULL;
-    axis_t ax = { 0 };
-
-    for (int i = 1; i < argc; i++) {
-        const char *a = argv[i];
-        const char *v = i + 1 < argc ? argv[i + 1] : NULL;
-        double d;
-        if (!strcmp(a, "--help") || !strcmp(a, "-h")) {
-            usage(stdout);
-            rc = 0;
-            goto done;
-        }
-#define NEED()                                                                    \
-    do {                                                                          \
-        if (!v) {                                                                 \
-            rc = usage_error("%s needs a value", a);                              \
-            goto done;                                                            \
-        }                                                                         \
-        i++;                                                                      \
-    } while (0)
-        if (!strcmp(a, "--rig")) { NEED(); o.rig = v; }
-        else if (!strcmp(a, "-o") || !strcmp(a, "--out")) { NEED(); o.out = v; }
-        else if (!strcmp(a, "--lensmodel")) { NEED(); o.lensmodel = v; }
-        else if (!strcmp(a, "--corners")) { NEED(); o.corners = v; }
-        else if (!strcmp(a, "--images")) { NEED(); o.images = v; }
-        else if (!strcmp(a, "--session")) { NEED(); g_ptr_array_add(o.sessions, (gpointer)v); }
-        else if (!strcmp(a, "--tilts")) { NEED(); o.tilts = v; }
-        else if (!strcmp(a, "--angles")) { NEED(); o.angles = v; }
-        else if (!strcmp(a, "--sample")) { NEED(); o.sample = v; }
-        else if (!strcmp(a, "--gridn")) {
-            NEED();
-            if (!parse_num(v, 2, 100, &d) || d != floor(d)) {
-                rc = usage_error("--gridn %s: give an integer 2..100", v);
-                goto done;
-            }
-            o.gridn = (int)d;
-        } else if (!strcmp(a, "--square-mm")) {
-            NEED();
-            if (!parse_num(v, 1e-3, 1e4, &o.square_mm)) {
-                rc = usage_error("--square-mm %s: give a length in mm > 0", v);
-                goto done;
-            }
-        } else if (!strcmp(a, "--board-height-mm")) {
-            NEED();
-            if (!parse_num(v, -1e4, 1e4, &o.board_height_mm)) {
-                rc = usage_error("--board-height-mm %s: give a length in mm", v);
-                goto done;
-            }
-        } else if (!strcmp(a, "--exposure-us")) {
-            NEED();
-            if (!parse_num(v, 1, 1e8, &o.exposure_us)) {
-                rc = usage_error("--exposure-us %s: give microseconds > 0", v);
-                goto done;
-            }
-        } else if (!strcmp(a, "--focal-px")) {
-            NEED();
-            if (!parse_num(v, 1, 1e6, &o.focal_px)) {
-                rc = usage_error("--focal-px %s: give a focal length in px > 0", v);
-                goto done;
-            }
-        } else if (!strcmp(a, "--distance-mm")) {
-            NEED();
-            if (!parse_num(v, 1, 1e7, &o.distance_mm)) {
-                rc = usage_error("--distance-mm %s: give a distance in mm > 0", v);
-                goto done;
-            }
-        } else if (!strcmp(a, "--min-views")) {
-            NEED();
-            if (!parse_num(v, 1, 1e5, &d) || d != floor(d)) {
-                rc = usage_error("--min-views %s: give an integer >= 1", v);
-                goto done;
-            }
-            o.min_views = (int)d;
-        } else if (!strcmp(a, "--imagersize")) {
-            if (i + 2 >= argc || !parse_num(argv[i + 1], 1, 1e5, &d)) {
-                rc = usage_error("%s needs W H in pixels", a);
-                goto done;
-            }
-            o.imager_w = (int)d;
-            if (!parse_num(argv[i + 2], 1, 1e5, &d)) {
-                rc = usage_error("%s needs W H in pixels", a);
-                goto done;
-            }
-            o.imager_h = (int)d;
-            i += 2;
-        } else {
-            rc = usage_error("unknown option '%s'", a);
-            goto done;
-        }
-#undef NEED
+    json_t *jimgs = json_object_get(s->sol, "images"), *intr = json_object_get(s->sol, "intrinsics");
+    size_t k;
+    json_t *im;
+    json_array_foreach(jimgs, k, im) {
+        calib_geometry_view_t *v = calib_geometry_view_find(&s->views, json_string_value(json_object_get(im, "path")));
+        if (!v) continue;
+        json_t *rt = json_object_get(im, "rt_cam_board");
+        for (int c = 0; c < 6; c++) v->rt_cam_board[c] = json_real_value(json_array_get(rt, c));
+        v->solved = true;
+        json_t *rms = json_object_get(im, "rms_px");
+        v->rms_px = json_is_number(rms) ? json_number_value(rms) : NAN;
+        v->outliers = (int)json_integer_value(json_object_get(im, "outliers"));
     }
-    user_sessions = o.sessions->len;
-    int nsrc = (o.rig != NULL) + (o.sessions->len > 0) + (o.images != NULL) + (o.corners != NULL);
-    if (nsrc != 1) {
-        rc = usage_error("%s", nsrc ? "give only one of --rig, --session, --images, --corners"
-                                    : "say where the views come from: --rig, --session, --images or --corners");
-        goto done;
-    }
-    if (!o.out) {
-        rc = usage_error("%s", "give the output directory: -o DIR");
-        goto done;
-    }
-    if (o.corners && !o.imager_w) {
-        rc = usage_error("%s", "--corners needs --imagersize W H (no images to read it from)");
-        goto done;
-    }
-    mrcal_lensmodel_t lm;
-    if (!mrcal_lensmodel_from_name(&lm, o.lensmodel)) {
-        rc = usage_error("--lensmodel %s: not a lens model mrcal knows (e.g. LENSMODEL_OPENCV8, "
-                         "LENSMODEL_SPLINED_STEREOGRAPHIC_order=3_Nx=16_Ny=12_fov_x_deg=50)", o.lensmodel);
-        goto done;
-    }
-    if (o.rig && access(o.rig, R_OK) != 0) {
-        rc = usage_error("--rig %s: cannot read the rig file", o.rig);
-        goto done;
-    }
-    if (o.corners && access(o.corners, R_OK) != 0) {
-        rc = usage_error("--corners %s: cannot read the corners file", o.corners);
-        goto done;
-    }
-    if (!o.min_views) o.min_views = default_min_views(o.lensmodel);
-
-    rc = 1;
-    prov = model_provenance(argc, argv);
-    if (!model_mkdir_p(o.out)) goto done;
-    outdir = realpath(o.out, NULL);
-    imgdir = g_strdup_printf("%s/images", outdir);
-    mdir = g_strdup_printf("%s/mrcal", outdir);
-    if (!model_mkdir_p(imgdir) || !model_mkdir_p(mdir)) goto done;
-
-    // 1. views
-    int W = o.imager_w, H = o.imager_h;
-    if (o.rig) {
-        if (!model_provenance_input(prov, "rig", o.rig)) goto done;
-        // every plan first: a bad --tilts fails before anything moves
-        char **specs = g_strsplit(o.tilts, " ", -1);
-        GPtrArray *plans = g_ptr_array_new_with_free_func(g_free), *names = g_ptr_array_new_with_free_func(g_free);
-        bool ok = true;
-        for (int k = 0; specs[k] && ok; k++) {
-            if (!*specs[k]) continue;
-            char name[128];
-            char *plan = tilt_plan(specs[k], &o, name, sizeof name);
-            if (!plan) ok = false;
-            else {
-                g_ptr_array_add(plans, plan);
-                g_ptr_array_add(names, g_strdup(name));
-            }
-        }
-        g_strfreev(specs);
-        if (!ok || plans->len == 0) {
-            if (ok) model_error("--tilts", 0, "'%s': no tilts", o.tilts);
-            g_ptr_array_free(plans, TRUE);
-            g_ptr_array_free(names, TRUE);
-            rc = 2;
-            goto done;
-        }
-        char *capdir = g_strdup_printf("%s/capture", outdir);
-        for (guint k = 0; k < plans->len && ok; k++) {
-            const char *name = g_ptr_array_index(names, k);
-            fprintf(stderr, "refl calib geometry: capturing %s (%u of %u)\n", name, k + 1, plans->len);
-            ok = calib_capture(o.rig, capdir, name, g_ptr_array_index(plans, k), o.progress) == 0;
-            if (ok) g_ptr_array_add(o.sessions, g_strdup_printf("%s/%s", capdir, name));
-        }
-        g_ptr_array_free(plans, TRUE);
-        g_ptr_array_free(names, TRUE);
-        g_free(capdir);
-        if (!ok) goto done;
-    }
-    for (guint k = 0; k < o.sessions->len; k++) {
-        const char *sd = g_ptr_array_index(o.sessions, k);
-        fprintf(stderr, "refl calib geometry: reading the frames of %s\n", sd);
-        if (!add_session(&vs, sd, imgdir, &W, &H) || !model_provenance_input(prov, "session", sd)) goto done;
-    }
-    if (o.images) {
-        fprintf(stderr, "refl calib geometry: reading the images %s\n", o.images);
-        if (!add_images(&vs, o.images, imgdir, &W, &H)) goto done;
-        for (guint k = 0; k < vs.v->len; k++) {
-            view_t *v = g_ptr_array_index(vs.v, k);
-            if (!model_provenance_input(prov, "image", v->source)) goto done;
-        }
-    }
-    if (o.imager_w && (W != o.imager_w || H != o.imager_h)) {
-        model_error(o.out, 0, "the frames are %dx%d, --imagersize says %dx%d", W, H, o.imager_w, o.imager_h);
-        goto done;
-    }
-
-    // 2. corners
-    int nfound = 0;
-    if (!find_corners(&o, &vs, outdir, imgdir, mdir, prov, &cornpath, &nfound)) goto done;
-
-    // 3. mrcal
-    if (!(sol = solve_mrcal(&o, cornpath, imgdir, mdir, nfound, W, H))) goto done;
-    json_t *jimgs = json_object_get(sol, "images"), *intr = json_object_get(sol, "intrinsics");
-    {
-        size_t k;
-        json_t *im;
-        json_array_foreach(jimgs, k, im) {
-            view_t *v = view_find(&vs, json_string_value(json_object_get(im, "path")));
-            if (!v) continue;
-            json_t *rt = json_object_get(im, "rt_cam_board");
-            for (int c = 0; c < 6; c++) v->rt_cam_board[c] = json_real_value(json_array_get(rt, c));
-            v->solved = true;
-            v->rms_px = json_is_number(json_object_get(im, "rms_px")) ? json_number_value(json_object_get(im, "rms_px"))
-                                                                       : NAN;
-            v->outliers = (int)json_integer_value(json_object_get(im, "outliers"));
-        }
-    }
-    double *ip = malloc(json_array_size(intr) * sizeof *ip);
-    for (size_t k = 0; k < json_array_size(intr); k++) ip[k] = json_real_value(json_array_get(intr, k));
+    double *ip = malloc((json_array_size(intr) + 1) * sizeof *ip);
+    for (k = 0; k < json_array_size(intr); k++) ip[k] = json_real_value(json_array_get(intr, k));
     double zero[6] = { 0 };
-    cam = model_camera_new(o.lensmodel, ip, W, H, zero);
+    s->cam = model_camera_new(o->lensmodel, ip, s->W, s->H, zero);
     free(ip);
-    if (!cam) goto done;
-    double rms = json_real_value(json_object_get(sol, "rms_px"));
-    fprintf(stderr, "refl calib geometry: RMS reprojection residual %.4f px, %d outliers\n", rms,
-            (int)json_integer_value(json_object_get(sol, "outliers")));
+    if (!s->cam) return false;
+    s->rms_px = json_real_value(json_object_get(s->sol, "rms_px"));
+    fprintf(stderr, "refl calib geometry: RMS reprojection residual %.4f px, %d outliers\n", s->rms_px,
+            (int)json_integer_value(json_object_get(s->sol, "outliers")));
+    return true;
+}
 
-    // 4. axis and rig frame
-    double rt_cam_rig[6] = { 0 };
-    bool have_rig = false;
-    char rigwhy[256] = "no turntable angles in the input (--images / --corners)";
-    if (vs.ngroups > 0) {
-        fprintf(stderr, "refl calib geometry: fitting the turntable axis\n");
-        if (!fit_axis(&vs, &o, &ax)) {
-            snprintf(rigwhy, sizeof rigwhy, "too few board poses at different angles of one tilt for the axis "
-                     "(need 2 views 5..175 deg apart)");
-            fprintf(stderr, "refl calib geometry: no axis: %s\n", rigwhy);
-        } else {
-            have_rig = rig_frame(&vs, &o, &ax, rt_cam_rig, rigwhy, sizeof rigwhy);
-            if (!have_rig) fprintf(stderr, "refl calib geometry: no rig frame: %s; the extrinsics are the camera's "
-                                   "own frame\n", rigwhy);
-            fprintf(stderr, "refl calib geometry: axis direction (camera frame) %.6f %.6f %.6f +- %.4f deg, %d pairs, "
-                    "off-axis rotation RMS %.4f deg\n", ax.a[0], ax.a[1], ax.a[2], ax.dir_unc_deg, ax.npairs,
-                    ax.off_axis_rms_deg);
+bool calib_geometry_capture(const calib_geometry_opts_t *o, calib_geometry_state_t *s, bool *usage)
+{
+    // every plan first: a bad --tilts fails before anything moves
+    char **specs = g_strsplit(o->tilts, " ", -1);
+    GPtrArray *plans = g_ptr_array_new_with_free_func(g_free), *names = g_ptr_array_new_with_free_func(g_free);
+    bool ok = true;
+    for (int k = 0; specs[k] && ok; k++) {
+        if (!*specs[k]) continue;
+        char name[128];
+        char *plan = calib_geometry_tilt_plan(specs[k], o, name, sizeof name);
+        if (!plan) ok = false;
+        else {
+            g_ptr_array_add(plans, plan);
+            g_ptr_array_add(names, g_strdup(name));
         }
     }
-    explain_missing(&vs, &o, ax.ok ? &ax : NULL, cam, W, H);
-    for (guint k = 0; k < vs.v->len; k++) {
-        view_t *v = g_ptr_array_index(vs.v, k);
+    g_strfreev(specs);
+    if (ok && plans->len == 0) {
+        model_error_set("--tilts", 0, "'%s': no tilts", o->tilts);
+        ok = false;
+    }
+    *usage = !ok;
+    char *capdir = g_strdup_printf("%s/capture", s->outdir);
+    g_strfreev(s->sessions);
+    s->sessions = g_new0(char *, plans->len + 1);
+    for (guint k = 0; k < plans->len && ok; k++) {
+        const char *name = g_ptr_array_index(names, k);
+        fprintf(stderr, "refl calib geometry: capturing %s (%u of %u)\n", name, k + 1, plans->len);
+        ok = calib_capture(o->rig, capdir, name, g_ptr_array_index(plans, k), o->progress) == 0;
+        if (ok) s->sessions[k] = g_strdup_printf("%s/%s", capdir, name);
+    }
+    g_ptr_array_free(plans, TRUE);
+    g_ptr_array_free(names, TRUE);
+    g_free(capdir);
+    return ok;
+}
+
+// Stage 1: the views of the sessions (given or captured) or the images.
+static bool collect_views(const calib_geometry_opts_t *o, calib_geometry_state_t *s)
+{
+    s->W = o->imager_w;
+    s->H = o->imager_h;
+    int n = s->sessions ? (int)g_strv_length(s->sessions) : o->nsessions;
+    for (int k = 0; k < n; k++) {
+        const char *sd = s->sessions ? s->sessions[k] : o->sessions[k];
+        fprintf(stderr, "refl calib geometry: reading the frames of %s\n", sd);
+        if (!calib_geometry_add_session(&s->views, sd, s->imgdir, &s->W, &s->H) ||
+            !model_provenance_input(s->prov, "session", sd))
+            return false;
+    }
+    if (o->images) {
+        fprintf(stderr, "refl calib geometry: reading the images %s\n", o->images);
+        if (!calib_geometry_add_images(&s->views, o->images, s->imgdir, &s->W, &s->H)) return false;
+        for (guint k = 0; k < s->views.v->len; k++) {
+            calib_geometry_view_t *v = g_ptr_array_index(s->views.v, k);
+            if (!model_provenance_input(s->prov, "image", v->source)) return false;
+        }
+    }
+    if (o->imager_w && (s->W != o->imager_w || s->H != o->imager_h)) {
+        model_error_set(o->out, 0, "the frames are %dx%d, --imagersize says %dx%d", s->W, s->H, o->imager_w,
+                        o->imager_h);
+        return false;
+    }
+    return true;
+}
+
+// Stage 4: the axis, the rig frame and why views have no board.
+static void axis_and_rig_frame(const calib_geometry_opts_t *o, calib_geometry_state_t *s)
+{
+    calib_geometry_axis_t *ax = &s->axis;
+    snprintf(s->rigwhy, sizeof s->rigwhy, "no turntable angles in the input (--images / --corners)");
+    if (s->views.ngroups > 0) {
+        fprintf(stderr, "refl calib geometry: fitting the turntable axis\n");
+        if (!calib_geometry_fit_axis(&s->views, o->gridn, o->square_mm, ax)) {
+            snprintf(s->rigwhy, sizeof s->rigwhy, "too few board poses at different angles of one tilt for the "
+                     "axis (need 2 views 5..175 deg apart)");
+            fprintf(stderr, "refl calib geometry: no axis: %s\n", s->rigwhy);
+        } else {
+            s->have_rig = calib_geometry_rig_frame(&s->views, o->board_height_mm, ax, s->rt_cam_rig, s->rigwhy,
+                                                   sizeof s->rigwhy);
+            if (!s->have_rig)
+                fprintf(stderr, "refl calib geometry: no rig frame: %s; the extrinsics are the camera's own frame\n",
+                        s->rigwhy);
+            fprintf(stderr, "refl calib geometry: axis direction (camera frame) %.6f %.6f %.6f +- %.4f deg, %d pairs, "
+                    "off-axis rotation RMS %.4f deg\n", ax->a[0], ax->a[1], ax->a[2], ax->dir_unc_deg, ax->npairs,
+                    ax->off_axis_rms_deg);
+        }
+    }
+    calib_geometry_explain_missing(&s->views, o->gridn, o->square_mm, ax->ok ? ax : NULL, s->cam, s->W, s->H);
+    for (guint k = 0; k < s->views.v->len; k++) {
+        calib_geometry_view_t *v = g_ptr_array_index(s->views.v, k);
         if (!v->found) fprintf(stderr, "refl calib geometry: no board in %s (%s): %s\n", v->name, v->source, v->why);
     }
+}
 
-    // 5. outputs
-    char *campath = g_strdup_printf("%s/camera.cameramodel", outdir);
-    bool ok = write_cameramodel(campath, o.lensmodel, intr, W, H, rt_cam_rig, have_rig, rms);
-    if (ok) {
-        final = model_camera_load(campath);   // check it reads back
-        ok = final != NULL;
+// geometry.json: the axis (null without one).
+static json_t *axis_json(const calib_geometry_state_t *s)
+{
+    const calib_geometry_axis_t *ax = &s->axis;
+    if (!ax->ok) return json_null();
+    json_t *aj = json_object();
+    json_object_set_new(aj, "direction_cam", jarr(ax->a, 3));
+    json_object_set_new(aj, "point_cam_mm", jarr(ax->c, 3));
+    json_object_set_new(aj, "direction_uncertainty_deg", json_real(ax->dir_unc_deg));
+    json_object_set_new(aj, "point_uncertainty_mm", json_real(ax->point_unc_mm));
+    json_object_set_new(aj, "uncertainty_note", json_string("approximate 1-sigma, from the scatter of the "
+                        "pairwise estimates (direction) and of the point equations (point, across the axis)"));
+    json_object_set_new(aj, "off_axis_rms_deg", json_real(ax->off_axis_rms_deg));
+    json_object_set_new(aj, "point_equation_rms_mm", json_real(ax->point_rms_mm));
+    json_object_set_new(aj, "pairs", json_integer(ax->npairs));
+    json_object_set_new(aj, "views", json_integer(ax->nviews));
+    if (s->have_rig) {
+        // in the rig frame the axis is +z through the origin, by construction
+        json_object_set_new(aj, "direction_rig", json_pack("[fff]", 0.0, 0.0, 1.0));
+        json_object_set_new(aj, "point_rig_mm", json_pack("[fff]", 0.0, 0.0, 0.0));
     }
-    if (!ok) {
-        g_free(campath);
-        goto done;
+    json_object_set_new(aj, "fit", json_incref(ax->fit));
+    return aj;
+}
+
+// geometry.json: one view.
+static json_t *view_json(const calib_geometry_state_t *s, const calib_geometry_view_t *v)
+{
+    json_t *im = json_object();
+    json_object_set_new(im, "image", json_string(v->name));
+    json_object_set_new(im, "source", json_string(v->source));
+    if (v->session) json_object_set_new(im, "session", json_string(v->session));
+    if (isfinite(v->angle_deg)) json_object_set_new(im, "angle_deg", json_real(v->angle_deg));
+    if (isfinite(v->tilt_deg)) {
+        json_object_set_new(im, "tilt_deg", json_real(v->tilt_deg));
+        json_object_set_new(im, "tilt_azimuth_deg", json_real(v->tilt_azimuth_deg));
     }
-    out = json_object();
+    json_object_set_new(im, "board_found", json_boolean(v->found));
+    if (v->why[0]) json_object_set_new(im, "why", json_string(v->why));
+    if (isfinite(v->rms_px)) {     // mrcal solved a pose for it
+        json_object_set_new(im, "rms_residual_px", json_real(v->rms_px));
+        json_object_set_new(im, "outliers", json_integer(v->outliers));
+        json_object_set_new(im, "rt_cam_board", jarr(v->rt_cam_board, 6));
+        json_object_set_new(im, "quarter_turns", json_integer(v->quarter_turns));
+        if (s->have_rig) {
+            double rt_rig_cam[6], rt_rig_board[6];
+            invert(rt_rig_cam, s->rt_cam_rig);
+            compose(rt_rig_board, rt_rig_cam, v->rt_cam_board);
+            json_object_set_new(im, "rt_rig_board", jarr(rt_rig_board, 6));
+        }
+    }
+    return im;
+}
+
+json_t *calib_geometry_json(const calib_geometry_opts_t *o, calib_geometry_state_t *s)
+{
+    json_t *sol = s->sol, *intr = json_object_get(sol, "intrinsics");
+    json_t *out = json_object();
     json_object_set_new(out, "units", json_string("lengths mm, angles deg (rotation vectors r in rad), pixels px with "
                                                   "(0, 0) the centre of the top-left pixel"));
-    json_object_set_new(out, "camera_model", json_string(campath));
+    json_object_set_new(out, "camera_model", json_string(s->campath));
+    model_camera_t *final = model_camera_load(s->campath);   // check it reads back
+    if (!final) {
+        json_decref(out);
+        return NULL;
+    }
     json_object_set_new(out, "camera_model_sha256", json_string(model_camera_sha256(final)));
-    json_object_set_new(out, "lensmodel", json_string(o.lensmodel));
+    model_camera_free(final);
+    json_object_set_new(out, "lensmodel", json_string(o->lensmodel));
     json_object_set_new(out, "intrinsics", json_incref(intr));
     json_object_set_new(out, "intrinsics_meaning", json_string("fx_px, fy_px, cx_px, cy_px, then the lens model's "
                                                                "distortion parameters (mrcal order)"));
-    json_object_set_new(out, "imagersize_px", json_pack("[ii]", W, H));
-    json_object_set_new(out, "rms_residual_px", json_real(rms));
-    json_object_set_new(out, "views_used", json_integer(json_array_size(jimgs)));
-    json_object_set_new(out, "views_total", json_integer(vs.v->len));
+    json_object_set_new(out, "imagersize_px", json_pack("[ii]", s->W, s->H));
+    json_object_set_new(out, "rms_residual_px", json_real(s->rms_px));
+    json_object_set_new(out, "views_used", json_integer(json_array_size(json_object_get(sol, "images"))));
+    json_object_set_new(out, "views_total", json_integer(s->views.v->len));
     json_object_set_new(out, "points_used", json_incref(json_object_get(sol, "points")));
     json_object_set_new(out, "outliers", json_incref(json_object_get(sol, "outliers")));
-    json_t *unc = json_deep_copy(json_object_get(sol, "uncertainty"));
-    json_object_set_new(out, "projection_uncertainty", unc);
-    json_object_set_new(out, "board", json_pack("{s:i,s:f,s:f,s:s}", "gridn", o.gridn, "square_mm", o.square_mm,
-                                                "height_at_tilt0_mm", o.board_height_mm, "sample", o.sample));
-    json_object_set_new(out, "rig_frame", json_string(have_rig
+    json_object_set_new(out, "projection_uncertainty", json_deep_copy(json_object_get(sol, "uncertainty")));
+    json_object_set_new(out, "board", json_pack("{s:i,s:f,s:f,s:s}", "gridn", o->gridn, "square_mm", o->square_mm,
+                                                "height_at_tilt0_mm", o->board_height_mm, "sample", o->sample));
+    json_object_set_new(out, "rig_frame", json_string(s->have_rig
         ? "origin on the fitted turntable axis at the table top (board_height_mm below the board's corner plane at "
           "tilt 0); z up along the axis (counter-clockwise turntable angles positive seen from +z); x the board's "
           "grid direction at angle 0, tilt 0 closest to the image's +x, projected onto the table plane"
-        : rigwhy));
-    json_object_set_new(out, "rt_cam_rig", have_rig ? jarr(rt_cam_rig, 6) : json_null());
-    if (have_rig) {
+        : s->rigwhy));
+    json_object_set_new(out, "rt_cam_rig", s->have_rig ? jarr(s->rt_cam_rig, 6) : json_null());
+    if (s->have_rig) {
         double rt_rig_cam[6];
-        invert(rt_rig_cam, rt_cam_rig);
+        invert(rt_rig_cam, s->rt_cam_rig);
         json_object_set_new(out, "camera_centre_rig_mm", jarr(&rt_rig_cam[3], 3));
     }
-    if (ax.ok) {
-        json_t *aj = json_object();
-        json_object_set_new(aj, "direction_cam", jarr(ax.a, 3));
-        json_object_set_new(aj, "point_cam_mm", jarr(ax.c, 3));
-        json_object_set_new(aj, "direction_uncertainty_deg", json_real(ax.dir_unc_deg));
-        json_object_set_new(aj, "point_uncertainty_mm", json_real(ax.point_unc_mm));
-        json_object_set_new(aj, "uncertainty_note", json_string("approximate 1-sigma, from the scatter of the "
-                            "pairwise estimates (direction) and of the point equations (point, across the axis)"));
-        json_object_set_new(aj, "off_axis_rms_deg", json_real(ax.off_axis_rms_deg));
-        json_object_set_new(aj, "point_equation_rms_mm", json_real(ax.point_rms_mm));
-        json_object_set_new(aj, "pairs", json_integer(ax.npairs));
-        json_object_set_new(aj, "views", json_integer(ax.nviews));
-        if (have_rig) {
-            // in the rig frame the axis is +z through the origin, by construction
-            json_object_set_new(aj, "direction_rig", json_pack("[fff]", 0.0, 0.0, 1.0));
-            json_object_set_new(aj, "point_rig_mm", json_pack("[fff]", 0.0, 0.0, 0.0));
-        }
-        json_object_set_new(aj, "fit", ax.fit);
-        ax.fit = NULL;
-        json_object_set_new(out, "axis", aj);
-    } else {
-        json_object_set_new(out, "axis", json_null());
-    }
+    json_object_set_new(out, "axis", axis_json(s));
     json_t *ims = json_array(), *missing = json_array();
-    for (guint k = 0; k < vs.v->len; k++) {
-        view_t *v = g_ptr_array_index(vs.v, k);
-        json_t *im = json_object();
-        json_object_set_new(im, "image", json_string(v->name));
-        json_object_set_new(im, "source", json_string(v->source));
-        if (v->session) json_object_set_new(im, "session", json_string(v->session));
-        if (isfinite(v->angle_deg)) json_object_set_new(im, "angle_deg", json_real(v->angle_deg));
-        if (isfinite(v->tilt_deg)) {
-            json_object_set_new(im, "tilt_deg", json_real(v->tilt_deg));
-            json_object_set_new(im, "tilt_azimuth_deg", json_real(v->tilt_azimuth_deg));
-        }
-        json_object_set_new(im, "board_found", json_boolean(v->found));
-        if (v->why[0]) json_object_set_new(im, "why", json_string(v->why));
-        if (isfinite(v->rms_px)) {     // mrcal solved a pose for it
-            json_object_set_new(im, "rms_residual_px", isfinite(v->rms_px) ? json_real(v->rms_px) : json_null());
-            json_object_set_new(im, "outliers", json_integer(v->outliers));
-            json_object_set_new(im, "rt_cam_board", jarr(v->rt_cam_board, 6));
-            json_object_set_new(im, "quarter_turns", json_integer(v->quarter_turns));
-            if (have_rig) {
-                double rt_rig_cam[6], rt_rig_board[6];
-                invert(rt_rig_cam, rt_cam_rig);
-                compose(rt_rig_board, rt_rig_cam, v->rt_cam_board);
-                json_object_set_new(im, "rt_rig_board", jarr(rt_rig_board, 6));
-            }
-        }
-        json_array_append_new(ims, im);
+    for (guint k = 0; k < s->views.v->len; k++) {
+        calib_geometry_view_t *v = g_ptr_array_index(s->views.v, k);
+        json_array_append_new(ims, view_json(s, v));
         if (!v->found)
             json_array_append_new(missing, json_pack("{s:s,s:s,s:s}", "image", v->name, "source", v->source, "why",
                                                      v->why));
     }
     json_object_set_new(out, "images", ims);
     json_object_set_new(out, "images_without_board", missing);
-    model_provenance_input(prov, "mrcal solution", campath);
-    json_object_set_new(out, "provenance", json_incref(prov));
-    char *jpath = g_strdup_printf("%s/geometry.json", outdir);
-    ok = model_write_json(jpath, out);
+    model_provenance_input(s->prov, "mrcal solution", s->campath);
+    json_object_set_new(out, "provenance", json_incref(s->prov));
+    return out;
+}
 
-    // 6. report
-    if (ok) {
-        char *solpath = g_strdup_printf("%s/solution.json", mdir), *hpath = g_strdup_printf("%s/report.html", outdir);
-        fprintf(stderr, "refl calib geometry: plots\n");
-        ok = model_run_script("calib_geometry_report.py", "plots", jpath, solpath, outdir, NULL) == 0;
-        FILE *f = ok ? model_html_begin(hpath, "refl calib geometry", prov) : NULL;
-        if (f) {
-            model_html_heading(f, "Camera model");
-            model_html_para(f, "%s, %dx%d px; %zu of %u views used; RMS reprojection residual %.4f px; %d outliers "
-                            "of %d points.", o.lensmodel, W, H, json_array_size(jimgs), vs.v->len, rms,
-                            (int)json_integer_value(json_object_get(sol, "outliers")),
-                            (int)json_integer_value(json_object_get(sol, "points")) +
-                                (int)json_integer_value(json_object_get(sol, "outliers")));
-            model_html_para(f, "Intrinsics fx, fy, cx, cy: %.3f, %.3f, %.3f, %.3f px.",
-                            json_real_value(json_array_get(intr, 0)), json_real_value(json_array_get(intr, 1)),
-                            json_real_value(json_array_get(intr, 2)), json_real_value(json_array_get(intr, 3)));
-            model_html_figure(f, "residuals_vectors.png", "Reprojection residuals over the imager");
-            model_html_figure(f, "residuals_histogram.png", "Distribution of the residuals");
-            model_html_figure(f, "residuals_per_image.png", "RMS residual per image");
-            json_t *u = json_object_get(sol, "uncertainty");
-            if (json_object_get(u, "max_px")) {
-                model_html_heading(f, "Projection uncertainty");
-                model_html_para(f, "mrcal.projection_uncertainty (worst direction, 1 sigma) at %g mm: centre %.4f px, "
-                                "median %.4f px, max %.4f px over the imager.", o.distance_mm,
-                                json_real_value(json_object_get(u, "centre_px")),
-                                json_real_value(json_object_get(u, "median_px")),
-                                json_real_value(json_object_get(u, "max_px")));
-                model_html_figure(f, "uncertainty.png", "Projection uncertainty (dots: observed corners)");
-            }
-            model_html_heading(f, "Turntable axis and rig frame");
-            if (ax.ok) {
-                model_html_para(f, "Axis direction (camera frame) %.6f %.6f %.6f, +- %.4f deg (approximate); point "
-                                "%.2f %.2f %.2f mm +- %.3f mm; %d pose pairs; off-axis rotation RMS %.4f deg.",
-                                ax.a[0], ax.a[1], ax.a[2], ax.dir_unc_deg, ax.c[0], ax.c[1], ax.c[2], ax.point_unc_mm,
-                                ax.npairs, ax.off_axis_rms_deg);
-                model_html_figure(f, "axis_fit.png", "Board rotation about the fitted axis against the turntable angle");
-            } else {
-                model_html_para(f, "No axis: %s.", rigwhy);
-            }
-            model_html_para(f, "Rig frame: %s.", json_string_value(json_object_get(out, "rig_frame")));
-            model_html_heading(f, "Images without a board");
-            GPtrArray *rows = g_ptr_array_new_with_free_func(g_free);
-            for (guint k = 0; k < vs.v->len; k++) {
-                view_t *v = g_ptr_array_index(vs.v, k);
-                if (!v->found) g_ptr_array_add(rows, g_strdup_printf("%s|%s|%s", v->name, v->source, v->why));
-            }
-            if (rows->len)
-                model_html_table(f, "image|source|why", (const char *const *)rows->pdata, (int)rows->len);
-            else
-                model_html_para(f, "none: the board was found in every image.");
-            g_ptr_array_free(rows, TRUE);
-            ok = model_html_end(f, hpath);
-        } else {
-            ok = false;
+bool calib_geometry_report(const calib_geometry_opts_t *o, const calib_geometry_state_t *s, const char *jpath)
+{
+    const calib_geometry_axis_t *ax = &s->axis;
+    json_t *sol = s->sol, *intr = json_object_get(sol, "intrinsics");
+    char *solpath = g_strdup_printf("%s/solution.json", s->mdir), *hpath = g_strdup_printf("%s/report.html", s->outdir);
+    fprintf(stderr, "refl calib geometry: plots\n");
+    bool ok = model_run_script("calib_geometry_report.py", "plots", jpath, solpath, s->outdir, NULL) == 0;
+    FILE *f = ok ? model_html_begin(hpath, "refl calib geometry", s->prov) : NULL;
+    if (f) {
+        int outliers = (int)json_integer_value(json_object_get(sol, "outliers"));
+        model_html_heading(f, "Camera model");
+        model_html_para(f, "%s, %dx%d px; %zu of %u views used; RMS reprojection residual %.4f px; %d outliers "
+                        "of %d points.", o->lensmodel, s->W, s->H, json_array_size(json_object_get(sol, "images")),
+                        s->views.v->len, s->rms_px, outliers,
+                        (int)json_integer_value(json_object_get(sol, "points")) + outliers);
+        model_html_para(f, "Intrinsics fx, fy, cx, cy: %.3f, %.3f, %.3f, %.3f px.",
+                        json_real_value(json_array_get(intr, 0)), json_real_value(json_array_get(intr, 1)),
+                        json_real_value(json_array_get(intr, 2)), json_real_value(json_array_get(intr, 3)));
+        model_html_figure(f, "residuals_vectors.png", "Reprojection residuals over the imager");
+        model_html_figure(f, "residuals_histogram.png", "Distribution of the residuals");
+        model_html_figure(f, "residuals_per_image.png", "RMS residual per image");
+        json_t *u = json_object_get(sol, "uncertainty");
+        if (json_object_get(u, "max_px")) {
+            model_html_heading(f, "Projection uncertainty");
+            model_html_para(f, "mrcal.projection_uncertainty (worst direction, 1 sigma) at %g mm: centre %.4f px, "
+                            "median %.4f px, max %.4f px over the imager.", o->distance_mm,
+                            json_real_value(json_object_get(u, "centre_px")),
+                            json_real_value(json_object_get(u, "median_px")),
+                            json_real_value(json_object_get(u, "max_px")));
+            model_html_figure(f, "uncertainty.png", "Projection uncertainty (dots: observed corners)");
         }
-        g_free(solpath);
-        g_free(hpath);
+        model_html_heading(f, "Turntable axis and rig frame");
+        if (ax->ok) {
+            model_html_para(f, "Axis direction (camera frame) %.6f %.6f %.6f, +- %.4f deg (approximate); point "
+                            "%.2f %.2f %.2f mm +- %.3f mm; %d pose pairs; off-axis rotation RMS %.4f deg.",
+                            ax->a[0], ax->a[1], ax->a[2], ax->dir_unc_deg, ax->c[0], ax->c[1], ax->c[2],
+                            ax->point_unc_mm, ax->npairs, ax->off_axis_rms_deg);
+            model_html_figure(f, "axis_fit.png", "Board rotation about the fitted axis against the turntable angle");
+        } else {
+            model_html_para(f, "No axis: %s.", s->rigwhy);
+        }
+        model_html_para(f, "Rig frame: %s.", json_string_value(json_object_get(s->out, "rig_frame")));
+        model_html_heading(f, "Images without a board");
+        GPtrArray *rows = g_ptr_array_new_with_free_func(g_free);
+        for (guint k = 0; k < s->views.v->len; k++) {
+            calib_geometry_view_t *v = g_ptr_array_index(s->views.v, k);
+            if (!v->found) g_ptr_array_add(rows, g_strdup_printf("%s|%s|%s", v->name, v->source, v->why));
+        }
+        if (rows->len)
+            model_html_table(f, "image|source|why", (const char *const *)rows->pdata, (int)rows->len);
+        else
+            model_html_para(f, "none: the board was found in every image.");
+        g_ptr_array_free(rows, TRUE);
+        ok = model_html_end(f, hpath);
+    } else {
+        ok = false;
     }
-    if (ok)
-        printf("refl calib geometry: %s (RMS %.4f px), %s/geometry.json, %s/report.html\n", campath, rms, outdir,
-               outdir);
+    g_free(solpath);
+    g_free(hpath);
+    return ok;
+}
+
+// Stage 5: camera.cameramodel, geometry.json, the report.
+static bool outputs(const calib_geometry_opts_t *o, calib_geometry_state_t *s)
+{
+    s->campath = g_strdup_printf("%s/camera.cameramodel", s->outdir);
+    if (!calib_geometry_write_cameramodel(s->campath, o->lensmodel, json_object_get(s->sol, "intrinsics"), s->W, s->H,
+                                          s->rt_cam_rig, s->have_rig, s->rms_px))
+        return false;
+    if (!(s->out = calib_geometry_json(o, s))) return false;
+    char *jpath = g_strdup_printf("%s/geometry.json", s->outdir);
+    bool ok = model_write_json(jpath, s->out) && calib_geometry_report(o, s, jpath);
     g_free(jpath);
-    g_free(campath);
-    rc = ok ? 0 : 1;
+    return ok;
+}
+
+calib_geometry_opts_t calib_geometry_defaults(void)
+{
+    return (calib_geometry_opts_t){ .lensmodel = "LENSMODEL_OPENCV8", .tilts = CALIB_GEOMETRY_DEFAULT_TILTS,
+                                    .angles = CALIB_GEOMETRY_DEFAULT_ANGLES, .sample = "calib_board", .gridn = 10,
+                                    .square_mm = 30, .board_height_mm = 5, .exposure_us = 6000, .focal_px = NAN,
+                                    .distance_mm = 900, .progress = 0 };
+}
+
+void calib_geometry_state_free(calib_geometry_state_t *s)
+{
+    calib_geometry_views_free(&s->views);
+    json_decref(s->prov);
+    free(s->outdir);
+    g_free(s->imgdir);
+    g_free(s->mdir);
+    g_free(s->cornpath);
+    g_strfreev(s->sessions);
+    json_decref(s->sol);
+    model_camera_free(s->cam);
+    json_decref(s->axis.fit);
+    g_free(s->campath);
+    json_decref(s->out);
+    memset(s, 0, sizeof *s);
+}
+
+void calib_geometry_result_free(calib_geometry_result_t *r)
+{
+    g_free(r->camera_model);
+    g_free(r->outdir);
+    memset(r, 0, sizeof *r);
+}
+
+bool calib_geometry_run(const calib_geometry_opts_t *o, calib_geometry_result_t *r)
+{
+    memset(r, 0, sizeof *r);
+    calib_geometry_state_t s = { 0 };
+    calib_geometry_views_init(&s.views);
+    bool ok = false;
+    s.prov = model_provenance(o->argc, o->argv);
+    if (!model_mkdir_p(o->out)) goto done;
+    s.outdir = realpath(o->out, NULL);
+    s.imgdir = g_strdup_printf("%s/images", s.outdir);
+    s.mdir = g_strdup_printf("%s/mrcal", s.outdir);
+    if (!model_mkdir_p(s.imgdir) || !model_mkdir_p(s.mdir)) goto done;
+    if (o->rig && (!model_provenance_input(s.prov, "rig", o->rig) || !calib_geometry_capture(o, &s, &r->usage)))
+        goto done;
+    if (!collect_views(o, &s) || !calib_geometry_find_corners(o, &s) || !calib_geometry_solve(o, &s) ||
+        !calib_geometry_apply_solution(o, &s))
+        goto done;
+    axis_and_rig_frame(o, &s);
+    if (!outputs(o, &s)) goto done;
+    r->camera_model = g_strdup(s.campath);
+    r->outdir = g_strdup(s.outdir);
+    r->rms_px = s.rms_px;
+    r->have_rig = s.have_rig;
+    ok = true;
 done:
-    if (ax.fit) json_decref(ax.fit);
-    json_decref(prov);
-    json_decref(sol);
-    json_decref(out);
-    model_camera_free(cam);
-    model_camera_free(final);
-    free(outdir);
-    g_free(imgdir);
-    g_free(cornpath);
-    g_free(mdir);
-    free(vs.group_tilt);
-    free(vs.group_az);
-    g_ptr_array_free(vs.v, TRUE);
-    // sessions added by --rig were g_strdup'ed after the user's; free only those
-    for (guint k = user_sessions; k < o.sessions->len; k++) g_free(g_ptr_array_index(o.sessions, k));
-    g_ptr_array_free(o.sessions, TRUE);
-    return rc;
+    calib_geometry_state_free(&s);
+    return ok;
 }

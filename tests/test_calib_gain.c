@@ -125,7 +125,8 @@ TEST(calib_gain_virtual)
     const char *out = test_path("gain");
     char *so = NULL, *se = NULL;
     double t0 = model_now_s();
-    int rc = test_refl_run(300, &so, &se, "calib", "gain", "--rig", rig_path, "-o", out, "--gains", "0,6", NULL);
+    int rc = test_refl_run(300, &so, &se, "calib", "gain", "--rig", rig_path, "-o", out, "--gains", "0,6",
+                           "--radiance", "5000", NULL);   // the truth's 5 lamps x radiance 1000
     fprintf(stderr, "  calib gain --rig: %.1f s\n", model_now_s() - t0);
     CHECK_MSG(rc == 0, "refl calib gain: %d\n%s", rc, se ? se : "");
     free(so);
@@ -279,7 +280,8 @@ TEST(calib_gain_virtual)
     // its flat field is a frame pair near 50 %, so PRNU is noisier)
     char *sweep = g_build_filename(out, "sweep_g0", NULL);
     const char *out2 = test_path("gain-session");
-    rc = test_refl_run(120, &so, &se, "calib", "gain", "--session", sweep, "-o", out2, "--no-report", NULL);
+    rc = test_refl_run(120, &so, &se, "calib", "gain", "--session", sweep, "-o", out2, "--no-report", "--radiance",
+                       "5000", NULL);
     CHECK_MSG(rc == 0, "refl calib gain --session: %d\n%s", rc, se ? se : "");
     free(so);
     free(se);
@@ -291,7 +293,7 @@ TEST(calib_gain_virtual)
     if (js) {
         CHECK_REL(jnum(js, "system_gain_dn_per_e"), jnum(j, "system_gain_dn_per_e"), 1e-9);
         CHECK_REL(jnum(js, "read_noise_e"), jnum(j, "read_noise_e"), 0.01);
-        CHECK_REL(jnum(js, "kc_per_us"), jnum(j, "kc_per_us"), 1e-9);   // radiance from the session's truth
+        CHECK_REL(jnum(js, "kc_per_us"), jnum(j, "kc_per_us"), 1e-9);
         CHECK_NEAR(jnum(json_object_get(js, "flat_field"), "light_frames"), 2, 0);
     }
     json_decref(js);
@@ -550,4 +552,24 @@ TEST(calib_gain_numerics)
     for (int i = 0; i < W * H; i++) in[i] *= pat[i];
     CHECK(calib_gain_highpass(in, W, H, out));
     CHECK(calib_gain_correlation(out, pat, W * H) > 0.99);
+}
+
+// calib_gain_truth_radiance, the comparison's only reader of the truth: the
+// flat-field source's radiance per lamp from a virtual rig's session facts;
+// nothing without them.
+TEST(calib_gain_truth_radiance_stage)
+{
+    json_t *facts = json_pack("{s:{s:s, s:s}}", "virtual_rig", "truth", truth_path(), "sample", "flat_field");
+    const char *tp = NULL;
+    double r = 0;
+    CHECK(calib_gain_truth_radiance(facts, &tp, &r));
+    CHECK_NEAR(r, 1000, 1e-9);
+    CHECK(tp && !strcmp(tp, truth_path()));
+    json_decref(facts);
+    facts = json_pack("{s:{s:s, s:s}}", "virtual_rig", "truth", truth_path(), "sample", "calib_board");
+    CHECK(!calib_gain_truth_radiance(facts, NULL, &r));   // not a uniform source
+    CHECK(isnan(r));
+    json_decref(facts);
+    CHECK(!calib_gain_truth_radiance(NULL, &tp, &r));
+    CHECK(tp == NULL && isnan(r));
 }

@@ -25,6 +25,8 @@
 //     world): < 0.05 deg. Compared without that transform, in the two camera
 //     frames as they are: printed, checked < 0.1 deg.
 // - Images without a board are named with a reason; bad arguments.
+// - The axis stage alone (calib_geometry_fit_axis, calib_geometry_rig_frame)
+//   on exact poses turned about a known axis.
 #define _GNU_SOURCE
 #include <glib.h>
 #include <jansson.h>
@@ -34,6 +36,7 @@
 #include <stdlib.h>
 #include <unistd.h>
 
+#include "calib/geometry.h"
 #include "model/model.h"
 #include "tests/test.h"
 
@@ -580,4 +583,63 @@ TEST(calib_geometry_bad_arguments)
     CHECK(rc == 0);
     CHECK_CONTAINS(out, "Rig frame");
     free(out), free(err);
+}
+
+// Board poses turned about a known axis (camera frame) at known turntable
+// angles: the axis stage recovers its direction and point, and the rig frame
+// has its z along it and its origin board_height_mm below the board's plane.
+TEST(calib_geometry_axis_stage)
+{
+    const double a[3] = { 0.1, -0.8, -0.55 }, c[3] = { 20, -150, 900 }, h_mm = 5;
+    const double an = sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2]), u[3] = { a[0] / an, a[1] / an, a[2] / an };
+    const double rt0[6] = { 2.2, 0.1, -0.2, -100, 30, 950 };
+    calib_geometry_views_t vs;
+    calib_geometry_views_init(&vs);
+    vs.ngroups = 1;
+    vs.group_tilt = calloc(1, sizeof(double));
+    vs.group_az = calloc(1, sizeof(double));
+    const double angles[] = { 0, 40, 80, 120, 160, 200 };
+    for (int i = 0; i < 6; i++) {
+        calib_geometry_view_t *v = calloc(1, sizeof *v);
+        double r[3] = { angles[i] * DEG * u[0], angles[i] * DEG * u[1], angles[i] * DEG * u[2] };
+        double rt_turn[6] = { r[0], r[1], r[2], 0, 0, 0 }, R[9], R0[9], Rn[9], d[3];
+        mrcal_R_from_r(R, NULL, r);
+        mrcal_R_from_r(R0, NULL, rt0);
+        for (int k = 0; k < 9; k++) Rn[k] = 0;
+        for (int p = 0; p < 3; p++)
+            for (int q = 0; q < 3; q++)
+                for (int k = 0; k < 3; k++) Rn[p * 3 + q] += R[p * 3 + k] * R0[k * 3 + q];
+        mrcal_r_from_R(v->rt_cam_board, NULL, Rn);
+        double t0c[3] = { rt0[3] - c[0], rt0[4] - c[1], rt0[5] - c[2] };
+        transform(rt_turn, t0c, d);
+        for (int k = 0; k < 3; k++) v->rt_cam_board[3 + k] = d[k] + c[k];
+        v->angle_deg = angles[i];
+        v->group = 0;
+        v->found = v->solved = true;
+        v->rms_px = NAN;
+        g_ptr_array_add(vs.v, v);
+    }
+    calib_geometry_axis_t ax;
+    CHECK(calib_geometry_fit_axis(&vs, 10, 30, &ax));
+    CHECK(ax.ok && ax.npairs > 0);
+    double dot = ax.a[0] * u[0] + ax.a[1] * u[1] + ax.a[2] * u[2];
+    CHECK_NEAR(dot, 1, 1e-9);
+    // the point: on the known axis (distance from it)
+    double pc[3] = { ax.c[0] - c[0], ax.c[1] - c[1], ax.c[2] - c[2] };
+    double along = pc[0] * u[0] + pc[1] * u[1] + pc[2] * u[2];
+    double off = sqrt(fmax(0, pc[0] * pc[0] + pc[1] * pc[1] + pc[2] * pc[2] - along * along));
+    CHECK_NEAR(off, 0, 1e-6);
+    CHECK_NEAR(ax.off_axis_rms_deg, 0, 1e-6);
+    double rt_cam_rig[6];
+    char why[256] = "";
+    CHECK_MSG(calib_geometry_rig_frame(&vs, h_mm, &ax, rt_cam_rig, why, sizeof why), "%s", why);
+    double z[3], zero[3] = { 0, 0, 0 }, ez[3] = { 0, 0, 1 }, O[3];
+    transform(rt_cam_rig, ez, z);
+    transform(rt_cam_rig, zero, O);
+    for (int k = 0; k < 3; k++) CHECK_NEAR(z[k] - O[k], u[k], 1e-9);
+    // the origin: on the axis, h_mm below the board's plane at angle 0 (the board's origin is on that plane)
+    double bo[3] = { rt0[3] - O[0], rt0[4] - O[1], rt0[5] - O[2] };
+    CHECK_NEAR(bo[0] * u[0] + bo[1] * u[1] + bo[2] * u[2], h_mm, 1e-6);
+    json_decref(ax.fit);
+    calib_geometry_views_free(&vs);
 }

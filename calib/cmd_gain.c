@@ -1,0 +1,157 @@
+// calib/cmd_gain.c — `refl calib gain`: parses the options (model/opts.h),
+// runs calib_gain_run (calib/gain.h) and prints the reference gain's figures.
+// Exit: 0 done, 1 error (printed once here), 2 usage.
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "calib/calib.h"
+#include "calib/gain.h"
+#include "model/model.h"
+#include "model/opts.h"
+
+#define ABOUT                                                                                                  \
+    "Sensitivity of a camera, EMVA 1288 style: photon transfer (system gain K, read noise, saturation,\n"      \
+    "SNR, dynamic range), linearity error, dark current, offset/DSNU and PRNU maps, and the response\n"       \
+    "kc per us per unit radiance at each gain. Writes DIR/gain.json, DIR/offset_dn.tiff, dsnu_dn.tiff,\n"     \
+    "prnu_gain.tiff (total flat field incl. vignetting, mean 1), prnu_highpass.tiff (smooth part\n"           \
+    "removed) and DIR/report.html. The frames come from one of:\n"                                            \
+    "  --rig RIG -o DIR                          captured here (the sample is a uniform source filling\n"      \
+    "                                            the view)\n"                                                   \
+    "  --frames MANIFEST.csv -o DIR              lines file,exposure_us,kind (kind dark|light; optional\n"    \
+    "                                            header line; paths relative to the manifest; 16-bit PNG\n"    \
+    "                                            or float TIFF). Light exposures need frame pairs.\n"           \
+    "  --session DIR [--session DIR ...] -o DIR  sessions captured elsewhere (light = lamps on, dark = none)"
+
+#define EPILOG                                                                                                 \
+    "kc needs the source's radiance (--radiance); a virtual rig's truth is only shown beside it, for\n"       \
+    "comparison. Exit: 0 done, 1 error, 2 usage."
+
+// A comma-separated list of numbers (malloc'ed); false when empty or not numbers.
+static bool parse_list(const char *s, double **out, int *n)
+{
+    *n = 0;
+    *out = NULL;
+    char *c = strdup(s), *save = NULL;
+    bool ok = true;
+    for (char *p = strtok_r(c, ", ", &save); p; p = strtok_r(NULL, ", ", &save)) {
+        double v;
+        if (!model_parse_double(p, &v)) {
+            ok = false;
+            break;
+        }
+        *out = realloc(*out, sizeof(double) * (*n + 1));
+        (*out)[(*n)++] = v;
+    }
+    free(c);
+    return ok && *n > 0;
+}
+
+// Whole numbers >= lo and positive numbers, with the command's own messages.
+static int numbers(model_cli_t *c, calib_gain_opts_t *o)
+{
+    static const char *const ints[] = { "--steps", "--flat-frames", "--min-steps", "--max-dn" };
+    static const char *const pos[] = { "--probe-exposure-us", "--max-exposure-us", "--radiance", "--quant-dn" };
+    int *idst[] = { &o->steps, &o->flat_frames, &o->min_steps, &o->max_dn };
+    const int ilo[] = { 2, 2, 6, 1 };
+    double *pdst[] = { &o->probe_us, &o->max_us, &o->radiance, &o->quant_dn };
+    for (int k = 0; k < 4; k++) {
+        const char *v = model_cli_value(c, ints[k]);
+        long lv;
+        if (v && (!model_parse_int(v, &lv) || lv < ilo[k] || lv > 1000000))
+            return model_cli_error(c, "%s '%s' must be an integer >= %d", ints[k], v, ilo[k]);
+        if (v) *idst[k] = (int)lv;
+        v = model_cli_value(c, pos[k]);
+        double dv;
+        if (v && (!model_parse_double(v, &dv) || !(dv > 0)))
+            return model_cli_error(c, "%s '%s' must be a positive number", pos[k], v);
+        if (v) *pdst[k] = dv;
+    }
+    return 0;
+}
+
+// The lists, the region and the one source.
+static int check_options(model_cli_t *c, calib_gain_opts_t *o, double **gains, double **darks)
+{
+    int rc = numbers(c, o);
+    if (rc) return rc;
+    if (!o->out || (!!o->rig + !!o->frames + (o->nsessions > 0)) != 1)
+        return model_cli_error(c, "give -o DIR and exactly one of --rig, --frames, --session");
+    const char *roi = model_cli_value(c, "--roi"), *gs = model_cli_value(c, "--gains");
+    const char *ds = model_cli_value(c, "--dark-exposures-us");
+    int *r = o->roi;
+    if (roi && (sscanf(roi, "%d,%d,%d,%d", &r[0], &r[1], &r[2], &r[3]) != 4 || r[0] < 0 || r[1] < 0 || r[2] < 2 ||
+                r[3] < 2))
+        return model_cli_error(c, "--roi '%s' must be X,Y,W,H (W, H >= 2)", roi);
+    if (gs && !parse_list(gs, gains, &o->ngains))
+        return model_cli_error(c, "--gains '%s' must be a comma-separated list of numbers (dB)", gs);
+    if (ds && !parse_list(ds, darks, &o->ndark_exposures))
+        return model_cli_error(c, "--dark-exposures-us '%s' must be a comma-separated list of us", ds);
+    if (*gains) o->gains_db = *gains;
+    if (*darks) o->dark_exposures_us = *darks;
+    return 0;
+}
+
+int calib_cmd_gain(int argc, char **argv)
+{
+    calib_gain_opts_t o = calib_gain_defaults();
+    bool no_report = false;
+    model_opt_t opts[] = {
+        MODEL_OPT_STRING("--rig", "RIG", "capture on this rig", &o.rig, false),
+        MODEL_OPT_STRING("--frames", "MANIFEST.csv", "frames listed in a manifest", &o.frames, false),
+        MODEL_OPT_VALUE("--session", "DIR", "a session captured elsewhere; repeat it for more", false),
+        { "-o", "--output", "DIR", "the output directory", MODEL_OPT_KIND_STRING, &o.out, 0, 0, false, false, NULL },
+        MODEL_OPT_VALUE("--gains", "LIST", "gains (camera unit, dB) to sweep, comma-separated (default 0); the first "
+                        "is the reference (dark current, maps, top-level figures). With --frames: one value, the gain "
+                        "the frames were taken at (a label)", false),
+        MODEL_OPT_VALUE("--steps", "N", "exposure steps of each sweep (default 50, at least --min-steps)", false),
+        MODEL_OPT_STRING("--sample", "NAME", "the plan's sample (default flat_field)", &o.sample, false),
+        MODEL_OPT_STRING("--lamps", "SET", "lamps feeding the source (default all)", &o.lamps, false),
+        MODEL_OPT_VALUE("--probe-exposure-us", "US", "first probe exposure (default 1000)", false),
+        MODEL_OPT_VALUE("--max-exposure-us", "US", "longest sweep exposure (default 1.2 x the probe's full-scale "
+                        "estimate)", false),
+        MODEL_OPT_VALUE("--flat-frames", "N", "light and dark frames of the flat field (default 16)", false),
+        MODEL_OPT_VALUE("--dark-exposures-us", "LIST", "long dark exposures for the dark current (default 100000,"
+                        "500000,1000000,2000000)", false),
+        MODEL_OPT_STRING("--pixel-format", "F", "Mono8|Mono12|Mono16 (default Mono12)", &o.pixel_format, false),
+        MODEL_OPT_VALUE("--min-steps", "N", "fewest sweep steps accepted (default 50, EMVA 1288)", false),
+        MODEL_OPT_VALUE("--radiance", "R", "radiance of the source with the lamps on (no default: without it, no kc)",
+                        false),
+        MODEL_OPT_VALUE("--roi", "X,Y,W,H", "pixels of the statistics (default the whole frame; maps are whole)",
+                        false),
+        MODEL_OPT_VALUE("--max-dn", "N", "full scale of manifest frames (default 65535)", false),
+        MODEL_OPT_VALUE("--quant-dn", "Q", "quantisation step in DN (default 1; 16 for 12-bit data in Mono16)", false),
+        MODEL_OPT_FLAG("--no-report", NULL, "skip the plots and report.html", &no_report),
+    };
+    model_cli_t cli = { .cmd = "calib gain", .synopsis = "", .about = ABOUT, .epilog = EPILOG, .opts = opts,
+                        .nopts = MODEL_NOPTS(opts), .min_positional = 0, .max_positional = 0, .repeat_ok = true };
+    int rc = model_cli_parse(&cli, argc, argv);
+    if (rc != MODEL_CLI_OK) return rc;
+    const char **sessions = calloc((size_t)argc + 1, sizeof *sessions);
+    double *gains = NULL, *darks = NULL;
+    for (int i = 1; i < argc && strcmp(argv[i], "--"); i++)   // every --session (the parser keeps the last)
+        if (!strncmp(argv[i], "--session=", 10)) sessions[o.nsessions++] = argv[i] + 10;
+        else if (!strcmp(argv[i], "--session") && i + 1 < argc) sessions[o.nsessions++] = argv[++i];
+    o.sessions = sessions;
+    o.report = !no_report;
+    o.argc = argc;
+    o.argv = argv;
+    if (!(rc = check_options(&cli, &o, &gains, &darks))) {
+        calib_gain_result_t r;
+        bool q = model_error_quiet_thread(true);   // the library's message is printed once, here
+        bool ok = calib_gain_run(&o, &r);
+        model_error_quiet_thread(q);
+        if (ok)
+            printf("system_gain_dn_per_e %.6g\nread_noise_e %.5g\nsaturation_dn %.2f\nlinearity_error_pct %.4f\n"
+                   "dsnu_dn %.4f\nprnu_pct %.4f\n", r.system_gain_dn_per_e, r.read_noise_e, r.saturation_dn,
+                   r.linearity_error_pct, r.dsnu_dn, r.prnu_pct);
+        else
+            fprintf(stderr, "refl calib gain: failed: %s\n", model_last_error());
+        rc = ok ? 0 : 1;
+    }
+    free(gains);
+    free(darks);
+    free(sessions);
+    return rc;
+}

@@ -1,0 +1,158 @@
+// calib/cmd_geometry.c — `refl calib geometry`: parses the options
+// (model/opts.h), runs calib_geometry_run (calib/geometry.h) and prints the
+// outputs. Exit: 0 done, 1 error (the library's message, printed once here),
+// 2 usage.
+#include <math.h>
+#include <mrcal/mrcal.h>
+#include <stdio.h>
+#include <string.h>
+#include <unistd.h>
+
+#include "calib/calib.h"
+#include "calib/geometry.h"
+#include "model/model.h"
+#include "model/opts.h"
+
+#define ABOUT                                                                                                  \
+    "Camera model by mrgingham (corners) and mrcal (mrcal-calibrate-cameras), the turntable axis\n"             \
+    "from the board poses across angles, and the extrinsics in the rig frame. Writes\n"                         \
+    "DIR/camera.cameramodel, DIR/geometry.json, DIR/report.html (and DIR/capture/, DIR/images/,\n"              \
+    "DIR/corners.vnl, DIR/mrcal/). The views come from one of:\n"                                               \
+    "  --rig RIG.ini -o DIR                    capture here, one session per tilt\n"                           \
+    "  --session DIR1 [--session DIR2 ...]     capture sessions made elsewhere\n"                               \
+    "  --images 'GLOB'                         images captured elsewhere\n"                                     \
+    "  --corners CORNERS.vnl --imagersize W H  mrgingham's corners"
+
+#define EPILOG                                                                                                 \
+    "Rig frame: z along the fitted turntable axis (counter-clockwise angles positive seen from\n"              \
+    "+z); origin on the axis at the table top (--board-height-mm below the board's corner plane\n"             \
+    "at tilt 0); x: the board grid direction at angle 0, tilt 0 closest to the image's +x\n"                   \
+    "(lay the board square to the turntable's home orientation). Units mm, deg, px.\n"                         \
+    "Exit: 0 done, 1 error, 2 usage."
+
+// A number option within [lo, hi] (whole when integer), with the command's own message.
+static int number(model_cli_t *c, const char *name, double lo, double hi, bool integer, const char *what, double *out)
+{
+    const char *v = model_cli_value(c, name);
+    double d;
+    if (!v) return 0;
+    if (!model_parse_double(v, &d) || !(d >= lo && d <= hi) || (integer && d != floor(d)))
+        return model_cli_error(c, "%s %s: %s", name, v, what);
+    *out = d;
+    return 0;
+}
+
+// The H of --imagersize W H: the argument after W (a positional to the parser).
+static int imagersize(model_cli_t *c, int argc, char **argv, calib_geometry_opts_t *o)
+{
+    int at = -1;
+    for (int i = 1; i < argc; i++)
+        if (!strcmp(argv[i], "--imagersize")) at = i;
+    double w = 0, h = 0;
+    if (at < 0) return c->npositional ? model_cli_error(c, "unexpected argument '%s'", c->positional[0]) : 0;
+    if (at + 2 >= argc || c->npositional != 1 || c->positional[0] != argv[at + 2] ||
+        !model_parse_double(argv[at + 1], &w) || !model_parse_double(argv[at + 2], &h) || !(w >= 1 && w <= 1e5) ||
+        !(h >= 1 && h <= 1e5))
+        return model_cli_error(c, "--imagersize needs W H in pixels");
+    o->imager_w = (int)w;
+    o->imager_h = (int)h;
+    return 0;
+}
+
+// The numbers, then the checks of the whole (one source, its needs).
+static int check_options(model_cli_t *c, int argc, char **argv, calib_geometry_opts_t *o)
+{
+    double gridn = o->gridn, min_views = 0;
+    int rc;
+    if ((rc = number(c, "--gridn", 2, 100, true, "give an integer 2..100", &gridn)) ||
+        (rc = number(c, "--square-mm", 1e-3, 1e4, false, "give a length in mm > 0", &o->square_mm)) ||
+        (rc = number(c, "--board-height-mm", -1e4, 1e4, false, "give a length in mm", &o->board_height_mm)) ||
+        (rc = number(c, "--exposure-us", 1, 1e8, false, "give microseconds > 0", &o->exposure_us)) ||
+        (rc = number(c, "--focal-px", 1, 1e6, false, "give a focal length in px > 0", &o->focal_px)) ||
+        (rc = number(c, "--distance-mm", 1, 1e7, false, "give a distance in mm > 0", &o->distance_mm)) ||
+        (rc = number(c, "--min-views", 1, 1e5, true, "give an integer >= 1", &min_views)) ||
+        (rc = imagersize(c, argc, argv, o)))
+        return rc;
+    o->gridn = (int)gridn;
+    o->min_views = (int)min_views;
+    int nsrc = (o->rig != NULL) + (o->nsessions > 0) + (o->images != NULL) + (o->corners != NULL);
+    if (nsrc != 1)
+        return model_cli_error(c, "%s", nsrc ? "give only one of --rig, --session, --images, --corners"
+                                             : "say where the views come from: --rig, --session, --images or "
+                                               "--corners");
+    if (!o->out) return model_cli_error(c, "give the output directory: -o DIR");
+    if (o->corners && !o->imager_w)
+        return model_cli_error(c, "--corners needs --imagersize W H (no images to read it from)");
+    mrcal_lensmodel_t lm;
+    if (!mrcal_lensmodel_from_name(&lm, o->lensmodel))
+        return model_cli_error(c, "--lensmodel %s: not a lens model mrcal knows (e.g. LENSMODEL_OPENCV8, "
+                               "LENSMODEL_SPLINED_STEREOGRAPHIC_order=3_Nx=16_Ny=12_fov_x_deg=50)", o->lensmodel);
+    if (o->rig && access(o->rig, R_OK) != 0) return model_cli_error(c, "--rig %s: cannot read the rig file", o->rig);
+    if (o->corners && access(o->corners, R_OK) != 0)
+        return model_cli_error(c, "--corners %s: cannot read the corners file", o->corners);
+    return 0;
+}
+
+int calib_cmd_geometry(int argc, char **argv)
+{
+    calib_geometry_opts_t o = calib_geometry_defaults();
+    model_opt_t opts[] = {
+        MODEL_OPT_STRING("--rig", "RIG.ini", "capture: one session per tilt (DIR/capture/tiltT_azA), all lamps on",
+                         &o.rig, false),
+        { "-o", "--out", "DIR", "the output directory", MODEL_OPT_KIND_STRING, &o.out, 0, 0, false, false, NULL },
+        MODEL_OPT_STRING("--tilts", "SPEC", "tilts for --rig: 'T[@AZ][:A,A,...] ...' (tilt deg, hinge azimuth deg, "
+                         "turntable angles deg; default: the example rig's\n                             '"
+                         CALIB_GEOMETRY_DEFAULT_TILTS "')", &o.tilts, false),
+        MODEL_OPT_STRING("--angles", "'A A ...'", "angles for tilts given without their own (default '"
+                         CALIB_GEOMETRY_DEFAULT_ANGLES "')", &o.angles, false),
+        MODEL_OPT_STRING("--sample", "NAME", "the board sample (default calib_board)", &o.sample, false),
+        MODEL_OPT_VALUE("--exposure-us", "US", "the capture's exposure (default 6000)", false),
+        MODEL_OPT_VALUE("--session", "DIR", "use a capture session (angles from its journal, tilt from its plan); "
+                        "repeat it for more", false),
+        MODEL_OPT_STRING("--images", "'GLOB'", "use images captured elsewhere (no angles: no axis, no rig frame)",
+                         &o.images, false),
+        MODEL_OPT_STRING("--corners", "FILE.vnl", "use mrgingham's corners (no images needed; needs --imagersize)",
+                         &o.corners, false),
+        MODEL_OPT_STRING("--lensmodel", "NAME", "LENSMODEL_OPENCV8 (default), LENSMODEL_OPENCV4, ..., "
+                         "LENSMODEL_SPLINED_STEREOGRAPHIC_order=3_Nx=16_Ny=12_fov_x_deg=50", &o.lensmodel, false),
+        MODEL_OPT_VALUE("--gridn", "N", "inner corners per side (mrgingham --gridn; default 10)", false),
+        MODEL_OPT_VALUE("--square-mm", "S", "corner spacing (default 30)", false),
+        MODEL_OPT_VALUE("--board-height-mm", "H", "height of the corner plane above the table top at tilt 0 "
+                        "(default 5)", false),
+        MODEL_OPT_VALUE("--focal-px", "F", "seed focal length for mrcal (default 1.4 x imager width)", false),
+        MODEL_OPT_VALUE("--imagersize", "W H", "imager size (needed with --corners)", false),
+        MODEL_OPT_VALUE("--distance-mm", "D", "distance of the projection-uncertainty figure (default 900)", false),
+        MODEL_OPT_VALUE("--min-views", "N", "views with a board the solve needs (default by lens model)", false),
+    };
+    model_cli_t cli = { .cmd = "calib geometry", .synopsis = "", .about = ABOUT, .epilog = EPILOG, .opts = opts,
+                        .nopts = MODEL_NOPTS(opts), .min_positional = 0, .max_positional = 1, .repeat_ok = true };
+    int rc = model_cli_parse(&cli, argc, argv);
+    if (rc != MODEL_CLI_OK) return rc;
+    const char **sessions = calloc((size_t)argc + 1, sizeof *sessions);
+    for (int i = 1; i < argc && strcmp(argv[i], "--"); i++)   // every --session (the parser keeps the last)
+        if (!strncmp(argv[i], "--session=", 10)) sessions[o.nsessions++] = argv[i] + 10;
+        else if (!strcmp(argv[i], "--session") && i + 1 < argc) sessions[o.nsessions++] = argv[++i];
+    o.sessions = sessions;
+    o.argc = argc;
+    o.argv = argv;
+    if ((rc = check_options(&cli, argc, argv, &o))) {
+        free(sessions);
+        return rc;
+    }
+    calib_geometry_result_t r;
+    bool q = model_error_quiet_thread(true);   // the library's message is printed once, here
+    bool ok = calib_geometry_run(&o, &r);
+    model_error_quiet_thread(q);
+    if (ok) {
+        printf("refl calib geometry: %s (RMS %.4f px), %s/geometry.json, %s/report.html\n", r.camera_model, r.rms_px,
+               r.outdir, r.outdir);
+        rc = 0;
+    } else {
+        fprintf(stderr, "refl calib geometry: %s\n", model_last_error());
+        if (r.usage) model_cli_usage(&cli, stderr);
+        rc = r.usage ? 2 : 1;
+    }
+    calib_geometry_result_free(&r);
+    free(sessions);
+    return rc;
+}

@@ -1,0 +1,204 @@
+// calib/geometry.h — `refl calib geometry` as a library: the camera model
+// (mrgingham corners, mrcal solve), the turntable axis from the board poses
+// and the camera's extrinsics in the rig frame. Public within calib/ and to
+// the tests; the command (argument parsing, calib/cmd_geometry.c) is
+// calib_cmd_geometry (calib/calib.h).
+//
+// calib_geometry_run does it all; its stages, in order, are declared below so
+// that a test can run one on data of its own:
+//   1. views: calib_geometry_capture (--rig: one session per tilt), then
+//      calib_geometry_add_session / calib_geometry_add_images (8-bit copies in
+//      DIR/images) or calib_geometry_parse_corners (--corners);
+//   2. corners: calib_geometry_find_corners (mrgingham → DIR/corners.vnl);
+//   3. solve: calib_geometry_solve (mrcal-calibrate-cameras and
+//      scripts/calib_geometry_report.py solution) and
+//      calib_geometry_apply_solution (poses into the views, the camera);
+//   4. axis and rig frame: calib_geometry_fit_axis, calib_geometry_rig_frame,
+//      calib_geometry_explain_missing (why a view has no board);
+//   5. outputs: calib_geometry_write_cameramodel, calib_geometry_json,
+//      calib_geometry_report (DIR/camera.cameramodel, geometry.json, report.html).
+//
+// Units: lengths mm, angles deg (rotation vectors r in rad), pixels px with
+// (0, 0) the centre of the top-left pixel. Poses are mrcal's rt (r: rotation
+// vector, rad; t: mm); rt_a_b maps coordinates in frame b to frame a.
+// Errors: false / NULL with the message kept by model_error_set
+// (model_last_error), not printed: the caller prints it once. Progress and
+// the views without a board go to stderr ("refl calib geometry: ...").
+#pragma once
+
+#include <glib.h>
+#include <jansson.h>
+#include <stdbool.h>
+#include <stddef.h>
+
+#include "model/model.h"
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+// The default tilts (--tilts) and angles (--angles) of the example rig (camera
+// ~900 mm away, 35 deg above the table, board 130 mm off the axis): chosen
+// greedily for imager coverage among the poses where the whole board is in
+// view at < 45 deg obliquity, plus two flat views (tilt 0) for the rig frame.
+#define CALIB_GEOMETRY_DEFAULT_TILTS                                                                           \
+    "0:40,240 20@0:0,10,40,340 20@90:290,300,320,350 20@180:210,240,260,270 35@0:10,20,40 "                     \
+    "35@180:210,230,240 50@0:20,30,40 50@180:210,220,230,240"
+#define CALIB_GEOMETRY_DEFAULT_ANGLES "0 40 80 120 160 200 240 280 320"
+
+// What to calibrate from (exactly one of rig, sessions, images, corners) and how.
+typedef struct {
+    const char  *rig;              // capture on this rig file (one session per tilt), or NULL
+    const char *const *sessions;   // capture sessions (nsessions), or NULL
+    int          nsessions;
+    const char  *images;           // a glob of images captured elsewhere, or NULL
+    const char  *corners;          // mrgingham's corners file (needs imager_w, imager_h), or NULL
+    const char  *out;              // the output directory (created)
+    const char  *lensmodel;        // mrcal's name, e.g. "LENSMODEL_OPENCV8"
+    const char  *tilts, *angles;   // --rig: "T[@AZ][:A,A,...] ..." and the default angles "A A ..."
+    const char  *sample;           // --rig: the board's sample name
+    double       exposure_us;      // --rig: the capture's exposure
+    int          gridn;            // inner corners per side
+    double       square_mm;        // corner spacing
+    double       board_height_mm;  // corner plane above the table top at tilt 0
+    double       focal_px;         // mrcal's seed focal length; NAN: 1.4 x the imager width
+    double       distance_mm;      // distance of the projection-uncertainty figure
+    int          imager_w, imager_h;   // px; 0: from the images (needed with corners)
+    int          min_views;        // views with a board the solve needs; 0: by lens model
+    int          progress;         // calib_capture's progress mode
+    int          argc;             // the command line, for the provenance (may be 0)
+    char       **argv;
+} calib_geometry_opts_t;
+
+// The defaults above, LENSMODEL_OPENCV8, board calib_board with 10x10 corners
+// 30 mm apart 5 mm above the table, 6000 us, distance 900 mm.
+calib_geometry_opts_t calib_geometry_defaults(void);
+
+// Views a lens model needs at least (a rule of thumb: 20 splined, 4 pinhole,
+// 6 OPENCV4, 7 OPENCV5, else 10).
+int calib_geometry_default_min_views(const char *lensmodel);
+
+// One image of the board.
+typedef struct {
+    char   *name;            // image name in DIR/images (and in the corners file)
+    char   *source;          // the original frame or image path
+    char   *session;         // session directory, NULL for images/corners
+    int     group;           // tilt group (session index), -1 none
+    double  angle_deg;       // turntable angle (measured), NAN unknown
+    double  tilt_deg, tilt_azimuth_deg;   // NAN unknown
+    bool    found;           // mrgingham found the N x N board
+    char    why[320];        // why not found / not used
+    double *q;               // gridn*gridn*2 corners, px (found)
+    bool    solved;          // mrcal has a pose for it
+    double  rt_cam_board[6]; // mrcal's pose (corner order as mrgingham's), then quarter-turn corrected
+    int     quarter_turns;
+    double  rms_px;          // mrcal's RMS residual of the view, NAN unknown
+    int     outliers;
+} calib_geometry_view_t;
+
+// The views and their tilt groups (one group per session).
+typedef struct {
+    GPtrArray *v;            // calib_geometry_view_t*, owned
+    int        ngroups;
+    double    *group_tilt, *group_az;   // ngroups each: the session's tilt and hinge azimuth, deg
+} calib_geometry_views_t;
+
+void calib_geometry_views_init(calib_geometry_views_t *vs);
+void calib_geometry_views_free(calib_geometry_views_t *vs);
+// The view of that name (or of that base name); NULL.
+calib_geometry_view_t *calib_geometry_view_find(calib_geometry_views_t *vs, const char *name);
+
+// The turntable axis in the camera frame.
+typedef struct {
+    bool    ok;
+    double  a[3], c[3];             // direction (unit) and a point, camera frame, mm
+    double  dir_unc_deg, point_unc_mm, off_axis_rms_deg, point_rms_mm;
+    int     npairs, nviews;
+    json_t *fit;                    // per group: angle_deg[], rotation_about_axis_deg[] (owned)
+} calib_geometry_axis_t;
+
+// Everything a run has found so far; the stages fill it in order.
+typedef struct {
+    calib_geometry_views_t views;
+    json_t         *prov;           // provenance (model_provenance), owned
+    char           *outdir;         // absolute output directory (free)
+    char           *imgdir, *mdir;  // DIR/images, DIR/mrcal (g_free)
+    char           *cornpath;       // the corners file used (g_free)
+    char          **sessions;       // --rig: the captured sessions (g_strfreev), else NULL
+    int             W, H;           // imager size, px
+    int             nfound;         // views with a board
+    json_t         *sol;            // scripts/calib_geometry_report.py's solution (owned)
+    double          rms_px;         // RMS reprojection residual
+    model_camera_t *cam;            // intrinsics of the solution, extrinsics 0
+    calib_geometry_axis_t axis;
+    bool            have_rig;
+    double          rt_cam_rig[6];
+    char            rigwhy[256];    // why there is no rig frame
+    char           *campath;        // DIR/camera.cameramodel (g_free)
+    json_t         *out;            // geometry.json's document (owned)
+} calib_geometry_state_t;
+
+void calib_geometry_state_free(calib_geometry_state_t *s);
+
+// The result of a run.
+typedef struct {
+    bool    usage;          // the failure is the options' (a bad --tilts): exit status 2
+    char   *camera_model;   // DIR/camera.cameramodel (g_free)
+    char   *outdir;         // the absolute output directory (g_free)
+    double  rms_px;         // RMS reprojection residual
+    bool    have_rig;       // the extrinsics are in the rig frame (else the camera's own)
+} calib_geometry_result_t;
+
+void calib_geometry_result_free(calib_geometry_result_t *r);
+
+// The whole calibration. false + message (r->usage for a bad option).
+bool calib_geometry_run(const calib_geometry_opts_t *o, calib_geometry_result_t *r);
+
+// --- stages ----------------------------------------------------------------
+
+// A capture plan (its text) for one --tilts entry "T[@AZ][:A,A,...]" (angles
+// default o->angles); name gets "tiltT_azA". NULL + message.
+char *calib_geometry_tilt_plan(const char *spec, const calib_geometry_opts_t *o, char *name, size_t namen);
+// Every plan of o->tilts first (a bad one fails before anything moves, with
+// *usage set), then the captures into DIR/capture/NAME; s->sessions gets them.
+bool calib_geometry_capture(const calib_geometry_opts_t *o, calib_geometry_state_t *s, bool *usage);
+// A session's frames → 8-bit images in imgdir and views of a new tilt group;
+// *w, *h: the frame size (0: not known yet; all frames must share it).
+bool calib_geometry_add_session(calib_geometry_views_t *vs, const char *sdir, const char *imgdir, int *w, int *h);
+// Images matching pattern → 8-bit images in imgdir and views without a group.
+bool calib_geometry_add_images(calib_geometry_views_t *vs, const char *pattern, const char *imgdir, int *w, int *h);
+// mrgingham's output text ("name x y [level]"; "name - -": no board) into the
+// views (create: add views for unknown names). path names the text in messages.
+bool calib_geometry_parse_corners(calib_geometry_views_t *vs, const char *text, const char *path, int gridn,
+                                  bool create);
+// The corners: from o->corners, or mrgingham on s->imgdir (kept as
+// DIR/corners.vnl); s->cornpath, s->nfound. Fails when fewer than o->min_views
+// views have a board (and lists the others).
+bool calib_geometry_find_corners(const calib_geometry_opts_t *o, calib_geometry_state_t *s);
+// mrcal-calibrate-cameras on the corners (model and log in DIR/mrcal), then
+// the solution (board poses, residuals, projection uncertainty) as JSON into s->sol.
+bool calib_geometry_solve(const calib_geometry_opts_t *o, calib_geometry_state_t *s);
+// The solution's poses into the views, s->cam and s->rms_px.
+bool calib_geometry_apply_solution(const calib_geometry_opts_t *o, calib_geometry_state_t *s);
+// The axis from the poses of each tilt group at different angles (quarter
+// turns of mrgingham's corner order made consistent first; inconsistent views
+// lose their pose). false when too few pairs.
+bool calib_geometry_fit_axis(calib_geometry_views_t *vs, int gridn, double square_mm, calib_geometry_axis_t *ax);
+// rt_cam_rig from the axis and the tilt-0 group's first pose; false + why.
+bool calib_geometry_rig_frame(calib_geometry_views_t *vs, double board_height_mm, const calib_geometry_axis_t *ax,
+                              double rt_cam_rig[6], char *why, size_t whyn);
+// Why each view without a board has none (predicted from the axis when ax).
+void calib_geometry_explain_missing(calib_geometry_views_t *vs, int gridn, double square_mm,
+                                    const calib_geometry_axis_t *ax, model_camera_t *cam, int W, int H);
+// mrcal's .cameramodel (intrinsics intr, imager W x H, extrinsics rt_cam_ref;
+// rig: ref is the rig frame, else the camera), written atomically.
+bool calib_geometry_write_cameramodel(const char *path, const char *lensmodel, json_t *intr, int W, int H,
+                                      const double rt[6], bool rig, double rms);
+// geometry.json's document from the state (new reference).
+json_t *calib_geometry_json(const calib_geometry_opts_t *o, calib_geometry_state_t *s);
+// The plots (scripts/calib_geometry_report.py plots) and DIR/report.html.
+bool calib_geometry_report(const calib_geometry_opts_t *o, const calib_geometry_state_t *s, const char *jpath);
+
+#ifdef __cplusplus
+}
+#endif
