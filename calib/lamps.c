@@ -17,6 +17,10 @@
 // (calib_lamps_bundle: the path's offset, shift and tilt with priors, the
 // highlights fitted again at the fitted path, the joint fit again) ->
 // DIR/lamps.json, DIR/report.html (plots by scripts/calib_lamps_report.py).
+// calib_lamps_run does it in stages (calib/lamps.h): calib_lamps_open (the
+// capture or the session, the frames), _find_highlights, _triangulate_lamps,
+// _joint_fit, _write_json, _write_report; `refl calib lamps` is
+// calib/cmd_lamps.c.
 //
 // Measured on the virtual rig (tests/test_calib_lamps.c): the centroid alone
 // is biased by the point sampling of a highlight ~2 px wide (0.06 px RMS);
