@@ -17,6 +17,10 @@
 // (calib_lamps_bundle: the path's offset, shift and tilt with priors, the
 // highlights fitted again at the fitted path, the joint fit again) ->
 // DIR/lamps.json, DIR/report.html (plots by scripts/calib_lamps_report.py).
+// calib_lamps_run does it in stages (calib/lamps.h): calib_lamps_open (the
+// capture or the session, the frames), _find_highlights, _triangulate_lamps,
+// _joint_fit, _write_json, _write_report; `refl calib lamps` is
+// calib/cmd_lamps.c.
 //
 // Measured on the virtual rig (tests/test_calib_lamps.c): the centroid alone
 // is biased by the point sampling of a highlight ~2 px wide (0.06 px RMS);
@@ -43,6 +47,7 @@
 #include <glib.h>
 #include <limits.h>
 #include <math.h>
+#include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -54,6 +59,7 @@
 #include "model/model.h"
 #include "model/report.h"
 #include "rig/rig.h"
+#include "rig/truth.h"
 
 // ---------------------------------------------------------------------------
 // Small linear algebra
@@ -134,8 +140,8 @@ calib_lamps_sphere_image_t *calib_lamps_sphere_image(const model_camera_t *cam, 
     model_vec3_t cc = vsub(c, C);
     double dist = sqrt(vdot(cc, cc));
     if (!(dist > r * 1.01)) {
-        model_error(NULL, 0, "the sphere (centre %.1f %.1f %.1f mm, radius %g mm) contains the camera centre", c.x,
-                    c.y, c.z, r);
+        model_error_set(NULL, 0, "the sphere (centre %.1f %.1f %.1f mm, radius %g mm) contains the camera centre", c.x,
+                        c.y, c.z, r);
         return NULL;
     }
     // silhouette: points of the sphere's tangent cone from the camera centre
@@ -166,7 +172,7 @@ calib_lamps_sphere_image_t *calib_lamps_sphere_image(const model_camera_t *cam, 
     }
     int x0 = (int)floor(xmin) - 3, x1 = (int)ceil(xmax) + 3, y0 = (int)floor(ymin) - 3, y1 = (int)ceil(ymax) + 3;
     if (!isfinite(xmin) || x1 < 0 || y1 < 0 || x0 >= W || y0 >= H) {
-        model_error(NULL, 0, "the sphere (centre %.1f %.1f %.1f mm) is outside the camera's view", c.x, c.y, c.z);
+        model_error_set(NULL, 0, "the sphere (centre %.1f %.1f %.1f mm) is outside the camera's view", c.x, c.y, c.z);
         return NULL;
     }
     x0 = x0 < 0 ? 0 : x0;
@@ -181,7 +187,7 @@ calib_lamps_sphere_image_t *calib_lamps_sphere_image(const model_camera_t *cam, 
         free(qq);
         free(dirs);
         calib_lamps_sphere_image_free(s);
-        model_error(NULL, 0, "out of memory");
+        model_error_set(NULL, 0, "out of memory");
         return NULL;
     }
     s->x0 = x0;
@@ -422,8 +428,8 @@ bool calib_lamps_reflect(const model_camera_t *cam, const double q[2], model_vec
     model_vec3_t C = model_camera_centre_world(cam);
     double t = ray_sphere(C, d, c, r);
     if (!isfinite(t)) {
-        model_error(NULL, 0, "the camera ray through (%.2f, %.2f) px misses the sphere (centre %.1f %.1f %.1f mm, "
-                    "radius %g mm)", q[0], q[1], c.x, c.y, c.z, r);
+        model_error_set(NULL, 0, "the camera ray through (%.2f, %.2f) px misses the sphere (centre %.1f %.1f %.1f mm, "
+                        "radius %g mm)", q[0], q[1], c.x, c.y, c.z, r);
         return false;
     }
     *p = vadd(C, vscale(d, t));
@@ -538,7 +544,7 @@ bool calib_lamps_fit_direction(const model_camera_t *cam, const calib_lamps_high
         }
     model_vec3_t d[81];
     if (m < 9 || !model_camera_unproject(cam, q, m, d)) {
-        model_error(NULL, 0, "too few pixels around the highlight for the direction fit (%d)", m);
+        model_error_set(NULL, 0, "too few pixels around the highlight for the direction fit (%d)", m);
         return false;
     }
     for (int k = 0; k < m; k++) {
@@ -555,7 +561,7 @@ bool calib_lamps_fit_direction(const model_camera_t *cam, const calib_lamps_high
         f.n++;
     }
     if (f.n < 9) {
-        model_error(NULL, 0, "too few pixels of the highlight on the sphere for the direction fit (%d)", f.n);
+        model_error_set(NULL, 0, "too few pixels of the highlight on the sphere for the direction fit (%d)", f.n);
         return false;
     }
     // start: the peak, at the centroid's direction, the lobe ~ a pixel's angle
@@ -620,7 +626,7 @@ bool calib_lamps_fit_direction(const model_camera_t *cam, const calib_lamps_high
         }
     }
     if (!(hypot(p[1], p[2]) < 0.05)) {
-        model_error(NULL, 0, "the direction fit moved %.3f rad from the centroid's direction", hypot(p[1], p[2]));
+        model_error_set(NULL, 0, "the direction fit moved %.3f rad from the centroid's direction", hypot(p[1], p[2]));
         return false;
     }
     model_vec3_t u = vadd(u0, vadd(vscale(e1, p[1]), vscale(e2, p[2])));
@@ -672,7 +678,7 @@ bool calib_lamps_triangulate(const model_vec3_t *p, const model_vec3_t *d, int n
     int navail = 0;
     for (int i = 0; i < n; i++) navail += used[i];
     if (navail < 3) {
-        model_error(NULL, 0, "%d ray%s: a position needs at least 3", navail, navail == 1 ? "" : "s");
+        model_error_set(NULL, 0, "%d ray%s: a position needs at least 3", navail, navail == 1 ? "" : "s");
         return false;
     }
     double *dist = malloc(sizeof *dist * (size_t)n), *tmp = malloc(sizeof *tmp * (size_t)n);
@@ -681,8 +687,8 @@ bool calib_lamps_triangulate(const model_vec3_t *p, const model_vec3_t *d, int n
     int max_drop = navail / 3, dropped = 0;
     for (;;) {
         if (!fit_once(p, d, n, used, o) || !(o->min_eig > 1e-4)) {
-            model_error(NULL, 0, "the %d rays are (nearly) parallel (smallest spread %.2g): they do not fix a point; "
-                        "use more turntable angles", o->n_used, o->min_eig);
+            model_error_set(NULL, 0, "the %d rays are (nearly) parallel (smallest spread %.2g): they do not fix a "
+                            "point; use more turntable angles", o->n_used, o->min_eig);
             goto done;
         }
         // deleted residuals: each used ray's distance from the fit without it
@@ -935,7 +941,7 @@ bool calib_lamps_bundle(const calib_lamps_obs_t *obs, int nobs, int nl, const ca
 {
     memset(out, 0, sizeof *out);
     if (nl < 1 || nl > 64) {
-        model_error(NULL, 0, "the joint fit takes 1 to 64 lamps (%d given)", nl);
+        model_error_set(NULL, 0, "the joint fit takes 1 to 64 lamps (%d given)", nl);
         return false;
     }
     int cnt[64] = { 0 };
@@ -943,7 +949,7 @@ bool calib_lamps_bundle(const calib_lamps_obs_t *obs, int nobs, int nl, const ca
         if (obs[i].lamp >= 0 && obs[i].lamp < nl) cnt[obs[i].lamp]++;
     for (int l = 0; l < nl; l++)
         if (cnt[l] < 3) {
-            model_error(NULL, 0, "lamp %d has %d rays in the joint fit: a position needs at least 3", l, cnt[l]);
+            model_error_set(NULL, 0, "lamp %d has %d rays in the joint fit: a position needs at least 3", l, cnt[l]);
             return false;
         }
     calib_lamps_bundle_ctx_t *ctx = calloc((size_t)nobs, sizeof *ctx);
@@ -951,7 +957,7 @@ bool calib_lamps_bundle(const calib_lamps_obs_t *obs, int nobs, int nl, const ca
     double *g = out->sphere;
     bool ok = false;
     if (!ctx || !pr) {
-        model_error(NULL, 0, "out of memory");
+        model_error_set(NULL, 0, "out of memory");
         goto done;
     }
     for (int l = 0; l < nl; l++)
@@ -972,7 +978,7 @@ bool calib_lamps_bundle(const calib_lamps_obs_t *obs, int nobs, int nl, const ca
         ctx[i].sigma_rad = 1e-3;
         for (int k = 0; k < 9; k++) ctx[i].W[k] = k % 4 == 0;
         if (S->image_weights && !calib_lamps_bundle_weight(&ctx[i], x_mm + 3 * obs[i].lamp, g)) {
-            model_error(NULL, 0, "the joint fit: a highlight's camera ray misses the sphere");
+            model_error_set(NULL, 0, "the joint fit: a highlight's camera ray misses the sphere");
             goto done;
         }
         double *blocks[2] = { x_mm + 3 * obs[i].lamp, g };
@@ -985,7 +991,7 @@ bool calib_lamps_bundle(const calib_lamps_obs_t *obs, int nobs, int nl, const ca
         fo.threads = 1;
         lsq_summary_t sm;
         if (!lsq_solve(pr, &fo, &sm)) {
-            model_error(NULL, 0, "the joint fit of lamps and sphere failed: %s", sm.message);
+            model_error_set(NULL, 0, "the joint fit of lamps and sphere failed: %s", sm.message);
             goto done;
         }
         out->iterations += sm.iterations;
@@ -994,7 +1000,7 @@ bool calib_lamps_bundle(const calib_lamps_obs_t *obs, int nobs, int nl, const ca
             double rr[3];
             const double *pb[2] = { x_mm + 3 * obs[i].lamp, g };
             if (!calib_lamps_bundle_residual(&ctx[i], pb, rr, NULL)) {
-                model_error(NULL, 0, "the joint fit: a highlight's ray misses the fitted sphere");
+                model_error_set(NULL, 0, "the joint fit: a highlight's ray misses the fitted sphere");
                 goto done;
             }
             double a2 = (rr[0] * rr[0] + rr[1] * rr[1] + rr[2] * rr[2]) * ctx[i].sigma_rad * ctx[i].sigma_rad;
@@ -1016,7 +1022,7 @@ bool calib_lamps_bundle(const calib_lamps_obs_t *obs, int nobs, int nl, const ca
         for (int i = 0; i < nobs; i++) {
             ctx[i].sigma_rad = out->sigma_rad[obs[i].lamp];
             if (S->image_weights && !calib_lamps_bundle_weight(&ctx[i], x_mm + 3 * obs[i].lamp, g)) {
-                model_error(NULL, 0, "the joint fit: a highlight's camera ray misses the fitted sphere");
+                model_error_set(NULL, 0, "the joint fit: a highlight's camera ray misses the fitted sphere");
                 goto done;
             }
         }
@@ -1038,7 +1044,7 @@ bool calib_lamps_bundle(const calib_lamps_obs_t *obs, int nobs, int nl, const ca
     ok = true;
     goto done;
 fail:
-    model_error(NULL, 0, "the joint fit of lamps and sphere: %s", model_last_error());
+    model_error_set(NULL, 0, "the joint fit of lamps and sphere: %s", model_last_error());
 done:
     lsq_problem_free(pr);
     free(ctx);
@@ -1046,164 +1052,29 @@ done:
 }
 
 // ---------------------------------------------------------------------------
-// The command
+// The calibration: calib_lamps_run and its stages
 
-typedef struct {
-    const char *rig, *camera, *out, *session, *sample, *lamps_opt, *angles_opt, *exposures_opt;
-    bool        have_centre, have_radius;
-    double      c0[3], radius_mm;
-    int         progress;
-    double      min_snr;
-    double      lamp_radius_mm;   // NAN: from the virtual rig's truth, else 0
-    int         method;           // 0 centroid, 1 Gaussian in the image, 2 direction-space model
-    double      offset_prior_mm;  // joint fit: std of the sphere-facts offset (<= 0: held)
-    double      shift_prior_mm;   // joint fit: std of the camera-relative shift (<= 0: held)
-    double      tilt_prior_mrad;  // joint fit: std of the camera-relative tilt (<= 0: held)
-    bool        joint;            // the joint fit of lamps and sphere path
-} opts_t;
-
-static void usage(FILE *f)
+calib_lamps_opts_t calib_lamps_defaults(void)
 {
-    fprintf(f,
-            "usage: refl calib lamps --rig RIG.ini --camera CAMERA.cameramodel -o DIR [options]\n"
-            "       refl calib lamps --session SESSION_DIR --camera CAMERA.cameramodel -o DIR [options]\n\n"
-            "Lamp positions from the highlights of a mirror (chrome) sphere of known radius carried round by the\n"
-            "turntable: each lamp alone at several angles, its highlight found to sub-pixel, reflected off the\n"
-            "sphere into a ray toward the lamp, the rays triangulated (least squares, outliers dropped).\n\n"
-            "options:\n"
-            "  --rig RIG.ini              capture on this rig into DIR/capture (a complete session there is reused)\n"
-            "  --session DIR              analyse a session captured elsewhere (its plan: the sphere, each lamp alone)\n"
-            "  --camera FILE              the camera model (mrcal .cameramodel, extrinsics in the rig frame)\n"
-            "  -o DIR                     output: lamps.json, report.html, plots\n"
-            "  --sphere-centre-mm X,Y,Z   the sphere's centre at turntable angle 0 (rig frame, mm)\n"
-            "  --sphere-radius-mm R       the sphere's radius (mm); both default, on a virtual rig, to the truth\n"
-            "                             file's [sample NAME] facts, and are required otherwise\n"
-            "  --sample NAME              the sample of the plan (default mirror_sphere)\n"
-            "  --angles DEG,DEG,...       turntable angles (default 24: 0,15,...,345)\n"
-            "  --lamps NAME,...           the lamps (default every lamp of the rig file)\n"
-            "  --exposures-us US,...      auto-bracketing ladder, longest first (default 40,20,10)\n"
-            "  --min-snr X                a highlight's peak / noise at least (default 12)\n"
-            "  --lamp-radius-mm R         the lamps' emitting radius, modelled in the highlight (default: a virtual\n"
-            "                             rig's truth, else 0 = point lamps)\n"
-            "  --highlight model|gauss|centroid  how a highlight is located: model (default) fits the lamp's disk\n"
-            "                             seen in the mirror in direction space; gauss a 2-D Gaussian in the image;\n"
-            "                             centroid the intensity-weighted centroid\n"
-            "  --sphere-path fit|fixed    fit (default): the lamps and the sphere's path jointly over every highlight\n"
-            "                             (the path: the given centre plus an offset that turns with the table, a\n"
-            "                             shift and a tilt that do not: what the camera model's extrinsics error\n"
-            "                             moves); fixed: each lamp alone with the sphere where the facts put it\n"
-            "  --sphere-offset-prior-mm S std of the sphere centre's offset from the facts (default 1)\n"
-            "  --sphere-shift-prior-mm S  std of the path's shift across the axis (default 0.1: a calibrated camera)\n"
-            "  --sphere-tilt-prior-mrad S std of the path's tilt (default 1); 0 holds a part at 0\n"
-            "  --progress lines|bar       capture progress (default: bar on a terminal)\n"
-            "  -h, --help                 this help\n\n"
-            "Output lamps.json: units mm, rig frame; per lamp position_mm, std_mm, rms_ray_distance_mm, n_frames,\n"
-            "frames_missing, radius_mm (the emitting radius the highlights were modelled with). A lamp whose\n"
-            "highlight is missing in some frames is named with those frames and fitted\n"
-            "from the rest (>= 3 needed, else an error).\n");
+    calib_lamps_opts_t o = { .sample = "mirror_sphere", .nangles = 24, .exposures_us = { 40, 20, 10 },
+                             .nexposures = 3, .min_snr = 12, .method = CALIB_LAMPS_MODEL, .joint = true,
+                             .offset_prior_mm = 1.0, .shift_prior_mm = 0.1, .tilt_prior_mrad = 1.0,
+                             .progress = -1 };
+    for (int i = 0; i < o.nangles; i++) o.angles_deg[i] = 15.0 * i;
+    return o;
 }
 
-static bool parse_list(const char *s, double *v, int max, int *n, const char *what)
+// A line of progress or a note: "refl calib lamps: " and the text (which
+// ends its own lines).
+__attribute__((format(printf, 2, 3))) static void note(const calib_lamps_opts_t *o, const char *fmt, ...)
 {
-    *n = 0;
-    char *dup = g_strdup(s);
-    bool ok = true;
-    for (char *tok = strtok(dup, ", "); tok; tok = strtok(NULL, ", ")) {
-        if (*n >= max) {
-            fprintf(stderr, "refl calib lamps: %s '%s': at most %d values\n", what, s, max);
-            ok = false;
-            break;
-        }
-        if (!model_parse_double(tok, &v[*n])) {
-            fprintf(stderr, "refl calib lamps: %s '%s': '%s' is not a number\n", what, s, tok);
-            ok = false;
-            break;
-        }
-        (*n)++;
-    }
-    g_free(dup);
-    return ok;
+    if (!o->log) return;
+    va_list ap;
+    va_start(ap, fmt);
+    fprintf(o->log, "refl calib lamps: ");
+    vfprintf(o->log, fmt, ap);
+    va_end(ap);
 }
-
-// Lamp names and, for a virtual rig, the truth file path from a rig file.
-static bool rig_file_facts(const char *rig_path, GPtrArray *names, char **truth)
-{
-    model_ini_t *ini = model_ini_load(rig_path);
-    if (!ini) return false;
-    *truth = NULL;
-    const model_ini_entry_t *be = model_ini_get(ini, "rig", "backend");
-    if (be && !strcmp(be->value, "virtual")) {
-        const model_ini_entry_t *t = model_ini_get(ini, "rig", "truth");
-        if (!t) {
-            model_error(rig_path, 0, "[rig] backend = virtual without truth = FILE");
-            model_ini_free(ini);
-            return false;
-        }
-        if (t->value[0] == '/') *truth = g_strdup(t->value);
-        else {
-            char *d = g_path_get_dirname(rig_path);
-            *truth = g_strdup_printf("%s/%s", d, t->value);
-            g_free(d);
-        }
-        model_ini_t *ti = model_ini_load(*truth);
-        if (!ti) {
-            model_ini_free(ini);
-            return false;
-        }
-        for (int s = 0; s < ti->nsections; s++)
-            if (!strncmp(ti->sections[s], "lamp ", 5)) g_ptr_array_add(names, g_strdup(ti->sections[s] + 5));
-        model_ini_free(ti);
-    } else {
-        for (int s = 0; s < ini->nsections; s++)
-            if (!strncmp(ini->sections[s], "lamp ", 5)) g_ptr_array_add(names, g_strdup(ini->sections[s] + 5));
-    }
-    model_ini_free(ini);
-    return true;
-}
-
-// The sphere facts of [sample NAME] in a truth file.
-static bool truth_sphere(const char *truth, const char *sample, double c0[3], double *r, bool need_c, bool need_r)
-{
-    model_ini_t *ti = model_ini_load(truth);
-    if (!ti) return false;
-    char *sec = g_strdup_printf("sample %s", sample);
-    const model_ini_entry_t *ec = model_ini_get(ti, sec, "sphere_centre_mm");
-    const model_ini_entry_t *er = model_ini_get(ti, sec, "sphere_radius_mm");
-    bool ok = true;
-    if ((need_c && !ec) || (need_r && !er)) {
-        model_error(truth, 0, "[%s] has no sphere_centre_mm / sphere_radius_mm: give --sphere-centre-mm and "
-                    "--sphere-radius-mm", sec);
-        ok = false;
-    }
-    char extra;
-    if (ok && need_c && sscanf(ec->value, "%lf %lf %lf %c", &c0[0], &c0[1], &c0[2], &extra) != 3) {
-        model_error(truth, ec->line, "sphere_centre_mm = '%s' is not three numbers", ec->value);
-        ok = false;
-    }
-    if (ok && need_r && !model_parse_double(er->value, r)) {
-        model_error(truth, er->line, "sphere_radius_mm = '%s' is not a number", er->value);
-        ok = false;
-    }
-    g_free(sec);
-    model_ini_free(ti);
-    return ok;
-}
-
-typedef struct {
-    char   name[64];
-    double lamp_radius_mm;
-    int    nangles;
-    int   *frame;          // per angle: session row index of the chosen frame (-1: none captured)
-    calib_lamps_highlight_t *hl;   // per angle
-    bool  *has_ray;
-    model_vec3_t *p, *d;   // per angle: ray origin on the sphere, unit direction
-    bool  *used;
-    double *dist;
-    calib_lamps_fit_t fit;
-    bool   fitted;
-    GString *missing;      // message lines
-    json_t *frames_missing;
-} lamp_t;
 
 static double full_scale(const char *pf)
 {
@@ -1212,552 +1083,602 @@ static double full_scale(const char *pf)
     return 4095;
 }
 
-int calib_cmd_lamps(int argc, char **argv)
+// The sphere's centre at turntable angle angle_deg: Rz(angle) c0.
+static model_vec3_t centre_at(const double c0[3], double angle_deg)
 {
-    opts_t o = { .sample = "mirror_sphere", .progress = -1, .min_snr = 12, .lamp_radius_mm = NAN, .method = 2,
-                 .offset_prior_mm = 1.0, .shift_prior_mm = 0.1, .tilt_prior_mrad = 1.0, .joint = true };
-    for (int i = 1; i < argc; i++) {
-        const char *a = argv[i];
-        if (!strcmp(a, "-h") || !strcmp(a, "--help")) {
-            usage(stdout);
-            return 0;
-        }
-        const char *v = i + 1 < argc ? argv[i + 1] : NULL;
-        bool takes = !strcmp(a, "--rig") || !strcmp(a, "--camera") || !strcmp(a, "-o") || !strcmp(a, "--session") ||
-                     !strcmp(a, "--sphere-centre-mm") || !strcmp(a, "--sphere-radius-mm") || !strcmp(a, "--sample") ||
-                     !strcmp(a, "--angles") || !strcmp(a, "--lamps") || !strcmp(a, "--exposures-us") ||
-                     !strcmp(a, "--progress") || !strcmp(a, "--min-snr") || !strcmp(a, "--lamp-radius-mm") ||
-                     !strcmp(a, "--highlight") || !strcmp(a, "--sphere-path") ||
-                     !strcmp(a, "--sphere-offset-prior-mm") || !strcmp(a, "--sphere-shift-prior-mm") ||
-                     !strcmp(a, "--sphere-tilt-prior-mrad");
-        if (!takes) {
-            fprintf(stderr, "refl calib lamps: unknown option '%s'\n\n", a);
-            usage(stderr);
-            return 2;
-        }
-        if (!v) {
-            fprintf(stderr, "refl calib lamps: %s needs a value\n", a);
-            return 2;
-        }
-        i++;
-        if (!strcmp(a, "--rig")) o.rig = v;
-        else if (!strcmp(a, "--camera")) o.camera = v;
-        else if (!strcmp(a, "-o")) o.out = v;
-        else if (!strcmp(a, "--session")) o.session = v;
-        else if (!strcmp(a, "--sample")) o.sample = v;
-        else if (!strcmp(a, "--lamps")) o.lamps_opt = v;
-        else if (!strcmp(a, "--angles")) o.angles_opt = v;
-        else if (!strcmp(a, "--exposures-us")) o.exposures_opt = v;
-        else if (!strcmp(a, "--progress")) {
-            if (!strcmp(v, "lines")) o.progress = 0;
-            else if (!strcmp(v, "bar")) o.progress = 1;
-            else {
-                fprintf(stderr, "refl calib lamps: --progress '%s': write lines or bar\n", v);
-                return 2;
-            }
-        } else if (!strcmp(a, "--lamp-radius-mm")) {
-            if (!model_parse_double(v, &o.lamp_radius_mm) || !(o.lamp_radius_mm >= 0)) {
-                fprintf(stderr, "refl calib lamps: --lamp-radius-mm '%s': give the lamps' radius in mm (>= 0)\n", v);
-                return 2;
-            }
-        } else if (!strcmp(a, "--highlight")) {
-            if (!strcmp(v, "centroid")) o.method = 0;
-            else if (!strcmp(v, "gauss")) o.method = 1;
-            else if (!strcmp(v, "model")) o.method = 2;
-            else {
-                fprintf(stderr, "refl calib lamps: --highlight '%s': write model, gauss or centroid\n", v);
-                return 2;
-            }
-        } else if (!strcmp(a, "--sphere-path")) {
-            if (!strcmp(v, "fit")) o.joint = true;
-            else if (!strcmp(v, "fixed")) o.joint = false;
-            else {
-                fprintf(stderr, "refl calib lamps: --sphere-path '%s': write fit or fixed\n", v);
-                return 2;
-            }
-        } else if (!strcmp(a, "--sphere-offset-prior-mm") || !strcmp(a, "--sphere-shift-prior-mm") ||
-                   !strcmp(a, "--sphere-tilt-prior-mrad")) {
-            double *dst = a[9] == 'o' ? &o.offset_prior_mm : a[9] == 's' ? &o.shift_prior_mm : &o.tilt_prior_mrad;
-            if (!model_parse_double(v, dst) || !(*dst >= 0)) {
-                fprintf(stderr, "refl calib lamps: %s '%s': give a std >= 0 (0 holds it at 0)\n", a, v);
-                return 2;
-            }
-        } else if (!strcmp(a, "--min-snr")) {
-            if (!model_parse_double(v, &o.min_snr) || !(o.min_snr >= 3)) {
-                fprintf(stderr, "refl calib lamps: --min-snr '%s': give a number >= 3\n", v);
-                return 2;
-            }
-        } else if (!strcmp(a, "--sphere-centre-mm")) {
-            int n = 0;
-            if (!parse_list(v, o.c0, 3, &n, "--sphere-centre-mm")) return 2;
-            if (n != 3) {
-                fprintf(stderr, "refl calib lamps: --sphere-centre-mm '%s': give X,Y,Z (mm, rig frame, angle 0)\n", v);
-                return 2;
-            }
-            o.have_centre = true;
-        } else if (!strcmp(a, "--sphere-radius-mm")) {
-            if (!model_parse_double(v, &o.radius_mm) || !(o.radius_mm > 0)) {
-                fprintf(stderr, "refl calib lamps: --sphere-radius-mm '%s': give the radius in mm (> 0)\n", v);
-                return 2;
-            }
-            o.have_radius = true;
-        }
-    }
-    if (!o.out || !o.camera || (!o.rig == !o.session)) {
-        fprintf(stderr, "refl calib lamps: %s\n\n",
-                !o.out ? "-o DIR is required" : !o.camera ? "--camera CAMERA.cameramodel is required"
-                : o.rig ? "give --rig or --session, not both" : "give --rig RIG.ini (capture) or --session DIR");
-        usage(stderr);
-        return 2;
-    }
-    double angles[360];
-    int nangles = 24;
-    for (int i = 0; i < 24; i++) angles[i] = 15.0 * i;
-    if (o.angles_opt) {
-        if (o.session) {
-            fprintf(stderr, "refl calib lamps: --angles is for a capture (--rig); a session has its own\n");
-            return 2;
-        }
-        if (!parse_list(o.angles_opt, angles, 360, &nangles, "--angles")) return 2;
-        if (nangles < 3) {
-            fprintf(stderr, "refl calib lamps: --angles '%s': at least 3 angles are needed to triangulate\n",
-                    o.angles_opt);
-            return 2;
-        }
-    }
-    double ladder[16] = { 40, 20, 10 };
-    int nladder = 3;
-    if (o.exposures_opt && (!parse_list(o.exposures_opt, ladder, 16, &nladder, "--exposures-us") || nladder < 1)) return 2;
-    if (access(o.camera, R_OK) != 0) {
-        fprintf(stderr, "refl calib lamps: %s: cannot read the camera model: %s (make it with refl calib geometry)\n",
-                o.camera, strerror(errno));
-        return 1;
-    }
+    double th = angle_deg * M_PI / 180;
+    return v3(cos(th) * c0[0] - sin(th) * c0[1], sin(th) * c0[0] + cos(th) * c0[1], c0[2]);
+}
 
-    int rc = 1;
-    model_camera_t *cam = NULL;
-    rig_session_t *s = NULL;
-    rig_plan_t *plan = NULL;
-    GPtrArray *names = g_ptr_array_new_with_free_func(g_free);
-    char *truth = NULL, *sdir = NULL;
-    lamp_t *L = NULL;
-    int nl = 0;
-    json_t *prov = NULL, *doc = NULL, *rep = NULL;
-    float **dark = NULL;
-    char *path = NULL;
-    model_lamps_t *truth_lamps = NULL;
-    int *dark_row = NULL;
-    double *angle_meas = NULL;
-    model_vec3_t *centre_at = NULL;
-    calib_lamps_bundle_t jf;
-    bool have_joint = false;
-    memset(&jf, 0, sizeof jf);
-    model_error_clear();
+char *calib_lamps_plan_text(const char *sample, const double *angles_deg, int nangles, char *const *lamps,
+                            int nlamps, const double *exposures_us, int nexposures)
+{
+    GString *pt = g_string_new("# refl calib lamps: the mirror sphere at several turntable angles, each lamp "
+                               "alone, a dark frame per angle\n[plan]\nname = lamp positions from mirror-sphere "
+                               "highlights\n");
+    g_string_append_printf(pt, "[sample]\nname = %s\nkind = mirror_sphere\n[angles]\nlist =", sample);
+    for (int i = 0; i < nangles; i++) g_string_append_printf(pt, " %.10g", angles_deg[i]);
+    g_string_append(pt, "\n[lamps]\nsets = ");
+    for (int i = 0; i < nlamps; i++) g_string_append_printf(pt, "%s; ", lamps[i]);
+    g_string_append(pt, "none\n[exposure]\n# auto bracketing: longest first, down to the first frame whose "
+                        "brightest pixel is at or below 70 % of full scale\nmode = auto\nlist_us =");
+    for (int i = 0; i < nexposures; i++) g_string_append_printf(pt, " %.10g", exposures_us[i]);
+    g_string_append(pt, "\ntarget_fraction = 0.7\npixel_format = Mono12\n[capture]\nsettle_ms = 0\n");
+    return g_string_free(pt, FALSE);
+}
 
-    cam = model_camera_load(o.camera);
-    if (!cam) goto done;
-    if (!model_mkdir_p(o.out)) goto done;
+// "none" and "all" are lamp sets, not lamps.
+static bool names_are_lamps(char *const *names)
+{
+    for (int l = 0; names[l]; l++)
+        if (!strcmp(names[l], "none") || !strcmp(names[l], "all")) {
+            model_error_set(NULL, 0, "--lamps: '%s' is not a lamp (each lamp is calibrated alone; the dark frames "
+                            "are the lamp set none)", names[l]);
+            return false;
+        }
+    return true;
+}
 
-    if (o.rig) {
-        if (!rig_file_facts(o.rig, names, &truth)) goto done;
-        if (o.lamps_opt) {
-            g_ptr_array_set_size(names, 0);
-            char **v = g_strsplit(o.lamps_opt, ",", -1);
-            for (char **p = v; *p; p++)
-                if (**p) g_ptr_array_add(names, g_strdup(g_strstrip(*p)));
-            g_strfreev(v);
-        }
-        if (names->len == 0) {
-            fprintf(stderr, "refl calib lamps: %s has no lamps (and no --lamps given)\n", o.rig);
-            goto done;
-        }
-        for (guint l = 0; l < names->len; l++)
-            if (!strcmp(names->pdata[l], "none") || !strcmp(names->pdata[l], "all")) {
-                fprintf(stderr, "refl calib lamps: --lamps: '%s' is not a lamp (each lamp is calibrated alone; the "
-                        "dark frames are the lamp set none)\n", (char *)names->pdata[l]);
-                goto done;
-            }
-        if (!truth && (!o.have_centre || !o.have_radius)) {
-            fprintf(stderr, "refl calib lamps: %s is not a virtual rig: give --sphere-centre-mm X,Y,Z and "
-                    "--sphere-radius-mm R (the sphere's facts) before anything is captured\n", o.rig);
-            goto done;
-        }
-        GString *pt = g_string_new("# refl calib lamps: the mirror sphere at several turntable angles, each lamp "
-                                   "alone, a dark frame per angle\n[plan]\nname = lamp positions from mirror-sphere "
-                                   "highlights\n");
-        g_string_append_printf(pt, "[sample]\nname = %s\nkind = mirror_sphere\n[angles]\nlist =", o.sample);
-        for (int i = 0; i < nangles; i++) g_string_append_printf(pt, " %.10g", angles[i]);
-        g_string_append(pt, "\n[lamps]\nsets = ");
-        for (guint i = 0; i < names->len; i++) g_string_append_printf(pt, "%s; ", (char *)names->pdata[i]);
-        g_string_append(pt, "none\n[exposure]\n# auto bracketing: longest first, down to the first frame whose "
-                            "brightest pixel is at or below 70 % of full scale\nmode = auto\nlist_us =");
-        for (int i = 0; i < nladder; i++) g_string_append_printf(pt, " %.10g", ladder[i]);
-        g_string_append(pt, "\ntarget_fraction = 0.7\npixel_format = Mono12\n[capture]\nsettle_ms = 0\n");
-        fprintf(stderr, "refl calib lamps: capturing %d angles x %u lamps + dark into %s/capture\n", nangles,
-                names->len, o.out);
-        int crc = calib_capture(o.rig, o.out, "capture", pt->str, o.progress);
-        g_string_free(pt, TRUE);
-        if (crc) goto done;
-        sdir = g_strdup_printf("%s/capture", o.out);
-    } else {
-        sdir = g_strdup(o.session);
+// Capture on o->rig into o->out/capture; *names: the lamps (g_strfreev).
+static bool capture(const calib_lamps_opts_t *o, calib_lamps_result_t *r, char ***names)
+{
+    int n = 0;
+    if (!rig_file_truth_path(o->rig, &r->truth_path)) return false;
+    if (o->lamps) {
+        *names = g_strdupv((char **)o->lamps);
+        n = (int)g_strv_length(*names);
+    } else if (!rig_file_lamp_names(o->rig, names, &n)) {
+        return false;
     }
-    s = rig_session_open(sdir);
-    if (!s) goto done;
-    plan = rig_plan_parse(s->plan_text, strlen(s->plan_text), "session plan");
-    if (!plan) goto done;
-    if (!truth && s->facts) {
-        json_t *vr = json_object_get(s->facts, "virtual_rig");
-        const char *t = json_string_value(json_object_get(vr, "truth"));
-        if (t) truth = g_strdup(t);
+    if (n == 0) {
+        model_error_set(NULL, 0, "%s has no lamps (and no --lamps given)", o->rig);
+        return false;
     }
-    if (!o.have_centre || !o.have_radius) {
-        if (!truth) {
-            fprintf(stderr, "refl calib lamps: %s is not a virtual rig: give --sphere-centre-mm X,Y,Z and "
-                    "--sphere-radius-mm R (the sphere's facts)\n", o.rig ? o.rig : sdir);
-            goto done;
-        }
-        if (!truth_sphere(truth, plan->sample, o.c0, &o.radius_mm, !o.have_centre, !o.have_radius)) goto done;
+    if (!names_are_lamps(*names)) return false;
+    if (!o->sphere_given) {
+        model_error_set(NULL, 0, r->truth_path ? "%s: give --sphere-centre-mm X,Y,Z and --sphere-radius-mm R (the "
+                        "sphere's facts) before anything is captured" : "%s is not a virtual rig: give "
+                        "--sphere-centre-mm X,Y,Z and --sphere-radius-mm R (the sphere's facts) before anything is "
+                        "captured", o->rig);
+        return false;
     }
-    if (truth) {
-        model_ini_t *ti = model_ini_load(truth);
-        bool q = model_error_quiet_thread(true);
-        if (ti) truth_lamps = model_lamps_from_ini(ti);
-        model_error_quiet_thread(q);
-        model_ini_free(ti);
-        model_error_clear();
-    }
-    // lamps: every lamp set of the plan that is one lamp alone
-    if (o.session && o.lamps_opt) {
-        char **v = g_strsplit(o.lamps_opt, ",", -1);
-        for (char **p = v; *p; p++)
-            if (**p) g_ptr_array_add(names, g_strdup(g_strstrip(*p)));
-        g_strfreev(v);
-    } else if (o.session) {
-        for (int i = 0; i < plan->nlamp_sets; i++)
-            if (strcmp(plan->lamp_sets[i], "none") && strcmp(plan->lamp_sets[i], "all") &&
-                !strchr(plan->lamp_sets[i], '+'))
-                g_ptr_array_add(names, g_strdup(plan->lamp_sets[i]));
-    }
-    nl = (int)names->len;
-    for (int l = 0; l < nl; l++)
-        if (!strcmp(names->pdata[l], "none") || !strcmp(names->pdata[l], "all")) {
-            fprintf(stderr, "refl calib lamps: --lamps: '%s' is not a lamp (each lamp is calibrated alone; the "
-                    "dark frames are the lamp set none)\n", (char *)names->pdata[l]);
-            goto done;
-        }
-    if (nl == 0) {
-        fprintf(stderr, "refl calib lamps: %s: the plan has no lamp set of one lamp alone\n", sdir);
-        goto done;
-    }
-    const int NA = plan->nangles;
-    const int W = model_camera_width(cam), H = model_camera_height(cam);
-    L = calloc((size_t)nl, sizeof *L);
-    dark = calloc((size_t)NA, sizeof *dark);
-    dark_row = malloc(sizeof(int) * (size_t)NA);
-    angle_meas = malloc(sizeof(double) * (size_t)NA);
-    centre_at = calloc((size_t)NA, sizeof *centre_at);
-    for (int a = 0; a < NA; a++) {
-        dark_row[a] = -1;
-        angle_meas[a] = NAN;
-    }
-    for (int l = 0; l < nl; l++) {
-        lamp_t *lp = &L[l];
-        snprintf(lp->name, sizeof lp->name, "%s", (char *)names->pdata[l]);
-        lp->lamp_radius_mm = o.lamp_radius_mm;
-        if (isnan(lp->lamp_radius_mm)) {
-            int ti = truth_lamps ? model_lamps_find(truth_lamps, lp->name) : -1;
-            lp->lamp_radius_mm = ti >= 0 ? truth_lamps->lamps[ti].radius_mm : 0;
-        }
-        lp->nangles = NA;
+    char *pt = calib_lamps_plan_text(o->sample, o->angles_deg, o->nangles, *names, n, o->exposures_us,
+                                     o->nexposures);
+    note(o, "capturing %d angles x %d lamps + dark into %s/capture\n", o->nangles, n, o->out);
+    int crc = calib_capture(o->rig, o->out, "capture", pt, o->progress);
+    g_free(pt);
+    if (crc) return false;
+    r->session_dir = g_strdup_printf("%s/capture", o->out);
+    return true;
+}
+
+// The lamps of a session: o->lamps, else every lamp set of the plan that is
+// one lamp alone. g_strfreev.
+static char **session_lamps(const calib_lamps_opts_t *o, const rig_plan_t *plan)
+{
+    if (o->lamps) return g_strdupv((char **)o->lamps);
+    GPtrArray *a = g_ptr_array_new();
+    for (int i = 0; i < plan->nlamp_sets; i++)
+        if (strcmp(plan->lamp_sets[i], "none") && strcmp(plan->lamp_sets[i], "all") &&
+            !strchr(plan->lamp_sets[i], '+'))
+            g_ptr_array_add(a, g_strdup(plan->lamp_sets[i]));
+    g_ptr_array_add(a, NULL);
+    return (char **)g_ptr_array_free(a, FALSE);
+}
+
+// r->lamps for names, each a lamp set of the plan.
+static bool lamps_alloc(const calib_lamps_opts_t *o, calib_lamps_result_t *r, char *const *names)
+{
+    const int NA = r->nangles;
+    r->nlamps = (int)g_strv_length((char **)names);
+    r->lamps = calloc((size_t)r->nlamps, sizeof *r->lamps);
+    if (!r->lamps) goto oom;
+    for (int l = 0; l < r->nlamps; l++) {
+        calib_lamps_lamp_t *lp = &r->lamps[l];
+        snprintf(lp->name, sizeof lp->name, "%s", names[l]);
+        lp->lamp_radius_mm = o->lamp_radius_mm;
         lp->frame = malloc(sizeof(int) * (size_t)NA);
         lp->hl = calloc((size_t)NA, sizeof *lp->hl);
         lp->has_ray = calloc((size_t)NA, sizeof(bool));
         lp->used = calloc((size_t)NA, sizeof(bool));
-        lp->p = calloc((size_t)NA, sizeof(model_vec3_t));
+        lp->p_mm = calloc((size_t)NA, sizeof(model_vec3_t));
         lp->d = calloc((size_t)NA, sizeof(model_vec3_t));
-        lp->dist = calloc((size_t)NA, sizeof(double));
-        lp->missing = g_string_new("");
-        lp->frames_missing = json_array();
+        lp->dist_mm = calloc((size_t)NA, sizeof(double));
+        if (!lp->frame || !lp->hl || !lp->has_ray || !lp->used || !lp->p_mm || !lp->d || !lp->dist_mm) goto oom;
         for (int a = 0; a < NA; a++) lp->frame[a] = -1;
         bool in_plan = false;
-        for (int i = 0; i < plan->nlamp_sets; i++) in_plan |= !strcmp(plan->lamp_sets[i], lp->name);
+        for (int i = 0; i < r->plan->nlamp_sets; i++) in_plan |= !strcmp(r->plan->lamp_sets[i], lp->name);
         if (!in_plan) {
-            fprintf(stderr, "refl calib lamps: %s: the session's plan has no lamp set '%s' alone (sets: ", sdir,
-                    lp->name);
-            for (int i = 0; i < plan->nlamp_sets; i++) fprintf(stderr, "%s%s", i ? "; " : "", plan->lamp_sets[i]);
-            fprintf(stderr, ")\n");
-            goto done;
+            GString *g = g_string_new("");
+            for (int i = 0; i < r->plan->nlamp_sets; i++)
+                g_string_append_printf(g, "%s%s", i ? "; " : "", r->plan->lamp_sets[i]);
+            model_error_set(NULL, 0, "%s: the session's plan has no lamp set '%s' alone (sets: %s)", r->session_dir,
+                            lp->name, g->str);
+            g_string_free(g, TRUE);
+            return false;
         }
     }
-    // choose frames: per (angle, lamp set) the longest exposure below 95 % of
-    // full scale (auto bracketing leaves the longest unsaturated one last)
+    return true;
+oom:
+    model_error_set(NULL, 0, "out of memory");
+    return false;
+}
+
+// Per (angle, lamp set) the longest exposure below 95 % of full scale (auto
+// bracketing leaves the longest unsaturated one last); per angle the dark
+// frame and the measured angle.
+static bool choose_frames(calib_lamps_result_t *r)
+{
+    const int NA = r->nangles;
+    const rig_session_t *s = r->session;
+    r->angle_deg = malloc(sizeof(double) * (size_t)NA);
+    r->dark_row = malloc(sizeof(int) * (size_t)NA);
+    r->centre_mm = calloc((size_t)NA, sizeof *r->centre_mm);
+    if (!r->angle_deg || !r->dark_row || !r->centre_mm) {
+        model_error_set(NULL, 0, "out of memory");
+        return false;
+    }
+    for (int a = 0; a < NA; a++) {
+        r->dark_row[a] = -1;
+        r->angle_deg[a] = NAN;
+    }
     for (int i = 0; i < s->n; i++) {
-        const rig_frame_row_t *r = &s->rows[i];
+        const rig_frame_row_t *row = &s->rows[i];
         int a = -1;
         for (int k = 0; k < NA; k++)
-            if (fabs(plan->angles_deg[k] - r->commanded_deg) < 1e-6) a = k;
+            if (fabs(r->plan->angles_deg[k] - row->commanded_deg) < 1e-6) a = k;
         if (a < 0) continue;
-        angle_meas[a] = r->measured_deg;
-        double fs = full_scale(r->pixel_format);
-        if (!strcmp(r->lamps, "none")) {
-            if (dark_row[a] < 0) dark_row[a] = i;
+        r->angle_deg[a] = row->measured_deg;
+        double fs = full_scale(row->pixel_format);
+        if (!strcmp(row->lamps, "none")) {
+            if (r->dark_row[a] < 0) r->dark_row[a] = i;
             continue;
         }
-        for (int l = 0; l < nl; l++) {
-            if (strcmp(r->lamps, L[l].name)) continue;
-            int cur = L[l].frame[a];
+        for (int l = 0; l < r->nlamps; l++) {
+            calib_lamps_lamp_t *lp = &r->lamps[l];
+            if (strcmp(row->lamps, lp->name)) continue;
+            int cur = lp->frame[a];
             if (cur < 0) {
-                L[l].frame[a] = i;
+                lp->frame[a] = i;
                 continue;
             }
             const rig_frame_row_t *c = &s->rows[cur];
-            bool c_ok = c->max < 0.95 * fs, r_ok = r->max < 0.95 * fs;
-            if ((r_ok && !c_ok) || (r_ok == c_ok && (r_ok ? r->exposure_us > c->exposure_us
-                                                           : r->exposure_us < c->exposure_us)))
-                L[l].frame[a] = i;
+            bool c_ok = c->max < 0.95 * fs, r_ok = row->max < 0.95 * fs;
+            if ((r_ok && !c_ok) || (r_ok == c_ok && (r_ok ? row->exposure_us > c->exposure_us
+                                                           : row->exposure_us < c->exposure_us)))
+                lp->frame[a] = i;
         }
     }
-    // analyse, angle by angle
-    model_vec3_t C = model_camera_centre_world(cam);
-    (void)C;
-    int first_angle_shown = -1;
-    for (int a = 0; a < NA; a++) {
-        double ang = isfinite(angle_meas[a]) ? angle_meas[a] : plan->angles_deg[a];
-        double th = ang * M_PI / 180;
-        model_vec3_t ca = v3(cos(th) * o.c0[0] - sin(th) * o.c0[1], sin(th) * o.c0[0] + cos(th) * o.c0[1], o.c0[2]);
-        centre_at[a] = ca;
-        fprintf(stderr, "refl calib lamps: angle %d/%d (%.3f deg): finding highlights\n", a + 1, NA, ang);
-        calib_lamps_sphere_image_t *sph = calib_lamps_sphere_image(cam, ca, o.radius_mm);
-        if (!sph) {
-            fprintf(stderr, "refl calib lamps: angle %.3f deg: %s\n", ang, model_last_error());
+    for (int a = 0; a < NA; a++)
+        if (!isfinite(r->angle_deg[a])) r->angle_deg[a] = r->plan->angles_deg[a];
+    return true;
+}
+
+bool calib_lamps_open(const calib_lamps_opts_t *o, calib_lamps_result_t *r)
+{
+    model_error_clear();
+    r->first_angle = -1;
+    if (access(o->camera, R_OK) != 0) {
+        model_error_set(NULL, 0, "%s: cannot read the camera model: %s (make it with refl calib geometry)", o->camera,
+                        strerror(errno));
+        return false;
+    }
+    r->cam = model_camera_load(o->camera);
+    if (!r->cam || !model_mkdir_p(o->out)) return false;
+    char **names = NULL;
+    bool ok = false;
+    if (o->rig) {
+        if (!capture(o, r, &names)) goto done;
+    } else {
+        r->session_dir = g_strdup(o->session);
+    }
+    r->session = rig_session_open(r->session_dir);
+    if (!r->session) goto done;
+    r->plan = rig_plan_parse(r->session->plan_text, strlen(r->session->plan_text), "session plan");
+    if (!r->plan) goto done;
+    r->nangles = r->plan->nangles;
+    if (!r->truth_path && r->session->facts) {
+        const char *t = json_string_value(json_object_get(json_object_get(r->session->facts, "virtual_rig"), "truth"));
+        if (t) r->truth_path = g_strdup(t);
+    }
+    if (!o->sphere_given) {
+        model_error_set(NULL, 0, "%s: give --sphere-centre-mm X,Y,Z and --sphere-radius-mm R (the sphere's facts)",
+                        r->session_dir);
+        goto done;
+    }
+    if (!names) names = session_lamps(o, r->plan);
+    if (!names_are_lamps(names)) goto done;
+    if (!names[0]) {
+        model_error_set(NULL, 0, "%s: the plan has no lamp set of one lamp alone", r->session_dir);
+        goto done;
+    }
+    ok = lamps_alloc(o, r, names) && choose_frames(r);
+done:
+    g_strfreev(names);
+    return ok;
+}
+
+// A frame of the session, checked against the camera model's size. NULL + message.
+static float *load_frame(const calib_lamps_opts_t *o, const calib_lamps_result_t *r, int row)
+{
+    int w = 0, h = 0, W = model_camera_width(r->cam), H = model_camera_height(r->cam);
+    float *img = rig_session_frame(r->session, row, &w, &h);
+    if (img && (w != W || h != H)) {
+        model_error_set(NULL, 0, "%s/%s: %dx%d pixels, the camera model %s has %dx%d", r->session_dir,
+                        r->session->rows[row].file, w, h, o->camera, W, H);
+        free(img);
+        img = NULL;
+    }
+    return img;
+}
+
+// Lamp lp's highlight at angle a in its frame and the ray toward it: the
+// direction-space model (pass 1: a point lamp), else the reflection at the
+// sub-pixel position. false only when the frame cannot be read.
+static bool lamp_ray(const calib_lamps_opts_t *o, calib_lamps_result_t *r, calib_lamps_lamp_t *lp, int a,
+                     const calib_lamps_sphere_image_t *sph, const float *dark)
+{
+    int fr = lp->frame[a];
+    calib_lamps_highlight_t *hl = &lp->hl[a];
+    float *img = load_frame(o, r, fr);
+    if (!img) return false;
+    double fs = full_scale(r->session->rows[fr].pixel_format);
+    calib_lamps_find_highlight(img, dark, model_camera_width(r->cam), model_camera_height(r->cam), sph, o->min_snr,
+                               0.02 * fs, 40, fs, hl);
+    free(img);
+    if (!hl->found) return true;
+    bool ok = false;
+    if (o->method == CALIB_LAMPS_MODEL) {
+        bool q = model_error_quiet_thread(true);
+        ok = calib_lamps_fit_direction(r->cam, hl, r->centre_mm[a], o->sphere_radius_mm, 0, &lp->p_mm[a], &lp->d[a],
+                                       NULL);
+        model_error_quiet_thread(q);
+    }
+    if (!ok && o->method == CALIB_LAMPS_CENTROID) {
+        hl->q[0] = hl->q_centroid[0];
+        hl->q[1] = hl->q_centroid[1];
+    }
+    if (!ok && !calib_lamps_reflect(r->cam, hl->q, r->centre_mm[a], o->sphere_radius_mm, &lp->p_mm[a], &lp->d[a])) {
+        hl->found = false;
+        snprintf(hl->why, sizeof hl->why, "%s", model_last_error());
+    } else {
+        lp->has_ray[a] = lp->used[a] = true;
+    }
+    return true;
+}
+
+// Every lamp's highlight at angle a.
+static bool angle_highlights(const calib_lamps_opts_t *o, calib_lamps_result_t *r, int a)
+{
+    double ang = r->angle_deg[a];
+    r->centre_mm[a] = centre_at(o->sphere_centre_mm, ang);
+    note(o, "angle %d/%d (%.3f deg): finding highlights\n", a + 1, r->nangles, ang);
+    calib_lamps_sphere_image_t *sph = calib_lamps_sphere_image(r->cam, r->centre_mm[a], o->sphere_radius_mm);
+    if (!sph) {
+        model_error_set(NULL, 0, "angle %.3f deg: %s", ang, model_last_error());
+        return false;
+    }
+    float *dark = NULL;
+    bool ok = false;
+    if (r->dark_row[a] >= 0 && !(dark = load_frame(o, r, r->dark_row[a]))) goto done;
+    for (int l = 0; l < r->nlamps; l++) {
+        calib_lamps_lamp_t *lp = &r->lamps[l];
+        if (lp->frame[a] < 0)
+            snprintf(lp->hl[a].why, sizeof lp->hl[a].why, "no frame of this lamp at this angle in the session");
+        else if (!lamp_ray(o, r, lp, a, sph, dark))
             goto done;
-        }
-        int w = 0, h = 0;
-        if (dark_row[a] >= 0) {
-            dark[a] = rig_session_frame(s, dark_row[a], &w, &h);
-            if (!dark[a]) {
-                calib_lamps_sphere_image_free(sph);
-                goto done;
-            }
-            if (w != W || h != H) {
-                fprintf(stderr, "refl calib lamps: %s/%s: %dx%d pixels, the camera model %s has %dx%d\n", sdir,
-                        s->rows[dark_row[a]].file, w, h, o.camera, W, H);
-                calib_lamps_sphere_image_free(sph);
-                goto done;
-            }
-        }
-        for (int l = 0; l < nl; l++) {
-            lamp_t *lp = &L[l];
-            int fr = lp->frame[a];
-            calib_lamps_highlight_t *hl = &lp->hl[a];
-            if (fr < 0) {
-                snprintf(hl->why, sizeof hl->why, "no frame of this lamp at this angle in the session");
-            } else {
-                float *img = rig_session_frame(s, fr, &w, &h);
-                if (!img) {
-                    calib_lamps_sphere_image_free(sph);
-                    goto done;
-                }
-                if (w != W || h != H) {
-                    fprintf(stderr, "refl calib lamps: %s/%s: %dx%d pixels, the camera model %s has %dx%d\n", sdir,
-                            s->rows[fr].file, w, h, o.camera, W, H);
-                    free(img);
-                    calib_lamps_sphere_image_free(sph);
-                    goto done;
-                }
-                double fs = full_scale(s->rows[fr].pixel_format);
-                calib_lamps_find_highlight(img, dark[a], W, H, sph, o.min_snr, 0.02 * fs, 40, fs, hl);
-                free(img);
-                if (hl->found) {
-                    // the sphere point and its ray: the direction-space model (pass 1: a point lamp),
-                    // else the reflection at the sub-pixel position
-                    bool ok = false;
-                    if (o.method == 2) {
-                        bool q = model_error_quiet_thread(true);
-                        ok = calib_lamps_fit_direction(cam, hl, ca, o.radius_mm, 0, &lp->p[a], &lp->d[a], NULL);
-                        model_error_quiet_thread(q);
-                    }
-                    if (!ok && o.method == 0) {
-                        hl->q[0] = hl->q_centroid[0];
-                        hl->q[1] = hl->q_centroid[1];
-                    }
-                    if (!ok && !calib_lamps_reflect(cam, hl->q, ca, o.radius_mm, &lp->p[a], &lp->d[a])) {
-                        hl->found = false;
-                        snprintf(hl->why, sizeof hl->why, "%s", model_last_error());
-                    } else {
-                        lp->has_ray[a] = lp->used[a] = true;
-                        if (first_angle_shown < 0) first_angle_shown = a;
-                    }
-                }
-            }
-            if (!lp->has_ray[a]) {
-                const char *file = fr >= 0 ? s->rows[fr].file : "(none)";
-                g_string_append_printf(lp->missing, "    %s (step %d, %.3f deg): %s\n", file,
-                                       fr >= 0 ? s->rows[fr].step : -1, ang, hl->why);
-                json_t *m = json_object();
-                json_object_set_new(m, "file", json_string(file));
-                json_object_set_new(m, "step", json_integer(fr >= 0 ? s->rows[fr].step : -1));
-                json_object_set_new(m, "angle_deg", json_real(ang));
-                json_object_set_new(m, "why", json_string(hl->why));
-                json_array_append_new(lp->frames_missing, m);
-            }
-        }
-        calib_lamps_sphere_image_free(sph);
+        if (lp->has_ray[a] && r->first_angle < 0) r->first_angle = a;
+        lp->nmissing += !lp->has_ray[a];
     }
-    // triangulate
-    bool all_ok = true;
-    for (int l = 0; l < nl; l++) {
-        lamp_t *lp = &L[l];
-        int nm = (int)json_array_size(lp->frames_missing), nr = NA - nm;
-        if (nm)
-            fprintf(stderr, "refl calib lamps: lamp %s: no highlight in %d of %d frames:\n%s", lp->name, nm, NA,
-                    lp->missing->str);
-        if (nr < 3) {
-            fprintf(stderr, "refl calib lamps: lamp %s: its highlight is in only %d frame%s of %s; at least 3 are "
-                    "needed: check the lamp switches on, is not hidden from the sphere, and the sphere facts "
-                    "(--sphere-centre-mm %g,%g,%g --sphere-radius-mm %g)\n", lp->name, nr, nr == 1 ? "" : "s", sdir,
-                    o.c0[0], o.c0[1], o.c0[2], o.radius_mm);
-            all_ok = false;
-            continue;
-        }
-        if (nm) fprintf(stderr, "refl calib lamps: lamp %s: fitted from the other %d frames\n", lp->name, nr);
-        if (!calib_lamps_triangulate(lp->p, lp->d, NA, 4.0, 0.5, lp->used, lp->dist, &lp->fit)) {
-            fprintf(stderr, "refl calib lamps: lamp %s (%s): %s\n", lp->name, sdir, model_last_error());
-            all_ok = false;
-            continue;
-        }
-        // pass 2: the lamp's finite size (its disk of angular radius asin(r / distance) as seen from the
-        // sphere) in the highlight model, then the fit again
-        if (o.method == 2 && lp->lamp_radius_mm > 0) {
-            for (int a = 0; a < NA; a++) {
-                if (!lp->has_ray[a]) continue;
-                model_vec3_t e = vsub(v3(lp->fit.x_mm[0], lp->fit.x_mm[1], lp->fit.x_mm[2]), lp->p[a]);
-                double dist = sqrt(vdot(e, e));
-                double rho = dist > lp->lamp_radius_mm ? asin(lp->lamp_radius_mm / dist) : 0;
-                bool q = model_error_quiet_thread(true);
-                calib_lamps_fit_direction(cam, &lp->hl[a], centre_at[a], o.radius_mm, rho, &lp->p[a], &lp->d[a],
-                                          NULL);
-                model_error_quiet_thread(q);
-                lp->used[a] = true;
-            }
-            if (!calib_lamps_triangulate(lp->p, lp->d, NA, 4.0, 0.5, lp->used, lp->dist, &lp->fit)) {
-                fprintf(stderr, "refl calib lamps: lamp %s (%s): %s\n", lp->name, sdir, model_last_error());
-                all_ok = false;
-                continue;
-            }
-        }
-        lp->fitted = true;
-        for (int a = 0; a < NA; a++)
-            if (lp->has_ray[a] && !lp->used[a])
-                fprintf(stderr, "refl calib lamps: lamp %s: the ray of %s (%.3f deg) is an outlier (%.1f mm from "
-                        "the fit, RMS %.2f mm) and was left out\n", lp->name, s->rows[lp->frame[a]].file,
-                        plan->angles_deg[a], lp->dist[a], lp->fit.rms_mm);
-    }
-    if (!all_ok) goto done;
+    ok = true;
+done:
+    free(dark);
+    calib_lamps_sphere_image_free(sph);
+    return ok;
+}
 
-    // the joint fit: every lamp and the sphere's path over all highlights
-    if (o.joint) {
-        model_vec3_t Cc = model_camera_centre_world(cam);
-        calib_lamps_bundle_setup_t bs = { .camera_mm = Cc, .c0_mm = { o.c0[0], o.c0[1], o.c0[2] },
-                                          .radius_mm = o.radius_mm, .offset_prior_mm = o.offset_prior_mm,
-                                          .shift_prior_mm = o.shift_prior_mm, .tilt_prior_mrad = o.tilt_prior_mrad,
-                                          .image_weights = true };
-        int nobs = 0;
-        for (int l = 0; l < nl; l++)
-            for (int a = 0; a < NA; a++) nobs += L[l].has_ray[a] && L[l].used[a];
-        calib_lamps_obs_t *ob = calloc((size_t)nobs, sizeof *ob);
-        int *ob_a = calloc((size_t)nobs, sizeof *ob_a);
-        double *x = calloc((size_t)nl * 3, sizeof *x), *cv = calloc((size_t)nl * 9, sizeof *cv);
-        bool jok = ob && ob_a && x && cv;
-        for (int pass = 0; jok && pass < 2; pass++) {
-            int k = 0;
-            for (int l = 0; l < nl; l++) {
-                for (int a = 0; a < NA; a++) {
-                    if (!L[l].has_ray[a] || !L[l].used[a]) continue;
-                    model_vec3_t r = vsub(L[l].p[a], Cc);
-                    ob[k].lamp = l;
-                    ob[k].angle_deg = isfinite(angle_meas[a]) ? angle_meas[a] : plan->angles_deg[a];
-                    ob[k].ray = vscale(r, 1 / sqrt(vdot(r, r)));
-                    ob_a[k] = a;
-                    k++;
-                }
-                if (pass == 0) memcpy(x + 3 * l, L[l].fit.x_mm, sizeof L[l].fit.x_mm);
-            }
-            jok = calib_lamps_bundle(ob, nobs, nl, &bs, x, cv, NULL, &jf);
-            if (!jok) break;
-            // every ray at the fitted sphere: pass 0 fits the highlights again there (the
-            // lobe's geometry), pass 1 only reflects the highlight's camera ray
-            for (int l = 0; l < nl; l++)
-                for (int a = 0; a < NA; a++) {
-                    if (!L[l].has_ray[a]) continue;
-                    double ang = isfinite(angle_meas[a]) ? angle_meas[a] : plan->angles_deg[a], sc[3];
-                    bundle_centre(&bs, ang, jf.sphere, sc, NULL);
-                    centre_at[a] = v3(sc[0], sc[1], sc[2]);
-                    model_vec3_t e = vsub(v3(x[3 * l], x[3 * l + 1], x[3 * l + 2]), L[l].p[a]);
-                    double dist = sqrt(vdot(e, e));
-                    double rho = L[l].lamp_radius_mm > 0 && dist > L[l].lamp_radius_mm
-                                     ? asin(L[l].lamp_radius_mm / dist) : 0;
-                    bool q = model_error_quiet_thread(true);
-                    if (pass == 0 && o.method == 2)
-                        calib_lamps_fit_direction(cam, &L[l].hl[a], centre_at[a], o.radius_mm, rho, &L[l].p[a],
-                                                  &L[l].d[a], NULL);
-                    else {
-                        model_vec3_t r = vsub(L[l].p[a], Cc);
-                        double t = ray_sphere(Cc, vscale(r, 1 / sqrt(vdot(r, r))), centre_at[a], o.radius_mm);
-                        if (isfinite(t)) {
-                            model_vec3_t dd = vscale(r, 1 / sqrt(vdot(r, r)));
-                            L[l].p[a] = vadd(Cc, vscale(dd, t));
-                            model_vec3_t nn = vscale(vsub(L[l].p[a], centre_at[a]), 1 / o.radius_mm);
-                            L[l].d[a] = vsub(dd, vscale(nn, 2 * vdot(dd, nn)));
-                        }
-                    }
-                    model_error_quiet_thread(q);
-                }
-        }
-        if (jok) {
-            for (int l = 0; l < nl; l++) {
-                calib_lamps_fit_t *f = &L[l].fit;
-                memcpy(f->x_mm, x + 3 * l, sizeof f->x_mm);
-                memcpy(f->cov_mm2, cv + 9 * l, sizeof f->cov_mm2);
-                double ss = 0;
-                for (int a = 0; a < NA; a++) {
-                    if (!L[l].has_ray[a]) continue;
-                    L[l].dist[a] = ray_dist(L[l].p[a], L[l].d[a], f->x_mm);
-                    if (L[l].used[a]) ss += L[l].dist[a] * L[l].dist[a];
-                }
-                f->rms_mm = sqrt(ss / f->n_used);
-            }
-            have_joint = true;
-            const double *gg = jf.sphere, *gc = jf.sphere_cov;
-            fprintf(stderr, "refl calib lamps: joint fit of %d lamps and the sphere's path over %d highlights: "
-                    "sphere offset %.3f %.3f %.3f mm (std %.3f %.3f %.3f), shift %.3f %.3f mm (std %.3f %.3f), "
-                    "tilt %.3f %.3f mrad (std %.3f %.3f); condition %.3g\n", nl, nobs, gg[0], gg[1], gg[2],
-                    sqrt(gc[0]), sqrt(gc[8]), sqrt(gc[16]), gg[3], gg[4], sqrt(gc[24]), sqrt(gc[32]), gg[5], gg[6],
-                    sqrt(gc[40]), sqrt(gc[48]), jf.cond);
-        } else {
-            fprintf(stderr, "refl calib lamps: %s\n", model_last_error());
-            all_ok = false;
-        }
-        free(ob);
-        free(ob_a);
-        free(x);
-        free(cv);
-    }
-    if (!all_ok) goto done;
+bool calib_lamps_find_highlights(const calib_lamps_opts_t *o, calib_lamps_result_t *r)
+{
+    for (int a = 0; a < r->nangles; a++)
+        if (!angle_highlights(o, r, a)) return false;
+    return true;
+}
 
-    // lamps.json
-    {
-        // the command as typed: refl calib lamps ARGS...
-        char **full = calloc((size_t)argc + 2, sizeof *full);
-        full[0] = (char *)"calib";
-        for (int i = 0; i < argc; i++) full[i + 1] = argv[i];
-        prov = model_provenance(argc + 1, full);
-        free(full);
+// The frame of lamp lp at angle a: its file ("(none)") and step (-1).
+static const char *frame_file(const calib_lamps_result_t *r, const calib_lamps_lamp_t *lp, int a, int *step)
+{
+    int fr = lp->frame[a];
+    *step = fr >= 0 ? r->session->rows[fr].step : -1;
+    return fr >= 0 ? r->session->rows[fr].file : "(none)";
+}
+
+// The frames without a ray, one line each: "    FILE (step N, A deg): why\n". g_free.
+static char *missing_text(const calib_lamps_result_t *r, const calib_lamps_lamp_t *lp)
+{
+    GString *g = g_string_new("");
+    for (int a = 0; a < r->nangles; a++) {
+        if (lp->has_ray[a]) continue;
+        int step;
+        const char *file = frame_file(r, lp, a, &step);
+        g_string_append_printf(g, "    %s (step %d, %.3f deg): %s\n", file, step, r->angle_deg[a], lp->hl[a].why);
     }
-    if (!model_provenance_input(prov, "camera", o.camera) || !model_provenance_input(prov, "session", sdir)) goto done;
-    if (o.rig) model_provenance_input(prov, "rig", o.rig);
-    doc = json_object();
+    return g_string_free(g, FALSE);
+}
+
+// Each ray again with the lamp's disk (its angular radius seen from the
+// sphere point, at the lamp's fitted distance), at the sphere centres
+// r->centre_mm; pass 0 of the joint fit and pass 2 of the per-lamp fit.
+static void refit_highlights(const calib_lamps_opts_t *o, calib_lamps_result_t *r, calib_lamps_lamp_t *lp,
+                             const double x_mm[3])
+{
+    for (int a = 0; a < r->nangles; a++) {
+        if (!lp->has_ray[a]) continue;
+        model_vec3_t e = vsub(v3(x_mm[0], x_mm[1], x_mm[2]), lp->p_mm[a]);
+        double dist = sqrt(vdot(e, e));
+        double rho = lp->lamp_radius_mm > 0 && dist > lp->lamp_radius_mm ? asin(lp->lamp_radius_mm / dist) : 0;
+        bool q = model_error_quiet_thread(true);
+        calib_lamps_fit_direction(r->cam, &lp->hl[a], r->centre_mm[a], o->sphere_radius_mm, rho, &lp->p_mm[a],
+                                  &lp->d[a], NULL);
+        model_error_quiet_thread(q);
+    }
+}
+
+// One lamp: the point nearest its rays, with the lamp's disk once more.
+static bool triangulate_lamp(const calib_lamps_opts_t *o, calib_lamps_result_t *r, calib_lamps_lamp_t *lp)
+{
+    const int NA = r->nangles, nm = lp->nmissing, nr = NA - nm;
+    if (nm) {
+        char *t = missing_text(r, lp);
+        note(o, "lamp %s: no highlight in %d of %d frames:\n%s", lp->name, nm, NA, t);
+        g_free(t);
+    }
+    if (nr < 3) {
+        const double *c0 = o->sphere_centre_mm;
+        model_error_set(NULL, 0, "lamp %s: its highlight is in only %d frame%s of %s; at least 3 are needed: check "
+                        "the lamp switches on, is not hidden from the sphere, and the sphere facts (--sphere-centre-mm "
+                        "%g,%g,%g --sphere-radius-mm %g)", lp->name, nr, nr == 1 ? "" : "s", r->session_dir, c0[0],
+                        c0[1], c0[2], o->sphere_radius_mm);
+        return false;
+    }
+    if (nm) note(o, "lamp %s: fitted from the other %d frames\n", lp->name, nr);
+    for (int pass = 0; pass < 2; pass++) {
+        if (pass == 1) {
+            // the lamp's finite size (its disk of angular radius asin(r / distance) as seen from
+            // the sphere) in the highlight model, then the fit again
+            if (!(o->method == CALIB_LAMPS_MODEL && lp->lamp_radius_mm > 0)) break;
+            refit_highlights(o, r, lp, lp->fit.x_mm);
+            for (int a = 0; a < NA; a++) lp->used[a] = lp->has_ray[a];
+        }
+        if (!calib_lamps_triangulate(lp->p_mm, lp->d, NA, 4.0, 0.5, lp->used, lp->dist_mm, &lp->fit)) {
+            model_error_set(NULL, 0, "lamp %s (%s): %s", lp->name, r->session_dir, model_last_error());
+            return false;
+        }
+    }
+    for (int a = 0; a < NA; a++)
+        if (lp->has_ray[a] && !lp->used[a])
+            note(o, "lamp %s: the ray of %s (%.3f deg) is an outlier (%.1f mm from the fit, RMS %.2f mm) and was "
+                 "left out\n", lp->name, r->session->rows[lp->frame[a]].file, r->plan->angles_deg[a], lp->dist_mm[a],
+                 lp->fit.rms_mm);
+    return true;
+}
+
+bool calib_lamps_triangulate_lamps(const calib_lamps_opts_t *o, calib_lamps_result_t *r)
+{
+    GString *err = g_string_new("");
+    int nfail = 0;
+    for (int l = 0; l < r->nlamps; l++) {
+        if (triangulate_lamp(o, r, &r->lamps[l])) continue;
+        g_string_append_printf(err, "\n  %s", model_last_error());
+        nfail++;
+    }
+    if (nfail == 1) model_error_set(NULL, 0, "%s", err->str + 3);
+    else if (nfail) model_error_set(NULL, 0, "%d lamps cannot be fitted:%s", nfail, err->str);
+    g_string_free(err, TRUE);
+    return nfail == 0;
+}
+
+// The observations of the joint fit: every used ray as the camera ray of its
+// sphere point. ob: room for every ray. Returns their number.
+static int joint_obs(const calib_lamps_result_t *r, model_vec3_t Cc, calib_lamps_obs_t *ob)
+{
+    int k = 0;
+    for (int l = 0; l < r->nlamps; l++)
+        for (int a = 0; a < r->nangles; a++) {
+            const calib_lamps_lamp_t *lp = &r->lamps[l];
+            if (!lp->has_ray[a] || !lp->used[a]) continue;
+            model_vec3_t ray = vsub(lp->p_mm[a], Cc);
+            ob[k].lamp = l;
+            ob[k].angle_deg = r->angle_deg[a];
+            ob[k].ray = vscale(ray, 1 / sqrt(vdot(ray, ray)));
+            k++;
+        }
+    return k;
+}
+
+// Every ray at the fitted sphere path: pass 0 fits the highlights again there
+// (the lobe's geometry), pass 1 only reflects the highlight's camera ray.
+static void rays_at_path(const calib_lamps_opts_t *o, calib_lamps_result_t *r, const calib_lamps_bundle_setup_t *bs,
+                         const double *x_mm, int pass)
+{
+    const double R = o->sphere_radius_mm;
+    for (int a = 0; a < r->nangles; a++) {
+        double sc[3];
+        bundle_centre(bs, r->angle_deg[a], r->joint.sphere, sc, NULL);
+        model_vec3_t c = v3(sc[0], sc[1], sc[2]);
+        for (int l = 0; l < r->nlamps; l++) {
+            calib_lamps_lamp_t *lp = &r->lamps[l];
+            if (!lp->has_ray[a]) continue;
+            r->centre_mm[a] = c;
+            if (pass == 0 && o->method == CALIB_LAMPS_MODEL) continue;   // refit_highlights below
+            model_vec3_t dd = vsub(lp->p_mm[a], bs->camera_mm);
+            dd = vscale(dd, 1 / sqrt(vdot(dd, dd)));
+            double t = ray_sphere(bs->camera_mm, dd, c, R);
+            if (!isfinite(t)) continue;
+            lp->p_mm[a] = vadd(bs->camera_mm, vscale(dd, t));
+            model_vec3_t nn = vscale(vsub(lp->p_mm[a], c), 1 / R);
+            lp->d[a] = vsub(dd, vscale(nn, 2 * vdot(dd, nn)));
+        }
+    }
+    if (pass == 0 && o->method == CALIB_LAMPS_MODEL)
+        for (int l = 0; l < r->nlamps; l++) refit_highlights(o, r, &r->lamps[l], x_mm + 3 * l);
+}
+
+bool calib_lamps_joint_fit(const calib_lamps_opts_t *o, calib_lamps_result_t *r)
+{
+    const int nl = r->nlamps, NA = r->nangles;
+    const double *c0 = o->sphere_centre_mm;
+    calib_lamps_bundle_setup_t bs = { .camera_mm = model_camera_centre_world(r->cam), .c0_mm = { c0[0], c0[1], c0[2] },
+                                      .radius_mm = o->sphere_radius_mm, .offset_prior_mm = o->offset_prior_mm,
+                                      .shift_prior_mm = o->shift_prior_mm, .tilt_prior_mrad = o->tilt_prior_mrad,
+                                      .image_weights = true };
+    calib_lamps_obs_t *ob = calloc((size_t)nl * NA + 1, sizeof *ob);
+    double *x = calloc((size_t)nl * 3, sizeof *x), *cv = calloc((size_t)nl * 9, sizeof *cv);
+    bool ok = ob && x && cv;
+    if (!ok) model_error_set(NULL, 0, "out of memory");
+    for (int l = 0; ok && l < nl; l++) memcpy(x + 3 * l, r->lamps[l].fit.x_mm, sizeof r->lamps[l].fit.x_mm);
+    for (int pass = 0; ok && pass < 2; pass++) {
+        r->joint_nobs = joint_obs(r, bs.camera_mm, ob);
+        ok = calib_lamps_bundle(ob, r->joint_nobs, nl, &bs, x, cv, NULL, &r->joint);
+        if (ok) rays_at_path(o, r, &bs, x, pass);
+    }
+    for (int l = 0; ok && l < nl; l++) {
+        calib_lamps_lamp_t *lp = &r->lamps[l];
+        calib_lamps_fit_t *f = &lp->fit;
+        memcpy(f->x_mm, x + 3 * l, sizeof f->x_mm);
+        memcpy(f->cov_mm2, cv + 9 * l, sizeof f->cov_mm2);
+        double ss = 0;
+        for (int a = 0; a < NA; a++) {
+            if (!lp->has_ray[a]) continue;
+            lp->dist_mm[a] = ray_dist(lp->p_mm[a], lp->d[a], f->x_mm);
+            if (lp->used[a]) ss += lp->dist_mm[a] * lp->dist_mm[a];
+        }
+        f->rms_mm = sqrt(ss / f->n_used);
+    }
+    if (ok) {
+        r->have_joint = true;
+        const double *gg = r->joint.sphere, *gc = r->joint.sphere_cov;
+        note(o, "joint fit of %d lamps and the sphere's path over %d highlights: sphere offset %.3f %.3f %.3f mm "
+             "(std %.3f %.3f %.3f), shift %.3f %.3f mm (std %.3f %.3f), tilt %.3f %.3f mrad (std %.3f %.3f); "
+             "condition %.3g\n", nl, r->joint_nobs, gg[0], gg[1], gg[2], sqrt(gc[0]), sqrt(gc[8]), sqrt(gc[16]),
+             gg[3], gg[4], sqrt(gc[24]), sqrt(gc[32]), gg[5], gg[6], sqrt(gc[40]), sqrt(gc[48]), r->joint.cond);
+    }
+    free(ob);
+    free(x);
+    free(cv);
+    return ok;
+}
+
+// The virtual rig's truth for the comparison (never an input): each lamp's
+// true position and the RMS error. Silent when there is no truth to read.
+static void compare_truth(calib_lamps_result_t *r)
+{
+    if (!r->truth_path) return;
+    bool q = model_error_quiet_thread(true);
+    rig_truth_t *t = rig_truth_load(r->truth_path);
+    model_lamps_t *tl = t ? rig_truth_lamps(t) : NULL;
+    model_error_quiet_thread(q);
+    model_error_clear();
+    r->have_truth = tl != NULL;
+    double se2 = 0;
+    for (int l = 0; tl && l < r->nlamps; l++) {
+        calib_lamps_lamp_t *lp = &r->lamps[l];
+        int ti = model_lamps_find(tl, lp->name);
+        if (ti < 0) continue;
+        lp->has_truth = true;
+        lp->truth_mm = tl->lamps[ti].position_mm;
+        model_vec3_t e = vsub(v3(lp->fit.x_mm[0], lp->fit.x_mm[1], lp->fit.x_mm[2]), lp->truth_mm);
+        se2 += vdot(e, e);
+        r->ntruth++;
+    }
+    r->truth_rms_mm = r->ntruth ? sqrt(se2 / r->ntruth) : NAN;
+    model_lamps_free(tl);
+    rig_truth_free(t);
+}
+
+// The provenance of the outputs (once): the command line, the camera model,
+// the session and the rig file.
+static bool provenance(const calib_lamps_opts_t *o, calib_lamps_result_t *r)
+{
+    if (r->provenance) return true;
+    r->provenance = model_provenance(o->argc, o->argv);
+    if (!model_provenance_input(r->provenance, "camera", o->camera) ||
+        !model_provenance_input(r->provenance, "session", r->session_dir))
+        return false;
+    if (o->rig) model_provenance_input(r->provenance, "rig", o->rig);
+    return true;
+}
+
+static json_t *vec_json(const double *v, int n)
+{
+    json_t *a = json_array();
+    for (int k = 0; k < n; k++) json_array_append_new(a, json_real(v[k]));
+    return a;
+}
+
+// lamps.json's entry of lamp lp.
+static json_t *lamp_json(const calib_lamps_result_t *r, const calib_lamps_lamp_t *lp)
+{
+    json_t *j = json_object(), *miss = json_array();
+    const double *x = lp->fit.x_mm, *cv = lp->fit.cov_mm2;
+    json_object_set_new(j, "name", json_string(lp->name));
+    json_object_set_new(j, "position_mm", json_pack("[fff]", x[0], x[1], x[2]));
+    json_object_set_new(j, "std_mm", json_pack("[fff]", sqrt(cv[0]), sqrt(cv[4]), sqrt(cv[8])));
+    json_object_set_new(j, "covariance_mm2", vec_json(cv, 9));
+    json_object_set_new(j, "rms_ray_distance_mm", json_real(lp->fit.rms_mm));
+    json_object_set_new(j, "radius_mm", json_real(lp->lamp_radius_mm));
+    json_object_set_new(j, "n_frames", json_integer(lp->fit.n_used));
+    int nout = 0;
+    for (int a = 0; a < r->nangles; a++) {
+        nout += lp->has_ray[a] && !lp->used[a];
+        if (lp->has_ray[a]) continue;
+        int step;
+        const char *file = frame_file(r, lp, a, &step);
+        json_array_append_new(miss, json_pack("{s:s,s:i,s:f,s:s}", "file", file, "step", step, "angle_deg",
+                                              r->angle_deg[a], "why", lp->hl[a].why));
+    }
+    json_object_set_new(j, "n_outliers", json_integer(nout));
+    json_object_set_new(j, "frames_missing", miss);
+    if (lp->has_truth) {
+        model_vec3_t tp = lp->truth_mm;
+        double e[3] = { x[0] - tp.x, x[1] - tp.y, x[2] - tp.z };
+        json_object_set_new(j, "virtual_truth", json_pack("{s:[fff],s:[fff],s:f}", "position_mm", tp.x, tp.y, tp.z,
+                                                          "error_mm", e[0], e[1], e[2], "error_norm_mm",
+                                                          sqrt(e[0] * e[0] + e[1] * e[1] + e[2] * e[2])));
+    }
+    return j;
+}
+
+// lamps.json's sphere.joint_fit.
+static json_t *joint_json(const calib_lamps_opts_t *o, const calib_lamps_result_t *r)
+{
+    const calib_lamps_bundle_t *jf = &r->joint;
+    const double *gc = jf->sphere_cov;
+    json_t *jj = json_object(), *js = json_array();
+    for (int l = 0; l < r->nlamps; l++) json_array_append_new(js, json_real(jf->sigma_rad[l] * 1e3));
+    json_object_set_new(jj, "offset_mm", json_pack("[fff]", jf->sphere[0], jf->sphere[1], jf->sphere[2]));
+    json_object_set_new(jj, "shift_mm", json_pack("[ff]", jf->sphere[3], jf->sphere[4]));
+    json_object_set_new(jj, "tilt_mrad", json_pack("[ff]", jf->sphere[5], jf->sphere[6]));
+    json_object_set_new(jj, "std", json_pack("[fffffff]", sqrt(gc[0]), sqrt(gc[8]), sqrt(gc[16]), sqrt(gc[24]),
+                                             sqrt(gc[32]), sqrt(gc[40]), sqrt(gc[48])));
+    json_object_set_new(jj, "covariance_mm2", vec_json(gc, 49));
+    json_object_set_new(jj, "prior_std", json_pack("{s:f,s:f,s:f}", "offset_mm", o->offset_prior_mm, "shift_mm",
+                                                   o->shift_prior_mm, "tilt_mrad", o->tilt_prior_mrad));
+    json_object_set_new(jj, "ray_sigma_mrad", js);
+    json_object_set_new(jj, "condition", json_real(jf->cond));
+    json_object_set_new(jj, "model", json_string(
+        "sphere centre at angle a = s0 + tilt x s0 + (shift_mm, 0), s0 = Rz(a) (centre_at_angle0_mm + "
+        "offset_mm), tilt = (tilt_mrad, 0) 1e-3, fitted jointly with the lamps over every highlight (each a "
+        "camera ray reflected off that sphere; residual the angle to the lamp over its lamp's ray sigma); "
+        "std and covariance in the order offset x y z, shift x y (mm), tilt x y (mrad); Gaussian priors "
+        "of prior_std"));
+    return jj;
+}
+
+bool calib_lamps_write_json(const calib_lamps_opts_t *o, calib_lamps_result_t *r)
+{
+    if (!provenance(o, r)) return false;
+    const double *c0 = o->sphere_centre_mm;
+    json_t *doc = json_object(), *ja = json_array(), *sj = json_object();
     json_object_set_new(doc, "units", json_string("lengths in mm; angles in degrees; pixels with (0,0) at the "
                                                   "centre of the top-left pixel"));
     json_object_set_new(doc, "conventions", json_string(
@@ -1767,269 +1688,232 @@ int calib_cmd_lamps(int argc, char **argv)
         "axis from the residuals (with sphere.joint_fit including the uncertainty of the sphere's path and its "
         "priors; covariance_mm2 the full 3x3); rms_ray_distance_mm the RMS distance of the used rays from the "
         "position; frames_missing lists frames whose highlight was not found"));
-    json_t *ja = json_array();
-    printf("lamp       x_mm      y_mm      z_mm    std_x  std_y  std_z  rms_mm  frames");
-    if (truth_lamps) printf("  truth_err_mm");
-    printf("\n");
-    double se2 = 0;
-    int nt = 0;
-    for (int l = 0; l < nl; l++) {
-        lamp_t *lp = &L[l];
-        json_t *j = json_object();
+    for (int l = 0; l < r->nlamps; l++) json_array_append_new(ja, lamp_json(r, &r->lamps[l]));
+    json_object_set_new(doc, "lamps", ja);
+    json_object_set_new(doc, "camera", json_pack("{s:s,s:s}", "path", o->camera, "sha256",
+                                                 model_camera_sha256(r->cam)));
+    json_object_set_new(sj, "sample", json_string(r->plan->sample));
+    json_object_set_new(sj, "centre_at_angle0_mm", json_pack("[fff]", c0[0], c0[1], c0[2]));
+    json_object_set_new(sj, "radius_mm", json_real(o->sphere_radius_mm));
+    json_object_set_new(sj, "motion", json_string("centre at turntable angle a: Rz(a) centre_at_angle0_mm (the "
+                                                  "journal's measured angle)"));
+    json_object_set_new(sj, "source", json_string("command line"));
+    if (r->have_joint) json_object_set_new(sj, "joint_fit", joint_json(o, r));
+    json_object_set_new(doc, "sphere", sj);
+    json_object_set_new(doc, "session", json_string(r->session_dir));
+    json_object_set_new(doc, "provenance", json_incref(r->provenance));
+    char *path = g_strdup_printf("%s/lamps.json", o->out);
+    bool ok = model_write_json(path, doc);
+    if (ok) note(o, "wrote %s\n", path);
+    g_free(path);
+    json_decref(doc);
+    return ok;
+}
+
+// report_data.json's detections: at the first angle with a ray, the per-pixel
+// maximum over the lamp frames (dark subtracted) around the sphere's image and
+// the highlights found. NULL when there is nothing to show.
+static json_t *detections_json(const calib_lamps_opts_t *o, const calib_lamps_result_t *r)
+{
+    const int a = r->first_angle, W = model_camera_width(r->cam);
+    if (a < 0) return NULL;
+    const double ang = r->angle_deg[a];
+    calib_lamps_sphere_image_t *sph = calib_lamps_sphere_image(r->cam, centre_at(o->sphere_centre_mm, ang),
+                                                               o->sphere_radius_mm);
+    if (!sph) return NULL;
+    float *acc = calloc((size_t)sph->w * sph->h, sizeof *acc);
+    float *dark = r->dark_row[a] >= 0 ? load_frame(o, r, r->dark_row[a]) : NULL;
+    json_t *det = json_array(), *crop = json_array();
+    for (int l = 0; acc && l < r->nlamps; l++) {
+        const calib_lamps_lamp_t *lp = &r->lamps[l];
+        int fr = lp->frame[a], w = 0, h = 0;
+        if (fr < 0) continue;
+        float *img = rig_session_frame(r->session, fr, &w, &h);
+        if (!img) continue;
+        for (int y = 0; y < sph->h; y++)
+            for (int x = 0; x < sph->w; x++) {
+                size_t k = (size_t)(sph->y0 + y) * W + sph->x0 + x;
+                float v = img[k] - (dark ? dark[k] : 0);
+                if (v > acc[y * sph->w + x]) acc[y * sph->w + x] = v;
+            }
+        free(img);
+        const calib_lamps_highlight_t *hl = &lp->hl[a];
+        json_array_append_new(det, json_pack("{s:s,s:s,s:b,s:[ff],s:f}", "lamp", lp->name, "file",
+                                             r->session->rows[fr].file, "found", hl->found, "q", hl->q[0], hl->q[1],
+                                             "peak_dn", hl->peak_dn));
+    }
+    for (int i = 0; acc && i < sph->w * sph->h; i++) json_array_append_new(crop, json_real(acc[i]));
+    json_t *out = json_pack("{s:f,s:i,s:i,s:i,s:i,s:o,s:o,s:[ff],s:f}", "angle_deg", ang, "x0", sph->x0, "y0",
+                            sph->y0, "w", sph->w, "h", sph->h, "crop", crop, "highlights", det, "sphere_q",
+                            sph->q_centre[0], sph->q_centre[1], "sphere_radius_px", sph->radius_px);
+    free(acc);
+    free(dark);
+    calib_lamps_sphere_image_free(sph);
+    return out;
+}
+
+// report_data.json for the plotting script: rays, fits, one angle's detections.
+static json_t *report_json(const calib_lamps_opts_t *o, const calib_lamps_result_t *r)
+{
+    json_t *rep = json_object(), *rl = json_array();
+    for (int l = 0; l < r->nlamps; l++) {
+        const calib_lamps_lamp_t *lp = &r->lamps[l];
         const double *x = lp->fit.x_mm, *cv = lp->fit.cov_mm2;
+        json_t *j = json_object(), *rays = json_array();
         json_object_set_new(j, "name", json_string(lp->name));
         json_object_set_new(j, "position_mm", json_pack("[fff]", x[0], x[1], x[2]));
         json_object_set_new(j, "std_mm", json_pack("[fff]", sqrt(cv[0]), sqrt(cv[4]), sqrt(cv[8])));
-        json_t *cj = json_array();
-        for (int k = 0; k < 9; k++) json_array_append_new(cj, json_real(cv[k]));
-        json_object_set_new(j, "covariance_mm2", cj);
-        json_object_set_new(j, "rms_ray_distance_mm", json_real(lp->fit.rms_mm));
-        json_object_set_new(j, "radius_mm", json_real(lp->lamp_radius_mm));
-        json_object_set_new(j, "n_frames", json_integer(lp->fit.n_used));
-        int nout = 0;
-        for (int a = 0; a < NA; a++) nout += lp->has_ray[a] && !lp->used[a];
-        json_object_set_new(j, "n_outliers", json_integer(nout));
-        json_object_set_new(j, "frames_missing", json_incref(lp->frames_missing));
-        printf("%-8s %9.2f %9.2f %9.2f  %6.2f %6.2f %6.2f  %6.2f  %2d/%d", lp->name, x[0], x[1], x[2], sqrt(cv[0]),
-               sqrt(cv[4]), sqrt(cv[8]), lp->fit.rms_mm, lp->fit.n_used, NA);
-        int ti = truth_lamps ? model_lamps_find(truth_lamps, lp->name) : -1;
-        if (ti >= 0) {
-            model_vec3_t tp = truth_lamps->lamps[ti].position_mm;
-            double e[3] = { x[0] - tp.x, x[1] - tp.y, x[2] - tp.z };
-            double en = sqrt(e[0] * e[0] + e[1] * e[1] + e[2] * e[2]);
-            json_t *t = json_object();
-            json_object_set_new(t, "position_mm", json_pack("[fff]", tp.x, tp.y, tp.z));
-            json_object_set_new(t, "error_mm", json_pack("[fff]", e[0], e[1], e[2]));
-            json_object_set_new(t, "error_norm_mm", json_real(en));
-            json_object_set_new(j, "virtual_truth", t);
-            printf("  %8.2f", en);
-            se2 += en * en;
-            nt++;
-        }
-        printf("\n");
-        json_array_append_new(ja, j);
-    }
-    if (nt) printf("virtual rig: RMS position error %.2f mm over %d lamps\n", sqrt(se2 / nt), nt);
-    json_object_set_new(doc, "lamps", ja);
-    json_t *cj = json_object();
-    json_object_set_new(cj, "path", json_string(o.camera));
-    json_object_set_new(cj, "sha256", json_string(model_camera_sha256(cam)));
-    json_object_set_new(doc, "camera", cj);
-    json_t *sj = json_object();
-    json_object_set_new(sj, "sample", json_string(plan->sample));
-    json_object_set_new(sj, "centre_at_angle0_mm", json_pack("[fff]", o.c0[0], o.c0[1], o.c0[2]));
-    json_object_set_new(sj, "radius_mm", json_real(o.radius_mm));
-    json_object_set_new(sj, "motion", json_string("centre at turntable angle a: Rz(a) centre_at_angle0_mm (the "
-                                                  "journal's measured angle)"));
-    json_object_set_new(sj, "source", json_string(o.have_centre && o.have_radius ? "command line" : "virtual rig truth file"));
-    if (have_joint) {
-        json_t *jj = json_object(), *jc = json_array(), *js = json_array();
-        for (int k = 0; k < 49; k++) json_array_append_new(jc, json_real(jf.sphere_cov[k]));
-        for (int l = 0; l < nl; l++) json_array_append_new(js, json_real(jf.sigma_rad[l] * 1e3));
-        json_object_set_new(jj, "offset_mm", json_pack("[fff]", jf.sphere[0], jf.sphere[1], jf.sphere[2]));
-        json_object_set_new(jj, "shift_mm", json_pack("[ff]", jf.sphere[3], jf.sphere[4]));
-        json_object_set_new(jj, "tilt_mrad", json_pack("[ff]", jf.sphere[5], jf.sphere[6]));
-        json_object_set_new(jj, "std", json_pack("[fffffff]", sqrt(jf.sphere_cov[0]), sqrt(jf.sphere_cov[8]),
-                                                 sqrt(jf.sphere_cov[16]), sqrt(jf.sphere_cov[24]),
-                                                 sqrt(jf.sphere_cov[32]), sqrt(jf.sphere_cov[40]),
-                                                 sqrt(jf.sphere_cov[48])));
-        json_object_set_new(jj, "covariance_mm2", jc);
-        json_object_set_new(jj, "prior_std", json_pack("{s:f,s:f,s:f}", "offset_mm", o.offset_prior_mm, "shift_mm",
-                                                       o.shift_prior_mm, "tilt_mrad", o.tilt_prior_mrad));
-        json_object_set_new(jj, "ray_sigma_mrad", js);
-        json_object_set_new(jj, "condition", json_real(jf.cond));
-        json_object_set_new(jj, "model", json_string(
-            "sphere centre at angle a = s0 + tilt x s0 + (shift_mm, 0), s0 = Rz(a) (centre_at_angle0_mm + "
-            "offset_mm), tilt = (tilt_mrad, 0) 1e-3, fitted jointly with the lamps over every highlight (each a "
-            "camera ray reflected off that sphere; residual the angle to the lamp over its lamp's ray sigma); "
-            "std and covariance in the order offset x y z, shift x y (mm), tilt x y (mrad); Gaussian priors "
-            "of prior_std"));
-        json_object_set_new(sj, "joint_fit", jj);
-    }
-    json_object_set_new(doc, "sphere", sj);
-    json_object_set_new(doc, "session", json_string(sdir));
-    json_object_set_new(doc, "provenance", json_incref(prov));
-    path = g_strdup_printf("%s/lamps.json", o.out);
-    if (!model_write_json(path, doc)) goto done;
-    fprintf(stderr, "refl calib lamps: wrote %s\n", path);
-
-    // report data for the plotting script: rays, fits, one angle's detections
-    rep = json_object();
-    json_t *rl = json_array();
-    for (int l = 0; l < nl; l++) {
-        lamp_t *lp = &L[l];
-        json_t *j = json_object(), *rays = json_array();
-        json_object_set_new(j, "name", json_string(lp->name));
-        json_object_set_new(j, "position_mm", json_pack("[fff]", lp->fit.x_mm[0], lp->fit.x_mm[1], lp->fit.x_mm[2]));
-        json_object_set_new(j, "std_mm", json_pack("[fff]", sqrt(lp->fit.cov_mm2[0]), sqrt(lp->fit.cov_mm2[4]),
-                                                   sqrt(lp->fit.cov_mm2[8])));
-        int ti = truth_lamps ? model_lamps_find(truth_lamps, lp->name) : -1;
-        if (ti >= 0) {
-            model_vec3_t tp = truth_lamps->lamps[ti].position_mm;
-            json_object_set_new(j, "truth_mm", json_pack("[fff]", tp.x, tp.y, tp.z));
-        }
-        for (int a = 0; a < NA; a++) {
+        if (lp->has_truth)
+            json_object_set_new(j, "truth_mm", json_pack("[fff]", lp->truth_mm.x, lp->truth_mm.y, lp->truth_mm.z));
+        for (int a = 0; a < r->nangles; a++) {
             if (!lp->has_ray[a]) continue;
             const calib_lamps_highlight_t *hl = &lp->hl[a];
-            double ang = isfinite(angle_meas[a]) ? angle_meas[a] : plan->angles_deg[a];
+            const model_vec3_t p = lp->p_mm[a], d = lp->d[a];
             json_array_append_new(rays, json_pack("{s:[fff],s:[fff],s:b,s:f,s:f,s:s,s:[ff],s:[ff],s:f,s:b}", "p",
-                                                  lp->p[a].x, lp->p[a].y, lp->p[a].z, "d", lp->d[a].x, lp->d[a].y,
-                                                  lp->d[a].z, "used", lp->used[a], "dist_mm", lp->dist[a],
-                                                  "angle_deg", ang, "file", s->rows[lp->frame[a]].file, "q",
-                                                  hl->q[0], hl->q[1], "q_centroid", hl->q_centroid[0],
-                                                  hl->q_centroid[1], "peak_dn", hl->peak_dn, "fit_used",
-                                                  hl->fit_used));
+                                                  p.x, p.y, p.z, "d", d.x, d.y, d.z, "used", lp->used[a], "dist_mm",
+                                                  lp->dist_mm[a], "angle_deg", r->angle_deg[a], "file",
+                                                  r->session->rows[lp->frame[a]].file, "q", hl->q[0], hl->q[1],
+                                                  "q_centroid", hl->q_centroid[0], hl->q_centroid[1], "peak_dn",
+                                                  hl->peak_dn, "fit_used", hl->fit_used));
         }
         json_object_set_new(j, "rays", rays);
         json_array_append_new(rl, j);
     }
     json_object_set_new(rep, "lamps", rl);
-    if (first_angle_shown >= 0) {
-        int a = first_angle_shown;
-        double ang = isfinite(angle_meas[a]) ? angle_meas[a] : plan->angles_deg[a];
-        double th = ang * M_PI / 180;
-        model_vec3_t ca = v3(cos(th) * o.c0[0] - sin(th) * o.c0[1], sin(th) * o.c0[0] + cos(th) * o.c0[1], o.c0[2]);
-        calib_lamps_sphere_image_t *sph = calib_lamps_sphere_image(cam, ca, o.radius_mm);
-        if (sph) {
-            // the per-pixel maximum over the lamp frames of this angle (dark subtracted)
-            float *acc = calloc((size_t)sph->w * sph->h, sizeof *acc);
-            json_t *det = json_array();
-            for (int l = 0; acc && l < nl; l++) {
-                int fr = L[l].frame[a], w = 0, h = 0;
-                if (fr < 0) continue;
-                float *img = rig_session_frame(s, fr, &w, &h);
-                if (!img) continue;
-                for (int y = 0; y < sph->h; y++)
-                    for (int x = 0; x < sph->w; x++) {
-                        size_t k = (size_t)(sph->y0 + y) * W + sph->x0 + x;
-                        float v = img[k] - (dark[a] ? dark[a][k] : 0);
-                        if (v > acc[y * sph->w + x]) acc[y * sph->w + x] = v;
-                    }
-                free(img);
-                const calib_lamps_highlight_t *hl = &L[l].hl[a];
-                json_array_append_new(det, json_pack("{s:s,s:s,s:b,s:[ff],s:f}", "lamp", L[l].name, "file",
-                                                     s->rows[fr].file, "found", hl->found, "q", hl->q[0], hl->q[1],
-                                                     "peak_dn", hl->peak_dn));
-            }
-            json_t *crop = json_array();
-            for (int i = 0; acc && i < sph->w * sph->h; i++) json_array_append_new(crop, json_real(acc[i]));
-            free(acc);
-            json_object_set_new(rep, "detections", json_pack("{s:f,s:i,s:i,s:i,s:i,s:o,s:o,s:[ff],s:f}", "angle_deg",
-                                                             ang, "x0", sph->x0, "y0", sph->y0, "w", sph->w, "h",
-                                                             sph->h, "crop", crop, "highlights", det, "sphere_q",
-                                                             sph->q_centre[0], sph->q_centre[1], "sphere_radius_px",
-                                                             sph->radius_px));
-            calib_lamps_sphere_image_free(sph);
-        }
-    }
-    model_vec3_t Cw = model_camera_centre_world(cam);
+    json_t *det = detections_json(o, r);
+    if (det) json_object_set_new(rep, "detections", det);
+    model_vec3_t Cw = model_camera_centre_world(r->cam);
+    const double *c0 = o->sphere_centre_mm;
     json_object_set_new(rep, "camera_centre_mm", json_pack("[fff]", Cw.x, Cw.y, Cw.z));
-    json_object_set_new(rep, "sphere_centre_angle0_mm", json_pack("[fff]", o.c0[0], o.c0[1], o.c0[2]));
-    json_object_set_new(rep, "sphere_radius_mm", json_real(o.radius_mm));
-    if (have_joint)
+    json_object_set_new(rep, "sphere_centre_angle0_mm", json_pack("[fff]", c0[0], c0[1], c0[2]));
+    json_object_set_new(rep, "sphere_radius_mm", json_real(o->sphere_radius_mm));
+    if (r->have_joint) {
+        const double *g = r->joint.sphere, *gc = r->joint.sphere_cov;
         json_object_set_new(rep, "sphere_joint_fit", json_pack("{s:[fff],s:[ff],s:[ff],s:[fffffff]}", "offset_mm",
-                                                               jf.sphere[0], jf.sphere[1], jf.sphere[2], "shift_mm",
-                                                               jf.sphere[3], jf.sphere[4], "tilt_mrad", jf.sphere[5],
-                                                               jf.sphere[6], "std", sqrt(jf.sphere_cov[0]),
-                                                               sqrt(jf.sphere_cov[8]), sqrt(jf.sphere_cov[16]),
-                                                               sqrt(jf.sphere_cov[24]), sqrt(jf.sphere_cov[32]),
-                                                               sqrt(jf.sphere_cov[40]), sqrt(jf.sphere_cov[48])));
-    g_free(path);
-    path = g_strdup_printf("%s/report_data.json", o.out);
-    if (!model_write_json(path, rep)) goto done;
-    char *png1 = g_strdup_printf("%s/lamps_triangulation.png", o.out);
-    char *png2 = g_strdup_printf("%s/lamps_detections.png", o.out);
-    fprintf(stderr, "refl calib lamps: plotting\n");
-    int prc = model_run_script("calib_lamps_report.py", path, png1, png2, NULL);
-    g_free(png1);
-    g_free(png2);
-    if (prc) goto done;
+                                                               g[0], g[1], g[2], "shift_mm", g[3], g[4], "tilt_mrad",
+                                                               g[5], g[6], "std", sqrt(gc[0]), sqrt(gc[8]),
+                                                               sqrt(gc[16]), sqrt(gc[24]), sqrt(gc[32]),
+                                                               sqrt(gc[40]), sqrt(gc[48])));
+    }
+    return rep;
+}
 
-    // report.html
-    g_free(path);
-    path = g_strdup_printf("%s/report.html", o.out);
-    FILE *f = model_html_begin(path, "refl calib lamps: lamp positions", prov);
-    if (!f) goto done;
+// report.html's table: one row per lamp.
+static void report_table(FILE *f, const calib_lamps_result_t *r)
+{
+    const char **rows = calloc((size_t)r->nlamps, sizeof *rows);
+    for (int l = 0; rows && l < r->nlamps; l++) {
+        const calib_lamps_lamp_t *lp = &r->lamps[l];
+        const double *x = lp->fit.x_mm, *cv = lp->fit.cov_mm2;
+        char te[64] = "-";
+        if (lp->has_truth) {
+            model_vec3_t e = vsub(v3(x[0], x[1], x[2]), lp->truth_mm);
+            snprintf(te, sizeof te, "%.2f", sqrt(vdot(e, e)));
+        }
+        rows[l] = g_strdup_printf("%s|%.2f|%.2f|%.2f|%.2f / %.2f / %.2f|%.2f|%d of %d|%d|%s", lp->name, x[0], x[1],
+                                  x[2], sqrt(cv[0]), sqrt(cv[4]), sqrt(cv[8]), lp->fit.rms_mm, lp->fit.n_used,
+                                  r->nangles, lp->nmissing, te);
+    }
+    if (rows)
+        model_html_table(f, "lamp|x mm|y mm|z mm|std x / y / z mm|RMS ray distance mm|rays used|frames missing|"
+                            "error vs virtual truth mm", rows, r->nlamps);
+    for (int l = 0; rows && l < r->nlamps; l++) g_free((char *)rows[l]);
+    free(rows);
+}
+
+static bool report_html(const calib_lamps_opts_t *o, const calib_lamps_result_t *r, const char *path)
+{
+    const double *c0 = o->sphere_centre_mm, *g = r->joint.sphere, *gc = r->joint.sphere_cov;
+    FILE *f = model_html_begin(path, "refl calib lamps: lamp positions", r->provenance);
+    if (!f) return false;
     model_html_heading(f, "Lamp positions");
     model_html_para(f, "Mirror sphere '%s': radius %g mm, centre (%g, %g, %g) mm at turntable angle 0 (rig frame); "
                     "%d angles. Each highlight's camera ray is reflected off the sphere into a ray toward the lamp; "
                     "the lamp is the least-squares point nearest its rays (outliers beyond 4 robust sigma dropped); "
-                    "std from the ray residuals.", plan->sample, o.radius_mm, o.c0[0], o.c0[1], o.c0[2], NA);
-    if (have_joint)
+                    "std from the ray residuals.", r->plan->sample, o->sphere_radius_mm, c0[0], c0[1], c0[2],
+                    r->nangles);
+    if (r->have_joint)
         model_html_para(f, "Joint fit of the lamps and the sphere's path over every highlight (the camera model's "
                         "extrinsics error moves the sphere relative to the camera; a tenth of a millimetre there is "
                         "millimetres at the lamps): centre at angle a = s0 + tilt x s0 + shift, s0 = Rz(a) (centre + "
                         "offset). Offset %.3f %.3f %.3f mm (std %.3f %.3f %.3f), shift %.3f %.3f mm (std %.3f %.3f), "
                         "tilt %.3f %.3f mrad (std %.3f %.3f); priors (std) offset %g mm, shift %g mm, tilt %g mrad. "
                         "Residuals are angles of the highlights' camera rays; the std of each lamp includes the "
-                        "path's uncertainty.", jf.sphere[0], jf.sphere[1], jf.sphere[2], sqrt(jf.sphere_cov[0]),
-                        sqrt(jf.sphere_cov[8]), sqrt(jf.sphere_cov[16]), jf.sphere[3], jf.sphere[4],
-                        sqrt(jf.sphere_cov[24]), sqrt(jf.sphere_cov[32]), jf.sphere[5], jf.sphere[6],
-                        sqrt(jf.sphere_cov[40]), sqrt(jf.sphere_cov[48]), o.offset_prior_mm, o.shift_prior_mm,
-                        o.tilt_prior_mrad);
-    const char **rows = calloc((size_t)nl, sizeof *rows);
-    for (int l = 0; l < nl; l++) {
-        lamp_t *lp = &L[l];
-        const double *x = lp->fit.x_mm, *cv = lp->fit.cov_mm2;
-        int ti = truth_lamps ? model_lamps_find(truth_lamps, lp->name) : -1;
-        char te[64] = "-";
-        if (ti >= 0) {
-            model_vec3_t tp = truth_lamps->lamps[ti].position_mm;
-            snprintf(te, sizeof te, "%.2f", sqrt((x[0] - tp.x) * (x[0] - tp.x) + (x[1] - tp.y) * (x[1] - tp.y) +
-                                                 (x[2] - tp.z) * (x[2] - tp.z)));
-        }
-        rows[l] = g_strdup_printf("%s|%.2f|%.2f|%.2f|%.2f / %.2f / %.2f|%.2f|%d of %d|%d|%s", lp->name, x[0], x[1],
-                                  x[2], sqrt(cv[0]), sqrt(cv[4]), sqrt(cv[8]), lp->fit.rms_mm, lp->fit.n_used, NA,
-                                  (int)json_array_size(lp->frames_missing), te);
+                        "path's uncertainty.", g[0], g[1], g[2], sqrt(gc[0]), sqrt(gc[8]), sqrt(gc[16]), g[3], g[4],
+                        sqrt(gc[24]), sqrt(gc[32]), g[5], g[6], sqrt(gc[40]), sqrt(gc[48]), o->offset_prior_mm,
+                        o->shift_prior_mm, o->tilt_prior_mrad);
+    report_table(f, r);
+    for (int l = 0; l < r->nlamps; l++) {
+        if (!r->lamps[l].nmissing) continue;
+        char *t = missing_text(r, &r->lamps[l]);
+        model_html_para(f, "Lamp %s: no highlight in:\n%s", r->lamps[l].name, t);
+        g_free(t);
     }
-    model_html_table(f, "lamp|x mm|y mm|z mm|std x / y / z mm|RMS ray distance mm|rays used|frames missing|"
-                        "error vs virtual truth mm", rows, nl);
-    for (int l = 0; l < nl; l++) g_free((char *)rows[l]);
-    free(rows);
-    for (int l = 0; l < nl; l++)
-        if (L[l].missing->len) model_html_para(f, "Lamp %s: no highlight in:\n%s", L[l].name, L[l].missing->str);
     model_html_figure(f, "lamps_triangulation.png", "Triangulation: the rays reflected off the sphere (one per "
                       "turntable angle; grey: left out as outliers) and the fitted lamp positions (x; + virtual "
                       "truth where known), top (x-y) and side (x-z, y-z) views, mm, rig frame; ray residuals");
     model_html_figure(f, "lamps_detections.png", "Highlight detections at the first angle: the per-pixel maximum "
                       "of every lamp's frame minus dark around the sphere's predicted image (circle), the found "
                       "highlights marked");
-    if (!model_html_end(f, path)) goto done;
-    fprintf(stderr, "refl calib lamps: wrote %s\n", path);
-    rc = 0;
-done:
-    if (rc) {
-        const char *e = model_last_error();
-        if (e && *e) fprintf(stderr, "refl calib lamps: failed: %s\n", e);
+    return model_html_end(f, path);
+}
+
+bool calib_lamps_write_report(const calib_lamps_opts_t *o, calib_lamps_result_t *r)
+{
+    if (!provenance(o, r)) return false;
+    json_t *rep = report_json(o, r);
+    char *path = g_strdup_printf("%s/report_data.json", o->out);
+    char *png1 = g_strdup_printf("%s/lamps_triangulation.png", o->out);
+    char *png2 = g_strdup_printf("%s/lamps_detections.png", o->out);
+    char *html = g_strdup_printf("%s/report.html", o->out);
+    bool ok = model_write_json(path, rep);
+    if (ok) {
+        note(o, "plotting\n");
+        ok = model_run_script("calib_lamps_report.py", path, png1, png2, NULL) == 0;
     }
-    for (int l = 0; L && l < nl; l++) {
-        free(L[l].frame);
-        free(L[l].hl);
-        free(L[l].has_ray);
-        free(L[l].used);
-        free(L[l].p);
-        free(L[l].d);
-        free(L[l].dist);
-        if (L[l].missing) g_string_free(L[l].missing, TRUE);
-        json_decref(L[l].frames_missing);
-    }
-    free(L);
-    if (dark && plan)
-        for (int a = 0; a < plan->nangles; a++) free(dark[a]);
-    free(dark);
-    free(dark_row);
-    free(angle_meas);
-    free(centre_at);
-    g_free(path);
-    json_decref(prov);
-    json_decref(doc);
+    if (ok) ok = report_html(o, r, html);
+    if (ok) note(o, "wrote %s\n", html);
     json_decref(rep);
-    model_lamps_free(truth_lamps);
-    rig_plan_free(plan);
-    rig_session_free(s);
-    model_camera_free(cam);
-    g_ptr_array_free(names, TRUE);
-    g_free(truth);
-    g_free(sdir);
-    return rc;
+    g_free(path);
+    g_free(png1);
+    g_free(png2);
+    g_free(html);
+    return ok;
+}
+
+bool calib_lamps_run(const calib_lamps_opts_t *o, calib_lamps_result_t *r)
+{
+    memset(r, 0, sizeof *r);
+    r->first_angle = -1;
+    if (!calib_lamps_open(o, r) || !calib_lamps_find_highlights(o, r) || !calib_lamps_triangulate_lamps(o, r))
+        return false;
+    if (o->joint && !calib_lamps_joint_fit(o, r)) return false;
+    compare_truth(r);
+    return calib_lamps_write_json(o, r) && calib_lamps_write_report(o, r);
+}
+
+void calib_lamps_result_free(calib_lamps_result_t *r)
+{
+    for (int l = 0; r->lamps && l < r->nlamps; l++) {
+        calib_lamps_lamp_t *lp = &r->lamps[l];
+        free(lp->frame);
+        free(lp->hl);
+        free(lp->has_ray);
+        free(lp->used);
+        free(lp->p_mm);
+        free(lp->d);
+        free(lp->dist_mm);
+    }
+    free(r->lamps);
+    free(r->angle_deg);
+    free(r->dark_row);
+    free(r->centre_mm);
+    json_decref(r->provenance);
+    rig_plan_free(r->plan);
+    rig_session_free(r->session);
+    model_camera_free(r->cam);
+    g_free(r->session_dir);
+    g_free(r->truth_path);
+    memset(r, 0, sizeof *r);
+    r->first_angle = -1;
 }

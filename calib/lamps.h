@@ -1,14 +1,20 @@
-// calib/lamps.h — the parts of the lamp calibration (calib/lamps.c) that its
-// tests call directly: the sub-pixel highlight finder and the triangulation.
-// `refl calib lamps` itself is calib_cmd_lamps (calib/calib.h).
+// calib/lamps.h — the lamp calibration (calib/lamps.c): lamp positions from
+// the highlights of a mirror sphere carried round by the turntable. The whole
+// calibration is calib_lamps_run (options in, result out), made of the stages
+// declared at the end; below them the parts the stages use: the sub-pixel
+// highlight finder, the ray toward a lamp, the triangulation and the joint fit
+// of lamps and sphere path. `refl calib lamps` (calib/cmd_lamps.c) parses its
+// options into a calib_lamps_opts_t, calls calib_lamps_run and prints.
 //
 // Conventions as calib/calib.h: mm, rig frame, pixel (0, 0) = centre of the
-// top-left pixel, grey values in DN.
+// top-left pixel, grey values in DN, turntable angles in degrees.
 #pragma once
 
 #include <stdbool.h>
+#include <stdio.h>
 
 #include "model/model.h"
+#include "rig/rig.h"
 
 #ifdef __cplusplus
 extern "C" {
@@ -170,6 +176,131 @@ typedef struct {
 // when the ray misses the sphere.
 bool calib_lamps_bundle_weight(calib_lamps_bundle_ctx_t *ctx, const double X[3], const double g[7]);
 bool calib_lamps_bundle_residual(void *ctx, const double *const *params, double *res, double **jac);
+
+// ---------------------------------------------------------------------------
+// The calibration: calib_lamps_run and its stages
+//
+// Errors: every stage returns false with one message kept by model_error_set
+// (model_last_error()); the functions it calls in model/ and rig/ print theirs
+// through model_error unless this thread is quiet (model_error_quiet_thread:
+// the command runs the calibration quiet and prints the one message).
+
+typedef enum {
+    CALIB_LAMPS_CENTROID = 0,   // the highlight's intensity-weighted centroid, reflected
+    CALIB_LAMPS_GAUSS = 1,      // the 2-D Gaussian fit in the image, reflected
+    CALIB_LAMPS_MODEL = 2,      // calib_lamps_fit_direction (the lamp's disk seen in the mirror)
+} calib_lamps_method_t;
+
+enum { CALIB_LAMPS_MAX_ANGLES = 360, CALIB_LAMPS_MAX_EXPOSURES = 16 };
+
+// What to calibrate and how. Strings are borrowed (they must outlive the run).
+typedef struct {
+    const char  *rig;              // capture on this rig file into out/capture (a complete session there is
+                                   // reused); NULL: analyse session
+    const char  *session;          // a session captured elsewhere (its plan: the sphere, each lamp alone)
+    const char  *camera;           // the camera model (.cameramodel, extrinsics in the rig frame)
+    const char  *out;              // output directory: lamps.json, report_data.json, report.html, plots
+    const char  *sample;           // the capture plan's sample (default "mirror_sphere")
+    char *const *lamps;            // NULL-terminated lamp names; NULL: every lamp of the rig file (capture),
+                                   // every lamp set of one lamp alone of the session's plan (session)
+    double       angles_deg[CALIB_LAMPS_MAX_ANGLES];        // capture: turntable angles (default 0, 15, ... 345)
+    int          nangles;
+    double       exposures_us[CALIB_LAMPS_MAX_EXPOSURES];   // capture: auto-bracketing ladder, longest first
+    int          nexposures;                                //   (default 40, 20, 10)
+    bool         sphere_given;     // the sphere's facts below are set (required: the run fails without them)
+    double       sphere_centre_mm[3];   // the sphere's centre at turntable angle 0, rig frame
+    double       sphere_radius_mm;
+    double       lamp_radius_mm;   // the lamps' emitting radius modelled in the highlights (0: point lamps)
+    double       min_snr;          // a highlight's peak / noise at least (default 12)
+    calib_lamps_method_t method;   // how a highlight is located (default CALIB_LAMPS_MODEL)
+    bool         joint;            // the joint fit of lamps and sphere path after the per-lamp fits (default true)
+    double       offset_prior_mm;  // joint fit: priors (std; 0 holds the part at 0), defaults 1 mm,
+    double       shift_prior_mm;   //   0.1 mm and 1 mrad (see calib_lamps_bundle_setup_t)
+    double       tilt_prior_mrad;
+    int          progress;         // capture progress: -1 auto (a bar on a terminal), 0 lines, 1 bar
+    int          argc;             // the command line for the provenance (may be 0, NULL)
+    char       **argv;
+    FILE        *log;              // progress and notes, each line "refl calib lamps: ..." (NULL: none)
+} calib_lamps_opts_t;
+
+// The defaults above; rig/session, camera, out and the sphere's facts unset.
+calib_lamps_opts_t calib_lamps_defaults(void);
+
+// One lamp over the session's nangles angles (arrays of nangles, index =
+// angle of the plan).
+typedef struct {
+    char          name[64];
+    double        lamp_radius_mm;  // emitting radius modelled in its highlights
+    int          *frame;           // session row of the frame used (-1: none in the session)
+    calib_lamps_highlight_t *hl;   // the highlight found (hl[a].why says why not)
+    bool         *has_ray;         // a ray toward the lamp was found
+    model_vec3_t *p_mm;            // ray origin on the sphere, rig frame
+    model_vec3_t *d;               // unit ray direction toward the lamp
+    bool         *used;            // the ray is in the fit (false: none, or an outlier)
+    double       *dist_mm;         // the ray's distance from the fitted position
+    int           nmissing;        // angles without a ray
+    calib_lamps_fit_t fit;         // the position: per-lamp triangulation, then the joint fit's
+    bool          has_truth;       // truth_mm set: the virtual rig's truth, for the comparison only
+    model_vec3_t  truth_mm;
+} calib_lamps_lamp_t;
+
+typedef struct {
+    model_camera_t     *cam;
+    char               *session_dir;
+    rig_session_t      *session;
+    rig_plan_t         *plan;
+    int                 nangles;        // the plan's angles
+    double             *angle_deg;      // nangles: the journal's measured angle (the plan's where none)
+    int                *dark_row;       // nangles: session row of the dark frame (lamp set none; -1: none)
+    model_vec3_t       *centre_mm;      // nangles: the sphere's centre the rays were last reflected at
+    int                 nlamps;
+    calib_lamps_lamp_t *lamps;          // nlamps
+    int                 first_angle;    // the first angle with a ray (-1: none): the report's detections
+    bool                have_joint;     // the joint fit ran
+    int                 joint_nobs;     // highlights in it
+    calib_lamps_bundle_t joint;
+    char               *truth_path;     // the virtual rig's truth file (comparison only; NULL: none)
+    bool                have_truth;     // its lamps were read
+    int                 ntruth;         // lamps compared with the truth
+    double              truth_rms_mm;   // their RMS position error
+    json_t             *provenance;
+} calib_lamps_result_t;
+
+// The whole calibration: the stages below in order (the joint fit when
+// o->joint), the comparison with the truth when there is one, lamps.json and
+// the report in o->out. false + message. r is filled as far as the run got;
+// free it with calib_lamps_result_free either way.
+bool calib_lamps_run(const calib_lamps_opts_t *o, calib_lamps_result_t *r);
+void calib_lamps_result_free(calib_lamps_result_t *r);   // accepts a zeroed result
+
+// The capture plan: sample at the angles, each lamp alone and the dark (lamp
+// set none) per angle, auto-bracketed exposures (longest first). Caller g_free's.
+char *calib_lamps_plan_text(const char *sample, const double *angles_deg, int nangles, char *const *lamps,
+                            int nlamps, const double *exposures_us, int nexposures);
+
+// Stage 1: the camera model; with o->rig the capture into o->out/capture;
+// the session, its plan and the lamps to calibrate; per angle and lamp the
+// frame to use (the longest exposure below 95 % of full scale) and per angle
+// the dark frame. r zeroed (or as calib_lamps_run leaves it).
+bool calib_lamps_open(const calib_lamps_opts_t *o, calib_lamps_result_t *r);
+// Stage 2: per angle the sphere's image, per lamp its highlight and the ray
+// toward the lamp (pass 1: a point lamp); fills hl, has_ray, p_mm, d, used,
+// nmissing, centre_mm, first_angle.
+bool calib_lamps_find_highlights(const calib_lamps_opts_t *o, calib_lamps_result_t *r);
+// Stage 3: each lamp the point nearest its rays (outliers dropped); then with
+// the lamp's disk (lamp_radius_mm > 0, CALIB_LAMPS_MODEL) its highlights
+// fitted again and the point again. Fails when a lamp has fewer than 3 rays
+// (every such lamp named in the one message).
+bool calib_lamps_triangulate_lamps(const calib_lamps_opts_t *o, calib_lamps_result_t *r);
+// Stage 4: calib_lamps_bundle over every used highlight, the highlights
+// fitted again at the fitted sphere path, the bundle again; the lamps' fits
+// (position, covariance, RMS) replaced by the joint ones.
+bool calib_lamps_joint_fit(const calib_lamps_opts_t *o, calib_lamps_result_t *r);
+// Stage 5: o->out/lamps.json (units mm, rig frame, provenance).
+bool calib_lamps_write_json(const calib_lamps_opts_t *o, calib_lamps_result_t *r);
+// Stage 6: o->out/report_data.json, its plots (scripts/calib_lamps_report.py)
+// and o->out/report.html.
+bool calib_lamps_write_report(const calib_lamps_opts_t *o, calib_lamps_result_t *r);
 
 #ifdef __cplusplus
 }

@@ -450,6 +450,7 @@ TEST(calib_lamps_virtual_rig_accuracy)
     snprintf(out, sizeof out, "%s/lamps", test_tmpdir());
     char *o = NULL, *e = NULL;
     int rc = test_refl_run(300, &o, &e, "calib", "lamps", "--rig", rig, "--camera", cam, "-o", out,
+                           "--sphere-centre-mm", "60,0,40", "--sphere-radius-mm", "25", "--lamp-radius-mm", "15",
                            "--progress", "lines", NULL);   // the default: 24 angles, 15 deg apart
     CHECK_MSG(rc == 0, "rc %d\n%s\n%s", rc, o, e);
     fprintf(stderr, "%s", o ? o : "");
@@ -569,6 +570,7 @@ TEST(calib_lamps_virtual_rig_accuracy)
         snprintf(out3, sizeof out3, "%s/chain", test_tmpdir());
         for (int k = 0; tl2 && k < 2; k++) {
             rc = test_refl_run(120, &o, &e, "calib", "lamps", "--session", sess, "--camera", pcam, "-o", out3,
+                               "--sphere-centre-mm", "60,0,40", "--sphere-radius-mm", "25", "--lamp-radius-mm", "15",
                                "--sphere-path", k ? "fixed" : "fit", NULL);
             CHECK_MSG(rc == 0, "rc %d\n%s", rc, e);
             if (k == 0) CHECK_CONTAINS(e, "joint fit of 5 lamps and the sphere's path over");
@@ -601,7 +603,7 @@ TEST(calib_lamps_virtual_rig_accuracy)
 
     // the dark frames (lamp set none) are not a lamp
     rc = test_refl_run(120, &o, &e, "calib", "lamps", "--session", sess, "--camera", cam, "-o", out2, "--lamps",
-                       "none", NULL);
+                       "none", "--sphere-centre-mm", "60,0,40", "--sphere-radius-mm", "25", NULL);
     CHECK(rc == 1);
     CHECK_CONTAINS(e, "--lamps: 'none' is not a lamp");
     g_free(o);
@@ -658,7 +660,8 @@ TEST(calib_lamps_occluded_frames)
     snprintf(out, sizeof out, "%s/lamps", test_tmpdir());
     char *o = NULL, *e = NULL;
     int rc = test_refl_run(300, &o, &e, "calib", "lamps", "--rig", rig, "--camera", cam, "-o", out, "--lamps",
-                           "east,south", "--angles", "0,20,40,90,135,180,225,270", "--progress", "lines", NULL);
+                           "east,south", "--angles", "0,20,40,90,135,180,225,270", "--sphere-centre-mm", "60,0,40",
+                           "--sphere-radius-mm", "25", "--lamp-radius-mm", "15", "--progress", "lines", NULL);
     CHECK_MSG(rc == 0, "rc %d\n%s\n%s", rc, o, e);
     CHECK_CONTAINS(e, "lamp east: no highlight in");
     CHECK_CONTAINS(e, "lamp east: fitted from the other");

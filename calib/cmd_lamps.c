@@ -1,0 +1,208 @@
+// calib/cmd_lamps.c — `refl calib lamps`: parses its options (model/opts.h)
+// into a calib_lamps_opts_t, runs calib_lamps_run (calib/lamps.c) and prints
+// the lamps' table.
+#define _GNU_SOURCE
+#include <glib.h>
+#include <math.h>
+#include <stdio.h>
+#include <string.h>
+
+#include "calib/calib.h"
+#include "calib/lamps.h"
+#include "model/model.h"
+#include "model/opts.h"
+
+static const char ABOUT[] =
+    "Lamp positions from the highlights of a mirror (chrome) sphere of known radius carried round by the\n"
+    "turntable: each lamp alone at several angles, its highlight found to sub-pixel, reflected off the\n"
+    "sphere into a ray toward the lamp, the rays triangulated (least squares, outliers dropped).\n"
+    "Either --rig RIG.ini (capture into DIR/capture) or --session DIR (a session captured elsewhere).";
+
+static const char EPILOG[] =
+    "The sphere's facts (--sphere-centre-mm, --sphere-radius-mm) are required, on a virtual rig too (its truth\n"
+    "file is read only to compare: the truth_err_mm column and lamps.json's virtual_truth).\n\n"
+    "Output lamps.json: units mm, rig frame; per lamp position_mm, std_mm, rms_ray_distance_mm, n_frames,\n"
+    "frames_missing, radius_mm (the emitting radius the highlights were modelled with). A lamp whose\n"
+    "highlight is missing in some frames is named with those frames and fitted\n"
+    "from the rest (>= 3 needed, else an error).";
+
+// The indentation of an option's help continued on the next line.
+#define IND "                             "
+
+// A list of numbers "A,B,C" (commas or spaces) into v (at most max). 0 or a usage error.
+static int number_list(model_cli_t *cli, const char *name, double *v, int max, int *n)
+{
+    const char *s = model_cli_value(cli, name);
+    if (!s) return 0;
+    *n = 0;
+    char *dup = g_strdup(s);
+    int rc = 0;
+    for (char *save = NULL, *tok = strtok_r(dup, ", ", &save); tok && !rc; tok = strtok_r(NULL, ", ", &save)) {
+        if (*n >= max) rc = model_cli_error(cli, "%s '%s': at most %d values", name, s, max);
+        else if (!model_parse_double(tok, &v[(*n)++]))
+            rc = model_cli_error(cli, "%s '%s': '%s' is not a number", name, s, tok);
+    }
+    g_free(dup);
+    return rc;
+}
+
+// A number option, at least lo (more than lo when lo_open), kept when absent;
+// why: the hint of the message "NAME 'V': why".
+static int number_opt(model_cli_t *cli, const char *name, double *out, double lo, bool lo_open, const char *why)
+{
+    const char *s = model_cli_value(cli, name);
+    double v;
+    if (!s) return 0;
+    if (!model_parse_double(s, &v) || !(lo_open ? v > lo : v >= lo))
+        return model_cli_error(cli, "%s '%s': %s", name, s, why);
+    *out = v;
+    return 0;
+}
+
+// A word option: the index of its value in words (NULL-terminated), kept when absent.
+static int word_opt(model_cli_t *cli, const char *name, const char *const *words, int *out, const char *why)
+{
+    const char *s = model_cli_value(cli, name);
+    if (!s) return 0;
+    for (int k = 0; words[k]; k++)
+        if (!strcmp(s, words[k])) {
+            *out = k;
+            return 0;
+        }
+    return model_cli_error(cli, "%s '%s': %s", name, s, why);
+}
+
+// The options after parsing: numbers, lists, words and the checks between them.
+static int read_options(model_cli_t *cli, calib_lamps_opts_t *o, char ***lamps)
+{
+    static const char *const progress[] = { "lines", "bar", NULL };
+    static const char *const method[] = { "centroid", "gauss", "model", NULL };
+    static const char *const path[] = { "fixed", "fit", NULL };
+    static const char *const prior[] = { "--sphere-offset-prior-mm", "--sphere-shift-prior-mm",
+                                         "--sphere-tilt-prior-mrad" };
+    double *prior_dest[] = { &o->offset_prior_mm, &o->shift_prior_mm, &o->tilt_prior_mrad };
+    int joint = o->joint, meth = (int)o->method, n = 0, rc;
+    if ((rc = word_opt(cli, "--progress", progress, &o->progress, "write lines or bar")) ||
+        (rc = word_opt(cli, "--highlight", method, &meth, "write model, gauss or centroid")) ||
+        (rc = word_opt(cli, "--sphere-path", path, &joint, "write fit or fixed")) ||
+        (rc = number_opt(cli, "--lamp-radius-mm", &o->lamp_radius_mm, 0, false,
+                         "give the lamps' radius in mm (>= 0)")) ||
+        (rc = number_opt(cli, "--min-snr", &o->min_snr, 3, false, "give a number >= 3")))
+        return rc;
+    for (int k = 0; k < 3; k++)
+        if ((rc = number_opt(cli, prior[k], prior_dest[k], 0, false, "give a std >= 0 (0 holds it at 0)"))) return rc;
+    o->method = (calib_lamps_method_t)meth;
+    o->joint = joint;
+    const char *c = model_cli_value(cli, "--sphere-centre-mm");
+    if ((rc = number_list(cli, "--sphere-centre-mm", o->sphere_centre_mm, 3, &n))) return rc;
+    if (c && n != 3) return model_cli_error(cli, "--sphere-centre-mm '%s': give X,Y,Z (mm, rig frame, angle 0)", c);
+    if ((rc = number_opt(cli, "--sphere-radius-mm", &o->sphere_radius_mm, 0, true, "give the radius in mm (> 0)")))
+        return rc;
+    o->sphere_given = c && model_cli_value(cli, "--sphere-radius-mm");
+    if (!o->out) return model_cli_error(cli, "-o DIR is required");
+    if (!o->camera) return model_cli_error(cli, "--camera CAMERA.cameramodel is required");
+    if (!o->rig == !o->session)
+        return model_cli_error(cli, o->rig ? "give --rig or --session, not both"
+                                           : "give --rig RIG.ini (capture) or --session DIR");
+    const char *a = model_cli_value(cli, "--angles");
+    if (a && o->session) return model_cli_error(cli, "--angles is for a capture (--rig); a session has its own");
+    if ((rc = number_list(cli, "--angles", o->angles_deg, CALIB_LAMPS_MAX_ANGLES, &o->nangles))) return rc;
+    if (a && o->nangles < 3)
+        return model_cli_error(cli, "--angles '%s': at least 3 angles are needed to triangulate", a);
+    if ((rc = number_list(cli, "--exposures-us", o->exposures_us, CALIB_LAMPS_MAX_EXPOSURES, &o->nexposures)))
+        return rc;
+    if (o->nexposures < 1) return model_cli_error(cli, "--exposures-us: give at least one exposure");
+    const char *l = model_cli_value(cli, "--lamps");
+    if (l) {
+        GPtrArray *v = g_ptr_array_new();
+        char **parts = g_strsplit(l, ",", -1);
+        for (char **p = parts; *p; p++)
+            if (*g_strstrip(*p)) g_ptr_array_add(v, g_strdup(*p));
+        g_strfreev(parts);
+        g_ptr_array_add(v, NULL);
+        *lamps = (char **)g_ptr_array_free(v, FALSE);
+        o->lamps = *lamps;
+    }
+    return 0;
+}
+
+// The lamps' table on stdout, with the error against the virtual rig's truth
+// where there is one.
+static void print_lamps(const calib_lamps_result_t *r)
+{
+    printf("lamp       x_mm      y_mm      z_mm    std_x  std_y  std_z  rms_mm  frames");
+    if (r->have_truth) printf("  truth_err_mm");
+    printf("\n");
+    for (int l = 0; l < r->nlamps; l++) {
+        const calib_lamps_lamp_t *lp = &r->lamps[l];
+        const double *x = lp->fit.x_mm, *cv = lp->fit.cov_mm2;
+        printf("%-8s %9.2f %9.2f %9.2f  %6.2f %6.2f %6.2f  %6.2f  %2d/%d", lp->name, x[0], x[1], x[2], sqrt(cv[0]),
+               sqrt(cv[4]), sqrt(cv[8]), lp->fit.rms_mm, lp->fit.n_used, r->nangles);
+        if (lp->has_truth) {
+            double e[3] = { x[0] - lp->truth_mm.x, x[1] - lp->truth_mm.y, x[2] - lp->truth_mm.z };
+            printf("  %8.2f", sqrt(e[0] * e[0] + e[1] * e[1] + e[2] * e[2]));
+        }
+        printf("\n");
+    }
+    if (r->ntruth) printf("virtual rig: RMS position error %.2f mm over %d lamps\n", r->truth_rms_mm, r->ntruth);
+}
+
+int calib_cmd_lamps(int argc, char **argv)
+{
+    calib_lamps_opts_t o = calib_lamps_defaults();
+    model_opt_t opts[] = {
+        MODEL_OPT_STRING("--rig", "RIG.ini", "capture on this rig into DIR/capture (a complete session there is "
+                         "reused)", &o.rig, false),
+        MODEL_OPT_STRING("--session", "DIR", "analyse a session captured elsewhere (its plan: the sphere, each lamp "
+                         "alone)", &o.session, false),
+        MODEL_OPT_STRING("--camera", "FILE", "the camera model (mrcal .cameramodel, extrinsics in the rig frame)",
+                         &o.camera, false),
+        MODEL_OPT_STRING("-o", "DIR", "output: lamps.json, report.html, plots", &o.out, false),
+        MODEL_OPT_VALUE("--sphere-centre-mm", "X,Y,Z", "the sphere's centre at turntable angle 0 (rig frame, mm; "
+                        "required)", false),
+        MODEL_OPT_VALUE("--sphere-radius-mm", "R", "the sphere's radius (mm; required)", false),
+        MODEL_OPT_STRING("--sample", "NAME", "the sample of the plan (default mirror_sphere)", &o.sample, false),
+        MODEL_OPT_VALUE("--angles", "DEG,DEG,...", "turntable angles (default 24: 0,15,...,345)", false),
+        MODEL_OPT_VALUE("--lamps", "NAME,...", "the lamps (default every lamp of the rig file, or every lamp"
+                        "\n" IND "alone of the session's plan)", false),
+        MODEL_OPT_VALUE("--exposures-us", "US,...", "auto-bracketing ladder, longest first (default 40,20,10)", false),
+        MODEL_OPT_VALUE("--min-snr", "X", "a highlight's peak / noise at least (default 12)", false),
+        MODEL_OPT_VALUE("--lamp-radius-mm", "R", "the lamps' emitting radius, modelled in the highlight (default 0 "
+                        "= point lamps)", false),
+        MODEL_OPT_VALUE("--highlight", "model|gauss|centroid", "how a highlight is located: model (default) fits "
+                        "the lamp's disk seen\n" IND "in the mirror in direction space; gauss a 2-D Gaussian in the "
+                        "image;\n" IND "centroid the intensity-weighted centroid", false),
+        MODEL_OPT_VALUE("--sphere-path", "fit|fixed", "fit (default): the lamps and the sphere's path jointly over "
+                        "every\n" IND "highlight (the path: the given centre plus an offset that turns with the\n"
+                        IND "table, a shift and a tilt that do not: what the camera model's extrinsics\n" IND
+                        "error moves); fixed: each lamp alone with the sphere where the facts put it", false),
+        MODEL_OPT_VALUE("--sphere-offset-prior-mm", "S", "std of the sphere centre's offset from the facts "
+                        "(default 1)", false),
+        MODEL_OPT_VALUE("--sphere-shift-prior-mm", "S", "std of the path's shift across the axis (default 0.1: a "
+                        "calibrated camera)", false),
+        MODEL_OPT_VALUE("--sphere-tilt-prior-mrad", "S", "std of the path's tilt (default 1); 0 holds a part at 0",
+                        false),
+        MODEL_OPT_VALUE("--progress", "lines|bar", "capture progress (default: bar on a terminal)", false),
+    };
+    model_cli_t cli = { .cmd = "calib lamps", .synopsis = "", .about = ABOUT, .epilog = EPILOG, .opts = opts,
+                        .nopts = MODEL_NOPTS(opts), .repeat_ok = true };
+    char **lamps = NULL;
+    int rc = model_cli_parse(&cli, argc, argv);
+    if (rc != MODEL_CLI_OK) return rc;
+    if ((rc = read_options(&cli, &o, &lamps))) goto done;
+    // the command as typed (refl calib lamps ...) for the provenance
+    o.argc = argc + 1;
+    o.argv = argv - 1;
+    o.log = stderr;
+    calib_lamps_result_t r;
+    bool q = model_error_quiet_thread(true);   // one message, printed here
+    bool ok = calib_lamps_run(&o, &r);
+    model_error_quiet_thread(q);
+    if (ok) print_lamps(&r);
+    else fprintf(stderr, "refl calib lamps: %s\n", model_last_error());
+    calib_lamps_result_free(&r);
+    rc = ok ? 0 : 1;
+done:
+    g_strfreev(lamps);
+    return rc;
+}
