@@ -343,66 +343,15 @@ void verify_interreflection(const model_tracer_t *t, const model_lamps_t *lamps,
     model_parallel_for(n, 64, threads > 0 ? threads : model_default_threads(), ir_rows, &ic);
 }
 
-verify_view_t *verify_view_new(const model_scene_t *scene, const verify_camera_t *cam, double angle_deg,
-                               const model_lamps_t *lamps, const model_material_t *const *mats,
-                               const verify_options_t *opt)
+// Grid points within reach (px) of a predicted edge (model_edges_predict):
+// USED -> NEAR_EDGE. q: the points' pixel coordinates. false + message.
+static bool view_near_edges(verify_view_t *v, const verify_camera_t *cam, const model_lamps_t *lamps,
+                            const model_material_t *const *mats, const double *q, double reach, int threads)
 {
-    double t0 = model_now_s();
-    if (lamps->n > MAX_LAMPS) {
-        model_error(lamps->path, 0, "%d lamps: verification handles at most %d", lamps->n, MAX_LAMPS);
-        return NULL;
-    }
-    if (opt->window_px < 1 || opt->window_px % 2 == 0 || opt->spacing_px < 1) {
-        model_error(NULL, 0, "verify: the window (%d px) must be odd and >= 1, the spacing (%d px) >= 1",
-                    opt->window_px, opt->spacing_px);
-        return NULL;
-    }
-    verify_view_t *v = calloc(1, sizeof *v);
-    if (!v) return NULL;
-    v->W = model_camera_width(cam->cam);
-    v->H = model_camera_height(cam->cam);
-    v->sp = opt->spacing_px;
-    v->nl = lamps->n;
-    int h = opt->window_px / 2;
-    int c = h + (int)ceil(opt->boundary_margin_px);
-    v->x0 = v->y0 = c > v->sp / 2 ? c : v->sp / 2;
-    v->gw = v->W - 1 - c >= v->x0 ? (v->W - 1 - c - v->x0) / v->sp + 1 : 0;
-    v->gh = v->H - 1 - c >= v->y0 ? (v->H - 1 - c - v->y0) / v->sp + 1 : 0;
-    int n = v->gw * v->gh, nl = v->nl;
-    if (n <= 0) {
-        model_error(NULL, 0, "verify: a %dx%d image has no room for reference points", v->W, v->H);
-        free(v);
-        return NULL;
-    }
-    int threads = opt->threads > 0 ? opt->threads : model_default_threads();
-    v->rot = model_scene_rotated_z(scene, angle_deg);
-    v->t = v->rot ? model_tracer_new(v->rot) : NULL;
-    v->pi = malloc((size_t)n * sizeof *v->pi);
-    v->ls = malloc((size_t)n * (nl ? nl : 1) * sizeof *v->ls);
-    v->status = calloc((size_t)n, 1);
-    v->B = calloc((size_t)n * (nl ? nl : 1), sizeof *v->B);
-    double *q = malloc((size_t)n * 2 * sizeof *q);
-    if (!v->t || !v->pi || !v->ls || !v->status || !v->B || !q) {
-        if (v->t) model_error(NULL, 0, "out of memory for %d reference points", n);
-        free(q);
-        verify_view_free(v);
-        return NULL;
-    }
-    for (int j = 0; j < v->gh; j++)
-        for (int i = 0; i < v->gw; i++) {
-            q[2 * (j * v->gw + i)] = v->x0 + i * v->sp;
-            q[2 * (j * v->gw + i) + 1] = v->y0 + j * v->sp;
-        }
-    bool ok = model_pixel_info(v->t, cam->cam, lamps, q, n, v->pi, v->ls, threads);
-    if (!ok) goto fail;
-    for (int g = 0; g < n; g++)
-        if (v->pi[g].face < 0) v->status[g] = VERIFY_PT_BACKGROUND;
-    // predicted edges (the edge query)
     model_shading_t sh = model_shading_default();
     sh.nthreads = threads;
     model_edges_t *ed = model_edges_predict(v->rot, v->t, cam->cam, lamps, mats, &sh, 1.0);
-    if (!ed) goto fail;
-    double reach = h * M_SQRT2 + opt->edge_margin_px;
+    if (!ed) return false;
     for (int e = 0; e < ed->nedges; e++)
         for (int s = 0; s < ed->edges[e].nsegments; s++) {
             const model_edge_segment_t *sg = &ed->edges[e].segments[s];
@@ -423,10 +372,17 @@ verify_view_t *verify_view_new(const model_scene_t *scene, const verify_camera_t
                 }
         }
     model_edges_free(ed);
-    // face or shadow changes within the window (+ margin): where a neighbour
-    // differs, look at the window's corners and edge midpoints
-    int *cand = malloc((size_t)n * sizeof *cand), ncand = 0;
-    if (!cand) goto fail;
+    return true;
+}
+
+// Face or shadow changes within the window (+ margin, c px from its centre):
+// where a neighbour differs, look at the window's corners and edge midpoints;
+// USED -> BOUNDARY. cand: room for the grid's points. false + message.
+static bool view_boundaries(verify_view_t *v, const verify_camera_t *cam, const model_lamps_t *lamps,
+                            const double *q, int c, int threads, int *cand)
+{
+    const int nl = v->nl;
+    int ncand = 0;
     for (int j = 0; j < v->gh; j++)
         for (int i = 0; i < v->gw; i++) {
             int g = j * v->gw + i;
@@ -442,44 +398,109 @@ verify_view_t *verify_view_new(const model_scene_t *scene, const verify_camera_t
                 }
             if (diff) cand[ncand++] = g;
         }
-    if (ncand) {
-        const int NC = 8;
-        double *qc = malloc((size_t)ncand * NC * 2 * sizeof *qc);
-        model_pixel_info_t *pc = malloc((size_t)ncand * NC * sizeof *pc);
-        model_lamp_sample_t *lc = malloc((size_t)ncand * NC * (nl ? nl : 1) * sizeof *lc);
-        ok = qc && pc && lc;
-        if (ok) {
-            static const int off[8][2] = { { -1, -1 }, { 1, -1 }, { -1, 1 }, { 1, 1 },
-                                           { 0, -1 }, { 0, 1 }, { -1, 0 }, { 1, 0 } };
-            for (int k = 0; k < ncand; k++)
-                for (int m = 0; m < NC; m++) {
-                    qc[2 * (k * NC + m)] = q[2 * cand[k]] + off[m][0] * c;
-                    qc[2 * (k * NC + m) + 1] = q[2 * cand[k] + 1] + off[m][1] * c;
-                }
-            ok = model_pixel_info(v->t, cam->cam, lamps, qc, ncand * NC, pc, lc, threads);
-        }
-        if (ok)
-            for (int k = 0; k < ncand; k++) {
-                int g = cand[k];
-                uint32_t bits = lit_bits(&v->ls[(size_t)g * nl], nl);
-                for (int m = 0; m < NC; m++) {
-                    int km = k * NC + m;
-                    if (pc[km].face != v->pi[g].face || lit_bits(&lc[(size_t)km * nl], nl) != bits) {
-                        v->status[g] = VERIFY_PT_BOUNDARY;
-                        break;
-                    }
+    if (!ncand) return true;
+    const int NC = 8;
+    double *qc = malloc((size_t)ncand * NC * 2 * sizeof *qc);
+    model_pixel_info_t *pc = malloc((size_t)ncand * NC * sizeof *pc);
+    model_lamp_sample_t *lc = malloc((size_t)ncand * NC * (nl ? nl : 1) * sizeof *lc);
+    bool ok = qc && pc && lc;
+    if (ok) {
+        static const int off[8][2] = { { -1, -1 }, { 1, -1 }, { -1, 1 }, { 1, 1 },
+                                       { 0, -1 }, { 0, 1 }, { -1, 0 }, { 1, 0 } };
+        for (int k = 0; k < ncand; k++)
+            for (int m = 0; m < NC; m++) {
+                qc[2 * (k * NC + m)] = q[2 * cand[k]] + off[m][0] * c;
+                qc[2 * (k * NC + m) + 1] = q[2 * cand[k] + 1] + off[m][1] * c;
+            }
+        ok = model_pixel_info(v->t, cam->cam, lamps, qc, ncand * NC, pc, lc, threads);
+    }
+    if (ok)
+        for (int k = 0; k < ncand; k++) {
+            int g = cand[k];
+            uint32_t bits = lit_bits(&v->ls[(size_t)g * nl], nl);
+            for (int m = 0; m < NC; m++) {
+                int km = k * NC + m;
+                if (pc[km].face != v->pi[g].face || lit_bits(&lc[(size_t)km * nl], nl) != bits) {
+                    v->status[g] = VERIFY_PT_BOUNDARY;
+                    break;
                 }
             }
-        free(qc);
-        free(pc);
-        free(lc);
-        if (!ok) {
-            free(cand);
-            goto fail;
         }
+    free(qc);
+    free(pc);
+    free(lc);
+    return ok;
+}
+
+// A view's grid (x0, y0, gw, gh) for the image size and options; false + message when it has no points.
+static bool view_grid(verify_view_t *v, const verify_options_t *opt, int *c)
+{
+    int h = opt->window_px / 2;
+    *c = h + (int)ceil(opt->boundary_margin_px);
+    v->x0 = v->y0 = *c > v->sp / 2 ? *c : v->sp / 2;
+    v->gw = v->W - 1 - *c >= v->x0 ? (v->W - 1 - *c - v->x0) / v->sp + 1 : 0;
+    v->gh = v->H - 1 - *c >= v->y0 ? (v->H - 1 - *c - v->y0) / v->sp + 1 : 0;
+    if (v->gw * v->gh <= 0) {
+        model_error(NULL, 0, "verify: a %dx%d image has no room for reference points", v->W, v->H);
+        return false;
     }
+    return true;
+}
+
+verify_view_t *verify_view_new(const model_scene_t *scene, const verify_camera_t *cam, double angle_deg,
+                               const model_lamps_t *lamps, const model_material_t *const *mats,
+                               const verify_options_t *opt)
+{
+    double t0 = model_now_s();
+    if (lamps->n > MAX_LAMPS) {
+        model_error(lamps->path, 0, "%d lamps: verification handles at most %d", lamps->n, MAX_LAMPS);
+        return NULL;
+    }
+    if (opt->window_px < 1 || opt->window_px % 2 == 0 || opt->spacing_px < 1) {
+        model_error(NULL, 0, "verify: the window (%d px) must be odd and >= 1, the spacing (%d px) >= 1",
+                    opt->window_px, opt->spacing_px);
+        return NULL;
+    }
+    verify_view_t *v = calloc(1, sizeof *v);
+    if (!v) return NULL;
+    v->W = model_camera_width(cam->cam);
+    v->H = model_camera_height(cam->cam);
+    v->sp = opt->spacing_px;
+    v->nl = lamps->n;
+    int c;
+    if (!view_grid(v, opt, &c)) {
+        free(v);
+        return NULL;
+    }
+    int n = v->gw * v->gh, nl = v->nl;
+    int threads = opt->threads > 0 ? opt->threads : model_default_threads();
+    v->rot = model_scene_rotated_z(scene, angle_deg);
+    v->t = v->rot ? model_tracer_new(v->rot) : NULL;
+    v->pi = malloc((size_t)n * sizeof *v->pi);
+    v->ls = malloc((size_t)n * (nl ? nl : 1) * sizeof *v->ls);
+    v->status = calloc((size_t)n, 1);
+    v->B = calloc((size_t)n * (nl ? nl : 1), sizeof *v->B);
+    double *q = malloc((size_t)n * 2 * sizeof *q);
+    int *cand = malloc((size_t)n * sizeof *cand);
+    if (!v->t || !v->pi || !v->ls || !v->status || !v->B || !q || !cand) {
+        if (v->t) model_error(NULL, 0, "out of memory for %d reference points", n);
+        goto fail;
+    }
+    // the grid's pixel_info: face, position, normal, lamp samples (background where the ray misses)
+    for (int j = 0; j < v->gh; j++)
+        for (int i = 0; i < v->gw; i++) {
+            q[2 * (j * v->gw + i)] = v->x0 + i * v->sp;
+            q[2 * (j * v->gw + i) + 1] = v->y0 + j * v->sp;
+        }
+    if (!model_pixel_info(v->t, cam->cam, lamps, q, n, v->pi, v->ls, threads)) goto fail;
+    for (int g = 0; g < n; g++)
+        if (v->pi[g].face < 0) v->status[g] = VERIFY_PT_BACKGROUND;
+    double reach = (opt->window_px / 2) * M_SQRT2 + opt->edge_margin_px;
+    if (!view_near_edges(v, cam, lamps, mats, q, reach, threads) ||
+        !view_boundaries(v, cam, lamps, q, c, threads, cand))
+        goto fail;
     // the interreflection basis at the usable points
-    ncand = 0;
+    int ncand = 0;
     for (int g = 0; g < n; g++)
         if (v->status[g] == VERIFY_PT_USED) cand[ncand++] = g;
     v->nusable = ncand;
@@ -492,6 +513,7 @@ verify_view_t *verify_view_new(const model_scene_t *scene, const verify_camera_t
     v->time_s = model_now_s() - t0;
     return v;
 fail:
+    free(cand);
     free(q);
     verify_view_free(v);
     return NULL;
@@ -1186,7 +1208,8 @@ static void fit_covariance(fit_t *F)
     bool cok = col && JtJ && inv && ev && jb && nf > 0;
     for (int gi = 0; gi < F->ngroups && cok; gi++) cok = covariance_add_group(F, &F->groups[gi], col, nf, jb, JtJ);
     for (int k = 0; k < npd && cok; k++)
-        if (col[k] >= 0 && pd[k].prior_std > 0) JtJ[(size_t)col[k] * nf + col[k]] += 1 / (pd[k].prior_std * pd[k].prior_std);
+        if (col[k] >= 0 && pd[k].prior_std > 0)
+            JtJ[(size_t)col[k] * nf + col[k]] += 1 / (pd[k].prior_std * pd[k].prior_std);
     for (int c = 0; c < nf && cok; c++) {
         double *A2 = malloc((size_t)nf * nf * sizeof *A2);
         if (!A2) {

@@ -61,6 +61,8 @@ static void case_rows(void *vctx, int begin, int end, int thread)
 {
     (void)thread;
     study_t *S = vctx;
+    // a failed case's message is kept (S->err) and reported once by verify_study_run
+    bool quiet = model_error_quiet_thread(true);
     int W = verify_lab_width(S->lab), H = verify_lab_height(S->lab), nl = verify_lab_nlamps(S->lab);
     float *img[NANG] = { 0 };
     for (int a = 0; a < NANG; a++) img[a] = malloc((size_t)W * H * sizeof(float));
@@ -109,6 +111,7 @@ static void case_rows(void *vctx, int begin, int end, int thread)
         pthread_mutex_unlock(&S->lock);
     }
     for (int a = 0; a < NANG; a++) free(img[a]);
+    model_error_quiet_thread(quiet);
 }
 
 // The descriptions: the correct one and its corruptions (D: room for 16). Returns their count.
