@@ -343,66 +343,15 @@ void verify_interreflection(const model_tracer_t *t, const model_lamps_t *lamps,
     model_parallel_for(n, 64, threads > 0 ? threads : model_default_threads(), ir_rows, &ic);
 }
 
-verify_view_t *verify_view_new(const model_scene_t *scene, const verify_camera_t *cam, double angle_deg,
-                               const model_lamps_t *lamps, const model_material_t *const *mats,
-                               const verify_options_t *opt)
+// Grid points within reach (px) of a predicted edge (model_edges_predict):
+// USED -> NEAR_EDGE. q: the points' pixel coordinates. false + message.
+static bool view_near_edges(verify_view_t *v, const verify_camera_t *cam, const model_lamps_t *lamps,
+                            const model_material_t *const *mats, const double *q, double reach, int threads)
 {
-    double t0 = model_now_s();
-    if (lamps->n > MAX_LAMPS) {
-        model_error(lamps->path, 0, "%d lamps: verification handles at most %d", lamps->n, MAX_LAMPS);
-        return NULL;
-    }
-    if (opt->window_px < 1 || opt->window_px % 2 == 0 || opt->spacing_px < 1) {
-        model_error(NULL, 0, "verify: the window (%d px) must be odd and >= 1, the spacing (%d px) >= 1",
-                    opt->window_px, opt->spacing_px);
-        return NULL;
-    }
-    verify_view_t *v = calloc(1, sizeof *v);
-    if (!v) return NULL;
-    v->W = model_camera_width(cam->cam);
-    v->H = model_camera_height(cam->cam);
-    v->sp = opt->spacing_px;
-    v->nl = lamps->n;
-    int h = opt->window_px / 2;
-    int c = h + (int)ceil(opt->boundary_margin_px);
-    v->x0 = v->y0 = c > v->sp / 2 ? c : v->sp / 2;
-    v->gw = v->W - 1 - c >= v->x0 ? (v->W - 1 - c - v->x0) / v->sp + 1 : 0;
-    v->gh = v->H - 1 - c >= v->y0 ? (v->H - 1 - c - v->y0) / v->sp + 1 : 0;
-    int n = v->gw * v->gh, nl = v->nl;
-    if (n <= 0) {
-        model_error(NULL, 0, "verify: a %dx%d image has no room for reference points", v->W, v->H);
-        free(v);
-        return NULL;
-    }
-    int threads = opt->threads > 0 ? opt->threads : model_default_threads();
-    v->rot = model_scene_rotated_z(scene, angle_deg);
-    v->t = v->rot ? model_tracer_new(v->rot) : NULL;
-    v->pi = malloc((size_t)n * sizeof *v->pi);
-    v->ls = malloc((size_t)n * (nl ? nl : 1) * sizeof *v->ls);
-    v->status = calloc((size_t)n, 1);
-    v->B = calloc((size_t)n * (nl ? nl : 1), sizeof *v->B);
-    double *q = malloc((size_t)n * 2 * sizeof *q);
-    if (!v->t || !v->pi || !v->ls || !v->status || !v->B || !q) {
-        if (v->t) model_error(NULL, 0, "out of memory for %d reference points", n);
-        free(q);
-        verify_view_free(v);
-        return NULL;
-    }
-    for (int j = 0; j < v->gh; j++)
-        for (int i = 0; i < v->gw; i++) {
-            q[2 * (j * v->gw + i)] = v->x0 + i * v->sp;
-            q[2 * (j * v->gw + i) + 1] = v->y0 + j * v->sp;
-        }
-    bool ok = model_pixel_info(v->t, cam->cam, lamps, q, n, v->pi, v->ls, threads);
-    if (!ok) goto fail;
-    for (int g = 0; g < n; g++)
-        if (v->pi[g].face < 0) v->status[g] = VERIFY_PT_BACKGROUND;
-    // predicted edges (the edge query)
     model_shading_t sh = model_shading_default();
     sh.nthreads = threads;
     model_edges_t *ed = model_edges_predict(v->rot, v->t, cam->cam, lamps, mats, &sh, 1.0);
-    if (!ed) goto fail;
-    double reach = h * M_SQRT2 + opt->edge_margin_px;
+    if (!ed) return false;
     for (int e = 0; e < ed->nedges; e++)
         for (int s = 0; s < ed->edges[e].nsegments; s++) {
             const model_edge_segment_t *sg = &ed->edges[e].segments[s];
@@ -423,10 +372,17 @@ verify_view_t *verify_view_new(const model_scene_t *scene, const verify_camera_t
                 }
         }
     model_edges_free(ed);
-    // face or shadow changes within the window (+ margin): where a neighbour
-    // differs, look at the window's corners and edge midpoints
-    int *cand = malloc((size_t)n * sizeof *cand), ncand = 0;
-    if (!cand) goto fail;
+    return true;
+}
+
+// Face or shadow changes within the window (+ margin, c px from its centre):
+// where a neighbour differs, look at the window's corners and edge midpoints;
+// USED -> BOUNDARY. cand: room for the grid's points. false + message.
+static bool view_boundaries(verify_view_t *v, const verify_camera_t *cam, const model_lamps_t *lamps,
+                            const double *q, int c, int threads, int *cand)
+{
+    const int nl = v->nl;
+    int ncand = 0;
     for (int j = 0; j < v->gh; j++)
         for (int i = 0; i < v->gw; i++) {
             int g = j * v->gw + i;
@@ -442,44 +398,109 @@ verify_view_t *verify_view_new(const model_scene_t *scene, const verify_camera_t
                 }
             if (diff) cand[ncand++] = g;
         }
-    if (ncand) {
-        const int NC = 8;
-        double *qc = malloc((size_t)ncand * NC * 2 * sizeof *qc);
-        model_pixel_info_t *pc = malloc((size_t)ncand * NC * sizeof *pc);
-        model_lamp_sample_t *lc = malloc((size_t)ncand * NC * (nl ? nl : 1) * sizeof *lc);
-        ok = qc && pc && lc;
-        if (ok) {
-            static const int off[8][2] = { { -1, -1 }, { 1, -1 }, { -1, 1 }, { 1, 1 },
-                                           { 0, -1 }, { 0, 1 }, { -1, 0 }, { 1, 0 } };
-            for (int k = 0; k < ncand; k++)
-                for (int m = 0; m < NC; m++) {
-                    qc[2 * (k * NC + m)] = q[2 * cand[k]] + off[m][0] * c;
-                    qc[2 * (k * NC + m) + 1] = q[2 * cand[k] + 1] + off[m][1] * c;
-                }
-            ok = model_pixel_info(v->t, cam->cam, lamps, qc, ncand * NC, pc, lc, threads);
-        }
-        if (ok)
-            for (int k = 0; k < ncand; k++) {
-                int g = cand[k];
-                uint32_t bits = lit_bits(&v->ls[(size_t)g * nl], nl);
-                for (int m = 0; m < NC; m++) {
-                    int km = k * NC + m;
-                    if (pc[km].face != v->pi[g].face || lit_bits(&lc[(size_t)km * nl], nl) != bits) {
-                        v->status[g] = VERIFY_PT_BOUNDARY;
-                        break;
-                    }
+    if (!ncand) return true;
+    const int NC = 8;
+    double *qc = malloc((size_t)ncand * NC * 2 * sizeof *qc);
+    model_pixel_info_t *pc = malloc((size_t)ncand * NC * sizeof *pc);
+    model_lamp_sample_t *lc = malloc((size_t)ncand * NC * (nl ? nl : 1) * sizeof *lc);
+    bool ok = qc && pc && lc;
+    if (ok) {
+        static const int off[8][2] = { { -1, -1 }, { 1, -1 }, { -1, 1 }, { 1, 1 },
+                                       { 0, -1 }, { 0, 1 }, { -1, 0 }, { 1, 0 } };
+        for (int k = 0; k < ncand; k++)
+            for (int m = 0; m < NC; m++) {
+                qc[2 * (k * NC + m)] = q[2 * cand[k]] + off[m][0] * c;
+                qc[2 * (k * NC + m) + 1] = q[2 * cand[k] + 1] + off[m][1] * c;
+            }
+        ok = model_pixel_info(v->t, cam->cam, lamps, qc, ncand * NC, pc, lc, threads);
+    }
+    if (ok)
+        for (int k = 0; k < ncand; k++) {
+            int g = cand[k];
+            uint32_t bits = lit_bits(&v->ls[(size_t)g * nl], nl);
+            for (int m = 0; m < NC; m++) {
+                int km = k * NC + m;
+                if (pc[km].face != v->pi[g].face || lit_bits(&lc[(size_t)km * nl], nl) != bits) {
+                    v->status[g] = VERIFY_PT_BOUNDARY;
+                    break;
                 }
             }
-        free(qc);
-        free(pc);
-        free(lc);
-        if (!ok) {
-            free(cand);
-            goto fail;
         }
+    free(qc);
+    free(pc);
+    free(lc);
+    return ok;
+}
+
+// A view's grid (x0, y0, gw, gh) for the image size and options; false + message when it has no points.
+static bool view_grid(verify_view_t *v, const verify_options_t *opt, int *c)
+{
+    int h = opt->window_px / 2;
+    *c = h + (int)ceil(opt->boundary_margin_px);
+    v->x0 = v->y0 = *c > v->sp / 2 ? *c : v->sp / 2;
+    v->gw = v->W - 1 - *c >= v->x0 ? (v->W - 1 - *c - v->x0) / v->sp + 1 : 0;
+    v->gh = v->H - 1 - *c >= v->y0 ? (v->H - 1 - *c - v->y0) / v->sp + 1 : 0;
+    if (v->gw * v->gh <= 0) {
+        model_error(NULL, 0, "verify: a %dx%d image has no room for reference points", v->W, v->H);
+        return false;
     }
+    return true;
+}
+
+verify_view_t *verify_view_new(const model_scene_t *scene, const verify_camera_t *cam, double angle_deg,
+                               const model_lamps_t *lamps, const model_material_t *const *mats,
+                               const verify_options_t *opt)
+{
+    double t0 = model_now_s();
+    if (lamps->n > MAX_LAMPS) {
+        model_error(lamps->path, 0, "%d lamps: verification handles at most %d", lamps->n, MAX_LAMPS);
+        return NULL;
+    }
+    if (opt->window_px < 1 || opt->window_px % 2 == 0 || opt->spacing_px < 1) {
+        model_error(NULL, 0, "verify: the window (%d px) must be odd and >= 1, the spacing (%d px) >= 1",
+                    opt->window_px, opt->spacing_px);
+        return NULL;
+    }
+    verify_view_t *v = calloc(1, sizeof *v);
+    if (!v) return NULL;
+    v->W = model_camera_width(cam->cam);
+    v->H = model_camera_height(cam->cam);
+    v->sp = opt->spacing_px;
+    v->nl = lamps->n;
+    int c;
+    if (!view_grid(v, opt, &c)) {
+        free(v);
+        return NULL;
+    }
+    int n = v->gw * v->gh, nl = v->nl;
+    int threads = opt->threads > 0 ? opt->threads : model_default_threads();
+    v->rot = model_scene_rotated_z(scene, angle_deg);
+    v->t = v->rot ? model_tracer_new(v->rot) : NULL;
+    v->pi = malloc((size_t)n * sizeof *v->pi);
+    v->ls = malloc((size_t)n * (nl ? nl : 1) * sizeof *v->ls);
+    v->status = calloc((size_t)n, 1);
+    v->B = calloc((size_t)n * (nl ? nl : 1), sizeof *v->B);
+    double *q = malloc((size_t)n * 2 * sizeof *q);
+    int *cand = malloc((size_t)n * sizeof *cand);
+    if (!v->t || !v->pi || !v->ls || !v->status || !v->B || !q || !cand) {
+        if (v->t) model_error(NULL, 0, "out of memory for %d reference points", n);
+        goto fail;
+    }
+    // the grid's pixel_info: face, position, normal, lamp samples (background where the ray misses)
+    for (int j = 0; j < v->gh; j++)
+        for (int i = 0; i < v->gw; i++) {
+            q[2 * (j * v->gw + i)] = v->x0 + i * v->sp;
+            q[2 * (j * v->gw + i) + 1] = v->y0 + j * v->sp;
+        }
+    if (!model_pixel_info(v->t, cam->cam, lamps, q, n, v->pi, v->ls, threads)) goto fail;
+    for (int g = 0; g < n; g++)
+        if (v->pi[g].face < 0) v->status[g] = VERIFY_PT_BACKGROUND;
+    double reach = (opt->window_px / 2) * M_SQRT2 + opt->edge_margin_px;
+    if (!view_near_edges(v, cam, lamps, mats, q, reach, threads) ||
+        !view_boundaries(v, cam, lamps, q, c, threads, cand))
+        goto fail;
     // the interreflection basis at the usable points
-    ncand = 0;
+    int ncand = 0;
     for (int g = 0; g < n; g++)
         if (v->status[g] == VERIFY_PT_USED) cand[ncand++] = g;
     v->nusable = ncand;
@@ -492,6 +513,7 @@ verify_view_t *verify_view_new(const model_scene_t *scene, const verify_camera_t
     v->time_s = model_now_s() - t0;
     return v;
 fail:
+    free(cand);
     free(q);
     verify_view_free(v);
     return NULL;
@@ -648,6 +670,7 @@ static void stats_of(const verify_point_t *pts, int n, int image, verify_stats_t
     free(z);
 }
 
+// A parameter of the fit: x[i], its prior and bounds.
 typedef struct {
     char   name[96];
     double *x;
@@ -656,334 +679,439 @@ typedef struct {
     bool   fixed;
 } pdesc_t;
 
-bool verify_run(const model_scene_t *scene, const verify_priors_t *pr, const verify_camera_t *cams, int ncams,
-                const model_lamps_t *lamps, const double *A, const verify_image_t *imgs, int nimgs,
-                verify_view_t *const *views, const verify_options_t *opt, verify_result_t *out)
+// The working state that verify_run's stages share. The inputs are borrowed;
+// every array below is owned and freed by fit_free (out's arrays go to the
+// caller).
+typedef struct {
+    // in
+    const model_scene_t    *scene;
+    const verify_camera_t  *cams;
+    int                     ncams;
+    const model_lamps_t    *lamps;
+    const double           *A;          // kc*I per us, per lamp
+    const verify_image_t   *imgs;
+    int                     nimgs;
+    verify_view_t *const   *views;
+    const verify_options_t *opt;
+    int                     nl, nm;     // lamps, scene materials
+    const verify_prior_t  **prior;      // nm: each material's prior
+    int                     npts;       // grid points of every image
+    // the fit's points: those used and those with an unexpected edge (predicted, not fitted)
+    pt_t            *pt;                // nfit
+    int             *ptidx;             // nfit: point -> index in out->points
+    int              nfit;
+    model_cosines_t *cs;                // per (fit point, lamp on)
+    double          *wv, *bv;           // A_i V / d^2 and A_i B_i, per (fit point, lamp on)
+    int             *lampv;             // lamp index, per (fit point, lamp on)
+    double          *mp;                // nm x MODEL_BRDF_MAX_PARAMS: the materials' parameters
+    res_ctx_t       *rcs;               // nm
+    res_group_t     *groups;            // ngroups residual blocks; their indices in gidx
+    int             *gidx;
+    int              ngroups, nused;
+    pdesc_t         *pd;                // npd parameters
+    int              npd;
+    lsq_problem_t   *prob;
+    verify_result_t *out;
+} fit_t;
+
+static void fit_free(fit_t *F)
 {
-    memset(out, 0, sizeof *out);
-    double t0 = model_now_s();
-    const int nl = lamps->n, nm = scene->nmaterials;
-    if (nl > MAX_LAMPS) {
-        model_error(lamps->path, 0, "%d lamps: verification handles at most %d", nl, MAX_LAMPS);
+    lsq_problem_free(F->prob);
+    free(F->prior);
+    free(F->pt);
+    free(F->ptidx);
+    free(F->cs);
+    free(F->wv);
+    free(F->bv);
+    free(F->lampv);
+    free(F->mp);
+    free(F->rcs);
+    free(F->groups);
+    free(F->gidx);
+    free(F->pd);
+}
+
+// The inputs agree (priors for every material, image sizes, cameras, lamp
+// masks); counts the grid points. false + message.
+static bool fit_check(fit_t *F, const verify_priors_t *pr)
+{
+    if (F->nl > MAX_LAMPS) {
+        model_error(F->lamps->path, 0, "%d lamps: verification handles at most %d", F->nl, MAX_LAMPS);
         return false;
     }
-    const verify_prior_t **prior = calloc((size_t)(nm ? nm : 1), sizeof *prior);
-    if (!prior || !verify_match_priors(scene, pr, prior)) {
-        free(prior);
-        return false;
-    }
-    const int w = opt->window_px, h = w / 2;
-    // count the candidate points
-    int npts = 0;
-    for (int m = 0; m < nimgs; m++) {
-        const verify_view_t *v = views[m];
-        if (imgs[m].W != v->W || imgs[m].H != v->H || imgs[m].camera < 0 || imgs[m].camera >= ncams) {
-            model_error(imgs[m].name, 0, "the image is %dx%d but its camera model (%s) is %dx%d: give the camera "
-                        "model calibrated for this image size", imgs[m].W, imgs[m].H,
-                        imgs[m].camera >= 0 && imgs[m].camera < ncams ? cams[imgs[m].camera].name : "?", v->W, v->H);
-            free(prior);
+    F->prior = calloc((size_t)(F->nm ? F->nm : 1), sizeof *F->prior);
+    if (!F->prior || !verify_match_priors(F->scene, pr, F->prior)) return false;
+    F->npts = 0;
+    for (int m = 0; m < F->nimgs; m++) {
+        const verify_view_t *v = F->views[m];
+        const verify_image_t *im = &F->imgs[m];
+        if (im->W != v->W || im->H != v->H || im->camera < 0 || im->camera >= F->ncams) {
+            model_error(im->name, 0, "the image is %dx%d but its camera model (%s) is %dx%d: give the camera "
+                        "model calibrated for this image size", im->W, im->H,
+                        im->camera >= 0 && im->camera < F->ncams ? F->cams[im->camera].name : "?", v->W, v->H);
             return false;
         }
-        if (imgs[m].lamps_on >> nl && nl < 32) {
-            model_error(imgs[m].name, 0, "lamp mask 0x%x names lamps beyond the %d given", imgs[m].lamps_on, nl);
-            free(prior);
+        if (im->lamps_on >> F->nl && F->nl < 32) {
+            model_error(im->name, 0, "lamp mask 0x%x names lamps beyond the %d given", im->lamps_on, F->nl);
             return false;
         }
-        npts += v->gw * v->gh;
+        F->npts += v->gw * v->gh;
     }
-    out->points = calloc((size_t)(npts ? npts : 1), sizeof *out->points);
+    return true;
+}
+
+// The result's arrays and the fit's, the parameters at their starts (kc = s
+// = 1, rho 1 with interreflections, the materials at the priors' means).
+static bool fit_alloc(fit_t *F)
+{
+    verify_result_t *out = F->out;
+    const int npts = F->npts, nimgs = F->nimgs, nm = F->nm, nl = F->nl, ncams = F->ncams;
+    size_t n1 = (size_t)(npts ? npts : 1), nle = 0;
+    for (int m = 0; m < nimgs; m++)
+        nle += (size_t)F->views[m]->gw * F->views[m]->gh * (size_t)__builtin_popcount(F->imgs[m].lamps_on);
+    if (!nle) nle = 1;
+    out->points = calloc(n1, sizeof *out->points);
     out->per_image = calloc((size_t)(nimgs ? nimgs : 1), sizeof *out->per_image);
     out->nimages = nimgs;
     out->kc = calloc((size_t)(ncams ? ncams : 1), sizeof(double));
     out->s = calloc((size_t)(nl ? nl : 1), sizeof(double));
     out->Pa = calloc((size_t)(nimgs ? nimgs : 1), sizeof(double));
     out->mats = calloc((size_t)(nm ? nm : 1), sizeof *out->mats);
-    pt_t *pt = malloc((size_t)(npts ? npts : 1) * sizeof *pt);
-    int *ptidx = malloc((size_t)(npts ? npts : 1) * sizeof *ptidx);   // point -> index in out->points
-    size_t nle = 0;
-    for (int m = 0; m < nimgs; m++) nle += (size_t)views[m]->gw * views[m]->gh * (size_t)__builtin_popcount(imgs[m].lamps_on);
-    model_cosines_t *cs = malloc((nle ? nle : 1) * sizeof *cs);
-    double *wv = malloc((nle ? nle : 1) * sizeof *wv), *bv = malloc((nle ? nle : 1) * sizeof *bv);
-    int *lampv = malloc((nle ? nle : 1) * sizeof *lampv);
-    double *mp = calloc((size_t)(nm ? nm : 1) * MODEL_BRDF_MAX_PARAMS, sizeof *mp);
-    res_ctx_t *rcs = calloc((size_t)(nm ? nm : 1), sizeof *rcs);
-    res_item_t *items = malloc((size_t)(npts ? npts : 1) * sizeof *items);
-    res_group_t *groups = malloc((size_t)(npts ? npts : 1) * sizeof *groups);
-    int *gidx = malloc((size_t)(npts ? npts : 1) * sizeof *gidx);
-    pdesc_t *pd = calloc((size_t)(ncams + nl + nimgs + 1 + nm * MODEL_BRDF_MAX_PARAMS), sizeof *pd);
-    lsq_problem_t *prob = lsq_problem_new();
-    bool *mat_used = NULL;
-    bool ok = false;
-    if (!out->points || !out->per_image || !out->kc || !out->s || !out->Pa || !out->mats || !pt || !ptidx || !cs ||
-        !wv || !bv || !lampv || !mp || !rcs || !items || !groups || !gidx || !pd || !prob) {
+    F->pt = malloc(n1 * sizeof *F->pt);
+    F->ptidx = malloc(n1 * sizeof *F->ptidx);
+    F->cs = malloc(nle * sizeof *F->cs);
+    F->wv = malloc(nle * sizeof *F->wv);
+    F->bv = malloc(nle * sizeof *F->bv);
+    F->lampv = malloc(nle * sizeof *F->lampv);
+    F->mp = calloc((size_t)(nm ? nm : 1) * MODEL_BRDF_MAX_PARAMS, sizeof *F->mp);
+    F->rcs = calloc((size_t)(nm ? nm : 1), sizeof *F->rcs);
+    F->groups = malloc(n1 * sizeof *F->groups);
+    F->gidx = malloc(n1 * sizeof *F->gidx);
+    F->pd = calloc((size_t)(ncams + nl + nimgs + 1 + nm * MODEL_BRDF_MAX_PARAMS), sizeof *F->pd);
+    F->prob = lsq_problem_new();
+    if (!out->points || !out->per_image || !out->kc || !out->s || !out->Pa || !out->mats || !F->pt || !F->ptidx ||
+        !F->cs || !F->wv || !F->bv || !F->lampv || !F->mp || !F->rcs || !F->groups || !F->gidx || !F->pd ||
+        !F->prob) {
         model_error(NULL, 0, "out of memory for %d reference points", npts);
-        goto done;
+        return false;
     }
     for (int c = 0; c < ncams; c++) out->kc[c] = 1;
     for (int i = 0; i < nl; i++) out->s[i] = 1;
-    out->rho = opt->ir_samples > 0 ? 1 : 0;
+    out->rho = F->opt->ir_samples > 0 ? 1 : 0;
     for (int k = 0; k < nm; k++) {
-        snprintf(out->mats[k].name, sizeof out->mats[k].name, "%s", scene->material_names[k]);
-        out->mats[k].model = prior[k]->model;
-        memcpy(out->mats[k].p, prior[k]->mean, sizeof prior[k]->mean);
-        memcpy(&mp[k * MODEL_BRDF_MAX_PARAMS], prior[k]->mean, sizeof prior[k]->mean);
+        snprintf(out->mats[k].name, sizeof out->mats[k].name, "%s", F->scene->material_names[k]);
+        out->mats[k].model = F->prior[k]->model;
+        memcpy(out->mats[k].p, F->prior[k]->mean, sizeof F->prior[k]->mean);
+        memcpy(&F->mp[k * MODEL_BRDF_MAX_PARAMS], F->prior[k]->mean, sizeof F->prior[k]->mean);
     }
-    // measure the windows
-    int np = 0, nfit = 0;
+    return true;
+}
+
+// Image m's reference points from first_pt on: the windows' means (after the
+// offset map, linearised), their spread (in sigma for now) and mean flat
+// field (in model for now), saturation. *Pa0: the offset's start (0 with the
+// offset map; else the median of the background windows, or the darkest
+// usable one); *var_px_fallback: without K, the pixel noise as the median
+// window variance of the usable points. false: out of memory.
+static bool measure_windows(fit_t *F, int m, int first_pt, double *Pa0, double *var_px_fallback)
+{
+    const verify_options_t *opt = F->opt;
+    const verify_view_t *v = F->views[m];
+    const verify_image_t *im = &F->imgs[m];
+    const verify_camera_t *cm = &F->cams[im->camera];
+    const int w = opt->window_px, h = w / 2, n = v->gw * v->gh;
+    const float *off = opt->use_flat ? cm->offset_dn : NULL, *flat = opt->use_flat ? cm->flat : NULL;
+    double gf = pow(10, im->gain_db / 20), Kg = cm->K_dn_per_e * gf;
+    double sat = cm->saturation_dn > 0 ? cm->saturation_dn : INFINITY;
+    double a_nl = opt->use_flat && cm->nonlin_a_per_dn > 0 ? cm->nonlin_a_per_dn / gf : 0;
+    double *tmp = malloc((size_t)n * sizeof *tmp);
+    int nt = 0;
+    if (!tmp) return false;
+    for (int g = 0; g < n; g++) {
+        verify_point_t *p = &F->out->points[first_pt + g];
+        int gx = v->x0 + (g % v->gw) * v->sp, gy = v->y0 + (g / v->gw) * v->sp;
+        p->image = m;
+        p->q[0] = (float)gx;
+        p->q[1] = (float)gy;
+        p->face = v->pi[g].face;
+        p->status = v->status[g];
+        p->region = -1;
+        double s1 = 0, s2 = 0, gs = 0, mx = 0;
+        for (int y = gy - h; y <= gy + h; y++)
+            for (int x = gx - h; x <= gx + h; x++) {
+                size_t o = (size_t)y * v->W + x;
+                double P = im->P[o];
+                if (P > mx) mx = P;
+                if (off) P -= off[o];
+                s1 += P;
+                s2 += P * P;
+                gs += flat ? flat[o] : 1;
+            }
+        double N = (double)w * w, mean = s1 / N;
+        if (a_nl > 0 && off) {
+            // linearise the window (mean and spread) with the inverse of S_m = S (1 - a S)
+            double disc = 1 - 4 * a_nl * mean;
+            if (mean > 0 && disc > 0) {
+                double lin = (1 - sqrt(disc)) / (2 * a_nl), slope = 1 / sqrt(disc);
+                double var = fmax(s2 / N - mean * mean, 0) * slope * slope;
+                mean = lin;
+                s1 = mean * N;
+                s2 = (var + mean * mean) * N;
+            }
+        }
+        p->meas = (float)mean;
+        p->sigma = (float)sqrt(fmax(s2 / N - mean * mean, 0) * N / (N > 1 ? N - 1 : 1));   // window std for now
+        p->model = (float)(gs / N);   // g for now
+        if (p->status == VERIFY_PT_USED && mx >= sat - 0.5) p->status = VERIFY_PT_SATURATED;
+        if (!off && p->status == VERIFY_PT_BACKGROUND) tmp[nt++] = mean;
+    }
+    *Pa0 = 0;
+    if (!off) {
+        if (nt >= 10) {
+            *Pa0 = median_of(tmp, nt);
+        } else {
+            *Pa0 = INFINITY;
+            for (int k = first_pt; k < first_pt + n; k++)
+                if (F->out->points[k].status == VERIFY_PT_USED) *Pa0 = fmin(*Pa0, F->out->points[k].meas);
+            if (!isfinite(*Pa0)) *Pa0 = 0;
+        }
+    }
+    *var_px_fallback = 0;
+    if (!(Kg > 0)) {
+        nt = 0;
+        for (int k = first_pt; k < first_pt + n; k++)
+            if (F->out->points[k].status == VERIFY_PT_USED)
+                tmp[nt++] = (double)F->out->points[k].sigma * F->out->points[k].sigma;
+        *var_px_fallback = nt ? median_of(tmp, nt) : 1;
+        if (!(*var_px_fallback > 0)) *var_px_fallback = 1;
+    }
+    free(tmp);
+    return true;
+}
+
+// Image m's usable points after measure_windows: the measured-edge test,
+// sigma, and the fit's points with their per-lamp terms (from *e on).
+static void image_fit_points(fit_t *F, int m, int first_pt, double Pa0, double var_px_fallback, size_t *e)
+{
+    const verify_options_t *opt = F->opt;
+    const verify_view_t *v = F->views[m];
+    const verify_image_t *im = &F->imgs[m];
+    const verify_camera_t *cm = &F->cams[im->camera];
+    const int w = opt->window_px;
+    double gf = pow(10, im->gain_db / 20), E = im->exposure_us * gf, Kg = cm->K_dn_per_e * gf;
+    for (int g = 0; g < v->gw * v->gh; g++) {
+        int k = first_pt + g;
+        verify_point_t *p = &F->out->points[k];
+        if (p->status != VERIFY_PT_USED) continue;
+        double S = fmax(p->meas - Pa0, 0), wstd = p->sigma, gmean = p->model;
+        double var_px = Kg > 0 ? Kg * S + Kg * Kg * cm->read_noise_e * cm->read_noise_e + 1.0 / 12
+                               : var_px_fallback;
+        double thr2 = opt->edge_k * opt->edge_k * var_px + (opt->edge_rel * S) * (opt->edge_rel * S);
+        if (wstd * wstd > thr2) {
+            p->status = VERIFY_PT_EDGE_MEASURED;
+            p->z = (float)(opt->z_flag * wstd / sqrt(thr2));
+        }
+        double sig = sqrt(var_px / ((double)w * w) + (opt->model_rel * S) * (opt->model_rel * S));
+        p->sigma = (float)sig;
+        p->model = 0;
+        // the fit's point (edge-measured ones are predicted too, not fitted)
+        pt_t *q = &F->pt[F->nfit];
+        q->meas = p->meas;
+        q->sigma = sig;
+        q->Eg = E * gmean;
+        q->mat = v->pi[g].material;
+        q->first = (int)*e;
+        q->nl = 0;
+        const model_lamp_sample_t *ls = &v->ls[(size_t)g * v->nl];
+        for (int i = 0; i < F->nl; i++) {
+            if (!((im->lamps_on >> i) & 1)) continue;
+            F->cs[*e] = model_cosines(v->pi[g].n, ls[i].l, v->pi[g].v);
+            F->wv[*e] = ls[i].d_mm > 0 ? F->A[i] * ls[i].V / (ls[i].d_mm * ls[i].d_mm) : 0;
+            F->bv[*e] = F->A[i] * v->B[(size_t)g * v->nl + i];
+            F->lampv[*e] = i;
+            (*e)++;
+            q->nl++;
+        }
+        F->ptidx[F->nfit] = k;
+        F->nfit++;
+    }
+}
+
+// Every image's reference points and windows. false: out of memory.
+static bool fit_measure(fit_t *F)
+{
+    int np = 0;
     size_t e = 0;
-    for (int m = 0; m < nimgs; m++) {
-        const verify_view_t *v = views[m];
-        const verify_image_t *im = &imgs[m];
-        const verify_camera_t *cm = &cams[im->camera];
-        const float *off = opt->use_flat ? cm->offset_dn : NULL, *flat = opt->use_flat ? cm->flat : NULL;
-        double gf = pow(10, im->gain_db / 20), E = im->exposure_us * gf, Kg = cm->K_dn_per_e * gf;
-        double sat = cm->saturation_dn > 0 ? cm->saturation_dn : INFINITY;
-        double a_nl = opt->use_flat && cm->nonlin_a_per_dn > 0 ? cm->nonlin_a_per_dn / gf : 0;
-        // Pa start: 0 with the offset map; else the median of the background windows, or the darkest window
-        double Pa0 = 0;
-        int first_pt = np;
-        double *tmp = malloc((size_t)v->gw * v->gh * sizeof *tmp);
-        int nt = 0;
-        if (!tmp) goto done;
-        for (int g = 0; g < v->gw * v->gh; g++) {
-            verify_point_t *p = &out->points[np++];
-            int gx = v->x0 + (g % v->gw) * v->sp, gy = v->y0 + (g / v->gw) * v->sp;
-            p->image = m;
-            p->q[0] = (float)gx;
-            p->q[1] = (float)gy;
-            p->face = v->pi[g].face;
-            p->status = v->status[g];
-            p->region = -1;
-            double s1 = 0, s2 = 0, gs = 0, mx = 0;
-            for (int y = gy - h; y <= gy + h; y++)
-                for (int x = gx - h; x <= gx + h; x++) {
-                    size_t o = (size_t)y * v->W + x;
-                    double P = im->P[o];
-                    if (P > mx) mx = P;
-                    if (off) P -= off[o];
-                    s1 += P;
-                    s2 += P * P;
-                    gs += flat ? flat[o] : 1;
-                }
-            double N = (double)w * w, mean = s1 / N;
-            if (a_nl > 0 && off) {
-                // linearise the window (mean and spread) with the inverse of S_m = S (1 - a S)
-                double disc = 1 - 4 * a_nl * mean;
-                if (mean > 0 && disc > 0) {
-                    double lin = (1 - sqrt(disc)) / (2 * a_nl), slope = 1 / sqrt(disc);
-                    double var = fmax(s2 / N - mean * mean, 0) * slope * slope;
-                    mean = lin;
-                    s1 = mean * N;
-                    s2 = (var + mean * mean) * N;
-                }
-            }
-            p->meas = (float)mean;
-            p->sigma = (float)sqrt(fmax(s2 / N - mean * mean, 0) * N / (N > 1 ? N - 1 : 1));   // window std for now
-            p->model = (float)(gs / N);   // g for now
-            if (p->status == VERIFY_PT_USED && mx >= sat - 0.5) p->status = VERIFY_PT_SATURATED;
-            if (!off && p->status == VERIFY_PT_BACKGROUND) tmp[nt++] = mean;
-        }
-        if (!off) {
-            if (nt >= 10) {
-                Pa0 = median_of(tmp, nt);
-            } else {
-                Pa0 = INFINITY;
-                for (int k = first_pt; k < np; k++)
-                    if (out->points[k].status == VERIFY_PT_USED) Pa0 = fmin(Pa0, out->points[k].meas);
-                if (!isfinite(Pa0)) Pa0 = 0;
-            }
-        }
-        out->Pa[m] = Pa0;
-        // the pixel noise without K: the median window variance of the usable points
-        double var_px_fallback = 0;
-        if (!(Kg > 0)) {
-            nt = 0;
-            for (int k = first_pt; k < np; k++)
-                if (out->points[k].status == VERIFY_PT_USED) tmp[nt++] = (double)out->points[k].sigma * out->points[k].sigma;
-            var_px_fallback = nt ? median_of(tmp, nt) : 1;
-            if (!(var_px_fallback > 0)) var_px_fallback = 1;
-        }
-        free(tmp);
-        for (int g = 0; g < v->gw * v->gh; g++) {
-            int k = first_pt + g;
-            verify_point_t *p = &out->points[k];
-            if (p->status != VERIFY_PT_USED) continue;
-            double S = fmax(p->meas - Pa0, 0), wstd = p->sigma, gmean = p->model;
-            double var_px = Kg > 0 ? Kg * S + Kg * Kg * cm->read_noise_e * cm->read_noise_e + 1.0 / 12
-                                   : var_px_fallback;
-            double thr2 = opt->edge_k * opt->edge_k * var_px + (opt->edge_rel * S) * (opt->edge_rel * S);
-            if (wstd * wstd > thr2) {
-                p->status = VERIFY_PT_EDGE_MEASURED;
-                p->z = (float)(opt->z_flag * wstd / sqrt(thr2));
-            }
-            double sig = sqrt(var_px / ((double)w * w) + (opt->model_rel * S) * (opt->model_rel * S));
-            p->sigma = (float)sig;
-            p->model = 0;
-            // the fit's point (edge-measured ones are predicted too, not fitted)
-            pt_t *q = &pt[nfit];
-            q->meas = p->meas;
-            q->sigma = sig;
-            q->Eg = E * gmean;
-            q->mat = v->pi[g].material;
-            q->first = (int)e;
-            q->nl = 0;
-            const model_lamp_sample_t *ls = &v->ls[(size_t)g * v->nl];
-            for (int i = 0; i < nl; i++) {
-                if (!((im->lamps_on >> i) & 1)) continue;
-                cs[e] = model_cosines(v->pi[g].n, ls[i].l, v->pi[g].v);
-                wv[e] = ls[i].d_mm > 0 ? A[i] * ls[i].V / (ls[i].d_mm * ls[i].d_mm) : 0;
-                bv[e] = A[i] * v->B[(size_t)g * v->nl + i];
-                lampv[e] = i;
-                e++;
-                q->nl++;
-            }
-            ptidx[nfit] = k;
-            nfit++;
-        }
+    for (int m = 0; m < F->nimgs; m++) {
+        double Pa0, var_px_fallback;
+        if (!measure_windows(F, m, np, &Pa0, &var_px_fallback)) return false;
+        F->out->Pa[m] = Pa0;
+        image_fit_points(F, m, np, Pa0, var_px_fallback, &e);
+        np += F->views[m]->gw * F->views[m]->gh;
     }
-    // the problem
-    int npd = 0;
-    for (int c = 0; c < ncams; c++) {
-        pdesc_t *d = &pd[npd++];
-        snprintf(d->name, sizeof d->name, "kc[%s]", cams[c].name);
-        d->x = &out->kc[c];
-        d->prior_mean = 1;
-        d->prior_std = opt->use_priors ? opt->camera_sigma : 0;
-        d->lo = opt->use_priors ? fmax(0.2, 1 - 5 * opt->camera_sigma) : 0;
-        d->hi = opt->use_priors ? 1 + 5 * opt->camera_sigma : INFINITY;
-        d->fixed = opt->fix_cameras;
-        if (!lsq_add_parameters(prob, d->x, 1)) goto fit_fail;
+    return true;
+}
+
+// A parameter's description (the next of F->pd).
+static pdesc_t *fit_param(fit_t *F, double *x, int i, double prior_mean, double prior_std, double lo, double hi,
+                          bool fixed)
+{
+    pdesc_t *d = &F->pd[F->npd++];
+    d->x = x;
+    d->i = i;
+    d->prior_mean = prior_mean;
+    d->prior_std = prior_std;
+    d->lo = lo;
+    d->hi = hi;
+    d->fixed = fixed;
+    return d;
+}
+
+// The parameters within the priors (verify.h): kc per camera, s per lamp, Pa
+// per image, rho, the materials'. false + message (kept) from the solver.
+static bool fit_parameters(fit_t *F)
+{
+    const verify_options_t *opt = F->opt;
+    verify_result_t *out = F->out;
+    const bool up = opt->use_priors;
+    for (int c = 0; c < F->ncams; c++) {
+        pdesc_t *d = fit_param(F, &out->kc[c], 0, 1, up ? opt->camera_sigma : 0,
+                               up ? fmax(0.2, 1 - 5 * opt->camera_sigma) : 0, up ? 1 + 5 * opt->camera_sigma : INFINITY,
+                               opt->fix_cameras);
+        snprintf(d->name, sizeof d->name, "kc[%s]", F->cams[c].name);
+        if (!lsq_add_parameters(F->prob, d->x, 1)) return false;
     }
-    if (!lsq_add_parameters(prob, out->s, nl ? nl : 1)) goto fit_fail;
-    for (int i = 0; i < nl; i++) {
-        pdesc_t *d = &pd[npd++];
-        snprintf(d->name, sizeof d->name, "lamp[%s]", lamps->lamps[i].name);
-        d->x = out->s;
-        d->i = i;
-        d->prior_mean = 1;
-        d->prior_std = opt->use_priors ? opt->lamp_sigma : 0;
-        d->lo = fmax(0.2, 1 - 5 * opt->lamp_sigma);
-        d->hi = 1 + 5 * opt->lamp_sigma;
-        d->fixed = opt->fix_lamps || !opt->use_priors;   // the thesis's fit: lamps fixed, kc free
+    if (!lsq_add_parameters(F->prob, out->s, F->nl ? F->nl : 1)) return false;
+    for (int i = 0; i < F->nl; i++) {
+        // the thesis's fit (no priors): lamps fixed, kc free
+        pdesc_t *d = fit_param(F, out->s, i, 1, up ? opt->lamp_sigma : 0, fmax(0.2, 1 - 5 * opt->lamp_sigma),
+                               1 + 5 * opt->lamp_sigma, opt->fix_lamps || !up);
+        snprintf(d->name, sizeof d->name, "lamp[%s]", F->lamps->lamps[i].name);
     }
-    for (int m = 0; m < nimgs; m++) {
-        pdesc_t *d = &pd[npd++];
+    for (int m = 0; m < F->nimgs; m++) {
+        bool have_map = opt->use_flat && F->cams[F->imgs[m].camera].offset_dn;
+        pdesc_t *d = fit_param(F, &out->Pa[m], 0, out->Pa[m], up && have_map ? opt->pa_sigma_dn : 0, -INFINITY,
+                               INFINITY, opt->fix_pa);
         snprintf(d->name, sizeof d->name, "Pa[%d]", m);
-        d->x = &out->Pa[m];
-        bool have_map = opt->use_flat && cams[imgs[m].camera].offset_dn;
-        d->prior_mean = out->Pa[m];
-        d->prior_std = opt->use_priors && have_map ? opt->pa_sigma_dn : 0;
-        d->lo = -INFINITY;
-        d->hi = INFINITY;
-        d->fixed = opt->fix_pa;
-        if (!lsq_add_parameters(prob, d->x, 1)) goto fit_fail;
+        if (!lsq_add_parameters(F->prob, d->x, 1)) return false;
     }
-    {
-        pdesc_t *d = &pd[npd++];
-        snprintf(d->name, sizeof d->name, "rho");
-        d->x = &out->rho;
-        d->prior_mean = 1;
-        d->prior_std = opt->use_priors ? 0.5 : 0;
-        d->lo = 0;
-        d->hi = opt->use_priors ? 3 : INFINITY;
-        d->fixed = opt->fix_rho || opt->ir_samples <= 0;
-        if (!lsq_add_parameters(prob, d->x, 1)) goto fit_fail;
-    }
-    mat_used = calloc((size_t)nm + 1, sizeof *mat_used);
-    if (!mat_used) goto fit_fail;
-    for (int k = 0; k < nfit; k++)
-        if (pt[k].mat >= 0 && pt[k].mat < nm && out->points[ptidx[k]].status == VERIFY_PT_USED) mat_used[pt[k].mat] = true;
-    for (int k = 0; k < nm; k++) {
-        const verify_prior_t *P = prior[k];
-        double *x = &mp[k * MODEL_BRDF_MAX_PARAMS];
-        if (!lsq_add_parameters(prob, x, P->np)) goto fit_fail;
+    pdesc_t *d = fit_param(F, &out->rho, 0, 1, up ? 0.5 : 0, 0, up ? 3 : INFINITY,
+                           opt->fix_rho || opt->ir_samples <= 0);
+    snprintf(d->name, sizeof d->name, "rho");
+    if (!lsq_add_parameters(F->prob, d->x, 1)) return false;
+    bool *mat_used = calloc((size_t)F->nm + 1, sizeof *mat_used);
+    if (!mat_used) return false;
+    for (int k = 0; k < F->nfit; k++)
+        if (F->pt[k].mat >= 0 && F->pt[k].mat < F->nm && out->points[F->ptidx[k]].status == VERIFY_PT_USED)
+            mat_used[F->pt[k].mat] = true;
+    bool ok = true;
+    for (int k = 0; k < F->nm && ok; k++) {
+        const verify_prior_t *P = F->prior[k];
+        double *x = &F->mp[k * MODEL_BRDF_MAX_PARAMS];
+        if (!(ok = lsq_add_parameters(F->prob, x, P->np))) break;
         for (int j = 0; j < P->np; j++) {
-            pdesc_t *d = &pd[npd++];
-            snprintf(d->name, sizeof d->name, "%s.%s", P->name, model_brdf_param_name(P->model, j));
-            d->x = x;
-            d->i = j;
             double lo, hi;
             model_brdf_param_range(P->model, j, &lo, &hi);
-            d->prior_mean = P->mean[j];
-            d->prior_std = opt->use_priors && isfinite(P->std[j]) ? P->std[j] : 0;
-            d->lo = opt->use_priors ? P->lo[j] : lo;
-            d->hi = opt->use_priors ? P->hi[j] : hi;
-            d->fixed = opt->fix_materials || (opt->use_priors && P->held[j]) || !mat_used[k] ||
-                       (!opt->use_priors && !strcmp(model_brdf_param_name(P->model, j), "F0"));
+            const char *pn = model_brdf_param_name(P->model, j);
+            bool fixed = opt->fix_materials || (up && P->held[j]) || !mat_used[k] || (!up && !strcmp(pn, "F0"));
+            d = fit_param(F, x, j, P->mean[j], up && isfinite(P->std[j]) ? P->std[j] : 0, up ? P->lo[j] : lo,
+                          up ? P->hi[j] : hi, fixed);
+            snprintf(d->name, sizeof d->name, "%s.%s", P->name, pn);
         }
-        rcs[k].pt = pt;
-        rcs[k].cs = cs;
-        rcs[k].w = wv;
-        rcs[k].b = bv;
-        rcs[k].lamp = lampv;
-        rcs[k].model = P->model;
-        rcs[k].np = P->np;
-        rcs[k].nl_all = nl ? nl : 1;
+        F->rcs[k] = (res_ctx_t){ .pt = F->pt, .cs = F->cs, .w = F->wv, .b = F->bv, .lamp = F->lampv,
+                                 .model = P->model, .np = P->np, .nl_all = F->nl ? F->nl : 1 };
     }
-    // bounds, masks and priors
+    free(mat_used);
+    return ok;
+}
+
+// Bounds and priors of the free parameters, the fixed ones' masks.
+static bool fit_bounds_and_masks(fit_t *F)
+{
+    const verify_options_t *opt = F->opt;
+    lsq_problem_t *prob = F->prob;
+    const pdesc_t *pd = F->pd;
+    const int npd = F->npd;
     for (int k = 0; k < npd; k++) {
-        pdesc_t *d = &pd[k];
+        const pdesc_t *d = &pd[k];
         if (d->fixed) continue;
-        if ((isfinite(d->lo) || isfinite(d->hi)) && !lsq_set_bounds(prob, d->x, d->i, d->lo, d->hi)) goto fit_fail;
-        if (d->prior_std > 0 && !lsq_add_prior(prob, d->x, d->i, d->prior_mean, d->prior_std)) goto fit_fail;
+        if ((isfinite(d->lo) || isfinite(d->hi)) && !lsq_set_bounds(prob, d->x, d->i, d->lo, d->hi)) return false;
+        if (d->prior_std > 0 && !lsq_add_prior(prob, d->x, d->i, d->prior_mean, d->prior_std)) return false;
     }
-    {
-        // masks per block
-        bool fx[MAX_LAMPS];
-        for (int i = 0; i < nl; i++) fx[i] = opt->fix_lamps || !opt->use_priors;
-        if (nl && !lsq_set_fixed(prob, out->s, fx)) goto fit_fail;
-        if (!nl) lsq_set_fixed(prob, out->s, NULL);
-        for (int k = 0; k < npd; k++) {
-            pdesc_t *d = &pd[k];
-            if (d->x == out->s) continue;
-            bool f[MODEL_BRDF_MAX_PARAMS] = { 0 };
-            int size = 1;
-            for (int q = 0; q < npd; q++)
-                if (pd[q].x == d->x) {
-                    f[pd[q].i] = pd[q].fixed;
-                    if (pd[q].i + 1 > size) size = pd[q].i + 1;
-                }
-            bool any = false;
-            for (int q = 0; q < size; q++) any |= f[q];
-            if (any && d->i == 0 && !lsq_set_fixed(prob, d->x, f)) goto fit_fail;
-        }
+    // masks per block
+    bool fx[MAX_LAMPS];
+    for (int i = 0; i < F->nl; i++) fx[i] = opt->fix_lamps || !opt->use_priors;
+    if (F->nl && !lsq_set_fixed(prob, F->out->s, fx)) return false;
+    if (!F->nl) lsq_set_fixed(prob, F->out->s, NULL);
+    for (int k = 0; k < npd; k++) {
+        const pdesc_t *d = &pd[k];
+        if (d->x == F->out->s) continue;
+        bool f[MODEL_BRDF_MAX_PARAMS] = { 0 };
+        int size = 1;
+        for (int q = 0; q < npd; q++)
+            if (pd[q].x == d->x) {
+                f[pd[q].i] = pd[q].fixed;
+                if (pd[q].i + 1 > size) size = pd[q].i + 1;
+            }
+        bool any = false;
+        for (int q = 0; q < size; q++) any |= f[q];
+        if (any && d->i == 0 && !lsq_set_fixed(prob, d->x, f)) return false;
     }
-    int nused = 0, ngroups = 0, gpos = 0;
-    for (int k = 0; k < nfit; k++) {
-        items[k].rc = &rcs[pt[k].mat];
-        items[k].k = k;
-    }
-    // groups of up to 64 used points of one image and material
-    for (int m = 0; m < nimgs; m++)
-        for (int mat = 0; mat < nm; mat++) {
+    return true;
+}
+
+// The parameter blocks of a point of image m and material mat: kc, s, Pa, p, rho.
+static void fit_blocks(const fit_t *F, int m, int mat, double *blocks[5])
+{
+    blocks[0] = &F->out->kc[F->imgs[m].camera];
+    blocks[1] = F->out->s;
+    blocks[2] = &F->out->Pa[m];
+    blocks[3] = &F->mp[mat * MODEL_BRDF_MAX_PARAMS];
+    blocks[4] = &F->out->rho;
+}
+
+// The residual blocks: groups of up to 64 used points of one image and material.
+static bool fit_residuals(fit_t *F)
+{
+    const verify_options_t *opt = F->opt;
+    int gpos = 0;
+    F->nused = F->ngroups = 0;
+    for (int m = 0; m < F->nimgs; m++)
+        for (int mat = 0; mat < F->nm; mat++) {
             int cur = -1;
-            for (int k = 0; k < nfit; k++) {
-                const verify_point_t *p = &out->points[ptidx[k]];
-                if (p->image != m || pt[k].mat != mat || p->status != VERIFY_PT_USED) continue;
-                nused++;
-                if (cur < 0 || groups[cur].n == 64) {
-                    cur = ngroups++;
-                    groups[cur].rc = &rcs[mat];
-                    groups[cur].k = &gidx[gpos];
-                    groups[cur].n = 0;
-                    groups[cur].b = opt->robust_scale > 0 ? opt->robust_scale * opt->robust_scale : 0;
+            for (int k = 0; k < F->nfit; k++) {
+                const verify_point_t *p = &F->out->points[F->ptidx[k]];
+                if (p->image != m || F->pt[k].mat != mat || p->status != VERIFY_PT_USED) continue;
+                F->nused++;
+                if (cur < 0 || F->groups[cur].n == 64) {
+                    cur = F->ngroups++;
+                    F->groups[cur].rc = &F->rcs[mat];
+                    F->groups[cur].k = &F->gidx[gpos];
+                    F->groups[cur].n = 0;
+                    F->groups[cur].b = opt->robust_scale > 0 ? opt->robust_scale * opt->robust_scale : 0;
                 }
-                gidx[gpos++] = k;   // a group's indices are contiguous in gidx
-                groups[cur].n++;
+                F->gidx[gpos++] = k;   // a group's indices are contiguous in gidx
+                F->groups[cur].n++;
             }
         }
-    for (int gi = 0; gi < ngroups; gi++) {
-        const verify_point_t *p = &out->points[ptidx[groups[gi].k[0]]];
-        int mat = pt[groups[gi].k[0]].mat;
-        double *blocks[5] = { &out->kc[imgs[p->image].camera], out->s, &out->Pa[p->image],
-                              &mp[mat * MODEL_BRDF_MAX_PARAMS], &out->rho };
-        if (!lsq_add_residual(prob, group_fn, &groups[gi], groups[gi].n, 5, blocks, LSQ_LOSS_NONE, 0))
-            goto fit_fail;
+    for (int gi = 0; gi < F->ngroups; gi++) {
+        const verify_point_t *p = &F->out->points[F->ptidx[F->groups[gi].k[0]]];
+        double *blocks[5];
+        fit_blocks(F, p->image, F->pt[F->groups[gi].k[0]].mat, blocks);
+        if (!lsq_add_residual(F->prob, group_fn, &F->groups[gi], F->groups[gi].n, 5, blocks, LSQ_LOSS_NONE, 0))
+            return false;
     }
-    if (nused < 10) {
+    return true;
+}
+
+// Solve (at least 10 usable points). false + message.
+static bool fit_solve(fit_t *F)
+{
+    const verify_options_t *opt = F->opt;
+    if (F->nused < 10) {
         model_error(NULL, 0, "verify: only %d usable reference points in %d image(s): the description's surfaces "
-                    "are not in view, or the images are saturated", nused, nimgs);
-        goto done;
+                    "are not in view, or the images are saturated", F->nused, F->nimgs);
+        return false;
     }
     lsq_options_t fo = lsq_defaults();
     fo.threads = opt->threads;
@@ -991,16 +1119,22 @@ bool verify_run(const model_scene_t *scene, const verify_priors_t *pr, const ver
     fo.function_tolerance = 1e-8;
     fo.parameter_tolerance = 1e-8;
     fo.verbose = opt->verbose;
-    if (!lsq_solve(prob, &fo, &out->summary)) {
-        model_error(NULL, 0, "verify: the fit failed: %s (%s)", out->summary.termination, out->summary.message);
-        goto done;
+    if (!lsq_solve(F->prob, &fo, &F->out->summary)) {
+        model_error(NULL, 0, "verify: the fit failed: %s (%s)", F->out->summary.termination, F->out->summary.message);
+        return false;
     }
-    // parameters
-    out->params = calloc((size_t)npd, sizeof *out->params);
-    if (!out->params) goto done;
-    out->nparams = npd;
-    for (int k = 0; k < npd; k++) {
-        pdesc_t *d = &pd[k];
+    return true;
+}
+
+// The fitted parameters with their priors and bounds; those at a bound are pinned.
+static bool fit_collect_params(fit_t *F)
+{
+    verify_result_t *out = F->out;
+    out->params = calloc((size_t)F->npd, sizeof *out->params);
+    if (!out->params) return false;
+    out->nparams = F->npd;
+    for (int k = 0; k < F->npd; k++) {
+        const pdesc_t *d = &F->pd[k];
         verify_param_t *o = &out->params[k];
         snprintf(o->name, sizeof o->name, "%s", d->name);
         o->value = d->x[d->i];
@@ -1014,198 +1148,227 @@ bool verify_run(const model_scene_t *scene, const verify_priors_t *pr, const ver
             double tol = 1e-3 * (d->hi - d->lo);
             o->pinned = o->value <= d->lo + tol || o->value >= d->hi - tol;
         } else if (!d->fixed && isfinite(d->lo) && o->value <= d->lo + 1e-9 * fmax(1, fabs(d->lo)) &&
-                   d->lo > -INFINITY && opt->use_priors) {
+                   d->lo > -INFINITY && F->opt->use_priors) {
             o->pinned = true;
         }
         if (o->pinned) out->npinned++;
     }
-    if (!opt->no_covariance) {
-        // the covariance: (J^T J + priors)^-1 over the free parameters at the
-        // solution, J of the loss-scaled residuals (as Ceres's)
-        int nf = 0, *col = malloc((size_t)npd * sizeof *col);
-        for (int k = 0; k < npd; k++) col[k] = pd[k].fixed ? -1 : nf++;
-        double *JtJ = calloc((size_t)nf * nf + 1, sizeof *JtJ), *inv = calloc((size_t)nf * nf + 1, sizeof *inv);
-        double *ev = malloc(((size_t)nf + 1) * sizeof *ev);
-        double *jb = malloc((size_t)64 * (3 + nl + MODEL_BRDF_MAX_PARAMS) * sizeof *jb), rbuf[64];
-        bool cok = col && JtJ && inv && ev && jb && nf > 0;
-        for (int gi = 0; gi < ngroups && cok; gi++) {
-            res_group_t *g = &groups[gi];
-            const verify_point_t *p = &out->points[ptidx[g->k[0]]];
-            int mat = pt[g->k[0]].mat;
-            double *blocks[5] = { &out->kc[imgs[p->image].camera], out->s, &out->Pa[p->image],
-                                  &mp[mat * MODEL_BRDF_MAX_PARAMS], &out->rho };
-            const int size[5] = { 1, nl ? nl : 1, 1, rcs[mat].np, 1 };
-            double *jac[5];
-            int off = 0, gcol[5][MAX_LAMPS];
-            for (int b = 0; b < 5; b++) {
-                jac[b] = jb + (size_t)off * 64;
-                off += size[b];
-                for (int q = 0; q < size[b]; q++) {
-                    gcol[b][q] = -1;
-                    for (int k = 0; k < npd; k++)
-                        if (pd[k].x == blocks[b] && pd[k].i == q) gcol[b][q] = col[k];
+    return true;
+}
+
+// Add residual group g's J^T J to JtJ (nf x nf; col: parameter -> column or -1).
+static bool covariance_add_group(const fit_t *F, const res_group_t *g, const int *col, int nf, double *jb,
+                                 double *JtJ)
+{
+    const pdesc_t *pd = F->pd;
+    const verify_point_t *p = &F->out->points[F->ptidx[g->k[0]]];
+    int mat = F->pt[g->k[0]].mat;
+    double *blocks[5], rbuf[64];
+    fit_blocks(F, p->image, mat, blocks);
+    const int size[5] = { 1, F->nl ? F->nl : 1, 1, F->rcs[mat].np, 1 };
+    double *jac[5];
+    int off = 0, gcol[5][MAX_LAMPS];
+    for (int b = 0; b < 5; b++) {
+        jac[b] = jb + (size_t)off * 64;
+        off += size[b];
+        for (int q = 0; q < size[b]; q++) {
+            gcol[b][q] = -1;
+            for (int k = 0; k < F->npd; k++)
+                if (pd[k].x == blocks[b] && pd[k].i == q) gcol[b][q] = col[k];
+        }
+    }
+    if (!group_fn((void *)g, (const double *const *)blocks, rbuf, jac)) return false;
+    for (int t = 0; t < g->n; t++) {
+        double row[64];
+        int rc_[64], nr = 0;
+        for (int b = 0; b < 5; b++)
+            for (int q = 0; q < size[b]; q++)
+                if (gcol[b][q] >= 0 && nr < 64) {
+                    row[nr] = jac[b][(size_t)t * size[b] + q];
+                    rc_[nr++] = gcol[b][q];
+                }
+        for (int u = 0; u < nr; u++)
+            for (int v2 = 0; v2 < nr; v2++) JtJ[(size_t)rc_[u] * nf + rc_[v2]] += row[u] * row[v2];
+    }
+    return true;
+}
+
+// The parameters' standard deviations: (J^T J + priors)^-1 over the free
+// parameters at the solution, J of the loss-scaled residuals (as Ceres's).
+// They stay NAN when it cannot be had.
+static void fit_covariance(fit_t *F)
+{
+    const int npd = F->npd, nl = F->nl;
+    const pdesc_t *pd = F->pd;
+    int nf = 0, *col = malloc((size_t)npd * sizeof *col);
+    for (int k = 0; col && k < npd; k++) col[k] = pd[k].fixed ? -1 : nf++;
+    double *JtJ = calloc((size_t)nf * nf + 1, sizeof *JtJ), *inv = calloc((size_t)nf * nf + 1, sizeof *inv);
+    double *ev = malloc(((size_t)nf + 1) * sizeof *ev);
+    double *jb = malloc((size_t)64 * (3 + nl + MODEL_BRDF_MAX_PARAMS) * sizeof *jb);
+    bool cok = col && JtJ && inv && ev && jb && nf > 0;
+    for (int gi = 0; gi < F->ngroups && cok; gi++) cok = covariance_add_group(F, &F->groups[gi], col, nf, jb, JtJ);
+    for (int k = 0; k < npd && cok; k++)
+        if (col[k] >= 0 && pd[k].prior_std > 0)
+            JtJ[(size_t)col[k] * nf + col[k]] += 1 / (pd[k].prior_std * pd[k].prior_std);
+    for (int c = 0; c < nf && cok; c++) {
+        double *A2 = malloc((size_t)nf * nf * sizeof *A2);
+        if (!A2) {
+            cok = false;
+            break;
+        }
+        memcpy(A2, JtJ, (size_t)nf * nf * sizeof *A2);
+        for (int q = 0; q < nf; q++) ev[q] = q == c;
+        cok = model_solve_linear(A2, ev, nf);
+        free(A2);
+        for (int q = 0; q < nf && cok; q++) inv[(size_t)q * nf + c] = ev[q];
+    }
+    if (cok)
+        for (int k = 0; k < npd; k++)
+            if (col[k] >= 0) F->out->params[k].std = sqrt(fmax(inv[(size_t)col[k] * nf + col[k]], 0));
+    free(col);
+    free(JtJ);
+    free(inv);
+    free(ev);
+    free(jb);
+}
+
+// The residue: the fitted model at every measured point (used and
+// edge-measured), z and the flags; the status counts and the statistics.
+static void fit_residue(fit_t *F)
+{
+    verify_result_t *out = F->out;
+    for (int k = 0; k < F->nfit; k++) {
+        verify_point_t *p = &out->points[F->ptidx[k]];
+        double r, *blocks[5];
+        res_item_t it = { &F->rcs[F->pt[k].mat], k };
+        fit_blocks(F, p->image, F->pt[k].mat, blocks);
+        residual_fn(&it, (const double *const *)blocks, &r, NULL);
+        p->model = (float)(F->pt[k].meas + r * F->pt[k].sigma);
+        if (p->status == VERIFY_PT_USED) {
+            p->z = (float)-r;   // (measured - model) / sigma, the sign of the difference images
+            p->flag = fabs(r) > F->opt->z_flag;
+        } else {
+            p->flag = true;   // an unexpected edge: z holds z_flag * its std ratio
+        }
+    }
+    for (int k = 0; k < F->npts; k++) out->nstatus[out->points[k].status]++;
+    out->npoints = F->npts;
+    stats_of(out->points, F->npts, -1, &out->all);
+    for (int m = 0; m < F->nimgs; m++) stats_of(out->points, F->npts, m, &out->per_image[m]);
+}
+
+// Grow region rid from grid point g0 of image m (points from base on) over
+// 8-connected flags; stack: room for the image's points.
+static void grow_region(verify_result_t *out, const verify_view_t *v, int m, int base, int g0, int rid, int *stack,
+                        const verify_options_t *opt)
+{
+    verify_region_t *R = &out->regions[rid];
+    memset(R, 0, sizeof *R);
+    R->image = m;
+    R->bbox[0] = R->bbox[1] = INFINITY;
+    R->bbox[2] = R->bbox[3] = -INFINITY;
+    int fc[64], fn[64], nf = 0;
+    int top = 0;
+    stack[top++] = g0;
+    out->points[base + g0].region = rid;
+    const double cap2 = 25 * opt->z_flag * opt->z_flag;
+    while (top) {
+        int g = stack[--top];
+        verify_point_t *p = &out->points[base + g];
+        R->npoints++;
+        double z2 = fmin((double)p->z * p->z, cap2);
+        R->excess_chi2 += fmax(z2 - opt->z_flag * opt->z_flag, 0);
+        R->max_abs_z = fmax(R->max_abs_z, fabs(p->z));
+        R->bbox[0] = fmin(R->bbox[0], p->q[0] - v->sp / 2.0);
+        R->bbox[1] = fmin(R->bbox[1], p->q[1] - v->sp / 2.0);
+        R->bbox[2] = fmax(R->bbox[2], p->q[0] + v->sp / 2.0);
+        R->bbox[3] = fmax(R->bbox[3], p->q[1] + v->sp / 2.0);
+        int f;
+        for (f = 0; f < nf; f++)
+            if (fc[f] == p->face) break;
+        if (f == nf && nf < 64) {
+            fc[nf] = p->face;
+            fn[nf++] = 0;
+        }
+        if (f < 64) fn[f]++;
+        int gi = g % v->gw, gj = g / v->gw;
+        for (int dj = -1; dj <= 1; dj++)
+            for (int di = -1; di <= 1; di++) {
+                int ii = gi + di, jj = gj + dj;
+                if (ii < 0 || jj < 0 || ii >= v->gw || jj >= v->gh) continue;
+                verify_point_t *q2 = &out->points[base + jj * v->gw + ii];
+                if (q2->flag && q2->region < 0) {
+                    q2->region = rid;
+                    stack[top++] = jj * v->gw + ii;
                 }
             }
-            if (!group_fn(g, (const double *const *)blocks, rbuf, jac)) {
-                cok = false;
-                break;
-            }
-            for (int t = 0; t < g->n; t++) {
-                double row[64];
-                int rc_[64], nr = 0;
-                for (int b = 0; b < 5; b++)
-                    for (int q = 0; q < size[b]; q++)
-                        if (gcol[b][q] >= 0 && nr < 64) {
-                            row[nr] = jac[b][(size_t)t * size[b] + q];
-                            rc_[nr++] = gcol[b][q];
-                        }
-                for (int u = 0; u < nr; u++)
-                    for (int v2 = 0; v2 < nr; v2++) JtJ[(size_t)rc_[u] * nf + rc_[v2]] += row[u] * row[v2];
-            }
-        }
-        for (int k = 0; k < npd && cok; k++)
-            if (col[k] >= 0 && pd[k].prior_std > 0)
-                JtJ[(size_t)col[k] * nf + col[k]] += 1 / (pd[k].prior_std * pd[k].prior_std);
-        for (int c = 0; c < nf && cok; c++) {
-            double *A2 = malloc((size_t)nf * nf * sizeof *A2);
-            if (!A2) {
-                cok = false;
-                break;
-            }
-            memcpy(A2, JtJ, (size_t)nf * nf * sizeof *A2);
-            for (int q = 0; q < nf; q++) ev[q] = q == c;
-            cok = model_solve_linear(A2, ev, nf);
-            free(A2);
-            for (int q = 0; q < nf && cok; q++) inv[(size_t)q * nf + c] = ev[q];
-        }
-        if (cok)
-            for (int k = 0; k < npd; k++)
-                if (col[k] >= 0) out->params[k].std = sqrt(fmax(inv[(size_t)col[k] * nf + col[k]], 0));
-        free(col);
-        free(JtJ);
-        free(inv);
-        free(ev);
-        free(jb);
     }
-    for (int k = 0; k < nm; k++) memcpy(out->mats[k].p, &mp[k * MODEL_BRDF_MAX_PARAMS], sizeof out->mats[k].p);
+    R->area_px = (double)R->npoints * v->sp * v->sp;
+    R->counts = R->npoints >= opt->min_region;
+    for (int t = 0; t < 4; t++) {
+        int best = -1;
+        for (int f = 0; f < nf; f++)
+            if (fn[f] > 0 && (best < 0 || fn[f] > fn[best])) best = f;
+        R->faces[t] = best >= 0 ? fc[best] : -1;
+        R->face_points[t] = best >= 0 ? fn[best] : 0;
+        if (best >= 0) fn[best] = 0;
+    }
+}
+
+// Change detection: 8-connected flags on each image's grid are regions; the
+// score sums the excess chi^2 of those of at least min_region points.
+static void fit_regions(fit_t *F)
+{
+    verify_result_t *out = F->out;
+    int base = 0, cap = 0;
+    int *stack = malloc((size_t)(F->npts ? F->npts : 1) * sizeof *stack);
+    for (int m = 0; m < F->nimgs && stack; m++) {
+        const verify_view_t *v = F->views[m];
+        int n = v->gw * v->gh;
+        for (int g0 = 0; g0 < n; g0++) {
+            const verify_point_t *p0 = &out->points[base + g0];
+            if (!p0->flag || p0->region >= 0) continue;
+            if (out->nregions == cap) {
+                cap = cap ? 2 * cap : 64;
+                verify_region_t *nr = realloc(out->regions, (size_t)cap * sizeof *nr);
+                if (!nr) break;
+                out->regions = nr;
+            }
+            int rid = out->nregions++;
+            grow_region(out, v, m, base, g0, rid, stack, F->opt);
+            if (out->regions[rid].counts) out->score += out->regions[rid].excess_chi2;
+        }
+        base += n;
+    }
+    free(stack);
+}
+
+bool verify_run(const model_scene_t *scene, const verify_priors_t *pr, const verify_camera_t *cams, int ncams,
+                const model_lamps_t *lamps, const double *A, const verify_image_t *imgs, int nimgs,
+                verify_view_t *const *views, const verify_options_t *opt, verify_result_t *out)
+{
+    memset(out, 0, sizeof *out);
+    double t0 = model_now_s();
+    fit_t F = { .scene = scene, .cams = cams, .ncams = ncams, .lamps = lamps, .A = A, .imgs = imgs, .nimgs = nimgs,
+                .views = views, .opt = opt, .nl = lamps->n, .nm = scene->nmaterials, .out = out };
+    bool ok = false;
+    if (!fit_check(&F, pr) || !fit_alloc(&F) || !fit_measure(&F)) goto done;
+    if (!fit_parameters(&F) || !fit_bounds_and_masks(&F) || !fit_residuals(&F)) {
+        model_error(NULL, 0, "verify: setting up the fit failed: %s", model_last_error());
+        goto done;
+    }
+    if (!fit_solve(&F) || !fit_collect_params(&F)) goto done;
+    if (!opt->no_covariance) fit_covariance(&F);
+    for (int k = 0; k < F.nm; k++) memcpy(out->mats[k].p, &F.mp[k * MODEL_BRDF_MAX_PARAMS], sizeof out->mats[k].p);
+    fit_residue(&F);
+    fit_regions(&F);
+    // the verdict
+    out->correct = out->score <= opt->score_threshold;
+    out->time_fit_s = model_now_s() - t0;
     ok = true;
 done:
-    if (ok) {
-        // predictions at every measured point (used and edge-measured)
-        for (int k = 0; k < nfit; k++) {
-            verify_point_t *p = &out->points[ptidx[k]];
-            double r;
-            res_item_t it = { &rcs[pt[k].mat], k };
-            const double *blocks[5] = { &out->kc[imgs[p->image].camera], out->s, &out->Pa[p->image],
-                                        &mp[pt[k].mat * MODEL_BRDF_MAX_PARAMS], &out->rho };
-            residual_fn(&it, blocks, &r, NULL);
-            p->model = (float)(pt[k].meas + r * pt[k].sigma);
-            if (p->status == VERIFY_PT_USED) {
-                p->z = (float)-r;   // (measured - model) / sigma, the sign of the difference images
-                p->flag = fabs(r) > opt->z_flag;
-            } else {
-                p->flag = true;   // an unexpected edge: z holds z_flag * its std ratio
-            }
-        }
-        for (int k = 0; k < npts; k++) out->nstatus[out->points[k].status]++;
-        out->npoints = npts;
-        stats_of(out->points, npts, -1, &out->all);
-        for (int m = 0; m < nimgs; m++) stats_of(out->points, npts, m, &out->per_image[m]);
-        // regions: 8-connected flags on each image's grid
-        int base = 0, cap = 0;
-        int *stack = malloc((size_t)(npts ? npts : 1) * sizeof *stack);
-        for (int m = 0; m < nimgs && stack; m++) {
-            const verify_view_t *v = views[m];
-            int n = v->gw * v->gh;
-            for (int g0 = 0; g0 < n; g0++) {
-                verify_point_t *p0 = &out->points[base + g0];
-                if (!p0->flag || p0->region >= 0) continue;
-                if (out->nregions == cap) {
-                    cap = cap ? 2 * cap : 64;
-                    verify_region_t *nr = realloc(out->regions, (size_t)cap * sizeof *nr);
-                    if (!nr) break;
-                    out->regions = nr;
-                }
-                int rid = out->nregions++;
-                verify_region_t *R = &out->regions[rid];
-                memset(R, 0, sizeof *R);
-                R->image = m;
-                R->bbox[0] = R->bbox[1] = INFINITY;
-                R->bbox[2] = R->bbox[3] = -INFINITY;
-                int fc[64], fn[64], nf = 0;
-                int top = 0;
-                stack[top++] = g0;
-                p0->region = rid;
-                const double cap2 = 25 * opt->z_flag * opt->z_flag;
-                while (top) {
-                    int g = stack[--top];
-                    verify_point_t *p = &out->points[base + g];
-                    R->npoints++;
-                    double z2 = fmin((double)p->z * p->z, cap2);
-                    R->excess_chi2 += fmax(z2 - opt->z_flag * opt->z_flag, 0);
-                    R->max_abs_z = fmax(R->max_abs_z, fabs(p->z));
-                    R->bbox[0] = fmin(R->bbox[0], p->q[0] - v->sp / 2.0);
-                    R->bbox[1] = fmin(R->bbox[1], p->q[1] - v->sp / 2.0);
-                    R->bbox[2] = fmax(R->bbox[2], p->q[0] + v->sp / 2.0);
-                    R->bbox[3] = fmax(R->bbox[3], p->q[1] + v->sp / 2.0);
-                    int f;
-                    for (f = 0; f < nf; f++)
-                        if (fc[f] == p->face) break;
-                    if (f == nf && nf < 64) {
-                        fc[nf] = p->face;
-                        fn[nf++] = 0;
-                    }
-                    if (f < 64) fn[f]++;
-                    int gi = g % v->gw, gj = g / v->gw;
-                    for (int dj = -1; dj <= 1; dj++)
-                        for (int di = -1; di <= 1; di++) {
-                            int ii = gi + di, jj = gj + dj;
-                            if (ii < 0 || jj < 0 || ii >= v->gw || jj >= v->gh) continue;
-                            verify_point_t *q2 = &out->points[base + jj * v->gw + ii];
-                            if (q2->flag && q2->region < 0) {
-                                q2->region = rid;
-                                stack[top++] = jj * v->gw + ii;
-                            }
-                        }
-                }
-                R->area_px = (double)R->npoints * v->sp * v->sp;
-                R->counts = R->npoints >= opt->min_region;
-                for (int t = 0; t < 4; t++) {
-                    int best = -1;
-                    for (int f = 0; f < nf; f++)
-                        if (fn[f] > 0 && (best < 0 || fn[f] > fn[best])) best = f;
-                    R->faces[t] = best >= 0 ? fc[best] : -1;
-                    R->face_points[t] = best >= 0 ? fn[best] : 0;
-                    if (best >= 0) fn[best] = 0;
-                }
-                if (R->counts) out->score += R->excess_chi2;
-            }
-            base += n;
-        }
-        free(stack);
-        out->correct = out->score <= opt->score_threshold;
-        out->time_fit_s = model_now_s() - t0;
-    }
-    lsq_problem_free(prob);
-    free(prior);
-    free(pt);
-    free(ptidx);
-    free(cs);
-    free(wv);
-    free(bv);
-    free(lampv);
-    free(mp);
-    free(rcs);
-    free(items);
-    free(groups);
-    free(gidx);
-    free(pd);
-    free(mat_used);
+    fit_free(&F);
     return ok;
-fit_fail:
-    model_error(NULL, 0, "verify: setting up the fit failed: %s", model_last_error());
-    ok = false;
-    goto done;
 }
 
 // ---------------------------------------------------------------------------

@@ -34,6 +34,7 @@
 #include <stdbool.h>
 #include <stdint.h>
 
+#include "calib/calib.h"
 #include "model/lsq.h"
 #include "model/model.h"
 
@@ -237,6 +238,79 @@ bool verify_match_priors(const model_scene_t *scene, const verify_priors_t *pr, 
 // Tests: the fit's residual Jacobian (with the robust transform, every
 // reflection model) against central differences.
 bool verify_check_jacobian(double *max_abs_err);
+
+// ---------------------------------------------------------------------------
+// Verification of files (fit/verify_files.c): `refl verify` without its
+// argument parsing and printing.
+
+enum { VERIFY_FILES_MAX = 64 };   // images, cameras, priors files, gain calibrations
+
+typedef struct {
+    const char *scene;                             // the description: D3D or OBJ, rig frame, mm
+    const char *images[VERIFY_FILES_MAX];          // 16-bit PNG frames of refl capture / refl rig snap (angle,
+    int         nimages;                           // lamps, exposure, gain in their text chunks), or float TIFFs
+    const char *priors[VERIFY_FILES_MAX];          // priors files (every material of the scene, each once)
+    int         npriors;
+    const char *cameras[VERIFY_FILES_MAX];         // camera models: none (calib's), one, or one per image
+    int         ncameras;
+    const char *gain[VERIFY_FILES_MAX];            // gain calibration directories: none, one, or one per camera
+    int         ngain;
+    const char *calib;                             // calibration directory (calib_set_load) or NULL
+    const char *lamps;                             // lamps.json or lamps INI (NULL: calib's)
+    const char *white;                             // white.json (kc*I per lamp per us) or NULL
+    double      kc_per_us;                         // > 0 without a white: kc*I = kc_per_us * the INI's intensity
+    bool        have_angle, have_exposure, have_gain;
+    double      angle_deg, exposure_us, gain_db;   // for every image when have_*: over the metadata
+    const char *lamps_on;                          // for every image ("east+west", "all"), NULL: metadata
+    const char *out;                               // output directory (created)
+    verify_options_t opt;
+    json_t     *provenance;                        // borrowed: the inputs are added, verify.json carries it
+} verify_files_opts_t;
+
+typedef struct {
+    verify_result_t fit;
+    int             nimages;
+    verify_image_t  images[VERIFY_FILES_MAX];      // as verified (P NULL: the pixels are freed)
+} verify_files_result_t;
+
+// Load the inputs, trace the views, fit and judge (verify_run), write
+// o->out/verify.json, points.csv, imgN_actual.tiff and imgN_synthetic.tiff.
+// Progress lines on stderr. false + message (printed through model_error).
+bool verify_files_run(const verify_files_opts_t *o, verify_files_result_t *r);
+void verify_files_result_free(verify_files_result_t *r);
+
+// A camera model with the gain calibration of gain_dir (gain.json and its maps
+// offset_dn.tiff, prnu_gain.tiff; NULL: none) as a calibration set (cam, W, H,
+// offset_dn, flat, gain_dn_per_e, read_noise_e, saturation_dn,
+// nonlin_a_per_dn). The loader wants a lamps.json: a minimal one from lamps (a
+// placeholder lamp when NULL) is written to tmp_dir/.lamps-TAG.json (tmp_dir
+// created) and removed. NULL + message. Free with calib_set_free.
+calib_set_t *verify_load_camera_gain(const char *camera, const char *gain_dir, const model_lamps_t *lamps,
+                                     const char *tmp_dir, int tag);
+// The scene's materials at their priors' means: mm[k] and mats[k] = &mm[k]
+// for each of scene->nmaterials. false + message naming a material without priors.
+bool verify_priors_means(const model_scene_t *scene, const verify_priors_t *pr, model_material_t *mm,
+                         const model_material_t **mats);
+
+// ---------------------------------------------------------------------------
+// The detection study on the virtual rig (fit/verify_study.c; refl verify
+// --study): the truth's T-stiffener, fixed-seed cases, the correct
+// description and its corruptions, four configurations.
+
+typedef struct {
+    const char      *out;          // output directory (created): study.csv, study.json
+    const char      *truth;        // the virtual rig's truth file (its sample t_stiffener, lamps, materials)
+    int              cases;
+    verify_options_t opt;          // the base options (threads: the cases in parallel)
+    json_t          *provenance;   // borrowed: the truth is added, study.json carries it
+} verify_study_opts_t;
+
+typedef struct {
+    int cases, ndescriptions, nconfigurations;
+} verify_study_result_t;
+
+// Run the study and write its tables (progress on stderr). false + message.
+bool verify_study_run(const verify_study_opts_t *o, verify_study_result_t *r);
 
 // `refl verify` (fit/cmd_verify.c).
 int verify_cmd(int argc, char **argv);

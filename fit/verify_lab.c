@@ -13,6 +13,7 @@
 
 #include "fit/verify_lab.h"
 #include "rig/rig.h"
+#include "rig/truth.h"
 
 struct verify_lab {
     rig_virtual_t *v;
@@ -87,11 +88,15 @@ verify_lab_t *verify_lab_open(const char *truth_path, const char *sample, const 
     L->offset = malloc(npx * sizeof(float));
     L->flat = malloc(npx * sizeof(float));
     L->A = malloc((size_t)L->nl * sizeof *L->A);
-    model_ini_t *ini = model_ini_load(truth_path);
-    L->lamps = ini ? model_lamps_from_ini(ini) : NULL;
-    L->mats = ini ? model_materials_from_ini(ini) : NULL;
-    model_ini_free(ini);
-    if (!L->angles || !L->L || !L->offset || !L->flat || !L->A || !L->lamps || !L->mats) goto fail;
+    // the truth's lamps and materials (rig/truth.h): this lab is the simulation path of the study
+    rig_truth_t *truth = rig_truth_load(truth_path);
+    double radiance = NAN;
+    L->lamps = truth ? rig_truth_lamps(truth) : NULL;
+    L->mats = L->lamps ? rig_truth_materials(truth) : NULL;
+    // the flat field's source radiance (for the flat field's mean below)
+    bool have_radiance = L->mats && rig_truth_uniform_radiance(truth, "flat_field", &radiance);
+    rig_truth_free(truth);
+    if (!have_radiance || !L->angles || !L->L || !L->offset || !L->flat || !L->A) goto fail;
     for (int i = 0; i < L->nl; i++) L->A[i] = L->kc_per_us * L->lamps->lamps[i].intensity;
     memcpy(L->angles, angles, (size_t)nang * sizeof *angles);
     // the flat field and the offset map, as a gain calibration measures them (noise-free here)
@@ -115,15 +120,6 @@ verify_lab_t *verify_lab_open(const char *truth_path, const char *sample, const 
     // The flat field has mean 1; the sensor's gain pattern (PRNU x vignetting)
     // does not: its mean goes into kc*I, as a white calibration through this
     // flat field measures it (linearised as verify does).
-    double radiance = NAN;
-    model_ini_t *ti = model_ini_load(truth_path);
-    const model_ini_entry_t *re = ti ? model_ini_get(ti, "sample flat_field", "radiance") : NULL;
-    if (!re || !model_parse_double(re->value, &radiance) || !(radiance > 0)) {
-        model_error(truth_path, 0, "the verify lab needs [sample flat_field] radiance");
-        model_ini_free(ti);
-        goto fail;
-    }
-    model_ini_free(ti);
     double a_nl = L->sensor.nonlinearity_pct / 100 / (L->sensor.system_gain_dn_per_e * L->sensor.full_well_e);
     double Sm = sum / npx, S = a_nl > 0 ? (1 - sqrt(1 - 4 * a_nl * Sm)) / (2 * a_nl) : Sm;
     double gmean = S / (L->kc_per_us * flat_us * radiance);

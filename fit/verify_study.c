@@ -61,6 +61,8 @@ static void case_rows(void *vctx, int begin, int end, int thread)
 {
     (void)thread;
     study_t *S = vctx;
+    // a failed case's message is kept (S->err) and reported once by verify_study_run
+    bool quiet = model_error_quiet_thread(true);
     int W = verify_lab_width(S->lab), H = verify_lab_height(S->lab), nl = verify_lab_nlamps(S->lab);
     float *img[NANG] = { 0 };
     for (int a = 0; a < NANG; a++) img[a] = malloc((size_t)W * H * sizeof(float));
@@ -109,51 +111,12 @@ static void case_rows(void *vctx, int begin, int end, int thread)
         pthread_mutex_unlock(&S->lock);
     }
     for (int a = 0; a < NANG; a++) free(img[a]);
+    model_error_quiet_thread(quiet);
 }
 
-int verify_study_cmd(const char *out, const char *truth, int cases, const verify_options_t *opt, int argc,
-                     char **argv);
-
-int verify_study_cmd(const char *out, const char *truth, int cases, const verify_options_t *opt, int argc,
-                     char **argv)
+// The descriptions: the correct one and its corruptions (D: room for 16). Returns their count.
+static int study_descriptions(desc_t *D)
 {
-    char *truth_path = truth ? g_strdup(truth) : NULL;
-    if (!truth_path) {
-        // examples/virtual-truth.ini beside the scripts
-        const char *sd = getenv("REFL_SCRIPTS_DIR");
-        char *exe = g_file_read_link("/proc/self/exe", NULL);
-        char *exedir = exe ? g_path_get_dirname(exe) : g_strdup(".");
-        const char *cands[3] = { NULL, NULL, NULL };
-        char *c0 = sd ? g_strdup_printf("%s/../examples/virtual-truth.ini", sd) : NULL;
-        char *c1 = g_strdup_printf("%s/../examples/virtual-truth.ini", exedir);
-        char *c2 = g_strdup_printf("%s/../../examples/virtual-truth.ini", exedir);
-        cands[0] = c0;
-        cands[1] = c1;
-        cands[2] = c2;
-        for (int i = 0; i < 3 && !truth_path; i++)
-            if (cands[i] && g_file_test(cands[i], G_FILE_TEST_EXISTS)) truth_path = g_strdup(cands[i]);
-        g_free(c0);
-        g_free(c1);
-        g_free(c2);
-        g_free(exe);
-        g_free(exedir);
-        if (!truth_path) {
-            fprintf(stderr, "refl verify --study: cannot find examples/virtual-truth.ini: give --truth FILE\n");
-            return 2;
-        }
-    }
-    study_t S = { 0 };
-    verify_priors_t pr = { 0 };
-    int rc = 1;
-    pthread_mutex_init(&S.lock, NULL);
-    S.cases = cases;
-    if (!model_mkdir_p(out)) goto done;
-    fprintf(stderr, "refl verify --study: rendering the T-stiffener at 4 angles x each lamp on the virtual rig (%s)\n",
-            truth_path);
-    S.lab = verify_lab_open(truth_path, "t_stiffener", angles, NANG, 6000, 0, true);
-    if (!S.lab) goto done;
-    // descriptions
-    desc_t D[16];
     int nd = 0;
     model_stiffener_t d0 = model_stiffener_default();
     D[nd++] = (desc_t){ "none", d0 };
@@ -177,59 +140,67 @@ int verify_study_cmd(const char *out, const char *truth, int cases, const verify
         D[nd] = (desc_t){ hl[k], d0 };
         D[nd++].d.height_scale = 1 + hs[k] / 100;
     }
-    S.ndesc = nd;
-    S.desc = D;
-    S.pr = &pr;
-    const model_materials_t *mm = verify_lab_materials(S.lab);
-    const model_material_t *ply = model_materials_find(mm, "plywood"), *st = model_materials_find(mm, "painted_steel");
-    if (!ply || !st || !verify_priors_add(&pr, ply, 0.1, 1e-4, 3) || !verify_priors_add(&pr, st, 0.1, 1e-4, 3)) {
-        model_error(truth_path, 0, "the study needs the materials plywood and painted_steel");
-        goto done;
-    }
-    S.scenes = calloc((size_t)nd, sizeof *S.scenes);
-    S.views = calloc((size_t)nd * NANG, sizeof *S.views);
-    S.score = calloc((size_t)cases * NCONF * nd, sizeof *S.score);
-    S.secs = calloc((size_t)cases * NCONF * nd, sizeof *S.secs);
-    S.correct = calloc((size_t)cases * NCONF * nd, sizeof *S.correct);
-    if (!S.scenes || !S.views || !S.score || !S.secs || !S.correct) goto done;
+    return nd;
+}
+
+// The configurations: with or without priors, with or without the gain maps.
+static void study_configurations(study_t *S, const verify_options_t *opt)
+{
     for (int k = 0; k < NCONF; k++) {
-        S.opt[k] = *opt;
-        S.opt[k].threads = 1;
-        S.opt[k].no_covariance = true;
-        S.opt[k].max_iterations = 30;
-        S.opt[k].verbose = false;
-        S.opt[k].use_priors = k < 2;
-        S.opt[k].use_flat = k % 2 == 0;
+        S->opt[k] = *opt;
+        S->opt[k].threads = 1;
+        S->opt[k].no_covariance = true;
+        S->opt[k].max_iterations = 30;
+        S->opt[k].verbose = false;
+        S->opt[k].use_priors = k < 2;
+        S->opt[k].use_flat = k % 2 == 0;
     }
-    S.conf_name[0] = "priors+maps";
-    S.conf_name[1] = "priors";
-    S.conf_name[2] = "no-priors+maps";
-    S.conf_name[3] = "no-priors";
+    S->conf_name[0] = "priors+maps";
+    S->conf_name[1] = "priors";
+    S->conf_name[2] = "no-priors+maps";
+    S->conf_name[3] = "no-priors";
+}
+
+// The priors (the truth's materials +- 10 %), the scenes and their views, the result arrays.
+static bool study_setup(study_t *S, const verify_study_opts_t *o)
+{
+    const int nd = S->ndesc, cases = o->cases;
+    const model_materials_t *mm = verify_lab_materials(S->lab);
+    const model_material_t *ply = model_materials_find(mm, "plywood"), *st = model_materials_find(mm, "painted_steel");
+    if (!ply || !st || !verify_priors_add(S->pr, ply, 0.1, 1e-4, 3) || !verify_priors_add(S->pr, st, 0.1, 1e-4, 3)) {
+        model_error(o->truth, 0, "the study needs the materials plywood and painted_steel");
+        return false;
+    }
+    S->scenes = calloc((size_t)nd, sizeof *S->scenes);
+    S->views = calloc((size_t)nd * NANG, sizeof *S->views);
+    S->score = calloc((size_t)cases * NCONF * nd, sizeof *S->score);
+    S->secs = calloc((size_t)cases * NCONF * nd, sizeof *S->secs);
+    S->correct = calloc((size_t)cases * NCONF * nd, sizeof *S->correct);
+    if (!S->scenes || !S->views || !S->score || !S->secs || !S->correct) return false;
+    study_configurations(S, &o->opt);
     model_material_t mean[2] = { *ply, *st };
     for (int d = 0; d < nd; d++) {
-        if (!(S.scenes[d] = model_stiffener_scene(&D[d].d, D[d].label))) goto done;
+        if (!(S->scenes[d] = model_stiffener_scene(&S->desc[d].d, S->desc[d].label))) return false;
         const model_material_t *mats[2];
-        for (int k = 0; k < S.scenes[d]->nmaterials; k++)
-            mats[k] = !strcmp(S.scenes[d]->material_names[k], "plywood") ? &mean[0] : &mean[1];
+        for (int k = 0; k < S->scenes[d]->nmaterials; k++)
+            mats[k] = !strcmp(S->scenes[d]->material_names[k], "plywood") ? &mean[0] : &mean[1];
         for (int a = 0; a < NANG; a++) {
-            verify_options_t vo = *opt;
-            if (!(S.views[d * NANG + a] = verify_view_new(S.scenes[d], verify_lab_camera(S.lab), angles[a],
-                                                          verify_lab_lamps(S.lab), mats, &vo)))
-                goto done;
+            verify_options_t vo = o->opt;
+            if (!(S->views[d * NANG + a] = verify_view_new(S->scenes[d], verify_lab_camera(S->lab), angles[a],
+                                                           verify_lab_lamps(S->lab), mats, &vo)))
+                return false;
         }
         fprintf(stderr, "\rrefl verify --study: views of description %d/%d   ", d + 1, nd);
     }
     fprintf(stderr, "\n");
-    S.t0 = model_now_s();
-    int threads = opt->threads > 0 ? opt->threads : model_default_threads();
-    model_parallel_for(cases, 1, threads, case_rows, &S);
-    fprintf(stderr, "\n");
-    if (S.failed) {
-        fprintf(stderr, "refl verify --study: %s\n", S.err);
-        goto done;
-    }
-    // study.csv
-    char *cp = g_strdup_printf("%s/study.csv", out), *tmp = g_strdup_printf("%s/study.csv.tmp", out);
+    return true;
+}
+
+// study.csv and study.json in o->out.
+static bool study_write(const study_t *S, const verify_study_opts_t *o)
+{
+    const int nd = S->ndesc, cases = o->cases;
+    char *cp = g_strdup_printf("%s/study.csv", o->out), *tmp = g_strdup_printf("%s/study.csv.tmp", o->out);
     FILE *f = fopen(tmp, "w");
     if (f) {
         fprintf(f, "config,corruption,case,score,verdict_correct,seconds\n");
@@ -237,15 +208,15 @@ int verify_study_cmd(const char *out, const char *truth, int cases, const verify
             for (int d = 0; d < nd; d++)
                 for (int c = 0; c < cases; c++) {
                     size_t at = ((size_t)c * NCONF + k) * nd + d;
-                    fprintf(f, "%s,%s,%d,%.6g,%d,%.4f\n", S.conf_name[k], D[d].label, c, S.score[at], S.correct[at],
-                            S.secs[at]);
+                    fprintf(f, "%s,%s,%d,%.6g,%d,%.4f\n", S->conf_name[k], S->desc[d].label, c, S->score[at],
+                            S->correct[at], S->secs[at]);
                 }
     }
     bool ok = f && fclose(f) == 0 && rename(tmp, cp) == 0;
     if (!ok) model_error(cp, 0, "cannot write the study table");
     g_free(cp);
     g_free(tmp);
-    if (!ok) goto done;
+    if (!ok) return false;
     json_t *doc = json_object();
     json_object_set_new(doc, "conditions",
                         json_string("virtual rig (truth file in provenance): T-stiffener, turntable 0/90/180/270 deg, "
@@ -255,19 +226,46 @@ int verify_study_cmd(const char *out, const char *truth, int cases, const verify
                                     "no-priors: the thesis's fit (physical bounds only, lamps fixed, kc free); "
                                     "+maps: the offset map, flat field and linearisation of the gain calibration"));
     json_object_set_new(doc, "cases_per_condition", json_integer(cases));
-    json_object_set_new(doc, "score_threshold", json_real(opt->score_threshold));
-    json_t *prov = model_provenance(argc, argv);
-    model_provenance_input(prov, "truth", truth_path);
-    json_object_set_new(doc, "provenance", prov);
-    char *jp = g_strdup_printf("%s/study.json", out);
+    json_object_set_new(doc, "score_threshold", json_real(o->opt.score_threshold));
+    model_provenance_input(o->provenance, "truth", o->truth);
+    json_object_set_new(doc, "provenance", json_incref(o->provenance));
+    char *jp = g_strdup_printf("%s/study.json", o->out);
     ok = model_write_json(jp, doc);
     g_free(jp);
     json_decref(doc);
-    if (!ok) goto done;
-    if (model_run_script("verify_study_report.py", out, NULL) != 0) goto done;
-    printf("refl verify --study: %d cases x %d descriptions x %d configurations; report: %s/index.html\n", cases, nd,
-           NCONF, out);
-    rc = 0;
+    return ok;
+}
+
+bool verify_study_run(const verify_study_opts_t *o, verify_study_result_t *r)
+{
+    memset(r, 0, sizeof *r);
+    study_t S = { 0 };
+    verify_priors_t pr = { 0 };
+    desc_t D[16];
+    bool ok = false;
+    pthread_mutex_init(&S.lock, NULL);
+    S.cases = o->cases;
+    S.pr = &pr;
+    S.desc = D;
+    S.ndesc = study_descriptions(D);
+    if (!model_mkdir_p(o->out)) goto done;
+    fprintf(stderr, "refl verify --study: rendering the T-stiffener at 4 angles x each lamp on the virtual rig (%s)\n",
+            o->truth);
+    if (!(S.lab = verify_lab_open(o->truth, "t_stiffener", angles, NANG, 6000, 0, true))) goto done;
+    if (!study_setup(&S, o)) goto done;
+    S.t0 = model_now_s();
+    int threads = o->opt.threads > 0 ? o->opt.threads : model_default_threads();
+    model_parallel_for(o->cases, 1, threads, case_rows, &S);
+    fprintf(stderr, "\n");
+    if (S.failed) {
+        model_error(NULL, 0, "verify study: %s", S.err);
+        goto done;
+    }
+    if (!study_write(&S, o)) goto done;
+    r->cases = o->cases;
+    r->ndescriptions = S.ndesc;
+    r->nconfigurations = NCONF;
+    ok = true;
 done:
     verify_priors_free(&pr);
     if (S.views)
@@ -280,7 +278,6 @@ done:
     free(S.secs);
     free(S.correct);
     verify_lab_free(S.lab);
-    g_free(truth_path);
     pthread_mutex_destroy(&S.lock);
-    return rc;
+    return ok;
 }
