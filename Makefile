@@ -53,7 +53,7 @@ RIG_SRC   := rig/rig.c rig/turntable_apt.c rig/turntable_sim.c rig/lamps.c \
              rig/camera_aravis.c rig/gv_camera.c rig/virtual.c rig/config.c rig/cmd_rig.c \
              rig/plan.c rig/journal.c rig/session.c rig/truth.c rig/pixfmt.c rig/capture.c rig/cmd_capture.c
 CALIB_SRC := calib/capture.c calib/calset.c calib/observe.c calib/white.c calib/cmd_calib.c calib/geometry.c calib/lamps.c calib/gain.c
-FIT_SRC   := fit/brdf_fit.c fit/material.c fit/cmd_fit.c fit/verify.c fit/verify_lab.c fit/verify_study.c fit/cmd_verify.c fit/lightplan.c fit/cmd_plan.c
+FIT_SRC   := fit/brdf_fit.c fit/material.c fit/cmd_fit.c fit/verify.c fit/verify_lab.c fit/verify_study.c fit/cmd_verify.c fit/lightplan.c fit/plan_lamps.c fit/cmd_plan.c
 MODEL_CXX_SRC := model/lsq.cc
 LIB_SRC   := $(MODEL_SRC) $(RIG_SRC) $(CALIB_SRC) $(FIT_SRC)
 

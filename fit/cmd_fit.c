@@ -237,10 +237,10 @@ int fit_cmd_material(int argc, char **argv)
     bool ok = fit_material_run(&o, r);
     print_material(&o, r);
     if (ok && o.report) printf("%s/report.html\n", o.report);
-    if (!ok) fprintf(stderr, "refl fit material: %s\n", model_last_error());
+    int rc2 = ok ? 0 : model_error_report("fit material");
     fit_material_result_free(r);
     free(r);
-    return ok ? 0 : 1;
+    return rc2;
 }
 
 // ---------------------------------------------------------------------------
