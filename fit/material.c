@@ -26,7 +26,7 @@ static bool material_report(const char *dir, const calib_obs_set_t *obs, const f
     bool ok = false;
     FILE *f = fopen(csv, "w");
     if (!f) {
-        model_error(csv, 0, "cannot write: %s", strerror(errno));
+        model_error_set(csv, 0, "cannot write: %s", strerror(errno));
         goto done;
     }
     fprintf(f, "# refl fit material samples: window centre (px), step, lamp, angles (deg: incidence, view, half "
@@ -41,7 +41,7 @@ static bool material_report(const char *dir, const calib_obs_set_t *obs, const f
                 smp->R[i], fit_samples_eval(smp, res[best].model, res[best].p, i));
     }
     if (fclose(f) != 0) {
-        model_error(csv, 0, "cannot write: %s", strerror(errno));
+        model_error_set(csv, 0, "cannot write: %s", strerror(errno));
         goto done;
     }
     char pbuf[256] = "";
@@ -177,7 +177,7 @@ oom:
     free(raw);
     if (h) g_hash_table_destroy(h);
     cells_free(ac);
-    model_error(NULL, 0, "out of memory for the albedo cells");
+    model_error_set(NULL, 0, "out of memory for the albedo cells");
     return false;
 }
 
@@ -192,7 +192,7 @@ static fit_samples_t *cells_samples(const fit_samples_t *smp, const albedo_cells
         const model_cosines_t *disc = smp->disc_at && smp->disc_at[i] >= 0 ? smp->disc + smp->disc_at[i] : NULL;
         if (!fit_samples_add_disc(out, &smp->c[i], disc, smp->R[i] / c, c * c)) {
             fit_samples_free(out);
-            model_error(NULL, 0, "sample %d: albedo factor %g gives no usable sample", i, c);
+            model_error_set(NULL, 0, "sample %d: albedo factor %g gives no usable sample", i, c);
             return NULL;
         }
     }

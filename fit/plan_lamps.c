@@ -107,7 +107,7 @@ static bool load_lamps(const lightplan_lamps_opts_t *o, plan_inputs_t *in)
 {
     if (g_str_has_suffix(o->lamps, ".json")) {
         if (!o->white) {
-            model_error(o->lamps, 0, "a lamps.json has positions only: give --white WHITE.json for kc*I");
+            model_error_set(o->lamps, 0, "a lamps.json has positions only: give --white WHITE.json for kc*I");
             return false;
         }
         if (!(in->wc = calib_set_load_files(o->camera, o->lamps, NULL, o->white))) return false;
@@ -117,14 +117,14 @@ static bool load_lamps(const lightplan_lamps_opts_t *o, plan_inputs_t *in)
     } else {
         if (!(in->lamps = model_lamps_load(o->lamps))) return false;
         if (!(o->kc_per_us > 0)) {
-            model_error(o->lamps, 0, "a lamps INI needs --kc-per-us X (kc*I = X * intensity)");
+            model_error_set(o->lamps, 0, "a lamps INI needs --kc-per-us X (kc*I = X * intensity)");
             return false;
         }
         for (int i = 0; i < in->lamps->n && i < MAXL_PLAN; i++) in->A[i] = o->kc_per_us * in->lamps->lamps[i].intensity;
     }
     model_provenance_input(in->prov, "lamps", o->lamps);
     if (in->lamps->n > MAXL_PLAN) {
-        model_error(o->lamps, 0, "%d candidate lamps: at most %d", in->lamps->n, MAXL_PLAN);
+        model_error_set(o->lamps, 0, "%d candidate lamps: at most %d", in->lamps->n, MAXL_PLAN);
         return false;
     }
     return true;
@@ -137,12 +137,12 @@ static bool load_materials(const lightplan_lamps_opts_t *o, plan_inputs_t *in)
     in->mats = calloc((size_t)scene->nmaterials + 1, sizeof *in->mats);
     in->mm = calloc((size_t)scene->nmaterials + 1, sizeof *in->mm);
     if (!in->mats || !in->mm) {
-        model_error(NULL, 0, "out of memory");
+        model_error_set(NULL, 0, "out of memory");
         return false;
     }
     if (!g_str_has_suffix(o->materials[0], ".json")) {
         if (o->nmaterials > 1) {
-            model_error(o->materials[0], 0, "one materials INI (several files: priors JSON)");
+            model_error_set(o->materials[0], 0, "one materials INI (several files: priors JSON)");
             return false;
         }
         if (!(in->mfile = model_materials_load(o->materials[0]))) return false;
@@ -242,8 +242,8 @@ static bool check_open(const lightplan_lamps_opts_t *o, const plan_inputs_t *in,
     for (int i = 0; i < in->lamps->n; i++) {
         c->map[i] = model_lamps_find(tl, in->lamps->lamps[i].name);
         if (c->map[i] < 0) {
-            model_error(o->check_truth, 0, "candidate lamp '%s' is not one of the virtual rig's lamps: the check "
-                        "renders the rig's own lamps", in->lamps->lamps[i].name);
+            model_error_set(o->check_truth, 0, "candidate lamp '%s' is not one of the virtual rig's lamps: the check "
+                            "renders the rig's own lamps", in->lamps->lamps[i].name);
             return false;
         }
     }
@@ -253,7 +253,7 @@ static bool check_open(const lightplan_lamps_opts_t *o, const plan_inputs_t *in,
     c->meas = calloc(ns, sizeof *c->meas);
     c->sg = malloc(ns * sizeof *c->sg);
     if (!c->frame || !c->found || !c->meas || !c->sg) {
-        model_error(NULL, 0, "out of memory");
+        model_error_set(NULL, 0, "out of memory");
         return false;
     }
     return true;
