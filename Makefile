@@ -54,8 +54,9 @@ RIG_SRC   := rig/rig.c rig/turntable_apt.c rig/turntable_sim.c rig/lamps.c \
 rig/plan.c rig/journal.c rig/session.c rig/truth.c rig/pixfmt.c rig/capture.c rig/cmd_capture.c
 CALIB_SRC := calib/capture.c calib/calset.c calib/observe.c calib/white.c calib/cmd_calib.c calib/geometry.c \
              calib/lamps.c calib/gain.c calib/cmd_geometry.c calib/cmd_gain.c calib/cmd_lamps.c
-FIT_SRC   := fit/brdf_fit.c fit/material.c fit/cmd_fit.c fit/verify.c fit/verify_lab.c fit/verify_study.c fit/cmd_verify.c fit/lightplan.c fit/cmd_plan.c
-FIT_SRC   += fit/verify_files.c
+FIT_SRC   := fit/brdf_fit.c fit/material.c fit/cmd_fit.c fit/verify.c fit/verify_lab.c fit/verify_study.c \
+             fit/cmd_verify.c fit/lightplan.c fit/cmd_plan.c fit/plan_lamps.c
+FIT_SRC += fit/verify_files.c
 MODEL_CXX_SRC := model/lsq.cc
 LIB_SRC   := $(MODEL_SRC) $(RIG_SRC) $(CALIB_SRC) $(FIT_SRC)
 

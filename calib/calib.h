@@ -108,8 +108,9 @@ typedef struct {
 } calib_obs_set_t;
 
 typedef struct {
-    const char *scene_path;     // NULL: the virtual rig's truth file names it (session facts)
-    const char *material;       // NULL: the sample's material (truth) or the scene's only material
+    const char *scene_path;     // the sample's scene (rig frame, mm, at angle 0 before the plan's wedge);
+                                // required: a session records no scene (NULL is an error saying so)
+    const char *material;       // the material to observe; NULL: the scene's only material
     int         window;         // window size, pixels (default 5)
     int         step;           // grid step between windows, pixels (default 8)
     double      min_signal_dn;  // windows below this (after dark) are dropped (default 20)
@@ -117,10 +118,12 @@ typedef struct {
 } calib_observe_options_t;
 
 calib_observe_options_t calib_observe_defaults(void);
-// Observations of the session's sample material. false + message (names the
-// session, file or frame).
+// Observations of the session's sample material (opt->scene_path posed on
+// the plan's wedge, turned to each frame's measured angle). false + message
+// (names the session, file or frame), kept in model_last_error() and not
+// printed: the caller reports it once.
 bool calib_observe(const char *session_dir, const calib_set_t *cal, const calib_observe_options_t *opt,
-                 calib_obs_set_t *out);
+                   calib_obs_set_t *out);
 void calib_obs_free(calib_obs_set_t *s);
 
 // Reference white: kc*I per lamp (median over its observations) and the
@@ -129,8 +132,9 @@ bool calib_white(const calib_obs_set_t *obs, const calib_set_t *cal, double albe
                json_t *provenance);
 
 // The calibration set of calib_dir (calib_set_load) and the observations of
-// the session through it (calib_observe). false + message; *cal is set (or
-// NULL) and out emptied either way: the caller frees both.
+// the session through it (calib_observe). false + message (kept, not
+// printed, as calib_observe's); *cal is set (or NULL) and out emptied either
+// way: the caller frees both.
 bool calib_observe_session(const char *session_dir, const char *calib_dir, bool need_white,
                            const calib_observe_options_t *opt, calib_set_t **cal, calib_obs_set_t *out);
 // Provenance of a result from observations: the command (argv[0] "refl"), the

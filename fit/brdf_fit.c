@@ -682,6 +682,47 @@ bool fit_brdf_from(const fit_samples_t *s, model_brdf_t m, const fit_brdf_option
 // ---------------------------------------------------------------------------
 // Priors
 
+bool fit_brdf_model_list(const char *name, model_brdf_t models[MODEL_BRDF_COUNT], int *nmodels)
+{
+    *nmodels = 0;
+    if (!strcmp(name, "all")) {
+        for (int m = 0; m < MODEL_BRDF_COUNT; m++) models[(*nmodels)++] = (model_brdf_t)m;
+        return true;
+    }
+    int m = model_brdf_from_name(name);
+    if (m < 0) return false;
+    models[(*nmodels)++] = (model_brdf_t)m;
+    return true;
+}
+
+bool fit_brdf_models(const fit_samples_t *s, const model_brdf_t *models, int nmodels, const fit_brdf_options_t *opt,
+                     fit_brdf_models_t *out)
+{
+    bool quiet = model_error_quiet_thread(true);   // each model's message goes to out->error
+    out->ntried = out->nres = 0;
+    out->best = -1;
+    for (int k = 0; k < nmodels && k < MODEL_BRDF_COUNT; k++) {
+        fit_brdf_result_t *r = &out->res[out->nres];
+        double t0 = model_now_s();
+        int t = out->ntried++;
+        out->tried[t] = models[k];
+        out->at[t] = -1;
+        out->error[t][0] = 0;
+        bool ok = fit_brdf(s, models[k], opt, r);
+        out->time_s[t] = model_now_s() - t0;
+        if (!ok) {
+            snprintf(out->error[t], sizeof out->error[t], "%s", model_last_error());
+            continue;
+        }
+        out->at[t] = out->nres;
+        if (out->best < 0 || r->bic < out->res[out->best].bic) out->best = out->nres;
+        out->nres++;
+    }
+    if (out->best < 0) model_error_set(NULL, 0, "no model could be fitted");
+    model_error_quiet_thread(quiet);
+    return out->best >= 0;
+}
+
 json_t *fit_priors_material(const char *name, const fit_brdf_result_t *best, const fit_brdf_result_t *cand,
                             int ncand, double k_sigma, double sys_rel)
 {

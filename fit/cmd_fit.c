@@ -1,123 +1,109 @@
-// fit/cmd_fit.c — `refl fit brdf FILE [--model M|all] -o PRIORS.json`:
-// fit the reflection models to BRDF samples from a file and write the
-// priors file (README, "Priors file").
+// fit/cmd_fit.c — `refl fit brdf FILE [--model M|all] -o PRIORS.json` (fit the
+// reflection models to BRDF samples from a file and write the priors file,
+// README "Priors file") and `refl fit material SESSION --calib DIR ...`
+// (fit_material_run, fit/material.h): arguments (model/opts.h), the library
+// call, the printed lines.
 #define _GNU_SOURCE
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
-#include "calib/calib.h"
 #include "fit/fit.h"
 #include "fit/material.h"
 #include "model/model.h"
+#include "model/opts.h"
 #include "model/report.h"
 
-static void brdf_usage(FILE *f)
+#define MODEL_NAMES "all|lambert|hall|torrance_sparrow|thesis_fit|cook_torrance|ggx"
+
+// A number option of cli converted after parsing: absent keeps *out; a value
+// not a finite number >= 0 (> 0 unless zero_ok) is a usage error
+// "NAME needs a number >= 0, not 'V'". 0 or MODEL_CLI_USAGE.
+static int number_opt(model_cli_t *cli, const char *name, bool zero_ok, double *out)
 {
-    fprintf(f, "usage: refl fit brdf FILE [--model all|lambert|hall|torrance_sparrow|thesis_fit|cook_torrance|ggx]\n"
-               "                     [--name MATERIAL] [--k-sigma K] [--noise-sigma S] [--systematic REL] -o PRIORS.json\n"
-               "\n"
-               "Fits reflection models to BRDF samples: a CSV (theta_i,phi_i,theta_o,phi_o,f_r[,weight], degrees,\n"
-               "1/sr; optional header; '#' comments) or a MERL binary file (its luminance). With --model all\n"
-               "(default) every model is fitted and the one with the lowest BIC is chosen. Errors are the RMS of\n"
-               "R = f_r cos(theta_i) (the cosine-weighted metric of Ngan et al. 2005) and of f_r. Bounds are\n"
-               "mean +- K std (default 3) clipped to the physical range; std includes REL * mean (default 0) for\n"
-               "systematic errors the samples share.\n\nrefl %s\n", REFL_VERSION);
+    const char *v = model_cli_value(cli, name);
+    double d;
+    if (!v) return 0;
+    if (!model_parse_double(v, &d) || !isfinite(d) || !(zero_ok ? d >= 0 : d > 0))
+        return model_cli_error(cli, "%s needs a number %s 0, not '%s'", name, zero_ok ? ">=" : ">", v);
+    *out = d;
+    return 0;
 }
 
-static int usage_error(const char *msg, const char *arg)
+// The material's name in the priors of a sample file: its base name without extension.
+static void base_name(const char *file, char *buf, size_t n)
 {
-    fprintf(stderr, "refl fit brdf: %s%s%s\n(refl fit brdf --help for the options)\n", msg, arg ? " " : "",
-            arg ? arg : "");
-    return 2;
+    const char *b = strrchr(file, '/');
+    snprintf(buf, n, "%s", b ? b + 1 : file);
+    char *dot = strrchr(buf, '.');
+    if (dot) *dot = 0;
 }
+
+// ---------------------------------------------------------------------------
+// refl fit brdf
 
 static int cmd_brdf(int argc, char **argv)
 {
-    const char *file = NULL, *out = NULL, *model = "all", *name = NULL;
+    const char *out = NULL, *model = "all", *name = NULL;
     double k_sigma = 3, noise = 0, sys_rel = 0;
-    for (int i = 1; i < argc; i++) {
-        const char *a = argv[i];
-        if (!strcmp(a, "-h") || !strcmp(a, "--help")) {
-            brdf_usage(stdout);
-            return 0;
-        }
-        bool has = i + 1 < argc;
-        if (!strcmp(a, "-o") || !strcmp(a, "--model") || !strcmp(a, "--name") || !strcmp(a, "--k-sigma") ||
-            !strcmp(a, "--noise-sigma") || !strcmp(a, "--systematic")) {
-            if (!has) return usage_error("missing value after", a);
-            const char *v = argv[++i];
-            char *e;
-            if (!strcmp(a, "-o")) out = v;
-            else if (!strcmp(a, "--model")) model = v;
-            else if (!strcmp(a, "--name")) name = v;
-            else if (!strcmp(a, "--k-sigma")) {
-                k_sigma = strtod(v, &e);
-                if (*e || !(k_sigma > 0) || !isfinite(k_sigma)) return usage_error("--k-sigma needs a number > 0, not", v);
-            } else if (!strcmp(a, "--systematic")) {
-                sys_rel = strtod(v, &e);
-                if (*e || !(sys_rel >= 0) || !isfinite(sys_rel)) return usage_error("--systematic needs a number >= 0, not", v);
-            } else {
-                noise = strtod(v, &e);
-                if (*e || !(noise >= 0) || !isfinite(noise)) return usage_error("--noise-sigma needs a number >= 0, not", v);
-            }
-        } else if (a[0] == '-') {
-            return usage_error("unknown option", a);
-        } else if (!file) {
-            file = a;
-        } else {
-            return usage_error("more than one sample file:", a);
-        }
-    }
-    if (!file) return usage_error("give the BRDF sample file", NULL);
-    if (!out) return usage_error("give the priors file to write: -o PRIORS.json", NULL);
-    int models[MODEL_BRDF_COUNT], nm = 0;
-    if (!strcmp(model, "all")) {
-        for (int m = 0; m < MODEL_BRDF_COUNT; m++) models[nm++] = m;
-    } else {
-        int m = model_brdf_from_name(model);
-        if (m < 0) return usage_error("--model: unknown model", model);
-        models[nm++] = m;
-    }
+    model_opt_t opts[] = {
+        MODEL_OPT_STRING("-o", "PRIORS.json", "the priors file to write", &out, true),
+        MODEL_OPT_STRING("--model", "M", MODEL_NAMES " (default all: the lowest BIC is chosen)", &model, false),
+        MODEL_OPT_STRING("--name", "MATERIAL", "the material's name (default: the file's base name)", &name, false),
+        MODEL_OPT_VALUE("--k-sigma", "K", "prior bounds mean +- K std (default 3)", false),
+        MODEL_OPT_VALUE("--noise-sigma", "S", "known std of R, 1/sr (default 0: from the residuals)", false),
+        MODEL_OPT_VALUE("--systematic", "REL", "std adds REL * mean for errors the samples share (default 0)", false),
+    };
+    model_cli_t cli = {
+        .cmd = "fit brdf", .synopsis = "FILE", .opts = opts, .nopts = MODEL_NOPTS(opts),
+        .min_positional = 1, .max_positional = 1,
+        .about = "Fits reflection models to BRDF samples: a CSV (theta_i,phi_i,theta_o,phi_o,f_r[,weight], degrees,\n"
+                 "1/sr; optional header; '#' comments) or a MERL binary file (its luminance). With --model all\n"
+                 "(default) every model is fitted and the one with the lowest BIC is chosen. Errors are the RMS of\n"
+                 "R = f_r cos(theta_i) (the cosine-weighted metric of Ngan et al. 2005) and of f_r. Bounds are\n"
+                 "mean +- K std (default 3) clipped to the physical range; std includes REL * mean (default 0) for\n"
+                 "systematic errors the samples share.",
+    };
+    int rc = model_cli_parse(&cli, argc, argv);
+    if (rc != MODEL_CLI_OK) return rc;
+    if (number_opt(&cli, "--k-sigma", false, &k_sigma) || number_opt(&cli, "--systematic", true, &sys_rel) ||
+        number_opt(&cli, "--noise-sigma", true, &noise))
+        return MODEL_CLI_USAGE;
+    model_brdf_t models[MODEL_BRDF_COUNT];
+    int nm = 0;
+    if (!fit_brdf_model_list(model, models, &nm)) return model_cli_error(&cli, "--model: unknown model %s", model);
+    const char *file = cli.positional[0];
     fit_samples_t *s = fit_samples_read(file);
     if (!s) return 1;
     fprintf(stderr, "refl fit brdf: %d samples from %s\n", s->n, file);
-    fit_brdf_result_t res[MODEL_BRDF_COUNT];
-    int nres = 0, best = -1;
     fit_brdf_options_t o = fit_brdf_defaults();
     o.noise_sigma = noise;
-    for (int k = 0; k < nm; k++) {
-        double t0 = model_now_s();
-        if (!fit_brdf(s, (model_brdf_t)models[k], &o, &res[nres])) {
-            fprintf(stderr, "refl fit brdf: %s: %s\n", model_brdf_name((model_brdf_t)models[k]), model_last_error());
-            continue;
-        }
-        fprintf(stderr, "  %-16s rms %.4g 1/sr  BIC %.6g  (%d iterations, %.2f s)%s\n",
-                model_brdf_name(res[nres].model), res[nres].rms, res[nres].bic, res[nres].summary.iterations,
-                model_now_s() - t0, res[nres].cov_ok ? "" : "  covariance: not available");
-        if (best < 0 || res[nres].bic < res[best].bic) best = nres;
-        nres++;
+    fit_brdf_models_t *fm = malloc(sizeof *fm);
+    rc = 1;
+    if (!fm) goto done;
+    fit_brdf_models(s, models, nm, &o, fm);
+    for (int t = 0; t < fm->ntried; t++) {
+        const fit_brdf_result_t *r = fm->at[t] >= 0 ? &fm->res[fm->at[t]] : NULL;
+        if (!r)
+            fprintf(stderr, "refl fit brdf: %s: %s\n", model_brdf_name(fm->tried[t]), fm->error[t]);
+        else
+            fprintf(stderr, "  %-16s rms %.4g 1/sr  BIC %.6g  (%d iterations, %.2f s)%s\n", model_brdf_name(r->model),
+                    r->rms, r->bic, r->summary.iterations, fm->time_s[t], r->cov_ok ? "" : "  covariance: not available");
     }
-    int rc = 1;
-    if (best < 0) {
+    if (fm->best < 0) {
         fprintf(stderr, "refl fit brdf: no model could be fitted to %s\n", file);
         goto done;
     }
-    const char *mat = name;
     char base[256];
-    if (!mat) {
-        const char *b = strrchr(file, '/');
-        snprintf(base, sizeof base, "%s", b ? b + 1 : file);
-        char *dot = strrchr(base, '.');
-        if (dot) *dot = 0;
-        mat = base;
-    }
+    base_name(file, base, sizeof base);
+    const char *mat = name ? name : base;
+    const fit_brdf_result_t *best = &fm->res[fm->best];
     json_t *top = json_object();
     json_object_set_new(top, "format", json_string("refl priors 1"));
     json_object_set_new(top, "units", json_string("R = f_r cos(theta_i) in 1/sr; parameter units per parameter"));
     json_t *mats = json_array();
-    json_t *entry = fit_priors_material(mat, &res[best], res, nres, k_sigma, sys_rel);
+    json_t *entry = fit_priors_material(mat, best, fm->res, fm->nres, k_sigma, sys_rel);
     json_t *src = json_object();
     json_object_set_new(src, "path", json_string(file));
     json_object_set_new(src, "sha256", json_string(s->sha256));
@@ -128,22 +114,144 @@ static int cmd_brdf(int argc, char **argv)
     model_provenance_input(prov, "brdf_samples", file);
     json_object_set_new(top, "provenance", prov);
     if (model_write_json(out, top)) {
-        printf("%s: %s, model %s (lowest BIC of %d), rms %.4g 1/sr\n", out, mat, model_brdf_name(res[best].model),
-               nres, res[best].rms);
+        printf("%s: %s, model %s (lowest BIC of %d), rms %.4g 1/sr\n", out, mat, model_brdf_name(best->model),
+               fm->nres, best->rms);
         rc = 0;
     }
     json_decref(top);
 done:
+    free(fm);
     fit_samples_free(s);
     return rc;
 }
+
+// ---------------------------------------------------------------------------
+// refl fit material
+
+// One line per model tried (a model that could not be fitted on stderr).
+static void print_models(const fit_brdf_models_t *m)
+{
+    for (int t = 0; t < m->ntried; t++) {
+        if (m->at[t] < 0) {
+            fprintf(stderr, "  %s: %s\n", model_brdf_name(m->tried[t]), m->error[t]);
+            continue;
+        }
+        const fit_brdf_result_t *r = &m->res[m->at[t]];
+        printf("  %-16s rms %.4g 1/sr  BIC %.6g", model_brdf_name(r->model), r->rms, r->bic);
+        for (int j = 0; j < r->nparams; j++) printf("  %s %.4g", model_brdf_param_name(r->model, j), r->p[j]);
+        printf("\n");
+    }
+}
+
+// What the fit did, in its order (r: as far as it went).
+static void print_material(const fit_material_opts_t *o, const fit_material_result_t *r)
+{
+    if (!r->observed) return;
+    printf("refl fit material: %s: %d BRDF samples from %d frames (%d skipped)\n", r->material, r->nsamples,
+           r->frames_used, r->frames_skipped);
+    if (r->have_gain) {
+        printf("  expected residual RMS from the sensor's noise alone: %.4g 1/sr\n", r->noise_rms);
+        printf("  response compression corrected: S_m = S (1 - a S), a = %.4g per DN at 0 dB%s\n", r->nonlin_a_per_dn,
+               r->nonlin_a_per_dn > 0 ? "" : " (none in the gain calibration)");
+    }
+    print_models(&r->first);
+    if (r->cells_done) {
+        printf("  albedo cells of %g mm: %d cells hold %d of %d observations; factors' std %.4f (%d iterations "
+               "with %s); every model again:\n", o->cell_mm, r->n_cells, r->n_obs_in_cells, r->nobs, r->cells_rel_std,
+               r->cell_iterations, model_brdf_name(r->cells_model));
+        print_models(&r->models);
+    }
+    if (isfinite(r->rms_over_noise))
+        printf("  residual per degree of freedom over the noise: %.3f\n", r->rms_over_noise);
+    if (r->written) {
+        printf("%s: %s, model %s (lowest BIC of %d)\n", o->out, o->name ? o->name : r->material,
+               model_brdf_name(r->models.res[r->models.best].model), r->models.nres);
+    }
+}
+
+int fit_cmd_material(int argc, char **argv)
+{
+    fit_material_opts_t o = fit_material_defaults();
+    model_opt_t opts[] = {
+        MODEL_OPT_STRING("--calib", "DIR", "the calibrations: camera.cameramodel, lamps.json, white.json, optionally "
+                         "gain.json and its maps (DIR or DIR/geometry, DIR/lamps, DIR/white, DIR/gain)", &o.calib, true),
+        MODEL_OPT_STRING("-o", "PRIORS.json", "the priors file to write", &o.out, true),
+        MODEL_OPT_STRING("--scene", "FILE", "the sample's scene (rig frame, mm; a session records none)", &o.scene,
+                         false),
+        MODEL_OPT_STRING("--material", "NAME", "its material in the scene (default: the scene's only material)",
+                         &o.material, false),
+        MODEL_OPT_STRING("--model", "M", MODEL_NAMES " (default all)", &o.model, false),
+        MODEL_OPT_STRING("--name", "NAME", "the material's name in the priors (default: the scene's)", &o.name, false),
+        MODEL_OPT_VALUE("--k-sigma", "K", "prior bounds mean +- K std (default 3)", false),
+        MODEL_OPT_VALUE("--systematic", "REL", "std adds REL * mean (default 0.03)", false),
+        MODEL_OPT_VALUE("--albedo-cells", "MM", "albedo cells of MM mm for a textured material (default 0: none)",
+                        false),
+        MODEL_OPT_VALUE("--window", "N", "windows of N x N pixels (default 5)", false),
+        MODEL_OPT_VALUE("--step", "N", "on a grid of N pixels (default 8)", false),
+        MODEL_OPT_STRING("--report", "DIR", "write an HTML report there", &o.report, false),
+        MODEL_OPT_VALUE("--albedo", "A", "(an option of refl calib white)", false),
+        MODEL_OPT_FLAG("-v", "--verbose", "print every angle", &o.verbose),
+    };
+    model_cli_t cli = {
+        .cmd = "fit material", .synopsis = "SESSION", .opts = opts, .nopts = MODEL_NOPTS(opts),
+        .min_positional = 1, .max_positional = 1,
+        .about = "BRDF samples of the session's sample material: every window of the material lit by one lamp, dark\n"
+                 "and flat corrected, brackets merged to high dynamic range, scaled by the reference white's kc*I of\n"
+                 "its lamp (DIR/white.json) with the geometry (DIR/camera.cameramodel) and lamp positions\n"
+                 "(DIR/lamps.json); then every requested model is fitted (refl fit brdf) and the priors file written.\n"
+                 "The sample's scene is given with --scene (a session records none), its material with --material\n"
+                 "when the scene has several. Each parameter's std adds REL * mean (default 0.03) to the statistical\n"
+                 "one, for the calibrations' shared errors (on the virtual rig kc*I comes out within ~3 % and the lamp\n"
+                 "positions within ~8 mm); the prior bounds are mean +- K std (default 3). --report DIR writes an HTML\n"
+                 "report there: measured vs fitted lobes, residual maps, the parameters and the model comparison.\n"
+                 "--albedo-cells MM (textured materials: wood, paint): the sample's surface is cut into cells of MM mm,\n"
+                 "each with its own albedo factor on the whole reflectance (mean 1 over the observations), fitted\n"
+                 "together with the parameters; the priors then hold the mean material and the factors' spread.\n"
+                 "Observations are windows of N x N pixels (--window, default 5) on a grid of N pixels (--step, 8).",
+    };
+    int rc = model_cli_parse(&cli, argc, argv);
+    if (rc != MODEL_CLI_OK) return rc;
+    if (model_cli_value(&cli, "--albedo")) return model_cli_error(&cli, "--albedo is an option of refl calib white");
+    static const char *const px[] = { "--window", "--step" };
+    for (int k = 0; k < 2; k++) {
+        const char *v = model_cli_value(&cli, px[k]);
+        long n;
+        if (v && (!model_parse_int(v, &n) || n < 1 || n > 64))
+            return model_cli_error(&cli, "%s needs a whole number of pixels 1..64, not '%s'", px[k], v);
+        if (v) *(k ? &o.step : &o.window) = (int)n;
+    }
+    if (number_opt(&cli, "--k-sigma", false, &o.k_sigma) || number_opt(&cli, "--systematic", true, &o.sys_rel) ||
+        number_opt(&cli, "--albedo-cells", true, &o.cell_mm))
+        return MODEL_CLI_USAGE;
+    model_brdf_t models[MODEL_BRDF_COUNT];
+    int nm;
+    if (!fit_brdf_model_list(o.model, models, &nm)) return model_cli_error(&cli, "--model: unknown model %s", o.model);
+    o.session = cli.positional[0];
+    o.argc = argc + 1;
+    o.argv = argv - 1;
+    fit_material_result_t *r = malloc(sizeof *r);
+    if (!r) {
+        fprintf(stderr, "refl fit material: out of memory\n");
+        return 1;
+    }
+    bool ok = fit_material_run(&o, r);
+    print_material(&o, r);
+    if (ok && o.report) printf("%s/report.html\n", o.report);
+    int rc2 = ok ? 0 : model_error_report("fit material");
+    fit_material_result_free(r);
+    free(r);
+    return rc2;
+}
+
+// ---------------------------------------------------------------------------
+// refl fit
 
 int fit_cmd(int argc, char **argv)
 {
     if (argc < 2 || !strcmp(argv[1], "--help") || !strcmp(argv[1], "-h")) {
         FILE *f = argc < 2 ? stderr : stdout;
         fprintf(f, "usage: refl fit brdf FILE ... -o PRIORS.json        (refl fit brdf --help)\n"
-                   "       refl fit material SESSION --calib DIR ... -o PRIORS.json   (refl fit material --help)\n"
+                   "       refl fit material SESSION --calib DIR --scene FILE ... -o PRIORS.json   (refl fit material --help)\n"
                    "\nrefl %s\n", REFL_VERSION);
         return argc < 2 ? 2 : 0;
     }

@@ -111,6 +111,30 @@ bool fit_brdf(const fit_samples_t *s, model_brdf_t m, const fit_brdf_options_t *
 bool fit_brdf_from(const fit_samples_t *s, model_brdf_t m, const fit_brdf_options_t *opt, const double *start,
                    fit_brdf_result_t *out);
 
+// Several models fitted to the same samples (refl fit brdf, refl fit
+// material): the results of those that could be fitted, in the order tried,
+// and the message of each that could not.
+typedef struct {
+    int               ntried;
+    model_brdf_t      tried[MODEL_BRDF_COUNT];
+    int               at[MODEL_BRDF_COUNT];           // per try: index in res, -1 not fitted (error[k])
+    char              error[MODEL_BRDF_COUNT][512];
+    double            time_s[MODEL_BRDF_COUNT];       // per try, wall clock
+    int               nres;
+    int               best;                           // in res: the lowest BIC, -1 when none was fitted
+    fit_brdf_result_t res[MODEL_BRDF_COUNT];
+} fit_brdf_models_t;
+
+// The models a name selects: "all" (every model, in model order) or one
+// model's name. false (no message) for an unknown name.
+bool fit_brdf_model_list(const char *name, model_brdf_t models[MODEL_BRDF_COUNT], int *nmodels);
+// Fit each of models[0..nmodels-1] (fit_brdf) into *out. The messages of the
+// models that could not be fitted are kept in out->error, not printed.
+// Returns out->best >= 0; false leaves the message "no model could be fitted"
+// (model_last_error, not printed).
+bool fit_brdf_models(const fit_samples_t *s, const model_brdf_t *models, int nmodels, const fit_brdf_options_t *opt,
+                     fit_brdf_models_t *out);
+
 // Units and convention of parameter i of model m ("1/sr", "albedo", ...).
 const char *fit_param_unit(model_brdf_t m, int i);
 const char *fit_param_convention(model_brdf_t m, int i);

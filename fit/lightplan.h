@@ -37,6 +37,8 @@
 extern "C" {
 #endif
 
+enum { MAXL_PLAN = 16 };         // candidate lamps at most (2^16 lamp sets)
+
 typedef struct {
     double glare_cone_deg;      // 15
     double sobel_threshold;     // DN of gradient magnitude (default 250: above the detector's noise
@@ -132,7 +134,70 @@ double lightplan_sobel_check(const lightplan_segment_t *segs, int nseg, const fl
 void lightplan_segments_for(const lightplan_result_t *r, uint32_t mask, double exposure_us,
                             const lightplan_options_t *opt, lightplan_segment_t *segs);
 
-// `refl plan lamps` (fit/lightplan.c).
+// ---------------------------------------------------------------------------
+// The plan of a view from files (`refl plan lamps`, fit/plan_lamps.c)
+
+typedef struct {
+    const char        *scene;           // D3D or OBJ description (rig frame, mm)
+    const char        *camera;          // camera model (mrcal; extrinsics in the rig frame)
+    const char        *lamps;           // candidates: a lamps INI (with kc_per_us) or lamps.json (with white)
+    const char        *white;           // white.json of refl calib white: kc*I per lamp (NULL: kc_per_us)
+    double             kc_per_us;       // with a lamps INI: kc*I = kc_per_us * intensity (DN/us)
+    const char *const *materials;       // one materials INI, or priors JSON files (their means)
+    int                nmaterials;
+    const char        *gain_dir;        // gain.json (K, read noise, saturation), offset_dn.tiff,
+                                        // prnu_gain.tiff; NULL: saturation_dn, offset_dn, no SNR floor
+    double             saturation_dn;   // without gain_dir (default 4095)
+    double             offset_dn;       // without gain_dir (default 0)
+    double             angle_deg;       // the view's turntable angle
+    const double      *exposures_us;    // the exposures to try
+    int                nexp;
+    lightplan_options_t opt;
+    const char        *check_truth;     // the virtual rig's truth file: check the plan there (NULL: no check)
+    const char        *check_sample;    // its sample for the check (default t_stiffener)
+    const char        *out;             // output directory: plan.json, predicted.tiff, glare.tiff
+                                        // (check_frame.tiff with a check)
+    bool               report;          // index.html by scripts/plan_lamps_report.py
+    int                argc;            // the command line for the provenance (argv[0] "refl")
+    char             **argv;
+} lightplan_lamps_opts_t;
+
+lightplan_lamps_opts_t lightplan_lamps_defaults(void);
+
+// One configuration checked on the virtual rig: a Sobel detector on its frame
+// against the predicted detectability of each segment.
+typedef struct {
+    char   lamps[512];                  // "east+west"
+    double exposure_us;
+    double agreement;                   // found == predicted over the judged segments (NAN: none judged)
+    int    judged, agreeing;
+} lightplan_check_t;
+
+typedef struct {
+    int                ncandidates;     // loaded: > 0
+    bool               planned;         // res holds the plan
+    lightplan_result_t res;
+    char               chosen[512];     // the chosen configuration's lamp names ("east+west")
+    bool               check_started;   // the virtual rig was opened for the check
+    int                nchecks;         // the chosen set, then each other single lamp (at the chosen exposure)
+    lightplan_check_t  checks[MAXL_PLAN + 1];
+    bool               checked;         // the check is done
+    double             check_agreement; // over every judged segment (NAN: none)
+    long               check_judged;
+    double             median_signal_dn;   // the object's median signal in the prediction (offset excluded)
+    double             sobel_noise_dn;     // the detector's response to the sensor's noise there (NAN: no gain)
+    bool               threshold_near_noise; // opt.sobel_threshold < 1.5 sobel_noise_dn: edges found in noise
+    bool               written;         // plan.json, predicted.tiff and glare.tiff are written
+} lightplan_lamps_result_t;
+
+// Load the inputs, plan the view (lightplan_run at the view's angle), check
+// it on the virtual rig (with check_truth), write the outputs and the report.
+// false + message (model_last_error(), not printed: the caller reports it);
+// *r holds what was done either way: free with lightplan_lamps_result_free.
+bool lightplan_lamps_run(const lightplan_lamps_opts_t *o, lightplan_lamps_result_t *r);
+void lightplan_lamps_result_free(lightplan_lamps_result_t *r);
+
+// `refl plan lamps` (fit/cmd_plan.c).
 int lightplan_cmd(int argc, char **argv);
 
 #ifdef __cplusplus

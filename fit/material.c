@@ -1,5 +1,6 @@
-// fit/material.c — the material fit (`refl fit material`): calibrated
-// observations (calib_observe) to BRDF samples, every model fitted, priors.
+// fit/material.c — the material fit (fit_material_run, see material.h):
+// calibrated observations (calib_observe) to BRDF samples, every model
+// fitted, priors and the report.
 #define _GNU_SOURCE
 #include <errno.h>
 #include <glib.h>
@@ -13,101 +14,6 @@
 #include "fit/material.h"
 #include "model/report.h"
 #include "model/vec.h"
-#include "rig/rig.h"
-
-// ---------------------------------------------------------------------------
-// Commands
-
-typedef struct {
-    const char *session, *calib, *out, *scene, *material, *model, *name, *report;
-    double      albedo, k_sigma, sys_rel, cell_mm;
-    int         window, step;   // 0: calib_observe's defaults
-    bool        verbose;
-} mat_args_t;
-
-static int parse_args(const char *cmd, int argc, char **argv, mat_args_t *a, void (*usage)(FILE *))
-{
-    for (int i = 1; i < argc; i++) {
-        const char *s = argv[i];
-        if (!strcmp(s, "-h") || !strcmp(s, "--help")) {
-            usage(stdout);
-            return 0;
-        }
-        if (!strcmp(s, "-v") || !strcmp(s, "--verbose")) {
-            a->verbose = true;
-            continue;
-        }
-        if (!strcmp(s, "--window") || !strcmp(s, "--step")) {
-            char *e = NULL;
-            long v = i + 1 < argc ? strtol(argv[i + 1], &e, 10) : 0;
-            if (i + 1 >= argc || *e || v < 1 || v > 64) {
-                fprintf(stderr, "refl %s: %s needs a whole number of pixels 1..64%s%s%s\n", cmd, s,
-                        i + 1 < argc ? ", not '" : "", i + 1 < argc ? argv[i + 1] : "", i + 1 < argc ? "'" : "");
-                return 2;
-            }
-            *(!strcmp(s, "--window") ? &a->window : &a->step) = (int)v;
-            i++;
-            continue;
-        }
-        const char **str = !strcmp(s, "-o") ? &a->out : !strcmp(s, "--calib") ? &a->calib
-                         : !strcmp(s, "--scene") ? &a->scene : !strcmp(s, "--material") ? &a->material
-                         : !strcmp(s, "--model") ? &a->model : !strcmp(s, "--name") ? &a->name
-                         : !strcmp(s, "--report") ? &a->report : NULL;
-        double *num = !strcmp(s, "--albedo") ? &a->albedo : !strcmp(s, "--k-sigma") ? &a->k_sigma
-                    : !strcmp(s, "--systematic") ? &a->sys_rel : !strcmp(s, "--albedo-cells") ? &a->cell_mm : NULL;
-        if (str || num) {
-            if (i + 1 >= argc) {
-                fprintf(stderr, "refl %s: missing value after %s\n", cmd, s);
-                return 2;
-            }
-            const char *v = argv[++i];
-            if (str) {
-                *str = v;
-            } else {
-                char *e;
-                *num = strtod(v, &e);
-                // the systematic floor may be 0 (as refl fit brdf's), and the cells (off);
-                // an albedo or K may not
-                bool zero_ok = num == &a->sys_rel || num == &a->cell_mm;
-                if (*e || !(zero_ok ? *num >= 0 : *num > 0) || !isfinite(*num)) {
-                    fprintf(stderr, "refl %s: %s needs a number %s 0, not '%s'\n", cmd, s, zero_ok ? ">=" : ">", v);
-                    return 2;
-                }
-            }
-        } else if (s[0] == '-') {
-            fprintf(stderr, "refl %s: unknown option %s (refl %s --help)\n", cmd, s, cmd);
-            return 2;
-        } else if (!a->session) {
-            a->session = s;
-        } else {
-            fprintf(stderr, "refl %s: more than one session: %s\n", cmd, s);
-            return 2;
-        }
-    }
-    if (!a->session || !a->calib || !a->out) {
-        fprintf(stderr, "refl %s: give SESSION, --calib DIR and -o FILE (refl %s --help)\n", cmd, cmd);
-        return 2;
-    }
-    return -1;
-}
-
-// The calibrations of --calib and the observations of the session. false with
-// the message printed (cmd names the command).
-static bool load_and_observe(const char *cmd, const mat_args_t *a, bool need_white, calib_set_t **cal,
-                             calib_obs_set_t *obs)
-{
-    calib_observe_options_t o = calib_observe_defaults();
-    o.scene_path = a->scene;
-    o.material = a->material;
-    o.verbose = a->verbose;
-    if (a->window > 0) o.window = a->window;
-    if (a->step > 0) o.step = a->step;
-    if (!calib_observe_session(a->session, a->calib, need_white, &o, cal, obs)) {
-        fprintf(stderr, "refl %s: %s\n", cmd, model_last_error());
-        return false;
-    }
-    return true;
-}
 
 // The report of a material fit: DIR/samples.csv (every sample with its
 // geometry, measured and fitted R), plots by scripts/fit_material_report.py,
@@ -120,7 +26,7 @@ static bool material_report(const char *dir, const calib_obs_set_t *obs, const f
     bool ok = false;
     FILE *f = fopen(csv, "w");
     if (!f) {
-        model_error(csv, 0, "cannot write: %s", strerror(errno));
+        model_error_set(csv, 0, "cannot write: %s", strerror(errno));
         goto done;
     }
     fprintf(f, "# refl fit material samples: window centre (px), step, lamp, angles (deg: incidence, view, half "
@@ -135,7 +41,7 @@ static bool material_report(const char *dir, const calib_obs_set_t *obs, const f
                 smp->R[i], fit_samples_eval(smp, res[best].model, res[best].p, i));
     }
     if (fclose(f) != 0) {
-        model_error(csv, 0, "cannot write: %s", strerror(errno));
+        model_error_set(csv, 0, "cannot write: %s", strerror(errno));
         goto done;
     }
     char pbuf[256] = "";
@@ -271,7 +177,7 @@ oom:
     free(raw);
     if (h) g_hash_table_destroy(h);
     cells_free(ac);
-    model_error(NULL, 0, "out of memory for the albedo cells");
+    model_error_set(NULL, 0, "out of memory for the albedo cells");
     return false;
 }
 
@@ -286,7 +192,7 @@ static fit_samples_t *cells_samples(const fit_samples_t *smp, const albedo_cells
         const model_cosines_t *disc = smp->disc_at && smp->disc_at[i] >= 0 ? smp->disc + smp->disc_at[i] : NULL;
         if (!fit_samples_add_disc(out, &smp->c[i], disc, smp->R[i] / c, c * c)) {
             fit_samples_free(out);
-            model_error(NULL, 0, "sample %d: albedo factor %g gives no usable sample", i, c);
+            model_error_set(NULL, 0, "sample %d: albedo factor %g gives no usable sample", i, c);
             return NULL;
         }
     }
@@ -356,173 +262,191 @@ static bool cells_fit(const fit_samples_t *smp, albedo_cells_t *ac, fit_brdf_res
     return ok;
 }
 
-// Fit every model of models[] to smp into res (printing a line each); the
-// index of the lowest BIC, -1 when none could be fitted.
-static int fit_models(const fit_samples_t *smp, const int *models, int nm, fit_brdf_result_t *res, int *nres)
+// ---------------------------------------------------------------------------
+// The material fit (fit_material_run): stages
+
+fit_material_opts_t fit_material_defaults(void)
 {
-    int best = -1;
-    *nres = 0;
-    for (int k = 0; k < nm; k++) {
-        fit_brdf_result_t *r = &res[*nres];
-        if (!fit_brdf(smp, (model_brdf_t)models[k], NULL, r)) {
-            fprintf(stderr, "  %s: %s\n", model_brdf_name((model_brdf_t)models[k]), model_last_error());
-            continue;
-        }
-        printf("  %-16s rms %.4g 1/sr  BIC %.6g", model_brdf_name(r->model), r->rms, r->bic);
-        for (int j = 0; j < r->nparams; j++) printf("  %s %.4g", model_brdf_param_name(r->model, j), r->p[j]);
-        printf("\n");
-        if (best < 0 || r->bic < res[best].bic) best = *nres;
-        (*nres)++;
-    }
-    return best;
+    return (fit_material_opts_t){ .model = "all", .k_sigma = 3, .sys_rel = 0.03 };
 }
 
-static void material_usage(FILE *f)
+void fit_material_result_free(fit_material_result_t *r)
 {
-    fprintf(f, "usage: refl fit material SESSION --calib DIR [--model all|lambert|hall|torrance_sparrow|thesis_fit|\n"
-               "                         cook_torrance|ggx] [--name NAME] [--scene FILE] [--material NAME]\n"
-               "                         [--k-sigma K] [--systematic REL] [--albedo-cells MM] [--window N]\n"
-               "                         [--step N] [--report DIR] -o PRIORS.json\n"
-               "\n"
-               "BRDF samples of the session's sample material: every window of the material lit by one lamp, dark\n"
-               "and flat corrected, brackets merged to high dynamic range, scaled by the reference white's kc*I of\n"
-               "its lamp (DIR/white.json) with the geometry (DIR/camera.cameramodel) and lamp positions\n"
-               "(DIR/lamps.json); then every requested model is fitted (refl fit brdf) and the priors file written.\n"
-               "On a virtual rig the sample's scene and material come from the truth file's [sample]; elsewhere\n"
-               "give --scene and --material. Each parameter's std adds REL * mean (default 0.03) to the statistical\n"
-               "one, for the calibrations' shared errors (on the virtual rig kc*I comes out within ~3 %% and the lamp\n"
-               "positions within ~8 mm); the prior bounds are mean +- K std (default 3). --report DIR writes an HTML\n"
-               "report there: measured vs fitted lobes, residual maps, the parameters and the model comparison.\n"
-               "--albedo-cells MM (textured materials: wood, paint): the sample's surface is cut into cells of MM mm,\n"
-               "each with its own albedo factor on the whole reflectance (mean 1 over the observations), fitted\n"
-               "together with the parameters; the priors then hold the mean material and the factors' spread.\n"
-               "Observations are windows of N x N pixels (--window, default 5) on a grid of N pixels (--step, 8).\n"
-               "\nrefl %s\n", REFL_VERSION);
+    if (r) memset(r, 0, sizeof *r);
 }
 
-int fit_cmd_material(int argc, char **argv)
+// The observations of the session (calib_observe_session) and their BRDF
+// samples R = s d^2 / kcI; the expected noise RMS with a gain calibration.
+static bool material_samples(const fit_material_opts_t *o, calib_set_t **cal, calib_obs_set_t *obs,
+                             fit_samples_t **smp, fit_material_result_t *r)
 {
-    mat_args_t a = { .k_sigma = 3, .model = "all", .sys_rel = 0.03 };
-    int rc = parse_args("fit material", argc, argv, &a, material_usage);
-    if (rc >= 0) return rc;
-    int models[MODEL_BRDF_COUNT], nm = 0;
-    if (!strcmp(a.model, "all")) {
-        for (int m = 0; m < MODEL_BRDF_COUNT; m++) models[nm++] = m;
-    } else if ((models[0] = model_brdf_from_name(a.model)) >= 0) {
-        nm = 1;
-    } else {
-        fprintf(stderr, "refl fit material: --model: unknown model %s\n", a.model);
-        return 2;
+    calib_observe_options_t co = calib_observe_defaults();
+    co.scene_path = o->scene;
+    co.material = o->material;
+    co.verbose = o->verbose;
+    if (o->window > 0) co.window = o->window;
+    if (o->step > 0) co.step = o->step;
+    if (!calib_observe_session(o->session, o->calib, true, &co, cal, obs)) return false;
+    if (!(*smp = fit_samples_new())) {
+        model_error_set(NULL, 0, "out of memory");
+        return false;
     }
-    calib_set_t *cal = NULL;
-    calib_obs_set_t obs;
-    fit_samples_t *smp = NULL, *csmp = NULL;
-    albedo_cells_t ac = { 0 };
-    rc = 1;
-    if (!load_and_observe("fit material", &a, true, &cal, &obs)) goto done;
-    smp = fit_samples_new();
-    snprintf(smp->source, sizeof smp->source, "%s", a.session);
-    for (int i = 0; i < obs.n; i++) {
-        const calib_obs_t *b = &obs.o[i];
-        if (!fit_samples_add_disc(smp, &b->c, b->has_disc ? b->disc : NULL,
-                                  b->s_dn_per_us * b->d_mm * b->d_mm / cal->kcI_per_us[b->lamp], 1)) {
-            fprintf(stderr, "refl fit material: observation %d (step %d) gives no usable sample (kc*I of lamp %s "
-                    "is %g)\n", i, b->step, cal->lamps->lamps[b->lamp].name, cal->kcI_per_us[b->lamp]);
-            goto done;
+    snprintf((*smp)->source, sizeof (*smp)->source, "%s", o->session);
+    const calib_set_t *c = *cal;
+    for (int i = 0; i < obs->n; i++) {
+        const calib_obs_t *b = &obs->o[i];
+        if (!fit_samples_add_disc(*smp, &b->c, b->has_disc ? b->disc : NULL,
+                                  b->s_dn_per_us * b->d_mm * b->d_mm / c->kcI_per_us[b->lamp], 1)) {
+            model_error_set(NULL, 0, "observation %d (step %d) gives no usable sample (kc*I of lamp %s is %g)", i,
+                            b->step, c->lamps->lamps[b->lamp].name, c->kcI_per_us[b->lamp]);
+            return false;
         }
     }
-    printf("refl fit material: %s: %d BRDF samples from %d frames (%d skipped)\n", obs.material, smp->n,
-           obs.frames_used, obs.frames_skipped);
+    r->observed = true;
+    snprintf(r->sample, sizeof r->sample, "%s", obs->sample);
+    snprintf(r->material, sizeof r->material, "%s", obs->material);
+    r->nobs = obs->n;
+    r->nsamples = (*smp)->n;
+    r->frames_used = obs->frames_used;
+    r->frames_skipped = obs->frames_skipped;
     // the residual RMS the sensor's temporal noise alone would give (with a gain calibration)
-    double noise_rms = NAN;
-    if (cal->gain_dn_per_e > 0) {
+    if (c->gain_dn_per_e > 0) {
         double v2 = 0;
-        for (int i = 0; i < obs.n; i++) {
-            double sr = obs.o[i].s_std * obs.o[i].d_mm * obs.o[i].d_mm / cal->kcI_per_us[obs.o[i].lamp];
+        for (int i = 0; i < obs->n; i++) {
+            double sr = obs->o[i].s_std * obs->o[i].d_mm * obs->o[i].d_mm / c->kcI_per_us[obs->o[i].lamp];
             v2 += sr * sr;
         }
-        noise_rms = sqrt(v2 / obs.n);
-        printf("  expected residual RMS from the sensor's noise alone: %.4g 1/sr\n", noise_rms);
-        printf("  response compression corrected: S_m = S (1 - a S), a = %.4g per DN at 0 dB%s\n", cal->nonlin_a_per_dn,
-               cal->nonlin_a_per_dn > 0 ? "" : " (none in the gain calibration)");
+        r->have_gain = true;
+        r->noise_rms = sqrt(v2 / obs->n);
+        r->nonlin_a_per_dn = c->nonlin_a_per_dn;
     }
-    fit_brdf_result_t res[MODEL_BRDF_COUNT];
-    int nres = 0, best = fit_models(smp, models, nm, res, &nres);
-    if (best < 0) {
-        fprintf(stderr, "refl fit material: no model could be fitted\n");
-        goto done;
+    return true;
+}
+
+// Albedo cells of o->cell_mm: the factors fitted with the first pass's best
+// model, *csmp the corrected samples, and every model fitted to them into r->models.
+static bool material_cells(const fit_material_opts_t *o, const calib_obs_set_t *obs, const fit_samples_t *smp,
+                           const model_brdf_t *models, int nm, albedo_cells_t *ac, fit_samples_t **csmp,
+                           fit_material_result_t *r)
+{
+    fit_brdf_result_t b = r->first.res[r->first.best];
+    if (!cells_assign(obs, o->cell_mm, ac) || !cells_fit(smp, ac, &b) || !(*csmp = cells_samples(smp, ac))) {
+        char msg[1600];
+        snprintf(msg, sizeof msg, "%s", model_last_error());
+        model_error_set(NULL, 0, "albedo cells: %s", msg);
+        return false;
     }
-    if (a.cell_mm > 0) {
-        fit_brdf_result_t r = res[best];
-        if (!cells_assign(&obs, a.cell_mm, &ac) || !cells_fit(smp, &ac, &r) || !(csmp = cells_samples(smp, &ac))) {
-            fprintf(stderr, "refl fit material: albedo cells: %s\n", model_last_error());
-            goto done;
-        }
-        printf("  albedo cells of %g mm: %d cells hold %d of %d observations; factors' std %.4f (%d iterations "
-               "with %s); every model again:\n", a.cell_mm, ac.n_cells, ac.n_obs_in, obs.n, ac.rel_std,
-               ac.iterations, model_brdf_name(r.model));
-        if ((best = fit_models(csmp, models, nm, res, &nres)) < 0) {
-            fprintf(stderr, "refl fit material: no model could be fitted to the samples with albedo cells\n");
-            goto done;
-        }
+    r->cells_done = true;
+    r->n_cells = ac->n_cells;
+    r->n_obs_in_cells = ac->n_obs_in;
+    r->cells_rel_std = ac->rel_std;
+    r->cell_iterations = ac->iterations;
+    r->cells_model = b.model;
+    if (!fit_brdf_models(*csmp, models, nm, NULL, &r->models)) {
+        model_error_set(NULL, 0, "no model could be fitted to the samples with albedo cells");
+        return false;
     }
+    return true;
+}
+
+// The albedo cells' record in the priors entry.
+static json_t *cells_json(const fit_material_opts_t *o, const fit_material_result_t *r)
+{
+    json_t *jc = json_object();
+    json_object_set_new(jc, "cell_mm", json_real(o->cell_mm));
+    json_object_set_new(jc, "cells", json_integer(r->n_cells));
+    json_object_set_new(jc, "observations_in_cells", json_integer(r->n_obs_in_cells));
+    json_object_set_new(jc, "observations", json_integer(r->nobs));
+    json_object_set_new(jc, "factor_rel_std", json_real(r->cells_rel_std));
+    json_object_set_new(jc, "iterations", json_integer(r->cell_iterations));
+    json_object_set_new(jc, "convention", json_string(
+        "each cell (MM mm of the sample's surface at angle 0, per face) scales the whole reflectance by its "
+        "factor; the factors' mean over the observations is 1, so the parameters describe the mean material; "
+        "factor_rel_std is the spread of the albedo from place to place"));
+    return jc;
+}
+
+// The priors document (format "refl priors 1") of the final fits; *entry
+// (borrowed) is its material's entry. Sets r->rms_over_noise.
+static json_t *material_priors(const fit_material_opts_t *o, const calib_set_t *cal, fit_material_result_t *r,
+                               json_t **entry)
+{
+    const fit_brdf_models_t *m = &r->models;
+    const fit_brdf_result_t *best = &m->res[m->best];
     json_t *top = json_object();
     json_object_set_new(top, "format", json_string("refl priors 1"));
     json_object_set_new(top, "units", json_string("R = f_r cos(theta_i) in 1/sr; parameter units per parameter"));
     json_t *mats = json_array();
-    json_t *e = fit_priors_material(a.name ? a.name : obs.material, &res[best], res, nres, a.k_sigma, a.sys_rel);
-    json_object_set_new(e, "session", json_string(a.session));
-    json_object_set_new(e, "sample", json_string(obs.sample));
-    json_object_set_new(e, "noise_rms_expected", isfinite(noise_rms) ? json_real(noise_rms) : json_null());
+    json_t *e = fit_priors_material(o->name ? o->name : r->material, best, m->res, m->nres, o->k_sigma, o->sys_rel);
+    json_object_set_new(e, "session", json_string(o->session));
+    json_object_set_new(e, "sample", json_string(r->sample));
+    json_object_set_new(e, "noise_rms_expected", isfinite(r->noise_rms) ? json_real(r->noise_rms) : json_null());
     // the residual per degree of freedom (the cells' factors take one each)
-    double dof = (double)res[best].n - res[best].nfree - ac.n_cells;
-    double rms_dof = dof > 0 ? sqrt(res[best].rss / dof) : NAN;
-    if (isfinite(noise_rms) && noise_rms > 0 && isfinite(rms_dof)) {
-        json_object_set_new(e, "rms_over_noise", json_real(rms_dof / noise_rms));
-        printf("  residual per degree of freedom over the noise: %.3f\n", rms_dof / noise_rms);
+    double dof = (double)best->n - best->nfree - r->n_cells;
+    double rms_dof = dof > 0 ? sqrt(best->rss / dof) : NAN;
+    if (isfinite(r->noise_rms) && r->noise_rms > 0 && isfinite(rms_dof)) {
+        r->rms_over_noise = rms_dof / r->noise_rms;
+        json_object_set_new(e, "rms_over_noise", json_real(r->rms_over_noise));
     }
-    if (a.cell_mm > 0) {
-        json_t *jc = json_object();
-        json_object_set_new(jc, "cell_mm", json_real(a.cell_mm));
-        json_object_set_new(jc, "cells", json_integer(ac.n_cells));
-        json_object_set_new(jc, "observations_in_cells", json_integer(ac.n_obs_in));
-        json_object_set_new(jc, "observations", json_integer(obs.n));
-        json_object_set_new(jc, "factor_rel_std", json_real(ac.rel_std));
-        json_object_set_new(jc, "iterations", json_integer(ac.iterations));
-        json_object_set_new(jc, "convention", json_string(
-            "each cell (MM mm of the sample's surface at angle 0, per face) scales the whole reflectance by its "
-            "factor; the factors' mean over the observations is 1, so the parameters describe the mean material; "
-            "factor_rel_std is the spread of the albedo from place to place"));
-        json_object_set_new(e, "albedo_cells", jc);
-    }
+    if (r->cells_done) json_object_set_new(e, "albedo_cells", cells_json(o, r));
     json_array_append_new(mats, e);
     json_object_set_new(top, "materials", mats);
-    json_object_set_new(top, "provenance", calib_observe_provenance(argc + 1, argv - 1, a.session, cal));
-    char *od = g_path_get_dirname(a.out);
+    char *argv0[] = { "refl", NULL };
+    json_object_set_new(top, "provenance", calib_observe_provenance(o->argc > 0 ? o->argc : 1,
+                                                                    o->argc > 0 ? o->argv : argv0, o->session, cal));
+    *entry = e;
+    return top;
+}
+
+bool fit_material_run(const fit_material_opts_t *o, fit_material_result_t *r)
+{
+    memset(r, 0, sizeof *r);
+    r->noise_rms = r->rms_over_noise = NAN;
+    r->first.best = r->models.best = -1;
+    bool quiet = model_error_quiet_thread(true);   // the caller reports the message
+    bool ok = false;
+    calib_set_t *cal = NULL;
+    calib_obs_set_t obs = { 0 };
+    fit_samples_t *smp = NULL, *csmp = NULL;
+    albedo_cells_t ac = { 0 };
+    json_t *top = NULL, *entry = NULL;
+    model_brdf_t models[MODEL_BRDF_COUNT];
+    int nm = 0;
+    if (!fit_brdf_model_list(o->model ? o->model : "all", models, &nm)) {
+        model_error_set(NULL, 0, "--model: unknown model %s", o->model);
+        goto done;
+    }
+    if (!material_samples(o, &cal, &obs, &smp, r)) goto done;
+    if (!fit_brdf_models(smp, models, nm, NULL, &r->first)) goto done;
+    if (o->cell_mm > 0) {
+        if (!material_cells(o, &obs, smp, models, nm, &ac, &csmp, r)) goto done;
+    } else {
+        r->models = r->first;
+    }
+    top = material_priors(o, cal, r, &entry);
+    char *od = g_path_get_dirname(o->out);
     bool made = model_mkdir_p(od);
     g_free(od);
-    if (made && model_write_json(a.out, top)) {
-        printf("%s: %s, model %s (lowest BIC of %d)\n", a.out, a.name ? a.name : obs.material,
-               model_brdf_name(res[best].model), nres);
-        rc = 0;
-        if (a.report) {
-            if (material_report(a.report, &obs, csmp ? csmp : smp, res, nres, best, e,
-                                json_object_get(top, "provenance"))) {
-                printf("%s/report.html\n", a.report);
-            } else {
-                fprintf(stderr, "refl fit material: the report: %s\n", model_last_error());
-                rc = 1;
-            }
+    if (!made || !model_write_json(o->out, top)) goto done;
+    r->written = true;
+    if (o->report) {
+        const fit_brdf_models_t *m = &r->models;
+        if (!material_report(o->report, &obs, csmp ? csmp : smp, m->res, m->nres, m->best, entry,
+                             json_object_get(top, "provenance"))) {
+            char msg[1600];
+            snprintf(msg, sizeof msg, "%s", model_last_error());
+            model_error_set(NULL, 0, "the report: %s", msg);
+            goto done;
         }
-    } else {
-        fprintf(stderr, "refl fit material: %s\n", model_last_error());
     }
-    json_decref(top);
+    ok = true;
 done:
+    json_decref(top);
     fit_samples_free(smp);
     fit_samples_free(csmp);
     cells_free(&ac);
     calib_obs_free(&obs);
     calib_set_free(cal);
-    return rc;
+    model_error_quiet_thread(quiet);
+    return ok;
 }

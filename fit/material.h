@@ -1,6 +1,13 @@
 // fit/material.h — the material fit: from calibrated observations of a
 // material (calib_observe, calib/calib.h) to BRDF samples, fitted models and
 // priors.
+//
+//   fit_material_opts_t o = fit_material_defaults();
+//   o.session = "sessions/glossy"; o.calib = "calib"; o.scene = "samples/coupon.d3d"; o.out = "priors.json";
+//   fit_material_result_t r;
+//   bool ok = fit_material_run(&o, &r);   // false: model_last_error(); r holds what was done
+//   ...
+//   fit_material_result_free(&r);
 #pragma once
 
 #include <jansson.h>
@@ -13,8 +20,61 @@
 extern "C" {
 #endif
 
-// `refl fit material` (fit/material.c); its observations come from
-// calib_observe (calib/calib.h).
+typedef struct {
+    const char *session;    // capture session directory of the sample
+    const char *calib;      // calibration directory (calib_set_load; white.json required)
+    const char *scene;      // the sample's scene (a session records none; NULL is an error)
+    const char *material;   // its material in the scene; NULL: the scene's only one
+    const char *model;      // "all" (default) or one model's name (fit_brdf_model_list)
+    const char *name;       // the material's name in the priors; NULL: the observed material's
+    const char *out;        // the priors file (JSON) to write; its directory is made
+    const char *report;     // a directory for the HTML report; NULL: none
+    double      k_sigma;    // prior bounds mean +- k_sigma std (default 3)
+    double      sys_rel;    // systematic std relative to the mean (default 0.03)
+    double      cell_mm;    // albedo cells of cell_mm mm (0: none)
+    int         window;     // observation windows, pixels (0: calib_observe's default)
+    int         step;       // their grid step, pixels (0: the default)
+    bool        verbose;    // calib_observe prints each angle on stderr
+    int         argc;       // the command line for the provenance (argv[0] "refl"; may be 0)
+    char      **argv;
+} fit_material_opts_t;
+
+fit_material_opts_t fit_material_defaults(void);
+
+typedef struct {
+    // the observations and samples (observed: they were made)
+    bool              observed;
+    char              sample[64], material[64];
+    int               nobs, nsamples, frames_used, frames_skipped;
+    // with a gain calibration: the residual RMS its temporal noise alone gives (1/sr; NAN without one)
+    // and the response compression corrected (per DN at 0 dB; 0: none)
+    bool              have_gain;
+    double            noise_rms, nonlin_a_per_dn;
+    // every model fitted to the samples as they are (first.ntried > 0: tried)
+    fit_brdf_models_t first;
+    // albedo cells (opts cell_mm > 0; cells_done: fitted): the factors' spread, then
+    // every model fitted again to the corrected samples (models)
+    bool              cells_done;
+    int               n_cells, n_obs_in_cells, cell_iterations;
+    double            cells_rel_std;
+    model_brdf_t      cells_model;      // the model the factors were fitted with
+    fit_brdf_models_t models;           // the final fits (a copy of first without cells)
+    double            rms_over_noise;   // residual per degree of freedom over noise_rms (NAN: unknown)
+    bool              written;          // the priors file is written (its material: o->name, else material[])
+} fit_material_result_t;
+
+// The material fit (`refl fit material`): observations of o->session through
+// the calibrations of o->calib (calib_observe_session), BRDF samples R = s d^2
+// / kcI (1/sr), every model of o->model fitted (and, with albedo cells, again
+// with the cells' factors), the priors file o->out written with the lowest
+// BIC's entry (fit_priors_material) and the provenance, and with o->report
+// the report (samples.csv, plots by scripts/fit_material_report.py,
+// report.html). false + message (model_last_error(), not printed: the caller
+// reports it); *r holds what was done up to the failure either way.
+bool fit_material_run(const fit_material_opts_t *o, fit_material_result_t *r);
+void fit_material_result_free(fit_material_result_t *r);
+
+// `refl fit material` (fit/cmd_fit.c).
 int fit_cmd_material(int argc, char **argv);
 
 #ifdef __cplusplus

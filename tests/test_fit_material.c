@@ -50,6 +50,15 @@ static char *calib_dir(void)
     return dir;
 }
 
+// The scene of a sample of the truth file (a session records none: refl
+// calib white and refl fit material are told it with --scene).
+static char *sample_scene(const char *sample)
+{
+    char *sd = srcdir(), *p = g_strdup_printf("%s/examples/samples/%s.d3d", sd, sample);
+    free(sd);
+    return p;
+}
+
 static char *rig_file(void)
 {
     char text[4200];
@@ -64,6 +73,7 @@ static char *rig_file(void)
 TEST(fit_material_chain_virtual_rig)
 {
     char *rig = rig_file(), *cal = calib_dir();
+    char *wsc = sample_scene("reference_white"), *gsc = sample_scene("coupon_glossy_plastic");
     char *white = keep(test_write("white.ini", "[plan]\nname = white\n[sample]\nname = reference_white\n"
                                                 "kind = reference_white\n[angles]\nlist = 0 120 240\n[lamps]\n"
                                                 "sets = east; south; west; north; rim; none\n[exposure]\nmode = fixed\n"
@@ -101,7 +111,8 @@ TEST(fit_material_chain_virtual_rig)
     g_free(err);
     char wj[4200];
     snprintf(wj, sizeof wj, "%s/white.json", cal);
-    rc = test_refl_run(300, &out, &err, "calib", "white", ws, "--calib", cal, "-o", wj, NULL);
+    rc = test_refl_run(300, &out, &err, "calib", "white", ws, "--calib", cal, "--scene", wsc, "-o", wj,
+                       NULL);
     CHECK_MSG(rc == 0, "%s", err);
     g_free(out);
     g_free(err);
@@ -124,8 +135,8 @@ TEST(fit_material_chain_virtual_rig)
     g_free(err);
     char *pj = keep(test_path("priors.json"));
     char *rep = keep(test_path("report"));
-    rc = test_refl_run(300, &out, &err, "fit", "material", gs, "--calib", cal, "--model", "all", "-o", pj,
-                       "--report", rep, NULL);
+    rc = test_refl_run(300, &out, &err, "fit", "material", gs, "--scene", gsc, "--calib", cal, "--model", "all",
+                       "-o", pj, "--report", rep, NULL);
     CHECK_MSG(rc == 0, "%s", err);
     CHECK_CONTAINS(out, "model ggx");
     g_free(out);
@@ -183,13 +194,20 @@ TEST(fit_material_chain_virtual_rig)
     CHECK_CONTAINS(err, "not a capture session");
     g_free(out);
     g_free(err);
+    // a session records no scene of its sample: without --scene, an error saying so
+    rc = test_refl_run(60, &out, &err, "fit", "material", gs, "--calib", cal, "-o", pj, NULL);
+    CHECK(rc == 1);
+    CHECK_CONTAINS(err, "give the sample's scene (--scene FILE)");
+    g_free(out);
+    g_free(err);
     // --systematic 0 is allowed (statistical std only), a negative one is not
-    rc = test_refl_run(300, &out, &err, "fit", "material", gs, "--calib", cal, "--model", "ggx", "--systematic", "0",
-                       "-o", pj, NULL);
+    rc = test_refl_run(300, &out, &err, "fit", "material", gs, "--scene", gsc, "--calib", cal, "--model", "ggx",
+                       "--systematic", "0", "-o", pj, NULL);
     CHECK_MSG(rc == 0, "%s", err);
     g_free(out);
     g_free(err);
-    rc = test_refl_run(60, &out, &err, "fit", "material", gs, "--calib", cal, "--systematic", "-1", "-o", pj, NULL);
+    rc = test_refl_run(60, &out, &err, "fit", "material", gs, "--scene", gsc, "--calib", cal, "--systematic", "-1",
+                       "-o", pj, NULL);
     CHECK(rc == 2);
     CHECK_CONTAINS(err, "--systematic needs a number >= 0");
     g_free(out);
@@ -199,7 +217,8 @@ TEST(fit_material_chain_virtual_rig)
                                           { "--step", "2.5", "--step needs a whole number of pixels 1..64, not '2.5'" },
                                           { "--albedo-cells", "-2", "--albedo-cells needs a number >= 0" } };
     for (size_t k = 0; k < sizeof bad / sizeof bad[0]; k++) {
-        rc = test_refl_run(60, &out, &err, "fit", "material", gs, "--calib", cal, bad[k][0], bad[k][1], "-o", pj, NULL);
+        rc = test_refl_run(60, &out, &err, "fit", "material", gs, "--scene", gsc, "--calib", cal, bad[k][0], bad[k][1],
+                           "-o", pj, NULL);
         CHECK(rc == 2);
         CHECK_CONTAINS(err, bad[k][2]);
         g_free(out);
@@ -211,13 +230,13 @@ TEST(fit_material_chain_virtual_rig)
     g_free(out);
     g_free(err);
     test_write("cal/lamps.json", "{\"lamps\": [{\"name\": \"east\"}]}");
-    rc = test_refl_run(60, &out, &err, "fit", "material", gs, "--calib", cal, "-o", pj, NULL);
+    rc = test_refl_run(60, &out, &err, "fit", "material", gs, "--scene", gsc, "--calib", cal, "-o", pj, NULL);
     CHECK(rc == 1);
     CHECK_CONTAINS(err, "position_mm");
     g_free(out);
     g_free(err);
     test_write("cal/lamps.json", "{\"lamps\": [{\"name\": \"east\", \"position_mm\": [0, 0, 1], \"radius_mm\": -2}]}");
-    rc = test_refl_run(60, &out, &err, "fit", "material", gs, "--calib", cal, "-o", pj, NULL);
+    rc = test_refl_run(60, &out, &err, "fit", "material", gs, "--scene", gsc, "--calib", cal, "-o", pj, NULL);
     CHECK(rc == 1);
     CHECK_CONTAINS(err, "lamps[0] (east): radius_mm must be a number of mm in [0, 1000)");
     g_free(out);
@@ -230,6 +249,8 @@ TEST(fit_material_chain_virtual_rig)
     g_free(gs);
     g_free(pj);
     g_free(cal2);
+    g_free(wsc);
+    g_free(gsc);
 }
 
 // One coupon on the 40 degree wedge: capture (9 angles, each lamp alone,
@@ -254,11 +275,13 @@ static json_t *fit_coupon(const char *rig, const char *cal, const char *sample, 
     CHECK_MSG(rc == 0, "%s: %s", sample, err);
     g_free(out);
     g_free(err);
+    char *sc = sample_scene(sample);
     if (cells)
-        rc = test_refl_run(300, &out, &err, "fit", "material", sd, "--calib", cal, "-o", pj, "--albedo-cells", "2",
-                           "--window", "3", "--step", "4", NULL);
+        rc = test_refl_run(300, &out, &err, "fit", "material", sd, "--scene", sc, "--calib", cal, "-o", pj,
+                           "--albedo-cells", "2", "--window", "3", "--step", "4", NULL);
     else
-        rc = test_refl_run(300, &out, &err, "fit", "material", sd, "--calib", cal, "-o", pj, NULL);
+        rc = test_refl_run(300, &out, &err, "fit", "material", sd, "--scene", sc, "--calib", cal, "-o", pj, NULL);
+    g_free(sc);
     CHECK_MSG(rc == 0, "%s: %s", sample, err);
     if (cells) CHECK_CONTAINS(out, "albedo cells of 2 mm: ");
     // with a gain calibration: the response compression it measured, against the truth's
@@ -352,7 +375,9 @@ TEST(fit_material_coupons_virtual_rig)
     CHECK_MSG(rc == 0, "%s", err);
     g_free(out);
     g_free(err);
-    rc = test_refl_run(300, &out, &err, "calib", "white", ws, "--calib", cal, "-o", wj, NULL);
+    char *wsc = sample_scene("reference_white");
+    rc = test_refl_run(300, &out, &err, "calib", "white", ws, "--calib", cal, "--scene", wsc, "-o", wj, NULL);
+    g_free(wsc);
     CHECK_MSG(rc == 0, "%s", err);
     g_free(out);
     g_free(err);
