@@ -49,8 +49,9 @@ LDLIBS_ALL   = $(PKG_LIBS) $(LIBS_NOPC) -lm
 MODEL_SRC := model/util.c model/ini.c model/scene.c model/config.c model/brdf.c model/brdf_batch.c \
              model/camera.c model/trace.c model/shade.c model/sensor.c \
              model/image.c model/edges.c model/workpiece.c model/report.c model/opts.c model/cmd.c
-RIG_SRC   := rig/rig.c rig/turntable_apt.c rig/turntable_sim.c rig/lamps.c \
-             rig/camera_aravis.c rig/gv_camera.c rig/virtual.c rig/config.c rig/cmd_rig.c \
+RIG_SRC   := rig/error.c rig/turntable.c rig/turntable_apt.c rig/turntable_sim.c \
+             rig/lamps.c rig/lamps_gpiod.c rig/lamps_sim.c \
+             rig/camera.c rig/camera_aravis.c rig/gv_camera.c rig/virtual.c rig/config.c rig/cmd_rig.c \
              rig/plan.c rig/journal.c rig/session.c rig/capture.c rig/cmd_capture.c
 CALIB_SRC := calib/capture.c calib/cmd_calib.c calib/geometry.c calib/lamps.c calib/gain.c
 FIT_SRC   := fit/brdf_fit.c fit/material.c fit/cmd_fit.c fit/verify.c fit/verify_lab.c fit/verify_study.c fit/cmd_verify.c fit/lightplan.c fit/cmd_plan.c

@@ -153,7 +153,7 @@ static int write_frame(writer_t *w, job_t *jb)
              m->bits);
     model_meta_add(meta, "session_step", "%d", jb->step.index);
     model_meta_add(meta, "step_kind", "%s", jb->step.kind == RIG_STEP_DARK ? "dark" : "light");
-    model_meta_add(meta, "camera", "%s", w->rig->camera->name);
+    model_meta_add(meta, "camera", "%s", rig_camera_name(w->rig->camera));
     model_meta_add(meta, "camera_serial", "%s", m->serial);
     model_meta_add(meta, "frame_id", "%llu", (unsigned long long)m->frame_id);
     model_meta_add(meta, "exposure_us", "%.10g", m->exposure_us);
@@ -213,8 +213,8 @@ static int write_frame(writer_t *w, job_t *jb)
     row.frame_id = m->frame_id;
     rc = rig_journal_frame_done(w->j, &row);
     if (rc) {
-        w->disk_full = strstr(rig_last_error(), "full") != NULL;
-        snprintf(w->msg, sizeof w->msg, "%s%s", w->disk_full ? "disk full: " : "", rig_last_error());
+        w->disk_full = strstr(model_last_error(), "full") != NULL;
+        snprintf(w->msg, sizeof w->msg, "%s%s", w->disk_full ? "disk full: " : "", model_last_error());
         unlink(part);
         goto done;
     }
@@ -338,8 +338,8 @@ static char *session_facts(rig_t *r, const rig_plan_t *p, const char *cmdline, j
     rig_frame_meta_t m;
     if (r->camera && rig_camera_settings(r->camera, &m) == 0) {
         json_t *c = json_object();
-        json_object_set_new(c, "name", json_string(r->camera->name));
-        json_object_set_new(c, "backend", json_string(r->camera->ops->backend));
+        json_object_set_new(c, "name", json_string(rig_camera_name(r->camera)));
+        json_object_set_new(c, "backend", json_string(rig_camera_backend(r->camera)));
         json_object_set_new(c, "vendor", json_string(m.vendor));
         json_object_set_new(c, "model", json_string(m.model));
         json_object_set_new(c, "serial", json_string(m.serial));
@@ -357,7 +357,7 @@ static char *session_facts(rig_t *r, const rig_plan_t *p, const char *cmdline, j
     rig_turntable_info_t ti;
     if (r->turntable && rig_turntable_info(r->turntable, &ti) == 0) {
         json_t *t = json_object();
-        json_object_set_new(t, "name", json_string(r->turntable->name));
+        json_object_set_new(t, "name", json_string(rig_turntable_name(r->turntable)));
         json_object_set_new(t, "model", json_string(ti.model));
         json_object_set_new(t, "serial", json_string(ti.serial));
         json_object_set_new(t, "firmware", json_string(ti.firmware));
@@ -366,12 +366,12 @@ static char *session_facts(rig_t *r, const rig_plan_t *p, const char *cmdline, j
         json_object_set_new(o, "turntable", t);
     }
     json_t *l = json_array();
-    for (int i = 0; r->lamps && i < r->lamps->n; i++) {
+    for (int i = 0; r->lamps && i < rig_lamps_count(r->lamps); i++) {
         json_t *a = json_object();
-        json_object_set_new(a, "name", json_string(r->lamps->lamps[i].name));
-        json_object_set_new(a, "backend", json_string(r->lamps->ops->backend));
-        json_object_set_new(a, "warmup_ms", json_real(r->lamps->lamps[i].warmup_ms));
-        json_object_set_new(a, "settle_ms", json_real(r->lamps->lamps[i].settle_ms));
+        json_object_set_new(a, "name", json_string(rig_lamps_name(r->lamps, i)));
+        json_object_set_new(a, "backend", json_string(rig_lamps_backend(r->lamps)));
+        json_object_set_new(a, "warmup_ms", json_real(rig_lamps_line(r->lamps, i)->warmup_ms));
+        json_object_set_new(a, "settle_ms", json_real(rig_lamps_line(r->lamps, i)->settle_ms));
         json_array_append_new(l, a);
     }
     json_object_set_new(o, "lamps", l);
@@ -667,7 +667,7 @@ int rig_capture_run(const rig_capture_opts_t *o)
         rig_turntable_status_t st;
         if ((rc = rig_turntable_status(r->turntable, &st))) goto fault_tt;
         if (!st.homed) {
-            fprintf(stderr, "refl capture: homing %s\n", r->turntable->name);
+            fprintf(stderr, "refl capture: homing %s\n", rig_turntable_name(r->turntable));
             double tmo = 1.5 * (isfinite(r->home_time_s) ? r->home_time_s : 120) + 5;
             if ((rc = rig_turntable_home(r->turntable, tmo))) goto fault_tt;
         }
@@ -684,7 +684,7 @@ int rig_capture_run(const rig_capture_opts_t *o)
     while (first < p->nsteps && status[first] != 'p') first++;
     pg.done0 = first;
     double floor_s = 0, angle = NAN, t_start = model_now_s();
-    uint32_t mask = r->lamps ? r->lamps->on_mask : 0;
+    uint32_t mask = r->lamps ? rig_lamps_on_mask(r->lamps) : 0;
     double cur_exposure = cam.exposure_us;
     // auto bracketing: the groups already satisfied (a frame at or below target)
     int ngroups = 0;
@@ -739,7 +739,7 @@ int rig_capture_run(const rig_capture_opts_t *o)
         if (r->lamps && s->lamp_mask != mask) {
             lamp_t = rig_lamps_settle_s(r->lamps, mask, s->lamp_mask) + 1e-3 * p->lamp_settle_ms;
             if ((rc = rig_lamps_set(r->lamps, s->lamp_mask))) {
-                snprintf(msg, sizeof msg, "lamps: %s", rig_last_error());
+                snprintf(msg, sizeof msg, "lamps: %s", model_last_error());
                 fault_stop(r, j, step, "fault", "fault", msg);
                 goto done;
             }
@@ -761,7 +761,7 @@ int rig_capture_run(const rig_capture_opts_t *o)
             if (!rc) break;
             if (rc != RIG_ERR_TIMEOUT || tries >= p->retries || g_sigint) break;
             tries++;
-            rig_journal_event(j, step, "retry", "camera time-out (%s): retry %d of %d", rig_last_error(), tries,
+            rig_journal_event(j, step, "retry", "camera time-out (%s): retry %d of %d", model_last_error(), tries,
                               p->retries);
             fprintf(stderr, "refl capture: camera time-out at step %d: retry %d of %d\n", step, tries, p->retries);
         }
@@ -769,8 +769,8 @@ int rig_capture_run(const rig_capture_opts_t *o)
             free(jb);
             if (rc == RIG_ERR_TIMEOUT || rc == RIG_ERR_DISCONNECTED) {
                 snprintf(msg, sizeof msg, "camera %s did not answer at step %d after %d retries (%s): session paused; "
-                         "check the camera's cable and power, then refl capture --resume %s", r->camera->name, step,
-                         tries, rig_last_error(), o->dir);
+                         "check the camera's cable and power, then refl capture --resume %s", rig_camera_name(r->camera), step,
+                         tries, model_last_error(), o->dir);
                 fault_stop(r, j, step, "paused", "pause", msg);
                 paused = 2;
                 break;
@@ -838,7 +838,7 @@ int rig_capture_run(const rig_capture_opts_t *o)
 
 fault_tt:
     snprintf(msg, sizeof msg, "turntable fault at step %d: %s: session stopped, lamps off; after fixing the stage, "
-             "refl capture --resume %s", step, rig_last_error(), o->dir);
+             "refl capture --resume %s", step, model_last_error(), o->dir);
     if (r && r->turntable) {
         bool q = model_error_quiet_thread(true);
         rig_turntable_stop(r->turntable, true);
@@ -849,7 +849,7 @@ fault_tt:
     goto done;
 fault_cam:
     snprintf(msg, sizeof msg, "camera fault at step %d: %s: session stopped, lamps off; refl capture --resume %s",
-             step, rig_last_error(), o->dir);
+             step, model_last_error(), o->dir);
     if (j) fault_stop(r, j, step, "fault", "fault", msg);
     rig_fail(rc, "refl capture: %s", msg);
 done:
@@ -861,7 +861,7 @@ done:
         pthread_join(wt, NULL);
     }
     if (sig_installed) sigaction(SIGINT, &g_old_int, NULL);
-    if (r && r->lamps && r->lamps->on_mask) {
+    if (r && r->lamps && rig_lamps_on_mask(r->lamps)) {
         bool q = model_error_quiet_thread(true);
         rig_lamps_all_off(r->lamps);
         model_error_quiet_thread(q);

@@ -229,8 +229,8 @@ static void lamp_names(const rig_lamps_t *l, uint32_t mask, char *out, size_t si
 {
     size_t n = 0;
     out[0] = 0;
-    for (int i = 0; l && i < l->n && n < size; i++)
-        if (mask & (1u << i)) n += (size_t)snprintf(out + n, size - n, "%s%s", n ? "," : "", l->lamps[i].name);
+    for (int i = 0; l && i < rig_lamps_count(l) && n < size; i++)
+        if (mask & (1u << i)) n += (size_t)snprintf(out + n, size - n, "%s%s", n ? "," : "", rig_lamps_name(l, i));
     if (!out[0]) snprintf(out, size, "none");
 }
 
@@ -241,11 +241,11 @@ static int lamps_mask(const rig_t *r, const char *spec, uint32_t *mask)
     if (!spec || !strcmp(spec, "none")) return 0;
     const rig_lamps_t *l = r->lamps;
     if (!strcmp(spec, "all")) {
-        *mask = !l ? 0 : l->n >= 32 ? 0xffffffffu : ((uint32_t)1 << l->n) - 1;
+        *mask = !l ? 0 : rig_lamps_count(l) >= 32 ? 0xffffffffu : ((uint32_t)1 << rig_lamps_count(l)) - 1;
         return 0;
     }
     char known[1024];
-    lamp_names(l, l ? (l->n >= 32 ? 0xffffffffu : ((uint32_t)1 << l->n) - 1) : 0, known, sizeof known);
+    lamp_names(l, l ? (rig_lamps_count(l) >= 32 ? 0xffffffffu : ((uint32_t)1 << rig_lamps_count(l)) - 1) : 0, known, sizeof known);
     gchar **names = g_strsplit(spec, ",", -1);
     int rc = 0;
     for (int i = 0; names[i]; i++) {
@@ -269,11 +269,11 @@ static int move_to(rig_t *r, double angle_deg)
     int rc = rig_turntable_status(r->turntable, &st);
     if (rc) return rc;
     if (!st.homed) {
-        fprintf(stderr, "refl rig: %s is not homed: homing first\n", r->turntable->name);
+        fprintf(stderr, "refl rig: %s is not homed: homing first\n", rig_turntable_name(r->turntable));
         if ((rc = rig_turntable_home(r->turntable, home_timeout_s(r)))) return rc;
         if ((rc = rig_turntable_status(r->turntable, &st))) return rc;
     }
-    fprintf(stderr, "refl rig: moving %s from %.3f to %.3f deg\n", r->turntable->name, st.angle_deg, angle_deg);
+    fprintf(stderr, "refl rig: moving %s from %.3f to %.3f deg\n", rig_turntable_name(r->turntable), st.angle_deg, angle_deg);
     return rig_turntable_move_abs_deg(r->turntable, angle_deg, move_timeout_s(r, angle_deg - st.angle_deg));
 }
 
@@ -302,17 +302,17 @@ static int do_status(rig_t *r)
         rig_turntable_status_t st;
         if ((rc = rig_turntable_status(r->turntable, &st))) return rc;
         printf("turntable: %s\nturntable_angle_deg: %.4f\nturntable_homed: %s\nturntable_moving: %s\n",
-               r->turntable->name, st.angle_deg, yes_no(st.homed), yes_no(st.moving || st.homing));
+               rig_turntable_name(r->turntable), st.angle_deg, yes_no(st.homed), yes_no(st.moving || st.homing));
         if (st.motion_error || st.limit_fwd || st.limit_rev)
             printf("turntable_faults: %s%s%s\n", st.motion_error ? "motion-error " : "",
                    st.limit_fwd ? "limit-forward " : "", st.limit_rev ? "limit-reverse" : "");
     } else {
         printf("turntable: none\n");
     }
-    if (r->lamps && r->lamps->n > 0) {
-        for (int i = 0; i < r->lamps->n; i++)
-            printf("lamp %s: %s (%s)\n", r->lamps->lamps[i].name, (r->lamps->on_mask >> i) & 1 ? "on" : "off",
-                   r->lamps->ops->backend);
+    if (r->lamps && rig_lamps_count(r->lamps) > 0) {
+        for (int i = 0; i < rig_lamps_count(r->lamps); i++)
+            printf("lamp %s: %s (%s)\n", rig_lamps_name(r->lamps, i), (rig_lamps_on_mask(r->lamps) >> i) & 1 ? "on" : "off",
+                   rig_lamps_backend(r->lamps));
     } else {
         printf("lamps: none\n");
     }
@@ -322,7 +322,7 @@ static int do_status(rig_t *r)
         printf("camera: %s\ncamera_vendor: %s\ncamera_model: %s\ncamera_serial: %s\n"
                "camera_pixel_format: %s (%d bits)\ncamera_region: %d x %d at (%d, %d)\n"
                "camera_exposure_us: %.6g\ncamera_gain: %.6g\n",
-               r->camera->name, m.vendor, m.model, m.serial, m.pixel_format, m.bits, m.width, m.height, m.offset_x,
+               rig_camera_name(r->camera), m.vendor, m.model, m.serial, m.pixel_format, m.bits, m.width, m.height, m.offset_x,
                m.offset_y, m.exposure_us, m.gain);
         if (isfinite(m.temperature_c)) printf("camera_temperature_c: %.2f\n", m.temperature_c);
         else printf("camera_temperature_c: none (the camera has no sensor)\n");
@@ -341,7 +341,7 @@ static int do_identify(rig_t *r)
         if ((rc = rig_turntable_info(r->turntable, &in))) return rc;
         printf("turntable: %s\nturntable_backend: %s\nturntable_model: %s\nturntable_serial: %s\n"
                "turntable_firmware: %s\nturntable_counts_per_deg: %.6g\n",
-               r->turntable->name, r->turntable->ops->backend, in.model, in.serial, in.firmware, in.counts_per_deg);
+               rig_turntable_name(r->turntable), rig_turntable_backend(r->turntable), in.model, in.serial, in.firmware, in.counts_per_deg);
     } else {
         printf("turntable: none\n");
     }
@@ -350,18 +350,18 @@ static int do_identify(rig_t *r)
         if ((rc = rig_camera_settings(r->camera, &m))) return rc;
         printf("camera: %s\ncamera_backend: %s\ncamera_vendor: %s\ncamera_model: %s\ncamera_serial: %s\n"
                "camera_sensor_region: %d x %d\n",
-               r->camera->name, r->camera->ops->backend, m.vendor, m.model, m.serial, m.width, m.height);
+               rig_camera_name(r->camera), rig_camera_backend(r->camera), m.vendor, m.model, m.serial, m.width, m.height);
     } else {
         printf("camera: none\n");
     }
-    if (r->lamps && r->lamps->n > 0) {
-        for (int i = 0; i < r->lamps->n; i++) {
-            const rig_lamp_line_t *a = &r->lamps->lamps[i];
-            if (!strcmp(r->lamps->ops->backend, "gpiod"))
+    if (r->lamps && rig_lamps_count(r->lamps) > 0) {
+        for (int i = 0; i < rig_lamps_count(r->lamps); i++) {
+            const rig_lamp_line_t *a = rig_lamps_line(r->lamps, i);
+            if (!strcmp(rig_lamps_backend(r->lamps), "gpiod"))
                 printf("lamp %s: gpiod %s line %u %s, warm-up %g ms, settle %g ms\n", a->name, a->chip, a->line,
                        a->active_low ? "active-low" : "active-high", a->warmup_ms, a->settle_ms);
             else
-                printf("lamp %s: %s%s, warm-up %g ms, settle %g ms\n", a->name, r->lamps->ops->backend,
+                printf("lamp %s: %s%s, warm-up %g ms, settle %g ms\n", a->name, rig_lamps_backend(r->lamps),
                        r->virt ? " (virtual rig)" : "", a->warmup_ms, a->settle_ms);
         }
     } else {
@@ -436,7 +436,7 @@ static int do_snap(rig_t *r, const snap_t *o, const char *cmdline)
              "unscaled");
     model_meta_add(meta, "pixel_convention", "row-major, (0,0) is the top-left pixel of the region, x to the right, "
              "y down");
-    model_meta_add(meta, "camera", "%s", r->camera->name);
+    model_meta_add(meta, "camera", "%s", rig_camera_name(r->camera));
     model_meta_add(meta, "camera_vendor", "%s", m->vendor);
     model_meta_add(meta, "camera_model", "%s", m->model);
     model_meta_add(meta, "camera_serial", "%s", m->serial);
@@ -495,7 +495,7 @@ static int do_snap(rig_t *r, const snap_t *o, const char *cmdline)
     printf(", lamps on: %s\n", on_names);
     printf("  pixels (DN): min %u  mean %.1f  max %u\n", lo, n ? sum / (double)n : 0.0, hi);
 done:
-    if (r->lamps && r->lamps->on_mask) {
+    if (r->lamps && rig_lamps_on_mask(r->lamps)) {
         bool q = model_error_quiet_thread(true);
         rig_lamps_all_off(r->lamps);
         model_error_quiet_thread(q);
@@ -597,7 +597,7 @@ int rig_cmd(int argc, char **argv)
         rc = do_identify(r);
     } else if (!strcmp(action, "home")) {
         if (!(rc = need_turntable(r, "home"))) {
-            fprintf(stderr, "refl rig: homing %s\n", r->turntable->name);
+            fprintf(stderr, "refl rig: homing %s\n", rig_turntable_name(r->turntable));
             rc = rig_turntable_home(r->turntable, home_timeout_s(r));
         }
         rig_turntable_status_t st;

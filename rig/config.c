@@ -71,7 +71,7 @@ static int cfg_fail(const spec_t *s, int line, const char *fmt, ...)
 static int device_fail(int rc, const spec_t *s, int line, const char *section)
 {
     char msg[1200];
-    snprintf(msg, sizeof msg, "%s", rig_last_error());
+    snprintf(msg, sizeof msg, "%s", model_last_error());
     return rig_fail(rc, "%s:%d: [%s]: %s", s->path, line, section, msg);
 }
 
@@ -646,7 +646,7 @@ void rig_close(rig_t *r)
     if (!r) return;
     bool q = model_error_quiet_thread(true);   // closing after an error must not overwrite its message
     char keep[1536];
-    snprintf(keep, sizeof keep, "%s", rig_last_error());
+    snprintf(keep, sizeof keep, "%s", model_last_error());
     if (r->lamps) rig_lamps_all_off(r->lamps);
     if (r->turntable) {
         rig_turntable_status_t st;

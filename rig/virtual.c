@@ -105,6 +105,7 @@
 
 #include "model/model.h"
 #include "rig/gv_camera.h"
+#include "rig/internal.h"
 #include "rig/rig.h"
 
 #define NPLANES  12   // cached radiance images (5 MB each at 1280x1024)
