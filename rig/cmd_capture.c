@@ -183,28 +183,9 @@ static int session_export(const char *dir, const char *format, const char *out)
         goto done;
     }
     if (!strcmp(format, "csv")) {
-        fprintf(f, "step,file,sha256,t_trigger_utc_s,t_written_utc_s,commanded_deg,measured_deg,lamps,exposure_us,"
-                   "gain,mean,max,roi_max,saturated_fraction,width,height,pixel_format,frame_id\n");
-        for (int i = 0; i < n; i++) {
-            const rig_frame_row_t *r = &rows[i];
-            fprintf(f, "%d,%s,%s,%.6f,%.6f,%.10g,%.6f,%s,%.10g,%.10g,%.4f,%.0f,%.0f,%.8g,%d,%d,%s,%llu\n", r->step,
-                    r->file, r->sha256, r->t_trigger_utc_s, r->t_written_utc_s, r->commanded_deg, r->measured_deg,
-                    r->lamps, r->exposure_us, r->gain, r->mean, r->max, r->roi_max, r->saturated_fraction, r->width,
-                    r->height, r->pixel_format, (unsigned long long)r->frame_id);
-        }
+        rig_frame_rows_write_csv(f, rows, n);
     } else {
-        json_t *a = json_array();
-        for (int i = 0; i < n; i++) {
-            const rig_frame_row_t *r = &rows[i];
-            json_t *o = json_pack("{s:i,s:s,s:s,s:f,s:f,s:f,s:f,s:s,s:f,s:f,s:f,s:f,s:f,s:f,s:i,s:i,s:s,s:I}", "step",
-                                  r->step, "file", r->file, "sha256", r->sha256, "t_trigger_utc_s", r->t_trigger_utc_s,
-                                  "t_written_utc_s", r->t_written_utc_s, "commanded_deg", r->commanded_deg,
-                                  "measured_deg", r->measured_deg, "lamps", r->lamps, "exposure_us", r->exposure_us,
-                                  "gain", r->gain, "mean", r->mean, "max", r->max, "roi_max", r->roi_max,
-                                  "saturated_fraction", r->saturated_fraction, "width", r->width, "height", r->height,
-                                  "pixel_format", r->pixel_format, "frame_id", (json_int_t)r->frame_id);
-            json_array_append_new(a, o);
-        }
+        json_t *a = rig_frame_rows_json(rows, n);
         json_dumpf(a, f, JSON_INDENT(1));
         fputc('\n', f);
         json_decref(a);

@@ -5,6 +5,7 @@
 #include <stdbool.h>
 #include <stddef.h>
 #include <stdint.h>
+#include <stdio.h>
 
 #include <jansson.h>
 
@@ -116,19 +117,50 @@ double rig_plan_floor_s(const rig_plan_t *p, const rig_t *r, int from_step);
 // The journal: DIR/session.sqlite (WAL, one transaction per frame).
 typedef struct rig_journal rig_journal_t;
 
+// The frame table: one list for the rig_frame_row_t fields, the journal's
+// frames table (CREATE / INSERT / SELECT) and `refl session export` (CSV and
+// JSON, in this order):
+//   _(KIND, field, "column", "column declaration", "CSV format", text size)
+// KIND: INT (int), REAL (double), TEXT (char field[size]), U64 (uint64_t),
+// UTC (a column only: the UTC text of the REAL field `field`, for people
+// reading the database; not in the struct, not exported).
+#define RIG_FRAME_COLUMNS(_)                                                                          \
+    _(INT,  step,               "step",               "INTEGER PRIMARY KEY REFERENCES steps(idx)", "%d", 0) \
+    _(TEXT, file,               "file",               "TEXT UNIQUE NOT NULL", "%s",   64) /* relative to the session directory */ \
+    _(TEXT, sha256,             "sha256",             "TEXT NOT NULL",        "%s",   65) \
+    _(UTC,  t_trigger_utc_s,    "t_trigger_utc",      "TEXT",                 "",     0)  \
+    _(UTC,  t_written_utc_s,    "t_written_utc",      "TEXT",                 "",     0)  \
+    _(REAL, t_trigger_utc_s,    "t_trigger_s",        "REAL",                 "%.6f", 0)  \
+    _(REAL, t_written_utc_s,    "t_written_s",        "REAL",                 "%.6f", 0)  \
+    _(REAL, commanded_deg,      "commanded_deg",      "REAL",                 "%.10g", 0) \
+    _(REAL, measured_deg,       "measured_deg",       "REAL",                 "%.6f", 0)  \
+    _(TEXT, lamps,              "lamps",              "TEXT",                 "%s",   256) \
+    _(REAL, exposure_us,        "exposure_us",        "REAL",                 "%.10g", 0) \
+    _(REAL, gain,               "gain",               "REAL",                 "%.10g", 0) \
+    _(REAL, mean,               "mean",               "REAL",                 "%.4f", 0)  \
+    _(REAL, max,                "max",                "REAL",                 "%.0f", 0)  \
+    _(REAL, roi_max,            "roi_max",            "REAL",                 "%.0f", 0)  \
+    _(REAL, saturated_fraction, "saturated_fraction", "REAL",                 "%.8g", 0)  \
+    _(INT,  width,              "width",              "INTEGER",              "%d",   0)  \
+    _(INT,  height,             "height",             "INTEGER",              "%d",   0)  \
+    _(TEXT, pixel_format,       "pixel_format",       "TEXT",                 "%s",   16) \
+    _(U64,  frame_id,           "frame_id",           "INTEGER",              "%llu", 0)
+
+#define RIG_FRAME_FIELD_INT(name, size)  int name;
+#define RIG_FRAME_FIELD_REAL(name, size) double name;
+#define RIG_FRAME_FIELD_TEXT(name, size) char name[size];
+#define RIG_FRAME_FIELD_U64(name, size)  uint64_t name;
+#define RIG_FRAME_FIELD_UTC(name, size)
+#define RIG_FRAME_FIELD_(kind, name, column, decl, csv, size) RIG_FRAME_FIELD_##kind(name, size)
+
 typedef struct {
-    int      step;
-    char     file[64];              // relative to the session directory
-    char     sha256[65];
-    double   t_trigger_utc_s, t_written_utc_s;
-    double   commanded_deg, measured_deg;
-    char     lamps[256];
-    double   exposure_us, gain;
-    double   mean, max, roi_max, saturated_fraction;
-    int      width, height;
-    char     pixel_format[16];
-    uint64_t frame_id;
+    RIG_FRAME_COLUMNS(RIG_FRAME_FIELD_)
 } rig_frame_row_t;
+
+// `refl session export`: the rows as CSV (a header line with the field names,
+// then one line per row) or as a JSON array of objects (NULL: out of memory).
+void    rig_frame_rows_write_csv(FILE *f, const rig_frame_row_t *rows, int n);
+json_t *rig_frame_rows_json(const rig_frame_row_t *rows, int n);
 
 // Create DIR/session.sqlite (fails when it exists) with the session and every
 // step pending. session_json: a JSON object of session facts (camera serials,
