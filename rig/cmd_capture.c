@@ -1,6 +1,6 @@
 // rig/cmd_capture.c — `refl capture` (run, dry-run or resume a capture
 // session) and `refl session` (check, export). Usage errors exit 2, runtime
-// errors 1, a paused session 3 (see rig/rig.h, "Capture sessions").
+// errors 1, a paused session 3 (see rig/session.h).
 #define _GNU_SOURCE
 #include <errno.h>
 #include <glib.h>
@@ -18,7 +18,7 @@ static const char capture_about[] =
     "also:  refl capture PLAN.ini --rig RIG.ini --dry-run\n"
     "       refl capture --resume DIR [--rig RIG.ini] [--allow-changed]\n"
     "\n"
-    "Runs the plan (see examples/plans/ and rig/rig.h) into the session directory DIR: a SQLite\n"
+    "Runs the plan (see examples/plans/ and rig/session.h) into the session directory DIR: a SQLite\n"
     "journal (session.sqlite) and 16-bit PNG frames (frames/). --dry-run prints the steps, the\n"
     "estimated duration and disk use and checks the plan against the rig; nothing moves.\n"
     "--calib DIR records the calibrations in use (their paths and sha256) in the session.\n"

@@ -71,7 +71,8 @@ static int check_action(model_cli_t *c)
 #define RIG_OPT_ACTIONS_(name, metavar, help, required, actions) actions,
     static const char *const opt_actions[] = { RIG_OPTS(RIG_OPT_ACTIONS_) };
 #undef RIG_OPT_ACTIONS_
-    if (c->npositional < 1) return model_cli_error(c, "missing action: status, home, move DEG, identify, snap or serve");
+    if (c->npositional < 1)
+        return model_cli_error(c, "missing action: status, home, move DEG, identify, snap or serve");
     const char *action = c->positional[0];
     static const char *const actions[] = { "status", "home", "move", "identify", "snap", "serve" };
     bool known = false;
@@ -135,7 +136,8 @@ static int lamps_mask(const rig_t *r, const char *spec, uint32_t *mask)
         return 0;
     }
     char known[1024];
-    lamp_names(l, l ? (rig_lamps_count(l) >= 32 ? 0xffffffffu : ((uint32_t)1 << rig_lamps_count(l)) - 1) : 0, known, sizeof known);
+    int nl = rig_lamps_count(l);
+    lamp_names(l, nl >= 32 ? 0xffffffffu : ((uint32_t)1 << nl) - 1, known, sizeof known);
     gchar **names = g_strsplit(spec, ",", -1);
     int rc = 0;
     for (int i = 0; names[i]; i++) {
@@ -163,7 +165,8 @@ static int move_to(rig_t *r, double angle_deg)
         if ((rc = rig_turntable_home(r->turntable, home_timeout_s(r)))) return rc;
         if ((rc = rig_turntable_status(r->turntable, &st))) return rc;
     }
-    fprintf(stderr, "refl rig: moving %s from %.3f to %.3f deg\n", rig_turntable_name(r->turntable), st.angle_deg, angle_deg);
+    fprintf(stderr, "refl rig: moving %s from %.3f to %.3f deg\n", rig_turntable_name(r->turntable), st.angle_deg,
+            angle_deg);
     return rig_turntable_move_abs_deg(r->turntable, angle_deg, move_timeout_s(r, angle_deg - st.angle_deg));
 }
 
@@ -201,8 +204,8 @@ static int do_status(rig_t *r)
     }
     if (r->lamps && rig_lamps_count(r->lamps) > 0) {
         for (int i = 0; i < rig_lamps_count(r->lamps); i++)
-            printf("lamp %s: %s (%s)\n", rig_lamps_name(r->lamps, i), (rig_lamps_on_mask(r->lamps) >> i) & 1 ? "on" : "off",
-                   rig_lamps_backend(r->lamps));
+            printf("lamp %s: %s (%s)\n", rig_lamps_name(r->lamps, i),
+                   (rig_lamps_on_mask(r->lamps) >> i) & 1 ? "on" : "off", rig_lamps_backend(r->lamps));
     } else {
         printf("lamps: none\n");
     }
@@ -212,8 +215,8 @@ static int do_status(rig_t *r)
         printf("camera: %s\ncamera_vendor: %s\ncamera_model: %s\ncamera_serial: %s\n"
                "camera_pixel_format: %s (%d bits)\ncamera_region: %d x %d at (%d, %d)\n"
                "camera_exposure_us: %.6g\ncamera_gain: %.6g\n",
-               rig_camera_name(r->camera), m.vendor, m.model, m.serial, m.pixel_format, m.bits, m.width, m.height, m.offset_x,
-               m.offset_y, m.exposure_us, m.gain);
+               rig_camera_name(r->camera), m.vendor, m.model, m.serial, m.pixel_format, m.bits, m.width, m.height,
+               m.offset_x, m.offset_y, m.exposure_us, m.gain);
         if (isfinite(m.temperature_c)) printf("camera_temperature_c: %.2f\n", m.temperature_c);
         else printf("camera_temperature_c: none (the camera has no sensor)\n");
     } else {
@@ -231,7 +234,8 @@ static int do_identify(rig_t *r)
         if ((rc = rig_turntable_info(r->turntable, &in))) return rc;
         printf("turntable: %s\nturntable_backend: %s\nturntable_model: %s\nturntable_serial: %s\n"
                "turntable_firmware: %s\nturntable_counts_per_deg: %.6g\n",
-               rig_turntable_name(r->turntable), rig_turntable_backend(r->turntable), in.model, in.serial, in.firmware, in.counts_per_deg);
+               rig_turntable_name(r->turntable), rig_turntable_backend(r->turntable), in.model, in.serial, in.firmware,
+               in.counts_per_deg);
     } else {
         printf("turntable: none\n");
     }
@@ -240,7 +244,8 @@ static int do_identify(rig_t *r)
         if ((rc = rig_camera_settings(r->camera, &m))) return rc;
         printf("camera: %s\ncamera_backend: %s\ncamera_vendor: %s\ncamera_model: %s\ncamera_serial: %s\n"
                "camera_sensor_region: %d x %d\n",
-               rig_camera_name(r->camera), rig_camera_backend(r->camera), m.vendor, m.model, m.serial, m.width, m.height);
+               rig_camera_name(r->camera), rig_camera_backend(r->camera), m.vendor, m.model, m.serial, m.width,
+               m.height);
     } else {
         printf("camera: none\n");
     }

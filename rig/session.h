@@ -123,10 +123,11 @@ typedef struct rig_journal rig_journal_t;
 //   _(KIND, field, "column", "column declaration", "CSV format", text size)
 // KIND: INT (int), REAL (double), TEXT (char field[size]), U64 (uint64_t),
 // UTC (a column only: the UTC text of the REAL field `field`, for people
-// reading the database; not in the struct, not exported).
-#define RIG_FRAME_COLUMNS(_)                                                                          \
+// reading the database; not in the struct, not exported). `file` is relative
+// to the session directory.
+#define RIG_FRAME_COLUMNS(_)                                                                    \
     _(INT,  step,               "step",               "INTEGER PRIMARY KEY REFERENCES steps(idx)", "%d", 0) \
-    _(TEXT, file,               "file",               "TEXT UNIQUE NOT NULL", "%s",   64) /* relative to the session directory */ \
+    _(TEXT, file,               "file",               "TEXT UNIQUE NOT NULL", "%s",   64)  \
     _(TEXT, sha256,             "sha256",             "TEXT NOT NULL",        "%s",   65) \
     _(UTC,  t_trigger_utc_s,    "t_trigger_utc",      "TEXT",                 "",     0)  \
     _(UTC,  t_written_utc_s,    "t_written_utc",      "TEXT",                 "",     0)  \
