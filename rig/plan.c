@@ -30,12 +30,7 @@ static const model_ini_entry_t *get(const model_ini_t *ini, const char *sec, con
     return model_ini_get(ini, sec, key);
 }
 
-static int sec_line(const model_ini_t *ini, const char *sec)
-{
-    for (int i = 0; i < ini->nsections; i++)
-        if (!strcmp(ini->sections[i], sec)) return ini->section_lines[i];
-    return 0;
-}
+static int sec_line(const model_ini_t *ini, const char *sec) { return model_ini_section_line(ini, sec); }
 
 // Numbers of a list value; false (reported) on a bad one.
 static bool parse_numbers(const model_ini_t *ini, const model_ini_entry_t *e, double **out, int *n)
@@ -62,18 +57,14 @@ static bool parse_numbers(const model_ini_t *ini, const model_ini_entry_t *e, do
     return ok;
 }
 
+// An optional number in [lo, hi] (a whole number when integer); absent keeps *v.
 static bool get_number(const model_ini_t *ini, const char *sec, const char *key, double *v, double lo,
                        double hi, bool integer)
 {
+    if (!model_ini_double_in(ini, sec, key, v, false, lo, false, hi, NULL)) return false;
     const model_ini_entry_t *e = get(ini, sec, key);
-    if (!e) return true;
-    if (!model_parse_double(e->value, v) || (integer && *v != floor(*v))) {
-        model_error(ini->path, e->line, "[%s] %s = '%s' is not %s", sec, key, e->value,
-                    integer ? "a whole number" : "a number");
-        return false;
-    }
-    if (!(*v >= lo && *v <= hi)) {
-        model_error(ini->path, e->line, "[%s] %s = %s is out of range (%g .. %g)", sec, key, e->value, lo, hi);
+    if (e && integer && *v != floor(*v)) {
+        model_error(ini->path, e->line, "[%s] %s = '%s' is not a whole number", sec, key, e->value);
         return false;
     }
     return true;
@@ -81,8 +72,7 @@ static bool get_number(const model_ini_t *ini, const char *sec, const char *key,
 
 static void copy_text(const model_ini_t *ini, const char *sec, const char *key, char *out, size_t size)
 {
-    const model_ini_entry_t *e = get(ini, sec, key);
-    snprintf(out, size, "%s", e ? e->value : "");
+    snprintf(out, size, "%s", model_ini_text(ini, sec, key, ""));
 }
 
 static int cmp_desc(const void *a, const void *b)
