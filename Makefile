@@ -46,33 +46,106 @@ LDFLAGS_ALL  = -pthread $(EXTRA_LDFLAGS)
 LDLIBS_ALL   = $(PKG_LIBS) $(LIBS_NOPC) -lm
 
 # ---- sources (explicit lists) ---------------------------------------------
-MODEL_SRC := model/util.c model/ini.c model/scene.c model/config.c model/brdf.c model/brdf_batch.c \
-             model/camera.c model/trace.c model/shade.c model/sensor.c \
-             model/image.c model/edges.c model/workpiece.c model/report.c model/opts.c model/cmd.c
-RIG_SRC   := rig/rig.c rig/turntable_apt.c rig/turntable_sim.c rig/lamps.c \
-             rig/camera_aravis.c rig/gv_camera.c rig/virtual.c rig/config.c rig/cmd_rig.c \
-rig/plan.c rig/journal.c rig/session.c rig/truth.c rig/pixfmt.c rig/capture.c rig/cmd_capture.c
-CALIB_SRC := calib/capture.c calib/calset.c calib/observe.c calib/white.c calib/cmd_calib.c calib/geometry.c \
-             calib/lamps.c calib/gain.c calib/cmd_geometry.c calib/cmd_gain.c calib/cmd_lamps.c
-FIT_SRC   := fit/brdf_fit.c fit/material.c fit/cmd_fit.c fit/verify.c fit/verify_lab.c fit/verify_study.c \
-             fit/cmd_verify.c fit/lightplan.c fit/cmd_plan.c fit/plan_lamps.c
-FIT_SRC += fit/verify_files.c
+# One file a line, by layer (model -> rig -> calib -> fit; README: Architecture).
+MODEL_SRC := \
+    model/util.c \
+    model/ini.c \
+    model/opts.c \
+    model/report.c \
+    model/image.c \
+    model/scene.c \
+    model/config.c \
+    model/brdf.c \
+    model/brdf_batch.c \
+    model/camera.c \
+    model/trace.c \
+    model/shade.c \
+    model/sensor.c \
+    model/edges.c \
+    model/workpiece.c \
+    model/cmd.c
+RIG_SRC := \
+    rig/error.c \
+    rig/turntable.c \
+    rig/turntable_apt.c \
+    rig/turntable_sim.c \
+    rig/lamps.c \
+    rig/lamps_gpiod.c \
+    rig/lamps_sim.c \
+    rig/camera.c \
+    rig/camera_aravis.c \
+    rig/pixfmt.c \
+    rig/gv_camera.c \
+    rig/config.c \
+    rig/plan.c \
+    rig/journal.c \
+    rig/session.c \
+    rig/capture.c \
+    rig/truth.c \
+    rig/virtual.c \
+    rig/cmd_rig.c \
+    rig/cmd_capture.c
+CALIB_SRC := \
+    calib/capture.c \
+    calib/calset.c \
+    calib/observe.c \
+    calib/geometry.c \
+    calib/lamps.c \
+    calib/gain.c \
+    calib/white.c \
+    calib/cmd_calib.c \
+    calib/cmd_geometry.c \
+    calib/cmd_lamps.c \
+    calib/cmd_gain.c
+FIT_SRC := \
+    fit/brdf_fit.c \
+    fit/material.c \
+    fit/lightplan.c \
+    fit/plan_lamps.c \
+    fit/verify.c \
+    fit/verify_files.c \
+    fit/verify_lab.c \
+    fit/verify_study.c \
+    fit/cmd_fit.c \
+    fit/cmd_plan.c \
+    fit/cmd_verify.c
 MODEL_CXX_SRC := model/lsq.cc
 LIB_SRC   := $(MODEL_SRC) $(RIG_SRC) $(CALIB_SRC) $(FIT_SRC)
 
 MAIN_SRC  := fit/main.c
-TEST_SRC  := tests/harness.c tests/fixtures.c \
-             tests/test_model_brdf.c tests/test_model_scene.c tests/test_model_config.c \
-             tests/test_model_camera.c tests/test_model_render.c tests/test_model_sensor.c \
-             tests/test_model_image.c tests/test_model_edges.c tests/test_model_cli.c \
-             tests/test_model_corpus.c tests/test_model_lsq.c tests/test_model_sphere.c \
-             tests/apt_sim.c tests/test_rig_turntable.c tests/test_rig_lamps.c \
-             tests/test_rig_camera_aravis.c tests/test_rig_virtual.c tests/test_rig_config.c \
-             tests/test_rig_cli.c tests/test_rig_virtual_inprocess.c \
-             tests/test_rig_plan.c tests/test_rig_capture.c \
-             tests/test_calib_geometry.c tests/test_calib_lamps.c tests/test_calib_gain.c \
-             tests/test_fit_brdf.c tests/test_fit_material.c tests/test_fit_verify.c \
-             tests/test_fit_lightplan.c tests/test_rig_pixfmt.c
+TEST_SRC := \
+    tests/harness.c \
+    tests/fixtures.c \
+    tests/apt_sim.c \
+    tests/test_model_brdf.c \
+    tests/test_model_camera.c \
+    tests/test_model_cli.c \
+    tests/test_model_config.c \
+    tests/test_model_corpus.c \
+    tests/test_model_edges.c \
+    tests/test_model_image.c \
+    tests/test_model_lsq.c \
+    tests/test_model_render.c \
+    tests/test_model_scene.c \
+    tests/test_model_sensor.c \
+    tests/test_model_sphere.c \
+    tests/test_rig_camera_aravis.c \
+    tests/test_rig_capture.c \
+    tests/test_rig_cli.c \
+    tests/test_rig_config.c \
+    tests/test_rig_lamps.c \
+    tests/test_rig_pixfmt.c \
+    tests/test_rig_plan.c \
+    tests/test_rig_turntable.c \
+    tests/test_rig_virtual.c \
+    tests/test_rig_virtual_inprocess.c \
+    tests/test_calib_gain.c \
+    tests/test_calib_geometry.c \
+    tests/test_calib_lamps.c \
+    tests/test_fit_brdf.c \
+    tests/test_fit_lightplan.c \
+    tests/test_fit_material.c \
+    tests/test_fit_verify.c
 BENCH_SRC := tests/bench.c
 FUZZ_SRC  := tests/fuzz_parsers.c
 

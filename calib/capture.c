@@ -34,7 +34,7 @@ int calib_capture(const char *rig_path, const char *dir, const char *name, const
         char *ptext = NULL, *psha = NULL, state[32] = "";
         if (rig_journal_open(&j, sdir)) {
             model_error(sdir, 0, "an earlier session is here but its journal cannot be read (%s); move it away",
-                        rig_last_error());
+                        model_last_error());
             goto done;
         }
         rig_journal_source(j, "plan", NULL, &ptext, &psha);
@@ -65,7 +65,7 @@ int calib_capture(const char *rig_path, const char *dir, const char *name, const
         model_error(sdir, 0, "the capture paused (interrupted, or the camera stopped answering); run the same "
                     "command again to resume it");
     else
-        model_error(sdir, 0, "the capture failed: %s", rig_last_error());
+        model_error(sdir, 0, "the capture failed: %s", model_last_error());
 done:
     g_free(plan_path);
     g_free(sdir);

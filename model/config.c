@@ -201,55 +201,35 @@ static bool parse_lamp(const model_ini_t *ini, int s, model_lamp_t *lamp)
     memset(lamp, 0, sizeof *lamp);
     lamp->line = ini->section_lines[s];
     if (!section_name(ini, s, "lamp", lamp->name)) return false;
-    bool have_pos = false, have_int = false;
+    const char *sec = ini->sections[s];
     for (int k = ini->section_first[s]; k < ini->section_first[s] + ini->section_count[s]; k++) {
         const model_ini_entry_t *e = &ini->entries[k];
-        if (!strcmp(e->key, "position_mm")) {
-            double xyz[3];
-            int n = 0;
-            char *copy = strdup(e->value), *save = NULL;
-            if (!copy) {
-                model_error(ini->path, e->line, "out of memory");
-                return false;
-            }
-            bool ok = true;
-            for (char *t = strtok_r(copy, " \t,", &save); t; t = strtok_r(NULL, " \t,", &save)) {
-                if (n == 3 || !model_parse_double(t, &xyz[n])) {
-                    ok = false;
-                    break;
-                }
-                n++;
-            }
-            free(copy);
-            if (!ok || n != 3) {
-                model_error(ini->path, e->line,
-                            "position_mm = '%s' in lamp '%s': expected exactly 3 numbers 'x y z' (mm, rig frame)",
-                            e->value, lamp->name);
-                return false;
-            }
-            lamp->position_mm = v3(xyz[0], xyz[1], xyz[2]);
-            have_pos = true;
-        } else if (!strcmp(e->key, "intensity")) {
-            if (!entry_double(ini, e, &lamp->intensity)) return false;
-            if (!(lamp->intensity > 0)) {
-                model_error(ini->path, e->line, "intensity = %g in lamp '%s' must be > 0", lamp->intensity,
-                            lamp->name);
-                return false;
-            }
-            have_int = true;
-        } else if (!strcmp(e->key, "radius_mm")) {
-            if (!entry_double(ini, e, &lamp->radius_mm)) return false;
-            if (!(lamp->radius_mm >= 0)) {
-                model_error(ini->path, e->line, "radius_mm = %g in lamp '%s' must be >= 0 (0 = point lamp)",
-                            lamp->radius_mm, lamp->name);
-                return false;
-            }
-        } else {
+        if (strcmp(e->key, "position_mm") && strcmp(e->key, "intensity") && strcmp(e->key, "radius_mm")) {
             model_error(ini->path, e->line,
                         "unknown key '%s' in lamp '%s'; valid keys: position_mm, intensity, radius_mm", e->key,
                         lamp->name);
             return false;
         }
+    }
+    char what[128];
+    snprintf(what, sizeof what, "'x y z': lamp '%s' expects exactly 3 numbers (mm, rig frame)", lamp->name);
+    double xyz[3];
+    if (!model_ini_vec3(ini, sec, "position_mm", xyz, false, what) ||
+        !model_ini_double(ini, sec, "intensity", &lamp->intensity, false) ||
+        !model_ini_double(ini, sec, "radius_mm", &lamp->radius_mm, false))
+        return false;
+    const model_ini_entry_t *pos = model_ini_get(ini, sec, "position_mm"), *in = model_ini_get(ini, sec, "intensity"),
+                            *rad = model_ini_get(ini, sec, "radius_mm");
+    bool have_pos = pos != NULL, have_int = in != NULL;
+    if (pos) lamp->position_mm = v3(xyz[0], xyz[1], xyz[2]);
+    if (in && !(lamp->intensity > 0)) {
+        model_error(ini->path, in->line, "intensity = %g in lamp '%s' must be > 0", lamp->intensity, lamp->name);
+        return false;
+    }
+    if (rad && !(lamp->radius_mm >= 0)) {
+        model_error(ini->path, rad->line, "radius_mm = %g in lamp '%s' must be >= 0 (0 = point lamp)",
+                    lamp->radius_mm, lamp->name);
+        return false;
     }
     if (!have_pos || !have_int) {
         model_error(ini->path, lamp->line, "lamp '%s' lacks '%s'; it needs position_mm = x y z and intensity = I",

@@ -7,6 +7,7 @@
 // "[lamp   left]" and "[lamp left]" name the same section.
 #include <glib.h>
 #include <stdalign.h>
+#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -179,7 +180,7 @@ model_ini_t *model_ini_parse(const char *text, size_t len, const char *name)
         ini->section_count[ini->nsections - 1]++;
         g_hash_table_insert(keys_seen, key, GINT_TO_POINTER(ini->nentries));
     }
-    g_hash_table_destroy(sections_seen);
+    ini->index_ = sections_seen;   // kept for model_ini_get (its keys live in the block)
     g_hash_table_destroy(keys_seen);
     return ini;
 
@@ -202,14 +203,168 @@ model_ini_t *model_ini_load(const char *path)
 
 void model_ini_free(model_ini_t *ini)
 {
-    if (ini) free(ini->storage_);   // the struct is the start of storage_
+    if (!ini) return;
+    if (ini->index_) g_hash_table_destroy(ini->index_);
+    free(ini->storage_);   // the struct is the start of storage_
+}
+
+// The index of section, -1 when there is none.
+static int section_index(const model_ini_t *ini, const char *section)
+{
+    if (ini->index_) return GPOINTER_TO_INT(g_hash_table_lookup(ini->index_, section)) - 1;
+    for (int i = 0; i < ini->nsections; i++)
+        if (!strcmp(ini->sections[i], section)) return i;
+    return -1;
 }
 
 const model_ini_entry_t *model_ini_get(const model_ini_t *ini, const char *section, const char *key)
 {
     if (!ini || !section || !key) return NULL;
-    for (int i = 0; i < ini->nentries; i++)
-        if (!strcmp(ini->entries[i].section, section) && !strcmp(ini->entries[i].key, key))
-            return &ini->entries[i];
+    int s = section_index(ini, section);
+    if (s < 0) return NULL;
+    // A section's entries are contiguous.
+    for (int i = ini->section_first[s]; i < ini->section_first[s] + ini->section_count[s]; i++)
+        if (!strcmp(ini->entries[i].key, key)) return &ini->entries[i];
     return NULL;
+}
+
+// ---------------------------------------------------------------------------
+// Typed getters (see model/model.h)
+
+int model_ini_section_line(const model_ini_t *ini, const char *section)
+{
+    int s = ini && section ? section_index(ini, section) : -1;
+    return s < 0 ? 0 : ini->section_lines[s];
+}
+
+const char *model_ini_text(const model_ini_t *ini, const char *section, const char *key, const char *def)
+{
+    const model_ini_entry_t *e = model_ini_get(ini, section, key);
+    return e ? e->value : def;
+}
+
+// The entry, or NULL: absent and optional (*ok true), or absent and required
+// (*ok false, reported at the section's line).
+static const model_ini_entry_t *entry_of(const model_ini_t *ini, const char *sec, const char *key, bool required,
+                                         bool *ok)
+{
+    const model_ini_entry_t *e = model_ini_get(ini, sec, key);
+    *ok = e || !required;
+    if (!e && required) model_error(ini->path, model_ini_section_line(ini, sec), "[%s] lacks '%s'; add it", sec, key);
+    return e;
+}
+
+bool model_ini_double_in(const model_ini_t *ini, const char *sec, const char *key, double *out, bool required,
+                         double lo, bool lo_open, double hi, const char *range_text)
+{
+    bool ok;
+    const model_ini_entry_t *e = entry_of(ini, sec, key, required, &ok);
+    if (!e) return ok;
+    char range[96];
+    if (range_text) snprintf(range, sizeof range, "%s", range_text);
+    else snprintf(range, sizeof range, "%s%g..%g", lo_open ? "> " : "", lo, hi);
+    double v;
+    if (!model_parse_double(e->value, &v)) {
+        model_error(ini->path, e->line, "[%s] %s: '%s' is not a number (%s)", sec, key, e->value, range);
+        return false;
+    }
+    if ((lo_open ? !(v > lo) : !(v >= lo)) || !(v <= hi)) {
+        model_error(ini->path, e->line, "[%s] %s = %s is out of range (%s)", sec, key, e->value, range);
+        return false;
+    }
+    *out = v;
+    return true;
+}
+
+bool model_ini_double(const model_ini_t *ini, const char *sec, const char *key, double *out, bool required)
+{
+    bool ok;
+    const model_ini_entry_t *e = entry_of(ini, sec, key, required, &ok);
+    if (!e) return ok;
+    if (!model_parse_double(e->value, out)) {
+        model_error(ini->path, e->line, "[%s] %s: '%s' is not a number", sec, key, e->value);
+        return false;
+    }
+    return true;
+}
+
+bool model_ini_int(const model_ini_t *ini, const char *sec, const char *key, long *out, bool required, long lo,
+                   long hi)
+{
+    bool ok;
+    const model_ini_entry_t *e = entry_of(ini, sec, key, required, &ok);
+    if (!e) return ok;
+    long v;
+    if (!model_parse_int(e->value, &v)) {
+        model_error(ini->path, e->line, "[%s] %s: '%s' is not an integer (%ld..%ld)", sec, key, e->value, lo, hi);
+        return false;
+    }
+    if (v < lo || v > hi) {
+        model_error(ini->path, e->line, "[%s] %s = %s is out of range (%ld..%ld)", sec, key, e->value, lo, hi);
+        return false;
+    }
+    *out = v;
+    return true;
+}
+
+bool model_ini_bool(const model_ini_t *ini, const char *sec, const char *key, bool *out, bool required)
+{
+    bool ok;
+    const model_ini_entry_t *e = entry_of(ini, sec, key, required, &ok);
+    if (!e) return ok;
+    const char *v = e->value;
+    if (!strcmp(v, "true") || !strcmp(v, "yes") || !strcmp(v, "1") || !strcmp(v, "on")) {
+        *out = true;
+    } else if (!strcmp(v, "false") || !strcmp(v, "no") || !strcmp(v, "0") || !strcmp(v, "off")) {
+        *out = false;
+    } else {
+        model_error(ini->path, e->line, "[%s] %s: '%s' is not a truth value (true/false, yes/no, 1/0)", sec, key, v);
+        return false;
+    }
+    return true;
+}
+
+bool model_ini_string(const model_ini_t *ini, const char *sec, const char *key, char *out, size_t size,
+                      bool required)
+{
+    bool ok;
+    const model_ini_entry_t *e = entry_of(ini, sec, key, required, &ok);
+    if (!e) return ok;
+    if (!e->value[0]) {
+        model_error(ini->path, e->line, "[%s] %s is empty: give a value or remove the line", sec, key);
+        return false;
+    }
+    if (strlen(e->value) >= size) {
+        model_error(ini->path, e->line, "[%s] %s: '%s' is longer than %zu characters", sec, key, e->value, size - 1);
+        return false;
+    }
+    snprintf(out, size, "%s", e->value);
+    return true;
+}
+
+bool model_ini_vec3(const model_ini_t *ini, const char *sec, const char *key, double out[3], bool required,
+                    const char *what)
+{
+    bool ok;
+    const model_ini_entry_t *e = entry_of(ini, sec, key, required, &ok);
+    if (!e) return ok;
+    double v[3];
+    int n = 0;
+    gchar **w = g_strsplit_set(e->value, " \t,", -1);
+    for (int i = 0; w[i] && n <= 3; i++) {
+        if (!w[i][0]) continue;
+        if (n == 3 || !model_parse_double(w[i], &v[n])) {
+            n = -1;
+            break;
+        }
+        n++;
+    }
+    g_strfreev(w);
+    if (n != 3) {
+        model_error(ini->path, e->line, "[%s] %s: '%s' is not three numbers %s", sec, key, e->value,
+                    what ? what : "x y z");
+        return false;
+    }
+    memcpy(out, v, sizeof v);
+    return true;
 }

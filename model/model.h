@@ -115,14 +115,40 @@ typedef struct {
     int                *section_first;   // entries of section i: entries[section_first[i] ..
     int                *section_count;   //   section_first[i] + section_count[i] - 1] (contiguous)
     char               *storage_;  // private
+    void               *index_;    // private: section name -> index + 1 (lookups in constant time)
 } model_ini_t;
 
 model_ini_t *model_ini_parse(const char *text, size_t len, const char *name);
 model_ini_t *model_ini_load(const char *path);
 void         model_ini_free(model_ini_t *ini);
-// The entry for (section, key), or NULL.
+// The entry for (section, key), or NULL (cost: the section's entries).
 const model_ini_entry_t *model_ini_get(const model_ini_t *ini, const char *section,
                                        const char *key);
+// The line of section's header, 0 when there is none.
+int         model_ini_section_line(const model_ini_t *ini, const char *section);
+// The value of (section, key) as written, or def when absent.
+const char *model_ini_text(const model_ini_t *ini, const char *section, const char *key, const char *def);
+// Typed getters: the value of (section, key) converted and checked into *out.
+// An absent key keeps *out and returns true, unless required: then
+// "[section] lacks 'key'" at the section's line. Every error goes through
+// model_error naming file:line, in one form:
+//   "[section] key: 'VALUE' is not a number (RANGE)"   (an integer, a truth value, three numbers ...)
+//   "[section] key = VALUE is out of range (RANGE)"
+// _double_in: within [lo, hi] (lo excluded when lo_open); range_text names the
+// range in messages (NULL: "lo..hi"). _int: a whole number in [lo, hi].
+// _bool: true/yes/1/on or false/no/0/off. _string: non-empty, at most size-1
+// characters. _vec3: three numbers separated by blanks or commas (what: how
+// the message names them, NULL: "x y z").
+bool model_ini_double(const model_ini_t *ini, const char *section, const char *key, double *out, bool required);
+bool model_ini_double_in(const model_ini_t *ini, const char *section, const char *key, double *out, bool required,
+                         double lo, bool lo_open, double hi, const char *range_text);
+bool model_ini_int(const model_ini_t *ini, const char *section, const char *key, long *out, bool required, long lo,
+                   long hi);
+bool model_ini_bool(const model_ini_t *ini, const char *section, const char *key, bool *out, bool required);
+bool model_ini_string(const model_ini_t *ini, const char *section, const char *key, char *out, size_t size,
+                      bool required);
+bool model_ini_vec3(const model_ini_t *ini, const char *section, const char *key, double out[3], bool required,
+                    const char *what);
 
 // ---------------------------------------------------------------------------
 // Scenes (model/scene.c)

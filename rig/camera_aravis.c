@@ -1,5 +1,5 @@
-// rig/camera_aravis.c — cameras through Aravis (GigE Vision, USB3 Vision), and
-// the rig_camera_* wrappers.
+// rig/camera_aravis.c — cameras through Aravis (GigE Vision, USB3 Vision); the
+// rig_camera_* wrappers are in rig/camera.c.
 //
 // One frame per software trigger: TriggerMode On, TriggerSource Software on the
 // FrameStart selector, AcquisitionMode Continuous; the stream (a small pool of
@@ -31,7 +31,7 @@
 #include <time.h>
 
 #include "rig/gv_camera.h"
-#include "rig/rig.h"
+#include "rig/internal.h"
 
 #define N_BUFFERS 4
 
@@ -595,71 +595,4 @@ done:
     op_close(c);
     free(c);
     return rc;
-}
-
-// ---------------------------------------------------------------------------
-// Wrappers
-
-void rig_frame_free(rig_frame_t *f)
-{
-    if (!f) return;
-    free(f->pix);
-    f->pix = NULL;
-}
-
-static int check_cam(rig_camera_t *c, const char *what)
-{
-    if (!c || !c->ops) return rig_fail(RIG_ERR_INVALID, "camera %s: no camera (NULL)", what);
-    return 0;
-}
-
-#define CAMERA_OP(c, op, what, ...)                                                          \
-    do {                                                                                     \
-        int rc_ = check_cam(c, what);                                                        \
-        if (rc_) return rc_;                                                                 \
-        if (!(c)->ops->op)                                                                   \
-            return rig_fail(RIG_ERR_NOT_SUPPORTED, "%s: %s is not supported by the %s backend", \
-                            (c)->name, what, (c)->ops->backend);                             \
-        return (c)->ops->op(__VA_ARGS__);                                                    \
-    } while (0)
-
-int rig_camera_set_pixel_format(rig_camera_t *c, const char *format)
-{
-    if (!format) return rig_fail(RIG_ERR_INVALID, "%s: no pixel format given", c ? c->name : "camera");
-    CAMERA_OP(c, set_pixel_format, "setting the pixel format", c, format);
-}
-
-int rig_camera_set_exposure_us(rig_camera_t *c, double exposure_us)
-{
-    CAMERA_OP(c, set_exposure_us, "setting the exposure", c, exposure_us);
-}
-
-int rig_camera_set_gain(rig_camera_t *c, double gain)
-{
-    CAMERA_OP(c, set_gain, "setting the gain", c, gain);
-}
-
-int rig_camera_set_region(rig_camera_t *c, int x, int y, int width, int height)
-{
-    CAMERA_OP(c, set_region, "setting the region", c, x, y, width, height);
-}
-
-int rig_camera_settings(rig_camera_t *c, rig_frame_meta_t *out)
-{
-    if (!out) return rig_fail(RIG_ERR_INVALID, "%s: NULL settings output", c ? c->name : "camera");
-    CAMERA_OP(c, settings, "reading the settings", c, out);
-}
-
-int rig_camera_capture(rig_camera_t *c, double timeout_s, int retries, rig_frame_t *out)
-{
-    if (!out) return rig_fail(RIG_ERR_INVALID, "%s: NULL frame output", c ? c->name : "camera");
-    out->pix = NULL;
-    CAMERA_OP(c, capture, "capturing", c, timeout_s, retries, out);
-}
-
-void rig_camera_close(rig_camera_t *c)
-{
-    if (!c) return;
-    if (c->ops && c->ops->close) c->ops->close(c);
-    free(c);
 }

@@ -153,7 +153,7 @@ static int write_frame(writer_t *w, job_t *jb)
              m->bits);
     model_meta_add(meta, "session_step", "%d", jb->step.index);
     model_meta_add(meta, "step_kind", "%s", jb->step.kind == RIG_STEP_DARK ? "dark" : "light");
-    model_meta_add(meta, "camera", "%s", w->rig->camera->name);
+    model_meta_add(meta, "camera", "%s", rig_camera_name(w->rig->camera));
     model_meta_add(meta, "camera_serial", "%s", m->serial);
     model_meta_add(meta, "frame_id", "%llu", (unsigned long long)m->frame_id);
     model_meta_add(meta, "exposure_us", "%.10g", m->exposure_us);
@@ -213,8 +213,8 @@ static int write_frame(writer_t *w, job_t *jb)
     row.frame_id = m->frame_id;
     rc = rig_journal_frame_done(w->j, &row);
     if (rc) {
-        w->disk_full = strstr(rig_last_error(), "full") != NULL;
-        snprintf(w->msg, sizeof w->msg, "%s%s", w->disk_full ? "disk full: " : "", rig_last_error());
+        w->disk_full = strstr(model_last_error(), "full") != NULL;
+        snprintf(w->msg, sizeof w->msg, "%s%s", w->disk_full ? "disk full: " : "", model_last_error());
         unlink(part);
         goto done;
     }
@@ -338,8 +338,8 @@ static char *session_facts(rig_t *r, const rig_plan_t *p, const char *cmdline, j
     rig_frame_meta_t m;
     if (r->camera && rig_camera_settings(r->camera, &m) == 0) {
         json_t *c = json_object();
-        json_object_set_new(c, "name", json_string(r->camera->name));
-        json_object_set_new(c, "backend", json_string(r->camera->ops->backend));
+        json_object_set_new(c, "name", json_string(rig_camera_name(r->camera)));
+        json_object_set_new(c, "backend", json_string(rig_camera_backend(r->camera)));
         json_object_set_new(c, "vendor", json_string(m.vendor));
         json_object_set_new(c, "model", json_string(m.model));
         json_object_set_new(c, "serial", json_string(m.serial));
@@ -357,7 +357,7 @@ static char *session_facts(rig_t *r, const rig_plan_t *p, const char *cmdline, j
     rig_turntable_info_t ti;
     if (r->turntable && rig_turntable_info(r->turntable, &ti) == 0) {
         json_t *t = json_object();
-        json_object_set_new(t, "name", json_string(r->turntable->name));
+        json_object_set_new(t, "name", json_string(rig_turntable_name(r->turntable)));
         json_object_set_new(t, "model", json_string(ti.model));
         json_object_set_new(t, "serial", json_string(ti.serial));
         json_object_set_new(t, "firmware", json_string(ti.firmware));
@@ -366,12 +366,12 @@ static char *session_facts(rig_t *r, const rig_plan_t *p, const char *cmdline, j
         json_object_set_new(o, "turntable", t);
     }
     json_t *l = json_array();
-    for (int i = 0; r->lamps && i < r->lamps->n; i++) {
+    for (int i = 0; r->lamps && i < rig_lamps_count(r->lamps); i++) {
         json_t *a = json_object();
-        json_object_set_new(a, "name", json_string(r->lamps->lamps[i].name));
-        json_object_set_new(a, "backend", json_string(r->lamps->ops->backend));
-        json_object_set_new(a, "warmup_ms", json_real(r->lamps->lamps[i].warmup_ms));
-        json_object_set_new(a, "settle_ms", json_real(r->lamps->lamps[i].settle_ms));
+        json_object_set_new(a, "name", json_string(rig_lamps_name(r->lamps, i)));
+        json_object_set_new(a, "backend", json_string(rig_lamps_backend(r->lamps)));
+        json_object_set_new(a, "warmup_ms", json_real(rig_lamps_line(r->lamps, i)->warmup_ms));
+        json_object_set_new(a, "settle_ms", json_real(rig_lamps_line(r->lamps, i)->settle_ms));
         json_array_append_new(l, a);
     }
     json_object_set_new(o, "lamps", l);
@@ -540,346 +540,457 @@ static bool file_sha(const char *path, char out[65])
     return ok;
 }
 
-int rig_capture_run(const rig_capture_opts_t *o)
-{
-    int rc = 0, exit_code = 1;
-    rig_plan_t *p = NULL;
-    rig_t *r = NULL;
-    rig_journal_t *j = NULL;
-    char *status = NULL, *facts = NULL, *rig_text = NULL;
-    char *s_plan_path = NULL, *s_plan_text = NULL, *s_plan_sha = NULL;
-    char *s_rig_path = NULL, *s_rig_text = NULL, *s_rig_sha = NULL;
-    writer_t w = { .dir = o->dir };
-    pthread_mutex_init(&w.m, NULL);
-    pthread_cond_init(&w.cv, NULL);
-    bool writer_running = false, sig_installed = false;
-    pthread_t wt;
-    const char *rig_path = o->rig_path;
-    int frames_before = 0;
-    bool *satisfied = NULL;
-    int step = 0;
-    char msg[10000];
+// ---------------------------------------------------------------------------
+// The run, in stages: the plan (new or resumed), the session (rig, journal,
+// recovery), the writer and signals, the hardware (homing, camera), the steps,
+// the end. Each stage returns RUN_ON to go on, or how the run ends.
 
-    if (o->resume) {
-        if ((rc = rig_journal_open(&j, o->dir))) goto done;
-        if ((rc = rig_journal_source(j, "plan", &s_plan_path, &s_plan_text, &s_plan_sha)) ||
-            (rc = rig_journal_source(j, "rig", &s_rig_path, &s_rig_text, &s_rig_sha)))
-            goto done;
-        char state[32] = "";
-        rig_journal_state(j, state, sizeof state);
-        if (!strcmp(state, "complete")) {
-            printf("refl capture: %s is complete: nothing to resume (refl session check %s)\n", o->dir, o->dir);
-            exit_code = 0;
-            goto done;
+enum {
+    RUN_ON,           // next stage / next step
+    RUN_DONE,         // clean up and return exit_code
+    RUN_BREAK,        // leave the step loop (pause, writer error), then the end stage
+    RUN_FAULT_TT,     // turntable fault (rc): stop the session
+    RUN_FAULT_CAM,    // camera fault (rc): stop the session
+};
+
+typedef struct {
+    const rig_capture_opts_t *o;
+    int         rc, exit_code;
+    rig_plan_t *p;
+    rig_t      *r;
+    rig_journal_t *j;
+    char       *status, *facts, *rig_text;
+    char       *s_plan_path, *s_plan_text, *s_plan_sha;
+    char       *s_rig_path, *s_rig_text, *s_rig_sha;
+    writer_t    w;
+    bool        writer_running, sig_installed;
+    pthread_t   wt;
+    const char *rig_path;
+    int         frames_before;
+    bool       *satisfied;       // auto bracketing: the groups already satisfied (a frame at or below target)
+    int         step;
+    char        msg[10000];
+    // The steps' state
+    double      full;            // full scale of the camera's pixel format, DN
+    progress_t  pg;
+    int         first;
+    double      floor_s, angle, t_start;
+    uint32_t    mask;
+    double      cur_exposure;
+    int         paused;          // 1 SIGINT, 2 camera not answering
+    double      T_cap, T_push;   // time in the camera (trigger to frame in hand), waiting for the writer
+} run_t;
+
+// The plan: from the plan file, or (--resume) the journal's stored plan once
+// the plan and rig files are checked against the journal's sha256.
+static int run_plan(run_t *x)
+{
+    const rig_capture_opts_t *o = x->o;
+    if (!o->resume) {
+        if (!(x->p = rig_plan_load(o->plan_path))) {
+            x->rc = RIG_ERR_INVALID;
+            return RUN_DONE;
         }
-        const char *pp = o->plan_path ? o->plan_path : s_plan_path;
-        if (!rig_path) rig_path = s_rig_path;
-        char sha[65];
-        bool plan_same = file_sha(pp, sha) && !strcmp(sha, s_plan_sha);
-        bool rig_same = file_sha(rig_path, sha) && !strcmp(sha, s_rig_sha);
-        if ((!plan_same || !rig_same) && !o->allow_changed) {
-            rc = rig_fail(RIG_ERR_INVALID, "refl capture --resume %s: the %s%s%s changed since the session started "
-                          "(sha256 differs from the journal's): resume with the original files, or add "
-                          "--allow-changed to continue the stored step list anyway", o->dir,
-                          plan_same ? "" : "plan ", !plan_same && !rig_same ? "and the rig file " : "",
-                          plan_same ? "rig file " : (rig_same ? pp : pp));
-            goto done;
-        }
-        // The stored plan text defines the steps (identical to the first run).
-        if (!(p = rig_plan_parse(s_plan_text, strlen(s_plan_text), s_plan_path))) {
-            rc = RIG_ERR_INVALID;
-            goto done;
-        }
-        if (!plan_same || !rig_same)
-            rig_journal_event(j, -1, "info", "resumed with changed %s%s (--allow-changed)", plan_same ? "" : "plan ",
-                              rig_same ? "" : "rig");
-    } else {
-        if (!(p = rig_plan_load(o->plan_path))) {
-            rc = RIG_ERR_INVALID;
-            goto done;
-        }
+        return RUN_ON;
     }
-    fprintf(stderr, "refl capture: opening the rig %s\n", rig_path);
-    if ((rc = rig_open(&r, rig_path))) goto done;
-    if ((rc = rig_plan_bind(p, r))) goto done;
+    if ((x->rc = rig_journal_open(&x->j, o->dir))) return RUN_DONE;
+    if ((x->rc = rig_journal_source(x->j, "plan", &x->s_plan_path, &x->s_plan_text, &x->s_plan_sha)) ||
+        (x->rc = rig_journal_source(x->j, "rig", &x->s_rig_path, &x->s_rig_text, &x->s_rig_sha)))
+        return RUN_DONE;
+    char state[32] = "";
+    rig_journal_state(x->j, state, sizeof state);
+    if (!strcmp(state, "complete")) {
+        printf("refl capture: %s is complete: nothing to resume (refl session check %s)\n", o->dir, o->dir);
+        x->exit_code = 0;
+        return RUN_DONE;
+    }
+    const char *pp = o->plan_path ? o->plan_path : x->s_plan_path;
+    if (!x->rig_path) x->rig_path = x->s_rig_path;
+    char sha[65];
+    bool plan_same = file_sha(pp, sha) && !strcmp(sha, x->s_plan_sha);
+    bool rig_same = file_sha(x->rig_path, sha) && !strcmp(sha, x->s_rig_sha);
+    if ((!plan_same || !rig_same) && !o->allow_changed) {
+        x->rc = rig_fail(RIG_ERR_INVALID, "refl capture --resume %s: the %s%s%s changed since the session started "
+                         "(sha256 differs from the journal's): resume with the original files, or add "
+                         "--allow-changed to continue the stored step list anyway", o->dir,
+                         plan_same ? "" : "plan ", !plan_same && !rig_same ? "and the rig file " : "",
+                         plan_same ? "rig file " : (rig_same ? pp : pp));
+        return RUN_DONE;
+    }
+    // The stored plan text defines the steps (identical to the first run).
+    if (!(x->p = rig_plan_parse(x->s_plan_text, strlen(x->s_plan_text), x->s_plan_path))) {
+        x->rc = RIG_ERR_INVALID;
+        return RUN_DONE;
+    }
+    if (!plan_same || !rig_same)
+        rig_journal_event(x->j, -1, "info", "resumed with changed %s%s (--allow-changed)", plan_same ? "" : "plan ",
+                          rig_same ? "" : "rig");
+    return RUN_ON;
+}
+
+// The rig (opened, the plan bound to it; a dry run ends here), the session
+// directory and journal (created, or on --resume its frames recovered), the
+// steps' status.
+static int run_session(run_t *x)
+{
+    const rig_capture_opts_t *o = x->o;
+    rig_plan_t *p = x->p;
+    fprintf(stderr, "refl capture: opening the rig %s\n", x->rig_path);
+    if ((x->rc = rig_open(&x->r, x->rig_path))) return RUN_DONE;
+    if ((x->rc = rig_plan_bind(p, x->r))) return RUN_DONE;
     if (o->dry_run) {
-        print_dry_run(p, r);
-        exit_code = 0;
-        goto done;
+        print_dry_run(p, x->r);
+        x->exit_code = 0;
+        return RUN_DONE;
     }
     size_t rlen = 0;
-    if (!(rig_text = model_read_file(rig_path, &rlen))) {
-        rc = RIG_ERR_IO;
-        goto done;
+    if (!(x->rig_text = model_read_file(x->rig_path, &rlen))) {
+        x->rc = RIG_ERR_IO;
+        return RUN_DONE;
     }
     if (!o->resume) {
-        if ((rc = mkdir_session(o->dir))) goto done;
+        if ((x->rc = mkdir_session(o->dir))) return RUN_DONE;
         if (o->operator_name) snprintf(p->operator_name, sizeof p->operator_name, "%s", o->operator_name);
         if (o->notes) snprintf(p->notes, sizeof p->notes, "%s", o->notes);
         json_t *cal = NULL;
         if (o->calib_dir && !(cal = calibration_files(o->calib_dir))) {
-            rc = RIG_ERR_INVALID;
-            goto done;
+            x->rc = RIG_ERR_INVALID;
+            return RUN_DONE;
         }
-        facts = session_facts(r, p, o->command_line, cal);
+        x->facts = session_facts(x->r, p, o->command_line, cal);
         json_decref(cal);
-        if ((rc = rig_journal_create(&j, o->dir, p, rig_path, rig_text, r->sha256, facts))) goto done;
-        rig_journal_event(j, -1, "start", "session started: %d steps, plan %s, rig %s", p->nsteps, p->path,
-                          rig_path);
+        if ((x->rc = rig_journal_create(&x->j, o->dir, p, x->rig_path, x->rig_text, x->r->sha256, x->facts)))
+            return RUN_DONE;
+        rig_journal_event(x->j, -1, "start", "session started: %d steps, plan %s, rig %s", p->nsteps, p->path,
+                          x->rig_path);
     }
     rig_step_t *stored = NULL;
     int nstored = 0;
-    if ((rc = rig_journal_steps(j, &stored, &status, &nstored))) goto done;
+    if ((x->rc = rig_journal_steps(x->j, &stored, &x->status, &nstored))) return RUN_DONE;
     free(stored);
     if (nstored != p->nsteps) {
-        rc = rig_fail(RIG_ERR_INVALID, "journal %s: %d steps stored, the plan makes %d", o->dir, nstored, p->nsteps);
-        goto done;
+        x->rc = rig_fail(RIG_ERR_INVALID, "journal %s: %d steps stored, the plan makes %d", o->dir, nstored,
+                         p->nsteps);
+        return RUN_DONE;
     }
     if (o->resume) {
         int relinked, removed;
-        if ((rc = recover_frames(j, o->dir, &relinked, &removed))) goto done;
+        if ((x->rc = recover_frames(x->j, o->dir, &relinked, &removed))) return RUN_DONE;
         int pend = 0;
-        for (int i = 0; i < nstored; i++) pend += status[i] == 'p';
-        rig_journal_event(j, -1, "resume", "resumed: %d of %d steps pending (%d frames recovered, %d temporary files "
-                          "removed)", pend, nstored, relinked, removed);
+        for (int i = 0; i < nstored; i++) pend += x->status[i] == 'p';
+        rig_journal_event(x->j, -1, "resume", "resumed: %d of %d steps pending (%d frames recovered, %d temporary "
+                          "files removed)", pend, nstored, relinked, removed);
         fprintf(stderr, "refl capture: resuming %s: %d of %d steps to go\n", o->dir, pend, nstored);
-        rig_journal_set_state(j, "running");
+        rig_journal_set_state(x->j, "running");
     }
-    for (int i = 0; i < nstored; i++) frames_before += status[i] == 'd';
+    for (int i = 0; i < nstored; i++) x->frames_before += x->status[i] == 'd';
+    return RUN_ON;
+}
 
-    w.j = j;
-    w.rig = r;
-    w.plan = p;
-    w.cmdline = o->command_line;
-    if (pthread_create(&wt, NULL, writer_main, &w)) {
-        rc = rig_fail(RIG_ERR_IO, "cannot start the writer thread");
-        goto done;
+// The writer thread and the SIGINT handler (first Ctrl-C pauses).
+static int run_start(run_t *x)
+{
+    x->w.j = x->j;
+    x->w.rig = x->r;
+    x->w.plan = x->p;
+    x->w.cmdline = x->o->command_line;
+    if (pthread_create(&x->wt, NULL, writer_main, &x->w)) {
+        x->rc = rig_fail(RIG_ERR_IO, "cannot start the writer thread");
+        return RUN_DONE;
     }
-    writer_running = true;
+    x->writer_running = true;
     g_sigint = 0;
     struct sigaction sa = { .sa_handler = on_sigint };
     sigemptyset(&sa.sa_mask);
     sigaction(SIGINT, &sa, &g_old_int);
-    sig_installed = true;
+    x->sig_installed = true;
+    return RUN_ON;
+}
 
-    // Home first when needed.
+// Home the turntable when needed, set the camera up, and the steps' state
+// (first pending step, progress, groups an earlier run already satisfied).
+static int run_hardware(run_t *x)
+{
+    rig_t *r = x->r;
+    rig_plan_t *p = x->p;
     if (r->turntable) {
         rig_turntable_status_t st;
-        if ((rc = rig_turntable_status(r->turntable, &st))) goto fault_tt;
+        if ((x->rc = rig_turntable_status(r->turntable, &st))) return RUN_FAULT_TT;
         if (!st.homed) {
-            fprintf(stderr, "refl capture: homing %s\n", r->turntable->name);
+            fprintf(stderr, "refl capture: homing %s\n", rig_turntable_name(r->turntable));
             double tmo = 1.5 * (isfinite(r->home_time_s) ? r->home_time_s : 120) + 5;
-            if ((rc = rig_turntable_home(r->turntable, tmo))) goto fault_tt;
+            if ((x->rc = rig_turntable_home(r->turntable, tmo))) return RUN_FAULT_TT;
         }
     }
     rig_frame_meta_t cam;
-    if ((rc = rig_camera_set_pixel_format(r->camera, p->pixel_format)) ||
-        (rc = rig_camera_set_gain(r->camera, p->gain)) || (rc = rig_camera_settings(r->camera, &cam)))
-        goto done;
-    double full = cam.bits >= 16 ? 65535 : (double)((1u << cam.bits) - 1);
+    if ((x->rc = rig_camera_set_pixel_format(r->camera, p->pixel_format)) ||
+        (x->rc = rig_camera_set_gain(r->camera, p->gain)) || (x->rc = rig_camera_settings(r->camera, &cam)))
+        return RUN_DONE;
+    x->full = cam.bits >= 16 ? 65535 : (double)((1u << cam.bits) - 1);
 
-    progress_t pg = { .bar = o->progress == 1 || (o->progress < 0 && isatty(2)), .t0 = model_now_s(),
-                      .total = p->nsteps, .done0 = 0 };
-    int first = 0;
-    while (first < p->nsteps && status[first] != 'p') first++;
-    pg.done0 = first;
-    double floor_s = 0, angle = NAN, t_start = model_now_s();
-    uint32_t mask = r->lamps ? r->lamps->on_mask : 0;
-    double cur_exposure = cam.exposure_us;
-    // auto bracketing: the groups already satisfied (a frame at or below target)
+    x->pg = (progress_t){ .bar = x->o->progress == 1 || (x->o->progress < 0 && isatty(2)), .t0 = model_now_s(),
+                          .total = p->nsteps, .done0 = 0 };
+    x->first = 0;
+    while (x->first < p->nsteps && x->status[x->first] != 'p') x->first++;
+    x->pg.done0 = x->first;
+    x->floor_s = 0;
+    x->angle = NAN;
+    x->t_start = model_now_s();
+    x->mask = r->lamps ? rig_lamps_on_mask(r->lamps) : 0;
+    x->cur_exposure = cam.exposure_us;
     int ngroups = 0;
     for (int i = 0; i < p->nsteps; i++) ngroups = p->steps[i].group + 1 > ngroups ? p->steps[i].group + 1 : ngroups;
-    satisfied = calloc((size_t)ngroups + 1, 1);
+    x->satisfied = calloc((size_t)ngroups + 1, 1);
     if (p->auto_exposure) {
         rig_frame_row_t *rows = NULL;
         int nr = 0;
-        if (!rig_journal_frames(j, &rows, &nr))
+        if (!rig_journal_frames(x->j, &rows, &nr))
             for (int i = 0; i < nr; i++) {
                 const rig_step_t *s = &p->steps[rows[i].step];
-                if (s->group >= 0 && rows[i].roi_max <= p->target_fraction * full) satisfied[s->group] = true;
+                if (s->group >= 0 && rows[i].roi_max <= p->target_fraction * x->full) x->satisfied[s->group] = true;
             }
         free(rows);
     }
-    int paused = 0, stopped = 0;
-    double T_cap = 0, T_push = 0;   // time in the camera (trigger to frame in hand), waiting for the writer
-    for (step = first; step < p->nsteps; step++) {
-        const rig_step_t *s = &p->steps[step];
-        if (status[step] != 'p') continue;
+    return RUN_ON;
+}
+
+// A step's motion, then its exposure and lamps during the settle; waits out
+// the settle.
+static int step_setup(run_t *x, const rig_step_t *s)
+{
+    rig_t *r = x->r;
+    rig_plan_t *p = x->p;
+    double t_settle = 0;
+    if (r->turntable && !(s->angle_deg == x->angle)) {
+        rig_turntable_status_t st;
+        if ((x->rc = rig_turntable_status(r->turntable, &st))) return RUN_FAULT_TT;
+        double tm = rig_motion_time_s(s->angle_deg - st.angle_deg, r->speed_deg_s, r->accel_deg_s2);
+        if (isfinite(x->angle)) x->floor_s += tm;
+        if ((x->rc = rig_turntable_move_abs_deg(r->turntable, s->angle_deg, 1.5 * (isfinite(tm) ? tm : 120) + 5)))
+            return RUN_FAULT_TT;
+        x->angle = s->angle_deg;
+        t_settle = model_now_s() + 1e-3 * p->settle_ms;
+    }
+    // The exposure register now: its round trip overlaps the settles.
+    if (s->exposure_us != x->cur_exposure) {
+        if ((x->rc = rig_camera_set_exposure_us(r->camera, s->exposure_us))) return RUN_FAULT_CAM;
+        x->cur_exposure = s->exposure_us;
+    }
+    double lamp_t = 0;
+    if (r->lamps && s->lamp_mask != x->mask) {
+        lamp_t = rig_lamps_settle_s(r->lamps, x->mask, s->lamp_mask) + 1e-3 * p->lamp_settle_ms;
+        if ((x->rc = rig_lamps_set(r->lamps, s->lamp_mask))) {
+            snprintf(x->msg, sizeof x->msg, "lamps: %s", model_last_error());
+            fault_stop(r, x->j, x->step, "fault", "fault", x->msg);
+            return RUN_DONE;
+        }
+        x->mask = s->lamp_mask;
+        if (p->lamp_settle_ms > 0) g_usleep((gulong)(1e3 * p->lamp_settle_ms));
+    }
+    x->floor_s += fmax(t_settle > 0 ? 1e-3 * p->settle_ms : 0, lamp_t) + 1e-6 * s->exposure_us;
+    double left = t_settle - model_now_s();
+    if (t_settle > 0 && left > 0) g_usleep((gulong)(left * 1e6));
+    return RUN_ON;
+}
+
+// A step's frame: captured (a camera that does not answer is retried, then
+// the session pauses), its statistics for auto bracketing, handed to the writer.
+static int step_capture(run_t *x, const rig_step_t *s)
+{
+    rig_t *r = x->r;
+    rig_plan_t *p = x->p;
+    int step = x->step;
+    double T_cap0 = model_now_s();
+    job_t *jb = calloc(1, sizeof *jb);
+    int tries = 0;
+    for (;;) {
+        jb->t_trigger_s = realtime_s();
+        bool q = model_error_quiet_thread(true);
+        x->rc = rig_camera_capture(r->camera, p->frame_timeout_s + 2e-6 * s->exposure_us, 0, &jb->f);
+        model_error_quiet_thread(q);
+        if (!x->rc) break;
+        if (x->rc != RIG_ERR_TIMEOUT || tries >= p->retries || g_sigint) break;
+        tries++;
+        rig_journal_event(x->j, step, "retry", "camera time-out (%s): retry %d of %d", model_last_error(), tries,
+                          p->retries);
+        fprintf(stderr, "refl capture: camera time-out at step %d: retry %d of %d\n", step, tries, p->retries);
+    }
+    if (x->rc) {
+        free(jb);
+        if (x->rc == RIG_ERR_TIMEOUT || x->rc == RIG_ERR_DISCONNECTED) {
+            snprintf(x->msg, sizeof x->msg, "camera %s did not answer at step %d after %d retries (%s): session "
+                     "paused; check the camera's cable and power, then refl capture --resume %s",
+                     rig_camera_name(r->camera), step, tries, model_last_error(), x->o->dir);
+            fault_stop(r, x->j, step, "paused", "pause", x->msg);
+            x->paused = 2;
+            return RUN_BREAK;
+        }
+        return RUN_FAULT_CAM;
+    }
+    x->T_cap += model_now_s() - T_cap0;
+    jb->step = *s;
+    rig_turntable_status_t st = { .angle_deg = NAN };
+    if (r->turntable) rig_turntable_status(r->turntable, &st);
+    jb->measured_deg = r->turntable ? st.angle_deg : NAN;
+    if (p->auto_exposure && s->group >= 0) {
+        frame_stats(&jb->f, p->roi, &jb->mean, &jb->max, &jb->roi_max, &jb->sat);
+        jb->stats_done = true;
+        if (jb->roi_max <= p->target_fraction * x->full) x->satisfied[s->group] = true;
+    }
+    double T_p0 = model_now_s();
+    writer_push(&x->w, jb);
+    x->T_push += model_now_s() - T_p0;
+    progress(&x->pg, step + 1, s, step == x->first ? rig_plan_floor_s(p, r, step + 1) : 0);
+    return RUN_ON;
+}
+
+// Every pending step, until the end, a pause (SIGINT) or a writer error.
+static int run_steps(run_t *x)
+{
+    rig_plan_t *p = x->p;
+    for (x->step = x->first; x->step < p->nsteps; x->step++) {
+        const rig_step_t *s = &p->steps[x->step];
+        if (x->status[x->step] != 'p') continue;
         if (g_sigint) {
-            paused = 1;
+            x->paused = 1;
             break;
         }
-        if (writer_error(&w, msg, sizeof msg)) {
-            stopped = 1;
-            break;
-        }
-        if (o->before_step) o->before_step(o->hook_ctx, r, step);
-        if (p->auto_exposure && s->group >= 0 && satisfied[s->group]) {
-            rig_journal_step_skipped(j, step, "auto bracketing: a shorter exposure is not needed");
+        if (writer_error(&x->w, x->msg, sizeof x->msg)) break;
+        if (x->o->before_step) x->o->before_step(x->o->hook_ctx, x->r, x->step);
+        if (p->auto_exposure && s->group >= 0 && x->satisfied[s->group]) {
+            rig_journal_step_skipped(x->j, x->step, "auto bracketing: a shorter exposure is not needed");
             continue;
         }
-        // Motion, then lamps during the settle.
-        double t_settle = 0;
-        if (r->turntable && !(s->angle_deg == angle)) {
-            rig_turntable_status_t st;
-            if ((rc = rig_turntable_status(r->turntable, &st))) goto fault_tt;
-            double tm = rig_motion_time_s(s->angle_deg - st.angle_deg, r->speed_deg_s, r->accel_deg_s2);
-            if (isfinite(angle)) floor_s += tm;
-            if ((rc = rig_turntable_move_abs_deg(r->turntable, s->angle_deg, 1.5 * (isfinite(tm) ? tm : 120) + 5)))
-                goto fault_tt;
-            angle = s->angle_deg;
-            t_settle = model_now_s() + 1e-3 * p->settle_ms;
-        }
-        // The exposure register now: its round trip overlaps the settles.
-        if (s->exposure_us != cur_exposure) {
-            if ((rc = rig_camera_set_exposure_us(r->camera, s->exposure_us))) goto fault_cam;
-            cur_exposure = s->exposure_us;
-        }
-        double lamp_t = 0;
-        if (r->lamps && s->lamp_mask != mask) {
-            lamp_t = rig_lamps_settle_s(r->lamps, mask, s->lamp_mask) + 1e-3 * p->lamp_settle_ms;
-            if ((rc = rig_lamps_set(r->lamps, s->lamp_mask))) {
-                snprintf(msg, sizeof msg, "lamps: %s", rig_last_error());
-                fault_stop(r, j, step, "fault", "fault", msg);
-                goto done;
-            }
-            mask = s->lamp_mask;
-            if (p->lamp_settle_ms > 0) g_usleep((gulong)(1e3 * p->lamp_settle_ms));
-        }
-        floor_s += fmax(t_settle > 0 ? 1e-3 * p->settle_ms : 0, lamp_t) + 1e-6 * s->exposure_us;
-        double left = t_settle - model_now_s();
-        if (t_settle > 0 && left > 0) g_usleep((gulong)(left * 1e6));
-        double T_cap0 = model_now_s();
-        // Capture, retrying a camera that does not answer.
-        job_t *jb = calloc(1, sizeof *jb);
-        int tries = 0;
-        for (;;) {
-            jb->t_trigger_s = realtime_s();
-            bool q = model_error_quiet_thread(true);
-            rc = rig_camera_capture(r->camera, p->frame_timeout_s + 2e-6 * s->exposure_us, 0, &jb->f);
-            model_error_quiet_thread(q);
-            if (!rc) break;
-            if (rc != RIG_ERR_TIMEOUT || tries >= p->retries || g_sigint) break;
-            tries++;
-            rig_journal_event(j, step, "retry", "camera time-out (%s): retry %d of %d", rig_last_error(), tries,
-                              p->retries);
-            fprintf(stderr, "refl capture: camera time-out at step %d: retry %d of %d\n", step, tries, p->retries);
-        }
-        if (rc) {
-            free(jb);
-            if (rc == RIG_ERR_TIMEOUT || rc == RIG_ERR_DISCONNECTED) {
-                snprintf(msg, sizeof msg, "camera %s did not answer at step %d after %d retries (%s): session paused; "
-                         "check the camera's cable and power, then refl capture --resume %s", r->camera->name, step,
-                         tries, rig_last_error(), o->dir);
-                fault_stop(r, j, step, "paused", "pause", msg);
-                paused = 2;
-                break;
-            }
-            goto fault_cam;
-        }
-        T_cap += model_now_s() - T_cap0;
-        jb->step = *s;
-        rig_turntable_status_t st = { .angle_deg = NAN };
-        if (r->turntable) rig_turntable_status(r->turntable, &st);
-        jb->measured_deg = r->turntable ? st.angle_deg : NAN;
-        if (p->auto_exposure && s->group >= 0) {
-            frame_stats(&jb->f, p->roi, &jb->mean, &jb->max, &jb->roi_max, &jb->sat);
-            jb->stats_done = true;
-            if (jb->roi_max <= p->target_fraction * full) satisfied[s->group] = true;
-        }
-        double T_p0 = model_now_s();
-        writer_push(&w, jb);
-        T_push += model_now_s() - T_p0;
-        progress(&pg, step + 1, s, step == first ? rig_plan_floor_s(p, r, step + 1) : 0);
+        int k = step_setup(x, s);
+        if (k == RUN_ON) k = step_capture(x, s);
+        if (k == RUN_BREAK) break;
+        if (k != RUN_ON) return k;
     }
-    // Drain the writer.
-    pthread_mutex_lock(&w.m);
-    w.closing = true;
-    pthread_cond_broadcast(&w.cv);
-    pthread_mutex_unlock(&w.m);
-    pthread_join(wt, NULL);
-    writer_running = false;
-    if (pg.bar) fprintf(stderr, "\n");
-    double wall = model_now_s() - t_start;
+    return RUN_ON;
+}
+
+static void writer_close(run_t *x)
+{
+    pthread_mutex_lock(&x->w.m);
+    x->w.closing = true;
+    pthread_cond_broadcast(&x->w.cv);
+    pthread_mutex_unlock(&x->w.m);
+    pthread_join(x->wt, NULL);
+    x->writer_running = false;
+}
+
+// The end: the writer drained, then the session stopped (writer error),
+// paused or complete, and the summary.
+static int run_end(run_t *x)
+{
+    const rig_capture_opts_t *o = x->o;
+    rig_plan_t *p = x->p;
+    writer_close(x);
+    if (x->pg.bar) fprintf(stderr, "\n");
+    double wall = model_now_s() - x->t_start;
     if (o->wall_s) *o->wall_s = wall;
-    if (o->floor_s) *o->floor_s = floor_s;
-    if (o->frames_written) *o->frames_written = w.written;
-    if (writer_error(&w, msg, sizeof msg)) {
-        fault_stop(r, j, step, "stopped", "fault", msg);
-        rig_fail(RIG_ERR_IO, "refl capture: %s", msg);
-        exit_code = 1;
-        goto done;
+    if (o->floor_s) *o->floor_s = x->floor_s;
+    if (o->frames_written) *o->frames_written = x->w.written;
+    if (writer_error(&x->w, x->msg, sizeof x->msg)) {
+        fault_stop(x->r, x->j, x->step, "stopped", "fault", x->msg);
+        rig_fail(RIG_ERR_IO, "refl capture: %s", x->msg);
+        x->exit_code = 1;
+        return RUN_DONE;
     }
-    if (paused) {
-        if (paused == 1) {
-            snprintf(msg, sizeof msg, "interrupted (SIGINT): the current frame was finished, lamps off, session "
-                     "paused at step %d of %d; continue with refl capture --resume %s", step, p->nsteps, o->dir);
-            fault_stop(r, j, step, "paused", "pause", msg);
+    if (x->paused) {
+        if (x->paused == 1) {
+            snprintf(x->msg, sizeof x->msg, "interrupted (SIGINT): the current frame was finished, lamps off, "
+                     "session paused at step %d of %d; continue with refl capture --resume %s", x->step, p->nsteps,
+                     o->dir);
+            fault_stop(x->r, x->j, x->step, "paused", "pause", x->msg);
         }
-        fprintf(stderr, "refl capture: %s\n", paused == 1 ? msg : "session paused (camera not answering)");
-        if (paused == 2) rig_fail(RIG_ERR_TIMEOUT, "refl capture: %s", msg);
-        exit_code = 3;
-        goto done;
+        fprintf(stderr, "refl capture: %s\n", x->paused == 1 ? x->msg : "session paused (camera not answering)");
+        if (x->paused == 2) rig_fail(RIG_ERR_TIMEOUT, "refl capture: %s", x->msg);
+        x->exit_code = 3;
+        return RUN_DONE;
     }
-    (void)stopped;
-    if (r->lamps) rig_lamps_all_off(r->lamps);
-    rig_journal_event(j, -1, "complete", "session complete: %d frames this run, wall %.3f s, hardware floor %.3f s",
-                      w.written, wall, floor_s);
-    rig_journal_set_state(j, "complete");
-    int total_frames = frames_before + w.written;
+    if (x->r->lamps) rig_lamps_all_off(x->r->lamps);
+    rig_journal_event(x->j, -1, "complete", "session complete: %d frames this run, wall %.3f s, hardware floor %.3f "
+                      "s", x->w.written, wall, x->floor_s);
+    rig_journal_set_state(x->j, "complete");
+    int total_frames = x->frames_before + x->w.written;
     printf("refl capture: session %s complete\n  steps: %d, frames: %d (%d this run)%s\n  wall time: %.1f s, hardware "
            "floor: %.1f s (ratio %.3f); in the camera (trigger to frame in hand): %.1f s; "
            "waiting for the writer: %.1f s\n  check: refl session check %s\n",
-           o->dir, p->nsteps, total_frames, w.written, p->auto_exposure ? " (auto bracketing skips the rest)" : "",
-           wall, floor_s, floor_s > 0 ? wall / floor_s : 0, T_cap, T_push, o->dir);
+           o->dir, p->nsteps, total_frames, x->w.written, p->auto_exposure ? " (auto bracketing skips the rest)" : "",
+           wall, x->floor_s, x->floor_s > 0 ? wall / x->floor_s : 0, x->T_cap, x->T_push, o->dir);
+    x->exit_code = 0;
+    return RUN_DONE;
+}
 
-    exit_code = 0;
-    goto done;
+// A turntable or camera fault: the session stops (lamps off, stage stopped).
+static void run_fault(run_t *x, bool turntable)
+{
+    if (turntable) {
+        snprintf(x->msg, sizeof x->msg, "turntable fault at step %d: %s: session stopped, lamps off; after fixing "
+                 "the stage, refl capture --resume %s", x->step, model_last_error(), x->o->dir);
+        if (x->r && x->r->turntable) {
+            bool q = model_error_quiet_thread(true);
+            rig_turntable_stop(x->r->turntable, true);
+            model_error_quiet_thread(q);
+        }
+    } else {
+        snprintf(x->msg, sizeof x->msg, "camera fault at step %d: %s: session stopped, lamps off; refl capture "
+                 "--resume %s", x->step, model_last_error(), x->o->dir);
+    }
+    if (x->j) fault_stop(x->r, x->j, x->step, "fault", "fault", x->msg);
+    rig_fail(x->rc, "refl capture: %s", x->msg);
+}
 
-fault_tt:
-    snprintf(msg, sizeof msg, "turntable fault at step %d: %s: session stopped, lamps off; after fixing the stage, "
-             "refl capture --resume %s", step, rig_last_error(), o->dir);
-    if (r && r->turntable) {
+static void run_cleanup(run_t *x)
+{
+    if (x->writer_running) writer_close(x);
+    if (x->sig_installed) sigaction(SIGINT, &g_old_int, NULL);
+    if (x->r && x->r->lamps && rig_lamps_on_mask(x->r->lamps)) {
         bool q = model_error_quiet_thread(true);
-        rig_turntable_stop(r->turntable, true);
+        rig_lamps_all_off(x->r->lamps);
         model_error_quiet_thread(q);
     }
-    if (j) fault_stop(r, j, step, "fault", "fault", msg);
-    rig_fail(rc, "refl capture: %s", msg);
-    goto done;
-fault_cam:
-    snprintf(msg, sizeof msg, "camera fault at step %d: %s: session stopped, lamps off; refl capture --resume %s",
-             step, rig_last_error(), o->dir);
-    if (j) fault_stop(r, j, step, "fault", "fault", msg);
-    rig_fail(rc, "refl capture: %s", msg);
-done:
-    if (writer_running) {
-        pthread_mutex_lock(&w.m);
-        w.closing = true;
-        pthread_cond_broadcast(&w.cv);
-        pthread_mutex_unlock(&w.m);
-        pthread_join(wt, NULL);
+    rig_close(x->r);
+    rig_journal_close(x->j);
+    rig_plan_free(x->p);
+    free(x->status);
+    free(x->satisfied);
+    free(x->facts);
+    free(x->rig_text);
+    free(x->s_plan_path);
+    free(x->s_plan_text);
+    free(x->s_plan_sha);
+    free(x->s_rig_path);
+    free(x->s_rig_text);
+    free(x->s_rig_sha);
+    pthread_mutex_destroy(&x->w.m);
+    pthread_cond_destroy(&x->w.cv);
+}
+
+int rig_capture_run(const rig_capture_opts_t *o)
+{
+    // run_t holds the writer's 10 kB message and the run's own: on the heap.
+    run_t *x = calloc(1, sizeof *x);
+    if (!x) {
+        rig_fail(RIG_ERR_NO_MEM, "refl capture: out of memory");
+        return 1;
     }
-    if (sig_installed) sigaction(SIGINT, &g_old_int, NULL);
-    if (r && r->lamps && r->lamps->on_mask) {
-        bool q = model_error_quiet_thread(true);
-        rig_lamps_all_off(r->lamps);
-        model_error_quiet_thread(q);
-    }
-    rig_close(r);
-    rig_journal_close(j);
-    rig_plan_free(p);
-    free(status);
-    free(satisfied);
-    free(facts);
-    free(rig_text);
-    free(s_plan_path);
-    free(s_plan_text);
-    free(s_plan_sha);
-    free(s_rig_path);
-    free(s_rig_text);
-    free(s_rig_sha);
-    pthread_mutex_destroy(&w.m);
-    pthread_cond_destroy(&w.cv);
+    x->o = o;
+    x->exit_code = 1;
+    x->rig_path = o->rig_path;
+    x->w.dir = o->dir;
+    pthread_mutex_init(&x->w.m, NULL);
+    pthread_cond_init(&x->w.cv, NULL);
+    int k = run_plan(x);
+    if (k == RUN_ON) k = run_session(x);
+    if (k == RUN_ON) k = run_start(x);
+    if (k == RUN_ON) k = run_hardware(x);
+    if (k == RUN_ON) k = run_steps(x);
+    if (k == RUN_ON) k = run_end(x);
+    if (k == RUN_FAULT_TT || k == RUN_FAULT_CAM) run_fault(x, k == RUN_FAULT_TT);
+    run_cleanup(x);
+    int exit_code = x->exit_code;
+    free(x);
     return exit_code;
 }

@@ -1,6 +1,6 @@
 // rig/cmd_capture.c — `refl capture` (run, dry-run or resume a capture
 // session) and `refl session` (check, export). Usage errors exit 2, runtime
-// errors 1, a paused session 3 (see rig/rig.h, "Capture sessions").
+// errors 1, a paused session 3 (see rig/session.h).
 #define _GNU_SOURCE
 #include <errno.h>
 #include <glib.h>
@@ -11,31 +11,21 @@
 #include <sys/stat.h>
 
 #include "model/model.h"
+#include "model/opts.h"
 #include "rig/rig.h"
 
-static void capture_usage(FILE *f)
-{
-    fprintf(f, "usage: refl capture PLAN.ini --rig RIG.ini -o DIR [--operator NAME] [--notes TEXT] [--calib DIR]\n"
-               "                    [--progress bar|lines]\n"
-               "       refl capture PLAN.ini --rig RIG.ini --dry-run\n"
-               "       refl capture --resume DIR [--rig RIG.ini] [--allow-changed]\n"
-               "\n"
-               "Runs the plan (see examples/plans/ and rig/rig.h) into the session directory DIR: a SQLite\n"
-               "journal (session.sqlite) and 16-bit PNG frames (frames/). --dry-run prints the steps, the\n"
-               "estimated duration and disk use and checks the plan against the rig; nothing moves.\n"
-               "--calib DIR records the calibrations in use (their paths and sha256) in the session.\n"
-               "--resume continues a stopped session where it stopped; it refuses when the plan or the rig file\n"
-               "changed since (--allow-changed continues the stored step list anyway).\n"
-               "First Ctrl-C: finish the frame, lamps off, pause (exit 3); second: stop at once.\n"
-               "Exit: 0 complete, 1 error or fault, 2 usage, 3 paused.\n\nrefl %s\n", REFL_VERSION);
-}
-
-static int usage_error(const char *cmd, const char *msg, const char *arg)
-{
-    fprintf(stderr, "refl %s: %s%s%s\n(refl %s --help for the options)\n", cmd, msg, arg ? " " : "", arg ? arg : "",
-            cmd);
-    return 2;
-}
+static const char capture_about[] =
+    "also:  refl capture PLAN.ini --rig RIG.ini --dry-run\n"
+    "       refl capture --resume DIR [--rig RIG.ini] [--allow-changed]\n"
+    "\n"
+    "Runs the plan (see examples/plans/ and rig/session.h) into the session directory DIR: a SQLite\n"
+    "journal (session.sqlite) and 16-bit PNG frames (frames/). --dry-run prints the steps, the\n"
+    "estimated duration and disk use and checks the plan against the rig; nothing moves.\n"
+    "--calib DIR records the calibrations in use (their paths and sha256) in the session.\n"
+    "--resume continues a stopped session where it stopped; it refuses when the plan or the rig file\n"
+    "changed since (--allow-changed continues the stored step list anyway).\n"
+    "First Ctrl-C: finish the frame, lamps off, pause (exit 3); second: stop at once.\n"
+    "Exit: 0 complete, 1 error or fault, 2 usage, 3 paused.";
 
 static char *join_args(int argc, char **argv)
 {
@@ -51,61 +41,49 @@ static char *join_args(int argc, char **argv)
 int rig_cmd_capture(int argc, char **argv)
 {
     rig_capture_opts_t o = { .progress = -1 };
-    for (int i = 1; i < argc; i++) {
-        const char *a = argv[i];
-        const char **val = NULL;
-        if (!strcmp(a, "-h") || !strcmp(a, "--help")) {
-            capture_usage(stdout);
-            return 0;
-        } else if (!strcmp(a, "--dry-run")) {
-            o.dry_run = true;
-        } else if (!strcmp(a, "--allow-changed")) {
-            o.allow_changed = true;
-        } else if (!strcmp(a, "--rig")) {
-            val = &o.rig_path;
-        } else if (!strcmp(a, "-o")) {
-            val = &o.dir;
-        } else if (!strcmp(a, "--resume")) {
-            o.resume = true;
-            val = &o.dir;
-        } else if (!strcmp(a, "--operator")) {
-            val = &o.operator_name;
-        } else if (!strcmp(a, "--notes")) {
-            val = &o.notes;
-        } else if (!strcmp(a, "--calib")) {
-            val = &o.calib_dir;
-        } else if (!strcmp(a, "--progress")) {
-            if (i + 1 >= argc) return usage_error("capture", "option --progress needs bar or lines", NULL);
-            const char *v = argv[++i];
-            if (!strcmp(v, "bar")) o.progress = 1;
-            else if (!strcmp(v, "lines")) o.progress = 0;
-            else return usage_error("capture", "option --progress: write bar or lines, not", v);
-            continue;
-        } else if (a[0] == '-') {
-            return usage_error("capture", "unknown option", a);
-        } else if (!o.plan_path) {
-            o.plan_path = a;
-        } else {
-            return usage_error("capture", "unexpected argument", a);
-        }
-        if (val) {
-            if (i + 1 >= argc || !argv[i + 1][0]) return usage_error("capture", "option needs a value:", a);
-            if (*val && strcmp(a, "--resume")) return usage_error("capture", "option given twice:", a);
-            *val = argv[++i];
-        }
+    const char *out_dir = NULL, *resume_dir = NULL, *progress = NULL;
+    bool dry_run = false, allow_changed = false;
+    model_opt_t opts[] = {
+        MODEL_OPT_STRING("--rig", "RIG.ini", "the rig description file", &o.rig_path, false),
+        MODEL_OPT_STRING("-o", "DIR", "the session directory (new or empty)", &out_dir, false),
+        MODEL_OPT_STRING("--operator", "NAME", "who runs the session (recorded)", &o.operator_name, false),
+        MODEL_OPT_STRING("--notes", "TEXT", "notes recorded with the session", &o.notes, false),
+        MODEL_OPT_STRING("--calib", "DIR", "the calibrations in use (recorded by path and sha256)", &o.calib_dir,
+                         false),
+        MODEL_OPT_STRING("--progress", "bar|lines", "progress display (default: bar on a terminal)", &progress,
+                         false),
+        MODEL_OPT_FLAG("--dry-run", NULL, "print the steps and check the plan against the rig; nothing moves",
+                       &dry_run),
+        MODEL_OPT_STRING("--resume", "DIR", "continue the session in DIR where it stopped", &resume_dir, false),
+        MODEL_OPT_FLAG("--allow-changed", NULL, "--resume: continue although the plan or rig file changed",
+                       &allow_changed),
+    };
+    model_cli_t c = { .cmd = "capture", .synopsis = "PLAN.ini", .about = capture_about, .opts = opts,
+                      .nopts = MODEL_NOPTS(opts), .min_positional = 0, .max_positional = 1 };
+    int rc = model_cli_parse(&c, argc, argv);
+    if (rc != MODEL_CLI_OK) return rc == MODEL_CLI_HELP ? 0 : rc;
+    o.plan_path = c.npositional ? c.positional[0] : NULL;
+    o.dry_run = dry_run;
+    o.allow_changed = allow_changed;
+    o.resume = resume_dir != NULL;
+    o.dir = resume_dir ? resume_dir : out_dir;
+    if (progress) {
+        if (!strcmp(progress, "bar")) o.progress = 1;
+        else if (!strcmp(progress, "lines")) o.progress = 0;
+        else return model_cli_error(&c, "option --progress: write bar or lines, not %s", progress);
     }
     if (o.resume) {
-        if (o.dry_run) return usage_error("capture", "--dry-run and --resume do not go together", NULL);
+        if (o.dry_run) return model_cli_error(&c, "--dry-run and --resume do not go together");
     } else {
-        if (!o.plan_path) return usage_error("capture", "missing the plan file (refl capture PLAN.ini --rig RIG.ini -o "
-                                             "DIR)", NULL);
-        if (!o.rig_path) return usage_error("capture", "missing required option --rig RIG.ini", NULL);
-        if (!o.dir && !o.dry_run) return usage_error("capture", "missing -o DIR (the session directory)", NULL);
-        if (o.allow_changed) return usage_error("capture", "--allow-changed is for --resume", NULL);
+        if (!o.plan_path)
+            return model_cli_error(&c, "missing the plan file (refl capture PLAN.ini --rig RIG.ini -o DIR)");
+        if (!o.rig_path) return model_cli_error(&c, "missing required option --rig RIG.ini");
+        if (!o.dir && !o.dry_run) return model_cli_error(&c, "missing -o DIR (the session directory)");
+        if (o.allow_changed) return model_cli_error(&c, "--allow-changed is for --resume");
     }
     char *cl = join_args(argc, argv);
     o.command_line = cl;
-    int rc = rig_capture_run(&o);
+    rc = rig_capture_run(&o);
     g_free(cl);
     fflush(stdout);
     return rc;
@@ -114,14 +92,11 @@ int rig_cmd_capture(int argc, char **argv)
 // ---------------------------------------------------------------------------
 // refl session
 
-static void session_usage(FILE *f)
-{
-    fprintf(f, "usage: refl session check DIR\n"
-               "       refl session export DIR --format csv|json [-o FILE]\n"
-               "\ncheck: verify every frame of the session against its sha256 and list the steps still missing\n"
-               "(exit 0 when every committed frame is intact, 1 otherwise).\n"
-               "export: the frame table, one row per frame (stdout unless -o).\n\nrefl %s\n", REFL_VERSION);
-}
+static const char session_about[] =
+    "also:  refl session export DIR --format csv|json [-o FILE]\n"
+    "\ncheck: verify every frame of the session against its sha256 and list the steps still missing\n"
+    "(exit 0 when every committed frame is intact, 1 otherwise).\n"
+    "export: the frame table, one row per frame (stdout unless -o).";
 
 static int session_check(const char *dir)
 {
@@ -183,28 +158,9 @@ static int session_export(const char *dir, const char *format, const char *out)
         goto done;
     }
     if (!strcmp(format, "csv")) {
-        fprintf(f, "step,file,sha256,t_trigger_utc_s,t_written_utc_s,commanded_deg,measured_deg,lamps,exposure_us,"
-                   "gain,mean,max,roi_max,saturated_fraction,width,height,pixel_format,frame_id\n");
-        for (int i = 0; i < n; i++) {
-            const rig_frame_row_t *r = &rows[i];
-            fprintf(f, "%d,%s,%s,%.6f,%.6f,%.10g,%.6f,%s,%.10g,%.10g,%.4f,%.0f,%.0f,%.8g,%d,%d,%s,%llu\n", r->step,
-                    r->file, r->sha256, r->t_trigger_utc_s, r->t_written_utc_s, r->commanded_deg, r->measured_deg,
-                    r->lamps, r->exposure_us, r->gain, r->mean, r->max, r->roi_max, r->saturated_fraction, r->width,
-                    r->height, r->pixel_format, (unsigned long long)r->frame_id);
-        }
+        rig_frame_rows_write_csv(f, rows, n);
     } else {
-        json_t *a = json_array();
-        for (int i = 0; i < n; i++) {
-            const rig_frame_row_t *r = &rows[i];
-            json_t *o = json_pack("{s:i,s:s,s:s,s:f,s:f,s:f,s:f,s:s,s:f,s:f,s:f,s:f,s:f,s:f,s:i,s:i,s:s,s:I}", "step",
-                                  r->step, "file", r->file, "sha256", r->sha256, "t_trigger_utc_s", r->t_trigger_utc_s,
-                                  "t_written_utc_s", r->t_written_utc_s, "commanded_deg", r->commanded_deg,
-                                  "measured_deg", r->measured_deg, "lamps", r->lamps, "exposure_us", r->exposure_us,
-                                  "gain", r->gain, "mean", r->mean, "max", r->max, "roi_max", r->roi_max,
-                                  "saturated_fraction", r->saturated_fraction, "width", r->width, "height", r->height,
-                                  "pixel_format", r->pixel_format, "frame_id", (json_int_t)r->frame_id);
-            json_array_append_new(a, o);
-        }
+        json_t *a = rig_frame_rows_json(rows, n);
         json_dumpf(a, f, JSON_INDENT(1));
         fputc('\n', f);
         json_decref(a);
@@ -224,25 +180,25 @@ done:
 
 int rig_cmd_session(int argc, char **argv)
 {
-    if (argc >= 2 && (!strcmp(argv[1], "-h") || !strcmp(argv[1], "--help"))) {
-        session_usage(stdout);
-        return 0;
-    }
-    if (argc < 3) return usage_error("session", "needs an action and a directory: check DIR | export DIR", NULL);
-    const char *action = argv[1], *dir = argv[2], *format = NULL, *out = NULL;
-    for (int i = 3; i < argc; i++) {
-        if (!strcmp(argv[i], "--format") && i + 1 < argc) format = argv[++i];
-        else if (!strcmp(argv[i], "-o") && i + 1 < argc) out = argv[++i];
-        else return usage_error("session", "unexpected argument", argv[i]);
-    }
+    const char *format = NULL, *out = NULL;
+    model_opt_t opts[] = {
+        MODEL_OPT_STRING("--format", "csv|json", "export: the output format", &format, false),
+        MODEL_OPT_STRING("-o", "FILE", "export: write to FILE instead of stdout", &out, false),
+    };
+    model_cli_t c = { .cmd = "session", .synopsis = "check|export DIR", .about = session_about, .opts = opts,
+                      .nopts = MODEL_NOPTS(opts), .min_positional = 0, .max_positional = 2 };
+    int rc = model_cli_parse(&c, argc, argv);
+    if (rc != MODEL_CLI_OK) return rc == MODEL_CLI_HELP ? 0 : rc;
+    if (c.npositional < 2) return model_cli_error(&c, "needs an action and a directory: check DIR | export DIR");
+    const char *action = c.positional[0], *dir = c.positional[1];
     if (!strcmp(action, "check")) {
-        if (format || out) return usage_error("session", "check takes no options", NULL);
+        if (format || out) return model_cli_error(&c, "check takes no options");
         return session_check(dir);
     }
     if (!strcmp(action, "export")) {
         if (!format || (strcmp(format, "csv") && strcmp(format, "json")))
-            return usage_error("session", "export needs --format csv or --format json", NULL);
+            return model_cli_error(&c, "export needs --format csv or --format json");
         return session_export(dir, format, out);
     }
-    return usage_error("session", "unknown action (check or export):", action);
+    return model_cli_error(&c, "unknown action (check or export): %s", action);
 }

@@ -14,7 +14,6 @@
 #include <math.h>
 #include <pthread.h>
 #include <signal.h>
-#include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -22,99 +21,41 @@
 #include <time.h>
 
 #include "model/model.h"
+#include "model/opts.h"
 #include "rig/rig.h"
 
 #define CAPTURE_TIMEOUT_S 20.0     // beyond the exposure: render time of the virtual camera, transfer
 #define CAPTURE_RETRIES   1
 
 // ---------------------------------------------------------------------------
-// Options
+// Options (model/opts.h), and the actions each option is for
 
-typedef struct {
-    const char *name;
-    const char *metavar;
-    const char *help;
-    const char *actions;    // space-separated actions that take it; NULL = all
-    const char *value;
-} ropt_t;
+static const char rig_about[] =
+    "actions:\n"
+    "  status     every device with its identity and state\n"
+    "  home       home the turntable\n"
+    "  move DEG   move the turntable to DEG (absolute; homes it first when needed)\n"
+    "  identify   model, serial and firmware of every device\n"
+    "  snap       one camera frame to a PNG (lamps switched off again afterwards)\n"
+    "  serve      virtual rigs: keep the virtual camera up on its address until SIGINT/SIGTERM";
 
-static ropt_t opts_proto[] = {
-    { "--rig", "RIG.ini", "the rig description file (required)", NULL, NULL },
-    { "-o", "OUT.png", "snap: output image (16-bit grey PNG with metadata)", "snap", NULL },
-    { "--angle", "DEG", "snap: move the turntable to DEG first (homes it first when needed)", "snap", NULL },
-    { "--lamps", "NAMES", "snap: lamps on during the frame: NAME,NAME,... | all | none (default none)", "snap", NULL },
-    { "--exposure-us", "US", "snap: exposure time, us (default: the rig file's, else the camera's)", "snap", NULL },
-    { "--gain", "G", "snap: gain in the camera's unit, dB for GenICam Gain (default: rig file / camera)", "snap",
-      NULL },
-    { "--pixel-format", "F", "snap: Mono8 | Mono12 | Mono16 (default: rig file / camera)", "snap", NULL },
-    { "--sample", "NAME", "snap, serve (virtual rigs): put this sample of the truth file on the table",
-      "snap serve", NULL },
-};
-#define NOPTS ((int)(sizeof opts_proto / sizeof opts_proto[0]))
+static const char rig_epilog[] =
+    "Rig files: [camera], [turntable], [lamp NAME] sections, or [rig] backend = virtual\n"
+    "(see rig/rig.h and examples/lab-rig.ini, examples/virtual-rig.ini).\n"
+    "Angles in degrees (turntable frame: 0 at home, counter-clockwise seen from above).";
 
-typedef struct {
-    ropt_t      o[NOPTS];
-    const char *action;
-    const char *args[4];
-    int         nargs;
-    bool        help;
-} rcli_t;
-
-static void usage(FILE *f, bool full)
-{
-    fprintf(f, "usage: refl rig --rig RIG.ini status | home | move DEG | identify\n"
-               "       refl rig --rig RIG.ini snap -o OUT.png [--angle DEG] [--lamps NAMES|all|none]\n"
-               "                [--exposure-us US] [--gain G] [--pixel-format F] [--sample NAME]\n"
-               "       refl rig --rig RIG.ini serve [--sample NAME]\n");
-    if (!full) {
-        fprintf(f, "(refl rig --help for the options)\n");
-        return;
-    }
-    fprintf(f, "\nactions:\n"
-               "  status     every device with its identity and state\n"
-               "  home       home the turntable\n"
-               "  move DEG   move the turntable to DEG (absolute; homes it first when needed)\n"
-               "  identify   model, serial and firmware of every device\n"
-               "  snap       one camera frame to a PNG (lamps switched off again afterwards)\n"
-               "  serve      virtual rigs: keep the virtual camera up on its address until SIGINT/SIGTERM\n"
-               "\noptions:\n");
-    for (int i = 0; i < NOPTS; i++) {
-        char lhs[64];
-        snprintf(lhs, sizeof lhs, "%s %s", opts_proto[i].name, opts_proto[i].metavar);
-        fprintf(f, "  %-22s %s\n", lhs, opts_proto[i].help);
-    }
-    fprintf(f, "  %-22s %s\n", "-h, --help", "print this help");
-    fprintf(f, "\nRig files: [camera], [turntable], [lamp NAME] sections, or [rig] backend = virtual\n"
-               "(see rig/rig.h and examples/lab-rig.ini, examples/virtual-rig.ini).\n"
-               "Angles in degrees (turntable frame: 0 at home, counter-clockwise seen from above).\n"
-               "\nrefl %s\n", REFL_VERSION);
-}
-
-static int usage_error(const char *fmt, ...) __attribute__((format(printf, 1, 2)));
-static int usage_error(const char *fmt, ...)
-{
-    va_list ap;
-    va_start(ap, fmt);
-    fprintf(stderr, "refl rig: ");
-    vfprintf(stderr, fmt, ap);
-    fprintf(stderr, "\n");
-    va_end(ap);
-    usage(stderr, false);
-    return 2;
-}
-
-static ropt_t *find_opt(rcli_t *c, const char *name, size_t len)
-{
-    for (int i = 0; i < NOPTS; i++)
-        if (strlen(c->o[i].name) == len && !strncmp(c->o[i].name, name, len)) return &c->o[i];
-    return NULL;
-}
-
-static const char *optv(rcli_t *c, const char *name)
-{
-    ropt_t *o = find_opt(c, name, strlen(name));
-    return o ? o->value : NULL;
-}
+#define RIG_OPTS(_)                                                                                               \
+    _("--rig", "RIG.ini", "the rig description file", true, NULL)                                                 \
+    _("-o", "OUT.png", "snap: output image (16-bit grey PNG with metadata)", false, "snap")                        \
+    _("--angle", "DEG", "snap: move the turntable to DEG first (homes it first when needed)", false, "snap")       \
+    _("--lamps", "NAMES", "snap: lamps on during the frame: NAME,NAME,... | all | none (default none)", false,     \
+      "snap")                                                                                                     \
+    _("--exposure-us", "US", "snap: exposure time, us (default: the rig file's, else the camera's)", false, "snap") \
+    _("--gain", "G", "snap: gain in the camera's unit, dB for GenICam Gain (default: rig file / camera)", false,   \
+      "snap")                                                                                                     \
+    _("--pixel-format", "F", "snap: Mono8 | Mono12 | Mono16 (default: rig file / camera)", false, "snap")          \
+    _("--sample", "NAME", "snap, serve (virtual rigs): put this sample of the truth file on the table", false,     \
+      "snap serve")
 
 static bool word_in(const char *words, const char *w)
 {
@@ -124,86 +65,36 @@ static bool word_in(const char *words, const char *w)
     return false;
 }
 
-static bool is_number(const char *s)
+// The action and its arguments, checked: 0 or MODEL_CLI_USAGE (printed).
+static int check_action(model_cli_t *c)
 {
-    double v;
-    return model_parse_double(s, &v);
-}
-
-static int parse_cli(rcli_t *c, int argc, char **argv)
-{
-    memcpy(c->o, opts_proto, sizeof c->o);
-    bool only_positional = false;
-    for (int i = 1; i < argc; i++) {
-        const char *a = argv[i];
-        if (!only_positional && (!strcmp(a, "--help") || !strcmp(a, "-h"))) {
-            c->help = true;
-            return 0;
-        }
-        if (!only_positional && !strcmp(a, "--")) {
-            only_positional = true;
-            continue;
-        }
-        // "-30" is an angle, not an option.
-        if (!only_positional && a[0] == '-' && a[1] != 0 && !is_number(a)) {
-            const char *eq = a[1] == '-' ? strchr(a, '=') : NULL;
-            size_t len = eq ? (size_t)(eq - a) : strlen(a);
-            ropt_t *o = find_opt(c, a, len);
-            if (!o) return usage_error("unknown option '%.*s'", (int)len, a);
-            if (o->value) return usage_error("option %s given twice", o->name);
-            if (eq) {
-                o->value = eq + 1;
-            } else {
-                if (i + 1 >= argc) return usage_error("option %s needs a value (%s)", o->name, o->metavar);
-                o->value = argv[++i];
-            }
-            if (!o->value[0]) return usage_error("option %s: empty value", o->name);
-            continue;
-        }
-        if (!c->action) {
-            c->action = a;
-        } else {
-            if (c->nargs >= (int)(sizeof c->args / sizeof c->args[0]))
-                return usage_error("too many arguments after '%s'", c->action);
-            c->args[c->nargs++] = a;
-        }
-    }
-    if (!optv(c, "--rig")) return usage_error("missing required option --rig RIG.ini");
-    if (!c->action) return usage_error("missing action: status, home, move DEG, identify, snap or serve");
+#define RIG_OPT_ACTIONS_(name, metavar, help, required, actions) actions,
+    static const char *const opt_actions[] = { RIG_OPTS(RIG_OPT_ACTIONS_) };
+#undef RIG_OPT_ACTIONS_
+    if (c->npositional < 1)
+        return model_cli_error(c, "missing action: status, home, move DEG, identify, snap or serve");
+    const char *action = c->positional[0];
     static const char *const actions[] = { "status", "home", "move", "identify", "snap", "serve" };
     bool known = false;
-    for (size_t i = 0; i < sizeof actions / sizeof actions[0]; i++) known |= !strcmp(c->action, actions[i]);
+    for (size_t i = 0; i < sizeof actions / sizeof actions[0]; i++) known |= !strcmp(action, actions[i]);
     if (!known)
-        return usage_error("unknown action '%s': use status, home, move DEG, identify, snap or serve", c->action);
-    int want = !strcmp(c->action, "move") ? 1 : 0;
-    if (c->nargs < want) return usage_error("move needs the angle: refl rig --rig RIG move DEG");
-    if (c->nargs > want) return usage_error("unexpected argument '%s' after %s", c->args[want], c->action);
-    for (int i = 0; i < NOPTS; i++)
-        if (c->o[i].value && c->o[i].actions && !word_in(c->o[i].actions, c->action))
-            return usage_error("option %s is for %s only, not %s", c->o[i].name, c->o[i].actions, c->action);
-    if (!strcmp(c->action, "snap") && !optv(c, "-o")) return usage_error("snap needs -o OUT.png");
+        return model_cli_error(c, "unknown action '%s': use status, home, move DEG, identify, snap or serve", action);
+    int nargs = c->npositional - 1, want = !strcmp(action, "move") ? 1 : 0;
+    if (nargs < want) return model_cli_error(c, "move needs the angle: refl rig --rig RIG move DEG");
+    if (nargs > want) return model_cli_error(c, "unexpected argument '%s' after %s", c->positional[1 + want], action);
+    for (int i = 0; i < c->nopts; i++)
+        if (c->opts[i].given && opt_actions[i] && !word_in(opt_actions[i], action))
+            return model_cli_error(c, "option %s is for %s only, not %s", c->opts[i].name, opt_actions[i], action);
+    if (!strcmp(action, "snap") && !model_cli_value(c, "-o")) return model_cli_error(c, "snap needs -o OUT.png");
     return 0;
 }
 
 // Angle: finite, within the wrappers' +-10000 deg.
-static int parse_angle(const char *what, const char *s, double *out)
+static int parse_angle(model_cli_t *c, const char *what, const char *s, double *out)
 {
     if (!model_parse_double(s, out))
-        return usage_error("%s: '%s' is not an angle in degrees", what, s);
-    if (!(fabs(*out) <= 1e4)) return usage_error("%s: %s deg is out of range (-10000..10000)", what, s);
-    return 0;
-}
-
-static int opt_double(rcli_t *c, const char *name, double *out, double lo, bool lo_open, double hi,
-                      const char *range_text)
-{
-    const char *s = optv(c, name);
-    if (!s) return 0;
-    double v;
-    if (!model_parse_double(s, &v)) return usage_error("option %s: '%s' is not a number", name, s);
-    if ((lo_open ? !(v > lo) : !(v >= lo)) || !(v <= hi))
-        return usage_error("option %s: %s is out of range (%s)", name, s, range_text);
-    *out = v;
+        return model_cli_error(c, "%s: '%s' is not an angle in degrees", what, s);
+    if (!(fabs(*out) <= 1e4)) return model_cli_error(c, "%s: %s deg is out of range (-10000..10000)", what, s);
     return 0;
 }
 
@@ -229,8 +120,8 @@ static void lamp_names(const rig_lamps_t *l, uint32_t mask, char *out, size_t si
 {
     size_t n = 0;
     out[0] = 0;
-    for (int i = 0; l && i < l->n && n < size; i++)
-        if (mask & (1u << i)) n += (size_t)snprintf(out + n, size - n, "%s%s", n ? "," : "", l->lamps[i].name);
+    for (int i = 0; l && i < rig_lamps_count(l) && n < size; i++)
+        if (mask & (1u << i)) n += (size_t)snprintf(out + n, size - n, "%s%s", n ? "," : "", rig_lamps_name(l, i));
     if (!out[0]) snprintf(out, size, "none");
 }
 
@@ -241,11 +132,12 @@ static int lamps_mask(const rig_t *r, const char *spec, uint32_t *mask)
     if (!spec || !strcmp(spec, "none")) return 0;
     const rig_lamps_t *l = r->lamps;
     if (!strcmp(spec, "all")) {
-        *mask = !l ? 0 : l->n >= 32 ? 0xffffffffu : ((uint32_t)1 << l->n) - 1;
+        *mask = !l ? 0 : rig_lamps_count(l) >= 32 ? 0xffffffffu : ((uint32_t)1 << rig_lamps_count(l)) - 1;
         return 0;
     }
     char known[1024];
-    lamp_names(l, l ? (l->n >= 32 ? 0xffffffffu : ((uint32_t)1 << l->n) - 1) : 0, known, sizeof known);
+    int nl = rig_lamps_count(l);
+    lamp_names(l, nl >= 32 ? 0xffffffffu : ((uint32_t)1 << nl) - 1, known, sizeof known);
     gchar **names = g_strsplit(spec, ",", -1);
     int rc = 0;
     for (int i = 0; names[i]; i++) {
@@ -269,11 +161,12 @@ static int move_to(rig_t *r, double angle_deg)
     int rc = rig_turntable_status(r->turntable, &st);
     if (rc) return rc;
     if (!st.homed) {
-        fprintf(stderr, "refl rig: %s is not homed: homing first\n", r->turntable->name);
+        fprintf(stderr, "refl rig: %s is not homed: homing first\n", rig_turntable_name(r->turntable));
         if ((rc = rig_turntable_home(r->turntable, home_timeout_s(r)))) return rc;
         if ((rc = rig_turntable_status(r->turntable, &st))) return rc;
     }
-    fprintf(stderr, "refl rig: moving %s from %.3f to %.3f deg\n", r->turntable->name, st.angle_deg, angle_deg);
+    fprintf(stderr, "refl rig: moving %s from %.3f to %.3f deg\n", rig_turntable_name(r->turntable), st.angle_deg,
+            angle_deg);
     return rig_turntable_move_abs_deg(r->turntable, angle_deg, move_timeout_s(r, angle_deg - st.angle_deg));
 }
 
@@ -302,17 +195,17 @@ static int do_status(rig_t *r)
         rig_turntable_status_t st;
         if ((rc = rig_turntable_status(r->turntable, &st))) return rc;
         printf("turntable: %s\nturntable_angle_deg: %.4f\nturntable_homed: %s\nturntable_moving: %s\n",
-               r->turntable->name, st.angle_deg, yes_no(st.homed), yes_no(st.moving || st.homing));
+               rig_turntable_name(r->turntable), st.angle_deg, yes_no(st.homed), yes_no(st.moving || st.homing));
         if (st.motion_error || st.limit_fwd || st.limit_rev)
             printf("turntable_faults: %s%s%s\n", st.motion_error ? "motion-error " : "",
                    st.limit_fwd ? "limit-forward " : "", st.limit_rev ? "limit-reverse" : "");
     } else {
         printf("turntable: none\n");
     }
-    if (r->lamps && r->lamps->n > 0) {
-        for (int i = 0; i < r->lamps->n; i++)
-            printf("lamp %s: %s (%s)\n", r->lamps->lamps[i].name, (r->lamps->on_mask >> i) & 1 ? "on" : "off",
-                   r->lamps->ops->backend);
+    if (r->lamps && rig_lamps_count(r->lamps) > 0) {
+        for (int i = 0; i < rig_lamps_count(r->lamps); i++)
+            printf("lamp %s: %s (%s)\n", rig_lamps_name(r->lamps, i),
+                   (rig_lamps_on_mask(r->lamps) >> i) & 1 ? "on" : "off", rig_lamps_backend(r->lamps));
     } else {
         printf("lamps: none\n");
     }
@@ -322,8 +215,8 @@ static int do_status(rig_t *r)
         printf("camera: %s\ncamera_vendor: %s\ncamera_model: %s\ncamera_serial: %s\n"
                "camera_pixel_format: %s (%d bits)\ncamera_region: %d x %d at (%d, %d)\n"
                "camera_exposure_us: %.6g\ncamera_gain: %.6g\n",
-               r->camera->name, m.vendor, m.model, m.serial, m.pixel_format, m.bits, m.width, m.height, m.offset_x,
-               m.offset_y, m.exposure_us, m.gain);
+               rig_camera_name(r->camera), m.vendor, m.model, m.serial, m.pixel_format, m.bits, m.width, m.height,
+               m.offset_x, m.offset_y, m.exposure_us, m.gain);
         if (isfinite(m.temperature_c)) printf("camera_temperature_c: %.2f\n", m.temperature_c);
         else printf("camera_temperature_c: none (the camera has no sensor)\n");
     } else {
@@ -341,7 +234,8 @@ static int do_identify(rig_t *r)
         if ((rc = rig_turntable_info(r->turntable, &in))) return rc;
         printf("turntable: %s\nturntable_backend: %s\nturntable_model: %s\nturntable_serial: %s\n"
                "turntable_firmware: %s\nturntable_counts_per_deg: %.6g\n",
-               r->turntable->name, r->turntable->ops->backend, in.model, in.serial, in.firmware, in.counts_per_deg);
+               rig_turntable_name(r->turntable), rig_turntable_backend(r->turntable), in.model, in.serial, in.firmware,
+               in.counts_per_deg);
     } else {
         printf("turntable: none\n");
     }
@@ -350,18 +244,19 @@ static int do_identify(rig_t *r)
         if ((rc = rig_camera_settings(r->camera, &m))) return rc;
         printf("camera: %s\ncamera_backend: %s\ncamera_vendor: %s\ncamera_model: %s\ncamera_serial: %s\n"
                "camera_sensor_region: %d x %d\n",
-               r->camera->name, r->camera->ops->backend, m.vendor, m.model, m.serial, m.width, m.height);
+               rig_camera_name(r->camera), rig_camera_backend(r->camera), m.vendor, m.model, m.serial, m.width,
+               m.height);
     } else {
         printf("camera: none\n");
     }
-    if (r->lamps && r->lamps->n > 0) {
-        for (int i = 0; i < r->lamps->n; i++) {
-            const rig_lamp_line_t *a = &r->lamps->lamps[i];
-            if (!strcmp(r->lamps->ops->backend, "gpiod"))
+    if (r->lamps && rig_lamps_count(r->lamps) > 0) {
+        for (int i = 0; i < rig_lamps_count(r->lamps); i++) {
+            const rig_lamp_line_t *a = rig_lamps_line(r->lamps, i);
+            if (!strcmp(rig_lamps_backend(r->lamps), "gpiod"))
                 printf("lamp %s: gpiod %s line %u %s, warm-up %g ms, settle %g ms\n", a->name, a->chip, a->line,
                        a->active_low ? "active-low" : "active-high", a->warmup_ms, a->settle_ms);
             else
-                printf("lamp %s: %s%s, warm-up %g ms, settle %g ms\n", a->name, r->lamps->ops->backend,
+                printf("lamp %s: %s%s, warm-up %g ms, settle %g ms\n", a->name, rig_lamps_backend(r->lamps),
                        r->virt ? " (virtual rig)" : "", a->warmup_ms, a->settle_ms);
         }
     } else {
@@ -436,7 +331,7 @@ static int do_snap(rig_t *r, const snap_t *o, const char *cmdline)
              "unscaled");
     model_meta_add(meta, "pixel_convention", "row-major, (0,0) is the top-left pixel of the region, x to the right, "
              "y down");
-    model_meta_add(meta, "camera", "%s", r->camera->name);
+    model_meta_add(meta, "camera", "%s", rig_camera_name(r->camera));
     model_meta_add(meta, "camera_vendor", "%s", m->vendor);
     model_meta_add(meta, "camera_model", "%s", m->model);
     model_meta_add(meta, "camera_serial", "%s", m->serial);
@@ -495,7 +390,7 @@ static int do_snap(rig_t *r, const snap_t *o, const char *cmdline)
     printf(", lamps on: %s\n", on_names);
     printf("  pixels (DN): min %u  mean %.1f  max %u\n", lo, n ? sum / (double)n : 0.0, hi);
 done:
-    if (r->lamps && r->lamps->on_mask) {
+    if (r->lamps && rig_lamps_on_mask(r->lamps)) {
         bool q = model_error_quiet_thread(true);
         rig_lamps_all_off(r->lamps);
         model_error_quiet_thread(q);
@@ -523,40 +418,42 @@ static bool file_is_virtual(const char *path, bool *readable)
 
 int rig_cmd(int argc, char **argv)
 {
-    rcli_t c = { 0 };
-    int rc = parse_cli(&c, argc, argv);
-    if (rc) return rc;
-    if (c.help) {
-        usage(stdout, true);
-        return 0;
-    }
-    const char *rig_path = optv(&c, "--rig"), *action = c.action;
+#define RIG_OPT_(name, metavar, help, required, actions) MODEL_OPT_VALUE(name, metavar, help, required),
+    model_opt_t opts[] = { RIG_OPTS(RIG_OPT_) };
+#undef RIG_OPT_
+    model_cli_t c = { .cmd = "rig", .synopsis = "ACTION [DEG]", .about = rig_about,
+                      .epilog = rig_epilog, .opts = opts, .nopts = MODEL_NOPTS(opts), .min_positional = 0,
+                      .max_positional = 5, .numbers_positional = true };
+    int rc = model_cli_parse(&c, argc, argv);
+    if (rc != MODEL_CLI_OK) return rc == MODEL_CLI_HELP ? 0 : rc;
+    if ((rc = check_action(&c))) return rc;
+    const char *rig_path = model_cli_value(&c, "--rig"), *action = c.positional[0];
     double move_deg = 0;
     snap_t so = { .exposure_us = NAN, .gain = NAN };
-    if (!strcmp(action, "move") && (rc = parse_angle("move", c.args[0], &move_deg))) return rc;
+    if (!strcmp(action, "move") && (rc = parse_angle(&c, "move", c.positional[1], &move_deg))) return rc;
     if (!strcmp(action, "snap")) {
-        so.out = optv(&c, "-o");
-        so.lamps = optv(&c, "--lamps");
-        so.pixel_format = optv(&c, "--pixel-format");
+        so.out = model_cli_value(&c, "-o");
+        so.lamps = model_cli_value(&c, "--lamps");
+        so.pixel_format = model_cli_value(&c, "--pixel-format");
         size_t n = strlen(so.out);
         if (n < 4 || strcasecmp(so.out + n - 4, ".png"))
-            return usage_error("option -o: '%s' must end in .png (16-bit grey PNG)", so.out);
-        if (optv(&c, "--angle")) {
+            return model_cli_error(&c, "option -o: '%s' must end in .png (16-bit grey PNG)", so.out);
+        if (model_cli_value(&c, "--angle")) {
             so.have_angle = true;
-            if ((rc = parse_angle("option --angle", optv(&c, "--angle"), &so.angle_deg))) return rc;
+            if ((rc = parse_angle(&c, "option --angle", model_cli_value(&c, "--angle"), &so.angle_deg))) return rc;
         }
-        if ((rc = opt_double(&c, "--exposure-us", &so.exposure_us, 0, true, 1e8, "0 < US <= 1e8")) ||
-            (rc = opt_double(&c, "--gain", &so.gain, -100, false, 100, "-100..100")))
+        if ((rc = model_cli_double(&c, "--exposure-us", &so.exposure_us, 0, true, 1e8, "0 < US <= 1e8")) ||
+            (rc = model_cli_double(&c, "--gain", &so.gain, -100, false, 100, "-100..100")))
             return rc;
         if (so.pixel_format && strcmp(so.pixel_format, "Mono8") && strcmp(so.pixel_format, "Mono12") &&
             strcmp(so.pixel_format, "Mono16"))
-            return usage_error("option --pixel-format: '%s' is not Mono8, Mono12 or Mono16", so.pixel_format);
+            return model_cli_error(&c, "option --pixel-format: '%s' is not Mono8, Mono12 or Mono16", so.pixel_format);
         if (so.lamps) {
             gchar **names = g_strsplit(so.lamps, ",", -1);
             bool empty = false;
             for (int i = 0; names[i]; i++) empty |= !*g_strstrip(names[i]);
             g_strfreev(names);
-            if (empty) return usage_error("option --lamps: '%s' has an empty lamp name", so.lamps);
+            if (empty) return model_cli_error(&c, "option --lamps: '%s' has an empty lamp name", so.lamps);
         }
     }
     bool serve = !strcmp(action, "serve");
@@ -581,7 +478,7 @@ int rig_cmd(int argc, char **argv)
     rig_t *r = NULL;
     fprintf(stderr, "refl rig: opening %s\n", rig_path);
     if ((rc = rig_open(&r, rig_path))) goto done;
-    const char *sample = optv(&c, "--sample");
+    const char *sample = model_cli_value(&c, "--sample");
     if (sample) {
         if (!r->virt) {
             rc = rig_fail(RIG_ERR_NOT_SUPPORTED, "refl rig: --sample: %s is not a virtual rig; put the sample on "
@@ -597,7 +494,7 @@ int rig_cmd(int argc, char **argv)
         rc = do_identify(r);
     } else if (!strcmp(action, "home")) {
         if (!(rc = need_turntable(r, "home"))) {
-            fprintf(stderr, "refl rig: homing %s\n", r->turntable->name);
+            fprintf(stderr, "refl rig: homing %s\n", rig_turntable_name(r->turntable));
             rc = rig_turntable_home(r->turntable, home_timeout_s(r));
         }
         rig_turntable_status_t st;

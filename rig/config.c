@@ -71,7 +71,7 @@ static int cfg_fail(const spec_t *s, int line, const char *fmt, ...)
 static int device_fail(int rc, const spec_t *s, int line, const char *section)
 {
     char msg[1200];
-    snprintf(msg, sizeof msg, "%s", rig_last_error());
+    snprintf(msg, sizeof msg, "%s", model_last_error());
     return rig_fail(rc, "%s:%d: [%s]: %s", s->path, line, section, msg);
 }
 
@@ -157,55 +157,28 @@ static const model_ini_entry_t *get(const spec_t *s, const char *section, const 
     return model_ini_get(s->ini, section, key);
 }
 
-// Optional number in [lo, hi] (open ends where asked); absent keeps *out.
+// Optional typed values (model/ini.c reports them with file:line); absent
+// keeps *out. 0 or RIG_ERR_INVALID.
 static int get_double(const spec_t *s, const char *section, const char *key, double *out, double lo, bool lo_open,
                       double hi, const char *range_text)
 {
-    const model_ini_entry_t *e = get(s, section, key);
-    if (!e) return 0;
-    double v;
-    if (!model_parse_double(e->value, &v))
-        return cfg_fail(s, e->line, "[%s] %s: '%s' is not a number (%s)", section, key, e->value, range_text);
-    if ((lo_open ? !(v > lo) : !(v >= lo)) || !(v <= hi))
-        return cfg_fail(s, e->line, "[%s] %s = %s is out of range (%s)", section, key, e->value, range_text);
-    *out = v;
-    return 0;
+    return model_ini_double_in(s->ini, section, key, out, false, lo, lo_open, hi, range_text) ? 0 : RIG_ERR_INVALID;
 }
 
 static int get_long(const spec_t *s, const char *section, const char *key, long *out, long lo, long hi)
 {
-    const model_ini_entry_t *e = get(s, section, key);
-    if (!e) return 0;
-    long v;
-    if (!model_parse_int(e->value, &v))
-        return cfg_fail(s, e->line, "[%s] %s: '%s' is not an integer (%ld..%ld)", section, key, e->value, lo, hi);
-    if (v < lo || v > hi)
-        return cfg_fail(s, e->line, "[%s] %s = %s is out of range (%ld..%ld)", section, key, e->value, lo, hi);
-    *out = v;
-    return 0;
+    return model_ini_int(s->ini, section, key, out, false, lo, hi) ? 0 : RIG_ERR_INVALID;
 }
 
 static int get_bool(const spec_t *s, const char *section, const char *key, bool *out)
 {
-    const model_ini_entry_t *e = get(s, section, key);
-    if (!e) return 0;
-    const char *v = e->value;
-    if (!strcmp(v, "true") || !strcmp(v, "yes") || !strcmp(v, "1") || !strcmp(v, "on")) *out = true;
-    else if (!strcmp(v, "false") || !strcmp(v, "no") || !strcmp(v, "0") || !strcmp(v, "off")) *out = false;
-    else return cfg_fail(s, e->line, "[%s] %s: '%s' is not a truth value (true/false, yes/no, 1/0)", section, key, v);
-    return 0;
+    return model_ini_bool(s->ini, section, key, out, false) ? 0 : RIG_ERR_INVALID;
 }
 
 // Optional string that must fit size-1 characters and be non-empty.
 static int get_string(const spec_t *s, const char *section, const char *key, char *out, size_t size)
 {
-    const model_ini_entry_t *e = get(s, section, key);
-    if (!e) return 0;
-    if (!e->value[0]) return cfg_fail(s, e->line, "[%s] %s is empty: give a value or remove the line", section, key);
-    if (strlen(e->value) >= size)
-        return cfg_fail(s, e->line, "[%s] %s: '%s' is longer than %zu characters", section, key, e->value, size - 1);
-    snprintf(out, size, "%s", e->value);
-    return 0;
+    return model_ini_string(s->ini, section, key, out, size, false) ? 0 : RIG_ERR_INVALID;
 }
 
 static int get_pixel_format(spec_t *s, const char *section)
@@ -409,15 +382,8 @@ static int parse_lamp(spec_t *s, const char *sec, int line, const backend_def_t 
                 return cfg_fail(s, l->line, "[lamp %s]: %s line %u is already lamp '%s' (line %d): one lamp per "
                                 "GPIO line", name, a->chip, a->line, s->lamps[j].name, s->lamp_line[j]);
     } else {
-        const model_ini_entry_t *p = get(s, sec, "position_mm");
-        if (p) {
-            double x, y, z;
-            char extra;
-            if (sscanf(p->value, "%lf %lf %lf %c", &x, &y, &z, &extra) != 3 || !isfinite(x) || !isfinite(y) ||
-                !isfinite(z))
-                return cfg_fail(s, p->line, "[lamp %s] position_mm: '%s' is not three numbers x y z (mm, rig frame)",
-                                name, p->value);
-        }
+        double xyz[3];
+        if (!model_ini_vec3(s->ini, sec, "position_mm", xyz, false, "x y z (mm, rig frame)")) return RIG_ERR_INVALID;
     }
     s->lamp_line[s->nlamps++] = line;
     return 0;
@@ -646,7 +612,7 @@ void rig_close(rig_t *r)
     if (!r) return;
     bool q = model_error_quiet_thread(true);   // closing after an error must not overwrite its message
     char keep[1536];
-    snprintf(keep, sizeof keep, "%s", rig_last_error());
+    snprintf(keep, sizeof keep, "%s", model_last_error());
     if (r->lamps) rig_lamps_all_off(r->lamps);
     if (r->turntable) {
         rig_turntable_status_t st;

@@ -338,7 +338,7 @@ static void fill_cb(ArvBuffer *buffer, void *data, guint32 exposure_us_int, guin
         snprintf(err, sizeof err, "settings changed while a frame was being sent");
     } else {
         rc = render_and_pack(g, &m, dst);
-        if (rc < 0) snprintf(err, sizeof err, "%s", rig_last_error());
+        if (rc < 0) snprintf(err, sizeof err, "%s", model_last_error());
     }
     g_mutex_unlock(&g->render_lock);
     if (rc < 0) {
@@ -507,7 +507,7 @@ static bool render_publish(rig_gv_camera_t *g, rig_frame_meta_t *mp, guint32 *pf
     g_mutex_lock(&g->render_lock);
     int rc = grow((void **)&g->back, &g->back_cap, size) ? render_and_pack(g, &m, g->back)
              : rig_fail(RIG_ERR_NO_MEM, "gv camera %s: out of memory", g->serial);
-    if (rc < 0) snprintf(err, sizeof err, "%s", rig_last_error());
+    if (rc < 0) snprintf(err, sizeof err, "%s", model_last_error());
     g_mutex_unlock(&g->render_lock);
     if (rc < 0) {
         note_render_error(g, err);

@@ -5,6 +5,7 @@
 #define _GNU_SOURCE
 #include <errno.h>
 #include <glib.h>
+#include <jansson.h>
 #include <pthread.h>
 #include <sqlite3.h>
 #include <stdarg.h>
@@ -33,13 +34,87 @@ static const char schema[] =
     " nsteps INTEGER);"
     "CREATE TABLE steps(idx INTEGER PRIMARY KEY, kind TEXT NOT NULL, angle_index INTEGER, lamp_set INTEGER,"
     " exposure_index INTEGER, repeat INTEGER, grp INTEGER, angle_deg REAL, lamps TEXT, exposure_us REAL,"
-    " gain REAL, status TEXT NOT NULL DEFAULT 'pending', note TEXT);"
-    "CREATE TABLE frames(step INTEGER PRIMARY KEY REFERENCES steps(idx), file TEXT UNIQUE NOT NULL,"
-    " sha256 TEXT NOT NULL, t_trigger_utc TEXT, t_written_utc TEXT, t_trigger_s REAL, t_written_s REAL,"
-    " commanded_deg REAL, measured_deg REAL, lamps TEXT, exposure_us REAL, gain REAL, mean REAL, max REAL,"
-    " roi_max REAL, saturated_fraction REAL, width INTEGER, height INTEGER, pixel_format TEXT,"
-    " frame_id INTEGER);"
+    " gain REAL, status TEXT NOT NULL DEFAULT 'pending', note TEXT);";
+// then the frames table (frames_sql, from RIG_FRAME_COLUMNS), then:
+static const char schema_events[] =
     "CREATE TABLE events(id INTEGER PRIMARY KEY, t_utc TEXT, step INTEGER, kind TEXT, message TEXT);";
+
+// ---------------------------------------------------------------------------
+// The frames table's SQL, from RIG_FRAME_COLUMNS (rig/session.h)
+
+#define IS_UTC_INT  0
+#define IS_UTC_REAL 0
+#define IS_UTC_TEXT 0
+#define IS_UTC_U64  0
+#define IS_UTC_UTC  1
+
+static const struct {
+    const char *column, *decl;
+    bool        utc;            // a column only (not read back)
+} frame_columns[] = {
+#define FRAME_COLUMN_(kind, name, column, decl, csv, size) { column, decl, IS_UTC_##kind },
+    RIG_FRAME_COLUMNS(FRAME_COLUMN_)
+#undef FRAME_COLUMN_
+};
+#define NFRAME_COLUMNS ((int)(sizeof frame_columns / sizeof frame_columns[0]))
+
+typedef enum { FRAMES_CREATE, FRAMES_INSERT, FRAMES_SELECT } frames_sql_t;
+
+// "CREATE TABLE frames(...);", "INSERT INTO frames VALUES(?,...)" or
+// "SELECT ... FROM frames ORDER BY step" (the columns rig_frame_row_t holds).
+// Caller g_free()s.
+static char *frames_sql(frames_sql_t what)
+{
+    GString *q = g_string_new(what == FRAMES_CREATE   ? "CREATE TABLE frames("
+                              : what == FRAMES_INSERT ? "INSERT INTO frames VALUES("
+                                                      : "SELECT ");
+    int k = 0;
+    for (int i = 0; i < NFRAME_COLUMNS; i++) {
+        if (what == FRAMES_SELECT && frame_columns[i].utc) continue;
+        if (k++) g_string_append(q, what == FRAMES_CREATE ? ", " : ",");
+        if (what == FRAMES_CREATE) g_string_append_printf(q, "%s %s", frame_columns[i].column, frame_columns[i].decl);
+        else if (what == FRAMES_INSERT) g_string_append(q, "?");
+        else g_string_append(q, frame_columns[i].column);
+    }
+    g_string_append(q, what == FRAMES_CREATE ? ");" : what == FRAMES_INSERT ? ")" : " FROM frames ORDER BY step");
+    return g_string_free(q, FALSE);
+}
+
+// Bind row f to the INSERT of frames_sql; read the SELECT's row into f.
+static void frame_bind(sqlite3_stmt *s, const rig_frame_row_t *f)
+{
+    int k = 1;
+#define BIND_INT(name)  sqlite3_bind_int(s, k++, f->name);
+#define BIND_REAL(name) sqlite3_bind_double(s, k++, f->name);
+#define BIND_TEXT(name) sqlite3_bind_text(s, k++, f->name, -1, SQLITE_STATIC);
+#define BIND_U64(name)  sqlite3_bind_int64(s, k++, (sqlite3_int64)f->name);
+#define BIND_UTC(name)                                           \
+    {                                                            \
+        char t_[40];                                             \
+        model_utc_text(f->name, t_);                             \
+        sqlite3_bind_text(s, k++, t_, -1, SQLITE_TRANSIENT);     \
+    }
+#define BIND_(kind, name, column, decl, csv, size) BIND_##kind(name)
+    RIG_FRAME_COLUMNS(BIND_)
+#undef BIND_
+}
+
+static void frame_read(sqlite3_stmt *s, rig_frame_row_t *f)
+{
+    int k = 0;
+#define READ_INT(name)  f->name = sqlite3_column_int(s, k++);
+#define READ_REAL(name) f->name = sqlite3_column_double(s, k++);
+#define READ_TEXT(name)                                                               \
+    {                                                                                 \
+        const unsigned char *t_ = sqlite3_column_text(s, k++);                        \
+        snprintf(f->name, sizeof f->name, "%s", t_ ? (const char *)t_ : "");          \
+    }
+#define READ_U64(name)  f->name = (uint64_t)sqlite3_column_int64(s, k++);
+#define READ_UTC(name)
+#define READ_(kind, name, column, decl, csv, size) READ_##kind(name)
+    RIG_FRAME_COLUMNS(READ_)
+#undef READ_
+}
 
 static int jfail(rig_journal_t *j, const char *what)
 {
@@ -120,8 +195,13 @@ int rig_journal_create(rig_journal_t **out, const char *dir, const rig_plan_t *p
     sqlite3_stmt *s = NULL;
     char now[40];
     model_utc_text(model_realtime_s(), now);
-    if (sqlite3_exec(j->db, "BEGIN", NULL, NULL, NULL) != SQLITE_OK ||
-        sqlite3_exec(j->db, schema, NULL, NULL, NULL) != SQLITE_OK) {
+    char *frames = frames_sql(FRAMES_CREATE);
+    bool made = sqlite3_exec(j->db, "BEGIN", NULL, NULL, NULL) == SQLITE_OK &&
+                sqlite3_exec(j->db, schema, NULL, NULL, NULL) == SQLITE_OK &&
+                sqlite3_exec(j->db, frames, NULL, NULL, NULL) == SQLITE_OK &&
+                sqlite3_exec(j->db, schema_events, NULL, NULL, NULL) == SQLITE_OK;
+    g_free(frames);
+    if (!made) {
         rc = jfail(j, "cannot create the tables");
         goto fail;
     }
@@ -295,35 +375,13 @@ int rig_journal_frames(rig_journal_t *j, rig_frame_row_t **rows, int *n)
     sqlite3_stmt *s = NULL;
     int rc = 0, k = 0;
     pthread_mutex_lock(&j->lock);
-    if (sqlite3_prepare_v2(j->db, "SELECT step,file,sha256,t_trigger_s,t_written_s,commanded_deg,measured_deg,"
-                           "lamps,exposure_us,gain,mean,max,roi_max,saturated_fraction,width,height,pixel_format,"
-                           "frame_id FROM frames ORDER BY step", -1, &s, NULL) != SQLITE_OK) {
+    char *sql = frames_sql(FRAMES_SELECT);
+    if (sqlite3_prepare_v2(j->db, sql, -1, &s, NULL) != SQLITE_OK) {
         rc = jfail(j, "cannot read the frames");
     } else {
-        while (k < total && sqlite3_step(s) == SQLITE_ROW) {
-            rig_frame_row_t *f = &r[k++];
-            f->step = sqlite3_column_int(s, 0);
-            snprintf(f->file, sizeof f->file, "%s", (const char *)sqlite3_column_text(s, 1));
-            snprintf(f->sha256, sizeof f->sha256, "%s", (const char *)sqlite3_column_text(s, 2));
-            f->t_trigger_utc_s = sqlite3_column_double(s, 3);
-            f->t_written_utc_s = sqlite3_column_double(s, 4);
-            f->commanded_deg = sqlite3_column_double(s, 5);
-            f->measured_deg = sqlite3_column_double(s, 6);
-            const unsigned char *l = sqlite3_column_text(s, 7);
-            snprintf(f->lamps, sizeof f->lamps, "%s", l ? (const char *)l : "");
-            f->exposure_us = sqlite3_column_double(s, 8);
-            f->gain = sqlite3_column_double(s, 9);
-            f->mean = sqlite3_column_double(s, 10);
-            f->max = sqlite3_column_double(s, 11);
-            f->roi_max = sqlite3_column_double(s, 12);
-            f->saturated_fraction = sqlite3_column_double(s, 13);
-            f->width = sqlite3_column_int(s, 14);
-            f->height = sqlite3_column_int(s, 15);
-            const unsigned char *pf = sqlite3_column_text(s, 16);
-            snprintf(f->pixel_format, sizeof f->pixel_format, "%s", pf ? (const char *)pf : "");
-            f->frame_id = (uint64_t)sqlite3_column_int64(s, 17);
-        }
+        while (k < total && sqlite3_step(s) == SQLITE_ROW) frame_read(s, &r[k++]);
     }
+    g_free(sql);
     sqlite3_finalize(s);
     pthread_mutex_unlock(&j->lock);
     if (rc) {
@@ -339,41 +397,21 @@ int rig_journal_frame_done(rig_journal_t *j, const rig_frame_row_t *f)
 {
     sqlite3_stmt *s = NULL, *u = NULL;
     int rc = 0;
-    char t0[40], t1[40];
-    model_utc_text(f->t_trigger_utc_s, t0);
-    model_utc_text(f->t_written_utc_s, t1);
     pthread_mutex_lock(&j->lock);
     if (sqlite3_exec(j->db, "BEGIN IMMEDIATE", NULL, NULL, NULL) != SQLITE_OK) {
         rc = jfail(j, "cannot begin a frame transaction");
         goto done;
     }
-    if (sqlite3_prepare_v2(j->db, "INSERT INTO frames VALUES(?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?)", -1, &s,
-                           NULL) != SQLITE_OK ||
-        sqlite3_prepare_v2(j->db, "UPDATE steps SET status='done' WHERE idx=? AND status='pending'", -1, &u,
-                           NULL) != SQLITE_OK) {
+    char *sql = frames_sql(FRAMES_INSERT);
+    bool prepared = sqlite3_prepare_v2(j->db, sql, -1, &s, NULL) == SQLITE_OK &&
+                    sqlite3_prepare_v2(j->db, "UPDATE steps SET status='done' WHERE idx=? AND status='pending'", -1,
+                                       &u, NULL) == SQLITE_OK;
+    g_free(sql);
+    if (!prepared) {
         rc = jfail(j, "cannot record a frame");
         goto rollback;
     }
-    sqlite3_bind_int(s, 1, f->step);
-    sqlite3_bind_text(s, 2, f->file, -1, SQLITE_STATIC);
-    sqlite3_bind_text(s, 3, f->sha256, -1, SQLITE_STATIC);
-    sqlite3_bind_text(s, 4, t0, -1, SQLITE_STATIC);
-    sqlite3_bind_text(s, 5, t1, -1, SQLITE_STATIC);
-    sqlite3_bind_double(s, 6, f->t_trigger_utc_s);
-    sqlite3_bind_double(s, 7, f->t_written_utc_s);
-    sqlite3_bind_double(s, 8, f->commanded_deg);
-    sqlite3_bind_double(s, 9, f->measured_deg);
-    sqlite3_bind_text(s, 10, f->lamps, -1, SQLITE_STATIC);
-    sqlite3_bind_double(s, 11, f->exposure_us);
-    sqlite3_bind_double(s, 12, f->gain);
-    sqlite3_bind_double(s, 13, f->mean);
-    sqlite3_bind_double(s, 14, f->max);
-    sqlite3_bind_double(s, 15, f->roi_max);
-    sqlite3_bind_double(s, 16, f->saturated_fraction);
-    sqlite3_bind_int(s, 17, f->width);
-    sqlite3_bind_int(s, 18, f->height);
-    sqlite3_bind_text(s, 19, f->pixel_format, -1, SQLITE_STATIC);
-    sqlite3_bind_int64(s, 20, (sqlite3_int64)f->frame_id);
+    frame_bind(s, f);
     sqlite3_bind_int(u, 1, f->step);
     if (sqlite3_step(s) != SQLITE_DONE || sqlite3_step(u) != SQLITE_DONE || sqlite3_changes(j->db) != 1) {
         rc = jfail(j, "cannot record a frame (a step recorded twice?)");
@@ -449,4 +487,53 @@ int rig_journal_state(rig_journal_t *j, char *out, size_t size)
     sqlite3_finalize(s);
     pthread_mutex_unlock(&j->lock);
     return rc;
+}
+
+// ---------------------------------------------------------------------------
+// `refl session export`, from RIG_FRAME_COLUMNS
+
+#define CSV_HEAD_INT(name)  #name ","
+#define CSV_HEAD_REAL(name) #name ","
+#define CSV_HEAD_TEXT(name) #name ","
+#define CSV_HEAD_U64(name)  #name ","
+#define CSV_HEAD_UTC(name)
+#define CSV_HEAD_(kind, name, column, decl, csv, size) CSV_HEAD_##kind(name)
+
+void rig_frame_rows_write_csv(FILE *f, const rig_frame_row_t *rows, int n)
+{
+    static const char head[] = RIG_FRAME_COLUMNS(CSV_HEAD_);
+    fprintf(f, "%.*s\n", (int)sizeof head - 2, head);   // without the last ','
+    for (int i = 0; i < n; i++) {
+        const rig_frame_row_t *r = &rows[i];
+        const char *sep = "";
+#define CSV_INT(name, fmt)  fprintf(f, "%s" fmt, sep, r->name), sep = ",";
+#define CSV_REAL(name, fmt) fprintf(f, "%s" fmt, sep, r->name), sep = ",";
+#define CSV_TEXT(name, fmt) fprintf(f, "%s" fmt, sep, r->name), sep = ",";
+#define CSV_U64(name, fmt)  fprintf(f, "%s" fmt, sep, (unsigned long long)r->name), sep = ",";
+#define CSV_UTC(name, fmt)
+#define CSV_(kind, name, column, decl, csv, size) CSV_##kind(name, csv)
+        RIG_FRAME_COLUMNS(CSV_)
+#undef CSV_
+        fputc('\n', f);
+    }
+}
+
+json_t *rig_frame_rows_json(const rig_frame_row_t *rows, int n)
+{
+    json_t *a = json_array();
+    for (int i = 0; a && i < n; i++) {
+        const rig_frame_row_t *r = &rows[i];
+        json_t *o = json_object();
+        if (!o) break;
+#define JSON_INT(name)  json_object_set_new(o, #name, json_integer(r->name));
+#define JSON_REAL(name) json_object_set_new(o, #name, json_real(r->name));
+#define JSON_TEXT(name) json_object_set_new(o, #name, json_string(r->name));
+#define JSON_U64(name)  json_object_set_new(o, #name, json_integer((json_int_t)r->name));
+#define JSON_UTC(name)
+#define JSON_(kind, name, column, decl, csv, size) JSON_##kind(name)
+        RIG_FRAME_COLUMNS(JSON_)
+#undef JSON_
+        json_array_append_new(a, o);
+    }
+    return a;
 }

@@ -30,12 +30,7 @@ static const model_ini_entry_t *get(const model_ini_t *ini, const char *sec, con
     return model_ini_get(ini, sec, key);
 }
 
-static int sec_line(const model_ini_t *ini, const char *sec)
-{
-    for (int i = 0; i < ini->nsections; i++)
-        if (!strcmp(ini->sections[i], sec)) return ini->section_lines[i];
-    return 0;
-}
+static int sec_line(const model_ini_t *ini, const char *sec) { return model_ini_section_line(ini, sec); }
 
 // Numbers of a list value; false (reported) on a bad one.
 static bool parse_numbers(const model_ini_t *ini, const model_ini_entry_t *e, double **out, int *n)
@@ -62,18 +57,14 @@ static bool parse_numbers(const model_ini_t *ini, const model_ini_entry_t *e, do
     return ok;
 }
 
+// An optional number in [lo, hi] (a whole number when integer); absent keeps *v.
 static bool get_number(const model_ini_t *ini, const char *sec, const char *key, double *v, double lo,
                        double hi, bool integer)
 {
+    if (!model_ini_double_in(ini, sec, key, v, false, lo, false, hi, NULL)) return false;
     const model_ini_entry_t *e = get(ini, sec, key);
-    if (!e) return true;
-    if (!model_parse_double(e->value, v) || (integer && *v != floor(*v))) {
-        model_error(ini->path, e->line, "[%s] %s = '%s' is not %s", sec, key, e->value,
-                    integer ? "a whole number" : "a number");
-        return false;
-    }
-    if (!(*v >= lo && *v <= hi)) {
-        model_error(ini->path, e->line, "[%s] %s = %s is out of range (%g .. %g)", sec, key, e->value, lo, hi);
+    if (e && integer && *v != floor(*v)) {
+        model_error(ini->path, e->line, "[%s] %s = '%s' is not a whole number", sec, key, e->value);
         return false;
     }
     return true;
@@ -81,8 +72,7 @@ static bool get_number(const model_ini_t *ini, const char *sec, const char *key,
 
 static void copy_text(const model_ini_t *ini, const char *sec, const char *key, char *out, size_t size)
 {
-    const model_ini_entry_t *e = get(ini, sec, key);
-    snprintf(out, size, "%s", e ? e->value : "");
+    snprintf(out, size, "%s", model_ini_text(ini, sec, key, ""));
 }
 
 static int cmp_desc(const void *a, const void *b)
@@ -405,7 +395,7 @@ void rig_plan_free(rig_plan_t *p)
 
 static uint32_t all_mask(const rig_lamps_t *l)
 {
-    return !l ? 0 : l->n >= 32 ? 0xffffffffu : ((uint32_t)1 << l->n) - 1;
+    return !l ? 0 : rig_lamps_count(l) >= 32 ? 0xffffffffu : ((uint32_t)1 << rig_lamps_count(l)) - 1;
 }
 
 int rig_plan_bind(rig_plan_t *p, rig_t *r)
@@ -423,8 +413,8 @@ int rig_plan_bind(rig_plan_t *p, rig_t *r)
             int i = rig_lamps_find(r->lamps, names[k]);
             if (i < 0) {
                 GString *known = g_string_new("");
-                for (int j = 0; r->lamps && j < r->lamps->n; j++)
-                    g_string_append_printf(known, "%s%s", j ? ", " : "", r->lamps->lamps[j].name);
+                for (int j = 0; r->lamps && j < rig_lamps_count(r->lamps); j++)
+                    g_string_append_printf(known, "%s%s", j ? ", " : "", rig_lamps_name(r->lamps, j));
                 model_error(p->path, p->lamp_sets_line, "[lamps] sets: the rig %s has no lamp '%s' (its lamps: %s)",
                             r->path, names[k], known->len ? known->str : "none");
                 g_string_free(known, TRUE);
@@ -455,7 +445,7 @@ int rig_plan_bind(rig_plan_t *p, rig_t *r)
         model_error_quiet_thread(q);
         if (e) {
             model_error(p->path, 0, "[sample] name = %s, tilt %g deg: the virtual rig (truth file %s) refuses it: %s",
-                        p->sample, p->tilt_deg, rig_virtual_truth_path(r->virt), rig_last_error());
+                        p->sample, p->tilt_deg, rig_virtual_truth_path(r->virt), model_last_error());
             rc = RIG_ERR_INVALID;
             goto done;
         }
@@ -466,9 +456,9 @@ int rig_plan_bind(rig_plan_t *p, rig_t *r)
     rc = rig_camera_settings(r->camera, &before);
     if (!rc && (rc = rig_camera_set_pixel_format(r->camera, p->pixel_format)))
         model_error(p->path, 0, "[exposure] pixel_format = %s: the camera refuses it (%s)", p->pixel_format,
-                    rig_last_error());
+                    model_last_error());
     if (!rc && (rc = rig_camera_set_gain(r->camera, p->gain)))
-        model_error(p->path, 0, "[exposure] gain = %g: the camera refuses it (%s)", p->gain, rig_last_error());
+        model_error(p->path, 0, "[exposure] gain = %g: the camera refuses it (%s)", p->gain, model_last_error());
     for (int i = 0; !rc && i < p->nexposures; i++) {
         double us = p->exposures_us[i];
         if ((rc = rig_camera_set_exposure_us(r->camera, us)) == 0 && (rc = rig_camera_settings(r->camera, &m)) == 0 &&
@@ -477,7 +467,7 @@ int rig_plan_bind(rig_plan_t *p, rig_t *r)
         }
         if (rc)
             model_error(p->path, p->exposure_line, "[exposure] list_us: the camera %s does not accept %g us",
-                        r->camera->name, us);
+                        rig_camera_name(r->camera), us);
     }
     if (!rc && !(rc = rig_camera_settings(r->camera, &m)) && p->roi[2] &&
         (p->roi[0] + p->roi[2] > m.width || p->roi[1] + p->roi[3] > m.height)) {

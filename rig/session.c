@@ -35,12 +35,12 @@ rig_session_t *rig_session_open(const char *dir)
     int e = rig_journal_open(&j, dir);
     model_error_quiet_thread(q);
     if (e) {
-        model_error(dir, 0, "not a capture session (no readable session.sqlite): %s", rig_last_error());
+        model_error(dir, 0, "not a capture session (no readable session.sqlite): %s", model_last_error());
         goto fail;
     }
     if (rig_journal_source(j, "plan", NULL, &s->plan_text, &psha) ||
         rig_journal_source(j, "rig", NULL, NULL, &rsha) || rig_journal_frames(j, &s->rows, &s->n)) {
-        model_error(dir, 0, "cannot read the session's journal: %s", rig_last_error());
+        model_error(dir, 0, "cannot read the session's journal: %s", model_last_error());
         goto fail;
     }
     snprintf(s->plan_sha256, sizeof s->plan_sha256, "%s", psha);

@@ -17,7 +17,7 @@
 #include <unistd.h>
 
 #include "model/model.h"
-#include "rig/rig.h"
+#include "rig/internal.h"
 
 enum { APT_HOST = 0x01, APT_DEST = 0x50, APT_CHAN = 1 };
 enum { APT_VID = 0x0403, APT_PID = 0xfaf0 };

@@ -12,7 +12,7 @@
 #include <time.h>
 
 #include "model/model.h"
-#include "rig/rig.h"
+#include "rig/internal.h"
 
 enum { MOTION_IDLE, MOTION_HOME, MOTION_MOVE, MOTION_DECEL };
 

@@ -105,6 +105,7 @@
 
 #include "model/model.h"
 #include "rig/gv_camera.h"
+#include "rig/internal.h"
 #include "rig/rig.h"
 
 #define NPLANES  12   // cached radiance images (5 MB each at 1280x1024)
@@ -1205,54 +1206,25 @@ static bool check_sections(const model_ini_t *ini)
 static int ini_line(const model_ini_t *ini, const char *sec, const char *key)
 {
     const model_ini_entry_t *e = model_ini_get(ini, sec, key);
-    if (e) return e->line;
-    for (int s = 0; s < ini->nsections; s++)
-        if (!strcmp(ini->sections[s], sec)) return ini->section_lines[s];
-    return 0;
+    return e ? e->line : model_ini_section_line(ini, sec);
 }
 
+// Typed values of the truth file (model/ini.c reports them with file:line).
 static bool get_double(const model_ini_t *ini, const char *sec, const char *key, double lo, double hi,
                        bool required, double *out)
 {
-    const model_ini_entry_t *e = model_ini_get(ini, sec, key);
-    if (!e) {
-        if (required)
-            model_error(ini->path, ini_line(ini, sec, key), "[%s] lacks '%s'; add it (see examples/virtual-truth.ini)",
-                        sec, key);
-        return !required;
-    }
-    double d;
-    if (!model_parse_double(e->value, &d)) {
-        model_error(ini->path, e->line, "%s = '%s' is not a number", key, e->value);
-        return false;
-    }
-    if (!(d >= lo && d <= hi)) {
-        model_error(ini->path, e->line, "%s = %g is out of range: must be in [%g, %g]", key, d, lo, hi);
-        return false;
-    }
-    *out = d;
-    return true;
+    return model_ini_double_in(ini, sec, key, out, required, lo, false, hi, NULL);
 }
 
 static bool get_int(const model_ini_t *ini, const char *sec, const char *key, long lo, long hi, long *out)
 {
-    const model_ini_entry_t *e = model_ini_get(ini, sec, key);
-    if (!e) return true;
-    long d;
-    if (!model_parse_int(e->value, &d) || d < lo || d > hi) {
-        model_error(ini->path, e->line, "%s = '%s': must be an integer in [%ld, %ld]", key, e->value, lo, hi);
-        return false;
-    }
-    *out = d;
-    return true;
+    return model_ini_int(ini, sec, key, out, false, lo, hi);
 }
 
 static const char *get_str(const model_ini_t *ini, const char *sec, const char *key, const char *def)
 {
-    const model_ini_entry_t *e = model_ini_get(ini, sec, key);
-    return e ? e->value : def;
+    return model_ini_text(ini, sec, key, def);
 }
-
 
 // A path relative to the truth file's directory (malloc'ed).
 static char *rel_path(const char *truth, const char *p)

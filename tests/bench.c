@@ -174,13 +174,13 @@ static int bench_virtual_rig(void)
     o.busy_wait_s = 120;
     if (rig_virtual_open(&v, truth, &o) || rig_camera_open_aravis(&c, rig_virtual_camera_address(v)) ||
         rig_camera_set_pixel_format(c, "Mono16")) {
-        fprintf(stderr, "refl-bench: virtual rig: %s\n", rig_last_error());
+        fprintf(stderr, "refl-bench: virtual rig: %s\n", model_last_error());
         goto done;
     }
     rig_turntable_t *tt = rig_virtual_turntable(v);
     rig_lamps_t *lamps = rig_virtual_lamps(v);
     if (rig_turntable_home(tt, 10) || rig_turntable_move_abs_deg(tt, 30, 10) || rig_lamps_set(lamps, 1)) {
-        fprintf(stderr, "refl-bench: virtual rig: %s\n", rig_last_error());
+        fprintf(stderr, "refl-bench: virtual rig: %s\n", model_last_error());
         goto done;
     }
     enum { NFRAMES = 20, NCHANGES = 8 };
@@ -193,7 +193,7 @@ static int bench_virtual_rig(void)
         rig_frame_t f;
         double t0 = model_now_s();
         if (e || rig_camera_capture(c, 10, 2, &f)) {
-            fprintf(stderr, "refl-bench: virtual rig: %s\n", rig_last_error());
+            fprintf(stderr, "refl-bench: virtual rig: %s\n", model_last_error());
             goto done;
         }
         lat[k] = model_now_s() - t0;
@@ -213,7 +213,7 @@ static int bench_virtual_rig(void)
     p.busy_wait_s = 120;
     if (rig_gv_camera_start(&g, &p) || rig_camera_open_aravis(&c, p.address) ||
         rig_camera_set_pixel_format(c, "Mono16")) {
-        fprintf(stderr, "refl-bench: trivial camera: %s\n", rig_last_error());
+        fprintf(stderr, "refl-bench: trivial camera: %s\n", model_last_error());
         goto done;
     }
     double fps_trivial = capture_fps(c, NFRAMES);
@@ -246,12 +246,12 @@ static int bench_virtual_rig_inprocess(void)
     if (rig_virtual_open(&v, truth, &o) || rig_camera_open_aravis(&c, rig_virtual_camera_address(v)) ||
         rig_camera_set_pixel_format(c, "Mono16") || rig_turntable_home(rig_virtual_turntable(v), 10) ||
         rig_turntable_move_abs_deg(rig_virtual_turntable(v), 30, 10) || rig_lamps_set(rig_virtual_lamps(v), 1)) {
-        fprintf(stderr, "refl-bench: virtual rig in-process: %s\n", rig_last_error());
+        fprintf(stderr, "refl-bench: virtual rig in-process: %s\n", model_last_error());
         goto done;
     }
     double fps = capture_fps(c, 40);
     if (!isfinite(fps)) {
-        fprintf(stderr, "refl-bench: virtual rig in-process: %s\n", rig_last_error());
+        fprintf(stderr, "refl-bench: virtual rig in-process: %s\n", model_last_error());
         goto done;
     }
     printf("virtual_rig_inprocess_fps_render_1280x1024_mono16: %.2f fps\n", fps);
@@ -563,7 +563,7 @@ static int capture_run(const char *name, const char *ratio_name, const char *ran
     close(saved_out);
     close(null);
     if (rc) {
-        fprintf(stderr, "refl-bench: capture: %s\n", rig_last_error());
+        fprintf(stderr, "refl-bench: capture: %s\n", model_last_error());
         return 1;
     }
     printf("capture_%s_frames: %d count\n", name, frames);

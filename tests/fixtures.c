@@ -223,11 +223,11 @@ bool fx_gv_open(fx_gv_t *f, bool open_camera)
     p.render_ctx = f->ctx;
     p.busy_wait_s = 120;   // another tree's tests may hold 127.0.0.1:3956
     int rc = rig_gv_camera_start(&f->g, &p);
-    CHECK_MSG(rc == 0, "rig_gv_camera_start: %d %s", rc, rig_last_error());
+    CHECK_MSG(rc == 0, "rig_gv_camera_start: %d %s", rc, model_last_error());
     if (!f->g) return false;
     if (!open_camera) return true;
     rc = rig_camera_open_aravis(&f->c, FX_GV_ADDR);
-    CHECK_MSG(rc == 0, "open: %d %s", rc, rig_last_error());
+    CHECK_MSG(rc == 0, "open: %d %s", rc, model_last_error());
     return rc == 0;
 }
 

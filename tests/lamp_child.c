@@ -13,7 +13,7 @@
 //     LAMP  NAME=CHIP:LINE or NAME=CHIP:LINE:low (active-low); no warm-up/settle
 //
 // Exit status 0, 2 on bad usage, 3 when the lamps fail (message on stderr:
-// "lamp_child: <rig_strerror>: <rig_last_error>").
+// "lamp_child: <rig_strerror>: <model_last_error>").
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -48,7 +48,7 @@ static bool parse_lamp(const char *arg, rig_lamp_line_t *out)
 
 static int fail(int err)
 {
-    fprintf(stderr, "lamp_child: %s: %s\n", rig_strerror(err), rig_last_error());
+    fprintf(stderr, "lamp_child: %s: %s\n", rig_strerror(err), model_last_error());
     return 3;
 }
 

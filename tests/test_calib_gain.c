@@ -72,7 +72,7 @@ static double expected_signal(rig_virtual_t *v, uint32_t mask, double t_us, doub
     double s[2] = { 0, 0 };
     for (int k = 0; k < 2; k++) {
         int rc = rig_virtual_expected(v, 0, k ? 0 : mask, t_us, gain_db, "Mono12", w, h, buf);
-        CHECK_MSG(rc == 0, "rig_virtual_expected: %s", rig_last_error());
+        CHECK_MSG(rc == 0, "rig_virtual_expected: %s", model_last_error());
         for (long i = 0; i < (long)w * h; i++) s[k] += buf[i];
     }
     return (s[0] - s[1]) / ((double)w * h);
@@ -86,7 +86,7 @@ static rig_virtual_t *open_truth(const char *path)
     o.sample = "flat_field";
     rig_virtual_t *v = NULL;
     int rc = rig_virtual_open(&v, path, &o);
-    CHECK_MSG(rc == 0, "rig_virtual_open %s: %d %s", path, rc, rig_last_error());
+    CHECK_MSG(rc == 0, "rig_virtual_open %s: %d %s", path, rc, model_last_error());
     return v;
 }
 

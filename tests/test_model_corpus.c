@@ -60,7 +60,7 @@ TEST(rig_parse_only_entry_points)
     free(text);
     const char *bad = "[turntable]\nbackend = sim\nspeed_deg_s = -1\n";
     CHECK(rig_config_parse(bad, strlen(bad), "x/rig.ini") == RIG_ERR_INVALID);
-    CHECK_CONTAINS(rig_last_error(), "x/rig.ini:3: [turntable] speed_deg_s = -1 is out of range");
+    CHECK_CONTAINS(model_last_error(), "x/rig.ini:3: [turntable] speed_deg_s = -1 is out of range");
 
     char examples[1024];
     snprintf(examples, sizeof examples, "%s/examples", test_srcdir());
@@ -72,6 +72,6 @@ TEST(rig_parse_only_entry_points)
     // Relative paths resolve against the base directory: the scene is not there.
     const char *t = "[camera]\nmodel = camera.cameramodel\n";
     CHECK(rig_virtual_check_truth(t, strlen(t), "t.ini", "/nonexistent") == RIG_ERR_INVALID);
-    CHECK_CONTAINS(rig_last_error(), "/nonexistent/t.ini:2: camera model");
-    CHECK_CONTAINS(rig_last_error(), "/nonexistent/camera.cameramodel");
+    CHECK_CONTAINS(model_last_error(), "/nonexistent/t.ini:2: camera model");
+    CHECK_CONTAINS(model_last_error(), "/nonexistent/camera.cameramodel");
 }

@@ -448,7 +448,7 @@ TEST(sphere_virtual_rig_mirror_sphere_highlights)
     o.sample = "mirror_sphere";
     rig_virtual_t *v = NULL;
     int rc = rig_virtual_open(&v, truth, &o);
-    CHECK_MSG(rc == 0, "rig_virtual_open: %d %s", rc, rig_last_error());
+    CHECK_MSG(rc == 0, "rig_virtual_open: %d %s", rc, model_last_error());
     model_camera_t *cam = model_camera_load(campath);
     model_ini_t *ini = model_ini_load(truth);
     model_lamps_t *lamps = ini ? model_lamps_from_ini(ini) : NULL;
@@ -464,7 +464,7 @@ TEST(sphere_virtual_rig_mirror_sphere_highlights)
         for (int i = 0; i < lamps->n; i++) {
             // 5 us: the highlights (the lamps' spheres seen in chrome) stay below full scale.
             rc = rig_virtual_expected(v, ang, 1u << i, 5, 0, "Mono12", W, H, E);
-            CHECK_MSG(rc == 0, "expected: %d %s", rc, rig_last_error());
+            CHECK_MSG(rc == 0, "expected: %d %s", rc, model_last_error());
             if (rc) goto done;
             double resid, q[2];
             model_vec3_t pm = mirror_point(c, 25, C, lamps->lamps[i].position_mm, &resid);
@@ -541,9 +541,9 @@ TEST(sphere_virtual_rig_facts_checked)
     rig_virtual_t *v = NULL;
     int rc = rig_virtual_open(&v, bad_path, &o);
     CHECK(rc != 0 && !v);
-    CHECK_CONTAINS(rig_last_error(), "bad-truth.ini:");
-    CHECK_CONTAINS(rig_last_error(), "sample 'mirror_sphere': its scene");
-    CHECK_CONTAINS(rig_last_error(), "has no sphere of centre (60, 0, 40) mm and radius 24 mm");
+    CHECK_CONTAINS(model_last_error(), "bad-truth.ini:");
+    CHECK_CONTAINS(model_last_error(), "sample 'mirror_sphere': its scene");
+    CHECK_CONTAINS(model_last_error(), "has no sphere of centre (60, 0, 40) mm and radius 24 mm");
     rig_virtual_close(v);
     // The facts on another kind are refused.
     g_string_assign(g, good);
@@ -552,7 +552,7 @@ TEST(sphere_virtual_rig_facts_checked)
     v = NULL;
     rc = rig_virtual_open(&v, bad_path, &o);
     CHECK(rc != 0 && !v);
-    CHECK_CONTAINS(rig_last_error(), "sphere_radius_mm is a key of mirror spheres, not of kind material_coupon");
+    CHECK_CONTAINS(model_last_error(), "sphere_radius_mm is a key of mirror spheres, not of kind material_coupon");
     rig_virtual_close(v);
     g_free(good);
     g_string_free(g, TRUE);

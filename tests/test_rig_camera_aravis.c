@@ -67,10 +67,10 @@ TEST(aravis_gv_settings_pixels_metadata)
     rig_gv_camera_t *g = F.g;
     rig_camera_t *c = F.c;
     int rc;
-    CHECK(!strcmp(c->ops->backend, "aravis"));
-    CHECK_CONTAINS(c->name, "TEST-0042");
-    CHECK_CONTAINS(c->name, "pattern cam");
-    CHECK_CONTAINS(c->name, ADDR);
+    CHECK(!strcmp(rig_camera_backend(c), "aravis"));
+    CHECK_CONTAINS(rig_camera_name(c), "TEST-0042");
+    CHECK_CONTAINS(rig_camera_name(c), "pattern cam");
+    CHECK_CONTAINS(rig_camera_name(c), ADDR);
 
     // Defaults of the virtual camera.
     rig_frame_meta_t s;
@@ -98,7 +98,7 @@ TEST(aravis_gv_settings_pixels_metadata)
         rig_frame_t f;
         double t0 = realtime_s();
         rc = rig_camera_capture(c, 2.0, 2, &f);
-        CHECK_MSG(rc == 0, "capture: %d %s", rc, rig_last_error());
+        CHECK_MSG(rc == 0, "capture: %d %s", rc, model_last_error());
         if (rc) break;
         const rig_frame_meta_t *m = &f.meta;
         CHECK(m->width == 320 && m->height == 240 && m->offset_x == 64 && m->offset_y == 32);
@@ -141,7 +141,7 @@ TEST(aravis_gv_settings_pixels_metadata)
         CHECK(rig_camera_set_pixel_format(c, fmts[k]) == 0);
         rig_frame_t f;
         rc = rig_camera_capture(c, 2.0, 2, &f);
-        CHECK_MSG(rc == 0, "capture %s: %d %s", fmts[k], rc, rig_last_error());
+        CHECK_MSG(rc == 0, "capture %s: %d %s", fmts[k], rc, model_last_error());
         if (rc) continue;
         CHECK(!strcmp(f.meta.pixel_format, fmts[k]) && f.meta.bits == bits[k]);
         CHECK(f.meta.width == 1280 && f.meta.height == 1024);
@@ -168,17 +168,17 @@ TEST(aravis_gv_invalid_settings)
     rig_camera_t *c = F.c;
     // Not a format refl records: names the camera's formats.
     CHECK(rig_camera_set_pixel_format(c, "RGB8") == RIG_ERR_INVALID);
-    CHECK_CONTAINS(rig_last_error(), "RGB8");
-    CHECK_CONTAINS(rig_last_error(), "Mono8, Mono12, Mono16");
-    CHECK_CONTAINS(rig_last_error(), "TEST-0042");
+    CHECK_CONTAINS(model_last_error(), "RGB8");
+    CHECK_CONTAINS(model_last_error(), "Mono8, Mono12, Mono16");
+    CHECK_CONTAINS(model_last_error(), "TEST-0042");
     CHECK(rig_camera_set_pixel_format(c, "BayerRG8") == RIG_ERR_INVALID);
     CHECK(rig_camera_set_exposure_us(c, 5) == RIG_ERR_INVALID);
-    CHECK_CONTAINS(rig_last_error(), "outside the camera's range 10..10000000 us");
+    CHECK_CONTAINS(model_last_error(), "outside the camera's range 10..10000000 us");
     CHECK(rig_camera_set_exposure_us(c, NAN) == RIG_ERR_INVALID);
     CHECK(rig_camera_set_gain(c, 30) == RIG_ERR_INVALID);
-    CHECK_CONTAINS(rig_last_error(), "0..24");
+    CHECK_CONTAINS(model_last_error(), "0..24");
     CHECK(rig_camera_set_region(c, 1000, 0, 300, 100) == RIG_ERR_INVALID);
-    CHECK_CONTAINS(rig_last_error(), "1280x1024 sensor");
+    CHECK_CONTAINS(model_last_error(), "1280x1024 sensor");
     CHECK(rig_camera_set_region(c, 0, 0, 0, 100) == RIG_ERR_INVALID);
     rig_frame_t f;
     CHECK(rig_camera_capture(c, 0, 1, &f) == RIG_ERR_INVALID && f.pix == NULL);
@@ -216,7 +216,7 @@ TEST(aravis_gv_frame_ids_retries)
         rig_frame_t f;
         rc = rig_camera_capture(c, 2.0, 1, &f);
         if (rc) {
-            CHECK_MSG(0, "capture %d: %d %s", i, rc, rig_last_error());
+            CHECK_MSG(0, "capture %d: %d %s", i, rc, model_last_error());
             break;
         }
         if (i > 0 && f.meta.frame_id != prev + 1)
@@ -233,7 +233,7 @@ TEST(aravis_gv_frame_ids_retries)
     rig_frame_t f;
     double t0 = now_s();
     rc = rig_camera_capture(c, 0.2, 2, &f);
-    CHECK_MSG(rc == 0, "capture with retries: %d %s", rc, rig_last_error());
+    CHECK_MSG(rc == 0, "capture with retries: %d %s", rc, model_last_error());
     CHECK(now_s() - t0 >= 0.39 && now_s() - t0 < 2.0);
     if (!rc) CHECK(f.meta.frame_id == prev + 1 && fx_pattern_mismatches(&f) == 0);   // dropped triggers send nothing
     rig_frame_free(&f);
@@ -244,15 +244,15 @@ TEST(aravis_gv_frame_ids_retries)
     rc = rig_camera_capture(c, 0.1, 1, &f);
     CHECK(rc == RIG_ERR_TIMEOUT && f.pix == NULL);
     CHECK(now_s() - t0 < 1.0);
-    CHECK_CONTAINS(rig_last_error(), "TEST-0042");
-    CHECK_CONTAINS(rig_last_error(), "no complete frame after 2 software triggers");
-    CHECK_CONTAINS(rig_last_error(), "no frame within 0.1 s");
+    CHECK_CONTAINS(model_last_error(), "TEST-0042");
+    CHECK_CONTAINS(model_last_error(), "no complete frame after 2 software triggers");
+    CHECK_CONTAINS(model_last_error(), "no frame within 0.1 s");
     rig_gv_camera_drop_triggers(g, 0);
 
     // A render failure sends no frame: the retry gets the next render.
     atomic_store(&ctx->fail, 1);
     rc = rig_camera_capture(c, 0.2, 1, &f);
-    CHECK_MSG(rc == 0, "capture after a failed render: %d %s", rc, rig_last_error());
+    CHECK_MSG(rc == 0, "capture after a failed render: %d %s", rc, model_last_error());
     rig_frame_free(&f);
     rig_gv_camera_stats_t st;
     rig_gv_camera_stats(g, &st);
@@ -377,7 +377,7 @@ TEST(aravis_gv_arv_tool_by_address)
     CHECK_CONTAINS(out, "SensorWidth = 1280");
     // What arv-tool wrote, our backend reads.
     int rc = rig_camera_open_aravis(&F.c, ADDR);
-    CHECK_MSG(rc == 0, "open: %d %s", rc, rig_last_error());
+    CHECK_MSG(rc == 0, "open: %d %s", rc, model_last_error());
     if (rc) goto done;
     rig_frame_meta_t m;
     CHECK(rig_camera_settings(F.c, &m) == 0);
@@ -488,11 +488,11 @@ TEST(aravis_gv_responsive_during_slow_render)
     double t1 = now_s();
     rc = rig_camera_settings(c, &s);
     double dt = now_s() - t1;
-    CHECK_MSG(rc == 0, "settings during a render: %d %s", rc, rig_last_error());
+    CHECK_MSG(rc == 0, "settings during a render: %d %s", rc, model_last_error());
     CHECK_MSG(dt < 0.35, "control request took %.3f s during a 0.6 s render", dt);
     pthread_join(th, NULL);
     double total = now_s() - t0, cpu = process_cpu_s() - cpu0;
-    CHECK_MSG(job.rc == 0, "capture: %d %s", job.rc, rig_last_error());
+    CHECK_MSG(job.rc == 0, "capture: %d %s", job.rc, model_last_error());
     CHECK(total >= 0.6 && total < 3.0);
     // Waiting for a frame costs (almost) no CPU: no thread of the camera or the
     // client spins meanwhile (Aravis's GV thread did, at a 1 kHz trigger check).
@@ -525,17 +525,17 @@ TEST(aravis_gv_camera_disappears)
     rc = rig_camera_capture(c, 0.5, 1, &f);
     double dt = now_s() - t0;
     CHECK_MSG(rc == RIG_ERR_DISCONNECTED || rc == RIG_ERR_TIMEOUT, "capture on a lost camera: %d %s", rc,
-              rig_last_error());
+              model_last_error());
     CHECK(f.pix == NULL);
     CHECK_MSG(dt < 8.0, "capture on a lost camera took %.1f s", dt);
-    CHECK_CONTAINS(rig_last_error(), "TEST-0042");
-    CHECK_CONTAINS(rig_last_error(), ADDR);
-    CHECK_CONTAINS(rig_last_error(), "check power, cable and network");
+    CHECK_CONTAINS(model_last_error(), "TEST-0042");
+    CHECK_CONTAINS(model_last_error(), ADDR);
+    CHECK_CONTAINS(model_last_error(), "check power, cable and network");
     // Later calls fail fast with the same verdict.
     t0 = now_s();
     rc = rig_camera_set_exposure_us(c, 2000);
     CHECK(rc == RIG_ERR_DISCONNECTED || rc == RIG_ERR_TIMEOUT);
-    CHECK_CONTAINS(rig_last_error(), "TEST-0042");
+    CHECK_CONTAINS(model_last_error(), "TEST-0042");
     CHECK(now_s() - t0 < 4.0);
     t0 = now_s();
     rig_camera_close(c);
@@ -560,8 +560,8 @@ TEST(aravis_open_nothing_there)
     int rc = rig_camera_open_aravis(&c, ADDR);
     double dt = now_s() - t0;
     CHECK(rc == RIG_ERR_NO_DEVICE && c == NULL);
-    CHECK_CONTAINS(rig_last_error(), "no camera at '127.0.0.1'");
-    CHECK_CONTAINS(rig_last_error(), "UDP 3956");
+    CHECK_CONTAINS(model_last_error(), "no camera at '127.0.0.1'");
+    CHECK_CONTAINS(model_last_error(), "UDP 3956");
     CHECK_MSG(dt < 8.0, "open took %.1f s", dt);
     CHECK(rig_camera_open_aravis(&c, "") == RIG_ERR_INVALID);
     CHECK(rig_camera_open_aravis(NULL, ADDR) == RIG_ERR_INVALID);
@@ -585,13 +585,13 @@ TEST(aravis_plain_aravis_fake_camera)
     if (!gv) goto done;
     arv_fake_camera_set_trigger_frequency(arv_gv_fake_camera_get_fake_camera(gv), 1000.0);
     int rc = rig_camera_open_aravis(&c, ADDR);
-    CHECK_MSG(rc == 0, "open: %d %s", rc, rig_last_error());
+    CHECK_MSG(rc == 0, "open: %d %s", rc, model_last_error());
     if (rc) goto done;
-    CHECK_CONTAINS(c->name, "Aravis Fake serial PLAIN-7 at 127.0.0.1");
+    CHECK_CONTAINS(rig_camera_name(c), "Aravis Fake serial PLAIN-7 at 127.0.0.1");
     CHECK(rig_camera_set_pixel_format(c, "Mono12") == RIG_ERR_NOT_SUPPORTED);
-    CHECK_CONTAINS(rig_last_error(), "does not offer pixel format Mono12; it offers: ");
-    CHECK_CONTAINS(rig_last_error(), "Mono8");
-    CHECK_CONTAINS(rig_last_error(), "BayerGR8");
+    CHECK_CONTAINS(model_last_error(), "does not offer pixel format Mono12; it offers: ");
+    CHECK_CONTAINS(model_last_error(), "Mono8");
+    CHECK_CONTAINS(model_last_error(), "BayerGR8");
     CHECK(rig_camera_set_pixel_format(c, "Mono16") == 0);
     CHECK(rig_camera_set_exposure_us(c, 1234.5) == 0);   // an integer register: 1234 us
     CHECK(rig_camera_set_gain(c, 5) == 0);
@@ -600,7 +600,7 @@ TEST(aravis_plain_aravis_fake_camera)
     rig_frame_t f;
     for (int i = 0; i < 2; i++) {
         rc = rig_camera_capture(c, 2.0, 2, &f);
-        CHECK_MSG(rc == 0, "capture: %d %s", rc, rig_last_error());
+        CHECK_MSG(rc == 0, "capture: %d %s", rc, model_last_error());
         if (rc) break;
         CHECK(f.meta.width == 200 && f.meta.height == 100 && f.meta.offset_x == 8 && f.meta.offset_y == 4);
         CHECK(!strcmp(f.meta.pixel_format, "Mono16") && f.meta.bits == 16);
@@ -630,11 +630,11 @@ TEST(gv_camera_server_params)
     rig_gv_camera_t *g = (rig_gv_camera_t *)&g;
     p.address = "192.168.1.20";
     CHECK(rig_gv_camera_start(&g, &p) == RIG_ERR_INVALID && g == NULL);
-    CHECK_CONTAINS(rig_last_error(), "not a loopback");
+    CHECK_CONTAINS(model_last_error(), "not a loopback");
     p.address = ADDR;
     p.render = NULL;
     CHECK(rig_gv_camera_start(&g, &p) == RIG_ERR_INVALID);
-    CHECK_CONTAINS(rig_last_error(), "render callback");
+    CHECK_CONTAINS(model_last_error(), "render callback");
     p.render = fx_render_pattern;
     p.serial = "A-SERIAL-THAT-IS-TOO-LONG";
     CHECK(rig_gv_camera_start(&g, &p) == RIG_ERR_INVALID);
@@ -651,7 +651,7 @@ TEST(gv_camera_server_params)
     double t0 = now_s();
     CHECK(rig_gv_camera_start(&g2, &q) == RIG_ERR_BUSY && g2 == NULL);
     CHECK(now_s() - t0 >= 0.2);
-    CHECK_CONTAINS(rig_last_error(), "127.0.0.1");
+    CHECK_CONTAINS(model_last_error(), "127.0.0.1");
     rig_gv_camera_stop(g);
     rig_gv_camera_stop(NULL);
     fx_pattern_ctx_free(ctx);

@@ -415,8 +415,8 @@ TEST(capture_camera_stops_answering)
                              .before_step = drop_at_step2 };
     int rc = rig_capture_run(&o);
     CHECK(rc == 3);
-    CHECK_CONTAINS(rig_last_error(), "did not answer at step 2 after 2 retries");
-    CHECK_CONTAINS(rig_last_error(), "refl capture --resume");
+    CHECK_CONTAINS(model_last_error(), "did not answer at step 2 after 2 retries");
+    CHECK_CONTAINS(model_last_error(), "refl capture --resume");
     CHECK(count_frames(dir) == 2);
     CHECK(count_events(dir, "retry") == 2);
     CHECK(count_events(dir, "pause") == 1);

@@ -48,22 +48,22 @@ TEST(rigcfg_sim_devices)
                                   "backend = sim\n");
     rig_t *r = NULL;
     int rc = rig_open(&r, path);
-    CHECK_MSG(rc == 0, "rig_open: %d %s", rc, rig_last_error());
+    CHECK_MSG(rc == 0, "rig_open: %d %s", rc, model_last_error());
     if (rc) return;
     char sha[65];
     CHECK(model_sha256_file(path, sha));
     CHECK(!strcmp(r->sha256, sha));
     CHECK(!strcmp(r->path, path));
     CHECK(r->camera == NULL && r->virt == NULL);
-    CHECK(r->turntable && !strcmp(r->turntable->ops->backend, "sim"));
-    CHECK_CONTAINS(r->turntable->name, "seed 7");
-    CHECK(r->lamps && r->lamps->n == 2 && r->lamps->on_mask == 0);
-    if (r->lamps && r->lamps->n == 2) {
-        CHECK(!strcmp(r->lamps->lamps[0].name, "key"));
-        CHECK(!strcmp(r->lamps->lamps[1].name, "fill light"));
-        CHECK_NEAR(r->lamps->lamps[0].warmup_ms, 1.5, 0);
-        CHECK_NEAR(r->lamps->lamps[0].settle_ms, 0.5, 0);
-        CHECK(!strcmp(r->lamps->ops->backend, "sim"));
+    CHECK(r->turntable && !strcmp(rig_turntable_backend(r->turntable), "sim"));
+    CHECK_CONTAINS(rig_turntable_name(r->turntable), "seed 7");
+    CHECK(r->lamps && rig_lamps_count(r->lamps) == 2 && rig_lamps_on_mask(r->lamps) == 0);
+    if (r->lamps && rig_lamps_count(r->lamps) == 2) {
+        CHECK(!strcmp(rig_lamps_name(r->lamps, 0), "key"));
+        CHECK(!strcmp(rig_lamps_name(r->lamps, 1), "fill light"));
+        CHECK_NEAR(rig_lamps_line(r->lamps, 0)->warmup_ms, 1.5, 0);
+        CHECK_NEAR(rig_lamps_line(r->lamps, 0)->settle_ms, 0.5, 0);
+        CHECK(!strcmp(rig_lamps_backend(r->lamps), "sim"));
     }
     // Camera defaults absent; the profile in real time (time_scale applied).
     CHECK(r->pixel_format[0] == 0 && isnan(r->exposure_us) && isnan(r->gain));
@@ -78,7 +78,7 @@ TEST(rigcfg_sim_devices)
     CHECK_NEAR(st.angle_deg, 45, 1e-9);   // position_noise_deg = 0
     CHECK(st.homed && !st.moving);
     CHECK(rig_lamps_set(r->lamps, 2) == 0);
-    CHECK(r->lamps->on_mask == 2);
+    CHECK(rig_lamps_on_mask(r->lamps) == 2);
     rig_close(r);
     rig_close(NULL);
 }
@@ -95,8 +95,8 @@ TEST(rigcfg_lab_example_parses)
     CHECK(r == NULL);
     char want[1100];
     snprintf(want, sizeof want, "%s:24: [turntable]: apt serial 55000001", path);
-    CHECK_CONTAINS(rig_last_error(), want);
-    CHECK(!strcmp(rig_last_error(), model_last_error()));
+    CHECK_CONTAINS(model_last_error(), want);
+    CHECK(!strcmp(model_last_error(), model_last_error()));
 }
 
 typedef struct {
@@ -167,18 +167,18 @@ TEST(rigcfg_errors_name_file_and_line)
         rig_t *r = (rig_t *)1;
         model_error_clear();
         int rc = rig_open(&r, path);
-        CHECK_MSG(rc == RIG_ERR_INVALID, "case %zu: rc %d (%s)", i, rc, rig_last_error());
+        CHECK_MSG(rc == RIG_ERR_INVALID, "case %zu: rc %d (%s)", i, rc, model_last_error());
         CHECK_MSG(r == NULL, "case %zu: *out not NULL", i);
-        CHECK_MSG(!strncmp(rig_last_error(), path, strlen(path)), "case %zu: '%s' does not start with the path", i,
-                  rig_last_error());
-        CHECK_MSG(!strcmp(rig_last_error(), model_last_error()), "case %zu: rig '%s' model '%s'", i, rig_last_error(),
+        CHECK_MSG(!strncmp(model_last_error(), path, strlen(path)), "case %zu: '%s' does not start with the path", i,
                   model_last_error());
-        for (int k = 0; k < 3 && b->want[k]; k++) CHECK_CONTAINS(rig_last_error(), b->want[k]);
+        CHECK_MSG(!strcmp(model_last_error(), model_last_error()), "case %zu: rig '%s' model '%s'", i, model_last_error(),
+                  model_last_error());
+        for (int k = 0; k < 3 && b->want[k]; k++) CHECK_CONTAINS(model_last_error(), b->want[k]);
         if (r && r != (rig_t *)1) rig_close(r);
     }
     rig_t *r = NULL;
     CHECK(rig_open(&r, test_path("missing.ini")) == RIG_ERR_NO_DEVICE);
-    CHECK_CONTAINS(rig_last_error(), "missing.ini: cannot open");
+    CHECK_CONTAINS(model_last_error(), "missing.ini: cannot open");
     CHECK(rig_open(NULL, "x.ini") == RIG_ERR_INVALID);
     CHECK(rig_open(&r, NULL) == RIG_ERR_INVALID && r == NULL);
 }
@@ -196,15 +196,15 @@ TEST(rigcfg_nothing_open_after_error)
     rig_t *r = NULL;
     int rc = rig_open(&r, path);
     CHECK(rc == RIG_ERR_NO_DEVICE && r == NULL);
-    CHECK_CONTAINS(rig_last_error(), ":7: [camera]: aravis: no camera at '127.0.0.3'");
+    CHECK_CONTAINS(model_last_error(), ":7: [camera]: aravis: no camera at '127.0.0.3'");
     // The turntable opens, then the lamps' GPIO chip is missing.
     path = test_write("gpio.ini",
                       "[turntable]\nbackend = sim\n"
                       "[lamp a]\nbackend = gpiod\nchip = /nonexistent/gpiochip9\nline = 3\n");
     rc = rig_open(&r, path);
     CHECK(rc != 0 && r == NULL);
-    CHECK_CONTAINS(rig_last_error(), "gpio.ini:3: [lamp a]: ");
-    CHECK_CONTAINS(rig_last_error(), "/nonexistent/gpiochip9");
+    CHECK_CONTAINS(model_last_error(), "gpio.ini:3: [lamp a]: ");
+    CHECK_CONTAINS(model_last_error(), "/nonexistent/gpiochip9");
     // Every safety slot is free again.
     rig_lamps_t *sets[32] = { 0 };
     rig_lamp_line_t one = { .name = "x" };
@@ -212,7 +212,7 @@ TEST(rigcfg_nothing_open_after_error)
     for (int i = 0; i < 32; i++)
         if (rig_lamps_open_sim(&sets[i], &one, 1) == 0) opened++;
     CHECK_MSG(opened == 32, "only %d of 32 lamp sets opened: a failed rig_open kept its lamps (%s)", opened,
-              rig_last_error());
+              model_last_error());
     for (int i = 0; i < 32; i++) rig_lamps_close(sets[i]);
 }
 
@@ -229,14 +229,14 @@ TEST(rigcfg_virtual_rig)
     int session = test_camera_lock();
     rig_t *r = NULL;
     int rc = rig_open(&r, path);
-    CHECK_MSG(rc == 0, "rig_open: %d %s", rc, rig_last_error());
+    CHECK_MSG(rc == 0, "rig_open: %d %s", rc, model_last_error());
     if (!rc) {
         CHECK(r->virt && r->camera && r->turntable && r->lamps);
         CHECK(r->turntable == rig_virtual_turntable(r->virt));
         CHECK(r->lamps == rig_virtual_lamps(r->virt));
-        CHECK(r->lamps->n == 5 && r->lamps->on_mask == 0);
+        CHECK(rig_lamps_count(r->lamps) == 5 && rig_lamps_on_mask(r->lamps) == 0);
         CHECK(rig_lamps_find(r->lamps, "east") >= 0 && rig_lamps_find(r->lamps, "north") >= 0);
-        CHECK_CONTAINS(r->camera->name, "127.0.0.1");
+        CHECK_CONTAINS(rig_camera_name(r->camera), "127.0.0.1");
         rig_frame_meta_t m;
         CHECK(rig_camera_settings(r->camera, &m) == 0);
         CHECK_NEAR(m.exposure_us, 5000, 1e-6);   // the file's camera default applied at open
@@ -256,15 +256,15 @@ TEST(rigcfg_virtual_rig)
     r = NULL;
     rc = rig_open(&r, path);
     CHECK(rc != 0 && r == NULL);
-    CHECK_CONTAINS(rig_last_error(), "virtual-bad.ini:1: [rig]: ");
-    CHECK_CONTAINS(rig_last_error(), "no-such-truth.ini");
+    CHECK_CONTAINS(model_last_error(), "virtual-bad.ini:1: [rig]: ");
+    CHECK_CONTAINS(model_last_error(), "no-such-truth.ini");
     // An unknown sample.
     snprintf(text, sizeof text, "[rig]\nbackend = virtual\ntruth = %s\nsample = unicorn\n",
              truth_path());
     path = test_write("virtual-sample.ini", text);
     rc = rig_open(&r, path);
     CHECK(rc != 0 && r == NULL);
-    CHECK_CONTAINS(rig_last_error(), "virtual-sample.ini:1: [rig]: ");
-    CHECK_CONTAINS(rig_last_error(), "unicorn");
+    CHECK_CONTAINS(model_last_error(), "virtual-sample.ini:1: [rig]: ");
+    CHECK_CONTAINS(model_last_error(), "unicorn");
     test_camera_unlock(session);
 }

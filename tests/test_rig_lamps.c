@@ -44,8 +44,8 @@ TEST(lamps_sim_settle_times)
     rig_lamps_t *l = NULL;
     CHECK(rig_lamps_open_sim(&l, ls, 3) == 0);
     if (!l) return;
-    CHECK(l->n == 3 && l->on_mask == 0);
-    CHECK(!strcmp(l->ops->backend, "sim"));
+    CHECK(rig_lamps_count(l) == 3 && rig_lamps_on_mask(l) == 0);
+    CHECK(!strcmp(rig_lamps_backend(l), "sim"));
     CHECK_NEAR(rig_lamps_settle_s(l, 0, 0x3), 0.030, 1e-12);    // warm-ups 30, 10
     CHECK_NEAR(rig_lamps_settle_s(l, 0x3, 0x2), 0.005, 1e-12);  // key off: settle 5
     CHECK_NEAR(rig_lamps_settle_s(l, 0x3, 0x1), 0.020, 1e-12);  // fill off: settle 20
@@ -67,16 +67,16 @@ TEST(lamps_sim_set_sleeps_settle_time)
     double t0 = model_now_s();
     CHECK(rig_lamps_set(l, 0x1) == 0);
     double dt_on = model_now_s() - t0;
-    CHECK(l->on_mask == 0x1);
+    CHECK(rig_lamps_on_mask(l) == 0x1);
     t0 = model_now_s();
     CHECK(rig_lamps_set(l, 0x2) == 0);          // a off (15 ms), b on (0 ms)
     double dt_swap = model_now_s() - t0;
-    CHECK(l->on_mask == 0x2);
+    CHECK(rig_lamps_on_mask(l) == 0x2);
     t0 = model_now_s();
     CHECK(rig_lamps_set(l, 0x2) == 0);          // no change, no wait
     double dt_same = model_now_s() - t0;
     CHECK(rig_lamps_all_off(l) == 0);
-    CHECK(l->on_mask == 0);
+    CHECK(rig_lamps_on_mask(l) == 0);
     CHECK_MSG(dt_on >= 0.040 && dt_on < 0.040 + 0.25, "switch-on took %.4f s, want 0.040", dt_on);
     CHECK_MSG(dt_swap >= 0.015 && dt_swap < 0.015 + 0.25, "swap took %.4f s, want 0.015", dt_swap);
     CHECK_MSG(dt_same < 0.010, "no-op set took %.4f s", dt_same);
@@ -91,9 +91,9 @@ TEST(lamps_sim_errors)
     CHECK(rig_lamps_open_sim(&l, ls, 3) == 0);
     if (l) {
         CHECK(rig_lamps_set(l, 0x8) == RIG_ERR_INVALID);
-        CHECK_CONTAINS(rig_last_error(), "on_mask 0x8");
-        CHECK_CONTAINS(rig_last_error(), "3 configured");
-        CHECK(l->on_mask == 0);
+        CHECK_CONTAINS(model_last_error(), "on_mask 0x8");
+        CHECK_CONTAINS(model_last_error(), "3 configured");
+        CHECK(rig_lamps_on_mask(l) == 0);
         CHECK(rig_lamps_find(l, "b") == 1);
         CHECK(rig_lamps_find(l, "d") == -1);
         CHECK(rig_lamps_find(l, NULL) == -1);
@@ -108,22 +108,22 @@ TEST(lamps_sim_errors)
     l = (rig_lamps_t *)1;
     CHECK(rig_lamps_open_sim(&l, dup, 2) == RIG_ERR_INVALID);
     CHECK(l == NULL);
-    CHECK_CONTAINS(rig_last_error(), "both named 'a'");
+    CHECK_CONTAINS(model_last_error(), "both named 'a'");
 
     rig_lamp_line_t bad = lamp("key", "", 0, false, -1, 0);
     CHECK(rig_lamps_open_sim(&l, &bad, 1) == RIG_ERR_INVALID);
-    CHECK_CONTAINS(rig_last_error(), "lamp 'key': warmup_ms -1");
+    CHECK_CONTAINS(model_last_error(), "lamp 'key': warmup_ms -1");
     bad = lamp("key", "", 0, false, 0, NAN);
     CHECK(rig_lamps_open_sim(&l, &bad, 1) == RIG_ERR_INVALID);
-    CHECK_CONTAINS(rig_last_error(), "lamp 'key': settle_ms nan");
+    CHECK_CONTAINS(model_last_error(), "lamp 'key': settle_ms nan");
     bad = lamp("", "", 0, false, 0, 0);
     CHECK(rig_lamps_open_sim(&l, &bad, 1) == RIG_ERR_INVALID);
-    CHECK_CONTAINS(rig_last_error(), "lamp 0 has no name");
+    CHECK_CONTAINS(model_last_error(), "lamp 0 has no name");
     CHECK(rig_lamps_open_sim(&l, ls, 33) == RIG_ERR_INVALID);
-    CHECK_CONTAINS(rig_last_error(), "33 lamps given");
+    CHECK_CONTAINS(model_last_error(), "33 lamps given");
     CHECK(rig_lamps_open_sim(NULL, ls, 1) == RIG_ERR_INVALID);
     CHECK(rig_lamps_open_gpiod(&l, dup, 2) == RIG_ERR_INVALID);   // checked before any chip is opened
-    CHECK_CONTAINS(rig_last_error(), "both named 'a'");
+    CHECK_CONTAINS(model_last_error(), "both named 'a'");
 }
 
 TEST(lamps_sim_registry_full)
@@ -135,7 +135,7 @@ TEST(lamps_sim_registry_full)
     while (opened < 40 && !(err = rig_lamps_open_sim(&sets[opened], &a, 1))) opened++;
     CHECK(opened >= 1 && opened <= 32);   // 32 unless another test left a set open
     CHECK(err == RIG_ERR_NO_MEM);
-    CHECK_CONTAINS(rig_last_error(), "more than 32 lamp sets open");
+    CHECK_CONTAINS(model_last_error(), "more than 32 lamp sets open");
     for (int i = 0; i < opened; i++) rig_lamps_close(sets[i]);
     rig_lamps_t *l = NULL;
     CHECK(rig_lamps_open_sim(&l, &a, 1) == 0);   // slots freed on close

@@ -7,6 +7,7 @@
 #include <string.h>
 
 #include "model/model.h"
+#include "rig/internal.h"   // a stand-in turntable on the stack
 #include "rig/rig.h"
 #include "tests/test.h"
 

@@ -12,6 +12,7 @@
 #include <unistd.h>
 
 #include "model/model.h"
+#include "rig/internal.h"   // a backend of our own: an ops table without optional operations
 #include "rig/rig.h"
 #include "tests/apt_sim.h"
 #include "tests/fixtures.h"
@@ -33,7 +34,7 @@ TEST(turntable_strerror_and_fail)
     CHECK(strcmp(rig_strerror(RIG_ERR_DISCONNECTED), "device disconnected") == 0);
     CHECK(strcmp(rig_strerror(-999), "unknown error") == 0);
     CHECK(rig_fail(RIG_ERR_LIMIT, "stage %s at %d", "X", 3) == RIG_ERR_LIMIT);
-    CHECK(strcmp(rig_last_error(), "stage X at 3") == 0);
+    CHECK(strcmp(model_last_error(), "stage X at 3") == 0);
     CHECK(strcmp(model_last_error(), "stage X at 3") == 0);
 }
 
@@ -171,8 +172,8 @@ TEST(turntable_sim_faults)
     CHECK(rig_turntable_home(t, 1.0) == 0);
     CHECK(rig_turntable_move_abs_deg(t, 10, 1.0) == 0);
     CHECK(rig_turntable_move_abs_deg(t, 100, 1.0) == RIG_ERR_MOTION);
-    CHECK_CONTAINS(rig_last_error(), "motion error");
-    CHECK_CONTAINS(rig_last_error(), "sim turntable");
+    CHECK_CONTAINS(model_last_error(), "motion error");
+    CHECK_CONTAINS(model_last_error(), "sim turntable");
     CHECK(rig_turntable_status(t, &st) == 0 && st.motion_error && !st.moving);
     CHECK_NEAR(st.angle_deg, 55, 1.0);                       // stopped half way (symmetric profile)
     CHECK(rig_turntable_move_abs_deg(t, 0, 1.0) == 0);       // the fault fires once
@@ -188,7 +189,7 @@ TEST(turntable_sim_faults)
     double t0 = model_now_s();
     CHECK(rig_turntable_move_abs_deg(t, 100, 0.3) == RIG_ERR_TIMEOUT);
     CHECK_NEAR(model_now_s() - t0, 0.3, 0.05);
-    CHECK_CONTAINS(rig_last_error(), "did not finish within 0.30 s");
+    CHECK_CONTAINS(model_last_error(), "did not finish within 0.30 s");
     CHECK(rig_turntable_status(t, &st) == 0 && st.moving);
     CHECK(rig_turntable_stop(t, true) == 0);
     CHECK(rig_turntable_status(t, &st) == 0 && !st.moving);
@@ -202,7 +203,7 @@ TEST(turntable_sim_faults)
     CHECK(rig_turntable_move_abs_deg(t, 10, 1.0) == 0);
     CHECK(rig_turntable_move_abs_deg(t, 20, 1.0) == 0);
     CHECK(rig_turntable_move_abs_deg(t, 30, 1.0) == RIG_ERR_DISCONNECTED);
-    CHECK_CONTAINS(rig_last_error(), "disconnected");
+    CHECK_CONTAINS(model_last_error(), "disconnected");
     CHECK(rig_turntable_status(t, &st) == RIG_ERR_DISCONNECTED);
     CHECK(rig_turntable_home(t, 1.0) == RIG_ERR_DISCONNECTED);
     rig_turntable_close(t);
@@ -215,22 +216,22 @@ TEST(turntable_sim_bad_input)
     rig_turntable_status_t st;
     p.time_scale = 0;
     CHECK(rig_turntable_open_sim(&t, &p) == RIG_ERR_INVALID && t == NULL);
-    CHECK_CONTAINS(rig_last_error(), "time_scale");
+    CHECK_CONTAINS(model_last_error(), "time_scale");
     p = fx_fast_sim();
     p.fault_after_moves = 1;
     p.fault = RIG_ERR_IO;
     CHECK(rig_turntable_open_sim(&t, &p) == RIG_ERR_INVALID);
-    CHECK_CONTAINS(rig_last_error(), "fault must be");
+    CHECK_CONTAINS(model_last_error(), "fault must be");
     p = fx_fast_sim();
     CHECK(rig_turntable_open_sim(&t, &p) == 0);
     if (!t) return;
     CHECK(rig_turntable_move_abs_deg(t, 10, 1.0) == RIG_ERR_NOT_HOMED);
-    CHECK_CONTAINS(rig_last_error(), "home it first");
+    CHECK_CONTAINS(model_last_error(), "home it first");
     CHECK(rig_turntable_home(t, 1.0) == 0);
     CHECK(rig_turntable_move_abs_deg(t, NAN, 1.0) == RIG_ERR_INVALID);
-    CHECK_CONTAINS(rig_last_error(), "not a finite angle");
+    CHECK_CONTAINS(model_last_error(), "not a finite angle");
     CHECK(rig_turntable_move_abs_deg(t, 10, 0) == RIG_ERR_INVALID);
-    CHECK_CONTAINS(rig_last_error(), "time-out 0 s");
+    CHECK_CONTAINS(model_last_error(), "time-out 0 s");
     CHECK(rig_turntable_move_rel_deg(t, INFINITY, 1.0) == RIG_ERR_INVALID);
     CHECK(rig_turntable_status(t, &st) == 0 && st.angle_deg == 0 && !st.moving);
     CHECK(rig_turntable_status(NULL, &st) == RIG_ERR_INVALID);
@@ -242,7 +243,7 @@ TEST(turntable_sim_bad_input)
     static const rig_turntable_ops_t none = { .backend = "none" };
     rig_turntable_t bare = { .ops = &none, .name = "bare stage" };
     CHECK(rig_turntable_home(&bare, 1.0) == RIG_ERR_NOT_SUPPORTED);
-    CHECK_CONTAINS(rig_last_error(), "bare stage: homing is not supported by the none backend");
+    CHECK_CONTAINS(model_last_error(), "bare stage: homing is not supported by the none backend");
     CHECK(rig_turntable_stop(&bare, true) == RIG_ERR_NOT_SUPPORTED);
 }
 
@@ -294,7 +295,7 @@ TEST(apt_umock_open_info)
         CHECK(strcmp(info.serial, "55000001") == 0);
         CHECK(strcmp(info.firmware, "1.0.3") == 0);
         CHECK_NEAR(info.counts_per_deg, 136533.33, 1e-9);
-        CHECK(strcmp(t->name, "apt K10CR1 serial 55000001") == 0);
+        CHECK(strcmp(rig_turntable_name(t), "apt K10CR1 serial 55000001") == 0);
         apt_sim_stats(s, 0, &st);
         CHECK(st.baud_divisor == 0x1a);       // 3 MHz / 115200 = 26 on an FT232R
         CHECK(st.flow_ctrl == 0x01);          // RTS/CTS
@@ -310,8 +311,8 @@ TEST(apt_umock_open_info)
     rig_turntable_close(t);
     t = NULL;
     CHECK(rig_turntable_open_apt(&t, "55000001", "NO-SUCH-STAGE") == RIG_ERR_NOT_SUPPORTED && !t);
-    CHECK_CONTAINS(rig_last_error(), "unknown stage model \"NO-SUCH-STAGE\"");
-    CHECK_CONTAINS(rig_last_error(), "known: K10CR1");
+    CHECK_CONTAINS(model_last_error(), "unknown stage model \"NO-SUCH-STAGE\"");
+    CHECK_CONTAINS(model_last_error(), "known: K10CR1");
     apt_sim_free(s);
 }
 
@@ -327,7 +328,7 @@ TEST(apt_umock_home_and_moves)
     if (t) {
         CHECK(rig_turntable_status(t, &st) == 0 && !st.homed);
         CHECK(rig_turntable_move_abs_deg(t, 90, 2.0) == RIG_ERR_NOT_HOMED);
-        CHECK_CONTAINS(rig_last_error(), "apt K10CR1 serial 55000001: the stage is not homed");
+        CHECK_CONTAINS(model_last_error(), "apt K10CR1 serial 55000001: the stage is not homed");
         CHECK(rig_turntable_home(t, 2.0) == 0);
         CHECK(rig_turntable_status(t, &st) == 0 && st.homed && !st.homing && !st.moving);
         CHECK_NEAR(st.angle_deg, 0, 0);
@@ -425,7 +426,7 @@ TEST(apt_umock_wait_timeout)
         double t0 = model_now_s();
         CHECK(rig_turntable_move_abs_deg(t, 90, 0.2) == RIG_ERR_TIMEOUT);
         CHECK_NEAR(model_now_s() - t0, 0.2, 0.1);
-        CHECK_CONTAINS(rig_last_error(), "apt K10CR1 serial 55000001: the move did not finish within 0.20 s");
+        CHECK_CONTAINS(model_last_error(), "apt K10CR1 serial 55000001: the move did not finish within 0.20 s");
         CHECK(rig_turntable_wait(t, 2.0) == 0);       // it was still moving; now done
         rig_turntable_status_t st;
         CHECK(rig_turntable_status(t, &st) == 0);
@@ -446,8 +447,8 @@ TEST(apt_umock_no_reply)
     CHECK(rig_turntable_open_apt(&t, NULL, NULL) == RIG_ERR_TIMEOUT && !t);
     double dt = model_now_s() - t0;
     CHECK_MSG(dt > 0.9 && dt < 2.5, "open took %.2f s", dt);
-    CHECK_CONTAINS(rig_last_error(), "apt serial 55000001: no reply to HW_REQ_INFO after 1.0 s");
-    CHECK_CONTAINS(rig_last_error(), "powered");
+    CHECK_CONTAINS(model_last_error(), "apt serial 55000001: no reply to HW_REQ_INFO after 1.0 s");
+    CHECK_CONTAINS(model_last_error(), "powered");
     apt_sim_free(s);
 }
 
@@ -461,8 +462,8 @@ TEST(apt_umock_motion_error)
     rig_turntable_status_t st;
     if (t) {
         CHECK(rig_turntable_move_abs_deg(t, 90, 2.0) == RIG_ERR_MOTION);
-        CHECK_CONTAINS(rig_last_error(), "apt K10CR1 serial 55000001: motion error during the move");
-        CHECK_CONTAINS(rig_last_error(), "MOTION-ERROR");
+        CHECK_CONTAINS(model_last_error(), "apt K10CR1 serial 55000001: motion error during the move");
+        CHECK_CONTAINS(model_last_error(), "MOTION-ERROR");
         CHECK(rig_turntable_status(t, &st) == 0 && st.motion_error && !st.moving);
         CHECK(st.angle_deg > 10 && st.angle_deg < 80);
         CHECK(rig_turntable_move_abs_deg(t, 0, 2.0) == 0);   // a new move clears it
@@ -486,7 +487,7 @@ TEST(apt_umock_unplugged_mid_move)
         double t0 = model_now_s();
         CHECK(rig_turntable_move_abs_deg(t, 90, 3.0) == RIG_ERR_DISCONNECTED);
         CHECK(model_now_s() - t0 < 1.5);
-        CHECK_CONTAINS(rig_last_error(), "apt K10CR1 serial 55000001: the device disconnected");
+        CHECK_CONTAINS(model_last_error(), "apt K10CR1 serial 55000001: the device disconnected");
         CHECK(rig_turntable_status(t, &st) == RIG_ERR_DISCONNECTED);
         CHECK(rig_turntable_stop(t, true) == RIG_ERR_DISCONNECTED);
         rig_turntable_close(t);
@@ -502,10 +503,10 @@ TEST(apt_umock_permission_denied)
     apt_sim_t *s = fx_apt_sim_start(&d, 1);
     rig_turntable_t *t = NULL;
     CHECK(rig_turntable_open_apt(&t, NULL, NULL) == RIG_ERR_ACCESS && !t);
-    CHECK_CONTAINS(rig_last_error(), "permission denied on /dev/bus/usb/001/002");
-    CHECK_CONTAINS(rig_last_error(), "udev rule");
+    CHECK_CONTAINS(model_last_error(), "permission denied on /dev/bus/usb/001/002");
+    CHECK_CONTAINS(model_last_error(), "udev rule");
     CHECK(rig_turntable_open_apt(&t, "55000001", NULL) == RIG_ERR_ACCESS && !t);
-    CHECK_CONTAINS(rig_last_error(), "apt serial 55000001: permission denied");
+    CHECK_CONTAINS(model_last_error(), "apt serial 55000001: permission denied");
     apt_sim_free(s);
 }
 
@@ -516,12 +517,12 @@ TEST(apt_umock_device_missing)
     apt_sim_t *s = fx_apt_sim_start(&d, 1);
     rig_turntable_t *t = NULL;
     CHECK(rig_turntable_open_apt(&t, "99999999", NULL) == RIG_ERR_NO_DEVICE && !t);
-    CHECK_CONTAINS(rig_last_error(), "apt serial 99999999: not found");
-    CHECK_CONTAINS(rig_last_error(), "present: 55000001 (bus 1 device 2)");
+    CHECK_CONTAINS(model_last_error(), "apt serial 99999999: not found");
+    CHECK_CONTAINS(model_last_error(), "present: 55000001 (bus 1 device 2)");
     apt_sim_free(s);
     s = fx_apt_sim_start(NULL, 0);   // no device at all
     CHECK(rig_turntable_open_apt(&t, NULL, NULL) == RIG_ERR_NO_DEVICE && !t);
-    CHECK_CONTAINS(rig_last_error(), "no Thorlabs APT controller (USB 0403:faf0) found");
+    CHECK_CONTAINS(model_last_error(), "no Thorlabs APT controller (USB 0403:faf0) found");
     apt_sim_free(s);
 }
 
@@ -534,10 +535,10 @@ TEST(apt_umock_two_devices)
     rig_turntable_t *t = NULL;
     rig_turntable_info_t info;
     CHECK(rig_turntable_open_apt(&t, NULL, NULL) == RIG_ERR_INVALID && !t);
-    CHECK_CONTAINS(rig_last_error(), "2 Thorlabs APT controllers found");
-    CHECK_CONTAINS(rig_last_error(), "55000001");
-    CHECK_CONTAINS(rig_last_error(), "55000002");
-    CHECK_CONTAINS(rig_last_error(), "give the serial");
+    CHECK_CONTAINS(model_last_error(), "2 Thorlabs APT controllers found");
+    CHECK_CONTAINS(model_last_error(), "55000001");
+    CHECK_CONTAINS(model_last_error(), "55000002");
+    CHECK_CONTAINS(model_last_error(), "give the serial");
     CHECK(rig_turntable_open_apt(&t, "55000002", NULL) == 0);
     if (t) {
         CHECK(rig_turntable_info(t, &info) == 0 && strcmp(info.serial, "55000002") == 0);
@@ -586,8 +587,8 @@ TEST(apt_umock_limit_switch)
     rig_turntable_status_t st;
     if (t) {
         CHECK(rig_turntable_move_abs_deg(t, 90, 2.0) == RIG_ERR_LIMIT);
-        CHECK_CONTAINS(rig_last_error(), "apt K10CR1 serial 55000001: the move stopped at a limit switch");
-        CHECK_CONTAINS(rig_last_error(), "fwd-limit");
+        CHECK_CONTAINS(model_last_error(), "apt K10CR1 serial 55000001: the move stopped at a limit switch");
+        CHECK_CONTAINS(model_last_error(), "fwd-limit");
         CHECK(rig_turntable_status(t, &st) == 0 && st.limit_fwd && !st.limit_rev && !st.moving);
         CHECK(!st.motion_error);
         rig_turntable_close(t);

@@ -46,7 +46,7 @@ static rig_virtual_t *open_inprocess(void)
     o.noise_seed = 91;
     rig_virtual_t *v = NULL;
     int rc = rig_virtual_open(&v, truth_path(), &o);
-    CHECK_MSG(rc == 0, "rig_virtual_open: %d %s", rc, rig_last_error());
+    CHECK_MSG(rc == 0, "rig_virtual_open: %d %s", rc, model_last_error());
     return v;
 }
 
@@ -79,7 +79,7 @@ static double realtime_s(void)
 static int capture(rig_camera_t *c, rig_frame_t *f)
 {
     int rc = rig_camera_capture(c, 10.0, 0, f);
-    CHECK_MSG(rc == 0, "capture: %d %s", rc, rig_last_error());
+    CHECK_MSG(rc == 0, "capture: %d %s", rc, model_last_error());
     return rc;
 }
 
@@ -95,9 +95,9 @@ TEST(virtual_inprocess_frame_matches_model)
     rig_turntable_t *tt = rig_virtual_turntable(v);
     rig_lamps_t *lamps = rig_virtual_lamps(v);
     int rc = rig_camera_open_aravis(&c, rig_virtual_camera_address(v));
-    CHECK_MSG(rc == 0, "open: %d %s", rc, rig_last_error());
+    CHECK_MSG(rc == 0, "open: %d %s", rc, model_last_error());
     if (rc) goto done;
-    CHECK_CONTAINS(c->name, "serial REFL-VIRT01 at inprocess:REFL-VIRT01");
+    CHECK_CONTAINS(rig_camera_name(c), "serial REFL-VIRT01 at inprocess:REFL-VIRT01");
     CHECK(rig_camera_set_pixel_format(c, "Mono12") == 0);
     CHECK(rig_camera_set_exposure_us(c, 10000) == 0);
     CHECK(rig_camera_set_gain(c, 0) == 0);
@@ -128,7 +128,7 @@ TEST(virtual_inprocess_frame_matches_model)
     CHECK_NEAR(1e-9 * (double)f.meta.timestamp_ns, f.meta.system_time_s, 5);
 
     rc = rig_virtual_expected(v, st.angle_deg, 1u << 0, 10000, 0, "Mono12", W, H, E);
-    CHECK_MSG(rc == 0, "expected: %d %s", rc, rig_last_error());
+    CHECK_MSG(rc == 0, "expected: %d %s", rc, model_last_error());
     vstat_t ok = vstat_compare(f.pix, E, (size_t)W * H, 100);
     printf("  in-process, right state: %ld lit pixels, mean diff %.4f DN (se %.4f), var ratio %.4f\n", ok.n,
            ok.mean, ok.se, ok.z2);
@@ -209,7 +209,7 @@ static int ahead_sequence(rig_virtual_t *v, uint16_t *out[AHEAD_FRAMES], long ah
 {
     rig_camera_t *c = NULL;
     int rc = rig_camera_open_aravis(&c, rig_virtual_camera_address(v));
-    CHECK_MSG(rc == 0, "open: %d %s", rc, rig_last_error());
+    CHECK_MSG(rc == 0, "open: %d %s", rc, model_last_error());
     if (rc) return rc;
     rig_turntable_t *tt = rig_virtual_turntable(v);
     rig_lamps_t *lamps = rig_virtual_lamps(v);
@@ -257,7 +257,7 @@ TEST(virtual_inprocess_frames_ahead_of_an_angle)
         o.prerender = pass ? 0 : 1;
         rig_virtual_t **v = pass ? &vb : &va;
         int rc = rig_virtual_open(v, truth_path(), &o);
-        CHECK_MSG(rc == 0, "rig_virtual_open: %d %s", rc, rig_last_error());
+        CHECK_MSG(rc == 0, "rig_virtual_open: %d %s", rc, model_last_error());
         if (rc) goto done;
         long ahead[AHEAD_ANGLES] = { 0 };
         if (ahead_sequence(*v, pass ? fb : fa, ahead)) goto done;
@@ -281,7 +281,7 @@ TEST(virtual_inprocess_frames_ahead_of_an_angle)
     o.prerender = 3;
     rig_virtual_t *vc = NULL;
     CHECK(rig_virtual_open(&vc, truth_path(), &o) == RIG_ERR_INVALID);
-    CHECK_CONTAINS(rig_last_error(), "prerender 3 outside 0..2");
+    CHECK_CONTAINS(model_last_error(), "prerender 3 outside 0..2");
 done:
     for (int k = 0; k < AHEAD_FRAMES; k++) {
         free(fa[k]);
@@ -298,20 +298,20 @@ TEST(virtual_inprocess_lifecycle)
     rig_camera_t *c = NULL;
     CHECK(rig_camera_open_aravis(&c, "inprocess:NOPE") == RIG_ERR_NO_DEVICE);
     CHECK(c == NULL);
-    CHECK_CONTAINS(rig_last_error(), "no in-process camera with serial 'NOPE'");
+    CHECK_CONTAINS(model_last_error(), "no in-process camera with serial 'NOPE'");
     rig_virtual_t *v = open_inprocess(), *v2 = NULL;
     if (!v) return;
     rig_virtual_options_t o = rig_virtual_defaults();
     o.serve = RIG_VIRTUAL_SERVE_INPROCESS;
     CHECK(rig_virtual_open(&v2, truth_path(), &o) == RIG_ERR_BUSY);
     CHECK(v2 == NULL);
-    CHECK_CONTAINS(rig_last_error(), "already serves an in-process camera with serial REFL-VIRT01");
+    CHECK_CONTAINS(model_last_error(), "already serves an in-process camera with serial REFL-VIRT01");
     o.serve = (rig_virtual_serve_t)7;
     CHECK(rig_virtual_open(&v2, truth_path(), &o) == RIG_ERR_INVALID);
-    CHECK_CONTAINS(rig_last_error(), "serve = 7");
+    CHECK_CONTAINS(model_last_error(), "serve = 7");
 
     int rc = rig_camera_open_aravis(&c, rig_virtual_camera_address(v));
-    CHECK_MSG(rc == 0, "open: %s", rig_last_error());
+    CHECK_MSG(rc == 0, "open: %s", model_last_error());
     rig_frame_t f = { 0 };
     if (!rc) {
         // Acquisition started by a capture, then the rig goes away first.
@@ -322,7 +322,7 @@ TEST(virtual_inprocess_lifecycle)
     rig_virtual_close(v);
     if (!rc) {
         CHECK(rig_camera_capture(c, 1, 0, &f) == RIG_ERR_DISCONNECTED);
-        CHECK_CONTAINS(rig_last_error(), "close this camera before the virtual rig");
+        CHECK_CONTAINS(model_last_error(), "close this camera before the virtual rig");
         CHECK(rig_camera_set_exposure_us(c, 1000) == RIG_ERR_DISCONNECTED);
     }
     rig_camera_close(c);
@@ -376,10 +376,10 @@ TEST(virtual_inprocess_server_pattern_and_faults)
     rig_camera_t *c = NULL;
     rig_frame_t f = { 0 };
     int rc = rig_gv_camera_start(&g, &p);
-    CHECK_MSG(rc == 0, "start: %s", rig_last_error());
+    CHECK_MSG(rc == 0, "start: %s", model_last_error());
     if (rc) return;
     rc = rig_camera_open_aravis(&c, "inprocess:REFL-IPT1");
-    CHECK_MSG(rc == 0, "open: %s", rig_last_error());
+    CHECK_MSG(rc == 0, "open: %s", model_last_error());
     if (rc) goto done;
     CHECK(rig_camera_set_pixel_format(c, "Mono12") == 0);
     for (int k = 1; k <= 3; k++) {
@@ -391,7 +391,7 @@ TEST(virtual_inprocess_server_pattern_and_faults)
     // A failed render: no frame; the waiting buffer takes the next trigger's frame.
     pat.fail = 1;
     CHECK(rig_camera_capture(c, 0.3, 0, &f) == RIG_ERR_TIMEOUT);
-    CHECK_CONTAINS(rig_last_error(), "no complete frame after 1 software trigger");
+    CHECK_CONTAINS(model_last_error(), "no complete frame after 1 software trigger");
     char msg[256];
     rig_gv_camera_last_render_error(g, msg, sizeof msg);
     CHECK_CONTAINS(msg, "failing on purpose");
@@ -401,7 +401,7 @@ TEST(virtual_inprocess_server_pattern_and_faults)
     // A dropped trigger, then retries: the second attempt gets its frame.
     rig_gv_camera_drop_triggers(g, 1);
     rc = rig_camera_capture(c, 0.3, 1, &f);
-    CHECK_MSG(rc == 0, "capture with a retry: %s", rig_last_error());
+    CHECK_MSG(rc == 0, "capture with a retry: %s", model_last_error());
     if (!rc) CHECK(pattern_ok(&f, 6));
     rig_frame_free(&f);
     rig_gv_camera_stats_t st;
@@ -426,7 +426,7 @@ TEST(virtual_inprocess_rig_file_and_cli)
     const char *rig = test_write("inprocess-rig.ini", text);
     rig_t *r = NULL;
     int rc = rig_open(&r, rig);
-    CHECK_MSG(rc == 0, "rig_open: %s", rig_last_error());
+    CHECK_MSG(rc == 0, "rig_open: %s", model_last_error());
     if (r) {
         CHECK(r->virt && r->camera);
         CHECK(!strcmp(rig_virtual_camera_address(r->virt), "inprocess:REFL-VIRT01"));
@@ -447,8 +447,8 @@ TEST(virtual_inprocess_rig_file_and_cli)
         r = (rig_t *)1;
         CHECK(rig_open(&r, path) == RIG_ERR_INVALID);
         CHECK(r == NULL);
-        CHECK_CONTAINS(rig_last_error(), path);
-        CHECK_CONTAINS(rig_last_error(), bad[i].want);
+        CHECK_CONTAINS(model_last_error(), path);
+        CHECK_CONTAINS(model_last_error(), bad[i].want);
     }
 
     // refl rig on it: identify, snap (a lit Mono12 frame), serve refused.

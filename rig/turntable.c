@@ -1,39 +1,10 @@
-// rig/rig.c — error codes and messages, stage models, the turntable wrappers
-// and the trapezoidal motion time.
+// rig/turntable.c — the turntable wrappers over rig_turntable_ops_t, the stage
+// models and the trapezoidal motion time.
 #include <math.h>
-#include <stdarg.h>
 #include <stdio.h>
 
 #include "model/model.h"
-#include "rig/rig.h"
-
-// ---------------------------------------------------------------------------
-// Errors
-
-const char *rig_strerror(int err)
-{
-    switch (err) {
-#define RIG_ERR_CASE_(name, value, desc) case value: return desc;
-        RIG_ERR_LIST(RIG_ERR_CASE_)
-#undef RIG_ERR_CASE_
-    }
-    return "unknown error";
-}
-
-static _Thread_local char rig_last_error_buf[1536];
-
-int rig_fail(int err, const char *fmt, ...)
-{
-    va_list ap;
-    va_start(ap, fmt);
-    vsnprintf(rig_last_error_buf, sizeof rig_last_error_buf, fmt, ap);
-    va_end(ap);
-    // model_error prints unless quiet mode is on, and keeps model_last_error in step.
-    model_error(NULL, 0, "%s", rig_last_error_buf);
-    return err;
-}
-
-const char *rig_last_error(void) { return rig_last_error_buf; }
+#include "rig/internal.h"
 
 // ---------------------------------------------------------------------------
 // Stage models. counts_per_deg: Thorlabs APT position units per degree.
@@ -163,6 +134,9 @@ void rig_turntable_close(rig_turntable_t *t)
 {
     if (t && t->ops && t->ops->close) t->ops->close(t);
 }
+
+const char *rig_turntable_name(const rig_turntable_t *t) { return t ? t->name : ""; }
+const char *rig_turntable_backend(const rig_turntable_t *t) { return t && t->ops ? t->ops->backend : ""; }
 
 double rig_motion_time_s(double delta_deg, double speed_deg_s, double accel_deg_s2)
 {
