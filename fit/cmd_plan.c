@@ -144,6 +144,10 @@ static int plan_lamps(int argc, char **argv)
     if (!parse_exposures(exposures, exps, &o.nexp))
         return model_cli_error(&cli, "--exposures-us: '%s' is not a list of up to %d positive exposures in us",
                                exposures, MAX_EXPOSURES);
+    if (!o.nmaterials) {   // --materials=FILE
+        matfiles[0] = model_cli_value(&cli, "--materials");
+        o.nmaterials = 1;
+    }
     o.scene = cli.positional[0];
     o.materials = matfiles;
     o.exposures_us = exps;
