@@ -844,7 +844,7 @@ bool calib_gain_truth_radiance(json_t *facts, const char **truth_path, double *r
 static char *plan_text(const calib_gain_opts_t *c, const char *name, const char *lamps, const char *list,
                        double gain, int repeats)
 {
-    return g_strdup_printf("# refl calib gain: %s (written by refl; see rig/rig.h, Capture sessions)\n"
+    return g_strdup_printf("# refl calib gain: %s (written by refl; see rig/session.h, Capture sessions)\n"
                            "[plan]\nname = calib gain %s\n[sample]\nname = %s\nkind = uniform_source\n"
                            "[angles]\nlist = 0\n[lamps]\nsets = %s\n[exposure]\nmode = fixed\nlist_us = %s\n"
                            "gain = %g\npixel_format = %s\n[capture]\nrepeats = %d\n",

@@ -107,6 +107,7 @@
 #include "rig/gv_camera.h"
 #include "rig/internal.h"
 #include "rig/rig.h"
+#include "rig/truth.h"
 
 #define NPLANES  12   // cached radiance images (5 MB each at 1280x1024)
 #define NTRACERS 3    // cached (sample, angle) tracers
@@ -1719,7 +1720,8 @@ int rig_virtual_open(rig_virtual_t **out, const char *truth_path, const rig_virt
         return rig_fail(RIG_ERR_INVALID, "virtual rig: serve = %d is neither RIG_VIRTUAL_SERVE_GIGE nor "
                         "RIG_VIRTUAL_SERVE_INPROCESS", (int)o.serve);
     int err = RIG_ERR_OK;
-    model_ini_t *ini = NULL;
+    rig_truth_t *truth = NULL;
+    const model_ini_t *ini = NULL;
     rig_virtual_t *v = calloc(1, sizeof *v);
     if (!v) return rig_fail(RIG_ERR_NO_MEM, "virtual rig: out of memory");
     pthread_mutex_init(&v->state_lock, NULL);
@@ -1731,8 +1733,8 @@ int rig_virtual_open(rig_virtual_t **out, const char *truth_path, const rig_virt
         err = rig_fail(RIG_ERR_NO_MEM, "virtual rig: out of memory");
         goto fail;
     }
-    ini = model_ini_load(truth_path);
-    if (!ini) {
+    truth = rig_truth_load(truth_path);   // the truth file's one reader (rig/truth.h)
+    if (!truth || !(ini = rig_truth_ini(truth))) {
         err = fail_model(RIG_ERR_INVALID);
         goto fail;
     }
@@ -1808,11 +1810,11 @@ int rig_virtual_open(rig_virtual_t **out, const char *truth_path, const rig_virt
         }
         v->pre_running = true;
     }
-    model_ini_free(ini);
+    rig_truth_free(truth);
     *out = v;
     return 0;
 fail:
-    model_ini_free(ini);
+    rig_truth_free(truth);
     rig_virtual_close(v);
     return err ? err : RIG_ERR_IO;
 }
