@@ -58,7 +58,7 @@ MODEL_CXX_SRC := model/lsq.cc
 LIB_SRC   := $(MODEL_SRC) $(RIG_SRC) $(CALIB_SRC) $(FIT_SRC)
 
 MAIN_SRC  := fit/main.c
-TEST_SRC  := tests/harness.c tests/fixtures.c \
+TEST_SRC  := tests/harness.c tests/fixtures.c tests/test_harness.c \
              tests/test_model_brdf.c tests/test_model_scene.c tests/test_model_config.c \
              tests/test_model_camera.c tests/test_model_render.c tests/test_model_sensor.c \
              tests/test_model_image.c tests/test_model_edges.c tests/test_model_cli.c \

@@ -323,6 +323,24 @@ static void run_child(const test_t *t, test_result_t *r, double limit_s, char *h
         snprintf(how, how_len, "exited before the test ended");
 }
 
+void test_run_isolated(test_fn_t fn, double limit_s, test_outcome_t *out)
+{
+    test_result_t *r = mmap(NULL, sizeof *r, PROT_READ | PROT_WRITE, MAP_SHARED | MAP_ANONYMOUS, -1, 0);
+    memset(out, 0, sizeof *out);
+    if (r == MAP_FAILED) {
+        snprintf(out->how, sizeof out->how, "mmap: %s", strerror(errno));
+        return;
+    }
+    const test_t t = { "isolated", __FILE__, fn };
+    run_child(&t, r, limit_s, out->how, sizeof out->how);
+    tmp_cleanup(r->tmpdir);
+    out->failures = r->failures;
+    out->skipped = r->skipped;
+    snprintf(out->reason, sizeof out->reason, "%s", r->reason);
+    snprintf(out->tmpdir, sizeof out->tmpdir, "%s", r->tmpdir);
+    munmap(r, sizeof *r);
+}
+
 int main(int argc, char **argv)
 {
     const char *filter = argc > 1 ? argv[1] : NULL;
