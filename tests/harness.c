@@ -286,25 +286,27 @@ static void run_child(const test_t *t, test_result_t *r, double limit_s, char *h
     int status = 0;
     bool timed_out = false;
     for (;;) {
-        pid_t w = waitpid(pid, &status, WNOHANG);
-        if (w == pid) break;
+        // Not reaped yet (WNOWAIT): the group's id stays the child's own
+        // until the group is killed below.
+        siginfo_t info = { 0 };
+        int w = waitid(P_PID, pid, &info, WEXITED | WNOHANG | WNOWAIT);
+        if (w == 0 && info.si_pid == pid) break;
         if (w < 0 && errno != EINTR) {
-            snprintf(how, how_len, "waitpid: %s", strerror(errno));
+            snprintf(how, how_len, "waitid: %s", strerror(errno));
             break;
         }
         double left = limit_s - (model_now_s() - t0);
         if (left <= 0) {
             timed_out = true;
-            kill(-pid, SIGKILL);
-            waitpid(pid, &status, 0);
             break;
         }
         if (left > 1) left = 1;
         struct timespec ts = { (time_t)left, (long)((left - (time_t)left) * 1e9) };
         sigtimedwait(&chld, NULL, &ts);
     }
-    // Whatever the test left running in its group ends with it.
+    // The test, when timed out, and whatever it left running in its group end here.
     kill(-pid, SIGKILL);
+    waitpid(pid, &status, 0);
     child_pgid = 0;
     sigprocmask(SIG_SETMASK, &old, NULL);
     if (how[0])
