@@ -117,6 +117,7 @@ TEST_SRC := \
     tests/harness.c \
     tests/fixtures.c \
     tests/apt_sim.c \
+    tests/test_harness.c \
     tests/test_model_brdf.c \
     tests/test_model_camera.c \
     tests/test_model_cli.c \

@@ -286,25 +286,27 @@ static void run_child(const test_t *t, test_result_t *r, double limit_s, char *h
     int status = 0;
     bool timed_out = false;
     for (;;) {
-        pid_t w = waitpid(pid, &status, WNOHANG);
-        if (w == pid) break;
+        // Not reaped yet (WNOWAIT): the group's id stays the child's own
+        // until the group is killed below.
+        siginfo_t info = { 0 };
+        int w = waitid(P_PID, pid, &info, WEXITED | WNOHANG | WNOWAIT);
+        if (w == 0 && info.si_pid == pid) break;
         if (w < 0 && errno != EINTR) {
-            snprintf(how, how_len, "waitpid: %s", strerror(errno));
+            snprintf(how, how_len, "waitid: %s", strerror(errno));
             break;
         }
         double left = limit_s - (model_now_s() - t0);
         if (left <= 0) {
             timed_out = true;
-            kill(-pid, SIGKILL);
-            waitpid(pid, &status, 0);
             break;
         }
         if (left > 1) left = 1;
         struct timespec ts = { (time_t)left, (long)((left - (time_t)left) * 1e9) };
         sigtimedwait(&chld, NULL, &ts);
     }
-    // Whatever the test left running in its group ends with it.
+    // The test, when timed out, and whatever it left running in its group end here.
     kill(-pid, SIGKILL);
+    waitpid(pid, &status, 0);
     child_pgid = 0;
     sigprocmask(SIG_SETMASK, &old, NULL);
     if (how[0])
@@ -321,6 +323,24 @@ static void run_child(const test_t *t, test_result_t *r, double limit_s, char *h
                  r->finished ? "" : " before the test ended");
     else if (!r->finished)
         snprintf(how, how_len, "exited before the test ended");
+}
+
+void test_run_isolated(test_fn_t fn, double limit_s, test_outcome_t *out)
+{
+    test_result_t *r = mmap(NULL, sizeof *r, PROT_READ | PROT_WRITE, MAP_SHARED | MAP_ANONYMOUS, -1, 0);
+    memset(out, 0, sizeof *out);
+    if (r == MAP_FAILED) {
+        snprintf(out->how, sizeof out->how, "mmap: %s", strerror(errno));
+        return;
+    }
+    const test_t t = { "isolated", __FILE__, fn };
+    run_child(&t, r, limit_s, out->how, sizeof out->how);
+    tmp_cleanup(r->tmpdir);
+    out->failures = r->failures;
+    out->skipped = r->skipped;
+    snprintf(out->reason, sizeof out->reason, "%s", r->reason);
+    snprintf(out->tmpdir, sizeof out->tmpdir, "%s", r->tmpdir);
+    munmap(r, sizeof *r);
 }
 
 int main(int argc, char **argv)

@@ -92,3 +92,15 @@ int test_refl_run(double timeout_s, char **out, char **err, ...) __attribute__((
 // turns. Waits up to 300 s; a failed CHECK and -1 if it cannot be had.
 int  test_camera_lock(void);
 void test_camera_unlock(int fd);
+
+// How the runner runs a test, for the runner's own tests (tests/test_harness.c):
+// fn in a child process of its own with a time limit, its temporary directory
+// removed afterwards.
+typedef struct {
+    int  failures;        // failed checks
+    bool skipped;
+    char reason[512];     // of the skip
+    char how[256];        // what alone fails it ("killed by signal ...", "timed out ..."), or ""
+    char tmpdir[512];     // the directory test_tmpdir() made, if any (removed by now)
+} test_outcome_t;
+void test_run_isolated(test_fn_t fn, double limit_s, test_outcome_t *out);
