@@ -27,6 +27,7 @@
 typedef struct {
     const char *name, *file;
     test_fn_t fn;
+    bool (*only_if)(void);   // NULL: always
 } test_t;
 
 static test_t tests[1024];
@@ -46,8 +47,13 @@ static char tmpdir[512];
 
 void test_register(const char *name, test_fn_t fn, const char *file)
 {
+    test_register_inner(name, fn, file, NULL);
+}
+
+void test_register_inner(const char *name, test_fn_t fn, const char *file, bool (*only_if)(void))
+{
     if (ntests < (int)(sizeof tests / sizeof tests[0]))
-        tests[ntests++] = (test_t){ name, file, fn };
+        tests[ntests++] = (test_t){ name, file, fn, only_if };
 }
 
 void test_fail(const char *file, int line, const char *fmt, ...)
@@ -333,7 +339,7 @@ void test_run_isolated(test_fn_t fn, double limit_s, test_outcome_t *out)
         snprintf(out->how, sizeof out->how, "mmap: %s", strerror(errno));
         return;
     }
-    const test_t t = { "isolated", __FILE__, fn };
+    const test_t t = { "isolated", __FILE__, fn, NULL };
     run_child(&t, r, limit_s, out->how, sizeof out->how);
     tmp_cleanup(r->tmpdir);
     out->failures = r->failures;
@@ -346,7 +352,7 @@ void test_run_isolated(test_fn_t fn, double limit_s, test_outcome_t *out)
 int main(int argc, char **argv)
 {
     const char *filter = argc > 1 ? argv[1] : NULL;
-    int passed = 0, failed = 0, skipped = 0;
+    int passed = 0, failed = 0, skipped = 0, inner = 0;
     double limit_s = timeout_s();
     model_error_quiet(true);
     test_result_t *r = mmap(NULL, sizeof *r, PROT_READ | PROT_WRITE, MAP_SHARED | MAP_ANONYMOUS, -1, 0);
@@ -361,6 +367,10 @@ int main(int argc, char **argv)
     double t_all = model_now_s();
     for (int i = 0; i < ntests; i++) {
         if (filter && !strstr(tests[i].name, filter) && !strstr(tests[i].file, filter)) continue;
+        if (tests[i].only_if && !tests[i].only_if()) {
+            inner++;
+            continue;
+        }
         char how[256];
         double t0 = model_now_s();
         run_child(&tests[i], r, limit_s, how, sizeof how);
@@ -384,6 +394,7 @@ int main(int argc, char **argv)
         }
         fflush(stdout);
     }
+    if (inner) printf("(%d tests run only inside the test that hosts them)\n", inner);
     printf("(%.1f s)\n%d passed, %d failed", model_now_s() - t_all, passed, failed);
     if (skipped) printf(", %d skipped", skipped);
     printf("\n");

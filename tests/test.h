@@ -21,6 +21,10 @@
 
 typedef void (*test_fn_t)(void);
 void test_register(const char *name, test_fn_t fn, const char *file);
+// A test that runs only where only_if() is true (e.g. inside umockdev-wrapper,
+// re-run by a host test that checks its result): elsewhere it is neither run
+// nor counted, and the summary says how many such tests were left to their host.
+void test_register_inner(const char *name, test_fn_t fn, const char *file, bool (*only_if)(void));
 void test_fail(const char *file, int line, const char *fmt, ...)
     __attribute__((format(printf, 3, 4)));
 // End the running test as skipped, with the reason (printf-style). A test that
@@ -33,6 +37,14 @@ void test_skip(const char *fmt, ...) __attribute__((format(printf, 1, 2), noretu
     __attribute__((constructor)) static void test_reg_##name(void)                 \
     {                                                                              \
         test_register(#name, name, __FILE__);                                      \
+    }                                                                              \
+    static void name(void)
+
+#define TEST_INNER(name, only_if)                                                  \
+    static void name(void);                                                        \
+    __attribute__((constructor)) static void test_reg_##name(void)                 \
+    {                                                                              \
+        test_register_inner(#name, name, __FILE__, only_if);                       \
     }                                                                              \
     static void name(void)
 

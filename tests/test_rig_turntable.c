@@ -5,7 +5,7 @@
 // The APT tests (apt_umock_*) need libumockdev-preload loaded at process
 // start, so turntable_apt_under_umockdev re-runs this test binary as
 // `umockdev-wrapper <self> apt_umock_`; run directly, the apt_umock_* tests
-// are skipped.
+// are left to it (TEST_INNER: neither run nor counted outside umockdev).
 #define _GNU_SOURCE
 #include <stdlib.h>
 #include <time.h>
@@ -280,9 +280,8 @@ TEST(turntable_apt_under_umockdev)
 // The simulated controller and the homed stage: fx_apt_sim_start() and
 // fx_apt_open_homed() (tests/fixtures.h).
 
-TEST(apt_umock_open_info)
+TEST_INNER(apt_umock_open_info, apt_sim_available)
 {
-    if (!apt_sim_available()) SKIP("runs under umockdev-wrapper, from turntable_apt_under_umockdev");
     apt_sim_device_t d = apt_sim_device_defaults();
     apt_sim_t *s = fx_apt_sim_start(&d, 1);
     rig_turntable_t *t = NULL;
@@ -316,9 +315,8 @@ TEST(apt_umock_open_info)
     apt_sim_free(s);
 }
 
-TEST(apt_umock_home_and_moves)
+TEST_INNER(apt_umock_home_and_moves, apt_sim_available)
 {
-    if (!apt_sim_available()) SKIP("runs under umockdev-wrapper, from turntable_apt_under_umockdev");
     apt_sim_device_t d = apt_sim_device_defaults();
     apt_sim_t *s = fx_apt_sim_start(&d, 1);
     rig_turntable_t *t = NULL;
@@ -352,9 +350,8 @@ TEST(apt_umock_home_and_moves)
     apt_sim_free(s);
 }
 
-TEST(apt_umock_status_while_moving_and_keepalive)
+TEST_INNER(apt_umock_status_while_moving_and_keepalive, apt_sim_available)
 {
-    if (!apt_sim_available()) SKIP("runs under umockdev-wrapper, from turntable_apt_under_umockdev");
     apt_sim_device_t d = apt_sim_device_defaults();
     d.speed_deg_s = 150;                  // 90 deg in ~0.7 s
     d.accel_deg_s2 = 1500;
@@ -382,9 +379,8 @@ TEST(apt_umock_status_while_moving_and_keepalive)
     apt_sim_free(s);
 }
 
-TEST(apt_umock_stop)
+TEST_INNER(apt_umock_stop, apt_sim_available)
 {
-    if (!apt_sim_available()) SKIP("runs under umockdev-wrapper, from turntable_apt_under_umockdev");
     apt_sim_device_t d = apt_sim_device_defaults();
     d.speed_deg_s = 100;
     d.accel_deg_s2 = 1000;
@@ -414,9 +410,8 @@ TEST(apt_umock_stop)
     apt_sim_free(s);
 }
 
-TEST(apt_umock_wait_timeout)
+TEST_INNER(apt_umock_wait_timeout, apt_sim_available)
 {
-    if (!apt_sim_available()) SKIP("runs under umockdev-wrapper, from turntable_apt_under_umockdev");
     apt_sim_device_t d = apt_sim_device_defaults();
     d.speed_deg_s = 100;
     d.accel_deg_s2 = 1000;
@@ -436,9 +431,8 @@ TEST(apt_umock_wait_timeout)
     apt_sim_free(s);
 }
 
-TEST(apt_umock_no_reply)
+TEST_INNER(apt_umock_no_reply, apt_sim_available)
 {
-    if (!apt_sim_available()) SKIP("runs under umockdev-wrapper, from turntable_apt_under_umockdev");
     apt_sim_device_t d = apt_sim_device_defaults();
     d.no_reply = true;
     apt_sim_t *s = fx_apt_sim_start(&d, 1);
@@ -452,9 +446,8 @@ TEST(apt_umock_no_reply)
     apt_sim_free(s);
 }
 
-TEST(apt_umock_motion_error)
+TEST_INNER(apt_umock_motion_error, apt_sim_available)
 {
-    if (!apt_sim_available()) SKIP("runs under umockdev-wrapper, from turntable_apt_under_umockdev");
     apt_sim_device_t d = apt_sim_device_defaults();
     d.motion_error = true;
     apt_sim_t *s = fx_apt_sim_start(&d, 1);
@@ -473,9 +466,8 @@ TEST(apt_umock_motion_error)
     apt_sim_free(s);
 }
 
-TEST(apt_umock_unplugged_mid_move)
+TEST_INNER(apt_umock_unplugged_mid_move, apt_sim_available)
 {
-    if (!apt_sim_available()) SKIP("runs under umockdev-wrapper, from turntable_apt_under_umockdev");
     apt_sim_device_t d = apt_sim_device_defaults();
     d.unplug_mid_move = true;
     d.speed_deg_s = 300;
@@ -495,9 +487,8 @@ TEST(apt_umock_unplugged_mid_move)
     apt_sim_free(s);
 }
 
-TEST(apt_umock_permission_denied)
+TEST_INNER(apt_umock_permission_denied, apt_sim_available)
 {
-    if (!apt_sim_available()) SKIP("runs under umockdev-wrapper, from turntable_apt_under_umockdev");
     apt_sim_device_t d = apt_sim_device_defaults();
     d.deny_access = true;
     apt_sim_t *s = fx_apt_sim_start(&d, 1);
@@ -510,9 +501,8 @@ TEST(apt_umock_permission_denied)
     apt_sim_free(s);
 }
 
-TEST(apt_umock_device_missing)
+TEST_INNER(apt_umock_device_missing, apt_sim_available)
 {
-    if (!apt_sim_available()) SKIP("runs under umockdev-wrapper, from turntable_apt_under_umockdev");
     apt_sim_device_t d = apt_sim_device_defaults();
     apt_sim_t *s = fx_apt_sim_start(&d, 1);
     rig_turntable_t *t = NULL;
@@ -526,9 +516,8 @@ TEST(apt_umock_device_missing)
     apt_sim_free(s);
 }
 
-TEST(apt_umock_two_devices)
+TEST_INNER(apt_umock_two_devices, apt_sim_available)
 {
-    if (!apt_sim_available()) SKIP("runs under umockdev-wrapper, from turntable_apt_under_umockdev");
     apt_sim_device_t d[2] = { apt_sim_device_defaults(), apt_sim_device_defaults() };
     d[1].serial = "55000002";
     apt_sim_t *s = fx_apt_sim_start(d, 2);
@@ -553,9 +542,8 @@ TEST(apt_umock_two_devices)
     apt_sim_free(s);
 }
 
-TEST(apt_umock_partial_messages_and_garbage)
+TEST_INNER(apt_umock_partial_messages_and_garbage, apt_sim_available)
 {
-    if (!apt_sim_available()) SKIP("runs under umockdev-wrapper, from turntable_apt_under_umockdev");
     apt_sim_device_t d = apt_sim_device_defaults();
     d.trickle_bytes = 5;                  // every message arrives in 5-byte pieces
     d.garbage_before_info = true;         // and junk precedes the first reply
@@ -577,9 +565,8 @@ TEST(apt_umock_partial_messages_and_garbage)
     apt_sim_free(s);
 }
 
-TEST(apt_umock_limit_switch)
+TEST_INNER(apt_umock_limit_switch, apt_sim_available)
 {
-    if (!apt_sim_available()) SKIP("runs under umockdev-wrapper, from turntable_apt_under_umockdev");
     apt_sim_device_t d = apt_sim_device_defaults();
     d.limit_mid_move = true;
     apt_sim_t *s = fx_apt_sim_start(&d, 1);
