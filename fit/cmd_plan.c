@@ -125,13 +125,13 @@ static int plan_lamps(int argc, char **argv)
         .about = "Predicts, for every set of the candidate lamps and every exposure, the grey values of each face\n"
                  "against the camera's usable range, the specular glare and the contrast across every visible scene\n"
                  "edge, and chooses the set and exposure that make the most edge length detectable by a Sobel\n"
-                 "detector and leave the most usable reference points, without glare or saturation.\n"
-                 "SCENE: a D3D or OBJ description (rig frame, mm). The candidates' kc*I: a lamps INI ([lamp NAME]\n"
-                 "position_mm, intensity) with --kc-per-us X (kc*I = X * intensity), or lamps.json with --white.\n"
-                 "Without --gain-calib: --saturation-dn S (4095), --offset-dn O (0), the SNR floor off.\n"
-                 "--check-virtual renders the chosen configuration and each single lamp at its exposure on the\n"
-                 "virtual rig (in process) and compares a Sobel detector with the prediction.",
-        .epilog = "Outputs in DIR: plan.json (every configuration, the chosen one, faces, edge segments; the check),\n"
+                 "detector and leave the most usable reference points, without glare or saturation.",
+        .epilog = "SCENE: a D3D or OBJ description (rig frame, mm). The candidates' kc*I: a lamps INI ([lamp NAME]\n"
+                  "position_mm, intensity) with --kc-per-us X (kc*I = X * intensity), or lamps.json with --white.\n"
+                  "Without --gain-calib: --saturation-dn S (4095), --offset-dn O (0), the SNR floor off.\n"
+                  "--check-virtual renders the chosen configuration and each single lamp at its exposure on the\n"
+                  "virtual rig (in process) and compares a Sobel detector with the prediction.\n\n"
+                  "Outputs in DIR: plan.json (every configuration, the chosen one, faces, edge segments; the check),\n"
                   "predicted.tiff (DN, direct light), glare.tiff (where each candidate would glare), index.html\n"
                   "(scripts/plan_lamps_report.py).",
     };

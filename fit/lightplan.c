@@ -14,15 +14,10 @@
 lightplan_options_t lightplan_defaults(void)
 {
     return (lightplan_options_t){
-        .glare_cone_deg = 15,
-        .sobel_threshold = 250,
-        .floor_snr = 10,
-        .floor_dn = 20,
-        .saturation_frac = 0.95,
-        .max_bad_frac = 0.001,
-        .max_lamps = 0,
-        .spacing_px = 8,
-        .ir_samples = 64,
+        .glare_cone_deg = 15, .sobel_threshold = 250,              // glare cone, Sobel detector
+        .floor_snr = 10, .floor_dn = 20, .saturation_frac = 0.95,   // the usable range
+        .max_bad_frac = 0.001, .max_lamps = 0,
+        .spacing_px = 8, .ir_samples = 64,
     };
 }
 

@@ -154,36 +154,60 @@ static bool parse_material(const model_ini_t *ini, int s, model_material_t *mat)
     return true;
 }
 
-static model_materials_t *materials_build(const model_ini_t *ini, bool only_kind);
+// build (from the [KIND NAME] sections of an INI: with only_kind, other
+// sections are skipped, else every section must be one), parse, load and free
+// of a list read from INI (lamps, materials): TYPE has n, path, sha256 and the
+// array FIELD whose elements PARSE_ONE(ini, section, &element) fills.
+#define INI_LIST_FUNCTIONS(prefix, type, build, kind, parse_one, field, none_msg)              \
+    static type *build(const model_ini_t *ini, bool only_kind)                                  \
+    {                                                                                           \
+        int n = only_kind ? count_kind(ini, kind) : ini->nsections;                             \
+        if (n == 0) {                                                                           \
+            model_error(ini->path, 0, none_msg);                                                \
+            return NULL;                                                                        \
+        }                                                                                       \
+        type *out = calloc(1, sizeof *out);                                                     \
+        if (out) out->field = calloc(n, sizeof *out->field);                                    \
+        if (out) out->path = strdup(ini->path);                                                 \
+        if (!out || !out->field || !out->path) {                                                \
+            model_error(ini->path, 0, "out of memory");                                         \
+            prefix##_free(out);                                                                 \
+            return NULL;                                                                        \
+        }                                                                                       \
+        for (int s = 0; s < ini->nsections; s++) {                                              \
+            if (only_kind && !is_kind(ini, s, kind)) continue;                                  \
+            if (!parse_one(ini, s, &out->field[out->n])) {                                      \
+                prefix##_free(out);                                                             \
+                return NULL;                                                                    \
+            }                                                                                   \
+            out->n++;                                                                           \
+        }                                                                                       \
+        return out;                                                                             \
+    }                                                                                           \
+    type *prefix##_parse(const char *text, size_t len, const char *name)                \
+    {                                                                                   \
+        model_ini_t *ini = model_ini_parse(text, len, name);                            \
+        type *out = ini ? build(ini, false) : NULL;                                     \
+        if (out) model_sha256_hex(text ? text : "", text ? len : 0, out->sha256);       \
+        model_ini_free(ini);                                                            \
+        return out;                                                                     \
+    }                                                                                   \
+    type *prefix##_load(const char *path)                                               \
+    {                                                                                   \
+        size_t len;                                                                     \
+        char *text = model_read_file(path, &len);                                       \
+        type *out = text ? prefix##_parse(text, len, path) : NULL;                      \
+        free(text);                                                                     \
+        return out;                                                                     \
+    }                                                                                   \
+    void prefix##_free(type *x)                                                         \
+    {                                                                                   \
+        if (!x) return;                                                                 \
+        free(x->field);                                                                 \
+        free(x->path);                                                                  \
+        free(x);                                                                        \
+    }
 
-model_materials_t *model_materials_parse(const char *text, size_t len, const char *name)
-{
-    model_ini_t *ini = model_ini_parse(text, len, name);
-    if (!ini) return NULL;
-    // every section must be a [material NAME]: parse_material says so otherwise
-    model_materials_t *out = materials_build(ini, false);
-    if (out) model_sha256_hex(text ? text : "", text ? len : 0, out->sha256);
-    model_ini_free(ini);
-    return out;
-}
-
-model_materials_t *model_materials_load(const char *path)
-{
-    size_t len;
-    char *text = model_read_file(path, &len);
-    if (!text) return NULL;
-    model_materials_t *m = model_materials_parse(text, len, path);
-    free(text);
-    return m;
-}
-
-void model_materials_free(model_materials_t *m)
-{
-    if (!m) return;
-    free(m->materials);
-    free(m->path);
-    free(m);
-}
 
 const model_material_t *model_materials_find(const model_materials_t *m, const char *name)
 {
@@ -239,36 +263,6 @@ static bool parse_lamp(const model_ini_t *ini, int s, model_lamp_t *lamp)
     return true;
 }
 
-static model_lamps_t *lamps_build(const model_ini_t *ini, bool only_kind);
-
-model_lamps_t *model_lamps_parse(const char *text, size_t len, const char *name)
-{
-    model_ini_t *ini = model_ini_parse(text, len, name);
-    if (!ini) return NULL;
-    // every section must be a [lamp NAME]: parse_lamp says so otherwise
-    model_lamps_t *out = lamps_build(ini, false);
-    if (out) model_sha256_hex(text ? text : "", text ? len : 0, out->sha256);
-    model_ini_free(ini);
-    return out;
-}
-
-model_lamps_t *model_lamps_load(const char *path)
-{
-    size_t len;
-    char *text = model_read_file(path, &len);
-    if (!text) return NULL;
-    model_lamps_t *l = model_lamps_parse(text, len, path);
-    free(text);
-    return l;
-}
-
-void model_lamps_free(model_lamps_t *l)
-{
-    if (!l) return;
-    free(l->lamps);
-    free(l->path);
-    free(l);
-}
 
 int model_lamps_find(const model_lamps_t *l, const char *name)
 {
@@ -460,61 +454,11 @@ static bool is_kind(const model_ini_t *ini, int s, const char *kind)
     return !strcmp(k, kind);
 }
 
-// The [material NAME] sections of ini (only_kind: skip other sections; else
-// every section must be one).
-static model_materials_t *materials_build(const model_ini_t *ini, bool only_kind)
-{
-    int n = only_kind ? count_kind(ini, "material") : ini->nsections;
-    if (n == 0) {
-        model_error(ini->path, 0, "no [material NAME] sections; add at least one");
-        return NULL;
-    }
-    model_materials_t *out = calloc(1, sizeof *out);
-    if (out) out->materials = calloc(n, sizeof *out->materials);
-    if (out) out->path = strdup(ini->path);
-    if (!out || !out->materials || !out->path) {
-        model_error(ini->path, 0, "out of memory");
-        model_materials_free(out);
-        return NULL;
-    }
-    for (int s = 0; s < ini->nsections; s++) {
-        if (only_kind && !is_kind(ini, s, "material")) continue;
-        if (!parse_material(ini, s, &out->materials[out->n])) {
-            model_materials_free(out);
-            return NULL;
-        }
-        out->n++;
-    }
-    return out;
-}
+INI_LIST_FUNCTIONS(model_materials, model_materials_t, materials_build, "material", parse_material, materials,
+                   "no [material NAME] sections; add at least one")
 
-// The [lamp NAME] sections of ini (only_kind: skip other sections; else every
-// section must be one).
-static model_lamps_t *lamps_build(const model_ini_t *ini, bool only_kind)
-{
-    int n = only_kind ? count_kind(ini, "lamp") : ini->nsections;
-    if (n == 0) {
-        model_error(ini->path, 0, "no [lamp NAME] sections; add at least one lamp");
-        return NULL;
-    }
-    model_lamps_t *out = calloc(1, sizeof *out);
-    if (out) out->lamps = calloc(n, sizeof *out->lamps);
-    if (out) out->path = strdup(ini->path);
-    if (!out || !out->lamps || !out->path) {
-        model_error(ini->path, 0, "out of memory");
-        model_lamps_free(out);
-        return NULL;
-    }
-    for (int s = 0; s < ini->nsections; s++) {
-        if (only_kind && !is_kind(ini, s, "lamp")) continue;
-        if (!parse_lamp(ini, s, &out->lamps[out->n])) {
-            model_lamps_free(out);
-            return NULL;
-        }
-        out->n++;
-    }
-    return out;
-}
+INI_LIST_FUNCTIONS(model_lamps, model_lamps_t, lamps_build, "lamp", parse_lamp, lamps,
+                   "no [lamp NAME] sections; add at least one lamp")
 
 model_materials_t *model_materials_from_ini(const model_ini_t *ini) { return materials_build(ini, true); }
 model_lamps_t *model_lamps_from_ini(const model_ini_t *ini) { return lamps_build(ini, true); }
