@@ -126,6 +126,7 @@ TEST_SRC := \
     tests/test_model_edges.c \
     tests/test_model_image.c \
     tests/test_model_lsq.c \
+    tests/test_model_opts.c \
     tests/test_model_render.c \
     tests/test_model_scene.c \
     tests/test_model_sensor.c \

@@ -97,10 +97,14 @@ int calib_cmd_gain(int argc, char **argv)
 {
     calib_gain_opts_t o = calib_gain_defaults();
     bool no_report = false;
+    const char **session_v = calloc((size_t)argc + 1, sizeof *session_v);
+    model_opt_list_t sessions = { session_v, 0, argc + 1 };
+    if (!session_v) return model_error_report("calib gain");
     model_opt_t opts[] = {
         MODEL_OPT_STRING("--rig", "RIG", "capture on this rig", &o.rig, false),
         MODEL_OPT_STRING("--frames", "MANIFEST.csv", "frames listed in a manifest", &o.frames, false),
-        MODEL_OPT_VALUE("--session", "DIR", "a session captured elsewhere; repeat it for more", false),
+        MODEL_OPT_LIST("--session", "DIR", "a session captured elsewhere; repeat it for more", &sessions, false,
+                       false),
         { "-o", "--output", "DIR", "the output directory", MODEL_OPT_KIND_STRING, &o.out, 0, 0, false, false, NULL },
         MODEL_OPT_VALUE("--gains", "LIST", "gains (camera unit, dB) to sweep, comma-separated (default 0); the first "
                         "is the reference (dark current, maps, top-level figures). With --frames: one value, the gain "
@@ -127,13 +131,13 @@ int calib_cmd_gain(int argc, char **argv)
     model_cli_t cli = { .cmd = "calib gain", .synopsis = "", .about = ABOUT, .epilog = EPILOG, .opts = opts,
                         .nopts = MODEL_NOPTS(opts), .min_positional = 0, .max_positional = 0, .repeat_ok = true };
     int rc = model_cli_parse(&cli, argc, argv);
-    if (rc != MODEL_CLI_OK) return rc;
-    const char **sessions = calloc((size_t)argc + 1, sizeof *sessions);
+    if (rc != MODEL_CLI_OK) {
+        free(session_v);
+        return rc;
+    }
     double *gains = NULL, *darks = NULL;
-    for (int i = 1; i < argc && strcmp(argv[i], "--"); i++)   // every --session (the parser keeps the last)
-        if (!strncmp(argv[i], "--session=", 10)) sessions[o.nsessions++] = argv[i] + 10;
-        else if (!strcmp(argv[i], "--session") && i + 1 < argc) sessions[o.nsessions++] = argv[++i];
-    o.sessions = sessions;
+    o.sessions = session_v;
+    o.nsessions = sessions.n;
     o.report = !no_report;
     o.argc = argc;
     o.argv = argv;
@@ -152,6 +156,6 @@ int calib_cmd_gain(int argc, char **argv)
     }
     free(gains);
     free(darks);
-    free(sessions);
+    free(session_v);
     return rc;
 }

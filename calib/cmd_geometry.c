@@ -42,16 +42,12 @@ static int number(model_cli_t *c, const char *name, double lo, double hi, bool i
     return 0;
 }
 
-// The H of --imagersize W H: the argument after W (a positional to the parser).
-static int imagersize(model_cli_t *c, int argc, char **argv, calib_geometry_opts_t *o)
+// --imagersize W H (a list option of two values).
+static int imagersize(model_cli_t *c, const model_opt_list_t *l, calib_geometry_opts_t *o)
 {
-    int at = -1;
-    for (int i = 1; i < argc; i++)
-        if (!strcmp(argv[i], "--imagersize")) at = i;
     double w = 0, h = 0;
-    if (at < 0) return c->npositional ? model_cli_error(c, "unexpected argument '%s'", c->positional[0]) : 0;
-    if (at + 2 >= argc || c->npositional != 1 || c->positional[0] != argv[at + 2] ||
-        !model_parse_double(argv[at + 1], &w) || !model_parse_double(argv[at + 2], &h) || !(w >= 1 && w <= 1e5) ||
+    if (!l->n) return 0;
+    if (l->n != 2 || !model_parse_double(l->v[0], &w) || !model_parse_double(l->v[1], &h) || !(w >= 1 && w <= 1e5) ||
         !(h >= 1 && h <= 1e5))
         return model_cli_error(c, "--imagersize needs W H in pixels");
     o->imager_w = (int)w;
@@ -60,7 +56,7 @@ static int imagersize(model_cli_t *c, int argc, char **argv, calib_geometry_opts
 }
 
 // The numbers, then the checks of the whole (one source, its needs).
-static int check_options(model_cli_t *c, int argc, char **argv, calib_geometry_opts_t *o)
+static int check_options(model_cli_t *c, const model_opt_list_t *imsize, calib_geometry_opts_t *o)
 {
     double gridn = o->gridn, min_views = 0;
     int rc;
@@ -71,7 +67,7 @@ static int check_options(model_cli_t *c, int argc, char **argv, calib_geometry_o
         (rc = number(c, "--focal-px", 1, 1e6, false, "give a focal length in px > 0", &o->focal_px)) ||
         (rc = number(c, "--distance-mm", 1, 1e7, false, "give a distance in mm > 0", &o->distance_mm)) ||
         (rc = number(c, "--min-views", 1, 1e5, true, "give an integer >= 1", &min_views)) ||
-        (rc = imagersize(c, argc, argv, o)))
+        (rc = imagersize(c, imsize, o)))
         return rc;
     o->gridn = (int)gridn;
     o->min_views = (int)min_views;
@@ -96,6 +92,11 @@ static int check_options(model_cli_t *c, int argc, char **argv, calib_geometry_o
 int calib_cmd_geometry(int argc, char **argv)
 {
     calib_geometry_opts_t o = calib_geometry_defaults();
+    const char **session_v = calloc((size_t)argc + 1, sizeof *session_v);
+    model_opt_list_t sessions = { session_v, 0, argc + 1 };
+    const char *imsize_v[2];
+    model_opt_list_t imsize = { imsize_v, 0, 2 };
+    if (!session_v) return model_error_report("calib geometry");
     model_opt_t opts[] = {
         MODEL_OPT_STRING("--rig", "RIG.ini", "capture: one session per tilt (DIR/capture/tiltT_azA), all lamps on",
                          &o.rig, false),
@@ -107,8 +108,8 @@ int calib_cmd_geometry(int argc, char **argv)
                          CALIB_GEOMETRY_DEFAULT_ANGLES "')", &o.angles, false),
         MODEL_OPT_STRING("--sample", "NAME", "the board sample (default calib_board)", &o.sample, false),
         MODEL_OPT_VALUE("--exposure-us", "US", "the capture's exposure (default 6000)", false),
-        MODEL_OPT_VALUE("--session", "DIR", "use a capture session (angles from its journal, tilt from its plan); "
-                        "repeat it for more", false),
+        MODEL_OPT_LIST("--session", "DIR", "use a capture session (angles from its journal, tilt from its plan); "
+                       "repeat it for more", &sessions, false, false),
         MODEL_OPT_STRING("--images", "'GLOB'", "use images captured elsewhere (no angles: no axis, no rig frame)",
                          &o.images, false),
         MODEL_OPT_STRING("--corners", "FILE.vnl", "use mrgingham's corners (no images needed; needs --imagersize)",
@@ -120,23 +121,23 @@ int calib_cmd_geometry(int argc, char **argv)
         MODEL_OPT_VALUE("--board-height-mm", "H", "height of the corner plane above the table top at tilt 0 "
                         "(default 5)", false),
         MODEL_OPT_VALUE("--focal-px", "F", "seed focal length for mrcal (default 1.4 x imager width)", false),
-        MODEL_OPT_VALUE("--imagersize", "W H", "imager size (needed with --corners)", false),
+        MODEL_OPT_LIST("--imagersize", "W H", "imager size (needed with --corners)", &imsize, true, false),
         MODEL_OPT_VALUE("--distance-mm", "D", "distance of the projection-uncertainty figure (default 900)", false),
         MODEL_OPT_VALUE("--min-views", "N", "views with a board the solve needs (default by lens model)", false),
     };
     model_cli_t cli = { .cmd = "calib geometry", .synopsis = "", .about = ABOUT, .epilog = EPILOG, .opts = opts,
-                        .nopts = MODEL_NOPTS(opts), .min_positional = 0, .max_positional = 1, .repeat_ok = true };
+                        .nopts = MODEL_NOPTS(opts), .min_positional = 0, .max_positional = 0, .repeat_ok = true };
     int rc = model_cli_parse(&cli, argc, argv);
-    if (rc != MODEL_CLI_OK) return rc;
-    const char **sessions = calloc((size_t)argc + 1, sizeof *sessions);
-    for (int i = 1; i < argc && strcmp(argv[i], "--"); i++)   // every --session (the parser keeps the last)
-        if (!strncmp(argv[i], "--session=", 10)) sessions[o.nsessions++] = argv[i] + 10;
-        else if (!strcmp(argv[i], "--session") && i + 1 < argc) sessions[o.nsessions++] = argv[++i];
-    o.sessions = sessions;
+    if (rc != MODEL_CLI_OK) {
+        free(session_v);
+        return rc;
+    }
+    o.sessions = session_v;
+    o.nsessions = sessions.n;
     o.argc = argc;
     o.argv = argv;
-    if ((rc = check_options(&cli, argc, argv, &o))) {
-        free(sessions);
+    if ((rc = check_options(&cli, &imsize, &o))) {
+        free(session_v);
         return rc;
     }
     calib_geometry_result_t r;
@@ -153,6 +154,6 @@ int calib_cmd_geometry(int argc, char **argv)
         rc = r.usage ? 2 : 1;
     }
     calib_geometry_result_free(&r);
-    free(sessions);
+    free(session_v);
     return rc;
 }

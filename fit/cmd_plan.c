@@ -13,28 +13,6 @@
 
 enum { MAX_MATERIAL_FILES = 8, MAX_EXPOSURES = 64 };
 
-// --materials takes one file or more: the files after its first value up to
-// the next option are moved from argv into files[1..] (files[0] stays an
-// ordinary value for the parser). Returns the new argc, or -1 after a usage
-// error (more than MAX_MATERIAL_FILES).
-static int split_materials(int argc, char **argv, const char **files, int *nfiles)
-{
-    int n = 0, j = 0;
-    *nfiles = 0;
-    for (int i = 0; i < argc; i++) {
-        argv[j++] = argv[i];
-        if (strcmp(argv[i], "--materials") || i + 1 >= argc) continue;
-        argv[j++] = argv[++i];
-        files[n++] = argv[i];
-        while (i + 1 < argc && !(argv[i + 1][0] == '-' && argv[i + 1][1])) {
-            if (n >= MAX_MATERIAL_FILES) return -1;
-            files[n++] = argv[++i];
-        }
-    }
-    *nfiles = n;
-    return j;
-}
-
 // The exposures of a comma list. false: not a list of positive numbers.
 static bool parse_exposures(const char *list, double *exps, int *nexp)
 {
@@ -79,12 +57,14 @@ static int plan_lamps(int argc, char **argv)
     lightplan_lamps_opts_t o = lightplan_lamps_defaults();
     lightplan_options_t *op = &o.opt;
     const char *matfiles[MAX_MATERIAL_FILES], *exposures = "500,1000,2000,4000,8000,16000";
+    model_opt_list_t materials = { matfiles, 0, MAX_MATERIAL_FILES };
     bool no_report = false;
     model_opt_t opts[] = {
         MODEL_OPT_STRING("--camera", "CAM", "camera model (mrcal; extrinsics in the rig frame)", &o.camera, true),
         MODEL_OPT_STRING("--lamps", "FILE", "candidates: a lamps INI with --kc-per-us, or lamps.json with --white",
                          &o.lamps, true),
-        MODEL_OPT_STRING("--materials", "FILE...", "a materials INI, or priors JSON files (their means)", NULL, true),
+        MODEL_OPT_LIST("--materials", "FILE...", "a materials INI, or priors JSON files (their means)", &materials,
+                       true, true),
         MODEL_OPT_DOUBLE("--kc-per-us", "X", "kc*I = X * a lamps INI's intensity (DN/us)", &o.kc_per_us, 1e-300,
                          1e300),
         MODEL_OPT_STRING("--white", "WHITE.json", "kc*I per lamp (refl calib white), with a lamps.json", &o.white,
@@ -135,8 +115,6 @@ static int plan_lamps(int argc, char **argv)
                   "predicted.tiff (DN, direct light), glare.tiff (where each candidate would glare), index.html\n"
                   "(scripts/plan_lamps_report.py).",
     };
-    argc = split_materials(argc, argv, matfiles, &o.nmaterials);
-    if (argc < 0) return model_cli_error(&cli, "--materials: at most %d files", MAX_MATERIAL_FILES);
     int rc = model_cli_parse(&cli, argc, argv);
     if (rc != MODEL_CLI_OK) return rc;
     if (!o.white && !(o.kc_per_us > 0)) return model_cli_error(&cli, "give --kc-per-us X (lamps INI) or --white WHITE.json");
@@ -144,10 +122,7 @@ static int plan_lamps(int argc, char **argv)
     if (!parse_exposures(exposures, exps, &o.nexp))
         return model_cli_error(&cli, "--exposures-us: '%s' is not a list of up to %d positive exposures in us",
                                exposures, MAX_EXPOSURES);
-    if (!o.nmaterials) {   // --materials=FILE
-        matfiles[0] = model_cli_value(&cli, "--materials");
-        o.nmaterials = 1;
-    }
+    o.nmaterials = materials.n;
     o.scene = cli.positional[0];
     o.materials = matfiles;
     o.exposures_us = exps;

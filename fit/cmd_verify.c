@@ -32,38 +32,6 @@ static const char epilog[] =
     "priors, provenance), points.csv, imgN_actual.tiff / imgN_synthetic.tiff (float DN), and index.html\n"
     "with the figures (scripts/verify_report.py). Prints the residue table in the thesis's form.";
 
-// An option that takes several values (--images A B C). model_cli_parse reads
-// one value per option: these are taken out of argv before it runs.
-typedef struct {
-    const char  *flag;
-    const char **values;
-    int         *n;
-} list_opt_t;
-
-static int take_lists(model_cli_t *cli, int argc, char **argv, const list_opt_t *lists, int nlists, char **rest,
-                      int *nrest)
-{
-    *nrest = 0;
-    for (int i = 0; i < argc; i++) {
-        const list_opt_t *L = NULL;
-        for (int k = 0; k < nlists && i > 0; k++)
-            if (!strcmp(argv[i], lists[k].flag)) L = &lists[k];
-        if (!L) {
-            rest[(*nrest)++] = argv[i];
-            continue;
-        }
-        int start = *L->n;
-        while (i + 1 < argc && !(argv[i + 1][0] == '-' && argv[i + 1][1])) {
-            if (*L->n >= VERIFY_FILES_MAX)
-                return model_cli_error(cli, "%s: at most %d values", L->flag, VERIFY_FILES_MAX);
-            L->values[(*L->n)++] = argv[++i];
-        }
-        if (*L->n == start) return model_cli_error(cli, "%s needs at least one value", L->flag);
-    }
-    rest[*nrest] = NULL;
-    return MODEL_CLI_OK;
-}
-
 // --fix lamps,cameras,offset,rho,materials
 static int parse_fix(model_cli_t *cli, const char *list, verify_options_t *opt)
 {
@@ -156,21 +124,24 @@ int verify_cmd(int argc, char **argv)
     const char *fixed = NULL, *truth = NULL;
     bool no_report = false, fail_on_incorrect = false, do_study = false;
     int cases = 200;
+    model_opt_list_t images = { o.images, 0, VERIFY_FILES_MAX }, priors = { o.priors, 0, VERIFY_FILES_MAX },
+                     cameras = { o.cameras, 0, VERIFY_FILES_MAX }, gains = { o.gain, 0, VERIFY_FILES_MAX };
     model_opt_t opts[] = {
-        MODEL_OPT_VALUE("--images", "IMG...", "16-bit PNG frames of refl capture / refl rig snap (angle, lamps, "
-                        "exposure and gain from their text chunks), or float TIFFs (give the options below)", false),
-        MODEL_OPT_VALUE("--priors", "FILE...", "priors files of refl fit material / refl fit brdf (every material "
-                        "of SCENE)", false),
+        MODEL_OPT_LIST("--images", "IMG...", "16-bit PNG frames of refl capture / refl rig snap (angle, lamps, "
+                       "exposure and gain from their text chunks), or float TIFFs (give the options below)", &images,
+                       true, false),
+        MODEL_OPT_LIST("--priors", "FILE...", "priors files of refl fit material / refl fit brdf (every material "
+                       "of SCENE)", &priors, true, false),
         { "-o", "--out", "DIR", "the output directory", MODEL_OPT_KIND_STRING, &o.out, 0, 0, false, false, NULL },
         MODEL_OPT_STRING("--calib", "DIR", "a calibration directory: camera.cameramodel, lamps.json, gain.json + "
                          "maps, white.json (or in geometry/ lamps/ gain/ white/); the options below override",
                          &o.calib, false),
-        MODEL_OPT_VALUE("--cameras", "CAM...", "camera models (mrcal, extrinsics in the rig frame): one, or one per "
-                        "image", false),
+        MODEL_OPT_LIST("--cameras", "CAM...", "camera models (mrcal, extrinsics in the rig frame): one, or one per "
+                       "image", &cameras, true, false),
         MODEL_OPT_STRING("--lamps", "FILE", "lamps.json of refl calib lamps, or a lamps INI ([lamp NAME] "
                          "position_mm, intensity: then kc*I = X * intensity with --kc-per-us X)", &o.lamps, false),
-        MODEL_OPT_VALUE("--gain-calib", "DIR...", "gain calibrations (gain.json, offset_dn.tiff, prnu_gain.tiff): "
-                        "one per camera", false),
+        MODEL_OPT_LIST("--gain-calib", "DIR...", "gain calibrations (gain.json, offset_dn.tiff, prnu_gain.tiff): "
+                       "one per camera", &gains, true, false),
         MODEL_OPT_STRING("--white", "FILE", "white.json of refl calib white: kc*I per lamp per us at 0 dB",
                          &o.white, false),
         MODEL_OPT_DOUBLE("--kc-per-us", "X", "without a white calibration: kc per us of exposure (lamps INI "
@@ -218,13 +189,12 @@ int verify_cmd(int argc, char **argv)
     };
     model_cli_t cli = { .cmd = "verify", .synopsis = "SCENE", .about = about, .epilog = epilog, .opts = opts,
                         .nopts = MODEL_NOPTS(opts), .min_positional = 0, .max_positional = 1, .repeat_ok = true };
-    const list_opt_t lists[] = { { "--images", o.images, &o.nimages }, { "--cameras", o.cameras, &o.ncameras },
-                                 { "--priors", o.priors, &o.npriors }, { "--gain-calib", o.gain, &o.ngain } };
-    char **rest = calloc((size_t)argc + 1, sizeof *rest);
-    int nrest = 0, rc = rest ? take_lists(&cli, argc, argv, lists, 4, rest, &nrest) : 1;
-    if (rc == MODEL_CLI_OK) rc = model_cli_parse(&cli, nrest, rest);
-    free(rest);
+    int rc = model_cli_parse(&cli, argc, argv);
     if (rc != MODEL_CLI_OK) return rc;
+    o.nimages = images.n;
+    o.npriors = priors.n;
+    o.ncameras = cameras.n;
+    o.ngain = gains.n;
     // the flags that turn defaults off
     op->use_priors = !model_cli_opt(&cli, "--no-priors")->given;
     op->use_flat = !model_cli_opt(&cli, "--no-gain-maps")->given;

@@ -11,6 +11,7 @@
 #include "fit/fit.h"
 #include "fit/verify.h"
 #include "fit/lightplan.h"
+#include "model/opts.h"
 #include "rig/rig.h"
 
 typedef struct {
@@ -48,22 +49,16 @@ static void usage(FILE *f)
 static int demo_cmd(int argc, char **argv)
 {
     const char *out = "refl-demo";
-    for (int i = 1; i < argc; i++) {
-        if (!strcmp(argv[i], "-h") || !strcmp(argv[i], "--help")) {
-            printf("usage: refl demo [-o DIR]\n\nRuns the whole lab day on the virtual rig (scripts/demo): geometry, "
-                   "lamp and gain\ncalibrations, the reference white, three material sessions and their fits, light "
-                   "planning\nfor the workpiece and its verification against the correct and wrong descriptions, "
-                   "each\nresult next to the rig's truth; prints the path of DIR/index.html (default DIR: "
-                   "refl-demo).\n\nrefl %s\n", REFL_VERSION);
-            return 0;
-        }
-        if (!strcmp(argv[i], "-o") && i + 1 < argc) {
-            out = argv[++i];
-            continue;
-        }
-        fprintf(stderr, "refl demo: unexpected argument '%s' (refl demo --help)\n", argv[i]);
-        return 2;
-    }
+    model_opt_t opts[] = { MODEL_OPT_STRING("-o", "DIR", "output directory (default refl-demo)", &out, false) };
+    model_cli_t cli = {
+        .cmd = "demo", .opts = opts, .nopts = MODEL_NOPTS(opts),
+        .about = "Runs the whole lab day on the virtual rig (scripts/demo): geometry, lamp and gain\n"
+                 "calibrations, the reference white, three material sessions and their fits, light planning\n"
+                 "for the workpiece and its verification against the correct and wrong descriptions, each\n"
+                 "result next to the rig's truth; prints the path of DIR/index.html.",
+    };
+    int rc = model_cli_parse(&cli, argc, argv);
+    if (rc != MODEL_CLI_OK) return rc;
     char exe[4096];
     ssize_t n = readlink("/proc/self/exe", exe, sizeof exe - 1);
     if (n <= 0) {

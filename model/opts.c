@@ -52,8 +52,7 @@ int model_usage_error(const char *cmd, const char *fmt, ...)
 
 void model_cli_help(const model_cli_t *c, FILE *f)
 {
-    fprintf(f, "usage: refl %s%s%s [options]\n", c->cmd, c->synopsis && c->synopsis[0] ? " " : "",
-            c->synopsis ? c->synopsis : "");
+    usage_line(c, f);
     if (c->about) fprintf(f, "\n%s\n", c->about);
     fprintf(f, "\noptions:\n");
     for (int i = 0; i < c->nopts; i++) {
@@ -149,6 +148,15 @@ static bool is_number(const char *s)
     return model_parse_double(s, &v);
 }
 
+// One more value of a list option.
+static int list_add(model_cli_t *c, model_opt_t *o, const char *v)
+{
+    model_opt_list_t *l = o->dest;
+    if (l->n >= l->cap) return model_cli_error(c, "%s: at most %d values", o->name, l->cap);
+    l->v[l->n++] = v;
+    return MODEL_CLI_OK;
+}
+
 static int take_option(model_cli_t *c, int argc, char **argv, int *i)
 {
     const char *a = argv[*i];
@@ -156,7 +164,8 @@ static int take_option(model_cli_t *c, int argc, char **argv, int *i)
     size_t len = eq ? (size_t)(eq - a) : strlen(a);
     model_opt_t *o = find_opt(c, a, len);
     if (!o) return model_cli_error(c, "unknown option '%.*s'", (int)len, a);
-    if (o->given && !c->repeat_ok) return model_cli_error(c, "option %s given twice", o->name);
+    if (o->given && !c->repeat_ok && o->kind != MODEL_OPT_KIND_LIST)
+        return model_cli_error(c, "option %s given twice", o->name);
     o->given = true;
     if (o->kind == MODEL_OPT_KIND_FLAG) {
         if (eq) return model_cli_error(c, "option %s takes no value", o->name);
@@ -173,6 +182,14 @@ static int take_option(model_cli_t *c, int argc, char **argv, int *i)
     }
     if (!v[0]) return model_cli_error(c, "option %s: empty value", o->name);
     o->value = v;
+    if (o->kind == MODEL_OPT_KIND_LIST) {
+        int rc = list_add(c, o, v);
+        // greedy: the arguments after it up to the next option ("-" alone is a value)
+        while (rc == MODEL_CLI_OK && o->min > 0 && !eq && *i + 1 < argc &&
+               !(argv[*i + 1][0] == '-' && argv[*i + 1][1]))
+            rc = list_add(c, o, argv[++*i]);
+        return rc;
+    }
     if (o->kind == MODEL_OPT_KIND_STRING) {
         if (o->dest) *(const char **)o->dest = v;
         return MODEL_CLI_OK;
@@ -187,6 +204,7 @@ int model_cli_parse(model_cli_t *c, int argc, char **argv)
     for (int i = 0; i < c->nopts; i++) {
         c->opts[i].given = false;
         c->opts[i].value = NULL;
+        if (c->opts[i].kind == MODEL_OPT_KIND_LIST) ((model_opt_list_t *)c->opts[i].dest)->n = 0;
     }
     for (int i = 1; i < argc; i++) {
         const char *a = argv[i];

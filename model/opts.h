@@ -36,7 +36,17 @@ typedef enum {
                              // model_cli_value, or convert it with model_cli_double / _long)
     MODEL_OPT_KIND_INT,      // int *: a whole number within [min, max]
     MODEL_OPT_KIND_DOUBLE,   // double *: a finite number within [min, max]
+    MODEL_OPT_KIND_LIST,     // model_opt_list_t *: every value of a repeated option (--session A --session B)
+                             // and, when min is 1, the arguments after it up to the next option
+                             // (--images A B C)
 } model_opt_kind_t;
+
+// The values of a list option: v[0..n-1] point into argv; v has cap slots
+// (the caller's array; more values are a usage error).
+typedef struct {
+    const char **v;
+    int          n, cap;
+} model_opt_list_t;
 
 typedef struct {
     const char      *name;      // "--calib" or "-o"
@@ -64,6 +74,10 @@ typedef struct {
 #define MODEL_OPT_VALUE(name, metavar, help, required) \
     { name, NULL, metavar, help, (metavar) ? MODEL_OPT_KIND_STRING : MODEL_OPT_KIND_FLAG, NULL, 0, 0, required, \
       false, NULL }
+// A list option (see MODEL_OPT_KIND_LIST); greedy: it also takes the arguments
+// after it up to the next option.
+#define MODEL_OPT_LIST(name, metavar, help, dest, greedy, required) \
+    { name, NULL, metavar, help, MODEL_OPT_KIND_LIST, dest, (greedy) ? 1 : 0, 0, required, false, NULL }
 #define MODEL_NOPTS(table) ((int)(sizeof(table) / sizeof((table)[0])))
 
 enum { MODEL_CLI_POSITIONAL_MAX = 64 };
