@@ -63,6 +63,7 @@ MODEL_SRC := \
     model/sensor.c \
     model/edges.c \
     model/workpiece.c \
+    model/render_file.c \
     model/cmd.c
 RIG_SRC := \
     rig/error.c \

@@ -1,4 +1,5 @@
-// model/cmd.c — the `refl render` and `refl edges` commands.
+// model/cmd.c — the `refl render` and `refl edges` commands (refl render's work
+// is model_render_file, model/render_file.c).
 //
 // Both parse their options strictly (an unknown option, a missing value, a
 // bad number or a missing required option is a usage error: exit 2), load the
@@ -22,11 +23,9 @@
 #include "model/internal.h"
 #include "model/opts.h"
 
-#define UNITS_P        "P: grey value, DN"
-#define PIXEL_CONV     "mrcal: (0,0) is the centre of the top-left pixel, x to the right, y down"
-#define FRAMES_TEXT    "world = rig frame (origin at the turntable top centre, z up along the rotation axis, " \
-                       "right-handed), mm; the camera model's rt_cam_ref is rt_cam_world; the scene is " \
-                       "rotated by the turntable angle about world z before rendering"
+#define UNITS_P        MODEL_UNITS_P
+#define PIXEL_CONV     MODEL_PIXEL_CONV
+#define FRAMES_TEXT    MODEL_FRAMES_TEXT
 
 static bool ends_with_ci(const char *s, const char *suffix)
 {
@@ -35,100 +34,6 @@ static bool ends_with_ci(const char *s, const char *suffix)
 }
 
 static bool is_tiff_name(const char *s) { return ends_with_ci(s, ".tif") || ends_with_ci(s, ".tiff"); }
-
-// ---------------------------------------------------------------------------
-// Provenance and metadata
-
-// An input file: role, path and its sha256.
-typedef struct {
-    const char *role;
-    const char *path;
-    char        sha256[65];
-} input_t;
-
-
-static void meta_add_inputs(model_meta_t *m, const input_t *in, int nin)
-{
-    for (int i = 0; i < nin; i++) {
-        if (!in[i].path) continue;
-        char key[80];
-        snprintf(key, sizeof key, "input_%s", in[i].role);
-        model_meta_add(m, key, "%s", in[i].path);
-        snprintf(key, sizeof key, "input_%s_sha256", in[i].role);
-        model_meta_add(m, key, "%s", in[i].sha256);
-    }
-}
-
-// BRDF conventions of the materials the scene uses ("name: model (convention); ...").
-static char *material_conventions(const model_scene_t *scene, const model_material_t *const *mats)
-{
-    GString *s = g_string_new("");
-    for (int k = 0; k < scene->nmaterials; k++) {
-        const model_material_t *mt = mats[k];
-        g_string_append_printf(s, "%s%s: %s(", k ? "; " : "", scene->material_names[k], model_brdf_name(mt->model));
-        for (int i = 0; i < model_brdf_nparams(mt->model); i++)
-            g_string_append_printf(s, "%s%s=%.6g", i ? ", " : "", model_brdf_param_name(mt->model, i), mt->p[i]);
-        g_string_append_printf(s, ") [%s]", model_brdf_convention(mt->model));
-    }
-    return g_string_free(s, FALSE);
-}
-
-// ---------------------------------------------------------------------------
-// Shared loading
-
-typedef struct {
-    model_scene_t           *scene;     // the (possibly rotated) scene
-    model_camera_t          *cam;
-    model_lamps_t           *lamps;
-    model_materials_t       *mats;
-    const model_material_t **resolved;  // scene->nmaterials
-    model_tracer_t          *tracer;
-} inputs_t;
-
-static void inputs_free(inputs_t *in)
-{
-    model_tracer_free(in->tracer);
-    free(in->resolved);
-    model_materials_free(in->mats);
-    model_lamps_free(in->lamps);
-    model_camera_free(in->cam);
-    model_scene_free(in->scene);
-    memset(in, 0, sizeof *in);
-}
-
-static bool inputs_load(inputs_t *in, const char *scene_path, const char *cam_path,
-                        const char *lamps_path, const char *mats_path, double planarity_tol_mm,
-                        double turntable_deg)
-{
-    model_scene_options_t so = MODEL_SCENE_OPTIONS_DEFAULT;
-    so.planarity_tol_mm = planarity_tol_mm;
-    in->scene = model_scene_load(scene_path, &so);
-    if (!in->scene) return false;
-    if (turntable_deg != 0) {
-        model_scene_t *r = model_scene_rotated_z(in->scene, turntable_deg);
-        if (!r) return false;
-        model_scene_free(in->scene);
-        in->scene = r;
-    }
-    if (!(in->cam = model_camera_load(cam_path))) return false;
-    if (!(in->lamps = model_lamps_load(lamps_path))) return false;
-    if (!(in->mats = model_materials_load(mats_path))) return false;
-    in->resolved = calloc((size_t)(in->scene->nmaterials > 0 ? in->scene->nmaterials : 1), sizeof *in->resolved);
-    if (!in->resolved) {
-        MODEL_FAIL("out of memory");
-        return false;
-    }
-    if (!model_resolve_materials(in->scene, in->mats, in->resolved)) return false;
-    if (!(in->tracer = model_tracer_new(in->scene))) return false;
-    return true;
-}
-
-static bool hash_inputs(input_t *in, int n)
-{
-    for (int i = 0; i < n; i++)
-        if (in[i].path && !model_sha256_file(in[i].path, in[i].sha256)) return false;
-    return true;
-}
 
 // Options render and edges share: the scene's inputs, the grey value's
 // offset and scale, and the view (rows of a model_opt_t table).
@@ -172,216 +77,64 @@ int model_cmd_render(int argc, char **argv)
     int rc = model_cli_parse(&c, argc, argv);
     if (rc != MODEL_CLI_OK) return rc;
 
-    model_shading_t sh = model_shading_default();
-    double planarity = MODEL_SCENE_OPTIONS_DEFAULT.planarity_tol_mm, turntable_deg = 0;
-    long mc_samples = sh.mc_samples, mc_bounces = sh.mc_bounces, seed = (long)sh.seed, threads = 0;
-    if ((rc = model_cli_double(&c, "--kc", &sh.kc, 0, false, INFINITY, "kc >= 0")) ||
-        (rc = model_cli_double(&c, "--offset", &sh.Pa, -INFINITY, false, INFINITY, "finite")) ||
-        (rc = model_cli_double(&c, "--rho", &sh.rho, 0, false, 1, "0 <= rho <= 1")) ||
+    model_render_file_opts_t o = {
+        .scene = c.positional[0], .camera = model_cli_value(&c, "--camera"), .lamps = model_cli_value(&c, "--lamps"),
+        .materials = model_cli_value(&c, "--materials"), .gain_map = model_cli_value(&c, "--gain-map"),
+        .sensor = model_cli_value(&c, "--sensor"), .out = model_cli_value(&c, "-o"),
+        .info = model_cli_value(&c, "--info"), .shading = model_shading_default(),
+        .planarity_tol_mm = MODEL_SCENE_OPTIONS_DEFAULT.planarity_tol_mm,
+    };
+    model_shading_t *sh = &o.shading;
+    long mc_samples = sh->mc_samples, mc_bounces = sh->mc_bounces, seed = (long)sh->seed, threads = 0;
+    if ((rc = model_cli_double(&c, "--kc", &sh->kc, 0, false, INFINITY, "kc >= 0")) ||
+        (rc = model_cli_double(&c, "--offset", &sh->Pa, -INFINITY, false, INFINITY, "finite")) ||
+        (rc = model_cli_double(&c, "--rho", &sh->rho, 0, false, 1, "0 <= rho <= 1")) ||
         (rc = model_cli_long(&c, "--mc-samples", &mc_samples, 1, 1000000)) ||
         (rc = model_cli_long(&c, "--mc-bounces", &mc_bounces, 0, 64)) ||
         (rc = model_cli_long(&c, "--seed", &seed, 0, LONG_MAX)) ||
         (rc = model_cli_long(&c, "--threads", &threads, 1, 256)) ||
-        (rc = model_cli_double(&c, "--turntable-deg", &turntable_deg, -1e6, false, 1e6, "|A| <= 1e6 deg")) ||
-        (rc = model_cli_double(&c, "--planarity-tol-mm", &planarity, 0, false, INFINITY, "T >= 0")))
+        (rc = model_cli_double(&c, "--turntable-deg", &o.turntable_deg, -1e6, false, 1e6, "|A| <= 1e6 deg")) ||
+        (rc = model_cli_double(&c, "--planarity-tol-mm", &o.planarity_tol_mm, 0, false, INFINITY, "T >= 0")))
         return rc;
     const char *ir = model_cli_value(&c, "--interreflection");
     if (ir) {
         int m = model_interreflection_from_name(ir);
         if (m < 0) return model_cli_error(&c, "option --interreflection: unknown value '%s' (use none, thesis or mc)", ir);
-        sh.interreflection = (model_interreflection_t)m;
+        sh->interreflection = (model_interreflection_t)m;
     }
-    sh.mc_samples = (int)mc_samples;
-    sh.mc_bounces = (int)mc_bounces;
-    sh.seed = (uint64_t)seed;
-    const char *out_path = model_cli_value(&c, "-o"), *info_path = model_cli_value(&c, "--info");
-    bool out_png = ends_with_ci(out_path, ".png");
-    if (!out_png && !is_tiff_name(out_path))
-        return model_cli_error(&c, "option -o: '%s' must end in .png, .tif or .tiff", out_path);
-    if (info_path && !is_tiff_name(info_path))
-        return model_cli_error(&c, "option --info: '%s' must end in .tif or .tiff", info_path);
+    sh->mc_samples = (int)mc_samples;
+    sh->mc_bounces = (int)mc_bounces;
+    sh->seed = (uint64_t)seed;
+    if (!ends_with_ci(o.out, ".png") && !is_tiff_name(o.out))
+        return model_cli_error(&c, "option -o: '%s' must end in .png, .tif or .tiff", o.out);
+    if (o.info && !is_tiff_name(o.info))
+        return model_cli_error(&c, "option --info: '%s' must end in .tif or .tiff", o.info);
     if (threads > 0) {
         char buf[24];
         snprintf(buf, sizeof buf, "%ld", threads);
         setenv("REFL_THREADS", buf, 1);   // the camera's ray table and the renderer follow it
-        sh.nthreads = (int)threads;
+        sh->nthreads = (int)threads;
+        o.threads_text = model_cli_value(&c, "--threads");
     }
-
-    rc = 1;
-    double t_start = model_now_s();
-    inputs_t in = { 0 };
-    float *P = NULL, *gain = NULL, *P_ideal = NULL;
-    int32_t *face = NULL;
-    uint8_t *lit = NULL;
-    uint16_t *pix = NULL;
-    char *cmdline = model_command_line(argc, argv), *conv = NULL, *optstr = NULL;
-    model_meta_t *meta = model_meta_new();
-    model_sensor_t sensor;
-    const char *sensor_path = model_cli_value(&c, "--sensor"), *gain_path = model_cli_value(&c, "--gain-map");
-    input_t inputs[] = {
-        { "scene", c.positional[0], "" }, { "camera", model_cli_value(&c, "--camera"), "" },
-        { "lamps", model_cli_value(&c, "--lamps"), "" }, { "materials", model_cli_value(&c, "--materials"), "" },
-        { "gain_map", gain_path, "" }, { "sensor", sensor_path, "" },
-    };
-    const int ninputs = (int)(sizeof inputs / sizeof inputs[0]);
-
-    if (!inputs_load(&in, c.positional[0], model_cli_value(&c, "--camera"), model_cli_value(&c, "--lamps"), model_cli_value(&c, "--materials"),
-                     planarity, turntable_deg))
-        goto done;
-    if (sensor_path && !model_sensor_load(sensor_path, &sensor)) goto done;
-    int W = model_camera_width(in.cam), H = model_camera_height(in.cam);
-    size_t npix = (size_t)W * (size_t)H;
-    if (gain_path) {
-        int gw, gh;
-        if (!model_tiff_read_float(gain_path, &gw, &gh, &gain)) goto done;
-        if (gw != W || gh != H) {
-            model_error(gain_path, 0, "gain map is %d x %d pixels but the camera %s is %d x %d: "
-                        "use the gain map calibrated for this camera", gw, gh, model_cli_value(&c, "--camera"), W, H);
-            goto done;
-        }
-        for (size_t i = 0; i < npix; i++)
-            if (!isfinite(gain[i]) || gain[i] < 0) {
-                model_error(gain_path, 0, "gain map pixel (%zu, %zu) is %g: gains must be finite and >= 0",
-                            i % (size_t)W, i / (size_t)W, (double)gain[i]);
-                goto done;
-            }
-        sh.gain_map = gain;
-    }
-    if (!hash_inputs(inputs, ninputs)) goto done;
-
-    P = malloc(npix * sizeof *P);
-    face = malloc(npix * sizeof *face);
-    if (info_path) lit = malloc(npix * (size_t)(in.lamps->n > 0 ? in.lamps->n : 1));
-    if (!P || !face || (info_path && !lit)) {
-        MODEL_FAIL("out of memory for a %d x %d image", W, H);
-        goto done;
-    }
-    double t_render = model_now_s();
-    if (!model_render(in.tracer, in.cam, in.lamps, in.resolved, &sh, P, face, lit)) goto done;
-    t_render = model_now_s() - t_render;
-    if (sensor_path) {
-        if (info_path) {
-            P_ideal = malloc(npix * sizeof *P_ideal);
-            if (!P_ideal) {
-                MODEL_FAIL("out of memory");
-                goto done;
-            }
-            memcpy(P_ideal, P, npix * sizeof *P);
-        }
-        model_sensor_apply(&sensor, W, H, P);
-    }
-
-    // Metadata.
-    char date[40];
-    model_utc_text(model_realtime_s(), date);
-    conv = material_conventions(in.scene, in.resolved);
-    optstr = g_strdup_printf(
-        "kc=%.9g offset_dn=%.9g gain_map=%s interreflection=%s rho=%.6g thesis_samples=%d thesis_cone_deg=%.6g "
-        "mc_samples=%d mc_bounces=%d finite_lamps=%s seed=%llu sensor=%s turntable_deg=%.9g threads=%s "
-        "planarity_tol_mm=%.6g",
-        sh.kc, sh.Pa, gain_path ? gain_path : "none", model_interreflection_name(sh.interreflection), sh.rho,
-        sh.thesis_samples, sh.thesis_cone_deg, sh.mc_samples, sh.mc_bounces, sh.finite_lamps ? "yes" : "no",
-        (unsigned long long)sh.seed, sensor_path ? sensor_path : "none", turntable_deg,
-        threads > 0 ? model_cli_value(&c, "--threads") : "default", planarity);
-    model_meta_add(meta, "Software", "refl %s (refl render)", REFL_VERSION);
-    model_meta_add(meta, "units", "%s", UNITS_P);
-    model_meta_add(meta, "image", "%s", sensor_path
-             ? "P after the sensor stage (shot/read noise, DSNU, PRNU, vignetting, non-linearity, quantisation)"
-             : "P from the imaging model (ideal, no sensor noise)");
-    model_meta_add(meta, "model", "P = Pa + kc * g(x,y) * [sum_i V_i I_i R_i / d_i^2 + interreflection]; "
-             "pixels whose ray misses the scene get Pa");
-    model_meta_add(meta, "pixel_convention", "%s", PIXEL_CONV);
-    model_meta_add(meta, "frames", "%s", FRAMES_TEXT);
-    model_meta_add(meta, "options", "%s", optstr);
-    model_meta_add(meta, "materials", "%s", conv);
-    meta_add_inputs(meta, inputs, ninputs);
-    model_meta_add(meta, "refl_version", "%s", REFL_VERSION);
-    model_meta_add(meta, "date_utc", "%s", date);
-    model_meta_add(meta, "command_line", "%s", cmdline);
-
-    // Statistics of the output image.
-    double pmin = INFINITY, pmax = -INFINITY, psum = 0;
-    size_t nbg = 0;
-    for (size_t i = 0; i < npix; i++) {
-        double v = P[i];
-        if (v < pmin) pmin = v;
-        if (v > pmax) pmax = v;
-        psum += v;
-        if (face[i] < 0) nbg++;
-    }
-
-    if (out_png) {
-        pix = malloc(npix * sizeof *pix);
-        if (!pix) {
-            MODEL_FAIL("out of memory");
-            goto done;
-        }
-        size_t nlo = 0, nhi = 0, nnan = 0;
-        for (size_t i = 0; i < npix; i++) {
-            double v = P[i];
-            if (isnan(v)) {
-                nnan++;
-                pix[i] = 0;
-            } else if (v < -0.5) {
-                nlo++;
-                pix[i] = 0;
-            } else if (v >= 65535.5) {
-                nhi++;
-                pix[i] = 65535;
-            } else {
-                long r = lround(v);
-                pix[i] = (uint16_t)(r < 0 ? 0 : r > 65535 ? 65535 : r);
-            }
-        }
-        if (nlo || nhi || nnan)
-            fprintf(stderr, "refl render: warning: %zu pixels clipped to [0, 65535] in %s (%zu below 0, %zu above "
-                    "65535, %zu not a number); write a .tiff to keep the float values\n",
-                    nlo + nhi + nnan, out_path, nlo, nhi, nnan);
-        model_meta_add(meta, "encoding", "16-bit grey PNG: P rounded to the nearest integer, clipped to [0, 65535]; "
-                 "%zu pixels clipped", nlo + nhi + nnan);
-        if (!model_png16_write(out_path, W, H, pix, model_meta_list(meta))) goto done;
-    } else {
-        model_meta_add(meta, "encoding", "float32 TIFF: P in DN, not rounded or clipped");
-        if (!model_tiff_write_float(out_path, W, H, P, model_meta_list(meta))) goto done;
-    }
-    if (info_path) {
-        const char **names = malloc((size_t)(in.lamps->n > 0 ? in.lamps->n : 1) * sizeof *names);
-        if (!names) {
-            MODEL_FAIL("out of memory");
-            goto done;
-        }
-        for (int i = 0; i < in.lamps->n; i++) names[i] = in.lamps->lamps[i].name;
-        model_meta_add(meta, "info", "page 0: P (float32, DN, %s); page 1: face id (int32, index into the scene's faces, "
-                 "0-based; nfaces + k for the scene's sphere k; -1 = background); pages 2..: lit mask per lamp (uint8, 1 where V > 0.5), in the "
-                 "order of the lamps file", sensor_path ? "ideal, before the sensor stage" : "as in the output image");
-        bool ok = model_tiff_write_info(info_path, W, H, P_ideal ? P_ideal : P, face, lit, in.lamps->n,
-                                        (const char *const *)names, model_meta_list(meta));
-        free(names);
-        if (!ok) goto done;
-    }
-
-    printf("refl render: %s -> %s\n", c.positional[0], out_path);
-    printf("  image %d x %d px, %d faces, %d lamps, interreflection %s%s\n", W, H, in.scene->nfaces, in.lamps->n,
-           model_interreflection_name(sh.interreflection), sensor_path ? ", sensor stage applied" : "");
-    printf("  time %.2f s (render %.2f s)\n", model_now_s() - t_start, t_render);
-    printf("  P (DN): min %.1f  mean %.1f  max %.1f;  background %.1f %% of the pixels\n", pmin,
-           psum / (double)npix, pmax, 100.0 * (double)nbg / (double)npix);
-    printf("  wrote %s (%s)\n", out_path, out_png ? "16-bit PNG" : "float32 TIFF");
-    if (info_path) printf("  wrote %s (info TIFF: P, face id, lit masks)\n", info_path);
-    rc = 0;
-done:
-    inputs_free(&in);
-    free(P);
-    free(P_ideal);
-    free(gain);
-    free(face);
-    free(lit);
-    free(pix);
+    char *cmdline = model_command_line(argc, argv);
+    o.command_line = cmdline;
+    model_render_file_result_t r;
+    bool ok = model_render_file(&o, &r);
     g_free(cmdline);
-    g_free(conv);
-    g_free(optstr);
-    model_meta_free(meta);
-    return rc;
+    if (!ok) return 1;   // the library's message names the input at fault
+    if (r.clipped_low || r.clipped_high || r.clipped_nan)
+        fprintf(stderr, "refl render: warning: %zu pixels clipped to [0, 65535] in %s (%zu below 0, %zu above "
+                "65535, %zu not a number); write a .tiff to keep the float values\n",
+                r.clipped_low + r.clipped_high + r.clipped_nan, o.out, r.clipped_low, r.clipped_high, r.clipped_nan);
+    printf("refl render: %s -> %s\n", o.scene, o.out);
+    printf("  image %d x %d px, %d faces, %d lamps, interreflection %s%s\n", r.width, r.height, r.nfaces, r.nlamps,
+           model_interreflection_name(r.interreflection), o.sensor ? ", sensor stage applied" : "");
+    printf("  time %.2f s (render %.2f s)\n", r.time_s, r.render_s);
+    printf("  P (DN): min %.1f  mean %.1f  max %.1f;  background %.1f %% of the pixels\n", r.p_min, r.p_mean,
+           r.p_max, 100.0 * r.background_frac);
+    printf("  wrote %s (%s)\n", o.out, r.png ? "16-bit PNG" : "float32 TIFF");
+    if (o.info) printf("  wrote %s (info TIFF: P, face id, lit masks)\n", o.info);
+    return 0;
 }
 
 // ---------------------------------------------------------------------------
@@ -442,19 +195,19 @@ int model_cmd_edges(int argc, char **argv)
     const char *json_path = model_cli_value(&c, "--json");
 
     rc = 1;
-    inputs_t in = { 0 };
+    model_inputs_t in = { 0 };
     model_edges_t *E = NULL;
     json_t *root = NULL;
     char *cmdline = model_command_line(argc, argv), *conv = NULL;
-    input_t inputs[] = {
+    model_input_t inputs[] = {
         { "scene", c.positional[0], "" }, { "camera", model_cli_value(&c, "--camera"), "" },
         { "lamps", model_cli_value(&c, "--lamps"), "" }, { "materials", model_cli_value(&c, "--materials"), "" },
     };
     const int ninputs = (int)(sizeof inputs / sizeof inputs[0]);
-    if (!inputs_load(&in, c.positional[0], model_cli_value(&c, "--camera"), model_cli_value(&c, "--lamps"), model_cli_value(&c, "--materials"),
+    if (!model_inputs_load(&in, c.positional[0], model_cli_value(&c, "--camera"), model_cli_value(&c, "--lamps"), model_cli_value(&c, "--materials"),
                      planarity, turntable_deg))
         goto done;
-    if (!hash_inputs(inputs, ninputs)) goto done;
+    if (!model_inputs_hash(inputs, ninputs)) goto done;
     double t0 = model_now_s();
     E = model_edges_predict(in.scene, in.tracer, in.cam, in.lamps, in.resolved, &sh, feature_deg);
     if (!E) goto done;
@@ -490,7 +243,7 @@ int model_cmd_edges(int argc, char **argv)
     if (json_path) {
         char date[40];
         model_utc_text(model_realtime_s(), date);
-        conv = material_conventions(in.scene, in.resolved);
+        conv = model_material_conventions(in.scene, in.resolved);
         json_t *prov = json_pack("{s:s, s:s, s:s, s:[]}", "refl_version", REFL_VERSION, "date_utc", date,
                                  "command_line", cmdline, "inputs");
         for (int i = 0; i < ninputs; i++)
@@ -552,7 +305,7 @@ int model_cmd_edges(int argc, char **argv)
 done:
     json_decref(root);
     model_edges_free(E);
-    inputs_free(&in);
+    model_inputs_free(&in);
     g_free(cmdline);
     g_free(conv);
     return rc;

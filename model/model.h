@@ -711,6 +711,32 @@ model_scene_t *model_stiffener_scene(const model_stiffener_t *p, const char *nam
 
 // ---------------------------------------------------------------------------
 // Commands (model/cmd.c): argv[0] is the subcommand name. Return the exit code.
+// A scene rendered to an image file (refl render's work; model/render_file.c).
+typedef struct {
+    const char     *scene, *camera, *lamps, *materials;   // inputs (required)
+    const char     *gain_map;        // per-pixel sensitivity g(x,y): float TIFF, camera size, mean 1 (NULL: 1)
+    const char     *sensor;          // sensor INI: the sensor stage after the physics (NULL: none)
+    const char     *out;             // .png (16-bit, P rounded and clipped) or .tif/.tiff (float32 P)
+    const char     *info;            // info TIFF (P, face ids, lit masks), or NULL
+    model_shading_t shading;         // its gain_map is set from gain_map
+    double          planarity_tol_mm, turntable_deg;
+    const char     *threads_text;    // the threads option as given, for the metadata (NULL: "default")
+    const char     *command_line;    // provenance
+} model_render_file_opts_t;
+
+typedef struct {
+    int    width, height, nfaces, nlamps;
+    model_interreflection_t interreflection;
+    bool   png;
+    double p_min, p_mean, p_max;     // DN, of the written image
+    double background_frac;          // pixels whose ray misses the scene
+    size_t clipped_low, clipped_high, clipped_nan;   // PNG: pixels clipped below 0, above 65535, not a number
+    double time_s, render_s;
+} model_render_file_result_t;
+
+// false + message (file and line of the input at fault).
+bool model_render_file(const model_render_file_opts_t *o, model_render_file_result_t *r);
+
 int model_cmd_render(int argc, char **argv);
 int model_cmd_edges(int argc, char **argv);
 int model_cmd_workpiece(int argc, char **argv);
