@@ -15,6 +15,7 @@
 #include <stdbool.h>
 #include <stdio.h>
 
+#include "model/opts.h"
 #include "rig/rig.h"
 
 #ifdef __cplusplus
@@ -142,6 +143,9 @@ bool calib_observe_session(const char *session_dir, const char *calib_dir, bool 
 json_t *calib_observe_provenance(int argc, char **argv, const char *session_dir, const calib_set_t *cal);
 
 // `refl calib white` (calib/cmd_calib.c).
+// The observation grid's options of a command (--window N, --step N: whole
+// pixels 1..64) after model_cli_parse; MODEL_CLI_OK or a usage error (2).
+int calib_cli_window_step(model_cli_t *cli, int *window, int *step);
 int calib_cmd_white(int argc, char **argv);
 
 #ifdef __cplusplus

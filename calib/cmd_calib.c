@@ -46,6 +46,19 @@ int calib_cmd(int argc, char **argv)
 // ---------------------------------------------------------------------------
 // refl calib white
 
+int calib_cli_window_step(model_cli_t *cli, int *window, int *step)
+{
+    static const char *const px[] = { "--window", "--step" };
+    for (int k = 0; k < 2; k++) {
+        const char *v = model_cli_value(cli, px[k]);
+        long n;
+        if (v && (!model_parse_int(v, &n) || n < 1 || n > 64))
+            return model_cli_error(cli, "%s needs a whole number of pixels 1..64, not '%s'", px[k], v);
+        if (v) *(k ? step : window) = (int)n;
+    }
+    return MODEL_CLI_OK;
+}
+
 int calib_cmd_white(int argc, char **argv)
 {
     const char *calib_dir = NULL, *out = NULL;
@@ -77,14 +90,7 @@ int calib_cmd_white(int argc, char **argv)
     if (rc != MODEL_CLI_OK) return rc;
     if (model_cli_value(&cli, "--albedo-cells"))
         return model_cli_error(&cli, "--albedo-cells is an option of refl fit material");
-    static const char *const px[] = { "--window", "--step" };
-    for (int k = 0; k < 2; k++) {
-        const char *v = model_cli_value(&cli, px[k]);
-        long n;
-        if (v && (!model_parse_int(v, &n) || n < 1 || n > 64))
-            return model_cli_error(&cli, "%s needs a whole number of pixels 1..64, not '%s'", px[k], v);
-        if (v) *(k ? &o.step : &o.window) = (int)n;
-    }
+    if ((rc = calib_cli_window_step(&cli, &o.window, &o.step)) != MODEL_CLI_OK) return rc;
     const char *av = model_cli_value(&cli, "--albedo");
     if (av && !(model_parse_double(av, &albedo) && albedo > 0))
         return model_cli_error(&cli, "--albedo needs a number > 0, not '%s'", av);

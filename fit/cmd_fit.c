@@ -9,6 +9,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "calib/calib.h"
 #include "fit/fit.h"
 #include "fit/material.h"
 #include "model/model.h"
@@ -212,14 +213,7 @@ int fit_cmd_material(int argc, char **argv)
     int rc = model_cli_parse(&cli, argc, argv);
     if (rc != MODEL_CLI_OK) return rc;
     if (model_cli_value(&cli, "--albedo")) return model_cli_error(&cli, "--albedo is an option of refl calib white");
-    static const char *const px[] = { "--window", "--step" };
-    for (int k = 0; k < 2; k++) {
-        const char *v = model_cli_value(&cli, px[k]);
-        long n;
-        if (v && (!model_parse_int(v, &n) || n < 1 || n > 64))
-            return model_cli_error(&cli, "%s needs a whole number of pixels 1..64, not '%s'", px[k], v);
-        if (v) *(k ? &o.step : &o.window) = (int)n;
-    }
+    if ((rc = calib_cli_window_step(&cli, &o.window, &o.step)) != MODEL_CLI_OK) return rc;
     if (number_opt(&cli, "--k-sigma", false, &o.k_sigma) || number_opt(&cli, "--systematic", true, &o.sys_rel) ||
         number_opt(&cli, "--albedo-cells", true, &o.cell_mm))
         return MODEL_CLI_USAGE;
