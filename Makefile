@@ -64,6 +64,7 @@ MODEL_SRC := \
     model/edges.c \
     model/workpiece.c \
     model/render_file.c \
+    model/edges_file.c \
     model/cmd.c
 RIG_SRC := \
     rig/error.c \

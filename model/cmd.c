@@ -140,26 +140,6 @@ int model_cmd_render(int argc, char **argv)
 // ---------------------------------------------------------------------------
 // refl edges
 
-static json_t *json_vec2(const double q[2]) { return json_pack("[f,f]", q[0], q[1]); }
-static json_t *json_vec3(model_vec3_t p) { return json_pack("[f,f,f]", p.x, p.y, p.z); }
-
-static json_t *json_lamp_list(const model_lamps_t *lamps, uint32_t bits)
-{
-    json_t *a = json_array();
-    for (int i = 0; i < lamps->n && i < 32; i++)
-        if (bits & (1u << i)) json_array_append_new(a, json_string(lamps->lamps[i].name));
-    return a;
-}
-
-static void lamp_letters(const model_lamps_t *lamps, uint32_t bits, char *out, size_t size)
-{
-    size_t n = 0;
-    out[0] = 0;
-    for (int i = 0; i < lamps->n && i < 32 && n + 1 < size; i++)
-        n += (size_t)snprintf(out + n, size - n, "%s", (bits & (1u << i)) ? "1" : ".");
-    if (!lamps->n) snprintf(out, size, "-");
-}
-
 int model_cmd_edges(int argc, char **argv)
 {
     model_opt_t opts[] = {
@@ -176,139 +156,35 @@ int model_cmd_edges(int argc, char **argv)
                "contrast P0 - P1.\nSide 0 lies to the right of q0 -> q1 in the displayed image (y down).";
     int rc = model_cli_parse(&c, argc, argv);
     if (rc != MODEL_CLI_OK) return rc;
-    model_shading_t sh = model_shading_default();
-    double planarity = MODEL_SCENE_OPTIONS_DEFAULT.planarity_tol_mm, turntable_deg = 0, feature_deg = 1;
+    model_edges_file_opts_t o = {
+        .scene = c.positional[0], .camera = model_cli_value(&c, "--camera"), .lamps = model_cli_value(&c, "--lamps"),
+        .materials = model_cli_value(&c, "--materials"), .shading = model_shading_default(),
+        .planarity_tol_mm = MODEL_SCENE_OPTIONS_DEFAULT.planarity_tol_mm, .feature_angle_deg = 1,
+    };
     long threads = 0;
-    if ((rc = model_cli_double(&c, "--kc", &sh.kc, 0, false, INFINITY, "kc >= 0")) ||
-        (rc = model_cli_double(&c, "--offset", &sh.Pa, -INFINITY, false, INFINITY, "finite")) ||
-        (rc = model_cli_double(&c, "--feature-angle-deg", &feature_deg, 0, false, 179.999, "0 <= A < 180")) ||
-        (rc = model_cli_double(&c, "--turntable-deg", &turntable_deg, -1e6, false, 1e6, "|A| <= 1e6 deg")) ||
+    if ((rc = model_cli_double(&c, "--kc", &o.shading.kc, 0, false, INFINITY, "kc >= 0")) ||
+        (rc = model_cli_double(&c, "--offset", &o.shading.Pa, -INFINITY, false, INFINITY, "finite")) ||
+        (rc = model_cli_double(&c, "--feature-angle-deg", &o.feature_angle_deg, 0, false, 179.999, "0 <= A < 180")) ||
+        (rc = model_cli_double(&c, "--turntable-deg", &o.turntable_deg, -1e6, false, 1e6, "|A| <= 1e6 deg")) ||
         (rc = model_cli_long(&c, "--threads", &threads, 1, 256)) ||
-        (rc = model_cli_double(&c, "--planarity-tol-mm", &planarity, 0, false, INFINITY, "T >= 0")))
+        (rc = model_cli_double(&c, "--planarity-tol-mm", &o.planarity_tol_mm, 0, false, INFINITY, "T >= 0")))
         return rc;
     if (threads > 0) {
         char buf[24];
         snprintf(buf, sizeof buf, "%ld", threads);
         setenv("REFL_THREADS", buf, 1);
-        sh.nthreads = (int)threads;
+        o.shading.nthreads = (int)threads;
     }
     const char *json_path = model_cli_value(&c, "--json");
-
-    rc = 1;
-    model_inputs_t in = { 0 };
-    model_edges_t *E = NULL;
-    json_t *root = NULL;
-    char *cmdline = model_command_line(argc, argv), *conv = NULL;
-    model_input_t inputs[] = {
-        { "scene", c.positional[0], "" }, { "camera", model_cli_value(&c, "--camera"), "" },
-        { "lamps", model_cli_value(&c, "--lamps"), "" }, { "materials", model_cli_value(&c, "--materials"), "" },
-    };
-    const int ninputs = (int)(sizeof inputs / sizeof inputs[0]);
-    if (!model_inputs_load(&in, c.positional[0], model_cli_value(&c, "--camera"), model_cli_value(&c, "--lamps"), model_cli_value(&c, "--materials"),
-                     planarity, turntable_deg))
-        goto done;
-    if (!model_inputs_hash(inputs, ninputs)) goto done;
-    double t0 = model_now_s();
-    E = model_edges_predict(in.scene, in.tracer, in.cam, in.lamps, in.resolved, &sh, feature_deg);
-    if (!E) goto done;
-    double dt = model_now_s() - t0;
-
-    const model_vec3_t *V = in.scene->vertices;
-    int nseg = 0, nvis = 0;
-    printf("refl edges: %s, camera %s, %d lamps (", c.positional[0], model_cli_value(&c, "--camera"), in.lamps->n);
-    for (int i = 0; i < in.lamps->n; i++) printf("%s%s", i ? " " : "", in.lamps->lamps[i].name);
-    printf(")\n");
-    printf("%4s %-38s %-9s %-29s %7s %-9s %8s %8s %8s\n", "edge", "3D end points (mm, rig frame)", "faces",
-           "image end points (px)", "len px", "lit 0|1", "P0 DN", "P1 DN", "P0-P1");
-    for (int i = 0; i < E->nedges; i++) {
-        const model_edge_t *e = &E->edges[i];
-        if (e->nsegments) nvis++;
-        for (int s = 0; s < e->nsegments; s++, nseg++) {
-            const model_edge_segment_t *g = &e->segments[s];
-            char ends3[96], faces[32], endsq[48], lit0[40], lit1[40], lit[84];
-            snprintf(ends3, sizeof ends3, "(%.5g,%.5g,%.5g)-(%.5g,%.5g,%.5g)", V[e->v0].x, V[e->v0].y, V[e->v0].z,
-                     V[e->v1].x, V[e->v1].y, V[e->v1].z);
-            if (e->face_b >= 0) snprintf(faces, sizeof faces, "%d/%d", e->face_a, e->face_b);
-            else snprintf(faces, sizeof faces, "%d/-", e->face_a);
-            snprintf(endsq, sizeof endsq, "(%.1f,%.1f)-(%.1f,%.1f)", g->q0[0], g->q0[1], g->q1[0], g->q1[1]);
-            lamp_letters(in.lamps, g->lit_side[0], lit0, sizeof lit0);
-            lamp_letters(in.lamps, g->lit_side[1], lit1, sizeof lit1);
-            snprintf(lit, sizeof lit, "%s|%s", lit0, lit1);
-            printf("%4d %-38s %-9s %-29s %7.1f %-9s %8.1f %8.1f %8.1f\n", i, ends3, faces, endsq, g->length_px, lit,
-                   g->P_side[0], g->P_side[1], g->contrast);
-        }
-    }
-    printf("%d edges, %d with visible segments, %d segments (%.2f s)\n", E->nedges, nvis, nseg, dt);
-
-    if (json_path) {
-        char date[40];
-        model_utc_text(model_realtime_s(), date);
-        conv = model_material_conventions(in.scene, in.resolved);
-        json_t *prov = json_pack("{s:s, s:s, s:s, s:[]}", "refl_version", REFL_VERSION, "date_utc", date,
-                                 "command_line", cmdline, "inputs");
-        for (int i = 0; i < ninputs; i++)
-            json_array_append_new(json_object_get(prov, "inputs"),
-                                  json_pack("{s:s, s:s, s:s}", "role", inputs[i].role, "path", inputs[i].path,
-                                            "sha256", inputs[i].sha256));
-        json_t *lamps = json_array();
-        for (int i = 0; i < in.lamps->n; i++) json_array_append_new(lamps, json_string(in.lamps->lamps[i].name));
-        json_t *edges = json_array();
-        for (int i = 0; i < E->nedges; i++) {
-            const model_edge_t *e = &E->edges[i];
-            json_t *segs = json_array();
-            for (int s = 0; s < e->nsegments; s++) {
-                const model_edge_segment_t *g = &e->segments[s];
-                json_array_append_new(segs, json_pack(
-                    "{s:o, s:o, s:f, s:[f,f], s:f, s:[i,i], s:[o,o]}",
-                    "q0_px", json_vec2(g->q0), "q1_px", json_vec2(g->q1), "length_px", g->length_px,
-                    "P_side_dn", g->P_side[0], g->P_side[1], "contrast_dn", g->contrast,
-                    "face_side", g->face_side[0], g->face_side[1],
-                    "lit_side", json_lamp_list(in.lamps, g->lit_side[0]), json_lamp_list(in.lamps, g->lit_side[1])));
-            }
-            json_array_append_new(edges, json_pack(
-                "{s:i, s:[i,i], s:o, s:o, s:i, s:o, s:f, s:o}", "id", i, "vertices", e->v0, e->v1,
-                "p0_mm", json_vec3(V[e->v0]), "p1_mm", json_vec3(V[e->v1]), "face_a", e->face_a,
-                "face_b", e->face_b >= 0 ? json_integer(e->face_b) : json_null(), "dihedral_deg", e->dihedral_deg,
-                "segments", segs));
-        }
-        root = json_pack(
-            "{s:s, s:{s:s, s:s, s:s, s:s, s:s, s:s, s:s}, s:s, s:s, s:s, s:{s:f, s:f, s:f, s:f, s:f}, s:s, s:o, "
-            "s:i, s:i, s:o, s:o}",
-            "description", "refl edges: visible image segments of the scene's edges, lighting per side, predicted contrast",
-            "units",
-            "p0_mm, p1_mm", "mm, world = rig frame",
-            "q0_px, q1_px, length_px", "pixels (" PIXEL_CONV ")",
-            "P_side_dn, contrast_dn", UNITS_P "; direct term only: Pa + kc * g * sum_i V_i I_i R_i / d_i^2",
-            "face_a, face_b, face_side", "index into the scene's faces, 0-based (the file's face number - 1); -1 = background",
-            "vertices", "indices into the scene's vertices, 0-based (the file's vertex number - 1)",
-            "lit_side", "names of the lamps with V > 0.5 on at least half the side's sample points",
-            "dihedral_deg", "angle between the two faces' normals, deg (0 for a boundary edge)",
-            "side_convention", "side 0 is 2 px to the right of q0 -> q1 in the displayed image (y down), side 1 2 px to the left; "
-            "contrast = P_side[0] - P_side[1]",
-            "pixel_convention", PIXEL_CONV, "frames", FRAMES_TEXT,
-            "options", "kc", sh.kc, "offset_dn", sh.Pa, "feature_angle_deg", feature_deg, "turntable_deg", turntable_deg,
-            "planarity_tol_mm", planarity,
-            "materials", conv, "provenance", prov,
-            "image_width", model_camera_width(in.cam), "image_height", model_camera_height(in.cam),
-            "lamps", lamps, "edges", edges);
-        if (!root) {
-            MODEL_FAIL("cannot build the JSON document");
-            goto done;
-        }
-        if (json_dump_file(root, json_path, JSON_INDENT(1) | JSON_REAL_PRECISION(10)) != 0) {
-            model_error(json_path, 0, "cannot write the JSON file: check the directory exists and is writable");
-            goto done;
-        }
-        printf("wrote %s\n", json_path);
-    }
-    rc = 0;
-done:
-    json_decref(root);
-    model_edges_free(E);
-    model_inputs_free(&in);
+    char *cmdline = model_command_line(argc, argv);
+    o.command_line = cmdline;
+    model_edges_file_t *f = model_edges_file_predict(&o);   // its message names the input at fault
+    if (f) model_edges_file_print(stdout, f, &o);
+    bool ok = f && (!json_path || model_edges_file_write_json(f, &o, json_path));
+    if (ok && json_path) printf("wrote %s\n", json_path);
+    model_edges_file_free(f);
     g_free(cmdline);
-    g_free(conv);
-    return rc;
+    return ok ? 0 : 1;
 }
 
 // ---------------------------------------------------------------------------

@@ -19,6 +19,7 @@
 #pragma once
 
 #include <stdbool.h>
+#include <stdio.h>
 #include <stddef.h>
 #include <stdint.h>
 
@@ -736,6 +737,25 @@ typedef struct {
 
 // false + message (file and line of the input at fault).
 bool model_render_file(const model_render_file_opts_t *o, model_render_file_result_t *r);
+
+// A scene's predicted edges for a camera and lamps (refl edges's work;
+// model/edges_file.c).
+typedef struct {
+    const char     *scene, *camera, *lamps, *materials;   // inputs (required)
+    model_shading_t shading;
+    double          planarity_tol_mm, turntable_deg;
+    double          feature_angle_deg;   // edges between faces whose normals differ by less are skipped
+    const char     *command_line;        // provenance
+} model_edges_file_opts_t;
+typedef struct model_edges_file model_edges_file_t;
+// Load and hash the inputs, predict the edges. NULL + message.
+model_edges_file_t *model_edges_file_predict(const model_edges_file_opts_t *o);
+void                model_edges_file_free(model_edges_file_t *f);   // accepts NULL
+// The table: one line per visible image segment (3D and image end points,
+// faces, lamps lighting each side, predicted grey values and contrast).
+void model_edges_file_print(FILE *out, const model_edges_file_t *f, const model_edges_file_opts_t *o);
+// The edges, their units and conventions and the provenance as JSON. false + message.
+bool model_edges_file_write_json(const model_edges_file_t *f, const model_edges_file_opts_t *o, const char *path);
 
 int model_cmd_render(int argc, char **argv);
 int model_cmd_edges(int argc, char **argv);
