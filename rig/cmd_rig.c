@@ -9,6 +9,7 @@
 // and rig_safety_install for signals).
 #define _GNU_SOURCE
 #include <ctype.h>
+#include <errno.h>
 #include <glib.h>
 #include <limits.h>
 #include <math.h>
@@ -18,7 +19,9 @@
 #include <stdlib.h>
 #include <string.h>
 #include <strings.h>
+#include <sys/stat.h>
 #include <time.h>
+#include <unistd.h>
 
 #include "model/model.h"
 #include "model/opts.h"
@@ -182,9 +185,13 @@ static const char *yes_no(bool b) { return b ? "yes" : "no"; }
 // ---------------------------------------------------------------------------
 // Actions
 
-static int do_status(rig_t *r)
+// Every device is reported, also after one fails ("DEVICE_error: ..."); the
+// first failure's code is returned.
+int rig_cmd_status(rig_t *r)
 {
-    int rc = 0;
+    int rc = 0, e;
+    const char *failed[2];
+    int nfailed = 0;
     printf("rig_file: %s\nrig_sha256: %s\n", r->path, r->sha256);
     if (r->virt)
         printf("rig_backend: virtual (truth %s, sample %s)\n", rig_virtual_truth_path(r->virt),
@@ -193,12 +200,17 @@ static int do_status(rig_t *r)
         printf("rig_backend: devices\n");
     if (r->turntable) {
         rig_turntable_status_t st;
-        if ((rc = rig_turntable_status(r->turntable, &st))) return rc;
-        printf("turntable: %s\nturntable_angle_deg: %.4f\nturntable_homed: %s\nturntable_moving: %s\n",
-               rig_turntable_name(r->turntable), st.angle_deg, yes_no(st.homed), yes_no(st.moving || st.homing));
-        if (st.motion_error || st.limit_fwd || st.limit_rev)
-            printf("turntable_faults: %s%s%s\n", st.motion_error ? "motion-error " : "",
-                   st.limit_fwd ? "limit-forward " : "", st.limit_rev ? "limit-reverse" : "");
+        if ((e = rig_turntable_status(r->turntable, &st))) {
+            printf("turntable: %s\nturntable_error: %s\n", rig_turntable_name(r->turntable), model_last_error());
+            failed[nfailed++] = "turntable";
+            if (!rc) rc = e;
+        } else {
+            printf("turntable: %s\nturntable_angle_deg: %.4f\nturntable_homed: %s\nturntable_moving: %s\n",
+                   rig_turntable_name(r->turntable), st.angle_deg, yes_no(st.homed), yes_no(st.moving || st.homing));
+            if (st.motion_error || st.limit_fwd || st.limit_rev)
+                printf("turntable_faults: %s%s%s\n", st.motion_error ? "motion-error " : "",
+                       st.limit_fwd ? "limit-forward " : "", st.limit_rev ? "limit-reverse" : "");
+        }
     } else {
         printf("turntable: none\n");
     }
@@ -211,18 +223,26 @@ static int do_status(rig_t *r)
     }
     if (r->camera) {
         rig_frame_meta_t m;
-        if ((rc = rig_camera_settings(r->camera, &m))) return rc;
-        printf("camera: %s\ncamera_vendor: %s\ncamera_model: %s\ncamera_serial: %s\n"
-               "camera_pixel_format: %s (%d bits)\ncamera_region: %d x %d at (%d, %d)\n"
-               "camera_exposure_us: %.6g\ncamera_gain: %.6g\n",
-               rig_camera_name(r->camera), m.vendor, m.model, m.serial, m.pixel_format, m.bits, m.width, m.height,
-               m.offset_x, m.offset_y, m.exposure_us, m.gain);
-        if (isfinite(m.temperature_c)) printf("camera_temperature_c: %.2f\n", m.temperature_c);
-        else printf("camera_temperature_c: none (the camera has no sensor)\n");
+        if ((e = rig_camera_settings(r->camera, &m))) {
+            printf("camera: %s\ncamera_error: %s\n", rig_camera_name(r->camera), model_last_error());
+            failed[nfailed++] = "camera";
+            if (!rc) rc = e;
+        } else {
+            printf("camera: %s\ncamera_vendor: %s\ncamera_model: %s\ncamera_serial: %s\n"
+                   "camera_pixel_format: %s (%d bits)\ncamera_region: %d x %d at (%d, %d)\n"
+                   "camera_exposure_us: %.6g\ncamera_gain: %.6g\n",
+                   rig_camera_name(r->camera), m.vendor, m.model, m.serial, m.pixel_format, m.bits, m.width, m.height,
+                   m.offset_x, m.offset_y, m.exposure_us, m.gain);
+            if (isfinite(m.temperature_c)) printf("camera_temperature_c: %.2f\n", m.temperature_c);
+            else printf("camera_temperature_c: none (the camera has no sensor)\n");
+        }
     } else {
         printf("camera: none\n");
     }
-    return 0;
+    if (nfailed)
+        rig_fail(rc, "refl rig status: the %s%s%s did not answer (its %s_error line above)", failed[0],
+                 nfailed > 1 ? " and the " : "", nfailed > 1 ? failed[1] : "", nfailed > 1 ? "DEVICE" : failed[0]);
+    return rc;
 }
 
 static int do_identify(rig_t *r)
@@ -400,6 +420,27 @@ done:
     return rc;
 }
 
+// snap -o FILE, before the rig is opened: FILE is not a directory, its
+// directory exists and this process may write there.
+static int check_out_path(const char *out)
+{
+    struct stat st;
+    if (stat(out, &st) == 0 && S_ISDIR(st.st_mode))
+        return rig_fail(RIG_ERR_INVALID, "refl rig snap: -o %s is a directory: name the PNG file to write", out);
+    char *dir = g_path_get_dirname(out);
+    int rc = 0;
+    if (stat(dir, &st) != 0)
+        rc = rig_fail(RIG_ERR_IO, "refl rig snap: -o %s: the directory %s does not exist (%s): create it first", out,
+                      dir, strerror(errno));
+    else if (!S_ISDIR(st.st_mode))
+        rc = rig_fail(RIG_ERR_IO, "refl rig snap: -o %s: %s is not a directory", out, dir);
+    else if (access(dir, W_OK | X_OK) != 0)
+        rc = rig_fail(RIG_ERR_IO, "refl rig snap: -o %s: cannot write in the directory %s (%s)", out, dir,
+                      strerror(errno));
+    g_free(dir);
+    return rc;
+}
+
 // True when the rig file is a virtual rig (a [rig] section); errors are left
 // to rig_open.
 static bool file_is_virtual(const char *path, bool *readable)
@@ -438,6 +479,7 @@ int rig_cmd(int argc, char **argv)
         size_t n = strlen(so.out);
         if (n < 4 || strcasecmp(so.out + n - 4, ".png"))
             return model_cli_error(&c, "option -o: '%s' must end in .png (16-bit grey PNG)", so.out);
+        if ((rc = check_out_path(so.out))) return 1;
         if (model_cli_value(&c, "--angle")) {
             so.have_angle = true;
             if ((rc = parse_angle(&c, "option --angle", model_cli_value(&c, "--angle"), &so.angle_deg))) return rc;
@@ -489,7 +531,7 @@ int rig_cmd(int argc, char **argv)
     }
 
     if (!strcmp(action, "status")) {
-        rc = do_status(r);
+        rc = rig_cmd_status(r);
     } else if (!strcmp(action, "identify")) {
         rc = do_identify(r);
     } else if (!strcmp(action, "home")) {

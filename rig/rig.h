@@ -74,6 +74,9 @@ int  rig_config_parse(const char *text, size_t len, const char *name);
 
 // `refl rig` (rig/cmd_rig.c).
 int rig_cmd(int argc, char **argv);
+// `refl rig status` of an open rig on stdout: every device, also after one
+// fails (its DEVICE_error line); 0, or the first failure's RIG_ERR_* code.
+int rig_cmd_status(rig_t *r);
 
 #ifdef __cplusplus
 }

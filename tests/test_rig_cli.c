@@ -2,7 +2,8 @@
 // usage errors, a simulated rig, the virtual rig (status, home, move,
 // identify, snap with its PNG metadata and pixel statistics, serve stopped by
 // SIGTERM), and lamps switched off and released on error paths (gpiod lamps
-// through the fake libgpiod of tests/fake_gpiod.c).
+// through the fake libgpiod of tests/fake_gpiod.c); status reporting every
+// device when one fails (in-process); snap checking -o before it opens the rig.
 //
 // Only one virtual camera serves 127.0.0.1 at a time: the virtual-rig tests
 // hold the lock of tests/test_rig_camera_aravis.c throughout, and run one refl at
@@ -18,10 +19,12 @@
 #include <stdarg.h>
 #include <stdlib.h>
 #include <sys/file.h>
+#include <sys/stat.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
 #include "model/model.h"
+#include "rig/rig.h"
 #include "tests/test.h"
 
 #define refl(out, err, ...) test_refl_run(120, out, err, __VA_ARGS__)
@@ -489,6 +492,107 @@ TEST(rigcli_gpiod_lamps_off_on_errors)
     CHECK_MSG(rc == 0, "identify: %d %s", rc, err);
     CHECK_CONTAINS(out, "lamp key: gpiod gpiochip0 line 3 active-high");
     CHECK_CONTAINS(out, "lamp fill: gpiod gpiochip0 line 5 active-low");
+    free(out);
+    free(err);
+}
+
+// stdout of fn(r) into a file: its text (caller frees) and fn's return value.
+static char *stdout_of(int (*fn)(rig_t *), rig_t *r, int *rc)
+{
+    const char *path = test_path("stdout.txt");
+    fflush(stdout);
+    int saved = dup(1), fd = open(path, O_WRONLY | O_CREAT | O_TRUNC, 0644);
+    dup2(fd, 1);
+    close(fd);
+    *rc = fn(r);
+    fflush(stdout);
+    dup2(saved, 1);
+    close(saved);
+    return model_read_file(path, NULL);
+}
+
+// `refl rig status` reports every device when one fails (a simulated stage
+// that disconnected): the turntable's error, then the lamps and the camera,
+// and a non-zero status.
+TEST(rigcli_status_every_device)
+{
+    const char *path = test_write("sim-fault.ini",
+                                  "[turntable]\nbackend = sim\ntime_scale = 0.001\nposition_noise_deg = 0\nseed = 3\n"
+                                  "fault_after_moves = 1\nfault = disconnected\n"
+                                  "[lamp key]\nbackend = sim\n[lamp fill]\nbackend = sim\n");
+    rig_t *r = NULL;
+    CHECK(rig_open(&r, path) == 0);
+    if (!r) return;
+    int rc = -1;
+    char *out = stdout_of(rig_cmd_status, r, &rc);
+    CHECK(rc == 0);
+    CHECK_CONTAINS(out, "turntable_homed: no\n");
+    free(out);
+    CHECK(rig_turntable_home(r->turntable, 5.0) == 0);
+    CHECK(rig_turntable_move_abs_deg(r->turntable, 10, 5.0) == 0);
+    CHECK(rig_turntable_move_abs_deg(r->turntable, 20, 5.0) == RIG_ERR_DISCONNECTED);
+    out = stdout_of(rig_cmd_status, r, &rc);
+    CHECK(rc == RIG_ERR_DISCONNECTED);
+    CHECK_CONTAINS(out, "turntable: sim turntable (seed 3)\nturntable_error: ");
+    CHECK_CONTAINS(out, "disconnected");
+    CHECK_CONTAINS(out, "lamp key: off (sim)\nlamp fill: off (sim)\n");   // reported after the failure
+    CHECK_CONTAINS(out, "camera: none\n");
+    CHECK_CONTAINS(model_last_error(), "refl rig status: the turntable did not answer");
+    free(out);
+    rig_close(r);
+}
+
+// `refl rig snap -o FILE` checks FILE before the rig is opened (nothing is
+// captured): its directory exists and is writable, FILE is no directory, it
+// ends in .png.
+TEST(rigcli_snap_checks_output_first)
+{
+    const char *rig = test_write("sim.ini",
+                                 "[turntable]\nbackend = sim\ntime_scale = 0.001\n[lamp key]\nbackend = sim\n");
+    char *out = NULL, *err = NULL;
+    int rc = refl(&out, &err, "rig", "--rig", rig, "snap", "-o", test_path("no/such/dir/x.png"), NULL);
+    CHECK(rc == 1);
+    CHECK_CONTAINS(err, "no/such/dir does not exist");
+    CHECK(err && !strstr(err, "opening"));   // before the rig is opened (this rig has no camera)
+    free(out);
+    free(err);
+    const char *d = test_path("d.png");
+    CHECK(mkdir(d, 0755) == 0);
+    rc = refl(&out, &err, "rig", "--rig", rig, "snap", "-o", d, NULL);
+    CHECK(rc == 1);
+    CHECK_CONTAINS(err, "is a directory");
+    CHECK(err && !strstr(err, "opening"));
+    free(out);
+    free(err);
+    const char *f = test_write("plain", "x");
+    char in_file[4200];
+    snprintf(in_file, sizeof in_file, "%s/x.png", f);
+    rc = refl(&out, &err, "rig", "--rig", rig, "snap", "-o", in_file, NULL);
+    CHECK(rc == 1);
+    CHECK_CONTAINS(err, "is not a directory");
+    free(out);
+    free(err);
+    if (geteuid() != 0) {   // root writes anywhere
+        const char *ro = test_path("ro");
+        CHECK(mkdir(ro, 0555) == 0);
+        char p[4200];
+        snprintf(p, sizeof p, "%s/x.png", ro);
+        rc = refl(&out, &err, "rig", "--rig", rig, "snap", "-o", p, NULL);
+        CHECK(rc == 1);
+        CHECK_CONTAINS(err, "cannot write in the directory");
+        CHECK(err && !strstr(err, "opening"));
+        free(out);
+        free(err);
+    }
+    rc = refl(&out, &err, "rig", "--rig", rig, "snap", "-o", test_path("x.jpg"), NULL);
+    CHECK(rc == 2);
+    CHECK_CONTAINS(err, "must end in .png");
+    free(out);
+    free(err);
+    // a good path goes on to the rig (which has no camera here)
+    rc = refl(&out, &err, "rig", "--rig", rig, "snap", "-o", test_path("x.png"), NULL);
+    CHECK(rc == 1);
+    CHECK_CONTAINS(err, "has no camera");
     free(out);
     free(err);
 }
