@@ -450,13 +450,20 @@ typedef struct {
     bool   bar;
     double t0;
     int    total, done0;
+    int    nrun;            // steps carried out in this run
+    double t1;              // when the first of them ended
 } progress_t;
 
-static void progress(progress_t *pg, int done, const rig_step_t *s, double remaining_floor_s)
+// A step ended (done: its position + 1). The ETA: the steps still pending
+// (remaining) at the pace of this run's steps after its first one (the first
+// carries the start: a long move from where the stage stood, the camera's
+// first frame); after the first step, the hardware floor of the rest
+// (remaining_floor_s).
+static void progress(progress_t *pg, int done, const rig_step_t *s, int remaining, double remaining_floor_s)
 {
-    double el = model_now_s() - pg->t0;
-    int run = done - pg->done0;
-    double eta = run > 0 ? el / run * (pg->total - done) : remaining_floor_s;
+    double now = model_now_s();
+    double eta = pg->nrun > 0 ? (now - pg->t1) / pg->nrun * remaining : remaining_floor_s;
+    if (pg->nrun++ == 0) pg->t1 = now;
     if (pg->bar) {
         int width = 30, fill = pg->total ? (int)((double)done * width / pg->total) : width;
         char bar[64];
@@ -610,11 +617,13 @@ static int run_plan(run_t *x)
     bool plan_same = file_sha(pp, sha) && !strcmp(sha, x->s_plan_sha);
     bool rig_same = file_sha(x->rig_path, sha) && !strcmp(sha, x->s_rig_sha);
     if ((!plan_same || !rig_same) && !o->allow_changed) {
-        x->rc = rig_fail(RIG_ERR_INVALID, "refl capture --resume %s: the %s%s%s changed since the session started "
-                         "(sha256 differs from the journal's): resume with the original files, or add "
-                         "--allow-changed to continue the stored step list anyway", o->dir,
-                         plan_same ? "" : "plan ", !plan_same && !rig_same ? "and the rig file " : "",
-                         plan_same ? "rig file " : (rig_same ? pp : pp));
+        char *what = g_strdup_printf("%s%s%s%s%s", plan_same ? "" : "the plan file ", plan_same ? "" : pp,
+                                     !plan_same && !rig_same ? " and " : "", rig_same ? "" : "the rig file ",
+                                     rig_same ? "" : x->rig_path);
+        x->rc = rig_fail(RIG_ERR_INVALID, "refl capture --resume %s: %s changed since the session started "
+                         "(sha256 differs from the journal's, or the file is gone): resume with the original "
+                         "files, or add --allow-changed to continue the stored step list anyway", o->dir, what);
+        g_free(what);
         return RUN_DONE;
     }
     // The stored plan text defines the steps (identical to the first run).
@@ -628,6 +637,34 @@ static int run_plan(run_t *x)
     return RUN_ON;
 }
 
+// --resume: the camera is the one the session started with (its serial
+// against the journal's facts); another camera is refused unless
+// --allow-changed (then the event log says so).
+static int check_camera(run_t *x)
+{
+    char *facts = NULL;
+    if (!x->r->camera || rig_journal_facts(x->j, &facts)) {
+        free(facts);
+        return 0;
+    }
+    json_t *f = facts[0] ? json_loads(facts, 0, NULL) : NULL;
+    free(facts);
+    const char *was = json_string_value(json_object_get(json_object_get(f, "camera"), "serial"));
+    rig_frame_meta_t m;
+    int rc = 0;
+    if (was && was[0] && !(rc = rig_camera_settings(x->r->camera, &m)) && strcmp(was, m.serial)) {
+        if (!x->o->allow_changed)
+            rc = rig_fail(RIG_ERR_INVALID, "refl capture --resume %s: the camera changed: serial %s now, the "
+                          "session started with serial %s: connect that camera, or add --allow-changed to continue "
+                          "with this one", x->o->dir, m.serial, was);
+        else
+            rig_journal_event(x->j, -1, "info", "resumed with another camera: serial %s, the session started with "
+                              "%s (--allow-changed)", m.serial, was);
+    }
+    json_decref(f);
+    return rc;
+}
+
 // The rig (opened, the plan bound to it; a dry run ends here), the session
 // directory and journal (created, or on --resume its frames recovered), the
 // steps' status.
@@ -637,6 +674,7 @@ static int run_session(run_t *x)
     rig_plan_t *p = x->p;
     fprintf(stderr, "refl capture: opening the rig %s\n", x->rig_path);
     if ((x->rc = rig_open(&x->r, x->rig_path))) return RUN_DONE;
+    if (o->resume && (x->rc = check_camera(x))) return RUN_DONE;
     if ((x->rc = rig_plan_bind(p, x->r))) return RUN_DONE;
     if (o->dry_run) {
         print_dry_run(p, x->r);
@@ -840,7 +878,9 @@ static int step_capture(run_t *x, const rig_step_t *s)
     double T_p0 = model_now_s();
     writer_push(&x->w, jb);
     x->T_push += model_now_s() - T_p0;
-    progress(&x->pg, step + 1, s, step == x->first ? rig_plan_floor_s(p, r, step + 1) : 0);
+    int remaining = 0;
+    for (int i = step + 1; i < p->nsteps; i++) remaining += x->status[i] == 'p';
+    progress(&x->pg, step + 1, s, remaining, x->pg.nrun == 0 ? rig_plan_floor_s(p, r, step + 1) : 0);
     return RUN_ON;
 }
 

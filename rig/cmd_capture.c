@@ -92,22 +92,29 @@ int rig_cmd_capture(int argc, char **argv)
 // ---------------------------------------------------------------------------
 // refl session
 
-static const char session_about[] =
-    "also:  refl session export DIR --format csv|json [-o FILE]\n"
-    "\ncheck: verify every frame of the session against its sha256 and list the steps still missing\n"
-    "(exit 0 when every committed frame is intact, 1 otherwise).\n"
-    "export: the frame table, one row per frame (stdout unless -o).";
+enum { SESSION_CHECK_LIST = 10 };   // missing steps listed one by one (the count covers all)
 
-static int session_check(const char *dir)
+static const char session_about[] =
+    "actions:\n"
+    "  check DIR    every frame against its sha256, the steps still missing and SQLite's integrity\n"
+    "               check of the journal (refl session check --help)\n"
+    "  export DIR   the frame table, one row per frame (refl session export --help)";
+
+static const char session_check_about[] =
+    "Checks the session in DIR: every committed frame against the sha256 in the journal, SQLite's\n"
+    "PRAGMA integrity_check on the journal (DIR/session.sqlite), and the steps not yet captured (their\n"
+    "count, and the first 10 with their angle, lamps and exposure).\n"
+    "Exit: 0 when every frame is intact, the journal passes and no step is missing (--allow-incomplete:\n"
+    "missing steps are fine), 1 otherwise.";
+
+static const char session_export_about[] =
+    "Writes the frame table of the session in DIR, one row per frame, as CSV (a header line) or JSON\n"
+    "(an array of objects), to stdout or to -o FILE.";
+
+// The frames against their hashes; prints each bad one. The count of bad frames.
+static int check_frames(const char *dir, const rig_frame_row_t *rows, int nrows)
 {
-    rig_journal_t *j = NULL;
-    rig_frame_row_t *rows = NULL;
-    rig_step_t *steps = NULL;
-    char *status = NULL;
-    int nrows = 0, nsteps = 0, bad = 0, missing = 0, skipped = 0, rc = 1;
-    if (rig_journal_open(&j, dir) || rig_journal_frames(j, &rows, &nrows) ||
-        rig_journal_steps(j, &steps, &status, &nsteps))
-        goto done;
+    int bad = 0;
     for (int i = 0; i < nrows; i++) {
         char path[4200], sha[65];
         snprintf(path, sizeof path, "%s/%s", dir, rows[i].file);
@@ -122,22 +129,55 @@ static int session_check(const char *dir)
             bad++;
         }
     }
+    return bad;
+}
+
+static int session_check(const char *dir, bool allow_incomplete)
+{
+    rig_journal_t *j = NULL;
+    rig_frame_row_t *rows = NULL;
+    rig_step_t *steps = NULL;
+    char *status = NULL, *integrity = NULL;
+    int nrows = 0, nsteps = 0, bad = 0, missing = 0, skipped = 0, rc = 1;
+    if (rig_journal_open(&j, dir)) goto done;
+    if (rig_journal_integrity(j, &integrity)) goto done;
+    bool intact = !strcmp(integrity, "ok");
+    if (!intact) {
+        printf("journal_integrity: FAILED: %s\n", integrity);
+        rig_fail(RIG_ERR_IO, "refl session check: %s fails SQLite's integrity check: %s", rig_journal_path(j),
+                 integrity);
+        goto done;
+    }
+    if (rig_journal_frames(j, &rows, &nrows) || rig_journal_steps(j, &steps, &status, &nsteps)) goto done;
+    bad = check_frames(dir, rows, nrows);
     for (int i = 0; i < nsteps; i++) {
         if (status[i] == 's') skipped++;
         if (status[i] != 'p') continue;
-        if (missing < 50)
+        if (missing < SESSION_CHECK_LIST)
             printf("missing step %d: %s angle %g deg lamps %s exposure %g us\n", steps[i].index,
                    steps[i].kind == RIG_STEP_DARK ? "dark" : "light", steps[i].angle_deg, steps[i].lamps,
                    steps[i].exposure_us);
         missing++;
     }
+    if (missing > SESSION_CHECK_LIST)
+        printf("... and %d more missing step(s) (%d in all)\n", missing - SESSION_CHECK_LIST, missing);
     char state[32] = "";
     rig_journal_state(j, state, sizeof state);
-    printf("session: %s\nstate: %s\nsteps: %d\nframes: %d\nframes_verified: %d\nframes_bad: %d\nsteps_skipped: %d\n"
-           "steps_missing: %d\n", dir, state, nsteps, nrows, nrows - bad, bad, skipped, missing);
-    if (bad) rig_fail(RIG_ERR_IO, "refl session check: %d frame(s) of %s fail their hash or are missing", bad, dir);
-    rc = bad ? 1 : 0;
+    printf("session: %s\nstate: %s\njournal_integrity: ok\nsteps: %d\nframes: %d\nframes_verified: %d\n"
+           "frames_bad: %d\nsteps_skipped: %d\nsteps_missing: %d\n", dir, state, nsteps, nrows, nrows - bad, bad,
+           skipped, missing);
+    rc = 0;
+    if (bad) {
+        rig_fail(RIG_ERR_IO, "refl session check: %d frame(s) of %s fail their hash or are missing", bad, dir);
+        rc = 1;
+    }
+    if (missing && !allow_incomplete) {
+        rig_fail(RIG_ERR_INVALID, "refl session check: %s is incomplete: %d of %d step(s) missing (continue it "
+                 "with refl capture --resume %s, or add --allow-incomplete)", dir, missing, nsteps, dir);
+        rc = 1;
+    }
 done:
+    g_free(integrity);
     free(rows);
     free(steps);
     free(status);
@@ -178,27 +218,45 @@ done:
     return rc;
 }
 
-int rig_cmd_session(int argc, char **argv)
+static int cmd_session_check(int argc, char **argv)
+{
+    bool allow_incomplete = false;
+    model_opt_t opts[] = {
+        MODEL_OPT_FLAG("--allow-incomplete", NULL, "missing steps are not an error (exit 0 when the rest is fine)",
+                       &allow_incomplete),
+    };
+    model_cli_t c = { .cmd = "session check", .synopsis = "DIR", .about = session_check_about, .opts = opts,
+                      .nopts = MODEL_NOPTS(opts), .min_positional = 1, .max_positional = 1 };
+    int rc = model_cli_parse(&c, argc, argv);
+    if (rc != MODEL_CLI_OK) return rc == MODEL_CLI_HELP ? 0 : rc;
+    return session_check(c.positional[0], allow_incomplete);
+}
+
+static int cmd_session_export(int argc, char **argv)
 {
     const char *format = NULL, *out = NULL;
     model_opt_t opts[] = {
-        MODEL_OPT_STRING("--format", "csv|json", "export: the output format", &format, false),
-        MODEL_OPT_STRING("-o", "FILE", "export: write to FILE instead of stdout", &out, false),
+        MODEL_OPT_STRING("--format", "csv|json", "the output format", &format, true),
+        MODEL_OPT_STRING("-o", "FILE", "write to FILE instead of stdout", &out, false),
     };
-    model_cli_t c = { .cmd = "session", .synopsis = "check|export DIR", .about = session_about, .opts = opts,
-                      .nopts = MODEL_NOPTS(opts), .min_positional = 0, .max_positional = 2 };
+    model_cli_t c = { .cmd = "session export", .synopsis = "DIR", .about = session_export_about, .opts = opts,
+                      .nopts = MODEL_NOPTS(opts), .min_positional = 1, .max_positional = 1 };
     int rc = model_cli_parse(&c, argc, argv);
     if (rc != MODEL_CLI_OK) return rc == MODEL_CLI_HELP ? 0 : rc;
-    if (c.npositional < 2) return model_cli_error(&c, "needs an action and a directory: check DIR | export DIR");
-    const char *action = c.positional[0], *dir = c.positional[1];
-    if (!strcmp(action, "check")) {
-        if (format || out) return model_cli_error(&c, "check takes no options");
-        return session_check(dir);
-    }
-    if (!strcmp(action, "export")) {
-        if (!format || (strcmp(format, "csv") && strcmp(format, "json")))
-            return model_cli_error(&c, "export needs --format csv or --format json");
-        return session_export(dir, format, out);
-    }
-    return model_cli_error(&c, "unknown action (check or export): %s", action);
+    if (strcmp(format, "csv") && strcmp(format, "json"))
+        return model_cli_error(&c, "option --format: write csv or json, not %s", format);
+    return session_export(c.positional[0], format, out);
+}
+
+int rig_cmd_session(int argc, char **argv)
+{
+    // argv[0] is "session"; an action parses its own options (and --help).
+    if (argc >= 2 && !strcmp(argv[1], "check")) return cmd_session_check(argc - 1, argv + 1);
+    if (argc >= 2 && !strcmp(argv[1], "export")) return cmd_session_export(argc - 1, argv + 1);
+    model_cli_t c = { .cmd = "session", .synopsis = "check|export DIR", .about = session_about,
+                      .min_positional = 0, .max_positional = 2 };
+    int rc = model_cli_parse(&c, argc, argv);
+    if (rc != MODEL_CLI_OK) return rc == MODEL_CLI_HELP ? 0 : rc;
+    if (c.npositional < 1) return model_cli_error(&c, "needs an action and a directory: check DIR | export DIR");
+    return model_cli_error(&c, "unknown action (check or export): %s", c.positional[0]);
 }

@@ -317,6 +317,33 @@ int rig_journal_nsteps(rig_journal_t *j)
     return n;
 }
 
+int rig_journal_integrity(rig_journal_t *j, char **result)
+{
+    *result = NULL;
+    sqlite3_stmt *s = NULL;
+    int rc = 0;
+    pthread_mutex_lock(&j->lock);
+    if (sqlite3_prepare_v2(j->db, "PRAGMA integrity_check(20)", -1, &s, NULL) != SQLITE_OK) {
+        rc = jfail(j, "cannot run PRAGMA integrity_check");
+    } else {
+        GString *g = g_string_new(NULL);
+        int st;
+        while ((st = sqlite3_step(s)) == SQLITE_ROW) {
+            const unsigned char *t = sqlite3_column_text(s, 0);
+            g_string_append_printf(g, "%s%s", g->len ? "; " : "", t ? (const char *)t : "");
+        }
+        if (st != SQLITE_DONE) {
+            g_string_append_printf(g, "%s%s", g->len ? "; " : "", sqlite3_errmsg(j->db));
+        }
+        *result = g_string_free(g, FALSE);
+    }
+    sqlite3_finalize(s);
+    pthread_mutex_unlock(&j->lock);
+    return rc;
+}
+
+const char *rig_journal_path(const rig_journal_t *j) { return j->path; }
+
 int rig_journal_steps(rig_journal_t *j, rig_step_t **steps, char **status, int *n)
 {
     *steps = NULL;

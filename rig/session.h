@@ -175,6 +175,12 @@ int  rig_journal_source(rig_journal_t *j, const char *which, char **path, char *
 int  rig_journal_nsteps(rig_journal_t *j);
 // The session facts (JSON object text, as given at create). Caller frees.
 int  rig_journal_facts(rig_journal_t *j, char **json);
+// SQLite's PRAGMA integrity_check on the journal: *result (caller frees with
+// g_free) is "ok" when the database is intact, else SQLite's findings (joined
+// by "; "). 0, or a RIG_ERR_* when the check cannot run.
+int  rig_journal_integrity(rig_journal_t *j, char **result);
+// DIR/session.sqlite, as opened.
+const char *rig_journal_path(const rig_journal_t *j);
 // Steps (as stored) and their status: 'p'ending, 'd'one, 's'kipped. Caller frees both.
 int  rig_journal_steps(rig_journal_t *j, rig_step_t **steps, char **status, int *n);
 int  rig_journal_frames(rig_journal_t *j, rig_frame_row_t **rows, int *n);

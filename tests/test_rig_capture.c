@@ -6,7 +6,11 @@
 // export; a full disk (a 3 MB tmpfs where mount is allowed, and everywhere an
 // ENOSPC injected by tests/enospc_shim.c); a
 // camera that stops answering (in-process, triggers dropped through the
-// before_step hook); a stalled turntable (truth file with fault keys).
+// before_step hook); a stalled turntable (truth file with fault keys); the
+// session subcommands' help; refl session check of a paused session (missing
+// steps, --allow-incomplete, SQLite's integrity check); --resume refusing a
+// changed rig file (named) and another camera (both serials); the ETA after
+// --resume.
 //
 // Only one virtual camera serves 127.0.0.1 at a time: these tests hold the
 // lock of tests/test_rig_camera_aravis.c throughout.
@@ -354,7 +358,7 @@ static void disk_full_body(const char *dir, const char *const *env)
     CHECK(n >= 1 && n < 24);
     CHECK(n == count_frames(dir));
     CHECK(count_events(dir, "fault") >= 1);
-    rc = refl(&out, &err, "session", "check", dir, NULL);
+    rc = refl(&out, &err, "session", "check", dir, "--allow-incomplete", NULL);   // stopped part way
     CHECK_MSG(rc == 0, "%s", out);
     CHECK_CONTAINS(out, "frames_bad: 0");
     g_free(out);
@@ -497,5 +501,197 @@ TEST(capture_auto_bracketing_skips)
     CHECK_CONTAINS(out, ",east,64000,");   // brightest pixel above 90 % (the statuses above say so)
     g_free(out);
     g_free(err);
+    test_camera_unlock(lk);
+}
+
+TEST(session_help)
+{
+    char *out = NULL, *err = NULL;
+    int rc = refl(&out, &err, "session", "check", "--help", NULL);
+    CHECK_MSG(rc == 0, "%s", err);
+    CHECK_CONTAINS(out, "usage: refl session check DIR");
+    CHECK_CONTAINS(out, "--allow-incomplete");
+    CHECK_CONTAINS(out, "integrity_check");
+    g_free(out);
+    g_free(err);
+    rc = refl(&out, &err, "session", "export", "--help", NULL);
+    CHECK_MSG(rc == 0, "%s", err);
+    CHECK_CONTAINS(out, "usage: refl session export DIR");
+    CHECK_CONTAINS(out, "--format csv|json");
+    g_free(out);
+    g_free(err);
+    rc = refl(&out, &err, "session", "--help", NULL);
+    CHECK(rc == 0);
+    CHECK_CONTAINS(out, "refl session check --help");
+    g_free(out);
+    g_free(err);
+    rc = refl(&out, &err, "session", "export", test_tmpdir(), NULL);
+    CHECK(rc == 2);
+    CHECK_CONTAINS(err, "missing required option --format");
+    g_free(out);
+    g_free(err);
+    rc = refl(&out, &err, "session", "check", test_tmpdir(), "--format", "csv", NULL);
+    CHECK(rc == 2);
+    CHECK_CONTAINS(err, "unknown option '--format'");
+    g_free(out);
+    g_free(err);
+}
+
+// A copy of the example truth file in the test directory (with the files it
+// names linked), the camera's serial set to `serial`.
+static const char *truth_copy(const char *serial, bool link_files)
+{
+    char top[PATH_MAX];
+    if (!realpath(test_srcdir(), top)) snprintf(top, sizeof top, "%s", test_srcdir());
+    char src[PATH_MAX + 64];
+    snprintf(src, sizeof src, "%s/examples/virtual-truth.ini", top);
+    char *text = model_read_file(src, NULL);
+    if (!text) return NULL;
+    char *s = strstr(text, "serial = REFL-VIRT01\n");
+    GString *g = g_string_new_len(text, s ? s - text : (gssize)strlen(text));
+    if (s) g_string_append_printf(g, "serial = %s\n%s", serial, s + strlen("serial = REFL-VIRT01\n"));
+    const char *truth = test_write("truth.ini", g->str);
+    g_string_free(g, TRUE);
+    free(text);
+    const char *links[] = { "camera.cameramodel", "samples", "t_stiffener.d3d" };
+    for (int i = 0; link_files && i < 3; i++) {
+        char a[PATH_MAX + 64], b[4200];
+        snprintf(a, sizeof a, "%s/examples/%s", top, links[i]);
+        snprintf(b, sizeof b, "%s/%s", test_tmpdir(), links[i]);
+        CHECK(symlink(a, b) == 0);
+    }
+    return truth;
+}
+
+static int slow_calls;
+static void slow_first_step(void *ctx, rig_t *r, int step)
+{
+    (void)ctx;
+    (void)r;
+    (void)step;
+    if (slow_calls++ == 0) g_usleep(3000000);   // the first step of the run: a long move, say
+}
+
+// A paused session: refl session check lists what is missing and fails
+// (unless --allow-incomplete) and reports the journal's integrity check;
+// --resume refuses a changed rig file (naming it) and another camera (naming
+// both serials); the ETA after --resume counts the steps left at this run's
+// pace (not the first step's); a journal that fails SQLite's integrity check
+// is an error naming the file.
+TEST(session_check_incomplete_and_resume)
+{
+    int lk = test_camera_lock();
+    const char *truth = truth_copy("REFL-VIRT01", true);
+    const char *rig = rig_file("rig.ini", truth);
+    char *rig_text = model_read_file(rig, NULL);
+    const char *plan = test_write("plan.ini", "[sample]\nname = coupon_matte_paint\nkind = material_coupon\n"
+                                  "[angles]\nrange = 0 35 5\n[lamps]\nsets = east\n[exposure]\nmode = fixed\n"
+                                  "list_us = 1000 2000\n[capture]\nframe_timeout_s = 0.5\nretries = 2\n");
+    char dir[4096];
+    snprintf(dir, sizeof dir, "%s/s", test_tmpdir());
+    rig_capture_opts_t o = { .plan_path = plan, .rig_path = rig, .dir = dir, .progress = 0,
+                             .before_step = drop_at_step2 };
+    int rc = rig_capture_run(&o);
+    CHECK(rc == 3);
+    CHECK(count_frames(dir) == 2);
+
+    char *out = NULL, *err = NULL;
+    rc = refl(&out, &err, "session", "check", dir, NULL);
+    CHECK(rc == 1);
+    CHECK_CONTAINS(out, "journal_integrity: ok\n");
+    CHECK_CONTAINS(out, "steps_missing: 14\n");
+    CHECK_CONTAINS(out, "missing step 2: light angle 5 deg lamps east exposure 1000 us\n");
+    CHECK_CONTAINS(out, "missing step 11: light angle 25 deg lamps east exposure 2000 us\n");
+    CHECK(out && !strstr(out, "missing step 12:"));
+    CHECK_CONTAINS(out, "... and 4 more missing step(s) (14 in all)");
+    CHECK_CONTAINS(out, "frames_bad: 0\n");
+    CHECK_CONTAINS(err, "is incomplete: 14 of 16 step(s) missing");
+    CHECK_CONTAINS(err, "--allow-incomplete");
+    g_free(out);
+    g_free(err);
+    rc = refl(&out, &err, "session", "check", dir, "--allow-incomplete", NULL);
+    CHECK_MSG(rc == 0, "%s", err);
+    CHECK_CONTAINS(out, "steps_missing: 14\n");
+    g_free(out);
+    g_free(err);
+
+    // the rig file changed: the refusal names it
+    char *changed = g_strdup_printf("%s# changed\n", rig_text ? rig_text : "");
+    test_write("rig.ini", changed);
+    g_free(changed);
+    rc = refl(&out, &err, "capture", "--resume", dir, NULL);
+    CHECK(rc == 1);
+    char *want = g_strdup_printf("the rig file %s changed since the session started", rig);
+    CHECK_CONTAINS(err, want);
+    g_free(want);
+    g_free(out);
+    g_free(err);
+    test_write("rig.ini", rig_text ? rig_text : "");
+
+    // another camera (the same rig file; the virtual camera's serial changed)
+    truth_copy("REFL-OTHER7", false);
+    rc = refl(&out, &err, "capture", "--resume", dir, NULL);
+    CHECK(rc == 1);
+    CHECK_CONTAINS(err, "the camera changed: serial REFL-OTHER7 now, the session started with serial REFL-VIRT01");
+    CHECK_CONTAINS(err, "--allow-changed");
+    g_free(out);
+    g_free(err);
+    CHECK(count_frames(dir) == 2);
+    truth_copy("REFL-VIRT01", false);
+
+    // resume (in-process, its progress lines on stderr into a file); the first
+    // step of the run is slow
+    const char *log = test_path("progress.txt");
+    fflush(stderr);
+    int saved = dup(2), fd = open(log, O_WRONLY | O_CREAT | O_TRUNC, 0644);
+    dup2(fd, 2);
+    close(fd);
+    slow_calls = 0;
+    o.resume = true;
+    o.before_step = slow_first_step;
+    rc = rig_capture_run(&o);
+    fflush(stderr);
+    dup2(saved, 2);
+    close(saved);
+    CHECK(rc == 0);
+    CHECK(count_frames(dir) == 16);
+    char *lines = model_read_file(log, NULL);
+    double eta[32];
+    int neta = 0;
+    for (char *l = lines; l && (l = strstr(l, "refl capture: step ")); l++) {
+        int done = 0, total = 0;
+        char *e = strstr(l, "(ETA ");
+        if (sscanf(l, "refl capture: step %d/%d", &done, &total) == 2 && e && neta < 32) eta[neta++] = atof(e + 5);
+    }
+    CHECK_MSG(neta == 14, "%d progress lines: %s", neta, lines ? lines : "");
+    // the second step of the run: 12 steps left at the pace of a step after
+    // the first (the old estimate took the first's 3 s in: 12 x 1.5 s)
+    if (neta == 14) {
+        CHECK_MSG(eta[1] <= 6, "ETA %g s with 12 steps left: %s", eta[1], lines);
+        CHECK(eta[13] == 0);
+    }
+    free(lines);
+    rc = refl(&out, &err, "session", "check", dir, NULL);
+    CHECK_MSG(rc == 0, "%s %s", out, err);
+    CHECK_CONTAINS(out, "steps_missing: 0\n");
+    g_free(out);
+    g_free(err);
+
+    // a journal that fails SQLite's integrity check: two tables on one b-tree
+    char db[4200];
+    snprintf(db, sizeof db, "%s/session.sqlite", dir);
+    sqlite3 *d = NULL;
+    CHECK(sqlite3_open(db, &d) == SQLITE_OK);
+    CHECK(sqlite3_exec(d, "PRAGMA writable_schema=ON; UPDATE sqlite_master SET rootpage=(SELECT rootpage FROM "
+                       "sqlite_master WHERE name='steps') WHERE name='events';", NULL, NULL, NULL) == SQLITE_OK);
+    sqlite3_close(d);
+    rc = refl(&out, &err, "session", "check", dir, NULL);
+    CHECK(rc == 1);
+    CHECK_CONTAINS(out, "journal_integrity: FAILED");
+    CHECK_CONTAINS(err, db);
+    CHECK_CONTAINS(err, "fails SQLite's integrity check");
+    g_free(out);
+    g_free(err);
+    free(rig_text);
     test_camera_unlock(lk);
 }
