@@ -23,7 +23,8 @@ static const char capture_about[] =
     "estimated duration and disk use and checks the plan against the rig; nothing moves.\n"
     "--calib DIR records the calibrations in use (their paths and sha256) in the session.\n"
     "--resume continues a stopped session where it stopped; it refuses when the plan or the rig file\n"
-    "changed since (--allow-changed continues the stored step list anyway).\n"
+    "changed since, or the camera is another one (its serial differs from the journal's);\n"
+    "--allow-changed continues the stored step list anyway.\n"
     "First Ctrl-C: finish the frame, lamps off, pause (exit 3); second: stop at once.\n"
     "Exit: 0 complete, 1 error or fault, 2 usage, 3 paused.";
 
@@ -55,7 +56,7 @@ int rig_cmd_capture(int argc, char **argv)
         MODEL_OPT_FLAG("--dry-run", NULL, "print the steps and check the plan against the rig; nothing moves",
                        &dry_run),
         MODEL_OPT_STRING("--resume", "DIR", "continue the session in DIR where it stopped", &resume_dir, false),
-        MODEL_OPT_FLAG("--allow-changed", NULL, "--resume: continue although the plan or rig file changed",
+        MODEL_OPT_FLAG("--allow-changed", NULL, "--resume: continue although the plan, rig file or camera changed",
                        &allow_changed),
     };
     model_cli_t c = { .cmd = "capture", .synopsis = "PLAN.ini", .about = capture_about, .opts = opts,
