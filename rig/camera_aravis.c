@@ -32,6 +32,7 @@
 
 #include "rig/gv_camera.h"
 #include "rig/internal.h"
+#include "rig/pixfmt.h"
 
 #define N_BUFFERS 4
 
@@ -183,13 +184,14 @@ static int start_stream(rig_camera_t *c)
     return 0;
 }
 
-static int format_bits(ArvPixelFormat pf, const char **name)
+// The formats refl records (rig/pixfmt.h), for messages.
+static void format_names(char *buf, size_t size)
 {
-    switch (pf) {
-    case ARV_PIXEL_FORMAT_MONO_8:  *name = "Mono8";  return 8;
-    case ARV_PIXEL_FORMAT_MONO_12: *name = "Mono12"; return 12;
-    case ARV_PIXEL_FORMAT_MONO_16: *name = "Mono16"; return 16;
-    default: *name = NULL; return 0;
+    buf[0] = 0;
+    for (int f = 0; f < RIG_PIXFMT_COUNT; f++) {
+        size_t len = strlen(buf);
+        snprintf(buf + len, size - len, "%s%s", f == 0 ? "" : f == RIG_PIXFMT_COUNT - 1 ? " or " : ", ",
+                 rig_pixfmt_name((rig_pixfmt_t)f));
     }
 }
 
@@ -230,10 +232,11 @@ static int op_settings(rig_camera_t *c, rig_frame_meta_t *m)
     if (e) return fail_gerror(c, &e, "reading the region");
     ArvPixelFormat pf = arv_camera_get_pixel_format(a->cam, &e);
     if (e) return fail_gerror(c, &e, "reading PixelFormat");
-    const char *name;
-    m->bits = format_bits(pf, &name);
-    if (name) snprintf(m->pixel_format, sizeof m->pixel_format, "%s", name);
-    else {
+    rig_pixfmt_t fmt;
+    if (rig_pixfmt_from_pfnc((uint32_t)pf, &fmt)) {
+        m->bits = rig_pixfmt_bits(fmt);
+        snprintf(m->pixel_format, sizeof m->pixel_format, "%s", rig_pixfmt_name(fmt));
+    } else {
         const char *s = arv_camera_get_pixel_format_as_string(a->cam, NULL);
         snprintf(m->pixel_format, sizeof m->pixel_format, "%s", s ? s : "?");
     }
@@ -268,9 +271,13 @@ static int op_set_pixel_format(rig_camera_t *c, const char *format)
         snprintf(list + len, sizeof list - len, "%s%s", i ? ", " : "", avail[i] ? avail[i] : "?");
     }
     g_free(avail);
-    if (strcmp(format, "Mono8") && strcmp(format, "Mono12") && strcmp(format, "Mono16"))
-        return rig_fail(RIG_ERR_INVALID, "%s: pixel format '%s' is not supported: refl records Mono8, Mono12 or "
-                        "Mono16 (the camera offers: %s)", c->name, format, n ? list : "none");
+    rig_pixfmt_t fmt;
+    if (!rig_pixfmt_from_name(format, &fmt)) {
+        char names[160];
+        format_names(names, sizeof names);
+        return rig_fail(RIG_ERR_INVALID, "%s: pixel format '%s' is not supported: refl records %s (the camera "
+                        "offers: %s)", c->name, format, names, n ? list : "none");
+    }
     if (!found)
         return rig_fail(RIG_ERR_NOT_SUPPORTED, "%s: the camera does not offer pixel format %s; it offers: %s",
                         c->name, format, n ? list : "none");
@@ -372,28 +379,32 @@ static int take_frame(rig_camera_t *c, ArvBuffer *b, rig_frame_t *out)
 {
     aravis_cam_t *a = impl_of(c);
     rig_frame_meta_t *m = &out->meta;
-    const char *name;
     ArvPixelFormat pf = arv_buffer_get_image_pixel_format(b);
-    int bits = format_bits(pf, &name);
-    if (!bits)
-        return rig_fail(RIG_ERR_PROTOCOL, "%s: the camera sent pixel format 0x%08x, not Mono8/Mono12/Mono16",
-                        c->name, (unsigned)pf);
+    rig_pixfmt_t fmt;
+    if (!rig_pixfmt_from_pfnc((uint32_t)pf, &fmt)) {
+        char names[160];
+        format_names(names, sizeof names);
+        return rig_fail(RIG_ERR_PROTOCOL, "%s: the camera sent pixel format 0x%08x, not %s", c->name, (unsigned)pf,
+                        names);
+    }
+    const char *name = rig_pixfmt_name(fmt);
     int x = 0, y = 0, w = 0, h = 0;
     arv_buffer_get_image_region(b, &x, &y, &w, &h);
     size_t size = 0;
     const uint8_t *d = arv_buffer_get_image_data(b, &size);
     size_t n = (size_t)(w > 0 ? w : 0) * (size_t)(h > 0 ? h : 0);
-    size_t need = n * (bits == 8 ? 1 : 2);
+    size_t need = n ? rig_pixfmt_frame_bytes(fmt, w, h) : 0;
     if (a->inprocess_dev && size == 0) size = a->payload;   // Aravis's fake stream leaves it 0
-    if (!d || n == 0 || size < need)
+    if (!d || n == 0 || size != need)
         return rig_fail(RIG_ERR_PROTOCOL, "%s: frame of %zu bytes for a %dx%d %s image (%zu bytes expected)",
                         c->name, size, w, h, name, need);
     out->pix = malloc(n * sizeof *out->pix);
     if (!out->pix) return rig_fail(RIG_ERR_NO_MEM, "%s: out of memory for a %dx%d frame", c->name, w, h);
-    if (bits == 8)
-        for (size_t i = 0; i < n; i++) out->pix[i] = d[i];
-    else   // 16-bit little-endian containers (GigE Vision / USB3 Vision pixel data)
-        for (size_t i = 0; i < n; i++) out->pix[i] = (uint16_t)(d[2 * i] | (d[2 * i + 1] << 8));
+    if (!rig_pixfmt_unpack(fmt, d, size, w, h, out->pix)) {   // little-endian containers or packed bit streams
+        char why[256];
+        snprintf(why, sizeof why, "%s", model_last_error());
+        return rig_fail(RIG_ERR_PROTOCOL, "%s: %s", c->name, why);
+    }
 
     guint64 raw = arv_buffer_get_frame_id(b);
     if (!a->have_last_id) {
@@ -413,7 +424,7 @@ static int take_frame(rig_camera_t *c, ArvBuffer *b, rig_frame_t *out)
     m->offset_x = x;
     m->offset_y = y;
     snprintf(m->pixel_format, sizeof m->pixel_format, "%s", name);
-    m->bits = bits;
+    m->bits = rig_pixfmt_bits(fmt);
     m->exposure_us = a->exposure_us;
     m->gain = a->gain;
     m->frame_id = a->frame_id;

@@ -15,6 +15,7 @@
 #include <string.h>
 
 #include "model/model.h"
+#include "rig/pixfmt.h"
 #include "rig/rig.h"
 
 #define MAX_LAMPS 32
@@ -185,8 +186,10 @@ static int get_pixel_format(spec_t *s, const char *section)
 {
     const model_ini_entry_t *e = get(s, section, "pixel_format");
     if (!e) return 0;
-    if (strcmp(e->value, "Mono8") && strcmp(e->value, "Mono12") && strcmp(e->value, "Mono16"))
-        return cfg_fail(s, e->line, "[%s] pixel_format: '%s' is not Mono8, Mono12 or Mono16", section, e->value);
+    rig_pixfmt_t f;
+    if (!rig_pixfmt_from_name(e->value, &f))
+        return cfg_fail(s, e->line, "[%s] pixel_format: '%s' is not Mono8, Mono12 or Mono16 (nor Mono10, Mono10p, "
+                        "Mono12p, Mono10Packed, Mono12Packed)", section, e->value);
     snprintf(s->pixel_format, sizeof s->pixel_format, "%s", e->value);
     return 0;
 }

@@ -191,8 +191,8 @@ const char            *rig_lamps_backend(const rig_lamps_t *l);
 typedef struct {
     int      width, height;
     int      offset_x, offset_y;     // region origin on the sensor, pixels
-    char     pixel_format[16];       // "Mono8", "Mono12", "Mono16"
-    int      bits;                   // significant bits of a pixel value (8, 12, 16)
+    char     pixel_format[16];       // "Mono8", "Mono12", "Mono16", "Mono12p", ... (rig/pixfmt.h)
+    int      bits;                   // significant bits of a pixel value (8, 10, 12, 16)
     double   exposure_us;
     double   gain;                   // as the camera states it (dB for GenICam Gain)
     uint64_t frame_id;

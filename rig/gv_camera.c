@@ -40,6 +40,7 @@
 #include <unistd.h>
 
 #include "rig/gv_camera.h"
+#include "rig/pixfmt.h"
 
 // GigE Vision bootstrap registers (GigE Vision 2.0, table 28).
 #define GVBS_MANUFACTURER_NAME 0x0048   // 32 bytes
@@ -140,14 +141,11 @@ static void reg_set_string(rig_gv_camera_t *g, guint32 addr, const char *s, size
     arv_fake_camera_write_memory(g->fake, addr, (guint32)size, buf);
 }
 
-static int format_bits(guint32 pf)
+// Bytes of a w x h frame in PFNC format pf; 0 when it is not a format of rig/pixfmt.h.
+static size_t format_frame_bytes(guint32 pf, int w, int h)
 {
-    switch (pf) {
-    case ARV_PIXEL_FORMAT_MONO_8:  return 8;
-    case ARV_PIXEL_FORMAT_MONO_12: return 12;
-    case ARV_PIXEL_FORMAT_MONO_16: return 16;
-    default: return 0;
-    }
+    rig_pixfmt_t f;
+    return rig_pixfmt_from_pfnc(pf, &f) ? rig_pixfmt_frame_bytes(f, w, h) : 0;
 }
 
 static double now_realtime_s(void)
@@ -167,8 +165,11 @@ static bool snapshot_settings(rig_gv_camera_t *g, rig_frame_meta_t *m, guint32 *
     m->height = (int)reg_get(g, ARV_FAKE_CAMERA_REGISTER_HEIGHT);
     m->offset_x = (int)reg_get(g, ARV_FAKE_CAMERA_REGISTER_X_OFFSET);
     m->offset_y = (int)reg_get(g, ARV_FAKE_CAMERA_REGISTER_Y_OFFSET);
-    m->bits = format_bits(pf);
-    snprintf(m->pixel_format, sizeof m->pixel_format, "%s", m->bits == 8 ? "Mono8" : m->bits == 12 ? "Mono12" : "Mono16");
+    rig_pixfmt_t fmt;
+    if (rig_pixfmt_from_pfnc(pf, &fmt)) {
+        m->bits = rig_pixfmt_bits(fmt);
+        snprintf(m->pixel_format, sizeof m->pixel_format, "%s", rig_pixfmt_name(fmt));
+    }
     m->exposure_us = reg_get_double(g, REG_EXPOSURE_US);
     m->gain = reg_get_double(g, REG_GAIN_DB);
     m->temperature_c = reg_get_double(g, REG_TEMPERATURE_C);
@@ -179,7 +180,8 @@ static bool snapshot_settings(rig_gv_camera_t *g, rig_frame_meta_t *m, guint32 *
     snprintf(m->serial, sizeof m->serial, "%s", g->serial);
     *pf_out = pf;
     if (!m->bits) {
-        snprintf(err, errsize, "pixel format register holds 0x%08x, not Mono8/Mono12/Mono16", pf);
+        snprintf(err, errsize, "pixel format register holds 0x%08x, not a format of rig/pixfmt.h (Mono8, Mono10, "
+                 "Mono12, Mono16, Mono10p, Mono12p, Mono10Packed, Mono12Packed)", pf);
         return false;
     }
     if (m->width < 1 || m->height < 1 || m->offset_x < 0 || m->offset_y < 0 ||
@@ -223,8 +225,15 @@ static int render_and_pack(rig_gv_camera_t *g, rig_frame_meta_t *m, uint8_t *dst
     g->stats.render_s_total += dt;
     g_mutex_unlock(&g->lock);
     if (rc < 0) return rc;
-    uint16_t maxv = m->bits == 8 ? 255 : m->bits == 12 ? 4095 : 65535;
-    if (m->bits == 8) {
+    uint16_t maxv = (uint16_t)((1u << m->bits) - 1);
+    rig_pixfmt_t fmt;
+    if (!rig_pixfmt_from_name(m->pixel_format, &fmt))
+        return rig_fail(RIG_ERR_INVALID, "gv camera %s: pixel format %s", g->serial, m->pixel_format);
+    if (rig_pixfmt_is_packed(fmt)) {   // saturate, then the packed bit stream of rig/pixfmt.h
+        for (size_t i = 0; i < n; i++) g->pix[i] = g->pix[i] > maxv ? maxv : g->pix[i];
+        if (!rig_pixfmt_pack(fmt, g->pix, m->width, m->height, dst))
+            return rig_fail(RIG_ERR_INVALID, "gv camera %s: %s", g->serial, model_last_error());
+    } else if (m->bits == 8) {
         for (size_t i = 0; i < n; i++) dst[i] = (uint8_t)(g->pix[i] > maxv ? maxv : g->pix[i]);
     } else {
         // GVSP pixel data is little-endian: on a little-endian host a clamped
@@ -298,11 +307,12 @@ static void fill_cb(ArvBuffer *buffer, void *data, guint32 exposure_us_int, guin
 {
     rig_gv_camera_t *g = data;
     int w = arv_buffer_get_image_width(buffer), h = arv_buffer_get_image_height(buffer);
-    int bits = format_bits(pf);
     uint8_t *dst = (uint8_t *)arv_buffer_get_data(buffer, NULL);
-    // fill_buffer checked that the buffer holds the payload of the current registers.
-    size_t size = (size_t)w * (size_t)h * (bits == 8 ? 1 : 2);
-    if (!dst || !bits || w < 1 || h < 1) return;
+    // fill_buffer checked that the buffer holds the payload of the current
+    // registers, Width * Height * bits per pixel (PFNC bits 16-23) / 8.
+    size_t size = w < 1 || h < 1 ? 0 : format_frame_bytes((guint32)pf, w, h);
+    size_t cap = w < 1 || h < 1 ? 0 : (size_t)w * (size_t)h * ARV_PIXEL_FORMAT_BIT_PER_PIXEL(pf) / 8;
+    if (!dst || !size || size > cap) return;
     if (g->p.inprocess) {
         fill_inprocess(g, dst, w, h, (guint32)pf, size);
         return;
@@ -503,7 +513,7 @@ static bool render_publish(rig_gv_camera_t *g, rig_frame_meta_t *mp, guint32 *pf
         note_render_error(g, err);
         return false;
     }
-    size_t size = (size_t)m.width * (size_t)m.height * (m.bits == 8 ? 1 : 2);
+    size_t size = format_frame_bytes(pf, m.width, m.height);
     g_mutex_lock(&g->render_lock);
     int rc = grow((void **)&g->back, &g->back_cap, size) ? render_and_pack(g, &m, g->back)
              : rig_fail(RIG_ERR_NO_MEM, "gv camera %s: out of memory", g->serial);
@@ -647,6 +657,22 @@ static const char xml_added[] =
 // ArvFakeCamera reads (arv_set_fake_camera_genicam_filename is not thread safe).
 static GMutex xml_name_lock;
 
+// PixelFormat entries after Mono16: the formats of rig/pixfmt.h the built-in
+// XML lacks (Mono12 goes after Mono8, as before). false when Mono16 is missing.
+static bool xml_add_formats(GString *x)
+{
+    GString *e = g_string_new("</EnumEntry>");
+    for (int f = 0; f < RIG_PIXFMT_COUNT; f++) {
+        if (f == RIG_PIXFMT_MONO8 || f == RIG_PIXFMT_MONO12 || f == RIG_PIXFMT_MONO16) continue;
+        g_string_append_printf(e, "\n\t\t<EnumEntry Name=\"%s\" NameSpace=\"Standard\">\n\t\t\t<Value>%u</Value>"
+                               "\n\t\t</EnumEntry>", rig_pixfmt_name((rig_pixfmt_t)f),
+                               (unsigned)rig_pixfmt_pfnc((rig_pixfmt_t)f));
+    }
+    bool ok = xml_edit(x, "<EnumEntry Name=\"Mono16\"", "</EnumEntry>", e->str);
+    g_string_free(e, TRUE);
+    return ok;
+}
+
 // Our XML as a new string, or NULL with a message.
 static char *make_genicam_xml(void)
 {
@@ -685,7 +711,7 @@ static char *make_genicam_xml(void)
     // Binning is not simulated: do not advertise it.
     if (!bad && !xml_cut(x, "<pFeature>BinningHorizontal</pFeature>", "</pFeature>")) bad = "BinningHorizontal";
     if (!bad && !xml_cut(x, "<pFeature>BinningVertical</pFeature>", "</pFeature>")) bad = "BinningVertical";
-    // Monochrome formats only, plus Mono12 (unpacked).
+    // Monochrome formats only: those of rig/pixfmt.h (Mono12 unpacked, the packed ones).
     static const char *const colour[] = { "BayerBG8", "BayerGB8", "BayerGR8", "BayerRG8", "RGB8" };
     for (size_t i = 0; !bad && i < sizeof colour / sizeof colour[0]; i++) {
         char start[64];
@@ -693,7 +719,7 @@ static char *make_genicam_xml(void)
         if (!xml_cut(x, start, "</EnumEntry>")) bad = colour[i];
     }
     if (!bad && !xml_edit(x, "<EnumEntry Name=\"Mono8\"", "</EnumEntry>", mono12)) bad = "Mono8 entry";
-    if (!bad && !strstr(x->str, "<EnumEntry Name=\"Mono16\"")) bad = "Mono16 entry";
+    if (!bad && !xml_add_formats(x)) bad = "Mono16 entry";
     // ExposureTime (float, us) replaces ExposureTimeAbs, which stays as an alias.
     if (!bad && !xml_edit(x, "<Category Name=\"AcquisitionControl\"", "<pFeature>ExposureTimeAbs</pFeature>",
                           "<pFeature>ExposureTime</pFeature>"))

@@ -7,7 +7,9 @@
 //   DeviceVendorName, DeviceModelName, DeviceSerialNumber (= DeviceID),
 //   DeviceTemperature (float, °C, read-only),
 //   SensorWidth/Height, Width, Height, OffsetX, OffsetY,
-//   PixelFormat Mono8 | Mono12 (16-bit containers) | Mono16,
+//   PixelFormat Mono8 | Mono12 (16-bit containers) | Mono16 | Mono10 | Mono10p |
+//     Mono12p | Mono10Packed | Mono12Packed (rig/pixfmt.h; packed ones packed
+//     with rig_pixfmt_pack),
 //   ExposureTime (float, µs, 10 .. 10e6; ExposureTimeAbs is the same value),
 //   Gain (float, dB, 0 .. 24),
 //   AcquisitionMode/Start/Stop, AcquisitionFrameRate (free running),

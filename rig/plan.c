@@ -12,6 +12,7 @@
 #include <string.h>
 
 #include "model/model.h"
+#include "rig/pixfmt.h"
 #include "rig/rig.h"
 
 #define MAX_STEPS 1000000
@@ -249,9 +250,11 @@ static bool parse_exposure(rig_plan_t *p, const model_ini_t *ini)
     if (!get_number(ini, "exposure", "gain", &p->gain, 0, 100, false)) return false;
     copy_text(ini, "exposure", "pixel_format", p->pixel_format, sizeof p->pixel_format);
     if (!p->pixel_format[0]) snprintf(p->pixel_format, sizeof p->pixel_format, "Mono12");
-    if (strcmp(p->pixel_format, "Mono8") && strcmp(p->pixel_format, "Mono12") && strcmp(p->pixel_format, "Mono16")) {
+    rig_pixfmt_t pf;
+    if (!rig_pixfmt_from_name(p->pixel_format, &pf)) {
         model_error(ini->path, get(ini, "exposure", "pixel_format")->line,
-                    "[exposure] pixel_format = %s: write Mono8, Mono12 or Mono16", p->pixel_format);
+                    "[exposure] pixel_format = %s: write Mono8, Mono12 or Mono16 (or Mono10, Mono10p, Mono12p, "
+                    "Mono10Packed, Mono12Packed)", p->pixel_format);
         return false;
     }
     return true;

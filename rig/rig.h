@@ -22,7 +22,8 @@ extern "C" {
 //
 //   [camera]     backend = aravis; address = A (IPv4, opened directly) | serial = S | name = N
 //                (exactly one); optional camera settings applied at open:
-//                pixel_format = Mono8|Mono12|Mono16; exposure_us = ...; gain = ... (the camera's unit)
+//                pixel_format = Mono8|Mono12|Mono16 (or Mono10, the packed Mono10p|Mono12p|
+//                Mono10Packed|Mono12Packed: rig/pixfmt.h); exposure_us = ...; gain = ... (the camera's unit)
 //   [turntable]  backend = apt: serial (optional: the only stage), stage = K10CR1 (optional:
 //                from the controller; one of rig_stage_models)
 //                | sim: speed_deg_s, accel_deg_s2, home_time_s, position_noise_deg, time_scale,

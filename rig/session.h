@@ -37,7 +37,8 @@ typedef struct rig rig_t;   // rig/rig.h
 //              or below target_fraction (0 < f <= 1, default 0.9) of full scale; the other
 //              exposures of the ladder are journalled as skipped); roi = X Y W H (the pixels
 //              of interest, default the whole frame)
-//              gain = G (camera unit, default 0); pixel_format = Mono8|Mono12|Mono16 (default Mono12)
+//              gain = G (camera unit, default 0); pixel_format = Mono8|Mono12|Mono16 (default Mono12;
+//              also Mono10 and the packed formats of rig/pixfmt.h)
 //   [capture]  repeats = N (frames per exposure, default 1); dark_every = N (a dark frame,
 //              lamps off at the step's exposure, after every N light steps; 0 = none);
 //              settle_ms = after each motion (default 0); lamp_settle_ms = extra after each

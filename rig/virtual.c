@@ -71,7 +71,8 @@
 //             whole sensor), cropped to the region, then mapped to the pixel
 //             format from the sensor's `bits` b: Mono8 v >> (b - 8), Mono12
 //             v << (12 - b) or >> (b - 12), Mono16 v << (16 - b) (12-bit values
-//             << 4 in Mono16, >> 4 in Mono8).
+//             << 4 in Mono16, >> 4 in Mono8); Mono10 and the packed formats of
+//             rig/pixfmt.h by their bits alike (Mono12p as Mono12).
 // The expected frame (rig_virtual_expected) is the same chain with
 // model_sensor_mean instead of the noisy sensor (a right shift becomes a
 // division by 2^s minus (2^s - 1) / 2^(s+1), the mean of the floor).
@@ -106,6 +107,7 @@
 #include "model/model.h"
 #include "rig/gv_camera.h"
 #include "rig/internal.h"
+#include "rig/pixfmt.h"
 #include "rig/rig.h"
 #include "rig/truth.h"
 
@@ -713,11 +715,8 @@ static const float *plane_for(rig_virtual_t *v, int sample, double angle_deg, in
 
 static int format_bits(const char *pf)
 {
-    if (!pf) return 0;
-    if (!strcmp(pf, "Mono8")) return 8;
-    if (!strcmp(pf, "Mono12")) return 12;
-    if (!strcmp(pf, "Mono16")) return 16;
-    return 0;
+    rig_pixfmt_t f;
+    return pf && rig_pixfmt_from_name(pf, &f) ? rig_pixfmt_bits(f) : 0;
 }
 
 // The ideal grey value P of the whole sensor into v->frame and the sensor of
@@ -1051,7 +1050,8 @@ int rig_virtual_expected(rig_virtual_t *v, double angle_deg, uint32_t lamp_mask,
     if (!v || !out) return rig_fail(RIG_ERR_INVALID, "virtual rig: expected frame: NULL argument");
     int fb = format_bits(pixel_format);
     if (!fb)
-        return rig_fail(RIG_ERR_INVALID, "virtual rig: pixel format '%s' is not Mono8, Mono12 or Mono16",
+        return rig_fail(RIG_ERR_INVALID, "virtual rig: pixel format '%s' is not Mono8, Mono12 or Mono16 (nor "
+                        "Mono10, Mono10p, Mono12p, Mono10Packed, Mono12Packed)",
                         pixel_format ? pixel_format : "(null)");
     if (width < 1 || height < 1 || width > v->W || height > v->H)
         return rig_fail(RIG_ERR_INVALID, "virtual rig: expected frame %dx%d does not fit the %dx%d sensor "

@@ -161,6 +161,59 @@ done:
     fx_gv_close(&F);
 }
 
+// Mono10 and the packed formats (rig/pixfmt.h): the server packs, the backend
+// unpacks; every pixel is the pattern's value, unscaled (0..1023, 0..4095).
+TEST(aravis_gv_mono10_and_packed_formats)
+{
+    fx_gv_t F;
+    if (!fx_gv_open(&F, true)) goto done;
+    rig_camera_t *c = F.c;
+    CHECK(rig_camera_set_region(c, 64, 32, 640, 480) == 0);
+    CHECK(rig_camera_set_exposure_us(c, 4000) == 0);   // up to 97 * 40 = 3880 DN: the high bits are used
+    const char *fmts[] = { "Mono10", "Mono10p", "Mono12p", "Mono12Packed", "Mono10Packed" };
+    const int bits[] = { 10, 10, 12, 12, 10 };
+    for (int k = 0; k < 5; k++) {
+        int rc = rig_camera_set_pixel_format(c, fmts[k]);
+        CHECK_MSG(rc == 0, "set %s: %d %s", fmts[k], rc, model_last_error());
+        if (rc) continue;
+        rig_frame_meta_t s;
+        CHECK(rig_camera_settings(c, &s) == 0);
+        CHECK_MSG(!strcmp(s.pixel_format, fmts[k]) && s.bits == bits[k], "%s: settings say %s, %d bits", fmts[k],
+                  s.pixel_format, s.bits);
+        rig_frame_t f;
+        rc = rig_camera_capture(c, 2.0, 2, &f);
+        CHECK_MSG(rc == 0, "capture %s: %d %s", fmts[k], rc, model_last_error());
+        if (rc) continue;
+        CHECK_MSG(!strcmp(f.meta.pixel_format, fmts[k]) && f.meta.bits == bits[k], "%s: frame says %s, %d bits",
+                  fmts[k], f.meta.pixel_format, f.meta.bits);
+        CHECK(f.meta.width == 640 && f.meta.height == 480 && f.meta.offset_x == 64 && f.meta.offset_y == 32);
+        CHECK_NEAR(f.meta.exposure_us, 4000, 1e-9);
+        long bad = 0;
+        uint16_t maxv = 0;
+        for (int y = 0; y < 480; y++)
+            for (int x = 0; x < 640; x++) {
+                uint16_t v = f.pix[(size_t)y * 640 + x];
+                bad += v != fx_pattern(x + 64, y + 32, 4000, 0, bits[k]);
+                maxv = v > maxv ? v : maxv;
+            }
+        CHECK_MSG(bad == 0, "%s: %ld pixels differ from the pattern", fmts[k], bad);
+        CHECK(fx_pattern_mismatches(&f) == 0);
+        CHECK_MSG(maxv == (bits[k] == 10 ? 1023 : 3880), "%s: maximum %u", fmts[k], maxv);
+        rig_frame_free(&f);
+    }
+    // Back to Mono12 (unpacked): the same values as Mono12p.
+    CHECK(rig_camera_set_pixel_format(c, "Mono12") == 0);
+    rig_frame_t f;
+    int rc = rig_camera_capture(c, 2.0, 2, &f);
+    CHECK_MSG(rc == 0, "capture Mono12: %d %s", rc, model_last_error());
+    if (!rc) {
+        CHECK(!strcmp(f.meta.pixel_format, "Mono12") && f.meta.bits == 12 && fx_pattern_mismatches(&f) == 0);
+        rig_frame_free(&f);
+    }
+done:
+    fx_gv_close(&F);
+}
+
 TEST(aravis_gv_invalid_settings)
 {
     fx_gv_t F;

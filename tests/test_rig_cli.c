@@ -365,6 +365,76 @@ TEST(rigcli_virtual_rig)
     test_camera_unlock(session);
 }
 
+// Bit depth of a PNG, 0 when it cannot be read.
+static int png_bit_depth(const char *path)
+{
+    FILE *f = fopen(path, "rb");
+    if (!f) return 0;
+    png_structp png = png_create_read_struct(PNG_LIBPNG_VER_STRING, NULL, NULL, NULL);
+    png_infop info = png ? png_create_info_struct(png) : NULL;
+    int depth = 0;
+    if (!png || !info || setjmp(png_jmpbuf(png))) goto done;
+    png_init_io(png, f);
+    png_read_info(png, info);
+    depth = png_get_bit_depth(png, info);
+done:
+    png_destroy_read_struct(&png, &info, NULL);
+    fclose(f);
+    return depth;
+}
+
+// A virtual rig file setting pixel_format at open (test_write's name `name`).
+static const char *virtual_rig_format(const char *name, const char *format)
+{
+    char top[PATH_MAX], text[PATH_MAX + 256];
+    if (!realpath(test_srcdir(), top)) snprintf(top, sizeof top, "%s", test_srcdir());
+    snprintf(text, sizeof text,
+             "[rig]\nbackend = virtual\ntruth = %s/examples/virtual-truth.ini\ntime_scale = 0.01\n"
+             "busy_wait_s = 120\npixel_format = %s\n", top, format);
+    return test_write(name, text);
+}
+
+// pixel_format = Mono12p in the rig file: the camera sends packed pixels, the
+// snap is a 16-bit PNG with the values Mono12 gives (the same first frame:
+// the same noise seed).
+TEST(rigcli_virtual_rig_mono12p)
+{
+    int session = test_camera_lock();
+    const char *fmts[] = { "Mono12", "Mono12p" };
+    const char *pngs[] = { test_path("snap-mono12.png"), test_path("snap-mono12p.png") };
+    for (int k = 0; k < 2; k++) {
+        char name[64];
+        snprintf(name, sizeof name, "virtual-rig-%s.ini", fmts[k]);
+        const char *rig = virtual_rig_format(name, fmts[k]);
+        char *out = NULL, *err = NULL;
+        int rc = refl(&out, &err, "rig", "--rig", rig, "snap", "-o", pngs[k], "--lamps", "east", "--exposure-us",
+                      "20000", NULL);
+        CHECK_MSG(rc == 0, "snap %s: %d %s", fmts[k], rc, err);
+        free(out);
+        free(err);
+        CHECK(png_bit_depth(pngs[k]) == 16);
+    }
+    CHECK_META(pngs[1], "pixel_format", "Mono12p (12 significant bits)");
+    CHECK_META(pngs[0], "pixel_format", "Mono12 (12 significant bits)");
+    uint16_t *a = NULL, *b = NULL;
+    int wa = 0, ha = 0, wb = 0, hb = 0;
+    CHECK(model_png_read(pngs[0], &wa, &ha, &a));
+    CHECK(model_png_read(pngs[1], &wb, &hb, &b));
+    CHECK(a && b && wa == wb && ha == hb && wa > 0);
+    long differ = 0, over = 0, lit = 0;
+    for (long i = 0; a && b && wa == wb && ha == hb && i < (long)wa * ha; i++) {
+        differ += a[i] != b[i];
+        over += b[i] > 4095;
+        lit += b[i] > 200;
+    }
+    CHECK_MSG(differ == 0, "%ld pixels of the Mono12p snap differ from the Mono12 one", differ);
+    CHECK(over == 0);
+    CHECK_MSG(lit > (long)wa * ha / 20, "only %ld pixels above 200 DN", lit);
+    free(a);
+    free(b);
+    test_camera_unlock(session);
+}
+
 // `serve` in a child: prints the address, stops cleanly on SIGTERM.
 TEST(rigcli_serve_sigterm)
 {

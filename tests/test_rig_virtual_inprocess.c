@@ -22,6 +22,7 @@
 
 #include "model/model.h"
 #include "rig/gv_camera.h"
+#include "tests/fixtures.h"
 #include "rig/rig.h"
 #include "tests/test.h"
 #include "tests/virtual_stats.h"
@@ -415,6 +416,59 @@ done:
     rig_frame_free(&f);
     rig_camera_close(c);
     rig_gv_camera_stop(g);
+}
+
+// In-process (Aravis's fake stream, whose buffers report no size: the payload
+// is used): packed formats unpack bit-exactly too.
+TEST(virtual_inprocess_packed_formats)
+{
+    fx_pattern_ctx_t *ctx = fx_pattern_ctx_new();
+    rig_gv_camera_params_t p = rig_gv_camera_defaults();
+    p.inprocess = true;
+    p.serial = "REFL-IPT2";
+    p.sensor_width = 320;
+    p.sensor_height = 200;
+    p.render = fx_render_pattern;
+    p.render_ctx = ctx;
+    rig_gv_camera_t *g = NULL;
+    rig_camera_t *c = NULL;
+    int rc = rig_gv_camera_start(&g, &p);
+    CHECK_MSG(rc == 0, "start: %s", model_last_error());
+    if (rc) goto done;
+    rc = rig_camera_open_aravis(&c, "inprocess:REFL-IPT2");
+    CHECK_MSG(rc == 0, "open: %s", model_last_error());
+    if (rc) goto done;
+    CHECK(rig_camera_set_exposure_us(c, 4000) == 0);
+    const char *fmts[] = { "Mono10p", "Mono12p", "Mono12Packed", "Mono10" };
+    const int bits[] = { 10, 12, 12, 10 };
+    for (int k = 0; k < 4; k++) {
+        rc = rig_camera_set_pixel_format(c, fmts[k]);
+        CHECK_MSG(rc == 0, "set %s: %d %s", fmts[k], rc, model_last_error());
+        if (rc) continue;
+        rig_frame_t f;
+        rc = rig_camera_capture(c, 2.0, 1, &f);
+        CHECK_MSG(rc == 0, "capture %s: %d %s", fmts[k], rc, model_last_error());
+        if (rc) continue;
+        CHECK(!strcmp(f.meta.pixel_format, fmts[k]) && f.meta.bits == bits[k]);
+        CHECK(f.meta.width == 320 && f.meta.height == 200);
+        long bad = fx_pattern_mismatches(&f);
+        CHECK_MSG(bad == 0, "%s: %ld pixels differ from the pattern", fmts[k], bad);
+        rig_frame_free(&f);
+    }
+    // 3 pixels of Mono12p take 5 bytes; the camera's PayloadSize (Width *
+    // Height * 12 / 8) says 4: a buffer of the wrong size is a protocol error.
+    CHECK(rig_camera_set_pixel_format(c, "Mono12p") == 0);
+    CHECK(rig_camera_set_region(c, 0, 0, 3, 1) == 0);
+    rig_frame_t f;
+    rc = rig_camera_capture(c, 1.0, 0, &f);
+    CHECK_MSG(rc == RIG_ERR_PROTOCOL, "capture of a short buffer: %d %s", rc, model_last_error());
+    CHECK_CONTAINS(model_last_error(), "REFL-IPT2");
+    CHECK_CONTAINS(model_last_error(), "frame of 4 bytes for a 3x1 Mono12p image (5 bytes expected)");
+    CHECK(f.pix == NULL);
+done:
+    rig_camera_close(c);
+    rig_gv_camera_stop(g);
+    fx_pattern_ctx_free(ctx);
 }
 
 // Rig files: [rig] serve = inprocess, its errors, and refl rig on it.
