@@ -25,6 +25,7 @@
 
 #include "model/model.h"
 #include "model/opts.h"
+#include "rig/pixfmt.h"
 #include "rig/rig.h"
 
 #define CAPTURE_TIMEOUT_S 20.0     // beyond the exposure: render time of the virtual camera, transfer
@@ -56,7 +57,7 @@ static const char rig_epilog[] =
     _("--exposure-us", "US", "snap: exposure time, us (default: the rig file's, else the camera's)", false, "snap") \
     _("--gain", "G", "snap: gain in the camera's unit, dB for GenICam Gain (default: rig file / camera)", false,   \
       "snap")                                                                                                     \
-    _("--pixel-format", "F", "snap: Mono8 | Mono12 | Mono16 (default: rig file / camera)", false, "snap")          \
+    _("--pixel-format", "F", "snap: Mono8 | Mono10 | Mono12 | Mono16 | Mono10p | Mono12p | ... (default: rig file / camera)", false, "snap")          \
     _("--sample", "NAME", "snap, serve (virtual rigs): put this sample of the truth file on the table", false,     \
       "snap serve")
 
@@ -487,9 +488,10 @@ int rig_cmd(int argc, char **argv)
         if ((rc = model_cli_double(&c, "--exposure-us", &so.exposure_us, 0, true, 1e8, "0 < US <= 1e8")) ||
             (rc = model_cli_double(&c, "--gain", &so.gain, -100, false, 100, "-100..100")))
             return rc;
-        if (so.pixel_format && strcmp(so.pixel_format, "Mono8") && strcmp(so.pixel_format, "Mono12") &&
-            strcmp(so.pixel_format, "Mono16"))
-            return model_cli_error(&c, "option --pixel-format: '%s' is not Mono8, Mono12 or Mono16", so.pixel_format);
+        rig_pixfmt_t pf;
+        if (so.pixel_format && !rig_pixfmt_from_name(so.pixel_format, &pf))
+            return model_cli_error(&c, "option --pixel-format: '%s' is not Mono8, Mono10, Mono12, Mono16, Mono10p, "
+                                   "Mono12p, Mono10Packed or Mono12Packed", so.pixel_format);
         if (so.lamps) {
             gchar **names = g_strsplit(so.lamps, ",", -1);
             bool empty = false;

@@ -97,7 +97,7 @@ TEST(rigcli_usage_errors)
         { { "--rig", rig, "snap", "-o", "x.png", "--angle", "north" }, "'north' is not an angle" },
         { { "--rig", rig, "snap", "-o", "x.png", "--exposure-us", "-5" }, "--exposure-us: -5 is out of range" },
         { { "--rig", rig, "snap", "-o", "x.png", "--gain", "lots" }, "--gain: 'lots' is not a number" },
-        { { "--rig", rig, "snap", "-o", "x.png", "--pixel-format", "Mono10" }, "'Mono10' is not Mono8" },
+        { { "--rig", rig, "snap", "-o", "x.png", "--pixel-format", "Mono14" }, "'Mono14' is not Mono8" },
         { { "--rig", rig, "snap", "-o", "x.png", "--lamps", "a,,b" }, "has an empty lamp name" },
         { { "--rig", rig, "status", "--frobnicate" }, "unknown option '--frobnicate'" },
         { { "--rig", rig, "--rig", rig, "status" }, "option --rig given twice" },
