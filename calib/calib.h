@@ -35,8 +35,11 @@ int calib_cmd_gain(int argc, char **argv);
 // directory dir/name. The plan is first written to dir/name.plan.ini (kept as
 // the record). A complete session of the same plan is reused as it is; a
 // paused or stopped one is resumed. progress: as rig_capture_opts_t (-1 auto).
+// op: who answers the plan's operator steps (rig_operator_t; NULL: the
+// terminal); after a pause rig_operator_paused(op) is true (the command exits 3).
 // 0, or -1 with the reason in model_last_error().
-int calib_capture(const char *rig_path, const char *dir, const char *name, const char *plan_text, int progress);
+int calib_capture(const char *rig_path, const char *dir, const char *name, const char *plan_text, int progress,
+                  rig_operator_t *op);
 
 // ---------------------------------------------------------------------------
 // The calibration set and calibrated observations (calib/calset.c,

@@ -18,7 +18,8 @@
 // ---------------------------------------------------------------------------
 // Capture
 
-int calib_capture(const char *rig_path, const char *dir, const char *name, const char *plan_text, int progress)
+int calib_capture(const char *rig_path, const char *dir, const char *name, const char *plan_text, int progress,
+                  rig_operator_t *op)
 {
     if (!model_mkdir_p(dir)) return -1;
     char *plan_path = g_strdup_printf("%s/%s.plan.ini", dir, name);
@@ -58,12 +59,13 @@ int calib_capture(const char *rig_path, const char *dir, const char *name, const
         goto done;
     }
     rig_capture_opts_t o = { .plan_path = plan_path, .rig_path = rig_path, .dir = sdir, .resume = exists,
-                             .progress = progress, .command_line = "refl calib" };
+                             .progress = progress, .command_line = "refl calib", .op = op };
     int ec = rig_capture_run(&o);
     if (ec == 0) rc = 0;
     else if (ec == 3)
-        model_error(sdir, 0, "the capture paused (interrupted, or the camera stopped answering); run the same "
-                    "command again to resume it");
+        model_error(sdir, 0, "the capture paused (an operator step not answered, interrupted, or the camera "
+                    "stopped answering: see above); run the same command again to resume it (--yes or "
+                    "--operator-input FILE answer the operator steps)");
     else
         model_error(sdir, 0, "the capture failed: %s", model_last_error());
 done:

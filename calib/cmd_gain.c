@@ -1,6 +1,6 @@
 // calib/cmd_gain.c — `refl calib gain`: parses the options (model/opts.h),
 // runs calib_gain_run (calib/gain.h) and prints the reference gain's figures.
-// Exit: 0 done, 1 error (printed once here), 2 usage.
+// Exit: 0 done, 1 error (printed once here), 2 usage, 3 paused (an operator step).
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -26,7 +26,10 @@
 
 #define EPILOG                                                                                                 \
     "kc needs the source's radiance (--radiance); a virtual rig's truth is only shown beside it, for\n"       \
-    "comparison. Exit: 0 done, 1 error, 2 usage."
+    "comparison. With --rig each session begins with an operator step (the flat-field source in front\n"    \
+    "of the lens; for the dark frames its lamps off, the lens shaded): Enter on a terminal, --yes or\n"     \
+    "--operator-input FILE answers it; with stdin not a terminal and neither option the command\n"          \
+    "pauses there (exit 3; run it again to continue). Exit: 0 done, 1 error, 2 usage, 3 paused."
 
 // A comma-separated list of numbers (malloc'ed); false when empty or not numbers.
 static bool parse_list(const char *s, double **out, int *n)
@@ -96,7 +99,8 @@ static int check_options(model_cli_t *c, calib_gain_opts_t *o, double **gains, d
 int calib_cmd_gain(int argc, char **argv)
 {
     calib_gain_opts_t o = calib_gain_defaults();
-    bool no_report = false;
+    bool no_report = false, yes = false;
+    const char *operator_input = NULL;
     const char **session_v = calloc((size_t)argc + 1, sizeof *session_v);
     model_opt_list_t sessions = { session_v, 0, argc + 1 };
     if (!session_v) return model_error_report("calib gain");
@@ -127,6 +131,7 @@ int calib_cmd_gain(int argc, char **argv)
         MODEL_OPT_VALUE("--max-dn", "N", "full scale of manifest frames (default 65535)", false),
         MODEL_OPT_VALUE("--quant-dn", "Q", "quantisation step in DN (default 1; 16 for 12-bit data in Mono16)", false),
         MODEL_OPT_FLAG("--no-report", NULL, "skip the plots and report.html", &no_report),
+        RIG_OPERATOR_OPTS(&yes, &operator_input),
     };
     model_cli_t cli = { .cmd = "calib gain", .synopsis = "", .about = ABOUT, .epilog = EPILOG, .opts = opts,
                         .nopts = MODEL_NOPTS(opts), .min_positional = 0, .max_positional = 0, .repeat_ok = true };
@@ -141,7 +146,10 @@ int calib_cmd_gain(int argc, char **argv)
     o.report = !no_report;
     o.argc = argc;
     o.argv = argv;
-    if (!(rc = check_options(&cli, &o, &gains, &darks))) {
+    if (!(rc = check_options(&cli, &o, &gains, &darks)) && !(o.op = rig_operator_open(yes, operator_input)))
+        rc = yes ? model_cli_error(&cli, "give --yes or --operator-input FILE, not both")
+                 : model_error_report("calib gain");
+    if (!rc) {
         calib_gain_result_t r;
         bool q = model_error_quiet_thread(true);   // the library's message is printed once, here
         bool ok = calib_gain_run(&o, &r);
@@ -152,8 +160,9 @@ int calib_cmd_gain(int argc, char **argv)
                    r.linearity_error_pct, r.dsnu_dn, r.prnu_pct);
         else
             fprintf(stderr, "refl calib gain: failed: %s\n", model_last_error());
-        rc = ok ? 0 : 1;
+        rc = ok ? 0 : rig_operator_paused(o.op) ? 3 : 1;
     }
+    rig_operator_close(o.op);
     free(gains);
     free(darks);
     free(session_v);

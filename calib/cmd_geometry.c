@@ -28,7 +28,10 @@
     "+z); origin on the axis at the table top (--board-height-mm below the board's corner plane\n"             \
     "at tilt 0); x: the board grid direction at angle 0, tilt 0 closest to the image's +x\n"                   \
     "(lay the board square to the turntable's home orientation). Units mm, deg, px.\n"                         \
-    "Exit: 0 done, 1 error, 2 usage."
+    "With --rig, each tilt's session begins with an operator step (mount the board on the wedge,\n"         \
+    "facing the camera): Enter on a terminal, --yes or --operator-input FILE answers it; with stdin\n"      \
+    "not a terminal and neither option the command pauses there (exit 3; run it again to continue).\n"     \
+    "Exit: 0 done, 1 error, 2 usage, 3 paused."
 
 // A number option within [lo, hi] (whole when integer), with the command's own message.
 static int number(model_cli_t *c, const char *name, double lo, double hi, bool integer, const char *what, double *out)
@@ -97,6 +100,8 @@ int calib_cmd_geometry(int argc, char **argv)
     const char *imsize_v[2];
     model_opt_list_t imsize = { imsize_v, 0, 2 };
     if (!session_v) return model_error_report("calib geometry");
+    bool yes = false;
+    const char *operator_input = NULL;
     model_opt_t opts[] = {
         MODEL_OPT_STRING("--rig", "RIG.ini", "capture: one session per tilt (DIR/capture/tiltT_azA), all lamps on",
                          &o.rig, false),
@@ -124,6 +129,7 @@ int calib_cmd_geometry(int argc, char **argv)
         MODEL_OPT_LIST("--imagersize", "W H", "imager size (needed with --corners)", &imsize, true, false),
         MODEL_OPT_VALUE("--distance-mm", "D", "distance of the projection-uncertainty figure (default 900)", false),
         MODEL_OPT_VALUE("--min-views", "N", "views with a board the solve needs (default by lens model)", false),
+        RIG_OPERATOR_OPTS(&yes, &operator_input),
     };
     model_cli_t cli = { .cmd = "calib geometry", .synopsis = "", .about = ABOUT, .epilog = EPILOG, .opts = opts,
                         .nopts = MODEL_NOPTS(opts), .min_positional = 0, .max_positional = 0, .repeat_ok = true };
@@ -140,6 +146,11 @@ int calib_cmd_geometry(int argc, char **argv)
         free(session_v);
         return rc;
     }
+    if (!(o.op = rig_operator_open(yes, operator_input))) {
+        free(session_v);
+        return yes ? model_cli_error(&cli, "give --yes or --operator-input FILE, not both")
+                   : model_error_report("calib geometry");
+    }
     calib_geometry_result_t r;
     bool q = model_error_quiet_thread(true);   // the library's message is printed once, here
     bool ok = calib_geometry_run(&o, &r);
@@ -151,8 +162,9 @@ int calib_cmd_geometry(int argc, char **argv)
     } else {
         fprintf(stderr, "refl calib geometry: %s\n", model_last_error());
         if (r.usage) model_cli_usage(&cli, stderr);
-        rc = r.usage ? 2 : 1;
+        rc = r.usage ? 2 : rig_operator_paused(o.op) ? 3 : 1;
     }
+    rig_operator_close(o.op);
     calib_geometry_result_free(&r);
     free(session_v);
     return rc;

@@ -24,7 +24,11 @@ static const char EPILOG[] =
     "Output lamps.json: units mm, rig frame; per lamp position_mm, std_mm, rms_ray_distance_mm, n_frames,\n"
     "frames_missing, radius_mm (the emitting radius the highlights were modelled with). A lamp whose\n"
     "highlight is missing in some frames is named with those frames and fitted\n"
-    "from the rest (>= 3 needed, else an error).";
+    "from the rest (>= 3 needed, else an error).\n\n"
+    "With --rig the session begins with an operator step (place the chrome ball at the table centre,\n"
+    "its centre as given): Enter on a terminal, --yes or --operator-input FILE answers it; with stdin\n"
+    "not a terminal and neither option the command pauses there (exit 3; run it again to continue).\n"
+    "Exit: 0 done, 1 error, 2 usage, 3 paused.";
 
 // The indentation of an option's help continued on the next line.
 #define IND "                             "
@@ -150,6 +154,8 @@ static void print_lamps(const calib_lamps_result_t *r)
 int calib_cmd_lamps(int argc, char **argv)
 {
     calib_lamps_opts_t o = calib_lamps_defaults();
+    bool yes = false;
+    const char *operator_input = NULL;
     model_opt_t opts[] = {
         MODEL_OPT_STRING("--rig", "RIG.ini", "capture on this rig into DIR/capture (a complete session there is "
                          "reused)", &o.rig, false),
@@ -183,6 +189,7 @@ int calib_cmd_lamps(int argc, char **argv)
         MODEL_OPT_VALUE("--sphere-tilt-prior-mrad", "S", "std of the path's tilt (default 1); 0 holds a part at 0",
                         false),
         MODEL_OPT_VALUE("--progress", "lines|bar", "capture progress (default: bar on a terminal)", false),
+        RIG_OPERATOR_OPTS(&yes, &operator_input),
     };
     model_cli_t cli = { .cmd = "calib lamps", .synopsis = "", .about = ABOUT, .epilog = EPILOG, .opts = opts,
                         .nopts = MODEL_NOPTS(opts), .repeat_ok = true };
@@ -194,6 +201,11 @@ int calib_cmd_lamps(int argc, char **argv)
     o.argc = argc + 1;
     o.argv = argv - 1;
     o.log = stderr;
+    if (!(o.op = rig_operator_open(yes, operator_input))) {
+        rc = yes ? model_cli_error(&cli, "give --yes or --operator-input FILE, not both")
+                 : model_error_report("calib lamps");
+        goto done;
+    }
     calib_lamps_result_t r;
     bool q = model_error_quiet_thread(true);   // one message, printed here
     bool ok = calib_lamps_run(&o, &r);
@@ -201,7 +213,8 @@ int calib_cmd_lamps(int argc, char **argv)
     if (ok) print_lamps(&r);
     else fprintf(stderr, "refl calib lamps: %s\n", model_last_error());
     calib_lamps_result_free(&r);
-    rc = ok ? 0 : 1;
+    rc = ok ? 0 : rig_operator_paused(o.op) ? 3 : 1;
+    rig_operator_close(o.op);
 done:
     g_strfreev(lamps);
     return rc;

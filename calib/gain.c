@@ -844,11 +844,18 @@ bool calib_gain_truth_radiance(json_t *facts, const char **truth_path, double *r
 static char *plan_text(const calib_gain_opts_t *c, const char *name, const char *lamps, const char *list,
                        double gain, int repeats)
 {
-    return g_strdup_printf("# refl calib gain: %s (written by refl; see rig/session.h, Capture sessions)\n"
-                           "[plan]\nname = calib gain %s\n[sample]\nname = %s\nkind = uniform_source\n"
-                           "[angles]\nlist = 0\n[lamps]\nsets = %s\n[exposure]\nmode = fixed\nlist_us = %s\n"
-                           "gain = %g\npixel_format = %s\n[capture]\nrepeats = %d\n",
-                           name, name, c->sample, lamps, list, gain, c->pixel_format, repeats);
+    char *instr = !strcmp(lamps, "none")
+                      ? g_strdup_printf("dark frames: leave the flat-field source %s in front of the lens with its "
+                                        "lamps off, and shade the lens from room light", c->sample)
+                      : g_strdup_printf("put the flat-field source %s in front of the lens, filling the frame (refl "
+                                        "switches its lamps)", c->sample);
+    char *t = g_strdup_printf("# refl calib gain: %s (written by refl; see rig/session.h, Capture sessions)\n"
+                              "[plan]\nname = calib gain %s\n[sample]\nname = %s\nkind = uniform_source\n"
+                              "instruction = %s\n[angles]\nlist = 0\n[lamps]\nsets = %s\n[exposure]\nmode = fixed\n"
+                              "list_us = %s\ngain = %g\npixel_format = %s\n[capture]\nrepeats = %d\n",
+                              name, name, c->sample, instr, lamps, list, gain, c->pixel_format, repeats);
+    g_free(instr);
+    return t;
 }
 
 static int run_plan(const calib_gain_opts_t *c, const char *name, const char *lamps, const char *list, double gain,
@@ -857,7 +864,7 @@ static int run_plan(const calib_gain_opts_t *c, const char *name, const char *la
     char *p = plan_text(c, name, lamps, list, gain, repeats);
     fprintf(stderr, "refl calib gain: capturing %s (%s, lamps %s, %d repeats)\n", name, gain > 0 ? "gain" : "0 dB",
             lamps, repeats);
-    int rc = calib_capture(c->rig, c->out, name, p, c->progress);
+    int rc = calib_capture(c->rig, c->out, name, p, c->progress, c->op);
     g_free(p);
     return rc;
 }

@@ -24,6 +24,8 @@
 #include <jansson.h>
 #include <stdbool.h>
 
+#include "rig/session.h"
+
 #ifdef __cplusplus
 extern "C" {
 #endif
@@ -96,6 +98,7 @@ typedef struct {
     int          steps;              // rig: exposure steps of each sweep
     int          flat_frames;        // rig: light and dark frames of the flat field
     int          progress;           // calib_capture's progress mode
+    rig_operator_t *op;             // who answers the operator steps (calib_capture)
     double       probe_us;           // rig: first probe exposure
     double       max_us;             // rig: longest sweep exposure; NAN: 1.2 x the probe's full-scale estimate
     int          min_steps;          // fewest sweep steps accepted

@@ -882,10 +882,13 @@ char *calib_geometry_tilt_plan(const char *spec, const calib_geometry_opts_t *o,
     char *plan = g_strdup_printf("# refl calib geometry: the board at tilt %g deg (hinge azimuth %g deg)\n"
                                  "[plan]\nname = calib geometry %s\n"
                                  "[sample]\nname = %s\nkind = chessboard\ntilt_deg = %g\ntilt_azimuth_deg = %g\n"
+                                 "instruction = mount the calibration board %s on the %g deg wedge (hinge at azimuth "
+                                 "%g deg; --tilts '%s') at the turntable centre, the board facing the camera\n"
                                  "[angles]\nlist =%s\n[lamps]\nsets = all\n"
                                  "[exposure]\nmode = fixed\nlist_us = %g\npixel_format = Mono12\n"
                                  "[capture]\nsettle_ms = 0\n",
-                                 tilt, az, name, o->sample, tilt, az, al->str, o->exposure_us);
+                                 tilt, az, name, o->sample, tilt, az, o->sample, tilt, az, spec, al->str,
+                                 o->exposure_us);
     g_string_free(al, TRUE);
     g_free(s);
     return plan;
@@ -1085,7 +1088,7 @@ bool calib_geometry_capture(const calib_geometry_opts_t *o, calib_geometry_state
     for (guint k = 0; k < plans->len && ok; k++) {
         const char *name = g_ptr_array_index(names, k);
         fprintf(stderr, "refl calib geometry: capturing %s (%u of %u)\n", name, k + 1, plans->len);
-        ok = calib_capture(o->rig, capdir, name, g_ptr_array_index(plans, k), o->progress) == 0;
+        ok = calib_capture(o->rig, capdir, name, g_ptr_array_index(plans, k), o->progress, o->op) == 0;
         if (ok) s->sessions[k] = g_strdup_printf("%s/%s", capdir, name);
     }
     g_ptr_array_free(plans, TRUE);

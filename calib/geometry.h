@@ -32,6 +32,7 @@
 #include <stddef.h>
 
 #include "model/model.h"
+#include "rig/session.h"
 
 #ifdef __cplusplus
 extern "C" {
@@ -66,6 +67,7 @@ typedef struct {
     int          imager_w, imager_h;   // px; 0: from the images (needed with corners)
     int          min_views;        // views with a board the solve needs; 0: by lens model
     int          progress;         // calib_capture's progress mode
+    rig_operator_t *op;             // who answers the operator steps (calib_capture)
     int          argc;             // the command line, for the provenance (may be 0)
     char       **argv;
 } calib_geometry_opts_t;

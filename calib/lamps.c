@@ -1090,13 +1090,19 @@ static model_vec3_t centre_at(const double c0[3], double angle_deg)
     return v3(cos(th) * c0[0] - sin(th) * c0[1], sin(th) * c0[0] + cos(th) * c0[1], c0[2]);
 }
 
-char *calib_lamps_plan_text(const char *sample, const double *angles_deg, int nangles, char *const *lamps,
+char *calib_lamps_plan_text(const char *sample, const double *centre_mm, double radius_mm, const double *angles_deg,
+                            int nangles, char *const *lamps,
                             int nlamps, const double *exposures_us, int nexposures)
 {
     GString *pt = g_string_new("# refl calib lamps: the mirror sphere at several turntable angles, each lamp "
                                "alone, a dark frame per angle\n[plan]\nname = lamp positions from mirror-sphere "
                                "highlights\n");
-    g_string_append_printf(pt, "[sample]\nname = %s\nkind = mirror_sphere\n[angles]\nlist =", sample);
+    g_string_append_printf(pt, "[sample]\nname = %s\nkind = mirror_sphere\n", sample);
+    if (centre_mm)
+        g_string_append_printf(pt, "instruction = place the chrome ball %s at the table centre: its centre at "
+                               "(%.10g, %.10g, %.10g) mm in the rig frame at turntable angle 0, radius %.10g mm\n",
+                               sample, centre_mm[0], centre_mm[1], centre_mm[2], radius_mm);
+    g_string_append(pt, "[angles]\nlist =");
     for (int i = 0; i < nangles; i++) g_string_append_printf(pt, " %.10g", angles_deg[i]);
     g_string_append(pt, "\n[lamps]\nsets = ");
     for (int i = 0; i < nlamps; i++) g_string_append_printf(pt, "%s; ", lamps[i]);
@@ -1142,10 +1148,10 @@ static bool capture(const calib_lamps_opts_t *o, calib_lamps_result_t *r, char *
                         "captured", o->rig);
         return false;
     }
-    char *pt = calib_lamps_plan_text(o->sample, o->angles_deg, o->nangles, *names, n, o->exposures_us,
+    char *pt = calib_lamps_plan_text(o->sample, o->sphere_centre_mm, o->sphere_radius_mm, o->angles_deg, o->nangles, *names, n, o->exposures_us,
                                      o->nexposures);
     note(o, "capturing %d angles x %d lamps + dark into %s/capture\n", o->nangles, n, o->out);
-    int crc = calib_capture(o->rig, o->out, "capture", pt, o->progress);
+    int crc = calib_capture(o->rig, o->out, "capture", pt, o->progress, o->op);
     g_free(pt);
     if (crc) return false;
     r->session_dir = g_strdup_printf("%s/capture", o->out);

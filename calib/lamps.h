@@ -218,6 +218,7 @@ typedef struct {
     double       shift_prior_mm;   //   0.1 mm and 1 mrad (see calib_lamps_bundle_setup_t)
     double       tilt_prior_mrad;
     int          progress;         // capture progress: -1 auto (a bar on a terminal), 0 lines, 1 bar
+    rig_operator_t *op;             // who answers the operator steps (calib_capture)
     int          argc;             // the command line for the provenance (may be 0, NULL)
     char       **argv;
     FILE        *log;              // progress and notes, each line "refl calib lamps: ..." (NULL: none)
@@ -275,7 +276,9 @@ void calib_lamps_result_free(calib_lamps_result_t *r);   // accepts a zeroed res
 
 // The capture plan: sample at the angles, each lamp alone and the dark (lamp
 // set none) per angle, auto-bracketed exposures (longest first). Caller g_free's.
-char *calib_lamps_plan_text(const char *sample, const double *angles_deg, int nangles, char *const *lamps,
+// centre_mm (may be NULL) and radius_mm: the sphere's facts, for the operator's instruction.
+char *calib_lamps_plan_text(const char *sample, const double *centre_mm, double radius_mm, const double *angles_deg,
+                            int nangles, char *const *lamps,
                             int nlamps, const double *exposures_us, int nexposures);
 
 // Stage 1: the camera model; with o->rig the capture into o->out/capture;

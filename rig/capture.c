@@ -383,11 +383,10 @@ static char *session_facts(rig_t *r, const rig_plan_t *p, const char *cmdline, j
         model_error_quiet_thread(q);
         json_object_set_new(v, "truth", json_string(rig_virtual_truth_path(r->virt)));
         json_object_set_new(v, "truth_sha256", json_string(sha));
-        json_object_set_new(v, "sample", json_string(rig_virtual_sample(r->virt)));
-        double tilt = 0, az = 0;
-        rig_virtual_sample_pose(r->virt, &tilt, &az, NULL, NULL);
-        json_object_set_new(v, "sample_tilt_deg", json_real(tilt));
-        json_object_set_new(v, "sample_tilt_azimuth_deg", json_real(az));
+        // the sample as the plan's operator step poses it (the frames' truth)
+        json_object_set_new(v, "sample", json_string(p->sample));
+        json_object_set_new(v, "sample_tilt_deg", json_real(p->tilt_deg));
+        json_object_set_new(v, "sample_tilt_azimuth_deg", json_real(p->tilt_azimuth_deg));
         json_object_set_new(o, "virtual_rig", v);
     }
     char *s = json_dumps(o, JSON_INDENT(1) | JSON_SORT_KEYS);
@@ -486,20 +485,26 @@ static void print_dry_run(const rig_plan_t *p, const rig_t *r)
     rig_camera_settings(r->camera, &m);
     printf("plan: %s (sha256 %s)\nsample: %s (%s)\nrig: %s\n", p->path, p->sha256, p->sample, p->sample_kind,
            r->path);
-    printf("steps: %d (%d angles x %d lamp sets x %d exposures x %d repeats%s%s)\n", p->nsteps, p->nangles,
-           p->nlamp_sets, p->nexposures, p->repeats, p->dark_every ? ", dark frames" : "",
-           p->auto_exposure ? "; auto bracketing: at most" : "");
+    int nframes = 0;
+    for (int i = 0; i < p->nsteps; i++) nframes += p->steps[i].kind != RIG_STEP_OPERATOR;
+    printf("steps: %d (%d operator step%s; %d frames: %d angles x %d lamp sets x %d exposures x %d repeats%s%s)\n",
+           p->nsteps, p->nsteps - nframes, p->nsteps - nframes == 1 ? "" : "s", nframes, p->nangles, p->nlamp_sets,
+           p->nexposures, p->repeats, p->dark_every ? ", dark frames" : "", p->auto_exposure ? "; auto bracketing: at most" : "");
     for (int i = 0; i < p->nsteps; i++) {
         const rig_step_t *s = &p->steps[i];
+        if (s->kind == RIG_STEP_OPERATOR) {
+            printf("  %6d  operator: %s\n", i, p->ops[s->op].instruction);
+            continue;
+        }
         printf("  %6d  %-5s angle %10.4f deg  lamps %-20s exposure %10.6g us  gain %g%s\n", i,
                s->kind == RIG_STEP_DARK ? "dark" : "light", s->angle_deg, s->lamps, s->exposure_us, s->gain,
                s->repeat ? " (repeat)" : "");
     }
     double floor_s = rig_plan_floor_s(p, r, 0);
-    double bytes = (double)p->nsteps * m.width * m.height * 2.0;
+    double bytes = (double)nframes * m.width * m.height * 2.0;
     printf("estimated_duration_s: %.1f (hardware floor: motions, settles, exposures; plus homing)\n", floor_s);
     printf("estimated_disk_bytes: %.0f (at most: %d frames of %d x %d 16-bit; PNG compresses them)\n", bytes,
-           p->nsteps, m.width, m.height);
+           nframes, m.width, m.height);
     printf("check: plan matches the rig (lamps exist, angles within range, the camera accepts every exposure)\n");
 }
 
@@ -584,9 +589,12 @@ typedef struct {
     double      floor_s, angle, t_start;
     uint32_t    mask;
     double      cur_exposure;
-    int         paused;          // 1 SIGINT, 2 camera not answering
+    int         paused;          // 1 SIGINT, 2 camera not answering, 3 operator step
+    rig_operator_t *op_own;      // the terminal's reader when o->op is NULL
     double      T_cap, T_push;   // time in the camera (trigger to frame in hand), waiting for the writer
 } run_t;
+
+static int replay_operator(run_t *x);
 
 // The plan: from the plan file, or (--resume) the journal's stored plan once
 // the plan and rig files are checked against the journal's sha256.
@@ -720,6 +728,7 @@ static int run_session(run_t *x)
                           "files removed)", pend, nstored, relinked, removed);
         fprintf(stderr, "refl capture: resuming %s: %d of %d steps to go\n", o->dir, pend, nstored);
         rig_journal_set_state(x->j, "running");
+        if (replay_operator(x) != RUN_ON) return RUN_DONE;
     }
     for (int i = 0; i < nstored; i++) x->frames_before += x->status[i] == 'd';
     return RUN_ON;
@@ -884,6 +893,67 @@ static int step_capture(run_t *x, const rig_step_t *s)
     return RUN_ON;
 }
 
+// An operator step: lamps off, the instruction, the operator's answer. An
+// answered step has its pose applied (the virtual rig plays the operator) and
+// is journalled done with how it was answered; otherwise the session pauses
+// (x->paused 3), or stops on a bad answer (x->paused 4: an error, exit 1).
+static int step_operator(run_t *x, const rig_step_t *s)
+{
+    rig_t *r = x->r;
+    int step = x->step;
+    if (r->lamps && x->mask) {
+        if ((x->rc = rig_lamps_all_off(r->lamps))) {
+            snprintf(x->msg, sizeof x->msg, "lamps: %s", model_last_error());
+            fault_stop(r, x->j, step, "fault", "fault", x->msg);
+            return RUN_DONE;
+        }
+        x->mask = 0;
+    }
+    if (x->pg.bar) fprintf(stderr, "\n");
+    char how[1024], what[512];
+    const char *dir = x->o->dir;
+    int a = rig_operator_ask(x->o->op ? x->o->op : x->op_own, step, x->p->ops[s->op].instruction, how, sizeof how);
+    if (a == RIG_OPERATOR_PAUSE) {
+        snprintf(x->msg, sizeof x->msg, "operator step %d not answered (%s): session paused, lamps off; when it is "
+                 "done, continue with refl capture --resume %s (Enter on a terminal answers it, or add --yes or "
+                 "--operator-input FILE)", step, how, dir);
+        fault_stop(r, x->j, step, "paused", "pause", x->msg);
+        x->paused = 3;
+        return RUN_BREAK;
+    }
+    if (a == RIG_OPERATOR_DONE && !(a = rig_plan_operator_pose(x->p, r, step, what, sizeof what))) {
+        char *note = g_strdup_printf("%s; %s", how, what);
+        a = rig_journal_operator_done(x->j, step, note);
+        g_free(note);
+    }
+    if (a) {
+        x->rc = a;
+        snprintf(x->msg, sizeof x->msg, "operator step %d: %s: session paused, lamps off; continue with refl "
+                 "capture --resume %s", step, model_last_error(), dir);
+        fault_stop(r, x->j, step, "paused", "pause", x->msg);
+        x->paused = 4;
+        return RUN_BREAK;
+    }
+    x->status[step] = 'd';
+    fprintf(stderr, "refl capture: operator step %d done; %s\n", step, what);
+    return RUN_ON;
+}
+
+// --resume: the operator steps answered earlier are not asked again; their
+// poses are applied again (a virtual rig; on a real rig the sample is where
+// the operator put it).
+static int replay_operator(run_t *x)
+{
+    for (int i = 0; i < x->p->nsteps; i++) {
+        if (x->p->steps[i].kind != RIG_STEP_OPERATOR || x->status[i] != 'd') continue;
+        char what[512];
+        if ((x->rc = rig_plan_operator_pose(x->p, x->r, i, what, sizeof what))) return RUN_DONE;
+        rig_journal_event(x->j, i, "info", "resume: operator step %d was answered earlier, not asked again; %s%s", i,
+                          what, x->r->virt ? " again" : " (still in place)");
+    }
+    return RUN_ON;
+}
+
 // Every pending step, until the end, a pause (SIGINT) or a writer error.
 static int run_steps(run_t *x)
 {
@@ -897,6 +967,12 @@ static int run_steps(run_t *x)
         }
         if (writer_error(&x->w, x->msg, sizeof x->msg)) break;
         if (x->o->before_step) x->o->before_step(x->o->hook_ctx, x->r, x->step);
+        if (s->kind == RIG_STEP_OPERATOR) {
+            int k = step_operator(x, s);
+            if (k == RUN_BREAK) break;
+            if (k != RUN_ON) return k;
+            continue;
+        }
         if (p->auto_exposure && s->group >= 0 && x->satisfied[s->group]) {
             rig_journal_step_skipped(x->j, x->step, "auto bracketing: a shorter exposure is not needed");
             continue;
@@ -944,7 +1020,13 @@ static int run_end(run_t *x)
                      o->dir);
             fault_stop(x->r, x->j, x->step, "paused", "pause", x->msg);
         }
-        fprintf(stderr, "refl capture: %s\n", x->paused == 1 ? x->msg : "session paused (camera not answering)");
+        if (x->paused == 4) {
+            rig_fail(x->rc ? x->rc : RIG_ERR_INVALID, "refl capture: %s", x->msg);
+            x->exit_code = 1;
+            return RUN_DONE;
+        }
+        fprintf(stderr, "refl capture: %s\n", x->paused == 1 || x->paused == 3 ? x->msg
+                                                                               : "session paused (camera not answering)");
         if (x->paused == 2) rig_fail(RIG_ERR_TIMEOUT, "refl capture: %s", x->msg);
         x->exit_code = 3;
         return RUN_DONE;
@@ -993,6 +1075,7 @@ static void run_cleanup(run_t *x)
     }
     rig_close(x->r);
     rig_journal_close(x->j);
+    rig_operator_close(x->op_own);
     rig_plan_free(x->p);
     free(x->status);
     free(x->satisfied);
@@ -1022,6 +1105,10 @@ int rig_capture_run(const rig_capture_opts_t *o)
     x->w.dir = o->dir;
     pthread_mutex_init(&x->w.m, NULL);
     pthread_cond_init(&x->w.cv, NULL);
+    if (!o->op && !(x->op_own = rig_operator_open(false, NULL))) {
+        free(x);
+        return 1;
+    }
     int k = run_plan(x);
     if (k == RUN_ON) k = run_session(x);
     if (k == RUN_ON) k = run_start(x);
@@ -1031,6 +1118,7 @@ int rig_capture_run(const rig_capture_opts_t *o)
     if (k == RUN_FAULT_TT || k == RUN_FAULT_CAM) run_fault(x, k == RUN_FAULT_TT);
     run_cleanup(x);
     int exit_code = x->exit_code;
+    if (exit_code == 3) rig_operator_set_paused(o->op);
     free(x);
     return exit_code;
 }

@@ -25,6 +25,11 @@ static const char capture_about[] =
     "--resume continues a stopped session where it stopped; it refuses when the plan or the rig file\n"
     "changed since, or the camera is another one (its serial differs from the journal's);\n"
     "--allow-changed continues the stored step list anyway.\n"
+    "Operator steps (the plan's [sample] first: put the sample on its wedge ...): lamps off, the\n"
+    "instruction is printed and the session waits: Enter on a terminal answers done, q pauses;\n"
+    "--yes answers every step done; --operator-input FILE one answer a line (empty, done, y, yes:\n"
+    "done; q, pause, stop: pause). With stdin not a terminal and neither option the session pauses\n"
+    "at the step (exit 3); --resume asks again (an answered step is not asked again).\n"
     "First Ctrl-C: finish the frame, lamps off, pause (exit 3); second: stop at once.\n"
     "Exit: 0 complete, 1 error or fault, 2 usage, 3 paused.";
 
@@ -43,7 +48,8 @@ int rig_cmd_capture(int argc, char **argv)
 {
     rig_capture_opts_t o = { .progress = -1 };
     const char *out_dir = NULL, *resume_dir = NULL, *progress = NULL;
-    bool dry_run = false, allow_changed = false;
+    bool dry_run = false, allow_changed = false, yes = false;
+    const char *operator_input = NULL;
     model_opt_t opts[] = {
         MODEL_OPT_STRING("--rig", "RIG.ini", "the rig description file", &o.rig_path, false),
         MODEL_OPT_STRING("-o", "DIR", "the session directory (new or empty)", &out_dir, false),
@@ -58,6 +64,7 @@ int rig_cmd_capture(int argc, char **argv)
         MODEL_OPT_STRING("--resume", "DIR", "continue the session in DIR where it stopped", &resume_dir, false),
         MODEL_OPT_FLAG("--allow-changed", NULL, "--resume: continue although the plan, rig file or camera changed",
                        &allow_changed),
+        RIG_OPERATOR_OPTS(&yes, &operator_input),
     };
     model_cli_t c = { .cmd = "capture", .synopsis = "PLAN.ini", .about = capture_about, .opts = opts,
                       .nopts = MODEL_NOPTS(opts), .min_positional = 0, .max_positional = 1 };
@@ -82,10 +89,15 @@ int rig_cmd_capture(int argc, char **argv)
         if (!o.dir && !o.dry_run) return model_cli_error(&c, "missing -o DIR (the session directory)");
         if (o.allow_changed) return model_cli_error(&c, "--allow-changed is for --resume");
     }
+    if (!(o.op = rig_operator_open(yes, operator_input))) {
+        if (yes && operator_input) return model_cli_error(&c, "give --yes or --operator-input FILE, not both");
+        return model_error_report("capture");
+    }
     char *cl = join_args(argc, argv);
     o.command_line = cl;
     rc = rig_capture_run(&o);
     g_free(cl);
+    rig_operator_close(o.op);
     fflush(stdout);
     return rc;
 }
@@ -104,7 +116,8 @@ static const char session_about[] =
 static const char session_check_about[] =
     "Checks the session in DIR: every committed frame against the sha256 in the journal, SQLite's\n"
     "PRAGMA integrity_check on the journal (DIR/session.sqlite), and the steps not yet captured (their\n"
-    "count, and the first 10 with their angle, lamps and exposure).\n"
+    "count, and the first 10 with their angle, lamps and exposure). Operator steps are listed with\n"
+    "their instruction and whether they were answered (the answers: the journal's events 'operator').\n"
     "Exit: 0 when every frame is intact, the journal passes and no step is missing (--allow-incomplete:\n"
     "missing steps are fine), 1 otherwise.";
 
@@ -153,8 +166,16 @@ static int session_check(const char *dir, bool allow_incomplete)
     bad = check_frames(dir, rows, nrows);
     for (int i = 0; i < nsteps; i++) {
         if (status[i] == 's') skipped++;
+        if (steps[i].kind == RIG_STEP_OPERATOR) {
+            char *note = rig_journal_step_note(j, steps[i].index);
+            printf("operator step %d: %s: %s\n", steps[i].index, status[i] == 'd' ? "answered" : "not answered yet",
+                   note ? note : "(no instruction)");
+            free(note);
+        }
         if (status[i] != 'p') continue;
-        if (missing < SESSION_CHECK_LIST)
+        if (missing < SESSION_CHECK_LIST && steps[i].kind == RIG_STEP_OPERATOR)
+            printf("missing step %d: operator (see above)\n", steps[i].index);
+        else if (missing < SESSION_CHECK_LIST)
             printf("missing step %d: %s angle %g deg lamps %s exposure %g us\n", steps[i].index,
                    steps[i].kind == RIG_STEP_DARK ? "dark" : "light", steps[i].angle_deg, steps[i].lamps,
                    steps[i].exposure_us);

@@ -224,7 +224,7 @@ int rig_journal_create(rig_journal_t **out, const char *dir, const rig_plan_t *p
     sqlite3_finalize(s);
     s = NULL;
     if (sqlite3_prepare_v2(j->db, "INSERT INTO steps(idx,kind,angle_index,lamp_set,exposure_index,repeat,grp,"
-                           "angle_deg,lamps,exposure_us,gain) VALUES(?,?,?,?,?,?,?,?,?,?,?)", -1, &s, NULL) !=
+                           "angle_deg,lamps,exposure_us,gain,note) VALUES(?,?,?,?,?,?,?,?,?,?,?,?)", -1, &s, NULL) !=
         SQLITE_OK) {
         rc = jfail(j, "cannot write the steps");
         goto fail;
@@ -233,7 +233,9 @@ int rig_journal_create(rig_journal_t **out, const char *dir, const rig_plan_t *p
         const rig_step_t *st = &p->steps[i];
         sqlite3_reset(s);
         sqlite3_bind_int(s, 1, st->index);
-        sqlite3_bind_text(s, 2, st->kind == RIG_STEP_DARK ? "dark" : "light", -1, SQLITE_STATIC);
+        sqlite3_bind_text(s, 2, st->kind == RIG_STEP_DARK ? "dark" : st->kind == RIG_STEP_OPERATOR ? "operator"
+                                                                                             : "light",
+                          -1, SQLITE_STATIC);
         sqlite3_bind_int(s, 3, st->angle_index);
         sqlite3_bind_int(s, 4, st->lamp_set);
         sqlite3_bind_int(s, 5, st->exposure_index);
@@ -243,6 +245,10 @@ int rig_journal_create(rig_journal_t **out, const char *dir, const rig_plan_t *p
         sqlite3_bind_text(s, 9, st->lamps, -1, SQLITE_TRANSIENT);
         sqlite3_bind_double(s, 10, st->exposure_us);
         sqlite3_bind_double(s, 11, st->gain);
+        if (st->kind == RIG_STEP_OPERATOR && st->op >= 0 && st->op < p->nops)
+            sqlite3_bind_text(s, 12, p->ops[st->op].instruction, -1, SQLITE_TRANSIENT);
+        else
+            sqlite3_bind_null(s, 12);
         if (sqlite3_step(s) != SQLITE_DONE) {
             rc = jfail(j, "cannot write the steps");
             goto fail;
@@ -363,7 +369,10 @@ int rig_journal_steps(rig_journal_t *j, rig_step_t **steps, char **status, int *
         while (k < total && sqlite3_step(s) == SQLITE_ROW) {
             rig_step_t *t = &st[k];
             t->index = sqlite3_column_int(s, 0);
-            t->kind = !strcmp((const char *)sqlite3_column_text(s, 1), "dark") ? RIG_STEP_DARK : RIG_STEP_LIGHT;
+            const char *kind = (const char *)sqlite3_column_text(s, 1);
+            t->kind = !strcmp(kind, "dark") ? RIG_STEP_DARK : !strcmp(kind, "operator") ? RIG_STEP_OPERATOR
+                                                                                         : RIG_STEP_LIGHT;
+            t->op = -1;
             t->angle_index = sqlite3_column_int(s, 2);
             t->lamp_set = sqlite3_column_int(s, 3);
             t->exposure_index = sqlite3_column_int(s, 4);
@@ -471,6 +480,60 @@ static int exec_bind(rig_journal_t *j, const char *sql, int nint, const int *int
         if (sqlite3_step(s) != SQLITE_DONE) rc = jfail(j, "cannot write");
     }
     sqlite3_finalize(s);
+    pthread_mutex_unlock(&j->lock);
+    return rc;
+}
+
+char *rig_journal_step_note(rig_journal_t *j, int step)
+{
+    sqlite3_stmt *s = NULL;
+    char *note = NULL;
+    pthread_mutex_lock(&j->lock);
+    if (sqlite3_prepare_v2(j->db, "SELECT note FROM steps WHERE idx=?", -1, &s, NULL) == SQLITE_OK) {
+        sqlite3_bind_int(s, 1, step);
+        if (sqlite3_step(s) == SQLITE_ROW && sqlite3_column_type(s, 0) != SQLITE_NULL) note = col_text(s, 0);
+    }
+    sqlite3_finalize(s);
+    pthread_mutex_unlock(&j->lock);
+    return note;
+}
+
+int rig_journal_operator_done(rig_journal_t *j, int step, const char *how)
+{
+    sqlite3_stmt *u = NULL, *e = NULL;
+    int rc = 0;
+    char now[40];
+    model_utc_text(model_realtime_s(), now);
+    pthread_mutex_lock(&j->lock);
+    if (sqlite3_exec(j->db, "BEGIN IMMEDIATE", NULL, NULL, NULL) != SQLITE_OK) {
+        rc = jfail(j, "cannot begin an operator transaction");
+        goto done;
+    }
+    if (sqlite3_prepare_v2(j->db, "UPDATE steps SET status='done' WHERE idx=? AND status='pending' AND "
+                           "kind='operator'", -1, &u, NULL) != SQLITE_OK ||
+        sqlite3_prepare_v2(j->db, "INSERT INTO events(t_utc, kind, message, step) VALUES(?,'operator',?,?)", -1, &e,
+                           NULL) != SQLITE_OK) {
+        rc = jfail(j, "cannot record an operator step");
+        goto rollback;
+    }
+    sqlite3_bind_int(u, 1, step);
+    sqlite3_bind_text(e, 1, now, -1, SQLITE_TRANSIENT);
+    sqlite3_bind_text(e, 2, how, -1, SQLITE_TRANSIENT);
+    sqlite3_bind_int(e, 3, step);
+    if (sqlite3_step(u) != SQLITE_DONE || sqlite3_changes(j->db) != 1 || sqlite3_step(e) != SQLITE_DONE) {
+        rc = jfail(j, "cannot record an operator step (not a pending operator step?)");
+        goto rollback;
+    }
+    if (sqlite3_exec(j->db, "COMMIT", NULL, NULL, NULL) != SQLITE_OK) {
+        rc = jfail(j, "cannot commit an operator step");
+        goto rollback;
+    }
+    goto done;
+rollback:
+    sqlite3_exec(j->db, "ROLLBACK", NULL, NULL, NULL);
+done:
+    sqlite3_finalize(u);
+    sqlite3_finalize(e);
     pthread_mutex_unlock(&j->lock);
     return rc;
 }

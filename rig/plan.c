@@ -17,9 +17,10 @@
 
 #define MAX_STEPS 1000000
 
-static const char *const sections[] = { "plan", "sample", "angles", "lamps", "exposure", "capture" };
+static const char *const sections[] = { "plan", "sample", "angles", "lamps", "exposure", "capture", "operator" };
 static const char *const keys[] = {
-    "plan: name operator notes", "sample: name kind tilt_deg tilt_azimuth_deg", "angles: list range", "lamps: sets",
+    "plan: name operator notes", "sample: name kind tilt_deg tilt_azimuth_deg instruction", "angles: list range",
+    "lamps: sets", "operator: end",
     "exposure: mode list_us target_fraction roi gain pixel_format",
     "capture: repeats dark_every settle_ms lamp_settle_ms frame_timeout_s retries",
 };
@@ -89,7 +90,7 @@ static bool check_keys(const model_ini_t *ini)
         for (size_t k = 0; k < sizeof sections / sizeof sections[0]; k++) known |= !strcmp(ini->sections[i], sections[k]);
         if (!known) {
             model_error(ini->path, ini->section_lines[i], "unknown section [%s]: a plan has [plan], [sample], "
-                        "[angles], [lamps], [exposure], [capture]", ini->sections[i]);
+                        "[angles], [lamps], [exposure], [capture], [operator]", ini->sections[i]);
             return false;
         }
     }
@@ -260,6 +261,60 @@ static bool parse_exposure(rig_plan_t *p, const model_ini_t *ini)
     return true;
 }
 
+// The sample's operator step, as the operator reads it.
+static void sample_instruction(const rig_plan_t *p, char *out, size_t size)
+{
+    static const char *const what[][2] = {
+        { "material_coupon", "put coupon %s" }, { "reference_white", "put the reference white %s" },
+        { "chessboard", "mount the calibration board %s" }, { "mirror_sphere", "place the chrome ball %s" },
+        { "workpiece", "put the workpiece %s" }, { "uniform_source", "put the flat-field source %s" },
+    };
+    const char *fmt = "put the sample %s";
+    for (size_t k = 0; k < sizeof what / sizeof what[0]; k++)
+        if (!strcmp(p->sample_kind, what[k][0])) fmt = what[k][1];
+    char head[256];
+    snprintf(head, sizeof head, fmt, p->sample);
+    if (!strcmp(p->sample_kind, "uniform_source"))
+        snprintf(out, size, "%s in front of the lens, filling the frame", head);
+    else if (p->tilt_deg != 0)
+        snprintf(out, size, "%s on the %g deg wedge (hinge at azimuth %g deg) at the turntable centre, facing the "
+                 "camera", head, p->tilt_deg, p->tilt_azimuth_deg);
+    else
+        snprintf(out, size, "%s flat at the turntable centre%s", head,
+                 !strcmp(p->sample_kind, "chessboard") ? ", facing the camera" : "");
+}
+
+// The operator steps: the [sample] one (generated, or [sample] instruction),
+// and [operator] end.
+static bool parse_operator(rig_plan_t *p, const model_ini_t *ini)
+{
+    p->ops = g_malloc0_n(2, sizeof *p->ops);
+    rig_op_step_t *o = &p->ops[0];
+    const model_ini_entry_t *e = get(ini, "sample", "instruction");
+    if (e && !e->value[0]) {
+        model_error(ini->path, e->line, "[sample] instruction is empty: write what the operator does, or leave the "
+                    "key out");
+        return false;
+    }
+    if (e) snprintf(o->instruction, sizeof o->instruction, "%s", e->value);
+    else sample_instruction(p, o->instruction, sizeof o->instruction);
+    o->pose = true;
+    snprintf(o->sample, sizeof o->sample, "%s", p->sample);
+    o->tilt_deg = p->tilt_deg;
+    o->tilt_azimuth_deg = p->tilt_azimuth_deg;
+    p->nops = 1;
+    if ((e = get(ini, "operator", "end"))) {
+        if (!e->value[0]) {
+            model_error(ini->path, e->line, "[operator] end is empty: write what the operator does after the last "
+                        "frame, or leave the key out");
+            return false;
+        }
+        snprintf(p->ops[1].instruction, sizeof p->ops[1].instruction, "%s", e->value);
+        p->nops = 2;
+    }
+    return true;
+}
+
 static bool build_steps(rig_plan_t *p, const model_ini_t *ini)
 {
     double light = (double)p->nangles * p->nlamp_sets * p->nexposures * p->repeats;
@@ -269,14 +324,18 @@ static bool build_steps(rig_plan_t *p, const model_ini_t *ini)
                     "it", total, MAX_STEPS);
         return false;
     }
-    p->steps = g_malloc0_n((size_t)total + 1, sizeof *p->steps);
+    bool end = p->nops > 1;
+    p->steps = g_malloc0_n((size_t)total + 2 + end, sizeof *p->steps);
     int n = 0, nlight = 0, group = 0;
+    p->steps[n++] = (rig_step_t){ .kind = RIG_STEP_OPERATOR, .op = 0, .angle_index = -1, .lamp_set = -1,
+                                  .exposure_index = -1, .group = -1, .lamps = "none" };
     for (int a = 0; a < p->nangles; a++)
         for (int l = 0; l < p->nlamp_sets; l++)
             for (int r = 0; r < p->repeats; r++, group++)
                 for (int e = 0; e < p->nexposures; e++) {
                     rig_step_t *s = &p->steps[n++];
                     s->kind = RIG_STEP_LIGHT;
+                    s->op = -1;
                     s->angle_index = a;
                     s->lamp_set = l;
                     s->exposure_index = e;
@@ -295,6 +354,9 @@ static bool build_steps(rig_plan_t *p, const model_ini_t *ini)
                         snprintf(d->lamps, sizeof d->lamps, "none");
                     }
                 }
+    if (end)
+        p->steps[n++] = (rig_step_t){ .kind = RIG_STEP_OPERATOR, .op = 1, .angle_index = -1, .lamp_set = -1,
+                                      .exposure_index = -1, .group = -1, .lamps = "none" };
     // Order in the file: angle, lamp set, exposure, repeat; with repeats the
     // bracket of one repeat is kept together (exposure inside repeat).
     for (int i = 0; i < n; i++) p->steps[i].index = i;
@@ -340,7 +402,8 @@ rig_plan_t *rig_plan_parse(const char *text, size_t len, const char *name)
     if (!get_number(ini, "sample", "tilt_deg", &p->tilt_deg, -80, 80, false) ||
         !get_number(ini, "sample", "tilt_azimuth_deg", &p->tilt_azimuth_deg, -360, 360, false))
         goto done;
-    if (!parse_angles(p, ini) || !parse_lamp_sets(p, ini) || !parse_exposure(p, ini)) goto done;
+    if (!parse_operator(p, ini) || !parse_angles(p, ini) || !parse_lamp_sets(p, ini) || !parse_exposure(p, ini))
+        goto done;
     double v = 1;
     if (!get_number(ini, "capture", "repeats", &v, 1, 10000, true)) goto done;
     p->repeats = (int)v;
@@ -393,6 +456,7 @@ void rig_plan_free(rig_plan_t *p)
     free(p->lamp_sets);
     free(p->exposures_us);
     free(p->steps);
+    free(p->ops);
     free(p);
 }
 
@@ -443,8 +507,15 @@ int rig_plan_bind(rig_plan_t *p, rig_t *r)
         goto done;
     }
     if (r->virt) {
+        // the sample must exist and take its pose; the virtual rig is put back
+        // as it was (the operator step poses it)
         bool q = model_error_quiet_thread(true);
+        char was[64];
+        double wt = 0, wa = 0;
+        snprintf(was, sizeof was, "%s", rig_virtual_sample(r->virt));
+        rig_virtual_sample_pose(r->virt, &wt, &wa, NULL, NULL);
         int e = rig_virtual_set_sample_pose(r->virt, p->sample, p->tilt_deg, p->tilt_azimuth_deg);
+        rig_virtual_set_sample_pose(r->virt, was, wt, wa);
         model_error_quiet_thread(q);
         if (e) {
             model_error(p->path, 0, "[sample] name = %s, tilt %g deg: the virtual rig (truth file %s) refuses it: %s",
@@ -492,12 +563,40 @@ done:
     return rc;
 }
 
+int rig_plan_operator_pose(const rig_plan_t *p, rig_t *r, int step, char *what, size_t size)
+{
+    const rig_step_t *s = step >= 0 && step < p->nsteps ? &p->steps[step] : NULL;
+    if (!s || s->kind != RIG_STEP_OPERATOR || s->op < 0 || s->op >= p->nops)
+        return rig_fail(RIG_ERR_INVALID, "plan %s: step %d is not an operator step", p->path, step);
+    const rig_op_step_t *o = &p->ops[s->op];
+    char buf[256];
+    if (!what) {
+        what = buf;
+        size = sizeof buf;
+    }
+    if (!o->pose) {
+        snprintf(what, size, "no pose to set");
+        return 0;
+    }
+    if (!r->virt) {
+        snprintf(what, size, "real rig: the operator put %s (tilt %g deg, hinge azimuth %g deg)", o->sample,
+                 o->tilt_deg, o->tilt_azimuth_deg);
+        return 0;
+    }
+    int rc = rig_virtual_set_sample_pose(r->virt, o->sample, o->tilt_deg, o->tilt_azimuth_deg);
+    if (rc) return rc;
+    snprintf(what, size, "virtual rig: sample %s posed at tilt %g deg, hinge azimuth %g deg", o->sample, o->tilt_deg,
+             o->tilt_azimuth_deg);
+    return 0;
+}
+
 double rig_plan_floor_s(const rig_plan_t *p, const rig_t *r, int from_step)
 {
     double t = 0, angle = NAN;
     uint32_t mask = 0;
     for (int i = from_step; i < p->nsteps; i++) {
         const rig_step_t *s = &p->steps[i];
+        if (s->kind == RIG_STEP_OPERATOR) continue;   // the operator's time is not the hardware's
         double motion = 0, settle = 0, lamp = 0;
         if (r->turntable && !(s->angle_deg == angle)) {
             if (isfinite(angle)) motion = rig_motion_time_s(s->angle_deg - angle, r->speed_deg_s, r->accel_deg_s2);

@@ -17,6 +17,7 @@ extern "C" {
 #endif
 
 typedef struct rig rig_t;   // rig/rig.h
+typedef struct rig_operator rig_operator_t;   // the operator's answers (below)
 
 // ---------------------------------------------------------------------------
 // Capture sessions (rig/plan.c, rig/journal.c, rig/capture.c, rig/cmd_capture.c)
@@ -27,8 +28,10 @@ typedef struct rig rig_t;   // rig/rig.h
 //              table); kind = material_coupon | reference_white | chessboard | mirror_sphere |
 //              workpiece | uniform_source; tilt_deg = the wedge the sample stands on (-80..80,
 //              default 0), tilt_azimuth_deg = the azimuth of the wedge's hinge axis (default
-//              0): a virtual rig poses the sample so (rig_virtual_set_sample_pose); on a real
-//              rig the operator sets it up, the journal records it
+//              0): the operator puts the sample so (an operator step, below); instruction =
+//              TEXT (optional) replaces the operator step's generated instruction
+//   [operator] end = TEXT (optional): one more operator step after the last frame (e.g.
+//              "take the coupon off the wedge")
 //   [angles]   list = DEG DEG ... | range = START STOP STEP (STOP included when reached)
 //   [lamps]    sets = SET; SET; ...   a SET is NAME+NAME..., "all" or "none"
 //   [exposure] mode = fixed: list_us = US US ...
@@ -45,9 +48,20 @@ typedef struct rig rig_t;   // rig/rig.h
 //              lamp change beyond the lamps' own (default 0); frame_timeout_s = how long to
 //              wait for a frame beyond its exposure (default 10); retries = captures tried
 //              again after a camera time-out before the session pauses (default 2)
-// Order: angle, then lamp set, then repeat, then exposure (a bracket stays
-// together). Every problem is reported through model_error naming the plan
-// file and line.
+// Order: the operator step of [sample] first, then angle, then lamp set, then
+// repeat, then exposure (a bracket stays together), then [operator] end. Every
+// problem is reported through model_error naming the plan file and line.
+//
+// Operator steps (RIG_STEP_OPERATOR): the session stops, switches the lamps
+// off, prints the instruction ("put coupon glossy_plastic (material_coupon) on
+// the 40 deg wedge ...", generated from [sample] kind, name, tilt_deg and
+// tilt_azimuth_deg) and waits for the operator's answer (rig_operator_t:
+// Enter on a terminal, --yes, --operator-input FILE; 'q' pauses: exit 3).
+// The answer is journalled (the step done and an events row 'operator' saying
+// how and when); an answered step is never asked again, an unanswered one is
+// asked on --resume. The virtual rig plays the operator: an answered step's
+// pose (the [sample] on its wedge) is applied to it (rig_virtual_set_sample_pose)
+// and applied again on --resume; a real rig only waits.
 //
 // A session directory: session.sqlite (tables schema_version, session, steps,
 // frames, events; every step is written pending at the start) and
@@ -57,7 +71,7 @@ typedef struct rig rig_t;   // rig/rig.h
 // and the temporary name removed; --resume re-links committed frames whose link
 // a crash prevented and deletes uncommitted temporary files.
 
-typedef enum { RIG_STEP_LIGHT, RIG_STEP_DARK } rig_step_kind_t;
+typedef enum { RIG_STEP_LIGHT, RIG_STEP_DARK, RIG_STEP_OPERATOR } rig_step_kind_t;
 
 typedef struct {
     int             index;          // 0-based position in the session
@@ -68,7 +82,17 @@ typedef struct {
     uint32_t        lamp_mask;      // bits of the rig's lamps (rig_plan_bind)
     char            lamps[256];     // "east+west", "none"
     double          exposure_us, gain;
+    int             op;             // RIG_STEP_OPERATOR: its rig_plan_t ops[] entry (else -1)
 } rig_step_t;
+
+// An operator step's content: the instruction and, for the [sample] step, the
+// pose the operator sets up (a virtual rig applies it when the step is answered).
+typedef struct {
+    char   instruction[512];
+    bool   pose;                    // sample, tilt_deg, tilt_azimuth_deg apply
+    char   sample[64];
+    double tilt_deg, tilt_azimuth_deg;
+} rig_op_step_t;
 
 typedef struct {
     char    *path, *text;           // file name, contents
@@ -95,6 +119,8 @@ typedef struct {
     int      retries;
     int      nsteps;
     rig_step_t *steps;              // built by rig_plan_load (lamp_mask 0 until rig_plan_bind)
+    int      nops;
+    rig_op_step_t *ops;             // the operator steps' content (rig_step_t op)
 } rig_plan_t;
 
 // Parse a plan file (or text, for tests: name is used in messages) and build
@@ -106,9 +132,14 @@ void        rig_plan_free(rig_plan_t *p);
 // angles within the turntable's range (+-10000 deg; a turntable is needed when
 // any angle is not 0), a camera exists and accepts every exposure, the gain and
 // the pixel format (set and read back, then restored), the ROI fits the frame,
-// the sample exists on a virtual rig. Fills every step's lamp_mask. 0 or a
+// the sample exists on a virtual rig (it is not posed: the operator step does
+// that, rig_plan_operator_pose). Fills every step's lamp_mask. 0 or a
 // RIG_ERR_* (message names the plan file and line).
 int rig_plan_bind(rig_plan_t *p, rig_t *r);
+// The operator's action of operator step `step` on rig r: on a virtual rig its
+// pose is applied (rig_virtual_set_sample_pose); on a real rig nothing (the
+// operator did it). *what (may be NULL) says which. 0 or a RIG_ERR_*.
+int rig_plan_operator_pose(const rig_plan_t *p, rig_t *r, int step, char *what, size_t size);
 
 // The hardware floor of a step list on a rig: the sum of motions (trapezoidal
 // profile from the rig's speed/acceleration), settles (max of motion settle and
@@ -183,12 +214,19 @@ int  rig_journal_integrity(rig_journal_t *j, char **result);
 // DIR/session.sqlite, as opened.
 const char *rig_journal_path(const rig_journal_t *j);
 // Steps (as stored) and their status: 'p'ending, 'd'one, 's'kipped. Caller frees both.
+// Operator steps come back with kind RIG_STEP_OPERATOR and op -1.
 int  rig_journal_steps(rig_journal_t *j, rig_step_t **steps, char **status, int *n);
+// A step's note (an operator step: its instruction; a skipped step: why), or
+// NULL. Caller frees.
+char *rig_journal_step_note(rig_journal_t *j, int step);
+// An operator step answered: its status done and an events row 'operator'
+// (message how), one transaction.
+int  rig_journal_operator_done(rig_journal_t *j, int step, const char *how);
 int  rig_journal_frames(rig_journal_t *j, rig_frame_row_t **rows, int *n);
 // One transaction: the frame row and its step done.
 int  rig_journal_frame_done(rig_journal_t *j, const rig_frame_row_t *f);
 int  rig_journal_step_skipped(rig_journal_t *j, int step, const char *why);
-// Event log: kind = start, resume, retry, fault, pause, stop, complete, info.
+// Event log: kind = start, resume, retry, fault, pause, stop, complete, info, operator.
 int  rig_journal_event(rig_journal_t *j, int step, const char *kind, const char *fmt, ...)
     __attribute__((format(printf, 4, 5)));
 int  rig_journal_set_state(rig_journal_t *j, const char *state);   // running paused stopped fault complete
@@ -233,8 +271,40 @@ typedef struct {
     // steps run, the number of frames written in this run.
     double     *wall_s, *floor_s;
     int        *frames_written;
+    // Who answers the operator steps (NULL: the terminal, or a pause when
+    // stdin is not one). Shared by the sessions of one command.
+    rig_operator_t *op;
 } rig_capture_opts_t;
 int rig_capture_run(const rig_capture_opts_t *o);
+
+// ---------------------------------------------------------------------------
+// The operator's answers (rig/operator.c)
+//
+// yes: every operator step is answered done (scripts, CI, the demo).
+// input: one answer per line, consumed in order across every session of the
+// command: empty, done, y, yes = done; q, pause, stop = pause; end of file =
+// pause; anything else is an error naming FILE:LINE. Neither: on a terminal
+// (stdin) the instruction is shown and Enter answers done, q pauses; when stdin
+// is not a terminal the session pauses (exit 3) with a hint.
+// NULL on error (both given, FILE unreadable; model_last_error says).
+rig_operator_t *rig_operator_open(bool yes, const char *input);
+void            rig_operator_close(rig_operator_t *op);
+enum { RIG_OPERATOR_DONE = 0, RIG_OPERATOR_PAUSE = 1 };
+// Ask for step `step`'s instruction: RIG_OPERATOR_DONE (how: "terminal",
+// "--yes", "--operator-input FILE:LINE", with the UTC time), RIG_OPERATOR_PAUSE
+// (how: why), or a negative RIG_ERR_* (a bad answer line: the message names
+// FILE:LINE).
+int  rig_operator_ask(rig_operator_t *op, int step, const char *instruction, char *how, size_t size);
+// Whether a session of this reader paused (exit 3) since it was opened: the
+// calibrations exit 3 then.
+bool rig_operator_paused(const rig_operator_t *op);
+void rig_operator_set_paused(rig_operator_t *op);
+// The options of every command that captures (model/opts.h tables).
+#define RIG_OPERATOR_OPTS(yes_dest, input_dest)                                                                \
+    MODEL_OPT_FLAG("--yes", NULL, "answer every operator step as done (scripts, CI; see README, Operator "     \
+                   "steps)", yes_dest),                                                                       \
+    MODEL_OPT_STRING("--operator-input", "FILE", "the operator's answers, one a line (empty|done|y|yes: done; " \
+                     "q|pause|stop: pause)", input_dest, false)
 
 // `refl capture`, `refl session` (rig/cmd_capture.c).
 int rig_cmd_capture(int argc, char **argv);

@@ -549,13 +549,14 @@ static int capture_run(const char *name, const char *ratio_name, const char *ran
     double wall = 0, floor_s = 0;
     int frames = 0;
     rig_capture_opts_t o = { .plan_path = plan, .rig_path = rig, .dir = sess, .progress = 0, .wall_s = &wall,
-                             .floor_s = &floor_s, .frames_written = &frames };
+                             .floor_s = &floor_s, .frames_written = &frames, .op = rig_operator_open(true, NULL) };
     // progress lines and the session summary off (this output is NAME: VALUE lines)
     fflush(stdout);
     int saved_err = dup(2), saved_out = dup(1), null = open("/dev/null", O_WRONLY);
     dup2(null, 2);
     dup2(null, 1);
     int rc = rig_capture_run(&o);
+    rig_operator_close(o.op);
     fflush(stdout);
     dup2(saved_err, 2);
     dup2(saved_out, 1);

@@ -125,7 +125,7 @@ TEST(calib_gain_virtual)
     const char *out = test_path("gain");
     char *so = NULL, *se = NULL;
     double t0 = model_now_s();
-    int rc = test_refl_run(300, &so, &se, "calib", "gain", "--rig", rig_path, "-o", out, "--gains", "0,6",
+    int rc = test_refl_run(300, &so, &se, "calib", "gain", "--yes", "--rig", rig_path, "-o", out, "--gains", "0,6",
                            "--radiance", "5000", NULL);   // the truth's 5 lamps x radiance 1000
     fprintf(stderr, "  calib gain --rig: %.1f s\n", model_now_s() - t0);
     CHECK_MSG(rc == 0, "refl calib gain: %d\n%s", rc, se ? se : "");
@@ -468,7 +468,7 @@ TEST(calib_gain_bad_input)
     CHECK(expect_fail(&err, "calib", "gain", "--frames", m, "-o", test_path("o3"), "--no-report", NULL) == 1);
     CHECK_CONTAINS(err, "too few sweep steps: 21 exposures");   // 20 + the flat's
     free(err);
-    CHECK(expect_fail(&err, "calib", "gain", "--rig", test_path("none.ini"), "-o", test_path("o4"), "--steps", "10",
+    CHECK(expect_fail(&err, "calib", "gain", "--yes", "--rig", test_path("none.ini"), "-o", test_path("o4"), "--steps", "10",
                       NULL) == 1);
     CHECK_CONTAINS(err, "too few sweep steps");
     free(err);

@@ -356,7 +356,7 @@ TEST(calib_geometry_virtual_rig)
     const char *dir = test_path("geo");
     char *out = NULL, *err = NULL;
     double t0 = model_realtime_s();
-    int rc = test_refl_run(300, &out, &err, "calib", "geometry", "--rig", rigp, "-o", dir, NULL);
+    int rc = test_refl_run(300, &out, &err, "calib", "geometry", "--yes", "--rig", rigp, "-o", dir, NULL);
     fprintf(stderr, "  virtual rig calibration: %.1f s\n", model_realtime_s() - t0);
     CHECK_MSG(rc == 0, "refl calib geometry --rig: exit %d\n%s", rc, err ? err : "");
     json_t *g = load_json(dir, "geometry.json");
@@ -552,12 +552,12 @@ TEST(calib_geometry_bad_arguments)
     CHECK(rc == 2);
     CHECK_CONTAINS(err, "LENSMODEL_FISHEYE9");
     free(out), free(err);
-    rc = test_refl_run(30, &out, &err, "calib", "geometry", "--rig", test_path("nope.ini"), "-o", test_path("x"), NULL);
+    rc = test_refl_run(30, &out, &err, "calib", "geometry", "--yes", "--rig", test_path("nope.ini"), "-o", test_path("x"), NULL);
     CHECK(rc == 2);
     CHECK_CONTAINS(err, "nope.ini");
     free(out), free(err);
     const char *rig = test_write("r.ini", "[rig]\nbackend = virtual\ntruth = t.ini\n");
-    rc = test_refl_run(30, &out, &err, "calib", "geometry", "--rig", rig, "--tilts", "95@0:0,10", "-o", test_path("x"),
+    rc = test_refl_run(30, &out, &err, "calib", "geometry", "--yes", "--rig", rig, "--tilts", "95@0:0,10", "-o", test_path("x"),
                        NULL);
     CHECK(rc == 2);
     CHECK_CONTAINS(err, "95@0:0,10");

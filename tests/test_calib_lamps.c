@@ -449,7 +449,7 @@ TEST(calib_lamps_virtual_rig_accuracy)
     char out[PATH_MAX];
     snprintf(out, sizeof out, "%s/lamps", test_tmpdir());
     char *o = NULL, *e = NULL;
-    int rc = test_refl_run(300, &o, &e, "calib", "lamps", "--rig", rig, "--camera", cam, "-o", out,
+    int rc = test_refl_run(300, &o, &e, "calib", "lamps", "--yes", "--rig", rig, "--camera", cam, "-o", out,
                            "--sphere-centre-mm", "60,0,40", "--sphere-radius-mm", "25", "--lamp-radius-mm", "15",
                            "--progress", "lines", NULL);   // the default: 24 angles, 15 deg apart
     CHECK_MSG(rc == 0, "rc %d\n%s\n%s", rc, o, e);
@@ -533,7 +533,7 @@ TEST(calib_lamps_virtual_rig_accuracy)
                        "--sphere-centre-mm", "-60,0,40", "--sphere-radius-mm", "25", NULL);
     CHECK(rc == 1);
     CHECK_CONTAINS(e, "lamp east: no highlight in 24 of 24 frames:");
-    CHECK_CONTAINS(e, "frames/s000000.png (step 0, ");
+    CHECK_CONTAINS(e, "frames/s000001.png (step 1, ");   // step 0: the operator step
     CHECK_CONTAINS(e, "brightest pixel on the sphere's image is");
     CHECK_CONTAINS(e, "lamp north: its highlight is in only 0 frames of");
     CHECK_CONTAINS(e, "--sphere-centre-mm -60,0,40");
@@ -659,7 +659,7 @@ TEST(calib_lamps_occluded_frames)
     char out[PATH_MAX];
     snprintf(out, sizeof out, "%s/lamps", test_tmpdir());
     char *o = NULL, *e = NULL;
-    int rc = test_refl_run(300, &o, &e, "calib", "lamps", "--rig", rig, "--camera", cam, "-o", out, "--lamps",
+    int rc = test_refl_run(300, &o, &e, "calib", "lamps", "--yes", "--rig", rig, "--camera", cam, "-o", out, "--lamps",
                            "east,south", "--angles", "0,20,40,90,135,180,225,270", "--sphere-centre-mm", "60,0,40",
                            "--sphere-radius-mm", "25", "--lamp-radius-mm", "15", "--progress", "lines", NULL);
     CHECK_MSG(rc == 0, "rc %d\n%s\n%s", rc, o, e);
@@ -738,7 +738,7 @@ TEST(calib_lamps_bad_arguments)
     // a camera model that is missing: named, with what to do
     char out[PATH_MAX];
     snprintf(out, sizeof out, "%s/o", test_tmpdir());
-    int rc = test_refl_run(30, &o, &e, "calib", "lamps", "--rig", rig, "--camera", "/nonexistent/cam.cameramodel",
+    int rc = test_refl_run(30, &o, &e, "calib", "lamps", "--yes", "--rig", rig, "--camera", "/nonexistent/cam.cameramodel",
                            "-o", out, NULL);
     CHECK(rc == 1);
     CHECK_CONTAINS(e, "/nonexistent/cam.cameramodel: cannot read the camera model");
@@ -753,7 +753,7 @@ TEST(calib_lamps_bad_arguments)
     g_free(e);
     // a real rig without sphere facts: asked for
     const char *real = test_write("real.ini", "[lamp a]\nbackend = sim\n");
-    rc = test_refl_run(30, &o, &e, "calib", "lamps", "--rig", real, "--camera", cam, "-o", out, NULL);
+    rc = test_refl_run(30, &o, &e, "calib", "lamps", "--yes", "--rig", real, "--camera", cam, "-o", out, NULL);
     CHECK(rc == 1);
     CHECK_CONTAINS(e, "is not a virtual rig: give --sphere-centre-mm X,Y,Z and --sphere-radius-mm R");
     g_free(o);

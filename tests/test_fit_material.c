@@ -84,7 +84,7 @@ TEST(fit_material_chain_virtual_rig)
                                                   "mode = fixed\nlist_us = 8000 500\n"));
     char *out = NULL, *err = NULL;
     char *ws = keep(test_path("w")), *gs = keep(test_path("g"));
-    int rc = test_refl_run(300, &out, &err, "capture", white, "--rig", rig, "-o", ws, "--progress", "lines",
+    int rc = test_refl_run(300, &out, &err, "capture", "--yes", white, "--rig", rig, "-o", ws, "--progress", "lines",
                            "--calib", cal, NULL);
     CHECK_MSG(rc == 0, "%s", err);
     g_free(out);
@@ -103,7 +103,7 @@ TEST(fit_material_chain_virtual_rig)
     }
     free(facts);
     rig_journal_close(j);
-    rc = test_refl_run(60, &out, &err, "capture", white, "--rig", rig, "-o", test_path("w2"), "--calib",
+    rc = test_refl_run(60, &out, &err, "capture", "--yes", white, "--rig", rig, "-o", test_path("w2"), "--calib",
                        test_tmpdir(), NULL);
     CHECK(rc == 1);
     CHECK_CONTAINS(err, "no calibration files there");
@@ -129,7 +129,7 @@ TEST(fit_material_chain_virtual_rig)
     }
     json_decref(w);
 
-    rc = test_refl_run(300, &out, &err, "capture", glossy, "--rig", rig, "-o", gs, "--progress", "lines", NULL);
+    rc = test_refl_run(300, &out, &err, "capture", "--yes", glossy, "--rig", rig, "-o", gs, "--progress", "lines", NULL);
     CHECK_MSG(rc == 0, "%s", err);
     g_free(out);
     g_free(err);
@@ -271,7 +271,7 @@ static json_t *fit_coupon(const char *rig, const char *cal, const char *sample, 
     snprintf(name, sizeof name, "p_%s.json", sample);
     char *pj = keep(test_path(name));
     char *out = NULL, *err = NULL;
-    int rc = test_refl_run(300, &out, &err, "capture", pp, "--rig", rig, "-o", sd, "--progress", "lines", NULL);
+    int rc = test_refl_run(300, &out, &err, "capture", "--yes", pp, "--rig", rig, "-o", sd, "--progress", "lines", NULL);
     CHECK_MSG(rc == 0, "%s: %s", sample, err);
     g_free(out);
     g_free(err);
@@ -367,11 +367,11 @@ TEST(fit_material_coupons_virtual_rig)
     snprintf(wj, sizeof wj, "%s/white.json", cal);
     snprintf(gd, sizeof gd, "%s/gain", cal);
     char *out = NULL, *err = NULL;
-    int rc = test_refl_run(300, &out, &err, "calib", "gain", "--rig", rig, "-o", gd, NULL);
+    int rc = test_refl_run(300, &out, &err, "calib", "gain", "--yes", "--rig", rig, "-o", gd, NULL);
     CHECK_MSG(rc == 0, "%s", err);
     g_free(out);
     g_free(err);
-    rc = test_refl_run(300, &out, &err, "capture", white, "--rig", rig, "-o", ws, "--progress", "lines", NULL);
+    rc = test_refl_run(300, &out, &err, "capture", "--yes", white, "--rig", rig, "-o", ws, "--progress", "lines", NULL);
     CHECK_MSG(rc == 0, "%s", err);
     g_free(out);
     g_free(err);

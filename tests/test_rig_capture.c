@@ -163,10 +163,10 @@ TEST(capture_kill9_resume_equals_uninterrupted)
     snprintf(ref, sizeof ref, "%s/ref", test_tmpdir());
     snprintf(dir, sizeof dir, "%s/killed", test_tmpdir());
     char *out = NULL, *err = NULL;
-    int rc = refl(&out, &err, "capture", plan, "--rig", rig, "-o", ref, "--progress", "lines", NULL);
+    int rc = refl(&out, &err, "capture", "--yes", plan, "--rig", rig, "-o", ref, "--progress", "lines", NULL);
     CHECK_MSG(rc == 0, "rc %d: %s", rc, err);
     CHECK_CONTAINS(out, "frames: 24");
-    CHECK_CONTAINS(err, "step 24/24");
+    CHECK_CONTAINS(err, "step 25/25");   // step 1 of 25: the operator step
     g_free(out);
     g_free(err);
 
@@ -187,12 +187,12 @@ TEST(capture_kill9_resume_equals_uninterrupted)
                 at[i] = at[k];
                 at[k] = t;
             }
-    const char *first[] = { test_refl(), "capture", plan, "--rig", rig, "-o", dir, NULL };
-    const char *resume[] = { test_refl(), "capture", "--resume", dir, NULL };
+    const char *first[] = { test_refl(), "capture", "--yes", plan, "--rig", rig, "-o", dir, NULL };
+    const char *resume[] = { test_refl(), "capture", "--yes", "--resume", dir, NULL };
     int kills = 0;
     for (int i = 0; i < 10; i++) kills += run_and_kill(i ? resume : first, dir, at[i]);
     CHECK_MSG(kills >= 8, "only %d of 10 runs were killed before finishing", kills);
-    rc = refl(&out, &err, "capture", "--resume", dir, NULL);
+    rc = refl(&out, &err, "capture", "--yes", "--resume", dir, NULL);
     CHECK_MSG(rc == 0, "final resume rc %d: %s", rc, err);
     g_free(out);
     g_free(err);
@@ -236,17 +236,17 @@ TEST(capture_kill9_resume_equals_uninterrupted)
     rc = refl(&out, &err, "session", "export", ref, "--format", "csv", NULL);
     CHECK(rc == 0);
     CHECK_CONTAINS(out, "step,file,sha256");
-    CHECK_CONTAINS(out, "23,frames/s000023.png,");
+    CHECK_CONTAINS(out, "24,frames/s000024.png,");   // step 0: the operator step, no frame
     g_free(out);
     g_free(err);
     rc = refl(&out, &err, "session", "export", ref, "--format", "json", NULL);
     CHECK(rc == 0);
-    CHECK_CONTAINS(out, "\"file\": \"frames/s000023.png\"");
+    CHECK_CONTAINS(out, "\"file\": \"frames/s000024.png\"");
     g_free(out);
     g_free(err);
 
     // resume of a complete session: nothing to do; a changed plan is refused
-    rc = refl(&out, &err, "capture", "--resume", ref, NULL);
+    rc = refl(&out, &err, "capture", "--yes", "--resume", ref, NULL);
     CHECK(rc == 0);
     CHECK_CONTAINS(out, "complete");
     g_free(out);
@@ -260,9 +260,10 @@ TEST(capture_dry_run_and_changed_plan)
     const char *rig = rig_file("rig.ini", NULL);
     const char *plan = test_write("plan.ini", SMALL_PLAN);
     char *out = NULL, *err = NULL;
-    int rc = refl(&out, &err, "capture", plan, "--rig", rig, "--dry-run", NULL);
+    int rc = refl(&out, &err, "capture", "--yes", plan, "--rig", rig, "--dry-run", NULL);
     CHECK_MSG(rc == 0, "%s", err);
-    CHECK_CONTAINS(out, "steps: 24 (6 angles x 2 lamp sets x 2 exposures");
+    CHECK_CONTAINS(out, "steps: 25 (1 operator step; 24 frames: 6 angles x 2 lamp sets x 2 exposures");
+    CHECK_CONTAINS(out, "     0  operator: put coupon coupon_matte_paint flat at the turntable centre\n");
     CHECK_CONTAINS(out, "estimated_duration_s:");
     CHECK_CONTAINS(out, "estimated_disk_bytes: 62914560");
     g_free(out);
@@ -270,7 +271,7 @@ TEST(capture_dry_run_and_changed_plan)
     // a lamp the rig does not have: the line of sets
     const char *bad = test_write("bad.ini", "[sample]\nname = coupon_matte_paint\nkind = material_coupon\n[angles]\n"
                                  "list = 0\n[lamps]\nsets = east; skylight\n[exposure]\nmode = fixed\nlist_us = 100\n");
-    rc = refl(&out, &err, "capture", bad, "--rig", rig, "--dry-run", NULL);
+    rc = refl(&out, &err, "capture", "--yes", bad, "--rig", rig, "--dry-run", NULL);
     CHECK(rc == 1);
     CHECK_CONTAINS(err, "bad.ini:7");
     CHECK_CONTAINS(err, "no lamp 'skylight'");
@@ -279,7 +280,7 @@ TEST(capture_dry_run_and_changed_plan)
     // an exposure the camera refuses (the virtual camera: 10 .. 10e6 us)
     bad = test_write("bad2.ini", "[sample]\nname = coupon_matte_paint\nkind = material_coupon\n[angles]\n"
                      "list = 0\n[lamps]\nsets = east\n[exposure]\nmode = fixed\nlist_us = 100 5e7\n");
-    rc = refl(&out, &err, "capture", bad, "--rig", rig, "--dry-run", NULL);
+    rc = refl(&out, &err, "capture", "--yes", bad, "--rig", rig, "--dry-run", NULL);
     CHECK(rc == 1);
     CHECK_CONTAINS(err, "bad2.ini:10");
     CHECK_CONTAINS(err, "does not accept 5e+07 us");
@@ -288,7 +289,7 @@ TEST(capture_dry_run_and_changed_plan)
     // a paused session (SIGINT) then a changed plan: refused; --allow-changed continues
     char dir[4096];
     snprintf(dir, sizeof dir, "%s/s", test_tmpdir());
-    const char *argv[] = { test_refl(), "capture", plan, "--rig", rig, "-o", dir, NULL };
+    const char *argv[] = { test_refl(), "capture", "--yes", plan, "--rig", rig, "-o", dir, NULL };
     pid_t pid = fork();
     if (pid == 0) {
         int null = open("/dev/null", O_WRONLY);
@@ -306,19 +307,19 @@ TEST(capture_dry_run_and_changed_plan)
     int done = count_frames(dir);
     CHECK(done >= 3 && done < 24);
     test_write("plan.ini", SMALL_PLAN "# changed\n");
-    rc = refl(&out, &err, "capture", "--resume", dir, NULL);
+    rc = refl(&out, &err, "capture", "--yes", "--resume", dir, NULL);
     CHECK(rc == 1);
     CHECK_CONTAINS(err, "changed since the session started");
     CHECK_CONTAINS(err, "--allow-changed");
     g_free(out);
     g_free(err);
-    rc = refl(&out, &err, "capture", "--resume", dir, "--allow-changed", NULL);
+    rc = refl(&out, &err, "capture", "--yes", "--resume", dir, "--allow-changed", NULL);
     CHECK_MSG(rc == 0, "%s", err);
     g_free(out);
     g_free(err);
     CHECK(count_frames(dir) == 24);
     // an existing session directory is not overwritten
-    rc = refl(&out, &err, "capture", plan, "--rig", rig, "-o", dir, NULL);
+    rc = refl(&out, &err, "capture", "--yes", plan, "--rig", rig, "-o", dir, NULL);
     CHECK(rc == 1);
     CHECK_CONTAINS(err, "already holds a session");
     g_free(out);
@@ -340,7 +341,7 @@ static void disk_full_body(const char *dir, const char *const *env)
         argv[k++] = "env";
         while (*env) argv[k++] = *env++;
     }
-    const char *rest[] = { test_refl(), "capture", plan, "--rig", rig, "-o", dir, NULL };
+    const char *rest[] = { test_refl(), "capture", "--yes", plan, "--rig", rig, "-o", dir, NULL };
     for (int i = 0; rest[i]; i++) argv[k++] = rest[i];
     argv[k] = NULL;
     char *out = NULL, *err = NULL;
@@ -400,10 +401,11 @@ TEST(capture_disk_full_injected)
     disk_full_body(dir, env);
 }
 
-static void drop_at_step2(void *ctx, rig_t *r, int step)
+// Step 3: the third frame (step 0 is the plan's operator step).
+static void drop_at_step3(void *ctx, rig_t *r, int step)
 {
     (void)ctx;
-    if (step == 2) rig_gv_camera_drop_triggers(rig_virtual_gv_camera(r->virt), 1000);
+    if (step == 3) rig_gv_camera_drop_triggers(rig_virtual_gv_camera(r->virt), 1000);
 }
 
 TEST(capture_camera_stops_answering)
@@ -416,10 +418,10 @@ TEST(capture_camera_stops_answering)
     char dir[4096];
     snprintf(dir, sizeof dir, "%s/s", test_tmpdir());
     rig_capture_opts_t o = { .plan_path = plan, .rig_path = rig, .dir = dir, .progress = 0,
-                             .before_step = drop_at_step2 };
+                             .before_step = drop_at_step3, .op = rig_operator_open(true, NULL) };
     int rc = rig_capture_run(&o);
     CHECK(rc == 3);
-    CHECK_CONTAINS(model_last_error(), "did not answer at step 2 after 2 retries");
+    CHECK_CONTAINS(model_last_error(), "did not answer at step 3 after 2 retries");
     CHECK_CONTAINS(model_last_error(), "refl capture --resume");
     CHECK(count_frames(dir) == 2);
     CHECK(count_events(dir, "retry") == 2);
@@ -430,6 +432,7 @@ TEST(capture_camera_stops_answering)
     rc = rig_capture_run(&o);
     CHECK(rc == 0);
     CHECK(count_frames(dir) == 4);
+    rig_operator_close(o.op);
     test_camera_unlock(lk);
 }
 
@@ -465,7 +468,7 @@ TEST(capture_turntable_stall)
     char dir[4096];
     snprintf(dir, sizeof dir, "%s/s", test_tmpdir());
     char *out = NULL, *err = NULL;
-    int rc = refl(&out, &err, "capture", plan, "--rig", rig, "-o", dir, NULL);
+    int rc = refl(&out, &err, "capture", "--yes", plan, "--rig", rig, "-o", dir, NULL);
     CHECK(rc == 1);
     CHECK_CONTAINS(err, "turntable fault at step");
     CHECK_CONTAINS(err, "lamps off");
@@ -488,13 +491,14 @@ TEST(capture_auto_bracketing_skips)
     char dir[4096];
     snprintf(dir, sizeof dir, "%s/s", test_tmpdir());
     char *out = NULL, *err = NULL;
-    int rc = refl(&out, &err, "capture", plan, "--rig", rig, "-o", dir, NULL);
+    int rc = refl(&out, &err, "capture", "--yes", plan, "--rig", rig, "-o", dir, NULL);
     CHECK_MSG(rc == 0, "%s", err);
     g_free(out);
     g_free(err);
     char *rows = step_rows(dir);
-    CHECK_CONTAINS(rows, "0 light 0 east 64000 done\n1 light 0 east 16000 done\n2 light 0 east 4000 skipped\n");
-    CHECK_CONTAINS(rows, "3 light 10 east 64000 done\n4 light 10 east 16000 done\n5 light 10 east 4000 skipped\n");
+    CHECK_CONTAINS(rows, "0 operator 0 none 0 done\n1 light 0 east 64000 done\n2 light 0 east 16000 done\n"
+                         "3 light 0 east 4000 skipped\n");
+    CHECK_CONTAINS(rows, "4 light 10 east 64000 done\n5 light 10 east 16000 done\n6 light 10 east 4000 skipped\n");
     g_free(rows);
     rc = refl(&out, &err, "session", "export", dir, "--format", "csv", NULL);
     CHECK(rc == 0);
@@ -590,7 +594,7 @@ TEST(session_check_incomplete_and_resume)
     char dir[4096];
     snprintf(dir, sizeof dir, "%s/s", test_tmpdir());
     rig_capture_opts_t o = { .plan_path = plan, .rig_path = rig, .dir = dir, .progress = 0,
-                             .before_step = drop_at_step2 };
+                             .before_step = drop_at_step3, .op = rig_operator_open(true, NULL) };
     int rc = rig_capture_run(&o);
     CHECK(rc == 3);
     CHECK(count_frames(dir) == 2);
@@ -600,12 +604,13 @@ TEST(session_check_incomplete_and_resume)
     CHECK(rc == 1);
     CHECK_CONTAINS(out, "journal_integrity: ok\n");
     CHECK_CONTAINS(out, "steps_missing: 14\n");
-    CHECK_CONTAINS(out, "missing step 2: light angle 5 deg lamps east exposure 1000 us\n");
-    CHECK_CONTAINS(out, "missing step 11: light angle 25 deg lamps east exposure 2000 us\n");
-    CHECK(out && !strstr(out, "missing step 12:"));
+    CHECK_CONTAINS(out, "operator step 0: answered: put coupon coupon_matte_paint flat at the turntable centre\n");
+    CHECK_CONTAINS(out, "missing step 3: light angle 5 deg lamps east exposure 1000 us\n");
+    CHECK_CONTAINS(out, "missing step 12: light angle 25 deg lamps east exposure 2000 us\n");
+    CHECK(out && !strstr(out, "missing step 13:"));
     CHECK_CONTAINS(out, "... and 4 more missing step(s) (14 in all)");
     CHECK_CONTAINS(out, "frames_bad: 0\n");
-    CHECK_CONTAINS(err, "is incomplete: 14 of 16 step(s) missing");
+    CHECK_CONTAINS(err, "is incomplete: 14 of 17 step(s) missing");
     CHECK_CONTAINS(err, "--allow-incomplete");
     g_free(out);
     g_free(err);
@@ -619,7 +624,7 @@ TEST(session_check_incomplete_and_resume)
     char *changed = g_strdup_printf("%s# changed\n", rig_text ? rig_text : "");
     test_write("rig.ini", changed);
     g_free(changed);
-    rc = refl(&out, &err, "capture", "--resume", dir, NULL);
+    rc = refl(&out, &err, "capture", "--yes", "--resume", dir, NULL);
     CHECK(rc == 1);
     char *want = g_strdup_printf("the rig file %s changed since the session started", rig);
     CHECK_CONTAINS(err, want);
@@ -630,7 +635,7 @@ TEST(session_check_incomplete_and_resume)
 
     // another camera (the same rig file; the virtual camera's serial changed)
     truth_copy("REFL-OTHER7", false);
-    rc = refl(&out, &err, "capture", "--resume", dir, NULL);
+    rc = refl(&out, &err, "capture", "--yes", "--resume", dir, NULL);
     CHECK(rc == 1);
     CHECK_CONTAINS(err, "the camera changed: serial REFL-OTHER7 now, the session started with serial REFL-VIRT01");
     CHECK_CONTAINS(err, "--allow-changed");
@@ -650,6 +655,7 @@ TEST(session_check_incomplete_and_resume)
     o.resume = true;
     o.before_step = slow_first_step;
     rc = rig_capture_run(&o);
+    rig_operator_close(o.op);
     fflush(stderr);
     dup2(saved, 2);
     close(saved);

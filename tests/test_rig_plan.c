@@ -28,11 +28,13 @@ TEST(plan_steps_order_dark_repeats)
     CHECK(p->nlamp_sets == 3);
     CHECK(!strcmp(p->lamp_sets[1], "east+west"));
     int light = 3 * 3 * 2 * 2;
-    CHECK(p->nsteps == light + light / 5);
-    // first steps: angle 0, east, repeat 0: 100, 200; repeat 1: 100, 200; then a dark after the 5th light
-    CHECK(p->steps[0].exposure_us == 100 && p->steps[1].exposure_us == 200 && p->steps[2].repeat == 1);
-    CHECK(p->steps[5].kind == RIG_STEP_DARK && !strcmp(p->steps[5].lamps, "none"));
-    CHECK(p->steps[5].exposure_us == p->steps[4].exposure_us);
+    CHECK(p->nsteps == 1 + light + light / 5);
+    // step 0: the [sample]'s operator step; then angle 0, east, repeat 0: 100, 200; repeat 1: 100, 200; then
+    // a dark after the 5th light
+    CHECK(p->steps[0].kind == RIG_STEP_OPERATOR && p->steps[0].op == 0 && p->nops == 1);
+    CHECK(p->steps[1].exposure_us == 100 && p->steps[2].exposure_us == 200 && p->steps[3].repeat == 1);
+    CHECK(p->steps[6].kind == RIG_STEP_DARK && !strcmp(p->steps[6].lamps, "none"));
+    CHECK(p->steps[6].exposure_us == p->steps[5].exposure_us);
     for (int i = 0; i < p->nsteps; i++) CHECK(p->steps[i].index == i);
     CHECK(p->steps[p->nsteps - 1].angle_deg == 20);
     rig_plan_free(p);
@@ -44,9 +46,9 @@ TEST(plan_auto_longest_first)
                           "list_us = 100 1600 400\ntarget_fraction = 0.8\nroi = 10 20 30 40\n");
     CHECK(p != NULL);
     if (!p) return;
-    CHECK(p->auto_exposure && p->nsteps == 3);
-    CHECK(p->steps[0].exposure_us == 1600 && p->steps[1].exposure_us == 400 && p->steps[2].exposure_us == 100);
-    CHECK(p->steps[0].group == p->steps[2].group);
+    CHECK(p->auto_exposure && p->nsteps == 4);   // the operator step, then the bracket
+    CHECK(p->steps[1].exposure_us == 1600 && p->steps[2].exposure_us == 400 && p->steps[3].exposure_us == 100);
+    CHECK(p->steps[1].group == p->steps[3].group && p->steps[0].group == -1);
     CHECK_NEAR(p->target_fraction, 0.8, 0);
     CHECK(p->roi[0] == 10 && p->roi[3] == 40);
     rig_plan_free(p);
