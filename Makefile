@@ -218,6 +218,7 @@ check: $(BIN)/refl $(BIN)/refl-tests $(FAKE_GPIOD) $(LAMP_CHILD) $(ENOSPC_SHIM)
 	  REFL_SCRIPTS_DIR=$(CURDIR)/scripts $(BIN)/refl-tests
 
 demo: $(BIN)/refl
+	rm -rf $(BUILD)/demo/session* $(BUILD)/demo/calib   # a fresh lab day (scripts/demo keeps and resumes sessions)
 	scripts/demo $(BIN)/refl $(BUILD)/demo
 
 # the verification detection study on the virtual rig (about 45 min on 2 cores; README: refl verify)

@@ -44,21 +44,34 @@ static void usage(FILE *f)
     fprintf(f, "\nrefl %s\n", REFL_VERSION);
 }
 
-// `refl demo [-o DIR]`: scripts/demo with this binary (the scripts beside it:
+// `refl demo [-o DIR] [--rig RIG.ini] [--yes | --operator-input FILE]`: scripts/demo with this binary (the scripts beside it:
 // $REFL_SCRIPTS_DIR, else ../scripts or ../../scripts of the executable).
 static int demo_cmd(int argc, char **argv)
 {
-    const char *out = "refl-demo";
-    model_opt_t opts[] = { MODEL_OPT_STRING("-o", "DIR", "output directory (default refl-demo)", &out, false) };
+    const char *out = "refl-demo", *rig = NULL, *operator_input = NULL;
+    bool yes = false;
+    model_opt_t opts[] = {
+        MODEL_OPT_STRING("-o", "DIR", "output directory (default refl-demo)", &out, false),
+        MODEL_OPT_STRING("--rig", "RIG.ini", "run the lab day on this rig (default: the virtual rig, --yes)", &rig,
+                         false),
+        RIG_OPERATOR_OPTS(&yes, &operator_input),
+    };
     model_cli_t cli = {
         .cmd = "demo", .opts = opts, .nopts = MODEL_NOPTS(opts),
         .about = "Runs the whole lab day on the virtual rig (scripts/demo): geometry, lamp and gain\n"
                  "calibrations, the reference white, three material sessions and their fits, light planning\n"
                  "for the workpiece and its verification against the correct and wrong descriptions, each\n"
-                 "result next to the rig's truth; prints the path of DIR/index.html.",
+                 "result next to the rig's truth; prints the path of DIR/index.html.\n"
+                 "--rig RIG.ini: the same day on that rig, the operator steps in order (put the board on its\n"
+                 "wedge, the chrome ball, the flat-field source, the reference white, each coupon, the\n"
+                 "workpiece), answered by --yes, --operator-input FILE (passed to every capture) or on the\n"
+                 "terminal. A pause ends it with exit 3: run the same command again to continue (complete\n"
+                 "sessions are kept, a partial one resumed). A rig that is not virtual has no truth to\n"
+                 "compare with: that part is skipped.",
     };
     int rc = model_cli_parse(&cli, argc, argv);
     if (rc != MODEL_CLI_OK) return rc;
+    if (yes && operator_input) return model_cli_error(&cli, "give --yes or --operator-input FILE, not both");
     char exe[4096];
     ssize_t n = readlink("/proc/self/exe", exe, sizeof exe - 1);
     if (n <= 0) {
@@ -77,7 +90,18 @@ static int demo_cmd(int argc, char **argv)
         if (k == 0) snprintf(script, sizeof script, "%s/demo", cands[k]);
         else snprintf(script, sizeof script, "%s%s/demo", dir, cands[k]);
         if (access(script, R_OK) == 0) {
-            char *args[] = { (char *)"/bin/bash", script, exe, (char *)out, NULL };
+            char *args[8] = { (char *)"/bin/bash", script, exe, (char *)out };
+            int na = 4;
+            if (rig) {
+                args[na++] = (char *)"--rig";
+                args[na++] = (char *)rig;
+            }
+            if (yes) args[na++] = (char *)"--yes";
+            if (operator_input) {
+                args[na++] = (char *)"--operator-input";
+                args[na++] = (char *)operator_input;
+            }
+            args[na] = NULL;
             execv("/bin/bash", args);
             fprintf(stderr, "refl demo: cannot run /bin/bash %s: %s\n", script, strerror(errno));
             return 1;

@@ -5,7 +5,8 @@
 // step, a bad line is an error naming FILE:LINE); a session killed with
 // SIGKILL between the answer and the next frame resumes without asking again
 // and with the virtual rig posed; refl calib geometry pausing at its first
-// operator step. The virtual rig is served in-process (no network).
+// operator step; refl demo passing --rig and the answers to scripts/demo. The
+// virtual rig is served in-process (no network).
 #define _GNU_SOURCE
 #include <glib.h>
 #include <limits.h>
@@ -332,6 +333,29 @@ TEST(operator_calib_geometry_pauses)
     }
     if (d) g_dir_close(d);
     CHECK(complete == 1 && paused == 1);
+    g_free(out);
+    g_free(err);
+}
+
+TEST(operator_demo_arguments)
+{
+    char *out = NULL, *err = NULL;
+    // refl demo passes --rig and the answers to scripts/demo, which checks them before anything runs
+    int rc = test_refl_run(60, &out, &err, "demo", "-o", test_path("d"), "--rig", test_path("no-rig.ini"), "--yes",
+                           NULL);
+    CHECK_MSG(rc == 1, "exit %d: %s", rc, err);
+    CHECK_CONTAINS(err, "no-rig.ini: cannot read the rig file");
+    g_free(out);
+    g_free(err);
+    rc = test_refl_run(60, &out, &err, "demo", "-o", test_path("d"), "--operator-input", test_path("none.txt"), NULL);
+    CHECK_MSG(rc == 1, "exit %d: %s", rc, err);
+    CHECK_CONTAINS(err, "--operator-input");
+    CHECK_CONTAINS(err, "none.txt: cannot read it");
+    g_free(out);
+    g_free(err);
+    rc = test_refl_run(60, &out, &err, "demo", "--yes", "--operator-input", "x", NULL);
+    CHECK(rc == 2);
+    CHECK_CONTAINS(err, "not both");
     g_free(out);
     g_free(err);
 }
