@@ -591,6 +591,7 @@ typedef struct {
     double      cur_exposure;
     int         paused;          // 1 SIGINT, 2 camera not answering, 3 operator step
     rig_operator_t *op_own;      // the terminal's reader when o->op is NULL
+    double      t_operator;      // waiting for the operator (not in the wall time)
     double      T_cap, T_push;   // time in the camera (trigger to frame in hand), waiting for the writer
 } run_t;
 
@@ -912,7 +913,9 @@ static int step_operator(run_t *x, const rig_step_t *s)
     if (x->pg.bar) fprintf(stderr, "\n");
     char how[1024], what[512];
     const char *dir = x->o->dir;
+    double t0 = model_now_s();
     int a = rig_operator_ask(x->o->op ? x->o->op : x->op_own, step, x->p->ops[s->op].instruction, how, sizeof how);
+    x->t_operator += model_now_s() - t0;
     if (a == RIG_OPERATOR_PAUSE) {
         snprintf(x->msg, sizeof x->msg, "operator step %d not answered (%s): session paused, lamps off; when it is "
                  "done, continue with refl capture --resume %s (Enter on a terminal answers it, or add --yes or "
@@ -1003,7 +1006,7 @@ static int run_end(run_t *x)
     rig_plan_t *p = x->p;
     writer_close(x);
     if (x->pg.bar) fprintf(stderr, "\n");
-    double wall = model_now_s() - x->t_start;
+    double wall = model_now_s() - x->t_start - x->t_operator;   // the operator's time is not the rig's
     if (o->wall_s) *o->wall_s = wall;
     if (o->floor_s) *o->floor_s = x->floor_s;
     if (o->frames_written) *o->frames_written = x->w.written;

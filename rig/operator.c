@@ -123,8 +123,10 @@ int rig_operator_ask(rig_operator_t *op, int step, const char *instruction, char
     for (;;) {
         fprintf(stderr, "refl: press Enter when done, q to pause: ");
         fflush(stderr);
+        errno = 0;
         if (!read_answer(stdin, a, sizeof a)) {
-            snprintf(how, size, "end of input on the terminal");
+            snprintf(how, size, "%s", errno == EINTR ? "interrupted (Ctrl-C) at the prompt" : "end of input on the terminal");
+            clearerr(stdin);
             return RIG_OPERATOR_PAUSE;
         }
         model_utc_text(model_realtime_s(), now);

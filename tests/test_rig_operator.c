@@ -10,6 +10,8 @@
 #define _GNU_SOURCE
 #include <glib.h>
 #include <limits.h>
+#include <poll.h>
+#include <pty.h>
 #include <math.h>
 #include <signal.h>
 #include <sqlite3.h>
@@ -358,4 +360,52 @@ TEST(operator_demo_arguments)
     CHECK_CONTAINS(err, "not both");
     g_free(out);
     g_free(err);
+}
+
+// Read the pty's output until `want` appears (or EOF / timeout); returns whether it did.
+static bool pty_wait(int fd, GString *seen, const char *want, double timeout_s)
+{
+    double t0 = model_now_s();
+    while (!strstr(seen->str, want)) {
+        if (model_now_s() - t0 > timeout_s) return false;
+        struct pollfd p = { fd, POLLIN, 0 };
+        if (poll(&p, 1, 100) <= 0) continue;
+        char buf[4096];
+        ssize_t n = read(fd, buf, sizeof buf);
+        if (n <= 0) return strstr(seen->str, want) != NULL;
+        g_string_append_len(seen, buf, n);
+    }
+    return true;
+}
+
+TEST(operator_terminal_answers)
+{
+    const char *rig = rig_file();
+    const char *plan = test_write("plan.ini", WEDGE_PLAN("20"));
+    const char *dir = test_path("s");
+    int master = -1;
+    fflush(NULL);
+    pid_t pid = forkpty(&master, NULL, NULL, NULL);
+    CHECK(pid >= 0);
+    if (pid < 0) return;
+    if (pid == 0) {
+        execl(test_refl(), test_refl(), "capture", plan, "--rig", rig, "-o", dir, "--progress", "lines", (char *)NULL);
+        _exit(127);
+    }
+    GString *seen = g_string_new("");
+    CHECK(pty_wait(master, seen, "press Enter when done, q to pause: ", 60));
+    CHECK_CONTAINS(seen->str, "OPERATOR STEP 0: put coupon coupon_matte_paint on the 20 deg wedge");
+    CHECK(write(master, "perhaps\n", 8) == 8);   // not an answer: asked again
+    CHECK(pty_wait(master, seen, "'perhaps' is not an answer", 30));
+    CHECK(write(master, "\n", 1) == 1);           // Enter: done
+    CHECK(pty_wait(master, seen, "complete", 60));
+    int st = 0;
+    waitpid(pid, &st, 0);
+    close(master);
+    CHECK_MSG(WIFEXITED(st) && WEXITSTATUS(st) == 0, "status %d: %s", st, seen->str);
+    char *ev = sql1(dir, "SELECT message FROM events WHERE kind = 'operator'");
+    CHECK_CONTAINS(ev, "done: terminal, 20");
+    g_free(ev);
+    CHECK(sql_int(dir, "SELECT count(*) FROM frames") == 2);
+    g_string_free(seen, TRUE);
 }
