@@ -279,6 +279,8 @@ static void sample_instruction(const rig_plan_t *p, char *out, size_t size)
     else if (p->tilt_deg != 0)
         snprintf(out, size, "%s on the %g deg wedge (hinge at azimuth %g deg) at the turntable centre, facing the "
                  "camera", head, p->tilt_deg, p->tilt_azimuth_deg);
+    else if (!strcmp(p->sample_kind, "mirror_sphere"))
+        snprintf(out, size, "%s at the turntable centre", head);
     else
         snprintf(out, size, "%s flat at the turntable centre%s", head,
                  !strcmp(p->sample_kind, "chessboard") ? ", facing the camera" : "");

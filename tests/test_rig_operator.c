@@ -94,6 +94,11 @@ TEST(operator_plan_steps_and_instructions)
     }
     rig_plan_free(p);
     g_free(t);
+    t = g_strdup_printf("[sample]\nname = ball\nkind = mirror_sphere\n%s", base);
+    p = rig_plan_parse(t, strlen(t), "b2.ini");
+    CHECK(p && !strcmp(p->ops[0].instruction, "place the chrome ball ball at the turntable centre"));
+    rig_plan_free(p);
+    g_free(t);
     t = g_strdup_printf("[sample]\nname = s\nkind = uniform_source\n%s", base);
     p = rig_plan_parse(t, strlen(t), "c.ini");
     CHECK(p && strstr(p->ops[0].instruction, "put the flat-field source s in front of the lens"));
