@@ -714,10 +714,13 @@ static int run_session(run_t *x)
     rig_step_t *stored = NULL;
     int nstored = 0;
     if ((x->rc = rig_journal_steps(x->j, &stored, &x->status, &nstored))) return RUN_DONE;
+    rig_step_kind_t stored_kind0 = nstored > 0 ? stored[0].kind : RIG_STEP_OPERATOR;
     free(stored);
     if (nstored != p->nsteps) {
-        x->rc = rig_fail(RIG_ERR_INVALID, "journal %s: %d steps stored, the plan makes %d", o->dir, nstored,
-                         p->nsteps);
+        bool before_operator = nstored > 0 && stored_kind0 != RIG_STEP_OPERATOR;
+        x->rc = rig_fail(RIG_ERR_INVALID, "journal %s: %d steps stored, the plan makes %d%s", o->dir, nstored,
+                         p->nsteps, before_operator ? " (a session of a refl without operator steps: its frames "
+                         "stay readable; capture the rest into a new session)" : "");
         return RUN_DONE;
     }
     if (o->resume) {

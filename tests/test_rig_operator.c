@@ -414,3 +414,27 @@ TEST(operator_terminal_answers)
     CHECK(sql_int(dir, "SELECT count(*) FROM frames") == 2);
     g_string_free(seen, TRUE);
 }
+
+TEST(operator_resume_of_an_older_session_is_refused_clearly)
+{
+    const char *rig = rig_file();
+    const char *plan = test_write("plan.ini", WEDGE_PLAN("0"));
+    const char *dir = test_path("s");
+    char *out = NULL, *err = NULL;
+    int rc = test_refl_run(120, &out, &err, "capture", plan, "--rig", rig, "-o", dir, NULL);
+    CHECK(rc == 3);
+    g_free(out);
+    g_free(err);
+    // a journal as a refl without operator steps wrote it: no step 0
+    char db[4096];
+    snprintf(db, sizeof db, "%s/session.sqlite", dir);
+    sqlite3 *d = NULL;
+    CHECK(sqlite3_open(db, &d) == SQLITE_OK);
+    CHECK(sqlite3_exec(d, "DELETE FROM steps WHERE idx = 0", NULL, NULL, NULL) == SQLITE_OK);
+    sqlite3_close(d);
+    rc = test_refl_run(120, &out, &err, "capture", "--resume", dir, "--yes", NULL);
+    CHECK(rc == 1);
+    CHECK_CONTAINS(err, "2 steps stored, the plan makes 3 (a session of a refl without operator steps");
+    g_free(out);
+    g_free(err);
+}
