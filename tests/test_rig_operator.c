@@ -4,9 +4,11 @@
 // answers consumed in order across sessions ('q' pauses at the next session's
 // step, a bad line is an error naming FILE:LINE); a session killed with
 // SIGKILL between the answer and the next frame resumes without asking again
-// and with the virtual rig posed; refl calib geometry pausing at its first
-// operator step; refl demo passing --rig and the answers to scripts/demo. The
-// virtual rig is served in-process (no network).
+// and with the virtual rig posed; refl calib geometry (its answers shared by
+// its sessions), gain and lamps pausing at their operator steps; answers on a
+// terminal (a pty); a journal without operator steps refused clearly; refl
+// demo passing --rig and the answers to scripts/demo. The virtual rig is
+// served in-process (no network).
 #define _GNU_SOURCE
 #include <glib.h>
 #include <limits.h>
@@ -306,7 +308,7 @@ TEST(operator_kill9_after_answer_resumes_posed)
     CHECK(d > 0.01);
 }
 
-TEST(operator_calib_geometry_pauses)
+TEST(operator_calibrations_pause)
 {
     const char *rig = rig_file();
     const char *dir = test_path("geo");
@@ -340,6 +342,21 @@ TEST(operator_calib_geometry_pauses)
     }
     if (d) g_dir_close(d);
     CHECK(complete == 1 && paused == 1);
+    g_free(out);
+    g_free(err);
+    // calib gain and calib lamps pause the same way, with their own instructions
+    rc = test_refl_run(120, &out, &err, "calib", "gain", "--rig", rig, "-o", test_path("gain"), NULL);
+    CHECK_MSG(rc == 3, "calib gain: exit %d: %s", rc, err);
+    CHECK_CONTAINS(err, "put the flat-field source flat_field in front of the lens");
+    g_free(out);
+    g_free(err);
+    char cam[PATH_MAX + 64], top[PATH_MAX];
+    if (!realpath(test_srcdir(), top)) snprintf(top, sizeof top, "%s", test_srcdir());
+    snprintf(cam, sizeof cam, "%s/examples/camera.cameramodel", top);
+    rc = test_refl_run(120, &out, &err, "calib", "lamps", "--rig", rig, "--camera", cam, "--sphere-centre-mm",
+                       "60,0,40", "--sphere-radius-mm", "25", "-o", test_path("lamps"), NULL);
+    CHECK_MSG(rc == 3, "calib lamps: exit %d: %s", rc, err);
+    CHECK_CONTAINS(err, "place the chrome ball mirror_sphere at the table centre: its centre at (60, 0, 40) mm");
     g_free(out);
     g_free(err);
 }
