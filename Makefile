@@ -80,6 +80,7 @@ RIG_SRC := \
     rig/gv_camera.c \
     rig/config.c \
     rig/plan.c \
+    rig/plan_views.c \
     rig/journal.c \
     rig/session.c \
     rig/capture.c \
@@ -140,6 +141,7 @@ TEST_SRC := \
     tests/test_rig_lamps.c \
     tests/test_rig_pixfmt.c \
     tests/test_rig_plan.c \
+    tests/test_rig_plan_text.c \
     tests/test_rig_turntable.c \
     tests/test_rig_virtual.c \
     tests/test_rig_virtual_inprocess.c \
