@@ -105,6 +105,7 @@ FIT_SRC := \
     fit/material.c \
     fit/lightplan.c \
     fit/plan_lamps.c \
+    fit/plan_capture.c \
     fit/verify.c \
     fit/verify_files.c \
     fit/verify_lab.c \
