@@ -173,6 +173,18 @@ TEST(lightplan_virtual_rig_agreement)
     }
     CHECK(json_array_size(json_object_get(chk, "configurations")) >= 4);
     CHECK(json_array_size(json_object_get(j, "faces")) >= 6);
+    // the one view's capture plan: angle 0, the chosen lamps and exposure, bound to the virtual rig
+    char *pp = g_strdup_printf("%s/capture_plan.ini", dir);
+    rig_plan_t *p = rig_plan_load(pp);
+    g_free(pp);
+    CHECK_MSG(p != NULL, "%s", model_last_error());
+    if (p) {
+        CHECK(p->nangles == 1 && p->angles_deg[0] == 0 && p->nsteps == 2 && p->steps[0].kind == RIG_STEP_LIGHT);
+        CHECK(!strcmp(p->steps[0].lamps, json_string_value(json_object_get(ch, "lamps"))));
+        CHECK(p->steps[0].exposure_us == json_number_value(json_object_get(ch, "exposure_us")));
+        CHECK(p->steps[1].kind == RIG_STEP_DARK);
+    }
+    rig_plan_free(p);
     json_decref(j);
     // usage errors
     CHECK(test_refl_run(30, &out, &err, "plan", "lamps", scene, "--camera", cam, "--lamps", lamps, "--materials",
@@ -315,6 +327,14 @@ TEST(lightplan_views_capture_plan)
     CHECK(test_refl_run(30, &out, &err, "plan", "lamps", scene, "--camera", cam, "--lamps", lamps, "--kc-per-us",
                         "1e-4", "--materials", mats, "--angles-deg", "0,ninety", "-o", dir, NULL) == 2);
     CHECK_CONTAINS(err, "--angles-deg");
+    g_free(out);
+    g_free(err);
+    // a capture plan that does not read back is refused, naming the file and the key
+    CHECK(test_refl_run(60, &out, &err, "plan", "lamps", scene, "--camera", cam, "--lamps", lamps, "--kc-per-us",
+                        "1e-4", "--materials", mats, "--exposures-us", "6000", "--max-lamps", "1", "--no-report",
+                        "--pixel-format", "Mono99", "-o", dir, NULL) == 1);
+    CHECK_CONTAINS(err, "capture_plan.ini");
+    CHECK_CONTAINS(err, "pixel_format = Mono99");
     g_free(out);
     g_free(err);
     g_free(sess);
