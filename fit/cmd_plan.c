@@ -11,6 +11,7 @@
 #include "fit/lightplan.h"
 #include "model/model.h"
 #include "model/opts.h"
+#include "rig/pixfmt.h"
 
 enum { MAX_MATERIAL_FILES = 8, MAX_EXPOSURES = 64, MAX_VIEWS = 360 };
 
@@ -150,6 +151,10 @@ static int plan_lamps(int argc, char **argv)
     if (angles && !isnan(o.angle_deg))
         return model_cli_error(&cli, "give --angle-deg (one view) or --angles-deg (several), not both");
     if (isnan(o.angle_deg)) o.angle_deg = 0;
+    rig_pixfmt_t pf;
+    if (o.pixel_format && !rig_pixfmt_from_name(o.pixel_format, &pf))
+        return model_cli_error(&cli, "--pixel-format %s: write Mono8, Mono12 or Mono16 (or Mono10, Mono10p, Mono12p, "
+                               "Mono10Packed, Mono12Packed)", o.pixel_format);
     o.angles_deg = angles ? angs : NULL;
     o.nmaterials = materials.n;
     o.scene = cli.positional[0];
