@@ -81,6 +81,7 @@ RIG_SRC := \
     rig/config.c \
     rig/plan.c \
     rig/operator.c \
+    rig/plan_views.c \
     rig/journal.c \
     rig/session.c \
     rig/capture.c \
@@ -105,6 +106,7 @@ FIT_SRC := \
     fit/material.c \
     fit/lightplan.c \
     fit/plan_lamps.c \
+    fit/plan_capture.c \
     fit/verify.c \
     fit/verify_files.c \
     fit/verify_lab.c \
@@ -142,6 +144,7 @@ TEST_SRC := \
     tests/test_rig_pixfmt.c \
     tests/test_rig_plan.c \
     tests/test_rig_operator.c \
+    tests/test_rig_plan_text.c \
     tests/test_rig_turntable.c \
     tests/test_rig_virtual.c \
     tests/test_rig_virtual_inprocess.c \

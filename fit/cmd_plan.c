@@ -1,6 +1,7 @@
-// fit/cmd_plan.c — `refl plan lamps`: choose lamps and exposure for a view
-// (lightplan_lamps_run, fit/lightplan.h), optionally checked on the virtual
-// rig: arguments (model/opts.h), the library call, the printed lines.
+// fit/cmd_plan.c — `refl plan lamps`: choose lamps and exposure for one view
+// or several (lightplan_lamps_run, fit/lightplan.h), optionally checked on the
+// virtual rig, and the capture plan of the views: arguments (model/opts.h),
+// the library call, the printed lines.
 #define _GNU_SOURCE
 #include <math.h>
 #include <stdio.h>
@@ -10,27 +11,28 @@
 #include "fit/lightplan.h"
 #include "model/model.h"
 #include "model/opts.h"
+#include "rig/pixfmt.h"
 
-enum { MAX_MATERIAL_FILES = 8, MAX_EXPOSURES = 64 };
+enum { MAX_MATERIAL_FILES = 8, MAX_EXPOSURES = 64, MAX_VIEWS = 360 };
 
-// The exposures of a comma list. false: not a list of positive numbers.
-static bool parse_exposures(const char *list, double *exps, int *nexp)
+// The numbers of a comma list, each in [lo, hi], at most max. false: not such a list.
+static bool parse_list(const char *list, double *v, int *n, int max, double lo, double hi)
 {
     char *dup = strdup(list), *save = NULL;
     bool ok = dup != NULL;
-    *nexp = 0;
+    *n = 0;
     for (char *t = ok ? strtok_r(dup, ", ", &save) : NULL; t && ok; t = strtok_r(NULL, ", ", &save)) {
-        double v;
-        ok = *nexp < MAX_EXPOSURES && model_parse_double(t, &v) && v > 0;
-        if (ok) exps[(*nexp)++] = v;
+        double x;
+        ok = *n < max && model_parse_double(t, &x) && x >= lo && x <= hi;
+        if (ok) v[(*n)++] = x;
     }
     free(dup);
-    return ok && *nexp > 0;
+    return ok && *n > 0;
 }
 
-static void print_plan(const lightplan_lamps_opts_t *o, const lightplan_lamps_result_t *r)
+static void print_view(const lightplan_lamps_opts_t *o, const lightplan_view_t *r)
 {
-    if (r->ncandidates) fprintf(stderr, "refl plan lamps: %d candidate lamps, %d exposures\n", r->ncandidates, o->nexp);
+    if (o->nangles > 0) printf("view %g deg (%s):\n", r->angle_deg, r->dir);
     if (r->check_started) fprintf(stderr, "refl plan lamps: checking on the virtual rig (%s)\n", o->check_truth);
     for (int k = 0; k < r->nchecks; k++) {
         const lightplan_check_t *c = &r->checks[k];
@@ -46,17 +48,29 @@ static void print_plan(const lightplan_lamps_opts_t *o, const lightplan_lamps_re
                 "raise --sobel-threshold\n", o->opt.sobel_threshold, r->sobel_noise_dn, r->median_signal_dn);
     if (!r->written) return;
     const lightplan_config_t *b = &r->res.configs[r->res.best];
-    printf("refl plan lamps: %s: chosen lamps %s at %g us%s: %d of %d edge segments detectable (%.0f px), "
+    printf("refl plan lamps: %s at %g deg: chosen lamps %s at %g us%s: %d of %d edge segments detectable (%.0f px), "
            "%.0f usable reference points, %d glare and %d saturated pixels (step-2 grid)\n",
-           o->scene, r->chosen, b->exposure_us, b->feasible ? "" : " (no configuration is free of glare and saturation)",
+           o->scene, r->angle_deg, r->chosen, b->exposure_us, b->feasible ? "" : " (no configuration is free of glare and saturation)",
            b->n_detectable, b->n_segments, b->detectable_length_px, b->usable_points, b->glare_pix, b->saturated_pix);
+}
+
+static void print_plan(const lightplan_lamps_opts_t *o, const lightplan_lamps_result_t *r)
+{
+    if (r->ncandidates)
+        fprintf(stderr, "refl plan lamps: %d candidate lamps, %d exposures, %d view%s\n", r->ncandidates, o->nexp,
+                o->nangles > 0 ? o->nangles : 1, o->nangles > 1 ? "s" : "");
+    for (int k = 0; k < r->nviews; k++) print_view(o, &r->views[k]);
+    if (r->capture_plan)
+        printf("capture plan: %s%s\n", r->capture_plan,
+               r->plan_bound ? " (binds to the virtual rig)" : "");
 }
 
 static int plan_lamps(int argc, char **argv)
 {
     lightplan_lamps_opts_t o = lightplan_lamps_defaults();
+    o.angle_deg = NAN;   // given or not
     lightplan_options_t *op = &o.opt;
-    const char *matfiles[MAX_MATERIAL_FILES], *exposures = "500,1000,2000,4000,8000,16000";
+    const char *matfiles[MAX_MATERIAL_FILES], *exposures = "500,1000,2000,4000,8000,16000", *angles = NULL;
     model_opt_list_t materials = { matfiles, 0, MAX_MATERIAL_FILES };
     bool no_report = false;
     model_opt_t opts[] = {
@@ -72,7 +86,9 @@ static int plan_lamps(int argc, char **argv)
         MODEL_OPT_STRING("--gain-calib", "DIR", "gain.json (K, read noise, saturation), offset_dn.tiff, "
                          "prnu_gain.tiff", &o.gain_dir, false),
         { "-o", "--out", "DIR", "the output directory", MODEL_OPT_KIND_STRING, &o.out, 0, 0, true, false, NULL },
-        MODEL_OPT_DOUBLE("--angle-deg", "A", "turntable angle of the view (0)", &o.angle_deg, -1e4, 1e4),
+        MODEL_OPT_DOUBLE("--angle-deg", "A", "turntable angle of the one view (0)", &o.angle_deg, -1e4, 1e4),
+        MODEL_OPT_STRING("--angles-deg", "LIST", "several views: their turntable angles (comma list), each planned "
+                         "on its own", &angles, false),
         MODEL_OPT_STRING("--exposures-us", "LIST", "comma list to try (500,1000,2000,4000,8000,16000)", &exposures,
                          false),
         MODEL_OPT_DOUBLE("--saturation-dn", "S", "saturation without a gain calibration (4095)", &o.saturation_dn, 1,
@@ -94,8 +110,9 @@ static int plan_lamps(int argc, char **argv)
                       &op->spacing_px, 1, 1000),
         MODEL_OPT_STRING("--check-virtual", "TRUTH.ini", "check the plan on the virtual rig of this truth file",
                          &o.check_truth, false),
-        MODEL_OPT_STRING("--sample", "NAME", "the virtual rig's sample for the check (t_stiffener)", &o.check_sample,
-                         false),
+        MODEL_OPT_STRING("--sample", "NAME", "the sample: the capture plan's and the virtual rig's for the check "
+                         "(the scene file's name)", &o.sample, false),
+        MODEL_OPT_STRING("--pixel-format", "FMT", "the capture plan's pixel format (Mono12)", &o.pixel_format, false),
         MODEL_OPT_INT("--threads", "N", "threads (0: all cores)", &op->threads, 0, 1024),
         MODEL_OPT_FLAG("--no-report", NULL, "no index.html", &no_report),
     };
@@ -113,22 +130,39 @@ static int plan_lamps(int argc, char **argv)
                   "virtual rig (in process) and compares a Sobel detector with the prediction.\n\n"
                   "Outputs in DIR: plan.json (every configuration, the chosen one, faces, edge segments; the check),\n"
                   "predicted.tiff (DN, direct light), glare.tiff (where each candidate would glare), index.html\n"
-                  "(scripts/plan_lamps_report.py).",
+                  "(scripts/plan_lamps_report.py), and capture_plan.ini: a capture plan refl capture takes as it is\n"
+                  "(refl capture DIR/capture_plan.ini --rig RIG -o SESSION): [sample] --sample (kind workpiece), the\n"
+                  "views' angles, a [view N] section per view with its chosen lamps and exposure (fixed, gain 0,\n"
+                  "--pixel-format), a dark frame after the views; the command and inputs (sha256) in its comments.\n"
+                  "With --check-virtual the capture plan is also bound to that virtual rig (lamps, exposures, sample).\n"
+                  "--angles-deg A,B,...: each view is planned on its own into DIR/view_A/ ... (the outputs above and\n"
+                  "a report each); DIR/plan.json then lists the views and DIR/index.html links their reports.",
     };
     int rc = model_cli_parse(&cli, argc, argv);
     if (rc != MODEL_CLI_OK) return rc;
     if (!o.white && !(o.kc_per_us > 0)) return model_cli_error(&cli, "give --kc-per-us X (lamps INI) or --white WHITE.json");
-    double exps[MAX_EXPOSURES];
-    if (!parse_exposures(exposures, exps, &o.nexp))
+    double exps[MAX_EXPOSURES], angs[MAX_VIEWS];
+    if (!parse_list(exposures, exps, &o.nexp, MAX_EXPOSURES, 1e-300, 1e300))
         return model_cli_error(&cli, "--exposures-us: '%s' is not a list of up to %d positive exposures in us",
                                exposures, MAX_EXPOSURES);
+    if (angles && !parse_list(angles, angs, &o.nangles, MAX_VIEWS, -1e4, 1e4))
+        return model_cli_error(&cli, "--angles-deg: '%s' is not a list of up to %d angles in deg (-10000..10000)",
+                               angles, MAX_VIEWS);
+    if (angles && !isnan(o.angle_deg))
+        return model_cli_error(&cli, "give --angle-deg (one view) or --angles-deg (several), not both");
+    if (isnan(o.angle_deg)) o.angle_deg = 0;
+    rig_pixfmt_t pf;
+    if (o.pixel_format && !rig_pixfmt_from_name(o.pixel_format, &pf))
+        return model_cli_error(&cli, "--pixel-format %s: write Mono8, Mono12 or Mono16 (or Mono10, Mono10p, Mono12p, "
+                               "Mono10Packed, Mono12Packed)", o.pixel_format);
+    o.angles_deg = angles ? angs : NULL;
     o.nmaterials = materials.n;
     o.scene = cli.positional[0];
     o.materials = matfiles;
     o.exposures_us = exps;
     o.report = !no_report;
-    o.argc = argc;
-    o.argv = argv;
+    o.argc = argc + 1;   // the provenance's command: refl plan lamps ...
+    o.argv = argv - 1;
     lightplan_lamps_result_t *r = malloc(sizeof *r);
     if (!r) return model_error_report("plan lamps");
     bool ok = lightplan_lamps_run(&o, r);

@@ -149,14 +149,18 @@ typedef struct {
                                         // prnu_gain.tiff; NULL: saturation_dn, offset_dn, no SNR floor
     double             saturation_dn;   // without gain_dir (default 4095)
     double             offset_dn;       // without gain_dir (default 0)
-    double             angle_deg;       // the view's turntable angle
+    double             angle_deg;       // the view's turntable angle (one view, outputs in out)
+    const double      *angles_deg;      // several views (nangles > 0; angle_deg unused): each planned
+    int                nangles;         // on its own, outputs in out/view_ANGLE/, a summary in out
     const double      *exposures_us;    // the exposures to try
     int                nexp;
     lightplan_options_t opt;
     const char        *check_truth;     // the virtual rig's truth file: check the plan there (NULL: no check)
-    const char        *check_sample;    // its sample for the check (default t_stiffener)
+    const char        *sample;          // the capture plan's [sample] name and the virtual rig's sample
+                                        // for the check (NULL: the scene file's name without extension)
+    const char        *pixel_format;    // the capture plan's (default Mono12)
     const char        *out;             // output directory: plan.json, predicted.tiff, glare.tiff
-                                        // (check_frame.tiff with a check)
+                                        // (check_frame.tiff with a check), capture_plan.ini
     bool               report;          // index.html by scripts/plan_lamps_report.py
     int                argc;            // the command line for the provenance (argv[0] "refl")
     char             **argv;
@@ -173,8 +177,10 @@ typedef struct {
     int    judged, agreeing;
 } lightplan_check_t;
 
+// One view's plan.
 typedef struct {
-    int                ncandidates;     // loaded: > 0
+    double             angle_deg;
+    char              *dir;             // its outputs (o->out for the one view)
     bool               planned;         // res holds the plan
     lightplan_result_t res;
     char               chosen[512];     // the chosen configuration's lamp names ("east+west")
@@ -188,14 +194,33 @@ typedef struct {
     double             sobel_noise_dn;     // the detector's response to the sensor's noise there (NAN: no gain)
     bool               threshold_near_noise; // opt.sobel_threshold < 1.5 sobel_noise_dn: edges found in noise
     bool               written;         // plan.json, predicted.tiff and glare.tiff are written
+} lightplan_view_t;
+
+typedef struct {
+    int                ncandidates;     // loaded: > 0
+    int                nviews;          // views begun (planned or not)
+    lightplan_view_t  *views;
+    char              *capture_plan;    // out/capture_plan.ini once written
+    bool               plan_bound;      // with check_truth: the capture plan binds to the virtual rig
 } lightplan_lamps_result_t;
 
-// Load the inputs, plan the view (lightplan_run at the view's angle), check
-// it on the virtual rig (with check_truth), write the outputs and the report.
-// false + message (model_last_error(), not printed: the caller reports it);
-// *r holds what was done either way: free with lightplan_lamps_result_free.
+// Load the inputs, plan each view (lightplan_run at its angle), check it on
+// the virtual rig (with check_truth), write its outputs and report; then the
+// capture plan of the views (lightplan_capture_plan) and, with several views,
+// the summary (plan.json and index.html in out). false + message
+// (model_last_error(), not printed: the caller reports it); *r holds what was
+// done either way: free with lightplan_lamps_result_free.
 bool lightplan_lamps_run(const lightplan_lamps_opts_t *o, lightplan_lamps_result_t *r);
 void lightplan_lamps_result_free(lightplan_lamps_result_t *r);
+
+// The capture plan of the planned views (fit/plan_capture.c): out/capture_plan.ini
+// in refl's plan format (rig_plan_text): [sample] o->sample, kind workpiece; [angles]
+// the views; [lamps] and [exposure] (fixed, gain 0, o->pixel_format) every chosen set
+// and exposure; one [view N] per angle with its own; [capture] a dark frame after
+// the views, settle 50 ms; provenance (command, inputs with sha256) in its comments.
+// Read back with rig_plan_parse before it is kept; with check_truth, bound to the
+// virtual rig of the truth file (rig_plan_bind). false + message.
+bool lightplan_capture_plan(const lightplan_lamps_opts_t *o, const json_t *prov, lightplan_lamps_result_t *r);
 
 // `refl plan lamps` (fit/cmd_plan.c).
 int lightplan_cmd(int argc, char **argv);

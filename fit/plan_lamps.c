@@ -1,6 +1,7 @@
-// fit/plan_lamps.c — the plan of a view from files (lightplan_lamps_run, see
-// lightplan.h): inputs loaded, lightplan_run, the check on the virtual rig,
-// plan.json, the images and the report.
+// fit/plan_lamps.c — the plan of one or several views from files
+// (lightplan_lamps_run, see lightplan.h): inputs loaded, per view lightplan_run,
+// the check on the virtual rig, plan.json, the images and the report; then the
+// capture plan (fit/plan_capture.c) and, for several views, their summary.
 #define _GNU_SOURCE
 #include <glib.h>
 #include <math.h>
@@ -18,13 +19,18 @@
 lightplan_lamps_opts_t lightplan_lamps_defaults(void)
 {
     return (lightplan_lamps_opts_t){ .saturation_dn = 4095, .opt = lightplan_defaults(),
-                                     .check_sample = "t_stiffener", .report = true };
+                                     .report = true };
 }
 
 void lightplan_lamps_result_free(lightplan_lamps_result_t *r)
 {
     if (!r) return;
-    lightplan_result_free(&r->res);
+    for (int k = 0; k < r->nviews; k++) {
+        lightplan_result_free(&r->views[k].res);
+        g_free(r->views[k].dir);
+    }
+    free(r->views);
+    g_free(r->capture_plan);
     memset(r, 0, sizeof *r);
 }
 
@@ -236,7 +242,7 @@ static bool check_open(const lightplan_lamps_opts_t *o, const plan_inputs_t *in,
 {
     const lightplan_config_t *b = &res->configs[res->best];
     double angle = o->angle_deg;
-    if (!(c->lab = verify_lab_open(o->check_truth, o->check_sample, &angle, 1, b->exposure_us, 0, false)))
+    if (!(c->lab = verify_lab_open(o->check_truth, o->sample, &angle, 1, b->exposure_us, 0, false)))
         return false;
     const model_lamps_t *tl = verify_lab_lamps(c->lab);
     for (int i = 0; i < in->lamps->n; i++) {
@@ -307,7 +313,7 @@ static json_t *check_config(const lightplan_lamps_opts_t *o, const plan_inputs_t
 
 // The chosen set, then each other single lamp, at the chosen exposure, on the
 // virtual rig: the record of plan.json's virtual_rig_check (*check), r->checks.
-static bool check_virtual(const lightplan_lamps_opts_t *o, plan_inputs_t *in, lightplan_lamps_result_t *r,
+static bool check_virtual(const lightplan_lamps_opts_t *o, plan_inputs_t *in, lightplan_view_t *r,
                           json_t **check)
 {
     const lightplan_result_t *res = &r->res;
@@ -342,7 +348,6 @@ static bool check_virtual(const lightplan_lamps_opts_t *o, plan_inputs_t *in, li
                                     "reaches the threshold; segments under 8 px are not judged; agreement = "
                                     "found == predicted detectable"));
     json_object_set_new(*check, "truth", json_string(o->check_truth));
-    model_provenance_input(in->prov, "virtual_rig_truth", o->check_truth);
     r->checked = ok = true;
 done:
     check_free(&c);
@@ -356,7 +361,7 @@ done:
 // signal (the check's rule: the largest |Sobel| of 7 positions across,
 // median along: about 8.7 sigma) into r and the chosen configuration's record.
 static void noise_response(const lightplan_lamps_opts_t *o, const lightplan_sensor_t *sensor,
-                           lightplan_lamps_result_t *r, json_t *chosen)
+                           lightplan_view_t *r, json_t *chosen)
 {
     const lightplan_result_t *res = &r->res;
     double *sv = malloc((size_t)res->W * res->H * sizeof *sv);
@@ -382,7 +387,7 @@ static void noise_response(const lightplan_lamps_opts_t *o, const lightplan_sens
 }
 
 // The chosen configuration's record.
-static json_t *chosen_json(const lightplan_lamps_opts_t *o, const plan_inputs_t *in, lightplan_lamps_result_t *r)
+static json_t *chosen_json(const lightplan_lamps_opts_t *o, const plan_inputs_t *in, lightplan_view_t *r)
 {
     const lightplan_config_t *b = &r->res.configs[r->res.best];
     json_t *chosen = json_pack("{s:s,s:f,s:b,s:f,s:i,s:i,s:f,s:i,s:i,s:i}", "lamps", r->chosen, "exposure_us",
@@ -439,7 +444,7 @@ static void tables_json(const plan_inputs_t *in, const lightplan_result_t *res, 
 }
 
 // plan.json's document (check: the virtual rig's record or NULL).
-static json_t *plan_json(const lightplan_lamps_opts_t *o, const plan_inputs_t *in, lightplan_lamps_result_t *r,
+static json_t *plan_json(const lightplan_lamps_opts_t *o, const plan_inputs_t *in, lightplan_view_t *r,
                          json_t *check)
 {
     const lightplan_result_t *res = &r->res;
@@ -476,7 +481,7 @@ static json_t *plan_json(const lightplan_lamps_opts_t *o, const plan_inputs_t *i
 
 // predicted.tiff and glare.tiff (where each candidate would glare: bit i of
 // the value for lamp i, file order).
-static bool write_images(const lightplan_lamps_opts_t *o, const plan_inputs_t *in, const lightplan_lamps_result_t *r)
+static bool write_images(const lightplan_lamps_opts_t *o, const plan_inputs_t *in, const lightplan_view_t *r)
 {
     const lightplan_result_t *res = &r->res;
     const lightplan_config_t *b = &res->configs[res->best];
@@ -507,40 +512,114 @@ static bool write_images(const lightplan_lamps_opts_t *o, const plan_inputs_t *i
 // ---------------------------------------------------------------------------
 // The run
 
-bool lightplan_lamps_run(const lightplan_lamps_opts_t *o, lightplan_lamps_result_t *r)
+// One view (v->angle_deg): lightplan_run at its angle, the check on the
+// virtual rig, plan.json, the images and the report in v->dir.
+static bool plan_view(const lightplan_lamps_opts_t *o, plan_inputs_t *in, lightplan_view_t *v)
 {
-    memset(r, 0, sizeof *r);
-    r->check_agreement = r->sobel_noise_dn = NAN;
-    bool quiet = model_error_quiet_thread(true);   // the caller reports the message
+    lightplan_lamps_opts_t ov = *o;
+    ov.angle_deg = v->angle_deg;
+    ov.out = v->dir;
+    v->check_agreement = v->sobel_noise_dn = NAN;
     bool ok = false;
-    plan_inputs_t in = { 0 };
-    model_scene_t *rot = NULL;
     json_t *check = NULL, *doc = NULL;
-    if (o->nmaterials < 1 || o->nexp < 1) {
-        model_error_set(NULL, 0, "light planning: give the materials and at least one exposure");
+    model_scene_t *rot = model_scene_rotated_z(in->scene, v->angle_deg);
+    if (!rot || !lightplan_run(rot, in->cam, in->lamps, in->A, in->mats, &in->sensor, o->exposures_us, o->nexp,
+                               &o->opt, &v->res))
         goto done;
-    }
-    if (!load_inputs(o, &in)) goto done;
-    r->ncandidates = in.lamps->n;
-    if (!(rot = model_scene_rotated_z(in.scene, o->angle_deg))) goto done;
-    if (!lightplan_run(rot, in.cam, in.lamps, in.A, in.mats, &in.sensor, o->exposures_us, o->nexp, &o->opt, &r->res))
-        goto done;
-    r->planned = true;
-    mask_names(in.lamps, r->res.configs[r->res.best].mask, r->chosen, sizeof r->chosen);
-    if (o->check_truth && !check_virtual(o, &in, r, &check)) goto done;
-    if (!model_mkdir_p(o->out)) goto done;
-    doc = plan_json(o, &in, r, check);
-    char *jp = g_strdup_printf("%s/plan.json", o->out);
+    v->planned = true;
+    mask_names(in->lamps, v->res.configs[v->res.best].mask, v->chosen, sizeof v->chosen);
+    if (o->check_truth && !check_virtual(&ov, in, v, &check)) goto done;
+    if (!model_mkdir_p(v->dir)) goto done;
+    doc = plan_json(&ov, in, v, check);
+    char *jp = g_strdup_printf("%s/plan.json", v->dir);
     bool wok = model_write_json(jp, doc);
     g_free(jp);
-    if (!wok || !write_images(o, &in, r)) goto done;
-    r->written = true;
-    if (o->report && model_run_script("plan_lamps_report.py", o->out, NULL) != 0) goto done;
+    if (!wok || !write_images(&ov, in, v)) goto done;
+    v->written = true;
+    if (o->report && model_run_script("plan_lamps_report.py", v->dir, NULL) != 0) goto done;
     ok = true;
 done:
     json_decref(doc);
     json_decref(check);
     model_scene_free(rot);
+    return ok;
+}
+
+// Several views: out/plan.json lists them (each one's choice, its directory)
+// with the capture plan, and out/index.html links their reports.
+static bool write_summary(const lightplan_lamps_opts_t *o, const plan_inputs_t *in, const lightplan_lamps_result_t *r)
+{
+    json_t *views = json_array();
+    for (int k = 0; k < r->nviews; k++) {
+        const lightplan_view_t *v = &r->views[k];
+        const lightplan_config_t *b = &v->res.configs[v->res.best];
+        char *base = g_path_get_basename(v->dir);
+        json_t *e = json_pack("{s:f,s:s,s:s,s:f,s:b,s:i,s:i,s:f,s:f,s:i,s:i}", "turntable_deg", v->angle_deg, "dir",
+                              base, "lamps", v->chosen, "exposure_us", b->exposure_us, "feasible", b->feasible,
+                              "n_detectable", b->n_detectable, "n_segments", b->n_segments, "detectable_length_px",
+                              b->detectable_length_px, "usable_points", b->usable_points, "glare_pix", b->glare_pix,
+                              "saturated_pix", b->saturated_pix);
+        g_free(base);
+        json_object_set_new(e, "check_agreement", v->checked && isfinite(v->check_agreement)
+                                                      ? json_real(v->check_agreement) : json_null());
+        json_array_append_new(views, e);
+    }
+    json_t *doc = json_pack("{s:s,s:o,s:s,s:o}", "scene", o->scene, "views", views, "capture_plan",
+                            "capture_plan.ini", "capture_plan_binds_to_virtual_rig",
+                            o->check_truth ? json_boolean(r->plan_bound) : json_null());
+    json_object_set_new(doc, "provenance", json_incref((json_t *)in->prov));
+    char *jp = g_strdup_printf("%s/plan.json", o->out);
+    bool ok = model_write_json(jp, doc);
+    g_free(jp);
+    json_decref(doc);
+    return ok && (!o->report || model_run_script("plan_lamps_report.py", o->out, NULL) == 0);
+}
+
+bool lightplan_lamps_run(const lightplan_lamps_opts_t *o, lightplan_lamps_result_t *r)
+{
+    memset(r, 0, sizeof *r);
+    bool quiet = model_error_quiet_thread(true);   // the caller reports the message
+    bool ok = false;
+    plan_inputs_t in = { 0 };
+    lightplan_lamps_opts_t oo = *o;
+    char *sample = NULL;
+    if (!oo.sample) {   // the scene file's name without its extension
+        sample = g_path_get_basename(o->scene);
+        char *dot = strrchr(sample, '.');
+        if (dot && dot != sample) *dot = 0;
+        oo.sample = sample;
+    }
+    if (!oo.pixel_format) oo.pixel_format = "Mono12";
+    if (o->nmaterials < 1 || o->nexp < 1) {
+        model_error_set(NULL, 0, "light planning: give the materials and at least one exposure");
+        goto done;
+    }
+    for (int i = 0; i < o->nangles; i++)
+        for (int k = 0; k < i; k++)
+            if (o->angles_deg[i] == o->angles_deg[k]) {
+                model_error_set(NULL, 0, "light planning: the view at %g deg is given twice", o->angles_deg[i]);
+                goto done;
+            }
+    if (!load_inputs(&oo, &in)) goto done;
+    r->ncandidates = in.lamps->n;
+    if (o->check_truth && !model_provenance_input(in.prov, "virtual_rig_truth", o->check_truth)) goto done;
+    int nv = o->nangles > 0 ? o->nangles : 1;
+    r->views = calloc((size_t)nv, sizeof *r->views);
+    if (!r->views) {
+        model_error_set(NULL, 0, "out of memory");
+        goto done;
+    }
+    for (int k = 0; k < nv; k++) {
+        lightplan_view_t *v = &r->views[r->nviews++];
+        v->angle_deg = o->nangles > 0 ? o->angles_deg[k] : o->angle_deg;
+        v->dir = o->nangles > 0 ? g_strdup_printf("%s/view_%g", o->out, v->angle_deg) : g_strdup(o->out);
+        if (!plan_view(&oo, &in, v)) goto done;
+    }
+    if (!lightplan_capture_plan(&oo, in.prov, r)) goto done;
+    if (o->nangles > 0 && !write_summary(&oo, &in, r)) goto done;
+    ok = true;
+done:
+    g_free(sample);
     inputs_free(&in);
     model_error_quiet_thread(quiet);
     return ok;

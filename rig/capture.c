@@ -487,9 +487,10 @@ static void print_dry_run(const rig_plan_t *p, const rig_t *r)
            r->path);
     int nframes = 0;
     for (int i = 0; i < p->nsteps; i++) nframes += p->steps[i].kind != RIG_STEP_OPERATOR;
-    printf("steps: %d (%d operator step%s; %d frames: %d angles x %d lamp sets x %d exposures x %d repeats%s%s)\n",
+    printf("steps: %d (%d operator step%s; %d frames: %d angles x %d lamp sets x %d exposures x %d repeats%s%s%s)\n",
            p->nsteps, p->nsteps - nframes, p->nsteps - nframes == 1 ? "" : "s", nframes, p->nangles, p->nlamp_sets,
-           p->nexposures, p->repeats, p->dark_every ? ", dark frames" : "", p->auto_exposure ? "; auto bracketing: at most" : "");
+           p->nexposures, p->repeats, p->nviews ? ", as the [view] sections choose" : "",
+           p->dark_every ? ", dark frames" : "", p->auto_exposure ? "; auto bracketing: at most" : "");
     for (int i = 0; i < p->nsteps; i++) {
         const rig_step_t *s = &p->steps[i];
         if (s->kind == RIG_STEP_OPERATOR) {

@@ -13,6 +13,7 @@
 
 #include "model/model.h"
 #include "rig/pixfmt.h"
+#include "rig/plan_views.h"
 #include "rig/rig.h"
 
 #define MAX_STEPS 1000000
@@ -88,9 +89,10 @@ static bool check_keys(const model_ini_t *ini)
     for (int i = 0; i < ini->nsections; i++) {
         bool known = false;
         for (size_t k = 0; k < sizeof sections / sizeof sections[0]; k++) known |= !strcmp(ini->sections[i], sections[k]);
+        known |= rig_plan_view_section(ini->sections[i]);   // [view NAME]: rig/plan_views.c checks its keys
         if (!known) {
             model_error(ini->path, ini->section_lines[i], "unknown section [%s]: a plan has [plan], [sample], "
-                        "[angles], [lamps], [exposure], [capture], [operator]", ini->sections[i]);
+                        "[angles], [lamps], [exposure], [capture], [operator] and [view NAME]", ini->sections[i]);
             return false;
         }
     }
@@ -335,6 +337,7 @@ static bool build_steps(rig_plan_t *p, const model_ini_t *ini)
         for (int l = 0; l < p->nlamp_sets; l++)
             for (int r = 0; r < p->repeats; r++, group++)
                 for (int e = 0; e < p->nexposures; e++) {
+                    if (!rig_plan_view_takes(p, a, l, e)) continue;   // [view NAME] (rig/plan_views.c)
                     rig_step_t *s = &p->steps[n++];
                     s->kind = RIG_STEP_LIGHT;
                     s->op = -1;
@@ -429,7 +432,7 @@ rig_plan_t *rig_plan_parse(const char *text, size_t len, const char *name)
                         p->angles_deg[i]);
             goto done;
         }
-    ok = build_steps(p, ini);
+    ok = rig_plan_views_parse(p, ini) && build_steps(p, ini);
 done:
     model_ini_free(ini);
     if (!ok) {
@@ -459,6 +462,7 @@ void rig_plan_free(rig_plan_t *p)
     free(p->exposures_us);
     free(p->steps);
     free(p->ops);
+    rig_plan_views_free(p);
     free(p);
 }
 
@@ -612,4 +616,134 @@ double rig_plan_floor_s(const rig_plan_t *p, const rig_t *r, int from_step)
         t += (isfinite(motion) ? motion : 0) + fmax(settle, lamp) + 1e-6 * s->exposure_us;
     }
     return t;
+}
+
+// ---------------------------------------------------------------------------
+// The plan as text (rig_plan_text): what rig_plan_parse reads back to the same
+// steps.
+
+// The shortest decimal of v that reads back as v.
+static void put_number(GString *t, double v)
+{
+    char b[40];
+    for (int prec = 6; prec <= 17; prec++) {
+        snprintf(b, sizeof b, "%.*g", prec, v);
+        if (strtod(b, NULL) == v) break;
+    }
+    g_string_append(t, b);
+}
+
+// key = text, when the text is one a plan file holds as it is.
+static bool put_text(GString *t, const char *key, const char *v, bool optional)
+{
+    if (optional && !v[0]) return true;
+    bool bad = strchr(v, '\n') || strchr(v, '\r') || v[0] == '#' || strstr(v, " #") || strstr(v, "\t#") ||
+               v[0] == ' ' || (v[0] && v[strlen(v) - 1] == ' ');
+    if (bad) {
+        model_error(NULL, 0, "capture plan: %s = '%s' cannot be written to a plan file (a line break, a '#' after a "
+                    "blank or blanks at the ends)", key, v);
+        return false;
+    }
+    g_string_append_printf(t, "%s = %s\n", key, v);
+    return true;
+}
+
+static void put_list(GString *t, const char *key, const double *v, int n, const bool *take)
+{
+    g_string_append_printf(t, "%s =", key);
+    for (int i = 0; i < n; i++)
+        if (!take || take[i]) {
+            g_string_append_c(t, ' ');
+            put_number(t, v[i]);
+        }
+    g_string_append_c(t, '\n');
+}
+
+static bool put_sets(GString *t, const rig_plan_t *p, const bool *take)
+{
+    g_string_append(t, "sets =");
+    bool first = true;
+    for (int i = 0; i < p->nlamp_sets; i++) {
+        if (take && !take[i]) continue;
+        if (strchr(p->lamp_sets[i], ';') || strchr(p->lamp_sets[i], '#') || !p->lamp_sets[i][0]) {
+            model_error(NULL, 0, "capture plan: lamp set '%s' cannot be written to a plan file", p->lamp_sets[i]);
+            return false;
+        }
+        g_string_append_printf(t, "%s %s", first ? "" : ";", p->lamp_sets[i]);
+        first = false;
+    }
+    g_string_append_c(t, '\n');
+    return true;
+}
+
+static bool put_views(GString *t, const rig_plan_t *p)
+{
+    for (int k = 0; k < p->nviews; k++) {
+        const rig_plan_view_t *v = &p->views[k];
+        if (!rig_plan_view_section(v->name) || strchr(v->name, ']') || strchr(v->name, '#')) {
+            model_error(NULL, 0, "capture plan: '%s' is not a view's section name (view NAME)", v->name);
+            return false;
+        }
+        g_string_append_printf(t, "\n[%s]\nangle_deg = ", v->name);
+        put_number(t, p->angles_deg[v->angle_index]);
+        g_string_append_c(t, '\n');
+        if (!put_sets(t, p, v->sets)) return false;
+        put_list(t, "list_us", p->exposures_us, p->nexposures, v->exposures);
+    }
+    return true;
+}
+
+char *rig_plan_text(const rig_plan_t *p, const char *comment)
+{
+    GString *t = g_string_new("");
+    if (comment) {
+        gchar **lines = g_strsplit(comment, "\n", -1);
+        for (int i = 0; lines[i]; i++) g_string_append_printf(t, "#%s%s\n", lines[i][0] ? " " : "", lines[i]);
+        g_strfreev(lines);
+    }
+    g_string_append(t, "[plan]\n");
+    bool ok = put_text(t, "name", p->name, true) && put_text(t, "operator", p->operator_name, true) &&
+              put_text(t, "notes", p->notes, true);
+    g_string_append(t, "\n[sample]\n");
+    ok = ok && put_text(t, "name", p->sample, false) && put_text(t, "kind", p->sample_kind, false);
+    g_string_append(t, "tilt_deg = ");
+    put_number(t, p->tilt_deg);
+    g_string_append(t, "\ntilt_azimuth_deg = ");
+    put_number(t, p->tilt_azimuth_deg);
+    g_string_append_c(t, '\n');
+    if (p->nops > 0) {   // the operator's instruction, when not the one [sample] generates
+        char gen[sizeof p->ops[0].instruction];
+        sample_instruction(p, gen, sizeof gen);
+        if (strcmp(gen, p->ops[0].instruction)) ok = ok && put_text(t, "instruction", p->ops[0].instruction, false);
+    }
+    if (p->nops > 1) {
+        g_string_append(t, "\n[operator]\n");
+        ok = ok && put_text(t, "end", p->ops[1].instruction, false);
+    }
+    g_string_append(t, "\n[angles]\n");
+    put_list(t, "list", p->angles_deg, p->nangles, NULL);
+    g_string_append(t, "\n[lamps]\n");
+    ok = ok && put_sets(t, p, NULL);
+    g_string_append_printf(t, "\n[exposure]\nmode = %s\n", p->auto_exposure ? "auto" : "fixed");
+    put_list(t, "list_us", p->exposures_us, p->nexposures, NULL);
+    if (p->auto_exposure) {
+        g_string_append(t, "target_fraction = ");
+        put_number(t, p->target_fraction);
+        g_string_append_c(t, '\n');
+    }
+    if (p->roi[2]) g_string_append_printf(t, "roi = %d %d %d %d\n", p->roi[0], p->roi[1], p->roi[2], p->roi[3]);
+    g_string_append(t, "gain = ");
+    put_number(t, p->gain);
+    g_string_append_c(t, '\n');
+    ok = ok && put_text(t, "pixel_format", p->pixel_format[0] ? p->pixel_format : "Mono12", false);
+    g_string_append_printf(t, "\n[capture]\nrepeats = %d\ndark_every = %d\nsettle_ms = ", p->repeats, p->dark_every);
+    put_number(t, p->settle_ms);
+    g_string_append(t, "\nlamp_settle_ms = ");
+    put_number(t, p->lamp_settle_ms);
+    g_string_append(t, "\nframe_timeout_s = ");
+    put_number(t, p->frame_timeout_s);
+    g_string_append_printf(t, "\nretries = %d\n", p->retries);
+    ok = ok && put_views(t, p);
+    char *s = g_string_free(t, !ok);
+    return s;
 }

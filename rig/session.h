@@ -48,6 +48,12 @@ typedef struct rig_operator rig_operator_t;   // the operator's answers (below)
 //              lamp change beyond the lamps' own (default 0); frame_timeout_s = how long to
 //              wait for a frame beyond its exposure (default 10); retries = captures tried
 //              again after a camera time-out before the session pauses (default 2)
+//   [view NAME] (optional, any number; rig/plan_views.c) what one turntable angle takes:
+//              angle_deg = one of [angles] (at most one view per angle); sets = SET; SET ...
+//              (some of [lamps] sets, written the same way; default all of them); list_us =
+//              US US ... (some of [exposure] list_us; default all). An angle without a view
+//              takes every lamp set and exposure. `refl plan lamps` writes a view per angle
+//              (each view's own lamps and exposure).
 // Order: the operator step of [sample] first, then angle, then lamp set, then
 // repeat, then exposure (a bracket stays together), then [operator] end. Every
 // problem is reported through model_error naming the plan file and line.
@@ -94,6 +100,15 @@ typedef struct {
     double tilt_deg, tilt_azimuth_deg;
 } rig_op_step_t;
 
+// A [view NAME] section: the lamp sets and exposures one angle takes.
+typedef struct {
+    char     name[64];
+    int      line;                  // the section header's line
+    int      angle_index;           // into angles_deg
+    bool    *sets;                  // nlamp_sets: taken at the angle
+    bool    *exposures;             // nexposures (auto: the sorted ladder's order)
+} rig_plan_view_t;
+
 typedef struct {
     char    *path, *text;           // file name, contents
     char     sha256[65];
@@ -121,6 +136,8 @@ typedef struct {
     rig_step_t *steps;              // built by rig_plan_load (lamp_mask 0 until rig_plan_bind)
     int      nops;
     rig_op_step_t *ops;             // the operator steps' content (rig_step_t op)
+    int      nviews;                // [view NAME] sections, in file order
+    rig_plan_view_t *views;
 } rig_plan_t;
 
 // Parse a plan file (or text, for tests: name is used in messages) and build
@@ -145,6 +162,14 @@ int rig_plan_operator_pose(const rig_plan_t *p, rig_t *r, int step, char *what, 
 // profile from the rig's speed/acceleration), settles (max of motion settle and
 // lamp settle when both happen at a step) and exposures; seconds.
 double rig_plan_floor_s(const rig_plan_t *p, const rig_t *r, int from_step);
+
+// The plan as a plan file's text (rig/plan.c, at its end): every section with
+// every value (angles as a list, [view NAME] sections as held), that
+// rig_plan_parse reads back to the same steps. comment (may be NULL): lines
+// written first as '# ' comments. NULL (model_error) when a text field holds
+// what a plan file cannot (a line break, '#' after a blank, ';' in a lamp set).
+// Caller frees with free().
+char *rig_plan_text(const rig_plan_t *p, const char *comment);
 
 // The journal: DIR/session.sqlite (WAL, one transaction per frame).
 typedef struct rig_journal rig_journal_t;

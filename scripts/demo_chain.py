@@ -160,7 +160,32 @@ for fname in ("priors_plywood.json", "priors_painted_steel.json"):
 
 # ---- light planning ------------------------------------------------------------
 pp = os.path.join(out, "plan_lamps", "plan.json")
-if os.path.exists(pp):
+if os.path.exists(pp) and "views" in load(pp):
+    # several views (refl plan lamps --angles-deg): each view's choice, and the capture plan of the views
+    pl = load(pp)
+    bound = pl.get("capture_plan_binds_to_virtual_rig")
+    parts.append("<h3>Light planning for the workpiece's views (refl plan lamps, "
+                 "<a href=\"plan_lamps/index.html\">report</a>)</h3>\n"
+                 "<p>With the calibrated camera, lamps, white and gain and the fitted priors, each view (turntable "
+                 "angle) planned on its own: every set of the calibrated lamps at six exposures, the set and exposure "
+                 "that make the most edge length detectable without glare or saturation. The views' choices make the "
+                 "capture plan <a href=\"plan_lamps/capture_plan.ini\">capture_plan.ini</a> the verification session "
+                 "below captures as it is"
+                 + ("" if bound is None else " (checked: it binds to the virtual rig)" if bound
+                    else " (it does NOT bind to the virtual rig)") + ".</p>\n<table>\n")
+    parts.append(row(["turntable (deg)", "lamps", "exposure (us)", "free of glare and saturation",
+                      "detectable segments", "detectable length (px)", "usable points",
+                      "Sobel agreement on the rig", "report"], True))
+    for v in pl["views"]:
+        ag = v.get("check_agreement")
+        cells = [f(v["turntable_deg"], 4), v["lamps"], f(v["exposure_us"], 6), "yes" if v["feasible"] else "NO",
+                 f"{v['n_detectable']} of {v['n_segments']}", f(v["detectable_length_px"], 5),
+                 f(v["usable_points"], 5), "" if ag is None else f"{100 * ag:.1f} %"]
+        parts.append("<tr>" + "".join(f"<td>{html.escape(str(c))}</td>" for c in cells)
+                     + f"<td><a href=\"plan_lamps/{html.escape(v['dir'])}/index.html\">{html.escape(v['dir'])}</a>"
+                     "</td></tr>\n")
+    parts.append("</table>\n")
+elif os.path.exists(pp):
     pl = load(pp)
     c = pl["chosen"]
     chk = pl.get("virtual_rig_check") or {}
@@ -185,8 +210,8 @@ ver = [("verify_t", "T-stiffener (the correct description)", True),
        ("verify_shift5", "T-stiffener shifted 5 mm (wrong)", False)]
 if any(os.path.exists(os.path.join(out, d, "verify.json")) for d, _, _ in ver):
     parts.append("<h3>Verification of the workpiece (refl verify, with the calibrations and priors above)</h3>\n"
-                 "<p>Four views of the T-stiffener (turntable 0, 90, 180, 270&deg;, all lamps on) captured on the "
-                 "virtual rig, verified against the correct description and two wrong ones. The residue columns "
+                 "<p>Four views of the T-stiffener (turntable 0, 90, 180, 270&deg;, each with its planned lamps and "
+                 "exposure) captured on the virtual rig, verified against the correct description and two wrong ones. The residue columns "
                  "are the thesis's (|measured &minus; model| at the reference points, DN); the thesis could not tell "
                  "T from I by them (mean 14.0 vs 17.9). The score sums the excess &chi;&sup2; of connected change "
                  "regions; the verdict is <i>incorrect</i> above the threshold.</p>\n<table>\n")

@@ -30,6 +30,16 @@ and the segments by agreement, and the predicted against the measured Sobel
 response; a check.png left by an earlier run is removed when there is no
 check), configs.png (detectable edge length and usable reference points
 against exposure per lamp set) and index.html.
+
+With several views (refl plan lamps --angles-deg) DIR/plan.json is their
+summary instead: "scene", "views" ([{turntable_deg, dir (the view's directory
+in DIR, itself a DIR as above), lamps, exposure_us, feasible, n_detectable,
+n_segments, detectable_length_px, usable_points, glare_pix, saturated_pix,
+check_agreement (0..1 or null)}]), "capture_plan" (its file name in DIR),
+"capture_plan_binds_to_virtual_rig" (true/false, null without the check) and
+"provenance"; then only DIR/index.html is written: a table of the views with
+links to their reports (run the script on each view's directory for those).
+DIR/capture_plan.ini, when present, is linked from the page.
 """
 import json
 import math
@@ -508,7 +518,9 @@ def write_html(d, p, have):
     L.append(f"<p>Turntable at {fmt(p['turntable_deg'], 'g')} deg; {len(p['configs'])} configurations tried "
              f'(lamp sets &times; exposures). Data: <a href="plan.json">plan.json</a>, '
              f'<a href="predicted.tiff">predicted.tiff</a>'
-             + (', <a href="check_frame.tiff">check_frame.tiff</a>' if chk else "") + ".</p>")
+             + (', <a href="check_frame.tiff">check_frame.tiff</a>' if chk else "")
+             + (', the capture plan <a href="capture_plan.ini">capture_plan.ini</a>'
+                if os.path.exists(os.path.join(d, "capture_plan.ini")) else "") + ".</p>")
 
     # the choice
     nseg = ch["n_segments"]
@@ -729,7 +741,55 @@ def write_html(d, p, have):
     return write_page(d, L)
 
 
+def report_views(d, raw):
+    """The summary page of several views (plan.json with "views")."""
+    path = os.path.join(d, "plan.json")
+    c = Plan(path)
+    scene = c.str(raw, "scene", "")
+    plan = c.str(raw, "capture_plan", "")
+    bound = raw.get("capture_plan_binds_to_virtual_rig")
+    if bound is not None and not isinstance(bound, bool):
+        c.fail("capture_plan_binds_to_virtual_rig", f"expected true, false or null, got {json.dumps(bound)}")
+    rows, cls = [], []
+    for i, v in enumerate(c.list(raw, "views", "")):
+        w = f"views[{i}]"
+        vd = c.str(v, "dir", w)
+        if os.sep in vd or vd in ("", ".", ".."):
+            c.fail(f"{w}.dir", f"expected a directory name inside {d}, got {json.dumps(vd)}")
+        feasible = c.bool(v, "feasible", w)
+        rows.append([fmt(c.num(v, "turntable_deg", w), "g"), e(c.str(v, "lamps", w)), fmt(c.num(v, "exposure_us", w), "g"),
+                     "yes" if feasible else "NO",
+                     f"{c.int(v, 'n_detectable', w)} of {c.int(v, 'n_segments', w)}",
+                     fmt(c.num(v, "detectable_length_px", w), ".0f"), fmt(c.num(v, "usable_points", w), ".0f"),
+                     str(c.int(v, "glare_pix", w)), str(c.int(v, "saturated_pix", w)),
+                     pct(c.num(v, "check_agreement", w, null=True)),
+                     f'<a href="{e(vd)}/index.html">{e(vd)}/</a>'])
+        cls.append("" if feasible else "miss")
+    title = f"refl plan lamps: {scene}, {len(rows)} views"
+    L = [f'<!DOCTYPE html>\n<html><head><meta charset="utf-8"><title>{e(title)}</title>\n'
+         f"<style>{CSS}</style>\n</head><body>\n<h1>{e(title)}</h1>"]
+    prov = raw.get("provenance")
+    head = provenance_head(prov)
+    if head:
+        L.append(head)
+    L.append(f'<p>Each view (turntable angle) planned on its own: its lamp set and exposure, its report in its '
+             f'directory. The capture plan of the views: <a href="{e(plan)}">{e(plan)}</a> (refl capture takes it '
+             f"as it is; a [view N] section per view)"
+             + ("" if bound is None else "; it binds to the virtual rig of the check" if bound
+                else "; it does NOT bind to the virtual rig of the check") + '. Data: <a href="plan.json">plan.json</a>.</p>')
+    L.append(table(["turntable (deg)", "lamps", "exposure (µs)", "feasible", "detectable segments",
+                    "detectable length (px)", "usable points", "glare px", "saturated px", "check agreement",
+                    "report"], rows, cls,
+                   [True, False, True, False, True, True, True, True, True, True, False]))
+    L.append(provenance_section(prov, "plan.json"))
+    L.append("</body></html>\n")
+    return write_page(d, L)
+
+
 def report(d):
+    raw = load_json(os.path.join(d, "plan.json"))
+    if isinstance(raw, dict) and "views" in raw:
+        return report_views(d, raw)
     p = load_plan(d)
     img = read_float_tiff(os.path.join(d, "predicted.tiff"), "refl plan lamps writes it with plan.json")[0]
     have = {}

@@ -1,6 +1,7 @@
 // tests/test_fit_lightplan.c — light planning (fit/lightplan.h): the Sobel
-// response of known steps, glare and saturation steering the choice, and the
-// prediction against a Sobel detector on the virtual rig's frames.
+// response of known steps, glare and saturation steering the choice, the
+// prediction against a Sobel detector on the virtual rig's frames, and the
+// capture plan of several views captured on the virtual rig.
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -12,6 +13,7 @@
 #include "fit/lightplan.h"
 #include "fit/verify_lab.h"
 #include "model/model.h"
+#include "rig/rig.h"
 #include "tests/test.h"
 
 // An ideal step of 50 DN: the detector's median response is 4.0 x 50 along an
@@ -171,6 +173,20 @@ TEST(lightplan_virtual_rig_agreement)
     }
     CHECK(json_array_size(json_object_get(chk, "configurations")) >= 4);
     CHECK(json_array_size(json_object_get(j, "faces")) >= 6);
+    // the one view's capture plan: angle 0, the chosen lamps and exposure, bound to the virtual rig
+    char *pp = g_strdup_printf("%s/capture_plan.ini", dir);
+    rig_plan_t *p = rig_plan_load(pp);
+    g_free(pp);
+    CHECK_MSG(p != NULL, "%s", model_last_error());
+    if (p) {
+        // step 0: the operator places the workpiece
+        CHECK(p->nangles == 1 && p->angles_deg[0] == 0 && p->nsteps == 3 && p->steps[0].kind == RIG_STEP_OPERATOR);
+        CHECK(p->steps[1].kind == RIG_STEP_LIGHT);
+        CHECK(!strcmp(p->steps[1].lamps, json_string_value(json_object_get(ch, "lamps"))));
+        CHECK(p->steps[1].exposure_us == json_number_value(json_object_get(ch, "exposure_us")));
+        CHECK(p->steps[2].kind == RIG_STEP_DARK);
+    }
+    rig_plan_free(p);
     json_decref(j);
     // usage errors
     CHECK(test_refl_run(30, &out, &err, "plan", "lamps", scene, "--camera", cam, "--lamps", lamps, "--materials",
@@ -198,4 +214,130 @@ TEST(demo_command_usage)
     CHECK_CONTAINS(err, "stray");
     g_free(out);
     g_free(err);
+}
+
+// Several views (--angles-deg): each planned on its own (its directory and
+// plan.json), the summary lists them, and capture_plan.ini holds those angles
+// with each view's chosen lamps and exposure in a [view N] section; refl
+// capture takes the plan as it is on the virtual rig and every light frame has
+// its view's planned lamps and exposure.
+TEST(lightplan_views_capture_plan)
+{
+    char scene[4096], cam[4096], lamps[4096], mats[4096], truth[4096];
+    snprintf(scene, sizeof scene, "%s/examples/t_stiffener.d3d", test_srcdir());
+    snprintf(cam, sizeof cam, "%s/examples/camera.cameramodel", test_srcdir());
+    snprintf(lamps, sizeof lamps, "%s/examples/lamps.ini", test_srcdir());
+    snprintf(mats, sizeof mats, "%s/examples/materials.ini", test_srcdir());
+    snprintf(truth, sizeof truth, "%s/examples/virtual-truth.ini", test_srcdir());
+    char *dir = g_strdup(test_path("views"));
+    char *out = NULL, *err = NULL;
+    int rc = test_refl_run(300, &out, &err, "plan", "lamps", scene, "--camera", cam, "--lamps", lamps, "--kc-per-us",
+                           "1e-4", "--materials", mats, "--angles-deg", "0,135", "--exposures-us", "2000,6000",
+                           "--max-lamps", "2", "--check-virtual", truth, "--no-report", "-o", dir, NULL);
+    CHECK_MSG(rc == 0, "rc %d: %s", rc, err);
+    CHECK_CONTAINS(out, "capture plan:");
+    CHECK_CONTAINS(out, "(binds to the virtual rig)");
+    g_free(out);
+    g_free(err);
+    // the summary and each view's own plan
+    char *jp = g_strdup_printf("%s/plan.json", dir);
+    json_t *j = json_load_file(jp, 0, NULL);
+    g_free(jp);
+    CHECK(j != NULL);
+    json_t *views = json_object_get(j, "views");
+    CHECK(json_array_size(views) == 2);
+    CHECK(json_is_true(json_object_get(j, "capture_plan_binds_to_virtual_rig")));
+    char want_lamps[2][512] = { "", "" };
+    double want_us[2] = { 0, 0 };
+    for (size_t k = 0; k < json_array_size(views) && k < 2; k++) {
+        json_t *v = json_array_get(views, k);
+        CHECK(json_number_value(json_object_get(v, "turntable_deg")) == (k ? 135 : 0));
+        snprintf(want_lamps[k], sizeof want_lamps[k], "%s", json_string_value(json_object_get(v, "lamps")));
+        want_us[k] = json_number_value(json_object_get(v, "exposure_us"));
+        char *vp = g_strdup_printf("%s/%s/plan.json", dir, json_string_value(json_object_get(v, "dir")));
+        json_t *vj = json_load_file(vp, 0, NULL);
+        CHECK_MSG(vj != NULL, "%s", vp);
+        if (vj) {
+            json_t *ch = json_object_get(vj, "chosen");
+            CHECK(!strcmp(json_string_value(json_object_get(ch, "lamps")), want_lamps[k]));
+            CHECK(json_number_value(json_object_get(ch, "exposure_us")) == want_us[k]);
+            CHECK(json_number_value(json_object_get(vj, "turntable_deg")) == (k ? 135 : 0));
+            CHECK(json_object_get(vj, "virtual_rig_check") != NULL);
+        }
+        json_decref(vj);
+        g_free(vp);
+        CHECK(strchr(want_lamps[k], '+') == NULL || strchr(strchr(want_lamps[k], '+') + 1, '+') == NULL);  // max 2
+    }
+    json_decref(j);
+    // the capture plan: those angles, each view's lamps and exposure
+    char *pp = g_strdup_printf("%s/capture_plan.ini", dir);
+    rig_plan_t *p = rig_plan_load(pp);
+    CHECK_MSG(p != NULL, "%s", model_last_error());
+    if (p) {
+        CHECK(p->nangles == 2 && p->angles_deg[0] == 0 && p->angles_deg[1] == 135);
+        CHECK(!strcmp(p->sample, "t_stiffener") && !strcmp(p->sample_kind, "workpiece"));
+        CHECK(!p->auto_exposure && p->gain == 0 && !strcmp(p->pixel_format, "Mono12"));
+        CHECK(p->nviews == 2 && p->nsteps == 4 && p->steps[0].kind == RIG_STEP_OPERATOR);
+        int light = 0;
+        for (int i = 0; i < p->nsteps; i++) {
+            const rig_step_t *s = &p->steps[i];
+            if (s->kind != RIG_STEP_LIGHT) continue;
+            light++;
+            CHECK(!strcmp(s->lamps, want_lamps[s->angle_index]) && s->exposure_us == want_us[s->angle_index]);
+        }
+        CHECK(light == 2 && p->steps[3].kind == RIG_STEP_DARK);
+        CHECK_CONTAINS(p->text, "# command: refl plan lamps ");
+        CHECK_CONTAINS(p->text, "scene ");
+    }
+    rig_plan_free(p);
+    // refl capture takes it as it is
+    char *abs_truth = g_canonicalize_filename(truth, NULL);
+    char *rig = g_strdup_printf("[rig]\nbackend = virtual\nserve = inprocess\ntruth = %s\ntime_scale = 0.01\n",
+                                abs_truth);
+    g_free(abs_truth);
+    test_write("views_rig.ini", rig);
+    g_free(rig);
+    char *sess = g_strdup(test_path("views_session"));
+    rc = test_refl_run(300, &out, &err, "capture", pp, "--rig", test_path("views_rig.ini"), "-o", sess, "--progress",
+                       "lines", "--yes", NULL);
+    CHECK_MSG(rc == 0, "rc %d: %s", rc, err);
+    g_free(out);
+    g_free(err);
+    rig_session_t *s = rig_session_open(sess);
+    CHECK_MSG(s != NULL, "%s", model_last_error());
+    if (s) {
+        CHECK(s->n == 3);
+        int seen = 0;
+        for (int i = 0; i < s->n; i++) {
+            const rig_frame_row_t *f = &s->rows[i];
+            if (!strcmp(f->lamps, "none")) continue;
+            int k = f->commanded_deg == 135;
+            CHECK_MSG(!strcmp(f->lamps, want_lamps[k]) && f->exposure_us == want_us[k],
+                      "frame %d at %g deg: lamps %s, %g us; planned %s, %g us", i, f->commanded_deg, f->lamps,
+                      f->exposure_us, want_lamps[k], want_us[k]);
+            seen |= 1 << k;
+        }
+        CHECK(seen == 3);
+    }
+    rig_session_free(s);
+    // usage: one view or several, not both; angles as numbers
+    CHECK(test_refl_run(30, &out, &err, "plan", "lamps", scene, "--camera", cam, "--lamps", lamps, "--kc-per-us",
+                        "1e-4", "--materials", mats, "--angle-deg", "0", "--angles-deg", "0,90", "-o", dir, NULL) == 2);
+    CHECK_CONTAINS(err, "not both");
+    g_free(out);
+    g_free(err);
+    CHECK(test_refl_run(30, &out, &err, "plan", "lamps", scene, "--camera", cam, "--lamps", lamps, "--kc-per-us",
+                        "1e-4", "--materials", mats, "--angles-deg", "0,ninety", "-o", dir, NULL) == 2);
+    CHECK_CONTAINS(err, "--angles-deg");
+    g_free(out);
+    g_free(err);
+    // a pixel format the capture plan cannot hold is a usage error
+    CHECK(test_refl_run(60, &out, &err, "plan", "lamps", scene, "--camera", cam, "--lamps", lamps, "--kc-per-us",
+                        "1e-4", "--materials", mats, "--pixel-format", "Mono99", "-o", dir, NULL) == 2);
+    CHECK_CONTAINS(err, "--pixel-format Mono99");
+    g_free(out);
+    g_free(err);
+    g_free(sess);
+    g_free(pp);
+    g_free(dir);
 }
