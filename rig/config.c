@@ -8,6 +8,7 @@
 #define _GNU_SOURCE
 #include <arpa/inet.h>
 #include <glib.h>
+#include <limits.h>
 #include <math.h>
 #include <stdarg.h>
 #include <stdio.h>
@@ -51,6 +52,7 @@ typedef struct {
     bool   lamps_gpiod;
     rig_lamp_line_t lamps[MAX_LAMPS];
     int    lamp_line[MAX_LAMPS];
+    char   lamp_state_file[PATH_MAX];   // [lamps] state_file ("": the default)
 } spec_t;
 
 // ---------------------------------------------------------------------------
@@ -125,7 +127,9 @@ static void backend_choices(const char *kind, char *out, size_t size)
 
 static const char *kind_of(const char *section)
 {
-    if (!strcmp(section, "camera") || !strcmp(section, "turntable") || !strcmp(section, "rig")) return section;
+    if (!strcmp(section, "camera") || !strcmp(section, "turntable") || !strcmp(section, "rig") ||
+        !strcmp(section, "lamps"))
+        return section;
     if (!strncmp(section, "lamp ", 5) || !strcmp(section, "lamp")) return "lamp";
     return NULL;
 }
@@ -392,6 +396,18 @@ static int parse_lamp(spec_t *s, const char *sec, int line, const backend_def_t 
     return 0;
 }
 
+// [lamps]: settings of the whole lamp set (no backend): state_file.
+static int parse_lamps(spec_t *s, const char *sec)
+{
+    for (int i = 0; i < s->ini->nentries; i++) {
+        const model_ini_entry_t *e = &s->ini->entries[i];
+        if (!strcmp(e->section, sec) && strcmp(e->key, "state_file"))
+            return cfg_fail(s, e->line, "[lamps]: unknown key '%s'; known keys: state_file (where the lamp-state "
+                            "file is kept)", e->key);
+    }
+    return get_string(s, sec, "state_file", s->lamp_state_file, sizeof s->lamp_state_file);
+}
+
 static int parse(spec_t *s)
 {
     const model_ini_t *ini = s->ini;
@@ -420,8 +436,9 @@ static int parse(spec_t *s)
         const char *sec = ini->sections[i], *kind = kind_of(sec);
         int line = ini->section_lines[i];
         const backend_def_t *def = NULL;
-        if ((rc = check_section(s, sec, line, &def))) return rc;
-        if (!strcmp(kind, "rig")) rc = parse_rig(s, sec, line);
+        if (!strcmp(kind, "lamps")) rc = parse_lamps(s, sec);
+        else if ((rc = check_section(s, sec, line, &def))) return rc;
+        else if (!strcmp(kind, "rig")) rc = parse_rig(s, sec, line);
         else if (!strcmp(kind, "camera")) rc = parse_camera(s, sec, line);
         else if (!strcmp(kind, "turntable")) rc = parse_turntable(s, sec, line, def);
         else rc = parse_lamp(s, sec, line, def);
@@ -550,8 +567,8 @@ static int open_devices(rig_t *r, spec_t *s)
         if (rc) return device_fail(rc, s, s->turntable_line, "turntable");
     }
     if (s->nlamps > 0) {
-        if (s->lamps_gpiod) QUIET(rig_lamps_open_gpiod(&r->lamps, s->lamps, s->nlamps));
-        else QUIET(rig_lamps_open_sim(&r->lamps, s->lamps, s->nlamps));
+        if (s->lamps_gpiod) QUIET(rig_lamps_open_gpiod_state(&r->lamps, s->lamps, s->nlamps, s->lamp_state_file));
+        else QUIET(rig_lamps_open_sim_state(&r->lamps, s->lamps, s->nlamps, s->lamp_state_file));
         if (rc) {
             char sec[80];
             snprintf(sec, sizeof sec, "lamp %s", s->lamps[0].name);

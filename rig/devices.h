@@ -159,6 +159,18 @@ int rig_lamps_open_gpiod(rig_lamps_t **out, const rig_lamp_line_t *lamps, int n)
 // [0, 3.6e6]; *out is NULL on error.
 // Simulated lamps (state only; the virtual rig reads on_mask).
 int rig_lamps_open_sim(rig_lamps_t **out, const rig_lamp_line_t *lamps, int n);
+// The lamp-state file (rig/lamps_state.c): records which lamps are on, flushed
+// before one turns on, so that after a death no handler sees (kill -9, the OOM
+// killer, a power cut) the next open of the same lamps reports on stderr "refl:
+// the last session (pid N, started T) died with lamps A, B on; switching them
+// off" and does. The open set holds an exclusive flock on it: an open while
+// another live process holds it fails with RIG_ERR_BUSY naming that pid.
+// gpiod: state_file NULL or "" = $XDG_STATE_HOME/refl (~/.local/state/refl)/
+// gpiod-CHIP-LINE....state, named after the chips and lines; rig_lamps_open_gpiod
+// uses that. sim: a file only when state_file is given (rig_lamps_open_sim: none).
+int rig_lamps_open_gpiod_state(rig_lamps_t **out, const rig_lamp_line_t *lamps, int n, const char *state_file);
+int rig_lamps_open_sim_state(rig_lamps_t **out, const rig_lamp_line_t *lamps, int n, const char *state_file);
+const char *rig_lamps_state_file(const rig_lamps_t *l);   // "" when the set keeps none
 // Switch to exactly on_mask and sleep the settle time the change needs (the
 // longest warm-up of lamps switched on / settle of lamps switched off).
 // RIG_ERR_INVALID for bits beyond the n lamps (nothing switched); when the
@@ -171,9 +183,12 @@ int  rig_lamps_all_off(rig_lamps_t *l);
 int  rig_lamps_find(const rig_lamps_t *l, const char *name);   // index or -1
 void rig_lamps_close(rig_lamps_t *l);
 
-// Safety: after this, SIGINT/SIGTERM/SIGHUP and exit() switch every open lamp
-// set off (emergency_off) before the process ends; the signals then re-raise
-// with the default action (a signal the process ignores stays ignored).
+// Safety: after this, SIGINT/SIGTERM/SIGHUP/SIGQUIT, SIGSEGV/SIGBUS/SIGFPE/
+// SIGABRT and exit() switch every open lamp set off (emergency_off; the state
+// file then says so) before the process ends; the signals then re-raise with
+// the default action, so the process still dies by that signal (with its core)
+// (a signal the process ignores stays ignored). Later sigaction calls for
+// these signals replace this (rig/capture.c's SIGINT handler calls it on).
 // Idempotent. Lamp sets register themselves on open (at most 32 open at once)
 // and deregister on close.
 void rig_safety_install(void);// The lamps of a set: how many (0 for NULL), lamp i's line as opened (NULL
