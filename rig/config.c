@@ -558,6 +558,12 @@ static int open_devices(rig_t *r, spec_t *s)
                 rig_turntable_info_t info;
                 QUIET(rig_turntable_info(r->turntable, &info));
                 set_profile_from_stage(r, s->apt_stage[0] ? s->apt_stage : rc ? NULL : info.model);
+                if (!rc && info.speed_deg_s > 0 && info.accel_deg_s2 > 0 && info.home_time_s > 0) {
+                    // the controller's own (or the table's) speeds, as the driver found them
+                    r->speed_deg_s = info.speed_deg_s;
+                    r->accel_deg_s2 = info.accel_deg_s2;
+                    r->home_time_s = info.home_time_s;
+                }
                 rc = 0;
             }
         } else {

@@ -70,6 +70,14 @@ typedef struct {
     char   serial[32];
     char   firmware[32];
     double counts_per_deg;     // encoder counts per degree (K10CR1: 136533.33)
+    // Motion parameters for time estimates and time-outs: apt reads them from
+    // the controller (MOT_GET_VELPARAMS, MOT_GET_HOMEPARAMS; params_from
+    // "controller"), or takes rig_stage_models' when it does not answer
+    // ("table", with a note on stderr); sim: its own ("sim", real time).
+    double speed_deg_s, accel_deg_s2;
+    double home_speed_deg_s;
+    double home_time_s;        // the longest homing: a full turn to the switch plus the offset
+    char   params_from[16];
 } rig_turntable_info_t;
 
 typedef struct {

@@ -154,6 +154,12 @@ static int sim_info(rig_turntable_t *t, rig_turntable_info_t *out)
     snprintf(out->serial, sizeof out->serial, "sim-%llu", (unsigned long long)s->p.seed);
     snprintf(out->firmware, sizeof out->firmware, "sim");
     out->counts_per_deg = 136533.33;
+    double ts = s->p.time_scale;
+    out->speed_deg_s = s->p.speed_deg_s / ts;
+    out->accel_deg_s2 = s->p.accel_deg_s2 / (ts * ts);
+    out->home_time_s = s->p.home_time_s * ts;
+    out->home_speed_deg_s = out->home_time_s > 0 ? 360 / out->home_time_s : out->speed_deg_s;
+    snprintf(out->params_from, sizeof out->params_from, "sim");
     return 0;
 }
 

@@ -7,6 +7,7 @@
 // `umockdev-wrapper <self> apt_umock_`; run directly, the apt_umock_* tests
 // are left to it (TEST_INNER: neither run nor counted outside umockdev).
 #define _GNU_SOURCE
+#include <fcntl.h>
 #include <stdlib.h>
 #include <time.h>
 #include <unistd.h>
@@ -251,7 +252,7 @@ TEST(turntable_sim_bad_input)
 // The APT driver under umockdev
 
 // The number of apt_umock_* tests below (the outer test checks they all ran).
-enum { N_APT_UMOCK_TESTS = 13 };
+enum { N_APT_UMOCK_TESTS = 15 };
 
 TEST(turntable_apt_under_umockdev)
 {
@@ -578,6 +579,88 @@ TEST_INNER(apt_umock_limit_switch, apt_sim_available)
         CHECK_CONTAINS(model_last_error(), "fwd-limit");
         CHECK(rig_turntable_status(t, &st) == 0 && st.limit_fwd && !st.limit_rev && !st.moving);
         CHECK(!st.motion_error);
+        rig_turntable_close(t);
+    }
+    apt_sim_free(s);
+}
+
+// The controller's own speeds (MOT_GET_VELPARAMS / MOT_GET_HOMEPARAMS), unlike
+// the stage table's K10CR1 10 deg/s, 10 deg/s^2, give the estimates.
+TEST_INNER(apt_umock_motion_params_from_controller, apt_sim_available)
+{
+    apt_sim_device_t d = apt_sim_device_defaults();
+    d.speed_deg_s = 25;
+    d.accel_deg_s2 = 40;
+    d.home_speed_deg_s = 7.5;
+    d.home_offset_deg = 4;
+    apt_sim_t *s = fx_apt_sim_start(&d, 1);
+    rig_turntable_t *t = NULL;
+    CHECK(rig_turntable_open_apt(&t, NULL, NULL) == 0);
+    if (t) {
+        rig_turntable_info_t info;
+        CHECK(rig_turntable_info(t, &info) == 0);
+        CHECK(strcmp(info.params_from, "controller") == 0);
+        CHECK_NEAR(info.speed_deg_s, 25, 1e-3);
+        CHECK_NEAR(info.accel_deg_s2, 40, 1e-2);
+        CHECK_NEAR(info.home_speed_deg_s, 7.5, 1e-3);
+        // a full turn and the offset at 7.5 deg/s, and the ramps at 40 deg/s^2
+        CHECK_NEAR(info.home_time_s, 364 / 7.5 + 2 * 7.5 / 40, 1e-3);
+        apt_sim_stats_t st;
+        apt_sim_stats(s, 0, &st);
+        CHECK(st.n_velparams == 1 && st.n_homeparams == 1);
+        // Moves are timed by the controller's speed: 90 deg at 25 deg/s,
+        // 40 deg/s^2 takes 4.225 s, so a time-out from the table's (10 deg/s)
+        // would be 9.0 + 1.0 s.
+        CHECK_NEAR(rig_motion_time_s(90, info.speed_deg_s, info.accel_deg_s2), 90 / 25.0 + 25 / 40.0, 1e-3);
+        rig_turntable_close(t);
+    }
+    // The rig file's turntable takes them as its motion profile.
+    char text[256];
+    snprintf(text, sizeof text, "[turntable]\nbackend = apt\n");
+    const char *path = test_write("apt-rig.ini", text);
+    rig_t *r = NULL;
+    CHECK(rig_open(&r, path) == 0);
+    if (r) {
+        CHECK_NEAR(r->speed_deg_s, 25, 1e-3);
+        CHECK_NEAR(r->accel_deg_s2, 40, 1e-2);
+        CHECK_NEAR(r->home_time_s, 364 / 7.5 + 2 * 7.5 / 40, 1e-3);
+        rig_close(r);
+    }
+    apt_sim_free(s);
+}
+
+// A controller that does not answer VELPARAMS/HOMEPARAMS: the stage table's
+// values, with a note.
+TEST_INNER(apt_umock_motion_params_fallback, apt_sim_available)
+{
+    apt_sim_device_t d = apt_sim_device_defaults();
+    d.no_params = true;
+    apt_sim_t *s = fx_apt_sim_start(&d, 1);
+    rig_turntable_t *t = NULL;
+    fflush(stderr);
+    const char *errpath = test_path("stderr.txt");
+    int saved = dup(2), fd = open(errpath, O_WRONLY | O_CREAT | O_TRUNC, 0644);
+    dup2(fd, 2);
+    close(fd);
+    int rc = rig_turntable_open_apt(&t, NULL, NULL);
+    fflush(stderr);
+    dup2(saved, 2);
+    close(saved);
+    CHECK(rc == 0);
+    char *err = model_read_file(errpath, NULL);
+    CHECK_CONTAINS(err, "apt K10CR1 serial 55000001: note: no reply to MOT_REQ_VELPARAMS/MOT_REQ_HOMEPARAMS; "
+                        "time estimates and time-outs use the stage table's 10 deg/s, 10 deg/s^2");
+    free(err);
+    if (t) {
+        rig_turntable_info_t info;
+        CHECK(rig_turntable_info(t, &info) == 0);
+        CHECK(strcmp(info.params_from, "table") == 0);
+        CHECK_NEAR(info.speed_deg_s, 10, 1e-9);
+        CHECK_NEAR(info.accel_deg_s2, 10, 1e-9);
+        CHECK_NEAR(info.home_time_s, 72, 1e-9);
+        // and the stage still works
+        CHECK(rig_turntable_home(t, 5) == 0);
+        CHECK(rig_turntable_move_abs_deg(t, 30, 5) == 0);
         rig_turntable_close(t);
     }
     apt_sim_free(s);
