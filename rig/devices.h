@@ -22,6 +22,7 @@
 // path that closes them.
 #pragma once
 
+#include <signal.h>
 #include <stdbool.h>
 #include <stdint.h>
 
@@ -136,6 +137,26 @@ int  rig_turntable_move_rel_deg(rig_turntable_t *t, double delta_deg, double tim
 int  rig_turntable_start_move_abs_deg(rig_turntable_t *t, double angle_deg);
 int  rig_turntable_wait(rig_turntable_t *t, double timeout_s);
 int  rig_turntable_stop(rig_turntable_t *t, bool immediate);
+int  rig_turntable_start_home(rig_turntable_t *t);                        // returns at once
+// Begins a stop and returns (rig_turntable_wait then waits for it); a
+// backend that cannot stops fully here, as rig_turntable_stop.
+int  rig_turntable_start_stop(rig_turntable_t *t, bool immediate);
+// An interruptible wait for the motion under way (after start_home or
+// start_move_abs_deg), in slices of 50 ms. When *interrupt becomes 1 the stage
+// starts a profiled stop; when it is 2 or more (also during that stop) an
+// immediate one; once it stands: RIG_ERR_INTERRUPTED, "NAME: WHAT interrupted:
+// the stage stopped [at once] at X deg" (recorded for model_last_error, not
+// printed: the caller words it). progress(ctx, elapsed, angle) every
+// period_s while it moves. Other errors as rig_turntable_wait.
+typedef struct {
+    const volatile sig_atomic_t *interrupt;   // NULL: none
+    const char *what;                          // "homing", "the move to 30 deg" (messages)
+    double      stop_s;                        // a profiled stop's expected length (NAN: unknown)
+    void      (*progress)(void *ctx, double elapsed_s, double angle_deg);
+    void       *ctx;
+    double      period_s;
+} rig_turntable_watch_t;
+int  rig_turntable_wait_watched(rig_turntable_t *t, double timeout_s, const rig_turntable_watch_t *w);
 void rig_turntable_close(rig_turntable_t *t);
 // Time a move of delta_deg takes with a trapezoidal profile.
 double rig_motion_time_s(double delta_deg, double speed_deg_s, double accel_deg_s2);

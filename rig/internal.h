@@ -25,6 +25,9 @@ typedef struct {
     // after timeout_s, RIG_ERR_MOTION / RIG_ERR_LIMIT / RIG_ERR_DISCONNECTED as found.
     int  (*wait)(rig_turntable_t *t, double timeout_s);
     int  (*stop)(rig_turntable_t *t, bool immediate);
+    // Optional: begin a stop and return at once (wait then waits for it to
+    // end, successfully); NULL makes rig_turntable_wait_watched use stop.
+    int  (*start_stop)(rig_turntable_t *t, bool immediate);
     void (*close)(rig_turntable_t *t);
 } rig_turntable_ops_t;
 

@@ -508,6 +508,16 @@ static int apt_stop(rig_turntable_t *t, bool immediate)
     return 0;
 }
 
+// Sends the stop and returns: apt_wait then sees MOVE_STOPPED (asked for).
+static int apt_start_stop(rig_turntable_t *t, bool immediate)
+{
+    apt_t *a = A(t);
+    int r = send_short(t, MOT_MOVE_STOP, APT_CHAN, immediate ? 1 : 2, "MOT_MOVE_STOP");
+    if (r) return r;
+    if (a->motion != MOTION_IDLE) a->stop_requested = true;
+    return 0;
+}
+
 static void apt_close(rig_turntable_t *t)
 {
     apt_t *a = A(t);
@@ -538,6 +548,7 @@ static const rig_turntable_ops_t apt_ops = {
     .start_move_rel_deg = apt_start_move_rel,
     .wait = apt_wait,
     .stop = apt_stop,
+    .start_stop = apt_start_stop,
     .close = apt_close,
 };
 
