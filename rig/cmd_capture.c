@@ -25,7 +25,8 @@ static const char capture_about[] =
     "--resume continues a stopped session where it stopped; it refuses when the plan or the rig file\n"
     "changed since, or the camera is another one (its serial differs from the journal's);\n"
     "--allow-changed continues the stored step list anyway.\n"
-    "First Ctrl-C: finish the frame, lamps off, pause (exit 3); second: stop at once.\n"
+    "First Ctrl-C: finish the frame, lamps off, pause (exit 3); during homing or a move: stop the\n"
+    "stage (profiled stop), pause (exit 3; --resume homes or moves again). Second: stop at once.\n"
     "Exit: 0 complete, 1 error or fault, 2 usage, 3 paused.";
 
 static char *join_args(int argc, char **argv)

@@ -405,7 +405,15 @@ static int parse_lamps(spec_t *s, const char *sec)
             return cfg_fail(s, e->line, "[lamps]: unknown key '%s'; known keys: state_file (where the lamp-state "
                             "file is kept)", e->key);
     }
-    return get_string(s, sec, "state_file", s->lamp_state_file, sizeof s->lamp_state_file);
+    int rc = get_string(s, sec, "state_file", s->lamp_state_file, sizeof s->lamp_state_file);
+    if (rc || !s->lamp_state_file[0] || s->lamp_state_file[0] == '/') return rc;
+    // relative to the rig file's directory, as truth is
+    char *dir = g_path_get_dirname(s->path), *full = g_build_filename(dir, s->lamp_state_file, NULL);
+    bool fits = strlen(full) < sizeof s->lamp_state_file;
+    if (fits) snprintf(s->lamp_state_file, sizeof s->lamp_state_file, "%s", full);
+    g_free(dir);
+    g_free(full);
+    return fits ? 0 : cfg_fail(s, get(s, sec, "state_file")->line, "[lamps] state_file: the path is too long");
 }
 
 static int parse(spec_t *s)

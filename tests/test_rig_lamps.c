@@ -671,6 +671,17 @@ TEST(lamps_rig_file_state_file_key)
     free(out);
     free(err);
 
+    // relative to the rig file's directory
+    snprintf(text, sizeof text, "[lamp east]\nbackend = sim\nposition_mm = 0 0 100\n[lamps]\nstate_file = rel.state\n");
+    argv[3] = test_write("rel.ini", text);
+    rc = test_run(argv, 60, &out, &err);
+    CHECK_MSG(rc == 0, "exit %d, stderr: %s", rc, err);
+    st = read_log(test_path("rel.state"));
+    CHECK_CONTAINS(st, "\nhardware = sim east\non =\n");
+    free(st);
+    free(out);
+    free(err);
+
     const char *bad = test_write("bad.ini", "[lamp east]\nbackend = sim\nposition_mm = 0 0 100\n"
                                             "[lamps]\nstate_fil = x\n");
     argv[3] = bad;
