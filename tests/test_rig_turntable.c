@@ -562,6 +562,30 @@ TEST(capture_ctrl_c_during_move_once_then_twice)
     test_camera_unlock(lk);
 }
 
+// refl rig home: Ctrl-C stops the homing stage, then refl ends by SIGINT.
+TEST(rig_home_ctrl_c_stops_the_stage)
+{
+    const char *rig = test_write("slow.ini", "[turntable]\nbackend = sim\nhome_time_s = 30\ntime_scale = 1\n");
+    const char *err_path = test_path("err.txt");
+    const char *args[] = { "rig", "--rig", rig, "home", NULL };
+    pid_t pid = spawn_refl(args, err_path);
+    if (!wait_for(err_path, "refl rig: homing", 30)) {
+        kill(pid, SIGKILL);
+        waitpid(pid, NULL, 0);
+        return;
+    }
+    sleep_s(0.4);
+    double t_int = model_now_s(), ended;
+    kill(pid, SIGINT);
+    int st = wait_pid(pid, 10, &ended);
+    CHECK_MSG(ended - t_int < 1.0, "ended %.2f s after Ctrl-C", ended - t_int);
+    CHECK_MSG(st >= 0 && WIFSIGNALED(st) && WTERMSIG(st) == SIGINT, "status 0x%x, want killed by SIGINT", st);
+    char *err = file_text(err_path);
+    CHECK_CONTAINS(err, "refl rig: interrupted (SIGINT): sim turntable");
+    CHECK_CONTAINS(err, "homing interrupted: the stage stopped at ");
+    free(err);
+}
+
 // ---------------------------------------------------------------------------
 // The APT driver under umockdev
 
