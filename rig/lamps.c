@@ -39,6 +39,11 @@ static const int   safety_signals[] = { SIGINT, SIGTERM, SIGHUP, SIGQUIT,
 // A stack overflow's SIGSEGV has no stack left to run the handler on: it runs
 // on this one (the installing thread's alternate stack).
 static char safety_stack[64 * 1024] __attribute__((aligned(16)));
+// The crash signals' handlers before ours (a sanitizer's, a crash reporter's):
+// they get the crash once the lamps are off.
+static struct sigaction safety_old[65];
+
+static bool is_crash(int sig) { return sig == SIGSEGV || sig == SIGBUS || sig == SIGFPE || sig == SIGABRT; }
 
 bool rig_lamps_safety_register(rig_lamps_t *l)
 {
@@ -79,16 +84,20 @@ static void safety_on_signal(int sig)
 {
     int saved_errno = errno;
     safety_all_off();
-    // Default action, then re-raise: the signal stays pending (blocked while
-    // this handler runs) and ends the process as soon as the handler returns
-    // (with a core where the default makes one). A fault (SIGSEGV from a bad
-    // access) would also recur at the faulting instruction, now with the
-    // default action.
+    // Default action (or, for a crash, the handler there was before ours),
+    // then re-raise: the signal stays pending (blocked while this handler
+    // runs) and ends the process as soon as the handler returns (with a core
+    // where the default makes one). A fault (SIGSEGV from a bad access) would
+    // also recur at the faulting instruction, now with that action.
     struct sigaction dfl;
     memset(&dfl, 0, sizeof dfl);
     dfl.sa_handler = SIG_DFL;
     sigemptyset(&dfl.sa_mask);
-    sigaction(sig, &dfl, NULL);
+    const struct sigaction *next = &dfl;
+    if (is_crash(sig) && sig < 65 && (safety_old[sig].sa_flags & SA_SIGINFO ? safety_old[sig].sa_sigaction != NULL
+                                      : safety_old[sig].sa_handler != SIG_DFL && safety_old[sig].sa_handler != SIG_IGN))
+        next = &safety_old[sig];
+    sigaction(sig, next, NULL);
     raise(sig);
     errno = saved_errno;
 }
@@ -99,14 +108,16 @@ void rig_safety_install(void)
 {
     if (atomic_exchange(&safety_installed, true)) return;
     atexit(safety_at_exit);
-    stack_t ss = { .ss_sp = safety_stack, .ss_size = sizeof safety_stack, .ss_flags = 0 };
-    bool alt = sigaltstack(&ss, NULL) == 0;
+    // An alternate stack unless the thread has one (a sanitizer's, say).
+    stack_t cur, ss = { .ss_sp = safety_stack, .ss_size = sizeof safety_stack, .ss_flags = 0 };
+    bool alt = sigaltstack(NULL, &cur) == 0 && (!(cur.ss_flags & SS_DISABLE) || sigaltstack(&ss, NULL) == 0);
     for (size_t i = 0; i < sizeof safety_signals / sizeof safety_signals[0]; i++) {
         int sig = safety_signals[i];
         struct sigaction old;
         // A signal the process ignores (nohup, background jobs) does not end it:
         // keep ignoring it.
         if (sigaction(sig, NULL, &old) == 0 && old.sa_handler == SIG_IGN) continue;
+        if (sig < 65) safety_old[sig] = old;
         struct sigaction sa;
         memset(&sa, 0, sizeof sa);
         sa.sa_handler = safety_on_signal;

@@ -17,10 +17,13 @@
 //           NAME=sim: a simulated lamp (then every lamp is)
 //   LAMP_CHILD_STATE_FILE=PATH in the environment: the lamp-state file to keep
 //   (else the gpiod default under $XDG_STATE_HOME/refl, and none for sim).
+//   LAMP_CHILD_CRASH_HANDLER=1: a SIGSEGV/SIGABRT handler of its own (as a
+//   sanitizer's) installed before the safety net; it exits with status 42.
 //
 // Exit status 0, 2 on bad usage, 3 when the lamps fail (message on stderr:
 // "lamp_child: <rig_strerror>: <model_last_error>").
 #include <fcntl.h>
+#include <signal.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -78,6 +81,12 @@ static void fault(const char *mode)
     }
 }
 
+static void own_crash_handler(int sig)
+{
+    (void)sig;
+    _exit(42);
+}
+
 static int fail(int err)
 {
     fprintf(stderr, "lamp_child: %s: %s\n", rig_strerror(err), model_last_error());
@@ -108,6 +117,10 @@ int main(int argc, char **argv)
     model_error_quiet(true);
 
     bool safety = !strcmp(mode, "hold") || !strcmp(mode, "exit") || faults;
+    if (getenv("LAMP_CHILD_CRASH_HANDLER")) {
+        signal(SIGSEGV, own_crash_handler);
+        signal(SIGABRT, own_crash_handler);
+    }
     if (safety) rig_safety_install();
     rig_lamps_t *l = NULL;
     const char *state = getenv("LAMP_CHILD_STATE_FILE");

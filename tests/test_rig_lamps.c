@@ -411,6 +411,30 @@ TEST(lamps_gpiod_bus_error_switches_off) { check_death(SIGBUS, "bus", false); }
 TEST(lamps_gpiod_division_by_zero_switches_off) { check_death(SIGFPE, "fpe", false); }
 TEST(lamps_gpiod_abort_switches_off) { check_death(SIGABRT, "abort", false); }
 
+// A crash handler that was there before the safety net (a sanitizer's) still
+// gets the crash, after the lamps are off.
+TEST(lamps_gpiod_crash_reaches_the_previous_handler)
+{
+    const char *modes[] = { "segv", "abort" };
+    for (int k = 0; k < 2; k++) {
+        child_cmd_t c;
+        if (!child_cmd(&c, "gpiochip0:32,gpiochip1:8", "LAMP_CHILD_CRASH_HANDLER=1", modes[k], "0x7", three_lamps))
+            return;
+        pid_t pid;
+        if (!spawn_ready(&c, &pid)) return;
+        int status = wait_end(pid);
+        CHECK_MSG(WIFEXITED(status) && WEXITSTATUS(status) == 42, "%s: status 0x%x, want exit 42 from the "
+                  "previous handler", modes[k], status);
+        char *log = read_log(c.log), *st = read_log(three_lamps_state());
+        CHECK(last_level(log, "gpiochip0", 3) == 0);
+        CHECK(last_level(log, "gpiochip0", 5) == 1);
+        CHECK(last_level(log, "gpiochip1", 2) == 0);
+        CHECK_CONTAINS(st, "\non =\n");
+        free(log);
+        free(st);
+    }
+}
+
 TEST(lamps_sim_every_signal_switches_off)
 {
     for (size_t k = 0; k < sizeof fatal_signals / sizeof fatal_signals[0]; k++)
