@@ -16,6 +16,7 @@
 #include <unistd.h>
 
 #include "model/model.h"
+#include "model/report.h"
 #include "rig/rig.h"
 #include "tests/test.h"
 
@@ -634,6 +635,30 @@ static void check_kill9(bool sim)
 
 TEST(lamps_gpiod_kill9_state_file_next_open_switches_off) { check_kill9(false); }
 TEST(lamps_sim_kill9_state_file_next_open_switches_off) { check_kill9(true); }
+
+// A state file cut short (a power cut while writing it): every lamp off, said so.
+TEST(lamps_gpiod_unreadable_state_file_switches_all_off)
+{
+    child_cmd_t c;
+    if (!child_cmd(&c, "gpiochip0:32,gpiochip1:8", NULL, "open", "0", three_lamps)) return;
+    char dir[PATH_MAX + 16];
+    snprintf(dir, sizeof dir, "%s/state/refl", test_tmpdir());
+    CHECK(model_mkdir_p(dir));
+    FILE *f = fopen(three_lamps_state(), "w");
+    if (f) {
+        fputs("# refl lamp state\npid = 4242\nstarted = 2026-11-24T23:00:00.000Z\nhardw", f);
+        fclose(f);
+    }
+    char *err = NULL;
+    int rc = test_run(c.argv, 20, NULL, &err);
+    CHECK_MSG(rc == 0, "exit %d, stderr: %s", rc, err);
+    CHECK_CONTAINS(err, "is unreadable (the last session, pid 4242, started 2026-11-24T23:00:00.000Z, may have "
+                        "died while writing it); switching every lamp off");
+    free(err);
+    char *st = read_log(three_lamps_state());
+    CHECK_CONTAINS(st, "\non =\n");
+    free(st);
+}
 
 // A live refl holding the lamps is not taken for a dead one: a second open
 // fails naming it, switches nothing and leaves its record alone.
