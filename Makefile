@@ -72,6 +72,7 @@ RIG_SRC := \
     rig/turntable_apt.c \
     rig/turntable_sim.c \
     rig/lamps.c \
+    rig/lamps_state.c \
     rig/lamps_gpiod.c \
     rig/lamps_sim.c \
     rig/camera.c \

@@ -14,7 +14,10 @@
 // Signals: the first SIGINT finishes the current frame, switches the lamps
 // off and marks the session paused (exit 3); a second one hands over to
 // rig_safety_install's handler (lamps off at once, process ends; the journal
-// stays consistent and --resume continues).
+// stays consistent and --resume continues). During homing or a move the first
+// SIGINT stops the stage (profiled stop) and pauses with no frame taken; a
+// second one stops it at once, then hands over (the handler cannot talk to
+// the stage itself, so the motion's wait does).
 #define _GNU_SOURCE
 #include <dirent.h>
 #include <errno.h>
@@ -44,17 +47,67 @@
 // Signals
 
 static volatile sig_atomic_t g_sigint;
+static volatile sig_atomic_t g_in_motion;   // a watched turntable wait runs (it sees the second SIGINT)
 static struct sigaction g_old_int;
+
+static void sigint_hand_over(int sig)
+{
+    sigaction(SIGINT, &g_old_int, NULL);
+    if (g_old_int.sa_handler != SIG_IGN && g_old_int.sa_handler != SIG_DFL && g_old_int.sa_handler)
+        g_old_int.sa_handler(sig);
+    else
+        raise(sig);
+}
 
 static void on_sigint(int sig)
 {
-    if (++g_sigint >= 2) {
-        sigaction(SIGINT, &g_old_int, NULL);
-        if (g_old_int.sa_handler != SIG_IGN && g_old_int.sa_handler != SIG_DFL && g_old_int.sa_handler)
-            g_old_int.sa_handler(sig);
-        else
-            raise(sig);
+    if (++g_sigint >= 2 && !g_in_motion) sigint_hand_over(sig);
+}
+
+// Homing progress: "homing ... 4 s of ~15 s (ETA 11 s) at 123.4 deg".
+typedef struct {
+    bool        bar;
+    const char *what;
+    double      eta_s;
+    bool        printed;
+} motion_progress_t;
+
+static void motion_progress(void *ctx, double elapsed_s, double angle_deg)
+{
+    motion_progress_t *m = ctx;
+    char eta[64] = "";
+    if (isfinite(m->eta_s) && m->eta_s > 0)
+        snprintf(eta, sizeof eta, " of ~%.0f s (ETA %.0f s)", m->eta_s, fmax(0, m->eta_s - elapsed_s));
+    fprintf(stderr, "%srefl capture: %s... %.0f s%s at %.1f deg%s", m->bar ? "\r" : "", m->what, elapsed_s, eta,
+            angle_deg, m->bar ? "   " : "\n");
+    m->printed = true;
+}
+
+// Homing (home) or a move to angle_deg, interruptible: RIG_ERR_INTERRUPTED
+// once the stage stands after a SIGINT (the message says where). A second
+// SIGINT stops it at once and ends the process (the safety handler: lamps off).
+static int watched_motion(rig_t *r, bool home, double angle_deg, double timeout_s, double eta_s, bool bar)
+{
+    char what[64];
+    if (home) snprintf(what, sizeof what, "homing");
+    else snprintf(what, sizeof what, "the move to %.4g deg", angle_deg);
+    motion_progress_t mp = { .bar = bar, .what = what, .eta_s = eta_s };
+    rig_turntable_watch_t w = {
+        .interrupt = &g_sigint, .what = what, .stop_s = r->speed_deg_s / r->accel_deg_s2,
+        // homing always shows progress; a move only once it runs long
+        .progress = motion_progress, .ctx = &mp, .period_s = home ? (bar ? 0.5 : 5) : 5,
+    };
+    g_in_motion = 1;
+    int rc = home ? rig_turntable_start_home(r->turntable) : rig_turntable_start_move_abs_deg(r->turntable, angle_deg);
+    if (!rc) rc = rig_turntable_wait_watched(r->turntable, timeout_s, &w);
+    g_in_motion = 0;
+    if (mp.printed && bar) fprintf(stderr, "\n");
+    if (rc == RIG_ERR_INTERRUPTED && g_sigint >= 2) {
+        fprintf(stderr, "refl capture: second interrupt: %s; ending now (lamps off; refl capture --resume "
+                "continues)\n", model_last_error());
+        sigint_hand_over(SIGINT);
     }
+    return rc;
 }
 
 // ---------------------------------------------------------------------------
@@ -590,7 +643,8 @@ typedef struct {
     double      floor_s, angle, t_start;
     uint32_t    mask;
     double      cur_exposure;
-    int         paused;          // 1 SIGINT, 2 camera not answering, 3 operator step
+    int         paused;          // 1 SIGINT, 2 camera not answering, 3 operator step, 4 operator error,
+                                 // 5 SIGINT during homing or a move (msg set)
     rig_operator_t *op_own;      // the terminal's reader when o->op is NULL
     double      t_operator;      // waiting for the operator (not in the wall time)
     double      T_cap, T_push;   // time in the camera (trigger to frame in hand), waiting for the writer
@@ -759,6 +813,17 @@ static int run_start(run_t *x)
     return RUN_ON;
 }
 
+// The first SIGINT during homing or a move: the stage stands; the session
+// pauses (no frame was being taken) and run_end reports it (exit 3).
+static int motion_paused(run_t *x, const char *during, const char *resume_does)
+{
+    snprintf(x->msg, sizeof x->msg, "interrupted (SIGINT) during %s: no frame was being taken; %s; lamps off, "
+             "session paused before step %d of %d; continue with refl capture --resume %s (it %s again)", during,
+             model_last_error(), x->step, x->p->nsteps, x->o->dir, resume_does);
+    x->paused = 5;
+    return RUN_BREAK;
+}
+
 // Home the turntable when needed, set the camera up, and the steps' state
 // (first pending step, progress, groups an earlier run already satisfied).
 static int run_hardware(run_t *x)
@@ -769,9 +834,14 @@ static int run_hardware(run_t *x)
         rig_turntable_status_t st;
         if ((x->rc = rig_turntable_status(r->turntable, &st))) return RUN_FAULT_TT;
         if (!st.homed) {
-            fprintf(stderr, "refl capture: homing %s\n", rig_turntable_name(r->turntable));
+            char up_to[48] = "";
+            if (isfinite(r->home_time_s)) snprintf(up_to, sizeof up_to, "up to %.0f s; ", r->home_time_s);
+            fprintf(stderr, "refl capture: homing %s (%sCtrl-C stops it)\n", rig_turntable_name(r->turntable), up_to);
             double tmo = 1.5 * (isfinite(r->home_time_s) ? r->home_time_s : 120) + 5;
-            if ((x->rc = rig_turntable_home(r->turntable, tmo))) return RUN_FAULT_TT;
+            bool bar = x->o->progress == 1 || (x->o->progress < 0 && isatty(2));
+            x->rc = watched_motion(r, true, 0, tmo, r->home_time_s, bar);
+            if (x->rc == RIG_ERR_INTERRUPTED) return motion_paused(x, "homing", "homes the stage");
+            if (x->rc) return RUN_FAULT_TT;
         }
     }
     rig_frame_meta_t cam;
@@ -818,8 +888,13 @@ static int step_setup(run_t *x, const rig_step_t *s)
         if ((x->rc = rig_turntable_status(r->turntable, &st))) return RUN_FAULT_TT;
         double tm = rig_motion_time_s(s->angle_deg - st.angle_deg, r->speed_deg_s, r->accel_deg_s2);
         if (isfinite(x->angle)) x->floor_s += tm;
-        if ((x->rc = rig_turntable_move_abs_deg(r->turntable, s->angle_deg, 1.5 * (isfinite(tm) ? tm : 120) + 5)))
-            return RUN_FAULT_TT;
+        x->rc = watched_motion(r, false, s->angle_deg, 1.5 * (isfinite(tm) ? tm : 120) + 5, tm, false);
+        if (x->rc == RIG_ERR_INTERRUPTED) {
+            char during[64];
+            snprintf(during, sizeof during, "the move to %.4g deg", s->angle_deg);
+            return motion_paused(x, during, "moves there");
+        }
+        if (x->rc) return RUN_FAULT_TT;
         x->angle = s->angle_deg;
         t_settle = model_now_s() + 1e-3 * p->settle_ms;
     }
@@ -1021,10 +1096,11 @@ static int run_end(run_t *x)
         return RUN_DONE;
     }
     if (x->paused) {
-        if (x->paused == 1) {
-            snprintf(x->msg, sizeof x->msg, "interrupted (SIGINT): the current frame was finished, lamps off, "
-                     "session paused at step %d of %d; continue with refl capture --resume %s", x->step, p->nsteps,
-                     o->dir);
+        if (x->paused == 1 || x->paused == 5) {
+            if (x->paused == 1)
+                snprintf(x->msg, sizeof x->msg, "interrupted (SIGINT): the current frame was finished, lamps off, "
+                         "session paused at step %d of %d; continue with refl capture --resume %s", x->step,
+                         p->nsteps, o->dir);
             fault_stop(x->r, x->j, x->step, "paused", "pause", x->msg);
         }
         if (x->paused == 4) {
@@ -1032,8 +1108,7 @@ static int run_end(run_t *x)
             x->exit_code = 1;
             return RUN_DONE;
         }
-        fprintf(stderr, "refl capture: %s\n", x->paused == 1 || x->paused == 3 ? x->msg
-                                                                               : "session paused (camera not answering)");
+        fprintf(stderr, "refl capture: %s\n", x->paused != 2 ? x->msg : "session paused (camera not answering)");
         if (x->paused == 2) rig_fail(RIG_ERR_TIMEOUT, "refl capture: %s", x->msg);
         x->exit_code = 3;
         return RUN_DONE;
@@ -1121,7 +1196,7 @@ int rig_capture_run(const rig_capture_opts_t *o)
     if (k == RUN_ON) k = run_start(x);
     if (k == RUN_ON) k = run_hardware(x);
     if (k == RUN_ON) k = run_steps(x);
-    if (k == RUN_ON) k = run_end(x);
+    if (k == RUN_ON || k == RUN_BREAK) k = run_end(x);   // RUN_BREAK: paused while homing
     if (k == RUN_FAULT_TT || k == RUN_FAULT_CAM) run_fault(x, k == RUN_FAULT_TT);
     run_cleanup(x);
     int exit_code = x->exit_code;

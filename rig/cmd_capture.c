@@ -30,7 +30,8 @@ static const char capture_about[] =
     "--yes answers every step done; --operator-input FILE one answer a line (empty, done, y, yes:\n"
     "done; q, pause, stop: pause). With stdin not a terminal and neither option the session pauses\n"
     "at the step (exit 3); --resume asks again (an answered step is not asked again).\n"
-    "First Ctrl-C: finish the frame, lamps off, pause (exit 3); second: stop at once.\n"
+    "First Ctrl-C: finish the frame, lamps off, pause (exit 3); during homing or a move: stop the\n"
+    "stage (profiled stop), pause (exit 3; --resume homes or moves again). Second: stop at once.\n"
     "Exit: 0 complete, 1 error or fault, 2 usage, 3 paused.";
 
 static char *join_args(int argc, char **argv)

@@ -44,9 +44,10 @@ static const char rig_about[] =
     "  serve      virtual rigs: keep the virtual camera up on its address until SIGINT/SIGTERM";
 
 static const char rig_epilog[] =
-    "Rig files: [camera], [turntable], [lamp NAME] sections, or [rig] backend = virtual\n"
+    "Rig files: [camera], [turntable], [lamp NAME], [lamps] sections, or [rig] backend = virtual\n"
     "(see rig/rig.h and examples/lab-rig.ini, examples/virtual-rig.ini).\n"
-    "Angles in degrees (turntable frame: 0 at home, counter-clockwise seen from above).";
+    "Angles in degrees (turntable frame: 0 at home, counter-clockwise seen from above).\n"
+    "Ctrl-C during homing or a move stops the stage (a second Ctrl-C: at once), then ends refl.";
 
 #define RIG_OPTS(_)                                                                                               \
     _("--rig", "RIG.ini", "the rig description file", true, NULL)                                                 \
@@ -119,6 +120,44 @@ static double home_timeout_s(const rig_t *r)
     return 1.5 * t + 5;
 }
 
+// Ctrl-C during homing or a move: the stage stops first (a profiled stop; a
+// second Ctrl-C: at once), then refl ends by SIGINT as anywhere else (the
+// safety handler: lamps off). The signal handler cannot talk to the stage, so
+// it only counts; the watched wait does the rest.
+static volatile sig_atomic_t g_motion_sigint;
+static void on_motion_sigint(int sig) { (void)sig; g_motion_sigint++; }
+
+static void motion_progress(void *ctx, double elapsed_s, double angle_deg)
+{
+    const rig_t *r = ctx;
+    char eta[64] = "";
+    if (isfinite(r->home_time_s)) snprintf(eta, sizeof eta, " of up to %.0f s", r->home_time_s);
+    fprintf(stderr, "refl rig: homing... %.0f s%s, at %.1f deg\n", elapsed_s, eta, angle_deg);
+}
+
+static int watched_motion(rig_t *r, bool home, double angle_deg, double timeout_s)
+{
+    char what[64];
+    if (home) snprintf(what, sizeof what, "homing");
+    else snprintf(what, sizeof what, "the move to %.4g deg", angle_deg);
+    rig_turntable_watch_t w = { .interrupt = &g_motion_sigint, .what = what,
+                                .stop_s = r->speed_deg_s / r->accel_deg_s2,
+                                .progress = home ? motion_progress : NULL, .ctx = r, .period_s = 5 };
+    struct sigaction sa = { .sa_handler = on_motion_sigint }, old;
+    sigemptyset(&sa.sa_mask);
+    g_motion_sigint = 0;
+    sigaction(SIGINT, &sa, &old);
+    int rc = home ? rig_turntable_start_home(r->turntable) : rig_turntable_start_move_abs_deg(r->turntable, angle_deg);
+    if (!rc) rc = rig_turntable_wait_watched(r->turntable, timeout_s, &w);
+    sigaction(SIGINT, &old, NULL);
+    if (rc == RIG_ERR_INTERRUPTED) {
+        fprintf(stderr, "refl rig: interrupted (SIGINT): %s\n", model_last_error());
+        raise(SIGINT);   // ends refl, unless SIGINT is ignored (nohup): then an error
+        rc = rig_fail(RIG_ERR_INTERRUPTED, "refl rig: %s", model_last_error());
+    }
+    return rc;
+}
+
 // Lamp names of a mask ("east,west", or "none").
 static void lamp_names(const rig_lamps_t *l, uint32_t mask, char *out, size_t size)
 {
@@ -166,12 +205,12 @@ static int move_to(rig_t *r, double angle_deg)
     if (rc) return rc;
     if (!st.homed) {
         fprintf(stderr, "refl rig: %s is not homed: homing first\n", rig_turntable_name(r->turntable));
-        if ((rc = rig_turntable_home(r->turntable, home_timeout_s(r)))) return rc;
+        if ((rc = watched_motion(r, true, 0, home_timeout_s(r)))) return rc;
         if ((rc = rig_turntable_status(r->turntable, &st))) return rc;
     }
     fprintf(stderr, "refl rig: moving %s from %.3f to %.3f deg\n", rig_turntable_name(r->turntable), st.angle_deg,
             angle_deg);
-    return rig_turntable_move_abs_deg(r->turntable, angle_deg, move_timeout_s(r, angle_deg - st.angle_deg));
+    return watched_motion(r, false, angle_deg, move_timeout_s(r, angle_deg - st.angle_deg));
 }
 
 static int need_turntable(const rig_t *r, const char *action)
@@ -539,7 +578,7 @@ int rig_cmd(int argc, char **argv)
     } else if (!strcmp(action, "home")) {
         if (!(rc = need_turntable(r, "home"))) {
             fprintf(stderr, "refl rig: homing %s\n", rig_turntable_name(r->turntable));
-            rc = rig_turntable_home(r->turntable, home_timeout_s(r));
+            rc = watched_motion(r, true, 0, home_timeout_s(r));
         }
         rig_turntable_status_t st;
         if (!rc && !(rc = rig_turntable_status(r->turntable, &st)))

@@ -8,6 +8,7 @@
 #define _GNU_SOURCE
 #include <arpa/inet.h>
 #include <glib.h>
+#include <limits.h>
 #include <math.h>
 #include <stdarg.h>
 #include <stdio.h>
@@ -51,6 +52,7 @@ typedef struct {
     bool   lamps_gpiod;
     rig_lamp_line_t lamps[MAX_LAMPS];
     int    lamp_line[MAX_LAMPS];
+    char   lamp_state_file[PATH_MAX];   // [lamps] state_file ("": the default)
 } spec_t;
 
 // ---------------------------------------------------------------------------
@@ -125,7 +127,9 @@ static void backend_choices(const char *kind, char *out, size_t size)
 
 static const char *kind_of(const char *section)
 {
-    if (!strcmp(section, "camera") || !strcmp(section, "turntable") || !strcmp(section, "rig")) return section;
+    if (!strcmp(section, "camera") || !strcmp(section, "turntable") || !strcmp(section, "rig") ||
+        !strcmp(section, "lamps"))
+        return section;
     if (!strncmp(section, "lamp ", 5) || !strcmp(section, "lamp")) return "lamp";
     return NULL;
 }
@@ -392,6 +396,26 @@ static int parse_lamp(spec_t *s, const char *sec, int line, const backend_def_t 
     return 0;
 }
 
+// [lamps]: settings of the whole lamp set (no backend): state_file.
+static int parse_lamps(spec_t *s, const char *sec)
+{
+    for (int i = 0; i < s->ini->nentries; i++) {
+        const model_ini_entry_t *e = &s->ini->entries[i];
+        if (!strcmp(e->section, sec) && strcmp(e->key, "state_file"))
+            return cfg_fail(s, e->line, "[lamps]: unknown key '%s'; known keys: state_file (where the lamp-state "
+                            "file is kept)", e->key);
+    }
+    int rc = get_string(s, sec, "state_file", s->lamp_state_file, sizeof s->lamp_state_file);
+    if (rc || !s->lamp_state_file[0] || s->lamp_state_file[0] == '/') return rc;
+    // relative to the rig file's directory, as truth is
+    char *dir = g_path_get_dirname(s->path), *full = g_build_filename(dir, s->lamp_state_file, NULL);
+    bool fits = strlen(full) < sizeof s->lamp_state_file;
+    if (fits) snprintf(s->lamp_state_file, sizeof s->lamp_state_file, "%s", full);
+    g_free(dir);
+    g_free(full);
+    return fits ? 0 : cfg_fail(s, get(s, sec, "state_file")->line, "[lamps] state_file: the path is too long");
+}
+
 static int parse(spec_t *s)
 {
     const model_ini_t *ini = s->ini;
@@ -420,8 +444,9 @@ static int parse(spec_t *s)
         const char *sec = ini->sections[i], *kind = kind_of(sec);
         int line = ini->section_lines[i];
         const backend_def_t *def = NULL;
-        if ((rc = check_section(s, sec, line, &def))) return rc;
-        if (!strcmp(kind, "rig")) rc = parse_rig(s, sec, line);
+        if (!strcmp(kind, "lamps")) rc = parse_lamps(s, sec);
+        else if ((rc = check_section(s, sec, line, &def))) return rc;
+        else if (!strcmp(kind, "rig")) rc = parse_rig(s, sec, line);
         else if (!strcmp(kind, "camera")) rc = parse_camera(s, sec, line);
         else if (!strcmp(kind, "turntable")) rc = parse_turntable(s, sec, line, def);
         else rc = parse_lamp(s, sec, line, def);
@@ -541,6 +566,12 @@ static int open_devices(rig_t *r, spec_t *s)
                 rig_turntable_info_t info;
                 QUIET(rig_turntable_info(r->turntable, &info));
                 set_profile_from_stage(r, s->apt_stage[0] ? s->apt_stage : rc ? NULL : info.model);
+                if (!rc && info.speed_deg_s > 0 && info.accel_deg_s2 > 0 && info.home_time_s > 0) {
+                    // the controller's own (or the table's) speeds, as the driver found them
+                    r->speed_deg_s = info.speed_deg_s;
+                    r->accel_deg_s2 = info.accel_deg_s2;
+                    r->home_time_s = info.home_time_s;
+                }
                 rc = 0;
             }
         } else {
@@ -550,8 +581,8 @@ static int open_devices(rig_t *r, spec_t *s)
         if (rc) return device_fail(rc, s, s->turntable_line, "turntable");
     }
     if (s->nlamps > 0) {
-        if (s->lamps_gpiod) QUIET(rig_lamps_open_gpiod(&r->lamps, s->lamps, s->nlamps));
-        else QUIET(rig_lamps_open_sim(&r->lamps, s->lamps, s->nlamps));
+        if (s->lamps_gpiod) QUIET(rig_lamps_open_gpiod_state(&r->lamps, s->lamps, s->nlamps, s->lamp_state_file));
+        else QUIET(rig_lamps_open_sim_state(&r->lamps, s->lamps, s->nlamps, s->lamp_state_file));
         if (rc) {
             char sec[80];
             snprintf(sec, sizeof sec, "lamp %s", s->lamps[0].name);

@@ -22,6 +22,7 @@
 // path that closes them.
 #pragma once
 
+#include <signal.h>
 #include <stdbool.h>
 #include <stdint.h>
 
@@ -70,6 +71,14 @@ typedef struct {
     char   serial[32];
     char   firmware[32];
     double counts_per_deg;     // encoder counts per degree (K10CR1: 136533.33)
+    // Motion parameters for time estimates and time-outs: apt reads them from
+    // the controller (MOT_GET_VELPARAMS, MOT_GET_HOMEPARAMS; params_from
+    // "controller"), or takes rig_stage_models' when it does not answer
+    // ("table", with a note on stderr); sim: its own ("sim", real time).
+    double speed_deg_s, accel_deg_s2;
+    double home_speed_deg_s;
+    double home_time_s;        // the longest homing: a full turn to the switch plus the offset
+    char   params_from[16];
 } rig_turntable_info_t;
 
 typedef struct {
@@ -128,6 +137,26 @@ int  rig_turntable_move_rel_deg(rig_turntable_t *t, double delta_deg, double tim
 int  rig_turntable_start_move_abs_deg(rig_turntable_t *t, double angle_deg);
 int  rig_turntable_wait(rig_turntable_t *t, double timeout_s);
 int  rig_turntable_stop(rig_turntable_t *t, bool immediate);
+int  rig_turntable_start_home(rig_turntable_t *t);                        // returns at once
+// Begins a stop and returns (rig_turntable_wait then waits for it); a
+// backend that cannot stops fully here, as rig_turntable_stop.
+int  rig_turntable_start_stop(rig_turntable_t *t, bool immediate);
+// An interruptible wait for the motion under way (after start_home or
+// start_move_abs_deg), in slices of 50 ms. When *interrupt becomes 1 the stage
+// starts a profiled stop; when it is 2 or more (also during that stop) an
+// immediate one; once it stands: RIG_ERR_INTERRUPTED, "NAME: WHAT interrupted:
+// the stage stopped [at once] at X deg" (recorded for model_last_error, not
+// printed: the caller words it). progress(ctx, elapsed, angle) every
+// period_s while it moves. Other errors as rig_turntable_wait.
+typedef struct {
+    const volatile sig_atomic_t *interrupt;   // NULL: none
+    const char *what;                          // "homing", "the move to 30 deg" (messages)
+    double      stop_s;                        // a profiled stop's expected length (NAN: unknown)
+    void      (*progress)(void *ctx, double elapsed_s, double angle_deg);
+    void       *ctx;
+    double      period_s;
+} rig_turntable_watch_t;
+int  rig_turntable_wait_watched(rig_turntable_t *t, double timeout_s, const rig_turntable_watch_t *w);
 void rig_turntable_close(rig_turntable_t *t);
 // Time a move of delta_deg takes with a trapezoidal profile.
 double rig_motion_time_s(double delta_deg, double speed_deg_s, double accel_deg_s2);
@@ -159,6 +188,18 @@ int rig_lamps_open_gpiod(rig_lamps_t **out, const rig_lamp_line_t *lamps, int n)
 // [0, 3.6e6]; *out is NULL on error.
 // Simulated lamps (state only; the virtual rig reads on_mask).
 int rig_lamps_open_sim(rig_lamps_t **out, const rig_lamp_line_t *lamps, int n);
+// The lamp-state file (rig/lamps_state.c): records which lamps are on, flushed
+// before one turns on, so that after a death no handler sees (kill -9, the OOM
+// killer, a power cut) the next open of the same lamps reports on stderr "refl:
+// the last session (pid N, started T) died with lamps A, B on; switching them
+// off" and does. The open set holds an exclusive flock on it: an open while
+// another live process holds it fails with RIG_ERR_BUSY naming that pid.
+// gpiod: state_file NULL or "" = $XDG_STATE_HOME/refl (~/.local/state/refl)/
+// gpiod-CHIP-LINE....state, named after the chips and lines; rig_lamps_open_gpiod
+// uses that. sim: a file only when state_file is given (rig_lamps_open_sim: none).
+int rig_lamps_open_gpiod_state(rig_lamps_t **out, const rig_lamp_line_t *lamps, int n, const char *state_file);
+int rig_lamps_open_sim_state(rig_lamps_t **out, const rig_lamp_line_t *lamps, int n, const char *state_file);
+const char *rig_lamps_state_file(const rig_lamps_t *l);   // "" when the set keeps none
 // Switch to exactly on_mask and sleep the settle time the change needs (the
 // longest warm-up of lamps switched on / settle of lamps switched off).
 // RIG_ERR_INVALID for bits beyond the n lamps (nothing switched); when the
@@ -171,9 +212,12 @@ int  rig_lamps_all_off(rig_lamps_t *l);
 int  rig_lamps_find(const rig_lamps_t *l, const char *name);   // index or -1
 void rig_lamps_close(rig_lamps_t *l);
 
-// Safety: after this, SIGINT/SIGTERM/SIGHUP and exit() switch every open lamp
-// set off (emergency_off) before the process ends; the signals then re-raise
-// with the default action (a signal the process ignores stays ignored).
+// Safety: after this, SIGINT/SIGTERM/SIGHUP/SIGQUIT, SIGSEGV/SIGBUS/SIGFPE/
+// SIGABRT and exit() switch every open lamp set off (emergency_off; the state
+// file then says so) before the process ends; the signals then re-raise with
+// the default action, so the process still dies by that signal (with its core)
+// (a signal the process ignores stays ignored). Later sigaction calls for
+// these signals replace this (rig/capture.c's SIGINT handler calls it on).
 // Idempotent. Lamp sets register themselves on open (at most 32 open at once)
 // and deregister on close.
 void rig_safety_install(void);// The lamps of a set: how many (0 for NULL), lamp i's line as opened (NULL

@@ -25,6 +25,9 @@ typedef struct {
     // after timeout_s, RIG_ERR_MOTION / RIG_ERR_LIMIT / RIG_ERR_DISCONNECTED as found.
     int  (*wait)(rig_turntable_t *t, double timeout_s);
     int  (*stop)(rig_turntable_t *t, bool immediate);
+    // Optional: begin a stop and return at once (wait then waits for it to
+    // end, successfully); NULL makes rig_turntable_wait_watched use stop.
+    int  (*start_stop)(rig_turntable_t *t, bool immediate);
     void (*close)(rig_turntable_t *t);
 } rig_turntable_ops_t;
 
@@ -48,6 +51,14 @@ struct rig_lamps {
     rig_lamp_line_t lamps[32];
     uint32_t        on_mask;
     void           *impl;
+    // The lamp-state file (rig/lamps_state.c); state_fd -1: none kept.
+    int             state_fd;
+    char           *state_path;
+    char           *state_off;          // the record "no lamp on", written by the signal handler
+    size_t          state_off_len;
+    uint32_t        state_mask;         // the lamps the file says are on
+    long            state_pid;
+    char            state_started[40];
 };
 
 // Lamp sets: at most RIG_LAMPS_MAX lamps each, at most RIG_LAMPS_SAFETY_SLOTS
@@ -61,6 +72,18 @@ int  rig_lamps_new(rig_lamps_t **out, rig_lamps_t **made, const rig_lamps_ops_t 
 // Enter an open set in the safety registry (switched off on signals and
 // exit); false when RIG_LAMPS_SAFETY_SLOTS sets are already open.
 bool rig_lamps_safety_register(rig_lamps_t *l);
+// The lamp-state file (rig/lamps_state.c, its format there). state_open, for
+// the backends' opens once the lines are held (all off): path NULL or "" = the
+// default per-user file named after the hardware; takes the lock (RIG_ERR_BUSY
+// naming the live refl that holds it), reports and switches off what a dead
+// process left on, and records "none on". state_write records `on` (durable:
+// flushed to disk, for lamps about to turn on). state_signal_off writes the
+// "none on" record and nothing else (async-signal-safe). state_close writes it
+// when lamps_off, then drops the lock; both do nothing for a set without a file.
+int  rig_lamps_state_open(rig_lamps_t *l, const char *path);
+int  rig_lamps_state_write(rig_lamps_t *l, uint32_t on, bool durable);
+void rig_lamps_state_signal_off(rig_lamps_t *l);
+void rig_lamps_state_close(rig_lamps_t *l, bool lamps_off);
 
 typedef struct {
     const char *backend;             // "aravis"

@@ -1,7 +1,9 @@
 // rig/lamps.c — lamps switched by GPIO lines: the wrappers over
 // rig_lamps_ops_t, the common checks of a lamp list, and the safety net that
-// switches every open lamp set off on SIGINT/SIGTERM/SIGHUP and exit(). The
-// backends: rig/lamps_gpiod.c (libgpiod v1), rig/lamps_sim.c (simulated).
+// switches every open lamp set off on SIGINT/SIGTERM/SIGHUP/SIGQUIT, on the
+// crash signals (SIGSEGV/SIGBUS/SIGFPE/SIGABRT) and exit(). The backends:
+// rig/lamps_gpiod.c (libgpiod v1), rig/lamps_sim.c (simulated); the lamp-state
+// file for deaths no handler sees: rig/lamps_state.c.
 #define _GNU_SOURCE
 #include <errno.h>
 #include <math.h>
@@ -32,7 +34,16 @@ static uint32_t mask_of(int n) { return n >= 32 ? 0xffffffffu : ((uint32_t)1 << 
 static _Atomic(rig_lamps_t *) safety_slot[SAFETY_SLOTS];
 static atomic_int  safety_busy;       // handlers currently walking the registry
 static atomic_bool safety_installed;
-static const int   safety_signals[] = { SIGINT, SIGTERM, SIGHUP };
+static const int   safety_signals[] = { SIGINT, SIGTERM, SIGHUP, SIGQUIT,
+                                        SIGSEGV, SIGBUS, SIGFPE, SIGABRT };
+// A stack overflow's SIGSEGV has no stack left to run the handler on: it runs
+// on this one (the installing thread's alternate stack).
+static char safety_stack[64 * 1024] __attribute__((aligned(16)));
+// The crash signals' handlers before ours (a sanitizer's, a crash reporter's):
+// they get the crash once the lamps are off.
+static struct sigaction safety_old[65];
+
+static bool is_crash(int sig) { return sig == SIGSEGV || sig == SIGBUS || sig == SIGFPE || sig == SIGABRT; }
 
 bool rig_lamps_safety_register(rig_lamps_t *l)
 {
@@ -64,6 +75,7 @@ static void safety_all_off(void)
     for (int i = 0; i < SAFETY_SLOTS; i++) {
         rig_lamps_t *l = atomic_load(&safety_slot[i]);
         if (l && l->ops && l->ops->emergency_off) l->ops->emergency_off(l);
+        if (l) rig_lamps_state_signal_off(l);     // the file says "off" once they are
     }
     atomic_fetch_sub(&safety_busy, 1);
 }
@@ -72,13 +84,20 @@ static void safety_on_signal(int sig)
 {
     int saved_errno = errno;
     safety_all_off();
-    // Default action, then re-raise: the signal stays pending (blocked while
-    // this handler runs) and ends the process as soon as the handler returns.
+    // Default action (or, for a crash, the handler there was before ours),
+    // then re-raise: the signal stays pending (blocked while this handler
+    // runs) and ends the process as soon as the handler returns (with a core
+    // where the default makes one). A fault (SIGSEGV from a bad access) would
+    // also recur at the faulting instruction, now with that action.
     struct sigaction dfl;
     memset(&dfl, 0, sizeof dfl);
     dfl.sa_handler = SIG_DFL;
     sigemptyset(&dfl.sa_mask);
-    sigaction(sig, &dfl, NULL);
+    const struct sigaction *next = &dfl;
+    if (is_crash(sig) && sig < 65 && (safety_old[sig].sa_flags & SA_SIGINFO ? safety_old[sig].sa_sigaction != NULL
+                                      : safety_old[sig].sa_handler != SIG_DFL && safety_old[sig].sa_handler != SIG_IGN))
+        next = &safety_old[sig];
+    sigaction(sig, next, NULL);
     raise(sig);
     errno = saved_errno;
 }
@@ -89,17 +108,21 @@ void rig_safety_install(void)
 {
     if (atomic_exchange(&safety_installed, true)) return;
     atexit(safety_at_exit);
+    // An alternate stack unless the thread has one (a sanitizer's, say).
+    stack_t cur, ss = { .ss_sp = safety_stack, .ss_size = sizeof safety_stack, .ss_flags = 0 };
+    bool alt = sigaltstack(NULL, &cur) == 0 && (!(cur.ss_flags & SS_DISABLE) || sigaltstack(&ss, NULL) == 0);
     for (size_t i = 0; i < sizeof safety_signals / sizeof safety_signals[0]; i++) {
         int sig = safety_signals[i];
         struct sigaction old;
         // A signal the process ignores (nohup, background jobs) does not end it:
         // keep ignoring it.
         if (sigaction(sig, NULL, &old) == 0 && old.sa_handler == SIG_IGN) continue;
+        if (sig < 65) safety_old[sig] = old;
         struct sigaction sa;
         memset(&sa, 0, sizeof sa);
         sa.sa_handler = safety_on_signal;
         sigfillset(&sa.sa_mask);          // no other signal interrupts the switch-off
-        sa.sa_flags = SA_RESTART;
+        sa.sa_flags = SA_RESTART | (alt ? SA_ONSTACK : 0);
         sigaction(sig, &sa, NULL);
     }
 }
@@ -140,6 +163,7 @@ int rig_lamps_new(rig_lamps_t **out, rig_lamps_t **made, const rig_lamps_ops_t *
     if (!l) return rig_fail(RIG_ERR_NO_MEM, "%s lamps: out of memory", be);
     l->ops = ops;
     l->n = n;
+    l->state_fd = -1;
     if (n > 0) memcpy(l->lamps, lamps, (size_t)n * sizeof *lamps);
     *made = l;
     return RIG_ERR_OK;
@@ -177,14 +201,21 @@ int rig_lamps_set(rig_lamps_t *l, uint32_t on_mask)
                         "configured (valid bits 0x%x); check the lamp indices", l->ops->backend,
                         on_mask, l->n, mask_of(l->n));
     uint32_t from = l->on_mask;
-    int err = l->ops->set(l, on_mask);
+    // The state file first names every lamp on during the change (on disk
+    // before any turns on), and after it those left on.
+    int err = RIG_ERR_OK;
+    if ((from | on_mask) & ~l->state_mask) err = rig_lamps_state_write(l, l->state_mask | from | on_mask, true);
+    if (!err) err = l->ops->set(l, on_mask);
     if (err) {
         // The lines' state is unknown after a failed switch: everything off.
         if (l->ops->emergency_off) l->ops->emergency_off(l);
         l->on_mask = 0;
+        rig_lamps_state_write(l, 0, false);
         return err;
     }
     l->on_mask = on_mask;
+    // A failure here leaves the file naming more lamps than are on: safe.
+    if (l->state_mask != on_mask) rig_lamps_state_write(l, on_mask, false);
     sleep_s(rig_lamps_settle_s(l, from, on_mask));
     return RIG_ERR_OK;
 }
@@ -208,6 +239,7 @@ void rig_lamps_close(rig_lamps_t *l)
     l->on_mask = 0;
     safety_unregister(l);
     if (l->ops && l->ops->close) l->ops->close(l);
+    rig_lamps_state_close(l, true);
     free(l);
 }
 

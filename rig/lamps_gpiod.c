@@ -219,6 +219,11 @@ static int gpiod_group_open(rig_lamps_t *l, gpiod_group_t *grp)
 
 int rig_lamps_open_gpiod(rig_lamps_t **out, const rig_lamp_line_t *lamps, int n)
 {
+    return rig_lamps_open_gpiod_state(out, lamps, n, NULL);
+}
+
+int rig_lamps_open_gpiod_state(rig_lamps_t **out, const rig_lamp_line_t *lamps, int n, const char *state_file)
+{
     rig_lamps_t *l = NULL;
     int err = rig_lamps_new(out, &l, &gpiod_ops, lamps, n);
     if (err) return err;
@@ -256,12 +261,16 @@ int rig_lamps_open_gpiod(rig_lamps_t **out, const rig_lamp_line_t *lamps, int n)
     for (int k = 0; k < g->ngroups; k++)
         if ((err = gpiod_group_open(l, &g->group[k]))) goto done;
 
+    // Every line is held and off: now the state file (what a dead refl left on
+    // is reported and switched off).
+    if ((err = rig_lamps_state_open(l, state_file))) goto done;
     if (!rig_lamps_safety_register(l))
         err = rig_fail(RIG_ERR_NO_MEM, "gpiod lamps: more than %d lamp sets open at once; close one "
                        "first", RIG_LAMPS_SAFETY_SLOTS);
 done:
     if (err) {
         gpiod_close(l);    // lines already requested: switched off and released
+        rig_lamps_state_close(l, false);
         free(l);
         return err;
     }

@@ -32,6 +32,9 @@ extern "C" {
 //                | sim: position_mm = x y z (nominal position, rig frame; checked, not used),
 //                warmup_ms, settle_ms. All lamps use one backend; NAME without ',' and not
 //                "all"/"none" (refl rig --lamps NAME,NAME|all|none); at most 32 lamps.
+//   [lamps]      state_file = PATH (relative to the rig file's directory): the lamp-state file
+//                (rig/lamps_state.c; default: per user, named after the chips and lines; sim
+//                lamps keep one only when given this)
 // or, for the whole rig (no other section):
 //   [rig]        backend = virtual; truth = FILE (relative to the rig file's directory);
 //                serve = gige (default: GigE Vision on the address) | inprocess (an Aravis

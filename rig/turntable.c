@@ -82,6 +82,14 @@ int rig_turntable_home(rig_turntable_t *t, double timeout_s)
     return t->ops->wait(t, timeout_s);
 }
 
+int rig_turntable_start_home(rig_turntable_t *t)
+{
+    int r = check(t, "home");
+    if (r) return r;
+    if (!t->ops->start_home) return not_supported(t, "homing");
+    return t->ops->start_home(t);
+}
+
 int rig_turntable_start_move_abs_deg(rig_turntable_t *t, double angle_deg)
 {
     int r = check(t, "move");
@@ -120,6 +128,82 @@ int rig_turntable_wait(rig_turntable_t *t, double timeout_s)
     if (r || (r = check_timeout(t, "wait", timeout_s))) return r;
     if (!t->ops->wait) return not_supported(t, "waiting for motion");
     return t->ops->wait(t, timeout_s);
+}
+
+// ---------------------------------------------------------------------------
+// Watched waits: the motion in slices, an interrupt between them.
+
+#define SLICE_S 0.05
+
+int rig_turntable_start_stop(rig_turntable_t *t, bool immediate)
+{
+    int r = check(t, "stop");
+    if (r) return r;
+    if (t->ops->start_stop) return t->ops->start_stop(t, immediate);
+    if (!t->ops->stop) return not_supported(t, "stop");
+    return t->ops->stop(t, immediate);
+}
+
+// Begins a stop, quietly (a failure shows in the wait that follows).
+static void begin_stop(rig_turntable_t *t, bool immediate)
+{
+    bool q = model_error_quiet_thread(true);
+    rig_turntable_start_stop(t, immediate);
+    model_error_quiet_thread(q);
+}
+
+// The angle now (NAN when the status fails); quiet.
+static double angle_now(rig_turntable_t *t)
+{
+    rig_turntable_status_t st = { .angle_deg = NAN };
+    bool q = model_error_quiet_thread(true);
+    if (t->ops->status && t->ops->status(t, &st)) st.angle_deg = NAN;
+    model_error_quiet_thread(q);
+    return st.angle_deg;
+}
+
+int rig_turntable_wait_watched(rig_turntable_t *t, double timeout_s, const rig_turntable_watch_t *w)
+{
+    int r = check(t, "wait");
+    if (r || (r = check_timeout(t, "wait", timeout_s))) return r;
+    if (!t->ops->wait) return not_supported(t, "waiting for motion");
+    const char *what = w && w->what ? w->what : "the motion";
+    double t0 = model_now_s(), last_report = t0, stop_end = 0;
+    int stopping = 0;               // 0 moving, 1 profiled stop under way, 2 immediate stop under way
+    for (;;) {
+        int level = w && w->interrupt ? *w->interrupt : 0;
+        if (level > stopping) {     // the first interrupt: a profiled stop; the second: at once
+            stopping = level >= 2 ? 2 : 1;
+            begin_stop(t, stopping == 2);
+            stop_end = model_now_s() + 5 + (isfinite(w->stop_s) ? w->stop_s : 60);
+        }
+        bool q = model_error_quiet_thread(true);
+        r = t->ops->wait(t, SLICE_S);
+        model_error_quiet_thread(q);
+        double now = model_now_s();
+        if (r == RIG_ERR_OK && !stopping) return RIG_ERR_OK;
+        if (r == RIG_ERR_OK || (stopping && r == RIG_ERR_TIMEOUT && now > stop_end)) {
+            double at = angle_now(t);
+            if (r) return rig_fail(RIG_ERR_TIMEOUT, "%s: %s interrupted, but the stage did not stop within %.1f s "
+                                   "(at %.3f deg): switch its controller off", t->name, what,
+                                   stop_end - t0, at);
+            // Quietly: the caller words the interruption.
+            bool quiet = model_error_quiet_thread(true);
+            r = rig_fail(RIG_ERR_INTERRUPTED, "%s: %s interrupted: the stage %s at %.3f deg", t->name, what,
+                         stopping == 2 ? "stopped at once" : "stopped", at);
+            model_error_quiet_thread(quiet);
+            return r;
+        }
+        if (r != RIG_ERR_TIMEOUT) return rig_fail(r, "%s", model_last_error());   // its own message, once
+        if (!stopping && now - t0 > timeout_s)
+            return rig_fail(RIG_ERR_TIMEOUT, "%s: %s did not finish within %.2f s (at %.3f deg): give it more "
+                            "time, or check that nothing blocks the stage; it may still be moving "
+                            "(rig_turntable_stop halts it)", t->name, what, timeout_s, angle_now(t));
+        if (w && w->progress && now - last_report >= w->period_s) {
+            last_report = now;
+            w->progress(w->ctx, now - t0, angle_now(t));
+        }
+    }
 }
 
 int rig_turntable_stop(rig_turntable_t *t, bool immediate)

@@ -32,6 +32,10 @@ enum {
     HW_RESPONSE = 0x0080,
     HW_RICHRESPONSE = 0x0081,
     MOD_SET_CHANENABLESTATE = 0x0210,
+    MOT_REQ_VELPARAMS = 0x0414,
+    MOT_GET_VELPARAMS = 0x0415,
+    MOT_REQ_HOMEPARAMS = 0x0441,
+    MOT_GET_HOMEPARAMS = 0x0442,
     MOT_MOVE_HOME = 0x0443,
     MOT_MOVE_HOMED = 0x0444,
     MOT_MOVE_RELATIVE = 0x0448,
@@ -61,6 +65,7 @@ enum { MOTION_IDLE, MOTION_HOME, MOTION_MOVE };
 // Times. The controller answers a request within milliseconds; the FTDI chip
 // sends a status-only packet every latency period, so reads never block long.
 static const double REPLY_TIMEOUT_S = 1.0;     // a request without its reply
+static const double PARAMS_TIMEOUT_S = 0.5;    // VELPARAMS/HOMEPARAMS: optional, then the stage table
 static const double SILENCE_TIMEOUT_S = 1.0;   // nothing at all while updates are on
 static const double ACK_PERIOD_S = 0.5;        // keep-alive while updates are on
 static const int ACK_EVERY_UPDATES = 10;
@@ -73,6 +78,8 @@ typedef struct {
     int rxlen;
     double counts_per_deg;
     double speed_deg_s, accel_deg_s2;
+    double home_speed_deg_s, home_offset_deg;
+    bool params_from_controller;    // speeds from VELPARAMS/HOMEPARAMS, else the stage table
     bool stepper;                   // K10CR1 & co: MOT_REQ_STATUSUPDATE, else DCSTATUSUPDATE
     rig_turntable_info_t info;
     int32_t position;               // counts, from the last status seen
@@ -283,7 +290,18 @@ static const char *bits_text(uint32_t bits, char *buf, int n)
 
 static int apt_info(rig_turntable_t *t, rig_turntable_info_t *out)
 {
-    *out = A(t)->info;
+    apt_t *a = A(t);
+    *out = a->info;
+    out->speed_deg_s = a->speed_deg_s;
+    out->accel_deg_s2 = a->accel_deg_s2;
+    out->home_speed_deg_s = a->home_speed_deg_s;
+    // From anywhere: up to a full turn to the home switch, then the offset,
+    // each with its ramps.
+    out->home_time_s = a->params_from_controller
+                           ? (360 + fabs(a->home_offset_deg)) / a->home_speed_deg_s +
+                                 2 * a->home_speed_deg_s / a->accel_deg_s2
+                           : 2 * 360 / a->speed_deg_s;    // table: a full turn at cruise speed, twice
+    snprintf(out->params_from, sizeof out->params_from, "%s", a->params_from_controller ? "controller" : "table");
     return 0;
 }
 
@@ -490,6 +508,16 @@ static int apt_stop(rig_turntable_t *t, bool immediate)
     return 0;
 }
 
+// Sends the stop and returns: apt_wait then sees MOVE_STOPPED (asked for).
+static int apt_start_stop(rig_turntable_t *t, bool immediate)
+{
+    apt_t *a = A(t);
+    int r = send_short(t, MOT_MOVE_STOP, APT_CHAN, immediate ? 1 : 2, "MOT_MOVE_STOP");
+    if (r) return r;
+    if (a->motion != MOTION_IDLE) a->stop_requested = true;
+    return 0;
+}
+
 static void apt_close(rig_turntable_t *t)
 {
     apt_t *a = A(t);
@@ -520,6 +548,7 @@ static const rig_turntable_ops_t apt_ops = {
     .start_move_rel_deg = apt_start_move_rel,
     .wait = apt_wait,
     .stop = apt_stop,
+    .start_stop = apt_start_stop,
     .close = apt_close,
 };
 
@@ -742,6 +771,71 @@ static int hw_info(rig_turntable_t *t, const char *stage_model)
     return 0;
 }
 
+// APT velocity and acceleration units per encoder count (the protocol
+// manual's scaling): stepper controllers (K10CR1, KST/TST) count velocity in
+// counts/s x 53.68 and acceleration in counts/s^2 / 90.9; DC servo ones (KDC101,
+// TDC001) in counts/s x T x 65536 and counts/s^2 x T^2 x 65536, T = 2048 / 6 MHz.
+static void apt_units(const apt_t *a, double *vel, double *acc)
+{
+    const double T = 2048 / 6e6;
+    *vel = a->counts_per_deg * (a->stepper ? 53.68 : T * 65536);
+    *acc = a->counts_per_deg * (a->stepper ? 1 / 90.9 : T * T * 65536);
+}
+
+// One request and its 14-byte reply (RIG_ERR_TIMEOUT quietly when none).
+static int ask_params(rig_turntable_t *t, unsigned req, unsigned rep, const char *what, uint8_t *data)
+{
+    uint8_t msg[6 + 256];
+    int len, r;
+    if ((r = send_short(t, req, APT_CHAN, 0, what))) return r;
+    if ((r = wait_message(t, rep, rep, PARAMS_TIMEOUT_S, msg, &len))) return r;
+    if (len < 6 + 14) return RIG_ERR_PROTOCOL;
+    memcpy(data, msg + 6, 14);
+    return 0;
+}
+
+// The controller's cruise speed, acceleration (MOT_GET_VELPARAMS: channel u16,
+// min velocity, acceleration, max velocity, i32 each) and homing speed and
+// offset (MOT_GET_HOMEPARAMS: channel, direction, limit switch u16; velocity,
+// offset distance i32), for time estimates and time-outs. A controller that
+// does not answer, or answers nonsense, leaves the stage table's values (a
+// note on stderr says so).
+static int read_motion_params(rig_turntable_t *t)
+{
+    apt_t *a = A(t);
+    uint8_t v[14], h[14];
+    double vu, au;
+    apt_units(a, &vu, &au);
+    a->home_speed_deg_s = a->speed_deg_s;
+    a->home_offset_deg = 0;
+    int r = ask_params(t, MOT_REQ_VELPARAMS, MOT_GET_VELPARAMS, "MOT_REQ_VELPARAMS", v);
+    if (!r) r = ask_params(t, MOT_REQ_HOMEPARAMS, MOT_GET_HOMEPARAMS, "MOT_REQ_HOMEPARAMS", h);
+    if (r == RIG_ERR_DISCONNECTED || r == RIG_ERR_IO) return r;
+    double accel = 0, speed = 0, home = 0, offset = 0;
+    if (!r) {
+        accel = (int32_t)get_u32(v + 6) / au;
+        speed = (int32_t)get_u32(v + 10) / vu;
+        home = (int32_t)get_u32(h + 6) / vu;
+        offset = (int32_t)get_u32(h + 10) / a->counts_per_deg;
+    }
+    // Sane: a rotation stage turns between 0.001 and 10000 deg/s.
+    bool ok = !r && speed > 1e-3 && speed < 1e4 && accel > 1e-3 && accel < 1e6 && home > 1e-3 && home < 1e4 &&
+              fabs(offset) < 360;
+    if (!ok) {
+        fprintf(stderr, "%s: note: %s; time estimates and time-outs use the stage table's %g deg/s, %g deg/s^2\n",
+                t->name, r == RIG_ERR_TIMEOUT ? "no reply to MOT_REQ_VELPARAMS/MOT_REQ_HOMEPARAMS"
+                : r ? "a short VELPARAMS/HOMEPARAMS reply" : "the controller's VELPARAMS/HOMEPARAMS are out of range",
+                a->speed_deg_s, a->accel_deg_s2);
+        return drain(t);
+    }
+    a->speed_deg_s = speed;
+    a->accel_deg_s2 = accel;
+    a->home_speed_deg_s = home;
+    a->home_offset_deg = offset;
+    a->params_from_controller = true;
+    return 0;
+}
+
 int rig_turntable_open_apt(rig_turntable_t **out, const char *serial, const char *stage_model)
 {
     rig_turntable_t *t = NULL;
@@ -790,7 +884,7 @@ int rig_turntable_open_apt(rig_turntable_t **out, const char *serial, const char
     }
     if ((r = setup_ftdi(t)) || (r = hw_info(t, stage_model))) goto fail;
     if ((r = send_short(t, MOD_SET_CHANENABLESTATE, APT_CHAN, 1, "MOD_SET_CHANENABLESTATE"))) goto fail;
-    if ((r = request_status(t))) goto fail;
+    if ((r = read_motion_params(t)) || (r = request_status(t))) goto fail;
     *out = t;
     return 0;
 fail:

@@ -154,6 +154,12 @@ static int sim_info(rig_turntable_t *t, rig_turntable_info_t *out)
     snprintf(out->serial, sizeof out->serial, "sim-%llu", (unsigned long long)s->p.seed);
     snprintf(out->firmware, sizeof out->firmware, "sim");
     out->counts_per_deg = 136533.33;
+    double ts = s->p.time_scale;
+    out->speed_deg_s = s->p.speed_deg_s / ts;
+    out->accel_deg_s2 = s->p.accel_deg_s2 / (ts * ts);
+    out->home_time_s = s->p.home_time_s * ts;
+    out->home_speed_deg_s = out->home_time_s > 0 ? 360 / out->home_time_s : out->speed_deg_s;
+    snprintf(out->params_from, sizeof out->params_from, "sim");
     return 0;
 }
 
@@ -245,7 +251,9 @@ static int sim_wait(rig_turntable_t *t, double timeout_s)
     }
 }
 
-static int sim_stop(rig_turntable_t *t, bool immediate)
+// Begins the stop: immediate (or at no speed) it stands at once, else it
+// decelerates (MOTION_DECEL) and sim_wait waits for the end.
+static int sim_start_stop(rig_turntable_t *t, bool immediate)
 {
     sim_t *s = S(t);
     double now = sim_now(s);
@@ -266,8 +274,17 @@ static int sim_stop(rig_turntable_t *t, bool immediate)
     s->p0 = p;
     s->v0 = v;
     s->t0 = now;
-    sleep_real(v / s->p.accel_deg_s2 * s->p.time_scale);
-    advance(s, fmax(sim_now(s), now + v / s->p.accel_deg_s2));
+    return 0;
+}
+
+static int sim_stop(rig_turntable_t *t, bool immediate)
+{
+    sim_t *s = S(t);
+    int r = sim_start_stop(t, immediate);
+    if (r || s->motion != MOTION_DECEL) return r;
+    double now = s->t0;
+    sleep_real(s->v0 / s->p.accel_deg_s2 * s->p.time_scale);
+    advance(s, fmax(sim_now(s), now + s->v0 / s->p.accel_deg_s2));
     return 0;
 }
 
@@ -286,6 +303,7 @@ static const rig_turntable_ops_t sim_ops = {
     .start_move_rel_deg = NULL,   // the wrapper moves to status + delta
     .wait = sim_wait,
     .stop = sim_stop,
+    .start_stop = sim_start_stop,
     .close = sim_close,
 };
 

@@ -370,6 +370,15 @@ static int vt_stop(rig_turntable_t *t, bool immediate)
     return r;
 }
 
+static int vt_start_stop(rig_turntable_t *t, bool immediate)
+{
+    rig_virtual_t *v = TV(t);
+    pthread_mutex_lock(&v->state_lock);
+    int r = rig_turntable_start_stop(v->tt_sim, immediate);
+    pthread_mutex_unlock(&v->state_lock);
+    return r;
+}
+
 static void vt_close(rig_turntable_t *t) { (void)t; }   // owned by the virtual rig
 
 static const rig_turntable_ops_t virtual_tt_ops = {
@@ -381,6 +390,7 @@ static const rig_turntable_ops_t virtual_tt_ops = {
     .start_move_rel_deg = NULL,
     .wait = vt_wait,
     .stop = vt_stop,
+    .start_stop = vt_start_stop,
     .close = vt_close,
 };
 

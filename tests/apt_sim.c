@@ -73,7 +73,7 @@ apt_sim_device_t apt_sim_device_defaults(void)
 {
     return (apt_sim_device_t){
         .serial = "55000001", .model = "K10CR1", .counts_per_deg = 136533.33,
-        .speed_deg_s = 900, .accel_deg_s2 = 9000, .home_time_s = 0.05,
+        .speed_deg_s = 900, .accel_deg_s2 = 9000, .home_time_s = 0.05, .home_offset_deg = 4,
         .update_period_s = 0.01, .max_unacked = 20,
     };
 }
@@ -254,6 +254,8 @@ static void tick(sim_dev_t *d, double t)
     }
 }
 
+static int32_t sat_i32(double v) { return v >= 2147483647.0 ? INT32_MAX : v <= -2147483648.0 ? INT32_MIN : (int32_t)lround(v); }
+
 static int32_t get_i32(const uint8_t *p) { return (int32_t)((uint32_t)p[0] | (uint32_t)p[1] << 8 | (uint32_t)p[2] << 16 | (uint32_t)p[3] << 24); }
 
 // One APT message from the host (whole messages: the driver writes each in one call).
@@ -332,6 +334,30 @@ static void apt_rx(sim_dev_t *d, const uint8_t *b, int n, double t)
                 put_u16(m, 1);
                 put_u32(m + 2, (uint32_t)lround(cur_pos(d, t)));
                 send_long(d, 0x0412, m, 6);
+                break;
+            }
+            case 0x0414:     // REQ_VELPARAMS -> GET_VELPARAMS: channel, min vel, accel, max vel
+            case 0x0441: {   // REQ_HOMEPARAMS -> GET_HOMEPARAMS: channel, dir, switch, velocity, offset
+                bool vel = id == 0x0414;
+                if (vel) d->st.n_velparams++;
+                else d->st.n_homeparams++;
+                if (d->cfg.no_params) break;
+                double cpd = d->cfg.counts_per_deg, vu = cpd * 53.68, au = cpd / 90.9;
+                double hv = d->cfg.home_speed_deg_s > 0 ? d->cfg.home_speed_deg_s
+                            : (360 + fabs(d->cfg.home_offset_deg)) / fmax(d->cfg.home_time_s, 1e-3);
+                uint8_t m[14] = { 0 };
+                put_u16(m, 1);
+                if (vel) {
+                    put_u32(m + 2, 0);
+                    put_u32(m + 6, (uint32_t)sat_i32(d->cfg.accel_deg_s2 * au));
+                    put_u32(m + 10, (uint32_t)sat_i32(d->cfg.speed_deg_s * vu));
+                } else {
+                    put_u16(m + 2, 2);
+                    put_u16(m + 4, 1);
+                    put_u32(m + 6, (uint32_t)sat_i32(hv * vu));
+                    put_u32(m + 10, (uint32_t)sat_i32(d->cfg.home_offset_deg * cpd));
+                }
+                send_long(d, vel ? 0x0415 : 0x0442, m, 14);
                 break;
             }
             case 0x0480: send_status(d, 0x0481, t); break;

@@ -17,7 +17,10 @@
 //     MOD_SET/REQ_CHANENABLESTATE, MOT_MOVE_HOME -> MOVE_HOMED,
 //     MOT_MOVE_ABSOLUTE / MOVE_RELATIVE -> MOVE_COMPLETED, MOT_MOVE_STOP ->
 //     MOVE_STOPPED, MOT_REQ_STATUSUPDATE / REQ_DCSTATUSUPDATE, REQ_POSCOUNTER,
-//     MOT_ACK_DCSTATUSUPDATE. Motion is a trapezoid in encoder counts computed
+//     MOT_ACK_DCSTATUSUPDATE, MOT_REQ_VELPARAMS (speed_deg_s, accel_deg_s2) and
+//     MOT_REQ_HOMEPARAMS (home_speed_deg_s, home_offset_deg), in the APT units
+//     of a stepper controller (counts/s x 53.68, counts/s^2 / 90.9; int32, so
+//     the defaults' 900 deg/s read as ~293 deg/s). Motion is a trapezoid in encoder counts computed
 //     from the clock; while update messages are on, a status update is sent
 //     every update_period_ms and the updates stop after `max_unacked` of them
 //     without an ACK_DCSTATUSUPDATE (the keep-alive).
@@ -34,10 +37,13 @@ typedef struct {
     double speed_deg_s;          // simulated cruise speed (fast for tests)
     double accel_deg_s2;
     double home_time_s;
+    double home_speed_deg_s;     // MOT_GET_HOMEPARAMS velocity (0: a turn + offset in home_time_s)
+    double home_offset_deg;      // MOT_GET_HOMEPARAMS offset distance
     double update_period_s;      // status update period while updates are on
     int    max_unacked;          // updates sent without ACK before they stop
     // Faults
     bool   no_reply;             // the FTDI chip works, the controller never answers
+    bool   no_params;            // VELPARAMS/HOMEPARAMS requests go unanswered (older firmware)
     bool   deny_access;          // open() of the device node fails with EACCES
     bool   motion_error;         // the next move stops half way with status bit 0x4000
     bool   unplug_mid_move;      // the device disappears half way through the next move
@@ -58,6 +64,7 @@ typedef struct {
     int  n_info, n_enable, n_home, n_move_abs, n_move_rel, n_stop;
     int  last_stop_mode;         // 1 immediate, 2 profiled
     int  n_ack;                  // MOT_ACK_DCSTATUSUPDATE received
+    int  n_velparams, n_homeparams;   // MOT_REQ_VELPARAMS / MOT_REQ_HOMEPARAMS received
     int  n_updates_sent;         // status updates sent while updates were on
     bool updates_on;
     bool updates_starved;        // updates stopped for lack of ACK

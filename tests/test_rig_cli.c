@@ -512,9 +512,11 @@ TEST(rigcli_gpiod_lamps_off_on_errors)
         return;
     }
     const char *log = test_path("gpio.log");
-    char env_pre[PATH_MAX + 32], env_log[PATH_MAX + 32];
+    char env_pre[PATH_MAX + 32], env_log[PATH_MAX + 32], env_state[PATH_MAX + 32];
     snprintf(env_pre, sizeof env_pre, "LD_PRELOAD=%s", lib);
     snprintf(env_log, sizeof env_log, "FAKE_GPIO_LOG=%s", log);
+    // The lamp-state file of the test, not the user's (~/.local/state/refl).
+    snprintf(env_state, sizeof env_state, "XDG_STATE_HOME=%s", test_path("state"));
     const char *lamps = "[turntable]\nbackend = sim\ntime_scale = 0.001\n"
                         "[lamp key]\nbackend = gpiod\nchip = gpiochip0\nline = 3\n"
                         "[lamp fill]\nbackend = gpiod\nchip = gpiochip0\nline = 5\nactive_low = yes\n";
@@ -523,7 +525,7 @@ TEST(rigcli_gpiod_lamps_off_on_errors)
     snprintf(text, sizeof text, "%s[camera]\nbackend = aravis\naddress = 127.0.0.3\n", lamps);
     const char *rig_cam = test_write("gpio-cam.ini", text);
 
-    const char *argv[] = { "env", env_pre, "FAKE_GPIOCHIP=gpiochip0:32", env_log,
+    const char *argv[] = { "env", env_pre, "FAKE_GPIOCHIP=gpiochip0:32", env_log, env_state,
                            "ASAN_OPTIONS=verify_asan_link_order=0:detect_leaks=0", test_refl(), "rig", "--rig", rig,
                            "snap", "-o", test_path("x.png"), "--lamps", "all", NULL };
     char *out = NULL, *err = NULL;
@@ -541,9 +543,9 @@ TEST(rigcli_gpiod_lamps_off_on_errors)
     free(err);
 
     unlink(log);
-    argv[8] = rig_cam;
-    argv[9] = "status";
-    argv[10] = NULL;
+    argv[9] = rig_cam;
+    argv[10] = "status";
+    argv[11] = NULL;
     rc = test_run(argv, 60, &out, &err);
     CHECK(rc == 1);
     CHECK_CONTAINS(err, "gpio-cam.ini:13: [camera]: aravis: no camera at '127.0.0.3'");
@@ -556,8 +558,8 @@ TEST(rigcli_gpiod_lamps_off_on_errors)
     free(err);
 
     // status on the lamps: off, gpiod; identify names chip and line.
-    argv[8] = rig;
-    argv[9] = "identify";
+    argv[9] = rig;
+    argv[10] = "identify";
     rc = test_run(argv, 60, &out, &err);
     CHECK_MSG(rc == 0, "identify: %d %s", rc, err);
     CHECK_CONTAINS(out, "lamp key: gpiod gpiochip0 line 3 active-high");

@@ -10,10 +10,13 @@
 #include <poll.h>
 #include <signal.h>
 #include <stdlib.h>
+#include <string.h>
+#include <sys/resource.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
 #include "model/model.h"
+#include "model/report.h"
 #include "rig/rig.h"
 #include "tests/test.h"
 
@@ -179,6 +182,9 @@ static bool child_cmd(child_cmd_t *c, const char *chips, const char *extra_env, 
     c->argv[k++] = c->env[e++];
     snprintf(c->env[e], sizeof c->env[e], "FAKE_GPIO_LOG=%s", c->log);
     c->argv[k++] = c->env[e++];
+    // The lamp-state files of the test, not the user's (~/.local/state/refl).
+    snprintf(c->env[e], sizeof c->env[e], "XDG_STATE_HOME=%s", test_path("state"));
+    c->argv[k++] = c->env[e++];
     // Under make asan the child is an ASan binary and the fake is preloaded first.
     c->argv[k++] = "ASAN_OPTIONS=verify_asan_link_order=0:detect_leaks=0";
     if (extra_env) c->argv[k++] = extra_env;
@@ -268,37 +274,40 @@ TEST(lamps_gpiod_active_low_only)
     free(log);
 }
 
-// Start the child in hold mode, wait for "ready", check the lamps are on, send
-// sig, and check it died of sig with every line at its OFF level.
-static void check_signal(int sig)
+static const int fatal_signals[] = { SIGINT, SIGTERM, SIGHUP, SIGQUIT, SIGSEGV, SIGBUS, SIGFPE, SIGABRT };
+
+// Forks and execs the child command, its signals at their defaults and no
+// core files; waits for "ready" on its stdout. *pid is the child (-1 when
+// the fork failed); false when it never got ready (then it is killed).
+static bool spawn_ready(const child_cmd_t *c, pid_t *pid)
 {
-    child_cmd_t c;
-    if (!child_cmd(&c, "gpiochip0:32,gpiochip1:8", NULL, "hold", "0x7", three_lamps)) return;
     int p[2];
+    *pid = -1;
     if (pipe2(p, O_CLOEXEC)) {
         test_fail(__FILE__, __LINE__, "pipe: %s", strerror(errno));
-        return;
+        return false;
     }
-    pid_t pid = fork();
-    if (pid == 0) {
+    *pid = fork();
+    if (*pid == 0) {
         // The lamp code leaves signals the parent ignores ignored (nohup, or a
         // background job of a non-interactive shell ignores SIGHUP/SIGINT):
         // the child starts from the defaults, as from a terminal.
-        signal(SIGINT, SIG_DFL);
-        signal(SIGTERM, SIG_DFL);
-        signal(SIGHUP, SIG_DFL);
+        for (size_t k = 0; k < sizeof fatal_signals / sizeof fatal_signals[0]; k++)
+            signal(fatal_signals[k], SIG_DFL);
         sigset_t none;
         sigemptyset(&none);
         sigprocmask(SIG_SETMASK, &none, NULL);
+        struct rlimit no_core = { 0, 0 };
+        setrlimit(RLIMIT_CORE, &no_core);
         dup2(p[1], 1);
-        execvp(c.argv[0], (char *const *)c.argv);
+        execvp(c->argv[0], (char *const *)c->argv);
         _exit(127);
     }
     close(p[1]);
-    if (pid < 0) {
+    if (*pid < 0) {
         close(p[0]);
         test_fail(__FILE__, __LINE__, "fork: %s", strerror(errno));
-        return;
+        return false;
     }
     char buf[256] = { 0 };
     size_t len = 0;
@@ -313,37 +322,126 @@ static void check_signal(int sig)
     close(p[0]);
     bool ready = strstr(buf, "ready") != NULL;
     CHECK_MSG(ready, "child never printed ready (got \"%s\")", buf);
+    if (!ready) {
+        kill(*pid, SIGKILL);
+        waitpid(*pid, NULL, 0);
+    }
+    return ready;
+}
 
-    char *log = read_log(c.log);
-    CHECK(last_level(log, "gpiochip0", 3) == 1);   // on before the signal
-    CHECK(last_level(log, "gpiochip0", 5) == 0);
-    CHECK(last_level(log, "gpiochip1", 2) == 1);
-    free(log);
-
-    kill(pid, ready ? sig : SIGKILL);
+// The child's wait status once it ends (killed after 10 s).
+static int wait_end(pid_t pid)
+{
     int status = 0;
-    t0 = model_now_s();
+    double t0 = model_now_s();
     while (waitpid(pid, &status, WNOHANG) == 0) {
         if (model_now_s() - t0 > 10) {
             kill(pid, SIGKILL);
             waitpid(pid, &status, 0);
-            test_fail(__FILE__, __LINE__, "child did not end after signal %d", sig);
+            test_fail(__FILE__, __LINE__, "child did not end");
             break;
         }
         usleep(5000);
     }
-    CHECK_MSG(WIFSIGNALED(status) && WTERMSIG(status) == sig, "child status 0x%x, want killed by %d",
-              status, sig);
-    log = read_log(c.log);
-    CHECK(last_level(log, "gpiochip0", 3) == 0);   // off after the signal
-    CHECK(last_level(log, "gpiochip0", 5) == 1);
-    CHECK(last_level(log, "gpiochip1", 2) == 0);
-    free(log);
+    return status;
 }
 
-TEST(lamps_gpiod_sigint_switches_off) { check_signal(SIGINT); }
-TEST(lamps_gpiod_sigterm_switches_off) { check_signal(SIGTERM); }
-TEST(lamps_gpiod_sighup_switches_off) { check_signal(SIGHUP); }
+// The default state file of the three lamps (named after chips and lines).
+static const char *three_lamps_state(void)
+{
+    return test_path("state/refl/gpiod-gpiochip0-3-5-gpiochip1-2.state");
+}
+
+// Start the child (hold: then send sig; a fault mode: it faults by itself)
+// with three lamps on, and check it died of sig with every lamp off: the
+// gpiod lines at their OFF level (fake library's log) and the state file
+// saying none is on.
+static void check_death(int sig, const char *mode, bool sim)
+{
+    static const char *const sim_lamps[] = { "key=sim", "fill=sim", "back=sim", NULL };
+    char state_env[PATH_MAX + 32];
+    const char *state = sim ? test_path("sim-lamps.state") : three_lamps_state();
+    snprintf(state_env, sizeof state_env, "LAMP_CHILD_STATE_FILE=%s", state);
+    child_cmd_t c;
+    if (!child_cmd(&c, "gpiochip0:32,gpiochip1:8", sim ? state_env : NULL, mode, "0x7",
+                   sim ? sim_lamps : three_lamps))
+        return;
+    pid_t pid;
+    if (!spawn_ready(&c, &pid)) return;
+
+    char *log = read_log(c.log), *st = read_log(state);
+    if (!sim) {
+        CHECK(last_level(log, "gpiochip0", 3) == 1);   // on before the signal
+        CHECK(last_level(log, "gpiochip0", 5) == 0);
+        CHECK(last_level(log, "gpiochip1", 2) == 1);
+    }
+    CHECK_CONTAINS(st, "\non = key, fill, back\n");
+    char pidline[32];
+    snprintf(pidline, sizeof pidline, "\npid = %ld\n", (long)pid);
+    CHECK_CONTAINS(st, pidline);
+    free(log);
+    free(st);
+
+    if (!strcmp(mode, "hold")) kill(pid, sig);
+    int status = wait_end(pid);
+    CHECK_MSG(WIFSIGNALED(status) && WTERMSIG(status) == sig, "child status 0x%x, want killed by %d (%s)",
+              status, sig, strsignal(sig));
+    log = read_log(c.log);
+    st = read_log(state);
+    if (!sim) {
+        CHECK(last_level(log, "gpiochip0", 3) == 0);   // off after the signal
+        CHECK(last_level(log, "gpiochip0", 5) == 1);
+        CHECK(last_level(log, "gpiochip1", 2) == 0);
+    }
+    CHECK_CONTAINS(st, "\non =\n");                     // and the state file says so
+    free(log);
+    free(st);
+}
+
+TEST(lamps_gpiod_sigint_switches_off) { check_death(SIGINT, "hold", false); }
+TEST(lamps_gpiod_sigterm_switches_off) { check_death(SIGTERM, "hold", false); }
+TEST(lamps_gpiod_sighup_switches_off) { check_death(SIGHUP, "hold", false); }
+TEST(lamps_gpiod_sigquit_switches_off) { check_death(SIGQUIT, "hold", false); }
+TEST(lamps_gpiod_sigsegv_switches_off) { check_death(SIGSEGV, "hold", false); }
+TEST(lamps_gpiod_sigbus_switches_off) { check_death(SIGBUS, "hold", false); }
+TEST(lamps_gpiod_sigfpe_switches_off) { check_death(SIGFPE, "hold", false); }
+TEST(lamps_gpiod_sigabrt_switches_off) { check_death(SIGABRT, "hold", false); }
+// Real faults, not sent signals.
+TEST(lamps_gpiod_null_write_switches_off) { check_death(SIGSEGV, "segv", false); }
+TEST(lamps_gpiod_bus_error_switches_off) { check_death(SIGBUS, "bus", false); }
+TEST(lamps_gpiod_division_by_zero_switches_off) { check_death(SIGFPE, "fpe", false); }
+TEST(lamps_gpiod_abort_switches_off) { check_death(SIGABRT, "abort", false); }
+
+// A crash handler that was there before the safety net (a sanitizer's) still
+// gets the crash, after the lamps are off.
+TEST(lamps_gpiod_crash_reaches_the_previous_handler)
+{
+    const char *modes[] = { "segv", "abort" };
+    for (int k = 0; k < 2; k++) {
+        child_cmd_t c;
+        if (!child_cmd(&c, "gpiochip0:32,gpiochip1:8", "LAMP_CHILD_CRASH_HANDLER=1", modes[k], "0x7", three_lamps))
+            return;
+        pid_t pid;
+        if (!spawn_ready(&c, &pid)) return;
+        int status = wait_end(pid);
+        CHECK_MSG(WIFEXITED(status) && WEXITSTATUS(status) == 42, "%s: status 0x%x, want exit 42 from the "
+                  "previous handler", modes[k], status);
+        char *log = read_log(c.log), *st = read_log(three_lamps_state());
+        CHECK(last_level(log, "gpiochip0", 3) == 0);
+        CHECK(last_level(log, "gpiochip0", 5) == 1);
+        CHECK(last_level(log, "gpiochip1", 2) == 0);
+        CHECK_CONTAINS(st, "\non =\n");
+        free(log);
+        free(st);
+    }
+}
+
+TEST(lamps_sim_every_signal_switches_off)
+{
+    for (size_t k = 0; k < sizeof fatal_signals / sizeof fatal_signals[0]; k++)
+        check_death(fatal_signals[k], "hold", true);
+    check_death(SIGSEGV, "segv", true);
+}
 
 TEST(lamps_gpiod_exit_switches_off)
 {
@@ -479,4 +577,166 @@ TEST(lamps_gpiod_error_same_line_twice)
     CHECK(count_lines(log, "request ") == 0);
     free(err);
     free(log);
+}
+
+// ---------------------------------------------------------------------------
+// The lamp-state file (rig/lamps_state.c): deaths no handler sees
+
+// kill -9 with lamps on leaves the state file naming them; the next open of
+// the same lamps reports the dead session, switches them off and clears it.
+static void check_kill9(bool sim)
+{
+    static const char *const sim_lamps[] = { "key=sim", "fill=sim", "back=sim", NULL };
+    const char *const *lamps = sim ? sim_lamps : three_lamps;
+    char state_env[PATH_MAX + 32];
+    const char *state = sim ? test_path("sim-lamps.state") : three_lamps_state();
+    snprintf(state_env, sizeof state_env, "LAMP_CHILD_STATE_FILE=%s", state);
+    child_cmd_t c;
+    if (!child_cmd(&c, "gpiochip0:32,gpiochip1:8", sim ? state_env : NULL, "hold", "0x5", lamps)) return;
+    pid_t pid;
+    if (!spawn_ready(&c, &pid)) return;
+    kill(pid, SIGKILL);
+    int status = wait_end(pid);
+    CHECK(WIFSIGNALED(status) && WTERMSIG(status) == SIGKILL);
+    char *st = read_log(state);
+    CHECK_CONTAINS(st, "\non = key, back\n");            // left behind: no handler ran
+    free(st);
+
+    if (!child_cmd(&c, "gpiochip0:32,gpiochip1:8", sim ? state_env : NULL, "open", "0", lamps)) return;
+    char *err = NULL;
+    int rc = test_run(c.argv, 20, NULL, &err);
+    CHECK_MSG(rc == 0, "exit %d, stderr: %s", rc, err);
+    char want[160];
+    snprintf(want, sizeof want, "refl: the last session (pid %ld, started 20", (long)pid);
+    CHECK_CONTAINS(err, want);
+    CHECK_CONTAINS(err, "died with lamps key, back on; switching them off\n");
+    free(err);
+    if (!sim) {
+        // Requested off, and switched off explicitly once found.
+        char *log = read_log(c.log);
+        CHECK_CONTAINS(log, "request gpiochip0 3=0 consumer=refl\n");
+        CHECK(count_lines(log, "set gpiochip0 3=0") >= 1);
+        CHECK(count_lines(log, "set gpiochip1 2=0") >= 1);
+        CHECK(last_level(log, "gpiochip0", 3) == 0);
+        CHECK(last_level(log, "gpiochip0", 5) == 1);
+        CHECK(last_level(log, "gpiochip1", 2) == 0);
+        free(log);
+    }
+    st = read_log(state);
+    CHECK_CONTAINS(st, "\non =\n");                      // cleared
+    free(st);
+
+    // Once cleared, the next open has nothing to say.
+    rc = test_run(c.argv, 20, NULL, &err);
+    CHECK(rc == 0);
+    CHECK(err && !strstr(err, "last session"));
+    free(err);
+}
+
+TEST(lamps_gpiod_kill9_state_file_next_open_switches_off) { check_kill9(false); }
+TEST(lamps_sim_kill9_state_file_next_open_switches_off) { check_kill9(true); }
+
+// A state file cut short (a power cut while writing it): every lamp off, said so.
+TEST(lamps_gpiod_unreadable_state_file_switches_all_off)
+{
+    child_cmd_t c;
+    if (!child_cmd(&c, "gpiochip0:32,gpiochip1:8", NULL, "open", "0", three_lamps)) return;
+    char dir[PATH_MAX + 16];
+    snprintf(dir, sizeof dir, "%s/state/refl", test_tmpdir());
+    CHECK(model_mkdir_p(dir));
+    FILE *f = fopen(three_lamps_state(), "w");
+    if (f) {
+        fputs("# refl lamp state\npid = 4242\nstarted = 2026-11-24T23:00:00.000Z\nhardw", f);
+        fclose(f);
+    }
+    char *err = NULL;
+    int rc = test_run(c.argv, 20, NULL, &err);
+    CHECK_MSG(rc == 0, "exit %d, stderr: %s", rc, err);
+    CHECK_CONTAINS(err, "is unreadable (the last session, pid 4242, started 2026-11-24T23:00:00.000Z, may have "
+                        "died while writing it); switching every lamp off");
+    free(err);
+    char *st = read_log(three_lamps_state());
+    CHECK_CONTAINS(st, "\non =\n");
+    free(st);
+}
+
+// A live refl holding the lamps is not taken for a dead one: a second open
+// fails naming it, switches nothing and leaves its record alone.
+TEST(lamps_gpiod_live_holder_is_not_dead)
+{
+    child_cmd_t b, a;
+    char log_b[PATH_MAX + 32];
+    snprintf(log_b, sizeof log_b, "FAKE_GPIO_LOG=%s", test_path("gpio-b.log"));
+    if (!child_cmd(&b, "gpiochip0:32,gpiochip1:8", log_b, "open", "0", three_lamps)) return;
+    if (!child_cmd(&a, "gpiochip0:32,gpiochip1:8", NULL, "hold", "0x7", three_lamps)) return;
+    pid_t pid;
+    if (!spawn_ready(&a, &pid)) return;
+
+    char *err = NULL;
+    int rc = test_run(b.argv, 20, NULL, &err);
+    CHECK(rc == 3);
+    char want[160];
+    snprintf(want, sizeof want, "these lamps are in use by another refl (pid %ld, started 20", (long)pid);
+    CHECK_CONTAINS(err, want);
+    CHECK_CONTAINS(err, "device busy");
+    CHECK(err && !strstr(err, "last session") && !strstr(err, "switching"));
+    free(err);
+    CHECK(kill(pid, 0) == 0);                            // still running, lamps still on
+    char *log = read_log(a.log), *st = read_log(three_lamps_state());
+    CHECK(last_level(log, "gpiochip0", 3) == 1);
+    CHECK(last_level(log, "gpiochip1", 2) == 1);
+    CHECK_CONTAINS(st, "\non = key, fill, back\n");
+    char pidline[32];
+    snprintf(pidline, sizeof pidline, "\npid = %ld\n", (long)pid);
+    CHECK_CONTAINS(st, pidline);
+    free(log);
+    free(st);
+
+    // Once it has ended (SIGTERM: lamps off, record cleared) the lamps open.
+    kill(pid, SIGTERM);
+    wait_end(pid);
+    rc = test_run(b.argv, 20, NULL, &err);
+    CHECK_MSG(rc == 0, "exit %d, stderr: %s", rc, err);
+    CHECK(err && !strstr(err, "last session"));
+    free(err);
+}
+
+// The rig file's [lamps] state_file puts the file there (sim lamps too), and
+// [lamps] takes no other key.
+TEST(lamps_rig_file_state_file_key)
+{
+    char text[PATH_MAX + 256];
+    const char *state = test_path("rig-lamps.state");
+    snprintf(text, sizeof text, "[turntable]\nbackend = sim\ntime_scale = 0.001\n"
+             "[lamp east]\nbackend = sim\nposition_mm = 0 0 100\n[lamps]\nstate_file = %s\n", state);
+    const char *rig = test_write("rig.ini", text);
+    const char *argv[] = { test_refl(), "rig", "--rig", rig, "status", NULL };
+    char *out = NULL, *err = NULL;
+    int rc = test_run(argv, 60, &out, &err);
+    CHECK_MSG(rc == 0, "exit %d, stderr: %s", rc, err);
+    char *st = read_log(state);
+    CHECK_CONTAINS(st, "\nhardware = sim east\non =\n");
+    free(st);
+    free(out);
+    free(err);
+
+    // relative to the rig file's directory
+    snprintf(text, sizeof text, "[lamp east]\nbackend = sim\nposition_mm = 0 0 100\n[lamps]\nstate_file = rel.state\n");
+    argv[3] = test_write("rel.ini", text);
+    rc = test_run(argv, 60, &out, &err);
+    CHECK_MSG(rc == 0, "exit %d, stderr: %s", rc, err);
+    st = read_log(test_path("rel.state"));
+    CHECK_CONTAINS(st, "\nhardware = sim east\non =\n");
+    free(st);
+    free(out);
+    free(err);
+
+    const char *bad = test_write("bad.ini", "[lamp east]\nbackend = sim\nposition_mm = 0 0 100\n"
+                                            "[lamps]\nstate_fil = x\n");
+    argv[3] = bad;
+    rc = test_run(argv, 60, &out, &err);
+    CHECK(rc == 1);
+    CHECK_CONTAINS(err, "bad.ini:5: [lamps]: unknown key 'state_fil'; known keys: state_file");
+    free(out);
+    free(err);
 }

@@ -1,13 +1,21 @@
 // tests/test_rig_turntable.c — the turntable: errors, stage table, motion time,
 // the simulated stage, and the unmodified APT driver against a simulated
-// FTDI + APT controller (tests/apt_sim.c) under umockdev.
+// FTDI + APT controller (tests/apt_sim.c) under umockdev; Ctrl-C (SIGINT)
+// during homing and moves, in-process and through refl capture.
 //
 // The APT tests (apt_umock_*) need libumockdev-preload loaded at process
 // start, so turntable_apt_under_umockdev re-runs this test binary as
 // `umockdev-wrapper <self> apt_umock_`; run directly, the apt_umock_* tests
 // are left to it (TEST_INNER: neither run nor counted outside umockdev).
 #define _GNU_SOURCE
+#include <fcntl.h>
+#include <glib.h>
+#include <limits.h>
+#include <signal.h>
 #include <stdlib.h>
+#include <string.h>
+#include <sys/stat.h>
+#include <sys/wait.h>
 #include <time.h>
 #include <unistd.h>
 
@@ -248,10 +256,341 @@ TEST(turntable_sim_bad_input)
 }
 
 // ---------------------------------------------------------------------------
+// Interruptible waits (rig_turntable_wait_watched): the progress callback
+// plays the operator, raising the interrupt level at given times.
+
+typedef struct {
+    volatile sig_atomic_t flag;
+    double at1_s, at2_s;          // elapsed seconds at which flag becomes 1, 2 (<= 0: never)
+    double t1_s, t2_s;            // model_now_s() when it did
+    int    calls;
+    double angle1;                // the angle when flag became 1
+} interrupter_t;
+
+static void interrupter(void *ctx, double elapsed_s, double angle_deg)
+{
+    interrupter_t *it = ctx;
+    it->calls++;
+    if (it->at1_s > 0 && elapsed_s >= it->at1_s && it->flag < 1) {
+        it->flag = 1;
+        it->angle1 = angle_deg;
+        it->t1_s = model_now_s();
+    }
+    if (it->at2_s > 0 && elapsed_s >= it->at2_s && it->flag < 2) {
+        it->flag = 2;
+        it->t2_s = model_now_s();
+    }
+}
+
+static rig_turntable_watch_t watch_of(interrupter_t *it, const char *what)
+{
+    return (rig_turntable_watch_t){ .interrupt = &it->flag, .what = what, .stop_s = 5, .progress = interrupter,
+                                    .ctx = it, .period_s = 0 };
+}
+
+TEST(turntable_sim_watched_homing_interrupted)
+{
+    rig_turntable_sim_params_t p = fx_fast_sim();
+    p.time_scale = 0.1;
+    p.home_time_s = 30;                       // 3 s real
+    rig_turntable_t *t = NULL;
+    CHECK(rig_turntable_open_sim(&t, &p) == 0);
+    if (!t) return;
+    interrupter_t it = { .at1_s = 0.2 };
+    rig_turntable_watch_t w = watch_of(&it, "homing");
+    double t0 = model_now_s();
+    CHECK(rig_turntable_start_home(t) == 0);
+    CHECK(rig_turntable_wait_watched(t, 10, &w) == RIG_ERR_INTERRUPTED);
+    CHECK_MSG(model_now_s() - it.t1_s < 0.3, "stood %.2f s after the interrupt", model_now_s() - it.t1_s);
+    CHECK(model_now_s() - t0 < 1.0);
+    CHECK_CONTAINS(model_last_error(), "homing interrupted: the stage stopped at ");
+    rig_turntable_status_t st;
+    CHECK(rig_turntable_status(t, &st) == 0 && !st.moving && !st.homed);
+    // uninterrupted, it homes; the progress callback is called on the way
+    interrupter_t quiet = { 0 };
+    w = watch_of(&quiet, "homing");
+    CHECK(rig_turntable_start_home(t) == 0);
+    CHECK(rig_turntable_wait_watched(t, 10, &w) == 0);
+    CHECK(quiet.calls > 10);
+    CHECK(rig_turntable_status(t, &st) == 0 && st.homed && !st.moving);
+    rig_turntable_close(t);
+}
+
+TEST(turntable_sim_watched_move_interrupted)
+{
+    rig_turntable_sim_params_t p = fx_fast_sim();
+    p.time_scale = 0.1;
+    p.speed_deg_s = 10;
+    p.accel_deg_s2 = 2;                       // a profiled stop from cruise: 5 s sim = 0.5 s real, 25 deg
+    p.position_noise_deg = 0;
+    rig_turntable_t *t = NULL;
+    CHECK(rig_turntable_open_sim(&t, &p) == 0);
+    if (!t) return;
+    CHECK(rig_turntable_home(t, 5) == 0);
+    rig_turntable_status_t st;
+
+    // One interrupt at cruise: a profiled stop, 25 deg further, 0.5 s.
+    interrupter_t it = { .at1_s = 1.2 };      // 12 s sim: cruising since 5 s
+    rig_turntable_watch_t w = watch_of(&it, "the move to 300 deg");
+    CHECK(rig_turntable_start_move_abs_deg(t, 300) == 0);
+    CHECK(rig_turntable_wait_watched(t, 30, &w) == RIG_ERR_INTERRUPTED);
+    double took = model_now_s() - it.t1_s;
+    CHECK_MSG(took > 0.4 && took < 0.8, "the profiled stop took %.2f s", took);
+    CHECK_CONTAINS(model_last_error(), "the move to 300 deg interrupted: the stage stopped at ");
+    CHECK(rig_turntable_status(t, &st) == 0 && !st.moving);
+    CHECK_NEAR(st.angle_deg, it.angle1 + 25, 3);
+
+    // A second interrupt 0.1 s into that stop: it stands at once.
+    double from = st.angle_deg;
+    interrupter_t it2 = { .at1_s = 1.2, .at2_s = 1.3 };
+    w = watch_of(&it2, "the move back");
+    CHECK(rig_turntable_start_move_abs_deg(t, from - 250) == 0);
+    CHECK(rig_turntable_wait_watched(t, 30, &w) == RIG_ERR_INTERRUPTED);
+    took = model_now_s() - it2.t2_s;
+    CHECK_MSG(took < 0.15, "the immediate stop took %.2f s", took);
+    CHECK_CONTAINS(model_last_error(), "the move back interrupted: the stage stopped at once at ");
+    CHECK(rig_turntable_status(t, &st) == 0 && !st.moving);
+    CHECK(st.angle_deg < from - 50 && st.angle_deg > from - 250);
+
+    // Not interrupted, a time-out names the motion
+    interrupter_t none = { 0 };
+    w = watch_of(&none, "the move to 0 deg");
+    CHECK(rig_turntable_start_move_abs_deg(t, 0) == 0);
+    CHECK(rig_turntable_wait_watched(t, 0.2, &w) == RIG_ERR_TIMEOUT);
+    CHECK_CONTAINS(model_last_error(), "the move to 0 deg did not finish within 0.20 s");
+    rig_turntable_stop(t, true);
+    rig_turntable_close(t);
+}
+
+// ---------------------------------------------------------------------------
+// Ctrl-C in refl capture during homing and moves (the virtual rig in real time)
+
+// A rig file for the virtual rig in real time whose truth is the example's
+// with the edits (pairs "old line", "new line") and the files it names linked.
+static const char *realtime_rig(const char *const *edits)
+{
+    char top[PATH_MAX];
+    if (!realpath(test_srcdir(), top)) snprintf(top, sizeof top, "%s", test_srcdir());
+    char src[PATH_MAX + 64];
+    snprintf(src, sizeof src, "%s/examples/virtual-truth.ini", top);
+    char *text = model_read_file(src, NULL);
+    if (!text) return NULL;
+    GString *g = g_string_new(text);
+    free(text);
+    for (int i = 0; edits && edits[i]; i += 2) {
+        char *at = strstr(g->str, edits[i]);
+        CHECK_MSG(at != NULL, "no \"%s\" in the example truth", edits[i]);
+        if (!at) continue;
+        gssize pos = at - g->str;
+        g_string_erase(g, pos, (gssize)strlen(edits[i]));
+        g_string_insert(g, pos, edits[i + 1]);
+    }
+    const char *truth = test_write("truth.ini", g->str);
+    g_string_free(g, TRUE);
+    const char *links[] = { "camera.cameramodel", "samples", "t_stiffener.d3d" };
+    for (int i = 0; i < 3; i++) {
+        char a[PATH_MAX + 64], b[PATH_MAX + 64];
+        snprintf(a, sizeof a, "%s/examples/%s", top, links[i]);
+        snprintf(b, sizeof b, "%s/%s", test_tmpdir(), links[i]);
+        symlink(a, b);
+    }
+    char rig[PATH_MAX + 128];
+    snprintf(rig, sizeof rig, "[rig]\nbackend = virtual\ntruth = %s\ntime_scale = 1\nbusy_wait_s = 60\n", truth);
+    return test_write("rig.ini", rig);
+}
+
+// refl ARGS with stderr to err_path (stdout dropped); the pid.
+static pid_t spawn_refl(const char *const *args, const char *err_path)
+{
+    const char *argv[32];
+    int n = 0;
+    argv[n++] = test_refl();
+    for (int i = 0; args[i] && n < 31; i++) argv[n++] = args[i];
+    argv[n] = NULL;
+    pid_t pid = fork();
+    if (pid == 0) {
+        signal(SIGINT, SIG_DFL);
+        int null = open("/dev/null", O_WRONLY), e = open(err_path, O_WRONLY | O_CREAT | O_TRUNC, 0644);
+        dup2(null, 1);
+        dup2(e, 2);
+        execv(argv[0], (char *const *)argv);
+        _exit(127);
+    }
+    return pid;
+}
+
+static char *file_text(const char *path)
+{
+    bool q = model_error_quiet(true);
+    char *t = model_read_file(path, NULL);
+    model_error_quiet(q);
+    return t ? t : calloc(1, 1);
+}
+
+// Waits (up to limit_s) until the file holds needle, or exists when needle is NULL.
+static bool wait_for(const char *path, const char *needle, double limit_s)
+{
+    for (double t0 = model_now_s(); model_now_s() - t0 < limit_s; sleep_s(0.02)) {
+        struct stat st;
+        if (!needle && stat(path, &st) == 0) return true;
+        if (needle) {
+            char *t = file_text(path);
+            bool found = strstr(t, needle) != NULL;
+            free(t);
+            if (found) return true;
+        }
+    }
+    CHECK_MSG(false, "waited %.0f s for %s%s%s", limit_s, path, needle ? " to say " : " to exist",
+              needle ? needle : "");
+    return false;
+}
+
+// The wait status, or -1 when pid does not end within limit_s (then killed).
+static int wait_pid(pid_t pid, double limit_s, double *ended)
+{
+    int st = 0;
+    for (double t0 = model_now_s(); model_now_s() - t0 < limit_s; sleep_s(0.005))
+        if (waitpid(pid, &st, WNOHANG) == pid) {
+            *ended = model_now_s();
+            return st;
+        }
+    kill(pid, SIGKILL);
+    waitpid(pid, &st, 0);
+    *ended = model_now_s();
+    return -1;
+}
+
+// The first Ctrl-C during homing (15 s on this stage) stops it within 1 s and
+// pauses the session (exit 3) saying so; no frame was being taken.
+TEST(capture_ctrl_c_during_homing)
+{
+    int lk = test_camera_lock();
+    const char *rig = realtime_rig(NULL);
+    const char *plan = test_write("plan.ini", "[sample]\nname = coupon_matte_paint\nkind = material_coupon\n"
+                                  "[angles]\nlist = 0 90\n[lamps]\nsets = east\n[exposure]\nmode = fixed\n"
+                                  "list_us = 1000\n");
+    char dir[PATH_MAX], frames[PATH_MAX + 16];
+    snprintf(dir, sizeof dir, "%s/s", test_tmpdir());
+    snprintf(frames, sizeof frames, "%s/frames", dir);
+    const char *err_path = test_path("err.txt");
+    const char *args[] = { "capture", plan, "--rig", rig, "-o", dir, "--yes", NULL };
+    pid_t pid = spawn_refl(args, err_path);
+    if (rig && wait_for(err_path, "refl capture: homing", 60)) {
+        sleep_s(0.5);
+        double t_int = model_now_s(), ended;
+        kill(pid, SIGINT);
+        int st = wait_pid(pid, 10, &ended);
+        CHECK_MSG(ended - t_int < 1.0, "ended %.2f s after Ctrl-C", ended - t_int);
+        CHECK_MSG(st >= 0 && WIFEXITED(st) && WEXITSTATUS(st) == 3, "status 0x%x, want exit 3", st);
+        char *err = file_text(err_path);
+        CHECK_CONTAINS(err, "(up to 15 s; Ctrl-C stops it)");
+        CHECK_CONTAINS(err, "refl capture: interrupted (SIGINT) during homing: no frame was being taken; "
+                            "virtual turntable (sim, seed 1): homing interrupted: the stage stopped at ");
+        CHECK_CONTAINS(err, "session paused before step 0 of 3; continue with refl capture --resume");
+        CHECK_CONTAINS(err, "(it homes the stage again)");
+        CHECK(!strstr(err, "the current frame was finished"));
+        free(err);
+        int tmp = 0, n = 0;
+        GDir *d = g_dir_open(frames, 0, NULL);
+        for (const char *e; d && (e = g_dir_read_name(d));) e[0] == '.' ? tmp++ : n++;
+        if (d) g_dir_close(d);
+        CHECK(n == 0);
+    } else {
+        kill(pid, SIGKILL);
+        waitpid(pid, NULL, 0);
+    }
+    test_camera_unlock(lk);
+}
+
+// During a long move (1 deg/s^2: a profiled stop from 2.5 deg/s takes 2.5 s):
+// one Ctrl-C waits for the profiled stop and pauses (exit 3); after --resume,
+// a second Ctrl-C 0.3 s after the first stops the stage at once and ends refl
+// by SIGINT at once.
+TEST(capture_ctrl_c_during_move_once_then_twice)
+{
+    int lk = test_camera_lock();
+    static const char *const edits[] = { "accel_deg_s2 = 10\n", "accel_deg_s2 = 1\n",
+                                         "home_time_s = 15\n", "home_time_s = 0.3\n", NULL };
+    const char *rig = realtime_rig(edits);
+    const char *plan = test_write("plan.ini", "[sample]\nname = coupon_matte_paint\nkind = material_coupon\n"
+                                  "[angles]\nlist = 0 170\n[lamps]\nsets = east\n[exposure]\nmode = fixed\n"
+                                  "list_us = 1000\n");
+    char dir[PATH_MAX], frame0[PATH_MAX + 32];
+    snprintf(dir, sizeof dir, "%s/s", test_tmpdir());
+    snprintf(frame0, sizeof frame0, "%s/frames/s000001.png", dir);   // step 0: the operator's
+    const char *err_path = test_path("err.txt");
+    const char *args[] = { "capture", plan, "--rig", rig, "-o", dir, "--yes", NULL };
+    pid_t pid = spawn_refl(args, err_path);
+    if (!rig || !wait_for(frame0, NULL, 60)) {
+        kill(pid, SIGKILL);
+        waitpid(pid, NULL, 0);
+        test_camera_unlock(lk);
+        return;
+    }
+    sleep_s(2.5);                             // into the move to 170 deg
+    double t_int = model_now_s(), ended;
+    kill(pid, SIGINT);
+    int st = wait_pid(pid, 20, &ended);
+    CHECK_MSG(ended - t_int > 1.0 && ended - t_int < 4.5, "ended %.2f s after Ctrl-C", ended - t_int);
+    CHECK_MSG(st >= 0 && WIFEXITED(st) && WEXITSTATUS(st) == 3, "status 0x%x, want exit 3", st);
+    char *err = file_text(err_path);
+    CHECK_CONTAINS(err, "refl capture: interrupted (SIGINT) during the move to 170 deg: no frame was being taken; "
+                        "virtual turntable (sim, seed 1): the move to 170 deg interrupted: the stage stopped at ");
+    CHECK_CONTAINS(err, "session paused before step 2 of 3");
+    CHECK_CONTAINS(err, "(it moves there again)");
+    free(err);
+
+    const char *resume[] = { "capture", "--resume", dir, "--yes", NULL };
+    pid = spawn_refl(resume, err_path);
+    if (wait_for(err_path, "resuming", 60)) {
+        sleep_s(3.0);                         // homed (0.3 s), 2.5 s into the move
+        kill(pid, SIGINT);
+        sleep_s(0.3);
+        t_int = model_now_s();
+        kill(pid, SIGINT);
+        st = wait_pid(pid, 20, &ended);
+        CHECK_MSG(ended - t_int < 0.5, "ended %.2f s after the second Ctrl-C", ended - t_int);
+        CHECK_MSG(st >= 0 && WIFSIGNALED(st) && WTERMSIG(st) == SIGINT, "status 0x%x, want killed by SIGINT", st);
+        err = file_text(err_path);
+        CHECK_CONTAINS(err, "refl capture: second interrupt: virtual turntable (sim, seed 1): the move to 170 deg "
+                            "interrupted: the stage stopped at once at ");
+        free(err);
+    } else {
+        kill(pid, SIGKILL);
+        waitpid(pid, NULL, 0);
+    }
+    test_camera_unlock(lk);
+}
+
+// refl rig home: Ctrl-C stops the homing stage, then refl ends by SIGINT.
+TEST(rig_home_ctrl_c_stops_the_stage)
+{
+    const char *rig = test_write("slow.ini", "[turntable]\nbackend = sim\nhome_time_s = 30\ntime_scale = 1\n");
+    const char *err_path = test_path("err.txt");
+    const char *args[] = { "rig", "--rig", rig, "home", NULL };
+    pid_t pid = spawn_refl(args, err_path);
+    if (!wait_for(err_path, "refl rig: homing", 30)) {
+        kill(pid, SIGKILL);
+        waitpid(pid, NULL, 0);
+        return;
+    }
+    sleep_s(0.4);
+    double t_int = model_now_s(), ended;
+    kill(pid, SIGINT);
+    int st = wait_pid(pid, 10, &ended);
+    CHECK_MSG(ended - t_int < 1.0, "ended %.2f s after Ctrl-C", ended - t_int);
+    CHECK_MSG(st >= 0 && WIFSIGNALED(st) && WTERMSIG(st) == SIGINT, "status 0x%x, want killed by SIGINT", st);
+    char *err = file_text(err_path);
+    CHECK_CONTAINS(err, "refl rig: interrupted (SIGINT): sim turntable");
+    CHECK_CONTAINS(err, "homing interrupted: the stage stopped at ");
+    free(err);
+}
+
+// ---------------------------------------------------------------------------
 // The APT driver under umockdev
 
 // The number of apt_umock_* tests below (the outer test checks they all ran).
-enum { N_APT_UMOCK_TESTS = 13 };
+enum { N_APT_UMOCK_TESTS = 16 };
 
 TEST(turntable_apt_under_umockdev)
 {
@@ -580,5 +919,131 @@ TEST_INNER(apt_umock_limit_switch, apt_sim_available)
         CHECK(!st.motion_error);
         rig_turntable_close(t);
     }
+    apt_sim_free(s);
+}
+
+// The controller's own speeds (MOT_GET_VELPARAMS / MOT_GET_HOMEPARAMS), unlike
+// the stage table's K10CR1 10 deg/s, 10 deg/s^2, give the estimates.
+TEST_INNER(apt_umock_motion_params_from_controller, apt_sim_available)
+{
+    apt_sim_device_t d = apt_sim_device_defaults();
+    d.speed_deg_s = 25;
+    d.accel_deg_s2 = 40;
+    d.home_speed_deg_s = 7.5;
+    d.home_offset_deg = 4;
+    apt_sim_t *s = fx_apt_sim_start(&d, 1);
+    rig_turntable_t *t = NULL;
+    CHECK(rig_turntable_open_apt(&t, NULL, NULL) == 0);
+    if (t) {
+        rig_turntable_info_t info;
+        CHECK(rig_turntable_info(t, &info) == 0);
+        CHECK(strcmp(info.params_from, "controller") == 0);
+        CHECK_NEAR(info.speed_deg_s, 25, 1e-3);
+        CHECK_NEAR(info.accel_deg_s2, 40, 1e-2);
+        CHECK_NEAR(info.home_speed_deg_s, 7.5, 1e-3);
+        // a full turn and the offset at 7.5 deg/s, and the ramps at 40 deg/s^2
+        CHECK_NEAR(info.home_time_s, 364 / 7.5 + 2 * 7.5 / 40, 1e-3);
+        apt_sim_stats_t st;
+        apt_sim_stats(s, 0, &st);
+        CHECK(st.n_velparams == 1 && st.n_homeparams == 1);
+        // Moves are timed by the controller's speed: 90 deg at 25 deg/s,
+        // 40 deg/s^2 takes 4.225 s, so a time-out from the table's (10 deg/s)
+        // would be 9.0 + 1.0 s.
+        CHECK_NEAR(rig_motion_time_s(90, info.speed_deg_s, info.accel_deg_s2), 90 / 25.0 + 25 / 40.0, 1e-3);
+        rig_turntable_close(t);
+    }
+    // The rig file's turntable takes them as its motion profile.
+    char text[256];
+    snprintf(text, sizeof text, "[turntable]\nbackend = apt\n");
+    const char *path = test_write("apt-rig.ini", text);
+    rig_t *r = NULL;
+    CHECK(rig_open(&r, path) == 0);
+    if (r) {
+        CHECK_NEAR(r->speed_deg_s, 25, 1e-3);
+        CHECK_NEAR(r->accel_deg_s2, 40, 1e-2);
+        CHECK_NEAR(r->home_time_s, 364 / 7.5 + 2 * 7.5 / 40, 1e-3);
+        rig_close(r);
+    }
+    apt_sim_free(s);
+}
+
+// A controller that does not answer VELPARAMS/HOMEPARAMS: the stage table's
+// values, with a note.
+TEST_INNER(apt_umock_motion_params_fallback, apt_sim_available)
+{
+    apt_sim_device_t d = apt_sim_device_defaults();
+    d.no_params = true;
+    apt_sim_t *s = fx_apt_sim_start(&d, 1);
+    rig_turntable_t *t = NULL;
+    fflush(stderr);
+    const char *errpath = test_path("stderr.txt");
+    int saved = dup(2), fd = open(errpath, O_WRONLY | O_CREAT | O_TRUNC, 0644);
+    dup2(fd, 2);
+    close(fd);
+    int rc = rig_turntable_open_apt(&t, NULL, NULL);
+    fflush(stderr);
+    dup2(saved, 2);
+    close(saved);
+    CHECK(rc == 0);
+    char *err = model_read_file(errpath, NULL);
+    CHECK_CONTAINS(err, "apt K10CR1 serial 55000001: note: no reply to MOT_REQ_VELPARAMS/MOT_REQ_HOMEPARAMS; "
+                        "time estimates and time-outs use the stage table's 10 deg/s, 10 deg/s^2");
+    free(err);
+    if (t) {
+        rig_turntable_info_t info;
+        CHECK(rig_turntable_info(t, &info) == 0);
+        CHECK(strcmp(info.params_from, "table") == 0);
+        CHECK_NEAR(info.speed_deg_s, 10, 1e-9);
+        CHECK_NEAR(info.accel_deg_s2, 10, 1e-9);
+        CHECK_NEAR(info.home_time_s, 72, 1e-9);
+        // and the stage still works
+        CHECK(rig_turntable_home(t, 5) == 0);
+        CHECK(rig_turntable_move_abs_deg(t, 30, 5) == 0);
+        rig_turntable_close(t);
+    }
+    apt_sim_free(s);
+}
+
+// Interrupted homing and moves on the APT stage: MOT_MOVE_STOP profiled (2),
+// then at once (1) for a second interrupt.
+TEST_INNER(apt_umock_watched_interrupts, apt_sim_available)
+{
+    apt_sim_device_t d = apt_sim_device_defaults();
+    d.home_time_s = 5;
+    d.speed_deg_s = 100;
+    d.accel_deg_s2 = 50;                      // a profiled stop from cruise: 2 s
+    apt_sim_t *s = fx_apt_sim_start(&d, 1);
+    rig_turntable_t *t = NULL;
+    CHECK(rig_turntable_open_apt(&t, NULL, NULL) == 0);
+    if (!t) {
+        apt_sim_free(s);
+        return;
+    }
+    interrupter_t it = { .at1_s = 0.3 };
+    rig_turntable_watch_t w = watch_of(&it, "homing");
+    CHECK(rig_turntable_start_home(t) == 0);
+    CHECK(rig_turntable_wait_watched(t, 20, &w) == RIG_ERR_INTERRUPTED);
+    CHECK_MSG(model_now_s() - it.t1_s < 0.5, "stood %.2f s after the interrupt", model_now_s() - it.t1_s);
+    CHECK_CONTAINS(model_last_error(), "apt K10CR1 serial 55000001: homing interrupted: the stage stopped at ");
+    apt_sim_stats_t ss;
+    apt_sim_stats(s, 0, &ss);
+    CHECK(ss.n_stop == 1 && ss.last_stop_mode == 2);
+    rig_turntable_status_t st;
+    CHECK(rig_turntable_status(t, &st) == 0 && !st.moving && !st.homed);
+
+    // homed, then a long move interrupted twice: at once
+    w = watch_of(&(interrupter_t){ 0 }, "homing");
+    CHECK(rig_turntable_start_home(t) == 0);
+    CHECK(rig_turntable_wait_watched(t, 20, &w) == 0);
+    interrupter_t it2 = { .at1_s = 2.5, .at2_s = 2.8 };
+    w = watch_of(&it2, "the move to 1000 deg");
+    CHECK(rig_turntable_start_move_abs_deg(t, 1000) == 0);
+    CHECK(rig_turntable_wait_watched(t, 30, &w) == RIG_ERR_INTERRUPTED);
+    CHECK_MSG(model_now_s() - it2.t2_s < 0.5, "stood %.2f s after the second interrupt", model_now_s() - it2.t2_s);
+    CHECK_CONTAINS(model_last_error(), "the move to 1000 deg interrupted: the stage stopped at once at ");
+    apt_sim_stats(s, 0, &ss);
+    CHECK(ss.n_stop == 3 && ss.last_stop_mode == 1);
+    CHECK(rig_turntable_status(t, &st) == 0 && !st.moving && st.angle_deg > 100 && st.angle_deg < 900);
+    rig_turntable_close(t);
     apt_sim_free(s);
 }
