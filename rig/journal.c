@@ -6,6 +6,7 @@
 #include <errno.h>
 #include <glib.h>
 #include <jansson.h>
+#include <math.h>
 #include <pthread.h>
 #include <sqlite3.h>
 #include <stdarg.h>
@@ -60,10 +61,26 @@ static const struct {
 
 typedef enum { FRAMES_CREATE, FRAMES_INSERT, FRAMES_SELECT } frames_sql_t;
 
+// Does the journal's frames table have this column? (Journals of an older refl
+// lack the later ones: gain_unit, black_level, ...)
+static bool frames_has_column(sqlite3 *db, const char *column)
+{
+    sqlite3_stmt *s = NULL;
+    bool has = true;   // when the question cannot be asked, the SELECT says what is wrong
+    if (sqlite3_prepare_v2(db, "SELECT count(*) FROM pragma_table_info('frames') WHERE name=?", -1, &s, NULL) ==
+        SQLITE_OK) {
+        sqlite3_bind_text(s, 1, column, -1, SQLITE_STATIC);
+        if (sqlite3_step(s) == SQLITE_ROW) has = sqlite3_column_int(s, 0) > 0;
+    }
+    sqlite3_finalize(s);
+    return has;
+}
+
 // "CREATE TABLE frames(...);", "INSERT INTO frames VALUES(?,...)" or
-// "SELECT ... FROM frames ORDER BY step" (the columns rig_frame_row_t holds).
+// "SELECT ... FROM frames ORDER BY step" (the columns rig_frame_row_t holds;
+// with db, a column an older journal lacks reads as NULL: "" or 0).
 // Caller g_free()s.
-static char *frames_sql(frames_sql_t what)
+static char *frames_sql(frames_sql_t what, sqlite3 *db)
 {
     GString *q = g_string_new(what == FRAMES_CREATE   ? "CREATE TABLE frames("
                               : what == FRAMES_INSERT ? "INSERT INTO frames VALUES("
@@ -74,6 +91,7 @@ static char *frames_sql(frames_sql_t what)
         if (k++) g_string_append(q, what == FRAMES_CREATE ? ", " : ",");
         if (what == FRAMES_CREATE) g_string_append_printf(q, "%s %s", frame_columns[i].column, frame_columns[i].decl);
         else if (what == FRAMES_INSERT) g_string_append(q, "?");
+        else if (db && !frames_has_column(db, frame_columns[i].column)) g_string_append(q, "NULL");
         else g_string_append(q, frame_columns[i].column);
     }
     g_string_append(q, what == FRAMES_CREATE ? ");" : what == FRAMES_INSERT ? ")" : " FROM frames ORDER BY step");
@@ -195,7 +213,7 @@ int rig_journal_create(rig_journal_t **out, const char *dir, const rig_plan_t *p
     sqlite3_stmt *s = NULL;
     char now[40];
     model_utc_text(model_realtime_s(), now);
-    char *frames = frames_sql(FRAMES_CREATE);
+    char *frames = frames_sql(FRAMES_CREATE, NULL);
     bool made = sqlite3_exec(j->db, "BEGIN", NULL, NULL, NULL) == SQLITE_OK &&
                 sqlite3_exec(j->db, schema, NULL, NULL, NULL) == SQLITE_OK &&
                 sqlite3_exec(j->db, frames, NULL, NULL, NULL) == SQLITE_OK &&
@@ -402,7 +420,7 @@ int rig_journal_frames(rig_journal_t *j, rig_frame_row_t **rows, int *n)
     sqlite3_stmt *s = NULL;
     int rc = 0, k = 0;
     pthread_mutex_lock(&j->lock);
-    char *sql = frames_sql(FRAMES_SELECT);
+    char *sql = frames_sql(FRAMES_SELECT, j->db);
     if (sqlite3_prepare_v2(j->db, sql, -1, &s, NULL) != SQLITE_OK) {
         rc = jfail(j, "cannot read the frames");
     } else {
@@ -429,7 +447,7 @@ int rig_journal_frame_done(rig_journal_t *j, const rig_frame_row_t *f)
         rc = jfail(j, "cannot begin a frame transaction");
         goto done;
     }
-    char *sql = frames_sql(FRAMES_INSERT);
+    char *sql = frames_sql(FRAMES_INSERT, NULL);
     bool prepared = sqlite3_prepare_v2(j->db, sql, -1, &s, NULL) == SQLITE_OK &&
                     sqlite3_prepare_v2(j->db, "UPDATE steps SET status='done' WHERE idx=? AND status='pending'", -1,
                                        &u, NULL) == SQLITE_OK;
@@ -526,6 +544,22 @@ int rig_journal_state(rig_journal_t *j, char *out, size_t size)
 #define CSV_HEAD_UTC(name)
 #define CSV_HEAD_(kind, name, column, decl, csv, size) CSV_HEAD_##kind(name)
 
+// A text field: quoted (quotes doubled) when it holds a comma, quote or line break.
+static void csv_text(FILE *f, const char *sep, const char *s)
+{
+    fputs(sep, f);
+    if (!strpbrk(s, ",\"\n\r")) {
+        fputs(s, f);
+        return;
+    }
+    fputc('"', f);
+    for (; *s; s++) {
+        if (*s == '"') fputc('"', f);
+        fputc(*s, f);
+    }
+    fputc('"', f);
+}
+
 void rig_frame_rows_write_csv(FILE *f, const rig_frame_row_t *rows, int n)
 {
     static const char head[] = RIG_FRAME_COLUMNS(CSV_HEAD_);
@@ -535,7 +569,7 @@ void rig_frame_rows_write_csv(FILE *f, const rig_frame_row_t *rows, int n)
         const char *sep = "";
 #define CSV_INT(name, fmt)  fprintf(f, "%s" fmt, sep, r->name), sep = ",";
 #define CSV_REAL(name, fmt) fprintf(f, "%s" fmt, sep, r->name), sep = ",";
-#define CSV_TEXT(name, fmt) fprintf(f, "%s" fmt, sep, r->name), sep = ",";
+#define CSV_TEXT(name, fmt) csv_text(f, sep, r->name), sep = ",";
 #define CSV_U64(name, fmt)  fprintf(f, "%s" fmt, sep, (unsigned long long)r->name), sep = ",";
 #define CSV_UTC(name, fmt)
 #define CSV_(kind, name, column, decl, csv, size) CSV_##kind(name, csv)
@@ -553,7 +587,7 @@ json_t *rig_frame_rows_json(const rig_frame_row_t *rows, int n)
         json_t *o = json_object();
         if (!o) break;
 #define JSON_INT(name)  json_object_set_new(o, #name, json_integer(r->name));
-#define JSON_REAL(name) json_object_set_new(o, #name, json_real(r->name));
+#define JSON_REAL(name) json_object_set_new(o, #name, isfinite(r->name) ? json_real(r->name) : json_null());
 #define JSON_TEXT(name) json_object_set_new(o, #name, json_string(r->name));
 #define JSON_U64(name)  json_object_set_new(o, #name, json_integer((json_int_t)r->name));
 #define JSON_UTC(name)
