@@ -337,6 +337,29 @@ TEST(camera_settings_in_session_and_status)
     CHECK_CONTAINS(out, "camera_settings: ExposureAuto=Off (was Continuous)");
     g_free(out);
     g_free(err);
+
+    // A journal of an older refl (no gain_unit ... camera_settings columns)
+    // still reads: the missing columns are empty (a gain without unit is dB).
+    d = NULL;
+    CHECK(sqlite3_open(db, &d) == SQLITE_OK);
+    static const char *const newer[] = { "gain_unit", "black_level", "gamma", "temperature_c", "firmware",
+                                         "camera_settings" };
+    for (size_t i = 0; d && i < sizeof newer / sizeof newer[0]; i++) {
+        char sql[128];
+        snprintf(sql, sizeof sql, "ALTER TABLE frames DROP COLUMN %s", newer[i]);
+        CHECK_MSG(sqlite3_exec(d, sql, NULL, NULL, NULL) == SQLITE_OK, "%s: %s", sql, sqlite3_errmsg(d));
+    }
+    sqlite3_close(d);
+    rc = test_refl_run(60, &out, &err, "session", "export", dir, "--format", "csv", NULL);
+    CHECK_MSG(rc == 0, "export of an older journal: %s", err);
+    CHECK_CONTAINS(out, ",gain_unit,black_level,gamma,temperature_c,firmware,camera_settings\n");
+    CHECK_CONTAINS(out, ",,0,0,0.00,,\n");
+    g_free(out);
+    g_free(err);
+    rc = test_refl_run(60, &out, &err, "session", "check", dir, NULL);
+    CHECK_MSG(rc == 0, "check of an older journal: %s", err);
+    g_free(out);
+    g_free(err);
 }
 
 // [camera] / [rig] packet_size and packet_delay: parsed, range-checked (the
