@@ -25,6 +25,7 @@ struct rig_journal {
     sqlite3        *db;
     char           *path;
     pthread_mutex_t lock;
+    bool            frame_columns_ok;   // the frames table has every column (add_frame_columns)
 };
 
 static const char schema[] =
@@ -83,8 +84,13 @@ static bool frames_has_column(sqlite3 *db, const char *column)
 static char *frames_sql(frames_sql_t what, sqlite3 *db)
 {
     GString *q = g_string_new(what == FRAMES_CREATE   ? "CREATE TABLE frames("
-                              : what == FRAMES_INSERT ? "INSERT INTO frames VALUES("
+                              : what == FRAMES_INSERT ? "INSERT INTO frames("
                                                       : "SELECT ");
+    if (what == FRAMES_INSERT) {   // by name: a journal of an older refl has its columns in another order
+        for (int i = 0; i < NFRAME_COLUMNS; i++)
+            g_string_append_printf(q, "%s%s", i ? "," : "", frame_columns[i].column);
+        g_string_append(q, ") VALUES(");
+    }
     int k = 0;
     for (int i = 0; i < NFRAME_COLUMNS; i++) {
         if (what == FRAMES_SELECT && frame_columns[i].utc) continue;
@@ -438,6 +444,23 @@ int rig_journal_frames(rig_journal_t *j, rig_frame_row_t **rows, int *n)
     return 0;
 }
 
+// A journal of an older refl, resumed: the frame columns it lacks are added
+// (its earlier frames hold NULL there). Within the frame's transaction.
+static int add_frame_columns(rig_journal_t *j)
+{
+    if (j->frame_columns_ok) return 0;
+    for (int i = 0; i < NFRAME_COLUMNS; i++) {
+        if (frames_has_column(j->db, frame_columns[i].column)) continue;
+        char *sql = g_strdup_printf("ALTER TABLE frames ADD COLUMN %s %.*s", frame_columns[i].column,
+                                    (int)strcspn(frame_columns[i].decl, " "), frame_columns[i].decl);
+        int ok = sqlite3_exec(j->db, sql, NULL, NULL, NULL);
+        g_free(sql);
+        if (ok != SQLITE_OK) return jfail(j, "cannot add a frame column to an older journal");
+    }
+    j->frame_columns_ok = true;
+    return 0;
+}
+
 int rig_journal_frame_done(rig_journal_t *j, const rig_frame_row_t *f)
 {
     sqlite3_stmt *s = NULL, *u = NULL;
@@ -447,6 +470,7 @@ int rig_journal_frame_done(rig_journal_t *j, const rig_frame_row_t *f)
         rc = jfail(j, "cannot begin a frame transaction");
         goto done;
     }
+    if ((rc = add_frame_columns(j))) goto rollback;
     char *sql = frames_sql(FRAMES_INSERT, NULL);
     bool prepared = sqlite3_prepare_v2(j->db, sql, -1, &s, NULL) == SQLITE_OK &&
                     sqlite3_prepare_v2(j->db, "UPDATE steps SET status='done' WHERE idx=? AND status='pending'", -1,
@@ -469,6 +493,7 @@ int rig_journal_frame_done(rig_journal_t *j, const rig_frame_row_t *f)
     goto done;
 rollback:
     sqlite3_exec(j->db, "ROLLBACK", NULL, NULL, NULL);
+    j->frame_columns_ok = false;   // an added column went with the transaction
 done:
     sqlite3_finalize(s);
     sqlite3_finalize(u);

@@ -131,7 +131,8 @@ typedef struct rig_journal rig_journal_t;
 // older refl, whose gains were dB), black_level and temperature_c (NULL in
 // the database where the camera has none; read back as 0), gamma (1 when
 // off), firmware, camera_settings (the automatics, gamma, LUT and transport
-// settings refl found, switched off and read back).
+// settings refl found, switched off and read back). Journals of an older refl
+// lack the later columns: they read as NULL, and a resume adds them.
 #define RIG_FRAME_COLUMNS(_)                                                                    \
     _(INT,  step,               "step",               "INTEGER PRIMARY KEY REFERENCES steps(idx)", "%d", 0) \
     _(TEXT, file,               "file",               "TEXT UNIQUE NOT NULL", "%s",   64)  \

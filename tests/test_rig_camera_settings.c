@@ -360,6 +360,27 @@ TEST(camera_settings_in_session_and_status)
     CHECK_MSG(rc == 0, "check of an older journal: %s", err);
     g_free(out);
     g_free(err);
+
+    // ... and resumes: its last step undone, refl capture --resume adds the
+    // columns and records the settings with the new frame.
+    char f1[4200];
+    snprintf(f1, sizeof f1, "%s/frames/s000001.png", dir);
+    CHECK(remove(f1) == 0);
+    CHECK(sqlite3_open(db, &d) == SQLITE_OK);
+    CHECK(sqlite3_exec(d, "DELETE FROM frames WHERE step=1; UPDATE steps SET status='pending' WHERE idx=1; "
+                       "UPDATE session SET state='paused'", NULL, NULL, NULL) == SQLITE_OK);
+    sqlite3_close(d);
+    rc = test_refl_run(120, &out, &err, "capture", "--resume", dir, NULL);
+    CHECK_MSG(rc == 0, "resume of an older journal: %s", err);
+    g_free(out);
+    g_free(err);
+    rc = test_refl_run(60, &out, &err, "session", "export", dir, "--format", "csv", NULL);
+    CHECK_MSG(rc == 0, "export: %s", err);
+    CHECK_CONTAINS(out, ",,0,0,0.00,,\n");                                   // step 0: as the older refl wrote it
+    CHECK_CONTAINS(out, ",dB,0,1,");                                          // step 1: this refl's
+    CHECK_CONTAINS(out, ",refl-gv 1.0,ExposureAuto=Off (was Continuous)");
+    g_free(out);
+    g_free(err);
 }
 
 // [camera] / [rig] packet_size and packet_delay: parsed, range-checked (the
