@@ -273,9 +273,9 @@ static int do_identify(rig_t *r)
         rig_frame_meta_t m;
         if ((rc = rig_camera_settings(r->camera, &m))) return rc;
         printf("camera: %s\ncamera_backend: %s\ncamera_vendor: %s\ncamera_model: %s\ncamera_serial: %s\n"
-               "camera_sensor_region: %d x %d\n",
-               rig_camera_name(r->camera), rig_camera_backend(r->camera), m.vendor, m.model, m.serial, m.width,
-               m.height);
+               "camera_firmware: %s\ncamera_sensor_region: %d x %d\n",
+               rig_camera_name(r->camera), rig_camera_backend(r->camera), m.vendor, m.model, m.serial,
+               m.firmware[0] ? m.firmware : "none (not stated)", m.width, m.height);
     } else {
         printf("camera: none\n");
     }

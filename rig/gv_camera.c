@@ -62,7 +62,8 @@
 #define REG_LUT_ENABLE         0xa02c   // LUTEnable: 0 / 1
 #define REG_GAMMA              0xa030   // float64 big-endian
 #define REG_BLACK_LEVEL        0xa038   // float64 big-endian, DN added to every pixel
-#define REG_FIRMWARE           0xa040   // DeviceFirmwareVersion, 32 bytes
+#define REG_FIRMWARE           0xa040   // DeviceFirmwareVersion, 32 bytes (to 0xa05f)
+#define REG_CONTRAST_AUTO      0xa060   // ContrastAuto, a vendor automatic: 0 Off, 1 Once, 2 Continuous
 #define REG_GAIN_AUTO          0x0114   // GainAuto of Aravis's fake camera XML: 1 Off, 3 Once, 2 Continuous
 #define GAIN_AUTO_OFF          1
 #define GVBS_SCPD0             0x0d08   // stream channel 0 packet delay, timestamp ticks
@@ -234,7 +235,7 @@ static bool snapshot_settings(rig_gv_camera_t *g, rig_frame_meta_t *m, guint32 *
 static void tone_curve(rig_gv_camera_t *g, const rig_frame_meta_t *m, uint16_t *pix, size_t n)
 {
     double maxv = (double)((1u << m->bits) - 1);
-    bool lut = reg_get(g, REG_LUT_ENABLE) != 0;
+    bool lut = reg_get(g, REG_LUT_ENABLE) != 0 || reg_get(g, REG_CONTRAST_AUTO) != 0;
     if (m->gamma == 1.0 && !lut && m->black_level == 0) return;
     for (size_t i = 0; i < n; i++) {
         double v = fmin((double)pix[i] + m->black_level, maxv);
@@ -729,6 +730,8 @@ static const char xml_added[] =
 static const char xml_radiometric[] =
     XML_AUTO_ENUM("ExposureAuto", "Automatic exposure: while on, frames are exposed 1.5 x ExposureTime.", "0xa020")
     XML_AUTO_ENUM("BalanceWhiteAuto", "Automatic white balance (a mono sensor ignores it).", "0xa024")
+    XML_AUTO_ENUM("ContrastAuto", "A vendor's own automatic (not in the SFNC): found by a client only in the "
+                  "feature tree; while on, frames get the LUT as with LUTEnable.", "0xa060")
     XML_BOOL("GammaEnable", "Gamma curve on the pixel values.", "0xa028")
     XML_FLOAT("Gamma", "The gamma of the curve v = max (v / max)^Gamma.", "0xa030", "0.1", "4.0")
     XML_BOOL("LUTEnable", "The camera's look-up table v = sqrt(v max) on the pixel values.", "0xa02c")
@@ -827,7 +830,8 @@ static char *make_genicam_xml(const char *gain_unit, const char *refuse_off)
     if (!bad && !xml_edit(x, "<Category Name=\"AnalogControl\"", "<pFeature>GainAuto</pFeature>",
                           "<pFeature>GainAuto</pFeature>\n\t\t<pFeature>BalanceWhiteAuto</pFeature>"
                           "\n\t\t<pFeature>BlackLevel</pFeature>\n\t\t<pFeature>GammaEnable</pFeature>"
-                          "\n\t\t<pFeature>Gamma</pFeature>\n\t\t<pFeature>LUTEnable</pFeature>"))
+                          "\n\t\t<pFeature>Gamma</pFeature>\n\t\t<pFeature>LUTEnable</pFeature>"
+                          "\n\t\t<pFeature>ContrastAuto</pFeature>"))
         bad = "AnalogControl/GainAuto";
     // Binning is not simulated: do not advertise it.
     if (!bad && !xml_cut(x, "<pFeature>BinningHorizontal</pFeature>", "</pFeature>")) bad = "BinningHorizontal";
@@ -1157,6 +1161,7 @@ registers:
     arv_fake_camera_write_register(g->fake, REG_EXPOSURE_AUTO, 2);   // automatics on, as a real camera starts
     arv_fake_camera_write_register(g->fake, REG_GAIN_AUTO, 2);
     arv_fake_camera_write_register(g->fake, REG_BALANCE_WHITE_AUTO, 2);
+    arv_fake_camera_write_register(g->fake, REG_CONTRAST_AUTO, 2);
     arv_fake_camera_write_register(g->fake, REG_GAMMA_ENABLE, 1);
     arv_fake_camera_write_register(g->fake, REG_LUT_ENABLE, 1);
     reg_set_double(g, REG_GAMMA, GAMMA_DEFAULT);

@@ -16,8 +16,9 @@
 //     (Off | Once | Continuous; on: frames exposed 1.5 x ExposureTime), GainAuto
 //     (on: 6 dB more than Gain), BalanceWhiteAuto (ignored: mono sensor),
 //     GammaEnable (1) + Gamma (0.45: v = max (v/max)^Gamma), LUTEnable (1: the
-//     LUT v = sqrt(v max)), BlackLevel (DN added, default 0): a client that
-//     leaves them on gets frames unlike its settings;
+//     LUT v = sqrt(v max)), BlackLevel (DN added, default 0), and a vendor's own
+//     ContrastAuto (on: the same LUT; not a standard name, found in the feature
+//     tree): a client that leaves them on gets frames unlike its settings;
 //   DeviceFirmwareVersion, GevSCPSPacketSize (bytes, 576 .. 9000, default 8192:
 //     the GVSP packets' size), GevSCPD (ticks, 0 .. 1e6; stored and read back,
 //     no delay is made),

@@ -101,6 +101,7 @@ TEST(camera_settings_automatics_off_recorded)
     CHECK(!strcmp(feature_text(k.dev, "BalanceWhiteAuto", b, sizeof b), "Continuous"));
     CHECK(!strcmp(feature_text(k.dev, "GammaEnable", b, sizeof b), "1"));
     CHECK(!strcmp(feature_text(k.dev, "LUTEnable", b, sizeof b), "1"));
+    CHECK(!strcmp(feature_text(k.dev, "ContrastAuto", b, sizeof b), "Continuous"));   // a vendor's own
 
     int rc = rig_camera_open_aravis(&c, k.id);
     CHECK_MSG(rc == 0, "open: %d %s", rc, model_last_error());
@@ -111,6 +112,7 @@ TEST(camera_settings_automatics_off_recorded)
     CHECK(!strcmp(feature_text(k.dev, "BalanceWhiteAuto", b, sizeof b), "Off"));
     CHECK(!strcmp(feature_text(k.dev, "GammaEnable", b, sizeof b), "0"));
     CHECK(!strcmp(feature_text(k.dev, "LUTEnable", b, sizeof b), "0"));
+    CHECK(!strcmp(feature_text(k.dev, "ContrastAuto", b, sizeof b), "Off"));
 
     CHECK(rig_camera_set_pixel_format(c, "Mono12") == 0);
     CHECK(rig_camera_set_exposure_us(c, 2000) == 0);
@@ -126,6 +128,7 @@ TEST(camera_settings_automatics_off_recorded)
     CHECK_CONTAINS(s.camera_settings, "BalanceWhiteAuto=Off (was Continuous)");
     CHECK_CONTAINS(s.camera_settings, "GammaEnable=0 (was 1)");
     CHECK_CONTAINS(s.camera_settings, "LUTEnable=0 (was 1)");
+    CHECK_CONTAINS(s.camera_settings, "ContrastAuto=Off (was Continuous)");
     CHECK_CONTAINS(s.camera_settings, "BlackLevel=0");
     CHECK_CONTAINS(s.camera_settings, "GevSCPSPacketSize=8192");
 
@@ -142,6 +145,7 @@ TEST(camera_settings_automatics_off_recorded)
     // by the test's own Aravis client): its frames are not the sensor's values.
     static const struct { const char *name; bool boolean; } on[] = {
         { "ExposureAuto", false }, { "GammaEnable", true }, { "LUTEnable", true }, { "GainAuto", false },
+        { "ContrastAuto", false },
     };
     for (size_t i = 0; i < sizeof on / sizeof on[0]; i++) {
         GError *e = NULL;
