@@ -89,7 +89,7 @@ void         calib_set_free(calib_set_t *c);
 typedef struct {
     int             lamp;           // index in calib lamps
     double          angle_deg;      // measured turntable angle
-    double          exposure_us, gain_db;
+    double          exposure_us, gain_db;   // gain_db: the frame's gain relative to the calibration's, dB
     double          q[2];           // window centre, pixels
     model_cosines_t c;
     bool            has_disc;       // lit by a finite lamp near the mirror direction: disc holds the

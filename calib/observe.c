@@ -228,7 +228,7 @@ static bool window_observation(const observe_t *ob, const rig_frame_row_t *r, in
     model_vec3_t dl[4];
     bool has_disc = c.nh > cos(20 * M_PI / 180) && model_lamp_disc_dirs(L->l, L->d_mm, cal->lamp_radius_mm[lamp], dl);
     *obs = (calib_obs_t){ .lamp = lamp, .angle_deg = r->measured_deg, .exposure_us = r->exposure_us,
-                          .gain_db = r->gain, .q = { w->q[0], w->q[1] }, .c = c, .d_mm = L->d_mm,
+                          .gain_db = 20 * log10(gf), .q = { w->q[0], w->q[1] }, .c = c, .d_mm = L->d_mm,
                           .s_dn_per_us = sig / (sg / n) / (r->exposure_us * gf), .step = r->step,
                           .face = p->face, .has_disc = has_disc };
     for (int k = 0; has_disc && k < 4; k++) obs->disc[k] = model_cosines(p->n, dl[k], p->v);
@@ -283,7 +283,12 @@ static bool observe_frame(observe_t *ob, int f, const model_pixel_info_t *pw, co
         goto done;
     }
     double sat = 0.95 * (cal->saturation_dn > 0 ? cal->saturation_dn : bits_full(r->pixel_format));
-    double gf = pow(10.0, r->gain / 20);
+    // the gain as a factor, by the frame's unit (model_gain_factor; the
+    // calibration's sensitivity is at 0 dB)
+    char what[512];
+    snprintf(what, sizeof what, "%s/%s (step %d)", ob->session_dir, r->file, r->step);
+    double gf;
+    if (!model_gain_factor(r->gain, r->gain_unit, 0, "dB", what, &gf)) goto done;
     for (int w = 0; w < ob->nw; w++) {
         if (taken[(size_t)w * nl + lamp]) continue;
         calib_obs_t obs;

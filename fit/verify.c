@@ -755,6 +755,11 @@ static bool fit_check(fit_t *F, const verify_priors_t *pr)
             model_error(im->name, 0, "lamp mask 0x%x names lamps beyond the %d given", im->lamps_on, F->nl);
             return false;
         }
+        double gf;
+        if (!model_gain_factor(im->gain_db, "dB", 0, "dB", im->name, &gf)) {
+            model_error(NULL, 0, "%s", model_last_error());
+            return false;
+        }
         F->npts += v->gw * v->gh;
     }
     return true;
@@ -812,6 +817,16 @@ static bool fit_alloc(fit_t *F)
 // field (in model for now), saturation. *Pa0: the offset's start (0 with the
 // offset map; else the median of the background windows, or the darkest
 // usable one); *var_px_fallback: without K, the pixel noise as the median
+// An image's gain as a factor: verify_image_t.gain_db is in dB relative to the
+// calibration (the readers convert a camera's own unit, model_gain_factor);
+// fit_check checked it.
+static double image_gain_factor(const verify_image_t *im)
+{
+    double gf = 1;
+    model_gain_factor(im->gain_db, "dB", 0, "dB", im->name, &gf);
+    return gf;
+}
+
 // window variance of the usable points. false: out of memory.
 static bool measure_windows(fit_t *F, int m, int first_pt, double *Pa0, double *var_px_fallback)
 {
@@ -821,7 +836,7 @@ static bool measure_windows(fit_t *F, int m, int first_pt, double *Pa0, double *
     const verify_camera_t *cm = &F->cams[im->camera];
     const int w = opt->window_px, h = w / 2, n = v->gw * v->gh;
     const float *off = opt->use_flat ? cm->offset_dn : NULL, *flat = opt->use_flat ? cm->flat : NULL;
-    double gf = pow(10, im->gain_db / 20), Kg = cm->K_dn_per_e * gf;
+    double gf = image_gain_factor(im), Kg = cm->K_dn_per_e * gf;
     double sat = cm->saturation_dn > 0 ? cm->saturation_dn : INFINITY;
     double a_nl = opt->use_flat && cm->nonlin_a_per_dn > 0 ? cm->nonlin_a_per_dn / gf : 0;
     double *tmp = malloc((size_t)n * sizeof *tmp);
@@ -898,7 +913,7 @@ static void image_fit_points(fit_t *F, int m, int first_pt, double Pa0, double v
     const verify_image_t *im = &F->imgs[m];
     const verify_camera_t *cm = &F->cams[im->camera];
     const int w = opt->window_px;
-    double gf = pow(10, im->gain_db / 20), E = im->exposure_us * gf, Kg = cm->K_dn_per_e * gf;
+    double gf = image_gain_factor(im), E = im->exposure_us * gf, Kg = cm->K_dn_per_e * gf;
     for (int g = 0; g < v->gw * v->gh; g++) {
         int k = first_pt + g;
         verify_point_t *p = &F->out->points[k];

@@ -309,16 +309,31 @@ static float *read_pixels(const char *path, int *W, int *H, model_meta_t *meta)
     return px;
 }
 
-// The gain of the metadata "gain" ("6" or "6 dB"; 0 when unreadable).
-static double meta_gain_db(const char *ga)
+// The gain of the metadata, in dB relative to the calibration (at 0 dB):
+// "gain" ("6", or "6 UNIT") in the unit of "gain_unit" (else the one after the
+// number; neither: dB, as refl wrote frames before it kept the unit),
+// converted by model_gain_factor. false + message naming the image.
+static bool meta_gain_db(const char *path, const char *ga, const char *unit, double *gain_db)
 {
-    double gd;
-    if (model_parse_double(ga, &gd)) return gd;
-    char tmp[64];
+    double g;
+    char tmp[64], suffix[32] = "";
     snprintf(tmp, sizeof tmp, "%.63s", ga);
     char *sp = strchr(tmp, ' ');
-    if (sp) *sp = 0;
-    return model_parse_double(tmp, &gd) ? gd : 0;
+    if (sp) {   // "6 dB"; a remark in parentheses ("6 (the camera's unit; ...)", refl rig snap) is no unit
+        *sp = 0;
+        if (sp[1] != '(') snprintf(suffix, sizeof suffix, "%.*s", (int)strcspn(sp + 1, " "), sp + 1);
+    }
+    if (!model_parse_double(tmp, &g)) {
+        model_error(path, 0, "metadata gain '%s' is not a number: give --gain-db", ga);
+        return false;
+    }
+    double f;
+    if (!model_gain_factor(g, unit && *unit ? unit : suffix, 0, "dB", path, &f)) {
+        model_error(NULL, 0, "%s", model_last_error());
+        return false;
+    }
+    *gain_db = 20 * log10(f);
+    return true;
 }
 
 // Image m's angle, lamps, exposure and gain: the options, else its metadata. false + message.
@@ -351,7 +366,7 @@ static bool image_conditions(const vf_t *V, verify_image_t *im, const model_meta
         ok = false;
     }
     if (o->have_gain) im->gain_db = o->gain_db;
-    else if (ga) im->gain_db = meta_gain_db(ga);
+    else if (ga && !meta_gain_db(path, ga, model_meta_get(meta, "gain_unit"), &im->gain_db)) ok = false;
     return ok;
 }
 
@@ -436,7 +451,9 @@ static bool synthetic_image(const vf_t *V, const verify_result_t *res, int m, fl
     }
     L.lamps = ll;
     model_shading_t sh = model_shading_default();
-    sh.kc = im->exposure_us * pow(10, im->gain_db / 20) * res->kc[im->camera];
+    double gf = 1;   // gain_db: dB relative to the calibration (meta_gain_db); checked by the fit
+    model_gain_factor(im->gain_db, "dB", 0, "dB", im->name, &gf);
+    sh.kc = im->exposure_us * gf * res->kc[im->camera];
     sh.Pa = res->Pa[m];
     sh.gain_map = V->o->opt.use_flat ? vc->flat : NULL;
     sh.nthreads = V->o->opt.threads;

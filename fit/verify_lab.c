@@ -175,7 +175,9 @@ bool verify_lab_image(verify_lab_t *L, int angle_index, uint32_t lamps_on, const
         return false;
     }
     size_t npx = (size_t)L->W * L->H;
-    double kc = L->kc_per_us * L->exposure_us * pow(10, L->gain_db / 20) * kc_scale;
+    double gf = 1;   // the virtual camera's Gain is in dB (its GenICam <Unit>); rig_virtual_expected checked it
+    model_gain_factor(L->gain_db, "dB", 0, "dB", "verify lab", &gf);
+    double kc = L->kc_per_us * L->exposure_us * gf * kc_scale;
     for (size_t p = 0; p < npx; p++) out[p] = (float)L->sensor.dark_offset_dn;
     for (int i = 0; i < L->nl; i++) {
         if (!((lamps_on >> i) & 1)) continue;

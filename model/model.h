@@ -592,6 +592,19 @@ void model_sensor_apply_patterns(const model_sensor_t *s, int width, int height,
 void model_sensor_mean(const model_sensor_t *s, int width, int height, const float *prnu_gain,
                        const float *dsnu_dn, float *img);
 
+// A camera's gain as a signal factor (model/sensor.c), the one conversion of a
+// recorded gain. unit is the camera's own (GenICam <Unit> of its Gain feature,
+// recorded with every frame): "dB" -> 10^(gain/20); "x", "times", "linear" or
+// "factor" -> gain itself; NULL or "" -> dB (frames of sessions recorded before
+// refl kept the unit: their gain was GenICam's Gain, in dB). Any other unit
+// ("raw", a vendor's) has no known scale: such a frame is usable only at the
+// gain its calibration was made at (cal_gain, cal_unit), and its factor is then
+// that of the calibration. *factor is relative to the calibration's gain (for
+// a calibration at 0 dB, the plain factor). false (model_error_set naming
+// `what`, e.g. the frame, its gain and unit) when the gain cannot be converted.
+bool model_gain_factor(double gain, const char *unit, double cal_gain, const char *cal_unit, const char *what,
+                       double *factor);
+
 // ---------------------------------------------------------------------------
 // Image files (model/image.c). Text metadata is a NULL-terminated list of
 // key, value, key, value, ..., NULL (may be NULL): PNG tEXt chunks, TIFF

@@ -36,6 +36,7 @@
 #include <pthread.h>
 #include <stdlib.h>
 #include <string.h>
+#include <strings.h>
 
 #include "model/internal.h"
 
@@ -529,4 +530,52 @@ void model_sensor_mean(const model_sensor_t *s, int width, int height, const flo
                        const float *dsnu_dn, float *img)
 {
     apply(s, width, height, prnu_gain, dsnu_dn, img, false, false);
+}
+
+// ---------------------------------------------------------------------------
+// Gain units
+
+typedef enum { GAIN_DB, GAIN_LINEAR, GAIN_OTHER } gain_unit_t;
+
+static gain_unit_t gain_unit_kind(const char *unit)
+{
+    if (!unit || !*unit || !strcasecmp(unit, "dB")) return GAIN_DB;   // "": sessions before units were kept
+    static const char *const linear[] = { "x", "times", "linear", "factor" };
+    for (size_t i = 0; i < sizeof linear / sizeof linear[0]; i++)
+        if (!strcasecmp(unit, linear[i])) return GAIN_LINEAR;
+    return GAIN_OTHER;
+}
+
+// The factor of a gain in a known unit (false for a linear gain <= 0 or not finite).
+static bool gain_linear(double gain, gain_unit_t k, double *f)
+{
+    *f = k == GAIN_DB ? pow(10.0, gain / 20.0) : gain;
+    return isfinite(gain) && isfinite(*f) && *f > 0;
+}
+
+bool model_gain_factor(double gain, const char *unit, double cal_gain, const char *cal_unit, const char *what,
+                       double *factor)
+{
+    const char *w = what && *what ? what : "gain";
+    const char *u = unit && *unit ? unit : "dB";
+    const char *cu = cal_unit && *cal_unit ? cal_unit : "dB";
+    gain_unit_t k = gain_unit_kind(unit), ck = gain_unit_kind(cal_unit);
+    if (k == GAIN_OTHER || ck == GAIN_OTHER) {
+        if (!strcmp(u, cu) && gain == cal_gain) {
+            *factor = 1;
+            return true;
+        }
+        model_error_set(NULL, 0, "%s: gain %.10g in unit '%s' has no known scale (not dB or a factor): only frames "
+                        "at the calibration's gain (%.10g %s) are usable; capture at that gain", w, gain, u, cal_gain,
+                        cu);
+        return false;
+    }
+    double f, fc;
+    if (!gain_linear(gain, k, &f) || !gain_linear(cal_gain, ck, &fc)) {
+        model_error_set(NULL, 0, "%s: gain %.10g %s (calibration at %.10g %s) is not a usable gain", w, gain, u,
+                        cal_gain, cu);
+        return false;
+    }
+    *factor = f / fc;
+    return true;
 }

@@ -51,6 +51,15 @@ int rig_camera_set_region(rig_camera_t *c, int x, int y, int width, int height)
     CAMERA_OP(c, set_region, "setting the region", c, x, y, width, height);
 }
 
+int rig_camera_set_stream_packets(rig_camera_t *c, long packet_size, long packet_delay)
+{
+    if (packet_size < -1 || packet_delay < -1)
+        return rig_fail(RIG_ERR_INVALID, "%s: packet size %ld / delay %ld: give -1 to leave one unchanged",
+                        c ? c->name : "camera", packet_size, packet_delay);
+    if (packet_size < 0 && packet_delay < 0) return check_cam(c, "setting the stream packets");
+    CAMERA_OP(c, set_stream_packets, "setting the stream packets", c, packet_size, packet_delay);
+}
+
 int rig_camera_settings(rig_camera_t *c, rig_frame_meta_t *out)
 {
     if (!out) return rig_fail(RIG_ERR_INVALID, "%s: NULL settings output", c ? c->name : "camera");

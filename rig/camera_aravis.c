@@ -24,6 +24,7 @@
 #include <arpa/inet.h>
 #include <arv.h>
 #include <math.h>
+#include <stdarg.h>
 #include <stdatomic.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -51,6 +52,12 @@ typedef struct {
     bool        has_temperature;
     bool        has_gain;
     double      exposure_us, gain;   // as read back from the camera
+    // Radiometric state (read back at open and after a change; see switch_off_automatics)
+    char        gain_unit[16];
+    double      black_level, gamma;
+    char        firmware[64];
+    char        settings[512];
+    bool        settings_full;
     bool        have_last_id;
     guint64     last_raw_id;
     uint64_t    frame_id;
@@ -219,6 +226,251 @@ static int read_exposure_gain(rig_camera_t *c)
 }
 
 // ---------------------------------------------------------------------------
+// Radiometric settings. Before any frame refl switches off what makes a pixel
+// value anything but the sensor's linear response: the automatics (every
+// enumeration named *Auto* that has an Off entry: ExposureAuto, GainAuto,
+// BalanceWhiteAuto, BlackLevelAuto and vendors' own), GammaEnable (or Gamma =
+// 1 where there is no enable) and LUTEnable; each is read back. A feature the
+// camera lacks is fine; one it will not switch off is an error naming it, except
+// BalanceWhiteAuto on a mono camera (every pixel format Mono*: it has no colour
+// to balance), which is kept as a warning in the settings text. What was found
+// and done goes into a->settings ("ExposureAuto=Off (was Continuous) ..."),
+// recorded with every frame.
+
+static void note(aravis_cam_t *a, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
+static void note(aravis_cam_t *a, const char *fmt, ...)
+{
+    size_t len = strlen(a->settings);
+    if (len + 2 >= sizeof a->settings) return;
+    if (len) a->settings[len++] = ' ';
+    va_list ap;
+    va_start(ap, fmt);
+    int n = vsnprintf(a->settings + len, sizeof a->settings - len, fmt, ap);
+    va_end(ap);
+    if (n < 0 || (size_t)n >= sizeof a->settings - len) {
+        a->settings_full = true;
+        a->settings[len ? len - 1 : 0] = 0;
+    }
+}
+
+// The feature's node when the camera has it, implemented and available now; else NULL.
+static ArvGcNode *feature(aravis_cam_t *a, const char *name)
+{
+    ArvGcNode *n = arv_device_get_feature(a->dev, name);
+    if (!n || !ARV_IS_GC_FEATURE_NODE(n)) return NULL;
+    GError *e = NULL;
+    bool ok = arv_gc_feature_node_is_implemented(ARV_GC_FEATURE_NODE(n), &e) &&
+              arv_gc_feature_node_is_available(ARV_GC_FEATURE_NODE(n), &e);
+    g_clear_error(&e);
+    return ok ? n : NULL;
+}
+
+static bool is_mono_camera(aravis_cam_t *a)
+{
+    guint n = 0;
+    const char **f = arv_camera_dup_available_pixel_formats_as_strings(a->cam, &n, NULL);
+    bool mono = f && n > 0;
+    for (guint i = 0; mono && i < n; i++) mono = f[i] && !strncmp(f[i], "Mono", 4);
+    g_free(f);
+    return mono;
+}
+
+// An auto enumeration to Off (absent, or without an Off entry: nothing to do).
+static int auto_off(rig_camera_t *c, const char *name, bool mono)
+{
+    aravis_cam_t *a = impl_of(c);
+    ArvGcNode *n = feature(a, name);
+    if (!n || !ARV_IS_GC_ENUMERATION(n)) return 0;
+    ArvGcEnumeration *en = ARV_GC_ENUMERATION(n);
+    GError *e = NULL;
+    guint nv = 0;
+    const char **vals = arv_gc_enumeration_dup_available_string_values(en, &nv, &e);
+    bool has_off = false;
+    for (guint i = 0; vals && i < nv; i++) has_off |= vals[i] && !strcmp(vals[i], "Off");
+    g_free(vals);
+    g_clear_error(&e);
+    const char *v = arv_gc_enumeration_get_string_value(en, &e);
+    if (e) return fail_gerror(c, &e, name);
+    char was[64];
+    snprintf(was, sizeof was, "%s", v ? v : "?");
+    if (!strcmp(was, "Off")) {
+        note(a, "%s=Off", name);
+        return 0;
+    }
+    if (has_off) arv_gc_enumeration_set_string_value(en, "Off", &e);
+    char why[200] = "";
+    if (e) snprintf(why, sizeof why, ": %s", e->message);
+    else if (!has_off) snprintf(why, sizeof why, ": it has no Off entry");
+    g_clear_error(&e);
+    v = arv_gc_enumeration_get_string_value(en, &e);
+    g_clear_error(&e);
+    if (v && !strcmp(v, "Off")) {
+        note(a, "%s=Off (was %s)", name, was);
+        return 0;
+    }
+    if (mono && !strcmp(name, "BalanceWhiteAuto")) {   // harmless: no colour channels to balance
+        note(a, "%s=%s (warning: cannot be switched off%s; harmless on a mono camera)", name, v ? v : was, why);
+        return 0;
+    }
+    return rig_fail(RIG_ERR_NOT_SUPPORTED, "%s: cannot switch %s off (it reads %s%s): refl needs the sensor's own "
+                    "linear response; switch it off with the camera's own tool or use another camera", c->name,
+                    name, v ? v : was, why);
+}
+
+// A boolean feature (GammaEnable, LUTEnable) to false.
+static int bool_off(rig_camera_t *c, const char *name)
+{
+    aravis_cam_t *a = impl_of(c);
+    ArvGcNode *n = feature(a, name);
+    if (!n || !ARV_IS_GC_BOOLEAN(n)) return 0;
+    GError *e = NULL;
+    bool was = arv_gc_boolean_get_value(ARV_GC_BOOLEAN(n), &e);
+    if (e) return fail_gerror(c, &e, name);
+    if (was) arv_gc_boolean_set_value(ARV_GC_BOOLEAN(n), FALSE, &e);
+    char why[200] = "";
+    if (e) snprintf(why, sizeof why, ": %s", e->message);
+    g_clear_error(&e);
+    bool now = arv_gc_boolean_get_value(ARV_GC_BOOLEAN(n), &e);
+    g_clear_error(&e);
+    if (now)
+        return rig_fail(RIG_ERR_NOT_SUPPORTED, "%s: cannot switch %s off (it reads true%s): refl needs the sensor's "
+                        "own linear response; switch it off with the camera's own tool or use another camera",
+                        c->name, name, why);
+    note(a, was ? "%s=0 (was 1)" : "%s=0", name);
+    return 0;
+}
+
+// A float or integer feature's value; NAN when absent or unreadable.
+static double number_feature(aravis_cam_t *a, const char *name)
+{
+    ArvGcNode *n = feature(a, name);
+    GError *e = NULL;
+    double v = NAN;
+    if (n && ARV_IS_GC_FLOAT(n)) v = arv_gc_float_get_value(ARV_GC_FLOAT(n), &e);
+    else if (n && ARV_IS_GC_INTEGER(n)) v = (double)arv_gc_integer_get_value(ARV_GC_INTEGER(n), &e);
+    if (e) v = NAN;
+    g_clear_error(&e);
+    return v;
+}
+
+// The gamma in effect: 1 with GammaEnable false; where there is no enable,
+// Gamma is set to 1 and read back.
+static int gamma_off(rig_camera_t *c)
+{
+    aravis_cam_t *a = impl_of(c);
+    int rc = bool_off(c, "GammaEnable");
+    if (rc) return rc;
+    a->gamma = 1;
+    ArvGcNode *n = feature(a, "Gamma");
+    if (feature(a, "GammaEnable") || !n || !ARV_IS_GC_FLOAT(n)) {
+        if (n) note(a, "Gamma=%.6g (not in effect)", number_feature(a, "Gamma"));
+        return 0;
+    }
+    GError *e = NULL;
+    double was = arv_gc_float_get_value(ARV_GC_FLOAT(n), &e);
+    if (e) return fail_gerror(c, &e, "Gamma");
+    if (was != 1) arv_gc_float_set_value(ARV_GC_FLOAT(n), 1.0, &e);
+    g_clear_error(&e);
+    a->gamma = arv_gc_float_get_value(ARV_GC_FLOAT(n), &e);
+    if (e) return fail_gerror(c, &e, "Gamma");
+    if (fabs(a->gamma - 1) > 1e-6)
+        return rig_fail(RIG_ERR_NOT_SUPPORTED, "%s: cannot set Gamma to 1 (it reads %.6g) and the camera has no "
+                        "GammaEnable: refl needs the sensor's own linear response", c->name, a->gamma);
+    note(a, was != 1 ? "Gamma=1 (was %.6g)" : "Gamma=1", was);
+    return 0;
+}
+
+// The gain feature's unit: GenICam's <Unit> of Gain (or GainAbs), "raw" for
+// GainRaw and for a gain that states no unit (never assumed to be dB).
+static void read_gain_unit(aravis_cam_t *a)
+{
+    static const char *const names[] = { "Gain", "GainAbs" };
+    snprintf(a->gain_unit, sizeof a->gain_unit, "raw");
+    for (size_t i = 0; i < sizeof names / sizeof names[0]; i++) {
+        ArvGcNode *n = feature(a, names[i]);
+        const char *u = NULL;
+        if (n && ARV_IS_GC_FLOAT(n)) u = arv_gc_float_get_unit(ARV_GC_FLOAT(n));
+        else if (n && ARV_IS_GC_INTEGER(n)) u = arv_gc_integer_get_unit(ARV_GC_INTEGER(n));
+        else continue;
+        if (u && *u) snprintf(a->gain_unit, sizeof a->gain_unit, "%s", u);
+        return;
+    }
+}
+
+// The enumerations named *Auto* of the camera's feature tree (from Root),
+// beyond the standard ones, appended to names (at most max).
+static void find_vendor_autos(ArvGc *gc, const char *cat, int depth, const char **names, int *n, int max)
+{
+    ArvGcNode *node = arv_gc_get_node(gc, cat);
+    if (!node || !ARV_IS_GC_CATEGORY(node) || depth > 8) return;
+    for (const GSList *l = arv_gc_category_get_features(ARV_GC_CATEGORY(node)); l; l = l->next) {
+        const char *name = l->data;
+        ArvGcNode *f = name ? arv_gc_get_node(gc, name) : NULL;
+        if (!f) continue;
+        if (ARV_IS_GC_CATEGORY(f)) {
+            find_vendor_autos(gc, name, depth + 1, names, n, max);
+        } else if (ARV_IS_GC_ENUMERATION(f) && strstr(name, "Auto") && *n < max) {
+            bool seen = false;
+            for (int i = 0; i < *n; i++) seen |= !strcmp(names[i], name);
+            if (!seen) names[(*n)++] = name;
+        }
+    }
+}
+
+static int switch_off_automatics(rig_camera_t *c)
+{
+    aravis_cam_t *a = impl_of(c);
+    a->settings[0] = 0;
+    bool mono = is_mono_camera(a);
+    const char *names[48] = { "ExposureAuto", "GainAuto", "BalanceWhiteAuto", "BlackLevelAuto" };
+    int n = 4;
+    find_vendor_autos(arv_device_get_genicam(a->dev), "Root", 0, names, &n, 48);
+    int rc = 0;
+    for (int i = 0; i < n && !rc; i++) rc = auto_off(c, names[i], mono);
+    if (!rc) rc = gamma_off(c);
+    if (!rc) rc = bool_off(c, "LUTEnable");
+    if (rc) return rc;
+    read_gain_unit(a);
+    a->black_level = number_feature(a, "BlackLevel");
+    if (isfinite(a->black_level)) note(a, "BlackLevel=%.10g", a->black_level);
+    ArvGcNode *fw = feature(a, "DeviceFirmwareVersion");
+    const char *s = fw && ARV_IS_GC_STRING(fw) ? arv_gc_string_get_value(ARV_GC_STRING(fw), NULL) : NULL;
+    snprintf(a->firmware, sizeof a->firmware, "%s", s ? s : "");
+    static const char *const transport[] = { "GevSCPSPacketSize", "GevSCPD" };
+    for (size_t i = 0; i < sizeof transport / sizeof transport[0]; i++) {
+        double v = number_feature(a, transport[i]);
+        if (isfinite(v)) note(a, "%s=%.0f", transport[i], v);
+    }
+    if (!a->settings[0]) note(a, "(no automatics, gamma or LUT found)");
+    return 0;
+}
+
+// The settings text's "name=..." token replaced by name=value (appended when absent).
+static void note_set(aravis_cam_t *a, const char *name, long value)
+{
+    char key[64];
+    snprintf(key, sizeof key, "%s=", name);
+    char *at = strstr(a->settings, key);
+    if (at && (at == a->settings || at[-1] == ' ')) {
+        char *end = strchr(at, ' ');
+        memmove(at, end ? end + 1 : at + strlen(at), strlen(end ? end + 1 : at + strlen(at)) + 1);
+        size_t len = strlen(a->settings);
+        if (len && a->settings[len - 1] == ' ') a->settings[len - 1] = 0;
+    }
+    note(a, "%s=%ld", name, value);
+}
+
+// Copy the radiometric state into a frame's metadata.
+static void radiometric_meta(const aravis_cam_t *a, rig_frame_meta_t *m)
+{
+    snprintf(m->gain_unit, sizeof m->gain_unit, "%s", a->gain_unit);
+    m->black_level = a->black_level;
+    m->gamma = a->gamma;
+    snprintf(m->firmware, sizeof m->firmware, "%s", a->firmware);
+    snprintf(m->camera_settings, sizeof m->camera_settings, "%s", a->settings);
+}
+
+// ---------------------------------------------------------------------------
 // ops
 
 static int op_settings(rig_camera_t *c, rig_frame_meta_t *m)
@@ -248,6 +500,7 @@ static int op_settings(rig_camera_t *c, rig_frame_meta_t *m)
     snprintf(m->vendor, sizeof m->vendor, "%s", a->vendor);
     snprintf(m->model, sizeof m->model, "%s", a->model);
     snprintf(m->serial, sizeof m->serial, "%s", a->serial);
+    radiometric_meta(a, m);
     return 0;
 }
 
@@ -359,6 +612,47 @@ static int op_set_region(rig_camera_t *c, int x, int y, int width, int height)
     return 0;
 }
 
+// GigE Vision stream packets: an integer feature set within the camera's range, read back.
+static int set_transport_feature(rig_camera_t *c, const char *name, long value, const char *unit)
+{
+    aravis_cam_t *a = impl_of(c);
+    ArvGcNode *n = feature(a, name);
+    if (!n || !ARV_IS_GC_INTEGER(n))
+        return rig_fail(RIG_ERR_NOT_SUPPORTED, "%s: the camera has no %s (a GigE Vision stream setting): remove it "
+                        "from the rig file", c->name, name);
+    GError *e = NULL;
+    gint64 lo = arv_gc_integer_get_min(ARV_GC_INTEGER(n), &e);
+    gint64 hi = e ? 0 : arv_gc_integer_get_max(ARV_GC_INTEGER(n), &e);
+    if (e) return fail_gerror(c, &e, name);
+    if (value < lo || value > hi)
+        return rig_fail(RIG_ERR_INVALID, "%s: %s %ld %s is outside the camera's range %lld..%lld", c->name, name, value,
+                        unit, (long long)lo, (long long)hi);
+    arv_gc_integer_set_value(ARV_GC_INTEGER(n), value, &e);
+    if (e) return fail_gerror(c, &e, name);
+    gint64 now = arv_gc_integer_get_value(ARV_GC_INTEGER(n), &e);
+    if (e) return fail_gerror(c, &e, name);
+    if (now != value)
+        return rig_fail(RIG_ERR_PROTOCOL, "%s: %s reads %lld after setting %ld %s", c->name, name, (long long)now, value,
+                        unit);
+    note_set(a, name, value);
+    return 0;
+}
+
+static int op_set_stream_packets(rig_camera_t *c, long packet_size, long packet_delay)
+{
+    aravis_cam_t *a = impl_of(c);
+    int rc = check_connected(c);
+    if (rc) return rc;
+    stop_stream(a);   // a new stream takes them
+    if (packet_size >= 0) {
+        if ((rc = set_transport_feature(c, "GevSCPSPacketSize", packet_size, "bytes"))) return rc;
+        if (ARV_IS_GV_DEVICE(a->dev))   // Aravis would otherwise test and change it when the stream starts
+            arv_gv_device_set_packet_size_adjustment(ARV_GV_DEVICE(a->dev), ARV_GV_PACKET_SIZE_ADJUSTMENT_NEVER);
+    }
+    if (packet_delay >= 0 && (rc = set_transport_feature(c, "GevSCPD", packet_delay, "ticks"))) return rc;
+    return 0;
+}
+
 static const char *status_name(ArvBufferStatus s)
 {
     switch (s) {
@@ -435,6 +729,7 @@ static int take_frame(rig_camera_t *c, ArvBuffer *b, rig_frame_t *out)
     snprintf(m->vendor, sizeof m->vendor, "%s", a->vendor);
     snprintf(m->model, sizeof m->model, "%s", a->model);
     snprintf(m->serial, sizeof m->serial, "%s", a->serial);
+    radiometric_meta(a, m);
     return 0;
 }
 
@@ -504,6 +799,7 @@ static const rig_camera_ops_t aravis_ops = {
     .set_exposure_us = op_set_exposure_us,
     .set_gain = op_set_gain,
     .set_region = op_set_region,
+    .set_stream_packets = op_set_stream_packets,
     .settings = op_settings,
     .capture = op_capture,
     .close = op_close,
@@ -599,6 +895,7 @@ int rig_camera_open_aravis(rig_camera_t **out, const char *id)
         rc = fail_gerror(c, &e, "setting TriggerMode On / TriggerSource Software");
         goto done;
     }
+    if ((rc = switch_off_automatics(c))) goto done;   // before any frame: the automatics change them
     if ((rc = read_exposure_gain(c))) goto done;
     *out = c;
     return 0;

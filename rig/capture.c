@@ -211,6 +211,12 @@ static int write_frame(writer_t *w, job_t *jb)
     model_meta_add(meta, "frame_id", "%llu", (unsigned long long)m->frame_id);
     model_meta_add(meta, "exposure_us", "%.10g", m->exposure_us);
     model_meta_add(meta, "gain", "%.10g", m->gain);
+    model_meta_add(meta, "gain_unit", "%s", m->gain_unit);
+    if (isfinite(m->black_level)) model_meta_add(meta, "black_level", "%.10g", m->black_level);
+    model_meta_add(meta, "gamma", "%.6g", m->gamma);
+    if (isfinite(m->temperature_c)) model_meta_add(meta, "temperature_c", "%.2f", m->temperature_c);
+    if (m->firmware[0]) model_meta_add(meta, "camera_firmware", "%s", m->firmware);
+    model_meta_add(meta, "camera_settings", "%s", m->camera_settings);
     model_meta_add(meta, "turntable_commanded_deg", "%.10g", jb->step.angle_deg);
     model_meta_add(meta, "turntable_measured_deg", "%.6f", jb->measured_deg);
     model_meta_add(meta, "lamps_on", "%s", jb->step.lamps);
@@ -264,6 +270,12 @@ static int write_frame(writer_t *w, job_t *jb)
     row.height = m->height;
     snprintf(row.pixel_format, sizeof row.pixel_format, "%s", m->pixel_format);
     row.frame_id = m->frame_id;
+    snprintf(row.gain_unit, sizeof row.gain_unit, "%s", m->gain_unit);
+    row.black_level = m->black_level;
+    row.gamma = m->gamma;
+    row.temperature_c = m->temperature_c;
+    snprintf(row.firmware, sizeof row.firmware, "%s", m->firmware);
+    snprintf(row.camera_settings, sizeof row.camera_settings, "%s", m->camera_settings);
     rc = rig_journal_frame_done(w->j, &row);
     if (rc) {
         w->disk_full = strstr(model_last_error(), "full") != NULL;
@@ -404,7 +416,12 @@ static char *session_facts(rig_t *r, const rig_plan_t *p, const char *cmdline, j
         json_object_set_new(c, "offset_y", json_integer(m.offset_y));
         json_object_set_new(c, "exposure_us", json_real(m.exposure_us));
         json_object_set_new(c, "gain", json_real(m.gain));
+        json_object_set_new(c, "gain_unit", json_string(m.gain_unit));
         if (isfinite(m.temperature_c)) json_object_set_new(c, "temperature_c", json_real(m.temperature_c));
+        if (isfinite(m.black_level)) json_object_set_new(c, "black_level", json_real(m.black_level));
+        json_object_set_new(c, "gamma", json_real(m.gamma));
+        json_object_set_new(c, "firmware", json_string(m.firmware));
+        json_object_set_new(c, "settings", json_string(m.camera_settings));   // what refl switched off at open
         json_object_set_new(o, "camera", c);
     }
     rig_turntable_info_t ti;

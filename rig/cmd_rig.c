@@ -36,7 +36,8 @@
 
 static const char rig_about[] =
     "actions:\n"
-    "  status     every device with its identity and state\n"
+    "  status     every device with its identity and state (the camera: gain and its unit, firmware,\n"
+    "             gamma, black level, and the automatics/gamma/LUT refl switched off at open)\n"
     "  home       home the turntable\n"
     "  move DEG   move the turntable to DEG (absolute; homes it first when needed)\n"
     "  identify   model, serial and firmware of every device\n"
@@ -45,7 +46,10 @@ static const char rig_about[] =
 
 static const char rig_epilog[] =
     "Rig files: [camera], [turntable], [lamp NAME], [lamps] sections, or [rig] backend = virtual\n"
-    "(see rig/rig.h and examples/lab-rig.ini, examples/virtual-rig.ini).\n"
+    "(see rig/rig.h and examples/lab-rig.ini, examples/virtual-rig.ini); [camera] and [rig] also take\n"
+    "packet_size (GevSCPSPacketSize, bytes) and packet_delay (GevSCPD, ticks) for GigE Vision.\n"
+    "Opening a camera switches off its automatics (ExposureAuto, GainAuto, ... every *Auto*), gamma and\n"
+    "LUT, or fails naming the feature; frames record what was done and the gain's unit.\n"
     "Angles in degrees (turntable frame: 0 at home, counter-clockwise seen from above).\n"
     "Ctrl-C during homing or a move stops the stage (a second Ctrl-C: at once), then ends refl.";
 
@@ -56,7 +60,7 @@ static const char rig_epilog[] =
     _("--lamps", "NAMES", "snap: lamps on during the frame: NAME,NAME,... | all | none (default none)", false,     \
       "snap")                                                                                                     \
     _("--exposure-us", "US", "snap: exposure time, us (default: the rig file's, else the camera's)", false, "snap") \
-    _("--gain", "G", "snap: gain in the camera's unit, dB for GenICam Gain (default: rig file / camera)", false,   \
+    _("--gain", "G", "snap: gain in the camera's unit (its GenICam <Unit>, recorded) (default: rig file / camera)", false, \
       "snap")                                                                                                     \
     _("--pixel-format", "F", "snap: Mono8 | Mono10 | Mono12 | Mono16 | Mono10p | Mono12p | ... (default: rig file / camera)", false, "snap")          \
     _("--sample", "NAME", "snap, serve (virtual rigs): put this sample of the truth file on the table", false,     \
@@ -270,11 +274,16 @@ int rig_cmd_status(rig_t *r)
         } else {
             printf("camera: %s\ncamera_vendor: %s\ncamera_model: %s\ncamera_serial: %s\n"
                    "camera_pixel_format: %s (%d bits)\ncamera_region: %d x %d at (%d, %d)\n"
-                   "camera_exposure_us: %.6g\ncamera_gain: %.6g\n",
+                   "camera_exposure_us: %.6g\ncamera_gain: %.6g %s\n",
                    rig_camera_name(r->camera), m.vendor, m.model, m.serial, m.pixel_format, m.bits, m.width, m.height,
-                   m.offset_x, m.offset_y, m.exposure_us, m.gain);
+                   m.offset_x, m.offset_y, m.exposure_us, m.gain, m.gain_unit);
             if (isfinite(m.temperature_c)) printf("camera_temperature_c: %.2f\n", m.temperature_c);
             else printf("camera_temperature_c: none (the camera has no sensor)\n");
+            printf("camera_firmware: %s\ncamera_gamma: %.6g\n", m.firmware[0] ? m.firmware : "none (not stated)",
+                   m.gamma);
+            if (isfinite(m.black_level)) printf("camera_black_level: %.10g\n", m.black_level);
+            else printf("camera_black_level: none (the camera has no BlackLevel)\n");
+            printf("camera_settings: %s\n", m.camera_settings);
         }
     } else {
         printf("camera: none\n");
@@ -303,9 +312,9 @@ static int do_identify(rig_t *r)
         rig_frame_meta_t m;
         if ((rc = rig_camera_settings(r->camera, &m))) return rc;
         printf("camera: %s\ncamera_backend: %s\ncamera_vendor: %s\ncamera_model: %s\ncamera_serial: %s\n"
-               "camera_sensor_region: %d x %d\n",
-               rig_camera_name(r->camera), rig_camera_backend(r->camera), m.vendor, m.model, m.serial, m.width,
-               m.height);
+               "camera_firmware: %s\ncamera_sensor_region: %d x %d\n",
+               rig_camera_name(r->camera), rig_camera_backend(r->camera), m.vendor, m.model, m.serial,
+               m.firmware[0] ? m.firmware : "none (not stated)", m.width, m.height);
     } else {
         printf("camera: none\n");
     }
@@ -399,7 +408,12 @@ static int do_snap(rig_t *r, const snap_t *o, const char *cmdline)
     model_meta_add(meta, "frame_timestamp_ns", "%llu (the camera's clock)", (unsigned long long)m->timestamp_ns);
     model_meta_add(meta, "frame_time_utc", "%s (host clock when the frame arrived)", t_frame);
     model_meta_add(meta, "exposure_us", "%.10g", m->exposure_us);
-    model_meta_add(meta, "gain", "%.10g (the camera's unit; dB for GenICam Gain)", m->gain);
+    model_meta_add(meta, "gain", "%.10g", m->gain);
+    model_meta_add(meta, "gain_unit", "%s", m->gain_unit);   // GenICam <Unit> of the gain; raw: none stated
+    model_meta_add(meta, "gamma", "%.6g (in effect)", m->gamma);
+    if (isfinite(m->black_level)) model_meta_add(meta, "black_level", "%.10g", m->black_level);
+    if (m->firmware[0]) model_meta_add(meta, "camera_firmware", "%s", m->firmware);
+    model_meta_add(meta, "camera_settings", "%s", m->camera_settings);
     model_meta_add(meta, "pixel_format", "%s (%d significant bits)", m->pixel_format, m->bits);
     model_meta_add(meta, "region", "%d x %d at (%d, %d) on the sensor", m->width, m->height, m->offset_x, m->offset_y);
     if (isfinite(m->temperature_c)) model_meta_add(meta, "temperature_c", "%.3f", m->temperature_c);

@@ -41,6 +41,8 @@ typedef struct {
     // camera defaults ([camera], or [rig] for the virtual camera)
     char   pixel_format[16];
     double exposure_us, gain;
+    long   packet_size, packet_delay;     // GevSCPSPacketSize (bytes), GevSCPD (ticks); -1: the camera's own
+    int    packet_line;                   // of the first of them, for messages
     // [turntable]
     bool   have_turntable;
     int    turntable_line;
@@ -89,7 +91,7 @@ typedef struct {
 } backend_def_t;
 
 static const backend_def_t backends[] = {
-    { "camera", "aravis", "backend address serial name pixel_format exposure_us gain",
+    { "camera", "aravis", "backend address serial name pixel_format exposure_us gain packet_size packet_delay",
       "aravis (GigE Vision / USB3 Vision camera)" },
     { "turntable", "apt", "backend serial stage", "apt (Thorlabs APT stage, e.g. K10CR1)" },
     { "turntable", "sim", "backend speed_deg_s accel_deg_s2 home_time_s position_noise_deg time_scale seed "
@@ -97,7 +99,7 @@ static const backend_def_t backends[] = {
     { "lamp", "gpiod", "backend chip line active_low warmup_ms settle_ms", "gpiod (a GPIO line)" },
     { "lamp", "sim", "backend position_mm warmup_ms settle_ms", "sim (simulated lamp)" },
     { "rig", "virtual", "backend truth serve address sample time_scale noise_seed busy_wait_s pixel_format "
-      "exposure_us gain",
+      "exposure_us gain packet_size packet_delay",
       "virtual (the whole rig simulated)" },
 };
 #define NBACKENDS ((int)(sizeof backends / sizeof backends[0]))
@@ -205,6 +207,14 @@ static int get_camera_defaults(spec_t *s, const char *section)
         (rc = get_double(s, section, "exposure_us", &s->exposure_us, 0, true, 1e8, "0 < exposure_us <= 1e8 us")) ||
         (rc = get_double(s, section, "gain", &s->gain, -100, false, 100, "-100..100, in the camera's unit (dB)")))
         return rc;
+    // GigE Vision stream packets (GenICam GevSCPSPacketSize, GevSCPD); the camera checks its own range at open
+    s->packet_size = s->packet_delay = -1;
+    if ((rc = get_long(s, section, "packet_size", &s->packet_size, 576, 16384)) ||
+        (rc = get_long(s, section, "packet_delay", &s->packet_delay, 0, 4294967295L)))
+        return rc;
+    const model_ini_entry_t *e = get(s, section, "packet_size");
+    if (!e) e = get(s, section, "packet_delay");
+    s->packet_line = e ? e->line : 0;
     return 0;
 }
 
@@ -520,7 +530,10 @@ static int apply_camera_defaults(rig_t *r, const spec_t *s, int line, const char
     if (r->pixel_format[0]) QUIET(rig_camera_set_pixel_format(r->camera, r->pixel_format));
     if (!rc && isfinite(r->exposure_us)) QUIET(rig_camera_set_exposure_us(r->camera, r->exposure_us));
     if (!rc && isfinite(r->gain)) QUIET(rig_camera_set_gain(r->camera, r->gain));
-    return rc ? device_fail(rc, s, line, section) : 0;
+    if (rc) return device_fail(rc, s, line, section);
+    if (s->packet_size >= 0 || s->packet_delay >= 0)
+        QUIET(rig_camera_set_stream_packets(r->camera, s->packet_size, s->packet_delay));
+    return rc ? device_fail(rc, s, s->packet_line, section) : 0;
 }
 
 static int open_devices(rig_t *r, spec_t *s)

@@ -244,6 +244,13 @@ typedef struct {
     double   system_time_s;          // host CLOCK_REALTIME when the frame arrived
     double   temperature_c;          // sensor temperature, NAN where the camera has none
     char     vendor[64], model[64], serial[64];
+    // Radiometric state, read back when the camera was opened or changed (rig/camera_aravis.c):
+    char     gain_unit[16];          // the gain feature's GenICam <Unit> ("dB", "x"); "raw" when it states none
+    double   black_level;            // BlackLevel as read back, NAN where the camera has none
+    double   gamma;                  // the gamma in effect: 1 with gamma off or absent
+    char     firmware[64];           // DeviceFirmwareVersion, "" where the camera has none
+    char     camera_settings[512];   // what refl found, switched off and read back, e.g. "ExposureAuto=Off
+                                     // (was Continuous) GainAuto=Off GammaEnable=0 LUTEnable=0 GevSCPSPacketSize=1500"
 } rig_frame_meta_t;
 
 typedef struct {
@@ -269,6 +276,18 @@ int  rig_camera_set_pixel_format(rig_camera_t *c, const char *format);
 int  rig_camera_set_exposure_us(rig_camera_t *c, double exposure_us);
 int  rig_camera_set_gain(rig_camera_t *c, double gain);
 int  rig_camera_set_region(rig_camera_t *c, int x, int y, int width, int height);
+// GigE Vision stream packets: GevSCPSPacketSize (bytes, IP and UDP headers
+// included) and GevSCPD (the delay between packets, in the camera's timestamp
+// ticks); -1 leaves one unchanged. Each is checked against the camera's range
+// (RIG_ERR_INVALID), set and read back; RIG_ERR_NOT_SUPPORTED when the camera
+// lacks it. A set size also stops Aravis from testing and changing it.
+int  rig_camera_set_stream_packets(rig_camera_t *c, long packet_size, long packet_delay);
+// The current settings, and what refl found and set at open (rig_frame_meta_t):
+// rig_camera_open_aravis switches off the automatics (every *Auto* enumeration
+// with an Off entry), GammaEnable (or sets Gamma = 1) and LUTEnable before any
+// frame; a feature it cannot switch off fails the open (RIG_ERR_NOT_SUPPORTED
+// naming the feature and the camera), except BalanceWhiteAuto on a mono camera
+// (a warning in camera_settings).
 int  rig_camera_settings(rig_camera_t *c, rig_frame_meta_t *out);
 int  rig_camera_capture(rig_camera_t *c, double timeout_s, int retries, rig_frame_t *out);
 void rig_camera_close(rig_camera_t *c);

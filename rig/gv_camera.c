@@ -56,14 +56,32 @@
 #define REG_EXPOSURE_US        0xa008   // float64 big-endian
 #define REG_GAIN_DB            0xa010   // float64 big-endian
 #define REG_TEMPERATURE_C      0xa018   // float64 big-endian, read-only to clients
+#define REG_EXPOSURE_AUTO      0xa020   // ExposureAuto: 0 Off, 1 Once, 2 Continuous
+#define REG_BALANCE_WHITE_AUTO 0xa024   // BalanceWhiteAuto: the same values (a mono sensor ignores it)
+#define REG_GAMMA_ENABLE       0xa028   // GammaEnable: 0 / 1
+#define REG_LUT_ENABLE         0xa02c   // LUTEnable: 0 / 1
+#define REG_GAMMA              0xa030   // float64 big-endian
+#define REG_BLACK_LEVEL        0xa038   // float64 big-endian, DN added to every pixel
+#define REG_FIRMWARE           0xa040   // DeviceFirmwareVersion, 32 bytes (to 0xa05f)
+#define REG_CONTRAST_AUTO      0xa060   // ContrastAuto, a vendor automatic: 0 Off, 1 Once, 2 Continuous
+#define REG_GAIN_AUTO          0x0114   // GainAuto of Aravis's fake camera XML: 1 Off, 3 Once, 2 Continuous
+#define GAIN_AUTO_OFF          1
+#define GVBS_SCPD0             0x0d08   // stream channel 0 packet delay, timestamp ticks
 
 #define EXPOSURE_MIN_US 10.0
 #define EXPOSURE_MAX_US 10e6
 #define GAIN_MAX_DB     24.0
+// What the camera's own automatics do while on (so a client that leaves them on
+// gets frames unlike the settings it asked for): ExposureAuto 1.5 x the set
+// exposure, GainAuto 6 dB more than the set gain (within the ranges).
+#define AUTO_EXPOSURE_FACTOR 1.5
+#define AUTO_GAIN_DB         6.0
+#define GAMMA_DEFAULT        0.45
 
 struct rig_gv_camera {
     rig_gv_camera_params_t p;
     char address[64], serial[16], vendor[GVBS_STRING_SIZE], model[GVBS_STRING_SIZE];
+    char gain_unit[16], firmware[GVBS_STRING_SIZE], refuse_off[32];
     ArvGvFakeCamera *gv;
     ArvDevice       *dev;         // in-process: the ArvFakeDevice (our reference)
     ArvFakeCamera   *fake;
@@ -198,7 +216,33 @@ static bool snapshot_settings(rig_gv_camera_t *g, rig_frame_meta_t *m, guint32 *
         snprintf(err, errsize, "Gain %g dB outside 0..%g dB", m->gain, GAIN_MAX_DB);
         return false;
     }
+    // The camera's automatics and tone curve: the settings the frame is really taken with.
+    if (reg_get(g, REG_EXPOSURE_AUTO) != 0) m->exposure_us = fmin(m->exposure_us * AUTO_EXPOSURE_FACTOR, EXPOSURE_MAX_US);
+    if (reg_get(g, REG_GAIN_AUTO) != GAIN_AUTO_OFF) m->gain = fmin(m->gain + AUTO_GAIN_DB, GAIN_MAX_DB);
+    m->gamma = reg_get(g, REG_GAMMA_ENABLE) ? reg_get_double(g, REG_GAMMA) : 1.0;
+    m->black_level = reg_get_double(g, REG_BLACK_LEVEL);
+    snprintf(m->gain_unit, sizeof m->gain_unit, "%s", g->gain_unit);
+    if (!(m->gamma > 0 && m->gamma <= 4) || !(m->black_level >= 0 && m->black_level <= 4095)) {
+        snprintf(err, errsize, "Gamma %g outside (0, 4] or BlackLevel %g outside 0..4095", m->gamma, m->black_level);
+        return false;
+    }
     return true;
+}
+
+// The tone curve after the sensor (the render callback's values): BlackLevel
+// added, then the gamma v = max (v / max)^gamma, then, with LUTEnable, the
+// camera's LUT v = sqrt(v max). Values stay within 0..max.
+static void tone_curve(rig_gv_camera_t *g, const rig_frame_meta_t *m, uint16_t *pix, size_t n)
+{
+    double maxv = (double)((1u << m->bits) - 1);
+    bool lut = reg_get(g, REG_LUT_ENABLE) != 0 || reg_get(g, REG_CONTRAST_AUTO) != 0;
+    if (m->gamma == 1.0 && !lut && m->black_level == 0) return;
+    for (size_t i = 0; i < n; i++) {
+        double v = fmin((double)pix[i] + m->black_level, maxv);
+        if (m->gamma != 1.0) v = maxv * pow(v / maxv, m->gamma);
+        if (lut) v = sqrt(v * maxv);
+        pix[i] = (uint16_t)lround(fmin(v, maxv));
+    }
 }
 
 static bool grow(void **buf, size_t *cap, size_t need)
@@ -226,6 +270,8 @@ static int render_and_pack(rig_gv_camera_t *g, rig_frame_meta_t *m, uint8_t *dst
     g_mutex_unlock(&g->lock);
     if (rc < 0) return rc;
     uint16_t maxv = (uint16_t)((1u << m->bits) - 1);
+    for (size_t i = 0; i < n; i++) g->pix[i] = g->pix[i] > maxv ? maxv : g->pix[i];   // the ADC saturates first
+    tone_curve(g, m, g->pix, n);
     rig_pixfmt_t fmt;
     if (!rig_pixfmt_from_name(m->pixel_format, &fmt))
         return rig_fail(RIG_ERR_INVALID, "gv camera %s: pixel format %s", g->serial, m->pixel_format);
@@ -413,6 +459,8 @@ static bool send_gvsp(rig_gv_camera_t *g, guint16 block, const rig_frame_meta_t 
         snprintf(err, errsize, "no stream channel is open (the client set no stream destination)");
         return false;
     }
+    // GevSCPSPacketSize as the client set it (Aravis places each packet's data
+    // by that size); jumbo packets on loopback unless it set another
     guint32 scps = reg_get(g, GVBS_SCPS0) & 0xffff;
     size_t chunk = scps > GVSP_IP_UDP + GVSP_HEADER + 64 ? scps - GVSP_IP_UDP - GVSP_HEADER : 512;
     size_t ndata = (size + chunk - 1) / chunk;
@@ -566,9 +614,6 @@ static gpointer render_thread(gpointer data)
 
         if (acquiring && triggered && !ready && reg_get(g, REG_TRIGGER) != 0) {
             arv_fake_camera_write_register(g->fake, REG_TRIGGER, 0);
-            // jumbo packets on loopback, whatever the client set: larger
-            // packets than it expects only make fewer of them
-            arv_fake_camera_write_register(g->fake, GVBS_SCPS0, GVSP_PACKET_SIZE);
             g_mutex_lock(&g->lock);
             g->stats.triggers++;
             bool drop = g->drop_triggers > 0;
@@ -653,6 +698,53 @@ static const char xml_added[] =
     "\t\t<Address>0xa010</Address>\n\t\t<Length>8</Length>\n\t\t<AccessMode>RW</AccessMode>\n"
     "\t\t<pPort>Device</pPort>\n\t\t<Endianess>BigEndian</Endianess>\n\t</FloatReg>\n\n";
 
+// The radiometric features (auto functions on by default, as on real cameras)
+// and the transport's packet size and delay.
+#define XML_AUTO_ENUM(name, desc, addr)                                                                 \
+    "\t<Enumeration Name=\"" name "\" NameSpace=\"Standard\">\n"                                     \
+    "\t\t<Description>" desc "</Description>\n"                                                       \
+    "\t\t<EnumEntry Name=\"Off\" NameSpace=\"Standard\">\n\t\t\t<Value>0</Value>\n\t\t</EnumEntry>\n"     \
+    "\t\t<EnumEntry Name=\"Once\" NameSpace=\"Standard\">\n\t\t\t<Value>1</Value>\n\t\t</EnumEntry>\n"    \
+    "\t\t<EnumEntry Name=\"Continuous\" NameSpace=\"Standard\">\n\t\t\t<Value>2</Value>\n\t\t</EnumEntry>\n" \
+    "\t\t<pValue>" name "Register</pValue>\n\t</Enumeration>\n\n"                                      \
+    XML_INT_REG(name "Register", addr, "RW")
+#define XML_INT_REG(name, addr, access)                                                                 \
+    "\t<IntReg Name=\"" name "\" NameSpace=\"Custom\">\n\t\t<Address>" addr "</Address>\n"              \
+    "\t\t<Length>4</Length>\n\t\t<AccessMode>" access "</AccessMode>\n\t\t<pPort>Device</pPort>\n"        \
+    "\t\t<Sign>Unsigned</Sign>\n\t\t<Endianess>BigEndian</Endianess>\n\t</IntReg>\n\n"
+#define XML_BOOL(name, desc, addr)                                                                      \
+    "\t<Boolean Name=\"" name "\" NameSpace=\"Standard\">\n\t\t<Description>" desc "</Description>\n"   \
+    "\t\t<pValue>" name "Register</pValue>\n\t\t<OnValue>1</OnValue>\n\t\t<OffValue>0</OffValue>\n"     \
+    "\t</Boolean>\n\n" XML_INT_REG(name "Register", addr, "RW")
+#define XML_FLOAT(name, desc, addr, min, max)                                                           \
+    "\t<Float Name=\"" name "\" NameSpace=\"Standard\">\n\t\t<Description>" desc "</Description>\n"     \
+    "\t\t<pValue>" name "Reg</pValue>\n\t\t<Min>" min "</Min>\n\t\t<Max>" max "</Max>\n\t</Float>\n\n"    \
+    "\t<FloatReg Name=\"" name "Reg\" NameSpace=\"Custom\">\n\t\t<Address>" addr "</Address>\n"          \
+    "\t\t<Length>8</Length>\n\t\t<AccessMode>RW</AccessMode>\n\t\t<pPort>Device</pPort>\n"               \
+    "\t\t<Endianess>BigEndian</Endianess>\n\t</FloatReg>\n\n"
+#define XML_INT(name, desc, reg, min, max, unit)                                                        \
+    "\t<Integer Name=\"" name "\" NameSpace=\"Standard\">\n\t\t<Description>" desc "</Description>\n"   \
+    "\t\t<pValue>" reg "</pValue>\n\t\t<Min>" min "</Min>\n\t\t<Max>" max "</Max>\n\t\t<Unit>" unit       \
+    "</Unit>\n\t</Integer>\n\n"
+
+static const char xml_radiometric[] =
+    XML_AUTO_ENUM("ExposureAuto", "Automatic exposure: while on, frames are exposed 1.5 x ExposureTime.", "0xa020")
+    XML_AUTO_ENUM("BalanceWhiteAuto", "Automatic white balance (a mono sensor ignores it).", "0xa024")
+    XML_AUTO_ENUM("ContrastAuto", "A vendor's own automatic (not in the SFNC): found by a client only in the "
+                  "feature tree; while on, frames get the LUT as with LUTEnable.", "0xa060")
+    XML_BOOL("GammaEnable", "Gamma curve on the pixel values.", "0xa028")
+    XML_FLOAT("Gamma", "The gamma of the curve v = max (v / max)^Gamma.", "0xa030", "0.1", "4.0")
+    XML_BOOL("LUTEnable", "The camera's look-up table v = sqrt(v max) on the pixel values.", "0xa02c")
+    XML_FLOAT("BlackLevel", "Black level, DN added to every pixel.", "0xa038", "0.0", "4095.0")
+    "\t<StringReg Name=\"DeviceFirmwareVersion\" NameSpace=\"Standard\">\n\t\t<Address>0xa040</Address>\n"
+    "\t\t<Length>32</Length>\n\t\t<AccessMode>RO</AccessMode>\n\t\t<pPort>Device</pPort>\n\t</StringReg>\n\n"
+    XML_INT("GevSCPSPacketSize", "Stream channel 0 packet size, bytes (IP and UDP headers included).",
+            "GevSCPSPacketSizeRegister", "576", "9000", "B")
+    XML_INT_REG("GevSCPSPacketSizeRegister", "0xd04", "RW")
+    XML_INT("GevSCPD", "Stream channel 0 delay between packets, timestamp ticks.", "GevSCPDRegister", "0",
+            "1000000", "")
+    XML_INT_REG("GevSCPDRegister", "0xd08", "RW");
+
 // Guards Aravis's process-wide fake camera XML file name, which every new
 // ArvFakeCamera reads (arv_set_fake_camera_genicam_filename is not thread safe).
 static GMutex xml_name_lock;
@@ -673,8 +765,31 @@ static bool xml_add_formats(GString *x)
     return ok;
 }
 
+// The variants of the XML a camera's parameters ask for: the Gain's unit, an
+// auto feature that cannot be switched off (no Off entry). false
+// when the XML lacks what is edited.
+static bool xml_variants(GString *x, const char *gain_unit, const char *refuse_off)
+{
+    if (strcmp(gain_unit, "dB")) {
+        char unit[48] = "";
+        if (*gain_unit) snprintf(unit, sizeof unit, "<Unit>%s</Unit>", gain_unit);
+        if (!xml_edit(x, "<Float Name=\"Gain\"", "<Unit>dB</Unit>", unit)) return false;
+    }
+    if (*refuse_off) {   // its Off entry removed: it cannot be switched off
+        char en[64];
+        snprintf(en, sizeof en, "<Enumeration Name=\"%s\"", refuse_off);
+        const char *e = strstr(x->str, en);
+        const char *off = e ? strstr(e, "<EnumEntry Name=\"Off\"") : NULL;
+        const char *end = off ? strstr(off, "</EnumEntry>") : NULL;
+        const char *next = e ? strstr(e, "</Enumeration>") : NULL;
+        if (!end || end > next) return false;
+        g_string_erase(x, off - x->str, end + strlen("</EnumEntry>") - off);
+    }
+    return true;
+}
+
 // Our XML as a new string, or NULL with a message.
-static char *make_genicam_xml(void)
+static char *make_genicam_xml(const char *gain_unit, const char *refuse_off)
 {
     g_mutex_lock(&xml_name_lock);
     ArvFakeCamera *tmp = arv_fake_camera_new("REFL-XML");   // no network: just the built-in XML
@@ -706,8 +821,18 @@ static char *make_genicam_xml(void)
     }
     if (!bad && !xml_edit(x, NULL, "<pFeature>DeviceID</pFeature>",
                           "<pFeature>DeviceID</pFeature>\n\t\t<pFeature>DeviceSerialNumber</pFeature>"
-                          "\n\t\t<pFeature>DeviceTemperature</pFeature>"))
+                          "\n\t\t<pFeature>DeviceTemperature</pFeature>\n\t\t<pFeature>DeviceFirmwareVersion</pFeature>"))
         bad = "DeviceID feature";
+    if (!bad && !xml_edit(x, "<Category Name=\"TransportLayerControl\"", "<pFeature>PayloadSize</pFeature>",
+                          "<pFeature>PayloadSize</pFeature>\n\t\t<pFeature>GevSCPSPacketSize</pFeature>"
+                          "\n\t\t<pFeature>GevSCPD</pFeature>"))
+        bad = "TransportLayerControl/PayloadSize";
+    if (!bad && !xml_edit(x, "<Category Name=\"AnalogControl\"", "<pFeature>GainAuto</pFeature>",
+                          "<pFeature>GainAuto</pFeature>\n\t\t<pFeature>BalanceWhiteAuto</pFeature>"
+                          "\n\t\t<pFeature>BlackLevel</pFeature>\n\t\t<pFeature>GammaEnable</pFeature>"
+                          "\n\t\t<pFeature>Gamma</pFeature>\n\t\t<pFeature>LUTEnable</pFeature>"
+                          "\n\t\t<pFeature>ContrastAuto</pFeature>"))
+        bad = "AnalogControl/GainAuto";
     // Binning is not simulated: do not advertise it.
     if (!bad && !xml_cut(x, "<pFeature>BinningHorizontal</pFeature>", "</pFeature>")) bad = "BinningHorizontal";
     if (!bad && !xml_cut(x, "<pFeature>BinningVertical</pFeature>", "</pFeature>")) bad = "BinningVertical";
@@ -724,6 +849,9 @@ static char *make_genicam_xml(void)
     if (!bad && !xml_edit(x, "<Category Name=\"AcquisitionControl\"", "<pFeature>ExposureTimeAbs</pFeature>",
                           "<pFeature>ExposureTime</pFeature>"))
         bad = "AcquisitionControl/ExposureTimeAbs";
+    if (!bad && !xml_edit(x, "<Category Name=\"AcquisitionControl\"", "<pFeature>ExposureTime</pFeature>",
+                          "<pFeature>ExposureTime</pFeature>\n\t\t<pFeature>ExposureAuto</pFeature>"))
+        bad = "AcquisitionControl/ExposureTime";
     if (!bad && !xml_edit(x, "<Float Name=\"ExposureTimeAbs\"", "<pValue>ExposureTimeAbsConverter</pValue>",
                           "<pValue>ExposureTimeReg</pValue>"))
         bad = "ExposureTimeAbs";
@@ -736,8 +864,12 @@ static char *make_genicam_xml(void)
                           "<pFeature>Gain</pFeature>"))
         bad = "AnalogControl/GainRaw";
     const char *end = bad ? NULL : strstr(x->str, "</RegisterDescription>");
-    if (end) g_string_insert(x, end - x->str, xml_added);
-    else if (!bad) bad = "</RegisterDescription>";
+    if (end) {
+        gssize pos = end - x->str;
+        g_string_insert(x, pos, xml_radiometric);
+        g_string_insert(x, pos, xml_added);
+    } else if (!bad) bad = "</RegisterDescription>";
+    if (!bad && !xml_variants(x, gain_unit, refuse_off)) bad = "Gain unit or the register of the feature to refuse";
     if (bad) {
         g_string_free(x, TRUE);
         rig_fail(RIG_ERR_IO, "gv camera: Aravis %d.%d.%d's built-in fake camera XML has no %s where expected; "
@@ -879,6 +1011,9 @@ int rig_gv_camera_start(rig_gv_camera_t **out, const rig_gv_camera_params_t *p)
     const char *serial = p->serial ? p->serial : d.serial;
     const char *vendor = p->vendor ? p->vendor : d.vendor;
     const char *model = p->model ? p->model : d.model;
+    const char *firmware = p->firmware ? p->firmware : "refl-gv 1.0";
+    const char *gain_unit = p->gain_unit ? p->gain_unit : "dB";
+    const char *refuse_off = p->refuse_off ? p->refuse_off : "";
     struct in_addr ia;
     if (!p->render) return rig_fail(RIG_ERR_INVALID, "gv camera: no render callback given");
     if (!p->inprocess && (inet_pton(AF_INET, address, &ia) != 1 || (ntohl(ia.s_addr) >> 24) != 127))
@@ -889,6 +1024,13 @@ int rig_gv_camera_start(rig_gv_camera_t **out, const rig_gv_camera_params_t *p)
     if (strlen(vendor) >= GVBS_STRING_SIZE || strlen(model) >= GVBS_STRING_SIZE)
         return rig_fail(RIG_ERR_INVALID, "gv camera %s: vendor and model must be shorter than %d characters",
                         serial, GVBS_STRING_SIZE);
+    if (strlen(firmware) >= GVBS_STRING_SIZE || strlen(gain_unit) >= 16)
+        return rig_fail(RIG_ERR_INVALID, "gv camera %s: firmware must be shorter than %d characters, the gain "
+                        "unit than 16", serial, GVBS_STRING_SIZE);
+    if (*refuse_off && strcmp(refuse_off, "ExposureAuto") && strcmp(refuse_off, "GainAuto") &&
+        strcmp(refuse_off, "BalanceWhiteAuto"))
+        return rig_fail(RIG_ERR_INVALID, "gv camera %s: refuse_off '%s' is not ExposureAuto, GainAuto or "
+                        "BalanceWhiteAuto", serial, refuse_off);
     if (p->sensor_width < 1 || p->sensor_width > 4096 || p->sensor_height < 1 || p->sensor_height > 4096)
         return rig_fail(RIG_ERR_INVALID, "gv camera %s: sensor size %dx%d outside 1..4096", serial,
                         p->sensor_width, p->sensor_height);
@@ -936,7 +1078,7 @@ int rig_gv_camera_start(rig_gv_camera_t **out, const rig_gv_camera_params_t *p)
         goto done;
     }
 make_xml:
-    if (!(xml = make_genicam_xml())) {
+    if (!(xml = make_genicam_xml(gain_unit, refuse_off))) {
         rc = RIG_ERR_IO;
         goto done;
     }
@@ -969,6 +1111,9 @@ make_xml:
     snprintf(g->serial, sizeof g->serial, "%s", serial);
     snprintf(g->vendor, sizeof g->vendor, "%s", vendor);
     snprintf(g->model, sizeof g->model, "%s", model);
+    snprintf(g->firmware, sizeof g->firmware, "%s", firmware);
+    snprintf(g->gain_unit, sizeof g->gain_unit, "%s", gain_unit);
+    snprintf(g->refuse_off, sizeof g->refuse_off, "%s", refuse_off);
     g->p.address = g->address;
     g->p.serial = g->serial;
     g->p.vendor = g->vendor;
@@ -1012,6 +1157,16 @@ registers:
     reg_set_double(g, REG_EXPOSURE_US, ARV_FAKE_CAMERA_EXPOSURE_TIME_US_DEFAULT);
     reg_set_double(g, REG_GAIN_DB, 0.0);
     reg_set_double(g, REG_TEMPERATURE_C, p->temperature_c);
+    reg_set_string(g, REG_FIRMWARE, g->firmware, GVBS_STRING_SIZE);
+    arv_fake_camera_write_register(g->fake, REG_EXPOSURE_AUTO, 2);   // automatics on, as a real camera starts
+    arv_fake_camera_write_register(g->fake, REG_GAIN_AUTO, 2);
+    arv_fake_camera_write_register(g->fake, REG_BALANCE_WHITE_AUTO, 2);
+    arv_fake_camera_write_register(g->fake, REG_CONTRAST_AUTO, 2);
+    arv_fake_camera_write_register(g->fake, REG_GAMMA_ENABLE, 1);
+    arv_fake_camera_write_register(g->fake, REG_LUT_ENABLE, 1);
+    reg_set_double(g, REG_GAMMA, GAMMA_DEFAULT);
+    reg_set_double(g, REG_BLACK_LEVEL, 0.0);
+    arv_fake_camera_write_register(g->fake, GVBS_SCPD0, 0);
     // In-process, the stream thread looks for a queued buffer at this rate;
     // over GigE Vision the GV thread's trigger check is not used (see the top).
     arv_fake_camera_set_trigger_frequency(g->fake, p->inprocess ? p->trigger_poll_hz : GV_TICK_HZ);

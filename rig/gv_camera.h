@@ -11,7 +11,17 @@
 //     Mono12p | Mono10Packed | Mono12Packed (rig/pixfmt.h; packed ones packed
 //     with rig_pixfmt_pack),
 //   ExposureTime (float, µs, 10 .. 10e6; ExposureTimeAbs is the same value),
-//   Gain (float, dB, 0 .. 24),
+//   Gain (float, dB, 0 .. 24; params.gain_unit changes its <Unit>),
+//   the automatics and tone curve, on at start as on real cameras: ExposureAuto
+//     (Off | Once | Continuous; on: frames exposed 1.5 x ExposureTime), GainAuto
+//     (on: 6 dB more than Gain), BalanceWhiteAuto (ignored: mono sensor),
+//     GammaEnable (1) + Gamma (0.45: v = max (v/max)^Gamma), LUTEnable (1: the
+//     LUT v = sqrt(v max)), BlackLevel (DN added, default 0), and a vendor's own
+//     ContrastAuto (on: the same LUT; not a standard name, found in the feature
+//     tree): a client that leaves them on gets frames unlike its settings;
+//   DeviceFirmwareVersion, GevSCPSPacketSize (bytes, 576 .. 9000, default 8192:
+//     the GVSP packets' size), GevSCPD (ticks, 0 .. 1e6; stored and read back,
+//     no delay is made),
 //   AcquisitionMode/Start/Stop, AcquisitionFrameRate (free running),
 //   TriggerSelector, TriggerMode, TriggerSource (Line0 | Software), TriggerSoftware.
 // Any GenICam client sees these (e.g. `arv-tool-0.8 -a 127.0.0.1 control ExposureTime`).
@@ -88,6 +98,13 @@ typedef struct {
     // Serve in this process instead (see above): address and busy_wait_s are
     // not used; the camera's id is RIG_GV_INPROCESS_PREFIX + serial.
     bool        inprocess;
+    const char *firmware;         // DeviceFirmwareVersion, < 32 chars (default "refl-gv 1.0")
+    // Variants for tests of the client: the Gain feature's <Unit> (NULL: "dB";
+    // "": none, as a camera whose gain is raw), and an auto feature
+    // ("ExposureAuto", "GainAuto", "BalanceWhiteAuto") without an Off entry,
+    // so it cannot be switched off (NULL: none).
+    const char *gain_unit;
+    const char *refuse_off;
 } rig_gv_camera_params_t;
 
 #define RIG_GV_INPROCESS_PREFIX "inprocess:"

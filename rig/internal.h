@@ -91,6 +91,7 @@ typedef struct {
     int  (*set_exposure_us)(rig_camera_t *c, double exposure_us);
     int  (*set_gain)(rig_camera_t *c, double gain);
     int  (*set_region)(rig_camera_t *c, int x, int y, int width, int height);
+    int  (*set_stream_packets)(rig_camera_t *c, long packet_size, long packet_delay);   // -1: unchanged
     // Current settings (fills meta except frame_id/timestamps).
     int  (*settings)(rig_camera_t *c, rig_frame_meta_t *out);
     // One frame per software trigger: waits up to timeout_s, retries `retries`

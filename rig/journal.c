@@ -6,6 +6,7 @@
 #include <errno.h>
 #include <glib.h>
 #include <jansson.h>
+#include <math.h>
 #include <pthread.h>
 #include <sqlite3.h>
 #include <stdarg.h>
@@ -24,6 +25,7 @@ struct rig_journal {
     sqlite3        *db;
     char           *path;
     pthread_mutex_t lock;
+    bool            frame_columns_ok;   // the frames table has every column (add_frame_columns)
 };
 
 static const char schema[] =
@@ -60,20 +62,42 @@ static const struct {
 
 typedef enum { FRAMES_CREATE, FRAMES_INSERT, FRAMES_SELECT } frames_sql_t;
 
+// Does the journal's frames table have this column? (Journals of an older refl
+// lack the later ones: gain_unit, black_level, ...)
+static bool frames_has_column(sqlite3 *db, const char *column)
+{
+    sqlite3_stmt *s = NULL;
+    bool has = true;   // when the question cannot be asked, the SELECT says what is wrong
+    if (sqlite3_prepare_v2(db, "SELECT count(*) FROM pragma_table_info('frames') WHERE name=?", -1, &s, NULL) ==
+        SQLITE_OK) {
+        sqlite3_bind_text(s, 1, column, -1, SQLITE_STATIC);
+        if (sqlite3_step(s) == SQLITE_ROW) has = sqlite3_column_int(s, 0) > 0;
+    }
+    sqlite3_finalize(s);
+    return has;
+}
+
 // "CREATE TABLE frames(...);", "INSERT INTO frames VALUES(?,...)" or
-// "SELECT ... FROM frames ORDER BY step" (the columns rig_frame_row_t holds).
+// "SELECT ... FROM frames ORDER BY step" (the columns rig_frame_row_t holds;
+// with db, a column an older journal lacks reads as NULL: "" or 0).
 // Caller g_free()s.
-static char *frames_sql(frames_sql_t what)
+static char *frames_sql(frames_sql_t what, sqlite3 *db)
 {
     GString *q = g_string_new(what == FRAMES_CREATE   ? "CREATE TABLE frames("
-                              : what == FRAMES_INSERT ? "INSERT INTO frames VALUES("
+                              : what == FRAMES_INSERT ? "INSERT INTO frames("
                                                       : "SELECT ");
+    if (what == FRAMES_INSERT) {   // by name: a journal of an older refl has its columns in another order
+        for (int i = 0; i < NFRAME_COLUMNS; i++)
+            g_string_append_printf(q, "%s%s", i ? "," : "", frame_columns[i].column);
+        g_string_append(q, ") VALUES(");
+    }
     int k = 0;
     for (int i = 0; i < NFRAME_COLUMNS; i++) {
         if (what == FRAMES_SELECT && frame_columns[i].utc) continue;
         if (k++) g_string_append(q, what == FRAMES_CREATE ? ", " : ",");
         if (what == FRAMES_CREATE) g_string_append_printf(q, "%s %s", frame_columns[i].column, frame_columns[i].decl);
         else if (what == FRAMES_INSERT) g_string_append(q, "?");
+        else if (db && !frames_has_column(db, frame_columns[i].column)) g_string_append(q, "NULL");
         else g_string_append(q, frame_columns[i].column);
     }
     g_string_append(q, what == FRAMES_CREATE ? ");" : what == FRAMES_INSERT ? ")" : " FROM frames ORDER BY step");
@@ -195,7 +219,7 @@ int rig_journal_create(rig_journal_t **out, const char *dir, const rig_plan_t *p
     sqlite3_stmt *s = NULL;
     char now[40];
     model_utc_text(model_realtime_s(), now);
-    char *frames = frames_sql(FRAMES_CREATE);
+    char *frames = frames_sql(FRAMES_CREATE, NULL);
     bool made = sqlite3_exec(j->db, "BEGIN", NULL, NULL, NULL) == SQLITE_OK &&
                 sqlite3_exec(j->db, schema, NULL, NULL, NULL) == SQLITE_OK &&
                 sqlite3_exec(j->db, frames, NULL, NULL, NULL) == SQLITE_OK &&
@@ -411,7 +435,7 @@ int rig_journal_frames(rig_journal_t *j, rig_frame_row_t **rows, int *n)
     sqlite3_stmt *s = NULL;
     int rc = 0, k = 0;
     pthread_mutex_lock(&j->lock);
-    char *sql = frames_sql(FRAMES_SELECT);
+    char *sql = frames_sql(FRAMES_SELECT, j->db);
     if (sqlite3_prepare_v2(j->db, sql, -1, &s, NULL) != SQLITE_OK) {
         rc = jfail(j, "cannot read the frames");
     } else {
@@ -429,6 +453,23 @@ int rig_journal_frames(rig_journal_t *j, rig_frame_row_t **rows, int *n)
     return 0;
 }
 
+// A journal of an older refl, resumed: the frame columns it lacks are added
+// (its earlier frames hold NULL there). Within the frame's transaction.
+static int add_frame_columns(rig_journal_t *j)
+{
+    if (j->frame_columns_ok) return 0;
+    for (int i = 0; i < NFRAME_COLUMNS; i++) {
+        if (frames_has_column(j->db, frame_columns[i].column)) continue;
+        char *sql = g_strdup_printf("ALTER TABLE frames ADD COLUMN %s %.*s", frame_columns[i].column,
+                                    (int)strcspn(frame_columns[i].decl, " "), frame_columns[i].decl);
+        int ok = sqlite3_exec(j->db, sql, NULL, NULL, NULL);
+        g_free(sql);
+        if (ok != SQLITE_OK) return jfail(j, "cannot add a frame column to an older journal");
+    }
+    j->frame_columns_ok = true;
+    return 0;
+}
+
 int rig_journal_frame_done(rig_journal_t *j, const rig_frame_row_t *f)
 {
     sqlite3_stmt *s = NULL, *u = NULL;
@@ -438,7 +479,8 @@ int rig_journal_frame_done(rig_journal_t *j, const rig_frame_row_t *f)
         rc = jfail(j, "cannot begin a frame transaction");
         goto done;
     }
-    char *sql = frames_sql(FRAMES_INSERT);
+    if ((rc = add_frame_columns(j))) goto rollback;
+    char *sql = frames_sql(FRAMES_INSERT, NULL);
     bool prepared = sqlite3_prepare_v2(j->db, sql, -1, &s, NULL) == SQLITE_OK &&
                     sqlite3_prepare_v2(j->db, "UPDATE steps SET status='done' WHERE idx=? AND status='pending'", -1,
                                        &u, NULL) == SQLITE_OK;
@@ -460,6 +502,7 @@ int rig_journal_frame_done(rig_journal_t *j, const rig_frame_row_t *f)
     goto done;
 rollback:
     sqlite3_exec(j->db, "ROLLBACK", NULL, NULL, NULL);
+    j->frame_columns_ok = false;   // an added column went with the transaction
 done:
     sqlite3_finalize(s);
     sqlite3_finalize(u);
@@ -589,6 +632,22 @@ int rig_journal_state(rig_journal_t *j, char *out, size_t size)
 #define CSV_HEAD_UTC(name)
 #define CSV_HEAD_(kind, name, column, decl, csv, size) CSV_HEAD_##kind(name)
 
+// A text field: quoted (quotes doubled) when it holds a comma, quote or line break.
+static void csv_text(FILE *f, const char *sep, const char *s)
+{
+    fputs(sep, f);
+    if (!strpbrk(s, ",\"\n\r")) {
+        fputs(s, f);
+        return;
+    }
+    fputc('"', f);
+    for (; *s; s++) {
+        if (*s == '"') fputc('"', f);
+        fputc(*s, f);
+    }
+    fputc('"', f);
+}
+
 void rig_frame_rows_write_csv(FILE *f, const rig_frame_row_t *rows, int n)
 {
     static const char head[] = RIG_FRAME_COLUMNS(CSV_HEAD_);
@@ -598,7 +657,7 @@ void rig_frame_rows_write_csv(FILE *f, const rig_frame_row_t *rows, int n)
         const char *sep = "";
 #define CSV_INT(name, fmt)  fprintf(f, "%s" fmt, sep, r->name), sep = ",";
 #define CSV_REAL(name, fmt) fprintf(f, "%s" fmt, sep, r->name), sep = ",";
-#define CSV_TEXT(name, fmt) fprintf(f, "%s" fmt, sep, r->name), sep = ",";
+#define CSV_TEXT(name, fmt) csv_text(f, sep, r->name), sep = ",";
 #define CSV_U64(name, fmt)  fprintf(f, "%s" fmt, sep, (unsigned long long)r->name), sep = ",";
 #define CSV_UTC(name, fmt)
 #define CSV_(kind, name, column, decl, csv, size) CSV_##kind(name, csv)
@@ -616,7 +675,7 @@ json_t *rig_frame_rows_json(const rig_frame_row_t *rows, int n)
         json_t *o = json_object();
         if (!o) break;
 #define JSON_INT(name)  json_object_set_new(o, #name, json_integer(r->name));
-#define JSON_REAL(name) json_object_set_new(o, #name, json_real(r->name));
+#define JSON_REAL(name) json_object_set_new(o, #name, isfinite(r->name) ? json_real(r->name) : json_null());
 #define JSON_TEXT(name) json_object_set_new(o, #name, json_string(r->name));
 #define JSON_U64(name)  json_object_set_new(o, #name, json_integer((json_int_t)r->name));
 #define JSON_UTC(name)

@@ -23,7 +23,10 @@ extern "C" {
 //   [camera]     backend = aravis; address = A (IPv4, opened directly) | serial = S | name = N
 //                (exactly one); optional camera settings applied at open:
 //                pixel_format = Mono8|Mono12|Mono16 (or Mono10, the packed Mono10p|Mono12p|
-//                Mono10Packed|Mono12Packed: rig/pixfmt.h); exposure_us = ...; gain = ... (the camera's unit)
+//                Mono10Packed|Mono12Packed: rig/pixfmt.h); exposure_us = ...; gain = ... (the camera's unit);
+//                packet_size = BYTES (GigE Vision GevSCPSPacketSize, 576..16384 and the
+//                camera's range), packet_delay = TICKS (GevSCPD, 0..4294967295 and the camera's
+//                range): set and read back at open (rig_camera_set_stream_packets)
 //   [turntable]  backend = apt: serial (optional: the only stage), stage = K10CR1 (optional:
 //                from the controller; one of rig_stage_models)
 //                | sim: speed_deg_s, accel_deg_s2, home_time_s, position_noise_deg, time_scale,
@@ -42,7 +45,7 @@ extern "C" {
 //                are then not allowed);
 //                address = 127.0.0.1; sample = NAME; time_scale = 1; noise_seed = 1;
 //                busy_wait_s = 0 (wait for another virtual camera on the address);
-//                pixel_format, exposure_us, gain (as in [camera])
+//                pixel_format, exposure_us, gain, packet_size, packet_delay (as in [camera])
 // Every section but [rig] is optional (a rig without [camera] moves and switches
 // lamps but takes no pictures). Unknown sections and keys, missing keys and bad
 // values are errors naming file and line and saying what to write instead.

@@ -181,7 +181,14 @@ typedef struct rig_journal rig_journal_t;
 // KIND: INT (int), REAL (double), TEXT (char field[size]), U64 (uint64_t),
 // UTC (a column only: the UTC text of the REAL field `field`, for people
 // reading the database; not in the struct, not exported). `file` is relative
-// to the session directory.
+// to the session directory. The camera's radiometric state (rig_frame_meta_t):
+// gain_unit (the unit of `gain`, GenICam's <Unit>: "dB", "x", or "raw" when
+// the camera states none; model_gain_factor converts; empty in sessions of
+// older refl, whose gains were dB), black_level and temperature_c (NULL in
+// the database where the camera has none; read back as 0), gamma (1 when
+// off), firmware, camera_settings (the automatics, gamma, LUT and transport
+// settings refl found, switched off and read back). Journals of an older refl
+// lack the later columns: they read as NULL, and a resume adds them.
 #define RIG_FRAME_COLUMNS(_)                                                                    \
     _(INT,  step,               "step",               "INTEGER PRIMARY KEY REFERENCES steps(idx)", "%d", 0) \
     _(TEXT, file,               "file",               "TEXT UNIQUE NOT NULL", "%s",   64)  \
@@ -202,7 +209,13 @@ typedef struct rig_journal rig_journal_t;
     _(INT,  width,              "width",              "INTEGER",              "%d",   0)  \
     _(INT,  height,             "height",             "INTEGER",              "%d",   0)  \
     _(TEXT, pixel_format,       "pixel_format",       "TEXT",                 "%s",   16) \
-    _(U64,  frame_id,           "frame_id",           "INTEGER",              "%llu", 0)
+    _(U64,  frame_id,           "frame_id",           "INTEGER",              "%llu", 0)  \
+    _(TEXT, gain_unit,          "gain_unit",          "TEXT",                 "%s",   16) \
+    _(REAL, black_level,        "black_level",        "REAL",                 "%.10g", 0) \
+    _(REAL, gamma,              "gamma",              "REAL",                 "%.6g", 0)  \
+    _(REAL, temperature_c,      "temperature_c",      "REAL",                 "%.2f", 0)  \
+    _(TEXT, firmware,           "firmware",           "TEXT",                 "%s",   64) \
+    _(TEXT, camera_settings,    "camera_settings",    "TEXT",                 "%s",   512)
 
 #define RIG_FRAME_FIELD_INT(name, size)  int name;
 #define RIG_FRAME_FIELD_REAL(name, size) double name;

@@ -735,6 +735,9 @@ static int ideal_frame(rig_virtual_t *v, int sample, double angle_deg, uint32_t 
                        double gain_db, model_sensor_t *s_out, float *out)
 {
     size_t n = (size_t)v->W * v->H;
+    // The virtual sensor's own physics: its camera's Gain is in dB (GenICam
+    // <Unit>dB</Unit>, rig/gv_camera.c), so this is not a recorded gain's
+    // conversion (that is model_gain_factor, by the frame's unit).
     double gf = pow(10.0, gain_db / 20.0);
     double kc = v->kc_per_us * exposure_us * gf;
     const double Pa = v->sensor.dark_offset_dn;
@@ -1118,7 +1121,7 @@ int rig_virtual_sensor_apply(rig_virtual_t *v, double exposure_us, double gain_d
         return rig_fail(RIG_ERR_INVALID, "virtual rig: exposure %g us must be > 0 and gain %g dB >= 0", exposure_us,
                         gain_db);
     model_sensor_t s = v->sensor;
-    s.system_gain_dn_per_e *= pow(10.0, gain_db / 20.0);
+    s.system_gain_dn_per_e *= pow(10.0, gain_db / 20.0);   // the sensor's physics: its Gain is in dB (see ideal_frame)
     s.exposure_us = exposure_us;
     s.noise_seed = seed;
     model_sensor_apply_patterns(&s, v->W, v->H, v->prnu, v->dsnu, img);

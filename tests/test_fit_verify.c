@@ -487,6 +487,31 @@ TEST(verify_cli_errors)
     CHECK_CONTAINS(err, "broken.json:3");
     g_free(out);
     g_free(err);
+    // a frame whose gain is in a unit without a known scale (raw), at another gain than the calibration's
+    {
+        int w = 0, h = 0;
+        uint16_t *px = NULL;
+        model_meta_t *m = model_meta_new();
+        CHECK(model_png_read_meta(imgs[0], &w, &h, &px, m));
+        model_meta_t *m2 = model_meta_new();
+        const char *const *kv = model_meta_list(m);
+        for (int k = 0; kv && kv[k]; k += 2)
+            if (strcmp(kv[k], "gain")) model_meta_add(m2, kv[k], "%s", kv[k + 1]);
+        model_meta_add(m2, "gain", "12");
+        model_meta_add(m2, "gain_unit", "raw");
+        const char *rawpng = test_path("raw_gain.png");
+        CHECK(px && model_png16_write(rawpng, w, h, px, model_meta_list(m2)));
+        free(px);
+        model_meta_free(m);
+        model_meta_free(m2);
+        rc = test_refl_run(120, &out, &err, "verify", t, "--images", rawpng, "--cameras", cam, "--lamps", lamps,
+                           "--kc-per-us", kc, "--priors", priors, "-o", dir, NULL);
+        CHECK(rc == 1);
+        CHECK_CONTAINS(err, "raw_gain.png");
+        CHECK_CONTAINS(err, "unit 'raw'");
+        g_free(out);
+        g_free(err);
+    }
     // no absolute scale for the lamps
     rc = test_refl_run(120, &out, &err, "verify", t, "--images", imgs[0], "--cameras", cam, "--lamps", lamps,
                        "--priors", priors, "-o", dir, NULL);

@@ -361,3 +361,38 @@ TEST(sensor_dark_current)
     CHECK_REL(v, 100, 0.02);   // K = 1: integer electrons, no quantisation noise
     free(a);
 }
+
+// model_gain_factor: the one conversion of a recorded gain, by its unit.
+TEST(sensor_gain_factor_units)
+{
+    double f = 0;
+    CHECK(model_gain_factor(6, "dB", 0, "dB", "frame a", &f));
+    CHECK_REL(f, 1.9952623149688795, 1e-12);                 // 10^(6/20)
+    CHECK(model_gain_factor(20, "db", 0, "dB", "frame a", &f));
+    CHECK_REL(f, 10.0, 1e-12);
+    CHECK(model_gain_factor(12, NULL, 0, "dB", "old frame", &f));   // no unit: dB (older sessions)
+    CHECK_REL(f, 3.981071705534972, 1e-12);
+    CHECK(model_gain_factor(12, "", 6, "dB", "old frame", &f));     // relative to a calibration at 6 dB
+    CHECK_REL(f, 1.9952623149688795, 1e-12);
+    CHECK(model_gain_factor(2.5, "x", 0, "dB", "frame b", &f));
+    CHECK_REL(f, 2.5, 1e-12);
+    CHECK(model_gain_factor(4, "times", 2, "linear", "frame b", &f));
+    CHECK_REL(f, 2.0, 1e-12);
+    CHECK(model_gain_factor(2, "factor", 20, "dB", "frame b", &f));   // 2 against 10
+    CHECK_REL(f, 0.2, 1e-12);
+    // raw: only at the calibration's gain
+    CHECK(model_gain_factor(100, "raw", 100, "raw", "frame c", &f));
+    CHECK_NEAR(f, 1.0, 0);
+    f = -1;
+    CHECK(!model_gain_factor(200, "raw", 100, "raw", "frames/s000007.png", &f));
+    CHECK_CONTAINS(model_last_error(), "frames/s000007.png");
+    CHECK_CONTAINS(model_last_error(), "unit 'raw'");
+    CHECK_NEAR(f, -1, 0);
+    CHECK(!model_gain_factor(0, "raw", 0, "dB", "frame d", &f));      // raw against a dB calibration
+    CHECK_CONTAINS(model_last_error(), "0 dB");
+    CHECK(!model_gain_factor(3, "DN/e", 0, "dB", "frame e", &f));     // any unknown unit
+    CHECK_CONTAINS(model_last_error(), "'DN/e'");
+    CHECK(!model_gain_factor(0, "x", 0, "dB", "frame f", &f));        // a factor of 0
+    CHECK_CONTAINS(model_last_error(), "frame f");
+    CHECK(!model_gain_factor(NAN, "dB", 0, "dB", "frame g", &f));
+}

@@ -454,6 +454,8 @@ static const char freerun_py[] =
     "cam.set_region(0, 0, 256, 128)\n"
     "cam.set_pixel_format_from_string('Mono16')\n"
     "cam.set_exposure_time(1000.0)\n"
+    "for f in ('ExposureAuto', 'GainAuto', 'ContrastAuto'): cam.set_string(f, 'Off')\n"   // the automatics
+    "for f in ('GammaEnable', 'LUTEnable'): cam.set_boolean(f, False)\n"  // and tone curve: on at start
     "cam.set_frame_rate(50.0)\n"   // turns triggering off
     "print('TriggerMode', cam.get_string('TriggerMode'))\n"
     "stream = cam.create_stream(None, None)\n"

@@ -94,7 +94,7 @@ TEST(rigcfg_lab_example_parses)
     CHECK(rc == RIG_ERR_NO_DEVICE);
     CHECK(r == NULL);
     char want[1100];
-    snprintf(want, sizeof want, "%s:24: [turntable]: apt serial 55000001", path);
+    snprintf(want, sizeof want, "%s:34: [turntable]: apt serial 55000001", path);
     CHECK_CONTAINS(model_last_error(), want);
     CHECK(!strcmp(model_last_error(), model_last_error()));
 }
