@@ -1,0 +1,220 @@
+// tests/test_rig_cameras.c — several cameras in one rig: [camera NAME]
+// sections (rig/config.c), `refl rig status` and `refl rig snap` of every
+// camera (rig/cmd_rig.c). The cameras are pattern servers of tests/fixtures.h
+// served in this process (rig_gv_camera_params_t.inprocess, opened as
+// "inprocess:SERIAL"): no network.
+#define _GNU_SOURCE
+#include <fcntl.h>
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <unistd.h>
+
+#include "model/model.h"
+#include "rig/gv_camera.h"
+#include "rig/rig.h"
+#include "tests/fixtures.h"
+#include "tests/test.h"
+
+// Parse errors of camera sections: file:line and what to write.
+TEST(rigcams_parse_errors)
+{
+    static const struct {
+        const char *text, *want;
+    } cases[] = {
+        { "[camera left]\nbackend = aravis\nserial = A\n[camera left]\nbackend = aravis\nserial = B\n",
+          NULL },   // the INI parser or ours: a repeated section is an error either way
+        { "[camera a/b]\nbackend = aravis\nserial = A\n", ":1: [camera a/b]: 'a/b' is not a camera name" },
+        { "[camera all]\nbackend = aravis\nserial = A\n", ":1: [camera all]: 'all' is not a camera name" },
+        { "[camera left]\nbackend = aravis\nserial = A\n[camera right]\nbackend = aravis\nserial = A\n",
+          ":6: [camera right]: 'A' already identifies [camera left] (line 1)" },
+        { "[camera]\nbackend = aravis\nserial = A\n[camera camera]\nbackend = aravis\nserial = B\n",
+          ":4: [camera camera]: camera 'camera' is already [camera] (line 1)" },
+        { "[camera right]\nbackend = aravis\nexposure_us = 5\n", ":1: [camera right] does not say which camera" },
+        { "[camera right]\nbackend = aravis\nserial = B\npixel_format = Mono9\n",
+          ":4: [camera right] pixel_format: 'Mono9' is not" },
+        { "[camera right]\nbackend = aravis\nserial = B\nroi = 1\n", ":4: [camera right]: unknown key 'roi'" },
+    };
+    bool q = model_error_quiet_thread(true);
+    for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++) {
+        int rc = rig_config_parse(cases[i].text, strlen(cases[i].text), "cams.ini");
+        CHECK_MSG(rc == RIG_ERR_INVALID, "case %zu accepted", i);
+        if (cases[i].want) CHECK_CONTAINS(model_last_error(), cases[i].want);
+    }
+    const char *ok = "[camera left]\nbackend = aravis\nserial = A\n[camera right-2]\nbackend = aravis\n"
+                     "address = 127.0.0.9\n";
+    CHECK(rig_config_parse(ok, strlen(ok), "cams.ini") == 0);
+    model_error_quiet_thread(q);
+}
+
+// Two pattern cameras in this process, serials CAM-L and CAM-R (sensors of
+// different sizes).
+typedef struct {
+    fx_pattern_ctx_t *ctx[2];
+    rig_gv_camera_t  *g[2];
+} two_t;
+
+static bool two_start(two_t *t)
+{
+    static const char *const serials[2] = { "CAM-L", "CAM-R" };
+    for (int i = 0; i < 2; i++) {
+        t->ctx[i] = fx_pattern_ctx_new();
+        rig_gv_camera_params_t p = rig_gv_camera_defaults();
+        p.inprocess = true;
+        p.serial = serials[i];
+        p.render = fx_render_pattern;
+        p.render_ctx = t->ctx[i];
+        p.sensor_width = i ? 96 : 64;
+        p.sensor_height = i ? 40 : 48;
+        int rc = rig_gv_camera_start(&t->g[i], &p);
+        CHECK_MSG(rc == 0, "camera %s: %d %s", serials[i], rc, model_last_error());
+        if (rc) return false;
+    }
+    return true;
+}
+
+static void two_stop(two_t *t)
+{
+    for (int i = 0; i < 2; i++) {
+        rig_gv_camera_stop(t->g[i]);
+        if (t->ctx[i]) fx_pattern_ctx_free(t->ctx[i]);
+    }
+}
+
+static const char two_rig[] =
+    "[turntable]\nbackend = sim\ntime_scale = 0.001\nposition_noise_deg = 0\n"
+    "[lamp key]\nbackend = sim\n"
+    "[camera left]\nbackend = aravis\nserial = inprocess:CAM-L\nexposure_us = 1500\npixel_format = Mono16\n"
+    "[camera right]\nbackend = aravis\nserial = inprocess:CAM-R\nexposure_us = 2500\npixel_format = Mono8\n";
+
+// stdout of fn(r) into a file: its text (caller frees) and fn's return value.
+static char *stdout_of(int (*fn)(rig_t *), rig_t *r, int *rc)
+{
+    const char *path = test_path("stdout.txt");
+    fflush(stdout);
+    int saved = dup(1), fd = open(path, O_WRONLY | O_CREAT | O_TRUNC, 0644);
+    dup2(fd, 1);
+    close(fd);
+    *rc = fn(r);
+    fflush(stdout);
+    dup2(saved, 1);
+    close(saved);
+    return model_read_file(path, NULL);
+}
+
+// rig_open opens both cameras in file order with their own defaults; status
+// lists each.
+TEST(rigcams_open_status)
+{
+    two_t t = { 0 };
+    if (!two_start(&t)) goto done;
+    const char *path = test_write("two.ini", two_rig);
+    rig_t *r = NULL;
+    int rc = rig_open(&r, path);
+    CHECK_MSG(rc == 0, "rig_open: %d %s", rc, model_last_error());
+    if (!r) goto done;
+    CHECK(r->ncameras == 2 && r->camera == r->cameras[0]);
+    CHECK(!strcmp(r->camera_names[0], "left") && !strcmp(r->camera_names[1], "right"));
+    CHECK(rig_camera_find(r, "right") == 1 && rig_camera_find(r, "left") == 0 && rig_camera_find(r, "x") < 0);
+    CHECK_NEAR(r->exposure_us, 1500, 1e-9);   // the first camera's defaults
+    rig_frame_meta_t m[2];
+    for (int i = 0; i < 2; i++) CHECK(rig_camera_settings(r->cameras[i], &m[i]) == 0);
+    CHECK(!strcmp(m[0].serial, "CAM-L") && !strcmp(m[1].serial, "CAM-R"));
+    CHECK_NEAR(m[0].exposure_us, 1500, 1e-6);
+    CHECK_NEAR(m[1].exposure_us, 2500, 1e-6);
+    CHECK(!strcmp(m[1].pixel_format, "Mono8") && !strcmp(m[0].pixel_format, "Mono16"));
+    char *out = stdout_of(rig_cmd_status, r, &rc);
+    CHECK(rc == 0);
+    CHECK_CONTAINS(out, "cameras: 2\ncamera_name: left\ncamera: ");
+    CHECK_CONTAINS(out, "camera_serial: CAM-L\n");
+    CHECK_CONTAINS(out, "camera_name: right\ncamera: ");
+    CHECK_CONTAINS(out, "camera_serial: CAM-R\n");
+    CHECK_CONTAINS(out, "camera_region: 96 x 40 at (0, 0)");
+    CHECK(strstr(out, "CAM-L") < strstr(out, "CAM-R"));
+    free(out);
+    // The second camera stops answering: status still lists both, names it and fails.
+    rig_gv_camera_stop(t.g[1]);
+    t.g[1] = NULL;
+    bool q = model_error_quiet_thread(true);
+    out = stdout_of(rig_cmd_status, r, &rc);
+    model_error_quiet_thread(q);
+    CHECK(rc != 0);
+    CHECK_CONTAINS(out, "camera_serial: CAM-L\n");
+    CHECK_CONTAINS(out, "camera_name: right\ncamera: aravis");
+    CHECK_CONTAINS(model_last_error(), "refl rig status: the camera right did not answer");
+    free(out);
+    rig_close(r);
+done:
+    two_stop(&t);
+}
+
+static int snap(const char *rig, const char *out, const char *camera)
+{
+    const char *argv[12] = { "rig", "--rig", rig, "snap", "-o", out, "--lamps", "key", "--angle", "15" };
+    int n = 10;
+    if (camera) {
+        argv[n++] = "--camera";
+        argv[n++] = camera;
+    }
+    fflush(stdout);
+    int saved = dup(1), fd = open(test_path("snap.txt"), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+    dup2(fd, 1);
+    close(fd);
+    int rc = rig_cmd(n, (char **)argv);
+    fflush(stdout);
+    dup2(saved, 1);
+    close(saved);
+    return rc;
+}
+
+static void check_png(const char *path, const char *serial, int w, int h, const char *name)
+{
+    int W = 0, H = 0;
+    uint16_t *pix = NULL;
+    model_meta_t *meta = model_meta_new();
+    CHECK_MSG(model_png_read_meta(path, &W, &H, &pix, meta), "%s: %s", path, model_last_error());
+    CHECK(W == w && H == h);
+    const char *s = model_meta_get(meta, "camera_serial"), *n = model_meta_get(meta, "camera_name");
+    const char *lamps = model_meta_get(meta, "lamps_on"), *ang = model_meta_get(meta, "turntable_commanded_deg");
+    CHECK(s && !strcmp(s, serial));
+    CHECK(n && !strncmp(n, name, strlen(name)) && n[strlen(name)] == ' ');
+    CHECK(lamps && !strcmp(lamps, "key"));
+    CHECK(ang && !strcmp(ang, "15"));
+    free(pix);
+    model_meta_free(meta);
+}
+
+// snap: every camera (OUT_NAME.png each) at one angle and lamp state, or the
+// one named by --camera (OUT.png); an unknown name is an error naming the
+// cameras.
+TEST(rigcams_snap)
+{
+    two_t t = { 0 };
+    if (!two_start(&t)) goto done;
+    char *rig = strdup(test_write("two.ini", two_rig));
+    int rc = snap(rig, test_path("all.png"), NULL);
+    CHECK_MSG(rc == 0, "snap all: %d %s", rc, model_last_error());
+    check_png(test_path("all_left.png"), "CAM-L", 64, 48, "left");
+    check_png(test_path("all_right.png"), "CAM-R", 96, 40, "right");
+    CHECK(access(test_path("all.png"), F_OK) != 0);
+    char *txt = model_read_file(test_path("snap.txt"), NULL);
+    CHECK(txt && strstr(txt, "wrote ") && strstr(txt, "all_left.png") && strstr(txt, "all_right.png"));
+    free(txt);
+
+    rc = snap(rig, test_path("one.png"), "right");
+    CHECK_MSG(rc == 0, "snap --camera right: %d %s", rc, model_last_error());
+    check_png(test_path("one.png"), "CAM-R", 96, 40, "right");
+    CHECK(access(test_path("one_left.png"), F_OK) != 0 && access(test_path("one_right.png"), F_OK) != 0);
+
+    bool q = model_error_quiet_thread(true);
+    rc = snap(rig, test_path("none.png"), "middle");
+    model_error_quiet_thread(q);
+    CHECK(rc == 1);
+    CHECK_CONTAINS(model_last_error(), "the rig ");
+    CHECK_CONTAINS(model_last_error(), "has no camera 'middle' (its cameras: left, right)");
+    CHECK(access(test_path("none.png"), F_OK) != 0);
+    free(rig);
+done:
+    two_stop(&t);
+}
