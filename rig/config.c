@@ -28,7 +28,7 @@ typedef struct {
     bool   virt;
     int    rig_line;
     char  *truth;                         // resolved against the rig file's directory (g_free)
-    char   address[64], sample[64];
+    char   address[256], sample[64];
     bool   inprocess;                     // serve = inprocess
     double time_scale, busy_wait_s;
     uint64_t noise_seed;
@@ -252,9 +252,15 @@ static int parse_rig(spec_t *s, const char *sec, int line)
     snprintf(s->address, sizeof s->address, "127.0.0.1");
     if ((rc = get_string(s, sec, "address", s->address, sizeof s->address))) return rc;
     const model_ini_entry_t *a = get(s, sec, "address");
-    if (a && (!is_ipv4(s->address) || strncmp(s->address, "127.", 4)))
-        return cfg_fail(s, a->line, "[rig] address: '%s' is not a loopback IPv4 address: the virtual camera serves "
-                        "on 127.0.0.1 only", s->address);
+    gchar **as = g_strsplit_set(s->address, " \t", -1);   // one per camera of the truth file
+    for (int i = 0; a && as[i]; i++)
+        if (as[i][0] && (!is_ipv4(as[i]) || strncmp(as[i], "127.", 4))) {
+            rc = cfg_fail(s, a->line, "[rig] address: '%s' is not a loopback IPv4 address: the virtual cameras "
+                          "serve on 127.x.y.z only (one address per camera, separated by spaces)", as[i]);
+            break;
+        }
+    g_strfreev(as);
+    if (rc) return rc;
     if ((rc = get_string(s, sec, "sample", s->sample, sizeof s->sample))) return rc;
     s->time_scale = 1;
     if ((rc = get_double(s, sec, "time_scale", &s->time_scale, 0, true, 1e3, "0 < time_scale <= 1000; 1 is real "
@@ -583,11 +589,16 @@ static int open_devices(rig_t *r, spec_t *s)
         model_ini_free(truth);
         p.time_scale = s->time_scale;
         set_profile_sim(r, &p);
-        rig_camera_t *c = NULL;
-        QUIET(rig_camera_open_aravis(&c, rig_virtual_camera_address(r->virt)));
-        if (rc) return device_fail(rc, s, s->rig_line, "rig");
-        add_camera(r, c, "camera");
-        return apply_camera_defaults(c, s->pixel_format, s->exposure_us, s->gain, s, s->rig_line, "rig");
+        for (int k = 0; k < rig_virtual_ncameras(r->virt); k++) {   // every camera of the truth file
+            rig_virtual_t *view = rig_virtual_camera_view(r->virt, k);
+            rig_camera_t *c = NULL;
+            QUIET(rig_camera_open_aravis(&c, rig_virtual_camera_address(view)));
+            if (rc) return device_fail(rc, s, s->rig_line, "rig");
+            add_camera(r, c, rig_virtual_camera_name(view));
+            if ((rc = apply_camera_defaults(c, s->pixel_format, s->exposure_us, s->gain, s, s->rig_line, "rig")))
+                return rc;
+        }
+        return 0;
     }
     if (s->have_turntable) {
         if (s->turntable_apt) {
