@@ -1499,12 +1499,19 @@ static void list_samples(const rig_virtual_t *v, char *buf, size_t size)
 }
 
 // Everything but the devices. false with a message naming file:line.
+static int camera_sections(const model_ini_t *ini, const char *secs[], int *line_over);
+
 static bool parse_truth(rig_virtual_t *v, const model_ini_t *ini, const char **default_sample,
                         rig_turntable_sim_params_t *tp, double *warmup_ms, double *settle_ms,
                         rig_gv_camera_params_t *gp)
 {
     if (!check_sections(ini)) return false;
-    if (!v->cam_sec[0]) snprintf(v->cam_sec, sizeof v->cam_sec, "%s", "camera");
+    if (!v->cam_sec[0]) {   // the first camera section
+        const char *secs[VIRTUAL_CAMERAS_MAX];
+        int over;
+        int n = camera_sections(ini, secs, &over);
+        snprintf(v->cam_sec, sizeof v->cam_sec, "%s", n ? secs[0] : "camera");
+    }
     // camera
     const char *cm = get_str(ini, v->cam_sec, "model", NULL);
     if (!cm) {
@@ -1686,6 +1693,32 @@ int rig_virtual_check_truth(const char *text, size_t len, const char *name, cons
         err = fail_model(RIG_ERR_INVALID);
         goto done;
     }
+    // every further camera: its [camera NAME] and [sensor NAME]
+    const char *secs[VIRTUAL_CAMERAS_MAX];
+    int over = 0, ncams = camera_sections(ini, secs, &over);
+    if (over) {
+        model_error(ini->path, over, "more than %d cameras: the virtual rig serves at most %d", VIRTUAL_CAMERAS_MAX,
+                    VIRTUAL_CAMERAS_MAX);
+        err = fail_model(RIG_ERR_INVALID);
+        goto done;
+    }
+    for (int k = 1; k < ncams; k++) {
+        rig_virtual_t *w = calloc(1, sizeof *w);
+        if (!w) {
+            err = rig_fail(RIG_ERR_NO_MEM, "virtual rig: out of memory");
+            goto done;
+        }
+        pthread_mutex_init(&w->state_lock, NULL);
+        pthread_mutex_init(&w->cache_lock, NULL);
+        snprintf(w->cam_sec, sizeof w->cam_sec, "%s", secs[k]);
+        rig_gv_camera_params_t gk = rig_gv_camera_defaults();
+        bool ok = parse_truth(w, ini, &def_sample, &tp, &warmup_ms, &settle_ms, &gk);
+        rig_virtual_close(w);
+        if (!ok) {
+            err = fail_model(RIG_ERR_INVALID);
+            goto done;
+        }
+    }
     err = RIG_ERR_OK;
 done:
     model_ini_free(ini);
@@ -1738,7 +1771,7 @@ done:
 
 
 // The camera sections of a truth file in file order ([camera], [camera NAME]): their count.
-static int camera_sections(const model_ini_t *ini, const char *secs[VIRTUAL_CAMERAS_MAX], int *line_over)
+static int camera_sections(const model_ini_t *ini, const char *secs[], int *line_over)
 {
     int n = 0;
     *line_over = 0;

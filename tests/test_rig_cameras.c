@@ -5,6 +5,7 @@
 // "inprocess:SERIAL"): no network.
 #define _GNU_SOURCE
 #include <fcntl.h>
+#include <glib.h>
 #include <limits.h>
 #include <math.h>
 #include <stdio.h>
@@ -347,4 +348,42 @@ TEST(rigcams_virtual_gige)
         rig_close(r);
     }
     test_camera_unlock(session);
+}
+
+// The truth file's camera sections, checked without starting anything: the
+// 2-camera example passes; a [sensor NAME] without its camera, a second
+// camera's bad key or model are errors naming the file and line.
+TEST(rigcams_truth_errors)
+{
+    char examples[PATH_MAX + 16];
+    snprintf(examples, sizeof examples, "%s/examples", test_srcdir());
+    char path[PATH_MAX + 64];
+    snprintf(path, sizeof path, "%s/virtual-truth-2cam.ini", examples);
+    size_t len = 0;
+    char *text = model_read_file(path, &len);
+    CHECK(text != NULL);
+    if (!text) return;
+    CHECK_MSG(rig_virtual_check_truth(text, len, "virtual-truth-2cam.ini", examples) == 0, "%s", model_last_error());
+    static const struct {
+        const char *from, *to, *want;
+    } cases[] = {
+        { "[sensor right]", "[sensor middle]", "[sensor middle] has no [camera middle]" },
+        { "model = camera-right.cameramodel", "model = camera-rightx.cameramodel", "camera-rightx.cameramodel" },
+        { "model_name = virtual rig camera B", "lens = 12 mm", "unknown key 'lens' in [camera right]" },
+        { "read_noise_e = 4", "read_noise_e = -4", "read_noise_e" },
+    };
+    bool q = model_error_quiet_thread(true);
+    for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++) {
+        char *at = strstr(text, cases[i].from);
+        CHECK_MSG(at != NULL, "case %zu: '%s' not in the example", i, cases[i].from);
+        if (!at) continue;
+        char *bad = g_strdup_printf("%.*s%s%s", (int)(at - text), text, cases[i].to, at + strlen(cases[i].from));
+        int rc = rig_virtual_check_truth(bad, strlen(bad), "virtual-truth-2cam.ini", examples);
+        CHECK_MSG(rc == RIG_ERR_INVALID, "case %zu accepted", i);
+        CHECK_CONTAINS(model_last_error(), "virtual-truth-2cam.ini:");
+        CHECK_CONTAINS(model_last_error(), cases[i].want);
+        g_free(bad);
+    }
+    model_error_quiet_thread(q);
+    free(text);
 }
