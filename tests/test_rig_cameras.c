@@ -6,6 +6,7 @@
 #define _GNU_SOURCE
 #include <fcntl.h>
 #include <glib.h>
+#include <sqlite3.h>
 #include <limits.h>
 #include <math.h>
 #include <stdio.h>
@@ -386,4 +387,153 @@ TEST(rigcams_truth_errors)
     }
     model_error_quiet_thread(q);
     free(text);
+}
+
+// ---------------------------------------------------------------------------
+// Capture with two cameras
+
+// Step 3 (the third frame step): the right camera stops answering.
+static void drop_right_at_step3(void *ctx, rig_t *r, int step)
+{
+    (void)ctx;
+    if (step == 3) rig_gv_camera_drop_triggers(rig_virtual_gv_camera(rig_virtual_camera_view(r->virt, 1)), 1000);
+}
+
+// Every step triggers both cameras: each frame journalled with its camera,
+// frames/sNNNNNN_left.png and _right.png; the right camera stops answering at
+// step 3: the session pauses with step 3's left frame committed and the step
+// pending; --resume takes the right camera's frame of step 3 only, then the
+// rest; the session's readers select a camera's frames; session check covers
+// every frame.
+TEST(rigcams_capture_resume)
+{
+    char *rig = rig_2cam("serve = inprocess\n");
+    const char *plan = test_write("plan.ini", "[sample]\nname = coupon_matte_paint\nkind = material_coupon\n"
+                                  "[angles]\nlist = 0 5\n[lamps]\nsets = east\n[exposure]\nmode = fixed\n"
+                                  "list_us = 1000 2000\n[capture]\nframe_timeout_s = 0.3\nretries = 1\n");
+    char dir[4096];
+    snprintf(dir, sizeof dir, "%s/s", test_tmpdir());
+    rig_capture_opts_t o = { .plan_path = plan, .rig_path = rig, .dir = dir, .progress = 0,
+                             .before_step = drop_right_at_step3, .op = rig_operator_open(true, NULL) };
+    bool q = model_error_quiet_thread(true);
+    int rc = rig_capture_run(&o);
+    model_error_quiet_thread(q);
+    CHECK(rc == 3);
+    CHECK_CONTAINS(model_last_error(), "serial REFL-VIRT02");
+    CHECK_CONTAINS(model_last_error(), "did not answer at step 3");
+    rig_session_t *s = rig_session_open(dir);
+    CHECK(s != NULL);
+    if (!s) goto done;
+    CHECK_MSG(s->n == 5, "%d frames after the pause", s->n);   // steps 1, 2 both cameras, step 3 left
+    CHECK(s->n == 5 && s->rows[4].step == 3 && !strcmp(s->rows[4].camera, "left"));
+    uint64_t left3 = s->n == 5 ? s->rows[4].frame_id : 0;
+    rig_session_free(s);
+
+    o.resume = true;
+    o.before_step = NULL;
+    rc = rig_capture_run(&o);
+    CHECK_MSG(rc == 0, "resume: %d %s", rc, model_last_error());
+    s = rig_session_open(dir);
+    CHECK(s != NULL);
+    if (!s) goto done;
+    CHECK_MSG(s->n == 8, "%d frames", s->n);
+    const char *names[4];
+    CHECK(rig_session_cameras(s, names, 4) == 2 && !strcmp(names[0], "left") && !strcmp(names[1], "right"));
+    for (int i = 0; i < s->n; i++) {
+        const rig_frame_row_t *w = &s->rows[i];
+        bool right = !strcmp(w->camera, "right");
+        CHECK(right || !strcmp(w->camera, "left"));
+        CHECK(w->step == 1 + i / 2);
+        CHECK(w->width == (right ? 1024 : 1280) && w->height == (right ? 768 : 1024));
+        char want[64];
+        snprintf(want, sizeof want, "frames/s%06d_%s.png", w->step, w->camera);
+        CHECK_MSG(!strcmp(w->file, want), "row %d: %s", i, w->file);
+        if (w->step == 3 && !right) CHECK(w->frame_id == left3);   // not taken again
+    }
+    int fw = 0, fh = 0;
+    float *img = rig_session_frame(s, 7, &fw, &fh);
+    CHECK(img && fw == 1024 && fh == 768);
+    free(img);
+    rig_session_free(s);
+    s = rig_session_open_camera(dir, "right");
+    CHECK(s && s->n == 4);
+    for (int i = 0; s && i < s->n; i++) CHECK(!strcmp(s->rows[i].camera, "right") && s->rows[i].step == i + 1);
+    rig_session_free(s);
+    s = rig_session_open_camera(dir, NULL);   // the first camera's
+    CHECK(s && s->n == 4 && !strcmp(s->rows[0].camera, "left"));
+    rig_session_free(s);
+    q = model_error_quiet_thread(true);
+    s = rig_session_open_camera(dir, "middle");
+    model_error_quiet_thread(q);
+    CHECK(s == NULL);
+    CHECK_CONTAINS(model_last_error(), "no frames of camera 'middle' (its cameras: left, right)");
+    // refl session check: every frame of both cameras verified
+    const char *argv[] = { "session", "check", dir };
+    fflush(stdout);
+    int saved = dup(1), fd = open(test_path("check.txt"), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+    dup2(fd, 1);
+    close(fd);
+    rc = rig_cmd_session(3, (char **)argv);
+    fflush(stdout);
+    dup2(saved, 1);
+    close(saved);
+    CHECK(rc == 0);
+    char *txt = model_read_file(test_path("check.txt"), NULL);
+    CHECK(txt && strstr(txt, "frames: 8\nframes_verified: 8\nframes_bad: 0\n") && strstr(txt, "steps_missing: 0"));
+    free(txt);
+done:
+    rig_operator_close(o.op);
+    free(rig);
+}
+
+// A journal of schema version 1 (one camera: frames keyed by step, no camera
+// column) is migrated when opened: every frame then has camera "camera", the
+// version is 2, and the session reads and checks as before.
+TEST(rigcams_journal_v1_migrated)
+{
+    char *rig = rig_2cam("serve = inprocess\n");
+    const char *plan = test_write("plan.ini", "[sample]\nname = coupon_matte_paint\nkind = material_coupon\n"
+                                  "[angles]\nlist = 0\n[lamps]\nsets = east\n[exposure]\nmode = fixed\n"
+                                  "list_us = 1000 2000\n");
+    char dir[4096], db[4200];
+    snprintf(dir, sizeof dir, "%s/s", test_tmpdir());
+    snprintf(db, sizeof db, "%s/session.sqlite", dir);
+    rig_capture_opts_t o = { .plan_path = plan, .rig_path = rig, .dir = dir, .progress = 0,
+                             .op = rig_operator_open(true, NULL) };
+    int rc = rig_capture_run(&o);
+    CHECK(rc == 0);
+    rig_operator_close(o.op);
+    free(rig);
+    // Make it a version-1 journal of one camera: the left camera's frames, no camera column.
+    sqlite3 *h = NULL;
+    CHECK(sqlite3_open(db, &h) == SQLITE_OK);
+    const char *to_v1 =
+        "DELETE FROM frames WHERE camera != 'left';"
+        "CREATE TABLE f1 AS SELECT step, file, sha256, t_trigger_utc, t_written_utc, t_trigger_s, t_written_s,"
+        " commanded_deg, measured_deg, lamps, exposure_us, gain, mean, max, roi_max, saturated_fraction, width,"
+        " height, pixel_format, frame_id FROM frames;"
+        "DROP TABLE frames; ALTER TABLE f1 RENAME TO frames; UPDATE schema_version SET version = 1;";
+    char *err = NULL;
+    CHECK_MSG(sqlite3_exec(h, to_v1, NULL, NULL, &err) == SQLITE_OK, "%s", err ? err : "");
+    sqlite3_free(err);
+    sqlite3_close(h);
+    rig_session_t *s = rig_session_open(dir);
+    CHECK_MSG(s != NULL, "%s", model_last_error());
+    if (!s) return;
+    CHECK(s->n == 2);
+    for (int i = 0; i < s->n; i++) CHECK(!strcmp(s->rows[i].camera, "camera") && s->rows[i].step == i + 1);
+    int w = 0, hh = 0;
+    float *img = rig_session_frame(s, 1, &w, &hh);
+    CHECK(img && w == 1280 && hh == 1024);
+    free(img);
+    rig_session_free(s);
+    CHECK(sqlite3_open(db, &h) == SQLITE_OK);
+    sqlite3_stmt *st = NULL;
+    int v = -1;
+    if (sqlite3_prepare_v2(h, "SELECT version FROM schema_version", -1, &st, NULL) == SQLITE_OK &&
+        sqlite3_step(st) == SQLITE_ROW)
+        v = sqlite3_column_int(st, 0);
+    sqlite3_finalize(st);
+    sqlite3_close(h);
+    CHECK(v == 2);
 }
