@@ -5,6 +5,7 @@
 // "inprocess:SERIAL"): no network.
 #define _GNU_SOURCE
 #include <fcntl.h>
+#include <sys/stat.h>
 #include <glib.h>
 #include <sqlite3.h>
 #include <limits.h>
@@ -15,6 +16,7 @@
 #include <unistd.h>
 
 #include "model/model.h"
+#include "calib/geometry.h"
 #include "rig/gv_camera.h"
 #include "rig/rig.h"
 #include "tests/fixtures.h"
@@ -536,4 +538,77 @@ TEST(rigcams_journal_v1_migrated)
     sqlite3_finalize(st);
     sqlite3_close(h);
     CHECK(v == 2);
+}
+
+// The calibrations read one camera's frames of a session of several: the
+// geometry's views of camera right (its imager), of the first camera by
+// default, and an error naming the cameras for a name the session lacks.
+TEST(rigcams_geometry_selects_camera)
+{
+    char *rig = rig_2cam("serve = inprocess\n");
+    const char *plan = test_write("plan.ini", "[sample]\nname = calib_board\nkind = chessboard\n"
+                                  "[angles]\nlist = 0 20\n[lamps]\nsets = all\n[exposure]\nmode = fixed\n"
+                                  "list_us = 6000\n");
+    char dir[4096], img[4200];
+    snprintf(dir, sizeof dir, "%s/s", test_tmpdir());
+    snprintf(img, sizeof img, "%s/img", test_tmpdir());
+    CHECK(mkdir(img, 0755) == 0);
+    rig_capture_opts_t o = { .plan_path = plan, .rig_path = rig, .dir = dir, .progress = 0,
+                             .op = rig_operator_open(true, NULL) };
+    CHECK(rig_capture_run(&o) == 0);
+    rig_operator_close(o.op);
+    free(rig);
+    static const struct {
+        const char *camera;
+        int w, h;
+    } cases[] = { { "right", 1024, 768 }, { NULL, 1280, 1024 }, { "left", 1280, 1024 } };
+    for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++) {
+        calib_geometry_views_t vs;
+        calib_geometry_views_init(&vs);
+        int w = 0, h = 0;
+        CHECK_MSG(calib_geometry_add_session(&vs, dir, cases[i].camera, img, &w, &h), "%s", model_last_error());
+        CHECK(w == cases[i].w && h == cases[i].h);
+        CHECK(vs.v->len == 2);
+        for (guint k = 0; k < vs.v->len; k++) {
+            const calib_geometry_view_t *v = g_ptr_array_index(vs.v, k);
+            CHECK(strstr(v->name, cases[i].camera ? cases[i].camera : "left") != NULL);
+        }
+        calib_geometry_views_free(&vs);
+    }
+    calib_geometry_views_t vs;
+    calib_geometry_views_init(&vs);
+    int w = 0, h = 0;
+    bool q = model_error_quiet_thread(true);
+    CHECK(!calib_geometry_add_session(&vs, dir, "middle", img, &w, &h));
+    model_error_quiet_thread(q);
+    CHECK_CONTAINS(model_last_error(), "no frames of camera 'middle' (its cameras: left, right)");
+    calib_geometry_views_free(&vs);
+}
+
+// A plan is checked against every camera: a region of interest that fits the
+// first camera's frame but not the second's is an error naming the second.
+TEST(rigcams_plan_bind_every_camera)
+{
+    char *path = rig_2cam("serve = inprocess\n");
+    rig_t *r = NULL;
+    CHECK(rig_open(&r, path) == 0);
+    free(path);
+    if (!r) return;
+    const char *text = "[sample]\nname = coupon_matte_paint\nkind = material_coupon\n[angles]\nlist = 0\n[lamps]\n"
+                       "sets = east\n[exposure]\nmode = auto\nlist_us = 4000 1000\nroi = 0 0 1100 100\n";
+    rig_plan_t *p = rig_plan_parse(text, strlen(text), "roi.ini");
+    CHECK(p != NULL);
+    bool q = model_error_quiet_thread(true);
+    int rc = p ? rig_plan_bind(p, r) : -1;
+    model_error_quiet_thread(q);
+    CHECK(rc == RIG_ERR_INVALID);
+    CHECK_CONTAINS(model_last_error(), "roi 0 0 1100 100 does not fit the 1024 x 768 frame of the camera");
+    CHECK_CONTAINS(model_last_error(), "REFL-VIRT02");
+    rig_plan_free(p);
+    text = "[sample]\nname = coupon_matte_paint\nkind = material_coupon\n[angles]\nlist = 0\n[lamps]\n"
+           "sets = east\n[exposure]\nmode = auto\nlist_us = 4000 1000\nroi = 0 0 1000 100\n";
+    p = rig_plan_parse(text, strlen(text), "roi.ini");
+    CHECK(p && rig_plan_bind(p, r) == 0);
+    rig_plan_free(p);
+    rig_close(r);
 }
