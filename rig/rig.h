@@ -39,9 +39,12 @@ extern "C" {
 //                serve = gige (default: GigE Vision on the address) | inprocess (an Aravis
 //                fake device in refl's own process, no network; address and busy_wait_s
 //                are then not allowed);
-//                address = 127.0.0.1; sample = NAME; time_scale = 1; noise_seed = 1;
+//                address = 127.0.0.1 (one loopback address per camera of the truth file, separated by
+//                spaces; a camera without one serves on the address after the previous camera's);
+//                sample = NAME; time_scale = 1; noise_seed = 1;
 //                busy_wait_s = 0 (wait for another virtual camera on the address);
-//                pixel_format, exposure_us, gain (as in [camera])
+//                pixel_format, exposure_us, gain (as in [camera], for every camera). The cameras are
+//                the truth file's [camera] or [camera NAME] sections (rig/virtual.h), named so here.
 // Every section but [rig] is optional (a rig without [camera] moves and switches
 // lamps but takes no pictures). Unknown sections and keys, missing keys and bad
 // values are errors naming file and line and saying what to write instead.
