@@ -264,8 +264,9 @@ int rig_cmd_status(rig_t *r)
     }
     if (nfailed)
         rig_fail(rc, "refl rig status: %s did not answer (%s above)", failed,
-                 nfailed > 1 ? "their DEVICE_error lines" : strncmp(failed, "the camera", 10) ? "its turntable_error line"
-                                                                                      : "its camera_error line");
+                 nfailed > 1                           ? "their DEVICE_error lines"
+                 : strncmp(failed, "the camera", 10) ? "its turntable_error line"
+                                                     : "its camera_error line");
     return rc;
 }
 

@@ -448,8 +448,9 @@ static int parse(spec_t *s)
     for (int i = 0; i < ini->nsections; i++) {
         const char *sec = ini->sections[i];
         if (!kind_of(sec))
-            return cfg_fail(s, ini->section_lines[i], "unknown section [%s]: a rig file has [camera] (or [camera NAME], "
-                            "one or more), [turntable], [lamp NAME] sections, or one [rig] section (backend = virtual)", sec);
+            return cfg_fail(s, ini->section_lines[i], "unknown section [%s]: a rig file has [camera] (or "
+                            "[camera NAME], one or more), [turntable], [lamp NAME] sections, or one [rig] section "
+                            "(backend = virtual)", sec);
         if (!strcmp(sec, "rig")) rig_sec = i;
         else if (other_sec < 0) other_sec = i;
     }
