@@ -139,6 +139,7 @@ TEST_SRC := \
     tests/test_model_sphere.c \
     tests/test_rig_camera_aravis.c \
     tests/test_rig_camera_settings.c \
+    tests/test_rig_cameras.c \
     tests/test_rig_capture.c \
     tests/test_rig_cli.c \
     tests/test_rig_config.c \

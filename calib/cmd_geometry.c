@@ -112,6 +112,8 @@ int calib_cmd_geometry(int argc, char **argv)
         MODEL_OPT_STRING("--angles", "'A A ...'", "angles for tilts given without their own (default '"
                          CALIB_GEOMETRY_DEFAULT_ANGLES "')", &o.angles, false),
         MODEL_OPT_STRING("--sample", "NAME", "the board sample (default calib_board)", &o.sample, false),
+        MODEL_OPT_STRING("--camera", "NAME", "--rig, --session: the camera (its rig file name) to calibrate "
+                         "(default: the first)", &o.camera, false),
         MODEL_OPT_VALUE("--exposure-us", "US", "the capture's exposure (default 6000)", false),
         MODEL_OPT_LIST("--session", "DIR", "use a capture session (angles from its journal, tilt from its plan); "
                        "repeat it for more", &sessions, false, false),

@@ -802,7 +802,7 @@ static int lamps_on(const char *lamps, int nlamps_rig)
 // Frames of a session; set: the role of its frames (CALIB_GAIN_SET_ANY: by lamps).
 bool calib_gain_add_session(calib_gain_data_t *d, const char *dir, int set, json_t **facts_out)
 {
-    rig_session_t *s = rig_session_open(dir);
+    rig_session_t *s = rig_session_open_camera(dir, NULL);   // the first camera's frames
     if (!s) return false;
     int nlr = -1;
     json_t *lamps = s->facts ? json_object_get(s->facts, "lamps") : NULL;
@@ -872,7 +872,7 @@ static int run_plan(const calib_gain_opts_t *c, const char *name, const char *la
 // Mean of a session's frames by kind (lamps on / off) at one exposure.
 static bool probe_levels(const char *dir, double *light, double *dark, double *max_dn)
 {
-    rig_session_t *s = rig_session_open(dir);
+    rig_session_t *s = rig_session_open_camera(dir, NULL);   // the first camera's frames
     if (!s) return false;
     *light = *dark = NAN;
     for (int i = 0; i < s->n; i++) {

@@ -243,9 +243,10 @@ calib_geometry_view_t *calib_geometry_view_find(calib_geometry_views_t *vs, cons
 }
 
 // A session's frames → 8-bit images and views.
-bool calib_geometry_add_session(calib_geometry_views_t *vs, const char *sdir, const char *imgdir, int *w, int *h)
+bool calib_geometry_add_session(calib_geometry_views_t *vs, const char *sdir, const char *camera, const char *imgdir,
+                                int *w, int *h)
 {
-    rig_session_t *s = rig_session_open(sdir);
+    rig_session_t *s = rig_session_open_camera(sdir, camera);
     if (!s) return false;
     rig_plan_t *p = rig_plan_parse(s->plan_text, strlen(s->plan_text), sdir);
     if (!p) {
@@ -1106,7 +1107,7 @@ static bool collect_views(const calib_geometry_opts_t *o, calib_geometry_state_t
     for (int k = 0; k < n; k++) {
         const char *sd = s->sessions ? s->sessions[k] : o->sessions[k];
         fprintf(stderr, "refl calib geometry: reading the frames of %s\n", sd);
-        if (!calib_geometry_add_session(&s->views, sd, s->imgdir, &s->W, &s->H) ||
+        if (!calib_geometry_add_session(&s->views, sd, o->camera, s->imgdir, &s->W, &s->H) ||
             !model_provenance_input(s->prov, "session", sd))
             return false;
     }

@@ -58,6 +58,8 @@ typedef struct {
     const char  *lensmodel;        // mrcal's name, e.g. "LENSMODEL_OPENCV8"
     const char  *tilts, *angles;   // --rig: "T[@AZ][:A,A,...] ..." and the default angles "A A ..."
     const char  *sample;           // --rig: the board's sample name
+    const char  *camera;           // --rig, sessions: the camera (rig file name) whose frames are used;
+                                   // NULL: the first camera
     double       exposure_us;      // --rig: the capture's exposure
     int          gridn;            // inner corners per side
     double       square_mm;        // corner spacing
@@ -164,9 +166,11 @@ char *calib_geometry_tilt_plan(const char *spec, const calib_geometry_opts_t *o,
 // Every plan of o->tilts first (a bad one fails before anything moves, with
 // *usage set), then the captures into DIR/capture/NAME; s->sessions gets them.
 bool calib_geometry_capture(const calib_geometry_opts_t *o, calib_geometry_state_t *s, bool *usage);
-// A session's frames → 8-bit images in imgdir and views of a new tilt group;
-// *w, *h: the frame size (0: not known yet; all frames must share it).
-bool calib_geometry_add_session(calib_geometry_views_t *vs, const char *sdir, const char *imgdir, int *w, int *h);
+// A session's frames of one camera (its rig file name; NULL: the first
+// camera) → 8-bit images in imgdir and views of a new tilt group; *w, *h: the
+// frame size (0: not known yet; all frames must share it).
+bool calib_geometry_add_session(calib_geometry_views_t *vs, const char *sdir, const char *camera, const char *imgdir,
+                                int *w, int *h);
 // Images matching pattern → 8-bit images in imgdir and views without a group.
 bool calib_geometry_add_images(calib_geometry_views_t *vs, const char *pattern, const char *imgdir, int *w, int *h);
 // mrgingham's output text ("name x y [level]"; "name - -": no board) into the

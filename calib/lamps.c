@@ -1278,7 +1278,7 @@ bool calib_lamps_open(const calib_lamps_opts_t *o, calib_lamps_result_t *r)
     } else {
         r->session_dir = g_strdup(o->session);
     }
-    r->session = rig_session_open(r->session_dir);
+    r->session = rig_session_open_camera(r->session_dir, NULL);   // the first camera's frames
     if (!r->session) goto done;
     r->plan = rig_plan_parse(r->session->plan_text, strlen(r->session->plan_text), "session plan");
     if (!r->plan) goto done;

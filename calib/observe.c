@@ -372,7 +372,7 @@ bool calib_observe(const char *session_dir, const calib_set_t *cal, const calib_
     int *order = NULL;
     bool *done_row = NULL;
     observe_t ob = { .session_dir = session_dir, .cal = cal, .o = &o, .out = out };
-    rig_session_t *s = rig_session_open(session_dir);
+    rig_session_t *s = rig_session_open_camera(session_dir, NULL);   // the first camera's frames
     if (!s) goto done;
     ob.s = s;
     if (!(plan = rig_plan_parse(s->plan_text, strlen(s->plan_text), session_dir))) goto done;

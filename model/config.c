@@ -478,3 +478,12 @@ bool model_sensor_from_ini(const model_ini_t *ini, model_sensor_t *out)
     *out = s;
     return true;
 }
+
+bool model_sensor_update_from_ini(const model_ini_t *ini, const char *section, model_sensor_t *s)
+{
+    model_sensor_t t = *s;
+    for (int k = 0; k < ini->nentries; k++)
+        if (!strcmp(ini->entries[k].section, section) && !sensor_entry(ini, &ini->entries[k], &t)) return false;
+    *s = t;
+    return true;
+}

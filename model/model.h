@@ -377,6 +377,9 @@ model_lamps_t     *model_lamps_from_ini(const model_ini_t *ini);       // [lamp 
 // is a point (radius 0) or the point lies inside it (model/shade.c).
 bool model_lamp_disc_dirs(model_vec3_t l, double d_mm, double radius_mm, model_vec3_t out[4]);
 bool               model_sensor_from_ini(const model_ini_t *ini, model_sensor_t *out);  // [sensor]
+// The keys of one more section (as in [sensor]) applied over *s: a sensor that
+// differs from [sensor] in a few keys (the virtual rig's [sensor CAMERA]).
+bool               model_sensor_update_from_ini(const model_ini_t *ini, const char *section, model_sensor_t *s);
 
 // ---------------------------------------------------------------------------
 // Cameras (model/camera.c): an mrcal camera model plus a cached ray table.

@@ -116,6 +116,8 @@ static int watched_motion(rig_t *r, bool home, double angle_deg, double timeout_
 typedef struct job {
     rig_frame_t  f;
     rig_step_t   step;
+    int          cam;           // the rig's camera (r->cameras[cam])
+    bool         step_done;     // the step's last camera: its commit marks the step done
     double       t_trigger_s, measured_deg;
     double       mean, max, roi_max, sat;
     size_t       bytes;         // of the pixels (the writer's queue budget)
@@ -186,11 +188,16 @@ static bool fsync_path(const char *path, bool dir)
     return ok;
 }
 
-static void frame_names(const char *dir, int step, char *rel, size_t rsize, char *fin, char *part, size_t size)
+// frames/sNNNNNN.png (a rig of one camera) or frames/sNNNNNN_NAME.png, its
+// temporary frames/.sNNNNNN[_NAME].png.part.
+static void frame_names(const char *dir, int step, const rig_t *r, int cam, char *rel, size_t rsize, char *fin,
+                        char *part, size_t size)
 {
-    snprintf(rel, rsize, "frames/s%06d.png", step);
+    char suffix[40] = "";
+    if (r->ncameras > 1) snprintf(suffix, sizeof suffix, "_%s", r->camera_names[cam]);
+    snprintf(rel, rsize, "frames/s%06d%s.png", step, suffix);
     snprintf(fin, size, "%s/%s", dir, rel);
-    snprintf(part, size, "%s/frames/.s%06d.png.part", dir, step);
+    snprintf(part, size, "%s/frames/.s%06d%s.png.part", dir, step, suffix);
 }
 
 
@@ -198,7 +205,7 @@ static void frame_names(const char *dir, int step, char *rel, size_t rsize, char
 static int write_frame(writer_t *w, job_t *jb)
 {
     char rel[64], fin[4096], part[4096];
-    frame_names(w->dir, jb->step.index, rel, sizeof rel, fin, part, sizeof fin);
+    frame_names(w->dir, jb->step.index, w->rig, jb->cam, rel, sizeof rel, fin, part, sizeof fin);
     const rig_frame_meta_t *m = &jb->f.meta;
     model_meta_t *meta = model_meta_new();
     model_meta_add(meta, "Software", "refl %s (refl capture)", REFL_VERSION);
@@ -206,7 +213,8 @@ static int write_frame(writer_t *w, job_t *jb)
              m->bits);
     model_meta_add(meta, "session_step", "%d", jb->step.index);
     model_meta_add(meta, "step_kind", "%s", jb->step.kind == RIG_STEP_DARK ? "dark" : "light");
-    model_meta_add(meta, "camera", "%s", rig_camera_name(w->rig->camera));
+    model_meta_add(meta, "camera", "%s", rig_camera_name(w->rig->cameras[jb->cam]));
+    model_meta_add(meta, "camera_name", "%s (the rig file's camera)", w->rig->camera_names[jb->cam]);
     model_meta_add(meta, "camera_serial", "%s", m->serial);
     model_meta_add(meta, "frame_id", "%llu", (unsigned long long)m->frame_id);
     model_meta_add(meta, "exposure_us", "%.10g", m->exposure_us);
@@ -249,6 +257,7 @@ static int write_frame(writer_t *w, job_t *jb)
         goto done;
     }
     rig_frame_row_t row = { .step = jb->step.index };
+    snprintf(row.camera, sizeof row.camera, "%s", w->rig->camera_names[jb->cam]);
     snprintf(row.file, sizeof row.file, "%s", rel);
     if (!model_sha256_file(part, row.sha256)) {
         snprintf(w->msg, sizeof w->msg, "cannot read back %s: %s", part, model_last_error());
@@ -276,7 +285,7 @@ static int write_frame(writer_t *w, job_t *jb)
     row.temperature_c = m->temperature_c;
     snprintf(row.firmware, sizeof row.firmware, "%s", m->firmware);
     snprintf(row.camera_settings, sizeof row.camera_settings, "%s", m->camera_settings);
-    rc = rig_journal_frame_done(w->j, &row);
+    rc = rig_journal_frame_done(w->j, &row, jb->step_done);
     if (rc) {
         w->disk_full = strstr(model_last_error(), "full") != NULL;
         snprintf(w->msg, sizeof w->msg, "%s%s", w->disk_full ? "disk full: " : "", model_last_error());
@@ -400,11 +409,15 @@ static char *session_facts(rig_t *r, const rig_plan_t *p, const char *cmdline, j
     json_object_set_new(o, "notes", json_string(p->notes));
     // the calibrations in use (by path and hash; frames are stored raw)
     json_object_set_new(o, "calibrations", calibrations ? json_incref(calibrations) : json_array());
-    rig_frame_meta_t m;
-    if (r->camera && rig_camera_settings(r->camera, &m) == 0) {
+    // "camera": the first camera (as before several cameras), "cameras": every one
+    json_t *cams = json_array();
+    for (int k = 0; k < r->ncameras; k++) {
+        rig_frame_meta_t m;
+        if (rig_camera_settings(r->cameras[k], &m) != 0) continue;
         json_t *c = json_object();
-        json_object_set_new(c, "name", json_string(rig_camera_name(r->camera)));
-        json_object_set_new(c, "backend", json_string(rig_camera_backend(r->camera)));
+        json_object_set_new(c, "camera", json_string(r->camera_names[k]));
+        json_object_set_new(c, "name", json_string(rig_camera_name(r->cameras[k])));
+        json_object_set_new(c, "backend", json_string(rig_camera_backend(r->cameras[k])));
         json_object_set_new(c, "vendor", json_string(m.vendor));
         json_object_set_new(c, "model", json_string(m.model));
         json_object_set_new(c, "serial", json_string(m.serial));
@@ -422,8 +435,10 @@ static char *session_facts(rig_t *r, const rig_plan_t *p, const char *cmdline, j
         json_object_set_new(c, "gamma", json_real(m.gamma));
         json_object_set_new(c, "firmware", json_string(m.firmware));
         json_object_set_new(c, "settings", json_string(m.camera_settings));   // what refl switched off at open
-        json_object_set_new(o, "camera", c);
+        if (k == 0) json_object_set_new(o, "camera", json_deep_copy(c));
+        json_array_append_new(cams, c);
     }
+    json_object_set_new(o, "cameras", cams);
     rig_turntable_info_t ti;
     if (r->turntable && rig_turntable_info(r->turntable, &ti) == 0) {
         json_t *t = json_object();
@@ -485,11 +500,14 @@ static int recover_frames(rig_journal_t *j, const char *dir, int *relinked, int 
         char path[4400];
         snprintf(path, sizeof path, "%s/%s", fd, e->d_name);
         int step = -1;
-        bool part = sscanf(e->d_name, ".s%d.png.part", &step) == 1 && strstr(e->d_name, ".part") &&
+        size_t len = strlen(e->d_name);
+        bool part = sscanf(e->d_name, ".s%d", &step) == 1 && len > 6 && !strcmp(e->d_name + len - 5, ".part") &&
                     !strstr(e->d_name, ".tmp");
+        char rel[300] = "";   // its committed name: frames/sNNNNNN[_NAME].png
+        if (part) snprintf(rel, sizeof rel, "frames/%.*s", (int)(len - 6), e->d_name + 1);
         const rig_frame_row_t *row = NULL;
         for (int i = 0; part && i < n; i++)
-            if (rows[i].step == step) row = &rows[i];
+            if (!strcmp(rows[i].file, rel)) row = &rows[i];
         if (row) {
             char fin[4400], sha[65];
             snprintf(fin, sizeof fin, "%s/%s", dir, row->file);
@@ -561,6 +579,12 @@ static void print_dry_run(const rig_plan_t *p, const rig_t *r)
            p->nsteps, p->nsteps - nframes, p->nsteps - nframes == 1 ? "" : "s", nframes, p->nangles, p->nlamp_sets,
            p->nexposures, p->repeats, p->nviews ? ", as the [view] sections choose" : "",
            p->dark_every ? ", dark frames" : "", p->auto_exposure ? "; auto bracketing: at most" : "");
+    if (r->ncameras > 1) {
+        printf("cameras: %d, each step triggers every one in this order (%d frames in all):", r->ncameras,
+               nframes * r->ncameras);
+        for (int k = 0; k < r->ncameras; k++) printf(" %s", r->camera_names[k]);
+        printf("\n");
+    }
     for (int i = 0; i < p->nsteps; i++) {
         const rig_step_t *s = &p->steps[i];
         if (s->kind == RIG_STEP_OPERATOR) {
@@ -651,6 +675,7 @@ typedef struct {
     const char *rig_path;
     int         frames_before;
     bool       *satisfied;       // auto bracketing: the groups already satisfied (a frame at or below target)
+    uint32_t   *cam_done;        // per step: bit k set when camera k's frame is journalled (--resume)
     int         step;
     char        msg[10000];
     // The steps' state
@@ -730,17 +755,27 @@ static int check_camera(run_t *x)
     }
     json_t *f = facts[0] ? json_loads(facts, 0, NULL) : NULL;
     free(facts);
-    const char *was = json_string_value(json_object_get(json_object_get(f, "camera"), "serial"));
-    rig_frame_meta_t m;
+    json_t *cams = json_object_get(f, "cameras");
     int rc = 0;
-    if (was && was[0] && !(rc = rig_camera_settings(x->r->camera, &m)) && strcmp(was, m.serial)) {
+    for (int k = 0; k < x->r->ncameras && !rc; k++) {
+        // its serial then: by name in "cameras", or the first camera's "camera" (a session of one camera)
+        const char *was = k == 0 ? json_string_value(json_object_get(json_object_get(f, "camera"), "serial")) : NULL;
+        size_t i;
+        json_t *c;
+        json_array_foreach(cams, i, c)
+            if (!strcmp(json_string_value(json_object_get(c, "camera")) ?: "", x->r->camera_names[k]))
+                was = json_string_value(json_object_get(c, "serial"));
+        rig_frame_meta_t m;
+        if (!was || !was[0] || (rc = rig_camera_settings(x->r->cameras[k], &m)) || !strcmp(was, m.serial)) continue;
         if (!x->o->allow_changed)
-            rc = rig_fail(RIG_ERR_INVALID, "refl capture --resume %s: the camera changed: serial %s now, the "
+            rc = rig_fail(RIG_ERR_INVALID, "refl capture --resume %s: the camera changed: %s%s%sserial %s now, the "
                           "session started with serial %s: connect that camera, or add --allow-changed to continue "
-                          "with this one", x->o->dir, m.serial, was);
+                          "with this one", x->o->dir, x->r->ncameras > 1 ? "camera " : "",
+                          x->r->ncameras > 1 ? x->r->camera_names[k] : "", x->r->ncameras > 1 ? ": " : "", m.serial,
+                          was);
         else
-            rig_journal_event(x->j, -1, "info", "resumed with another camera: serial %s, the session started with "
-                              "%s (--allow-changed)", m.serial, was);
+            rig_journal_event(x->j, -1, "info", "resumed with another camera %s: serial %s, the session started "
+                              "with %s (--allow-changed)", x->r->camera_names[k], m.serial, was);
     }
     json_decref(f);
     return rc;
@@ -806,7 +841,8 @@ static int run_session(run_t *x)
         rig_journal_set_state(x->j, "running");
         if (replay_operator(x) != RUN_ON) return RUN_DONE;
     }
-    for (int i = 0; i < nstored; i++) x->frames_before += x->status[i] == 'd';
+    rig_frame_row_t *rows = NULL;   // the frames journalled before this run (every camera's)
+    if (!rig_journal_frames(x->j, &rows, &x->frames_before)) free(rows);
     return RUN_ON;
 }
 
@@ -862,9 +898,11 @@ static int run_hardware(run_t *x)
         }
     }
     rig_frame_meta_t cam;
-    if ((x->rc = rig_camera_set_pixel_format(r->camera, p->pixel_format)) ||
-        (x->rc = rig_camera_set_gain(r->camera, p->gain)) || (x->rc = rig_camera_settings(r->camera, &cam)))
-        return RUN_DONE;
+    for (int k = r->ncameras - 1; k >= 0; k--)   // every camera; cam: the first's settings
+        if ((x->rc = rig_camera_set_pixel_format(r->cameras[k], p->pixel_format)) ||
+            (x->rc = rig_camera_set_gain(r->cameras[k], p->gain)) ||
+            (x->rc = rig_camera_settings(r->cameras[k], &cam)))
+            return RUN_DONE;
     x->full = cam.bits >= 16 ? 65535 : (double)((1u << cam.bits) - 1);
 
     x->pg = (progress_t){ .bar = x->o->progress == 1 || (x->o->progress < 0 && isatty(2)), .t0 = model_now_s(),
@@ -880,16 +918,28 @@ static int run_hardware(run_t *x)
     int ngroups = 0;
     for (int i = 0; i < p->nsteps; i++) ngroups = p->steps[i].group + 1 > ngroups ? p->steps[i].group + 1 : ngroups;
     x->satisfied = calloc((size_t)ngroups + 1, 1);
-    if (p->auto_exposure) {
-        rig_frame_row_t *rows = NULL;
-        int nr = 0;
-        if (!rig_journal_frames(x->j, &rows, &nr))
-            for (int i = 0; i < nr; i++) {
-                const rig_step_t *s = &p->steps[rows[i].step];
-                if (s->group >= 0 && rows[i].roi_max <= p->target_fraction * x->full) x->satisfied[s->group] = true;
-            }
-        free(rows);
+    x->cam_done = calloc((size_t)p->nsteps + 1, sizeof *x->cam_done);
+    if (!x->satisfied || !x->cam_done) {
+        x->rc = rig_fail(RIG_ERR_NO_MEM, "refl capture: out of memory");
+        return RUN_DONE;
     }
+    rig_frame_row_t *rows = NULL;
+    int nr = 0;
+    if (!rig_journal_frames(x->j, &rows, &nr)) {
+        // a group is satisfied by a step whose every camera's frame is at or below the target
+        uint32_t *low = calloc((size_t)p->nsteps + 1, sizeof *low);
+        uint32_t all = r->ncameras >= 32 ? 0xffffffffu : (1u << r->ncameras) - 1;
+        for (int i = 0; i < nr; i++) {
+            int k = rig_camera_find(r, rows[i].camera);
+            if (k < 0 || rows[i].step < 0 || rows[i].step >= p->nsteps) continue;
+            x->cam_done[rows[i].step] |= 1u << k;
+            if (low && rows[i].roi_max <= p->target_fraction * x->full) low[rows[i].step] |= 1u << k;
+        }
+        for (int i = 0; low && p->auto_exposure && i < p->nsteps; i++)
+            if (p->steps[i].group >= 0 && low[i] == all) x->satisfied[p->steps[i].group] = true;
+        free(low);
+    }
+    free(rows);
     return RUN_ON;
 }
 
@@ -917,7 +967,8 @@ static int step_setup(run_t *x, const rig_step_t *s)
     }
     // The exposure register now: its round trip overlaps the settles.
     if (s->exposure_us != x->cur_exposure) {
-        if ((x->rc = rig_camera_set_exposure_us(r->camera, s->exposure_us))) return RUN_FAULT_CAM;
+        for (int k = 0; k < r->ncameras; k++)
+            if ((x->rc = rig_camera_set_exposure_us(r->cameras[k], s->exposure_us))) return RUN_FAULT_CAM;
         x->cur_exposure = s->exposure_us;
     }
     double lamp_t = 0;
@@ -937,53 +988,80 @@ static int step_setup(run_t *x, const rig_step_t *s)
     return RUN_ON;
 }
 
-// A step's frame: captured (a camera that does not answer is retried, then
-// the session pauses), its statistics for auto bracketing, handed to the writer.
+// Camera k's frame of a step into jb->f (a camera that does not answer is
+// retried, then the session pauses): RUN_ON, RUN_BREAK or RUN_FAULT_CAM.
+static int capture_camera(run_t *x, const rig_step_t *s, int k, job_t *jb)
+{
+    rig_t *r = x->r;
+    rig_plan_t *p = x->p;
+    int step = x->step, tries = 0;
+    const char *cn = r->ncameras > 1 ? r->camera_names[k] : "";
+    for (;;) {
+        jb->t_trigger_s = realtime_s();
+        bool q = model_error_quiet_thread(true);
+        x->rc = rig_camera_capture(r->cameras[k], p->frame_timeout_s + 2e-6 * s->exposure_us, 0, &jb->f);
+        model_error_quiet_thread(q);
+        if (!x->rc) return RUN_ON;
+        if (x->rc != RIG_ERR_TIMEOUT || tries >= p->retries || g_sigint) break;
+        tries++;
+        rig_journal_event(x->j, step, "retry", "camera %stime-out (%s): retry %d of %d", r->ncameras > 1 ? cn : "",
+                          model_last_error(), tries, p->retries);
+        fprintf(stderr, "refl capture: camera %s%stime-out at step %d: retry %d of %d\n", cn, *cn ? " " : "", step,
+                tries, p->retries);
+    }
+    if (x->rc == RIG_ERR_TIMEOUT || x->rc == RIG_ERR_DISCONNECTED) {
+        snprintf(x->msg, sizeof x->msg, "camera %s did not answer at step %d after %d retries (%s): session "
+                 "paused; check the camera's cable and power, then refl capture --resume %s",
+                 rig_camera_name(r->cameras[k]), step, tries, model_last_error(), x->o->dir);
+        fault_stop(r, x->j, step, "paused", "pause", x->msg);
+        x->paused = 2;
+        return RUN_BREAK;
+    }
+    return RUN_FAULT_CAM;
+}
+
+// A step's frames: every camera whose frame the journal lacks, one after the
+// other (the rig file's order), their statistics for auto bracketing, each
+// handed to the writer (the last marks the step done).
 static int step_capture(run_t *x, const rig_step_t *s)
 {
     rig_t *r = x->r;
     rig_plan_t *p = x->p;
-    int step = x->step;
-    double T_cap0 = model_now_s();
-    job_t *jb = calloc(1, sizeof *jb);
-    int tries = 0;
-    for (;;) {
-        jb->t_trigger_s = realtime_s();
-        bool q = model_error_quiet_thread(true);
-        x->rc = rig_camera_capture(r->camera, p->frame_timeout_s + 2e-6 * s->exposure_us, 0, &jb->f);
-        model_error_quiet_thread(q);
-        if (!x->rc) break;
-        if (x->rc != RIG_ERR_TIMEOUT || tries >= p->retries || g_sigint) break;
-        tries++;
-        rig_journal_event(x->j, step, "retry", "camera time-out (%s): retry %d of %d", model_last_error(), tries,
-                          p->retries);
-        fprintf(stderr, "refl capture: camera time-out at step %d: retry %d of %d\n", step, tries, p->retries);
-    }
-    if (x->rc) {
-        free(jb);
-        if (x->rc == RIG_ERR_TIMEOUT || x->rc == RIG_ERR_DISCONNECTED) {
-            snprintf(x->msg, sizeof x->msg, "camera %s did not answer at step %d after %d retries (%s): session "
-                     "paused; check the camera's cable and power, then refl capture --resume %s",
-                     rig_camera_name(r->camera), step, tries, model_last_error(), x->o->dir);
-            fault_stop(r, x->j, step, "paused", "pause", x->msg);
-            x->paused = 2;
-            return RUN_BREAK;
+    int step = x->step, last = -1;
+    for (int k = 0; k < r->ncameras; k++)
+        if (!((x->cam_done[step] >> k) & 1)) last = k;
+    bool low = true;
+    for (int k = 0; k <= last; k++) {
+        if ((x->cam_done[step] >> k) & 1) continue;
+        double T_cap0 = model_now_s();
+        job_t *jb = calloc(1, sizeof *jb);
+        if (!jb) {
+            x->rc = rig_fail(RIG_ERR_NO_MEM, "refl capture: out of memory");
+            return RUN_FAULT_CAM;
         }
-        return RUN_FAULT_CAM;
+        int c = capture_camera(x, s, k, jb);
+        if (c != RUN_ON) {
+            free(jb);
+            return c;
+        }
+        x->T_cap += model_now_s() - T_cap0;
+        jb->step = *s;
+        jb->cam = k;
+        jb->step_done = k == last;
+        rig_turntable_status_t st = { .angle_deg = NAN };
+        if (r->turntable) rig_turntable_status(r->turntable, &st);
+        jb->measured_deg = r->turntable ? st.angle_deg : NAN;
+        if (p->auto_exposure && s->group >= 0) {
+            frame_stats(&jb->f, p->roi, &jb->mean, &jb->max, &jb->roi_max, &jb->sat);
+            jb->stats_done = true;
+            low &= jb->roi_max <= p->target_fraction * x->full;
+        }
+        double T_p0 = model_now_s();
+        writer_push(&x->w, jb);
+        x->T_push += model_now_s() - T_p0;
+        x->cam_done[step] |= 1u << k;
     }
-    x->T_cap += model_now_s() - T_cap0;
-    jb->step = *s;
-    rig_turntable_status_t st = { .angle_deg = NAN };
-    if (r->turntable) rig_turntable_status(r->turntable, &st);
-    jb->measured_deg = r->turntable ? st.angle_deg : NAN;
-    if (p->auto_exposure && s->group >= 0) {
-        frame_stats(&jb->f, p->roi, &jb->mean, &jb->max, &jb->roi_max, &jb->sat);
-        jb->stats_done = true;
-        if (jb->roi_max <= p->target_fraction * x->full) x->satisfied[s->group] = true;
-    }
-    double T_p0 = model_now_s();
-    writer_push(&x->w, jb);
-    x->T_push += model_now_s() - T_p0;
+    if (p->auto_exposure && s->group >= 0 && low) x->satisfied[s->group] = true;
     int remaining = 0;
     for (int i = step + 1; i < p->nsteps; i++) remaining += x->status[i] == 'p';
     progress(&x->pg, step + 1, s, remaining, x->pg.nrun == 0 ? rig_plan_floor_s(p, r, step + 1) : 0);
@@ -1178,6 +1256,7 @@ static void run_cleanup(run_t *x)
     rig_plan_free(x->p);
     free(x->status);
     free(x->satisfied);
+    free(x->cam_done);
     free(x->facts);
     free(x->rig_text);
     free(x->s_plan_path);

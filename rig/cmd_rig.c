@@ -41,13 +41,14 @@ static const char rig_about[] =
     "  home       home the turntable\n"
     "  move DEG   move the turntable to DEG (absolute; homes it first when needed)\n"
     "  identify   model, serial and firmware of every device\n"
-    "  snap       one camera frame to a PNG (lamps switched off again afterwards)\n"
+    "  snap       a frame of each camera to a PNG (lamps switched off again afterwards)\n"
     "  serve      virtual rigs: keep the virtual camera up on its address until SIGINT/SIGTERM";
 
 static const char rig_epilog[] =
-    "Rig files: [camera], [turntable], [lamp NAME], [lamps] sections, or [rig] backend = virtual\n"
-    "(see rig/rig.h and examples/lab-rig.ini, examples/virtual-rig.ini); [camera] and [rig] also take\n"
-    "packet_size (GevSCPSPacketSize, bytes) and packet_delay (GevSCPD, ticks) for GigE Vision.\n"
+    "Rig files: [camera] (or [camera NAME], one or more), [turntable], [lamp NAME], [lamps] sections, or\n"
+    "[rig] backend = virtual (see rig/rig.h and examples/lab-rig.ini, examples/virtual-rig.ini);\n"
+    "[camera] and [rig] also take packet_size (GevSCPSPacketSize, bytes) and packet_delay (GevSCPD,\n"
+    "ticks) for GigE Vision. snap captures every camera at one angle and lamp state (--camera NAME: one).\n"
     "Opening a camera switches off its automatics (ExposureAuto, GainAuto, ... every *Auto*), gamma and\n"
     "LUT, or fails naming the feature; frames record what was done and the gain's unit.\n"
     "Angles in degrees (turntable frame: 0 at home, counter-clockwise seen from above).\n"
@@ -64,7 +65,9 @@ static const char rig_epilog[] =
       "snap")                                                                                                     \
     _("--pixel-format", "F", "snap: Mono8 | Mono10 | Mono12 | Mono16 | Mono10p | Mono12p | ... (default: rig file / camera)", false, "snap")          \
     _("--sample", "NAME", "snap, serve (virtual rigs): put this sample of the truth file on the table", false,     \
-      "snap serve")
+      "snap serve")                                                                                               \
+    _("--camera", "NAME", "snap: only this camera of the rig file, written to OUT.png (default all: one camera "     \
+      "writes OUT.png, several OUT_NAME.png each)", false, "snap")
 
 static bool word_in(const char *words, const char *w)
 {
@@ -231,10 +234,38 @@ static const char *yes_no(bool b) { return b ? "yes" : "no"; }
 
 // Every device is reported, also after one fails ("DEVICE_error: ..."); the
 // first failure's code is returned.
+// One camera's lines of `refl rig status`: 0 or its error code (its camera_error line printed).
+static int status_camera(rig_t *r, int i)
+{
+    rig_camera_t *c = r->cameras[i];
+    rig_frame_meta_t m;
+    printf("camera_name: %s\n", r->camera_names[i]);
+    int e = rig_camera_settings(c, &m);
+    if (e) {
+        printf("camera: %s\ncamera_error: %s\n", rig_camera_name(c), model_last_error());
+        return e;
+    }
+    printf("camera: %s\ncamera_vendor: %s\ncamera_model: %s\ncamera_serial: %s\n"
+           "camera_pixel_format: %s (%d bits)\ncamera_region: %d x %d at (%d, %d)\n"
+           "camera_exposure_us: %.6g\ncamera_gain: %.6g %s\n",
+           rig_camera_name(c), m.vendor, m.model, m.serial, m.pixel_format, m.bits, m.width, m.height,
+           m.offset_x, m.offset_y, m.exposure_us, m.gain, m.gain_unit);
+    if (isfinite(m.temperature_c)) printf("camera_temperature_c: %.2f\n", m.temperature_c);
+    else printf("camera_temperature_c: none (the camera has no sensor)\n");
+    printf("camera_firmware: %s\ncamera_gamma: %.6g\n", m.firmware[0] ? m.firmware : "none (not stated)", m.gamma);
+    if (isfinite(m.black_level)) printf("camera_black_level: %.10g\n", m.black_level);
+    else printf("camera_black_level: none (the camera has no BlackLevel)\n");
+    printf("camera_settings: %s\n", m.camera_settings);
+    return 0;
+}
+
+// Every device is reported, also after one fails ("DEVICE_error: ..."); the
+// first failure's code is returned. Each camera is a block of lines beginning
+// with its camera_name line.
 int rig_cmd_status(rig_t *r)
 {
     int rc = 0, e;
-    const char *failed[2];
+    char failed[600] = "";
     int nfailed = 0;
     printf("rig_file: %s\nrig_sha256: %s\n", r->path, r->sha256);
     if (r->virt)
@@ -246,7 +277,8 @@ int rig_cmd_status(rig_t *r)
         rig_turntable_status_t st;
         if ((e = rig_turntable_status(r->turntable, &st))) {
             printf("turntable: %s\nturntable_error: %s\n", rig_turntable_name(r->turntable), model_last_error());
-            failed[nfailed++] = "turntable";
+            snprintf(failed, sizeof failed, "the turntable");
+            nfailed++;
             if (!rc) rc = e;
         } else {
             printf("turntable: %s\nturntable_angle_deg: %.4f\nturntable_homed: %s\nturntable_moving: %s\n",
@@ -265,32 +297,23 @@ int rig_cmd_status(rig_t *r)
     } else {
         printf("lamps: none\n");
     }
-    if (r->camera) {
-        rig_frame_meta_t m;
-        if ((e = rig_camera_settings(r->camera, &m))) {
-            printf("camera: %s\ncamera_error: %s\n", rig_camera_name(r->camera), model_last_error());
-            failed[nfailed++] = "camera";
-            if (!rc) rc = e;
-        } else {
-            printf("camera: %s\ncamera_vendor: %s\ncamera_model: %s\ncamera_serial: %s\n"
-                   "camera_pixel_format: %s (%d bits)\ncamera_region: %d x %d at (%d, %d)\n"
-                   "camera_exposure_us: %.6g\ncamera_gain: %.6g %s\n",
-                   rig_camera_name(r->camera), m.vendor, m.model, m.serial, m.pixel_format, m.bits, m.width, m.height,
-                   m.offset_x, m.offset_y, m.exposure_us, m.gain, m.gain_unit);
-            if (isfinite(m.temperature_c)) printf("camera_temperature_c: %.2f\n", m.temperature_c);
-            else printf("camera_temperature_c: none (the camera has no sensor)\n");
-            printf("camera_firmware: %s\ncamera_gamma: %.6g\n", m.firmware[0] ? m.firmware : "none (not stated)",
-                   m.gamma);
-            if (isfinite(m.black_level)) printf("camera_black_level: %.10g\n", m.black_level);
-            else printf("camera_black_level: none (the camera has no BlackLevel)\n");
-            printf("camera_settings: %s\n", m.camera_settings);
-        }
-    } else {
-        printf("camera: none\n");
+    if (r->ncameras == 0) printf("camera: none\n");
+    else if (r->ncameras > 1) printf("cameras: %d\n", r->ncameras);
+    for (int i = 0; i < r->ncameras; i++) {
+        if (!(e = status_camera(r, i))) continue;
+        size_t n = strlen(failed);
+        if (r->ncameras == 1)
+            snprintf(failed + n, sizeof failed - n, "%sthe camera", n ? " and " : "");
+        else
+            snprintf(failed + n, sizeof failed - n, "%sthe camera %s", n ? " and " : "", r->camera_names[i]);
+        nfailed++;
+        if (!rc) rc = e;
     }
     if (nfailed)
-        rig_fail(rc, "refl rig status: the %s%s%s did not answer (its %s_error line above)", failed[0],
-                 nfailed > 1 ? " and the " : "", nfailed > 1 ? failed[1] : "", nfailed > 1 ? "DEVICE" : failed[0]);
+        rig_fail(rc, "refl rig status: %s did not answer (%s above)", failed,
+                 nfailed > 1                           ? "their DEVICE_error lines"
+                 : strncmp(failed, "the camera", 10) ? "its turntable_error line"
+                                                     : "its camera_error line");
     return rc;
 }
 
@@ -308,15 +331,15 @@ static int do_identify(rig_t *r)
     } else {
         printf("turntable: none\n");
     }
-    if (r->camera) {
+    if (r->ncameras == 0) printf("camera: none\n");
+    for (int i = 0; i < r->ncameras; i++) {
+        rig_camera_t *c = r->cameras[i];
         rig_frame_meta_t m;
-        if ((rc = rig_camera_settings(r->camera, &m))) return rc;
-        printf("camera: %s\ncamera_backend: %s\ncamera_vendor: %s\ncamera_model: %s\ncamera_serial: %s\n"
-               "camera_firmware: %s\ncamera_sensor_region: %d x %d\n",
-               rig_camera_name(r->camera), rig_camera_backend(r->camera), m.vendor, m.model, m.serial,
+        if ((rc = rig_camera_settings(c, &m))) return rc;
+        printf("camera_name: %s\ncamera: %s\ncamera_backend: %s\ncamera_vendor: %s\ncamera_model: %s\n"
+               "camera_serial: %s\ncamera_firmware: %s\ncamera_sensor_region: %d x %d\n",
+               r->camera_names[i], rig_camera_name(c), rig_camera_backend(c), m.vendor, m.model, m.serial,
                m.firmware[0] ? m.firmware : "none (not stated)", m.width, m.height);
-    } else {
-        printf("camera: none\n");
     }
     if (r->lamps && rig_lamps_count(r->lamps) > 0) {
         for (int i = 0; i < rig_lamps_count(r->lamps); i++) {
@@ -345,51 +368,25 @@ typedef struct {
     double      exposure_us, gain;     // NAN: keep
     const char *pixel_format;          // NULL: keep
     const char *out;
+    const char *camera;                // NULL or "all": every camera
 } snap_t;
 
-static int do_snap(rig_t *r, const snap_t *o, const char *cmdline)
+// The file a snap of camera i writes: -o itself for one camera (--camera
+// NAME, or a rig of one), else OUT_NAME.png.
+static char *snap_path(const rig_t *r, const snap_t *o, int i)
 {
-    int rc = 0;
-    rig_frame_t f = { 0 };
+    bool one = r->ncameras == 1 || (o->camera && strcmp(o->camera, "all"));
+    if (one) return g_strdup(o->out);
+    size_t n = strlen(o->out) - 4;
+    return g_strdup_printf("%.*s_%s%s", (int)n, o->out, r->camera_names[i], o->out + n);
+}
+
+// One snapped frame of camera i to its PNG with metadata, and its summary on stdout.
+static int snap_write(rig_t *r, int i, const snap_t *o, const rig_frame_t *f, const rig_turntable_status_t *st,
+                      const char *on_names, const char *cmdline)
+{
+    const rig_frame_meta_t *m = &f->meta;
     model_meta_t *meta = model_meta_new();
-    uint32_t mask = 0;
-    if (!r->camera) {
-        rc = rig_fail(RIG_ERR_NO_DEVICE, "refl rig snap: the rig %s has no camera: add a [camera] section (or use "
-                      "[rig] backend = virtual)", r->path);
-        goto done;
-    }
-    if ((rc = lamps_mask(r, o->lamps, &mask))) goto done;
-    if (mask && !r->lamps) {
-        rc = rig_fail(RIG_ERR_NO_DEVICE, "refl rig snap: the rig %s has no lamps", r->path);
-        goto done;
-    }
-    if (o->have_angle) {
-        if ((rc = need_turntable(r, "snap --angle")) || (rc = move_to(r, o->angle_deg))) goto done;
-    }
-    if (o->pixel_format && (rc = rig_camera_set_pixel_format(r->camera, o->pixel_format))) goto done;
-    if (isfinite(o->exposure_us) && (rc = rig_camera_set_exposure_us(r->camera, o->exposure_us))) goto done;
-    if (isfinite(o->gain) && (rc = rig_camera_set_gain(r->camera, o->gain))) goto done;
-    rig_frame_meta_t set;
-    if ((rc = rig_camera_settings(r->camera, &set))) goto done;
-
-    char on_names[1100];
-    lamp_names(r->lamps, mask, on_names, sizeof on_names);
-    if (r->lamps) {
-        fprintf(stderr, "refl rig: lamps on: %s\n", on_names);
-        if ((rc = rig_lamps_set(r->lamps, mask))) goto done;
-    }
-    fprintf(stderr, "refl rig: capturing (%s, exposure %.6g us, gain %.6g)\n", set.pixel_format, set.exposure_us,
-            set.gain);
-    rc = rig_camera_capture(r->camera, CAPTURE_TIMEOUT_S + 2e-6 * set.exposure_us, CAPTURE_RETRIES, &f);
-    int off_rc = r->lamps ? rig_lamps_all_off(r->lamps) : 0;
-    if (rc) goto done;
-    if ((rc = off_rc)) goto done;
-
-    rig_turntable_status_t st = { 0 };
-    if (r->turntable && (rc = rig_turntable_status(r->turntable, &st))) goto done;
-
-    // Metadata.
-    const rig_frame_meta_t *m = &f.meta;
     char date[40], t_frame[40];
     model_utc_text(model_realtime_s(), date);
     model_utc_text(m->system_time_s, t_frame);
@@ -400,7 +397,8 @@ static int do_snap(rig_t *r, const snap_t *o, const char *cmdline)
              "unscaled");
     model_meta_add(meta, "pixel_convention", "row-major, (0,0) is the top-left pixel of the region, x to the right, "
              "y down");
-    model_meta_add(meta, "camera", "%s", rig_camera_name(r->camera));
+    model_meta_add(meta, "camera", "%s", rig_camera_name(r->cameras[i]));
+    model_meta_add(meta, "camera_name", "%s (the rig file's camera)", r->camera_names[i]);
     model_meta_add(meta, "camera_vendor", "%s", m->vendor);
     model_meta_add(meta, "camera_model", "%s", m->model);
     model_meta_add(meta, "camera_serial", "%s", m->serial);
@@ -420,7 +418,7 @@ static int do_snap(rig_t *r, const snap_t *o, const char *cmdline)
     else model_meta_add(meta, "temperature_c", "none (the camera has no temperature sensor)");
     if (o->have_angle) model_meta_add(meta, "turntable_commanded_deg", "%.10g", o->angle_deg);
     else model_meta_add(meta, "turntable_commanded_deg", "none (not moved by this command)");
-    if (r->turntable) model_meta_add(meta, "turntable_measured_deg", "%.6f", st.angle_deg);
+    if (r->turntable) model_meta_add(meta, "turntable_measured_deg", "%.6f", st->angle_deg);
     else model_meta_add(meta, "turntable_measured_deg", "none (no turntable)");
     model_meta_add(meta, "turntable_frame", "degrees, 0 at home, positive counter-clockwise seen from above (about +z "
              "of the rig frame)");
@@ -442,35 +440,103 @@ static int do_snap(rig_t *r, const snap_t *o, const char *cmdline)
     model_meta_add(meta, "command_line", "%s", cmdline);
 
     // model_png16_write writes a temporary file and renames it into place.
-    if (!model_png16_write(o->out, m->width, m->height, f.pix, model_meta_list(meta))) {
-        rc = RIG_ERR_IO;
-        goto done;
+    char *path = snap_path(r, o, i);
+    bool ok = model_png16_write(path, m->width, m->height, f->pix, model_meta_list(meta));
+    model_meta_free(meta);
+    if (!ok) {
+        g_free(path);
+        return RIG_ERR_IO;
     }
     size_t n = (size_t)m->width * (size_t)m->height;
     double sum = 0;
     unsigned lo = 65535, hi = 0;
-    for (size_t i = 0; i < n; i++) {
-        unsigned v = f.pix[i];
+    for (size_t k = 0; k < n; k++) {
+        unsigned v = f->pix[k];
         sum += v;
         if (v < lo) lo = v;
         if (v > hi) hi = v;
     }
-    printf("refl rig snap: wrote %s\n", o->out);
+    printf("refl rig snap: wrote %s\n", path);
+    g_free(path);
+    if (r->ncameras > 1) printf("  camera %s\n", r->camera_names[i]);
     printf("  frame %d x %d %s, id %llu, exposure %.6g us, gain %.6g\n", m->width, m->height, m->pixel_format,
            (unsigned long long)m->frame_id, m->exposure_us, m->gain);
-    if (r->turntable) printf("  turntable %.4f deg", st.angle_deg);
+    if (r->turntable) printf("  turntable %.4f deg", st->angle_deg);
     else printf("  no turntable");
     if (o->have_angle) printf(" (commanded %.6g)", o->angle_deg);
     printf(", lamps on: %s\n", on_names);
     printf("  pixels (DN): min %u  mean %.1f  max %u\n", lo, n ? sum / (double)n : 0.0, hi);
+    return 0;
+}
+
+// The snap's settings on camera i, then its frame (the lamps already on).
+static int snap_capture(rig_t *r, int i, const snap_t *o, rig_frame_t *f)
+{
+    rig_camera_t *c = r->cameras[i];
+    int rc;
+    if (o->pixel_format && (rc = rig_camera_set_pixel_format(c, o->pixel_format))) return rc;
+    if (isfinite(o->exposure_us) && (rc = rig_camera_set_exposure_us(c, o->exposure_us))) return rc;
+    if (isfinite(o->gain) && (rc = rig_camera_set_gain(c, o->gain))) return rc;
+    rig_frame_meta_t set;
+    if ((rc = rig_camera_settings(c, &set))) return rc;
+    fprintf(stderr, "refl rig: capturing%s%s (%s, exposure %.6g us, gain %.6g)\n", r->ncameras > 1 ? " camera " : "",
+            r->ncameras > 1 ? r->camera_names[i] : "", set.pixel_format, set.exposure_us, set.gain);
+    return rig_camera_capture(c, CAPTURE_TIMEOUT_S + 2e-6 * set.exposure_us, CAPTURE_RETRIES, f);
+}
+
+// Every selected camera captures at one turntable angle and lamp state, one
+// after the other (file order), the lamps on throughout; then the files.
+static int do_snap(rig_t *r, const snap_t *o, const char *cmdline)
+{
+    int rc = 0;
+    rig_frame_t f[RIG_CAMERAS_MAX] = { 0 };
+    uint32_t mask = 0;
+    int first = 0, last = r->ncameras - 1;
+    if (!r->camera) {
+        rc = rig_fail(RIG_ERR_NO_DEVICE, "refl rig snap: the rig %s has no camera: add a [camera] section (or use "
+                      "[rig] backend = virtual)", r->path);
+        goto done;
+    }
+    if (o->camera && strcmp(o->camera, "all")) {
+        if ((first = last = rig_camera_find(r, o->camera)) < 0) {
+            char names[RIG_CAMERAS_MAX * RIG_CAMERA_NAME_MAX + 16] = "";
+            for (int i = 0; i < r->ncameras; i++)
+                snprintf(names + strlen(names), sizeof names - strlen(names), "%s%s", i ? ", " : "",
+                         r->camera_names[i]);
+            rc = rig_fail(RIG_ERR_INVALID, "refl rig snap: --camera: the rig %s has no camera '%s' (its cameras: "
+                          "%s)", r->path, o->camera, names);
+            goto done;
+        }
+    }
+    if ((rc = lamps_mask(r, o->lamps, &mask))) goto done;
+    if (mask && !r->lamps) {
+        rc = rig_fail(RIG_ERR_NO_DEVICE, "refl rig snap: the rig %s has no lamps", r->path);
+        goto done;
+    }
+    if (o->have_angle) {
+        if ((rc = need_turntable(r, "snap --angle")) || (rc = move_to(r, o->angle_deg))) goto done;
+    }
+    char on_names[1100];
+    lamp_names(r->lamps, mask, on_names, sizeof on_names);
+    if (r->lamps) {
+        fprintf(stderr, "refl rig: lamps on: %s\n", on_names);
+        if ((rc = rig_lamps_set(r->lamps, mask))) goto done;
+    }
+    for (int i = first; i <= last && !rc; i++) rc = snap_capture(r, i, o, &f[i]);
+    int off_rc = r->lamps ? rig_lamps_all_off(r->lamps) : 0;
+    if (rc) goto done;
+    if ((rc = off_rc)) goto done;
+
+    rig_turntable_status_t st = { 0 };
+    if (r->turntable && (rc = rig_turntable_status(r->turntable, &st))) goto done;
+    for (int i = first; i <= last && !rc; i++) rc = snap_write(r, i, o, &f[i], &st, on_names, cmdline);
 done:
     if (r->lamps && rig_lamps_on_mask(r->lamps)) {
         bool q = model_error_quiet_thread(true);
         rig_lamps_all_off(r->lamps);
         model_error_quiet_thread(q);
     }
-    rig_frame_free(&f);
-    model_meta_free(meta);
+    for (int i = 0; i < RIG_CAMERAS_MAX; i++) rig_frame_free(&f[i]);
     return rc;
 }
 
@@ -530,6 +596,7 @@ int rig_cmd(int argc, char **argv)
         so.out = model_cli_value(&c, "-o");
         so.lamps = model_cli_value(&c, "--lamps");
         so.pixel_format = model_cli_value(&c, "--pixel-format");
+        so.camera = model_cli_value(&c, "--camera");
         size_t n = strlen(so.out);
         if (n < 4 || strcasecmp(so.out + n - 4, ".png"))
             return model_cli_error(&c, "option -o: '%s' must end in .png (16-bit grey PNG)", so.out);
@@ -611,8 +678,9 @@ int rig_cmd(int argc, char **argv)
     } else {   // serve
         // The client connection rig_open made would hold the camera's control
         // channel: let other clients have it.
-        rig_camera_close(r->camera);
+        for (int i = 0; i < r->ncameras; i++) rig_camera_close(r->cameras[i]);
         r->camera = NULL;
+        r->ncameras = 0;
         printf("address: %s\nsample: %s\n", rig_virtual_camera_address(r->virt), rig_virtual_sample(r->virt));
         fflush(stdout);
         fprintf(stderr, "refl rig: serving the virtual camera at %s; stop with Ctrl-C (SIGINT) or SIGTERM\n",

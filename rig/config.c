@@ -29,16 +29,22 @@ typedef struct {
     bool   virt;
     int    rig_line;
     char  *truth;                         // resolved against the rig file's directory (g_free)
-    char   address[64], sample[64];
+    char   address[256], sample[64];
     bool   inprocess;                     // serve = inprocess
     double time_scale, busy_wait_s;
     uint64_t noise_seed;
     bool   have_noise_seed;
-    // [camera]
-    bool   have_camera;
-    int    camera_line;
-    char   camera_id[64];
-    // camera defaults ([camera], or [rig] for the virtual camera)
+    // [camera] / [camera NAME], in file order
+    int    ncameras;
+    struct {
+        int  line;
+        char section[80], name[RIG_CAMERA_NAME_MAX], id[64];
+        char pixel_format[16];
+        double exposure_us, gain;
+        long packet_size, packet_delay;
+        int  packet_line;
+    } cam[RIG_CAMERAS_MAX];
+    // camera defaults ([rig] for the virtual camera; the section being parsed)
     char   pixel_format[16];
     double exposure_us, gain;
     long   packet_size, packet_delay;     // GevSCPSPacketSize (bytes), GevSCPD (ticks); -1: the camera's own
@@ -129,9 +135,8 @@ static void backend_choices(const char *kind, char *out, size_t size)
 
 static const char *kind_of(const char *section)
 {
-    if (!strcmp(section, "camera") || !strcmp(section, "turntable") || !strcmp(section, "rig") ||
-        !strcmp(section, "lamps"))
-        return section;
+    if (!strcmp(section, "turntable") || !strcmp(section, "rig") || !strcmp(section, "lamps")) return section;
+    if (!strncmp(section, "camera ", 7) || !strcmp(section, "camera")) return "camera";
     if (!strncmp(section, "lamp ", 5) || !strcmp(section, "lamp")) return "lamp";
     return NULL;
 }
@@ -261,9 +266,15 @@ static int parse_rig(spec_t *s, const char *sec, int line)
     snprintf(s->address, sizeof s->address, "127.0.0.1");
     if ((rc = get_string(s, sec, "address", s->address, sizeof s->address))) return rc;
     const model_ini_entry_t *a = get(s, sec, "address");
-    if (a && (!is_ipv4(s->address) || strncmp(s->address, "127.", 4)))
-        return cfg_fail(s, a->line, "[rig] address: '%s' is not a loopback IPv4 address: the virtual camera serves "
-                        "on 127.0.0.1 only", s->address);
+    gchar **as = g_strsplit_set(s->address, " \t", -1);   // one per camera of the truth file
+    for (int i = 0; a && as[i]; i++)
+        if (as[i][0] && (!is_ipv4(as[i]) || strncmp(as[i], "127.", 4))) {
+            rc = cfg_fail(s, a->line, "[rig] address: '%s' is not a loopback IPv4 address: the virtual cameras "
+                          "serve on 127.x.y.z only (one address per camera, separated by spaces)", as[i]);
+            break;
+        }
+    g_strfreev(as);
+    if (rc) return rc;
     if ((rc = get_string(s, sec, "sample", s->sample, sizeof s->sample))) return rc;
     s->time_scale = 1;
     if ((rc = get_double(s, sec, "time_scale", &s->time_scale, 0, true, 1e3, "0 < time_scale <= 1000; 1 is real "
@@ -279,29 +290,67 @@ static int parse_rig(spec_t *s, const char *sec, int line)
     return get_camera_defaults(s, sec);
 }
 
+// A camera's name: what frame files and --camera use ([A-Za-z0-9_-], not "all").
+static bool camera_name_ok(const char *n)
+{
+    if (!*n || strlen(n) >= RIG_CAMERA_NAME_MAX || !strcmp(n, "all")) return false;
+    for (const char *p = n; *p; p++)
+        if (!g_ascii_isalnum(*p) && *p != '_' && *p != '-') return false;
+    return true;
+}
+
 static int parse_camera(spec_t *s, const char *sec, int line)
 {
     int rc;
-    s->have_camera = true;
-    s->camera_line = line;
+    const char *name = !strcmp(sec, "camera") ? "camera" : sec + 7;
+    if (!camera_name_ok(name))
+        return cfg_fail(s, line, "[%s]: '%s' is not a camera name: write [camera NAME] with NAME of letters, "
+                        "digits, '_' and '-' (at most %d characters, not 'all'), or [camera] for one camera",
+                        sec, name, RIG_CAMERA_NAME_MAX - 1);
+    for (int j = 0; j < s->ncameras; j++)
+        if (!strcmp(s->cam[j].name, name))
+            return cfg_fail(s, line, "[%s]: camera '%s' is already [%s] (line %d): give each camera its own name",
+                            sec, name, s->cam[j].section, s->cam[j].line);
+    if (s->ncameras >= RIG_CAMERAS_MAX)
+        return cfg_fail(s, line, "[%s]: more than %d cameras; a rig has at most %d", sec, RIG_CAMERAS_MAX,
+                        RIG_CAMERAS_MAX);
     static const char *const ids[] = { "address", "serial", "name" };
     const model_ini_entry_t *id = NULL;
     for (int i = 0; i < 3; i++) {
         const model_ini_entry_t *e = get(s, sec, ids[i]);
         if (!e) continue;
         if (id)
-            return cfg_fail(s, e->line, "[camera]: both %s (line %d) and %s given: identify the camera by one of "
-                            "address, serial or name", id->key, id->line, e->key);
+            return cfg_fail(s, e->line, "[%s]: both %s (line %d) and %s given: identify the camera by one of "
+                            "address, serial or name", sec, id->key, id->line, e->key);
         id = e;
     }
     if (!id)
-        return cfg_fail(s, line, "[camera] does not say which camera: add 'address = IP' (GigE Vision, opened "
-                        "directly), 'serial = S' or 'name = N'");
-    if ((rc = get_string(s, sec, id->key, s->camera_id, sizeof s->camera_id))) return rc;
+        return cfg_fail(s, line, "[%s] does not say which camera: add 'address = IP' (GigE Vision, opened "
+                        "directly), 'serial = S' or 'name = N'", sec);
+    char cid[64] = "";
+    if ((rc = get_string(s, sec, id->key, cid, sizeof cid))) return rc;
     if (!strcmp(id->key, "address") && !is_ipv4(id->value))
-        return cfg_fail(s, id->line, "[camera] address: '%s' is not an IPv4 address (a.b.c.d); identify the camera "
-                        "by 'serial =' or 'name =' otherwise", id->value);
-    return get_camera_defaults(s, sec);
+        return cfg_fail(s, id->line, "[%s] address: '%s' is not an IPv4 address (a.b.c.d); identify the camera "
+                        "by 'serial =' or 'name =' otherwise", sec, id->value);
+    for (int j = 0; j < s->ncameras; j++)
+        if (!strcmp(s->cam[j].id, cid))
+            return cfg_fail(s, id->line, "[%s]: '%s' already identifies [%s] (line %d): one section per camera",
+                            sec, cid, s->cam[j].section, s->cam[j].line);
+    s->pixel_format[0] = 0;
+    s->exposure_us = s->gain = NAN;
+    if ((rc = get_camera_defaults(s, sec))) return rc;
+    int k = s->ncameras++;
+    s->cam[k].line = line;
+    snprintf(s->cam[k].section, sizeof s->cam[k].section, "%s", sec);
+    snprintf(s->cam[k].name, sizeof s->cam[k].name, "%s", name);
+    snprintf(s->cam[k].id, sizeof s->cam[k].id, "%s", cid);
+    snprintf(s->cam[k].pixel_format, sizeof s->cam[k].pixel_format, "%s", s->pixel_format);
+    s->cam[k].exposure_us = s->exposure_us;
+    s->cam[k].gain = s->gain;
+    s->cam[k].packet_size = s->packet_size;
+    s->cam[k].packet_delay = s->packet_delay;
+    s->cam[k].packet_line = s->packet_line;
+    return 0;
 }
 
 static int parse_turntable(spec_t *s, const char *sec, int line, const backend_def_t *def)
@@ -436,8 +485,9 @@ static int parse(spec_t *s)
     for (int i = 0; i < ini->nsections; i++) {
         const char *sec = ini->sections[i];
         if (!kind_of(sec))
-            return cfg_fail(s, ini->section_lines[i], "unknown section [%s]: a rig file has [camera], [turntable], "
-                            "[lamp NAME] sections, or one [rig] section (backend = virtual)", sec);
+            return cfg_fail(s, ini->section_lines[i], "unknown section [%s]: a rig file has [camera] (or "
+                            "[camera NAME], one or more), [turntable], [lamp NAME] sections, or one [rig] section "
+                            "(backend = virtual)", sec);
         if (!strcmp(sec, "rig")) rig_sec = i;
         else if (other_sec < 0) other_sec = i;
     }
@@ -461,6 +511,11 @@ static int parse(spec_t *s)
         else if (!strcmp(kind, "turntable")) rc = parse_turntable(s, sec, line, def);
         else rc = parse_lamp(s, sec, line, def);
         if (rc) return rc;
+    }
+    if (!s->virt && s->ncameras > 0) {   // the rig's defaults: its first camera's
+        snprintf(s->pixel_format, sizeof s->pixel_format, "%s", s->cam[0].pixel_format);
+        s->exposure_us = s->cam[0].exposure_us;
+        s->gain = s->cam[0].gain;
     }
     return 0;
 }
@@ -523,17 +578,28 @@ static void set_profile_sim(rig_t *r, const rig_turntable_sim_params_t *p)
         model_error_quiet_thread(q_);                                                                       \
     } while (0)
 
-static int apply_camera_defaults(rig_t *r, const spec_t *s, int line, const char *section)
+// A camera's settings from the rig file: pixel format, exposure, gain, then the
+// GigE Vision stream packets (-1: the camera's own), each set and read back.
+static int apply_camera_defaults(rig_camera_t *c, const char *pixel_format, double exposure_us, double gain,
+                                 long packet_size, long packet_delay, int packet_line, const spec_t *s, int line,
+                                 const char *section)
 {
     int rc = 0;
-    if (!r->camera) return 0;
-    if (r->pixel_format[0]) QUIET(rig_camera_set_pixel_format(r->camera, r->pixel_format));
-    if (!rc && isfinite(r->exposure_us)) QUIET(rig_camera_set_exposure_us(r->camera, r->exposure_us));
-    if (!rc && isfinite(r->gain)) QUIET(rig_camera_set_gain(r->camera, r->gain));
+    if (!c) return 0;
+    if (pixel_format[0]) QUIET(rig_camera_set_pixel_format(c, pixel_format));
+    if (!rc && isfinite(exposure_us)) QUIET(rig_camera_set_exposure_us(c, exposure_us));
+    if (!rc && isfinite(gain)) QUIET(rig_camera_set_gain(c, gain));
     if (rc) return device_fail(rc, s, line, section);
-    if (s->packet_size >= 0 || s->packet_delay >= 0)
-        QUIET(rig_camera_set_stream_packets(r->camera, s->packet_size, s->packet_delay));
-    return rc ? device_fail(rc, s, s->packet_line, section) : 0;
+    if (packet_size >= 0 || packet_delay >= 0) QUIET(rig_camera_set_stream_packets(c, packet_size, packet_delay));
+    return rc ? device_fail(rc, s, packet_line ? packet_line : line, section) : 0;
+}
+
+// Enters an opened camera in r->cameras (r->camera is the first).
+static void add_camera(rig_t *r, rig_camera_t *c, const char *name)
+{
+    snprintf(r->camera_names[r->ncameras], sizeof r->camera_names[0], "%s", name);
+    r->cameras[r->ncameras++] = c;
+    r->camera = r->cameras[0];
 }
 
 static int open_devices(rig_t *r, spec_t *s)
@@ -567,9 +633,17 @@ static int open_devices(rig_t *r, spec_t *s)
         model_ini_free(truth);
         p.time_scale = s->time_scale;
         set_profile_sim(r, &p);
-        QUIET(rig_camera_open_aravis(&r->camera, rig_virtual_camera_address(r->virt)));
-        if (rc) return device_fail(rc, s, s->rig_line, "rig");
-        return apply_camera_defaults(r, s, s->rig_line, "rig");
+        for (int k = 0; k < rig_virtual_ncameras(r->virt); k++) {   // every camera of the truth file
+            rig_virtual_t *view = rig_virtual_camera_view(r->virt, k);
+            rig_camera_t *c = NULL;
+            QUIET(rig_camera_open_aravis(&c, rig_virtual_camera_address(view)));
+            if (rc) return device_fail(rc, s, s->rig_line, "rig");
+            add_camera(r, c, rig_virtual_camera_name(view));
+            if ((rc = apply_camera_defaults(c, s->pixel_format, s->exposure_us, s->gain, s->packet_size,
+                                            s->packet_delay, s->packet_line, s, s->rig_line, "rig")))
+                return rc;
+        }
+        return 0;
     }
     if (s->have_turntable) {
         if (s->turntable_apt) {
@@ -602,10 +676,15 @@ static int open_devices(rig_t *r, spec_t *s)
             return device_fail(rc, s, s->lamp_line[0], sec);
         }
     }
-    if (s->have_camera) {
-        QUIET(rig_camera_open_aravis(&r->camera, s->camera_id));
-        if (rc) return device_fail(rc, s, s->camera_line, "camera");
-        return apply_camera_defaults(r, s, s->camera_line, "camera");
+    for (int i = 0; i < s->ncameras; i++) {
+        rig_camera_t *c = NULL;
+        QUIET(rig_camera_open_aravis(&c, s->cam[i].id));
+        if (rc) return device_fail(rc, s, s->cam[i].line, s->cam[i].section);
+        add_camera(r, c, s->cam[i].name);
+        if ((rc = apply_camera_defaults(c, s->cam[i].pixel_format, s->cam[i].exposure_us, s->cam[i].gain,
+                                        s->cam[i].packet_size, s->cam[i].packet_delay, s->cam[i].packet_line, s,
+                                        s->cam[i].line, s->cam[i].section)))
+            return rc;
     }
     return 0;
 }
@@ -654,6 +733,13 @@ done:
     return rc;
 }
 
+int rig_camera_find(const rig_t *r, const char *name)
+{
+    for (int i = 0; r && name && i < r->ncameras; i++)
+        if (!strcmp(r->camera_names[i], name)) return i;
+    return -1;
+}
+
 void rig_close(rig_t *r)
 {
     if (!r) return;
@@ -665,7 +751,7 @@ void rig_close(rig_t *r)
         rig_turntable_status_t st;
         if (rig_turntable_status(r->turntable, &st) == 0 && st.moving) rig_turntable_stop(r->turntable, false);
     }
-    rig_camera_close(r->camera);
+    for (int i = r->ncameras - 1; i >= 0; i--) rig_camera_close(r->cameras[i]);
     if (r->virt) {
         rig_virtual_close(r->virt);
     } else {

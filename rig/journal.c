@@ -19,7 +19,7 @@
 #include "model/model.h"
 #include "rig/rig.h"
 
-#define SCHEMA_VERSION 1
+#define SCHEMA_VERSION 2   // 2: frames keyed by (step, camera); 1 is migrated on open
 
 struct rig_journal {
     sqlite3        *db;
@@ -100,7 +100,9 @@ static char *frames_sql(frames_sql_t what, sqlite3 *db)
         else if (db && !frames_has_column(db, frame_columns[i].column)) g_string_append(q, "NULL");
         else g_string_append(q, frame_columns[i].column);
     }
-    g_string_append(q, what == FRAMES_CREATE ? ");" : what == FRAMES_INSERT ? ")" : " FROM frames ORDER BY step");
+    g_string_append(q, what == FRAMES_CREATE   ? ", PRIMARY KEY(step, camera));"
+                       : what == FRAMES_INSERT ? ")"
+                                               : " FROM frames ORDER BY step, rowid");
     return g_string_free(q, FALSE);
 }
 
@@ -149,6 +151,31 @@ static int jfail(rig_journal_t *j, const char *what)
                     full ? " (disk full: free space, then refl capture --resume)" : "");
 }
 
+// Schema 1 -> 2 in one transaction: the frames table gets its camera column
+// (every frame "camera", the one camera of a version-1 session) and the key
+// (step, camera).
+static int migrate_v1(rig_journal_t *j)
+{
+    GString *cols = g_string_new("");
+    for (int i = 0; i < NFRAME_COLUMNS; i++)   // the columns it has (an older refl's lack the later ones)
+        if (strcmp(frame_columns[i].column, "camera") && frames_has_column(j->db, frame_columns[i].column))
+            g_string_append_printf(cols, "%s%s", cols->len ? "," : "", frame_columns[i].column);
+    char *create = frames_sql(FRAMES_CREATE, NULL);
+    char *sql = g_strdup_printf("BEGIN IMMEDIATE; ALTER TABLE frames RENAME TO frames_v1; %s "
+                                "INSERT INTO frames(%s) SELECT %s FROM frames_v1; DROP TABLE frames_v1; "
+                                "UPDATE schema_version SET version = %d; COMMIT;",
+                                create, cols->str, cols->str, SCHEMA_VERSION);
+    int rc = 0;
+    if (sqlite3_exec(j->db, sql, NULL, NULL, NULL) != SQLITE_OK) {
+        rc = jfail(j, "cannot migrate the journal from schema version 1 (one camera) to 2");
+        sqlite3_exec(j->db, "ROLLBACK", NULL, NULL, NULL);
+    }
+    g_free(sql);
+    g_free(create);
+    g_string_free(cols, TRUE);
+    return rc;
+}
+
 static int open_db(rig_journal_t **out, const char *dir, bool create)
 {
     *out = NULL;
@@ -186,6 +213,8 @@ static int open_db(rig_journal_t **out, const char *dir, bool create)
             sqlite3_step(s) == SQLITE_ROW)
             v = sqlite3_column_int(s, 0);
         sqlite3_finalize(s);
+        if (v == 1 && (rc = migrate_v1(j))) goto fail;
+        if (v == 1) v = SCHEMA_VERSION;
         if (v != SCHEMA_VERSION) {
             rc = rig_fail(RIG_ERR_PROTOCOL, "journal %s: schema version %d, this refl reads version %d", j->path, v,
                           SCHEMA_VERSION);
@@ -429,11 +458,18 @@ int rig_journal_frames(rig_journal_t *j, rig_frame_row_t **rows, int *n)
 {
     *rows = NULL;
     *n = 0;
-    int total = rig_journal_nsteps(j);
+    sqlite3_stmt *s = NULL;
+    int rc = 0, k = 0, total = -1;
+    pthread_mutex_lock(&j->lock);
+    if (sqlite3_prepare_v2(j->db, "SELECT COUNT(*) FROM frames", -1, &s, NULL) == SQLITE_OK &&
+        sqlite3_step(s) == SQLITE_ROW)
+        total = sqlite3_column_int(s, 0);
+    sqlite3_finalize(s);
+    s = NULL;
+    pthread_mutex_unlock(&j->lock);
     if (total < 0) return jfail(j, "cannot read the frames");
     rig_frame_row_t *r = calloc((size_t)total + 1, sizeof *r);
-    sqlite3_stmt *s = NULL;
-    int rc = 0, k = 0;
+    if (!r) return rig_fail(RIG_ERR_NO_MEM, "journal %s: out of memory for %d frames", j->path, total);
     pthread_mutex_lock(&j->lock);
     char *sql = frames_sql(FRAMES_SELECT, j->db);
     if (sqlite3_prepare_v2(j->db, sql, -1, &s, NULL) != SQLITE_OK) {
@@ -470,7 +506,7 @@ static int add_frame_columns(rig_journal_t *j)
     return 0;
 }
 
-int rig_journal_frame_done(rig_journal_t *j, const rig_frame_row_t *f)
+int rig_journal_frame_done(rig_journal_t *j, const rig_frame_row_t *f, bool step_done)
 {
     sqlite3_stmt *s = NULL, *u = NULL;
     int rc = 0;
@@ -491,8 +527,9 @@ int rig_journal_frame_done(rig_journal_t *j, const rig_frame_row_t *f)
     }
     frame_bind(s, f);
     sqlite3_bind_int(u, 1, f->step);
-    if (sqlite3_step(s) != SQLITE_DONE || sqlite3_step(u) != SQLITE_DONE || sqlite3_changes(j->db) != 1) {
-        rc = jfail(j, "cannot record a frame (a step recorded twice?)");
+    if (sqlite3_step(s) != SQLITE_DONE ||
+        (step_done && (sqlite3_step(u) != SQLITE_DONE || sqlite3_changes(j->db) != 1))) {
+        rc = jfail(j, "cannot record a frame (a step's camera recorded twice?)");
         goto rollback;
     }
     if (sqlite3_exec(j->db, "COMMIT", NULL, NULL, NULL) != SQLITE_OK) {

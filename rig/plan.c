@@ -471,6 +471,47 @@ static uint32_t all_mask(const rig_lamps_t *l)
     return !l ? 0 : rig_lamps_count(l) >= 32 ? 0xffffffffu : ((uint32_t)1 << rig_lamps_count(l)) - 1;
 }
 
+// One camera against the plan: every exposure, the gain and the format set and
+// read back (the exposure restored), the ROI within its frame. 0 or RIG_ERR_*.
+static int bind_camera(const rig_plan_t *p, rig_camera_t *c)
+{
+    int rc;
+    rig_frame_meta_t before, m;
+    bool q = model_error_quiet_thread(true);
+    rc = rig_camera_settings(c, &before);
+    if (!rc && (rc = rig_camera_set_pixel_format(c, p->pixel_format)))
+        model_error(p->path, 0, "[exposure] pixel_format = %s: the camera refuses it (%s)", p->pixel_format,
+                    model_last_error());
+    if (!rc && (rc = rig_camera_set_gain(c, p->gain)))
+        model_error(p->path, 0, "[exposure] gain = %g: the camera refuses it (%s)", p->gain, model_last_error());
+    for (int i = 0; !rc && i < p->nexposures; i++) {
+        double us = p->exposures_us[i];
+        if ((rc = rig_camera_set_exposure_us(c, us)) == 0 && (rc = rig_camera_settings(c, &m)) == 0 &&
+            !(fabs(m.exposure_us - us) <= 0.01 * us + 1)) {
+            rc = RIG_ERR_INVALID;
+        }
+        if (rc)
+            model_error(p->path, p->exposure_line, "[exposure] list_us: the camera %s does not accept %g us",
+                        rig_camera_name(c), us);
+    }
+    if (!rc && !(rc = rig_camera_settings(c, &m)) && p->roi[2] &&
+        (p->roi[0] + p->roi[2] > m.width || p->roi[1] + p->roi[3] > m.height)) {
+        model_error(p->path, 0, "[exposure] roi %d %d %d %d does not fit the %d x %d frame of the camera %s",
+                    p->roi[0], p->roi[1], p->roi[2], p->roi[3], m.width, m.height, rig_camera_name(c));
+        rc = RIG_ERR_INVALID;
+    }
+    model_error_quiet_thread(q);
+    if (!rc) {
+        rig_camera_set_exposure_us(c, before.exposure_us);
+    } else {
+        // re-report the plan error loudly unless the caller silenced errors
+        char msg[1024];
+        snprintf(msg, sizeof msg, "%s", model_last_error());
+        model_error(NULL, 0, "%s", msg);
+    }
+    return rc;
+}
+
 int rig_plan_bind(rig_plan_t *p, rig_t *r)
 {
     uint32_t *masks = g_malloc0_n((size_t)p->nlamp_sets + 1, sizeof *masks);
@@ -530,40 +571,8 @@ int rig_plan_bind(rig_plan_t *p, rig_t *r)
             goto done;
         }
     }
-    // The camera: set every exposure, the gain and the format, read them back.
-    rig_frame_meta_t before, m;
-    bool q = model_error_quiet_thread(true);
-    rc = rig_camera_settings(r->camera, &before);
-    if (!rc && (rc = rig_camera_set_pixel_format(r->camera, p->pixel_format)))
-        model_error(p->path, 0, "[exposure] pixel_format = %s: the camera refuses it (%s)", p->pixel_format,
-                    model_last_error());
-    if (!rc && (rc = rig_camera_set_gain(r->camera, p->gain)))
-        model_error(p->path, 0, "[exposure] gain = %g: the camera refuses it (%s)", p->gain, model_last_error());
-    for (int i = 0; !rc && i < p->nexposures; i++) {
-        double us = p->exposures_us[i];
-        if ((rc = rig_camera_set_exposure_us(r->camera, us)) == 0 && (rc = rig_camera_settings(r->camera, &m)) == 0 &&
-            !(fabs(m.exposure_us - us) <= 0.01 * us + 1)) {
-            rc = RIG_ERR_INVALID;
-        }
-        if (rc)
-            model_error(p->path, p->exposure_line, "[exposure] list_us: the camera %s does not accept %g us",
-                        rig_camera_name(r->camera), us);
-    }
-    if (!rc && !(rc = rig_camera_settings(r->camera, &m)) && p->roi[2] &&
-        (p->roi[0] + p->roi[2] > m.width || p->roi[1] + p->roi[3] > m.height)) {
-        model_error(p->path, 0, "[exposure] roi %d %d %d %d does not fit the %d x %d frame", p->roi[0], p->roi[1],
-                    p->roi[2], p->roi[3], m.width, m.height);
-        rc = RIG_ERR_INVALID;
-    }
-    model_error_quiet_thread(q);
-    if (!rc) {
-        rig_camera_set_exposure_us(r->camera, before.exposure_us);
-    } else {
-        // re-report the plan error loudly unless the caller silenced errors
-        char msg[1024];
-        snprintf(msg, sizeof msg, "%s", model_last_error());
-        model_error(NULL, 0, "%s", msg);
-    }
+    // Every camera: set every exposure, the gain and the format, read them back.
+    for (int k = 0; k < r->ncameras && !rc; k++) rc = bind_camera(p, r->cameras[k]);
 done:
     free(masks);
     return rc;

@@ -20,7 +20,9 @@ extern "C" {
 // ---------------------------------------------------------------------------
 // Rig description files (rig/config.c)
 //
-//   [camera]     backend = aravis; address = A (IPv4, opened directly) | serial = S | name = N
+//   [camera] or [camera NAME] (one or more, at most RIG_CAMERAS_MAX; NAME of letters, digits, '_', '-',
+//                not "all"; a plain [camera] is named "camera"; names and camera ids are unique):
+//                backend = aravis; address = A (IPv4, opened directly) | serial = S | name = N
 //                (exactly one); optional camera settings applied at open:
 //                pixel_format = Mono8|Mono12|Mono16 (or Mono10, the packed Mono10p|Mono12p|
 //                Mono10Packed|Mono12Packed: rig/pixfmt.h); exposure_us = ...; gain = ... (the camera's unit);
@@ -43,21 +45,31 @@ extern "C" {
 //                serve = gige (default: GigE Vision on the address) | inprocess (an Aravis
 //                fake device in refl's own process, no network; address and busy_wait_s
 //                are then not allowed);
-//                address = 127.0.0.1; sample = NAME; time_scale = 1; noise_seed = 1;
+//                address = 127.0.0.1 (one loopback address per camera of the truth file, separated by
+//                spaces; a camera without one serves on the address after the previous camera's);
+//                sample = NAME; time_scale = 1; noise_seed = 1;
 //                busy_wait_s = 0 (wait for another virtual camera on the address);
-//                pixel_format, exposure_us, gain, packet_size, packet_delay (as in [camera])
+//                pixel_format, exposure_us, gain, packet_size, packet_delay (as in [camera], for every
+//                camera). The cameras are the truth file's [camera] or [camera NAME] sections
+//                (rig/virtual.h), named so here.
 // Every section but [rig] is optional (a rig without [camera] moves and switches
 // lamps but takes no pictures). Unknown sections and keys, missing keys and bad
 // values are errors naming file and line and saying what to write instead.
 
+#define RIG_CAMERAS_MAX 8
+#define RIG_CAMERA_NAME_MAX 32
+
 typedef struct rig {
     char            *path;
     char             sha256[65];
-    rig_camera_t    *camera;
+    rig_camera_t    *camera;        // the first camera (cameras[0]); NULL when the file has none
+    int              ncameras;      // the cameras in file order (a virtual rig: one, "camera")
+    rig_camera_t    *cameras[RIG_CAMERAS_MAX];
+    char             camera_names[RIG_CAMERAS_MAX][RIG_CAMERA_NAME_MAX];
     rig_turntable_t *turntable;     // may be NULL when the file has no [turntable]
     rig_lamps_t     *lamps;         // may be NULL when the file has no lamps
     rig_virtual_t   *virt;          // non-NULL for backend = virtual
-    char             pixel_format[16];  // camera defaults from the file ("" = the camera's own),
+    char             pixel_format[16];  // the first camera's defaults from the file ("" = the camera's own),
     double           exposure_us;       // applied by rig_open (NAN = not given)
     double           gain;
     // The turntable's motion profile, for time-outs: real seconds (a simulated
@@ -78,6 +90,8 @@ void rig_close(rig_t *r);
 // file's path, used in messages and to resolve [rig] truth, which is not read):
 // 0, or RIG_ERR_INVALID with the file:line message of rig_open. Opens nothing.
 int  rig_config_parse(const char *text, size_t len, const char *name);
+// The index in r->cameras of the camera named name, or -1.
+int  rig_camera_find(const rig_t *r, const char *name);
 
 // `refl rig` (rig/cmd_rig.c).
 int rig_cmd(int argc, char **argv);

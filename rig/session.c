@@ -62,6 +62,44 @@ fail:
     return NULL;
 }
 
+int rig_session_cameras(const rig_session_t *s, const char **names, int max)
+{
+    int n = 0;
+    for (int i = 0; s && i < s->n; i++) {
+        bool seen = false;
+        for (int k = 0; k < n && k < max; k++) seen |= !strcmp(names[k], s->rows[i].camera);
+        if (seen) continue;
+        if (n < max) names[n] = s->rows[i].camera;
+        n++;
+    }
+    return n;
+}
+
+rig_session_t *rig_session_open_camera(const char *dir, const char *camera)
+{
+    rig_session_t *s = rig_session_open(dir);
+    if (!s) return NULL;
+    const char *names[64];
+    int nc = rig_session_cameras(s, names, 64);
+    if (nc == 0) return s;   // no frames yet
+    const char *want = camera ? camera : names[0];
+    char keep[32];
+    snprintf(keep, sizeof keep, "%s", want);
+    int k = 0;
+    for (int i = 0; i < s->n; i++)
+        if (!strcmp(s->rows[i].camera, keep)) s->rows[k++] = s->rows[i];
+    if (k == 0) {
+        GString *list = g_string_new("");
+        for (int i = 0; i < nc && i < 64; i++) g_string_append_printf(list, "%s%s", i ? ", " : "", names[i]);
+        model_error(dir, 0, "the session has no frames of camera '%s' (its cameras: %s)", keep, list->str);
+        g_string_free(list, TRUE);
+        rig_session_free(s);
+        return NULL;
+    }
+    s->n = k;
+    return s;
+}
+
 float *rig_session_frame(const rig_session_t *s, int i, int *width, int *height)
 {
     if (i < 0 || i >= s->n) {

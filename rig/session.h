@@ -71,7 +71,14 @@ typedef struct rig_operator rig_operator_t;   // the operator's answers (below)
 //
 // A session directory: session.sqlite (tables schema_version, session, steps,
 // frames, events; every step is written pending at the start) and
-// frames/sNNNNNN.png (step index; 16-bit grey PNG with metadata). A frame is
+// frames/sNNNNNN.png (step index; 16-bit grey PNG with metadata), or with
+// several cameras frames/sNNNNNN_NAME.png, one per camera (NAME: the rig
+// file's camera name): each step triggers every camera, one after the other
+// in the rig file's order, at the step's angle and lamps; a step is done when
+// every camera's frame is committed, and --resume takes the missing
+// (step, camera) frames only. Journal schema version 2 (frames keyed by
+// (step, camera)); a version-1 journal (one camera) is migrated when opened:
+// its frames become camera "camera". A frame is
 // written to frames/.sNNNNNN.png.part, fsync'ed, hashed, committed with its row
 // (one transaction), then linked to its name (link(2): nothing is overwritten)
 // and the temporary name removed; --resume re-links committed frames whose link
@@ -189,8 +196,12 @@ typedef struct rig_journal rig_journal_t;
 // off), firmware, camera_settings (the automatics, gamma, LUT and transport
 // settings refl found, switched off and read back). Journals of an older refl
 // lack the later columns: they read as NULL, and a resume adds them.
+// A frame's key is (step, camera): `camera` (last,
+// so that readers of the CSV by position keep their columns) is the
+// rig file's name of the camera that took it ("camera" for a plain [camera]
+// and a one-camera virtual rig); rows come in step order, then camera order.
 #define RIG_FRAME_COLUMNS(_)                                                                    \
-    _(INT,  step,               "step",               "INTEGER PRIMARY KEY REFERENCES steps(idx)", "%d", 0) \
+    _(INT,  step,               "step",               "INTEGER NOT NULL REFERENCES steps(idx)", "%d", 0) \
     _(TEXT, file,               "file",               "TEXT UNIQUE NOT NULL", "%s",   64)  \
     _(TEXT, sha256,             "sha256",             "TEXT NOT NULL",        "%s",   65) \
     _(UTC,  t_trigger_utc_s,    "t_trigger_utc",      "TEXT",                 "",     0)  \
@@ -215,7 +226,8 @@ typedef struct rig_journal rig_journal_t;
     _(REAL, gamma,              "gamma",              "REAL",                 "%.6g", 0)  \
     _(REAL, temperature_c,      "temperature_c",      "REAL",                 "%.2f", 0)  \
     _(TEXT, firmware,           "firmware",           "TEXT",                 "%s",   64) \
-    _(TEXT, camera_settings,    "camera_settings",    "TEXT",                 "%s",   512)
+    _(TEXT, camera_settings,    "camera_settings",    "TEXT",                 "%s",   512) \
+    _(TEXT, camera,             "camera",             "TEXT NOT NULL DEFAULT 'camera'", "%s", 32)
 
 #define RIG_FRAME_FIELD_INT(name, size)  int name;
 #define RIG_FRAME_FIELD_REAL(name, size) double name;
@@ -261,8 +273,9 @@ char *rig_journal_step_note(rig_journal_t *j, int step);
 // (message how), one transaction.
 int  rig_journal_operator_done(rig_journal_t *j, int step, const char *how);
 int  rig_journal_frames(rig_journal_t *j, rig_frame_row_t **rows, int *n);
-// One transaction: the frame row and its step done.
-int  rig_journal_frame_done(rig_journal_t *j, const rig_frame_row_t *f);
+// One transaction: the frame row and, when step_done (its step's last
+// camera), its step done.
+int  rig_journal_frame_done(rig_journal_t *j, const rig_frame_row_t *f, bool step_done);
 int  rig_journal_step_skipped(rig_journal_t *j, int step, const char *why);
 // Event log: kind = start, resume, retry, fault, pause, stop, complete, info, operator.
 int  rig_journal_event(rig_journal_t *j, int step, const char *kind, const char *fmt, ...)
@@ -281,8 +294,15 @@ typedef struct {
     json_t          *facts;            // session facts (camera, virtual rig, ...); may be NULL
 } rig_session_t;
 
-// NULL on error (model_last_error names the directory).
+// NULL on error (model_last_error names the directory). rig_session_open:
+// every frame; rig_session_open_camera: the frames of one camera (NULL: the
+// session's first camera; an analysis of one camera reads a session of
+// several so), an error naming the cameras when it has none of that name.
 rig_session_t *rig_session_open(const char *dir);
+rig_session_t *rig_session_open_camera(const char *dir, const char *camera);
+// The cameras of a session's frames in first-seen order (at most max names
+// into names, pointers into s->rows): their number.
+int            rig_session_cameras(const rig_session_t *s, const char **names, int max);
 void             rig_session_free(rig_session_t *s);
 // Frame i as float DN (its pixel format's values); checks the file's sha256
 // against the journal first. NULL on error (names the file). Caller frees.

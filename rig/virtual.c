@@ -94,6 +94,7 @@
 // the last angle's, the rest of that sequence. A trigger that matches one
 // takes it, as above; the motion's idle time pays for them.
 #define _GNU_SOURCE
+#include <glib.h>
 #include <limits.h>
 #include <math.h>
 #include <pthread.h>
@@ -195,9 +196,21 @@ typedef struct {
     uint64_t used;
 } tracer_slot_t;
 
+#define VIRTUAL_CAMERAS_MAX 8
+
 struct rig_virtual {
     char   *truth_path;
     char    address[64];
+    // Cameras: one rig_virtual_t per [camera NAME] of the truth file, in file
+    // order. The first is the rig (it owns the stage, the lamps and the
+    // others, views[1..]); the others render the first's state (angle, lamps),
+    // have a camera server, a model, a sensor and caches of their own, the
+    // same samples (rig_virtual_set_sample* reaches every camera) and no
+    // pre-render thread.
+    char    cam_sec[80], cam_name[32], serial[32];     // "camera" / "camera NAME"; "camera" / NAME
+    rig_virtual_t *state;                  // the rig whose stage and lamps a frame shows (itself for the first)
+    rig_virtual_t *views[VIRTUAL_CAMERAS_MAX];
+    int     nviews;
     model_camera_t    *cam;
     char   *cam_path;
     int     W, H;
@@ -979,20 +992,22 @@ static void *prerender_main(void *arg)
 
 static int render_cb(void *ctx, const rig_frame_meta_t *m, uint16_t *pix)
 {
-    rig_virtual_t *v = ctx;
+    rig_virtual_t *v = ctx, *sv = v->state;
     rig_turntable_status_t st;
-    pthread_mutex_lock(&v->state_lock);
+    pthread_mutex_lock(&sv->state_lock);
     // A stage that disconnected leaves the sample where it was: the camera
     // keeps seeing it at the last known angle.
-    if (!v->stage_gone) {
-        if (rig_turntable_status(v->tt_sim, &st) == 0) v->last_angle_deg = st.angle_deg;
-        else v->stage_gone = true;
+    if (!sv->stage_gone) {
+        if (rig_turntable_status(sv->tt_sim, &st) == 0) sv->last_angle_deg = st.angle_deg;
+        else sv->stage_gone = true;
     }
-    st.angle_deg = v->last_angle_deg;
+    st.angle_deg = sv->last_angle_deg;
+    pthread_mutex_unlock(&sv->state_lock);
+    pthread_mutex_lock(&v->state_lock);
     int sample = v->cur_sample;
     uint64_t seed = v->next_seed++;
     pthread_mutex_unlock(&v->state_lock);
-    uint32_t mask = __atomic_load_n(&v->lamps_dev->on_mask, __ATOMIC_ACQUIRE);
+    uint32_t mask = __atomic_load_n(&sv->lamps_dev->on_mask, __ATOMIC_ACQUIRE);
     int fb = format_bits(m->pixel_format);
     if (!fb || m->offset_x + m->width > v->W || m->offset_y + m->height > v->H)
         return rig_fail(RIG_ERR_INVALID, "virtual rig: frame %s %dx%d at (%d,%d) does not fit the %dx%d sensor",
@@ -1182,13 +1197,24 @@ static bool check_sections(const model_ini_t *ini)
         const allowed_t *a = find_allowed(kind);
         bool named = !strcmp(kind, "lamp") || !strcmp(kind, "material") || !strcmp(kind, "sample") ||
                      !strcmp(kind, "texture");
+        bool may_name = !strcmp(kind, "camera") || !strcmp(kind, "sensor");
         if (!a) {
             model_error(ini->path, ini->section_lines[s], "unknown section [%s]; a truth file has [virtual], "
-                        "[camera], [render], [sensor], [turntable], [lamp NAME], [material NAME], "
-                        "[texture MATERIAL] and [sample NAME]", ini->sections[s]);
+                        "[camera] (or [camera NAME], one or more), [render], [sensor] (and [sensor NAME]), "
+                        "[turntable], [lamp NAME], [material NAME], [texture MATERIAL] and [sample NAME]", ini->sections[s]);
             return false;
         }
-        if (named != (*name != 0)) {
+        if (!strcmp(kind, "sensor") && *name) {
+            char cs[80];
+            snprintf(cs, sizeof cs, "camera %s", name);
+            if (model_ini_section_line(ini, cs) <= 0) {
+                model_error(ini->path, ini->section_lines[s], "[%s] has no [camera %s]: a [sensor NAME] is the "
+                            "sensor of the camera [camera NAME] (its keys over those of [sensor])", ini->sections[s],
+                            name);
+                return false;
+            }
+        }
+        if (!may_name && named != (*name != 0)) {
             model_error(ini->path, ini->section_lines[s], named ? "[%s] needs a name: write [%s NAME]"
                         : "[%s] takes no name: write [%s]", ini->sections[s], kind);
             return false;
@@ -1486,16 +1512,24 @@ static void list_samples(const rig_virtual_t *v, char *buf, size_t size)
 }
 
 // Everything but the devices. false with a message naming file:line.
+static int camera_sections(const model_ini_t *ini, const char *secs[], int *line_over);
+
 static bool parse_truth(rig_virtual_t *v, const model_ini_t *ini, const char **default_sample,
                         rig_turntable_sim_params_t *tp, double *warmup_ms, double *settle_ms,
                         rig_gv_camera_params_t *gp)
 {
     if (!check_sections(ini)) return false;
+    if (!v->cam_sec[0]) {   // the first camera section
+        const char *secs[VIRTUAL_CAMERAS_MAX];
+        int over;
+        int n = camera_sections(ini, secs, &over);
+        snprintf(v->cam_sec, sizeof v->cam_sec, "%s", n ? secs[0] : "camera");
+    }
     // camera
-    const char *cm = get_str(ini, "camera", "model", NULL);
+    const char *cm = get_str(ini, v->cam_sec, "model", NULL);
     if (!cm) {
-        model_error(ini->path, ini_line(ini, "camera", "model"), "[camera] lacks 'model': the path of the "
-                    "camera's .cameramodel (relative to this file)");
+        model_error(ini->path, ini_line(ini, v->cam_sec, "model"), "[%s] lacks 'model': the path of the "
+                    "camera's .cameramodel (relative to this file)", v->cam_sec);
         return false;
     }
     char *cpath = rel_path(ini->path, cm);
@@ -1503,9 +1537,9 @@ static bool parse_truth(rig_virtual_t *v, const model_ini_t *ini, const char **d
     char sha[65];
     bool ok = model_sha256_file(cpath, sha);
     if (ok) {
-        const char *want = get_str(ini, "camera", "model_sha256", NULL);
+        const char *want = get_str(ini, v->cam_sec, "model_sha256", NULL);
         if (want && strcmp(want, sha)) {
-            model_error(ini->path, ini_line(ini, "camera", "model_sha256"), "camera model %s has sha256 %s, not "
+            model_error(ini->path, ini_line(ini, v->cam_sec, "model_sha256"), "camera model %s has sha256 %s, not "
                         "the %s recorded here: the ground truth changed; record the new hash if that is intended",
                         cpath, sha, want);
             ok = false;
@@ -1516,26 +1550,26 @@ static bool parse_truth(rig_virtual_t *v, const model_ini_t *ini, const char **d
     if (ok && !v->cam) {
         char msg[1024];
         snprintf(msg, sizeof msg, "%s", model_last_error());
-        model_error(ini->path, ini_line(ini, "camera", "model"), "camera model: %s", msg);
+        model_error(ini->path, ini_line(ini, v->cam_sec, "model"), "camera model: %s", msg);
         ok = false;
     } else if (!ok && !strstr(model_last_error(), "sha256")) {
         char msg[1024];
         snprintf(msg, sizeof msg, "%s", model_last_error());
-        model_error(ini->path, ini_line(ini, "camera", "model"), "camera model: %s", msg);
+        model_error(ini->path, ini_line(ini, v->cam_sec, "model"), "camera model: %s", msg);
     }
     if (!ok) return false;
     v->W = model_camera_width(v->cam);
     v->H = model_camera_height(v->cam);
     if (v->W < 1 || v->H < 1 || v->W > 4096 || v->H > 4096) {
-        model_error(ini->path, ini_line(ini, "camera", "model"), "camera model of %dx%d pixels: the virtual "
+        model_error(ini->path, ini_line(ini, v->cam_sec, "model"), "camera model of %dx%d pixels: the virtual "
                     "camera serves 1..4096 x 1..4096", v->W, v->H);
         return false;
     }
-    if (!get_double(ini, "camera", "kc_per_us", 0, 1e6, true, &v->kc_per_us)) return false;
-    gp->serial = get_str(ini, "camera", "serial", gp->serial);
-    gp->vendor = get_str(ini, "camera", "vendor", gp->vendor);
-    gp->model = get_str(ini, "camera", "model_name", gp->model);
-    if (!get_double(ini, "camera", "temperature_c", -100, 200, false, &gp->temperature_c)) return false;
+    if (!get_double(ini, v->cam_sec, "kc_per_us", 0, 1e6, true, &v->kc_per_us)) return false;
+    gp->serial = get_str(ini, v->cam_sec, "serial", gp->serial);
+    gp->vendor = get_str(ini, v->cam_sec, "vendor", gp->vendor);
+    gp->model = get_str(ini, v->cam_sec, "model_name", gp->model);
+    if (!get_double(ini, v->cam_sec, "temperature_c", -100, 200, false, &gp->temperature_c)) return false;
     gp->sensor_width = v->W;
     gp->sensor_height = v->H;
     // render
@@ -1578,6 +1612,11 @@ static bool parse_truth(rig_virtual_t *v, const model_ini_t *ini, const char **d
         return false;
     // sensor, lamps, materials
     if (!model_sensor_from_ini(ini, &v->sensor)) return false;
+    if (strcmp(v->cam_sec, "camera")) {   // [sensor NAME] of [camera NAME]
+        char ss[80];
+        snprintf(ss, sizeof ss, "sensor %s", v->cam_sec + 7);
+        if (!model_sensor_update_from_ini(ini, ss, &v->sensor)) return false;
+    }
     if (!(v->lamps = model_lamps_from_ini(ini))) return false;
     if (v->lamps->n > 32) {
         model_error(ini->path, v->lamps->lamps[32].line, "more than 32 lamps; the rig switches at most 32");
@@ -1667,6 +1706,32 @@ int rig_virtual_check_truth(const char *text, size_t len, const char *name, cons
         err = fail_model(RIG_ERR_INVALID);
         goto done;
     }
+    // every further camera: its [camera NAME] and [sensor NAME]
+    const char *secs[VIRTUAL_CAMERAS_MAX];
+    int over = 0, ncams = camera_sections(ini, secs, &over);
+    if (over) {
+        model_error(ini->path, over, "more than %d cameras: the virtual rig serves at most %d", VIRTUAL_CAMERAS_MAX,
+                    VIRTUAL_CAMERAS_MAX);
+        err = fail_model(RIG_ERR_INVALID);
+        goto done;
+    }
+    for (int k = 1; k < ncams; k++) {
+        rig_virtual_t *w = calloc(1, sizeof *w);
+        if (!w) {
+            err = rig_fail(RIG_ERR_NO_MEM, "virtual rig: out of memory");
+            goto done;
+        }
+        pthread_mutex_init(&w->state_lock, NULL);
+        pthread_mutex_init(&w->cache_lock, NULL);
+        snprintf(w->cam_sec, sizeof w->cam_sec, "%s", secs[k]);
+        rig_gv_camera_params_t gk = rig_gv_camera_defaults();
+        bool ok = parse_truth(w, ini, &def_sample, &tp, &warmup_ms, &settle_ms, &gk);
+        rig_virtual_close(w);
+        if (!ok) {
+            err = fail_model(RIG_ERR_INVALID);
+            goto done;
+        }
+    }
     err = RIG_ERR_OK;
 done:
     model_ini_free(ini);
@@ -1718,17 +1783,69 @@ done:
 }
 
 
+// The camera sections of a truth file in file order ([camera], [camera NAME]): their count.
+static int camera_sections(const model_ini_t *ini, const char *secs[], int *line_over)
+{
+    int n = 0;
+    *line_over = 0;
+    for (int s = 0; s < ini->nsections; s++)
+        if (!strcmp(ini->sections[s], "camera") || !strncmp(ini->sections[s], "camera ", 7)) {
+            if (n == VIRTUAL_CAMERAS_MAX) *line_over = ini->section_lines[s];
+            else secs[n++] = ini->sections[s];
+        }
+    return n;
+}
+
+// Camera k's loopback address: the k-th of the space-separated list, else
+// the address after camera k-1's (last byte + 1). false when none is left.
+static bool camera_address(const char *list, int k, char out[64])
+{
+    gchar **a = g_strsplit_set(list, " \t", -1);
+    int n = 0, last = -1;
+    for (int i = 0; a[i]; i++)
+        if (a[i][0]) {
+            if (n <= k) last = i;
+            n++;
+        }
+    bool ok = last >= 0;
+    if (ok) snprintf(out, 64, "%s", a[last]);
+    int more = k - (n - 1);
+    if (ok && more > 0) {
+        char *dot = strrchr(out, '.');
+        long b = dot ? strtol(dot + 1, NULL, 10) + more : 256;
+        ok = dot && b < 255;
+        if (ok) snprintf(dot + 1, 64 - (size_t)(dot + 1 - out), "%ld", b);
+    }
+    g_strfreev(a);
+    return ok;
+}
+
+static int open_camera(rig_virtual_t **out, const char *truth_path, const rig_virtual_options_t *opt,
+                       rig_virtual_t *parent, int k);
+
 int rig_virtual_open(rig_virtual_t **out, const char *truth_path, const rig_virtual_options_t *opt)
+{
+    return open_camera(out, truth_path, opt, NULL, 0);
+}
+
+// Camera k of the truth file: the rig itself (k = 0, parent NULL: the stage,
+// the lamps, then cameras 1.. as its views), or a view of parent.
+static int open_camera(rig_virtual_t **out, const char *truth_path, const rig_virtual_options_t *opt,
+                       rig_virtual_t *parent, int k)
 {
     if (!out) return rig_fail(RIG_ERR_INVALID, "virtual rig: NULL output handle");
     *out = NULL;
     if (!truth_path) return rig_fail(RIG_ERR_INVALID, "virtual rig: no truth file given");
     rig_virtual_options_t o = opt ? *opt : rig_virtual_defaults();
     if (!o.address) o.address = "127.0.0.1";
+    char addr[64];
+    if (!camera_address(o.address, k, addr))
+        return rig_fail(RIG_ERR_INVALID, "virtual rig: address '%s': no loopback address for camera %d", o.address,
+                        k + 1);
     if (!(isfinite(o.time_scale) && o.time_scale > 0))
         return rig_fail(RIG_ERR_INVALID, "virtual rig: time_scale %g must be > 0", o.time_scale);
-    if (strlen(o.address) >= 64)
-        return rig_fail(RIG_ERR_INVALID, "virtual rig: address '%s' is too long", o.address);
+    if (strlen(addr) >= 64 - 1)
+        return rig_fail(RIG_ERR_INVALID, "virtual rig: address '%s' is too long", addr);
     if (o.serve != RIG_VIRTUAL_SERVE_GIGE && o.serve != RIG_VIRTUAL_SERVE_INPROCESS)
         return rig_fail(RIG_ERR_INVALID, "virtual rig: serve = %d is neither RIG_VIRTUAL_SERVE_GIGE nor "
                         "RIG_VIRTUAL_SERVE_INPROCESS", (int)o.serve);
@@ -1740,8 +1857,10 @@ int rig_virtual_open(rig_virtual_t **out, const char *truth_path, const rig_virt
     pthread_mutex_init(&v->state_lock, NULL);
     pthread_mutex_init(&v->cache_lock, NULL);
     v->truth_path = strdup(truth_path);
-    snprintf(v->address, sizeof v->address, "%s", o.address);
-    v->next_seed = o.noise_seed;
+    snprintf(v->address, sizeof v->address, "%s", addr);
+    v->next_seed = o.noise_seed + (uint64_t)k * 1000003u;   // each camera its own noise
+    v->state = parent ? parent : v;
+    v->views[v->nviews++] = v;
     if (!v->truth_path) {
         err = rig_fail(RIG_ERR_NO_MEM, "virtual rig: out of memory");
         goto fail;
@@ -1755,6 +1874,18 @@ int rig_virtual_open(rig_virtual_t **out, const char *truth_path, const rig_virt
     rig_turntable_sim_params_t tp = rig_turntable_sim_defaults();
     double warmup_ms, settle_ms;
     rig_gv_camera_params_t gp = rig_gv_camera_defaults();
+    const char *secs[VIRTUAL_CAMERAS_MAX];
+    int over = 0, ncams = camera_sections(ini, secs, &over);
+    if (over) {
+        model_error(ini->path, over, "more than %d cameras: the virtual rig serves at most %d", VIRTUAL_CAMERAS_MAX,
+                    VIRTUAL_CAMERAS_MAX);
+        err = fail_model(RIG_ERR_INVALID);
+        goto fail;
+    }
+    if (k < ncams) {
+        snprintf(v->cam_sec, sizeof v->cam_sec, "%s", secs[k]);
+        snprintf(v->cam_name, sizeof v->cam_name, "%s", strcmp(secs[k], "camera") ? secs[k] + 7 : "camera");
+    }
     if (!parse_truth(v, ini, &def_sample, &tp, &warmup_ms, &settle_ms, &gp)) {
         err = fail_model(RIG_ERR_INVALID);
         goto fail;
@@ -1766,7 +1897,8 @@ int rig_virtual_open(rig_virtual_t **out, const char *truth_path, const rig_virt
         }
         v->prerender = o.prerender;
     }
-    if (o.serial) gp.serial = o.serial;
+    if (o.serial && k == 0) gp.serial = o.serial;
+    if (parent) v->prerender = 0;
     const char *sample = o.sample ? o.sample : def_sample ? def_sample : v->samples[0].name;
     v->cur_sample = find_sample(v, sample);
     if (v->cur_sample < 0) {
@@ -1792,7 +1924,8 @@ int rig_virtual_open(rig_virtual_t **out, const char *truth_path, const rig_virt
         err = fail_model(RIG_ERR_IO);
         goto fail;
     }
-    // devices
+    // devices (the rig's; a view shows its parent's)
+    if (parent) goto camera;
     tp.time_scale = o.time_scale;
     if ((err = rig_turntable_open_sim(&v->tt_sim, &tp))) goto fail;
     v->tt.ops = &virtual_tt_ops;
@@ -1808,6 +1941,14 @@ int rig_virtual_open(rig_virtual_t **out, const char *truth_path, const rig_virt
         lines[i].settle_ms = settle_ms * o.time_scale;
     }
     if ((err = rig_lamps_open_sim(&v->lamps_dev, lines, v->lamps->n))) goto fail;
+camera:
+    snprintf(v->serial, sizeof v->serial, "%s", gp.serial ? gp.serial : "");
+    for (int d = 0; parent && d < parent->nviews; d++)
+        if (!strcmp(parent->views[d]->serial, v->serial)) {
+            err = rig_fail(RIG_ERR_INVALID, "virtual rig: %s: [%s] and [%s] have the same serial '%s': give each "
+                           "camera its own 'serial ='", truth_path, parent->views[d]->cam_sec, v->cam_sec, v->serial);
+            goto fail;
+        }
     gp.address = v->address;
     gp.busy_wait_s = o.busy_wait_s;
     gp.render = render_cb;
@@ -1823,6 +1964,11 @@ int rig_virtual_open(rig_virtual_t **out, const char *truth_path, const rig_virt
         }
         v->pre_running = true;
     }
+    for (int c = 1; !parent && c < ncams; c++) {
+        rig_virtual_t *w = NULL;
+        if ((err = open_camera(&w, truth_path, &o, v, c))) goto fail;
+        v->views[v->nviews++] = w;
+    }
     rig_truth_free(truth);
     *out = v;
     return 0;
@@ -1835,6 +1981,7 @@ fail:
 void rig_virtual_close(rig_virtual_t *v)
 {
     if (!v) return;
+    for (int c = v->nviews - 1; c >= 1; c--) rig_virtual_close(v->views[c]);
     if (v->pre_running) {
         __atomic_store_n(&v->pre_stop, 1, __ATOMIC_RELEASE);
         pthread_join(v->pre_thread, NULL);
@@ -1872,8 +2019,14 @@ void rig_virtual_close(rig_virtual_t *v)
     free(v);
 }
 
-rig_turntable_t *rig_virtual_turntable(rig_virtual_t *v) { return v ? &v->tt : NULL; }
-rig_lamps_t *rig_virtual_lamps(rig_virtual_t *v) { return v ? v->lamps_dev : NULL; }
+rig_turntable_t *rig_virtual_turntable(rig_virtual_t *v) { return v ? &v->state->tt : NULL; }
+int rig_virtual_ncameras(const rig_virtual_t *v) { return v ? v->nviews : 0; }
+rig_virtual_t *rig_virtual_camera_view(rig_virtual_t *v, int k)
+{
+    return v && k >= 0 && k < v->state->nviews ? v->state->views[k] : NULL;
+}
+const char *rig_virtual_camera_name(const rig_virtual_t *v) { return v ? v->cam_name : NULL; }
+rig_lamps_t *rig_virtual_lamps(rig_virtual_t *v) { return v ? v->state->lamps_dev : NULL; }
 const char *rig_virtual_camera_address(const rig_virtual_t *v) { return v ? v->address : NULL; }
 rig_gv_camera_t *rig_virtual_gv_camera(rig_virtual_t *v) { return v ? v->gv : NULL; }
 const char *rig_virtual_truth_path(const rig_virtual_t *v) { return v ? v->truth_path : NULL; }
@@ -1888,9 +2041,8 @@ const char *rig_virtual_sample(const rig_virtual_t *v)
     return s;
 }
 
-int rig_virtual_set_sample_pose(rig_virtual_t *v, const char *name, double tilt_deg, double tilt_azimuth_deg)
+static int set_sample_pose_one(rig_virtual_t *v, const char *name, double tilt_deg, double tilt_azimuth_deg)
 {
-    if (!v || !name) return rig_fail(RIG_ERR_INVALID, "virtual rig: set sample: NULL argument");
     int i = find_sample(v, name);
     if (i < 0) {
         char list[512];
@@ -1944,6 +2096,15 @@ int rig_virtual_set_sample(rig_virtual_t *v, const char *name)
     return rig_virtual_set_sample_pose(v, name, 0, 0);
 }
 
+int rig_virtual_set_sample_pose(rig_virtual_t *v, const char *name, double tilt_deg, double tilt_azimuth_deg)
+{
+    if (!v || !name) return rig_fail(RIG_ERR_INVALID, "virtual rig: set sample: NULL argument");
+    int rc = 0;
+    rig_virtual_t *r = v->state;
+    for (int c = 0; c < r->nviews && !rc; c++) rc = set_sample_pose_one(r->views[c], name, tilt_deg, tilt_azimuth_deg);
+    return rc;
+}
+
 int rig_virtual_sample_pose(rig_virtual_t *v, double *tilt_deg, double *tilt_azimuth_deg, double R[9], double t[3])
 {
     if (!v) return rig_fail(RIG_ERR_INVALID, "virtual rig: sample pose: NULL rig");
@@ -1968,6 +2129,7 @@ long rig_virtual_frames_ahead(rig_virtual_t *v)
 
 bool rig_virtual_destination(rig_virtual_t *v, double *angle_deg)
 {
+    if (v) v = v->state;
     if (!v) return false;
     pthread_mutex_lock(&v->state_lock);
     bool ok = !v->stage_gone && rig_turntable_sim_destination(v->tt_sim, angle_deg);

@@ -29,12 +29,15 @@ typedef enum { RIG_VIRTUAL_SERVE_GIGE = 0, RIG_VIRTUAL_SERVE_INPROCESS = 1 } rig
 
 typedef struct {
     rig_virtual_serve_t serve;  // default RIG_VIRTUAL_SERVE_GIGE
-    const char *address;        // where the camera serves (default "127.0.0.1"; GigE only)
+    const char *address;        // where the cameras serve (default "127.0.0.1"; GigE only): one loopback
+                                // address per camera, separated by spaces; a camera without one serves on
+                                // the address after the previous camera's (127.0.0.1 127.0.0.2 ...)
     const char *sample;         // the sample on the table (default: the truth file's `sample`)
     double      time_scale;     // turntable and lamp timing: 1 real time, 0.01 = 100x faster
-    uint64_t    noise_seed;     // first frame's noise seed (default 1; +1 per frame)
+    uint64_t    noise_seed;     // first frame's noise seed (default 1; +1 per frame; camera k from
+                                // noise_seed + k * 1000003)
     double      busy_wait_s;    // wait this long for another camera server on the address to stop (default 0; GigE only)
-    const char *serial;         // the camera's serial instead of the truth file's (NULL: the file's); a process
+    const char *serial;         // the (first) camera's serial instead of the truth file's (NULL: the file's); a process
                                 // serves one in-process camera per serial
     int         prerender;      // [render] prerender instead of the truth file's (0, 1, 2; -1 = the file's, default)
 } rig_virtual_options_t;
@@ -50,6 +53,18 @@ void rig_virtual_close(rig_virtual_t *v);
 // its relative paths (camera model, scenes) resolve against; messages name
 // base_dir/name and the line. Starts nothing. 0 or RIG_ERR_INVALID.
 int  rig_virtual_check_truth(const char *text, size_t len, const char *name, const char *base_dir);
+// Cameras: the truth file's [camera] or [camera NAME] sections (one or more,
+// with [sensor NAME] keys over [sensor] for camera NAME), in file order. The
+// rig is its first camera; camera k (0 <= k < rig_virtual_ncameras) is a view
+// (NULL outside the range) with its own camera server (address, serial),
+// model, sensor and kc, showing the rig's stage, lamps and sample: the
+// per-camera functions below (camera address, gv camera, expected, radiance,
+// sensor, kc, camera model) take a view; the devices and samples are shared.
+// rig_virtual_close closes the views with the rig (never close a view).
+int            rig_virtual_ncameras(const rig_virtual_t *v);
+rig_virtual_t *rig_virtual_camera_view(rig_virtual_t *v, int k);
+// The view's camera name: NAME of [camera NAME], or "camera".
+const char    *rig_virtual_camera_name(const rig_virtual_t *v);
 // The devices (owned by the virtual rig; do not close them yourself).
 rig_turntable_t *rig_virtual_turntable(rig_virtual_t *v);
 rig_lamps_t     *rig_virtual_lamps(rig_virtual_t *v);

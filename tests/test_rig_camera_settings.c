@@ -295,7 +295,7 @@ TEST(camera_settings_in_session_and_status)
 
     rc = test_refl_run(60, &out, &err, "session", "export", dir, "--format", "csv", NULL);
     CHECK_MSG(rc == 0, "export: %s", err);
-    CHECK_CONTAINS(out, ",gain_unit,black_level,gamma,temperature_c,firmware,camera_settings\n");
+    CHECK_CONTAINS(out, ",gain_unit,black_level,gamma,temperature_c,firmware,camera_settings,camera\n");
     CHECK_CONTAINS(out, ",3,");
     CHECK_CONTAINS(out, ",dB,0,1,");
     CHECK_CONTAINS(out, ",refl-gv 1.0,ExposureAuto=Off (was Continuous) GainAuto=Off");
@@ -356,8 +356,8 @@ TEST(camera_settings_in_session_and_status)
     sqlite3_close(d);
     rc = test_refl_run(60, &out, &err, "session", "export", dir, "--format", "csv", NULL);
     CHECK_MSG(rc == 0, "export of an older journal: %s", err);
-    CHECK_CONTAINS(out, ",gain_unit,black_level,gamma,temperature_c,firmware,camera_settings\n");
-    CHECK_CONTAINS(out, ",,0,0,0.00,,\n");
+    CHECK_CONTAINS(out, ",gain_unit,black_level,gamma,temperature_c,firmware,camera_settings,camera\n");
+    CHECK_CONTAINS(out, ",,0,0,0.00,,,camera\n");
     g_free(out);
     g_free(err);
     rc = test_refl_run(60, &out, &err, "session", "check", dir, NULL);
@@ -380,7 +380,7 @@ TEST(camera_settings_in_session_and_status)
     g_free(err);
     rc = test_refl_run(60, &out, &err, "session", "export", dir, "--format", "csv", NULL);
     CHECK_MSG(rc == 0, "export: %s", err);
-    CHECK_CONTAINS(out, ",,0,0,0.00,,\n");                                   // step 0: as the older refl wrote it
+    CHECK_CONTAINS(out, ",,0,0,0.00,,,camera\n");                                   // step 2: as the older refl wrote it
     CHECK_CONTAINS(out, ",dB,0,1,");                                          // step 1: this refl's
     CHECK_CONTAINS(out, ",refl-gv 1.0,ExposureAuto=Off (was Continuous)");
     g_free(out);

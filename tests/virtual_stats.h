@@ -27,10 +27,11 @@ typedef struct {
     double z2;         // mean of (frame - expected)^2 / var_model
 } vstat_t;
 
-// Compare n frame values (Mono12) with the expected ones, gain 0 dB.
-static inline vstat_t vstat_compare(const uint16_t *pix, const float *E, size_t n, double lit_dn)
+// The same for a sensor of system gain K, read noise read_e and dark offset
+// (another camera's sensor, tests/test_rig_cameras.c).
+static inline vstat_t vstat_compare_sensor(const uint16_t *pix, const float *E, size_t n, double lit_dn, double K,
+                                           double read_e, double offset)
 {
-    const double K = VSTAT_K_DN_PER_E, read_e = VSTAT_READ_NOISE_E, offset = VSTAT_OFFSET_DN;
     vstat_t c = { 0, 0, 0, 0 };
     double sum = 0, sumvar = 0, z2 = 0;
     for (size_t i = 0; i < n; i++) {
@@ -48,4 +49,10 @@ static inline vstat_t vstat_compare(const uint16_t *pix, const float *E, size_t 
         c.z2 = z2 / c.n;
     }
     return c;
+}
+
+// Compare n frame values (Mono12) with the expected ones, gain 0 dB.
+static inline vstat_t vstat_compare(const uint16_t *pix, const float *E, size_t n, double lit_dn)
+{
+    return vstat_compare_sensor(pix, E, n, lit_dn, VSTAT_K_DN_PER_E, VSTAT_READ_NOISE_E, VSTAT_OFFSET_DN);
 }
