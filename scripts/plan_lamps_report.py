@@ -506,15 +506,42 @@ def seg_cells(i, s):
             f"{e(s['side0'])} | {e(s['side1'])}"]
 
 
-def write_html(d, p, have):
-    raw, ch, chk = p["raw"], p["chosen"], p["check"]
-    title = f"refl plan lamps: {p['scene']}"
+def page_head(title, prov):
+    """The page's opening lines: title, then the provenance's head."""
     L = [f'<!DOCTYPE html>\n<html><head><meta charset="utf-8"><title>{e(title)}</title>\n'
          f"<style>{CSS}</style>\n</head><body>\n<h1>{e(title)}</h1>"]
-    prov = raw.get("provenance")
     head = provenance_head(prov)
     if head:
         L.append(head)
+    return L
+
+
+def fig_views(d, views):
+    """views.png: per view (turntable angle) the detectable edge length and the check's agreement."""
+    ang = [v[0] for v in views]
+    x = np.arange(len(views))
+    fig, (a1, a2) = plt.subplots(1, 2, figsize=(11, 3.6), constrained_layout=True)
+    a1.bar(x, [v[1] for v in views], color="#4477aa")
+    a1.set_xticks(x, [f"{a:g}°\n{v[3]}" for a, v in zip(ang, views)])
+    a1.set_ylabel("detectable edge length (px)")
+    a1.set_title("predicted detectable edges per view")
+    agr = [100 * v[2] if v[2] is not None else np.nan for v in views]
+    a2.bar(x, agr, color=["#228833" if (a == a and a >= 100 * v[4]) else "#cc6677" for a, v in zip(agr, views)])
+    if views and views[0][4] is not None:
+        a2.axhline(100 * views[0][4], color="k", ls="--", lw=1, label=f"target {100 * views[0][4]:.0f} %")
+        a2.legend(loc="lower right")
+    a2.set_xticks(x, [f"{a:g}°" for a in ang])
+    a2.set_ylim(min([80] + [a for a in agr if a == a]) - 2, 100.5)
+    a2.set_ylabel("check agreement (%)")
+    a2.set_title("virtual-rig check: measured vs predicted edges")
+    fig.savefig(os.path.join(d, "views.png"), dpi=80)
+    plt.close(fig)
+
+
+def write_html(d, p, have):
+    raw, ch, chk = p["raw"], p["chosen"], p["check"]
+    prov = raw.get("provenance")
+    L = page_head(f"refl plan lamps: {p['scene']}", prov)
     L.append(f"<p>Turntable at {fmt(p['turntable_deg'], 'g')} deg; {len(p['configs'])} configurations tried "
              f'(lamp sets &times; exposures). Data: <a href="plan.json">plan.json</a>, '
              f'<a href="predicted.tiff">predicted.tiff</a>'
@@ -750,7 +777,7 @@ def report_views(d, raw):
     bound = raw.get("capture_plan_binds_to_virtual_rig")
     if bound is not None and not isinstance(bound, bool):
         c.fail("capture_plan_binds_to_virtual_rig", f"expected true, false or null, got {json.dumps(bound)}")
-    rows, cls = [], []
+    rows, cls, figv = [], [], []
     for i, v in enumerate(c.list(raw, "views", "")):
         w = f"views[{i}]"
         vd = c.str(v, "dir", w)
@@ -765,13 +792,14 @@ def report_views(d, raw):
                      pct(c.num(v, "check_agreement", w, null=True)),
                      f'<a href="{e(vd)}/index.html">{e(vd)}/</a>'])
         cls.append("" if feasible else "miss")
-    title = f"refl plan lamps: {scene}, {len(rows)} views"
-    L = [f'<!DOCTYPE html>\n<html><head><meta charset="utf-8"><title>{e(title)}</title>\n'
-         f"<style>{CSS}</style>\n</head><body>\n<h1>{e(title)}</h1>"]
+        vj = load_json(os.path.join(d, vd, "plan.json"))
+        vchk = vj.get("virtual_rig_check") if isinstance(vj, dict) else None
+        target = vchk.get("target") if isinstance(vchk, dict) and is_num(vchk.get("target")) else None
+        figv.append((c.num(v, "turntable_deg", w), c.num(v, "detectable_length_px", w),
+                     c.num(v, "check_agreement", w, null=True), c.str(v, "lamps", w), target))
+    fig_views(d, figv)
     prov = raw.get("provenance")
-    head = provenance_head(prov)
-    if head:
-        L.append(head)
+    L = page_head(f"refl plan lamps: {scene}, {len(rows)} views", prov)
     L.append(f'<p>Each view (turntable angle) planned on its own: its lamp set and exposure, its report in its '
              f'directory. The capture plan of the views: <a href="{e(plan)}">{e(plan)}</a> (refl capture takes it '
              f"as it is; a [view N] section per view)"
@@ -781,6 +809,10 @@ def report_views(d, raw):
                     "detectable length (px)", "usable points", "glare px", "saturated px", "check agreement",
                     "report"], rows, cls,
                    [True, False, True, False, True, True, True, True, True, True, False]))
+    L.append('<img src="views.png" alt="detectable edge length and check agreement per view">')
+    L.append('<p class="note">Left: the predicted length of detectable edges per view, with its chosen lamps. Right: '
+             'the virtual-rig check (when run): the share of segments whose detection on the rendered frame agrees '
+             'with the prediction, against the target (dashed); red below it.</p>')
     L.append(provenance_section(prov, "plan.json"))
     L.append("</body></html>\n")
     return write_page(d, L)
