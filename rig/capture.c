@@ -682,6 +682,7 @@ typedef struct {
     double      full;            // full scale of the camera's pixel format, DN
     progress_t  pg;
     int         first;
+    bool        home_pending;    // the stage homes before the first frame (after leading operator steps)
     double      floor_s, angle, t_start;
     uint32_t    mask;
     double      cur_exposure;
@@ -689,6 +690,7 @@ typedef struct {
                                  // 5 SIGINT during homing or a move (msg set)
     rig_operator_t *op_own;      // the terminal's reader when o->op is NULL
     double      t_operator;      // waiting for the operator (not in the wall time)
+    double      t_homing;        // homing after the operator's first steps (not in the wall time either)
     double      T_cap, T_push;   // time in the camera (trigger to frame in hand), waiting for the writer
 } run_t;
 
@@ -879,24 +881,31 @@ static int motion_paused(run_t *x, const char *during, const char *resume_does)
 
 // Home the turntable when needed, set the camera up, and the steps' state
 // (first pending step, progress, groups an earlier run already satisfied).
+// Homes the turntable unless it is homed (Ctrl-C stops it: the session pauses).
+static int home_turntable(run_t *x)
+{
+    rig_t *r = x->r;
+    x->home_pending = false;
+    if (!r->turntable) return RUN_ON;
+    rig_turntable_status_t st;
+    if ((x->rc = rig_turntable_status(r->turntable, &st))) return RUN_FAULT_TT;
+    if (st.homed) return RUN_ON;
+    char up_to[48] = "";
+    if (isfinite(r->home_time_s)) snprintf(up_to, sizeof up_to, "up to %.0f s; ", r->home_time_s);
+    fprintf(stderr, "refl capture: homing %s (%sCtrl-C stops it)\n", rig_turntable_name(r->turntable), up_to);
+    double tmo = 1.5 * (isfinite(r->home_time_s) ? r->home_time_s : 120) + 5;
+    bool bar = x->o->progress == 1 || (x->o->progress < 0 && isatty(2));
+    double t0 = model_now_s();
+    x->rc = watched_motion(r, true, 0, tmo, r->home_time_s, bar);
+    x->t_homing += model_now_s() - t0;
+    if (x->rc == RIG_ERR_INTERRUPTED) return motion_paused(x, "homing", "homes the stage");
+    return x->rc ? RUN_FAULT_TT : RUN_ON;
+}
+
 static int run_hardware(run_t *x)
 {
     rig_t *r = x->r;
     rig_plan_t *p = x->p;
-    if (r->turntable) {
-        rig_turntable_status_t st;
-        if ((x->rc = rig_turntable_status(r->turntable, &st))) return RUN_FAULT_TT;
-        if (!st.homed) {
-            char up_to[48] = "";
-            if (isfinite(r->home_time_s)) snprintf(up_to, sizeof up_to, "up to %.0f s; ", r->home_time_s);
-            fprintf(stderr, "refl capture: homing %s (%sCtrl-C stops it)\n", rig_turntable_name(r->turntable), up_to);
-            double tmo = 1.5 * (isfinite(r->home_time_s) ? r->home_time_s : 120) + 5;
-            bool bar = x->o->progress == 1 || (x->o->progress < 0 && isatty(2));
-            x->rc = watched_motion(r, true, 0, tmo, r->home_time_s, bar);
-            if (x->rc == RIG_ERR_INTERRUPTED) return motion_paused(x, "homing", "homes the stage");
-            if (x->rc) return RUN_FAULT_TT;
-        }
-    }
     rig_frame_meta_t cam;
     for (int k = r->ncameras - 1; k >= 0; k--)   // every camera; cam: the first's settings
         if ((x->rc = rig_camera_set_pixel_format(r->cameras[k], p->pixel_format)) ||
@@ -910,9 +919,18 @@ static int run_hardware(run_t *x)
     x->first = 0;
     while (x->first < p->nsteps && x->status[x->first] != 'p') x->first++;
     x->pg.done0 = x->first;
+    // The stage homes now, or after the operator's steps that come first (the
+    // operator sets the sample up before anything moves)
+    x->home_pending = true;
+    if (x->first >= p->nsteps || p->steps[x->first].kind != RIG_STEP_OPERATOR) {
+        x->step = x->first;
+        int k = home_turntable(x);
+        if (k != RUN_ON) return k;
+    }
     x->floor_s = 0;
     x->angle = NAN;
     x->t_start = model_now_s();
+    x->t_homing = 0;   // homing before this is not in the interval
     x->mask = r->lamps ? rig_lamps_on_mask(r->lamps) : 0;
     x->cur_exposure = cam.exposure_us;
     int ngroups = 0;
@@ -1154,7 +1172,8 @@ static int run_steps(run_t *x)
             rig_journal_step_skipped(x->j, x->step, "auto bracketing: a shorter exposure is not needed");
             continue;
         }
-        int k = step_setup(x, s);
+        int k = x->home_pending ? home_turntable(x) : RUN_ON;
+        if (k == RUN_ON) k = step_setup(x, s);
         if (k == RUN_ON) k = step_capture(x, s);
         if (k == RUN_BREAK) break;
         if (k != RUN_ON) return k;
@@ -1180,7 +1199,8 @@ static int run_end(run_t *x)
     rig_plan_t *p = x->p;
     writer_close(x);
     if (x->pg.bar) fprintf(stderr, "\n");
-    double wall = model_now_s() - x->t_start - x->t_operator;   // the operator's time is not the rig's
+    // the operator's time is not the rig's, nor homing (before the first frame, as before operator steps)
+    double wall = model_now_s() - x->t_start - x->t_operator - x->t_homing;
     if (o->wall_s) *o->wall_s = wall;
     if (o->floor_s) *o->floor_s = x->floor_s;
     if (o->frames_written) *o->frames_written = x->w.written;

@@ -65,7 +65,8 @@ typedef struct rig_operator rig_operator_t;   // the operator's answers (below)
 // Enter on a terminal, --yes, --operator-input FILE; 'q' pauses: exit 3).
 // The answer is journalled (the step done and an events row 'operator' saying
 // how and when); an answered step is never asked again, an unanswered one is
-// asked on --resume. The virtual rig plays the operator: an answered step's
+// asked on --resume. Nothing moves before the leading operator steps are
+// answered: the stage homes after them. The virtual rig plays the operator: an answered step's
 // pose (the [sample] on its wedge) is applied to it (rig_virtual_set_sample_pose)
 // and applied again on --resume; a real rig only waits.
 //

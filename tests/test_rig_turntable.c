@@ -486,7 +486,10 @@ TEST(capture_ctrl_c_during_homing)
         CHECK_CONTAINS(err, "(up to 15 s; Ctrl-C stops it)");
         CHECK_CONTAINS(err, "refl capture: interrupted (SIGINT) during homing: no frame was being taken; "
                             "virtual turntable (sim, seed 1): homing interrupted: the stage stopped at ");
-        CHECK_CONTAINS(err, "session paused before step 0 of 3; continue with refl capture --resume");
+        // the operator's step first (nothing moves while the sample is set up), then homing
+        CHECK_CONTAINS(err, "session paused before step 1 of 3; continue with refl capture --resume");
+        const char *op = strstr(err, "operator step 0 done"), *home = strstr(err, "refl capture: homing");
+        CHECK_MSG(op && home && op < home, "the operator step is answered before homing:\n%s", err);
         CHECK_CONTAINS(err, "(it homes the stage again)");
         CHECK(!strstr(err, "the current frame was finished"));
         free(err);
