@@ -60,8 +60,10 @@ static bool parse_lamp(const char *arg, rig_lamp_line_t *out)
 }
 
 // A real fault of the kind mode names (returns only if it did not fault).
+// Not instrumented by UBSan (make asan): it would end the process at the null
+// store or the division itself, before the fault the test is about.
 static volatile int zero = 0;
-static void fault(const char *mode)
+__attribute__((no_sanitize("undefined"))) static void fault(const char *mode)
 {
     if (!strcmp(mode, "segv")) {
         volatile int *p = (volatile int *)(uintptr_t)zero;
