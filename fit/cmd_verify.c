@@ -23,6 +23,8 @@ static const char about[] =
     "Images: 16-bit PNG frames as refl capture and refl rig snap write them (their text chunks give the\n"
     "turntable angle, the lamps that were on, the exposure and the gain; --angle-deg, --lamps-on,\n"
     "--exposure-us, --gain-db override for every image), or float TIFFs with those options.\n"
+    "With --calib DIR of several cameras (DIR/NAME.cameramodel, DIR/NAME/gain.json, DIR/NAME/white.json) and\n"
+    "no --cameras, each frame goes to the camera its text names (camera_name) with that camera's calibrations.\n"
     "\n"
     "       refl verify --study -o DIR [--truth TRUTH.ini] [--cases N] [--threads N]\n"
     "runs the detection study on the virtual rig instead (make study).";
