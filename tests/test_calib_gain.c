@@ -16,7 +16,9 @@
 #include <jansson.h>
 #include <limits.h>
 #include <stdlib.h>
+#include <unistd.h>
 
+#include "calib/calib.h"
 #include "calib/gain.h"
 #include "model/model.h"
 #include "rig/rig.h"
@@ -672,4 +674,76 @@ TEST(calib_gain_truth_radiance_stage)
     json_decref(facts);
     CHECK(!calib_gain_truth_radiance(NULL, &tp, &r));
     CHECK(tp == NULL && isnan(r));
+}
+
+// calib_set_camera_layouts: the calibration set of one camera of a directory
+// of several (calib_set_load_camera): NAME's camera model in any of its
+// places, its own gain calibration (or the top level's when that records
+// NAME, never another camera's), its white; the gain calibration's gain and
+// unit read back; missing and malformed files named.
+TEST(calib_set_camera_layouts)
+{
+    char src[PATH_MAX + 64], top[PATH_MAX];
+    if (!realpath(test_srcdir(), top)) snprintf(top, sizeof top, "%s", test_srcdir());
+    snprintf(src, sizeof src, "%s/examples/camera.cameramodel", top);
+    char *cm = model_read_file(src, NULL);
+    CHECK(cm != NULL);
+    if (!cm) return;
+    const char *lamps = "{\"lamps\": [{\"name\": \"east\", \"position_mm\": [400, 0, 600]}]}\n";
+    static const char *const dirs[] = { "one", "two/geometry", "two/right", "two/lamps", "two/gain/right",
+                                        "two/white/right", "two/left" };
+    for (size_t k = 0; k < sizeof dirs / sizeof dirs[0]; k++) g_mkdir_with_parents(test_path(dirs[k]), 0755);
+    // one camera, as before: no camera, the gain calibration's gain 0 dB
+    test_write("one/camera.cameramodel", cm);
+    test_write("one/lamps.json", lamps);
+    test_write("one/gain.json", "{\"camera\": \"camera\", \"system_gain_dn_per_e\": 0.25, \"read_noise_e\": 6}\n");
+    bool q = model_error_quiet_thread(true);
+    calib_set_t *c = calib_set_load(test_path("one"), false);
+    CHECK(c && !c->camera[0] && c->cal_gain == 0 && !strcmp(c->cal_gain_unit, "dB") && c->gain_dn_per_e == 0.25);
+    calib_set_free(c);
+    // several: left's model in geometry/, its gain the top level's (it records left, at 6 dB); right's
+    // model in right/, its gain in gain/right/ (at 100 raw) and its white in white/right/
+    test_write("two/geometry/left.cameramodel", cm);
+    test_write("two/right/camera.cameramodel", cm);
+    test_write("two/lamps/lamps.json", lamps);
+    test_write("two/gain.json", "{\"camera\": \"left\", \"gain_db\": 6, \"gain_unit\": \"dB\", "
+                                "\"system_gain_dn_per_e\": 0.5, \"read_noise_e\": 6}\n");
+    test_write("two/gain/right/gain.json", "{\"camera\": \"right\", \"gain_db\": 100, \"gain_unit\": \"raw\", "
+                                           "\"system_gain_dn_per_e\": 0.3, \"read_noise_e\": 4}\n");
+    test_write("two/white/right/white.json", "{\"camera\": \"right\", \"lamps\": [{\"name\": \"east\", "
+                                             "\"kc_I_per_us\": 480}]}\n");
+    char two[PATH_MAX];
+    snprintf(two, sizeof two, "%s", test_path("two"));
+    CHECK(calib_set_has_camera(two, "left") && calib_set_has_camera(two, "right"));
+    CHECK(!calib_set_has_camera(two, "middle"));
+    c = calib_set_load_camera(two, "left", false);
+    CHECK_MSG(c != NULL, "%s", model_last_error());
+    if (c) {
+        CHECK(!strcmp(c->camera, "left") && c->cal_gain == 6 && !strcmp(c->cal_gain_unit, "dB"));
+        CHECK(c->gain_dn_per_e == 0.5 && !c->have_white);
+    }
+    calib_set_free(c);
+    c = calib_set_load_camera(two, "right", true);
+    CHECK_MSG(c != NULL, "%s", model_last_error());
+    if (c) {
+        CHECK(!strcmp(c->camera, "right") && c->cal_gain == 100 && !strcmp(c->cal_gain_unit, "raw"));
+        CHECK(c->gain_dn_per_e == 0.3 && c->have_white && c->kcI_per_us[0] == 480);
+    }
+    calib_set_free(c);
+    // left has no white; a camera without a model; right without its own gain: not left's
+    CHECK(calib_set_load_camera(two, "left", true) == NULL);
+    CHECK_CONTAINS(model_last_error(), "no left/white.json");
+    CHECK(calib_set_load_camera(two, "middle", false) == NULL);
+    CHECK_CONTAINS(model_last_error(), "no middle.cameramodel");
+    CHECK(unlink(test_path("two/gain/right/gain.json")) == 0);
+    c = calib_set_load_camera(two, "right", false);
+    CHECK(c && c->gain_dn_per_e == 0 && c->cal_gain == 0 && !strcmp(c->cal_gain_unit, "dB"));
+    calib_set_free(c);
+    // a malformed gain unit
+    test_write("two/left/gain.json", "{\"camera\": \"left\", \"gain_db\": 0, \"gain_unit\": 5}\n");
+    CHECK(calib_set_load_camera(two, "left", false) == NULL);
+    CHECK_CONTAINS(model_last_error(), "gain_unit a string");
+    CHECK_CONTAINS(model_last_error(), "left/gain.json");
+    model_error_quiet_thread(q);
+    free(cm);
 }
