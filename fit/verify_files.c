@@ -443,9 +443,11 @@ static bool image_conditions(const vf_t *V, verify_image_t *im, const model_meta
         model_error(path, 0, "no exposure_us in the image's metadata: give --exposure-us");
         ok = false;
     }
-    if (o->have_gain) im->gain_db = o->gain_db;
-    else if (ga && !meta_gain_db(path, ga, model_meta_get(meta, "gain_unit"), V->cal_gain[im->camera],
-                                 V->cal_unit[im->camera], &im->gain_db))
+    char given[64];
+    snprintf(given, sizeof given, "%.10g dB", o->gain_db);   // --gain-db: the camera's gain in dB
+    if (o->have_gain) ga = given;
+    if (ga && !meta_gain_db(path, ga, o->have_gain ? "dB" : model_meta_get(meta, "gain_unit"),
+                            V->cal_gain[im->camera], V->cal_unit[im->camera], &im->gain_db))
         ok = false;
     return ok;
 }

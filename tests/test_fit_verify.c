@@ -718,7 +718,8 @@ TEST(verify_two_cameras)
 // camera its text names: the right description passes, with both cameras in
 // the fit and each camera's fitted kc near 1 (the right camera's 1.5 x the
 // left's sensitivity comes from its own white); a description with the
-// stiffener moved 5 mm fails.
+// stiffener moved 5 mm fails. --gain-db is taken relative to each camera's
+// gain calibration's gain.
 TEST(verify_two_camera_session)
 {
     char top[4096], text[8400];
@@ -852,6 +853,37 @@ TEST(verify_two_camera_session)
         g_free(out);
         g_free(err);
     }
+    // --gain-db is the camera's gain, taken relative to each camera's gain calibration's: the same
+    // calibrations said to be made at 6 dB and --gain-db 6 give the frames' own scale (kc near 1 again)
+    for (int k = 0; k < 2; k++) {
+        char gj[512], rel[64];
+        snprintf(gj, sizeof gj, "{\"camera\": \"%s\", \"gain_db\": 6, \"gain_unit\": \"dB\", \"system_gain_dn_per_e\": "
+                 "%g, \"read_noise_e\": %g, \"saturation_dn\": %g}\n", names[k], K[k], rn[k], sat[k]);
+        snprintf(rel, sizeof rel, "cal/%s/gain.json", names[k]);
+        test_write(rel, gj);
+    }
+    char scene[4200], dir[4200];
+    snprintf(scene, sizeof scene, "%s/examples/t_stiffener.d3d", top);
+    snprintf(dir, sizeof dir, "%s", test_path("v-gain"));
+    argv[scene_at] = scene;
+    argv[out_at] = dir;
+    argv[out_at + 1] = "--gain-db";
+    argv[out_at + 2] = "6";
+    argv[out_at + 3] = NULL;
+    rc = test_run(argv, 300, &out, &err);
+    CHECK_MSG(rc == 0, "--gain-db 6: %s", err);
+    CHECK_CONTAINS(out, "description CORRECT");
+    snprintf(dir, sizeof dir, "%s/verify.json", test_path("v-gain"));
+    json_t *j = json_load_file(dir, 0, NULL);
+    json_t *pa = json_object_get(j, "parameters");
+    for (size_t i = 0; i < json_array_size(pa); i++) {
+        json_t *e = json_array_get(pa, i);
+        if (!strncmp(json_string_value(json_object_get(e, "name")) ?: "", "kc[", 3))
+            CHECK_NEAR(json_number_value(json_object_get(e, "value")), 1, 0.05);
+    }
+    json_decref(j);
+    g_free(out);
+    g_free(err);
     for (int i = 0; i < nimg; i++) g_free(paths[i]);
     g_free(rig);
     g_free(cal);
