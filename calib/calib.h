@@ -92,7 +92,8 @@ calib_set_t *calib_set_load(const char *dir, bool need_white);
 // DIR/white/NAME/white.json (a white of another camera does not apply: kc is
 // the camera's); the lamps: the directory's lamps.json, shared. NULL + message.
 calib_set_t *calib_set_load_camera(const char *dir, const char *camera, bool need_white);
-// DIR has a camera model of camera NAME (one of calib_set_load_camera's).
+// DIR has a camera model of camera NAME (one of calib_set_load_camera's;
+// NULL: the layout of one camera's, calib_set_load's).
 bool         calib_set_has_camera(const char *dir, const char *camera);
 // The same from explicit files: camera model and lamps.json required, gain.json
 // (its maps beside it) and white.json optional (NULL).

@@ -115,7 +115,7 @@ static char *camera_model_of(const char *dir, const char *camera)
 
 bool calib_set_has_camera(const char *dir, const char *camera)
 {
-    char *cam = camera && *camera ? camera_model_of(dir, camera) : NULL;
+    char *cam = camera && *camera ? camera_model_of(dir, camera) : find_in(dir, "geometry", "camera.cameramodel");
     g_free(cam);
     return cam != NULL;
 }

@@ -716,6 +716,7 @@ TEST(calib_set_camera_layouts)
     snprintf(two, sizeof two, "%s", test_path("two"));
     CHECK(calib_set_has_camera(two, "left") && calib_set_has_camera(two, "right"));
     CHECK(!calib_set_has_camera(two, "middle"));
+    CHECK(calib_set_has_camera(test_path("one"), NULL) && !calib_set_has_camera(two, NULL));
     c = calib_set_load_camera(two, "left", false);
     CHECK_MSG(c != NULL, "%s", model_last_error());
     if (c) {

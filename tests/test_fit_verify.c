@@ -719,7 +719,8 @@ TEST(verify_two_cameras)
 // the fit and each camera's fitted kc near 1 (the right camera's 1.5 x the
 // left's sensitivity comes from its own white); a description with the
 // stiffener moved 5 mm fails. --gain-db is taken relative to each camera's
-// gain calibration's gain.
+// gain calibration's gain. A session of one camera (named "camera") through a
+// directory of one camera's layout is read as before.
 TEST(verify_two_camera_session)
 {
     char top[4096], text[8400];
@@ -852,6 +853,62 @@ TEST(verify_two_camera_session)
         }
         g_free(out);
         g_free(err);
+    }
+    // a session of the rig of one camera (examples/virtual-truth.ini: the left camera's model, sensor and
+    // sensitivity; its camera is named "camera") through a directory of one camera's layout
+    // (camera.cameramodel, gain.json as refl wrote it before it recorded the camera, white.json): read as before
+    {
+        char from[8400], *txt;
+        g_mkdir_with_parents(test_path("cal1"), 0755);
+        static const char *const files[3][2] = { { "left.cameramodel", "camera.cameramodel" },
+                                                 { "left/white.json", "white.json" }, { "lamps.json", "lamps.json" } };
+        for (int f = 0; f < 3; f++) {
+            snprintf(from, sizeof from, "%s/%s", cal, files[f][0]);
+            txt = model_read_file(from, NULL);
+            CHECK(txt != NULL);
+            snprintf(from, sizeof from, "cal1/%s", files[f][1]);
+            test_write(from, txt ? txt : "");
+            free(txt);
+        }
+        snprintf(from, sizeof from, "{\"system_gain_dn_per_e\": %g, \"read_noise_e\": %g, \"saturation_dn\": %g}\n",
+                 K[0], rn[0], sat[0]);
+        test_write("cal1/gain.json", from);
+        snprintf(from, sizeof from, "[rig]\nbackend = virtual\ntruth = %s/examples/virtual-truth.ini\n"
+                 "serve = inprocess\ntime_scale = 0.005\npixel_format = Mono12\n", top);
+        char *rig1 = g_strdup(test_write("rig-1cam.ini", from)), *ps1 = g_strdup(test_path("ps1"));
+        snprintf(from, sizeof from, "%s/examples/plans/workpiece_verify.ini", top);
+        rc = test_refl_run(300, &out, &err, "capture", "--yes", from, "--rig", rig1, "-o", ps1, NULL);
+        CHECK_MSG(rc == 0, "%s", err);
+        g_free(out);
+        g_free(err);
+        char scene[4200], dir[4200], c1[4200];
+        snprintf(scene, sizeof scene, "%s/examples/t_stiffener.d3d", top);
+        snprintf(dir, sizeof dir, "%s", test_path("v-one"));
+        snprintf(c1, sizeof c1, "%s", test_path("cal1"));
+        const char *a1[64];
+        char *p1[16];
+        int n1 = 0, np1 = 0;
+        a1[n1++] = test_refl();
+        a1[n1++] = "verify";
+        a1[n1++] = scene;
+        a1[n1++] = "--images";
+        rig_session_t *s1 = rig_session_open(ps1);
+        for (int i = 0; s1 && i < s1->n && np1 < 16; i++)
+            if (strcmp(s1->rows[i].lamps, "none")) a1[n1++] = p1[np1++] = g_strdup_printf("%s/%s", ps1, s1->rows[i].file);
+        CHECK(s1 && np1 == 4 && !strcmp(s1->rows[0].camera, "camera"));
+        rig_session_free(s1);
+        const char *rest[] = { "--calib", c1, "--priors", priors, "--no-report", "-o", dir, NULL };
+        for (int i = 0; rest[i]; i++) a1[n1++] = rest[i];
+        a1[n1] = NULL;
+        rc = test_run(a1, 300, &out, &err);
+        CHECK_MSG(rc == 0, "one camera's layout: %s", err);
+        CHECK_CONTAINS(out, "against 4 image(s)");
+        CHECK_CONTAINS(out, "description CORRECT");
+        g_free(out);
+        g_free(err);
+        for (int i = 0; i < np1; i++) g_free(p1[i]);
+        g_free(rig1);
+        g_free(ps1);
     }
     // --gain-db is the camera's gain, taken relative to each camera's gain calibration's: the same
     // calibrations said to be made at 6 dB and --gain-db 6 give the frames' own scale (kc near 1 again)
