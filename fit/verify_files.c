@@ -483,13 +483,16 @@ static bool vf_image(vf_t *V, int m)
 }
 
 // --calib DIR: its calibration set; of the first camera the images name when
-// they name several, or one that DIR has its own calibrations of and no
-// layout of one camera (by_name).
+// they name several, or one that DIR has its own calibrations of (by_name),
+// but for "camera", a rig's one plain [camera], whose calibrations are the
+// layout of one camera (DIR/camera.cameramodel: also the first camera's of
+// several, as refl calib geometry writes them).
 static bool vf_base(vf_t *V)
 {
     const verify_files_opts_t *o = V->o;
-    V->by_name = !o->ncameras && (V->nnamed > 1 || (V->nnamed == 1 && !calib_set_has_camera(o->calib, NULL) &&
-                                                     calib_set_has_camera(o->calib, V->named[0])));
+    const char *n0 = V->named[0];
+    V->by_name = !o->ncameras && (V->nnamed > 1 || (V->nnamed == 1 && strcmp(n0, "camera") &&
+                                                     calib_set_has_camera(o->calib, n0)));
     V->base = V->by_name ? calib_set_load_camera(o->calib, V->named[0], false) : calib_set_load(o->calib, false);
     return V->base != NULL;
 }

@@ -719,7 +719,9 @@ TEST(verify_two_cameras)
 // the fit and each camera's fitted kc near 1 (the right camera's 1.5 x the
 // left's sensitivity comes from its own white); a description with the
 // stiffener moved 5 mm fails. --gain-db is taken relative to each camera's
-// gain calibration's gain. A session of one camera (named "camera") through a
+// gain calibration's gain. The right camera's frames alone go to its own
+// calibrations (DIR/camera.cameramodel is the first camera's, as refl calib
+// geometry writes it). A session of one camera (named "camera") through a
 // directory of one camera's layout is read as before.
 TEST(verify_two_camera_session)
 {
@@ -739,6 +741,7 @@ TEST(verify_two_camera_session)
         CHECK(cm != NULL);
         snprintf(text, sizeof text, "cal/%s.cameramodel", names[k]);
         test_write(text, cm ? cm : "");
+        if (k == 0) test_write("cal/camera.cameramodel", cm ? cm : "");   // the first camera's, as geometry writes
         free(cm);
         char gj[512], rel[64];
         snprintf(gj, sizeof gj, "{\"camera\": \"%s\", \"gain_db\": 0, \"gain_unit\": \"dB\", \"system_gain_dn_per_e\": "
@@ -851,6 +854,25 @@ TEST(verify_two_camera_session)
             CHECK_MSG(rc == 3, "rc %d: %s", rc, err);
             CHECK_CONTAINS(out, "description INCORRECT");
         }
+        g_free(out);
+        g_free(err);
+    }
+    // the right camera's frames alone: its own calibrations (not camera.cameramodel, the first camera's)
+    {
+        const char *a2[64];
+        int n2 = 0;
+        char dir[4200], scene[4200];
+        snprintf(scene, sizeof scene, "%s/examples/t_stiffener.d3d", top);
+        snprintf(dir, sizeof dir, "%s", test_path("v-right"));
+        for (int i = 0; i < n; i++) {
+            if (i >= scene_at + 2 && i < scene_at + 2 + nimg && !strstr(argv[i], "_right.png")) continue;
+            a2[n2++] = i == scene_at ? scene : i == out_at ? dir : argv[i];
+        }
+        a2[n2] = NULL;
+        rc = test_run(a2, 300, &out, &err);
+        CHECK_MSG(rc == 0, "the right camera alone: %s", err);
+        CHECK_CONTAINS(out, "against 4 image(s)");
+        CHECK_CONTAINS(out, "description CORRECT");
         g_free(out);
         g_free(err);
     }
