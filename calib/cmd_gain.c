@@ -17,7 +17,7 @@
     "kc per us per unit radiance at each gain. Writes DIR/gain.json, DIR/offset_dn.tiff, dsnu_dn.tiff,\n"     \
     "prnu_gain.tiff (total flat field incl. vignetting, mean 1), prnu_highpass.tiff (smooth part\n"           \
     "removed) and DIR/report.html; of a rig or sessions of several cameras, every camera's into DIR/NAME/\n"   \
-    "(DIR/gain.json and maps: also the first camera's). The frames come from one of:\n"                                            \
+    "(DIR/gain.json and maps: also the first camera's). The frames come from one of:\n"                      \
     "  --rig RIG -o DIR                          captured here (the sample is a uniform source filling\n"      \
     "                                            the view)\n"                                                   \
     "  --frames MANIFEST.csv -o DIR              lines file,exposure_us,kind (kind dark|light; optional\n"    \

@@ -71,7 +71,8 @@ typedef struct {
 // The material fit (`refl fit material`): observations of o->session through
 // the calibrations of o->calib (calib_observe_session; of several cameras:
 // every camera's, each through its own camera model, gain and white, in one
-// fit), BRDF samples R = s d^2 / kcI (1/sr, kcI of the observation's camera), every model of o->model fitted (and, with albedo cells, again
+// fit), BRDF samples R = s d^2 / kcI (1/sr, kcI of the observation's
+// camera), every model of o->model fitted (and, with albedo cells, again
 // with the cells' factors), the priors file o->out written with the lowest
 // BIC's entry (fit_priors_material) and the provenance, and with o->report
 // the report (samples.csv, plots by scripts/fit_material_report.py,

@@ -916,7 +916,8 @@ TEST(verify_two_camera_session)
         a1[n1++] = "--images";
         rig_session_t *s1 = rig_session_open(ps1);
         for (int i = 0; s1 && i < s1->n && np1 < 16; i++)
-            if (strcmp(s1->rows[i].lamps, "none")) a1[n1++] = p1[np1++] = g_strdup_printf("%s/%s", ps1, s1->rows[i].file);
+            if (strcmp(s1->rows[i].lamps, "none"))
+                a1[n1++] = p1[np1++] = g_strdup_printf("%s/%s", ps1, s1->rows[i].file);
         CHECK(s1 && np1 == 4 && !strcmp(s1->rows[0].camera, "camera"));
         rig_session_free(s1);
         const char *rest[] = { "--calib", c1, "--priors", priors, "--no-report", "-o", dir, NULL };
