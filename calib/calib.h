@@ -65,7 +65,10 @@ typedef struct {
     float          *offset_dn;      // gain calibration: dark offset map (NULL: use dark frames)
     float          *flat;           // gain calibration: flat field g(x,y), mean 1 (NULL: 1)
     double          saturation_dn;  // 0: from the frame's bits
-    double          gain_dn_per_e;  // gain calibration's K at 0 dB (0: unknown)
+    char            camera[32];     // the camera of the set ("": a calibration of one camera, no selector)
+    double          cal_gain;       // the gain the gain calibration was made at (gain.json gain_db; 0 without)
+    char            cal_gain_unit[16];  // its unit (gain.json gain_unit; "dB" without, or from before the unit)
+    double          gain_dn_per_e;  // gain calibration's K at its gain (0: unknown)
     double          read_noise_e;   // its read noise
     double          nonlin_a_per_dn;// response compression S_m = S (1 - a S) at 0 dB from its curves (0: none)
     int             W, H;
@@ -80,6 +83,18 @@ typedef struct {
 // flat_field.tiff or prnu_gain.tiff (or gain/...), and white.json (or
 // white/white.json). need_white: white.json is required. NULL + message.
 calib_set_t *calib_set_load(const char *dir, bool need_white);
+// The calibration set of camera NAME of a calibration directory of several
+// cameras (camera NULL: calib_set_load). Its camera model: DIR/NAME.cameramodel,
+// DIR/geometry/NAME.cameramodel or DIR/NAME/camera.cameramodel; its gain
+// calibration: DIR/NAME/gain.json or DIR/gain/NAME/gain.json (refl calib gain
+// of several cameras), else DIR/gain.json (or gain/gain.json) when that one
+// records camera NAME; its reference white: DIR/NAME/white.json or
+// DIR/white/NAME/white.json (a white of another camera does not apply: kc is
+// the camera's); the lamps: the directory's lamps.json, shared. NULL + message.
+calib_set_t *calib_set_load_camera(const char *dir, const char *camera, bool need_white);
+// DIR has a camera model of camera NAME (one of calib_set_load_camera's;
+// NULL: the layout of one camera's, calib_set_load's).
+bool         calib_set_has_camera(const char *dir, const char *camera);
 // The same from explicit files: camera model and lamps.json required, gain.json
 // (its maps beside it) and white.json optional (NULL).
 calib_set_t *calib_set_load_files(const char *camera, const char *lamps_json, const char *gain_json,
@@ -123,7 +138,8 @@ typedef struct {
 
 calib_observe_options_t calib_observe_defaults(void);
 // Observations of the session's sample material (opt->scene_path posed on
-// the plan's wedge, turned to each frame's measured angle). false + message
+// the plan's wedge, turned to each frame's measured angle), in the frames of
+// cal->camera (the session's first camera when cal has none). false + message
 // (names the session, file or frame), kept in model_last_error() and not
 // printed: the caller reports it once.
 bool calib_observe(const char *session_dir, const calib_set_t *cal, const calib_observe_options_t *opt,
@@ -131,15 +147,17 @@ bool calib_observe(const char *session_dir, const calib_set_t *cal, const calib_
 void calib_obs_free(calib_obs_set_t *s);
 
 // Reference white: kc*I per lamp (median over its observations) and the
-// relative spread; writes DIR/white.json. albedo: the standard's (e.g. 0.99).
+// relative spread; writes DIR/white.json (with the camera, cal->camera, when
+// it has one). albedo: the standard's (e.g. 0.99).
 bool calib_white(const calib_obs_set_t *obs, const calib_set_t *cal, double albedo, const char *out_json,
                json_t *provenance);
 
-// The calibration set of calib_dir (calib_set_load) and the observations of
-// the session through it (calib_observe). false + message (kept, not
-// printed, as calib_observe's); *cal is set (or NULL) and out emptied either
-// way: the caller frees both.
-bool calib_observe_session(const char *session_dir, const char *calib_dir, bool need_white,
+// The calibration set of calib_dir for camera (calib_set_load_camera; NULL:
+// calib_set_load) and the observations of the session through it
+// (calib_observe: that camera's frames). false + message (kept, not printed,
+// as calib_observe's); *cal is set (or NULL) and out emptied either way: the
+// caller frees both.
+bool calib_observe_session(const char *session_dir, const char *calib_dir, const char *camera, bool need_white,
                            const calib_observe_options_t *opt, calib_set_t **cal, calib_obs_set_t *out);
 // Provenance of a result from observations: the command (argv[0] "refl"), the
 // session and every calibration file read.

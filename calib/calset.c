@@ -77,6 +77,88 @@ calib_set_t *calib_set_load(const char *dir, bool need_white)
     return c;
 }
 
+// The first of DIR/A, DIR/B (B may be NULL) readable (g_free), or NULL.
+static char *first_of(const char *dir, const char *a, const char *b)
+{
+    char *p = g_strdup_printf("%s/%s", dir, a);
+    if (access(p, R_OK) == 0) return p;
+    g_free(p);
+    if (!b) return NULL;
+    p = g_strdup_printf("%s/%s", dir, b);
+    if (access(p, R_OK) == 0) return p;
+    g_free(p);
+    return NULL;
+}
+
+// The camera a gain.json records ("" when none or unreadable: the caller reads and reports it).
+static void gain_camera(const char *path, char *out, size_t size)
+{
+    json_t *j = json_load_file(path, 0, NULL);
+    snprintf(out, size, "%s", json_string_value(json_object_get(j, "camera")) ?: "");
+    json_decref(j);
+}
+
+// Camera NAME's model in DIR (g_free), or NULL.
+static char *camera_model_of(const char *dir, const char *camera)
+{
+    char *a = g_strdup_printf("%s.cameramodel", camera), *b = g_strdup_printf("geometry/%s.cameramodel", camera);
+    char *cam = first_of(dir, a, b);
+    g_free(a);
+    g_free(b);
+    if (!cam) {
+        a = g_strdup_printf("%s/camera.cameramodel", camera);
+        cam = first_of(dir, a, NULL);
+        g_free(a);
+    }
+    return cam;
+}
+
+bool calib_set_has_camera(const char *dir, const char *camera)
+{
+    char *cam = camera && *camera ? camera_model_of(dir, camera) : find_in(dir, "geometry", "camera.cameramodel");
+    g_free(cam);
+    return cam != NULL;
+}
+
+calib_set_t *calib_set_load_camera(const char *dir, const char *camera, bool need_white)
+{
+    if (!camera) return calib_set_load(dir, need_white);
+    char *a, *b, *cam = camera_model_of(dir, camera);
+    a = g_strdup_printf("%s/gain.json", camera);
+    b = g_strdup_printf("gain/%s/gain.json", camera);
+    char *gain = first_of(dir, a, b), rec[32];
+    g_free(a);
+    g_free(b);
+    if (!gain && (gain = find_in(dir, "gain", "gain.json"))) {   // the top level's, when it is this camera's
+        gain_camera(gain, rec, sizeof rec);
+        if (strcmp(rec, camera)) {
+            g_free(gain);
+            gain = NULL;
+        }
+    }
+    a = g_strdup_printf("%s/white.json", camera);
+    b = g_strdup_printf("white/%s/white.json", camera);
+    char *white = first_of(dir, a, b), *lamps = find_in(dir, "lamps", "lamps.json");
+    g_free(a);
+    g_free(b);
+    calib_set_t *c = NULL;
+    if (!cam)
+        model_error(dir, 0, "no %s.cameramodel (nor geometry/%s.cameramodel, %s/camera.cameramodel): run refl calib "
+                    "geometry --camera %s first", camera, camera, camera, camera);
+    else if (!lamps)
+        model_error(dir, 0, "no lamps.json (nor lamps/lamps.json): run refl calib lamps first");
+    else if (!white && need_white)
+        model_error(dir, 0, "no %s/white.json (nor white/%s/white.json): run refl calib white --camera %s on a "
+                    "reference-white session", camera, camera, camera);
+    else if ((c = calib_set_load_files(cam, lamps, gain, white)))
+        snprintf(c->camera, sizeof c->camera, "%s", camera);
+    g_free(cam);
+    g_free(lamps);
+    g_free(gain);
+    g_free(white);
+    return c;
+}
+
 // The response compression a (per DN at 0 dB) of S_m = S (1 - a S), S the
 // linear signal, from a gain calibration's photon-transfer curves (gain.json:
 // gains[] at 0 dB, curves.exposure_us and curves.signal_dn): linear least
@@ -88,7 +170,9 @@ static double nonlinearity_of(json_t *gj, double sat)
     json_t *gains = json_object_get(gj, "gains"), *g0 = NULL;
     for (size_t k = 0; k < json_array_size(gains); k++) {
         json_t *e = json_array_get(gains, k);
-        if (fabs(json_number_value(json_object_get(e, "gain_db"))) < 1e-9) g0 = e;
+        if (fabs(json_number_value(json_object_get(e, "gain_db")) -
+                 json_number_value(json_object_get(gj, "gain_db"))) < 1e-9)
+            g0 = e;
     }
     json_t *cv = json_object_get(g0 ? g0 : gj, "curves");
     json_t *t = json_object_get(cv, "exposure_us"), *S = json_object_get(cv, "signal_dn");
@@ -126,6 +210,7 @@ calib_set_t *calib_set_load_files(const char *cam, const char *lamps, const char
     const char *dir = cam;
     if (!c) return NULL;
     c->inputs = json_array();
+    snprintf(c->cal_gain_unit, sizeof c->cal_gain_unit, "dB");
     if (!(c->cam = model_camera_load(cam))) goto fail;
     add_input(c, "camera", cam);
     c->W = model_camera_width(c->cam);
@@ -181,6 +266,14 @@ calib_set_t *calib_set_load_files(const char *cam, const char *lamps, const char
             c->read_noise_e = json_number_value(rn);
         }
         c->nonlin_a_per_dn = nonlinearity_of(gj, c->saturation_dn);
+        json_t *gdb = json_object_get(gj, "gain_db"), *gu = json_object_get(gj, "gain_unit");
+        if ((gdb && !json_is_number(gdb)) || (gu && !json_is_string(gu))) {
+            model_error(gain, 0, "gain_db must be a number and gain_unit a string (the gain the calibration was "
+                        "made at)");
+            goto fail;
+        }
+        c->cal_gain = gdb ? json_number_value(gdb) : 0;
+        snprintf(c->cal_gain_unit, sizeof c->cal_gain_unit, "%s", gu ? json_string_value(gu) : "dB");
         char *gd = g_path_get_dirname(gain);
         off = g_strdup_printf("%s/offset_dn.tiff", gd);
         flat = g_strdup_printf("%s/flat_field.tiff", gd);

@@ -61,7 +61,7 @@ int calib_cli_window_step(model_cli_t *cli, int *window, int *step)
 
 int calib_cmd_white(int argc, char **argv)
 {
-    const char *calib_dir = NULL, *out = NULL;
+    const char *calib_dir = NULL, *out = NULL, *camera = NULL;
     calib_observe_options_t o = calib_observe_defaults();
     double albedo = 0.99;
     model_opt_t opts[] = {
@@ -69,6 +69,8 @@ int calib_cmd_white(int argc, char **argv)
                          "and its maps (DIR or DIR/geometry, DIR/lamps, DIR/gain)", &calib_dir, true),
         MODEL_OPT_STRING("-o", "WHITE.json", "the output (put it in DIR or DIR/white/ for refl fit material)", &out,
                          true),
+        MODEL_OPT_STRING("--camera", "NAME", "camera NAME's frames with its calibrations (a directory of several "
+                         "cameras: NAME.cameramodel, NAME/gain.json; write -o DIR/NAME/white.json)", &camera, false),
         MODEL_OPT_VALUE("--albedo", "A", "the standard's albedo (default 0.99)", false),
         MODEL_OPT_STRING("--scene", "FILE", "the standard's scene, D3D or OBJ (needed: a session records no scene)",
                          &o.scene_path, false),
@@ -101,7 +103,7 @@ int calib_cmd_white(int argc, char **argv)
     calib_obs_set_t obs;
     json_t *prov = NULL;
     bool q = model_error_quiet_thread(true);
-    bool ok = calib_observe_session(session, calib_dir, false, &o, &cal, &obs);
+    bool ok = calib_observe_session(session, calib_dir, camera, false, &o, &cal, &obs);
     if (ok) {
         printf("refl calib white: %d observations of %s in %d frames (%d skipped)\n", obs.n, obs.material,
                obs.frames_used, obs.frames_skipped);

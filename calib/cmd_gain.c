@@ -16,7 +16,8 @@
     "SNR, dynamic range), linearity error, dark current, offset/DSNU and PRNU maps, and the response\n"       \
     "kc per us per unit radiance at each gain. Writes DIR/gain.json, DIR/offset_dn.tiff, dsnu_dn.tiff,\n"     \
     "prnu_gain.tiff (total flat field incl. vignetting, mean 1), prnu_highpass.tiff (smooth part\n"           \
-    "removed) and DIR/report.html. The frames come from one of:\n"                                            \
+    "removed) and DIR/report.html; of a rig or sessions of several cameras, every camera's into DIR/NAME/\n"   \
+    "(DIR/gain.json and maps: also the first camera's). The frames come from one of:\n"                      \
     "  --rig RIG -o DIR                          captured here (the sample is a uniform source filling\n"      \
     "                                            the view)\n"                                                   \
     "  --frames MANIFEST.csv -o DIR              lines file,exposure_us,kind (kind dark|light; optional\n"    \
@@ -81,6 +82,8 @@ static int check_options(model_cli_t *c, calib_gain_opts_t *o, double **gains, d
     if (rc) return rc;
     if (!o->out || (!!o->rig + !!o->frames + (o->nsessions > 0)) != 1)
         return model_cli_error(c, "give -o DIR and exactly one of --rig, --frames, --session");
+    if (o->frames && o->camera)
+        return model_cli_error(c, "--camera selects a camera of a rig or sessions, not of --frames");
     const char *roi = model_cli_value(c, "--roi"), *gs = model_cli_value(c, "--gains");
     const char *ds = model_cli_value(c, "--dark-exposures-us");
     int *r = o->roi;
@@ -114,6 +117,8 @@ int calib_cmd_gain(int argc, char **argv)
                         "is the reference (dark current, maps, top-level figures). With --frames: one value, the gain "
                         "the frames were taken at (a label)", false),
         MODEL_OPT_VALUE("--steps", "N", "exposure steps of each sweep (default 50, at least --min-steps)", false),
+        MODEL_OPT_STRING("--camera", "NAME", "calibrate this camera of the rig or sessions only (default every "
+                         "camera)", &o.camera, false),
         MODEL_OPT_STRING("--sample", "NAME", "the plan's sample (default flat_field)", &o.sample, false),
         MODEL_OPT_STRING("--lamps", "SET", "lamps feeding the source (default all)", &o.lamps, false),
         MODEL_OPT_VALUE("--probe-exposure-us", "US", "first probe exposure (default 1000)", false),
@@ -150,15 +155,19 @@ int calib_cmd_gain(int argc, char **argv)
         rc = yes ? model_cli_error(&cli, "give --yes or --operator-input FILE, not both")
                  : model_error_report("calib gain");
     if (!rc) {
-        calib_gain_result_t r;
+        static calib_gain_result_t rs[CALIB_GAIN_MAX_CAMERAS];
+        int n = 0;
         bool q = model_error_quiet_thread(true);   // the library's message is printed once, here
-        bool ok = calib_gain_run(&o, &r);
+        bool ok = calib_gain_run(&o, rs, CALIB_GAIN_MAX_CAMERAS, &n);
         model_error_quiet_thread(q);
-        if (ok)
+        for (int k = 0; ok && k < n; k++) {
+            const calib_gain_result_t *r = &rs[k];
+            if (n > 1) printf("camera %s %s/gain.json\n", r->camera, r->dir);
             printf("system_gain_dn_per_e %.6g\nread_noise_e %.5g\nsaturation_dn %.2f\nlinearity_error_pct %.4f\n"
-                   "dsnu_dn %.4f\nprnu_pct %.4f\n", r.system_gain_dn_per_e, r.read_noise_e, r.saturation_dn,
-                   r.linearity_error_pct, r.dsnu_dn, r.prnu_pct);
-        else
+                   "dsnu_dn %.4f\nprnu_pct %.4f\n", r->system_gain_dn_per_e, r->read_noise_e, r->saturation_dn,
+                   r->linearity_error_pct, r->dsnu_dn, r->prnu_pct);
+        }
+        if (!ok)
             fprintf(stderr, "refl calib gain: failed: %s\n", model_last_error());
         rc = ok ? 0 : rig_operator_paused(o.op) ? 3 : 1;
     }

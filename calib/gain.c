@@ -799,16 +799,27 @@ static int lamps_on(const char *lamps, int nlamps_rig)
     return n;
 }
 
-// Frames of a session; set: the role of its frames (CALIB_GAIN_SET_ANY: by lamps).
-bool calib_gain_add_session(calib_gain_data_t *d, const char *dir, int set, json_t **facts_out)
+// Frames of one camera of a session; set: the role of its frames (CALIB_GAIN_SET_ANY: by lamps).
+bool calib_gain_add_session(calib_gain_data_t *d, const char *dir, const char *camera, int set,
+                            json_t **facts_out)
 {
-    rig_session_t *s = rig_session_open_camera(dir, NULL);   // the first camera's frames
+    rig_session_t *s = rig_session_open_camera(dir, camera);   // NULL: the first camera's frames
     if (!s) return false;
     int nlr = -1;
     json_t *lamps = s->facts ? json_object_get(s->facts, "lamps") : NULL;
     if (json_is_array(lamps)) nlr = (int)json_array_size(lamps);
-    for (int i = 0; i < s->n; i++) {
+    bool ok = true;
+    for (int i = 0; i < s->n && ok; i++) {
         const rig_frame_row_t *r = &s->rows[i];
+        const char *unit = r->gain_unit[0] ? r->gain_unit : "dB";   // an older session's gain: dB
+        if (!d->gain_unit[0]) snprintf(d->gain_unit, sizeof d->gain_unit, "%s", unit);
+        if (strcmp(d->gain_unit, unit)) {
+            model_error_set(dir, 0, "frame %s: gain unit '%s', the run's other frames '%s': one calibration needs "
+                            "one unit of gain", r->file, unit, d->gain_unit);
+            ok = false;
+            break;
+        }
+        snprintf(d->camera, sizeof d->camera, "%s", r->camera);
         int on = lamps_on(r->lamps, nlr);
         calib_gain_frame_t f = { .path = g_strdup_printf("%s/%s", dir, r->file), .where = g_strdup(dir), .line = 0,
                        .step = r->step, .exposure_us = r->exposure_us, .gain_db = r->gain, .dark = on == 0,
@@ -816,9 +827,9 @@ bool calib_gain_add_session(calib_gain_data_t *d, const char *dir, int set, json
         snprintf(f.sha256, sizeof f.sha256, "%s", r->sha256);
         add_frame(d, &f);
     }
-    if (facts_out && !*facts_out && s->facts) *facts_out = json_incref(s->facts);
+    if (ok && facts_out && !*facts_out && s->facts) *facts_out = json_incref(s->facts);
     rig_session_free(s);
-    return true;
+    return ok;
 }
 
 bool calib_gain_truth_radiance(json_t *facts, const char **truth_path, double *radiance_per_lamp)
@@ -869,23 +880,37 @@ static int run_plan(const calib_gain_opts_t *c, const char *name, const char *la
     return rc;
 }
 
-// Mean of a session's frames by kind (lamps on / off) at one exposure.
-static bool probe_levels(const char *dir, double *light, double *dark, double *max_dn)
+// Mean of a session's frames by kind (lamps on / off) at one exposure, per
+// camera (in the session's order, at most CALIB_GAIN_MAX_CAMERAS): their number, 0 on error.
+static int probe_levels(const char *dir, double *light, double *dark, double *max_dn)
 {
-    rig_session_t *s = rig_session_open_camera(dir, NULL);   // the first camera's frames
-    if (!s) return false;
-    *light = *dark = NAN;
-    for (int i = 0; i < s->n; i++) {
-        if (!strcmp(s->rows[i].lamps, "none")) *dark = s->rows[i].mean;
-        else *light = s->rows[i].mean;
-        *max_dn = format_max(s->rows[i].pixel_format);
-    }
+    rig_session_t *s = rig_session_open(dir);
+    if (!s) return 0;
+    const char *names[CALIB_GAIN_MAX_CAMERAS];
+    int nc = rig_session_cameras(s, names, CALIB_GAIN_MAX_CAMERAS);
+    if (nc > CALIB_GAIN_MAX_CAMERAS) nc = CALIB_GAIN_MAX_CAMERAS;
+    for (int k = 0; k < nc; k++) light[k] = dark[k] = NAN;
+    for (int i = 0; i < s->n; i++)
+        for (int k = 0; k < nc; k++) {
+            if (strcmp(names[k], s->rows[i].camera)) continue;
+            if (!strcmp(s->rows[i].lamps, "none")) dark[k] = s->rows[i].mean;
+            else light[k] = s->rows[i].mean;
+            max_dn[k] = format_max(s->rows[i].pixel_format);
+        }
+    for (int k = 0; k < nc; k++)
+        if (!(isfinite(light[k]) && isfinite(dark[k]))) {
+            model_error_set(dir, 0, "the probe session has no light and dark frame of camera %s", names[k]);
+            nc = 0;
+        }
+    if (nc == 0 && s->n == 0) model_error_set(dir, 0, "the probe session has no frames");
     rig_session_free(s);
-    if (!(isfinite(*light) && isfinite(*dark))) {
-        model_error_set(dir, 0, "the probe session has no light and dark frame");
-        return false;
-    }
-    return true;
+    return nc;
+}
+
+static int cmp_double(const void *a, const void *b)
+{
+    double x = *(const double *)a, y = *(const double *)b;
+    return (x > y) - (x < y);
 }
 
 static char *exposure_list(const double *t, int n)
@@ -895,40 +920,62 @@ static char *exposure_list(const double *t, int n)
     return g_string_free(g, FALSE);
 }
 
-// Probe and sweep at one gain; *t_sat_us: the estimated exposure of full scale.
-static bool capture_sweep(const calib_gain_opts_t *c, double gain, char **sweep_dir, double *t_sat_us)
+// The probe's next exposure for every camera's levels; t_full[k]: camera k's
+// estimated exposure of full scale (NAN while unknown). false: done (all known).
+static bool probe_next(const double *l, const double *dk, const double *mx, int nc, double *probe, double *t_full)
 {
-    double probe = c->probe_us, t_full = NAN;
-    for (int attempt = 0; attempt < 8 && !isfinite(t_full); attempt++) {
+    bool over = false, under = false;
+    for (int k = 0; k < nc; k++) {
+        double sig = l[k] - dk[k];
+        over |= l[k] > 0.6 * mx[k];
+        under |= sig < 0.02 * mx[k];
+        t_full[k] = l[k] > 0.6 * mx[k] || sig < 0.02 * mx[k] ? NAN : *probe * (mx[k] - dk[k]) / sig;
+    }
+    if (over) *probe = fmax(10, floor(*probe / 8));
+    else if (under) *probe *= 8;
+    return over || under;
+}
+
+// Probe and sweep at one gain; t_sat_us[k]: camera k's estimated exposure of
+// full scale (*ncam cameras).
+static bool capture_sweep(const calib_gain_opts_t *c, double gain, char **sweep_dir, double *t_sat_us, int *ncam)
+{
+    double probe = c->probe_us, l[CALIB_GAIN_MAX_CAMERAS], dk[CALIB_GAIN_MAX_CAMERAS], mx[CALIB_GAIN_MAX_CAMERAS];
+    bool more = true;
+    for (int attempt = 0; attempt < 8 && more && probe <= 1e7; attempt++) {
         char *name = g_strdup_printf("probe_g%g_%.0fus", gain, probe);
         char *list = g_strdup_printf("%.0f", probe);
         char *sets = g_strdup_printf("%s; none", c->lamps);
         int rc = run_plan(c, name, sets, list, gain, 1);
         g_free(sets);
         char *dir = g_strdup_printf("%s/%s", c->out, name);
-        double l, dk, mx;
-        bool ok = rc == 0 && probe_levels(dir, &l, &dk, &mx);
+        *ncam = rc == 0 ? probe_levels(dir, l, dk, mx) : 0;
         g_free(list);
         g_free(name);
         g_free(dir);
-        if (!ok) return false;
-        double sig = l - dk;
-        fprintf(stderr, "refl calib gain: probe at %.0f us: light %.1f DN, dark %.1f DN\n", probe, l, dk);
-        if (l > 0.6 * mx) probe = fmax(10, floor(probe / 8));
-        else if (sig < 0.02 * mx) probe *= 8;
-        else t_full = probe * (mx - dk) / sig;
-        if (probe > 1e7) break;
+        if (!*ncam) return false;
+        for (int k = 0; k < *ncam; k++)
+            fprintf(stderr, "refl calib gain: probe at %.0f us: light %.1f DN, dark %.1f DN (camera %d)\n", probe,
+                    l[k], dk[k], k + 1);
+        more = probe_next(l, dk, mx, *ncam, &probe, t_sat_us);
     }
-    if (!isfinite(t_full)) {
+    if (more) {
         model_error_set(c->rig, 0, "gain %g dB: no exposure between 10 us and 10 s gives a usable level of the flat "
-                        "field (lamps %s): check the lamps and the source", gain, c->lamps);
+                        "field for every camera (lamps %s): check the lamps and the source", gain, c->lamps);
         return false;
     }
-    double tmax = isfinite(c->max_us) ? c->max_us : 1.2 * t_full;
-    *t_sat_us = t_full;
-    double *t = malloc(sizeof(double) * c->steps);
-    for (int i = 0; i < c->steps; i++) t[i] = fmax(10, round(tmax * (i + 1) / c->steps));
-    char *list = exposure_list(t, c->steps);
+    // each camera's steps up to 1.2 x its full scale (or --max-exposure-us), merged
+    int nt = 0;
+    double *t = malloc(sizeof(double) * c->steps * *ncam);
+    for (int k = 0; k < *ncam; k++) {
+        double tmax = isfinite(c->max_us) ? c->max_us : 1.2 * t_sat_us[k];
+        for (int i = 0; i < c->steps; i++) t[nt++] = fmax(10, round(tmax * (i + 1) / c->steps));
+    }
+    qsort(t, nt, sizeof *t, cmp_double);
+    int nu = 0;
+    for (int i = 0; i < nt; i++)
+        if (!nu || t[i] != t[nu - 1]) t[nu++] = t[i];
+    char *list = exposure_list(t, nu);
     char *name = g_strdup_printf("sweep_g%g", gain);
     char *sets = g_strdup_printf("%s; none", c->lamps);
     int rc = run_plan(c, name, sets, list, gain, 2);
@@ -1026,44 +1073,53 @@ bool calib_gain_write_maps(const char *dir, const calib_gain_maps_t *m)
 }
 
 // A session of the capture into d and the provenance (role), its directory o->out/name.
-static bool add_captured(const calib_gain_opts_t *o, calib_gain_data_t *d, json_t *prov, json_t **facts,
-                         const char *name, int set, const char *role)
+static bool add_source(const calib_gain_opts_t *o, json_t *prov, calib_gain_source_t **src, int *nsrc,
+                       const char *name, int set, const char *role)
 {
     char *dir = g_strdup_printf("%s/%s", o->out, name);
-    bool ok = calib_gain_add_session(d, dir, set, facts) && model_provenance_input(prov, role, dir);
-    g_free(dir);
-    return ok;
+    *src = realloc(*src, sizeof **src * (*nsrc + 1));
+    (*src)[(*nsrc)++] = (calib_gain_source_t){ dir, set, role };
+    return model_provenance_input(prov, role, dir);
 }
 
-bool calib_gain_capture(const calib_gain_opts_t *o, calib_gain_data_t *d, json_t *prov, json_t **facts)
+void calib_gain_sources_free(calib_gain_source_t *src, int n)
+{
+    for (int i = 0; i < n; i++) g_free(src[i].dir);
+    free(src);
+}
+
+bool calib_gain_capture(const calib_gain_opts_t *o, json_t *prov, calib_gain_source_t **src, int *nsrc)
 {
     double t_start = model_now_s();
+    *src = NULL;
+    *nsrc = 0;
     if (!model_provenance_input(prov, "rig", o->rig)) return false;
     // sweeps at every gain; the first gives the flat field's exposure
-    double t_sat0 = NAN;
+    double t_sat0 = INFINITY;
     for (int gi = 0; gi < o->ngains; gi++) {
-        double ts;
+        double ts[CALIB_GAIN_MAX_CAMERAS];
+        int nc = 0;
         char *sd = NULL;
-        if (!capture_sweep(o, o->gains_db[gi], &sd, &ts)) return false;
-        if (gi == 0) t_sat0 = ts;
+        if (!capture_sweep(o, o->gains_db[gi], &sd, ts, &nc)) return false;
+        for (int k = 0; gi == 0 && k < nc; k++) t_sat0 = fmin(t_sat0, ts[k]);
         char *name = g_path_get_basename(sd);
-        bool ok = add_captured(o, d, prov, facts, name, CALIB_GAIN_SET_SWEEP, "sweep");
+        bool ok = add_source(o, prov, src, nsrc, name, CALIB_GAIN_SET_SWEEP, "sweep");
         g_free(name);
         g_free(sd);
         if (!ok) return false;
     }
-    // the flat field near 50 % of full scale, its darks, and long darks
+    // the flat field near 50 % of full scale (of the most sensitive camera), its darks, and long darks
     double t_flat = fmax(10, round(0.5 * t_sat0 * 0.95));
     char *fl = g_strdup_printf("%.0f", t_flat);
     char *sets = g_strdup_printf("%s; none", o->lamps);
     int r1 = run_plan(o, "flat", sets, fl, o->gains_db[0], o->flat_frames);
     g_free(sets);
     g_free(fl);
-    if (r1 || !add_captured(o, d, prov, facts, "flat", CALIB_GAIN_SET_FLAT, "flat")) return false;
+    if (r1 || !add_source(o, prov, src, nsrc, "flat", CALIB_GAIN_SET_FLAT, "flat")) return false;
     char *dl = exposure_list(o->dark_exposures_us, o->ndark_exposures);
     r1 = run_plan(o, "dark", "none", dl, o->gains_db[0], 2);
     g_free(dl);
-    if (r1 || !add_captured(o, d, prov, facts, "dark", CALIB_GAIN_SET_DARK, "dark")) return false;
+    if (r1 || !add_source(o, prov, src, nsrc, "dark", CALIB_GAIN_SET_DARK, "dark")) return false;
     fprintf(stderr, "refl calib gain: capture done in %.1f s\n", model_now_s() - t_start);
     return true;
 }
@@ -1119,7 +1175,9 @@ json_t *calib_gain_json(const calib_gain_opts_t *o, const calib_gain_data_t *d, 
     const double K = a->ptc.system_gain_dn_per_e;
     json_t *root = json_object();
     json_object_set_new(root, "calibration", json_string("gain (EMVA 1288 style)"));
+    if (d->camera[0]) json_object_set_new(root, "camera", json_string(d->camera));
     json_object_set_new(root, "gain_db", json_real(a->gain_db));
+    json_object_set_new(root, "gain_unit", json_string(d->gain_unit[0] ? d->gain_unit : "dB"));
     json_object_set_new(root, "system_gain_dn_per_e", jreal(K));
     json_object_set_new(root, "read_noise_e", jreal(a->ptc.read_noise_e));
     json_object_set_new(root, "saturation_dn", jreal(a->ptc.saturation_dn));
@@ -1247,17 +1305,9 @@ calib_gain_opts_t calib_gain_defaults(void)
                                 .min_steps = 50, .radiance = NAN, .max_dn = 65535, .quant_dn = 1, .report = true };
 }
 
-// The frames of the run's source into d (and the provenance).
-static bool gather_frames(const calib_gain_opts_t *o, calib_gain_data_t *d, json_t *prov, json_t **facts)
+// The frames of a manifest into d (and the provenance).
+static bool manifest_frames(const calib_gain_opts_t *o, calib_gain_data_t *d, json_t *prov)
 {
-    if (o->rig) return calib_gain_capture(o, d, prov, facts);
-    if (!o->frames) {
-        for (int i = 0; i < o->nsessions; i++)
-            if (!calib_gain_add_session(d, o->sessions[i], CALIB_GAIN_SET_ANY, facts) ||
-                !model_provenance_input(prov, "session", o->sessions[i]))
-                return false;
-        return true;
-    }
     if (!calib_gain_read_manifest(o->frames, o->max_dn, d) || !model_provenance_input(prov, "manifest", o->frames))
         return false;
     if (o->ngains != 1) {
@@ -1265,6 +1315,7 @@ static bool gather_frames(const calib_gain_opts_t *o, calib_gain_data_t *d, json
                         "label)");
         return false;
     }
+    snprintf(d->gain_unit, sizeof d->gain_unit, "dB");
     for (int i = 0; i < d->nf; i++) d->f[i].gain_db = o->gains_db[0];
     // the frames themselves
     for (int i = 0; i < d->nf; i++) {
@@ -1278,6 +1329,49 @@ static bool gather_frames(const calib_gain_opts_t *o, calib_gain_data_t *d, json
         }
     }
     return true;
+}
+
+// The sessions of the run: captured on o->rig, or given (and the provenance).
+static bool gather_sources(const calib_gain_opts_t *o, json_t *prov, calib_gain_source_t **src, int *nsrc)
+{
+    if (o->rig) return calib_gain_capture(o, prov, src, nsrc);
+    *src = calloc(o->nsessions, sizeof **src);
+    *nsrc = 0;
+    for (int i = 0; i < o->nsessions; i++) {
+        (*src)[(*nsrc)++] = (calib_gain_source_t){ g_strdup(o->sessions[i]), CALIB_GAIN_SET_ANY, "session" };
+        if (!model_provenance_input(prov, "session", o->sessions[i])) return false;
+    }
+    return true;
+}
+
+// The cameras to calibrate (names[], at most CALIB_GAIN_MAX_CAMERAS): those
+// of the first session, or o->camera when it has frames there. 0 on error.
+static int run_cameras(const calib_gain_opts_t *o, const calib_gain_source_t *src, int nsrc,
+                       char names[][32])
+{
+    rig_session_t *s = nsrc ? rig_session_open(src[0].dir) : NULL;
+    if (!s) {
+        if (!nsrc) model_error_set(NULL, 0, "no session to read");
+        return 0;
+    }
+    const char *nm[CALIB_GAIN_MAX_CAMERAS];
+    int nc = rig_session_cameras(s, nm, CALIB_GAIN_MAX_CAMERAS), n = 0;
+    GString *list = g_string_new("");
+    for (int k = 0; k < nc && k < CALIB_GAIN_MAX_CAMERAS; k++) {
+        g_string_append_printf(list, "%s%s", k ? ", " : "", nm[k]);
+        if (!o->camera || !strcmp(o->camera, nm[k])) snprintf(names[n++], 32, "%s", nm[k]);
+    }
+    if (nc > CALIB_GAIN_MAX_CAMERAS && !o->camera) {
+        model_error_set(src[0].dir, 0, "%d cameras: refl calib gain calibrates at most %d at once (give --camera "
+                        "NAME)", nc, CALIB_GAIN_MAX_CAMERAS);
+        n = 0;
+    } else if (!n && nc)
+        model_error_set(src[0].dir, 0, "no camera '%s' in the session (its cameras: %s)", o->camera, list->str);
+    else if (!nc)
+        model_error_set(src[0].dir, 0, "the session has no frames");
+    g_string_free(list, TRUE);
+    rig_session_free(s);
+    return n;
 }
 
 // Every gain present (rig: in the order asked; else in order of appearance):
@@ -1319,47 +1413,90 @@ static bool analyse_all(const calib_gain_opts_t *o, calib_gain_data_t *d, json_t
     return ok;
 }
 
-bool calib_gain_run(const calib_gain_opts_t *o, calib_gain_result_t *r)
+// One camera's frames (d) analysed into dir: gain.json, the maps and the
+// report; top (may be NULL): gain.json and the maps also there.
+static bool run_one(const calib_gain_opts_t *o, calib_gain_data_t *d, json_t *facts, json_t *prov, const char *dir,
+                    const char *top, calib_gain_result_t *r)
 {
-    memset(r, 0, sizeof *r);
+    calib_gain_an_t *an = NULL;
+    int ngains = 0;
+    calib_gain_maps_t maps = { 0 };
+    json_t *root = NULL;
+    bool ok = false;
+    const char *truth = NULL;
+    double truth_per_lamp;
+    if (!model_mkdir_p(dir)) return false;
+    calib_gain_make_groups(d);
+    fprintf(stderr, "refl calib gain: analysing %d frames (%d exposure groups)%s%s\n", d->nf, d->ng,
+            d->camera[0] ? " of camera " : "", d->camera);
+    if (!calib_gain_frame_stats(d) || !analyse_all(o, d, facts, &an, &ngains)) goto done;
+    if (!calib_gain_make_maps(d, &an[0], &maps) || !calib_gain_write_maps(dir, &maps)) goto done;
+    if (top && !calib_gain_write_maps(top, &maps)) goto done;
+    calib_gain_truth_radiance(facts, &truth, &truth_per_lamp);
+    root = calib_gain_json(o, d, an, ngains, &maps, truth, prov);
+    ok = true;
+    for (int k = 0; k < (top ? 2 : 1) && ok; k++) {
+        char *jp = g_build_filename(k ? top : dir, "gain.json", NULL);
+        ok = model_write_json(jp, root);
+        g_free(jp);
+    }
+    if (ok && o->report) ok = calib_gain_report(dir, an, ngains, &maps, prov);
+    if (!ok) goto done;
+    *r = (calib_gain_result_t){ .system_gain_dn_per_e = an[0].ptc.system_gain_dn_per_e,
+                                .read_noise_e = an[0].ptc.read_noise_e, .saturation_dn = an[0].ptc.saturation_dn,
+                                .linearity_error_pct = an[0].ptc.linearity_error_pct, .dsnu_dn = maps.dsnu_dn,
+                                .prnu_pct = maps.prnu_pct };
+    snprintf(r->camera, sizeof r->camera, "%s", d->camera);
+    snprintf(r->dir, sizeof r->dir, "%s", dir);
+done:
+    for (int i = 0; an && i < ngains; i++) calib_gain_an_free(&an[i]);
+    free(an);
+    calib_gain_maps_free(&maps);
+    json_decref(root);
+    return ok;
+}
+
+bool calib_gain_run(const calib_gain_opts_t *o, calib_gain_result_t *r, int max, int *n)
+{
+    *n = 0;
     if (o->rig && o->steps < o->min_steps) {
         model_error_set(NULL, 0, "too few sweep steps: --steps %d, EMVA 1288 asks for at least %d (--min-steps)",
                         o->steps, o->min_steps);
         return false;
     }
-    calib_gain_data_t d = { 0 };
-    memcpy(d.roi, o->roi, sizeof d.roi);
-    calib_gain_an_t *an = NULL;
-    int ngains = 0;
-    calib_gain_maps_t maps = { 0 };
-    json_t *facts = NULL, *prov = NULL, *root = NULL;
+    calib_gain_source_t *src = NULL;
+    int nsrc = 0, nc = 0;
+    char names[CALIB_GAIN_MAX_CAMERAS][32];
+    json_t *facts = NULL, *prov = NULL;
     bool ok = false;
-    const char *truth = NULL;
-    double t_start = model_now_s(), truth_per_lamp;
-    if (!model_mkdir_p(o->out)) goto done;
+    double t_start = model_now_s();
+    if (!model_mkdir_p(o->out)) return false;
     prov = model_provenance(o->argc, o->argv);
-    if (!gather_frames(o, &d, prov, &facts)) goto done;
-    calib_gain_make_groups(&d);
-    fprintf(stderr, "refl calib gain: analysing %d frames (%d exposure groups)\n", d.nf, d.ng);
-    if (!calib_gain_frame_stats(&d) || !analyse_all(o, &d, facts, &an, &ngains)) goto done;
-    if (!calib_gain_make_maps(&d, &an[0], &maps) || !calib_gain_write_maps(o->out, &maps)) goto done;
-    calib_gain_truth_radiance(facts, &truth, &truth_per_lamp);
-    root = calib_gain_json(o, &d, an, ngains, &maps, truth, prov);
-    char *jp = g_build_filename(o->out, "gain.json", NULL);
-    ok = model_write_json(jp, root);
-    g_free(jp);
-    if (ok && o->report) ok = calib_gain_report(o->out, an, ngains, &maps, prov);
-    if (!ok) goto done;
-    fprintf(stderr, "refl calib gain: wrote %s/gain.json (%.1f s)\n", o->out, model_now_s() - t_start);
-    *r = (calib_gain_result_t){ an[0].ptc.system_gain_dn_per_e, an[0].ptc.read_noise_e, an[0].ptc.saturation_dn,
-                                an[0].ptc.linearity_error_pct, maps.dsnu_dn, maps.prnu_pct };
+    if (o->frames) {
+        calib_gain_data_t d = { 0 };
+        memcpy(d.roi, o->roi, sizeof d.roi);
+        ok = manifest_frames(o, &d, prov) && max > 0 && run_one(o, &d, NULL, prov, o->out, NULL, &r[0]);
+        calib_gain_data_free(&d);
+        *n = ok;
+        goto done;
+    }
+    if (!gather_sources(o, prov, &src, &nsrc) || !(nc = run_cameras(o, src, nsrc, names))) goto done;
+    ok = true;
+    for (int k = 0; k < nc && ok; k++) {
+        calib_gain_data_t d = { 0 };
+        memcpy(d.roi, o->roi, sizeof d.roi);
+        for (int i = 0; i < nsrc && ok; i++) ok = calib_gain_add_session(&d, src[i].dir, names[k], src[i].set, &facts);
+        char *dir = nc > 1 ? g_build_filename(o->out, names[k], NULL) : g_strdup(o->out);
+        calib_gain_result_t rk;
+        ok = ok && run_one(o, &d, facts, prov, dir, nc > 1 && k == 0 ? o->out : NULL, &rk);
+        if (ok && *n < max) r[(*n)++] = rk;
+        g_free(dir);
+        calib_gain_data_free(&d);
+    }
 done:
-    for (int i = 0; an && i < ngains; i++) calib_gain_an_free(&an[i]);
-    free(an);
-    calib_gain_maps_free(&maps);
-    calib_gain_data_free(&d);
+    if (ok) fprintf(stderr, "refl calib gain: wrote %s/gain.json (%.1f s)\n", o->out, model_now_s() - t_start);
+    calib_gain_sources_free(src, nsrc);
     json_decref(facts);
     json_decref(prov);
-    json_decref(root);
     return ok;
 }

@@ -90,6 +90,7 @@ typedef struct {
     const char *const *sessions;     // capture sessions made elsewhere (nsessions), or NULL
     int          nsessions;
     const char  *out;                // the output directory (created)
+    const char  *camera;             // rig or sessions: calibrate this camera only (NULL: every camera)
     const double *gains_db;          // rig: the gains to sweep, the first the reference; frames: its one label
     int          ngains;
     const double *dark_exposures_us; // rig: the long dark exposures (dark current)
@@ -116,13 +117,22 @@ typedef struct {
 // NAN, max_dn 65535, quant_dn 1, report.
 calib_gain_opts_t calib_gain_defaults(void);
 
-// The reference gain's figures (the first of the run).
+// The reference gain's figures (the first of the run) of one camera.
 typedef struct {
+    char   camera[32];               // the camera's name ("" for a manifest's frames)
+    char   dir[4096];                // where its gain.json is
     double system_gain_dn_per_e, read_noise_e, saturation_dn, linearity_error_pct, dsnu_dn, prnu_pct;
 } calib_gain_result_t;
 
-// The whole calibration: DIR/gain.json, the maps, the report. false + message.
-bool calib_gain_run(const calib_gain_opts_t *o, calib_gain_result_t *r);
+#define CALIB_GAIN_MAX_CAMERAS 8
+
+// The whole calibration: gain.json, the maps and the report of every camera
+// (o->camera NULL) or of o->camera. The sessions' frames of one camera go to
+// o->out itself; of several, camera NAME's to o->out/NAME/ (gain.json, maps,
+// report.html), and the first camera's gain.json and maps also to o->out (the
+// layout of one camera, which a calibration set reads without a camera
+// selector). r gets up to max cameras' figures (*n of them). false + message.
+bool calib_gain_run(const calib_gain_opts_t *o, calib_gain_result_t *r, int max, int *n);
 
 // ---------------------------------------------------------------------------
 // Stages
@@ -143,6 +153,13 @@ typedef struct {
     int    max_dn;        // full scale of the frame's pixel format
     int    nlamps;        // lamps on (session frames: from the lamp set; -1 unknown)
 } calib_gain_frame_t;
+
+// A session of the run and the role of its frames (calib_gain_capture).
+typedef struct {
+    char *dir;
+    int   set;            // CALIB_GAIN_SET_*
+    const char *role;     // its provenance role (static)
+} calib_gain_source_t;
 
 // The frames of one exposure, gain, kind and role.
 typedef struct {
@@ -165,18 +182,28 @@ typedef struct {
     calib_gain_group_t *g;
     int                 ng;
     int                 roi[4];     // x y w h (w 0: whole frame)
+    char                camera[32]; // the frames' camera ("": a manifest)
+    char                gain_unit[16];   // the unit of the frames' gain (GenICam's; "dB" for a manifest)
 } calib_gain_data_t;
 
 void calib_gain_data_free(calib_gain_data_t *d);
 // Frames of a manifest (gain 0; max_dn their full scale). false + message (file:line).
 bool calib_gain_read_manifest(const char *path, int max_dn, calib_gain_data_t *d);
-// Frames of a session; set: their role (CALIB_GAIN_SET_ANY: dark = no lamp
-// on). *facts_out (may be NULL) gets the first session's facts (a reference).
-bool calib_gain_add_session(calib_gain_data_t *d, const char *dir, int set, json_t **facts_out);
+// Frames of camera `camera` (NULL: the session's first) of a session; set:
+// their role (CALIB_GAIN_SET_ANY: dark = no lamp on). d->camera and
+// d->gain_unit are set from them (frames of another gain unit than d's
+// earlier ones: an error). *facts_out (may be NULL) gets the first session's
+// facts (a reference).
+bool calib_gain_add_session(calib_gain_data_t *d, const char *dir, const char *camera, int set,
+                            json_t **facts_out);
 // Capture on o->rig: per gain a probe and a sweep, then at the first gain the
-// flat field and long darks, into o->out; their frames into d, the sessions
-// into prov. false + message.
-bool calib_gain_capture(const calib_gain_opts_t *o, calib_gain_data_t *d, json_t *prov, json_t **facts);
+// flat field and long darks, into o->out; the sessions into *src (*nsrc; free
+// with calib_gain_sources_free) and prov. With several cameras the sweep's
+// exposures are the union of each camera's (each reaching 1.2 x its own
+// full-scale estimate) and the flat field is near 50 % of full scale for the
+// most sensitive. false + message.
+bool calib_gain_capture(const calib_gain_opts_t *o, json_t *prov, calib_gain_source_t **src, int *nsrc);
+void calib_gain_sources_free(calib_gain_source_t *src, int n);
 // Group the frames (exposure, gain, dark, role).
 void calib_gain_make_groups(calib_gain_data_t *d);
 // Every group's mean and temporal variance (reads every frame, in threads).

@@ -283,12 +283,12 @@ static bool observe_frame(observe_t *ob, int f, const model_pixel_info_t *pw, co
         goto done;
     }
     double sat = 0.95 * (cal->saturation_dn > 0 ? cal->saturation_dn : bits_full(r->pixel_format));
-    // the gain as a factor, by the frame's unit (model_gain_factor; the
-    // calibration's sensitivity is at 0 dB)
+    // the gain as a factor relative to the gain calibration's gain (gain.json
+    // gain_db and gain_unit), by the frame's unit (model_gain_factor)
     char what[512];
     snprintf(what, sizeof what, "%s/%s (step %d)", ob->session_dir, r->file, r->step);
     double gf;
-    if (!model_gain_factor(r->gain, r->gain_unit, 0, "dB", what, &gf)) goto done;
+    if (!model_gain_factor(r->gain, r->gain_unit, cal->cal_gain, cal->cal_gain_unit, what, &gf)) goto done;
     for (int w = 0; w < ob->nw; w++) {
         if (taken[(size_t)w * nl + lamp]) continue;
         calib_obs_t obs;
@@ -372,7 +372,7 @@ bool calib_observe(const char *session_dir, const calib_set_t *cal, const calib_
     int *order = NULL;
     bool *done_row = NULL;
     observe_t ob = { .session_dir = session_dir, .cal = cal, .o = &o, .out = out };
-    rig_session_t *s = rig_session_open_camera(session_dir, NULL);   // the first camera's frames
+    rig_session_t *s = rig_session_open_camera(session_dir, cal->camera[0] ? cal->camera : NULL);   // NULL: the first
     if (!s) goto done;
     ob.s = s;
     if (!(plan = rig_plan_parse(s->plan_text, strlen(s->plan_text), session_dir))) goto done;
@@ -414,12 +414,12 @@ done:
     return ok;
 }
 
-bool calib_observe_session(const char *session_dir, const char *calib_dir, bool need_white,
+bool calib_observe_session(const char *session_dir, const char *calib_dir, const char *camera, bool need_white,
                            const calib_observe_options_t *opt, calib_set_t **cal, calib_obs_set_t *out)
 {
     memset(out, 0, sizeof *out);
     bool quiet = model_error_quiet_thread(true);   // the caller reports the message
-    *cal = calib_set_load(calib_dir, need_white);
+    *cal = calib_set_load_camera(calib_dir, camera, need_white);
     model_error_quiet_thread(quiet);
     return *cal && calib_observe(session_dir, *cal, opt, out);
 }

@@ -25,6 +25,7 @@ bool calib_white(const calib_obs_set_t *obs, const calib_set_t *cal, double albe
                                                   "(R in 1/sr / d^2 in mm^2), so P - Pa = kc_I_per_us * t_us * "
                                                   "10^(gain_dB/20) * g(x,y) * R / d^2"));
     json_object_set_new(top, "albedo", json_real(albedo));
+    if (cal->camera[0]) json_object_set_new(top, "camera", json_string(cal->camera));
     json_object_set_new(top, "sample", json_string(obs->sample));
     json_t *arr = json_array();
     double *v = malloc((size_t)obs->n * sizeof *v);

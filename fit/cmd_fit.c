@@ -150,6 +150,8 @@ static void print_material(const fit_material_opts_t *o, const fit_material_resu
     if (!r->observed) return;
     printf("refl fit material: %s: %d BRDF samples from %d frames (%d skipped)\n", r->material, r->nsamples,
            r->frames_used, r->frames_skipped);
+    for (int k = 0; r->ncameras > 1 && k < r->ncameras; k++)
+        printf("  camera %s: %d observations\n", r->cameras[k], r->nobs_camera[k]);
     if (r->have_gain) {
         printf("  expected residual RMS from the sensor's noise alone: %.4g 1/sr\n", r->noise_rms);
         printf("  response compression corrected: S_m = S (1 - a S), a = %.4g per DN at 0 dB%s\n", r->nonlin_a_per_dn,
@@ -177,6 +179,9 @@ int fit_cmd_material(int argc, char **argv)
         MODEL_OPT_STRING("--calib", "DIR", "the calibrations: camera.cameramodel, lamps.json, white.json, optionally "
                          "gain.json and its maps (DIR or DIR/geometry, DIR/lamps, DIR/white, DIR/gain)", &o.calib, true),
         MODEL_OPT_STRING("-o", "PRIORS.json", "the priors file to write", &o.out, true),
+        MODEL_OPT_STRING("--camera", "NAME", "only camera NAME's frames of a session of several (default every "
+                         "camera's, each with its calibrations: DIR/NAME.cameramodel, DIR/NAME/white.json, "
+                         "DIR/NAME/gain.json)", &o.camera, false),
         MODEL_OPT_STRING("--scene", "FILE", "the sample's scene (rig frame, mm; a session records none)", &o.scene,
                          false),
         MODEL_OPT_STRING("--material", "NAME", "its material in the scene (default: the scene's only material)",
@@ -208,7 +213,9 @@ int fit_cmd_material(int argc, char **argv)
                  "--albedo-cells MM (textured materials: wood, paint): the sample's surface is cut into cells of MM mm,\n"
                  "each with its own albedo factor on the whole reflectance (mean 1 over the observations), fitted\n"
                  "together with the parameters; the priors then hold the mean material and the factors' spread.\n"
-                 "Observations are windows of N x N pixels (--window, default 5) on a grid of N pixels (--step, 8).",
+                 "Observations are windows of N x N pixels (--window, default 5) on a grid of N pixels (--step, 8).\n"
+                 "A session of several cameras: every camera's frames in one fit, each camera's through its own\n"
+                 "calibrations in DIR (refl calib gain / white / geometry of that camera); --camera NAME takes one.",
     };
     int rc = model_cli_parse(&cli, argc, argv);
     if (rc != MODEL_CLI_OK) return rc;

@@ -23,6 +23,8 @@ static const char about[] =
     "Images: 16-bit PNG frames as refl capture and refl rig snap write them (their text chunks give the\n"
     "turntable angle, the lamps that were on, the exposure and the gain; --angle-deg, --lamps-on,\n"
     "--exposure-us, --gain-db override for every image), or float TIFFs with those options.\n"
+    "With --calib DIR of several cameras (DIR/NAME.cameramodel, DIR/NAME/gain.json, DIR/NAME/white.json) and\n"
+    "no --cameras, each frame goes to the camera its text names (camera_name) with that camera's calibrations.\n"
     "\n"
     "       refl verify --study -o DIR [--truth TRUTH.ini] [--cases N] [--threads N]\n"
     "runs the detection study on the virtual rig instead (make study).";
@@ -150,7 +152,8 @@ int verify_cmd(int argc, char **argv)
                          -1e4, 1e4),
         MODEL_OPT_STRING("--lamps-on", "NAMES", "lamps on in every image (east+west, all)", &o.lamps_on, false),
         MODEL_OPT_DOUBLE("--exposure-us", "T", "exposure of every image", &o.exposure_us, 1e-3, 1e9),
-        MODEL_OPT_DOUBLE("--gain-db", "G", "gain of every image", &o.gain_db, 0, 60),
+        MODEL_OPT_DOUBLE("--gain-db", "G", "gain of every image, dB (taken relative to the gain calibration's)",
+                         &o.gain_db, 0, 60),
         MODEL_OPT_INT("--spacing-px", "N", "grid step of the reference points (8)", &op->spacing_px, 1, 1000),
         MODEL_OPT_INT("--window-px", "N", "window side, odd (5)", &op->window_px, 1, 99),
         MODEL_OPT_DOUBLE("--edge-margin-px", "D", "skip windows this close to predicted edges (2)",

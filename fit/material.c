@@ -12,6 +12,7 @@
 
 #include "calib/calib.h"
 #include "fit/material.h"
+#include "rig/session.h"
 #include "model/report.h"
 #include "model/vec.h"
 
@@ -275,8 +276,77 @@ void fit_material_result_free(fit_material_result_t *r)
     if (r) memset(r, 0, sizeof *r);
 }
 
-// The observations of the session (calib_observe_session) and their BRDF
-// samples R = s d^2 / kcI; the expected noise RMS with a gain calibration.
+// The cameras of o->session to observe: o->camera, else every camera of the
+// session (names; NULL entries: a session of one camera, read with the
+// calibration directory's plain layout). Their number, 0 on error.
+static int material_cameras(const fit_material_opts_t *o, const char *names[8], char store[8][32])
+{
+    if (o->camera) {
+        snprintf(store[0], 32, "%s", o->camera);
+        names[0] = store[0];
+        return 1;
+    }
+    rig_session_t *s = rig_session_open(o->session);
+    if (!s) return 0;
+    const char *nm[8];
+    int nc = rig_session_cameras(s, nm, 8);
+    if (nc > 8) {
+        model_error_set(o->session, 0, "%d cameras: the fit takes at most 8 (give --camera NAME)", nc);
+        nc = 0;
+    }
+    for (int k = 0; k < nc; k++) {
+        snprintf(store[k], 32, "%s", nm[k]);
+        names[k] = nc > 1 ? store[k] : NULL;
+    }
+    if (nc == 0 && s->n == 0) model_error_set(o->session, 0, "the session has no frames");
+    if (nc == 1) names[0] = NULL;
+    rig_session_free(s);
+    return nc;
+}
+
+// One camera's observations (through c) as BRDF samples R = s d^2 / kcI into
+// smp; *v2 += the squares of their expected noise.
+static bool camera_samples(const calib_set_t *c, const calib_obs_set_t *ob, fit_samples_t *smp, double *v2)
+{
+    for (int i = 0; i < ob->n; i++) {
+        const calib_obs_t *b = &ob->o[i];
+        if (!fit_samples_add_disc(smp, &b->c, b->has_disc ? b->disc : NULL,
+                                  b->s_dn_per_us * b->d_mm * b->d_mm / c->kcI_per_us[b->lamp], 1)) {
+            model_error_set(NULL, 0, "observation %d (step %d%s%s) gives no usable sample (kc*I of lamp %s is %g)",
+                            i, b->step, c->camera[0] ? ", camera " : "", c->camera, c->lamps->lamps[b->lamp].name,
+                            c->kcI_per_us[b->lamp]);
+            return false;
+        }
+        double sr = b->s_std * b->d_mm * b->d_mm / c->kcI_per_us[b->lamp];
+        *v2 += sr * sr;
+    }
+    return true;
+}
+
+// ob's observations appended to obs (ob emptied).
+static bool obs_append(calib_obs_set_t *obs, calib_obs_set_t *ob)
+{
+    calib_obs_t *o2 = realloc(obs->o, sizeof *o2 * (size_t)(obs->n + ob->n + 1));
+    if (!o2) {
+        model_error_set(NULL, 0, "out of memory");
+        return false;
+    }
+    obs->o = o2;
+    memcpy(obs->o + obs->n, ob->o, sizeof *o2 * (size_t)ob->n);
+    obs->n += ob->n;
+    obs->cap = obs->n;
+    obs->frames_used += ob->frames_used;
+    obs->frames_skipped += ob->frames_skipped;
+    snprintf(obs->sample, sizeof obs->sample, "%s", ob->sample);
+    snprintf(obs->material, sizeof obs->material, "%s", ob->material);
+    calib_obs_free(ob);
+    return true;
+}
+
+// The observations of the session (calib_observe_session, each camera's
+// through its calibrations) and their BRDF samples R = s d^2 / kcI; the
+// expected noise RMS when every camera has a gain calibration. *cal: the
+// first camera's set, its inputs listing every camera's files.
 static bool material_samples(const fit_material_opts_t *o, calib_set_t **cal, calib_obs_set_t *obs,
                              fit_samples_t **smp, fit_material_result_t *r)
 {
@@ -286,22 +356,37 @@ static bool material_samples(const fit_material_opts_t *o, calib_set_t **cal, ca
     co.verbose = o->verbose;
     if (o->window > 0) co.window = o->window;
     if (o->step > 0) co.step = o->step;
-    if (!calib_observe_session(o->session, o->calib, true, &co, cal, obs)) return false;
+    memset(obs, 0, sizeof *obs);
+    const char *names[8];
+    char store[8][32];
+    int nc = material_cameras(o, names, store);
+    if (!nc) return false;
     if (!(*smp = fit_samples_new())) {
         model_error_set(NULL, 0, "out of memory");
         return false;
     }
     snprintf((*smp)->source, sizeof (*smp)->source, "%s", o->session);
-    const calib_set_t *c = *cal;
-    for (int i = 0; i < obs->n; i++) {
-        const calib_obs_t *b = &obs->o[i];
-        if (!fit_samples_add_disc(*smp, &b->c, b->has_disc ? b->disc : NULL,
-                                  b->s_dn_per_us * b->d_mm * b->d_mm / c->kcI_per_us[b->lamp], 1)) {
-            model_error_set(NULL, 0, "observation %d (step %d) gives no usable sample (kc*I of lamp %s is %g)", i,
-                            b->step, c->lamps->lamps[b->lamp].name, c->kcI_per_us[b->lamp]);
-            return false;
+    double v2 = 0;
+    bool all_gain = true;
+    for (int k = 0; k < nc; k++) {
+        calib_set_t *ck = NULL;
+        calib_obs_set_t ob;
+        bool ok = calib_observe_session(o->session, o->calib, names[k], true, &co, &ck, &ob) &&
+                  camera_samples(ck, &ob, *smp, &v2);
+        if (ok) {
+            snprintf(r->cameras[k], sizeof r->cameras[k], "%s", store[k]);
+            r->nobs_camera[k] = ob.n;
+            r->ncameras = k + 1;
+            all_gain &= ck->gain_dn_per_e > 0;
+            ok = obs_append(obs, &ob);
         }
+        calib_obs_free(&ob);
+        if (ok && k == 0) *cal = ck;
+        else if (ok) json_array_extend((*cal)->inputs, ck->inputs);
+        if (k > 0 || !ok) calib_set_free(ck);
+        if (!ok) return false;
     }
+    const calib_set_t *c = *cal;
     r->observed = true;
     snprintf(r->sample, sizeof r->sample, "%s", obs->sample);
     snprintf(r->material, sizeof r->material, "%s", obs->material);
@@ -309,13 +394,8 @@ static bool material_samples(const fit_material_opts_t *o, calib_set_t **cal, ca
     r->nsamples = (*smp)->n;
     r->frames_used = obs->frames_used;
     r->frames_skipped = obs->frames_skipped;
-    // the residual RMS the sensor's temporal noise alone would give (with a gain calibration)
-    if (c->gain_dn_per_e > 0) {
-        double v2 = 0;
-        for (int i = 0; i < obs->n; i++) {
-            double sr = obs->o[i].s_std * obs->o[i].d_mm * obs->o[i].d_mm / c->kcI_per_us[obs->o[i].lamp];
-            v2 += sr * sr;
-        }
+    // the residual RMS the sensor's temporal noise alone would give (with gain calibrations)
+    if (all_gain && obs->n > 0) {
         r->have_gain = true;
         r->noise_rms = sqrt(v2 / obs->n);
         r->nonlin_a_per_dn = c->nonlin_a_per_dn;

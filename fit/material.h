@@ -23,6 +23,8 @@ extern "C" {
 typedef struct {
     const char *session;    // capture session directory of the sample
     const char *calib;      // calibration directory (calib_set_load; white.json required)
+    const char *camera;     // one camera of a session of several (NULL: every camera of the session, each
+                            // through its own calibrations, calib_set_load_camera; one camera: calib_set_load)
     const char *scene;      // the sample's scene (a session records none; NULL is an error)
     const char *material;   // its material in the scene; NULL: the scene's only one
     const char *model;      // "all" (default) or one model's name (fit_brdf_model_list)
@@ -46,6 +48,9 @@ typedef struct {
     bool              observed;
     char              sample[64], material[64];
     int               nobs, nsamples, frames_used, frames_skipped;
+    int               ncameras;         // the cameras whose frames were observed, and each one's observations
+    char              cameras[8][32];
+    int               nobs_camera[8];
     // with a gain calibration: the residual RMS its temporal noise alone gives (1/sr; NAN without one)
     // and the response compression corrected (per DN at 0 dB; 0: none)
     bool              have_gain;
@@ -64,8 +69,10 @@ typedef struct {
 } fit_material_result_t;
 
 // The material fit (`refl fit material`): observations of o->session through
-// the calibrations of o->calib (calib_observe_session), BRDF samples R = s d^2
-// / kcI (1/sr), every model of o->model fitted (and, with albedo cells, again
+// the calibrations of o->calib (calib_observe_session; of several cameras:
+// every camera's, each through its own camera model, gain and white, in one
+// fit), BRDF samples R = s d^2 / kcI (1/sr, kcI of the observation's
+// camera), every model of o->model fitted (and, with albedo cells, again
 // with the cells' factors), the priors file o->out written with the lowest
 // BIC's entry (fit_priors_material) and the provenance, and with o->report
 // the report (samples.csv, plots by scripts/fit_material_report.py,

@@ -913,7 +913,8 @@ static void image_fit_points(fit_t *F, int m, int first_pt, double Pa0, double v
     const verify_image_t *im = &F->imgs[m];
     const verify_camera_t *cm = &F->cams[im->camera];
     const int w = opt->window_px;
-    double gf = image_gain_factor(im), E = im->exposure_us * gf, Kg = cm->K_dn_per_e * gf;
+    double gf = image_gain_factor(im), Kg = cm->K_dn_per_e * gf;
+    double E = im->exposure_us * gf * (cm->kc_rel > 0 ? cm->kc_rel : 1);   // the camera's own sensitivity
     for (int g = 0; g < v->gw * v->gh; g++) {
         int k = first_pt + g;
         verify_point_t *p = &F->out->points[k];

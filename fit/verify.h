@@ -85,6 +85,8 @@ typedef struct {
     double          saturation_dn;  // window maxima at or above are not used
     double          nonlin_a_per_dn;// response compression at 0 dB: measured S_m = S (1 - a S), S the linear
                                     // signal above the offset (DN); inverted before the fit (0: linear)
+    double          kc_rel;         // its sensitivity relative to the lamps' scale kc*I (its own white's over
+                                    // the one given; 0 or 1: the same camera), a factor on its signal
 } verify_camera_t;
 
 typedef struct {

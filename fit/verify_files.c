@@ -80,6 +80,13 @@ typedef struct {
     verify_camera_t            vcs[VERIFY_FILES_MAX];
     int                        ncams;
     float                     *px[VERIFY_FILES_MAX];    // the images' pixels
+    model_meta_t              *meta[VERIFY_FILES_MAX];  // and their metadata (PNG text)
+    char                       img_cam[VERIFY_FILES_MAX][32];   // the rig file's camera each names ("": none)
+    char                       named[VERIFY_FILES_MAX][32];     // the cameras the images name, in their order
+    int                        nnamed;
+    bool                       by_name;    // --calib of several cameras: each image's camera by its name
+    double                     cal_gain[VERIFY_FILES_MAX];      // each camera's gain calibration's gain and unit
+    char                       cal_unit[VERIFY_FILES_MAX][16];
     verify_image_t             imgs[VERIFY_FILES_MAX];
     verify_view_t             *views[VERIFY_FILES_MAX]; // images of one camera and angle share one
     model_material_t          *mean_mats;  // the priors' means
@@ -93,6 +100,7 @@ static void vf_free(vf_t *V)
         for (int k = 0; k < m; k++) shared |= V->views[k] == V->views[m];
         if (!shared) verify_view_free(V->views[m]);
         free(V->px[m]);
+        model_meta_free(V->meta[m]);
     }
     for (int c = 0; c < V->ncams; c++)
         if (V->cal[c] != V->base) calib_set_free(V->cal[c]);
@@ -219,9 +227,84 @@ static bool vf_scale(vf_t *V)
 
 // The cameras: --cameras (one, or one per image) with --gain-calib (none, one, or one per camera), else the
 // calibration directory's; without --gain-calib the directory's gain calibration applies to a given camera too.
+// One camera's calibration into V->vcs[c] (g: its gain calibration's set).
+static void vf_camera_fill(vf_t *V, int c, const calib_set_t *cal, const calib_set_t *g)
+{
+    verify_camera_t *vc = &V->vcs[c];
+    vc->cam = cal->cam;
+    bool same_size = g->W == cal->W && g->H == cal->H;
+    vc->offset_dn = same_size ? g->offset_dn : NULL;
+    vc->flat = same_size ? g->flat : NULL;
+    vc->K_dn_per_e = g->gain_dn_per_e;
+    vc->read_noise_e = g->read_noise_e;
+    vc->saturation_dn = g->saturation_dn;
+    vc->nonlin_a_per_dn = g->nonlin_a_per_dn;
+    vc->kc_rel = 1;
+    V->cal_gain[c] = g->cal_gain;
+    snprintf(V->cal_unit[c], sizeof V->cal_unit[c], "%s", g->cal_gain_unit);
+}
+
+// --calib DIR of several cameras: camera c is the c-th the images name, with
+// its own calibrations (calib_set_load_camera); its sensitivity relative to
+// the lamps' scale (the first camera's white) is the mean ratio of its own
+// white's kc*I to that scale over the lamps.
+static bool vf_cameras_by_name(vf_t *V)
+{
+    const verify_files_opts_t *o = V->o;
+    if (o->ngain) {
+        model_error(o->calib, 0, "--gain-calib with the calibrations of several cameras: each camera's gain "
+                    "calibration is its own there (NAME/gain.json)");
+        return false;
+    }
+    for (int c = 0; c < V->nnamed; c++) {
+        V->cal[c] = c == 0 ? V->base : calib_set_load_camera(o->calib, V->named[c], false);
+        if (!V->cal[c]) return false;
+        V->ncams = c + 1;
+        const calib_set_t *cal = V->cal[c];
+        g_strlcpy(V->vcs[c].name, V->named[c], sizeof V->vcs[c].name);
+        vf_camera_fill(V, c, cal, cal);
+        bool own_scale = !o->white && !(o->kc_per_us > 0);
+        if (c > 0 && own_scale && cal->have_white) {
+            double r = 0;
+            int n = 0;
+            for (int i = 0; i < V->lamps->n && i < 32; i++) {
+                int j = model_lamps_find(cal->lamps, V->lamps->lamps[i].name);
+                if (j >= 0 && cal->kcI_per_us[j] > 0 && V->A[i] > 0) r += cal->kcI_per_us[j] / V->A[i], n++;
+            }
+            if (n) V->vcs[c].kc_rel = r / n;
+        } else if (c > 0 && own_scale) {
+            model_error(o->calib, 0, "camera %s has no white calibration (%s/white.json): its sensitivity is "
+                        "unknown; run refl calib white --camera %s", V->named[c], V->named[c], V->named[c]);
+            return false;
+        }
+        for (size_t k = 0; c > 0 && k < json_array_size(cal->inputs); k++) {
+            json_t *e = json_array_get(cal->inputs, k);
+            model_provenance_input(V->prov, json_string_value(json_object_get(e, "role")),
+                                   json_string_value(json_object_get(e, "path")));
+        }
+    }
+    for (size_t k = 0; k < json_array_size(V->base->inputs); k++) {
+        json_t *e = json_array_get(V->base->inputs, k);
+        model_provenance_input(V->prov, json_string_value(json_object_get(e, "role")),
+                               json_string_value(json_object_get(e, "path")));
+    }
+    for (int m = 0; m < V->o->nimages; m++) {
+        V->imgs[m].camera = -1;
+        for (int c = 0; c < V->nnamed; c++)
+            if (!strcmp(V->img_cam[m], V->named[c])) V->imgs[m].camera = c;
+        if (V->imgs[m].camera < 0) {
+            model_error(V->imgs[m].name, 0, "the image names no camera (no camera_name in its text) and the "
+                        "calibrations are of several cameras: give --cameras");
+            return false;
+        }
+    }
+    return true;
+}
+
 static bool vf_cameras(vf_t *V)
 {
     const verify_files_opts_t *o = V->o;
+    if (V->by_name) return vf_cameras_by_name(V);
     int want = o->ncameras ? o->ncameras : 1;
     if (o->ngain > 1 && o->ngain != want) {
         model_error(NULL, 0, "%d gain calibrations for %d cameras: give one, or one per camera", o->ngain, want);
@@ -246,18 +329,11 @@ static bool vf_cameras(vf_t *V)
         }
         if (!V->cal[c]) return false;
         const calib_set_t *cal = V->cal[c], *g = o->ngain ? cal : V->base ? V->base : cal;
-        verify_camera_t *vc = &V->vcs[c];
-        snprintf(vc->name, sizeof vc->name, "%d", c);
-        vc->cam = cal->cam;
-        bool same_size = g->W == cal->W && g->H == cal->H;
-        vc->offset_dn = same_size ? g->offset_dn : NULL;
-        vc->flat = same_size ? g->flat : NULL;
-        vc->K_dn_per_e = g->gain_dn_per_e;
-        vc->read_noise_e = g->read_noise_e;
-        vc->saturation_dn = g->saturation_dn;
-        vc->nonlin_a_per_dn = g->nonlin_a_per_dn;
+        snprintf(V->vcs[c].name, sizeof V->vcs[c].name, "%d", c);
+        vf_camera_fill(V, c, cal, g);
         V->ncams++;
     }
+    for (int m = 0; m < o->nimages; m++) V->imgs[m].camera = V->ncams == 1 ? 0 : m;
     for (size_t k = 0; V->base && k < json_array_size(V->base->inputs); k++) {
         json_t *e = json_array_get(V->base->inputs, k);
         model_provenance_input(V->prov, json_string_value(json_object_get(e, "role")),
@@ -309,11 +385,13 @@ static float *read_pixels(const char *path, int *W, int *H, model_meta_t *meta)
     return px;
 }
 
-// The gain of the metadata, in dB relative to the calibration (at 0 dB):
-// "gain" ("6", or "6 UNIT") in the unit of "gain_unit" (else the one after the
-// number; neither: dB, as refl wrote frames before it kept the unit),
-// converted by model_gain_factor. false + message naming the image.
-static bool meta_gain_db(const char *path, const char *ga, const char *unit, double *gain_db)
+// The gain of the metadata, in dB relative to the gain calibration's gain
+// (cal_gain in cal_unit): "gain" ("6", or "6 UNIT") in the unit of
+// "gain_unit" (else the one after the number; neither: dB, as refl wrote
+// frames before it kept the unit), converted by model_gain_factor. false +
+// message naming the image.
+static bool meta_gain_db(const char *path, const char *ga, const char *unit, double cal_gain, const char *cal_unit,
+                         double *gain_db)
 {
     double g;
     char tmp[64], suffix[32] = "";
@@ -328,7 +406,7 @@ static bool meta_gain_db(const char *path, const char *ga, const char *unit, dou
         return false;
     }
     double f;
-    if (!model_gain_factor(g, unit && *unit ? unit : suffix, 0, "dB", path, &f)) {
+    if (!model_gain_factor(g, unit && *unit ? unit : suffix, cal_gain, cal_unit, path, &f)) {
         model_error(NULL, 0, "%s", model_last_error());
         return false;
     }
@@ -365,29 +443,58 @@ static bool image_conditions(const vf_t *V, verify_image_t *im, const model_meta
         model_error(path, 0, "no exposure_us in the image's metadata: give --exposure-us");
         ok = false;
     }
-    if (o->have_gain) im->gain_db = o->gain_db;
-    else if (ga && !meta_gain_db(path, ga, model_meta_get(meta, "gain_unit"), &im->gain_db)) ok = false;
+    char given[64];
+    snprintf(given, sizeof given, "%.10g dB", o->gain_db);   // --gain-db: the camera's gain in dB
+    if (o->have_gain) ga = given;
+    if (ga && !meta_gain_db(path, ga, o->have_gain ? "dB" : model_meta_get(meta, "gain_unit"),
+                            V->cal_gain[im->camera], V->cal_unit[im->camera], &im->gain_db))
+        ok = false;
     return ok;
 }
 
-// Image m: its pixels and conditions.
-static bool vf_image(vf_t *V, int m)
+// Image m: its pixels and metadata, and the camera it names (the rig file's, "camera_name").
+static bool vf_read_image(vf_t *V, int m)
 {
     verify_image_t *im = &V->imgs[m];
     const char *path = V->o->images[m];
     snprintf(im->name, sizeof im->name, "%s", path);
-    im->camera = V->ncams == 1 ? 0 : m;
-    model_meta_t *meta = model_meta_new();
-    V->px[m] = read_pixels(path, &im->W, &im->H, meta);
+    V->meta[m] = model_meta_new();
+    V->px[m] = read_pixels(path, &im->W, &im->H, V->meta[m]);
     im->P = V->px[m];
-    bool ok = V->px[m] && image_conditions(V, im, meta);
-    model_meta_free(meta);
-    if (!ok || !model_provenance_input(V->prov, "image", path)) return false;
+    if (!V->px[m] || !model_provenance_input(V->prov, "image", path)) return false;
+    const char *cn = model_meta_get(V->meta[m], "camera_name");   // "left (the rig file's camera)"
+    snprintf(V->img_cam[m], sizeof V->img_cam[m], "%.*s", cn ? (int)strcspn(cn, " ") : 0, cn ? cn : "");
+    bool seen = !V->img_cam[m][0];
+    for (int c = 0; c < V->nnamed && !seen; c++) seen = !strcmp(V->named[c], V->img_cam[m]);
+    if (!seen) snprintf(V->named[V->nnamed++], sizeof V->named[0], "%s", V->img_cam[m]);
+    return true;
+}
+
+// Image m's conditions (its camera known).
+static bool vf_image(vf_t *V, int m)
+{
+    verify_image_t *im = &V->imgs[m];
+    if (!image_conditions(V, im, V->meta[m])) return false;
     if (im->lamps_on == 0) {
-        model_error(path, 0, "no lamp was on: such an image has nothing to verify with (a dark frame?)");
+        model_error(im->name, 0, "no lamp was on: such an image has nothing to verify with (a dark frame?)");
         return false;
     }
     return true;
+}
+
+// --calib DIR: its calibration set; of the first camera the images name when
+// they name several, or one that DIR has its own calibrations of (by_name),
+// but for "camera", a rig's one plain [camera], whose calibrations are the
+// layout of one camera (DIR/camera.cameramodel: also the first camera's of
+// several, as refl calib geometry writes them).
+static bool vf_base(vf_t *V)
+{
+    const verify_files_opts_t *o = V->o;
+    const char *n0 = V->named[0];
+    V->by_name = !o->ncameras && (V->nnamed > 1 || (V->nnamed == 1 && strcmp(n0, "camera") &&
+                                                     calib_set_has_camera(o->calib, n0)));
+    V->base = V->by_name ? calib_set_load_camera(o->calib, V->named[0], false) : calib_set_load(o->calib, false);
+    return V->base != NULL;
 }
 
 // The views (verify_view_new): one per camera and angle, images of both share it.
@@ -453,7 +560,7 @@ static bool synthetic_image(const vf_t *V, const verify_result_t *res, int m, fl
     model_shading_t sh = model_shading_default();
     double gf = 1;   // gain_db: dB relative to the calibration (meta_gain_db); checked by the fit
     model_gain_factor(im->gain_db, "dB", 0, "dB", im->name, &gf);
-    sh.kc = im->exposure_us * gf * res->kc[im->camera];
+    sh.kc = im->exposure_us * gf * res->kc[im->camera] * (vc->kc_rel > 0 ? vc->kc_rel : 1);
     sh.Pa = res->Pa[m];
     sh.gain_map = V->o->opt.use_flat ? vc->flat : NULL;
     sh.nthreads = V->o->opt.threads;
@@ -579,8 +686,9 @@ bool verify_files_run(const verify_files_opts_t *o, verify_files_result_t *r)
     V->o = o;
     V->prov = o->provenance;
     bool ok = vf_scene_priors(V);
+    for (int m = 0; ok && m < o->nimages; m++) ok = vf_read_image(V, m);
     // calibrations: the base directory, then the overrides
-    if (ok && o->calib) ok = (V->base = calib_set_load(o->calib, false)) != NULL;
+    if (ok && o->calib) ok = vf_base(V);
     ok = ok && vf_lamps(V) && vf_scale(V) && vf_cameras(V);
     for (int m = 0; ok && m < o->nimages; m++) ok = vf_image(V, m);
     ok = ok && vf_views(V) &&

@@ -16,7 +16,9 @@
 #include <jansson.h>
 #include <limits.h>
 #include <stdlib.h>
+#include <unistd.h>
 
+#include "calib/calib.h"
 #include "calib/gain.h"
 #include "model/model.h"
 #include "rig/rig.h"
@@ -379,6 +381,106 @@ static const char *gen_manifest(const char *sub, const gen_t *g)
     return r;
 }
 
+// calib_gain_two_cameras: the calibration of both cameras of the in-process
+// 2-camera virtual rig (examples/virtual-truth-2cam.ini: sensors [sensor] and
+// [sensor right]) in one run: each camera's K within 2 % and read noise within
+// 5 % of its own truth sensor, each into DIR/NAME/, DIR/gain.json the first
+// camera's; gain.json records the gain's value and unit and the camera. Then
+// --camera right on the captured sessions gives its figures again, and an
+// unknown camera is an error naming the session's cameras.
+TEST(calib_gain_two_cameras)
+{
+    char top[PATH_MAX], rig[3 * PATH_MAX];
+    if (!realpath(test_srcdir(), top)) snprintf(top, sizeof top, "%s", test_srcdir());
+    snprintf(rig, sizeof rig, "[rig]\nbackend = virtual\ntruth = %s/examples/virtual-truth-2cam.ini\n"
+             "serve = inprocess\ntime_scale = 0.01\npixel_format = Mono12\n", top);
+    const char *rig_path = test_write("rig-2cam.ini", rig);
+    const char *out = test_path("gain2");
+    char *so = NULL, *se = NULL;
+    double t0 = model_now_s();
+    int rc = test_refl_run(400, &so, &se, "calib", "gain", "--yes", "--rig", rig_path, "-o", out, "--no-report",
+                           "--radiance", "5000", "--dark-exposures-us", "100000,1000000", NULL);
+    fprintf(stderr, "  calib gain --rig (2 cameras): %.1f s\n", model_now_s() - t0);
+    CHECK_MSG(rc == 0, "refl calib gain: %d\n%s", rc, se ? se : "");
+    if (so) {
+        CHECK_CONTAINS(so, "camera left ");
+        CHECK_CONTAINS(so, "camera right ");
+    }
+    free(so);
+    free(se);
+    if (rc) return;
+    // the truth sensors of both cameras
+    char truth[PATH_MAX + 64];
+    snprintf(truth, sizeof truth, "%s/examples/virtual-truth-2cam.ini", top);
+    rig_virtual_t *v = open_truth(truth);
+    if (!v) return;
+    CHECK(rig_virtual_ncameras(v) == 2);
+    model_sensor_t s[2] = { rig_virtual_sensor_params(v), rig_virtual_sensor_params(rig_virtual_camera_view(v, 1)) };
+    rig_virtual_close(v);
+    CHECK(fabs(s[0].system_gain_dn_per_e - s[1].system_gain_dn_per_e) > 0.04);   // the test tells them apart
+    const char *names[2] = { "left", "right" };
+    double K[2] = { NAN, NAN };
+    for (int k = 0; k < 2; k++) {
+        char *jp = g_strdup_printf("%s/%s/gain.json", out, names[k]);
+        json_t *j = json_load_file(jp, 0, NULL);
+        CHECK_MSG(j != NULL, "no %s", jp);
+        g_free(jp);
+        if (!j) continue;
+        K[k] = jnum(j, "system_gain_dn_per_e");
+        fprintf(stderr, "  camera %s: K %.5f DN/e- (truth %.5f), read noise %.4f e- (truth %.4f)\n", names[k], K[k],
+                s[k].system_gain_dn_per_e, jnum(j, "read_noise_e"), s[k].read_noise_e);
+        CHECK_REL(K[k], s[k].system_gain_dn_per_e, 0.02);
+        CHECK_REL(jnum(j, "read_noise_e"), s[k].read_noise_e, 0.05);
+        CHECK(!strcmp(json_string_value(json_object_get(j, "camera")) ?: "", names[k]));
+        CHECK(!strcmp(json_string_value(json_object_get(j, "gain_unit")) ?: "", "dB"));
+        CHECK_NEAR(jnum(j, "gain_db"), 0, 1e-12);
+        int w = 0, h = 0;
+        char *d = g_strdup_printf("%s/%s", out, names[k]);
+        float *m = read_tiff(d, "offset_dn.tiff", &w, &h);
+        CHECK(m && w == (k ? 1024 : 1280) && h == (k ? 768 : 1024));
+        free(m);
+        g_free(d);
+        json_decref(j);
+    }
+    // the top level: the first camera's, as with one camera
+    char *jp = g_strdup_printf("%s/gain.json", out);
+    json_t *j = json_load_file(jp, 0, NULL);
+    g_free(jp);
+    CHECK(j && !strcmp(json_string_value(json_object_get(j, "camera")) ?: "", "left"));
+    if (j) CHECK_NEAR(jnum(j, "system_gain_dn_per_e"), K[0], 1e-12);
+    json_decref(j);
+    // one camera of the captured sessions
+    char *sw = g_strdup_printf("%s/sweep_g0", out), *fl = g_strdup_printf("%s/flat", out),
+         *dk = g_strdup_printf("%s/dark", out);
+    const char *out2 = test_path("gain2-right");
+    rc = test_refl_run(200, &so, &se, "calib", "gain", "--session", sw, "--session", fl, "--session", dk, "--camera",
+                       "right", "-o", out2, "--no-report", NULL);
+    CHECK_MSG(rc == 0, "refl calib gain --camera right: %d\n%s", rc, se ? se : "");
+    free(so);
+    free(se);
+    jp = g_strdup_printf("%s/gain.json", out2);
+    j = json_load_file(jp, 0, NULL);
+    g_free(jp);
+    CHECK(j && !strcmp(json_string_value(json_object_get(j, "camera")) ?: "", "right"));
+    if (j) {   // the same frames (their roles by lamps here: the long darks join the dark model)
+        CHECK_REL(jnum(j, "system_gain_dn_per_e"), K[1], 0.005);
+        CHECK_REL(jnum(j, "system_gain_dn_per_e"), s[1].system_gain_dn_per_e, 0.02);
+    }
+    json_decref(j);
+    rc = test_refl_run(60, &so, &se, "calib", "gain", "--session", sw, "--camera", "middle", "-o",
+                       test_path("gain2-none"), "--no-report", NULL);
+    CHECK(rc == 1);
+    if (se) {
+        CHECK_CONTAINS(se, "no camera 'middle'");
+        CHECK_CONTAINS(se, "left, right");
+    }
+    free(so);
+    free(se);
+    g_free(sw);
+    g_free(fl);
+    g_free(dk);
+}
+
 TEST(calib_gain_manifest)
 {
     model_sensor_t s;
@@ -572,4 +674,77 @@ TEST(calib_gain_truth_radiance_stage)
     json_decref(facts);
     CHECK(!calib_gain_truth_radiance(NULL, &tp, &r));
     CHECK(tp == NULL && isnan(r));
+}
+
+// calib_set_camera_layouts: the calibration set of one camera of a directory
+// of several (calib_set_load_camera): NAME's camera model in any of its
+// places, its own gain calibration (or the top level's when that records
+// NAME, never another camera's), its white; the gain calibration's gain and
+// unit read back; missing and malformed files named.
+TEST(calib_set_camera_layouts)
+{
+    char src[PATH_MAX + 64], top[PATH_MAX];
+    if (!realpath(test_srcdir(), top)) snprintf(top, sizeof top, "%s", test_srcdir());
+    snprintf(src, sizeof src, "%s/examples/camera.cameramodel", top);
+    char *cm = model_read_file(src, NULL);
+    CHECK(cm != NULL);
+    if (!cm) return;
+    const char *lamps = "{\"lamps\": [{\"name\": \"east\", \"position_mm\": [400, 0, 600]}]}\n";
+    static const char *const dirs[] = { "one", "two/geometry", "two/right", "two/lamps", "two/gain/right",
+                                        "two/white/right", "two/left" };
+    for (size_t k = 0; k < sizeof dirs / sizeof dirs[0]; k++) g_mkdir_with_parents(test_path(dirs[k]), 0755);
+    // one camera, as before: no camera, the gain calibration's gain 0 dB
+    test_write("one/camera.cameramodel", cm);
+    test_write("one/lamps.json", lamps);
+    test_write("one/gain.json", "{\"camera\": \"camera\", \"system_gain_dn_per_e\": 0.25, \"read_noise_e\": 6}\n");
+    bool q = model_error_quiet_thread(true);
+    calib_set_t *c = calib_set_load(test_path("one"), false);
+    CHECK(c && !c->camera[0] && c->cal_gain == 0 && !strcmp(c->cal_gain_unit, "dB") && c->gain_dn_per_e == 0.25);
+    calib_set_free(c);
+    // several: left's model in geometry/, its gain the top level's (it records left, at 6 dB); right's
+    // model in right/, its gain in gain/right/ (at 100 raw) and its white in white/right/
+    test_write("two/geometry/left.cameramodel", cm);
+    test_write("two/right/camera.cameramodel", cm);
+    test_write("two/lamps/lamps.json", lamps);
+    test_write("two/gain.json", "{\"camera\": \"left\", \"gain_db\": 6, \"gain_unit\": \"dB\", "
+                                "\"system_gain_dn_per_e\": 0.5, \"read_noise_e\": 6}\n");
+    test_write("two/gain/right/gain.json", "{\"camera\": \"right\", \"gain_db\": 100, \"gain_unit\": \"raw\", "
+                                           "\"system_gain_dn_per_e\": 0.3, \"read_noise_e\": 4}\n");
+    test_write("two/white/right/white.json", "{\"camera\": \"right\", \"lamps\": [{\"name\": \"east\", "
+                                             "\"kc_I_per_us\": 480}]}\n");
+    char two[PATH_MAX];
+    snprintf(two, sizeof two, "%s", test_path("two"));
+    CHECK(calib_set_has_camera(two, "left") && calib_set_has_camera(two, "right"));
+    CHECK(!calib_set_has_camera(two, "middle"));
+    CHECK(calib_set_has_camera(test_path("one"), NULL) && !calib_set_has_camera(two, NULL));
+    c = calib_set_load_camera(two, "left", false);
+    CHECK_MSG(c != NULL, "%s", model_last_error());
+    if (c) {
+        CHECK(!strcmp(c->camera, "left") && c->cal_gain == 6 && !strcmp(c->cal_gain_unit, "dB"));
+        CHECK(c->gain_dn_per_e == 0.5 && !c->have_white);
+    }
+    calib_set_free(c);
+    c = calib_set_load_camera(two, "right", true);
+    CHECK_MSG(c != NULL, "%s", model_last_error());
+    if (c) {
+        CHECK(!strcmp(c->camera, "right") && c->cal_gain == 100 && !strcmp(c->cal_gain_unit, "raw"));
+        CHECK(c->gain_dn_per_e == 0.3 && c->have_white && c->kcI_per_us[0] == 480);
+    }
+    calib_set_free(c);
+    // left has no white; a camera without a model; right without its own gain: not left's
+    CHECK(calib_set_load_camera(two, "left", true) == NULL);
+    CHECK_CONTAINS(model_last_error(), "no left/white.json");
+    CHECK(calib_set_load_camera(two, "middle", false) == NULL);
+    CHECK_CONTAINS(model_last_error(), "no middle.cameramodel");
+    CHECK(unlink(test_path("two/gain/right/gain.json")) == 0);
+    c = calib_set_load_camera(two, "right", false);
+    CHECK(c && c->gain_dn_per_e == 0 && c->cal_gain == 0 && !strcmp(c->cal_gain_unit, "dB"));
+    calib_set_free(c);
+    // a malformed gain unit
+    test_write("two/left/gain.json", "{\"camera\": \"left\", \"gain_db\": 0, \"gain_unit\": 5}\n");
+    CHECK(calib_set_load_camera(two, "left", false) == NULL);
+    CHECK_CONTAINS(model_last_error(), "gain_unit a string");
+    CHECK_CONTAINS(model_last_error(), "left/gain.json");
+    model_error_quiet_thread(q);
+    free(cm);
 }

@@ -16,6 +16,7 @@
 
 #include <glib.h>
 #include <jansson.h>
+#include <sqlite3.h>
 
 #include "model/model.h"
 #include "rig/rig.h"
@@ -438,4 +439,205 @@ TEST(fit_material_coupons_virtual_rig)
     g_free(cal);
     g_free(white);
     g_free(ws);
+}
+
+// A gain in a unit without a known scale ("raw"): the white session's frames
+// recorded again at gain 100 raw (the journal rewritten); a calibration
+// directory whose gain calibration was made at 100 raw gives the same kc*I as
+// at 0 dB; one made at 50 raw is an error naming the frame and the unit.
+static void raw_gain_white(const char *ws, const char *cal, const char *wsc)
+{
+    char db[4300], wj[4300];
+    snprintf(db, sizeof db, "%s/session.sqlite", ws);
+    sqlite3 *d = NULL;
+    CHECK(sqlite3_open(db, &d) == SQLITE_OK);
+    CHECK(sqlite3_exec(d, "UPDATE frames SET gain = 100, gain_unit = 'raw'", NULL, NULL, NULL) == SQLITE_OK);
+    sqlite3_close(d);
+    char *rc_dir = keep(test_path("calraw"));
+    g_mkdir_with_parents(rc_dir, 0755);
+    snprintf(db, sizeof db, "%s/left.cameramodel", cal);
+    char *cm = model_read_file(db, NULL);
+    test_write("calraw/left.cameramodel", cm ? cm : "");
+    free(cm);
+    snprintf(db, sizeof db, "%s/lamps.json", cal);
+    char *lj = model_read_file(db, NULL);
+    test_write("calraw/lamps.json", lj ? lj : "");
+    free(lj);
+    snprintf(db, sizeof db, "%s/left", rc_dir);
+    g_mkdir_with_parents(db, 0755);
+    snprintf(wj, sizeof wj, "%s/white_raw.json", rc_dir);
+    static const char *const at[2] = { "100", "50" };
+    for (int k = 0; k < 2; k++) {
+        snprintf(db, sizeof db, "{\"camera\": \"left\", \"gain_db\": %s, \"gain_unit\": \"raw\", "
+                 "\"saturation_dn\": 3920}\n", at[k]);
+        test_write("calraw/left/gain.json", db);
+        char *out = NULL, *err = NULL;
+        int rc = test_refl_run(300, &out, &err, "calib", "white", ws, "--calib", rc_dir, "--camera", "left",
+                               "--scene", wsc, "-o", wj, NULL);
+        if (k == 0) {
+            CHECK_MSG(rc == 0, "%s", err);
+            snprintf(db, sizeof db, "%s/left/white.json", cal);
+            json_t *a = json_load_file(db, 0, NULL), *b = json_load_file(wj, 0, NULL);
+            for (int l = 0; a && b && l < 5; l++)
+                CHECK_REL(json_number_value(json_object_get(json_array_get(json_object_get(b, "lamps"), l),
+                                                            "kc_I_per_us")),
+                          json_number_value(json_object_get(json_array_get(json_object_get(a, "lamps"), l),
+                                                            "kc_I_per_us")), 1e-9);
+            CHECK(a && b);
+            json_decref(a);
+            json_decref(b);
+        } else {
+            CHECK(rc == 1);
+            CHECK_CONTAINS(err, "in unit 'raw' has no known scale");
+            CHECK_CONTAINS(err, "calibration's gain (50 raw)");
+            CHECK_CONTAINS(err, "frames/s0000");
+        }
+        g_free(out);
+        g_free(err);
+    }
+    g_free(rc_dir);
+}
+
+// fit_material_two_cameras: the 2-camera virtual rig (examples/virtual-truth-2cam.ini:
+// "left" and "right", other poses and sensors, kc_per_us 1e-4 and 1.5e-4). The
+// calibration directory holds each camera's model as NAME.cameramodel (the
+// truth's), the shared lamps.json and each camera's white (refl calib white
+// --camera NAME -o DIR/NAME/white.json: kc*I within 3 % of that camera's
+// truth) and gain.json (its saturation). The glossy coupon captured with both
+// cameras is fitted with every camera's frames through its own calibrations
+// in one fit (more observations than either camera's alone) and recovers the
+// truth's GGX material (kd within 5 %, alpha, F0 and ks*F0 within 10 %). A camera without calibration files is an
+// error naming the file to make.
+TEST(fit_material_two_cameras)
+{
+    char *sd = srcdir(), text[4200];
+    snprintf(text, sizeof text, "[rig]\nbackend = virtual\ntruth = %s/examples/virtual-truth-2cam.ini\n"
+             "serve = inprocess\ntime_scale = 0.005\npixel_format = Mono12\n", sd);
+    char *rig = keep(test_write("rig-2cam.ini", text));
+    char *cal = keep(test_path("cal2cam"));
+    g_mkdir_with_parents(cal, 0755);
+    static const char *const names[2] = { "left", "right" }, *const models[2] = { "camera", "camera-right" };
+    for (int k = 0; k < 2; k++) {
+        snprintf(text, sizeof text, "%s/examples/%s.cameramodel", sd, models[k]);
+        char *cm = model_read_file(text, NULL);
+        CHECK(cm != NULL);
+        snprintf(text, sizeof text, "cal2cam/%s.cameramodel", names[k]);
+        test_write(text, cm ? cm : "");
+        free(cm);
+    }
+    free(sd);
+    // each camera's gain calibration: its saturation (without it the 12-bit full scale is taken, above which
+    // the right camera's well (13000 e- x 0.3 DN/e-) clips: its highlights would be taken clipped); the
+    // sensors' full well x K less the 2 % compression, as refl calib gain measures it (calib_gain_two_cameras)
+    g_mkdir_with_parents(test_path("cal2cam/left"), 0755);
+    g_mkdir_with_parents(test_path("cal2cam/right"), 0755);
+    test_write("cal2cam/left/gain.json", "{\"camera\": \"left\", \"gain_db\": 0, \"gain_unit\": \"dB\", "
+                                         "\"saturation_dn\": 3920}\n");
+    test_write("cal2cam/right/gain.json", "{\"camera\": \"right\", \"gain_db\": 0, \"gain_unit\": \"dB\", "
+                                          "\"saturation_dn\": 3822}\n");
+    test_write("cal2cam/lamps.json",
+               "{\"lamps\": [{\"name\": \"east\", \"position_mm\": [488.6, 177.9, 600], \"radius_mm\": 15},"
+               " {\"name\": \"south\", \"position_mm\": [-52.3, -597.7, 480], \"radius_mm\": 15},"
+               " {\"name\": \"west\", \"position_mm\": [-526.2, -191.5, 520], \"radius_mm\": 15},"
+               " {\"name\": \"north\", \"position_mm\": [98.4, 367.1, 700], \"radius_mm\": 15},"
+               " {\"name\": \"rim\", \"position_mm\": [-619.8, 65.1, 219.6], \"radius_mm\": 15}]}\n");
+    char *wsc = sample_scene("reference_white"), *gsc = sample_scene("coupon_glossy_plastic");
+    char *white = keep(test_write("white2.ini", "[plan]\nname = white\n[sample]\nname = reference_white\n"
+                                                 "kind = reference_white\n[angles]\nlist = 0 120 240\n[lamps]\n"
+                                                 "sets = east; south; west; north; rim; none\n[exposure]\nmode = fixed\n"
+                                                 "list_us = 8000\n"));
+    char *glossy = keep(test_write("glossy2.ini", "[plan]\nname = glossy\n[sample]\nname = coupon_glossy_plastic\n"
+                                                   "kind = material_coupon\ntilt_deg = 40\n[angles]\nrange = 0 340 20\n"
+                                                   "[lamps]\nsets = east; south; west; north; rim; none\n[exposure]\n"
+                                                   "mode = fixed\nlist_us = 8000 500\n"));
+    char *ws = keep(test_path("w2cam")), *gs = keep(test_path("g2cam")), *pj = keep(test_path("priors2.json"));
+    char *out = NULL, *err = NULL;
+    double t0 = model_now_s();
+    int rc = test_refl_run(300, &out, &err, "capture", "--yes", white, "--rig", rig, "-o", ws, NULL);
+    CHECK_MSG(rc == 0, "%s", err);
+    g_free(out);
+    g_free(err);
+    // each camera's white: kc*I = its truth kc_per_us times the lamps' intensities
+    const double I[5] = { 3.2e9, 2.9e9, 3.1e9, 3.6e9, 2.6e9 }, kc[2] = { 1e-4, 1.5e-4 };
+    for (int k = 0; k < 2 && rc == 0; k++) {
+        char wj[4300];
+        snprintf(wj, sizeof wj, "%s/%s/white.json", cal, names[k]);
+        char *wd = g_path_get_dirname(wj);
+        g_mkdir_with_parents(wd, 0755);
+        g_free(wd);
+        rc = test_refl_run(300, &out, &err, "calib", "white", ws, "--calib", cal, "--camera", names[k], "--scene", wsc,
+                           "-o", wj, NULL);
+        CHECK_MSG(rc == 0, "calib white --camera %s: %s", names[k], err);
+        g_free(out);
+        g_free(err);
+        json_t *w = json_load_file(wj, 0, NULL);
+        CHECK(w && !strcmp(json_string_value(json_object_get(w, "camera")) ?: "", names[k]));
+        for (int l = 0; w && l < 5; l++) {
+            json_t *e = json_array_get(json_object_get(w, "lamps"), l);
+            double v = json_number_value(json_object_get(e, "kc_I_per_us")), t = kc[k] * I[l];
+            CHECK_MSG(fabs(v / t - 1) < 0.03, "camera %s lamp %d: kc*I %.6g vs truth %.6g", names[k], l, v, t);
+        }
+        json_decref(w);
+    }
+    fprintf(stderr, "  whites: %.1f s\n", model_now_s() - t0);
+    raw_gain_white(ws, cal, wsc);
+    rc = test_refl_run(300, &out, &err, "capture", "--yes", glossy, "--rig", rig, "-o", gs, NULL);
+    CHECK_MSG(rc == 0, "%s", err);
+    g_free(out);
+    g_free(err);
+    rc = test_refl_run(300, &out, &err, "fit", "material", gs, "--scene", gsc, "--calib", cal, "--model", "ggx", "-o",
+                       pj, NULL);
+    CHECK_MSG(rc == 0, "%s", err);
+    fprintf(stderr, "  capture and fit: %.1f s\n%s", model_now_s() - t0, out ? out : "");
+    // every camera's observations in the one fit
+    int nl = 0, nr = 0, ns = 0;
+    const char *p = out ? strstr(out, "camera left: ") : NULL, *q = out ? strstr(out, "camera right: ") : NULL;
+    const char *t = out ? strstr(out, "BRDF samples") : NULL;
+    CHECK(p && sscanf(p, "camera left: %d", &nl) == 1 && q && sscanf(q, "camera right: %d", &nr) == 1);
+    while (t && t > out && t[-1] == ' ') t--;
+    while (t && t > out && t[-1] >= '0' && t[-1] <= '9') t--;
+    CHECK(t && sscanf(t, "%d", &ns) == 1);
+    fprintf(stderr, "  observations: left %d, right %d, samples %d\n", nl, nr, ns);
+    CHECK(nl > 100 && nr > 100 && ns == nl + nr);
+    g_free(out);
+    g_free(err);
+    json_t *doc = json_load_file(pj, 0, NULL);
+    json_t *m = doc ? json_array_get(json_object_get(doc, "materials"), 0) : NULL;
+    CHECK(m != NULL);
+    if (m) {
+        check_param(m, "kd", 0.35, 0.05, false);
+        check_param(m, "alpha", 0.05, 0.10, false);
+        double prod = json_number_value(json_object_get(m, "ks_times_F0"));
+        CHECK_MSG(fabs(prod / (0.6 * 0.045) - 1) < 0.10, "ks*F0 %.4g vs truth 0.027", prod);
+        check_param(m, "F0", 0.045, 0.10, false);
+        // the provenance lists both cameras' calibration files
+        json_t *in = json_object_get(json_object_get(doc, "provenance"), "inputs");
+        int ncam = 0;
+        for (size_t i = 0; i < json_array_size(in); i++)
+            ncam += !strcmp(json_string_value(json_object_get(json_array_get(in, i), "role")) ?: "", "camera");
+        CHECK(ncam == 2);
+        int ngain = 0;
+        for (size_t i = 0; i < json_array_size(in); i++)
+            ngain += !strcmp(json_string_value(json_object_get(json_array_get(in, i), "role")) ?: "", "gain");
+        CHECK(ngain == 2);
+    }
+    json_decref(doc);
+    // a camera of the session without its calibrations
+    char rm[4400];
+    snprintf(rm, sizeof rm, "%s/right.cameramodel", cal);
+    CHECK(unlink(rm) == 0);
+    rc = test_refl_run(60, &out, &err, "fit", "material", gs, "--scene", gsc, "--calib", cal, "-o", pj, NULL);
+    CHECK(rc == 1);
+    CHECK_CONTAINS(err, "no right.cameramodel");
+    g_free(out);
+    g_free(err);
+    g_free(rig);
+    g_free(cal);
+    g_free(wsc);
+    g_free(gsc);
+    g_free(white);
+    g_free(glossy);
+    g_free(ws);
+    g_free(gs);
+    g_free(pj);
 }

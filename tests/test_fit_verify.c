@@ -13,6 +13,7 @@
 #include "fit/verify.h"
 #include "fit/verify_lab.h"
 #include "model/model.h"
+#include "rig/session.h"
 #include "tests/test.h"
 
 static double v3dot(model_vec3_t a, model_vec3_t b) { return a.x * b.x + a.y * b.y + a.z * b.z; }
@@ -705,4 +706,268 @@ TEST(verify_two_cameras)
     free(b1);
     free(b3);
     images_free(&I);
+}
+
+// verify_two_camera_session: a session of the T-stiffener captured with both
+// cameras of the 2-camera virtual rig (examples/virtual-truth-2cam.ini: left
+// and right, other poses, sensors and sensitivities), verified from its lit
+// frames of both cameras through a calibration directory of two cameras
+// (NAME.cameramodel: the truth's models; NAME/gain.json: each sensor's K,
+// read noise and saturation; NAME/white.json from refl calib white --camera
+// NAME; the shared lamps.json). Each frame goes to its own camera by the
+// camera its text names: the right description passes, with both cameras in
+// the fit and each camera's fitted kc near 1 (the right camera's 1.5 x the
+// left's sensitivity comes from its own white); a description with the
+// stiffener moved 5 mm fails. --gain-db is taken relative to each camera's
+// gain calibration's gain. The right camera's frames alone go to its own
+// calibrations (DIR/camera.cameramodel is the first camera's, as refl calib
+// geometry writes it). A session of one camera (named "camera") through a
+// directory of one camera's layout is read as before.
+TEST(verify_two_camera_session)
+{
+    char top[4096], text[8400];
+    if (!realpath(test_srcdir(), top)) snprintf(top, sizeof top, "%s", test_srcdir());
+    snprintf(text, sizeof text, "[rig]\nbackend = virtual\ntruth = %s/examples/virtual-truth-2cam.ini\n"
+             "serve = inprocess\ntime_scale = 0.005\npixel_format = Mono12\n", top);
+    char *rig = g_strdup(test_write("rig-2cam.ini", text));
+    char *cal = g_strdup(test_path("cal"));
+    static const char *const names[2] = { "left", "right" }, *const models[2] = { "camera", "camera-right" };
+    static const double K[2] = { 0.25, 0.3 }, rn[2] = { 6, 4 }, sat[2] = { 3920, 3822 };
+    for (int k = 0; k < 2; k++) {
+        snprintf(text, sizeof text, "%s/%s", cal, names[k]);
+        g_mkdir_with_parents(text, 0755);
+        snprintf(text, sizeof text, "%s/examples/%s.cameramodel", top, models[k]);
+        char *cm = model_read_file(text, NULL);
+        CHECK(cm != NULL);
+        snprintf(text, sizeof text, "cal/%s.cameramodel", names[k]);
+        test_write(text, cm ? cm : "");
+        if (k == 0) test_write("cal/camera.cameramodel", cm ? cm : "");   // the first camera's, as geometry writes
+        free(cm);
+        char gj[512], rel[64];
+        snprintf(gj, sizeof gj, "{\"camera\": \"%s\", \"gain_db\": 0, \"gain_unit\": \"dB\", \"system_gain_dn_per_e\": "
+                 "%g, \"read_noise_e\": %g, \"saturation_dn\": %g}\n", names[k], K[k], rn[k], sat[k]);
+        snprintf(rel, sizeof rel, "cal/%s/gain.json", names[k]);
+        test_write(rel, gj);
+    }
+    test_write("cal/lamps.json",
+               "{\"lamps\": [{\"name\": \"east\", \"position_mm\": [488.6, 177.9, 600], \"radius_mm\": 15},"
+               " {\"name\": \"south\", \"position_mm\": [-52.3, -597.7, 480], \"radius_mm\": 15},"
+               " {\"name\": \"west\", \"position_mm\": [-526.2, -191.5, 520], \"radius_mm\": 15},"
+               " {\"name\": \"north\", \"position_mm\": [98.4, 367.1, 700], \"radius_mm\": 15},"
+               " {\"name\": \"rim\", \"position_mm\": [-619.8, 65.1, 219.6], \"radius_mm\": 15}]}\n");
+    char *white = g_strdup(test_write("white.ini", "[plan]\nname = white\n[sample]\nname = reference_white\n"
+                                                   "kind = reference_white\n[angles]\nlist = 0 120 240\n[lamps]\n"
+                                                   "sets = east; south; west; north; rim; none\n[exposure]\n"
+                                                   "mode = fixed\nlist_us = 8000\n"));
+    char *ws = g_strdup(test_path("ws")), *ps = g_strdup(test_path("ps"));
+    char *out = NULL, *err = NULL;
+    double t0 = model_now_s();
+    int rc = test_refl_run(300, &out, &err, "capture", "--yes", white, "--rig", rig, "-o", ws, NULL);
+    CHECK_MSG(rc == 0, "%s", err);
+    g_free(out);
+    g_free(err);
+    snprintf(text, sizeof text, "%s/examples/samples/reference_white.d3d", top);
+    for (int k = 0; k < 2 && rc == 0; k++) {
+        char wj[4200];
+        snprintf(wj, sizeof wj, "%s/%s/white.json", cal, names[k]);
+        rc = test_refl_run(300, &out, &err, "calib", "white", ws, "--calib", cal, "--camera", names[k], "--scene",
+                           text, "-o", wj, NULL);
+        CHECK_MSG(rc == 0, "calib white --camera %s: %s", names[k], err);
+        g_free(out);
+        g_free(err);
+    }
+    snprintf(text, sizeof text, "%s/examples/plans/workpiece_verify.ini", top);
+    rc = test_refl_run(300, &out, &err, "capture", "--yes", text, "--rig", rig, "-o", ps, NULL);
+    CHECK_MSG(rc == 0, "%s", err);
+    g_free(out);
+    g_free(err);
+    // the lit frames of both cameras
+    const char *argv[64];
+    int n = 0, nimg = 0;
+    argv[n++] = test_refl();
+    argv[n++] = "verify";
+    int scene_at = n++;
+    argv[n++] = "--images";
+    rig_session_t *s = rig_session_open(ps);
+    CHECK(s != NULL);
+    char *paths[32];
+    for (int i = 0; s && i < s->n && nimg < 32; i++)
+        if (strcmp(s->rows[i].lamps, "none")) {
+            paths[nimg] = g_strdup_printf("%s/%s", ps, s->rows[i].file);
+            argv[n++] = paths[nimg++];
+        }
+    rig_session_free(s);
+    CHECK(nimg == 8);
+    argv[n++] = "--calib";
+    argv[n++] = cal;
+    char priors[4200];
+    snprintf(priors, sizeof priors, "%s", test_write("priors.json",
+        "{\"format\": \"refl priors 1\", \"materials\": ["
+        "{\"name\": \"plywood\", \"model\": \"thesis_fit\", \"parameters\": ["
+        " {\"name\": \"ks\", \"mean\": 0.02, \"std\": 0.002, \"lo\": 0.014, \"hi\": 0.026},"
+        " {\"name\": \"ns\", \"mean\": 8, \"std\": 0.8, \"lo\": 5.6, \"hi\": 10.4},"
+        " {\"name\": \"kd\", \"mean\": 0.16, \"std\": 0.016, \"lo\": 0.112, \"hi\": 0.208}]},"
+        "{\"name\": \"painted_steel\", \"model\": \"ggx\", \"parameters\": ["
+        " {\"name\": \"kd\", \"mean\": 0.5, \"std\": 0.05, \"lo\": 0.35, \"hi\": 0.65},"
+        " {\"name\": \"ks\", \"mean\": 0.25, \"std\": 0.025, \"lo\": 0.175, \"hi\": 0.325},"
+        " {\"name\": \"alpha\", \"mean\": 0.15, \"std\": 0.015, \"lo\": 0.105, \"hi\": 0.195},"
+        " {\"name\": \"F0\", \"mean\": 0.04, \"std\": 0, \"lo\": 0.04, \"hi\": 0.04}]}]}\n"));
+    argv[n++] = "--priors";
+    argv[n++] = priors;
+    argv[n++] = "--no-report";
+    argv[n++] = "--fail-on-incorrect";
+    argv[n++] = "-o";
+    int out_at = n++;
+    argv[n] = NULL;
+    for (int wrong = 0; wrong < 2; wrong++) {
+        char scene[4200], dir[4200];
+        snprintf(scene, sizeof scene, "%s/examples/%s.d3d", top, wrong ? "t_shifted_5mm" : "t_stiffener");
+        snprintf(dir, sizeof dir, "%s", test_path(wrong ? "v-wrong" : "v-right"));
+        argv[scene_at] = scene;
+        argv[out_at] = dir;
+        rc = test_run(argv, 300, &out, &err);
+        fprintf(stderr, "  verify %s (%.1f s): rc %d\n%s", wrong ? "t_shifted_5mm" : "t_stiffener",
+                model_now_s() - t0, rc, out ? out : "");
+        if (!wrong) {
+            CHECK_MSG(rc == 0, "%s", err);
+            CHECK_CONTAINS(out, "description CORRECT");
+            char vj[4300];
+            snprintf(vj, sizeof vj, "%s/verify.json", dir);
+            json_t *j = json_load_file(vj, 0, NULL);
+            CHECK(j != NULL);
+            // both cameras in the fit, by name, each kc near 1: the right camera's 1.5 x the left's sensitivity
+            // is its own white's (kc_rel), not the fit's (its kc's bounds are 1 +- 0.5)
+            json_t *pa = json_object_get(j, "parameters");
+            int found = 0;
+            for (size_t i = 0; i < json_array_size(pa); i++) {
+                json_t *e = json_array_get(pa, i);
+                const char *nm = json_string_value(json_object_get(e, "name")) ?: "";
+                if (strcmp(nm, "kc[left]") && strcmp(nm, "kc[right]")) continue;
+                found++;
+                double v = json_number_value(json_object_get(e, "value"));
+                fprintf(stderr, "  %s = %.4f\n", nm, v);
+                CHECK_MSG(fabs(v - 1) < 0.05, "%s = %.4f", nm, v);
+            }
+            CHECK(found == 2);
+            json_decref(j);
+        } else {
+            CHECK_MSG(rc == 3, "rc %d: %s", rc, err);
+            CHECK_CONTAINS(out, "description INCORRECT");
+        }
+        g_free(out);
+        g_free(err);
+    }
+    // the right camera's frames alone: its own calibrations (not camera.cameramodel, the first camera's)
+    {
+        const char *a2[64];
+        int n2 = 0;
+        char dir[4200], scene[4200];
+        snprintf(scene, sizeof scene, "%s/examples/t_stiffener.d3d", top);
+        snprintf(dir, sizeof dir, "%s", test_path("v-right"));
+        for (int i = 0; i < n; i++) {
+            if (i >= scene_at + 2 && i < scene_at + 2 + nimg && !strstr(argv[i], "_right.png")) continue;
+            a2[n2++] = i == scene_at ? scene : i == out_at ? dir : argv[i];
+        }
+        a2[n2] = NULL;
+        rc = test_run(a2, 300, &out, &err);
+        CHECK_MSG(rc == 0, "the right camera alone: %s", err);
+        CHECK_CONTAINS(out, "against 4 image(s)");
+        CHECK_CONTAINS(out, "description CORRECT");
+        g_free(out);
+        g_free(err);
+    }
+    // a session of the rig of one camera (examples/virtual-truth.ini: the left camera's model, sensor and
+    // sensitivity; its camera is named "camera") through a directory of one camera's layout
+    // (camera.cameramodel, gain.json as refl wrote it before it recorded the camera, white.json): read as before
+    {
+        char from[8400], *txt;
+        g_mkdir_with_parents(test_path("cal1"), 0755);
+        static const char *const files[3][2] = { { "left.cameramodel", "camera.cameramodel" },
+                                                 { "left/white.json", "white.json" }, { "lamps.json", "lamps.json" } };
+        for (int f = 0; f < 3; f++) {
+            snprintf(from, sizeof from, "%s/%s", cal, files[f][0]);
+            txt = model_read_file(from, NULL);
+            CHECK(txt != NULL);
+            snprintf(from, sizeof from, "cal1/%s", files[f][1]);
+            test_write(from, txt ? txt : "");
+            free(txt);
+        }
+        snprintf(from, sizeof from, "{\"system_gain_dn_per_e\": %g, \"read_noise_e\": %g, \"saturation_dn\": %g}\n",
+                 K[0], rn[0], sat[0]);
+        test_write("cal1/gain.json", from);
+        snprintf(from, sizeof from, "[rig]\nbackend = virtual\ntruth = %s/examples/virtual-truth.ini\n"
+                 "serve = inprocess\ntime_scale = 0.005\npixel_format = Mono12\n", top);
+        char *rig1 = g_strdup(test_write("rig-1cam.ini", from)), *ps1 = g_strdup(test_path("ps1"));
+        snprintf(from, sizeof from, "%s/examples/plans/workpiece_verify.ini", top);
+        rc = test_refl_run(300, &out, &err, "capture", "--yes", from, "--rig", rig1, "-o", ps1, NULL);
+        CHECK_MSG(rc == 0, "%s", err);
+        g_free(out);
+        g_free(err);
+        char scene[4200], dir[4200], c1[4200];
+        snprintf(scene, sizeof scene, "%s/examples/t_stiffener.d3d", top);
+        snprintf(dir, sizeof dir, "%s", test_path("v-one"));
+        snprintf(c1, sizeof c1, "%s", test_path("cal1"));
+        const char *a1[64];
+        char *p1[16];
+        int n1 = 0, np1 = 0;
+        a1[n1++] = test_refl();
+        a1[n1++] = "verify";
+        a1[n1++] = scene;
+        a1[n1++] = "--images";
+        rig_session_t *s1 = rig_session_open(ps1);
+        for (int i = 0; s1 && i < s1->n && np1 < 16; i++)
+            if (strcmp(s1->rows[i].lamps, "none"))
+                a1[n1++] = p1[np1++] = g_strdup_printf("%s/%s", ps1, s1->rows[i].file);
+        CHECK(s1 && np1 == 4 && !strcmp(s1->rows[0].camera, "camera"));
+        rig_session_free(s1);
+        const char *rest[] = { "--calib", c1, "--priors", priors, "--no-report", "-o", dir, NULL };
+        for (int i = 0; rest[i]; i++) a1[n1++] = rest[i];
+        a1[n1] = NULL;
+        rc = test_run(a1, 300, &out, &err);
+        CHECK_MSG(rc == 0, "one camera's layout: %s", err);
+        CHECK_CONTAINS(out, "against 4 image(s)");
+        CHECK_CONTAINS(out, "description CORRECT");
+        g_free(out);
+        g_free(err);
+        for (int i = 0; i < np1; i++) g_free(p1[i]);
+        g_free(rig1);
+        g_free(ps1);
+    }
+    // --gain-db is the camera's gain, taken relative to each camera's gain calibration's: the same
+    // calibrations said to be made at 6 dB and --gain-db 6 give the frames' own scale (kc near 1 again)
+    for (int k = 0; k < 2; k++) {
+        char gj[512], rel[64];
+        snprintf(gj, sizeof gj, "{\"camera\": \"%s\", \"gain_db\": 6, \"gain_unit\": \"dB\", \"system_gain_dn_per_e\": "
+                 "%g, \"read_noise_e\": %g, \"saturation_dn\": %g}\n", names[k], K[k], rn[k], sat[k]);
+        snprintf(rel, sizeof rel, "cal/%s/gain.json", names[k]);
+        test_write(rel, gj);
+    }
+    char scene[4200], dir[4200];
+    snprintf(scene, sizeof scene, "%s/examples/t_stiffener.d3d", top);
+    snprintf(dir, sizeof dir, "%s", test_path("v-gain"));
+    argv[scene_at] = scene;
+    argv[out_at] = dir;
+    argv[out_at + 1] = "--gain-db";
+    argv[out_at + 2] = "6";
+    argv[out_at + 3] = NULL;
+    rc = test_run(argv, 300, &out, &err);
+    CHECK_MSG(rc == 0, "--gain-db 6: %s", err);
+    CHECK_CONTAINS(out, "description CORRECT");
+    snprintf(dir, sizeof dir, "%s/verify.json", test_path("v-gain"));
+    json_t *j = json_load_file(dir, 0, NULL);
+    json_t *pa = json_object_get(j, "parameters");
+    for (size_t i = 0; i < json_array_size(pa); i++) {
+        json_t *e = json_array_get(pa, i);
+        if (!strncmp(json_string_value(json_object_get(e, "name")) ?: "", "kc[", 3))
+            CHECK_NEAR(json_number_value(json_object_get(e, "value")), 1, 0.05);
+    }
+    json_decref(j);
+    g_free(out);
+    g_free(err);
+    for (int i = 0; i < nimg; i++) g_free(paths[i]);
+    g_free(rig);
+    g_free(cal);
+    g_free(white);
+    g_free(ws);
+    g_free(ps);
 }
