@@ -60,14 +60,16 @@ extern "C" {
 #define CALIB_GEOMETRY_DEFAULT_ANGLES "0 40 80 120 160 200 240 280 320"
 // Tilts for the two-camera example rig (examples/virtual-rig-2cam.ini: the
 // cameras 65 deg apart in azimuth, each seeing the 330 mm board whole only near
-// the middle of its view): of 18 angles x 10 tilts, the poses where at least
-// one camera finds the board (13 both: they tie the cameras together).
+// the middle of its view): the poses (of tilt 0 and five tilts at every 10 deg)
+// where at least one camera finds the board; 21 of the 111 both cameras do
+// (they tie the cameras together).
 #define CALIB_GEOMETRY_TILTS_2CAM_EXAMPLE                                                                      \
-    "0:20,40,60,160,200,220,240,300,320 35@0:20,40,80,220,300,320,340 20@0:0,20,40,60,220,300,320,340 "           \
-    "20@180:60,80,120,140,160,180,200,220,240,260,300,320 "                                                       \
-    "20@270:20,40,60,80,100,120,140,160,180,220,240,300,320 20@90:20,140,160,220,280,300,320,340 "                \
-    "35@180:140,160,180,200,220,240,260,300 35@270:40,80,120,140,160,180,320 "                                    \
-    "35@90:160,200,220,240,260,280,300,320,340"
+    "0:20,40,60,160,200,220,240,300,320 "                                                                          \
+    "20@0:0,10,20,30,40,50,60,70,110,160,200,210,220,230,290,300,310,320,330 "                                    \
+    "20@270:20,30,40,50,60,70,80,90,100,110,120,130,140,160,170,210,220,230,240,250,310,320,330,340 "             \
+    "20@90:20,30,130,140,150,160,170,210,220,230,270,280,290,300,310,320,330,340 "                                \
+    "35@90:150,160,200,220,230,240,250,260,270,280,290,300,310,320,330,340,350 "                                  \
+    "20@180:30,40,50,60,70,80,110,120,140,150,160,180,190,200,210,220,230,240,250,260,290,300,310,320"
 
 // What to calibrate from (exactly one of rig, sessions, images, corners) and how.
 typedef struct {
