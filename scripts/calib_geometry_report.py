@@ -191,8 +191,9 @@ def align(corners_in, corners_out, out_path, gridn, spacing, camspecs):
     for i, v in enumerate(views):
         byframe.setdefault(v[2], {})[v[1]] = i
 
-    def rdiff(a, b):                               # rotation between two rt, deg
-        return float(np.linalg.norm(mrcal.compose_r(a[:3], -b[:3]))) * 180 / np.pi
+    def rdiff(a, b):                               # rotation between two rt, deg (0..180)
+        x = float(np.linalg.norm(mrcal.compose_r(a[:3], -b[:3]))) % (2 * np.pi)   # compose_r may exceed pi
+        return min(x, 2 * np.pi - x) * 180 / np.pi
 
     # rt_camk_cam0: the candidate most shared frames agree with
     T = [np.zeros(6)] + [None] * (len(cams) - 1)

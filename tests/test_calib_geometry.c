@@ -42,6 +42,7 @@
 
 #include "calib/geometry.h"
 #include "model/model.h"
+#include "model/report.h"
 #include "tests/test.h"
 
 #define DEG (M_PI / 180.0)
@@ -784,4 +785,120 @@ TEST(calib_geometry_two_cameras)
     json_decref(g);
     free(out);
     free(err);
+}
+
+// The corner order across cameras (scripts/calib_geometry_report.py align):
+// boards near the table centre in the rig frame seen by both truth cameras
+// (examples/virtual-truth-2cam.ini), the right camera's corners written a
+// quarter turn k = frame % 4 away from the left's order (as mrgingham may
+// order them), one frame's right view mirrored (no quarter turn makes it
+// agree). The script turns each right view back (k + turns = 0 mod 4: the
+// corners come out in the left's order) and leaves the mirrored one out.
+TEST(calib_geometry_align_quarter_turns)
+{
+    char p[PATH_MAX + 64];
+    mrcal_cameramodel_t *t[2];
+    const char *files[2] = { "camera.cameramodel", "camera-right.cameramodel" }, *names[2] = { "left", "right" };
+    for (int k = 0; k < 2; k++) {
+        snprintf(p, sizeof p, "%s/examples/%s", test_srcdir(), files[k]);
+        t[k] = mrcal_read_cameramodel_file(p);
+        CHECK(t[k] != NULL);
+        if (!t[k]) return;
+    }
+    const int n = 10, nframes = 9, mirrored = 5;
+    GString *g = g_string_new("# filename x y level\n");
+    double (*truth_q)[100][2] = calloc(nframes, sizeof *truth_q);   // the right camera's corners, left's order
+    int made = 0;
+    for (int attempt = 0; made < nframes && attempt < 5000; attempt++) {
+        // a board about the table centre: turned about z, tilted up to 20 deg
+        double rt[6] = { (urand() - 0.5) * 40 * DEG, (urand() - 0.5) * 40 * DEG, urand() * 2 * M_PI, 0, 0, 0 };
+        double c[3] = { (n - 1) * 30 / 2.0, (n - 1) * 30 / 2.0, 0 }, Rc[3];
+        transform(rt, c, Rc);
+        double centre[3] = { (urand() - 0.5) * 60, (urand() - 0.5) * 60, 40 + (urand() - 0.5) * 40 };
+        for (int k = 0; k < 3; k++) rt[3 + k] = centre[k] - Rc[k];
+        mrcal_point2_t Q[2][100];
+        bool in = true;
+        for (int cam = 0; cam < 2 && in; cam++) {
+            mrcal_point3_t P[100];
+            for (int j = 0; j < n; j++)
+                for (int i = 0; i < n; i++) {
+                    double b[3] = { i * 30.0, j * 30.0, 0 }, w[3];
+                    transform(rt, b, w);
+                    transform(t[cam]->rt_cam_ref, w, P[j * n + i].xyz);
+                }
+            mrcal_project(Q[cam], NULL, NULL, P, n * n, &t[cam]->lensmodel, t[cam]->intrinsics);
+            for (int k = 0; k < n * n; k++)
+                if (!(Q[cam][k].xy[0] > 5 && Q[cam][k].xy[0] < t[cam]->imagersize[0] - 6 && Q[cam][k].xy[1] > 5 &&
+                      Q[cam][k].xy[1] < t[cam]->imagersize[1] - 6))
+                    in = false;
+        }
+        if (!in) continue;
+        int turns = made % 4;
+        for (int cam = 0; cam < 2; cam++)
+            for (int m = 0; m < n * n; m++) {
+                // line m of the right view: the corner np.rot90(grid, turns) puts there (rows r, columns c)
+                int r = m / n, col = m % n, src = r * n + col;
+                if (cam == 1 && made == mirrored) src = col * n + r;   // transposed: a mirror image
+                else if (cam == 1)
+                    for (int q = 0; q < turns; q++) {   // rot90 once: out[r][c] = in[c][n-1-r]
+                        int rr = src / n, cc = src % n;
+                        src = cc * n + (n - 1 - rr);
+                    }
+                g_string_append_printf(g, "%s/f%08d.png %.4f %.4f 0\n", names[cam], made, Q[cam][src].xy[0] +
+                                       0.1 * nrand(), Q[cam][src].xy[1] + 0.1 * nrand());
+                if (cam == 1) {
+                    truth_q[made][m][0] = Q[1][m].xy[0];
+                    truth_q[made][m][1] = Q[1][m].xy[1];
+                }
+            }
+        made++;
+    }
+    CHECK(made == nframes);
+    char *in = g_strdup(test_write("corners-2cam.vnl", g->str)), *out = g_strdup(test_path("joint.vnl")),
+         *js = g_strdup(test_path("align.json"));
+    g_string_free(g, TRUE);
+    int rc = model_run_script("calib_geometry_report.py", "align", in, out, js, "10", "30", "left:1280:1024:1750",
+                              "right:1024:768:1400", NULL);
+    CHECK(rc == 0);
+    json_t *a = json_load_file(js, 0, NULL);
+    json_t *views = json_object_get(a, "views");
+    CHECK(json_object_size(views) == (size_t)(2 * nframes));
+    for (int f = 0; f < nframes; f++) {
+        snprintf(p, sizeof p, "right/f%08d.png", f);
+        json_t *v = json_object_get(views, p);
+        CHECK_MSG(v != NULL, "%s", p);
+        if (!v) continue;
+        int q = (int)json_integer_value(json_object_get(v, "quarter_turns"));
+        bool dropped = json_is_true(json_object_get(v, "dropped"));
+        if (f == mirrored) {
+            CHECK_MSG(dropped, "%s: the mirrored view is kept (%.2f deg off)", p,
+                      json_real_value(json_object_get(v, "mismatch_deg")));
+        } else {
+            CHECK_MSG(!dropped && (f % 4 + q) % 4 == 0, "%s: written %d quarter turns away, turned back %d (%.2f deg "
+                      "off)", p, f % 4, q, json_real_value(json_object_get(v, "mismatch_deg")));
+        }
+    }
+    // the joint corners: the right views in the left's order, the mirrored one gone
+    char *text = NULL;
+    CHECK(g_file_get_contents(out, &text, NULL, NULL));
+    int idx[9] = { 0 }, bad = 0, lines_mirrored = 0;
+    for (char *l = text ? strtok(text, "\n") : NULL; l; l = strtok(NULL, "\n")) {
+        int f;
+        double x, y;
+        if (sscanf(l, "right/f%08d.png %lf %lf", &f, &x, &y) != 3 || f < 0 || f >= nframes) continue;
+        if (f == mirrored) lines_mirrored++;
+        else if (idx[f] < 100 && hypot(x - truth_q[f][idx[f]][0], y - truth_q[f][idx[f]][1]) > 1) bad++;
+        idx[f]++;
+    }
+    CHECK(bad == 0);
+    CHECK(lines_mirrored == 0);
+    for (int f = 0; f < nframes; f++) CHECK(f == mirrored || idx[f] == 100);
+    g_free(text);
+    json_decref(a);
+    free(truth_q);
+    g_free(in);
+    g_free(out);
+    g_free(js);
+    free(t[0]);
+    free(t[1]);
 }
