@@ -803,8 +803,22 @@ static json_t *jarr(const double *x, int n)
     return a;
 }
 
+static bool write_cameramodel_ref(const char *path, const char *lensmodel, json_t *intr, int W, int H,
+                                  const double rt[6], const char *ref, double rms);
+
 bool calib_geometry_write_cameramodel(const char *path, const char *lensmodel, json_t *intr, int W, int H,
                               const double rt[6], bool rig, double rms)
+{
+    return write_cameramodel_ref(path, lensmodel, intr, W, H, rt,
+                                 rig ? "the rig frame: origin on the fitted turntable axis at the table top, z up along "
+                                       "the axis (counter-clockwise angles positive), x the board's grid direction at "
+                                       "angle 0, tilt 0 closest to the image's +x"
+                                     : "the camera itself (no turntable angles in the input: no rig frame)", rms);
+}
+
+// The model with the extrinsics' reference frame described by ref.
+static bool write_cameramodel_ref(const char *path, const char *lensmodel, json_t *intr, int W, int H,
+                                  const double rt[6], const char *ref, double rms)
 {
     char *tmp = g_strdup_printf("%s.part", path);
     FILE *f = fopen(tmp, "w");
@@ -815,10 +829,7 @@ bool calib_geometry_write_cameramodel(const char *path, const char *lensmodel, j
     }
     fprintf(f, "# refl calib geometry (refl %s): camera model from mrgingham corners and mrcal; RMS reprojection "
             "residual %.4f px.\n", REFL_VERSION, rms);
-    fprintf(f, "# Units mm. extrinsics are rt_cam_ref (r in rad, t in mm) with ref = %s\n",
-            rig ? "the rig frame: origin on the fitted turntable axis at the table top, z up along the axis "
-                  "(counter-clockwise angles positive), x the board's grid direction at angle 0, tilt 0 closest "
-                  "to the image's +x" : "the camera itself (no turntable angles in the input: no rig frame)");
+    fprintf(f, "# Units mm. extrinsics are rt_cam_ref (r in rad, t in mm) with ref = %s\n", ref);
     fprintf(f, "{\n    'lensmodel':  '%s',\n\n    # intrinsics are fx,fy,cx,cy,distortion0,distortion1,....\n"
             "    'intrinsics': [", lensmodel);
     size_t i;
@@ -1532,9 +1543,12 @@ static bool camera_outputs(const calib_geometry_opts_t *o, calib_geometry_state_
         camera_rt(s, cj, rt);
         char *path = g_strdup_printf("%s/%s.cameramodel", s->outdir, s->camnames[k]);
         json_t *rms = json_object_get(cj, "rms_px");
-        ok = calib_geometry_write_cameramodel(path, o->lensmodel, json_object_get(cj, "intrinsics"), s->camw[k],
-                                              s->camh[k], rt, s->have_rig, json_is_number(rms) ? json_number_value(rms)
-                                                                                               : NAN);
+        char ref[400];
+        snprintf(ref, sizeof ref, "camera %s (the first camera; no rig frame: %s)", s->camnames[0], s->rigwhy);
+        ok = s->have_rig ? calib_geometry_write_cameramodel(path, o->lensmodel, json_object_get(cj, "intrinsics"),
+                                                            s->camw[k], s->camh[k], rt, true, json_number_value(rms))
+                         : write_cameramodel_ref(path, o->lensmodel, json_object_get(cj, "intrinsics"), s->camw[k],
+                                                 s->camh[k], rt, ref, json_number_value(rms));
         json_object_set_new(c, "name", json_string(s->camnames[k]));
         json_object_set_new(c, "camera_model", json_string(path));
         json_object_set_new(c, "intrinsics", json_incref(json_object_get(cj, "intrinsics")));
