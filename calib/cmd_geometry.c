@@ -31,8 +31,8 @@
     "Several cameras (a rig or sessions of several, no --camera): one mrcal solve of every camera and\n"     \
     "its pose relative to the first (corner order made to agree across the cameras); DIR/NAME.cameramodel\n" \
     "per camera, DIR/camera.cameramodel the first's; the rig frame from the first camera's views; every\n"  \
-    "camera needs the board in enough views (give --tilts that show it to all: the two-camera example's\n"  \
-    "are CALIB_GEOMETRY_TILTS_2CAM_EXAMPLE in calib/geometry.h, see README).\n"                             \
+    "camera needs the board in enough views (give --tilts that show it to all; --tilts 2cam-example:\n"     \
+    "those of examples/virtual-rig-2cam.ini, 111 poses).\n"                                                  \
     "With --rig, each tilt's session begins with an operator step (mount the board on the wedge,\n"         \
     "facing the camera): Enter on a terminal, --yes or --operator-input FILE answers it; with stdin\n"      \
     "not a terminal and neither option the command pauses there (exit 3; run it again to continue).\n"     \

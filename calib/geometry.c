@@ -1168,10 +1168,16 @@ bool calib_geometry_apply_solution(const calib_geometry_opts_t *o, calib_geometr
     return true;
 }
 
+const char *calib_geometry_tilts_expand(const char *tilts)
+{
+    return tilts && !strcmp(tilts, "2cam-example") ? CALIB_GEOMETRY_TILTS_2CAM_EXAMPLE : tilts;
+}
+
 bool calib_geometry_capture(const calib_geometry_opts_t *o, calib_geometry_state_t *s, bool *usage)
 {
     // every plan first: a bad --tilts fails before anything moves
-    char **specs = g_strsplit(o->tilts, " ", -1);
+    const char *tilts = calib_geometry_tilts_expand(o->tilts);
+    char **specs = g_strsplit(tilts, " ", -1);
     GPtrArray *plans = g_ptr_array_new_with_free_func(g_free), *names = g_ptr_array_new_with_free_func(g_free);
     bool ok = true;
     for (int k = 0; specs[k] && ok; k++) {
@@ -1186,7 +1192,7 @@ bool calib_geometry_capture(const calib_geometry_opts_t *o, calib_geometry_state
     }
     g_strfreev(specs);
     if (ok && plans->len == 0) {
-        model_error_set("--tilts", 0, "'%s': no tilts", o->tilts);
+        model_error_set("--tilts", 0, "'%s': no tilts", tilts);
         ok = false;
     }
     *usage = !ok;

@@ -71,6 +71,10 @@ extern "C" {
     "35@90:150,160,200,220,230,240,250,260,270,280,290,300,310,320,330,340,350 "                                  \
     "20@180:30,40,50,60,70,80,110,120,140,150,160,180,190,200,210,220,230,240,250,260,290,300,310,320"
 
+// --tilts NAME: "2cam-example" is CALIB_GEOMETRY_TILTS_2CAM_EXAMPLE; any other
+// text is itself.
+const char *calib_geometry_tilts_expand(const char *tilts);
+
 // What to calibrate from (exactly one of rig, sessions, images, corners) and how.
 typedef struct {
     const char  *rig;              // capture on this rig file (one session per tilt), or NULL

@@ -688,8 +688,8 @@ TEST(calib_geometry_two_cameras)
     const char *dir = test_path("geo2");
     char *out = NULL, *err = NULL;
     double t0 = model_realtime_s();
-    int rc = test_refl_run(400, &out, &err, "calib", "geometry", "--yes", "--rig", rigp, "--tilts",
-                           CALIB_GEOMETRY_TILTS_2CAM_EXAMPLE, "-o", dir, NULL);
+    int rc = test_refl_run(400, &out, &err, "calib", "geometry", "--yes", "--rig", rigp, "--tilts", "2cam-example",
+                           "-o", dir, NULL);
     fprintf(stderr, "  two-camera calibration: %.1f s\n", model_realtime_s() - t0);
     CHECK_MSG(rc == 0, "refl calib geometry --rig (two cameras): exit %d\n%s", rc, err ? err : "");
     json_t *g = load_json(dir, "geometry.json");
@@ -901,4 +901,27 @@ TEST(calib_geometry_align_quarter_turns)
     g_free(js);
     free(t[0]);
     free(t[1]);
+}
+
+// --tilts 2cam-example is the two-camera example's tilts, each of which makes
+// a plan; other text stays itself.
+TEST(calib_geometry_tilts_2cam_example)
+{
+    CHECK(!strcmp(calib_geometry_tilts_expand("2cam-example"), CALIB_GEOMETRY_TILTS_2CAM_EXAMPLE));
+    CHECK(!strcmp(calib_geometry_tilts_expand("0:10,20"), "0:10,20"));
+    calib_geometry_opts_t o = calib_geometry_defaults();
+    char **specs = g_strsplit(CALIB_GEOMETRY_TILTS_2CAM_EXAMPLE, " ", -1);
+    int nplans = 0, nangles = 0;
+    for (int k = 0; specs[k]; k++) {
+        char name[128];
+        char *plan = calib_geometry_tilt_plan(specs[k], &o, name, sizeof name);
+        CHECK_MSG(plan != NULL, "%s: %s", specs[k], model_last_error());
+        if (plan) nplans++;
+        g_free(plan);
+        const char *a = strchr(specs[k], ':');
+        for (; a; a = strchr(a + 1, ',')) nangles++;
+    }
+    g_strfreev(specs);
+    CHECK(nplans == 6);
+    CHECK(nangles == 111);
 }
