@@ -28,6 +28,11 @@
     "+z); origin on the axis at the table top (--board-height-mm below the board's corner plane\n"             \
     "at tilt 0); x: the board grid direction at angle 0, tilt 0 closest to the image's +x\n"                   \
     "(lay the board square to the turntable's home orientation). Units mm, deg, px.\n"                         \
+    "Several cameras (a rig or sessions of several, no --camera): one mrcal solve of every camera and\n"     \
+    "its pose relative to the first (corner order made to agree across the cameras); DIR/NAME.cameramodel\n" \
+    "per camera, DIR/camera.cameramodel the first's; the rig frame from the first camera's views; every\n"  \
+    "camera needs the board in enough views (give --tilts that show it to all; --tilts 2cam-example:\n"     \
+    "those of examples/virtual-rig-2cam.ini, 111 poses).\n"                                                  \
     "With --rig, each tilt's session begins with an operator step (mount the board on the wedge,\n"         \
     "facing the camera): Enter on a terminal, --yes or --operator-input FILE answers it; with stdin\n"      \
     "not a terminal and neither option the command pauses there (exit 3; run it again to continue).\n"     \
@@ -112,8 +117,8 @@ int calib_cmd_geometry(int argc, char **argv)
         MODEL_OPT_STRING("--angles", "'A A ...'", "angles for tilts given without their own (default '"
                          CALIB_GEOMETRY_DEFAULT_ANGLES "')", &o.angles, false),
         MODEL_OPT_STRING("--sample", "NAME", "the board sample (default calib_board)", &o.sample, false),
-        MODEL_OPT_STRING("--camera", "NAME", "--rig, --session: the camera (its rig file name) to calibrate "
-                         "(default: the first)", &o.camera, false),
+        MODEL_OPT_STRING("--camera", "NAME", "--rig, --session: calibrate only this camera (its rig file "
+                         "name; default: every camera together)", &o.camera, false),
         MODEL_OPT_VALUE("--exposure-us", "US", "the capture's exposure (default 6000)", false),
         MODEL_OPT_LIST("--session", "DIR", "use a capture session (angles from its journal, tilt from its plan); "
                        "repeat it for more", &sessions, false, false),

@@ -242,9 +242,11 @@ calib_geometry_view_t *calib_geometry_view_find(calib_geometry_views_t *vs, cons
     return NULL;
 }
 
-// A session's frames → 8-bit images and views.
-bool calib_geometry_add_session(calib_geometry_views_t *vs, const char *sdir, const char *camera, const char *imgdir,
-                                int *w, int *h)
+// A session's frames of one camera → 8-bit images and views. sub NULL: names
+// "SESSION-FRAME" in group g = a new one; else (several cameras) names
+// "sub/fGGSSSSSS.png" (g: the group, already made; SSSSSS: the step) of camera cam.
+static bool add_session_camera(calib_geometry_views_t *vs, const char *sdir, const char *camera, const char *imgdir,
+                               const char *sub, int cam, int g, int *w, int *h)
 {
     rig_session_t *s = rig_session_open_camera(sdir, camera);
     if (!s) return false;
@@ -253,11 +255,13 @@ bool calib_geometry_add_session(calib_geometry_views_t *vs, const char *sdir, co
         rig_session_free(s);
         return false;
     }
-    int g = vs->ngroups++;
-    vs->group_tilt = realloc(vs->group_tilt, vs->ngroups * sizeof(double));
-    vs->group_az = realloc(vs->group_az, vs->ngroups * sizeof(double));
-    vs->group_tilt[g] = p->tilt_deg;
-    vs->group_az[g] = p->tilt_azimuth_deg;
+    if (!sub) {
+        g = vs->ngroups++;
+        vs->group_tilt = realloc(vs->group_tilt, vs->ngroups * sizeof(double));
+        vs->group_az = realloc(vs->group_az, vs->ngroups * sizeof(double));
+        vs->group_tilt[g] = p->tilt_deg;
+        vs->group_az[g] = p->tilt_azimuth_deg;
+    }
     char *base = g_path_get_basename(sdir);
     bool ok = true;
     if (s->n == 0) fprintf(stderr, "refl calib geometry: %s has no frames\n", sdir);
@@ -270,7 +274,7 @@ bool calib_geometry_add_session(calib_geometry_views_t *vs, const char *sdir, co
             break;
         }
         char *fb = g_path_get_basename(r->file);
-        char *name = g_strdup_printf("%s-%s", base, fb);
+        char *name = sub ? g_strdup_printf("%s/f%02d%06d.png", sub, g, r->step) : g_strdup_printf("%s-%s", base, fb);
         char *dst = g_strdup_printf("%s/%s", imgdir, name);
         char *src = g_strdup_printf("%s/%s", sdir, r->file);
         double full = !strcmp(r->pixel_format, "Mono8") ? 255 : !strcmp(r->pixel_format, "Mono16") ? 65535 : 4095;
@@ -283,7 +287,7 @@ bool calib_geometry_add_session(calib_geometry_views_t *vs, const char *sdir, co
             *w = fw;
             *h = fh;
             ok = write_8bit(dst, img, fw, fh, full);
-            if (ok) view_add(vs, name, src, sdir, g, r->measured_deg, p->tilt_deg, p->tilt_azimuth_deg);
+            if (ok) view_add(vs, name, src, sdir, g, r->measured_deg, p->tilt_deg, p->tilt_azimuth_deg)->camera = cam;
         }
         free(img);
         g_free(fb);
@@ -295,6 +299,12 @@ bool calib_geometry_add_session(calib_geometry_views_t *vs, const char *sdir, co
     rig_plan_free(p);
     rig_session_free(s);
     return ok;
+}
+
+bool calib_geometry_add_session(calib_geometry_views_t *vs, const char *sdir, const char *camera, const char *imgdir,
+                                int *w, int *h)
+{
+    return add_session_camera(vs, sdir, camera, imgdir, NULL, 0, -1, w, h);
 }
 
 bool calib_geometry_add_images(calib_geometry_views_t *vs, const char *pattern, const char *imgdir, int *w, int *h)
@@ -438,7 +448,7 @@ static int group_views(const calib_geometry_views_t *vs, int g, calib_geometry_v
     int n = 0;
     for (guint i = 0; i < vs->v->len; i++) {
         calib_geometry_view_t *v = g_ptr_array_index(vs->v, i);
-        if (v->group == g && v->solved && isfinite(v->angle_deg)) l[n++] = v;
+        if (v->group == g && v->camera == 0 && v->solved && isfinite(v->angle_deg)) l[n++] = v;
     }
     qsort(l, n, sizeof *l, cmp_angle);
     *out = l;
@@ -714,7 +724,7 @@ void calib_geometry_explain_missing(calib_geometry_views_t *vs, int gridn, doubl
     double sgn = 0;
     for (guint i = 0; i < vs->v->len && sgn == 0; i++) {
         calib_geometry_view_t *v = g_ptr_array_index(vs->v, i);
-        if (!v->solved) continue;
+        if (!v->solved || v->camera != 0) continue;
         double R[9];
         pose_R(R, v);
         double n[3] = { R[2], R[5], R[8] };
@@ -727,7 +737,7 @@ void calib_geometry_explain_missing(calib_geometry_views_t *vs, int gridn, doubl
         calib_geometry_view_t *v = g_ptr_array_index(vs->v, i);
         if (v->found) continue;
         snprintf(v->why, sizeof v->why, "mrgingham found no %dx%d board", gridn, gridn);
-        if (!ax || !ax->ok || v->group < 0 || !isfinite(v->angle_deg)) continue;
+        if (!ax || !ax->ok || v->group < 0 || v->camera != 0 || !isfinite(v->angle_deg)) continue;
         calib_geometry_view_t **l;
         int n = group_views(vs, v->group, &l);
         if (n == 0) {
@@ -793,8 +803,22 @@ static json_t *jarr(const double *x, int n)
     return a;
 }
 
+static bool write_cameramodel_ref(const char *path, const char *lensmodel, json_t *intr, int W, int H,
+                                  const double rt[6], const char *ref, double rms);
+
 bool calib_geometry_write_cameramodel(const char *path, const char *lensmodel, json_t *intr, int W, int H,
                               const double rt[6], bool rig, double rms)
+{
+    return write_cameramodel_ref(path, lensmodel, intr, W, H, rt,
+                                 rig ? "the rig frame: origin on the fitted turntable axis at the table top, z up along "
+                                       "the axis (counter-clockwise angles positive), x the board's grid direction at "
+                                       "angle 0, tilt 0 closest to the image's +x"
+                                     : "the camera itself (no turntable angles in the input: no rig frame)", rms);
+}
+
+// The model with the extrinsics' reference frame described by ref.
+static bool write_cameramodel_ref(const char *path, const char *lensmodel, json_t *intr, int W, int H,
+                                  const double rt[6], const char *ref, double rms)
 {
     char *tmp = g_strdup_printf("%s.part", path);
     FILE *f = fopen(tmp, "w");
@@ -805,10 +829,7 @@ bool calib_geometry_write_cameramodel(const char *path, const char *lensmodel, j
     }
     fprintf(f, "# refl calib geometry (refl %s): camera model from mrgingham corners and mrcal; RMS reprojection "
             "residual %.4f px.\n", REFL_VERSION, rms);
-    fprintf(f, "# Units mm. extrinsics are rt_cam_ref (r in rad, t in mm) with ref = %s\n",
-            rig ? "the rig frame: origin on the fitted turntable axis at the table top, z up along the axis "
-                  "(counter-clockwise angles positive), x the board's grid direction at angle 0, tilt 0 closest "
-                  "to the image's +x" : "the camera itself (no turntable angles in the input: no rig frame)");
+    fprintf(f, "# Units mm. extrinsics are rt_cam_ref (r in rad, t in mm) with ref = %s\n", ref);
     fprintf(f, "{\n    'lensmodel':  '%s',\n\n    # intrinsics are fx,fy,cx,cy,distortion0,distortion1,....\n"
             "    'intrinsics': [", lensmodel);
     size_t i;
@@ -988,12 +1009,70 @@ bool calib_geometry_find_corners(const calib_geometry_opts_t *o, calib_geometry_
         }
         return false;
     }
+    for (int c = 0; c < s->ncams && s->ncams > 1; c++) {
+        int nf = 0, nv = 0;
+        for (guint k = 0; k < vs->v->len; k++) {
+            calib_geometry_view_t *v = g_ptr_array_index(vs->v, k);
+            nv += v->camera == c;
+            nf += v->camera == c && v->found;
+        }
+        fprintf(stderr, "refl calib geometry: camera %s: the board in %d of %d images\n", s->camnames[c], nf, nv);
+        if (nf < min_views) {
+            model_error_set(o->out, 0, "too few views for %s of camera %s: the board was found in %d of its %d images, "
+                            "the solve needs at least %d (tilt the board towards it, or give --tilts with poses "
+                            "it sees)", o->lensmodel, s->camnames[c], nf, nv, min_views);
+            return false;
+        }
+    }
     return true;
+}
+
+// Several cameras: mrgingham's corner order made to agree across the cameras
+// of each frame (scripts/calib_geometry_report.py align) into
+// DIR/corners-joint.vnl; views left out get their reason. false + message.
+static bool align_corners(const calib_geometry_opts_t *o, calib_geometry_state_t *s, char **joint)
+{
+    char gn[16], sp[32], *spec[RIG_CAMERAS_MAX] = { 0 };
+    snprintf(gn, sizeof gn, "%d", o->gridn);
+    snprintf(sp, sizeof sp, "%.9g", o->square_mm);
+    for (int k = 0; k < RIG_CAMERAS_MAX; k++)
+        if (k < s->ncams)
+            spec[k] = g_strdup_printf("%s:%d:%d:%.6g", s->camnames[k], s->camw[k], s->camh[k],
+                                      isfinite(o->focal_px) ? o->focal_px : 1.4 * s->camw[k]);
+    *joint = g_strdup_printf("%s/corners-joint.vnl", s->outdir);
+    char *ajson = g_strdup_printf("%s/align.json", s->mdir);
+    fprintf(stderr, "refl calib geometry: making the corner order agree across the cameras\n");
+    int e = model_run_script("calib_geometry_report.py", "align", s->cornpath, *joint, ajson, gn, sp, spec[0],
+                             spec[1], spec[2], spec[3], spec[4], spec[5], spec[6], spec[7], NULL);
+    for (int k = 0; k < RIG_CAMERAS_MAX; k++) g_free(spec[k]);
+    json_error_t je;
+    json_t *a = e == 0 ? json_load_file(ajson, 0, &je) : NULL;
+    bool ok = a != NULL;
+    if (e == 0 && !a) model_error_set(ajson, je.line, "cannot read: %s", je.text);
+    else if (e != 0) model_error_set(s->cornpath, 0, "aligning the cameras' corner order failed (exit status %d)", e);
+    if (ok && json_object_get(a, "error")) {
+        model_error_set(s->cornpath, 0, "%s", json_string_value(json_object_get(a, "error")));
+        ok = false;
+    }
+    const char *name;
+    json_t *vj;
+    json_object_foreach(ok ? json_object_get(a, "views") : NULL, name, vj) {
+        calib_geometry_view_t *v = calib_geometry_view_find(&s->views, name);
+        if (!v) continue;
+        v->quarter_turns = (int)json_integer_value(json_object_get(vj, "quarter_turns"));
+        if (json_is_true(json_object_get(vj, "dropped")))
+            snprintf(v->why, sizeof v->why, "left out of the joint solve: no quarter turn of its corners agrees "
+                     "with the other cameras' view of this board pose (%.1f deg off)",
+                     json_real_value(json_object_get(vj, "mismatch_deg")));
+    }
+    json_decref(a);
+    g_free(ajson);
+    return ok;
 }
 
 bool calib_geometry_solve(const calib_geometry_opts_t *o, calib_geometry_state_t *s)
 {
-    char focal[32], spacing[32], wn[16], ws[16], hs[16];
+    char focal[160], spacing[32], wn[16], ws[16], hs[16];
     snprintf(focal, sizeof focal, "%.6g", isfinite(o->focal_px) ? o->focal_px : 1.4 * s->W);
     snprintf(spacing, sizeof spacing, "%.9g", o->square_mm);
     snprintf(wn, sizeof wn, "%d", o->gridn);
@@ -1002,7 +1081,26 @@ bool calib_geometry_solve(const calib_geometry_opts_t *o, calib_geometry_state_t
     char *cwd = o->corners ? g_path_get_dirname(s->cornpath) : g_strdup(s->imgdir);
     char *argv_m[] = { "mrcal-calibrate-cameras", "--corners-cache", s->cornpath, "--lensmodel",
                        (char *)o->lensmodel, "--focal", focal, "--object-spacing", spacing, "--object-width-n", wn,
-                       "--imagersize", ws, hs, "--outdir", s->mdir, "*", NULL };
+                       "--imagersize", ws, hs, "--outdir", s->mdir, "*", NULL, NULL, NULL, NULL, NULL, NULL, NULL,
+                       NULL };
+    char *joint = NULL;
+    if (s->ncams > 1) {    // one glob and seed focal length per camera, each its own imager size
+        if (!align_corners(o, s, &joint)) {
+            g_free(cwd);
+            g_free(joint);
+            return false;
+        }
+        GString *fl = g_string_new("");
+        for (int k = 0; k < s->ncams; k++)
+            g_string_append_printf(fl, "%s%.6g", k ? "," : "", isfinite(o->focal_px) ? o->focal_px : 1.4 * s->camw[k]);
+        snprintf(focal, sizeof focal, "%s", fl->str);
+        g_string_free(fl, TRUE);
+        argv_m[2] = joint;
+        argv_m[11] = "--outdir";
+        argv_m[12] = s->mdir;
+        for (int k = 0; k < s->ncams; k++) argv_m[13 + k] = g_strdup_printf("%s/*.png", s->camnames[k]);
+        argv_m[13 + s->ncams] = NULL;
+    }
     // mrcal-calibrate-cameras runs under Debian's Python (its shebang)
     fprintf(stderr, "refl calib geometry: solving %s from %d views (mrcal-calibrate-cameras)\n", o->lensmodel,
             s->nfound);
@@ -1011,6 +1109,9 @@ bool calib_geometry_solve(const calib_geometry_opts_t *o, calib_geometry_state_t
     unlink(model0);
     int e = run_tool(cwd, argv_m, log, NULL);
     g_free(cwd);
+    if (s->ncams > 1)
+        for (int k = 0; k < s->ncams; k++) g_free(argv_m[13 + k]);
+    g_free(joint);
     if (e != 0 || access(model0, R_OK) != 0) {
         if (e >= 0)
             model_error_set(s->mdir, 0, "mrcal-calibrate-cameras failed (exit status %d) on %s; see %s (a bad seed? "
@@ -1040,7 +1141,13 @@ bool calib_geometry_apply_solution(const calib_geometry_opts_t *o, calib_geometr
     size_t k;
     json_t *im;
     json_array_foreach(jimgs, k, im) {
-        calib_geometry_view_t *v = calib_geometry_view_find(&s->views, json_string_value(json_object_get(im, "path")));
+        const char *path = json_string_value(json_object_get(im, "path"));
+        calib_geometry_view_t *v = s->ncams > 1 ? NULL : calib_geometry_view_find(&s->views, path);
+        for (guint i = 0; i < s->views.v->len && s->ncams > 1 && path; i++) {   // names differ by directory only
+            calib_geometry_view_t *w = g_ptr_array_index(s->views.v, i);
+            size_t ln = strlen(path), lw = strlen(w->name);
+            if (ln >= lw && !strcmp(path + ln - lw, w->name) && (ln == lw || path[ln - lw - 1] == '/')) v = w;
+        }
         if (!v) continue;
         json_t *rt = json_object_get(im, "rt_cam_board");
         for (int c = 0; c < 6; c++) v->rt_cam_board[c] = json_real_value(json_array_get(rt, c));
@@ -1061,10 +1168,16 @@ bool calib_geometry_apply_solution(const calib_geometry_opts_t *o, calib_geometr
     return true;
 }
 
+const char *calib_geometry_tilts_expand(const char *tilts)
+{
+    return tilts && !strcmp(tilts, "2cam-example") ? CALIB_GEOMETRY_TILTS_2CAM_EXAMPLE : tilts;
+}
+
 bool calib_geometry_capture(const calib_geometry_opts_t *o, calib_geometry_state_t *s, bool *usage)
 {
     // every plan first: a bad --tilts fails before anything moves
-    char **specs = g_strsplit(o->tilts, " ", -1);
+    const char *tilts = calib_geometry_tilts_expand(o->tilts);
+    char **specs = g_strsplit(tilts, " ", -1);
     GPtrArray *plans = g_ptr_array_new_with_free_func(g_free), *names = g_ptr_array_new_with_free_func(g_free);
     bool ok = true;
     for (int k = 0; specs[k] && ok; k++) {
@@ -1079,7 +1192,7 @@ bool calib_geometry_capture(const calib_geometry_opts_t *o, calib_geometry_state
     }
     g_strfreev(specs);
     if (ok && plans->len == 0) {
-        model_error_set("--tilts", 0, "'%s': no tilts", o->tilts);
+        model_error_set("--tilts", 0, "'%s': no tilts", tilts);
         ok = false;
     }
     *usage = !ok;
@@ -1098,18 +1211,81 @@ bool calib_geometry_capture(const calib_geometry_opts_t *o, calib_geometry_state
     return ok;
 }
 
+// The cameras of the first session when it has several and no --camera picks
+// one: s->ncams, s->camnames (else s->ncams = 1). Names must be safe as
+// directory names and globs.
+static bool session_cameras(const calib_geometry_opts_t *o, calib_geometry_state_t *s, const char *sdir)
+{
+    s->ncams = 1;
+    if (o->camera || !sdir) return true;
+    rig_session_t *rs = rig_session_open(sdir);
+    if (!rs) return false;
+    const char *names[RIG_CAMERAS_MAX];
+    int n = rig_session_cameras(rs, names, RIG_CAMERAS_MAX);
+    bool ok = true;
+    for (int k = 0; k < n && n > 1 && ok; k++) {
+        if (!*names[k] || strspn(names[k], "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789_-") !=
+            strlen(names[k])) {
+            model_error_set(sdir, 0, "camera name '%s': calibrating several cameras needs names of letters, digits, "
+                            "'_' and '-' (or give --camera NAME for one)", names[k]);
+            ok = false;
+        }
+        snprintf(s->camnames[k], sizeof s->camnames[k], "%s", names[k]);
+    }
+    if (ok && n > 1) s->ncams = n;
+    rig_session_free(rs);
+    return ok;
+}
+
+// One session's frames of every camera (several cameras): one group, the
+// views of camera k named camnames[k]/fGGSSSSSS.png.
+static bool add_session_cameras(calib_geometry_state_t *s, const char *sd)
+{
+    calib_geometry_views_t *vs = &s->views;
+    int g = vs->ngroups;
+    for (int k = 0; k < s->ncams; k++) {
+        char *sub = g_strdup_printf("%s/%s", s->imgdir, s->camnames[k]);
+        bool ok = model_mkdir_p(sub) && add_session_camera(vs, sd, s->camnames[k], s->imgdir, s->camnames[k], k, g,
+                                                           &s->camw[k], &s->camh[k]);
+        g_free(sub);
+        if (!ok) return false;
+    }
+    rig_session_t *rs = rig_session_open_camera(sd, s->camnames[0]);
+    rig_plan_t *p = rs ? rig_plan_parse(rs->plan_text, strlen(rs->plan_text), sd) : NULL;
+    if (p) {
+        vs->ngroups++;
+        vs->group_tilt = realloc(vs->group_tilt, vs->ngroups * sizeof(double));
+        vs->group_az = realloc(vs->group_az, vs->ngroups * sizeof(double));
+        vs->group_tilt[g] = p->tilt_deg;
+        vs->group_az[g] = p->tilt_azimuth_deg;
+    }
+    rig_plan_free(p);
+    rig_session_free(rs);
+    return p != NULL;
+}
+
 // Stage 1: the views of the sessions (given or captured) or the images.
 static bool collect_views(const calib_geometry_opts_t *o, calib_geometry_state_t *s)
 {
     s->W = o->imager_w;
     s->H = o->imager_h;
     int n = s->sessions ? (int)g_strv_length(s->sessions) : o->nsessions;
+    if (!session_cameras(o, s, n ? (s->sessions ? s->sessions[0] : o->sessions[0]) : NULL)) return false;
     for (int k = 0; k < n; k++) {
         const char *sd = s->sessions ? s->sessions[k] : o->sessions[k];
         fprintf(stderr, "refl calib geometry: reading the frames of %s\n", sd);
-        if (!calib_geometry_add_session(&s->views, sd, o->camera, s->imgdir, &s->W, &s->H) ||
+        if (!(s->ncams > 1 ? add_session_cameras(s, sd)
+                           : calib_geometry_add_session(&s->views, sd, o->camera, s->imgdir, &s->W, &s->H)) ||
             !model_provenance_input(s->prov, "session", sd))
             return false;
+    }
+    if (s->ncams > 1) {
+        s->W = s->camw[0];
+        s->H = s->camh[0];
+        fprintf(stderr, "refl calib geometry: %d cameras (", s->ncams);
+        for (int k = 0; k < s->ncams; k++) fprintf(stderr, "%s%s %dx%d", k ? ", " : "", s->camnames[k], s->camw[k],
+                                                   s->camh[k]);
+        fprintf(stderr, "), calibrated together; the rig frame from %s's views\n", s->camnames[0]);
     }
     if (o->images) {
         fprintf(stderr, "refl calib geometry: reading the images %s\n", o->images);
@@ -1187,6 +1363,7 @@ static json_t *view_json(const calib_geometry_state_t *s, const calib_geometry_v
     json_t *im = json_object();
     json_object_set_new(im, "image", json_string(v->name));
     json_object_set_new(im, "source", json_string(v->source));
+    if (s->ncams > 1) json_object_set_new(im, "camera", json_string(s->camnames[v->camera]));
     if (v->session) json_object_set_new(im, "session", json_string(v->session));
     if (isfinite(v->angle_deg)) json_object_set_new(im, "angle_deg", json_real(v->angle_deg));
     if (isfinite(v->tilt_deg)) {
@@ -1200,7 +1377,7 @@ static json_t *view_json(const calib_geometry_state_t *s, const calib_geometry_v
         json_object_set_new(im, "outliers", json_integer(v->outliers));
         json_object_set_new(im, "rt_cam_board", jarr(v->rt_cam_board, 6));
         json_object_set_new(im, "quarter_turns", json_integer(v->quarter_turns));
-        if (s->have_rig) {
+        if (s->have_rig && v->camera == 0) {
             double rt_rig_cam[6], rt_rig_board[6];
             invert(rt_rig_cam, s->rt_cam_rig);
             compose(rt_rig_board, rt_rig_cam, v->rt_cam_board);
@@ -1295,6 +1472,29 @@ bool calib_geometry_report(const calib_geometry_opts_t *o, const calib_geometry_
                             json_real_value(json_object_get(u, "max_px")));
             model_html_figure(f, "uncertainty.png", "Projection uncertainty (dots: observed corners)");
         }
+        json_t *cams = json_object_get(s->out, "cameras");
+        if (json_array_size(cams) > 1) {
+            model_html_heading(f, "Cameras (one joint solve)");
+            size_t k;
+            json_t *c;
+            json_array_foreach(cams, k, c) {
+                json_t *ci = json_object_get(c, "intrinsics"), *rel = json_object_get(c, "rt_cam_cam0");
+                model_html_para(f, "%s: %s, %lld views, RMS %.4f px; fx, fy, cx, cy %.3f, %.3f, %.3f, %.3f px; pose "
+                                "relative to %s rt %.6f %.6f %.6f rad, %.3f %.3f %.3f mm (1-sigma %.4f deg, %.3f mm).",
+                                json_string_value(json_object_get(c, "name")),
+                                json_string_value(json_object_get(c, "camera_model")),
+                                json_integer_value(json_object_get(c, "views_used")),
+                                json_number_value(json_object_get(c, "rms_residual_px")),
+                                json_real_value(json_array_get(ci, 0)), json_real_value(json_array_get(ci, 1)),
+                                json_real_value(json_array_get(ci, 2)), json_real_value(json_array_get(ci, 3)),
+                                s->camnames[0], json_real_value(json_array_get(rel, 0)),
+                                json_real_value(json_array_get(rel, 1)), json_real_value(json_array_get(rel, 2)),
+                                json_real_value(json_array_get(rel, 3)), json_real_value(json_array_get(rel, 4)),
+                                json_real_value(json_array_get(rel, 5)),
+                                json_real_value(json_object_get(c, "rotation_stdev_deg")),
+                                json_real_value(json_object_get(c, "translation_stdev_mm")));
+            }
+        }
         model_html_heading(f, "Turntable axis and rig frame");
         if (ax->ok) {
             model_html_para(f, "Axis direction (camera frame) %.6f %.6f %.6f, +- %.4f deg (approximate); point "
@@ -1326,6 +1526,62 @@ bool calib_geometry_report(const calib_geometry_opts_t *o, const calib_geometry_
     return ok;
 }
 
+// Several cameras: camera k's rt_cam_ref (the rig frame's, else camera 0's)
+// from the joint solve's rt_camk_cam0.
+static void camera_rt(const calib_geometry_state_t *s, json_t *cj, double rt[6])
+{
+    double rt_k0[6];
+    json_t *e = json_object_get(cj, "rt_cam_cam0");
+    for (int c = 0; c < 6; c++) rt_k0[c] = json_real_value(json_array_get(e, c));
+    if (s->have_rig) compose(rt, rt_k0, s->rt_cam_rig);
+    else memcpy(rt, rt_k0, sizeof rt_k0);
+}
+
+// Several cameras: DIR/NAME.cameramodel each, and geometry.json's "cameras".
+static bool camera_outputs(const calib_geometry_opts_t *o, calib_geometry_state_t *s)
+{
+    json_t *cams = json_object_get(s->sol, "cameras"), *arr = json_array();
+    bool ok = json_array_size(cams) == (size_t)s->ncams;
+    if (!ok) model_error_set(s->mdir, 0, "the solution has %zu cameras, not %d", json_array_size(cams), s->ncams);
+    for (int k = 0; k < s->ncams && ok; k++) {
+        json_t *cj = json_array_get(cams, k), *c = json_object();
+        double rt[6], inv[6];
+        camera_rt(s, cj, rt);
+        char *path = g_strdup_printf("%s/%s.cameramodel", s->outdir, s->camnames[k]);
+        json_t *rms = json_object_get(cj, "rms_px");
+        char ref[400];
+        snprintf(ref, sizeof ref, "camera %s (the first camera; no rig frame: %s)", s->camnames[0], s->rigwhy);
+        ok = s->have_rig ? calib_geometry_write_cameramodel(path, o->lensmodel, json_object_get(cj, "intrinsics"),
+                                                            s->camw[k], s->camh[k], rt, true, json_number_value(rms))
+                         : write_cameramodel_ref(path, o->lensmodel, json_object_get(cj, "intrinsics"), s->camw[k],
+                                                 s->camh[k], rt, ref, json_number_value(rms));
+        json_object_set_new(c, "name", json_string(s->camnames[k]));
+        json_object_set_new(c, "camera_model", json_string(path));
+        json_object_set_new(c, "intrinsics", json_incref(json_object_get(cj, "intrinsics")));
+        json_object_set_new(c, "imagersize_px", json_pack("[ii]", s->camw[k], s->camh[k]));
+        json_object_set_new(c, "rms_residual_px", json_incref(rms));
+        json_object_set_new(c, "views_used", json_incref(json_object_get(cj, "observations")));
+        json_object_set_new(c, "rt_cam_cam0", json_incref(json_object_get(cj, "rt_cam_cam0")));
+        const char *keys[] = { "rt_cam_cam0_stdev", "rotation_stdev_deg", "translation_stdev_mm" };
+        for (int i = 0; i < 3; i++)
+            if (json_object_get(cj, keys[i])) json_object_set_new(c, keys[i], json_incref(json_object_get(cj, keys[i])));
+        json_object_set_new(c, "rt_cam_rig", s->have_rig ? jarr(rt, 6) : json_null());
+        if (s->have_rig) {
+            invert(inv, rt);
+            json_object_set_new(c, "camera_centre_rig_mm", jarr(&inv[3], 3));
+        }
+        json_object_set_new(c, "projection_uncertainty", json_incref(json_object_get(cj, "uncertainty")));
+        json_array_append_new(arr, c);
+        g_free(path);
+    }
+    json_object_set_new(s->out, "cameras_note", json_string("several cameras calibrated in one mrcal solve; "
+                        "rt_cam_cam0: each camera's pose relative to the first (rt_camk_cam0, r rad, t mm) with its "
+                        "1-sigma from the solve; rt_cam_rig = rt_cam_cam0 composed with the first camera's "
+                        "rt_cam_rig (the rig frame from the first camera's views)"));
+    json_object_set_new(s->out, "cameras", arr);
+    return ok;
+}
+
 // Stage 5: camera.cameramodel, geometry.json, the report.
 static bool outputs(const calib_geometry_opts_t *o, calib_geometry_state_t *s)
 {
@@ -1334,6 +1590,7 @@ static bool outputs(const calib_geometry_opts_t *o, calib_geometry_state_t *s)
                                           s->rt_cam_rig, s->have_rig, s->rms_px))
         return false;
     if (!(s->out = calib_geometry_json(o, s))) return false;
+    if (s->ncams > 1 && !camera_outputs(o, s)) return false;
     char *jpath = g_strdup_printf("%s/geometry.json", s->outdir);
     bool ok = model_write_json(jpath, s->out) && calib_geometry_report(o, s, jpath);
     g_free(jpath);

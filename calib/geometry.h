@@ -18,6 +18,17 @@
 //   5. outputs: calib_geometry_write_cameramodel, calib_geometry_json,
 //      calib_geometry_report (DIR/camera.cameramodel, geometry.json, report.html).
 //
+// Several cameras (sessions of a rig with several and no --camera): every
+// camera's frames become views DIR/images/NAME/fGGSSSSSS.png (GG the session,
+// SSSSSS the step: one frame number per board pose, the same in every camera),
+// scripts/calib_geometry_report.py align makes mrgingham's corner order of
+// each frame agree across the cameras (DIR/corners-joint.vnl), and one mrcal
+// solve calibrates every camera and its pose relative to camera 0 (the first).
+// The axis and the rig frame come from camera 0's views; camera k's rig pose
+// is rt_camk_cam0 (the joint solve) composed with camera 0's. Outputs also
+// DIR/NAME.cameramodel per camera (DIR/camera.cameramodel stays camera 0's)
+// and geometry.json's "cameras".
+//
 // Units: lengths mm, angles deg (rotation vectors r in rad), pixels px with
 // (0, 0) the centre of the top-left pixel. Poses are mrcal's rt (r: rotation
 // vector, rad; t: mm); rt_a_b maps coordinates in frame b to frame a.
@@ -32,6 +43,7 @@
 #include <stddef.h>
 
 #include "model/model.h"
+#include "rig/rig.h"
 #include "rig/session.h"
 
 #ifdef __cplusplus
@@ -46,6 +58,22 @@ extern "C" {
     "0:40,240 20@0:0,10,40,340 20@90:290,300,320,350 20@180:210,240,260,270 35@0:10,20,40 "                     \
     "35@180:210,230,240 50@0:20,30,40 50@180:210,220,230,240"
 #define CALIB_GEOMETRY_DEFAULT_ANGLES "0 40 80 120 160 200 240 280 320"
+// Tilts for the two-camera example rig (examples/virtual-rig-2cam.ini: the
+// cameras 65 deg apart in azimuth, each seeing the 330 mm board whole only near
+// the middle of its view): the poses (of tilt 0 and five tilts at every 10 deg)
+// where at least one camera finds the board; 21 of the 111 both cameras do
+// (they tie the cameras together).
+#define CALIB_GEOMETRY_TILTS_2CAM_EXAMPLE                                                                      \
+    "0:20,40,60,160,200,220,240,300,320 "                                                                          \
+    "20@0:0,10,20,30,40,50,60,70,110,160,200,210,220,230,290,300,310,320,330 "                                    \
+    "20@270:20,30,40,50,60,70,80,90,100,110,120,130,140,160,170,210,220,230,240,250,310,320,330,340 "             \
+    "20@90:20,30,130,140,150,160,170,210,220,230,270,280,290,300,310,320,330,340 "                                \
+    "35@90:150,160,200,220,230,240,250,260,270,280,290,300,310,320,330,340,350 "                                  \
+    "20@180:30,40,50,60,70,80,110,120,140,150,160,180,190,200,210,220,230,240,250,260,290,300,310,320"
+
+// --tilts NAME: "2cam-example" is CALIB_GEOMETRY_TILTS_2CAM_EXAMPLE; any other
+// text is itself.
+const char *calib_geometry_tilts_expand(const char *tilts);
 
 // What to calibrate from (exactly one of rig, sessions, images, corners) and how.
 typedef struct {
@@ -96,6 +124,7 @@ typedef struct {
     bool    solved;          // mrcal has a pose for it
     double  rt_cam_board[6]; // mrcal's pose (corner order as mrgingham's), then quarter-turn corrected
     int     quarter_turns;
+    int     camera;          // index into the state's cameras (0: the first, the only one of a single camera)
     double  rms_px;          // mrcal's RMS residual of the view, NAN unknown
     int     outliers;
 } calib_geometry_view_t;
@@ -137,6 +166,9 @@ typedef struct {
     calib_geometry_axis_t axis;
     bool            have_rig;
     double          rt_cam_rig[6];
+    int             ncams;          // cameras calibrated together (1: one, as always before)
+    char            camnames[RIG_CAMERAS_MAX][RIG_CAMERA_NAME_MAX];
+    int             camw[RIG_CAMERAS_MAX], camh[RIG_CAMERAS_MAX];   // each camera's imager, px
     char            rigwhy[256];    // why there is no rig frame
     char           *campath;        // DIR/camera.cameramodel (g_free)
     json_t         *out;            // geometry.json's document (owned)

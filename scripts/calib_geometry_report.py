@@ -11,6 +11,23 @@
 #       excluded) and the outlier count; the projection uncertainty from
 #       mrcal.projection_uncertainty (worst-direction standard deviation, px)
 #       at a grid over the imager, for points DISTANCE_MM from the camera.
+#       With several cameras (mrcal-calibrate-cameras given one glob per
+#       camera; camera 0 is mrcal's reference) each observation also names its
+#       camera, its rt_cam_board is composed from mrcal's extrinsics of that
+#       camera and the frame's pose, and "cameras" gives per camera the
+#       intrinsics, imager size, RMS residual, projection uncertainty and the
+#       pose rt_cam_cam0 (mrcal's extrinsics) with its standard deviation (from
+#       the solve's J^T J and the residuals' RMS per component).
+#   align CORNERS_IN CORNERS_OUT OUT.json GRIDN SPACING_MM DIR:W:H:FOCAL...
+#       Several cameras: mrgingham orders a square board's corners up to a
+#       quarter turn, independently in each camera's image, while a joint solve
+#       needs one order per frame (DIR/fNNN.png of every camera: one frame).
+#       Estimates each view's board pose (pinhole seed, every quarter turn of
+#       its corner order), camera k's pose relative to camera 0 as the one most
+#       shared frames agree on, and turns each view's corners so that its pose
+#       agrees with the first camera seeing that frame; a view no turn makes
+#       agree (within 5 deg) is left out. Writes CORNERS_OUT and, per view, the
+#       camera, frame, quarter turns and mismatch into OUT.json.
 #   plots GEOMETRY.json MODEL OUTDIR
 #       The report's figures (PNG): residual vectors over the imager,
 #       residual histogram, RMS per image, projection uncertainty map, the
@@ -41,19 +58,80 @@ def solution(model_path, out_path, distance_mm):
     ok = w > 0
     ru = np.zeros_like(r)
     ru[ok] = r[ok] / w[ok][:, None]                  # unweighted residuals, px
+    extr = oi.get("extrinsics_rt_fromref")
+    ncam = int(np.max(idx[:, 1])) + 1
     images = []
     for i in range(obs.shape[0]):
         o = ok[i]
         rr = ru[i][o]
-        images.append({
+        rt = frames[idx[i, 0]]
+        if idx[i, 2] >= 0:
+            rt = mrcal.compose_rt(extr[idx[i, 2]], rt)
+        im = {
             "path": str(paths[i]) if paths is not None else f"observation {i}",
-            "rt_cam_board": [float(v) for v in frames[idx[i, 0]]],
+            "rt_cam_board": [float(v) for v in rt],
             "rms_px": float(np.sqrt(np.mean(np.sum(rr * rr, axis=-1)))) if rr.size else None,
             "outliers": int(np.sum(~o)),
             "residuals_px": [[float(a), float(b)] for a, b in ru[i].reshape(-1, 2)],
             "observed_px": [[float(a), float(b)] for a, b in obs[i, ..., :2].reshape(-1, 2)],
-        })
+        }
+        if ncam > 1:
+            im["camera"] = int(idx[i, 1])
+        images.append(im)
     allr = ru[ok]
+    out = {"lensmodel": lensmodel, "intrinsics": [float(v) for v in intrinsics], "imagersize": [W, H],
+           "rms_px": float(np.sqrt(np.mean(np.sum(allr * allr, axis=-1)))),
+           "observations": int(obs.shape[0]), "points": int(np.sum(ok)), "outliers": int(np.sum(~ok)),
+           "images": images, "uncertainty": uncertainty(m, distance_mm)}
+    if ncam > 1:
+        out["cameras"] = cameras(model_path, oi, idx, ru, ok, ncam, distance_mm)
+    with open(out_path, "w") as f:
+        json.dump(out, f)
+
+
+def cameras(model_path, oi, idx, ru, ok, ncam, distance_mm):
+    """Per camera of a joint solve: intrinsics, residuals, uncertainty, pose to camera 0 (+- 1 sigma)."""
+    import os
+    import mrcal
+    J = mrcal.optimizer_callback(**oi, no_factorization=True)[2]
+    JtJ = (J.T @ J).toarray()
+    allr = ru[ok]
+    sigma = float(np.sqrt(np.mean(allr * allr)))     # per residual component, px
+    try:
+        cov = np.linalg.inv(JtJ) * sigma * sigma
+    except np.linalg.LinAlgError:
+        cov = None
+    scale = np.ones(JtJ.shape[0])
+    mrcal.unpack_state(scale, **oi)                   # in place: the packed state's scale
+    res = []
+    for k in range(ncam):
+        mk = mrcal.cameramodel(os.path.join(os.path.dirname(model_path), f"camera-{k}.cameramodel"))
+        lk, ik = mk.intrinsics()
+        sel = idx[:, 1] == k
+        rk = ru[sel][ok[sel]]
+        c = {"intrinsics": [float(v) for v in ik], "lensmodel": lk,
+             "imagersize": [int(v) for v in mk.imagersize()],
+             "observations": int(np.sum(sel)),
+             "rms_px": float(np.sqrt(np.mean(np.sum(rk * rk, axis=-1)))) if rk.size else None,
+             "rt_cam_cam0": [float(v) for v in mk.extrinsics_rt_fromref()],
+             "uncertainty": uncertainty(mk, distance_mm)}
+        if k > 0 and cov is not None:
+            i0 = mrcal.state_index_extrinsics(k - 1, **oi)
+            s6 = scale[i0:i0 + 6]
+            ck = cov[i0:i0 + 6, i0:i0 + 6] * np.outer(s6, s6)
+            sd = np.sqrt(np.maximum(np.diag(ck), 0))
+            c["rt_cam_cam0_stdev"] = [float(v) for v in sd]
+            c["rotation_stdev_deg"] = float(np.sqrt(max(np.trace(ck[:3, :3]), 0)) * 180 / np.pi)
+            c["translation_stdev_mm"] = float(np.sqrt(max(np.trace(ck[3:, 3:]), 0)))
+        res.append(c)
+    return res
+
+
+def uncertainty(m, distance_mm):
+    """mrcal.projection_uncertainty of model m at a grid over its imager."""
+    import mrcal
+    lensmodel, intrinsics = m.intrinsics()
+    W, H = (int(x) for x in m.imagersize())
     # projection uncertainty at a grid over the imager
     gx = np.linspace(0, W - 1, 17)
     gy = np.linspace(0, H - 1, 14)
@@ -71,12 +149,104 @@ def solution(model_path, out_path, distance_mm):
                "observed_pixel_uncertainty_px": "from the residuals (mrcal's default)"}
     except Exception as e:                             # noqa: BLE001 — reported, not fatal
         unc = {"error": f"mrcal.projection_uncertainty failed: {e}"}
-    out = {"lensmodel": lensmodel, "intrinsics": [float(v) for v in intrinsics], "imagersize": [W, H],
-           "rms_px": float(np.sqrt(np.mean(np.sum(allr * allr, axis=-1)))),
-           "observations": int(obs.shape[0]), "points": int(np.sum(ok)), "outliers": int(np.sum(~ok)),
-           "images": images, "uncertainty": unc}
+    return unc
+
+
+def align(corners_in, corners_out, out_path, gridn, spacing, camspecs):
+    import re
+    import mrcal
+    cams = []
+    for spec in camspecs:
+        d, w, h, f = spec.rsplit(":", 3)
+        cams.append((d, int(w), int(h), float(f)))
+    order, rows = [], {}
+    for line in open(corners_in):
+        if not line.strip() or line.lstrip().startswith("#"):
+            continue
+        name, rest = line.split(None, 1)
+        if name not in rows:
+            rows[name] = []
+            order.append(name)
+        rows[name].append(line.rstrip("\n"))
+    N = gridn
+    views = []                                     # (name, icam, frame, obs N x N x 3)
+    for name in order:
+        d, _, base = name.rpartition("/")
+        icam = next((k for k, c in enumerate(cams) if c[0] == d), None)
+        digits = re.sub(r"\D", "", base)
+        if icam is None or not digits or len(rows[name]) != N * N:
+            continue
+        q = []
+        for line in rows[name]:
+            f = line.split()
+            q.append([float(f[1]), float(f[2]), 1.0] if f[1] != "-" and f[2] != "-" else [-1.0, -1.0, -1.0])
+        views.append((name, icam, int(digits), np.array(q).reshape(N, N, 3)))
+    # every view's pose for each quarter turn of its corner order
+    ifc = np.array([[4 * i + j, v[1]] for i, v in enumerate(views) for j in range(4)], dtype=np.int32)
+    ob = np.array([np.rot90(v[3], j, axes=(0, 1)) for v in views for j in range(4)])
+    seeds = [("LENSMODEL_PINHOLE", np.array([c[3], c[3], (c[1] - 1) / 2, (c[2] - 1) / 2])) for c in cams]
+    Rt = mrcal.estimate_monocular_calobject_poses_Rt_tocam(ifc, ob, spacing, seeds)
+    rt = mrcal.rt_from_Rt(Rt).reshape(len(views), 4, 6)
+    byframe = {}
+    for i, v in enumerate(views):
+        byframe.setdefault(v[2], {})[v[1]] = i
+
+    def rdiff(a, b):                               # rotation between two rt, deg (0..180)
+        x = float(np.linalg.norm(mrcal.compose_r(a[:3], -b[:3]))) % (2 * np.pi)   # compose_r may exceed pi
+        return min(x, 2 * np.pi - x) * 180 / np.pi
+
+    # rt_camk_cam0: the candidate most shared frames agree with
+    T = [np.zeros(6)] + [None] * (len(cams) - 1)
+    err = None
+    for k in range(1, len(cams)):
+        cand = []
+        for f, vs in byframe.items():
+            if 0 in vs and k in vs:
+                cand.append([mrcal.compose_rt(rt[vs[k], j], mrcal.invert_rt(rt[vs[0], 0])) for j in range(4)])
+        if not cand:
+            err = f"camera {k} ({cams[k][0]}) sees the board in no frame that camera 0 ({cams[0][0]}) sees: " \
+                  "the joint solve needs views of the board by both"
+            break
+        best, bscore = None, -1
+        for cf in cand:
+            for c in cf:
+                score = sum(1 for other in cand if min(rdiff(c, o) for o in other) < 5)
+                if score > bscore:
+                    best, bscore = c, score
+        T[k] = best
+    res = {"cameras": [c[0] for c in cams], "views": {}}
+    if err:
+        res["error"] = err
+    else:
+        turns = {}
+        for f, vs in sorted(byframe.items()):
+            ref = min(vs)
+            turns[vs[ref]] = (0, 0.0)
+            rref = mrcal.compose_rt(mrcal.invert_rt(T[ref]), rt[vs[ref], 0])   # the board in camera 0's frame
+            for k, i in vs.items():
+                if k == ref:
+                    continue
+                pred = mrcal.compose_rt(T[k], rref)
+                d = [rdiff(pred, rt[i, j]) for j in range(4)]
+                j = int(np.argmin(d))
+                turns[i] = (j, d[j])
+        for i, v in enumerate(views):
+            j, d = turns[i]
+            res["views"][v[0]] = {"camera": v[1], "frame": v[2], "quarter_turns": j, "mismatch_deg": d,
+                                  "dropped": bool(d > 5)}
+        res["rt_cam_cam0_seed"] = [[float(x) for x in t] for t in T]
+    with open(corners_out, "w") as fo:
+        for name in order:
+            r = rows[name]
+            info = res["views"].get(name)
+            if info and info["dropped"]:
+                continue
+            if info and info["quarter_turns"]:
+                perm = np.rot90(np.arange(N * N).reshape(N, N), info["quarter_turns"]).ravel()
+                r = [r[p] for p in perm]
+            fo.write("\n".join(r) + "\n")
     with open(out_path, "w") as f:
-        json.dump(out, f)
+        json.dump(res, f)
 
 
 def plots(geometry_path, solution_path, outdir):
@@ -156,10 +326,13 @@ def plots(geometry_path, solution_path, outdir):
 
 
 if __name__ == "__main__":
-    if len(sys.argv) == 5 and sys.argv[1] == "solution":
+    if len(sys.argv) >= 8 and sys.argv[1] == "align":
+        align(sys.argv[2], sys.argv[3], sys.argv[4], int(sys.argv[5]), float(sys.argv[6]), sys.argv[7:])
+    elif len(sys.argv) == 5 and sys.argv[1] == "solution":
         solution(sys.argv[2], sys.argv[3], float(sys.argv[4]))
     elif len(sys.argv) == 5 and sys.argv[1] == "plots":
         plots(sys.argv[2], sys.argv[3], sys.argv[4])
     else:
         sys.exit("usage: calib_geometry_report.py solution MODEL OUT.json DISTANCE_MM | "
-                 "plots GEOMETRY.json SOLUTION.json OUTDIR")
+                 "plots GEOMETRY.json SOLUTION.json OUTDIR | "
+                 "align CORNERS_IN CORNERS_OUT OUT.json GRIDN SPACING_MM DIR:W:H:FOCAL...")

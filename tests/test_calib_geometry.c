@@ -24,6 +24,10 @@
 //     error of cy turns every direction by ~0.06 deg and moves nothing in the
 //     world): < 0.05 deg. Compared without that transform, in the two camera
 //     frames as they are: printed, checked < 0.1 deg.
+// - Two cameras (examples/virtual-truth-2cam.ini): one joint solve; each
+//   camera's intrinsics, rig pose and the right camera's pose relative to the
+//   left against the truth (rotations compared in the camera frames the
+//   recovered intrinsics imply, as the axis above; printed also as they are).
 // - Images without a board are named with a reason; bad arguments.
 // - The axis stage alone (calib_geometry_fit_axis, calib_geometry_rig_frame)
 //   on exact poses turned about a known axis.
@@ -38,6 +42,7 @@
 
 #include "calib/geometry.h"
 #include "model/model.h"
+#include "model/report.h"
 #include "tests/test.h"
 
 #define DEG (M_PI / 180.0)
@@ -642,4 +647,281 @@ TEST(calib_geometry_axis_stage)
     CHECK_NEAR(bo[0] * u[0] + bo[1] * u[1] + bo[2] * u[2], h_mm, 1e-6);
     json_decref(ax.fit);
     calib_geometry_views_free(&vs);
+}
+
+// Rotation (deg) and camera-centre distance (mm) between the poses rt_cam_ref
+// a (recovered) and b (truth). fit (may be NULL): the rotation part of
+// diff_fitted's rt_fit (truth camera -> recovered camera: the slight turn of
+// the camera frame that the recovered intrinsics imply, as for the axis
+// above) applied to b first; it moves no camera centre.
+static void pose_diff(const double a[6], const double b[6], const double *fit, double *rot_deg, double *centre_mm)
+{
+    double r[6] = { 0 }, bf[6], ibf[6], d[6], ia[6], ib[6];
+    if (fit) memcpy(r, fit, 3 * sizeof(double));
+    mrcal_compose_rt(bf, NULL, NULL, NULL, NULL, r, b);
+    mrcal_invert_rt(ibf, NULL, NULL, bf);
+    mrcal_compose_rt(d, NULL, NULL, NULL, NULL, a, ibf);
+    *rot_deg = sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]) / DEG;
+    mrcal_invert_rt(ia, NULL, NULL, a);
+    mrcal_invert_rt(ib, NULL, NULL, b);
+    *centre_mm = sqrt((ia[3] - ib[3]) * (ia[3] - ib[3]) + (ia[4] - ib[4]) * (ia[4] - ib[4]) +
+                      (ia[5] - ib[5]) * (ia[5] - ib[5]));
+}
+
+// Two cameras (examples/virtual-truth-2cam.ini, in-process): one capture per
+// tilt triggers both, one mrcal solve calibrates both and their relative pose
+// (mrgingham's corner order made to agree across the cameras first), the rig
+// frame from the first camera's views. Against the truth's camera models (rig
+// frame): each camera's intrinsics (projection difference at 900 mm after the
+// best rigid transform, as above), each camera's rig pose and the right
+// camera's pose relative to the left within 0.05 deg / 0.5 mm; the JSON names
+// each view's camera and gives the relative pose's 1-sigma; camera.cameramodel
+// is the first camera's.
+TEST(calib_geometry_two_cameras)
+{
+    char top[PATH_MAX];
+    if (!realpath(test_srcdir(), top)) snprintf(top, sizeof top, "%s", test_srcdir());
+    char rig[3 * PATH_MAX];
+    snprintf(rig, sizeof rig, "[rig]\nbackend = virtual\ntruth = %s/examples/virtual-truth-2cam.ini\n"
+             "serve = inprocess\ntime_scale = 0.01\nnoise_seed = 7\npixel_format = Mono12\n", top);
+    const char *rigp = test_write("rig2.ini", rig);
+    const char *dir = test_path("geo2");
+    char *out = NULL, *err = NULL;
+    double t0 = model_realtime_s();
+    int rc = test_refl_run(400, &out, &err, "calib", "geometry", "--yes", "--rig", rigp, "--tilts", "2cam-example",
+                           "-o", dir, NULL);
+    fprintf(stderr, "  two-camera calibration: %.1f s\n", model_realtime_s() - t0);
+    CHECK_MSG(rc == 0, "refl calib geometry --rig (two cameras): exit %d\n%s", rc, err ? err : "");
+    json_t *g = load_json(dir, "geometry.json");
+    const char *names[2] = { "left", "right" }, *truths[2] = { "camera.cameramodel", "camera-right.cameramodel" };
+    mrcal_cameramodel_t *t[2] = { 0 }, *b[2] = { 0 };
+    double fit[2][6] = { { 0 } };
+    for (int k = 0; k < 2; k++) {
+        char p[PATH_MAX + 64];
+        snprintf(p, sizeof p, "%s/examples/%s", top, truths[k]);
+        t[k] = mrcal_read_cameramodel_file(p);
+        snprintf(p, sizeof p, "%s/%s.cameramodel", dir, names[k]);
+        b[k] = rc == 0 ? mrcal_read_cameramodel_file(p) : NULL;
+        CHECK(t[k] && b[k]);
+    }
+    json_t *cams = json_object_get(g, "cameras");
+    CHECK(json_array_size(cams) == 2);
+    if (g && t[0] && t[1] && b[0] && b[1] && json_array_size(cams) == 2) {
+        for (int k = 0; k < 2; k++) {
+            json_t *c = json_array_get(cams, k);
+            CHECK(!g_strcmp0(json_string_value(json_object_get(c, "name")), names[k]));
+            double mx, rot, rot_raw, cen, d = diff_fitted(t[k], b[k], 900, &mx, fit[k]);
+            pose_diff(b[k]->rt_cam_ref, t[k]->rt_cam_ref, fit[k], &rot, &cen);
+            pose_diff(b[k]->rt_cam_ref, t[k]->rt_cam_ref, NULL, &rot_raw, &cen);
+            fprintf(stderr, "  camera %s: %lld views, RMS %.4f px; projection difference at 900 mm RMS %.4f px "
+                    "(max %.4f); rig pose off by %.4f deg (%.4f deg in the camera frames as recovered), %.3f mm; "
+                    "fx %.3f (truth %.3f) cx %.3f (%.3f) cy %.3f (%.3f)\n", names[k],
+                    json_integer_value(json_object_get(c, "views_used")),
+                    json_real_value(json_object_get(c, "rms_residual_px")), d, mx, rot, rot_raw, cen, b[k]->intrinsics[0],
+                    t[k]->intrinsics[0], b[k]->intrinsics[2], t[k]->intrinsics[2], b[k]->intrinsics[3],
+                    t[k]->intrinsics[3]);
+            CHECK(json_integer_value(json_object_get(c, "views_used")) >= 10);
+            CHECK(d < 0.15);
+            CHECK(rot < 0.05);
+            CHECK(rot_raw < 0.1);
+            CHECK(cen < 0.5);
+        }
+        // the right camera relative to the left: truth (carried into the
+        // recovered camera frames by the fitted turns) and recovered
+        double it0[6], ib0[6], rt_t[6], rt_b[6], rt_e[6], f0[6] = { 0 }, f1[6] = { 0 }, if0[6], rot, rot_raw, cen;
+        memcpy(f0, fit[0], 3 * sizeof(double));
+        memcpy(f1, fit[1], 3 * sizeof(double));
+        mrcal_invert_rt(it0, NULL, NULL, t[0]->rt_cam_ref);
+        mrcal_invert_rt(ib0, NULL, NULL, b[0]->rt_cam_ref);
+        mrcal_invert_rt(if0, NULL, NULL, f0);
+        mrcal_compose_rt(rt_t, NULL, NULL, NULL, NULL, t[1]->rt_cam_ref, it0);
+        mrcal_compose_rt(rt_b, NULL, NULL, NULL, NULL, b[1]->rt_cam_ref, ib0);
+        mrcal_compose_rt(rt_e, NULL, NULL, NULL, NULL, f1, rt_t);
+        mrcal_compose_rt(rt_e, NULL, NULL, NULL, NULL, rt_e, if0);
+        pose_diff(rt_b, rt_e, NULL, &rot, &cen);
+        pose_diff(rt_b, rt_t, NULL, &rot_raw, &cen);
+        json_t *c1 = json_array_get(cams, 1), *rel = json_object_get(c1, "rt_cam_cam0");
+        double rj[6], rotj, cenj;
+        for (int i = 0; i < 6; i++) rj[i] = json_real_value(json_array_get(rel, i));
+        pose_diff(rj, rt_e, NULL, &rotj, &cenj);
+        fprintf(stderr, "  right relative to left: off by %.4f deg (%.4f deg in the camera frames as recovered), "
+                "%.3f mm (the JSON's: %.4f deg, %.3f mm; stated 1-sigma %.4f deg, %.3f mm)\n", rot, rot_raw, cen,
+                rotj, cenj, json_real_value(json_object_get(c1, "rotation_stdev_deg")),
+                json_real_value(json_object_get(c1, "translation_stdev_mm")));
+        CHECK(rot < 0.05);
+        CHECK(rot_raw < 0.1);
+        CHECK(cen < 0.5);
+        CHECK(rotj < 0.05 && cenj < 0.5);
+        CHECK(json_real_value(json_object_get(c1, "rotation_stdev_deg")) > 0);
+        CHECK(json_real_value(json_object_get(c1, "translation_stdev_mm")) > 0);
+        // camera.cameramodel is the first camera's
+        char p[PATH_MAX + 64];
+        snprintf(p, sizeof p, "%s/camera.cameramodel", dir);
+        mrcal_cameramodel_t *c0 = mrcal_read_cameramodel_file(p);
+        CHECK(c0 != NULL);
+        if (c0) {
+            for (int i = 0; i < 6; i++) CHECK_NEAR(c0->rt_cam_ref[i], b[0]->rt_cam_ref[i], 1e-12);
+            CHECK_NEAR(c0->intrinsics[0], b[0]->intrinsics[0], 1e-9);
+            CHECK(c0->imagersize[0] == 1280);
+        }
+        free(c0);
+        CHECK(b[1]->imagersize[0] == 1024 && b[1]->imagersize[1] == 768);
+        // every view names its camera; both cameras' views are used
+        size_t i;
+        json_t *im;
+        int seen[2] = { 0 };
+        json_array_foreach(json_object_get(g, "images"), i, im) {
+            const char *cn = json_string_value(json_object_get(im, "camera"));
+            CHECK(cn != NULL);
+            for (int k = 0; k < 2; k++)
+                if (cn && !strcmp(cn, names[k]) && json_object_get(im, "rt_cam_board")) seen[k]++;
+        }
+        CHECK(seen[0] >= 10 && seen[1] >= 10);
+    }
+    for (int k = 0; k < 2; k++) {
+        free(t[k]);
+        free(b[k]);
+    }
+    json_decref(g);
+    free(out);
+    free(err);
+}
+
+// The corner order across cameras (scripts/calib_geometry_report.py align):
+// boards near the table centre in the rig frame seen by both truth cameras
+// (examples/virtual-truth-2cam.ini), the right camera's corners written a
+// quarter turn k = frame % 4 away from the left's order (as mrgingham may
+// order them), one frame's right view mirrored (no quarter turn makes it
+// agree). The script turns each right view back (k + turns = 0 mod 4: the
+// corners come out in the left's order) and leaves the mirrored one out.
+TEST(calib_geometry_align_quarter_turns)
+{
+    char p[PATH_MAX + 64];
+    mrcal_cameramodel_t *t[2];
+    const char *files[2] = { "camera.cameramodel", "camera-right.cameramodel" }, *names[2] = { "left", "right" };
+    for (int k = 0; k < 2; k++) {
+        snprintf(p, sizeof p, "%s/examples/%s", test_srcdir(), files[k]);
+        t[k] = mrcal_read_cameramodel_file(p);
+        CHECK(t[k] != NULL);
+        if (!t[k]) return;
+    }
+    const int n = 10, nframes = 9, mirrored = 5;
+    GString *g = g_string_new("# filename x y level\n");
+    double (*truth_q)[100][2] = calloc(nframes, sizeof *truth_q);   // the right camera's corners, left's order
+    int made = 0;
+    for (int attempt = 0; made < nframes && attempt < 5000; attempt++) {
+        // a board about the table centre: turned about z, tilted up to 20 deg
+        double rt[6] = { (urand() - 0.5) * 40 * DEG, (urand() - 0.5) * 40 * DEG, urand() * 2 * M_PI, 0, 0, 0 };
+        double c[3] = { (n - 1) * 30 / 2.0, (n - 1) * 30 / 2.0, 0 }, Rc[3];
+        transform(rt, c, Rc);
+        double centre[3] = { (urand() - 0.5) * 60, (urand() - 0.5) * 60, 40 + (urand() - 0.5) * 40 };
+        for (int k = 0; k < 3; k++) rt[3 + k] = centre[k] - Rc[k];
+        mrcal_point2_t Q[2][100];
+        bool in = true;
+        for (int cam = 0; cam < 2 && in; cam++) {
+            mrcal_point3_t P[100];
+            for (int j = 0; j < n; j++)
+                for (int i = 0; i < n; i++) {
+                    double b[3] = { i * 30.0, j * 30.0, 0 }, w[3];
+                    transform(rt, b, w);
+                    transform(t[cam]->rt_cam_ref, w, P[j * n + i].xyz);
+                }
+            mrcal_project(Q[cam], NULL, NULL, P, n * n, &t[cam]->lensmodel, t[cam]->intrinsics);
+            for (int k = 0; k < n * n; k++)
+                if (!(Q[cam][k].xy[0] > 5 && Q[cam][k].xy[0] < t[cam]->imagersize[0] - 6 && Q[cam][k].xy[1] > 5 &&
+                      Q[cam][k].xy[1] < t[cam]->imagersize[1] - 6))
+                    in = false;
+        }
+        if (!in) continue;
+        int turns = made % 4;
+        for (int cam = 0; cam < 2; cam++)
+            for (int m = 0; m < n * n; m++) {
+                // line m of the right view: the corner np.rot90(grid, turns) puts there (rows r, columns c)
+                int r = m / n, col = m % n, src = r * n + col;
+                if (cam == 1 && made == mirrored) src = col * n + r;   // transposed: a mirror image
+                else if (cam == 1)
+                    for (int q = 0; q < turns; q++) {   // rot90 once: out[r][c] = in[c][n-1-r]
+                        int rr = src / n, cc = src % n;
+                        src = cc * n + (n - 1 - rr);
+                    }
+                g_string_append_printf(g, "%s/f%08d.png %.4f %.4f 0\n", names[cam], made, Q[cam][src].xy[0] +
+                                       0.1 * nrand(), Q[cam][src].xy[1] + 0.1 * nrand());
+                if (cam == 1) {
+                    truth_q[made][m][0] = Q[1][m].xy[0];
+                    truth_q[made][m][1] = Q[1][m].xy[1];
+                }
+            }
+        made++;
+    }
+    CHECK(made == nframes);
+    char *in = g_strdup(test_write("corners-2cam.vnl", g->str)), *out = g_strdup(test_path("joint.vnl")),
+         *js = g_strdup(test_path("align.json"));
+    g_string_free(g, TRUE);
+    int rc = model_run_script("calib_geometry_report.py", "align", in, out, js, "10", "30", "left:1280:1024:1750",
+                              "right:1024:768:1400", NULL);
+    CHECK(rc == 0);
+    json_t *a = json_load_file(js, 0, NULL);
+    json_t *views = json_object_get(a, "views");
+    CHECK(json_object_size(views) == (size_t)(2 * nframes));
+    for (int f = 0; f < nframes; f++) {
+        snprintf(p, sizeof p, "right/f%08d.png", f);
+        json_t *v = json_object_get(views, p);
+        CHECK_MSG(v != NULL, "%s", p);
+        if (!v) continue;
+        int q = (int)json_integer_value(json_object_get(v, "quarter_turns"));
+        bool dropped = json_is_true(json_object_get(v, "dropped"));
+        if (f == mirrored) {
+            CHECK_MSG(dropped, "%s: the mirrored view is kept (%.2f deg off)", p,
+                      json_real_value(json_object_get(v, "mismatch_deg")));
+        } else {
+            CHECK_MSG(!dropped && (f % 4 + q) % 4 == 0, "%s: written %d quarter turns away, turned back %d (%.2f deg "
+                      "off)", p, f % 4, q, json_real_value(json_object_get(v, "mismatch_deg")));
+        }
+    }
+    // the joint corners: the right views in the left's order, the mirrored one gone
+    char *text = NULL;
+    CHECK(g_file_get_contents(out, &text, NULL, NULL));
+    int idx[9] = { 0 }, bad = 0, lines_mirrored = 0;
+    for (char *l = text ? strtok(text, "\n") : NULL; l; l = strtok(NULL, "\n")) {
+        int f;
+        double x, y;
+        if (sscanf(l, "right/f%08d.png %lf %lf", &f, &x, &y) != 3 || f < 0 || f >= nframes) continue;
+        if (f == mirrored) lines_mirrored++;
+        else if (idx[f] < 100 && hypot(x - truth_q[f][idx[f]][0], y - truth_q[f][idx[f]][1]) > 1) bad++;
+        idx[f]++;
+    }
+    CHECK(bad == 0);
+    CHECK(lines_mirrored == 0);
+    for (int f = 0; f < nframes; f++) CHECK(f == mirrored || idx[f] == 100);
+    g_free(text);
+    json_decref(a);
+    free(truth_q);
+    g_free(in);
+    g_free(out);
+    g_free(js);
+    free(t[0]);
+    free(t[1]);
+}
+
+// --tilts 2cam-example is the two-camera example's tilts, each of which makes
+// a plan; other text stays itself.
+TEST(calib_geometry_tilts_2cam_example)
+{
+    CHECK(!strcmp(calib_geometry_tilts_expand("2cam-example"), CALIB_GEOMETRY_TILTS_2CAM_EXAMPLE));
+    CHECK(!strcmp(calib_geometry_tilts_expand("0:10,20"), "0:10,20"));
+    calib_geometry_opts_t o = calib_geometry_defaults();
+    char **specs = g_strsplit(CALIB_GEOMETRY_TILTS_2CAM_EXAMPLE, " ", -1);
+    int nplans = 0, nangles = 0;
+    for (int k = 0; specs[k]; k++) {
+        char name[128];
+        char *plan = calib_geometry_tilt_plan(specs[k], &o, name, sizeof name);
+        CHECK_MSG(plan != NULL, "%s: %s", specs[k], model_last_error());
+        if (plan) nplans++;
+        g_free(plan);
+        const char *a = strchr(specs[k], ':');
+        for (; a; a = strchr(a + 1, ',')) nangles++;
+    }
+    g_strfreev(specs);
+    CHECK(nplans == 6);
+    CHECK(nangles == 111);
 }

@@ -612,3 +612,23 @@ TEST(rigcams_plan_bind_every_camera)
     rig_plan_free(p);
     rig_close(r);
 }
+
+// refl calib geometry on a rig of two cameras calibrates them together, and
+// each camera needs the board in enough views: at tilt 0 and angles 20, 40,
+// 60 the left camera finds it at 20 and 40, the right only at 60, so with
+// --min-views 2 the error names the right camera and its count.
+TEST(rigcams_geometry_each_camera_needs_views)
+{
+    char *rig = rig_2cam("serve = inprocess\nnoise_seed = 7\n");
+    char *out = NULL, *err = NULL;
+    int rc = test_refl_run(120, &out, &err, "calib", "geometry", "--yes", "--rig", rig, "--tilts", "0:20,40,60",
+                           "--min-views", "2", "-o", test_path("geo"), NULL);
+    CHECK(rc == 1);
+    CHECK_CONTAINS(err, "2 cameras (left 1280x1024, right 1024x768), calibrated together");
+    CHECK_CONTAINS(err, "camera left: the board in 2 of 3 images");
+    CHECK_CONTAINS(err, "too few views for LENSMODEL_OPENCV8 of camera right: the board was found in 1 of its 3 "
+                        "images, the solve needs at least 2");
+    free(rig);
+    free(out);
+    free(err);
+}
