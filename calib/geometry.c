@@ -901,16 +901,21 @@ char *calib_geometry_tilt_plan(const char *spec, const calib_geometry_opts_t *o,
         return NULL;
     }
     snprintf(name, namen, "tilt%g_az%g", tilt, az);
+    char what[512];   // the operator's instruction
+    if (tilt == 0)
+        snprintf(what, sizeof what, "lay the calibration board %s flat at the turntable centre, printed side up "
+                 "(no wedge; --tilts '%s')", o->sample, spec);
+    else
+        snprintf(what, sizeof what, "mount the calibration board %s on the %g deg wedge (hinge at azimuth %g deg; "
+                 "--tilts '%s') at the turntable centre, the board facing the camera", o->sample, tilt, az, spec);
     char *plan = g_strdup_printf("# refl calib geometry: the board at tilt %g deg (hinge azimuth %g deg)\n"
                                  "[plan]\nname = calib geometry %s\n"
                                  "[sample]\nname = %s\nkind = chessboard\ntilt_deg = %g\ntilt_azimuth_deg = %g\n"
-                                 "instruction = mount the calibration board %s on the %g deg wedge (hinge at azimuth "
-                                 "%g deg; --tilts '%s') at the turntable centre, the board facing the camera\n"
+                                 "instruction = %s\n"
                                  "[angles]\nlist =%s\n[lamps]\nsets = all\n"
                                  "[exposure]\nmode = fixed\nlist_us = %g\npixel_format = Mono12\n"
                                  "[capture]\nsettle_ms = 0\n",
-                                 tilt, az, name, o->sample, tilt, az, o->sample, tilt, az, spec, al->str,
-                                 o->exposure_us);
+                                 tilt, az, name, o->sample, tilt, az, what, al->str, o->exposure_us);
     g_string_free(al, TRUE);
     g_free(s);
     return plan;
