@@ -365,9 +365,28 @@ static int writer_error(writer_t *w, char *msg, size_t size)
 // ---------------------------------------------------------------------------
 // Session setup
 
-// The calibration files of a directory, by role: path and sha256. NULL with a
-// message when the directory holds none of them.
-static json_t *calibration_files(const char *dir)
+// One calibration file of a directory (the first of the candidate paths that
+// reads), entered by role, path, sha256 and, for a camera's own, the camera.
+static void calibration_file(json_t *arr, const char *role, const char *const *cands, int n, const char *camera)
+{
+    for (int k = 0; k < n; k++) {
+        char sha[65];
+        if (access(cands[k], R_OK) != 0 || !model_sha256_file(cands[k], sha)) continue;
+        json_t *e = json_object();
+        json_object_set_new(e, "role", json_string(role));
+        if (camera) json_object_set_new(e, "camera", json_string(camera));
+        json_object_set_new(e, "path", json_string(cands[k]));
+        json_object_set_new(e, "sha256", json_string(sha));
+        json_array_append_new(arr, e);
+        return;
+    }
+}
+
+// The calibration files of a directory, by role: path and sha256; with several
+// cameras also each camera's own (NAME.cameramodel, NAME/gain.json, NAME/white.json,
+// directly or under geometry/, gain/, white/: calib/calset.c's layout). NULL
+// with a message when the directory holds none of them.
+static json_t *calibration_files(const char *dir, const rig_t *r)
 {
     static const char *const files[][3] = {
         { "camera geometry", "geometry", "camera.cameramodel" }, { "geometry summary", "geometry", "geometry.json" },
@@ -377,17 +396,26 @@ static json_t *calibration_files(const char *dir)
     json_t *arr = json_array();
     char *abs = realpath(dir, NULL);
     for (size_t i = 0; abs && i < sizeof files / sizeof files[0]; i++) {
-        for (int sub = 0; sub < 2; sub++) {
-            char path[8192], sha[65];
-            if (sub) snprintf(path, sizeof path, "%s/%s/%s", abs, files[i][1], files[i][2]);
-            else snprintf(path, sizeof path, "%s/%s", abs, files[i][2]);
-            if (access(path, R_OK) != 0 || !model_sha256_file(path, sha)) continue;
-            json_t *e = json_object();
-            json_object_set_new(e, "role", json_string(files[i][0]));
-            json_object_set_new(e, "path", json_string(path));
-            json_object_set_new(e, "sha256", json_string(sha));
-            json_array_append_new(arr, e);
-            break;
+        char *c[2] = { g_strdup_printf("%s/%s", abs, files[i][2]),
+                       g_strdup_printf("%s/%s/%s", abs, files[i][1], files[i][2]) };
+        calibration_file(arr, files[i][0], (const char *const *)c, 2, NULL);
+        g_free(c[0]);
+        g_free(c[1]);
+    }
+    for (int k = 0; abs && r && r->ncameras > 1 && k < r->ncameras; k++) {
+        const char *nm = r->camera_names[k];
+        char *g[3] = { g_strdup_printf("%s/%s.cameramodel", abs, nm), g_strdup_printf("%s/geometry/%s.cameramodel",
+                       abs, nm), g_strdup_printf("%s/%s/camera.cameramodel", abs, nm) };
+        char *s[2] = { g_strdup_printf("%s/%s/gain.json", abs, nm), g_strdup_printf("%s/gain/%s/gain.json", abs, nm) };
+        char *w[2] = { g_strdup_printf("%s/%s/white.json", abs, nm), g_strdup_printf("%s/white/%s/white.json", abs,
+                       nm) };
+        calibration_file(arr, "camera geometry", (const char *const *)g, 3, nm);
+        calibration_file(arr, "sensitivity", (const char *const *)s, 2, nm);
+        calibration_file(arr, "reference white", (const char *const *)w, 2, nm);
+        for (int i = 0; i < 3; i++) g_free(g[i]);
+        for (int i = 0; i < 2; i++) {
+            g_free(s[i]);
+            g_free(w[i]);
         }
     }
     free(abs);
@@ -809,7 +837,7 @@ static int run_session(run_t *x)
         if (o->operator_name) snprintf(p->operator_name, sizeof p->operator_name, "%s", o->operator_name);
         if (o->notes) snprintf(p->notes, sizeof p->notes, "%s", o->notes);
         json_t *cal = NULL;
-        if (o->calib_dir && !(cal = calibration_files(o->calib_dir))) {
+        if (o->calib_dir && !(cal = calibration_files(o->calib_dir, x->r))) {
             x->rc = RIG_ERR_INVALID;
             return RUN_DONE;
         }

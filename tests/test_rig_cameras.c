@@ -632,3 +632,53 @@ TEST(rigcams_geometry_each_camera_needs_views)
     free(out);
     free(err);
 }
+
+// refl capture --calib DIR on a rig of several cameras records the shared
+// calibration files and each camera's own (calib/calset.c's layout), with
+// the camera they belong to; a camera without its own files has none listed.
+TEST(rigcams_capture_records_each_cameras_calibration)
+{
+    char *rig = rig_2cam("serve = inprocess\n");
+    char *plan = g_strdup(test_write("plan.ini", "[sample]\nname = coupon_matte_paint\nkind = material_coupon\n"
+                                  "[angles]\nlist = 0\n[lamps]\nsets = east\n[exposure]\nmode = fixed\n"
+                                  "list_us = 1000\n"));   // test_path's buffers are reused
+    CHECK(g_mkdir_with_parents(test_path("cal/geometry"), 0755) == 0 &&
+          g_mkdir_with_parents(test_path("cal/gain/right"), 0755) == 0);
+    test_write("cal/geometry/camera.cameramodel", "left\n");
+    test_write("cal/geometry/left.cameramodel", "left\n");
+    test_write("cal/geometry/right.cameramodel", "right\n");
+    test_write("cal/gain/gain.json", "{}\n");
+    test_write("cal/gain/right/gain.json", "{\"camera\": \"right\"}\n");
+    char *cal_dir = g_strdup(test_path("cal")), dir[4096];
+    snprintf(dir, sizeof dir, "%s/s", test_tmpdir());
+    rig_capture_opts_t o = { .plan_path = plan, .rig_path = rig, .dir = dir, .progress = 0,
+                             .calib_dir = cal_dir, .op = rig_operator_open(true, NULL) };
+    int rc = rig_capture_run(&o);
+    CHECK_MSG(rc == 0, "capture: %d %s", rc, model_last_error());
+    rig_session_t *s = rig_session_open(dir);
+    CHECK(s != NULL && s->facts != NULL);
+    json_t *cal = s ? json_object_get(s->facts, "calibrations") : NULL;
+    int shared = 0, left_geo = 0, right_geo = 0, right_gain = 0, left_gain = 0;
+    for (size_t i = 0; i < json_array_size(cal); i++) {
+        json_t *e = json_array_get(cal, i);
+        const char *role = json_string_value(json_object_get(e, "role"));
+        const char *cam = json_string_value(json_object_get(e, "camera"));
+        const char *path = json_string_value(json_object_get(e, "path"));
+        CHECK(role && path && json_string_length(json_object_get(e, "sha256")) == 64);
+        if (!role || !path) continue;
+        bool geo = !strcmp(role, "camera geometry"), gain = !strcmp(role, "sensitivity");
+        if (!cam) shared++;
+        else if (geo && !strcmp(cam, "left")) left_geo += g_str_has_suffix(path, "/geometry/left.cameramodel");
+        else if (geo && !strcmp(cam, "right")) right_geo += g_str_has_suffix(path, "/geometry/right.cameramodel");
+        else if (gain && !strcmp(cam, "right")) right_gain += g_str_has_suffix(path, "/gain/right/gain.json");
+        else if (gain && !strcmp(cam, "left")) left_gain++;
+    }
+    CHECK_MSG(shared == 2 && left_geo == 1 && right_geo == 1 && right_gain == 1 && left_gain == 0,
+              "shared %d, left geometry %d, right geometry %d, right gain %d, left gain %d", shared, left_geo,
+              right_geo, right_gain, left_gain);
+    rig_session_free(s);
+    rig_operator_close(o.op);
+    g_free(plan);
+    g_free(cal_dir);
+    free(rig);
+}
