@@ -1,5 +1,6 @@
 // tests/fixtures.c — setup that several tests share (tests/fixtures.h).
 #define _GNU_SOURCE
+#include <fcntl.h>
 #include <mrcal/poseutils.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -239,4 +240,18 @@ void fx_gv_close(fx_gv_t *f)
     test_camera_unlock(f->session);
     memset(f, 0, sizeof *f);
     f->session = -1;
+}
+
+char *fx_stdout_of(int (*fn)(rig_t *), rig_t *r, int *rc)
+{
+    const char *path = test_path("stdout.txt");
+    fflush(stdout);
+    int saved = dup(1), fd = open(path, O_WRONLY | O_CREAT | O_TRUNC, 0644);
+    dup2(fd, 1);
+    close(fd);
+    *rc = fn(r);
+    fflush(stdout);
+    dup2(saved, 1);
+    close(saved);
+    return model_read_file(path, NULL);
 }

@@ -118,4 +118,8 @@ typedef struct {
 // false (after a failed CHECK) when the server or the client could not be
 // had; close anyway.
 bool fx_gv_open(fx_gv_t *f, bool open_camera);
+
+// What fn(r) prints on stdout (caught in a file of the test's directory): its
+// text (caller frees) and fn's return value in *rc (e.g. rig_cmd_status).
+char *fx_stdout_of(int (*fn)(rig_t *), rig_t *r, int *rc);
 void fx_gv_close(fx_gv_t *f);

@@ -94,21 +94,6 @@ static const char two_rig[] =
     "[camera left]\nbackend = aravis\nserial = inprocess:CAM-L\nexposure_us = 1500\npixel_format = Mono16\n"
     "[camera right]\nbackend = aravis\nserial = inprocess:CAM-R\nexposure_us = 2500\npixel_format = Mono8\n";
 
-// stdout of fn(r) into a file: its text (caller frees) and fn's return value.
-static char *stdout_of(int (*fn)(rig_t *), rig_t *r, int *rc)
-{
-    const char *path = test_path("stdout.txt");
-    fflush(stdout);
-    int saved = dup(1), fd = open(path, O_WRONLY | O_CREAT | O_TRUNC, 0644);
-    dup2(fd, 1);
-    close(fd);
-    *rc = fn(r);
-    fflush(stdout);
-    dup2(saved, 1);
-    close(saved);
-    return model_read_file(path, NULL);
-}
-
 // rig_open opens both cameras in file order with their own defaults; status
 // lists each.
 TEST(rigcams_open_status)
@@ -130,7 +115,7 @@ TEST(rigcams_open_status)
     CHECK_NEAR(m[0].exposure_us, 1500, 1e-6);
     CHECK_NEAR(m[1].exposure_us, 2500, 1e-6);
     CHECK(!strcmp(m[1].pixel_format, "Mono8") && !strcmp(m[0].pixel_format, "Mono16"));
-    char *out = stdout_of(rig_cmd_status, r, &rc);
+    char *out = fx_stdout_of(rig_cmd_status, r, &rc);
     CHECK(rc == 0);
     CHECK_CONTAINS(out, "cameras: 2\ncamera_name: left\ncamera: ");
     CHECK_CONTAINS(out, "camera_serial: CAM-L\n");
@@ -143,7 +128,7 @@ TEST(rigcams_open_status)
     rig_gv_camera_stop(t.g[1]);
     t.g[1] = NULL;
     bool q = model_error_quiet_thread(true);
-    out = stdout_of(rig_cmd_status, r, &rc);
+    out = fx_stdout_of(rig_cmd_status, r, &rc);
     model_error_quiet_thread(q);
     CHECK(rc != 0);
     CHECK_CONTAINS(out, "camera_serial: CAM-L\n");

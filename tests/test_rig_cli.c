@@ -25,6 +25,7 @@
 
 #include "model/model.h"
 #include "rig/rig.h"
+#include "tests/fixtures.h"
 #include "tests/test.h"
 
 #define refl(out, err, ...) test_refl_run(120, out, err, __VA_ARGS__)
@@ -568,21 +569,6 @@ TEST(rigcli_gpiod_lamps_off_on_errors)
     free(err);
 }
 
-// stdout of fn(r) into a file: its text (caller frees) and fn's return value.
-static char *stdout_of(int (*fn)(rig_t *), rig_t *r, int *rc)
-{
-    const char *path = test_path("stdout.txt");
-    fflush(stdout);
-    int saved = dup(1), fd = open(path, O_WRONLY | O_CREAT | O_TRUNC, 0644);
-    dup2(fd, 1);
-    close(fd);
-    *rc = fn(r);
-    fflush(stdout);
-    dup2(saved, 1);
-    close(saved);
-    return model_read_file(path, NULL);
-}
-
 // `refl rig status` reports every device when one fails (a simulated stage
 // that disconnected): the turntable's error, then the lamps and the camera,
 // and a non-zero status.
@@ -596,14 +582,14 @@ TEST(rigcli_status_every_device)
     CHECK(rig_open(&r, path) == 0);
     if (!r) return;
     int rc = -1;
-    char *out = stdout_of(rig_cmd_status, r, &rc);
+    char *out = fx_stdout_of(rig_cmd_status, r, &rc);
     CHECK(rc == 0);
     CHECK_CONTAINS(out, "turntable_homed: no\n");
     free(out);
     CHECK(rig_turntable_home(r->turntable, 5.0) == 0);
     CHECK(rig_turntable_move_abs_deg(r->turntable, 10, 5.0) == 0);
     CHECK(rig_turntable_move_abs_deg(r->turntable, 20, 5.0) == RIG_ERR_DISCONNECTED);
-    out = stdout_of(rig_cmd_status, r, &rc);
+    out = fx_stdout_of(rig_cmd_status, r, &rc);
     CHECK(rc == RIG_ERR_DISCONNECTED);
     CHECK_CONTAINS(out, "turntable: sim turntable (seed 3)\nturntable_error: ");
     CHECK_CONTAINS(out, "disconnected");
