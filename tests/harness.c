@@ -28,6 +28,7 @@ typedef struct {
     const char *name, *file;
     test_fn_t fn;
     bool (*only_if)(void);   // NULL: always
+    bool alone;              // runs with no other test beside it (TEST_ALONE)
 } test_t;
 
 static test_t tests[1024];
@@ -53,7 +54,18 @@ void test_register(const char *name, test_fn_t fn, const char *file)
 void test_register_inner(const char *name, test_fn_t fn, const char *file, bool (*only_if)(void))
 {
     if (ntests < (int)(sizeof tests / sizeof tests[0]))
-        tests[ntests++] = (test_t){ name, file, fn, only_if };
+        tests[ntests++] = (test_t){ name, file, fn, only_if, false };
+}
+
+void test_register_alone(const char *name, test_fn_t fn, const char *file)
+{
+    test_register_full(name, fn, file, NULL, true);
+}
+
+void test_register_full(const char *name, test_fn_t fn, const char *file, bool (*only_if)(void), bool alone)
+{
+    if (ntests < (int)(sizeof tests / sizeof tests[0]))
+        tests[ntests++] = (test_t){ name, file, fn, only_if, alone };
 }
 
 void test_fail(const char *file, int line, const char *fmt, ...)
@@ -237,13 +249,15 @@ void test_camera_unlock(int fd)
     if (fd >= 0) close(fd);
 }
 
-// The test being run by the parent: its process group, killed with it when
-// the run is interrupted.
-static volatile sig_atomic_t child_pgid;
+// The process groups of the tests being run, killed with the run when it is
+// interrupted.
+#define MAX_JOBS 16
+static volatile sig_atomic_t child_pgids[MAX_JOBS];
 
 static void on_interrupt(int sig)
 {
-    if (child_pgid > 0) kill(-child_pgid, SIGKILL);
+    for (int i = 0; i < MAX_JOBS; i++)
+        if (child_pgids[i] > 0) kill(-child_pgids[i], SIGKILL);
     signal(sig, SIG_DFL);
     raise(sig);
 }
@@ -256,67 +270,97 @@ static double timeout_s(void)
     return s && *s && *end == 0 && t > 0 ? t : 600;
 }
 
-// Run one test in a child process, which fills *r. how: what fails the test
-// whatever its checks said (a signal, the time-out, an exit status), else "".
-static void run_child(const test_t *t, test_result_t *r, double limit_s, char *how, size_t how_len)
+// How many tests run at once: $REFL_TEST_JOBS (1 to 16), default 2. Tests
+// marked TEST_ALONE run with no other test beside them.
+static int jobs(void)
 {
-    memset(r, 0, sizeof *r);
+    const char *s = getenv("REFL_TEST_JOBS");
+    char *end;
+    long n = s && *s ? strtol(s, &end, 10) : 0;
+    if (s && *s && (*end || n < 1 || n > MAX_JOBS)) {
+        fprintf(stderr, "REFL_TEST_JOBS=%s: want a whole number from 1 to %d; running 1 test at a time\n", s,
+                MAX_JOBS);
+        return 1;
+    }
+    return n > 0 ? (int)n : 2;
+}
+
+// A test being run: its child process, its shared page, and (when several
+// run at once) the file that holds what it prints until it has ended.
+typedef struct {
+    const test_t *t;
+    test_result_t *r;
+    pid_t pid;           // 0: slot free
+    double t0;
+    int out_fd;          // -1: the test prints to the runner's own stdout/stderr
+    char state_dir[600]; // its $XDG_STATE_HOME ("" to leave it as it is)
+} slot_t;
+
+// Start t in a child process (its own process group) filling s->r. Returns
+// false, with how set, when it cannot be started. SIGCHLD is blocked here.
+static bool start_child(slot_t *s, char *how, size_t how_len)
+{
+    memset(s->r, 0, sizeof *s->r);
     how[0] = 0;
     fflush(NULL);
-    sigset_t chld, old;
-    sigemptyset(&chld);
-    sigaddset(&chld, SIGCHLD);
-    sigprocmask(SIG_BLOCK, &chld, &old);
     pid_t pid = fork();
     if (pid < 0) {
         snprintf(how, how_len, "fork: %s", strerror(errno));
-        sigprocmask(SIG_SETMASK, &old, NULL);
-        return;
+        return false;
     }
     if (pid == 0) {
         setpgid(0, 0);
         signal(SIGINT, SIG_DFL);
         signal(SIGTERM, SIG_DFL);
         signal(SIGHUP, SIG_DFL);
-        sigprocmask(SIG_SETMASK, &old, NULL);
+        sigset_t none;
+        sigemptyset(&none);
+        sigprocmask(SIG_SETMASK, &none, NULL);
         int devnull = open("/dev/null", O_RDONLY);
         if (devnull >= 0) dup2(devnull, 0);
-        cur = r;
-        t->fn();
-        r->finished = true;
+        if (s->out_fd >= 0) {
+            dup2(s->out_fd, 1);
+            dup2(s->out_fd, 2);
+            setvbuf(stdout, NULL, _IOLBF, 0);
+        }
+        // Lamp-state files (rig/lamps_state.c) of tests running side by side
+        // never meet, nor touch the user's own.
+        if (s->state_dir[0]) setenv("XDG_STATE_HOME", s->state_dir, 1);
+        cur = s->r;
+        s->t->fn();
+        s->r->finished = true;
         exit(0);
     }
     setpgid(pid, pid);
-    child_pgid = pid;
-    double t0 = model_now_s();
-    int status = 0;
-    bool timed_out = false;
-    for (;;) {
-        // Not reaped yet (WNOWAIT): the group's id stays the child's own
-        // until the group is killed below.
-        siginfo_t info = { 0 };
-        int w = waitid(P_PID, pid, &info, WEXITED | WNOHANG | WNOWAIT);
-        if (w == 0 && info.si_pid == pid) break;
-        if (w < 0 && errno != EINTR) {
-            snprintf(how, how_len, "waitid: %s", strerror(errno));
-            break;
-        }
-        double left = limit_s - (model_now_s() - t0);
-        if (left <= 0) {
-            timed_out = true;
-            break;
-        }
-        if (left > 1) left = 1;
-        struct timespec ts = { (time_t)left, (long)((left - (time_t)left) * 1e9) };
-        sigtimedwait(&chld, NULL, &ts);
+    s->pid = pid;
+    s->t0 = model_now_s();
+    return true;
+}
+
+// The child has ended (not reaped yet, WNOWAIT: the group's id stays the
+// child's own until the group is killed in end_child).
+static bool child_ended(pid_t pid, char *how, size_t how_len)
+{
+    siginfo_t info = { 0 };
+    int w = waitid(P_PID, pid, &info, WEXITED | WNOHANG | WNOWAIT);
+    if (w == 0 && info.si_pid == pid) return true;
+    if (w < 0 && errno != EINTR) {
+        snprintf(how, how_len, "waitid: %s", strerror(errno));
+        return true;
     }
-    // The test, when timed out, and whatever it left running in its group end here.
-    kill(-pid, SIGKILL);
-    waitpid(pid, &status, 0);
-    child_pgid = 0;
-    sigprocmask(SIG_SETMASK, &old, NULL);
-    if (how[0])
-        return;
+    return false;
+}
+
+// End the test's process group (the test itself when timed out, and whatever
+// it left running), reap it and say in how what alone fails it.
+static void end_child(slot_t *s, bool timed_out, double limit_s, char *how, size_t how_len)
+{
+    int status = 0;
+    kill(-s->pid, SIGKILL);
+    waitpid(s->pid, &status, 0);
+    s->pid = 0;
+    if (how[0]) return;
+    test_result_t *r = s->r;
     if (timed_out)
         snprintf(how, how_len, "timed out after %g s", limit_s);
     else if (WIFSIGNALED(status)) {
@@ -331,6 +375,37 @@ static void run_child(const test_t *t, test_result_t *r, double limit_s, char *h
         snprintf(how, how_len, "exited before the test ended");
 }
 
+// Run one test in a child process, which fills *r, and wait for it. how:
+// what fails the test whatever its checks said (a signal, the time-out, an
+// exit status), else "".
+static void run_child(const test_t *t, test_result_t *r, double limit_s, char *how, size_t how_len)
+{
+    sigset_t chld, old;
+    sigemptyset(&chld);
+    sigaddset(&chld, SIGCHLD);
+    sigprocmask(SIG_BLOCK, &chld, &old);
+    slot_t s = { .t = t, .r = r, .out_fd = -1 };
+    if (!start_child(&s, how, how_len)) {
+        sigprocmask(SIG_SETMASK, &old, NULL);
+        return;
+    }
+    child_pgids[0] = s.pid;
+    bool timed_out = false;
+    while (!child_ended(s.pid, how, how_len)) {
+        double left = limit_s - (model_now_s() - s.t0);
+        if (left <= 0) {
+            timed_out = true;
+            break;
+        }
+        if (left > 1) left = 1;
+        struct timespec ts = { (time_t)left, (long)((left - (time_t)left) * 1e9) };
+        sigtimedwait(&chld, NULL, &ts);
+    }
+    end_child(&s, timed_out, limit_s, how, how_len);
+    child_pgids[0] = 0;
+    sigprocmask(SIG_SETMASK, &old, NULL);
+}
+
 void test_run_isolated(test_fn_t fn, double limit_s, test_outcome_t *out)
 {
     test_result_t *r = mmap(NULL, sizeof *r, PROT_READ | PROT_WRITE, MAP_SHARED | MAP_ANONYMOUS, -1, 0);
@@ -339,7 +414,7 @@ void test_run_isolated(test_fn_t fn, double limit_s, test_outcome_t *out)
         snprintf(out->how, sizeof out->how, "mmap: %s", strerror(errno));
         return;
     }
-    const test_t t = { "isolated", __FILE__, fn, NULL };
+    const test_t t = { "isolated", __FILE__, fn, NULL, false };
     run_child(&t, r, limit_s, out->how, sizeof out->how);
     tmp_cleanup(r->tmpdir);
     out->failures = r->failures;
@@ -349,51 +424,140 @@ void test_run_isolated(test_fn_t fn, double limit_s, test_outcome_t *out)
     munmap(r, sizeof *r);
 }
 
+// Print what a test printed (when it ran beside others) and its result line;
+// count it.
+static void report(slot_t *s, const char *how, double dt, int *passed, int *failed, int *skipped)
+{
+    if (s->out_fd >= 0) {
+        char buf[8192];
+        ssize_t n;
+        fflush(stdout);
+        lseek(s->out_fd, 0, SEEK_SET);
+        while ((n = read(s->out_fd, buf, sizeof buf)) > 0)
+            if (fwrite(buf, 1, (size_t)n, stderr) != (size_t)n) break;
+        fflush(stderr);
+        if (ftruncate(s->out_fd, 0) != 0 || lseek(s->out_fd, 0, SEEK_SET) != 0) {
+            close(s->out_fd);   // what the next test prints goes to the runner's own output
+            s->out_fd = -1;
+        }
+    }
+    const test_t *t = s->t;
+    test_result_t *r = s->r;
+    if (r->failures || how[0]) {
+        (*failed)++;
+        if (how[0] && r->failures)
+            printf("FAIL %s (%s, %s after %d failed check%s, %.2f s)\n", t->name, t->file, how, r->failures,
+                   r->failures == 1 ? "" : "s", dt);
+        else if (how[0])
+            printf("FAIL %s (%s, %s, %.2f s)\n", t->name, t->file, how, dt);
+        else
+            printf("FAIL %s (%s, %.2f s)\n", t->name, t->file, dt);
+    } else if (r->skipped) {
+        (*skipped)++;
+        printf("skip %s (%s, %.2f s)\n", t->name, r->reason, dt);
+    } else {
+        (*passed)++;
+        printf("ok   %s (%.2f s)\n", t->name, dt);
+    }
+    fflush(stdout);
+}
+
 int main(int argc, char **argv)
 {
     const char *filter = argc > 1 ? argv[1] : NULL;
     int passed = 0, failed = 0, skipped = 0, inner = 0;
     double limit_s = timeout_s();
+    int njobs = jobs();
     model_error_quiet(true);
-    test_result_t *r = mmap(NULL, sizeof *r, PROT_READ | PROT_WRITE, MAP_SHARED | MAP_ANONYMOUS, -1, 0);
-    if (r == MAP_FAILED) {
-        perror("mmap");
-        return 2;
-    }
-    struct sigaction sa = { .sa_handler = on_interrupt };
-    sigaction(SIGINT, &sa, NULL);
-    sigaction(SIGTERM, &sa, NULL);
-    sigaction(SIGHUP, &sa, NULL);
-    double t_all = model_now_s();
+
+    // The tests to run, in order.
+    static const test_t *todo[1024];
+    int ntodo = 0;
     for (int i = 0; i < ntests; i++) {
         if (filter && !strstr(tests[i].name, filter) && !strstr(tests[i].file, filter)) continue;
         if (tests[i].only_if && !tests[i].only_if()) {
             inner++;
             continue;
         }
-        char how[256];
-        double t0 = model_now_s();
-        run_child(&tests[i], r, limit_s, how, sizeof how);
-        tmp_cleanup(r->tmpdir);
-        double dt = model_now_s() - t0;
-        if (r->failures || how[0]) {
-            failed++;
-            if (how[0] && r->failures)
-                printf("FAIL %s (%s, %s after %d failed check%s, %.2f s)\n", tests[i].name, tests[i].file, how,
-                       r->failures, r->failures == 1 ? "" : "s", dt);
-            else if (how[0])
-                printf("FAIL %s (%s, %s, %.2f s)\n", tests[i].name, tests[i].file, how, dt);
-            else
-                printf("FAIL %s (%s, %.2f s)\n", tests[i].name, tests[i].file, dt);
-        } else if (r->skipped) {
-            skipped++;
-            printf("skip %s (%s, %.2f s)\n", tests[i].name, r->reason, dt);
-        } else {
-            passed++;
-            printf("ok   %s (%.2f s)\n", tests[i].name, dt);
-        }
-        fflush(stdout);
+        todo[ntodo++] = &tests[i];
     }
+    if (njobs > ntodo) njobs = ntodo > 0 ? ntodo : 1;
+
+    // The run's own directory: each slot's $XDG_STATE_HOME below it.
+    char rundir[512] = "";
+    const char *base = getenv("TMPDIR");
+    snprintf(rundir, sizeof rundir, "%s/refl-tests-XXXXXX", base && *base ? base : "/tmp");
+    if (!mkdtemp(rundir)) {
+        perror(rundir);
+        return 2;
+    }
+    slot_t slots[MAX_JOBS];
+    memset(slots, 0, sizeof slots);
+    for (int j = 0; j < njobs; j++) {
+        slots[j].r = mmap(NULL, sizeof *slots[j].r, PROT_READ | PROT_WRITE, MAP_SHARED | MAP_ANONYMOUS, -1, 0);
+        if (slots[j].r == MAP_FAILED) {
+            perror("mmap");
+            return 2;
+        }
+        slots[j].out_fd = njobs > 1 ? memfd_create("refl-test-output", MFD_CLOEXEC) : -1;
+        snprintf(slots[j].state_dir, sizeof slots[j].state_dir, "%s/state-%d", rundir, j);
+    }
+    struct sigaction sa = { .sa_handler = on_interrupt };
+    sigaction(SIGINT, &sa, NULL);
+    sigaction(SIGTERM, &sa, NULL);
+    sigaction(SIGHUP, &sa, NULL);
+    sigset_t chld, old;
+    sigemptyset(&chld);
+    sigaddset(&chld, SIGCHLD);
+    sigprocmask(SIG_BLOCK, &chld, &old);
+    if (njobs > 1)
+        printf("(%d tests, %d at a time; what a test prints follows it when it has ended)\n", ntodo, njobs);
+    fflush(stdout);
+
+    double t_all = model_now_s();
+    bool started[1024] = { false };
+    int next = 0, running = 0, alone_running = 0;
+    while (next < ntodo || running > 0) {
+        // Start what may start: the first tests not started, in order; a
+        // TEST_ALONE test only when nothing runs, and nothing beside it.
+        for (int j = 0; j < njobs && !alone_running; j++) {
+            if (slots[j].pid) continue;
+            int pick = -1;
+            for (int i = next; i < ntodo && pick < 0; i++)
+                if (!started[i] && (!todo[i]->alone || running == 0)) pick = i;
+            if (pick < 0) break;
+            started[pick] = true;
+            while (next < ntodo && started[next]) next++;
+            slots[j].t = todo[pick];
+            char how[256];
+            if (!start_child(&slots[j], how, sizeof how)) {
+                report(&slots[j], how, 0, &passed, &failed, &skipped);
+                continue;
+            }
+            child_pgids[j] = slots[j].pid;
+            running++;
+            if (todo[pick]->alone) alone_running = 1;
+        }
+        // Wait for one to end (or a second to pass).
+        struct timespec ts = { 1, 0 };
+        sigtimedwait(&chld, NULL, &ts);
+        for (int j = 0; j < njobs; j++) {
+            if (!slots[j].pid) continue;
+            char how[256] = "";
+            double dt = model_now_s() - slots[j].t0;
+            bool ended = child_ended(slots[j].pid, how, sizeof how);
+            if (!ended && dt < limit_s) continue;
+            end_child(&slots[j], !ended, limit_s, how, sizeof how);
+            child_pgids[j] = 0;
+            tmp_cleanup(slots[j].r->tmpdir);
+            tmp_cleanup(slots[j].state_dir);
+            running--;
+            if (slots[j].t->alone) alone_running = 0;
+            report(&slots[j], how, dt, &passed, &failed, &skipped);
+        }
+    }
+    sigprocmask(SIG_SETMASK, &old, NULL);
+    tmp_cleanup(rundir);
     if (inner) printf("(%d tests run only inside the test that hosts them)\n", inner);
     printf("(%.1f s)\n%d passed, %d failed", model_now_s() - t_all, passed, failed);
     if (skipped) printf(", %d skipped", skipped);

@@ -4,8 +4,12 @@
 //                CHECK_CONTAINS(msg, "line 3"); }
 //
 // Tests register themselves; bin/refl-tests runs them all (or those whose name
-// or file contains argv[1]), each in its own child process, and ends with the
-// line "N passed, N failed" (", N skipped" appended when tests were skipped).
+// or file contains argv[1]), each in its own child process, $REFL_TEST_JOBS
+// (default 2) at a time, and ends with the line "N passed, N failed"
+// (", N skipped" appended when tests were skipped). A test that measures time
+// (a stop within 1 s, a settle time, linear time on large input) is declared
+// with TEST_ALONE instead of TEST: it runs with no other test beside it. Each
+// test's $XDG_STATE_HOME is a directory of its own, removed afterwards.
 // A test passes when none of its checks failed; a test that crashes, aborts or
 // is killed by a signal fails with the signal named, and so does one that runs
 // longer than $REFL_TEST_TIMEOUT seconds (default 600). Each failed check
@@ -45,6 +49,17 @@ void test_skip(const char *fmt, ...) __attribute__((format(printf, 1, 2), noretu
     __attribute__((constructor)) static void test_reg_##name(void)                 \
     {                                                                              \
         test_register_inner(#name, name, __FILE__, only_if);                       \
+    }                                                                              \
+    static void name(void)
+
+void test_register_alone(const char *name, test_fn_t fn, const char *file);
+// Either or both (the runner's own tests register a TEST_INNER that runs alone).
+void test_register_full(const char *name, test_fn_t fn, const char *file, bool (*only_if)(void), bool alone);
+#define TEST_ALONE(name)                                                           \
+    static void name(void);                                                        \
+    __attribute__((constructor)) static void test_reg_##name(void)                 \
+    {                                                                              \
+        test_register_alone(#name, name, __FILE__);                                \
     }                                                                              \
     static void name(void)
 

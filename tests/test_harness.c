@@ -56,7 +56,7 @@ TEST(harness_crash_fails_with_the_signal_named)
     CHECK(o.failures == 0 && !o.skipped);
 }
 
-TEST(harness_hung_test_times_out)
+TEST_ALONE(harness_hung_test_times_out)
 {
     test_outcome_t o;
     double t0 = model_now_s();
@@ -96,4 +96,74 @@ TEST(harness_tmpdir_and_left_processes_removed)
     }
     CHECK_MSG(gone, "process %d the test left is still running", (int)*left_child);
     munmap(left_child, sizeof *left_child);
+}
+
+// Several tests at once (REFL_TEST_JOBS): the runner re-runs this binary on
+// three inner tests that record when they ran. The two plain ones run side by
+// side; the TEST_ALONE one beside neither; what each prints comes out whole,
+// before its result line; each has its own $XDG_STATE_HOME.
+static bool inner_run(void) { return getenv("REFL_TEST_HARNESS_DIR") != NULL; }
+
+static void record_span(const char *name)
+{
+    double t0 = model_realtime_s();
+    printf("%s: begins\n", name);
+    usleep(600000);
+    printf("%s: ends\n", name);
+    char path[1024];
+    snprintf(path, sizeof path, "%s/%s", getenv("REFL_TEST_HARNESS_DIR"), name);
+    FILE *f = fopen(path, "w");
+    if (f) {
+        fprintf(f, "%.6f %.6f %s\n", t0, model_realtime_s(), getenv("XDG_STATE_HOME") ? getenv("XDG_STATE_HOME") : "");
+        fclose(f);
+    }
+}
+
+TEST_INNER(harness_inner_span_a, inner_run) { record_span("a"); }
+TEST_INNER(harness_inner_span_b, inner_run) { record_span("b"); }
+static void harness_inner_span_c(void) { record_span("c"); }
+__attribute__((constructor)) static void register_span_c(void)
+{
+    test_register_full("harness_inner_span_c", harness_inner_span_c, __FILE__, inner_run, true);
+}
+
+TEST(harness_jobs_side_by_side_and_alone)
+{
+    if (inner_run()) return;   // we are the inner run
+    char self[4096];
+    ssize_t n = readlink("/proc/self/exe", self, sizeof self - 1);
+    CHECK(n > 0);
+    if (n <= 0) return;
+    self[n] = 0;
+    char env_dir[1200];
+    snprintf(env_dir, sizeof env_dir, "REFL_TEST_HARNESS_DIR=%s", test_tmpdir());
+    const char *argv[] = { "env", env_dir, "REFL_TEST_JOBS=2", self, "harness_inner_span_", NULL };
+    char *out = NULL, *err = NULL;
+    int rc = test_run(argv, 60, &out, &err);
+    CHECK_MSG(rc == 0 && out && strstr(out, "3 passed, 0 failed"), "exit %d\n%s%s", rc, out ? out : "", err ? err : "");
+    CHECK_CONTAINS(out, "3 tests, 2 at a time");
+    double t[3][2] = { { 0 } };
+    char state[3][1024] = { "" };
+    const char *names = "abc";
+    for (int i = 0; i < 3; i++) {
+        char p[64];
+        snprintf(p, sizeof p, "%c", names[i]);
+        FILE *f = fopen(test_path(p), "r");
+        CHECK(f && fscanf(f, "%lf %lf %1023s", &t[i][0], &t[i][1], state[i]) == 3);
+        if (f) fclose(f);
+        // its output whole: "x: begins\nx: ends\n" together, before "ok   harness_inner_span_x"
+        char whole[64], ok[64];
+        snprintf(whole, sizeof whole, "%c: begins\n%c: ends\n", names[i], names[i]);
+        snprintf(ok, sizeof ok, "ok   harness_inner_span_%c", names[i]);
+        const char *w = err ? strstr(err, whole) : NULL, *o = out ? strstr(out, ok) : NULL;
+        CHECK_MSG(w && o, "'%s' whole in stderr and '%s' in stdout", whole, ok);
+    }
+    bool ab = t[0][0] < t[1][1] && t[1][0] < t[0][1];
+    bool ac = t[0][0] < t[2][1] && t[2][0] < t[0][1];
+    bool bc = t[1][0] < t[2][1] && t[2][0] < t[1][1];
+    CHECK_MSG(ab, "a [%.3f, %.3f] and b [%.3f, %.3f] did not run side by side", t[0][0], t[0][1], t[1][0], t[1][1]);
+    CHECK_MSG(!ac && !bc, "the TEST_ALONE test ran beside another");
+    CHECK(state[0][0] && strcmp(state[0], state[1]) != 0);
+    free(out);
+    free(err);
 }

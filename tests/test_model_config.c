@@ -379,7 +379,7 @@ TEST(sensor_errors)
 
 // Large files parse in linear time (duplicate checks are hashed): 100,000 keys
 // in one section and 100,000 sections, each well under a second.
-TEST(ini_large_files_linear_time)
+TEST_ALONE(ini_large_files_linear_time)
 {
     size_t cap = 4 << 20, n = 0;
     char *buf = malloc(cap);
@@ -405,7 +405,7 @@ TEST(ini_large_files_linear_time)
 
 // Materials and lamps files with many sections parse in linear time (each
 // section reads only its own entries).
-TEST(materials_lamps_many_sections_linear_time)
+TEST_ALONE(materials_lamps_many_sections_linear_time)
 {
     size_t cap = 8 << 20, n = 0;
     char *buf = malloc(cap);

@@ -394,7 +394,7 @@ TEST(scene_load_by_extension)
     model_scene_free(NULL);
 }
 
-TEST(scene_hostile_inputs)
+TEST_ALONE(scene_hostile_inputs)
 {
     // Very long lines, huge numbers, many tokens: errors (or results), never a crash or hang.
     size_t n = 1 << 20;
@@ -426,7 +426,7 @@ TEST(scene_hostile_inputs)
     free(big);
 }
 
-TEST(scene_large_inputs_in_linear_time)
+TEST_ALONE(scene_large_inputs_in_linear_time)
 {
     // 100k vertices, 50k faces each with its own material: well under a second
     // (a quadratic step would take minutes, under ASan even more).

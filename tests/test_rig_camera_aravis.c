@@ -254,7 +254,7 @@ done:
 // Frame ids keep increasing across the 16-bit GVSP block id wrap (the Aravis
 // fake camera starts at 65400), triggers lost by the camera are retried, and a
 // camera that sends nothing times out with a clear message.
-TEST(aravis_gv_frame_ids_retries)
+TEST_ALONE(aravis_gv_frame_ids_retries)
 {
     fx_gv_t F;
     if (!fx_gv_open(&F, true)) goto done;
@@ -472,7 +472,7 @@ static const char freerun_py[] =
     "cam.stop_acquisition()\n"
     "print('good frames', ok)\n";
 
-TEST(gv_camera_free_running_external_client)
+TEST_ALONE(gv_camera_free_running_external_client)
 {
     char *out = NULL, *err = NULL;
     fx_gv_t F;
@@ -519,7 +519,7 @@ static double process_cpu_s(void)
     return ru.ru_utime.tv_sec + ru.ru_stime.tv_sec + 1e-6 * (ru.ru_utime.tv_usec + ru.ru_stime.tv_usec);
 }
 
-TEST(aravis_gv_responsive_during_slow_render)
+TEST_ALONE(aravis_gv_responsive_during_slow_render)
 {
     fx_gv_t F;
     if (!fx_gv_open(&F, true)) goto done;
@@ -562,7 +562,7 @@ done:
 
 // The camera disappears in the middle of a session: clear errors naming the
 // camera, bounded time, no hang; closing is bounded too.
-TEST(aravis_gv_camera_disappears)
+TEST_ALONE(aravis_gv_camera_disappears)
 {
     fx_gv_t F;
     if (!fx_gv_open(&F, true)) goto done;
@@ -601,7 +601,7 @@ done:
     fx_gv_close(&F);
 }
 
-TEST(aravis_open_nothing_there)
+TEST_ALONE(aravis_open_nothing_there)
 {
     int session = test_camera_lock();
     // Also hold the lock of refl's servers on the address (rig/gv_camera.h):
@@ -675,7 +675,7 @@ done:
     test_camera_unlock(session);
 }
 
-TEST(gv_camera_server_params)
+TEST_ALONE(gv_camera_server_params)
 {
     int session = test_camera_lock();
     fx_pattern_ctx_t *ctx = fx_pattern_ctx_new();

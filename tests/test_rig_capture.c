@@ -254,7 +254,7 @@ TEST(capture_kill9_resume_equals_uninterrupted)
     test_camera_unlock(lk);
 }
 
-TEST(capture_dry_run_and_changed_plan)
+TEST_ALONE(capture_dry_run_and_changed_plan)
 {
     int lk = test_camera_lock();
     const char *rig = rig_file("rig.ini", NULL);

@@ -437,7 +437,7 @@ TEST(rigcli_virtual_rig_mono12p)
 }
 
 // `serve` in a child: prints the address, stops cleanly on SIGTERM.
-TEST(rigcli_serve_sigterm)
+TEST_ALONE(rigcli_serve_sigterm)
 {
     int session = test_camera_lock();
     const char *rig = virtual_rig();

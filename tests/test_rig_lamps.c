@@ -61,7 +61,7 @@ TEST(lamps_sim_settle_times)
     rig_lamps_close(l);
 }
 
-TEST(lamps_sim_set_sleeps_settle_time)
+TEST_ALONE(lamps_sim_set_sleeps_settle_time)
 {
     rig_lamp_line_t ls[2] = { lamp("a", "", 0, false, 40, 15), lamp("b", "", 1, false, 0, 0) };
     rig_lamps_t *l = NULL;
@@ -264,7 +264,7 @@ TEST(lamps_gpiod_switch_and_close)
     free(err);
 }
 
-TEST(lamps_gpiod_active_low_only)
+TEST_ALONE(lamps_gpiod_active_low_only)
 {
     static const char *const lamps[] = { "ring=gpiochip0:7:low", NULL };
     child_cmd_t c;
@@ -401,8 +401,8 @@ static void check_death(int sig, const char *mode, bool sim)
     free(st);
 }
 
-TEST(lamps_gpiod_sigint_switches_off) { check_death(SIGINT, "hold", false); }
-TEST(lamps_gpiod_sigterm_switches_off) { check_death(SIGTERM, "hold", false); }
+TEST_ALONE(lamps_gpiod_sigint_switches_off) { check_death(SIGINT, "hold", false); }
+TEST_ALONE(lamps_gpiod_sigterm_switches_off) { check_death(SIGTERM, "hold", false); }
 TEST(lamps_gpiod_sighup_switches_off) { check_death(SIGHUP, "hold", false); }
 TEST(lamps_gpiod_sigquit_switches_off) { check_death(SIGQUIT, "hold", false); }
 TEST(lamps_gpiod_sigsegv_switches_off) { check_death(SIGSEGV, "hold", false); }
@@ -569,7 +569,7 @@ TEST(lamps_gpiod_error_permission)
     free(err);
 }
 
-TEST(lamps_gpiod_error_same_line_twice)
+TEST_ALONE(lamps_gpiod_error_same_line_twice)
 {
     static const char *const lamps[] = { "key=gpiochip0:4", "fill=gpiochip0:4", NULL };
     int rc;
@@ -665,7 +665,7 @@ TEST(lamps_gpiod_unreadable_state_file_switches_all_off)
 
 // A live refl holding the lamps is not taken for a dead one: a second open
 // fails naming it, switches nothing and leaves its record alone.
-TEST(lamps_gpiod_live_holder_is_not_dead)
+TEST_ALONE(lamps_gpiod_live_holder_is_not_dead)
 {
     child_cmd_t b, a;
     char log_b[PATH_MAX + 32];

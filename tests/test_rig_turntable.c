@@ -87,7 +87,7 @@ TEST(turntable_motion_time)
 
 // fx_fast_sim() (tests/fixtures.h): 10 s of stage time = 0.1 s.
 
-TEST(turntable_sim_home_move_timing)
+TEST_ALONE(turntable_sim_home_move_timing)
 {
     rig_turntable_sim_params_t p = fx_fast_sim();
     rig_turntable_t *t = NULL;
@@ -127,7 +127,7 @@ TEST(turntable_sim_home_move_timing)
     rig_turntable_close(t);
 }
 
-TEST(turntable_sim_relative_and_stop)
+TEST_ALONE(turntable_sim_relative_and_stop)
 {
     rig_turntable_sim_params_t p = fx_fast_sim();
     p.position_noise_deg = 0;
@@ -166,7 +166,7 @@ TEST(turntable_sim_relative_and_stop)
     rig_turntable_close(t);
 }
 
-TEST(turntable_sim_faults)
+TEST_ALONE(turntable_sim_faults)
 {
     rig_turntable_sim_params_t p = fx_fast_sim();
     rig_turntable_t *t = NULL;
@@ -217,7 +217,7 @@ TEST(turntable_sim_faults)
     rig_turntable_close(t);
 }
 
-TEST(turntable_sim_bad_input)
+TEST_ALONE(turntable_sim_bad_input)
 {
     rig_turntable_sim_params_t p = fx_fast_sim();
     rig_turntable_t *t = NULL;
@@ -288,7 +288,7 @@ static rig_turntable_watch_t watch_of(interrupter_t *it, const char *what)
                                     .ctx = it, .period_s = 0 };
 }
 
-TEST(turntable_sim_watched_homing_interrupted)
+TEST_ALONE(turntable_sim_watched_homing_interrupted)
 {
     rig_turntable_sim_params_t p = fx_fast_sim();
     p.time_scale = 0.1;
@@ -316,7 +316,7 @@ TEST(turntable_sim_watched_homing_interrupted)
     rig_turntable_close(t);
 }
 
-TEST(turntable_sim_watched_move_interrupted)
+TEST_ALONE(turntable_sim_watched_move_interrupted)
 {
     rig_turntable_sim_params_t p = fx_fast_sim();
     p.time_scale = 0.1;
@@ -462,7 +462,7 @@ static int wait_pid(pid_t pid, double limit_s, double *ended)
 
 // The first Ctrl-C during homing (15 s on this stage) stops it within 1 s and
 // pauses the session (exit 3) saying so; no frame was being taken.
-TEST(capture_ctrl_c_during_homing)
+TEST_ALONE(capture_ctrl_c_during_homing)
 {
     int lk = test_camera_lock();
     const char *rig = realtime_rig(NULL);
@@ -509,7 +509,7 @@ TEST(capture_ctrl_c_during_homing)
 // one Ctrl-C waits for the profiled stop and pauses (exit 3); after --resume,
 // a second Ctrl-C 0.3 s after the first stops the stage at once and ends refl
 // by SIGINT at once.
-TEST(capture_ctrl_c_during_move_once_then_twice)
+TEST_ALONE(capture_ctrl_c_during_move_once_then_twice)
 {
     int lk = test_camera_lock();
     static const char *const edits[] = { "accel_deg_s2 = 10\n", "accel_deg_s2 = 1\n",
@@ -566,7 +566,7 @@ TEST(capture_ctrl_c_during_move_once_then_twice)
 }
 
 // refl rig home: Ctrl-C stops the homing stage, then refl ends by SIGINT.
-TEST(rig_home_ctrl_c_stops_the_stage)
+TEST_ALONE(rig_home_ctrl_c_stops_the_stage)
 {
     const char *rig = test_write("slow.ini", "[turntable]\nbackend = sim\nhome_time_s = 30\ntime_scale = 1\n");
     const char *err_path = test_path("err.txt");
@@ -595,7 +595,7 @@ TEST(rig_home_ctrl_c_stops_the_stage)
 // The number of apt_umock_* tests below (the outer test checks they all ran).
 enum { N_APT_UMOCK_TESTS = 16 };
 
-TEST(turntable_apt_under_umockdev)
+TEST_ALONE(turntable_apt_under_umockdev)
 {
     if (apt_sim_available()) return;   // we are the inner run
     char self[4096];
@@ -607,7 +607,8 @@ TEST(turntable_apt_under_umockdev)
     char asan[1024];
     const char *ao = getenv("ASAN_OPTIONS");
     snprintf(asan, sizeof asan, "ASAN_OPTIONS=%s%sverify_asan_link_order=0", ao ? ao : "", ao && *ao ? ":" : "");
-    const char *argv[] = { "env", asan, "umockdev-wrapper", self, "apt_umock_", NULL };
+    // One at a time: the inner tests share the wrapper's one test bed.
+    const char *argv[] = { "env", asan, "REFL_TEST_JOBS=1", "umockdev-wrapper", self, "apt_umock_", NULL };
     char *out = NULL, *err = NULL;
     int rc = test_run(argv, 60, &out, &err);
     char want[64];
