@@ -456,3 +456,71 @@ TEST(operator_resume_of_an_older_session_is_refused_clearly)
     g_free(out);
     g_free(err);
 }
+
+static int count_of(const char *hay, const char *needle)
+{
+    int n = 0;
+    for (const char *p = hay ? strstr(hay, needle) : NULL; p; p = strstr(p + 1, needle)) n++;
+    return n;
+}
+
+// The lab day (refl demo, scripts/demo) on the virtual rig with scripted
+// answers: one answer pauses it (exit 3) at the next operator step; run again
+// with answers enough, it goes on where it stopped (the complete session kept,
+// the answered step not asked again), asks every step once, in the day's
+// order, and completes.
+TEST(operator_lab_day_scripted)
+{
+    const char *dir = test_path("day");
+    const char *one = test_write("answers-1.txt", "done\n");
+    GString *many = g_string_new("");
+    for (int i = 0; i < 60; i++) g_string_append(many, "done\n");
+    const char *all = g_strdup(test_write("answers-all.txt", many->str));
+    g_string_free(many, TRUE);
+
+    char *out = NULL, *err = NULL, *log1 = NULL, *log2 = NULL;
+    int rc = test_refl_run(300, &out, &err, "demo", "-o", dir, "--operator-input", one, NULL);
+    CHECK_MSG(rc == 3, "first run (one answer): exit %d\n%s", rc, err ? err : "");
+    CHECK_CONTAINS(err, "run the demo again with the same arguments");
+    char *logp = g_build_filename(dir, "demo.log", NULL);
+    CHECK(g_file_get_contents(logp, &log1, NULL, NULL));
+    // the workpiece session's step answered by line 1, the next step paused at the end of the answers
+    CHECK(count_of(log1, "OPERATOR STEP") == 2);
+    CHECK(count_of(log1, "answered done (--operator-input") == 1);
+    CHECK_CONTAINS(log1, "no answer left (end of file after line ");
+    const char *first = log1 ? strstr(log1, "OPERATOR STEP 0: ") : NULL;
+    char first_instr[300] = "";
+    if (first) sscanf(first, "%299[^\n]", first_instr);
+    CHECK(first_instr[0] != 0);
+    g_free(out);
+    g_free(err);
+
+    rc = test_refl_run(900, &out, &err, "demo", "-o", dir, "--operator-input", all, NULL);
+    CHECK_MSG(rc == 0, "second run: exit %d\n%s", rc, err ? err : "");
+    CHECK(g_file_get_contents(logp, &log2, NULL, NULL));
+    int asked = count_of(log2, "OPERATOR STEP"), answered = count_of(log2, "answered done (--operator-input");
+    fprintf(stderr, "  the day's second run: %d operator steps asked, %d answered\n", asked, answered);
+    CHECK(asked >= 15 && answered == asked);
+    CHECK_CONTAINS(out, "complete, kept");           // the workpiece session of the first run
+    // not asked again: the run goes on at the board (the workpiece comes back only for the verification)
+    const char *first2 = log2 ? strstr(log2, "OPERATOR STEP") : NULL;
+    CHECK(first2 && strncmp(first2, first_instr, strlen(first_instr)) != 0);
+    CHECK(count_of(log2, first_instr) <= 1);
+    CHECK(first2 && strstr(first2, "calibration board") && strstr(first2, "calibration board") < strchr(first2, '\n'));
+    // in the day's order: the board first, then the mirror ball, the flat-field source, the white, the coupons
+    const char *order[] = { "calibration board", "ball", "flat-field", "white", "glossy", "plywood", "steel" };
+    const char *at = log2;
+    for (size_t i = 0; at && i < sizeof order / sizeof order[0]; i++) {
+        const char *p = strstr(at, order[i]);
+        CHECK_MSG(p != NULL, "'%s' not asked after the step before it", order[i]);
+        at = p;
+    }
+    char *index = g_build_filename(dir, "index.html", NULL);
+    CHECK(g_file_test(index, G_FILE_TEST_EXISTS));
+    g_free(index);
+    g_free(logp);
+    g_free(log1);
+    g_free(log2);
+    g_free(out);
+    g_free(err);
+}
