@@ -95,6 +95,7 @@ CALIB_SRC := \
     calib/calset.c \
     calib/observe.c \
     calib/geometry.c \
+    calib/geometry_diff.c \
     calib/lamps.c \
     calib/gain.c \
     calib/white.c \
@@ -112,6 +113,8 @@ FIT_SRC := \
     fit/verify_files.c \
     fit/verify_lab.c \
     fit/verify_study.c \
+    fit/chain.c \
+    fit/cmd_chain.c \
     fit/cmd_fit.c \
     fit/cmd_plan.c \
     fit/cmd_verify.c
@@ -155,6 +158,7 @@ TEST_SRC := \
     tests/test_calib_geometry.c \
     tests/test_calib_lamps.c \
     tests/test_fit_brdf.c \
+    tests/test_fit_chain.c \
     tests/test_fit_lightplan.c \
     tests/test_fit_material.c \
     tests/test_fit_verify.c

@@ -39,6 +39,7 @@
 
 #include <glib.h>
 #include <jansson.h>
+#include <mrcal/mrcal.h>
 #include <stdbool.h>
 #include <stddef.h>
 
@@ -237,6 +238,25 @@ json_t *calib_geometry_json(const calib_geometry_opts_t *o, calib_geometry_state
 // The plots (scripts/calib_geometry_report.py plots) and DIR/report.html.
 bool calib_geometry_report(const calib_geometry_opts_t *o, const calib_geometry_state_t *s, const char *jpath);
 
+// How far model b projects from model a over a's imager (calib/geometry_diff.c),
+// as mrcal's projection_diff judges it: a 33 x 27 grid of a's pixels (margin_px
+// of the border left out) unprojected with a to distance_mm, the rigid
+// transform of a's camera frame onto b's fitted (least squares on the pixel
+// differences), the points projected with b. A focal length's error at that
+// one distance is absorbed by a shift along the axis (see the .c file).
+// false + message (model_last_error).
+typedef struct {
+    double rms_px, worst_px;                        // after the fitted transform
+    double rms_unaligned_px, worst_unaligned_px;    // with the frames taken as they are
+    double rt_a_to_b[6];                            // mrcal rt (r rad, t mm)
+    double rotation_deg, translation_mm;            // of that transform
+    double distance_mm;
+    int    npoints;
+} calib_projection_diff_t;
+bool calib_projection_diff(const mrcal_cameramodel_t *a, const mrcal_cameramodel_t *b, double distance_mm,
+                           int margin_px, calib_projection_diff_t *out);
+
 #ifdef __cplusplus
 }
 #endif
+

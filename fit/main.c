@@ -8,6 +8,7 @@
 
 #include "model/model.h"
 #include "calib/calib.h"
+#include "fit/chain.h"
 #include "fit/fit.h"
 #include "fit/verify.h"
 #include "fit/lightplan.h"
@@ -33,6 +34,7 @@ static const command_t commands[] = {
     { "fit",     fit_cmd,         "fit reflection models to BRDF samples and write priors" },
     { "verify",  verify_cmd,      "verify a scene description against images: fit within the priors, residue, changes, verdict" },
     { "demo",    demo_cmd,        "the whole lab day on the virtual rig: calibrations, materials, light planning, verification" },
+    { "chain",   chain_cmd,       "compare a lab day's calibrated and fitted figures with the virtual rig's truth: chain.json" },
     { "plan",    lightplan_cmd,   "plan lamps: choose the lamp set and exposure for detectable edges, no glare or saturation" },
 };
 
@@ -44,16 +46,20 @@ static void usage(FILE *f)
     fprintf(f, "\nrefl %s\n", REFL_VERSION);
 }
 
-// `refl demo [-o DIR] [--rig RIG.ini] [--yes | --operator-input FILE]`: scripts/demo with this binary (the scripts beside it:
+// `refl demo [-o DIR] [--rig RIG.ini | --truth TRUTH.ini] [--yes | --operator-input FILE]`: scripts/demo with this
+// binary (the scripts beside it:
 // $REFL_SCRIPTS_DIR, else ../scripts or ../../scripts of the executable).
 static int demo_cmd(int argc, char **argv)
 {
-    const char *out = "refl-demo", *rig = NULL, *operator_input = NULL;
+    const char *out = "refl-demo", *rig = NULL, *truth = NULL, *operator_input = NULL;
     bool yes = false;
     model_opt_t opts[] = {
         MODEL_OPT_STRING("-o", "DIR", "output directory (default refl-demo)", &out, false),
         MODEL_OPT_STRING("--rig", "RIG.ini", "run the lab day on this rig (default: the virtual rig, --yes)", &rig,
                          false),
+        MODEL_OPT_STRING("--truth", "TRUTH.ini", "the virtual rig of this truth file (default "
+                         "examples/virtual-truth.ini; examples/virtual-truth-adversarial.ini: physics outside the "
+                         "fitters' models)", &truth, false),
         RIG_OPERATOR_OPTS(&yes, &operator_input),
     };
     model_cli_t cli = {
@@ -67,11 +73,17 @@ static int demo_cmd(int argc, char **argv)
                  "workpiece), answered by --yes, --operator-input FILE (passed to every capture) or on the\n"
                  "terminal. A pause ends it with exit 3: run the same command again to continue (complete\n"
                  "sessions are kept, a partial one resumed). A rig that is not virtual has no truth to\n"
-                 "compare with: that part is skipped.",
+                 "compare with: that part is skipped.\n"
+                 "--truth TRUTH.ini: the day on the virtual rig of that truth file. On a virtual rig every\n"
+                 "calibrated and fitted figure is compared with the truth in DIR/chain.json (refl chain:\n"
+                 "value, truth, the sigma refl states, error and z) and DIR/chain.html.",
     };
     int rc = model_cli_parse(&cli, argc, argv);
     if (rc != MODEL_CLI_OK) return rc;
     if (yes && operator_input) return model_cli_error(&cli, "give --yes or --operator-input FILE, not both");
+    if (rig && truth)
+        return model_cli_error(&cli, "give --rig RIG.ini or --truth TRUTH.ini, not both (a virtual rig file names "
+                               "its truth file)");
     char exe[4096];
     ssize_t n = readlink("/proc/self/exe", exe, sizeof exe - 1);
     if (n <= 0) {
@@ -90,11 +102,15 @@ static int demo_cmd(int argc, char **argv)
         if (k == 0) snprintf(script, sizeof script, "%s/demo", cands[k]);
         else snprintf(script, sizeof script, "%s%s/demo", dir, cands[k]);
         if (access(script, R_OK) == 0) {
-            char *args[8] = { (char *)"/bin/bash", script, exe, (char *)out };
+            char *args[10] = { (char *)"/bin/bash", script, exe, (char *)out };
             int na = 4;
             if (rig) {
                 args[na++] = (char *)"--rig";
                 args[na++] = (char *)rig;
+            }
+            if (truth) {
+                args[na++] = (char *)"--truth";
+                args[na++] = (char *)truth;
             }
             if (yes) args[na++] = (char *)"--yes";
             if (operator_input) {

@@ -1,7 +1,9 @@
 #!/usr/bin/python3
 # scripts/demo_chain.py OUTDIR TRUTH.ini — the calibration and fitting chain of
 # `make demo` against the virtual rig's ground truth: writes OUTDIR/chain.html
-# (an HTML fragment: tables of calibrated vs true values) and OUTDIR/lobes.png
+# (an HTML fragment: OUTDIR/chain.json's table of every figure with its value,
+# truth, stated sigma and z, computed by refl chain; then tables of calibrated
+# vs true values by calibration) and OUTDIR/lobes.png
 # (the fitted material's in-plane lobes against the truth's, at several
 # incidence angles). Reads OUTDIR/calib/{geometry,lamps,gain,white}/*.json,
 # OUTDIR/priors_glossy.json and the truth file (INI).
@@ -38,6 +40,31 @@ def f(x, n=4):
 
 
 parts = []
+# ---- every figure against the truth (chain.json, written by refl chain) ------
+cj_path = os.path.join(out, "chain.json")
+if os.path.exists(cj_path):
+    cj = load(cj_path)
+    sm = cj["summary"]
+    over = sm.get("z_over_3", [])
+    parts.append("<h3>Every figure against the truth (<a href=\"chain.json\">chain.json</a>, refl chain)</h3>\n"
+                 f"<p>Truth file <code>{html.escape(os.path.basename(cj['truth']))}</code>. "
+                 f"{sm['entries']} figures; {sm['with_sigma']} with a stated &sigma; (1-sigma refl states for the "
+                 f"value), {sm['without_sigma']} with a truth but no stated &sigma;. z = (value &minus; truth) / "
+                 f"&sigma;. <b>{len(over)}</b> stated &sigma; fail to cover their error (|z| &gt; 3)"
+                 + (": " + ", ".join(html.escape(n) for n in over) if over else "")
+                 + f"; wrong verdicts: {sm.get('wrong_verdicts', 0)}.</p>\n<table>\n")
+    parts.append(row(["figure", "value", "truth", "sigma", "error", "z", "unit", "note"], True))
+    for e in cj["entries"]:
+        z = e.get("z")
+        bad = (z is not None and abs(z) > 3) or (isinstance(e.get("value"), str) and e.get("error"))
+        cells = [e["name"], f(e.get("value"), 6), "" if e.get("truth") is None else f(e["truth"], 6),
+                 "" if e.get("sigma") is None else f(e["sigma"], 3),
+                 "" if e.get("error") is None else f(e["error"], 3),
+                 "" if z is None else f"{z:+.2f}", e.get("unit", ""), e.get("note", "")]
+        tr = "<tr style=\"background:#fdd\">" if bad else "<tr>"
+        parts.append(tr + "".join(f"<td>{html.escape(str(c))}</td>" for c in cells) + "</tr>\n")
+    parts.append("</table>\n")
+
 # ---- geometry ---------------------------------------------------------------
 geo = load(cal, "geometry", "geometry.json")
 import mrcal  # noqa: E402  (python3-mrcal: the truth camera's centre)

@@ -1,0 +1,428 @@
+// fit/chain.c — the lab day's calibrated and fitted figures against the
+// virtual rig's truth (fit/chain.h): chain.json's entries, each with the
+// uncertainty refl states for it and z = error / sigma.
+#include <glib.h>
+#include <math.h>
+#include <mrcal/mrcal.h>
+#include <mrcal/poseutils.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "calib/geometry.h"
+#include "fit/chain.h"
+#include "model/model.h"
+#include "model/report.h"
+#include "rig/truth.h"
+
+typedef struct {
+    const char *dir;
+    rig_truth_t *truth;
+    const model_ini_t *ini;
+    char *truth_dir;
+    json_t *entries, *missing, *prov;
+} chain_t;
+
+// One entry; NAN: none (JSON null). error = value - truth, z = error / sigma.
+static void add(chain_t *c, const char *group, const char *name, double value, double truth, double sigma,
+                const char *unit, const char *note)
+{
+    json_t *e = json_object();
+    double err = value - truth, z = err / sigma;
+    json_object_set_new(e, "name", json_string(name));
+    json_object_set_new(e, "group", json_string(group));
+    json_object_set_new(e, "value", isfinite(value) ? json_real(value) : json_null());
+    json_object_set_new(e, "truth", isfinite(truth) ? json_real(truth) : json_null());
+    json_object_set_new(e, "sigma", isfinite(sigma) && sigma > 0 ? json_real(sigma) : json_null());
+    json_object_set_new(e, "unit", json_string(unit));
+    json_object_set_new(e, "error", isfinite(err) ? json_real(err) : json_null());
+    json_object_set_new(e, "z", isfinite(z) && sigma > 0 ? json_real(z) : json_null());
+    if (note && *note) json_object_set_new(e, "note", json_string(note));
+    json_array_append_new(c->entries, e);
+}
+
+static json_t *load(chain_t *c, const char *role, const char *rel)
+{
+    char *p = g_build_filename(c->dir, rel, NULL);
+    json_error_t je;
+    json_t *j = g_file_test(p, G_FILE_TEST_EXISTS) ? json_load_file(p, 0, &je) : NULL;
+    if (j) model_provenance_input(c->prov, role, p);
+    else json_array_append_new(c->missing, json_string(rel));
+    g_free(p);
+    return j;
+}
+
+static double num(const json_t *o, const char *key)
+{
+    const json_t *v = json_object_get(o, key);
+    return json_is_number(v) ? json_number_value(v) : NAN;
+}
+
+static double ini_num(const chain_t *c, const char *sec, const char *key)
+{
+    const char *t = model_ini_text(c->ini, sec, key, NULL);
+    char *end;
+    double v = t ? strtod(t, &end) : NAN;
+    return t && end != t ? v : NAN;
+}
+
+// ---------------------------------------------------------------------------
+// Camera geometry
+
+// sqrt(mean(stdev^2)) of geometry.json's projection-uncertainty grid: the
+// stated 1-sigma of an RMS projection difference over the imager.
+static double uncertainty_rms(const json_t *pu)
+{
+    const json_t *rows = json_object_get(pu, "stdev_px"), *row;
+    size_t i, j;
+    double s = 0;
+    int n = 0;
+    json_array_foreach(rows, i, row) {
+        const json_t *v;
+        json_array_foreach(row, j, v) {
+            s += json_number_value(v) * json_number_value(v);
+            n++;
+        }
+    }
+    return n ? sqrt(s / n) : NAN;
+}
+
+static void chain_camera(chain_t *c, const json_t *cam, const char *model_path, const char *truth_sec,
+                         const char *label)
+{
+    const char *tm = model_ini_text(c->ini, truth_sec, "model", NULL);
+    char *tpath = tm ? g_build_filename(c->truth_dir, tm, NULL) : NULL;
+    mrcal_cameramodel_t *t = tpath ? mrcal_read_cameramodel_file(tpath) : NULL;
+    mrcal_cameramodel_t *b = mrcal_read_cameramodel_file(model_path);
+    char name[160], note[200];
+    if (!t || !b) {
+        snprintf(note, sizeof note, "%s: %s", label, !b ? model_path : tpath ? tpath : "no [camera] model");
+        json_array_append_new(c->missing, json_string(note));
+        goto done;
+    }
+    model_provenance_input(c->prov, "camera_model", model_path);
+    static const char *const in[4] = { "fx", "fy", "cx", "cy" };
+    for (int k = 0; k < 4; k++) {
+        snprintf(name, sizeof name, "%s.%s", label, in[k]);
+        add(c, "camera geometry", name, b->intrinsics[k], t->intrinsics[k], NAN, "px",
+            "the intrinsics' own sigma is not stated (their correlations make it misleading alone)");
+    }
+    calib_projection_diff_t d;
+    const json_t *pu = json_object_get(cam, "projection_uncertainty");
+    double dist = num(pu, "distance_mm");
+    if (!isfinite(dist)) dist = 900;
+    if (calib_projection_diff(t, b, dist, 0, &d)) {
+        snprintf(note, sizeof note, "over the imager at %g mm, after the best rigid alignment (mrcal's "
+                 "projection_diff); sigma: RMS of the stated projection uncertainty", dist);
+        snprintf(name, sizeof name, "%s.projection_error_rms", label);
+        add(c, "camera geometry", name, d.rms_px, 0, uncertainty_rms(pu), "px", note);
+        snprintf(name, sizeof name, "%s.projection_error_worst", label);
+        add(c, "camera geometry", name, d.worst_px, 0, num(pu, "max_px"), "px",
+            "the worst grid point; sigma: the worst stated projection uncertainty");
+    } else {
+        snprintf(note, sizeof note, "%s projection difference: %s", label, model_last_error());
+        json_array_append_new(c->missing, json_string(note));
+    }
+    // the camera's centre in the rig frame, and the turntable axis
+    double rt_ref_cam[6], R[9];
+    mrcal_invert_rt(rt_ref_cam, NULL, NULL, t->rt_cam_ref);
+    const json_t *cc = json_object_get(cam, "camera_centre_rig_mm");
+    for (int k = 0; cc && k < 3; k++) {
+        snprintf(name, sizeof name, "%s.centre_rig.%c", label, "xyz"[k]);
+        add(c, "camera geometry", name, json_number_value(json_array_get(cc, k)), rt_ref_cam[3 + k], NAN, "mm",
+            "the camera's centre in the rig frame; no sigma stated");
+    }
+    const json_t *ax = json_object_get(cam, "axis");
+    const json_t *dc = json_object_get(ax, "direction_cam");
+    if (json_array_size(dc) == 3) {
+        mrcal_R_from_r(R, NULL, t->rt_cam_ref);
+        double dot = 0;
+        for (int k = 0; k < 3; k++) dot += json_number_value(json_array_get(dc, k)) * R[k * 3 + 2];
+        snprintf(name, sizeof name, "%s.axis_direction_angle", label);
+        add(c, "camera geometry", name, acos(fmin(1, fabs(dot))) * 180 / M_PI, 0,
+            num(ax, "direction_uncertainty_deg"), "deg",
+            "angle between the fitted turntable axis and the truth's (rig z), in the camera frame");
+    }
+done:
+    if (t) mrcal_free_cameramodel(&t);
+    if (b) mrcal_free_cameramodel(&b);
+    g_free(tpath);
+}
+
+static void chain_geometry(chain_t *c, const json_t *geo)
+{
+    const json_t *cams = json_object_get(geo, "cameras"), *cam;
+    size_t i;
+    if (json_array_size(cams) == 0) {
+        char *p = g_build_filename(c->dir, "calib", "geometry", "camera.cameramodel", NULL);
+        chain_camera(c, geo, p, "camera", "camera");
+        g_free(p);
+        return;
+    }
+    json_array_foreach(cams, i, cam) {
+        const char *n = json_string_value(json_object_get(cam, "name"));
+        if (!n) continue;
+        char *file = g_strdup_printf("%s.cameramodel", n), sec[96], label[96];
+        char *p = g_build_filename(c->dir, "calib", "geometry", file, NULL);
+        snprintf(sec, sizeof sec, "camera %s", n);
+        snprintf(label, sizeof label, "camera_%s", n);
+        // a camera's own axis and centre are in geometry.json's top level for the first
+        json_t *merged = json_deep_copy(cam);
+        if (i == 0) {
+            json_object_set(merged, "axis", json_object_get(geo, "axis"));
+            if (!json_object_get(merged, "camera_centre_rig_mm"))
+                json_object_set(merged, "camera_centre_rig_mm", json_object_get(geo, "camera_centre_rig_mm"));
+        }
+        chain_camera(c, merged, p, model_ini_section_line(c->ini, sec) > 0 ? sec : "camera", label);
+        json_decref(merged);
+        g_free(p);
+        g_free(file);
+    }
+}
+
+// ---------------------------------------------------------------------------
+// Lamps, sensor, white
+
+static void chain_lamps(chain_t *c, const json_t *lj)
+{
+    const json_t *l;
+    size_t i;
+    json_array_foreach(json_object_get(lj, "lamps"), i, l) {
+        const char *n = json_string_value(json_object_get(l, "name"));
+        char sec[96], name[160];
+        snprintf(sec, sizeof sec, "lamp %s", n ? n : "");
+        const char *tp = n ? model_ini_text(c->ini, sec, "position_mm", NULL) : NULL;
+        double t[3];
+        if (!tp || sscanf(tp, "%lf %lf %lf", &t[0], &t[1], &t[2]) != 3) continue;
+        const json_t *p = json_object_get(l, "position_mm"), *s = json_object_get(l, "std_mm");
+        for (int k = 0; k < 3; k++) {
+            snprintf(name, sizeof name, "lamp_%s.%c", n, "xyz"[k]);
+            add(c, "lamps", name, json_number_value(json_array_get(p, k)), t[k],
+                json_is_number(json_array_get(s, k)) ? json_number_value(json_array_get(s, k)) : NAN, "mm",
+                "rig frame; sigma from the triangulation's covariance");
+        }
+    }
+}
+
+static void chain_gain(chain_t *c, const json_t *g)
+{
+    static const struct { const char *key, *truth, *unit; } k[] = {
+        { "system_gain_dn_per_e", "system_gain_dn_per_e", "DN/e-" },
+        { "read_noise_e", "read_noise_e", "e-" },
+        { "dsnu_dn", "dsnu_dn", "DN" },
+        { "prnu_pct", "prnu_pct", "%" },
+        { "dark_current_e_per_s", "dark_current_e_per_s", "e-/s" },
+    };
+    for (size_t i = 0; i < sizeof k / sizeof k[0]; i++) {
+        char name[96];
+        snprintf(name, sizeof name, "sensor.%s", k[i].key);
+        double t = ini_num(c, "sensor", k[i].truth);
+        if (!isfinite(t)) continue;
+        add(c, "sensor (EMVA 1288)", name, num(g, k[i].key), t, NAN, k[i].unit, "no sigma stated");
+    }
+}
+
+static void chain_white(chain_t *c, const json_t *w, const json_t *g)
+{
+    double kc = ini_num(c, "camera", "kc_per_us"), ks = num(g, "kc_small_signal_per_us");
+    double gmean = isfinite(ks) && kc > 0 ? ks / kc : 1;
+    const json_t *l;
+    size_t i;
+    json_array_foreach(json_object_get(w, "lamps"), i, l) {
+        const char *n = json_string_value(json_object_get(l, "name"));
+        char sec[96], name[160];
+        snprintf(sec, sizeof sec, "lamp %s", n ? n : "");
+        double I = ini_num(c, sec, "intensity"), v = num(l, "kc_I_per_us");
+        if (!isfinite(I) || !isfinite(kc)) continue;
+        snprintf(name, sizeof name, "white.kc_I_%s", n);
+        add(c, "reference white", name, v, kc * I * gmean, v * num(l, "std_of_median_rel"),
+            "DN/us per (1/sr)/mm^2",
+            "truth: kc_per_us * I * mean(g), mean(g) the flat field's mean from the gain calibration's "
+            "small-signal kc; sigma: the median's standard error");
+    }
+}
+
+// ---------------------------------------------------------------------------
+// Materials and verdicts
+
+static void chain_priors(chain_t *c, const json_t *pj)
+{
+    const json_t *m, *p;
+    size_t i, j;
+    json_array_foreach(json_object_get(pj, "materials"), i, m) {
+        const char *n = json_string_value(json_object_get(m, "name"));
+        const char *model = json_string_value(json_object_get(m, "model"));
+        char sec[96], name[200], note[200];
+        snprintf(sec, sizeof sec, "material %s", n ? n : "");
+        const char *tmodel = model_ini_text(c->ini, sec, "model", NULL);
+        bool same = model && tmodel && !strcmp(model, tmodel);
+        snprintf(note, sizeof note, same ? "the truth's model (%s); sigma: the fit's"
+                 : "fitted model %s, the truth's is %s: no truth per parameter", model ? model : "?",
+                 tmodel ? tmodel : "none");
+        json_array_foreach(json_object_get(m, "parameters"), j, p) {
+            const char *pn = json_string_value(json_object_get(p, "name"));
+            const char *unit = json_string_value(json_object_get(p, "unit"));
+            if (!pn) continue;
+            snprintf(name, sizeof name, "material_%s.%s", n, pn);
+            add(c, "materials", name, num(p, "mean"), same ? ini_num(c, sec, pn) : NAN, num(p, "std"),
+                unit ? unit : "", note);
+        }
+    }
+}
+
+// A verdict: expected "correct" when the verified description is (byte for
+// byte) the scene of one of the truth's samples, else "incorrect".
+static void chain_verdict(chain_t *c, const char *sub, const json_t *v)
+{
+    const char *scene = json_string_value(json_object_get(v, "scene"));
+    const char *verdict = json_string_value(json_object_get(v, "verdict"));
+    char sha[65] = "", tsha[65];
+    if (!scene || !verdict || !model_sha256_file(scene, sha)) return;
+    bool expect_correct = false;
+    for (int s = 0; s < c->ini->nsections && !expect_correct; s++) {
+        const char *sec = c->ini->sections[s];
+        if (strncmp(sec, "sample ", 7) || !model_ini_text(c->ini, sec, "scene", NULL)) continue;
+        char *sp = NULL;
+        if (rig_truth_sample_scene(c->truth, sec + 7, &sp, NULL, 0) && sp && model_sha256_file(sp, tsha))
+            expect_correct = !strcmp(sha, tsha);
+        g_free(sp);
+    }
+    model_error_clear();
+    const char *want = expect_correct ? "correct" : "incorrect";
+    json_t *e = json_object();
+    char name[160], note[300];
+    snprintf(name, sizeof name, "verify_%s.verdict", sub);
+    snprintf(note, sizeof note, "%s: score %g, threshold %g (error 1: not the expected verdict)", scene,
+             num(v, "score"), num(v, "score_threshold"));
+    json_object_set_new(e, "name", json_string(name));
+    json_object_set_new(e, "group", json_string("verification"));
+    json_object_set_new(e, "value", json_string(verdict));
+    json_object_set_new(e, "truth", json_string(want));
+    json_object_set_new(e, "sigma", json_null());
+    json_object_set_new(e, "unit", json_string(""));
+    json_object_set_new(e, "error", json_integer(strcmp(verdict, want) != 0));
+    json_object_set_new(e, "z", json_null());
+    json_object_set_new(e, "note", json_string(note));
+    json_array_append_new(c->entries, e);
+    snprintf(name, sizeof name, "verify_%s.score", sub);
+    add(c, "verification", name, num(v, "score"), NAN, NAN, "",
+        expect_correct ? "the correct description: should stay below the threshold"
+                       : "a wrong description: should exceed the threshold");
+}
+
+static void chain_dir_files(chain_t *c)
+{
+    GDir *d = g_dir_open(c->dir, 0, NULL);
+    GPtrArray *names = g_ptr_array_new_with_free_func(g_free);
+    const char *n;
+    while (d && (n = g_dir_read_name(d))) g_ptr_array_add(names, g_strdup(n));
+    if (d) g_dir_close(d);
+    // in name order
+    for (guint i = 1; i < names->len; i++)
+        for (guint j = i; j > 0 && strcmp(names->pdata[j - 1], names->pdata[j]) > 0; j--) {
+            gpointer t = names->pdata[j];
+            names->pdata[j] = names->pdata[j - 1];
+            names->pdata[j - 1] = t;
+        }
+    for (guint i = 0; i < names->len; i++) {
+        const char *f = names->pdata[i];
+        if (g_str_has_prefix(f, "priors_") && g_str_has_suffix(f, ".json")) {
+            json_t *pj = load(c, "priors", f);
+            if (pj) chain_priors(c, pj);
+            json_decref(pj);
+        }
+    }
+    for (guint i = 0; i < names->len; i++) {
+        const char *f = names->pdata[i];
+        char *vp = g_build_filename(c->dir, f, "verify.json", NULL);
+        if (g_file_test(vp, G_FILE_TEST_EXISTS)) {
+            char *rel = g_build_filename(f, "verify.json", NULL);
+            json_t *v = load(c, "verify", rel);
+            if (v) chain_verdict(c, g_str_has_prefix(f, "verify_") ? f + 7 : f, v);
+            json_decref(v);
+            g_free(rel);
+        }
+        g_free(vp);
+    }
+    g_ptr_array_free(names, TRUE);
+}
+
+// ---------------------------------------------------------------------------
+
+static json_t *summary(const json_t *entries)
+{
+    json_t *s = json_object(), *over = json_array();
+    const json_t *e;
+    size_t i;
+    int with = 0, without = 0, wrong = 0;
+    json_array_foreach(entries, i, e) {
+        const json_t *z = json_object_get(e, "z");
+        if (json_is_number(z)) {
+            with++;
+            if (fabs(json_number_value(z)) > 3) json_array_append(over, json_object_get(e, "name"));
+        } else if (json_is_number(json_object_get(e, "truth")))
+            without++;
+        if (json_is_string(json_object_get(e, "value")) && json_integer_value(json_object_get(e, "error")))
+            wrong++;
+    }
+    json_object_set_new(s, "entries", json_integer((json_int_t)json_array_size(entries)));
+    json_object_set_new(s, "with_sigma", json_integer(with));
+    json_object_set_new(s, "without_sigma", json_integer(without));
+    json_object_set_new(s, "z_over_3", over);
+    json_object_set_new(s, "wrong_verdicts", json_integer(wrong));
+    return s;
+}
+
+json_t *fit_chain_compare(const char *dir, const char *truth_path, json_t *prov)
+{
+    chain_t c = { .dir = dir, .prov = prov };
+    c.truth = rig_truth_load(truth_path);
+    if (!c.truth) return NULL;
+    c.ini = rig_truth_ini(c.truth);
+    c.truth_dir = g_path_get_dirname(truth_path);
+    c.entries = json_array();
+    c.missing = json_array();
+    model_provenance_input(prov, "truth", truth_path);
+    json_t *geo = load(&c, "geometry", "calib/geometry/geometry.json"), *doc = NULL;
+    if (!geo) {
+        char *p = g_build_filename(dir, "calib", "geometry", "geometry.json", NULL);
+        model_error(p, 0, "cannot read it: refl chain compares a lab day's directory (refl demo -o DIR), which "
+                    "holds calib/geometry/geometry.json");
+        g_free(p);
+        goto done;
+    }
+    chain_geometry(&c, geo);
+    json_t *lj = load(&c, "lamps", "calib/lamps/lamps.json");
+    if (lj) chain_lamps(&c, lj);
+    json_t *gj = load(&c, "gain", "calib/gain/gain.json");
+    if (gj) chain_gain(&c, gj);
+    json_t *wj = load(&c, "white", "calib/white/white.json");
+    if (wj) chain_white(&c, wj, gj);
+    chain_dir_files(&c);
+    json_decref(lj);
+    json_decref(gj);
+    json_decref(wj);
+    doc = json_object();
+    json_object_set_new(doc, "chain", json_string("refl chain: the lab day's calibrated and fitted figures against "
+                                                  "the truth of the virtual rig it ran on"));
+    json_object_set_new(doc, "dir", json_string(dir));
+    json_object_set_new(doc, "truth", json_string(truth_path));
+    json_object_set_new(doc, "units_and_conventions",
+                        json_string("each entry's unit; lengths mm in the rig frame (origin at the turntable top "
+                                    "centre, z up); pixels px with (0,0) the centre of the top-left pixel (mrcal); "
+                                    "error = value - truth; sigma: the 1-sigma refl states for the value (null: "
+                                    "none stated); z = error / sigma; a verdict's error is 1 when it is not the "
+                                    "expected one"));
+    json_object_set_new(doc, "summary", summary(c.entries));
+    json_object_set_new(doc, "entries", c.entries);
+    c.entries = NULL;
+    json_object_set_new(doc, "missing", c.missing);
+    c.missing = NULL;
+    json_object_set_new(doc, "provenance", json_incref(prov));
+done:
+    json_decref(geo);
+    json_decref(c.entries);
+    json_decref(c.missing);
+    rig_truth_free(c.truth);
+    g_free(c.truth_dir);
+    return doc;
+}

@@ -1,0 +1,198 @@
+// tests/test_fit_chain.c — the lab day against the truth (fit/chain.h,
+// calib_projection_diff in calib/geometry_diff.c): projection differences
+// with known answers; chain.json of a made-up day whose every error and z is
+// known; refl chain's and refl demo --truth's errors.
+#include <glib.h>
+#include <jansson.h>
+#include <limits.h>
+#include <math.h>
+#include <mrcal/mrcal.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "calib/geometry.h"
+#include "fit/chain.h"
+#include "model/model.h"
+#include "model/report.h"
+#include "tests/test.h"
+
+static char *example(const char *name)
+{
+    char top[PATH_MAX];
+    if (!realpath(test_srcdir(), top)) snprintf(top, sizeof top, "%s", test_srcdir());
+    return g_build_filename(top, "examples", name, NULL);
+}
+
+// Identical models project alike; a principal point moved by d px moves every
+// pixel by exactly d (it is added after the lens), which a slight turn of the
+// camera frame (or a shift across the axis) explains almost wholly.
+TEST(chain_projection_diff_known_answers)
+{
+    char *p = example("camera.cameramodel");
+    mrcal_cameramodel_t *a = mrcal_read_cameramodel_file(p), *b = mrcal_read_cameramodel_file(p);
+    CHECK(a && b);
+    if (!a || !b) return;
+    calib_projection_diff_t d;
+    CHECK(calib_projection_diff(a, b, 900, 0, &d));
+    CHECK(d.rms_px < 1e-6 && d.worst_px < 1e-6 && d.npoints == 33 * 27);
+    const double shift = 0.8;
+    b->intrinsics[2] += shift;
+    CHECK(calib_projection_diff(a, b, 900, 0, &d));
+    CHECK_NEAR(d.rms_unaligned_px, shift, 1e-6);
+    CHECK_NEAR(d.worst_unaligned_px, shift, 1e-6);
+    CHECK_MSG(d.rms_px < 0.1 * shift, "aligned RMS %.4f px", d.rms_px);
+    // a focal length 0.5 % longer, at one distance, is the camera 0.5 % of
+    // 900 mm nearer: the alignment finds that shift
+    b->intrinsics[2] -= shift;
+    b->intrinsics[0] *= 1.005;
+    b->intrinsics[1] *= 1.005;
+    CHECK(calib_projection_diff(a, b, 900, 0, &d));
+    CHECK_MSG(d.rms_px < 0.1 && d.rms_unaligned_px > 1, "scaled: %.3f of %.3f px", d.rms_px, d.rms_unaligned_px);
+    CHECK_NEAR(d.translation_mm, 900 * (1 - 1 / 1.005), 0.5);
+    CHECK(!calib_projection_diff(a, b, -1, 0, &d));
+    CHECK_CONTAINS(model_last_error(), "distance > 0");
+    mrcal_free_cameramodel(&a);
+    mrcal_free_cameramodel(&b);
+    g_free(p);
+}
+
+static void put(const char *rel, const char *text)
+{
+    char *p = g_build_filename(test_tmpdir(), "day", rel, NULL), *d = g_path_get_dirname(p);
+    CHECK(model_mkdir_p(d));
+    CHECK(g_file_set_contents(p, text, -1, NULL));
+    g_free(d);
+    g_free(p);
+}
+
+static const json_t *entry(const json_t *doc, const char *name)
+{
+    const json_t *e;
+    size_t i;
+    json_array_foreach(json_object_get(doc, "entries"), i, e)
+        if (!strcmp(json_string_value(json_object_get(e, "name")), name)) return e;
+    test_fail(__FILE__, __LINE__, "no entry %s", name);
+    return NULL;
+}
+
+static double field(const json_t *e, const char *k)
+{
+    const json_t *v = json_object_get(e, k);
+    return json_is_number(v) ? json_number_value(v) : NAN;
+}
+
+// A made-up day on the matched truth: the truth's camera model as calibrated,
+// lamp east 1 mm off in x with a stated 0.5 mm, K 0.01 high, the glossy
+// plastic's kd 0.01 high with a stated 0.005, the correct description judged
+// incorrect and a wrong one incorrect.
+TEST(chain_known_errors_and_z)
+{
+    char *truth = example("virtual-truth.ini"), *cam = example("camera.cameramodel");
+    char *t_scene = example("t_stiffener.d3d"), *i_scene = example("i_stiffener.d3d");
+    char *model_text = NULL;
+    CHECK(g_file_get_contents(cam, &model_text, NULL, NULL));
+    put("calib/geometry/camera.cameramodel", model_text ? model_text : "");
+    put("calib/geometry/geometry.json", "{"
+        "\"projection_uncertainty\": {\"distance_mm\": 900, \"max_px\": 0.2, \"stdev_px\": [[0.1, 0.1], [0.1, 0.1]]}}");
+    put("calib/lamps/lamps.json", "{\"lamps\": [{\"name\": \"east\", \"position_mm\": [489.6, 177.9, 600],"
+        "\"std_mm\": [0.5, 0.5, 0.5]}]}");
+    put("calib/gain/gain.json", "{\"system_gain_dn_per_e\": 0.26, \"read_noise_e\": 6}");
+    put("priors_glossy.json", "{\"materials\": [{\"name\": \"glossy_plastic\", \"model\": \"ggx\", \"parameters\": "
+        "[{\"name\": \"kd\", \"mean\": 0.36, \"std\": 0.005, \"unit\": \"1\"}]}]}");
+    char v[PATH_MAX + 128];
+    snprintf(v, sizeof v, "{\"scene\": \"%s\", \"verdict\": \"incorrect\", \"score\": 900, \"score_threshold\": 400}",
+             t_scene);
+    put("verify_t/verify.json", v);
+    snprintf(v, sizeof v, "{\"scene\": \"%s\", \"verdict\": \"incorrect\", \"score\": 9000, \"score_threshold\": 400}",
+             i_scene);
+    put("verify_i/verify.json", v);
+    const char *day = test_path("day");
+    json_t *prov = model_provenance(0, NULL);
+    json_t *doc = fit_chain_compare(day, truth, prov);
+    CHECK_MSG(doc != NULL, "%s", model_last_error());
+    if (doc) {
+        const json_t *e = entry(doc, "camera.projection_error_rms");
+        CHECK(field(e, "value") < 1e-6 && fabs(field(e, "sigma") - 0.1) < 1e-12);
+        e = entry(doc, "lamp_east.x");
+        CHECK_NEAR(field(e, "error"), 1.0, 1e-9);
+        CHECK_NEAR(field(e, "z"), 2.0, 1e-9);
+        CHECK_NEAR(field(entry(doc, "lamp_east.y"), "z"), 0.0, 1e-9);
+        e = entry(doc, "sensor.system_gain_dn_per_e");
+        CHECK_NEAR(field(e, "error"), 0.01, 1e-12);
+        CHECK(json_is_null(json_object_get(e, "sigma")) && json_is_null(json_object_get(e, "z")));
+        e = entry(doc, "material_glossy_plastic.kd");
+        CHECK_NEAR(field(e, "truth"), 0.35, 1e-12);
+        CHECK_NEAR(field(e, "z"), 2.0, 1e-9);
+        e = entry(doc, "verify_t.verdict");
+        CHECK(e && !strcmp(json_string_value(json_object_get(e, "truth")), "correct"));
+        CHECK(e && json_integer_value(json_object_get(e, "error")) == 1);
+        e = entry(doc, "verify_i.verdict");
+        CHECK(e && json_integer_value(json_object_get(e, "error")) == 0);
+        const json_t *s = json_object_get(doc, "summary");
+        CHECK(json_integer_value(json_object_get(s, "wrong_verdicts")) == 1);
+        CHECK(json_array_size(json_object_get(s, "z_over_3")) == 0);
+        // missing parts are named, not fatal
+        const json_t *m;
+        size_t i;
+        bool white = false;
+        json_array_foreach(json_object_get(doc, "missing"), i, m) white |= strstr(json_string_value(m), "white") != NULL;
+        CHECK(white);
+    }
+    json_decref(doc);
+    json_decref(prov);
+
+    // refl chain: the table, |z| > 3 marked, chain.json written
+    put("calib/lamps/lamps.json", "{\"lamps\": [{\"name\": \"east\", \"position_mm\": [492.6, 177.9, 600],"
+        "\"std_mm\": [0.5, 0.5, 0.5]}]}");
+    char *out = NULL, *err = NULL;
+    int rc = test_refl_run(60, &out, &err, "chain", day, "--truth", truth, NULL);
+    CHECK_MSG(rc == 0, "exit %d: %s", rc, err);
+    CHECK_CONTAINS(out, "lamp_east.x");
+    CHECK_CONTAINS(out, "+8.00 mm");
+    CHECK_CONTAINS(out, "|z| > 3: 1; wrong verdicts: 1");
+    char *cj = g_build_filename(day, "chain.json", NULL);
+    json_error_t je;
+    json_t *j = json_load_file(cj, 0, &je);
+    CHECK(j && json_is_object(json_object_get(j, "provenance")));
+    json_decref(j);
+    g_free(cj);
+    g_free(out);
+    g_free(err);
+    g_free(model_text);
+    g_free(truth);
+    g_free(cam);
+    g_free(t_scene);
+    g_free(i_scene);
+}
+
+TEST(chain_and_demo_truth_errors)
+{
+    char *out = NULL, *err = NULL;
+    char *truth = example("virtual-truth.ini");
+    int rc = test_refl_run(60, &out, &err, "chain", test_path("nothing"), "--truth", truth, NULL);
+    CHECK(rc == 1);
+    CHECK_CONTAINS(err, "nothing/calib/geometry/geometry.json: cannot read it");
+    g_free(out);
+    g_free(err);
+    rc = test_refl_run(60, &out, &err, "chain", test_tmpdir(), "--truth", test_path("none.ini"), NULL);
+    CHECK(rc == 1);
+    CHECK_CONTAINS(err, "none.ini");
+    g_free(out);
+    g_free(err);
+    rc = test_refl_run(60, &out, &err, "chain", test_tmpdir(), NULL);
+    CHECK(rc == 2);
+    CHECK_CONTAINS(err, "--truth");
+    g_free(out);
+    g_free(err);
+    rc = test_refl_run(60, &out, &err, "demo", "-o", test_path("d"), "--rig", truth, "--truth", truth, NULL);
+    CHECK(rc == 2);
+    CHECK_CONTAINS(err, "not both");
+    g_free(out);
+    g_free(err);
+    rc = test_refl_run(60, &out, &err, "demo", "-o", test_path("d"), "--truth", test_path("no-truth.ini"), NULL);
+    CHECK(rc == 1);
+    CHECK_CONTAINS(err, "no-truth.ini: cannot read the truth file");
+    g_free(out);
+    g_free(err);
+    g_free(truth);
+}
