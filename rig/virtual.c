@@ -13,7 +13,8 @@
 //   [sensor]     model_sensor_t's keys (exposure_us and noise_seed are set per frame)
 //   [turntable]  speed_deg_s, accel_deg_s2, home_time_s, position_noise_deg, seed,
 //                fault_after_moves, fault = motion|stall|disconnect
-//   [lamp NAME]  position_mm, intensity, radius_mm
+//   [lamp NAME]  position_mm, intensity, radius_mm, emission_cos_power, emission_axis
+//   [lamp_drift NAME], [stray]  lamp warm-up and drift, stray light (rig/virtual_lamps.h)
 //   [material NAME] model and parameters
 //   [texture MATERIAL] amplitude (0..0.5), scale_mm (> 0), seed: an albedo
 //                texture of that material (see texture_t)

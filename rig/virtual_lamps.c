@@ -29,20 +29,20 @@ bool rig_vlamps_parse(rig_vlamps_t *fx, const model_ini_t *ini, const model_lamp
             return false;
         }
         double a = 0, tau = 0, d = 0;
-        if (!get(ini, sec, "warmup_fraction", 0, false, 0.5, "0..0.5 (the intensity deficit at switch-on)", &a) ||
+        if (!get(ini, sec, "warmup_fraction", -0.5, false, 0.5, "-0.5..0.5 (deficit at switch-on; < 0: brighter, as a heating LED)", &a) ||
             !get(ini, sec, "warmup_tau_s", 0, true, 1e5, "> 0 and <= 1e5 s", &tau) ||
             !get(ini, sec, "drift_pct_per_h", -10, false, 10, "-10..10 %/h", &d))
             return false;
-        if ((a > 0) != (tau > 0)) {
-            const model_ini_entry_t *e = model_ini_get(ini, sec, a > 0 ? "warmup_fraction" : "warmup_tau_s");
+        if ((a != 0) != (tau > 0)) {
+            const model_ini_entry_t *e = model_ini_get(ini, sec, a != 0 ? "warmup_fraction" : "warmup_tau_s");
             model_error(ini->path, e ? e->line : ini->section_lines[s], "[%s]: a warm-up needs both "
-                        "warmup_fraction (> 0) and warmup_tau_s", sec);
+                        "warmup_fraction (not 0) and warmup_tau_s", sec);
             return false;
         }
         fx->warmup_fraction[i] = a;
         fx->warmup_tau_s[i] = tau;
         fx->drift_pct_per_h[i] = d;
-        if (a > 0 || d != 0) fx->timed = true;
+        if (a != 0 || d != 0) fx->timed = true;
     }
     return get(ini, "stray", "ambient_radiance", 0, false, 1e12, ">= 0 (radiance units)", &fx->ambient_radiance) &&
            get(ini, "stray", "veiling_glare", 0, false, 0.2, "0..0.2 (a fraction of the mean image radiance)",
@@ -53,7 +53,7 @@ double rig_vlamps_curve(const rig_vlamps_t *fx, int lamp, double t_on_s)
 {
     if (!fx || lamp < 0 || lamp >= fx->n) return 1.0;
     double f = 1.0, t = t_on_s > 0 ? t_on_s : 0;
-    if (fx->warmup_fraction[lamp] > 0) f *= 1 - fx->warmup_fraction[lamp] * exp(-t / fx->warmup_tau_s[lamp]);
+    if (fx->warmup_fraction[lamp] != 0) f *= 1 - fx->warmup_fraction[lamp] * exp(-t / fx->warmup_tau_s[lamp]);
     if (fx->drift_pct_per_h[lamp] != 0) f *= 1 + fx->drift_pct_per_h[lamp] / 100 * t / 3600;
     return f;
 }

@@ -2,7 +2,8 @@
 // fitters' model (issue 18): each lamp's warm-up and drift in time, and stray
 // light (room light into the lens, the lens's veiling glare). Truth-file
 // sections (examples/virtual-truth.ini documents them; all off by default):
-//   [lamp_drift NAME]  (NAME a [lamp NAME]) warmup_fraction = a (0..0.5),
+//   [lamp_drift NAME]  (NAME a [lamp NAME]) warmup_fraction = a (-0.5..0.5;
+//                      < 0: brighter at switch-on, as an LED whose junction heats),
 //                      warmup_tau_s = tau (> 0), drift_pct_per_h = d (-10..10):
 //                      lamp NAME's intensity times
 //                        f(t) = (1 - a exp(-t / tau)) (1 + d / 100 * t / 3600 s)

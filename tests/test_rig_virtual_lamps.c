@@ -120,6 +120,11 @@ TEST(virtual_lamps_curve_known_values)
     CHECK_NEAR(rig_vlamps_curve(&fx, 1, 0), 0.96, 1e-15);
     CHECK_NEAR(rig_vlamps_curve(&fx, 1, 120), (1 - 0.04 / M_E) * (1 - 0.005 / 30), 1e-15);
     CHECK_NEAR(rig_vlamps_curve(&fx, 1, 7200), (1 - 0.04 * exp(-60)) * 0.99, 1e-15);
+    // an LED's sag: brighter at switch-on
+    fx.warmup_fraction[0] = -0.05;
+    fx.warmup_tau_s[0] = 300;
+    CHECK_NEAR(rig_vlamps_curve(&fx, 0, 0), 1.05, 1e-15);
+    CHECK_NEAR(rig_vlamps_curve(&fx, 0, 600), 1 + 0.05 * exp(-2), 1e-15);
     // glare: g times the mean of the lamps' planes, each by its factor; kc scales it
     float out[4] = { 1, 2, 3, 4 }, p0[4] = { 0, 0, 0, 40 }, p1[4] = { 10, 10, 10, 10 };
     const float *pl[2] = { p0, p1 };
