@@ -19,6 +19,7 @@
 #include <time.h>
 
 #include "model/model.h"
+#include "model/vec.h"
 #include "rig/rig.h"
 #include "rig/virtual_lamps.h"
 #include "tests/test.h"
@@ -34,9 +35,10 @@ static double mono_s(void)
     return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
 }
 
-// The example truth file with the flat field as the sample, a linear sensor
-// and `extra` appended; its relative paths made absolute.
-static const char *truth_with(const char *name, const char *extra)
+// The example truth file with the flat field as the sample, a linear sensor,
+// `from` replaced by `to` (both may be NULL) and `extra` appended; its
+// relative paths made absolute.
+static const char *truth_edit(const char *name, const char *extra, const char *from, const char *to)
 {
     char top[PATH_MAX];
     if (!realpath(test_srcdir(), top)) snprintf(top, sizeof top, "%s", test_srcdir());
@@ -51,8 +53,9 @@ static const char *truth_with(const char *name, const char *extra)
     struct { const char *from, *to; } subst[] = {
         { "sample = t_stiffener", "sample = flat_field" },
         { "nonlinearity_pct = 2", "nonlinearity_pct = 0" },
+        { from, to },
     };
-    for (size_t k = 0; k < 2; k++) {
+    for (size_t k = 0; k < 3 && subst[k].from; k++) {
         char *p = strstr(s->str, subst[k].from);
         CHECK_MSG(p != NULL, "'%s' not in the example truth file", subst[k].from);
         if (p) {
@@ -72,6 +75,8 @@ static const char *truth_with(const char *name, const char *extra)
     g_string_free(s, TRUE);
     return out;
 }
+
+static const char *truth_with(const char *name, const char *extra) { return truth_edit(name, extra, NULL, NULL); }
 
 static rig_virtual_t *open_truth(const char *path, const char *serial)
 {
@@ -303,4 +308,52 @@ done:
     rig_virtual_close(v);
     rig_virtual_close(ref);
     free(E);
+}
+
+// The emission pattern of a truth lamp reaches the virtual rig's frames: the
+// reference white under lamp east with emission_cos_power = 4.8 (an LED with a
+// 60 deg optic) about a tilted axis, over the same lamp isotropic, is
+// (a . u)^n at points of the white's top face (z = 5 mm), u from the lamp to
+// the point (the same random draws: the renders differ by that factor only).
+TEST(virtual_lamps_emission_pattern_in_frames)
+{
+    const char *east = "[lamp east]\nposition_mm = 488.6 177.9 600\n";
+    rig_virtual_t *ref = open_truth(truth_with("plain.ini", ""), "REFL-LAMPS-R3");
+    rig_virtual_t *v = open_truth(truth_edit("pattern.ini", "", east,
+                                             "[lamp east]\nposition_mm = 488.6 177.9 600\nemission_cos_power = 4.8\n"
+                                             "emission_axis = -488.6 -177.9 -500\n"),
+                                  "REFL-LAMPS-P");
+    float *A = malloc(NPX * sizeof(float)), *B = malloc(NPX * sizeof(float));
+    if (!ref || !v || !A || !B) goto done;
+    CHECK(rig_virtual_set_sample(ref, "reference_white") == 0);
+    CHECK(rig_virtual_set_sample(v, "reference_white") == 0);
+    CHECK(rig_virtual_radiance(ref, 0, 0, A) == 0);
+    CHECK(rig_virtual_radiance(v, 0, 0, B) == 0);
+    model_vec3_t L = v3(488.6, 177.9, 600), a = v3_unit(v3(-488.6, -177.9, -500));
+    model_vec3_t pts[3] = { v3(0, 0, 5), v3(50, 40, 5), v3(-50, -40, 5) };
+    double q[6];
+    CHECK(model_camera_project(rig_virtual_camera_model(v), pts, 3, q));
+    double lo = 2, hi = 0;
+    for (int k = 0; k < 3; k++) {
+        int x = (int)lround(q[2 * k]), y = (int)lround(q[2 * k + 1]);
+        CHECK(x > 2 && x < W - 3 && y > 2 && y < H - 3);
+        if (!(x > 2 && x < W - 3 && y > 2 && y < H - 3)) continue;
+        double sa = 0, sb = 0;
+        for (int dy = -2; dy <= 2; dy++)
+            for (int dx = -2; dx <= 2; dx++) {
+                sa += A[(size_t)(y + dy) * W + x + dx];
+                sb += B[(size_t)(y + dy) * W + x + dx];
+            }
+        double want = pow(v3_dot(a, v3_unit(v3_sub(pts[k], L))), 4.8);
+        printf("  point %d (%.0f, %.0f): ratio %.5f, (a.u)^n %.5f\n", k, pts[k].x, pts[k].y, sb / sa, want);
+        CHECK_REL(sb / sa, want, 2e-3);
+        lo = fmin(lo, want);
+        hi = fmax(hi, want);
+    }
+    CHECK_MSG(hi - lo > 0.03, "the points' factors %.4f..%.4f do not show the pattern", lo, hi);
+done:
+    rig_virtual_close(v);
+    rig_virtual_close(ref);
+    free(A);
+    free(B);
 }
