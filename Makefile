@@ -88,6 +88,7 @@ RIG_SRC := \
     rig/capture.c \
     rig/truth.c \
     rig/virtual.c \
+    rig/virtual_lamps.c \
     rig/cmd_rig.c \
     rig/cmd_capture.c
 CALIB_SRC := \
@@ -153,6 +154,7 @@ TEST_SRC := \
     tests/test_rig_plan_text.c \
     tests/test_rig_turntable.c \
     tests/test_rig_virtual.c \
+    tests/test_rig_virtual_lamps.c \
     tests/test_rig_virtual_inprocess.c \
     tests/test_calib_gain.c \
     tests/test_calib_geometry.c \

@@ -40,7 +40,9 @@ static bool is_tiff_name(const char *s) { return ends_with_ci(s, ".tif") || ends
 #define SCENE_INPUT_OPTS                                                                                           \
     MODEL_OPT_VALUE("--camera", "CAM.cameramodel", "camera model (mrcal); its extrinsics place it in the rig frame", \
                     true),                                                                                         \
-    MODEL_OPT_VALUE("--lamps", "LAMPS.ini", "lamps: [lamp NAME] position_mm, intensity, radius_mm", true),         \
+    MODEL_OPT_VALUE("--lamps", "LAMPS.ini",                                                                        \
+                    "lamps: [lamp NAME] position_mm, intensity, radius_mm, emission_cos_power, emission_axis",     \
+                    true),                                                                                         \
     MODEL_OPT_VALUE("--materials", "MATS.ini", "materials: [material NAME] model and parameters", true)
 #define SHADING_OPTS                                                                                               \
     MODEL_OPT_VALUE("--kc", "K", "camera parameter kc, DN per radiance unit (default 1)", false),                  \

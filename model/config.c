@@ -220,6 +220,41 @@ const model_material_t *model_materials_find(const model_materials_t *m, const c
 // ---------------------------------------------------------------------------
 // Lamps
 
+// The optional emission pattern of a lamp: emission_cos_power = n (0..1000,
+// 0 = isotropic) and emission_axis = x y z (normalised; default toward the
+// rig origin, which a lamp at the origin cannot use).
+static bool parse_lamp_emission(const model_ini_t *ini, const char *sec, model_lamp_t *lamp)
+{
+    if (!model_ini_double_in(ini, sec, "emission_cos_power", &lamp->emission_cos_power, false, 0, false, 1000,
+                             "0 <= emission_cos_power <= 1000 (0 = isotropic)"))
+        return false;
+    const model_ini_entry_t *ax = model_ini_get(ini, sec, "emission_axis");
+    char what[192];
+    snprintf(what, sizeof what, "'x y z': lamp '%s' expects exactly 3 numbers (a direction, rig frame)", lamp->name);
+    double a[3];
+    if (ax && !model_ini_vec3(ini, sec, "emission_axis", a, true, what)) return false;
+    if (ax && !(lamp->emission_cos_power > 0)) {
+        model_error(ini->path, ax->line, "emission_axis in lamp '%s' needs emission_cos_power = n > 0 (without it "
+                    "the lamp is isotropic)", lamp->name);
+        return false;
+    }
+    if (ax) {
+        model_vec3_t d = v3(a[0], a[1], a[2]);
+        double len = v3_norm(d);
+        if (!(len > 0) || !isfinite(len)) {
+            model_error(ini->path, ax->line, "emission_axis = %g %g %g in lamp '%s' is not a direction (zero length)",
+                        a[0], a[1], a[2], lamp->name);
+            return false;
+        }
+        lamp->emission_axis = v3_scale(d, 1.0 / len);
+    } else if (lamp->emission_cos_power > 0 && !(v3_norm(lamp->position_mm) > 0)) {
+        model_error(ini->path, lamp->line, "lamp '%s' at the rig origin has emission_cos_power but no "
+                    "emission_axis: give emission_axis = x y z", lamp->name);
+        return false;
+    }
+    return true;
+}
+
 static bool parse_lamp(const model_ini_t *ini, int s, model_lamp_t *lamp)
 {
     memset(lamp, 0, sizeof *lamp);
@@ -228,10 +263,11 @@ static bool parse_lamp(const model_ini_t *ini, int s, model_lamp_t *lamp)
     const char *sec = ini->sections[s];
     for (int k = ini->section_first[s]; k < ini->section_first[s] + ini->section_count[s]; k++) {
         const model_ini_entry_t *e = &ini->entries[k];
-        if (strcmp(e->key, "position_mm") && strcmp(e->key, "intensity") && strcmp(e->key, "radius_mm")) {
+        if (strcmp(e->key, "position_mm") && strcmp(e->key, "intensity") && strcmp(e->key, "radius_mm") &&
+            strcmp(e->key, "emission_cos_power") && strcmp(e->key, "emission_axis")) {
             model_error(ini->path, e->line,
-                        "unknown key '%s' in lamp '%s'; valid keys: position_mm, intensity, radius_mm", e->key,
-                        lamp->name);
+                        "unknown key '%s' in lamp '%s'; valid keys: position_mm, intensity, radius_mm, "
+                        "emission_cos_power, emission_axis", e->key, lamp->name);
             return false;
         }
     }
@@ -260,7 +296,7 @@ static bool parse_lamp(const model_ini_t *ini, int s, model_lamp_t *lamp)
                     lamp->name, have_pos ? "intensity" : "position_mm");
         return false;
     }
-    return true;
+    return parse_lamp_emission(ini, sec, lamp);
 }
 
 

@@ -323,6 +323,11 @@ typedef struct {
     model_vec3_t position_mm;   // world (rig) frame
     double       intensity;     // I_i, in the units of the grey value per kc (see model_grey)
     double       radius_mm;     // 0 = ideal point lamp
+    // Emission pattern: the intensity toward direction u (unit, from the lamp)
+    // is intensity * max(0, axis . u)^emission_cos_power; 0 = isotropic (the
+    // fitters' model). emission_axis: unit; (0, 0, 0) = toward the rig origin.
+    double       emission_cos_power;
+    model_vec3_t emission_axis;
     int          line;
 } model_lamp_t;
 
@@ -333,7 +338,8 @@ typedef struct {
     char          sha256[65];
 } model_lamps_t;
 
-// [lamp NAME] with position_mm = x y z, intensity = I (> 0), optional radius_mm (>= 0).
+// [lamp NAME] with position_mm = x y z, intensity = I (> 0), optional radius_mm (>= 0),
+// emission_cos_power = n (>= 0, 0 = isotropic) and emission_axis = x y z (needs n > 0).
 model_lamps_t *model_lamps_load(const char *path);
 model_lamps_t *model_lamps_parse(const char *text, size_t len, const char *name);
 void           model_lamps_free(model_lamps_t *l);
@@ -370,6 +376,10 @@ bool model_sensor_parse(const char *text, size_t len, const char *name, model_se
 // when there is no such section.
 model_materials_t *model_materials_from_ini(const model_ini_t *ini);   // [material NAME]
 model_lamps_t     *model_lamps_from_ini(const model_ini_t *ini);       // [lamp NAME]
+// The factor of lamp L's emission pattern toward point p: max(0, a . u)^n, u
+// the unit direction from the lamp to p, a its emission axis; exactly 1 when
+// emission_cos_power is 0 (isotropic), 0 at the lamp itself. (model/shade.c)
+double             model_lamp_emission(const model_lamp_t *L, model_vec3_t p);
 // The 4 quadrature directions of a spherical lamp of radius radius_mm seen at
 // distance d_mm in unit direction l: the mean of R over them is R averaged over
 // the lamp's disc to its second moments (at r/sqrt(2) from the centre along

@@ -72,6 +72,16 @@ bool model_resolve_materials(const model_scene_t *scene, const model_materials_t
     return true;
 }
 
+double model_lamp_emission(const model_lamp_t *L, model_vec3_t p)
+{
+    if (!(L->emission_cos_power > 0)) return 1.0;
+    model_vec3_t u = v3_sub(p, L->position_mm), a = L->emission_axis;
+    double d = v3_norm(u);
+    if (a.x == 0 && a.y == 0 && a.z == 0) a = v3_scale(L->position_mm, -1.0 / v3_norm(L->position_mm));
+    double c = d > 0 ? v3_dot(a, u) / d : 0;
+    return c > 0 ? pow(c, L->emission_cos_power) : 0.0;
+}
+
 double model_direct_sum(const model_pixel_info_t *pi, const model_lamp_sample_t *ls,
                         const model_lamps_t *lamps, const model_material_t *mat, double *dS_dp)
 {
@@ -84,6 +94,8 @@ double model_direct_sum(const model_pixel_info_t *pi, const model_lamp_sample_t 
         if (!(ls[i].V > 0) || !(ls[i].d_mm > 0)) continue;
         model_cosines_t c = model_cosines(pi->n, ls[i].l, pi->v);
         double w = ls[i].V * lamps->lamps[i].intensity / (ls[i].d_mm * ls[i].d_mm);
+        if (lamps->lamps[i].emission_cos_power > 0)
+            w *= model_lamp_emission(&lamps->lamps[i], pi->p_mm);
         double R = model_brdf_eval(mat->model, mat->p, &c, dS_dp ? dR : NULL);
         S += w * R;
         if (dS_dp)
@@ -172,14 +184,14 @@ static double direct_point(render_ctx_t *c, const model_material_t *mat, model_v
         double R = brdf(mat, n, l, v);
         if (R == 0) continue;
         if (!model_tracer_visible_from(c->t, p, n, L->position_mm)) continue;
-        S += L->intensity * R / d2;
+        S += L->intensity * R / d2 * (L->emission_cos_power > 0 ? model_lamp_emission(L, p) : 1.0);
     }
     return S;
 }
 
 // One sample of lamp i's light at (p, n, v) for the MC renderer. A lamp of
 // radius r > 0 is a sphere of uniform radiance Le = I / (pi r^2) (intensity I
-// in every direction); a direction w is drawn uniformly in the cone of solid
+// in every direction; with an emission pattern, I that toward p); a direction w is drawn uniformly in the cone of solid
 // angle Omega = 2 pi (1 - cos theta_max) the sphere subtends, and the estimate is
 //   V(p -> sphere point along w) * Le * Omega * R(w, v, n)
 // (-> I R / d^2 as r -> 0).
@@ -201,10 +213,12 @@ static double lamp_draw(render_ctx_t *c, int i, model_vec3_t p, model_rng_t *rng
     double d2 = v3_dot(dl, dl), d = sqrt(d2), r = L->radius_mm;
     if (!(d > 0)) return 0;
     model_vec3_t axis = v3_scale(dl, 1.0 / d);
+    // the emission pattern toward p (a finite lamp's whole sphere by that of its centre)
+    double I = L->emission_cos_power > 0 ? L->intensity * model_lamp_emission(L, p) : L->intensity;
     if (!c->sh->finite_lamps || !(r > 0) || d <= r * (1 + 1e-9)) {
         *w_out = axis;
         *target = L->position_mm;
-        return L->intensity / d2;
+        return I / d2;
     }
     double s2max = r * r / d2;                          // sin^2 theta_max
     double one_m_cos = s2max / (1 + sqrt(1 - s2max));   // 1 - cos theta_max, stable
@@ -240,7 +254,7 @@ static double lamp_draw(render_ctx_t *c, int i, model_vec3_t p, model_rng_t *rng
     double tt = d * ct - sqrt(fmax(0.0, disc));
     *w_out = w;
     *target = v3_add(p, v3_scale(w, tt));
-    return L->intensity / (M_PI * r * r) * (2 * M_PI * one_m_cos);
+    return I / (M_PI * r * r) * (2 * M_PI * one_m_cos);
 }
 
 // lamp_draw plus the shadow ray and R: one estimate; *V its visibility (0 or 1).
@@ -428,6 +442,7 @@ static void render_packet(render_ctx_t *c, packet_t *pk, int bx, int by)
             pk->l[k] = v3_scale(dl, inv);
             pk->nl[k] = ndl * inv;
             pk->w[k] = I * inv * inv;
+            if (L->emission_cos_power > 0) pk->w[k] *= model_lamp_emission(L, pk->pts[k]);
             // from p + eps n to about eps short of the lamp
             sp->org_x[k] = (float)(pk->pts[k].x + eps * n.x);
             sp->org_y[k] = (float)(pk->pts[k].y + eps * n.y);

@@ -50,6 +50,7 @@ struct rig_lamps {
     int             n;
     rig_lamp_line_t lamps[32];
     uint32_t        on_mask;
+    int64_t         on_since_ns[32];    // CLOCK_MONOTONIC when lamp i last turned on (the virtual rig's warm-up)
     void           *impl;
     // The lamp-state file (rig/lamps_state.c); state_fd -1: none kept.
     int             state_fd;
@@ -60,6 +61,10 @@ struct rig_lamps {
     long            state_pid;
     char            state_started[40];
 };
+
+// When lamp i last turned on (CLOCK_MONOTONIC ns; 0 never), for the virtual
+// rig's lamp warm-up (rig/virtual_lamps.c); safe beside rig_lamps_set.
+int64_t rig_lamps_on_since_ns(const rig_lamps_t *l, int i);
 
 // Lamp sets: at most RIG_LAMPS_MAX lamps each, at most RIG_LAMPS_SAFETY_SLOTS
 // open at once.

@@ -213,6 +213,11 @@ int rig_lamps_set(rig_lamps_t *l, uint32_t on_mask)
         rig_lamps_state_write(l, 0, false);
         return err;
     }
+    struct timespec now;
+    clock_gettime(CLOCK_MONOTONIC, &now);
+    for (int i = 0; i < l->n; i++)
+        if ((on_mask & ~from) >> i & 1)
+            __atomic_store_n(&l->on_since_ns[i], (int64_t)now.tv_sec * 1000000000 + now.tv_nsec, __ATOMIC_RELEASE);
     l->on_mask = on_mask;
     // A failure here leaves the file naming more lamps than are on: safe.
     if (l->state_mask != on_mask) rig_lamps_state_write(l, on_mask, false);
@@ -259,4 +264,8 @@ const char *rig_lamps_name(const rig_lamps_t *l, int i)
 }
 
 uint32_t    rig_lamps_on_mask(const rig_lamps_t *l) { return l ? l->on_mask : 0; }
+int64_t     rig_lamps_on_since_ns(const rig_lamps_t *l, int i)
+{
+    return l && i >= 0 && i < l->n ? __atomic_load_n(&l->on_since_ns[i], __ATOMIC_ACQUIRE) : 0;
+}
 const char *rig_lamps_backend(const rig_lamps_t *l) { return l && l->ops ? l->ops->backend : ""; }

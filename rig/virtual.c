@@ -13,7 +13,8 @@
 //   [sensor]     model_sensor_t's keys (exposure_us and noise_seed are set per frame)
 //   [turntable]  speed_deg_s, accel_deg_s2, home_time_s, position_noise_deg, seed,
 //                fault_after_moves, fault = motion|stall|disconnect
-//   [lamp NAME]  position_mm, intensity, radius_mm
+//   [lamp NAME]  position_mm, intensity, radius_mm, emission_cos_power, emission_axis
+//   [lamp_drift NAME], [stray]  lamp warm-up and drift, stray light (rig/virtual_lamps.h)
 //   [material NAME] model and parameters
 //   [texture MATERIAL] amplitude (0..0.5), scale_mm (> 0), seed: an albedo
 //                texture of that material (see texture_t)
@@ -111,6 +112,7 @@
 #include "rig/pixfmt.h"
 #include "rig/rig.h"
 #include "rig/truth.h"
+#include "rig/virtual_lamps.h"
 
 #define NPLANES  12   // cached radiance images (5 MB each at 1280x1024)
 #define NTRACERS 3    // cached (sample, angle) tracers
@@ -225,6 +227,7 @@ struct rig_virtual {
     int32_t *face, *face_lr;          // scratch of the renders (cache_lock)
     float   *A_lr, *B_lr;
     model_lamps_t     *lamps;
+    rig_vlamps_t       lamp_fx;       // warm-up, drift, stray light (rig/virtual_lamps.c; off by default)
     model_materials_t *mats;
     texture_t         *textures;
     int                ntextures;
@@ -755,20 +758,28 @@ static int ideal_frame(rig_virtual_t *v, int sample, double angle_deg, uint32_t 
     double kc = v->kc_per_us * exposure_us * gf;
     const double Pa = v->sensor.dark_offset_dn;
     bool first = true;
-    for (int l = 0; l < v->lamps->n; l++) {
+    double lf[32];   // each lamp's warm-up and drift now (exactly 1 without them)
+    const float *pl[32];
+    int np = 0;
+    rig_vlamps_factors(&v->lamp_fx, v->state->lamps_dev, lf);
+    for (int l = 0; l < v->lamps->n && l < 32; l++) {
         if (!((mask >> l) & 1)) continue;
         const float *L = plane_for(v, sample, angle_deg, l);
         if (!L) return rig_fail(RIG_ERR_IO, "virtual rig: rendering %s at %.4f deg with lamp %s failed: %s",
                                 v->samples[sample].name, angle_deg, v->lamps->lamps[l].name, model_last_error());
+        double kl = kc * lf[l];
+        lf[np] = lf[l];
+        pl[np++] = L;
         // the same float arithmetic as Pa first, then each lamp added in turn
         if (first)
-            for (size_t i = 0; i < n; i++) out[i] = (float)Pa + (float)(kc * L[i]);
+            for (size_t i = 0; i < n; i++) out[i] = (float)Pa + (float)(kl * L[i]);
         else
-            for (size_t i = 0; i < n; i++) out[i] += (float)(kc * L[i]);
+            for (size_t i = 0; i < n; i++) out[i] += (float)(kl * L[i]);
         first = false;
     }
     if (first)
         for (size_t i = 0; i < n; i++) out[i] = (float)Pa;
+    rig_vlamps_add_stray(&v->lamp_fx, out, n, kc, pl, lf, np);
     *s_out = v->sensor;
     s_out->system_gain_dn_per_e *= gf;
     s_out->exposure_us = exposure_us;
@@ -818,6 +829,7 @@ static bool spec_is(const spec_t *p, int sample, double angle_deg, uint32_t mask
 // was computed.
 static bool speculate_one(rig_virtual_t *v, int sample, double angle_deg, uint32_t mask, uint64_t next_seed)
 {
+    if (v->lamp_fx.timed) return false;   // lamps that drift: a frame is that of its trigger's time
     const shot_t *seq = v->cur;   // a state without frames yet: as the last one
     int nseq = v->ncur, pos = 0;
     if (v->cur_key_set && v->cur_key_sample == sample && v->cur_key_angle == angle_deg && v->cur_key_mask == mask) {
@@ -899,6 +911,7 @@ static int predict_angle(const rig_virtual_t *v, int sample, double angle_deg, a
 // 1 computed, 0 all there (or no room), -1 no prediction.
 static int speculate_angle(rig_virtual_t *v, int sample, double angle_deg, uint64_t next_seed)
 {
+    if (v->lamp_fx.timed) return -1;   // lamps that drift: a frame is that of its trigger's time
     ashot_t pred[NSPEC];
     int np = predict_angle(v, sample, angle_deg, pred);
     if (np == 0) return -1;
@@ -1168,6 +1181,8 @@ static const allowed_t allowed[] = {
     { "texture", { "amplitude", "scale_mm", "seed" } },
     { "sensor", { NULL } },     // checked by model_sensor_from_ini
     { "lamp", { NULL } },       // model_lamps_from_ini
+    { "lamp_drift", { "warmup_fraction", "warmup_tau_s", "drift_pct_per_h" } },   // rig/virtual_lamps.c
+    { "stray", { "ambient_radiance", "veiling_glare" } },                        // rig/virtual_lamps.c
     { "material", { NULL } },   // model_materials_from_ini
 };
 
@@ -1196,12 +1211,14 @@ static bool check_sections(const model_ini_t *ini)
         section_kind(ini->sections[s], kind, &name);
         const allowed_t *a = find_allowed(kind);
         bool named = !strcmp(kind, "lamp") || !strcmp(kind, "material") || !strcmp(kind, "sample") ||
-                     !strcmp(kind, "texture");
+                     !strcmp(kind, "texture") ||
+                     !strcmp(kind, "lamp_drift");
         bool may_name = !strcmp(kind, "camera") || !strcmp(kind, "sensor");
         if (!a) {
             model_error(ini->path, ini->section_lines[s], "unknown section [%s]; a truth file has [virtual], "
                         "[camera] (or [camera NAME], one or more), [render], [sensor] (and [sensor NAME]), "
-                        "[turntable], [lamp NAME], [material NAME], [texture MATERIAL] and [sample NAME]", ini->sections[s]);
+                        "[turntable], [lamp NAME], [material NAME], [texture MATERIAL] and [sample NAME] "
+                        "(and [lamp_drift LAMP], [stray])", ini->sections[s]);
             return false;
         }
         if (!strcmp(kind, "sensor") && *name) {
@@ -1660,6 +1677,7 @@ static bool parse_truth(rig_virtual_t *v, const model_ini_t *ini, const char **d
     *default_sample = get_str(ini, "virtual", "sample", NULL);
     // textures, samples
     if (!parse_textures(v, ini) || !parse_samples(v, ini)) return false;
+    if (!rig_vlamps_parse(&v->lamp_fx, ini, v->lamps)) return false;
     v->nbase_samples = v->nsamples;
     if (*default_sample && find_sample(v, *default_sample) < 0) {
         char list[512];
@@ -1890,6 +1908,7 @@ static int open_camera(rig_virtual_t **out, const char *truth_path, const rig_vi
         err = fail_model(RIG_ERR_INVALID);
         goto fail;
     }
+    v->lamp_fx.time_scale = o.time_scale;
     if (o.prerender >= 0) {
         if (o.prerender > 2) {
             err = rig_fail(RIG_ERR_INVALID, "virtual rig: prerender %d outside 0..2", o.prerender);

@@ -92,6 +92,9 @@ const char *rig_virtual_truth_path(const rig_virtual_t *v);
 // non-linearity) for a state: for tests and for checking calibrations.
 // gain_db in dB; width x height: the region at the sensor's top-left corner
 // (the full sensor is the camera model's size); the sample is the current one.
+// With the truth's [lamp_drift] / [stray] (rig/virtual_lamps.h) it has the lamps'
+// factors of the moment of the call (a lamp of the mask that is off: just switched
+// on) and the stray light, as a frame triggered then.
 // The devices are owned by the rig: rig_virtual_close closes them (never
 // rig_lamps_close / rig_turntable_close them yourself).
 int  rig_virtual_expected(rig_virtual_t *v, double angle_deg, uint32_t lamp_mask,
@@ -100,7 +103,8 @@ int  rig_virtual_expected(rig_virtual_t *v, double angle_deg, uint32_t lamp_mask
 
 // The radiance plane of one lamp at an angle for the current sample (kc 1,
 // Pa 0: model units, as model_render's bracket; the whole sensor, W*H floats
-// into out): what the rig's frames are made of. Lamps add linearly.
+// into out): what the rig's frames are made of. Lamps add linearly. (Without
+// warm-up, drift and stray light: those a frame applies when it sums the lamps.)
 int  rig_virtual_radiance(rig_virtual_t *v, double angle_deg, int lamp, float *out);
 // The rig's sensor stage on an ideal frame img (whole sensor, DN of the
 // sensor's bits, dark offset included: Pa + kc L): its fixed patterns, the

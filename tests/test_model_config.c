@@ -272,8 +272,36 @@ TEST(lamps_valid)
             CHECK_CONTAINS(model_last_error(), needles_[i_]);                           \
     } while (0)
 
+TEST(lamps_emission_pattern_keys)
+{
+    const char *text = "[lamp a]\nposition_mm = 0 0 500\nintensity = 1\n"
+                       "[lamp b]\nposition_mm = 100 0 500\nintensity = 1\nemission_cos_power = 13.5\n"
+                       "[lamp c]\nposition_mm = 0 0 500\nintensity = 1\nemission_cos_power = 1\n"
+                       "emission_axis = 0 3 -4\n";
+    model_lamps_t *l = model_lamps_parse(text, strlen(text), "lamps.ini");
+    CHECK(l && l->n == 3);
+    if (!l) return;
+    CHECK(l->lamps[0].emission_cos_power == 0);
+    CHECK(l->lamps[1].emission_cos_power == 13.5);
+    CHECK(l->lamps[1].emission_axis.x == 0 && l->lamps[1].emission_axis.y == 0 && l->lamps[1].emission_axis.z == 0);
+    CHECK(l->lamps[2].emission_cos_power == 1);
+    CHECK_NEAR(l->lamps[2].emission_axis.y, 0.6, 1e-15);
+    CHECK_NEAR(l->lamps[2].emission_axis.z, -0.8, 1e-15);
+    model_lamps_free(l);
+}
+
 TEST(lamps_errors)
 {
+    LAMPS_FAIL("[lamp a]\nposition_mm = 1 2 3\nintensity = 1\nemission_cos_power = -1\n", "lamps.ini:4:",
+               "emission_cos_power", "out of range");
+    LAMPS_FAIL("[lamp a]\nposition_mm = 1 2 3\nintensity = 1\nemission_axis = 0 0 -1\n", "lamps.ini:4:",
+               "needs emission_cos_power");
+    LAMPS_FAIL("[lamp a]\nposition_mm = 1 2 3\nintensity = 1\nemission_cos_power = 2\nemission_axis = 0 0 0\n",
+               "lamps.ini:5:", "not a direction");
+    LAMPS_FAIL("[lamp a]\nposition_mm = 1 2 3\nintensity = 1\nemission_cos_power = 2\nemission_axis = 0 1\n",
+               "lamps.ini:5:", "exactly 3 numbers");
+    LAMPS_FAIL("[lamp a]\nposition_mm = 0 0 0\nintensity = 1\nemission_cos_power = 2\n", "lamps.ini:1:",
+               "at the rig origin", "emission_axis");
     LAMPS_FAIL("[lamp a]\nposition_mm = 1 2\nintensity = 1\n", "lamps.ini:2:", "exactly 3 numbers", "lamp 'a'");
     LAMPS_FAIL("[lamp a]\nposition_mm = 1 2 3 4\nintensity = 1\n", "lamps.ini:2:", "exactly 3 numbers");
     LAMPS_FAIL("[lamp a]\nposition_mm = 1 two 3\nintensity = 1\n", "lamps.ini:2:", "exactly 3 numbers");
