@@ -347,3 +347,29 @@ TEST(optics_truth_errors)
         free(text);
     }
 }
+
+// rays_per_pixel with the example's own rendering (Monte Carlo direct light
+// of finite lamps, interreflection at 1/4 of the resolution, textures): the
+// indirect light and the textures follow the finer camera, and the plane's
+// mean stays that of one ray per pixel (1 %: the MC noise of a state).
+TEST(optics_rig_rays_with_mc)
+{
+    int W, H, W2, H2;
+    float *L1 = plane(truth_with(NULL, NULL), &W, &H);
+    float *L2 = plane(truth_with("[optics]\nrays_per_pixel = 2\n", NULL), &W2, &H2);
+    CHECK(L1 && L2 && W == W2 && H == H2);
+    if (!L1 || !L2) goto done;
+    double m1 = 0, m2 = 0;
+    size_t n = (size_t)W * H, lit = 0;
+    for (size_t i = 0; i < n; i++) {
+        CHECK(isfinite(L2[i]) && L2[i] >= 0);
+        m1 += L1[i];
+        m2 += L2[i];
+        lit += L2[i] > 0;
+    }
+    CHECK(lit > n / 10);
+    CHECK_REL(m2, m1, 0.01);
+done:
+    free(L1);
+    free(L2);
+}
