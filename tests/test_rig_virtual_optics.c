@@ -373,3 +373,52 @@ done:
     free(L1);
     free(L2);
 }
+
+// The knee through the rig (flat field, one lamp): the expected frame's photon
+// transfer departs from the linear response exactly as configured, pixel by
+// pixel: E(t) = E_dark + K knee(e(t)), e(t) the linear rig's electrons scaled
+// with the exposure (no dark current, no quadratic compression here).
+TEST(optics_rig_sensor_knee_photon_transfer)
+{
+#define LIN "dark_current_e_per_s = 20", "dark_current_e_per_s = 0", "nonlinearity_pct = 2", "nonlinearity_pct = 0"
+    const char *lin = truth_with(NULL, LIN, NULL);
+    const char *knee = truth_with(NULL, LIN, "pattern_seed = 1", "pattern_seed = 1\nknee_e = 12000", NULL);
+#undef LIN
+    rig_virtual_t *v = open_truth(lin);
+    float *E0 = NULL, *E1 = NULL, *Ek = NULL;
+    if (!v) return;
+    model_camera_t *cam = rig_virtual_camera_model(v);
+    int W = model_camera_width(cam), H = model_camera_height(cam);
+    size_t n = (size_t)W * H;
+    const double K = rig_virtual_sensor_params(v).system_gain_dn_per_e, t0 = 10000;
+    E0 = malloc(n * sizeof *E0);
+    E1 = malloc(n * sizeof *E1);
+    Ek = malloc(n * sizeof *Ek);
+    CHECK(rig_virtual_set_sample(v, "flat_field") == 0);
+    CHECK(rig_virtual_expected(v, 0, 0x0, t0, 0, "Mono12", W, H, E0) == 0);   // dark
+    CHECK(rig_virtual_expected(v, 0, 0x1, t0, 0, "Mono12", W, H, E1) == 0);
+    rig_virtual_close(v);
+    v = open_truth(knee);
+    if (!v) goto done;
+    CHECK(rig_virtual_set_sample(v, "flat_field") == 0);
+    const double ts[] = { 10000, 25000, 35000, 42000 };
+    double centre_drop = 0;
+    for (int k = 0; k < 4; k++) {
+        CHECK(rig_virtual_expected(v, 0, 0x1, ts[k], 0, "Mono12", W, H, Ek) == 0);
+        double worst = 0;
+        for (size_t i = 0; i < n; i++) {
+            double e = (E1[i] - E0[i]) / K * ts[k] / t0;
+            double ke = e <= 12000 ? e : 12000 + 4000 * tanh((e - 12000) / 4000);
+            worst = fmax(worst, fabs(Ek[i] - (E0[i] + K * ke)));
+        }
+        CHECK_MSG(worst < 0.02, "exposure %g us: worst %g DN", ts[k], worst);
+        size_t c = (size_t)(H / 2) * W + W / 2;
+        centre_drop = (E1[c] - E0[c]) * ts[k] / t0 - (Ek[c] - E0[c]);
+    }
+    CHECK(centre_drop > 100);   // DN below the straight line at the longest exposure
+    rig_virtual_close(v);
+done:
+    free(E0);
+    free(E1);
+    free(Ek);
+}
