@@ -89,6 +89,7 @@ RIG_SRC := \
     rig/truth.c \
     rig/virtual.c \
     rig/virtual_lamps.c \
+    rig/virtual_optics.c \
     rig/cmd_rig.c \
     rig/cmd_capture.c
 CALIB_SRC := \
@@ -156,6 +157,7 @@ TEST_SRC := \
     tests/test_rig_virtual.c \
     tests/test_rig_virtual_lamps.c \
     tests/test_rig_virtual_inprocess.c \
+    tests/test_rig_virtual_optics.c \
     tests/test_calib_gain.c \
     tests/test_calib_geometry.c \
     tests/test_calib_lamps.c \

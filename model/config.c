@@ -327,6 +327,12 @@ model_sensor_t model_sensor_default(void)
         .nonlinearity_pct = 2,
         .pattern_seed = 1,
         .noise_seed = 1,
+        .knee_e = 0,
+        .low_end_gamma = 1,
+        .low_end_e = 0,
+        .hot_pixel_fraction = 0,
+        .hot_pixel_dark_current_e_per_s = 0,
+        .row_noise_dn = 0,
     };
 }
 
@@ -357,6 +363,12 @@ static const sensor_key_t sensor_keys[] = {
     SK_(nonlinearity_pct, KEY_DOUBLE, 0, 50, false, false),
     SK_(pattern_seed, KEY_SEED, 0, 0, false, false),
     SK_(noise_seed, KEY_SEED, 0, 0, false, false),
+    SK_(knee_e, KEY_DOUBLE, 0, INFINITY, false, false),
+    SK_(low_end_gamma, KEY_DOUBLE, 0.5, 2, false, false),
+    SK_(low_end_e, KEY_DOUBLE, 0, INFINITY, false, false),
+    SK_(hot_pixel_fraction, KEY_DOUBLE, 0, 1, false, false),
+    SK_(hot_pixel_dark_current_e_per_s, KEY_DOUBLE, 0, INFINITY, false, false),
+    SK_(row_noise_dn, KEY_DOUBLE, 0, INFINITY, false, false),
 };
 #undef SK_
 #define NSENSOR_KEYS ((int)(sizeof sensor_keys / sizeof sensor_keys[0]))

@@ -360,6 +360,14 @@ typedef struct {
     double   nonlinearity_pct;       // compression at full well, % (0 = linear)
     uint64_t pattern_seed;           // fixed patterns (DSNU, PRNU)
     uint64_t noise_seed;             // temporal noise of this frame
+    // Outside the fitters' linearised response S(1 - aS) (the virtual rig's
+    // adversary, issue 18; all off by default, see model/sensor.c):
+    double   knee_e;                 // soft clip toward full well above this many e- (0 = off)
+    double   low_end_gamma;          // e' = low_end_e (e / low_end_e)^gamma below low_end_e (1 = off)
+    double   low_end_e;
+    double   hot_pixel_fraction;     // fixed share of pixels with a high dark current (0 = none)
+    double   hot_pixel_dark_current_e_per_s;
+    double   row_noise_dn;           // per-row, per-frame offset, rms DN (0 = none)
 } model_sensor_t;
 
 // Defaults: 12 bits, K 0.25 DN/e-, full well 16000 e-, read noise 6 e-,

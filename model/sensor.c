@@ -15,6 +15,19 @@
 //           (a quadratic compression: smooth, monotonic for c < 0.5, exactly
 //           c*100 % below linear at e = FW, 0 at e = 0)
 //   DN    = round(e_nl * K + dark_offset_dn + dsnu(x,y)), clipped to [0, 2^bits - 1]
+// Beyond that model (the virtual rig's adversary; all off by default, and then
+// every value is what it was without them):
+//   hot pixels  a fixed share hot_pixel_fraction of the pixels (chosen by
+//               pattern_seed) add hot_pixel_dark_current_e_per_s * exposure to mu;
+//   response    applied to e before the well's clip: first a gamma at the low
+//               end, e = low_end_e * (e / low_end_e)^low_end_gamma for
+//               0 < e < low_end_e (continuous at low_end_e), then a soft knee,
+//               e = k + (FW - k) tanh((e - k) / (FW - k)) above k = knee_e
+//               (slope 1 at k, tends to FW; knee_e >= FW: no knee). Neither
+//               is the quadratic S(1 - aS) the fitters linearise.
+//   row noise   each row of each frame is offset by row_noise_dn * N(0,1)
+//               (DN, drawn from model_rng(noise_seed ^ ROW_OFFSET_STREAM, row));
+//               the mean (model_sensor_mean) has none.
 // Vignetting: vig(x,y) = 1 - vignetting * (r / r_corner)^2, r the distance from
 // the image centre ((width-1)/2, (height-1)/2) and r_corner that of pixel (0,0);
 // vignetting is the relative fall-off at the corners.
@@ -46,7 +59,7 @@
 // Fixed patterns
 
 // Random streams of the patterns (high byte; the low bits index pixel, column or row).
-enum { STREAM_PIXEL = 1, STREAM_COLUMN = 2, STREAM_ROW = 3 };
+enum { STREAM_PIXEL = 1, STREAM_COLUMN = 2, STREAM_ROW = 3, STREAM_HOT = 4 };
 #define STREAM(kind, i) (((uint64_t)(kind) << 56) | (uint64_t)(i))
 
 // Two independent standard normal values from one Box-Muller transform.
@@ -404,9 +417,9 @@ static void row_slow(const apply_job_t *J, int y, uint64_t base, const double *m
 }
 
 // k, z: the Poisson and normal variates (noise), or mu and zeros (the mean);
-// zero: a row of zeros (for a NULL dsnu)
+// dsnu: the row's offsets (DN)
 SENSOR_CLONES
-static void row_dn(const apply_job_t *J, int y, const float *restrict zero, const double *restrict k,
+static void row_dn(const apply_job_t *J, int y, const float *restrict dsnu, const double *restrict k,
                    const double *restrict z)
 {
     const model_sensor_t *s = J->s;
@@ -417,7 +430,6 @@ static void row_dn(const apply_job_t *J, int y, const float *restrict zero, cons
     const double Pa = s->dark_offset_dn, sigma_r = J->noise && s->read_noise_e > 0 ? s->read_noise_e : 0;
     const bool noise = J->noise;
     float *restrict img = J->img + (size_t)y * W;
-    const float *restrict dsnu = J->dsnu ? J->dsnu + (size_t)y * W : zero;
 #define DN_LOOP(ROUND)                                                                   \
     for (int x = 0; x < W; x++) {                                                        \
         double e = k[x] + sigma_r * z[x];                                                \
@@ -440,34 +452,94 @@ static void row_dn(const apply_job_t *J, int y, const float *restrict zero, cons
 #undef DN_KEEP
 }
 
+// The adversary's effects (see the top of the file), each only when it is on.
+static bool hot_on(const model_sensor_t *s)
+{
+    return s->hot_pixel_fraction > 0 && s->hot_pixel_dark_current_e_per_s > 0 && s->exposure_us > 0;
+}
+
+static bool response_on(const model_sensor_t *s)
+{
+    return (s->knee_e > 0 && s->knee_e < s->full_well_e) || (s->low_end_gamma != 1 && s->low_end_e > 0);
+}
+
+#define ROW_OFFSET_STREAM 0x2545f4914f6cdd1dULL
+
+// A pixel is hot when its uniform draw of pattern_seed is below the fraction.
+static void row_hot(const apply_job_t *J, int y, double *mu)
+{
+    const model_sensor_t *s = J->s;
+    const double extra = s->hot_pixel_dark_current_e_per_s * s->exposure_us * 1e-6;
+    for (int x = 0; x < J->width; x++) {
+        model_rng_t r = model_rng(s->pattern_seed, STREAM(STREAM_HOT, (size_t)y * J->width + x));
+        if (model_rng_uniform(&r) < s->hot_pixel_fraction) mu[x] = fmin(mu[x] + extra, 1e15);
+    }
+}
+
+static double response(const model_sensor_t *s, double e)
+{
+    const double g = s->low_end_gamma, el = s->low_end_e, FW = s->full_well_e, k = s->knee_e;
+    if (g != 1 && el > 0 && e > 0 && e < el) e = el * pow(e / el, g);
+    if (k > 0 && k < FW && e > k) e = k + (FW - k) * tanh((e - k) / (FW - k));
+    return e;
+}
+
+// The response applied to the electrons k + read noise (folded into k, z = 0).
+static void row_response(const apply_job_t *J, double *k, double *z)
+{
+    const double sr = J->noise && J->s->read_noise_e > 0 ? J->s->read_noise_e : 0;
+    for (int x = 0; x < J->width; x++) {
+        k[x] = response(J->s, k[x] + sr * z[x]);
+        z[x] = 0;
+    }
+}
+
+// The row's offsets: dsnu (or zeros) plus this frame's row offset (if any).
+static const float *row_offsets(const apply_job_t *J, int y, const float *zeros, float *scratch)
+{
+    const float *d = J->dsnu ? J->dsnu + (size_t)y * J->width : zeros;
+    if (!J->noise || !(J->s->row_noise_dn > 0)) return d;
+    model_rng_t r = model_rng(J->s->noise_seed ^ ROW_OFFSET_STREAM, (uint64_t)y);
+    double a, b;
+    gauss_pair(&r, &a, &b);
+    float off = (float)(J->s->row_noise_dn * a);
+    for (int x = 0; x < J->width; x++) scratch[x] = d[x] + off;
+    return scratch;
+}
+
 static void apply_rows(void *ctx, int begin, int end, int thread)
 {
     (void)thread;
     const apply_job_t *J = ctx;
     const int W = J->width;
-    // row scratch: mu, k, z (doubles), ones, zeros (floats), flags
-    double *buf = malloc((size_t)W * (3 * sizeof(double) + 2 * sizeof(float) + 1));
+    // row scratch: mu, k, z (doubles), ones, zeros, offsets (floats), flags
+    double *buf = malloc((size_t)W * (3 * sizeof(double) + 3 * sizeof(float) + 1));
     if (!buf) {   // no way to report from a worker: leave these rows as they are
         MODEL_FAIL("out of memory for the sensor stage's row buffers (%d pixels)", W);
         return;
     }
     double *mu = buf, *k = buf + W, *z = buf + 2 * (size_t)W;
-    float *ones = (float *)(buf + 3 * (size_t)W), *zeros = ones + W;
-    uint8_t *slow = (uint8_t *)(zeros + W);
+    float *ones = (float *)(buf + 3 * (size_t)W), *zeros = ones + W, *offs = zeros + W;
+    uint8_t *slow = (uint8_t *)(offs + W);
+    const bool hot = hot_on(J->s), resp = response_on(J->s);
     for (int x = 0; x < W; x++) {
         ones[x] = 1.0f;
         zeros[x] = 0.0f;
     }
     for (int y = begin; y < end; y++) {
         row_mu(J, y, ones, mu);
+        if (hot) row_hot(J, y, mu);
+        const float *d = row_offsets(J, y, zeros, offs);
         if (J->noise) {
             uint64_t base = model_rng(J->s->noise_seed, (uint64_t)y).s;
             row_draw(J, base, mu, k, z, slow);
             row_slow(J, y, base, mu, k, z, slow);
-            row_dn(J, y, zeros, k, z);
+            if (resp) row_response(J, k, z);
+            row_dn(J, y, d, k, z);
         } else {
             memset(z, 0, (size_t)W * sizeof *z);
-            row_dn(J, y, zeros, mu, z);
+            if (resp) row_response(J, mu, z);
+            row_dn(J, y, d, mu, z);
         }
     }
     free(buf);

@@ -11,6 +11,8 @@
 //                mc_bounces, indirect_downsample, thesis_samples, thesis_cone_deg,
 //                rho_sr, finite_lamps, seed, prerender = 0|1|2
 //   [sensor]     model_sensor_t's keys (exposure_us and noise_seed are set per frame)
+//   [optics]     rays_per_pixel, psf = none|gaussian|disc, psf_sigma_px,
+//                psf_radius_px (rig/virtual_optics.c: applied to every lamp's plane)
 //   [turntable]  speed_deg_s, accel_deg_s2, home_time_s, position_noise_deg, seed,
 //                fault_after_moves, fault = motion|stall|disconnect
 //   [lamp NAME]  position_mm, intensity, radius_mm, emission_cos_power, emission_axis
@@ -113,6 +115,7 @@
 #include "rig/rig.h"
 #include "rig/truth.h"
 #include "rig/virtual_lamps.h"
+#include "rig/virtual_optics.h"
 
 #define NPLANES  12   // cached radiance images (5 MB each at 1280x1024)
 #define NTRACERS 3    // cached (sample, angle) tracers
@@ -223,6 +226,10 @@ struct rig_virtual {
     int     direct_samples;           // mc: finite-lamp samples of the direct light, full resolution
     int     ds;                       // mc: the indirect light is rendered at 1/ds resolution (1: full)
     model_camera_t    *cam_lr;        // that camera (NULL when ds = 1)
+    rig_optics_t       optics;        // [optics] (rig/virtual_optics.c)
+    model_camera_t    *cam_hr;        // rays_per_pixel N > 1: the camera of N times the resolution
+    int32_t           *face_hr;       // its face ids and plane (cache_lock)
+    float             *L_hr;
     int     Wl, Hl;
     int32_t *face, *face_lr;          // scratch of the renders (cache_lock)
     float   *A_lr, *B_lr;
@@ -666,7 +673,45 @@ static void add_indirect(rig_virtual_t *v, float *L)
 
 static bool render_layers(rig_virtual_t *v, model_tracer_t *t, int sample, int lamp, float *L);
 
+static bool render_lamp_rays(rig_virtual_t *v, tracer_slot_t *slot, int sample, int lamp, float *L);
+
+// A lamp's radiance plane with the optics of [optics] (rig/virtual_optics.c).
+static bool render_lamp_once(rig_virtual_t *v, tracer_slot_t *slot, int sample, int lamp, float *L);
+
 static bool render_lamp(rig_virtual_t *v, tracer_slot_t *slot, int sample, int lamp, float *L)
+{
+    bool ok = v->optics.rays_per_pixel > 1 ? render_lamp_rays(v, slot, sample, lamp, L)
+                                           : render_lamp_once(v, slot, sample, lamp, L);
+    return ok && rig_optics_psf(&v->optics, v->W, v->H, L);
+}
+
+// rays_per_pixel N > 1: the same rendering by the camera of N times the
+// resolution (a view of v with that camera, its own face ids and texture),
+// its N x N blocks averaged.
+static bool render_lamp_rays(rig_virtual_t *v, tracer_slot_t *slot, int sample, int lamp, float *L)
+{
+    const int N = v->optics.rays_per_pixel;
+    rig_virtual_t *hv = malloc(sizeof *hv);
+    if (!hv) {
+        model_error(v->truth_path, 0, "out of memory for a rendering of %d x %d rays per pixel", N, N);
+        return false;
+    }
+    *hv = *v;   // its locks are never used
+    hv->cam = v->cam_hr;
+    hv->W = v->W * N;
+    hv->H = v->H * N;
+    hv->face = v->face_hr;
+    hv->ds = v->ds > 1 ? v->ds * N : 1;   // the same low-resolution indirect camera
+    tracer_slot_t hs = *slot;
+    hs.tex = NULL;
+    bool ok = render_lamp_once(hv, &hs, sample, lamp, v->L_hr);
+    free(hs.tex);
+    free(hv);
+    if (ok) rig_optics_average(N, v->W, v->H, v->L_hr, L);
+    return ok;
+}
+
+static bool render_lamp_once(rig_virtual_t *v, tracer_slot_t *slot, int sample, int lamp, float *L)
 {
     if (!render_layers(v, slot->t, sample, lamp, L)) return false;
     if (!v->samples[sample].textured) return true;
@@ -1179,6 +1224,7 @@ static const allowed_t allowed[] = {
     { "sample", { "kind", "scene", "square_mm", "corners", "corner0_mm", "material", "sphere_centre_mm",
                   "sphere_radius_mm", "radiance", "direct_samples" } },
     { "texture", { "amplitude", "scale_mm", "seed" } },
+    { "optics", { "rays_per_pixel", "psf", "psf_sigma_px", "psf_radius_px" } },
     { "sensor", { NULL } },     // checked by model_sensor_from_ini
     { "lamp", { NULL } },       // model_lamps_from_ini
     { "lamp_drift", { "warmup_fraction", "warmup_tau_s", "drift_pct_per_h" } },   // rig/virtual_lamps.c
@@ -1217,7 +1263,7 @@ static bool check_sections(const model_ini_t *ini)
         if (!a) {
             model_error(ini->path, ini->section_lines[s], "unknown section [%s]; a truth file has [virtual], "
                         "[camera] (or [camera NAME], one or more), [render], [sensor] (and [sensor NAME]), "
-                        "[turntable], [lamp NAME], [material NAME], [texture MATERIAL] and [sample NAME] "
+                        "[turntable], [lamp NAME], [material NAME], [texture MATERIAL], [sample NAME] and [optics] "
                         "(and [lamp_drift LAMP], [stray])", ini->sections[s]);
             return false;
         }
@@ -1678,6 +1724,7 @@ static bool parse_truth(rig_virtual_t *v, const model_ini_t *ini, const char **d
     // textures, samples
     if (!parse_textures(v, ini) || !parse_samples(v, ini)) return false;
     if (!rig_vlamps_parse(&v->lamp_fx, ini, v->lamps)) return false;
+    if (!rig_optics_parse(ini, &v->optics)) return false;
     v->nbase_samples = v->nsamples;
     if (*default_sample && find_sample(v, *default_sample) < 0) {
         char list[512];
@@ -1800,6 +1847,20 @@ done:
     return err;
 }
 
+
+// rays_per_pixel N > 1: the camera of N times the resolution and its buffers.
+static int make_highres(rig_virtual_t *v)
+{
+    const int N = v->optics.rays_per_pixel;
+    int err = rig_optics_scaled_camera(v->cam_path, v->cam, N, v->W * N, v->H * N, &v->cam_hr);
+    if (err) return err;
+    size_t n = (size_t)v->W * v->H * N * N;
+    v->face_hr = malloc(n * sizeof *v->face_hr);
+    v->L_hr = malloc(n * sizeof *v->L_hr);
+    if (!v->face_hr || !v->L_hr)
+        return rig_fail(RIG_ERR_NO_MEM, "virtual rig: out of memory for %d x %d rays per pixel", N, N);
+    return 0;
+}
 
 // The camera sections of a truth file in file order ([camera], [camera NAME]): their count.
 static int camera_sections(const model_ini_t *ini, const char *secs[], int *line_over)
@@ -1928,6 +1989,7 @@ static int open_camera(rig_virtual_t **out, const char *truth_path, const rig_vi
     }
     if (v->shading.interreflection == MODEL_INTERREFLECTION_MC && v->ds > 1 && (err = make_lowres(v)))
         goto fail;
+    if (v->optics.rays_per_pixel > 1 && (err = make_highres(v))) goto fail;
     // fixed patterns and buffers
     size_t n = (size_t)v->W * v->H;
     v->prnu = malloc(n * sizeof(float));
@@ -2023,6 +2085,9 @@ void rig_virtual_close(rig_virtual_t *v)
     free(v->textures);
     model_camera_free(v->cam);
     model_camera_free(v->cam_lr);
+    model_camera_free(v->cam_hr);
+    free(v->face_hr);
+    free(v->L_hr);
     free(v->cam_path);
     free(v->face);
     free(v->face_lr);

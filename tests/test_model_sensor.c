@@ -396,3 +396,158 @@ TEST(sensor_gain_factor_units)
     CHECK_CONTAINS(model_last_error(), "frame f");
     CHECK(!model_gain_factor(NAN, "dB", 0, "dB", "frame g", &f));
 }
+
+// ---------------------------------------------------------------------------
+// The adversary's sensor effects (issue 18): outside the fitters' S(1 - aS).
+
+// The photon transfer curve with a soft knee: mean vs exposure is linear below
+// knee_e (0.1 %) and follows k + (FW - k) tanh((e - k)/(FW - k)) above it,
+// whereas the quadratic S(1 - aS) fitted to the linear part would not.
+TEST(sensor_adversary_knee_photon_transfer)
+{
+    model_sensor_t s = counting_sensor();
+    s.full_well_e = 16000;
+    s.knee_e = 12000;
+    s.dsnu_dn = 1;   // dithers the rounding
+    const double rate_e_per_ms = 1000;   // electrons per ms of exposure
+    for (int t_ms = 2; t_ms <= 30; t_ms += 4) {
+        double mu = rate_e_per_ms * t_ms;
+        float *a = filled(mu);
+        model_sensor_apply(&s, W, H, a);
+        double m, v;
+        mean_var(a, &m, &v);
+        double k = s.knee_e, FW = s.full_well_e;
+        double want = mu <= k ? mu : k + (FW - k) * tanh((mu - k) / (FW - k));
+        // Poisson spread through the knee's curvature is below 1 e- here
+        CHECK_NEAR(m, want, 1.5);
+        if (mu > 14000) CHECK(mu - m > 0.05 * mu);   // well off the straight line
+        if (mu <= 10000) CHECK_REL(m, mu, 1e-3);
+        free(a);
+    }
+    // the noise-free mean follows the same curve, and never reaches full well
+    float *a = filled(40000);
+    model_sensor_mean(&s, W, H, NULL, NULL, a);
+    CHECK_NEAR(a[0], 12000 + 4000 * tanh(7.0), 1e-2);
+    CHECK(a[0] < 16000);
+    free(a);
+}
+
+// A gamma at the low end: low_end_e (e / low_end_e)^gamma below low_end_e.
+TEST(sensor_adversary_low_end_gamma)
+{
+    model_sensor_t s = counting_sensor();
+    s.low_end_gamma = 1.1;
+    s.low_end_e = 200;
+    const double lv[] = { 20, 50, 100, 199, 400 };
+    for (size_t i = 0; i < sizeof lv / sizeof lv[0]; i++) {
+        float *a = filled(lv[i]);
+        model_sensor_mean(&s, W, H, NULL, NULL, a);
+        double want = lv[i] < 200 ? 200 * pow(lv[i] / 200, 1.1) : lv[i];
+        CHECK_NEAR(a[0], want, 1e-3);
+        free(a);
+    }
+    // with noise: the mean at 50 e- is ~14 % low (200 (1/4)^1.1 = 43.5)
+    float *a = filled(50);
+    model_sensor_apply(&s, W, H, a);
+    double m, v;
+    mean_var(a, &m, &v);
+    CHECK_NEAR(m, 43.5, 0.5);
+    free(a);
+}
+
+// Dark current: the dark frame's mean grows linearly with exposure (slope the
+// dark current, intercept the offset), hot pixels excluded.
+TEST(sensor_adversary_dark_current_linear)
+{
+    model_sensor_t s = counting_sensor();
+    s.dark_current_e_per_s = 50;
+    s.dark_offset_dn = 10;
+    double sx = 0, sy = 0, sxx = 0, sxy = 0;
+    const double t_s[] = { 0.1, 0.5, 1, 2, 4 };
+    for (int i = 0; i < 5; i++) {
+        s.exposure_us = t_s[i] * 1e6;
+        float *a = filled(10);
+        model_sensor_apply(&s, W, H, a);
+        double m, v;
+        mean_var(a, &m, &v);
+        CHECK_NEAR(m, 10 + 50 * t_s[i], 4 * sqrt(50 * t_s[i] / N) + 1e-9);
+        sx += t_s[i];
+        sy += m;
+        sxx += t_s[i] * t_s[i];
+        sxy += t_s[i] * m;
+        free(a);
+    }
+    double slope = (5 * sxy - sx * sy) / (5 * sxx - sx * sx), icpt = (sy - slope * sx) / 5;
+    CHECK_REL(slope, 50, 2e-3);
+    CHECK_NEAR(icpt, 10, 0.05);
+}
+
+// Hot pixels: the configured fraction, at the configured dark current, fixed
+// (the same pixels in every frame, from pattern_seed).
+TEST(sensor_adversary_hot_pixels)
+{
+    model_sensor_t s = counting_sensor();
+    s.dark_current_e_per_s = 20;
+    s.hot_pixel_fraction = 1e-3;
+    s.hot_pixel_dark_current_e_per_s = 2000;
+    s.exposure_us = 1e6;
+    float *a = filled(0), *b = filled(0);
+    model_sensor_apply(&s, W, H, a);
+    s.noise_seed = 99;
+    model_sensor_apply(&s, W, H, b);
+    size_t hot = 0, same = 0;
+    double sum = 0;
+    for (size_t i = 0; i < N; i++)
+        if (a[i] > 1000) {
+            hot++;
+            same += b[i] > 1000;
+            sum += a[i];
+        }
+    // binomial: 131 expected, sd 11.4
+    CHECK_NEAR((double)hot, 1e-3 * N, 4 * sqrt(1e-3 * N));
+    CHECK(same == hot);
+    CHECK_NEAR(sum / (double)hot, 2020, 4 * sqrt(2020.0 / (double)hot));
+    free(a);
+    free(b);
+    // off by default: no pixel above the dark level's Poisson tail
+    s = counting_sensor();
+    s.dark_current_e_per_s = 20;
+    s.exposure_us = 1e6;
+    a = filled(0);
+    model_sensor_apply(&s, W, H, a);
+    hot = 0;
+    for (size_t i = 0; i < N; i++) hot += a[i] > 100;
+    CHECK(hot == 0);
+    free(a);
+}
+
+// Row noise: the std of the row means (over rows) is the configured DN rms,
+// new in every frame; the mean has none.
+TEST(sensor_adversary_row_noise)
+{
+    model_sensor_t s = counting_sensor();
+    s.dark_offset_dn = 100;
+    s.row_noise_dn = 3;
+    float *a = filled(100);
+    model_sensor_apply(&s, W, H, a);
+    double rm[H], m = 0, v = 0;
+    for (int y = 0; y < H; y++) {
+        double t = 0;
+        for (int x = 0; x < W; x++) t += a[(size_t)y * W + x];
+        rm[y] = t / W;
+        m += rm[y] / H;
+    }
+    for (int y = 0; y < H; y++) v += (rm[y] - m) * (rm[y] - m) / (H - 1);
+    // quantisation of the offset to integers adds ~1/12 DN^2 per pixel, averaged out over a row
+    CHECK_NEAR(sqrt(v), 3, 4 * 3 / sqrt(2.0 * H));
+    // within a row, nothing: every pixel of a row has the same value
+    size_t differ = 0;
+    for (int y = 0; y < H; y++)
+        for (int x = 1; x < W; x++) differ += a[(size_t)y * W + x] != a[(size_t)y * W];
+    CHECK(differ == 0);
+    free(a);
+    float *b = filled(100);
+    model_sensor_mean(&s, W, H, NULL, NULL, b);
+    CHECK(b[0] == 100 && b[N - 1] == 100);
+    free(b);
+}
