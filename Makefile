@@ -57,6 +57,9 @@ MODEL_SRC := \
     model/config.c \
     model/brdf.c \
     model/brdf_batch.c \
+    model/brdf_table.c \
+    model/brdf_gen.c \
+    model/cmd_brdf.c \
     model/camera.c \
     model/trace.c \
     model/shade.c \
@@ -125,6 +128,7 @@ TEST_SRC := \
     tests/apt_sim.c \
     tests/test_harness.c \
     tests/test_model_brdf.c \
+    tests/test_model_brdf_table.c \
     tests/test_model_camera.c \
     tests/test_model_cli.c \
     tests/test_model_config.c \

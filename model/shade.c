@@ -72,6 +72,11 @@ bool model_resolve_materials(const model_scene_t *scene, const model_materials_t
     return true;
 }
 
+double model_material_eval(const model_material_t *mat, const model_cosines_t *c)
+{
+    return mat->table ? model_brdf_table_eval(mat->table, c) : model_brdf_eval(mat->model, mat->p, c, NULL);
+}
+
 double model_direct_sum(const model_pixel_info_t *pi, const model_lamp_sample_t *ls,
                         const model_lamps_t *lamps, const model_material_t *mat, double *dS_dp)
 {
@@ -84,7 +89,10 @@ double model_direct_sum(const model_pixel_info_t *pi, const model_lamp_sample_t 
         if (!(ls[i].V > 0) || !(ls[i].d_mm > 0)) continue;
         model_cosines_t c = model_cosines(pi->n, ls[i].l, pi->v);
         double w = ls[i].V * lamps->lamps[i].intensity / (ls[i].d_mm * ls[i].d_mm);
-        double R = model_brdf_eval(mat->model, mat->p, &c, dS_dp ? dR : NULL);
+        double R = mat->table ? model_brdf_table_eval(mat->table, &c)
+                              : model_brdf_eval(mat->model, mat->p, &c, dS_dp ? dR : NULL);
+        if (mat->table && dS_dp)
+            for (int k = 0; k < np; k++) dR[k] = 0;   // a table has no parameters
         S += w * R;
         if (dS_dp)
             for (int k = 0; k < np; k++) dS_dp[k] += w * dR[k];
@@ -131,7 +139,7 @@ static inline const model_material_t *material_of(render_ctx_t *c, int32_t m)
 // one source of the formulas).
 static inline double brdf_value(const model_material_t *mat, const model_cosines_t *c)
 {
-    return model_brdf_eval(mat->model, mat->p, c, NULL);
+    return model_material_eval(mat, c);
 }
 
 static inline double brdf(const model_material_t *mat, model_vec3_t n, model_vec3_t l,
