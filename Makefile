@@ -91,6 +91,7 @@ RIG_SRC := \
     rig/capture.c \
     rig/truth.c \
     rig/virtual.c \
+    rig/virtual_materials.c \
     rig/cmd_rig.c \
     rig/cmd_capture.c
 CALIB_SRC := \
@@ -154,6 +155,7 @@ TEST_SRC := \
     tests/test_rig_plan_text.c \
     tests/test_rig_turntable.c \
     tests/test_rig_virtual.c \
+    tests/test_rig_virtual_materials.c \
     tests/test_rig_virtual_inprocess.c \
     tests/test_calib_gain.c \
     tests/test_calib_geometry.c \
