@@ -123,9 +123,12 @@ model_brdf_table_t *model_brdf_table_load(const char *path)
     return t;
 }
 
+// Written to PATH.tmp and renamed: an existing file is replaced whole or kept.
 bool model_brdf_table_save(const model_brdf_table_t *t, const char *path)
 {
-    FILE *fp = fopen(path, "wb");
+    char tmp[4096];
+    snprintf(tmp, sizeof tmp, "%s.tmp", path);
+    FILE *fp = fopen(tmp, "wb");
     if (!fp) {
         model_error(path, 0, "cannot write: %s", strerror(errno));
         return false;
@@ -144,9 +147,10 @@ bool model_brdf_table_save(const model_brdf_table_t *t, const char *path)
             ok = fwrite(buf, sizeof(double), n, fp) == n;
         }
     if (fclose(fp) != 0) ok = false;
+    if (ok && rename(tmp, path) != 0) ok = false;
     if (!ok) {
         model_error(path, 0, "cannot write the BRDF table: %s", strerror(errno));
-        remove(path);
+        remove(tmp);
     }
     return ok;
 }

@@ -61,7 +61,7 @@ int model_cmd_brdf(int argc, char **argv)
         return 0;
     }
     if (argc >= 2 && !strcmp(argv[1], "tabulate")) return cmd_tabulate(argc - 1, argv + 1);
-    fprintf(stderr, "refl brdf: %s '%s'\n%s", argc < 2 ? "missing sub-command" : "unknown sub-command",
-            argc < 2 ? "" : argv[1], use);
+    if (argc < 2) fprintf(stderr, "refl brdf: missing sub-command (tabulate)\n%s", use);
+    else fprintf(stderr, "refl brdf: unknown sub-command '%s' (tabulate)\n%s", argv[1], use);
     return 2;
 }
