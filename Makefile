@@ -57,6 +57,9 @@ MODEL_SRC := \
     model/config.c \
     model/brdf.c \
     model/brdf_batch.c \
+    model/brdf_table.c \
+    model/brdf_gen.c \
+    model/cmd_brdf.c \
     model/camera.c \
     model/trace.c \
     model/shade.c \
@@ -90,6 +93,7 @@ RIG_SRC := \
     rig/virtual.c \
     rig/virtual_lamps.c \
     rig/virtual_optics.c \
+    rig/virtual_materials.c \
     rig/cmd_rig.c \
     rig/cmd_capture.c
 CALIB_SRC := \
@@ -130,6 +134,7 @@ TEST_SRC := \
     tests/apt_sim.c \
     tests/test_harness.c \
     tests/test_model_brdf.c \
+    tests/test_model_brdf_table.c \
     tests/test_model_camera.c \
     tests/test_model_cli.c \
     tests/test_model_config.c \
@@ -156,6 +161,7 @@ TEST_SRC := \
     tests/test_rig_turntable.c \
     tests/test_rig_virtual.c \
     tests/test_rig_virtual_lamps.c \
+    tests/test_rig_virtual_materials.c \
     tests/test_rig_virtual_inprocess.c \
     tests/test_rig_virtual_optics.c \
     tests/test_calib_gain.c \

@@ -233,76 +233,36 @@ fit_samples_t *fit_samples_read_csv(const char *path)
     return s;
 }
 
-enum { MERL_TH = 90, MERL_TD = 90, MERL_PD = 180 };
-
-static bool merl_header(const unsigned char *b, size_t len)
-{
-    if (len < 12) return false;
-    int32_t d[3];
-    memcpy(d, b, 12);
-    return d[0] == MERL_TH && d[1] == MERL_TD && d[2] == MERL_PD &&
-           len == 12 + 3 * (size_t)MERL_TH * MERL_TD * MERL_PD * sizeof(double);
-}
-
+// The MERL binary (read by model/brdf_table.c, its one owner): one sample per
+// cell centre above the horizon, R = f_r (n.l); missing cells are skipped.
 fit_samples_t *fit_samples_read_merl(const char *path)
 {
-    size_t len = 0;
-    unsigned char *b = (unsigned char *)model_read_file(path, &len);
-    if (!b) return NULL;
-    if (!merl_header(b, len)) {
-        int32_t d[3] = { 0, 0, 0 };
-        if (len >= 12) memcpy(d, b, 12);
-        model_error(path, 0, "not a MERL BRDF file: dims %d %d %d and %zu bytes (expected 90 90 180 and %zu bytes)",
-                    d[0], d[1], d[2], len, 12 + 3 * (size_t)MERL_TH * MERL_TD * MERL_PD * sizeof(double));
-        free(b);
-        return NULL;
-    }
+    model_brdf_table_t *t = model_brdf_table_load(path);
+    if (!t) return NULL;
     fit_samples_t *s = fit_samples_new();
     if (!s) {
-        free(b);
+        model_brdf_table_free(t);
         model_error(path, 0, "out of memory");
         return NULL;
     }
     snprintf(s->source, sizeof s->source, "%s", path);
-    model_sha256_hex(b, len, s->sha256);
-    const size_t N = (size_t)MERL_TH * MERL_TD * MERL_PD;
-    const double *v = (const double *)(b + 12);
-    const double scale[3] = { 1.0 / 1500, 1.15 / 1500, 1.66 / 1500 }, Y[3] = { 0.2126, 0.7152, 0.0722 };
+    snprintf(s->sha256, sizeof s->sha256, "%s", model_brdf_table_sha256(t));
+    const double *f = model_brdf_table_values_const(t);
     bool ok = true;
-    for (int i = 0; i < MERL_TH && ok; i++) {
-        double th = (i + 0.5) / MERL_TH;
-        th = th * th * (M_PI / 2);
-        for (int j = 0; j < MERL_TD && ok; j++) {
-            double td = (j + 0.5) / MERL_TD * (M_PI / 2);
-            for (int k = 0; k < MERL_PD; k++) {
-                double pd = (k + 0.5) / MERL_PD * M_PI;
-                size_t idx = ((size_t)i * MERL_TD + j) * MERL_PD + k;
-                double rgb[3], f = 0;
-                bool missing = false;
-                for (int ch = 0; ch < 3; ch++) {
-                    memcpy(&rgb[ch], v + ch * N + idx, sizeof(double));
-                    if (!(rgb[ch] >= 0)) missing = true;
-                    f += Y[ch] * rgb[ch] * scale[ch];
-                }
-                if (missing) continue;
-                // l: the difference vector rotated by theta_h about the binormal;
-                // v: its mirror about h. Only the cosines matter.
-                double dx = sin(td) * cos(pd), dz = cos(td);
+    for (int i = 0; i < MODEL_MERL_TH && ok; i++)
+        for (int j = 0; j < MODEL_MERL_TD && ok; j++)
+            for (int k = 0; k < MODEL_MERL_PD; k++) {
+                double v = f[((size_t)i * MODEL_MERL_TD + j) * MODEL_MERL_PD + k];
                 model_cosines_t c;
-                c.nl = -dx * sin(th) + dz * cos(th);
-                c.nv = 2 * cos(td) * cos(th) - c.nl;
-                c.nh = cos(th);
-                c.vh = cos(td);
-                if (!(c.nl > 0 && c.nv > 0)) continue;
-                if (!fit_samples_add(s, &c, f * c.nl, 1)) {
+                model_brdf_table_cell(i, j, k, &c);
+                if (isnan(v) || !(c.nl > 0 && c.nv > 0)) continue;
+                if (!fit_samples_add(s, &c, v * c.nl, 1)) {
                     model_error(path, 0, "out of memory");
                     ok = false;
                     break;
                 }
             }
-        }
-    }
-    free(b);
+    model_brdf_table_free(t);
     if (!ok) {
         fit_samples_free(s);
         return NULL;
@@ -321,7 +281,7 @@ fit_samples_t *fit_samples_read(const char *path)
     size_t got = fread(h, 1, sizeof h, f);
     long size = fseek(f, 0, SEEK_END) == 0 ? ftell(f) : -1;
     fclose(f);
-    if (got == 12 && size > 0 && merl_header(h, (size_t)size)) return fit_samples_read_merl(path);
+    if (got == 12 && size > 0 && model_brdf_table_sniff(h, (size_t)size)) return fit_samples_read_merl(path);
     return fit_samples_read_csv(path);
 }
 

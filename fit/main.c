@@ -27,6 +27,7 @@ static const command_t commands[] = {
     { "render", model_cmd_render, "render a scene through the imaging model to a PNG/TIFF image" },
     { "edges",  model_cmd_edges,  "list scene edges: visible image segments, lighting per side, contrast" },
     { "workpiece", model_cmd_workpiece, "write the reference workpiece (T/I/no stiffener, shifted, rotated, scaled) as D3D" },
+    { "brdf",   model_cmd_brdf,   "tabulate a reflection model outside the fitted ones as a MERL binary (refl brdf tabulate)" },
     { "rig",    rig_cmd,          "drive the rig of a rig file: status, home, move, identify, snap, serve" },
     { "capture", rig_cmd_capture, "run a capture plan on the rig into a session directory (journal + frames)" },
     { "session", rig_cmd_session, "check a session's frames against their hashes, export its frame table" },

@@ -89,6 +89,56 @@ static void format_range(double lo, double hi, char *buf, size_t size)
         snprintf(buf, size, "[%g, %g]", lo, hi);
 }
 
+// [material NAME] model = table: table = FILE (relative to the INI) or
+// generate = RECIPE, exactly one of them.
+static bool parse_table_material(const model_ini_t *ini, int s, model_material_t *mat)
+{
+    const model_ini_entry_t *file = NULL, *gen = NULL;
+    const int first = ini->section_first[s], end = first + ini->section_count[s];
+    for (int k = first; k < end; k++) {
+        const model_ini_entry_t *e = &ini->entries[k];
+        if (!strcmp(e->key, "table")) file = e;
+        else if (!strcmp(e->key, "generate")) gen = e;
+        else if (strcmp(e->key, "model")) {
+            model_error(ini->path, e->line, "unknown key '%s' in material '%s' (model table); valid keys: model, "
+                        "table (a MERL binary file) or generate (a recipe: %s)", e->key, mat->name,
+                        model_brdf_recipe_models());
+            return false;
+        }
+    }
+    if (!file == !gen) {
+        model_error(ini->path, mat->line, "material '%s' (model table) needs exactly one of 'table = FILE' (a MERL "
+                    "binary, relative to this file) and 'generate = RECIPE' (%s)", mat->name,
+                    model_brdf_recipe_models());
+        return false;
+    }
+    if (gen) {
+        model_brdf_recipe_t r;
+        if (!model_brdf_recipe_parse(gen->value, ini->path, gen->line, &r)) return false;
+        mat->table = model_brdf_tabulate(&r);
+    } else {
+        char path[4096];
+        const char *slash = strrchr(ini->path, '/');
+        if (file->value[0] == '/' || !slash)
+            snprintf(path, sizeof path, "%s", file->value);
+        else
+            snprintf(path, sizeof path, "%.*s/%s", (int)(slash - ini->path), ini->path, file->value);
+        bool quiet = model_error_quiet_thread(true);   // reported once below, with the material's line
+        mat->table = model_brdf_table_load(path);
+        model_error_quiet_thread(quiet);
+        if (!mat->table) {
+            char msg[1024];
+            snprintf(msg, sizeof msg, "%s", model_last_error());
+            model_error(ini->path, file->line, "material '%s': %s", mat->name, msg);
+            return false;
+        }
+    }
+    if (!mat->table) return false;
+    mat->model = MODEL_BRDF_LAMBERT;
+    mat->p[0] = model_brdf_table_albedo(mat->table, 0, 64) / M_PI;
+    return true;
+}
+
 static bool parse_material(const model_ini_t *ini, int s, model_material_t *mat)
 {
     memset(mat, 0, sizeof *mat);
@@ -105,6 +155,7 @@ static bool parse_material(const model_ini_t *ini, int s, model_material_t *mat)
         model_error(ini->path, mat->line, "material '%s' has no 'model = ...' line; models: %s", mat->name, buf);
         return false;
     }
+    if (!strcmp(me->value, "table")) return parse_table_material(ini, s, mat);
     int m = model_brdf_from_name(me->value);
     if (m < 0) {
         list_models(buf, sizeof buf);
@@ -158,7 +209,7 @@ static bool parse_material(const model_ini_t *ini, int s, model_material_t *mat)
 // sections are skipped, else every section must be one), parse, load and free
 // of a list read from INI (lamps, materials): TYPE has n, path, sha256 and the
 // array FIELD whose elements PARSE_ONE(ini, section, &element) fills.
-#define INI_LIST_FUNCTIONS(prefix, type, build, kind, parse_one, field, none_msg)              \
+#define INI_LIST_FUNCTIONS(prefix, type, build, kind, parse_one, field, none_msg, free_one)    \
     static type *build(const model_ini_t *ini, bool only_kind)                                  \
     {                                                                                           \
         int n = only_kind ? count_kind(ini, kind) : ini->nsections;                             \
@@ -176,11 +227,12 @@ static bool parse_material(const model_ini_t *ini, int s, model_material_t *mat)
         }                                                                                       \
         for (int s = 0; s < ini->nsections; s++) {                                              \
             if (only_kind && !is_kind(ini, s, kind)) continue;                                  \
-            if (!parse_one(ini, s, &out->field[out->n])) {                                      \
+            bool ok_ = parse_one(ini, s, &out->field[out->n]);                                      \
+            out->n++;                                                                           \
+            if (!ok_) {                                                                         \
                 prefix##_free(out);                                                             \
                 return NULL;                                                                    \
             }                                                                                   \
-            out->n++;                                                                           \
         }                                                                                       \
         return out;                                                                             \
     }                                                                                           \
@@ -203,6 +255,7 @@ static bool parse_material(const model_ini_t *ini, int s, model_material_t *mat)
     void prefix##_free(type *x)                                                         \
     {                                                                                   \
         if (!x) return;                                                                 \
+        for (int i_ = 0; x->field && i_ < x->n; i_++) free_one(&x->field[i_]);          \
         free(x->field);                                                                 \
         free(x->path);                                                                  \
         free(x);                                                                        \
@@ -502,11 +555,14 @@ static bool is_kind(const model_ini_t *ini, int s, const char *kind)
     return !strcmp(k, kind);
 }
 
+static void material_free_one(model_material_t *m) { model_brdf_table_free(m->table); }
+static void lamp_free_one(model_lamp_t *l) { (void)l; }
+
 INI_LIST_FUNCTIONS(model_materials, model_materials_t, materials_build, "material", parse_material, materials,
-                   "no [material NAME] sections; add at least one")
+                   "no [material NAME] sections; add at least one", material_free_one)
 
 INI_LIST_FUNCTIONS(model_lamps, model_lamps_t, lamps_build, "lamp", parse_lamp, lamps,
-                   "no [lamp NAME] sections; add at least one lamp")
+                   "no [lamp NAME] sections; add at least one lamp", lamp_free_one)
 
 model_materials_t *model_materials_from_ini(const model_ini_t *ini) { return materials_build(ini, true); }
 model_lamps_t *model_lamps_from_ini(const model_ini_t *ini) { return lamps_build(ini, true); }

@@ -294,6 +294,56 @@ void model_brdf_eval_n(model_brdf_t m, const double *p, const model_cosines_t *c
                        double *dR_dp);
 
 // ---------------------------------------------------------------------------
+// Tabulated isotropic BRDFs (model/brdf_table.c), MERL's binary layout: 3
+// int32 dims 90 90 180 (theta_h square-root mapped, theta_d, phi_d), then the
+// red, green and blue channels of doubles, each f_r divided by MERL's channel
+// scale (1/1500, 1.15/1500, 1.66/1500); negative = missing. refl reads the
+// Rec. 709 luminance of the scaled channels and writes f_r in all three.
+// Evaluation interpolates trilinearly between cell centres and is reciprocal
+// by construction (mean over phi_d and pi - phi_d).
+enum { MODEL_MERL_TH = 90, MODEL_MERL_TD = 90, MODEL_MERL_PD = 180 };
+typedef struct model_brdf_table model_brdf_table_t;
+
+model_brdf_table_t *model_brdf_table_new(void);                        // every cell 0
+// NULL and "FILE: not a MERL BRDF file: ..." (short, wrong dims, wrong size).
+model_brdf_table_t *model_brdf_table_load(const char *path);
+// True when a file of file_bytes starting with head is a MERL table.
+bool                model_brdf_table_sniff(const unsigned char head[12], size_t file_bytes);
+bool                model_brdf_table_save(const model_brdf_table_t *t, const char *path);
+void                model_brdf_table_free(model_brdf_table_t *t);
+// The 90*90*180 values of f_r, index (i*90 + j)*180 + k; NAN = missing.
+double             *model_brdf_table_values(model_brdf_table_t *t);
+const double       *model_brdf_table_values_const(const model_brdf_table_t *t);
+const char         *model_brdf_table_sha256(const model_brdf_table_t *t);   // of the file read, else ""
+// The cosines of cell (i, j, k)'s centre (nl or nv may be <= 0: below the horizon).
+void                model_brdf_table_cell(int i, int j, int k, model_cosines_t *c);
+// f_r, and R = f_r (n.l), interpolated (0 when n.l <= 0 or n.v <= 0).
+double              model_brdf_table_f(const model_brdf_table_t *t, const model_cosines_t *c);
+double              model_brdf_table_eval(const model_brdf_table_t *t, const model_cosines_t *c);
+// Directional albedo int f_r cos(theta_o) d omega_o at incidence theta_i (rad),
+// on an n x n cosine-weighted grid; of any f (from cosines) or of a table.
+double model_brdf_directional_albedo(double (*f)(const void *ctx, const model_cosines_t *c), const void *ctx,
+                                     double theta_i, int n);
+double model_brdf_table_albedo(const model_brdf_table_t *t, double theta_i, int n);
+
+// Generators (model/brdf_gen.c): "NAME key=value ..." with NAME oren-nayar,
+// ggx2, retro, ggx-ms, ptfe or ggx (model_brdf_recipe_models lists the keys
+// and defaults); reciprocal and energy conserving within their ranges.
+enum { MODEL_BRDF_RECIPE_MAX = 8, MODEL_BRDF_RECIPE_NE = 65 };
+typedef struct {
+    char   name[32];
+    int    model, np;
+    double p[MODEL_BRDF_RECIPE_MAX];
+    double E[MODEL_BRDF_RECIPE_NE], Eavg;   // ggx-ms: single-scattering albedo over mu = cos theta
+} model_brdf_recipe_t;
+
+const char         *model_brdf_recipe_models(void);
+// file, line: where the recipe was written (messages); NULL / 0 for the command line.
+bool                model_brdf_recipe_parse(const char *text, const char *file, int line, model_brdf_recipe_t *r);
+double              model_brdf_recipe_f(const model_brdf_recipe_t *r, const model_cosines_t *c);   // f_r
+model_brdf_table_t *model_brdf_tabulate(const model_brdf_recipe_t *r);
+
+// ---------------------------------------------------------------------------
 // Materials, lamps and sensor files (model/config.c)
 
 typedef struct {
@@ -301,7 +351,15 @@ typedef struct {
     model_brdf_t model;
     double       p[MODEL_BRDF_MAX_PARAMS];
     int          line;        // of the [material NAME] header
+    // model = table: the tabulated BRDF (owned by the materials list) the
+    // renderer evaluates (model_material_eval); model and p then hold a
+    // Lambertian stand-in of the table's albedo at normal incidence for code
+    // that knows only the fitted models.
+    model_brdf_table_t *table;
 } model_material_t;
+
+// R of a material: its table when it has one, else model_brdf_eval.
+double model_material_eval(const model_material_t *mat, const model_cosines_t *c);
 
 typedef struct {
     int               n;
@@ -311,7 +369,9 @@ typedef struct {
 } model_materials_t;
 
 // [material NAME] with model = lambert|hall|..., and that model's parameters by
-// name. Unknown keys, missing required parameters and out-of-range values are
+// name; or model = table with either table = FILE (a MERL binary, path relative
+// to the INI file) or generate = RECIPE (model_brdf_recipe_parse, tabulated
+// when the file is read). Unknown keys, missing required parameters and out-of-range values are
 // errors naming file and line.
 model_materials_t *model_materials_load(const char *path);
 model_materials_t *model_materials_parse(const char *text, size_t len, const char *name);
@@ -794,6 +854,7 @@ bool model_edges_file_write_json(const model_edges_file_t *f, const model_edges_
 int model_cmd_render(int argc, char **argv);
 int model_cmd_edges(int argc, char **argv);
 int model_cmd_workpiece(int argc, char **argv);
+int model_cmd_brdf(int argc, char **argv);   // refl brdf tabulate (model/cmd_brdf.c)
 
 #ifdef __cplusplus
 }

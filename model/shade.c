@@ -82,6 +82,11 @@ double model_lamp_emission(const model_lamp_t *L, model_vec3_t p)
     return c > 0 ? pow(c, L->emission_cos_power) : 0.0;
 }
 
+double model_material_eval(const model_material_t *mat, const model_cosines_t *c)
+{
+    return mat->table ? model_brdf_table_eval(mat->table, c) : model_brdf_eval(mat->model, mat->p, c, NULL);
+}
+
 double model_direct_sum(const model_pixel_info_t *pi, const model_lamp_sample_t *ls,
                         const model_lamps_t *lamps, const model_material_t *mat, double *dS_dp)
 {
@@ -96,7 +101,10 @@ double model_direct_sum(const model_pixel_info_t *pi, const model_lamp_sample_t 
         double w = ls[i].V * lamps->lamps[i].intensity / (ls[i].d_mm * ls[i].d_mm);
         if (lamps->lamps[i].emission_cos_power > 0)
             w *= model_lamp_emission(&lamps->lamps[i], pi->p_mm);
-        double R = model_brdf_eval(mat->model, mat->p, &c, dS_dp ? dR : NULL);
+        double R = mat->table ? model_brdf_table_eval(mat->table, &c)
+                              : model_brdf_eval(mat->model, mat->p, &c, dS_dp ? dR : NULL);
+        if (mat->table && dS_dp)
+            for (int k = 0; k < np; k++) dR[k] = 0;   // a table has no parameters
         S += w * R;
         if (dS_dp)
             for (int k = 0; k < np; k++) dS_dp[k] += w * dR[k];
@@ -143,7 +151,7 @@ static inline const model_material_t *material_of(render_ctx_t *c, int32_t m)
 // one source of the formulas).
 static inline double brdf_value(const model_material_t *mat, const model_cosines_t *c)
 {
-    return model_brdf_eval(mat->model, mat->p, c, NULL);
+    return model_material_eval(mat, c);
 }
 
 static inline double brdf(const model_material_t *mat, model_vec3_t n, model_vec3_t l,

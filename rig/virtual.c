@@ -116,6 +116,7 @@
 #include "rig/truth.h"
 #include "rig/virtual_lamps.h"
 #include "rig/virtual_optics.h"
+#include "rig/virtual_materials.h"
 
 #define NPLANES  12   // cached radiance images (5 MB each at 1280x1024)
 #define NTRACERS 3    // cached (sample, angle) tracers
@@ -133,6 +134,7 @@ typedef struct {
     char     material[64];
     double   amplitude, scale_mm;
     uint64_t seed;
+    double   roughness_amplitude;   // 0: none (rig/virtual_materials.c)
 } texture_t;
 
 typedef struct {
@@ -144,6 +146,11 @@ typedef struct {
     const model_material_t **mats;    // scene->nmaterials
     const texture_t **tex;            // scene->nmaterials, NULL = untextured
     bool   textured;
+    // roughness variation (rig/virtual_materials.c): the materials' rough and
+    // smooth variants, blended per pixel by the slot's rough map
+    bool   rough;
+    const model_material_t **mats_rough, **mats_smooth;
+    model_material_t *rough_store;
     int    direct_samples;            // 0: the [render] value
     // uniform_source: no scene; every lamp that is on adds `radiance` at every pixel
     bool   uniform;
@@ -196,6 +203,7 @@ typedef struct {
     model_tracer_t *t;
     model_scene_t  *rot;      // the rotated scene
     float          *tex;      // W*H texture factors (textured samples; NULL until made)
+    float          *rough;    // W*H roughness mixture weights in [0, 1] (samples with roughness variation)
     int      sample;
     double   angle_deg;
     uint64_t used;
@@ -425,6 +433,7 @@ static void slot_free(tracer_slot_t *s)
     model_tracer_free(s->t);
     model_scene_free(s->rot);
     free(s->tex);
+    free(s->rough);
     memset(s, 0, sizeof *s);
 }
 
@@ -538,10 +547,11 @@ static void texture_rows(void *ctx, int begin, int end, int thread)
     const rig_virtual_t *v = J->v;
     const model_scene_t *sc = J->slot->rot;
     const model_vec3_t c = J->c;
-    cell_cache_t cc[3] = { { 0 } };
+    cell_cache_t cc[3] = { { 0 } }, cr[3] = { { 0 } };
     for (size_t i = (size_t)begin * v->W; i < (size_t)end * v->W; i++) {
         float *out = &J->slot->tex[i];
         *out = 1.0f;
+        if (J->slot->rough) J->slot->rough[i] = 0.5f;
         int f = J->face[i];
         if (f < 0 || f >= sc->nfaces || !J->ff[f].tx) continue;
         const model_face_t *F = &sc->faces[f];
@@ -555,6 +565,8 @@ static void texture_rows(void *ctx, int begin, int end, int thread)
         model_vec3_t q = { p.x - v0.x, p.y - v0.y, p.z - v0.z };
         double u = q.x * e1.x + q.y * e1.y + q.z * e1.z, w = q.x * e2.x + q.y * e2.y + q.z * e2.z;
         *out = (float)(1.0 + fr->tx->amplitude * texture_noise(cc, fr->tx, fr->seed, u, w));
+        if (J->slot->rough && fr->tx->roughness_amplitude > 0)
+            J->slot->rough[i] = (float)(0.5 + 0.5 * texture_noise(cr, fr->tx, mix64(fr->seed ^ 0x70756768ULL), u, w));
     }
 }
 
@@ -586,6 +598,10 @@ static bool make_texture(rig_virtual_t *v, tracer_slot_t *slot, const int32_t *f
 {
     size_t n = (size_t)v->W * v->H;
     slot->tex = malloc(n * sizeof *slot->tex);
+    if (v->samples[slot->sample].rough && slot->tex && !(slot->rough = malloc(n * sizeof *slot->rough))) {
+        free(slot->tex);
+        slot->tex = NULL;
+    }
     if (!slot->tex) {
         model_error(v->truth_path, 0, "out of memory for a texture image");
         return false;
@@ -671,7 +687,8 @@ static void add_indirect(rig_virtual_t *v, float *L)
     model_parallel_for(v->H, 16, model_default_threads(), indirect_rows, &J);
 }
 
-static bool render_layers(rig_virtual_t *v, model_tracer_t *t, int sample, int lamp, float *L);
+static bool render_layers(rig_virtual_t *v, model_tracer_t *t, int sample, int lamp,
+                          const model_material_t *const *mats, float *L);
 
 static bool render_lamp_rays(rig_virtual_t *v, tracer_slot_t *slot, int sample, int lamp, float *L);
 
@@ -686,8 +703,8 @@ static bool render_lamp(rig_virtual_t *v, tracer_slot_t *slot, int sample, int l
 }
 
 // rays_per_pixel N > 1: the same rendering by the camera of N times the
-// resolution (a view of v with that camera, its own face ids and texture),
-// its N x N blocks averaged.
+// resolution (a view of v with that camera, its own face ids, texture and
+// roughness weights), its N x N blocks averaged.
 static bool render_lamp_rays(rig_virtual_t *v, tracer_slot_t *slot, int sample, int lamp, float *L)
 {
     const int N = v->optics.rays_per_pixel;
@@ -704,8 +721,10 @@ static bool render_lamp_rays(rig_virtual_t *v, tracer_slot_t *slot, int sample, 
     hv->ds = v->ds > 1 ? v->ds * N : 1;   // the same low-resolution indirect camera
     tracer_slot_t hs = *slot;
     hs.tex = NULL;
+    hs.rough = NULL;
     bool ok = render_lamp_once(hv, &hs, sample, lamp, v->L_hr);
     free(hs.tex);
+    free(hs.rough);
     free(hv);
     if (ok) rig_optics_average(N, v->W, v->H, v->L_hr, L);
     return ok;
@@ -713,21 +732,30 @@ static bool render_lamp_rays(rig_virtual_t *v, tracer_slot_t *slot, int sample, 
 
 static bool render_lamp_once(rig_virtual_t *v, tracer_slot_t *slot, int sample, int lamp, float *L)
 {
-    if (!render_layers(v, slot->t, sample, lamp, L)) return false;
-    if (!v->samples[sample].textured) return true;
+    const sample_t *sm = &v->samples[sample];
+    if (!render_layers(v, slot->t, sample, lamp, sm->rough ? sm->mats_smooth : sm->mats, L)) return false;
+    if (!sm->textured) return true;
     if (!slot->tex && !make_texture(v, slot, v->face)) return false;
+    if (sm->rough) {   // the rough population, blended in by the slot's weights
+        float *Lr = malloc((size_t)v->W * v->H * sizeof *Lr);
+        bool ok = Lr && render_layers(v, slot->t, sample, lamp, sm->mats_rough, Lr);
+        if (ok) rig_vmat_blend(L, Lr, slot->rough, (size_t)v->W * v->H);
+        else if (!Lr) model_error(v->truth_path, 0, "out of memory for a roughness layer");
+        free(Lr);
+        if (!ok) return false;
+    }
     for (size_t i = 0; i < (size_t)v->W * v->H; i++) L[i] *= slot->tex[i];
     return true;
 }
 
 // The layers of a rendering (direct, indirect), untextured, and the face ids
 // into v->face.
-static bool render_layers(rig_virtual_t *v, model_tracer_t *t, int sample, int lamp, float *L)
+static bool render_layers(rig_virtual_t *v, model_tracer_t *t, int sample, int lamp,
+                          const model_material_t *const *mats, float *L)
 {
     model_lamps_t one = *v->lamps;
     one.n = 1;
     one.lamps = &v->lamps->lamps[lamp];
-    const model_material_t *const *mats = v->samples[sample].mats;
     model_shading_t sh = v->shading;
     sh.kc = 1;
     sh.Pa = 0;
@@ -1223,7 +1251,8 @@ static const allowed_t allowed[] = {
                      "fault_after_moves", "fault" } },
     { "sample", { "kind", "scene", "square_mm", "corners", "corner0_mm", "material", "sphere_centre_mm",
                   "sphere_radius_mm", "radiance", "direct_samples" } },
-    { "texture", { "amplitude", "scale_mm", "seed" } },
+    { "texture", { "amplitude", "scale_mm", "seed",
+                   "roughness_amplitude" } },
     { "optics", { "rays_per_pixel", "psf", "psf_sigma_px", "psf_radius_px" } },
     { "sensor", { NULL } },     // checked by model_sensor_from_ini
     { "lamp", { NULL } },       // model_lamps_from_ini
@@ -1340,6 +1369,30 @@ static char *rel_path(const char *truth, const char *p)
     return out;
 }
 
+// A sample's rough and smooth material variants (rig/virtual_materials.c).
+static bool sample_roughness(rig_virtual_t *v, const model_ini_t *ini, sample_t *sm)
+{
+    int n = sm->scene->nmaterials;
+    double *amp = calloc(n ? n : 1, sizeof *amp);
+    sm->mats_rough = calloc(n ? n : 1, sizeof *sm->mats_rough);
+    sm->mats_smooth = calloc(n ? n : 1, sizeof *sm->mats_smooth);
+    if (!amp || !sm->mats_rough || !sm->mats_smooth) {
+        free(amp);
+        return false;
+    }
+    int line = sm->line;
+    for (int k = 0; k < n; k++)
+        if (sm->tex[k] && sm->tex[k]->roughness_amplitude > 0) {
+            amp[k] = sm->tex[k]->roughness_amplitude;
+            char sec[96];
+            snprintf(sec, sizeof sec, "texture %s", sm->tex[k]->material);
+            line = ini_line(ini, sec, "roughness_amplitude");
+        }
+    bool ok = rig_vmat_variants(n, sm->mats, amp, ini->path, line, &sm->rough_store, sm->mats_rough, sm->mats_smooth);
+    free(amp);
+    return ok;
+}
+
 static bool parse_textures(rig_virtual_t *v, const model_ini_t *ini)
 {
     int n = 0;
@@ -1367,6 +1420,7 @@ static bool parse_textures(rig_virtual_t *v, const model_ini_t *ini)
         long seed = 1;
         if (!get_int(ini, sec, "seed", 0, LONG_MAX, &seed)) return false;
         tx->seed = (uint64_t)seed;
+        if (!get_double(ini, sec, "roughness_amplitude", 0, 0.9, false, &tx->roughness_amplitude)) return false;
     }
     return true;
 }
@@ -1542,10 +1596,13 @@ static bool parse_samples(rig_virtual_t *v, const model_ini_t *ini)
         if (!sm->tex) return false;
         for (int k = 0; k < sm->scene->nmaterials; k++)
             for (int j = 0; j < v->ntextures; j++)
-                if (!strcmp(v->textures[j].material, sm->scene->material_names[k]) && v->textures[j].amplitude > 0) {
+                if (!strcmp(v->textures[j].material, sm->scene->material_names[k]) &&
+                    (v->textures[j].amplitude > 0 || v->textures[j].roughness_amplitude > 0)) {
                     sm->tex[k] = &v->textures[j];
                     sm->textured = true;
+                    sm->rough |= v->textures[j].roughness_amplitude > 0;
                 }
+        if (sm->rough && !sample_roughness(v, ini, sm)) return false;
         if (!check_sphere_facts(ini, sec, sm)) return false;
         if (mat)
             for (int k = 0; k < sm->scene->nmaterials; k++)
@@ -2078,6 +2135,9 @@ void rig_virtual_close(rig_virtual_t *v)
         if (v->samples[i].variant) continue;
         free(v->samples[i].mats);
         free(v->samples[i].tex);
+        free(v->samples[i].mats_rough);
+        free(v->samples[i].mats_smooth);
+        free(v->samples[i].rough_store);
     }
     free(v->samples);
     model_lamps_free(v->lamps);
