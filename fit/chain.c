@@ -10,6 +10,7 @@
 
 #include "calib/geometry.h"
 #include "fit/chain.h"
+#include "fit/fit.h"
 #include "model/model.h"
 #include "model/report.h"
 #include "rig/truth.h"
@@ -17,6 +18,7 @@
 typedef struct {
     const char *dir;
     rig_truth_t *truth;
+    model_materials_t *mats;   // the truth's materials (tables generated), or NULL
     const model_ini_t *ini;
     char *truth_dir;
     json_t *entries, *missing, *prov;
@@ -244,6 +246,70 @@ static void chain_white(chain_t *c, const json_t *w, const json_t *g)
 // ---------------------------------------------------------------------------
 // Materials and verdicts
 
+// Dense samples of a material's f_r over pairs of directions uniform in solid
+// angle (cos theta uniform; the light in the plane phi = 0, the material being
+// isotropic), theta below 85 deg: R = f_r cos theta_i, each of weight 1, so a
+// fit's RMS is the Ngan et al. (2005) error of the model against the material.
+static fit_samples_t *dense_samples(const model_material_t *mat)
+{
+    enum { NI = 12, NO = 24, NP = 48 };
+    fit_samples_t *s = fit_samples_new();
+    const double cmin = cos(85 * M_PI / 180);
+    for (int i = 0; s && i < NI; i++) {
+        double ci = 1 - (i + 0.5) / NI * (1 - cmin), si = sqrt(1 - ci * ci);
+        model_vec3_t n = { 0, 0, 1 }, l = { si, 0, ci };
+        for (int o = 0; o < NO; o++) {
+            double co = 1 - (o + 0.5) / NO * (1 - cmin), so = sqrt(1 - co * co);
+            for (int k = 0; k < NP; k++) {
+                double ph = 2 * M_PI * (k + 0.5) / NP;
+                model_vec3_t v = { so * cos(ph), so * sin(ph), co };
+                model_cosines_t c = model_cosines(n, l, v);
+                double f = model_material_eval(mat, &c);
+                if (isfinite(f)) fit_samples_add(s, &c, f * ci, 1);
+            }
+        }
+    }
+    return s;
+}
+
+// A fitted material whose truth is a table (none of the fitted models): its
+// Ngan error against the table, and that of the best fit of the same model to
+// the table itself (refl fit brdf on dense samples of it).
+static void chain_table_material(chain_t *c, const json_t *m, const model_material_t *truth)
+{
+    const char *n = json_string_value(json_object_get(m, "name"));
+    int model = model_brdf_from_name(json_string_value(json_object_get(m, "model")));
+    const json_t *ps = json_object_get(m, "parameters");
+    if (model < 0 || (int)json_array_size(ps) != model_brdf_nparams((model_brdf_t)model)) return;
+    double p[MODEL_BRDF_MAX_PARAMS];
+    for (size_t i = 0; i < json_array_size(ps); i++) p[i] = num(json_array_get(ps, i), "mean");
+    fit_samples_t *s = dense_samples(truth);
+    fit_brdf_options_t o = fit_brdf_defaults();
+    fit_brdf_result_t best;
+    if (s && s->n > 0 && fit_brdf(s, (model_brdf_t)model, &o, &best)) {
+        double ss = 0;
+        for (int i = 0; i < s->n; i++) {
+            double d = fit_samples_eval(s, (model_brdf_t)model, p, i) - s->R[i];
+            ss += d * d;
+        }
+        double e = sqrt(ss / s->n);
+        char name[200], note[300];
+        snprintf(name, sizeof name, "material_%s.ngan_error", n);
+        snprintf(note, sizeof note, "the fitted %s against the truth's table (Ngan et al. 2005: RMS of (f_model - "
+                 "f) cos theta_i over the hemisphere); truth column: the best fit of %s to the table itself",
+                 model_brdf_name((model_brdf_t)model), model_brdf_name((model_brdf_t)model));
+        add(c, "materials", name, e, best.ngan_error, NAN, "1/sr", note);
+        snprintf(name, sizeof name, "material_%s.ngan_error_ratio", n);
+        add(c, "materials", name, best.ngan_error > 0 ? e / best.ngan_error : NAN, 1, NAN, "1",
+            "the chain's error over the best fit's (the chain should come within 1.2)");
+    } else {
+        char note[300];
+        snprintf(note, sizeof note, "material %s: the best fit to the truth's table failed: %s", n, model_last_error());
+        json_array_append_new(c->missing, json_string(note));
+    }
+    fit_samples_free(s);
+}
+
 static void chain_priors(chain_t *c, const json_t *pj)
 {
     const json_t *m, *p;
@@ -258,6 +324,8 @@ static void chain_priors(chain_t *c, const json_t *pj)
         snprintf(note, sizeof note, same ? "the truth's model (%s); sigma: the fit's"
                  : "fitted model %s, the truth's is %s: no truth per parameter", model ? model : "?",
                  tmodel ? tmodel : "none");
+        const model_material_t *tm = c->mats && n ? model_materials_find(c->mats, n) : NULL;
+        if (tm && tm->table) chain_table_material(c, m, tm);
         json_array_foreach(json_object_get(m, "parameters"), j, p) {
             const char *pn = json_string_value(json_object_get(p, "name"));
             const char *unit = json_string_value(json_object_get(p, "unit"));
@@ -350,7 +418,7 @@ static void chain_dir_files(chain_t *c)
 
 static json_t *summary(const json_t *entries)
 {
-    json_t *s = json_object(), *over = json_array();
+    json_t *s = json_object(), *over = json_array(), *ngan = json_array();
     const json_t *e;
     size_t i;
     int with = 0, without = 0, wrong = 0;
@@ -363,12 +431,16 @@ static json_t *summary(const json_t *entries)
             without++;
         if (json_is_string(json_object_get(e, "value")) && json_integer_value(json_object_get(e, "error")))
             wrong++;
+        if (g_str_has_suffix(json_string_value(json_object_get(e, "name")), ".ngan_error_ratio") &&
+            json_number_value(json_object_get(e, "value")) > 1.2)
+            json_array_append(ngan, json_object_get(e, "name"));
     }
     json_object_set_new(s, "entries", json_integer((json_int_t)json_array_size(entries)));
     json_object_set_new(s, "with_sigma", json_integer(with));
     json_object_set_new(s, "without_sigma", json_integer(without));
     json_object_set_new(s, "z_over_3", over);
     json_object_set_new(s, "wrong_verdicts", json_integer(wrong));
+    json_object_set_new(s, "ngan_ratio_over_1_2", ngan);
     return s;
 }
 
@@ -378,6 +450,7 @@ json_t *fit_chain_compare(const char *dir, const char *truth_path, json_t *prov)
     c.truth = rig_truth_load(truth_path);
     if (!c.truth) return NULL;
     c.ini = rig_truth_ini(c.truth);
+    c.mats = rig_truth_materials(c.truth);
     c.truth_dir = g_path_get_dirname(truth_path);
     c.entries = json_array();
     c.missing = json_array();
@@ -422,6 +495,7 @@ done:
     json_decref(geo);
     json_decref(c.entries);
     json_decref(c.missing);
+    model_materials_free(c.mats);
     rig_truth_free(c.truth);
     g_free(c.truth_dir);
     return doc;

@@ -23,10 +23,12 @@ static void print_entry(const json_t *e)
     else snprintf(tb, sizeof tb, "-");
     snprintf(sb, sizeof sb, json_is_number(s) ? "%.3g" : "-", json_number_value(s));
     snprintf(zb, sizeof zb, json_is_number(z) ? "%+.2f" : "-", json_number_value(z));
+    const char *name = json_string_value(json_object_get(e, "name"));
     bool flag = (json_is_number(z) && fabs(json_number_value(z)) > 3) ||
-                (json_is_string(v) && json_integer_value(json_object_get(e, "error")));
-    printf("%-40s %14s %14s %10s %8s %-10s%s\n", json_string_value(json_object_get(e, "name")), vb, tb, sb, zb,
-           json_string_value(json_object_get(e, "unit")), flag ? "  <-- |z| > 3 or wrong" : "");
+                (json_is_string(v) && json_integer_value(json_object_get(e, "error"))) ||
+                (g_str_has_suffix(name, ".ngan_error_ratio") && json_number_value(v) > 1.2);
+    printf("%-40s %14s %14s %10s %8s %-10s%s\n", name, vb, tb, sb, zb,
+           json_string_value(json_object_get(e, "unit")), flag ? "  <-- |z| > 3, wrong, or over 1.2x the best" : "");
 }
 
 int chain_cmd(int argc, char **argv)
@@ -64,11 +66,13 @@ int chain_cmd(int argc, char **argv)
             json_array_foreach(json_object_get(doc, "entries"), i, e) print_entry(e);
         }
         printf("%lld figures: %lld with a stated sigma, %lld with a truth but no sigma; |z| > 3: %zu; wrong "
-               "verdicts: %lld\n", json_integer_value(json_object_get(s, "entries")),
+               "verdicts: %lld; materials over 1.2x the best fit's Ngan error: %zu\n",
+               json_integer_value(json_object_get(s, "entries")),
                json_integer_value(json_object_get(s, "with_sigma")),
                json_integer_value(json_object_get(s, "without_sigma")),
                json_array_size(json_object_get(s, "z_over_3")),
-               json_integer_value(json_object_get(s, "wrong_verdicts")));
+               json_integer_value(json_object_get(s, "wrong_verdicts")),
+               json_array_size(json_object_get(s, "ngan_ratio_over_1_2")));
         json_array_foreach(json_object_get(doc, "missing"), i, e)
             printf("not compared (missing): %s\n", json_string_value(e));
         printf("%s\n", path);

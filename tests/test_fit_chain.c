@@ -165,6 +165,47 @@ TEST(chain_known_errors_and_z)
     g_free(i_scene);
 }
 
+// A material whose truth is a table of other physics (two GGX lobes): the
+// chain's fitted GGX is judged by its Ngan error against the table, next to
+// the best GGX fit to the table itself, which no parameters can beat.
+TEST(chain_table_material_ngan_ratio)
+{
+    char *truth = example("virtual-truth.ini"), *text = NULL;
+    CHECK(g_file_get_contents(truth, &text, NULL, NULL));
+    if (!text) return;
+    const char *old = "[material glossy_plastic]\nmodel = ggx\nkd = 0.35\nks = 0.6\nalpha = 0.05\nF0 = 0.045\n";
+    char *at = strstr(text, old);
+    CHECK(at != NULL);
+    if (!at) return;
+    GString *t = g_string_new_len(text, at - text);
+    g_string_append(t, "[material glossy_plastic]\nmodel = table\n"
+                       "generate = ggx2 albedo=0.35 ks1=0.3 alpha1=0.05 ks2=0.3 alpha2=0.2 F0=0.045\n");
+    g_string_append(t, at + strlen(old));
+    const char *tp = test_write("truth-table.ini", t->str);
+    g_string_free(t, TRUE);
+    put("calib/geometry/geometry.json", "{}");
+    put("priors_glossy.json", "{\"materials\": [{\"name\": \"glossy_plastic\", \"model\": \"ggx\", \"parameters\": "
+        "[{\"name\": \"kd\", \"mean\": 0.35, \"std\": 0.01}, {\"name\": \"ks\", \"mean\": 0.6, \"std\": 0.01},"
+        "{\"name\": \"alpha\", \"mean\": 0.05, \"std\": 0.001}, {\"name\": \"F0\", \"mean\": 0.045, \"std\": 0.001}]}]}");
+    json_t *prov = model_provenance(0, NULL);
+    json_t *doc = fit_chain_compare(test_path("day"), tp, prov);
+    CHECK_MSG(doc != NULL, "%s", model_last_error());
+    if (doc) {
+        const json_t *e = entry(doc, "material_glossy_plastic.ngan_error");
+        double chain = field(e, "value"), best = field(e, "truth");
+        fprintf(stderr, "  one lobe of 0.6 at alpha 0.05 against two lobes: Ngan error %.5f, best GGX %.5f 1/sr\n",
+                chain, best);
+        CHECK(best > 0 && chain >= best * (1 - 1e-6));
+        CHECK_NEAR(field(entry(doc, "material_glossy_plastic.ngan_error_ratio"), "value"), chain / best, 1e-9);
+        // the table has no per-parameter truth
+        CHECK(json_is_null(json_object_get(entry(doc, "material_glossy_plastic.ks"), "truth")));
+    }
+    json_decref(doc);
+    json_decref(prov);
+    g_free(text);
+    g_free(truth);
+}
+
 TEST(chain_and_demo_truth_errors)
 {
     char *out = NULL, *err = NULL;
