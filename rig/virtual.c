@@ -852,7 +852,11 @@ static int ideal_frame(rig_virtual_t *v, int sample, double angle_deg, uint32_t 
     }
     if (first)
         for (size_t i = 0; i < n; i++) out[i] = (float)Pa;
-    rig_vlamps_add_stray(&v->lamp_fx, out, n, kc, pl, lf, np);
+    // room light does not reach a lens covered by a flat-field source (a
+    // uniform_source sample): only the lens's own veiling glare is left
+    rig_vlamps_t stray = v->lamp_fx;
+    if (v->samples[sample].uniform) stray.ambient_radiance = 0;
+    rig_vlamps_add_stray(&stray, out, n, kc, pl, lf, np);
     *s_out = v->sensor;
     s_out->system_gain_dn_per_e *= gf;
     s_out->exposure_us = exposure_us;

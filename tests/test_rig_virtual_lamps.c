@@ -267,8 +267,9 @@ done:
     free(E);
 }
 
-// Stray light: the room light's radiance at every pixel with the lamps off,
-// plus the veiling glare (a fraction of the frame's mean lamp radiance) with
+// Stray light: the room light's radiance at every pixel with the lamps off
+// (none through a flat-field source covering the lens), plus the veiling
+// glare (a fraction of the frame's mean lamp radiance) with
 // them on; in expected frames and in a frame through the camera.
 TEST(virtual_lamps_stray_light_levels)
 {
@@ -283,13 +284,21 @@ TEST(virtual_lamps_stray_light_levels)
     double dark = mean_f(E);
     CHECK(rig_virtual_expected(ref, 0, 1, 10000, 0, "Mono12", W, H, E) == 0);
     double den = mean_f(E) - dark;   // one lamp's 1000 radiance units
-    // lamps off: 50 / 1000; one lamp: (1000 + 50 + 0.02 * 1000) / 1000; two: (2000 + 50 + 40) / 1000
+    // the flat-field source covers the lens: no room light, the glare alone:
+    // lamps off 0; one lamp (1000 + 0.02 * 1000) / 1000; two (2000 + 40) / 1000
     const uint32_t masks[3] = { 0, 1, 3 };
-    const double want[3] = { 0.05, 1.07, 2.09 };
+    const double want[3] = { 0, 1.02, 2.04 };
     for (int k = 0; k < 3; k++) {
         CHECK(rig_virtual_expected(v, 0, masks[k], 10000, 0, "Mono12", W, H, E) == 0);
         CHECK_NEAR((mean_f(E) - dark) / den, want[k], 2e-4);
     }
+    // another sample on the table, lamps off: the room light, 50 / 1000 of a lamp here
+    CHECK(rig_virtual_set_sample(ref, "reference_white") == 0 && rig_virtual_set_sample(v, "reference_white") == 0);
+    CHECK(rig_virtual_expected(ref, 0, 0, 10000, 0, "Mono12", W, H, E) == 0);
+    double dark_white = mean_f(E);
+    CHECK(rig_virtual_expected(v, 0, 0, 10000, 0, "Mono12", W, H, E) == 0);
+    CHECK_NEAR((mean_f(E) - dark_white) / den, 0.05, 2e-4);
+    CHECK(rig_virtual_set_sample(v, "flat_field") == 0);
     int rc = rig_camera_open_aravis(&c, rig_virtual_camera_address(v));
     CHECK_MSG(rc == 0, "open: %d %s", rc, model_last_error());
     if (rc) goto done;
@@ -297,11 +306,11 @@ TEST(virtual_lamps_stray_light_levels)
     CHECK(rig_camera_set_exposure_us(c, 10000) == 0);
     CHECK(rig_camera_set_gain(c, 0) == 0);
     CHECK(rig_camera_capture(c, 10.0, 0, &f) == 0);   // lamps off
-    if (f.pix) CHECK_NEAR((mean_u16(f.pix) - dark) / den, 0.05, 1e-3);
+    if (f.pix) CHECK_NEAR((mean_u16(f.pix) - dark) / den, 0, 1e-3);
     rig_frame_free(&f);
     CHECK(rig_lamps_set(rig_virtual_lamps(v), 1) == 0);
     CHECK(rig_camera_capture(c, 10.0, 0, &f) == 0);
-    if (f.pix) CHECK_NEAR((mean_u16(f.pix) - dark) / den, 1.07, 1e-3);
+    if (f.pix) CHECK_NEAR((mean_u16(f.pix) - dark) / den, 1.02, 1e-3);
 done:
     rig_frame_free(&f);
     rig_camera_close(c);
