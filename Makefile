@@ -88,6 +88,7 @@ RIG_SRC := \
     rig/capture.c \
     rig/truth.c \
     rig/virtual.c \
+    rig/virtual_place.c \
     rig/cmd_rig.c \
     rig/cmd_capture.c
 CALIB_SRC := \
@@ -151,6 +152,7 @@ TEST_SRC := \
     tests/test_rig_turntable.c \
     tests/test_rig_virtual.c \
     tests/test_rig_virtual_inprocess.c \
+    tests/test_rig_virtual_place.c \
     tests/test_calib_gain.c \
     tests/test_calib_geometry.c \
     tests/test_calib_lamps.c \
