@@ -1761,14 +1761,13 @@ static int make_lowres(rig_virtual_t *v)
     if (!m) return rig_fail(RIG_ERR_IO, "virtual rig: mrcal cannot read %s", v->cam_path);
     mrcal_lensmodel_metadata_t meta = mrcal_lensmodel_metadata(&m->lensmodel);
     int np = mrcal_lensmodel_num_params(&m->lensmodel);
-    if (!meta.has_core || np < 4 || np > 64) {
+    if (!meta.has_core || np < 4) {
         err = rig_fail(RIG_ERR_NOT_SUPPORTED, "virtual rig: %s: lens model %s has no fx fy cx cy core; set "
                        "indirect_downsample = 1 in [render] of %s", v->cam_path, model_camera_lensmodel(v->cam),
                        v->truth_path);
         goto done;
     }
-    double in[64], rt[6];
-    memcpy(in, m->intrinsics, (size_t)np * sizeof(double));
+    double *in = m->intrinsics, rt[6];   // (a splined model's knots stay: they act on the normalised image)
     const double f = v->ds;
     in[0] /= f;
     in[1] /= f;
