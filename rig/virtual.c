@@ -1174,7 +1174,8 @@ static const allowed_t allowed[] = {
                      "axis_tilt_deg", "axis_tilt_azimuth_deg", "wobble_deg" } },
     { "placement", { "position_sigma_mm", "angle_sigma_deg", "seed" } },
     { "sample", { "kind", "scene", "square_mm", "corners", "corner0_mm", "material", "sphere_centre_mm",
-                  "sphere_radius_mm", "radiance", "direct_samples" } },
+                  "sphere_radius_mm", "radiance", "direct_samples",
+                  "flex_mm" } },
     { "texture", { "amplitude", "scale_mm", "seed" } },
     { "sensor", { NULL } },     // checked by model_sensor_from_ini
     { "lamp", { NULL } },       // model_lamps_from_ini
@@ -1477,6 +1478,7 @@ static bool parse_samples(rig_virtual_t *v, const model_ini_t *ini)
                         sm->scene_path, msg);
             return false;
         }
+        if (!rig_virtual_place_flex_sample(ini, sec, sm->name, kind, &sm->scene)) return false;
         sm->mats = calloc(sm->scene->nmaterials ? sm->scene->nmaterials : 1, sizeof *sm->mats);
         if (!sm->mats) return false;
         if (!model_resolve_materials(sm->scene, v->mats, sm->mats)) {

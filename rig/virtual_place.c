@@ -1,7 +1,9 @@
 // rig/virtual_place.c — placement errors and the turntable's axis of the
 // virtual rig (see rig/virtual_place.h).
+#include <glib.h>
 #include <limits.h>
 #include <math.h>
+#include <stdio.h>
 #include <string.h>
 
 #include "model/vec.h"
@@ -101,4 +103,61 @@ model_scene_t *rig_virtual_place_rotated(const rig_virtual_place_t *p, const mod
     static const double t[3] = { 0, 0, 0 };
     rig_virtual_place_table_R(p, angle_deg, R);
     return model_scene_transformed(scene, R, t);
+}
+
+model_scene_t *rig_virtual_place_flexed(const model_scene_t *sc, double flex_mm)
+{
+    double lo[2] = { INFINITY, INFINITY }, hi[2] = { -INFINITY, -INFINITY };
+    for (int i = 0; i < sc->nvertices; i++) {
+        lo[0] = fmin(lo[0], sc->vertices[i].x), hi[0] = fmax(hi[0], sc->vertices[i].x);
+        lo[1] = fmin(lo[1], sc->vertices[i].y), hi[1] = fmax(hi[1], sc->vertices[i].y);
+    }
+    double cx = (lo[0] + hi[0]) / 2, cy = (lo[1] + hi[1]) / 2;
+    double R2 = pow((hi[0] - lo[0]) / 2, 2) + pow((hi[1] - lo[1]) / 2, 2);
+    if (sc->nspheres > 0 || !(R2 > 0)) {
+        model_error(sc->path, 0, "flex_mm: only a scene of faces with an extent in x and y can bend");
+        return NULL;
+    }
+    GString *s = g_string_new("# flexed copy (rig/virtual_place.c)\n");
+    for (int i = 0; i < sc->nvertices; i++) {
+        model_vec3_t p = sc->vertices[i];
+        double r2 = (p.x - cx) * (p.x - cx) + (p.y - cy) * (p.y - cy);
+        double z = p.z + flex_mm * r2 / R2 - fmin(0, flex_mm);   // the lowest point stays
+        g_string_append_printf(s, "v %.17g %.17g %.17g\n", p.x, p.y, z);
+    }
+    int mat = -1;
+    for (int k = 0; k < sc->nfaces; k++) {
+        const model_face_t *F = &sc->faces[k];
+        if (F->material != mat) g_string_append_printf(s, "usemtl %s\n", sc->material_names[mat = F->material]);
+        for (int j = 1; j + 1 < F->nverts; j++)   // a fan: each flat
+            g_string_append_printf(s, "f %d %d %d\n", F->verts[0] + 1, F->verts[j] + 1, F->verts[j + 1] + 1);
+    }
+    model_scene_t *r = model_scene_parse_obj(s->str, s->len, sc->path, NULL);
+    g_string_free(s, TRUE);
+    return r;
+}
+
+bool rig_virtual_place_flex_sample(const model_ini_t *ini, const char *sec, const char *name, const char *kind,
+                                   model_scene_t **scene)
+{
+    const model_ini_entry_t *e = model_ini_get(ini, sec, "flex_mm");
+    if (!e) return true;
+    double flex = 0;
+    if (!model_ini_double_in(ini, sec, "flex_mm", &flex, true, -5, false, 5, NULL)) return false;
+    if (strcmp(kind, "chessboard") != 0) {
+        model_error(ini->path, e->line, "sample '%s': flex_mm bends a chessboard (a calibration board), not a "
+                    "sample of kind %s", name, kind);
+        return false;
+    }
+    if (flex == 0) return true;
+    model_scene_t *f = rig_virtual_place_flexed(*scene, flex);
+    if (!f) {
+        char msg[1024];
+        snprintf(msg, sizeof msg, "%s", model_last_error());
+        model_error(ini->path, e->line, "sample '%s': flex_mm: %s", name, msg);
+        return false;
+    }
+    model_scene_free(*scene);
+    *scene = f;
+    return true;
 }

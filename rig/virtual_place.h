@@ -18,6 +18,13 @@
 //                axis towards the platter's own +x, so it cones about the
 //                axis once per revolution. Pivot: the table top centre.
 //                x_rig = A Rz(angle) Wb x_table (A: the tilt, Wb: the wobble).
+//   [sample NAME] flex_mm (a chessboard, -5..5): the board bends as a
+//                paraboloid, z += flex_mm rho^2 / rho_max^2 (rho from the
+//                middle of its bounding box in x, y; rho_max its half
+//                diagonal), less min(0, flex_mm): with flex_mm > 0 the centre
+//                lies flex_mm below the corners (it sags), < 0 above them;
+//                the lowest point keeps its height. Every face is split into
+//                flat triangles (a fan).
 #pragma once
 
 #include <stdbool.h>
@@ -45,3 +52,9 @@ void rig_virtual_place_table_R(const rig_virtual_place_t *p, double angle_deg, d
 // axis is ideal, bit for bit). NULL + message.
 model_scene_t *rig_virtual_place_rotated(const rig_virtual_place_t *p, const model_scene_t *scene,
                                          double angle_deg);
+// A copy of scene bent by flex_mm (see above). NULL + message.
+model_scene_t *rig_virtual_place_flexed(const model_scene_t *scene, double flex_mm);
+// [sample NAME] flex_mm of a sample of kind `kind`: *scene replaced by its
+// bent copy (unchanged without the key or at 0). false + message (file:line).
+bool rig_virtual_place_flex_sample(const model_ini_t *ini, const char *sec, const char *name, const char *kind,
+                                   model_scene_t **scene);

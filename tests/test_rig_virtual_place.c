@@ -12,6 +12,7 @@
 
 #include "model/model.h"
 #include "rig/rig.h"
+#include "rig/virtual_place.h"
 #include "tests/test.h"
 
 #define W 1280
@@ -326,4 +327,69 @@ TEST(virtual_place_splined_lens)
 done:
     model_camera_free(s);
     model_camera_free(o);
+}
+
+// Board flex 0.3 mm on the calibration board (390 x 390 mm, centred at (130,
+// 0)): every vertex rises by 0.3 rho^2 / rho_max^2, so the corners stand 0.3
+// mm above the centre (its sag), each face is split into flat triangles, a
+// dome (-0.3) keeps its lowest point; the rig renders the bent board, and a
+// flex_mm on a sample that is no chessboard names its line.
+TEST(virtual_place_board_flex)
+{
+    char top[PATH_MAX], path[PATH_MAX + 64];
+    if (!realpath(test_srcdir(), top)) snprintf(top, sizeof top, "%s", test_srcdir());
+    snprintf(path, sizeof path, "%s/examples/samples/calib_board.d3d", top);
+    model_scene_t *b = model_scene_load(path, NULL);
+    CHECK_MSG(b != NULL, "%s", model_last_error());
+    if (!b) return;
+    model_scene_t *f = rig_virtual_place_flexed(b, 0.3), *g = rig_virtual_place_flexed(b, -0.3);
+    CHECK(f && g);
+    if (f && g) {
+        CHECK(f->nvertices == b->nvertices);
+        int ntri = 0;
+        for (int k = 0; k < b->nfaces; k++) ntri += b->faces[k].nverts - 2;
+        CHECK(f->nfaces == ntri);
+        double zmin0 = INFINITY, zmin1 = INFINITY, rmax = 0;
+        for (int i = 0; i < b->nvertices; i++) {
+            model_vec3_t p = b->vertices[i], q = f->vertices[i];
+            double r2 = (p.x - 130) * (p.x - 130) + p.y * p.y;
+            CHECK(q.x == p.x && q.y == p.y);
+            CHECK_NEAR(q.z - p.z, 0.3 * r2 / (2 * 195.0 * 195.0), 1e-12);
+            CHECK_NEAR(g->vertices[i].z - p.z, -0.3 * r2 / (2 * 195.0 * 195.0) + 0.3, 1e-12);
+            if (sqrt(r2) > rmax - 1e-9) rmax = sqrt(r2);
+            zmin0 = fmin(zmin0, p.z), zmin1 = fmin(zmin1, g->vertices[i].z);
+        }
+        CHECK_NEAR(rmax, 195 * sqrt(2), 1e-9);   // the corners: + 0.3
+        CHECK_NEAR(zmin1, zmin0, 1e-12);
+    }
+    model_scene_free(f);
+    model_scene_free(g);
+    model_scene_free(b);
+    float *A = malloc((size_t)W * H * sizeof(float)), *B = malloc((size_t)W * H * sizeof(float));
+    CHECK(A && B);
+    rig_virtual_t *v = open_truth(truth_with("corner0_mm = -5 -135 5\n", "corner0_mm = -5 -135 5\nflex_mm = 0.3\n"));
+    if (v && A) {
+        CHECK(rig_virtual_set_sample(v, "calib_board") == 0);
+        CHECK(rig_virtual_expected(v, 0, 0xf, 10000, 0, "Mono12", W, H, A) == 0);
+    }
+    rig_virtual_close(v);
+    v = open_truth(truth_with("corner0_mm = -5 -135 5\n", "corner0_mm = -5 -135 5\n"));
+    if (v && A && B) {
+        CHECK(rig_virtual_set_sample(v, "calib_board") == 0);
+        CHECK(rig_virtual_expected(v, 0, 0xf, 10000, 0, "Mono12", W, H, B) == 0);
+        long differ = 0;
+        for (size_t i = 0; i < (size_t)W * H; i++) differ += fabsf(A[i] - B[i]) > 20;
+        printf("  flexed vs flat board: %ld pixels differ by > 20 DN\n", differ);
+        CHECK(differ > 100);
+    }
+    rig_virtual_close(v);
+    free(A);
+    free(B);
+    const char *bad = truth_with("scene = samples/coupon_metal.d3d\n", "scene = samples/coupon_metal.d3d\nflex_mm = 1\n");
+    rig_virtual_options_t o = rig_virtual_defaults();
+    o.serve = RIG_VIRTUAL_SERVE_INPROCESS;
+    rig_virtual_t *w = NULL;
+    CHECK(rig_virtual_open(&w, bad, &o) == RIG_ERR_INVALID);
+    CHECK_CONTAINS(model_last_error(), "flex_mm bends a chessboard");
+    CHECK_CONTAINS(model_last_error(), bad);
 }
