@@ -2121,11 +2121,14 @@ static int new_pose(rig_virtual_t *v, int i, double tilt_deg, double tilt_azimut
     return slot;
 }
 
-static int set_sample_pose_one(rig_virtual_t *v, const char *name, double tilt_deg, double tilt_azimuth_deg,
-                               const double *dR, const double *dt)
+// Whether sample `name` can take the pose: its index (*i) and the posed copy
+// that has it already (*j, -1: none; only without a placement error). 0 or a RIG_ERR_* code.
+static int pose_check(rig_virtual_t *v, const char *name, double tilt_deg, double tilt_azimuth_deg, bool placed,
+                      int *i, int *j)
 {
-    int i = find_sample(v, name);
-    if (i < 0) {
+    *i = find_sample(v, name);
+    *j = -1;
+    if (*i < 0) {
         char list[512];
         list_samples(v, list, sizeof list);
         return rig_fail(RIG_ERR_INVALID, "virtual rig: %s has no sample '%s'; samples: %s", v->truth_path, name, list);
@@ -2133,14 +2136,21 @@ static int set_sample_pose_one(rig_virtual_t *v, const char *name, double tilt_d
     if (!isfinite(tilt_deg) || fabs(tilt_deg) > 80 || !isfinite(tilt_azimuth_deg))
         return rig_fail(RIG_ERR_INVALID, "virtual rig: sample '%s': tilt %g deg at azimuth %g deg; the tilt must be "
                         "within +-80 deg and both finite", name, tilt_deg, tilt_azimuth_deg);
-    if (tilt_deg != 0 && v->samples[i].uniform)
+    if (tilt_deg != 0 && v->samples[*i].uniform)
         return rig_fail(RIG_ERR_INVALID, "virtual rig: sample '%s' is a uniform source and cannot be tilted", name);
+    for (int k = 0; k < v->nsamples && !placed; k++)
+        if (v->samples[k].variant && !v->samples[k].placed && v->samples[k].base == *i &&
+            v->samples[k].tilt_deg == tilt_deg && v->samples[k].tilt_azimuth_deg == tilt_azimuth_deg)
+            *j = k;
+    return 0;
+}
+
+static int set_sample_pose_one(rig_virtual_t *v, const char *name, double tilt_deg, double tilt_azimuth_deg,
+                               const double *dR, const double *dt)
+{
+    int i, j, rc = pose_check(v, name, tilt_deg, tilt_azimuth_deg, dR != NULL, &i, &j);
+    if (rc) return rc;
     if (tilt_deg != 0 || dR) {
-        int j = -1;
-        for (int k = 0; k < v->nsamples && !dR; k++)
-            if (v->samples[k].variant && !v->samples[k].placed && v->samples[k].base == i &&
-                v->samples[k].tilt_deg == tilt_deg && v->samples[k].tilt_azimuth_deg == tilt_azimuth_deg)
-                j = k;
         if (j < 0 && (j = new_pose(v, i, tilt_deg, tilt_azimuth_deg, dR, dt)) < 0) return j;
         i = j;
     }
@@ -2172,6 +2182,17 @@ int rig_virtual_set_sample_pose(rig_virtual_t *v, const char *name, double tilt_
     }
     for (int c = 0; c < r->nviews && !rc; c++)
         rc = set_sample_pose_one(r->views[c], name, tilt_deg, tilt_azimuth_deg, placed ? dR : NULL, placed ? dt : NULL);
+    return rc;
+}
+
+int rig_virtual_check_sample_pose(rig_virtual_t *v, const char *name, double tilt_deg, double tilt_azimuth_deg)
+{
+    if (!v || !name) return rig_fail(RIG_ERR_INVALID, "virtual rig: check sample: NULL argument");
+    rig_virtual_t *r = v->state;
+    int i, j, rc = pose_check(r, name, tilt_deg, tilt_azimuth_deg, r->place.on, &i, &j);
+    if (!rc && tilt_deg != 0 && j < 0 && !r->place.on && r->nsamples >= r->nbase_samples + MAX_POSES)
+        rc = rig_fail(RIG_ERR_INVALID, "virtual rig: more than %d sample poses in one rig session; close and open "
+                      "the rig", MAX_POSES);
     return rc;
 }
 

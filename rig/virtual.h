@@ -82,6 +82,10 @@ int  rig_virtual_set_sample(rig_virtual_t *v, const char *name);
 // the turntable angle applies after this pose. Tilt 0 = rig_virtual_set_sample.
 // At most 32 distinct poses per open rig. A uniform_source cannot be tilted.
 int  rig_virtual_set_sample_pose(rig_virtual_t *v, const char *name, double tilt_deg, double tilt_azimuth_deg);
+// Whether rig_virtual_set_sample_pose would take that pose (0, or its error
+// with the message), without putting the sample anywhere: a placement error
+// ([placement]) is drawn when the operator places a sample, not by a check.
+int  rig_virtual_check_sample_pose(rig_virtual_t *v, const char *name, double tilt_deg, double tilt_azimuth_deg);
 // The current sample's pose (truth): x_table = R x_sample_file + t (R
 // row-major; identity and 0 at tilt 0 without a placement error). With a truth
 // [placement] section (rig/virtual_place.h) every placement (each call of

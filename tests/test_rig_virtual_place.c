@@ -100,6 +100,13 @@ TEST(virtual_place_placement_spread)
         dy[k] = R[3] * 130 + t[1];
         if (k < 5) memcpy(first[k], R, sizeof R), memcpy(first[k] + 9, t, sizeof t);
     }
+    // a check (a capture's of its plan) places nothing
+    double R2[9], t2[3];
+    CHECK(rig_virtual_check_sample_pose(v, "coupon_metal", 20, 90) == 0);
+    CHECK(rig_virtual_check_sample_pose(v, "no_such_sample", 0, 0) == RIG_ERR_INVALID);
+    CHECK(rig_virtual_check_sample_pose(v, "flat_field", 10, 0) == RIG_ERR_INVALID);
+    CHECK(rig_virtual_sample_pose(v, NULL, NULL, R2, t2) == 0);
+    CHECK(!strcmp(rig_virtual_sample(v), "calib_board") && !memcmp(R, R2, sizeof R) && !memcmp(t, t2, sizeof t));
     double m[3] = { 0 }, q[3] = { 0 };
     for (int k = 0; k < N; k++) {
         double x[3] = { yaw[k], dx[k], dy[k] };
