@@ -21,11 +21,11 @@
 
 // The example truth file with `from` replaced by `to`, its relative paths made
 // absolute, written into the test's directory.
-static const char *truth_with(const char *from, const char *to)
+static const char *truth_file_with(const char *file, const char *from, const char *to)
 {
     char top[PATH_MAX], path[PATH_MAX + 64];
     if (!realpath(test_srcdir(), top)) snprintf(top, sizeof top, "%s", test_srcdir());
-    snprintf(path, sizeof path, "%s/examples/virtual-truth.ini", top);
+    snprintf(path, sizeof path, "%s/examples/%s", top, file);
     char *text = model_read_file(path, NULL);
     CHECK(text != NULL);
     if (!text) return "";
@@ -54,6 +54,11 @@ static const char *truth_with(const char *from, const char *to)
     g_free(j2);
     g_string_free(s, TRUE);
     return out;
+}
+
+static const char *truth_with(const char *from, const char *to)
+{
+    return truth_file_with("virtual-truth.ini", from, to);
 }
 
 static rig_virtual_t *open_truth(const char *path)
@@ -153,6 +158,30 @@ TEST(virtual_place_placement_spread)
     rig_virtual_close(v);
     free(A);
     free(B);
+}
+
+// Two cameras see one placement: both views' samples take the same actual pose;
+// on the wedge the error stays in the wedge's face (the sample's normal is the wedge's).
+TEST(virtual_place_two_cameras_one_placement)
+{
+    rig_virtual_t *v = open_truth(truth_file_with("virtual-truth-2cam.ini", "[sample t_stiffener]",
+                                                  "[placement]\nposition_sigma_mm = 1\nangle_sigma_deg = 1\n\n"
+                                                  "[sample t_stiffener]"));
+    if (!v) return;
+    CHECK(rig_virtual_ncameras(v) == 2);
+    for (int k = 0; k < 40; k++) {
+        double R0[9], t0[3], R1[9], t1[3];
+        CHECK(rig_virtual_set_sample_pose(v, "coupon_metal", k % 2 ? 30 : 0, 90) == 0);
+        CHECK(rig_virtual_sample_pose(rig_virtual_camera_view(v, 0), NULL, NULL, R0, t0) == 0);
+        CHECK(rig_virtual_sample_pose(rig_virtual_camera_view(v, 1), NULL, NULL, R1, t1) == 0);
+        CHECK(!memcmp(R0, R1, sizeof R0) && !memcmp(t0, t1, sizeof t0));
+        CHECK(t0[0] != 0 || t0[1] != 0);
+        // the error lies in the plane it rests on: the sample's normal stays the wedge's (30 deg about y)
+        CHECK_NEAR(R0[2], k % 2 ? 0.5 : 0, 1e-12);
+        CHECK_NEAR(R0[5], 0, 1e-12);
+        CHECK_NEAR(R0[8], k % 2 ? sqrt(0.75) : 1, 1e-12);
+    }
+    rig_virtual_close(v);
 }
 
 // Turntable axis tilted by 0.5 deg towards azimuth 30 deg: a point at radius
