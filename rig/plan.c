@@ -597,6 +597,10 @@ int rig_plan_operator_pose(const rig_plan_t *p, rig_t *r, int step, char *what, 
     if (rc) return rc;
     snprintf(what, size, "virtual rig: sample %s posed at tilt %g deg, hinge azimuth %g deg", o->sample, o->tilt_deg,
              o->tilt_azimuth_deg);
+    double turn, dx, dy;
+    size_t n = strlen(what);
+    if (rig_virtual_last_placement(r->virt, &turn, &dx, &dy) && n < size)
+        snprintf(what + n, size - n, "; truth placement error: turn %.3f deg, shift %.3f %.3f mm", turn, dx, dy);
     return 0;
 }
 

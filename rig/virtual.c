@@ -238,6 +238,8 @@ struct rig_virtual {
     rig_virtual_place_t place;        // placement and axis errors (rig/virtual_place.h)
     long     *place_count;            // placements of each base sample (the rig's, state)
     int       place_next;             // the next posed copy to reuse when all are taken
+    double    place_last[3];          // the current sample's placement error: turn deg, dx, dy mm
+    bool      place_last_set;         // (state_lock)
 
     // state_lock guards: cur_sample, the inner turntable, next_seed.
     pthread_mutex_t state_lock;
@@ -2171,18 +2173,39 @@ int rig_virtual_set_sample_pose(rig_virtual_t *v, const char *name, double tilt_
     int rc = 0;
     rig_virtual_t *r = v->state;
     // a placement error (the same for every camera): the count-th placement of this sample
-    double dR[9], dt[3];
+    double dR[9], dt[3], err[3];
     bool placed = false;
     int b = find_sample(r, name);
     if (r->place.on && b >= 0 && !r->samples[b].uniform) {
         if (!r->place_count && !(r->place_count = calloc((size_t)r->nbase_samples, sizeof *r->place_count)))
             return rig_fail(RIG_ERR_NO_MEM, "virtual rig: out of memory");
-        rig_virtual_place_error(&r->place, name, r->place_count[b]++, r->samples[b].scene, dR, dt);
+        rig_virtual_place_error(&r->place, name, r->place_count[b]++, r->samples[b].scene, dR, dt, err);
         placed = true;
     }
     for (int c = 0; c < r->nviews && !rc; c++)
         rc = set_sample_pose_one(r->views[c], name, tilt_deg, tilt_azimuth_deg, placed ? dR : NULL, placed ? dt : NULL);
+    if (!rc) {
+        pthread_mutex_lock(&r->state_lock);
+        r->place_last_set = placed;
+        if (placed) memcpy(r->place_last, err, sizeof err);
+        pthread_mutex_unlock(&r->state_lock);
+    }
     return rc;
+}
+
+bool rig_virtual_last_placement(rig_virtual_t *v, double *turn_deg, double *dx_mm, double *dy_mm)
+{
+    if (!v) return false;
+    rig_virtual_t *r = v->state;
+    pthread_mutex_lock(&r->state_lock);
+    bool set = r->place_last_set;
+    if (set) {
+        if (turn_deg) *turn_deg = r->place_last[0];
+        if (dx_mm) *dx_mm = r->place_last[1];
+        if (dy_mm) *dy_mm = r->place_last[2];
+    }
+    pthread_mutex_unlock(&r->state_lock);
+    return set;
 }
 
 int rig_virtual_check_sample_pose(rig_virtual_t *v, const char *name, double tilt_deg, double tilt_azimuth_deg)

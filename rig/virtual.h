@@ -86,6 +86,10 @@ int  rig_virtual_set_sample_pose(rig_virtual_t *v, const char *name, double tilt
 // with the message), without putting the sample anywhere: a placement error
 // ([placement]) is drawn when the operator places a sample, not by a check.
 int  rig_virtual_check_sample_pose(rig_virtual_t *v, const char *name, double tilt_deg, double tilt_azimuth_deg);
+// The placement error of the current sample (truth, [placement]): the turn
+// about its centre (deg) and the shift (mm) in the plane it rests on. false
+// when it was placed without one (no [placement]; a uniform source).
+bool rig_virtual_last_placement(rig_virtual_t *v, double *turn_deg, double *dx_mm, double *dy_mm);
 // The current sample's pose (truth): x_table = R x_sample_file + t (R
 // row-major; identity and 0 at tilt 0 without a placement error). With a truth
 // [placement] section (rig/virtual_place.h) every placement (each call of

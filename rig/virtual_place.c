@@ -53,7 +53,7 @@ static uint64_t name_hash(const char *s)
 }
 
 void rig_virtual_place_error(const rig_virtual_place_t *p, const char *name, long count,
-                             const model_scene_t *scene, double dR[9], double dt[3])
+                             const model_scene_t *scene, double dR[9], double dt[3], double err[3])
 {
     model_rng_t r = model_rng(p->seed ^ name_hash(name), (uint64_t)count);
     double psi = model_rng_gauss(&r) * p->angle_sigma_deg * M_PI / 180;
@@ -76,6 +76,7 @@ void rig_virtual_place_error(const rig_virtual_place_t *p, const char *name, lon
     dt[0] = cx - (dR[0] * cx + dR[1] * cy) + dx;
     dt[1] = cy - (dR[3] * cx + dR[4] * cy) + dy;
     dt[2] = 0;
+    if (err) err[0] = psi * 180 / M_PI, err[1] = dx, err[2] = dy;
 }
 
 void rig_virtual_place_table_R(const rig_virtual_place_t *p, double angle_deg, double R[9])

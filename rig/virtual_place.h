@@ -43,9 +43,10 @@ typedef struct {
 // [placement] and the [turntable] axis keys of a truth file. false + message (file:line).
 bool rig_virtual_place_parse(const model_ini_t *ini, rig_virtual_place_t *out);
 // The placement error of sample `name` (its scene in the sample's own frame,
-// before any wedge pose) at its count-th placement: x' = dR x + dt.
+// before any wedge pose) at its count-th placement: x' = dR x + dt; err (may
+// be NULL): the turn (deg) and the shift dx, dy (mm) drawn.
 void rig_virtual_place_error(const rig_virtual_place_t *p, const char *name, long count,
-                             const model_scene_t *scene, double dR[9], double dt[3]);
+                             const model_scene_t *scene, double dR[9], double dt[3], double err[3]);
 // The table's rotation at angle_deg: x_rig = R x_table (row-major).
 void rig_virtual_place_table_R(const rig_virtual_place_t *p, double angle_deg, double R[9]);
 // The scene rotated by the table at angle_deg (model_scene_rotated_z when the

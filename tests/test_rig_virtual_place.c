@@ -103,6 +103,11 @@ TEST(virtual_place_placement_spread)
         yaw[k] = atan2(R[3], R[0]) / D2R;
         dx[k] = R[0] * 130 + t[0] - 130;
         dy[k] = R[3] * 130 + t[1];
+        double turn, ex, ey;   // the error as the rig reports it (and a capture journals it)
+        CHECK(rig_virtual_last_placement(v, &turn, &ex, &ey));
+        CHECK_NEAR(turn, yaw[k], 1e-9);
+        CHECK_NEAR(ex, dx[k], 1e-9);
+        CHECK_NEAR(ey, dy[k], 1e-9);
         if (k < 5) memcpy(first[k], R, sizeof R), memcpy(first[k] + 9, t, sizeof t);
     }
     // a check (a capture's of its plan) places nothing
@@ -257,6 +262,7 @@ TEST(virtual_place_off_and_errors)
     CHECK(A && B);
     rig_virtual_t *v = open_truth(truth_with("[sample calib_board]", "[sample calib_board]"));
     if (v && A) CHECK(rig_virtual_expected(v, 25, 0x5, 10000, 0, "Mono12", W, H, A) == 0);
+    if (v) CHECK(rig_virtual_set_sample(v, "calib_board") == 0 && !rig_virtual_last_placement(v, NULL, NULL, NULL));
     rig_virtual_close(v);
     v = open_truth(truth_with("position_noise_deg = 0.002\n", "position_noise_deg = 0.002\naxis_tilt_deg = 0\n"
                               "wobble_deg = 0\n\n[placement]\nposition_sigma_mm = 0\nangle_sigma_deg = 0\n"));
@@ -428,4 +434,25 @@ TEST(virtual_place_board_flex)
     CHECK(rig_virtual_open(&w, bad, &o) == RIG_ERR_INVALID);
     CHECK_CONTAINS(model_last_error(), "flex_mm bends a chessboard");
     CHECK_CONTAINS(model_last_error(), bad);
+}
+
+// A capture on a rig with [placement]: the operator step that puts the coupon
+// on the wedge reports (and journals) the placement error the truth drew.
+TEST(virtual_place_capture_reports_placement)
+{
+    const char *truth = placement_truth(3);
+    char text[2 * PATH_MAX];
+    snprintf(text, sizeof text, "[rig]\nbackend = virtual\nserve = inprocess\ntruth = %s\ntime_scale = 0.01\n", truth);
+    const char *rig = test_write("rig.ini", text);
+    const char *plan = test_write("plan.ini", "[sample]\nname = coupon_matte_paint\nkind = material_coupon\n"
+                                  "tilt_deg = 30\n[angles]\nlist = 0\n[lamps]\nsets = east\n[exposure]\nmode = fixed\n"
+                                  "list_us = 2000\n");
+    char *out = NULL, *err = NULL;
+    int rc = test_refl_run(120, &out, &err, "capture", plan, "--rig", rig, "-o", test_path("s"), "--yes", NULL);
+    CHECK_MSG(rc == 0, "exit %d: %s", rc, err);
+    CHECK_CONTAINS(err, "posed at tilt 30 deg, hinge azimuth 0 deg; truth placement error: turn ");
+    const char *line = err ? strstr(err, "operator step 0 done") : NULL;
+    if (line) printf("  %.*s\n", (int)strcspn(line, "\n"), line);
+    g_free(out);
+    g_free(err);
 }
