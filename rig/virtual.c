@@ -1214,7 +1214,7 @@ static bool check_sections(const model_ini_t *ini)
         if (!a) {
             model_error(ini->path, ini->section_lines[s], "unknown section [%s]; a truth file has [virtual], "
                         "[camera] (or [camera NAME], one or more), [render], [sensor] (and [sensor NAME]), "
-                        "[turntable], [lamp NAME], [material NAME], [texture MATERIAL] and [sample NAME]", ini->sections[s]);
+                        "[turntable], [placement], [lamp NAME], [material NAME], [texture MATERIAL] and [sample NAME]", ini->sections[s]);
             return false;
         }
         if (!strcmp(kind, "sensor") && *name) {

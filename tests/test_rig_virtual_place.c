@@ -427,7 +427,8 @@ TEST(virtual_place_board_flex)
     rig_virtual_close(v);
     free(A);
     free(B);
-    const char *bad = truth_with("scene = samples/coupon_metal.d3d\n", "scene = samples/coupon_metal.d3d\nflex_mm = 1\n");
+    const char *bad = truth_with("scene = samples/coupon_metal.d3d\n",
+                                 "scene = samples/coupon_metal.d3d\nflex_mm = 1\n");
     rig_virtual_options_t o = rig_virtual_defaults();
     o.serve = RIG_VIRTUAL_SERVE_INPROCESS;
     rig_virtual_t *w = NULL;
