@@ -94,6 +94,7 @@ RIG_SRC := \
     rig/virtual_lamps.c \
     rig/virtual_optics.c \
     rig/virtual_materials.c \
+    rig/virtual_place.c \
     rig/cmd_rig.c \
     rig/cmd_capture.c
 CALIB_SRC := \
@@ -164,6 +165,7 @@ TEST_SRC := \
     tests/test_rig_virtual_materials.c \
     tests/test_rig_virtual_inprocess.c \
     tests/test_rig_virtual_optics.c \
+    tests/test_rig_virtual_place.c \
     tests/test_calib_gain.c \
     tests/test_calib_geometry.c \
     tests/test_calib_lamps.c \

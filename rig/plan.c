@@ -554,15 +554,10 @@ int rig_plan_bind(rig_plan_t *p, rig_t *r)
         goto done;
     }
     if (r->virt) {
-        // the sample must exist and take its pose; the virtual rig is put back
-        // as it was (the operator step poses it)
+        // the sample must exist and take its pose; nothing is put on the
+        // table (the operator step poses it)
         bool q = model_error_quiet_thread(true);
-        char was[64];
-        double wt = 0, wa = 0;
-        snprintf(was, sizeof was, "%s", rig_virtual_sample(r->virt));
-        rig_virtual_sample_pose(r->virt, &wt, &wa, NULL, NULL);
-        int e = rig_virtual_set_sample_pose(r->virt, p->sample, p->tilt_deg, p->tilt_azimuth_deg);
-        rig_virtual_set_sample_pose(r->virt, was, wt, wa);
+        int e = rig_virtual_check_sample_pose(r->virt, p->sample, p->tilt_deg, p->tilt_azimuth_deg);
         model_error_quiet_thread(q);
         if (e) {
             model_error(p->path, 0, "[sample] name = %s, tilt %g deg: the virtual rig (truth file %s) refuses it: %s",
@@ -602,6 +597,10 @@ int rig_plan_operator_pose(const rig_plan_t *p, rig_t *r, int step, char *what, 
     if (rc) return rc;
     snprintf(what, size, "virtual rig: sample %s posed at tilt %g deg, hinge azimuth %g deg", o->sample, o->tilt_deg,
              o->tilt_azimuth_deg);
+    double turn, dx, dy;
+    size_t n = strlen(what);
+    if (rig_virtual_last_placement(r->virt, &turn, &dx, &dy) && n < size)
+        snprintf(what + n, size - n, "; truth placement error: turn %.3f deg, shift %.3f %.3f mm", turn, dx, dy);
     return 0;
 }
 

@@ -36,6 +36,9 @@
 //   tilt_deg about the horizontal hinge axis (cos az, sin az, 0) through the
 //   rig origin, then lifted along z so its lowest point stays at its height;
 //   the turntable angle applies after the pose.
+//   [placement] and the [turntable] axis keys (axis_tilt_deg,
+//   axis_tilt_azimuth_deg, wobble_deg): placement errors and an imperfect
+//   rotation axis, off by default (rig/virtual_place.h).
 //
 // The camera is served over GigE Vision on a loopback address, or in-process
 // (options.serve: an Aravis fake device in this process, rig/gv_camera.h);
@@ -117,6 +120,7 @@
 #include "rig/virtual_lamps.h"
 #include "rig/virtual_optics.h"
 #include "rig/virtual_materials.h"
+#include "rig/virtual_place.h"
 
 #define NPLANES  12   // cached radiance images (5 MB each at 1280x1024)
 #define NTRACERS 3    // cached (sample, angle) tracers
@@ -161,6 +165,7 @@ typedef struct {
     int    base;
     double tilt_deg, tilt_azimuth_deg;
     double R[9], t[3];
+    bool   placed;                    // with a placement error (rig/virtual_place.h): never shared
 } sample_t;
 
 #define MAX_POSES 32   // posed copies of samples one rig can hold
@@ -248,6 +253,11 @@ struct rig_virtual {
     int                ntextures;
     sample_t *samples;
     int       nsamples, nbase_samples;   // base samples of the truth file, then posed copies
+    rig_virtual_place_t place;        // placement and axis errors (rig/virtual_place.h)
+    long     *place_count;            // placements of each base sample (the rig's, state)
+    int       place_next;             // the next posed copy to reuse when all are taken
+    double    place_last[3];          // the current sample's placement error: turn deg, dx, dy mm
+    bool      place_last_set;         // (state_lock)
 
     // state_lock guards: cur_sample, the inner turntable, next_seed.
     pthread_mutex_t state_lock;
@@ -449,7 +459,7 @@ static tracer_slot_t *tracer_for(rig_virtual_t *v, int sample, double angle_deg)
         }
         if (!s->t || (lru->t && s->used < lru->used)) lru = s;
     }
-    model_scene_t *rot = model_scene_rotated_z(v->samples[sample].scene, angle_deg);
+    model_scene_t *rot = rig_virtual_place_rotated(&v->place, v->samples[sample].scene, angle_deg);
     if (!rot) return NULL;
     model_tracer_t *t = model_tracer_new(rot);
     if (!t) {
@@ -1252,9 +1262,12 @@ static const allowed_t allowed[] = {
     { "render", { "interreflection", "mc_samples", "mc_bounces", "thesis_samples", "thesis_cone_deg", "rho_sr",
                   "finite_lamps", "seed", "direct_samples", "indirect_downsample", "prerender" } },
     { "turntable", { "speed_deg_s", "accel_deg_s2", "home_time_s", "position_noise_deg", "seed",
-                     "fault_after_moves", "fault" } },
+                     "fault_after_moves", "fault",
+                     "axis_tilt_deg", "axis_tilt_azimuth_deg", "wobble_deg" } },
+    { "placement", { "position_sigma_mm", "angle_sigma_deg", "seed" } },
     { "sample", { "kind", "scene", "square_mm", "corners", "corner0_mm", "material", "sphere_centre_mm",
-                  "sphere_radius_mm", "radiance", "direct_samples" } },
+                  "sphere_radius_mm", "radiance", "direct_samples",
+                  "flex_mm" } },
     { "texture", { "amplitude", "scale_mm", "seed",
                    "roughness_amplitude" } },
     { "optics", { "rays_per_pixel", "psf", "psf_sigma_px", "psf_radius_px" } },
@@ -1296,8 +1309,8 @@ static bool check_sections(const model_ini_t *ini)
         if (!a) {
             model_error(ini->path, ini->section_lines[s], "unknown section [%s]; a truth file has [virtual], "
                         "[camera] (or [camera NAME], one or more), [render], [sensor] (and [sensor NAME]), "
-                        "[turntable], [lamp NAME], [material NAME], [texture MATERIAL], [sample NAME] and [optics] "
-                        "(and [lamp_drift LAMP], [stray])", ini->sections[s]);
+                        "[turntable], [placement], [lamp NAME], [material NAME], [texture MATERIAL], [sample NAME] "
+                        "and [optics] (and [lamp_drift LAMP], [stray])", ini->sections[s]);
             return false;
         }
         if (!strcmp(kind, "sensor") && *name) {
@@ -1588,6 +1601,7 @@ static bool parse_samples(rig_virtual_t *v, const model_ini_t *ini)
                         sm->scene_path, msg);
             return false;
         }
+        if (!rig_virtual_place_flex_sample(ini, sec, sm->name, kind, &sm->scene)) return false;
         sm->mats = calloc(sm->scene->nmaterials ? sm->scene->nmaterials : 1, sizeof *sm->mats);
         if (!sm->mats) return false;
         if (!model_resolve_materials(sm->scene, v->mats, sm->mats)) {
@@ -1787,6 +1801,7 @@ static bool parse_truth(rig_virtual_t *v, const model_ini_t *ini, const char **d
     if (!rig_vlamps_parse(&v->lamp_fx, ini, v->lamps)) return false;
     if (!rig_optics_parse(ini, &v->optics)) return false;
     v->nbase_samples = v->nsamples;
+    if (!rig_virtual_place_parse(ini, &v->place)) return false;
     if (*default_sample && find_sample(v, *default_sample) < 0) {
         char list[512];
         list_samples(v, list, sizeof list);
@@ -1876,14 +1891,13 @@ static int make_lowres(rig_virtual_t *v)
     if (!m) return rig_fail(RIG_ERR_IO, "virtual rig: mrcal cannot read %s", v->cam_path);
     mrcal_lensmodel_metadata_t meta = mrcal_lensmodel_metadata(&m->lensmodel);
     int np = mrcal_lensmodel_num_params(&m->lensmodel);
-    if (!meta.has_core || np < 4 || np > 64) {
+    if (!meta.has_core || np < 4) {
         err = rig_fail(RIG_ERR_NOT_SUPPORTED, "virtual rig: %s: lens model %s has no fx fy cx cy core; set "
                        "indirect_downsample = 1 in [render] of %s", v->cam_path, model_camera_lensmodel(v->cam),
                        v->truth_path);
         goto done;
     }
-    double in[64], rt[6];
-    memcpy(in, m->intrinsics, (size_t)np * sizeof(double));
+    double *in = m->intrinsics, rt[6];   // (a splined model's knots stay: they act on the normalised image)
     const double f = v->ds;
     in[0] /= f;
     in[1] /= f;
@@ -2111,6 +2125,7 @@ camera:
         if ((err = open_camera(&w, truth_path, &o, v, c))) goto fail;
         v->views[v->nviews++] = w;
     }
+    if (!parent && v->place.on && (err = rig_virtual_set_sample(v, v->samples[v->cur_sample].name))) goto fail;
     rig_truth_free(truth);
     *out = v;
     return 0;
@@ -2144,6 +2159,7 @@ void rig_virtual_close(rig_virtual_t *v)
         free(v->samples[i].rough_store);
     }
     free(v->samples);
+    free(v->place_count);
     model_lamps_free(v->lamps);
     model_materials_free(v->mats);
     free(v->textures);
@@ -2189,10 +2205,80 @@ const char *rig_virtual_sample(const rig_virtual_t *v)
     return s;
 }
 
-static int set_sample_pose_one(rig_virtual_t *v, const char *name, double tilt_deg, double tilt_azimuth_deg)
+// Posed copy `slot` of the samples is taken again: forget what the caches
+// keep of it; cache_lock held.
+static void forget_sample(rig_virtual_t *v, int slot)
 {
-    int i = find_sample(v, name);
-    if (i < 0) {
+    for (int i = 0; i < NPLANES; i++)
+        if (v->planes[i].L && v->planes[i].sample == slot) v->planes[i].sample = -1;
+    for (int i = 0; i < NTRACERS; i++)
+        if (v->tracers[i].t && v->tracers[i].sample == slot) slot_free(&v->tracers[i]);
+    for (int k = 0; k < NSPEC; k++)
+        if (v->spec[k].sample == slot) v->spec[k].valid = false;
+    if (v->cur_key_sample == slot) v->cur_key_set = false;
+    if (v->akey_sample == slot) v->akey_set = false;
+    free(v->samples[slot].scene_path);
+    model_scene_free(v->samples[slot].scene);
+}
+
+// A new posed copy of base sample i (the wedge's pose after the placement
+// error dR, dt when dR is not NULL); its index, or a RIG_ERR_* code.
+static int new_pose(rig_virtual_t *v, int i, double tilt_deg, double tilt_azimuth_deg, const double *dR,
+                    const double *dt)
+{
+    int slot = v->nsamples;
+    if (v->nsamples >= v->nbase_samples + MAX_POSES) {
+        if (!dR)
+            return rig_fail(RIG_ERR_INVALID, "virtual rig: more than %d sample poses in one rig session; "
+                            "close and open the rig", MAX_POSES);
+        pthread_mutex_lock(&v->state_lock);
+        int cur = v->cur_sample;
+        pthread_mutex_unlock(&v->state_lock);
+        do slot = v->nbase_samples + v->place_next++ % MAX_POSES;
+        while (slot == cur);
+    }
+    sample_t *b = &v->samples[i], sm = *b;
+    sm.variant = true;
+    sm.base = i;
+    sm.tilt_deg = tilt_deg;
+    sm.tilt_azimuth_deg = tilt_azimuth_deg;
+    sm.placed = dR != NULL;
+    sm.scene_path = strdup(b->scene_path);
+    model_scene_wedge_pose(b->scene, tilt_deg, tilt_azimuth_deg, sm.R, sm.t);
+    if (dR) {   // x = Rw (dR x0 + dt) + tw
+        double R[9], t[3];
+        for (int r = 0; r < 3; r++) {
+            t[r] = sm.t[r];
+            for (int c = 0; c < 3; c++) {
+                R[3 * r + c] = sm.R[3 * r] * dR[c] + sm.R[3 * r + 1] * dR[3 + c] + sm.R[3 * r + 2] * dR[6 + c];
+                t[r] += sm.R[3 * r + c] * dt[c];
+            }
+        }
+        memcpy(sm.R, R, sizeof R);
+        memcpy(sm.t, t, sizeof t);
+    }
+    sm.scene = model_scene_transformed(b->scene, sm.R, sm.t);
+    if (!sm.scene || !sm.scene_path) {
+        model_scene_free(sm.scene);
+        free(sm.scene_path);
+        return rig_fail(RIG_ERR_NO_MEM, "virtual rig: sample '%s': out of memory for its posed scene", b->name);
+    }
+    pthread_mutex_lock(&v->cache_lock);
+    if (slot < v->nsamples) forget_sample(v, slot);
+    v->samples[slot] = sm;
+    if (slot == v->nsamples) v->nsamples = slot + 1;
+    pthread_mutex_unlock(&v->cache_lock);
+    return slot;
+}
+
+// Whether sample `name` can take the pose: its index (*i) and the posed copy
+// that has it already (*j, -1: none; only without a placement error). 0 or a RIG_ERR_* code.
+static int pose_check(rig_virtual_t *v, const char *name, double tilt_deg, double tilt_azimuth_deg, bool placed,
+                      int *i, int *j)
+{
+    *i = find_sample(v, name);
+    *j = -1;
+    if (*i < 0) {
         char list[512];
         list_samples(v, list, sizeof list);
         return rig_fail(RIG_ERR_INVALID, "virtual rig: %s has no sample '%s'; samples: %s", v->truth_path, name, list);
@@ -2200,37 +2286,22 @@ static int set_sample_pose_one(rig_virtual_t *v, const char *name, double tilt_d
     if (!isfinite(tilt_deg) || fabs(tilt_deg) > 80 || !isfinite(tilt_azimuth_deg))
         return rig_fail(RIG_ERR_INVALID, "virtual rig: sample '%s': tilt %g deg at azimuth %g deg; the tilt must be "
                         "within +-80 deg and both finite", name, tilt_deg, tilt_azimuth_deg);
-    if (tilt_deg != 0 && v->samples[i].uniform)
+    if (tilt_deg != 0 && v->samples[*i].uniform)
         return rig_fail(RIG_ERR_INVALID, "virtual rig: sample '%s' is a uniform source and cannot be tilted", name);
-    if (tilt_deg != 0) {
-        int j = -1;
-        for (int k = 0; k < v->nsamples; k++)
-            if (v->samples[k].variant && v->samples[k].base == i && v->samples[k].tilt_deg == tilt_deg &&
-                v->samples[k].tilt_azimuth_deg == tilt_azimuth_deg)
-                j = k;
-        if (j < 0) {
-            if (v->nsamples >= v->nbase_samples + MAX_POSES)
-                return rig_fail(RIG_ERR_INVALID, "virtual rig: more than %d sample poses in one rig session; "
-                                "close and open the rig", MAX_POSES);
-            sample_t *b = &v->samples[i], sm = *b;
-            sm.variant = true;
-            sm.base = i;
-            sm.tilt_deg = tilt_deg;
-            sm.tilt_azimuth_deg = tilt_azimuth_deg;
-            sm.scene_path = strdup(b->scene_path);
-            model_scene_wedge_pose(b->scene, tilt_deg, tilt_azimuth_deg, sm.R, sm.t);
-            sm.scene = model_scene_transformed(b->scene, sm.R, sm.t);
-            if (!sm.scene || !sm.scene_path) {
-                model_scene_free(sm.scene);
-                free(sm.scene_path);
-                return rig_fail(RIG_ERR_NO_MEM, "virtual rig: sample '%s': out of memory for its tilted scene", name);
-            }
-            pthread_mutex_lock(&v->cache_lock);
-            j = v->nsamples;
-            v->samples[j] = sm;
-            v->nsamples = j + 1;
-            pthread_mutex_unlock(&v->cache_lock);
-        }
+    for (int k = 0; k < v->nsamples && !placed; k++)
+        if (v->samples[k].variant && !v->samples[k].placed && v->samples[k].base == *i &&
+            v->samples[k].tilt_deg == tilt_deg && v->samples[k].tilt_azimuth_deg == tilt_azimuth_deg)
+            *j = k;
+    return 0;
+}
+
+static int set_sample_pose_one(rig_virtual_t *v, const char *name, double tilt_deg, double tilt_azimuth_deg,
+                               const double *dR, const double *dt)
+{
+    int i, j, rc = pose_check(v, name, tilt_deg, tilt_azimuth_deg, dR != NULL, &i, &j);
+    if (rc) return rc;
+    if (tilt_deg != 0 || dR) {
+        if (j < 0 && (j = new_pose(v, i, tilt_deg, tilt_azimuth_deg, dR, dt)) < 0) return j;
         i = j;
     }
     pthread_mutex_lock(&v->state_lock);
@@ -2249,8 +2320,58 @@ int rig_virtual_set_sample_pose(rig_virtual_t *v, const char *name, double tilt_
     if (!v || !name) return rig_fail(RIG_ERR_INVALID, "virtual rig: set sample: NULL argument");
     int rc = 0;
     rig_virtual_t *r = v->state;
-    for (int c = 0; c < r->nviews && !rc; c++) rc = set_sample_pose_one(r->views[c], name, tilt_deg, tilt_azimuth_deg);
+    // a placement error (the same for every camera): the count-th placement of this sample
+    double dR[9], dt[3], err[3];
+    bool placed = false;
+    int b = find_sample(r, name);
+    if (r->place.on && b >= 0 && !r->samples[b].uniform) {
+        if (!r->place_count && !(r->place_count = calloc((size_t)r->nbase_samples, sizeof *r->place_count)))
+            return rig_fail(RIG_ERR_NO_MEM, "virtual rig: out of memory");
+        rig_virtual_place_error(&r->place, name, r->place_count[b]++, r->samples[b].scene, dR, dt, err);
+        placed = true;
+    }
+    for (int c = 0; c < r->nviews && !rc; c++)
+        rc = set_sample_pose_one(r->views[c], name, tilt_deg, tilt_azimuth_deg, placed ? dR : NULL, placed ? dt : NULL);
+    if (!rc) {
+        pthread_mutex_lock(&r->state_lock);
+        r->place_last_set = placed;
+        if (placed) memcpy(r->place_last, err, sizeof err);
+        pthread_mutex_unlock(&r->state_lock);
+    }
     return rc;
+}
+
+bool rig_virtual_last_placement(rig_virtual_t *v, double *turn_deg, double *dx_mm, double *dy_mm)
+{
+    if (!v) return false;
+    rig_virtual_t *r = v->state;
+    pthread_mutex_lock(&r->state_lock);
+    bool set = r->place_last_set;
+    if (set) {
+        if (turn_deg) *turn_deg = r->place_last[0];
+        if (dx_mm) *dx_mm = r->place_last[1];
+        if (dy_mm) *dy_mm = r->place_last[2];
+    }
+    pthread_mutex_unlock(&r->state_lock);
+    return set;
+}
+
+int rig_virtual_check_sample_pose(rig_virtual_t *v, const char *name, double tilt_deg, double tilt_azimuth_deg)
+{
+    if (!v || !name) return rig_fail(RIG_ERR_INVALID, "virtual rig: check sample: NULL argument");
+    rig_virtual_t *r = v->state;
+    int i, j, rc = pose_check(r, name, tilt_deg, tilt_azimuth_deg, r->place.on, &i, &j);
+    if (!rc && tilt_deg != 0 && j < 0 && !r->place.on && r->nsamples >= r->nbase_samples + MAX_POSES)
+        rc = rig_fail(RIG_ERR_INVALID, "virtual rig: more than %d sample poses in one rig session; close and open "
+                      "the rig", MAX_POSES);
+    return rc;
+}
+
+int rig_virtual_table_pose(rig_virtual_t *v, double angle_deg, double R[9])
+{
+    if (!v || !R || !isfinite(angle_deg)) return rig_fail(RIG_ERR_INVALID, "virtual rig: table pose: bad argument");
+    rig_virtual_place_table_R(&v->place, angle_deg, R);
+    return 0;
 }
 
 int rig_virtual_sample_pose(rig_virtual_t *v, double *tilt_deg, double *tilt_azimuth_deg, double R[9], double t[3])

@@ -82,9 +82,25 @@ int  rig_virtual_set_sample(rig_virtual_t *v, const char *name);
 // the turntable angle applies after this pose. Tilt 0 = rig_virtual_set_sample.
 // At most 32 distinct poses per open rig. A uniform_source cannot be tilted.
 int  rig_virtual_set_sample_pose(rig_virtual_t *v, const char *name, double tilt_deg, double tilt_azimuth_deg);
+// Whether rig_virtual_set_sample_pose would take that pose (0, or its error
+// with the message), without putting the sample anywhere: a placement error
+// ([placement]) is drawn when the operator places a sample, not by a check.
+int  rig_virtual_check_sample_pose(rig_virtual_t *v, const char *name, double tilt_deg, double tilt_azimuth_deg);
+// The placement error of the current sample (truth, [placement]): the turn
+// about its centre (deg) and the shift (mm) in the plane it rests on. false
+// when it was placed without one (no [placement]; a uniform source).
+bool rig_virtual_last_placement(rig_virtual_t *v, double *turn_deg, double *dx_mm, double *dy_mm);
 // The current sample's pose (truth): x_table = R x_sample_file + t (R
-// row-major; identity and 0 at tilt 0). Any pointer may be NULL.
+// row-major; identity and 0 at tilt 0 without a placement error). With a truth
+// [placement] section (rig/virtual_place.h) every placement (each call of
+// rig_virtual_set_sample*) adds a random rigid error, and R, t are the actual
+// pose used (tilt_deg, tilt_azimuth_deg stay the nominal ones). Any pointer may be NULL.
 int  rig_virtual_sample_pose(rig_virtual_t *v, double *tilt_deg, double *tilt_azimuth_deg, double R[9], double t[3]);
+// The turntable's rotation at angle_deg (truth): x_rig = R x_table (row-major):
+// Rz(angle) for an ideal stage; with the truth's [turntable] axis_tilt_deg,
+// axis_tilt_azimuth_deg and wobble_deg the tilted, wobbling axis
+// (rig/virtual_place.h). The frames render the sample through it.
+int  rig_virtual_table_pose(rig_virtual_t *v, double angle_deg, double R[9]);
 const char *rig_virtual_sample(const rig_virtual_t *v);
 const char *rig_virtual_truth_path(const rig_virtual_t *v);
 // The noise-free expected frame (DN of the camera's pixel format, before the
