@@ -1886,39 +1886,21 @@ done:
 // pose; and its scratch buffers.
 static int make_lowres(rig_virtual_t *v)
 {
-    int err = RIG_ERR_OK;
-    mrcal_cameramodel_t *m = mrcal_read_cameramodel_file(v->cam_path);
-    if (!m) return rig_fail(RIG_ERR_IO, "virtual rig: mrcal cannot read %s", v->cam_path);
-    mrcal_lensmodel_metadata_t meta = mrcal_lensmodel_metadata(&m->lensmodel);
-    int np = mrcal_lensmodel_num_params(&m->lensmodel);
-    if (!meta.has_core || np < 4) {
-        err = rig_fail(RIG_ERR_NOT_SUPPORTED, "virtual rig: %s: lens model %s has no fx fy cx cy core; set "
-                       "indirect_downsample = 1 in [render] of %s", v->cam_path, model_camera_lensmodel(v->cam),
-                       v->truth_path);
-        goto done;
-    }
-    double *in = m->intrinsics, rt[6];   // (a splined model's knots stay: they act on the normalised image)
-    const double f = v->ds;
-    in[0] /= f;
-    in[1] /= f;
-    in[2] = (in[2] + 0.5) / f - 0.5;
-    in[3] = (in[3] + 0.5) / f - 0.5;
     v->Wl = (v->W + v->ds - 1) / v->ds;
     v->Hl = (v->H + v->ds - 1) / v->ds;
-    model_camera_rt_cam_world(v->cam, rt);
-    v->cam_lr = model_camera_new(model_camera_lensmodel(v->cam), in, v->Wl, v->Hl, rt);
-    if (!v->cam_lr) {
-        err = fail_model(RIG_ERR_IO);
-        goto done;
+    int err = rig_optics_scaled_camera(v->cam_path, v->cam, 1.0 / v->ds, v->Wl, v->Hl, &v->cam_lr);
+    if (err == RIG_ERR_NOT_SUPPORTED) {
+        char *why = g_strdup(model_last_error());
+        err = rig_fail(err, "%s; set indirect_downsample = 1 in [render] of %s", why, v->truth_path);
+        g_free(why);
     }
+    if (err) return err;
     size_t nl = (size_t)v->Wl * v->Hl;
     v->face_lr = malloc(nl * sizeof *v->face_lr);
     v->A_lr = malloc(nl * sizeof *v->A_lr);
     v->B_lr = malloc(nl * sizeof *v->B_lr);
     if (!v->face_lr || !v->A_lr || !v->B_lr)
         err = rig_fail(RIG_ERR_NO_MEM, "virtual rig: out of memory");
-done:
-    mrcal_free_cameramodel(&m);
     return err;
 }
 

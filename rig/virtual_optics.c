@@ -177,12 +177,12 @@ int rig_optics_scaled_camera(const char *cam_path, const model_camera_t *cam, do
     int err = RIG_ERR_OK;
     mrcal_lensmodel_metadata_t meta = mrcal_lensmodel_metadata(&m->lensmodel);
     int np = mrcal_lensmodel_num_params(&m->lensmodel);
-    if (!meta.has_core || np < 4 || np > 64) {
+    if (!meta.has_core || np < 4) {
         err = rig_fail(RIG_ERR_NOT_SUPPORTED, "virtual rig: %s: lens model %s has no fx fy cx cy core, so it "
-                       "cannot be scaled (rays_per_pixel = 1 in [optics])", cam_path, model_camera_lensmodel(cam));
+                       "cannot be scaled", cam_path, model_camera_lensmodel(cam));
     } else {
-        double in[64], rt[6];
-        memcpy(in, m->intrinsics, (size_t)np * sizeof(double));
+        // in place: a splined model's knots stay (they act on the normalised image)
+        double *in = m->intrinsics, rt[6];
         in[0] *= f;
         in[1] *= f;
         in[2] = (in[2] + 0.5) * f - 0.5;

@@ -31,7 +31,8 @@ void rig_optics_average(int N, int W, int H, const float *hi, float *out);
 
 // A camera like cam (its mrcal model at cam_path) with f times the
 // resolution: fx, fy times f, pixel centres (c + 0.5) f - 0.5, W x H pixels
-// (f > 1: the rays of rays_per_pixel). RIG_ERR_* (rig_fail) on error.
+// (f > 1: the rays of rays_per_pixel; f < 1: the indirect light's camera).
+// RIG_ERR_* (rig_fail) on error, e.g. a lens model without that core.
 int rig_optics_scaled_camera(const char *cam_path, const model_camera_t *cam, double f, int W, int H,
                              model_camera_t **out);
 
