@@ -131,18 +131,22 @@ static void chain_camera(chain_t *c, const json_t *cam, const char *model_path, 
     for (int k = 0; cc && k < 3; k++) {
         snprintf(name, sizeof name, "%s.centre_rig.%c", label, "xyz"[k]);
         add(c, "camera geometry", name, json_number_value(json_array_get(cc, k)), rt_ref_cam[3 + k], NAN, "mm",
-            "the camera's centre in the rig frame; no sigma stated");
+            "the camera's centre in the rig frame (the calibration's frame rests on the flat board's placement: "
+            "its azimuth and origin carry that placement's error); no sigma stated");
     }
     const json_t *ax = json_object_get(cam, "axis");
     const json_t *dc = json_object_get(ax, "direction_cam");
-    if (json_array_size(dc) == 3) {
+    double a[3];
+    if (json_array_size(dc) == 3 && rig_truth_axis(c->truth, a)) {
         mrcal_R_from_r(R, NULL, t->rt_cam_ref);
         double dot = 0;
-        for (int k = 0; k < 3; k++) dot += json_number_value(json_array_get(dc, k)) * R[k * 3 + 2];
+        for (int k = 0; k < 3; k++)
+            dot += json_number_value(json_array_get(dc, k)) * (R[k * 3] * a[0] + R[k * 3 + 1] * a[1] + R[k * 3 + 2] * a[2]);
         snprintf(name, sizeof name, "%s.axis_direction_angle", label);
         add(c, "camera geometry", name, acos(fmin(1, fabs(dot))) * 180 / M_PI, 0,
             num(ax, "direction_uncertainty_deg"), "deg",
-            "angle between the fitted turntable axis and the truth's (rig z), in the camera frame");
+            "angle between the fitted turntable axis and the truth's (rig z, or as [turntable] axis_tilt_deg "
+            "leans it), in the camera frame");
     }
 done:
     if (t) mrcal_free_cameramodel(&t);

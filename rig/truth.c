@@ -1,4 +1,5 @@
 // rig/truth.c — the virtual rig's truth file, read in one place (rig/truth.h).
+#include <math.h>
 #include <glib.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -128,6 +129,25 @@ bool rig_truth_sphere(const rig_truth_t *t, const char *sample, double centre_mm
         model_error(t->path, er->line, "sphere_radius_mm = '%s' is not a number", er->value);
         return false;
     }
+    return true;
+}
+
+bool rig_truth_axis(const rig_truth_t *t, double dir[3])
+{
+    double tilt = 0, az = 0;
+    const char *keys[2] = { "axis_tilt_deg", "axis_tilt_azimuth_deg" };
+    double *vals[2] = { &tilt, &az };
+    for (int k = 0; k < 2; k++) {
+        const model_ini_entry_t *e = model_ini_get(t->ini, "turntable", keys[k]);
+        if (e && !model_parse_double(e->value, vals[k])) {
+            model_error(t->path, e->line, "%s = '%s' is not a number", keys[k], e->value);
+            return false;
+        }
+    }
+    double th = tilt * M_PI / 180, ph = az * M_PI / 180;
+    dir[0] = sin(th) * cos(ph);
+    dir[1] = sin(th) * sin(ph);
+    dir[2] = cos(th);
     return true;
 }
 

@@ -48,6 +48,10 @@ bool rig_truth_sample_scene(const rig_truth_t *t, const char *sample, char **sce
                             size_t material_size);
 // [sample NAME] of a mirror sphere: its centre (mm, rig frame at angle 0) and radius. false + message.
 bool rig_truth_sphere(const rig_truth_t *t, const char *sample, double centre_mm[3], double *radius_mm);
+// The turntable's rotation axis, a unit vector in the rig frame: z leaning
+// [turntable] axis_tilt_deg towards azimuth axis_tilt_azimuth_deg (both 0
+// when absent: z). false + message.
+bool rig_truth_axis(const rig_truth_t *t, double dir[3]);
 // [sample NAME] of kind uniform_source: its radiance. false + message.
 bool rig_truth_uniform_radiance(const rig_truth_t *t, const char *sample, double *radiance);
 

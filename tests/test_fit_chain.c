@@ -14,6 +14,7 @@
 #include "fit/chain.h"
 #include "model/model.h"
 #include "model/report.h"
+#include "rig/truth.h"
 #include "tests/test.h"
 
 static char *example(const char *name)
@@ -202,6 +203,33 @@ TEST(chain_table_material_ngan_ratio)
     }
     json_decref(doc);
     json_decref(prov);
+    g_free(text);
+    g_free(truth);
+}
+
+// The truth's rotation axis: z, or z leaning axis_tilt_deg towards its azimuth.
+TEST(chain_truth_axis)
+{
+    char *truth = example("virtual-truth.ini"), *text = NULL;
+    CHECK(g_file_get_contents(truth, &text, NULL, NULL));
+    if (!text) return;
+    rig_truth_t *t = rig_truth_load(truth);
+    double a[3];
+    CHECK(t && rig_truth_axis(t, a));
+    if (t) CHECK(a[0] == 0 && a[1] == 0 && a[2] == 1);
+    rig_truth_free(t);
+    GString *g = g_string_new(text);
+    char *at = strstr(g->str, "[turntable]\n");
+    CHECK(at != NULL);
+    if (at) g_string_insert(g, at - g->str + strlen("[turntable]\n"), "axis_tilt_deg = 0.2\naxis_tilt_azimuth_deg = 30\n");
+    t = rig_truth_load(test_write("tilted.ini", g->str));
+    CHECK(t && rig_truth_axis(t, a));
+    double th = 0.2 * M_PI / 180, ph = 30 * M_PI / 180;
+    CHECK_NEAR(a[0], sin(th) * cos(ph), 1e-12);
+    CHECK_NEAR(a[1], sin(th) * sin(ph), 1e-12);
+    CHECK_NEAR(a[2], cos(th), 1e-12);
+    rig_truth_free(t);
+    g_string_free(g, TRUE);
     g_free(text);
     g_free(truth);
 }
