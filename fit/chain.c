@@ -22,6 +22,8 @@ typedef struct {
     const model_ini_t *ini;
     char *truth_dir;
     json_t *entries, *missing, *prov;
+    bool   cams;                            // the first camera's poses (rig -> camera), calibrated and true
+    double rt_cam_rig_cal[6], rt_cam_rig_truth[6];
 } chain_t;
 
 // One entry; NAN: none (JSON null). error = value - truth, z = error / sigma.
@@ -124,6 +126,11 @@ static void chain_camera(chain_t *c, const json_t *cam, const char *model_path, 
         snprintf(note, sizeof note, "%s projection difference: %s", label, model_last_error());
         json_array_append_new(c->missing, json_string(note));
     }
+    if (!c->cams) {   // the first camera: where the lamps are compared in its frame
+        memcpy(c->rt_cam_rig_cal, b->rt_cam_ref, sizeof c->rt_cam_rig_cal);
+        memcpy(c->rt_cam_rig_truth, t->rt_cam_ref, sizeof c->rt_cam_rig_truth);
+        c->cams = true;
+    }
     // the camera's centre in the rig frame, and the turntable axis
     double rt_ref_cam[6], R[9];
     mrcal_invert_rt(rt_ref_cam, NULL, NULL, t->rt_cam_ref);
@@ -188,6 +195,30 @@ static void chain_geometry(chain_t *c, const json_t *geo)
 // ---------------------------------------------------------------------------
 // Lamps, sensor, white
 
+// A lamp in the first camera's frame (calibrated: through the calibrated
+// camera's rig pose; truth: through the truth's): the comparison free of how
+// the calibration's rig frame was laid (the flat board's placement sets its
+// azimuth and origin). sigma: the covariance turned into the camera frame.
+static void chain_lamp_in_camera(chain_t *c, const char *n, const double v[3], const double t[3], const json_t *cov)
+{
+    double vc[3], tc[3], R[9], C[9], RC[9];
+    mrcal_transform_point_rt(vc, NULL, NULL, c->rt_cam_rig_cal, v);
+    mrcal_transform_point_rt(tc, NULL, NULL, c->rt_cam_rig_truth, t);
+    mrcal_R_from_r(R, NULL, c->rt_cam_rig_cal);
+    bool have_cov = json_array_size(cov) == 9;
+    for (int k = 0; k < 9; k++) C[k] = have_cov ? json_number_value(json_array_get(cov, k)) : NAN;
+    for (int i = 0; i < 3; i++)
+        for (int j = 0; j < 3; j++) RC[i * 3 + j] = R[i * 3] * C[j] + R[i * 3 + 1] * C[3 + j] + R[i * 3 + 2] * C[6 + j];
+    for (int k = 0; k < 3; k++) {
+        double var = RC[k * 3] * R[k * 3] + RC[k * 3 + 1] * R[k * 3 + 1] + RC[k * 3 + 2] * R[k * 3 + 2];
+        char name[160];
+        snprintf(name, sizeof name, "lamp_%s.camera_%c", n, "xyz"[k]);
+        add(c, "lamps", name, vc[k], tc[k], var > 0 ? sqrt(var) : NAN, "mm",
+            "the first camera's frame (x right, y down, z forward): free of the rig frame's placement; sigma: the "
+            "covariance turned into that frame (the camera's own uncertainty not included)");
+    }
+}
+
 static void chain_lamps(chain_t *c, const json_t *lj)
 {
     const json_t *l;
@@ -200,12 +231,15 @@ static void chain_lamps(chain_t *c, const json_t *lj)
         double t[3];
         if (!tp || sscanf(tp, "%lf %lf %lf", &t[0], &t[1], &t[2]) != 3) continue;
         const json_t *p = json_object_get(l, "position_mm"), *s = json_object_get(l, "std_mm");
+        double v[3];
         for (int k = 0; k < 3; k++) {
+            v[k] = json_number_value(json_array_get(p, k));
             snprintf(name, sizeof name, "lamp_%s.%c", n, "xyz"[k]);
-            add(c, "lamps", name, json_number_value(json_array_get(p, k)), t[k],
+            add(c, "lamps", name, v[k], t[k],
                 json_is_number(json_array_get(s, k)) ? json_number_value(json_array_get(s, k)) : NAN, "mm",
                 "rig frame; sigma from the triangulation's covariance");
         }
+        if (c->cams) chain_lamp_in_camera(c, n, v, t, json_object_get(l, "covariance_mm2"));
     }
 }
 

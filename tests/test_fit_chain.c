@@ -96,7 +96,7 @@ TEST(chain_known_errors_and_z)
     put("calib/geometry/geometry.json", "{"
         "\"projection_uncertainty\": {\"distance_mm\": 900, \"max_px\": 0.2, \"stdev_px\": [[0.1, 0.1], [0.1, 0.1]]}}");
     put("calib/lamps/lamps.json", "{\"lamps\": [{\"name\": \"east\", \"position_mm\": [489.6, 177.9, 600],"
-        "\"std_mm\": [0.5, 0.5, 0.5]}]}");
+        "\"std_mm\": [0.5, 0.5, 0.5], \"covariance_mm2\": [0.25, 0, 0, 0, 0.25, 0, 0, 0, 0.25]}]}");
     put("calib/gain/gain.json", "{\"system_gain_dn_per_e\": 0.26, \"read_noise_e\": 6}");
     put("priors_glossy.json", "{\"materials\": [{\"name\": \"glossy_plastic\", \"model\": \"ggx\", \"parameters\": "
         "[{\"name\": \"kd\", \"mean\": 0.36, \"std\": 0.005, \"unit\": \"1\"}]}]}");
@@ -118,6 +118,16 @@ TEST(chain_known_errors_and_z)
         CHECK_NEAR(field(e, "error"), 1.0, 1e-9);
         CHECK_NEAR(field(e, "z"), 2.0, 1e-9);
         CHECK_NEAR(field(entry(doc, "lamp_east.y"), "z"), 0.0, 1e-9);
+        // in the camera's frame (the same camera, calibrated and true): the same 1 mm, turned; sigma 0.5 each
+        double e2 = 0;
+        for (int k = 0; k < 3; k++) {
+            char n[64];
+            snprintf(n, sizeof n, "lamp_east.camera_%c", "xyz"[k]);
+            const json_t *ec = entry(doc, n);
+            e2 += field(ec, "error") * field(ec, "error");
+            CHECK_NEAR(field(ec, "sigma"), 0.5, 1e-9);
+        }
+        CHECK_NEAR(sqrt(e2), 1.0, 1e-6);
         e = entry(doc, "sensor.system_gain_dn_per_e");
         CHECK_NEAR(field(e, "error"), 0.01, 1e-12);
         CHECK(json_is_null(json_object_get(e, "sigma")) && json_is_null(json_object_get(e, "z")));
