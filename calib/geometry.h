@@ -241,8 +241,9 @@ bool calib_geometry_report(const calib_geometry_opts_t *o, const calib_geometry_
 // How far model b projects from model a over a's imager (calib/geometry_diff.c),
 // as mrcal's projection_diff judges it: a 33 x 27 grid of a's pixels (margin_px
 // of the border left out) unprojected with a to distance_mm, the rigid
-// transform of a's camera frame onto b's fitted (least squares on the pixel
-// differences), the points projected with b. A focal length's error at that
+// transform of a's camera frame onto b's fitted to the points within
+// focus_radius_px of the imager's centre (<= 0: all; mrcal's default is
+// min(W, H) / 6), every point projected with b. A focal length's error at that
 // one distance is absorbed by a shift along the axis (see the .c file).
 // false + message (model_last_error).
 typedef struct {
@@ -254,7 +255,7 @@ typedef struct {
     int    npoints;
 } calib_projection_diff_t;
 bool calib_projection_diff(const mrcal_cameramodel_t *a, const mrcal_cameramodel_t *b, double distance_mm,
-                           int margin_px, calib_projection_diff_t *out);
+                           int margin_px, double focus_radius_px, calib_projection_diff_t *out);
 
 #ifdef __cplusplus
 }

@@ -1,11 +1,12 @@
 // calib/geometry_diff.c — how far two camera models project apart over the
 // imager, the way mrcal's projection_diff judges it: pixels on a grid over
 // model a's imager are unprojected with a to points at the working distance,
-// the rigid transform from a's camera frame to b's that best explains them is
-// fitted (two calibrations of one lens differ by a slight turn of the frame,
-// which no user sees), and the points are projected with b. The RMS and the
-// worst distance between the pixels and b's projections are the difference,
-// px. At one distance a focal length's error looks like a shift of the camera
+// the rigid transform from a's camera frame to b's that best explains the
+// points within a focus radius of the imager's centre is fitted (two
+// calibrations of one lens differ by a slight turn of the frame, which no user
+// sees; mrcal fits it within min(W, H) / 6 of the centre by default), and all
+// the points are projected with b. The RMS and the worst distance between the
+// pixels and b's projections over the whole grid are the difference, px. At one distance a focal length's error looks like a shift of the camera
 // along its axis, and is absorbed by it: the difference is that of the views
 // of points at that distance (where the lab works); where the camera itself
 // is, is the extrinsics' to say.
@@ -61,7 +62,7 @@ static double pd_stats(const pd_point_t *pts, int n, const double rt[6], double 
 }
 
 bool calib_projection_diff(const mrcal_cameramodel_t *a, const mrcal_cameramodel_t *b, double distance_mm,
-                           int margin_px, calib_projection_diff_t *out)
+                           int margin_px, double focus_radius_px, calib_projection_diff_t *out)
 {
     memset(out, 0, sizeof *out);
     enum { GX = 33, GY = 27, N = GX * GY };
@@ -85,13 +86,22 @@ bool calib_projection_diff(const mrcal_cameramodel_t *a, const mrcal_cameramodel
         model_error(NULL, 0, "projection difference: mrcal_unproject failed over the first model's imager");
     }
     double rt[6] = { 0 };
+    int nfit = 0;
     if (ok) ok = lsq_add_parameters(p, rt, 6);
     for (int k = 0; ok && k < N; k++) {
         double n = sqrt(v[k].xyz[0] * v[k].xyz[0] + v[k].xyz[1] * v[k].xyz[1] + v[k].xyz[2] * v[k].xyz[2]);
         pts[k] = (pd_point_t){ .b = b, .q = q[k] };
         for (int c = 0; c < 3; c++) pts[k].p.xyz[c] = v[k].xyz[c] * distance_mm / n;
         double *blocks[1] = { rt };
+        double dx = q[k].xy[0] - (a->imagersize[0] - 1) / 2.0, dy = q[k].xy[1] - (a->imagersize[1] - 1) / 2.0;
+        if (focus_radius_px > 0 && dx * dx + dy * dy > focus_radius_px * focus_radius_px) continue;
+        nfit++;
         ok = lsq_add_residual(p, pd_residual, &pts[k], 2, 1, blocks, LSQ_LOSS_NONE, 0);
+    }
+    if (ok && nfit < 3) {
+        ok = false;
+        model_error(NULL, 0, "projection difference: fewer than 3 grid points within the focus radius (%g px)",
+                    focus_radius_px);
     }
     if (ok) {
         out->rms_unaligned_px = pd_stats(pts, N, rt, &out->worst_unaligned_px);

@@ -114,9 +114,11 @@ static void chain_camera(chain_t *c, const json_t *cam, const char *model_path, 
     const json_t *pu = json_object_get(cam, "projection_uncertainty");
     double dist = num(pu, "distance_mm");
     if (!isfinite(dist)) dist = 900;
-    if (calib_projection_diff(t, b, dist, 0, &d)) {
-        snprintf(note, sizeof note, "over the imager at %g mm, after the best rigid alignment (mrcal's "
-                 "projection_diff); sigma: RMS of the stated projection uncertainty", dist);
+    double focus = fmin(t->imagersize[0], t->imagersize[1]) / 6.0;
+    if (calib_projection_diff(t, b, dist, 0, focus, &d)) {
+        snprintf(note, sizeof note, "over the imager at %g mm, after the rigid alignment that fits best within "
+                 "%.0f px of the centre (mrcal's projection_diff default); sigma: RMS of the stated projection "
+                 "uncertainty", dist, focus);
         snprintf(name, sizeof name, "%s.projection_error_rms", label);
         add(c, "camera geometry", name, d.rms_px, 0, uncertainty_rms(pu), "px", note);
         snprintf(name, sizeof name, "%s.projection_error_worst", label);
