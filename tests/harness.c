@@ -29,6 +29,7 @@ typedef struct {
     test_fn_t fn;
     bool (*only_if)(void);   // NULL: always
     bool alone;              // runs with no other test beside it (TEST_ALONE)
+    bool long_;              // a minute or more: started before the others (TEST_LONG)
 } test_t;
 
 static test_t tests[1024];
@@ -54,18 +55,23 @@ void test_register(const char *name, test_fn_t fn, const char *file)
 void test_register_inner(const char *name, test_fn_t fn, const char *file, bool (*only_if)(void))
 {
     if (ntests < (int)(sizeof tests / sizeof tests[0]))
-        tests[ntests++] = (test_t){ name, file, fn, only_if, false };
+        tests[ntests++] = (test_t){ name, file, fn, only_if, false, false };
 }
 
 void test_register_alone(const char *name, test_fn_t fn, const char *file)
 {
-    test_register_full(name, fn, file, NULL, true);
+    test_register_full(name, fn, file, NULL, TEST_FLAG_ALONE);
 }
 
-void test_register_full(const char *name, test_fn_t fn, const char *file, bool (*only_if)(void), bool alone)
+void test_register_long(const char *name, test_fn_t fn, const char *file)
+{
+    test_register_full(name, fn, file, NULL, TEST_FLAG_LONG);
+}
+
+void test_register_full(const char *name, test_fn_t fn, const char *file, bool (*only_if)(void), int flags)
 {
     if (ntests < (int)(sizeof tests / sizeof tests[0]))
-        tests[ntests++] = (test_t){ name, file, fn, only_if, alone };
+        tests[ntests++] = (test_t){ name, file, fn, only_if, flags & TEST_FLAG_ALONE, flags & TEST_FLAG_LONG };
 }
 
 void test_fail(const char *file, int line, const char *fmt, ...)
@@ -414,7 +420,7 @@ void test_run_isolated(test_fn_t fn, double limit_s, test_outcome_t *out)
         snprintf(out->how, sizeof out->how, "mmap: %s", strerror(errno));
         return;
     }
-    const test_t t = { "isolated", __FILE__, fn, NULL, false };
+    const test_t t = { "isolated", __FILE__, fn, NULL, false, false };
     run_child(&t, r, limit_s, out->how, sizeof out->how);
     tmp_cleanup(r->tmpdir);
     out->failures = r->failures;
@@ -522,7 +528,10 @@ int main(int argc, char **argv)
         // TEST_ALONE test only when nothing runs, and nothing beside it.
         for (int j = 0; j < njobs && !alone_running; j++) {
             if (slots[j].pid) continue;
+            // the long tests first (in order), so that the short ones fill in beside them
             int pick = -1;
+            for (int i = next; i < ntodo && pick < 0; i++)
+                if (!started[i] && todo[i]->long_) pick = i;
             for (int i = next; i < ntodo && pick < 0; i++)
                 if (!started[i] && (!todo[i]->alone || running == 0)) pick = i;
             if (pick < 0) break;

@@ -8,8 +8,11 @@
 // (default 2) at a time, and ends with the line "N passed, N failed"
 // (", N skipped" appended when tests were skipped). A test that measures time
 // (a stop within 1 s, a settle time, linear time on large input) is declared
-// with TEST_ALONE instead of TEST: it runs with no other test beside it. Each
-// test's $XDG_STATE_HOME is a directory of its own, removed afterwards.
+// with TEST_ALONE instead of TEST: it runs with no other test beside it. A
+// test of a minute or more (a lab day, a calibration on the virtual rig) is
+// declared with TEST_LONG: the long tests start first, so the short ones fill
+// in beside them. Each test's $XDG_STATE_HOME is a directory of its own,
+// removed afterwards.
 // A test passes when none of its checks failed; a test that crashes, aborts or
 // is killed by a signal fails with the signal named, and so does one that runs
 // longer than $REFL_TEST_TIMEOUT seconds (default 600). Each failed check
@@ -53,8 +56,17 @@ void test_skip(const char *fmt, ...) __attribute__((format(printf, 1, 2), noretu
     static void name(void)
 
 void test_register_alone(const char *name, test_fn_t fn, const char *file);
-// Either or both (the runner's own tests register a TEST_INNER that runs alone).
-void test_register_full(const char *name, test_fn_t fn, const char *file, bool (*only_if)(void), bool alone);
+void test_register_long(const char *name, test_fn_t fn, const char *file);
+#define TEST_LONG(name)                                                            \
+    static void name(void);                                                        \
+    __attribute__((constructor)) static void test_reg_##name(void)                 \
+    {                                                                              \
+        test_register_long(#name, name, __FILE__);                                 \
+    }                                                                              \
+    static void name(void)
+// With flags (the runner's own tests register a TEST_INNER that runs alone or long).
+enum { TEST_FLAG_ALONE = 1, TEST_FLAG_LONG = 2 };
+void test_register_full(const char *name, test_fn_t fn, const char *file, bool (*only_if)(void), int flags);
 #define TEST_ALONE(name)                                                           \
     static void name(void);                                                        \
     __attribute__((constructor)) static void test_reg_##name(void)                 \

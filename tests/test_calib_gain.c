@@ -117,7 +117,7 @@ static const char *linear_truth(void)
     return p;
 }
 
-TEST(calib_gain_virtual)
+TEST_LONG(calib_gain_virtual)
 {
     char top[PATH_MAX], rig[3 * PATH_MAX];
     if (!realpath(test_srcdir(), top)) snprintf(top, sizeof top, "%s", test_srcdir());
@@ -388,7 +388,7 @@ static const char *gen_manifest(const char *sub, const gen_t *g)
 // camera's; gain.json records the gain's value and unit and the camera. Then
 // --camera right on the captured sessions gives its figures again, and an
 // unknown camera is an error naming the session's cameras.
-TEST(calib_gain_two_cameras)
+TEST_LONG(calib_gain_two_cameras)
 {
     char top[PATH_MAX], rig[3 * PATH_MAX];
     if (!realpath(test_srcdir(), top)) snprintf(top, sizeof top, "%s", test_srcdir());

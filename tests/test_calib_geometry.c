@@ -350,7 +350,7 @@ TEST(calib_geometry_synthetic_mrcal)
     free(t);
 }
 
-TEST(calib_geometry_virtual_rig)
+TEST_LONG(calib_geometry_virtual_rig)
 {
     char top[PATH_MAX];
     if (!realpath(test_srcdir(), top)) snprintf(top, sizeof top, "%s", test_srcdir());
@@ -677,7 +677,7 @@ static void pose_diff(const double a[6], const double b[6], const double *fit, d
 // camera's pose relative to the left within 0.05 deg / 0.5 mm; the JSON names
 // each view's camera and gives the relative pose's 1-sigma; camera.cameramodel
 // is the first camera's.
-TEST(calib_geometry_two_cameras)
+TEST_LONG(calib_geometry_two_cameras)
 {
     char top[PATH_MAX];
     if (!realpath(test_srcdir(), top)) snprintf(top, sizeof top, "%s", test_srcdir());

@@ -440,7 +440,7 @@ static bool lamps_vs_truth(const char *json_path, const model_lamps_t *tl, const
     return n == tl->n;
 }
 
-TEST(calib_lamps_virtual_rig_accuracy)
+TEST_LONG(calib_lamps_virtual_rig_accuracy)
 {
     double t0 = model_now_s();
     const char *truth = truth_file("truth.ini", 0);

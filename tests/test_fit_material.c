@@ -71,7 +71,7 @@ static char *rig_file(void)
 }
 
 
-TEST(fit_material_chain_virtual_rig)
+TEST_LONG(fit_material_chain_virtual_rig)
 {
     char *rig = rig_file(), *cal = calib_dir();
     char *wsc = sample_scene("reference_white"), *gsc = sample_scene("coupon_glossy_plastic");
@@ -357,7 +357,7 @@ static void check_noise(json_t *m, double lo, double hi)
 // on 5x5 windows the plywood's stays at 2x, a window's footprint turning with
 // the table over the texture); the cells' factors spread as the textures'
 // amplitudes do (4x).
-TEST(fit_material_coupons_virtual_rig)
+TEST_LONG(fit_material_coupons_virtual_rig)
 {
     char *rig = rig_file(), *cal = calib_dir();
     char *white = keep(test_write("white.ini", "[plan]\nname = white\n[sample]\nname = reference_white\n"
@@ -508,7 +508,7 @@ static void raw_gain_white(const char *ws, const char *cal, const char *wsc)
 // in one fit (more observations than either camera's alone) and recovers the
 // truth's GGX material (kd within 5 %, alpha, F0 and ks*F0 within 10 %). A camera without calibration files is an
 // error naming the file to make.
-TEST(fit_material_two_cameras)
+TEST_LONG(fit_material_two_cameras)
 {
     char *sd = srcdir(), text[4200];
     snprintf(text, sizeof text, "[rig]\nbackend = virtual\ntruth = %s/examples/virtual-truth-2cam.ini\n"

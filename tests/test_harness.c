@@ -99,9 +99,10 @@ TEST(harness_tmpdir_and_left_processes_removed)
 }
 
 // Several tests at once (REFL_TEST_JOBS): the runner re-runs this binary on
-// three inner tests that record when they ran. The two plain ones run side by
-// side; the TEST_ALONE one beside neither; what each prints comes out whole,
-// before its result line; each has its own $XDG_STATE_HOME.
+// four inner tests that record when they ran. The TEST_LONG one, registered
+// last, starts first, and a plain one beside it; the TEST_ALONE one beside
+// none; what each prints comes out whole, before its result line; each
+// has its own $XDG_STATE_HOME.
 static bool inner_run(void) { return getenv("REFL_TEST_HARNESS_DIR") != NULL; }
 
 static void record_span(const char *name)
@@ -124,7 +125,12 @@ TEST_INNER(harness_inner_span_b, inner_run) { record_span("b"); }
 static void harness_inner_span_c(void) { record_span("c"); }
 __attribute__((constructor)) static void register_span_c(void)
 {
-    test_register_full("harness_inner_span_c", harness_inner_span_c, __FILE__, inner_run, true);
+    test_register_full("harness_inner_span_c", harness_inner_span_c, __FILE__, inner_run, TEST_FLAG_ALONE);
+}
+static void harness_inner_span_d(void) { record_span("d"); }
+__attribute__((constructor)) static void register_span_d(void)
+{
+    test_register_full("harness_inner_span_d", harness_inner_span_d, __FILE__, inner_run, TEST_FLAG_LONG);
 }
 
 TEST(harness_jobs_side_by_side_and_alone)
@@ -140,12 +146,12 @@ TEST(harness_jobs_side_by_side_and_alone)
     const char *argv[] = { "env", env_dir, "REFL_TEST_JOBS=2", self, "harness_inner_span_", NULL };
     char *out = NULL, *err = NULL;
     int rc = test_run(argv, 60, &out, &err);
-    CHECK_MSG(rc == 0 && out && strstr(out, "3 passed, 0 failed"), "exit %d\n%s%s", rc, out ? out : "", err ? err : "");
-    CHECK_CONTAINS(out, "3 tests, 2 at a time");
-    double t[3][2] = { { 0 } };
-    char state[3][1024] = { "" };
-    const char *names = "abc";
-    for (int i = 0; i < 3; i++) {
+    CHECK_MSG(rc == 0 && out && strstr(out, "4 passed, 0 failed"), "exit %d\n%s%s", rc, out ? out : "", err ? err : "");
+    CHECK_CONTAINS(out, "4 tests, 2 at a time");
+    double t[4][2] = { { 0 } };
+    char state[4][1024] = { "" };
+    const char *names = "abcd";
+    for (int i = 0; i < 4; i++) {
         char p[64];
         snprintf(p, sizeof p, "%c", names[i]);
         FILE *f = fopen(test_path(p), "r");
@@ -158,12 +164,14 @@ TEST(harness_jobs_side_by_side_and_alone)
         const char *w = err ? strstr(err, whole) : NULL, *o = out ? strstr(out, ok) : NULL;
         CHECK_MSG(w && o, "'%s' whole in stderr and '%s' in stdout", whole, ok);
     }
-    bool ab = t[0][0] < t[1][1] && t[1][0] < t[0][1];
-    bool ac = t[0][0] < t[2][1] && t[2][0] < t[0][1];
-    bool bc = t[1][0] < t[2][1] && t[2][0] < t[1][1];
-    CHECK_MSG(ab, "a [%.3f, %.3f] and b [%.3f, %.3f] did not run side by side", t[0][0], t[0][1], t[1][0], t[1][1]);
-    CHECK_MSG(!ac && !bc, "the TEST_ALONE test ran beside another");
-    CHECK(state[0][0] && strcmp(state[0], state[1]) != 0);
+    // run side by side: i's span and j's overlap
+#define SIDE_BY_SIDE(i, j) (t[i][0] < t[j][1] && t[j][0] < t[i][1])
+    CHECK_MSG(t[3][0] < t[0][0] && t[3][0] < t[1][0] && t[3][0] < t[2][0], "the TEST_LONG test did not start first");
+    CHECK_MSG(SIDE_BY_SIDE(3, 0), "d [%.3f, %.3f] and a [%.3f, %.3f] did not run side by side", t[3][0], t[3][1],
+              t[0][0], t[0][1]);
+    CHECK_MSG(!SIDE_BY_SIDE(2, 0) && !SIDE_BY_SIDE(2, 1) && !SIDE_BY_SIDE(2, 3), "the TEST_ALONE test ran beside another");
+#undef SIDE_BY_SIDE
+    CHECK(state[0][0] && strcmp(state[0], state[3]) != 0);
     free(out);
     free(err);
 }

@@ -469,7 +469,7 @@ static int count_of(const char *hay, const char *needle)
 // with answers enough, it goes on where it stopped (the complete session kept,
 // the answered step not asked again), asks every step once, in the day's
 // order, and completes.
-TEST(operator_lab_day_scripted)
+TEST_LONG(operator_lab_day_scripted)
 {
     const char *dir = test_path("day");
     const char *one = test_write("answers-1.txt", "done\n");
