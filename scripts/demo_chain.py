@@ -52,11 +52,14 @@ if os.path.exists(cj_path):
                  f"value), {sm['without_sigma']} with a truth but no stated &sigma;. z = (value &minus; truth) / "
                  f"&sigma;. <b>{len(over)}</b> stated &sigma; fail to cover their error (|z| &gt; 3)"
                  + (": " + ", ".join(html.escape(n) for n in over) if over else "")
-                 + f"; wrong verdicts: {sm.get('wrong_verdicts', 0)}.</p>\n<table>\n")
+                 + f"; wrong verdicts: {sm.get('wrong_verdicts', 0)}; materials whose fitted model is over 1.2 "
+                 f"&times; the best fit's Ngan error against a tabulated truth: "
+                 f"{len(sm.get('ngan_ratio_over_1_2', []))}.</p>\n<table>\n")
     parts.append(row(["figure", "value", "truth", "sigma", "error", "z", "unit", "note"], True))
     for e in cj["entries"]:
         z = e.get("z")
-        bad = (z is not None and abs(z) > 3) or (isinstance(e.get("value"), str) and e.get("error"))
+        bad = ((z is not None and abs(z) > 3) or (isinstance(e.get("value"), str) and e.get("error"))
+               or (e["name"].endswith(".ngan_error_ratio") and (e.get("value") or 0) > 1.2))
         cells = [e["name"], f(e.get("value"), 6), "" if e.get("truth") is None else f(e["truth"], 6),
                  "" if e.get("sigma") is None else f(e["sigma"], 3),
                  "" if e.get("error") is None else f(e["error"], 3),
