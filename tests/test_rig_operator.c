@@ -475,7 +475,7 @@ TEST_LONG(operator_lab_day_scripted)
     const char *one = test_write("answers-1.txt", "done\n");
     GString *many = g_string_new("");
     for (int i = 0; i < 60; i++) g_string_append(many, "done\n");
-    const char *all = g_strdup(test_write("answers-all.txt", many->str));
+    char *all = g_strdup(test_write("answers-all.txt", many->str));
     g_string_free(many, TRUE);
 
     char *out = NULL, *err = NULL, *log1 = NULL, *log2 = NULL;
@@ -523,4 +523,5 @@ TEST_LONG(operator_lab_day_scripted)
     g_free(log2);
     g_free(out);
     g_free(err);
+    g_free(all);
 }
