@@ -1,6 +1,8 @@
 // tests/fixtures.c — setup that several tests share (tests/fixtures.h).
 #define _GNU_SOURCE
 #include <fcntl.h>
+#include <glib.h>
+#include <limits.h>
 #include <mrcal/poseutils.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -254,4 +256,35 @@ char *fx_stdout_of(int (*fn)(rig_t *), rig_t *r, int *rc)
     dup2(saved, 1);
     close(saved);
     return model_read_file(path, NULL);
+}
+
+const char *fx_truth_variant(const char *file, const char *name, const char *const *rep, const char *extra)
+{
+    char top[PATH_MAX];
+    if (!realpath(test_srcdir(), top)) snprintf(top, sizeof top, "%s", test_srcdir());
+    char *path = g_strdup_printf("%s/examples/%s", top, file);
+    char *text = model_read_file(path, NULL);
+    CHECK_MSG(text != NULL, "cannot read %s", path);
+    g_free(path);
+    if (!text) return "";
+    GString *s = g_string_new(text);
+    free(text);
+    for (int k = 0; rep && rep[k]; k += 2) {
+        char *p = strstr(s->str, rep[k]);
+        CHECK_MSG(p != NULL, "'%s' not in examples/%s", rep[k], file);
+        if (!p) continue;
+        size_t at = (size_t)(p - s->str);
+        g_string_erase(s, (gssize)at, (gssize)strlen(rep[k]));
+        g_string_insert(s, (gssize)at, rep[k + 1]);
+    }
+    // every relative path of the examples is on a "scene = " or "model = camera" line
+    char *sep = g_strdup_printf("scene = %s/examples/", top), *msep = g_strdup_printf("model = %s/examples/camera", top);
+    g_string_replace(s, "scene = ", sep, 0);
+    g_string_replace(s, "model = camera", msep, 0);
+    if (extra) g_string_append_printf(s, "\n%s", extra);
+    const char *out = test_write(name, s->str);
+    g_free(sep);
+    g_free(msep);
+    g_string_free(s, TRUE);
+    return out;
 }

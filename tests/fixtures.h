@@ -123,3 +123,11 @@ bool fx_gv_open(fx_gv_t *f, bool open_camera);
 // text (caller frees) and fn's return value in *rc (e.g. rig_cmd_status).
 char *fx_stdout_of(int (*fn)(rig_t *), rig_t *r, int *rc);
 void fx_gv_close(fx_gv_t *f);
+
+// A variant of an example truth file (examples/FILE, e.g. "virtual-truth.ini"):
+// the replacements rep (pairs from, to; NULL-ended; rep may be NULL) made in
+// turn, each of which must be found (a failed CHECK otherwise), the relative
+// paths ("scene = ...", "model = camera...") made absolute, then extra (may
+// be NULL) appended as it is; written as NAME in the test's directory. Returns
+// its path (test_path's buffer: copy it to keep it), "" when FILE is unreadable.
+const char *fx_truth_variant(const char *file, const char *name, const char *const *rep, const char *extra);

@@ -19,6 +19,7 @@
 
 #include "model/model.h"
 #include "rig/rig.h"
+#include "tests/fixtures.h"
 #include "tests/test.h"
 #include "tests/virtual_stats.h"
 
@@ -214,38 +215,7 @@ done:
 // A truth file with one thing changed: `from` replaced by `to` in the example.
 static const char *truth_variant(const char *from, const char *to)
 {
-    char *text = model_read_file(truth_path(), NULL);
-    CHECK(text != NULL);
-    if (!text) return "";
-    char *p = strstr(text, from);
-    CHECK_MSG(p != NULL, "'%s' not in the truth file", from);
-    GString *s = g_string_new(NULL);
-    if (p) {
-        g_string_append_len(s, text, p - text);
-        g_string_append(s, to);
-        g_string_append(s, p + strlen(from));
-    }
-    free(text);
-    char top[PATH_MAX];
-    if (!realpath(test_srcdir(), top)) snprintf(top, sizeof top, "%s", test_srcdir());
-    char *abs_dir = g_strdup_printf("%s/examples/", top);
-    // every relative path of the example is on a "model = " or "scene = " line
-    gchar **parts = g_strsplit(s->str, "scene = ", -1);
-    char *sep = g_strdup_printf("scene = %s", abs_dir);
-    char *joined = g_strjoinv(sep, parts);
-    g_free(sep);
-    g_strfreev(parts);
-    parts = g_strsplit(joined, "model = camera", -1);
-    char *pfx = g_strdup_printf("model = %scamera", abs_dir);
-    char *joined2 = g_strjoinv(pfx, parts);
-    g_strfreev(parts);
-    const char *path = test_write("truth.ini", joined2);
-    g_free(pfx);
-    g_free(joined);
-    g_free(joined2);
-    g_free(abs_dir);
-    g_string_free(s, TRUE);
-    return path;
+    return fx_truth_variant("virtual-truth.ini", "truth.ini", (const char *const[]){ from, to, NULL }, NULL);
 }
 
 // Line number of the first line of path containing needle.

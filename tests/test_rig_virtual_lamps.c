@@ -22,6 +22,7 @@
 #include "model/vec.h"
 #include "rig/rig.h"
 #include "rig/virtual_lamps.h"
+#include "tests/fixtures.h"
 #include "tests/test.h"
 
 #define W 1280
@@ -40,40 +41,9 @@ static double mono_s(void)
 // relative paths made absolute.
 static const char *truth_edit(const char *name, const char *extra, const char *from, const char *to)
 {
-    char top[PATH_MAX];
-    if (!realpath(test_srcdir(), top)) snprintf(top, sizeof top, "%s", test_srcdir());
-    char *path = g_strdup_printf("%s/examples/virtual-truth.ini", top);
-    char *text = model_read_file(path, NULL);
-    g_free(path);
-    CHECK(text != NULL);
-    if (!text) return "";
-    char *dir = g_strdup_printf("%s/examples/", top);
-    GString *s = g_string_new(text);
-    free(text);
-    struct { const char *from, *to; } subst[] = {
-        { "sample = t_stiffener", "sample = flat_field" },
-        { "nonlinearity_pct = 2", "nonlinearity_pct = 0" },
-        { from, to },
-    };
-    for (size_t k = 0; k < 3 && subst[k].from; k++) {
-        char *p = strstr(s->str, subst[k].from);
-        CHECK_MSG(p != NULL, "'%s' not in the example truth file", subst[k].from);
-        if (p) {
-            size_t at = (size_t)(p - s->str);
-            g_string_erase(s, (gssize)at, (gssize)strlen(subst[k].from));
-            g_string_insert(s, (gssize)at, subst[k].to);
-        }
-    }
-    char *sep = g_strdup_printf("scene = %s", dir), *msep = g_strdup_printf("model = %scamera", dir);
-    g_string_replace(s, "scene = ", sep, 0);
-    g_string_replace(s, "model = camera", msep, 0);
-    g_string_append_printf(s, "\n%s", extra);
-    const char *out = test_write(name, s->str);
-    g_free(sep);
-    g_free(msep);
-    g_free(dir);
-    g_string_free(s, TRUE);
-    return out;
+    const char *rep[] = { "sample = t_stiffener", "sample = flat_field", "nonlinearity_pct = 2", "nonlinearity_pct = 0",
+                          from, to, NULL };
+    return fx_truth_variant("virtual-truth.ini", name, rep, extra);
 }
 
 static const char *truth_with(const char *name, const char *extra) { return truth_edit(name, extra, NULL, NULL); }

@@ -16,43 +16,18 @@
 #include "tests/test.h"
 
 // The example truth file with the replacements (pairs old, new; NULL ended)
-// and `extra` appended, as NAME in the test directory (the files it names
-// linked there once). Interreflection off: the frames are the direct light.
+// and `extra` appended, as NAME in the test directory (fx_truth_variant).
+// Interreflection off: the frames are the direct light.
 static const char *truth_variant(const char *name, const char *const *rep, const char *extra)
 {
-    char top[PATH_MAX];
-    if (!realpath(test_srcdir(), top)) snprintf(top, sizeof top, "%s", test_srcdir());
-    char src[PATH_MAX + 64];
-    snprintf(src, sizeof src, "%s/examples/virtual-truth.ini", top);
-    char *text = model_read_file(src, NULL);
-    if (!text) return NULL;
-    static const char *const base[] = { "interreflection = mc\n", "interreflection = none\n", "prerender = 1\n",
-                                        "prerender = 0\n", NULL };
-    for (int pass = 0; pass < 2; pass++) {
-        const char *const *r = pass ? rep : base;
-        for (int k = 0; r && r[k]; k += 2) {
-            char *at = strstr(text, r[k]);
-            CHECK_MSG(at != NULL, "the example truth file has no '%s'", r[k]);
-            if (!at) continue;
-            char *out = NULL;
-            if (asprintf(&out, "%.*s%s%s", (int)(at - text), text, r[k + 1], at + strlen(r[k])) < 0) break;
-            free(text);
-            text = out;
-        }
+    const char *all[40] = { "interreflection = mc\n", "interreflection = none\n", "prerender = 1\n", "prerender = 0\n" };
+    int n = 4;
+    for (int k = 0; rep && rep[k] && n < 38; k += 2) {
+        all[n++] = rep[k];
+        all[n++] = rep[k + 1];
     }
-    char *all = NULL;
-    if (asprintf(&all, "%s\n%s", text, extra ? extra : "") < 0) all = NULL;
-    free(text);
-    const char *truth = all ? test_write(name, all) : NULL;
-    free(all);
-    const char *links[] = { "camera.cameramodel", "samples", "t_stiffener.d3d" };
-    for (int i = 0; i < 3; i++) {
-        char a[PATH_MAX + 64], b[4200];
-        snprintf(a, sizeof a, "%s/examples/%s", top, links[i]);
-        snprintf(b, sizeof b, "%s/%s", test_tmpdir(), links[i]);
-        if (access(b, F_OK) != 0) CHECK(symlink(a, b) == 0);
-    }
-    return truth;
+    all[n] = NULL;
+    return fx_truth_variant("virtual-truth.ini", name, all, extra ? extra : "");
 }
 
 // The radiance planes (every lamp) of a sample at angle 0 under a truth file.

@@ -15,6 +15,7 @@
 #include "model/model.h"
 #include "rig/rig.h"
 #include "rig/virtual_optics.h"
+#include "tests/fixtures.h"
 #include "tests/test.h"
 
 // A vertical step edge (0 left of x = 100, 1000 from it on), PSF applied; the
@@ -156,46 +157,20 @@ TEST(optics_rays_area_fraction)
 // extra text appended, its relative paths made absolute; its path.
 static const char *truth_with(const char *extra, ...)
 {
-    char path[PATH_MAX];
-    snprintf(path, sizeof path, "%s/examples/virtual-truth.ini", test_srcdir());
-    char *text = model_read_file(path, NULL);
-    CHECK(text != NULL);
-    if (!text) return "";
-    GString *s = g_string_new(text);
-    free(text);
+    const char *rep[33];
+    int n = 0;
     va_list ap;
     va_start(ap, extra);
-    for (const char *from; (from = va_arg(ap, const char *));) {
-        const char *to = va_arg(ap, const char *);
-        char *p = strstr(s->str, from);
-        CHECK_MSG(p != NULL, "'%s' not in the truth file", from);
-        if (!p) continue;
-        size_t at = (size_t)(p - s->str);
-        g_string_erase(s, (gssize)at, (gssize)strlen(from));
-        g_string_insert(s, (gssize)at, to);
+    for (const char *from; n < 31 && (from = va_arg(ap, const char *));) {
+        rep[n++] = from;
+        rep[n++] = va_arg(ap, const char *);
     }
     va_end(ap);
-    char top[PATH_MAX];
-    if (!realpath(test_srcdir(), top)) snprintf(top, sizeof top, "%s", test_srcdir());
-    char *a = g_strdup_printf("scene = %s/examples/", top), *b = g_strdup_printf("model = %s/examples/camera", top);
-    gchar **parts = g_strsplit(s->str, "scene = ", -1);
-    char *j1 = g_strjoinv(a, parts);
-    g_strfreev(parts);
-    parts = g_strsplit(j1, "model = camera", -1);
-    char *j2 = g_strjoinv(b, parts);
-    g_strfreev(parts);
-    char *all = g_strconcat(j2, "\n", extra ? extra : "", NULL);
+    rep[n] = NULL;
     static int count;
     char name[32];
     snprintf(name, sizeof name, "truth%d.ini", count++);
-    const char *out = test_write(name, all);
-    g_free(a);
-    g_free(b);
-    g_free(j1);
-    g_free(j2);
-    g_free(all);
-    g_string_free(s, TRUE);
-    return out;
+    return fx_truth_variant("virtual-truth.ini", name, rep, extra ? extra : "");
 }
 
 // Deterministic planes: no Monte Carlo, point lamps.

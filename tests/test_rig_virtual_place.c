@@ -13,6 +13,7 @@
 #include "model/model.h"
 #include "rig/rig.h"
 #include "rig/virtual_place.h"
+#include "tests/fixtures.h"
 #include "tests/test.h"
 
 #define W 1280
@@ -23,37 +24,7 @@
 // absolute, written into the test's directory.
 static const char *truth_file_with(const char *file, const char *from, const char *to)
 {
-    char top[PATH_MAX], path[PATH_MAX + 64];
-    if (!realpath(test_srcdir(), top)) snprintf(top, sizeof top, "%s", test_srcdir());
-    snprintf(path, sizeof path, "%s/examples/%s", top, file);
-    char *text = model_read_file(path, NULL);
-    CHECK(text != NULL);
-    if (!text) return "";
-    char *p = strstr(text, from);
-    CHECK_MSG(p != NULL, "'%s' not in the truth file", from);
-    GString *s = g_string_new(NULL);
-    if (p) {
-        g_string_append_len(s, text, p - text);
-        g_string_append(s, to);
-        g_string_append(s, p + strlen(from));
-    }
-    free(text);
-    char *dir = g_strdup_printf("%s/examples/", top);
-    char *pre1 = g_strdup_printf("scene = %s", dir), *pre2 = g_strdup_printf("model = %scamera", dir);
-    gchar **parts = g_strsplit(s->str, "scene = ", -1);
-    char *j1 = g_strjoinv(pre1, parts);
-    g_strfreev(parts);
-    parts = g_strsplit(j1, "model = camera", -1);
-    char *j2 = g_strjoinv(pre2, parts);
-    g_strfreev(parts);
-    const char *out = test_write("truth.ini", j2);
-    g_free(dir);
-    g_free(pre1);
-    g_free(pre2);
-    g_free(j1);
-    g_free(j2);
-    g_string_free(s, TRUE);
-    return out;
+    return fx_truth_variant(file, "truth.ini", (const char *const[]){ from, to, NULL }, NULL);
 }
 
 static const char *truth_with(const char *from, const char *to)
