@@ -94,7 +94,7 @@ static void chain_camera(chain_t *c, const json_t *cam, const char *model_path, 
                          const char *label)
 {
     const char *tm = model_ini_text(c->ini, truth_sec, "model", NULL);
-    char *tpath = tm ? g_build_filename(c->truth_dir, tm, NULL) : NULL;
+    char *tpath = !tm ? NULL : g_path_is_absolute(tm) ? g_strdup(tm) : g_build_filename(c->truth_dir, tm, NULL);
     mrcal_cameramodel_t *t = tpath ? mrcal_read_cameramodel_file(tpath) : NULL;
     mrcal_cameramodel_t *b = mrcal_read_cameramodel_file(model_path);
     char name[160], note[200];

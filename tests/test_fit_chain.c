@@ -15,6 +15,7 @@
 #include "model/model.h"
 #include "model/report.h"
 #include "rig/truth.h"
+#include "tests/fixtures.h"
 #include "tests/test.h"
 
 static char *example(const char *name)
@@ -205,19 +206,10 @@ TEST(chain_known_errors_and_z)
 // the best GGX fit to the table itself, which no parameters can beat.
 TEST(chain_table_material_ngan_ratio)
 {
-    char *truth = example("virtual-truth.ini"), *text = NULL;
-    CHECK(g_file_get_contents(truth, &text, NULL, NULL));
-    if (!text) return;
-    const char *old = "[material glossy_plastic]\nmodel = ggx\nkd = 0.35\nks = 0.6\nalpha = 0.05\nF0 = 0.045\n";
-    char *at = strstr(text, old);
-    CHECK(at != NULL);
-    if (!at) return;
-    GString *t = g_string_new_len(text, at - text);
-    g_string_append(t, "[material glossy_plastic]\nmodel = table\n"
-                       "generate = ggx2 albedo=0.35 ks1=0.3 alpha1=0.05 ks2=0.3 alpha2=0.2 F0=0.045\n");
-    g_string_append(t, at + strlen(old));
-    const char *tp = test_write("truth-table.ini", t->str);
-    g_string_free(t, TRUE);
+    const char *tp = fx_truth_variant("virtual-truth.ini", "truth-table.ini", (const char *const[]){
+        "[material glossy_plastic]\nmodel = ggx\nkd = 0.35\nks = 0.6\nalpha = 0.05\nF0 = 0.045\n",
+        "[material glossy_plastic]\nmodel = table\n"
+        "generate = ggx2 albedo=0.35 ks1=0.3 alpha1=0.05 ks2=0.3 alpha2=0.2 F0=0.045\n", NULL }, NULL);
     put("calib/geometry/geometry.json", "{}");
     put("priors_glossy.json", "{\"materials\": [{\"name\": \"glossy_plastic\", \"model\": \"ggx\", \"parameters\": "
         "[{\"name\": \"kd\", \"mean\": 0.35, \"std\": 0.01}, {\"name\": \"ks\", \"mean\": 0.6, \"std\": 0.01},"
@@ -237,34 +229,25 @@ TEST(chain_table_material_ngan_ratio)
     }
     json_decref(doc);
     json_decref(prov);
-    g_free(text);
-    g_free(truth);
 }
 
 // The truth's rotation axis: z, or z leaning axis_tilt_deg towards its azimuth.
 TEST(chain_truth_axis)
 {
-    char *truth = example("virtual-truth.ini"), *text = NULL;
-    CHECK(g_file_get_contents(truth, &text, NULL, NULL));
-    if (!text) return;
+    char *truth = example("virtual-truth.ini");
     rig_truth_t *t = rig_truth_load(truth);
     double a[3];
     CHECK(t && rig_truth_axis(t, a));
     if (t) CHECK(a[0] == 0 && a[1] == 0 && a[2] == 1);
     rig_truth_free(t);
-    GString *g = g_string_new(text);
-    char *at = strstr(g->str, "[turntable]\n");
-    CHECK(at != NULL);
-    if (at) g_string_insert(g, at - g->str + strlen("[turntable]\n"), "axis_tilt_deg = 0.2\naxis_tilt_azimuth_deg = 30\n");
-    t = rig_truth_load(test_write("tilted.ini", g->str));
+    t = rig_truth_load(fx_truth_variant("virtual-truth.ini", "tilted.ini", (const char *const[]){
+        "[turntable]\n", "[turntable]\naxis_tilt_deg = 0.2\naxis_tilt_azimuth_deg = 30\n", NULL }, NULL));
     CHECK(t && rig_truth_axis(t, a));
     double th = 0.2 * M_PI / 180, ph = 30 * M_PI / 180;
     CHECK_NEAR(a[0], sin(th) * cos(ph), 1e-12);
     CHECK_NEAR(a[1], sin(th) * sin(ph), 1e-12);
     CHECK_NEAR(a[2], cos(th), 1e-12);
     rig_truth_free(t);
-    g_string_free(g, TRUE);
-    g_free(text);
     g_free(truth);
 }
 
