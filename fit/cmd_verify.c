@@ -3,7 +3,8 @@
 //   refl verify SCENE --images IMG... --priors PRIORS.json... -o DIR
 //               [--calib DIR] [--cameras CAM...] [--lamps LAMPS] [--gain-calib DIR...]
 //               [--white WHITE.json | --kc-per-us X] [options]
-//   refl verify --study -o DIR [--truth FILE] [--cases N]      (fit/verify_study.c)
+//   refl verify --study -o DIR [--truth FILE] [--calib CAL --priors P...] [--cases N] [--shard K/N]
+//   refl verify --study-merge DIR... -o OUT                      (fit/verify_study.c)
 //
 // Parses the arguments (model/opts.h), calls verify_files_run or
 // verify_study_run (fit/verify.h) and prints the residue table and verdict.
@@ -26,8 +27,10 @@ static const char about[] =
     "With --calib DIR of several cameras (DIR/NAME.cameramodel, DIR/NAME/gain.json, DIR/NAME/white.json) and\n"
     "no --cameras, each frame goes to the camera its text names (camera_name) with that camera's calibrations.\n"
     "\n"
-    "       refl verify --study -o DIR [--truth TRUTH.ini] [--cases N] [--threads N]\n"
-    "runs the detection study on the virtual rig instead (make study).";
+    "       refl verify --study -o DIR [--truth TRUTH.ini] [--calib CAL --priors P...] [--cases N] [--shard K/N]\n"
+    "       refl verify --study-merge DIR... -o OUT\n"
+    "run the detection study on the virtual rig instead (make study), through the chain's calibrations and\n"
+    "priors when given, or one shard of it; --study-merge joins the shards' directories into one study.";
 
 static const char epilog[] =
     "Outputs in DIR: verify.json (verdict, score, residue, change regions, parameters against their\n"
@@ -72,26 +75,59 @@ static char *study_truth(const char *truth)
     return path;
 }
 
-static int study(const char *out, const char *truth, int cases, const verify_options_t *opt, int argc, char **argv)
+// --study: the study (or one shard of it), then its report when every case is in.
+static int study(verify_study_opts_t *so, const char *truth, bool no_report, int argc, char **argv)
 {
-    verify_study_opts_t so = { .out = out, .cases = cases, .opt = *opt };
     char *truth_path = study_truth(truth);
     if (!truth_path) {
         fprintf(stderr, "refl verify --study: cannot find examples/virtual-truth.ini: give --truth FILE\n");
         return 2;
     }
-    so.truth = truth_path;
-    so.provenance = model_provenance(argc, argv);
+    so->truth = truth_path;
+    so->provenance = model_provenance(argc, argv);
     verify_study_result_t sr;
     int rc = 1;
-    if (verify_study_run(&so, &sr) && model_run_script("verify_study_report.py", out, NULL) == 0) {
-        printf("refl verify --study: %d cases x %d descriptions x %d configurations; report: %s/index.html\n",
-               sr.cases, sr.ndescriptions, sr.nconfigurations, out);
+    if (verify_study_run(so, &sr)) {
         rc = 0;
+        if (!sr.complete)
+            printf("refl verify --study: shard %d/%d: %d of %d cases x %d descriptions x %d configurations in %s; "
+                   "merge the shards with refl verify --study-merge DIR... -o OUT\n", so->shard_k, so->shard_n,
+                   sr.cases_run, sr.cases, sr.ndescriptions, sr.nconfigurations, so->out);
+        else if (no_report || model_run_script("verify_study_report.py", so->out, NULL) == 0)
+            printf("refl verify --study: %d cases x %d descriptions x %d configurations in %s%s\n", sr.cases,
+                   sr.ndescriptions, sr.nconfigurations, so->out, no_report ? "" : " (report: index.html)");
+        else
+            rc = 1;
     }
-    json_decref(so.provenance);
+    json_decref(so->provenance);
     g_free(truth_path);
     return rc;
+}
+
+// --study-merge DIR...: the shards' tables into one study, then its report.
+static int study_merge(const char *const *dirs, int n, const char *out, bool no_report, int argc, char **argv)
+{
+    json_t *prov = model_provenance(argc, argv);
+    verify_study_result_t sr;
+    int rc = 1;
+    if (!verify_study_merge(dirs, n, out, prov, &sr)) rc = 1;   // the library printed why
+    else if (no_report || model_run_script("verify_study_report.py", out, NULL) == 0) {
+        printf("refl verify --study-merge: %d shard(s), %d cases x %d descriptions x %d configurations%s%s%s\n", n,
+               sr.cases, sr.ndescriptions, sr.nconfigurations, no_report ? "" : "; report: ", no_report ? "" : out,
+               no_report ? "" : "/index.html");
+        rc = 0;
+    }
+    json_decref(prov);
+    return rc;
+}
+
+// --shard K/N
+static int parse_shard(model_cli_t *cli, const char *s, int *k, int *n)
+{
+    char tail;
+    if (sscanf(s, "%d/%d%c", k, n, &tail) != 2 || *n < 1 || *k < 1 || *k > *n)
+        return model_cli_error(cli, "--shard '%s': give K/N with 1 <= K <= N (the K-th of N slices of the cases)", s);
+    return MODEL_CLI_OK;
 }
 
 // The thesis's table: the residue per image and over all, change regions, pinned parameters, the verdict.
@@ -123,8 +159,8 @@ int verify_cmd(int argc, char **argv)
 {
     verify_files_opts_t o = { .opt = verify_defaults() };
     verify_options_t *op = &o.opt;
-    const char *fixed = NULL, *truth = NULL;
-    bool no_report = false, fail_on_incorrect = false, do_study = false;
+    const char *fixed = NULL, *truth = NULL, *shard = NULL, *configs = NULL;
+    bool no_report = false, fail_on_incorrect = false, do_study = false, do_merge = false;
     int cases = 200;
     model_opt_list_t images = { o.images, 0, VERIFY_FILES_MAX }, priors = { o.priors, 0, VERIFY_FILES_MAX },
                      cameras = { o.cameras, 0, VERIFY_FILES_MAX }, gains = { o.gain, 0, VERIFY_FILES_MAX };
@@ -189,9 +225,15 @@ int verify_cmd(int argc, char **argv)
         MODEL_OPT_STRING("--truth", "TRUTH.ini", "--study: the virtual rig's truth (default "
                          "examples/virtual-truth.ini)", &truth, false),
         MODEL_OPT_INT("--cases", "N", "--study: cases per condition (200)", &cases, 1, 100000),
+        MODEL_OPT_STRING("--shard", "K/N", "--study: run the K-th of N disjoint slices of the cases (the cases c "
+                         "with c mod N = K - 1, each with its own seeds as in the whole study)", &shard, false),
+        MODEL_OPT_STRING("--configs", "NAMES", "--study: the configurations, comma-separated (priors+maps, "
+                         "priors, no-priors+maps, no-priors; default all)", &configs, false),
+        MODEL_OPT_FLAG("--study-merge", NULL, "merge the output directories DIR... of a study's shards into -o OUT "
+                       "(equal to the unsharded run)", &do_merge),
     };
     model_cli_t cli = { .cmd = "verify", .synopsis = "SCENE", .about = about, .epilog = epilog, .opts = opts,
-                        .nopts = MODEL_NOPTS(opts), .min_positional = 0, .max_positional = 1, .repeat_ok = true };
+                        .nopts = MODEL_NOPTS(opts), .min_positional = 0, .max_positional = MODEL_CLI_POSITIONAL_MAX, .repeat_ok = true };
     int rc = model_cli_parse(&cli, argc, argv);
     if (rc != MODEL_CLI_OK) return rc;
     o.nimages = images.n;
@@ -207,8 +249,22 @@ int verify_cmd(int argc, char **argv)
     o.scene = cli.npositional ? cli.positional[0] : NULL;
     if (op->window_px % 2 == 0) return model_cli_error(&cli, "--window-px must be odd");
     if (!o.out) return model_cli_error(&cli, "missing -o DIR");
-    if (do_study) return study(o.out, truth, cases, op, argc, argv);
+    if (do_merge) {
+        if (!cli.npositional) return model_cli_error(&cli, "--study-merge: give the shards' directories DIR...");
+        return study_merge((const char *const *)cli.positional, cli.npositional, o.out, no_report, argc, argv);
+    }
+    if (do_study) {
+        verify_study_opts_t so = { .out = o.out, .cases = cases, .opt = *op, .calib = o.calib,
+                                   .priors = (const char *const *)o.priors, .npriors = o.npriors,
+                                   .configs = configs };
+        if (cli.npositional) return model_cli_error(&cli, "--study takes no SCENE (its scenes are the truth's)");
+        if (shard && (rc = parse_shard(&cli, shard, &so.shard_k, &so.shard_n)) != MODEL_CLI_OK) return rc;
+        if (so.shard_n > cases)
+            return model_cli_error(&cli, "--shard %s: more shards than the %d cases", shard, cases);
+        return study(&so, truth, no_report, argc, argv);
+    }
     if (!o.scene) return model_cli_error(&cli, "missing SCENE");
+    if (cli.npositional > 1) return model_cli_error(&cli, "one SCENE, not %d", cli.npositional);
     if (!o.nimages) return model_cli_error(&cli, "missing --images IMG...");
     if (!o.npriors) return model_cli_error(&cli, "missing --priors PRIORS.json");
     if (!o.calib && !o.ncameras) return model_cli_error(&cli, "missing --cameras (or --calib DIR)");

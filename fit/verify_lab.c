@@ -17,10 +17,11 @@
 
 struct verify_lab {
     rig_virtual_t *v;
-    int W, H, nang, nl;
+    int W, H, nang, nl, nplace;   // nplace: sets of planes (0: as opened; then each verify_lab_add_placement)
     double *angles;
     double exposure_us, gain_db, kc_per_us;
-    float **L;                 // nang * nl radiance planes
+    float **L;                 // nplace * nang * nl radiance planes
+    char sample[64];
     float *offset, *flat;
     model_sensor_t sensor;
     verify_camera_t cam;
@@ -36,11 +37,36 @@ static int fail_rig(int r, const char *what)
     return r;
 }
 
+// The radiance planes of placement set `place` (L->L[place * nang * nl ...]) for the current sample.
+static bool render_planes(verify_lab_t *L, int place, bool verbose)
+{
+    size_t npx = (size_t)L->W * L->H;
+    for (int a = 0; a < L->nang; a++)
+        for (int i = 0; i < L->nl; i++) {
+            if (verbose)
+                fprintf(stderr, "\rverify lab: rendering %s at %g deg, lamp %s (%d/%d)   ", L->sample, L->angles[a],
+                        L->lamps->lamps[i].name, a * L->nl + i + 1, L->nang * L->nl);
+            float *P = malloc(npx * sizeof(float));
+            if (!P) {
+                model_error(NULL, 0, "verify lab: out of memory for the radiance planes");
+                return false;
+            }
+            L->L[(place * L->nang + a) * L->nl + i] = P;
+            int r = rig_virtual_radiance(L->v, L->angles[a], i, P);
+            if (r) {
+                fail_rig(r, "rendering");
+                return false;
+            }
+        }
+    if (verbose) fprintf(stderr, "\n");
+    return true;
+}
+
 void verify_lab_free(verify_lab_t *L)
 {
     if (!L) return;
     if (L->L)
-        for (int k = 0; k < L->nang * L->nl; k++) free(L->L[k]);
+        for (int k = 0; k < L->nplace * L->nang * L->nl; k++) free(L->L[k]);
     free(L->L);
     free(L->angles);
     free(L->offset);
@@ -58,6 +84,7 @@ verify_lab_t *verify_lab_open(const char *truth_path, const char *sample, const 
     verify_lab_t *L = calloc(1, sizeof *L);
     if (!L) return NULL;
     snprintf(L->truth, sizeof L->truth, "%s", truth_path);
+    snprintf(L->sample, sizeof L->sample, "%s", sample);
     // several labs may live in one process: each camera its own serial
     static atomic_int count;
     char serial[32];
@@ -132,19 +159,8 @@ verify_lab_t *verify_lab_open(const char *truth_path, const char *sample, const 
         fail_rig(r, "dark frame");
         goto fail;
     }
-    for (int a = 0; a < nang; a++)
-        for (int i = 0; i < L->nl; i++) {
-            if (verbose) fprintf(stderr, "\rverify lab: rendering %s at %g deg, lamp %s (%d/%d)   ", sample, angles[a],
-                                 L->lamps->lamps[i].name, a * L->nl + i + 1, nang * L->nl);
-            float *P = malloc(npx * sizeof(float));
-            if (!P) goto fail;
-            L->L[a * L->nl + i] = P;
-            if ((r = rig_virtual_radiance(L->v, angles[a], i, P))) {
-                fail_rig(r, "rendering");
-                goto fail;
-            }
-        }
-    if (verbose) fprintf(stderr, "\n");
+    L->nplace = 1;
+    if (!render_planes(L, 0, verbose)) goto fail;
     snprintf(L->cam.name, sizeof L->cam.name, "virtual");
     L->cam.cam = cam;
     L->cam.offset_dn = L->offset;
@@ -167,11 +183,38 @@ const model_materials_t *verify_lab_materials(const verify_lab_t *L) { return L-
 int verify_lab_width(const verify_lab_t *L) { return L->W; }
 int verify_lab_height(const verify_lab_t *L) { return L->H; }
 
+int verify_lab_add_placement(verify_lab_t *L, double turn_deg, double dx_mm, double dy_mm, bool verbose)
+{
+    int r = rig_virtual_set_sample_offset(L->v, L->sample, turn_deg, dx_mm, dy_mm);
+    if (r) {
+        fail_rig(r, L->sample);
+        return -1;
+    }
+    size_t per = (size_t)L->nang * L->nl;
+    float **grown = realloc(L->L, (size_t)(L->nplace + 1) * per * sizeof *grown);
+    if (!grown) {
+        model_error(NULL, 0, "verify lab: out of memory for the radiance planes");
+        return -1;
+    }
+    L->L = grown;
+    memset(&L->L[L->nplace * per], 0, per * sizeof *L->L);
+    int place = L->nplace++;
+    return render_planes(L, place, verbose) ? place : -1;
+}
+
+int verify_lab_nplacements(const verify_lab_t *L) { return L->nplace; }
+
 bool verify_lab_image(verify_lab_t *L, int angle_index, uint32_t lamps_on, const double *lamp_scale,
                       double kc_scale, uint64_t seed, float *out)
 {
-    if (angle_index < 0 || angle_index >= L->nang) {
-        model_error(NULL, 0, "verify lab: angle index %d out of range", angle_index);
+    return verify_lab_image_placed(L, 0, angle_index, lamps_on, lamp_scale, kc_scale, seed, out);
+}
+
+bool verify_lab_image_placed(verify_lab_t *L, int place, int angle_index, uint32_t lamps_on, const double *lamp_scale,
+                             double kc_scale, uint64_t seed, float *out)
+{
+    if (angle_index < 0 || angle_index >= L->nang || place < 0 || place >= L->nplace) {
+        model_error(NULL, 0, "verify lab: angle index %d or placement %d out of range", angle_index, place);
         return false;
     }
     size_t npx = (size_t)L->W * L->H;
@@ -181,7 +224,7 @@ bool verify_lab_image(verify_lab_t *L, int angle_index, uint32_t lamps_on, const
     for (size_t p = 0; p < npx; p++) out[p] = (float)L->sensor.dark_offset_dn;
     for (int i = 0; i < L->nl; i++) {
         if (!((lamps_on >> i) & 1)) continue;
-        const float *P = L->L[angle_index * L->nl + i];
+        const float *P = L->L[(place * L->nang + angle_index) * L->nl + i];
         float f = (float)(kc * (lamp_scale ? lamp_scale[i] : 1));
         for (size_t p = 0; p < npx; p++) out[p] += f * P[p];
     }

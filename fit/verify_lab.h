@@ -37,6 +37,17 @@ const model_materials_t *verify_lab_materials(const verify_lab_t *L);
 bool verify_lab_image(verify_lab_t *L, int angle_index, uint32_t lamps_on, const double *lamp_scale,
                       double kc_scale, uint64_t seed, float *out);
 
+// The sample placed off by a known amount (rig_virtual_set_sample_offset: turned
+// by turn_deg about its centre, shifted by dx, dy mm on the table, after its
+// placement error of the truth's [placement]) and rendered at the lab's angles:
+// a new placement set for verify_lab_image_placed; its index (1, 2, ...; 0 is
+// the sample as opened), or -1 + message.
+int  verify_lab_add_placement(verify_lab_t *L, double turn_deg, double dx_mm, double dy_mm, bool verbose);
+int  verify_lab_nplacements(const verify_lab_t *L);
+// verify_lab_image of placement set `place`.
+bool verify_lab_image_placed(verify_lab_t *L, int place, int angle_index, uint32_t lamps_on, const double *lamp_scale,
+                             double kc_scale, uint64_t seed, float *out);
+
 #ifdef __cplusplus
 }
 #endif

@@ -80,7 +80,7 @@ typedef struct {
     { name, NULL, metavar, help, MODEL_OPT_KIND_LIST, dest, (greedy) ? 1 : 0, 0, required, false, NULL }
 #define MODEL_NOPTS(table) ((int)(sizeof(table) / sizeof((table)[0])))
 
-enum { MODEL_CLI_POSITIONAL_MAX = 64 };
+enum { MODEL_CLI_POSITIONAL_MAX = 1024 };
 
 typedef struct {
     const char  *cmd;             // "calib white" (printed as "refl calib white")

@@ -2297,7 +2297,11 @@ int rig_virtual_set_sample(rig_virtual_t *v, const char *name)
     return rig_virtual_set_sample_pose(v, name, 0, 0);
 }
 
-int rig_virtual_set_sample_pose(rig_virtual_t *v, const char *name, double tilt_deg, double tilt_azimuth_deg)
+// The sample on the table: its pose, the placement error of this placement
+// ([placement]), then the operator's intended offset off (turn deg, dx, dy mm;
+// NULL: none): x = off (err x0).
+static int set_sample(rig_virtual_t *v, const char *name, double tilt_deg, double tilt_azimuth_deg,
+                      const double *off)
 {
     if (!v || !name) return rig_fail(RIG_ERR_INVALID, "virtual rig: set sample: NULL argument");
     int rc = 0;
@@ -2312,8 +2316,29 @@ int rig_virtual_set_sample_pose(rig_virtual_t *v, const char *name, double tilt_
         rig_virtual_place_error(&r->place, name, r->place_count[b]++, r->samples[b].scene, dR, dt, err);
         placed = true;
     }
+    if (off && b >= 0) {
+        if (r->samples[b].uniform)
+            return rig_fail(RIG_ERR_INVALID, "virtual rig: sample '%s' is a uniform source: it is not placed", name);
+        double oR[9], ot[3], R[9], t[3];
+        rig_virtual_place_about_centre(r->samples[b].scene, off[0] * M_PI / 180, off[1], off[2], oR, ot);
+        if (!placed) {
+            memcpy(dR, oR, sizeof oR);
+            memcpy(dt, ot, sizeof ot);
+        } else {   // off (dR x + dt) = oR dR x + oR dt + ot
+            for (int i = 0; i < 3; i++) {
+                t[i] = ot[i];
+                for (int j = 0; j < 3; j++) {
+                    R[3 * i + j] = oR[3 * i] * dR[j] + oR[3 * i + 1] * dR[3 + j] + oR[3 * i + 2] * dR[6 + j];
+                    t[i] += oR[3 * i + j] * dt[j];
+                }
+            }
+            memcpy(dR, R, sizeof R);
+            memcpy(dt, t, sizeof t);
+        }
+    }
+    bool moved = placed || (off && b >= 0);
     for (int c = 0; c < r->nviews && !rc; c++)
-        rc = set_sample_pose_one(r->views[c], name, tilt_deg, tilt_azimuth_deg, placed ? dR : NULL, placed ? dt : NULL);
+        rc = set_sample_pose_one(r->views[c], name, tilt_deg, tilt_azimuth_deg, moved ? dR : NULL, moved ? dt : NULL);
     if (!rc) {
         pthread_mutex_lock(&r->state_lock);
         r->place_last_set = placed;
@@ -2321,6 +2346,21 @@ int rig_virtual_set_sample_pose(rig_virtual_t *v, const char *name, double tilt_
         pthread_mutex_unlock(&r->state_lock);
     }
     return rc;
+}
+
+int rig_virtual_set_sample_pose(rig_virtual_t *v, const char *name, double tilt_deg, double tilt_azimuth_deg)
+{
+    return set_sample(v, name, tilt_deg, tilt_azimuth_deg, NULL);
+}
+
+int rig_virtual_set_sample_offset(rig_virtual_t *v, const char *name, double turn_deg, double dx_mm, double dy_mm)
+{
+    if (!isfinite(turn_deg) || !isfinite(dx_mm) || !isfinite(dy_mm) || fabs(turn_deg) > 45 || fabs(dx_mm) > 100 ||
+        fabs(dy_mm) > 100)
+        return rig_fail(RIG_ERR_INVALID, "virtual rig: sample '%s' placed off by %g deg, (%g, %g) mm: give a turn "
+                        "within +-45 deg and shifts within +-100 mm", name ? name : "?", turn_deg, dx_mm, dy_mm);
+    const double off[3] = { turn_deg, dx_mm, dy_mm };
+    return set_sample(v, name, 0, 0, off);
 }
 
 bool rig_virtual_last_placement(rig_virtual_t *v, double *turn_deg, double *dx_mm, double *dy_mm)

@@ -82,6 +82,12 @@ int  rig_virtual_set_sample(rig_virtual_t *v, const char *name);
 // the turntable angle applies after this pose. Tilt 0 = rig_virtual_set_sample.
 // At most 32 distinct poses per open rig. A uniform_source cannot be tilted.
 int  rig_virtual_set_sample_pose(rig_virtual_t *v, const char *name, double tilt_deg, double tilt_azimuth_deg);
+// The sample on the table placed off where it belongs by a known amount (an
+// operator's placement off the fixture; the detection study's placed-off
+// cases): after its placement error ([placement]) turned by turn_deg about z
+// through its centre (the middle of its bounding box) and shifted by (dx_mm,
+// dy_mm) on the table. |turn| <= 45 deg, |shift| <= 100 mm. Not for a uniform source.
+int  rig_virtual_set_sample_offset(rig_virtual_t *v, const char *name, double turn_deg, double dx_mm, double dy_mm);
 // Whether rig_virtual_set_sample_pose would take that pose (0, or its error
 // with the message), without putting the sample anywhere: a placement error
 // ([placement]) is drawn when the operator places a sample, not by a check.

@@ -52,12 +52,9 @@ static uint64_t name_hash(const char *s)
     return h;
 }
 
-void rig_virtual_place_error(const rig_virtual_place_t *p, const char *name, long count,
-                             const model_scene_t *scene, double dR[9], double dt[3], double err[3])
+void rig_virtual_place_about_centre(const model_scene_t *scene, double turn_rad, double dx_mm, double dy_mm,
+                                    double dR[9], double dt[3])
 {
-    model_rng_t r = model_rng(p->seed ^ name_hash(name), (uint64_t)count);
-    double psi = model_rng_gauss(&r) * p->angle_sigma_deg * M_PI / 180;
-    double dx = model_rng_gauss(&r) * p->position_sigma_mm, dy = model_rng_gauss(&r) * p->position_sigma_mm;
     // the sample's centre: the middle of its bounding box in x and y
     double lo[2] = { INFINITY, INFINITY }, hi[2] = { -INFINITY, -INFINITY };
     for (int i = 0; i < scene->nvertices; i++) {
@@ -71,11 +68,20 @@ void rig_virtual_place_error(const rig_virtual_place_t *p, const char *name, lon
         lo[1] = fmin(lo[1], c.y - rr), hi[1] = fmax(hi[1], c.y + rr);
     }
     double cx = isfinite(lo[0]) ? (lo[0] + hi[0]) / 2 : 0, cy = isfinite(lo[1]) ? (lo[1] + hi[1]) / 2 : 0;
-    rot_axis(0, 0, 1, psi, dR);
+    rot_axis(0, 0, 1, turn_rad, dR);
     // x' = dR (x - c) + c + d
-    dt[0] = cx - (dR[0] * cx + dR[1] * cy) + dx;
-    dt[1] = cy - (dR[3] * cx + dR[4] * cy) + dy;
+    dt[0] = cx - (dR[0] * cx + dR[1] * cy) + dx_mm;
+    dt[1] = cy - (dR[3] * cx + dR[4] * cy) + dy_mm;
     dt[2] = 0;
+}
+
+void rig_virtual_place_error(const rig_virtual_place_t *p, const char *name, long count,
+                             const model_scene_t *scene, double dR[9], double dt[3], double err[3])
+{
+    model_rng_t r = model_rng(p->seed ^ name_hash(name), (uint64_t)count);
+    double psi = model_rng_gauss(&r) * p->angle_sigma_deg * M_PI / 180;
+    double dx = model_rng_gauss(&r) * p->position_sigma_mm, dy = model_rng_gauss(&r) * p->position_sigma_mm;
+    rig_virtual_place_about_centre(scene, psi, dx, dy, dR, dt);
     if (err) err[0] = psi * 180 / M_PI, err[1] = dx, err[2] = dy;
 }
 

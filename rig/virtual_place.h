@@ -47,6 +47,11 @@ bool rig_virtual_place_parse(const model_ini_t *ini, rig_virtual_place_t *out);
 // be NULL): the turn (deg) and the shift dx, dy (mm) drawn.
 void rig_virtual_place_error(const rig_virtual_place_t *p, const char *name, long count,
                              const model_scene_t *scene, double dR[9], double dt[3], double err[3]);
+// A rigid move of a sample (its scene in its own frame) in the plane it rests
+// on: a turn of turn_rad about z through its centre (the middle of its
+// bounding box in x, y), then a shift (dx, dy) mm: x' = dR x + dt.
+void rig_virtual_place_about_centre(const model_scene_t *scene, double turn_rad, double dx_mm, double dy_mm,
+                                    double dR[9], double dt[3]);
 // The table's rotation at angle_deg: x_rig = R x_table (row-major).
 void rig_virtual_place_table_R(const rig_virtual_place_t *p, double angle_deg, double R[9]);
 // The scene rotated by the table at angle_deg (model_scene_rotated_z when the

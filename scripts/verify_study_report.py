@@ -1,30 +1,18 @@
 #!/usr/bin/python3
-"""Summary of `refl verify --study`: how well the score tells wrong descriptions
-from the correct one, per fitter configuration and corruption.
+"""The page of `refl verify --study` (or --study-merge): figures and tables of the
+summary that refl computed (scripts only plot).
 
 usage: verify_study_report.py DIR
 
-DIR/study.csv: config,corruption,case,score,verdict_correct,seconds (one row per
-fit; config and corruption are labels, kept in the order they first appear;
-corruption "none" is the correct description; rows of the same case share the
-images; score >= 0, higher = more likely wrong; verdict_correct 0/1).
-DIR/study.json: {"conditions": text, ...}; a "summary" list is added, other keys
-are kept.
+DIR/study.json (written by refl, fit/verify_study.c): "units", "conditions", "design"
+(cases, configurations, descriptions with their expected class: correct, wrong,
+placed), "complete", and when complete "results": "summary" (one entry per
+configuration and description other than the correct one: auc, threshold_1pct,
+det_at_1pct_fa or flagged_at_1pct_fa, det_verdict or flagged_verdict, fa_verdict,
+n, n_correct) and "roc" (false_alarm, detection, threshold lists per configuration
+and description); "timing"; "provenance".
 
-For each config and each corruption other than "none" (positives: its rows;
-negatives: the "none" rows of the same config):
-  auc             P(score of a wrong description > score of a correct one), ties 1/2
-                  (Mann-Whitney U / (n_pos n_neg))
-  threshold_1pct  the 99th percentile of the negatives' scores, as the k-th
-                  smallest of n with k = n - floor(n/100): at most 1 % of the
-                  negatives lie above it (none when n < 100)
-  det_at_1pct_fa  share of positives with score > threshold_1pct
-  det_verdict     share of positives with verdict_correct == 0 (flagged)
-  fa_verdict      share of negatives with verdict_correct == 0
-Rates are fractions in summary.csv and study.json, percent in the page.
-
-Writes DIR/summary.csv, DIR/roc.png, DIR/auc.png, DIR/index.html and rewrites
-DIR/study.json (atomically).
+Writes DIR/roc.png, DIR/auc.png, DIR/placed.png and DIR/index.html.
 """
 import json
 import math
@@ -36,166 +24,39 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
-from report_common import Bad, e, load_json, provenance_head, read_table, run_report  # noqa: E402
+from report_common import Bad, e, load_json, provenance_head, run_report  # noqa: E402
 
 PROG = "verify_study_report.py"
-COLUMNS = ["config", "corruption", "case", "score", "verdict_correct", "seconds"]
-SUMMARY = ["config", "corruption", "n_neg", "n_pos", "auc", "det_at_1pct_fa", "threshold_1pct", "det_verdict",
-           "fa_verdict"]
-NONE = "none"
 RULE = ("Detection at 1 % false alarms: per configuration, the threshold is the 99th percentile of the scores of "
-        "the correct description (corruption \u201cnone\u201d), taken as the k-th smallest of its n scores with "
-        "k = n \u2212 \u230an/100\u230b, so that at most 1 % of the correct cases score above it (none when "
-        "n < 100: the threshold is then their maximum); a wrong description counts as detected when its "
-        "score > threshold. AUC (Mann\u2013Whitney): the probability that a wrong description of the corruption "
-        "scores higher than the correct one, over all pairs of the same configuration, ties counting 1/2. Fixed "
-        "verdict: a fit is flagged when refl's verdict says incorrect (verdict_correct = 0); detection = share of "
-        "the wrong descriptions flagged, false alarms = share of the correct ones flagged.")
+        "the correct description, taken as the k-th smallest of its n scores with k = n \u2212 \u230an/100\u230b, "
+        "so that at most 1 % of the correct cases score above it (when n < 100 it is their maximum); a wrong "
+        "description counts as detected when its score > threshold. AUC (Mann\u2013Whitney): the probability "
+        "that a description scores higher than the correct one on the part as placed, over all pairs of the same "
+        "configuration, ties counting 1/2. Fixed verdict: a fit is flagged when refl's verdict says incorrect. "
+        "All figures are computed by refl (study.json \u201cresults\u201d); this page only shows them.")
 
 
-# ---------------------------------------------------------------------------
-# inputs
-
-def load_csv(path):
-    rows = []
-    seen = {}
-    for line, t in read_table(path, COLUMNS):
-        if not t["config"]:
-            raise Bad(path, f"line {line}: empty config")
-        if not t["corruption"]:
-            raise Bad(path, f"line {line}: empty corruption")
-        try:
-            case = int(t["case"])
-        except ValueError:
-            raise Bad(path, f"line {line}: case {t['case']!r} is not an integer")
-        vals = {}
-        for k in ("score", "seconds"):
-            try:
-                vals[k] = float(t[k])
-            except ValueError:
-                raise Bad(path, f"line {line}: {k} {t[k]!r} is not a number")
-            if not (math.isfinite(vals[k]) and vals[k] >= 0):
-                raise Bad(path, f"line {line}: {k} {t[k]!r} is not a finite number >= 0")
-        if t["verdict_correct"] not in ("0", "1"):
-            raise Bad(path, f"line {line}: verdict_correct {t['verdict_correct']!r} is not 0 or 1")
-        key = (t["config"], t["corruption"], case)
-        if key in seen:
-            raise Bad(path, f"line {line}: config {key[0]!r}, corruption {key[1]!r}, case {case} "
-                      f"already on line {seen[key]}")
-        seen[key] = line
-        rows.append({"config": t["config"], "corruption": t["corruption"], "case": case,
-                     "score": vals["score"], "flagged": t["verdict_correct"] == "0",
-                     "seconds": vals["seconds"]})
-    if not rows:
-        raise Bad(path, "no data rows")
-    if not any(r["corruption"] == NONE for r in rows):
-        raise Bad(path, f"no row with corruption \"{NONE}\" (the correct description): nothing to compare with")
-    if all(r["corruption"] == NONE for r in rows):
-        raise Bad(path, "only rows with corruption \"none\": no wrong description to detect")
-    return rows
-
-
-def ordered(values):
-    out = []
-    for v in values:
-        if v not in out:
-            out.append(v)
-    return out
-
-
-# ---------------------------------------------------------------------------
-# statistics
-
-def auc_mw(neg, pos):
-    """Mann-Whitney AUC: P(pos > neg) + P(pos == neg)/2."""
-    ns = np.sort(neg)
-    less = np.searchsorted(ns, pos, side="left")
-    leq = np.searchsorted(ns, pos, side="right")
-    return float(np.sum(less + 0.5 * (leq - less))) / (len(pos) * len(neg))
-
-
-def threshold_1pct(neg):
-    ns = np.sort(neg)
-    n = len(ns)
-    return float(ns[n - 1 - n // 100])
-
-
-def roc_points(neg, pos):
-    """False-alarm and detection rates of the rule score >= t, t over every distinct score (descending),
-    from (0, 0) to (1, 1)."""
-    ts = np.unique(np.concatenate([neg, pos]))[::-1]
-    ns, ps = np.sort(neg), np.sort(pos)
-    fa = (len(ns) - np.searchsorted(ns, ts, side="left")) / len(ns)
-    tp = (len(ps) - np.searchsorted(ps, ts, side="left")) / len(ps)
-    return np.concatenate([[0.0], fa]), np.concatenate([[0.0], tp])
-
-
-def summarise(rows):
-    configs = ordered(r["config"] for r in rows)
-    corrs = [c for c in ordered(r["corruption"] for r in rows) if c != NONE]
-    out = []
-    for cf in configs:
-        sel = [r for r in rows if r["config"] == cf]
-        neg = np.array([r["score"] for r in sel if r["corruption"] == NONE])
-        negf = np.array([r["flagged"] for r in sel if r["corruption"] == NONE], dtype=bool)
-        thr = threshold_1pct(neg) if len(neg) else math.nan
-        for c in corrs:
-            pos = np.array([r["score"] for r in sel if r["corruption"] == c])
-            posf = np.array([r["flagged"] for r in sel if r["corruption"] == c], dtype=bool)
-            if not len(pos):
-                continue
-            s = {"config": cf, "corruption": c, "n_neg": int(len(neg)), "n_pos": int(len(pos)),
-                 "auc": auc_mw(neg, pos) if len(neg) else math.nan,
-                 "det_at_1pct_fa": float(np.mean(pos > thr)) if len(neg) else math.nan,
-                 "threshold_1pct": thr,
-                 "det_verdict": float(np.mean(posf)),
-                 "fa_verdict": float(np.mean(negf)) if len(neg) else math.nan,
-                 "_neg": neg, "_pos": pos}
-            out.append(s)
-    return configs, corrs, out
-
-
-# ---------------------------------------------------------------------------
-# output
-
-def atomic_write(path, text):
-    tmp = f"{path}.tmp{os.getpid()}"
-    try:
-        with open(tmp, "w", encoding="utf-8", newline="") as f:
-            f.write(text)
-        os.replace(tmp, path)
-    except OSError as e:
-        try:
-            os.unlink(tmp)
-        except OSError:
-            pass
-        raise Bad(path, f"cannot write: {e.strerror or e}")
-
-
-def jnum(x):
-    return None if isinstance(x, float) and not math.isfinite(x) else x
-
-
-def write_summary_csv(d, summ):
-    lines = [",".join(SUMMARY)]
+def load(d):
+    doc = load_json(os.path.join(d, "study.json"))
+    if not isinstance(doc, dict) or not isinstance(doc.get("design"), dict):
+        raise Bad(os.path.join(d, "study.json"), "no design: not a study of refl verify --study")
+    if not doc.get("complete") or not isinstance(doc.get("results"), dict):
+        raise Bad(os.path.join(d, "study.json"), "not complete (a shard?): merge the shards with "
+                  "refl verify --study-merge DIR... -o OUT first")
+    res = doc["results"]
+    summ, roc = res.get("summary"), res.get("roc")
+    if not isinstance(summ, list) or not isinstance(roc, list) or not summ:
+        raise Bad(os.path.join(d, "study.json"), "results without a summary or ROC")
     for s in summ:
-        cells = []
-        for k in SUMMARY:
-            v = s[k]
-            if isinstance(v, str):
-                cells.append(csv_cell(v))
-            elif isinstance(v, int):
-                cells.append(str(v))
-            else:
-                cells.append("nan" if not math.isfinite(v) else f"{v:.6g}")
-        lines.append(",".join(cells))
-    atomic_write(os.path.join(d, "summary.csv"), "\n".join(lines) + "\n")
+        for k in ("config", "description", "expected"):
+            if not isinstance(s.get(k), str):
+                raise Bad(os.path.join(d, "study.json"), f"a summary entry without {k}")
+    configs = [c for c in doc["design"].get("configurations", []) if isinstance(c, str)]
+    return doc, configs, summ, roc
 
 
-def csv_cell(s):
-    if any(ch in s for ch in ',"\n\r') or s != s.strip():
-        return '"' + s.replace('"', '""') + '"'
-    return s
+def num(x):
+    return x if isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x) else math.nan
 
 
 def colours(n):
@@ -203,11 +64,11 @@ def colours(n):
     return [cmap(i % cmap.N) for i in range(n)]
 
 
-def fig_roc(d, configs, corrs, summ):
+def fig_roc(d, configs, corrs, summ, roc):
     n = len(configs)
     ncol = min(2, n)
     nrow = (n + ncol - 1) // ncol
-    nneg = max([s["n_neg"] for s in summ if s["n_neg"]] or [1])
+    nneg = max([s.get("n_correct") or 0 for s in summ] or [1]) or 1
     xmin = min(1e-3, 10.0 ** math.floor(math.log10(0.5 / nneg)))
     col = dict(zip(corrs, colours(len(corrs))))
     # tab20 pairs a dark and a light shade of each hue: tell the pair apart by the line style too
@@ -226,18 +87,24 @@ def fig_roc(d, configs, corrs, summ):
         ax.axvline(0.01, color="0.3", ls="--", lw=0.8)
         ax.text(0.0105, 0.02, "1 % false alarms", fontsize=7, color="0.3", rotation=90, va="bottom")
         any_ = False
+        by = {(r.get("config"), r.get("description")): r for r in roc}
         for s in summ:
-            if s["config"] != cf or not s["n_neg"]:
+            r = by.get((cf, s["description"]))
+            if s["config"] != cf or s["expected"] != "wrong" or r is None:
                 continue
-            fa, tp = roc_points(s["_neg"], s["_pos"])
-            c = col[s["corruption"]]
-            ax.plot(np.maximum(fa, xmin), tp, sty[s["corruption"]], color=c, lw=1.4)
-            ax.plot(max(s["fa_verdict"], xmin), s["det_verdict"], "o", color=c, ms=5, mec="k", mew=0.6)
+            fa = np.array([num(x) for x in r.get("false_alarm", [])], dtype=float)
+            tp = np.array([num(x) for x in r.get("detection", [])], dtype=float)
+            if len(fa) != len(tp) or not len(fa):
+                continue
+            c = col[s["description"]]
+            ax.plot(np.maximum(fa, xmin), tp, sty[s["description"]], color=c, lw=1.4)
+            ax.plot(max(num(s.get("fa_verdict")), xmin), num(s.get("det_verdict")), "o", color=c, ms=5, mec="k",
+                    mew=0.6)
             any_ = True
         ax.set_xscale("log")
         ax.set_xlim(xmin / 1.4, 1.0)
         ax.set_ylim(-0.02, 1.02)
-        n_neg = next((s["n_neg"] for s in summ if s["config"] == cf), 0)
+        n_neg = next((s.get("n_correct") or 0 for s in summ if s["config"] == cf), 0)
         ax.set_title(f"{cf}: {n_neg} correct cases" + ("" if any_ else " (no ROC: no correct cases)"), fontsize=10)
         ax.set_xlabel("false-alarm rate (correct description called wrong), log; 0 drawn at the left edge")
         ax.set_ylabel("detection rate (wrong description detected)")
@@ -253,7 +120,7 @@ def fig_roc(d, configs, corrs, summ):
 
 
 def fig_auc(d, configs, corrs, summ):
-    by = {(s["config"], s["corruption"]): s["auc"] for s in summ}
+    by = {(s["config"], s["description"]): num(s.get("auc")) for s in summ}
     nc = len(configs)
     w = 0.8 / nc
     x = np.arange(len(corrs))
@@ -271,8 +138,8 @@ def fig_auc(d, configs, corrs, summ):
     ax.set_xticklabels(corrs, rotation=35, ha="right")
     ax.set_ylim(0, 1.0)
     ax.set_ylabel("ROC AUC (1 = always scored above the correct description)")
-    ax.set_xlabel("corruption of the description")
-    ax.set_title("AUC of the score per corruption and configuration")
+    ax.set_xlabel("description (wrong ones; placed: the correct one, the part placed off)")
+    ax.set_title("AUC of the score against the correct description, per description and configuration")
     ax.grid(axis="y", alpha=0.3)
     ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0))
     fig.savefig(os.path.join(d, "auc.png"), dpi=80)
@@ -282,121 +149,142 @@ def fig_auc(d, configs, corrs, summ):
 CSS = ("body{font-family:sans-serif;max-width:1200px;margin:1em auto;padding:0 1em;color:#222}"
        "table{border-collapse:collapse;margin:0.5em 0}td,th{border:1px solid #bbb;padding:3px 8px;"
        "text-align:left;font-size:90%}th{background:#eee}td.n{text-align:right;font-variant-numeric:tabular-nums}"
-       "td.l{white-space:nowrap}tr.first td{border-top:2px solid #888}figure{margin:1em 0}img{max-width:100%;border:1px solid #ddd}"
-       "figcaption{font-size:90%;color:#555}code{font-size:90%}pre{background:#f6f6f6;border:1px solid #ddd;"
-       "padding:0.6em;overflow-x:auto;font-size:85%;white-space:pre-wrap}.note{color:#555}")
+       "td.l{white-space:nowrap}tr.first td{border-top:2px solid #888}figure{margin:1em 0}img{max-width:100%;"
+       "border:1px solid #ddd}figcaption{font-size:90%;color:#555}code{font-size:90%}pre{background:#f6f6f6;"
+       "border:1px solid #ddd;padding:0.6em;overflow-x:auto;font-size:85%;white-space:pre-wrap}.note{color:#555}")
 
 
 def pct(x):
+    x = num(x)
     return "n/a" if not math.isfinite(x) else f"{100 * x:.1f} %"
 
 
-def write_html(d, doc, rows, configs, corrs, summ):
+def f3(x):
+    x = num(x)
+    return "n/a" if not math.isfinite(x) else f"{x:.3f}"
+
+
+def grid(configs, descs, by, cell):
+    out = ["<table>", "<tr><th>description</th>" + "".join(f"<th>{e(cf)}</th>" for cf in configs) + "</tr>"]
+    for c in descs:
+        cells = [cell(by.get((cf, c))) if by.get((cf, c)) else "" for cf in configs]
+        out.append(f'<tr><td class="l">{e(c)}</td>' + "".join(f'<td class="n">{x}</td>' for x in cells) + "</tr>")
+    out.append("</table>")
+    return "\n".join(out)
+
+
+def fig_placed(d, configs, placed, by):
+    fig, ax = plt.subplots(figsize=(9.0, 4.2), layout="constrained")
+    nc = len(configs)
+    w = 0.8 / max(nc, 1)
+    x = np.arange(len(placed))
+    for i, (cf, c) in enumerate(zip(configs, colours(nc))):
+        vals = np.array([num(by[(cf, p)].get("flagged_verdict")) if (cf, p) in by else math.nan for p in placed])
+        ok = np.isfinite(vals)
+        ax.bar((x - 0.4 + w * (i + 0.5))[ok], 100 * vals[ok], width=w * 0.95, color=c, label=cf)
+    ax.set_xticks(x)
+    ax.set_xticklabels(placed)
+    ax.set_ylim(0, 100)
+    ax.set_ylabel("correct description flagged by the verdict (%)")
+    ax.set_xlabel("the part placed off (shift, turn)")
+    ax.set_title("Placed-off parts called wrong (they should pass once verification tolerates placement)")
+    ax.grid(axis="y", alpha=0.3)
+    ax.legend(fontsize=8, loc="upper left")
+    fig.savefig(os.path.join(d, "placed.png"), dpi=80)
+    plt.close(fig)
+
+
+def write_html(d, doc, configs, summ):
     title = "refl verify --study"
-    L = [f'<!DOCTYPE html>\n<html><head><meta charset="utf-8"><title>{e(title)}: {e(os.path.basename(os.path.abspath(d)))}'
-         f"</title>\n<style>{CSS}</style>\n</head><body>\n<h1>{e(title)}</h1>"]
+    L = [f'<!DOCTYPE html>\n<html><head><meta charset="utf-8"><title>{e(title)}: '
+         f'{e(os.path.basename(os.path.abspath(d)))}</title>\n<style>{CSS}</style>\n</head><body>\n<h1>{e(title)}</h1>']
     head = provenance_head(doc.get("provenance"))
     if head:
         L.append(head)
+    des = doc["design"]
     L.append('<h2 id="conditions">Conditions</h2>')
-    cond = doc.get("conditions")
-    if isinstance(cond, str):
-        L.append(f"<pre>{e(cond)}</pre>")
-    elif cond is None:
-        L.append("<p>study.json names no conditions.</p>")
-    else:
-        L.append(f"<pre>{e(json.dumps(cond, indent=2, ensure_ascii=False))}</pre>")
-    ncase = len(ordered(r["case"] for r in rows))
-    L.append(f"<p>{len(rows)} fits: {len(configs)} configurations &times; {len(corrs)} corruptions and the "
-             f"correct description, {ncase} cases (a case number names the same images: noise, lamp and gain "
-             "drift).</p>")
-
-    L.append('<h2 id="summary">Summary</h2>')
-    by = {(s["config"], s["corruption"]): s for s in summ}
-    out = ["<table>", "<tr><th>corruption</th>" + "".join(f"<th>{e(cf)}</th>" for cf in configs) + "</tr>"]
-    for c in corrs:
-        cells = []
-        for cf in configs:
-            s = by.get((cf, c))
-            cells.append("" if s is None or not math.isfinite(s["auc"]) else
-                         f"{s['auc']:.3f} ({pct(s['det_at_1pct_fa'])})")
-        out.append(f'<tr><td class="l">{e(c)}</td>' + "".join(f'<td class="n">{x}</td>' for x in cells) + "</tr>")
-    out.append("</table>")
-    L.append("<p>AUC (and in brackets the detection rate at 1 % false alarms) per corruption and configuration:</p>")
-    L.append("\n".join(out))
-    L.append("<p>All figures:</p>")
-    hdr = ["config", "corruption", "correct cases", "wrong cases", "AUC", "detected at 1 % false alarms",
-           "threshold (score)", "detected by the verdict", "false alarms of the verdict"]
+    L.append(f"<pre>{e(str(doc.get('conditions', '')))}</pre>")
+    L.append(f"<p>Calibrations: {e(str(des.get('calibrations')))}; priors: {e(str(des.get('priors')))}; "
+             f"{des.get('cases')} cases (a case number names the same drifts and noise under every description); "
+             f"units: {e(str(doc.get('units', '')))}.</p>")
+    wrong = []
+    placed = []
+    for s in summ:
+        lst = placed if s["expected"] == "placed" else wrong
+        if s["description"] not in lst:
+            lst.append(s["description"])
+    by = {(s["config"], s["description"]): s for s in summ}
+    L.append('<h2 id="summary">Wrong descriptions</h2>')
+    L.append("<p>AUC (and in brackets the detection rate at 1 % false alarms) per description and configuration:</p>")
+    L.append(grid(configs, wrong, by, lambda s: f"{f3(s.get('auc'))} ({pct(s.get('det_at_1pct_fa'))})"))
+    L.append('<h2 id="placed">The correct description, the part placed off</h2>')
+    L.append("<p>AUC against the part as placed (0.5: placement makes no difference to the score), and the share "
+             "called wrong at the 1 % threshold / by the verdict:</p>")
+    L.append(grid(configs, placed, by, lambda s: f"{f3(s.get('auc'))} ({pct(s.get('flagged_at_1pct_fa'))} / "
+                                                  f"{pct(s.get('flagged_verdict'))})"))
+    L.append("<h2 id=\"all\">All figures</h2>")
+    hdr = ["config", "description", "expected", "correct cases", "cases", "AUC", "above the 1 % threshold",
+           "threshold (score)", "flagged by the verdict", "false alarms of the verdict"]
     out = ["<table>", "<tr>" + "".join(f"<th>{e(h)}</th>" for h in hdr) + "</tr>"]
     last = None
     for s in summ:
         cls = ' class="first"' if last is not None and s["config"] != last else ""
         last = s["config"]
-        cells = [e(s["config"]), e(s["corruption"])]
-        num = [str(s["n_neg"]), str(s["n_pos"]), "n/a" if not math.isfinite(s["auc"]) else f"{s['auc']:.3f}",
-               pct(s["det_at_1pct_fa"]),
-               "n/a" if not math.isfinite(s["threshold_1pct"]) else f"{s['threshold_1pct']:.4g}",
-               pct(s["det_verdict"]), pct(s["fa_verdict"])]
+        above = s.get("det_at_1pct_fa", s.get("flagged_at_1pct_fa"))
+        flag = s.get("det_verdict", s.get("flagged_verdict"))
+        cells = [e(s["config"]), e(s["description"]), e(s["expected"])]
+        nums = [str(s.get("n_correct")), str(s.get("n")), f3(s.get("auc")), pct(above),
+                "n/a" if not math.isfinite(num(s.get("threshold_1pct"))) else f"{num(s['threshold_1pct']):.4g}",
+                pct(flag), pct(s.get("fa_verdict"))]
         out.append(f"<tr{cls}>" + "".join(f'<td class="l">{c}</td>' for c in cells)
-                   + "".join(f'<td class="n">{c}</td>' for c in num) + "</tr>")
+                   + "".join(f'<td class="n">{c}</td>' for c in nums) + "</tr>")
     out.append("</table>")
     L.append("\n".join(out))
-    L.append(f'<p class="note">{e(RULE)} The cases are paired (the same images under every corruption) but the '
-             "rates here do not use the pairing. Machine-readable: <a href=\"summary.csv\">summary.csv</a> "
-             "(rates as fractions), and the \u201csummary\u201d list of study.json.</p>")
-    if isinstance(doc.get("score_threshold"), (int, float)) and not isinstance(doc.get("score_threshold"), bool):
-        L.append(f'<p class="note">The fixed verdict calls a description incorrect when its score &gt; '
-                 f'{doc["score_threshold"]:g} (score_threshold of study.json).</p>')
-    small = [cf for cf in configs if 0 < sum(1 for r in rows if r["config"] == cf and r["corruption"] == NONE) < 100]
-    if small:
-        L.append(f'<p class="note">Fewer than 100 correct cases for {e(", ".join(small))}: the 1 % threshold is '
-                 "the largest score of the correct description there, so the false-alarm rate it stands for is "
-                 "0 of those cases, not 1 %.</p>")
-    noneg = [cf for cf in configs if not any(r["config"] == cf and r["corruption"] == NONE for r in rows)]
-    if noneg:
-        L.append(f'<p class="note">No correct-description rows for {e(", ".join(noneg))}: AUC, threshold and '
-                 "false alarms are n/a there.</p>")
-
+    L.append(f'<p class="note">{e(RULE)} The fixed verdict calls a description incorrect when its score &gt; '
+             f'{num(des.get("score_threshold")):g}.</p>')
+    if isinstance(des.get("cases"), int) and des["cases"] < 100:
+        L.append('<p class="note">Fewer than 100 cases: the 1 % threshold is the largest score of the correct '
+                 "description, so the false-alarm rate it stands for is 0 of those cases, not 1 %.</p>")
+    t = doc.get("timing") or {}
     L.append('<h2 id="runtime">Run time</h2>')
-    rt = []
-    for cf in configs:
-        sec = np.array([r["seconds"] for r in rows if r["config"] == cf])
-        rt.append(f'<tr><td>{e(cf)}</td><td class="n">{len(sec)}</td><td class="n">{np.median(sec):.3g}</td>'
-                  f'<td class="n">{np.mean(sec):.3g}</td><td class="n">{np.max(sec):.3g}</td></tr>')
-    L.append("<table><tr><th>config</th><th>fits</th><th>median (s)</th><th>mean (s)</th><th>max (s)</th></tr>"
-             + "".join(rt) + "</table>")
-
+    L.append(f"<p>{t.get('fits')} fits, {num(t.get('fit_seconds_sum')):.0f} s of fitting summed over the threads "
+             f"(mean {num(t.get('mean_iterations')):.1f} solver iterations a fit); per fit: timing.csv.</p>")
     L.append('<h2 id="figures">Figures</h2>')
-    L.append('<figure><img src="roc.png" alt="ROC curves per configuration"><figcaption>ROC curves, one panel per '
-             "configuration and one curve per corruption: the detection rate (share of the wrong descriptions "
-             "whose score reaches a threshold) against the false-alarm rate (share of the correct description's "
-             "fits that reach it) as the threshold falls; log false-alarm axis (a rate of 0 is drawn at the left "
-             "edge); dotted: chance; dashed: 1 % false alarms; dots: the fixed verdict of refl verify (its false-alarm "
-             "and detection rates). The AUCs are in the table and the next figure.</figcaption></figure>")
-    L.append('<figure><img src="auc.png" alt="AUC per corruption"><figcaption>ROC AUC of the score per corruption, '
-             "one bar per configuration (1: every wrong description scored above every correct one; 0.5, dotted: "
-             "no better than chance).</figcaption></figure>")
-    other = {k: v for k, v in doc.items() if k not in ("summary", "conditions")}
-    if other:
-        L.append('<h2 id="study-json">study.json</h2>')
-        L.append(f"<pre>{e(json.dumps(other, indent=2, ensure_ascii=False))}</pre>")
+    L.append('<figure><img src="roc.png" alt="ROC curves per configuration"><figcaption>ROC curves of the wrong '
+             "descriptions, one panel per configuration: the detection rate against the false-alarm rate (the "
+             "correct description's fits above the threshold) as the threshold falls; log false-alarm axis (0 at "
+             "the left edge); dotted: chance; dashed: 1 % false alarms; dots: the fixed verdict.</figcaption></figure>")
+    L.append('<figure><img src="auc.png" alt="AUC per description"><figcaption>ROC AUC per description (wrong ones '
+             "and the placed-off part), one bar per configuration (0.5, dotted: no better than chance)."
+             "</figcaption></figure>")
+    if placed:
+        L.append('<figure><img src="placed.png" alt="placed-off parts flagged"><figcaption>The correct description '
+                 "of a part placed off by the amounts shown: the share of cases the verdict calls wrong."
+                 "</figcaption></figure>")
+    L.append('<h2 id="design">Design and provenance</h2>')
+    L.append(f"<pre>{e(json.dumps({'design': des, 'provenance': doc.get('provenance')}, indent=2, ensure_ascii=False))}</pre>")
     L.append("</body></html>\n")
     out_path = os.path.join(d, "index.html")
-    atomic_write(out_path, "\n".join(L))
+    tmp = out_path + ".part"
+    with open(tmp, "w", encoding="utf-8") as f:
+        f.write("\n".join(L))
+    os.replace(tmp, out_path)
     return out_path
 
 
 def report(d):
-    rows = load_csv(os.path.join(d, "study.csv"))
-    jpath = os.path.join(d, "study.json")
-    doc = load_json(jpath)
-    configs, corrs, summ = summarise(rows)
-    fig_roc(d, configs, corrs, summ)
-    fig_auc(d, configs, corrs, summ)
-    write_summary_csv(d, summ)
-    doc["summary"] = [{k: jnum(s[k]) for k in SUMMARY} for s in summ]
-    atomic_write(jpath, json.dumps(doc, indent=2, ensure_ascii=False, allow_nan=False) + "\n")
-    return write_html(d, doc, rows, configs, corrs, summ)
+    doc, configs, summ, roc = load(d)
+    descs = []
+    for s in summ:
+        if s["description"] not in descs:
+            descs.append(s["description"])
+    wrong = [c for c in descs if any(s["description"] == c and s["expected"] == "wrong" for s in summ)]
+    placed = [c for c in descs if c not in wrong]
+    fig_roc(d, configs, wrong, summ, roc)
+    fig_auc(d, configs, descs, summ)
+    if placed:
+        fig_placed(d, configs, placed, {(s["config"], s["description"]): s for s in summ})
+    return write_html(d, doc, configs, summ)
 
 
 def main():

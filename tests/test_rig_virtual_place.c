@@ -428,3 +428,48 @@ TEST(virtual_place_capture_reports_placement)
     g_free(out);
     g_free(err);
 }
+
+// An operator's placement off the fixture by a known amount
+// (rig_virtual_set_sample_offset; the detection study's placed-off parts): the
+// calibration board (centre (130, 0) mm) turned by 2 deg about its centre and
+// shifted by (3, -1) mm: its pose turns by 2 deg and its centre moves to
+// (133, -1). With a truth [placement] the offset follows the placement error of
+// that placement: the pose is the offset composed with the error the same seed
+// gives without an offset. Out-of-range offsets and a uniform source are refused.
+TEST(virtual_place_intended_offset)
+{
+    rig_virtual_t *v = open_truth(truth_with("[sample calib_board]", "[sample calib_board]"));
+    if (!v) return;
+    double R[9], t[3];
+    CHECK(rig_virtual_set_sample_offset(v, "calib_board", 2, 3, -1) == 0);
+    CHECK(rig_virtual_sample_pose(v, NULL, NULL, R, t) == 0);
+    CHECK_NEAR(atan2(R[3], R[0]) / D2R, 2, 1e-12);
+    CHECK_NEAR(R[8], 1, 1e-12);
+    CHECK_NEAR(R[0] * 130 + t[0], 133, 1e-9);
+    CHECK_NEAR(R[3] * 130 + t[1], -1, 1e-9);
+    CHECK(!rig_virtual_last_placement(v, NULL, NULL, NULL));   // no placement error: the truth has none
+    CHECK(rig_virtual_set_sample_offset(v, "calib_board", 50, 0, 0) == RIG_ERR_INVALID);
+    CHECK(rig_virtual_set_sample_offset(v, "calib_board", 0, NAN, 0) == RIG_ERR_INVALID);
+    CHECK(rig_virtual_set_sample_offset(v, "flat_field", 1, 0, 0) == RIG_ERR_INVALID);
+    CHECK(rig_virtual_set_sample_offset(v, "no_such_sample", 1, 0, 0) == RIG_ERR_INVALID);
+    rig_virtual_close(v);
+    // with placement errors: offset after error
+    double Re[9], te[3];
+    v = open_truth(placement_truth(11));
+    if (!v) return;
+    CHECK(rig_virtual_set_sample(v, "calib_board") == 0);
+    CHECK(rig_virtual_sample_pose(v, NULL, NULL, Re, te) == 0);
+    rig_virtual_close(v);
+    v = open_truth(placement_truth(11));
+    if (!v) return;
+    CHECK(rig_virtual_set_sample_offset(v, "calib_board", 2, 3, -1) == 0);
+    CHECK(rig_virtual_sample_pose(v, NULL, NULL, R, t) == 0);
+    CHECK(rig_virtual_last_placement(v, NULL, NULL, NULL));
+    double yaw_e = atan2(Re[3], Re[0]) / D2R;
+    CHECK_NEAR(atan2(R[3], R[0]) / D2R, yaw_e + 2, 1e-9);
+    // the board's centre: where the error put it, turned 2 deg about the centre, shifted
+    double ex = Re[0] * 130 + te[0], ey = Re[3] * 130 + te[1], c = cos(2 * D2R), s = sin(2 * D2R);
+    CHECK_NEAR(R[0] * 130 + t[0], c * (ex - 130) - s * ey + 130 + 3, 1e-9);
+    CHECK_NEAR(R[3] * 130 + t[1], s * (ex - 130) + c * ey - 1, 1e-9);
+    rig_virtual_close(v);
+}

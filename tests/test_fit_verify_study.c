@@ -1,0 +1,214 @@
+// tests/test_fit_verify_study.c — `refl verify --study` through a chain's
+// calibrations and priors, in shards, and `--study-merge` (fit/verify_study.c):
+// the merged shards equal the unsharded run exactly; bad merges are refused
+// with the directory or file:line named.
+#define _GNU_SOURCE
+#include <glib.h>
+#include <jansson.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "model/model.h"
+#include "tests/test.h"
+
+// A chain's calibration directory as refl calib writes it: the truth's camera
+// model, lamps.json with each lamp a few mm off the truth (as the lamp
+// calibration finds them), gain.json (K, read noise, saturation at 0 dB) and
+// white.json (kc*I per lamp, as refl calib white measured them on the matched rig).
+static char *chain_calib(void)
+{
+    char src[4096];
+    char *top = realpath(test_srcdir(), NULL);
+    snprintf(src, sizeof src, "%s/examples/camera.cameramodel", top ? top : ".");
+    free(top);
+    char *cam = model_read_file(src, NULL);
+    CHECK(cam != NULL);
+    char *dir = g_strdup(test_path("cal"));
+    g_mkdir_with_parents(dir, 0755);
+    test_write("cal/camera.cameramodel", cam ? cam : "");
+    free(cam);
+    test_write("cal/lamps.json",
+               "{\"lamps\": [{\"name\": \"east\", \"position_mm\": [490.1, 176.5, 601.2], \"radius_mm\": 15},"
+               " {\"name\": \"south\", \"position_mm\": [-51.0, -599.1, 478.8], \"radius_mm\": 15},"
+               " {\"name\": \"west\", \"position_mm\": [-527.0, -190.2, 521.5], \"radius_mm\": 15},"
+               " {\"name\": \"north\", \"position_mm\": [97.1, 368.0, 701.9], \"radius_mm\": 15},"
+               " {\"name\": \"rim\", \"position_mm\": [-621.0, 66.0, 220.4], \"radius_mm\": 15}]}\n");
+    test_write("cal/gain.json", "{\"gain_db\": 0, \"gain_unit\": \"dB\", \"system_gain_dn_per_e\": 0.25, "
+                                "\"read_noise_e\": 6, \"saturation_dn\": 3920}\n");
+    test_write("cal/white.json",
+               "{\"albedo\": 0.99, \"lamps\": [{\"name\": \"east\", \"kc_I_per_us\": 309746.3},"
+               " {\"name\": \"south\", \"kc_I_per_us\": 280660.8}, {\"name\": \"west\", \"kc_I_per_us\": 299996.2},"
+               " {\"name\": \"north\", \"kc_I_per_us\": 348310.6}, {\"name\": \"rim\", \"kc_I_per_us\": 250041.8}]}\n");
+    return dir;
+}
+
+// Priors files as refl fit material writes them (the means a few % off the truth).
+static void chain_priors(char **ply, char **steel)
+{
+    *ply = g_strdup(test_write("priors_plywood.json",
+        "{\"format\": \"refl priors 1\", \"materials\": [{\"name\": \"plywood\", \"model\": \"thesis_fit\", "
+        "\"parameters\": [{\"name\": \"ks\", \"mean\": 0.0205, \"std\": 0.0006}, {\"name\": \"ns\", \"mean\": 8.1, "
+        "\"std\": 0.25}, {\"name\": \"kd\", \"mean\": 0.161, \"std\": 0.005}]}]}\n"));
+    *steel = g_strdup(test_write("priors_painted_steel.json",
+        "{\"format\": \"refl priors 1\", \"materials\": [{\"name\": \"painted_steel\", \"model\": \"ggx\", "
+        "\"parameters\": [{\"name\": \"kd\", \"mean\": 0.49, \"std\": 0.015}, {\"name\": \"ks\", \"mean\": 0.255, "
+        "\"std\": 0.008}, {\"name\": \"alpha\", \"mean\": 0.151, \"std\": 0.0045}, {\"name\": \"F0\", \"mean\": "
+        "0.04, \"std\": 0.0012}]}]}\n"));
+}
+
+__attribute__((noinline)) static char *slurp(const char *dir, const char *name)
+{
+    char *p = g_strdup_printf("%s/%s", dir, name), *t = NULL;
+    g_file_get_contents(p, &t, NULL, NULL);
+    g_free(p);
+    return t;
+}
+
+// refl verify ARGS...; its exit status, stderr kept in *err (g_free).
+static int verify(char **err, const char *const *args)
+{
+    const char *argv[32];
+    int n = 0;
+    argv[n++] = test_refl();
+    argv[n++] = "verify";
+    for (int i = 0; args[i] && n < 31; i++) argv[n++] = args[i];
+    argv[n] = NULL;
+    char *out = NULL;
+    int rc = test_run(argv, 600, &out, err);
+    g_free(out);
+    return rc;
+}
+
+// The study of 2 cases in the default configuration through the chain's
+// calibrations and priors: complete, with the report page, 17 descriptions
+// (the correct one, 13 corruptions, the part placed off three ways) in
+// study.csv, summary and ROC in study.json computed by refl, the chain's
+// inputs in its design. Its shards 1/2 and 2/2 hold case 0 and case 1 only
+// and no results; merged they give study.csv byte for byte and study.json's
+// results and design exactly. A merge that lacks a shard, repeats one, mixes
+// in another study's or reads a bad row is refused with the reason.
+TEST_LONG(verify_study_shards_merge_equal_unsharded)
+{
+    char *cal = chain_calib(), *ply, *steel, *err = NULL;
+    chain_priors(&ply, &steel);
+    char *whole = g_strdup(test_path("whole")), *s1 = g_strdup(test_path("s1")), *s2 = g_strdup(test_path("s2")),
+         *merged = g_strdup(test_path("merged"));
+    const char *common[] = { "--study", "--cases", "2", "--configs", "priors+maps", "--calib", cal, "--priors", ply,
+                             steel, "--threads", "2", NULL };
+    const char *a0[32], *a1[32], *a2[32];
+    int n = 0;
+    for (; common[n]; n++) a0[n] = a1[n] = a2[n] = common[n];
+    a0[n] = "-o", a0[n + 1] = whole, a0[n + 2] = NULL;
+    a1[n] = "-o", a1[n + 1] = s1, a1[n + 2] = "--shard", a1[n + 3] = "1/2", a1[n + 4] = NULL;
+    a2[n] = "-o", a2[n + 1] = s2, a2[n + 2] = "--shard", a2[n + 3] = "2/2", a2[n + 4] = NULL;
+    int rc = verify(&err, a0);
+    CHECK_MSG(rc == 0, "%s", err);
+    g_free(err);
+    rc = verify(&err, a1);
+    CHECK_MSG(rc == 0, "%s", err);
+    g_free(err);
+    rc = verify(&err, a2);
+    CHECK_MSG(rc == 0, "%s", err);
+    g_free(err);
+    rc = verify(&err, (const char *const[]){ "--study-merge", s1, s2, "-o", merged, NULL });
+    CHECK_MSG(rc == 0, "%s", err);
+    g_free(err);
+
+    char *cw = slurp(whole, "study.csv"), *cm = slurp(merged, "study.csv"), *c1 = slurp(s1, "study.csv");
+    char *html = slurp(whole, "index.html"), *html_m = slurp(merged, "index.html");
+    CHECK(cw && cm && c1 && html && html_m);
+    if (cw && cm) CHECK_MSG(!strcmp(cw, cm), "merged study.csv differs from the unsharded one");
+    int rows = 0, placed = 0, case1_in_s1 = 0;
+    for (char *p = cw; p && (p = strchr(p, '\n')); p++) rows += p[1] != 0;
+    for (char *p = cw; p && (p = strstr(p, ",placed,")); p++) placed++;
+    for (char *p = c1; p && (p = strstr(p, ",1,")); p++) case1_in_s1++;   // ",wrong,1," etc: case 1
+    CHECK_MSG(rows == 2 * 17, "%d rows: want 2 cases x 17 descriptions", rows);
+    CHECK(placed == 2 * 3);
+    CHECK_MSG(case1_in_s1 == 0, "shard 1/2 has case 1");
+    char *jp[3] = { g_strdup_printf("%s/study.json", whole), g_strdup_printf("%s/study.json", merged),
+                    g_strdup_printf("%s/study.json", s1) };
+    json_t *jw = json_load_file(jp[0], 0, NULL), *jm = json_load_file(jp[1], 0, NULL), *j1 = json_load_file(jp[2], 0, NULL);
+    CHECK(jw && jm && j1);
+    if (jw && jm && j1) {
+        json_t *rw = json_object_get(jw, "results"), *rm = json_object_get(jm, "results");
+        CHECK(json_is_true(json_object_get(jw, "complete")) && json_is_true(json_object_get(jm, "complete")));
+        CHECK(!json_is_true(json_object_get(j1, "complete")) && !json_object_get(j1, "results"));
+        CHECK(json_equal(rw, rm));
+        CHECK(json_equal(json_object_get(jw, "design"), json_object_get(jm, "design")));
+        CHECK(json_array_size(json_object_get(rw, "summary")) == 16);
+        CHECK(json_array_size(json_object_get(rw, "roc")) == 16);
+        // the I-stiffener: scored far above the correct description in both cases
+        json_t *s0 = json_array_get(json_object_get(rw, "summary"), 0);
+        CHECK(!strcmp(json_string_value(json_object_get(s0, "description")), "I-stiffener"));
+        CHECK_NEAR(json_number_value(json_object_get(s0, "auc")), 1.0, 1e-12);
+        // the chain's calibrations and priors are the study's inputs
+        const char *ds = json_dumps(json_object_get(jw, "design"), 0);
+        CHECK(ds && strstr(ds, "the chain's (--calib)") && strstr(ds, "\"white\"") && strstr(ds, "\"priors\""));
+        free((void *)ds);
+        CHECK(json_array_size(json_object_get(json_object_get(jm, "provenance"), "merged_from")) == 2);
+    }
+    json_decref(jw);
+    json_decref(jm);
+    json_decref(j1);
+
+    // refused merges
+    rc = verify(&err, (const char *const[]){ "--study-merge", s1, "-o", test_path("m2"), NULL });
+    CHECK_MSG(rc != 0 && err && strstr(err, "case 1") && strstr(err, "none of the shards"), "%s", err);
+    g_free(err);
+    rc = verify(&err, (const char *const[]){ "--study-merge", s1, s1, s2, "-o", test_path("m3"), NULL });
+    CHECK_MSG(rc != 0 && err && strstr(err, "already in another shard"), "%s", err);
+    g_free(err);
+    // another study's shard: its design names other inputs
+    char *s2b = g_strdup(test_path("s2b"));
+    g_mkdir_with_parents(s2b, 0755);
+    char *c2 = slurp(s2, "study.csv"), *j2 = slurp(s2, "study.json");
+    if (c2 && j2) {
+        char *cases_at = strstr(j2, "\"cases\": 2");
+        CHECK(cases_at != NULL);
+        if (cases_at) cases_at[9] = '3';
+        test_write("s2b/study.json", j2);
+        test_write("s2b/study.csv", c2);
+    }
+    rc = verify(&err, (const char *const[]){ "--study-merge", s1, s2b, "-o", test_path("m4"), NULL });
+    CHECK_MSG(rc != 0 && err && strstr(err, "s2b/study.json") && strstr(err, "differs"), "%s", err);
+    g_free(err);
+    // a bad row: file and line named
+    if (c2 && j2) {
+        char *j2orig = slurp(s2, "study.json");
+        test_write("s2b/study.json", j2orig ? j2orig : "");
+        g_free(j2orig);
+        static const char row[] = "\npriors+maps,missing,wrong,1,";
+        char *row_at = strstr(c2, row);
+        CHECK(row_at != NULL);
+        if (row_at) row_at[strlen(row)] = 'x';
+        test_write("s2b/study.csv", c2);
+        rc = verify(&err, (const char *const[]){ "--study-merge", s1, s2b, "-o", test_path("m5"), NULL });
+        CHECK_MSG(rc != 0 && err && strstr(err, "s2b/study.csv:4"), "%s", err);
+        g_free(err);
+    }
+    // usage errors
+    rc = verify(&err, (const char *const[]){ "--study", "--cases", "2", "--shard", "3/2", "-o", test_path("x"), NULL });
+    CHECK_MSG(rc == 2 && err && strstr(err, "--shard"), "%s", err);
+    g_free(err);
+    rc = verify(&err, (const char *const[]){ "--study", "--cases", "2", "--configs", "best", "-o", test_path("x"),
+                                             NULL });
+    CHECK_MSG(rc != 0 && err && strstr(err, "'best'"), "%s", err);
+    g_free(err);
+    for (int i = 0; i < 3; i++) g_free(jp[i]);
+    g_free(c2);
+    g_free(j2);
+    g_free(s2b);
+    g_free(cw);
+    g_free(cm);
+    g_free(c1);
+    g_free(html);
+    g_free(html_m);
+    g_free(cal);
+    g_free(ply);
+    g_free(steel);
+    g_free(whole);
+    g_free(s1);
+    g_free(s2);
+    g_free(merged);
+}
