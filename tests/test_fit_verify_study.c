@@ -8,6 +8,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/stat.h>
 
 #include "model/model.h"
 #include "tests/test.h"
@@ -92,29 +93,34 @@ TEST_LONG(verify_study_shards_merge_equal_unsharded)
 {
     char *cal = chain_calib(), *ply, *steel, *err = NULL;
     chain_priors(&ply, &steel);
-    char *whole = g_strdup(test_path("whole")), *s1 = g_strdup(test_path("s1")), *s2 = g_strdup(test_path("s2")),
-         *merged = g_strdup(test_path("merged"));
+    char *whole = g_strdup(test_path("whole")), *merged = g_strdup(test_path("par"));
+    char s1buf[4200], s2buf[4200];
+    const char *s1 = s1buf, *s2 = s2buf;
     const char *common[] = { "--study", "--cases", "2", "--configs", "priors+maps", "--calib", cal, "--priors", ply,
                              steel, "--threads", "2", NULL };
-    const char *a0[32], *a1[32], *a2[32];
+    const char *a0[32];
     int n = 0;
-    for (; common[n]; n++) a0[n] = a1[n] = a2[n] = common[n];
+    for (; common[n]; n++) a0[n] = common[n];
     a0[n] = "-o", a0[n + 1] = whole, a0[n + 2] = NULL;
-    a1[n] = "-o", a1[n + 1] = s1, a1[n + 2] = "--shard", a1[n + 3] = "1/2", a1[n + 4] = NULL;
-    a2[n] = "-o", a2[n + 1] = s2, a2[n + 2] = "--shard", a2[n + 3] = "2/2", a2[n + 4] = NULL;
     int rc = verify(&err, a0);
     CHECK_MSG(rc == 0, "%s", err);
     g_free(err);
-    rc = verify(&err, a1);
-    CHECK_MSG(rc == 0, "%s", err);
+    // the shards side by side with GNU parallel (scripts/study-shards): shard K in par/shards/K, merged in par
+    const char *sd = getenv("REFL_SCRIPTS_DIR");
+    char *shards_sh = g_strdup_printf("%s/study-shards", sd ? sd : "scripts"), *refl_env = g_strdup_printf(
+        "REFL=%s", test_refl());
+    const char *ps[40] = { "/usr/bin/env", refl_env, shards_sh, "-j", "2", "2", merged, "--" };
+    int m = 8;
+    for (int i = 1; common[i] && m < 38; i++) ps[m++] = common[i];   // (the script says --study)
+    ps[m] = NULL;
+    char *out = NULL;
+    rc = test_run(ps, 600, &out, &err);
+    CHECK_MSG(rc == 0, "study-shards: %s", err);
+    g_free(out);
     g_free(err);
-    rc = verify(&err, a2);
-    CHECK_MSG(rc == 0, "%s", err);
-    g_free(err);
-    rc = verify(&err, (const char *const[]){ "--study-merge", s1, s2, "-o", merged, NULL });
-    CHECK_MSG(rc == 0, "%s", err);
-    g_free(err);
-
+    g_free(shards_sh);
+    snprintf(s1buf, sizeof s1buf, "%s/shards/1", merged);
+    snprintf(s2buf, sizeof s2buf, "%s/shards/2", merged);
     char *cw = slurp(whole, "study.csv"), *cm = slurp(merged, "study.csv"), *c1 = slurp(s1, "study.csv");
     char *html = slurp(whole, "index.html"), *html_m = slurp(merged, "index.html");
     CHECK(cw && cm && c1 && html && html_m);
@@ -151,6 +157,56 @@ TEST_LONG(verify_study_shards_merge_equal_unsharded)
     json_decref(jw);
     json_decref(jm);
     json_decref(j1);
+
+    // Slurm (scripts/study-slurm): submit makes the array of 2 and the merge after it (sbatch stands in: it
+    // records its arguments); task 2 of the array runs shard 2/2; with shard 1 beside it the merge job
+    // gives the same study again
+    char *slurm = g_strdup(test_path("slurm")), *slurm_sh = g_strdup_printf("%s/study-slurm", sd ? sd : "scripts");
+    char *bindir = g_strdup(test_path("fakebin")), *path_env = g_strdup_printf("PATH=%s:%s", bindir, getenv("PATH"));
+    g_mkdir_with_parents(bindir, 0755);
+    char *sb = g_strdup(test_write("fakebin/sbatch", "#!/bin/sh\necho \"$*\" >> \"$(dirname \"$0\")/calls\"\n"
+                                                     "echo 4711\n"));
+    chmod(sb, 0755);
+    const char *sub[40] = { "/usr/bin/env", path_env, refl_env, slurm_sh, "submit", "2", slurm, "--" };
+    m = 8;
+    for (int i = 1; common[i] && m < 38; i++) sub[m++] = common[i];
+    sub[m] = NULL;
+    rc = test_run(sub, 60, &out, &err);
+    CHECK_MSG(rc == 0 && out && strstr(out, "4711"), "study-slurm submit: %s %s", out, err);
+    g_free(out);
+    g_free(err);
+    char *calls = slurp(bindir, "calls");
+    CHECK_MSG(calls && strstr(calls, "--array=1-2") && strstr(calls, " shard ") &&
+              strstr(calls, "--dependency=afterok:4711") && strstr(calls, " merge "), "sbatch got: %s", calls);
+    g_free(calls);
+    const char *task[40] = { "/usr/bin/env", refl_env, "SLURM_ARRAY_TASK_ID=2", "SLURM_ARRAY_TASK_MIN=1",
+                             "SLURM_ARRAY_TASK_COUNT=2", "SLURM_CPUS_PER_TASK=2", slurm_sh, "shard", slurm, "--" };
+    m = 10;
+    for (int i = 1; common[i] && m < 38; i++)
+        if (strcmp(common[i], "--threads") && (i == 0 || strcmp(common[i - 1], "--threads"))) task[m++] = common[i];
+    task[m] = NULL;
+    rc = test_run(task, 600, &out, &err);
+    CHECK_MSG(rc == 0, "study-slurm shard: %s", err);
+    g_free(out);
+    g_free(err);
+    char *dst = g_strdup_printf("%s/shards/", slurm);
+    rc = test_run((const char *const[]){ "cp", "-r", s1, dst, NULL }, 60, &out, &err);
+    CHECK_MSG(rc == 0, "cp: %s", err);
+    g_free(out);
+    g_free(err);
+    g_free(dst);
+    rc = test_run((const char *const[]){ "/usr/bin/env", refl_env, slurm_sh, "merge", slurm, NULL }, 120, &out, &err);
+    CHECK_MSG(rc == 0, "study-slurm merge: %s", err);
+    g_free(out);
+    g_free(err);
+    char *cs = slurp(slurm, "study.csv");
+    CHECK_MSG(cs && cw && !strcmp(cs, cw), "the Slurm study's study.csv differs from the unsharded one");
+    g_free(cs);
+    g_free(slurm);
+    g_free(slurm_sh);
+    g_free(bindir);
+    g_free(path_env);
+    g_free(sb);
 
     // refused merges
     rc = verify(&err, (const char *const[]){ "--study-merge", s1, "-o", test_path("m2"), NULL });
@@ -208,7 +264,6 @@ TEST_LONG(verify_study_shards_merge_equal_unsharded)
     g_free(ply);
     g_free(steel);
     g_free(whole);
-    g_free(s1);
-    g_free(s2);
     g_free(merged);
+    g_free(refl_env);
 }
