@@ -2,7 +2,7 @@
 #   make          build bin/refl (installs missing Debian packages first)
 #   make check    fast tests (prints "N passed, N failed")
 #   make demo     the main job on the virtual rig
-#   make study    the verification detection study on the virtual rig (about 45 min)
+#   make study    the verification detection study through the lab day's calibrations and priors
 #   make bench    performance figures, one "NAME: VALUE UNIT" line each
 #   make asan     the tests under AddressSanitizer + UndefinedBehaviorSanitizer
 #   make fuzz     fuzz the parsers with libFuzzer (FUZZ_SECONDS=60)
@@ -244,9 +244,12 @@ demo: $(BIN)/refl
 	rm -rf $(BUILD)/demo/session* $(BUILD)/demo/calib   # a fresh lab day (scripts/demo keeps and resumes sessions)
 	scripts/demo $(BIN)/refl $(BUILD)/demo
 
-# the verification detection study on the virtual rig (about 45 min on 2 cores; README: refl verify)
+# the verification detection study on the virtual rig, through the calibrations and priors of the lab
+# day (make demo runs it first when its calibrations are missing; README: refl verify)
 study: $(BIN)/refl
-	REFL_SCRIPTS_DIR=$(CURDIR)/scripts $(BIN)/refl verify --study -o $(BUILD)/study --cases 200
+	@test -f $(BUILD)/demo/calib/white/white.json || $(MAKE) demo
+	REFL_SCRIPTS_DIR=$(CURDIR)/scripts $(BIN)/refl verify --study -o $(BUILD)/study --cases 200 \
+	  --calib $(BUILD)/demo/calib --priors $(BUILD)/demo/priors_plywood.json $(BUILD)/demo/priors_painted_steel.json
 
 bench: $(BIN)/refl $(BIN)/refl-bench
 	REFL=$(BIN)/refl $(BIN)/refl-bench
