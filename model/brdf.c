@@ -318,3 +318,75 @@ double model_brdf_eval(model_brdf_t m, const double *p, const model_cosines_t *c
         for (int i = 0; i < np; i++) dR_dp[i] = g[i];
     return R;
 }
+
+// ---- prepared geometry -----------------------------------------------------
+// The same expressions as above with the parameter-free factors read from pc
+// (computed there exactly as d_blinn, g_torrance_sparrow and f_schlick do).
+
+model_brdf_prep_t model_brdf_prepare(const model_cosines_t *c)
+{
+    model_brdf_prep_t pc = { .c = *c, .zero = !(c->nl > 0) || !(c->nv > 0) };
+    pc.lognh = c->nh > 0 ? log(c->nh) : 0;
+    pc.s_ts = pc.zero ? 0 : g_torrance_sparrow(c) / c->nv;
+    double x = 1 - c->vh;
+    pc.x5 = x * x * x * x * x;
+    return pc;
+}
+
+// Blinn's D and, when wanted, dD/dns from the prepared log(n.h).
+static inline double d_blinn_prepared(const model_brdf_prep_t *pc, double ns, double *dD_dns)
+{
+    if (!(pc->c.nh > 0)) {
+        if (dD_dns) *dD_dns = 0;
+        return 0;
+    }
+    double D = pow_whole(pc->c.nh, ns);
+    if (dD_dns) *dD_dns = D * pc->lognh;
+    return D;
+}
+
+double model_brdf_eval_prepared(model_brdf_t m, const double *p, const model_brdf_prep_t *pc, double *dR_dp)
+{
+    const model_cosines_t *c = &pc->c;
+    if (m != MODEL_BRDF_THESIS_FIT && m != MODEL_BRDF_HALL && m != MODEL_BRDF_TORRANCE_SPARROW)
+        return model_brdf_eval(m, p, c, dR_dp);
+    int np = model_brdf_nparams(m);
+    if (pc->zero) {
+        if (dR_dp)
+            for (int i = 0; i < np; i++) dR_dp[i] = 0;
+        return 0.0;
+    }
+    bool want = dR_dp != NULL;
+    double dD = 0, R;
+    if (m == MODEL_BRDF_THESIS_FIT) {
+        double ks = p[0], ns = p[1], kd = p[2];
+        double D = d_blinn_prepared(pc, ns, want ? &dD : NULL), s = pc->s_ts;
+        R = ks * D * s + kd * c->nl;
+        if (want) {
+            dR_dp[0] = D * s;
+            dR_dp[1] = ks * dD * s;
+            dR_dp[2] = c->nl;
+        }
+    } else if (m == MODEL_BRDF_HALL) {
+        double kd = p[0], ks = p[1], ns = p[2];
+        double D = d_blinn_prepared(pc, ns, want ? &dD : NULL);
+        R = kd * c->nl + ks * D;
+        if (want) {
+            dR_dp[0] = c->nl;
+            dR_dp[1] = D;
+            dR_dp[2] = ks * dD;
+        }
+    } else {
+        double kd = p[0], ks = p[1], ns = p[2], F0 = p[3];
+        double D = d_blinn_prepared(pc, ns, want ? &dD : NULL), s = pc->s_ts;
+        double F = F0 + (1 - F0) * pc->x5, dF = 1 - pc->x5;
+        R = kd * c->nl + ks * D * F * s;
+        if (want) {
+            dR_dp[0] = c->nl;
+            dR_dp[1] = D * F * s;
+            dR_dp[2] = ks * dD * F * s;
+            dR_dp[3] = ks * D * dF * s;
+        }
+    }
+    return R;
+}

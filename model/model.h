@@ -287,6 +287,20 @@ model_cosines_t model_cosines(model_vec3_t n, model_vec3_t l, model_vec3_t v);
 // dR_dp (out, may be NULL): model_brdf_nparams(m) derivatives.
 double model_brdf_eval(model_brdf_t m, const double *p, const model_cosines_t *c,
                        double *dR_dp);
+// The parameter-free terms of one (point, lamp) geometry, computed once by
+// model_brdf_prepare so that fits which evaluate the same geometry many times
+// skip them: model_brdf_eval_prepared equals model_brdf_eval bit for bit
+// (the same operations in the same order; the Blinn-based models use the
+// stored terms, the others evaluate c).
+typedef struct {
+    model_cosines_t c;
+    double lognh;   // log(n.h) (0 when n.h <= 0)
+    double s_ts;    // G_ts / (n.v), the Torrance-Sparrow attenuation over n.v
+    double x5;      // (1 - v.h)^5, Schlick's term
+    bool   zero;    // n.l <= 0 or n.v <= 0: R = 0
+} model_brdf_prep_t;
+model_brdf_prep_t model_brdf_prepare(const model_cosines_t *c);
+double model_brdf_eval_prepared(model_brdf_t m, const double *p, const model_brdf_prep_t *pc, double *dR_dp);
 // The same for n cosines (model/brdf_batch.c): R[i], and dR_dp (may be
 // NULL) n x nparams row-major. Equal to model_brdf_eval sample by sample to
 // rounding (1e-9 relative); GGX, the fitters' inner loop, is vectorised.

@@ -1,0 +1,96 @@
+// tests/test_fit_verify_speed.c — the verification fit's fast paths give the
+// same numbers as the plain ones, bit for bit: the prepared BRDF geometry
+// (model_brdf_prepare / model_brdf_eval_prepared) against model_brdf_eval,
+// and the selection median against a full sort.
+#include <math.h>
+#include <stdint.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "fit/verify.h"
+#include "model/model.h"
+#include "tests/test.h"
+
+static uint64_t rs = 0x9e3779b97f4a7c15ull;
+static double urand(void)
+{
+    rs ^= rs << 13;
+    rs ^= rs >> 7;
+    rs ^= rs << 17;
+    return (double)(rs >> 11) / 9007199254740992.0;
+}
+
+static bool same_bits(double a, double b) { return memcmp(&a, &b, sizeof a) == 0; }
+
+// Random cosines, including the degenerate ones (n.l, n.v or n.h <= 0, v.h
+// near 0 or negative) and exact zeros.
+static model_cosines_t random_cosines(int i)
+{
+    model_cosines_t c = { 2 * urand() - 0.3, 2 * urand() - 0.3, 2 * urand() - 0.2, 2 * urand() - 0.2 };
+    if (c.nl > 1) c.nl = 1;
+    if (c.nv > 1) c.nv = 1;
+    if (c.nh > 1) c.nh = 1;
+    if (c.vh > 1) c.vh = 1;
+    if (i % 17 == 0) c.nh = 0;
+    if (i % 19 == 0) c.vh = 0;
+    if (i % 23 == 0) c.nh = 1;
+    return c;
+}
+
+TEST(brdf_prepared_equals_eval_bit_for_bit)
+{
+    long compared = 0, mismatches = 0;
+    for (int m = 0; m < MODEL_BRDF_COUNT; m++) {
+        int np = model_brdf_nparams((model_brdf_t)m);
+        for (int i = 0; i < 20000; i++) {
+            model_cosines_t c = random_cosines(i);
+            model_brdf_prep_t pc = model_brdf_prepare(&c);
+            double p[MODEL_BRDF_MAX_PARAMS];
+            for (int j = 0; j < np; j++) p[j] = 0.01 + urand();
+            int ins = model_brdf_param_index((model_brdf_t)m, "ns");
+            if (ins >= 0) p[ins] = i % 3 == 0 ? (double)(int)(300 * urand()) : 500 * urand();   // whole and not
+            double d0[MODEL_BRDF_MAX_PARAMS], d1[MODEL_BRDF_MAX_PARAMS];
+            double r0 = model_brdf_eval((model_brdf_t)m, p, &c, d0);
+            double r1 = model_brdf_eval_prepared((model_brdf_t)m, p, &pc, d1);
+            double q0 = model_brdf_eval((model_brdf_t)m, p, &c, NULL);
+            double q1 = model_brdf_eval_prepared((model_brdf_t)m, p, &pc, NULL);
+            bool ok = same_bits(r0, r1) && same_bits(q0, q1) && same_bits(r0, q1);
+            for (int j = 0; j < np; j++) ok = ok && same_bits(d0[j], d1[j]);
+            compared++;
+            if (!ok && mismatches++ < 5)
+                CHECK_MSG(false, "%s: cosines %.17g %.17g %.17g %.17g: R %.17g vs %.17g", model_brdf_name(m), c.nl,
+                          c.nv, c.nh, c.vh, r0, r1);
+        }
+    }
+    CHECK(compared == 20000L * MODEL_BRDF_COUNT);
+    CHECK_MSG(mismatches == 0, "%ld of %ld evaluations differ", mismatches, compared);
+}
+
+static int cmp_sorted(const void *a, const void *b) { return model_cmp_double(a, b); }
+
+TEST(verify_median_equals_sorted_middle)
+{
+    for (int t = 0; t < 3000; t++) {
+        int n = 1 + (int)(urand() * (t % 10 == 0 ? 2000 : 40));
+        double *v = malloc((size_t)n * sizeof *v), *s = malloc((size_t)n * sizeof *s);
+        CHECK(v && s);
+        if (!v || !s) return;
+        int kind = t % 4;
+        for (int i = 0; i < n; i++) {
+            double x = urand() * 2 - 1;
+            if (kind == 1) x = (double)(int)(x * 4);   // many ties
+            if (kind == 2) x = i;                      // sorted already
+            if (kind == 3) x = n - i + 0.5 * (i % 3);  // mostly descending
+            v[i] = s[i] = x;
+        }
+        if (t % 50 == 7) v[n / 2] = s[n / 2] = NAN;   // NaN sorts last, as model_cmp_double has it
+        qsort(s, (size_t)n, sizeof *s, cmp_sorted);
+        double want = n % 2 ? s[n / 2] : 0.5 * (s[n / 2 - 1] + s[n / 2]);
+        double got = verify_median(v, n);
+        CHECK_MSG(same_bits(want, got) || (isnan(want) && isnan(got)), "n %d kind %d: %.17g, sorted %.17g", n, kind,
+                  got, want);
+        free(v);
+        free(s);
+    }
+    CHECK(isnan(verify_median(NULL, 0)));
+}
