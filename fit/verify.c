@@ -531,7 +531,7 @@ typedef struct {
 
 typedef struct {
     const pt_t   *pt;
-    const model_brdf_prep_t *cs; // per (point, lamp on): the geometry's parameter-free terms
+    model_brdf_prep_t *cs;       // per (point, lamp on): the geometry's terms (kept factors change)
     const double *w;             // A_i V / d^2
     const double *b;             // A_i B_i
     const int    *lamp;          // lamp index

@@ -66,6 +66,38 @@ TEST(brdf_prepared_equals_eval_bit_for_bit)
     CHECK_MSG(mismatches == 0, "%ld of %ld evaluations differ", mismatches, compared);
 }
 
+// A prepared geometry keeps its last distribution/shadowing factors: a solver's
+// sequence of parameters (repeats, with and without derivatives, the shape
+// parameter changing or not) gives model_brdf_eval's values at every step.
+TEST(brdf_prepared_kept_factors_follow_the_parameters)
+{
+    long compared = 0, mismatches = 0;
+    for (int m = 0; m < MODEL_BRDF_COUNT; m++) {
+        int np = model_brdf_nparams((model_brdf_t)m);
+        for (int i = 0; i < 2000; i++) {
+            model_cosines_t c = random_cosines(i);
+            model_brdf_prep_t pc = model_brdf_prepare(&c);
+            double p[MODEL_BRDF_MAX_PARAMS];
+            for (int j = 0; j < np; j++) p[j] = 0.01 + urand();
+            for (int step = 0; step < 12; step++) {
+                int r = (int)(urand() * 4);
+                if (r == 1) p[(int)(urand() * np)] = 0.01 + urand();   // any parameter moves (or the shape one)
+                if (r == 2) p[(int)(urand() * np)] *= 1 + 1e-9;          // a tiny step, as in a difference
+                bool want = urand() < 0.5;
+                double d0[MODEL_BRDF_MAX_PARAMS], d1[MODEL_BRDF_MAX_PARAMS];
+                double r0 = model_brdf_eval((model_brdf_t)m, p, &c, want ? d0 : NULL);
+                double r1 = model_brdf_eval_prepared((model_brdf_t)m, p, &pc, want ? d1 : NULL);
+                bool ok = same_bits(r0, r1);
+                for (int j = 0; want && j < np; j++) ok = ok && same_bits(d0[j], d1[j]);
+                compared++;
+                if (!ok && mismatches++ < 5)
+                    CHECK_MSG(false, "%s step %d: R %.17g vs %.17g", model_brdf_name(m), step, r0, r1);
+            }
+        }
+    }
+    CHECK_MSG(mismatches == 0, "%ld of %ld evaluations differ", mismatches, compared);
+}
+
 static int cmp_sorted(const void *a, const void *b) { return model_cmp_double(a, b); }
 
 TEST(verify_median_equals_sorted_middle)
