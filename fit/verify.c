@@ -527,17 +527,18 @@ typedef struct {
     int    mat;               // scene material
     int    nl;                // lamps on
     int    first;             // into the lamp arrays
+    double r_last, rr_last;   // the robust transform's last residual and its image (group_fn; NAN: none)
 } pt_t;
 
 typedef struct {
-    const pt_t   *pt;
+    pt_t         *pt;            // (r_last, rr_last change in group_fn)
     model_brdf_prep_t *cs;       // per (point, lamp on): the geometry's terms (kept factors change)
     const double *w;             // A_i V / d^2
     const double *b;             // A_i B_i
     const int    *lamp;          // lamp index
     model_brdf_t  model;         // of the point's material
     int           np, nl_all;
-    bool          reference;     // model_brdf_eval on cs[].c (verify_options_t.reference_eval)
+    bool          reference;     // model_brdf_eval on cs[].c, no kept robust images (reference_eval)
 } res_ctx_t;
 
 typedef struct {
@@ -607,7 +608,12 @@ static bool group_fn(void *vctx, const double *const *par, double *res, double *
         double r = point_eval(g->rc, g->k[t], par, row[0], row[1], row[2], row[3], row[4]);
         if (!isfinite(r)) return false;
         if (g->b > 0) {
-            double s2 = r * r, rr = copysign(sqrt(g->b * log1p(s2 / g->b)), r);
+            // the same r again (the solver's Jacobian at an accepted candidate): its image is kept
+            pt_t *p = &g->rc->pt[g->k[t]];
+            bool same = !g->rc->reference && r == p->r_last && signbit(r) == signbit(p->r_last);
+            double s2 = r * r, rr = same ? p->rr_last : copysign(sqrt(g->b * log1p(s2 / g->b)), r);
+            p->r_last = r;
+            p->rr_last = rr;
             double f = fabs(r) > 1e-12 ? r / (1 + s2 / g->b) / rr : 1;
             for (int b = 0; b < 5; b++)
                 if (row[b])
@@ -974,6 +980,7 @@ static void image_fit_points(fit_t *F, int m, int first_pt, double Pa0, double v
         q->mat = v->pi[g].material;
         q->first = (int)*e;
         q->nl = 0;
+        q->r_last = q->rr_last = NAN;
         const model_lamp_sample_t *ls = &v->ls[(size_t)g * v->nl];
         for (int i = 0; i < F->nl; i++) {
             if (!((im->lamps_on >> i) & 1)) continue;
@@ -1072,7 +1079,8 @@ static bool fit_parameters(fit_t *F)
             snprintf(d->name, sizeof d->name, "%s.%s", P->name, pn);
         }
         F->rcs[k] = (res_ctx_t){ .pt = F->pt, .cs = F->cs, .w = F->wv, .b = F->bv, .lamp = F->lampv,
-                                 .model = P->model, .np = P->np, .nl_all = F->nl ? F->nl : 1, .reference = opt->reference_eval };
+                                 .model = P->model, .np = P->np, .nl_all = F->nl ? F->nl : 1,
+                                 .reference = opt->reference_eval };
     }
     free(mat_used);
     return ok;
@@ -1576,7 +1584,7 @@ bool verify_check_jacobian(double *max_abs_err)
     if (max_abs_err) *max_abs_err = 0;
     for (int m = 0; m < MODEL_BRDF_COUNT; m++) {
         const int nl = 3;
-        pt_t p = { .meas = 900, .sigma = 3, .Eg = 6000 * 1.02, .mat = 0, .nl = nl, .first = 0 };
+        pt_t p = { .meas = 900, .sigma = 3, .Eg = 6000 * 1.02, .mat = 0, .nl = nl, .first = 0, .r_last = NAN };
         model_brdf_prep_t cs[3];
         double w[3], b[3];
         int lamp[3] = { 0, 1, 2 };

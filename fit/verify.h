@@ -122,7 +122,8 @@ typedef struct {
     int    max_iterations;      // of the fit (default 100)
     bool   no_covariance;       // skip the parameters' standard deviations (faster; studies)
     bool   reference_eval;      // benchmarks: model_brdf_eval per residual instead of the prepared
-                                //   terms (model_brdf_eval_prepared); the same results, slower
+                                //   terms (model_brdf_eval_prepared), the robust transform always
+                                //   computed (not kept per point); the same results, slower
     bool   verbose;
 } verify_options_t;
 

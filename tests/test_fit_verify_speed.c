@@ -4,10 +4,12 @@
 // and the selection median against a full sort.
 #include <math.h>
 #include <stdint.h>
+#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
 #include "fit/verify.h"
+#include "fit/verify_lab.h"
 #include "model/model.h"
 #include "tests/test.h"
 
@@ -125,4 +127,77 @@ TEST(verify_median_equals_sorted_middle)
         free(s);
     }
     CHECK(isnan(verify_median(NULL, 0)));
+}
+
+// verify_run with the prepared terms and kept robust images against the
+// reference evaluation (verify_options_t.reference_eval) on a virtual-rig
+// view of the T-stiffener, with a correct and a wrong description, every
+// configuration the study uses: the same score, parameters and points, bit
+// for bit.
+TEST(verify_run_prepared_equals_reference)
+{
+    char truth[4096];
+    snprintf(truth, sizeof truth, "%s/examples/virtual-truth.ini", test_srcdir());
+    const double angle = 30;
+    verify_lab_t *L = verify_lab_open(truth, "t_stiffener", &angle, 1, 6000, 0, false);
+    CHECK_MSG(L != NULL, "%s", model_last_error());
+    if (!L) return;
+    int W = verify_lab_width(L), H = verify_lab_height(L);
+    float *img = malloc((size_t)W * H * sizeof(float));
+    CHECK(img && verify_lab_image(L, 0, 0xf, NULL, 1, 7, img));
+    verify_image_t im = { .P = img, .W = W, .H = H, .camera = 0, .angle_deg = angle, .lamps_on = 0xf,
+                          .exposure_us = 6000 };
+    snprintf(im.name, sizeof im.name, "speed");
+    verify_priors_t pr = { 0 };
+    const model_materials_t *mm = verify_lab_materials(L);
+    const model_material_t *ply = model_materials_find(mm, "plywood"), *st = model_materials_find(mm, "painted_steel");
+    CHECK(ply && st && verify_priors_add(&pr, ply, 0.1, 1e-4, 3) && verify_priors_add(&pr, st, 0.1, 1e-4, 3));
+    const model_material_t *mats[2] = { ply, st };
+    int compared = 0;
+    for (int wrong = 0; wrong < 2; wrong++) {
+        model_stiffener_t d = model_stiffener_default();
+        if (wrong) d.height_scale = 1.04;
+        model_scene_t *sc = model_stiffener_scene(&d, "t_stiffener");
+        verify_options_t opt = verify_defaults();
+        opt.threads = 1;
+        verify_view_t *v = sc ? verify_view_new(sc, verify_lab_camera(L), angle, verify_lab_lamps(L), mats, &opt) : NULL;
+        CHECK_MSG(v != NULL, "%s", model_last_error());
+        for (int k = 0; v && k < 4; k++) {
+            opt.use_priors = k < 2;
+            opt.use_flat = k % 2 == 0;
+            opt.no_covariance = k != 0;
+            verify_result_t r[2];
+            bool ok[2];
+            for (int ref = 0; ref < 2; ref++) {
+                opt.reference_eval = ref;
+                ok[ref] = verify_run(sc, &pr, verify_lab_camera(L), 1, verify_lab_lamps(L), verify_lab_A(L), &im, 1, &v,
+                                     &opt, &r[ref]);
+            }
+            CHECK_MSG(ok[0] && ok[1], "%s", model_last_error());
+            if (ok[0] && ok[1]) {
+                compared++;
+                CHECK_MSG(same_bits(r[0].score, r[1].score), "config %d: score %.17g vs reference %.17g", k,
+                          r[0].score, r[1].score);
+                CHECK(r[0].correct == r[1].correct && r[0].nparams == r[1].nparams && r[0].npoints == r[1].npoints);
+                for (int j = 0; j < r[0].nparams && j < r[1].nparams; j++)
+                    CHECK_MSG(same_bits(r[0].params[j].value, r[1].params[j].value) &&
+                                  (same_bits(r[0].params[j].std, r[1].params[j].std) ||
+                                   (isnan(r[0].params[j].std) && isnan(r[1].params[j].std))),
+                              "config %d: %s %.17g vs reference %.17g", k, r[0].params[j].name, r[0].params[j].value,
+                              r[1].params[j].value);
+                int differ = 0;
+                for (int j = 0; j < r[0].npoints && j < r[1].npoints; j++)
+                    differ += memcmp(&r[0].points[j], &r[1].points[j], sizeof r[0].points[j]) != 0;
+                CHECK_MSG(differ == 0, "config %d: %d points differ", k, differ);
+            }
+            for (int ref = 0; ref < 2; ref++)
+                if (ok[ref]) verify_result_free(&r[ref]);
+        }
+        verify_view_free(v);
+        model_scene_free(sc);
+    }
+    CHECK(compared == 8);
+    verify_priors_free(&pr);
+    free(img);
+    verify_lab_free(L);
 }
