@@ -174,7 +174,8 @@ TEST_SRC := \
     tests/test_fit_lightplan.c \
     tests/test_fit_material.c \
     tests/test_fit_verify.c \
-    tests/test_fit_verify_study.c
+    tests/test_fit_verify_study.c \
+    tests/test_fit_verify_speed.c
 BENCH_SRC := tests/bench.c
 FUZZ_SRC  := tests/fuzz_parsers.c
 

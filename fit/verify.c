@@ -527,16 +527,18 @@ typedef struct {
     int    mat;               // scene material
     int    nl;                // lamps on
     int    first;             // into the lamp arrays
+    double r_last, rr_last;   // the robust transform's last residual and its image (group_fn; NAN: none)
 } pt_t;
 
 typedef struct {
-    const pt_t   *pt;
-    const model_cosines_t *cs;   // per (point, lamp on)
+    pt_t         *pt;            // (r_last, rr_last change in group_fn)
+    model_brdf_prep_t *cs;       // per (point, lamp on): the geometry's terms (kept factors change)
     const double *w;             // A_i V / d^2
     const double *b;             // A_i B_i
     const int    *lamp;          // lamp index
     model_brdf_t  model;         // of the point's material
     int           np, nl_all;
+    bool          reference;     // model_brdf_eval on cs[].c, no kept robust images (reference_eval)
 } res_ctx_t;
 
 typedef struct {
@@ -556,7 +558,8 @@ static double point_eval(const res_ctx_t *rc, int k, const double *const *par, d
     double dS_ds[MAX_LAMPS] = { 0 };
     for (int j = 0; j < p->nl; j++) {
         int e = p->first + j, i = rc->lamp[e];
-        double R = model_brdf_eval(rc->model, mp, &rc->cs[e], j3 ? dR : NULL);
+        double R = rc->reference ? model_brdf_eval(rc->model, mp, &rc->cs[e].c, j3 ? dR : NULL)
+                                  : model_brdf_eval_prepared(rc->model, mp, &rc->cs[e], j3 ? dR : NULL);
         double wr = rc->w[e] * R;
         S += s[i] * wr;
         T += s[i] * rc->b[e];
@@ -605,7 +608,12 @@ static bool group_fn(void *vctx, const double *const *par, double *res, double *
         double r = point_eval(g->rc, g->k[t], par, row[0], row[1], row[2], row[3], row[4]);
         if (!isfinite(r)) return false;
         if (g->b > 0) {
-            double s2 = r * r, rr = copysign(sqrt(g->b * log1p(s2 / g->b)), r);
+            // the same r again (the solver's Jacobian at an accepted candidate): its image is kept
+            pt_t *p = &g->rc->pt[g->k[t]];
+            bool same = !g->rc->reference && r == p->r_last && signbit(r) == signbit(p->r_last);
+            double s2 = r * r, rr = same ? p->rr_last : copysign(sqrt(g->b * log1p(s2 / g->b)), r);
+            p->r_last = r;
+            p->rr_last = rr;
             double f = fabs(r) > 1e-12 ? r / (1 + s2 / g->b) / rr : 1;
             for (int b = 0; b < 5; b++)
                 if (row[b])
@@ -631,11 +639,45 @@ void verify_result_free(verify_result_t *r)
     memset(r, 0, sizeof *r);
 }
 
-static double median_of(double *v, int n)
+// v[k] after sorting v[lo..hi] (Hoare's selection; v is reordered): the
+// same value a full sort puts there. No NaN in v.
+static double select_kth(double *v, int lo, int hi, int k)
+{
+    while (lo < hi) {
+        double piv = v[lo + (hi - lo) / 2];
+        int i = lo, j = hi;
+        while (i <= j) {
+            while (v[i] < piv) i++;
+            while (v[j] > piv) j--;
+            if (i <= j) {
+                double t = v[i];
+                v[i++] = v[j];
+                v[j--] = t;
+            }
+        }
+        if (k <= j) hi = j;
+        else if (k >= i) lo = i;
+        else return v[k];
+    }
+    return v[k];
+}
+
+// The median of v[0..n) (v is reordered), equal to the sorted middle.
+double verify_median(double *v, int n)
 {
     if (n <= 0) return NAN;
-    qsort(v, (size_t)n, sizeof *v, model_cmp_double);
-    return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
+    for (int i = 0; i < n; i++)
+        if (isnan(v[i])) {
+            qsort(v, (size_t)n, sizeof *v, model_cmp_double);
+            return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
+        }
+    double hi = select_kth(v, 0, n - 1, n / 2);
+    if (n % 2) return hi;
+    // the largest value below position n/2
+    double lo = v[0];
+    for (int i = 1; i < n / 2; i++)
+        if (v[i] > lo) lo = v[i];
+    return 0.5 * (lo + hi);
 }
 
 static void stats_of(const verify_point_t *pts, int n, int image, verify_stats_t *st)
@@ -661,10 +703,10 @@ static void stats_of(const verify_point_t *pts, int n, int image, verify_stats_t
         st->mean_abs = s1 / m;
         st->std_abs = sqrt(fmax(s2 / m - st->mean_abs * st->mean_abs, 0));
         st->rms_z = sqrt(zz / m);
-        st->median_abs_z = median_of(z, m);
-        double med = median_of(d, m);
+        st->median_abs_z = verify_median(z, m);
+        double med = verify_median(d, m);
         for (int k = 0; k < m; k++) d[k] = fabs(d[k] - med);
-        st->robust_sigma = 1.4826 * median_of(d, m);
+        st->robust_sigma = 1.4826 * verify_median(d, m);
     }
     free(d);
     free(z);
@@ -700,7 +742,7 @@ typedef struct {
     pt_t            *pt;                // nfit
     int             *ptidx;             // nfit: point -> index in out->points
     int              nfit;
-    model_cosines_t *cs;                // per (fit point, lamp on)
+    model_brdf_prep_t *cs;              // per (fit point, lamp on)
     double          *wv, *bv;           // A_i V / d^2 and A_i B_i, per (fit point, lamp on)
     int             *lampv;             // lamp index, per (fit point, lamp on)
     double          *mp;                // nm x MODEL_BRDF_MAX_PARAMS: the materials' parameters
@@ -883,7 +925,7 @@ static bool measure_windows(fit_t *F, int m, int first_pt, double *Pa0, double *
     *Pa0 = 0;
     if (!off) {
         if (nt >= 10) {
-            *Pa0 = median_of(tmp, nt);
+            *Pa0 = verify_median(tmp, nt);
         } else {
             *Pa0 = INFINITY;
             for (int k = first_pt; k < first_pt + n; k++)
@@ -897,7 +939,7 @@ static bool measure_windows(fit_t *F, int m, int first_pt, double *Pa0, double *
         for (int k = first_pt; k < first_pt + n; k++)
             if (F->out->points[k].status == VERIFY_PT_USED)
                 tmp[nt++] = (double)F->out->points[k].sigma * F->out->points[k].sigma;
-        *var_px_fallback = nt ? median_of(tmp, nt) : 1;
+        *var_px_fallback = nt ? verify_median(tmp, nt) : 1;
         if (!(*var_px_fallback > 0)) *var_px_fallback = 1;
     }
     free(tmp);
@@ -938,10 +980,12 @@ static void image_fit_points(fit_t *F, int m, int first_pt, double Pa0, double v
         q->mat = v->pi[g].material;
         q->first = (int)*e;
         q->nl = 0;
+        q->r_last = q->rr_last = NAN;
         const model_lamp_sample_t *ls = &v->ls[(size_t)g * v->nl];
         for (int i = 0; i < F->nl; i++) {
             if (!((im->lamps_on >> i) & 1)) continue;
-            F->cs[*e] = model_cosines(v->pi[g].n, ls[i].l, v->pi[g].v);
+            model_cosines_t c = model_cosines(v->pi[g].n, ls[i].l, v->pi[g].v);
+            F->cs[*e] = model_brdf_prepare(&c);
             F->wv[*e] = ls[i].d_mm > 0 ? F->A[i] * ls[i].V / (ls[i].d_mm * ls[i].d_mm) : 0;
             F->bv[*e] = F->A[i] * v->B[(size_t)g * v->nl + i];
             F->lampv[*e] = i;
@@ -1035,7 +1079,8 @@ static bool fit_parameters(fit_t *F)
             snprintf(d->name, sizeof d->name, "%s.%s", P->name, pn);
         }
         F->rcs[k] = (res_ctx_t){ .pt = F->pt, .cs = F->cs, .w = F->wv, .b = F->bv, .lamp = F->lampv,
-                                 .model = P->model, .np = P->np, .nl_all = F->nl ? F->nl : 1 };
+                                 .model = P->model, .np = P->np, .nl_all = F->nl ? F->nl : 1,
+                                 .reference = opt->reference_eval };
     }
     free(mat_used);
     return ok;
@@ -1539,19 +1584,20 @@ bool verify_check_jacobian(double *max_abs_err)
     if (max_abs_err) *max_abs_err = 0;
     for (int m = 0; m < MODEL_BRDF_COUNT; m++) {
         const int nl = 3;
-        pt_t p = { .meas = 900, .sigma = 3, .Eg = 6000 * 1.02, .mat = 0, .nl = nl, .first = 0 };
-        model_cosines_t cs[3];
+        pt_t p = { .meas = 900, .sigma = 3, .Eg = 6000 * 1.02, .mat = 0, .nl = nl, .first = 0, .r_last = NAN };
+        model_brdf_prep_t cs[3];
         double w[3], b[3];
         int lamp[3] = { 0, 1, 2 };
         for (int i = 0; i < nl; i++) {
             model_vec3_t n = v3(0, 0, 1);
             double a = 2 * M_PI * model_rng_uniform(&rng), t = 0.1 + 1.2 * model_rng_uniform(&rng);
             model_vec3_t l = v3(sin(t) * cos(a), sin(t) * sin(a), cos(t)), v = v3_unit(v3(0.3, -0.2, 0.9));
-            cs[i] = model_cosines(n, l, v);
+            model_cosines_t c = model_cosines(n, l, v);
+            cs[i] = model_brdf_prepare(&c);
             w[i] = 3e5 * 1e-6 * (0.5 + model_rng_uniform(&rng));
             b[i] = 0.02 * model_rng_uniform(&rng);
         }
-        res_ctx_t rc = { &p, cs, w, b, lamp, (model_brdf_t)m, model_brdf_nparams((model_brdf_t)m), nl };
+        res_ctx_t rc = { &p, cs, w, b, lamp, (model_brdf_t)m, model_brdf_nparams((model_brdf_t)m), nl, false };
         int k[1] = { 0 };
         res_group_t g = { &rc, k, 1, 9 };
         double kc = 0.97, s[3] = { 1.02, 0.95, 1.1 }, Pa = 3, rho = 0.8, mp[MODEL_BRDF_MAX_PARAMS];

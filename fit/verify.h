@@ -121,6 +121,9 @@ typedef struct {
     int    threads;             // 0: REFL_THREADS or all
     int    max_iterations;      // of the fit (default 100)
     bool   no_covariance;       // skip the parameters' standard deviations (faster; studies)
+    bool   reference_eval;      // benchmarks: model_brdf_eval per residual instead of the prepared
+                                //   terms (model_brdf_eval_prepared), the robust transform always
+                                //   computed (not kept per point); the same results, slower
     bool   verbose;
 } verify_options_t;
 
@@ -240,6 +243,10 @@ bool verify_match_priors(const model_scene_t *scene, const verify_priors_t *pr, 
 // Tests: the fit's residual Jacobian (with the robust transform, every
 // reflection model) against central differences.
 bool verify_check_jacobian(double *max_abs_err);
+// The median of v[0..n) (NAN when n <= 0; v is reordered), by selection:
+// the same value as the middle (or the mean of the two middle values) of
+// v sorted with model_cmp_double.
+double verify_median(double *v, int n);
 
 // ---------------------------------------------------------------------------
 // Verification of files (fit/verify_files.c): `refl verify` without its

@@ -318,3 +318,124 @@ double model_brdf_eval(model_brdf_t m, const double *p, const model_cosines_t *c
         for (int i = 0; i < np; i++) dR_dp[i] = g[i];
     return R;
 }
+
+// ---- prepared geometry -----------------------------------------------------
+// The same expressions as above with the parameter-free factors read from pc
+// (computed there exactly as d_blinn, g_torrance_sparrow, f_schlick, d_ggx
+// and lambda_ggx do), and the parameter-dependent ones kept for a repeat.
+
+model_brdf_prep_t model_brdf_prepare(const model_cosines_t *c)
+{
+    model_brdf_prep_t pc = { .c = *c, .zero = !(c->nl > 0) || !(c->nv > 0), .key = NAN };
+    pc.lognh = c->nh > 0 ? log(c->nh) : 0;
+    pc.s_ts = pc.zero ? 0 : g_torrance_sparrow(c) / c->nv;
+    double x = 1 - c->vh;
+    pc.x5 = x * x * x * x * x;
+    pc.nh2 = c->nh * c->nh;
+    double cl = c->nl * c->nl, cv = c->nv * c->nv;
+    pc.t2l = fmax(0.0, (1 - cl) / cl);
+    pc.t2v = fmax(0.0, (1 - cv) / cv);
+    return pc;
+}
+
+// Blinn's D (kept with its ns) and, when wanted, dD/dns from the prepared log(n.h).
+static inline double d_blinn_prepared(model_brdf_prep_t *pc, double ns, double *dD_dns)
+{
+    if (!(pc->c.nh > 0)) {
+        if (dD_dns) *dD_dns = 0;
+        return 0;
+    }
+    if (!(ns == pc->key)) {
+        pc->D = pow_whole(pc->c.nh, ns);
+        pc->key = ns;
+    }
+    double D = pc->D;
+    if (dD_dns) *dD_dns = D * pc->lognh;
+    return D;
+}
+
+// GGX's D and height-correlated G2 and their alpha derivatives (when want),
+// kept with their alpha.
+static void ggx_prepared(model_brdf_prep_t *pc, double a, bool want)
+{
+    if (a == pc->key && (pc->kept_d || !want)) return;
+    const model_cosines_t *c = &pc->c;
+    double a2 = a * a, D = 0, dD = 0, G = 0, dG = 0;
+    if (c->nh > 0) {
+        double q = pc->nh2 * (a2 - 1) + 1;
+        D = a2 / (M_PI * q * q);
+        if (want) dD = 2 * a * (q - 2 * a2 * pc->nh2) / (M_PI * q * q * q);
+    }
+    if (c->vh > 0) {
+        double sl = sqrt(1 + a2 * pc->t2l), sv = sqrt(1 + a2 * pc->t2v);
+        double ll = (sl - 1) / 2, lv = (sv - 1) / 2;
+        G = 1 / (1 + ll + lv);
+        if (want) dG = -G * G * (pc->t2l / (4 * sl) + pc->t2v / (4 * sv)) * 2 * a;
+    }
+    pc->key = a;
+    pc->D = D, pc->G = G, pc->dD = dD, pc->dG = dG;
+    pc->kept_d = want;
+}
+
+static double eval_prepared_ggx(const double *p, model_brdf_prep_t *pc, double *dR_dp)
+{
+    const model_cosines_t *c = &pc->c;
+    double kd = p[0], ks = p[1], F0 = p[3];
+    ggx_prepared(pc, p[2], dR_dp != NULL);
+    double D = pc->D, G = pc->G, F = F0 + (1 - F0) * pc->x5, s = 1 / (4 * c->nv);
+    double R = kd / M_PI * c->nl + ks * D * G * F * s;
+    if (dR_dp) {
+        dR_dp[0] = c->nl / M_PI;
+        dR_dp[1] = D * G * F * s;
+        dR_dp[2] = ks * (pc->dD * G + D * pc->dG) * F * s;
+        dR_dp[3] = ks * D * G * (1 - pc->x5) * s;
+    }
+    return R;
+}
+
+double model_brdf_eval_prepared(model_brdf_t m, const double *p, model_brdf_prep_t *pc, double *dR_dp)
+{
+    const model_cosines_t *c = &pc->c;
+    if (m != MODEL_BRDF_THESIS_FIT && m != MODEL_BRDF_HALL && m != MODEL_BRDF_TORRANCE_SPARROW && m != MODEL_BRDF_GGX)
+        return model_brdf_eval(m, p, c, dR_dp);
+    int np = model_brdf_nparams(m);
+    if (pc->zero) {
+        if (dR_dp)
+            for (int i = 0; i < np; i++) dR_dp[i] = 0;
+        return 0.0;
+    }
+    if (m == MODEL_BRDF_GGX) return eval_prepared_ggx(p, pc, dR_dp);
+    bool want = dR_dp != NULL;
+    double dD = 0, R;
+    if (m == MODEL_BRDF_THESIS_FIT) {
+        double ks = p[0], ns = p[1], kd = p[2];
+        double D = d_blinn_prepared(pc, ns, want ? &dD : NULL), s = pc->s_ts;
+        R = ks * D * s + kd * c->nl;
+        if (want) {
+            dR_dp[0] = D * s;
+            dR_dp[1] = ks * dD * s;
+            dR_dp[2] = c->nl;
+        }
+    } else if (m == MODEL_BRDF_HALL) {
+        double kd = p[0], ks = p[1], ns = p[2];
+        double D = d_blinn_prepared(pc, ns, want ? &dD : NULL);
+        R = kd * c->nl + ks * D;
+        if (want) {
+            dR_dp[0] = c->nl;
+            dR_dp[1] = D;
+            dR_dp[2] = ks * dD;
+        }
+    } else {
+        double kd = p[0], ks = p[1], ns = p[2], F0 = p[3];
+        double D = d_blinn_prepared(pc, ns, want ? &dD : NULL), s = pc->s_ts;
+        double F = F0 + (1 - F0) * pc->x5, dF = 1 - pc->x5;
+        R = kd * c->nl + ks * D * F * s;
+        if (want) {
+            dR_dp[0] = c->nl;
+            dR_dp[1] = D * F * s;
+            dR_dp[2] = ks * dD * F * s;
+            dR_dp[3] = ks * D * dF * s;
+        }
+    }
+    return R;
+}

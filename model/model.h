@@ -287,6 +287,29 @@ model_cosines_t model_cosines(model_vec3_t n, model_vec3_t l, model_vec3_t v);
 // dR_dp (out, may be NULL): model_brdf_nparams(m) derivatives.
 double model_brdf_eval(model_brdf_t m, const double *p, const model_cosines_t *c,
                        double *dR_dp);
+// The parameter-free terms of one (point, lamp) geometry, computed once by
+// model_brdf_prepare so that fits which evaluate the same geometry many times
+// skip them: model_brdf_eval_prepared equals model_brdf_eval bit for bit
+// (the same operations in the same order). The Blinn-based models and GGX
+// use the stored terms (the others evaluate c), and keep their last
+// distribution and shadowing factors with the shape parameter (ns, alpha)
+// they came from: a solver evaluating the same parameters again (the cost
+// at a candidate, then its Jacobian) gets them back instead of pow() and
+// sqrt(). A prepared geometry is used by one thread at a time.
+typedef struct {
+    model_cosines_t c;
+    double lognh;   // log(n.h) (0 when n.h <= 0)
+    double s_ts;    // G_ts / (n.v), the Torrance-Sparrow attenuation over n.v
+    double x5;      // (1 - v.h)^5, Schlick's term
+    double nh2;     // (n.h)^2
+    double t2l, t2v;   // tan^2 of l's and v's angles from n (GGX's Smith term)
+    double key;     // the shape parameter of the kept factors (NAN: none)
+    double D, G, dD, dG;   // kept: distribution, shadowing, their derivatives (when kept_d)
+    bool   kept_d;
+    bool   zero;    // n.l <= 0 or n.v <= 0: R = 0
+} model_brdf_prep_t;
+model_brdf_prep_t model_brdf_prepare(const model_cosines_t *c);
+double model_brdf_eval_prepared(model_brdf_t m, const double *p, model_brdf_prep_t *pc, double *dR_dp);
 // The same for n cosines (model/brdf_batch.c): R[i], and dR_dp (may be
 // NULL) n x nparams row-major. Equal to model_brdf_eval sample by sample to
 // rounding (1e-9 relative); GGX, the fitters' inner loop, is vectorised.

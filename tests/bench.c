@@ -14,6 +14,9 @@
 // then software trigger until the frame is in hand; median).
 // The same rig served in-process (serve = inprocess: an Aravis fake device,
 // no network): frames per second with our rendering at 1280x1024 Mono16.
+// The verification study (`refl-bench study` alone): per-case wall and CPU
+// time, the 200-case projection, the mean per fit, and the prepared BRDF
+// terms' speedup against the reference evaluation measured side by side.
 #include <embree3/rtcore.h>
 #include <fcntl.h>
 #include <glib.h>
@@ -266,6 +269,7 @@ static int bench_capture(void);
 static int bench_virtual_rig(void);
 static int bench_fit_ggx(void);
 static int bench_verify(void);
+static int bench_verify_study(void);
 static int bench_capture(void);
 
 int main(int argc, char **argv)
@@ -276,6 +280,8 @@ int main(int argc, char **argv)
     if (argc > 1 && !strcmp(argv[1], "rig")) return bench_virtual_rig() ? 1 : 0;
     // `refl-bench verify`: one view of the verification fitter
     if (argc > 1 && !strcmp(argv[1], "verify")) return bench_verify() ? 1 : 0;
+    // `refl-bench study`: the verification study's speed (about a minute)
+    if (argc > 1 && !strcmp(argv[1], "study")) return bench_verify_study() ? 1 : 0;
     // `refl-bench capture`: only the capture sessions' wall time against the hardware floor
     if (argc > 1 && !strcmp(argv[1], "capture")) return bench_capture() ? 1 : 0;
     char p_cam[1024], p_scene[1024], p_lamps[1024], p_mats[1024];
@@ -497,6 +503,7 @@ int main(int argc, char **argv)
     if (bench_capture()) return 1;
     if (bench_fit_ggx()) return 1;
     if (bench_verify()) return 1;
+    if (bench_verify_study()) return 1;
     rc = 0;
     free(prim);
     free(shad);
@@ -666,6 +673,92 @@ static int bench_fit_ggx(void)
 // spacing (6 px) that gives at least 5,000 reference points: the view (pixel_info of
 // the grid, predicted edges, window checks, interreflection basis) plus the
 // fit (with covariance), median of 5 runs on the images of one frame.
+// CPU time of the whole process (all threads).
+static double process_cpu_s(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &ts);
+    return ts.tv_sec + 1e-9 * ts.tv_nsec;
+}
+
+// The detection study (verify_study_run, 2 threads, the cases in parallel)
+// on `cases` cases into a fresh directory: its wall and CPU time and the mean
+// of study.csv's per-fit seconds. false + message.
+static bool study_once(const char *truth, int cases, bool reference, double *wall_s, double *cpu_s, double *fit_s,
+                       int *nfits)
+{
+    char dir[] = "/tmp/refl-bench-study-XXXXXX", csv[1100];
+    if (!mkdtemp(dir)) return false;
+    verify_study_opts_t o = { .out = dir, .truth = truth, .cases = cases, .opt = verify_defaults() };
+    o.opt.threads = 2;
+    o.opt.reference_eval = reference;
+    o.provenance = json_object();
+    verify_study_result_t r;
+    double t0 = model_now_s(), c0 = process_cpu_s();
+    bool ok = verify_study_run(&o, &r);
+    *wall_s = model_now_s() - t0;
+    *cpu_s = process_cpu_s() - c0;
+    json_decref(o.provenance);
+    snprintf(csv, sizeof csv, "%s/study.csv", dir);
+    FILE *f = ok ? fopen(csv, "r") : NULL;
+    double sum = 0;
+    int n = 0;
+    char line[512];
+    while (f && fgets(line, sizeof line, f)) {
+        const char *c = strrchr(line, ',');
+        double x;
+        if (c && sscanf(c + 1, "%lf", &x) == 1 && strncmp(line, "config,", 7)) {
+            sum += x;
+            n++;
+        }
+    }
+    if (f) fclose(f);
+    char cmd[200];
+    snprintf(cmd, sizeof cmd, "rm -rf '%s'", dir);
+    if (system(cmd) != 0) fprintf(stderr, "refl-bench: could not remove %s\n", dir);
+    *fit_s = n ? sum / n : NAN;
+    *nfits = n;
+    return ok && n > 0;
+}
+
+// The study's speed: 2 and 6 cases (each with the study's setup: rendering
+// and the views), the per-case wall time from their difference, projected to
+// the 200 cases of `make study` (setup + 200 x per case); the same from CPU
+// time (per case / 2 cores: what 2 free cores give when the machine is
+// shared); the mean per fit; and the reference BRDF evaluation
+// (verify_options_t.reference_eval, the same results) on 2 cases beside it:
+// the prepared terms' speedup per fit.
+static int bench_verify_study(void)
+{
+    char truth[1024];
+    src_path(truth, sizeof truth, "examples/virtual-truth.ini");
+    double w2, w6, wr, c2, c6, cr, f2, f6, fr;
+    int n2, n6, nr;
+    bool quiet = model_error_quiet_thread(true);
+    bool ok = study_once(truth, 2, false, &w2, &c2, &f2, &n2) && study_once(truth, 6, false, &w6, &c6, &f6, &n6) &&
+              study_once(truth, 2, true, &wr, &cr, &fr, &nr);
+    model_error_quiet_thread(quiet);
+    fprintf(stderr, "\n");
+    if (!ok) {
+        fprintf(stderr, "refl-bench verify study: %s\n", model_last_error());
+        return 1;
+    }
+    double per_case = (w6 - w2) / 4, setup = w2 - 2 * per_case;
+    printf("verify_fit_ms: %.2f ms (mean of %d study fits, 2 threads)\n", 1e3 * (f2 * n2 + f6 * n6) / (n2 + n6),
+           n2 + n6);
+    printf("verify_study_setup_s: %.2f s\n", setup);
+    printf("verify_study_case_s: %.3f s (wall per case, 2 threads)\n", per_case);
+    printf("verify_study_200_cases_projected_s: %.0f s (target 600)\n", setup + 200 * per_case);
+    double cpu_case = (c6 - c2) / 4;
+    printf("verify_study_case_cpu_s: %.3f s (CPU per case)\n", cpu_case);
+    printf("verify_study_200_cases_projected_from_cpu_s: %.0f s (setup + 200 x CPU per case / 2 cores)\n",
+           setup + 200 * cpu_case / 2);
+    printf("verify_fit_reference_ms: %.2f ms\n", 1e3 * fr);
+    printf("verify_fit_speedup: %.3f x (reference BRDF evaluation / prepared, 2 cases each)\n", fr / f2);
+    printf("verify_study_2_cases_cpu_speedup: %.3f x (reference / prepared, setup included)\n", cr / c2);
+    return 0;
+}
+
 static int bench_verify(void)
 {
     char truth[1024];
