@@ -854,11 +854,6 @@ static bool fit_alloc(fit_t *F)
     return true;
 }
 
-// Image m's reference points from first_pt on: the windows' means (after the
-// offset map, linearised), their spread (in sigma for now) and mean flat
-// field (in model for now), saturation. *Pa0: the offset's start (0 with the
-// offset map; else the median of the background windows, or the darkest
-// usable one); *var_px_fallback: without K, the pixel noise as the median
 // An image's gain as a factor: verify_image_t.gain_db is in dB relative to the
 // calibration (the readers convert a camera's own unit, model_gain_factor);
 // fit_check checked it.
@@ -869,30 +864,54 @@ static double image_gain_factor(const verify_image_t *im)
     return gf;
 }
 
-// window variance of the usable points. false: out of memory.
-static bool measure_windows(fit_t *F, int m, int first_pt, double *Pa0, double *var_px_fallback)
+// A window's sums: of P - offset, its square, the flat field, and the largest raw P.
+typedef struct {
+    double s1, s2, gs, mx;
+} wsum_t;
+
+#define WINDOWS_KEPT 2   // with and without the maps
+struct verify_windows {
+    struct {
+        const float *P, *off, *flat;
+        int          w, sp, x0, y0, gw, gh;
+        wsum_t      *s;
+    } e[WINDOWS_KEPT];
+    int next;
+};
+
+verify_windows_t *verify_windows_new(void) { return calloc(1, sizeof(verify_windows_t)); }
+
+void verify_windows_clear(verify_windows_t *W)
 {
-    const verify_options_t *opt = F->opt;
-    const verify_view_t *v = F->views[m];
-    const verify_image_t *im = &F->imgs[m];
-    const verify_camera_t *cm = &F->cams[im->camera];
-    const int w = opt->window_px, h = w / 2, n = v->gw * v->gh;
-    const float *off = opt->use_flat ? cm->offset_dn : NULL, *flat = opt->use_flat ? cm->flat : NULL;
-    double gf = image_gain_factor(im), Kg = cm->K_dn_per_e * gf;
-    double sat = cm->saturation_dn > 0 ? cm->saturation_dn : INFINITY;
-    double a_nl = opt->use_flat && cm->nonlin_a_per_dn > 0 ? cm->nonlin_a_per_dn / gf : 0;
-    double *tmp = malloc((size_t)n * sizeof *tmp);
-    int nt = 0;
-    if (!tmp) return false;
+    if (!W) return;
+    for (int k = 0; k < WINDOWS_KEPT; k++) free(W->e[k].s);
+    memset(W, 0, sizeof *W);
+}
+
+void verify_windows_free(verify_windows_t *W)
+{
+    verify_windows_clear(W);
+    free(W);
+}
+
+// The sums of every window of view v's grid on image im (w x w, offset map
+// off and flat field flat or NULL): kept in im->windows when given (*owned
+// false), else made for this fit (*owned true: the caller frees). NULL: out of memory.
+static const wsum_t *window_sums(const verify_image_t *im, const verify_view_t *v, int w, const float *off,
+                                 const float *flat, bool *owned)
+{
+    verify_windows_t *W = im->windows;
+    *owned = W == NULL;
+    for (int k = 0; W && k < WINDOWS_KEPT; k++)
+        if (W->e[k].s && W->e[k].P == im->P && W->e[k].off == off && W->e[k].flat == flat && W->e[k].w == w &&
+            W->e[k].sp == v->sp && W->e[k].x0 == v->x0 && W->e[k].y0 == v->y0 && W->e[k].gw == v->gw &&
+            W->e[k].gh == v->gh)
+            return W->e[k].s;
+    const int h = w / 2, n = v->gw * v->gh;
+    wsum_t *S = malloc((size_t)n * sizeof *S);
+    if (!S) return NULL;
     for (int g = 0; g < n; g++) {
-        verify_point_t *p = &F->out->points[first_pt + g];
         int gx = v->x0 + (g % v->gw) * v->sp, gy = v->y0 + (g / v->gw) * v->sp;
-        p->image = m;
-        p->q[0] = (float)gx;
-        p->q[1] = (float)gy;
-        p->face = v->pi[g].face;
-        p->status = v->status[g];
-        p->region = -1;
         double s1 = 0, s2 = 0, gs = 0, mx = 0;
         for (int y = gy - h; y <= gy + h; y++)
             for (int x = gx - h; x <= gx + h; x++) {
@@ -904,6 +923,62 @@ static bool measure_windows(fit_t *F, int m, int first_pt, double *Pa0, double *
                 s2 += P * P;
                 gs += flat ? flat[o] : 1;
             }
+        S[g] = (wsum_t){ s1, s2, gs, mx };
+    }
+    if (W) {
+        int k = W->next;
+        W->next = (k + 1) % WINDOWS_KEPT;
+        free(W->e[k].s);
+        W->e[k].P = im->P;
+        W->e[k].off = off;
+        W->e[k].flat = flat;
+        W->e[k].w = w;
+        W->e[k].sp = v->sp;
+        W->e[k].x0 = v->x0;
+        W->e[k].y0 = v->y0;
+        W->e[k].gw = v->gw;
+        W->e[k].gh = v->gh;
+        W->e[k].s = S;
+    }
+    return S;
+}
+
+// Image m's reference points from first_pt on: the windows' means (after the
+// offset map, linearised), their spread (in sigma for now) and mean flat
+// field (in model for now), saturation. *Pa0: the offset's start (0 with the
+// offset map; else the median of the background windows, or the darkest
+// usable one); *var_px_fallback: without K, the pixel noise as the median
+// window variance of the usable points. false: out of memory.
+static bool measure_windows(fit_t *F, int m, int first_pt, double *Pa0, double *var_px_fallback)
+{
+    const verify_options_t *opt = F->opt;
+    const verify_view_t *v = F->views[m];
+    const verify_image_t *im = &F->imgs[m];
+    const verify_camera_t *cm = &F->cams[im->camera];
+    const int w = opt->window_px, n = v->gw * v->gh;
+    const float *off = opt->use_flat ? cm->offset_dn : NULL, *flat = opt->use_flat ? cm->flat : NULL;
+    double gf = image_gain_factor(im), Kg = cm->K_dn_per_e * gf;
+    double sat = cm->saturation_dn > 0 ? cm->saturation_dn : INFINITY;
+    double a_nl = opt->use_flat && cm->nonlin_a_per_dn > 0 ? cm->nonlin_a_per_dn / gf : 0;
+    bool owned;
+    const wsum_t *ws = window_sums(im, v, w, off, flat, &owned);
+    double *tmp = malloc((size_t)n * sizeof *tmp);
+    int nt = 0;
+    if (!tmp || !ws) {
+        free(tmp);
+        if (owned) free((void *)ws);
+        return false;
+    }
+    for (int g = 0; g < n; g++) {
+        verify_point_t *p = &F->out->points[first_pt + g];
+        int gx = v->x0 + (g % v->gw) * v->sp, gy = v->y0 + (g / v->gw) * v->sp;
+        p->image = m;
+        p->q[0] = (float)gx;
+        p->q[1] = (float)gy;
+        p->face = v->pi[g].face;
+        p->status = v->status[g];
+        p->region = -1;
+        double s1 = ws[g].s1, s2 = ws[g].s2, gs = ws[g].gs, mx = ws[g].mx;
         double N = (double)w * w, mean = s1 / N;
         if (a_nl > 0 && off) {
             // linearise the window (mean and spread) with the inverse of S_m = S (1 - a S)
@@ -943,6 +1018,7 @@ static bool measure_windows(fit_t *F, int m, int first_pt, double *Pa0, double *
         if (!(*var_px_fallback > 0)) *var_px_fallback = 1;
     }
     free(tmp);
+    if (owned) free((void *)ws);
     return true;
 }
 
@@ -1180,6 +1256,7 @@ static bool fit_solve(fit_t *F)
     fo.function_tolerance = 1e-8;
     fo.parameter_tolerance = 1e-8;
     fo.verbose = opt->verbose;
+    fo.normal_equations = !opt->reference_eval;   // the reference: QR, as before the speed work
     if (!lsq_solve(F->prob, &fo, &F->out->summary)) {
         model_error(NULL, 0, "verify: the fit failed: %s (%s)", F->out->summary.termination, F->out->summary.message);
         return false;

@@ -97,7 +97,18 @@ typedef struct {
     double       angle_deg;         // turntable angle (the scene is rotated by it about z)
     uint32_t     lamps_on;          // bit i: lamp i on
     double       exposure_us, gain_db;
+    struct verify_windows *windows; // optional (NULL: none): the image's window sums kept for the next fits
+                                    //   of the same pixels (verify_windows_new)
 } verify_image_t;
+
+// The window sums of an image's reference points (per window and maps), kept
+// across the fits of the same pixels: a study verifies each case's images
+// against every description and configuration, whose reference grids are the
+// same. The caller clears it when the pixels change; one thread at a time.
+typedef struct verify_windows verify_windows_t;
+verify_windows_t *verify_windows_new(void);
+void              verify_windows_clear(verify_windows_t *w);
+void              verify_windows_free(verify_windows_t *w);
 
 typedef struct {
     int    spacing_px;          // grid step of reference points (default 8)

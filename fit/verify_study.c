@@ -192,7 +192,10 @@ typedef struct {
     double            t0;
 } study_t;
 
-static bool case_images(study_t *S, int c, int place, const double *ls, double kc, float **img, verify_image_t *im)
+// Case c's images at placement place into img (and im; win: each image's
+// window sums, cleared: new pixels).
+static bool case_images(study_t *S, int c, int place, const double *ls, double kc, float **img,
+                        verify_windows_t **win, verify_image_t *im)
 {
     int W = verify_lab_width(S->lab), H = verify_lab_height(S->lab), nl = verify_lab_nlamps(S->lab);
     for (int a = 0; a < NANG; a++) {
@@ -207,12 +210,14 @@ static bool case_images(study_t *S, int c, int place, const double *ls, double k
         im[a].lamps_on = S->lamps_on;
         im[a].exposure_us = 6000;
         im[a].gain_db = S->gain_db;
+        verify_windows_clear(win[a]);
+        im[a].windows = win[a];
     }
     return true;
 }
 
 // Case c: its drifts, then its images at each placement and every fit on them.
-static bool run_case(study_t *S, int c, float **img)
+static bool run_case(study_t *S, int c, float **img, verify_windows_t **win)
 {
     table_t *T = S->T;
     int nl = verify_lab_nlamps(S->lab);
@@ -222,7 +227,7 @@ static bool run_case(study_t *S, int c, float **img)
     double kc = 0.95 + 0.1 * model_rng_uniform(&rng);
     verify_image_t im[NANG];
     for (int place = 0; place <= NPLACE; place++) {
-        if (!case_images(S, c, place, ls, kc, img, im)) return false;
+        if (!case_images(S, c, place, ls, kc, img, win, im)) return false;
         for (int k = 0; k < T->nconf; k++)
             for (int d = 0; d < T->ncond; d++) {
                 const cond_t *cd = &T->cond[d];
@@ -253,11 +258,15 @@ static void case_rows(void *vctx, int begin, int end, int thread)
     bool quiet = model_error_quiet_thread(true);
     size_t npx = (size_t)verify_lab_width(S->lab) * verify_lab_height(S->lab);
     float *img[NANG] = { 0 };
-    for (int a = 0; a < NANG; a++) img[a] = malloc(npx * sizeof(float));
+    verify_windows_t *win[NANG] = { 0 };
+    for (int a = 0; a < NANG; a++) {
+        img[a] = malloc(npx * sizeof(float));
+        win[a] = verify_windows_new();
+    }
     for (int j = begin; j < end; j++) {
         if (S->failed) break;
         int c = S->shard_k - 1 + j * S->shard_n;
-        bool ok = run_case(S, c, img);
+        bool ok = run_case(S, c, img, win);
         pthread_mutex_lock(&S->lock);
         if (!ok && !S->failed) {
             S->failed = true;
@@ -269,7 +278,10 @@ static void case_rows(void *vctx, int begin, int end, int thread)
                 el / S->done * (S->ncases_here - S->done));
         pthread_mutex_unlock(&S->lock);
     }
-    for (int a = 0; a < NANG; a++) free(img[a]);
+    for (int a = 0; a < NANG; a++) {
+        free(img[a]);
+        verify_windows_free(win[a]);
+    }
     model_error_quiet_thread(quiet);
 }
 

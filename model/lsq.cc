@@ -304,6 +304,7 @@ lsq_options_t lsq_defaults(void)
     o.gradient_tolerance = 1e-12;
     o.threads = 0;
     o.verbose = false;
+    o.normal_equations = false;
     return o;
 }
 
@@ -325,7 +326,9 @@ bool lsq_solve(lsq_problem_t *p, const lsq_options_t *opt, lsq_summary_t *s)
     ceres::Solver::Options so;
     int nparam = 0;
     for (auto &kv : p->sizes) nparam += kv.second;
-    so.linear_solver_type = nparam <= 400 ? ceres::DENSE_QR : ceres::SPARSE_NORMAL_CHOLESKY;
+    so.linear_solver_type = nparam > 400            ? ceres::SPARSE_NORMAL_CHOLESKY
+                            : o.normal_equations ? ceres::DENSE_NORMAL_CHOLESKY
+                                                 : ceres::DENSE_QR;
     std::string why;
     if (!so.IsValid(&why)) so.linear_solver_type = ceres::DENSE_QR;
     so.max_num_iterations = o.max_iterations;

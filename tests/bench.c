@@ -15,8 +15,9 @@
 // The same rig served in-process (serve = inprocess: an Aravis fake device,
 // no network): frames per second with our rendering at 1280x1024 Mono16.
 // The verification study (`refl-bench study` alone): per-case wall and CPU
-// time, the 200-case projection, the mean per fit, and the prepared BRDF
-// terms' speedup against the reference evaluation measured side by side.
+// time, the 200-case projection, the mean per fit, beside the reference fit
+// (QR, plain BRDF evaluation) in the same run, and the two runs' results
+// compared.
 #include <embree3/rtcore.h>
 #include <fcntl.h>
 #include <glib.h>
@@ -280,7 +281,7 @@ int main(int argc, char **argv)
     if (argc > 1 && !strcmp(argv[1], "rig")) return bench_virtual_rig() ? 1 : 0;
     // `refl-bench verify`: one view of the verification fitter
     if (argc > 1 && !strcmp(argv[1], "verify")) return bench_verify() ? 1 : 0;
-    // `refl-bench study`: the verification study's speed (about a minute)
+    // `refl-bench study`: the verification study's speed beside the reference fit (a few minutes)
     if (argc > 1 && !strcmp(argv[1], "study")) return bench_verify_study() ? 1 : 0;
     // `refl-bench capture`: only the capture sessions' wall time against the hardware floor
     if (argc > 1 && !strcmp(argv[1], "capture")) return bench_capture() ? 1 : 0;
@@ -682,12 +683,13 @@ static double process_cpu_s(void)
 }
 
 // The detection study (verify_study_run, 2 threads, the cases in parallel)
-// on `cases` cases into a fresh directory: its wall and CPU time and the mean
+// on `cases` cases into dir (made fresh): its wall and CPU time and the mean
 // of timing.csv's per-fit seconds. false + message.
-static bool study_once(const char *truth, int cases, bool reference, double *wall_s, double *cpu_s, double *fit_s,
-                       int *nfits)
+static bool study_once(const char *truth, int cases, bool reference, char *dir, double *wall_s, double *cpu_s,
+                       double *fit_s, int *nfits)
 {
-    char dir[] = "/tmp/refl-bench-study-XXXXXX", csv[1100];
+    char csv[1100];
+    strcpy(dir, "/tmp/refl-bench-study-XXXXXX");
     if (!mkdtemp(dir)) return false;
     verify_study_opts_t o = { .out = dir, .truth = truth, .cases = cases, .opt = verify_defaults() };
     o.opt.threads = 2;
@@ -715,51 +717,107 @@ static bool study_once(const char *truth, int cases, bool reference, double *wal
         }
     }
     if (f) fclose(f);
-    char cmd[200];
-    snprintf(cmd, sizeof cmd, "rm -rf '%s'", dir);
-    if (system(cmd) != 0) fprintf(stderr, "refl-bench: could not remove %s\n", dir);
     *fit_s = n ? sum / n : NAN;
     *nfits = n;
     return ok && n > 0;
 }
 
-// The study's speed: 2 and 6 cases (each with the study's setup: rendering
-// and the views), the per-case wall time from their difference, projected to
-// the 200 cases of `make study` (setup + 200 x per case); the same from CPU
-// time (per case / 2 cores: what 2 free cores give when the machine is
-// shared); the mean per fit; and the reference BRDF evaluation
-// (verify_options_t.reference_eval, the same results) on 2 cases beside it:
-// the prepared terms' speedup per fit.
+static void remove_dir(const char *dir)
+{
+    char cmd[300];
+    snprintf(cmd, sizeof cmd, "rm -rf '%s'", dir);
+    if (system(cmd) != 0) fprintf(stderr, "refl-bench: could not remove %s\n", dir);
+}
+
+// Two runs' study.csv (config,description,expected,case,score,verdict_correct)
+// row by row: the largest relative score difference and the rows whose verdict
+// differs. false: unreadable or not the same rows.
+static bool study_compare(const char *a, const char *b, double *max_rel, char worst[160], int *verdicts, int *rows)
+{
+    char pa[1100], pb[1100], la[512], lb[512];
+    snprintf(pa, sizeof pa, "%s/study.csv", a);
+    snprintf(pb, sizeof pb, "%s/study.csv", b);
+    FILE *fa = fopen(pa, "r"), *fb = fopen(pb, "r");
+    bool ok = fa && fb;
+    *max_rel = 0;
+    *verdicts = *rows = 0;
+    worst[0] = 0;
+    while (ok && fgets(la, sizeof la, fa)) {
+        if (!fgets(lb, sizeof lb, fb)) {
+            ok = false;
+            break;
+        }
+        char *ca = strrchr(la, ','), *cb = strrchr(lb, ',');
+        if (!ca || !cb) continue;
+        *verdicts += atoi(ca + 1) != atoi(cb + 1);
+        *ca = *cb = 0;
+        ca = strrchr(la, ',');
+        cb = strrchr(lb, ',');
+        double x, y;
+        if (!ca || !cb || sscanf(ca + 1, "%lf", &x) != 1 || sscanf(cb + 1, "%lf", &y) != 1) continue;   // header
+        *ca = *cb = 0;
+        ok = !strcmp(la, lb);   // the same config, description, expected, case
+        double d = fabs(x - y) / fmax(fmax(fabs(x), fabs(y)), 1e-300);
+        if (d > *max_rel) {
+            *max_rel = d;
+            snprintf(worst, 160, "%.100s: %.10g vs %.10g", la, x, y);
+        }
+        (*rows)++;
+    }
+    if (fa) fclose(fa);
+    if (fb) fclose(fb);
+    return ok && *rows > 0;
+}
+
+// The study's speed, the fit as it is beside the reference fit
+// (verify_options_t.reference_eval: QR and the plain BRDF evaluation, the fit
+// before the speed work), each on 2 and 6 cases (each with the study's setup:
+// rendering and the views): the per-case wall and CPU time from their
+// difference, projected to the 200 cases of `make study` (setup + 200 x per
+// case; from CPU: per case / 2 cores, what 2 free cores give when the machine
+// is shared); the mean per fit; the speedups; and the two runs' results on
+// the 6 cases compared row by row (largest relative score difference, verdicts
+// that differ).
 static int bench_verify_study(void)
 {
-    char truth[1024];
+    char truth[1024], d[4][64];
     src_path(truth, sizeof truth, "examples/virtual-truth.ini");
-    double w2, w6, wr, c2, c6, cr, f2, f6, fr;
-    int n2, n6, nr;
-    bool quiet = model_error_quiet_thread(true);
-    bool ok = study_once(truth, 2, false, &w2, &c2, &f2, &n2) && study_once(truth, 6, false, &w6, &c6, &f6, &n6) &&
-              study_once(truth, 2, true, &wr, &cr, &fr, &nr);
+    double w[4], c[4], f[4];
+    int n[4];
+    const int cases[4] = { 2, 6, 2, 6 };
+    bool quiet = model_error_quiet_thread(true), ok = true;
+    for (int k = 0; k < 4 && ok; k++) ok = study_once(truth, cases[k], k >= 2, d[k], &w[k], &c[k], &f[k], &n[k]);
     model_error_quiet_thread(quiet);
     fprintf(stderr, "\n");
-    if (!ok) {
-        fprintf(stderr, "refl-bench verify study: %s\n", model_last_error());
+    double max_rel = NAN;
+    int verdicts = -1, rows = 0;
+    char worst[160] = "";
+    bool same_rows = ok && study_compare(d[1], d[3], &max_rel, worst, &verdicts, &rows);
+    for (int k = 0; k < 4; k++) remove_dir(d[k]);
+    if (!ok || !same_rows) {
+        fprintf(stderr, "refl-bench verify study: %s\n", ok ? "the two runs' study.csv differ in rows" : model_last_error());
         return 1;
     }
-    double per_case = (w6 - w2) / 4, setup = w2 - 2 * per_case;
-    printf("verify_fit_ms: %.2f ms (mean of %d study fits, 2 threads)\n", 1e3 * (f2 * n2 + f6 * n6) / (n2 + n6),
-           n2 + n6);
+    double per_case = (w[1] - w[0]) / 4, setup = w[0] - 2 * per_case, cpu_case = (c[1] - c[0]) / 4;
+    double ref_case = (w[3] - w[2]) / 4, ref_setup = w[2] - 2 * ref_case, ref_cpu = (c[3] - c[2]) / 4;
+    printf("verify_fit_ms: %.2f ms (mean of %d study fits, 2 threads)\n",
+           1e3 * (f[0] * n[0] + f[1] * n[1]) / (n[0] + n[1]), n[0] + n[1]);
+    printf("verify_fit_reference_ms: %.2f ms (QR, plain BRDF evaluation)\n",
+           1e3 * (f[2] * n[2] + f[3] * n[3]) / (n[2] + n[3]));
     printf("verify_study_setup_s: %.2f s\n", setup);
-    printf("verify_study_case_s: %.3f s (wall per case, 2 threads)\n", per_case);
-    printf("verify_study_200_cases_projected_s: %.0f s (target 600)\n", setup + 200 * per_case);
-    double cpu_case = (c6 - c2) / 4;
+    printf("verify_study_case_s: %.3f s (wall per case, 2 threads; 17 descriptions x 4 configurations)\n", per_case);
+    printf("verify_study_case_reference_s: %.3f s\n", ref_case);
     printf("verify_study_case_cpu_s: %.3f s (CPU per case)\n", cpu_case);
-    printf("verify_study_200_cases_projected_from_cpu_s: %.0f s (setup + 200 x CPU per case / 2 cores; 17 "
-           "descriptions x 4 configurations a case)\n", setup + 200 * cpu_case / 2);
-    printf("verify_study_11200_fits_projected_from_cpu_s: %.0f s (the 14 descriptions of before the placed-off "
-           "cases: setup + 200 x 14/17 x CPU per case / 2 cores; target 600)\n", setup + 200 * cpu_case * 14 / 17 / 2);
-    printf("verify_fit_reference_ms: %.2f ms\n", 1e3 * fr);
-    printf("verify_fit_speedup: %.3f x (reference BRDF evaluation / prepared, 2 cases each)\n", fr / f2);
-    printf("verify_study_2_cases_cpu_speedup: %.3f x (reference / prepared, setup included)\n", cr / c2);
+    printf("verify_study_case_cpu_reference_s: %.3f s\n", ref_cpu);
+    printf("verify_study_case_cpu_speedup: %.3f x (reference / as it is, CPU per case)\n", ref_cpu / cpu_case);
+    printf("verify_study_200_cases_projected_s: %.0f s (target 600)\n", setup + 200 * per_case);
+    printf("verify_study_200_cases_projected_reference_s: %.0f s\n", ref_setup + 200 * ref_case);
+    printf("verify_study_200_cases_projected_from_cpu_s: %.0f s (setup + 200 x CPU per case / 2 cores; target 600)\n",
+           setup + 200 * cpu_case / 2);
+    printf("verify_study_200_cases_projected_from_cpu_reference_s: %.0f s\n", ref_setup + 200 * ref_cpu / 2);
+    printf("verify_study_score_max_rel_diff: %.2g (as it is vs reference, %d rows of 6 cases; largest: %s)\n", max_rel,
+           rows, worst);
+    printf("verify_study_verdicts_differ: %d rows\n", verdicts);
     return 0;
 }
 
