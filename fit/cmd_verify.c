@@ -147,10 +147,7 @@ static void print_result(const verify_files_opts_t *o, const verify_files_result
     int nreg = 0;
     for (int k = 0; k < res->nregions; k++) nreg += res->regions[k].counts;
     printf("change regions: %d; pinned parameters: %d\n", nreg, res->npinned);
-    for (int k = 0; k < res->nparams; k++)
-        if (res->params[k].pinned)
-            printf("  warning: %s = %.6g pinned at its bound [%.6g, %.6g]: its prior may be wrong\n",
-                   res->params[k].name, res->params[k].value, res->params[k].lo, res->params[k].hi);
+    for (int k = 0; k < res->nwarnings; k++) printf("  warning: %s\n", res->warnings[k]);
     printf("verdict: description %s (score %.1f, threshold %.1f)\n", res->correct ? "CORRECT" : "INCORRECT",
            res->score, o->opt.score_threshold);
 }

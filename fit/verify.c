@@ -636,6 +636,7 @@ void verify_result_free(verify_result_t *r)
     free(r->s);
     free(r->Pa);
     free(r->mats);
+    free(r->warnings);
     memset(r, 0, sizeof *r);
 }
 
@@ -1103,6 +1104,14 @@ static pdesc_t *fit_param(fit_t *F, double *x, int i, double prior_mean, double 
     return d;
 }
 
+// Lamp i is on in at least one image (else its scale is held: no data).
+static bool lamp_lit(const fit_t *F, int i)
+{
+    for (int m = 0; m < F->nimgs; m++)
+        if ((F->imgs[m].lamps_on >> i) & 1) return true;
+    return false;
+}
+
 // The parameters within the priors (verify.h): kc per camera, s per lamp, Pa
 // per image, rho, the materials'. false + message (kept) from the solver.
 static bool fit_parameters(fit_t *F)
@@ -1121,7 +1130,7 @@ static bool fit_parameters(fit_t *F)
     for (int i = 0; i < F->nl; i++) {
         // the thesis's fit (no priors): lamps fixed, kc free
         pdesc_t *d = fit_param(F, out->s, i, 1, up ? opt->lamp_sigma : 0, fmax(0.2, 1 - 5 * opt->lamp_sigma),
-                               1 + 5 * opt->lamp_sigma, opt->fix_lamps || !up);
+                               1 + 5 * opt->lamp_sigma, opt->fix_lamps || !up || !lamp_lit(F, i));
         snprintf(d->name, sizeof d->name, "lamp[%s]", F->lamps->lamps[i].name);
     }
     for (int m = 0; m < F->nimgs; m++) {
@@ -1177,7 +1186,7 @@ static bool fit_bounds_and_masks(fit_t *F)
     }
     // masks per block
     bool fx[MAX_LAMPS];
-    for (int i = 0; i < F->nl; i++) fx[i] = opt->fix_lamps || !opt->use_priors;
+    for (int i = 0; i < F->nl; i++) fx[i] = opt->fix_lamps || !opt->use_priors || !lamp_lit(F, i);
     if (F->nl && !lsq_set_fixed(prob, F->out->s, fx)) return false;
     if (!F->nl) lsq_set_fixed(prob, F->out->s, NULL);
     for (int k = 0; k < npd; k++) {
@@ -1481,6 +1490,41 @@ static void fit_regions(fit_t *F)
     free(stack);
 }
 
+bool verify_param_warning(const verify_param_t *p, char *buf, size_t n)
+{
+    if (p->fixed) return false;
+    if (p->pinned) {
+        snprintf(buf, n, "%s = %.6g is pinned at its bound [%.6g, %.6g]: its prior may be wrong (swapped or "
+                 "mislabelled materials, a changed lamp or camera)", p->name, p->value, p->lo, p->hi);
+        return true;
+    }
+    double z = p->prior_std > 0 ? (p->value - p->prior_mean) / p->prior_std : 0;
+    if (fabs(z) > 3) {
+        snprintf(buf, n, "%s = %.6g is %.1f sigma from its prior %.6g +- %.3g: the prior does not hold for these "
+                 "images (a changed lamp, camera, offset or material)", p->name, p->value, z, p->prior_mean,
+                 p->prior_std);
+        return true;
+    }
+    return false;
+}
+
+// The fit's warnings: its parameters' (verify_param_warning), and the lamps
+// that were off in every image (held, not fitted). false: out of memory.
+static bool fit_warnings(fit_t *F)
+{
+    verify_result_t *out = F->out;
+    out->warnings = calloc((size_t)out->nparams + F->nl + 1, sizeof *out->warnings);
+    if (!out->warnings) return false;
+    for (int k = 0; k < out->nparams; k++)
+        if (verify_param_warning(&out->params[k], out->warnings[out->nwarnings], sizeof out->warnings[0]))
+            out->nwarnings++;
+    for (int i = 0; i < F->nl; i++)
+        if (!lamp_lit(F, i))
+            snprintf(out->warnings[out->nwarnings++], sizeof out->warnings[0],
+                     "lamp %s is off in every image: its scale is held at 1, not fitted", F->lamps->lamps[i].name);
+    return true;
+}
+
 bool verify_run(const model_scene_t *scene, const verify_priors_t *pr, const verify_camera_t *cams, int ncams,
                 const model_lamps_t *lamps, const double *A, const verify_image_t *imgs, int nimgs,
                 verify_view_t *const *views, const verify_options_t *opt, verify_result_t *out)
@@ -1497,6 +1541,7 @@ bool verify_run(const model_scene_t *scene, const verify_priors_t *pr, const ver
     }
     if (!fit_solve(&F) || !fit_collect_params(&F)) goto done;
     if (!opt->no_covariance) fit_covariance(&F);
+    if (!fit_warnings(&F)) goto done;
     for (int k = 0; k < F.nm; k++) memcpy(out->mats[k].p, &F.mp[k * MODEL_BRDF_MAX_PARAMS], sizeof out->mats[k].p);
     fit_residue(&F);
     fit_regions(&F);
@@ -1542,14 +1587,7 @@ json_t *verify_result_json(const verify_result_t *r, const model_scene_t *scene,
                                     "reference point; an unexpected edge counts as z_flag x its window-std ratio"));
     json_object_set_new(o, "n_pinned_parameters", json_integer(r->npinned));
     json_t *warn = json_array();
-    for (int k = 0; k < r->nparams; k++)
-        if (r->params[k].pinned) {
-            char buf[256];
-            snprintf(buf, sizeof buf, "%s = %.6g is pinned at its bound [%.6g, %.6g]: its prior may be wrong "
-                     "(swapped or mislabelled materials, a changed lamp or camera)", r->params[k].name,
-                     r->params[k].value, r->params[k].lo, r->params[k].hi);
-            json_array_append_new(warn, json_string(buf));
-        }
+    for (int k = 0; k < r->nwarnings; k++) json_array_append_new(warn, json_string(r->warnings[k]));
     json_object_set_new(o, "warnings", warn);
     json_object_set_new(o, "residue", stats_json(&r->all));
     json_object_set_new(o, "residue_units", json_string("DN of the images' pixel format; difference = measured - "

@@ -234,7 +234,16 @@ typedef struct {
     double          *Pa;            // nimages
     double           rho;
     model_material_t *mats;         // scene->nmaterials, fitted
+    // what the user should look at (verify_param_warning; lamps off in every image, held, not fitted)
+    int              nwarnings;
+    char           (*warnings)[256];
 } verify_result_t;
+
+// A fitted parameter's warning into buf (true), or false: pinned at a bound,
+// or more than 3 sigma from its prior's mean (a prior that does not hold for
+// these images: swapped or mislabelled materials, a changed lamp or camera,
+// an offset that moved).
+bool verify_param_warning(const verify_param_t *p, char *buf, size_t n);
 
 // Fit and judge. views[m] is image m's view; scene: the description (for
 // material names; its materials must all have priors: pr). A: kc*I per us.

@@ -176,6 +176,25 @@ TEST(verify_follows_lamp_and_gain_drift)
             if (!strcmp(r.params[k].name, "plywood.kd")) kd = r.params[k].value;
         CHECK_REL(fit_mean * kd, true_mean * 0.16, 0.03);
         CHECK(r.all.median_abs_z < 1);
+        // the lamps off in every image (0xf: the fifth and on) are held and named
+        const model_lamps_t *ll = verify_lab_lamps(get_lab());
+        int off = 0, warned = 0;
+        for (int i = 4; i < ll->n; i++) {
+            char name[96], msg[160];
+            snprintf(name, sizeof name, "lamp[%s]", ll->lamps[i].name);
+            snprintf(msg, sizeof msg, "lamp %s is off in every image", ll->lamps[i].name);
+            for (int k = 0; k < r.nparams; k++)
+                if (!strcmp(r.params[k].name, name)) {
+                    CHECK_MSG(r.params[k].fixed && r.params[k].value == 1, "%s fitted (%g)", name, r.params[k].value);
+                    off++;
+                }
+            for (int k = 0; k < r.nwarnings; k++) warned += strstr(r.warnings[k], msg) != NULL;
+        }
+        CHECK_MSG(off == ll->n - 4 && off >= 1, "%d lamps off of %d", off, ll->n);
+        CHECK(warned == off);
+        // (the offsets Pa fit at about 23 DN against their prior 0 +- 5 here, and say so: an additive
+        // term the model lacks; not asserted either way)
+        for (int k = 0; k < r.nwarnings; k++) fprintf(stderr, "  warning: %s\n", r.warnings[k]);
         verify_result_free(&r);
     }
     verify_priors_free(&pr);
@@ -212,6 +231,29 @@ TEST(verify_swapped_priors_pinned)
     // with the right priors nothing is pinned (same images)
     verify_priors_free(&pr);
     images_free(&I);
+}
+
+// A parameter's warning: pinned at a bound, or beyond 3 sigma of its prior;
+// none when fixed, within 3 sigma, or without a prior.
+TEST(verify_param_warnings)
+{
+    char buf[256];
+    verify_param_t p = { .name = "Pa[0]", .value = 23, .prior_mean = 0, .prior_std = 5, .lo = -INFINITY, .hi = INFINITY };
+    CHECK(verify_param_warning(&p, buf, sizeof buf));
+    CHECK_CONTAINS(buf, "Pa[0] = 23 is 4.6 sigma from its prior 0 +- 5");
+    p.value = -14.9;
+    CHECK(!verify_param_warning(&p, buf, sizeof buf));
+    p.value = -15.1;
+    CHECK(verify_param_warning(&p, buf, sizeof buf));
+    CHECK_CONTAINS(buf, "-3.0 sigma");
+    p.fixed = true;
+    CHECK(!verify_param_warning(&p, buf, sizeof buf));
+    verify_param_t q = { .name = "kc[cam]", .value = 1.4996, .prior_mean = 1, .prior_std = 0.1, .lo = 0.5, .hi = 1.5,
+                         .pinned = true };
+    CHECK(verify_param_warning(&q, buf, sizeof buf));
+    CHECK_CONTAINS(buf, "pinned at its bound [0.5, 1.5]");
+    verify_param_t u = { .name = "plywood.kd", .value = 9, .prior_mean = 0.1, .prior_std = 0, .lo = 0, .hi = INFINITY };
+    CHECK(!verify_param_warning(&u, buf, sizeof buf));   // no prior (the unbounded fit): nothing to hold
 }
 
 // The residual's analytic Jacobian against central differences.
