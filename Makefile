@@ -120,6 +120,7 @@ FIT_SRC := \
     fit/verify_files.c \
     fit/verify_lab.c \
     fit/verify_study.c \
+    fit/verify_register.c \
     fit/chain.c \
     fit/cmd_chain.c \
     fit/cmd_fit.c \
@@ -175,6 +176,7 @@ TEST_SRC := \
     tests/test_fit_material.c \
     tests/test_fit_verify.c \
     tests/test_fit_verify_study.c \
+    tests/test_fit_verify_register.c \
     tests/test_fit_verify_speed.c
 BENCH_SRC := tests/bench.c
 FUZZ_SRC  := tests/fuzz_parsers.c

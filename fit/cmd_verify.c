@@ -135,6 +135,13 @@ static void print_result(const verify_files_opts_t *o, const verify_files_result
 {
     const verify_result_t *res = &r->fit;
     printf("refl verify: %s against %d image(s)\n", o->scene, r->nimages);
+    const verify_placement_t *p = &r->placement;
+    if (o->placement_tol_mm > 0 || o->placement_tol_deg > 0)
+        printf("placement: (%.2f, %.2f) mm, %.2f deg about (%.1f, %.1f) mm (registered within %g mm, %g deg; edge "
+               "agreement %.3f, %.3f as described)\n", p->dx_mm, p->dy_mm, p->turn_deg, p->centre_mm[0],
+               p->centre_mm[1], o->placement_tol_mm, o->placement_tol_deg, p->score, p->score_nominal);
+    else
+        printf("placement: as described (--placement-tolerance-mm 0 --placement-tolerance-deg 0)\n");
     printf("%-28s %8s %10s %10s %10s %10s %8s\n", "image", "points", "max|diff|", "mean|diff|", "std|diff|",
            "robust s", "rms z");
     for (int m = 0; m <= r->nimages; m++) {
@@ -154,7 +161,8 @@ static void print_result(const verify_files_opts_t *o, const verify_files_result
 
 int verify_cmd(int argc, char **argv)
 {
-    verify_files_opts_t o = { .opt = verify_defaults() };
+    // the placement tolerance of a part laid on the turntable by hand against a stop (README: refl verify)
+    verify_files_opts_t o = { .opt = verify_defaults(), .placement_tol_mm = 3, .placement_tol_deg = 2 };
     verify_options_t *op = &o.opt;
     const char *fixed = NULL, *truth = NULL, *shard = NULL, *configs = NULL;
     bool no_report = false, fail_on_incorrect = false, do_study = false, do_merge = false;
@@ -187,6 +195,11 @@ int verify_cmd(int argc, char **argv)
         MODEL_OPT_DOUBLE("--exposure-us", "T", "exposure of every image", &o.exposure_us, 1e-3, 1e9),
         MODEL_OPT_DOUBLE("--gain-db", "G", "gain of every image, dB (taken relative to the gain calibration's)",
                          &o.gain_db, 0, 60),
+        MODEL_OPT_DOUBLE("--placement-tolerance-mm", "D", "the part's placement is registered to the images "
+                         "within +-D mm in x and y before the fit (3; 0 with --placement-tolerance-deg 0: as "
+                         "described)", &o.placement_tol_mm, 0, 50),
+        MODEL_OPT_DOUBLE("--placement-tolerance-deg", "A", "and within +-A deg about the part's centre (2)",
+                         &o.placement_tol_deg, 0, 30),
         MODEL_OPT_INT("--spacing-px", "N", "grid step of the reference points (8)", &op->spacing_px, 1, 1000),
         MODEL_OPT_INT("--window-px", "N", "window side, odd (5)", &op->window_px, 1, 99),
         MODEL_OPT_DOUBLE("--edge-margin-px", "D", "skip windows this close to predicted edges (2)",

@@ -1508,20 +1508,16 @@ bool verify_param_warning(const verify_param_t *p, char *buf, size_t n)
     return false;
 }
 
-// The fit's warnings: its parameters' (verify_param_warning), and the lamps
-// that were off in every image (held, not fitted). false: out of memory.
+// The fit's warnings: its parameters' (verify_param_warning; the lamps off
+// in every image are held, not fitted: fixed, no warning). false: out of memory.
 static bool fit_warnings(fit_t *F)
 {
     verify_result_t *out = F->out;
-    out->warnings = calloc((size_t)out->nparams + F->nl + 1, sizeof *out->warnings);
+    out->warnings = calloc((size_t)out->nparams + 1, sizeof *out->warnings);
     if (!out->warnings) return false;
     for (int k = 0; k < out->nparams; k++)
         if (verify_param_warning(&out->params[k], out->warnings[out->nwarnings], sizeof out->warnings[0]))
             out->nwarnings++;
-    for (int i = 0; i < F->nl; i++)
-        if (!lamp_lit(F, i))
-            snprintf(out->warnings[out->nwarnings++], sizeof out->warnings[0],
-                     "lamp %s is off in every image: its scale is held at 1, not fitted", F->lamps->lamps[i].name);
     return true;
 }
 

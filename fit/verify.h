@@ -234,7 +234,7 @@ typedef struct {
     double          *Pa;            // nimages
     double           rho;
     model_material_t *mats;         // scene->nmaterials, fitted
-    // what the user should look at (verify_param_warning; lamps off in every image, held, not fitted)
+    // what the user should look at (verify_param_warning; and the placement's, verify_files_run)
     int              nwarnings;
     char           (*warnings)[256];
 } verify_result_t;
@@ -251,6 +251,30 @@ bool verify_run(const model_scene_t *scene, const verify_priors_t *pr, const ver
                 const model_lamps_t *lamps, const double *A, const verify_image_t *imgs, int nimgs,
                 verify_view_t *const *views, const verify_options_t *opt, verify_result_t *out);
 void verify_result_free(verify_result_t *r);
+
+// The part's placement on the turntable as a nuisance (fit/verify_register.c):
+// x' = Rz(turn)(x - c) + c + (dx, dy, 0) in the part's frame before the
+// turntable angle, c the middle of the description's bounding box in x and y.
+typedef struct {
+    double dx_mm, dy_mm, turn_deg;   // the registered placement
+    double centre_mm[2];             // c
+    double tol_mm, tol_deg;          // the search range (the fixture's tolerance): |dx|, |dy| <= tol_mm, ...
+    double score_nominal, score;     // edge agreement at (0, 0, 0) and at the placement (1: every edge
+                                     //   where and as predicted)
+    int    nsamples;                 // edge points used
+    bool   at_limit;                 // the placement is at the edge of the range: the part may lie further off
+    double time_s;
+} verify_placement_t;
+
+// Register the description's predicted edges (at the priors' means mats, the
+// lamps' kc*I A, each image's lamps, exposure and gain) to the images over
+// the tolerance (0 and 0: nothing to do, out->dx = dy = turn = 0). false +
+// message (too few edges in view to register).
+bool verify_register(const model_scene_t *scene, const verify_camera_t *cams, const model_lamps_t *lamps,
+                     const double *A, const model_material_t *const *mats, const verify_image_t *imgs, int nimgs,
+                     double tol_mm, double tol_deg, verify_placement_t *out);
+// The description moved to placement p (a new scene; NULL + message).
+model_scene_t *verify_placed_scene(const model_scene_t *scene, const verify_placement_t *p);
 
 // The result as JSON (units and conventions named).
 json_t *verify_result_json(const verify_result_t *r, const model_scene_t *scene, const verify_image_t *imgs,
@@ -292,12 +316,15 @@ typedef struct {
     double      angle_deg, exposure_us, gain_db;   // for every image when have_*: over the metadata
     const char *lamps_on;                          // for every image ("east+west", "all"), NULL: metadata
     const char *out;                               // output directory (created)
+    double      placement_tol_mm, placement_tol_deg;   // the part's placement registered within these
+                                                   //   (verify_register) before the fit; 0 and 0: as described
     verify_options_t opt;
     json_t     *provenance;                        // borrowed: the inputs are added, verify.json carries it
 } verify_files_opts_t;
 
 typedef struct {
     verify_result_t fit;
+    verify_placement_t placement;                  // the registered placement (zero: none asked)
     int             nimages;
     verify_image_t  images[VERIFY_FILES_MAX];      // as verified (P NULL: the pixels are freed)
 } verify_files_result_t;

@@ -91,6 +91,7 @@ typedef struct {
     verify_view_t             *views[VERIFY_FILES_MAX]; // images of one camera and angle share one
     model_material_t          *mean_mats;  // the priors' means
     const model_material_t   **mats;
+    verify_placement_t         placement;  // registered (o->placement_tol_*), the scene moved to it
 } vf_t;
 
 static void vf_free(vf_t *V)
@@ -497,6 +498,48 @@ static bool vf_base(vf_t *V)
     return V->base != NULL;
 }
 
+// The part's placement within the tolerance (verify_register): the scene
+// moved to where the images show it. false + message.
+static bool vf_register(vf_t *V)
+{
+    const verify_files_opts_t *o = V->o;
+    if (!(o->placement_tol_mm > 0) && !(o->placement_tol_deg > 0)) return true;
+    fprintf(stderr, "refl verify: registering the placement (within %g mm, %g deg)\n", o->placement_tol_mm,
+            o->placement_tol_deg);
+    if (!verify_register(V->scene, V->vcs, V->lamps, V->A, V->mats, V->imgs, o->nimages, o->placement_tol_mm,
+                         o->placement_tol_deg, &V->placement))
+        return false;
+    model_scene_t *placed = verify_placed_scene(V->scene, &V->placement);
+    if (!placed) return false;
+    model_scene_free(V->scene);
+    V->scene = placed;
+    return true;
+}
+
+// The placement as JSON (units and conventions named).
+static json_t *placement_json(const verify_placement_t *p)
+{
+    json_t *o = json_object();
+    json_object_set_new(o, "convention", json_string("x' = Rz(turn)(x - c) + c + (dx, dy, 0): the part's frame before "
+                                                     "the turntable angle, c the middle of the description's "
+                                                     "bounding box in x and y; mm and deg"));
+    json_object_set_new(o, "dx_mm", json_real(p->dx_mm));
+    json_object_set_new(o, "dy_mm", json_real(p->dy_mm));
+    json_object_set_new(o, "turn_deg", json_real(p->turn_deg));
+    json_object_set_new(o, "centre_mm", json_pack("[f,f]", p->centre_mm[0], p->centre_mm[1]));
+    json_object_set_new(o, "tolerance_mm", json_real(p->tol_mm));
+    json_object_set_new(o, "tolerance_deg", json_real(p->tol_deg));
+    json_object_set_new(o, "edge_agreement", json_real(p->score));
+    json_object_set_new(o, "edge_agreement_nominal", json_real(p->score_nominal));
+    json_object_set_new(o, "edge_agreement_definition",
+                        json_string("sum over predicted edge points of |c| clamp(m/c, -1, 2) / sum |c|: c the "
+                                    "predicted contrast across the edge (1 px each side), m the image's; 1: every "
+                                    "edge where and as predicted"));
+    json_object_set_new(o, "edge_points", json_integer(p->nsamples));
+    json_object_set_new(o, "at_limit", json_boolean(p->at_limit));
+    return o;
+}
+
 // The views (verify_view_new): one per camera and angle, images of both share it.
 static bool vf_views(vf_t *V)
 {
@@ -653,6 +696,8 @@ static bool vf_outputs(const vf_t *V, const verify_result_t *res)
     const verify_files_opts_t *o = V->o;
     if (!model_mkdir_p(o->out)) return false;
     json_t *doc = verify_result_json(res, V->scene, V->imgs, V->lamps, &o->opt);
+    if (o->placement_tol_mm > 0 || o->placement_tol_deg > 0)
+        json_object_set_new(doc, "placement", placement_json(&V->placement));
     json_object_set_new(doc, "scene", json_string(o->scene));
     json_object_set_new(doc, "units_and_conventions",
                         json_string("grey values in DN of the images' pixel format; pixel coordinates as mrcal "
@@ -691,9 +736,21 @@ bool verify_files_run(const verify_files_opts_t *o, verify_files_result_t *r)
     if (ok && o->calib) ok = vf_base(V);
     ok = ok && vf_lamps(V) && vf_scale(V) && vf_cameras(V);
     for (int m = 0; ok && m < o->nimages; m++) ok = vf_image(V, m);
-    ok = ok && vf_views(V) &&
+    ok = ok && vf_register(V) && vf_views(V) &&
          verify_run(V->scene, &V->pr, V->vcs, V->ncams, V->lamps, V->A, V->imgs, o->nimages, V->views, &o->opt,
                     &r->fit);
+    r->placement = V->placement;
+    if (ok && V->placement.at_limit) {
+        // the part may lie further off than the fixture allows: say so with the fit's warnings
+        char (*w)[256] = realloc(r->fit.warnings, (size_t)(r->fit.nwarnings + 1) * sizeof *w);
+        if (w) {
+            r->fit.warnings = w;
+            snprintf(w[r->fit.nwarnings++], sizeof w[0], "the placement (%.2f, %.2f) mm, %.2f deg is at the edge of "
+                     "the tolerance (%g mm, %g deg): the part may lie further off, or the description is wrong",
+                     V->placement.dx_mm, V->placement.dy_mm, V->placement.turn_deg, o->placement_tol_mm,
+                     o->placement_tol_deg);
+        }
+    }
     r->nimages = o->nimages;
     memcpy(r->images, V->imgs, sizeof r->images);
     for (int m = 0; m < o->nimages; m++) r->images[m].P = NULL;
