@@ -106,6 +106,7 @@ CALIB_SRC := \
     calib/lamps.c \
     calib/gain.c \
     calib/white.c \
+    calib/export.c \
     calib/cmd_calib.c \
     calib/cmd_geometry.c \
     calib/cmd_lamps.c \
@@ -169,6 +170,7 @@ TEST_SRC := \
     tests/test_calib_gain.c \
     tests/test_calib_geometry.c \
     tests/test_calib_lamps.c \
+    tests/test_calib_export.c \
     tests/test_fit_brdf.c \
     tests/test_fit_chain.c \
     tests/test_fit_lightplan.c \

@@ -1,0 +1,216 @@
+// tests/test_calib_export.c — `refl calib export` (calib/export.c) and mrcal's
+// option names on `refl calib geometry`.
+//
+// - OpenCV YAML read back by OpenCV (python3 cv2.FileStorage): the same K,
+//   distortion and image size; points projected with cv2.projectPoints equal
+//   refl's projection (model_camera_project, mrcal) to 1e-6 px, for
+//   LENSMODEL_OPENCV8, OPENCV5 and OPENCV4. The ROS YAML (python3 yaml) holds
+//   the same numbers, plumb_bob / rational_polynomial, identity rectification
+//   and P = [K | 0]; cv2.projectPoints with its coefficients agrees too.
+// - Splined models and ROS with OPENCV12 are refused with the reason.
+// - Usage errors; mrcal's option names reach refl's options.
+#define _GNU_SOURCE
+#include <glib.h>
+#include <stdlib.h>
+#include <unistd.h>
+
+#include "calib/export.h"
+#include "model/model.h"
+#include "tests/test.h"
+
+// The camera-frame points of the check: a grid of directions up to the
+// imager's corners, at several distances.
+static int test_points(model_vec3_t *p, int cap)
+{
+    int n = 0;
+    for (int j = -3; j <= 3; j++)
+        for (int i = -4; i <= 4; i++)
+            if (n < cap) {
+                double z = 400 + 150 * ((i + j + 7) % 5);
+                p[n++] = (model_vec3_t){ i * 0.09 * z, j * 0.09 * z, z };
+            }
+    return n;
+}
+
+static const char PY[] =
+    "import sys, cv2, numpy as np, yaml\n"
+    "fmt, path, pts = sys.argv[1], sys.argv[2], np.loadtxt(sys.argv[3]).reshape(-1, 3)\n"
+    "if fmt == 'opencv':\n"
+    "    fs = cv2.FileStorage(path, cv2.FILE_STORAGE_READ)\n"
+    "    K = fs.getNode('camera_matrix').mat(); D = fs.getNode('distortion_coefficients').mat()\n"
+    "    W = int(fs.getNode('image_width').real()); H = int(fs.getNode('image_height').real()); extra = ''\n"
+    "else:\n"
+    "    y = yaml.safe_load(open(path))\n"
+    "    K = np.array(y['camera_matrix']['data'], float).reshape(3, 3)\n"
+    "    D = np.array(y['distortion_coefficients']['data'], float).reshape(1, -1)\n"
+    "    W, H = y['image_width'], y['image_height']\n"
+    "    R = np.array(y['rectification_matrix']['data']).reshape(3, 3)\n"
+    "    P = np.array(y['projection_matrix']['data']).reshape(3, 4)\n"
+    "    ok = np.allclose(R, np.eye(3), 0, 0) and np.allclose(P[:, :3], K, 0, 0) and not P[:, 3].any()\n"
+    "    extra = ' %s %s %d' % (y['distortion_model'], y['camera_name'], ok)\n"
+    "q, _ = cv2.projectPoints(pts, np.zeros(3), np.zeros(3), K, D)\n"
+    "print(W, H, ' '.join('%.17g' % v for v in K.ravel()), '|', ' '.join('%.17g' % v for v in D.ravel()), '|',\n"
+    "      ' '.join('%.17g' % v for v in q.ravel()), '|' + extra)\n";
+
+// Export a camera of this lens model and intrinsics in both formats; read
+// each back with OpenCV and compare.
+static void roundtrip(const char *lensmodel, const double *in, int nd)
+{
+    model_camera_t *cam = model_camera_new(lensmodel, in, 1280, 1024, (double[6]){ 0 });
+    CHECK(cam != NULL);
+    if (!cam) return;
+    char name[128];
+    snprintf(name, sizeof name, "%s.cameramodel", lensmodel);
+    const char *mp = test_path(name);
+    CHECK(model_camera_save(cam, mp));
+    model_vec3_t p[64];
+    int n = test_points(p, 64);
+    double q[128];
+    CHECK(model_camera_project(cam, p, n, q));
+    GString *g = g_string_new("");
+    for (int i = 0; i < n; i++) g_string_append_printf(g, "%.17g %.17g %.17g\n", p[i].x, p[i].y, p[i].z);
+    const char *pts = test_write("points.txt", g->str);
+    g_string_free(g, TRUE);
+    const char *script = test_write("check.py", PY);
+    for (int f = 0; f < 2; f++) {
+        const char *fmt = f ? "ros" : "opencv", *yml = test_path(f ? "ros.yaml" : "opencv.yaml");
+        char *out = NULL, *err = NULL;
+        int rc = test_refl_run(30, &out, &err, "calib", "export", mp, "--format", fmt, "-o", yml, NULL);
+        CHECK_MSG(rc == 0, "%s %s: exit %d: %s", lensmodel, fmt, rc, err ? err : "");
+        free(out), free(err);
+        const char *argv[] = { "/usr/bin/python3", script, fmt, yml, pts, NULL };
+        rc = test_run(argv, 60, &out, &err);
+        CHECK_MSG(rc == 0, "python3 cv2 (python3-opencv, python3-yaml): exit %d: %s", rc, err ? err : "");
+        char **part = g_strsplit(out ? out : "", "|", -1);
+        CHECK(g_strv_length(part) == 4);
+        if (g_strv_length(part) == 4) {
+            char **a = g_strsplit_set(g_strstrip(part[0]), " ", -1), **d = g_strsplit_set(g_strstrip(part[1]), " ", -1);
+            char **qq = g_strsplit_set(g_strstrip(part[2]), " ", -1);
+            CHECK(g_strv_length(a) == 11 && atoi(a[0]) == 1280 && atoi(a[1]) == 1024);
+            double K[9] = { in[0], 0, in[2], 0, in[1], in[3], 0, 0, 1 };
+            for (int k = 0; k < 9 && g_strv_length(a) == 11; k++) CHECK(strtod(a[2 + k], NULL) == K[k]);
+            int want = nd <= 5 ? 5 : nd;
+            CHECK((int)g_strv_length(d) == want);
+            for (int k = 0; k < want && k < (int)g_strv_length(d); k++)
+                CHECK(strtod(d[k], NULL) == (k < nd ? in[4 + k] : 0));
+            CHECK((int)g_strv_length(qq) == 2 * n);
+            double worst = 0;
+            for (int k = 0; k < 2 * n && k < (int)g_strv_length(qq); k++)
+                worst = fmax(worst, fabs(strtod(qq[k], NULL) - q[k]));
+            fprintf(stderr, "  %s %s: cv2.projectPoints against refl: largest difference %.2e px\n", lensmodel, fmt,
+                    worst);
+            CHECK(worst < 1e-6);
+            if (f) {
+                CHECK_CONTAINS(part[3], nd == 8 ? "rational_polynomial" : "plumb_bob");
+                CHECK_CONTAINS(part[3], lensmodel);   // camera_name: the file's stem
+                CHECK_CONTAINS(part[3], " 1");        // identity rectification, P = [K | 0]
+            }
+            g_strfreev(a), g_strfreev(d), g_strfreev(qq);
+        }
+        g_strfreev(part);
+        free(out), free(err);
+    }
+    model_camera_free(cam);
+}
+
+TEST(calib_export_opencv_ros_read_back_by_opencv)
+{
+    // strong distortion, so that every coefficient matters at the imager's corners
+    const double c8[12] = { 1750, 1745, 642.7, 508.9, -0.12, 0.08, 0.0005, -0.0003, -0.01, 0.002, -0.001, 0.0005 };
+    roundtrip("LENSMODEL_OPENCV8", c8, 8);
+    const double c5[9] = { 1200, 1210, 630.2, 515.4, -0.21, 0.11, 0.0007, 0.0004, -0.03 };
+    roundtrip("LENSMODEL_OPENCV5", c5, 5);
+    const double c4[8] = { 900, 905, 640.5, 511.5, 0.05, -0.02, -0.001, 0.0009 };
+    roundtrip("LENSMODEL_OPENCV4", c4, 4);
+}
+
+TEST(calib_export_refusals_and_usage)
+{
+    char *out = NULL, *err = NULL, mp[4096];
+    snprintf(mp, sizeof mp, "%s/examples/camera-adversarial.cameramodel", test_srcdir());
+    int rc = test_refl_run(30, &out, &err, "calib", "export", mp, "--format", "opencv", "-o", test_path("x.yaml"),
+                           NULL);
+    CHECK(rc == 1);
+    CHECK_CONTAINS(err, "camera-adversarial.cameramodel");
+    CHECK_CONTAINS(err, "LENSMODEL_SPLINED_STEREOGRAPHIC");
+    CHECK_CONTAINS(err, "mrcal-convert-lensmodel");
+    CHECK(access(test_path("x.yaml"), F_OK) != 0);
+    free(out), free(err);
+    // OPENCV12: OpenCV yes, ROS no
+    double c12[16] = { 1000, 1000, 640, 512, -0.1, 0.01, 0, 0, 0, 0, 0, 0, 1e-4, 0, 0, 0 };
+    model_camera_t *cam = model_camera_new("LENSMODEL_OPENCV12", c12, 1280, 1024, (double[6]){ 0 });
+    const char *p12 = test_path("c12.cameramodel");
+    CHECK(cam && model_camera_save(cam, p12));
+    model_camera_free(cam);
+    char *text = calib_export_camera_text(p12, CALIB_EXPORT_OPENCV, NULL);
+    CHECK_CONTAINS(text, "cols: 12");
+    free(text);
+    model_error_quiet_thread(true);
+    CHECK(calib_export_camera_text(p12, CALIB_EXPORT_ROS, NULL) == NULL);
+    CHECK_CONTAINS(model_last_error(), "rational_polynomial (8) only");
+    // a file that is not a camera model: named
+    const char *bad = test_write("bad.cameramodel", "{ 'lensmodel': 'LENSMODEL_OPENCV8', \n");
+    CHECK(calib_export_camera_text(bad, CALIB_EXPORT_OPENCV, NULL) == NULL);
+    CHECK_CONTAINS(model_last_error(), "bad.cameramodel");
+    model_error_quiet_thread(false);
+    rc = test_refl_run(30, &out, &err, "calib", "export", p12, "--format", "matlab", "-o", test_path("y"), NULL);
+    CHECK(rc == 2);
+    CHECK_CONTAINS(err, "--format matlab");
+    free(out), free(err);
+    rc = test_refl_run(30, &out, &err, "calib", "export", p12, "--format", "opencv", NULL);
+    CHECK(rc == 2);
+    free(out), free(err);
+    rc = test_refl_run(30, &out, &err, "calib", "--help", NULL);
+    CHECK(rc == 0);
+    CHECK_CONTAINS(out, "export");
+    free(out), free(err);
+}
+
+// mrcal-calibrate-cameras' option names are refl's options (the values reach
+// the same checks); --object-spacing is in metres unless it names its unit.
+TEST(calib_geometry_mrcal_option_names)
+{
+    char *out = NULL, *err = NULL;
+    const char *x = test_path("x");
+    int rc = test_refl_run(30, &out, &err, "calib", "geometry", "--corners-cache", test_path("nope.vnl"),
+                           "--imagersize", "640", "480", "-o", x, NULL);
+    CHECK(rc == 2);
+    CHECK_CONTAINS(err, "nope.vnl: cannot read the corners file");
+    free(out), free(err);
+    const char *c = test_write("c.vnl", "# filename x y level\na.png 1 2 0\n");
+    rc = test_refl_run(30, &out, &err, "calib", "geometry", "--corners", c, "--imagersize", "640", "480",
+                       "--object-width-n", "1", "-o", x, NULL);
+    CHECK(rc == 2);
+    CHECK_CONTAINS(err, "give an integer 2..100");
+    free(out), free(err);
+    rc = test_refl_run(30, &out, &err, "calib", "geometry", "--corners", c, "--imagersize", "640", "480", "--focal",
+                       "-3", "-o", x, NULL);
+    CHECK(rc == 2);
+    CHECK_CONTAINS(err, "give a focal length in px");
+    free(out), free(err);
+    rc = test_refl_run(30, &out, &err, "calib", "geometry", "--corners", c, "--imagersize", "640", "480",
+                       "--object-spacing", "0.03", "--square-mm", "30", "-o", x, NULL);
+    CHECK(rc == 2);
+    CHECK_CONTAINS(err, "not both");
+    free(out), free(err);
+    static const char *const bad[] = { "3furlongs", "20m", "0.5um", "m" };
+    for (int k = 0; k < 4; k++) {
+        rc = test_refl_run(30, &out, &err, "calib", "geometry", "--corners", c, "--imagersize", "640", "480",
+                           "--object-spacing", bad[k], "-o", x, NULL);
+        CHECK_MSG(rc == 2, "--object-spacing %s: exit %d", bad[k], rc);
+        CHECK_CONTAINS(err, "in metres");
+        free(out), free(err);
+    }
+    // accepted spellings get past the options to the corners file (one corner: too few views)
+    static const char *const good[] = { "0.03", "0.03m", "3cm", "30mm" };
+    for (int k = 0; k < 4; k++) {
+        rc = test_refl_run(30, &out, &err, "calib", "geometry", "--corners-cache", c, "--imagersize", "640", "480",
+                           "--object-spacing", good[k], "--object-width-n", "10", "--focal", "800", "-o", x, NULL);
+        CHECK_MSG(rc == 1, "--object-spacing %s: exit %d: %s", good[k], rc, err ? err : "");
+        free(out), free(err);
+    }
+    rc = test_refl_run(30, &out, &err, "calib", "geometry", "--help", NULL);
+    CHECK_CONTAINS(out, "--object-spacing");
+    CHECK_CONTAINS(out, "--corners, --corners-cache");
+    free(out), free(err);
+}
