@@ -122,8 +122,10 @@ FIT_SRC := \
     fit/verify_lab.c \
     fit/verify_study.c \
     fit/chain.c \
+    fit/export_material.c \
     fit/cmd_chain.c \
     fit/cmd_fit.c \
+    fit/cmd_export.c \
     fit/cmd_plan.c \
     fit/cmd_verify.c
 MODEL_CXX_SRC := model/lsq.cc
@@ -173,6 +175,7 @@ TEST_SRC := \
     tests/test_calib_export.c \
     tests/test_fit_brdf.c \
     tests/test_fit_chain.c \
+    tests/test_fit_export.c \
     tests/test_fit_lightplan.c \
     tests/test_fit_material.c \
     tests/test_fit_verify.c \
