@@ -37,7 +37,8 @@
     "facing the camera): Enter on a terminal, --yes or --operator-input FILE answers it; with stdin\n"      \
     "not a terminal and neither option the command pauses there (exit 3; run it again to continue).\n"     \
     "mrcal-calibrate-cameras' names are accepted: --object-spacing (metres unless a unit is given),\n"  \
-    "--object-width-n (--gridn), --corners-cache (--corners), --focal (--focal-px).\n"                 \
+    "--object-width-n (--gridn), --corners-cache (--corners), --focal (--focal-px). The camera\n"      \
+    "models keep mrcal's optimization_inputs with refl's extrinsics: mrcal's tools run on them.\n"      \
     "Exit: 0 done, 1 error, 2 usage, 3 paused."
 
 // A number option within [lo, hi] (whole when integer), with the command's own message.

@@ -122,3 +122,11 @@ bool calib_export_camera(const char *model_path, calib_export_format_t fmt, cons
     g_free(text);
     return ok;
 }
+
+bool calib_export_keep_optimization_inputs(const char *mrcal_model, const char *model)
+{
+    if (model_run_script("calib_cameramodel_merge.py", mrcal_model, model, model, NULL) == 0) return true;
+    model_error(model, 0, "could not give it mrcal's optimization_inputs from %s (scripts/calib_cameramodel_merge.py: "
+                "its message is above; the model itself is as refl wrote it)", mrcal_model);
+    return false;
+}

@@ -32,6 +32,18 @@ char *calib_export_camera_text(const char *model_path, calib_export_format_t fmt
 bool calib_export_camera(const char *model_path, calib_export_format_t fmt, const char *camera_name,
                          const char *out);
 
+// One .cameramodel with mrcal's optimization_inputs and refl's extrinsics
+// (refl calib geometry's outputs): model (refl's: rig-frame extrinsics, the
+// same intrinsics) is rewritten as mrcal_model (mrcal-calibrate-cameras'
+// output, with its optimization_inputs) with model's extrinsics and comment
+// lines, by mrcal itself (scripts/calib_cameramodel_merge.py). mrcal allows
+// moving a camera without invalidating the optimization_inputs: its tools
+// (projection_uncertainty, mrcal-show-projection-uncertainty,
+// mrcal-show-residuals-*, mrcal-show-projection-diff) take the solve's poses
+// from them, in the solve's reference frame (camera 0). false + message
+// (intrinsics that differ: not the same solve). model is left as it was then.
+bool calib_export_keep_optimization_inputs(const char *mrcal_model, const char *model);
+
 // `refl calib export` (calib/cmd_calib.c).
 int calib_cmd_export(int argc, char **argv);
 

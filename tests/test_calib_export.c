@@ -214,3 +214,143 @@ TEST(calib_geometry_mrcal_option_names)
     CHECK_CONTAINS(out, "--corners, --corners-cache");
     free(out), free(err);
 }
+
+// ---------------------------------------------------------------------------
+// camera.cameramodel with mrcal's optimization_inputs and refl's extrinsics
+
+static double normal(GRand *r)
+{
+    double u = g_rand_double_range(r, 1e-12, 1), v = g_rand_double(r);
+    return sqrt(-2 * log(u)) * cos(2 * M_PI * v);
+}
+
+// Corners of a 10 x 10 board (30 mm) in nviews poses seen by the model at
+// path, 0.1 px noise (fixed seed), as mrgingham's vnl.
+static const char *board_corners(const char *model_path, int nviews)
+{
+    model_camera_t *src = model_camera_load(model_path), *cam = NULL;
+    CHECK(src != NULL);
+    if (src) {   // the same lens at the origin: the poses are in its frame
+        cam = model_camera_new(model_camera_lensmodel(src), model_camera_intrinsics(src, NULL),
+                               model_camera_width(src), model_camera_height(src), (double[6]){ 0 });
+        model_camera_free(src);
+    }
+    if (!cam) return NULL;
+    // the board's poses: its centre 700..1000 mm ahead, tilted up to 35 deg, turned
+    GString *g = g_string_new("# filename x y level\n");
+    GRand *rnd = g_rand_new_with_seed(20261125);
+    int made = 0;
+    for (int v = 0; v < 400 && made < nviews; v++) {
+        double ax = g_rand_double_range(rnd, -0.6, 0.6), ay = g_rand_double_range(rnd, -0.6, 0.6);
+        double az = g_rand_double_range(rnd, -M_PI, M_PI), d = g_rand_double_range(rnd, 700, 1000);
+        double cx = g_rand_double_range(rnd, -150, 150), cy = g_rand_double_range(rnd, -120, 120);
+        model_vec3_t P[100];
+        for (int j = 0; j < 10; j++)
+            for (int i = 0; i < 10; i++) {
+                // board point about its centre, turned by az about z, then tilted about x and y
+                double bx = (i - 4.5) * 30, by = (j - 4.5) * 30;
+                double x = bx * cos(az) - by * sin(az), y = bx * sin(az) + by * cos(az), z = 0;
+                double y2 = y * cos(ax) - z * sin(ax), z2 = y * sin(ax) + z * cos(ax);
+                double x3 = x * cos(ay) + z2 * sin(ay), z3 = -x * sin(ay) + z2 * cos(ay);
+                P[j * 10 + i] = (model_vec3_t){ x3 + cx, y2 + cy, z3 + d };
+            }
+        double q[200];
+        bool in = model_camera_project(cam, P, 100, q);
+        for (int k = 0; in && k < 100; k++)
+            in = q[2 * k] > 10 && q[2 * k] < 1270 && q[2 * k + 1] > 10 && q[2 * k + 1] < 1014;
+        if (!in) continue;
+        for (int k = 0; k < 100; k++)
+            g_string_append_printf(g, "v%02d.png %.4f %.4f 0\n", made, q[2 * k] + 0.1 * normal(rnd),
+                                   q[2 * k + 1] + 0.1 * normal(rnd));
+        made++;
+    }
+    CHECK(made == nviews);
+    g_rand_free(rnd);
+    model_camera_free(cam);
+    const char *p = test_write("corners.vnl", g->str);
+    g_string_free(g, TRUE);
+    return p;
+}
+
+static const char MRCAL_PY[] =
+    "import sys, mrcal, numpy as np\n"
+    "merged, solve, rt = sys.argv[1], sys.argv[2], [float(x) for x in sys.argv[3:9]]\n"
+    "m, s = mrcal.cameramodel(merged), mrcal.cameramodel(solve)\n"
+    "oi = m.optimization_inputs()\n"
+    "assert oi is not None, 'no optimization_inputs'\n"
+    "print('spacing', oi['calibration_object_spacing'])\n"
+    "print('extrinsics', np.abs(m.extrinsics_rt_fromref() - np.array(rt)).max())\n"
+    "print('intrinsics', np.abs(m.intrinsics()[1] - s.intrinsics()[1]).max())\n"
+    "p = np.array([[0., 0., 900.], [200., -150., 900.], [-300., 250., 1200.]])\n"
+    "u, u0 = mrcal.projection_uncertainty(p, m, what='worstdirection-stdev'), \\\n"
+    "        mrcal.projection_uncertainty(p, s, what='worstdirection-stdev')\n"
+    "print('uncertainty', ' '.join('%.6g' % x for x in u), 'same', np.abs(u - u0).max())\n";
+
+TEST(calib_geometry_cameramodel_for_mrcal_tools)
+{
+    char mp[4096];
+    snprintf(mp, sizeof mp, "%s/examples/camera.cameramodel", test_srcdir());
+    const char *corners = board_corners(mp, 14), *dir = test_path("geo");
+    if (!corners) return;
+    char *out = NULL, *err = NULL;
+    // mrcal's option names, the spacing in metres
+    int rc = test_refl_run(180, &out, &err, "calib", "geometry", "--corners-cache", corners, "--imagersize", "1280",
+                           "1024", "--focal", "1700", "--object-spacing", "0.03", "--object-width-n", "10", "-o", dir,
+                           NULL);
+    CHECK_MSG(rc == 0, "refl calib geometry: exit %d: %s", rc, err ? err : "");
+    free(out), free(err);
+    char cam[4200], solve[4200], moved[4200];
+    snprintf(cam, sizeof cam, "%s/camera.cameramodel", dir);
+    snprintf(solve, sizeof solve, "%s/mrcal/camera-0.cameramodel", dir);
+    snprintf(moved, sizeof moved, "%s", test_path("rig.cameramodel"));
+    // refl's camera.cameramodel itself (no turntable: extrinsics zero) and a
+    // model of the same camera moved into a rig frame, given mrcal's inputs
+    model_camera_t *c = model_camera_load(cam);
+    CHECK(c != NULL);
+    if (!c) return;
+    int n = 0;
+    const double *in = model_camera_intrinsics(c, &n);
+    const double rt[6] = { 0.3, -1.2, 0.4, 120.5, -80.25, 950 };
+    model_camera_t *c2 = model_camera_new(model_camera_lensmodel(c), in, 1280, 1024, rt);
+    CHECK(c2 && model_camera_save(c2, moved));
+    model_camera_free(c2);
+    model_camera_free(c);
+    model_error_quiet_thread(true);
+    CHECK_MSG(calib_export_keep_optimization_inputs(solve, moved), "%s", model_last_error());
+    model_error_quiet_thread(false);
+    const char *py = test_write("mrcal_check.py", MRCAL_PY);
+    const char *models[2] = { cam, moved };
+    for (int k = 0; k < 2; k++) {
+        char a[6][32];
+        const char *argv[12] = { "/usr/bin/python3", py, models[k], solve };
+        for (int i = 0; i < 6; i++) {
+            snprintf(a[i], sizeof a[i], "%.17g", k ? rt[i] : 0.0);
+            argv[4 + i] = a[i];
+        }
+        rc = test_run(argv, 120, &out, &err);
+        CHECK_MSG(rc == 0, "python3 mrcal on %s: exit %d: %s", models[k], rc, err ? err : "");
+        fprintf(stderr, "  %s: %s", k ? "moved to a rig frame" : "camera.cameramodel", out ? out : "");
+        CHECK_CONTAINS(out, "spacing 30.0");   // --object-spacing 0.03 (m) reached mrcal as 30 mm
+        char *e = out ? strstr(out, "extrinsics ") : NULL, *i = out ? strstr(out, "intrinsics ") : NULL;
+        char *s = out ? strstr(out, " same ") : NULL;
+        CHECK(e && strtod(e + 11, NULL) < 1e-9);
+        CHECK(i && strtod(i + 11, NULL) < 1e-9);
+        CHECK(s && strtod(s + 6, NULL) < 1e-9);   // the uncertainty is the solve's: moving the camera changes nothing
+        free(out), free(err);
+    }
+    // mrcal's own command-line tools on them, headless
+    char png[4200], png2[4200];
+    snprintf(png, sizeof png, "%s", test_path("diff.png"));
+    snprintf(png2, sizeof png2, "%s", test_path("uncertainty.png"));
+    const char *diff[] = { "/usr/bin/mrcal-show-projection-diff", "--unset", "key", "--hardcopy", png, moved, solve,
+                           NULL };
+    rc = test_run(diff, 180, &out, &err);
+    CHECK_MSG(rc == 0, "mrcal-show-projection-diff: exit %d: %s", rc, err ? err : "");
+    CHECK(access(png, R_OK) == 0);
+    free(out), free(err);
+    const char *unc[] = { "/usr/bin/mrcal-show-projection-uncertainty", "--hardcopy", png2, cam, NULL };
+    rc = test_run(unc, 180, &out, &err);
+    CHECK_MSG(rc == 0, "mrcal-show-projection-uncertainty: exit %d: %s", rc, err ? err : "");
+    CHECK(access(png2, R_OK) == 0);
+    free(out), free(err);
+}
