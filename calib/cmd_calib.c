@@ -127,12 +127,16 @@ int calib_cmd_white(int argc, char **argv)
 int calib_cmd_export(int argc, char **argv)
 {
     const char *format = NULL, *out = NULL, *name = NULL;
+    bool approximate = false;
     model_opt_t opts[] = {
         MODEL_OPT_STRING("--format", "opencv|ros", "OpenCV FileStorage YAML (cv::FileStorage, cv2.FileStorage) or "
                          "ROS camera_info YAML (camera_calibration_parsers)", &format, true),
         { "-o", "--out", "FILE", "the output file", MODEL_OPT_KIND_STRING, &out, 0, 0, true, false, NULL },
         MODEL_OPT_STRING("--camera-name", "NAME", "ROS camera_name (default: the model file's name without "
                          "extension)", &name, false),
+        MODEL_OPT_FLAG("--approximate", NULL, "a model OpenCV cannot hold (splined, ...): export LENSMODEL_OPENCV8 "
+                       "fitted to it over the imager,\n                             its error stated (FILE.approx.cameramodel, "
+                       "FILE.approx.json)", &approximate),
     };
     model_cli_t cli = {
         .cmd = "calib export", .synopsis = "CAMERA.cameramodel", .opts = opts, .nopts = MODEL_NOPTS(opts),
@@ -142,8 +146,9 @@ int calib_cmd_export(int argc, char **argv)
                  "coefficients in OpenCV's order k1 k2 p1 p2 [k3 [k4 k5 k6 [s1 s2 s3 s4]]], which is mrcal's\n"
                  "for LENSMODEL_OPENCV4/5/8/12 (a pinhole: 5 zeros). ROS: distortion_model plumb_bob (OPENCV4,\n"
                  "OPENCV5, pinhole: 5 coefficients) or rational_polynomial (OPENCV8), rectification identity,\n"
-                 "projection_matrix [K | 0]; OPENCV12 only as OpenCV. Splined and other models are refused\n"
-                 "(mrcal-convert-lensmodel LENSMODEL_OPENCV8 fits one and states its error). The extrinsics\n"
+                 "projection_matrix [K | 0]; OPENCV12 only as OpenCV. Splined and other models are refused,\n"
+                 "or with --approximate replaced by LENSMODEL_OPENCV8 fitted to them over the imager (the\n"
+                 "reprojection error's RMS and maximum printed and written in the file). The extrinsics\n"
                  "are not exported.",
     };
     int rc = model_cli_parse(&cli, argc, argv);
@@ -152,9 +157,14 @@ int calib_cmd_export(int argc, char **argv)
     if (!calib_export_format_from_name(format, &f))
         return model_cli_error(&cli, "--format %s: give opencv or ros", format);
     bool q = model_error_quiet_thread(true);
-    bool ok = calib_export_camera(cli.positional[0], f, name, out);
+    double rms = 0, mx = 0;
+    bool ok = approximate ? calib_export_camera_approx(cli.positional[0], f, name, out, &rms, &mx)
+                          : calib_export_camera(cli.positional[0], f, name, out);
     model_error_quiet_thread(q);
     if (!ok) return model_error_report("calib export");
+    if (rms > 0 || mx > 0)
+        printf("refl calib export: LENSMODEL_OPENCV8 fitted to %s: reprojection error over the imager RMS %.4g px, "
+               "max %.4g px (%s.approx.json)\n", cli.positional[0], rms, mx, out);
     printf("%s\n", out);
     return 0;
 }

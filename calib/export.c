@@ -2,6 +2,7 @@
 // camera_info YAML from a .cameramodel (calib/export.h has the coefficient
 // orders and the models each format can hold).
 #include <glib.h>
+#include <jansson.h>
 #include <string.h>
 
 #include "calib/export.h"
@@ -68,9 +69,9 @@ char *calib_export_camera_text(const char *model_path, calib_export_format_t fmt
     const double *in = model_camera_intrinsics(cam, &np);
     if (nd < 0) {
         model_error(model_path, 0, "lens model %s is not one of OpenCV's (LENSMODEL_PINHOLE, LENSMODEL_OPENCV4/5/8/12): "
-                    "refl does not export it, since OpenCV and ROS cannot project with it; fit an OpenCV model to "
-                    "it (mrcal-convert-lensmodel LENSMODEL_OPENCV8 %s states the fit's error) or calibrate with "
-                    "--lensmodel LENSMODEL_OPENCV8, and export that", lm, model_path);
+                    "refl does not export it as it is, since OpenCV and ROS cannot project with it; give --approximate "
+                    "for a fitted LENSMODEL_OPENCV8 with its stated error (or mrcal-convert-lensmodel LENSMODEL_OPENCV8 "
+                    "%s), or calibrate with --lensmodel LENSMODEL_OPENCV8", lm, model_path);
         model_camera_free(cam);
         return NULL;
     }
@@ -129,4 +130,47 @@ bool calib_export_keep_optimization_inputs(const char *mrcal_model, const char *
     model_error(model, 0, "could not give it mrcal's optimization_inputs from %s (scripts/calib_cameramodel_merge.py: "
                 "its message is above; the model itself is as refl wrote it)", mrcal_model);
     return false;
+}
+
+bool calib_export_camera_approx(const char *model_path, calib_export_format_t fmt, const char *camera_name,
+                                const char *out, double *rms_px, double *max_px)
+{
+    *rms_px = *max_px = 0;
+    model_camera_t *cam = model_camera_load(model_path);
+    if (!cam) return false;
+    bool opencv = opencv_ncoeffs(model_camera_lensmodel(cam)) >= 0;
+    model_camera_free(cam);
+    if (opencv) return calib_export_camera(model_path, fmt, camera_name, out);
+    char *fitted = g_strdup_printf("%s.approx.cameramodel", out), *js = g_strdup_printf("%s.approx.json", out);
+    char *text = NULL;
+    bool ok = model_run_script("calib_export_approx.py", model_path, "LENSMODEL_OPENCV8", fitted, js, NULL) == 0;
+    if (!ok) model_error(model_path, 0, "no OpenCV model could be fitted to it (scripts/calib_export_approx.py: its "
+                         "message is above)");
+    json_error_t je;
+    json_t *j = ok ? json_load_file(js, 0, &je) : NULL;
+    if (ok && !j) {
+        model_error(js, je.line, "not the fit's summary: %s", je.text);
+        ok = false;
+    }
+    if (ok) {
+        *rms_px = json_number_value(json_object_get(j, "rms_px"));
+        *max_px = json_number_value(json_object_get(j, "max_px"));
+        ok = (text = calib_export_camera_text(fitted, fmt, camera_name)) != NULL;
+    }
+    if (ok) {   // the approximation stated after the first line (OpenCV's %YAML header stays first)
+        char *nl = strchr(text, '\n');
+        GString *g = g_string_new_len(text, nl ? nl - text + 1 : 0);
+        g_string_append_printf(g, "# APPROXIMATION of %s (%s): LENSMODEL_OPENCV8 fitted over the imager, "
+                               "reprojection error RMS %.4g px, max %.4g px over %lld pixels (%s)\n", model_path,
+                               json_string_value(json_object_get(j, "source_lensmodel")), *rms_px, *max_px,
+                               (long long)json_integer_value(json_object_get(j, "points")), js);
+        g_string_append(g, nl ? nl + 1 : text);
+        ok = model_write_file_atomic(out, g->str);
+        g_string_free(g, TRUE);
+    }
+    json_decref(j);
+    g_free(text);
+    g_free(fitted);
+    g_free(js);
+    return ok;
 }

@@ -9,8 +9,9 @@
 //   LENSMODEL_OPENCV8  -> k1 k2 p1 p2 k3 k4 k5 k6   (ROS rational_polynomial)
 //   LENSMODEL_OPENCV12 -> k1 k2 p1 p2 k3 k4 k5 k6 s1 s2 s3 s4 (OpenCV only; ROS has no such model)
 // Other models (splined stereographic, stereographic, CAHVOR, lon/lat, ...)
-// are refused with a message: they are not OpenCV's projection, and an
-// approximation is mrcal-convert-lensmodel's job (its fit states its error).
+// are refused with a message (they are not OpenCV's projection), unless an
+// approximation is asked for (calib_export_camera_approx: a fitted
+// LENSMODEL_OPENCV8 and its stated error).
 #pragma once
 
 #include <stdbool.h>
@@ -31,6 +32,16 @@ char *calib_export_camera_text(const char *model_path, calib_export_format_t fmt
 // The same written atomically to out. false + message.
 bool calib_export_camera(const char *model_path, calib_export_format_t fmt, const char *camera_name,
                          const char *out);
+
+// The same for a model OpenCV cannot hold (splined, ...), approximated:
+// LENSMODEL_OPENCV8 fitted to it over the whole imager (48 x 40 pixels
+// unprojected with the model, the OpenCV model's intrinsics fitted to project
+// those rays onto them; scripts/calib_export_approx.py), written as
+// out.approx.cameramodel with its error in out.approx.json, then exported;
+// the error (RMS and largest over the grid, px) is returned and stated in the
+// YAML's comment. A model OpenCV holds is exported as it is (*rms_px, *max_px 0).
+bool calib_export_camera_approx(const char *model_path, calib_export_format_t fmt, const char *camera_name,
+                                const char *out, double *rms_px, double *max_px);
 
 // One .cameramodel with mrcal's optimization_inputs and refl's extrinsics
 // (refl calib geometry's outputs): model (refl's: rig-frame extrinsics, the

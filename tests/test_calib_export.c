@@ -363,3 +363,63 @@ TEST(calib_geometry_cameramodel_for_mrcal_tools)
     CHECK_MSG(rc == 0, "refl calib export: exit %d: %s", rc, err ? err : "");
     free(out), free(err);
 }
+
+// --approximate: a splined model as a fitted LENSMODEL_OPENCV8; OpenCV's
+// projection of rays the splined model unprojects (a grid other than the
+// fit's) lands within the stated error of their pixels.
+TEST(calib_export_approximate_splined)
+{
+    char mp[4096];
+    snprintf(mp, sizeof mp, "%s/examples/camera-adversarial.cameramodel", test_srcdir());
+    const char *yml = test_path("adv.yaml");
+    char *out = NULL, *err = NULL;
+    int rc = test_refl_run(120, &out, &err, "calib", "export", mp, "--format", "opencv", "--approximate", "-o", yml,
+                           NULL);
+    CHECK_MSG(rc == 0, "exit %d: %s", rc, err ? err : "");
+    const char *at = out ? strstr(out, "RMS ") : NULL, *mx = out ? strstr(out, "max ") : NULL;
+    CHECK(at && mx);
+    if (!at || !mx) return;
+    double rms = strtod(at + 4, NULL), max = strtod(mx + 4, NULL);
+    fprintf(stderr, "  stated: RMS %.4g px, max %.4g px\n", rms, max);
+    CHECK(rms > 0 && max >= rms && max < 1);
+    free(out), free(err);
+    // rays through pixels of a grid off the fit's, 800 mm away, from the splined model (camera frame)
+    model_camera_t *src = model_camera_load(mp), *cam = NULL;
+    CHECK(src != NULL);
+    if (!src) return;
+    cam = model_camera_new(model_camera_lensmodel(src), model_camera_intrinsics(src, NULL), 1280, 1024,
+                           (double[6]){ 0 });
+    model_camera_free(src);
+    double q[2 * 13 * 11];
+    model_vec3_t d[13 * 11];
+    int n = 0;
+    for (int j = 0; j < 11; j++)
+        for (int i = 0; i < 13; i++, n++) q[2 * n] = 7 + i * 1265.0 / 12, q[2 * n + 1] = 5 + j * 1013.0 / 10;
+    CHECK(cam && model_camera_unproject(cam, q, n, d));
+    model_camera_free(cam);
+    GString *g = g_string_new("");
+    for (int k = 0; k < n; k++)
+        g_string_append_printf(g, "%.17g %.17g %.17g\n", d[k].x / d[k].z * 800, d[k].y / d[k].z * 800, 800.0);
+    const char *pts = test_write("rays.txt", g->str);
+    g_string_free(g, TRUE);
+    const char *argv[] = { "/usr/bin/python3", test_write("check.py", PY), "opencv", yml, pts, NULL };
+    rc = test_run(argv, 60, &out, &err);
+    CHECK_MSG(rc == 0, "python3 cv2: exit %d: %s", rc, err ? err : "");
+    char **part = g_strsplit(out ? out : "", "|", -1);
+    if (g_strv_length(part) == 4) {
+        char **qq = g_strsplit_set(g_strstrip(part[2]), " ", -1);
+        CHECK((int)g_strv_length(qq) == 2 * n);
+        double worst = 0, ss = 0;
+        for (int k = 0; k < n && 2 * k + 1 < (int)g_strv_length(qq); k++) {
+            double e = hypot(strtod(qq[2 * k], NULL) - q[2 * k], strtod(qq[2 * k + 1], NULL) - q[2 * k + 1]);
+            worst = fmax(worst, e);
+            ss += e * e;
+        }
+        fprintf(stderr, "  cv2.projectPoints on another grid: RMS %.4g px, max %.4g px\n", sqrt(ss / n), worst);
+        CHECK(worst <= 1.5 * max);
+        CHECK(sqrt(ss / n) <= 1.5 * rms);
+        g_strfreev(qq);
+    } else CHECK(false);
+    g_strfreev(part);
+    free(out), free(err);
+}
