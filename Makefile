@@ -106,6 +106,7 @@ CALIB_SRC := \
     calib/lamps.c \
     calib/gain.c \
     calib/white.c \
+    calib/export.c \
     calib/cmd_calib.c \
     calib/cmd_geometry.c \
     calib/cmd_lamps.c \
@@ -122,8 +123,10 @@ FIT_SRC := \
     fit/verify_study.c \
     fit/verify_register.c \
     fit/chain.c \
+    fit/export_material.c \
     fit/cmd_chain.c \
     fit/cmd_fit.c \
+    fit/cmd_export.c \
     fit/cmd_plan.c \
     fit/cmd_verify.c
 MODEL_CXX_SRC := model/lsq.cc
@@ -170,8 +173,10 @@ TEST_SRC := \
     tests/test_calib_gain.c \
     tests/test_calib_geometry.c \
     tests/test_calib_lamps.c \
+    tests/test_calib_export.c \
     tests/test_fit_brdf.c \
     tests/test_fit_chain.c \
+    tests/test_fit_export.c \
     tests/test_fit_lightplan.c \
     tests/test_fit_material.c \
     tests/test_fit_verify.c \

@@ -5,6 +5,7 @@
 #include <string.h>
 
 #include "calib/calib.h"
+#include "calib/export.h"
 #include "model/model.h"
 #include "model/opts.h"
 
@@ -17,11 +18,12 @@ static const struct {
     { "lamps",    calib_cmd_lamps,    "lamp positions from mirror-sphere highlights, with uncertainty in mm" },
     { "white",    calib_cmd_white,      "kc*I per lamp from a reference-white session" },
     { "gain",     calib_cmd_gain,     "sensitivity (EMVA 1288): dark, photon transfer, linearity, PRNU/DSNU maps" },
+    { "export",   calib_cmd_export,   "a camera model as OpenCV FileStorage YAML or ROS camera_info YAML" },
 };
 
 static void usage(FILE *f)
 {
-    fprintf(f, "usage: refl calib geometry|lamps|gain|white [ARGS...]   (refl calib NAME --help for its options)\n\n");
+    fprintf(f, "usage: refl calib geometry|lamps|gain|white|export [ARGS...]   (refl calib NAME --help for its options)\n\n");
     for (size_t i = 0; i < sizeof subs / sizeof subs[0]; i++) fprintf(f, "  %-9s %s\n", subs[i].name, subs[i].summary);
     fprintf(f, "\nrefl %s\n", REFL_VERSION);
 }
@@ -117,4 +119,52 @@ int calib_cmd_white(int argc, char **argv)
     calib_obs_free(&obs);
     calib_set_free(cal);
     return rc;
+}
+
+// ---------------------------------------------------------------------------
+// refl calib export
+
+int calib_cmd_export(int argc, char **argv)
+{
+    const char *format = NULL, *out = NULL, *name = NULL;
+    bool approximate = false;
+    model_opt_t opts[] = {
+        MODEL_OPT_STRING("--format", "opencv|ros", "OpenCV FileStorage YAML (cv::FileStorage, cv2.FileStorage) or "
+                         "ROS camera_info YAML (camera_calibration_parsers)", &format, true),
+        { "-o", "--out", "FILE", "the output file", MODEL_OPT_KIND_STRING, &out, 0, 0, true, false, NULL },
+        MODEL_OPT_STRING("--camera-name", "NAME", "ROS camera_name (default: the model file's name without "
+                         "extension)", &name, false),
+        MODEL_OPT_FLAG("--approximate", NULL, "a model OpenCV cannot hold (splined, ...): export LENSMODEL_OPENCV8 "
+                       "fitted to it over the imager,\n                             its error stated (FILE.approx.cameramodel, "
+                       "FILE.approx.json)", &approximate),
+    };
+    model_cli_t cli = {
+        .cmd = "calib export", .synopsis = "CAMERA.cameramodel", .opts = opts, .nopts = MODEL_NOPTS(opts),
+        .min_positional = 1, .max_positional = 1,
+        .about = "Writes a camera model (refl calib geometry's camera.cameramodel, or any mrcal model) for OpenCV\n"
+                 "or ROS: camera_matrix K = [fx 0 cx; 0 fy cy; 0 0 1], the image size and the distortion\n"
+                 "coefficients in OpenCV's order k1 k2 p1 p2 [k3 [k4 k5 k6 [s1 s2 s3 s4]]], which is mrcal's\n"
+                 "for LENSMODEL_OPENCV4/5/8/12 (a pinhole: 5 zeros). ROS: distortion_model plumb_bob (OPENCV4,\n"
+                 "OPENCV5, pinhole: 5 coefficients) or rational_polynomial (OPENCV8), rectification identity,\n"
+                 "projection_matrix [K | 0]; OPENCV12 only as OpenCV. Splined and other models are refused,\n"
+                 "or with --approximate replaced by LENSMODEL_OPENCV8 fitted to them over the imager (the\n"
+                 "reprojection error's RMS and maximum printed and written in the file). The extrinsics\n"
+                 "are not exported.",
+    };
+    int rc = model_cli_parse(&cli, argc, argv);
+    if (rc != MODEL_CLI_OK) return rc;
+    calib_export_format_t f;
+    if (!calib_export_format_from_name(format, &f))
+        return model_cli_error(&cli, "--format %s: give opencv or ros", format);
+    bool q = model_error_quiet_thread(true);
+    double rms = 0, mx = 0;
+    bool ok = approximate ? calib_export_camera_approx(cli.positional[0], f, name, out, &rms, &mx)
+                          : calib_export_camera(cli.positional[0], f, name, out);
+    model_error_quiet_thread(q);
+    if (!ok) return model_error_report("calib export");
+    if (rms > 0 || mx > 0)
+        printf("refl calib export: LENSMODEL_OPENCV8 fitted to %s: reprojection error over the imager RMS %.4g px, "
+               "max %.4g px (%s.approx.json)\n", cli.positional[0], rms, mx, out);
+    printf("%s\n", out);
+    return 0;
 }

@@ -36,6 +36,9 @@
     "With --rig, each tilt's session begins with an operator step (mount the board on the wedge,\n"         \
     "facing the camera): Enter on a terminal, --yes or --operator-input FILE answers it; with stdin\n"      \
     "not a terminal and neither option the command pauses there (exit 3; run it again to continue).\n"     \
+    "mrcal-calibrate-cameras' names are accepted: --object-spacing (metres unless a unit is given),\n"  \
+    "--object-width-n (--gridn), --corners-cache (--corners), --focal (--focal-px). The camera\n"      \
+    "models keep mrcal's optimization_inputs with refl's extrinsics: mrcal's tools run on them.\n"      \
     "Exit: 0 done, 1 error, 2 usage, 3 paused."
 
 // A number option within [lo, hi] (whole when integer), with the command's own message.
@@ -63,6 +66,34 @@ static int imagersize(model_cli_t *c, const model_opt_list_t *l, calib_geometry_
     return 0;
 }
 
+// --object-spacing (mrcal-calibrate-cameras' name): metres, or a length with
+// its unit m, cm or mm; the same as --square-mm, which it excludes.
+static int object_spacing(model_cli_t *c, calib_geometry_opts_t *o)
+{
+    const char *v = model_cli_value(c, "--object-spacing");
+    if (!v) return 0;
+    if (model_cli_value(c, "--square-mm"))
+        return model_cli_error(c, "give --square-mm or --object-spacing, not both (the same corner spacing)");
+    static const struct { const char *unit; double mm; } units[] = { { "mm", 1 }, { "cm", 10 }, { "m", 1000 } };
+    char num[64];
+    double scale = 1000, d;
+    snprintf(num, sizeof num, "%s", v);
+    size_t n = strlen(num);
+    for (size_t k = 0; k < sizeof units / sizeof units[0]; k++) {
+        size_t u = strlen(units[k].unit);
+        if (n > u && !strcmp(num + n - u, units[k].unit)) {
+            num[n - u] = 0;
+            scale = units[k].mm;
+            break;
+        }
+    }
+    if (!model_parse_double(num, &d) || !(d * scale >= 1e-3 && d * scale <= 1e4))
+        return model_cli_error(c, "--object-spacing %s: give the corner spacing in metres (as mrcal does, e.g. "
+                               "0.03) or with its unit (30mm, 3cm, 0.03m), 0.001 mm .. 10 m", v);
+    o->square_mm = d * scale;
+    return 0;
+}
+
 // The numbers, then the checks of the whole (one source, its needs).
 static int check_options(model_cli_t *c, const model_opt_list_t *imsize, calib_geometry_opts_t *o)
 {
@@ -77,6 +108,7 @@ static int check_options(model_cli_t *c, const model_opt_list_t *imsize, calib_g
         (rc = number(c, "--min-views", 1, 1e5, true, "give an integer >= 1", &min_views)) ||
         (rc = imagersize(c, imsize, o)))
         return rc;
+    if ((rc = object_spacing(c, o))) return rc;
     o->gridn = (int)gridn;
     o->min_views = (int)min_views;
     int nsrc = (o->rig != NULL) + (o->nsessions > 0) + (o->images != NULL) + (o->corners != NULL);
@@ -124,15 +156,19 @@ int calib_cmd_geometry(int argc, char **argv)
                        "repeat it for more", &sessions, false, false),
         MODEL_OPT_STRING("--images", "'GLOB'", "use images captured elsewhere (no angles: no axis, no rig frame)",
                          &o.images, false),
-        MODEL_OPT_STRING("--corners", "FILE.vnl", "use mrgingham's corners (no images needed; needs --imagersize)",
-                         &o.corners, false),
+        { "--corners", "--corners-cache", "FILE.vnl", "use mrgingham's corners (no images needed; needs "
+          "--imagersize)", MODEL_OPT_KIND_STRING, &o.corners, 0, 0, false, false, NULL },
         MODEL_OPT_STRING("--lensmodel", "NAME", "LENSMODEL_OPENCV8 (default), LENSMODEL_OPENCV4, ..., "
                          "LENSMODEL_SPLINED_STEREOGRAPHIC_order=3_Nx=16_Ny=12_fov_x_deg=50", &o.lensmodel, false),
-        MODEL_OPT_VALUE("--gridn", "N", "inner corners per side (mrgingham --gridn; default 10)", false),
+        { "--gridn", "--object-width-n", "N", "inner corners per side (mrgingham --gridn; default 10)",
+          MODEL_OPT_KIND_STRING, NULL, 0, 0, false, false, NULL },
         MODEL_OPT_VALUE("--square-mm", "S", "corner spacing (default 30)", false),
+        MODEL_OPT_VALUE("--object-spacing", "S[m|cm|mm]", "corner spacing as mrcal-calibrate-cameras takes it: in "
+                        "metres,\n                             or with a unit (0.03, 0.03m, 3cm, 30mm)", false),
         MODEL_OPT_VALUE("--board-height-mm", "H", "height of the corner plane above the table top at tilt 0 "
                         "(default 5)", false),
-        MODEL_OPT_VALUE("--focal-px", "F", "seed focal length for mrcal (default 1.4 x imager width)", false),
+        { "--focal-px", "--focal", "F", "seed focal length for mrcal in px (default 1.4 x imager width)",
+          MODEL_OPT_KIND_STRING, NULL, 0, 0, false, false, NULL },
         MODEL_OPT_LIST("--imagersize", "W H", "imager size (needed with --corners)", &imsize, true, false),
         MODEL_OPT_VALUE("--distance-mm", "D", "distance of the projection-uncertainty figure (default 900)", false),
         MODEL_OPT_VALUE("--min-views", "N", "views with a board the solve needs (default by lens model)", false),

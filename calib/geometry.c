@@ -43,6 +43,7 @@
 #include <unistd.h>
 
 #include "calib/calib.h"
+#include "calib/export.h"
 #include "calib/geometry.h"
 #include "model/model.h"
 #include "model/report.h"
@@ -1591,11 +1592,23 @@ static bool camera_outputs(const calib_geometry_opts_t *o, calib_geometry_state_
 static bool outputs(const calib_geometry_opts_t *o, calib_geometry_state_t *s)
 {
     s->campath = g_strdup_printf("%s/camera.cameramodel", s->outdir);
-    if (!calib_geometry_write_cameramodel(s->campath, o->lensmodel, json_object_get(s->sol, "intrinsics"), s->W, s->H,
-                                          s->rt_cam_rig, s->have_rig, s->rms_px))
-        return false;
-    if (!(s->out = calib_geometry_json(o, s))) return false;
+    // each model written here gets mrcal's optimization_inputs (camera k's: mrcal's camera-k.cameramodel)
+    // while keeping its extrinsics, so that mrcal's tools run on it (calib/export.c)
+    char *m0 = g_strdup_printf("%s/camera-0.cameramodel", s->mdir);
+    bool kept = calib_geometry_write_cameramodel(s->campath, o->lensmodel, json_object_get(s->sol, "intrinsics"), s->W,
+                                                 s->H, s->rt_cam_rig, s->have_rig, s->rms_px) &&
+                calib_export_keep_optimization_inputs(m0, s->campath);
+    g_free(m0);
+    if (!kept || !(s->out = calib_geometry_json(o, s))) return false;
     if (s->ncams > 1 && !camera_outputs(o, s)) return false;
+    for (int k = 0; k < s->ncams && s->ncams > 1 && kept; k++) {
+        char *mk = g_strdup_printf("%s/camera-%d.cameramodel", s->mdir, k);
+        char *pk = g_strdup_printf("%s/%s.cameramodel", s->outdir, s->camnames[k]);
+        kept = calib_export_keep_optimization_inputs(mk, pk);
+        g_free(mk);
+        g_free(pk);
+    }
+    if (!kept) return false;
     char *jpath = g_strdup_printf("%s/geometry.json", s->outdir);
     bool ok = model_write_json(jpath, s->out) && calib_geometry_report(o, s, jpath);
     g_free(jpath);

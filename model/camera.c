@@ -309,6 +309,11 @@ int         model_camera_width(const model_camera_t *cam) { return (int)cam->m->
 int         model_camera_height(const model_camera_t *cam) { return (int)cam->m->imagersize[1]; }
 const char *model_camera_lensmodel(const model_camera_t *cam) { return cam->lensmodel; }
 const char *model_camera_sha256(const model_camera_t *cam) { return cam->sha256; }
+const double *model_camera_intrinsics(const model_camera_t *cam, int *n)
+{
+    if (n) *n = cam->nintrinsics;
+    return cam->m->intrinsics;
+}
 void        model_camera_rt_cam_world(const model_camera_t *cam, double rt[6])
 {
     memcpy(rt, cam->m->rt_cam_ref, 6 * sizeof(double));

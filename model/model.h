@@ -500,6 +500,8 @@ void            model_camera_free(model_camera_t *cam);
 int             model_camera_width(const model_camera_t *cam);
 int             model_camera_height(const model_camera_t *cam);
 const char     *model_camera_lensmodel(const model_camera_t *cam);
+// The lens model's parameters (fx fy cx cy and the distortions, mrcal's order); *n their count.
+const double   *model_camera_intrinsics(const model_camera_t *cam, int *n);
 const char     *model_camera_sha256(const model_camera_t *cam);   // of the file, or of the parameters
 void            model_camera_rt_cam_world(const model_camera_t *cam, double rt[6]);
 model_vec3_t    model_camera_centre_world(const model_camera_t *cam);
