@@ -740,10 +740,6 @@ const char *const *model_meta_list(model_meta_t *m);
 void          model_meta_free(model_meta_t *m);
 // The value of the first entry named key, or NULL.
 const char   *model_meta_get(const model_meta_t *m, const char *key);
-// Reads 8- or 16-bit greyscale PNG into 16-bit values (8-bit values are kept as is).
-bool model_png_read(const char *path, int *width, int *height, uint16_t **pix);
-// The same, also adding the PNG's text chunks (tEXt, zTXt, iTXt) to meta.
-bool model_png_read_meta(const char *path, int *width, int *height, uint16_t **pix, model_meta_t *meta);
 bool model_tiff_write_float(const char *path, int width, int height, const float *pix,
                             const char *const *meta);
 // Multi-page TIFF: page 0 P (float32), page 1 face id (int32, -1 = background),
@@ -751,9 +747,52 @@ bool model_tiff_write_float(const char *path, int width, int height, const float
 bool model_tiff_write_info(const char *path, int width, int height, const float *P,
                            const int32_t *face, const uint8_t *lit, int nlamps,
                            const char *const *lamp_names, const char *const *meta);
-bool model_tiff_read_float(const char *path, int *width, int *height, float **pix);
-// A 16-bit PNG or a float TIFF (told apart by content) as float. NULL on error.
+// Reading (model/image_read.c): one reader for every command that takes
+// images. The format is told by the first bytes, never by the name: PNG
+// (grey, grey+alpha, RGB(A), palette; 1 to 16 bits), JPEG (libjpeg-turbo;
+// grey or YCbCr/RGB; CMYK refused) and TIFF (first page, strips; grey or
+// RGB(A), contiguous or planar; integer 8/16/32 bits or float 32/64).
+// Values are kept as stored (an 8-bit image gives 0..255, a 16-bit one
+// 0..65535; no scaling). Colour gives one value per pixel by the channel:
+// MODEL_CHANNEL_LUMA = Rec. 709 luma weights applied to the stored (encoded)
+// values, no transfer curve undone; R, G or B: that channel. A grey image is
+// the same whatever the channel. Alpha is ignored.
+typedef enum { MODEL_CHANNEL_LUMA, MODEL_CHANNEL_R, MODEL_CHANNEL_G, MODEL_CHANNEL_B } model_channel_t;
+#define MODEL_LUMA_R 0.2126
+#define MODEL_LUMA_G 0.7152
+#define MODEL_LUMA_B 0.0722
+typedef enum { MODEL_IMAGE_UNKNOWN, MODEL_IMAGE_PNG, MODEL_IMAGE_JPEG, MODEL_IMAGE_TIFF } model_image_format_t;
+// "luma", "r", "g" or "b"; false for anything else.
+bool            model_channel_parse(const char *s, model_channel_t *out);
+const char     *model_channel_name(model_channel_t ch);
+// The channel the path-only readers below use for colour images: luma unless
+// a command set another from its --channel option (process-wide, set once
+// before the work starts).
+void            model_image_set_channel(model_channel_t ch);
+model_channel_t model_image_channel(void);
+// The format of a file from its first bytes (8 are enough).
+model_image_format_t model_image_format(const void *data, size_t len);
+// Decode an image file's bytes (name: for messages). meta (may be NULL): a
+// PNG's text chunks are added. NULL + model_error naming the file and why
+// (not an image, truncated, unsupported layout).
+float *model_image_decode(const void *data, size_t len, const char *name, model_channel_t ch, int *width,
+                          int *height, model_meta_t *meta);
+float *model_image_read(const char *path, model_channel_t ch, int *width, int *height, model_meta_t *meta);
+// model_image_read with model_image_channel() and no metadata.
 float *model_image_read_float(const char *path, int *width, int *height);
+// The same as *pix (free it); false on error.
+bool model_tiff_read_float(const char *path, int *width, int *height, float **pix);
+// The same as 16-bit values (grey values kept; colour mixed, rounded and
+// clamped to 0..65535), optionally with the PNG's text chunks (tEXt, zTXt,
+// iTXt) added to meta.
+bool model_png_read(const char *path, int *width, int *height, uint16_t **pix);
+bool model_png_read_meta(const char *path, int *width, int *height, uint16_t **pix, model_meta_t *meta);
+// The files of an --images argument: a directory (its regular files, not the
+// hidden ones; not recursive) or a glob pattern (or one file name), sorted by
+// name. Whether each is an image is for the reader to say (callers skip what
+// it refuses, printing why). false + model_error when there is no file at all.
+bool model_image_list(const char *spec, char ***paths, int *n);
+void model_image_list_free(char **paths, int n);
 
 // ---------------------------------------------------------------------------
 // Edge query (model/edges.c; thesis 1.6, PREMIO)

@@ -2,9 +2,13 @@
 // the multi-page info TIFF, other sample types, and clean errors on damaged
 // files.
 #define _GNU_SOURCE
+#include <glib.h>
 #include <png.h>
+#include <stdio.h>   // before jpeglib.h, which uses FILE
+#include <jpeglib.h>
 #include <stdlib.h>
 #include <tiffio.h>
+#include <unistd.h>
 
 #include "model/internal.h"
 #include "tests/test.h"
@@ -96,7 +100,8 @@ static bool write_png_raw(const char *path, int w, int h, int depth, int ctype, 
             png_set_PLTE(png, info, pal, 2);
         }
         png_write_info(png, info);
-        for (int y = 0; y < h; y++) png_write_row(png, (png_const_bytep)(data + (size_t)y * w * channels));
+        size_t stride = (size_t)w * channels * (depth == 16 ? 2 : 1);
+        for (int y = 0; y < h; y++) png_write_row(png, (png_const_bytep)(data + (size_t)y * stride));
         png_write_end(png, info);
         ok = true;
     }
@@ -127,19 +132,79 @@ TEST(image_png8_and_colour)
     }
     free(back);
 
+    // colour (grey values in RGB): luma of equal channels is the grey value
     const char *prgb = test_path("rgb.png");
     CHECK(write_png_raw(prgb, W, H, 8, PNG_COLOR_TYPE_RGB, rgb, 3));
     back = NULL;
-    CHECK(!model_png_read(prgb, &w, &h, &back));
-    CHECK(back == NULL);
-    CHECK_CONTAINS(model_last_error(), prgb);
-    CHECK_CONTAINS(model_last_error(), "colour (RGB) PNG");
+    CHECK(model_png_read(prgb, &w, &h, &back));
+    if (back) {
+        bool same = true;
+        for (int i = 0; i < W * H; i++) same = same && back[i] == g[i];
+        CHECK(same);
+    }
+    free(back);
 
+    // a palette PNG: expanded to RGB; black and red (255, 0, 0)
     const char *ppal = test_path("pal.png");
     CHECK(write_png_raw(ppal, W, H, 8, PNG_COLOR_TYPE_PALETTE, idx, 1));
-    CHECK(!model_png_read(ppal, &w, &h, &back));
-    CHECK_CONTAINS(model_last_error(), ppal);
-    CHECK_CONTAINS(model_last_error(), "palette");
+    float *f = model_image_read(ppal, MODEL_CHANNEL_LUMA, &w, &h, NULL);
+    CHECK(f != NULL);
+    if (f) CHECK(f[0] == 0 && fabsf(f[1] - (float)(MODEL_LUMA_R * 255)) < 1e-3f);
+    free(f);
+    f = model_image_read(ppal, MODEL_CHANNEL_R, &w, &h, NULL);
+    if (f) CHECK(f[0] == 0 && f[1] == 255);
+    free(f);
+}
+
+// Colour PNG, 8- and 16-bit, with and without alpha: luma by the stated
+// weights, or one channel.
+TEST(image_png_colour_channels)
+{
+    enum { W = 5, H = 3 };
+    uint8_t rgb8[W * H * 3], rgba16[W * H * 4 * 2];
+    double want[W * H][3];
+    for (int i = 0; i < W * H; i++) {
+        int r = 10 + 17 * i, gg = 250 - 9 * i, b = (i * 53) % 256;
+        rgb8[3 * i] = (uint8_t)r, rgb8[3 * i + 1] = (uint8_t)gg, rgb8[3 * i + 2] = (uint8_t)b;
+        want[i][0] = r, want[i][1] = gg, want[i][2] = b;
+        int v16[4] = { r * 257 + 3, gg * 250, b * 199, 1234 };   // the alpha is ignored
+        for (int c = 0; c < 4; c++) {   // big-endian
+            rgba16[2 * (4 * i + c)] = (uint8_t)(v16[c] >> 8);
+            rgba16[2 * (4 * i + c) + 1] = (uint8_t)(v16[c] & 0xff);
+        }
+    }
+    const char *p8 = test_path("c8.png"), *p16 = test_path("c16.png");
+    CHECK(write_png_raw(p8, W, H, 8, PNG_COLOR_TYPE_RGB, rgb8, 3));
+    CHECK(write_png_raw(p16, W, H, 16, PNG_COLOR_TYPE_RGBA, rgba16, 4));
+    const model_channel_t chs[4] = { MODEL_CHANNEL_LUMA, MODEL_CHANNEL_R, MODEL_CHANNEL_G, MODEL_CHANNEL_B };
+    for (int k = 0; k < 4; k++) {
+        int w = 0, h = 0;
+        float *a = model_image_read(p8, chs[k], &w, &h, NULL);
+        CHECK(a != NULL && w == W && h == H);
+        int w2 = 0, h2 = 0;
+        float *b = model_image_read(p16, chs[k], &w2, &h2, NULL);
+        CHECK(b != NULL && w2 == W && h2 == H);
+        for (int i = 0; a && b && i < W * H; i++) {
+            double v16[3] = { want[i][0] * 257 + 3, want[i][1] * 250, want[i][2] * 199 };
+            double e8 = k ? want[i][k - 1] : 0.2126 * want[i][0] + 0.7152 * want[i][1] + 0.0722 * want[i][2];
+            double e16 = k ? v16[k - 1] : 0.2126 * v16[0] + 0.7152 * v16[1] + 0.0722 * v16[2];
+            CHECK_NEAR(a[i], e8, 1e-4 * (1 + e8));
+            CHECK_NEAR(b[i], e16, 1e-6 * (1 + e16));
+        }
+        free(a);
+        free(b);
+    }
+    // the process-wide channel of the path-only readers, as --channel sets it
+    model_image_set_channel(MODEL_CHANNEL_G);
+    int w, h;
+    float *g = model_image_read_float(p8, &w, &h);
+    model_image_set_channel(MODEL_CHANNEL_LUMA);
+    CHECK(g != NULL);
+    if (g) CHECK(g[2] == (float)want[2][1]);
+    free(g);
+    model_channel_t ch;
+    CHECK(model_channel_parse("b", &ch) && ch == MODEL_CHANNEL_B);
+    CHECK(!model_channel_parse("red", &ch));
 }
 
 TEST(image_png_errors)
@@ -162,7 +227,7 @@ TEST(image_png_errors)
     const char *text = test_write("text.png", "just some text, not an image\n");
     CHECK(!model_png_read(text, &w, &h, &back));
     CHECK_CONTAINS(model_last_error(), text);
-    CHECK_CONTAINS(model_last_error(), "not a PNG file");
+    CHECK_CONTAINS(model_last_error(), "not an image refl reads");
 
     const char *missing = test_path("missing.png");
     CHECK(!model_png_read(missing, &w, &h, &back));
@@ -375,7 +440,7 @@ TEST(image_tiff_errors)
     const char *text = test_write("text.tif", "not a TIFF at all\n");
     CHECK(!model_tiff_read_float(text, &w, &h, &back));
     CHECK_CONTAINS(model_last_error(), text);
-    CHECK_CONTAINS(model_last_error(), "not a readable TIFF");
+    CHECK_CONTAINS(model_last_error(), "not an image refl reads");
 
     const char *missing = test_path("missing.tif");
     CHECK(!model_tiff_read_float(missing, &w, &h, &back));
@@ -408,4 +473,244 @@ TEST(image_tiff_errors)
     }
     CHECK(!model_tiff_write_float("/nonexistent-dir/x.tif", W, H, (const float[W * H]){ 0 }, NULL));
     CHECK_CONTAINS(model_last_error(), "/nonexistent-dir/x.tif");
+}
+
+// A JPEG written with libjpeg: nch 1 (grey) or 3 (RGB), quality 100.
+static bool write_jpeg(const char *path, int w, int h, int nch, const uint8_t *pix)
+{
+    FILE *f = fopen(path, "wb");
+    if (!f) return false;
+    struct jpeg_compress_struct c;
+    struct jpeg_error_mgr e;
+    c.err = jpeg_std_error(&e);
+    jpeg_create_compress(&c);
+    jpeg_stdio_dest(&c, f);
+    c.image_width = (JDIMENSION)w;
+    c.image_height = (JDIMENSION)h;
+    c.input_components = nch;
+    c.in_color_space = nch == 1 ? JCS_GRAYSCALE : JCS_RGB;
+    jpeg_set_defaults(&c);
+    jpeg_set_quality(&c, 100, TRUE);
+    if (nch == 3) {   // no chroma subsampling: flat colour blocks stay exact to a DN or two
+        for (int i = 0; i < 3; i++) c.comp_info[i].h_samp_factor = c.comp_info[i].v_samp_factor = 1;
+    }
+    jpeg_start_compress(&c, TRUE);
+    while (c.next_scanline < c.image_height) {
+        JSAMPROW r = (JSAMPROW)(pix + (size_t)c.next_scanline * w * nch);
+        jpeg_write_scanlines(&c, &r, 1);
+    }
+    jpeg_finish_compress(&c);
+    jpeg_destroy_compress(&c);
+    return fclose(f) == 0;
+}
+
+// JPEG, told by content (the grey one is named .png): grey values and a colour
+// image's channels and luma within JPEG's rounding; truncated: a clear error.
+TEST(image_jpeg_grey_and_colour)
+{
+    enum { W = 32, H = 16 };
+    uint8_t grey[W * H], rgb[W * H * 3];
+    for (int y = 0; y < H; y++)
+        for (int x = 0; x < W; x++) {
+            bool left = x < W / 2;   // two flat 16x16 blocks (whole 8x8 JPEG blocks)
+            grey[y * W + x] = left ? 40 : 200;
+            uint8_t *p = rgb + 3 * (y * W + x);
+            p[0] = left ? 200 : 30, p[1] = left ? 60 : 120, p[2] = left ? 20 : 220;
+        }
+    const char *pg = test_path("grey_jpeg.png"), *pc = test_path("colour.jpg");
+    CHECK(write_jpeg(pg, W, H, 1, grey));
+    CHECK(write_jpeg(pc, W, H, 3, rgb));
+    int w = 0, h = 0;
+    float *g = model_image_read_float(pg, &w, &h);
+    CHECK(g != NULL && w == W && h == H);
+    for (int i = 0; g && i < W * H; i += 7) CHECK_NEAR(g[i], grey[i], 1.01);
+    free(g);
+    for (int k = 0; k < 4; k++) {
+        float *c = model_image_read(pc, (model_channel_t)k, &w, &h, NULL);
+        CHECK(c != NULL && w == W && h == H);
+        for (int i = 0; c && i < W * H; i += 5) {
+            const uint8_t *p = rgb + 3 * i;
+            double e = k ? p[k - 1] : MODEL_LUMA_R * p[0] + MODEL_LUMA_G * p[1] + MODEL_LUMA_B * p[2];
+            CHECK_NEAR(c[i], e, 2.01);
+        }
+        free(c);
+    }
+    CHECK(model_image_format("\xff\xd8\xff\xe0", 4) == MODEL_IMAGE_JPEG);
+
+    const char *trunc = test_path("trunc.jpg");
+    truncate_copy(pc, trunc, 0.6, -1);
+    CHECK(model_image_read_float(trunc, &w, &h) == NULL);
+    CHECK_CONTAINS(model_last_error(), trunc);
+    CHECK_CONTAINS(model_last_error(), "corrupt or truncated JPEG");
+    // every cut and flipped bytes: an image or an error naming the file
+    size_t len;
+    char *buf = model_read_file(pc, &len);
+    CHECK(buf != NULL);
+    free(buf);
+    const char *bad = test_path("bad.jpg");
+    for (size_t cut = 0; cut < len; cut += len / 61 + 1) {
+        truncate_copy(pc, bad, (double)cut / len, -1);
+        float *r = model_image_read_float(bad, &w, &h);
+        if (!r) CHECK_CONTAINS(model_last_error(), bad);
+        free(r);
+    }
+    for (long at = 0; at < (long)len; at += (long)(len / 97) + 1) {
+        truncate_copy(pc, bad, 1.0, at);
+        float *r = model_image_read_float(bad, &w, &h);
+        if (!r) CHECK_CONTAINS(model_last_error(), bad);
+        free(r);
+    }
+}
+
+// An RGB TIFF written with libtiff: 16-bit contiguous, 16-bit planar, float.
+static bool write_tiff_rgb(const char *path, int w, int h, int bits, bool planar, const double *v /* w*h*3 */)
+{
+    TIFFSetWarningHandler(NULL);
+    TIFF *t = TIFFOpen(path, "w");
+    if (!t) return false;
+    TIFFSetField(t, TIFFTAG_IMAGEWIDTH, (uint32_t)w);
+    TIFFSetField(t, TIFFTAG_IMAGELENGTH, (uint32_t)h);
+    TIFFSetField(t, TIFFTAG_BITSPERSAMPLE, bits);
+    TIFFSetField(t, TIFFTAG_SAMPLESPERPIXEL, 3);
+    TIFFSetField(t, TIFFTAG_SAMPLEFORMAT, bits == 32 ? SAMPLEFORMAT_IEEEFP : SAMPLEFORMAT_UINT);
+    TIFFSetField(t, TIFFTAG_PHOTOMETRIC, PHOTOMETRIC_RGB);
+    TIFFSetField(t, TIFFTAG_PLANARCONFIG, planar ? PLANARCONFIG_SEPARATE : PLANARCONFIG_CONTIG);
+    TIFFSetField(t, TIFFTAG_COMPRESSION, COMPRESSION_LZW);
+    TIFFSetField(t, TIFFTAG_ROWSPERSTRIP, 2);
+    size_t bps = (size_t)bits / 8;
+    unsigned char *row = malloc((size_t)w * 3 * bps);
+    bool ok = row != NULL;
+    for (int s = 0; ok && s < (planar ? 3 : 1); s++)
+        for (int y = 0; ok && y < h; y++) {
+            for (int x = 0; x < w; x++)
+                for (int c = 0; c < 3; c++) {
+                    if (planar && c != s) continue;
+                    double d = v[3 * (y * w + x) + c];
+                    size_t at = planar ? (size_t)x : (size_t)x * 3 + c;
+                    if (bits == 32) { float f = (float)d; memcpy(row + at * 4, &f, 4); }
+                    else { uint16_t u = (uint16_t)d; memcpy(row + at * 2, &u, 2); }
+                }
+            ok = TIFFWriteScanline(t, row, (uint32_t)y, (uint16_t)s) == 1;
+        }
+    free(row);
+    TIFFClose(t);
+    return ok;
+}
+
+TEST(image_tiff_colour_16bit_and_float)
+{
+    enum { W = 9, H = 5 };
+    double v[W * H * 3], vf[W * H * 3];
+    for (int i = 0; i < W * H; i++)
+        for (int c = 0; c < 3; c++) {
+            v[3 * i + c] = (i * 1499 + c * 20011) % 65536;
+            vf[3 * i + c] = 0.001 * i - 0.5 * c + 1e-7 * (i * c);
+        }
+    struct { const char *name; int bits; bool planar; const double *v; } cases[] = {
+        { "rgb16.tif", 16, false, v }, { "rgb16p.tif", 16, true, v }, { "rgbf.tif", 32, false, vf },
+        { "rgbfp.tif", 32, true, vf },
+    };
+    for (size_t k = 0; k < sizeof cases / sizeof cases[0]; k++) {
+        const char *p = test_path(cases[k].name);
+        CHECK_MSG(write_tiff_rgb(p, W, H, cases[k].bits, cases[k].planar, cases[k].v), "%s", p);
+        for (int ch = 0; ch < 4; ch++) {
+            int w = 0, h = 0;
+            float *r = model_image_read(p, (model_channel_t)ch, &w, &h, NULL);
+            CHECK_MSG(r != NULL && w == W && h == H, "%s: %s", p, model_last_error());
+            for (int i = 0; r && i < W * H; i++) {
+                double px[3];
+                for (int c = 0; c < 3; c++) px[c] = cases[k].bits == 32 ? (float)cases[k].v[3 * i + c] : cases[k].v[3 * i + c];
+                double e = ch ? px[ch - 1] : 0.2126 * px[0] + 0.7152 * px[1] + 0.0722 * px[2];
+                CHECK_NEAR(r[i], e, 1e-6 * (1 + fabs(e)));
+            }
+            free(r);
+        }
+    }
+}
+
+// An --images directory: the listing (sorted, regular files, no hidden ones),
+// and each file read or refused with its reason.
+TEST(image_list_directory_and_glob)
+{
+    const char *dir = test_path("imgs");
+    CHECK(g_mkdir_with_parents(dir, 0755) == 0);
+    char *good = g_build_filename(dir, "b_good.png", NULL), *txt = g_build_filename(dir, "a_notes.txt", NULL);
+    char *corrupt = g_build_filename(dir, "c_corrupt.png", NULL), *hidden = g_build_filename(dir, ".hidden", NULL);
+    char *sub = g_build_filename(dir, "subdir", NULL);
+    uint16_t pix[64];
+    for (int i = 0; i < 64; i++) pix[i] = (uint16_t)(i * 1000);
+    CHECK(model_png16_write(good, 8, 8, pix, NULL));
+    CHECK(g_file_set_contents(txt, "not an image\n", -1, NULL));
+    CHECK(g_file_set_contents(hidden, "x", -1, NULL));
+    truncate_copy(good, corrupt, 0.7, -1);
+    CHECK(g_mkdir_with_parents(sub, 0755) == 0);
+    char **paths = NULL;
+    int n = 0;
+    CHECK(model_image_list(dir, &paths, &n));
+    CHECK(n == 3);
+    if (n == 3) {
+        CHECK(!strcmp(paths[0], txt) && !strcmp(paths[1], good) && !strcmp(paths[2], corrupt));
+        int w, h;
+        float *f = model_image_read_float(paths[0], &w, &h);
+        CHECK(f == NULL);
+        CHECK_CONTAINS(model_last_error(), "not an image refl reads");
+        f = model_image_read_float(paths[1], &w, &h);
+        CHECK(f != NULL && w == 8 && f[63] == 63000);
+        free(f);
+        f = model_image_read_float(paths[2], &w, &h);
+        CHECK(f == NULL);
+        CHECK_CONTAINS(model_last_error(), "corrupt or truncated PNG");
+    }
+    model_image_list_free(paths, n);
+    char *pat = g_build_filename(dir, "*.png", NULL);
+    CHECK(model_image_list(pat, &paths, &n));
+    CHECK(n == 2);
+    model_image_list_free(paths, n);
+    char *none = g_build_filename(dir, "*.jpg", NULL);
+    CHECK(!model_image_list(none, &paths, &n));
+    CHECK_CONTAINS(model_last_error(), "matches no file");
+    CHECK(!model_image_list(sub, &paths, &n));
+    CHECK_CONTAINS(model_last_error(), "holds no files");
+    g_free(none);
+    g_free(pat);
+    g_free(good);
+    g_free(txt);
+    g_free(corrupt);
+    g_free(hidden);
+    g_free(sub);
+}
+
+// refl calib geometry --images DIR: the text file and the corrupt PNG are
+// skipped with their reasons; with no image left the run is an error.
+TEST(image_geometry_images_skips_with_reasons)
+{
+    const char *dir = test_path("geo_in");
+    CHECK(g_mkdir_with_parents(dir, 0755) == 0);
+    char *txt = g_build_filename(dir, "readme.txt", NULL), *corrupt = g_build_filename(dir, "broken.png", NULL);
+    char *good = g_build_filename(dir, "blank.png", NULL);
+    uint16_t pix[64 * 48];
+    for (int i = 0; i < 64 * 48; i++) pix[i] = (uint16_t)(100 + i % 5);
+    CHECK(model_png16_write(good, 64, 48, pix, NULL));
+    truncate_copy(good, corrupt, 0.5, -1);
+    CHECK(g_file_set_contents(txt, "notes\n", -1, NULL));
+    unlink(good);
+    char *out = NULL, *err = NULL;
+    int rc = test_refl_run(60, &out, &err, "calib", "geometry", "--images", dir, "-o", test_path("geo_out0"), NULL);
+    CHECK(rc == 1);
+    CHECK_CONTAINS(err, "skipped ");
+    CHECK_CONTAINS(err, "readme.txt: not an image refl reads");
+    CHECK_CONTAINS(err, "broken.png: corrupt or truncated PNG");
+    CHECK_CONTAINS(err, "none of its 2 files is an image");
+    free(out);
+    free(err);
+    // a bad --channel is a usage error
+    rc = test_refl_run(30, &out, &err, "calib", "geometry", "--images", dir, "--channel", "red", "-o",
+                       test_path("geo_out1"), NULL);
+    CHECK(rc == 2);
+    CHECK_CONTAINS(err, "--channel");
+    free(out);
+    free(err);
+    g_free(txt);
+    g_free(corrupt);
+    g_free(good);
 }
