@@ -55,6 +55,7 @@ MODEL_SRC := \
     model/image.c \
     model/image_read.c \
     model/scene.c \
+    model/scene_mesh.c \
     model/config.c \
     model/brdf.c \
     model/brdf_batch.c \

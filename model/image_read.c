@@ -287,8 +287,11 @@ static int tiff_err_fn(TIFF *t, void *user, const char *module, const char *fmt,
     if (src->msg[0]) return 1;   // keep the first error: it is the cause
     char m[400];
     vsnprintf(m, sizeof m, fmt, ap);
-    if (module && !strcmp(module, src->name)) module = NULL;   // the file: named once, by the caller
-    snprintf(src->msg, sizeof src->msg, "%s%s%s", module ? module : "", module ? ": " : "", m);
+    // the file is named once, by the caller: not as libtiff's module nor at the message's start
+    size_t nn = strlen(src->name);
+    const char *mm = !strncmp(m, src->name, nn) && !strncmp(m + nn, ": ", 2) ? m + nn + 2 : m;
+    if (module && !strcmp(module, src->name)) module = NULL;
+    snprintf(src->msg, sizeof src->msg, "%s%s%s", module ? module : "", module ? ": " : "", mm);
     return 1;
 }
 

@@ -56,6 +56,9 @@ int model_error_report(const char *cmd);
 bool model_error_quiet(bool quiet);
 // The same for the calling thread only.
 bool model_error_quiet_thread(bool quiet);
+// Whether the process-wide quiet mode is on (warnings the library prints
+// itself, which a command's quiet thread still shows, follow it).
+bool model_error_quiet_global(void);
 
 // Read a whole file into a NUL-terminated buffer (caller frees). *len may be
 // NULL. Reports "path: reason" on failure.
@@ -170,6 +173,17 @@ bool model_ini_vec3(const model_ini_t *ini, const char *section, const char *key
 // Wavefront OBJ: v, f (v, v/vt, v/vt/vn, v//vn, negative indices), usemtl;
 // vn, vt, o, g, s, mtllib, l are ignored; other statements are errors.
 // Faces without a material get the material "default".
+// STL (binary or ASCII; model/scene_mesh.c): triangles, their repeated
+// corners merged into shared vertices (equal bit for bit), facet normals
+// ignored (the corner order gives the normal); every face "default".
+// PLY (ascii or binary_little_endian): element vertex (x, y, z; other
+// properties skipped), element face (list vertex_indices or vertex_index,
+// 0-based; polygons checked for planarity like the others), other elements
+// skipped; every face "default". Errors name the line (ASCII) or the byte
+// offset (binary); faces of a binary file have line 0.
+// Units: the coordinates are in mm unless unit_mm says otherwise
+// (model_units_parse: --units mm, m or in); a D3D/OBJ/STL/PLY scene's
+// spheres and vertices are scaled alike.
 
 typedef struct {
     int          nverts;
@@ -200,19 +214,35 @@ typedef struct {
     int           *vert_storage_; // private
     int            nspheres;     // exact spheres (D3D @sphere); 0 for OBJ
     model_sphere_t *spheres;     // sphere k is "face" nfaces + k in pixel_info
+    char           warning[320]; // model_scene_load: a warning it printed ("" none), e.g. the units'
 } model_scene_t;
 
 typedef struct {
     double planarity_tol_mm;     // max distance of a vertex from its face's plane (default 0.01)
+    double unit_mm;              // mm per unit of the file's coordinates; 0: mm, not said (default)
 } model_scene_options_t;
+
+// An OBJ, STL or PLY scene whose bounding box is smaller than this on every
+// side, loaded with no unit given, gets a warning (metres read as mm?).
+#define MODEL_SCENE_SMALL_MM 5.0
+// "mm" -> 1, "m" -> 1000, "in" -> 25.4 (mm per unit); false for anything else.
+bool model_units_parse(const char *s, double *unit_mm);
 
 #define MODEL_SCENE_OPTIONS_DEFAULT ((model_scene_options_t){ .planarity_tol_mm = 0.01 })
 
-// Load by extension (.d3d or .obj, case-insensitive). opt may be NULL.
+// Load a scene file: STL and PLY told by their content (a .stl name also
+// makes a damaged STL read as one, for its error), D3D and OBJ by the name
+// (.d3d, .obj, case-insensitive). opt may be NULL. An OBJ/STL/PLY scene under
+// MODEL_SCENE_SMALL_MM with opt->unit_mm 0 gets scene->warning, printed on
+// stderr as "PATH: warning: ..." (unless the process-wide quiet mode is on).
 model_scene_t *model_scene_load(const char *path, const model_scene_options_t *opt);
 model_scene_t *model_scene_parse_d3d(const char *text, size_t len, const char *name,
                                      const model_scene_options_t *opt);
 model_scene_t *model_scene_parse_obj(const char *text, size_t len, const char *name,
+                                     const model_scene_options_t *opt);
+model_scene_t *model_scene_parse_stl(const char *text, size_t len, const char *name,
+                                     const model_scene_options_t *opt);
+model_scene_t *model_scene_parse_ply(const char *text, size_t len, const char *name,
                                      const model_scene_options_t *opt);
 void           model_scene_free(model_scene_t *scene);
 // Index of a material name in the scene, or -1.
