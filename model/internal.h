@@ -33,11 +33,11 @@ typedef struct {
     model_tracer_t          *tracer;
 } model_inputs_t;
 
-// Scene (rotated by turntable_deg about z), camera, lamps, materials resolved
-// for the scene, and its tracer. false + message; free with model_inputs_free
-// either way.
+// Scene (rotated by turntable_deg about z; its file's unit scene_unit_mm, 0:
+// mm), camera, lamps, materials resolved for the scene, and its tracer. false
+// + message; free with model_inputs_free either way.
 bool  model_inputs_load(model_inputs_t *in, const char *scene_path, const char *cam_path, const char *lamps_path,
-                        const char *mats_path, double planarity_tol_mm, double turntable_deg);
+                        const char *mats_path, double planarity_tol_mm, double scene_unit_mm, double turntable_deg);
 void  model_inputs_free(model_inputs_t *in);
 // The sha256 of every input with a path. false + message.
 bool  model_inputs_hash(model_input_t *in, int n);

@@ -907,6 +907,7 @@ typedef struct {
     const char     *info;            // info TIFF (P, face ids, lit masks), or NULL
     model_shading_t shading;         // its gain_map is set from gain_map
     double          planarity_tol_mm, turntable_deg;
+    double          scene_unit_mm;   // mm per unit of the scene file (0: mm, not said; --units)
     const char     *threads_text;    // the threads option as given, for the metadata (NULL: "default")
     const char     *command_line;    // provenance
 } model_render_file_opts_t;
@@ -930,6 +931,7 @@ typedef struct {
     const char     *scene, *camera, *lamps, *materials;   // inputs (required)
     model_shading_t shading;
     double          planarity_tol_mm, turntable_deg;
+    double          scene_unit_mm;       // mm per unit of the scene file (0: mm, not said; --units)
     double          feature_angle_deg;   // edges between faces whose normals differ by less are skipped
     const char     *command_line;        // provenance
 } model_edges_file_opts_t;

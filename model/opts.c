@@ -129,6 +129,14 @@ int model_cli_channel(model_cli_t *c)
     return 0;
 }
 
+int model_cli_units(model_cli_t *c, double *unit_mm)
+{
+    const char *s = model_cli_value(c, "--units");
+    if (s && !model_units_parse(s, unit_mm))
+        return model_cli_error(c, "option --units: '%s' is none of mm, m, in", s);
+    return 0;
+}
+
 // The value of a number option, checked against its range.
 static int set_number(model_cli_t *c, model_opt_t *o, const char *v)
 {

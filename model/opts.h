@@ -130,6 +130,15 @@ int model_cli_long(model_cli_t *c, const char *name, long *out, long lo, long hi
                     "of the stored values; default) or one channel", false)
 int model_cli_channel(model_cli_t *c);
 
+// --units of the commands that read a scene (model/scene.c): the unit of the
+// scene file's coordinates. MODEL_OPT_UNITS in the table; model_cli_units
+// after parsing sets *unit_mm (mm per unit) when given (absent: unchanged,
+// 0 = mm not said, which lets a tiny mesh warn); 0 or MODEL_CLI_USAGE.
+#define MODEL_OPT_UNITS                                                                                         \
+    MODEL_OPT_VALUE("--units", "mm|m|in", "unit of the scene file's coordinates (default mm; a mesh smaller "   \
+                    "than 5 mm read without --units gets a warning)", false)
+int model_cli_units(model_cli_t *c, double *unit_mm);
+
 #ifdef __cplusplus
 }
 #endif

@@ -729,3 +729,85 @@ TEST(scene_stl_ply_errors)
     expect_mesh_error(false, shortp, strlen(shortp), "bad.ply:11: the file ends at vertex 3 of 3", NULL);
     cube_files_free(&f);
 }
+
+// refl render of one box as an OBJ in mm, a PLY in metres (--units m) and a
+// binary STL in inches (--units in): the same image; the PLY without --units
+// is read as mm with a warning.
+TEST(scene_render_units_cli)
+{
+    GString *objt = g_string_new(""), *plyt = g_string_new("ply\nformat ascii 1.0\nelement vertex 8\nproperty double x\n"
+                                                          "property double y\nproperty double z\nelement face 6\n"
+                                                          "property list uchar int vertex_indices\nend_header\n");
+    GByteArray *stl = g_byte_array_new();
+    guint8 header[80] = "box in inches";
+    g_byte_array_append(stl, header, 80);
+    put_u32(stl, 12);
+    double V[8][3];
+    for (int i = 0; i < 8; i++) {
+        V[i][0] = CUBE_V[i][0] * 100 - 50, V[i][1] = CUBE_V[i][1] * 80 - 40, V[i][2] = CUBE_V[i][2] * 60;
+        g_string_append_printf(objt, "v %.17g %.17g %.17g\n", V[i][0], V[i][1], V[i][2]);
+        g_string_append_printf(plyt, "%.17g %.17g %.17g\n", V[i][0] / 1000, V[i][1] / 1000, V[i][2] / 1000);
+    }
+    for (int k = 0; k < 6; k++) {
+        const int *q = CUBE_F[k];
+        g_string_append_printf(objt, "f %d %d %d %d\n", q[0] + 1, q[1] + 1, q[2] + 1, q[3] + 1);
+        g_string_append_printf(plyt, "4 %d %d %d %d\n", q[0], q[1], q[2], q[3]);
+        const int tri[2][3] = { { q[0], q[1], q[2] }, { q[0], q[2], q[3] } };
+        for (int t = 0; t < 2; t++) {
+            for (int i = 0; i < 3; i++) put_f32(stl, 0);
+            for (int c = 0; c < 3; c++)
+                for (int i = 0; i < 3; i++) put_f32(stl, (float)(V[tri[t][c]][i] / 25.4));
+            g_byte_array_append(stl, (const guint8 *)"\0\0", 2);
+        }
+    }
+    const char *pobj = test_write("box.obj", objt->str), *pply = test_write("box.ply", plyt->str);
+    const char *pstl = test_path("box.stl");
+    CHECK(g_file_set_contents(pstl, (const char *)stl->data, stl->len, NULL));
+    char cam[1024], lamps[1024], mats[1024];
+    snprintf(cam, sizeof cam, "%s/examples/camera.cameramodel", test_srcdir());
+    snprintf(lamps, sizeof lamps, "%s/examples/lamps.ini", test_srcdir());
+    snprintf(mats, sizeof mats, "%s/examples/materials.ini", test_srcdir());
+    const char *scenes[3] = { pobj, pply, pstl }, *units[3] = { "mm", "m", "in" };
+    const char *outs[3] = { test_path("box_obj.png"), test_path("box_ply.png"), test_path("box_stl.png") };
+    uint16_t *pix[3] = { NULL, NULL, NULL };
+    int w = 0, h = 0;
+    for (int i = 0; i < 3; i++) {
+        char *out = NULL, *err = NULL;
+        int rc = test_refl_run(120, &out, &err, "render", scenes[i], "--units", units[i], "--camera", cam, "--lamps",
+                               lamps, "--materials", mats, "--threads", "2", "-o", outs[i], NULL);
+        CHECK_MSG(rc == 0, "%s: exit %d: %s", scenes[i], rc, err ? err : "");
+        CHECK(err == NULL || strstr(err, "warning") == NULL);
+        CHECK(model_png_read(outs[i], &w, &h, &pix[i]));
+        free(out);
+        free(err);
+    }
+    if (pix[0] && pix[1] && pix[2]) {
+        long lit = 0, diff1 = 0, diff2 = 0;
+        for (int k = 0; k < w * h; k++) {
+            lit += pix[0][k] > 100;
+            diff1 += abs((int)pix[1][k] - (int)pix[0][k]) > 2;
+            diff2 += abs((int)pix[2][k] - (int)pix[0][k]) > 2;
+        }
+        CHECK_MSG(lit > 1000, "the box covers %ld bright pixels", lit);
+        CHECK_MSG(diff1 <= lit / 1000 && diff2 <= lit / 1000, "pixels that differ: PLY %ld, STL %ld (of %ld)", diff1,
+                  diff2, lit);
+    }
+    for (int i = 0; i < 3; i++) free(pix[i]);
+    char *out = NULL, *err = NULL;
+    int rc = test_refl_run(120, &out, &err, "render", pply, "--camera", cam, "--lamps", lamps, "--materials", mats,
+                           "--threads", "2", "-o", test_path("box_tiny.png"), NULL);
+    CHECK(rc == 0);
+    CHECK_CONTAINS(err, "box.ply: warning: the whole scene spans 0.1 mm");
+    CHECK_CONTAINS(err, "--units m");
+    free(out);
+    free(err);
+    rc = test_refl_run(30, &out, &err, "render", pply, "--units", "cm", "--camera", cam, "--lamps", lamps,
+                       "--materials", mats, "-o", test_path("box_cm.png"), NULL);
+    CHECK(rc == 2);
+    CHECK_CONTAINS(err, "--units: 'cm' is none of mm, m, in");
+    free(out);
+    free(err);
+    g_string_free(objt, TRUE);
+    g_string_free(plyt, TRUE);
+    g_byte_array_free(stl, TRUE);
+}
