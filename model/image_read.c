@@ -21,6 +21,7 @@
 #include <glob.h>
 #include <stdio.h>   // before jpeglib.h, which uses FILE
 #include <jpeglib.h>
+#include <jerror.h>
 #include <png.h>
 #include <setjmp.h>
 #include <stdarg.h>
@@ -147,6 +148,12 @@ static float *png_decode(const unsigned char *data, size_t len, const char *name
                     (unsigned)w);
         goto done;
     }
+    // deflate packs at most ~1030 bytes into one: a header that claims more is damaged
+    if ((double)rowbytes * h > 1100.0 * (double)len) {
+        model_error(name, 0, "a PNG of %ux%u pixels cannot fit in its %zu bytes: truncated or damaged", (unsigned)w,
+                    (unsigned)h, len);
+        goto done;
+    }
     buf = malloc(rowbytes * h);
     rows = malloc(h * sizeof *rows);
     out = malloc((size_t)w * h * sizeof *out);
@@ -199,12 +206,16 @@ static void jpeg_exit_fn(j_common_ptr c)
     longjmp(e->jb, 1);
 }
 
-// Warnings (level -1) are counted; the first is kept as the reason.
+// Warnings (level -1) of damaged data end the decoding at once (libjpeg would
+// go on with grey filler); the others (an unknown JFIF revision, extraneous
+// bytes before a marker) are harmless and silent.
 static void jpeg_emit_fn(j_common_ptr c, int level)
 {
-    jpeg_err_t *e = (jpeg_err_t *)c->err;
     if (level >= 0) return;
-    if (e->pub.num_warnings++ == 0) c->err->format_message(c, e->msg);
+    int code = c->err->msg_code;
+    if (code == JWRN_JPEG_EOF || code == JWRN_HIT_MARKER || code == JWRN_HUFF_BAD_CODE ||
+        code == JWRN_ARITH_BAD_CODE || code == JWRN_MUST_RESYNC || code == JWRN_NOT_SEQUENTIAL)
+        jpeg_exit_fn(c);
 }
 
 static float *jpeg_decode(const unsigned char *data, size_t len, const char *name, model_channel_t ch, int *width,
@@ -255,10 +266,6 @@ static float *jpeg_decode(const unsigned char *data, size_t len, const char *nam
             o[x] = nch == 1 ? row[x] : mix(row[3 * x], row[3 * x + 1], row[3 * x + 2], ch);
     }
     jpeg_finish_decompress(&cinfo);
-    if (jerr.pub.num_warnings > 0) {
-        model_error(name, 0, "corrupt or truncated JPEG: %s", jerr.msg);
-        goto done;
-    }
     *width = (int)w;
     *height = (int)h;
     res = out;

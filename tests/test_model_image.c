@@ -9,6 +9,7 @@
 #include <stdlib.h>
 #include <tiffio.h>
 #include <unistd.h>
+#include <zlib.h>
 
 #include "model/internal.h"
 #include "tests/test.h"
@@ -263,6 +264,17 @@ TEST(image_png_errors)
             CHECK_CONTAINS(model_last_error(), bad);
         }
     }
+
+    // a header that claims 16000 x 16000 pixels in a file of 57 bytes: refused before any allocation
+    unsigned char hdr[57] = { 0x89, 'P', 'N', 'G', '\r', '\n', 0x1a, '\n', 0, 0, 0, 13, 'I', 'H', 'D', 'R',
+                              0, 0, 0x3e, 0x80, 0, 0, 0x3e, 0x80, 8, 0, 0, 0, 0 };
+    uLong crc = crc32(0, hdr + 12, 17);
+    for (int i = 0; i < 4; i++) hdr[29 + i] = (unsigned char)(crc >> (24 - 8 * i));
+    memcpy(hdr + 33, "\0\0\0\0IDAT\x35\xaf\x06\x1e\0\0\0\0IEND\xae\x42\x60\x82", 24);
+    const char *huge = test_path("huge.png");
+    CHECK(g_file_set_contents(huge, (const char *)hdr, sizeof hdr, NULL));
+    CHECK(!model_png_read(huge, &w, &h, &back));
+    CHECK_CONTAINS(model_last_error(), "a PNG of 16000x16000 pixels cannot fit in its 57 bytes");
 
     // writing: a bad metadata key, and an impossible path
     const char *meta[] = { "", "x", NULL };
