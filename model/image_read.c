@@ -446,7 +446,8 @@ static float *tiff_decode(const unsigned char *data, size_t len, const char *nam
                     continue;
                 }
                 double v[3];
-                for (int c = 0; c < nch; c++) v[c] = tiff_sample(rows + ((size_t)x * (size_t)spp + (size_t)c) * step, bps, fmt);
+                for (int c = 0; c < nch; c++)
+                    v[c] = tiff_sample(rows + ((size_t)x * (size_t)spp + (size_t)c) * step, bps, fmt);
                 op[x] = nch == 1 ? (float)v[0] : mix(v[0], v[1], v[2], ch);
             }
         }

@@ -11,6 +11,7 @@
 // - Binary STL: 80 header bytes, a little-endian triangle count, 50 bytes per
 //   triangle; a file whose size is 84 + 50 x count is binary even when its
 //   header begins with "solid" (many writers do that).
+// - ASCII STL keywords are read in any case ("FACET NORMAL" too).
 // - Errors name the line (ASCII) or the byte offset (binary).
 // - Neither format carries refl's materials: every face is "default", as OBJ
 //   faces before any usemtl are.
@@ -21,6 +22,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <strings.h>
 
 #include "model/internal.h"
 
@@ -213,18 +215,19 @@ static bool stl_ascii(mb_t *b, const char *text, size_t len)
     while (next_line(&L, nm, &err)) {
         const char *k = L.tok[0];
         bool ok = true;
-        if (!strcmp(k, "solid")) ok = state == 0 && (state = 1, nsolid++, true);
-        else if (!strcmp(k, "endsolid")) ok = state == 1 && (state = 0, true);
-        else if (!strcmp(k, "facet")) ok = state == 1 && (state = 2, true) && mb_face(b, L.line);
-        else if (!strcmp(k, "outer")) ok = state == 2 && L.ntok == 2 && !strcmp(L.tok[1], "loop") && (state = 3, nvert = 0, true);
-        else if (!strcmp(k, "endloop")) {
+        if (!strcasecmp(k, "solid")) ok = state == 0 && (state = 1, nsolid++, true);
+        else if (!strcasecmp(k, "endsolid")) ok = state == 1 && (state = 0, true);
+        else if (!strcasecmp(k, "facet")) ok = state == 1 && (state = 2, true) && mb_face(b, L.line);
+        else if (!strcasecmp(k, "outer"))
+            ok = state == 2 && L.ntok == 2 && !strcasecmp(L.tok[1], "loop") && (state = 3, nvert = 0, true);
+        else if (!strcasecmp(k, "endloop")) {
             if (state == 3 && nvert != 3) {
                 model_error(nm, L.line, "facet %d has %d vertices; an STL facet is a triangle (3)", b->m.nf, nvert);
                 return false;
             }
             ok = state == 3 && (state = 2, true);
-        } else if (!strcmp(k, "endfacet")) ok = state == 2 && (state = 1, true);
-        else if (!strcmp(k, "vertex")) {
+        } else if (!strcasecmp(k, "endfacet")) ok = state == 2 && (state = 1, true);
+        else if (!strcasecmp(k, "vertex")) {
             double p[3];
             if (state != 3 || L.ntok != 4) ok = false;
             else if (!num(L.tok[1], &p[0]) || !num(L.tok[2], &p[1]) || !num(L.tok[3], &p[2])) {
@@ -335,7 +338,10 @@ static ptype_t ptype(const char *s)
     return T_NONE;
 }
 
-static size_t psize(ptype_t t) { return t == T_I8 || t == T_U8 ? 1 : t == T_I16 || t == T_U16 ? 2 : t == T_F64 ? 8 : 4; }
+static size_t psize(ptype_t t)
+{
+    return t == T_I8 || t == T_U8 ? 1 : t == T_I16 || t == T_U16 ? 2 : t == T_F64 ? 8 : 4;
+}
 
 static double pread(const unsigned char *p, ptype_t t)
 {
@@ -389,7 +395,10 @@ static bool ply_header(mb_t *b, const char *text, size_t len, ply_t *h)
     while (next_line(&L, nm, &err)) {
         const char *k = L.tok[0];
         if (L.line == 1) {
-            if (strcmp(k, "ply") || L.ntok != 1) return model_error(nm, 1, "not a PLY file (no 'ply' line first)"), false;
+            if (strcmp(k, "ply") || L.ntok != 1) {
+                model_error(nm, 1, "not a PLY file (no 'ply' line first)");
+                return false;
+            }
         } else if (!strcmp(k, "format")) {
             if (L.ntok != 3 || (strcmp(L.tok[1], "ascii") && strcmp(L.tok[1], "binary_little_endian"))) {
                 model_error(nm, L.line, "PLY format '%.40s': refl reads 'ascii' and 'binary_little_endian' (convert "
@@ -517,7 +526,10 @@ static bool ply_ascii(mb_t *b, const char *text, size_t len, const ply_t *h, lon
                     if (e->role == 1 && (pi == e->px || pi == e->py || pi == e->pz))
                         p[pi == e->px ? 0 : pi == e->py ? 1 : 2] = v;
                     if (e->role == 2 && pi == e->plist) {
-                        if (v != floor(v)) return model_error(nm, L.line, "face %ld: index %g is not whole", r + 1, v), false;
+                        if (v != floor(v)) {
+                            model_error(nm, L.line, "face %ld: index %g is not whole", r + 1, v);
+                            return false;
+                        }
                         ix[nix++] = (long)fmax(-1e15, fmin(1e15, v));
                     }
                 }
@@ -619,6 +631,15 @@ static bool ply(mb_t *b, const char *text, size_t len)
 // ---------------------------------------------------------------------------
 // Entry points
 
+// Whether word (lower case) is in text[0..n), in any case.
+static bool strcasestr_n(const char *text, size_t n, const char *word)
+{
+    size_t m = strlen(word);
+    for (size_t i = 0; i + m <= n; i++)
+        if (!strncasecmp(text + i, word, m)) return true;
+    return false;
+}
+
 model_mesh_format_t model_mesh_format_(const char *text, size_t len, bool strict)
 {
     if (len >= 4 && !memcmp(text, "ply", 3) && (text[3] == '\n' || text[3] == '\r')) return MODEL_MESH_PLY;
@@ -627,8 +648,8 @@ model_mesh_format_t model_mesh_format_(const char *text, size_t len, bool strict
     while (i < len && (text[i] == ' ' || text[i] == '\t' || text[i] == '\r' || text[i] == '\n')) i++;
     // "solid" first and no NUL byte near the start (a binary header that begins with
     // "solid" is padded with NULs, or followed by a count with a zero byte)
-    if (len - i >= 5 && !memcmp(text + i, "solid", 5) && !memchr(text, 0, len < 1024 ? len : 1024) &&
-        (!strict || memmem(text, len < 4096 ? len : 4096, "facet", 5)))
+    if (len - i >= 5 && !strncasecmp(text + i, "solid", 5) && !memchr(text, 0, len < 1024 ? len : 1024) &&
+        (!strict || strcasestr_n(text, len < 4096 ? len : 4096, "facet")))
         return MODEL_MESH_STL_ASCII;
     return MODEL_MESH_NONE;
 }

@@ -574,6 +574,11 @@ TEST(scene_stl_ply_cube_same_as_obj)
     check_same_scene(o, sb, "binary STL");
     check_same_scene(o, pa, "ASCII PLY");
     check_same_scene(o, pb, "binary PLY");
+    char *up = g_ascii_strup(f.stl->str, -1);   // keywords in capitals, as some writers have them
+    model_scene_t *su = model_scene_parse_stl(up, strlen(up), "CUBE.STL", NULL);
+    check_same_scene(o, su, "ASCII STL in capitals");
+    model_scene_free(su);
+    g_free(up);
     if (sa) CHECK(sa->faces[0].line == 2);   // ASCII: the facet's line
     if (sb) CHECK(sb->faces[0].line == 0);   // binary: no line
     model_scene_free(sa);
