@@ -816,3 +816,27 @@ TEST(scene_render_units_cli)
     g_string_free(plyt, TRUE);
     g_byte_array_free(stl, TRUE);
 }
+
+// --units on every command that reads a scene: a unit refl does not know is a usage error.
+TEST(scene_units_option_on_every_scene_command)
+{
+    const char *cmds[][14] = {
+        { "edges", "s.ply", "--camera", "c", "--lamps", "l", "--materials", "m", "--units", "ft", NULL },
+        { "plan", "lamps", "s.ply", "--camera", "c", "--lamps", "l", "--materials", "m", "-o", "D", "--units", "ft",
+          NULL },
+        { "fit", "material", "S", "--calib", "C", "--scene", "s.stl", "-o", "p.json", "--units", "ft", NULL },
+        { "calib", "white", "S", "--calib", "C", "--scene", "s.stl", "-o", "w.json", "--units", "ft", NULL },
+    };
+    for (size_t k = 0; k < sizeof cmds / sizeof cmds[0]; k++) {
+        const char *argv[16] = { test_refl() };
+        int n = 1;
+        for (int i = 0; cmds[k][i]; i++) argv[n++] = cmds[k][i];
+        argv[n] = NULL;
+        char *out = NULL, *err = NULL;
+        int rc = test_run(argv, 30, &out, &err);
+        CHECK_MSG(rc == 2, "refl %s %s: exit %d: %s", cmds[k][0], cmds[k][1], rc, err ? err : "");
+        CHECK_CONTAINS(err, "--units: 'ft' is none of mm, m, in");
+        free(out);
+        free(err);
+    }
+}
