@@ -726,3 +726,52 @@ TEST(image_geometry_images_skips_with_reasons)
     g_free(corrupt);
     g_free(good);
 }
+
+// A chessboard of 10 x 10 inner corners drawn in the green channel only (red
+// and blue flat), as colour JPEG, PNG and 16-bit TIFF in one directory with a
+// text file: refl calib geometry --images DIR finds the board in all three
+// (luma), in none with --channel r.
+TEST(image_geometry_colour_boards_and_channel)
+{
+    enum { W = 640, H = 480, SQ = 30 };
+    uint8_t *rgb = malloc((size_t)W * H * 3);
+    for (int y = 0; y < H; y++)
+        for (int x = 0; x < W; x++) {
+            int bx = (x - 150) / SQ, by = (y - 70) / SQ;
+            bool on = x >= 150 && y >= 70 && bx < 11 && by < 11;
+            bool dark = on && (bx + by) % 2 == 0;
+            uint8_t *p = rgb + 3 * ((size_t)y * W + x);
+            p[0] = 200, p[1] = dark ? 20 : 235, p[2] = 120;
+        }
+    const char *dir = test_path("boards");
+    CHECK(g_mkdir_with_parents(dir, 0755) == 0);
+    char *pj = g_build_filename(dir, "board_a.jpg", NULL), *pp = g_build_filename(dir, "board_b.png", NULL);
+    char *pt = g_build_filename(dir, "board_c.tif", NULL), *px = g_build_filename(dir, "notes.txt", NULL);
+    CHECK(write_jpeg(pj, W, H, 3, rgb));
+    CHECK(write_png_raw(pp, W, H, 8, PNG_COLOR_TYPE_RGB, rgb, 3));
+    double *v = malloc((size_t)W * H * 3 * sizeof *v);
+    for (size_t i = 0; i < (size_t)W * H * 3; i++) v[i] = rgb[i] * 257.0;
+    CHECK(write_tiff_rgb(pt, W, H, 16, false, v));
+    CHECK(g_file_set_contents(px, "calibration notes\n", -1, NULL));
+    free(v);
+    free(rgb);
+    char *out = NULL, *err = NULL;
+    int rc = test_refl_run(120, &out, &err, "calib", "geometry", "--images", dir, "-o", test_path("geo_col"), NULL);
+    CHECK(rc == 1);   // three views are too few for a solve
+    CHECK_CONTAINS(err, "skipped ");
+    CHECK_CONTAINS(err, "notes.txt: not an image refl reads");
+    CHECK_CONTAINS(err, "the board was found in 3 of 3 images");
+    free(out);
+    free(err);
+    rc = test_refl_run(120, &out, &err, "calib", "geometry", "--images", dir, "--channel", "r", "-o",
+                       test_path("geo_col_r"), NULL);
+    CHECK(rc == 1);
+    CHECK_CONTAINS(err, "board_a.jpg): mrgingham found no 10x10 board");
+    CHECK_CONTAINS(err, "the board was found in 0 of 3 images");
+    free(out);
+    free(err);
+    g_free(pj);
+    g_free(pp);
+    g_free(pt);
+    g_free(px);
+}
