@@ -418,6 +418,11 @@ static bool ply_header(mb_t *b, const char *text, size_t len, ply_t *h)
             snprintf(e->name, sizeof e->name, "%s", L.tok[1]);
             e->count = c;
             e->role = !strcmp(e->name, "vertex") ? 1 : !strcmp(e->name, "face") ? 2 : 0;
+            for (int i = 0; e->role && i < h->nel - 1; i++)
+                if (h->el[i].role == e->role) {
+                    model_error(nm, L.line, "a second '%s' element (a PLY scene has one)", e->name);
+                    return false;
+                }
             e->px = e->py = e->pz = e->plist = -1;
         } else if (!strcmp(k, "property")) {
             elem_t *e = h->nel ? &h->el[h->nel - 1] : NULL;

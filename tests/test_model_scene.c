@@ -726,6 +726,8 @@ TEST(scene_stl_ply_errors)
     g_byte_array_free(bp, TRUE);
     const char *be = "ply\nformat binary_big_endian 1.0\nelement vertex 0\nend_header\n";
     expect_mesh_error(false, be, strlen(be), "bad.ply:2: PLY format 'binary_big_endian'", NULL);
+    const char *two = "ply\nformat ascii 1.0\nelement vertex 0\nproperty float x\nelement vertex 0\nend_header\n";
+    expect_mesh_error(false, two, strlen(two), "bad.ply:5: a second 'vertex' element", NULL);
     const char *nox = "ply\nformat ascii 1.0\nelement vertex 1\nproperty float y\nproperty float z\nend_header\n";
     expect_mesh_error(false, nox, strlen(nox), "bad.ply:6: the vertex element lacks property x", NULL);
     const char *shortp = "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
