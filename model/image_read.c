@@ -499,6 +499,13 @@ float *model_image_decode(const void *data, size_t len, const char *name, model_
 
 float *model_image_read(const char *path, model_channel_t ch, int *width, int *height, model_meta_t *meta)
 {
+    // the first bytes first: a large file that is no image (a video beside the photos) is not read whole
+    FILE *f = fopen(path, "rb");
+    unsigned char head[16];
+    size_t got = f ? fread(head, 1, sizeof head, f) : 0;
+    if (f) fclose(f);
+    if (f && got > 0 && model_image_format(head, got) == MODEL_IMAGE_UNKNOWN)
+        return model_image_decode(head, got, path, ch, width, height, meta);   // the error saying why
     size_t len = 0;
     char *data = model_read_file(path, &len);
     if (!data) return NULL;
