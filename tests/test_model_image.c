@@ -195,6 +195,18 @@ TEST(image_png_colour_channels)
         free(a);
         free(b);
     }
+    // grey + alpha: the grey values, the alpha ignored
+    uint8_t ga[W * H * 2];
+    for (int i = 0; i < W * H; i++) ga[2 * i] = (uint8_t)(i * 11), ga[2 * i + 1] = (uint8_t)(255 - i);
+    const char *pga = test_path("ga.png");
+    CHECK(write_png_raw(pga, W, H, 8, PNG_COLOR_TYPE_GRAY_ALPHA, ga, 2));
+    for (int k = 0; k < 4; k++) {
+        int w = 0, h = 0;
+        float *a = model_image_read(pga, chs[k], &w, &h, NULL);
+        CHECK(a != NULL && w == W && h == H);
+        for (int i = 0; a && i < W * H; i++) CHECK(a[i] == (float)(uint8_t)(i * 11));
+        free(a);
+    }
     // the process-wide channel of the path-only readers, as --channel sets it
     model_image_set_channel(MODEL_CHANNEL_G);
     int w, h;
@@ -575,7 +587,8 @@ TEST(image_jpeg_grey_and_colour)
 }
 
 // An RGB TIFF written with libtiff: 16-bit contiguous, 16-bit planar, float.
-static bool write_tiff_rgb(const char *path, int w, int h, int bits, bool planar, const double *v /* w*h*3 */)
+// spp: 3 (RGB), or 2 (grey and alpha: v holds w*h*2 values).
+static bool write_tiff_spp(const char *path, int w, int h, int bits, bool planar, const double *v, int spp)
 {
     TIFFSetWarningHandler(NULL);
     TIFF *t = TIFFOpen(path, "w");
@@ -583,22 +596,26 @@ static bool write_tiff_rgb(const char *path, int w, int h, int bits, bool planar
     TIFFSetField(t, TIFFTAG_IMAGEWIDTH, (uint32_t)w);
     TIFFSetField(t, TIFFTAG_IMAGELENGTH, (uint32_t)h);
     TIFFSetField(t, TIFFTAG_BITSPERSAMPLE, bits);
-    TIFFSetField(t, TIFFTAG_SAMPLESPERPIXEL, 3);
+    TIFFSetField(t, TIFFTAG_SAMPLESPERPIXEL, spp);
     TIFFSetField(t, TIFFTAG_SAMPLEFORMAT, bits == 32 ? SAMPLEFORMAT_IEEEFP : SAMPLEFORMAT_UINT);
-    TIFFSetField(t, TIFFTAG_PHOTOMETRIC, PHOTOMETRIC_RGB);
+    TIFFSetField(t, TIFFTAG_PHOTOMETRIC, spp == 3 ? PHOTOMETRIC_RGB : PHOTOMETRIC_MINISBLACK);
+    if (spp == 2) {
+        uint16_t extra = EXTRASAMPLE_UNASSALPHA;
+        TIFFSetField(t, TIFFTAG_EXTRASAMPLES, 1, &extra);
+    }
     TIFFSetField(t, TIFFTAG_PLANARCONFIG, planar ? PLANARCONFIG_SEPARATE : PLANARCONFIG_CONTIG);
     TIFFSetField(t, TIFFTAG_COMPRESSION, COMPRESSION_LZW);
     TIFFSetField(t, TIFFTAG_ROWSPERSTRIP, 2);
     size_t bps = (size_t)bits / 8;
-    unsigned char *row = malloc((size_t)w * 3 * bps);
+    unsigned char *row = malloc((size_t)w * spp * bps);
     bool ok = row != NULL;
-    for (int s = 0; ok && s < (planar ? 3 : 1); s++)
+    for (int s = 0; ok && s < (planar ? spp : 1); s++)
         for (int y = 0; ok && y < h; y++) {
             for (int x = 0; x < w; x++)
-                for (int c = 0; c < 3; c++) {
+                for (int c = 0; c < spp; c++) {
                     if (planar && c != s) continue;
-                    double d = v[3 * (y * w + x) + c];
-                    size_t at = planar ? (size_t)x : (size_t)x * 3 + c;
+                    double d = v[spp * (y * w + x) + c];
+                    size_t at = planar ? (size_t)x : (size_t)x * spp + c;
                     if (bits == 32) { float f = (float)d; memcpy(row + at * 4, &f, 4); }
                     else { uint16_t u = (uint16_t)d; memcpy(row + at * 2, &u, 2); }
                 }
@@ -607,6 +624,11 @@ static bool write_tiff_rgb(const char *path, int w, int h, int bits, bool planar
     free(row);
     TIFFClose(t);
     return ok;
+}
+
+static bool write_tiff_rgb(const char *path, int w, int h, int bits, bool planar, const double *v /* w*h*3 */)
+{
+    return write_tiff_spp(path, w, h, bits, planar, v, 3);
 }
 
 TEST(image_tiff_colour_16bit_and_float)
@@ -635,6 +657,20 @@ TEST(image_tiff_colour_16bit_and_float)
                 double e = ch ? px[ch - 1] : 0.2126 * px[0] + 0.7152 * px[1] + 0.0722 * px[2];
                 CHECK_NEAR(r[i], e, 1e-6 * (1 + fabs(e)));
             }
+            free(r);
+        }
+    }
+    // grey and alpha, planar and contiguous: the grey values, whatever the channel
+    double ga[W * H * 2];
+    for (int i = 0; i < W * H; i++) ga[2 * i] = 100 + 37 * i, ga[2 * i + 1] = 65535 - i;
+    for (int planar = 0; planar < 2; planar++) {
+        const char *p = test_path(planar ? "gap.tif" : "ga.tif");
+        CHECK(write_tiff_spp(p, W, H, 16, planar, ga, 2));
+        for (int ch = 0; ch < 4; ch++) {
+            int w = 0, h = 0;
+            float *r = model_image_read(p, (model_channel_t)ch, &w, &h, NULL);
+            CHECK_MSG(r != NULL && w == W && h == H, "%s: %s", p, model_last_error());
+            for (int i = 0; r && i < W * H; i++) CHECK(r[i] == (float)(100 + 37 * i));
             free(r);
         }
     }
