@@ -16,7 +16,7 @@ CXX   ?= c++
 
 # Libraries found through pkg-config; Embree 3 and mrcal ship no .pc file on
 # Debian 12, so they are linked by name (scripts/install-deps installs them).
-PKGS := glib-2.0 libpng libtiff-4 jansson libftdi1 libusb-1.0 libgpiod aravis-0.8 sqlite3 zlib
+PKGS := glib-2.0 libpng libjpeg libtiff-4 jansson libftdi1 libusb-1.0 libgpiod aravis-0.8 sqlite3 zlib
 # Only the tests link libumockdev (the simulated USB device of the APT tests).
 TEST_PKGS := umockdev-1.0
 # Ceres Solver ships a CMake config only: its headers need Eigen's include path.
@@ -53,7 +53,9 @@ MODEL_SRC := \
     model/opts.c \
     model/report.c \
     model/image.c \
+    model/image_read.c \
     model/scene.c \
+    model/scene_mesh.c \
     model/config.c \
     model/brdf.c \
     model/brdf_batch.c \

@@ -130,6 +130,7 @@ typedef struct {
     const char *scene_path;     // the sample's scene (rig frame, mm, at angle 0 before the plan's wedge);
                                 // required: a session records no scene (NULL is an error saying so)
     const char *material;       // the material to observe; NULL: the scene's only material
+    double      scene_unit_mm;  // mm per unit of the scene file (0: mm, not said; --units)
     int         window;         // window size, pixels (default 5)
     int         step;           // grid step between windows, pixels (default 8)
     double      min_signal_dn;  // windows below this (after dark) are dropped (default 20)

@@ -74,8 +74,9 @@ int calib_cmd_white(int argc, char **argv)
         MODEL_OPT_STRING("--camera", "NAME", "camera NAME's frames with its calibrations (a directory of several "
                          "cameras: NAME.cameramodel, NAME/gain.json; write -o DIR/NAME/white.json)", &camera, false),
         MODEL_OPT_VALUE("--albedo", "A", "the standard's albedo (default 0.99)", false),
-        MODEL_OPT_STRING("--scene", "FILE", "the standard's scene, D3D or OBJ (needed: a session records no scene)",
-                         &o.scene_path, false),
+        MODEL_OPT_STRING("--scene", "FILE", "the standard's scene, D3D, OBJ, STL or PLY (needed: a session records "
+                         "no scene)", &o.scene_path, false),
+        MODEL_OPT_UNITS,
         MODEL_OPT_STRING("--material", "NAME", "its material in the scene (default: the scene's only material)",
                          &o.material, false),
         MODEL_OPT_VALUE("--window", "N", "windows of N x N pixels (default 5)", false),
@@ -95,6 +96,7 @@ int calib_cmd_white(int argc, char **argv)
     if (model_cli_value(&cli, "--albedo-cells"))
         return model_cli_error(&cli, "--albedo-cells is an option of refl fit material");
     if ((rc = calib_cli_window_step(&cli, &o.window, &o.step)) != MODEL_CLI_OK) return rc;
+    if ((rc = model_cli_units(&cli, &o.scene_unit_mm))) return rc;
     const char *av = model_cli_value(&cli, "--albedo");
     if (av && !(model_parse_double(av, &albedo) && albedo > 0))
         return model_cli_error(&cli, "--albedo needs a number > 0, not '%s'", av);

@@ -20,7 +20,7 @@
     "DIR/corners.vnl, DIR/mrcal/). The views come from one of:\n"                                               \
     "  --rig RIG.ini -o DIR                    capture here, one session per tilt\n"                           \
     "  --session DIR1 [--session DIR2 ...]     capture sessions made elsewhere\n"                               \
-    "  --images 'GLOB'                         images captured elsewhere\n"                                     \
+    "  --images 'GLOB'|DIR                     images captured elsewhere (PNG, JPEG, TIFF; others skipped)\n"   \
     "  --corners CORNERS.vnl --imagersize W H  mrgingham's corners"
 
 #define EPILOG                                                                                                 \
@@ -154,8 +154,9 @@ int calib_cmd_geometry(int argc, char **argv)
         MODEL_OPT_VALUE("--exposure-us", "US", "the capture's exposure (default 6000)", false),
         MODEL_OPT_LIST("--session", "DIR", "use a capture session (angles from its journal, tilt from its plan); "
                        "repeat it for more", &sessions, false, false),
-        MODEL_OPT_STRING("--images", "'GLOB'", "use images captured elsewhere (no angles: no axis, no rig frame)",
-                         &o.images, false),
+        MODEL_OPT_STRING("--images", "'GLOB'|DIR", "use images captured elsewhere (no angles: no axis, no rig "
+                         "frame); files that are no image are skipped with the reason", &o.images, false),
+        MODEL_OPT_CHANNEL,
         { "--corners", "--corners-cache", "FILE.vnl", "use mrgingham's corners (no images needed; needs "
           "--imagersize)", MODEL_OPT_KIND_STRING, &o.corners, 0, 0, false, false, NULL },
         MODEL_OPT_STRING("--lensmodel", "NAME", "LENSMODEL_OPENCV8 (default), LENSMODEL_OPENCV4, ..., "
@@ -185,7 +186,7 @@ int calib_cmd_geometry(int argc, char **argv)
     o.nsessions = sessions.n;
     o.argc = argc;
     o.argv = argv;
-    if ((rc = check_options(&cli, &imsize, &o))) {
+    if ((rc = check_options(&cli, &imsize, &o)) || (rc = model_cli_channel(&cli))) {
         free(session_v);
         return rc;
     }

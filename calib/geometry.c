@@ -310,22 +310,19 @@ bool calib_geometry_add_session(calib_geometry_views_t *vs, const char *sdir, co
 
 bool calib_geometry_add_images(calib_geometry_views_t *vs, const char *pattern, const char *imgdir, int *w, int *h)
 {
-    glob_t gl;
-    int e = glob(pattern, 0, NULL, &gl);
-    if (e != 0 || gl.gl_pathc == 0) {
-        model_error_set(pattern, 0, "--images: the pattern matches no file");
-        if (e == 0) globfree(&gl);
-        return false;
-    }
+    char **paths = NULL;
+    int npaths = 0, nread = 0;
+    if (!model_image_list(pattern, &paths, &npaths)) return false;
     bool ok = true;
-    for (size_t i = 0; i < gl.gl_pathc && ok; i++) {
-        const char *src = gl.gl_pathv[i];
+    for (int i = 0; i < npaths && ok; i++) {
+        const char *src = paths[i];
         int fw = 0, fh = 0;
         float *img = model_image_read_float(src, &fw, &fh);
-        if (!img) {
-            ok = false;
-            break;
+        if (!img) {   // not an image, or damaged: skipped, as views without a board are
+            fprintf(stderr, "refl calib geometry: skipped %s\n", model_last_error());
+            continue;
         }
+        nread++;
         if (*w && (fw != *w || fh != *h)) {
             model_error_set(src, 0, "%dx%d pixels, the other images are %dx%d: one camera and one region per "
                             "calibration",
@@ -342,7 +339,7 @@ bool calib_geometry_add_images(calib_geometry_views_t *vs, const char *pattern, 
         char *b = g_path_get_basename(src);
         char *dot = strrchr(b, '.');
         if (dot) *dot = 0;
-        char *name = g_strdup_printf("%03zu-%s.png", i, b);
+        char *name = g_strdup_printf("%03d-%s.png", i, b);
         char *dst = g_strdup_printf("%s/%s", imgdir, name);
         ok = write_8bit(dst, img, fw, fh, full);
         if (ok) view_add(vs, name, src, NULL, -1, NAN, NAN, NAN);
@@ -351,7 +348,12 @@ bool calib_geometry_add_images(calib_geometry_views_t *vs, const char *pattern, 
         g_free(name);
         g_free(dst);
     }
-    globfree(&gl);
+    if (ok && nread == 0) {
+        model_error_set(pattern, 0, "--images: none of its %d file%s is an image refl reads (PNG, JPEG or TIFF; "
+                        "each is listed above with the reason)", npaths, npaths == 1 ? "" : "s");
+        ok = false;
+    }
+    model_image_list_free(paths, npaths);
     return ok;
 }
 

@@ -56,7 +56,7 @@ static bool obs_add(calib_obs_set_t *s, const calib_obs_t *o)
 // on the plan's wedge, and the index of the material to observe (named in
 // out->material, or the scene's only one).
 static model_scene_t *observe_scene(const rig_session_t *s, const rig_plan_t *plan, const char *scene_path,
-                                    calib_obs_set_t *out, int *mat)
+                                    double unit_mm, calib_obs_set_t *out, int *mat)
 {
     if (!scene_path) {
         model_error_set(s->dir, 0, "the session records no scene of its sample %s (a capture plan's [sample] names "
@@ -64,7 +64,9 @@ static model_scene_t *observe_scene(const rig_session_t *s, const rig_plan_t *pl
                         plan->sample);
         return NULL;
     }
-    model_scene_t *scene = model_scene_load(scene_path, NULL);
+    model_scene_options_t so = MODEL_SCENE_OPTIONS_DEFAULT;
+    so.unit_mm = unit_mm;
+    model_scene_t *scene = model_scene_load(scene_path, &so);
     if (!scene) return NULL;
     *mat = -1;
     if (out->material[0]) {
@@ -378,7 +380,7 @@ bool calib_observe(const char *session_dir, const calib_set_t *cal, const calib_
     if (!(plan = rig_plan_parse(s->plan_text, strlen(s->plan_text), session_dir))) goto done;
     snprintf(out->sample, sizeof out->sample, "%s", plan->sample);
     if (o.material) snprintf(out->material, sizeof out->material, "%s", o.material);
-    if (!(scene = observe_scene(s, plan, o.scene_path, out, &ob.mat))) goto done;
+    if (!(scene = observe_scene(s, plan, o.scene_path, o.scene_unit_mm, out, &ob.mat))) goto done;
     ob.scene = scene;
     ob.nx = (cal->W - o.window) / o.step + 1;
     ob.ny = (cal->H - o.window) / o.step + 1;

@@ -182,8 +182,9 @@ int fit_cmd_material(int argc, char **argv)
         MODEL_OPT_STRING("--camera", "NAME", "only camera NAME's frames of a session of several (default every "
                          "camera's, each with its calibrations: DIR/NAME.cameramodel, DIR/NAME/white.json, "
                          "DIR/NAME/gain.json)", &o.camera, false),
-        MODEL_OPT_STRING("--scene", "FILE", "the sample's scene (rig frame, mm; a session records none)", &o.scene,
-                         false),
+        MODEL_OPT_STRING("--scene", "FILE", "the sample's scene (rig frame; D3D, OBJ, STL or PLY; a session "
+                         "records none)", &o.scene, false),
+        MODEL_OPT_UNITS,
         MODEL_OPT_STRING("--material", "NAME", "its material in the scene (default: the scene's only material)",
                          &o.material, false),
         MODEL_OPT_STRING("--model", "M", MODEL_NAMES " (default all)", &o.model, false),
@@ -221,6 +222,7 @@ int fit_cmd_material(int argc, char **argv)
     if (rc != MODEL_CLI_OK) return rc;
     if (model_cli_value(&cli, "--albedo")) return model_cli_error(&cli, "--albedo is an option of refl calib white");
     if ((rc = calib_cli_window_step(&cli, &o.window, &o.step)) != MODEL_CLI_OK) return rc;
+    if ((rc = model_cli_units(&cli, &o.scene_unit_mm))) return rc;
     if (number_opt(&cli, "--k-sigma", false, &o.k_sigma) || number_opt(&cli, "--systematic", true, &o.sys_rel) ||
         number_opt(&cli, "--albedo-cells", true, &o.cell_mm))
         return MODEL_CLI_USAGE;

@@ -115,6 +115,7 @@ static int plan_lamps(int argc, char **argv)
         MODEL_OPT_STRING("--pixel-format", "FMT", "the capture plan's pixel format (Mono12)", &o.pixel_format, false),
         MODEL_OPT_INT("--threads", "N", "threads (0: all cores)", &op->threads, 0, 1024),
         MODEL_OPT_FLAG("--no-report", NULL, "no index.html", &no_report),
+        MODEL_OPT_UNITS,
     };
     model_cli_t cli = {
         .cmd = "plan lamps", .synopsis = "SCENE", .opts = opts, .nopts = MODEL_NOPTS(opts),
@@ -123,7 +124,7 @@ static int plan_lamps(int argc, char **argv)
                  "against the camera's usable range, the specular glare and the contrast across every visible scene\n"
                  "edge, and chooses the set and exposure that make the most edge length detectable by a Sobel\n"
                  "detector and leave the most usable reference points, without glare or saturation.",
-        .epilog = "SCENE: a D3D or OBJ description (rig frame, mm). The candidates' kc*I: a lamps INI ([lamp NAME]\n"
+        .epilog = "SCENE: a D3D, OBJ, STL or PLY description (rig frame, mm unless --units m|in). The candidates' kc*I: a lamps INI ([lamp NAME]\n"
                   "position_mm, intensity) with --kc-per-us X (kc*I = X * intensity), or lamps.json with --white.\n"
                   "Without --gain-calib: --saturation-dn S (4095), --offset-dn O (0), the SNR floor off.\n"
                   "--check-virtual renders the chosen configuration and each single lamp at its exposure on the\n"
@@ -140,6 +141,7 @@ static int plan_lamps(int argc, char **argv)
     };
     int rc = model_cli_parse(&cli, argc, argv);
     if (rc != MODEL_CLI_OK) return rc;
+    if ((rc = model_cli_units(&cli, &o.scene_unit_mm))) return rc;
     if (!o.white && !(o.kc_per_us > 0)) return model_cli_error(&cli, "give --kc-per-us X (lamps INI) or --white WHITE.json");
     double exps[MAX_EXPOSURES], angs[MAX_VIEWS];
     if (!parse_list(exposures, exps, &o.nexp, MAX_EXPOSURES, 1e-300, 1e300))

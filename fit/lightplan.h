@@ -138,7 +138,8 @@ void lightplan_segments_for(const lightplan_result_t *r, uint32_t mask, double e
 // The plan of a view from files (`refl plan lamps`, fit/plan_lamps.c)
 
 typedef struct {
-    const char        *scene;           // D3D or OBJ description (rig frame, mm)
+    const char        *scene;           // D3D, OBJ, STL or PLY description (rig frame)
+    double             scene_unit_mm;   // mm per unit of its coordinates (0: mm, not said; --units)
     const char        *camera;          // camera model (mrcal; extrinsics in the rig frame)
     const char        *lamps;           // candidates: a lamps INI (with kc_per_us) or lamps.json (with white)
     const char        *white;           // white.json of refl calib white: kc*I per lamp (NULL: kc_per_us)

@@ -352,6 +352,7 @@ static bool material_samples(const fit_material_opts_t *o, calib_set_t **cal, ca
 {
     calib_observe_options_t co = calib_observe_defaults();
     co.scene_path = o->scene;
+    co.scene_unit_mm = o->scene_unit_mm;
     co.material = o->material;
     co.verbose = o->verbose;
     if (o->window > 0) co.window = o->window;

@@ -27,6 +27,7 @@ typedef struct {
                             // through its own calibrations, calib_set_load_camera; one camera: calib_set_load)
     const char *scene;      // the sample's scene (a session records none; NULL is an error)
     const char *material;   // its material in the scene; NULL: the scene's only one
+    double      scene_unit_mm;  // mm per unit of the scene file (0: mm, not said; --units)
     const char *model;      // "all" (default) or one model's name (fit_brdf_model_list)
     const char *name;       // the material's name in the priors; NULL: the observed material's
     const char *out;        // the priors file (JSON) to write; its directory is made

@@ -208,7 +208,9 @@ static bool load_inputs(const lightplan_lamps_opts_t *o, plan_inputs_t *in)
 {
     char *argv0[] = { "refl", NULL };
     in->prov = model_provenance(o->argc > 0 ? o->argc : 1, o->argc > 0 ? o->argv : argv0);
-    if (!(in->scene = model_scene_load(o->scene, NULL)) || !(in->cam = model_camera_load(o->camera))) return false;
+    model_scene_options_t so = MODEL_SCENE_OPTIONS_DEFAULT;
+    so.unit_mm = o->scene_unit_mm;
+    if (!(in->scene = model_scene_load(o->scene, &so)) || !(in->cam = model_camera_load(o->camera))) return false;
     model_provenance_input(in->prov, "scene", o->scene);
     model_provenance_input(in->prov, "camera", o->camera);
     return load_lamps(o, in) && load_materials(o, in) && load_sensor(o, in);

@@ -35,6 +35,10 @@ static bool ends_with_ci(const char *s, const char *suffix)
 
 static bool is_tiff_name(const char *s) { return ends_with_ci(s, ".tif") || ends_with_ci(s, ".tiff"); }
 
+#define SCENE_ABOUT                                                                                              \
+    "SCENE: D3D or Wavefront OBJ (told by the name: .d3d, .obj), STL (binary or ASCII) or PLY (ASCII or\n"         \
+    "binary little-endian) (told by the content); rig frame, in mm unless --units says m or in."
+
 // Options render and edges share: the scene's inputs, the grey value's
 // offset and scale, and the view (rows of a model_opt_t table).
 #define SCENE_INPUT_OPTS                                                                                           \
@@ -43,7 +47,8 @@ static bool is_tiff_name(const char *s) { return ends_with_ci(s, ".tif") || ends
     MODEL_OPT_VALUE("--lamps", "LAMPS.ini",                                                                        \
                     "lamps: [lamp NAME] position_mm, intensity, radius_mm, emission_cos_power, emission_axis",     \
                     true),                                                                                         \
-    MODEL_OPT_VALUE("--materials", "MATS.ini", "materials: [material NAME] model and parameters", true)
+    MODEL_OPT_VALUE("--materials", "MATS.ini", "materials: [material NAME] model and parameters", true),           \
+    MODEL_OPT_UNITS
 #define SHADING_OPTS                                                                                               \
     MODEL_OPT_VALUE("--kc", "K", "camera parameter kc, DN per radiance unit (default 1)", false),                  \
     MODEL_OPT_VALUE("--offset", "PA", "offset Pa, DN (default 0)", false)
@@ -74,6 +79,7 @@ int model_cmd_render(int argc, char **argv)
         MODEL_OPT_VALUE("--info", "INFO.tiff", "multi-page TIFF: ideal P (float32), face id (int32), lit mask per lamp (uint8)", false),
     };
     model_cli_t c = { .cmd = "render", .synopsis = "SCENE", .opts = opts, .nopts = MODEL_NOPTS(opts), .min_positional = 1, .max_positional = 1 };
+    c.about = SCENE_ABOUT;
     c.epilog = "P = Pa + kc * g(x,y) * [sum_i V_i I_i R_i / d_i^2 + interreflection], in DN.\n"
                "Pixel convention: " PIXEL_CONV ".";
     int rc = model_cli_parse(&c, argc, argv);
@@ -96,7 +102,8 @@ int model_cmd_render(int argc, char **argv)
         (rc = model_cli_long(&c, "--seed", &seed, 0, LONG_MAX)) ||
         (rc = model_cli_long(&c, "--threads", &threads, 1, 256)) ||
         (rc = model_cli_double(&c, "--turntable-deg", &o.turntable_deg, -1e6, false, 1e6, "|A| <= 1e6 deg")) ||
-        (rc = model_cli_double(&c, "--planarity-tol-mm", &o.planarity_tol_mm, 0, false, INFINITY, "T >= 0")))
+        (rc = model_cli_double(&c, "--planarity-tol-mm", &o.planarity_tol_mm, 0, false, INFINITY, "T >= 0")) ||
+        (rc = model_cli_units(&c, &o.scene_unit_mm)))
         return rc;
     const char *ir = model_cli_value(&c, "--interreflection");
     if (ir) {
@@ -152,6 +159,7 @@ int model_cmd_edges(int argc, char **argv)
         MODEL_OPT_VALUE("--json", "OUT.json", "write the edges, units and provenance as JSON", false),
     };
     model_cli_t c = { .cmd = "edges", .synopsis = "SCENE", .opts = opts, .nopts = MODEL_NOPTS(opts), .min_positional = 1, .max_positional = 1 };
+    c.about = SCENE_ABOUT;
     c.epilog = "One line per visible image segment of a scene edge: its 3D end points (mm, rig frame), faces,\n"
                "image end points (px, " PIXEL_CONV "),\nlength, lamps lighting each side (one character per lamp in "
                "file order: 1 lit, . not), the\npredicted grey value 2 px to each side (DN; direct term only) and the "
@@ -169,7 +177,8 @@ int model_cmd_edges(int argc, char **argv)
         (rc = model_cli_double(&c, "--feature-angle-deg", &o.feature_angle_deg, 0, false, 179.999, "0 <= A < 180")) ||
         (rc = model_cli_double(&c, "--turntable-deg", &o.turntable_deg, -1e6, false, 1e6, "|A| <= 1e6 deg")) ||
         (rc = model_cli_long(&c, "--threads", &threads, 1, 256)) ||
-        (rc = model_cli_double(&c, "--planarity-tol-mm", &o.planarity_tol_mm, 0, false, INFINITY, "T >= 0")))
+        (rc = model_cli_double(&c, "--planarity-tol-mm", &o.planarity_tol_mm, 0, false, INFINITY, "T >= 0")) ||
+        (rc = model_cli_units(&c, &o.scene_unit_mm)))
         return rc;
     if (threads > 0) {
         char buf[24];

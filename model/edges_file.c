@@ -35,7 +35,7 @@ model_edges_file_t *model_edges_file_predict(const model_edges_file_opts_t *o)
     const model_input_t inputs[4] = { { "scene", o->scene, "" }, { "camera", o->camera, "" },
                                       { "lamps", o->lamps, "" }, { "materials", o->materials, "" } };
     memcpy(f->inputs, inputs, sizeof inputs);
-    if (!model_inputs_load(&f->in, o->scene, o->camera, o->lamps, o->materials, o->planarity_tol_mm,
+    if (!model_inputs_load(&f->in, o->scene, o->camera, o->lamps, o->materials, o->planarity_tol_mm, o->scene_unit_mm,
                            o->turntable_deg) ||
         !model_inputs_hash(f->inputs, 4)) {
         model_edges_file_free(f);
@@ -145,7 +145,7 @@ bool model_edges_file_write_json(const model_edges_file_t *f, const model_edges_
     json_t *lamps = json_array();
     for (int i = 0; i < f->in.lamps->n; i++) json_array_append_new(lamps, json_string(f->in.lamps->lamps[i].name));
     json_t *root = json_pack(
-        "{s:s, s:{s:s, s:s, s:s, s:s, s:s, s:s, s:s}, s:s, s:s, s:s, s:{s:f, s:f, s:f, s:f, s:f}, s:s, s:o, "
+        "{s:s, s:{s:s, s:s, s:s, s:s, s:s, s:s, s:s}, s:s, s:s, s:s, s:{s:f, s:f, s:f, s:f, s:f, s:f}, s:s, s:o, "
         "s:i, s:i, s:o, s:o}",
         "description", "refl edges: visible image segments of the scene's edges, lighting per side, predicted contrast",
         "units",
@@ -161,6 +161,7 @@ bool model_edges_file_write_json(const model_edges_file_t *f, const model_edges_
         "pixel_convention", MODEL_PIXEL_CONV, "frames", MODEL_FRAMES_TEXT,
         "options", "kc", o->shading.kc, "offset_dn", o->shading.Pa, "feature_angle_deg", o->feature_angle_deg,
         "turntable_deg", o->turntable_deg, "planarity_tol_mm", o->planarity_tol_mm,
+        "scene_unit_mm", o->scene_unit_mm ? o->scene_unit_mm : 1,
         "materials", conv, "provenance", prov,
         "image_width", model_camera_width(f->in.cam), "image_height", model_camera_height(f->in.cam),
         "lamps", lamps, "edges", edges_json(f));

@@ -1,5 +1,6 @@
-// model/image.c — image files: 16-bit greyscale PNG (libpng) with tEXt
-// metadata, float32 and multi-page TIFF (libtiff) with ImageDescription.
+// model/image.c — image files written: 16-bit greyscale PNG (libpng) with tEXt
+// metadata, float32 and multi-page TIFF (libtiff) with ImageDescription. The
+// readers (PNG, JPEG, TIFF) are in model/image_read.c.
 //
 // - Writers write to "<path>.tmp<pid>" and rename it over path on success, so a
 //   failed write never leaves a half-written file under the final name.
@@ -7,7 +8,7 @@
 //   that is allocated after the setjmp() is reached through volatile pointers.
 // - libtiff messages go to per-file handlers (TIFFOpenExt): errors become part
 //   of the model_error() message, warnings are kept silent.
-// - Size limit: at most MAX_PIXELS pixels and MAX_SIDE per side on reading.
+// - Size limit: at most MAX_PIXELS pixels and MAX_SIDE per side.
 #define _GNU_SOURCE
 #include <errno.h>
 #include <png.h>
@@ -206,106 +207,6 @@ done:
     return ok;
 }
 
-static bool png_read_impl(const char *path, int *width, int *height, uint16_t **pix, model_meta_t *meta)
-{
-    *pix = NULL;
-    FILE *f = fopen(path, "rb");
-    if (!f) {
-        model_error(path, 0, "cannot open: %s", strerror(errno));
-        return false;
-    }
-    png_byte sig[8];
-    if (fread(sig, 1, 8, f) != 8 || png_sig_cmp(sig, 0, 8) != 0) {
-        model_error(path, 0, "not a PNG file (no PNG signature)");
-        fclose(f);
-        return false;
-    }
-    png_ctx_t ctx = { "" };
-    png_structp png = png_create_read_struct(PNG_LIBPNG_VER_STRING, &ctx, png_err_fn, png_warn_fn);
-    png_infop info = png ? png_create_info_struct(png) : NULL;
-    // allocated after setjmp(): volatile, so that their values survive a longjmp
-    png_bytep volatile data = NULL;
-    png_bytepp volatile rows = NULL;
-    uint16_t *volatile out = NULL;
-    bool ok = false;
-    if (!png || !info) {
-        model_error(path, 0, "out of memory reading PNG");
-        goto done;
-    }
-    if (setjmp(png_jmpbuf(png))) {
-        model_error(path, 0, "corrupt or truncated PNG: %s", ctx.msg);
-        goto done;
-    }
-    png_init_io(png, f);
-    png_set_sig_bytes(png, 8);
-    png_set_user_limits(png, MAX_SIDE, MAX_SIDE);
-    png_read_info(png, info);
-    png_uint_32 w, h;
-    int depth, ctype, interlace;
-    png_get_IHDR(png, info, &w, &h, &depth, &ctype, &interlace, NULL, NULL);
-    if (ctype & PNG_COLOR_MASK_PALETTE) {
-        model_error(path, 0, "a palette (indexed colour) PNG; expected 8- or 16-bit greyscale: "
-                    "convert it to greyscale");
-        goto done;
-    }
-    if (ctype & PNG_COLOR_MASK_COLOR) {
-        model_error(path, 0, "a colour (RGB) PNG; expected 8- or 16-bit greyscale: convert it "
-                    "to greyscale");
-        goto done;
-    }
-    if (!check_size(path, (long)w, (long)h)) goto done;
-    if (ctype & PNG_COLOR_MASK_ALPHA) png_set_strip_alpha(png);
-    if (depth < 8) png_set_packing(png);   // 1, 2, 4 bits: one byte per pixel, values kept
-    png_set_interlace_handling(png);
-    png_read_update_info(png, info);
-    size_t bpp = depth == 16 ? 2 : 1, rowbytes = png_get_rowbytes(png, info);
-    if (rowbytes != (size_t)w * bpp) {
-        model_error(path, 0, "unexpected PNG layout (%zu bytes per row for %u pixels)", rowbytes,
-                    (unsigned)w);
-        goto done;
-    }
-    data = malloc(rowbytes * h);
-    rows = malloc(h * sizeof *rows);
-    out = malloc((size_t)w * h * sizeof *out);
-    if (!data || !rows || !out) {
-        model_error(path, 0, "out of memory for a %ux%u image", (unsigned)w, (unsigned)h);
-        goto done;
-    }
-    for (png_uint_32 y = 0; y < h; y++) rows[y] = data + y * rowbytes;
-    png_read_image(png, rows);
-    png_read_end(png, meta ? info : NULL);
-    if (meta) {
-        png_textp text = NULL;
-        int ntext = png_get_text(png, info, &text, NULL);
-        for (int i = 0; i < ntext; i++)
-            if (text[i].key && text[i].text) model_meta_add(meta, text[i].key, "%s", text[i].text);
-    }
-    for (size_t i = 0; i < (size_t)w * h; i++)
-        out[i] = bpp == 2 ? (uint16_t)(data[2 * i] << 8 | data[2 * i + 1]) : data[i];
-    *width = (int)w;
-    *height = (int)h;
-    *pix = out;
-    out = NULL;
-    ok = true;
-done:
-    png_destroy_read_struct(&png, &info, NULL);
-    fclose(f);
-    free(data);
-    free(rows);
-    free(out);
-    return ok;
-}
-
-bool model_png_read(const char *path, int *width, int *height, uint16_t **pix)
-{
-    return png_read_impl(path, width, height, pix, NULL);
-}
-
-bool model_png_read_meta(const char *path, int *width, int *height, uint16_t **pix, model_meta_t *meta)
-{
-    return png_read_impl(path, width, height, pix, meta);
-}
-
 // ---------------------------------------------------------------------------
 // TIFF
 
@@ -478,128 +379,4 @@ done:
     free(pages);
     free(names);
     return ok;
-}
-
-bool model_tiff_read_float(const char *path, int *width, int *height, float **pix)
-{
-    *pix = NULL;
-    FILE *f = fopen(path, "rb");   // for a plain message when it cannot be opened
-    if (!f) {
-        model_error(path, 0, "cannot open: %s", strerror(errno));
-        return false;
-    }
-    fclose(f);
-    tiff_ctx_t ctx = { "" };
-    TIFF *t = tiff_open(path, "r", &ctx);
-    unsigned char *row = NULL;
-    float *out = NULL;
-    bool ok = false;
-    if (!t) {
-        model_error(path, 0, "not a readable TIFF: %s", ctx.msg[0] ? ctx.msg : "unknown error");
-        goto done;
-    }
-    uint32_t w = 0, h = 0;
-    uint16_t spp = 1, bps = 1, fmt = SAMPLEFORMAT_UINT, planar = PLANARCONFIG_CONTIG;
-    TIFFGetField(t, TIFFTAG_IMAGEWIDTH, &w);
-    TIFFGetField(t, TIFFTAG_IMAGELENGTH, &h);
-    TIFFGetFieldDefaulted(t, TIFFTAG_SAMPLESPERPIXEL, &spp);
-    TIFFGetFieldDefaulted(t, TIFFTAG_BITSPERSAMPLE, &bps);
-    TIFFGetFieldDefaulted(t, TIFFTAG_SAMPLEFORMAT, &fmt);
-    TIFFGetFieldDefaulted(t, TIFFTAG_PLANARCONFIG, &planar);
-    if (!check_size(path, (long)w, (long)h)) goto done;
-    if (spp != 1) {
-        model_error(path, 0, "TIFF with %u samples per pixel; expected one grey channel", spp);
-        goto done;
-    }
-    if (TIFFIsTiled(t)) {
-        model_error(path, 0, "tiled TIFF is not supported; save it with strips");
-        goto done;
-    }
-    bool known = (fmt == SAMPLEFORMAT_IEEEFP && (bps == 32 || bps == 64)) ||
-                 ((fmt == SAMPLEFORMAT_UINT || fmt == SAMPLEFORMAT_INT) &&
-                  (bps == 8 || bps == 16 || bps == 32));
-    if (!known) {
-        model_error(path, 0, "TIFF samples of %u bits, format %u: expected float 32/64 or "
-                    "integer 8/16/32 bits", bps, fmt);
-        goto done;
-    }
-    tmsize_t sl = TIFFScanlineSize(t);
-    if (sl != (tmsize_t)((size_t)w * bps / 8)) {
-        model_error(path, 0, "unexpected TIFF layout (%ld bytes per row)", (long)sl);
-        goto done;
-    }
-    row = malloc((size_t)sl);
-    out = malloc((size_t)w * h * sizeof *out);
-    if (!row || !out) {
-        model_error(path, 0, "out of memory for a %ux%u image", w, h);
-        goto done;
-    }
-    for (uint32_t y = 0; y < h; y++) {
-        if (TIFFReadScanline(t, row, y, 0) != 1) {
-            model_error(path, 0, "corrupt or truncated TIFF at row %u: %s", y,
-                        ctx.msg[0] ? ctx.msg : "read error");
-            goto done;
-        }
-        float *o = out + (size_t)y * w;
-        for (uint32_t x = 0; x < w; x++) {
-            const void *p = row + (size_t)x * bps / 8;
-            double v;
-            if (fmt == SAMPLEFORMAT_IEEEFP) {
-                if (bps == 32) { float a; memcpy(&a, p, 4); v = a; }
-                else { double a; memcpy(&a, p, 8); v = a; }
-            } else if (fmt == SAMPLEFORMAT_UINT) {
-                if (bps == 8) v = *(const uint8_t *)p;
-                else if (bps == 16) { uint16_t a; memcpy(&a, p, 2); v = a; }
-                else { uint32_t a; memcpy(&a, p, 4); v = a; }
-            } else {
-                if (bps == 8) v = *(const int8_t *)p;
-                else if (bps == 16) { int16_t a; memcpy(&a, p, 2); v = a; }
-                else { int32_t a; memcpy(&a, p, 4); v = a; }
-            }
-            o[x] = (float)v;
-        }
-    }
-    *width = (int)w;
-    *height = (int)h;
-    *pix = out;
-    out = NULL;
-    ok = true;
-done:
-    if (t) TIFFClose(t);
-    free(row);
-    free(out);
-    return ok;
-}
-
-float *model_image_read_float(const char *path, int *width, int *height)
-{
-    FILE *f = fopen(path, "rb");
-    if (!f) {
-        model_error(path, 0, "cannot open: %s", strerror(errno));
-        return NULL;
-    }
-    unsigned char sig[4] = { 0 };
-    size_t got = fread(sig, 1, 4, f);
-    fclose(f);
-    if (got == 4 && sig[0] == 0x89 && sig[1] == 'P' && sig[2] == 'N' && sig[3] == 'G') {
-        uint16_t *pix = NULL;
-        if (!model_png_read(path, width, height, &pix)) return NULL;
-        size_t n = (size_t)*width * *height;
-        float *out = malloc(n * sizeof *out);
-        if (!out) {
-            free(pix);
-            model_error(path, 0, "out of memory");
-            return NULL;
-        }
-        for (size_t i = 0; i < n; i++) out[i] = pix[i];
-        free(pix);
-        return out;
-    }
-    if (got == 4 && ((sig[0] == 'I' && sig[1] == 'I') || (sig[0] == 'M' && sig[1] == 'M'))) {
-        float *out = NULL;
-        if (!model_tiff_read_float(path, width, height, &out)) return NULL;
-        return out;
-    }
-    model_error(path, 0, "neither a PNG nor a TIFF image (first bytes)");
-    return NULL;
 }

@@ -56,6 +56,9 @@ int model_error_report(const char *cmd);
 bool model_error_quiet(bool quiet);
 // The same for the calling thread only.
 bool model_error_quiet_thread(bool quiet);
+// Whether the process-wide quiet mode is on (warnings the library prints
+// itself, which a command's quiet thread still shows, follow it).
+bool model_error_quiet_global(void);
 
 // Read a whole file into a NUL-terminated buffer (caller frees). *len may be
 // NULL. Reports "path: reason" on failure.
@@ -170,6 +173,17 @@ bool model_ini_vec3(const model_ini_t *ini, const char *section, const char *key
 // Wavefront OBJ: v, f (v, v/vt, v/vt/vn, v//vn, negative indices), usemtl;
 // vn, vt, o, g, s, mtllib, l are ignored; other statements are errors.
 // Faces without a material get the material "default".
+// STL (binary or ASCII; model/scene_mesh.c): triangles, their repeated
+// corners merged into shared vertices (equal bit for bit), facet normals
+// ignored (the corner order gives the normal); every face "default".
+// PLY (ascii or binary_little_endian): element vertex (x, y, z; other
+// properties skipped), element face (list vertex_indices or vertex_index,
+// 0-based; polygons checked for planarity like the others), other elements
+// skipped; every face "default". Errors name the line (ASCII) or the byte
+// offset (binary); faces of a binary file have line 0.
+// Units: the coordinates are in mm unless unit_mm says otherwise
+// (model_units_parse: --units mm, m or in); a D3D/OBJ/STL/PLY scene's
+// spheres and vertices are scaled alike.
 
 typedef struct {
     int          nverts;
@@ -200,19 +214,35 @@ typedef struct {
     int           *vert_storage_; // private
     int            nspheres;     // exact spheres (D3D @sphere); 0 for OBJ
     model_sphere_t *spheres;     // sphere k is "face" nfaces + k in pixel_info
+    char           warning[320]; // model_scene_load: a warning it printed ("" none), e.g. the units'
 } model_scene_t;
 
 typedef struct {
     double planarity_tol_mm;     // max distance of a vertex from its face's plane (default 0.01)
+    double unit_mm;              // mm per unit of the file's coordinates; 0: mm, not said (default)
 } model_scene_options_t;
+
+// An OBJ, STL or PLY scene whose bounding box is smaller than this on every
+// side, loaded with no unit given, gets a warning (metres read as mm?).
+#define MODEL_SCENE_SMALL_MM 5.0
+// "mm" -> 1, "m" -> 1000, "in" -> 25.4 (mm per unit); false for anything else.
+bool model_units_parse(const char *s, double *unit_mm);
 
 #define MODEL_SCENE_OPTIONS_DEFAULT ((model_scene_options_t){ .planarity_tol_mm = 0.01 })
 
-// Load by extension (.d3d or .obj, case-insensitive). opt may be NULL.
+// Load a scene file: STL and PLY told by their content (a .stl name also
+// makes a damaged STL read as one, for its error), D3D and OBJ by the name
+// (.d3d, .obj, case-insensitive). opt may be NULL. An OBJ/STL/PLY scene under
+// MODEL_SCENE_SMALL_MM with opt->unit_mm 0 gets scene->warning, printed on
+// stderr as "PATH: warning: ..." (unless the process-wide quiet mode is on).
 model_scene_t *model_scene_load(const char *path, const model_scene_options_t *opt);
 model_scene_t *model_scene_parse_d3d(const char *text, size_t len, const char *name,
                                      const model_scene_options_t *opt);
 model_scene_t *model_scene_parse_obj(const char *text, size_t len, const char *name,
+                                     const model_scene_options_t *opt);
+model_scene_t *model_scene_parse_stl(const char *text, size_t len, const char *name,
+                                     const model_scene_options_t *opt);
+model_scene_t *model_scene_parse_ply(const char *text, size_t len, const char *name,
                                      const model_scene_options_t *opt);
 void           model_scene_free(model_scene_t *scene);
 // Index of a material name in the scene, or -1.
@@ -744,10 +774,6 @@ const char *const *model_meta_list(model_meta_t *m);
 void          model_meta_free(model_meta_t *m);
 // The value of the first entry named key, or NULL.
 const char   *model_meta_get(const model_meta_t *m, const char *key);
-// Reads 8- or 16-bit greyscale PNG into 16-bit values (8-bit values are kept as is).
-bool model_png_read(const char *path, int *width, int *height, uint16_t **pix);
-// The same, also adding the PNG's text chunks (tEXt, zTXt, iTXt) to meta.
-bool model_png_read_meta(const char *path, int *width, int *height, uint16_t **pix, model_meta_t *meta);
 bool model_tiff_write_float(const char *path, int width, int height, const float *pix,
                             const char *const *meta);
 // Multi-page TIFF: page 0 P (float32), page 1 face id (int32, -1 = background),
@@ -755,9 +781,52 @@ bool model_tiff_write_float(const char *path, int width, int height, const float
 bool model_tiff_write_info(const char *path, int width, int height, const float *P,
                            const int32_t *face, const uint8_t *lit, int nlamps,
                            const char *const *lamp_names, const char *const *meta);
-bool model_tiff_read_float(const char *path, int *width, int *height, float **pix);
-// A 16-bit PNG or a float TIFF (told apart by content) as float. NULL on error.
+// Reading (model/image_read.c): one reader for every command that takes
+// images. The format is told by the first bytes, never by the name: PNG
+// (grey, grey+alpha, RGB(A), palette; 1 to 16 bits), JPEG (libjpeg-turbo;
+// grey or YCbCr/RGB; CMYK refused) and TIFF (first page, strips; grey or
+// RGB(A), contiguous or planar; integer 8/16/32 bits or float 32/64).
+// Values are kept as stored (an 8-bit image gives 0..255, a 16-bit one
+// 0..65535; no scaling). Colour gives one value per pixel by the channel:
+// MODEL_CHANNEL_LUMA = Rec. 709 luma weights applied to the stored (encoded)
+// values, no transfer curve undone; R, G or B: that channel. A grey image is
+// the same whatever the channel. Alpha is ignored.
+typedef enum { MODEL_CHANNEL_LUMA, MODEL_CHANNEL_R, MODEL_CHANNEL_G, MODEL_CHANNEL_B } model_channel_t;
+#define MODEL_LUMA_R 0.2126
+#define MODEL_LUMA_G 0.7152
+#define MODEL_LUMA_B 0.0722
+typedef enum { MODEL_IMAGE_UNKNOWN, MODEL_IMAGE_PNG, MODEL_IMAGE_JPEG, MODEL_IMAGE_TIFF } model_image_format_t;
+// "luma", "r", "g" or "b"; false for anything else.
+bool            model_channel_parse(const char *s, model_channel_t *out);
+const char     *model_channel_name(model_channel_t ch);
+// The channel the path-only readers below use for colour images: luma unless
+// a command set another from its --channel option (process-wide, set once
+// before the work starts).
+void            model_image_set_channel(model_channel_t ch);
+model_channel_t model_image_channel(void);
+// The format of a file from its first bytes (8 are enough).
+model_image_format_t model_image_format(const void *data, size_t len);
+// Decode an image file's bytes (name: for messages). meta (may be NULL): a
+// PNG's text chunks are added. NULL + model_error naming the file and why
+// (not an image, truncated, unsupported layout).
+float *model_image_decode(const void *data, size_t len, const char *name, model_channel_t ch, int *width,
+                          int *height, model_meta_t *meta);
+float *model_image_read(const char *path, model_channel_t ch, int *width, int *height, model_meta_t *meta);
+// model_image_read with model_image_channel() and no metadata.
 float *model_image_read_float(const char *path, int *width, int *height);
+// The same as *pix (free it); false on error.
+bool model_tiff_read_float(const char *path, int *width, int *height, float **pix);
+// The same as 16-bit values (grey values kept; colour mixed, rounded and
+// clamped to 0..65535), optionally with the PNG's text chunks (tEXt, zTXt,
+// iTXt) added to meta.
+bool model_png_read(const char *path, int *width, int *height, uint16_t **pix);
+bool model_png_read_meta(const char *path, int *width, int *height, uint16_t **pix, model_meta_t *meta);
+// The files of an --images argument: a directory (its regular files, not the
+// hidden ones; not recursive) or a glob pattern (or one file name), sorted by
+// name. Whether each is an image is for the reader to say (callers skip what
+// it refuses, printing why). false + model_error when there is no file at all.
+bool model_image_list(const char *spec, char ***paths, int *n);
+void model_image_list_free(char **paths, int n);
 
 // ---------------------------------------------------------------------------
 // Edge query (model/edges.c; thesis 1.6, PREMIO)
@@ -842,6 +911,7 @@ typedef struct {
     const char     *info;            // info TIFF (P, face ids, lit masks), or NULL
     model_shading_t shading;         // its gain_map is set from gain_map
     double          planarity_tol_mm, turntable_deg;
+    double          scene_unit_mm;   // mm per unit of the scene file (0: mm, not said; --units)
     const char     *threads_text;    // the threads option as given, for the metadata (NULL: "default")
     const char     *command_line;    // provenance
 } model_render_file_opts_t;
@@ -865,6 +935,7 @@ typedef struct {
     const char     *scene, *camera, *lamps, *materials;   // inputs (required)
     model_shading_t shading;
     double          planarity_tol_mm, turntable_deg;
+    double          scene_unit_mm;       // mm per unit of the scene file (0: mm, not said; --units)
     double          feature_angle_deg;   // edges between faces whose normals differ by less are skipped
     const char     *command_line;        // provenance
 } model_edges_file_opts_t;

@@ -119,6 +119,24 @@ int model_cli_long(model_cli_t *c, const char *name, long *out, long lo, long hi
     return 0;
 }
 
+int model_cli_channel(model_cli_t *c)
+{
+    const char *s = model_cli_value(c, "--channel");
+    model_channel_t ch = MODEL_CHANNEL_LUMA;
+    if (s && !model_channel_parse(s, &ch))
+        return model_cli_error(c, "option --channel: '%s' is none of luma, r, g, b", s);
+    model_image_set_channel(ch);
+    return 0;
+}
+
+int model_cli_units(model_cli_t *c, double *unit_mm)
+{
+    const char *s = model_cli_value(c, "--units");
+    if (s && !model_units_parse(s, unit_mm))
+        return model_cli_error(c, "option --units: '%s' is none of mm, m, in", s);
+    return 0;
+}
+
 // The value of a number option, checked against its range.
 static int set_number(model_cli_t *c, model_opt_t *o, const char *v)
 {

@@ -121,6 +121,24 @@ int model_cli_double(model_cli_t *c, const char *name, double *out, double lo, b
                      const char *range_text);
 int model_cli_long(model_cli_t *c, const char *name, long *out, long lo, long hi);
 
+// --channel of the commands that read images (model/image_read.c): how a
+// colour image becomes one value per pixel. Put MODEL_OPT_CHANNEL in the
+// table and call model_cli_channel after parsing (it sets the process-wide
+// model_image_set_channel; absent: luma); 0 or MODEL_CLI_USAGE.
+#define MODEL_OPT_CHANNEL                                                                                       \
+    MODEL_OPT_VALUE("--channel", "luma|r|g|b", "colour images: Rec. 709 luma (0.2126 R + 0.7152 G + 0.0722 B "   \
+                    "of the stored values; default) or one channel", false)
+int model_cli_channel(model_cli_t *c);
+
+// --units of the commands that read a scene (model/scene.c): the unit of the
+// scene file's coordinates. MODEL_OPT_UNITS in the table; model_cli_units
+// after parsing sets *unit_mm (mm per unit) when given (absent: unchanged,
+// 0 = mm not said, which lets a tiny mesh warn); 0 or MODEL_CLI_USAGE.
+#define MODEL_OPT_UNITS                                                                                         \
+    MODEL_OPT_VALUE("--units", "mm|m|in", "unit of the scene file's coordinates (default mm; a mesh smaller "   \
+                    "than 5 mm read without --units gets a warning)", false)
+int model_cli_units(model_cli_t *c, double *unit_mm);
+
 #ifdef __cplusplus
 }
 #endif

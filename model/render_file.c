@@ -60,10 +60,11 @@ void model_inputs_free(model_inputs_t *in)
 
 bool model_inputs_load(model_inputs_t *in, const char *scene_path, const char *cam_path,
                         const char *lamps_path, const char *mats_path, double planarity_tol_mm,
-                        double turntable_deg)
+                        double scene_unit_mm, double turntable_deg)
 {
     model_scene_options_t so = MODEL_SCENE_OPTIONS_DEFAULT;
     so.planarity_tol_mm = planarity_tol_mm;
+    so.unit_mm = scene_unit_mm;
     in->scene = model_scene_load(scene_path, &so);
     if (!in->scene) return false;
     if (turntable_deg != 0) {
@@ -181,11 +182,12 @@ static void add_metadata(render_job_t *j, const model_render_file_opts_t *o, con
     char *optstr = g_strdup_printf(
         "kc=%.9g offset_dn=%.9g gain_map=%s interreflection=%s rho=%.6g thesis_samples=%d thesis_cone_deg=%.6g "
         "mc_samples=%d mc_bounces=%d finite_lamps=%s seed=%llu sensor=%s turntable_deg=%.9g threads=%s "
-        "planarity_tol_mm=%.6g",
+        "planarity_tol_mm=%.6g scene_unit_mm=%.6g",
         sh->kc, sh->Pa, o->gain_map ? o->gain_map : "none", model_interreflection_name(sh->interreflection), sh->rho,
         sh->thesis_samples, sh->thesis_cone_deg, sh->mc_samples, sh->mc_bounces, sh->finite_lamps ? "yes" : "no",
         (unsigned long long)sh->seed, o->sensor ? o->sensor : "none", o->turntable_deg,
-        o->threads_text ? o->threads_text : "default", o->planarity_tol_mm);
+        o->threads_text ? o->threads_text : "default", o->planarity_tol_mm,
+        o->scene_unit_mm ? o->scene_unit_mm : 1);
     model_meta_t *m = j->meta;
     model_meta_add(m, "Software", "refl %s (refl render)", REFL_VERSION);
     model_meta_add(m, "units", "%s", MODEL_UNITS_P);
@@ -289,7 +291,7 @@ bool model_render_file(const model_render_file_opts_t *o, model_render_file_resu
     const int ninputs = (int)(sizeof inputs / sizeof inputs[0]);
     r->png = is_png_name(o->out);
     bool ok = j.meta &&
-              model_inputs_load(&j.in, o->scene, o->camera, o->lamps, o->materials, o->planarity_tol_mm,
+              model_inputs_load(&j.in, o->scene, o->camera, o->lamps, o->materials, o->planarity_tol_mm, o->scene_unit_mm,
                                 o->turntable_deg) &&
               (!o->sensor || model_sensor_load(o->sensor, &j.sensor));
     if (ok) {

@@ -1,5 +1,7 @@
 // model/scene.c — scenes: the D3D and Wavefront OBJ readers, face checks
-// (planarity, degeneracy), materials per face, rotation about the turntable axis.
+// (planarity, degeneracy), materials per face, rotation about the turntable
+// axis; the scene of an STL or PLY mesh (read by model/scene_mesh.c); the unit
+// of the file's coordinates (--units).
 //
 // Both readers work on (text, len) without assuming a NUL terminator, split the
 // text into lines and the lines into blank-separated tokens, and feed one
@@ -12,6 +14,7 @@
 #define _GNU_SOURCE
 #include <errno.h>
 #include <limits.h>
+#include <stdarg.h>
 #include <stdio.h>
 #include <glib.h>
 #include <stdlib.h>
@@ -182,6 +185,8 @@ typedef struct {
     model_sphere_t *sph;      // D3D @sphere
     int           nsph;
     size_t        cap_sph;
+    double        unit_mm;    // mm per unit of the file's coordinates
+    bool          binary;     // face lines are byte offsets (binary STL / PLY)
 } builder_t;
 
 static bool grow(void **p, size_t *cap, size_t need, size_t elem)
@@ -218,7 +223,7 @@ static bool add_vertex(builder_t *b, int line, model_vec3_t p, int number)
     if (!grow((void **)&b->v, &b->cap_v, (size_t)b->nv + 1, sizeof *b->v) ||
         !grow((void **)&b->vnum, &b->cap_vnum, (size_t)b->nv + 1, sizeof *b->vnum))
         goto oom;
-    b->v[b->nv] = p;
+    b->v[b->nv] = v3_scale(p, b->unit_mm);
     b->vnum[b->nv] = number;
     b->nv++;
     return true;
@@ -278,6 +283,19 @@ oom:
     return false;
 }
 
+// A face's error at its line, or at its byte offset in a binary file.
+__attribute__((format(printf, 3, 4))) static void face_error(const builder_t *b, const model_face_t *f,
+                                                             const char *fmt, ...)
+{
+    char m[600];
+    va_list ap;
+    va_start(ap, fmt);
+    vsnprintf(m, sizeof m, fmt, ap);
+    va_end(ap);
+    if (b->binary) model_error(b->name, 0, "byte offset %d: %s", f->line, m);
+    else model_error(b->name, f->line, "%s", m);
+}
+
 static int cmp_int(const void *a, const void *b)
 {
     int x = *(const int *)a, y = *(const int *)b;
@@ -290,7 +308,7 @@ static bool check_face(builder_t *b, int k, size_t end)
     model_face_t *f = &b->f[k];
     size_t n = end - b->fstart[k];
     if (n < 3) {
-        model_error(b->name, f->line,
+        face_error(b, f,
                     "face %d has %zu %s; a face needs at least 3 (list its vertex numbers, then '.')",
                     f->number, n, n == 1 ? "vertex" : "vertices");
         return false;
@@ -306,7 +324,7 @@ static bool check_face(builder_t *b, int k, size_t end)
     } else {
         int *s = malloc(n * sizeof *s);
         if (!s) {
-            model_error(b->name, f->line, "out of memory");
+            face_error(b, f, "out of memory");
             return false;
         }
         memcpy(s, ix, n * sizeof *s);
@@ -316,7 +334,7 @@ static bool check_face(builder_t *b, int k, size_t end)
         free(s);
     }
     if (dup >= 0) {
-        model_error(b->name, f->line,
+        face_error(b, f,
                     "face %d uses vertex %d twice; a face lists each of its vertices once",
                     f->number, b->vnum[dup]);
         return false;
@@ -335,13 +353,13 @@ static bool check_face(builder_t *b, int k, size_t end)
     }
     double area2 = v3_norm(nn);   // twice the area
     if (!isfinite(area2) || !isfinite(r2) || !isfinite(c.x + c.y + c.z)) {
-        model_error(b->name, f->line,
+        face_error(b, f,
                     "face %d: its plane cannot be computed because its coordinates are too large "
                     "(coordinates are in mm; check the units)", f->number);
         return false;
     }
     if (!(area2 > 1e-12 * r2)) {
-        model_error(b->name, f->line,
+        face_error(b, f,
                     "face %d is degenerate (zero area: its vertices coincide or lie on one line); "
                     "remove it or fix its vertices", f->number);
         return false;
@@ -355,7 +373,7 @@ static bool check_face(builder_t *b, int k, size_t end)
         if (d > worst) { worst = d; worst_v = ix[i]; }
     }
     if (worst > b->tol_mm) {
-        model_error(b->name, f->line,
+        face_error(b, f,
                     "face %d is not planar: vertex %d is %.3g mm from the face's plane "
                     "(tolerance %.3g mm); fix its coordinates, split the face into planar parts, "
                     "or raise the planarity tolerance",
@@ -424,6 +442,7 @@ static bool add_sphere(builder_t *b, const lexer_t *lx)
         model_error(b->name, lx->line, "@sphere: radius %g mm must be > 0", x[3]);
         return false;
     }
+    for (int i = 0; i < 4; i++) x[i] *= b->unit_mm;
     double big = fmax(fmax(fabs(x[0]), fabs(x[1])), fmax(fabs(x[2]), x[3]));
     if (!(big < 1e150)) {
         model_error(b->name, lx->line, "@sphere: coordinates up to %g are too large to trace "
@@ -463,7 +482,10 @@ static model_scene_t *finish(builder_t *b, const char *text, size_t len)
     s->vert_storage_ = b->idx;
     s->nspheres = b->nsph;
     s->spheres = b->sph;
-    for (int k = 0; k < b->nf; k++) s->faces[k].verts = b->idx + b->fstart[k];
+    for (int k = 0; k < b->nf; k++) {
+        s->faces[k].verts = b->idx + b->fstart[k];
+        if (b->binary) s->faces[k].line = 0;   // no line in a binary file
+    }
     model_sha256_hex(text ? text : "", len, s->sha256);
     free(b->vnum);
     free(b->fstart);
@@ -485,6 +507,11 @@ static bool setup(builder_t *b, lexer_t *lx, const char *text, size_t len, const
         return false;
     }
     b->tol_mm = o.planarity_tol_mm;
+    b->unit_mm = o.unit_mm == 0 ? 1 : o.unit_mm;
+    if (!(b->unit_mm > 0) || !isfinite(b->unit_mm)) {
+        model_error(b->name, 0, "the unit %g mm is invalid; give a finite value > 0 (--units mm, m or in)", o.unit_mm);
+        return false;
+    }
     if (!text && len > 0) {
         model_error(b->name, 0, "no text to parse");
         return false;
@@ -773,6 +800,66 @@ done:
 // ---------------------------------------------------------------------------
 // Files, lookup, rotation
 
+// ---------------------------------------------------------------------------
+// Meshes (STL, PLY: model/scene_mesh.c)
+
+model_scene_t *model_scene_from_mesh_(const model_mesh_t *m, const char *name, const char *text, size_t len,
+                                      const model_scene_options_t *opt)
+{
+    builder_t b;
+    lexer_t lx;
+    model_scene_t *scene = NULL;
+    if (!setup(&b, &lx, text, len, name, opt)) goto done;
+    b.binary = m->binary;
+    for (int i = 0; i < m->nv; i++) {
+        const double *p = m->v + 3 * (size_t)i;
+        if (!add_vertex(&b, 0, v3(p[0], p[1], p[2]), i + 1)) goto done;
+    }
+    for (int k = 0; k < m->nf; k++) {
+        if (!begin_face(&b, m->floc[k])) goto done;
+        for (size_t i = m->fstart[k]; i < m->fstart[k + 1]; i++)
+            if (!add_ref(&b, m->floc[k], m->idx[i])) goto done;
+        if (!check_face(&b, k, b.nidx)) goto done;
+    }
+    scene = finish(&b, text, len);
+done:
+    builder_free(&b);
+    free(lx.toks);
+    return scene;
+}
+
+// ---------------------------------------------------------------------------
+// Files, lookup, rotation
+
+bool model_units_parse(const char *s, double *unit_mm)
+{
+    static const struct { const char *n; double mm; } u[] = { { "mm", 1 }, { "m", 1000 }, { "in", 25.4 } };
+    for (size_t i = 0; s && i < sizeof u / sizeof u[0]; i++)
+        if (!strcmp(s, u[i].n)) {
+            *unit_mm = u[i].mm;
+            return true;
+        }
+    return false;
+}
+
+// A mesh whose whole extent is under 5 mm with no unit given was probably
+// drawn in metres (or inches): say so.
+static void units_warning(model_scene_t *s, const model_scene_options_t *opt)
+{
+    if (opt && opt->unit_mm != 0) return;
+    double lo[3] = { INFINITY, INFINITY, INFINITY }, hi[3] = { -INFINITY, -INFINITY, -INFINITY };
+    for (int i = 0; i < s->nvertices; i++) {
+        const double p[3] = { s->vertices[i].x, s->vertices[i].y, s->vertices[i].z };
+        for (int k = 0; k < 3; k++) lo[k] = fmin(lo[k], p[k]), hi[k] = fmax(hi[k], p[k]);
+    }
+    double ext = fmax(fmax(hi[0] - lo[0], hi[1] - lo[1]), hi[2] - lo[2]);
+    if (!(ext < MODEL_SCENE_SMALL_MM)) return;
+    snprintf(s->warning, sizeof s->warning, "the whole scene spans %.3g mm (the largest side of its bounding box), "
+             "read in mm as no --units was given: if its coordinates are metres or inches, give --units m or "
+             "--units in", ext);
+    if (!model_error_quiet_global()) fprintf(stderr, "%s: warning: %s\n", s->path, s->warning);
+}
+
 model_scene_t *model_scene_load(const char *path, const model_scene_options_t *opt)
 {
     if (!path) {
@@ -783,17 +870,23 @@ model_scene_t *model_scene_load(const char *path, const model_scene_options_t *o
     const char *base = slash ? slash + 1 : path;
     const char *dot = strrchr(base, '.');
     bool d3d = dot && strcasecmp(dot, ".d3d") == 0, obj = dot && strcasecmp(dot, ".obj") == 0;
-    if (!d3d && !obj) {
-        model_error(path, 0, "unknown scene format%s%s%s; name the file .d3d or .obj",
-                    dot ? " '" : " (no extension)", dot ? dot : "", dot ? "'" : "");
-        return NULL;
-    }
+    bool stl = dot && strcasecmp(dot, ".stl") == 0, ply = dot && strcasecmp(dot, ".ply") == 0;
     size_t len;
     char *text = model_read_file(path, &len);
     if (!text) return NULL;
-    model_scene_t *s = d3d ? model_scene_parse_d3d(text, len, path, opt)
-                           : model_scene_parse_obj(text, len, path, opt);
+    // STL and PLY are told by their content (whatever the name); D3D and OBJ by the name.
+    model_mesh_format_t mf = model_mesh_format_(text, len, !stl);
+    if (mf == MODEL_MESH_PLY) ply = true, stl = false;
+    else if (mf != MODEL_MESH_NONE) stl = true, ply = false;
+    model_scene_t *s = NULL;
+    if (stl || ply) s = stl ? model_scene_parse_stl(text, len, path, opt) : model_scene_parse_ply(text, len, path, opt);
+    else if (d3d || obj)
+        s = d3d ? model_scene_parse_d3d(text, len, path, opt) : model_scene_parse_obj(text, len, path, opt);
+    else
+        model_error(path, 0, "unknown scene format%s%s%s: neither STL nor PLY by its content; name a D3D file .d3d "
+                    "and an OBJ file .obj", dot ? " '" : " (no extension)", dot ? dot : "", dot ? "'" : "");
     free(text);
+    if (s && !d3d) units_warning(s, opt);
     return s;
 }
 

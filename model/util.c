@@ -57,6 +57,7 @@ int model_error_report(const char *cmd)
 }
 void model_error_clear(void) { last_error[0] = 0; }
 bool model_error_quiet(bool quiet) { return atomic_exchange(&quiet_mode, quiet); }
+bool model_error_quiet_global(void) { return atomic_load(&quiet_mode); }
 
 bool model_error_quiet_thread(bool quiet)
 {

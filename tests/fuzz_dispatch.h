@@ -2,7 +2,9 @@
 //
 // The first byte selects the parser: 'p' a capture plan (rig_plan_parse),
 // 'r' a rig description file (rig_config_parse), 'v' a virtual rig truth file
-// (rig_virtual_check_truth); any other byte b selects b % 6: 0 D3D scene,
+// (rig_virtual_check_truth), 'i' an image file's bytes (model_image_decode:
+// PNG, JPEG, TIFF by content), 'l' an STL scene (model_scene_parse_stl), 'y' a
+// PLY scene (model_scene_parse_ply); any other byte b selects b % 6: 0 D3D scene,
 // 1 OBJ scene, 2 INI, 3 materials, 4 lamps, 5 sensor (seeds use '0'..'5'; the
 // corpus was written with that rule, which is why the newer parsers have
 // letters). The rest of the input is the text (not NUL-terminated, so reads
@@ -31,7 +33,8 @@
 
 enum { REFL_FUZZ_D3D, REFL_FUZZ_OBJ, REFL_FUZZ_INI, REFL_FUZZ_MATERIALS, REFL_FUZZ_LAMPS,
        REFL_FUZZ_SENSOR, REFL_FUZZ_NMOD,   // selected by first byte % REFL_FUZZ_NMOD
-       REFL_FUZZ_PLAN = REFL_FUZZ_NMOD, REFL_FUZZ_RIG, REFL_FUZZ_TRUTH, REFL_FUZZ_NPARSERS };
+       REFL_FUZZ_PLAN = REFL_FUZZ_NMOD, REFL_FUZZ_RIG, REFL_FUZZ_TRUTH, REFL_FUZZ_IMAGE, REFL_FUZZ_STL,
+       REFL_FUZZ_PLY, REFL_FUZZ_NPARSERS };
 
 // The parser a first byte selects (REFL_FUZZ_*).
 static inline int refl_fuzz_selector(uint8_t b)
@@ -40,6 +43,9 @@ static inline int refl_fuzz_selector(uint8_t b)
     case 'p': return REFL_FUZZ_PLAN;
     case 'r': return REFL_FUZZ_RIG;
     case 'v': return REFL_FUZZ_TRUTH;
+    case 'i': return REFL_FUZZ_IMAGE;
+    case 'l': return REFL_FUZZ_STL;
+    case 'y': return REFL_FUZZ_PLY;
     default: return b % REFL_FUZZ_NMOD;
     }
 }
@@ -67,6 +73,22 @@ static inline bool refl_fuzz_parse_in(const uint8_t *data, size_t len, const cha
         return rig_config_parse(text, n, "fuzz-rig.ini") == 0;
     case REFL_FUZZ_TRUTH:
         return rig_virtual_check_truth(text, n, "fuzz-truth.ini", examples_dir) == 0;
+    case REFL_FUZZ_IMAGE: {
+        int w = 0, h = 0;
+        float *px = model_image_decode(text, n, "fuzz-image", MODEL_CHANNEL_LUMA, &w, &h, NULL);
+        free(px);
+        return px != NULL;
+    }
+    case REFL_FUZZ_STL: {
+        model_scene_t *s = model_scene_parse_stl(text, n, "fuzz.stl", NULL);
+        model_scene_free(s);
+        return s != NULL;
+    }
+    case REFL_FUZZ_PLY: {
+        model_scene_t *s = model_scene_parse_ply(text, n, "fuzz.ply", NULL);
+        model_scene_free(s);
+        return s != NULL;
+    }
     case REFL_FUZZ_D3D: {
         model_scene_t *s = model_scene_parse_d3d(text, n, "fuzz.d3d", NULL);
         model_scene_free(s);

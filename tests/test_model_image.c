@@ -2,9 +2,14 @@
 // the multi-page info TIFF, other sample types, and clean errors on damaged
 // files.
 #define _GNU_SOURCE
+#include <glib.h>
 #include <png.h>
+#include <stdio.h>   // before jpeglib.h, which uses FILE
+#include <jpeglib.h>
 #include <stdlib.h>
 #include <tiffio.h>
+#include <unistd.h>
+#include <zlib.h>
 
 #include "model/internal.h"
 #include "tests/test.h"
@@ -96,7 +101,8 @@ static bool write_png_raw(const char *path, int w, int h, int depth, int ctype, 
             png_set_PLTE(png, info, pal, 2);
         }
         png_write_info(png, info);
-        for (int y = 0; y < h; y++) png_write_row(png, (png_const_bytep)(data + (size_t)y * w * channels));
+        size_t stride = (size_t)w * channels * (depth == 16 ? 2 : 1);
+        for (int y = 0; y < h; y++) png_write_row(png, (png_const_bytep)(data + (size_t)y * stride));
         png_write_end(png, info);
         ok = true;
     }
@@ -127,19 +133,91 @@ TEST(image_png8_and_colour)
     }
     free(back);
 
+    // colour (grey values in RGB): luma of equal channels is the grey value
     const char *prgb = test_path("rgb.png");
     CHECK(write_png_raw(prgb, W, H, 8, PNG_COLOR_TYPE_RGB, rgb, 3));
     back = NULL;
-    CHECK(!model_png_read(prgb, &w, &h, &back));
-    CHECK(back == NULL);
-    CHECK_CONTAINS(model_last_error(), prgb);
-    CHECK_CONTAINS(model_last_error(), "colour (RGB) PNG");
+    CHECK(model_png_read(prgb, &w, &h, &back));
+    if (back) {
+        bool same = true;
+        for (int i = 0; i < W * H; i++) same = same && back[i] == g[i];
+        CHECK(same);
+    }
+    free(back);
 
+    // a palette PNG: expanded to RGB; black and red (255, 0, 0)
     const char *ppal = test_path("pal.png");
     CHECK(write_png_raw(ppal, W, H, 8, PNG_COLOR_TYPE_PALETTE, idx, 1));
-    CHECK(!model_png_read(ppal, &w, &h, &back));
-    CHECK_CONTAINS(model_last_error(), ppal);
-    CHECK_CONTAINS(model_last_error(), "palette");
+    float *f = model_image_read(ppal, MODEL_CHANNEL_LUMA, &w, &h, NULL);
+    CHECK(f != NULL);
+    if (f) CHECK(f[0] == 0 && fabsf(f[1] - (float)(MODEL_LUMA_R * 255)) < 1e-3f);
+    free(f);
+    f = model_image_read(ppal, MODEL_CHANNEL_R, &w, &h, NULL);
+    if (f) CHECK(f[0] == 0 && f[1] == 255);
+    free(f);
+}
+
+// Colour PNG, 8- and 16-bit, with and without alpha: luma by the stated
+// weights, or one channel.
+TEST(image_png_colour_channels)
+{
+    enum { W = 5, H = 3 };
+    uint8_t rgb8[W * H * 3], rgba16[W * H * 4 * 2];
+    double want[W * H][3];
+    for (int i = 0; i < W * H; i++) {
+        int r = 10 + 17 * i, gg = 250 - 9 * i, b = (i * 53) % 256;
+        rgb8[3 * i] = (uint8_t)r, rgb8[3 * i + 1] = (uint8_t)gg, rgb8[3 * i + 2] = (uint8_t)b;
+        want[i][0] = r, want[i][1] = gg, want[i][2] = b;
+        int v16[4] = { r * 257 + 3, gg * 250, b * 199, 1234 };   // the alpha is ignored
+        for (int c = 0; c < 4; c++) {   // big-endian
+            rgba16[2 * (4 * i + c)] = (uint8_t)(v16[c] >> 8);
+            rgba16[2 * (4 * i + c) + 1] = (uint8_t)(v16[c] & 0xff);
+        }
+    }
+    const char *p8 = test_path("c8.png"), *p16 = test_path("c16.png");
+    CHECK(write_png_raw(p8, W, H, 8, PNG_COLOR_TYPE_RGB, rgb8, 3));
+    CHECK(write_png_raw(p16, W, H, 16, PNG_COLOR_TYPE_RGBA, rgba16, 4));
+    const model_channel_t chs[4] = { MODEL_CHANNEL_LUMA, MODEL_CHANNEL_R, MODEL_CHANNEL_G, MODEL_CHANNEL_B };
+    for (int k = 0; k < 4; k++) {
+        int w = 0, h = 0;
+        float *a = model_image_read(p8, chs[k], &w, &h, NULL);
+        CHECK(a != NULL && w == W && h == H);
+        int w2 = 0, h2 = 0;
+        float *b = model_image_read(p16, chs[k], &w2, &h2, NULL);
+        CHECK(b != NULL && w2 == W && h2 == H);
+        for (int i = 0; a && b && i < W * H; i++) {
+            double v16[3] = { want[i][0] * 257 + 3, want[i][1] * 250, want[i][2] * 199 };
+            double e8 = k ? want[i][k - 1] : 0.2126 * want[i][0] + 0.7152 * want[i][1] + 0.0722 * want[i][2];
+            double e16 = k ? v16[k - 1] : 0.2126 * v16[0] + 0.7152 * v16[1] + 0.0722 * v16[2];
+            CHECK_NEAR(a[i], e8, 1e-4 * (1 + e8));
+            CHECK_NEAR(b[i], e16, 1e-6 * (1 + e16));
+        }
+        free(a);
+        free(b);
+    }
+    // grey + alpha: the grey values, the alpha ignored
+    uint8_t ga[W * H * 2];
+    for (int i = 0; i < W * H; i++) ga[2 * i] = (uint8_t)(i * 11), ga[2 * i + 1] = (uint8_t)(255 - i);
+    const char *pga = test_path("ga.png");
+    CHECK(write_png_raw(pga, W, H, 8, PNG_COLOR_TYPE_GRAY_ALPHA, ga, 2));
+    for (int k = 0; k < 4; k++) {
+        int w = 0, h = 0;
+        float *a = model_image_read(pga, chs[k], &w, &h, NULL);
+        CHECK(a != NULL && w == W && h == H);
+        for (int i = 0; a && i < W * H; i++) CHECK(a[i] == (float)(uint8_t)(i * 11));
+        free(a);
+    }
+    // the process-wide channel of the path-only readers, as --channel sets it
+    model_image_set_channel(MODEL_CHANNEL_G);
+    int w, h;
+    float *g = model_image_read_float(p8, &w, &h);
+    model_image_set_channel(MODEL_CHANNEL_LUMA);
+    CHECK(g != NULL);
+    if (g) CHECK(g[2] == (float)want[2][1]);
+    free(g);
+    model_channel_t ch;
+    CHECK(model_channel_parse("b", &ch) && ch == MODEL_CHANNEL_B);
+    CHECK(!model_channel_parse("red", &ch));
 }
 
 TEST(image_png_errors)
@@ -162,7 +240,7 @@ TEST(image_png_errors)
     const char *text = test_write("text.png", "just some text, not an image\n");
     CHECK(!model_png_read(text, &w, &h, &back));
     CHECK_CONTAINS(model_last_error(), text);
-    CHECK_CONTAINS(model_last_error(), "not a PNG file");
+    CHECK_CONTAINS(model_last_error(), "not an image refl reads");
 
     const char *missing = test_path("missing.png");
     CHECK(!model_png_read(missing, &w, &h, &back));
@@ -198,6 +276,17 @@ TEST(image_png_errors)
             CHECK_CONTAINS(model_last_error(), bad);
         }
     }
+
+    // a header that claims 16000 x 16000 pixels in a file of 57 bytes: refused before any allocation
+    unsigned char hdr[57] = { 0x89, 'P', 'N', 'G', '\r', '\n', 0x1a, '\n', 0, 0, 0, 13, 'I', 'H', 'D', 'R',
+                              0, 0, 0x3e, 0x80, 0, 0, 0x3e, 0x80, 8, 0, 0, 0, 0 };
+    uLong crc = crc32(0, hdr + 12, 17);
+    for (int i = 0; i < 4; i++) hdr[29 + i] = (unsigned char)(crc >> (24 - 8 * i));
+    memcpy(hdr + 33, "\0\0\0\0IDAT\x35\xaf\x06\x1e\0\0\0\0IEND\xae\x42\x60\x82", 24);
+    const char *huge = test_path("huge.png");
+    CHECK(g_file_set_contents(huge, (const char *)hdr, sizeof hdr, NULL));
+    CHECK(!model_png_read(huge, &w, &h, &back));
+    CHECK_CONTAINS(model_last_error(), "a PNG of 16000x16000 pixels cannot fit in its 57 bytes");
 
     // writing: a bad metadata key, and an impossible path
     const char *meta[] = { "", "x", NULL };
@@ -375,7 +464,7 @@ TEST(image_tiff_errors)
     const char *text = test_write("text.tif", "not a TIFF at all\n");
     CHECK(!model_tiff_read_float(text, &w, &h, &back));
     CHECK_CONTAINS(model_last_error(), text);
-    CHECK_CONTAINS(model_last_error(), "not a readable TIFF");
+    CHECK_CONTAINS(model_last_error(), "not an image refl reads");
 
     const char *missing = test_path("missing.tif");
     CHECK(!model_tiff_read_float(missing, &w, &h, &back));
@@ -408,4 +497,317 @@ TEST(image_tiff_errors)
     }
     CHECK(!model_tiff_write_float("/nonexistent-dir/x.tif", W, H, (const float[W * H]){ 0 }, NULL));
     CHECK_CONTAINS(model_last_error(), "/nonexistent-dir/x.tif");
+}
+
+// A JPEG written with libjpeg: nch 1 (grey) or 3 (RGB), quality 100.
+static bool write_jpeg(const char *path, int w, int h, int nch, const uint8_t *pix)
+{
+    FILE *f = fopen(path, "wb");
+    if (!f) return false;
+    struct jpeg_compress_struct c;
+    struct jpeg_error_mgr e;
+    c.err = jpeg_std_error(&e);
+    jpeg_create_compress(&c);
+    jpeg_stdio_dest(&c, f);
+    c.image_width = (JDIMENSION)w;
+    c.image_height = (JDIMENSION)h;
+    c.input_components = nch;
+    c.in_color_space = nch == 1 ? JCS_GRAYSCALE : JCS_RGB;
+    jpeg_set_defaults(&c);
+    jpeg_set_quality(&c, 100, TRUE);
+    if (nch == 3) {   // no chroma subsampling: flat colour blocks stay exact to a DN or two
+        for (int i = 0; i < 3; i++) c.comp_info[i].h_samp_factor = c.comp_info[i].v_samp_factor = 1;
+    }
+    jpeg_start_compress(&c, TRUE);
+    while (c.next_scanline < c.image_height) {
+        JSAMPROW r = (JSAMPROW)(pix + (size_t)c.next_scanline * w * nch);
+        jpeg_write_scanlines(&c, &r, 1);
+    }
+    jpeg_finish_compress(&c);
+    jpeg_destroy_compress(&c);
+    return fclose(f) == 0;
+}
+
+// JPEG, told by content (the grey one is named .png): grey values and a colour
+// image's channels and luma within JPEG's rounding; truncated: a clear error.
+TEST(image_jpeg_grey_and_colour)
+{
+    enum { W = 32, H = 16 };
+    uint8_t grey[W * H], rgb[W * H * 3];
+    for (int y = 0; y < H; y++)
+        for (int x = 0; x < W; x++) {
+            bool left = x < W / 2;   // two flat 16x16 blocks (whole 8x8 JPEG blocks)
+            grey[y * W + x] = left ? 40 : 200;
+            uint8_t *p = rgb + 3 * (y * W + x);
+            p[0] = left ? 200 : 30, p[1] = left ? 60 : 120, p[2] = left ? 20 : 220;
+        }
+    const char *pg = test_path("grey_jpeg.png"), *pc = test_path("colour.jpg");
+    CHECK(write_jpeg(pg, W, H, 1, grey));
+    CHECK(write_jpeg(pc, W, H, 3, rgb));
+    int w = 0, h = 0;
+    float *g = model_image_read_float(pg, &w, &h);
+    CHECK(g != NULL && w == W && h == H);
+    for (int i = 0; g && i < W * H; i += 7) CHECK_NEAR(g[i], grey[i], 1.01);
+    free(g);
+    for (int k = 0; k < 4; k++) {
+        float *c = model_image_read(pc, (model_channel_t)k, &w, &h, NULL);
+        CHECK(c != NULL && w == W && h == H);
+        for (int i = 0; c && i < W * H; i += 5) {
+            const uint8_t *p = rgb + 3 * i;
+            double e = k ? p[k - 1] : MODEL_LUMA_R * p[0] + MODEL_LUMA_G * p[1] + MODEL_LUMA_B * p[2];
+            CHECK_NEAR(c[i], e, 2.01);
+        }
+        free(c);
+    }
+    CHECK(model_image_format("\xff\xd8\xff\xe0", 4) == MODEL_IMAGE_JPEG);
+
+    const char *trunc = test_path("trunc.jpg");
+    truncate_copy(pc, trunc, 0.6, -1);
+    CHECK(model_image_read_float(trunc, &w, &h) == NULL);
+    CHECK_CONTAINS(model_last_error(), trunc);
+    CHECK_CONTAINS(model_last_error(), "corrupt or truncated JPEG");
+    // every cut and flipped bytes: an image or an error naming the file
+    size_t len;
+    char *buf = model_read_file(pc, &len);
+    CHECK(buf != NULL);
+    free(buf);
+    const char *bad = test_path("bad.jpg");
+    for (size_t cut = 0; cut < len; cut += len / 61 + 1) {
+        truncate_copy(pc, bad, (double)cut / len, -1);
+        float *r = model_image_read_float(bad, &w, &h);
+        if (!r) CHECK_CONTAINS(model_last_error(), bad);
+        free(r);
+    }
+    for (long at = 0; at < (long)len; at += (long)(len / 97) + 1) {
+        truncate_copy(pc, bad, 1.0, at);
+        float *r = model_image_read_float(bad, &w, &h);
+        if (!r) CHECK_CONTAINS(model_last_error(), bad);
+        free(r);
+    }
+}
+
+// An RGB TIFF written with libtiff: 16-bit contiguous, 16-bit planar, float.
+// spp: 3 (RGB), or 2 (grey and alpha: v holds w*h*2 values).
+static bool write_tiff_spp(const char *path, int w, int h, int bits, bool planar, const double *v, int spp)
+{
+    TIFFSetWarningHandler(NULL);
+    TIFF *t = TIFFOpen(path, "w");
+    if (!t) return false;
+    TIFFSetField(t, TIFFTAG_IMAGEWIDTH, (uint32_t)w);
+    TIFFSetField(t, TIFFTAG_IMAGELENGTH, (uint32_t)h);
+    TIFFSetField(t, TIFFTAG_BITSPERSAMPLE, bits);
+    TIFFSetField(t, TIFFTAG_SAMPLESPERPIXEL, spp);
+    TIFFSetField(t, TIFFTAG_SAMPLEFORMAT, bits == 32 ? SAMPLEFORMAT_IEEEFP : SAMPLEFORMAT_UINT);
+    TIFFSetField(t, TIFFTAG_PHOTOMETRIC, spp == 3 ? PHOTOMETRIC_RGB : PHOTOMETRIC_MINISBLACK);
+    if (spp == 2) {
+        uint16_t extra = EXTRASAMPLE_UNASSALPHA;
+        TIFFSetField(t, TIFFTAG_EXTRASAMPLES, 1, &extra);
+    }
+    TIFFSetField(t, TIFFTAG_PLANARCONFIG, planar ? PLANARCONFIG_SEPARATE : PLANARCONFIG_CONTIG);
+    TIFFSetField(t, TIFFTAG_COMPRESSION, COMPRESSION_LZW);
+    TIFFSetField(t, TIFFTAG_ROWSPERSTRIP, 2);
+    size_t bps = (size_t)bits / 8;
+    unsigned char *row = malloc((size_t)w * spp * bps);
+    bool ok = row != NULL;
+    for (int s = 0; ok && s < (planar ? spp : 1); s++)
+        for (int y = 0; ok && y < h; y++) {
+            for (int x = 0; x < w; x++)
+                for (int c = 0; c < spp; c++) {
+                    if (planar && c != s) continue;
+                    double d = v[spp * (y * w + x) + c];
+                    size_t at = planar ? (size_t)x : (size_t)x * spp + c;
+                    if (bits == 32) { float f = (float)d; memcpy(row + at * 4, &f, 4); }
+                    else { uint16_t u = (uint16_t)d; memcpy(row + at * 2, &u, 2); }
+                }
+            ok = TIFFWriteScanline(t, row, (uint32_t)y, (uint16_t)s) == 1;
+        }
+    free(row);
+    TIFFClose(t);
+    return ok;
+}
+
+static bool write_tiff_rgb(const char *path, int w, int h, int bits, bool planar, const double *v /* w*h*3 */)
+{
+    return write_tiff_spp(path, w, h, bits, planar, v, 3);
+}
+
+TEST(image_tiff_colour_16bit_and_float)
+{
+    enum { W = 9, H = 5 };
+    double v[W * H * 3], vf[W * H * 3];
+    for (int i = 0; i < W * H; i++)
+        for (int c = 0; c < 3; c++) {
+            v[3 * i + c] = (i * 1499 + c * 20011) % 65536;
+            vf[3 * i + c] = 0.001 * i - 0.5 * c + 1e-7 * (i * c);
+        }
+    struct { const char *name; int bits; bool planar; const double *v; } cases[] = {
+        { "rgb16.tif", 16, false, v }, { "rgb16p.tif", 16, true, v }, { "rgbf.tif", 32, false, vf },
+        { "rgbfp.tif", 32, true, vf },
+    };
+    for (size_t k = 0; k < sizeof cases / sizeof cases[0]; k++) {
+        const char *p = test_path(cases[k].name);
+        CHECK_MSG(write_tiff_rgb(p, W, H, cases[k].bits, cases[k].planar, cases[k].v), "%s", p);
+        for (int ch = 0; ch < 4; ch++) {
+            int w = 0, h = 0;
+            float *r = model_image_read(p, (model_channel_t)ch, &w, &h, NULL);
+            CHECK_MSG(r != NULL && w == W && h == H, "%s: %s", p, model_last_error());
+            for (int i = 0; r && i < W * H; i++) {
+                double px[3];
+                for (int c = 0; c < 3; c++) px[c] = cases[k].bits == 32 ? (float)cases[k].v[3 * i + c] : cases[k].v[3 * i + c];
+                double e = ch ? px[ch - 1] : 0.2126 * px[0] + 0.7152 * px[1] + 0.0722 * px[2];
+                CHECK_NEAR(r[i], e, 1e-6 * (1 + fabs(e)));
+            }
+            free(r);
+        }
+    }
+    // grey and alpha, planar and contiguous: the grey values, whatever the channel
+    double ga[W * H * 2];
+    for (int i = 0; i < W * H; i++) ga[2 * i] = 100 + 37 * i, ga[2 * i + 1] = 65535 - i;
+    for (int planar = 0; planar < 2; planar++) {
+        const char *p = test_path(planar ? "gap.tif" : "ga.tif");
+        CHECK(write_tiff_spp(p, W, H, 16, planar, ga, 2));
+        for (int ch = 0; ch < 4; ch++) {
+            int w = 0, h = 0;
+            float *r = model_image_read(p, (model_channel_t)ch, &w, &h, NULL);
+            CHECK_MSG(r != NULL && w == W && h == H, "%s: %s", p, model_last_error());
+            for (int i = 0; r && i < W * H; i++) CHECK(r[i] == (float)(100 + 37 * i));
+            free(r);
+        }
+    }
+}
+
+// An --images directory: the listing (sorted, regular files, no hidden ones),
+// and each file read or refused with its reason.
+TEST(image_list_directory_and_glob)
+{
+    const char *dir = test_path("imgs");
+    CHECK(g_mkdir_with_parents(dir, 0755) == 0);
+    char *good = g_build_filename(dir, "b_good.png", NULL), *txt = g_build_filename(dir, "a_notes.txt", NULL);
+    char *corrupt = g_build_filename(dir, "c_corrupt.png", NULL), *hidden = g_build_filename(dir, ".hidden", NULL);
+    char *sub = g_build_filename(dir, "subdir", NULL);
+    uint16_t pix[64];
+    for (int i = 0; i < 64; i++) pix[i] = (uint16_t)(i * 1000);
+    CHECK(model_png16_write(good, 8, 8, pix, NULL));
+    CHECK(g_file_set_contents(txt, "not an image\n", -1, NULL));
+    CHECK(g_file_set_contents(hidden, "x", -1, NULL));
+    truncate_copy(good, corrupt, 0.7, -1);
+    CHECK(g_mkdir_with_parents(sub, 0755) == 0);
+    char **paths = NULL;
+    int n = 0;
+    CHECK(model_image_list(dir, &paths, &n));
+    CHECK(n == 3);
+    if (n == 3) {
+        CHECK(!strcmp(paths[0], txt) && !strcmp(paths[1], good) && !strcmp(paths[2], corrupt));
+        int w, h;
+        float *f = model_image_read_float(paths[0], &w, &h);
+        CHECK(f == NULL);
+        CHECK_CONTAINS(model_last_error(), "not an image refl reads");
+        f = model_image_read_float(paths[1], &w, &h);
+        CHECK(f != NULL && w == 8 && f[63] == 63000);
+        free(f);
+        f = model_image_read_float(paths[2], &w, &h);
+        CHECK(f == NULL);
+        CHECK_CONTAINS(model_last_error(), "corrupt or truncated PNG");
+    }
+    model_image_list_free(paths, n);
+    char *pat = g_build_filename(dir, "*.png", NULL);
+    CHECK(model_image_list(pat, &paths, &n));
+    CHECK(n == 2);
+    model_image_list_free(paths, n);
+    char *none = g_build_filename(dir, "*.jpg", NULL);
+    CHECK(!model_image_list(none, &paths, &n));
+    CHECK_CONTAINS(model_last_error(), "matches no file");
+    CHECK(!model_image_list(sub, &paths, &n));
+    CHECK_CONTAINS(model_last_error(), "holds no files");
+    g_free(none);
+    g_free(pat);
+    g_free(good);
+    g_free(txt);
+    g_free(corrupt);
+    g_free(hidden);
+    g_free(sub);
+}
+
+// refl calib geometry --images DIR: the text file and the corrupt PNG are
+// skipped with their reasons; with no image left the run is an error.
+TEST(image_geometry_images_skips_with_reasons)
+{
+    const char *dir = test_path("geo_in");
+    CHECK(g_mkdir_with_parents(dir, 0755) == 0);
+    char *txt = g_build_filename(dir, "readme.txt", NULL), *corrupt = g_build_filename(dir, "broken.png", NULL);
+    char *good = g_build_filename(dir, "blank.png", NULL);
+    uint16_t pix[64 * 48];
+    for (int i = 0; i < 64 * 48; i++) pix[i] = (uint16_t)(100 + i % 5);
+    CHECK(model_png16_write(good, 64, 48, pix, NULL));
+    truncate_copy(good, corrupt, 0.5, -1);
+    CHECK(g_file_set_contents(txt, "notes\n", -1, NULL));
+    unlink(good);
+    char *out = NULL, *err = NULL;
+    int rc = test_refl_run(60, &out, &err, "calib", "geometry", "--images", dir, "-o", test_path("geo_out0"), NULL);
+    CHECK(rc == 1);
+    CHECK_CONTAINS(err, "skipped ");
+    CHECK_CONTAINS(err, "readme.txt: not an image refl reads");
+    CHECK_CONTAINS(err, "broken.png: corrupt or truncated PNG");
+    CHECK_CONTAINS(err, "none of its 2 files is an image");
+    free(out);
+    free(err);
+    // a bad --channel is a usage error
+    rc = test_refl_run(30, &out, &err, "calib", "geometry", "--images", dir, "--channel", "red", "-o",
+                       test_path("geo_out1"), NULL);
+    CHECK(rc == 2);
+    CHECK_CONTAINS(err, "--channel");
+    free(out);
+    free(err);
+    g_free(txt);
+    g_free(corrupt);
+    g_free(good);
+}
+
+// A chessboard of 10 x 10 inner corners drawn in the green channel only (red
+// and blue flat), as colour JPEG, PNG and 16-bit TIFF in one directory with a
+// text file: refl calib geometry --images DIR finds the board in all three
+// (luma), in none with --channel r.
+TEST(image_geometry_colour_boards_and_channel)
+{
+    enum { W = 640, H = 480, SQ = 30 };
+    uint8_t *rgb = malloc((size_t)W * H * 3);
+    for (int y = 0; y < H; y++)
+        for (int x = 0; x < W; x++) {
+            int bx = (x - 150) / SQ, by = (y - 70) / SQ;
+            bool on = x >= 150 && y >= 70 && bx < 11 && by < 11;
+            bool dark = on && (bx + by) % 2 == 0;
+            uint8_t *p = rgb + 3 * ((size_t)y * W + x);
+            p[0] = 200, p[1] = dark ? 20 : 235, p[2] = 120;
+        }
+    const char *dir = test_path("boards");
+    CHECK(g_mkdir_with_parents(dir, 0755) == 0);
+    char *pj = g_build_filename(dir, "board_a.jpg", NULL), *pp = g_build_filename(dir, "board_b.png", NULL);
+    char *pt = g_build_filename(dir, "board_c.tif", NULL), *px = g_build_filename(dir, "notes.txt", NULL);
+    CHECK(write_jpeg(pj, W, H, 3, rgb));
+    CHECK(write_png_raw(pp, W, H, 8, PNG_COLOR_TYPE_RGB, rgb, 3));
+    double *v = malloc((size_t)W * H * 3 * sizeof *v);
+    for (size_t i = 0; i < (size_t)W * H * 3; i++) v[i] = rgb[i] * 257.0;
+    CHECK(write_tiff_rgb(pt, W, H, 16, false, v));
+    CHECK(g_file_set_contents(px, "calibration notes\n", -1, NULL));
+    free(v);
+    free(rgb);
+    char *out = NULL, *err = NULL;
+    int rc = test_refl_run(120, &out, &err, "calib", "geometry", "--images", dir, "-o", test_path("geo_col"), NULL);
+    CHECK(rc == 1);   // three views are too few for a solve
+    CHECK_CONTAINS(err, "skipped ");
+    CHECK_CONTAINS(err, "notes.txt: not an image refl reads");
+    CHECK_CONTAINS(err, "the board was found in 3 of 3 images");
+    free(out);
+    free(err);
+    rc = test_refl_run(120, &out, &err, "calib", "geometry", "--images", dir, "--channel", "r", "-o",
+                       test_path("geo_col_r"), NULL);
+    CHECK(rc == 1);
+    CHECK_CONTAINS(err, "board_a.jpg): mrgingham found no 10x10 board");
+    CHECK_CONTAINS(err, "the board was found in 0 of 3 images");
+    free(out);
+    free(err);
+    g_free(pj);
+    g_free(pp);
+    g_free(pt);
+    g_free(px);
 }

@@ -1,5 +1,8 @@
 // tests/test_model_scene.c — D3D and OBJ readers, face checks, rotation, loading.
+#include <glib.h>
+#include <math.h>
 #include <stdlib.h>
+#include <string.h>
 
 #include "model/model.h"
 #include "tests/test.h"
@@ -378,11 +381,11 @@ TEST(scene_load_by_extension)
     model_scene_free(a);
     model_scene_free(b);
     model_error_clear();
-    CHECK(model_scene_load(px, NULL) == NULL);
-    CHECK_CONTAINS(model_last_error(), "cube.stl: unknown scene format '.stl'; name the file .d3d or .obj");
+    CHECK(model_scene_load(px, NULL) == NULL);   // named .stl: read as one, and refused as one
+    CHECK_CONTAINS(model_last_error(), "cube.stl: a truncated binary STL: its header announces");
     model_error_clear();
-    CHECK(model_scene_load(test_path("noext"), NULL) == NULL);
-    CHECK_CONTAINS(model_last_error(), "unknown scene format (no extension)");
+    CHECK(model_scene_load(test_write("noext", CUBE_D3D), NULL) == NULL);
+    CHECK_CONTAINS(model_last_error(), "unknown scene format (no extension): neither STL nor PLY by its content");
     model_error_clear();
     CHECK(model_scene_load(test_path("missing.d3d"), NULL) == NULL);
     CHECK_CONTAINS(model_last_error(), "missing.d3d: cannot open");
@@ -451,4 +454,391 @@ TEST_ALONE(scene_large_inputs_in_linear_time)
     }
     model_scene_free(s);
     free(t);
+}
+
+// ---------------------------------------------------------------------------
+// STL and PLY
+
+// The unit cube's faces as in CUBE_OBJ (0-based): bottom, top, front, back, left, right.
+static const double CUBE_V[8][3] = { { 0, 0, 0 }, { 1, 0, 0 }, { 1, 1, 0 }, { 0, 1, 0 },
+                                     { 0, 0, 1 }, { 1, 0, 1 }, { 1, 1, 1 }, { 0, 1, 1 } };
+static const int CUBE_F[6][4] = { { 0, 3, 2, 1 }, { 4, 5, 6, 7 }, { 0, 1, 5, 4 },
+                                  { 3, 7, 6, 2 }, { 0, 4, 7, 3 }, { 1, 2, 6, 5 } };
+
+static void put_f32(GByteArray *a, float f) { g_byte_array_append(a, (const guint8 *)&f, 4); }   // little-endian host
+static void put_u32(GByteArray *a, uint32_t u) { g_byte_array_append(a, (const guint8 *)&u, 4); }
+
+// The cube as 12 triangles (each quad a b c d as a b c, a c d), written as
+// ASCII STL, binary STL, and an OBJ / ASCII PLY / binary PLY with the
+// vertices in the order STL's corners first appear.
+typedef struct {
+    GString *stl, *obj, *ply;
+    GByteArray *stlb, *plyb;
+} cube_files_t;
+
+static cube_files_t cube_files(double scale)
+{
+    int tri[12][3], order[8], pos[8], n = 0;
+    for (int k = 0; k < 6; k++) {
+        const int *q = CUBE_F[k];
+        int a[3] = { q[0], q[1], q[2] }, b[3] = { q[0], q[2], q[3] };
+        memcpy(tri[2 * k], a, sizeof a);
+        memcpy(tri[2 * k + 1], b, sizeof b);
+    }
+    for (int i = 0; i < 8; i++) pos[i] = -1;
+    for (int t = 0; t < 12; t++)
+        for (int c = 0; c < 3; c++)
+            if (pos[tri[t][c]] < 0) pos[tri[t][c]] = n, order[n++] = tri[t][c];
+    cube_files_t f = { g_string_new("solid cube\n"), g_string_new(""), g_string_new(""), g_byte_array_new(),
+                       g_byte_array_new() };
+    guint8 header[80] = "solid binary written by the test (a header may begin with solid)";
+    g_byte_array_append(f.stlb, header, 80);
+    put_u32(f.stlb, 12);
+    for (int t = 0; t < 12; t++) {
+        g_string_append(f.stl, "  facet normal 0 0 0\n    outer loop\n");
+        for (int i = 0; i < 3; i++) put_f32(f.stlb, 0);
+        for (int c = 0; c < 3; c++) {
+            const double *v = CUBE_V[tri[t][c]];
+            g_string_append_printf(f.stl, "      vertex %g %g %g\n", v[0] * scale, v[1] * scale, v[2] * scale);
+            for (int i = 0; i < 3; i++) put_f32(f.stlb, (float)(v[i] * scale));
+        }
+        g_byte_array_append(f.stlb, (const guint8 *)"\0\0", 2);
+        g_string_append(f.stl, "    endloop\n  endfacet\n");
+    }
+    g_string_append(f.stl, "endsolid cube\n");
+    const char *ph = "ply\nformat %s 1.0\ncomment the test's cube\nelement vertex 8\nproperty float x\n"
+                     "property float y\nproperty float z\nproperty uchar red\nelement face 12\n"
+                     "property list uchar int vertex_indices\nend_header\n";
+    g_string_append_printf(f.ply, ph, "ascii");
+    char *hb = g_strdup_printf(ph, "binary_little_endian");
+    g_byte_array_append(f.plyb, (const guint8 *)hb, (guint)strlen(hb));
+    g_free(hb);
+    for (int i = 0; i < 8; i++) {
+        const double *v = CUBE_V[order[i]];
+        g_string_append_printf(f.obj, "v %g %g %g\n", v[0] * scale, v[1] * scale, v[2] * scale);
+        g_string_append_printf(f.ply, "%g %g %g 200\n", v[0] * scale, v[1] * scale, v[2] * scale);
+        for (int c = 0; c < 3; c++) put_f32(f.plyb, (float)(v[c] * scale));
+        g_byte_array_append(f.plyb, (const guint8 *)"\xc8", 1);
+    }
+    for (int t = 0; t < 12; t++) {
+        g_string_append_printf(f.obj, "f %d %d %d\n", pos[tri[t][0]] + 1, pos[tri[t][1]] + 1, pos[tri[t][2]] + 1);
+        g_string_append_printf(f.ply, "3 %d %d %d\n", pos[tri[t][0]], pos[tri[t][1]], pos[tri[t][2]]);
+        g_byte_array_append(f.plyb, (const guint8 *)"\x03", 1);
+        for (int c = 0; c < 3; c++) put_u32(f.plyb, (uint32_t)pos[tri[t][c]]);
+    }
+    return f;
+}
+
+static void cube_files_free(cube_files_t *f)
+{
+    g_string_free(f->stl, TRUE);
+    g_string_free(f->obj, TRUE);
+    g_string_free(f->ply, TRUE);
+    g_byte_array_free(f->stlb, TRUE);
+    g_byte_array_free(f->plyb, TRUE);
+}
+
+static void check_same_scene(const model_scene_t *a, const model_scene_t *b, const char *what)
+{
+    CHECK_MSG(a && b, "%s: %s", what, model_last_error());
+    if (!a || !b) return;
+    CHECK_MSG(a->nvertices == b->nvertices && a->nfaces == b->nfaces, "%s: %d/%d vertices, %d/%d faces", what,
+              a->nvertices, b->nvertices, a->nfaces, b->nfaces);
+    if (a->nvertices != b->nvertices || a->nfaces != b->nfaces) return;
+    for (int i = 0; i < a->nvertices; i++)
+        CHECK_MSG(a->vertices[i].x == b->vertices[i].x && a->vertices[i].y == b->vertices[i].y &&
+                  a->vertices[i].z == b->vertices[i].z, "%s: vertex %d", what, i + 1);
+    for (int k = 0; k < a->nfaces; k++) {
+        const model_face_t *f = &a->faces[k], *g = &b->faces[k];
+        CHECK_MSG(f->nverts == g->nverts && !memcmp(f->verts, g->verts, (size_t)f->nverts * sizeof(int)),
+                  "%s: face %d", what, k + 1);
+        CHECK_NEAR(f->normal.x, g->normal.x, 1e-12);
+        CHECK_NEAR(f->normal.y, g->normal.y, 1e-12);
+        CHECK_NEAR(f->normal.z, g->normal.z, 1e-12);
+        CHECK_NEAR(f->offset_mm, g->offset_mm, 1e-12);
+        CHECK(!strcmp(a->material_names[f->material], b->material_names[g->material]));
+    }
+}
+
+TEST(scene_stl_ply_cube_same_as_obj)
+{
+    cube_files_t f = cube_files(10);
+    model_scene_t *o = model_scene_parse_obj(f.obj->str, f.obj->len, "cube.obj", NULL);
+    CHECK_MSG(o != NULL, "%s", model_last_error());
+    CHECK(o && o->nvertices == 8 && o->nfaces == 12 && o->nmaterials == 1 && !strcmp(o->material_names[0], "default"));
+    model_scene_t *sa = model_scene_parse_stl(f.stl->str, f.stl->len, "cube.stl", NULL);
+    model_scene_t *sb = model_scene_parse_stl((const char *)f.stlb->data, f.stlb->len, "cubeb.stl", NULL);
+    model_scene_t *pa = model_scene_parse_ply(f.ply->str, f.ply->len, "cube.ply", NULL);
+    model_scene_t *pb = model_scene_parse_ply((const char *)f.plyb->data, f.plyb->len, "cubeb.ply", NULL);
+    check_same_scene(o, sa, "ASCII STL");
+    check_same_scene(o, sb, "binary STL");
+    check_same_scene(o, pa, "ASCII PLY");
+    check_same_scene(o, pb, "binary PLY");
+    char *up = g_ascii_strup(f.stl->str, -1);   // keywords in capitals, as some writers have them
+    model_scene_t *su = model_scene_parse_stl(up, strlen(up), "CUBE.STL", NULL);
+    check_same_scene(o, su, "ASCII STL in capitals");
+    model_scene_free(su);
+    g_free(up);
+    if (sa) CHECK(sa->faces[0].line == 2);   // ASCII: the facet's line
+    if (sb) CHECK(sb->faces[0].line == 0);   // binary: no line
+    model_scene_free(sa);
+    model_scene_free(sb);
+    model_scene_free(pa);
+    model_scene_free(pb);
+
+    // Loaded from files, told by content: the binary STL named .dat, the PLY named .obj.
+    const char *p1 = test_path("cube_bin.dat"), *p2 = test_path("cube_ply.obj"), *p3 = test_write("c.stl", f.stl->str);
+    CHECK(g_file_set_contents(p1, (const char *)f.stlb->data, f.stlb->len, NULL));
+    CHECK(g_file_set_contents(p2, (const char *)f.plyb->data, f.plyb->len, NULL));
+    model_scene_t *l1 = model_scene_load(p1, NULL), *l2 = model_scene_load(p2, NULL), *l3 = model_scene_load(p3, NULL);
+    check_same_scene(o, l1, "binary STL file");
+    check_same_scene(o, l2, "binary PLY file");
+    check_same_scene(o, l3, "ASCII STL file");
+    if (l1) CHECK(l1->warning[0] == 0);   // 10 mm: no units warning
+    model_scene_free(l1);
+    model_scene_free(l2);
+    model_scene_free(l3);
+    model_scene_free(o);
+    cube_files_free(&f);
+
+    // PLY polygons: the quad cube, as the OBJ and D3D cubes
+    GString *q = g_string_new("ply\nformat ascii 1.0\nelement vertex 8\nproperty double x\nproperty double y\n"
+                              "property double z\nelement face 6\nproperty list uchar uint vertex_index\n"
+                              "element edge 1\nproperty int vertex1\nproperty int vertex2\nend_header\n");
+    for (int i = 0; i < 8; i++) g_string_append_printf(q, "%g %g %g\n", CUBE_V[i][0], CUBE_V[i][1], CUBE_V[i][2]);
+    for (int k = 0; k < 6; k++)
+        g_string_append_printf(q, "4 %d %d %d %d\n", CUBE_F[k][0], CUBE_F[k][1], CUBE_F[k][2], CUBE_F[k][3]);
+    g_string_append(q, "0 1\n");
+    model_scene_t *pq = model_scene_parse_ply(q->str, q->len, "quads.ply", NULL);
+    CHECK_MSG(pq != NULL, "%s", model_last_error());
+    if (pq) check_cube(pq);
+    model_scene_free(pq);
+    g_string_free(q, TRUE);
+}
+
+TEST(scene_units_scale_and_warning)
+{
+    double u = 0;
+    CHECK(model_units_parse("m", &u) && u == 1000);
+    CHECK(model_units_parse("in", &u) && u == 25.4);
+    CHECK(model_units_parse("mm", &u) && u == 1);
+    CHECK(!model_units_parse("cm", &u));
+    cube_files_t f = cube_files(0.1);   // a 100 mm cube drawn in metres
+    const char *pstl = test_path("m.stl"), *pply = test_write("m.ply", f.ply->str), *pobj = test_write("m.obj", f.obj->str);
+    CHECK(g_file_set_contents(pstl, (const char *)f.stlb->data, f.stlb->len, NULL));
+    const char *paths[3] = { pstl, pply, pobj };
+    for (int i = 0; i < 3; i++) {
+        model_scene_t *d = model_scene_load(paths[i], NULL);   // no unit: read as mm, with the warning
+        CHECK_MSG(d != NULL, "%s", model_last_error());
+        if (d) {
+            CHECK_CONTAINS(d->warning, "spans 0.1 mm");
+            CHECK_CONTAINS(d->warning, "--units m");
+        }
+        model_scene_options_t o = MODEL_SCENE_OPTIONS_DEFAULT;
+        o.unit_mm = 1000;
+        model_scene_t *m = model_scene_load(paths[i], &o);
+        CHECK_MSG(m != NULL, "%s", model_last_error());
+        if (d && m) {
+            CHECK(m->warning[0] == 0);
+            double mx = 0;
+            for (int k = 0; k < m->nvertices; k++) {
+                CHECK_NEAR(m->vertices[k].x, 1000 * d->vertices[k].x, 1e-9);
+                mx = fmax(mx, m->vertices[k].z);
+            }
+            CHECK_NEAR(mx, 100, 1e-4);   // float STL: 0.1 is not exact
+            CHECK_NEAR(m->faces[1].offset_mm, 1000 * d->faces[1].offset_mm, 1e-6);
+        }
+        o.unit_mm = 25.4;
+        model_scene_t *in = model_scene_load(paths[i], &o);
+        if (in && d) CHECK_NEAR(in->vertices[1].y, 25.4 * d->vertices[1].y, 1e-9);
+        o.unit_mm = 1;   // mm said explicitly: no warning
+        model_scene_t *mm = model_scene_load(paths[i], &o);
+        if (mm) CHECK(mm->warning[0] == 0);
+        model_scene_free(d);
+        model_scene_free(m);
+        model_scene_free(in);
+        model_scene_free(mm);
+    }
+    model_scene_options_t bad = { .planarity_tol_mm = 0.01, .unit_mm = -1 };
+    CHECK(model_scene_load(pobj, &bad) == NULL);
+    CHECK_CONTAINS(model_last_error(), "unit");
+    cube_files_free(&f);
+}
+
+static void expect_mesh_error(bool stl, const void *data, size_t len, const char *a, const char *b)
+{
+    model_error_clear();
+    if (len == 0) len = strlen(data);
+    model_scene_t *s = stl ? model_scene_parse_stl(data, len, "bad.stl", NULL)
+                           : model_scene_parse_ply(data, len, "bad.ply", NULL);
+    CHECK_MSG(s == NULL, "accepted: expected '%s'", a);
+    model_scene_free(s);
+    CHECK_CONTAINS(model_last_error(), a);
+    if (b) CHECK_CONTAINS(model_last_error(), b);
+}
+
+TEST(scene_stl_ply_errors)
+{
+    cube_files_t f = cube_files(10);
+    const char *sb = (const char *)f.stlb->data;
+    // binary STL: truncated inside triangle 12, a header alone, bytes left over
+    expect_mesh_error(true, sb, f.stlb->len - 20, "bad.stl: a truncated binary STL: its header announces 12 triangles",
+                      "inside triangle 12, at byte offset 664");
+    expect_mesh_error(true, sb, 50, "truncated", NULL);   // 50 bytes of "solid ...": a cut ASCII or binary STL
+    GByteArray *more = g_byte_array_new();
+    g_byte_array_append(more, f.stlb->data, f.stlb->len);
+    g_byte_array_append(more, (const guint8 *)"xyz", 3);
+    expect_mesh_error(true, more->data, more->len, "3 bytes after the last triangle", NULL);
+    // a non-finite coordinate (triangle 2, vertex 1, x at byte 84 + 50 + 12)
+    memcpy(more->data + 146, &(float){ NAN }, 4);
+    expect_mesh_error(true, more->data, f.stlb->len, "bad.stl: byte offset 146: triangle 2, vertex 1", "not a finite");
+    // a degenerate triangle: its byte offset
+    memcpy(more->data, f.stlb->data, f.stlb->len);
+    memcpy(more->data + 84 + 50 + 24, more->data + 84 + 50 + 12, 12);   // corner 2 = corner 1
+    expect_mesh_error(true, more->data, f.stlb->len, "bad.stl: byte offset 134: face 2 uses vertex", NULL);
+    g_byte_array_free(more, TRUE);
+    // ASCII STL: line numbers
+    expect_mesh_error(true, "solid x\n facet normal 0 0 1\n  outer loop\n   vertex 0 0 0\n   vertex 1 0 0\n"
+                      "   vertex 0 1 0\n   vertex 1 1 0\n", 0, "bad.stl:7: facet 1 has more than 3 vertices", NULL);
+    expect_mesh_error(true, "solid x\n facet normal 0 0 1\n  outer loop\n   vertex 0 0 zero\n", 0,
+                      "bad.stl:4: facet 1: 'vertex x y z' needs three finite numbers", NULL);
+    const char *cut = "solid x\n facet normal 0 0 1\n  outer loop\n   vertex 0 0 0\n";
+    expect_mesh_error(true, cut, strlen(cut), "the file ends inside a solid", NULL);
+    const char *kw = "solid x\n facet normal 0 0 1\n  polygon\n";
+    expect_mesh_error(true, kw, strlen(kw), "bad.stl:3: 'polygon' is not an ASCII STL keyword", NULL);
+    // PLY: a face index out of range (ASCII: line; binary: byte offset)
+    GString *p = g_string_new(f.ply->str);
+    char *at = strstr(p->str, "3 0 1 2\n");
+    CHECK(at != NULL);
+    if (at) at[6] = '9';   // "3 0 1 9": the first face (11 header lines, 8 vertices: line 20)
+    expect_mesh_error(false, p->str, p->len, "bad.ply:20: face 1: vertex index 9 is out of range", "8 vertices");
+    g_string_free(p, TRUE);
+    GByteArray *bp = g_byte_array_new();
+    g_byte_array_append(bp, f.plyb->data, f.plyb->len);
+    size_t body = (size_t)(strstr((const char *)bp->data, "end_header\n") - (const char *)bp->data) + 11;
+    size_t face1 = body + 8 * 13;
+    memcpy(bp->data + face1 + 1 + 4, &(uint32_t){ 4000u }, 4);
+    expect_mesh_error(false, bp->data, bp->len, "byte offset", "vertex index 4000 is out of range");
+    char want[64];
+    snprintf(want, sizeof want, "bad.ply: byte offset %zu: face 1", face1);
+    expect_mesh_error(false, bp->data, bp->len, want, NULL);
+    expect_mesh_error(false, f.plyb->data, f.plyb->len - 3, "a truncated binary PLY", "inside face 12 of 12");
+    g_byte_array_free(bp, TRUE);
+    const char *be = "ply\nformat binary_big_endian 1.0\nelement vertex 0\nend_header\n";
+    expect_mesh_error(false, be, strlen(be), "bad.ply:2: PLY format 'binary_big_endian'", NULL);
+    const char *two = "ply\nformat ascii 1.0\nelement vertex 0\nproperty float x\nelement vertex 0\nend_header\n";
+    expect_mesh_error(false, two, strlen(two), "bad.ply:5: a second 'vertex' element", NULL);
+    const char *nox = "ply\nformat ascii 1.0\nelement vertex 1\nproperty float y\nproperty float z\nend_header\n";
+    expect_mesh_error(false, nox, strlen(nox), "bad.ply:6: the vertex element lacks property x", NULL);
+    const char *shortp = "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
+                         "property float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n"
+                         "0 0 0\n1 0 0\n";
+    expect_mesh_error(false, shortp, strlen(shortp), "bad.ply:11: the file ends at vertex 3 of 3", NULL);
+    cube_files_free(&f);
+}
+
+// refl render of one box as an OBJ in mm, a PLY in metres (--units m) and a
+// binary STL in inches (--units in): the same image; the PLY without --units
+// is read as mm with a warning.
+TEST(scene_render_units_cli)
+{
+    GString *objt = g_string_new(""), *plyt = g_string_new("ply\nformat ascii 1.0\nelement vertex 8\nproperty double x\n"
+                                                          "property double y\nproperty double z\nelement face 6\n"
+                                                          "property list uchar int vertex_indices\nend_header\n");
+    GByteArray *stl = g_byte_array_new();
+    guint8 header[80] = "box in inches";
+    g_byte_array_append(stl, header, 80);
+    put_u32(stl, 12);
+    double V[8][3];
+    for (int i = 0; i < 8; i++) {
+        V[i][0] = CUBE_V[i][0] * 100 - 50, V[i][1] = CUBE_V[i][1] * 80 - 40, V[i][2] = CUBE_V[i][2] * 60;
+        g_string_append_printf(objt, "v %.17g %.17g %.17g\n", V[i][0], V[i][1], V[i][2]);
+        g_string_append_printf(plyt, "%.17g %.17g %.17g\n", V[i][0] / 1000, V[i][1] / 1000, V[i][2] / 1000);
+    }
+    for (int k = 0; k < 6; k++) {
+        const int *q = CUBE_F[k];
+        g_string_append_printf(objt, "f %d %d %d %d\n", q[0] + 1, q[1] + 1, q[2] + 1, q[3] + 1);
+        g_string_append_printf(plyt, "4 %d %d %d %d\n", q[0], q[1], q[2], q[3]);
+        const int tri[2][3] = { { q[0], q[1], q[2] }, { q[0], q[2], q[3] } };
+        for (int t = 0; t < 2; t++) {
+            for (int i = 0; i < 3; i++) put_f32(stl, 0);
+            for (int c = 0; c < 3; c++)
+                for (int i = 0; i < 3; i++) put_f32(stl, (float)(V[tri[t][c]][i] / 25.4));
+            g_byte_array_append(stl, (const guint8 *)"\0\0", 2);
+        }
+    }
+    const char *pobj = test_write("box.obj", objt->str), *pply = test_write("box.ply", plyt->str);
+    const char *pstl = test_path("box.stl");
+    CHECK(g_file_set_contents(pstl, (const char *)stl->data, stl->len, NULL));
+    char cam[1024], lamps[1024], mats[1024];
+    snprintf(cam, sizeof cam, "%s/examples/camera.cameramodel", test_srcdir());
+    snprintf(lamps, sizeof lamps, "%s/examples/lamps.ini", test_srcdir());
+    snprintf(mats, sizeof mats, "%s/examples/materials.ini", test_srcdir());
+    const char *scenes[3] = { pobj, pply, pstl }, *units[3] = { "mm", "m", "in" };
+    const char *outs[3] = { test_path("box_obj.png"), test_path("box_ply.png"), test_path("box_stl.png") };
+    uint16_t *pix[3] = { NULL, NULL, NULL };
+    int w = 0, h = 0;
+    for (int i = 0; i < 3; i++) {
+        char *out = NULL, *err = NULL;
+        int rc = test_refl_run(120, &out, &err, "render", scenes[i], "--units", units[i], "--camera", cam, "--lamps",
+                               lamps, "--materials", mats, "--threads", "2", "-o", outs[i], NULL);
+        CHECK_MSG(rc == 0, "%s: exit %d: %s", scenes[i], rc, err ? err : "");
+        CHECK(err == NULL || strstr(err, "warning") == NULL);
+        CHECK(model_png_read(outs[i], &w, &h, &pix[i]));
+        free(out);
+        free(err);
+    }
+    if (pix[0] && pix[1] && pix[2]) {
+        long lit = 0, diff1 = 0, diff2 = 0;
+        for (int k = 0; k < w * h; k++) {
+            lit += pix[0][k] > 100;
+            diff1 += abs((int)pix[1][k] - (int)pix[0][k]) > 2;
+            diff2 += abs((int)pix[2][k] - (int)pix[0][k]) > 2;
+        }
+        CHECK_MSG(lit > 1000, "the box covers %ld bright pixels", lit);
+        CHECK_MSG(diff1 <= lit / 1000 && diff2 <= lit / 1000, "pixels that differ: PLY %ld, STL %ld (of %ld)", diff1,
+                  diff2, lit);
+    }
+    for (int i = 0; i < 3; i++) free(pix[i]);
+    char *out = NULL, *err = NULL;
+    int rc = test_refl_run(120, &out, &err, "render", pply, "--camera", cam, "--lamps", lamps, "--materials", mats,
+                           "--threads", "2", "-o", test_path("box_tiny.png"), NULL);
+    CHECK(rc == 0);
+    CHECK_CONTAINS(err, "box.ply: warning: the whole scene spans 0.1 mm");
+    CHECK_CONTAINS(err, "--units m");
+    free(out);
+    free(err);
+    rc = test_refl_run(30, &out, &err, "render", pply, "--units", "cm", "--camera", cam, "--lamps", lamps,
+                       "--materials", mats, "-o", test_path("box_cm.png"), NULL);
+    CHECK(rc == 2);
+    CHECK_CONTAINS(err, "--units: 'cm' is none of mm, m, in");
+    free(out);
+    free(err);
+    g_string_free(objt, TRUE);
+    g_string_free(plyt, TRUE);
+    g_byte_array_free(stl, TRUE);
+}
+
+// --units on every command that reads a scene: a unit refl does not know is a usage error.
+TEST(scene_units_option_on_every_scene_command)
+{
+    const char *cmds[][14] = {
+        { "edges", "s.ply", "--camera", "c", "--lamps", "l", "--materials", "m", "--units", "ft", NULL },
+        { "plan", "lamps", "s.ply", "--camera", "c", "--lamps", "l", "--materials", "m", "-o", "D", "--units", "ft",
+          NULL },
+        { "fit", "material", "S", "--calib", "C", "--scene", "s.stl", "-o", "p.json", "--units", "ft", NULL },
+        { "calib", "white", "S", "--calib", "C", "--scene", "s.stl", "-o", "w.json", "--units", "ft", NULL },
+    };
+    for (size_t k = 0; k < sizeof cmds / sizeof cmds[0]; k++) {
+        const char *argv[16] = { test_refl() };
+        int n = 1;
+        for (int i = 0; cmds[k][i]; i++) argv[n++] = cmds[k][i];
+        argv[n] = NULL;
+        char *out = NULL, *err = NULL;
+        int rc = test_run(argv, 30, &out, &err);
+        CHECK_MSG(rc == 2, "refl %s %s: exit %d: %s", cmds[k][0], cmds[k][1], rc, err ? err : "");
+        CHECK_CONTAINS(err, "--units: 'ft' is none of mm, m, in");
+        free(out);
+        free(err);
+    }
 }
