@@ -195,6 +195,8 @@ int verify_cmd(int argc, char **argv)
         MODEL_OPT_DOUBLE("--exposure-us", "T", "exposure of every image", &o.exposure_us, 1e-3, 1e9),
         MODEL_OPT_DOUBLE("--gain-db", "G", "gain of every image, dB (taken relative to the gain calibration's)",
                          &o.gain_db, 0, 60),
+        MODEL_OPT_UNITS,
+        MODEL_OPT_CHANNEL,
         MODEL_OPT_DOUBLE("--placement-tolerance-mm", "D", "the part's placement is registered to the images "
                          "within +-D mm in x and y before the fit (3; 0 with --placement-tolerance-deg 0: as "
                          "described)", &o.placement_tol_mm, 0, 50),
@@ -246,6 +248,7 @@ int verify_cmd(int argc, char **argv)
                         .nopts = MODEL_NOPTS(opts), .min_positional = 0, .max_positional = MODEL_CLI_POSITIONAL_MAX, .repeat_ok = true };
     int rc = model_cli_parse(&cli, argc, argv);
     if (rc != MODEL_CLI_OK) return rc;
+    if ((rc = model_cli_units(&cli, &o.scene_unit_mm)) || (rc = model_cli_channel(&cli))) return rc;
     o.nimages = images.n;
     o.npriors = priors.n;
     o.ncameras = cameras.n;

@@ -299,7 +299,8 @@ double verify_median(double *v, int n);
 enum { VERIFY_FILES_MAX = 64 };   // images, cameras, priors files, gain calibrations
 
 typedef struct {
-    const char *scene;                             // the description: D3D or OBJ, rig frame, mm
+    const char *scene;                             // the description: D3D, OBJ, STL or PLY, rig frame
+    double      scene_unit_mm;                     // mm per unit of the scene file (0: mm, not said; --units)
     const char *images[VERIFY_FILES_MAX];          // 16-bit PNG frames of refl capture / refl rig snap (angle,
     int         nimages;                           // lamps, exposure, gain in their text chunks), or float TIFFs
     const char *priors[VERIFY_FILES_MAX];          // priors files (every material of the scene, each once)

@@ -117,7 +117,9 @@ static void vf_free(vf_t *V)
 static bool vf_scene_priors(vf_t *V)
 {
     const verify_files_opts_t *o = V->o;
-    if (!(V->scene = model_scene_load(o->scene, NULL))) return false;
+    model_scene_options_t so = MODEL_SCENE_OPTIONS_DEFAULT;
+    so.unit_mm = o->scene_unit_mm;
+    if (!(V->scene = model_scene_load(o->scene, &so))) return false;
     model_provenance_input(V->prov, "scene", o->scene);
     for (int k = 0; k < o->npriors; k++) {
         if (!verify_priors_load(&V->pr, o->priors[k])) return false;

@@ -828,6 +828,7 @@ TEST(scene_units_option_on_every_scene_command)
           NULL },
         { "fit", "material", "S", "--calib", "C", "--scene", "s.stl", "-o", "p.json", "--units", "ft", NULL },
         { "calib", "white", "S", "--calib", "C", "--scene", "s.stl", "-o", "w.json", "--units", "ft", NULL },
+        { "verify", "s.stl", "--images", "i.png", "--priors", "p.json", "-o", "D", "--units", "ft", NULL },
     };
     for (size_t k = 0; k < sizeof cmds / sizeof cmds[0]; k++) {
         const char *argv[16] = { test_refl() };
