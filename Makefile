@@ -104,6 +104,7 @@ CALIB_SRC := \
     calib/geometry.c \
     calib/geometry_diff.c \
     calib/lamps.c \
+    calib/lamps_pattern.c \
     calib/gain.c \
     calib/white.c \
     calib/cmd_calib.c \

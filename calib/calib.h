@@ -26,6 +26,7 @@ extern "C" {
 int calib_cmd(int argc, char **argv);
 int calib_cmd_geometry(int argc, char **argv);
 int calib_cmd_lamps(int argc, char **argv);
+int calib_cmd_pattern(int argc, char **argv);   // the lamps' emission patterns (calib/cmd_lamps.c)
 int calib_cmd_gain(int argc, char **argv);
 
 // ---------------------------------------------------------------------------
@@ -51,7 +52,8 @@ int calib_capture(const char *rig_path, const char *dir, const char *name, const
 // dark level (the gain calibration's offset map, else the session's dark frame
 // of that exposure), divided by the flat field g (the gain calibration's map,
 // when given), per microsecond of exposure and at 0 dB: s = (P - Pa) / (g t 10^(G/20))
-// in DN/us. Exposure brackets are merged to high dynamic range by keeping, per
+// in DN/us, divided by the lamp's emission pattern toward the window (lamps.json's
+// emission_cos_power and emission_axis; 1 for an isotropic lamp). Exposure brackets are merged to high dynamic range by keeping, per
 // window, angle and lamp, the longest exposure whose window stays below 95 % of
 // saturation.
 //   reference white of albedo a (Lambertian, kd = a/pi): kcI_i = s d^2 / (kd n.l)
@@ -61,7 +63,7 @@ int calib_capture(const char *rig_path, const char *dir, const char *name, const
 // calib/calset.c).
 typedef struct {
     model_camera_t *cam;            // geometry: camera.cameramodel (extrinsics in the rig frame)
-    model_lamps_t  *lamps;          // lamps.json positions (intensity 1, point lamps)
+    model_lamps_t  *lamps;          // lamps.json positions (intensity 1) and emission patterns (n = 0: isotropic)
     float          *offset_dn;      // gain calibration: dark offset map (NULL: use dark frames)
     float          *flat;           // gain calibration: flat field g(x,y), mean 1 (NULL: 1)
     double          saturation_dn;  // 0: from the frame's bits
@@ -110,7 +112,10 @@ typedef struct {
     bool            has_disc;       // lit by a finite lamp near the mirror direction: disc holds the
     model_cosines_t disc[4];        // cosines of its 4 quadrature directions (fit_samples_t)
     double          d_mm;
-    double          s_dn_per_us;    // dark and flat corrected signal per us at 0 dB
+    double          s_dn_per_us;    // dark and flat corrected signal per us at 0 dB, divided by the lamp's
+                                    // emission pattern toward the window (emission below): the signal of
+                                    // the lamp's on-axis intensity
+    double          emission;       // that factor, model_lamp_emission (exactly 1 for an isotropic lamp)
     double          s_std;          // its expected temporal noise (shot, read, quantisation of the
                                     // window mean; dark level noise-free), same unit; 0 without K
     int             step;           // the session step of the frame

@@ -13,6 +13,7 @@
 #include <stdbool.h>
 #include <stdio.h>
 
+#include "calib/calib.h"
 #include "model/model.h"
 #include "rig/rig.h"
 
@@ -304,6 +305,45 @@ bool calib_lamps_write_json(const calib_lamps_opts_t *o, calib_lamps_result_t *r
 // Stage 6: o->out/report_data.json, its plots (scripts/calib_lamps_report.py)
 // and o->out/report.html.
 bool calib_lamps_write_report(const calib_lamps_opts_t *o, calib_lamps_result_t *r);
+
+// ---------------------------------------------------------------------------
+// The lamps' emission patterns (calib/lamps_pattern.c; `refl calib pattern`)
+//
+// A flat Lambertian target of albedo A (the reference white) lit by each lamp
+// alone (at one or more turntable angles): each window's irradiance relative to
+// the lamp's on-axis intensity, y = s d^2 / (kd n.l) (kd = A/pi; s the raw
+// signal, calib_obs_t's times its emission), is fitted per lamp with the
+// model's pattern y = kcI max(0, a.u)^n (u the unit direction from the lamp to
+// the window): log residuals weighted by each window's noise (floor 0.1 %),
+// Levenberg-Marquardt in ln kcI, n >= 0 and the axis (two tilts across the
+// windows' mean direction, prior N(0, 45 deg) that only matters where n ~ 0),
+// started at n = 0.5, 3, 10, 30 (the best kept), windows beyond 5 robust std
+// dropped (at most a fifth) and fitted again.
+typedef struct {
+    char         name[64];
+    bool         fitted;              // false: fewer than 20 windows (the lamp's entry is left as it was)
+    int          nwindows, rejected;  // windows of the lamp (in the fit) and those dropped
+    double       n, n_std;            // emission_cos_power and its 1-sigma
+    model_vec3_t axis;                // emission_axis (unit, rig frame)
+    double       axis_std_deg;        // the axis's 1-sigma (the larger of its two tilts)
+    double       tilt_deg;            // the axis against the direction from the lamp to the rig origin
+    model_vec3_t cone_centre;         // the windows' mean direction from the lamp
+    double       cone_half_angle_deg; // the largest angle of a window's direction from it: the measured cone
+    double       kcI_axis_per_us;     // the on-axis kc*I the albedo implies (DN/us at 0 dB per (1/sr)/mm^2)
+    double       rms_rel;             // RMS relative residual of the windows
+    double       irradiance_std_rel;  // the largest relative 1-sigma of the fitted irradiance over the windows
+} calib_lamps_pattern_t;
+
+// Each lamp of cal (out: cal->lamps->n) from obs (calib_observe of the target
+// through cal). false (model_error_set) on a singular fit or out of memory.
+bool calib_lamps_pattern_fit(const calib_obs_set_t *obs, const calib_set_t *cal, double albedo,
+                             calib_lamps_pattern_t *out);
+// cal's lamps.json (cal->lamps->path) with each fitted lamp's
+// emission_cos_power, emission_axis and emission (the figures above), the
+// conventions, the session and the provenance, written to out_json (may be
+// the same file; atomic). false + message.
+bool calib_lamps_pattern_write(const calib_set_t *cal, const calib_lamps_pattern_t *pat, const char *session,
+                               const char *out_json, json_t *provenance);
 
 #ifdef __cplusplus
 }

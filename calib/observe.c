@@ -227,10 +227,14 @@ static bool window_observation(const observe_t *ob, const rig_frame_row_t *r, in
     // narrow lobe changes over the lamp's disc) gets its disc's cosines
     model_vec3_t dl[4];
     bool has_disc = c.nh > cos(20 * M_PI / 180) && model_lamp_disc_dirs(L->l, L->d_mm, cal->lamp_radius_mm[lamp], dl);
+    // the lamp's emission pattern toward the window (1: isotropic) is divided
+    // out, as the flat field is: s is the signal of the lamp's on-axis intensity
+    double em = model_lamp_emission(&cal->lamps->lamps[lamp], p->p_mm);
+    if (!(em > 1e-6)) return false;   // outside the lamp's beam
     *obs = (calib_obs_t){ .lamp = lamp, .angle_deg = r->measured_deg, .exposure_us = r->exposure_us,
                           .gain_db = 20 * log10(gf), .q = { w->q[0], w->q[1] }, .c = c, .d_mm = L->d_mm,
-                          .s_dn_per_us = sig / (sg / n) / (r->exposure_us * gf), .step = r->step,
-                          .face = p->face, .has_disc = has_disc };
+                          .s_dn_per_us = sig / (sg / n) / (r->exposure_us * gf * em), .emission = em,
+                          .step = r->step, .face = p->face, .has_disc = has_disc };
     for (int k = 0; has_disc && k < 4; k++) obs->disc[k] = model_cosines(p->n, dl[k], p->v);
     // the point at angle 0: turned back about the table's axis (z)
     double ca = cos(-r->measured_deg * M_PI / 180), sa = sin(-r->measured_deg * M_PI / 180);
@@ -242,7 +246,7 @@ static bool window_observation(const observe_t *ob, const rig_frame_row_t *r, in
         // per pixel: shot noise K*signal (K scales with the gain), read noise, quantisation
         double K = cal->gain_dn_per_e * gf, rd = K * cal->read_noise_e;
         double var = (K * sig + rd * rd + 1.0 / 12) / n;
-        obs->s_std = sqrt(var) / (sg / n) / (r->exposure_us * gf);
+        obs->s_std = sqrt(var) / (sg / n) / (r->exposure_us * gf * em);
     }
     return true;
 }

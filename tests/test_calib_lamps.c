@@ -23,6 +23,7 @@
 #include "calib/lamps.h"
 #include "model/lsq.h"
 #include "model/model.h"
+#include "model/vec.h"
 #include "tests/test.h"
 
 #define CAMERA "/examples/camera.cameramodel"
@@ -766,4 +767,247 @@ TEST(calib_lamps_bad_arguments)
     CHECK_CONTAINS(o, "--sphere-path fit|fixed");
     g_free(o);
     g_free(e);
+}
+
+// ---------------------------------------------------------------------------
+// The lamps' emission patterns (refl calib pattern): the reference white at
+// three angles on a virtual rig whose lamps each have their own pattern and
+// tilt; the measured pattern against the truth's over the samples' region.
+
+// Each lamp's pattern of the test's truth: cos power n and the axis turned
+// tilt degrees from the direction toward the rig origin (toward +z x d).
+static const struct { const char *name; double n, tilt_deg; } PAT_TRUE[5] = {
+    { "east", 4.8, 15 }, { "south", 2.0, 8 }, { "west", 8.0, 20 }, { "north", 1.0, 0 }, { "rim", 4.8, 10 },
+};
+
+// The example truth with PAT_TRUE's patterns (and, when drift, lamp east's
+// drift), vignetting off (a lab's gain calibration corrects it with its flat
+// field; here the calibration set has none).
+static const char *pattern_truth(const char *name, const char *extra)
+{
+    const char *t0 = truth_file("truth0.ini", 0);
+    char *text = model_read_file(t0, NULL);
+    model_ini_t *ti = model_ini_load(t0);
+    model_lamps_t *tl = ti ? model_lamps_from_ini(ti) : NULL;
+    GString *g = g_string_new(text ? text : "");
+    for (int l = 0; tl && l < 5; l++) {
+        int k = model_lamps_find(tl, PAT_TRUE[l].name);
+        if (k < 0) continue;
+        model_vec3_t d = v3_unit(v3_scale(tl->lamps[k].position_mm, -1));
+        model_vec3_t e = v3_unit(v3_cross(v3(0, 0, 1), d));
+        double a = PAT_TRUE[l].tilt_deg * M_PI / 180;
+        model_vec3_t ax = v3_add(v3_scale(d, cos(a)), v3_scale(e, sin(a)));
+        char hdr[80], rep[300];
+        snprintf(hdr, sizeof hdr, "[lamp %s]\n", PAT_TRUE[l].name);
+        snprintf(rep, sizeof rep, "[lamp %s]\nemission_cos_power = %g\nemission_axis = %.9f %.9f %.9f\n",
+                 PAT_TRUE[l].name, PAT_TRUE[l].n, ax.x, ax.y, ax.z);
+        g_string_replace(g, hdr, rep, 1);
+    }
+    g_string_replace(g, "vignetting = 0.1\n", "vignetting = 0\n", 1);
+    if (extra) g_string_append(g, extra);
+    const char *p = test_write(name, g->str);
+    g_string_free(g, TRUE);
+    model_lamps_free(tl);
+    model_ini_free(ti);
+    free(text);
+    return p;
+}
+
+// A calibration directory: the truth's camera model and the truth's lamp
+// positions (the positions' own accuracy is calib_lamps_virtual_rig_accuracy's).
+static char *pattern_calib(const model_lamps_t *tl)
+{
+    char *cam = src(CAMERA), *text = model_read_file(cam, NULL);
+    g_mkdir_with_parents(test_path("cal"), 0755);
+    test_write("cal/camera.cameramodel", text);
+    free(text);
+    g_free(cam);
+    GString *g = g_string_new("{\"lamps\": [");
+    for (int i = 0; i < tl->n; i++)
+        g_string_append_printf(g, "%s{\"name\": \"%s\", \"position_mm\": [%.6f, %.6f, %.6f], \"radius_mm\": 15}",
+                               i ? ", " : "", tl->lamps[i].name, tl->lamps[i].position_mm.x,
+                               tl->lamps[i].position_mm.y, tl->lamps[i].position_mm.z);
+    g_string_append(g, "]}\n");
+    test_write("cal/lamps.json", g->str);
+    g_string_free(g, TRUE);
+    return g_strdup(test_path("cal"));
+}
+
+// kc*I per lamp of a white.json (by the truth's lamp order; 0 where absent).
+static void white_kcI(const char *path, const model_lamps_t *tl, double *kcI)
+{
+    json_t *w = json_load_file(path, 0, NULL);
+    for (int l = 0; l < tl->n; l++) {
+        kcI[l] = 0;
+        size_t i;
+        json_t *e;
+        json_array_foreach(json_object_get(w, "lamps"), i, e)
+            if (!strcmp(json_string_value(json_object_get(e, "name")), tl->lamps[l].name))
+                kcI[l] = json_number_value(json_object_get(e, "kc_I_per_us"));
+    }
+    json_decref(w);
+}
+
+// The largest relative error of the irradiance kcI E(p) of lamp ml (kcI
+// measured, E its pattern) against the truth's (kc 1e-4 per us times I, E the
+// truth's) over the samples' region: x, y in [-60, 60] mm, z 5 and 50 mm.
+static double irradiance_error(const model_lamp_t *ml, double kcI, const model_lamp_t *tl)
+{
+    double worst = 0;
+    for (int ix = -3; ix <= 3; ix++)
+        for (int iy = -3; iy <= 3; iy++)
+            for (int iz = 0; iz < 2; iz++) {
+                model_vec3_t p = v3(20 * ix, 20 * iy, iz ? 50 : 5);
+                double m = kcI * model_lamp_emission(ml, p), t = 1e-4 * tl->intensity * model_lamp_emission(tl, p);
+                worst = fmax(worst, fabs(m / t - 1));
+            }
+    return worst;
+}
+
+TEST_LONG(calib_lamps_pattern_virtual_white)
+{
+    double t0 = model_now_s();
+    char *truth = g_strdup(pattern_truth("truth.ini", NULL));
+    char *rig = g_strdup(rig_file("rig.ini", truth));
+    model_ini_t *ti = model_ini_load(truth);
+    model_lamps_t *tl = ti ? model_lamps_from_ini(ti) : NULL;
+    CHECK(tl && tl->n == 5);
+    if (!tl) return;
+    char *cal = pattern_calib(tl);
+    // examples/plans/reference_white_lamps.ini with the dark frames (no gain calibration here)
+    char *wsc = src("/examples/samples/reference_white.d3d");
+    char *plan = g_strdup(test_write("white.ini", "[plan]\nname = white\n[sample]\nname = reference_white\n"
+                                     "kind = reference_white\n[angles]\nlist = 0 120 240\n[lamps]\n"
+                                     "sets = east; south; west; north; rim; none\n[exposure]\nmode = fixed\n"
+                                     "list_us = 8000\n"));
+    char *ws = g_strdup(test_path("white")), *o = NULL, *e = NULL;
+    int rc = test_refl_run(300, &o, &e, "capture", "--yes", plan, "--rig", rig, "-o", ws, "--progress", "lines", NULL);
+    CHECK_MSG(rc == 0, "%s", e);
+    g_free(o);
+    g_free(e);
+    // the white as an isotropic lamp's: kc*I toward the white
+    char *wj = g_strdup_printf("%s/white.json", cal), *lj = g_strdup_printf("%s/lamps.json", cal);
+    rc = test_refl_run(300, &o, &e, "calib", "white", ws, "--calib", cal, "--scene", wsc, "-o", wj, NULL);
+    CHECK_MSG(rc == 0, "%s", e);
+    g_free(o);
+    g_free(e);
+    double kcI_iso[5], kcI[5];
+    white_kcI(wj, tl, kcI_iso);
+    // the patterns, into the directory's lamps.json itself
+    rc = test_refl_run(300, &o, &e, "calib", "pattern", ws, "--calib", cal, "--scene", wsc, "-o", lj, NULL);
+    CHECK_MSG(rc == 0, "%s", e);
+    fprintf(stderr, "%s", o ? o : "");
+    CHECK_CONTAINS(o, "irr_std%");
+    g_free(o);
+    g_free(e);
+    // the white again through the patterns: kc*I is the on-axis intensity's
+    rc = test_refl_run(300, &o, &e, "calib", "white", ws, "--calib", cal, "--scene", wsc, "-o", wj, NULL);
+    CHECK_MSG(rc == 0, "%s", e);
+    g_free(o);
+    g_free(e);
+    white_kcI(wj, tl, kcI);
+    calib_set_t *cs = calib_set_load(cal, true);
+    CHECK(cs && cs->lamps->n == 5);
+    json_t *doc = json_load_file(lj, 0, NULL);
+    CHECK(doc && json_string_length(json_object_get(doc, "emission_conventions")) > 100);
+    double worst = 0, worst_iso = 0;
+    for (int l = 0; cs && l < 5; l++) {
+        const model_lamp_t *T = &tl->lamps[l], *M = &cs->lamps->lamps[l];
+        CHECK(!strcmp(T->name, M->name));
+        model_lamp_t iso = *M;
+        iso.emission_cos_power = 0;
+        double err = irradiance_error(M, kcI[l], T), err_iso = irradiance_error(&iso, kcI_iso[l], T);
+        json_t *em = json_object_get(json_array_get(json_object_get(doc, "lamps"), (size_t)l), "emission");
+        double tilt = acos(v3_dot(M->emission_axis, T->emission_axis)) * 180 / M_PI;
+        fprintf(stderr, "  lamp %-5s n %.2f (truth %.1f, std %.2f), axis %.2f deg off (std %.2f), kc*I %.4g (truth "
+                "%.4g); irradiance over the samples' region within %.2f %% (isotropic: %.2f %%)\n", T->name,
+                M->emission_cos_power, T->emission_cos_power, json_number_value(json_object_get(em, "cos_power_std")),
+                tilt, json_number_value(json_object_get(em, "axis_std_deg")), kcI[l], 1e-4 * T->intensity,
+                100 * err, 100 * err_iso);
+        CHECK_MSG(err < 0.03, "lamp %s: irradiance %.2f %% off the truth's", T->name, 100 * err);
+        CHECK(json_integer_value(json_object_get(em, "windows")) > 500);
+        worst = fmax(worst, err);
+        worst_iso = fmax(worst_iso, err_iso);
+    }
+    // the test matters: an isotropic lamp's irradiance is far off
+    CHECK_MSG(worst_iso > 3 * worst && worst_iso > 0.05, "isotropic %.2f %% vs measured pattern %.2f %%",
+              100 * worst_iso, 100 * worst);
+    json_decref(doc);
+    calib_set_free(cs);
+    g_free(wj);
+    g_free(lj);
+    g_free(ws);
+    g_free(wsc);
+    g_free(plan);
+    g_free(cal);
+    model_lamps_free(tl);
+    model_ini_free(ti);
+    g_free(truth);
+    g_free(rig);
+    fprintf(stderr, "  calib_lamps_pattern_virtual_white: %.1f s\n", model_now_s() - t0);
+}
+
+// refl calib pattern's usage errors, and lamps.json patterns that are wrong:
+// named with the file and the lamp.
+TEST(calib_lamps_pattern_bad_input)
+{
+    char *o = NULL, *e = NULL;
+    struct {
+        const char *args[12];
+        int rc;
+        const char *msg;
+    } cases[] = {
+        { { "--calib", "c", "-o", "x", NULL }, 2, "SESSION" },
+        { { "s", "-o", "x", NULL }, 2, "missing required option --calib DIR" },
+        { { "s", "--calib", "c", "-o", "x", "--albedo", "2", NULL }, 2, "--albedo needs a number in (0, 1]" },
+        { { "s", "--calib", "c", "-o", "x", "--window", "0", NULL }, 2, "--window needs a whole number" },
+        { { "s", "--calib", test_tmpdir(), "-o", "x", NULL }, 1, "no camera" },
+    };
+    for (size_t k = 0; k < sizeof cases / sizeof cases[0]; k++) {
+        const char *argv[20] = { test_refl(), "calib", "pattern" };
+        int n = 3;
+        for (int i = 0; cases[k].args[i]; i++) argv[n++] = cases[k].args[i];
+        argv[n] = NULL;
+        int rc = test_run(argv, 30, &o, &e);
+        CHECK_MSG(rc == cases[k].rc, "case %zu: rc %d: %s", k, rc, e);
+        CHECK_CONTAINS(e, cases[k].msg);
+        g_free(o);
+        g_free(e);
+    }
+    char *cam = src(CAMERA);
+    static const char *bad[][2] = {
+        { "\"emission_cos_power\": 4", "emission_cos_power 4 needs emission_axis = [x, y, z]" },
+        { "\"emission_cos_power\": 4, \"emission_axis\": [0, 0, 0]", "needs emission_axis" },
+        { "\"emission_cos_power\": -1, \"emission_axis\": [0, 0, -1]", "emission_cos_power must be a number in [0, 1000]" },
+        { "\"emission_cos_power\": \"x\"", "emission_cos_power must be a number" },
+    };
+    for (size_t k = 0; k < sizeof bad / sizeof bad[0]; k++) {
+        char text[400];
+        snprintf(text, sizeof text, "{\"lamps\": [{\"name\": \"a\", \"position_mm\": [0, 0, 500]}, {\"name\": \"east\", "
+                 "\"position_mm\": [500, 0, 500], %s}]}\n", bad[k][0]);
+        const char *lj = test_write("bad.json", text);
+        bool q = model_error_quiet_thread(true);
+        calib_set_t *c = calib_set_load_files(cam, lj, NULL, NULL);
+        model_error_quiet_thread(q);
+        CHECK_MSG(!c, "case %zu loaded", k);
+        CHECK_CONTAINS(model_last_error(), "bad.json");
+        CHECK_CONTAINS(model_last_error(), "lamps[1] (east)");
+        CHECK_CONTAINS(model_last_error(), bad[k][1]);
+        calib_set_free(c);
+    }
+    // a good one: the pattern into model_lamp_t (the axis normalised)
+    const char *lj = test_write("good.json", "{\"lamps\": [{\"name\": \"east\", \"position_mm\": [500, 0, 500], "
+                                "\"emission_cos_power\": 3.5, \"emission_axis\": [-2, 0, -2]}]}\n");
+    calib_set_t *c = calib_set_load_files(cam, lj, NULL, NULL);
+    CHECK(c);
+    if (c) {
+        CHECK_NEAR(c->lamps->lamps[0].emission_cos_power, 3.5, 1e-12);
+        CHECK_NEAR(c->lamps->lamps[0].emission_axis.x, -sqrt(0.5), 1e-12);
+        CHECK_NEAR(c->lamps->lamps[0].emission_axis.z, -sqrt(0.5), 1e-12);
+        // 30 deg off the axis: cos^3.5
+        model_vec3_t p = v3(500 - 500 * sqrt(2) * cos(75 * M_PI / 180), 0, 500 - 500 * sqrt(2) * sin(75 * M_PI / 180));
+        CHECK_NEAR(model_lamp_emission(&c->lamps->lamps[0], p), pow(cos(30 * M_PI / 180), 3.5), 1e-9);
+    }
+    calib_set_free(c);
+    g_free(cam);
 }
