@@ -20,7 +20,11 @@ static const char ABOUT[] =
 
 static const char EPILOG[] =
     "The sphere's facts (--sphere-centre-mm, --sphere-radius-mm) are required, on a virtual rig too (its truth\n"
-    "file is read only to compare: the truth_err_mm column and lamps.json's virtual_truth).\n\n"
+    "file is read only to compare: the truth_err_mm column and lamps.json's virtual_truth). The centre typed is\n"
+    "a prior (std --sphere-offset-prior-mm, default 3 mm) and a check: the joint fit finds the centre from the\n"
+    "highlights across the turntable's angles, and while it moves by more than 0.2 mm the highlights are found\n"
+    "again at the moved centre (at most 3 rounds); lamps.json's sphere.centre_found_mm and its std, and a note\n"
+    "when the typed centre is more than twice its std away.\n\n"
     "Output lamps.json: units mm, rig frame; per lamp position_mm, std_mm, rms_ray_distance_mm, n_frames,\n"
     "frames_missing, radius_mm (the emitting radius the highlights were modelled with). A lamp whose\n"
     "highlight is missing in some frames is named with those frames and fitted\n"
@@ -149,6 +153,13 @@ static void print_lamps(const calib_lamps_result_t *r)
         printf("\n");
     }
     if (r->ntruth) printf("virtual rig: RMS position error %.2f mm over %d lamps\n", r->truth_rms_mm, r->ntruth);
+    if (r->have_joint && r->have_typed) {
+        const double *f = r->found_mm, *t = r->typed_mm, *c = r->found_cov_mm2;
+        printf("sphere centre at angle 0 from the highlights: %.2f %.2f %.2f mm (std %.2f %.2f %.2f), typed %g %g %g "
+               "(%.2f mm off; %d round%s)\n", f[0], f[1], f[2], sqrt(c[0]), sqrt(c[4]), sqrt(c[8]), t[0], t[1], t[2],
+               sqrt(pow(f[0] - t[0], 2) + pow(f[1] - t[1], 2) + pow(f[2] - t[2], 2)), r->rounds,
+               r->rounds == 1 ? "" : "s");
+    }
 }
 
 int calib_cmd_lamps(int argc, char **argv)
@@ -164,8 +175,9 @@ int calib_cmd_lamps(int argc, char **argv)
         MODEL_OPT_STRING("--camera", "FILE", "the camera model (mrcal .cameramodel, extrinsics in the rig frame)",
                          &o.camera, false),
         MODEL_OPT_STRING("-o", "DIR", "output: lamps.json, report.html, plots", &o.out, false),
-        MODEL_OPT_VALUE("--sphere-centre-mm", "X,Y,Z", "the sphere's centre at turntable angle 0 (rig frame, mm; "
-                        "required)", false),
+        MODEL_OPT_VALUE("--sphere-centre-mm", "X,Y,Z", "the sphere's centre at turntable angle 0 as measured (rig "
+                        "frame,\n" IND "mm; required): where the highlights are looked for first, and the prior of "
+                        "the\n" IND "centre the joint fit finds from them", false),
         MODEL_OPT_VALUE("--sphere-radius-mm", "R", "the sphere's radius (mm; required)", false),
         MODEL_OPT_STRING("--sample", "NAME", "the sample of the plan (default mirror_sphere)", &o.sample, false),
         MODEL_OPT_VALUE("--angles", "DEG,DEG,...", "turntable angles (default 24: 0,15,...,345)", false),
@@ -182,8 +194,9 @@ int calib_cmd_lamps(int argc, char **argv)
                         "every\n" IND "highlight (the path: the given centre plus an offset that turns with the\n"
                         IND "table, a shift and a tilt that do not: what the camera model's extrinsics\n" IND
                         "error moves); fixed: each lamp alone with the sphere where the facts put it", false),
-        MODEL_OPT_VALUE("--sphere-offset-prior-mm", "S", "std of the sphere centre's offset from the facts "
-                        "(default 1)", false),
+        MODEL_OPT_VALUE("--sphere-offset-prior-mm", "S", "std of the typed sphere centre (default 3): the centre "
+                        "is\n" IND "found from the highlights across angles, the typed one its prior and check",
+                        false),
         MODEL_OPT_VALUE("--sphere-shift-prior-mm", "S", "std of the path's shift across the axis (default 0.1: a "
                         "calibrated camera)", false),
         MODEL_OPT_VALUE("--sphere-tilt-prior-mrad", "S", "std of the path's tilt (default 1); 0 holds a part at 0",

@@ -144,6 +144,8 @@ typedef struct {
     double       shift_prior_mm;   // std of each shift component (<= 0: shift held at 0)
     double       tilt_prior_mrad;  // std of each tilt component (<= 0: tilt held at 0)
     bool         image_weights;    // residuals mapped back to the camera ray (false: the reflected ray's angle)
+    double       offset_prior_mean_mm[3];   // the offset prior's mean (0: c0_mm is the typed centre; a later
+                                            // round of calib_lamps_run: the typed centre - c0_mm)
 } calib_lamps_bundle_setup_t;
 
 typedef struct {
@@ -215,7 +217,8 @@ typedef struct {
     double       min_snr;          // a highlight's peak / noise at least (default 12)
     calib_lamps_method_t method;   // how a highlight is located (default CALIB_LAMPS_MODEL)
     bool         joint;            // the joint fit of lamps and sphere path after the per-lamp fits (default true)
-    double       offset_prior_mm;  // joint fit: priors (std; 0 holds the part at 0), defaults 1 mm,
+    double       offset_prior_mm;  // joint fit: priors (std; 0 holds the part at 0), defaults 3 mm (the
+                                   //   typed centre's std: the centre is found from the highlights),
     double       shift_prior_mm;   //   0.1 mm and 1 mrad (see calib_lamps_bundle_setup_t)
     double       tilt_prior_mrad;
     int          progress;         // capture progress: -1 auto (a bar on a terminal), 0 lines, 1 bar
@@ -261,6 +264,16 @@ typedef struct {
     bool                have_joint;     // the joint fit ran
     int                 joint_nobs;     // highlights in it
     calib_lamps_bundle_t joint;
+    // The sphere's centre from the images: calib_lamps_run finds the highlights
+    // at the typed centre, and while the joint fit moves it (offset > 0.2 mm,
+    // at most 3 rounds) finds them again at the moved one; the typed centre is
+    // the offset's prior (mean, std offset_prior_mm), and a check.
+    bool                have_typed;     // typed_mm set (by calib_lamps_run)
+    double              typed_mm[3];    // the sphere's centre at angle 0 as typed (--sphere-centre-mm)
+    double              base_mm[3];     // the centre the last round's highlights were found at (the path's c0)
+    int                 rounds;         // rounds of highlights and fits
+    double              found_mm[3];    // base + the joint fit's offset: the centre the images give
+    double              found_cov_mm2[9];
     char               *truth_path;     // the virtual rig's truth file (comparison only; NULL: none)
     bool                have_truth;     // its lamps were read
     int                 ntruth;         // lamps compared with the truth

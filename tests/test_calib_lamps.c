@@ -544,6 +544,49 @@ TEST_LONG(calib_lamps_virtual_rig_accuracy)
     g_free(o);
     g_free(e);
 
+    // The sphere's centre typed 2 mm off (1.2, 1.2, 1 mm): found from the
+    // highlights across the angles (the joint fit's offset; the highlights
+    // found again there), the lamps where the right centre puts them.
+    {
+        char out4[PATH_MAX + 16];
+        snprintf(out4, sizeof out4, "%s/off2mm", test_tmpdir());
+        rc = test_refl_run(120, &o, &e, "calib", "lamps", "--session", sess, "--camera", cam, "-o", out4,
+                           "--sphere-centre-mm", "61.2,1.2,41", "--sphere-radius-mm", "25", "--lamp-radius-mm", "15",
+                           NULL);
+        CHECK_MSG(rc == 0, "rc %d\n%s", rc, e);
+        CHECK_CONTAINS(e, "1.97 mm from the typed); finding them again there");
+        CHECK_CONTAINS(o, "typed 61.2 1.2 41 (1.97 mm off; 2 rounds)");
+        g_free(o);
+        g_free(e);
+        char *jp4 = g_strdup_printf("%s/lamps.json", out4);
+        json_t *d4 = json_load_file(jp4, 0, NULL), *d0 = json_load_file(jp, 0, NULL);
+        json_t *sph = json_object_get(d4, "sphere"), *f = json_object_get(sph, "centre_found_mm");
+        CHECK(json_array_size(f) == 3);
+        double fe = sqrt(pow(jnum(f, 0) - 60, 2) + pow(jnum(f, 1), 2) + pow(jnum(f, 2) - 40, 2));
+        fprintf(stderr, "  typed centre 2 mm off: found %.3f %.3f %.3f mm (%.3f mm from the truth)\n", jnum(f, 0),
+                jnum(f, 1), jnum(f, 2), fe);
+        CHECK_MSG(fe < 0.2, "the centre found %.3f mm from the truth", fe);
+        CHECK_NEAR(json_number_value(json_object_get(sph, "centre_typed_off_mm")), 1.97, 0.05);
+        CHECK(json_integer_value(json_object_get(sph, "rounds")) == 2);
+        for (int l = 0; l < 5; l++) {
+            json_t *a = json_object_get(json_array_get(json_object_get(d4, "lamps"), (size_t)l), "position_mm");
+            json_t *b = json_object_get(json_array_get(json_object_get(d0, "lamps"), (size_t)l), "position_mm");
+            double dd = sqrt(pow(jnum(a, 0) - jnum(b, 0), 2) + pow(jnum(a, 1) - jnum(b, 1), 2) +
+                             pow(jnum(a, 2) - jnum(b, 2), 2));
+            CHECK_MSG(dd < 0.1, "lamp %d: %.3f mm from where the right centre puts it", l, dd);
+        }
+        json_decref(d4);
+        json_decref(d0);
+        model_ini_t *ti4 = model_ini_load(truth);
+        model_lamps_t *tl4 = ti4 ? model_lamps_from_ini(ti4) : NULL;
+        double rms4 = INFINITY, std4 = 0, worst4 = INFINITY;
+        CHECK(tl4 && lamps_vs_truth(jp4, tl4, "typed centre 2 mm off", &rms4, &std4, &worst4));
+        CHECK_MSG(rms4 < 1.0, "typed centre 2 mm off: RMS lamp error %.2f mm", rms4);
+        model_lamps_free(tl4);
+        model_ini_free(ti4);
+        g_free(jp4);
+    }
+
     // The chain: the same session analysed with a camera model moved like a
     // calibration error (the demo's `refl calib geometry` camera: centre
     // 1.45 mm off, 0.05 deg, focal length 0.17 % long; this one turned about
