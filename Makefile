@@ -105,6 +105,7 @@ CALIB_SRC := \
     calib/geometry_diff.c \
     calib/lamps.c \
     calib/lamps_pattern.c \
+    calib/lamps_drift.c \
     calib/gain.c \
     calib/white.c \
     calib/cmd_calib.c \

@@ -116,6 +116,8 @@ typedef struct {
                                     // emission pattern toward the window (emission below): the signal of
                                     // the lamp's on-axis intensity
     double          emission;       // that factor, model_lamp_emission (exactly 1 for an isotropic lamp)
+    double          drift;          // the lamp's intensity at the frame's time relative to its first visit of
+                                    // the reference, also divided out of s (calib_drift_factor; 1 without)
     double          s_std;          // its expected temporal noise (shot, read, quantisation of the
                                     // window mean; dark level noise-free), same unit; 0 without K
     int             step;           // the session step of the frame
@@ -124,9 +126,31 @@ typedef struct {
                                     // turns with the table: the same point of the sample at every angle)
 } calib_obs_t;
 
+// Lamp drift (calib/lamps_drift.c): a plan whose [angles] list has an angle
+// more than once (list = 0 30 60 0 90 120 0 ...) takes every lamp set and
+// exposure there again: the reference, revisited. Each lamp alone's frames
+// there (grouped by angle, exposure and gain; the group of the most visits)
+// against its first visit: the median over the lit (above a fifth of the
+// brightest), unsaturated pixels of (P_k - dark) / (P_0 - dark) is the lamp's
+// intensity at that time relative to the first visit. Between visits linear
+// in time (the frames' trigger time), constant before the first and after the
+// last. calib_observe divides every observation of the lamp by it.
+typedef struct {
+    int    nlamps;
+    int    nvisits[32];               // per lamp of the calibration set (< 2: no correction)
+    double *t_s[32], *f[32];          // its visits' trigger times (s, UTC) and relative intensities (f[0] = 1)
+    char   angle_ref[32][320];        // the reference used: "LAMP at DEG deg, US us"
+} calib_drift_t;
+// From the session s and its plan; every lamp without revisits gets none.
+// false + message (kept) when a revisit cannot be compared.
+bool   calib_drift_measure(const rig_session_t *s, const rig_plan_t *p, const calib_set_t *cal, calib_drift_t *d);
+double calib_drift_factor(const calib_drift_t *d, int lamp, double t_s);
+void   calib_drift_free(calib_drift_t *d);
+
 typedef struct {
     int        n, cap;
     calib_obs_t *o;
+    calib_drift_t drift;         // the session's lamp drift (nvisits 0: none measured)
     int        frames_used, frames_skipped;
     char       sample[64], material[64];
 } calib_obs_set_t;

@@ -20,6 +20,7 @@
 #include <mrcal/poseutils.h>
 #include <stdlib.h>
 
+#include "calib/calib.h"
 #include "calib/lamps.h"
 #include "model/lsq.h"
 #include "model/model.h"
@@ -823,18 +824,18 @@ static const struct { const char *name; double n, tilt_deg; } PAT_TRUE[5] = {
     { "east", 4.8, 15 }, { "south", 2.0, 8 }, { "west", 8.0, 20 }, { "north", 1.0, 0 }, { "rim", 4.8, 10 },
 };
 
-// The example truth with PAT_TRUE's patterns (and, when drift, lamp east's
-// drift), vignetting and the sensor's response compression off (a lab's gain
+// The example truth with PAT_TRUE's patterns (when patterns) and extra
+// appended (sections), vignetting and the sensor's response compression off (a lab's gain
 // calibration corrects them, with its flat field and its fitted compression;
 // here the calibration set has none: the compression left in costs 0.75 %).
-static const char *pattern_truth(const char *name, const char *extra)
+static const char *pattern_truth(const char *name, const char *extra, bool patterns)
 {
     const char *t0 = truth_file("truth0.ini", 0);
     char *text = model_read_file(t0, NULL);
     model_ini_t *ti = model_ini_load(t0);
     model_lamps_t *tl = ti ? model_lamps_from_ini(ti) : NULL;
     GString *g = g_string_new(text ? text : "");
-    for (int l = 0; tl && l < 5; l++) {
+    for (int l = 0; tl && patterns && l < 5; l++) {
         int k = model_lamps_find(tl, PAT_TRUE[l].name);
         if (k < 0) continue;
         model_vec3_t d = v3_unit(v3_scale(tl->lamps[k].position_mm, -1));
@@ -912,7 +913,7 @@ static double irradiance_error(const model_lamp_t *ml, double kcI, const model_l
 TEST_LONG(calib_lamps_pattern_virtual_white)
 {
     double t0 = model_now_s();
-    char *truth = g_strdup(pattern_truth("truth.ini", NULL));
+    char *truth = g_strdup(pattern_truth("truth.ini", NULL, true));
     char *rig = g_strdup(rig_file("rig.ini", truth));
     model_ini_t *ti = model_ini_load(truth);
     model_lamps_t *tl = ti ? model_lamps_from_ini(ti) : NULL;
@@ -1055,4 +1056,117 @@ TEST(calib_lamps_pattern_bad_input)
     }
     calib_set_free(c);
     g_free(cam);
+}
+
+// ---------------------------------------------------------------------------
+// Lamp drift: lamp east warms up (brightest at switch-on, -8 %, tau 200 s)
+// and drifts (-5 %/h) while it stays on through a session of the reference
+// white whose plan revisits 0 deg every third angle; the observations
+// corrected by the revisits against the frames' raw ones.
+
+static int cmp_double(const void *a, const void *b)
+{
+    double x = *(const double *)a, y = *(const double *)b;
+    return x < y ? -1 : x > y;
+}
+
+TEST_LONG(calib_lamps_drift_reference)
+{
+    double t0 = model_now_s();
+    char *truth = g_strdup(pattern_truth("truth.ini", "\n[lamp_drift east]\nwarmup_fraction = -0.08\n"
+                                         "warmup_tau_s = 200\ndrift_pct_per_h = -5\n", false));
+    char rt[PATH_MAX + 200];
+    snprintf(rt, sizeof rt, "[rig]\nbackend = virtual\nserve = inprocess\ntruth = %s\ntime_scale = 0.005\n"
+             "pixel_format = Mono12\n", truth);
+    char *rig = g_strdup(test_write("rig.ini", rt));
+    model_ini_t *ti = model_ini_load(truth);
+    model_lamps_t *tl = ti ? model_lamps_from_ini(ti) : NULL;
+    CHECK(tl && tl->n == 5);
+    if (!tl) return;
+    char *cal = pattern_calib(tl);
+    // the dark level as a gain calibration's offset map (the truth's 64 DN): a
+    // dark frame in the plan would switch the lamp off and restart its warm-up
+    char *camp = src(CAMERA);
+    model_camera_t *cm = model_camera_load(camp);
+    g_free(camp);
+    CHECK(cm);
+    if (!cm) return;
+    int W = model_camera_width(cm), H = model_camera_height(cm);
+    model_camera_free(cm);
+    float *off = malloc(sizeof *off * (size_t)W * H);
+    for (size_t i = 0; off && i < (size_t)W * H; i++) off[i] = 64;
+    CHECK(off && model_tiff_write_float(test_path("cal/offset_dn.tiff"), W, H, off, NULL));
+    free(off);
+    test_write("cal/gain.json", "{\"saturation_dn\": 4095}\n");
+    char *plan = g_strdup(test_write("drift.ini", "[plan]\nname = white, lamp east on throughout, 0 deg revisited\n"
+                                     "[sample]\nname = reference_white\nkind = reference_white\n[angles]\n"
+                                     "list = 0 40 80 0 120 160 0 200 240 0 280 320 0\n[lamps]\nsets = east\n"
+                                     "[exposure]\nmode = fixed\nlist_us = 8000\n"));
+    char *ws = g_strdup(test_path("white")), *o = NULL, *e = NULL;
+    int rc = test_refl_run(300, &o, &e, "capture", "--yes", plan, "--rig", rig, "-o", ws, "--progress", "lines", NULL);
+    CHECK_MSG(rc == 0, "%s", e);
+    g_free(o);
+    g_free(e);
+    char *wsc = src("/examples/samples/reference_white.d3d");
+    calib_observe_options_t opt = calib_observe_defaults();
+    opt.scene_path = wsc;
+    opt.verbose = true;
+    calib_set_t *cs = NULL;
+    calib_obs_set_t obs;
+    bool ok = calib_observe_session(ws, cal, NULL, false, &opt, &cs, &obs);
+    CHECK_MSG(ok, "%s", model_last_error());
+    int east = cs ? model_lamps_find(cs->lamps, "east") : -1;
+    if (ok && east >= 0) {
+        CHECK(obs.drift.nvisits[east] == 5);
+        CHECK_CONTAINS(obs.drift.angle_ref[east], "east at 0 deg, 8000 us");
+        for (int k = 0; k < obs.drift.nvisits[east]; k++)
+            fprintf(stderr, "  visit %d: t %+.2f s, intensity %.4f of the first\n", k,
+                    obs.drift.t_s[east][k] - obs.drift.t_s[east][0], obs.drift.f[east][k]);
+        CHECK(obs.drift.f[east][4] < 0.98);   // the warm-up
+        // per frame (step): the median kc*I of its windows, raw and corrected
+        const double kd = 0.99 / M_PI;
+        double med[2][64];
+        int nst = 0;
+        for (int st = 0; st < 64; st++) {
+            double *v[2] = { malloc(sizeof(double) * (size_t)obs.n), malloc(sizeof(double) * (size_t)obs.n) };
+            int n = 0;
+            for (int i = 0; v[0] && v[1] && i < obs.n; i++) {
+                const calib_obs_t *b = &obs.o[i];
+                if (b->step != st) continue;
+                double k = b->s_dn_per_us * b->d_mm * b->d_mm / (kd * b->c.nl);
+                v[0][n] = k * b->drift;
+                v[1][n++] = k;
+            }
+            if (n > 100) {
+                for (int c = 0; c < 2; c++) {
+                    qsort(v[c], (size_t)n, sizeof(double), cmp_double);
+                    med[c][nst] = v[c][n / 2];
+                }
+                nst++;
+            }
+            free(v[0]);
+            free(v[1]);
+        }
+        CHECK(nst == 13);
+        // the intensity error: each frame's kc*I against the lamp's at the first visit (frame 0's)
+        double err[2] = { 0, 0 };
+        for (int c = 0; c < 2; c++)
+            for (int k = 0; k < nst; k++) err[c] = fmax(err[c], fabs(med[c][k] / med[c][0] - 1));
+        fprintf(stderr, "  lamp drift: frames' kc*I within %.2f %% of the first visit's raw, %.2f %% corrected\n",
+                100 * err[0], 100 * err[1]);
+        CHECK_MSG(err[0] > 0.02, "the drift matters: raw %.2f %%", 100 * err[0]);
+        CHECK_MSG(err[1] < 0.005 && err[1] < err[0] / 4, "corrected %.2f %% (raw %.2f %%)", 100 * err[1],
+                  100 * err[0]);
+    }
+    calib_obs_free(&obs);
+    calib_set_free(cs);
+    g_free(wsc);
+    g_free(ws);
+    g_free(plan);
+    g_free(cal);
+    g_free(rig);
+    g_free(truth);
+    model_lamps_free(tl);
+    model_ini_free(ti);
+    fprintf(stderr, "  calib_lamps_drift_reference: %.1f s\n", model_now_s() - t0);
 }
