@@ -1862,6 +1862,15 @@ static bool report_html(const calib_lamps_opts_t *o, const calib_lamps_result_t 
                         "path's uncertainty.", g[0], g[1], g[2], sqrt(gc[0]), sqrt(gc[8]), sqrt(gc[16]), g[3], g[4],
                         sqrt(gc[24]), sqrt(gc[32]), g[5], g[6], sqrt(gc[40]), sqrt(gc[48]), o->offset_prior_mm,
                         o->shift_prior_mm, o->tilt_prior_mrad);
+    if (r->have_joint && r->have_typed) {
+        const double *fm = r->found_mm, *t = r->typed_mm, *fc = r->found_cov_mm2;
+        model_html_para(f, "The sphere's centre from its highlights across the angles: (%.3f, %.3f, %.3f) mm (std "
+                        "%.3f %.3f %.3f), typed (%g, %g, %g) mm, %.2f mm apart; %d round%s of highlights (found again "
+                        "at the moved centre while it moved by more than 0.2 mm).", fm[0], fm[1], fm[2], sqrt(fc[0]),
+                        sqrt(fc[4]), sqrt(fc[8]), t[0], t[1], t[2],
+                        sqrt(pow(fm[0] - t[0], 2) + pow(fm[1] - t[1], 2) + pow(fm[2] - t[2], 2)), r->rounds,
+                        r->rounds == 1 ? "" : "s");
+    }
     report_table(f, r);
     for (int l = 0; l < r->nlamps; l++) {
         if (!r->lamps[l].nmissing) continue;

@@ -569,6 +569,10 @@ TEST_LONG(calib_lamps_virtual_rig_accuracy)
         CHECK_MSG(fe < 0.2, "the centre found %.3f mm from the truth", fe);
         CHECK_NEAR(json_number_value(json_object_get(sph, "centre_typed_off_mm")), 1.97, 0.05);
         CHECK(json_integer_value(json_object_get(sph, "rounds")) == 2);
+        char *h4 = g_strdup_printf("%s/report.html", out4), *ht = model_read_file(h4, NULL);
+        CHECK_CONTAINS(ht, "typed (61.2, 1.2, 41) mm, 1.97 mm apart; 2 rounds");
+        free(ht);
+        g_free(h4);
         for (int l = 0; l < 5; l++) {
             json_t *a = json_object_get(json_array_get(json_object_get(d4, "lamps"), (size_t)l), "position_mm");
             json_t *b = json_object_get(json_array_get(json_object_get(d0, "lamps"), (size_t)l), "position_mm");
