@@ -129,7 +129,9 @@ static bool lamp_drift(const rig_session_t *s, const rig_plan_t *p, const calib_
     ok = dark && d->t_s[l] && d->f[l] && (base = rig_session_frame(s, rows[0], &w, &h));
     size_t npx = (size_t)cal->W * cal->H;
     ok = ok && (size_t)w * h == npx;
-    double sat = 0.95 * (cal->saturation_dn > 0 ? cal->saturation_dn : strcmp(r0->pixel_format, "Mono12") ? 65535 : 4095);
+    const char *pf = r0->pixel_format;
+    double full = !strcmp(pf, "Mono8") ? 255 : !strcmp(pf, "Mono12") ? 4095 : 65535;
+    double sat = 0.95 * (cal->saturation_dn > 0 ? cal->saturation_dn : full);
     snprintf(d->angle_ref[l], sizeof d->angle_ref[l], "%s at %g deg, %g us", r0->lamps,
              p->steps[r0->step].angle_deg, r0->exposure_us);
     for (int k = 0; ok && k < n; k++) {
