@@ -1181,7 +1181,9 @@ TEST_LONG(calib_lamps_drift_reference)
         fprintf(stderr, "  lamp drift: frames' kc*I within %.2f %% of the first visit's raw, %.2f %% corrected\n",
                 100 * err[0], 100 * err[1]);
         CHECK_MSG(err[0] > 0.02, "the drift matters: raw %.2f %%", 100 * err[0]);
-        CHECK_MSG(err[1] < 0.005 && err[1] < err[0] / 4, "corrected %.2f %% (raw %.2f %%)", 100 * err[1],
+        // (the rig's clock runs on real time: a loaded machine spaces the visits
+        // wider in the lamp's time, and the warm-up bends more between them)
+        CHECK_MSG(err[1] < 0.01 && err[1] < err[0] / 5, "corrected %.2f %% (raw %.2f %%)", 100 * err[1],
                   100 * err[0]);
     }
     calib_obs_free(&obs);
