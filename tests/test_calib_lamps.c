@@ -960,6 +960,21 @@ static void pattern_run(bool patterns, double *worst, double *worst_iso)
     g_free(o);
     g_free(e);
     white_kcI(wj, tl, kcI);
+    // the patterns again through the directory's patterns: the same (the loaded pattern is divided back in)
+    char *lj2 = g_strdup_printf("%s/lamps2.json", test_tmpdir());
+    rc = test_refl_run(300, &o, &e, "calib", "pattern", ws, "--calib", cal, "--scene", wsc, "-o", lj2, NULL);
+    CHECK_MSG(rc == 0, "%s", e);
+    g_free(o);
+    g_free(e);
+    json_t *d1 = json_load_file(lj, 0, NULL), *d2 = json_load_file(lj2, 0, NULL);
+    for (size_t l = 0; l < 5; l++) {
+        json_t *a = json_array_get(json_object_get(d1, "lamps"), l), *b = json_array_get(json_object_get(d2, "lamps"), l);
+        CHECK_NEAR(json_number_value(json_object_get(a, "emission_cos_power")),
+                   json_number_value(json_object_get(b, "emission_cos_power")), 1e-6);
+    }
+    json_decref(d1);
+    json_decref(d2);
+    g_free(lj2);
     calib_set_t *cs = calib_set_load(cal, true);
     CHECK(cs && cs->lamps->n == 5);
     json_t *doc = json_load_file(lj, 0, NULL);
