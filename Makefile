@@ -106,6 +106,8 @@ CALIB_SRC := \
     calib/geometry.c \
     calib/geometry_diff.c \
     calib/lamps.c \
+    calib/lamps_pattern.c \
+    calib/lamps_drift.c \
     calib/gain.c \
     calib/white.c \
     calib/export.c \

@@ -26,6 +26,7 @@ extern "C" {
 int calib_cmd(int argc, char **argv);
 int calib_cmd_geometry(int argc, char **argv);
 int calib_cmd_lamps(int argc, char **argv);
+int calib_cmd_pattern(int argc, char **argv);   // the lamps' emission patterns (calib/cmd_lamps.c)
 int calib_cmd_gain(int argc, char **argv);
 
 // ---------------------------------------------------------------------------
@@ -51,7 +52,8 @@ int calib_capture(const char *rig_path, const char *dir, const char *name, const
 // dark level (the gain calibration's offset map, else the session's dark frame
 // of that exposure), divided by the flat field g (the gain calibration's map,
 // when given), per microsecond of exposure and at 0 dB: s = (P - Pa) / (g t 10^(G/20))
-// in DN/us. Exposure brackets are merged to high dynamic range by keeping, per
+// in DN/us, divided by the lamp's emission pattern toward the window (lamps.json's
+// emission_cos_power and emission_axis; 1 for an isotropic lamp). Exposure brackets are merged to high dynamic range by keeping, per
 // window, angle and lamp, the longest exposure whose window stays below 95 % of
 // saturation.
 //   reference white of albedo a (Lambertian, kd = a/pi): kcI_i = s d^2 / (kd n.l)
@@ -61,7 +63,7 @@ int calib_capture(const char *rig_path, const char *dir, const char *name, const
 // calib/calset.c).
 typedef struct {
     model_camera_t *cam;            // geometry: camera.cameramodel (extrinsics in the rig frame)
-    model_lamps_t  *lamps;          // lamps.json positions (intensity 1, point lamps)
+    model_lamps_t  *lamps;          // lamps.json positions (intensity 1) and emission patterns (n = 0: isotropic)
     float          *offset_dn;      // gain calibration: dark offset map (NULL: use dark frames)
     float          *flat;           // gain calibration: flat field g(x,y), mean 1 (NULL: 1)
     double          saturation_dn;  // 0: from the frame's bits
@@ -110,7 +112,12 @@ typedef struct {
     bool            has_disc;       // lit by a finite lamp near the mirror direction: disc holds the
     model_cosines_t disc[4];        // cosines of its 4 quadrature directions (fit_samples_t)
     double          d_mm;
-    double          s_dn_per_us;    // dark and flat corrected signal per us at 0 dB
+    double          s_dn_per_us;    // dark and flat corrected signal per us at 0 dB, divided by the lamp's
+                                    // emission pattern toward the window (emission below): the signal of
+                                    // the lamp's on-axis intensity
+    double          emission;       // that factor, model_lamp_emission (exactly 1 for an isotropic lamp)
+    double          drift;          // the lamp's intensity at the frame's time relative to its first visit of
+                                    // the reference, also divided out of s (calib_drift_factor; 1 without)
     double          s_std;          // its expected temporal noise (shot, read, quantisation of the
                                     // window mean; dark level noise-free), same unit; 0 without K
     int             step;           // the session step of the frame
@@ -119,9 +126,31 @@ typedef struct {
                                     // turns with the table: the same point of the sample at every angle)
 } calib_obs_t;
 
+// Lamp drift (calib/lamps_drift.c): a plan whose [angles] list has an angle
+// more than once (list = 0 30 60 0 90 120 0 ...) takes every lamp set and
+// exposure there again: the reference, revisited. Each lamp alone's frames
+// there (grouped by angle, exposure and gain; the group of the most visits)
+// against its first visit: the median over the lit (above a fifth of the
+// brightest), unsaturated pixels of (P_k - dark) / (P_0 - dark) is the lamp's
+// intensity at that time relative to the first visit. Between visits linear
+// in time (the frames' trigger time), constant before the first and after the
+// last. calib_observe divides every observation of the lamp by it.
+typedef struct {
+    int    nlamps;
+    int    nvisits[32];               // per lamp of the calibration set (< 2: no correction)
+    double *t_s[32], *f[32];          // its visits' trigger times (s, UTC) and relative intensities (f[0] = 1)
+    char   angle_ref[32][320];        // the reference used: "LAMP at DEG deg, US us"
+} calib_drift_t;
+// From the session s and its plan; every lamp without revisits gets none.
+// false + message (kept) when a revisit cannot be compared.
+bool   calib_drift_measure(const rig_session_t *s, const rig_plan_t *p, const calib_set_t *cal, calib_drift_t *d);
+double calib_drift_factor(const calib_drift_t *d, int lamp, double t_s);
+void   calib_drift_free(calib_drift_t *d);
+
 typedef struct {
     int        n, cap;
     calib_obs_t *o;
+    calib_drift_t drift;         // the session's lamp drift (nvisits 0: none measured)
     int        frames_used, frames_skipped;
     char       sample[64], material[64];
 } calib_obs_set_t;

@@ -200,6 +200,36 @@ static double nonlinearity_of(json_t *gj, double sat)
 }
 
 
+// The lamp's emission pattern of lamps.json (refl calib pattern writes it):
+// emission_cos_power = n (0..1000; 0 or absent: isotropic) and emission_axis =
+// [x, y, z] (a direction, rig frame; required with n > 0), into l.
+static bool lamp_emission(json_t *e, const char *path, size_t i, model_lamp_t *l)
+{
+    json_t *n = json_object_get(e, "emission_cos_power"), *a = json_object_get(e, "emission_axis");
+    if (!n && !a) return true;
+    if (!json_is_number(n) || !(json_number_value(n) >= 0 && json_number_value(n) <= 1000)) {
+        model_error(path, 0, "lamps[%zu] (%s): emission_cos_power must be a number in [0, 1000] (0: isotropic)", i,
+                    l->name);
+        return false;
+    }
+    l->emission_cos_power = json_number_value(n);
+    if (!(l->emission_cos_power > 0)) return true;
+    double v[3], len = 0;
+    for (int k = 0; k < 3; k++) {
+        json_t *x = json_array_get(a, (size_t)k);
+        v[k] = json_is_number(x) ? json_number_value(x) : NAN;
+        len += v[k] * v[k];
+    }
+    if (json_array_size(a) != 3 || !(len > 1e-24) || !isfinite(len)) {
+        model_error(path, 0, "lamps[%zu] (%s): emission_cos_power %g needs emission_axis = [x, y, z], a direction "
+                    "(rig frame)", i, l->name, l->emission_cos_power);
+        return false;
+    }
+    len = sqrt(len);
+    l->emission_axis = v3(v[0] / len, v[1] / len, v[2] / len);
+    return true;
+}
+
 calib_set_t *calib_set_load_files(const char *cam, const char *lamps, const char *gain, const char *white)
 {
     calib_set_t *c = calloc(1, sizeof *c);
@@ -249,6 +279,7 @@ calib_set_t *calib_set_load_files(const char *cam, const char *lamps, const char
             goto fail;
         }
         c->lamp_radius_mm[i] = rad ? json_number_value(rad) : 0;
+        if (!lamp_emission(e, lamps, i, l)) goto fail;
         c->lamps->n = (int)i + 1;
     }
     add_input(c, "lamps", lamps);

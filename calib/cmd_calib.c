@@ -1,4 +1,4 @@
-// calib/cmd_calib.c — `refl calib geometry|lamps|gain|white`: dispatches to the
+// calib/cmd_calib.c — `refl calib geometry|lamps|pattern|gain|white`: dispatches to the
 // calibrations (calib/geometry.c, calib/lamps.c, calib/gain.c, calib/white.c).
 #include <math.h>
 #include <stdio.h>
@@ -16,6 +16,7 @@ static const struct {
 } subs[] = {
     { "geometry", calib_cmd_geometry, "camera model (mrgingham + mrcal) and turntable axis from chessboard views" },
     { "lamps",    calib_cmd_lamps,    "lamp positions from mirror-sphere highlights, with uncertainty in mm" },
+    { "pattern",  calib_cmd_pattern,  "each lamp's emission pattern (cos power, axis) from a reference-white session" },
     { "white",    calib_cmd_white,      "kc*I per lamp from a reference-white session" },
     { "gain",     calib_cmd_gain,     "sensitivity (EMVA 1288): dark, photon transfer, linearity, PRNU/DSNU maps" },
     { "export",   calib_cmd_export,   "a camera model as OpenCV FileStorage YAML or ROS camera_info YAML" },
@@ -23,7 +24,7 @@ static const struct {
 
 static void usage(FILE *f)
 {
-    fprintf(f, "usage: refl calib geometry|lamps|gain|white|export [ARGS...]   (refl calib NAME --help for its options)\n\n");
+    fprintf(f, "usage: refl calib geometry|lamps|pattern|gain|white|export [ARGS...]   (refl calib NAME --help for its options)\n\n");
     for (size_t i = 0; i < sizeof subs / sizeof subs[0]; i++) fprintf(f, "  %-9s %s\n", subs[i].name, subs[i].summary);
     fprintf(f, "\nrefl %s\n", REFL_VERSION);
 }

@@ -20,7 +20,11 @@ static const char ABOUT[] =
 
 static const char EPILOG[] =
     "The sphere's facts (--sphere-centre-mm, --sphere-radius-mm) are required, on a virtual rig too (its truth\n"
-    "file is read only to compare: the truth_err_mm column and lamps.json's virtual_truth).\n\n"
+    "file is read only to compare: the truth_err_mm column and lamps.json's virtual_truth). The centre typed is\n"
+    "a prior (std --sphere-offset-prior-mm, default 3 mm) and a check: the joint fit finds the centre from the\n"
+    "highlights across the turntable's angles, and while it moves by more than 0.2 mm the highlights are found\n"
+    "again at the moved centre (at most 3 rounds); lamps.json's sphere.centre_found_mm and its std, and a note\n"
+    "when the typed centre is more than twice its std away.\n\n"
     "Output lamps.json: units mm, rig frame; per lamp position_mm, std_mm, rms_ray_distance_mm, n_frames,\n"
     "frames_missing, radius_mm (the emitting radius the highlights were modelled with). A lamp whose\n"
     "highlight is missing in some frames is named with those frames and fitted\n"
@@ -149,6 +153,13 @@ static void print_lamps(const calib_lamps_result_t *r)
         printf("\n");
     }
     if (r->ntruth) printf("virtual rig: RMS position error %.2f mm over %d lamps\n", r->truth_rms_mm, r->ntruth);
+    if (r->have_joint && r->have_typed) {
+        const double *f = r->found_mm, *t = r->typed_mm, *c = r->found_cov_mm2;
+        printf("sphere centre at angle 0 from the highlights: %.2f %.2f %.2f mm (std %.2f %.2f %.2f), typed %g %g %g "
+               "(%.2f mm off; %d round%s)\n", f[0], f[1], f[2], sqrt(c[0]), sqrt(c[4]), sqrt(c[8]), t[0], t[1], t[2],
+               sqrt(pow(f[0] - t[0], 2) + pow(f[1] - t[1], 2) + pow(f[2] - t[2], 2)), r->rounds,
+               r->rounds == 1 ? "" : "s");
+    }
 }
 
 int calib_cmd_lamps(int argc, char **argv)
@@ -164,8 +175,9 @@ int calib_cmd_lamps(int argc, char **argv)
         MODEL_OPT_STRING("--camera", "FILE", "the camera model (mrcal .cameramodel, extrinsics in the rig frame)",
                          &o.camera, false),
         MODEL_OPT_STRING("-o", "DIR", "output: lamps.json, report.html, plots", &o.out, false),
-        MODEL_OPT_VALUE("--sphere-centre-mm", "X,Y,Z", "the sphere's centre at turntable angle 0 (rig frame, mm; "
-                        "required)", false),
+        MODEL_OPT_VALUE("--sphere-centre-mm", "X,Y,Z", "the sphere's centre at turntable angle 0 as measured (rig "
+                        "frame,\n" IND "mm; required): where the highlights are looked for first, and the prior of "
+                        "the\n" IND "centre the joint fit finds from them", false),
         MODEL_OPT_VALUE("--sphere-radius-mm", "R", "the sphere's radius (mm; required)", false),
         MODEL_OPT_STRING("--sample", "NAME", "the sample of the plan (default mirror_sphere)", &o.sample, false),
         MODEL_OPT_VALUE("--angles", "DEG,DEG,...", "turntable angles (default 24: 0,15,...,345)", false),
@@ -182,8 +194,9 @@ int calib_cmd_lamps(int argc, char **argv)
                         "every\n" IND "highlight (the path: the given centre plus an offset that turns with the\n"
                         IND "table, a shift and a tilt that do not: what the camera model's extrinsics\n" IND
                         "error moves); fixed: each lamp alone with the sphere where the facts put it", false),
-        MODEL_OPT_VALUE("--sphere-offset-prior-mm", "S", "std of the sphere centre's offset from the facts "
-                        "(default 1)", false),
+        MODEL_OPT_VALUE("--sphere-offset-prior-mm", "S", "std of the typed sphere centre (default 3): the centre "
+                        "is\n" IND "found from the highlights across angles, the typed one its prior and check",
+                        false),
         MODEL_OPT_VALUE("--sphere-shift-prior-mm", "S", "std of the path's shift across the axis (default 0.1: a "
                         "calibrated camera)", false),
         MODEL_OPT_VALUE("--sphere-tilt-prior-mrad", "S", "std of the path's tilt (default 1); 0 holds a part at 0",
@@ -217,5 +230,99 @@ int calib_cmd_lamps(int argc, char **argv)
     rig_operator_close(o.op);
 done:
     g_strfreev(lamps);
+    return rc;
+}
+
+// ---------------------------------------------------------------------------
+// refl calib pattern
+
+static const char PATTERN_ABOUT[] =
+    "Each lamp's emission pattern from a session of a flat Lambertian target of albedo A (the reference white,\n"
+    "default 0.99) lit by each lamp alone, at one or more turntable angles (examples/plans/reference_white_lamps.ini):\n"
+    "every window's irradiance s d^2 / (kd n.l) against its direction u from the lamp, fitted per lamp with\n"
+    "kcI max(0, a.u)^n (n the cos power, a the axis). Writes the lamps.json of DIR with each lamp's\n"
+    "emission_cos_power, emission_axis and their uncertainties; every later use of that lamps.json (refl calib\n"
+    "white, refl fit material, refl verify, refl plan lamps) applies the pattern.";
+
+static const char PATTERN_EPILOG[] =
+    "Order on a lab day: refl calib lamps (positions), refl calib gain (its flat field corrects the vignetting that\n"
+    "would otherwise read as a pattern), then this, then refl calib white (kc*I becomes the on-axis intensity's).\n"
+    "The pattern is measured over the directions of the target's windows (a cone printed per lamp); beyond it it\n"
+    "is extrapolated: make the target cover the samples' region (the 150 mm white at the table centre does).\n"
+    "Output (-o, may be DIR's lamps.json itself, written atomically): lamps.json as read, plus per lamp\n"
+    "emission_cos_power (n, 0 = isotropic), emission_axis ([x, y, z], unit, rig frame) and emission (the figures:\n"
+    "cos_power_std, axis_std_deg, tilt_from_origin_deg, the measured cone, rms_residual_pct, irradiance_std_pct).";
+
+int calib_cmd_pattern(int argc, char **argv)
+{
+    const char *calib_dir = NULL, *out = NULL, *camera = NULL;
+    calib_observe_options_t o = calib_observe_defaults();
+    double albedo = 0.99;
+    model_opt_t opts[] = {
+        MODEL_OPT_STRING("--calib", "DIR", "the calibrations: camera.cameramodel, lamps.json (positions), optionally "
+                         "gain.json and its maps", &calib_dir, true),
+        MODEL_OPT_STRING("-o", "LAMPS.json", "the output: DIR's lamps.json with the patterns (it may be that file)",
+                         &out, true),
+        MODEL_OPT_STRING("--camera", "NAME", "camera NAME's frames with its calibrations (a directory of several "
+                         "cameras)", &camera, false),
+        MODEL_OPT_VALUE("--albedo", "A", "the target's albedo (default 0.99)", false),
+        MODEL_OPT_STRING("--scene", "FILE", "the target's scene, D3D or OBJ (needed: a session records no scene)",
+                         &o.scene_path, false),
+        MODEL_OPT_STRING("--material", "NAME", "its material in the scene (default: the scene's only material)",
+                         &o.material, false),
+        MODEL_OPT_VALUE("--window", "N", "windows of N x N pixels (default 5)", false),
+        MODEL_OPT_VALUE("--step", "N", "on a grid of N pixels (default 8)", false),
+        MODEL_OPT_FLAG("-v", "--verbose", "print every frame", &o.verbose),
+    };
+    model_cli_t cli = { .cmd = "calib pattern", .synopsis = "SESSION", .about = PATTERN_ABOUT,
+                        .epilog = PATTERN_EPILOG, .opts = opts, .nopts = MODEL_NOPTS(opts), .min_positional = 1,
+                        .max_positional = 1 };
+    int rc = model_cli_parse(&cli, argc, argv);
+    if (rc != MODEL_CLI_OK) return rc;
+    if ((rc = calib_cli_window_step(&cli, &o.window, &o.step)) != MODEL_CLI_OK) return rc;
+    const char *av = model_cli_value(&cli, "--albedo");
+    if (av && !(model_parse_double(av, &albedo) && albedo > 0 && albedo <= 1))
+        return model_cli_error(&cli, "--albedo needs a number in (0, 1], not '%s'", av);
+
+    const char *session = cli.positional[0];
+    calib_set_t *cal = NULL;
+    calib_obs_set_t obs;
+    json_t *prov = NULL;
+    calib_lamps_pattern_t *pat = NULL;
+    bool q = model_error_quiet_thread(true);
+    bool ok = calib_observe_session(session, calib_dir, camera, false, &o, &cal, &obs);
+    if (ok) {
+        printf("refl calib pattern: %d observations of %s in %d frames (%d skipped)\n", obs.n, obs.material,
+               obs.frames_used, obs.frames_skipped);
+        ok = (pat = calloc((size_t)cal->lamps->n, sizeof *pat)) != NULL;
+        if (!ok) model_error_set(NULL, 0, "out of memory");
+    }
+    ok = ok && calib_lamps_pattern_fit(&obs, cal, albedo, pat);
+    if (ok) {
+        prov = calib_observe_provenance(argc + 1, argv - 1, session, cal);
+        ok = calib_lamps_pattern_write(cal, pat, session, out, prov);
+    }
+    model_error_quiet_thread(q);
+    if (ok) {
+        printf("%-8s %6s %6s %9s %8s %8s %6s %7s %7s\n", "lamp", "n", "n_std", "tilt_deg", "axis_std", "cone_deg",
+               "rms_%", "irr_std%", "windows");
+        for (int l = 0; l < cal->lamps->n; l++) {
+            const calib_lamps_pattern_t *P = &pat[l];
+            if (!P->fitted) {
+                printf("%-8s not measured: %d windows (need 20); its lamps.json entry is unchanged\n", P->name,
+                       P->nwindows);
+                continue;
+            }
+            printf("%-8s %6.2f %6.2f %9.2f %8.2f %8.2f %6.2f %7.2f %7d\n", P->name, P->n, P->n_std, P->tilt_deg,
+                   P->axis_std_deg, P->cone_half_angle_deg, 100 * P->rms_rel, 100 * P->irradiance_std_rel,
+                   P->nwindows);
+        }
+        printf("%s\n", out);
+    }
+    rc = ok ? 0 : model_error_report("calib pattern");
+    free(pat);
+    json_decref(prov);
+    calib_obs_free(&obs);
+    calib_set_free(cal);
     return rc;
 }

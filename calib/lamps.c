@@ -971,7 +971,7 @@ bool calib_lamps_bundle(const calib_lamps_obs_t *obs, int nobs, int nl, const ca
     }
     if (!lsq_set_fixed(pr, g, fixed)) goto fail;
     for (int k = 0; k < 7; k++)
-        if (!fixed[k] && !lsq_add_prior(pr, g, k, 0, prior[k])) goto fail;
+        if (!fixed[k] && !lsq_add_prior(pr, g, k, k < 3 ? S->offset_prior_mean_mm[k] : 0, prior[k])) goto fail;
     for (int i = 0; i < nobs; i++) {
         ctx[i].setup = S;
         ctx[i].obs = obs[i];
@@ -1058,7 +1058,7 @@ calib_lamps_opts_t calib_lamps_defaults(void)
 {
     calib_lamps_opts_t o = { .sample = "mirror_sphere", .nangles = 24, .exposures_us = { 40, 20, 10 },
                              .nexposures = 3, .min_snr = 12, .method = CALIB_LAMPS_MODEL, .joint = true,
-                             .offset_prior_mm = 1.0, .shift_prior_mm = 0.1, .tilt_prior_mrad = 1.0,
+                             .offset_prior_mm = 3.0, .shift_prior_mm = 0.1, .tilt_prior_mrad = 1.0,
                              .progress = -1 };
     for (int i = 0; i < o.nangles; i++) o.angles_deg[i] = 15.0 * i;
     return o;
@@ -1537,6 +1537,7 @@ bool calib_lamps_joint_fit(const calib_lamps_opts_t *o, calib_lamps_result_t *r)
                                       .radius_mm = o->sphere_radius_mm, .offset_prior_mm = o->offset_prior_mm,
                                       .shift_prior_mm = o->shift_prior_mm, .tilt_prior_mrad = o->tilt_prior_mrad,
                                       .image_weights = true };
+    for (int k = 0; k < 3 && r->have_typed; k++) bs.offset_prior_mean_mm[k] = r->typed_mm[k] - c0[k];
     calib_lamps_obs_t *ob = calloc((size_t)nl * NA + 1, sizeof *ob);
     double *x = calloc((size_t)nl * 3, sizeof *x), *cv = calloc((size_t)nl * 9, sizeof *cv);
     bool ok = ob && x && cv;
@@ -1703,8 +1704,21 @@ bool calib_lamps_write_json(const calib_lamps_opts_t *o, calib_lamps_result_t *r
     json_object_set_new(sj, "radius_mm", json_real(o->sphere_radius_mm));
     json_object_set_new(sj, "motion", json_string("centre at turntable angle a: Rz(a) centre_at_angle0_mm (the "
                                                   "journal's measured angle)"));
-    json_object_set_new(sj, "source", json_string("command line"));
-    if (r->have_joint) json_object_set_new(sj, "joint_fit", joint_json(o, r));
+    if (r->have_joint) {
+        const double *f = r->found_mm, *t = r->typed_mm, *fc = r->found_cov_mm2;
+        json_object_set_new(sj, "source", json_string(
+            "the highlights across turntable angles: the joint fit's offset, the typed centre its prior (mean, "
+            "std joint_fit.prior_std.offset_mm); highlights found again at the moved centre while it moved > 0.2 mm"));
+        json_object_set_new(sj, "centre_typed_mm", json_pack("[fff]", t[0], t[1], t[2]));
+        json_object_set_new(sj, "centre_found_mm", json_pack("[fff]", f[0], f[1], f[2]));
+        json_object_set_new(sj, "centre_found_std_mm", json_pack("[fff]", sqrt(fc[0]), sqrt(fc[4]), sqrt(fc[8])));
+        json_object_set_new(sj, "centre_typed_off_mm", json_real(sqrt(pow(f[0] - t[0], 2) + pow(f[1] - t[1], 2) +
+                                                                      pow(f[2] - t[2], 2))));
+        json_object_set_new(sj, "rounds", json_integer(r->rounds));
+        json_object_set_new(sj, "joint_fit", joint_json(o, r));
+    } else {
+        json_object_set_new(sj, "source", json_string("command line"));
+    }
     json_object_set_new(doc, "sphere", sj);
     json_object_set_new(doc, "session", json_string(r->session_dir));
     json_object_set_new(doc, "provenance", json_incref(r->provenance));
@@ -1848,6 +1862,15 @@ static bool report_html(const calib_lamps_opts_t *o, const calib_lamps_result_t 
                         "path's uncertainty.", g[0], g[1], g[2], sqrt(gc[0]), sqrt(gc[8]), sqrt(gc[16]), g[3], g[4],
                         sqrt(gc[24]), sqrt(gc[32]), g[5], g[6], sqrt(gc[40]), sqrt(gc[48]), o->offset_prior_mm,
                         o->shift_prior_mm, o->tilt_prior_mrad);
+    if (r->have_joint && r->have_typed) {
+        const double *fm = r->found_mm, *t = r->typed_mm, *fc = r->found_cov_mm2;
+        model_html_para(f, "The sphere's centre from its highlights across the angles: (%.3f, %.3f, %.3f) mm (std "
+                        "%.3f %.3f %.3f), typed (%g, %g, %g) mm, %.2f mm apart; %d round%s of highlights (found again "
+                        "at the moved centre while it moved by more than 0.2 mm).", fm[0], fm[1], fm[2], sqrt(fc[0]),
+                        sqrt(fc[4]), sqrt(fc[8]), t[0], t[1], t[2],
+                        sqrt(pow(fm[0] - t[0], 2) + pow(fm[1] - t[1], 2) + pow(fm[2] - t[2], 2)), r->rounds,
+                        r->rounds == 1 ? "" : "s");
+    }
     report_table(f, r);
     for (int l = 0; l < r->nlamps; l++) {
         if (!r->lamps[l].nmissing) continue;
@@ -1887,15 +1910,70 @@ bool calib_lamps_write_report(const calib_lamps_opts_t *o, calib_lamps_result_t 
     return ok;
 }
 
+// Every lamp's highlights, rays and fit forgotten (another round).
+static void reset_rays(calib_lamps_result_t *r)
+{
+    const size_t NA = (size_t)r->nangles;
+    for (int l = 0; l < r->nlamps; l++) {
+        calib_lamps_lamp_t *lp = &r->lamps[l];
+        memset(lp->hl, 0, NA * sizeof *lp->hl);
+        memset(lp->has_ray, 0, NA * sizeof *lp->has_ray);
+        memset(lp->used, 0, NA * sizeof *lp->used);
+        memset(lp->p_mm, 0, NA * sizeof *lp->p_mm);
+        memset(lp->d, 0, NA * sizeof *lp->d);
+        memset(lp->dist_mm, 0, NA * sizeof *lp->dist_mm);
+        memset(&lp->fit, 0, sizeof lp->fit);
+        lp->nmissing = 0;
+    }
+    r->first_angle = -1;
+    r->have_joint = false;
+}
+
+// The rounds: highlights, rays and fits at the centre oc->sphere_centre_mm
+// (first the typed one); while the joint fit moves it by more than 0.2 mm
+// (at most 3 rounds), again at the moved one.
+static bool rounds(calib_lamps_opts_t *oc, calib_lamps_result_t *r)
+{
+    for (r->rounds = 1;; r->rounds++) {
+        if (r->rounds > 1) reset_rays(r);
+        memcpy(r->base_mm, oc->sphere_centre_mm, sizeof r->base_mm);
+        if (!calib_lamps_find_highlights(oc, r) || !calib_lamps_triangulate_lamps(oc, r)) return false;
+        if (!oc->joint) break;
+        if (!calib_lamps_joint_fit(oc, r)) return false;
+        const double *g = r->joint.sphere;
+        for (int k = 0; k < 3; k++) {
+            r->found_mm[k] = r->base_mm[k] + g[k];
+            for (int j = 0; j < 3; j++) r->found_cov_mm2[3 * k + j] = r->joint.sphere_cov[7 * k + j];
+        }
+        double moved = sqrt(g[0] * g[0] + g[1] * g[1] + g[2] * g[2]);
+        if (!(oc->offset_prior_mm > 0) || moved <= 0.2 || r->rounds == 3) break;
+        note(oc, "the sphere's centre from its highlights: %.2f, %.2f, %.2f mm (%.2f mm from where they were found, "
+             "%.2f mm from the typed); finding them again there\n", r->found_mm[0], r->found_mm[1], r->found_mm[2],
+             moved, sqrt(pow(r->found_mm[0] - r->typed_mm[0], 2) + pow(r->found_mm[1] - r->typed_mm[1], 2) +
+                         pow(r->found_mm[2] - r->typed_mm[2], 2)));
+        memcpy(oc->sphere_centre_mm, r->found_mm, sizeof r->found_mm);
+    }
+    double off = 0;
+    for (int k = 0; k < 3; k++) off += pow(r->found_mm[k] - r->typed_mm[k], 2);
+    off = sqrt(off);
+    if (oc->joint && oc->offset_prior_mm > 0 && off > 2 * oc->offset_prior_mm)
+        note(oc, "the typed sphere centre is %.2f mm from the one its highlights give (%.2f, %.2f, %.2f mm), more "
+             "than twice its std (--sphere-offset-prior-mm %g): check the ball's placement and --sphere-centre-mm\n",
+             off, r->found_mm[0], r->found_mm[1], r->found_mm[2], oc->offset_prior_mm);
+    return true;
+}
+
 bool calib_lamps_run(const calib_lamps_opts_t *o, calib_lamps_result_t *r)
 {
     memset(r, 0, sizeof *r);
     r->first_angle = -1;
-    if (!calib_lamps_open(o, r) || !calib_lamps_find_highlights(o, r) || !calib_lamps_triangulate_lamps(o, r))
-        return false;
-    if (o->joint && !calib_lamps_joint_fit(o, r)) return false;
+    if (!calib_lamps_open(o, r)) return false;
+    calib_lamps_opts_t oc = *o;   // the centre moves to the images' between rounds
+    r->have_typed = true;
+    memcpy(r->typed_mm, o->sphere_centre_mm, sizeof r->typed_mm);
+    if (!rounds(&oc, r)) return false;
     compare_truth(r);
-    return calib_lamps_write_json(o, r) && calib_lamps_write_report(o, r);
+    return calib_lamps_write_json(&oc, r) && calib_lamps_write_report(&oc, r);
 }
 
 void calib_lamps_result_free(calib_lamps_result_t *r)

@@ -13,6 +13,7 @@
 #include <stdbool.h>
 #include <stdio.h>
 
+#include "calib/calib.h"
 #include "model/model.h"
 #include "rig/rig.h"
 
@@ -143,6 +144,8 @@ typedef struct {
     double       shift_prior_mm;   // std of each shift component (<= 0: shift held at 0)
     double       tilt_prior_mrad;  // std of each tilt component (<= 0: tilt held at 0)
     bool         image_weights;    // residuals mapped back to the camera ray (false: the reflected ray's angle)
+    double       offset_prior_mean_mm[3];   // the offset prior's mean (0: c0_mm is the typed centre; a later
+                                            // round of calib_lamps_run: the typed centre - c0_mm)
 } calib_lamps_bundle_setup_t;
 
 typedef struct {
@@ -214,7 +217,8 @@ typedef struct {
     double       min_snr;          // a highlight's peak / noise at least (default 12)
     calib_lamps_method_t method;   // how a highlight is located (default CALIB_LAMPS_MODEL)
     bool         joint;            // the joint fit of lamps and sphere path after the per-lamp fits (default true)
-    double       offset_prior_mm;  // joint fit: priors (std; 0 holds the part at 0), defaults 1 mm,
+    double       offset_prior_mm;  // joint fit: priors (std; 0 holds the part at 0), defaults 3 mm (the
+                                   //   typed centre's std: the centre is found from the highlights),
     double       shift_prior_mm;   //   0.1 mm and 1 mrad (see calib_lamps_bundle_setup_t)
     double       tilt_prior_mrad;
     int          progress;         // capture progress: -1 auto (a bar on a terminal), 0 lines, 1 bar
@@ -260,6 +264,16 @@ typedef struct {
     bool                have_joint;     // the joint fit ran
     int                 joint_nobs;     // highlights in it
     calib_lamps_bundle_t joint;
+    // The sphere's centre from the images: calib_lamps_run finds the highlights
+    // at the typed centre, and while the joint fit moves it (offset > 0.2 mm,
+    // at most 3 rounds) finds them again at the moved one; the typed centre is
+    // the offset's prior (mean, std offset_prior_mm), and a check.
+    bool                have_typed;     // typed_mm set (by calib_lamps_run)
+    double              typed_mm[3];    // the sphere's centre at angle 0 as typed (--sphere-centre-mm)
+    double              base_mm[3];     // the centre the last round's highlights were found at (the path's c0)
+    int                 rounds;         // rounds of highlights and fits
+    double              found_mm[3];    // base + the joint fit's offset: the centre the images give
+    double              found_cov_mm2[9];
     char               *truth_path;     // the virtual rig's truth file (comparison only; NULL: none)
     bool                have_truth;     // its lamps were read
     int                 ntruth;         // lamps compared with the truth
@@ -304,6 +318,45 @@ bool calib_lamps_write_json(const calib_lamps_opts_t *o, calib_lamps_result_t *r
 // Stage 6: o->out/report_data.json, its plots (scripts/calib_lamps_report.py)
 // and o->out/report.html.
 bool calib_lamps_write_report(const calib_lamps_opts_t *o, calib_lamps_result_t *r);
+
+// ---------------------------------------------------------------------------
+// The lamps' emission patterns (calib/lamps_pattern.c; `refl calib pattern`)
+//
+// A flat Lambertian target of albedo A (the reference white) lit by each lamp
+// alone (at one or more turntable angles): each window's irradiance relative to
+// the lamp's on-axis intensity, y = s d^2 / (kd n.l) (kd = A/pi; s the raw
+// signal, calib_obs_t's times its emission), is fitted per lamp with the
+// model's pattern y = kcI max(0, a.u)^n (u the unit direction from the lamp to
+// the window): log residuals weighted by each window's noise (floor 0.1 %),
+// Levenberg-Marquardt in ln kcI, n >= 0 and the axis (two tilts across the
+// windows' mean direction, prior N(0, 45 deg) that only matters where n ~ 0),
+// started at n = 0.5, 3, 10, 30 (the best kept), windows beyond 5 robust std
+// dropped (at most a fifth) and fitted again.
+typedef struct {
+    char         name[64];
+    bool         fitted;              // false: fewer than 20 windows (the lamp's entry is left as it was)
+    int          nwindows, rejected;  // windows of the lamp (in the fit) and those dropped
+    double       n, n_std;            // emission_cos_power and its 1-sigma
+    model_vec3_t axis;                // emission_axis (unit, rig frame)
+    double       axis_std_deg;        // the axis's 1-sigma (the larger of its two tilts)
+    double       tilt_deg;            // the axis against the direction from the lamp to the rig origin
+    model_vec3_t cone_centre;         // the windows' mean direction from the lamp
+    double       cone_half_angle_deg; // the largest angle of a window's direction from it: the measured cone
+    double       kcI_axis_per_us;     // the on-axis kc*I the albedo implies (DN/us at 0 dB per (1/sr)/mm^2)
+    double       rms_rel;             // RMS relative residual of the windows
+    double       irradiance_std_rel;  // the largest relative 1-sigma of the fitted irradiance over the windows
+} calib_lamps_pattern_t;
+
+// Each lamp of cal (out: cal->lamps->n) from obs (calib_observe of the target
+// through cal). false (model_error_set) on a singular fit or out of memory.
+bool calib_lamps_pattern_fit(const calib_obs_set_t *obs, const calib_set_t *cal, double albedo,
+                             calib_lamps_pattern_t *out);
+// cal's lamps.json (cal->lamps->path) with each fitted lamp's
+// emission_cos_power, emission_axis and emission (the figures above), the
+// conventions, the session and the provenance, written to out_json (may be
+// the same file; atomic). false + message.
+bool calib_lamps_pattern_write(const calib_set_t *cal, const calib_lamps_pattern_t *pat, const char *session,
+                               const char *out_json, json_t *provenance);
 
 #ifdef __cplusplus
 }

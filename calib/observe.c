@@ -35,6 +35,7 @@ void calib_obs_free(calib_obs_set_t *s)
 {
     if (!s) return;
     free(s->o);
+    calib_drift_free(&s->drift);
     memset(s, 0, sizeof *s);
 }
 
@@ -229,10 +230,17 @@ static bool window_observation(const observe_t *ob, const rig_frame_row_t *r, in
     // narrow lobe changes over the lamp's disc) gets its disc's cosines
     model_vec3_t dl[4];
     bool has_disc = c.nh > cos(20 * M_PI / 180) && model_lamp_disc_dirs(L->l, L->d_mm, cal->lamp_radius_mm[lamp], dl);
+    // the lamp's emission pattern toward the window (1: isotropic) is divided
+    // out, as the flat field is: s is the signal of the lamp's on-axis intensity
+    double em = model_lamp_emission(&cal->lamps->lamps[lamp], p->p_mm);
+    if (!(em > 1e-6)) return false;   // outside the lamp's beam
+    // and the lamp's drift since its first visit of the reference (1 without revisits)
+    double dr = calib_drift_factor(&ob->out->drift, lamp, r->t_trigger_utc_s);
+    em *= dr;
     *obs = (calib_obs_t){ .lamp = lamp, .angle_deg = r->measured_deg, .exposure_us = r->exposure_us,
                           .gain_db = 20 * log10(gf), .q = { w->q[0], w->q[1] }, .c = c, .d_mm = L->d_mm,
-                          .s_dn_per_us = sig / (sg / n) / (r->exposure_us * gf), .step = r->step,
-                          .face = p->face, .has_disc = has_disc };
+                          .s_dn_per_us = sig / (sg / n) / (r->exposure_us * gf * em), .emission = em / dr, .drift = dr,
+                          .step = r->step, .face = p->face, .has_disc = has_disc };
     for (int k = 0; has_disc && k < 4; k++) obs->disc[k] = model_cosines(p->n, dl[k], p->v);
     // the point at angle 0: turned back about the table's axis (z)
     double ca = cos(-r->measured_deg * M_PI / 180), sa = sin(-r->measured_deg * M_PI / 180);
@@ -244,7 +252,7 @@ static bool window_observation(const observe_t *ob, const rig_frame_row_t *r, in
         // per pixel: shot noise K*signal (K scales with the gain), read noise, quantisation
         double K = cal->gain_dn_per_e * gf, rd = K * cal->read_noise_e;
         double var = (K * sig + rd * rd + 1.0 / 12) / n;
-        obs->s_std = sqrt(var) / (sg / n) / (r->exposure_us * gf);
+        obs->s_std = sqrt(var) / (sg / n) / (r->exposure_us * gf * em);
     }
     return true;
 }
@@ -381,6 +389,15 @@ bool calib_observe(const char *session_dir, const calib_set_t *cal, const calib_
     snprintf(out->sample, sizeof out->sample, "%s", plan->sample);
     if (o.material) snprintf(out->material, sizeof out->material, "%s", o.material);
     if (!(scene = observe_scene(s, plan, o.scene_path, o.scene_unit_mm, out, &ob.mat))) goto done;
+    if (!calib_drift_measure(s, plan, cal, &out->drift)) goto done;
+    for (int l = 0; o.verbose && l < out->drift.nlamps; l++)
+        if (out->drift.nvisits[l] > 1) {
+            double lo = INFINITY, hi = -INFINITY;
+            for (int k = 0; k < out->drift.nvisits[l]; k++)
+                lo = fmin(lo, out->drift.f[l][k]), hi = fmax(hi, out->drift.f[l][k]);
+            fprintf(stderr, "  %s: lamp drift of %s from %d visits of %s: %.4f .. %.4f of the first\n", session_dir,
+                    cal->lamps->lamps[l].name, out->drift.nvisits[l], out->drift.angle_ref[l], lo, hi);
+        }
     ob.scene = scene;
     ob.nx = (cal->W - o.window) / o.step + 1;
     ob.ny = (cal->H - o.window) / o.step + 1;

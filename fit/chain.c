@@ -13,6 +13,7 @@
 #include "fit/fit.h"
 #include "model/model.h"
 #include "model/report.h"
+#include "model/vec.h"
 #include "rig/truth.h"
 
 typedef struct {
@@ -283,6 +284,53 @@ static void chain_white(chain_t *c, const json_t *w, const json_t *g)
     }
 }
 
+// Each lamp's light over the samples' region (x, y in [-60, 60] mm, z 5 and
+// 50 mm): the calibrated kc*I (white.json) times the calibrated emission
+// pattern (lamps.json; isotropic without one) against the truth's kc I mean(g)
+// times its pattern: the largest relative error (%), truth 0; sigma the
+// pattern's stated irradiance_std_pct (none without a measured pattern).
+static void chain_lamp_irradiance(chain_t *c, const json_t *lj, const json_t *w, const json_t *g)
+{
+    double kc = ini_num(c, "camera", "kc_per_us"), ks = num(g, "kc_small_signal_per_us");
+    double gmean = isfinite(ks) && kc > 0 ? ks / kc : 1;
+    model_lamps_t *tl = model_lamps_from_ini(c->ini);
+    const json_t *l, *e;
+    size_t i, j;
+    json_array_foreach(json_object_get(lj, "lamps"), i, l) {
+        const char *n = json_string_value(json_object_get(l, "name"));
+        int k = n && tl ? model_lamps_find(tl, n) : -1;
+        double v = NAN;
+        json_array_foreach(json_object_get(w, "lamps"), j, e)
+            if (n && !g_strcmp0(json_string_value(json_object_get(e, "name")), n)) v = num(e, "kc_I_per_us");
+        const json_t *p = json_object_get(l, "position_mm"), *ax = json_object_get(l, "emission_axis");
+        if (k < 0 || !isfinite(v) || !isfinite(kc) || json_array_size(p) != 3) continue;
+        model_lamp_t M = { .position_mm = v3(json_number_value(json_array_get(p, 0)),
+                                             json_number_value(json_array_get(p, 1)),
+                                             json_number_value(json_array_get(p, 2))) };
+        if (json_is_number(json_object_get(l, "emission_cos_power")) && json_array_size(ax) == 3) {
+            M.emission_cos_power = json_number_value(json_object_get(l, "emission_cos_power"));
+            M.emission_axis = v3_unit(v3(json_number_value(json_array_get(ax, 0)),
+                                         json_number_value(json_array_get(ax, 1)),
+                                         json_number_value(json_array_get(ax, 2))));
+        }
+        const model_lamp_t *T = &tl->lamps[k];
+        double worst = 0;
+        for (int ix = -3; ix <= 3; ix++)
+            for (int iy = -3; iy <= 3; iy++)
+                for (int iz = 0; iz < 2; iz++) {
+                    model_vec3_t q = v3(20 * ix, 20 * iy, iz ? 50 : 5);
+                    double m = v * model_lamp_emission(&M, q), t = kc * T->intensity * gmean * model_lamp_emission(T, q);
+                    worst = fmax(worst, fabs(m / t - 1));
+                }
+        char name[160];
+        snprintf(name, sizeof name, "lamp_%s.irradiance_max_err", n);
+        add(c, "lamps", name, 100 * worst, 0, num(json_object_get(l, "emission"), "irradiance_std_pct"), "%",
+            "the calibrated kc*I (white) times the emission pattern (lamps.json; isotropic without one) against the "
+            "truth's over the samples' region (x, y within 60 mm, z 5 and 50 mm): the largest relative error");
+    }
+    model_lamps_free(tl);
+}
+
 // ---------------------------------------------------------------------------
 // Materials and verdicts
 
@@ -510,6 +558,7 @@ json_t *fit_chain_compare(const char *dir, const char *truth_path, json_t *prov)
     if (gj) chain_gain(&c, gj);
     json_t *wj = load(&c, "white", "calib/white/white.json");
     if (wj) chain_white(&c, wj, gj);
+    if (wj && lj) chain_lamp_irradiance(&c, lj, wj, gj);
     chain_dir_files(&c);
     json_decref(lj);
     json_decref(gj);

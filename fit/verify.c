@@ -289,7 +289,8 @@ static double radical_inverse2(uint32_t i)
     return i * 0x1p-32;
 }
 
-// B_ik = (pi / N) sum_j f_x(w_j, v) sum over lamp i: V_yi R_y(l_yi, -w_j) / d_yi^2, w_j cosine-weighted.
+// B_ik = (pi / N) sum_j f_x(w_j, v) sum over lamp i: V_yi R_y(l_yi, -w_j) E_i(y) / d_yi^2, w_j cosine-weighted
+// (E_i: lamp i's emission pattern, model_lamp_emission).
 static void ir_rows(void *vctx, int begin, int end, int thread)
 {
     (void)thread;
@@ -329,7 +330,8 @@ static void ir_rows(void *vctx, int begin, int end, int thread)
                 model_cosines_t cy = model_cosines(y.n, l, vy);
                 if (cy.nl <= 0 || cy.nv <= 0) continue;
                 if (!model_tracer_visible_from(c->t, y.p_mm, y.n, c->lamps->lamps[i].position_mm)) continue;
-                acc[i] += fx * model_brdf_eval(my->model, my->p, &cy, NULL) / (dd * dd);
+                acc[i] += fx * model_brdf_eval(my->model, my->p, &cy, NULL) / (dd * dd) *
+                          model_lamp_emission(&c->lamps->lamps[i], y.p_mm);
             }
         }
         for (int i = 0; i < nl; i++) B[i] = (float)(M_PI / N * acc[i]);
@@ -1063,7 +1065,10 @@ static void image_fit_points(fit_t *F, int m, int first_pt, double Pa0, double v
             if (!((im->lamps_on >> i) & 1)) continue;
             model_cosines_t c = model_cosines(v->pi[g].n, ls[i].l, v->pi[g].v);
             F->cs[*e] = model_brdf_prepare(&c);
-            F->wv[*e] = ls[i].d_mm > 0 ? F->A[i] * ls[i].V / (ls[i].d_mm * ls[i].d_mm) : 0;
+            // the lamp's emission pattern toward the point (exactly 1 for an isotropic lamp)
+            F->wv[*e] = ls[i].d_mm > 0 ? F->A[i] * ls[i].V / (ls[i].d_mm * ls[i].d_mm) *
+                                             model_lamp_emission(&F->lamps->lamps[i], v->pi[g].p_mm)
+                                       : 0;
             F->bv[*e] = F->A[i] * v->B[(size_t)g * v->nl + i];
             F->lampv[*e] = i;
             (*e)++;

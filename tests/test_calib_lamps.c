@@ -20,9 +20,11 @@
 #include <mrcal/poseutils.h>
 #include <stdlib.h>
 
+#include "calib/calib.h"
 #include "calib/lamps.h"
 #include "model/lsq.h"
 #include "model/model.h"
+#include "model/vec.h"
 #include "tests/test.h"
 
 #define CAMERA "/examples/camera.cameramodel"
@@ -543,6 +545,53 @@ TEST_LONG(calib_lamps_virtual_rig_accuracy)
     g_free(o);
     g_free(e);
 
+    // The sphere's centre typed 2 mm off (1.2, 1.2, 1 mm): found from the
+    // highlights across the angles (the joint fit's offset; the highlights
+    // found again there), the lamps where the right centre puts them.
+    {
+        char out4[PATH_MAX + 16];
+        snprintf(out4, sizeof out4, "%s/off2mm", test_tmpdir());
+        rc = test_refl_run(120, &o, &e, "calib", "lamps", "--session", sess, "--camera", cam, "-o", out4,
+                           "--sphere-centre-mm", "61.2,1.2,41", "--sphere-radius-mm", "25", "--lamp-radius-mm", "15",
+                           NULL);
+        CHECK_MSG(rc == 0, "rc %d\n%s", rc, e);
+        CHECK_CONTAINS(e, "1.97 mm from the typed); finding them again there");
+        CHECK_CONTAINS(o, "typed 61.2 1.2 41 (1.97 mm off; 2 rounds)");
+        g_free(o);
+        g_free(e);
+        char *jp4 = g_strdup_printf("%s/lamps.json", out4);
+        json_t *d4 = json_load_file(jp4, 0, NULL), *d0 = json_load_file(jp, 0, NULL);
+        json_t *sph = json_object_get(d4, "sphere"), *f = json_object_get(sph, "centre_found_mm");
+        CHECK(json_array_size(f) == 3);
+        double fe = sqrt(pow(jnum(f, 0) - 60, 2) + pow(jnum(f, 1), 2) + pow(jnum(f, 2) - 40, 2));
+        fprintf(stderr, "  typed centre 2 mm off: found %.3f %.3f %.3f mm (%.3f mm from the truth)\n", jnum(f, 0),
+                jnum(f, 1), jnum(f, 2), fe);
+        CHECK_MSG(fe < 0.2, "the centre found %.3f mm from the truth", fe);
+        CHECK_NEAR(json_number_value(json_object_get(sph, "centre_typed_off_mm")), 1.97, 0.05);
+        CHECK(json_integer_value(json_object_get(sph, "rounds")) == 2);
+        char *h4 = g_strdup_printf("%s/report.html", out4), *ht = model_read_file(h4, NULL);
+        CHECK_CONTAINS(ht, "typed (61.2, 1.2, 41) mm, 1.97 mm apart; 2 rounds");
+        free(ht);
+        g_free(h4);
+        for (int l = 0; l < 5; l++) {
+            json_t *a = json_object_get(json_array_get(json_object_get(d4, "lamps"), (size_t)l), "position_mm");
+            json_t *b = json_object_get(json_array_get(json_object_get(d0, "lamps"), (size_t)l), "position_mm");
+            double dd = sqrt(pow(jnum(a, 0) - jnum(b, 0), 2) + pow(jnum(a, 1) - jnum(b, 1), 2) +
+                             pow(jnum(a, 2) - jnum(b, 2), 2));
+            CHECK_MSG(dd < 0.1, "lamp %d: %.3f mm from where the right centre puts it", l, dd);
+        }
+        json_decref(d4);
+        json_decref(d0);
+        model_ini_t *ti4 = model_ini_load(truth);
+        model_lamps_t *tl4 = ti4 ? model_lamps_from_ini(ti4) : NULL;
+        double rms4 = INFINITY, std4 = 0, worst4 = INFINITY;
+        CHECK(tl4 && lamps_vs_truth(jp4, tl4, "typed centre 2 mm off", &rms4, &std4, &worst4));
+        CHECK_MSG(rms4 < 1.0, "typed centre 2 mm off: RMS lamp error %.2f mm", rms4);
+        model_lamps_free(tl4);
+        model_ini_free(ti4);
+        g_free(jp4);
+    }
+
     // The chain: the same session analysed with a camera model moved like a
     // calibration error (the demo's `refl calib geometry` camera: centre
     // 1.45 mm off, 0.05 deg, focal length 0.17 % long; this one turned about
@@ -766,4 +815,401 @@ TEST(calib_lamps_bad_arguments)
     CHECK_CONTAINS(o, "--sphere-path fit|fixed");
     g_free(o);
     g_free(e);
+}
+
+// ---------------------------------------------------------------------------
+// The lamps' emission patterns (refl calib pattern): the reference white at
+// three angles on a virtual rig whose lamps each have their own pattern and
+// tilt; the measured pattern against the truth's over the samples' region.
+
+// Each lamp's pattern of the test's truth: cos power n and the axis turned
+// tilt degrees from the direction toward the rig origin (toward +z x d).
+static const struct { const char *name; double n, tilt_deg; } PAT_TRUE[5] = {
+    { "east", 4.8, 15 }, { "south", 2.0, 8 }, { "west", 8.0, 20 }, { "north", 1.0, 0 }, { "rim", 4.8, 10 },
+};
+
+// The example truth with PAT_TRUE's patterns (when patterns) and extra
+// appended (sections), vignetting and the sensor's response compression off (a lab's gain
+// calibration corrects them, with its flat field and its fitted compression;
+// here the calibration set has none: the compression left in costs 0.75 %).
+static const char *pattern_truth(const char *name, const char *extra, bool patterns)
+{
+    const char *t0 = truth_file("truth0.ini", 0);
+    char *text = model_read_file(t0, NULL);
+    model_ini_t *ti = model_ini_load(t0);
+    model_lamps_t *tl = ti ? model_lamps_from_ini(ti) : NULL;
+    GString *g = g_string_new(text ? text : "");
+    for (int l = 0; tl && patterns && l < 5; l++) {
+        int k = model_lamps_find(tl, PAT_TRUE[l].name);
+        if (k < 0) continue;
+        model_vec3_t d = v3_unit(v3_scale(tl->lamps[k].position_mm, -1));
+        model_vec3_t e = v3_unit(v3_cross(v3(0, 0, 1), d));
+        double a = PAT_TRUE[l].tilt_deg * M_PI / 180;
+        model_vec3_t ax = v3_add(v3_scale(d, cos(a)), v3_scale(e, sin(a)));
+        char hdr[80], rep[300];
+        snprintf(hdr, sizeof hdr, "[lamp %s]\n", PAT_TRUE[l].name);
+        snprintf(rep, sizeof rep, "[lamp %s]\nemission_cos_power = %g\nemission_axis = %.9f %.9f %.9f\n",
+                 PAT_TRUE[l].name, PAT_TRUE[l].n, ax.x, ax.y, ax.z);
+        g_string_replace(g, hdr, rep, 1);
+    }
+    g_string_replace(g, "vignetting = 0.1\n", "vignetting = 0\n", 1);
+    g_string_replace(g, "nonlinearity_pct = 2\n", "nonlinearity_pct = 0\n", 1);
+    if (extra) g_string_append(g, extra);
+    const char *p = test_write(name, g->str);
+    g_string_free(g, TRUE);
+    model_lamps_free(tl);
+    model_ini_free(ti);
+    free(text);
+    return p;
+}
+
+// A calibration directory: the truth's camera model and the truth's lamp
+// positions (the positions' own accuracy is calib_lamps_virtual_rig_accuracy's).
+static char *pattern_calib(const model_lamps_t *tl)
+{
+    char *cam = src(CAMERA), *text = model_read_file(cam, NULL);
+    g_mkdir_with_parents(test_path("cal"), 0755);
+    test_write("cal/camera.cameramodel", text);
+    free(text);
+    g_free(cam);
+    GString *g = g_string_new("{\"lamps\": [");
+    for (int i = 0; i < tl->n; i++)
+        g_string_append_printf(g, "%s{\"name\": \"%s\", \"position_mm\": [%.6f, %.6f, %.6f], \"radius_mm\": 15}",
+                               i ? ", " : "", tl->lamps[i].name, tl->lamps[i].position_mm.x,
+                               tl->lamps[i].position_mm.y, tl->lamps[i].position_mm.z);
+    g_string_append(g, "]}\n");
+    test_write("cal/lamps.json", g->str);
+    g_string_free(g, TRUE);
+    return g_strdup(test_path("cal"));
+}
+
+// kc*I per lamp of a white.json (by the truth's lamp order; 0 where absent).
+static void white_kcI(const char *path, const model_lamps_t *tl, double *kcI)
+{
+    json_t *w = json_load_file(path, 0, NULL);
+    for (int l = 0; l < tl->n; l++) {
+        kcI[l] = 0;
+        size_t i;
+        json_t *e;
+        json_array_foreach(json_object_get(w, "lamps"), i, e)
+            if (!strcmp(json_string_value(json_object_get(e, "name")), tl->lamps[l].name))
+                kcI[l] = json_number_value(json_object_get(e, "kc_I_per_us"));
+    }
+    json_decref(w);
+}
+
+// The largest relative error of the irradiance kcI E(p) of lamp ml (kcI
+// measured, E its pattern) against the truth's (kc 1e-4 per us times I, E the
+// truth's) over the samples' region: x, y in [-60, 60] mm, z 5 and 50 mm.
+static double irradiance_error(const model_lamp_t *ml, double kcI, const model_lamp_t *tl)
+{
+    double worst = 0;
+    for (int ix = -3; ix <= 3; ix++)
+        for (int iy = -3; iy <= 3; iy++)
+            for (int iz = 0; iz < 2; iz++) {
+                model_vec3_t p = v3(20 * ix, 20 * iy, iz ? 50 : 5);
+                double m = kcI * model_lamp_emission(ml, p), t = 1e-4 * tl->intensity * model_lamp_emission(tl, p);
+                worst = fmax(worst, fabs(m / t - 1));
+            }
+    return worst;
+}
+
+// The white session on the virtual rig (its lamps with PAT_TRUE's patterns
+// when patterns, else isotropic), refl calib white before and after refl
+// calib pattern: *worst and *worst_iso the largest irradiance error over the
+// samples' region with the measured patterns and as isotropic lamps.
+static void pattern_run(bool patterns, double *worst, double *worst_iso)
+{
+    *worst = *worst_iso = INFINITY;
+    char *truth = g_strdup(pattern_truth("truth.ini", NULL, patterns));
+    char *rig = g_strdup(rig_file("rig.ini", truth));
+    model_ini_t *ti = model_ini_load(truth);
+    model_lamps_t *tl = ti ? model_lamps_from_ini(ti) : NULL;
+    CHECK(tl && tl->n == 5);
+    if (!tl) return;
+    char *cal = pattern_calib(tl);
+    // examples/plans/reference_white_lamps.ini with the dark frames (no gain calibration here)
+    char *wsc = src("/examples/samples/reference_white.d3d");
+    char *plan = g_strdup(test_write("white.ini", "[plan]\nname = white\n[sample]\nname = reference_white\n"
+                                     "kind = reference_white\n[angles]\nlist = 0 120 240\n[lamps]\n"
+                                     "sets = east; south; west; north; rim; none\n[exposure]\nmode = fixed\n"
+                                     "list_us = 8000\n"));
+    char *ws = g_strdup(test_path("white")), *o = NULL, *e = NULL;
+    int rc = test_refl_run(300, &o, &e, "capture", "--yes", plan, "--rig", rig, "-o", ws, "--progress", "lines", NULL);
+    CHECK_MSG(rc == 0, "%s", e);
+    g_free(o);
+    g_free(e);
+    // the white as an isotropic lamp's: kc*I toward the white
+    char *wj = g_strdup_printf("%s/white.json", cal), *lj = g_strdup_printf("%s/lamps.json", cal);
+    rc = test_refl_run(300, &o, &e, "calib", "white", ws, "--calib", cal, "--scene", wsc, "-o", wj, NULL);
+    CHECK_MSG(rc == 0, "%s", e);
+    g_free(o);
+    g_free(e);
+    double kcI_iso[5], kcI[5];
+    white_kcI(wj, tl, kcI_iso);
+    // the patterns, into the directory's lamps.json itself
+    rc = test_refl_run(300, &o, &e, "calib", "pattern", ws, "--calib", cal, "--scene", wsc, "-o", lj, NULL);
+    CHECK_MSG(rc == 0, "%s", e);
+    fprintf(stderr, "%s", o ? o : "");
+    CHECK_CONTAINS(o, "irr_std%");
+    g_free(o);
+    g_free(e);
+    // the white again through the patterns: kc*I is the on-axis intensity's
+    rc = test_refl_run(300, &o, &e, "calib", "white", ws, "--calib", cal, "--scene", wsc, "-o", wj, NULL);
+    CHECK_MSG(rc == 0, "%s", e);
+    g_free(o);
+    g_free(e);
+    white_kcI(wj, tl, kcI);
+    // the patterns again through the directory's patterns: the same (the loaded pattern is divided back in)
+    char *lj2 = g_strdup_printf("%s/lamps2.json", test_tmpdir());
+    rc = test_refl_run(300, &o, &e, "calib", "pattern", ws, "--calib", cal, "--scene", wsc, "-o", lj2, NULL);
+    CHECK_MSG(rc == 0, "%s", e);
+    g_free(o);
+    g_free(e);
+    json_t *d1 = json_load_file(lj, 0, NULL), *d2 = json_load_file(lj2, 0, NULL);
+    for (size_t l = 0; l < 5; l++) {
+        json_t *a = json_array_get(json_object_get(d1, "lamps"), l), *b = json_array_get(json_object_get(d2, "lamps"), l);
+        CHECK_NEAR(json_number_value(json_object_get(a, "emission_cos_power")),
+                   json_number_value(json_object_get(b, "emission_cos_power")), 1e-6);
+    }
+    json_decref(d1);
+    json_decref(d2);
+    g_free(lj2);
+    calib_set_t *cs = calib_set_load(cal, true);
+    CHECK(cs && cs->lamps->n == 5);
+    json_t *doc = json_load_file(lj, 0, NULL);
+    CHECK(doc && json_string_length(json_object_get(doc, "emission_conventions")) > 100);
+    *worst = *worst_iso = 0;
+    for (int l = 0; cs && l < 5; l++) {
+        const model_lamp_t *T = &tl->lamps[l], *M = &cs->lamps->lamps[l];
+        CHECK(!strcmp(T->name, M->name));
+        model_lamp_t iso = *M;
+        iso.emission_cos_power = 0;
+        double err = irradiance_error(M, kcI[l], T), err_iso = irradiance_error(&iso, kcI_iso[l], T);
+        json_t *em = json_object_get(json_array_get(json_object_get(doc, "lamps"), (size_t)l), "emission");
+        double tilt = acos(v3_dot(M->emission_axis, T->emission_axis)) * 180 / M_PI;
+        fprintf(stderr, "  lamp %-5s n %.2f (truth %.1f, std %.2f), axis %.2f deg off (std %.2f), kc*I %.4g (truth "
+                "%.4g); irradiance over the samples' region within %.2f %% (isotropic: %.2f %%)\n", T->name,
+                M->emission_cos_power, T->emission_cos_power, json_number_value(json_object_get(em, "cos_power_std")),
+                tilt, json_number_value(json_object_get(em, "axis_std_deg")), kcI[l], 1e-4 * T->intensity,
+                100 * err, 100 * err_iso);
+        CHECK_MSG(err < 0.03, "lamp %s: irradiance %.2f %% off the truth's", T->name, 100 * err);
+        CHECK(json_integer_value(json_object_get(em, "windows")) > 500);
+        *worst = fmax(*worst, err);
+        *worst_iso = fmax(*worst_iso, err_iso);
+    }
+    json_decref(doc);
+    calib_set_free(cs);
+    g_free(wj);
+    g_free(lj);
+    g_free(ws);
+    g_free(wsc);
+    g_free(plan);
+    g_free(cal);
+    model_lamps_free(tl);
+    model_ini_free(ti);
+    g_free(truth);
+    g_free(rig);
+}
+
+TEST_LONG(calib_lamps_pattern_virtual_white)
+{
+    double t0 = model_now_s(), worst, worst_iso;
+    pattern_run(true, &worst, &worst_iso);
+    // the test matters: an isotropic lamp's irradiance is far off
+    CHECK_MSG(worst_iso > 3 * worst && worst_iso > 0.05, "isotropic %.2f %% vs measured pattern %.2f %%",
+              100 * worst_iso, 100 * worst);
+    fprintf(stderr, "  calib_lamps_pattern_virtual_white: %.1f s\n", model_now_s() - t0);
+}
+
+// Isotropic lamps (the matched rig): the measured pattern changes nothing
+// that matters (the irradiance over the samples' region as the isotropic
+// lamps' within 0.3 %).
+TEST_LONG(calib_lamps_pattern_isotropic)
+{
+    double t0 = model_now_s(), worst, worst_iso;
+    pattern_run(false, &worst, &worst_iso);
+    CHECK_MSG(worst < 0.003 && worst_iso < 0.003, "measured pattern %.2f %%, isotropic %.2f %%", 100 * worst,
+              100 * worst_iso);
+    fprintf(stderr, "  calib_lamps_pattern_isotropic: %.1f s\n", model_now_s() - t0);
+}
+
+// refl calib pattern's usage errors, and lamps.json patterns that are wrong:
+// named with the file and the lamp.
+TEST(calib_lamps_pattern_bad_input)
+{
+    char *o = NULL, *e = NULL;
+    struct {
+        const char *args[12];
+        int rc;
+        const char *msg;
+    } cases[] = {
+        { { "--calib", "c", "-o", "x", NULL }, 2, "SESSION" },
+        { { "s", "-o", "x", NULL }, 2, "missing required option --calib DIR" },
+        { { "s", "--calib", "c", "-o", "x", "--albedo", "2", NULL }, 2, "--albedo needs a number in (0, 1]" },
+        { { "s", "--calib", "c", "-o", "x", "--window", "0", NULL }, 2, "--window needs a whole number" },
+        { { "s", "--calib", test_tmpdir(), "-o", "x", NULL }, 1, "no camera" },
+    };
+    for (size_t k = 0; k < sizeof cases / sizeof cases[0]; k++) {
+        const char *argv[20] = { test_refl(), "calib", "pattern" };
+        int n = 3;
+        for (int i = 0; cases[k].args[i]; i++) argv[n++] = cases[k].args[i];
+        argv[n] = NULL;
+        int rc = test_run(argv, 30, &o, &e);
+        CHECK_MSG(rc == cases[k].rc, "case %zu: rc %d: %s", k, rc, e);
+        CHECK_CONTAINS(e, cases[k].msg);
+        g_free(o);
+        g_free(e);
+    }
+    char *cam = src(CAMERA);
+    static const char *bad[][2] = {
+        { "\"emission_cos_power\": 4", "emission_cos_power 4 needs emission_axis = [x, y, z]" },
+        { "\"emission_cos_power\": 4, \"emission_axis\": [0, 0, 0]", "needs emission_axis" },
+        { "\"emission_cos_power\": -1, \"emission_axis\": [0, 0, -1]", "emission_cos_power must be a number in [0, 1000]" },
+        { "\"emission_cos_power\": \"x\"", "emission_cos_power must be a number" },
+    };
+    for (size_t k = 0; k < sizeof bad / sizeof bad[0]; k++) {
+        char text[400];
+        snprintf(text, sizeof text, "{\"lamps\": [{\"name\": \"a\", \"position_mm\": [0, 0, 500]}, {\"name\": \"east\", "
+                 "\"position_mm\": [500, 0, 500], %s}]}\n", bad[k][0]);
+        const char *lj = test_write("bad.json", text);
+        bool q = model_error_quiet_thread(true);
+        calib_set_t *c = calib_set_load_files(cam, lj, NULL, NULL);
+        model_error_quiet_thread(q);
+        CHECK_MSG(!c, "case %zu loaded", k);
+        CHECK_CONTAINS(model_last_error(), "bad.json");
+        CHECK_CONTAINS(model_last_error(), "lamps[1] (east)");
+        CHECK_CONTAINS(model_last_error(), bad[k][1]);
+        calib_set_free(c);
+    }
+    // a good one: the pattern into model_lamp_t (the axis normalised)
+    const char *lj = test_write("good.json", "{\"lamps\": [{\"name\": \"east\", \"position_mm\": [500, 0, 500], "
+                                "\"emission_cos_power\": 3.5, \"emission_axis\": [-2, 0, -2]}]}\n");
+    calib_set_t *c = calib_set_load_files(cam, lj, NULL, NULL);
+    CHECK(c);
+    if (c) {
+        CHECK_NEAR(c->lamps->lamps[0].emission_cos_power, 3.5, 1e-12);
+        CHECK_NEAR(c->lamps->lamps[0].emission_axis.x, -sqrt(0.5), 1e-12);
+        CHECK_NEAR(c->lamps->lamps[0].emission_axis.z, -sqrt(0.5), 1e-12);
+        // 30 deg off the axis: cos^3.5
+        model_vec3_t p = v3(500 - 500 * sqrt(2) * cos(75 * M_PI / 180), 0, 500 - 500 * sqrt(2) * sin(75 * M_PI / 180));
+        CHECK_NEAR(model_lamp_emission(&c->lamps->lamps[0], p), pow(cos(30 * M_PI / 180), 3.5), 1e-9);
+    }
+    calib_set_free(c);
+    g_free(cam);
+}
+
+// ---------------------------------------------------------------------------
+// Lamp drift: lamp east warms up (brightest at switch-on, -8 %, tau 200 s)
+// and drifts (-5 %/h) while it stays on through a session of the reference
+// white whose plan revisits 0 deg every third angle; the observations
+// corrected by the revisits against the frames' raw ones.
+
+static int cmp_double(const void *a, const void *b)
+{
+    double x = *(const double *)a, y = *(const double *)b;
+    return x < y ? -1 : x > y;
+}
+
+TEST_LONG(calib_lamps_drift_reference)
+{
+    double t0 = model_now_s();
+    char *truth = g_strdup(pattern_truth("truth.ini", "\n[lamp_drift east]\nwarmup_fraction = -0.08\n"
+                                         "warmup_tau_s = 200\ndrift_pct_per_h = -5\n", false));
+    char rt[PATH_MAX + 200];
+    snprintf(rt, sizeof rt, "[rig]\nbackend = virtual\nserve = inprocess\ntruth = %s\ntime_scale = 0.005\n"
+             "pixel_format = Mono12\n", truth);
+    char *rig = g_strdup(test_write("rig.ini", rt));
+    model_ini_t *ti = model_ini_load(truth);
+    model_lamps_t *tl = ti ? model_lamps_from_ini(ti) : NULL;
+    CHECK(tl && tl->n == 5);
+    if (!tl) return;
+    char *cal = pattern_calib(tl);
+    // the dark level as a gain calibration's offset map (the truth's 64 DN): a
+    // dark frame in the plan would switch the lamp off and restart its warm-up
+    char *camp = src(CAMERA);
+    model_camera_t *cm = model_camera_load(camp);
+    g_free(camp);
+    CHECK(cm);
+    if (!cm) return;
+    int W = model_camera_width(cm), H = model_camera_height(cm);
+    model_camera_free(cm);
+    float *off = malloc(sizeof *off * (size_t)W * H);
+    for (size_t i = 0; off && i < (size_t)W * H; i++) off[i] = 64;
+    CHECK(off && model_tiff_write_float(test_path("cal/offset_dn.tiff"), W, H, off, NULL));
+    free(off);
+    test_write("cal/gain.json", "{\"saturation_dn\": 4095}\n");
+    char *plan = g_strdup(test_write("drift.ini", "[plan]\nname = white, lamp east on throughout, 0 deg revisited\n"
+                                     "[sample]\nname = reference_white\nkind = reference_white\n[angles]\n"
+                                     "list = 0 40 80 0 120 160 0 200 240 0 280 320 0\n[lamps]\nsets = east\n"
+                                     "[exposure]\nmode = fixed\nlist_us = 8000\n"));
+    char *ws = g_strdup(test_path("white")), *o = NULL, *e = NULL;
+    int rc = test_refl_run(300, &o, &e, "capture", "--yes", plan, "--rig", rig, "-o", ws, "--progress", "lines", NULL);
+    CHECK_MSG(rc == 0, "%s", e);
+    g_free(o);
+    g_free(e);
+    char *wsc = src("/examples/samples/reference_white.d3d");
+    calib_observe_options_t opt = calib_observe_defaults();
+    opt.scene_path = wsc;
+    opt.verbose = true;
+    calib_set_t *cs = NULL;
+    calib_obs_set_t obs;
+    bool ok = calib_observe_session(ws, cal, NULL, false, &opt, &cs, &obs);
+    CHECK_MSG(ok, "%s", model_last_error());
+    int east = cs ? model_lamps_find(cs->lamps, "east") : -1;
+    if (ok && east >= 0) {
+        CHECK(obs.drift.nvisits[east] == 5);
+        CHECK_CONTAINS(obs.drift.angle_ref[east], "east at 0 deg, 8000 us");
+        for (int k = 0; k < obs.drift.nvisits[east]; k++)
+            fprintf(stderr, "  visit %d: t %+.2f s, intensity %.4f of the first\n", k,
+                    obs.drift.t_s[east][k] - obs.drift.t_s[east][0], obs.drift.f[east][k]);
+        CHECK(obs.drift.f[east][4] < 0.98);   // the warm-up
+        // per frame (step): the median kc*I of its windows, raw and corrected
+        const double kd = 0.99 / M_PI;
+        double med[2][64];
+        int nst = 0;
+        for (int st = 0; st < 64; st++) {
+            double *v[2] = { malloc(sizeof(double) * (size_t)obs.n), malloc(sizeof(double) * (size_t)obs.n) };
+            int n = 0;
+            for (int i = 0; v[0] && v[1] && i < obs.n; i++) {
+                const calib_obs_t *b = &obs.o[i];
+                if (b->step != st) continue;
+                double k = b->s_dn_per_us * b->d_mm * b->d_mm / (kd * b->c.nl);
+                v[0][n] = k * b->drift;
+                v[1][n++] = k;
+            }
+            if (n > 100) {
+                for (int c = 0; c < 2; c++) {
+                    qsort(v[c], (size_t)n, sizeof(double), cmp_double);
+                    med[c][nst] = v[c][n / 2];
+                }
+                nst++;
+            }
+            free(v[0]);
+            free(v[1]);
+        }
+        CHECK(nst == 13);
+        // the intensity error: each frame's kc*I against the lamp's at the first visit (frame 0's)
+        double err[2] = { 0, 0 };
+        for (int c = 0; c < 2; c++)
+            for (int k = 0; k < nst; k++) err[c] = fmax(err[c], fabs(med[c][k] / med[c][0] - 1));
+        fprintf(stderr, "  lamp drift: frames' kc*I within %.2f %% of the first visit's raw, %.2f %% corrected\n",
+                100 * err[0], 100 * err[1]);
+        CHECK_MSG(err[0] > 0.02, "the drift matters: raw %.2f %%", 100 * err[0]);
+        // (the rig's clock runs on real time: a loaded machine spaces the visits
+        // wider in the lamp's time, and the warm-up bends more between them)
+        CHECK_MSG(err[1] < 0.01 && err[1] < err[0] / 5, "corrected %.2f %% (raw %.2f %%)", 100 * err[1],
+                  100 * err[0]);
+    }
+    calib_obs_free(&obs);
+    calib_set_free(cs);
+    g_free(wsc);
+    g_free(ws);
+    g_free(plan);
+    g_free(cal);
+    g_free(rig);
+    g_free(truth);
+    model_lamps_free(tl);
+    model_ini_free(ti);
+    fprintf(stderr, "  calib_lamps_drift_reference: %.1f s\n", model_now_s() - t0);
 }

@@ -282,3 +282,45 @@ TEST(chain_and_demo_truth_errors)
     g_free(err);
     g_free(truth);
 }
+
+// Each lamp's light over the samples' region: the white's kc*I times the
+// lamps.json pattern against the truth's (the example truth: isotropic lamps,
+// kc 1e-4 per us): a pattern n = 2 toward the origin is off by the largest
+// 1 - cos^2 over the region; an isotropic lamp with the right kc*I by 0.
+TEST(chain_lamp_irradiance)
+{
+    char *truth = example("virtual-truth.ini"), *cam = example("camera.cameramodel");
+    char *model_text = NULL;
+    CHECK(g_file_get_contents(cam, &model_text, NULL, NULL));
+    put("calib/geometry/camera.cameramodel", model_text ? model_text : "");
+    put("calib/geometry/geometry.json", "{}");
+    put("calib/lamps/lamps.json", "{\"lamps\": [{\"name\": \"east\", \"position_mm\": [488.6, 177.9, 600], "
+        "\"emission_cos_power\": 2, \"emission_axis\": [-488.6, -177.9, -600], \"emission\": "
+        "{\"irradiance_std_pct\": 0.5}}, {\"name\": \"south\", \"position_mm\": [-52.3, -597.7, 480]}]}");
+    put("calib/white/white.json", "{\"lamps\": [{\"name\": \"east\", \"kc_I_per_us\": 3.2e5}, "
+        "{\"name\": \"south\", \"kc_I_per_us\": 2.9e5}]}");
+    json_t *prov = model_provenance(0, NULL);
+    json_t *doc = fit_chain_compare(test_path("day"), truth, prov);
+    CHECK_MSG(doc != NULL, "%s", model_last_error());
+    if (doc) {
+        double worst = 0, len = sqrt(488.6 * 488.6 + 177.9 * 177.9 + 600 * 600);
+        model_lamp_t L = { .position_mm = { 488.6, 177.9, 600 }, .emission_cos_power = 2,
+                           .emission_axis = { -488.6 / len, -177.9 / len, -600 / len } };
+        for (int x = -60; x <= 60; x += 20)
+            for (int y = -60; y <= 60; y += 20)
+                for (int z = 5; z <= 50; z += 45)
+                    worst = fmax(worst, 1 - model_lamp_emission(&L, (model_vec3_t){ x, y, z }));
+        const json_t *e = entry(doc, "lamp_east.irradiance_max_err");
+        CHECK(worst > 0.005);
+        CHECK_NEAR(field(e, "value"), 100 * worst, 1e-6);
+        CHECK_NEAR(field(e, "sigma"), 0.5, 1e-12);
+        e = entry(doc, "lamp_south.irradiance_max_err");
+        CHECK_NEAR(field(e, "value"), 0, 1e-9);
+        CHECK(json_is_null(json_object_get(e, "sigma")));
+    }
+    json_decref(doc);
+    json_decref(prov);
+    g_free(model_text);
+    g_free(truth);
+    g_free(cam);
+}
