@@ -270,6 +270,11 @@ int verify_cmd(int argc, char **argv)
         verify_study_opts_t so = { .out = o.out, .cases = cases, .opt = *op, .calib = o.calib,
                                    .priors = (const char *const *)o.priors, .npriors = o.npriors,
                                    .configs = configs };
+        // the study registers only when asked (each case's descriptions then get their own views: slower)
+        if (model_cli_opt(&cli, "--placement-tolerance-mm")->given || model_cli_opt(&cli, "--placement-tolerance-deg")->given) {
+            so.placement_tol_mm = o.placement_tol_mm;
+            so.placement_tol_deg = o.placement_tol_deg;
+        }
         if (cli.npositional) return model_cli_error(&cli, "--study takes no SCENE (its scenes are the truth's)");
         if (shard && (rc = parse_shard(&cli, shard, &so.shard_k, &so.shard_n)) != MODEL_CLI_OK) return rc;
         if (so.shard_n > cases)

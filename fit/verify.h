@@ -368,6 +368,8 @@ typedef struct {
     const char         *configs;   // comma-separated configurations (priors+maps, priors, no-priors+maps,
                                    // no-priors); NULL: all four
     int                 shard_k, shard_n;   // run the cases c with c mod shard_n = shard_k - 1 (shard_n 0: all)
+    double              placement_tol_mm, placement_tol_deg;   // > 0: each case's description registered to its
+                                   // images (verify_register) and verified there (placement.csv); 0: as described
     verify_options_t    opt;       // the base options (threads: the cases in parallel)
     json_t             *provenance;   // borrowed: the inputs are added, study.json carries it
 } verify_study_opts_t;

@@ -63,6 +63,8 @@ typedef struct {
     signed char *verdict;   // 1: verdict correct, 0: incorrect, -1: not run here (another shard)
     double *secs;        // wall time of the fit (timing.csv; not part of the results)
     int    *iters;
+    bool    reg;         // the placement registered (placement.csv)
+    float  *pose;        // [case][cond][4]: dx mm, dy mm, turn deg, edge agreement (NAN: not here)
 } table_t;
 
 static size_t at(const table_t *T, int c, int k, int d) { return ((size_t)c * T->nconf + k) * T->ncond + d; }
@@ -74,7 +76,10 @@ static bool table_alloc(table_t *T)
     T->verdict = malloc(n);
     T->secs = calloc(n, sizeof *T->secs);
     T->iters = calloc(n, sizeof *T->iters);
-    if (!T->score || !T->verdict || !T->secs || !T->iters) {
+    size_t np = (size_t)T->cases * T->ncond * 4;
+    T->pose = T->reg ? malloc(np * sizeof *T->pose) : NULL;
+    for (size_t i = 0; T->pose && i < np; i++) T->pose[i] = NAN;
+    if (!T->score || !T->verdict || !T->secs || !T->iters || (T->reg && !T->pose)) {
         model_error(NULL, 0, "verify study: out of memory for %d cases", T->cases);
         return false;
     }
@@ -88,7 +93,10 @@ static void table_free(table_t *T)
     free(T->verdict);
     free(T->secs);
     free(T->iters);
+    free(T->pose);
 }
+
+static float *pose_at(const table_t *T, int c, int d) { return T->pose + ((size_t)c * T->ncond + d) * 4; }
 
 static const double angles[NANG] = { 0, 90, 180, 270 };
 // the placed-off cases: turn (deg) about the part's centre, shift (mm) along
@@ -184,6 +192,7 @@ typedef struct {
     double            gain_db;          // the lab's 0 dB relative to the gain calibration's gain
     verify_options_t  opt[NCONF];
     int               shard_k, shard_n; // this run's cases: c mod shard_n == shard_k - 1
+    double            tol_mm, tol_deg;  // the placement tolerance (T->reg)
     int               ncases_here;
     bool              failed;
     char              err[512];
@@ -216,6 +225,60 @@ static bool case_images(study_t *S, int c, int place, const double *ls, double k
     return true;
 }
 
+// The views of description desc as registered to images im (placement p). false + message.
+static bool registered_views(study_t *S, int desc, const verify_image_t *im, verify_placement_t *p,
+                             model_scene_t **placed, verify_view_t **views)
+{
+    model_material_t mm[8];
+    const model_material_t *mats[8];
+    const model_scene_t *sc = S->scenes[desc];
+    if (sc->nmaterials > 8 || !verify_priors_means(sc, &S->pr, mm, mats)) return false;
+    if (!verify_register(sc, &S->cam, S->lamps, S->A, mats, im, NANG, S->tol_mm, S->tol_deg, p) ||
+        !(*placed = verify_placed_scene(sc, p)))
+        return false;
+    verify_options_t vo = S->opt[0];
+    for (int a = 0; a < NANG; a++)
+        if (!(views[a] = verify_view_new(*placed, &S->cam, angles[a], S->lamps, mats, &vo))) return false;
+    return true;
+}
+
+// Condition d of case c on its images im: every configuration (registered first when the study registers).
+static bool run_condition(study_t *S, int c, int d, const verify_image_t *im)
+{
+    table_t *T = S->T;
+    const cond_t *cd = &T->cond[d];
+    verify_view_t *own[NANG] = { 0 }, **views = &S->views[cd->desc * NANG];
+    model_scene_t *placed = NULL;
+    const model_scene_t *scene = S->scenes[cd->desc];
+    bool ok = true;
+    if (T->reg) {
+        verify_placement_t p;
+        ok = registered_views(S, cd->desc, im, &p, &placed, own);
+        if (ok) {
+            float *q = pose_at(T, c, d);
+            q[0] = (float)p.dx_mm, q[1] = (float)p.dy_mm, q[2] = (float)p.turn_deg, q[3] = (float)p.score;
+        }
+        views = own;
+        scene = placed;
+    }
+    for (int k = 0; ok && k < T->nconf; k++) {
+        verify_result_t r;
+        double t0 = model_now_s();
+        ok = verify_run(scene, &S->pr, &S->cam, 1, S->lamps, S->A, im, NANG, views, &S->opt[k], &r);
+        size_t i = at(T, c, k, d);
+        if (ok) {
+            T->score[i] = r.score;
+            T->verdict[i] = r.correct ? 1 : 0;
+            T->secs[i] = model_now_s() - t0;
+            T->iters[i] = r.summary.iterations;
+        }
+        verify_result_free(&r);
+    }
+    for (int a = 0; a < NANG; a++) verify_view_free(own[a]);
+    model_scene_free(placed);
+    return ok;
+}
+
 // Case c: its drifts, then its images at each placement and every fit on them.
 static bool run_case(study_t *S, int c, float **img, verify_windows_t **win)
 {
@@ -228,27 +291,15 @@ static bool run_case(study_t *S, int c, float **img, verify_windows_t **win)
     verify_image_t im[NANG];
     for (int place = 0; place <= NPLACE; place++) {
         if (!case_images(S, c, place, ls, kc, img, win, im)) return false;
-        for (int k = 0; k < T->nconf; k++)
-            for (int d = 0; d < T->ncond; d++) {
-                const cond_t *cd = &T->cond[d];
-                if (cd->place != place) continue;
-                verify_result_t r;
-                double t0 = model_now_s();
-                bool ok = verify_run(S->scenes[cd->desc], &S->pr, &S->cam, 1, S->lamps, S->A, im, NANG,
-                                     &S->views[cd->desc * NANG], &S->opt[k], &r);
-                size_t i = at(T, c, k, d);
-                if (ok) {
-                    T->score[i] = r.score;
-                    T->verdict[i] = r.correct ? 1 : 0;
-                    T->secs[i] = model_now_s() - t0;
-                    T->iters[i] = r.summary.iterations;
-                }
-                verify_result_free(&r);
-                if (!ok) return false;
-            }
+        for (int d = 0; d < T->ncond; d++) {
+            const cond_t *cd = &T->cond[d];
+            if (cd->place != place) continue;
+            if (!run_condition(S, c, d, im)) return false;
+        }
     }
     return true;
 }
+
 
 static void case_rows(void *vctx, int begin, int end, int thread)
 {
@@ -550,6 +601,9 @@ static json_t *design_json(const table_t *T, const json_t *inputs, const verify_
     }
     json_object_set_new(d, "descriptions", cd);
     json_object_set_new(d, "score_threshold", json_real(o->opt.score_threshold));
+    if (T->reg)
+        json_object_set_new(d, "placement_tolerance", json_pack("{s:f, s:f}", "mm", o->placement_tol_mm, "deg",
+                                                                o->placement_tol_deg));
     json_object_set_new(d, "calibrations", json_string(o->calib ? "the chain's (--calib)" : "the lab's (truth)"));
     json_object_set_new(d, "priors", json_string(o->npriors ? "the chain's (--priors)" : "truth +- 10 %"));
     size_t i;
@@ -580,6 +634,21 @@ static bool write_tables(const char *out, const table_t *T)
     bool ok = model_write_file_atomic(sp, st->str) && model_write_file_atomic(tp, tm->str);
     g_free(sp);
     g_free(tp);
+    if (ok && T->reg) {
+        // each case's registered placement of each description (the same for every configuration)
+        GString *pl = g_string_new("description,case,dx_mm,dy_mm,turn_deg,edge_agreement\n");
+        for (int d = 0; d < T->ncond; d++)
+            for (int c = 0; c < T->cases; c++) {
+                const float *q = pose_at(T, c, d);
+                if (isfinite(q[3]))
+                    g_string_append_printf(pl, "%s,%d,%.9g,%.9g,%.9g,%.9g\n", T->cond[d].label, c, q[0], q[1], q[2],
+                                           q[3]);
+            }
+        char *pp = g_strdup_printf("%s/placement.csv", out);
+        ok = model_write_file_atomic(pp, pl->str);
+        g_free(pp);
+        g_string_free(pl, TRUE);
+    }
     g_string_free(st, TRUE);
     g_string_free(tm, TRUE);
     return ok;
@@ -681,7 +750,7 @@ static void study_free(study_t *S)
 bool verify_study_run(const verify_study_opts_t *o, verify_study_result_t *r)
 {
     memset(r, 0, sizeof *r);
-    table_t T = { .cases = o->cases };
+    table_t T = { .cases = o->cases, .reg = o->placement_tol_mm > 0 || o->placement_tol_deg > 0 };
     model_stiffener_t D[NDESC];
     int which[NCONF];
     study_design(&T, D);
@@ -692,7 +761,8 @@ bool verify_study_run(const verify_study_opts_t *o, verify_study_result_t *r)
                     o->cases);
         return false;
     }
-    study_t S = { .T = &T, .shard_k = sk, .shard_n = sn, .ncases_here = (o->cases - sk + sn) / sn };
+    study_t S = { .T = &T, .shard_k = sk, .shard_n = sn, .ncases_here = (o->cases - sk + sn) / sn,
+                  .tol_mm = o->placement_tol_mm, .tol_deg = o->placement_tol_deg };
     pthread_mutex_init(&S.lock, NULL);
     bool ok = false;
     json_t *inputs = NULL, *design = NULL, *shard = NULL;
@@ -763,7 +833,46 @@ static bool table_from_design(table_t *T, const json_t *design, const char *path
         snprintf(T->cond[k].label, sizeof T->cond[k].label, "%s", l);
         snprintf(T->cond[k].expected, sizeof T->cond[k].expected, "%s", x);
     }
+    T->reg = json_object_get(design, "placement_tolerance") != NULL;
     return table_alloc(T);
+}
+
+static int find_label(const char *s, const char *base, int n, size_t stride);
+
+// DIR/placement.csv (a study that registers) into the table. false + message naming the file and line.
+static bool read_placement(const char *dir, table_t *T)
+{
+    static const char *h = "description,case,dx_mm,dy_mm,turn_deg,edge_agreement";
+    char *path = g_strdup_printf("%s/placement.csv", dir), *text = NULL;
+    GError *ge = NULL;
+    bool ok = g_file_get_contents(path, &text, NULL, &ge);
+    if (!ok) model_error(path, 0, "cannot read: %s (the study registered the placement)", ge->message);
+    g_clear_error(&ge);
+    char **lines = ok ? g_strsplit(text, "\n", -1) : NULL;
+    if (ok && strcmp(lines[0], h)) ok = false, model_error(path, 1, "the header is not '%s'", h);
+    for (int ln = 1; ok && lines[ln]; ln++) {
+        if (!lines[ln][0] && !lines[ln + 1]) break;
+        char **f = g_strsplit(lines[ln], ",", -1);
+        int d = g_strv_length(f) == 6 ? find_label(f[0], T->cond[0].label, T->ncond, sizeof T->cond[0]) : -1;
+        long c = -1;
+        double v[4];
+        char *end = NULL;
+        bool good = d >= 0 && model_parse_int(f[1], &c) && c >= 0 && c < T->cases;
+        for (int k = 0; good && k < 4; k++) good = (v[k] = strtod(f[2 + k], &end), !*end && isfinite(v[k]));
+        if (!good) {
+            ok = false;
+            model_error(path, ln + 1, "a bad row (%s): want description,case,dx_mm,dy_mm,turn_deg,edge_agreement",
+                        lines[ln]);
+        } else {
+            float *q = pose_at(T, (int)c, d);
+            for (int k = 0; k < 4; k++) q[k] = (float)v[k];
+        }
+        g_strfreev(f);
+    }
+    g_strfreev(lines);
+    g_free(text);
+    g_free(path);
+    return ok;
 }
 
 // The index of label s among n strings stored stride bytes apart from base (-1: none).
@@ -890,6 +999,7 @@ bool verify_study_merge(const char *const *dirs, int ndirs, const char *out, jso
             char *tp = g_strdup_printf("%s/timing.csv", dirs[s]);
             if (ok && g_file_test(tp, G_FILE_TEST_EXISTS)) ok = read_rows(dirs[s], &T, true);
             g_free(tp);
+            if (ok && T.reg) ok = read_placement(dirs[s], &T);
         }
         json_decref(doc);
         g_free(jp);

@@ -267,3 +267,66 @@ TEST_LONG(verify_study_shards_merge_equal_unsharded)
     g_free(merged);
     g_free(refl_env);
 }
+
+// The study that registers each case's descriptions (--placement-tolerance-mm
+// 3 --placement-tolerance-deg 2), as two shards merged: placement.csv has one
+// row per case and description, the parts placed off are registered where
+// they lie (within 0.1 mm, 0.05 deg of the offset given to the rig), the
+// correct description at the nominal pose, and the merge keeps every shard's
+// row; the design names the tolerance.
+TEST_LONG(verify_study_registered_placement_sharded)
+{
+    char *dir[3] = { g_strdup(test_path("reg1")), g_strdup(test_path("reg2")), g_strdup(test_path("regm")) };
+    char *err = NULL;
+    for (int k = 0; k < 2; k++) {
+        const char *a[] = { "--study", "--cases", "2", "--configs", "priors+maps", "--placement-tolerance-mm", "3",
+                            "--placement-tolerance-deg", "2", "--shard", k ? "2/2" : "1/2", "-o", dir[k], NULL };
+        int rc = verify(&err, a);
+        CHECK_MSG(rc == 0, "shard %d: %s", k + 1, err);
+        g_free(err);
+    }
+    const char *m[] = { "--study-merge", dir[0], dir[1], "-o", dir[2], NULL };
+    int rc = verify(&err, m);
+    CHECK_MSG(rc == 0, "merge: %s", err);
+    g_free(err);
+    char *p1 = slurp(dir[0], "placement.csv"), *p2 = slurp(dir[1], "placement.csv"), *pm = slurp(dir[2], "placement.csv");
+    CHECK(p1 && p2 && pm);
+    // every shard's row in the merge, and only those
+    int rows = 0, found = 0;
+    char **lines = pm ? g_strsplit(pm, "\n", -1) : NULL;
+    for (int i = 1; lines && lines[i]; i++) {
+        if (!lines[i][0]) continue;
+        rows++;
+        char *key = g_strdup_printf("\n%s\n", lines[i]);
+        found += (p1 && strstr(p1, key)) || (p2 && strstr(p2, key));
+        g_free(key);
+        char desc[64];
+        int c;
+        double dx, dy, turn, agree;
+        if (sscanf(lines[i], "%63[^,],%d,%lf,%lf,%lf,%lf", desc, &c, &dx, &dy, &turn, &agree) != 6) continue;
+        const double mm[3] = { 1, 2, 3 }, deg[3] = { 0.5, 1, 2 };
+        static const char *pl[3] = { "placed 1 mm 0.5 deg", "placed 2 mm 1 deg", "placed 3 mm 2 deg" };
+        for (int k = 0; k < 3; k++)
+            if (!strcmp(desc, pl[k])) {
+                CHECK_MSG(fabs(dx - mm[k] * cos(M_PI / 6)) < 0.1 && fabs(dy - mm[k] * sin(M_PI / 6)) < 0.1 &&
+                              fabs(turn - deg[k]) < 0.05, "%s case %d: registered (%g, %g) mm, %g deg", desc, c, dx,
+                          dy, turn);
+            }
+        if (!strcmp(desc, "correct"))
+            CHECK_MSG(fabs(dx) < 0.1 && fabs(dy) < 0.1 && fabs(turn) < 0.05 && agree > 0.8, "correct case %d: "
+                      "(%g, %g) mm, %g deg, agreement %g", c, dx, dy, turn, agree);
+    }
+    CHECK_MSG(rows == 2 * 17 && found == rows, "%d rows (want 34), %d of them from the shards", rows, found);
+    g_strfreev(lines);
+    char *jp = g_strdup_printf("%s/study.json", dir[2]);
+    json_t *j = json_load_file(jp, 0, NULL);
+    json_t *t = j ? json_object_get(json_object_get(j, "design"), "placement_tolerance") : NULL;
+    CHECK(t && json_real_value(json_object_get(t, "mm")) == 3 && json_real_value(json_object_get(t, "deg")) == 2);
+    CHECK(j && json_is_true(json_object_get(j, "complete")));
+    json_decref(j);
+    g_free(jp);
+    g_free(p1);
+    g_free(p2);
+    g_free(pm);
+    for (int k = 0; k < 3; k++) g_free(dir[k]);
+}
