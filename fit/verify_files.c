@@ -586,8 +586,57 @@ static bool write_tiff(const char *dir, const char *name, int W, int H, const fl
     return ok;
 }
 
+// The fit's interreflection term kc g rho sum_i s_i A_i B_i added to the
+// synthetic image (the direct term, face: the faces seen) at every pixel of a
+// face: B as the fit makes it (verify_interreflection, the priors' means) on
+// a grid of IR_STEP px, each pixel taking the nearest grid point on its own
+// face (none within one step: the pixel keeps the direct term). L: the
+// lamps with their fitted s_i A_i (0: off). false + message.
+#define IR_STEP 4
+static bool synthetic_interreflection(const vf_t *V, const verify_result_t *res, int m, const model_tracer_t *t,
+                                      const model_lamps_t *L, double kc, const float *gmap, const int32_t *face,
+                                      float *synth)
+{
+    const verify_image_t *im = &V->imgs[m];
+    const verify_camera_t *vc = &V->vcs[im->camera];
+    int gw = (im->W + IR_STEP - 1) / IR_STEP, gh = (im->H + IR_STEP - 1) / IR_STEP, n = gw * gh, nl = L->n;
+    double *q = malloc((size_t)n * 2 * sizeof *q);
+    model_pixel_info_t *pi = malloc((size_t)n * sizeof *pi);
+    float *B = malloc((size_t)n * (nl ? nl : 1) * sizeof *B);
+    bool ok = q && pi && B;
+    if (!ok) model_error(im->name, 0, "out of memory for the synthetic image's interreflection");
+    for (int g = 0; ok && g < n; g++) {
+        q[2 * g] = (g % gw) * IR_STEP;
+        q[2 * g + 1] = (g / gw) * IR_STEP;
+    }
+    ok = ok && model_pixel_info(t, vc->cam, L, q, n, pi, NULL, V->o->opt.threads);
+    if (ok) verify_interreflection(t, V->lamps, V->mats, pi, n, V->o->opt.ir_samples, V->o->opt.threads, B);
+    for (int y = 0; ok && y < im->H; y++)
+        for (int x = 0; x < im->W; x++) {
+            size_t p = (size_t)y * im->W + x;
+            if (face[p] < 0) continue;
+            int gx = (x + IR_STEP / 2) / IR_STEP, gy = (y + IR_STEP / 2) / IR_STEP, best = -1;
+            double bd = INFINITY;
+            for (int j = gy - 1; j <= gy + 1; j++)
+                for (int i = gx - 1; i <= gx + 1; i++) {
+                    if (i < 0 || j < 0 || i >= gw || j >= gh || pi[j * gw + i].face != face[p]) continue;
+                    double d = hypot(i * IR_STEP - x, j * IR_STEP - y);
+                    if (d < bd) bd = d, best = j * gw + i;
+                }
+            if (best < 0) continue;
+            double acc = 0;
+            for (int i = 0; i < nl; i++) acc += L->lamps[i].intensity * B[(size_t)best * nl + i];
+            synth[p] += (float)(kc * (gmap ? gmap[p] : 1) * res->rho * acc);
+        }
+    free(q);
+    free(pi);
+    free(B);
+    return ok;
+}
+
 // The synthetic image of image m: the fitted model's direct term at every
-// pixel (W*H into synth), NaN where the description has no surface.
+// pixel and its interreflection term (synthetic_interreflection; W*H into
+// synth), NaN where the description has no surface.
 static bool synthetic_image(const vf_t *V, const verify_result_t *res, int m, float *synth)
 {
     const verify_image_t *im = &V->imgs[m];
@@ -616,6 +665,8 @@ static bool synthetic_image(const vf_t *V, const verify_result_t *res, int m, fl
     int32_t *face = malloc(npx * sizeof *face);
     bool ok = t && face && fm && model_render(t, vc->cam, &L, fm, &sh, synth, face, NULL);
     free(fm);
+    if (ok && V->o->opt.ir_samples > 0 && res->rho != 0)
+        ok = synthetic_interreflection(V, res, m, t, &L, sh.kc, sh.gain_map, face, synth);
     if (ok)
         for (size_t q = 0; q < npx; q++)
             if (face[q] < 0) synth[q] = NAN;   // no surface of the description: nothing predicted
@@ -641,9 +692,9 @@ static bool write_image_pair(const vf_t *V, const verify_result_t *res, int m, j
     for (size_t p = 0; ok && p < npx; p++) act[p] = im->P[p] - (maps && vc->offset_dn ? vc->offset_dn[p] : 0);
     ok = ok && synthetic_image(V, res, m, synth) &&
          write_tiff(dir, an, im->W, im->H, act, "the image minus the offset map (when given)") &&
-         write_tiff(dir, sn, im->W, im->H, synth, "the fitted model: offset + kc g sum_i s_i A_i V R / d^2 "
-                    "(direct light; the fit's interreflection term is only at reference points); NaN where "
-                    "the description has no surface");
+         write_tiff(dir, sn, im->W, im->H, synth, "the fitted model: offset + kc g sum_i s_i A_i (V R / d^2 + "
+                    "rho B_i) (direct light, and the fit's interreflection term from a 4 px grid, each pixel the "
+                    "nearest grid point on its face); NaN where the description has no surface");
     free(act);
     free(synth);
     if (!ok) return false;
