@@ -70,7 +70,7 @@ typedef struct {
     char            cal_gain_unit[16];  // its unit (gain.json gain_unit; "dB" without, or from before the unit)
     double          gain_dn_per_e;  // gain calibration's K at its gain (0: unknown)
     double          read_noise_e;   // its read noise
-    double          nonlin_a_per_dn;// response compression S_m = S (1 - a S) at 0 dB from its curves (0: none)
+    model_lin_t     lin;            // the gain calibration's response linearisation at its gain (model_linearise)
     int             W, H;
     bool            have_white;
     double          kcI_per_us[32]; // white.json: kc I per lamp (DN/us at 0 dB per (1/sr)/mm^2)
