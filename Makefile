@@ -175,6 +175,7 @@ TEST_SRC := \
     tests/test_rig_virtual_optics.c \
     tests/test_rig_virtual_place.c \
     tests/test_calib_gain.c \
+    tests/test_calib_white.c \
     tests/test_calib_geometry.c \
     tests/test_calib_lamps.c \
     tests/test_calib_export.c \

@@ -72,7 +72,7 @@ typedef struct {
     char            cal_gain_unit[16];  // its unit (gain.json gain_unit; "dB" without, or from before the unit)
     double          gain_dn_per_e;  // gain calibration's K at its gain (0: unknown)
     double          read_noise_e;   // its read noise
-    double          nonlin_a_per_dn;// response compression S_m = S (1 - a S) at 0 dB from its curves (0: none)
+    model_lin_t     lin;            // the gain calibration's response linearisation at its gain (model_linearise)
     int             W, H;
     bool            have_white;
     double          kcI_per_us[32]; // white.json: kc I per lamp (DN/us at 0 dB per (1/sr)/mm^2)
@@ -176,11 +176,42 @@ bool calib_observe(const char *session_dir, const calib_set_t *cal, const calib_
                    calib_obs_set_t *out);
 void calib_obs_free(calib_obs_set_t *s);
 
+// The reference white's reflectance-factor table (its certificate's; the
+// format's one owner is calib/white.c, README "Reference white"): a CSV file
+// with the header line theta_i_deg,theta_r_deg,factor and one row per
+// (incidence, viewing) angle pair, angles from the standard's normal in
+// degrees [0, 90), factor the reflectance factor R (the standard's radiance
+// over a perfect Lambertian reflector's under the same light and view: the
+// BRDF is R/pi; azimuth not resolved), in (0, 2]. The rows form a full grid
+// (every theta_i with every theta_r; a single theta_r value: a table by
+// incidence only); '#' lines and blank lines are skipped.
+typedef struct {
+    int     ni, nr;          // grid sizes
+    double *ti, *tr;         // the angles, ascending (degrees)
+    double *f;               // f[i * nr + r]
+    char    path[4096];
+    char    sha256[65];
+} calib_white_table_t;
+
+// NULL + message "file:line: ..." (model_error).
+calib_white_table_t *calib_white_table_load(const char *path);
+calib_white_table_t *calib_white_table_parse(const char *text, size_t len, const char *name);
+void                 calib_white_table_free(calib_white_table_t *t);
+// R at (theta_i, theta_r) in degrees: bilinear in the grid, clamped at its
+// edges (*outside, may be NULL, set true when an angle lies beyond them).
+double calib_white_table_factor(const calib_white_table_t *t, double theta_i_deg, double theta_r_deg,
+                                bool *outside);
+
 // Reference white: kc*I per lamp (median over its observations) and the
 // relative spread; writes DIR/white.json (with the camera, cal->camera, when
-// it has one). albedo: the standard's (e.g. 0.99).
-bool calib_white(const calib_obs_set_t *obs, const calib_set_t *cal, double albedo, const char *out_json,
-               json_t *provenance);
+// it has one). table NULL: a Lambertian standard of albedo (e.g. 0.99), kd =
+// albedo/pi; else each observation's BRDF is the table's factor at its
+// incidence and viewing angles over pi (albedo unused), and white.json states
+// the white's departure from Lambertian over the observed geometries and
+// what the Lambertian assumption (the table's factor nearest the normal)
+// would have given.
+bool calib_white(const calib_obs_set_t *obs, const calib_set_t *cal, double albedo,
+                 const calib_white_table_t *table, const char *out_json, json_t *provenance);
 
 // The calibration set of calib_dir for camera (calib_set_load_camera; NULL:
 // calib_set_load) and the observations of the session through it

@@ -11,6 +11,7 @@
 #include <unistd.h>
 
 #include "calib/calib.h"
+#include "calib/gain.h"
 #include "model/report.h"
 #include "model/vec.h"
 #include "rig/rig.h"
@@ -159,47 +160,6 @@ calib_set_t *calib_set_load_camera(const char *dir, const char *camera, bool nee
     return c;
 }
 
-// The response compression a (per DN at 0 dB) of S_m = S (1 - a S), S the
-// linear signal, from a gain calibration's photon-transfer curves (gain.json:
-// gains[] at 0 dB, curves.exposure_us and curves.signal_dn): linear least
-// squares of S_m = u t + v - a S_m^2 over the steps below 90 % of saturation
-// (S_m^2 stands for S^2: the error is second order in a). 0 when the curves
-// are absent or say no compression.
-static double nonlinearity_of(json_t *gj, double sat)
-{
-    json_t *gains = json_object_get(gj, "gains"), *g0 = NULL;
-    for (size_t k = 0; k < json_array_size(gains); k++) {
-        json_t *e = json_array_get(gains, k);
-        if (fabs(json_number_value(json_object_get(e, "gain_db")) -
-                 json_number_value(json_object_get(gj, "gain_db"))) < 1e-9)
-            g0 = e;
-    }
-    json_t *cv = json_object_get(g0 ? g0 : gj, "curves");
-    json_t *t = json_object_get(cv, "exposure_us"), *S = json_object_get(cv, "signal_dn");
-    if (json_array_size(t) != json_array_size(S) || json_array_size(t) < 5) return 0;
-    double A[9] = { 0 }, b[3] = { 0 }, ts = 0, ss = 0;   // column scales
-    for (size_t i = 0; i < json_array_size(t); i++) {
-        ts = fmax(ts, fabs(json_number_value(json_array_get(t, i))));
-        ss = fmax(ss, fabs(json_number_value(json_array_get(S, i))));
-    }
-    if (!(ts > 0) || !(ss > 0)) return 0;
-    int n = 0;
-    for (size_t i = 0; i < json_array_size(t); i++) {
-        double ti = json_number_value(json_array_get(t, i)), si = json_number_value(json_array_get(S, i));
-        if (!(si > 0) || (sat > 0 && si > 0.9 * sat) || !isfinite(ti)) continue;
-        double x[3] = { ti / ts, 1, -si * si / (ss * ss) };
-        for (int r = 0; r < 3; r++) {
-            for (int c = 0; c < 3; c++) A[3 * r + c] += x[r] * x[c];
-            b[r] += x[r] * si;
-        }
-        n++;
-    }
-    if (n < 5 || !model_solve_linear(A, b, 3)) return 0;
-    double a = b[2] / (ss * ss);
-    return isfinite(a) && a > 0 && a < 1e-3 ? a : 0;
-}
-
-
 // The lamp's emission pattern of lamps.json (refl calib pattern writes it):
 // emission_cos_power = n (0..1000; 0 or absent: isotropic) and emission_axis =
 // [x, y, z] (a direction, rig frame; required with n > 0), into l.
@@ -296,7 +256,7 @@ calib_set_t *calib_set_load_files(const char *cam, const char *lamps, const char
             c->gain_dn_per_e = json_number_value(K);
             c->read_noise_e = json_number_value(rn);
         }
-        c->nonlin_a_per_dn = nonlinearity_of(gj, c->saturation_dn);
+        if (!calib_gain_lin_from_json(gj, gain, &c->lin)) goto fail;
         json_t *gdb = json_object_get(gj, "gain_db"), *gu = json_object_get(gj, "gain_unit");
         if ((gdb && !json_is_number(gdb)) || (gu && !json_is_string(gu))) {
             model_error(gain, 0, "gain_db must be a number and gain_unit a string (the gain the calibration was "

@@ -64,7 +64,7 @@ int calib_cli_window_step(model_cli_t *cli, int *window, int *step)
 
 int calib_cmd_white(int argc, char **argv)
 {
-    const char *calib_dir = NULL, *out = NULL, *camera = NULL;
+    const char *calib_dir = NULL, *out = NULL, *camera = NULL, *table_path = NULL;
     calib_observe_options_t o = calib_observe_defaults();
     double albedo = 0.99;
     model_opt_t opts[] = {
@@ -74,7 +74,10 @@ int calib_cmd_white(int argc, char **argv)
                          true),
         MODEL_OPT_STRING("--camera", "NAME", "camera NAME's frames with its calibrations (a directory of several "
                          "cameras: NAME.cameramodel, NAME/gain.json; write -o DIR/NAME/white.json)", &camera, false),
-        MODEL_OPT_VALUE("--albedo", "A", "the standard's albedo (default 0.99)", false),
+        MODEL_OPT_VALUE("--albedo", "A", "a Lambertian standard's albedo (default 0.99)", false),
+        MODEL_OPT_STRING("--reflectance-table", "CSV", "the standard's reflectance factor by incidence and viewing "
+                         "angle (its certificate; columns theta_i_deg,theta_r_deg,factor, a full grid) instead of "
+                         "--albedo", &table_path, false),
         MODEL_OPT_STRING("--scene", "FILE", "the standard's scene, D3D, OBJ, STL or PLY (needed: a session records "
                          "no scene)", &o.scene_path, false),
         MODEL_OPT_UNITS,
@@ -90,7 +93,9 @@ int calib_cmd_white(int argc, char **argv)
         .min_positional = 1, .max_positional = 1,
         .about = "The absolute scale kc*I of each lamp from a session of the reference white (a Lambertian standard\n"
                  "of albedo A, default 0.99): every lit window of the standard gives (P - Pa) d^2 / (g t kd n.l),\n"
-                 "kd = A/pi; the median per lamp is written. Windows lie wholly on one face of the material.",
+                 "kd = A/pi; the median per lamp is written. Windows lie wholly on one face of the material.\n"
+                 "With --reflectance-table the standard's BRDF is its reflectance factor at each window's\n"
+                 "incidence and viewing angles over pi, and white.json states its departure from Lambertian.",
     };
     int rc = model_cli_parse(&cli, argc, argv);
     if (rc != MODEL_CLI_OK) return rc;
@@ -102,6 +107,14 @@ int calib_cmd_white(int argc, char **argv)
     if (av && !(model_parse_double(av, &albedo) && albedo > 0))
         return model_cli_error(&cli, "--albedo needs a number > 0, not '%s'", av);
     if (albedo > 1) return model_cli_error(&cli, "--albedo %g: an albedo is at most 1", albedo);
+    if (av && table_path) return model_cli_error(&cli, "give --albedo or --reflectance-table, not both");
+    calib_white_table_t *table = NULL;
+    if (table_path) {
+        bool q0 = model_error_quiet_thread(true);
+        table = calib_white_table_load(table_path);
+        model_error_quiet_thread(q0);
+        if (!table) return model_error_report("calib white");
+    }
 
     const char *session = cli.positional[0];
     calib_set_t *cal = NULL;
@@ -113,7 +126,7 @@ int calib_cmd_white(int argc, char **argv)
         printf("refl calib white: %d observations of %s in %d frames (%d skipped)\n", obs.n, obs.material,
                obs.frames_used, obs.frames_skipped);
         prov = calib_observe_provenance(argc + 1, argv - 1, session, cal);
-        ok = calib_white(&obs, cal, albedo, out, prov);
+        ok = calib_white(&obs, cal, albedo, table, out, prov);
     }
     model_error_quiet_thread(q);
     if (ok) printf("%s\n", out);
@@ -121,6 +134,7 @@ int calib_cmd_white(int argc, char **argv)
     json_decref(prov);
     calib_obs_free(&obs);
     calib_set_free(cal);
+    calib_white_table_free(table);
     return rc;
 }
 

@@ -13,7 +13,8 @@
 
 #define ABOUT                                                                                                  \
     "Sensitivity of a camera, EMVA 1288 style: photon transfer (system gain K, read noise, saturation,\n"      \
-    "SNR, dynamic range), linearity error, dark current, offset/DSNU and PRNU maps, and the response\n"       \
+    "SNR, dynamic range), linearity error (EMVA 1288 Release 4.0), the response linearisation (a monotone\n"  \
+    "table measured signal -> linear signal), dark current, offset/DSNU and PRNU maps, and the response\n"       \
     "kc per us per unit radiance at each gain. Writes DIR/gain.json, DIR/offset_dn.tiff, dsnu_dn.tiff,\n"     \
     "prnu_gain.tiff (total flat field incl. vignetting, mean 1), prnu_highpass.tiff (smooth part\n"           \
     "removed) and DIR/report.html; of a rig or sessions of several cameras, every camera's into DIR/NAME/\n"   \
@@ -94,6 +95,15 @@ static int check_options(model_cli_t *c, calib_gain_opts_t *o, double **gains, d
         return model_cli_error(c, "--gains '%s' must be a comma-separated list of numbers (dB)", gs);
     if (ds && !parse_list(ds, darks, &o->ndark_exposures))
         return model_cli_error(c, "--dark-exposures-us '%s' must be a comma-separated list of us", ds);
+    const char *ls = model_cli_value(c, "--low-steps");
+    long lv;
+    if (ls && (!model_parse_int(ls, &lv) || lv < 0 || lv > 1000))
+        return model_cli_error(c, "--low-steps '%s' must be an integer 0..1000", ls);
+    if (ls) o->low_steps = (int)lv;
+    const char *lin = model_cli_value(c, "--linearisation");
+    if (lin && strcmp(lin, "monotone") && strcmp(lin, "parametric"))
+        return model_cli_error(c, "--linearisation '%s' must be monotone or parametric", lin);
+    if (lin) o->linearisation = strcmp(lin, "monotone") ? MODEL_LIN_PARAMETRIC : MODEL_LIN_MONOTONE;
     if (*gains) o->gains_db = *gains;
     if (*darks) o->dark_exposures_us = *darks;
     return 0;
@@ -117,6 +127,8 @@ int calib_cmd_gain(int argc, char **argv)
                         "is the reference (dark current, maps, top-level figures). With --frames: one value, the gain "
                         "the frames were taken at (a label)", false),
         MODEL_OPT_VALUE("--steps", "N", "exposure steps of each sweep (default 50, at least --min-steps)", false),
+        MODEL_OPT_VALUE("--low-steps", "N", "more steps at the sweep's low end, geometric from 0.2 % to 12 % of its "
+                        "longest exposure (default 16; 0 none): the linearisation's knots there", false),
         MODEL_OPT_STRING("--camera", "NAME", "calibrate this camera of the rig or sessions only (default every "
                          "camera)", &o.camera, false),
         MODEL_OPT_STRING("--sample", "NAME", "the plan's sample (default flat_field)", &o.sample, false),
@@ -135,6 +147,9 @@ int calib_cmd_gain(int argc, char **argv)
                         false),
         MODEL_OPT_VALUE("--max-dn", "N", "full scale of manifest frames (default 65535)", false),
         MODEL_OPT_VALUE("--quant-dn", "Q", "quantisation step in DN (default 1; 16 for 12-bit data in Mono16)", false),
+        MODEL_OPT_VALUE("--linearisation", "M", "monotone|parametric: the response linearisation every consumer of "
+                        "gain.json applies (default monotone: a monotone table of the sweep; parametric: S_m = "
+                        "S (1 - a S)); both are written", false),
         MODEL_OPT_FLAG("--no-report", NULL, "skip the plots and report.html", &no_report),
         RIG_OPERATOR_OPTS(&yes, &operator_input),
     };

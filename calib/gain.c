@@ -94,6 +94,124 @@ double calib_gain_linearity(const double *t, const double *mu, int n, double sat
     return le;
 }
 
+double calib_gain_linearity_r4(const double *t, const double *mu, int n, double sat_dn, double lo, double hi,
+                               double *slope, double *offset, int *nfit, double *dev_pct)
+{
+    // EMVA 1288 Release 4.0, "Linearity": the regression minimises the
+    // relative deviations, i.e. weighted least squares with weights 1/mu^2
+    double ts = 0;
+    for (int i = 0; i < n; i++) ts = fmax(ts, fabs(t[i]));
+    double A[4] = { 0 }, b[2] = { 0 };
+    int m = 0;
+    for (int i = 0; i < n; i++) {
+        if (!(mu[i] >= lo * sat_dn && mu[i] <= hi * sat_dn && mu[i] > 0) || !(ts > 0)) continue;
+        double w = 1 / (mu[i] * mu[i]), x = t[i] / ts;
+        A[0] += w;
+        A[1] += w * x;
+        A[3] += w * x * x;
+        b[0] += w * mu[i];
+        b[1] += w * x * mu[i];
+        m++;
+    }
+    A[2] = A[1];
+    double le = NAN, c0 = NAN, c1 = NAN;
+    if (m >= 3 && model_solve_linear(A, b, 2)) {
+        c0 = b[0];
+        c1 = b[1] / ts;
+        double dmin = INFINITY, dmax = -INFINITY;
+        for (int i = 0; i < n; i++) {
+            double line = c0 + c1 * t[i], d = 100.0 * (mu[i] - line) / line;
+            bool in = mu[i] >= lo * sat_dn && mu[i] <= hi * sat_dn && mu[i] > 0;
+            if (dev_pct) dev_pct[i] = in ? d : NAN;
+            if (in) {
+                dmin = fmin(dmin, d);
+                dmax = fmax(dmax, d);
+            }
+        }
+        le = 0.5 * (dmax - dmin);
+    } else if (dev_pct)
+        for (int i = 0; i < n; i++) dev_pct[i] = NAN;
+    if (slope) *slope = c1;
+    if (offset) *offset = c0;
+    if (nfit) *nfit = m;
+    return le;
+}
+
+double calib_gain_parametric_a(const double *t, const double *mu, int n, double sat)
+{
+    double A[9] = { 0 }, b[3] = { 0 }, ts = 0, ss = 0;   // column scales
+    for (int i = 0; i < n; i++) {
+        ts = fmax(ts, fabs(t[i]));
+        ss = fmax(ss, fabs(mu[i]));
+    }
+    if (!(ts > 0) || !(ss > 0)) return 0;
+    int m = 0;
+    for (int i = 0; i < n; i++) {
+        double ti = t[i], si = mu[i];
+        if (!(si > 0) || (sat > 0 && si > 0.9 * sat) || !isfinite(ti)) continue;
+        double x[3] = { ti / ts, 1, -si * si / (ss * ss) };
+        for (int r = 0; r < 3; r++) {
+            for (int c = 0; c < 3; c++) A[3 * r + c] += x[r] * x[c];
+            b[r] += x[r] * si;
+        }
+        m++;
+    }
+    if (m < 5 || !model_solve_linear(A, b, 3)) return 0;
+    double a = b[2] / (ss * ss);
+    return isfinite(a) && a > 0 && a < 1e-3 ? a : 0;
+}
+
+bool calib_gain_linearisation(const double *t, const double *mu, int n, double sat, model_lin_t *table,
+                              double *a_per_dn, double *anchor_slope, double *anchor_offset)
+{
+    memset(table, 0, sizeof *table);
+    *a_per_dn = calib_gain_parametric_a(t, mu, n, sat);
+    double *x = malloc(sizeof(double) * (n + 1) * 2), *y = x + n + 1, c[3];
+    if (!x) {
+        model_error_set(NULL, 0, "out of memory for the linearisation");
+        return false;
+    }
+    // the anchor: small-signal response from 5..70 % of saturation (above the
+    // low end, below the knee of a sensor's top end)
+    int m = 0;
+    for (int i = 0; i < n; i++)
+        if (mu[i] >= 0.05 * sat && mu[i] <= 0.7 * sat) {
+            x[m] = t[i];
+            y[m] = mu[i];
+            m++;
+        }
+    if (m < 4 || !calib_gain_polyfit(x, y, m, 2, c) || !(c[1] > 0)) {
+        free(x);
+        model_error_set(NULL, 0, "linearisation: %d sweep steps between 5 %% and 70 %% of saturation (%.6g DN); the "
+                        "small-signal response needs at least 4 with a rising signal", m, sat);
+        return false;
+    }
+    *anchor_slope = c[1];
+    *anchor_offset = c[0];
+    // the table: every step up to saturation, measured -> anchored linear
+    m = 0;
+    double tlast = -INFINITY;
+    for (int i = 0; i < n; i++)
+        if (mu[i] <= sat && t[i] > tlast) {
+            tlast = t[i];
+            x[m] = mu[i];
+            y[m] = c[0] + c[1] * t[i];
+            m++;
+        }
+    // the linear signal must rise: steps whose anchored value is not above 0 (exposures shorter than the
+    // offset c0 / r allows) carry nothing
+    int k0 = 0;
+    while (k0 < m && !(y[k0] > 0)) k0++;
+    bool ok = model_lin_monotone(x + k0, y + k0, m - k0, table);
+    free(x);
+    if (!ok) {
+        char *e = g_strdup(model_last_error());
+        model_error_set(NULL, 0, "linearisation: %s", e);
+        g_free(e);
+    }
+    return ok;
+}
+
 bool calib_gain_ptc(const double *t, const double *mu, const double *var, const double *var_y, int n,
                     double var_dark_dn2, double quant_dn, calib_gain_ptc_t *o)
 {
@@ -143,8 +261,10 @@ bool calib_gain_ptc(const double *t, const double *mu, const double *var, const 
     o->read_noise_e = o->read_noise_dn / o->system_gain_dn_per_e;
     o->saturation_capacity_e = o->saturation_dn / o->system_gain_dn_per_e;
     o->dynamic_range = o->read_noise_e > 0 ? o->saturation_capacity_e / o->read_noise_e : NAN;
-    o->linearity_error_pct = calib_gain_linearity(t, mu, n, o->saturation_dn, 0.05, 0.95, &o->response_dn_per_us,
-                                                  &o->response_offset_dn, &o->n_lin_fit, NULL);
+    o->linearity_error_pct = calib_gain_linearity_r4(t, mu, n, o->saturation_dn, 0.05, 0.95,
+                                                     &o->response_dn_per_us, &o->response_offset_dn, &o->n_lin_fit,
+                                                     NULL);
+    o->linearity_error_r3_pct = calib_gain_linearity(t, mu, n, o->saturation_dn, 0.05, 0.95, NULL, NULL, NULL, NULL);
     o->snr_max = 0;
     for (int i = 0; i <= imax; i++) {
         double vy = var_y ? var_y[i] : var[i];
@@ -420,6 +540,33 @@ static int cmp_group_t(const void *a, const void *b)
     return ((*x)->exposure_us > (*y)->exposure_us) - ((*x)->exposure_us < (*y)->exposure_us);
 }
 
+// The linearisation of a's sweep and the Release 4.0 LE of the signal through
+// it (the table's and the parametric form's; the range 5..95 % of saturation
+// mapped through each), for the report.
+static bool analyse_linearisation(calib_gain_an_t *a)
+{
+    const double sat = a->ptc.saturation_dn;
+    if (!calib_gain_linearisation(a->t, a->mu, a->n, sat, &a->lin, &a->lin_a_per_dn, &a->lin_anchor_dn_per_us,
+                                  &a->lin_anchor_offset_dn)) {
+        char *m = g_strdup(model_last_error());
+        model_error_set(NULL, 0, "gain %g dB: %s", a->gain_db, m);
+        g_free(m);
+        return false;
+    }
+    double *v = malloc(sizeof(double) * a->n);
+    if (!v) return false;
+    model_lin_t par = { .kind = MODEL_LIN_PARAMETRIC, .a_per_dn = a->lin_a_per_dn };
+    for (int k = 0; k < 2; k++) {
+        const model_lin_t *L = k ? &par : &a->lin;
+        for (int i = 0; i < a->n; i++) v[i] = model_linearise(L, a->mu[i], 1, NULL);
+        double lo = model_linearise(L, 0.05 * sat, 1, NULL), hi = model_linearise(L, 0.95 * sat, 1, NULL);
+        *(k ? &a->le_linearised_param_pct : &a->le_linearised_pct) =
+            calib_gain_linearity_r4(a->t, v, a->n, 1, lo, hi, NULL, NULL, NULL, NULL);
+    }
+    free(v);
+    return true;
+}
+
 bool calib_gain_analyse(calib_gain_data_t *d, double gain_db, int min_steps, double quant_dn, calib_gain_an_t *a)
 {
     memset(a, 0, sizeof *a);
@@ -527,7 +674,11 @@ bool calib_gain_analyse(calib_gain_data_t *d, double gain_db, int min_steps, dou
         g_free(m);
         goto done;
     }
-    calib_gain_linearity(a->t, a->mu, nl, a->ptc.saturation_dn, 0.05, 0.95, NULL, NULL, NULL, a->dev_pct);
+    calib_gain_linearity_r4(a->t, a->mu, nl, a->ptc.saturation_dn, 0.05, 0.95, NULL, NULL, NULL, a->dev_pct);
+    if (!analyse_linearisation(a)) {   // consumers fall back to the parametric form
+        fprintf(stderr, "refl calib gain: warning: %s; the parametric S(1 - aS) applies\n", model_last_error());
+        memset(&a->lin, 0, sizeof a->lin);
+    }
     {
         double *x = malloc(sizeof(double) * nl), *y = malloc(sizeof(double) * nl), q[3];
         int m = 0;
@@ -938,6 +1089,16 @@ static bool probe_next(const double *l, const double *dk, const double *mx, int 
 
 // Probe and sweep at one gain; t_sat_us[k]: camera k's estimated exposure of
 // full scale (*ncam cameras).
+int calib_gain_sweep_exposures(double tmax, int steps, int low_steps, double *t)
+{
+    int n = 0;
+    for (int i = 0; i < low_steps; i++)
+        t[n++] = tmax * (low_steps > 1 ? 0.002 * pow(0.12 / 0.002, (double)i / (low_steps - 1)) : 0.002);
+    for (int i = 0; i < steps; i++) t[n++] = tmax * (i + 1) / steps;
+    qsort(t, n, sizeof *t, cmp_double);
+    return n;
+}
+
 static bool capture_sweep(const calib_gain_opts_t *c, double gain, char **sweep_dir, double *t_sat_us, int *ncam)
 {
     double probe = c->probe_us, l[CALIB_GAIN_MAX_CAMERAS], dk[CALIB_GAIN_MAX_CAMERAS], mx[CALIB_GAIN_MAX_CAMERAS];
@@ -966,10 +1127,12 @@ static bool capture_sweep(const calib_gain_opts_t *c, double gain, char **sweep_
     }
     // each camera's steps up to 1.2 x its full scale (or --max-exposure-us), merged
     int nt = 0;
-    double *t = malloc(sizeof(double) * c->steps * *ncam);
+    double *t = malloc(sizeof(double) * (c->steps + c->low_steps) * *ncam);
     for (int k = 0; k < *ncam; k++) {
         double tmax = isfinite(c->max_us) ? c->max_us : 1.2 * t_sat_us[k];
-        for (int i = 0; i < c->steps; i++) t[nt++] = fmax(10, round(tmax * (i + 1) / c->steps));
+        int n = calib_gain_sweep_exposures(tmax, c->steps, c->low_steps, t + nt);
+        for (int i = 0; i < n; i++) t[nt + i] = fmax(10, round(t[nt + i]));
+        nt += n;
     }
     qsort(t, nt, sizeof *t, cmp_double);
     int nu = 0;
@@ -1017,6 +1180,9 @@ static json_t *gain_json(const calib_gain_an_t *a)
     json_object_set_new(o, "saturation_exposure_us", jreal(a->t[p->i_sat]));
     json_object_set_new(o, "saturation_capacity_e", jreal(p->saturation_capacity_e));
     json_object_set_new(o, "linearity_error_pct", jreal(p->linearity_error_pct));
+    json_object_set_new(o, "linearity_error_r3_pct", jreal(p->linearity_error_r3_pct));
+    json_object_set_new(o, "linearity_error_linearised_pct", jreal(a->le_linearised_pct));
+    json_object_set_new(o, "linearity_error_linearised_parametric_pct", jreal(a->le_linearised_param_pct));
     json_object_set_new(o, "snr_max", jreal(p->snr_max));
     json_object_set_new(o, "snr_max_db", jreal(20 * log10(p->snr_max)));
     json_object_set_new(o, "dynamic_range", jreal(p->dynamic_range));
@@ -1141,8 +1307,19 @@ static json_t *conventions_json(const calib_gain_opts_t *o, const calib_gain_dat
                                                         "dark temporal variance extrapolated to exposure 0"));
     json_object_set_new(cv, "saturation_dn", json_string("signal (above dark) where the temporal variance peaks"));
     json_object_set_new(cv, "linearity_error_pct", json_string(
-        "EMVA 1288 release 3: least-squares line of signal against exposure between 5 % and 95 % of saturation; "
-        "(max - min of the relative deviations in %) / 2"));
+        "EMVA 1288 Release 4.0, section Linearity: the line a0 + a1 t of signal against exposure through the "
+        "steps between 5 % and 95 % of saturation minimising the squared relative deviations "
+        "sum((mu_i - a0 - a1 t_i) / mu_i)^2; delta_i = 100 (mu_i - line_i) / line_i; LE = (max delta - min "
+        "delta) / 2 in %. linearity_error_r3_pct: the same with Release 3's unweighted least-squares line"));
+    json_object_set_new(cv, "linearisation", json_string(
+        "measured signal above dark S_m (DN) -> linear signal S (DN) at the reference gain (at gain factor f "
+        "relative to it: S = f T(S_m / f)). monotone: a monotone piecewise-cubic Hermite interpolant (Fritsch & "
+        "Carlson 1980, knot slopes by Fritsch & Butland 1984) through (measured_dn, linear_dn): every sweep step "
+        "up to saturation, made monotone by isotonic regression, from (0, 0); linear_dn = anchor_offset_dn + "
+        "anchor_response_dn_per_us t, the small-signal line of a quadratic fit of signal against exposure over "
+        "5..70 % of saturation. parametric: S_m = S (1 - a S), a_per_dn from a least-squares fit over the steps "
+        "below 90 % of saturation. method: what the consumers apply. linearity_error_linearised_pct: the "
+        "Release 4.0 LE of the sweep's signal through the table (its own check; _parametric_pct: through S(1 - aS))"));
     json_object_set_new(cv, "prnu_pct", json_string(
         "std of the flat field (light minus dark averages) divided by its quadratic smooth surface (vignetting "
         "and illumination fall-off removed), temporal noise of the averages subtracted (EMVA 1288 variance "
@@ -1168,6 +1345,99 @@ static json_t *conventions_json(const calib_gain_opts_t *o, const calib_gain_dat
     return cv;
 }
 
+// gain.json's "linearisation" (calib_gain_lin_from_json reads it).
+static json_t *lin_json(const calib_gain_opts_t *o, const calib_gain_an_t *a)
+{
+    bool table = a->lin.kind == MODEL_LIN_MONOTONE && a->lin.n >= 2;
+    bool mono = o->linearisation != MODEL_LIN_PARAMETRIC && table;
+    json_t *l = json_object();
+    json_object_set_new(l, "method", json_string(mono ? "monotone" : "parametric"));
+    json_object_set_new(l, "a_per_dn", json_real(a->lin_a_per_dn));
+    if (table) {
+        json_object_set_new(l, "measured_dn", jarray(a->lin.m, a->lin.n));
+        json_object_set_new(l, "linear_dn", jarray(a->lin.s, a->lin.n));
+    }
+    json_object_set_new(l, "anchor_response_dn_per_us", jreal(a->lin_anchor_dn_per_us));
+    json_object_set_new(l, "anchor_offset_dn", jreal(a->lin_anchor_offset_dn));
+    json_object_set_new(l, "linearity_error_linearised_pct", jreal(a->le_linearised_pct));
+    json_object_set_new(l, "linearity_error_linearised_parametric_pct", jreal(a->le_linearised_param_pct));
+    return l;
+}
+
+bool calib_gain_lin_from_json(json_t *gj, const char *path, model_lin_t *out)
+{
+    memset(out, 0, sizeof *out);
+    json_t *l = json_object_get(gj, "linearisation");
+    if (!l) {   // a file from before the table: the parametric form of its reference gain's curves
+        json_t *gains = json_object_get(gj, "gains"), *g0 = NULL;
+        for (size_t k = 0; k < json_array_size(gains); k++) {
+            json_t *e = json_array_get(gains, k);
+            if (fabs(json_number_value(json_object_get(e, "gain_db")) -
+                     json_number_value(json_object_get(gj, "gain_db"))) < 1e-9)
+                g0 = e;
+        }
+        json_t *cv = json_object_get(g0 ? g0 : gj, "curves");
+        json_t *t = json_object_get(cv, "exposure_us"), *S = json_object_get(cv, "signal_dn");
+        size_t n = json_array_size(t);
+        if (n != json_array_size(S) || n < 5 || n > 100000) return true;
+        double *tv = malloc(sizeof(double) * n * 2), *sv = tv + n;
+        if (!tv) return true;
+        for (size_t i = 0; i < n; i++) {
+            tv[i] = json_is_number(json_array_get(t, i)) ? json_number_value(json_array_get(t, i)) : NAN;
+            sv[i] = json_is_number(json_array_get(S, i)) ? json_number_value(json_array_get(S, i)) : NAN;
+        }
+        json_t *sat = json_object_get(gj, "saturation_dn");
+        out->a_per_dn = calib_gain_parametric_a(tv, sv, (int)n, json_is_number(sat) ? json_number_value(sat) : 0);
+        out->kind = out->a_per_dn > 0 ? MODEL_LIN_PARAMETRIC : MODEL_LIN_NONE;
+        free(tv);
+        return true;
+    }
+    const char *method = json_string_value(json_object_get(l, "method"));
+    json_t *a = json_object_get(l, "a_per_dn");
+    if (!json_is_object(l) || !method || (strcmp(method, "monotone") && strcmp(method, "parametric")) ||
+        (a && !json_is_number(a))) {
+        model_error(path, 0, "linearisation: needs method \"monotone\" or \"parametric\" and a number a_per_dn "
+                    "(refl calib gain writes it; run it again)");
+        return false;
+    }
+    double av = a ? json_number_value(a) : 0;
+    if (!strcmp(method, "parametric")) {
+        if (!(av >= 0 && av < 1e-3)) {
+            model_error(path, 0, "linearisation: a_per_dn %g is outside [0, 1e-3) per DN", av);
+            return false;
+        }
+        *out = (model_lin_t){ .kind = av > 0 ? MODEL_LIN_PARAMETRIC : MODEL_LIN_NONE, .a_per_dn = av };
+        return true;
+    }
+    json_t *jm = json_object_get(l, "measured_dn"), *js = json_object_get(l, "linear_dn");
+    size_t n = json_array_size(jm);
+    if (n < 2 || n > MODEL_LIN_MAX || json_array_size(js) != n) {
+        model_error(path, 0, "linearisation: the monotone table needs measured_dn and linear_dn of equal length, "
+                    "2 to %d knots (has %zu and %zu)", MODEL_LIN_MAX, n, json_array_size(js));
+        return false;
+    }
+    double m[MODEL_LIN_MAX], s[MODEL_LIN_MAX];
+    for (size_t i = 0; i < n; i++) {
+        json_t *x = json_array_get(jm, i), *y = json_array_get(js, i);
+        if (!json_is_number(x) || !json_is_number(y) ||
+            (i > 0 && !(json_number_value(x) > m[i - 1] && json_number_value(y) > s[i - 1]))) {
+            model_error(path, 0, "linearisation: knot %zu: measured_dn and linear_dn must be numbers, both "
+                        "strictly increasing", i);
+            return false;
+        }
+        m[i] = json_number_value(x);
+        s[i] = json_number_value(y);
+    }
+    if (!model_lin_knots(m, s, (int)n, out)) {
+        char *e = g_strdup(model_last_error());
+        model_error(path, 0, "linearisation: %s", e);
+        g_free(e);
+        return false;
+    }
+    out->a_per_dn = av;
+    return true;
+}
+
 json_t *calib_gain_json(const calib_gain_opts_t *o, const calib_gain_data_t *d, const calib_gain_an_t *an, int ngains,
                         const calib_gain_maps_t *maps, const char *truth, json_t *prov)
 {
@@ -1182,6 +1452,8 @@ json_t *calib_gain_json(const calib_gain_opts_t *o, const calib_gain_data_t *d, 
     json_object_set_new(root, "read_noise_e", jreal(a->ptc.read_noise_e));
     json_object_set_new(root, "saturation_dn", jreal(a->ptc.saturation_dn));
     json_object_set_new(root, "linearity_error_pct", jreal(a->ptc.linearity_error_pct));
+    json_object_set_new(root, "linearity_error_r3_pct", jreal(a->ptc.linearity_error_r3_pct));
+    json_object_set_new(root, "linearisation", lin_json(o, a));
     json_object_set_new(root, "dsnu_dn", jreal(maps->dsnu_dn));
     json_object_set_new(root, "dsnu_e", jreal(maps->dsnu_dn / K));
     json_object_set_new(root, "prnu_pct", jreal(maps->prnu_pct));
@@ -1230,7 +1502,11 @@ static int summary_rows(const calib_gain_an_t *an, int ngains, const calib_gain_
     rows[nr++] = g_strdup_printf("read noise|%.4g e- (%.4g DN)|", a->ptc.read_noise_e, a->ptc.read_noise_dn);
     rows[nr++] = g_strdup_printf("saturation|%.1f DN above dark (%.0f e-)|at %.6g us", a->ptc.saturation_dn,
                                  a->ptc.saturation_capacity_e, a->t[a->ptc.i_sat]);
-    rows[nr++] = g_strdup_printf("linearity error|%.3f %%|5..95 %% of saturation", a->ptc.linearity_error_pct);
+    rows[nr++] = g_strdup_printf("linearity error|%.3f %%|EMVA 1288 Release 4.0, 5..95 %% of saturation (Release 3's "
+                                 "unweighted line: %.3f %%)", a->ptc.linearity_error_pct, a->ptc.linearity_error_r3_pct);
+    rows[nr++] = g_strdup_printf("response linearisation|%s|LE after it %.3g %% (S(1 - aS), a = %.3g per DN: %.3g %%)",
+                                 a->lin.kind == MODEL_LIN_MONOTONE ? "monotone table" : "none made",
+                                 a->le_linearised_pct, a->lin_a_per_dn, a->le_linearised_param_pct);
     rows[nr++] = g_strdup_printf("SNR max|%.1f (%.1f dB)|", a->ptc.snr_max, 20 * log10(a->ptc.snr_max));
     rows[nr++] = g_strdup_printf("dynamic range|%.0f (%.1f dB)|", a->ptc.dynamic_range,
                                  20 * log10(a->ptc.dynamic_range));
@@ -1280,8 +1556,10 @@ bool calib_gain_report(const char *dir, const calib_gain_an_t *an, int ngains, c
     model_html_heading(f, "Photon transfer");
     model_html_figure(f, "ptc.png", "temporal variance against signal (dark subtracted), with the K fit");
     model_html_heading(f, "Linearity");
-    model_html_figure(f, "linearity.png", "signal against exposure with the least-squares line, and the "
-                      "relative deviation from it (5..95 % of saturation)");
+    model_html_figure(f, "linearity.png", "signal against exposure with the line of EMVA 1288 Release 4.0 (least "
+                      "squared relative deviations), and the relative deviation from it (5..95 % of saturation)");
+    model_html_figure(f, "linearisation.png", "the response linearisation: linear over measured signal at the "
+                      "monotone table's knots, and the parametric S(1 - aS)'s");
     model_html_heading(f, "SNR");
     model_html_figure(f, "snr.png", "signal-to-noise ratio against signal, with the ideal shot-noise limit");
     model_html_heading(f, "Response (kc) per gain");
@@ -1302,7 +1580,8 @@ calib_gain_opts_t calib_gain_defaults(void)
     return (calib_gain_opts_t){ .gains_db = gains, .ngains = 1, .dark_exposures_us = darks, .ndark_exposures = 4,
                                 .sample = "flat_field", .lamps = "all", .pixel_format = "Mono12", .steps = 50,
                                 .flat_frames = 16, .progress = -1, .probe_us = 1000, .max_us = NAN,
-                                .min_steps = 50, .radiance = NAN, .max_dn = 65535, .quant_dn = 1, .report = true };
+                                .min_steps = 50, .radiance = NAN, .max_dn = 65535, .quant_dn = 1, .report = true,
+                                .linearisation = MODEL_LIN_MONOTONE, .low_steps = 16 };
 }
 
 // The frames of a manifest into d (and the provenance).

@@ -24,6 +24,7 @@
 #include <jansson.h>
 #include <stdbool.h>
 
+#include "model/model.h"
 #include "rig/session.h"
 
 #ifdef __cplusplus
@@ -49,7 +50,8 @@ typedef struct {
     double read_noise_e;           // read_noise_dn / K
     double saturation_capacity_e;  // saturation_dn / K
     double dynamic_range;          // saturation_capacity_e / read_noise_e
-    double linearity_error_pct;    // see calib_gain_linearity
+    double linearity_error_pct;    // EMVA 1288 Release 4.0, see calib_gain_linearity_r4
+    double linearity_error_r3_pct; // the Release 3 figure (unweighted line), kept for comparison
     double response_dn_per_us;     // slope of the linearity line
     double response_offset_dn;     // its intercept
     int    n_lin_fit;
@@ -62,6 +64,16 @@ typedef struct {
 bool calib_gain_ptc(const double *exposure_us, const double *mu, const double *var, const double *var_y, int n,
                     double var_dark_dn2, double quant_dn, calib_gain_ptc_t *out);
 
+// Linearity error as EMVA 1288 Release 4.0 defines it (section "Linearity"):
+// the line mu = a0 + a1 t through the points with lo*sat <= mu <= hi*sat (lo
+// 0.05, hi 0.95) that minimises the sum of the squared relative deviations,
+// sum ((mu_i - (a0 + a1 t_i)) / mu_i)^2 (Release 4's weighting; Release 3 took
+// the plain least-squares line); delta_i = 100 (mu_i - line_i) / line_i; LE =
+// (max delta - min delta) / 2 over the fitted points. Arguments and return as
+// calib_gain_linearity's.
+double calib_gain_linearity_r4(const double *t, const double *mu, int n, double sat_dn, double lo, double hi,
+                               double *slope, double *offset, int *nfit, double *dev_pct);
+
 // Linearity error (EMVA 1288 release 3): a least-squares line mu = a + b t
 // through the points with lo*sat <= mu <= hi*sat (lo 0.05, hi 0.95); the
 // relative deviations dev_pct[i] = 100 (mu_i - line_i) / line_i; LE = (max dev
@@ -69,6 +81,26 @@ bool calib_gain_ptc(const double *exposure_us, const double *mu, const double *v
 // (NAN outside the range). Returns LE in %, NAN when fewer than 3 points fit.
 double calib_gain_linearity(const double *t, const double *mu, int n, double sat_dn, double lo, double hi,
                             double *slope, double *offset, int *nfit, double *dev_pct);
+
+// The response linearisation from the sweep (t[n] us ascending, mu[n] DN above
+// dark, sat_dn the saturation): the linear signal is anchored to the
+// small-signal response, a quadratic least-squares fit mu = c0 + r t + q t^2
+// over 5..70 % of saturation, L(t) = c0 + r t (*anchor_slope = r DN/us,
+// *anchor_offset = c0 DN); the monotone table maps each step's mu (up to
+// saturation) to L (model_lin_monotone); *a_per_dn gets the parametric
+// S_m = S (1 - a S) of the same curve (calib_gain_parametric_a). false +
+// message when the fit or the table fails.
+bool calib_gain_linearisation(const double *t, const double *mu, int n, double sat_dn, model_lin_t *table,
+                              double *a_per_dn, double *anchor_slope, double *anchor_offset);
+// a (per DN) of S_m = S (1 - a S): linear least squares of S_m = u t + v - a S_m^2
+// over the steps below 90 % of saturation; 0 when there are fewer than 5 or
+// the curve says no compression.
+double calib_gain_parametric_a(const double *t, const double *mu, int n, double sat_dn);
+// The linearisation a gain.json (path, for messages) records: its
+// "linearisation" (method monotone: the table; parametric: a), else (files
+// from before it) the parametric a of its reference gain's curves, else none.
+// false + message (model_error, naming the file) when "linearisation" is malformed.
+bool calib_gain_lin_from_json(json_t *gj, const char *path, model_lin_t *out);
 
 // Pearson correlation of two maps of n values (NAN when one is constant).
 double calib_gain_correlation(const float *a, const float *b, long n);
@@ -96,7 +128,8 @@ typedef struct {
     const double *dark_exposures_us; // rig: the long dark exposures (dark current)
     int          ndark_exposures;
     const char  *sample, *lamps, *pixel_format;   // rig: the plan's sample, lamp set, pixel format
-    int          steps;              // rig: exposure steps of each sweep
+    int          steps;              // rig: exposure steps of each sweep (equally spaced)
+    int          low_steps;          // rig: and geometric steps at the low end (calib_gain_sweep_exposures)
     int          flat_frames;        // rig: light and dark frames of the flat field
     int          progress;           // calib_capture's progress mode
     rig_operator_t *op;             // who answers the operator steps (calib_capture)
@@ -107,13 +140,22 @@ typedef struct {
     int          roi[4];             // x y w h of the statistics, px (w 0: the whole frame)
     int          max_dn;             // full scale of manifest frames, DN
     double       quant_dn;           // quantisation step, DN
+    int          linearisation;      // what gain.json's consumers apply: MODEL_LIN_MONOTONE (the table,
+                                     // default) or MODEL_LIN_PARAMETRIC (S_m = S (1 - a S)); both are written
     bool         report;             // the plots and report.html
     int          argc;               // the command line, for the provenance (may be 0)
     char       **argv;
 } calib_gain_opts_t;
 
+// The sweep's exposures up to tmax (us): steps equally spaced (tmax/steps ..
+// tmax) and low_steps geometric ones from 0.2 % to 12 % of tmax (the low end,
+// where a response departs most from linear in relative terms and the
+// linearisation needs its knots close), sorted (duplicates kept) into t
+// (steps + low_steps values); returns their number.
+int calib_gain_sweep_exposures(double tmax, int steps, int low_steps, double *t);
+
 // Gains {0}, dark exposures 1e5, 5e5, 1e6, 2e6 us, sample flat_field, lamps
-// all, Mono12, 50 steps, 16 flat frames, probe 1000 us, min_steps 50, radiance
+// all, Mono12, 50 steps and 16 low steps, 16 flat frames, probe 1000 us, min_steps 50, radiance
 // NAN, max_dn 65535, quant_dn 1, report.
 calib_gain_opts_t calib_gain_defaults(void);
 
@@ -224,6 +266,12 @@ typedef struct {
     double kc_per_us;           // response / radiance
     double response0_dn_per_us; // small-signal response: slope at 0 of a quadratic in exposure (0..70 % of sat)
     double kc0_per_us;          // response0 / radiance
+    // the response linearisation (calib_gain_linearisation)
+    model_lin_t lin;            // the monotone table (n 0: none could be made)
+    double lin_a_per_dn;        // the parametric a of the same curve
+    double lin_anchor_dn_per_us, lin_anchor_offset_dn;
+    double le_linearised_pct;   // Release 4.0 LE of the linearised signal (the table's own check)
+    double le_linearised_param_pct;   // the same through S(1 - aS)
 } calib_gain_an_t;
 
 void calib_gain_an_free(calib_gain_an_t *a);

@@ -16,16 +16,6 @@
 #include "model/vec.h"
 #include "rig/rig.h"
 
-// The linear signal S of a measured S_m = S (1 - a S) (the root that goes to
-// S_m as a -> 0); S_m as it is without a compression or where it has no root.
-static double linear_signal(double s_m, double a)
-{
-    if (!(a > 0) || !(s_m > 0)) return s_m;
-    double disc = 1 - 4 * a * s_m;
-    return disc > 0 ? 2 * s_m / (1 + sqrt(disc)) : s_m;
-}
-
-
 calib_observe_options_t calib_observe_defaults(void)
 {
     return (calib_observe_options_t){ .window = 5, .step = 8, .min_signal_dn = 20 };
@@ -210,15 +200,13 @@ static bool window_observation(const observe_t *ob, const rig_frame_row_t *r, in
     if (!(L->V > 0.999)) return false;
     model_cosines_t c = model_cosines(p->n, L->l, p->v);
     if (!(c.nl > 0 && c.nv > 0)) return false;
-    // the gain calibration's response compression S_m = S (1 - a S) at this gain
-    // (a is per DN at 0 dB; the signal in DN scales with the gain)
-    double a_nl = cal->nonlin_a_per_dn > 0 ? cal->nonlin_a_per_dn / gf : 0;
     int x0 = (int)w->q[0] - half, y0 = (int)w->q[1] - half;
     double sum = 0, mx = 0, sg = 0;
     for (int y = y0; y < y0 + win; y++)
         for (int x = x0; x < x0 + win; x++) {
             size_t i = (size_t)y * cal->W + x;
-            sum += linear_signal(img[i] - (cal->offset_dn ? cal->offset_dn[i] : dark[i]), a_nl);
+            // the gain calibration's linearisation at this gain
+            sum += model_linearise(&cal->lin, img[i] - (cal->offset_dn ? cal->offset_dn[i] : dark[i]), gf, NULL);
             mx = fmax(mx, img[i]);
             sg += cal->flat ? cal->flat[i] : 1;
         }

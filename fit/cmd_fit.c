@@ -154,8 +154,12 @@ static void print_material(const fit_material_opts_t *o, const fit_material_resu
         printf("  camera %s: %d observations\n", r->cameras[k], r->nobs_camera[k]);
     if (r->have_gain) {
         printf("  expected residual RMS from the sensor's noise alone: %.4g 1/sr\n", r->noise_rms);
-        printf("  response compression corrected: S_m = S (1 - a S), a = %.4g per DN at 0 dB%s\n", r->nonlin_a_per_dn,
-               r->nonlin_a_per_dn > 0 ? "" : " (none in the gain calibration)");
+        if (r->lin.kind == MODEL_LIN_MONOTONE)
+            printf("  response linearised: the gain calibration's monotone table (%d knots up to %.1f DN; its "
+                   "S_m = S (1 - a S) fit: a = %.4g per DN)\n", r->lin.n, r->lin.m[r->lin.n - 1], r->lin.a_per_dn);
+        else
+            printf("  response linearised: S_m = S (1 - a S), a = %.4g per DN at the calibration's gain%s\n",
+                   r->lin.a_per_dn, r->lin.kind == MODEL_LIN_PARAMETRIC ? "" : " (none in the gain calibration)");
     }
     print_models(&r->first);
     if (r->cells_done) {

@@ -399,7 +399,7 @@ static bool material_samples(const fit_material_opts_t *o, calib_set_t **cal, ca
     if (all_gain && obs->n > 0) {
         r->have_gain = true;
         r->noise_rms = sqrt(v2 / obs->n);
-        r->nonlin_a_per_dn = c->nonlin_a_per_dn;
+        r->lin = c->lin;
     }
     return true;
 }

@@ -53,9 +53,10 @@ typedef struct {
     char              cameras[8][32];
     int               nobs_camera[8];
     // with a gain calibration: the residual RMS its temporal noise alone gives (1/sr; NAN without one)
-    // and the response compression corrected (per DN at 0 dB; 0: none)
+    // and the response linearisation applied (the gain calibration's)
     bool              have_gain;
-    double            noise_rms, nonlin_a_per_dn;
+    double            noise_rms;
+    model_lin_t       lin;
     // every model fitted to the samples as they are (first.ntried > 0: tried)
     fit_brdf_models_t first;
     // albedo cells (opts cell_mm > 0; cells_done: fitted): the factors' spread, then

@@ -962,7 +962,6 @@ static bool measure_windows(fit_t *F, int m, int first_pt, double *Pa0, double *
     const float *off = opt->use_flat ? cm->offset_dn : NULL, *flat = opt->use_flat ? cm->flat : NULL;
     double gf = image_gain_factor(im), Kg = cm->K_dn_per_e * gf;
     double sat = cm->saturation_dn > 0 ? cm->saturation_dn : INFINITY;
-    double a_nl = opt->use_flat && cm->nonlin_a_per_dn > 0 ? cm->nonlin_a_per_dn / gf : 0;
     bool owned;
     const wsum_t *ws = window_sums(im, v, w, off, flat, &owned);
     double *tmp = malloc((size_t)n * sizeof *tmp);
@@ -983,16 +982,13 @@ static bool measure_windows(fit_t *F, int m, int first_pt, double *Pa0, double *
         p->region = -1;
         double s1 = ws[g].s1, s2 = ws[g].s2, gs = ws[g].gs, mx = ws[g].mx;
         double N = (double)w * w, mean = s1 / N;
-        if (a_nl > 0 && off) {
-            // linearise the window (mean and spread) with the inverse of S_m = S (1 - a S)
-            double disc = 1 - 4 * a_nl * mean;
-            if (mean > 0 && disc > 0) {
-                double lin = (1 - sqrt(disc)) / (2 * a_nl), slope = 1 / sqrt(disc);
-                double var = fmax(s2 / N - mean * mean, 0) * slope * slope;
-                mean = lin;
-                s1 = mean * N;
-                s2 = (var + mean * mean) * N;
-            }
+        if (cm->lin && off) {
+            // linearise the window (mean and spread) with the gain calibration's linearisation
+            double slope, lin = model_linearise(cm->lin, mean, gf, &slope);
+            double var = fmax(s2 / N - mean * mean, 0) * slope * slope;
+            mean = lin;
+            s1 = mean * N;
+            s2 = (var + mean * mean) * N;
         }
         p->meas = (float)mean;
         p->sigma = (float)sqrt(fmax(s2 / N - mean * mean, 0) * N / (N > 1 ? N - 1 : 1));   // window std for now

@@ -83,8 +83,8 @@ typedef struct {
     double          K_dn_per_e;     // system gain at 0 dB (0: unknown)
     double          read_noise_e;
     double          saturation_dn;  // window maxima at or above are not used
-    double          nonlin_a_per_dn;// response compression at 0 dB: measured S_m = S (1 - a S), S the linear
-                                    // signal above the offset (DN); inverted before the fit (0: linear)
+    const model_lin_t *lin;         // the gain calibration's response linearisation of the signal above the
+                                    // offset (model_linearise), applied before the fit (NULL: linear)
     double          kc_rel;         // its sensitivity relative to the lamps' scale kc*I (its own white's over
                                     // the one given; 0 or 1: the same camera), a factor on its signal
 } verify_camera_t;
@@ -339,7 +339,7 @@ void verify_files_result_free(verify_files_result_t *r);
 // A camera model with the gain calibration of gain_dir (gain.json and its maps
 // offset_dn.tiff, prnu_gain.tiff; NULL: none) as a calibration set (cam, W, H,
 // offset_dn, flat, gain_dn_per_e, read_noise_e, saturation_dn,
-// nonlin_a_per_dn). The loader wants a lamps.json: a minimal one from lamps (a
+// lin). The loader wants a lamps.json: a minimal one from lamps (a
 // placeholder lamp when NULL) is written to tmp_dir/.lamps-TAG.json (tmp_dir
 // created) and removed. NULL + message. Free with calib_set_free.
 calib_set_t *verify_load_camera_gain(const char *camera, const char *gain_dir, const model_lamps_t *lamps,

@@ -241,7 +241,7 @@ static void vf_camera_fill(vf_t *V, int c, const calib_set_t *cal, const calib_s
     vc->K_dn_per_e = g->gain_dn_per_e;
     vc->read_noise_e = g->read_noise_e;
     vc->saturation_dn = g->saturation_dn;
-    vc->nonlin_a_per_dn = g->nonlin_a_per_dn;
+    vc->lin = &g->lin;
     vc->kc_rel = 1;
     V->cal_gain[c] = g->cal_gain;
     snprintf(V->cal_unit[c], sizeof V->cal_unit[c], "%s", g->cal_gain_unit);

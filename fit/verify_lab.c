@@ -25,6 +25,7 @@ struct verify_lab {
     float *offset, *flat;
     model_sensor_t sensor;
     verify_camera_t cam;
+    model_lin_t lin;           // the truth sensor's S(1 - aS) (the matched rig's response), cam.lin
     model_lamps_t *lamps;      // a copy (truth positions, intensities)
     double *A;                 // kc_per_us * I
     model_materials_t *mats;   // the truth's materials
@@ -147,8 +148,10 @@ verify_lab_t *verify_lab_open(const char *truth_path, const char *sample, const 
     // The flat field has mean 1; the sensor's gain pattern (PRNU x vignetting)
     // does not: its mean goes into kc*I, as a white calibration through this
     // flat field measures it (linearised as verify does).
-    double a_nl = L->sensor.nonlinearity_pct / 100 / (L->sensor.system_gain_dn_per_e * L->sensor.full_well_e);
-    double Sm = sum / npx, S = a_nl > 0 ? (1 - sqrt(1 - 4 * a_nl * Sm)) / (2 * a_nl) : Sm;
+    L->lin = (model_lin_t){ .kind = MODEL_LIN_PARAMETRIC, .a_per_dn = L->sensor.nonlinearity_pct / 100 /
+                                                                   (L->sensor.system_gain_dn_per_e *
+                                                                    L->sensor.full_well_e) };
+    double S = model_linearise(&L->lin, sum / npx, 1, NULL);
     double gmean = S / (L->kc_per_us * flat_us * radiance);
     for (int i = 0; i < L->nl; i++) L->A[i] *= gmean;
     if ((r = rig_virtual_set_sample(L->v, sample))) {
@@ -168,7 +171,7 @@ verify_lab_t *verify_lab_open(const char *truth_path, const char *sample, const 
     L->cam.K_dn_per_e = L->sensor.system_gain_dn_per_e;
     L->cam.read_noise_e = L->sensor.read_noise_e;
     L->cam.saturation_dn = (1 << L->sensor.bits) - 1;
-    L->cam.nonlin_a_per_dn = L->sensor.nonlinearity_pct / 100 / (L->sensor.system_gain_dn_per_e * L->sensor.full_well_e);
+    L->cam.lin = &L->lin;
     return L;
 fail:
     verify_lab_free(L);

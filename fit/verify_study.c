@@ -389,7 +389,7 @@ static bool calibs_of_chain(study_t *S, const verify_study_opts_t *o)
     }
     S->cam = (verify_camera_t){ .cam = cal->cam, .offset_dn = cal->offset_dn, .flat = cal->flat,
                                 .K_dn_per_e = cal->gain_dn_per_e, .read_noise_e = cal->read_noise_e,
-                                .saturation_dn = cal->saturation_dn, .nonlin_a_per_dn = cal->nonlin_a_per_dn,
+                                .saturation_dn = cal->saturation_dn, .lin = &cal->lin,
                                 .kc_rel = 1 };
     snprintf(S->cam.name, sizeof S->cam.name, "%s", cal->camera[0] ? cal->camera : "camera");
     S->lamps = cal->lamps;

@@ -743,6 +743,50 @@ void model_sensor_mean(const model_sensor_t *s, int width, int height, const flo
 bool model_gain_factor(double gain, const char *unit, double cal_gain, const char *cal_unit, const char *what,
                        double *factor);
 
+// The sensor's response linearisation (model/sensor.c): a measured signal
+// above dark S_m (DN) -> the linear signal S (DN), as the gain calibration
+// (calib/gain.c, gain.json "linearisation") measured it at its gain. The one
+// function every consumer applies (calibrated observations, the white, the
+// material fit, verification) is model_linearise.
+//   MODEL_LIN_NONE        S = S_m
+//   MODEL_LIN_PARAMETRIC  S_m = S (1 - a S) (a per DN; files from before the
+//                         table, or refl calib gain --linearisation parametric)
+//   MODEL_LIN_MONOTONE    a monotone piecewise-cubic Hermite interpolant
+//                         (Fritsch & Carlson, SIAM J. Numer. Anal. 17, 1980;
+//                         knot derivatives by Fritsch & Butland's weighted
+//                         harmonic mean, SIAM J. Sci. Stat. Comput. 5, 1984)
+//                         through knots (m[k], s[k]), m and s strictly
+//                         increasing from (0, 0); linear beyond the last knot
+//                         (slope d[n-1]) and below 0 (slope d[0]).
+#define MODEL_LIN_MAX 256
+enum { MODEL_LIN_NONE, MODEL_LIN_PARAMETRIC, MODEL_LIN_MONOTONE };
+typedef struct {
+    int    kind;                 // MODEL_LIN_*
+    double a_per_dn;             // PARAMETRIC: a at the calibration's gain
+    int    n;                    // MONOTONE: knots (2..MODEL_LIN_MAX)
+    double m[MODEL_LIN_MAX];     // measured DN above dark
+    double s[MODEL_LIN_MAX];     // linear DN
+    double d[MODEL_LIN_MAX];     // dS/dS_m at the knots
+} model_lin_t;
+
+// The linear signal of s_m (DN above dark) at gain factor gf relative to the
+// calibration's (the response is the sensor's: S = gf T(s_m / gf)); *slope
+// (may be NULL) gets dS/dS_m (for the noise). L NULL: S = s_m.
+double model_linearise(const model_lin_t *L, double s_m, double gf, double *slope);
+// The monotone table through points (m[i], s[i]), i = 0..n-1, s strictly
+// increasing (the order of exposure): m is first made non-decreasing by
+// isotonic regression (pool-adjacent-violators), points of equal m pooled,
+// points at m <= 0 dropped, a point nearer the one before than min(20 % of
+// its level, half the median spacing) pooled with it (close knots would make
+// the slopes follow the noise), (0, 0) put first, and more than MODEL_LIN_MAX
+// knots thinned evenly. false (message set) when fewer than 2 knots remain or
+// a value is not finite.
+bool model_lin_monotone(const double *m, const double *s, int n, model_lin_t *out);
+// The table through knots as they are (a table written by model_lin_monotone,
+// read back): 2..MODEL_LIN_MAX knots, m and s finite and strictly increasing.
+// false (message set) otherwise.
+bool model_lin_knots(const double *m, const double *s, int n, model_lin_t *out);
+
 // ---------------------------------------------------------------------------
 // Image files (model/image.c). Text metadata is a NULL-terminated list of
 // key, value, key, value, ..., NULL (may be NULL): PNG tEXt chunks, TIFF

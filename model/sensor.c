@@ -651,3 +651,191 @@ bool model_gain_factor(double gain, const char *unit, double cal_gain, const cha
     *factor = f / fc;
     return true;
 }
+
+// ---------------------------------------------------------------------------
+// Response linearisation (model.h: model_lin_t)
+
+// The monotone table at x (measured DN above dark at the calibration's gain).
+static double lin_table(const model_lin_t *L, double x, double *slope)
+{
+    const int n = L->n;
+    if (x <= L->m[0]) {
+        *slope = L->d[0];
+        return L->s[0] + L->d[0] * (x - L->m[0]);
+    }
+    if (x >= L->m[n - 1]) {
+        *slope = L->d[n - 1];
+        return L->s[n - 1] + L->d[n - 1] * (x - L->m[n - 1]);
+    }
+    int lo = 0, hi = n - 1;   // m[lo] <= x < m[hi]
+    while (hi - lo > 1) {
+        int mid = (lo + hi) / 2;
+        if (L->m[mid] <= x) lo = mid;
+        else hi = mid;
+    }
+    double h = L->m[hi] - L->m[lo], u = (x - L->m[lo]) / h, u2 = u * u, u3 = u2 * u;
+    double y0 = L->s[lo], y1 = L->s[hi], d0 = L->d[lo] * h, d1 = L->d[hi] * h;
+    // cubic Hermite basis and its derivative
+    double v = (2 * u3 - 3 * u2 + 1) * y0 + (u3 - 2 * u2 + u) * d0 + (-2 * u3 + 3 * u2) * y1 + (u3 - u2) * d1;
+    *slope = ((6 * u2 - 6 * u) * y0 + (3 * u2 - 4 * u + 1) * d0 + (-6 * u2 + 6 * u) * y1 + (3 * u2 - 2 * u) * d1) / h;
+    return v;
+}
+
+double model_linearise(const model_lin_t *L, double s_m, double gf, double *slope)
+{
+    double sl = 1, S = s_m;
+    if (!(gf > 0)) gf = 1;
+    if (L && L->kind == MODEL_LIN_PARAMETRIC && L->a_per_dn > 0 && s_m > 0) {
+        // the root of S_m = S (1 - a' S), a' = a / gf, that goes to S_m as a -> 0
+        double a = L->a_per_dn / gf, disc = 1 - 4 * a * s_m;
+        if (disc > 0) {
+            S = 2 * s_m / (1 + sqrt(disc));
+            sl = 1 / sqrt(disc);
+        }
+    } else if (L && L->kind == MODEL_LIN_MONOTONE && L->n >= 2 && isfinite(s_m)) {
+        S = gf * lin_table(L, s_m / gf, &sl);
+    }
+    if (slope) *slope = sl;
+    return S;
+}
+
+// Fritsch & Butland's knot derivatives (the weighted harmonic mean of the
+// neighbouring secants; 0 at a local extremum) with the one-sided
+// three-point ends limited as Fritsch & Carlson's monotone region asks
+// (|d| <= 3 secant): the interpolant is monotone on every interval.
+static void lin_derivatives(model_lin_t *L)
+{
+    const int n = L->n;
+    double h[MODEL_LIN_MAX], del[MODEL_LIN_MAX];
+    for (int k = 0; k < n - 1; k++) {
+        h[k] = L->m[k + 1] - L->m[k];
+        del[k] = (L->s[k + 1] - L->s[k]) / h[k];
+    }
+    if (n == 2) {
+        L->d[0] = L->d[1] = del[0];
+        return;
+    }
+    for (int k = 1; k < n - 1; k++) {
+        double w1 = 2 * h[k] + h[k - 1], w2 = h[k] + 2 * h[k - 1];
+        L->d[k] = del[k - 1] * del[k] > 0 ? (w1 + w2) / (w1 / del[k - 1] + w2 / del[k]) : 0;
+    }
+    for (int e = 0; e < 2; e++) {   // the ends
+        int k0 = e ? n - 2 : 0, k1 = e ? n - 3 : 1, kd = e ? n - 1 : 0;
+        double d = ((2 * h[k0] + h[k1]) * del[k0] - h[k0] * del[k1]) / (h[k0] + h[k1]);
+        if (d * del[k0] <= 0) d = 0;
+        else if (del[k0] * del[k1] <= 0 && fabs(d) > 3 * fabs(del[k0])) d = 3 * del[k0];
+        L->d[kd] = d;
+    }
+    for (int k = 0; k < n - 1; k++) {   // Fritsch & Carlson's monotonicity condition alpha^2 + beta^2 <= 9
+        double al = L->d[k] / del[k], be = L->d[k + 1] / del[k], r = al * al + be * be;
+        if (r > 9) {
+            double tau = 3 / sqrt(r);
+            L->d[k] = tau * al * del[k];
+            L->d[k + 1] = tau * be * del[k];
+        }
+    }
+}
+
+bool model_lin_monotone(const double *m, const double *s, int n, model_lin_t *out)
+{
+    memset(out, 0, sizeof *out);
+    double *bm = malloc((size_t)(n > 0 ? n : 1) * 3 * sizeof(double)), *bs = bm + (n > 0 ? n : 1),
+           *bw = bs + (n > 0 ? n : 1);
+    if (!bm) {
+        model_error_set(NULL, 0, "out of memory for a linearisation table of %d points", n);
+        return false;
+    }
+    // pool adjacent violators: m non-decreasing in the order given; each
+    // block keeps its mean m and mean s (weights: the points it pools)
+    int nb = 0;
+    for (int i = 0; i < n; i++) {
+        if (!isfinite(m[i]) || !isfinite(s[i]) || (i > 0 && !(s[i] > s[i - 1]))) {
+            free(bm);
+            model_error_set(NULL, 0, "linearisation table: point %d (measured %g, linear %g) is not finite or the "
+                            "linear signal does not increase", i, m[i], s[i]);
+            return false;
+        }
+        bm[nb] = m[i];
+        bs[nb] = s[i];
+        bw[nb] = 1;
+        nb++;
+        while (nb > 1 && bm[nb - 2] >= bm[nb - 1]) {
+            double w = bw[nb - 2] + bw[nb - 1];
+            bm[nb - 2] = (bw[nb - 2] * bm[nb - 2] + bw[nb - 1] * bm[nb - 1]) / w;
+            bs[nb - 2] = (bw[nb - 2] * bs[nb - 2] + bw[nb - 1] * bs[nb - 1]) / w;
+            bw[nb - 2] = w;
+            nb--;
+        }
+    }
+    int first = 0;
+    while (first < nb && !(bm[first] > 0 && bs[first] > 0)) first++;
+    // knots much closer than their neighbours (two sweeps' steps side by side)
+    // make the knot slopes follow the means' noise: a knot nearer the last
+    // kept one than min(20 % of its level, half the median spacing) is pooled
+    // with it
+    if (nb - first >= 3) {
+        double *h = malloc(sizeof(double) * (size_t)(nb - first));
+        int nh = 0;
+        for (int i = first + 1; h && i < nb; i++) h[nh++] = bm[i] - bm[i - 1];
+        if (h) {
+            qsort(h, (size_t)nh, sizeof *h, model_cmp_double);
+            double med = h[nh / 2];
+            free(h);
+            int k = first;
+            for (int i = first + 1; i < nb; i++) {
+                if (bm[i] - bm[k] < fmin(0.2 * bm[k], 0.5 * med)) {
+                    double w = bw[k] + bw[i];
+                    bm[k] = (bw[k] * bm[k] + bw[i] * bm[i]) / w;
+                    bs[k] = (bw[k] * bs[k] + bw[i] * bs[i]) / w;
+                    bw[k] = w;
+                } else {
+                    k++;
+                    bm[k] = bm[i];
+                    bs[k] = bs[i];
+                    bw[k] = bw[i];
+                }
+            }
+            nb = k + 1;
+        }
+    }
+    int avail = nb - first, keep = avail < MODEL_LIN_MAX - 1 ? avail : MODEL_LIN_MAX - 1;
+    out->m[0] = out->s[0] = 0;
+    out->n = 1;
+    for (int j = 0; j < keep; j++) {
+        int i = first + (keep > 1 ? (int)((double)j * (avail - 1) / (keep - 1) + 0.5) : 0);
+        out->m[out->n] = bm[i];
+        out->s[out->n] = bs[i];
+        out->n++;
+    }
+    free(bm);
+    if (out->n < 2) {
+        model_error_set(NULL, 0, "linearisation table: no point with a positive signal (of %d)", n);
+        out->n = 0;
+        return false;
+    }
+    out->kind = MODEL_LIN_MONOTONE;
+    lin_derivatives(out);
+    return true;
+}
+
+bool model_lin_knots(const double *m, const double *s, int n, model_lin_t *out)
+{
+    memset(out, 0, sizeof *out);
+    if (n < 2 || n > MODEL_LIN_MAX) {
+        model_error_set(NULL, 0, "linearisation table: %d knots (2 to %d)", n, MODEL_LIN_MAX);
+        return false;
+    }
+    for (int i = 0; i < n; i++) {
+        if (!isfinite(m[i]) || !isfinite(s[i]) || (i > 0 && !(m[i] > m[i - 1] && s[i] > s[i - 1]))) {
+            model_error_set(NULL, 0, "linearisation table: knot %d (measured %g, linear %g): both must be finite "
+                            "and strictly increasing", i, m[i], s[i]);
+            return false;
+        }
+        out->m[i] = m[i];
+        out->s[i] = s[i];
+    }
+    out->n = n;
+    out->kind = MODEL_LIN_MONOTONE;
+    lin_derivatives(out);
+    return true;
+}

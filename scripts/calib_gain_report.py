@@ -4,7 +4,7 @@
 usage: calib_gain_report.py GAIN_JSON OUT_DIR
 
 Reads gain.json and the float TIFF maps next to it and writes into OUT_DIR:
-ptc.png, linearity.png, snr.png, kc.png, prnu_map.png, prnu_hist.png, dark.png.
+ptc.png, linearity.png, linearisation.png, snr.png, kc.png, prnu_map.png, prnu_hist.png, dark.png.
 Only plots what refl computed; no figure is recomputed here except the fitted
 lines drawn from the published coefficients.
 """
@@ -69,7 +69,7 @@ def main():
         a1.plot(t, e["response_offset_dn"] + e["response_dn_per_us"] * t, "-", lw=0.8)
         a2.plot(t, dev, "o-", ms=3, label="%g dB: LE %.3f %%" % (e["gain_db"], e["linearity_error_pct"]))
     a1.set_ylabel("signal (DN)")
-    a1.set_title("Linearity (line: least squares over 5..95 % of saturation)")
+    a1.set_title("Linearity (EMVA 1288 Release 4.0: the line of least squared relative deviations over 5..95 % of saturation)", fontsize=9)
     a1.legend(fontsize=8)
     a1.grid(alpha=0.3)
     a2.set_xlabel("exposure (us)")
@@ -79,6 +79,32 @@ def main():
     fig.tight_layout()
     fig.savefig(os.path.join(out, "linearity.png"), dpi=90)
     plt.close(fig)
+
+    # the response linearisation of the reference gain: linear / measured at the table's knots, and
+    # S(1 - aS)'s inverse from the published a
+    lin = g.get("linearisation")
+    if lin is not None:
+        fig, ax = plt.subplots(figsize=(8, 5))
+        if "measured_dn" in lin:
+            m, s = arr(lin["measured_dn"]), arr(lin["linear_dn"])
+            ok = m > 0
+            ax.plot(m[ok], s[ok] / m[ok], "o-", ms=3, lw=0.8, label="monotone table (knots)")
+        a = lin.get("a_per_dn") or 0
+        x = np.linspace(1, g["saturation_dn"], 200)
+        if a > 0:
+            ax.plot(x, 2 / (1 + np.sqrt(np.maximum(1 - 4 * a * x, 1e-12))), "--", lw=0.8,
+                    label="S(1 - aS), a = %.3g per DN" % a)
+        ax.axvline(g["saturation_dn"], ls=":", lw=0.8, color="grey")
+        ax.set_xlabel("measured signal above dark (DN)")
+        ax.set_ylabel("linear / measured")
+        ax.set_title("Response linearisation (applied: %s; LE after: %.3g %%, S(1 - aS): %.3g %%)"
+                     % (lin["method"], lin.get("linearity_error_linearised_pct") or float("nan"),
+                        lin.get("linearity_error_linearised_parametric_pct") or float("nan")), fontsize=9)
+        ax.legend(fontsize=8)
+        ax.grid(alpha=0.3)
+        fig.tight_layout()
+        fig.savefig(os.path.join(out, "linearisation.png"), dpi=90)
+        plt.close(fig)
 
     # SNR
     fig, ax = plt.subplots(figsize=(8, 5))

@@ -239,13 +239,29 @@ TEST_LONG(calib_gain_virtual)
             fprintf(stderr, "  measured signal vs the expected frames: max deviation %.3f %%\n", 100 * maxdev);
             CHECK(maxdev < 0.005);
             double kc_slope = 0;
-            double le_t = calib_gain_linearity(t, mt, n, sat, 0.05, 0.95, &kc_slope, NULL, NULL, NULL);
-            double le_l = calib_gain_linearity(t, ml, n, sat, 0.05, 0.95, NULL, NULL, NULL, NULL);
+            double le_t = calib_gain_linearity_r4(t, mt, n, sat, 0.05, 0.95, &kc_slope, NULL, NULL, NULL);
+            double le_l = calib_gain_linearity_r4(t, ml, n, sat, 0.05, 0.95, NULL, NULL, NULL, NULL);
+            double le3 = jnum(j, "linearity_error_r3_pct");
+            double le_t3 = calib_gain_linearity(t, mt, n, sat, 0.05, 0.95, NULL, NULL, NULL, NULL);
             fprintf(stderr, "  linearity error: measured %.3f %%, truth curve %.3f %%, linear truth %.3f %%\n", le,
                     le_t, le_l);
             CHECK(le_t > 3 * le_l);
             CHECK(le > 3 * le_l);
             CHECK_NEAR(le, le_t, 0.15 * le_t);
+            CHECK_NEAR(le3, le_t3, 0.15 * le_t3);   // Release 3's figure, kept beside it
+            // the monotone table recovers the truth's linear twin (its frames without the
+            // compression) over 5..95 % of saturation, up to one scale
+            model_lin_t L;
+            CHECK(calib_gain_lin_from_json(j, "gain.json", &L) && L.kind == MODEL_LIN_MONOTONE);
+            double rmin = INFINITY, rmax = -INFINITY;
+            for (int i = 0; i < n; i++)
+                if (mt[i] >= 0.05 * sat && mt[i] <= 0.95 * sat) {
+                    double r = model_linearise(&L, mt[i], 1, NULL) / ml[i];
+                    rmin = fmin(rmin, r);
+                    rmax = fmax(rmax, r);
+                }
+            fprintf(stderr, "  linearised / linear truth over 5..95 %%: %.5f .. %.5f\n", rmin, rmax);
+            CHECK(rmax / rmin - 1 < 0.002);
             // kc: the response slope per unit radiance (the truth's 5 lamps x radiance 1000)
             CHECK_REL(jnum(j, "kc_per_us"), kc_slope / 5000.0, 0.01);
             CHECK_REL(jnum(j, "response_dn_per_us"), kc_slope, 0.01);
@@ -747,4 +763,209 @@ TEST(calib_set_camera_layouts)
     CHECK_CONTAINS(model_last_error(), "left/gain.json");
     model_error_quiet_thread(q);
     free(cm);
+}
+
+// ---------------------------------------------------------------------------
+// The response linearisation (issue 19): a known monotone response that is
+// not of the form S (1 - a S) (a gamma at the low end, an exponential knee
+// toward full well), swept as refl calib gain sweeps (calib_gain_sweep_exposures:
+// 50 equal steps up to 1.2 x saturation and 16 geometric ones at the low end).
+
+enum { LIN_N = 66 };
+static const double LIN_K = 0.25, LIN_FW = 16000, LIN_RATE = 16.0;   // DN/e-, e-, e-/us
+
+// The test sensor's electrons out for e in: a gamma of 1.03 below 600 e-, a
+// knee from 85 % of the well, k + (FW - k)(1 - exp(-(e - k)/(FW - k))).
+static double lin_response(double e)
+{
+    const double el = 600, g = 1.03, k = 0.85 * LIN_FW;
+    if (e > 0 && e < el) e = el * pow(e / el, g);
+    if (e > k) e = k + (LIN_FW - k) * (1 - exp(-(e - k) / (LIN_FW - k)));
+    return e;
+}
+
+// The sweep: t[i] us and mu[i] DN above dark (clipped at the well); returns
+// the saturation (the last step below the clip).
+static double lin_sweep(double *t, double *mu, double noise_rel)
+{
+    double sat = 0;
+    CHECK(calib_gain_sweep_exposures(1.2 * LIN_FW / LIN_RATE, 50, 16, t) == LIN_N);
+    for (int i = 0; i < LIN_N; i++) {
+        double e = fmin(lin_response(LIN_RATE * t[i]), 0.999 * LIN_FW);
+        // a deterministic +-noise_rel pattern (the ROI mean's noise)
+        mu[i] = LIN_K * e * (1 + noise_rel * ((i * 7919) % 13 - 6) / 6.0);
+        if (e < 0.999 * LIN_FW) sat = mu[i];
+    }
+    return sat;
+}
+
+// The largest relative error of the linearisation over 2..95 % of saturation
+// (a fine grid of the true signal), the linear truth K e.
+static double lin_max_error(const model_lin_t *L, double sat, double gf)
+{
+    double worst = 0;
+    for (int k = 0; k <= 2000; k++) {
+        double S = sat * (0.02 + 0.93 * k / 2000.0);   // the linear truth, DN
+        double e = S / LIN_K, m = LIN_K * lin_response(e);
+        if (m > 0.95 * sat) break;
+        double r = model_linearise(L, gf * m, gf, NULL) / (gf * S) - 1;
+        worst = fmax(worst, fabs(r));
+    }
+    return worst;
+}
+
+TEST(calib_gain_linearisation_known_response)
+{
+    double t[LIN_N], mu[LIN_N];
+    double sat = lin_sweep(t, mu, 0);
+    model_lin_t L;
+    double a, r, c0;
+    CHECK(calib_gain_linearisation(t, mu, LIN_N, sat, &L, &a, &r, &c0));
+    CHECK(L.kind == MODEL_LIN_MONOTONE && L.n >= 56);
+    CHECK_REL(r, LIN_K * LIN_RATE, 1e-3);   // the anchor: the small-signal response
+    double err = lin_max_error(&L, sat, 1), err6 = lin_max_error(&L, sat, pow(10, 6 / 20.0));
+    model_lin_t P = { .kind = MODEL_LIN_PARAMETRIC, .a_per_dn = a };
+    double err_p = lin_max_error(&P, sat, 1);
+    fprintf(stderr, "  linear signal recovered over 2..95 %% of saturation: monotone table %.4f %% (at 6 dB %.4f %%), "
+            "S(1 - aS) with a = %.3g per DN %.3f %%\n", 100 * err, 100 * err6, a, 100 * err_p);
+    CHECK(err < 0.002);
+    CHECK(err6 < 0.002);   // the table scales with the gain
+    CHECK(err_p > 0.002);
+    CHECK(err_p > 3 * err);
+    // monotone: a fine grid from below 0 to beyond the last knot rises, its slope positive
+    double prev = -INFINITY;
+    bool mono = true;
+    for (int k = -50; k <= 5000; k++) {
+        double x = 1.1 * sat * k / 5000.0, sl, y = model_linearise(&L, x, 1, &sl);
+        mono &= y > prev && sl > 0;
+        prev = y;
+    }
+    CHECK(mono);
+    // the Release 4.0 LE of the linearised sweep is far below the raw one's
+    double le_raw = calib_gain_linearity_r4(t, mu, LIN_N, sat, 0.05, 0.95, NULL, NULL, NULL, NULL), lt[LIN_N];
+    for (int i = 0; i < LIN_N; i++) lt[i] = model_linearise(&L, mu[i], 1, NULL);
+    double le_lin = calib_gain_linearity_r4(t, lt, LIN_N, 1, model_linearise(&L, 0.05 * sat, 1, NULL),
+                                            model_linearise(&L, 0.95 * sat, 1, NULL), NULL, NULL, NULL, NULL);
+    fprintf(stderr, "  LE (Release 4.0): raw %.3f %%, linearised %.4f %%\n", le_raw, le_lin);
+    CHECK(le_raw > 1);
+    CHECK(le_lin < 0.1);
+
+    // noisy means that are not monotone near the top: isotonic regression keeps the table monotone
+    // (means with a +-0.05 % pattern: the noise of a small region's mean)
+    sat = lin_sweep(t, mu, 0.0005);
+    mu[56] = mu[57] + 1;   // a step above its successor
+    CHECK(calib_gain_linearisation(t, mu, LIN_N, sat, &L, &a, &r, &c0));
+    for (int k = 1; k < L.n; k++) CHECK(L.m[k] > L.m[k - 1] && L.s[k] > L.s[k - 1] && L.d[k] >= 0);
+    double err_n = lin_max_error(&L, sat, 1);
+    fprintf(stderr, "  with noisy, non-monotone means: %.4f %%\n", 100 * err_n);
+    CHECK(err_n < 0.003);
+    // too few steps in the anchor's range: an error that says why
+    CHECK(!calib_gain_linearisation(t, mu, 3, sat, &L, &a, &r, &c0));
+    CHECK_CONTAINS(model_last_error(), "small-signal response");
+}
+
+// Fritsch & Carlson's interpolant on knots of a known function: exact on a
+// straight line, monotone on steps, and the table's own knots reproduced.
+TEST(model_lin_monotone_interpolant)
+{
+    double m[6] = { 10, 20, 30, 40, 50, 60 }, s[6];
+    for (int i = 0; i < 6; i++) s[i] = 2 * m[i];
+    model_lin_t L;
+    CHECK(model_lin_monotone(m, s, 6, &L));
+    CHECK(L.n == 7 && L.m[0] == 0 && L.s[0] == 0);   // (0, 0) first
+    double sl;
+    for (double x = -5; x < 80; x += 0.37) CHECK_NEAR(model_linearise(&L, x, 1, &sl), 2 * x, 1e-9);
+    CHECK_NEAR(sl, 2, 1e-12);
+    // a flat run between rising parts: no overshoot, the knots exact
+    double m2[5] = { 1, 2, 3, 4, 5 }, s2[5] = { 1, 2, 2.001, 2.002, 6 };
+    CHECK(model_lin_monotone(m2, s2, 5, &L));
+    for (int i = 0; i < 5; i++) CHECK_NEAR(model_linearise(&L, m2[i], 1, NULL), s2[i], 1e-12);
+    double prev = -1;
+    for (double x = 0; x <= 5; x += 0.001) {
+        double y = model_linearise(&L, x, 1, NULL);
+        CHECK(y >= prev - 1e-12);
+        prev = y;
+    }
+    // the linear signal must rise with exposure; nothing positive: errors
+    double bad[3] = { 1, 3, 2 };
+    CHECK(!model_lin_monotone(m2, bad, 3, &L));
+    double neg[3] = { -1, -2, -3 }, up[3] = { 1, 2, 3 };
+    CHECK(!model_lin_monotone(neg, up, 3, &L));
+    // parametric: the inverse of S_m = S (1 - a S), and a -> a / f at gain factor f
+    model_lin_t P = { .kind = MODEL_LIN_PARAMETRIC, .a_per_dn = 1e-5 };
+    double S = 3000, Sm = S * (1 - 1e-5 * S);
+    CHECK_REL(model_linearise(&P, Sm, 1, NULL), S, 1e-12);
+    CHECK_REL(model_linearise(&P, 2 * S * (1 - 1e-5 / 2 * 2 * S), 2, NULL), 2 * S, 1e-12);
+    CHECK_NEAR(model_linearise(NULL, 123.5, 1, NULL), 123.5, 0);
+}
+
+// EMVA 1288 Release 4.0's linearity error on a response computed by hand:
+// t = 1, 2, 3 us, mu = 100, 210, 290 DN (saturation 310: all three within
+// 5..95 %). The line minimising sum((mu - a0 - a1 t) / mu)^2 solves the 2x2
+// normal equations with weights 1/mu^2; in exact fractions a0 = 2 and
+// a1 = 99.10905730129..., deviations 100 (mu - line) / line = -1.09689,
+// +4.88561, -3.11605 %, LE = (4.88561 + 3.11605) / 2 = 4.00083 %. Release
+// 3's unweighted line (a0 = 10, a1 = 95): deviations -4.76190, +5, -1.69492 %,
+// LE 4.88095 %.
+TEST(calib_gain_linearity_r4_hand)
+{
+    double t[3] = { 1, 2, 3 }, mu[3] = { 100, 210, 290 }, dev[3], a1, a0;
+    int nfit;
+    double le = calib_gain_linearity_r4(t, mu, 3, 310, 0.05, 0.95, &a1, &a0, &nfit, dev);
+    CHECK(nfit == 3);
+    CHECK_NEAR(a0, 2, 1e-9);
+    CHECK_NEAR(a1, 99.1090573013, 1e-8);
+    CHECK_NEAR(dev[0], -1.0968921389, 1e-8);
+    CHECK_NEAR(dev[1], 4.8856145793, 1e-8);
+    CHECK_NEAR(le, 4.0008302123, 1e-8);
+    CHECK_NEAR(calib_gain_linearity(t, mu, 3, 310, 0.05, 0.95, NULL, NULL, NULL, NULL), 4.8809523810, 1e-8);
+}
+
+// An old gain.json (before the table: no "linearisation") still loads and
+// applies S(1 - aS) of its curves; a new one applies its table, and its method
+// "parametric" the a; a malformed one is an error naming the file.
+TEST(calib_gain_lin_json_compat)
+{
+    double t[LIN_N], mu[LIN_N];
+    double sat = lin_sweep(t, mu, 0);
+    // the old layout: gains[0].curves at gain_db 0
+    json_t *cv = json_object(), *et = json_array(), *es = json_array();
+    for (int i = 0; i < LIN_N; i++) {
+        json_array_append_new(et, json_real(t[i]));
+        json_array_append_new(es, json_real(mu[i]));
+    }
+    json_object_set_new(cv, "exposure_us", et);
+    json_object_set_new(cv, "signal_dn", es);
+    json_t *old = json_pack("{s:f, s:f, s:[{s:f, s:o}]}", "gain_db", 0.0, "saturation_dn", sat, "gains", "gain_db",
+                            0.0, "curves", cv);
+    model_lin_t L;
+    CHECK(calib_gain_lin_from_json(old, "old/gain.json", &L));
+    CHECK(L.kind == MODEL_LIN_PARAMETRIC);
+    CHECK_REL(L.a_per_dn, calib_gain_parametric_a(t, mu, LIN_N, sat), 1e-12);
+    CHECK(L.a_per_dn > 0);
+    // the new layout
+    model_lin_t T;
+    double a, r, c0;
+    CHECK(calib_gain_linearisation(t, mu, LIN_N, sat, &T, &a, &r, &c0));
+    json_t *jm = json_array(), *js = json_array();
+    for (int i = 0; i < T.n; i++) {
+        json_array_append_new(jm, json_real(T.m[i]));
+        json_array_append_new(js, json_real(T.s[i]));
+    }
+    json_object_set_new(old, "linearisation", json_pack("{s:s, s:f, s:o, s:o}", "method", "monotone", "a_per_dn", a,
+                                                        "measured_dn", jm, "linear_dn", js));
+    CHECK(calib_gain_lin_from_json(old, "new/gain.json", &L));
+    CHECK(L.kind == MODEL_LIN_MONOTONE && L.n == T.n);
+    CHECK_REL(model_linearise(&L, 0.9 * sat, 1, NULL), model_linearise(&T, 0.9 * sat, 1, NULL), 1e-12);
+    json_object_set_new(json_object_get(old, "linearisation"), "method", json_string("parametric"));
+    CHECK(calib_gain_lin_from_json(old, "new/gain.json", &L));
+    CHECK(L.kind == MODEL_LIN_PARAMETRIC && L.a_per_dn == a);
+    json_object_set_new(json_object_get(old, "linearisation"), "method", json_string("spline"));
+    CHECK(!calib_gain_lin_from_json(old, "bad/gain.json", &L));
+    CHECK_CONTAINS(model_last_error(), "bad/gain.json");
+    json_object_set_new(json_object_get(old, "linearisation"), "method", json_string("monotone"));
+    json_array_set_new(js, 3, json_real(-1));
+    CHECK(!calib_gain_lin_from_json(old, "bad/gain.json", &L));
+    CHECK_CONTAINS(model_last_error(), "knot 3");
+    json_decref(old);
 }

@@ -285,10 +285,13 @@ static json_t *fit_coupon(const char *rig, const char *cal, const char *sample, 
     g_free(sc);
     CHECK_MSG(rc == 0, "%s: %s", sample, err);
     if (cells) CHECK_CONTAINS(out, "albedo cells of 2 mm: ");
-    // with a gain calibration: the response compression it measured, against the truth's
-    // nonlinearity 2 % of the full well 16000 e- at 0.25 DN/e-: a = 0.02 / 4000 per DN
-    const char *ac = out ? strstr(out, "response compression corrected: S_m = S (1 - a S), a = ") : NULL;
-    double a = ac ? strtod(ac + strlen("response compression corrected: S_m = S (1 - a S), a = "), NULL) : NAN;
+    // with a gain calibration: its monotone table applied, and the compression it measured
+    // (the parametric fit beside it), against the truth's nonlinearity 2 % of the full well
+    // 16000 e- at 0.25 DN/e-: a = 0.02 / 4000 per DN
+    CHECK_CONTAINS(out, "response linearised: the gain calibration's monotone table");
+    const char *ac = out ? strstr(out, "response linearised") : NULL;
+    ac = ac ? strstr(ac, "a = ") : NULL;
+    double a = ac ? strtod(ac + strlen("a = "), NULL) : NAN;
     CHECK_MSG(fabs(a / 5e-6 - 1) < 0.10, "%s: response compression a = %g per DN vs truth 5e-6", sample, a);
     g_free(out);
     g_free(err);
@@ -345,8 +348,9 @@ static void check_noise(json_t *m, double lo, double hi)
 // uniform holds the truth within 2 std. The fit averages each sample near a
 // lamp's mirror direction over the lamp's disc (lamps.json radius_mm): with
 // point lamps the glossy plastic's rim highlight left it at 4.4x the noise.
-// The response compression is measured (a within 10 % of
-// the truth's) and corrected: uncorrected, the metal's tiny diffuse part came
+// The response is linearised with the gain calibration's monotone table, and
+// its parametric fit beside it measures the compression (a within 10 % of the
+// truth's); uncorrected, the metal's tiny diffuse part came
 // out 9 % high. Residuals: the glossy plastic's is at the sensor's noise
 // (within 1.5x), and so is the metal's (the truth renders these two coupons
 // with 64 and 16 stratified samples of each 15 mm lamp per pixel, as a pixel
