@@ -815,6 +815,11 @@ static int bench_verify_study(void)
     printf("verify_study_200_cases_projected_from_cpu_s: %.0f s (setup + 200 x CPU per case / 2 cores; target 600)\n",
            setup + 200 * cpu_case / 2);
     printf("verify_study_200_cases_projected_from_cpu_reference_s: %.0f s\n", ref_setup + 200 * ref_cpu / 2);
+    printf("verify_study_11200_fits_projected_from_cpu_s: %.0f s (the issue's 11,200 fits: the 14 descriptions of "
+           "before the placed-off cases, setup + 200 x 14/17 x CPU per case / 2 cores; target 600)\n",
+           setup + 200 * cpu_case * 14 / 17 / 2);
+    printf("verify_study_11200_fits_projected_from_cpu_reference_s: %.0f s\n",
+           ref_setup + 200 * ref_cpu * 14 / 17 / 2);
     printf("verify_study_score_max_rel_diff: %.2g (as it is vs reference, %d rows of 6 cases; largest: %s)\n", max_rel,
            rows, worst);
     printf("verify_study_verdicts_differ: %d rows\n", verdicts);
