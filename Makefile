@@ -60,6 +60,7 @@ MODEL_SRC := \
     model/brdf.c \
     model/brdf_batch.c \
     model/brdf_table.c \
+    model/brdf_rgl.c \
     model/brdf_gen.c \
     model/cmd_brdf.c \
     model/camera.c \
@@ -115,6 +116,7 @@ CALIB_SRC := \
     calib/cmd_gain.c
 FIT_SRC := \
     fit/brdf_fit.c \
+    fit/brdf_samples.c \
     fit/material.c \
     fit/lightplan.c \
     fit/plan_lamps.c \
