@@ -144,6 +144,7 @@ TEST_SRC := \
     tests/test_harness.c \
     tests/test_model_brdf.c \
     tests/test_model_brdf_table.c \
+    tests/test_model_brdf_rgl.c \
     tests/test_model_camera.c \
     tests/test_model_cli.c \
     tests/test_model_config.c \
