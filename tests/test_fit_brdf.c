@@ -263,6 +263,10 @@ TEST(fit_brdf_merl_file)
     CHECK_MSG(s != NULL, "%s", model_last_error());
     if (!s) return;
     CHECK(s->n > N / 3);
+    // each cell weighted by its measure in (omega_i, omega_o): the cells with
+    // both centre directions above the surface cover the hemispheres' (2 pi)^2
+    printf("  MERL cells' solid angles: %.4f sr^2 = %.4f (2 pi)^2\n", s->omega_sr2, s->omega_sr2 / (4 * M_PI * M_PI));
+    CHECK_REL(s->omega_sr2, 4 * M_PI * M_PI, 0.002);
     // a subsample keeps the test fast
     fit_samples_t *sub = fit_samples_new();
     for (int i = 0; i < s->n; i += 37) fit_samples_add(sub, &s->c[i], s->R[i], 1);
