@@ -177,6 +177,79 @@ bool fit_solid_angles(int n, const double *ang, double *w)
     return ok;
 }
 
+// Scattered samples: a k-nearest-neighbour estimate. An isotropic BRDF
+// depends on (omega_i, omega_o) only up to a turn about the normal, so each
+// sample is the point (u = cos theta_i, omega_o turned by -phi_i) where the
+// measure d omega_i d omega_o integrated over phi_i is 2 pi du d omega_o:
+// locally Euclidean in (u, the sphere's tangent plane), a ball of radius r
+// has measure 2 pi (4/3) pi r^3. A sample's solid angle is that of the ball
+// reaching its K-th nearest neighbour, over K (among a strided subset of M
+// reference samples when n M would exceed 4e8: times M / n). Balls cut by
+// the domain's edges (normal incidence, grazing) overstate their samples'.
+bool fit_solid_angles_knn(int n, const double *ang, double *w)
+{
+    enum { K = 8 };
+    if (n <= K) {
+        for (int k = 0; k < n; k++) w[k] = 4 * M_PI * M_PI / n;
+        return true;
+    }
+    double *p = malloc(4 * (size_t)n * sizeof *p);
+    if (!p) {
+        model_error(NULL, 0, "out of memory for the samples' solid angles");
+        return false;
+    }
+    for (int k = 0; k < n; k++) {
+        double ti = ang[4 * k], to = ang[4 * k + 2], dp = ang[4 * k + 3] - ang[4 * k + 1];
+        p[4 * k] = cos(ti);
+        p[4 * k + 1] = sin(to) * cos(dp);
+        p[4 * k + 2] = sin(to) * sin(dp);
+        p[4 * k + 3] = cos(to);
+    }
+    int M = n;
+    if ((double)n * n > 4e8) M = (int)fmax(4 * K, 4e8 / n);
+    if (M > n) M = n;
+    double stride = (double)n / M;
+    for (int i = 0; i < n; i++) {
+        double best[K];
+        for (int q = 0; q < K; q++) best[q] = INFINITY;
+        for (int m = 0; m < M; m++) {
+            int j = (int)(m * stride);
+            if (j == i) continue;
+            double d0 = p[4 * i] - p[4 * j], d1 = p[4 * i + 1] - p[4 * j + 1], d2 = p[4 * i + 2] - p[4 * j + 2];
+            double d3 = p[4 * i + 3] - p[4 * j + 3], dd = d0 * d0 + d1 * d1 + d2 * d2 + d3 * d3;
+            if (dd >= best[K - 1]) continue;
+            int q = K - 1;
+            while (q > 0 && best[q - 1] > dd) {
+                best[q] = best[q - 1];
+                q--;
+            }
+            best[q] = dd;
+        }
+        double r = sqrt(best[K - 1]);
+        w[i] = 2 * M_PI * (4.0 / 3) * M_PI * r * r * r / K * ((double)M / n);
+    }
+    free(p);
+    return true;
+}
+
+// Rings for grids (few incident directions, each with rings of outgoing
+// ones), else the k-nearest-neighbour estimate; *how says which.
+static bool solid_angles_auto(int n, const double *ang, double *w, const char **how)
+{
+    int *idx = malloc((size_t)(n > 0 ? n : 1) * sizeof *idx);
+    if (!idx) return false;
+    for (int k = 0; k < n; k++) idx[k] = k;
+    qsort_r(idx, (size_t)n, sizeof *idx, cmp_in, (void *)ang);
+    int groups = 0;
+    for (int k = 0; k < n; k++)
+        if (k == 0 || !same(ang[4 * idx[k]], ang[4 * idx[k - 1]]) || !same(ang[4 * idx[k] + 1], ang[4 * idx[k - 1] + 1]))
+            groups++;
+    free(idx);
+    bool grid = n >= 16 && groups <= n / 8;
+    *how = grid ? "rings" : "k-nearest";
+    return grid ? fit_solid_angles(n, ang, w) : fit_solid_angles_knn(n, ang, w);
+}
+
 // Weights to mean 1 (the fit's statistics count samples), the sum of the
 // solid angles kept in s->omega_sr2.
 static void normalise(fit_samples_t *s, bool solid)
@@ -342,7 +415,7 @@ static fit_samples_t *load_csv(const char *path, const fit_read_opts_t *o)
     } else if (o->weights == FIT_WEIGHTS_UNIFORM) {
         for (int k = 0; k < s->n; k++) s->w[k] = 1;
     } else if (o->weights == FIT_WEIGHTS_SOLID_ANGLE) {
-        ok = fit_solid_angles(s->n, ang, s->w);
+        ok = solid_angles_auto(s->n, ang, s->w, &s->omega_how);
     }
     free(ang);
     if (!ok) {
@@ -385,6 +458,7 @@ static fit_samples_t *load_merl(const char *path, const fit_read_opts_t *o)
                 model_brdf_table_cell(i, j, k, &c);
                 if (isnan(v) || !(c.nl > 0 && c.nv > 0)) continue;
                 double w = o->weights == FIT_WEIGHTS_SOLID_ANGLE ? model_brdf_table_cell_solid_angle(i, j, k) : 1;
+                s->omega_how = "cells";
                 if (!fit_samples_add(s, &c, v * c.nl, w)) {
                     model_error(path, 0, "out of memory");
                     ok = false;
@@ -443,6 +517,7 @@ static fit_samples_t *load_rgl(const char *path, const fit_read_opts_t *o)
                     double fr = model_brdf_rgl_eval(r, wi, wo, chw) / co;
                     model_cosines_t c = model_cosines(v3(0, 0, 1), wi, wo);
                     double w = o->weights == FIT_WEIGHTS_SOLID_ANGLE ? w_in * w_out : 1;
+                    s->omega_how = "grid";
                     ok = fit_samples_add(s, &c, fr * c.nl, w);
                     if (!ok) model_error(path, 0, "out of memory");
                     s->n_negative += fr < 0;

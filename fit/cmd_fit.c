@@ -97,7 +97,8 @@ static int cmd_brdf(int argc, char **argv)
     if (!s) return model_error_report("fit brdf");
     fprintf(stderr, "refl fit brdf: %d samples from %s (%s, weights %s", s->n, file, model_channel_name(ch), weights);
     if (s->omega_sr2 > 0)
-        fprintf(stderr, ": %.4g sr^2, %.1f %% of (2 pi)^2", s->omega_sr2, 100 * s->omega_sr2 / (4 * M_PI * M_PI));
+        fprintf(stderr, " by %s: %.4g sr^2, %.1f %% of (2 pi)^2", s->omega_how ? s->omega_how : "?", s->omega_sr2,
+                100 * s->omega_sr2 / (4 * M_PI * M_PI));
     fprintf(stderr, ")\n");
     if (s->n_negative)
         fprintf(stderr, "refl fit brdf: %d samples with f_r < 0 kept as measurements\n", s->n_negative);

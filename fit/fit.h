@@ -30,7 +30,8 @@
 // Weights (fit_read_opts_t.weights) multiply the squared residuals, scaled to
 // mean 1: solid-angle (default) the measure each sample stands for in
 // (omega_i, omega_o), sr^2 (MERL: its cell's, RGL: its grid's, CSV: the
-// rings of equal theta of fit_solid_angles); uniform 1; column the CSV's.
+// rings of equal theta of fit_solid_angles for grids, else the k-nearest-
+// neighbour estimate of fit_solid_angles_knn); uniform 1; column the CSV's.
 #pragma once
 
 #include <jansson.h>
@@ -59,6 +60,7 @@ typedef struct {
     char             source[512];
     char             sha256[65];
     double           omega_sr2;    // solid-angle weights: their sum before scaling to mean 1, sr^2 (else 0)
+    const char      *omega_how;    // and how: "cells" (MERL), "grid" (RGL), "rings", "k-nearest" (CSV); else NULL
     int              n_negative;   // samples with f_r < 0 (kept: measurements within noise)
 } fit_samples_t;
 
@@ -99,8 +101,13 @@ fit_samples_t *fit_samples_read_merl(const char *path);   // uniform weights
 // (edges at midpoints, the outer ones half a spacing out, clipped to 0 and
 // 90 deg) and within a ring the azimuths' midpoints (a ring with a gap over
 // twice its widest other is open). Exact cells for theta/phi grids (a full
-// grid sums to (2 pi)^2), a density estimate for scattered directions.
+// grid sums to (2 pi)^2). A CSV uses them when its incident directions are
+// few (at most 1 in 8 samples has its own), else fit_solid_angles_knn.
 bool fit_solid_angles(int n, const double *ang, double *w);
+// A density estimate for scattered samples (fit/brdf_samples.c): the measure
+// of the ball reaching each sample's 8th nearest neighbour over 8, in
+// (cos theta_i, omega_o turned by -phi_i) where it is 2 pi du d omega_o.
+bool fit_solid_angles_knn(int n, const double *ang, double *w);
 
 typedef struct {
     int     threads;            // 0: all cores

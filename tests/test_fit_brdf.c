@@ -614,3 +614,59 @@ TEST(fit_samples_rgl_file)
     CHECK(fit_samples_load(path, &o) == NULL);
     CHECK_CONTAINS(model_last_error(), "no weight column");
 }
+
+// Scattered samples (no grid: every incident direction its own) get the
+// k-nearest-neighbour estimate: drawn uniformly in solid angle their solid
+// angles sum to about (2 pi)^2 (balls cut by the edges overstate theirs);
+// drawn uniformly in theta (crowded at the pole) the weights pull the
+// Lambert fit of an Oren-Nayar material to the kd the hemispheres' metric
+// chooses, much closer than uniform weights.
+TEST(fit_weights_knn_scattered)
+{
+    enum { N = 3000 };
+    double *ang = malloc(4 * (size_t)N * sizeof *ang), *w = malloc((size_t)N * sizeof *w);
+    model_rng_t rng = model_rng(5, 1);
+    for (int k = 0; k < N; k++) {
+        ang[4 * k] = acos(model_rng_uniform(&rng));
+        ang[4 * k + 1] = 2 * M_PI * model_rng_uniform(&rng);
+        ang[4 * k + 2] = acos(model_rng_uniform(&rng));
+        ang[4 * k + 3] = 2 * M_PI * model_rng_uniform(&rng);
+    }
+    CHECK(fit_solid_angles_knn(N, ang, w));
+    double sum = 0;
+    for (int k = 0; k < N; k++) sum += w[k];
+    printf("  uniform in solid angle: sum %.4g sr^2 = %.3f (2 pi)^2\n", sum, sum / (4 * M_PI * M_PI));
+    CHECK(sum > 0.9 * 4 * M_PI * M_PI && sum < 1.4 * 4 * M_PI * M_PI);
+    free(ang);
+    free(w);
+
+    model_brdf_recipe_t truth;
+    CHECK(model_brdf_recipe_parse("oren-nayar albedo=0.6 sigma=0.5", NULL, 0, &truth));
+    GString *g = g_string_new("");
+    const double d = M_PI / 180;
+    for (int k = 0; k < N; k++) {
+        double ti = 89.5 * model_rng_uniform(&rng), pi = 360 * model_rng_uniform(&rng);
+        double to = 89.5 * model_rng_uniform(&rng), po = 360 * model_rng_uniform(&rng);
+        model_cosines_t c = model_cosines(v3(0, 0, 1), v3(sin(ti * d) * cos(pi * d), sin(ti * d) * sin(pi * d), cos(ti * d)),
+                                          v3(sin(to * d) * cos(po * d), sin(to * d) * sin(po * d), cos(to * d)));
+        g_string_append_printf(g, "%.9g,%.9g,%.9g,%.9g,%.12g\n", ti, pi, to, po, model_brdf_recipe_f(&truth, &c));
+    }
+    const char *csv = test_write("scattered.csv", g->str);
+    g_string_free(g, TRUE);
+    double kd[2], best = 0;
+    for (int mode = 0; mode < 2; mode++) {
+        fit_read_opts_t o = fit_read_defaults();
+        o.weights = mode ? FIT_WEIGHTS_UNIFORM : FIT_WEIGHTS_SOLID_ANGLE;
+        fit_samples_t *s = fit_samples_load(csv, &o);
+        CHECK_MSG(s != NULL, "%s", model_last_error());
+        if (!s) return;
+        if (mode == 0) CHECK(s->omega_how && !strcmp(s->omega_how, "k-nearest"));
+        fit_brdf_result_t r;
+        CHECK(fit_brdf(s, MODEL_BRDF_LAMBERT, NULL, &r));
+        kd[mode] = r.p[0];
+        ngan_lambert(kd[mode], &truth, &best);
+        fit_samples_free(s);
+    }
+    printf("  kd: k-nearest %.5f, uniform %.5f; the metric's best %.5f\n", kd[0], kd[1], best);
+    CHECK(fabs(kd[0] - best) < 0.5 * fabs(kd[1] - best));
+}
