@@ -132,6 +132,13 @@ static int cmd_brdf(int argc, char **argv)
     json_t *src = json_object();
     json_object_set_new(src, "path", json_string(file));
     json_object_set_new(src, "sha256", json_string(s->sha256));
+    json_object_set_new(src, "channel", json_string(model_channel_name(ch)));
+    json_object_set_new(src, "weights", json_string(weights));
+    if (s->omega_sr2 > 0) {
+        json_object_set_new(src, "solid_angle_sr2", json_real(s->omega_sr2));
+        json_object_set_new(src, "solid_angle_by", json_string(s->omega_how ? s->omega_how : ""));
+    }
+    if (s->n_negative) json_object_set_new(src, "negative_f_r_kept", json_integer(s->n_negative));
     json_object_set_new(entry, "samples", src);
     json_array_append_new(mats, entry);
     json_object_set_new(top, "materials", mats);

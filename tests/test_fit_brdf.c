@@ -196,6 +196,11 @@ TEST(fit_brdf_csv_round_trip_and_errors)
         CHECK(json_object_get(mat, "rms") && json_object_get(mat, "ngan_error") && json_object_get(mat, "aic") &&
               json_object_get(mat, "bic") && json_object_get(mat, "n_samples"));
         CHECK(json_array_size(json_object_get(mat, "candidates")) == MODEL_BRDF_COUNT);
+        json_t *src = json_object_get(mat, "samples");   // how the samples were read and weighted
+        CHECK(!strcmp(json_string_value(json_object_get(src, "weights")), "solid-angle"));
+        CHECK(!strcmp(json_string_value(json_object_get(src, "channel")), "luma"));
+        CHECK(!strcmp(json_string_value(json_object_get(src, "solid_angle_by")), "rings"));
+        CHECK(json_number_value(json_object_get(src, "solid_angle_sr2")) > 0);
         json_t *prov = json_object_get(top, "provenance");
         CHECK(json_object_get(prov, "refl_version") && json_array_size(json_object_get(prov, "inputs")) == 1);
         json_decref(top);
