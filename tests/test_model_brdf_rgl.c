@@ -114,3 +114,61 @@ TEST(brdf_rgl_bad_files)
     CHECK_CONTAINS(model_last_error(), "version 2.0");
     g_byte_array_free(b, TRUE);
 }
+
+// An anisotropic file measured over half the azimuths (phi_i = -pi, -pi/2, 0):
+// w_i on the other side is turned into them by pi (x, y -> -x, -y for both
+// directions: a half range assumes that symmetry; a quarter, mirrors);
+// the half vector's azimuth is absolute; the values are linear between the
+// measured phi_i and theta_i. A uniform VNDF leaves the square unwarped and
+// jacobian 0 leaves the values as they are, so the expected value is the
+// interpolated linear data at u_m.
+TEST(brdf_rgl_anisotropic_half_range)
+{
+    float theta[2] = { 0, 0.8f }, phi[3] = { (float)-M_PI, (float)(-M_PI / 2), 0 }, ndf[4] = { 1, 1, 1, 1 };
+    float sigma[4] = { 1, 1, 1, 1 }, vndf[6 * 4], rgb[6 * 3 * 4];
+    uint8_t jac = 0;
+    for (int k = 0; k < 6 * 4; k++) vndf[k] = 2;
+    // slice (a, b), channel c: 0.1 + 0.2 a + 0.3 b + 0.05 c + (0.4 + 0.1 a) x + (0.2 - 0.1 b) y on a 2 x 2 grid
+    for (int a = 0; a < 3; a++)
+        for (int b = 0; b < 2; b++)
+            for (int c = 0; c < 3; c++)
+                for (int i = 0; i < 2; i++)
+                    for (int j = 0; j < 2; j++)
+                        rgb[(((a * 2 + b) * 3 + c) * 2 + i) * 2 + j] =
+                            (float)(0.1 + 0.2 * a + 0.3 * b + 0.05 * c + (0.4 + 0.1 * a) * j + (0.2 - 0.1 * b) * i);
+    rgl_field_t f[] = {
+        { "theta_i", 10, 1, { 2 }, theta },        { "phi_i", 10, 1, { 3 }, phi },
+        { "ndf", 10, 2, { 2, 2 }, ndf },            { "sigma", 10, 2, { 2, 2 }, sigma },
+        { "vndf", 10, 4, { 3, 2, 2, 2 }, vndf },    { "rgb", 10, 5, { 3, 2, 3, 2, 2 }, rgb },
+        { "jacobian", 1, 1, { 1 }, &jac },
+    };
+    GByteArray *bytes = rgl_tensor_file(f, 7);
+    model_brdf_rgl_t *r = model_brdf_rgl_parse(bytes->data, bytes->len, "aniso.bsdf");
+    g_byte_array_free(bytes, TRUE);
+    CHECK_MSG(r != NULL, "%s", model_last_error());
+    if (!r) return;
+    CHECK(!model_brdf_rgl_isotropic(r));
+    const double w[3] = { 0, 1, 0 };   // green: c = 1
+    double worst = 0;
+    for (double ti = 0.1; ti < 1.0; ti += 0.2)
+        for (double pi = -3; pi < 3.1; pi += 0.5)
+            for (double to = 0.1; to < 1.4; to += 0.3)
+                for (double po = -3; po < 3.1; po += 0.9) {
+                    model_vec3_t wi = dir(ti, pi), wo = dir(to, po);
+                    double got = model_brdf_rgl_eval(r, wi, wo, w);
+                    if (wi.y >= 0) {
+                        wi.x = -wi.x, wi.y = -wi.y;
+                        wo.x = -wo.x, wo.y = -wo.y;
+                    }
+                    model_vec3_t m = v3_unit(v3_add(wi, wo));
+                    double x = sqrt(acos(m.z) / (M_PI / 2)), y = (atan2(m.y, m.x) + M_PI) / (2 * M_PI);
+                    y -= floor(y);   // wrapped to [0, 1)
+                    double ph = atan2(wi.y, wi.x);   // in [-pi, 0]
+                    double ta = fmin(2, fmax(0, (ph + M_PI) / (M_PI / 2))), tb = fmin(1, acos(wi.z) / 0.8);
+                    double want = 0.1 + 0.2 * ta + 0.3 * tb + 0.05 + (0.4 + 0.1 * ta) * x + (0.2 - 0.1 * tb) * y;
+                    worst = fmax(worst, fabs(got - want));
+                }
+    printf("  worst |difference| %.3g\n", worst);
+    CHECK(worst < 2e-6);
+    model_brdf_rgl_free(r);
+}
