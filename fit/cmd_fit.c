@@ -100,8 +100,16 @@ static int cmd_brdf(int argc, char **argv)
         fprintf(stderr, " by %s: %.4g sr^2, %.1f %% of (2 pi)^2", s->omega_how ? s->omega_how : "?", s->omega_sr2,
                 100 * s->omega_sr2 / (4 * M_PI * M_PI));
     fprintf(stderr, ")\n");
-    if (s->n_negative)
-        fprintf(stderr, "refl fit brdf: %d samples with f_r < 0 kept as measurements\n", s->n_negative);
+    if (s->n_negative) {   // measurements (dark-subtracted noise): kept, and how far below 0 they reach
+        double lo = 0, hi = 0;
+        for (int k = 0; k < s->n; k++) {
+            double fr = s->R[k] / s->c[k].nl;
+            lo = fmin(lo, fr);
+            hi = fmax(hi, fr);
+        }
+        fprintf(stderr, "refl fit brdf: %d samples with f_r < 0 kept as measurements (down to %.3g 1/sr; the largest "
+                "f_r %.3g)\n", s->n_negative, lo, hi);
+    }
     fit_brdf_options_t o = fit_brdf_defaults();
     o.noise_sigma = noise;
     fit_brdf_models_t *fm = malloc(sizeof *fm);

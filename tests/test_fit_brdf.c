@@ -541,6 +541,11 @@ TEST(fit_samples_robust_files)
         CHECK(s->R[1] < 0);
         fit_samples_free(s);
     }
+    char *o1 = NULL, *e1 = NULL;
+    CHECK(test_refl_run(60, &o1, &e1, "fit", "brdf", csv, "--model", "lambert", "-o", test_path("neg.json"), NULL) == 0);
+    CHECK_CONTAINS(e1, "1 samples with f_r < 0 kept as measurements (down to -0.002 1/sr");
+    g_free(o1);
+    g_free(e1);
     const char *nan = test_write("nan.csv", "10,0,20,0,0.1\n# x\n10,0,30,0,nan\n");
     CHECK(fit_samples_read(nan) == NULL);
     CHECK_CONTAINS(model_last_error(), "nan.csv:3");
