@@ -60,6 +60,7 @@ MODEL_SRC := \
     model/brdf.c \
     model/brdf_batch.c \
     model/brdf_table.c \
+    model/brdf_rgl.c \
     model/brdf_gen.c \
     model/cmd_brdf.c \
     model/camera.c \
@@ -117,6 +118,7 @@ CALIB_SRC := \
     calib/cmd_gain.c
 FIT_SRC := \
     fit/brdf_fit.c \
+    fit/brdf_samples.c \
     fit/material.c \
     fit/lightplan.c \
     fit/plan_lamps.c \
@@ -144,6 +146,7 @@ TEST_SRC := \
     tests/test_harness.c \
     tests/test_model_brdf.c \
     tests/test_model_brdf_table.c \
+    tests/test_model_brdf_rgl.c \
     tests/test_model_camera.c \
     tests/test_model_cli.c \
     tests/test_model_config.c \

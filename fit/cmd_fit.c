@@ -46,7 +46,7 @@ static void base_name(const char *file, char *buf, size_t n)
 
 static int cmd_brdf(int argc, char **argv)
 {
-    const char *out = NULL, *model = "all", *name = NULL;
+    const char *out = NULL, *model = "all", *name = NULL, *weights = "solid-angle", *channel = "luma";
     double k_sigma = 3, noise = 0, sys_rel = 0;
     model_opt_t opts[] = {
         MODEL_OPT_STRING("-o", "PRIORS.json", "the priors file to write", &out, true),
@@ -55,12 +55,22 @@ static int cmd_brdf(int argc, char **argv)
         MODEL_OPT_VALUE("--k-sigma", "K", "prior bounds mean +- K std (default 3)", false),
         MODEL_OPT_VALUE("--noise-sigma", "S", "known std of R, 1/sr (default 0: from the residuals)", false),
         MODEL_OPT_VALUE("--systematic", "REL", "std adds REL * mean for errors the samples share (default 0)", false),
+        MODEL_OPT_STRING("--weights", "solid-angle|uniform|column", "each sample's weight on its squared residual: "
+                         "the solid angle it stands for in (omega_i, omega_o) (default), 1, or the CSV's 6th field",
+                         &weights, false),
+        MODEL_OPT_STRING("--channel", "luma|r|g|b", "MERL and RGL colour: Rec. 709 luma (0.2126 R + 0.7152 G + "
+                         "0.0722 B; default; spectral RGL: CIE Y) or one channel", &channel, false),
     };
     model_cli_t cli = {
         .cmd = "fit brdf", .synopsis = "FILE", .opts = opts, .nopts = MODEL_NOPTS(opts),
         .min_positional = 1, .max_positional = 1,
         .about = "Fits reflection models to BRDF samples: a CSV (theta_i,phi_i,theta_o,phi_o,f_r[,weight], degrees,\n"
-                 "1/sr; optional header; '#' comments) or a MERL binary file (its luminance). With --model all\n"
+                 "1/sr; optional header; '#' comments; negative f_r kept, NaN/inf refused), a MERL binary or an RGL\n"
+                 ".bsdf file (Dupuy & Jakob 2018; its measured incident directions, 32 x 64 outgoing each), told\n"
+                 "apart by content. Each sample's squared residual is multiplied by its weight (scaled to mean 1):\n"
+                 "by default the solid angle it stands for in (omega_i, omega_o) (exact for MERL and RGL grids and\n"
+                 "CSV theta/phi grids, a ring estimate otherwise), so a grid crowded at the pole does not dominate;\n"
+                 "--weights uniform or column (the CSV's 6th field) instead. With --model all\n"
                  "(default) every model is fitted and the one with the lowest BIC is chosen. Errors are the RMS of\n"
                  "R = f_r cos(theta_i) (the cosine-weighted metric of Ngan et al. 2005) and of f_r. Bounds are\n"
                  "mean +- K std (default 3) clipped to the physical range; std includes REL * mean (default 0) for\n"
@@ -74,10 +84,32 @@ static int cmd_brdf(int argc, char **argv)
     model_brdf_t models[MODEL_BRDF_COUNT];
     int nm = 0;
     if (!fit_brdf_model_list(model, models, &nm)) return model_cli_error(&cli, "--model: unknown model %s", model);
+    fit_read_opts_t ro = fit_read_defaults();
+    model_channel_t ch;
+    if (!fit_weights_parse(weights, &ro.weights))
+        return model_cli_error(&cli, "--weights: solid-angle, uniform or column, not '%s'", weights);
+    if (!model_channel_parse(channel, &ch)) return model_cli_error(&cli, "--channel: luma, r, g or b, not '%s'", channel);
+    ro.channel = (int)ch;
     const char *file = cli.positional[0];
-    fit_samples_t *s = fit_samples_read(file);
-    if (!s) return 1;
-    fprintf(stderr, "refl fit brdf: %d samples from %s\n", s->n, file);
+    bool quiet = model_error_quiet_thread(true);   // reported once, below
+    fit_samples_t *s = fit_samples_load(file, &ro);
+    model_error_quiet_thread(quiet);
+    if (!s) return model_error_report("fit brdf");
+    fprintf(stderr, "refl fit brdf: %d samples from %s (%s, weights %s", s->n, file, model_channel_name(ch), weights);
+    if (s->omega_sr2 > 0)
+        fprintf(stderr, " by %s: %.4g sr^2, %.1f %% of (2 pi)^2", s->omega_how ? s->omega_how : "?", s->omega_sr2,
+                100 * s->omega_sr2 / (4 * M_PI * M_PI));
+    fprintf(stderr, ")\n");
+    if (s->n_negative) {   // measurements (dark-subtracted noise): kept, and how far below 0 they reach
+        double lo = 0, hi = 0;
+        for (int k = 0; k < s->n; k++) {
+            double fr = s->R[k] / s->c[k].nl;
+            lo = fmin(lo, fr);
+            hi = fmax(hi, fr);
+        }
+        fprintf(stderr, "refl fit brdf: %d samples with f_r < 0 kept as measurements (down to %.3g 1/sr; the largest "
+                "f_r %.3g)\n", s->n_negative, lo, hi);
+    }
     fit_brdf_options_t o = fit_brdf_defaults();
     o.noise_sigma = noise;
     fit_brdf_models_t *fm = malloc(sizeof *fm);
@@ -108,6 +140,13 @@ static int cmd_brdf(int argc, char **argv)
     json_t *src = json_object();
     json_object_set_new(src, "path", json_string(file));
     json_object_set_new(src, "sha256", json_string(s->sha256));
+    json_object_set_new(src, "channel", json_string(model_channel_name(ch)));
+    json_object_set_new(src, "weights", json_string(weights));
+    if (s->omega_sr2 > 0) {
+        json_object_set_new(src, "solid_angle_sr2", json_real(s->omega_sr2));
+        json_object_set_new(src, "solid_angle_by", json_string(s->omega_how ? s->omega_how : ""));
+    }
+    if (s->n_negative) json_object_set_new(src, "negative_f_r_kept", json_integer(s->n_negative));
     json_object_set_new(entry, "samples", src);
     json_array_append_new(mats, entry);
     json_object_set_new(top, "materials", mats);

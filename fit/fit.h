@@ -12,16 +12,26 @@
 // uniform's std, ks = ks*F0 / F0, the covariance spread along ks*F0 = const.
 // Samples lit by finite lamps may carry their lamp's disc (fit_samples_t).
 //
-// BRDF sample files (refl fit brdf):
+// BRDF sample files (refl fit brdf; fit/brdf_samples.c), told apart by content:
 //   CSV: theta_i,phi_i,theta_o,phi_o,f_r[,weight] per line, angles in degrees
-//        (theta from the normal, phi about it), f_r in 1/sr; an optional header
-//        line (not starting with a number); lines starting with '#' and blank
-//        lines are comments. Errors name file and line.
+//        (theta from the normal, phi about it), f_r in 1/sr (negative values
+//        are measurements, kept; NaN and inf refused with file:line); an
+//        optional header line (not starting with a number); lines starting
+//        with '#' and blank lines are comments. Errors name file and line.
 //   MERL binary (Matusik et al. 2003): int32 dims 90 90 180 (theta_h, theta_d,
 //        phi_d), then 3 x 1458000 little-endian doubles (R, G, B), scaled by
 //        1/1500, 1.15/1500, 1.66/1500; negative values are missing samples.
-//        refl fits the luminance Y = 0.2126 R + 0.7152 G + 0.0722 B at the
-//        centre of each bin (theta_h = ((i + 0.5)/90)^2 * 90 deg).
+//        refl fits the luminance Y = 0.2126 R + 0.7152 G + 0.0722 B (or one
+//        channel) at the centre of each bin (theta_h = ((i + 0.5)/90)^2 * 90 deg).
+//   RGL .bsdf (Dupuy & Jakob 2018; model/brdf_rgl.c): the measured incident
+//        directions, each with a 32 x 64 grid of outgoing directions of equal
+//        solid angle, f_r = the evaluation / cos(theta_o).
+//   Any other binary file is refused.
+// Weights (fit_read_opts_t.weights) multiply the squared residuals, scaled to
+// mean 1: solid-angle (default) the measure each sample stands for in
+// (omega_i, omega_o), sr^2 (MERL: its cell's, RGL: its grid's, CSV: the
+// rings of equal theta of fit_solid_angles for grids, else the k-nearest-
+// neighbour estimate of fit_solid_angles_knn); uniform 1; column the CSV's.
 #pragma once
 
 #include <jansson.h>
@@ -49,6 +59,9 @@ typedef struct {
     int              ndisc, disc_cap, disc_alloc;   // cosines in disc; disc_at's and disc's capacities
     char             source[512];
     char             sha256[65];
+    double           omega_sr2;    // solid-angle weights: their sum before scaling to mean 1, sr^2 (else 0)
+    const char      *omega_how;    // and how: "cells" (MERL), "grid" (RGL), "rings", "k-nearest" (CSV); else NULL
+    int              n_negative;   // samples with f_r < 0 (kept: measurements within noise)
 } fit_samples_t;
 
 fit_samples_t *fit_samples_new(void);
@@ -67,11 +80,34 @@ bool fit_samples_add_disc(fit_samples_t *s, const model_cosines_t *c, const mode
 void fit_samples_eval_n(const fit_samples_t *s, model_brdf_t m, const double *p, int off, int cnt, double *R,
                         double *dR);
 double fit_samples_eval(const fit_samples_t *s, model_brdf_t m, const double *p, int i);
-// Read a CSV or MERL file (by content: MERL when the header dims and the file
-// size agree). NULL with a message naming file (and line).
-fit_samples_t *fit_samples_read(const char *path);
-fit_samples_t *fit_samples_read_csv(const char *path);
-fit_samples_t *fit_samples_read_merl(const char *path);
+typedef enum { FIT_WEIGHTS_SOLID_ANGLE, FIT_WEIGHTS_UNIFORM, FIT_WEIGHTS_COLUMN } fit_weights_t;
+typedef struct {
+    fit_weights_t weights;   // default solid-angle
+    int           channel;   // model_channel_t: luma (default), r, g, b (MERL, RGL)
+} fit_read_opts_t;
+fit_read_opts_t fit_read_defaults(void);
+bool            fit_weights_parse(const char *s, fit_weights_t *out);   // solid-angle|uniform|column
+// Read a CSV, MERL or RGL file (by content: MERL when the header dims and the
+// file size agree, RGL by its magic; another binary is refused), weighted as
+// opts says (NULL: defaults). NULL with a message naming file (and line).
+fit_samples_t *fit_samples_load(const char *path, const fit_read_opts_t *opts);
+fit_samples_t *fit_samples_read(const char *path);        // fit_samples_load with the defaults
+fit_samples_t *fit_samples_read_csv(const char *path);    // the file's own weights (1 without)
+fit_samples_t *fit_samples_read_merl(const char *path);   // uniform weights
+// The solid angle in (omega_i, omega_o) each of n samples stands for, sr^2
+// (ang: theta_i, phi_i, theta_o, phi_o per sample, radians): the incident
+// direction's area among the distinct incident directions times the outgoing
+// one's among those measured with it; each area from rings of equal theta
+// (edges at midpoints, the outer ones half a spacing out, clipped to 0 and
+// 90 deg) and within a ring the azimuths' midpoints (a ring with a gap over
+// twice its widest other is open). Exact cells for theta/phi grids (a full
+// grid sums to (2 pi)^2). A CSV uses them when its incident directions are
+// few (at most 1 in 8 samples has its own), else fit_solid_angles_knn.
+bool fit_solid_angles(int n, const double *ang, double *w);
+// A density estimate for scattered samples (fit/brdf_samples.c): the measure
+// of the ball reaching each sample's 8th nearest neighbour over 8, in
+// (cos theta_i, omega_o turned by -phi_i) where it is 2 pi du d omega_o.
+bool fit_solid_angles_knn(int n, const double *ang, double *w);
 
 typedef struct {
     int     threads;            // 0: all cores

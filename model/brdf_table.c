@@ -74,6 +74,21 @@ void model_brdf_table_cell(int i, int j, int k, model_cosines_t *c)
     c->vh = cos(td);
 }
 
+// The measure of cell (i, j, k) in (omega_i, omega_o): d omega_i d omega_o =
+// 4 cos(theta_d) d omega_h d omega_d (for fixed l, d omega_v = 4 (l.h) d omega_h),
+// integrated over the cell, phi_h over 2 pi (isotropy) and both phi_d and
+// phi_d + pi (the table folds them), in sr^2.
+double model_brdf_table_cell_solid_angle(int i, int j, int k)
+{
+    double h0 = (double)i / TH, h1 = (double)(i + 1) / TH;
+    h0 = h0 * h0 * (M_PI / 2);
+    h1 = h1 * h1 * (M_PI / 2);
+    double d0 = (double)j / TD * (M_PI / 2), d1 = (double)(j + 1) / TD * (M_PI / 2);
+    double s0 = sin(d0), s1 = sin(d1);
+    (void)k;
+    return 2 * M_PI * 2 * (M_PI / PD) * 4 * 0.5 * (s1 * s1 - s0 * s0) * (cos(h0) - cos(h1));
+}
+
 bool model_brdf_table_sniff(const unsigned char head[12], size_t file_bytes)
 {
     int32_t d[3];
@@ -81,7 +96,10 @@ bool model_brdf_table_sniff(const unsigned char head[12], size_t file_bytes)
     return d[0] == TH && d[1] == TD && d[2] == PD && file_bytes == FILE_BYTES;
 }
 
-model_brdf_table_t *model_brdf_table_load(const char *path)
+model_brdf_table_t *model_brdf_table_load(const char *path) { return model_brdf_table_load_channel(path, 0); }
+
+// ch: 0 the luminance, 1..3 red, green or blue alone (model_channel_t).
+model_brdf_table_t *model_brdf_table_load_channel(const char *path, int ch)
 {
     size_t len = 0;
     unsigned char *b = (unsigned char *)model_read_file(path, &len);
@@ -111,11 +129,11 @@ model_brdf_table_t *model_brdf_table_load(const char *path)
     for (size_t idx = 0; idx < NCELLS; idx++) {
         double f = 0;
         bool missing = false;
-        for (int ch = 0; ch < 3; ch++) {
-            double x;
-            memcpy(&x, v + (ch * NCELLS + idx) * sizeof(double), sizeof x);
+        for (int c = 0; c < 3; c++) {
+            double x, wc = ch == 0 ? luma[c] : c == ch - 1 ? 1 : 0;
+            memcpy(&x, v + (c * NCELLS + idx) * sizeof(double), sizeof x);
             if (!(x >= 0) || !isfinite(x)) missing = true;
-            f += luma[ch] * x * merl_scale[ch];
+            f += wc * x * merl_scale[c];
         }
         t->f[idx] = missing ? NAN : f;
     }

@@ -362,6 +362,12 @@ typedef struct model_brdf_table model_brdf_table_t;
 model_brdf_table_t *model_brdf_table_new(void);                        // every cell 0
 // NULL and "FILE: not a MERL BRDF file: ..." (short, wrong dims, wrong size).
 model_brdf_table_t *model_brdf_table_load(const char *path);
+// The same of one channel: ch 0 the luminance, 1 red, 2 green, 3 blue (model_channel_t).
+model_brdf_table_t *model_brdf_table_load_channel(const char *path, int ch);
+// Cell (i, j, k)'s measure in (omega_i, omega_o), sr^2: 4 cos(theta_d) d omega_h
+// d omega_d over the cell, phi_h over 2 pi and phi_d folded (x 2). Over every
+// cell 8 pi^2; over the cells with both directions above the surface ~(2 pi)^2.
+double              model_brdf_table_cell_solid_angle(int i, int j, int k);
 // True when a file of file_bytes starting with head is a MERL table.
 bool                model_brdf_table_sniff(const unsigned char head[12], size_t file_bytes);
 bool                model_brdf_table_save(const model_brdf_table_t *t, const char *path);
@@ -380,6 +386,32 @@ double              model_brdf_table_eval(const model_brdf_table_t *t, const mod
 double model_brdf_directional_albedo(double (*f)(const void *ctx, const model_cosines_t *c), const void *ctx,
                                      double theta_i, int n);
 double model_brdf_table_albedo(const model_brdf_table_t *t, double theta_i, int n);
+
+// Measured BRDFs in the RGL ".bsdf" tensor format (model/brdf_rgl.c, the one
+// owner; Dupuy & Jakob 2018): rgb or spectral, isotropic or not. Detected by
+// content (the magic "tensor_file\0"); the file's description and evaluation
+// are in the .c file's head. NULL and "FILE: ..." for what is not a valid one.
+typedef struct model_brdf_rgl model_brdf_rgl_t;
+bool              model_brdf_rgl_sniff(const unsigned char *head, size_t n);
+model_brdf_rgl_t *model_brdf_rgl_load(const char *path);
+model_brdf_rgl_t *model_brdf_rgl_parse(const void *data, size_t len, const char *name);
+void              model_brdf_rgl_free(model_brdf_rgl_t *r);
+int               model_brdf_rgl_channels(const model_brdf_rgl_t *r);        // 3 (rgb) or the wavelengths'
+const double     *model_brdf_rgl_wavelengths(const model_brdf_rgl_t *r);     // nm; NULL for rgb
+int               model_brdf_rgl_ntheta(const model_brdf_rgl_t *r);
+int               model_brdf_rgl_nphi(const model_brdf_rgl_t *r);
+double            model_brdf_rgl_theta_i(const model_brdf_rgl_t *r, int k);  // radians
+double            model_brdf_rgl_phi_i(const model_brdf_rgl_t *r, int k);
+bool              model_brdf_rgl_isotropic(const model_brdf_rgl_t *r);       // phi_i has <= 2 values
+const char       *model_brdf_rgl_sha256(const model_brdf_rgl_t *r);
+const char       *model_brdf_rgl_description(const model_brdf_rgl_t *r);
+// The weights of the channels for ch (w[channels]): rgb files Rec. 709 luma
+// (0.2126, 0.7152, 0.0722) or one channel; spectral files luma only, the CIE
+// 1931 y-bar over the wavelengths normalised to sum 1 (false + message for r/g/b).
+bool   model_brdf_rgl_channel_weights(const model_brdf_rgl_t *r, int ch /* model_channel_t */, double *w, const char *name);
+// f_r cos(theta_o) of the channels weighted by chw, for unit directions wi, wo
+// in the surface frame (z = normal); 0 when either is below the surface.
+double model_brdf_rgl_eval(const model_brdf_rgl_t *r, model_vec3_t wi, model_vec3_t wo, const double *chw);
 
 // Generators (model/brdf_gen.c): "NAME key=value ..." with NAME oren-nayar,
 // ggx2, retro, ggx-ms, ptfe or ggx (model_brdf_recipe_models lists the keys

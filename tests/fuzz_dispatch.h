@@ -4,7 +4,8 @@
 // 'r' a rig description file (rig_config_parse), 'v' a virtual rig truth file
 // (rig_virtual_check_truth), 'i' an image file's bytes (model_image_decode:
 // PNG, JPEG, TIFF by content), 'l' an STL scene (model_scene_parse_stl), 'y' a
-// PLY scene (model_scene_parse_ply); any other byte b selects b % 6: 0 D3D scene,
+// PLY scene (model_scene_parse_ply), 'b' an RGL .bsdf tensor file
+// (model_brdf_rgl_parse, evaluated once when it parses); any other byte b selects b % 6: 0 D3D scene,
 // 1 OBJ scene, 2 INI, 3 materials, 4 lamps, 5 sensor (seeds use '0'..'5'; the
 // corpus was written with that rule, which is why the newer parsers have
 // letters). The rest of the input is the text (not NUL-terminated, so reads
@@ -34,7 +35,7 @@
 enum { REFL_FUZZ_D3D, REFL_FUZZ_OBJ, REFL_FUZZ_INI, REFL_FUZZ_MATERIALS, REFL_FUZZ_LAMPS,
        REFL_FUZZ_SENSOR, REFL_FUZZ_NMOD,   // selected by first byte % REFL_FUZZ_NMOD
        REFL_FUZZ_PLAN = REFL_FUZZ_NMOD, REFL_FUZZ_RIG, REFL_FUZZ_TRUTH, REFL_FUZZ_IMAGE, REFL_FUZZ_STL,
-       REFL_FUZZ_PLY, REFL_FUZZ_NPARSERS };
+       REFL_FUZZ_PLY, REFL_FUZZ_RGL, REFL_FUZZ_NPARSERS };
 
 // The parser a first byte selects (REFL_FUZZ_*).
 static inline int refl_fuzz_selector(uint8_t b)
@@ -46,6 +47,7 @@ static inline int refl_fuzz_selector(uint8_t b)
     case 'i': return REFL_FUZZ_IMAGE;
     case 'l': return REFL_FUZZ_STL;
     case 'y': return REFL_FUZZ_PLY;
+    case 'b': return REFL_FUZZ_RGL;
     default: return b % REFL_FUZZ_NMOD;
     }
 }
@@ -88,6 +90,19 @@ static inline bool refl_fuzz_parse_in(const uint8_t *data, size_t len, const cha
         model_scene_t *s = model_scene_parse_ply(text, n, "fuzz.ply", NULL);
         model_scene_free(s);
         return s != NULL;
+    }
+    case REFL_FUZZ_RGL: {
+        model_brdf_rgl_t *r = model_brdf_rgl_parse(text, n, "fuzz.bsdf");
+        if (r) {   // one evaluation walks every table the parse built
+            double w[3] = { 0.2126, 0.7152, 0.0722 }, *cw = w;
+            double *all = model_brdf_rgl_channels(r) > 3 ? calloc((size_t)model_brdf_rgl_channels(r), sizeof *all) : NULL;
+            if (all) cw = all;
+            model_vec3_t wi = { 0.3, 0.1, 0.95 }, wo = { -0.4, 0.2, 0.89 };
+            (void)model_brdf_rgl_eval(r, wi, wo, cw);
+            free(all);
+        }
+        model_brdf_rgl_free(r);
+        return r != NULL;
     }
     case REFL_FUZZ_D3D: {
         model_scene_t *s = model_scene_parse_d3d(text, n, "fuzz.d3d", NULL);

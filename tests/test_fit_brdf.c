@@ -13,6 +13,7 @@
 
 #include "fit/fit.h"
 #include "model/internal.h"
+#include "tests/rgl_fixture.h"
 #include "tests/test.h"
 
 // Samples of model m with parameters p on a grid of directions (incidence and
@@ -195,6 +196,11 @@ TEST(fit_brdf_csv_round_trip_and_errors)
         CHECK(json_object_get(mat, "rms") && json_object_get(mat, "ngan_error") && json_object_get(mat, "aic") &&
               json_object_get(mat, "bic") && json_object_get(mat, "n_samples"));
         CHECK(json_array_size(json_object_get(mat, "candidates")) == MODEL_BRDF_COUNT);
+        json_t *src = json_object_get(mat, "samples");   // how the samples were read and weighted
+        CHECK(!strcmp(json_string_value(json_object_get(src, "weights")), "solid-angle"));
+        CHECK(!strcmp(json_string_value(json_object_get(src, "channel")), "luma"));
+        CHECK(!strcmp(json_string_value(json_object_get(src, "solid_angle_by")), "rings"));
+        CHECK(json_number_value(json_object_get(src, "solid_angle_sr2")) > 0);
         json_t *prov = json_object_get(top, "provenance");
         CHECK(json_object_get(prov, "refl_version") && json_array_size(json_object_get(prov, "inputs")) == 1);
         json_decref(top);
@@ -262,6 +268,10 @@ TEST(fit_brdf_merl_file)
     CHECK_MSG(s != NULL, "%s", model_last_error());
     if (!s) return;
     CHECK(s->n > N / 3);
+    // each cell weighted by its measure in (omega_i, omega_o): the cells with
+    // both centre directions above the surface cover the hemispheres' (2 pi)^2
+    printf("  MERL cells' solid angles: %.4f sr^2 = %.4f (2 pi)^2\n", s->omega_sr2, s->omega_sr2 / (4 * M_PI * M_PI));
+    CHECK_REL(s->omega_sr2, 4 * M_PI * M_PI, 0.002);
     // a subsample keeps the test fast
     fit_samples_t *sub = fit_samples_new();
     for (int i = 0; i < s->n; i += 37) fit_samples_add(sub, &s->c[i], s->R[i], 1);
@@ -388,4 +398,285 @@ TEST(fit_lamp_disc_quadrature)
     model_vec3_t q[4];
     CHECK(!model_lamp_disc_dirs(v3(0, 0, 1), 650, 0, q));   // a point lamp
     CHECK(!model_lamp_disc_dirs(v3(0, 0, 1), 10, 15, q));   // inside the lamp
+}
+
+// ---------------------------------------------------------------------------
+// Sample files: weights, channels, robust CSV (fit/brdf_samples.c)
+
+// A CSV of f_r on a theta/phi grid: theta_i and theta_o at 2.5, 7.5, ..., 87.5
+// deg (phi_i 0), phi_o every 10 deg; f_r of the recipe (NULL: 0.1).
+static const char *grid_csv(const char *name, const model_brdf_recipe_t *truth)
+{
+    GString *g = g_string_new("theta_i,phi_i,theta_o,phi_o,f_r\n");
+    const double d = M_PI / 180;
+    for (int a = 0; a < 18; a++)
+        for (int b = 0; b < 18; b++)
+            for (int po = 0; po < 360; po += 10) {
+                double ti = 2.5 + 5 * a, to = 2.5 + 5 * b, fr = 0.1;
+                if (truth) {
+                    model_cosines_t c = model_cosines(v3(0, 0, 1), v3(sin(ti * d), 0, cos(ti * d)),
+                                                      v3(sin(to * d) * cos(po * d), sin(to * d) * sin(po * d), cos(to * d)));
+                    fr = model_brdf_recipe_f(truth, &c);
+                }
+                g_string_append_printf(g, "%g,0,%g,%d,%.12g\n", ti, to, po, fr);
+            }
+    const char *p = test_write(name, g->str);
+    g_string_free(g, TRUE);
+    return p;
+}
+
+// The solid angles of a full theta/phi grid are its cells' and sum to the
+// hemispheres' product (2 pi)^2 before the weights are scaled to mean 1; a
+// grid that stops short of the horizon covers less; near the pole a sample
+// stands for less than at 45 deg (sin theta).
+TEST(fit_weights_solid_angle_grid_sums)
+{
+    const char *csv = grid_csv("grid.csv", NULL);
+    fit_samples_t *s = fit_samples_read(csv);
+    CHECK_MSG(s != NULL, "%s", model_last_error());
+    if (!s) return;
+    CHECK(s->n == 18 * 18 * 36);
+    CHECK_REL(s->omega_sr2, 4 * M_PI * M_PI, 1e-9);
+    double mean = 0;
+    for (int k = 0; k < s->n; k++) mean += s->w[k] / s->n;
+    CHECK_NEAR(mean, 1, 1e-12);
+    // sample 0: theta_i = theta_o = 2.5 deg; the cell's weight is sin-proportional
+    const double d = M_PI / 180;
+    double cell0 = (1 - cos(5 * d)) * 2 * M_PI * (1 - cos(5 * d)) * (10 * d);
+    CHECK_REL(s->w[0] * s->omega_sr2 / s->n, cell0, 1e-9);
+    fit_samples_free(s);
+    // the same points weighted by hand: (theta_i, phi_i, theta_o, phi_o) for a
+    // grid at 0, 10, ..., 80 deg: its last ring ends at 85 deg
+    int n = 9 * 9 * 36, k = 0;
+    double *ang = malloc(4 * (size_t)n * sizeof *ang), *w = malloc((size_t)n * sizeof *w);
+    for (int a = 0; a < 9; a++)
+        for (int b = 0; b < 9; b++)
+            for (int po = 0; po < 360; po += 10, k++) {
+                ang[4 * k] = 10 * a * d;
+                ang[4 * k + 1] = 0;
+                ang[4 * k + 2] = 10 * b * d;
+                ang[4 * k + 3] = po * d;
+            }
+    CHECK(fit_solid_angles(n, ang, w));
+    double sum = 0;
+    for (k = 0; k < n; k++) sum += w[k];
+    double cap = 2 * M_PI * (1 - cos(85 * d));
+    CHECK_REL(sum, cap * cap, 1e-9);
+    free(ang);
+    free(w);
+    // uniform: every weight 1
+    fit_read_opts_t o = fit_read_defaults();
+    o.weights = FIT_WEIGHTS_UNIFORM;
+    s = fit_samples_load(csv, &o);
+    CHECK(s && s->w[0] == 1 && s->w[s->n - 1] == 1 && s->omega_sr2 == 0);
+    fit_samples_free(s);
+    o.weights = FIT_WEIGHTS_COLUMN;
+    CHECK(fit_samples_load(csv, &o) == NULL);
+    CHECK_CONTAINS(model_last_error(), "not every line has a weight");
+}
+
+// The Ngan et al. error of Lambert's kd against f over pairs of directions
+// uniform in solid angle (cos theta and phi on a grid), and the kd that
+// minimises it (*best: sum f cos^2 / sum cos^2).
+static double ngan_lambert(double kd, const model_brdf_recipe_t *truth, double *best)
+{
+    double ss = 0, fc = 0, cc = 0;
+    int n = 0;
+    for (int a = 0; a < 24; a++)
+        for (int b = 0; b < 24; b++)
+            for (int q = 0; q < 48; q++) {
+                double ci = (a + 0.5) / 24, co = (b + 0.5) / 24, ph = (q + 0.5) / 48 * 2 * M_PI;
+                model_vec3_t l = v3(sqrt(1 - ci * ci), 0, ci), v = v3(sqrt(1 - co * co) * cos(ph), sqrt(1 - co * co) * sin(ph), co);
+                model_cosines_t c = model_cosines(v3(0, 0, 1), l, v);
+                double f = model_brdf_recipe_f(truth, &c), e = (kd - f) * ci;
+                ss += e * e;
+                fc += f * ci * ci;
+                cc += ci * ci;
+                n++;
+            }
+    *best = fc / cc;
+    return sqrt(ss / n);
+}
+
+// A pole-crowded theta/phi grid of an Oren-Nayar material (sigma 0.5 rad)
+// fitted with Lambert: the solid-angle weights give the kd whose error over
+// the hemispheres (the Ngan metric) is smaller than the uniform weights' kd,
+// which the crowded small angles pull; and that kd is close to the one the
+// metric itself chooses (the uniform weights' is 4 % off).
+TEST(fit_weights_solid_angle_beat_uniform_on_crowded_grid)
+{
+    model_brdf_recipe_t truth;
+    CHECK(model_brdf_recipe_parse("oren-nayar albedo=0.6 sigma=0.5", NULL, 0, &truth));
+    const char *csv = grid_csv("on.csv", &truth);
+    double kd[2], err[2], best = 0;
+    for (int mode = 0; mode < 2; mode++) {
+        fit_read_opts_t o = fit_read_defaults();
+        o.weights = mode ? FIT_WEIGHTS_UNIFORM : FIT_WEIGHTS_SOLID_ANGLE;
+        fit_samples_t *s = fit_samples_load(csv, &o);
+        CHECK_MSG(s != NULL, "%s", model_last_error());
+        if (!s) return;
+        fit_brdf_result_t r;
+        CHECK(fit_brdf(s, MODEL_BRDF_LAMBERT, NULL, &r));
+        kd[mode] = r.p[0];
+        err[mode] = ngan_lambert(kd[mode], &truth, &best);
+        fit_samples_free(s);
+    }
+    printf("  kd: solid-angle %.5f (Ngan error %.5f 1/sr), uniform %.5f (%.5f); the metric's best %.5f\n", kd[0],
+           err[0], kd[1], err[1], best);
+    CHECK(err[0] < err[1]);
+    CHECK(fabs(kd[0] - best) < 0.2 * fabs(kd[1] - best));
+}
+
+// Negative f_r (dark-subtracted noise) are measurements: kept and counted;
+// NaN and inf are refused with file:line; a binary that is neither MERL nor
+// RGL is refused by content, whatever its name; an RGL file is read by
+// content even when named .csv, per channel, weighted by its grid.
+TEST(fit_samples_robust_files)
+{
+    const char *csv = test_write("neg.csv", "10,0,20,0,0.1\n10,0,30,0,-0.002\n20,0,30,180,0.05\n");
+    fit_samples_t *s = fit_samples_read(csv);
+    CHECK_MSG(s != NULL, "%s", model_last_error());
+    if (s) {
+        CHECK(s->n == 3 && s->n_negative == 1);
+        CHECK(s->R[1] < 0);
+        fit_samples_free(s);
+    }
+    char *o1 = NULL, *e1 = NULL;
+    CHECK(test_refl_run(60, &o1, &e1, "fit", "brdf", csv, "--model", "lambert", "-o", test_path("neg.json"), NULL) == 0);
+    CHECK_CONTAINS(e1, "1 samples with f_r < 0 kept as measurements (down to -0.002 1/sr");
+    g_free(o1);
+    g_free(e1);
+    const char *nan = test_write("nan.csv", "10,0,20,0,0.1\n# x\n10,0,30,0,nan\n");
+    CHECK(fit_samples_read(nan) == NULL);
+    CHECK_CONTAINS(model_last_error(), "nan.csv:3");
+    CHECK_CONTAINS(model_last_error(), "NaN and inf are refused");
+    const char *inf = test_write("inf.csv", "10,0,20,0,inf\n");
+    CHECK(fit_samples_read(inf) == NULL);
+    CHECK_CONTAINS(model_last_error(), "inf.csv:1");
+    unsigned char junk[3000];
+    uint64_t st = 77;
+    for (size_t k = 0; k < sizeof junk; k++) junk[k] = (unsigned char)((st = st * 6364136223846793005ULL + 1) >> 56);
+    const char *bin = test_path("random.csv");
+    CHECK(g_file_set_contents(bin, (const char *)junk, sizeof junk, NULL));
+    CHECK(fit_samples_read(bin) == NULL);
+    CHECK_CONTAINS(model_last_error(), "random.csv");
+    CHECK_CONTAINS(model_last_error(), "neither a MERL table");
+    char *out = NULL, *err = NULL;
+    int rc = test_refl_run(60, &out, &err, "fit", "brdf", bin, "-o", test_path("p.json"), NULL);
+    CHECK(rc == 1);
+    CHECK_CONTAINS(err, "neither a MERL table");
+    const char *once = strstr(err, "neither a MERL table");
+    CHECK_MSG(once && !strstr(once + 1, "neither a MERL table"), "printed twice: %s", err);   // reported once
+    g_free(out);
+    g_free(err);
+}
+
+// An RGL file (tests/rgl_fixture.h) is read by its content even when named
+// .csv: its 2 incident directions x 32 x 64 outgoing ones, f_r = the
+// evaluation / cos(theta_o) of the channel asked for, the solid-angle weights
+// summing to the rings' (theta_i 0 and 0.6 rad: edges 0, 0.3, 0.9) times the
+// outgoing hemisphere's.
+TEST(fit_samples_rgl_file)
+{
+    rgl_data_t d;
+    rgl_fill(&d);
+    GByteArray *b = rgl_test_file(&d, NULL);
+    const char *path = test_path("measured.csv");
+    CHECK(g_file_set_contents(path, (const char *)b->data, b->len, NULL));
+    g_byte_array_free(b, TRUE);
+    fit_samples_t *s[2] = { NULL, NULL };
+    for (int ch = 0; ch < 2; ch++) {
+        fit_read_opts_t o = fit_read_defaults();
+        o.channel = ch == 0 ? MODEL_CHANNEL_LUMA : MODEL_CHANNEL_G;
+        s[ch] = fit_samples_load(path, &o);
+        CHECK_MSG(s[ch] != NULL, "%s", model_last_error());
+        if (!s[ch]) return;
+    }
+    CHECK(s[0]->n == 2 * 32 * 64);
+    CHECK_REL(s[0]->omega_sr2, 2 * M_PI * (1 - cos(0.9)) * 2 * M_PI, 1e-6);   // theta_i in float32
+    model_brdf_rgl_t *r = model_brdf_rgl_load(path);
+    CHECK(r != NULL);
+    double wl[3], wg[3];
+    model_brdf_rgl_channel_weights(r, MODEL_CHANNEL_LUMA, wl, path);
+    model_brdf_rgl_channel_weights(r, MODEL_CHANNEL_G, wg, path);
+    // sample 32 * 64 + 5: theta_i 0.6, phi_i 0; outgoing cell (0, 5)
+    int k = 32 * 64 + 5;
+    double co = 0.5 / 32, po = 5.5 / 64 * 2 * M_PI, so = sqrt(1 - co * co);
+    model_vec3_t wi = v3(sin(0.6), 0, cos(0.6)), wo = v3(so * cos(po), so * sin(po), co);
+    CHECK_REL(s[0]->R[k], model_brdf_rgl_eval(r, wi, wo, wl) / co * cos(0.6), 1e-6);
+    CHECK_REL(s[1]->R[k], model_brdf_rgl_eval(r, wi, wo, wg) / co * cos(0.6), 1e-6);
+    CHECK(fabs(s[0]->R[k] - s[1]->R[k]) > 1e-3 * fabs(s[0]->R[k]));
+    // linear rgb data: luma is the weighted sum of the channels
+    double sum = 0;
+    for (int c = 0; c < 3; c++) {
+        double w1[3] = { 0, 0, 0 };
+        w1[c] = 1;
+        sum += wl[c] * model_brdf_rgl_eval(r, wi, wo, w1);
+    }
+    CHECK_REL(sum, model_brdf_rgl_eval(r, wi, wo, wl), 1e-12);
+    (void)RGL_A;
+    (void)RGL_BX;
+    (void)RGL_BY;
+    model_brdf_rgl_free(r);
+    for (int ch = 0; ch < 2; ch++) fit_samples_free(s[ch]);
+    fit_read_opts_t o = fit_read_defaults();
+    o.weights = FIT_WEIGHTS_COLUMN;
+    CHECK(fit_samples_load(path, &o) == NULL);
+    CHECK_CONTAINS(model_last_error(), "no weight column");
+}
+
+// Scattered samples (no grid: every incident direction its own) get the
+// k-nearest-neighbour estimate: drawn uniformly in solid angle their solid
+// angles sum to about (2 pi)^2 (balls cut by the edges overstate theirs);
+// drawn uniformly in theta (crowded at the pole) the weights pull the
+// Lambert fit of an Oren-Nayar material to the kd the hemispheres' metric
+// chooses, much closer than uniform weights.
+TEST(fit_weights_knn_scattered)
+{
+    enum { N = 3000 };
+    double *ang = malloc(4 * (size_t)N * sizeof *ang), *w = malloc((size_t)N * sizeof *w);
+    model_rng_t rng = model_rng(5, 1);
+    for (int k = 0; k < N; k++) {
+        ang[4 * k] = acos(model_rng_uniform(&rng));
+        ang[4 * k + 1] = 2 * M_PI * model_rng_uniform(&rng);
+        ang[4 * k + 2] = acos(model_rng_uniform(&rng));
+        ang[4 * k + 3] = 2 * M_PI * model_rng_uniform(&rng);
+    }
+    CHECK(fit_solid_angles_knn(N, ang, w));
+    double sum = 0;
+    for (int k = 0; k < N; k++) sum += w[k];
+    printf("  uniform in solid angle: sum %.4g sr^2 = %.3f (2 pi)^2\n", sum, sum / (4 * M_PI * M_PI));
+    CHECK(sum > 0.9 * 4 * M_PI * M_PI && sum < 1.4 * 4 * M_PI * M_PI);
+    free(ang);
+    free(w);
+
+    model_brdf_recipe_t truth;
+    CHECK(model_brdf_recipe_parse("oren-nayar albedo=0.6 sigma=0.5", NULL, 0, &truth));
+    GString *g = g_string_new("");
+    const double d = M_PI / 180;
+    for (int k = 0; k < N; k++) {
+        double ti = 89.5 * model_rng_uniform(&rng), pi = 360 * model_rng_uniform(&rng);
+        double to = 89.5 * model_rng_uniform(&rng), po = 360 * model_rng_uniform(&rng);
+        model_cosines_t c = model_cosines(v3(0, 0, 1), v3(sin(ti * d) * cos(pi * d), sin(ti * d) * sin(pi * d), cos(ti * d)),
+                                          v3(sin(to * d) * cos(po * d), sin(to * d) * sin(po * d), cos(to * d)));
+        g_string_append_printf(g, "%.9g,%.9g,%.9g,%.9g,%.12g\n", ti, pi, to, po, model_brdf_recipe_f(&truth, &c));
+    }
+    const char *csv = test_write("scattered.csv", g->str);
+    g_string_free(g, TRUE);
+    double kd[2], best = 0;
+    for (int mode = 0; mode < 2; mode++) {
+        fit_read_opts_t o = fit_read_defaults();
+        o.weights = mode ? FIT_WEIGHTS_UNIFORM : FIT_WEIGHTS_SOLID_ANGLE;
+        fit_samples_t *s = fit_samples_load(csv, &o);
+        CHECK_MSG(s != NULL, "%s", model_last_error());
+        if (!s) return;
+        if (mode == 0) CHECK(s->omega_how && !strcmp(s->omega_how, "k-nearest"));
+        fit_brdf_result_t r;
+        CHECK(fit_brdf(s, MODEL_BRDF_LAMBERT, NULL, &r));
+        kd[mode] = r.p[0];
+        ngan_lambert(kd[mode], &truth, &best);
+        fit_samples_free(s);
+    }
+    printf("  kd: k-nearest %.5f, uniform %.5f; the metric's best %.5f\n", kd[0], kd[1], best);
+    CHECK(fabs(kd[0] - best) < 0.5 * fabs(kd[1] - best));
 }
