@@ -1002,11 +1002,12 @@ bool calib_geometry_find_corners(const calib_geometry_opts_t *o, calib_geometry_
         else snprintf(v->why, sizeof v->why, "mrgingham found no %dx%d board", o->gridn, o->gridn);
     }
     fprintf(stderr, "refl calib geometry: the board was found in %d of %u images\n", s->nfound, vs->v->len);
-    int min_views = o->min_views ? o->min_views : calib_geometry_default_min_views(o->lensmodel);
+    const char *lens0 = calib_geometry_is_auto(o->lensmodel) ? CALIB_GEOMETRY_LEAN_LENSMODEL : o->lensmodel;
+    int min_views = o->min_views ? o->min_views : calib_geometry_default_min_views(lens0);
     if (s->nfound < min_views) {
         model_error_set(o->corners ? o->corners : o->out, 0, "too few views for %s: the board was found in %d of %u "
                         "images, the solve needs at least %d (%d more views; tilt the board and turn the table so the "
-                        "corners cover the imager)", o->lensmodel, s->nfound, vs->v->len, min_views,
+                        "corners cover the imager)", lens0, s->nfound, vs->v->len, min_views,
                         min_views - s->nfound);
         for (guint k = 0; k < vs->v->len; k++) {
             calib_geometry_view_t *v = g_ptr_array_index(vs->v, k);
@@ -1025,7 +1026,7 @@ bool calib_geometry_find_corners(const calib_geometry_opts_t *o, calib_geometry_
         if (nf < min_views) {
             model_error_set(o->out, 0, "too few views for %s of camera %s: the board was found in %d of its %d images, "
                             "the solve needs at least %d (tilt the board towards it, or give --tilts with poses "
-                            "it sees)", o->lensmodel, s->camnames[c], nf, nv, min_views);
+                            "it sees)", lens0, s->camnames[c], nf, nv, min_views);
             return false;
         }
     }
@@ -1075,69 +1076,82 @@ static bool align_corners(const calib_geometry_opts_t *o, calib_geometry_state_t
     return ok;
 }
 
-bool calib_geometry_solve(const calib_geometry_opts_t *o, calib_geometry_state_t *s)
+bool calib_geometry_mrcal(const calib_geometry_opts_t *o, calib_geometry_state_t *s, const char *lensmodel,
+                          const char *corners, const char *mdir, int nviews, json_t **sol)
 {
     char focal[160], spacing[32], wn[16], ws[16], hs[16];
+    *sol = NULL;
     snprintf(focal, sizeof focal, "%.6g", isfinite(o->focal_px) ? o->focal_px : 1.4 * s->W);
     snprintf(spacing, sizeof spacing, "%.9g", o->square_mm);
     snprintf(wn, sizeof wn, "%d", o->gridn);
     snprintf(ws, sizeof ws, "%d", s->W);
     snprintf(hs, sizeof hs, "%d", s->H);
+    if (!model_mkdir_p(mdir)) return false;
     char *cwd = o->corners ? g_path_get_dirname(s->cornpath) : g_strdup(s->imgdir);
-    char *argv_m[] = { "mrcal-calibrate-cameras", "--corners-cache", s->cornpath, "--lensmodel",
-                       (char *)o->lensmodel, "--focal", focal, "--object-spacing", spacing, "--object-width-n", wn,
-                       "--imagersize", ws, hs, "--outdir", s->mdir, "*", NULL, NULL, NULL, NULL, NULL, NULL, NULL,
+    char *argv_m[] = { "mrcal-calibrate-cameras", "--corners-cache", (char *)corners, "--lensmodel",
+                       (char *)lensmodel, "--focal", focal, "--object-spacing", spacing, "--object-width-n", wn,
+                       "--imagersize", ws, hs, "--outdir", (char *)mdir, "*", NULL, NULL, NULL, NULL, NULL, NULL, NULL,
                        NULL };
-    char *joint = NULL;
     if (s->ncams > 1) {    // one glob and seed focal length per camera, each its own imager size
-        if (!align_corners(o, s, &joint)) {
-            g_free(cwd);
-            g_free(joint);
-            return false;
-        }
         GString *fl = g_string_new("");
         for (int k = 0; k < s->ncams; k++)
             g_string_append_printf(fl, "%s%.6g", k ? "," : "", isfinite(o->focal_px) ? o->focal_px : 1.4 * s->camw[k]);
         snprintf(focal, sizeof focal, "%s", fl->str);
         g_string_free(fl, TRUE);
-        argv_m[2] = joint;
         argv_m[11] = "--outdir";
-        argv_m[12] = s->mdir;
+        argv_m[12] = (char *)mdir;
         for (int k = 0; k < s->ncams; k++) argv_m[13 + k] = g_strdup_printf("%s/*.png", s->camnames[k]);
         argv_m[13 + s->ncams] = NULL;
     }
     // mrcal-calibrate-cameras runs under Debian's Python (its shebang)
-    fprintf(stderr, "refl calib geometry: solving %s from %d views (mrcal-calibrate-cameras)\n", o->lensmodel,
-            s->nfound);
-    char *log = g_strdup_printf("%s/mrcal-calibrate-cameras.log", s->mdir);
-    char *model0 = g_strdup_printf("%s/camera-0.cameramodel", s->mdir);
+    fprintf(stderr, "refl calib geometry: solving %s from %d views (mrcal-calibrate-cameras)\n", lensmodel, nviews);
+    char *log = g_strdup_printf("%s/mrcal-calibrate-cameras.log", mdir);
+    char *model0 = g_strdup_printf("%s/camera-0.cameramodel", mdir);
     unlink(model0);
     int e = run_tool(cwd, argv_m, log, NULL);
     g_free(cwd);
     if (s->ncams > 1)
         for (int k = 0; k < s->ncams; k++) g_free(argv_m[13 + k]);
-    g_free(joint);
     if (e != 0 || access(model0, R_OK) != 0) {
         if (e >= 0)
-            model_error_set(s->mdir, 0, "mrcal-calibrate-cameras failed (exit status %d) on %s; see %s (a bad seed? "
-                            "give --focal-px)", e, s->cornpath, log);
+            model_error_set(mdir, 0, "mrcal-calibrate-cameras failed (exit status %d) on %s with %s; see %s (a bad "
+                            "seed? give --focal-px)", e, corners, lensmodel, log);
         g_free(log);
         g_free(model0);
         return false;
     }
     g_free(log);
-    char *solpath = g_strdup_printf("%s/solution.json", s->mdir), dist[32];
+    char *solpath = g_strdup_printf("%s/solution.json", mdir), dist[32];
     snprintf(dist, sizeof dist, "%g", o->distance_mm);
     fprintf(stderr, "refl calib geometry: residuals and projection uncertainty (mrcal)\n");
     e = model_run_script("calib_geometry_report.py", "solution", model0, solpath, dist, NULL);
     g_free(model0);
     if (e == 0) {
         json_error_t je;
-        s->sol = json_load_file(solpath, 0, &je);
-        if (!s->sol) model_error_set(solpath, je.line, "cannot read: %s", je.text);
+        *sol = json_load_file(solpath, 0, &je);
+        if (!*sol) model_error_set(solpath, je.line, "cannot read: %s", je.text);
+    } else {
+        model_error_set(solpath, 0, "scripts/calib_geometry_report.py solution failed (exit status %d)", e);
     }
     g_free(solpath);
-    return s->sol != NULL;
+    return *sol != NULL;
+}
+
+bool calib_geometry_solve(const calib_geometry_opts_t *o, calib_geometry_state_t *s)
+{
+    g_free(s->solvecorners);
+    s->solvecorners = NULL;
+    if (s->ncams > 1) {    // the corner order made to agree across the cameras first
+        if (!align_corners(o, s, &s->solvecorners)) return false;
+    } else {
+        s->solvecorners = g_strdup(s->cornpath);
+    }
+    if (!s->lensmodel) s->lensmodel = g_strdup(calib_geometry_is_auto(o->lensmodel) ? CALIB_GEOMETRY_LEAN_LENSMODEL
+                                                                                  : o->lensmodel);
+    g_free(s->soldir);
+    s->soldir = g_strdup(s->mdir);
+    json_decref(s->sol);
+    return calib_geometry_mrcal(o, s, s->lensmodel, s->solvecorners, s->mdir, s->nfound, &s->sol);
 }
 
 bool calib_geometry_apply_solution(const calib_geometry_opts_t *o, calib_geometry_state_t *s)
@@ -1164,7 +1178,8 @@ bool calib_geometry_apply_solution(const calib_geometry_opts_t *o, calib_geometr
     double *ip = malloc((json_array_size(intr) + 1) * sizeof *ip);
     for (k = 0; k < json_array_size(intr); k++) ip[k] = json_real_value(json_array_get(intr, k));
     double zero[6] = { 0 };
-    s->cam = model_camera_new(o->lensmodel, ip, s->W, s->H, zero);
+    model_camera_free(s->cam);
+    s->cam = model_camera_new(s->lensmodel, ip, s->W, s->H, zero);
     free(ip);
     if (!s->cam) return false;
     s->rms_px = json_real_value(json_object_get(s->sol, "rms_px"));
@@ -1406,7 +1421,7 @@ json_t *calib_geometry_json(const calib_geometry_opts_t *o, calib_geometry_state
     }
     json_object_set_new(out, "camera_model_sha256", json_string(model_camera_sha256(final)));
     model_camera_free(final);
-    json_object_set_new(out, "lensmodel", json_string(o->lensmodel));
+    json_object_set_new(out, "lensmodel", json_string(s->lensmodel));
     json_object_set_new(out, "intrinsics", json_incref(intr));
     json_object_set_new(out, "intrinsics_meaning", json_string("fx_px, fy_px, cx_px, cy_px, then the lens model's "
                                                                "distortion parameters (mrcal order)"));
@@ -1417,6 +1432,7 @@ json_t *calib_geometry_json(const calib_geometry_opts_t *o, calib_geometry_state
     json_object_set_new(out, "points_used", json_incref(json_object_get(sol, "points")));
     json_object_set_new(out, "outliers", json_incref(json_object_get(sol, "outliers")));
     json_object_set_new(out, "projection_uncertainty", json_deep_copy(json_object_get(sol, "uncertainty")));
+    json_object_set_new(out, "cross_validation", s->xv ? json_incref(s->xv) : json_null());
     json_object_set_new(out, "board", json_pack("{s:i,s:f,s:f,s:s}", "gridn", o->gridn, "square_mm", o->square_mm,
                                                 "height_at_tilt0_mm", o->board_height_mm, "sample", o->sample));
     json_object_set_new(out, "rig_frame", json_string(s->have_rig
@@ -1446,11 +1462,57 @@ json_t *calib_geometry_json(const calib_geometry_opts_t *o, calib_geometry_state
     return out;
 }
 
+// The report's cross-validation section: each run's figures, the lens choice.
+static void report_crossvalidation(FILE *f, const calib_geometry_state_t *s)
+{
+    json_t *x = s->xv;
+    if (!x) return;
+    model_html_heading(f, "Cross-validation and the lens model");
+    model_html_para(f, "Method: %s. Criterion: %s.", json_string_value(json_object_get(x, "method")),
+                    json_string_value(json_object_get(x, "criterion")));
+    GPtrArray *rows = g_ptr_array_new_with_free_func(g_free);
+    json_t *runs = json_object_get(x, "runs"), *r;
+    size_t i;
+    json_t *all = json_array();
+    json_array_foreach(runs, i, r) json_array_append(all, r);
+    if (json_object_get(x, "lean_vs_splined")) json_array_append(all, json_object_get(x, "lean_vs_splined"));
+    json_array_foreach(all, i, r) {
+        const char *what = json_object_get(r, "lensmodel") ? json_string_value(json_object_get(r, "lensmodel"))
+                                                           : "lean against the splined fit of the same views";
+        if (!json_is_true(json_object_get(r, "done")) && json_object_get(r, "lensmodel")) {
+            g_ptr_array_add(rows, g_strdup_printf("%s|not done: %s||||", what,
+                                                  json_string_value(json_object_get(r, "why"))));
+            continue;
+        }
+        json_t *c;
+        size_t k;
+        json_array_foreach(json_object_get(r, "cameras"), k, c) {
+            json_t *o = json_object_get(c, "observed");
+            g_ptr_array_add(rows, g_strdup_printf("%s%s%s|%.4f / %.4f|%.4f / %.4f|%.2f|%s", what,
+                            json_object_get(c, "camera") ? ", camera " : "",
+                            json_object_get(c, "camera") ? json_string_value(json_object_get(c, "camera")) : "",
+                            json_number_value(json_object_get(o, "diff_rms_px")),
+                            json_number_value(json_object_get(o, "diff_worst_px")),
+                            json_number_value(json_object_get(o, "predicted_rms_px")),
+                            json_number_value(json_object_get(o, "predicted_worst_px")),
+                            json_number_value(json_object_get(o, "ratio_rms")),
+                            json_number_value(json_object_get(o, "ratio_rms")) <= CALIB_GEOMETRY_XV_MAX_RATIO
+                                ? "passes" : "FAILS"));
+        }
+    }
+    json_decref(all);
+    model_html_table(f, "comparison|difference RMS / worst (px)|predicted s0 + s1 RMS / worst (px)|ratio|verdict",
+                     (const char *const *)rows->pdata, (int)rows->len);
+    g_ptr_array_free(rows, TRUE);
+    model_html_para(f, "Lens model: %s.",
+                    json_string_value(json_object_get(json_object_get(x, "lens_choice"), "why")));
+}
+
 bool calib_geometry_report(const calib_geometry_opts_t *o, const calib_geometry_state_t *s, const char *jpath)
 {
     const calib_geometry_axis_t *ax = &s->axis;
     json_t *sol = s->sol, *intr = json_object_get(sol, "intrinsics");
-    char *solpath = g_strdup_printf("%s/solution.json", s->mdir), *hpath = g_strdup_printf("%s/report.html", s->outdir);
+    char *solpath = g_strdup_printf("%s/solution.json", s->soldir), *hpath = g_strdup_printf("%s/report.html", s->outdir);
     fprintf(stderr, "refl calib geometry: plots\n");
     bool ok = model_run_script("calib_geometry_report.py", "plots", jpath, solpath, s->outdir, NULL) == 0;
     FILE *f = ok ? model_html_begin(hpath, "refl calib geometry", s->prov) : NULL;
@@ -1458,7 +1520,7 @@ bool calib_geometry_report(const calib_geometry_opts_t *o, const calib_geometry_
         int outliers = (int)json_integer_value(json_object_get(sol, "outliers"));
         model_html_heading(f, "Camera model");
         model_html_para(f, "%s, %dx%d px; %zu of %u views used; RMS reprojection residual %.4f px; %d outliers "
-                        "of %d points.", o->lensmodel, s->W, s->H, json_array_size(json_object_get(sol, "images")),
+                        "of %d points.", s->lensmodel, s->W, s->H, json_array_size(json_object_get(sol, "images")),
                         s->views.v->len, s->rms_px, outliers,
                         (int)json_integer_value(json_object_get(sol, "points")) + outliers);
         model_html_para(f, "Intrinsics fx, fy, cx, cy: %.3f, %.3f, %.3f, %.3f px.",
@@ -1477,6 +1539,7 @@ bool calib_geometry_report(const calib_geometry_opts_t *o, const calib_geometry_
                             json_real_value(json_object_get(u, "max_px")));
             model_html_figure(f, "uncertainty.png", "Projection uncertainty (dots: observed corners)");
         }
+        report_crossvalidation(f, s);
         json_t *cams = json_object_get(s->out, "cameras");
         if (json_array_size(cams) > 1) {
             model_html_heading(f, "Cameras (one joint solve)");
@@ -1556,9 +1619,9 @@ static bool camera_outputs(const calib_geometry_opts_t *o, calib_geometry_state_
         json_t *rms = json_object_get(cj, "rms_px");
         char ref[400];
         snprintf(ref, sizeof ref, "camera %s (the first camera; no rig frame: %s)", s->camnames[0], s->rigwhy);
-        ok = s->have_rig ? calib_geometry_write_cameramodel(path, o->lensmodel, json_object_get(cj, "intrinsics"),
+        ok = s->have_rig ? calib_geometry_write_cameramodel(path, s->lensmodel, json_object_get(cj, "intrinsics"),
                                                             s->camw[k], s->camh[k], rt, true, json_number_value(rms))
-                         : write_cameramodel_ref(path, o->lensmodel, json_object_get(cj, "intrinsics"), s->camw[k],
+                         : write_cameramodel_ref(path, s->lensmodel, json_object_get(cj, "intrinsics"), s->camw[k],
                                                  s->camh[k], rt, ref, json_number_value(rms));
         json_object_set_new(c, "name", json_string(s->camnames[k]));
         json_object_set_new(c, "camera_model", json_string(path));
@@ -1591,7 +1654,7 @@ static bool camera_outputs(const calib_geometry_opts_t *o, calib_geometry_state_
 static bool outputs(const calib_geometry_opts_t *o, calib_geometry_state_t *s)
 {
     s->campath = g_strdup_printf("%s/camera.cameramodel", s->outdir);
-    if (!calib_geometry_write_cameramodel(s->campath, o->lensmodel, json_object_get(s->sol, "intrinsics"), s->W, s->H,
+    if (!calib_geometry_write_cameramodel(s->campath, s->lensmodel, json_object_get(s->sol, "intrinsics"), s->W, s->H,
                                           s->rt_cam_rig, s->have_rig, s->rms_px))
         return false;
     if (!(s->out = calib_geometry_json(o, s))) return false;
@@ -1617,6 +1680,10 @@ void calib_geometry_state_free(calib_geometry_state_t *s)
     free(s->outdir);
     g_free(s->imgdir);
     g_free(s->mdir);
+    g_free(s->soldir);
+    g_free(s->solvecorners);
+    g_free(s->lensmodel);
+    json_decref(s->xv);
     g_free(s->cornpath);
     g_strfreev(s->sessions);
     json_decref(s->sol);
@@ -1649,7 +1716,7 @@ bool calib_geometry_run(const calib_geometry_opts_t *o, calib_geometry_result_t 
     if (o->rig && (!model_provenance_input(s.prov, "rig", o->rig) || !calib_geometry_capture(o, &s, &r->usage)))
         goto done;
     if (!collect_views(o, &s) || !calib_geometry_find_corners(o, &s) || !calib_geometry_solve(o, &s) ||
-        !calib_geometry_apply_solution(o, &s))
+        !calib_geometry_apply_solution(o, &s) || !calib_geometry_validate_lens(o, &s))
         goto done;
     axis_and_rig_frame(o, &s);
     if (!outputs(o, &s)) goto done;

@@ -152,6 +152,73 @@ def uncertainty(m, distance_mm):
     return unc
 
 
+def observed_near(m, q, step):
+    """Which of the pixels q (N x 2) lie within step px of a corner model m's camera observed (outliers out)."""
+    oi = m.optimization_inputs()
+    if oi is None:
+        return np.ones(len(q), dtype=bool)
+    obs = oi["observations_board"]
+    sel = oi["indices_frame_camintrinsics_camextrinsics"][:, 1] == m.icam_intrinsics()
+    o = obs[sel].reshape(-1, 3)
+    o = o[o[:, 2] > 0][:, :2]
+    near = np.zeros(len(q), dtype=bool)
+    for k in range(0, len(o), 4096):
+        d2 = np.sum((q[:, None, :] - o[None, k:k + 4096, :]) ** 2, axis=-1)
+        near |= np.min(d2, axis=1) <= step * step
+    return near
+
+
+def compare(model_a, model_b, out_path, distance_mm):
+    """Two models of one lens (the two halves of a cross-validation, or two lens models fitted to the same views)
+    compared over a's imager the way mrcal differences models: pixels on a 33 x 27 grid unprojected with a to
+    DISTANCE_MM, the rigid transform of a's camera frame onto b's fitted (weighted by 1 / (sa^2 + sb^2), mrcal's
+    projection uncertainties, so the regions the calibrations saw decide it), every point projected with b; the
+    difference at each point against the predicted sa + sb (worst-direction standard deviations). Figures over
+    the whole grid and over the points within one grid step of a corner each model observed ("observed")."""
+    import mrcal
+    ma, mb = mrcal.cameramodel(model_a), mrcal.cameramodel(model_b)
+    la, ia = ma.intrinsics()
+    lb, ib = mb.intrinsics()
+    W, H = (int(x) for x in ma.imagersize())
+    gx, gy = np.linspace(0, W - 1, 33), np.linspace(0, H - 1, 27)
+    q = np.array([[a, b] for b in gy for a in gx])
+    pa = mrcal.unproject(q, la, ia, normalize=True) * distance_mm
+    sa = mrcal.projection_uncertainty(pa, ma, what="worstdirection-stdev")
+    pb0 = mrcal.unproject(q, lb, ib, normalize=True) * distance_mm
+    sb = mrcal.projection_uncertainty(pb0, mb, what="worstdirection-stdev")
+    w = 1.0 / np.sqrt(sa * sa + sb * sb)
+    rt = np.zeros(6)
+    for _ in range(20):                               # Gauss-Newton on the 6 pose parameters
+        x, dx_drt, _ = mrcal.transform_point_rt(rt, pa, get_gradients=True)
+        qb, dq_dx, _ = mrcal.project(x, lb, ib, get_gradients=True)
+        r = ((qb - q) * w[:, None]).ravel()
+        J = (np.einsum("nij,njk->nik", dq_dx, dx_drt) * w[:, None, None]).reshape(-1, 6)
+        step = np.linalg.lstsq(J, -r, rcond=None)[0]
+        rt = rt + step
+        if np.max(np.abs(step)) < 1e-12:
+            break
+    qb = mrcal.project(mrcal.transform_point_rt(rt, pa), lb, ib)
+    d = np.linalg.norm(qb - q, axis=-1)
+    pred = sa + sb
+    ratio = d / pred
+    near = observed_near(ma, q, gx[1] - gx[0]) & observed_near(mb, q, gx[1] - gx[0])
+    rms = lambda v: float(np.sqrt(np.mean(v * v))) if v.size else None
+
+    def figures(m):
+        return {"npoints": int(np.sum(m)), "diff_rms_px": rms(d[m]),
+                "diff_worst_px": float(np.max(d[m])) if m.any() else None,
+                "predicted_rms_px": rms(pred[m]), "predicted_worst_px": float(np.max(pred[m])) if m.any() else None,
+                "ratio_rms": rms(ratio[m]), "ratio_median": float(np.median(ratio[m])) if m.any() else None,
+                "ratio_worst": float(np.max(ratio[m])) if m.any() else None}
+    out = {"distance_mm": distance_mm, "grid": [33, 27], "lensmodel_a": la, "lensmodel_b": lb,
+           "observed": figures(near), "imager": figures(np.ones(len(d), dtype=bool)),
+           "rt_a_to_b": [float(v) for v in rt], "grid_x_px": gx.tolist(), "grid_y_px": gy.tolist(),
+           "diff_px": d.reshape(len(gy), len(gx)).tolist(), "predicted_px": pred.reshape(len(gy), len(gx)).tolist(),
+           "observed_mask": near.reshape(len(gy), len(gx)).astype(int).tolist()}
+    with open(out_path, "w") as f:
+        json.dump(out, f)
+
+
 def align(corners_in, corners_out, out_path, gridn, spacing, camspecs):
     import re
     import mrcal
@@ -330,9 +397,11 @@ if __name__ == "__main__":
         align(sys.argv[2], sys.argv[3], sys.argv[4], int(sys.argv[5]), float(sys.argv[6]), sys.argv[7:])
     elif len(sys.argv) == 5 and sys.argv[1] == "solution":
         solution(sys.argv[2], sys.argv[3], float(sys.argv[4]))
+    elif len(sys.argv) == 6 and sys.argv[1] == "compare":
+        compare(sys.argv[2], sys.argv[3], sys.argv[4], float(sys.argv[5]))
     elif len(sys.argv) == 5 and sys.argv[1] == "plots":
         plots(sys.argv[2], sys.argv[3], sys.argv[4])
     else:
         sys.exit("usage: calib_geometry_report.py solution MODEL OUT.json DISTANCE_MM | "
-                 "plots GEOMETRY.json SOLUTION.json OUTDIR | "
+                 "plots GEOMETRY.json SOLUTION.json OUTDIR | compare MODEL_A MODEL_B OUT.json DISTANCE_MM | "
                  "align CORNERS_IN CORNERS_OUT OUT.json GRIDN SPACING_MM DIR:W:H:FOCAL...")
