@@ -44,6 +44,7 @@
 
 #include "calib/calib.h"
 #include "calib/geometry.h"
+#include "model/lsq.h"
 #include "model/model.h"
 #include "model/report.h"
 
@@ -634,6 +635,256 @@ bool calib_geometry_fit_axis(calib_geometry_views_t *vs, int gridn, double squar
     ax->point_unc_mm = ax->point_rms_mm * sqrt(fmax(tr - aAa, 0) / 2);
     ax->ok = true;
     return true;
+}
+
+// ---------------------------------------------------------------------------
+// The axis refined jointly with the board poses (calib_geometry_refine_axis)
+//
+// Each tilt group's board has one pose P_g (at its first view's angle); view
+// v of the group sees it turned about the axis by its turntable angle step:
+// X = Rot(a, dtheta_v) (P_g(b) - c) + c. The axis (a: a0 + u e1 + v e2
+// normalised; c: c0 + s e1 + t e2, e1, e2 across a0) and every P_g are fitted
+// to the corners each view observed (projected with the solved camera, fixed),
+// residuals in units of the per-axis corner noise (mrcal's RMS / sqrt 2). The
+// Jacobians are central differences (10 parameters a view).
+
+typedef struct {
+    model_camera_t *cam;
+    const double   *a0, *e1, *e2, *c0;   // the axis frame (closed-form axis)
+    double          dtheta;              // rad: the view's angle minus its group's first
+    int             n;                   // corners
+    model_vec3_t   *b;                   // the board point of each observed corner
+    double         *q;                   // observed corners (2 n)
+    double          inv_sigma;
+    model_vec3_t   *x;                   // scratch (n)
+    double         *qp;                  // scratch (2 n)
+} axj_view_t;
+
+static void axj_axis(const axj_view_t *w, const double *p, double a[3], double c[3])
+{
+    for (int k = 0; k < 3; k++) {
+        a[k] = w->a0[k] + p[0] * w->e1[k] + p[1] * w->e2[k];
+        c[k] = w->c0[k] + p[2] * w->e1[k] + p[3] * w->e2[k];
+    }
+    double n = norm3(a);
+    for (int k = 0; k < 3; k++) a[k] /= n;
+}
+
+// The view's board pose: R, t of rt_g turned by dtheta about the axis p.
+static void axj_pose(const axj_view_t *w, const double *p, const double *rt_g, double R[9], double t[3])
+{
+    double a[3], c[3], Rg[9], Rot[9], d[3];
+    axj_axis(w, p, a, c);
+    double r[3] = { w->dtheta * a[0], w->dtheta * a[1], w->dtheta * a[2] };
+    R_from_r(Rot, r);
+    R_from_r(Rg, rt_g);
+    mat_mul(R, Rot, Rg);
+    for (int k = 0; k < 3; k++) d[k] = rt_g[3 + k] - c[k];
+    mat_vec(t, Rot, d);
+    for (int k = 0; k < 3; k++) t[k] += c[k];
+}
+
+static bool axj_eval(const axj_view_t *w, const double *p, const double *rt_g, double *res)
+{
+    double R[9], t[3];
+    axj_pose(w, p, rt_g, R, t);
+    for (int i = 0; i < w->n; i++) {
+        double b[3] = { w->b[i].x, w->b[i].y, w->b[i].z }, x[3];
+        mat_vec(x, R, b);
+        w->x[i] = (model_vec3_t){ x[0] + t[0], x[1] + t[1], x[2] + t[2] };
+        if (!(w->x[i].z > 0)) return false;
+    }
+    if (!model_camera_project(w->cam, w->x, w->n, w->qp)) return false;
+    for (int i = 0; i < 2 * w->n; i++) {
+        res[i] = (w->qp[i] - w->q[i]) * w->inv_sigma;
+        if (!isfinite(res[i])) return false;
+    }
+    return true;
+}
+
+static bool axj_residual(void *ctx, const double *const *params, double *res, double **J)
+{
+    const axj_view_t *w = ctx;
+    if (!axj_eval(w, params[0], params[1], res)) return false;
+    if (!J) return true;
+    int nr = 2 * w->n, sizes[2] = { 4, 6 };
+    double *rp = malloc(2 * nr * sizeof *rp), *rm = rp + nr, pp[2][6];
+    bool ok = rp != NULL;
+    for (int blk = 0; ok && blk < 2; blk++) {
+        if (!J[blk]) continue;
+        for (int i = 0; ok && i < sizes[blk]; i++) {
+            memcpy(pp[0], params[0], 4 * sizeof(double));
+            memcpy(pp[1], params[1], 6 * sizeof(double));
+            double h = (blk == 0 ? i < 2 : i < 3) ? 1e-7 : 1e-4;   // rad or mm
+            pp[blk][i] += h;
+            ok = axj_eval(w, pp[0], pp[1], rp);
+            pp[blk][i] -= 2 * h;
+            ok = ok && axj_eval(w, pp[0], pp[1], rm);
+            for (int r = 0; ok && r < nr; r++) J[blk][r * sizes[blk] + i] = (rp[r] - rm[r]) / (2 * h);
+        }
+    }
+    free(rp);
+    return ok;
+}
+
+// The board point each observed corner of v is (nearest projection of the
+// grid under v's pose, within a third of the spacing, one to one); false when
+// they do not match.
+static bool axj_match(const calib_geometry_view_t *v, model_camera_t *cam, int gridn, double square_mm,
+                      model_vec3_t *b)
+{
+    int N = gridn * gridn;
+    model_vec3_t *p = malloc(N * sizeof *p);
+    double *qg = malloc(2 * N * sizeof *qg), R[9], spacing = INFINITY;
+    int *used = calloc(N, sizeof *used);
+    R_from_r(R, v->rt_cam_board);
+    for (int j = 0; j < N; j++) {
+        double bb[3] = { (j % gridn) * square_mm, (j / gridn) * square_mm, 0 }, x[3];
+        mat_vec(x, R, bb);
+        p[j] = (model_vec3_t){ x[0] + v->rt_cam_board[3], x[1] + v->rt_cam_board[4], x[2] + v->rt_cam_board[5] };
+    }
+    bool ok = model_camera_project(cam, p, N, qg);
+    for (int j = 1; ok && j < N; j++) spacing = fmin(spacing, hypot(qg[2 * j] - qg[0], qg[2 * j + 1] - qg[1]));
+    for (int i = 0; ok && i < N; i++) {
+        int best = -1;
+        double bd = INFINITY;
+        for (int j = 0; j < N; j++) {
+            double d = hypot(qg[2 * j] - v->q[2 * i], qg[2 * j + 1] - v->q[2 * i + 1]);
+            if (d < bd) {
+                bd = d;
+                best = j;
+            }
+        }
+        ok = best >= 0 && bd < spacing / 3 && !used[best]++;
+        if (ok) b[i] = (model_vec3_t){ (best % gridn) * square_mm, (best / gridn) * square_mm, 0 };
+    }
+    free(p);
+    free(qg);
+    free(used);
+    return ok;
+}
+
+
+// Axis-frame vectors across a0.
+static void axj_frame(const double a0[3], double e1[3], double e2[3])
+{
+    double t[3] = { 1, 0, 0 };
+    if (fabs(a0[0]) > 0.8) t[0] = 0, t[1] = 1;
+    cross3(e1, a0, t);
+    double n = norm3(e1);
+    for (int k = 0; k < 3; k++) e1[k] /= n;
+    cross3(e2, a0, e1);
+}
+
+// One group's views into the problem (w: its n views, filled); false + message.
+static bool axj_group(lsq_problem_t *p, calib_geometry_view_t **l, int n, int gridn, double square_mm,
+                      model_camera_t *cam, double sigma_px, axj_view_t *frame, double *axp, double *rt_g,
+                      axj_view_t *w, int *nused)
+{
+    int N = gridn * gridn;
+    memcpy(rt_g, l[0]->rt_cam_board, 6 * sizeof(double));
+    if (!lsq_add_parameters(p, rt_g, 6)) return false;
+    for (int i = 0; i < n; i++) {
+        w[i] = *frame;
+        w[i].cam = cam;
+        w[i].dtheta = wrap_deg(l[i]->angle_deg - l[0]->angle_deg) * DEG;
+        w[i].n = N;
+        w[i].b = malloc(N * sizeof *w[i].b);
+        w[i].x = malloc(N * sizeof *w[i].x);
+        w[i].qp = malloc(2 * N * sizeof *w[i].qp);
+        w[i].q = l[i]->q;
+        w[i].inv_sigma = 1 / sigma_px;
+        if (!l[i]->q || !axj_match(l[i], cam, gridn, square_mm, w[i].b)) {
+            fprintf(stderr, "refl calib geometry: %s: its corners do not match its pose; left out of the joint "
+                    "axis fit\n", l[i]->name);
+            w[i].n = 0;
+            continue;
+        }
+        double *blocks[2] = { axp, rt_g };
+        if (!lsq_add_residual(p, axj_residual, &w[i], 2 * N, 2, blocks, LSQ_LOSS_NONE, 0)) return false;
+        (*nused)++;
+    }
+    return true;
+}
+
+bool calib_geometry_refine_axis(calib_geometry_views_t *vs, int gridn, double square_mm, model_camera_t *cam,
+                                double sigma_px, calib_geometry_axis_t *ax)
+{
+    if (!ax->ok || !(sigma_px > 0)) return false;
+    double a0[3], c0[3], e1[3], e2[3], axp[4] = { 0 };
+    memcpy(a0, ax->a, sizeof a0);
+    memcpy(c0, ax->c, sizeof c0);
+    axj_frame(a0, e1, e2);
+    axj_view_t frame = { .a0 = a0, .e1 = e1, .e2 = e2, .c0 = c0 };
+    lsq_problem_t *p = lsq_problem_new();
+    int ng = vs->ngroups, nused = 0, g0 = -1;
+    double *rt = calloc((size_t)6 * (ng ? ng : 1), sizeof *rt);
+    calib_geometry_view_t ***lists = calloc(ng ? ng : 1, sizeof *lists);
+    int *cnt = calloc(ng ? ng : 1, sizeof *cnt);
+    axj_view_t **ws = calloc(ng ? ng : 1, sizeof *ws);
+    bool ok = p && rt && lists && cnt && ws && lsq_add_parameters(p, axp, 4);
+    for (int g = 0; ok && g < ng; g++) {
+        cnt[g] = group_views(vs, g, &lists[g]);
+        if (cnt[g] < 2) continue;
+        ws[g] = calloc(cnt[g], sizeof *ws[g]);
+        ok = axj_group(p, lists[g], cnt[g], gridn, square_mm, cam, sigma_px, &frame, axp, &rt[6 * g], ws[g], &nused);
+        if (g0 < 0 && fabs(vs->group_tilt[g]) < 1e-9) g0 = g;
+    }
+    if (ok && nused < 3) {
+        model_error_set(NULL, 0, "the joint axis fit needs 3 views with matched corners, %d have them", nused);
+        ok = false;
+    }
+    lsq_summary_t sum = { 0 };
+    lsq_options_t lo = lsq_defaults();
+    lo.threads = 2;
+    if (ok) ok = lsq_solve(p, &lo, &sum);
+    double cov[16], cg[36];
+    if (ok) ok = lsq_covariance(p, axp, cov);
+    if (ok) {
+        int dof = sum.nresiduals - sum.nfree;
+        double chi2 = dof > 0 ? 2 * sum.final_cost / dof : 1, k2 = fmax(chi2, 1);
+        frame.cam = cam;
+        axj_axis(&frame, axp, ax->a, ax->c);
+        ax->joint = true;
+        ax->joint_views = nused;
+        ax->joint_rms_px = sqrt(2 * sum.final_cost / sum.nresiduals) * sigma_px;
+        ax->joint_chi2 = chi2;
+        ax->dir_unc_deg = sqrt(k2 * (cov[0] + cov[5])) / DEG;
+        ax->point_unc_mm = sqrt(k2 * (cov[10] + cov[15]));
+        ax->rig_x_unc_deg = ax->rig_origin_along_mm = NAN;
+        if (g0 >= 0 && lsq_covariance(p, &rt[6 * g0], cg)) {
+            double vr = 0, vt = 0;
+            for (int i = 0; i < 3; i++)
+                for (int j = 0; j < 3; j++) {
+                    vr += ax->a[i] * cg[i * 6 + j] * ax->a[j];
+                    vt += ax->a[i] * cg[(3 + i) * 6 + 3 + j] * ax->a[j];
+                }
+            ax->rig_x_unc_deg = sqrt(k2 * fmax(vr, 0)) / DEG;
+            ax->rig_origin_along_mm = sqrt(k2 * fmax(vt, 0));
+        }
+        for (int g = 0; g < ng; g++)   // the poses as the fit has them: turned about the axis
+            for (int i = 0; ws[g] && i < cnt[g]; i++) {
+                double R[9], t[3];
+                axj_pose(&ws[g][i], axp, &rt[6 * g], R, t);
+                r_from_R(lists[g][i]->rt_cam_board, R);
+                memcpy(&lists[g][i]->rt_cam_board[3], t, sizeof t);
+            }
+    }
+    for (int g = 0; g < ng; g++) {
+        for (int i = 0; ws && ws[g] && i < cnt[g]; i++) {
+            free(ws[g][i].b);
+            free(ws[g][i].x);
+            free(ws[g][i].qp);
+        }
+        if (ws) free(ws[g]);
+        if (lists) free(lists[g]);
+    }
+    free(ws);
+    free(lists);
+    free(cnt);
+    free(rt);
+    lsq_problem_free(p);
+    return ok;
 }
 
 // rt_cam_rig from the axis and the tilt-0 group's first pose; false + why.
@@ -1335,6 +1586,14 @@ static void axis_and_rig_frame(const calib_geometry_opts_t *o, calib_geometry_st
                      "axis (need 2 views 5..175 deg apart)");
             fprintf(stderr, "refl calib geometry: no axis: %s\n", s->rigwhy);
         } else {
+            fprintf(stderr, "refl calib geometry: the axis fitted with the board poses as turns about it (from the "
+                    "closed form: direction +- %.4f deg)\n", ax->dir_unc_deg);
+            if (!calib_geometry_refine_axis(&s->views, o->gridn, o->square_mm, s->cam, s->rms_px / sqrt(2), ax))
+                fprintf(stderr, "refl calib geometry: the joint axis fit failed (%s); the closed-form axis is kept\n",
+                        model_last_error());
+            else
+                fprintf(stderr, "refl calib geometry: joint axis fit: %d views, corner RMS %.4f px (chi^2/dof %.2f)\n",
+                        ax->joint_views, ax->joint_rms_px, ax->joint_chi2);
             s->have_rig = calib_geometry_rig_frame(&s->views, o->board_height_mm, ax, s->rt_cam_rig, s->rigwhy,
                                                    sizeof s->rigwhy);
             if (!s->have_rig)
@@ -1352,6 +1611,30 @@ static void axis_and_rig_frame(const calib_geometry_opts_t *o, calib_geometry_st
     }
 }
 
+// The rig frame's 1-sigma from the axis fit: z (the axis direction), x (the
+// tilt-0 board's turn about the axis), the origin across and along the axis,
+// and what they make of the camera centre's position in the rig frame
+// (sqrt(origin^2 + (distance x rotation)^2), rotation the two angles combined).
+static json_t *rig_sigma_json(const calib_geometry_state_t *s)
+{
+    const calib_geometry_axis_t *ax = &s->axis;
+    double inv[6];
+    invert(inv, s->rt_cam_rig);
+    double d = norm3(&inv[3]), rot = hypot(ax->dir_unc_deg, isfinite(ax->rig_x_unc_deg) ? ax->rig_x_unc_deg : 0) * DEG;
+    double o2 = ax->point_unc_mm * ax->point_unc_mm +
+                (isfinite(ax->rig_origin_along_mm) ? ax->rig_origin_along_mm * ax->rig_origin_along_mm : 0);
+    json_t *j = json_object();
+    json_object_set_new(j, "z_direction_deg", json_real(ax->dir_unc_deg));
+    json_object_set_new(j, "x_direction_deg", isfinite(ax->rig_x_unc_deg) ? json_real(ax->rig_x_unc_deg) : json_null());
+    json_object_set_new(j, "origin_across_axis_mm", json_real(ax->point_unc_mm));
+    json_object_set_new(j, "origin_along_axis_mm",
+                        isfinite(ax->rig_origin_along_mm) ? json_real(ax->rig_origin_along_mm) : json_null());
+    json_object_set_new(j, "camera_centre_mm", json_real(sqrt(o2 + d * d * rot * rot)));
+    json_object_set_new(j, "note", json_string("1-sigma of the rig frame as the axis fit determines it (the "
+                        "camera's intrinsics fixed); camera_centre_mm: sqrt(origin^2 + (distance x rotation)^2)"));
+    return j;
+}
+
 // geometry.json: the axis (null without one).
 static json_t *axis_json(const calib_geometry_state_t *s)
 {
@@ -1362,8 +1645,22 @@ static json_t *axis_json(const calib_geometry_state_t *s)
     json_object_set_new(aj, "point_cam_mm", jarr(ax->c, 3));
     json_object_set_new(aj, "direction_uncertainty_deg", json_real(ax->dir_unc_deg));
     json_object_set_new(aj, "point_uncertainty_mm", json_real(ax->point_unc_mm));
-    json_object_set_new(aj, "uncertainty_note", json_string("approximate 1-sigma, from the scatter of the "
-                        "pairwise estimates (direction) and of the point equations (point, across the axis)"));
+    if (ax->joint) {
+        json_object_set_new(aj, "method", json_string("fitted jointly with the board poses: each tilt group's board "
+                            "one pose turned about the axis by the turntable's measured angles, fitted with the axis "
+                            "to the observed corners (camera model fixed); the images' rt_cam_board are these poses"));
+        json_object_set_new(aj, "uncertainty_note", json_string("1-sigma from the joint fit's covariance (corner "
+                            "noise = mrcal's RMS residual / sqrt 2), scaled by chi^2/dof when above 1; the point: "
+                            "RMS distance across the axis"));
+        json_object_set_new(aj, "joint_views", json_integer(ax->joint_views));
+        json_object_set_new(aj, "joint_rms_residual_px", json_real(ax->joint_rms_px));
+        json_object_set_new(aj, "joint_chi2_per_dof", json_real(ax->joint_chi2));
+    } else {
+        json_object_set_new(aj, "method", json_string("closed form from the pairs of board poses (the joint fit "
+                            "failed or was not run)"));
+        json_object_set_new(aj, "uncertainty_note", json_string("approximate 1-sigma, from the scatter of the "
+                            "pairwise estimates (direction) and of the point equations (point, across the axis)"));
+    }
     json_object_set_new(aj, "off_axis_rms_deg", json_real(ax->off_axis_rms_deg));
     json_object_set_new(aj, "point_equation_rms_mm", json_real(ax->point_rms_mm));
     json_object_set_new(aj, "pairs", json_integer(ax->npairs));
@@ -1372,6 +1669,7 @@ static json_t *axis_json(const calib_geometry_state_t *s)
         // in the rig frame the axis is +z through the origin, by construction
         json_object_set_new(aj, "direction_rig", json_pack("[fff]", 0.0, 0.0, 1.0));
         json_object_set_new(aj, "point_rig_mm", json_pack("[fff]", 0.0, 0.0, 0.0));
+        json_object_set_new(aj, "rig_frame_sigma", rig_sigma_json(s));
     }
     json_object_set_new(aj, "fit", json_incref(ax->fit));
     return aj;
@@ -1565,10 +1863,16 @@ bool calib_geometry_report(const calib_geometry_opts_t *o, const calib_geometry_
         }
         model_html_heading(f, "Turntable axis and rig frame");
         if (ax->ok) {
-            model_html_para(f, "Axis direction (camera frame) %.6f %.6f %.6f, +- %.4f deg (approximate); point "
-                            "%.2f %.2f %.2f mm +- %.3f mm; %d pose pairs; off-axis rotation RMS %.4f deg.",
-                            ax->a[0], ax->a[1], ax->a[2], ax->dir_unc_deg, ax->c[0], ax->c[1], ax->c[2],
-                            ax->point_unc_mm, ax->npairs, ax->off_axis_rms_deg);
+            model_html_para(f, "Axis direction (camera frame) %.6f %.6f %.6f, +- %.4f deg; point %.2f %.2f %.2f mm "
+                            "+- %.3f mm across the axis (1 sigma, %s); %d pose pairs; off-axis rotation RMS of mrcal's "
+                            "free poses %.4f deg.", ax->a[0], ax->a[1], ax->a[2], ax->dir_unc_deg, ax->c[0], ax->c[1],
+                            ax->c[2], ax->point_unc_mm, ax->joint ? "fitted jointly with the board poses as turns "
+                            "about it" : "closed form, approximate", ax->npairs, ax->off_axis_rms_deg);
+            if (ax->joint)
+                model_html_para(f, "Joint fit: %d views, corner RMS %.4f px (chi^2/dof %.2f). Rig frame 1 sigma: z "
+                                "%.4f deg, x %.4f deg, origin %.3f mm across and %.3f mm along the axis.",
+                                ax->joint_views, ax->joint_rms_px, ax->joint_chi2, ax->dir_unc_deg, ax->rig_x_unc_deg,
+                                ax->point_unc_mm, ax->rig_origin_along_mm);
             model_html_figure(f, "axis_fit.png", "Board rotation about the fitted axis against the turntable angle");
         } else {
             model_html_para(f, "No axis: %s.", s->rigwhy);

@@ -149,6 +149,14 @@ typedef struct {
     double  dir_unc_deg, point_unc_mm, off_axis_rms_deg, point_rms_mm;
     int     npairs, nviews;
     json_t *fit;                    // per group: angle_deg[], rotation_about_axis_deg[] (owned)
+    // calib_geometry_refine_axis (joint true): a, c, dir_unc_deg, point_unc_mm from the joint fit
+    // (point_unc_mm: RMS distance across the axis, both directions; 1 sigma, scaled by the fit's
+    // chi^2 per degree of freedom when above 1)
+    bool    joint;
+    int     joint_views;
+    double  joint_rms_px, joint_chi2;
+    double  rig_x_unc_deg;          // the rig frame's x: rotation about the axis of the tilt-0 board, 1 sigma
+    double  rig_origin_along_mm;    // the rig origin along the axis (the tilt-0 board's height), 1 sigma
 } calib_geometry_axis_t;
 
 // Everything a run has found so far; the stages fill it in order.
@@ -233,6 +241,15 @@ bool calib_geometry_apply_solution(const calib_geometry_opts_t *o, calib_geometr
 // turns of mrgingham's corner order made consistent first; inconsistent views
 // lose their pose). false when too few pairs.
 bool calib_geometry_fit_axis(calib_geometry_views_t *vs, int gridn, double square_mm, calib_geometry_axis_t *ax);
+// The axis refined jointly with the board poses (after calib_geometry_fit_axis,
+// from its axis): each tilt group's board one pose, turned about the axis by
+// the turntable's measured angles in its views, fitted with the axis to the
+// corners camera 0 observed (cam fixed, sigma_px the per-axis corner noise).
+// Sets ax's joint fields and a, c, dir_unc_deg, point_unc_mm from the fit's
+// covariance, and the views' rt_cam_board to the constrained poses. false +
+// message (ax and the views unchanged).
+bool calib_geometry_refine_axis(calib_geometry_views_t *vs, int gridn, double square_mm, model_camera_t *cam,
+                                double sigma_px, calib_geometry_axis_t *ax);
 // rt_cam_rig from the axis and the tilt-0 group's first pose; false + why.
 bool calib_geometry_rig_frame(calib_geometry_views_t *vs, double board_height_mm, const calib_geometry_axis_t *ax,
                               double rt_cam_rig[6], char *why, size_t whyn);
