@@ -1574,6 +1574,24 @@ static bool collect_views(const calib_geometry_opts_t *o, calib_geometry_state_t
     return true;
 }
 
+// The camera frame itself is as uncertain as the principal point: a shift of
+// (dcx, dcy) px turns every direction in it by about (dcy / fy, dcx / fx) rad.
+// The axis direction's sigma (in the camera frame) gets that in quadrature
+// (mrcal's 1-sigma of cx, cy from the solve; the fit's own kept apart).
+static void axis_intrinsics_sigma(calib_geometry_state_t *s)
+{
+    calib_geometry_axis_t *ax = &s->axis;
+    json_t *sd = json_object_get(s->sol, "intrinsics_core_stdev"), *in = json_object_get(s->sol, "intrinsics");
+    ax->dir_unc_fit_deg = ax->dir_unc_deg;
+    ax->dir_unc_intrinsics_deg = NAN;
+    if (json_array_size(sd) != 4 || json_array_size(in) < 4) return;
+    double ex = json_number_value(json_array_get(sd, 2)) / json_number_value(json_array_get(in, 0));
+    double ey = json_number_value(json_array_get(sd, 3)) / json_number_value(json_array_get(in, 1));
+    if (!isfinite(ex) || !isfinite(ey)) return;
+    ax->dir_unc_intrinsics_deg = hypot(ex, ey) / DEG;
+    ax->dir_unc_deg = hypot(ax->dir_unc_fit_deg, ax->dir_unc_intrinsics_deg);
+}
+
 // Stage 4: the axis, the rig frame and why views have no board.
 static void axis_and_rig_frame(const calib_geometry_opts_t *o, calib_geometry_state_t *s)
 {
@@ -1594,6 +1612,7 @@ static void axis_and_rig_frame(const calib_geometry_opts_t *o, calib_geometry_st
             else
                 fprintf(stderr, "refl calib geometry: joint axis fit: %d views, corner RMS %.4f px (chi^2/dof %.2f)\n",
                         ax->joint_views, ax->joint_rms_px, ax->joint_chi2);
+            axis_intrinsics_sigma(s);
             s->have_rig = calib_geometry_rig_frame(&s->views, o->board_height_mm, ax, s->rt_cam_rig, s->rigwhy,
                                                    sizeof s->rigwhy);
             if (!s->have_rig)
@@ -1618,17 +1637,15 @@ static void axis_and_rig_frame(const calib_geometry_opts_t *o, calib_geometry_st
 static json_t *rig_sigma_json(const calib_geometry_state_t *s)
 {
     const calib_geometry_axis_t *ax = &s->axis;
-    double inv[6];
+    double inv[6], xs = ax->joint ? ax->rig_x_unc_deg : NAN, os = ax->joint ? ax->rig_origin_along_mm : NAN;
     invert(inv, s->rt_cam_rig);
-    double d = norm3(&inv[3]), rot = hypot(ax->dir_unc_deg, isfinite(ax->rig_x_unc_deg) ? ax->rig_x_unc_deg : 0) * DEG;
-    double o2 = ax->point_unc_mm * ax->point_unc_mm +
-                (isfinite(ax->rig_origin_along_mm) ? ax->rig_origin_along_mm * ax->rig_origin_along_mm : 0);
+    double d = norm3(&inv[3]), rot = hypot(ax->dir_unc_deg, isfinite(xs) ? xs : 0) * DEG;
+    double o2 = ax->point_unc_mm * ax->point_unc_mm + (isfinite(os) ? os * os : 0);
     json_t *j = json_object();
     json_object_set_new(j, "z_direction_deg", json_real(ax->dir_unc_deg));
-    json_object_set_new(j, "x_direction_deg", isfinite(ax->rig_x_unc_deg) ? json_real(ax->rig_x_unc_deg) : json_null());
+    json_object_set_new(j, "x_direction_deg", isfinite(xs) ? json_real(xs) : json_null());
     json_object_set_new(j, "origin_across_axis_mm", json_real(ax->point_unc_mm));
-    json_object_set_new(j, "origin_along_axis_mm",
-                        isfinite(ax->rig_origin_along_mm) ? json_real(ax->rig_origin_along_mm) : json_null());
+    json_object_set_new(j, "origin_along_axis_mm", isfinite(os) ? json_real(os) : json_null());
     json_object_set_new(j, "camera_centre_mm", json_real(sqrt(o2 + d * d * rot * rot)));
     json_object_set_new(j, "note", json_string("1-sigma of the rig frame as the axis fit determines it (the "
                         "camera's intrinsics fixed); camera_centre_mm: sqrt(origin^2 + (distance x rotation)^2)"));
@@ -1651,8 +1668,12 @@ static json_t *axis_json(const calib_geometry_state_t *s)
                             "to the observed corners (camera model fixed); the images' rt_cam_board are these poses"));
         json_object_set_new(aj, "uncertainty_note", json_string("1-sigma from the joint fit's covariance (corner "
                             "noise = mrcal's RMS residual / sqrt 2), scaled by chi^2/dof when above 1; the point: "
-                            "RMS distance across the axis"));
+                            "RMS distance across the axis; the direction (in the camera frame) also carries the "
+                            "principal point's 1-sigma from mrcal's solve (hypot(s_cx / fx, s_cy / fy)) in quadrature"));
         json_object_set_new(aj, "joint_views", json_integer(ax->joint_views));
+        json_object_set_new(aj, "direction_uncertainty_fit_deg", json_real(ax->dir_unc_fit_deg));
+        json_object_set_new(aj, "direction_uncertainty_intrinsics_deg", isfinite(ax->dir_unc_intrinsics_deg)
+                            ? json_real(ax->dir_unc_intrinsics_deg) : json_null());
         json_object_set_new(aj, "joint_rms_residual_px", json_real(ax->joint_rms_px));
         json_object_set_new(aj, "joint_chi2_per_dof", json_real(ax->joint_chi2));
     } else {

@@ -157,6 +157,8 @@ typedef struct {
     double  joint_rms_px, joint_chi2;
     double  rig_x_unc_deg;          // the rig frame's x: rotation about the axis of the tilt-0 board, 1 sigma
     double  rig_origin_along_mm;    // the rig origin along the axis (the tilt-0 board's height), 1 sigma
+    double  dir_unc_fit_deg;        // the joint fit's own direction sigma; dir_unc_deg adds in quadrature
+    double  dir_unc_intrinsics_deg; // the camera frame's turn from the principal point's sigma (NAN: unknown)
 } calib_geometry_axis_t;
 
 // Everything a run has found so far; the stages fill it in order.

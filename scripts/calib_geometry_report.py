@@ -79,7 +79,19 @@ def solution(model_path, out_path, distance_mm):
             im["camera"] = int(idx[i, 1])
         images.append(im)
     allr = ru[ok]
+    core_sd = None
+    try:                                              # the intrinsics core's 1-sigma (fx, fy, cx, cy), camera 0
+        J = mrcal.optimizer_callback(**oi, no_factorization=True)[2]
+        sig = float(np.sqrt(np.mean(allr * allr)))
+        cov = np.linalg.inv((J.T @ J).toarray()) * sig * sig
+        scale = np.ones(cov.shape[0])
+        mrcal.unpack_state(scale, **oi)
+        i0 = mrcal.state_index_intrinsics(0, **oi)
+        core_sd = [float(np.sqrt(max(cov[i0 + k, i0 + k], 0)) * scale[i0 + k]) for k in range(4)]
+    except Exception:                                  # noqa: BLE001 — optional figure
+        core_sd = None
     out = {"lensmodel": lensmodel, "intrinsics": [float(v) for v in intrinsics], "imagersize": [W, H],
+           "intrinsics_core_stdev": core_sd,
            "rms_px": float(np.sqrt(np.mean(np.sum(allr * allr, axis=-1)))),
            "observations": int(obs.shape[0]), "points": int(np.sum(ok)), "outliers": int(np.sum(~ok)),
            "images": images, "uncertainty": uncertainty(m, distance_mm)}
