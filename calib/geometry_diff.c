@@ -341,6 +341,16 @@ json_t *calib_geometry_crossvalidate(const calib_geometry_opts_t *o, calib_geome
     return ok ? r : NULL;
 }
 
+// "passes (ratio r)", "FAILS (ratio r)" or "was not done: why".
+static void xv_words(const json_t *r, char *out, size_t n)
+{
+    if (!json_is_true(json_object_get(r, "done")))
+        snprintf(out, n, "was not done: %s", json_string_value(json_object_get(r, "why")));
+    else
+        snprintf(out, n, "%s (ratio %.2f)", json_is_true(json_object_get(r, "pass")) ? "passes" : "FAILS",
+                 json_number_value(json_object_get(r, "ratio")));
+}
+
 static double xv_ratio(const json_t *r)
 {
     return json_is_true(json_object_get(r, "done")) ? json_number_value(json_object_get(r, "ratio")) : NAN;
@@ -383,20 +393,21 @@ static bool choose_lens(const calib_geometry_opts_t *o, calib_geometry_state_t *
         double rs = sp ? xv_ratio(sp) : NAN;
         bool lean_ok = lean_xv && rb <= CALIB_GEOMETRY_XV_MAX_RATIO, spl_ok = !(rs > CALIB_GEOMETRY_XV_MAX_RATIO);
         bool take = !lean_ok && (spl_ok || !(rs >= rl));
-        if (lean_ok)
-            snprintf(why, sizeof why, "%s kept: its cross-validation passes (ratio %.2f) and it agrees with the "
-                     "splined fit of the same views (ratio %.2f <= %.1f)", leanname, rl, rb,
-                     CALIB_GEOMETRY_XV_MAX_RATIO);
-        else
-            snprintf(why, sizeof why, "%s %s: the lean %s %s (cross-validation ratio %.2f, against the splined fit "
-                     "%.2f; criterion <= %.1f); the splined model's cross-validation %s (ratio %.2f)%s",
-                     take ? spl : leanname, take ? "chosen" : "kept", leanname,
-                     lean_xv ? "departs from the splined fit of the same views" : "fails its cross-validation", rl,
-                     rb, CALIB_GEOMETRY_XV_MAX_RATIO, spl_ok ? "passes" : "FAILS too", rs,
-                     spl_ok ? "" : take ? "; kept as the smaller ratio" : "; the lean model kept as the smaller "
-                                                                          "ratio");
+        char xl[400], xs[400];
+        xv_words(lean, xl, sizeof xl);
+        if (sp) xv_words(sp, xs, sizeof xs);
+        char *w = lean_ok
+            ? g_strdup_printf("%s kept: its cross-validation %s, and it agrees with the splined fit of the same views "
+                              "(ratio %.2f <= %.1f)", leanname, xl, rb, CALIB_GEOMETRY_XV_MAX_RATIO)
+            : g_strdup_printf("%s %s: the lean %s's cross-validation %s, against the splined fit of the same views "
+                              "ratio %.2f (criterion <= %.1f); the splined model's cross-validation %s%s",
+                              take ? spl : leanname, take ? "chosen" : "kept", leanname, xl, rb,
+                              CALIB_GEOMETRY_XV_MAX_RATIO, sp ? xs : "not run",
+                              spl_ok ? "" : take ? "; kept as the smaller ratio" : "; the lean model kept as the "
+                                                                                   "smaller ratio");
         json_object_set_new(choice, "chosen", json_string(take ? spl : leanname));
-        json_object_set_new(choice, "why", json_string(why));
+        json_object_set_new(choice, "why", json_string(w));
+        g_free(w);
         if (take) {
             json_decref(s->sol);
             s->sol = ssol;

@@ -940,7 +940,7 @@ static double xv_num(json_t *r, const char *key)
 // noise, --lensmodel auto: the lean model's halves agree within their predicted
 // uncertainty (ratio below 1), it agrees with the splined fit of the same views,
 // and it is kept; the figures are in geometry.json.
-TEST(calib_geometry_crossvalidation_matched)
+TEST_LONG(calib_geometry_crossvalidation_matched)
 {
     mrcal_cameramodel_t *t = mrcal_read_cameramodel_file(truth_model());
     CHECK(t != NULL);
