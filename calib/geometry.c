@@ -765,6 +765,12 @@ static bool axj_match(const calib_geometry_view_t *v, model_camera_t *cam, int g
 }
 
 
+static int cmp_double(const void *a, const void *b)
+{
+    double x = *(const double *)a, y = *(const double *)b;
+    return (x > y) - (x < y);
+}
+
 // Axis-frame vectors across a0.
 static void axj_frame(const double a0[3], double e1[3], double e2[3])
 {
@@ -778,8 +784,8 @@ static void axj_frame(const double a0[3], double e1[3], double e2[3])
 
 // One group's views into the problem (w: its n views, filled); false + message.
 static bool axj_group(lsq_problem_t *p, calib_geometry_view_t **l, int n, int gridn, double square_mm,
-                      model_camera_t *cam, double sigma_px, axj_view_t *frame, double *axp, double *rt_g,
-                      axj_view_t *w, int *nused)
+                      model_camera_t *cam, double sigma_px, axj_view_t *frame, double *rt_g, axj_view_t *w,
+                      int *nused)
 {
     int N = gridn * gridn;
     memcpy(rt_g, l[0]->rt_cam_board, 6 * sizeof(double));
@@ -800,17 +806,73 @@ static bool axj_group(lsq_problem_t *p, calib_geometry_view_t **l, int n, int gr
             w[i].n = 0;
             continue;
         }
-        double *blocks[2] = { axp, rt_g };
-        if (!lsq_add_residual(p, axj_residual, &w[i], 2 * N, 2, blocks, LSQ_LOSS_NONE, 0)) return false;
         (*nused)++;
     }
     return true;
 }
 
-bool calib_geometry_refine_axis(calib_geometry_views_t *vs, int gridn, double square_mm, model_camera_t *cam,
-                                double sigma_px, calib_geometry_axis_t *ax)
+// The prepared views' residuals into the problem, but for those the closed
+// form's start does not explain (corner RMS above 10 x the views' median, at
+// least 2 px: a frame of another angle than its journal says, which the
+// closed form's check of the turn's size alone lets through when the sign is
+// wrong); those are marked unsolved and named. false + message.
+static bool axj_add(lsq_problem_t *p, int ng, const int *cnt, axj_view_t **ws, calib_geometry_view_t ***lists,
+                    double *axp, double *rt, double sigma_px, int *nused)
 {
-    if (!ax->ok || !(sigma_px > 0)) return false;
+    double *rv = calloc(*nused + 1, sizeof *rv), *sorted = calloc(*nused + 1, sizeof *sorted);
+    int nr = 0;
+    for (int g = 0; rv && sorted && g < ng; g++)
+        for (int i = 0; ws[g] && i < cnt[g]; i++) {
+            if (!ws[g][i].n) continue;
+            double *res = malloc(2 * ws[g][i].n * sizeof *res), ss = 0;
+            if (res && axj_eval(&ws[g][i], axp, &rt[6 * g], res))
+                for (int k = 0; k < 2 * ws[g][i].n; k++) ss += res[k] * res[k];
+            else
+                ss = INFINITY;
+            free(res);
+            rv[nr] = sorted[nr] = sqrt(ss / ws[g][i].n) * sigma_px;
+            nr++;
+        }
+    qsort(sorted, nr, sizeof *sorted, cmp_double);
+    double med = nr ? sorted[nr / 2] : 0, limit = fmax(2.0, 10 * med);
+    bool ok = rv && sorted;
+    nr = 0;
+    *nused = 0;
+    for (int g = 0; ok && g < ng; g++)
+        for (int i = 0; ok && ws[g] && i < cnt[g]; i++) {
+            if (!ws[g][i].n) continue;
+            if (rv[nr] > limit) {
+                fprintf(stderr, "refl calib geometry: %s: its corners are %.1f px RMS from its group's board turned "
+                        "to its turntable angle (%.3f deg; the views' median %.3f px): left out of the axis fit\n",
+                        lists[g][i]->name, rv[nr], lists[g][i]->angle_deg, med);
+                snprintf(lists[g][i]->why, sizeof lists[g][i]->why, "left out of the axis fit: its corners %.1f px "
+                         "RMS from the board turned to its turntable angle (another angle than its journal says?)",
+                         rv[nr]);
+                lists[g][i]->solved = false;
+                ws[g][i].n = 0;
+            } else {
+                double *blocks[2] = { axp, &rt[6 * g] };
+                ok = lsq_add_residual(p, axj_residual, &ws[g][i], 2 * ws[g][i].n, 2, blocks, LSQ_LOSS_NONE, 0);
+                (*nused)++;
+            }
+            nr++;
+        }
+    for (int g = 0; ok && g < ng; g++) {   // a group left without views: its pose held (no residual sees it)
+        bool any = false;
+        for (int i = 0; ws[g] && i < cnt[g]; i++) any = any || ws[g][i].n > 0;
+        if (ws[g] && !any) ok = lsq_set_fixed(p, &rt[6 * g], NULL);
+    }
+    free(rv);
+    free(sorted);
+    return ok;
+}
+
+// One joint fit of the views group_views gives; *worst: the view of the
+// largest corner RMS (px) *wrms, *med the views' median RMS.
+static bool refine_once(calib_geometry_views_t *vs, int gridn, double square_mm, model_camera_t *cam,
+                        double sigma_px, calib_geometry_axis_t *ax, calib_geometry_view_t **worst, double *wrms,
+                        double *med)
+{
     double a0[3], c0[3], e1[3], e2[3], axp[4] = { 0 };
     memcpy(a0, ax->a, sizeof a0);
     memcpy(c0, ax->c, sizeof c0);
@@ -827,9 +889,10 @@ bool calib_geometry_refine_axis(calib_geometry_views_t *vs, int gridn, double sq
         cnt[g] = group_views(vs, g, &lists[g]);
         if (cnt[g] < 2) continue;
         ws[g] = calloc(cnt[g], sizeof *ws[g]);
-        ok = axj_group(p, lists[g], cnt[g], gridn, square_mm, cam, sigma_px, &frame, axp, &rt[6 * g], ws[g], &nused);
+        ok = axj_group(p, lists[g], cnt[g], gridn, square_mm, cam, sigma_px, &frame, &rt[6 * g], ws[g], &nused);
         if (g0 < 0 && fabs(vs->group_tilt[g]) < 1e-9) g0 = g;
     }
+    if (ok) ok = axj_add(p, ng, cnt, ws, lists, axp, rt, sigma_px, &nused);
     if (ok && nused < 3) {
         model_error_set(NULL, 0, "the joint axis fit needs 3 views with matched corners, %d have them", nused);
         ok = false;
@@ -862,6 +925,29 @@ bool calib_geometry_refine_axis(calib_geometry_views_t *vs, int gridn, double sq
             ax->rig_x_unc_deg = sqrt(k2 * fmax(vr, 0)) / DEG;
             ax->rig_origin_along_mm = sqrt(k2 * fmax(vt, 0));
         }
+        double *rv = calloc(nused + 1, sizeof *rv);
+        int nr = 0;
+        *worst = NULL;
+        *wrms = 0;
+        for (int g = 0; rv && g < ng; g++)   // each view's corner RMS
+            for (int i = 0; ws[g] && i < cnt[g]; i++) {
+                if (!ws[g][i].n) continue;
+                double *res = malloc(2 * ws[g][i].n * sizeof *res), ss = 0;
+                if (res && axj_eval(&ws[g][i], axp, &rt[6 * g], res))
+                    for (int k = 0; k < 2 * ws[g][i].n; k++) ss += res[k] * res[k];
+                else
+                    ss = INFINITY;
+                free(res);
+                rv[nr] = sqrt(ss / ws[g][i].n) * sigma_px;
+                if (rv[nr] > *wrms) {
+                    *wrms = rv[nr];
+                    *worst = lists[g][i];
+                }
+                nr++;
+            }
+        qsort(rv, nr, sizeof *rv, cmp_double);
+        *med = nr ? rv[nr / 2] : 0;
+        free(rv);
         for (int g = 0; g < ng; g++)   // the poses as the fit has them: turned about the axis
             for (int i = 0; ws[g] && i < cnt[g]; i++) {
                 double R[9], t[3];
@@ -884,6 +970,51 @@ bool calib_geometry_refine_axis(calib_geometry_views_t *vs, int gridn, double sq
     free(cnt);
     free(rt);
     lsq_problem_free(p);
+    return ok;
+}
+
+bool calib_geometry_refine_axis(calib_geometry_views_t *vs, int gridn, double square_mm, model_camera_t *cam,
+                                double sigma_px, calib_geometry_axis_t *ax)
+{
+    if (!ax->ok || !(sigma_px > 0)) return false;
+    // the closed form and mrcal's poses: every attempt starts from them
+    calib_geometry_axis_t ax0 = *ax;
+    guint n = vs->v->len;
+    double *rt0 = malloc((size_t)6 * (n ? n : 1) * sizeof *rt0);
+    for (guint k = 0; k < n; k++)
+        memcpy(&rt0[6 * k], ((calib_geometry_view_t *)g_ptr_array_index(vs->v, k))->rt_cam_board, 6 * sizeof *rt0);
+    bool ok = false, failed = false;
+    for (int attempt = 0; attempt < 10; attempt++) {
+        *ax = ax0;
+        for (guint k = 0; k < n; k++)
+            memcpy(((calib_geometry_view_t *)g_ptr_array_index(vs->v, k))->rt_cam_board, &rt0[6 * k],
+                   6 * sizeof *rt0);
+        calib_geometry_view_t *worst = NULL;
+        double wrms = 0, med = 0;
+        if (!(ok = refine_once(vs, gridn, square_mm, cam, sigma_px, ax, &worst, &wrms, &med))) {
+            failed = true;
+            break;
+        }
+        // a view the turns about the axis do not explain (a frame of another angle than its journal says, a
+        // board moved between frames) leaves, and the fit is done again without it
+        double limit = fmax(0.5, 5 * med);
+        if (!worst || wrms <= limit) break;
+        fprintf(stderr, "refl calib geometry: %s: its corners are %.2f px RMS from the joint axis fit (the views' "
+                "median %.3f px): its board is not where the turntable's angle puts it; left out of the axis fit\n",
+                worst->name, wrms, med);
+        snprintf(worst->why, sizeof worst->why, "left out of the joint axis fit: its corners %.2f px RMS from the "
+                 "board turned to its turntable angle", wrms);
+        worst->solved = false;
+        ok = false;
+    }
+    if (!ok) {
+        *ax = ax0;
+        for (guint k = 0; k < n; k++)
+            memcpy(((calib_geometry_view_t *)g_ptr_array_index(vs->v, k))->rt_cam_board, &rt0[6 * k],
+                   6 * sizeof *rt0);
+        if (!failed) model_error_set(NULL, 0, "the joint axis fit did not settle (ten views left out one by one)");
+    }
+    free(rt0);
     return ok;
 }
 
