@@ -887,7 +887,7 @@ static bool refine_once(calib_geometry_views_t *vs, int gridn, double square_mm,
     bool ok = p && rt && lists && cnt && ws && lsq_add_parameters(p, axp, 4);
     for (int g = 0; ok && g < ng; g++) {
         cnt[g] = group_views(vs, g, &lists[g]);
-        if (cnt[g] < 2) continue;
+        if (cnt[g] < 1) continue;   // a group of one view: its pose only (the rig frame's sigma from it)
         ws[g] = calloc(cnt[g], sizeof *ws[g]);
         ok = axj_group(p, lists[g], cnt[g], gridn, square_mm, cam, sigma_px, &frame, &rt[6 * g], ws[g], &nused);
         if (g0 < 0 && fabs(vs->group_tilt[g]) < 1e-9) g0 = g;
