@@ -1953,6 +1953,10 @@ static void report_crossvalidation(FILE *f, const calib_geometry_state_t *s)
     json_decref(all);
     model_html_table(f, "comparison|difference RMS / worst (px)|predicted s0 + s1 RMS / worst (px)|ratio|verdict",
                      (const char *const *)rows->pdata, (int)rows->len);
+    char *png = g_strdup_printf("%s/crossvalidation.png", s->outdir);
+    if (access(png, R_OK) == 0)
+        model_html_figure(f, "crossvalidation.png", "|difference| / (s0 + s1) over the imager (first camera)");
+    g_free(png);
     g_ptr_array_free(rows, TRUE);
     model_html_para(f, "Lens model: %s.",
                     json_string_value(json_object_get(json_object_get(x, "lens_choice"), "why")));

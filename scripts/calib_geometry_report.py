@@ -32,7 +32,10 @@
 #       The report's figures (PNG): residual vectors over the imager,
 #       residual histogram, RMS per image, projection uncertainty map, the
 #       turntable axis fit (the rotation angle of each board pose about the
-#       fitted axis against the turntable angle).
+#       fitted axis against the turntable angle), the cross-validation's
+#       |difference| / (s0 + s1) maps (crossvalidation.png).
+#   compare MODEL_A MODEL_B OUT.json DISTANCE_MM
+#       Two models of one lens differenced over A's imager (see compare()).
 import json
 import sys
 
@@ -384,6 +387,26 @@ def plots(geometry_path, solution_path, outdir):
         ax.set_title(f"projection uncertainty at {u['distance_mm']:g} mm (worst direction, 1 sigma)")
         fig.tight_layout()
         fig.savefig(f"{outdir}/uncertainty.png", dpi=90)
+        plt.close(fig)
+    # cross-validation: each comparison's |difference| / (s0 + s1) over the imager
+    xv = g.get("cross_validation") or {}
+    comps = [(r.get("lensmodel", ""), c) for r in xv.get("runs", []) if r.get("done") for c in r.get("cameras", [])[:1]]
+    comps += [("lean against splined", c) for c in (xv.get("lean_vs_splined") or {}).get("cameras", [])[:1]]
+    comps = [(n, json.load(open(c["details"]))) for n, c in comps if c.get("details")]
+    if comps:
+        fig, axs = plt.subplots(1, len(comps), figsize=(6 * len(comps), 4.6), squeeze=False)
+        for a, (name, c) in zip(axs[0], comps):
+            ratio = np.array(c["diff_px"]) / np.array(c["predicted_px"])
+            im = a.imshow(ratio, extent=(c["grid_x_px"][0], c["grid_x_px"][-1], c["grid_y_px"][-1], c["grid_y_px"][0]),
+                          cmap="viridis", vmin=0, vmax=3, interpolation="nearest")
+            a.contour(np.array(c["grid_x_px"]), np.array(c["grid_y_px"]), np.array(c["observed_mask"]), levels=[0.5],
+                      colors="w", linewidths=0.8)
+            short = name.replace("LENSMODEL_", "").split("_order")[0]
+            a.set_title(f"{short}: ratio RMS {c['observed']['ratio_rms']:.2f} (judged inside the white line)",
+                        fontsize=9)
+            fig.colorbar(im, ax=a, label="|difference| / (s0 + s1)")
+        fig.tight_layout()
+        fig.savefig(f"{outdir}/crossvalidation.png", dpi=90)
         plt.close(fig)
     # axis fit
     ax_ = g.get("axis")
