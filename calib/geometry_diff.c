@@ -319,18 +319,26 @@ json_t *calib_geometry_crossvalidate(const calib_geometry_opts_t *o, calib_geome
         json_object_set_new(r, "why", json_string(why));
         fprintf(stderr, "refl calib geometry: no cross-validation: %s\n", why);
     }
+    // a half that cannot be solved or compared is said, not fatal: the calibration of all the views stands
     for (int h = 0; ok && !why[0] && h < 2; h++) {
         json_t *sol = NULL;
         fprintf(stderr, "refl calib geometry: cross-validation of %s, half %d\n", lensmodel, h);
-        ok = calib_geometry_mrcal(o, s, lensmodel, hc[h], hd[h], n[h], &sol);
+        if (!calib_geometry_mrcal(o, s, lensmodel, hc[h], hd[h], n[h], &sol))
+            snprintf(why, sizeof why, "half %d could not be solved: %.250s", h, model_last_error());
         json_decref(sol);
     }
     if (ok && !why[0]) {
         json_object_set_new(r, "done", json_true());
-        ok = compare_cameras(s, hd[0], hd[1], tag, o->distance_mm, r);
+        if (!compare_cameras(s, hd[0], hd[1], tag, o->distance_mm, r))
+            snprintf(why, sizeof why, "the halves could not be compared: %.250s", model_last_error());
         char what[300];
         snprintf(what, sizeof what, "cross-validation of %s (halves of %d and %d views)", lensmodel, n[0], n[1]);
-        if (ok) xv_print(what, r);
+        if (!why[0]) xv_print(what, r);
+    }
+    if (ok && why[0] && !json_is_false(json_object_get(r, "done"))) {
+        json_object_set_new(r, "done", json_false());
+        json_object_set_new(r, "why", json_string(why));
+        fprintf(stderr, "refl calib geometry: no cross-validation of %s: %s\n", lensmodel, why);
     }
     for (int h = 0; h < 2; h++) {
         g_free(hc[h]);
@@ -379,8 +387,20 @@ static bool choose_lens(const calib_geometry_opts_t *o, calib_geometry_state_t *
     }
     char *sdir = g_strdup_printf("%s/splined", s->mdir);
     json_t *ssol = NULL, *bias = json_pack("{s:s,s:s}", "a", leanname, "b", spl);
-    bool ok = calib_geometry_mrcal(o, s, spl, s->solvecorners, sdir, s->nfound, &ssol) &&
-              compare_cameras(s, s->mdir, sdir, "lean-splined", o->distance_mm, bias);
+    if (!calib_geometry_mrcal(o, s, spl, s->solvecorners, sdir, s->nfound, &ssol) ||
+        !compare_cameras(s, s->mdir, sdir, "lean-splined", o->distance_mm, bias)) {
+        char *w = g_strdup_printf("%s kept: the splined model could not be fitted or compared (%s)%s", leanname,
+                                  model_last_error(), lean_xv ? "" : "; its cross-validation FAILS");
+        fprintf(stderr, "refl calib geometry: %s\n", w);
+        json_object_set_new(choice, "chosen", json_string(leanname));
+        json_object_set_new(choice, "why", json_string(w));
+        g_free(w);
+        json_decref(bias);
+        json_decref(ssol);
+        g_free(sdir);
+        return true;
+    }
+    bool ok = true;
     json_object_set_new(x, "lean_vs_splined", bias);
     if (ok) xv_print("the lean model against the splined fit of the same views", bias);
     double rb = json_number_value(json_object_get(bias, "ratio"));
