@@ -1800,7 +1800,8 @@ static json_t *axis_json(const calib_geometry_state_t *s)
         json_object_set_new(aj, "uncertainty_note", json_string("1-sigma from the joint fit's covariance (corner "
                             "noise = mrcal's RMS residual / sqrt 2), scaled by chi^2/dof when above 1; the point: "
                             "RMS distance across the axis; the direction (in the camera frame) also carries the "
-                            "principal point's 1-sigma from mrcal's solve (hypot(s_cx / fx, s_cy / fy)) in quadrature"));
+                            "principal point's 1-sigma from mrcal's solve (hypot(s_cx / fx, s_cy / fy)) in "
+                            "quadrature"));
         json_object_set_new(aj, "joint_views", json_integer(ax->joint_views));
         json_object_set_new(aj, "direction_uncertainty_fit_deg", json_real(ax->dir_unc_fit_deg));
         json_object_set_new(aj, "direction_uncertainty_intrinsics_deg", isfinite(ax->dir_unc_intrinsics_deg)
@@ -1966,7 +1967,8 @@ bool calib_geometry_report(const calib_geometry_opts_t *o, const calib_geometry_
 {
     const calib_geometry_axis_t *ax = &s->axis;
     json_t *sol = s->sol, *intr = json_object_get(sol, "intrinsics");
-    char *solpath = g_strdup_printf("%s/solution.json", s->soldir), *hpath = g_strdup_printf("%s/report.html", s->outdir);
+    char *solpath = g_strdup_printf("%s/solution.json", s->soldir);
+    char *hpath = g_strdup_printf("%s/report.html", s->outdir);
     fprintf(stderr, "refl calib geometry: plots\n");
     bool ok = model_run_script("calib_geometry_report.py", "plots", jpath, solpath, s->outdir, NULL) == 0;
     FILE *f = ok ? model_html_begin(hpath, "refl calib geometry", s->prov) : NULL;

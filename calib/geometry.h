@@ -280,7 +280,7 @@ bool calib_geometry_report(const calib_geometry_opts_t *o, const calib_geometry_
 // uncertainty of each half, worst direction; two independent estimates with
 // per-axis sigma s differ by sqrt(2 (s0^2 + s1^2)) RMS, = s0 + s1 when
 // s0 = s1). Judged where the views were: the grid points within one grid step
-// of a corner either half observed. A model fails when the RMS over those
+// of a corner each half observed. A model fails when the RMS over those
 // points of diff / (s0 + s1) exceeds CALIB_GEOMETRY_XV_MAX_RATIO.
 //
 // --lensmodel auto: the lean model (CALIB_GEOMETRY_LEAN_LENSMODEL) is solved

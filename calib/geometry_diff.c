@@ -286,7 +286,8 @@ static void xv_print(const char *what, const json_t *r)
     json_t *c0 = json_array_get(json_object_get(r, "cameras"), 0), *f = json_object_get(c0, "observed");
     fprintf(stderr, "refl calib geometry: %s: differ by RMS %.4f px (worst %.4f) where the views were, predicted "
             "s0 + s1 RMS %.4f px (worst %.4f); ratio %.2f: %s (criterion: ratio <= %.1f)\n", what,
-            json_number_value(json_object_get(f, "diff_rms_px")), json_number_value(json_object_get(f, "diff_worst_px")),
+            json_number_value(json_object_get(f, "diff_rms_px")),
+            json_number_value(json_object_get(f, "diff_worst_px")),
             json_number_value(json_object_get(f, "predicted_rms_px")),
             json_number_value(json_object_get(f, "predicted_worst_px")),
             json_number_value(json_object_get(r, "ratio")),
@@ -452,9 +453,9 @@ bool calib_geometry_validate_lens(const calib_geometry_opts_t *o, calib_geometry
     json_array_append_new(runs, lean);
     json_object_set_new(x, "runs", runs);
     json_object_set_new(x, "criterion", json_sprintf(
-        "a lens model fails when, over the grid points within one grid step of an observed corner, the RMS of "
-        "|difference| / (s0 + s1) exceeds %.1f (s: mrcal's worst-direction projection standard deviation of each "
-        "model at distance_mm)", CALIB_GEOMETRY_XV_MAX_RATIO));
+        "a lens model fails when, over the grid points within one grid step of a corner each model observed, the "
+        "RMS of |difference| / (s0 + s1) exceeds %.1f (s: mrcal's worst-direction projection standard deviation of "
+        "each model at distance_mm)", CALIB_GEOMETRY_XV_MAX_RATIO));
     json_object_set_new(x, "method", json_string(
         "halves: alternate frames of the corners file; each solved alone; the difference over a 33 x 27 grid "
         "after the rigid transform between the camera frames fitted with weights 1 / (s0^2 + s1^2)"));

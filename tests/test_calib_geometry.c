@@ -929,7 +929,10 @@ TEST(calib_geometry_tilts_2cam_example)
 
 // --- cross-validation and --lensmodel auto ---------------------------------
 
-static json_t *xv_run(json_t *g, int k) { return json_array_get(json_object_get(json_object_get(g, "cross_validation"), "runs"), k); }
+static json_t *xv_run(json_t *g, int k)
+{
+    return json_array_get(json_object_get(json_object_get(g, "cross_validation"), "runs"), k);
+}
 static double xv_num(json_t *r, const char *key)
 {
     json_t *c0 = json_array_get(json_object_get(r, "cameras"), 0);
@@ -1095,7 +1098,8 @@ TEST(calib_geometry_splined_camera_roundtrip)
         }
     CHECK(model_camera_unproject(cam, q, N, dir));
     model_vec3_t c = model_camera_centre_world(cam);
-    for (int k = 0; k < N; k++) p[k] = (model_vec3_t){ c.x + 900 * dir[k].x, c.y + 900 * dir[k].y, c.z + 900 * dir[k].z };
+    for (int k = 0; k < N; k++)
+        p[k] = (model_vec3_t){ c.x + 900 * dir[k].x, c.y + 900 * dir[k].y, c.z + 900 * dir[k].z };
     CHECK(model_camera_project(cam, p, N, q2));
     double worst = 0;
     for (int k = 0; k < N; k++) worst = fmax(worst, hypot(q2[2 * k] - q[2 * k], q2[2 * k + 1] - q[2 * k + 1]));
@@ -1114,7 +1118,8 @@ TEST(calib_geometry_splined_camera_roundtrip)
     double terr = -1;
     const model_vec3_t *tab = model_camera_ray_table(cam, &terr);
     CHECK(tab != NULL && terr >= 0 && terr < 0.01);
-    fprintf(stderr, "  splined camera: round trip %.2e px, against mrcal %.2e px, ray table %.4f px\n", worst, dm, terr);
+    fprintf(stderr, "  splined camera: round trip %.2e px, against mrcal %.2e px, ray table %.4f px\n", worst, dm,
+            terr);
     model_camera_free(cam);
     free(m);
 }
