@@ -415,6 +415,27 @@ TEST_LONG(calib_geometry_virtual_rig)
         CHECK(json_real_value(json_object_get(g, "rms_residual_px")) < 0.5);
         CHECK(json_real_value(json_object_get(ax, "direction_uncertainty_deg")) > 0);
         CHECK(json_is_array(json_object_get(g, "rt_cam_rig")));
+        // the matched lens cross-validates: the halves agree within their predicted s0 + s1; the axis was
+        // fitted jointly with the board poses and states the rig frame's sigma
+        json_t *xv = json_array_get(json_object_get(json_object_get(g, "cross_validation"), "runs"), 0);
+        json_t *xo = json_object_get(json_array_get(json_object_get(xv, "cameras"), 0), "observed");
+        fprintf(stderr, "  virtual rig cross-validation (halves of %lld and %lld views): RMS %.4f px (worst %.4f), "
+                "predicted %.4f (worst %.4f), ratio %.2f; axis: %s, joint corner RMS %.4f px, rig frame sigma: z "
+                "%.4f deg, origin across the axis %.3f mm\n",
+                json_integer_value(json_array_get(json_object_get(xv, "views_per_half"), 0)),
+                json_integer_value(json_array_get(json_object_get(xv, "views_per_half"), 1)),
+                json_number_value(json_object_get(xo, "diff_rms_px")),
+                json_number_value(json_object_get(xo, "diff_worst_px")),
+                json_number_value(json_object_get(xo, "predicted_rms_px")),
+                json_number_value(json_object_get(xo, "predicted_worst_px")),
+                json_number_value(json_object_get(xv, "ratio")), json_string_value(json_object_get(ax, "method")),
+                json_number_value(json_object_get(ax, "joint_rms_residual_px")),
+                json_number_value(json_object_get(json_object_get(ax, "rig_frame_sigma"), "z_direction_deg")),
+                json_number_value(json_object_get(json_object_get(ax, "rig_frame_sigma"), "origin_across_axis_mm")));
+        CHECK(json_is_true(json_object_get(xv, "done")));
+        CHECK(json_is_true(json_object_get(xv, "pass")));
+        CHECK_CONTAINS(json_string_value(json_object_get(ax, "method")), "jointly");
+        CHECK(json_number_value(json_object_get(ax, "joint_rms_residual_px")) < 0.5);
         // every image without a board is named with a reason, in the JSON and on stderr
         json_t *miss = json_object_get(g, "images_without_board");
         size_t i;
