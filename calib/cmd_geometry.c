@@ -44,6 +44,9 @@
     "either, LENSMODEL_SPLINED_STEREOGRAPHIC (order 3, ~70 px per knot, the knots covering the\n"          \
     "imager with 10 % margin) is cross-validated and kept when it passes. geometry.json's\n"              \
     "cross_validation has the figures and the choice; the report says which and why.\n"                   \
+    "The axis: fitted with the board poses as turns of one pose per tilt about it, to the corners;\n"    \
+    "a frame those turns do not explain is left out and named; its 1-sigma and the rig frame's\n"         \
+    "(axis.rig_frame_sigma) in geometry.json.\n"                                                          \
     "Exit: 0 done, 1 error, 2 usage, 3 paused."
 
 // A number option within [lo, hi] (whole when integer), with the command's own message.
