@@ -45,6 +45,7 @@
 #include "calib/calib.h"
 #include "calib/export.h"
 #include "calib/geometry.h"
+#include "model/lsq.h"
 #include "model/model.h"
 #include "model/report.h"
 
@@ -639,6 +640,387 @@ bool calib_geometry_fit_axis(calib_geometry_views_t *vs, int gridn, double squar
     return true;
 }
 
+// ---------------------------------------------------------------------------
+// The axis refined jointly with the board poses (calib_geometry_refine_axis)
+//
+// Each tilt group's board has one pose P_g (at its first view's angle); view
+// v of the group sees it turned about the axis by its turntable angle step:
+// X = Rot(a, dtheta_v) (P_g(b) - c) + c. The axis (a: a0 + u e1 + v e2
+// normalised; c: c0 + s e1 + t e2, e1, e2 across a0) and every P_g are fitted
+// to the corners each view observed (projected with the solved camera, fixed),
+// residuals in units of the per-axis corner noise (mrcal's RMS / sqrt 2). The
+// Jacobians are central differences (10 parameters a view).
+
+typedef struct {
+    model_camera_t *cam;
+    const double   *a0, *e1, *e2, *c0;   // the axis frame (closed-form axis)
+    double          dtheta;              // rad: the view's angle minus its group's first
+    int             n;                   // corners
+    model_vec3_t   *b;                   // the board point of each observed corner
+    double         *q;                   // observed corners (2 n)
+    double          inv_sigma;
+    model_vec3_t   *x;                   // scratch (n)
+    double         *qp;                  // scratch (2 n)
+} axj_view_t;
+
+static void axj_axis(const axj_view_t *w, const double *p, double a[3], double c[3])
+{
+    for (int k = 0; k < 3; k++) {
+        a[k] = w->a0[k] + p[0] * w->e1[k] + p[1] * w->e2[k];
+        c[k] = w->c0[k] + p[2] * w->e1[k] + p[3] * w->e2[k];
+    }
+    double n = norm3(a);
+    for (int k = 0; k < 3; k++) a[k] /= n;
+}
+
+// The view's board pose: R, t of rt_g turned by dtheta about the axis p.
+static void axj_pose(const axj_view_t *w, const double *p, const double *rt_g, double R[9], double t[3])
+{
+    double a[3], c[3], Rg[9], Rot[9], d[3];
+    axj_axis(w, p, a, c);
+    double r[3] = { w->dtheta * a[0], w->dtheta * a[1], w->dtheta * a[2] };
+    R_from_r(Rot, r);
+    R_from_r(Rg, rt_g);
+    mat_mul(R, Rot, Rg);
+    for (int k = 0; k < 3; k++) d[k] = rt_g[3 + k] - c[k];
+    mat_vec(t, Rot, d);
+    for (int k = 0; k < 3; k++) t[k] += c[k];
+}
+
+static bool axj_eval(const axj_view_t *w, const double *p, const double *rt_g, double *res)
+{
+    double R[9], t[3];
+    axj_pose(w, p, rt_g, R, t);
+    for (int i = 0; i < w->n; i++) {
+        double b[3] = { w->b[i].x, w->b[i].y, w->b[i].z }, x[3];
+        mat_vec(x, R, b);
+        w->x[i] = (model_vec3_t){ x[0] + t[0], x[1] + t[1], x[2] + t[2] };
+        if (!(w->x[i].z > 0)) return false;
+    }
+    if (!model_camera_project(w->cam, w->x, w->n, w->qp)) return false;
+    for (int i = 0; i < 2 * w->n; i++) {
+        res[i] = (w->qp[i] - w->q[i]) * w->inv_sigma;
+        if (!isfinite(res[i])) return false;
+    }
+    return true;
+}
+
+static bool axj_residual(void *ctx, const double *const *params, double *res, double **J)
+{
+    const axj_view_t *w = ctx;
+    if (!axj_eval(w, params[0], params[1], res)) return false;
+    if (!J) return true;
+    int nr = 2 * w->n, sizes[2] = { 4, 6 };
+    double *rp = malloc(2 * nr * sizeof *rp), *rm = rp + nr, pp[2][6];
+    bool ok = rp != NULL;
+    for (int blk = 0; ok && blk < 2; blk++) {
+        if (!J[blk]) continue;
+        for (int i = 0; ok && i < sizes[blk]; i++) {
+            memcpy(pp[0], params[0], 4 * sizeof(double));
+            memcpy(pp[1], params[1], 6 * sizeof(double));
+            double h = (blk == 0 ? i < 2 : i < 3) ? 1e-7 : 1e-4;   // rad or mm
+            pp[blk][i] += h;
+            ok = axj_eval(w, pp[0], pp[1], rp);
+            pp[blk][i] -= 2 * h;
+            ok = ok && axj_eval(w, pp[0], pp[1], rm);
+            for (int r = 0; ok && r < nr; r++) J[blk][r * sizes[blk] + i] = (rp[r] - rm[r]) / (2 * h);
+        }
+    }
+    free(rp);
+    return ok;
+}
+
+// The board point each observed corner of v is (nearest projection of the
+// grid under v's pose, within a third of the spacing, one to one); false when
+// they do not match.
+static bool axj_match(const calib_geometry_view_t *v, model_camera_t *cam, int gridn, double square_mm,
+                      model_vec3_t *b)
+{
+    int N = gridn * gridn;
+    model_vec3_t *p = malloc(N * sizeof *p);
+    double *qg = malloc(2 * N * sizeof *qg), R[9], spacing = INFINITY;
+    int *used = calloc(N, sizeof *used);
+    R_from_r(R, v->rt_cam_board);
+    for (int j = 0; j < N; j++) {
+        double bb[3] = { (j % gridn) * square_mm, (j / gridn) * square_mm, 0 }, x[3];
+        mat_vec(x, R, bb);
+        p[j] = (model_vec3_t){ x[0] + v->rt_cam_board[3], x[1] + v->rt_cam_board[4], x[2] + v->rt_cam_board[5] };
+    }
+    bool ok = model_camera_project(cam, p, N, qg);
+    for (int j = 1; ok && j < N; j++) spacing = fmin(spacing, hypot(qg[2 * j] - qg[0], qg[2 * j + 1] - qg[1]));
+    for (int i = 0; ok && i < N; i++) {
+        int best = -1;
+        double bd = INFINITY;
+        for (int j = 0; j < N; j++) {
+            double d = hypot(qg[2 * j] - v->q[2 * i], qg[2 * j + 1] - v->q[2 * i + 1]);
+            if (d < bd) {
+                bd = d;
+                best = j;
+            }
+        }
+        ok = best >= 0 && bd < spacing / 3 && !used[best]++;
+        if (ok) b[i] = (model_vec3_t){ (best % gridn) * square_mm, (best / gridn) * square_mm, 0 };
+    }
+    free(p);
+    free(qg);
+    free(used);
+    return ok;
+}
+
+
+static int cmp_double(const void *a, const void *b)
+{
+    double x = *(const double *)a, y = *(const double *)b;
+    return (x > y) - (x < y);
+}
+
+// Axis-frame vectors across a0.
+static void axj_frame(const double a0[3], double e1[3], double e2[3])
+{
+    double t[3] = { 1, 0, 0 };
+    if (fabs(a0[0]) > 0.8) t[0] = 0, t[1] = 1;
+    cross3(e1, a0, t);
+    double n = norm3(e1);
+    for (int k = 0; k < 3; k++) e1[k] /= n;
+    cross3(e2, a0, e1);
+}
+
+// One group's views into the problem (w: its n views, filled); false + message.
+static bool axj_group(lsq_problem_t *p, calib_geometry_view_t **l, int n, int gridn, double square_mm,
+                      model_camera_t *cam, double sigma_px, axj_view_t *frame, double *rt_g, axj_view_t *w,
+                      int *nused)
+{
+    int N = gridn * gridn;
+    memcpy(rt_g, l[0]->rt_cam_board, 6 * sizeof(double));
+    if (!lsq_add_parameters(p, rt_g, 6)) return false;
+    for (int i = 0; i < n; i++) {
+        w[i] = *frame;
+        w[i].cam = cam;
+        w[i].dtheta = wrap_deg(l[i]->angle_deg - l[0]->angle_deg) * DEG;
+        w[i].n = N;
+        w[i].b = malloc(N * sizeof *w[i].b);
+        w[i].x = malloc(N * sizeof *w[i].x);
+        w[i].qp = malloc(2 * N * sizeof *w[i].qp);
+        w[i].q = l[i]->q;
+        w[i].inv_sigma = 1 / sigma_px;
+        if (!l[i]->q || !axj_match(l[i], cam, gridn, square_mm, w[i].b)) {
+            fprintf(stderr, "refl calib geometry: %s: its corners do not match its pose; left out of the joint "
+                    "axis fit\n", l[i]->name);
+            w[i].n = 0;
+            continue;
+        }
+        (*nused)++;
+    }
+    return true;
+}
+
+// The prepared views' residuals into the problem, but for those the closed
+// form's start does not explain (corner RMS above 10 x the views' median, at
+// least 2 px: a frame of another angle than its journal says, which the
+// closed form's check of the turn's size alone lets through when the sign is
+// wrong); those are marked unsolved and named. false + message.
+static bool axj_add(lsq_problem_t *p, int ng, const int *cnt, axj_view_t **ws, calib_geometry_view_t ***lists,
+                    double *axp, double *rt, double sigma_px, int *nused)
+{
+    double *rv = calloc(*nused + 1, sizeof *rv), *sorted = calloc(*nused + 1, sizeof *sorted);
+    int nr = 0;
+    for (int g = 0; rv && sorted && g < ng; g++)
+        for (int i = 0; ws[g] && i < cnt[g]; i++) {
+            if (!ws[g][i].n) continue;
+            double *res = malloc(2 * ws[g][i].n * sizeof *res), ss = 0;
+            if (res && axj_eval(&ws[g][i], axp, &rt[6 * g], res))
+                for (int k = 0; k < 2 * ws[g][i].n; k++) ss += res[k] * res[k];
+            else
+                ss = INFINITY;
+            free(res);
+            rv[nr] = sorted[nr] = sqrt(ss / ws[g][i].n) * sigma_px;
+            nr++;
+        }
+    qsort(sorted, nr, sizeof *sorted, cmp_double);
+    double med = nr ? sorted[nr / 2] : 0, limit = fmax(2.0, 10 * med);
+    bool ok = rv && sorted;
+    nr = 0;
+    *nused = 0;
+    for (int g = 0; ok && g < ng; g++)
+        for (int i = 0; ok && ws[g] && i < cnt[g]; i++) {
+            if (!ws[g][i].n) continue;
+            if (rv[nr] > limit) {
+                fprintf(stderr, "refl calib geometry: %s: its corners are %.1f px RMS from its group's board turned "
+                        "to its turntable angle (%.3f deg; the views' median %.3f px): left out of the axis fit\n",
+                        lists[g][i]->name, rv[nr], lists[g][i]->angle_deg, med);
+                snprintf(lists[g][i]->why, sizeof lists[g][i]->why, "left out of the axis fit: its corners %.1f px "
+                         "RMS from the board turned to its turntable angle (another angle than its journal says?)",
+                         rv[nr]);
+                lists[g][i]->solved = false;
+                ws[g][i].n = 0;
+            } else {
+                double *blocks[2] = { axp, &rt[6 * g] };
+                ok = lsq_add_residual(p, axj_residual, &ws[g][i], 2 * ws[g][i].n, 2, blocks, LSQ_LOSS_NONE, 0);
+                (*nused)++;
+            }
+            nr++;
+        }
+    for (int g = 0; ok && g < ng; g++) {   // a group left without views: its pose held (no residual sees it)
+        bool any = false;
+        for (int i = 0; ws[g] && i < cnt[g]; i++) any = any || ws[g][i].n > 0;
+        if (ws[g] && !any) ok = lsq_set_fixed(p, &rt[6 * g], NULL);
+    }
+    free(rv);
+    free(sorted);
+    return ok;
+}
+
+// One joint fit of the views group_views gives; *worst: the view of the
+// largest corner RMS (px) *wrms, *med the views' median RMS.
+static bool refine_once(calib_geometry_views_t *vs, int gridn, double square_mm, model_camera_t *cam,
+                        double sigma_px, calib_geometry_axis_t *ax, calib_geometry_view_t **worst, double *wrms,
+                        double *med)
+{
+    double a0[3], c0[3], e1[3], e2[3], axp[4] = { 0 };
+    memcpy(a0, ax->a, sizeof a0);
+    memcpy(c0, ax->c, sizeof c0);
+    axj_frame(a0, e1, e2);
+    axj_view_t frame = { .a0 = a0, .e1 = e1, .e2 = e2, .c0 = c0 };
+    lsq_problem_t *p = lsq_problem_new();
+    int ng = vs->ngroups, nused = 0, g0 = -1;
+    double *rt = calloc((size_t)6 * (ng ? ng : 1), sizeof *rt);
+    calib_geometry_view_t ***lists = calloc(ng ? ng : 1, sizeof *lists);
+    int *cnt = calloc(ng ? ng : 1, sizeof *cnt);
+    axj_view_t **ws = calloc(ng ? ng : 1, sizeof *ws);
+    bool ok = p && rt && lists && cnt && ws && lsq_add_parameters(p, axp, 4);
+    for (int g = 0; ok && g < ng; g++) {
+        cnt[g] = group_views(vs, g, &lists[g]);
+        if (cnt[g] < 1) continue;   // a group of one view: its pose only (the rig frame's sigma from it)
+        ws[g] = calloc(cnt[g], sizeof *ws[g]);
+        ok = axj_group(p, lists[g], cnt[g], gridn, square_mm, cam, sigma_px, &frame, &rt[6 * g], ws[g], &nused);
+        if (g0 < 0 && fabs(vs->group_tilt[g]) < 1e-9) g0 = g;
+    }
+    if (ok) ok = axj_add(p, ng, cnt, ws, lists, axp, rt, sigma_px, &nused);
+    if (ok && nused < 3) {
+        model_error_set(NULL, 0, "the joint axis fit needs 3 views with matched corners, %d have them", nused);
+        ok = false;
+    }
+    lsq_summary_t sum = { 0 };
+    lsq_options_t lo = lsq_defaults();
+    lo.threads = 2;
+    if (ok) ok = lsq_solve(p, &lo, &sum);
+    double cov[16], cg[36];
+    if (ok) ok = lsq_covariance(p, axp, cov);
+    if (ok) {
+        int dof = sum.nresiduals - sum.nfree;
+        double chi2 = dof > 0 ? 2 * sum.final_cost / dof : 1, k2 = fmax(chi2, 1);
+        frame.cam = cam;
+        axj_axis(&frame, axp, ax->a, ax->c);
+        ax->joint = true;
+        ax->joint_views = nused;
+        ax->joint_rms_px = sqrt(2 * sum.final_cost / sum.nresiduals) * sigma_px;
+        ax->joint_chi2 = chi2;
+        ax->dir_unc_deg = sqrt(k2 * (cov[0] + cov[5])) / DEG;
+        ax->point_unc_mm = sqrt(k2 * (cov[10] + cov[15]));
+        ax->rig_x_unc_deg = ax->rig_origin_along_mm = NAN;
+        if (g0 >= 0 && lsq_covariance(p, &rt[6 * g0], cg)) {
+            double vr = 0, vt = 0;
+            for (int i = 0; i < 3; i++)
+                for (int j = 0; j < 3; j++) {
+                    vr += ax->a[i] * cg[i * 6 + j] * ax->a[j];
+                    vt += ax->a[i] * cg[(3 + i) * 6 + 3 + j] * ax->a[j];
+                }
+            ax->rig_x_unc_deg = sqrt(k2 * fmax(vr, 0)) / DEG;
+            ax->rig_origin_along_mm = sqrt(k2 * fmax(vt, 0));
+        }
+        double *rv = calloc(nused + 1, sizeof *rv);
+        int nr = 0;
+        *worst = NULL;
+        *wrms = 0;
+        for (int g = 0; rv && g < ng; g++)   // each view's corner RMS
+            for (int i = 0; ws[g] && i < cnt[g]; i++) {
+                if (!ws[g][i].n) continue;
+                double *res = malloc(2 * ws[g][i].n * sizeof *res), ss = 0;
+                if (res && axj_eval(&ws[g][i], axp, &rt[6 * g], res))
+                    for (int k = 0; k < 2 * ws[g][i].n; k++) ss += res[k] * res[k];
+                else
+                    ss = INFINITY;
+                free(res);
+                rv[nr] = sqrt(ss / ws[g][i].n) * sigma_px;
+                if (rv[nr] > *wrms) {
+                    *wrms = rv[nr];
+                    *worst = lists[g][i];
+                }
+                nr++;
+            }
+        qsort(rv, nr, sizeof *rv, cmp_double);
+        *med = nr ? rv[nr / 2] : 0;
+        free(rv);
+        for (int g = 0; g < ng; g++)   // the poses as the fit has them: turned about the axis
+            for (int i = 0; ws[g] && i < cnt[g]; i++) {
+                double R[9], t[3];
+                axj_pose(&ws[g][i], axp, &rt[6 * g], R, t);
+                r_from_R(lists[g][i]->rt_cam_board, R);
+                memcpy(&lists[g][i]->rt_cam_board[3], t, sizeof t);
+            }
+    }
+    for (int g = 0; g < ng; g++) {
+        for (int i = 0; ws && ws[g] && i < cnt[g]; i++) {
+            free(ws[g][i].b);
+            free(ws[g][i].x);
+            free(ws[g][i].qp);
+        }
+        if (ws) free(ws[g]);
+        if (lists) free(lists[g]);
+    }
+    free(ws);
+    free(lists);
+    free(cnt);
+    free(rt);
+    lsq_problem_free(p);
+    return ok;
+}
+
+bool calib_geometry_refine_axis(calib_geometry_views_t *vs, int gridn, double square_mm, model_camera_t *cam,
+                                double sigma_px, calib_geometry_axis_t *ax)
+{
+    if (!ax->ok || !(sigma_px > 0)) return false;
+    // the closed form and mrcal's poses: every attempt starts from them
+    calib_geometry_axis_t ax0 = *ax;
+    guint n = vs->v->len;
+    double *rt0 = malloc((size_t)6 * (n ? n : 1) * sizeof *rt0);
+    for (guint k = 0; k < n; k++)
+        memcpy(&rt0[6 * k], ((calib_geometry_view_t *)g_ptr_array_index(vs->v, k))->rt_cam_board, 6 * sizeof *rt0);
+    bool ok = false, failed = false;
+    for (int attempt = 0; attempt < 10; attempt++) {
+        *ax = ax0;
+        for (guint k = 0; k < n; k++)
+            memcpy(((calib_geometry_view_t *)g_ptr_array_index(vs->v, k))->rt_cam_board, &rt0[6 * k],
+                   6 * sizeof *rt0);
+        calib_geometry_view_t *worst = NULL;
+        double wrms = 0, med = 0;
+        if (!(ok = refine_once(vs, gridn, square_mm, cam, sigma_px, ax, &worst, &wrms, &med))) {
+            failed = true;
+            break;
+        }
+        // a view the turns about the axis do not explain (a frame of another angle than its journal says, a
+        // board moved between frames) leaves, and the fit is done again without it
+        double limit = fmax(0.5, 5 * med);
+        if (!worst || wrms <= limit) break;
+        fprintf(stderr, "refl calib geometry: %s: its corners are %.2f px RMS from the joint axis fit (the views' "
+                "median %.3f px): its board is not where the turntable's angle puts it; left out of the axis fit\n",
+                worst->name, wrms, med);
+        snprintf(worst->why, sizeof worst->why, "left out of the joint axis fit: its corners %.2f px RMS from the "
+                 "board turned to its turntable angle", wrms);
+        worst->solved = false;
+        ok = false;
+    }
+    if (!ok) {
+        *ax = ax0;
+        for (guint k = 0; k < n; k++)
+            memcpy(((calib_geometry_view_t *)g_ptr_array_index(vs->v, k))->rt_cam_board, &rt0[6 * k],
+                   6 * sizeof *rt0);
+        if (!failed) model_error_set(NULL, 0, "the joint axis fit did not settle (ten views left out one by one)");
+    }
+    free(rt0);
+    return ok;
+}
+
 // rt_cam_rig from the axis and the tilt-0 group's first pose; false + why.
 bool calib_geometry_rig_frame(calib_geometry_views_t *vs, double board_height_mm, const calib_geometry_axis_t *ax,
                               double rt_cam_rig[6], char *why, size_t whyn)
@@ -1005,11 +1387,12 @@ bool calib_geometry_find_corners(const calib_geometry_opts_t *o, calib_geometry_
         else snprintf(v->why, sizeof v->why, "mrgingham found no %dx%d board", o->gridn, o->gridn);
     }
     fprintf(stderr, "refl calib geometry: the board was found in %d of %u images\n", s->nfound, vs->v->len);
-    int min_views = o->min_views ? o->min_views : calib_geometry_default_min_views(o->lensmodel);
+    const char *lens0 = calib_geometry_is_auto(o->lensmodel) ? CALIB_GEOMETRY_LEAN_LENSMODEL : o->lensmodel;
+    int min_views = o->min_views ? o->min_views : calib_geometry_default_min_views(lens0);
     if (s->nfound < min_views) {
         model_error_set(o->corners ? o->corners : o->out, 0, "too few views for %s: the board was found in %d of %u "
                         "images, the solve needs at least %d (%d more views; tilt the board and turn the table so the "
-                        "corners cover the imager)", o->lensmodel, s->nfound, vs->v->len, min_views,
+                        "corners cover the imager)", lens0, s->nfound, vs->v->len, min_views,
                         min_views - s->nfound);
         for (guint k = 0; k < vs->v->len; k++) {
             calib_geometry_view_t *v = g_ptr_array_index(vs->v, k);
@@ -1028,7 +1411,7 @@ bool calib_geometry_find_corners(const calib_geometry_opts_t *o, calib_geometry_
         if (nf < min_views) {
             model_error_set(o->out, 0, "too few views for %s of camera %s: the board was found in %d of its %d images, "
                             "the solve needs at least %d (tilt the board towards it, or give --tilts with poses "
-                            "it sees)", o->lensmodel, s->camnames[c], nf, nv, min_views);
+                            "it sees)", lens0, s->camnames[c], nf, nv, min_views);
             return false;
         }
     }
@@ -1078,69 +1461,82 @@ static bool align_corners(const calib_geometry_opts_t *o, calib_geometry_state_t
     return ok;
 }
 
-bool calib_geometry_solve(const calib_geometry_opts_t *o, calib_geometry_state_t *s)
+bool calib_geometry_mrcal(const calib_geometry_opts_t *o, calib_geometry_state_t *s, const char *lensmodel,
+                          const char *corners, const char *mdir, int nviews, json_t **sol)
 {
     char focal[160], spacing[32], wn[16], ws[16], hs[16];
+    *sol = NULL;
     snprintf(focal, sizeof focal, "%.6g", isfinite(o->focal_px) ? o->focal_px : 1.4 * s->W);
     snprintf(spacing, sizeof spacing, "%.9g", o->square_mm);
     snprintf(wn, sizeof wn, "%d", o->gridn);
     snprintf(ws, sizeof ws, "%d", s->W);
     snprintf(hs, sizeof hs, "%d", s->H);
+    if (!model_mkdir_p(mdir)) return false;
     char *cwd = o->corners ? g_path_get_dirname(s->cornpath) : g_strdup(s->imgdir);
-    char *argv_m[] = { "mrcal-calibrate-cameras", "--corners-cache", s->cornpath, "--lensmodel",
-                       (char *)o->lensmodel, "--focal", focal, "--object-spacing", spacing, "--object-width-n", wn,
-                       "--imagersize", ws, hs, "--outdir", s->mdir, "*", NULL, NULL, NULL, NULL, NULL, NULL, NULL,
+    char *argv_m[] = { "mrcal-calibrate-cameras", "--corners-cache", (char *)corners, "--lensmodel",
+                       (char *)lensmodel, "--focal", focal, "--object-spacing", spacing, "--object-width-n", wn,
+                       "--imagersize", ws, hs, "--outdir", (char *)mdir, "*", NULL, NULL, NULL, NULL, NULL, NULL, NULL,
                        NULL };
-    char *joint = NULL;
     if (s->ncams > 1) {    // one glob and seed focal length per camera, each its own imager size
-        if (!align_corners(o, s, &joint)) {
-            g_free(cwd);
-            g_free(joint);
-            return false;
-        }
         GString *fl = g_string_new("");
         for (int k = 0; k < s->ncams; k++)
             g_string_append_printf(fl, "%s%.6g", k ? "," : "", isfinite(o->focal_px) ? o->focal_px : 1.4 * s->camw[k]);
         snprintf(focal, sizeof focal, "%s", fl->str);
         g_string_free(fl, TRUE);
-        argv_m[2] = joint;
         argv_m[11] = "--outdir";
-        argv_m[12] = s->mdir;
+        argv_m[12] = (char *)mdir;
         for (int k = 0; k < s->ncams; k++) argv_m[13 + k] = g_strdup_printf("%s/*.png", s->camnames[k]);
         argv_m[13 + s->ncams] = NULL;
     }
     // mrcal-calibrate-cameras runs under Debian's Python (its shebang)
-    fprintf(stderr, "refl calib geometry: solving %s from %d views (mrcal-calibrate-cameras)\n", o->lensmodel,
-            s->nfound);
-    char *log = g_strdup_printf("%s/mrcal-calibrate-cameras.log", s->mdir);
-    char *model0 = g_strdup_printf("%s/camera-0.cameramodel", s->mdir);
+    fprintf(stderr, "refl calib geometry: solving %s from %d views (mrcal-calibrate-cameras)\n", lensmodel, nviews);
+    char *log = g_strdup_printf("%s/mrcal-calibrate-cameras.log", mdir);
+    char *model0 = g_strdup_printf("%s/camera-0.cameramodel", mdir);
     unlink(model0);
     int e = run_tool(cwd, argv_m, log, NULL);
     g_free(cwd);
     if (s->ncams > 1)
         for (int k = 0; k < s->ncams; k++) g_free(argv_m[13 + k]);
-    g_free(joint);
     if (e != 0 || access(model0, R_OK) != 0) {
         if (e >= 0)
-            model_error_set(s->mdir, 0, "mrcal-calibrate-cameras failed (exit status %d) on %s; see %s (a bad seed? "
-                            "give --focal-px)", e, s->cornpath, log);
+            model_error_set(mdir, 0, "mrcal-calibrate-cameras failed (exit status %d) on %s with %s; see %s (a bad "
+                            "seed? give --focal-px)", e, corners, lensmodel, log);
         g_free(log);
         g_free(model0);
         return false;
     }
     g_free(log);
-    char *solpath = g_strdup_printf("%s/solution.json", s->mdir), dist[32];
+    char *solpath = g_strdup_printf("%s/solution.json", mdir), dist[32];
     snprintf(dist, sizeof dist, "%g", o->distance_mm);
     fprintf(stderr, "refl calib geometry: residuals and projection uncertainty (mrcal)\n");
     e = model_run_script("calib_geometry_report.py", "solution", model0, solpath, dist, NULL);
     g_free(model0);
     if (e == 0) {
         json_error_t je;
-        s->sol = json_load_file(solpath, 0, &je);
-        if (!s->sol) model_error_set(solpath, je.line, "cannot read: %s", je.text);
+        *sol = json_load_file(solpath, 0, &je);
+        if (!*sol) model_error_set(solpath, je.line, "cannot read: %s", je.text);
+    } else {
+        model_error_set(solpath, 0, "scripts/calib_geometry_report.py solution failed (exit status %d)", e);
     }
     g_free(solpath);
-    return s->sol != NULL;
+    return *sol != NULL;
+}
+
+bool calib_geometry_solve(const calib_geometry_opts_t *o, calib_geometry_state_t *s)
+{
+    g_free(s->solvecorners);
+    s->solvecorners = NULL;
+    if (s->ncams > 1) {    // the corner order made to agree across the cameras first
+        if (!align_corners(o, s, &s->solvecorners)) return false;
+    } else {
+        s->solvecorners = g_strdup(s->cornpath);
+    }
+    if (!s->lensmodel) s->lensmodel = g_strdup(calib_geometry_is_auto(o->lensmodel) ? CALIB_GEOMETRY_LEAN_LENSMODEL
+                                                                                  : o->lensmodel);
+    g_free(s->soldir);
+    s->soldir = g_strdup(s->mdir);
+    json_decref(s->sol);
+    return calib_geometry_mrcal(o, s, s->lensmodel, s->solvecorners, s->mdir, s->nfound, &s->sol);
 }
 
 bool calib_geometry_apply_solution(const calib_geometry_opts_t *o, calib_geometry_state_t *s)
@@ -1167,7 +1563,8 @@ bool calib_geometry_apply_solution(const calib_geometry_opts_t *o, calib_geometr
     double *ip = malloc((json_array_size(intr) + 1) * sizeof *ip);
     for (k = 0; k < json_array_size(intr); k++) ip[k] = json_real_value(json_array_get(intr, k));
     double zero[6] = { 0 };
-    s->cam = model_camera_new(o->lensmodel, ip, s->W, s->H, zero);
+    model_camera_free(s->cam);
+    s->cam = model_camera_new(s->lensmodel, ip, s->W, s->H, zero);
     free(ip);
     if (!s->cam) return false;
     s->rms_px = json_real_value(json_object_get(s->sol, "rms_px"));
@@ -1311,6 +1708,24 @@ static bool collect_views(const calib_geometry_opts_t *o, calib_geometry_state_t
     return true;
 }
 
+// The camera frame itself is as uncertain as the principal point: a shift of
+// (dcx, dcy) px turns every direction in it by about (dcy / fy, dcx / fx) rad.
+// The axis direction's sigma (in the camera frame) gets that in quadrature
+// (mrcal's 1-sigma of cx, cy from the solve; the fit's own kept apart).
+static void axis_intrinsics_sigma(calib_geometry_state_t *s)
+{
+    calib_geometry_axis_t *ax = &s->axis;
+    json_t *sd = json_object_get(s->sol, "intrinsics_core_stdev"), *in = json_object_get(s->sol, "intrinsics");
+    ax->dir_unc_fit_deg = ax->dir_unc_deg;
+    ax->dir_unc_intrinsics_deg = NAN;
+    if (json_array_size(sd) != 4 || json_array_size(in) < 4) return;
+    double ex = json_number_value(json_array_get(sd, 2)) / json_number_value(json_array_get(in, 0));
+    double ey = json_number_value(json_array_get(sd, 3)) / json_number_value(json_array_get(in, 1));
+    if (!isfinite(ex) || !isfinite(ey)) return;
+    ax->dir_unc_intrinsics_deg = hypot(ex, ey) / DEG;
+    ax->dir_unc_deg = hypot(ax->dir_unc_fit_deg, ax->dir_unc_intrinsics_deg);
+}
+
 // Stage 4: the axis, the rig frame and why views have no board.
 static void axis_and_rig_frame(const calib_geometry_opts_t *o, calib_geometry_state_t *s)
 {
@@ -1323,6 +1738,15 @@ static void axis_and_rig_frame(const calib_geometry_opts_t *o, calib_geometry_st
                      "axis (need 2 views 5..175 deg apart)");
             fprintf(stderr, "refl calib geometry: no axis: %s\n", s->rigwhy);
         } else {
+            fprintf(stderr, "refl calib geometry: the axis fitted with the board poses as turns about it (from the "
+                    "closed form: direction +- %.4f deg)\n", ax->dir_unc_deg);
+            if (!calib_geometry_refine_axis(&s->views, o->gridn, o->square_mm, s->cam, s->rms_px / sqrt(2), ax))
+                fprintf(stderr, "refl calib geometry: the joint axis fit failed (%s); the closed-form axis is kept\n",
+                        model_last_error());
+            else
+                fprintf(stderr, "refl calib geometry: joint axis fit: %d views, corner RMS %.4f px (chi^2/dof %.2f)\n",
+                        ax->joint_views, ax->joint_rms_px, ax->joint_chi2);
+            axis_intrinsics_sigma(s);
             s->have_rig = calib_geometry_rig_frame(&s->views, o->board_height_mm, ax, s->rt_cam_rig, s->rigwhy,
                                                    sizeof s->rigwhy);
             if (!s->have_rig)
@@ -1340,6 +1764,28 @@ static void axis_and_rig_frame(const calib_geometry_opts_t *o, calib_geometry_st
     }
 }
 
+// The rig frame's 1-sigma from the axis fit: z (the axis direction), x (the
+// tilt-0 board's turn about the axis), the origin across and along the axis,
+// and what they make of the camera centre's position in the rig frame
+// (sqrt(origin^2 + (distance x rotation)^2), rotation the two angles combined).
+static json_t *rig_sigma_json(const calib_geometry_state_t *s)
+{
+    const calib_geometry_axis_t *ax = &s->axis;
+    double inv[6], xs = ax->joint ? ax->rig_x_unc_deg : NAN, os = ax->joint ? ax->rig_origin_along_mm : NAN;
+    invert(inv, s->rt_cam_rig);
+    double d = norm3(&inv[3]), rot = hypot(ax->dir_unc_deg, isfinite(xs) ? xs : 0) * DEG;
+    double o2 = ax->point_unc_mm * ax->point_unc_mm + (isfinite(os) ? os * os : 0);
+    json_t *j = json_object();
+    json_object_set_new(j, "z_direction_deg", json_real(ax->dir_unc_deg));
+    json_object_set_new(j, "x_direction_deg", isfinite(xs) ? json_real(xs) : json_null());
+    json_object_set_new(j, "origin_across_axis_mm", json_real(ax->point_unc_mm));
+    json_object_set_new(j, "origin_along_axis_mm", isfinite(os) ? json_real(os) : json_null());
+    json_object_set_new(j, "camera_centre_mm", json_real(sqrt(o2 + d * d * rot * rot)));
+    json_object_set_new(j, "note", json_string("1-sigma of the rig frame as the axis fit determines it (the "
+                        "camera's intrinsics fixed); camera_centre_mm: sqrt(origin^2 + (distance x rotation)^2)"));
+    return j;
+}
+
 // geometry.json: the axis (null without one).
 static json_t *axis_json(const calib_geometry_state_t *s)
 {
@@ -1350,8 +1796,27 @@ static json_t *axis_json(const calib_geometry_state_t *s)
     json_object_set_new(aj, "point_cam_mm", jarr(ax->c, 3));
     json_object_set_new(aj, "direction_uncertainty_deg", json_real(ax->dir_unc_deg));
     json_object_set_new(aj, "point_uncertainty_mm", json_real(ax->point_unc_mm));
-    json_object_set_new(aj, "uncertainty_note", json_string("approximate 1-sigma, from the scatter of the "
-                        "pairwise estimates (direction) and of the point equations (point, across the axis)"));
+    if (ax->joint) {
+        json_object_set_new(aj, "method", json_string("fitted jointly with the board poses: each tilt group's board "
+                            "one pose turned about the axis by the turntable's measured angles, fitted with the axis "
+                            "to the observed corners (camera model fixed); the images' rt_cam_board are these poses"));
+        json_object_set_new(aj, "uncertainty_note", json_string("1-sigma from the joint fit's covariance (corner "
+                            "noise = mrcal's RMS residual / sqrt 2), scaled by chi^2/dof when above 1; the point: "
+                            "RMS distance across the axis; the direction (in the camera frame) also carries the "
+                            "principal point's 1-sigma from mrcal's solve (hypot(s_cx / fx, s_cy / fy)) in "
+                            "quadrature"));
+        json_object_set_new(aj, "joint_views", json_integer(ax->joint_views));
+        json_object_set_new(aj, "direction_uncertainty_fit_deg", json_real(ax->dir_unc_fit_deg));
+        json_object_set_new(aj, "direction_uncertainty_intrinsics_deg", isfinite(ax->dir_unc_intrinsics_deg)
+                            ? json_real(ax->dir_unc_intrinsics_deg) : json_null());
+        json_object_set_new(aj, "joint_rms_residual_px", json_real(ax->joint_rms_px));
+        json_object_set_new(aj, "joint_chi2_per_dof", json_real(ax->joint_chi2));
+    } else {
+        json_object_set_new(aj, "method", json_string("closed form from the pairs of board poses (the joint fit "
+                            "failed or was not run)"));
+        json_object_set_new(aj, "uncertainty_note", json_string("approximate 1-sigma, from the scatter of the "
+                            "pairwise estimates (direction) and of the point equations (point, across the axis)"));
+    }
     json_object_set_new(aj, "off_axis_rms_deg", json_real(ax->off_axis_rms_deg));
     json_object_set_new(aj, "point_equation_rms_mm", json_real(ax->point_rms_mm));
     json_object_set_new(aj, "pairs", json_integer(ax->npairs));
@@ -1360,6 +1825,7 @@ static json_t *axis_json(const calib_geometry_state_t *s)
         // in the rig frame the axis is +z through the origin, by construction
         json_object_set_new(aj, "direction_rig", json_pack("[fff]", 0.0, 0.0, 1.0));
         json_object_set_new(aj, "point_rig_mm", json_pack("[fff]", 0.0, 0.0, 0.0));
+        json_object_set_new(aj, "rig_frame_sigma", rig_sigma_json(s));
     }
     json_object_set_new(aj, "fit", json_incref(ax->fit));
     return aj;
@@ -1409,7 +1875,7 @@ json_t *calib_geometry_json(const calib_geometry_opts_t *o, calib_geometry_state
     }
     json_object_set_new(out, "camera_model_sha256", json_string(model_camera_sha256(final)));
     model_camera_free(final);
-    json_object_set_new(out, "lensmodel", json_string(o->lensmodel));
+    json_object_set_new(out, "lensmodel", json_string(s->lensmodel));
     json_object_set_new(out, "intrinsics", json_incref(intr));
     json_object_set_new(out, "intrinsics_meaning", json_string("fx_px, fy_px, cx_px, cy_px, then the lens model's "
                                                                "distortion parameters (mrcal order)"));
@@ -1420,6 +1886,7 @@ json_t *calib_geometry_json(const calib_geometry_opts_t *o, calib_geometry_state
     json_object_set_new(out, "points_used", json_incref(json_object_get(sol, "points")));
     json_object_set_new(out, "outliers", json_incref(json_object_get(sol, "outliers")));
     json_object_set_new(out, "projection_uncertainty", json_deep_copy(json_object_get(sol, "uncertainty")));
+    json_object_set_new(out, "cross_validation", s->xv ? json_incref(s->xv) : json_null());
     json_object_set_new(out, "board", json_pack("{s:i,s:f,s:f,s:s}", "gridn", o->gridn, "square_mm", o->square_mm,
                                                 "height_at_tilt0_mm", o->board_height_mm, "sample", o->sample));
     json_object_set_new(out, "rig_frame", json_string(s->have_rig
@@ -1449,11 +1916,62 @@ json_t *calib_geometry_json(const calib_geometry_opts_t *o, calib_geometry_state
     return out;
 }
 
+// The report's cross-validation section: each run's figures, the lens choice.
+static void report_crossvalidation(FILE *f, const calib_geometry_state_t *s)
+{
+    json_t *x = s->xv;
+    if (!x) return;
+    model_html_heading(f, "Cross-validation and the lens model");
+    model_html_para(f, "Method: %s. Criterion: %s.", json_string_value(json_object_get(x, "method")),
+                    json_string_value(json_object_get(x, "criterion")));
+    GPtrArray *rows = g_ptr_array_new_with_free_func(g_free);
+    json_t *runs = json_object_get(x, "runs"), *r;
+    size_t i;
+    json_t *all = json_array();
+    json_array_foreach(runs, i, r) json_array_append(all, r);
+    if (json_object_get(x, "lean_vs_splined")) json_array_append(all, json_object_get(x, "lean_vs_splined"));
+    json_array_foreach(all, i, r) {
+        const char *what = json_object_get(r, "lensmodel") ? json_string_value(json_object_get(r, "lensmodel"))
+                                                           : "lean against the splined fit of the same views";
+        if (!json_is_true(json_object_get(r, "done")) && json_object_get(r, "lensmodel")) {
+            g_ptr_array_add(rows, g_strdup_printf("%s|not done: %s||||", what,
+                                                  json_string_value(json_object_get(r, "why"))));
+            continue;
+        }
+        json_t *c;
+        size_t k;
+        json_array_foreach(json_object_get(r, "cameras"), k, c) {
+            json_t *o = json_object_get(c, "observed");
+            g_ptr_array_add(rows, g_strdup_printf("%s%s%s|%.4f / %.4f|%.4f / %.4f|%.2f|%s", what,
+                            json_object_get(c, "camera") ? ", camera " : "",
+                            json_object_get(c, "camera") ? json_string_value(json_object_get(c, "camera")) : "",
+                            json_number_value(json_object_get(o, "diff_rms_px")),
+                            json_number_value(json_object_get(o, "diff_worst_px")),
+                            json_number_value(json_object_get(o, "predicted_rms_px")),
+                            json_number_value(json_object_get(o, "predicted_worst_px")),
+                            json_number_value(json_object_get(o, "ratio_rms")),
+                            json_number_value(json_object_get(o, "ratio_rms")) <= CALIB_GEOMETRY_XV_MAX_RATIO
+                                ? "passes" : "FAILS"));
+        }
+    }
+    json_decref(all);
+    model_html_table(f, "comparison|difference RMS / worst (px)|predicted s0 + s1 RMS / worst (px)|ratio|verdict",
+                     (const char *const *)rows->pdata, (int)rows->len);
+    char *png = g_strdup_printf("%s/crossvalidation.png", s->outdir);
+    if (access(png, R_OK) == 0)
+        model_html_figure(f, "crossvalidation.png", "|difference| / (s0 + s1) over the imager (first camera)");
+    g_free(png);
+    g_ptr_array_free(rows, TRUE);
+    model_html_para(f, "Lens model: %s.",
+                    json_string_value(json_object_get(json_object_get(x, "lens_choice"), "why")));
+}
+
 bool calib_geometry_report(const calib_geometry_opts_t *o, const calib_geometry_state_t *s, const char *jpath)
 {
     const calib_geometry_axis_t *ax = &s->axis;
     json_t *sol = s->sol, *intr = json_object_get(sol, "intrinsics");
-    char *solpath = g_strdup_printf("%s/solution.json", s->mdir), *hpath = g_strdup_printf("%s/report.html", s->outdir);
+    char *solpath = g_strdup_printf("%s/solution.json", s->soldir);
+    char *hpath = g_strdup_printf("%s/report.html", s->outdir);
     fprintf(stderr, "refl calib geometry: plots\n");
     bool ok = model_run_script("calib_geometry_report.py", "plots", jpath, solpath, s->outdir, NULL) == 0;
     FILE *f = ok ? model_html_begin(hpath, "refl calib geometry", s->prov) : NULL;
@@ -1461,7 +1979,7 @@ bool calib_geometry_report(const calib_geometry_opts_t *o, const calib_geometry_
         int outliers = (int)json_integer_value(json_object_get(sol, "outliers"));
         model_html_heading(f, "Camera model");
         model_html_para(f, "%s, %dx%d px; %zu of %u views used; RMS reprojection residual %.4f px; %d outliers "
-                        "of %d points.", o->lensmodel, s->W, s->H, json_array_size(json_object_get(sol, "images")),
+                        "of %d points.", s->lensmodel, s->W, s->H, json_array_size(json_object_get(sol, "images")),
                         s->views.v->len, s->rms_px, outliers,
                         (int)json_integer_value(json_object_get(sol, "points")) + outliers);
         model_html_para(f, "Intrinsics fx, fy, cx, cy: %.3f, %.3f, %.3f, %.3f px.",
@@ -1480,6 +1998,7 @@ bool calib_geometry_report(const calib_geometry_opts_t *o, const calib_geometry_
                             json_real_value(json_object_get(u, "max_px")));
             model_html_figure(f, "uncertainty.png", "Projection uncertainty (dots: observed corners)");
         }
+        report_crossvalidation(f, s);
         json_t *cams = json_object_get(s->out, "cameras");
         if (json_array_size(cams) > 1) {
             model_html_heading(f, "Cameras (one joint solve)");
@@ -1505,10 +2024,16 @@ bool calib_geometry_report(const calib_geometry_opts_t *o, const calib_geometry_
         }
         model_html_heading(f, "Turntable axis and rig frame");
         if (ax->ok) {
-            model_html_para(f, "Axis direction (camera frame) %.6f %.6f %.6f, +- %.4f deg (approximate); point "
-                            "%.2f %.2f %.2f mm +- %.3f mm; %d pose pairs; off-axis rotation RMS %.4f deg.",
-                            ax->a[0], ax->a[1], ax->a[2], ax->dir_unc_deg, ax->c[0], ax->c[1], ax->c[2],
-                            ax->point_unc_mm, ax->npairs, ax->off_axis_rms_deg);
+            model_html_para(f, "Axis direction (camera frame) %.6f %.6f %.6f, +- %.4f deg; point %.2f %.2f %.2f mm "
+                            "+- %.3f mm across the axis (1 sigma, %s); %d pose pairs; off-axis rotation RMS of mrcal's "
+                            "free poses %.4f deg.", ax->a[0], ax->a[1], ax->a[2], ax->dir_unc_deg, ax->c[0], ax->c[1],
+                            ax->c[2], ax->point_unc_mm, ax->joint ? "fitted jointly with the board poses as turns "
+                            "about it" : "closed form, approximate", ax->npairs, ax->off_axis_rms_deg);
+            if (ax->joint)
+                model_html_para(f, "Joint fit: %d views, corner RMS %.4f px (chi^2/dof %.2f). Rig frame 1 sigma: z "
+                                "%.4f deg, x %.4f deg, origin %.3f mm across and %.3f mm along the axis.",
+                                ax->joint_views, ax->joint_rms_px, ax->joint_chi2, ax->dir_unc_deg, ax->rig_x_unc_deg,
+                                ax->point_unc_mm, ax->rig_origin_along_mm);
             model_html_figure(f, "axis_fit.png", "Board rotation about the fitted axis against the turntable angle");
         } else {
             model_html_para(f, "No axis: %s.", s->rigwhy);
@@ -1559,9 +2084,9 @@ static bool camera_outputs(const calib_geometry_opts_t *o, calib_geometry_state_
         json_t *rms = json_object_get(cj, "rms_px");
         char ref[400];
         snprintf(ref, sizeof ref, "camera %s (the first camera; no rig frame: %s)", s->camnames[0], s->rigwhy);
-        ok = s->have_rig ? calib_geometry_write_cameramodel(path, o->lensmodel, json_object_get(cj, "intrinsics"),
+        ok = s->have_rig ? calib_geometry_write_cameramodel(path, s->lensmodel, json_object_get(cj, "intrinsics"),
                                                             s->camw[k], s->camh[k], rt, true, json_number_value(rms))
-                         : write_cameramodel_ref(path, o->lensmodel, json_object_get(cj, "intrinsics"), s->camw[k],
+                         : write_cameramodel_ref(path, s->lensmodel, json_object_get(cj, "intrinsics"), s->camw[k],
                                                  s->camh[k], rt, ref, json_number_value(rms));
         json_object_set_new(c, "name", json_string(s->camnames[k]));
         json_object_set_new(c, "camera_model", json_string(path));
@@ -1594,17 +2119,17 @@ static bool camera_outputs(const calib_geometry_opts_t *o, calib_geometry_state_
 static bool outputs(const calib_geometry_opts_t *o, calib_geometry_state_t *s)
 {
     s->campath = g_strdup_printf("%s/camera.cameramodel", s->outdir);
-    // each model written here gets mrcal's optimization_inputs (camera k's: mrcal's camera-k.cameramodel)
-    // while keeping its extrinsics, so that mrcal's tools run on it (calib/export.c)
-    char *m0 = g_strdup_printf("%s/camera-0.cameramodel", s->mdir);
-    bool kept = calib_geometry_write_cameramodel(s->campath, o->lensmodel, json_object_get(s->sol, "intrinsics"), s->W,
+    // each model written here gets mrcal's optimization_inputs (camera k's: the chosen solve's
+    // camera-k.cameramodel) while keeping its extrinsics, so that mrcal's tools run on it (calib/export.c)
+    char *m0 = g_strdup_printf("%s/camera-0.cameramodel", s->soldir);
+    bool kept = calib_geometry_write_cameramodel(s->campath, s->lensmodel, json_object_get(s->sol, "intrinsics"), s->W,
                                                  s->H, s->rt_cam_rig, s->have_rig, s->rms_px) &&
                 calib_export_keep_optimization_inputs(m0, s->campath);
     g_free(m0);
     if (!kept || !(s->out = calib_geometry_json(o, s))) return false;
     if (s->ncams > 1 && !camera_outputs(o, s)) return false;
     for (int k = 0; k < s->ncams && s->ncams > 1 && kept; k++) {
-        char *mk = g_strdup_printf("%s/camera-%d.cameramodel", s->mdir, k);
+        char *mk = g_strdup_printf("%s/camera-%d.cameramodel", s->soldir, k);
         char *pk = g_strdup_printf("%s/%s.cameramodel", s->outdir, s->camnames[k]);
         kept = calib_export_keep_optimization_inputs(mk, pk);
         g_free(mk);
@@ -1632,6 +2157,10 @@ void calib_geometry_state_free(calib_geometry_state_t *s)
     free(s->outdir);
     g_free(s->imgdir);
     g_free(s->mdir);
+    g_free(s->soldir);
+    g_free(s->solvecorners);
+    g_free(s->lensmodel);
+    json_decref(s->xv);
     g_free(s->cornpath);
     g_strfreev(s->sessions);
     json_decref(s->sol);
@@ -1664,7 +2193,7 @@ bool calib_geometry_run(const calib_geometry_opts_t *o, calib_geometry_result_t 
     if (o->rig && (!model_provenance_input(s.prov, "rig", o->rig) || !calib_geometry_capture(o, &s, &r->usage)))
         goto done;
     if (!collect_views(o, &s) || !calib_geometry_find_corners(o, &s) || !calib_geometry_solve(o, &s) ||
-        !calib_geometry_apply_solution(o, &s))
+        !calib_geometry_apply_solution(o, &s) || !calib_geometry_validate_lens(o, &s))
         goto done;
     axis_and_rig_frame(o, &s);
     if (!outputs(o, &s)) goto done;

@@ -149,6 +149,16 @@ typedef struct {
     double  dir_unc_deg, point_unc_mm, off_axis_rms_deg, point_rms_mm;
     int     npairs, nviews;
     json_t *fit;                    // per group: angle_deg[], rotation_about_axis_deg[] (owned)
+    // calib_geometry_refine_axis (joint true): a, c, dir_unc_deg, point_unc_mm from the joint fit
+    // (point_unc_mm: RMS distance across the axis, both directions; 1 sigma, scaled by the fit's
+    // chi^2 per degree of freedom when above 1)
+    bool    joint;
+    int     joint_views;
+    double  joint_rms_px, joint_chi2;
+    double  rig_x_unc_deg;          // the rig frame's x: rotation about the axis of the tilt-0 board, 1 sigma
+    double  rig_origin_along_mm;    // the rig origin along the axis (the tilt-0 board's height), 1 sigma
+    double  dir_unc_fit_deg;        // the joint fit's own direction sigma; dir_unc_deg adds in quadrature
+    double  dir_unc_intrinsics_deg; // the camera frame's turn from the principal point's sigma (NAN: unknown)
 } calib_geometry_axis_t;
 
 // Everything a run has found so far; the stages fill it in order.
@@ -173,6 +183,10 @@ typedef struct {
     char            rigwhy[256];    // why there is no rig frame
     char           *campath;        // DIR/camera.cameramodel (g_free)
     json_t         *out;            // geometry.json's document (owned)
+    char           *lensmodel;      // the lens model solved (and, with auto, chosen) (g_free)
+    char           *solvecorners;   // the corners file mrcal solves from (cornpath, or the joint one) (g_free)
+    char           *soldir;         // the chosen solution's directory (DIR/mrcal or DIR/mrcal/splined) (g_free)
+    json_t         *xv;             // cross-validation and lens choice (calib/geometry_diff.c), or NULL (owned)
 } calib_geometry_state_t;
 
 void calib_geometry_state_free(calib_geometry_state_t *s);
@@ -215,14 +229,29 @@ bool calib_geometry_parse_corners(calib_geometry_views_t *vs, const char *text, 
 // views have a board (and lists the others).
 bool calib_geometry_find_corners(const calib_geometry_opts_t *o, calib_geometry_state_t *s);
 // mrcal-calibrate-cameras on the corners (model and log in DIR/mrcal), then
-// the solution (board poses, residuals, projection uncertainty) as JSON into s->sol.
+// the solution (board poses, residuals, projection uncertainty) as JSON into
+// s->sol. The lens model: o->lensmodel, or with auto the lean one (s->lensmodel).
 bool calib_geometry_solve(const calib_geometry_opts_t *o, calib_geometry_state_t *s);
+// One mrcal solve: lensmodel on the corners file (views: its count, for the
+// progress line) into mdir (created; camera-K.cameramodel, the log, and
+// solution.json, read into *sol). false + message.
+bool calib_geometry_mrcal(const calib_geometry_opts_t *o, calib_geometry_state_t *s, const char *lensmodel,
+                          const char *corners, const char *mdir, int nviews, json_t **sol);
 // The solution's poses into the views, s->cam and s->rms_px.
 bool calib_geometry_apply_solution(const calib_geometry_opts_t *o, calib_geometry_state_t *s);
 // The axis from the poses of each tilt group at different angles (quarter
 // turns of mrgingham's corner order made consistent first; inconsistent views
 // lose their pose). false when too few pairs.
 bool calib_geometry_fit_axis(calib_geometry_views_t *vs, int gridn, double square_mm, calib_geometry_axis_t *ax);
+// The axis refined jointly with the board poses (after calib_geometry_fit_axis,
+// from its axis): each tilt group's board one pose, turned about the axis by
+// the turntable's measured angles in its views, fitted with the axis to the
+// corners camera 0 observed (cam fixed, sigma_px the per-axis corner noise).
+// Sets ax's joint fields and a, c, dir_unc_deg, point_unc_mm from the fit's
+// covariance, and the views' rt_cam_board to the constrained poses. false +
+// message (ax and the views unchanged).
+bool calib_geometry_refine_axis(calib_geometry_views_t *vs, int gridn, double square_mm, model_camera_t *cam,
+                                double sigma_px, calib_geometry_axis_t *ax);
 // rt_cam_rig from the axis and the tilt-0 group's first pose; false + why.
 bool calib_geometry_rig_frame(calib_geometry_views_t *vs, double board_height_mm, const calib_geometry_axis_t *ax,
                               double rt_cam_rig[6], char *why, size_t whyn);
@@ -237,6 +266,50 @@ bool calib_geometry_write_cameramodel(const char *path, const char *lensmodel, j
 json_t *calib_geometry_json(const calib_geometry_opts_t *o, calib_geometry_state_t *s);
 // The plots (scripts/calib_geometry_report.py plots) and DIR/report.html.
 bool calib_geometry_report(const calib_geometry_opts_t *o, const calib_geometry_state_t *s, const char *jpath);
+
+// --- cross-validation and the lens model (calib/geometry_diff.c) -----------
+//
+// Cross-validation as mrcal practises it: the views split into two disjoint
+// halves (alternate frames in the order of the corners file, so each half has
+// every tilt group's sweep; the views of one frame in every camera stay
+// together), each half solved alone, and the two models differenced over the
+// imager (scripts/calib_geometry_report.py compare: a 33 x 27 grid unprojected
+// with half 0 to o->distance_mm, the rigid transform between the halves'
+// camera frames fitted with weights 1 / (s0^2 + s1^2), every point projected
+// with half 1) against the predicted difference s0 + s1 (mrcal's projection
+// uncertainty of each half, worst direction; two independent estimates with
+// per-axis sigma s differ by sqrt(2 (s0^2 + s1^2)) RMS, = s0 + s1 when
+// s0 = s1). Judged where the views were: the grid points within one grid step
+// of a corner each half observed. A model fails when the RMS over those
+// points of diff / (s0 + s1) exceeds CALIB_GEOMETRY_XV_MAX_RATIO.
+//
+// --lensmodel auto: the lean model (CALIB_GEOMETRY_LEAN_LENSMODEL) is solved
+// and cross-validated; as halves of one dance share a lens model's bias (it
+// depends on where the corners are, alike in both halves), the lean model is
+// also compared with LENSMODEL_SPLINED_STEREOGRAPHIC fitted to the same views,
+// by the same measure against the lean and splined uncertainties. The lean
+// model is kept when it passes both; else the splined one is cross-validated
+// and kept when it passes; when neither passes the one of the smaller
+// cross-validation ratio is kept and the output says so.
+#define CALIB_GEOMETRY_LEAN_LENSMODEL "LENSMODEL_OPENCV8"
+#define CALIB_GEOMETRY_XV_MAX_RATIO   1.5
+bool calib_geometry_is_auto(const char *lensmodel);
+// LENSMODEL_SPLINED_STEREOGRAPHIC_order=3_Nx=.._Ny=.._fov_x_deg=.. for an imager
+// W x H seen through cam (the lean fit): about 70 px per knot interval across
+// (Nx 8..30), the knots covering the imager's border rays with a 10 % margin
+// (fov_x_deg from cam's unprojection of the border, Ny for the same spacing).
+// false + message when cam cannot unproject its border.
+bool calib_geometry_splined_name(const model_camera_t *cam, int W, int H, char *name, size_t n);
+// Cross-validate lensmodel on s->solvecorners: halves into
+// DIR/mrcal/xv-TAG/half0, half1, their comparison; a JSON object (new
+// reference) with the figures, "pass" and "why" (or "done": false and why:
+// too few views per half). NULL + message when a solve fails.
+json_t *calib_geometry_crossvalidate(const calib_geometry_opts_t *o, calib_geometry_state_t *s,
+                                     const char *lensmodel, const char *tag);
+// Cross-validation of s->lensmodel and, with --lensmodel auto, the choice (may
+// replace s->sol, s->lensmodel, s->soldir with the splined solve's): s->xv.
+// false + message.
+bool calib_geometry_validate_lens(const calib_geometry_opts_t *o, calib_geometry_state_t *s);
 
 // How far model b projects from model a over a's imager (calib/geometry_diff.c),
 // as mrcal's projection_diff judges it: a 33 x 27 grid of a's pixels (margin_px

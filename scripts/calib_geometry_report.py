@@ -32,7 +32,10 @@
 #       The report's figures (PNG): residual vectors over the imager,
 #       residual histogram, RMS per image, projection uncertainty map, the
 #       turntable axis fit (the rotation angle of each board pose about the
-#       fitted axis against the turntable angle).
+#       fitted axis against the turntable angle), the cross-validation's
+#       |difference| / (s0 + s1) maps (crossvalidation.png).
+#   compare MODEL_A MODEL_B OUT.json DISTANCE_MM
+#       Two models of one lens differenced over A's imager (see compare()).
 import json
 import sys
 
@@ -79,7 +82,19 @@ def solution(model_path, out_path, distance_mm):
             im["camera"] = int(idx[i, 1])
         images.append(im)
     allr = ru[ok]
+    core_sd = None
+    try:                                              # the intrinsics core's 1-sigma (fx, fy, cx, cy), camera 0
+        J = mrcal.optimizer_callback(**oi, no_factorization=True)[2]
+        sig = float(np.sqrt(np.mean(allr * allr)))
+        cov = np.linalg.inv((J.T @ J).toarray()) * sig * sig
+        scale = np.ones(cov.shape[0])
+        mrcal.unpack_state(scale, **oi)
+        i0 = mrcal.state_index_intrinsics(0, **oi)
+        core_sd = [float(np.sqrt(max(cov[i0 + k, i0 + k], 0)) * scale[i0 + k]) for k in range(4)]
+    except Exception:                                  # noqa: BLE001 — optional figure
+        core_sd = None
     out = {"lensmodel": lensmodel, "intrinsics": [float(v) for v in intrinsics], "imagersize": [W, H],
+           "intrinsics_core_stdev": core_sd,
            "rms_px": float(np.sqrt(np.mean(np.sum(allr * allr, axis=-1)))),
            "observations": int(obs.shape[0]), "points": int(np.sum(ok)), "outliers": int(np.sum(~ok)),
            "images": images, "uncertainty": uncertainty(m, distance_mm)}
@@ -150,6 +165,73 @@ def uncertainty(m, distance_mm):
     except Exception as e:                             # noqa: BLE001 — reported, not fatal
         unc = {"error": f"mrcal.projection_uncertainty failed: {e}"}
     return unc
+
+
+def observed_near(m, q, step):
+    """Which of the pixels q (N x 2) lie within step px of a corner model m's camera observed (outliers out)."""
+    oi = m.optimization_inputs()
+    if oi is None:
+        return np.ones(len(q), dtype=bool)
+    obs = oi["observations_board"]
+    sel = oi["indices_frame_camintrinsics_camextrinsics"][:, 1] == m.icam_intrinsics()
+    o = obs[sel].reshape(-1, 3)
+    o = o[o[:, 2] > 0][:, :2]
+    near = np.zeros(len(q), dtype=bool)
+    for k in range(0, len(o), 4096):
+        d2 = np.sum((q[:, None, :] - o[None, k:k + 4096, :]) ** 2, axis=-1)
+        near |= np.min(d2, axis=1) <= step * step
+    return near
+
+
+def compare(model_a, model_b, out_path, distance_mm):
+    """Two models of one lens (the two halves of a cross-validation, or two lens models fitted to the same views)
+    compared over a's imager the way mrcal differences models: pixels on a 33 x 27 grid unprojected with a to
+    DISTANCE_MM, the rigid transform of a's camera frame onto b's fitted (weighted by 1 / (sa^2 + sb^2), mrcal's
+    projection uncertainties, so the regions the calibrations saw decide it), every point projected with b; the
+    difference at each point against the predicted sa + sb (worst-direction standard deviations). Figures over
+    the whole grid and over the points within one grid step of a corner each model observed ("observed")."""
+    import mrcal
+    ma, mb = mrcal.cameramodel(model_a), mrcal.cameramodel(model_b)
+    la, ia = ma.intrinsics()
+    lb, ib = mb.intrinsics()
+    W, H = (int(x) for x in ma.imagersize())
+    gx, gy = np.linspace(0, W - 1, 33), np.linspace(0, H - 1, 27)
+    q = np.array([[a, b] for b in gy for a in gx])
+    pa = mrcal.unproject(q, la, ia, normalize=True) * distance_mm
+    sa = mrcal.projection_uncertainty(pa, ma, what="worstdirection-stdev")
+    pb0 = mrcal.unproject(q, lb, ib, normalize=True) * distance_mm
+    sb = mrcal.projection_uncertainty(pb0, mb, what="worstdirection-stdev")
+    w = 1.0 / np.sqrt(sa * sa + sb * sb)
+    rt = np.zeros(6)
+    for _ in range(20):                               # Gauss-Newton on the 6 pose parameters
+        x, dx_drt, _ = mrcal.transform_point_rt(rt, pa, get_gradients=True)
+        qb, dq_dx, _ = mrcal.project(x, lb, ib, get_gradients=True)
+        r = ((qb - q) * w[:, None]).ravel()
+        J = (np.einsum("nij,njk->nik", dq_dx, dx_drt) * w[:, None, None]).reshape(-1, 6)
+        step = np.linalg.lstsq(J, -r, rcond=None)[0]
+        rt = rt + step
+        if np.max(np.abs(step)) < 1e-12:
+            break
+    qb = mrcal.project(mrcal.transform_point_rt(rt, pa), lb, ib)
+    d = np.linalg.norm(qb - q, axis=-1)
+    pred = sa + sb
+    ratio = d / pred
+    near = observed_near(ma, q, gx[1] - gx[0]) & observed_near(mb, q, gx[1] - gx[0])
+    rms = lambda v: float(np.sqrt(np.mean(v * v))) if v.size else None
+
+    def figures(m):
+        return {"npoints": int(np.sum(m)), "diff_rms_px": rms(d[m]),
+                "diff_worst_px": float(np.max(d[m])) if m.any() else None,
+                "predicted_rms_px": rms(pred[m]), "predicted_worst_px": float(np.max(pred[m])) if m.any() else None,
+                "ratio_rms": rms(ratio[m]), "ratio_median": float(np.median(ratio[m])) if m.any() else None,
+                "ratio_worst": float(np.max(ratio[m])) if m.any() else None}
+    out = {"distance_mm": distance_mm, "grid": [33, 27], "lensmodel_a": la, "lensmodel_b": lb,
+           "observed": figures(near), "imager": figures(np.ones(len(d), dtype=bool)),
+           "rt_a_to_b": [float(v) for v in rt], "grid_x_px": gx.tolist(), "grid_y_px": gy.tolist(),
+           "diff_px": d.reshape(len(gy), len(gx)).tolist(), "predicted_px": pred.reshape(len(gy), len(gx)).tolist(),
+           "observed_mask": near.reshape(len(gy), len(gx)).astype(int).tolist()}
+    with open(out_path, "w") as f:
+        json.dump(out, f)
 
 
 def align(corners_in, corners_out, out_path, gridn, spacing, camspecs):
@@ -306,6 +388,26 @@ def plots(geometry_path, solution_path, outdir):
         fig.tight_layout()
         fig.savefig(f"{outdir}/uncertainty.png", dpi=90)
         plt.close(fig)
+    # cross-validation: each comparison's |difference| / (s0 + s1) over the imager
+    xv = g.get("cross_validation") or {}
+    comps = [(r.get("lensmodel", ""), c) for r in xv.get("runs", []) if r.get("done") for c in r.get("cameras", [])[:1]]
+    comps += [("lean against splined", c) for c in (xv.get("lean_vs_splined") or {}).get("cameras", [])[:1]]
+    comps = [(n, json.load(open(c["details"]))) for n, c in comps if c.get("details")]
+    if comps:
+        fig, axs = plt.subplots(1, len(comps), figsize=(6 * len(comps), 4.6), squeeze=False)
+        for a, (name, c) in zip(axs[0], comps):
+            ratio = np.array(c["diff_px"]) / np.array(c["predicted_px"])
+            im = a.imshow(ratio, extent=(c["grid_x_px"][0], c["grid_x_px"][-1], c["grid_y_px"][-1], c["grid_y_px"][0]),
+                          cmap="viridis", vmin=0, vmax=3, interpolation="nearest")
+            a.contour(np.array(c["grid_x_px"]), np.array(c["grid_y_px"]), np.array(c["observed_mask"]), levels=[0.5],
+                      colors="w", linewidths=0.8)
+            short = name.replace("LENSMODEL_", "").split("_order")[0]
+            a.set_title(f"{short}: ratio RMS {c['observed']['ratio_rms']:.2f} (judged inside the white line)",
+                        fontsize=9)
+            fig.colorbar(im, ax=a, label="|difference| / (s0 + s1)")
+        fig.tight_layout()
+        fig.savefig(f"{outdir}/crossvalidation.png", dpi=90)
+        plt.close(fig)
     # axis fit
     ax_ = g.get("axis")
     if ax_ and ax_.get("fit"):
@@ -330,9 +432,11 @@ if __name__ == "__main__":
         align(sys.argv[2], sys.argv[3], sys.argv[4], int(sys.argv[5]), float(sys.argv[6]), sys.argv[7:])
     elif len(sys.argv) == 5 and sys.argv[1] == "solution":
         solution(sys.argv[2], sys.argv[3], float(sys.argv[4]))
+    elif len(sys.argv) == 6 and sys.argv[1] == "compare":
+        compare(sys.argv[2], sys.argv[3], sys.argv[4], float(sys.argv[5]))
     elif len(sys.argv) == 5 and sys.argv[1] == "plots":
         plots(sys.argv[2], sys.argv[3], sys.argv[4])
     else:
         sys.exit("usage: calib_geometry_report.py solution MODEL OUT.json DISTANCE_MM | "
-                 "plots GEOMETRY.json SOLUTION.json OUTDIR | "
+                 "plots GEOMETRY.json SOLUTION.json OUTDIR | compare MODEL_A MODEL_B OUT.json DISTANCE_MM | "
                  "align CORNERS_IN CORNERS_OUT OUT.json GRIDN SPACING_MM DIR:W:H:FOCAL...")
