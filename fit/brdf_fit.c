@@ -294,7 +294,8 @@ const char *fit_param_unit(model_brdf_t m, int i)
     if (!p) return "";
     bool phys = model_brdf_is_physical(m);
     if (!strcmp(p, "kd")) return phys ? "1 (albedo)" : "1/sr (albedo/pi)";
-    if (!strcmp(p, "ks")) return phys ? "1" : "1/sr";
+    if (!strcmp(p, "Rd")) return "1 (reflectance)";
+    if (!strcmp(p, "ks") || !strcmp(p, "ks2")) return phys ? "1" : "1/sr";
     return "1";
 }
 
@@ -305,8 +306,15 @@ const char *fit_param_convention(model_brdf_t m, int i)
     bool phys = model_brdf_is_physical(m);
     if (!strcmp(p, "kd"))
         return phys ? "diffuse albedo (the model divides by pi)" : "thesis coefficient kd = albedo/pi";
-    if (!strcmp(p, "ks")) return "weight of the specular lobe";
-    if (!strcmp(p, "ns")) return "Blinn cosine exponent of (n.h)";
+    if (!strcmp(p, "ks"))
+        return m == MODEL_BRDF_GGX2 ? "weight of the sharper specular lobe" : "weight of the specular lobe";
+    if (!strcmp(p, "ks2")) return "weight of the broader specular lobe";
+    if (!strcmp(p, "Rd")) return "diffuse reflectance (Ashikhmin-Shirley; the model divides by pi and scales by 1-Rs)";
+    if (!strcmp(p, "Rs")) return "specular reflectance at normal incidence (Ashikhmin-Shirley; also Schlick's F0)";
+    if (!strcmp(p, "ns"))
+        return m == MODEL_BRDF_ASHIKHMIN_SHIRLEY ? "Phong exponent of (n.h), normalised by (ns+1)/(8 pi)"
+                                                 : "Blinn cosine exponent of (n.h)";
+    if (!strcmp(p, "alpha2")) return "GGX alpha of the broader lobe (alpha2 >= alpha; not perceptual roughness)";
     if (!strcmp(p, "F0")) return "Schlick Fresnel reflectance at normal incidence";
     if (!strcmp(p, "m")) return "Beckmann rms microfacet slope";
     if (!strcmp(p, "alpha")) return "GGX alpha (not perceptual roughness; alpha = r^2)";
@@ -370,6 +378,7 @@ static double clampd(double x, double lo, double hi) { return x < lo ? lo : x > 
 static void start_point(const fit_samples_t *s, model_brdf_t m, int start, double kd_thesis, double *p)
 {
     static const double ns0[] = { 20, 200, 2000, 5 }, rough0[] = { 0.05, 0.15, 0.4, 0.8 };
+    static const double rough2[] = { 0.3, 0.6, 0.9, 0.2 };   // ggx2's second lobe: broader than the first
     int np = model_brdf_nparams(m);
     double peak = 0;
     for (int i = 0; i < s->n; i++) peak = fmax(peak, s->R[i] - kd_thesis * s->c[i].nl);
@@ -382,6 +391,10 @@ static void start_point(const fit_samples_t *s, model_brdf_t m, int start, doubl
         else if (!strcmp(n, "m") || !strcmp(n, "alpha")) v = rough0[start % 4];
         else if (!strcmp(n, "F0")) v = 0.5;
         else if (!strcmp(n, "ks")) v = model_brdf_is_physical(m) ? 0.5 : fmax(peak, 1e-3);
+        else if (!strcmp(n, "ks2")) v = 0.1;
+        else if (!strcmp(n, "alpha2")) v = fmax(rough2[start % 4], 2 * rough0[start % 4]);
+        else if (!strcmp(n, "Rd")) v = kd_thesis * M_PI;
+        else if (!strcmp(n, "Rs")) v = fmax(peak, 1e-3) * 8 * M_PI / (ns0[start % 4] + 1);
         double span = isfinite(hi) ? hi - lo : 1;
         p[j] = clampd(v, lo + 1e-6 * span, isfinite(hi) ? hi - 1e-6 * span : v);
     }
@@ -447,7 +460,7 @@ bool fit_brdf(const fit_samples_t *s, model_brdf_t m, const fit_brdf_options_t *
     bool has_rough = false;
     for (int j = 0; j < np; j++) {
         const char *n = model_brdf_param_name(m, j);
-        has_rough |= !strcmp(n, "ns") || !strcmp(n, "m") || !strcmp(n, "alpha");
+        has_rough |= !strcmp(n, "ns") || !strcmp(n, "m") || !strcmp(n, "alpha") || !strcmp(n, "alpha2");
     }
     int starts = has_rough ? (o.starts > 0 ? o.starts : 1) : 1;
     double best[MODEL_BRDF_MAX_PARAMS], best_cost = INFINITY;
@@ -479,15 +492,22 @@ bool fit_brdf(const fit_samples_t *s, model_brdf_t m, const fit_brdf_options_t *
     return true;
 }
 
-// F0 the samples cannot measure: only the product P = ks*F0 is. With ks at
-// most ks_hi, F0 lies in [max(F0_lo, P / ks_hi), F0_hi]; *a, *b that interval.
+// F0 the samples cannot measure: only the products P = ks*F0 (and ks2*F0 in
+// ggx2) are. With ks at most ks_hi, F0 lies in [max(F0_lo, P / ks_hi), F0_hi];
+// *a, *b that interval.
 static void f0_interval(model_brdf_t m, int jk, int jF, const double *p, double *a, double *b)
 {
     double klo, khi, flo, fhi;
-    model_brdf_param_range(m, jk, &klo, &khi);
     model_brdf_param_range(m, jF, &flo, &fhi);
-    double prod = p[jk] * p[jF];
-    *a = isfinite(khi) && khi > 0 ? fmax(flo, prod / khi) : flo;
+    *a = flo;
+    int j2 = model_brdf_param_index(m, "ks2");
+    for (int t = 0; t < 2; t++) {
+        int j = t ? j2 : jk;
+        if (j < 0) continue;
+        model_brdf_param_range(m, j, &klo, &khi);
+        double prod = p[j] * p[jF];
+        if (isfinite(khi) && khi > 0) *a = fmax(*a, prod / khi);
+    }
     *b = fhi;
     if (*a > *b) *a = *b;
 }
@@ -498,7 +518,8 @@ static bool hold_f0(const fit_samples_t *s, model_brdf_t m, const fit_brdf_optio
                     lsq_problem_t **pr, block_t **blocks)
 {
     int jF = model_brdf_param_index(m, "F0"), jk = model_brdf_param_index(m, "ks");
-    double a, b, lo, hi, prod = out->p[jk] * out->p[jF];
+    int jk2 = model_brdf_param_index(m, "ks2");
+    double a, b, lo, hi, prod = out->p[jk] * out->p[jF], prod2 = jk2 >= 0 ? out->p[jk2] * out->p[jF] : 0;
     f0_interval(m, jk, jF, out->p, &a, &b);
     out->f0_unmeasured = true;
     out->f0_lo = a;
@@ -507,6 +528,11 @@ static bool hold_f0(const fit_samples_t *s, model_brdf_t m, const fit_brdf_optio
     out->p[jk] = out->p[jF] > 0 ? prod / out->p[jF] : out->p[jk];
     model_brdf_param_range(m, jk, &lo, &hi);
     out->p[jk] = clampd(out->p[jk], lo, hi);
+    int j2 = model_brdf_param_index(m, "ks2");   // ggx2: its second lobe scales alike
+    if (j2 >= 0 && out->p[jF] > 0) {
+        model_brdf_param_range(m, j2, &lo, &hi);
+        out->p[j2] = clampd(prod2 / out->p[jF], lo, hi);
+    }
     for (int j = 0; j < out->nparams; j++) out->fixed[j] = false;
     out->fixed[jF] = true;
     lsq_problem_free(*pr);
@@ -559,7 +585,7 @@ static void finish(const fit_samples_t *s, model_brdf_t m, const fit_brdf_option
     bool cov_ok = lsq_covariance(pr, out->p, out->cov);
     for (int pass = 0; !cov_ok && pass < np; pass++) {
         // hold the parameter with the largest |correlation| partner: F0, then roughness
-        const char *order[] = { "F0", "ks", "ns", "m", "alpha", "kd" };
+        const char *order[] = { "F0", "alpha2", "ks2", "ks", "ns", "m", "alpha", "kd", "Rs", "Rd" };
         for (size_t t = 0; t < sizeof order / sizeof order[0]; t++) {
             int j = model_brdf_param_index(m, order[t]);
             if (j >= 0 && !out->fixed[j]) {
@@ -583,11 +609,27 @@ static void finish(const fit_samples_t *s, model_brdf_t m, const fit_brdf_option
         double J[MODEL_BRDF_MAX_PARAMS] = { 0 }, w = out->f0_hi - out->f0_lo, var_u = w * w / 12;
         J[jF] = 1;
         J[jk] = -out->p[jk] / out->p[jF];
+        int j2 = model_brdf_param_index(m, "ks2");
+        if (j2 >= 0) J[j2] = -out->p[j2] / out->p[jF];
         for (int a = 0; a < np; a++) out->cov[a * np + jF] = out->cov[jF * np + a] = 0;
         for (int a = 0; a < np; a++)
             for (int b = 0; b < np; b++) out->cov[a * np + b] += J[a] * J[b] * var_u;
     }
     for (int j = 0; j < np; j++) out->std[j] = cov_ok ? sqrt(fmax(out->cov[j * np + j], 0)) : NAN;
+}
+
+// ggx2's two lobes are interchangeable: the first is made the sharper
+// (alpha <= alpha2) by swapping (ks, alpha) with (ks2, alpha2), which leaves
+// R unchanged.
+static void order_lobes(model_brdf_t m, double *p)
+{
+    int ja = model_brdf_param_index(m, "alpha"), jb = model_brdf_param_index(m, "alpha2");
+    int ka = model_brdf_param_index(m, "ks"), kb = model_brdf_param_index(m, "ks2");
+    if (ja < 0 || jb < 0 || ka < 0 || kb < 0 || !(p[ja] > p[jb])) return;
+    double t = p[ja];
+    p[ja] = p[jb], p[jb] = t;
+    t = p[ka];
+    p[ka] = p[kb], p[kb] = t;
 }
 
 bool fit_brdf_from(const fit_samples_t *s, model_brdf_t m, const fit_brdf_options_t *opt, const double *start,
@@ -624,6 +666,7 @@ bool fit_brdf_from(const fit_samples_t *s, model_brdf_t m, const fit_brdf_option
         out->fresnel_variation = var;
         if (var < 0.05) ok = hold_f0(s, m, &o, out, &pr, &blocks);
     }
+    if (ok) order_lobes(m, out->p);
     if (ok) finish(s, m, &o, out, pr);
     // F0 fitted free: measured only if the samples say more about it than its
     // interval does (a std below the uniform's), else held as above
@@ -632,7 +675,8 @@ bool fit_brdf_from(const fit_samples_t *s, model_brdf_t m, const fit_brdf_option
         f0_interval(m, jk, jF, out->p, &a, &b);
         if (out->fixed[jF] || !(out->std[jF] < (b - a) / sqrt(12))) {
             ok = hold_f0(s, m, &o, out, &pr, &blocks);
-            if (ok) finish(s, m, &o, out, pr);
+            if (ok) order_lobes(m, out->p);
+    if (ok) finish(s, m, &o, out, pr);
         }
     }
     lsq_problem_free(pr);
@@ -737,6 +781,8 @@ json_t *fit_priors_material(const char *name, const fit_brdf_result_t *best, con
     json_object_set_new(o, "systematic_rel", json_real(sys_rel));
     int jF = model_brdf_param_index(m, "F0"), jk = model_brdf_param_index(m, "ks");
     if (jF >= 0 && jk >= 0) json_object_set_new(o, "ks_times_F0", json_real(best->p[jk] * best->p[jF]));
+    int jk2 = model_brdf_param_index(m, "ks2");
+    if (jF >= 0 && jk2 >= 0) json_object_set_new(o, "ks2_times_F0", json_real(best->p[jk2] * best->p[jF]));
     json_object_set_new(o, "rms", json_real(best->rms));
     json_object_set_new(o, "rms_unit", json_string("1/sr, of R = f_r cos(theta_i)"));
     json_object_set_new(o, "ngan_error", json_real(best->ngan_error));
