@@ -16,7 +16,26 @@
 #include "model/opts.h"
 #include "model/report.h"
 
-#define MODEL_NAMES "all|lambert|hall|torrance_sparrow|thesis_fit|cook_torrance|ggx"
+#define MODEL_NAMES "all|lambert|hall|torrance_sparrow|thesis_fit|cook_torrance|ggx|ashikhmin_shirley|ggx2"
+
+// --cv-folds K and --cv-seed N into *folds, *seed (absent: kept); 0 or MODEL_CLI_USAGE.
+static int cv_opts(model_cli_t *cli, int *folds, uint64_t *seed)
+{
+    const char *v = model_cli_value(cli, "--cv-folds");
+    char *e;
+    if (v) {
+        long k = strtol(v, &e, 10);
+        if (e == v || *e || k < 0 || k > 64)
+            return model_cli_error(cli, "--cv-folds needs a whole number 0..64 (0: choose by BIC), not '%s'", v);
+        *folds = (int)k;
+    }
+    if ((v = model_cli_value(cli, "--cv-seed"))) {
+        unsigned long long x = strtoull(v, &e, 10);
+        if (e == v || *e || *v == '-') return model_cli_error(cli, "--cv-seed needs a whole number >= 0, not '%s'", v);
+        *seed = x;
+    }
+    return 0;
+}
 
 // A number option of cli converted after parsing: absent keeps *out; a value
 // not a finite number >= 0 (> 0 unless zero_ok) is a usage error
@@ -50,7 +69,10 @@ static int cmd_brdf(int argc, char **argv)
     double k_sigma = 3, noise = 0, sys_rel = 0;
     model_opt_t opts[] = {
         MODEL_OPT_STRING("-o", "PRIORS.json", "the priors file to write", &out, true),
-        MODEL_OPT_STRING("--model", "M", MODEL_NAMES " (default all: the lowest BIC is chosen)", &model, false),
+        MODEL_OPT_STRING("--model", "M", MODEL_NAMES " (default all: chosen by cross-validation)", &model, false),
+        MODEL_OPT_VALUE("--cv-folds", "K", "folds of the model choice's cross-validation (default 5; 0: lowest BIC)",
+                        false),
+        MODEL_OPT_VALUE("--cv-seed", "N", "seed of the folds' shuffle (default 1)", false),
         MODEL_OPT_STRING("--name", "MATERIAL", "the material's name (default: the file's base name)", &name, false),
         MODEL_OPT_VALUE("--k-sigma", "K", "prior bounds mean +- K std (default 3)", false),
         MODEL_OPT_VALUE("--noise-sigma", "S", "known std of R, 1/sr (default 0: from the residuals)", false),
@@ -61,7 +83,11 @@ static int cmd_brdf(int argc, char **argv)
         .min_positional = 1, .max_positional = 1,
         .about = "Fits reflection models to BRDF samples: a CSV (theta_i,phi_i,theta_o,phi_o,f_r[,weight], degrees,\n"
                  "1/sr; optional header; '#' comments) or a MERL binary file (its luminance). With --model all\n"
-                 "(default) every model is fitted and the one with the lowest BIC is chosen. Errors are the RMS of\n"
+                 "(default) every model is fitted and one chosen by K-fold cross-validation (--cv-folds, default 5):\n"
+                 "the samples cut into 10 K contiguous blocks dealt to K folds in an order shuffled by --cv-seed,\n"
+                 "each model refitted without each fold and its held-out weighted RMS of R computed; the model with\n"
+                 "the fewest parameters within one standard error of the lowest is chosen (BIC and AIC reported\n"
+                 "beside it; --cv-folds 0 chooses the lowest BIC). Errors are the RMS of\n"
                  "R = f_r cos(theta_i) (the cosine-weighted metric of Ngan et al. 2005) and of f_r. Bounds are\n"
                  "mean +- K std (default 3) clipped to the physical range; std includes REL * mean (default 0) for\n"
                  "systematic errors the samples share.",
@@ -80,6 +106,10 @@ static int cmd_brdf(int argc, char **argv)
     fprintf(stderr, "refl fit brdf: %d samples from %s\n", s->n, file);
     fit_brdf_options_t o = fit_brdf_defaults();
     o.noise_sigma = noise;
+    if (cv_opts(&cli, &o.cv_folds, &o.cv_seed)) {
+        fit_samples_free(s);
+        return MODEL_CLI_USAGE;
+    }
     fit_brdf_models_t *fm = malloc(sizeof *fm);
     rc = 1;
     if (!fm) goto done;
@@ -89,8 +119,9 @@ static int cmd_brdf(int argc, char **argv)
         if (!r)
             fprintf(stderr, "refl fit brdf: %s: %s\n", model_brdf_name(fm->tried[t]), fm->error[t]);
         else
-            fprintf(stderr, "  %-16s rms %.4g 1/sr  BIC %.6g  (%d iterations, %.2f s)%s\n", model_brdf_name(r->model),
-                    r->rms, r->bic, r->summary.iterations, fm->time_s[t], r->cov_ok ? "" : "  covariance: not available");
+            fprintf(stderr, "  %-17s rms %.4g 1/sr  held-out rms %.4g +- %.2g 1/sr  BIC %.6g  (%d iterations, %.2f s)%s\n",
+                    model_brdf_name(r->model), r->rms, r->cv_rms, r->cv_se, r->bic, r->summary.iterations,
+                    fm->time_s[t], r->cov_ok ? "" : "  covariance: not available");
     }
     if (fm->best < 0) {
         fprintf(stderr, "refl fit brdf: no model could be fitted to %s\n", file);
@@ -109,14 +140,18 @@ static int cmd_brdf(int argc, char **argv)
     json_object_set_new(src, "path", json_string(file));
     json_object_set_new(src, "sha256", json_string(s->sha256));
     json_object_set_new(entry, "samples", src);
+    json_object_set_new(entry, "model_choice", fit_brdf_choice_json(fm));
     json_array_append_new(mats, entry);
     json_object_set_new(top, "materials", mats);
     json_t *prov = model_provenance(argc + 1, argv - 1);
     model_provenance_input(prov, "brdf_samples", file);
     json_object_set_new(top, "provenance", prov);
     if (model_write_json(out, top)) {
-        printf("%s: %s, model %s (lowest BIC of %d), rms %.4g 1/sr\n", out, mat, model_brdf_name(best->model),
-               fm->nres, best->rms);
+        printf("%s: %s, model %s (%s of %d; lowest BIC: %s), rms %.4g 1/sr", out, mat, model_brdf_name(best->model),
+               fm->by_cv ? "cross-validated" : "lowest BIC", fm->nres, model_brdf_name(fm->res[fm->best_bic].model),
+               best->rms);
+        if (fm->by_cv) printf(", held-out rms %.4g 1/sr (%s)\n", best->cv_rms, fm->cv_note);
+        else printf("\n  model choice: %s\n", fm->cv_note);
         rc = 0;
     }
     json_decref(top);
@@ -138,7 +173,8 @@ static void print_models(const fit_brdf_models_t *m)
             continue;
         }
         const fit_brdf_result_t *r = &m->res[m->at[t]];
-        printf("  %-16s rms %.4g 1/sr  BIC %.6g", model_brdf_name(r->model), r->rms, r->bic);
+        printf("  %-17s rms %.4g 1/sr  held-out rms %.4g +- %.2g 1/sr  BIC %.6g", model_brdf_name(r->model), r->rms,
+               r->cv_rms, r->cv_se, r->bic);
         for (int j = 0; j < r->nparams; j++) printf("  %s %.4g", model_brdf_param_name(r->model, j), r->p[j]);
         printf("\n");
     }
@@ -167,8 +203,10 @@ static void print_material(const fit_material_opts_t *o, const fit_material_resu
     if (isfinite(r->rms_over_noise))
         printf("  residual per degree of freedom over the noise: %.3f\n", r->rms_over_noise);
     if (r->written) {
-        printf("%s: %s, model %s (lowest BIC of %d)\n", o->out, o->name ? o->name : r->material,
-               model_brdf_name(r->models.res[r->models.best].model), r->models.nres);
+        const fit_brdf_models_t *m = &r->models;
+        printf("%s: %s, model %s (%s of %d; lowest BIC: %s)\n", o->out, o->name ? o->name : r->material,
+               model_brdf_name(m->res[m->best].model), m->by_cv ? m->cv_note : "lowest BIC", m->nres,
+               model_brdf_name(m->res[m->best_bic].model));
     }
 }
 
@@ -187,7 +225,11 @@ int fit_cmd_material(int argc, char **argv)
         MODEL_OPT_UNITS,
         MODEL_OPT_STRING("--material", "NAME", "its material in the scene (default: the scene's only material)",
                          &o.material, false),
-        MODEL_OPT_STRING("--model", "M", MODEL_NAMES " (default all)", &o.model, false),
+        MODEL_OPT_STRING("--model", "M", MODEL_NAMES " (default all: chosen by cross-validation over the frames)",
+                         &o.model, false),
+        MODEL_OPT_VALUE("--cv-folds", "K", "folds of the model choice's cross-validation over the frames (default 5; "
+                        "0: lowest BIC)", false),
+        MODEL_OPT_VALUE("--cv-seed", "N", "seed of the folds' shuffle (default 1)", false),
         MODEL_OPT_STRING("--name", "NAME", "the material's name in the priors (default: the scene's)", &o.name, false),
         MODEL_OPT_VALUE("--k-sigma", "K", "prior bounds mean +- K std (default 3)", false),
         MODEL_OPT_VALUE("--systematic", "REL", "std adds REL * mean (default 0.03)", false),
@@ -206,6 +248,9 @@ int fit_cmd_material(int argc, char **argv)
                  "and flat corrected, brackets merged to high dynamic range, scaled by the reference white's kc*I of\n"
                  "its lamp (DIR/white.json) with the geometry (DIR/camera.cameramodel) and lamp positions\n"
                  "(DIR/lamps.json); then every requested model is fitted (refl fit brdf) and the priors file written.\n"
+                 "With --model all the model is chosen by K-fold cross-validation over the frames (--cv-folds, default\n"
+                 "5; a frame's windows are held out together): the fewest parameters within one standard error of the\n"
+                 "lowest held-out RMS; BIC and AIC are reported beside it (--cv-folds 0 chooses the lowest BIC).\n"
                  "The sample's scene is given with --scene (a session records none), its material with --material\n"
                  "when the scene has several. Each parameter's std adds REL * mean (default 0.03) to the statistical\n"
                  "one, for the calibrations' shared errors (on the virtual rig kc*I comes out within ~3 % and the lamp\n"
@@ -224,7 +269,7 @@ int fit_cmd_material(int argc, char **argv)
     if ((rc = calib_cli_window_step(&cli, &o.window, &o.step)) != MODEL_CLI_OK) return rc;
     if ((rc = model_cli_units(&cli, &o.scene_unit_mm))) return rc;
     if (number_opt(&cli, "--k-sigma", false, &o.k_sigma) || number_opt(&cli, "--systematic", true, &o.sys_rel) ||
-        number_opt(&cli, "--albedo-cells", true, &o.cell_mm))
+        number_opt(&cli, "--albedo-cells", true, &o.cell_mm) || cv_opts(&cli, &o.cv_folds, &o.cv_seed))
         return MODEL_CLI_USAGE;
     model_brdf_t models[MODEL_BRDF_COUNT];
     int nm;

@@ -35,6 +35,8 @@ typedef struct {
     double      k_sigma;    // prior bounds mean +- k_sigma std (default 3)
     double      sys_rel;    // systematic std relative to the mean (default 0.03)
     double      cell_mm;    // albedo cells of cell_mm mm (0: none)
+    int         cv_folds;   // model choice by cross-validation over the frames, folds (default 5; 0: BIC)
+    uint64_t    cv_seed;    // the folds' shuffle (default 1)
     int         window;     // observation windows, pixels (0: calib_observe's default)
     int         step;       // their grid step, pixels (0: the default)
     bool        verbose;    // calib_observe prints each angle on stderr
