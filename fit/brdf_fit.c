@@ -444,6 +444,7 @@ static bool begin_result(const fit_samples_t *s, model_brdf_t m, fit_brdf_result
     memset(out, 0, sizeof *out);
     out->model = m;
     out->nparams = model_brdf_nparams(m);
+    out->cv_rms = out->cv_se = NAN;   // set by fit_brdf_models' cross-validation
     if (!s || s->n < out->nparams + 1) {
         model_error(s ? s->source : "samples", 0, "%d samples: too few to fit %s (%d parameters)", s ? s->n : 0,
                     model_brdf_name(m), out->nparams);
@@ -585,7 +586,8 @@ static void finish(const fit_samples_t *s, model_brdf_t m, const fit_brdf_option
     if (anyfixed) lsq_set_fixed(pr, out->p, out->fixed);
     bool cov_ok = lsq_covariance(pr, out->p, out->cov);
     for (int pass = 0; !cov_ok && pass < np; pass++) {
-        // hold the parameter with the largest |correlation| partner: F0, then roughness
+        // hold a parameter the samples cannot separate: ggx2's second lobe (absent from
+        // one-lobe samples), F0, then roughness
         const char *order[] = { "alpha2", "F0", "ks2", "ks", "ns", "m", "alpha", "kd", "Rs", "Rd" };
         for (size_t t = 0; t < sizeof order / sizeof order[0]; t++) {
             int j = model_brdf_param_index(m, order[t]);
@@ -880,7 +882,6 @@ bool fit_brdf_models(const fit_samples_t *s, const model_brdf_t *models, int nmo
         out->at[t] = -1;
         out->error[t][0] = 0;
         bool ok = fit_brdf(s, models[k], &o, r);
-        r->cv_rms = r->cv_se = NAN;
         out->time_s[t] = model_now_s() - t0;
         if (!ok) {
             snprintf(out->error[t], sizeof out->error[t], "%s", model_last_error());
