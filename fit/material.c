@@ -117,7 +117,7 @@ done:
 // their faces); each cell with at least CELL_MIN_OBS observations gets a
 // factor c_j on its whole reflectance (the virtual rig's texture multiplies
 // it so), and the fit becomes R_k = c_j(k) R(theta; geometry_k):
-//   1. theta from the samples as they are (the model with the lowest BIC);
+//   1. theta from the samples as they are (the model fit_brdf_models chose);
 //   2. c_j = sum R_k f_k / sum f_k^2 over the cell (f = the model's R),
 //      then the factors scaled to mean 1 over the observations (so kd & co
 //      are the sample's mean);
