@@ -821,6 +821,10 @@ static void cv_choose(const fit_samples_t *s, const fit_brdf_options_t *o, fit_b
     out->cv_seed = o->cv_seed;
     snprintf(out->cv_unit_name, sizeof out->cv_unit_name, "%s",
              o->cv_unit ? (o->cv_unit_name ? o->cv_unit_name : "unit") : "block of samples");
+    if (out->nres < 2) {
+        snprintf(out->cv_note, sizeof out->cv_note, "one model fitted: nothing to choose, no cross-validation");
+        return;
+    }
     if (k < 2) {
         snprintf(out->cv_note, sizeof out->cv_note, "cross-validation off (folds %d): the lowest BIC", o->cv_folds);
         return;
@@ -905,8 +909,9 @@ json_t *fit_brdf_choice_json(const fit_brdf_models_t *m)
         m->by_cv ? "k-fold cross-validation: each model refitted without each fold of independent units and its "
                    "held-out weighted RMS of R (cv_rms, 1/sr) computed; chosen: the model with the fewest parameters "
                    "whose cv_rms is within one standard error (cv_rms_se) of the lowest"
-                 : "the lowest BIC (cross-validation not done: see note)"));
-    json_object_set_new(o, "criterion", json_string(m->by_cv ? "cv_rms" : "bic"));
+                 : m->nres < 2 ? "one model fitted (see note)"
+                               : "the lowest BIC (cross-validation not done: see note)"));
+    json_object_set_new(o, "criterion", json_string(m->by_cv ? "cv_rms" : m->nres < 2 ? "only_model" : "bic"));
     json_object_set_new(o, "note", json_string(m->cv_note));
     json_object_set_new(o, "folds", json_integer(m->cv_folds));
     json_object_set_new(o, "units", json_integer(m->cv_units));

@@ -60,6 +60,17 @@ static void base_name(const char *file, char *buf, size_t n)
     if (dot) *dot = 0;
 }
 
+// "  held-out rms X +- SE 1/sr" of a cross-validated fit, else "".
+typedef struct {
+    char s[64];
+} held_out_t;
+static held_out_t held_out(const fit_brdf_result_t *r)
+{
+    held_out_t h = { "" };
+    if (isfinite(r->cv_rms)) snprintf(h.s, sizeof h.s, "  held-out rms %.4g +- %.2g 1/sr", r->cv_rms, r->cv_se);
+    return h;
+}
+
 // ---------------------------------------------------------------------------
 // refl fit brdf
 
@@ -119,9 +130,9 @@ static int cmd_brdf(int argc, char **argv)
         if (!r)
             fprintf(stderr, "refl fit brdf: %s: %s\n", model_brdf_name(fm->tried[t]), fm->error[t]);
         else
-            fprintf(stderr, "  %-17s rms %.4g 1/sr  held-out rms %.4g +- %.2g 1/sr  BIC %.6g  (%d iterations, %.2f s)%s\n",
-                    model_brdf_name(r->model), r->rms, r->cv_rms, r->cv_se, r->bic, r->summary.iterations,
-                    fm->time_s[t], r->cov_ok ? "" : "  covariance: not available");
+            fprintf(stderr, "  %-17s rms %.4g 1/sr%s  BIC %.6g  (%d iterations, %.2f s)%s\n", model_brdf_name(r->model),
+                    r->rms, held_out(r).s, r->bic, r->summary.iterations, fm->time_s[t],
+                    r->cov_ok ? "" : "  covariance: not available");
     }
     if (fm->best < 0) {
         fprintf(stderr, "refl fit brdf: no model could be fitted to %s\n", file);
@@ -147,11 +158,14 @@ static int cmd_brdf(int argc, char **argv)
     model_provenance_input(prov, "brdf_samples", file);
     json_object_set_new(top, "provenance", prov);
     if (model_write_json(out, top)) {
-        printf("%s: %s, model %s (%s of %d; lowest BIC: %s), rms %.4g 1/sr", out, mat, model_brdf_name(best->model),
-               fm->by_cv ? "cross-validated" : "lowest BIC", fm->nres, model_brdf_name(fm->res[fm->best_bic].model),
-               best->rms);
+        char how[160];
+        if (fm->nres < 2) snprintf(how, sizeof how, "the only model fitted");
+        else snprintf(how, sizeof how, "%s of %d; lowest BIC: %s", fm->by_cv ? "cross-validated" : "lowest BIC",
+                      fm->nres, model_brdf_name(fm->res[fm->best_bic].model));
+        printf("%s: %s, model %s (%s), rms %.4g 1/sr", out, mat, model_brdf_name(best->model), how, best->rms);
         if (fm->by_cv) printf(", held-out rms %.4g 1/sr (%s)\n", best->cv_rms, fm->cv_note);
-        else printf("\n  model choice: %s\n", fm->cv_note);
+        else if (fm->nres > 1) printf("\n  model choice: %s\n", fm->cv_note);
+        else printf("\n");
         rc = 0;
     }
     json_decref(top);
@@ -173,8 +187,7 @@ static void print_models(const fit_brdf_models_t *m)
             continue;
         }
         const fit_brdf_result_t *r = &m->res[m->at[t]];
-        printf("  %-17s rms %.4g 1/sr  held-out rms %.4g +- %.2g 1/sr  BIC %.6g", model_brdf_name(r->model), r->rms,
-               r->cv_rms, r->cv_se, r->bic);
+        printf("  %-17s rms %.4g 1/sr%s  BIC %.6g", model_brdf_name(r->model), r->rms, held_out(r).s, r->bic);
         for (int j = 0; j < r->nparams; j++) printf("  %s %.4g", model_brdf_param_name(r->model, j), r->p[j]);
         printf("\n");
     }
@@ -204,9 +217,13 @@ static void print_material(const fit_material_opts_t *o, const fit_material_resu
         printf("  residual per degree of freedom over the noise: %.3f\n", r->rms_over_noise);
     if (r->written) {
         const fit_brdf_models_t *m = &r->models;
-        printf("%s: %s, model %s (%s of %d; lowest BIC: %s)\n", o->out, o->name ? o->name : r->material,
-               model_brdf_name(m->res[m->best].model), m->by_cv ? m->cv_note : "lowest BIC", m->nres,
-               model_brdf_name(m->res[m->best_bic].model));
+        if (m->nres < 2)
+            printf("%s: %s, model %s (the only model fitted)\n", o->out, o->name ? o->name : r->material,
+                   model_brdf_name(m->res[m->best].model));
+        else
+            printf("%s: %s, model %s (%s of %d; lowest BIC: %s)\n", o->out, o->name ? o->name : r->material,
+                   model_brdf_name(m->res[m->best].model), m->by_cv ? m->cv_note : "lowest BIC", m->nres,
+                   model_brdf_name(m->res[m->best_bic].model));
     }
 }
 

@@ -60,7 +60,8 @@ static bool material_report(const char *dir, const calib_obs_set_t *obs, const f
                     model_brdf_name(res[best].model),
                     !strcmp(json_string_value(json_object_get(ch, "criterion")), "cv_rms")
                         ? "the held-out RMS (the fewest parameters within one standard error of the lowest)"
-                        : "the lowest BIC",
+                    : !strcmp(json_string_value(json_object_get(ch, "criterion")), "only_model") ? "--model"
+                                                                                                 : "the lowest BIC",
                     json_string_value(json_object_get(ch, "note")),
                     json_string_value(json_object_get(ch, "lowest_bic")));
     model_html_heading(h, "Parameters");
