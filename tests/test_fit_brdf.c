@@ -302,6 +302,48 @@ TEST(fit_brdf_model_choice_cross_validated)
     g_free(err);
 }
 
+// The folds are deterministic (the same seed, the same held-out figures bit
+// for bit; another seed, other folds), a unit's samples stay together (one
+// unit for all: nothing to hold out, the lowest BIC, said so), and the
+// number of units is the number of distinct unit ids.
+TEST(fit_brdf_cv_folds_seeded_and_by_unit)
+{
+    double ggx[] = { 0.35, 0.6, 0.1, 0.3 };
+    fit_samples_t *s = synth_grid(MODEL_BRDF_GGX, ggx, 0.002, 3, 10, -1);
+    const model_brdf_t models[] = { MODEL_BRDF_LAMBERT, MODEL_BRDF_GGX };
+    fit_brdf_models_t *a = malloc(sizeof *a), *b = malloc(sizeof *b);
+    fit_brdf_options_t o = fit_brdf_defaults();
+    CHECK(fit_brdf_models(s, models, 2, &o, a) && fit_brdf_models(s, models, 2, &o, b));
+    CHECK(a->by_cv && a->cv_folds == 5 && a->cv_units == 50);
+    CHECK(a->res[1].model == MODEL_BRDF_GGX && a->res[1].cv_rms == b->res[1].cv_rms && a->res[1].cv_se == b->res[1].cv_se);
+    CHECK(a->res[a->best].model == MODEL_BRDF_GGX);
+    o.cv_seed = 2;
+    CHECK(fit_brdf_models(s, models, 2, &o, b));
+    CHECK(b->by_cv && b->res[1].cv_rms != a->res[1].cv_rms);
+    CHECK_REL(b->res[1].cv_rms, a->res[1].cv_rms, 0.05);
+    int *unit = malloc((size_t)s->n * sizeof *unit);
+    for (int i = 0; i < s->n; i++) unit[i] = 7;
+    o.cv_unit = unit;
+    o.cv_unit_name = "frame";
+    CHECK(fit_brdf_models(s, models, 2, &o, b));
+    CHECK(!b->by_cv && b->best == b->best_bic && isnan(b->res[1].cv_rms));
+    CHECK_CONTAINS(b->cv_note, "1 frame(s): too few to cross-validate");
+    for (int i = 0; i < s->n; i++) unit[i] = 1000 - 3 * (i / 37);   // any ids, in any order
+    CHECK(fit_brdf_models(s, models, 2, &o, b));
+    CHECK(b->by_cv && b->cv_units == (s->n + 36) / 37 && !strcmp(b->cv_unit_name, "frame"));
+    o.cv_folds = 0;
+    CHECK(fit_brdf_models(s, models, 2, &o, b));
+    CHECK(!b->by_cv && b->cv_folds == 0);
+    CHECK_CONTAINS(b->cv_note, "cross-validation off");
+    json_t *j = fit_brdf_choice_json(b);
+    CHECK(!strcmp(json_string_value(json_object_get(j, "criterion")), "bic"));
+    json_decref(j);
+    free(unit);
+    free(a);
+    free(b);
+    fit_samples_free(s);
+}
+
 TEST(fit_brdf_csv_round_trip_and_errors)
 {
     // a GGX material written as a CSV with a header and comments
