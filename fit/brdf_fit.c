@@ -130,7 +130,8 @@ const char *fit_param_unit(model_brdf_t m, int i)
     if (!p) return "";
     bool phys = model_brdf_is_physical(m);
     if (!strcmp(p, "kd")) return phys ? "1 (albedo)" : "1/sr (albedo/pi)";
-    if (!strcmp(p, "ks")) return phys ? "1" : "1/sr";
+    if (!strcmp(p, "Rd")) return "1 (reflectance)";
+    if (!strcmp(p, "ks") || !strcmp(p, "ks2")) return phys ? "1" : "1/sr";
     return "1";
 }
 
@@ -141,8 +142,15 @@ const char *fit_param_convention(model_brdf_t m, int i)
     bool phys = model_brdf_is_physical(m);
     if (!strcmp(p, "kd"))
         return phys ? "diffuse albedo (the model divides by pi)" : "thesis coefficient kd = albedo/pi";
-    if (!strcmp(p, "ks")) return "weight of the specular lobe";
-    if (!strcmp(p, "ns")) return "Blinn cosine exponent of (n.h)";
+    if (!strcmp(p, "ks"))
+        return m == MODEL_BRDF_GGX2 ? "weight of the sharper specular lobe" : "weight of the specular lobe";
+    if (!strcmp(p, "ks2")) return "weight of the broader specular lobe";
+    if (!strcmp(p, "Rd")) return "diffuse reflectance (Ashikhmin-Shirley; the model divides by pi and scales by 1-Rs)";
+    if (!strcmp(p, "Rs")) return "specular reflectance at normal incidence (Ashikhmin-Shirley; also Schlick's F0)";
+    if (!strcmp(p, "ns"))
+        return m == MODEL_BRDF_ASHIKHMIN_SHIRLEY ? "Phong exponent of (n.h), normalised by (ns+1)/(8 pi)"
+                                                 : "Blinn cosine exponent of (n.h)";
+    if (!strcmp(p, "alpha2")) return "GGX alpha of the broader lobe (alpha2 >= alpha; not perceptual roughness)";
     if (!strcmp(p, "F0")) return "Schlick Fresnel reflectance at normal incidence";
     if (!strcmp(p, "m")) return "Beckmann rms microfacet slope";
     if (!strcmp(p, "alpha")) return "GGX alpha (not perceptual roughness; alpha = r^2)";
@@ -179,7 +187,8 @@ static bool block_res(void *ctx, const double *const *p, double *r, double **J)
 
 fit_brdf_options_t fit_brdf_defaults(void)
 {
-    return (fit_brdf_options_t){ .threads = 0, .starts = 3, .noise_sigma = 0, .verbose = false };
+    return (fit_brdf_options_t){ .threads = 0, .starts = 3, .noise_sigma = 0, .verbose = false, .cv_folds = 5,
+                                 .cv_seed = 1 };
 }
 
 // The diffuse level: the median of R / n.l away from the mirror direction.
@@ -206,6 +215,7 @@ static double clampd(double x, double lo, double hi) { return x < lo ? lo : x > 
 static void start_point(const fit_samples_t *s, model_brdf_t m, int start, double kd_thesis, double *p)
 {
     static const double ns0[] = { 20, 200, 2000, 5 }, rough0[] = { 0.05, 0.15, 0.4, 0.8 };
+    static const double rough2[] = { 0.3, 0.6, 0.9, 0.2 };   // ggx2's second lobe: broader than the first
     int np = model_brdf_nparams(m);
     double peak = 0;
     for (int i = 0; i < s->n; i++) peak = fmax(peak, s->R[i] - kd_thesis * s->c[i].nl);
@@ -218,6 +228,10 @@ static void start_point(const fit_samples_t *s, model_brdf_t m, int start, doubl
         else if (!strcmp(n, "m") || !strcmp(n, "alpha")) v = rough0[start % 4];
         else if (!strcmp(n, "F0")) v = 0.5;
         else if (!strcmp(n, "ks")) v = model_brdf_is_physical(m) ? 0.5 : fmax(peak, 1e-3);
+        else if (!strcmp(n, "ks2")) v = 0.1;
+        else if (!strcmp(n, "alpha2")) v = fmax(rough2[start % 4], 2 * rough0[start % 4]);
+        else if (!strcmp(n, "Rd")) v = kd_thesis * M_PI;
+        else if (!strcmp(n, "Rs")) v = fmax(peak, 1e-3) * 8 * M_PI / (ns0[start % 4] + 1);
         double span = isfinite(hi) ? hi - lo : 1;
         p[j] = clampd(v, lo + 1e-6 * span, isfinite(hi) ? hi - 1e-6 * span : v);
     }
@@ -266,6 +280,7 @@ static bool begin_result(const fit_samples_t *s, model_brdf_t m, fit_brdf_result
     memset(out, 0, sizeof *out);
     out->model = m;
     out->nparams = model_brdf_nparams(m);
+    out->cv_rms = out->cv_se = NAN;   // set by fit_brdf_models' cross-validation
     if (!s || s->n < out->nparams + 1) {
         model_error(s ? s->source : "samples", 0, "%d samples: too few to fit %s (%d parameters)", s ? s->n : 0,
                     model_brdf_name(m), out->nparams);
@@ -283,7 +298,7 @@ bool fit_brdf(const fit_samples_t *s, model_brdf_t m, const fit_brdf_options_t *
     bool has_rough = false;
     for (int j = 0; j < np; j++) {
         const char *n = model_brdf_param_name(m, j);
-        has_rough |= !strcmp(n, "ns") || !strcmp(n, "m") || !strcmp(n, "alpha");
+        has_rough |= !strcmp(n, "ns") || !strcmp(n, "m") || !strcmp(n, "alpha") || !strcmp(n, "alpha2");
     }
     int starts = has_rough ? (o.starts > 0 ? o.starts : 1) : 1;
     double best[MODEL_BRDF_MAX_PARAMS], best_cost = INFINITY;
@@ -315,15 +330,22 @@ bool fit_brdf(const fit_samples_t *s, model_brdf_t m, const fit_brdf_options_t *
     return true;
 }
 
-// F0 the samples cannot measure: only the product P = ks*F0 is. With ks at
-// most ks_hi, F0 lies in [max(F0_lo, P / ks_hi), F0_hi]; *a, *b that interval.
+// F0 the samples cannot measure: only the products P = ks*F0 (and ks2*F0 in
+// ggx2) are. With ks at most ks_hi, F0 lies in [max(F0_lo, P / ks_hi), F0_hi];
+// *a, *b that interval.
 static void f0_interval(model_brdf_t m, int jk, int jF, const double *p, double *a, double *b)
 {
     double klo, khi, flo, fhi;
-    model_brdf_param_range(m, jk, &klo, &khi);
     model_brdf_param_range(m, jF, &flo, &fhi);
-    double prod = p[jk] * p[jF];
-    *a = isfinite(khi) && khi > 0 ? fmax(flo, prod / khi) : flo;
+    *a = flo;
+    int j2 = model_brdf_param_index(m, "ks2");
+    for (int t = 0; t < 2; t++) {
+        int j = t ? j2 : jk;
+        if (j < 0) continue;
+        model_brdf_param_range(m, j, &klo, &khi);
+        double prod = p[j] * p[jF];
+        if (isfinite(khi) && khi > 0) *a = fmax(*a, prod / khi);
+    }
     *b = fhi;
     if (*a > *b) *a = *b;
 }
@@ -334,7 +356,8 @@ static bool hold_f0(const fit_samples_t *s, model_brdf_t m, const fit_brdf_optio
                     lsq_problem_t **pr, block_t **blocks)
 {
     int jF = model_brdf_param_index(m, "F0"), jk = model_brdf_param_index(m, "ks");
-    double a, b, lo, hi, prod = out->p[jk] * out->p[jF];
+    int jk2 = model_brdf_param_index(m, "ks2");
+    double a, b, lo, hi, prod = out->p[jk] * out->p[jF], prod2 = jk2 >= 0 ? out->p[jk2] * out->p[jF] : 0;
     f0_interval(m, jk, jF, out->p, &a, &b);
     out->f0_unmeasured = true;
     out->f0_lo = a;
@@ -343,6 +366,11 @@ static bool hold_f0(const fit_samples_t *s, model_brdf_t m, const fit_brdf_optio
     out->p[jk] = out->p[jF] > 0 ? prod / out->p[jF] : out->p[jk];
     model_brdf_param_range(m, jk, &lo, &hi);
     out->p[jk] = clampd(out->p[jk], lo, hi);
+    int j2 = model_brdf_param_index(m, "ks2");   // ggx2: its second lobe scales alike
+    if (j2 >= 0 && out->p[jF] > 0) {
+        model_brdf_param_range(m, j2, &lo, &hi);
+        out->p[j2] = clampd(prod2 / out->p[jF], lo, hi);
+    }
     for (int j = 0; j < out->nparams; j++) out->fixed[j] = false;
     out->fixed[jF] = true;
     lsq_problem_free(*pr);
@@ -394,8 +422,9 @@ static void finish(const fit_samples_t *s, model_brdf_t m, const fit_brdf_option
     if (anyfixed) lsq_set_fixed(pr, out->p, out->fixed);
     bool cov_ok = lsq_covariance(pr, out->p, out->cov);
     for (int pass = 0; !cov_ok && pass < np; pass++) {
-        // hold the parameter with the largest |correlation| partner: F0, then roughness
-        const char *order[] = { "F0", "ks", "ns", "m", "alpha", "kd" };
+        // hold a parameter the samples cannot separate: ggx2's second lobe (absent from
+        // one-lobe samples), F0, then roughness
+        const char *order[] = { "alpha2", "F0", "ks2", "ks", "ns", "m", "alpha", "kd", "Rs", "Rd" };
         for (size_t t = 0; t < sizeof order / sizeof order[0]; t++) {
             int j = model_brdf_param_index(m, order[t]);
             if (j >= 0 && !out->fixed[j]) {
@@ -419,11 +448,27 @@ static void finish(const fit_samples_t *s, model_brdf_t m, const fit_brdf_option
         double J[MODEL_BRDF_MAX_PARAMS] = { 0 }, w = out->f0_hi - out->f0_lo, var_u = w * w / 12;
         J[jF] = 1;
         J[jk] = -out->p[jk] / out->p[jF];
+        int j2 = model_brdf_param_index(m, "ks2");
+        if (j2 >= 0) J[j2] = -out->p[j2] / out->p[jF];
         for (int a = 0; a < np; a++) out->cov[a * np + jF] = out->cov[jF * np + a] = 0;
         for (int a = 0; a < np; a++)
             for (int b = 0; b < np; b++) out->cov[a * np + b] += J[a] * J[b] * var_u;
     }
     for (int j = 0; j < np; j++) out->std[j] = cov_ok ? sqrt(fmax(out->cov[j * np + j], 0)) : NAN;
+}
+
+// ggx2's two lobes are interchangeable: the first is made the sharper
+// (alpha <= alpha2) by swapping (ks, alpha) with (ks2, alpha2), which leaves
+// R unchanged.
+static void order_lobes(model_brdf_t m, double *p)
+{
+    int ja = model_brdf_param_index(m, "alpha"), jb = model_brdf_param_index(m, "alpha2");
+    int ka = model_brdf_param_index(m, "ks"), kb = model_brdf_param_index(m, "ks2");
+    if (ja < 0 || jb < 0 || ka < 0 || kb < 0 || !(p[ja] > p[jb])) return;
+    double t = p[ja];
+    p[ja] = p[jb], p[jb] = t;
+    t = p[ka];
+    p[ka] = p[kb], p[kb] = t;
 }
 
 bool fit_brdf_from(const fit_samples_t *s, model_brdf_t m, const fit_brdf_options_t *opt, const double *start,
@@ -460,6 +505,7 @@ bool fit_brdf_from(const fit_samples_t *s, model_brdf_t m, const fit_brdf_option
         out->fresnel_variation = var;
         if (var < 0.05) ok = hold_f0(s, m, &o, out, &pr, &blocks);
     }
+    if (ok) order_lobes(m, out->p);
     if (ok) finish(s, m, &o, out, pr);
     // F0 fitted free: measured only if the samples say more about it than its
     // interval does (a std below the uniform's), else held as above
@@ -468,7 +514,8 @@ bool fit_brdf_from(const fit_samples_t *s, model_brdf_t m, const fit_brdf_option
         f0_interval(m, jk, jF, out->p, &a, &b);
         if (out->fixed[jF] || !(out->std[jF] < (b - a) / sqrt(12))) {
             ok = hold_f0(s, m, &o, out, &pr, &blocks);
-            if (ok) finish(s, m, &o, out, pr);
+            if (ok) order_lobes(m, out->p);
+    if (ok) finish(s, m, &o, out, pr);
         }
     }
     lsq_problem_free(pr);
@@ -491,12 +538,182 @@ bool fit_brdf_model_list(const char *name, model_brdf_t models[MODEL_BRDF_COUNT]
     return true;
 }
 
+// ---------------------------------------------------------------------------
+// Model choice by k-fold cross-validation
+
+static int cmp_int(const void *a, const void *b)
+{
+    int x = *(const int *)a, y = *(const int *)b;
+    return (x > y) - (x < y);
+}
+
+// fold[i] of each sample: its unit (o->cv_unit, else one of 10 k contiguous
+// blocks) dealt to k folds in an order shuffled by the seed. The number of
+// distinct units, 0 when out of memory.
+static int cv_folds_of(const fit_samples_t *s, const fit_brdf_options_t *o, int k, int *fold)
+{
+    int n = s->n, *u = malloc((size_t)n * sizeof *u), *ids = malloc((size_t)n * sizeof *ids);
+    if (!u || !ids) {
+        free(u);
+        free(ids);
+        return 0;
+    }
+    long nb = 10L * k < n ? 10L * k : n;
+    for (int i = 0; i < n; i++) u[i] = o->cv_unit ? o->cv_unit[i] : (int)((long)i * nb / n);
+    memcpy(ids, u, (size_t)n * sizeof *ids);
+    qsort(ids, (size_t)n, sizeof *ids, cmp_int);
+    int nu = 0;
+    for (int i = 0; i < n; i++)
+        if (i == 0 || ids[i] != ids[nu - 1]) ids[nu++] = ids[i];
+    // a seeded Fisher-Yates shuffle of the unit ids; unit at position j goes to fold j % k
+    int *pos = malloc((size_t)nu * sizeof *pos);
+    model_rng_t rng = model_rng(o->cv_seed, 19);
+    for (int j = nu - 1; pos && j > 0; j--) {
+        int r = (int)(model_rng_uniform(&rng) * (j + 1));
+        if (r > j) r = j;
+        int t = ids[j];
+        ids[j] = ids[r], ids[r] = t;
+    }
+    // pos[j]: the shuffled place of sorted unit j (search the shuffled ids by a sorted copy)
+    int *sorted = pos ? malloc((size_t)nu * sizeof *sorted) : NULL;
+    if (!sorted) {
+        free(u), free(ids), free(pos);
+        return 0;
+    }
+    for (int j = 0; j < nu; j++) sorted[j] = ids[j];
+    qsort(sorted, (size_t)nu, sizeof *sorted, cmp_int);
+    for (int j = 0; j < nu; j++) {
+        int *at = bsearch(&ids[j], sorted, (size_t)nu, sizeof *sorted, cmp_int);
+        pos[at - sorted] = j;
+    }
+    for (int i = 0; i < n; i++) {
+        int *at = bsearch(&u[i], sorted, (size_t)nu, sizeof *sorted, cmp_int);
+        fold[i] = pos[at - sorted] % k;
+    }
+    free(u), free(ids), free(pos), free(sorted);
+    return nu;
+}
+
+// The samples with (fold[i] == f) == keep, lamp discs kept.
+static fit_samples_t *cv_subset(const fit_samples_t *s, const int *fold, int f, bool keep)
+{
+    fit_samples_t *t = fit_samples_new();
+    if (!t) return NULL;
+    snprintf(t->source, sizeof t->source, "%s", s->source);
+    for (int i = 0; i < s->n; i++) {
+        if ((fold[i] == f) != keep) continue;
+        const model_cosines_t *disc = s->disc_at && s->disc_at[i] >= 0 ? s->disc + s->disc_at[i] : NULL;
+        if (!fit_samples_add_disc(t, &s->c[i], disc, s->R[i], s->w[i])) {
+            fit_samples_free(t);
+            return NULL;
+        }
+    }
+    return t;
+}
+
+// r's cross-validation: refitted from its full fit without each fold, the
+// held-out weighted squares summed. false when a fold could not be fitted.
+static bool cv_model(const fit_samples_t *s, const int *fold, int k, const fit_brdf_options_t *o,
+                     fit_brdf_result_t *r)
+{
+    double sw = 0, swe = 0, mse[64], sum = 0, sum2 = 0;
+    fit_brdf_options_t fo = *o;
+    fo.cv_unit = NULL;
+    bool ok = true;
+    for (int f = 0; f < k && ok; f++) {
+        fit_samples_t *train = cv_subset(s, fold, f, false), *test = cv_subset(s, fold, f, true);
+        fit_brdf_result_t *fr = malloc(sizeof *fr);
+        ok = train && test && fr && test->n > 0 && fit_brdf_from(train, r->model, &fo, r->p, fr);
+        double fw = 0, fe = 0, Rb[256];
+        for (int i0 = 0; ok && i0 < test->n; i0 += 256) {
+            int cnt = test->n - i0 < 256 ? test->n - i0 : 256;
+            fit_samples_eval_n(test, r->model, fr->p, i0, cnt, Rb, NULL);
+            for (int j = 0; j < cnt; j++) {
+                double e = Rb[j] - test->R[i0 + j];
+                fw += test->w[i0 + j];
+                fe += test->w[i0 + j] * e * e;
+            }
+        }
+        if (ok) {
+            sw += fw, swe += fe;
+            mse[f] = fe / fw;
+            sum += mse[f], sum2 += mse[f] * mse[f];
+        }
+        free(fr);
+        fit_samples_free(train);
+        fit_samples_free(test);
+    }
+    r->cv_rms = ok && sw > 0 ? sqrt(swe / sw) : NAN;
+    double var = k > 1 ? fmax(0.0, (sum2 - sum * sum / k) / (k - 1)) : 0;
+    // the standard error of the mean square over folds, carried to the RMS
+    r->cv_se = ok && r->cv_rms > 0 ? sqrt(var / k) / (2 * r->cv_rms) : NAN;
+    return ok && isfinite(r->cv_rms);
+}
+
+// Cross-validate every fitted model of out and choose by the one-standard-error rule.
+static void cv_choose(const fit_samples_t *s, const fit_brdf_options_t *o, fit_brdf_models_t *out)
+{
+    int k = o->cv_folds > 64 ? 64 : o->cv_folds;
+    out->cv_seed = o->cv_seed;
+    snprintf(out->cv_unit_name, sizeof out->cv_unit_name, "%s",
+             o->cv_unit ? (o->cv_unit_name ? o->cv_unit_name : "unit") : "block of samples");
+    if (out->nres < 2) {
+        snprintf(out->cv_note, sizeof out->cv_note, "one model fitted: nothing to choose, no cross-validation");
+        return;
+    }
+    if (k < 2) {
+        snprintf(out->cv_note, sizeof out->cv_note, "cross-validation off (folds %d): the lowest BIC", o->cv_folds);
+        return;
+    }
+    int *fold = malloc((size_t)s->n * sizeof *fold);
+    int nu = fold ? cv_folds_of(s, o, k, fold) : 0;
+    if (nu < 2) {
+        snprintf(out->cv_note, sizeof out->cv_note, "%d %s(s): too few to cross-validate; the lowest BIC", nu,
+                 out->cv_unit_name);
+        free(fold);
+        return;
+    }
+    if (nu < k) k = nu;
+    out->cv_folds = k;
+    out->cv_units = nu;
+    for (int i = 0; i < out->nres; i++) {
+        bool q = model_error_quiet_thread(true);
+        if (cv_model(s, fold, k, o, &out->res[i]) &&
+            (out->best_cv < 0 || out->res[i].cv_rms < out->res[out->best_cv].cv_rms))
+            out->best_cv = i;
+        model_error_quiet_thread(q);
+    }
+    free(fold);
+    if (out->best_cv < 0) {
+        snprintf(out->cv_note, sizeof out->cv_note, "no model could be cross-validated; the lowest BIC");
+        return;
+    }
+    // the simplest model within one standard error of the lowest held-out RMS
+    // (and within rounding of it, for noise-free samples)
+    const fit_brdf_result_t *b = &out->res[out->best_cv];
+    double tol = b->cv_rms + fmax(isfinite(b->cv_se) ? b->cv_se : 0, 1e-9 * b->cv_rms + 1e-15);
+    int pick = out->best_cv;
+    for (int i = 0; i < out->nres; i++) {
+        const fit_brdf_result_t *r = &out->res[i];
+        if (!(r->cv_rms <= tol)) continue;
+        const fit_brdf_result_t *p = &out->res[pick];
+        if (r->nparams < p->nparams || (r->nparams == p->nparams && r->cv_rms < p->cv_rms)) pick = i;
+    }
+    out->best = pick;
+    out->by_cv = true;
+    snprintf(out->cv_note, sizeof out->cv_note, "%d-fold cross-validation over %d %ss", k, nu, out->cv_unit_name);
+}
+
 bool fit_brdf_models(const fit_samples_t *s, const model_brdf_t *models, int nmodels, const fit_brdf_options_t *opt,
                      fit_brdf_models_t *out)
 {
+    fit_brdf_options_t o = opt ? *opt : fit_brdf_defaults();
     bool quiet = model_error_quiet_thread(true);   // each model's message goes to out->error
     out->ntried = out->nres = 0;
-    out->best = -1;
+    out->best = out->best_bic = out->best_cv = -1;
+    out->by_cv = false;
+    out->cv_folds = out->cv_units = 0;
+    out->cv_note[0] = 0;
     for (int k = 0; k < nmodels && k < MODEL_BRDF_COUNT; k++) {
         fit_brdf_result_t *r = &out->res[out->nres];
         double t0 = model_now_s();
@@ -504,19 +721,45 @@ bool fit_brdf_models(const fit_samples_t *s, const model_brdf_t *models, int nmo
         out->tried[t] = models[k];
         out->at[t] = -1;
         out->error[t][0] = 0;
-        bool ok = fit_brdf(s, models[k], opt, r);
+        bool ok = fit_brdf(s, models[k], &o, r);
         out->time_s[t] = model_now_s() - t0;
         if (!ok) {
             snprintf(out->error[t], sizeof out->error[t], "%s", model_last_error());
             continue;
         }
         out->at[t] = out->nres;
-        if (out->best < 0 || r->bic < out->res[out->best].bic) out->best = out->nres;
+        if (out->best_bic < 0 || r->bic < out->res[out->best_bic].bic) out->best_bic = out->nres;
         out->nres++;
     }
+    out->best = out->best_bic;
+    if (out->best >= 0) cv_choose(s, &o, out);
     if (out->best < 0) model_error_set(NULL, 0, "no model could be fitted");
     model_error_quiet_thread(quiet);
     return out->best >= 0;
+}
+
+json_t *fit_brdf_choice_json(const fit_brdf_models_t *m)
+{
+    json_t *o = json_object();
+    json_object_set_new(o, "rule", json_string(
+        m->by_cv ? "k-fold cross-validation: each model refitted without each fold of independent units and its "
+                   "held-out weighted RMS of R (cv_rms, 1/sr) computed; chosen: the model with the fewest parameters "
+                   "whose cv_rms is within one standard error (cv_rms_se) of the lowest"
+                 : m->nres < 2 ? "one model fitted (see note)"
+                               : "the lowest BIC (cross-validation not done: see note)"));
+    json_object_set_new(o, "criterion", json_string(m->by_cv ? "cv_rms" : m->nres < 2 ? "only_model" : "bic"));
+    json_object_set_new(o, "note", json_string(m->cv_note));
+    json_object_set_new(o, "folds", json_integer(m->cv_folds));
+    json_object_set_new(o, "units", json_integer(m->cv_units));
+    json_object_set_new(o, "unit", json_string(m->cv_unit_name));
+    json_object_set_new(o, "seed", json_integer((json_int_t)m->cv_seed));
+    json_object_set_new(o, "cv_rms_unit", json_string("1/sr, of R = f_r cos(theta_i), weighted"));
+    json_object_set_new(o, "chosen", m->best >= 0 ? json_string(model_brdf_name(m->res[m->best].model)) : json_null());
+    json_object_set_new(o, "lowest_bic",
+                        m->best_bic >= 0 ? json_string(model_brdf_name(m->res[m->best_bic].model)) : json_null());
+    json_object_set_new(o, "lowest_cv_rms",
+                        m->best_cv >= 0 ? json_string(model_brdf_name(m->res[m->best_cv].model)) : json_null());
+    return o;
 }
 
 json_t *fit_priors_material(const char *name, const fit_brdf_result_t *best, const fit_brdf_result_t *cand,
@@ -573,12 +816,16 @@ json_t *fit_priors_material(const char *name, const fit_brdf_result_t *best, con
     json_object_set_new(o, "systematic_rel", json_real(sys_rel));
     int jF = model_brdf_param_index(m, "F0"), jk = model_brdf_param_index(m, "ks");
     if (jF >= 0 && jk >= 0) json_object_set_new(o, "ks_times_F0", json_real(best->p[jk] * best->p[jF]));
+    int jk2 = model_brdf_param_index(m, "ks2");
+    if (jF >= 0 && jk2 >= 0) json_object_set_new(o, "ks2_times_F0", json_real(best->p[jk2] * best->p[jF]));
     json_object_set_new(o, "rms", json_real(best->rms));
     json_object_set_new(o, "rms_unit", json_string("1/sr, of R = f_r cos(theta_i)"));
     json_object_set_new(o, "ngan_error", json_real(best->ngan_error));
     json_object_set_new(o, "rms_fr", json_real(best->rms_fr));
     json_object_set_new(o, "aic", json_real(best->aic));
     json_object_set_new(o, "bic", json_real(best->bic));
+    json_object_set_new(o, "cv_rms", isfinite(best->cv_rms) ? json_real(best->cv_rms) : json_null());
+    json_object_set_new(o, "cv_rms_se", isfinite(best->cv_se) ? json_real(best->cv_se) : json_null());
     json_object_set_new(o, "n_samples", json_integer(best->n));
     json_object_set_new(o, "iterations", json_integer(best->summary.iterations));
     json_object_set_new(o, "termination", json_string(best->summary.termination));
@@ -590,6 +837,8 @@ json_t *fit_priors_material(const char *name, const fit_brdf_result_t *best, con
             json_object_set_new(e, "rms", json_real(cand[c].rms));
             json_object_set_new(e, "aic", json_real(cand[c].aic));
             json_object_set_new(e, "bic", json_real(cand[c].bic));
+            json_object_set_new(e, "cv_rms", isfinite(cand[c].cv_rms) ? json_real(cand[c].cv_rms) : json_null());
+            json_object_set_new(e, "cv_rms_se", isfinite(cand[c].cv_se) ? json_real(cand[c].cv_se) : json_null());
             json_t *pv = json_object();
             for (int j = 0; j < cand[c].nparams; j++)
                 json_object_set_new(pv, model_brdf_param_name(cand[c].model, j), json_real(cand[c].p[j]));

@@ -16,7 +16,26 @@
 #include "model/opts.h"
 #include "model/report.h"
 
-#define MODEL_NAMES "all|lambert|hall|torrance_sparrow|thesis_fit|cook_torrance|ggx"
+#define MODEL_NAMES "all|lambert|hall|torrance_sparrow|thesis_fit|cook_torrance|ggx|ashikhmin_shirley|ggx2"
+
+// --cv-folds K and --cv-seed N into *folds, *seed (absent: kept); 0 or MODEL_CLI_USAGE.
+static int cv_opts(model_cli_t *cli, int *folds, uint64_t *seed)
+{
+    const char *v = model_cli_value(cli, "--cv-folds");
+    char *e;
+    if (v) {
+        long k = strtol(v, &e, 10);
+        if (e == v || *e || k < 0 || k > 64)
+            return model_cli_error(cli, "--cv-folds needs a whole number 0..64 (0: choose by BIC), not '%s'", v);
+        *folds = (int)k;
+    }
+    if ((v = model_cli_value(cli, "--cv-seed"))) {
+        unsigned long long x = strtoull(v, &e, 10);
+        if (e == v || *e || *v == '-') return model_cli_error(cli, "--cv-seed needs a whole number >= 0, not '%s'", v);
+        *seed = x;
+    }
+    return 0;
+}
 
 // A number option of cli converted after parsing: absent keeps *out; a value
 // not a finite number >= 0 (> 0 unless zero_ok) is a usage error
@@ -41,6 +60,17 @@ static void base_name(const char *file, char *buf, size_t n)
     if (dot) *dot = 0;
 }
 
+// "  held-out rms X +- SE 1/sr" of a cross-validated fit, else "".
+typedef struct {
+    char s[64];
+} held_out_t;
+static held_out_t held_out(const fit_brdf_result_t *r)
+{
+    held_out_t h = { "" };
+    if (isfinite(r->cv_rms)) snprintf(h.s, sizeof h.s, "  held-out rms %.4g +- %.2g 1/sr", r->cv_rms, r->cv_se);
+    return h;
+}
+
 // ---------------------------------------------------------------------------
 // refl fit brdf
 
@@ -50,7 +80,10 @@ static int cmd_brdf(int argc, char **argv)
     double k_sigma = 3, noise = 0, sys_rel = 0;
     model_opt_t opts[] = {
         MODEL_OPT_STRING("-o", "PRIORS.json", "the priors file to write", &out, true),
-        MODEL_OPT_STRING("--model", "M", MODEL_NAMES " (default all: the lowest BIC is chosen)", &model, false),
+        MODEL_OPT_STRING("--model", "M", MODEL_NAMES " (default all: chosen by cross-validation)", &model, false),
+        MODEL_OPT_VALUE("--cv-folds", "K", "folds of the model choice's cross-validation (default 5; 0: lowest BIC)",
+                        false),
+        MODEL_OPT_VALUE("--cv-seed", "N", "seed of the folds' shuffle (default 1)", false),
         MODEL_OPT_STRING("--name", "MATERIAL", "the material's name (default: the file's base name)", &name, false),
         MODEL_OPT_VALUE("--k-sigma", "K", "prior bounds mean +- K std (default 3)", false),
         MODEL_OPT_VALUE("--noise-sigma", "S", "known std of R, 1/sr (default 0: from the residuals)", false),
@@ -71,7 +104,11 @@ static int cmd_brdf(int argc, char **argv)
                  "by default the solid angle it stands for in (omega_i, omega_o) (exact for MERL and RGL grids and\n"
                  "CSV theta/phi grids, a ring estimate otherwise), so a grid crowded at the pole does not dominate;\n"
                  "--weights uniform or column (the CSV's 6th field) instead. With --model all\n"
-                 "(default) every model is fitted and the one with the lowest BIC is chosen. Errors are the RMS of\n"
+                 "(default) every model is fitted and one chosen by K-fold cross-validation (--cv-folds, default 5):\n"
+                 "the samples cut into 10 K contiguous blocks dealt to K folds in an order shuffled by --cv-seed,\n"
+                 "each model refitted without each fold and its held-out weighted RMS of R computed; the model with\n"
+                 "the fewest parameters within one standard error of the lowest is chosen (BIC and AIC reported\n"
+                 "beside it; --cv-folds 0 chooses the lowest BIC). Errors are the RMS of\n"
                  "R = f_r cos(theta_i) (the cosine-weighted metric of Ngan et al. 2005) and of f_r. Bounds are\n"
                  "mean +- K std (default 3) clipped to the physical range; std includes REL * mean (default 0) for\n"
                  "systematic errors the samples share.",
@@ -112,6 +149,10 @@ static int cmd_brdf(int argc, char **argv)
     }
     fit_brdf_options_t o = fit_brdf_defaults();
     o.noise_sigma = noise;
+    if (cv_opts(&cli, &o.cv_folds, &o.cv_seed)) {
+        fit_samples_free(s);
+        return MODEL_CLI_USAGE;
+    }
     fit_brdf_models_t *fm = malloc(sizeof *fm);
     rc = 1;
     if (!fm) goto done;
@@ -121,8 +162,9 @@ static int cmd_brdf(int argc, char **argv)
         if (!r)
             fprintf(stderr, "refl fit brdf: %s: %s\n", model_brdf_name(fm->tried[t]), fm->error[t]);
         else
-            fprintf(stderr, "  %-16s rms %.4g 1/sr  BIC %.6g  (%d iterations, %.2f s)%s\n", model_brdf_name(r->model),
-                    r->rms, r->bic, r->summary.iterations, fm->time_s[t], r->cov_ok ? "" : "  covariance: not available");
+            fprintf(stderr, "  %-17s rms %.4g 1/sr%s  BIC %.6g  (%d iterations, %.2f s)%s\n", model_brdf_name(r->model),
+                    r->rms, held_out(r).s, r->bic, r->summary.iterations, fm->time_s[t],
+                    r->cov_ok ? "" : "  covariance: not available");
     }
     if (fm->best < 0) {
         fprintf(stderr, "refl fit brdf: no model could be fitted to %s\n", file);
@@ -148,14 +190,21 @@ static int cmd_brdf(int argc, char **argv)
     }
     if (s->n_negative) json_object_set_new(src, "negative_f_r_kept", json_integer(s->n_negative));
     json_object_set_new(entry, "samples", src);
+    json_object_set_new(entry, "model_choice", fit_brdf_choice_json(fm));
     json_array_append_new(mats, entry);
     json_object_set_new(top, "materials", mats);
     json_t *prov = model_provenance(argc + 1, argv - 1);
     model_provenance_input(prov, "brdf_samples", file);
     json_object_set_new(top, "provenance", prov);
     if (model_write_json(out, top)) {
-        printf("%s: %s, model %s (lowest BIC of %d), rms %.4g 1/sr\n", out, mat, model_brdf_name(best->model),
-               fm->nres, best->rms);
+        char how[160];
+        if (fm->nres < 2) snprintf(how, sizeof how, "the only model fitted");
+        else snprintf(how, sizeof how, "%s of %d; lowest BIC: %s", fm->by_cv ? "cross-validated" : "lowest BIC",
+                      fm->nres, model_brdf_name(fm->res[fm->best_bic].model));
+        printf("%s: %s, model %s (%s), rms %.4g 1/sr", out, mat, model_brdf_name(best->model), how, best->rms);
+        if (fm->by_cv) printf(", held-out rms %.4g 1/sr (%s)\n", best->cv_rms, fm->cv_note);
+        else if (fm->nres > 1) printf("\n  model choice: %s\n", fm->cv_note);
+        else printf("\n");
         rc = 0;
     }
     json_decref(top);
@@ -177,7 +226,7 @@ static void print_models(const fit_brdf_models_t *m)
             continue;
         }
         const fit_brdf_result_t *r = &m->res[m->at[t]];
-        printf("  %-16s rms %.4g 1/sr  BIC %.6g", model_brdf_name(r->model), r->rms, r->bic);
+        printf("  %-17s rms %.4g 1/sr%s  BIC %.6g", model_brdf_name(r->model), r->rms, held_out(r).s, r->bic);
         for (int j = 0; j < r->nparams; j++) printf("  %s %.4g", model_brdf_param_name(r->model, j), r->p[j]);
         printf("\n");
     }
@@ -210,8 +259,14 @@ static void print_material(const fit_material_opts_t *o, const fit_material_resu
     if (isfinite(r->rms_over_noise))
         printf("  residual per degree of freedom over the noise: %.3f\n", r->rms_over_noise);
     if (r->written) {
-        printf("%s: %s, model %s (lowest BIC of %d)\n", o->out, o->name ? o->name : r->material,
-               model_brdf_name(r->models.res[r->models.best].model), r->models.nres);
+        const fit_brdf_models_t *m = &r->models;
+        if (m->nres < 2)
+            printf("%s: %s, model %s (the only model fitted)\n", o->out, o->name ? o->name : r->material,
+                   model_brdf_name(m->res[m->best].model));
+        else
+            printf("%s: %s, model %s (%s of %d; lowest BIC: %s)\n", o->out, o->name ? o->name : r->material,
+                   model_brdf_name(m->res[m->best].model), m->by_cv ? m->cv_note : "lowest BIC", m->nres,
+                   model_brdf_name(m->res[m->best_bic].model));
     }
 }
 
@@ -230,7 +285,11 @@ int fit_cmd_material(int argc, char **argv)
         MODEL_OPT_UNITS,
         MODEL_OPT_STRING("--material", "NAME", "its material in the scene (default: the scene's only material)",
                          &o.material, false),
-        MODEL_OPT_STRING("--model", "M", MODEL_NAMES " (default all)", &o.model, false),
+        MODEL_OPT_STRING("--model", "M", MODEL_NAMES " (default all: chosen by cross-validation over the frames)",
+                         &o.model, false),
+        MODEL_OPT_VALUE("--cv-folds", "K", "folds of the model choice's cross-validation over the frames (default 5; "
+                        "0: lowest BIC)", false),
+        MODEL_OPT_VALUE("--cv-seed", "N", "seed of the folds' shuffle (default 1)", false),
         MODEL_OPT_STRING("--name", "NAME", "the material's name in the priors (default: the scene's)", &o.name, false),
         MODEL_OPT_VALUE("--k-sigma", "K", "prior bounds mean +- K std (default 3)", false),
         MODEL_OPT_VALUE("--systematic", "REL", "std adds REL * mean (default 0.03)", false),
@@ -249,6 +308,9 @@ int fit_cmd_material(int argc, char **argv)
                  "and flat corrected, brackets merged to high dynamic range, scaled by the reference white's kc*I of\n"
                  "its lamp (DIR/white.json) with the geometry (DIR/camera.cameramodel) and lamp positions\n"
                  "(DIR/lamps.json); then every requested model is fitted (refl fit brdf) and the priors file written.\n"
+                 "With --model all the model is chosen by K-fold cross-validation over the frames (--cv-folds, default\n"
+                 "5; a frame's windows are held out together): the fewest parameters within one standard error of the\n"
+                 "lowest held-out RMS; BIC and AIC are reported beside it (--cv-folds 0 chooses the lowest BIC).\n"
                  "The sample's scene is given with --scene (a session records none), its material with --material\n"
                  "when the scene has several. Each parameter's std adds REL * mean (default 0.03) to the statistical\n"
                  "one, for the calibrations' shared errors (on the virtual rig kc*I comes out within ~3 % and the lamp\n"
@@ -267,7 +329,7 @@ int fit_cmd_material(int argc, char **argv)
     if ((rc = calib_cli_window_step(&cli, &o.window, &o.step)) != MODEL_CLI_OK) return rc;
     if ((rc = model_cli_units(&cli, &o.scene_unit_mm))) return rc;
     if (number_opt(&cli, "--k-sigma", false, &o.k_sigma) || number_opt(&cli, "--systematic", true, &o.sys_rel) ||
-        number_opt(&cli, "--albedo-cells", true, &o.cell_mm))
+        number_opt(&cli, "--albedo-cells", true, &o.cell_mm) || cv_opts(&cli, &o.cv_folds, &o.cv_seed))
         return MODEL_CLI_USAGE;
     model_brdf_t models[MODEL_BRDF_COUNT];
     int nm;

@@ -36,6 +36,7 @@
 
 #include <jansson.h>
 #include <stdbool.h>
+#include <stdint.h>
 
 #include "model/lsq.h"
 #include "model/model.h"
@@ -114,6 +115,15 @@ typedef struct {
     int     starts;             // multi-start points for the roughness (default 3)
     double  noise_sigma;        // known std of R; 0 = estimate from the residuals
     bool    verbose;
+    // Model choice (fit_brdf_models) by k-fold cross-validation: cv_folds
+    // folds (default 5; 0 or 1: by the lowest BIC instead) over the samples'
+    // independent units, cv_unit[i] the unit of sample i (a frame, a window:
+    // any int; NULL: contiguous blocks of samples, 10 per fold), the units
+    // dealt to folds in an order shuffled by cv_seed (deterministic).
+    int         cv_folds;
+    uint64_t    cv_seed;
+    const int  *cv_unit;
+    const char *cv_unit_name;   // what a unit is, for the outputs ("frame", ...; NULL: "block of samples")
 } fit_brdf_options_t;
 
 fit_brdf_options_t fit_brdf_defaults(void);
@@ -138,6 +148,11 @@ typedef struct {
     bool          f0_unmeasured;                  // F0 held at the middle of [f0_lo, f0_hi], where
     double        f0_lo, f0_hi;                   // ks*F0 and the ranges put it; std[F0] = the
                                                   // uniform's, in cov along ks*F0 = const
+    // k-fold cross-validation (fit_brdf_models): the held-out weighted RMS
+    // of R over every fold, sqrt(sum w e^2 / sum w) with each fold's samples
+    // predicted by the fit to the others (1/sr), and its standard error from
+    // the spread of the folds' mean squares; NAN when not done or a fold failed.
+    double        cv_rms, cv_se;
     lsq_summary_t summary;
 } fit_brdf_result_t;
 
@@ -157,15 +172,28 @@ typedef struct {
     char              error[MODEL_BRDF_COUNT][512];
     double            time_s[MODEL_BRDF_COUNT];       // per try, wall clock
     int               nres;
-    int               best;                           // in res: the lowest BIC, -1 when none was fitted
+    int               best;                           // in res: the chosen model, -1 when none was fitted
+    int               best_bic;                       // in res: the lowest BIC (reported beside the choice)
+    int               best_cv;                        // in res: the lowest cv_rms, -1 without cross-validation
+    bool              by_cv;                          // best chosen by cross-validation (else by BIC: why in cv_note)
+    int               cv_folds, cv_units;             // folds used, independent units dealt to them
+    uint64_t          cv_seed;
+    char              cv_unit_name[32];
+    char              cv_note[160];
     fit_brdf_result_t res[MODEL_BRDF_COUNT];
 } fit_brdf_models_t;
 
 // The models a name selects: "all" (every model, in model order) or one
 // model's name. false (no message) for an unknown name.
 bool fit_brdf_model_list(const char *name, model_brdf_t models[MODEL_BRDF_COUNT], int *nmodels);
-// Fit each of models[0..nmodels-1] (fit_brdf) into *out. The messages of the
-// models that could not be fitted are kept in out->error, not printed.
+// Fit each of models[0..nmodels-1] (fit_brdf) into *out and choose one: with
+// opt->cv_folds >= 2 (and at least 2 units), k-fold cross-validation: each
+// model refitted (fit_brdf_from its full fit) without each fold and its
+// held-out weighted RMS (cv_rms) computed; the chosen model is the one with
+// the fewest parameters whose cv_rms is within one standard error of the
+// lowest (the one-standard-error rule: models the held-out data cannot tell
+// apart count as equivalent, and the simpler is kept). Else the lowest BIC.
+// The messages of the models that could not be fitted are kept in out->error, not printed.
 // Returns out->best >= 0; false leaves the message "no model could be fitted"
 // (model_last_error, not printed).
 bool fit_brdf_models(const fit_samples_t *s, const model_brdf_t *models, int nmodels, const fit_brdf_options_t *opt,
@@ -180,6 +208,10 @@ const char *fit_param_convention(model_brdf_t m, int i);
 // shrinks with the sample count; sys_rel covers the calibrations' systematic
 // errors, which every sample shares), bounds mean +- k_sigma * std clipped to
 // the physical range; candidates (may be NULL) are every model tried.
+// The model choice of *m as JSON: the rule, folds, units, seed, the chosen
+// model, the lowest BIC's and the lowest cv_rms's (written into a priors entry
+// as "model_choice").
+json_t *fit_brdf_choice_json(const fit_brdf_models_t *m);
 json_t *fit_priors_material(const char *name, const fit_brdf_result_t *best, const fit_brdf_result_t *candidates,
                             int ncandidates, double k_sigma, double sys_rel);
 

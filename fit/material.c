@@ -53,10 +53,17 @@ static bool material_report(const char *dir, const calib_obs_set_t *obs, const f
         goto done;
     FILE *h = model_html_begin(html, "refl fit material", prov);
     if (!h) goto done;
+    json_t *ch = json_object_get(entry, "model_choice");
     model_html_para(h, "Material %s of sample %s: %d BRDF samples (windows of %d frames lit by one lamp each). "
-                    "Chosen model: %s (lowest BIC). R = f_r cos(theta_i) in 1/sr.",
+                    "Chosen model: %s by %s (%s; lowest BIC: %s). R = f_r cos(theta_i) in 1/sr.",
                     json_string_value(json_object_get(entry, "name")), obs->sample, smp->n, obs->frames_used,
-                    model_brdf_name(res[best].model));
+                    model_brdf_name(res[best].model),
+                    !strcmp(json_string_value(json_object_get(ch, "criterion")), "cv_rms")
+                        ? "the held-out RMS (the fewest parameters within one standard error of the lowest)"
+                    : !strcmp(json_string_value(json_object_get(ch, "criterion")), "only_model") ? "--model"
+                                                                                                 : "the lowest BIC",
+                    json_string_value(json_object_get(ch, "note")),
+                    json_string_value(json_object_get(ch, "lowest_bic")));
     model_html_heading(h, "Parameters");
     json_t *ps = json_object_get(entry, "parameters");
     char **rows = calloc(json_array_size(ps) + 1, sizeof *rows);
@@ -84,13 +91,15 @@ static bool material_report(const char *dir, const calib_obs_set_t *obs, const f
     char **mr = calloc((size_t)nres + 1, sizeof *mr);
     for (int k = 0; k < nres; k++) {
         GString *g = g_string_new("");
-        g_string_append_printf(g, "%s%s|%.4g|%.4g|%.8g|%.8g|", model_brdf_name(res[k].model), k == best ? " (chosen)" : "",
-                               res[k].rms, res[k].rms_fr, res[k].aic, res[k].bic);
+        g_string_append_printf(g, "%s%s|%.4g|%.4g|%.4g|%.4g|%.8g|%.8g|", model_brdf_name(res[k].model),
+                               k == best ? " (chosen)" : "", res[k].rms, res[k].cv_rms, res[k].cv_se, res[k].rms_fr,
+                               res[k].aic, res[k].bic);
         for (int j = 0; j < res[k].nparams; j++)
             g_string_append_printf(g, "%s%s %.4g", j ? ", " : "", model_brdf_param_name(res[k].model, j), res[k].p[j]);
         mr[k] = g_string_free(g, FALSE);
     }
-    model_html_table(h, "model|RMS of R (1/sr)|RMS of f_r (1/sr)|AIC|BIC|parameters", (const char *const *)mr, nres);
+    model_html_table(h, "model|RMS of R (1/sr)|held-out RMS of R (1/sr)|its standard error (1/sr)|RMS of f_r (1/sr)|"
+                        "AIC|BIC|parameters", (const char *const *)mr, nres);
     for (int k = 0; k < nres; k++) g_free(mr[k]);
     free(mr);
     model_html_figure(h, "models.png", "residuals of the chosen model: histogram, and relative to R against the half-vector angle");
@@ -109,7 +118,7 @@ done:
 // their faces); each cell with at least CELL_MIN_OBS observations gets a
 // factor c_j on its whole reflectance (the virtual rig's texture multiplies
 // it so), and the fit becomes R_k = c_j(k) R(theta; geometry_k):
-//   1. theta from the samples as they are (the model with the lowest BIC);
+//   1. theta from the samples as they are (the model fit_brdf_models chose);
 //   2. c_j = sum R_k f_k / sum f_k^2 over the cell (f = the model's R),
 //      then the factors scaled to mean 1 over the observations (so kd & co
 //      are the sample's mean);
@@ -268,7 +277,7 @@ static bool cells_fit(const fit_samples_t *smp, albedo_cells_t *ac, fit_brdf_res
 
 fit_material_opts_t fit_material_defaults(void)
 {
-    return (fit_material_opts_t){ .model = "all", .k_sigma = 3, .sys_rel = 0.03 };
+    return (fit_material_opts_t){ .model = "all", .k_sigma = 3, .sys_rel = 0.03, .cv_folds = 5, .cv_seed = 1 };
 }
 
 void fit_material_result_free(fit_material_result_t *r)
@@ -404,11 +413,28 @@ static bool material_samples(const fit_material_opts_t *o, calib_set_t **cal, ca
     return true;
 }
 
+// The fits' options: the model choice by cross-validation over the frames
+// (one turntable step lit by one lamp: the windows of a frame share its pose,
+// lamp and exposure errors, so they are held out together). unit: per sample
+// (= observation) its step.
+static fit_brdf_options_t material_fit_options(const fit_material_opts_t *o, const calib_obs_set_t *obs, int *unit)
+{
+    fit_brdf_options_t fo = fit_brdf_defaults();
+    fo.cv_folds = o->cv_folds;
+    fo.cv_seed = o->cv_seed;
+    if (unit) {
+        for (int i = 0; i < obs->n; i++) unit[i] = obs->o[i].step;
+        fo.cv_unit = unit;
+        fo.cv_unit_name = "frame";
+    }
+    return fo;
+}
+
 // Albedo cells of o->cell_mm: the factors fitted with the first pass's best
 // model, *csmp the corrected samples, and every model fitted to them into r->models.
 static bool material_cells(const fit_material_opts_t *o, const calib_obs_set_t *obs, const fit_samples_t *smp,
                            const model_brdf_t *models, int nm, albedo_cells_t *ac, fit_samples_t **csmp,
-                           fit_material_result_t *r)
+                           fit_material_result_t *r, const fit_brdf_options_t *fo)
 {
     fit_brdf_result_t b = r->first.res[r->first.best];
     if (!cells_assign(obs, o->cell_mm, ac) || !cells_fit(smp, ac, &b) || !(*csmp = cells_samples(smp, ac))) {
@@ -423,7 +449,7 @@ static bool material_cells(const fit_material_opts_t *o, const calib_obs_set_t *
     r->cells_rel_std = ac->rel_std;
     r->cell_iterations = ac->iterations;
     r->cells_model = b.model;
-    if (!fit_brdf_models(*csmp, models, nm, NULL, &r->models)) {
+    if (!fit_brdf_models(*csmp, models, nm, fo, &r->models)) {
         model_error_set(NULL, 0, "no model could be fitted to the samples with albedo cells");
         return false;
     }
@@ -459,6 +485,7 @@ static json_t *material_priors(const fit_material_opts_t *o, const calib_set_t *
     json_object_set_new(top, "units", json_string("R = f_r cos(theta_i) in 1/sr; parameter units per parameter"));
     json_t *mats = json_array();
     json_t *e = fit_priors_material(o->name ? o->name : r->material, best, m->res, m->nres, o->k_sigma, o->sys_rel);
+    json_object_set_new(e, "model_choice", fit_brdf_choice_json(m));
     json_object_set_new(e, "session", json_string(o->session));
     json_object_set_new(e, "sample", json_string(r->sample));
     json_object_set_new(e, "noise_rms_expected", isfinite(r->noise_rms) ? json_real(r->noise_rms) : json_null());
@@ -491,6 +518,7 @@ bool fit_material_run(const fit_material_opts_t *o, fit_material_result_t *r)
     fit_samples_t *smp = NULL, *csmp = NULL;
     albedo_cells_t ac = { 0 };
     json_t *top = NULL, *entry = NULL;
+    int *unit = NULL;
     model_brdf_t models[MODEL_BRDF_COUNT];
     int nm = 0;
     if (!fit_brdf_model_list(o->model ? o->model : "all", models, &nm)) {
@@ -498,9 +526,14 @@ bool fit_material_run(const fit_material_opts_t *o, fit_material_result_t *r)
         goto done;
     }
     if (!material_samples(o, &cal, &obs, &smp, r)) goto done;
-    if (!fit_brdf_models(smp, models, nm, NULL, &r->first)) goto done;
+    if (!(unit = malloc((size_t)(obs.n ? obs.n : 1) * sizeof *unit))) {
+        model_error_set(NULL, 0, "out of memory");
+        goto done;
+    }
+    fit_brdf_options_t fo = material_fit_options(o, &obs, obs.n == smp->n ? unit : NULL);
+    if (!fit_brdf_models(smp, models, nm, &fo, &r->first)) goto done;
     if (o->cell_mm > 0) {
-        if (!material_cells(o, &obs, smp, models, nm, &ac, &csmp, r)) goto done;
+        if (!material_cells(o, &obs, smp, models, nm, &ac, &csmp, r, &fo)) goto done;
     } else {
         r->models = r->first;
     }
@@ -522,6 +555,7 @@ bool fit_material_run(const fit_material_opts_t *o, fit_material_result_t *r)
     }
     ok = true;
 done:
+    free(unit);
     json_decref(top);
     fit_samples_free(smp);
     fit_samples_free(csmp);

@@ -35,6 +35,8 @@ typedef struct {
     double      k_sigma;    // prior bounds mean +- k_sigma std (default 3)
     double      sys_rel;    // systematic std relative to the mean (default 0.03)
     double      cell_mm;    // albedo cells of cell_mm mm (0: none)
+    int         cv_folds;   // model choice by cross-validation over the frames, folds (default 5; 0: BIC)
+    uint64_t    cv_seed;    // the folds' shuffle (default 1)
     int         window;     // observation windows, pixels (0: calib_observe's default)
     int         step;       // their grid step, pixels (0: the default)
     bool        verbose;    // calib_observe prints each angle on stderr
@@ -75,8 +77,10 @@ typedef struct {
 // every camera's, each through its own camera model, gain and white, in one
 // fit), BRDF samples R = s d^2 / kcI (1/sr, kcI of the observation's
 // camera), every model of o->model fitted (and, with albedo cells, again
-// with the cells' factors), the priors file o->out written with the lowest
-// BIC's entry (fit_priors_material) and the provenance, and with o->report
+// with the cells' factors), the model chosen by cross-validation over the
+// frames (fit_brdf_models; o->cv_folds 0: the lowest BIC), the priors file
+// o->out written with its entry (fit_priors_material, with "model_choice")
+// and the provenance, and with o->report
 // the report (samples.csv, plots by scripts/fit_material_report.py,
 // report.html). false + message (model_last_error(), not printed: the caller
 // reports it); *r holds what was done up to the failure either way.

@@ -8,6 +8,10 @@
 //   D_beckmann = exp(-tan^2(th_h)/m^2) / (pi m^2 cos^4(th_h))
 //   D_ggx      = a^2 / (pi ((n.h)^2 (a^2-1) + 1)^2)
 //   G_smith    = 1 / (1 + Lambda(l) + Lambda(v)),  Lambda(w) = (-1 + sqrt(1 + a^2 tan^2(th_w)))/2
+//   Ashikhmin-Shirley (2000, isotropic), as f_r:
+//     diffuse  = 28 Rd / (23 pi) (1 - Rs) (1 - (1 - n.l/2)^5) (1 - (1 - n.v/2)^5)
+//     specular = (ns + 1) / (8 pi) (n.h)^ns / ((v.h) max(n.l, n.v)) F(v.h), F Schlick's with F0 = Rs
+//   ggx2: kd/pi + [ks D(alpha) G2(alpha) + ks2 D(alpha2) G2(alpha2)] F / (4 (n.l)(n.v))
 #include <string.h>
 
 #include "model/internal.h"
@@ -64,7 +68,8 @@ int model_brdf_param_index(model_brdf_t m, const char *name)
 
 bool model_brdf_is_physical(model_brdf_t m)
 {
-    return m == MODEL_BRDF_COOK_TORRANCE || m == MODEL_BRDF_GGX;
+    return m == MODEL_BRDF_COOK_TORRANCE || m == MODEL_BRDF_GGX || m == MODEL_BRDF_ASHIKHMIN_SHIRLEY ||
+           m == MODEL_BRDF_GGX2;
 }
 
 void model_brdf_param_range(model_brdf_t m, int i, double *lo, double *hi)
@@ -75,13 +80,15 @@ void model_brdf_param_range(model_brdf_t m, int i, double *lo, double *hi)
     if (!p) {
     } else if (!strcmp(p, "kd")) {
         l = 0, h = phys ? 1.0 : 1.0 / M_PI;   // albedo, or albedo/pi
-    } else if (!strcmp(p, "ks")) {
+    } else if (!strcmp(p, "ks") || !strcmp(p, "ks2")) {
         l = 0, h = phys ? 1.0 : INFINITY;
+    } else if (!strcmp(p, "Rd") || !strcmp(p, "Rs")) {
+        l = 0, h = 1;
     } else if (!strcmp(p, "ns")) {
         l = 0, h = 10000;
     } else if (!strcmp(p, "F0")) {
         l = 0, h = 1;
-    } else if (!strcmp(p, "m") || !strcmp(p, "alpha")) {
+    } else if (!strcmp(p, "m") || !strcmp(p, "alpha") || !strcmp(p, "alpha2")) {
         l = 0.001, h = 1;
     }
     if (lo) *lo = l;
@@ -115,6 +122,16 @@ const char *model_brdf_convention(model_brdf_t m)
         return "ggx: R = [kd/pi + ks D G2 F/(4 (n.l)(n.v))] (n.l), height-correlated Smith G2; kd: albedo "
                "(divided by pi here); ks: specular weight; alpha: GGX alpha (alpha = perceptual_roughness^2), "
                "not perceptual roughness; F0: Schlick reflectance at normal incidence";
+    case MODEL_BRDF_ASHIKHMIN_SHIRLEY:
+        return "ashikhmin_shirley: R = [28 Rd/(23 pi) (1-Rs) (1-(1-n.l/2)^5) (1-(1-n.v/2)^5) + (ns+1)/(8 pi) "
+               "(n.h)^ns F/((v.h) max(n.l, n.v))] (n.l) (Ashikhmin & Shirley 2000, isotropic); Rd: diffuse "
+               "reflectance (albedo-like, divided by pi here); Rs: specular reflectance at normal incidence, also "
+               "Schlick's F0 of F; ns: Phong exponent of (n.h)";
+    case MODEL_BRDF_GGX2:
+        return "ggx2: R = [kd/pi + (ks D1 G1 + ks2 D2 G2) F/(4 (n.l)(n.v))] (n.l), two GGX lobes "
+               "(height-correlated Smith) sharing Schlick's F; kd: albedo (divided by pi here); ks, alpha: the "
+               "sharper lobe's weight and GGX alpha; ks2, alpha2: the broader lobe's (alpha <= alpha2 after a "
+               "fit); alpha = perceptual_roughness^2; F0: Schlick reflectance at normal incidence";
     default:
         return "unknown reflection model";
     }
@@ -234,6 +251,46 @@ static double g_smith_ggx(const model_cosines_t *c, double a, double *dG_da)
     return G;
 }
 
+// Ashikhmin-Shirley's diffuse shape 28/(23 pi) (1-(1-n.l/2)^5)(1-(1-n.v/2)^5).
+static double as_diffuse(const model_cosines_t *c)
+{
+    double a = 1 - c->nl / 2, b = 1 - c->nv / 2;
+    return 28 / (23 * M_PI) * (1 - a * a * a * a * a) * (1 - b * b * b * b * b);
+}
+
+// Ashikhmin-Shirley (isotropic): R and dR/d(Rd, Rs, ns) into g (when want).
+static double eval_ashikhmin_shirley(const double *p, const model_cosines_t *c, bool want, double *g)
+{
+    double Rd = p[0], Rs = p[1], ns = p[2], dD = 0, dF = 0;
+    double kdiff = as_diffuse(c) * c->nl;
+    double D = d_blinn(c->nh, ns, want ? &dD : NULL);
+    double F = f_schlick(c->vh, Rs, want ? &dF : NULL);
+    double q = c->vh > 0 ? c->nl / (8 * M_PI * c->vh * fmax(c->nl, c->nv)) : 0;   // s = (ns+1) q
+    double s = (ns + 1) * q;
+    g[0] = (1 - Rs) * kdiff;
+    g[1] = -Rd * kdiff + s * D * dF;
+    g[2] = (s * dD + q * D) * F;
+    return Rd * (1 - Rs) * kdiff + s * D * F;
+}
+
+// Two GGX lobes with one Schlick F: R and its 6 derivatives into g (when want).
+static double eval_ggx2(const double *p, const model_cosines_t *c, bool want, double *g)
+{
+    double kd = p[0], ks = p[1], a = p[2], ks2 = p[3], a2 = p[4], F0 = p[5];
+    double dD1 = 0, dG1 = 0, dD2 = 0, dG2 = 0, dF = 0;
+    double D1 = d_ggx(c->nh, a, want ? &dD1 : NULL), G1 = g_smith_ggx(c, a, want ? &dG1 : NULL);
+    double D2 = d_ggx(c->nh, a2, want ? &dD2 : NULL), G2 = g_smith_ggx(c, a2, want ? &dG2 : NULL);
+    double F = f_schlick(c->vh, F0, want ? &dF : NULL);
+    double s = 1 / (4 * c->nv), L = ks * D1 * G1 + ks2 * D2 * G2;
+    g[0] = c->nl / M_PI;
+    g[1] = D1 * G1 * F * s;
+    g[2] = ks * (dD1 * G1 + D1 * dG1) * F * s;
+    g[3] = D2 * G2 * F * s;
+    g[4] = ks2 * (dD2 * G2 + D2 * dG2) * F * s;
+    g[5] = L * dF * s;
+    return kd / M_PI * c->nl + L * F * s;
+}
+
 // ---- evaluation ------------------------------------------------------------
 
 double model_brdf_eval(model_brdf_t m, const double *p, const model_cosines_t *c, double *dR_dp)
@@ -311,6 +368,12 @@ double model_brdf_eval(model_brdf_t m, const double *p, const model_cosines_t *c
         g[3] = ks * D * G * dF * s;
         break;
     }
+    case MODEL_BRDF_ASHIKHMIN_SHIRLEY:
+        R = eval_ashikhmin_shirley(p, c, want, g);
+        break;
+    case MODEL_BRDF_GGX2:
+        R = eval_ggx2(p, c, want, g);
+        break;
     default:
         return NAN;
     }

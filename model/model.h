@@ -269,8 +269,16 @@ void model_scene_wedge_pose(const model_scene_t *scene, double tilt_deg, double 
 // single source of the models, their names and parameters.
 // Conventions: in lambert, hall, torrance_sparrow and thesis_fit, kd is the
 // thesis's coefficient (albedo/pi absorbed: a Lambertian surface of albedo a
-// has kd = a/pi); in cook_torrance and ggx, kd is the albedo (they divide by pi).
+// has kd = a/pi); in cook_torrance, ggx and ggx2, kd is the albedo (they divide by pi).
 // alpha is the GGX alpha (not "perceptual roughness", alpha = r^2).
+// ashikhmin_shirley (Ashikhmin & Shirley, "An anisotropic Phong BRDF model",
+// 2000, isotropic: n_u = n_v = ns): Rd the diffuse reflectance, Rs the
+// specular reflectance at normal incidence (its own Schlick Fresnel F0 = Rs,
+// and the diffuse term is scaled by 1 - Rs as in the paper), ns the Phong
+// exponent of (n.h).
+// ggx2: two GGX lobes sharing one Schlick F0: (ks, alpha) the first lobe,
+// (ks2, alpha2) the second; a fit orders them so that alpha <= alpha2 (the
+// first lobe is the sharper one). The same f_r as the ggx2 generator.
 //
 //   _(ENUM, name, nparams, param names...)
 #define MODEL_BRDF_LIST(_)                                           \
@@ -279,7 +287,9 @@ void model_scene_wedge_pose(const model_scene_t *scene, double tilt_deg, double 
     _(TORRANCE_SPARROW, torrance_sparrow, 4, "kd", "ks", "ns", "F0") \
     _(THESIS_FIT,       thesis_fit,       3, "ks", "ns", "kd")       \
     _(COOK_TORRANCE,    cook_torrance,    4, "kd", "ks", "m", "F0")  \
-    _(GGX,              ggx,              4, "kd", "ks", "alpha", "F0")
+    _(GGX,              ggx,              4, "kd", "ks", "alpha", "F0") \
+    _(ASHIKHMIN_SHIRLEY, ashikhmin_shirley, 3, "Rd", "Rs", "ns")   \
+    _(GGX2,             ggx2,             6, "kd", "ks", "alpha", "ks2", "alpha2", "F0")
 
 typedef enum {
 #define MODEL_BRDF_ENUM_(e, name, np, ...) MODEL_BRDF_##e,
@@ -288,7 +298,7 @@ typedef enum {
     MODEL_BRDF_COUNT
 } model_brdf_t;
 
-#define MODEL_BRDF_MAX_PARAMS 4
+#define MODEL_BRDF_MAX_PARAMS 6
 
 typedef struct {
     double nl, nv, nh, vh;   // n.l, n.v, n.h, v.h

@@ -134,11 +134,21 @@ for l in wj["lamps"]:
 parts.append("</table>\n")
 
 # ---- material ----------------------------------------------------------------
+def choice(m):
+    """How a priors entry's model was chosen (its model_choice; older files: the lowest BIC)."""
+    c, n = m.get("model_choice") or {}, len(m.get("candidates", []))
+    if c.get("criterion") == "cv_rms":
+        return (f"the lowest held-out RMS of {n} ({c.get('folds')}-fold cross-validation over {c.get('units')} "
+                f"{html.escape(str(c.get('unit')))}s, the simplest within one standard error); lowest BIC: "
+                f"{html.escape(str(c.get('lowest_bic')))}")
+    return f"lowest BIC of {n}"
+
+
 pj = load(out, "priors_glossy.json")
 m = pj["materials"][0]
 tmat = ini["material " + m["name"]] if ("material " + m["name"]) in ini else None
 parts.append(f"<h3>Material: {html.escape(m['name'])} (refl fit material &rarr; priors_glossy.json)</h3>\n"
-             f"<p>Chosen model <b>{html.escape(m['model'])}</b> (lowest BIC of {len(m.get('candidates', []))}); "
+             f"<p>Chosen model <b>{html.escape(m['model'])}</b> ({choice(m)}); "
              f"RMS of R {f(m['rms'], 3)} 1/sr over {m['n_samples']} samples"
              + (f"; the sensor's noise alone would give {f(m['noise_rms_expected'], 3)} 1/sr "
                 f"(ratio {f(m['rms_over_noise'], 3)}: the narrow lobe is sensitive to the calibrated camera and "
@@ -152,9 +162,9 @@ if "ks_times_F0" in m and tmat is not None and "ks" in tmat and "F0" in tmat:
     parts.append(row(["ks*F0", f(m["ks_times_F0"], 5), "", "", f(float(tmat["ks"]) * float(tmat["F0"]), 5),
                       "the product; F0 apart from ks needs a highlight nearer grazing (the rim lamp's, v.h = cos 55 deg)"]))
 parts.append("</table>\n<table>\n")
-parts.append(row(["model", "RMS (1/sr)", "BIC"], True))
+parts.append(row(["model", "RMS (1/sr)", "held-out RMS (1/sr)", "BIC"], True))
 for c in m.get("candidates", []):
-    parts.append(row([c["model"], f(c["rms"], 4), f(c["bic"], 7)]))
+    parts.append(row([c["model"], f(c["rms"], 4), f(c["cv_rms"], 4) if c.get("cv_rms") is not None else "", f(c["bic"], 7)]))
 parts.append("</table>\n<img src=\"lobes.png\" alt=\"fitted vs true lobes\">\n")
 
 # ---- the workpiece's materials: plywood and painted steel ----------------------
@@ -165,8 +175,7 @@ for fname in ("priors_plywood.json", "priors_painted_steel.json"):
         wtmat = ini["material " + wm["name"]] if ("material " + wm["name"]) in ini else None
         parts.append(f"<h3>Material: {html.escape(wm['name'])} (refl fit material &rarr; {fname}, "
                      f"<a href=\"fit_{html.escape(wm['name'])}/report.html\">fit report</a>)</h3>\n"
-                     f"<p>Chosen model <b>{html.escape(wm['model'])}</b> (lowest BIC of "
-                     f"{len(wm.get('candidates', []))}; the truth's is "
+                     f"<p>Chosen model <b>{html.escape(wm['model'])}</b> ({choice(wm)}; the truth's is "
                      f"<b>{html.escape(wtmat.get('model', '?') if wtmat is not None else '?')}</b>); RMS of R "
                      f"{f(wm['rms'], 3)} 1/sr over {wm['n_samples']} samples"
                      + (f"; {f(wm['rms_over_noise'], 3)} &times; what the sensor's noise alone would leave"

@@ -84,6 +84,80 @@ TEST(fit_brdf_recovers_each_model_exact)
     check_recovery(MODEL_BRDF_THESIS_FIT, th, 0);
     check_recovery(MODEL_BRDF_COOK_TORRANCE, ct, 0);
     check_recovery(MODEL_BRDF_GGX, ggx, 0);
+    double as[] = { 0.5, 0.08, 60 };
+    double ggx2[] = { 0.3, 0.2, 0.06, 0.3, 0.35, 0.5 };
+    check_recovery(MODEL_BRDF_ASHIKHMIN_SHIRLEY, as, 0);
+    check_recovery(MODEL_BRDF_GGX2, ggx2, 0);
+}
+
+// A CSV of samples of model m with parameters p (f_r, degrees), one line per
+// direction of the 5-degree grid, with white noise sigma on R and, with corr
+// > 0, each block of 200 lines scaled by its own 1 + corr N(0,1) (errors a
+// block of samples shares, as a frame's lamp or exposure error).
+static const char *write_model_csv_corr(const char *name, model_brdf_t m, const double *p, double sigma,
+                                        uint64_t seed, double corr)
+{
+    fit_samples_t *s = synth(m, p, sigma, seed);
+    model_rng_t rng = model_rng(seed, 9);
+    double fac = 1;
+    for (int i = 0; i < s->n; i++) {
+        if (i % 200 == 0) fac = 1 + corr * model_rng_gauss(&rng);
+        s->R[i] = fmax(0, s->R[i] * fac);   // a file's f_r is >= 0
+    }
+    GString *g = g_string_new("theta_i,phi_i,theta_o,phi_o,f_r\n");
+    const double d = 180 / M_PI;
+    for (int i = 0; i < s->n; i++) {
+        // the grid's directions back from the cosines: l in the xz plane, v by its azimuth about n
+        const model_cosines_t *c = &s->c[i];
+        double ti = acos(fmin(1, c->nl)), to = acos(fmin(1, c->nv));
+        double lv = 2 * c->vh * c->vh - 1, sl = sin(ti), sv = sin(to);
+        double cp = sl * sv > 1e-12 ? fmax(-1, fmin(1, (lv - c->nl * c->nv) / (sl * sv))) : 1;
+        g_string_append_printf(g, "%.12g,0,%.12g,%.12g,%.15g\n", ti * d, to * d, acos(cp) * d, s->R[i] / c->nl);
+    }
+    fit_samples_free(s);
+    const char *path = test_write(name, g->str);
+    g_string_free(g, TRUE);
+    return path;
+}
+
+static const char *write_model_csv(const char *name, model_brdf_t m, const double *p, double sigma, uint64_t seed)
+{
+    return write_model_csv_corr(name, m, p, sigma, seed, 0);
+}
+
+// refl fit brdf recovers the parameters of the new classes from noise-free
+// samples of each, through its priors file.
+TEST(fit_brdf_command_recovers_new_models)
+{
+    const struct {
+        model_brdf_t m;
+        double       p[6];
+    } k[] = { { MODEL_BRDF_ASHIKHMIN_SHIRLEY, { 0.45, 0.1, 35 } }, { MODEL_BRDF_GGX2, { 0.25, 0.25, 0.08, 0.4, 0.4, 0.6 } } };
+    for (size_t i = 0; i < 2; i++) {
+        const char *name = model_brdf_name(k[i].m);
+        char fn[64];
+        snprintf(fn, sizeof fn, "%s.csv", name);
+        const char *csv = write_model_csv(fn, k[i].m, k[i].p, 0, 1);
+        snprintf(fn, sizeof fn, "%s.json", name);
+        const char *priors = test_path(fn);
+        char *out = NULL, *err = NULL;
+        int rc = test_refl_run(120, &out, &err, "fit", "brdf", csv, "--model", name, "-o", priors, NULL);
+        CHECK_MSG(rc == 0, "%s", err);
+        g_free(out);
+        g_free(err);
+        json_t *top = json_load_file(priors, 0, NULL);
+        json_t *mat = json_array_get(json_object_get(top, "materials"), 0);
+        CHECK(mat && !strcmp(json_string_value(json_object_get(mat, "model")), name));
+        json_t *ps = json_object_get(mat, "parameters");
+        CHECK((int)json_array_size(ps) == model_brdf_nparams(k[i].m));
+        for (size_t j = 0; j < json_array_size(ps); j++) {
+            json_t *e = json_array_get(ps, j);
+            double mean = json_number_value(json_object_get(e, "mean"));
+            CHECK_MSG(fabs(mean - k[i].p[j]) <= 1e-4 * fmax(1, k[i].p[j]), "%s %s: %.8g vs truth %.8g", name,
+                      json_string_value(json_object_get(e, "name")), mean, k[i].p[j]);
+        }
+        json_decref(top);
+    }
 }
 
 TEST(fit_brdf_noisy_within_uncertainty)
@@ -140,6 +214,135 @@ TEST(fit_brdf_jacobians_match_central_differences)
         bool ok = lsq_check_jacobian(jac_res, &J, 16, 1, sizes, b, 1e-6, 1e-7, 1e-5, &err);
         CHECK_MSG(ok, "%s: %s", model_brdf_name((model_brdf_t)m), model_last_error());
     }
+}
+
+// A candidate of a priors entry by model name.
+static json_t *candidate(json_t *mat, const char *model)
+{
+    json_t *c;
+    size_t i;
+    json_array_foreach(json_object_get(mat, "candidates"), i, c)
+        if (!strcmp(json_string_value(json_object_get(c, "model")), model)) return c;
+    return NULL;
+}
+
+// The model choice of refl fit brdf --model all by 5-fold cross-validation:
+// on samples of each model with white noise (sigma 0.002 1/sr) it picks the
+// generating model, or one the held-out data cannot tell from it (within one
+// standard error); with errors that blocks of samples share (3 % per 200
+// lines, on ggx) it keeps ggx, and BIC's pick (which counts every sample as
+// independent, and at other seeds prefers the 6-parameter ggx2) is recorded
+// and is what --cv-folds 0 chooses. Both criteria are in the priors
+// (model_choice, cv_rms and bic per candidate) and printed.
+TEST(fit_brdf_model_choice_cross_validated)
+{
+    const struct {
+        model_brdf_t m;
+        double       p[6], corr;
+    } k[] = {
+        { MODEL_BRDF_GGX, { 0.35, 0.6, 0.1, 0.3 }, 0 },
+        { MODEL_BRDF_ASHIKHMIN_SHIRLEY, { 0.5, 0.08, 60 }, 0 },
+        { MODEL_BRDF_GGX2, { 0.25, 0.25, 0.05, 0.3, 0.4, 0.6 }, 0 },
+        { MODEL_BRDF_HALL, { 0.12, 0.05, 40 }, 0 },
+        { MODEL_BRDF_GGX, { 0.35, 0.6, 0.1, 0.3 }, 0.03 },
+    };
+    char bic_pick[32] = "";
+    for (size_t i = 0; i < sizeof k / sizeof k[0]; i++) {
+        const char *name = model_brdf_name(k[i].m);
+        char fn[64];
+        snprintf(fn, sizeof fn, "cv%zu.csv", i);
+        const char *csv = write_model_csv_corr(fn, k[i].m, k[i].p, 0.002, 21 + i, k[i].corr);
+        snprintf(fn, sizeof fn, "cv%zu.json", i);
+        const char *priors = test_path(fn);
+        char *out = NULL, *err = NULL;
+        int rc = test_refl_run(300, &out, &err, "fit", "brdf", csv, "-o", priors, NULL);
+        CHECK_MSG(rc == 0, "%s", err);
+        CHECK_CONTAINS(out, "cross-validated");
+        CHECK_CONTAINS(out, "lowest BIC");
+        CHECK_CONTAINS(err, "held-out rms");
+        g_free(out);
+        g_free(err);
+        json_t *top = json_load_file(priors, 0, NULL);
+        json_t *mat = json_array_get(json_object_get(top, "materials"), 0), *ch = json_object_get(mat, "model_choice");
+        CHECK(ch && !strcmp(json_string_value(json_object_get(ch, "criterion")), "cv_rms"));
+        CHECK(json_integer_value(json_object_get(ch, "folds")) == 5 && json_integer_value(json_object_get(ch, "units")) == 50);
+        CHECK_CONTAINS(json_string_value(json_object_get(ch, "cv_rms_unit")), "1/sr");
+        const char *chosen = json_string_value(json_object_get(ch, "chosen")), *bic = json_string_value(json_object_get(ch, "lowest_bic"));
+        CHECK(chosen && bic && !strcmp(chosen, json_string_value(json_object_get(mat, "model"))));
+        CHECK(json_is_number(json_object_get(mat, "cv_rms")) && json_is_number(json_object_get(mat, "bic")));
+        json_t *c_truth = candidate(mat, name), *c_chosen = candidate(mat, chosen ? chosen : "");
+        CHECK(json_array_size(json_object_get(mat, "candidates")) == MODEL_BRDF_COUNT);
+        if (c_truth && c_chosen) {
+            double ct = json_number_value(json_object_get(c_truth, "cv_rms"));
+            double cc = json_number_value(json_object_get(c_chosen, "cv_rms")), se = json_number_value(json_object_get(c_chosen, "cv_rms_se"));
+            fprintf(stderr, "  %s%s: chosen %s (held-out rms %.5g +- %.2g), generating %.5g; lowest BIC %s\n", name,
+                    k[i].corr > 0 ? " (errors shared by blocks)" : "", chosen, cc, se, ct, bic);
+            CHECK_MSG(!strcmp(chosen, name) || ct <= cc + se, "%s: chose %s (held-out %.5g +- %.2g), generating %.5g",
+                      name, chosen, cc, se, ct);
+            if (k[i].corr == 0) CHECK_MSG(cc < 1.05 * 0.002, "%s: held-out rms %.5g over the noise 0.002", name, cc);
+        }
+        if (k[i].corr > 0) CHECK(chosen && !strcmp(chosen, "ggx"));
+        if (k[i].corr > 0 && bic) snprintf(bic_pick, sizeof bic_pick, "%s", bic);
+        json_decref(top);
+    }
+    // --cv-folds 0 on the correlated samples: the lowest BIC (the one recorded above), said so
+    char *out = NULL, *err = NULL, expect[64];
+    int rc = test_refl_run(300, &out, &err, "fit", "brdf", test_path("cv4.csv"), "--cv-folds", "0", "-o",
+                           test_path("cvb.json"), NULL);
+    CHECK_MSG(rc == 0, "%s", err);
+    snprintf(expect, sizeof expect, "model %s (lowest BIC", bic_pick);
+    CHECK_CONTAINS(out, expect);
+    CHECK_CONTAINS(out, "cross-validation off");
+    const char *csv = test_path("cv4.csv");
+    g_free(out);
+    g_free(err);
+    rc = test_refl_run(60, &out, &err, "fit", "brdf", csv, "--cv-folds", "x", "-o", test_path("cvc.json"), NULL);
+    CHECK(rc == 2);
+    CHECK_CONTAINS(err, "--cv-folds needs a whole number");
+    g_free(out);
+    g_free(err);
+}
+
+// The folds are deterministic (the same seed, the same held-out figures bit
+// for bit; another seed, other folds), a unit's samples stay together (one
+// unit for all: nothing to hold out, the lowest BIC, said so), and the
+// number of units is the number of distinct unit ids.
+TEST(fit_brdf_cv_folds_seeded_and_by_unit)
+{
+    double ggx[] = { 0.35, 0.6, 0.1, 0.3 };
+    fit_samples_t *s = synth_grid(MODEL_BRDF_GGX, ggx, 0.002, 3, 10, -1);
+    const model_brdf_t models[] = { MODEL_BRDF_LAMBERT, MODEL_BRDF_GGX };
+    fit_brdf_models_t *a = malloc(sizeof *a), *b = malloc(sizeof *b);
+    fit_brdf_options_t o = fit_brdf_defaults();
+    CHECK(fit_brdf_models(s, models, 2, &o, a) && fit_brdf_models(s, models, 2, &o, b));
+    CHECK(a->by_cv && a->cv_folds == 5 && a->cv_units == 50);
+    CHECK(a->res[1].model == MODEL_BRDF_GGX && a->res[1].cv_rms == b->res[1].cv_rms && a->res[1].cv_se == b->res[1].cv_se);
+    CHECK(a->res[a->best].model == MODEL_BRDF_GGX);
+    o.cv_seed = 2;
+    CHECK(fit_brdf_models(s, models, 2, &o, b));
+    CHECK(b->by_cv && b->res[1].cv_rms != a->res[1].cv_rms);
+    CHECK_REL(b->res[1].cv_rms, a->res[1].cv_rms, 0.05);
+    int *unit = malloc((size_t)s->n * sizeof *unit);
+    for (int i = 0; i < s->n; i++) unit[i] = 7;
+    o.cv_unit = unit;
+    o.cv_unit_name = "frame";
+    CHECK(fit_brdf_models(s, models, 2, &o, b));
+    CHECK(!b->by_cv && b->best == b->best_bic && isnan(b->res[1].cv_rms));
+    CHECK_CONTAINS(b->cv_note, "1 frame(s): too few to cross-validate");
+    for (int i = 0; i < s->n; i++) unit[i] = 1000 - 3 * (i / 37);   // any ids, in any order
+    CHECK(fit_brdf_models(s, models, 2, &o, b));
+    CHECK(b->by_cv && b->cv_units == (s->n + 36) / 37 && !strcmp(b->cv_unit_name, "frame"));
+    o.cv_folds = 0;
+    CHECK(fit_brdf_models(s, models, 2, &o, b));
+    CHECK(!b->by_cv && b->cv_folds == 0);
+    CHECK_CONTAINS(b->cv_note, "cross-validation off");
+    json_t *j = fit_brdf_choice_json(b);
+    CHECK(!strcmp(json_string_value(json_object_get(j, "criterion")), "bic"));
+    json_decref(j);
+    free(unit);
+    free(a);
+    free(b);
+    fit_samples_free(s);
 }
 
 TEST(fit_brdf_csv_round_trip_and_errors)

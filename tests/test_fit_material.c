@@ -71,6 +71,8 @@ static char *rig_file(void)
 }
 
 
+static void check_choice(json_t *m, const char *sample);
+
 TEST_LONG(fit_material_chain_virtual_rig)
 {
     char *rig = rig_file(), *cal = calib_dir();
@@ -140,8 +142,13 @@ TEST_LONG(fit_material_chain_virtual_rig)
                        "-o", pj, "--report", rep, NULL);
     CHECK_MSG(rc == 0, "%s", err);
     CHECK_CONTAINS(out, "model ggx");
+    CHECK_CONTAINS(out, "5-fold cross-validation over");
+    CHECK_CONTAINS(out, "held-out rms");
     g_free(out);
     g_free(err);
+    json_t *pd = json_load_file(pj, 0, NULL);
+    check_choice(json_array_get(json_object_get(pd, "materials"), 0), "glossy (chain)");
+    json_decref(pd);
     // the report: the page with its tables and the plots it names
     char rp[4300];
     snprintf(rp, sizeof rp, "%s/report.html", rep);
@@ -150,6 +157,8 @@ TEST_LONG(fit_material_chain_virtual_rig)
     if (page) {
         CHECK_CONTAINS(page, "Model comparison");
         CHECK_CONTAINS(page, "ggx (chosen)");
+        CHECK_CONTAINS(page, "held-out RMS of R (1/sr)");
+        CHECK_CONTAINS(page, "lowest BIC: ");
         CHECK_CONTAINS(page, "not perceptual roughness");
         free(page);
     }
@@ -258,6 +267,26 @@ TEST_LONG(fit_material_chain_virtual_rig)
 // bracketed), fit every model (cells: with --albedo-cells 2 on 3x3 windows
 // every 4 pixels, for a textured material), and return the priors' material
 // entry (caller json_decref's the returned document through *doc).
+// The model choice of a priors entry: by 5-fold cross-validation over the
+// frames, the chosen model's held-out RMS and BIC recorded, BIC's own pick
+// beside it (printed).
+static void check_choice(json_t *m, const char *sample)
+{
+    json_t *ch = json_object_get(m, "model_choice");
+    CHECK_MSG(ch != NULL, "%s: no model_choice", sample);
+    if (!ch) return;
+    CHECK(!strcmp(json_string_value(json_object_get(ch, "criterion")), "cv_rms"));
+    CHECK(!strcmp(json_string_value(json_object_get(ch, "unit")), "frame"));
+    CHECK(json_integer_value(json_object_get(ch, "folds")) == 5 && json_integer_value(json_object_get(ch, "units")) >= 10);
+    CHECK(!strcmp(json_string_value(json_object_get(ch, "chosen")), json_string_value(json_object_get(m, "model"))));
+    CHECK(json_is_number(json_object_get(m, "cv_rms")) && json_is_number(json_object_get(m, "bic")));
+    double rms = json_number_value(json_object_get(m, "rms")), cv = json_number_value(json_object_get(m, "cv_rms"));
+    CHECK_MSG(cv >= 0.9 * rms && cv < 2 * rms, "%s: held-out rms %g vs rms %g", sample, cv, rms);
+    fprintf(stderr, "  %s: chosen %s by held-out rms (%.4g 1/sr over %lld frames); lowest BIC %s\n", sample,
+            json_string_value(json_object_get(ch, "chosen")), cv, json_integer_value(json_object_get(ch, "units")),
+            json_string_value(json_object_get(ch, "lowest_bic")));
+}
+
 static json_t *fit_coupon(const char *rig, const char *cal, const char *sample, bool cells, json_t **doc)
 {
     char plan[1024];
@@ -300,7 +329,9 @@ static json_t *fit_coupon(const char *rig, const char *cal, const char *sample, 
     g_free(pp);
     g_free(sd);
     g_free(pj);
-    return *doc ? json_array_get(json_object_get(*doc, "materials"), 0) : NULL;
+    json_t *m = *doc ? json_array_get(json_object_get(*doc, "materials"), 0) : NULL;
+    check_choice(m, sample);
+    return m;
 }
 
 static double param(json_t *m, const char *name, double *sd)

@@ -52,6 +52,37 @@ TEST(brdf_known_values)
     }
 }
 
+static model_vec3_t random_upper(model_rng_t *r);
+
+// Ashikhmin-Shirley (isotropic) at the same two geometries, Rd 0.4, Rs 0.3,
+// ns 20: values from the 2000 paper's formulas (mpmath, 30 digits); ggx2 is
+// one ggx plus a second lobe with the same F0 and no diffuse part.
+TEST(brdf_known_values_new_models)
+{
+    static const struct {
+        double tl, pl, tv, pv, as;
+    } k[] = { { 50, 0, 70, 120, 0.03758812420619286 }, { 40, 0, 35, 180, 0.36041387089421701 } };
+    for (size_t i = 0; i < sizeof k / sizeof k[0]; i++) {
+        model_cosines_t c = model_cosines(N, dir_deg(k[i].tl, k[i].pl), dir_deg(k[i].tv, k[i].pv));
+        const double as[] = { 0.4, 0.3, 20 };
+        CHECK_REL(model_brdf_eval(MODEL_BRDF_ASHIKHMIN_SHIRLEY, as, &c, NULL), k[i].as, 1e-12);
+        const double g2[] = { 0.2, 0.3, 0.1, 0.25, 0.5, 0.04 }, a[] = { 0.2, 0.3, 0.1, 0.04 },
+                     b[] = { 0, 0.25, 0.5, 0.04 };
+        double ra = model_brdf_eval(MODEL_BRDF_GGX, a, &c, NULL), rb = model_brdf_eval(MODEL_BRDF_GGX, b, &c, NULL);
+        CHECK_REL(model_brdf_eval(MODEL_BRDF_GGX2, g2, &c, NULL), ra + rb, 1e-13);
+    }
+    // the ggx2 model and the ggx2 generator (model/brdf_gen.c) are the same f_r
+    model_brdf_recipe_t r;
+    CHECK(model_brdf_recipe_parse("ggx2 albedo=0.2 ks1=0.3 alpha1=0.1 ks2=0.25 alpha2=0.5 F0=0.04", "t", 1, &r));
+    const double g2[] = { 0.2, 0.3, 0.1, 0.25, 0.5, 0.04 };
+    model_rng_t rng = model_rng(11, 1);
+    for (int j = 0; j < 100; j++) {
+        model_cosines_t c = model_cosines(N, random_upper(&rng), random_upper(&rng));
+        if (!(c.nl > 1e-3 && c.nv > 1e-3)) continue;
+        CHECK_REL(model_brdf_eval(MODEL_BRDF_GGX2, g2, &c, NULL) / c.nl, model_brdf_recipe_f(&r, &c), 1e-12);
+    }
+}
+
 TEST(brdf_cosines_degenerate)
 {
     // l = -v: the half vector is undefined; n.h = v.h = 0 by convention.
@@ -75,7 +106,7 @@ static void random_params(model_brdf_t m, model_rng_t *r, double *p)
         double u = model_rng_uniform(r);
         if (!strcmp(name, "ns"))
             p[i] = 0.5 + 200 * u;                       // the useful part of [0, 10000]
-        else if (!strcmp(name, "m") || !strcmp(name, "alpha"))
+        else if (!strcmp(name, "m") || !strcmp(name, "alpha") || !strcmp(name, "alpha2"))
             p[i] = 0.05 + 0.95 * u;                     // D is extremely peaked below
         else if (isinf(hi))
             p[i] = 0.01 + 5 * u;
@@ -168,9 +199,10 @@ TEST(brdf_zero_below_horizon)
 
 TEST(brdf_helmholtz_reciprocity)
 {
-    const model_brdf_t models[] = { MODEL_BRDF_LAMBERT, MODEL_BRDF_COOK_TORRANCE, MODEL_BRDF_GGX };
+    const model_brdf_t models[] = { MODEL_BRDF_LAMBERT, MODEL_BRDF_COOK_TORRANCE, MODEL_BRDF_GGX,
+                                    MODEL_BRDF_ASHIKHMIN_SHIRLEY, MODEL_BRDF_GGX2 };
     model_rng_t r = model_rng(3, 3);
-    for (size_t k = 0; k < 3; k++)
+    for (size_t k = 0; k < sizeof models / sizeof models[0]; k++)
         for (int j = 0; j < 200; j++) {
             double p[MODEL_BRDF_MAX_PARAMS];
             random_params(models[k], &r, p);
@@ -241,6 +273,36 @@ TEST(brdf_albedo_at_most_one)
     CHECK(max_a > 0.9);
 }
 
+// The new classes in a white furnace: Ashikhmin-Shirley's diffuse term is
+// Rd (1 - Rs) at most, its specular one about Rs; ggx2 with kd + ks + ks2 <= 1
+// stays below 1 as ggx does. A dense hemisphere integral at each incidence.
+TEST(brdf_albedo_new_models_at_most_one)
+{
+    const double incid[] = { 0, 30, 60, 85 };
+    const double as[][3] = { { 1, 0, 1 }, { 1, 0.05, 10 }, { 1, 0.5, 100 }, { 0, 1, 1000 }, { 0.8, 0.2, 3 } };
+    const double g2[][6] = { { 0, 0.5, 0.05, 0.5, 0.4, 1 }, { 0.4, 0.3, 0.1, 0.3, 0.8, 1 },
+                             { 0.6, 0.2, 0.3, 0.2, 0.3, 0.04 } };
+    double amax = 0;
+    for (int t = 0; t < 4; t++) {
+        for (size_t k = 0; k < sizeof as / sizeof as[0]; k++) {
+            double A = albedo(MODEL_BRDF_ASHIKHMIN_SHIRLEY, as[k], incid[t], 500, 720);
+            amax = fmax(amax, A);
+            CHECK_MSG(A <= 1 + 2e-3, "ashikhmin_shirley Rd %g Rs %g ns %g at %g deg: albedo %.6f > 1", as[k][0],
+                      as[k][1], as[k][2], incid[t], A);
+        }
+        for (size_t k = 0; k < sizeof g2 / sizeof g2[0]; k++) {
+            double A = albedo(MODEL_BRDF_GGX2, g2[k], incid[t], 500, 720);
+            CHECK_MSG(A <= 1 + 2e-3, "ggx2 case %zu at %g deg: albedo %.6f > 1", k, incid[t], A);
+        }
+    }
+    // the diffuse part alone (Rs = 0, Rd = 1) reflects most light at normal
+    // incidence: 28/23 (1 - 1/32)(mean of the view factor) = 0.95 (catches a lost pi)
+    const double diff[] = { 1, 0, 1 };
+    double Ad = albedo(MODEL_BRDF_ASHIKHMIN_SHIRLEY, diff, 0, 500, 16);
+    CHECK_MSG(Ad > 0.9 && Ad < 1, "ashikhmin_shirley diffuse albedo %.4f", Ad);
+    CHECK(amax > 0.9);
+}
+
 // The microfacet distributions are normalised: integral of D(h) (n.h) dw_h = 1.
 // D is read from R at the retro-reflection geometry l = v = h (then n.l = n.v =
 // n.h = c, v.h = 1, F = F0 = 1, kd = 0, ks = 1): R = D G / (4 c), with
@@ -266,7 +328,7 @@ TEST(brdf_distributions_normalised)
 
 TEST(brdf_tables)
 {
-    CHECK(MODEL_BRDF_COUNT == 6);
+    CHECK(MODEL_BRDF_COUNT == 8);
     for (int m = 0; m < MODEL_BRDF_COUNT; m++) {
         const char *name = model_brdf_name(m);
         CHECK(model_brdf_from_name(name) == m);
@@ -303,6 +365,12 @@ TEST(brdf_tables)
     CHECK_CONTAINS(model_brdf_convention(MODEL_BRDF_LAMBERT), "albedo/pi");
     CHECK_CONTAINS(model_brdf_convention(MODEL_BRDF_COOK_TORRANCE), "Beckmann RMS slope");
     CHECK_CONTAINS(model_brdf_convention(MODEL_BRDF_HALL), "Blinn exponent");
+    CHECK(model_brdf_nparams(MODEL_BRDF_GGX2) == 6 && MODEL_BRDF_MAX_PARAMS >= 6);
+    CHECK(model_brdf_param_index(MODEL_BRDF_GGX2, "alpha2") == 4);
+    CHECK(model_brdf_param_index(MODEL_BRDF_ASHIKHMIN_SHIRLEY, "Rs") == 1);
+    CHECK(model_brdf_is_physical(MODEL_BRDF_GGX2) && model_brdf_is_physical(MODEL_BRDF_ASHIKHMIN_SHIRLEY));
+    CHECK_CONTAINS(model_brdf_convention(MODEL_BRDF_ASHIKHMIN_SHIRLEY), "Schlick's F0");
+    CHECK_CONTAINS(model_brdf_convention(MODEL_BRDF_GGX2), "alpha <= alpha2");
 }
 
 TEST(brdf_ranges_and_defaults)
