@@ -1542,11 +1542,30 @@ bool calib_lamps_joint_fit(const calib_lamps_opts_t *o, calib_lamps_result_t *r)
     double *x = calloc((size_t)nl * 3, sizeof *x), *cv = calloc((size_t)nl * 9, sizeof *cv);
     bool ok = ob && x && cv;
     if (!ok) model_error_set(NULL, 0, "out of memory");
-    for (int l = 0; ok && l < nl; l++) memcpy(x + 3 * l, r->lamps[l].fit.x_mm, sizeof r->lamps[l].fit.x_mm);
-    for (int pass = 0; ok && pass < 2; pass++) {
-        r->joint_nobs = joint_obs(r, bs.camera_mm, ob);
-        ok = calib_lamps_bundle(ob, r->joint_nobs, nl, &bs, x, cv, NULL, &r->joint);
-        if (ok) rays_at_path(o, r, &bs, x, pass);
+    // the sphere's offset free within its prior; when that fit runs away (a lamp driven off to where its
+    // rays turn parallel, or no covariance), once more with the offset held to 1 mm around the typed centre
+    for (int attempt = 0; ok && attempt < 2; attempt++) {
+        if (attempt) {
+            if (!(bs.offset_prior_mm > 1)) break;
+            note(o, "the joint fit with the sphere's offset free within %g mm failed (%s); fitting again with it "
+                 "within 1 mm of the typed centre\n", bs.offset_prior_mm, model_last_error());
+            bs.offset_prior_mm = 1;
+        }
+        for (int l = 0; l < nl; l++) memcpy(x + 3 * l, r->lamps[l].fit.x_mm, sizeof r->lamps[l].fit.x_mm);
+        bool fit = true;
+        for (int pass = 0; fit && pass < 2; pass++) {
+            r->joint_nobs = joint_obs(r, bs.camera_mm, ob);
+            fit = calib_lamps_bundle(ob, r->joint_nobs, nl, &bs, x, cv, NULL, &r->joint);
+            for (int l = 0; fit && l < nl; l++)
+                if (!(fabs(x[3 * l]) < 1e5 && fabs(x[3 * l + 1]) < 1e5 && fabs(x[3 * l + 2]) < 1e5)) {
+                    model_error_set(NULL, 0, "lamp %s ran off to (%.3g, %.3g, %.3g) mm", r->lamps[l].name, x[3 * l],
+                                    x[3 * l + 1], x[3 * l + 2]);
+                    fit = false;
+                }
+            if (fit) rays_at_path(o, r, &bs, x, pass);
+        }
+        if (fit) break;
+        if (attempt == 1 || !(bs.offset_prior_mm > 1)) ok = false;
     }
     for (int l = 0; ok && l < nl; l++) {
         calib_lamps_lamp_t *lp = &r->lamps[l];
