@@ -59,6 +59,25 @@ bool calib_gain_polyfit(const double *x, const double *y, int n, int degree, dou
     return true;
 }
 
+// Half the range of the relative deviations 100 (mu - line) / line, %, over
+// the points with mu in [lo_dn, hi_dn] (and mu > 0 when positive); each
+// point's deviation into dev_pct (NAN outside the range) when given.
+static double deviation_half_range(double c0, double c1, const double *t, const double *mu, int n, double lo_dn,
+                                   double hi_dn, bool positive, double *dev_pct)
+{
+    double dmin = INFINITY, dmax = -INFINITY;
+    for (int i = 0; i < n; i++) {
+        double line = c0 + c1 * t[i], d = 100.0 * (mu[i] - line) / line;
+        bool in = mu[i] >= lo_dn && mu[i] <= hi_dn && (!positive || mu[i] > 0);
+        if (dev_pct) dev_pct[i] = in ? d : NAN;
+        if (in) {
+            dmin = fmin(dmin, d);
+            dmax = fmax(dmax, d);
+        }
+    }
+    return 0.5 * (dmax - dmin);
+}
+
 double calib_gain_linearity(const double *t, const double *mu, int n, double sat_dn, double lo, double hi,
                             double *slope, double *offset, int *nfit, double *dev_pct)
 {
@@ -72,18 +91,7 @@ double calib_gain_linearity(const double *t, const double *mu, int n, double sat
         }
     double c[3] = { NAN, NAN, NAN }, le = NAN;
     if (m >= 3 && calib_gain_polyfit(x, y, m, 1, c)) {
-        double dmin = INFINITY, dmax = -INFINITY;
-        for (int i = 0; i < n; i++) {
-            double line = c[0] + c[1] * t[i];
-            double d = 100.0 * (mu[i] - line) / line;
-            bool in = mu[i] >= lo * sat_dn && mu[i] <= hi * sat_dn;
-            if (dev_pct) dev_pct[i] = in ? d : NAN;
-            if (in) {
-                dmin = fmin(dmin, d);
-                dmax = fmax(dmax, d);
-            }
-        }
-        le = 0.5 * (dmax - dmin);
+        le = deviation_half_range(c[0], c[1], t, mu, n, lo * sat_dn, hi * sat_dn, false, dev_pct);
     } else if (dev_pct)
         for (int i = 0; i < n; i++) dev_pct[i] = NAN;
     if (slope) *slope = c[1];
@@ -118,17 +126,7 @@ double calib_gain_linearity_r4(const double *t, const double *mu, int n, double 
     if (m >= 3 && model_solve_linear(A, b, 2)) {
         c0 = b[0];
         c1 = b[1] / ts;
-        double dmin = INFINITY, dmax = -INFINITY;
-        for (int i = 0; i < n; i++) {
-            double line = c0 + c1 * t[i], d = 100.0 * (mu[i] - line) / line;
-            bool in = mu[i] >= lo * sat_dn && mu[i] <= hi * sat_dn && mu[i] > 0;
-            if (dev_pct) dev_pct[i] = in ? d : NAN;
-            if (in) {
-                dmin = fmin(dmin, d);
-                dmax = fmax(dmax, d);
-            }
-        }
-        le = 0.5 * (dmax - dmin);
+        le = deviation_half_range(c0, c1, t, mu, n, lo * sat_dn, hi * sat_dn, true, dev_pct);
     } else if (dev_pct)
         for (int i = 0; i < n; i++) dev_pct[i] = NAN;
     if (slope) *slope = c1;

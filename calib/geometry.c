@@ -705,6 +705,18 @@ static bool axj_eval(const axj_view_t *w, const double *p, const double *rt_g, d
     return true;
 }
 
+// A view's corner RMS (px) at axis p and group pose rt_g (INFINITY: not evaluable).
+static double axj_view_rms(const axj_view_t *w, const double *p, const double *rt_g, double sigma_px)
+{
+    double *res = malloc(2 * w->n * sizeof *res), ss = 0;
+    if (res && axj_eval(w, p, rt_g, res))
+        for (int k = 0; k < 2 * w->n; k++) ss += res[k] * res[k];
+    else
+        ss = INFINITY;
+    free(res);
+    return sqrt(ss / w->n) * sigma_px;
+}
+
 static bool axj_residual(void *ctx, const double *const *params, double *res, double **J)
 {
     const axj_view_t *w = ctx;
@@ -827,13 +839,7 @@ static bool axj_add(lsq_problem_t *p, int ng, const int *cnt, axj_view_t **ws, c
     for (int g = 0; rv && sorted && g < ng; g++)
         for (int i = 0; ws[g] && i < cnt[g]; i++) {
             if (!ws[g][i].n) continue;
-            double *res = malloc(2 * ws[g][i].n * sizeof *res), ss = 0;
-            if (res && axj_eval(&ws[g][i], axp, &rt[6 * g], res))
-                for (int k = 0; k < 2 * ws[g][i].n; k++) ss += res[k] * res[k];
-            else
-                ss = INFINITY;
-            free(res);
-            rv[nr] = sorted[nr] = sqrt(ss / ws[g][i].n) * sigma_px;
+            rv[nr] = sorted[nr] = axj_view_rms(&ws[g][i], axp, &rt[6 * g], sigma_px);
             nr++;
         }
     qsort(sorted, nr, sizeof *sorted, cmp_double);
@@ -935,13 +941,7 @@ static bool refine_once(calib_geometry_views_t *vs, int gridn, double square_mm,
         for (int g = 0; rv && g < ng; g++)   // each view's corner RMS
             for (int i = 0; ws[g] && i < cnt[g]; i++) {
                 if (!ws[g][i].n) continue;
-                double *res = malloc(2 * ws[g][i].n * sizeof *res), ss = 0;
-                if (res && axj_eval(&ws[g][i], axp, &rt[6 * g], res))
-                    for (int k = 0; k < 2 * ws[g][i].n; k++) ss += res[k] * res[k];
-                else
-                    ss = INFINITY;
-                free(res);
-                rv[nr] = sqrt(ss / ws[g][i].n) * sigma_px;
+                rv[nr] = axj_view_rms(&ws[g][i], axp, &rt[6 * g], sigma_px);
                 if (rv[nr] > *wrms) {
                     *wrms = rv[nr];
                     *worst = lists[g][i];
