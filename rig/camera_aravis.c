@@ -61,6 +61,14 @@ typedef struct {
     bool        have_last_id;
     guint64     last_raw_id;
     uint64_t    frame_id;
+    // Triggers whose frames may still come (a time-out leaves its frame on the
+    // way), until pending_until (monotonic s), and the last frame id seen
+    // (kept or recycled): a frame whose id comes before the latest trigger's
+    // is an earlier trigger's, late.
+    int         pending;
+    double      pending_until;
+    bool        have_seen_id;
+    guint64     seen_id;
 } aravis_cam_t;
 
 static aravis_cam_t *impl_of(rig_camera_t *c) { return c->impl; }
@@ -733,6 +741,73 @@ static int take_frame(rig_camera_t *c, ArvBuffer *b, rig_frame_t *out)
     return 0;
 }
 
+// Frames from `from` to `to` (signed): GVSP's 16-bit block ids wrap after
+// 65535 (0 is skipped), the 64-bit ones of GigE Vision 2 do not.
+static int64_t id_steps(guint64 from, guint64 to)
+{
+    if (from <= 0xffff && to <= 0xffff) {
+        int64_t d = ((int64_t)to - (int64_t)from) % 0xffff;
+        if (d > 0x7fff) d -= 0xffff;
+        else if (d < -0x7fff) d += 0xffff;
+        return d;
+    }
+    return (int64_t)(to - from);
+}
+
+// A frame came (kept or recycled): one trigger less owed.
+static void frame_seen(aravis_cam_t *a, ArvBuffer *b)
+{
+    a->seen_id = arv_buffer_get_frame_id(b);
+    a->have_seen_id = true;
+    if (a->pending > 0) a->pending--;
+}
+
+// Whether b may answer an earlier trigger than the latest, `owed` triggers
+// before it unanswered and `seen` the last frame id seen: its id comes before
+// seen + owed + 1, the latest trigger's frame's at the earliest, unless the
+// camera let some of those triggers pass (with no id seen yet: any frame).
+static bool frame_may_be_late(ArvBuffer *b, bool have_seen, guint64 seen, int owed)
+{
+    if (owed <= 0) return false;
+    return !have_seen || id_steps(seen, arv_buffer_get_frame_id(b)) <= owed;
+}
+
+// The frame of a trigger sent with frames of earlier ones owed: a frame that
+// may be a late one is held while the time-out lasts; one after it is this
+// trigger's (the held one recycled); none after it, the held one is (the
+// camera let the earlier triggers pass, or this trigger's frame is late too:
+// it stays owed). NULL: no frame in time.
+static ArvBuffer *pop_own_frame(aravis_cam_t *a, int owed, double timeout_s)
+{
+    bool have_seen = a->have_seen_id;
+    guint64 seen = a->seen_id;
+    double until = model_now_s() + timeout_s;
+    ArvBuffer *b, *held = NULL;
+    for (;;) {
+        double left = until - model_now_s();
+        b = left > 0 ? arv_stream_timeout_pop_buffer(a->stream, (guint64)(left * 1e6) + 1) : NULL;
+        if (!b || !frame_may_be_late(b, have_seen, seen, owed)) break;
+        frame_seen(a, b);
+        have_seen = true;
+        seen = a->seen_id;
+        owed--;
+        if (held) arv_stream_push_buffer(a->stream, held);
+        held = b;
+    }
+    if (b) {
+        if (held) arv_stream_push_buffer(a->stream, held);
+        frame_seen(a, b);
+        a->pending = 0;   // frames come in order: none before it is still on the way
+    } else if (held) {
+        b = held;
+        a->pending = 1;
+        a->pending_until = model_now_s() + fmax(5 * timeout_s, 2.0);
+    } else {
+        a->pending_until = model_now_s() + fmax(5 * timeout_s, 2.0);
+    }
+    return b;
+}
+
 static int op_capture(rig_camera_t *c, double timeout_s, int retries, rig_frame_t *out)
 {
     aravis_cam_t *a = impl_of(c);
@@ -749,10 +824,19 @@ static int op_capture(rig_camera_t *c, double timeout_s, int retries, rig_frame_
     for (int attempt = 0; attempt <= retries; attempt++) {
         // Frames still queued belong to earlier triggers: recycle them.
         ArvBuffer *b;
-        while ((b = arv_stream_try_pop_buffer(a->stream))) arv_stream_push_buffer(a->stream, b);
+        while ((b = arv_stream_try_pop_buffer(a->stream))) {
+            frame_seen(a, b);
+            arv_stream_push_buffer(a->stream, b);
+        }
+        // An earlier trigger's frame may still come after this trigger (a
+        // time-out: a slow render, a late packet); it shows the rig as it was
+        // then and must not be taken for this one's.
+        if (a->pending > 0 && model_now_s() > a->pending_until) a->pending = 0;
+        int owed = a->pending;
         arv_camera_software_trigger(a->cam, &e);
         if (e) return fail_gerror(c, &e, "TriggerSoftware");
-        b = arv_stream_timeout_pop_buffer(a->stream, (guint64)(timeout_s * 1e6));
+        a->pending++;
+        b = pop_own_frame(a, owed, timeout_s);
         if (!b) {
             snprintf(problem, sizeof problem, "no frame within %g s", timeout_s);
             if (atomic_load(&a->control_lost)) break;

@@ -317,6 +317,39 @@ done:
     fx_gv_close(&F);
 }
 
+// A frame that comes after its trigger timed out (the renderer slower than
+// the time-out) is not taken for a later trigger's: the exposure changed
+// after the time-out, the next two frames are the new exposure's pattern.
+TEST_ALONE(aravis_gv_late_frame_not_taken_for_the_next)
+{
+    fx_gv_t F;
+    if (!fx_gv_open(&F, true)) goto done;
+    rig_camera_t *c = F.c;
+    rig_frame_t f = { 0 };
+    CHECK(rig_camera_set_region(c, 0, 0, 64, 48) == 0);
+    CHECK(rig_camera_set_exposure_us(c, 10000) == 0);
+    int rc = rig_camera_capture(c, 2.0, 0, &f);
+    CHECK_MSG(rc == 0, "first capture: %d %s", rc, model_last_error());
+    rig_frame_free(&f);
+    atomic_store(&F.ctx->sleep_ms, 400);
+    rc = rig_camera_capture(c, 0.1, 0, &f);
+    CHECK_MSG(rc == RIG_ERR_TIMEOUT, "capture with a renderer slower than the time-out: %d %s", rc,
+              model_last_error());
+    atomic_store(&F.ctx->sleep_ms, 0);
+    CHECK(rig_camera_set_exposure_us(c, 20000) == 0);
+    for (int k = 0; k < 2; k++) {
+        rc = rig_camera_capture(c, 2.0, 0, &f);
+        CHECK_MSG(rc == 0, "capture %d after the late frame: %d %s", k, rc, model_last_error());
+        if (rc) break;
+        long bad = fx_pattern_mismatches(&f);
+        CHECK_MSG(bad == 0 && f.meta.exposure_us == 20000, "capture %d after the late frame: %ld pixels not the "
+                  "20000 us pattern", k, bad);
+        rig_frame_free(&f);
+    }
+done:
+    fx_gv_close(&F);
+}
+
 // An independent GenICam client (Aravis through Python GObject introspection,
 // by address) reads our features by name from the camera's XML and sees the
 // values we set.
