@@ -49,12 +49,12 @@ static void usage(FILE *f)
     fprintf(f, "\nrefl %s\n", REFL_VERSION);
 }
 
-// `refl demo [-o DIR] [--rig RIG.ini | --truth TRUTH.ini] [--yes | --operator-input FILE]`: scripts/demo with this
+// `refl demo [-o DIR] [--rig RIG.ini | --truth TRUTH.ini] [--yes | --operator-input FILE] [--until STAGE]`: scripts/demo with this
 // binary (the scripts beside it:
 // $REFL_SCRIPTS_DIR, else ../scripts or ../../scripts of the executable).
 static int demo_cmd(int argc, char **argv)
 {
-    const char *out = "refl-demo", *rig = NULL, *truth = NULL, *operator_input = NULL;
+    const char *out = "refl-demo", *rig = NULL, *truth = NULL, *operator_input = NULL, *until = NULL;
     bool yes = false;
     model_opt_t opts[] = {
         MODEL_OPT_STRING("-o", "DIR", "output directory (default refl-demo)", &out, false),
@@ -63,6 +63,9 @@ static int demo_cmd(int argc, char **argv)
         MODEL_OPT_STRING("--truth", "TRUTH.ini", "the virtual rig of this truth file (default "
                          "examples/virtual-truth.ini; examples/virtual-truth-adversarial.ini: physics outside the "
                          "fitters' models)", &truth, false),
+        MODEL_OPT_STRING("--until", "STAGE", "end the day after this stage: calibrations, or captures (the "
+                         "calibrations and the coupon sessions: the rig's work before the offline fits); default all",
+                         &until, false),
         RIG_OPERATOR_OPTS(&yes, &operator_input),
     };
     model_cli_t cli = {
@@ -87,6 +90,8 @@ static int demo_cmd(int argc, char **argv)
     if (rig && truth)
         return model_cli_error(&cli, "give --rig RIG.ini or --truth TRUTH.ini, not both (a virtual rig file names "
                                "its truth file)");
+    if (until && strcmp(until, "calibrations") && strcmp(until, "captures") && strcmp(until, "all"))
+        return model_cli_error(&cli, "--until %s: give calibrations, captures or all", until);
     char exe[4096];
     ssize_t n = readlink("/proc/self/exe", exe, sizeof exe - 1);
     if (n <= 0) {
@@ -105,7 +110,7 @@ static int demo_cmd(int argc, char **argv)
         if (k == 0) snprintf(script, sizeof script, "%s/demo", cands[k]);
         else snprintf(script, sizeof script, "%s%s/demo", dir, cands[k]);
         if (access(script, R_OK) == 0) {
-            char *args[10] = { (char *)"/bin/bash", script, exe, (char *)out };
+            char *args[12] = { (char *)"/bin/bash", script, exe, (char *)out };
             int na = 4;
             if (rig) {
                 args[na++] = (char *)"--rig";
@@ -119,6 +124,10 @@ static int demo_cmd(int argc, char **argv)
             if (operator_input) {
                 args[na++] = (char *)"--operator-input";
                 args[na++] = (char *)operator_input;
+            }
+            if (until) {
+                args[na++] = (char *)"--until";
+                args[na++] = (char *)until;
             }
             args[na] = NULL;
             execv("/bin/bash", args);

@@ -403,7 +403,8 @@ TEST_LONG(fit_material_coupons_virtual_rig)
     snprintf(wj, sizeof wj, "%s/white.json", cal);
     snprintf(gd, sizeof gd, "%s/gain", cal);
     char *out = NULL, *err = NULL;
-    int rc = test_refl_run(300, &out, &err, "calib", "gain", "--yes", "--rig", rig, "-o", gd, NULL);
+    int rc = test_refl_run(300, &out, &err, "calib", "gain", "--yes", "--rig", rig, "-o", gd, "--no-report",
+                           "--dark-exposures-us", "100000,1000000", NULL);
     CHECK_MSG(rc == 0, "%s", err);
     g_free(out);
     g_free(err);
