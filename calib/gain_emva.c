@@ -172,6 +172,14 @@ static void dft(const double complex *in, int stride, int n, int ntop, const dou
         return;
     }
     for (int q = 0; q < p; q++) dft(in + (size_t)q * stride, stride * p, m, ntop, tw, out + (size_t)q * m, tmp);
+    if (p == 2) {   // the butterfly, in place
+        for (int k = 0; k < m; k++) {
+            double complex a = out[k], b = out[m + k] * tw[(size_t)k * step];
+            out[k] = a + b;
+            out[m + k] = a - b;
+        }
+        return;
+    }
     double complex t[64];
     for (int k = 0; k < m; k++) {
         for (int q = 0; q < p; q++) t[q] = out[(size_t)q * m + k] * tw[((long)q * k % n) * step];
@@ -219,25 +227,55 @@ int calib_gain_spectrogram(const float *img, int w, int h, const int roi[4], boo
     return nk;
 }
 
-static int cmp_float(const void *a, const void *b)
+// The k-th smallest of v[n] (reorders v): Hoare's selection, O(n) expected.
+static float select_k(float *v, size_t n, size_t k)
 {
-    float x = *(const float *)a, y = *(const float *)b;
-    return (x > y) - (x < y);
+    size_t lo = 0, hi = n - 1;
+    while (lo < hi) {
+        float pivot = v[lo + (hi - lo) / 2];
+        size_t i = lo, j = hi;
+        while (i <= j) {
+            while (v[i] < pivot) i++;
+            while (v[j] > pivot) j--;
+            if (i <= j) {
+                float t = v[i];
+                v[i] = v[j];
+                v[j] = t;
+                i++;
+                if (j == 0) break;
+                j--;
+            }
+        }
+        if (k <= j) hi = j;
+        else if (k >= i) lo = i;
+        else break;
+    }
+    return v[k];
 }
 
-// Median and robust std (1.4826 MAD) of the roi of m.
+static double median_of(float *v, size_t n)
+{
+    double a = select_k(v, n, (n - 1) / 2);
+    return n % 2 ? a : 0.5 * (a + select_k(v, n, n / 2));
+}
+
+// Median and robust std (1.4826 MAD) of the roi of m (NaN values left out).
 static bool robust(const float *m, int w, const int r[4], double *med, double *sigma)
 {
-    size_t n = (size_t)r[2] * r[3], k = 0;
-    float *v = malloc(sizeof(float) * n);
+    size_t n = 0;
+    float *v = malloc(sizeof(float) * ((size_t)r[2] * r[3] + 1));
     if (!v) return false;
     for (int y = 0; y < r[3]; y++)
-        for (int x = 0; x < r[2]; x++) v[k++] = m[(size_t)(r[1] + y) * w + r[0] + x];
-    qsort(v, n, sizeof *v, cmp_float);
-    *med = 0.5 * (v[(n - 1) / 2] + v[n / 2]);
-    for (size_t i = 0; i < n; i++) v[i] = fabsf(v[i] - (float)*med);
-    qsort(v, n, sizeof *v, cmp_float);
-    *sigma = 1.4826 * 0.5 * (v[(n - 1) / 2] + v[n / 2]);
+        for (int x = 0; x < r[2]; x++) {
+            float f = m[(size_t)(r[1] + y) * w + r[0] + x];
+            if (isfinite(f)) v[n++] = f;
+        }
+    *med = *sigma = NAN;
+    if (n) {
+        *med = median_of(v, n);
+        for (size_t i = 0; i < n; i++) v[i] = fabsf(v[i] - (float)*med);
+        *sigma = 1.4826 * median_of(v, n);
+    }
     free(v);
     return true;
 }
@@ -251,14 +289,17 @@ static void histogram(const float *m, int w, const int r[4], double med, double 
     for (int y = 0; y < r[3]; y++)
         for (int x = 0; x < r[2]; x++) {
             double d = scale * (m[(size_t)(r[1] + y) * w + r[0] + x] - med);
+            if (!isfinite(d)) continue;
             *lo = fmin(*lo, d);
             *hi = fmax(*hi, d);
         }
+    if (!isfinite(*lo)) *lo = 0;
     if (!(*hi > *lo)) *hi = *lo + 1;
     memset(hist, 0, sizeof(long) * CALIB_GAIN_HIST_BINS);
     for (int y = 0; y < r[3]; y++)
         for (int x = 0; x < r[2]; x++) {
             double d = scale * (m[(size_t)(r[1] + y) * w + r[0] + x] - med);
+            if (!isfinite(d)) continue;
             int b = (int)((d - *lo) / (*hi - *lo) * CALIB_GAIN_HIST_BINS);
             hist[b < 0 ? 0 : b >= CALIB_GAIN_HIST_BINS ? CALIB_GAIN_HIST_BINS - 1 : b]++;
         }
