@@ -11,6 +11,7 @@
 #include <complex.h>
 #include <glib.h>
 #include <math.h>
+#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -68,6 +69,9 @@ bool calib_gain_photon_axis(const double *t, const double *mu, int n, double sat
     o->responsivity_dn_per_photon = c[1];
     o->responsivity_offset_dn = c[0];
     o->qe = c[1] / K;
+    if (o->qe > 1)
+        fprintf(stderr, "refl calib gain: warning: quantum efficiency %.3g %% is above 100 %%: check --irradiance "
+                "(uW/cm^2 at the sensor), the pixel area and the wavelength\n", 100 * o->qe);
     o->mu_p_min = o->mu_e_min / o->qe;
     o->mu_p_sat = o->mu_e_sat / o->qe;
     return true;
@@ -586,8 +590,21 @@ static json_t *snr_json(const calib_gain_an_t *a)
     json_object_set_new(o, "snr_measured", jvec(a->snr, a->n));
     json_object_set_new(o, "snr_model", jvec(m, a->n));
     json_object_set_new(o, "snr_ideal", jvec(id, a->n));
+    // the model and the ideal on a grid from half the threshold to saturation (the plot's lines)
+    if (a->ph.measured && a->ph.mu_p_min > 0 && a->ph.mu_p_sat > a->ph.mu_p_min) {
+        enum { NG = 64 };
+        double g[NG], gm[NG], gi[NG], lo = log(0.5 * a->ph.mu_p_min), hi = log(a->ph.mu_p_sat);
+        for (int i = 0; i < NG; i++) {
+            g[i] = exp(lo + (hi - lo) * i / (NG - 1));
+            gm[i] = calib_gain_snr_model(&a->ph, g[i]);
+            gi[i] = sqrt(g[i]);
+        }
+        json_object_set_new(o, "grid_photons", jvec(g, NG));
+        json_object_set_new(o, "grid_snr_model", jvec(gm, NG));
+        json_object_set_new(o, "grid_snr_ideal", jvec(gi, NG));
+    }
     json_object_set_new(o, "definition", json_string(
-        "measured: (mu_y - mu_y.dark) / sigma_y; model: eta mu_p / sqrt(sigma^2_y.dark / K^2 + eta mu_p); ideal: "
+        "grid_*: the same on 64 photon counts from mu_p.min / 2 to mu_p.sat; measured: (mu_y - mu_y.dark) / sigma_y; model: eta mu_p / sqrt(sigma^2_y.dark / K^2 + eta mu_p); ideal: "
         "sqrt(mu_p) (eta = 1, no dark noise); photons null when the photon axis is not measured"));
     free(m);
     free(id);
@@ -612,6 +629,9 @@ json_t *calib_gain_emva_json(const calib_gain_opts_t *o, const calib_gain_an_t *
     json_object_set_new(c, "photons", json_string("mu_p = A E t_exp lambda / (h c), h = 6.62607015e-34 J s, "
                                                   "c = 299792458 m/s"));
     json_object_set_new(e, "conditions", c);
+    if (a->ph.measured && a->ph.qe > 1)
+        json_object_set_new(e, "warning", json_string("quantum efficiency above 100 %: check the irradiance (uW/cm^2 "
+                                                      "at the sensor), the pixel area and the wavelength"));
     json_object_set_new(e, "datasheet", datasheet_rows(a, m));
     json_object_set_new(e, "responsivity_offset_dn", a->ph.measured ? jnum(a->ph.responsivity_offset_dn)
                                                                     : json_string("not measured"));
@@ -683,19 +703,22 @@ bool calib_gain_datasheet_html(const char *dir, json_t *emva, json_t *prov)
     model_html_table(f, "quantity|symbol|value|unit|definition", (const char *const *)rs, rs ? (int)n : 0);
     for (size_t i = 0; rs && i < n; i++) g_free(rs[i]);
     free(rs);
-    static const char *const figs[][2] = {
-        { "snr_photons.png", "SNR against photons per pixel (or electrons when not measured): measured, the linear "
-                             "model and the ideal sqrt(mu_p)" },
-        { "spectrogram_h.png", "horizontal spectrograms (along the rows: column patterns), dark (DN) and light (%)" },
-        { "spectrogram_v.png", "vertical spectrograms (along the columns: row patterns), dark (DN) and light (%)" },
-        { "profiles.png", "horizontal and vertical profiles: column and row means of the averaged dark and flat" },
-        { "log_histograms.png", "logarithmic histograms of the deviations from the median: dark (DN) and high-pass "
-                                "flat (%), with the defect thresholds" },
-        { "defect_map.png", "defect pixels (defects.tiff): hot, dead, bright" },
+    static const char *const figs[][3] = {
+        { "SNR", "snr_photons.png", "SNR against photons per pixel (or electrons when not measured): measured up to "
+                                    "saturation, the linear model and the ideal sqrt(mu_p)" },
+        { "Spectrograms", "spectrogram_h.png", "horizontal spectrograms (along the rows: column patterns), dark (DN) "
+                                               "and light (%)" },
+        { NULL, "spectrogram_v.png", "vertical spectrograms (along the columns: row patterns), dark (DN) and light "
+                                     "(%)" },
+        { "Profiles", "profiles.png", "horizontal and vertical profiles: column and row means of the averaged dark "
+                                      "and flat minus dark" },
+        { "Defect pixels", "log_histograms.png", "logarithmic histograms of the deviations from the median: dark "
+                                                 "(DN) and high-pass flat (%), with the defect thresholds" },
+        { NULL, "defect_map.png", "defect pixels (defects.tiff): hot, dead, bright" },
     };
     for (size_t i = 0; i < sizeof figs / sizeof figs[0]; i++) {
-        model_html_heading(f, figs[i][1]);
-        model_html_figure(f, figs[i][0], figs[i][1]);
+        if (figs[i][0]) model_html_heading(f, figs[i][0]);
+        model_html_figure(f, figs[i][1], figs[i][2]);
     }
     fprintf(f, "<p><a href=\"report.html\">the full report</a>; figures and curves: gain.json \"emva1288\"</p>\n");
     bool ok = model_html_end(f, hp);

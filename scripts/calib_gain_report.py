@@ -15,6 +15,7 @@ import os
 import sys
 
 import matplotlib
+import matplotlib.ticker
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
@@ -237,14 +238,18 @@ def emva_plots(g, base, out):
     c = e["snr_curve"]
     x = arr(c["photons"] if measured else c["electrons"])
     snr = arr(c["snr_measured"])
-    ok = (x > 0) & (snr > 0)
+    # up to saturation (beyond it the variance collapses and the ratio means nothing)
+    sat_e = num(row_value(e, "mu_e.sat", "e-"))
+    ok = (x > 0) & (snr > 0) & (arr(c["electrons"]) <= sat_e * 1.0001)
     fig, ax = plt.subplots(figsize=(8, 5))
     ax.loglog(x[ok], snr[ok], "o", ms=3, label="measured (mu_y - mu_y.dark) / sigma_y")
     if measured:
-        xs = np.argsort(x[ok])
-        ax.loglog(x[ok][xs], arr(c["snr_model"])[ok][xs], "-", lw=1,
-                  label="linear model, eta = %.3g" % (num(row_value(e, "eta", "%")) / 100))
-        ax.loglog(x[ok][xs], arr(c["snr_ideal"])[ok][xs], "--", lw=0.8, label="ideal sqrt(mu_p)")
+        if "grid_photons" in c:
+            gx = arr(c["grid_photons"])
+            ax.loglog(gx, arr(c["grid_snr_model"]), "-", lw=1,
+                      label="linear model, eta = %.3g" % (num(row_value(e, "eta", "%")) / 100))
+            ax.loglog(gx, arr(c["grid_snr_ideal"]), "--", lw=0.8, label="ideal sqrt(mu_p)")
+            ax.axhline(1, ls=":", lw=0.8, color="grey")
         for sym, lab in (("mu_p.min", "threshold"), ("mu_p.sat", "saturation")):
             v = row_value(e, sym, "photons")
             if isinstance(v, (int, float)):
@@ -269,10 +274,20 @@ def emva_plots(g, base, out):
         for ax, vals, unit, split, lab in ((a1, arr(s["dark_dn"]), "DN", sp["dsnu_dn"], "dark (DSNU)"),
                                            (a2, arr(s["light_pct"]), "%", sp["prnu_pct"], "light (PRNU)")):
             ax.semilogy(f[1:], vals[1:], "-", lw=0.8)
-            pix = num(split["pixel"])
+            # white levels: the pixel part alone, and with the column (horizontal) or row (vertical) part, which
+            # is white along that direction too
+            pix, other = num(split["pixel"]), num(split["column" if key == "horizontal" else "row"])
             if pix > 0:
-                ax.axhline(pix, ls="--", lw=0.8, color="grey", label="pixel part %.3g %s (white level)" % (pix, unit))
+                ax.axhline(pix, ls="--", lw=0.8, color="grey", label="pixel part %.3g %s" % (pix, unit))
+                both = np.hypot(pix, other)
+                ax.axhline(both, ls=":", lw=0.8, color="black",
+                           label="pixel and %s parts %.3g %s (white if random)" % (
+                               "column" if key == "horizontal" else "row", both, unit))
                 ax.legend(fontsize=8)
+            fmt = matplotlib.ticker.FormatStrFormatter("%.3g")
+            ax.yaxis.set_major_formatter(fmt)
+            ax.yaxis.set_minor_formatter(fmt)
+            ax.tick_params(axis="y", which="minor", labelsize=7)
             ax.set_xlabel("frequency (cycles per pixel)")
             ax.set_ylabel("standard deviation (%s)" % unit)
             ax.set_title("%s spectrogram, %s" % (key, lab), fontsize=10)
@@ -332,7 +347,9 @@ def emva_plots(g, base, out):
         ax.legend(fontsize=8, loc="upper right")
     ax.set_xlabel("x (pixels)")
     ax.set_ylabel("y (pixels)")
-    ax.set_title("Defect pixels (defects.tiff; markers circle the first listed)", fontsize=10)
+    nd = d["hot"] + d["dead"] + d["bright"]
+    ax.set_title("Defect pixels (defects.tiff): hot %d, dead %d, bright %d%s" % (
+        d["hot"], d["dead"], d["bright"], "; markers circle the first listed" if nd else ": none"), fontsize=10)
     save(fig, out, "defect_map.png")
 
 
