@@ -1530,6 +1530,31 @@ static int summary_rows(const calib_gain_an_t *an, int ngains, const calib_gain_
     rows[nr++] = g_strdup_printf("read noise|%.4g e- (%.4g DN)|", a->ptc.read_noise_e, a->ptc.read_noise_dn);
     rows[nr++] = g_strdup_printf("saturation|%.1f DN above dark (%.0f e-)|at %.6g us", a->ptc.saturation_dn,
                                  a->ptc.saturation_capacity_e, a->t[a->ptc.i_sat]);
+    const calib_gain_photon_t *ph = &a->ph;
+    if (ph->measured)
+        rows[nr++] = g_strdup_printf("quantum efficiency|%.2f %%|responsivity R %.5g DN/photon at %.6g nm, %.6g "
+                                     "uW/cm^2, pixel %.6g um^2", 100 * ph->qe, ph->responsivity_dn_per_photon,
+                                     ph->wavelength_nm, ph->irradiance_uw_cm2, ph->pixel_area_um2);
+    else
+        rows[nr++] = g_strdup("quantum efficiency|not measured|give --irradiance, --pixel-area-um2 (or "
+                              "--pixel-pitch-um) and --wavelength-nm");
+    char pmin[64] = "not measured", psat[64] = "not measured";
+    if (ph->measured) {
+        snprintf(pmin, sizeof pmin, "%.4g photons", ph->mu_p_min);
+        snprintf(psat, sizeof psat, "%.6g photons", ph->mu_p_sat);
+    }
+    rows[nr++] = g_strdup_printf("absolute sensitivity threshold|%.4g e- (%s)|SNR = 1 of the linear model",
+                                 ph->mu_e_min, pmin);
+    rows[nr++] = g_strdup_printf("saturation capacity|%.6g e- (%s)|EMVA 1288 R4 dynamic range %.0f (%.1f dB)",
+                                 ph->mu_e_sat, psat, ph->dynamic_range, 20 * log10(ph->dynamic_range));
+    rows[nr++] = g_strdup_printf("DSNU row / column / pixel|%.3g / %.3g / %.3g DN|total %.3g DN (averaged dark)",
+                                 maps->sp.dsnu.row, maps->sp.dsnu.col, maps->sp.dsnu.pixel, maps->sp.dsnu.total);
+    rows[nr++] = g_strdup_printf("PRNU row / column / pixel|%.3g / %.3g / %.3g %%|total %.3g %% (flat minus dark, "
+                                 "vignetting included)", maps->sp.prnu.row, maps->sp.prnu.col, maps->sp.prnu.pixel,
+                                 maps->sp.prnu.total);
+    rows[nr++] = g_strdup_printf("defect pixels|hot %d, dead %d, bright %d|beyond %g robust standard deviations",
+                                 maps->sp.defects.hot, maps->sp.defects.dead, maps->sp.defects.bright,
+                                 maps->sp.defects.nsigma);
     rows[nr++] = g_strdup_printf("linearity error|%.3f %%|EMVA 1288 Release 4.0, 5..95 %% of saturation (Release 3's "
                                  "unweighted line: %.3f %%)", a->ptc.linearity_error_pct, a->ptc.linearity_error_r3_pct);
     rows[nr++] = g_strdup_printf("response linearisation|%s|LE after it %.3g %% (S(1 - aS), a = %.3g per DN: %.3g %%)",
@@ -1538,9 +1563,10 @@ static int summary_rows(const calib_gain_an_t *an, int ngains, const calib_gain_
     rows[nr++] = g_strdup_printf("SNR max|%.1f (%.1f dB)|", a->ptc.snr_max, 20 * log10(a->ptc.snr_max));
     rows[nr++] = g_strdup_printf("dynamic range|%.0f (%.1f dB)|", a->ptc.dynamic_range,
                                  20 * log10(a->ptc.dynamic_range));
-    rows[nr++] = g_strdup_printf("dark current|%.3g e-/s (%.3g DN/s)|dark frames from %.6g us to %.6g us",
-                                 a->dark_slope_dn_per_us * 1e6 / K, a->dark_slope_dn_per_us * 1e6, a->dark_t_min_us,
-                                 a->dark_t_max_us);
+    rows[nr++] = g_strdup_printf("dark current|%.3g e-/s (%.3g DN/s)|from the mean; from the variance %.3g e-/s; "
+                                 "dark frames from %.6g us to %.6g us", a->dark_slope_dn_per_us * 1e6 / K,
+                                 a->dark_slope_dn_per_us * 1e6, a->dark_var_slope_dn2_per_us * 1e6 / (K * K),
+                                 a->dark_t_min_us, a->dark_t_max_us);
     rows[nr++] = g_strdup_printf("DSNU|%.3f DN (%.2f e-)|", maps->dsnu_dn, maps->dsnu_dn / K);
     rows[nr++] = g_strdup_printf("PRNU (high-pass)|%.3f %%|smooth part (vignetting) removed", maps->prnu_pct);
     rows[nr++] = g_strdup_printf("flat-field non-uniformity (total)|%.3f %%|vignetting included",
@@ -1605,9 +1631,11 @@ bool calib_gain_report(const char *dir, const calib_gain_an_t *an, int ngains, c
                       "measured, the linear model and the ideal");
     model_html_heading(f, "EMVA 1288: spatial nonuniformity");
     model_html_para(f, "DSNU total %.3g DN: row %.3g, column %.3g, pixel %.3g DN. PRNU total %.3g %%: row %.3g, column "
-                    "%.3g, pixel %.3g %% (of the averaged flat minus dark, vignetting included).", maps->sp.dsnu.total,
+                    "%.3g, pixel %.3g %% (of the averaged flat minus dark, vignetting included); of the high-pass flat "
+                    "(vignetting removed): row %.3g, column %.3g, pixel %.3g %%.", maps->sp.dsnu.total,
                     maps->sp.dsnu.row, maps->sp.dsnu.col, maps->sp.dsnu.pixel, maps->sp.prnu.total, maps->sp.prnu.row,
-                    maps->sp.prnu.col, maps->sp.prnu.pixel);
+                    maps->sp.prnu.col, maps->sp.prnu.pixel, maps->sp.prnu_hp.row, maps->sp.prnu_hp.col,
+                    maps->sp.prnu_hp.pixel);
     model_html_figure(f, "spectrogram_h.png", "horizontal spectrograms (column patterns)");
     model_html_figure(f, "spectrogram_v.png", "vertical spectrograms (row patterns)");
     model_html_figure(f, "profiles.png", "horizontal and vertical profiles");

@@ -194,6 +194,7 @@ bool calib_gain_defects(const float *dark, const float *light, int w, int h, con
 // The spatial analysis of the reference gain's flat field (calib_gain_maps_t).
 typedef struct {
     calib_gain_split_t dsnu, prnu;          // DN; % of the mean signal
+    calib_gain_split_t prnu_hp;             // % of the high-pass flat (vignetting removed)
     int     nh, nv;                          // spectrogram lengths (roi w / 2 + 1, h / 2 + 1)
     double *spec_h_dark, *spec_v_dark;       // DN
     double *spec_h_light, *spec_v_light;     // % of the mean signal

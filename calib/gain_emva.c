@@ -399,6 +399,8 @@ bool calib_gain_make_spatial(const calib_gain_data_t *d, calib_gain_maps_t *m, d
     const double rel = 100 / smean, dtv = m->dark_var_dn2 / m->dark_frames;
     calib_gain_spatial_split(m->offset, m->w, m->h, r, dtv, 1, &sp->dsnu);
     calib_gain_spatial_split(sig, m->w, m->h, r, m->signal_temporal_var_dn2, rel, &sp->prnu);
+    calib_gain_spatial_split(m->prnu_hp, m->w, m->h, r, m->signal_temporal_var_dn2 / (smean * smean), 100,
+                             &sp->prnu_hp);
     bool ok = calib_gain_spectrogram(m->offset, m->w, m->h, r, false, 1, sp->spec_h_dark) &&
               calib_gain_spectrogram(m->offset, m->w, m->h, r, true, 1, sp->spec_v_dark) &&
               calib_gain_spectrogram(sig, m->w, m->h, r, false, rel, sp->spec_h_light) &&
@@ -639,12 +641,14 @@ json_t *calib_gain_emva_json(const calib_gain_opts_t *o, const calib_gain_an_t *
     json_t *s = json_object();
     json_object_set_new(s, "dsnu_dn", split_json(&sp->dsnu));
     json_object_set_new(s, "prnu_pct", split_json(&sp->prnu));
+    json_object_set_new(s, "prnu_highpass_pct", split_json(&sp->prnu_hp));
     json_object_set_new(s, "signal_mean_dn", jnum(sp->signal_mean_dn));
     json_object_set_new(s, "definition", json_string(
         "averaged frame y = mu + r[row] + c[column] + p + e; V, Vr, Vc the variances of all values, of the row means "
         "and of the column means, less the temporal variance of the average (sigma^2/L, /M, /N); s2_pixel = (V - Vr "
         "- Vc) / (1 - 1/M - 1/N), s2_row = Vr - s2_pixel / M, s2_col = Vc - s2_pixel / N (M columns, N rows); "
-        "DSNU of the averaged dark (DN), PRNU of the averaged flat minus dark, % of its mean, vignetting included"));
+        "DSNU of the averaged dark (DN), PRNU of the averaged flat minus dark, % of its mean, vignetting included; "
+        "prnu_highpass_pct: the same of the flat divided by its quadratic smooth surface (vignetting removed)"));
     json_object_set_new(e, "spatial", s);
     json_t *sg = json_object();
     json_object_set_new(sg, "horizontal", spectro_json(sp->nh, sp->pw, sp->spec_h_dark, sp->spec_h_light));
