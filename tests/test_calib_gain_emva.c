@@ -209,16 +209,16 @@ TEST(calib_gain_emva_le_compression)
 
 // The synthetic camera: eta 0.6, K 0.5 DN/e-, dark noise 4 e-, offset 100 DN with a row pattern 1.5 sin(2 pi
 // y / 12) and a column pattern 2 cos(2 pi 8 x / 64) (DN), pixel DSNU 0.8 DN, PRNU 1 %; 100 uW/cm^2 on 25 um^2
-// at 550 nm; Mono12 (clipped at 4095). Planted: hot (13, 7) +60 DN dark, dead (40, 30) gain 0.2, bright
+// at 550 nm; dark current 1e5 e-/s (24 e- at the longest exposure); Mono12 (clipped at 4095). Planted: hot (13, 7) +60 DN dark, dead (40, 30) gain 0.2, bright
 // (5, 44) gain 1.5.
 enum { FW = 64, FH = 48 };
-static const double F_ETA = 0.6, F_K = 0.5, F_RN = 4, F_E = 100, F_A = 25, F_L = 550;
+static const double F_ETA = 0.6, F_K = 0.5, F_RN = 4, F_E = 100, F_A = 25, F_L = 550, F_DARK = 1e5;   // e-/s
 
 static void frame_make(double t_us, bool dark, model_rng_t *r, const float *dsnu, const float *gain, uint16_t *pix)
 {
     double mp = calib_gain_photons(F_E, F_A, F_L, t_us);
     for (int i = 0; i < FW * FH; i++) {
-        double e = dark ? 0 : F_ETA * mp * gain[i];
+        double e = (dark ? 0 : F_ETA * mp * gain[i]) + F_DARK * t_us * 1e-6;
         e += sqrt(e) * model_rng_gauss(r) + F_RN * model_rng_gauss(r);
         double v = floor(dsnu[i] + F_K * e + 0.5);
         pix[i] = (uint16_t)(v < 0 ? 0 : v > 4095 ? 4095 : v);
@@ -316,6 +316,13 @@ TEST(calib_gain_emva_frames)
     // threshold: sigma_y.dark^2 = K^2 4^2 + 1/12 DN^2
     double se_min = 0.5 + sqrt((F_K * F_K * 16 + 1.0 / 12) / (F_K * F_K) + 0.25);
     CHECK_REL(json_number_value(datasheet_row(e, "mu_e.min", "e-")), se_min, 0.08);
+    // dark current from the mean (K mu_I t) and from the variance (K^2 mu_I t)
+    json_t *g0 = json_array_get(json_object_get(j, "gains"), 0);
+    fprintf(stderr, "  dark current %.4g e-/s (mean), %.4g e-/s (variance), truth %.4g\n",
+            json_number_value(json_object_get(g0, "dark_current_e_per_s")),
+            json_number_value(json_object_get(g0, "dark_current_from_variance_e_per_s")), F_DARK);
+    CHECK_REL(json_number_value(datasheet_row(e, "mu_I", "e-/s")), F_DARK, 0.05);
+    CHECK_REL(json_number_value(datasheet_row(e, "mu_I.var", "e-/s")), F_DARK, 0.15);
     // the spatial set (kind flat / flat-dark): 16 frames each, the DSNU's row and column parts
     json_t *ff = json_object_get(j, "flat_field");
     CHECK_NEAR(json_number_value(json_object_get(ff, "light_frames")), 16, 0);
