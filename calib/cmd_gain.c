@@ -88,15 +88,26 @@ static int numbers(model_cli_t *c, calib_gain_opts_t *o)
 static int photon_options(model_cli_t *c, calib_gain_opts_t *o)
 {
     static const char *const names[] = { "--irradiance", "--pixel-area-um2", "--pixel-pitch-um", "--wavelength-nm",
-                                         "--defect-sigma" };
-    double v[5] = { NAN, NAN, NAN, NAN, NAN };
-    for (int k = 0; k < 5; k++) {
+                                         "--defect-sigma", "--photodiode-na", "--photodiode-a-per-w",
+                                         "--photodiode-mm2" };
+    double v[8] = { NAN, NAN, NAN, NAN, NAN, NAN, NAN, NAN };
+    for (int k = 0; k < 8; k++) {
         const char *s = model_cli_value(c, names[k]);
         if (s && (!model_parse_double(s, &v[k]) || !(v[k] > 0) || !isfinite(v[k])))
             return model_cli_error(c, "%s '%s' must be a positive number", names[k], s);
     }
     if (isfinite(v[1]) && isfinite(v[2]))
         return model_cli_error(c, "give --pixel-area-um2 or --pixel-pitch-um, not both");
+    int pd = isfinite(v[5]) + isfinite(v[6]) + isfinite(v[7]);
+    if (pd && pd != 3)
+        return model_cli_error(c, "a photodiode reading needs all of --photodiode-na, --photodiode-a-per-w and "
+                               "--photodiode-mm2");
+    if (pd && isfinite(v[0]))
+        return model_cli_error(c, "give --irradiance or a photodiode reading (--photodiode-na ...), not both");
+    if (pd) v[0] = calib_gain_photodiode_irradiance(v[5], v[6], v[7]);
+    o->photodiode_na = v[5];
+    o->photodiode_a_per_w = v[6];
+    o->photodiode_mm2 = v[7];
     double area = isfinite(v[1]) ? v[1] : v[2] * v[2];
     int given = isfinite(v[0]) + isfinite(area) + isfinite(v[3]);
     if (given && given != 3)
@@ -193,6 +204,11 @@ int calib_cmd_gain(int argc, char **argv)
                         false),
         MODEL_OPT_VALUE("--pixel-pitch-um", "P", "the pixel pitch in um: area P^2", false),
         MODEL_OPT_VALUE("--wavelength-nm", "L", "the light's (centre) wavelength in nm", false),
+        MODEL_OPT_VALUE("--photodiode-na", "I", "instead of --irradiance: the current in nA of a photodiode in the "
+                        "sensor's place, with --photodiode-a-per-w (its responsivity at the wavelength, A/W) and "
+                        "--photodiode-mm2 (its area): E = I / (R S)", false),
+        MODEL_OPT_VALUE("--photodiode-a-per-w", "R", "the photodiode's responsivity at the wavelength, A/W", false),
+        MODEL_OPT_VALUE("--photodiode-mm2", "S", "the photodiode's area, mm^2", false),
         MODEL_OPT_VALUE("--defect-sigma", "N", "defect pixels: deviation from the median beyond N robust standard "
                         "deviations (default 6)", false),
         MODEL_OPT_FLAG("--no-report", NULL, "skip the plots and report.html", &no_report),

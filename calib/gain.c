@@ -1658,7 +1658,8 @@ calib_gain_opts_t calib_gain_defaults(void)
                                 .flat_frames = 16, .progress = -1, .probe_us = 1000, .max_us = NAN,
                                 .min_steps = 50, .radiance = NAN, .max_dn = 65535, .quant_dn = 1, .report = true,
                                 .linearisation = MODEL_LIN_MONOTONE, .low_steps = 16, .irradiance_uw_cm2 = NAN,
-                                .pixel_area_um2 = NAN, .wavelength_nm = NAN, .defect_sigma = 6 };
+                                .pixel_area_um2 = NAN, .wavelength_nm = NAN, .defect_sigma = 6,
+                                .photodiode_na = NAN, .photodiode_a_per_w = NAN, .photodiode_mm2 = NAN };
 }
 
 // The frames of a manifest into d (and the provenance).

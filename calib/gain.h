@@ -120,6 +120,10 @@ bool calib_gain_highpass(const float *in, int w, int h, float *out);
 // Mean photons per pixel during t_us: mu_p = A E t lambda / (h c), A the
 // pixel area (um^2), E the irradiance at the sensor (uW/cm^2), lambda (nm).
 double calib_gain_photons(double irradiance_uw_cm2, double pixel_area_um2, double wavelength_nm, double t_us);
+// The irradiance (uW/cm^2) a photodiode in the sensor's place reads: its
+// current I (nA) over its responsivity R (A/W) at the wavelength and its
+// area S (mm^2): E = I / (R S) = 0.1 I / (R S) uW/cm^2.
+double calib_gain_photodiode_irradiance(double current_na, double responsivity_a_per_w, double area_mm2);
 
 // The photon axis of one gain. measured false: no irradiance given (the
 // photon figures are NAN and stated "not measured"); the electron figures
@@ -238,6 +242,8 @@ typedef struct {
     double       irradiance_uw_cm2;  // at the sensor, uW/cm^2, constant over the sweep (NAN: not measured)
     double       pixel_area_um2;     // the pixel's area, um^2 (NAN: not given)
     double       wavelength_nm;      // the light's (centre) wavelength, nm (NAN: not given)
+    double       photodiode_na, photodiode_a_per_w, photodiode_mm2;   // instead of irradiance_uw_cm2: a
+                                     // photodiode's reading (NAN: none), calib_gain_photodiode_irradiance
     double       defect_sigma;       // defect threshold, robust standard deviations (default 6)
     bool         report;             // the plots and report.html
     int          argc;               // the command line, for the provenance (may be 0)

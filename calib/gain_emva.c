@@ -30,6 +30,12 @@ double calib_gain_photons(double irradiance_uw_cm2, double pixel_area_um2, doubl
     return energy_j * wavelength_nm * 1e-9 / (PLANCK_JS * LIGHT_MS);
 }
 
+double calib_gain_photodiode_irradiance(double current_na, double responsivity_a_per_w, double area_mm2)
+{
+    // nA = 1e-9 A; mm^2 = 1e-2 cm^2; W/cm^2 = 1e6 uW/cm^2
+    return current_na * 1e-9 / (responsivity_a_per_w * area_mm2 * 1e-2) * 1e6;
+}
+
 bool calib_gain_photon_axis(const double *t, const double *mu, int n, double sat_dn, double K, double var_dark_dn2,
                             double E, double A, double lambda, calib_gain_photon_t *o)
 {
@@ -85,16 +91,17 @@ double calib_gain_snr_model(const calib_gain_photon_t *p, double mu_p)
 
 bool calib_gain_an_photons(const calib_gain_opts_t *o, calib_gain_an_t *a)
 {
+    double E = isfinite(o->photodiode_na) ? calib_gain_photodiode_irradiance(o->photodiode_na, o->photodiode_a_per_w,
+                                                                             o->photodiode_mm2)
+                                          : o->irradiance_uw_cm2;
     if (!calib_gain_photon_axis(a->t, a->mu, a->n, a->ptc.saturation_dn, a->ptc.system_gain_dn_per_e, a->var_dark_dn2,
-                                o->irradiance_uw_cm2, o->pixel_area_um2, o->wavelength_nm, &a->ph))
+                                E, o->pixel_area_um2, o->wavelength_nm, &a->ph))
         return false;
     free(a->mu_p);
     a->mu_p = malloc(sizeof(double) * (a->n + 1));
     if (!a->mu_p) return false;
     for (int i = 0; i < a->n; i++)
-        a->mu_p[i] = a->ph.measured ? calib_gain_photons(o->irradiance_uw_cm2, o->pixel_area_um2, o->wavelength_nm,
-                                                         a->t[i])
-                                    : NAN;
+        a->mu_p[i] = a->ph.measured ? calib_gain_photons(E, o->pixel_area_um2, o->wavelength_nm, a->t[i]) : NAN;
     return true;
 }
 
@@ -623,8 +630,12 @@ json_t *calib_gain_emva_json(const calib_gain_opts_t *o, const calib_gain_an_t *
     json_object_set_new(e, "photon_axis", json_string(a->ph.measured ? "measured" : "not measured (give "
                                                       "--irradiance, --pixel-area-um2 and --wavelength-nm)"));
     json_t *c = json_object();
-    json_object_set_new(c, "irradiance_uw_cm2", a->ph.measured ? json_real(o->irradiance_uw_cm2)
+    json_object_set_new(c, "irradiance_uw_cm2", a->ph.measured ? json_real(a->ph.irradiance_uw_cm2)
                                                                 : json_string("not measured"));
+    if (isfinite(o->photodiode_na))
+        json_object_set_new(c, "photodiode", json_pack("{s:f, s:f, s:f, s:s}", "current_na", o->photodiode_na,
+                                                       "responsivity_a_per_w", o->photodiode_a_per_w, "area_mm2",
+                                                       o->photodiode_mm2, "irradiance", "E = I / (R S)"));
     json_object_set_new(c, "pixel_area_um2", jnum(o->pixel_area_um2));
     json_object_set_new(c, "wavelength_nm", jnum(o->wavelength_nm));
     json_object_set_new(c, "gain_db", json_real(a->gain_db));

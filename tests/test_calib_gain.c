@@ -623,6 +623,9 @@ TEST(calib_gain_bad_input)
     CHECK(expect_fail(&err, "calib", "gain", "--frames", bad, "-o", test_path("o9"), "--irradiance", "-5", NULL) == 2);
     CHECK_CONTAINS(err, "--irradiance '-5' must be a positive number");
     free(err);
+    CHECK(expect_fail(&err, "calib", "gain", "--frames", bad, "-o", test_path("o9"), "--photodiode-na", "5", NULL) == 2);
+    CHECK_CONTAINS(err, "needs all of --photodiode-na");
+    free(err);
 }
 
 TEST(calib_gain_numerics)

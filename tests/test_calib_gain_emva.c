@@ -36,6 +36,8 @@ TEST(calib_gain_emva_photon_axis)
     double one = calib_gain_photons(1, 25, 500, 1000);
     CHECK_REL(one, 2.5e-16 / (6.62607015e-34 * 299792458.0 / 500e-9), 1e-12);
     CHECK_NEAR(one, 629.2639, 1e-3);
+    // a photodiode of 0.3 A/W and 1 mm^2 reading 5 nA: 5e-9 / 0.3 W on 0.01 cm^2 = 1.6667 uW/cm^2
+    CHECK_NEAR(calib_gain_photodiode_irradiance(5, 0.3, 1), 5e-9 / 0.3 / 0.01 * 1e6, 1e-12);
     // a sweep of eta 0.55, K 0.4 DN/e-, saturation at 4000 DN: mu = K eta mu_p up to saturation
     const double eta = 0.55, K = 0.4, E = 3, A = 16, L = 620, var_dark = 9;
     double t[30], mu[30];
@@ -352,6 +354,21 @@ TEST(calib_gain_emva_frames)
     CHECK(map && w == FW && hh == FH);
     if (map) CHECK(map[7 * FW + 13] == 1 && map[30 * FW + 40] == 2 && map[44 * FW + 5] == 3);
     free(map);
+    json_decref(j);
+    // the same irradiance from a photodiode: 1000 nA at 0.5 A/W on 2 mm^2 = 100 uW/cm^2
+    const char *out3 = test_path("out3");
+    rc = test_refl_run(120, &so, &se, "calib", "gain", "--frames", m, "-o", out3, "--no-report", "--max-dn", "4095",
+                       "--min-steps", "20", "--photodiode-na", "1000", "--photodiode-a-per-w", "0.5",
+                       "--photodiode-mm2", "2", "--pixel-pitch-um", "5", "--wavelength-nm", "550", NULL);
+    CHECK_MSG(rc == 0, "refl calib gain --photodiode-na: %d\n%s", rc, se ? se : "");
+    free(so);
+    free(se);
+    j = load_out(out3);
+    if (!j) return;
+    CHECK_REL(json_number_value(json_object_get(j, "quantum_efficiency")), qe, 1e-9);
+    json_t *cond = json_object_get(json_object_get(j, "emva1288"), "conditions");
+    CHECK_REL(json_number_value(json_object_get(cond, "irradiance_uw_cm2")), 100, 1e-12);
+    CHECK(json_is_object(json_object_get(cond, "photodiode")));
     json_decref(j);
     fprintf(stderr, "  calib_gain_emva_frames: %.1f s\n", model_now_s() - t0);
 }
