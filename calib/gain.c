@@ -1793,7 +1793,7 @@ static bool run_one(const calib_gain_opts_t *o, calib_gain_data_t *d, json_t *fa
     fprintf(stderr, "refl calib gain: analysing %d frames (%d exposure groups)%s%s\n", d->nf, d->ng,
             d->camera[0] ? " of camera " : "", d->camera);
     if (!calib_gain_frame_stats(d) || !analyse_all(o, d, facts, &an, &ngains)) goto done;
-    if (!calib_gain_make_maps(d, &an[0], &maps) || !calib_gain_make_spatial(d, &maps, o->defect_sigma) ||
+    if (!calib_gain_make_maps(d, &an[0], &maps) || !calib_gain_make_spatial(d, &maps, o->defect_sigma, o->quant_dn) ||
         !calib_gain_write_maps(dir, &maps) || !calib_gain_write_defects(dir, &maps))
         goto done;
     if (top && !(calib_gain_write_maps(top, &maps) && calib_gain_write_defects(top, &maps))) goto done;

@@ -177,7 +177,9 @@ int calib_gain_spectrogram(const float *img, int w, int h, const int roi[4], boo
 // standard deviations (1.4826 MAD, at least the temporal std of the average):
 // hot (dark above), dead (light below), bright (light above). map (w x h, may
 // be NULL): 0 good, 1 hot, 2 dead, 3 bright (hot wins). The first
-// CALIB_GAIN_MAX_DEFECT_LIST of each kind are listed (x, y).
+// CALIB_GAIN_MAX_DEFECT_LIST of each kind are listed (x, y). dark_quantum:
+// the step between the averaged dark's values (q / frames; 0 unknown), for
+// bins of whole steps.
 #define CALIB_GAIN_MAX_DEFECT_LIST 64
 #define CALIB_GAIN_HIST_BINS 128
 typedef struct {
@@ -190,9 +192,10 @@ typedef struct {
     // logarithmic histograms of the deviations from the median: dark (DN), light (%)
     double dark_lo, dark_hi, light_lo, light_hi;
     long   dark_hist[CALIB_GAIN_HIST_BINS], light_hist[CALIB_GAIN_HIST_BINS];
+    int    dark_nbins, light_nbins;                                  // bins used (<= CALIB_GAIN_HIST_BINS)
 } calib_gain_defects_t;
 bool calib_gain_defects(const float *dark, const float *light, int w, int h, const int roi[4], double nsigma,
-                        double dark_temporal_std, double light_temporal_std, unsigned char *map,
+                        double dark_temporal_std, double light_temporal_std, double dark_quantum, unsigned char *map,
                         calib_gain_defects_t *out);
 
 // The spatial analysis of the reference gain's flat field (calib_gain_maps_t).
@@ -409,7 +412,7 @@ bool calib_gain_write_maps(const char *dir, const calib_gain_maps_t *m);
 // The EMVA 1288 spatial analysis of m's averaged dark and flat (m->sp): the
 // row/column/pixel split, spectrograms, profiles, defects (nsigma) over d's
 // roi. false + message (no memory).
-bool calib_gain_make_spatial(const calib_gain_data_t *d, calib_gain_maps_t *m, double nsigma);
+bool calib_gain_make_spatial(const calib_gain_data_t *d, calib_gain_maps_t *m, double nsigma, double quant_dn);
 // The photon axis of a (o's irradiance, area, wavelength): a->ph, a->mu_p.
 bool calib_gain_an_photons(const calib_gain_opts_t *o, calib_gain_an_t *a);
 // gain.json's "emva1288": the datasheet rows, definitions, the spatial

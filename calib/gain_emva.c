@@ -291,9 +291,13 @@ static bool robust(const float *m, int w, const int r[4], double *med, double *s
     return true;
 }
 
-// Histogram of the deviations dev = scale (m - med) over the roi in [lo, hi].
-static void histogram(const float *m, int w, const int r[4], double med, double scale, double *lo, double *hi,
-                      long *hist)
+// Histogram of the deviations dev = scale (m - med) over the roi in [lo, hi]
+// (*nb bins). q > 0: the values are multiples of q apart (an average of
+// quantised frames): the bins are whole multiples of q wide, their edges
+// halfway between values, so that no bin holds one level more than its
+// neighbour (no comb).
+static void histogram(const float *m, int w, const int r[4], double med, double scale, double q, double *lo,
+                      double *hi, long *hist, int *nb)
 {
     *lo = INFINITY;
     *hi = -INFINITY;
@@ -305,14 +309,21 @@ static void histogram(const float *m, int w, const int r[4], double med, double 
             *hi = fmax(*hi, d);
         }
     if (!isfinite(*lo)) *lo = 0;
+    *nb = CALIB_GAIN_HIST_BINS;
+    if (q > 0 && isfinite(*hi)) {
+        double width = q * fmax(1, ceil((*hi - *lo + q) / CALIB_GAIN_HIST_BINS / q));
+        *lo -= 0.5 * q;
+        *nb = (int)fmin(CALIB_GAIN_HIST_BINS, ceil((*hi + 0.5 * q - *lo) / width));
+        *hi = *lo + *nb * width;
+    }
     if (!(*hi > *lo)) *hi = *lo + 1;
     memset(hist, 0, sizeof(long) * CALIB_GAIN_HIST_BINS);
     for (int y = 0; y < r[3]; y++)
         for (int x = 0; x < r[2]; x++) {
             double d = scale * (m[(size_t)(r[1] + y) * w + r[0] + x] - med);
             if (!isfinite(d)) continue;
-            int b = (int)((d - *lo) / (*hi - *lo) * CALIB_GAIN_HIST_BINS);
-            hist[b < 0 ? 0 : b >= CALIB_GAIN_HIST_BINS ? CALIB_GAIN_HIST_BINS - 1 : b]++;
+            int b = (int)((d - *lo) / (*hi - *lo) * *nb);
+            hist[b < 0 ? 0 : b >= *nb ? *nb - 1 : b]++;
         }
 }
 
@@ -328,7 +339,8 @@ static void defect_add(calib_gain_defects_t *o, int kind, int x, int y)
 }
 
 bool calib_gain_defects(const float *dark, const float *light, int w, int h, const int roi[4], double nsigma,
-                        double dark_tstd, double light_tstd, unsigned char *map, calib_gain_defects_t *o)
+                        double dark_tstd, double light_tstd, double dark_quantum, unsigned char *map,
+                        calib_gain_defects_t *o)
 {
     memset(o, 0, sizeof *o);
     o->nsigma = nsigma;
@@ -354,9 +366,9 @@ bool calib_gain_defects(const float *dark, const float *light, int w, int h, con
             if (kind == 0 && (dl < -o->light_threshold || dl > o->light_threshold))
                 defect_add(o, dl < 0 ? 1 : 2, x, y);
         }
-    histogram(dark, w, r, o->dark_median_dn, 1, &o->dark_lo, &o->dark_hi, o->dark_hist);
-    histogram(light, w, r, o->light_median, 100 / (o->light_median != 0 ? o->light_median : 1), &o->light_lo,
-              &o->light_hi, o->light_hist);
+    histogram(dark, w, r, o->dark_median_dn, 1, dark_quantum, &o->dark_lo, &o->dark_hi, o->dark_hist, &o->dark_nbins);
+    histogram(light, w, r, o->light_median, 100 / (o->light_median != 0 ? o->light_median : 1), 0, &o->light_lo,
+              &o->light_hi, o->light_hist, &o->light_nbins);
     return true;
 }
 
@@ -375,7 +387,7 @@ static double *profile(const float *m, int w, const int r[4], bool rows, double 
     return p;
 }
 
-bool calib_gain_make_spatial(const calib_gain_data_t *d, calib_gain_maps_t *m, double nsigma)
+bool calib_gain_make_spatial(const calib_gain_data_t *d, calib_gain_maps_t *m, double nsigma, double quant_dn)
 {
     calib_gain_spatial_t *sp = &m->sp;
     memset(sp, 0, sizeof *sp);
@@ -426,7 +438,8 @@ bool calib_gain_make_spatial(const calib_gain_data_t *d, calib_gain_maps_t *m, d
     }
     // defects: the dark average and the high-pass flat (vignetting removed)
     return calib_gain_defects(m->offset, m->prnu_hp, m->w, m->h, r, nsigma, sqrt(dtv),
-                              sqrt(m->signal_temporal_var_dn2) / smean, sp->defect_map, &sp->defects);
+                              sqrt(m->signal_temporal_var_dn2) / smean, quant_dn / m->dark_frames, sp->defect_map,
+                              &sp->defects);
 }
 
 bool calib_gain_write_defects(const char *dir, const calib_gain_maps_t *m)
@@ -538,10 +551,10 @@ static json_t *datasheet_rows(const calib_gain_an_t *a, const calib_gain_maps_t 
     return r;
 }
 
-static json_t *hist_json(double lo, double hi, const long *h, const char *unit)
+static json_t *hist_json(double lo, double hi, const long *h, int nb, const char *unit)
 {
     json_t *c = json_array();
-    for (int i = 0; i < CALIB_GAIN_HIST_BINS; i++) json_array_append_new(c, json_integer(h[i]));
+    for (int i = 0; i < nb; i++) json_array_append_new(c, json_integer(h[i]));
     return json_pack("{s:o, s:o, s:s, s:o}", "lo", jnum(lo), "hi", jnum(hi), "unit", unit, "counts", c);
 }
 
@@ -567,8 +580,9 @@ static json_t *defects_json(const calib_gain_defects_t *d, double nsigma)
             json_array_append_new(l, json_pack("[ii]", d->list[k][i][0], d->list[k][i][1]));
         json_object_set_new(o, names[k], l);
     }
-    json_object_set_new(o, "histogram_dark", hist_json(d->dark_lo, d->dark_hi, d->dark_hist, "DN from the median"));
-    json_object_set_new(o, "histogram_light", hist_json(d->light_lo, d->light_hi, d->light_hist,
+    json_object_set_new(o, "histogram_dark", hist_json(d->dark_lo, d->dark_hi, d->dark_hist, d->dark_nbins,
+                                                       "DN from the median"));
+    json_object_set_new(o, "histogram_light", hist_json(d->light_lo, d->light_hi, d->light_hist, d->light_nbins,
                                                         "% from the median (high-pass flat)"));
     return o;
 }

@@ -159,7 +159,7 @@ TEST(calib_gain_emva_defects)
     light[30 * W + 40] = 0.2f;  // dead at (40, 30)
     light[44 * W + 5] = 1.5f;   // bright at (5, 44)
     calib_gain_defects_t d;
-    CHECK(calib_gain_defects(dark, light, W, H, NULL, 6, 0.1, 0.001, map, &d));
+    CHECK(calib_gain_defects(dark, light, W, H, NULL, 6, 0.1, 0.001, 0, map, &d));
     CHECK(d.hot == 1 && d.dead == 1 && d.bright == 1);
     CHECK(d.nlist[0] == 1 && d.list[0][0][0] == 13 && d.list[0][0][1] == 7);
     CHECK(d.nlist[1] == 1 && d.list[1][0][0] == 40 && d.list[1][0][1] == 30);
@@ -174,6 +174,17 @@ TEST(calib_gain_emva_defects)
     for (int b = 0; b < CALIB_GAIN_HIST_BINS; b++) total += d.dark_hist[b];
     CHECK(total == W * H);
     CHECK(d.dark_hi > 39 && d.light_lo < -79);   // the histograms reach the defects (DN, %)
+    // an averaged dark of 16 frames: values 1/16 DN apart, 160 levels of 30 pixels each; with the step given the
+    // bins are 2 levels wide (80 bins of 60 pixels, no comb); without it 128 bins hold 1 or 2 levels
+    for (int i = 0; i < W * H; i++) dark[i] = (float)(100 + (i % 160) / 16.0);
+    CHECK(calib_gain_defects(dark, light, W, H, NULL, 6, 0.1, 0.001, 1.0 / 16, NULL, &d));
+    CHECK(d.dark_nbins == 80);
+    int uneven = 0;
+    for (int b = 0; b < d.dark_nbins; b++) uneven += d.dark_hist[b] != 60;
+    CHECK_MSG(uneven == 0, "%d bins of other than 60 pixels", uneven);
+    CHECK_NEAR(d.dark_hi - d.dark_lo, 80 * 2.0 / 16, 1e-9);
+    CHECK(calib_gain_defects(dark, light, W, H, NULL, 6, 0.1, 0.001, 0, NULL, &d));
+    CHECK(d.dark_nbins == CALIB_GAIN_HIST_BINS);
     free(dark);
     free(light);
     free(map);
