@@ -8,8 +8,12 @@
 // gain, dark/light and role) → calib_gain_frame_stats (each group's mean and
 // temporal variance) → per gain calib_gain_analyse (dark model, photon
 // transfer, linearity, response) → calib_gain_make_maps (offset, DSNU, PRNU
-// of the flat field at the first gain) → calib_gain_write_maps,
-// calib_gain_json (gain.json), calib_gain_report (plots, report.html).
+// of the flat field at the first gain) → calib_gain_make_spatial (EMVA 1288
+// Release 4.0 Linear: row/column/pixel split, spectrograms, profiles,
+// defects; calib/gain_emva.c) → calib_gain_write_maps, calib_gain_write_defects,
+// calib_gain_json (gain.json, with "emva1288"), calib_gain_report (plots,
+// report.html), calib_gain_datasheet_html (datasheet.html). The photon axis
+// (calib_gain_an_photons) follows each gain's calib_gain_analyse.
 // Errors: false / NULL with the message kept by model_error_set
 // (model_last_error), not printed: the caller prints it once. Progress lines
 // go to stderr ("refl calib gain: ...").
