@@ -110,6 +110,7 @@ CALIB_SRC := \
     calib/lamps_pattern.c \
     calib/lamps_drift.c \
     calib/gain.c \
+    calib/gain_emva.c \
     calib/white.c \
     calib/export.c \
     calib/cmd_calib.c \
@@ -178,6 +179,7 @@ TEST_SRC := \
     tests/test_rig_virtual_optics.c \
     tests/test_rig_virtual_place.c \
     tests/test_calib_gain.c \
+    tests/test_calib_gain_emva.c \
     tests/test_calib_white.c \
     tests/test_calib_geometry.c \
     tests/test_calib_lamps.c \

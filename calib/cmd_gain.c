@@ -12,18 +12,25 @@
 #include "model/opts.h"
 
 #define ABOUT                                                                                                  \
-    "Sensitivity of a camera, EMVA 1288 style: photon transfer (system gain K, read noise, saturation,\n"      \
-    "SNR, dynamic range), linearity error (EMVA 1288 Release 4.0), the response linearisation (a monotone\n"  \
-    "table measured signal -> linear signal), dark current, offset/DSNU and PRNU maps, and the response\n"       \
-    "kc per us per unit radiance at each gain. Writes DIR/gain.json, DIR/offset_dn.tiff, dsnu_dn.tiff,\n"     \
-    "prnu_gain.tiff (total flat field incl. vignetting, mean 1), prnu_highpass.tiff (smooth part\n"           \
-    "removed) and DIR/report.html; of a rig or sessions of several cameras, every camera's into DIR/NAME/\n"   \
-    "(DIR/gain.json and maps: also the first camera's). The frames come from one of:\n"                      \
+    "Sensitivity of a camera, EMVA 1288 Release 4.0 Linear: photon transfer (system gain K, temporal dark\n"  \
+    "noise, saturation, SNR, dynamic range), linearity error (Release 4.0's, and Release 3's beside it),\n"    \
+    "with --irradiance the photon axis (quantum efficiency, responsivity, absolute sensitivity threshold\n"    \
+    "and saturation in photons, SNR against photons), dark current from the mean and the variance, DSNU\n"    \
+    "and PRNU split into row, column and pixel parts, spectrograms, profiles, defect pixels, and the\n"       \
+    "summary datasheet (gain.json \"emva1288\", DIR/datasheet.html); also the response linearisation (a\n"   \
+    "monotone table measured signal -> linear signal) and the response kc per us per unit radiance at\n"     \
+    "each gain. Writes DIR/gain.json, DIR/offset_dn.tiff, dsnu_dn.tiff, prnu_gain.tiff (total flat field\n"  \
+    "incl. vignetting, mean 1), prnu_highpass.tiff (smooth part removed), defects.tiff (0 good, 1 hot,\n"     \
+    "2 dead, 3 bright), DIR/report.html and DIR/datasheet.html; of a rig or sessions of several cameras,\n"  \
+    "every camera's into DIR/NAME/ (DIR/gain.json and maps: also the first camera's). The frames come\n"      \
+    "from one of:\n"                                                                                          \
     "  --rig RIG -o DIR                          captured here (the sample is a uniform source filling\n"      \
     "                                            the view)\n"                                                   \
-    "  --frames MANIFEST.csv -o DIR              lines file,exposure_us,kind (kind dark|light; optional\n"    \
-    "                                            header line; paths relative to the manifest; 16-bit PNG\n"    \
-    "                                            or float TIFF). Light exposures need frame pairs.\n"           \
+    "  --frames MANIFEST.csv -o DIR              lines file,exposure_us,kind; kind dark|light: the sweep\n"    \
+    "                                            (light exposures need frame pairs), flat|flat-dark: the\n"    \
+    "                                            spatial set, many frames at one level (DSNU, PRNU, defects;\n" \
+    "                                            aliases spatial-light|spatial-dark); optional header line;\n"  \
+    "                                            paths relative to the manifest; PNG, JPEG or TIFF\n"           \
     "  --session DIR [--session DIR ...] -o DIR  sessions captured elsewhere (light = lamps on, dark = none)"
 
 #define EPILOG                                                                                                 \
@@ -76,6 +83,43 @@ static int numbers(model_cli_t *c, calib_gain_opts_t *o)
     return 0;
 }
 
+// The photon axis (--irradiance with the pixel's area or pitch and the
+// wavelength, all or none) and the defect threshold.
+static int photon_options(model_cli_t *c, calib_gain_opts_t *o)
+{
+    static const char *const names[] = { "--irradiance", "--pixel-area-um2", "--pixel-pitch-um", "--wavelength-nm",
+                                         "--defect-sigma", "--photodiode-na", "--photodiode-a-per-w",
+                                         "--photodiode-mm2" };
+    double v[8] = { NAN, NAN, NAN, NAN, NAN, NAN, NAN, NAN };
+    for (int k = 0; k < 8; k++) {
+        const char *s = model_cli_value(c, names[k]);
+        if (s && (!model_parse_double(s, &v[k]) || !(v[k] > 0) || !isfinite(v[k])))
+            return model_cli_error(c, "%s '%s' must be a positive number", names[k], s);
+    }
+    if (isfinite(v[1]) && isfinite(v[2]))
+        return model_cli_error(c, "give --pixel-area-um2 or --pixel-pitch-um, not both");
+    int pd = isfinite(v[5]) + isfinite(v[6]) + isfinite(v[7]);
+    if (pd && pd != 3)
+        return model_cli_error(c, "a photodiode reading needs all of --photodiode-na, --photodiode-a-per-w and "
+                               "--photodiode-mm2");
+    if (pd && isfinite(v[0]))
+        return model_cli_error(c, "give --irradiance or a photodiode reading (--photodiode-na ...), not both");
+    if (pd) v[0] = calib_gain_photodiode_irradiance(v[5], v[6], v[7]);
+    o->photodiode_na = v[5];
+    o->photodiode_a_per_w = v[6];
+    o->photodiode_mm2 = v[7];
+    double area = isfinite(v[1]) ? v[1] : v[2] * v[2];
+    int given = isfinite(v[0]) + isfinite(area) + isfinite(v[3]);
+    if (given && given != 3)
+        return model_cli_error(c, "the photon axis needs all of --irradiance, --pixel-area-um2 (or "
+                               "--pixel-pitch-um) and --wavelength-nm");
+    o->irradiance_uw_cm2 = v[0];
+    o->pixel_area_um2 = area;
+    o->wavelength_nm = v[3];
+    if (isfinite(v[4])) o->defect_sigma = v[4];
+    return 0;
+}
+
 // The lists, the region and the one source.
 static int check_options(model_cli_t *c, calib_gain_opts_t *o, double **gains, double **darks)
 {
@@ -104,6 +148,8 @@ static int check_options(model_cli_t *c, calib_gain_opts_t *o, double **gains, d
     if (lin && strcmp(lin, "monotone") && strcmp(lin, "parametric"))
         return model_cli_error(c, "--linearisation '%s' must be monotone or parametric", lin);
     if (lin) o->linearisation = strcmp(lin, "monotone") ? MODEL_LIN_PARAMETRIC : MODEL_LIN_MONOTONE;
+    rc = photon_options(c, o);
+    if (rc) return rc;
     if (*gains) o->gains_db = *gains;
     if (*darks) o->dark_exposures_us = *darks;
     return 0;
@@ -150,6 +196,21 @@ int calib_cmd_gain(int argc, char **argv)
         MODEL_OPT_VALUE("--linearisation", "M", "monotone|parametric: the response linearisation every consumer of "
                         "gain.json applies (default monotone: a monotone table of the sweep; parametric: S_m = "
                         "S (1 - a S)); both are written", false),
+        MODEL_OPT_VALUE("--irradiance", "E", "irradiance at the sensor in uW/cm^2 during the light frames (constant "
+                        "over the sweep): with the pixel area and the wavelength, the photon axis mu_p = A E t lambda "
+                        "/ (h c) and from it quantum efficiency, responsivity, sensitivity threshold and saturation "
+                        "in photons (without it: \"not measured\")", false),
+        MODEL_OPT_VALUE("--pixel-area-um2", "A", "the pixel's light-sensitive area in um^2 (or --pixel-pitch-um)",
+                        false),
+        MODEL_OPT_VALUE("--pixel-pitch-um", "P", "the pixel pitch in um: area P^2", false),
+        MODEL_OPT_VALUE("--wavelength-nm", "L", "the light's (centre) wavelength in nm", false),
+        MODEL_OPT_VALUE("--photodiode-na", "I", "instead of --irradiance: the current in nA of a photodiode in the "
+                        "sensor's place, with --photodiode-a-per-w (its responsivity at the wavelength, A/W) and "
+                        "--photodiode-mm2 (its area): E = I / (R S)", false),
+        MODEL_OPT_VALUE("--photodiode-a-per-w", "R", "the photodiode's responsivity at the wavelength, A/W", false),
+        MODEL_OPT_VALUE("--photodiode-mm2", "S", "the photodiode's area, mm^2", false),
+        MODEL_OPT_VALUE("--defect-sigma", "N", "defect pixels: deviation from the median beyond N robust standard "
+                        "deviations (default 6)", false),
         MODEL_OPT_FLAG("--no-report", NULL, "skip the plots and report.html", &no_report),
         RIG_OPERATOR_OPTS(&yes, &operator_input),
     };

@@ -528,7 +528,7 @@ bool calib_gain_frame_stats(calib_gain_data_t *d)
 
 void calib_gain_an_free(calib_gain_an_t *a)
 {
-    double *arrays[] = { a->t, a->mu_y, a->var_y, a->mu_d, a->var_d, a->mu, a->var, a->dev_pct, a->snr };
+    double *arrays[] = { a->t, a->mu_y, a->var_y, a->mu_d, a->var_d, a->mu, a->var, a->dev_pct, a->snr, a->mu_p };
     for (size_t i = 0; i < sizeof arrays / sizeof arrays[0]; i++) free(arrays[i]);
 }
 
@@ -625,6 +625,7 @@ bool calib_gain_analyse(calib_gain_data_t *d, double gain_db, int min_steps, dou
             tmax = fmax(tmax, dtv[i]);
         }
         dv_fit = ndv >= 3 && tmax > tmin && calib_gain_polyfit(dtv, dv, ndv, 1, dvc);
+        a->dark_var_slope_dn2_per_us = dv_fit ? dvc[1] : NAN;
         if (dv_fit) a->var_dark_dn2 = dvc[0];
         else {
             double s = 0;
@@ -709,6 +710,11 @@ void calib_gain_maps_free(calib_gain_maps_t *m)
     free(m->dsnu);
     free(m->prnu);
     free(m->prnu_hp);
+    calib_gain_spatial_t *sp = &m->sp;
+    free(sp->spec_h_dark);   // the four spectrograms' one block
+    double *prof[] = { sp->col_dark, sp->row_dark, sp->col_light, sp->row_light };
+    for (int i = 0; i < 4; i++) free(prof[i]);
+    free(sp->defect_map);
 }
 
 // Average of a group's frames (full frame) into out (w*h doubles summed then divided).
@@ -841,6 +847,7 @@ bool calib_gain_make_maps(calib_gain_data_t *d, const calib_gain_an_t *a, calib_
     double svar, smean = roi_mean_var(d, m->prnu, w, h, &svar);
     m->flat_var_dn2 = isfinite(flat->var_dn2) ? flat->var_dn2 : NAN;
     double tvar = (isfinite(m->flat_var_dn2) ? m->flat_var_dn2 / flat->n : 0) + m->dark_var_dn2 / dark->n;
+    m->signal_temporal_var_dn2 = tvar;
     m->prnu_total_pct = 100 * sqrt(fmax(svar - tvar, 0)) / smean;
     if (!calib_gain_highpass(m->prnu, w, h, m->prnu_hp)) {
         model_error_set(NULL, 0, "flat field: the smooth-surface fit is singular (%dx%d frames)", w, h);
@@ -855,6 +862,7 @@ bool calib_gain_make_maps(calib_gain_data_t *d, const calib_gain_an_t *a, calib_
     double s = 0;
     for (size_t i = 0; i < n; i++) s += m->prnu[i];
     s /= n;
+    m->prnu_mean_dn = s;
     for (size_t i = 0; i < n; i++) m->prnu[i] = (float)(m->prnu[i] / s);
     return true;
 }
@@ -898,11 +906,14 @@ bool calib_gain_read_manifest(const char *path, int max_dn, calib_gain_data_t *d
             model_error_set(path, line, "exposure_us '%s' is not a positive number (microseconds)", f[1]);
             goto done;
         }
-        bool dark;
-        if (!strcmp(f[2], "dark")) dark = true;
-        else if (!strcmp(f[2], "light")) dark = false;
-        else {
-            model_error_set(path, line, "kind '%s' must be dark or light", f[2]);
+        // kind: dark | light (the sweep and the dark model), flat | flat-dark (the spatial set: many frames at
+        // one level for DSNU, PRNU, spectrograms and defects; aliases spatial-light | spatial-dark)
+        bool dark = !strcmp(f[2], "dark") || !strcmp(f[2], "flat-dark") || !strcmp(f[2], "spatial-dark");
+        bool flat = !strcmp(f[2], "flat") || !strcmp(f[2], "flat-dark") || !strcmp(f[2], "spatial-light") ||
+                    !strcmp(f[2], "spatial-dark");
+        if (!dark && !flat && strcmp(f[2], "light")) {
+            model_error_set(path, line, "kind '%s' must be dark, light (the sweep), flat or flat-dark (the spatial "
+                            "set; also spatial-light, spatial-dark)", f[2]);
             goto done;
         }
         if (!*f[0]) {
@@ -911,7 +922,7 @@ bool calib_gain_read_manifest(const char *path, int max_dn, calib_gain_data_t *d
         }
         calib_gain_frame_t fr = { .path = f[0][0] == '/' ? g_strdup(f[0]) : g_build_filename(dir, f[0], NULL),
                         .where = g_strdup(path), .line = line, .exposure_us = e, .gain_db = 0, .dark = dark,
-                        .set = CALIB_GAIN_SET_ANY, .max_dn = max_dn, .nlamps = -1 };
+                        .set = flat ? CALIB_GAIN_SET_FLAT : CALIB_GAIN_SET_ANY, .max_dn = max_dn, .nlamps = -1 };
         if (access(fr.path, R_OK) != 0) {
             model_error_set(path, line, "frame %s: %s", fr.path, strerror(errno));
             g_free(fr.path);
@@ -1195,6 +1206,17 @@ static json_t *gain_json(const calib_gain_an_t *a)
     json_object_set_new(o, "dark_current_dn_per_s", jreal(a->dark_slope_dn_per_us * 1e6));
     json_object_set_new(o, "dark_current_e_per_s", jreal(a->dark_slope_dn_per_us * 1e6 / p->system_gain_dn_per_e));
     json_object_set_new(o, "dark_level_dn", jreal(a->dark_intercept_dn));
+    json_object_set_new(o, "dark_current_from_variance_e_per_s",
+                        jreal(a->dark_var_slope_dn2_per_us * 1e6 / (p->system_gain_dn_per_e * p->system_gain_dn_per_e)));
+    const calib_gain_photon_t *ph = &a->ph;
+#define PHOTON(key, v) json_object_set_new(o, key, ph->measured ? jreal(v) : json_string("not measured"))
+    PHOTON("quantum_efficiency", ph->qe);
+    PHOTON("responsivity_dn_per_photon", ph->responsivity_dn_per_photon);
+    PHOTON("absolute_sensitivity_threshold_photons", ph->mu_p_min);
+    PHOTON("saturation_capacity_photons", ph->mu_p_sat);
+#undef PHOTON
+    json_object_set_new(o, "absolute_sensitivity_threshold_e", jreal(ph->mu_e_min));
+    json_object_set_new(o, "dynamic_range_r4", jreal(ph->dynamic_range));
     json_object_set_new(o, "n_steps", json_integer(a->n));
     json_object_set_new(o, "n_ptc_fit", json_integer(p->n_ptc_fit));
     json_object_set_new(o, "n_linearity_fit", json_integer(p->n_lin_fit));
@@ -1208,6 +1230,7 @@ static json_t *gain_json(const calib_gain_an_t *a)
     json_object_set_new(c, "signal_variance_dn2", jarray(a->var, a->n));
     json_object_set_new(c, "snr", jarray(a->snr, a->n));
     json_object_set_new(c, "linearity_deviation_pct", jarray(a->dev_pct, a->n));
+    if (a->mu_p) json_object_set_new(c, "photons", jarray(a->mu_p, a->n));
     double *kc = malloc(sizeof(double) * (a->n + 1));
     for (int i = 0; i < a->n; i++) kc[i] = isfinite(a->radiance) ? a->mu[i] / a->radiance : NAN;
     json_object_set_new(c, "kc", jarray(kc, a->n));
@@ -1334,7 +1357,12 @@ static json_t *conventions_json(const calib_gain_opts_t *o, const calib_gain_dat
         "saturation, per unit radiance (free of the non-linearity's compression)"));
     json_object_set_new(cv, "radiance_truth", json_string("the virtual rig's truth of the radiance, for comparison "
                                                           "only (not used in the figures)"));
-    json_object_set_new(cv, "dark_current", json_string("slope of the mean dark level against exposure"));
+    json_object_set_new(cv, "dark_current", json_string("slope of the mean dark level against exposure; "
+                                                        "dark_current_from_variance_e_per_s: slope of the dark "
+                                                        "temporal variance against exposure / K^2"));
+    json_object_set_new(cv, "emva1288", json_string("the EMVA 1288 Release 4.0 Linear datasheet, each row with its "
+                                                    "definition; quantum_efficiency etc. \"not measured\" without "
+                                                    "--irradiance"));
     json_object_set_new(cv, "dynamic_range", json_string("saturation_capacity_e / read_noise_e"));
     json_object_set_new(cv, "statistics_region", d->roi[2] > 0 ? json_pack("[iiii]", d->roi[0], d->roi[1], d->roi[2],
                                                                            d->roi[3])
@@ -1477,9 +1505,11 @@ json_t *calib_gain_json(const calib_gain_opts_t *o, const calib_gain_data_t *d, 
     json_object_set_new(f, "width", json_integer(maps->w));
     json_object_set_new(f, "height", json_integer(maps->h));
     json_object_set_new(root, "flat_field", f);
-    json_object_set_new(root, "maps", json_pack("{s:s, s:s, s:s, s:s}", "offset_dn", "offset_dn.tiff", "dsnu_dn",
+    json_object_set_new(root, "maps", json_pack("{s:s, s:s, s:s, s:s, s:s}", "offset_dn", "offset_dn.tiff", "dsnu_dn",
                                                 "dsnu_dn.tiff", "prnu_gain", "prnu_gain.tiff", "prnu_highpass",
-                                                "prnu_highpass.tiff"));
+                                                "prnu_highpass.tiff", "defects", "defects.tiff"));
+    json_object_set_new(root, "quantum_efficiency", a->ph.measured ? jreal(a->ph.qe) : json_string("not measured"));
+    json_object_set_new(root, "emva1288", calib_gain_emva_json(o, an, maps));
     json_t *pg = json_array();
     for (int i = 0; i < ngains; i++) json_array_append_new(pg, gain_json(&an[i]));
     json_object_set_new(root, "gains", pg);
@@ -1500,6 +1530,31 @@ static int summary_rows(const calib_gain_an_t *an, int ngains, const calib_gain_
     rows[nr++] = g_strdup_printf("read noise|%.4g e- (%.4g DN)|", a->ptc.read_noise_e, a->ptc.read_noise_dn);
     rows[nr++] = g_strdup_printf("saturation|%.1f DN above dark (%.0f e-)|at %.6g us", a->ptc.saturation_dn,
                                  a->ptc.saturation_capacity_e, a->t[a->ptc.i_sat]);
+    const calib_gain_photon_t *ph = &a->ph;
+    if (ph->measured)
+        rows[nr++] = g_strdup_printf("quantum efficiency|%.2f %%|responsivity R %.5g DN/photon at %.6g nm, %.6g "
+                                     "uW/cm^2, pixel %.6g um^2", 100 * ph->qe, ph->responsivity_dn_per_photon,
+                                     ph->wavelength_nm, ph->irradiance_uw_cm2, ph->pixel_area_um2);
+    else
+        rows[nr++] = g_strdup("quantum efficiency|not measured|give --irradiance, --pixel-area-um2 (or "
+                              "--pixel-pitch-um) and --wavelength-nm");
+    char pmin[64] = "not measured", psat[64] = "not measured";
+    if (ph->measured) {
+        snprintf(pmin, sizeof pmin, "%.4g photons", ph->mu_p_min);
+        snprintf(psat, sizeof psat, "%.6g photons", ph->mu_p_sat);
+    }
+    rows[nr++] = g_strdup_printf("absolute sensitivity threshold|%.4g e- (%s)|SNR = 1 of the linear model",
+                                 ph->mu_e_min, pmin);
+    rows[nr++] = g_strdup_printf("saturation capacity|%.6g e- (%s)|EMVA 1288 R4 dynamic range %.0f (%.1f dB)",
+                                 ph->mu_e_sat, psat, ph->dynamic_range, 20 * log10(ph->dynamic_range));
+    rows[nr++] = g_strdup_printf("DSNU row / column / pixel|%.3g / %.3g / %.3g DN|total %.3g DN (averaged dark)",
+                                 maps->sp.dsnu.row, maps->sp.dsnu.col, maps->sp.dsnu.pixel, maps->sp.dsnu.total);
+    rows[nr++] = g_strdup_printf("PRNU row / column / pixel|%.3g / %.3g / %.3g %%|total %.3g %% (flat minus dark, "
+                                 "vignetting included)", maps->sp.prnu.row, maps->sp.prnu.col, maps->sp.prnu.pixel,
+                                 maps->sp.prnu.total);
+    rows[nr++] = g_strdup_printf("defect pixels|hot %d, dead %d, bright %d|beyond %g robust standard deviations",
+                                 maps->sp.defects.hot, maps->sp.defects.dead, maps->sp.defects.bright,
+                                 maps->sp.defects.nsigma);
     rows[nr++] = g_strdup_printf("linearity error|%.3f %%|EMVA 1288 Release 4.0, 5..95 %% of saturation (Release 3's "
                                  "unweighted line: %.3f %%)", a->ptc.linearity_error_pct, a->ptc.linearity_error_r3_pct);
     rows[nr++] = g_strdup_printf("response linearisation|%s|LE after it %.3g %% (S(1 - aS), a = %.3g per DN: %.3g %%)",
@@ -1508,9 +1563,10 @@ static int summary_rows(const calib_gain_an_t *an, int ngains, const calib_gain_
     rows[nr++] = g_strdup_printf("SNR max|%.1f (%.1f dB)|", a->ptc.snr_max, 20 * log10(a->ptc.snr_max));
     rows[nr++] = g_strdup_printf("dynamic range|%.0f (%.1f dB)|", a->ptc.dynamic_range,
                                  20 * log10(a->ptc.dynamic_range));
-    rows[nr++] = g_strdup_printf("dark current|%.3g e-/s (%.3g DN/s)|dark frames from %.6g us to %.6g us",
-                                 a->dark_slope_dn_per_us * 1e6 / K, a->dark_slope_dn_per_us * 1e6, a->dark_t_min_us,
-                                 a->dark_t_max_us);
+    rows[nr++] = g_strdup_printf("dark current|%.3g e-/s (%.3g DN/s)|from the mean; from the variance %.3g e-/s; "
+                                 "dark frames from %.6g us to %.6g us", a->dark_slope_dn_per_us * 1e6 / K,
+                                 a->dark_slope_dn_per_us * 1e6, a->dark_var_slope_dn2_per_us * 1e6 / (K * K),
+                                 a->dark_t_min_us, a->dark_t_max_us);
     rows[nr++] = g_strdup_printf("DSNU|%.3f DN (%.2f e-)|", maps->dsnu_dn, maps->dsnu_dn / K);
     rows[nr++] = g_strdup_printf("PRNU (high-pass)|%.3f %%|smooth part (vignetting) removed", maps->prnu_pct);
     rows[nr++] = g_strdup_printf("flat-field non-uniformity (total)|%.3f %%|vignetting included",
@@ -1551,6 +1607,8 @@ bool calib_gain_report(const char *dir, const calib_gain_an_t *an, int ngains, c
                     "dark frames at %.6g us. Definitions: see \"conventions\" in gain.json.", maps->flat_frames,
                     maps->flat_exposure_us, maps->flat_level_dn, 100 * maps->flat_level_dn / a->ptc.saturation_dn,
                     maps->dark_frames, maps->dark_exposure_us);
+    fprintf(f, "<p><b><a href=\"datasheet.html\">EMVA 1288 Release 4.0 Linear summary datasheet</a></b> "
+            "(gain.json \"emva1288\": every figure with its definition)</p>\n");
     model_html_heading(f, "Photon transfer");
     model_html_figure(f, "ptc.png", "temporal variance against signal (dark subtracted), with the K fit");
     model_html_heading(f, "Linearity");
@@ -1566,7 +1624,27 @@ bool calib_gain_report(const char *dir, const calib_gain_an_t *an, int ngains, c
     model_html_figure(f, "prnu_map.png", "relative sensitivity: total (incl. vignetting) and high-pass");
     model_html_figure(f, "prnu_hist.png", "histograms of the high-pass PRNU map and of the DSNU map");
     model_html_heading(f, "Dark signal");
-    model_html_figure(f, "dark.png", "mean dark level against exposure (dark current) and dark temporal variance");
+    model_html_figure(f, "dark.png", "mean dark level against exposure (dark current) and dark temporal variance, "
+                      "with the dark current from each");
+    model_html_heading(f, "EMVA 1288: SNR against photons");
+    model_html_figure(f, "snr_photons.png", "SNR against photons per pixel (electrons without --irradiance): "
+                      "measured, the linear model and the ideal");
+    model_html_heading(f, "EMVA 1288: spatial nonuniformity");
+    model_html_para(f, "DSNU total %.3g DN: row %.3g, column %.3g, pixel %.3g DN. PRNU total %.3g %%: row %.3g, column "
+                    "%.3g, pixel %.3g %% (of the averaged flat minus dark, vignetting included); of the high-pass flat "
+                    "(vignetting removed): row %.3g, column %.3g, pixel %.3g %%.", maps->sp.dsnu.total,
+                    maps->sp.dsnu.row, maps->sp.dsnu.col, maps->sp.dsnu.pixel, maps->sp.prnu.total, maps->sp.prnu.row,
+                    maps->sp.prnu.col, maps->sp.prnu.pixel, maps->sp.prnu_hp.row, maps->sp.prnu_hp.col,
+                    maps->sp.prnu_hp.pixel);
+    model_html_figure(f, "spectrogram_h.png", "horizontal spectrograms (column patterns)");
+    model_html_figure(f, "spectrogram_v.png", "vertical spectrograms (row patterns)");
+    model_html_figure(f, "profiles.png", "horizontal and vertical profiles");
+    model_html_heading(f, "EMVA 1288: defect pixels");
+    model_html_para(f, "hot %d, dead %d, bright %d (beyond %g robust standard deviations; defects.tiff)",
+                    maps->sp.defects.hot, maps->sp.defects.dead, maps->sp.defects.bright,
+                    maps->sp.defects.nsigma);
+    model_html_figure(f, "log_histograms.png", "logarithmic histograms with the defect thresholds");
+    model_html_figure(f, "defect_map.png", "the defect map");
     bool ok = model_html_end(f, hp);
     g_free(hp);
     return ok;
@@ -1579,7 +1657,9 @@ calib_gain_opts_t calib_gain_defaults(void)
                                 .sample = "flat_field", .lamps = "all", .pixel_format = "Mono12", .steps = 50,
                                 .flat_frames = 16, .progress = -1, .probe_us = 1000, .max_us = NAN,
                                 .min_steps = 50, .radiance = NAN, .max_dn = 65535, .quant_dn = 1, .report = true,
-                                .linearisation = MODEL_LIN_MONOTONE, .low_steps = 16 };
+                                .linearisation = MODEL_LIN_MONOTONE, .low_steps = 16, .irradiance_uw_cm2 = NAN,
+                                .pixel_area_um2 = NAN, .wavelength_nm = NAN, .defect_sigma = 6,
+                                .photodiode_na = NAN, .photodiode_a_per_w = NAN, .photodiode_mm2 = NAN };
 }
 
 // The frames of a manifest into d (and the provenance).
@@ -1682,6 +1762,12 @@ static bool analyse_all(const calib_gain_opts_t *o, calib_gain_data_t *d, json_t
         a->radiance_truth = nl > 0 ? truth_per_lamp * nl : NAN;
         a->kc_per_us = a->ptc.response_dn_per_us / a->radiance;
         a->kc0_per_us = a->response0_dn_per_us / a->radiance;
+        if (!(ok = calib_gain_an_photons(o, a))) {
+            char *m = g_strdup(model_last_error());
+            model_error_set(NULL, 0, "gain %g dB: %s", gl[i], m);
+            g_free(m);
+            break;
+        }
         fprintf(stderr, "refl calib gain: gain %g dB: K %.5g DN/e-, read noise %.4g e-, saturation %.1f DN, LE %.3f "
                 "%%, %d steps\n", gl[i], a->ptc.system_gain_dn_per_e, a->ptc.read_noise_e, a->ptc.saturation_dn,
                 a->ptc.linearity_error_pct, a->n);
@@ -1707,8 +1793,10 @@ static bool run_one(const calib_gain_opts_t *o, calib_gain_data_t *d, json_t *fa
     fprintf(stderr, "refl calib gain: analysing %d frames (%d exposure groups)%s%s\n", d->nf, d->ng,
             d->camera[0] ? " of camera " : "", d->camera);
     if (!calib_gain_frame_stats(d) || !analyse_all(o, d, facts, &an, &ngains)) goto done;
-    if (!calib_gain_make_maps(d, &an[0], &maps) || !calib_gain_write_maps(dir, &maps)) goto done;
-    if (top && !calib_gain_write_maps(top, &maps)) goto done;
+    if (!calib_gain_make_maps(d, &an[0], &maps) || !calib_gain_make_spatial(d, &maps, o->defect_sigma, o->quant_dn) ||
+        !calib_gain_write_maps(dir, &maps) || !calib_gain_write_defects(dir, &maps))
+        goto done;
+    if (top && !(calib_gain_write_maps(top, &maps) && calib_gain_write_defects(top, &maps))) goto done;
     calib_gain_truth_radiance(facts, &truth, &truth_per_lamp);
     root = calib_gain_json(o, d, an, ngains, &maps, truth, prov);
     ok = true;
@@ -1717,7 +1805,9 @@ static bool run_one(const calib_gain_opts_t *o, calib_gain_data_t *d, json_t *fa
         ok = model_write_json(jp, root);
         g_free(jp);
     }
-    if (ok && o->report) ok = calib_gain_report(dir, an, ngains, &maps, prov);
+    if (ok && o->report)
+        ok = calib_gain_report(dir, an, ngains, &maps, prov) &&
+             calib_gain_datasheet_html(dir, json_object_get(root, "emva1288"), prov);
     if (!ok) goto done;
     *r = (calib_gain_result_t){ .system_gain_dn_per_e = an[0].ptc.system_gain_dn_per_e,
                                 .read_noise_e = an[0].ptc.read_noise_e, .saturation_dn = an[0].ptc.saturation_dn,

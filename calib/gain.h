@@ -8,8 +8,12 @@
 // gain, dark/light and role) → calib_gain_frame_stats (each group's mean and
 // temporal variance) → per gain calib_gain_analyse (dark model, photon
 // transfer, linearity, response) → calib_gain_make_maps (offset, DSNU, PRNU
-// of the flat field at the first gain) → calib_gain_write_maps,
-// calib_gain_json (gain.json), calib_gain_report (plots, report.html).
+// of the flat field at the first gain) → calib_gain_make_spatial (EMVA 1288
+// Release 4.0 Linear: row/column/pixel split, spectrograms, profiles,
+// defects; calib/gain_emva.c) → calib_gain_write_maps, calib_gain_write_defects,
+// calib_gain_json (gain.json, with "emva1288"), calib_gain_report (plots,
+// report.html), calib_gain_datasheet_html (datasheet.html). The photon axis
+// (calib_gain_an_photons) follows each gain's calib_gain_analyse.
 // Errors: false / NULL with the message kept by model_error_set
 // (model_last_error), not printed: the caller prints it once. Progress lines
 // go to stderr ("refl calib gain: ...").
@@ -113,6 +117,106 @@ bool calib_gain_highpass(const float *in, int w, int h, float *out);
 
 
 // ---------------------------------------------------------------------------
+// EMVA 1288 Release 4.0 Linear: the photon axis, the spatial split,
+// spectrograms, defect pixels (calib/gain_emva.c). The definitions with their
+// formulas are in gain.json's "emva1288" "definitions" and README.
+
+// Mean photons per pixel during t_us: mu_p = A E t lambda / (h c), A the
+// pixel area (um^2), E the irradiance at the sensor (uW/cm^2), lambda (nm).
+double calib_gain_photons(double irradiance_uw_cm2, double pixel_area_um2, double wavelength_nm, double t_us);
+// The irradiance (uW/cm^2) a photodiode in the sensor's place reads: its
+// current I (nA) over its responsivity R (A/W) at the wavelength and its
+// area S (mm^2): E = I / (R S) = 0.1 I / (R S) uW/cm^2.
+double calib_gain_photodiode_irradiance(double current_na, double responsivity_a_per_w, double area_mm2);
+
+// The photon axis of one gain. measured false: no irradiance given (the
+// photon figures are NAN and stated "not measured"); the electron figures
+// (mu_e_min, mu_e_sat, the dynamic range) need only K.
+typedef struct {
+    bool   measured;
+    double irradiance_uw_cm2, pixel_area_um2, wavelength_nm;
+    double responsivity_dn_per_photon;   // R: slope of mu_y - mu_y.dark against mu_p (0..70 % of saturation)
+    double responsivity_offset_dn;       // its intercept
+    int    n_fit;
+    double qe;                           // eta = R / K
+    double mu_e_min, mu_p_min;           // absolute sensitivity threshold (SNR = 1), e-, photons
+    double mu_e_sat, mu_p_sat;           // saturation capacity, e-, photons
+    double dynamic_range;                // mu_p.sat / mu_p.min (= mu_e.sat / mu_e.min)
+    double dark_noise_e;                 // sigma_y.dark / K (incl. quantisation), the SNR model's
+} calib_gain_photon_t;
+
+// From the sweep t[n] (us), mu[n] (DN above dark), the saturation sat_dn, K,
+// the dark temporal variance sigma^2_y.dark (DN^2) and the irradiance etc.
+// (NAN irradiance: not measured). false + message when the fit of R fails.
+bool calib_gain_photon_axis(const double *t, const double *mu, int n, double sat_dn, double K, double var_dark_dn2,
+                            double irradiance_uw_cm2, double pixel_area_um2, double wavelength_nm,
+                            calib_gain_photon_t *out);
+// The linear model's SNR at mu_p photons: eta mu_p / sqrt(sigma^2_y.dark / K^2 + eta mu_p).
+double calib_gain_snr_model(const calib_gain_photon_t *p, double mu_p);
+
+// The row/column/pixel split of the spatial variance of an averaged frame
+// (w x h, statistics over roi x y w h), temporal_var the temporal variance
+// left in the average (sigma^2 / L). Model y = mu + r[row] + c[col] + p + e:
+// the variances of the row means Vr, column means Vc and of all values V,
+// each less its temporal part, give s2_pixel = (V - Vr - Vc) / (1 - 1/M - 1/N)
+// (M columns averaged in a row mean, N rows in a column mean), s2_row = Vr -
+// s2_pixel / M, s2_col = Vc - s2_pixel / N. The figures are standard
+// deviations (sqrt of max(0, .)), in the map's units times scale.
+typedef struct {
+    double total, row, col, pixel;
+} calib_gain_split_t;
+void calib_gain_spatial_split(const float *img, int w, int h, const int roi[4], double temporal_var, double scale,
+                              calib_gain_split_t *out);
+
+// Spectrogram: horizontal (vertical false): the DFT Y(k) of every row of the
+// roi after removing the roi's mean, s(k) = sqrt(mean over rows |Y(k)|^2 / N),
+// k = 0..N/2 (N the row length; frequency k / N cycles per pixel); vertical:
+// the same along the columns. White noise of std sigma gives s(k) ~ sigma.
+// spec gets N/2 + 1 values times scale; returns their number (0: no memory).
+int calib_gain_spectrogram(const float *img, int w, int h, const int roi[4], bool vertical, double scale,
+                           double *spec);
+
+// Defect pixels of the averaged dark (DN) and the relative light map (mean ~1,
+// the high-pass flat field): deviations from the median beyond nsigma robust
+// standard deviations (1.4826 MAD, at least the temporal std of the average):
+// hot (dark above), dead (light below), bright (light above). map (w x h, may
+// be NULL): 0 good, 1 hot, 2 dead, 3 bright (hot wins). The first
+// CALIB_GAIN_MAX_DEFECT_LIST of each kind are listed (x, y). dark_quantum:
+// the step between the averaged dark's values (q / frames; 0 unknown), for
+// bins of whole steps.
+#define CALIB_GAIN_MAX_DEFECT_LIST 64
+#define CALIB_GAIN_HIST_BINS 128
+typedef struct {
+    int    hot, dead, bright;
+    double nsigma;                                                 // the threshold in robust stds
+    double dark_median_dn, dark_sigma_dn, dark_threshold_dn;      // hot: dark > median + threshold
+    double light_sigma, light_threshold;                           // relative; dead/bright: |light - median| > it
+    double light_median;
+    int    nlist[3], list[3][CALIB_GAIN_MAX_DEFECT_LIST][2];         // hot, dead, bright: x, y
+    // logarithmic histograms of the deviations from the median: dark (DN), light (%)
+    double dark_lo, dark_hi, light_lo, light_hi;
+    long   dark_hist[CALIB_GAIN_HIST_BINS], light_hist[CALIB_GAIN_HIST_BINS];
+    int    dark_nbins, light_nbins;                                  // bins used (<= CALIB_GAIN_HIST_BINS)
+} calib_gain_defects_t;
+bool calib_gain_defects(const float *dark, const float *light, int w, int h, const int roi[4], double nsigma,
+                        double dark_temporal_std, double light_temporal_std, double dark_quantum, unsigned char *map,
+                        calib_gain_defects_t *out);
+
+// The spatial analysis of the reference gain's flat field (calib_gain_maps_t).
+typedef struct {
+    calib_gain_split_t dsnu, prnu;          // DN; % of the mean signal
+    calib_gain_split_t prnu_hp;             // % of the high-pass flat (vignetting removed)
+    int     nh, nv;                          // spectrogram lengths (roi w / 2 + 1, h / 2 + 1)
+    double *spec_h_dark, *spec_v_dark;       // DN
+    double *spec_h_light, *spec_v_light;     // % of the mean signal
+    int     pw, ph;                          // profile lengths (roi w, h)
+    double *col_dark, *row_dark, *col_light, *row_light;   // means of the roi's columns / rows, DN
+    calib_gain_defects_t defects;
+    unsigned char *defect_map;               // whole frame, codes as calib_gain_defects
+    double  signal_mean_dn;                  // roi mean of the flat minus dark
+} calib_gain_spatial_t;
+
+// ---------------------------------------------------------------------------
 // A run
 
 // Options of calib_gain_run: exactly one source of frames (rig, frames, sessions).
@@ -142,6 +246,12 @@ typedef struct {
     double       quant_dn;           // quantisation step, DN
     int          linearisation;      // what gain.json's consumers apply: MODEL_LIN_MONOTONE (the table,
                                      // default) or MODEL_LIN_PARAMETRIC (S_m = S (1 - a S)); both are written
+    double       irradiance_uw_cm2;  // at the sensor, uW/cm^2, constant over the sweep (NAN: not measured)
+    double       pixel_area_um2;     // the pixel's area, um^2 (NAN: not given)
+    double       wavelength_nm;      // the light's (centre) wavelength, nm (NAN: not given)
+    double       photodiode_na, photodiode_a_per_w, photodiode_mm2;   // instead of irradiance_uw_cm2: a
+                                     // photodiode's reading (NAN: none), calib_gain_photodiode_irradiance
+    double       defect_sigma;       // defect threshold, robust standard deviations (default 6)
     bool         report;             // the plots and report.html
     int          argc;               // the command line, for the provenance (may be 0)
     char       **argv;
@@ -272,6 +382,9 @@ typedef struct {
     double lin_anchor_dn_per_us, lin_anchor_offset_dn;
     double le_linearised_pct;   // Release 4.0 LE of the linearised signal (the table's own check)
     double le_linearised_param_pct;   // the same through S(1 - aS)
+    double dark_var_slope_dn2_per_us; // slope of sigma^2_y.dark against exposure (NAN: not fitted)
+    calib_gain_photon_t ph;           // the photon axis (calib_gain_photon_axis)
+    double *mu_p;                     // photons per pixel of each step (NAN: not measured)
 } calib_gain_an_t;
 
 void calib_gain_an_free(calib_gain_an_t *a);
@@ -289,6 +402,9 @@ typedef struct {
     double  prnu_pct, prnu_total_pct;
     double  flat_var_dn2, dark_var_dn2;
     bool    dark_same_exposure;
+    double  prnu_mean_dn;            // the flat minus dark's whole-frame mean (prnu * it: the signal, DN)
+    double  signal_temporal_var_dn2; // temporal variance left in the averaged signal
+    calib_gain_spatial_t sp;         // calib_gain_make_spatial
 } calib_gain_maps_t;
 
 void calib_gain_maps_free(calib_gain_maps_t *m);
@@ -297,6 +413,18 @@ void calib_gain_maps_free(calib_gain_maps_t *m);
 bool calib_gain_make_maps(calib_gain_data_t *d, const calib_gain_an_t *a, calib_gain_maps_t *m);
 // DIR/offset_dn.tiff, dsnu_dn.tiff, prnu_gain.tiff, prnu_highpass.tiff.
 bool calib_gain_write_maps(const char *dir, const calib_gain_maps_t *m);
+// The EMVA 1288 spatial analysis of m's averaged dark and flat (m->sp): the
+// row/column/pixel split, spectrograms, profiles, defects (nsigma) over d's
+// roi. false + message (no memory).
+bool calib_gain_make_spatial(const calib_gain_data_t *d, calib_gain_maps_t *m, double nsigma, double quant_dn);
+// The photon axis of a (o's irradiance, area, wavelength): a->ph, a->mu_p.
+bool calib_gain_an_photons(const calib_gain_opts_t *o, calib_gain_an_t *a);
+// gain.json's "emva1288": the datasheet rows, definitions, the spatial
+// analysis and its curves (an[0] the reference gain).
+json_t *calib_gain_emva_json(const calib_gain_opts_t *o, const calib_gain_an_t *an, const calib_gain_maps_t *m);
+// DIR/defects.tiff (codes 0 good, 1 hot, 2 dead, 3 bright) and DIR/datasheet.html.
+bool calib_gain_write_defects(const char *dir, const calib_gain_maps_t *m);
+bool calib_gain_datasheet_html(const char *dir, json_t *emva, json_t *prov);
 // The radiance per lamp of the sample of a virtual rig's session facts
 // (virtual_rig.truth, .sample), for the comparison with the truth only: false
 // when there is none. *truth_path (may be NULL) points into facts.

@@ -4,7 +4,9 @@
 usage: calib_gain_report.py GAIN_JSON OUT_DIR
 
 Reads gain.json and the float TIFF maps next to it and writes into OUT_DIR:
-ptc.png, linearity.png, linearisation.png, snr.png, kc.png, prnu_map.png, prnu_hist.png, dark.png.
+ptc.png, linearity.png, linearisation.png, snr.png, kc.png, prnu_map.png, prnu_hist.png, dark.png and,
+from gain.json's "emva1288" (EMVA 1288 Release 4.0 Linear), snr_photons.png, spectrogram_h.png,
+spectrogram_v.png, profiles.png, log_histograms.png, defect_map.png.
 Only plots what refl computed; no figure is recomputed here except the fitted
 lines drawn from the published coefficients.
 """
@@ -13,6 +15,7 @@ import os
 import sys
 
 import matplotlib
+import matplotlib.ticker
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
@@ -192,6 +195,11 @@ def main():
     a1.grid(alpha=0.3)
     a2.plot(t, arr(c["dark_variance_dn2"]), "o", ms=3)
     a2.axhline(ref["dark_temporal_variance_dn2"], ls="--", lw=0.8, label="sigma^2_y.dark at 0 us")
+    dv = ref.get("dark_current_from_variance_e_per_s")
+    if isinstance(dv, (int, float)):
+        K = ref["system_gain_dn_per_e"]
+        a2.plot(tt, ref["dark_temporal_variance_dn2"] + dv * K * K * 1e-6 * tt, "-", lw=0.8,
+                label="fit: %.3g e-/s (from the variance)" % dv)
     a2.set_xlabel("exposure (us)")
     a2.set_ylabel("dark temporal variance (DN^2)")
     a2.legend(fontsize=8)
@@ -199,7 +207,150 @@ def main():
     fig.tight_layout()
     fig.savefig(os.path.join(out, "dark.png"), dpi=90)
     plt.close(fig)
+    if "emva1288" in g:
+        emva_plots(g, base, out)
     return 0
+
+
+def num(v):
+    return v if isinstance(v, (int, float)) else float("nan")
+
+
+def row_value(e, symbol, unit):
+    for r in e["datasheet"]:
+        if r["symbol"] == symbol and r["unit"] == unit:
+            return r["value"]
+    return None
+
+
+def save(fig, out, name, dpi=90):
+    fig.tight_layout()
+    fig.savefig(os.path.join(out, name), dpi=dpi)
+    plt.close(fig)
+
+
+def emva_plots(g, base, out):
+    """The EMVA 1288 figures: only what refl computed (gain.json "emva1288")."""
+    e = g["emva1288"]
+    measured = e["photon_axis"] == "measured"
+
+    # SNR against photons (electrons when the photon axis is not measured)
+    c = e["snr_curve"]
+    x = arr(c["photons"] if measured else c["electrons"])
+    snr = arr(c["snr_measured"])
+    # up to saturation (beyond it the variance collapses and the ratio means nothing)
+    sat_e = num(row_value(e, "mu_e.sat", "e-"))
+    ok = (x > 0) & (snr > 0) & (arr(c["electrons"]) <= sat_e * 1.0001)
+    fig, ax = plt.subplots(figsize=(8, 5))
+    ax.loglog(x[ok], snr[ok], "o", ms=3, label="measured (mu_y - mu_y.dark) / sigma_y")
+    if measured:
+        if "grid_photons" in c:
+            gx = arr(c["grid_photons"])
+            ax.loglog(gx, arr(c["grid_snr_model"]), "-", lw=1,
+                      label="linear model, eta = %.3g" % (num(row_value(e, "eta", "%")) / 100))
+            ax.loglog(gx, arr(c["grid_snr_ideal"]), "--", lw=0.8, label="ideal sqrt(mu_p)")
+            ax.axhline(1, ls=":", lw=0.8, color="grey")
+        for sym, lab in (("mu_p.min", "threshold"), ("mu_p.sat", "saturation")):
+            v = row_value(e, sym, "photons")
+            if isinstance(v, (int, float)):
+                ax.axvline(v, ls=":", lw=0.8, color="grey")
+                ax.text(v, ax.get_ylim()[0] * 1.5, " %s %.3g" % (lab, v), fontsize=8, rotation=90)
+        ax.set_xlabel("photons per pixel mu_p")
+    else:
+        ax.set_xlabel("electrons per pixel mu_e (photon axis not measured: no --irradiance)")
+    ax.set_ylabel("SNR")
+    ax.set_title("SNR (EMVA 1288 Release 4.0 Linear)")
+    ax.legend(fontsize=8)
+    ax.grid(alpha=0.3, which="both")
+    save(fig, out, "snr_photons.png")
+
+    # spectrograms
+    sp = e["spatial"]
+    for key, name, what in (("horizontal", "spectrogram_h.png", "along the rows: column patterns"),
+                            ("vertical", "spectrogram_v.png", "along the columns: row patterns")):
+        s = e["spectrograms"][key]
+        f = arr(s["frequency_cycles_per_px"])
+        fig, (a1, a2) = plt.subplots(1, 2, figsize=(12, 4.5))
+        for ax, vals, unit, split, lab in ((a1, arr(s["dark_dn"]), "DN", sp["dsnu_dn"], "dark (DSNU)"),
+                                           (a2, arr(s["light_pct"]), "%", sp["prnu_pct"], "light (PRNU)")):
+            ax.semilogy(f[1:], vals[1:], "-", lw=0.8)
+            # white levels: the pixel part alone, and with the column (horizontal) or row (vertical) part, which
+            # is white along that direction too
+            pix, other = num(split["pixel"]), num(split["column" if key == "horizontal" else "row"])
+            if pix > 0:
+                ax.axhline(pix, ls="--", lw=0.8, color="grey", label="pixel part %.3g %s" % (pix, unit))
+                both = np.hypot(pix, other)
+                ax.axhline(both, ls=":", lw=0.8, color="black",
+                           label="pixel and %s parts %.3g %s (white if random)" % (
+                               "column" if key == "horizontal" else "row", both, unit))
+                ax.legend(fontsize=8)
+            fmt = matplotlib.ticker.FormatStrFormatter("%.3g")
+            ax.yaxis.set_major_formatter(fmt)
+            ax.yaxis.set_minor_formatter(fmt)
+            ax.tick_params(axis="y", which="minor", labelsize=7)
+            ax.set_xlabel("frequency (cycles per pixel)")
+            ax.set_ylabel("standard deviation (%s)" % unit)
+            ax.set_title("%s spectrogram, %s" % (key, lab), fontsize=10)
+            ax.grid(alpha=0.3, which="both")
+        fig.suptitle("%s spectrogram (%s); frequency 0 left out" % (key.capitalize(), what), fontsize=10)
+        save(fig, out, name)
+
+    # profiles
+    p = e["profiles"]
+    fig, axs = plt.subplots(2, 2, figsize=(12, 7))
+    for ax, k, xl in ((axs[0][0], "column_dark_dn", "column"), (axs[0][1], "column_signal_dn", "column"),
+                      (axs[1][0], "row_dark_dn", "row"), (axs[1][1], "row_signal_dn", "row")):
+        v = arr(p[k])
+        ax.plot(np.arange(len(v)), v, "-", lw=0.8)
+        ax.set_xlabel("%s (pixels from the region's edge)" % xl)
+        ax.set_ylabel("mean (DN)")
+        ax.set_title("%s profile: %s means" % ("horizontal" if xl == "column" else "vertical", k.replace("_dn", "")
+                                                .replace("_", " ")), fontsize=10)
+        ax.grid(alpha=0.3)
+    save(fig, out, "profiles.png")
+
+    # logarithmic histograms
+    d = e["defects"]
+    fig, (a1, a2) = plt.subplots(1, 2, figsize=(12, 4.5))
+    for ax, h, thr, lab, col in ((a1, d["histogram_dark"], [d["hot_threshold_dn"]], "dark", "tab:orange"),
+                                 (a2, d["histogram_light"],
+                                  [-100 * num(d["light_threshold"]) / num(d["light_median"]),
+                                   100 * num(d["light_threshold"]) / num(d["light_median"])], "light", "tab:blue")):
+        counts = np.array(h["counts"], dtype=float)
+        edges = np.linspace(num(h["lo"]), num(h["hi"]), len(counts) + 1)
+        ax.stairs(np.where(counts > 0, counts, np.nan), edges, color=col)
+        ax.set_yscale("log")
+        for t in thr:
+            ax.axvline(t, ls="--", lw=0.8, color="red")
+        ax.set_xlabel("deviation: %s" % h["unit"])
+        ax.set_ylabel("pixels (log)")
+        ax.set_title("%s: %s" % (lab, "hot %d" % d["hot"] if lab == "dark" else
+                                 "dead %d, bright %d" % (d["dead"], d["bright"])), fontsize=10)
+        ax.grid(alpha=0.3, which="both")
+    fig.suptitle("Logarithmic histograms (dashed: the defect thresholds, %g robust std)" % d["nsigma"], fontsize=10)
+    save(fig, out, "log_histograms.png")
+
+    # the defect map
+    m = read_map(os.path.join(base, d["map"]))
+    fig, ax = plt.subplots(figsize=(8, 6))
+    cmap = matplotlib.colors.ListedColormap(["#f4f4f4", "tab:red", "black", "tab:orange"])
+    im = ax.imshow(m, cmap=cmap, vmin=-0.5, vmax=3.5, interpolation="nearest")
+    cb = fig.colorbar(im, ax=ax, ticks=[0, 1, 2, 3], shrink=0.8)
+    cb.ax.set_yticklabels(["good", "hot", "dead", "bright"])
+    for key, mk, col in (("hot_pixels", "o", "tab:red"), ("dead_pixels", "s", "black"),
+                         ("bright_pixels", "^", "tab:orange")):
+        pts = np.array(d[key], dtype=float).reshape(-1, 2)
+        if len(pts):
+            ax.scatter(pts[:, 0], pts[:, 1], s=60, facecolors="none", edgecolors=col, marker=mk,
+                       label="%s (%d)" % (key.replace("_", " "), d[key.split("_")[0]]))
+    if any(len(d[k]) for k in ("hot_pixels", "dead_pixels", "bright_pixels")):
+        ax.legend(fontsize=8, loc="upper right")
+    ax.set_xlabel("x (pixels)")
+    ax.set_ylabel("y (pixels)")
+    nd = d["hot"] + d["dead"] + d["bright"]
+    ax.set_title("Defect pixels (defects.tiff): hot %d, dead %d, bright %d%s" % (
+        d["hot"], d["dead"], d["bright"], "; markers circle the first listed" if nd else ": none"), fontsize=10)
+    save(fig, out, "defect_map.png")
 
 
 if __name__ == "__main__":

@@ -614,7 +614,17 @@ TEST(calib_gain_bad_input)
     const char *bad = test_write("bad.csv", "file,exposure_us,kind\na.png,12,bright\n");
     CHECK(expect_fail(&err, "calib", "gain", "--frames", bad, "-o", test_path("o8"), NULL) == 1);
     CHECK_CONTAINS(err, "bad.csv:2:");
-    CHECK_CONTAINS(err, "dark or light");
+    CHECK_CONTAINS(err, "kind 'bright' must be dark, light (the sweep), flat or flat-dark");
+    free(err);
+    // the photon axis needs all three of its options
+    CHECK(expect_fail(&err, "calib", "gain", "--frames", bad, "-o", test_path("o9"), "--irradiance", "5", NULL) == 2);
+    CHECK_CONTAINS(err, "needs all of --irradiance");
+    free(err);
+    CHECK(expect_fail(&err, "calib", "gain", "--frames", bad, "-o", test_path("o9"), "--irradiance", "-5", NULL) == 2);
+    CHECK_CONTAINS(err, "--irradiance '-5' must be a positive number");
+    free(err);
+    CHECK(expect_fail(&err, "calib", "gain", "--frames", bad, "-o", test_path("o9"), "--photodiode-na", "5", NULL) == 2);
+    CHECK_CONTAINS(err, "needs all of --photodiode-na");
     free(err);
 }
 
