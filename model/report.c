@@ -14,13 +14,43 @@
 #include "model/report.h"
 #include "model/model.h"
 
+static GMutex     made_lock;
+static GPtrArray *made_dirs;   // directories model_mkdir_p made, parents before children
+
 bool model_mkdir_p(const char *path)
 {
-    if (g_mkdir_with_parents(path, 0755) != 0) {
-        model_error(path, 0, "cannot make the directory: %s", strerror(errno));
-        return false;
+    // the path's missing prefixes, outermost first, are the directories this call makes
+    GPtrArray *missing = g_ptr_array_new_with_free_func(g_free);
+    char *p = g_strdup(path);
+    for (size_t n = strlen(p); n > 1 && p[n - 1] == '/'; n--) p[n - 1] = 0;
+    struct stat st;
+    while (*p && strcmp(p, "/") && strcmp(p, ".") && stat(p, &st) != 0 && errno == ENOENT) {
+        g_ptr_array_insert(missing, 0, g_strdup(p));
+        char *d = g_path_get_dirname(p);
+        g_free(p);
+        p = d;
     }
-    return true;
+    g_free(p);
+    bool ok = g_mkdir_with_parents(path, 0755) == 0;
+    if (!ok) model_error(path, 0, "cannot make the directory: %s", strerror(errno));
+    g_mutex_lock(&made_lock);
+    if (!made_dirs) made_dirs = g_ptr_array_new_with_free_func(g_free);
+    for (guint i = 0; i < missing->len; i++)
+        if (g_file_test(missing->pdata[i], G_FILE_TEST_IS_DIR)) g_ptr_array_add(made_dirs, g_strdup(missing->pdata[i]));
+    g_mutex_unlock(&made_lock);
+    g_ptr_array_free(missing, TRUE);
+    return ok;
+}
+
+int model_remove_made_empty_dirs(void)
+{
+    int n = 0;
+    g_mutex_lock(&made_lock);
+    for (guint i = made_dirs ? made_dirs->len : 0; i-- > 0;)
+        if (rmdir(made_dirs->pdata[i]) == 0) n++;   // fails, and so stays, when not empty
+    if (made_dirs) g_ptr_array_set_size(made_dirs, 0);
+    g_mutex_unlock(&made_lock);
+    return n;
 }
 
 bool model_write_file_atomic(const char *path, const char *text)
