@@ -11,6 +11,7 @@
 
 #include "model/model.h"
 #include "model/report.h"
+#include "model/vec.h"
 #include "tests/test.h"
 
 static int count(const char *hay, const char *needle)
@@ -169,6 +170,47 @@ TEST(model_demo_index_summary)
     CHECK_CONTAINS(html, "1 off by more than 3 sigma (lamp_x)");
     CHECK_CONTAINS(html, "3.10 &times; the noise");
     free(html);
+    free(out);
+    free(err);
+    g_free(script);
+}
+
+// scripts/fit_material_report.py on a small samples.csv made here (a Lambertian-plus-lobe surface seen in and
+// out of the plane of incidence, with albedo cells): the polar lobes, the cells' map and every other plot.
+TEST(fit_material_report_plots)
+{
+    const char *d = test_tmpdir();
+    GString *g = g_string_new("# samples\nx_px,y_px,step,lamp,theta_i_deg,theta_o_deg,theta_h_deg,R_meas,R_fit,"
+                              "lamp_name,phi_deg,sigma_R,albedo_factor,x0_mm,y0_mm,z0_mm\n");
+    model_rng_t rng = model_rng(7, 1);
+    for (int i = 0; i < 1200; i++) {
+        double ti = 30 + 30 * model_rng_uniform(&rng), to = 70 * model_rng_uniform(&rng);
+        double phi = (i % 3 == 0) ? 180 * model_rng_uniform(&rng) : (i % 3 == 1 ? 178 : 3);
+        double th = fabs(ti - (phi > 90 ? to : -to)) / 2, fit = 0.1 * cos(ti * M_PI / 180) + 0.05 * exp(-th * th / 50);
+        int cell = i % 40;
+        double fac = 0.95 + 0.1 * cell / 39.0;
+        g_string_append_printf(g, "%d,%d,%d,%d,%.3f,%.3f,%.3f,%.6g,%.6g,%s,%.2f,%.3g,%.4f,%.1f,%.1f,0\n",
+                               500 + i % 30, 400 + i / 30, i % 8, i % 2, ti, to, th,
+                               fit * (1 + 0.01 * model_rng_gauss(&rng)), fit, i % 2 ? "west" : "east", phi,
+                               0.01 * fit, fac, (double)(cell % 8) * 2, (double)(cell / 8) * 2);
+    }
+    char *p = g_build_filename(d, "samples.csv", NULL);
+    CHECK(g_file_set_contents(p, g->str, -1, NULL));
+    g_free(p);
+    g_string_free(g, TRUE);
+    char *script = g_build_filename(test_srcdir(), "scripts", "fit_material_report.py", NULL);
+    const char *argv[] = { "/usr/bin/python3", script, d, "ggx", "0.1,0.05", NULL };
+    char *out = NULL, *err = NULL;
+    int rc = test_run(argv, 120, &out, &err);
+    CHECK_MSG(rc == 0, "fit_material_report.py: exit %d\n%s", rc, err ? err : "");
+    static const char *const pngs[] = { "polar.png", "lobes.png", "residual_maps.png", "albedo_cells.png",
+                                        "models.png" };
+    for (int k = 0; k < 5; k++) {
+        p = g_build_filename(d, pngs[k], NULL);
+        struct stat st;
+        CHECK_MSG(stat(p, &st) == 0 && st.st_size > 10000, "%s missing or empty", pngs[k]);
+        g_free(p);
+    }
     free(out);
     free(err);
     g_free(script);
