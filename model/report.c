@@ -223,6 +223,26 @@ static void esc(FILE *f, const char *s)
     }
 }
 
+// Text of a page (paragraphs, headings, captions, table cells): escaped, and a number that prints as
+// a negative zero ("-0.00", "-0") without its sign: "-0.00 deg" reads as a direction that is not there.
+// A '-' after a letter, digit, '.' or '_' (a name, a date, an exponent) is left alone.
+static void esc_text(FILE *f, const char *s)
+{
+    for (const char *p = s; p && *p; p++) {
+        if (*p == '-' && (p == s || !(g_ascii_isalnum(p[-1]) || p[-1] == '.' || p[-1] == '_'))) {
+            const char *q = p + 1;
+            bool digits = false, zero = true;
+            while (*q == '0' || *q == '.' || g_ascii_isdigit(*q)) {
+                if (g_ascii_isdigit(*q)) digits = true;
+                if (g_ascii_isdigit(*q) && *q != '0') zero = false;
+                q++;
+            }
+            if (digits && zero && !g_ascii_isalpha(*q) && q[-1] != '.') continue;   // drop the sign
+        }
+        esc(f, (char[]){ *p, 0 });
+    }
+}
+
 FILE *model_html_begin(const char *path, const char *title, const json_t *prov)
 {
     char *tmp = g_strdup_printf("%s.part", path);
@@ -268,7 +288,7 @@ FILE *model_html_begin(const char *path, const char *title, const json_t *prov)
 void model_html_heading(FILE *f, const char *text)
 {
     fputs("<h2>", f);
-    esc(f, text);
+    esc_text(f, text);
     fputs("</h2>\n", f);
 }
 
@@ -279,7 +299,7 @@ void model_html_para(FILE *f, const char *fmt, ...)
     char *s = g_strdup_vprintf(fmt, ap);
     va_end(ap);
     fputs("<p>", f);
-    esc(f, s);
+    esc_text(f, s);
     fputs("</p>\n", f);
     g_free(s);
 }
@@ -291,7 +311,7 @@ void model_html_figure(FILE *f, const char *src, const char *caption)
     fputs("\" alt=\"", f);
     esc(f, caption);
     fputs("\"><figcaption>", f);
-    esc(f, caption);
+    esc_text(f, caption);
     fputs("</figcaption></figure>\n", f);
 }
 
@@ -304,7 +324,7 @@ static void cells(FILE *f, const char *row, const char *tag)
         size_t n = e ? (size_t)(e - p) : strlen(p);
         char *c = g_strndup(p, n);
         fprintf(f, "<%s>", tag);
-        esc(f, c);
+        esc_text(f, c);
         fprintf(f, "</%s>", tag);
         g_free(c);
         if (!e) break;

@@ -126,7 +126,7 @@ def main():
                 ax.plot(h["q"][0], h["q"][1], "o", mfc="none", mec=col, ms=14, mew=1.5,
                         label="%s (%s, %.0f DN)" % (h["lamp"], h["file"], h["peak_dn"]))
         ax.set_title("highlights at turntable angle %.2f deg (sqrt of DN above dark, max over lamps)"
-                     % det["angle_deg"])
+                     % (round(det["angle_deg"], 2) + 0.0))   # + 0.0: no "-0.00"
         ax.legend(fontsize=7, loc="lower right")
     ax.set_xlabel("x (px)")
     ax.set_ylabel("y (px)")

@@ -36,7 +36,10 @@ def row(cells, head=False):
 
 
 def f(x, n=4):
-    return f"{x:.{n}g}" if isinstance(x, (int, float)) else str(x)
+    if not isinstance(x, (int, float)):
+        return str(x)
+    t = f"{x:.{n}g}"
+    return t[1:] if t.startswith("-") and not any(c in "123456789" for c in t.split("e")[0]) else t   # no "-0"
 
 
 parts = []

@@ -215,3 +215,24 @@ TEST(fit_material_report_plots)
     free(err);
     g_free(script);
 }
+
+// A page's text never shows a negative zero ("-0.00 deg"); other minus signs, dates and names stay.
+TEST(model_html_no_negative_zero)
+{
+    const char *path = test_path("page.html");
+    FILE *f = model_html_begin(path, "t", NULL);
+    CHECK(f != NULL);
+    if (!f) return;
+    model_html_para(f, "angle %.2f deg, tilt %.1f deg, offset %g px, %.2f mm, on 2026-00-01, x-0, 1e-00", -0.001,
+                    -0.04, -0.0, -0.5);
+    const char *rows[] = { "-0.000|-0.25", NULL };
+    model_html_table(f, "a|b", rows, 1);
+    model_html_figure(f, "x.png", "turned -0.0 deg");
+    CHECK(model_html_end(f, path));
+    char *html = NULL;
+    CHECK(g_file_get_contents(path, &html, NULL, NULL));
+    CHECK_CONTAINS(html, "angle 0.00 deg, tilt 0.0 deg, offset 0 px, -0.50 mm, on 2026-00-01, x-0, 1e-00");
+    CHECK_CONTAINS(html, "<td>0.000</td><td>-0.25</td>");
+    CHECK_CONTAINS(html, "<figcaption>turned 0.0 deg</figcaption>");
+    g_free(html);
+}
