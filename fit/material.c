@@ -19,6 +19,30 @@
 // The report of a material fit: DIR/samples.csv (every sample with its
 // geometry, measured and fitted R), plots by scripts/fit_material_report.py,
 // and DIR/report.html with the parameter table and the model comparison.
+// DIR/lobes_fit.csv: the chosen model in the plane of incidence, for the report's polar lobes: R at every
+// incidence 0..89 deg and view -89..89 deg (negative: the incidence's side), 1 deg apart.
+static bool lobes_fit_csv(const char *dir, const fit_brdf_result_t *r)
+{
+    char *path = g_strdup_printf("%s/lobes_fit.csv", dir);
+    FILE *f = fopen(path, "w");
+    bool ok = f != NULL;
+    if (f) {
+        fprintf(f, "theta_i_deg,theta_o_deg,R_fit\n");
+        const model_vec3_t n = { 0, 0, 1 };
+        for (int ti = 0; ti < 90; ti++)
+            for (int to = -89; to <= 89; to++) {
+                double a = ti * M_PI / 180, b = to * M_PI / 180;
+                model_vec3_t l = { -sin(a), 0, cos(a) }, v = { sin(b), 0, cos(b) };
+                model_cosines_t c = model_cosines(n, l, v);
+                fprintf(f, "%d,%d,%.6g\n", ti, to, model_brdf_eval(r->model, r->p, &c, NULL));
+            }
+        ok = fclose(f) == 0;
+    }
+    if (!ok) model_error_set(path, 0, "cannot write: %s", strerror(errno));
+    g_free(path);
+    return ok;
+}
+
 // cell, factor: the albedo cells (--albedo-cells) per observation and per cell, NULL without.
 static bool material_report(const char *dir, const calib_obs_set_t *obs, const fit_samples_t *smp,
                             const fit_brdf_result_t *res, int nres, int best, const json_t *entry, const json_t *prov,
@@ -58,6 +82,7 @@ static bool material_report(const char *dir, const calib_obs_set_t *obs, const f
         model_error_set(csv, 0, "cannot write: %s", strerror(errno));
         goto done;
     }
+    if (!lobes_fit_csv(dir, &res[best])) goto done;
     char pbuf[256] = "";
     size_t o = 0;
     for (int j = 0; j < res[best].nparams; j++)

@@ -5,8 +5,9 @@
 # phi in deg, R measured and fitted and the expected noise sigma_R, 1/sr, the
 # albedo cell's factor and the sample point at angle 0, mm) and writes
 #   DIR/polar.png: the lobes in the plane of incidence, one polar panel per band
-#     of incidence: measured R (mean ± spread per view-angle bin, ± sigma) and
-#     the fitted model at the same samples;
+#     of incidence: measured R (mean ± spread per view-angle bin, ± sigma), the
+#     fitted model at the same samples and its lobe at the band's mean incidence
+#     (DIR/lobes_fit.csv: theta_i_deg, theta_o_deg signed, R_fit, written by refl);
 #   DIR/lobes.png: R against the half-vector angle, measured and fitted, per lamp (by name);
 #   DIR/residual_maps.png: R_meas - R_fit at each window for four frames;
 #   DIR/albedo_cells.png: each albedo cell's factor on the sample, and their histogram
@@ -49,6 +50,8 @@ def save(fig, name):
 
 # ---- polar: the plane of incidence -------------------------------------------------------
 if "phi_deg" in cols:
+    cp = os.path.join(d, "lobes_fit.csv")
+    curves = np.genfromtxt(cp, delimiter=",", names=True) if os.path.exists(cp) else None
     phi = a["phi_deg"]
     fwd = np.abs(phi - 180) < 15        # the view on the far side of the normal (toward the mirror direction)
     back = phi < 15                     # the view on the incidence's side
@@ -99,12 +102,26 @@ if "phi_deg" in cols:
             if np.any(ns > 0):
                 ax.fill_between(th, np.maximum(mu - ns, 0), mu + ns, color="tab:blue", alpha=0.25,
                                 label="± expected noise σ")
-            ax.plot(th, fi, "-", color="tab:red", lw=2, label=f"fitted {model}")
-            top = float(np.max(np.concatenate([mu + sd, fi]))) * 1.1
-            ax.set_rmax(top if top > 0 else 1)
+            ax.plot(th, fi, "x", color="tab:red", ms=5, label=f"fitted {model} at the samples")
+            # the scale of the measurements: a glossy lobe's peak where nothing was measured is cut off (said so)
+            top = float(np.max(np.concatenate([mu + sd, fi]))) * 1.25
+            peak = None
+            if curves is not None:   # the model's in-plane lobe at the band's mean incidence
+                c = curves[curves["theta_i_deg"] == int(round(float(np.mean(ti[m]))))]
+                ax.plot(np.radians(c["theta_o_deg"]), c["R_fit"], "-", color="tab:red", lw=1.8,
+                        label=f"fitted {model} at the mean incidence")
+                if len(c) and float(np.max(c["R_fit"])) > top:
+                    peak = float(np.max(c["R_fit"]))
+            if peak is not None:
+                ax.text(0.5, 0.02, f"the fitted lobe's peak {peak:.3g} 1/sr is off this scale",
+                        transform=ax.transAxes, ha="center", fontsize=9, color="tab:red")
+        else:
+            top = 1.0
         tim = float(np.mean(ti[m]))
-        ax.plot([-math.radians(tim)] * 2, [0, ax.get_rmax()], "--", color="orange", lw=1.5,
+        ax.plot([-math.radians(tim)] * 2, [0, top], "--", color="orange", lw=1.5,
                 label="incidence direction (the band's mean)")
+        ax.set_autoscale_on(False)
+        ax.set_ylim(0, top if top > 0 else 1)
         ax.yaxis.set_major_locator(matplotlib.ticker.MaxNLocator(4))
         ax.yaxis.set_major_formatter(matplotlib.ticker.FormatStrFormatter("%.3g"))
         ax.set_rlabel_position(75)

@@ -6,6 +6,7 @@
 #include <jansson.h>
 #include <math.h>
 #include <stdio.h>
+#include <stdlib.h>
 #include <string.h>
 #include <sys/stat.h>
 
@@ -195,6 +196,16 @@ TEST(fit_material_report_plots)
                                0.01 * fit, fac, (double)(cell % 8) * 2, (double)(cell / 8) * 2);
     }
     char *p = g_build_filename(d, "samples.csv", NULL);
+    CHECK(g_file_set_contents(p, g->str, -1, NULL));
+    g_free(p);
+    g_string_truncate(g, 0);
+    g_string_append(g, "theta_i_deg,theta_o_deg,R_fit\n");   // the model's in-plane lobes, as refl writes them
+    for (int ti = 0; ti < 90; ti++)
+        for (int to = -89; to <= 89; to++) {
+            double th = abs(ti - to) / 2.0;
+            g_string_append_printf(g, "%d,%d,%.6g\n", ti, to, 0.1 * cos(ti * M_PI / 180) + 0.05 * exp(-th * th / 50));
+        }
+    p = g_build_filename(d, "lobes_fit.csv", NULL);
     CHECK(g_file_set_contents(p, g->str, -1, NULL));
     g_free(p);
     g_string_free(g, TRUE);
