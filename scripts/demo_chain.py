@@ -150,7 +150,8 @@ def choice(m):
 pj = load(out, "priors_glossy.json")
 m = pj["materials"][0]
 tmat = ini["material " + m["name"]] if ("material " + m["name"]) in ini else None
-parts.append(f"<h3>Material: {html.escape(m['name'])} (refl fit material &rarr; priors_glossy.json)</h3>\n"
+parts.append(f"<h3>Material: {html.escape(m['name'])} (refl fit material &rarr; priors_glossy.json, "
+             "<a href=\"fit_glossy/report.html\">fit report</a>)</h3>\n"
              f"<p>Chosen model <b>{html.escape(m['model'])}</b> ({choice(m)}); "
              f"RMS of R {f(m['rms'], 3)} 1/sr over {m['n_samples']} samples"
              + (f"; the sensor's noise alone would give {f(m['noise_rms_expected'], 3)} 1/sr "
