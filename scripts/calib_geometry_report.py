@@ -475,8 +475,10 @@ def plots(geometry_path, solution_path, outdir):
         fig, ax = plt.subplots(figsize=(8, 6.5))
         im = ax.imshow(np.array(u["stdev_px"]), extent=(u["grid_x_px"][0], u["grid_x_px"][-1],
                        u["grid_y_px"][-1], u["grid_y_px"][0]), cmap="magma", interpolation="bilinear")
-        fig.colorbar(im, ax=ax, label="px")
+        fig.colorbar(im, ax=ax, label="projection uncertainty, 1 sigma (px)")
         ax.plot(obs[:, 0], obs[:, 1], ",", color="#66ccee", alpha=0.5)
+        ax.set_xlabel("x (px)")
+        ax.set_ylabel("y (px)")
         ax.set_title(f"projection uncertainty at {u['distance_mm']:g} mm (worst direction, 1 sigma)")
         fig.tight_layout()
         fig.savefig(f"{outdir}/uncertainty.png", dpi=90)
