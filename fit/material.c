@@ -17,8 +17,10 @@
 #include "model/vec.h"
 
 // The report of a material fit: DIR/samples.csv (every sample with its
-// geometry, measured and fitted R), plots by scripts/fit_material_report.py,
-// and DIR/report.html with the parameter table and the model comparison.
+// geometry, lamp, measured and fitted R, noise and albedo cell), DIR/lobes_fit.csv,
+// plots by scripts/fit_material_report.py, and DIR/report.html with the
+// residual over the noise, the parameter table and the model comparison.
+
 // DIR/lobes_fit.csv: the chosen model in the plane of incidence, for the report's polar lobes: R at every
 // incidence 0..89 deg and view -89..89 deg (negative: the incidence's side), 1 deg apart.
 static bool lobes_fit_csv(const char *dir, const fit_brdf_result_t *r)
