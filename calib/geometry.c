@@ -1693,8 +1693,9 @@ static bool collect_views(const calib_geometry_opts_t *o, calib_geometry_state_t
         fprintf(stderr, "), calibrated together; the rig frame from %s's views\n", s->camnames[0]);
     }
     if (o->images) {
-        fprintf(stderr, "refl calib geometry: reading the images %s\n", o->images);
+        // said after reading: a failure's message names the path, once
         if (!calib_geometry_add_images(&s->views, o->images, s->imgdir, &s->W, &s->H)) return false;
+        fprintf(stderr, "refl calib geometry: %u images from %s\n", s->views.v->len, o->images);
         for (guint k = 0; k < s->views.v->len; k++) {
             calib_geometry_view_t *v = g_ptr_array_index(s->views.v, k);
             if (!model_provenance_input(s->prov, "image", v->source)) return false;

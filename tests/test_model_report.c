@@ -78,7 +78,8 @@ TEST(model_failed_run_removes_empty_output_dirs)
                            NULL);
     CHECK(rc == 1);
     CHECK_MSG(!g_file_test(geo, G_FILE_TEST_EXISTS), "%s is left after the failed run", geo);
-    CHECK_CONTAINS(err, "no-such-dir");
+    CHECK_MSG(count(err, "no-such-dir") == 1, "the directory named %d times:\n%s", count(err, "no-such-dir"),
+              err ? err : "");
     free(out);
     free(err);
     // an output directory that was there before stays
