@@ -43,9 +43,15 @@ def link(out, rel, text=None):
 def calib_rows(out):
     rows = []
     g = jload(out, "calib/geometry/geometry.json")
+    c = jload(out, "chain.json")
+    ent = {x.get("name"): x for x in (c or {}).get("entries", []) if isinstance(x, dict)}
+    truth = ent.get("camera.projection_error_rms")
+    worst = ent.get("camera.projection_error_worst")
+    vs_truth = (f"; projection against the truth's lens {fmt(truth.get('value'), '.3f')} px RMS"
+                + (f", {fmt(worst.get('value'), '.3f')} px worst" if worst else "") if truth else "")
     rows.append(["camera geometry (refl calib geometry)", link(out, "calib/geometry/report.html", "geometry report"),
                  f"{fmt(g.get('rms_residual_px'), '.3f')} px RMS residual, {g.get('views_used')} of "
-                 f"{g.get('views_total')} views, {g.get('outliers')} outliers" if g else "missing"])
+                 f"{g.get('views_total')} views, {g.get('outliers')} outliers{vs_truth}" if g else "missing"])
     lp = jload(out, "calib/lamps/lamps.json")
     lamps = lp.get("lamps") if lp else None
     rows.append(["lamp positions (refl calib lamps)", link(out, "calib/lamps/report.html", "lamps report"),
