@@ -147,8 +147,15 @@ def make(out, version):
     mr = material_rows(out)
     L.append(table(["material", "report", "priors", "fit"], mr) if mr else "<p>No priors_*.json.</p>")
     L.append("<h2>Light plan and verification</h2>")
-    L.append(f"<p>{link(out, 'plan_lamps/index.html', 'Light plan')} of the views (each view's lamps and "
-             "exposure).</p>")
+    pl = jload(out, "plan_lamps/plan.json")
+    views = [v for v in (pl or {}).get("views", []) if isinstance(v, dict)]
+    pv = "; ".join(f"{fmt(v.get('turntable_deg'), 'g')}°: {e(v.get('lamps'))} at {fmt(v.get('exposure_us'), 'g')} µs"
+                   for v in views)
+    warn = sorted({str(w).split(":")[0] for v in views for w in (v.get("warnings") or [])})
+    L.append(f"<p>{link(out, 'plan_lamps/index.html', 'Light plan')} of the views (each view's lamps and exposure)"
+             + (f": {pv}" if pv else "") + ".</p>")
+    if warn:
+        L.append("<p><b>Light plan warnings:</b> " + "; ".join(e(w) for w in warn) + ".</p>")
     vr, vc = verify_rows(out)
     L.append(table(["description", "report", "result"], vr, classes=vc) if vr else "<p>No verification.</p>")
     L.append("<h2>Against the truth</h2>")
