@@ -157,6 +157,7 @@ TEST_SRC := \
     tests/test_model_lsq.c \
     tests/test_model_opts.c \
     tests/test_model_render.c \
+    tests/test_model_report.c \
     tests/test_model_scene.c \
     tests/test_model_sensor.c \
     tests/test_model_sphere.c \

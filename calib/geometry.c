@@ -1693,8 +1693,9 @@ static bool collect_views(const calib_geometry_opts_t *o, calib_geometry_state_t
         fprintf(stderr, "), calibrated together; the rig frame from %s's views\n", s->camnames[0]);
     }
     if (o->images) {
-        fprintf(stderr, "refl calib geometry: reading the images %s\n", o->images);
+        // said after reading: a failure's message names the path, once
         if (!calib_geometry_add_images(&s->views, o->images, s->imgdir, &s->W, &s->H)) return false;
+        fprintf(stderr, "refl calib geometry: %u images from %s\n", s->views.v->len, o->images);
         for (guint k = 0; k < s->views.v->len; k++) {
             calib_geometry_view_t *v = g_ptr_array_index(s->views.v, k);
             if (!model_provenance_input(s->prov, "image", v->source)) return false;
@@ -1760,7 +1761,10 @@ static void axis_and_rig_frame(const calib_geometry_opts_t *o, calib_geometry_st
     calib_geometry_explain_missing(&s->views, o->gridn, o->square_mm, ax->ok ? ax : NULL, s->cam, s->W, s->H);
     for (guint k = 0; k < s->views.v->len; k++) {
         calib_geometry_view_t *v = g_ptr_array_index(s->views.v, k);
-        if (!v->found) fprintf(stderr, "refl calib geometry: no board in %s (%s): %s\n", v->name, v->source, v->why);
+        bool same = !strcmp(v->name, v->source);   // the source named once
+        if (!v->found)
+            fprintf(stderr, "refl calib geometry: no board in %s%s%s%s: %s\n", v->name, same ? "" : " (",
+                    same ? "" : v->source, same ? "" : ")", v->why);
     }
 }
 
@@ -1959,11 +1963,21 @@ static void report_crossvalidation(FILE *f, const calib_geometry_state_t *s)
                      (const char *const *)rows->pdata, (int)rows->len);
     char *png = g_strdup_printf("%s/crossvalidation.png", s->outdir);
     if (access(png, R_OK) == 0)
-        model_html_figure(f, "crossvalidation.png", "|difference| / (s0 + s1) over the imager (first camera)");
+        model_html_figure(f, "crossvalidation.png", "the two halves' calibrations against each other (first camera): "
+                          "|difference| / (s0 + s1) over the imager (top) and the projection difference in px "
+                          "(bottom)");
     g_free(png);
     g_ptr_array_free(rows, TRUE);
     model_html_para(f, "Lens model: %s.",
                     json_string_value(json_object_get(json_object_get(x, "lens_choice"), "why")));
+}
+
+// A figure of the plots script when it wrote it (older scripts or a missing mrcal leave some out).
+static void report_figure_if(FILE *f, const char *outdir, const char *png, const char *caption)
+{
+    char *p = g_strdup_printf("%s/%s", outdir, png);
+    if (access(p, R_OK) == 0) model_html_figure(f, png, caption);
+    g_free(p);
 }
 
 bool calib_geometry_report(const calib_geometry_opts_t *o, const calib_geometry_state_t *s, const char *jpath)
@@ -1988,6 +2002,10 @@ bool calib_geometry_report(const calib_geometry_opts_t *o, const calib_geometry_
         model_html_figure(f, "residuals_vectors.png", "Reprojection residuals over the imager");
         model_html_figure(f, "residuals_histogram.png", "Distribution of the residuals");
         model_html_figure(f, "residuals_per_image.png", "RMS residual per image");
+        report_figure_if(f, s->outdir, "worst_views.png", "The three images with the largest RMS residual: observed "
+                         "corners and their residuals over the image");
+        report_figure_if(f, s->outdir, "distortion.png", "Lens distortion: how far the model moves each pixel from "
+                         "the pinhole of the same fx, fy, cx, cy, with the valid-intrinsics region");
         json_t *u = json_object_get(sol, "uncertainty");
         if (json_object_get(u, "max_px")) {
             model_html_heading(f, "Projection uncertainty");

@@ -48,6 +48,11 @@ static void print_view(const lightplan_lamps_opts_t *o, const lightplan_view_t *
                 "raise --sobel-threshold\n", o->opt.sobel_threshold, r->sobel_noise_dn, r->median_signal_dn);
     if (!r->written) return;
     const lightplan_config_t *b = &r->res.configs[r->res.best];
+    if (r->exposure_edge)
+        fprintf(stderr, "refl plan lamps: warning: the chosen exposure %g us is the %s of those searched: a %s one "
+                "may be better; add %s exposures to --exposures-us\n", b->exposure_us,
+                r->exposure_edge > 0 ? "longest" : "shortest", r->exposure_edge > 0 ? "longer" : "shorter",
+                r->exposure_edge > 0 ? "longer" : "shorter");
     printf("refl plan lamps: %s at %g deg: chosen lamps %s at %g us%s: %d of %d edge segments detectable (%.0f px), "
            "%.0f usable reference points, %d glare and %d saturated pixels (step-2 grid)\n",
            o->scene, r->angle_deg, r->chosen, b->exposure_us, b->feasible ? "" : " (no configuration is free of glare and saturation)",

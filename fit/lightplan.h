@@ -194,6 +194,8 @@ typedef struct {
     double             median_signal_dn;   // the object's median signal in the prediction (offset excluded)
     double             sobel_noise_dn;     // the detector's response to the sensor's noise there (NAN: no gain)
     bool               threshold_near_noise; // opt.sobel_threshold < 1.5 sobel_noise_dn: edges found in noise
+    int                exposure_edge;   // the chosen exposure is the longest searched (+1), the shortest (-1),
+                                        // or neither, or only one was searched (0): plan.json's "warnings"
     bool               written;         // plan.json, predicted.tiff and glare.tiff are written
 } lightplan_view_t;
 

@@ -7,6 +7,7 @@
 #include <unistd.h>
 
 #include "model/model.h"
+#include "model/report.h"
 #include "calib/calib.h"
 #include "fit/chain.h"
 #include "fit/export.h"
@@ -141,6 +142,7 @@ static int demo_cmd(int argc, char **argv)
 
 int main(int argc, char **argv)
 {
+    model_set_command_line(argc, argv);   // provenance records the command as typed
     if (argc < 2) {
         usage(stderr);
         return 2;
@@ -153,8 +155,13 @@ int main(int argc, char **argv)
         printf("refl %s\n", REFL_VERSION);
         return 0;
     }
-    for (size_t i = 0; i < sizeof commands / sizeof commands[0]; i++)
-        if (!strcmp(argv[1], commands[i].name)) return commands[i].run(argc - 1, argv + 1);
+    for (size_t i = 0; i < sizeof commands / sizeof commands[0]; i++) {
+        if (strcmp(argv[1], commands[i].name)) continue;
+        int rc = commands[i].run(argc - 1, argv + 1);
+        // a failed run leaves no empty output directory (3, a paused session, is resumed later)
+        if (rc != 0 && rc != 3) model_remove_made_empty_dirs();
+        return rc;
+    }
     fprintf(stderr, "refl: unknown command '%s'\n", argv[1]);
     usage(stderr);
     return 2;

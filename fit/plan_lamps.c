@@ -402,7 +402,30 @@ static json_t *chosen_json(const lightplan_lamps_opts_t *o, const plan_inputs_t 
                                                         "has the fewest such pixels"));
     json_object_set_new(chosen, "index", json_integer(r->res.best));
     noise_response(o, &in->sensor, r, chosen);
+    // at the edge of the searched exposures: the best may lie beyond them
+    double lo = INFINITY, hi = -INFINITY;
+    for (int k = 0; k < o->nexp; k++) lo = fmin(lo, o->exposures_us[k]), hi = fmax(hi, o->exposures_us[k]);
+    r->exposure_edge = !(hi > lo) ? 0 : b->exposure_us >= hi ? 1 : b->exposure_us <= lo ? -1 : 0;
+    if (r->exposure_edge)
+        json_object_set_new(chosen, "exposure_at_edge", json_string(r->exposure_edge > 0 ? "longest" : "shortest"));
     return chosen;
+}
+
+// plan.json's "warnings": sentences a reader must see (the report shows them at the top).
+static json_t *warnings_json(const lightplan_lamps_opts_t *o, const lightplan_view_t *r)
+{
+    json_t *w = json_array();
+    const lightplan_config_t *b = &r->res.configs[r->res.best];
+    if (r->exposure_edge)
+        json_array_append_new(w, json_sprintf("the chosen exposure %g us is the %s of those searched (--exposures-us): "
+                                              "a %s one may be better; search beyond it", b->exposure_us,
+                                              r->exposure_edge > 0 ? "longest" : "shortest",
+                                              r->exposure_edge > 0 ? "longer" : "shorter"));
+    if (r->threshold_near_noise)
+        json_array_append_new(w, json_sprintf("the Sobel threshold %.0f DN is close to the detector's response to the "
+                                              "sensor's noise alone (%.0f DN): edges will be found in noise",
+                                              o->opt.sobel_threshold, r->sobel_noise_dn));
+    return w;
 }
 
 // Every configuration, the glare per candidate and the chosen one's faces.
@@ -462,6 +485,7 @@ static json_t *plan_json(const lightplan_lamps_opts_t *o, const plan_inputs_t *i
                                     "it; sobel_predicted_dn = the median along it of f |dP|, f = 4.0 axis-aligned .. "
                                     "4.24 diagonal"));
     json_object_set_new(doc, "chosen", chosen_json(o, in, r));
+    json_object_set_new(doc, "warnings", warnings_json(o, r));
     json_object_set_new(doc, "chosen_index", json_integer(res->best));
     tables_json(in, res, doc);
     json_object_set_new(doc, "segments", segments_json(res->segments, res->nsegments, in->scene, NULL, NULL));
@@ -564,6 +588,7 @@ static bool write_summary(const lightplan_lamps_opts_t *o, const plan_inputs_t *
         g_free(base);
         json_object_set_new(e, "check_agreement", v->checked && isfinite(v->check_agreement)
                                                       ? json_real(v->check_agreement) : json_null());
+        json_object_set_new(e, "warnings", warnings_json(o, v));
         json_array_append_new(views, e);
     }
     json_t *doc = json_pack("{s:s,s:o,s:s,s:o}", "scene", o->scene, "views", views, "capture_plan",

@@ -86,8 +86,14 @@ double model_realtime_s(void);
 // t_s as ISO 8601 UTC with milliseconds: "2026-11-21T08:41:02.123Z".
 void   model_utc_text(double t_s, char out[40]);
 // The command line as one shell-readable string "refl ARG ..." (argv[0] is the
-// subcommand; arguments quoted where needed). Free with g_free().
+// subcommand; arguments quoted where needed). Free with g_free(). When argv is
+// the tail of the whole command line registered by model_set_command_line (a
+// command or subcommand handed argc - k, argv + k by its dispatcher), the
+// whole line is given, as typed: "refl calib geometry ...", never "refl
+// geometry ...", so the recorded command can be run again.
 char  *model_command_line(int argc, char **argv);
+// The process's whole argv (main's), registered once by the dispatcher.
+void   model_set_command_line(int argc, char **argv);
 // A command-line usage error: "refl CMD: <message>" and "(refl CMD --help for
 // the options)" on stderr; returns 2, the exit status of a usage error. The
 // same printer as model_cli_error (model/opts.c), for errors found without the

@@ -14,13 +14,43 @@
 #include "model/report.h"
 #include "model/model.h"
 
+static GMutex     made_lock;
+static GPtrArray *made_dirs;   // directories model_mkdir_p made, parents before children
+
 bool model_mkdir_p(const char *path)
 {
-    if (g_mkdir_with_parents(path, 0755) != 0) {
-        model_error(path, 0, "cannot make the directory: %s", strerror(errno));
-        return false;
+    // the path's missing prefixes, outermost first, are the directories this call makes
+    GPtrArray *missing = g_ptr_array_new_with_free_func(g_free);
+    char *p = g_strdup(path);
+    for (size_t n = strlen(p); n > 1 && p[n - 1] == '/'; n--) p[n - 1] = 0;
+    struct stat st;
+    while (*p && strcmp(p, "/") && strcmp(p, ".") && stat(p, &st) != 0 && errno == ENOENT) {
+        g_ptr_array_insert(missing, 0, g_strdup(p));
+        char *d = g_path_get_dirname(p);
+        g_free(p);
+        p = d;
     }
-    return true;
+    g_free(p);
+    bool ok = g_mkdir_with_parents(path, 0755) == 0;
+    if (!ok) model_error(path, 0, "cannot make the directory: %s", strerror(errno));
+    g_mutex_lock(&made_lock);
+    if (!made_dirs) made_dirs = g_ptr_array_new_with_free_func(g_free);
+    for (guint i = 0; i < missing->len; i++)
+        if (g_file_test(missing->pdata[i], G_FILE_TEST_IS_DIR)) g_ptr_array_add(made_dirs, g_strdup(missing->pdata[i]));
+    g_mutex_unlock(&made_lock);
+    g_ptr_array_free(missing, TRUE);
+    return ok;
+}
+
+int model_remove_made_empty_dirs(void)
+{
+    int n = 0;
+    g_mutex_lock(&made_lock);
+    for (guint i = made_dirs ? made_dirs->len : 0; i-- > 0;)
+        if (rmdir(made_dirs->pdata[i]) == 0) n++;   // fails, and so stays, when not empty
+    if (made_dirs) g_ptr_array_set_size(made_dirs, 0);
+    g_mutex_unlock(&made_lock);
+    return n;
 }
 
 bool model_write_file_atomic(const char *path, const char *text)
@@ -193,6 +223,26 @@ static void esc(FILE *f, const char *s)
     }
 }
 
+// Text of a page (paragraphs, headings, captions, table cells): escaped, and a number that prints as
+// a negative zero ("-0.00", "-0") without its sign: "-0.00 deg" reads as a direction that is not there.
+// A '-' after a letter, digit, '.' or '_' (a name, a date, an exponent) is left alone.
+static void esc_text(FILE *f, const char *s)
+{
+    for (const char *p = s; p && *p; p++) {
+        if (*p == '-' && (p == s || !(g_ascii_isalnum(p[-1]) || p[-1] == '.' || p[-1] == '_'))) {
+            const char *q = p + 1;
+            bool digits = false, zero = true;
+            while (*q == '0' || *q == '.' || g_ascii_isdigit(*q)) {
+                if (g_ascii_isdigit(*q)) digits = true;
+                if (g_ascii_isdigit(*q) && *q != '0') zero = false;
+                q++;
+            }
+            if (digits && zero && !g_ascii_isalpha(*q) && q[-1] != '.') continue;   // drop the sign
+        }
+        esc(f, (char[]){ *p, 0 });
+    }
+}
+
 FILE *model_html_begin(const char *path, const char *title, const json_t *prov)
 {
     char *tmp = g_strdup_printf("%s.part", path);
@@ -238,7 +288,7 @@ FILE *model_html_begin(const char *path, const char *title, const json_t *prov)
 void model_html_heading(FILE *f, const char *text)
 {
     fputs("<h2>", f);
-    esc(f, text);
+    esc_text(f, text);
     fputs("</h2>\n", f);
 }
 
@@ -249,7 +299,7 @@ void model_html_para(FILE *f, const char *fmt, ...)
     char *s = g_strdup_vprintf(fmt, ap);
     va_end(ap);
     fputs("<p>", f);
-    esc(f, s);
+    esc_text(f, s);
     fputs("</p>\n", f);
     g_free(s);
 }
@@ -261,7 +311,7 @@ void model_html_figure(FILE *f, const char *src, const char *caption)
     fputs("\" alt=\"", f);
     esc(f, caption);
     fputs("\"><figcaption>", f);
-    esc(f, caption);
+    esc_text(f, caption);
     fputs("</figcaption></figure>\n", f);
 }
 
@@ -274,7 +324,7 @@ static void cells(FILE *f, const char *row, const char *tag)
         size_t n = e ? (size_t)(e - p) : strlen(p);
         char *c = g_strndup(p, n);
         fprintf(f, "<%s>", tag);
-        esc(f, c);
+        esc_text(f, c);
         fprintf(f, "</%s>", tag);
         g_free(c);
         if (!e) break;

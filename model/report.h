@@ -28,7 +28,15 @@ bool    model_inputs_add(json_t *inputs, const char *role, const char *path);
 // Write JSON to path atomically (temporary name, fsync, rename). false + message.
 bool model_write_json(const char *path, json_t *o);
 // Make a directory and its parents (mode 0755); false + message naming it.
+// The directories it makes are remembered (process-wide) for
+// model_remove_made_empty_dirs.
 bool model_mkdir_p(const char *path);
+// After a failed command: removes, deepest first, every directory
+// model_mkdir_p made in this process that is empty now (a directory with
+// anything in it stays, and so do its parents), so a failed run leaves no
+// empty output directory behind. Returns how many it removed. The dispatcher
+// (fit/main.c) calls it when a command exits with an error.
+int  model_remove_made_empty_dirs(void);
 
 // Run scripts/NAME with /usr/bin/python3 and the arguments (NULL-terminated);
 // scripts are found in $REFL_SCRIPTS_DIR, else ../scripts of the running

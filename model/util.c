@@ -6,6 +6,7 @@
 #include <pthread.h>
 #include <stdarg.h>
 #include <stdatomic.h>
+#include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -289,8 +290,26 @@ void model_utc_text(double t_s, char out[40])
     snprintf(out + n, 40 - n, ".%03dZ", ms > 999 ? 999 : ms);
 }
 
+static int    whole_argc;
+static char **whole_argv;
+
+void model_set_command_line(int argc, char **argv)
+{
+    whole_argc = argc;
+    whole_argv = argv;
+}
+
 char *model_command_line(int argc, char **argv)
 {
+    // argv + argc ends where the whole line ends and starts inside it: a
+    // dispatcher's tail, so take the whole line (main's argv[0] is the program).
+    if (whole_argv && argv && argc > 0) {
+        uintptr_t a = (uintptr_t)argv, lo = (uintptr_t)(whole_argv + 1), end = (uintptr_t)(whole_argv + whole_argc);
+        if (a >= lo && a < end && (uintptr_t)(argv + argc) == end) {
+            argc = whole_argc - 1;
+            argv = whole_argv + 1;
+        }
+    }
     GString *s = g_string_new("refl");
     for (int i = 0; i < argc; i++) {
         g_string_append_c(s, ' ');

@@ -35,7 +35,13 @@ rig_session_t *rig_session_open(const char *dir)
     int e = rig_journal_open(&j, dir);
     model_error_quiet_thread(q);
     if (e) {
-        model_error(dir, 0, "not a capture session (no readable session.sqlite): %s", model_last_error());
+        // the journal's message names dir already: said once
+        char *why = g_strdup(model_last_error());
+        const char *w = why;
+        size_t n = strlen(dir);
+        if (!strncmp(w, dir, n) && w[n] == ':') w += n + 1 + (w[n + 1] == ' ');
+        model_error(dir, 0, "not a capture session: %s", w);
+        g_free(why);
         goto fail;
     }
     if (rig_journal_source(j, "plan", NULL, &s->plan_text, &psha) ||

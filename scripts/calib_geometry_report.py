@@ -33,7 +33,10 @@
 #       residual histogram, RMS per image, projection uncertainty map, the
 #       turntable axis fit (the rotation angle of each board pose about the
 #       fitted axis against the turntable angle), the cross-validation's
-#       |difference| / (s0 + s1) maps (crossvalidation.png).
+#       projection difference (px) and |difference| / (s0 + s1) maps
+#       (crossvalidation.png), the worst images' residuals over the image
+#       (worst_views.png) and the lens distortion against the pinhole with
+#       the valid-intrinsics region (distortion.png).
 #   compare MODEL_A MODEL_B OUT.json DISTANCE_MM
 #       Two models of one lens differenced over A's imager (see compare()).
 import json
@@ -331,6 +334,92 @@ def align(corners_in, corners_out, out_path, gridn, spacing, camspecs):
         json.dump(res, f)
 
 
+def worst_views(plt, s, W, H, outdir, n=3):
+    """worst_views.png: the n images with the largest RMS residual, each over its image (when the copy in
+    OUTDIR/images is readable): the observed corners and their residual vectors, coloured by |residual|."""
+    ims = sorted((im for im in s["images"] if im.get("residuals_px")), key=lambda im: -float(im.get("rms_px") or 0))[:n]
+    if not ims:
+        return
+    fig, axs = plt.subplots(1, len(ims), figsize=(6.2 * len(ims) + 1, 5.4), squeeze=False, constrained_layout=True)
+    allmag = np.concatenate([np.hypot(*np.array(im["residuals_px"], dtype=float).T) for im in ims])
+    vmax = float(np.percentile(allmag, 99)) or 1e-3
+    scale = 0.05 * max(W, H) / vmax   # the largest arrows 5 % of the imager
+    for a, im in zip(axs[0], ims):
+        q = np.array(im["observed_px"], dtype=float)
+        r = np.array(im["residuals_px"], dtype=float)
+        try:
+            from PIL import Image
+            img = np.asarray(Image.open(f"{outdir}/images/{im['path']}"), dtype=float)
+            if img.ndim == 3:
+                img = img[..., :3].mean(axis=2)
+            a.imshow(img, cmap="gray", vmin=np.percentile(img, 1), vmax=np.percentile(img, 99.5), alpha=0.6,
+                     extent=(-0.5, img.shape[1] - 0.5, img.shape[0] - 0.5, -0.5))
+        except (OSError, ValueError, ImportError):
+            pass
+        qv = a.quiver(q[:, 0], q[:, 1], r[:, 0] * scale, r[:, 1] * scale, np.hypot(r[:, 0], r[:, 1]), angles="xy",
+                      scale_units="xy", scale=1, cmap="plasma", clim=(0, vmax), width=0.004)
+        a.plot(q[:, 0], q[:, 1], ".", ms=2, color="c")
+        pad = 60
+        a.set_xlim(max(q[:, 0].min() - pad, 0), min(q[:, 0].max() + pad, W))
+        a.set_ylim(min(q[:, 1].max() + pad, H), max(q[:, 1].min() - pad, 0))
+        a.set_aspect("equal")
+        a.set_title(f"{im['path']}: RMS {float(im['rms_px']):.3f} px, {im.get('outliers', 0)} outliers", fontsize=10)
+        a.set_xlabel("x (px)")
+        a.set_ylabel("y (px)")
+    fig.colorbar(qv, ax=axs[0].tolist(), label=f"|residual| (px); arrows x{scale:.0f}")
+    fig.savefig(f"{outdir}/worst_views.png", dpi=90)
+    plt.close(fig)
+
+
+def distortion(plt, s, W, H, outdir, step=16):
+    """distortion.png: how far the lens model moves each pixel from the pinhole of the same fx, fy, cx, cy
+    (|q - q_pinhole| over the imager, arrows), with the valid-intrinsics region: mrcal's (the model's) when it
+    has one, and where the projection uncertainty stays under 1 px (solution.json's grid)."""
+    try:
+        import mrcal
+    except ImportError:
+        return
+    lens, intr = s["lensmodel"], np.array(s["intrinsics"], dtype=float)
+    xs, ys = np.arange(0, W, step, dtype=float), np.arange(0, H, step, dtype=float)
+    q = np.stack(np.meshgrid(xs, ys), axis=-1)
+    v = mrcal.unproject(np.ascontiguousarray(q), lens, intr)
+    q0 = mrcal.project(v, "LENSMODEL_PINHOLE", intr[:4])
+    d = q - q0
+    mag = np.hypot(d[..., 0], d[..., 1])
+    fig, ax = plt.subplots(figsize=(9.5, 7.2))
+    im = ax.imshow(mag, extent=(-0.5, W - 0.5, H - 0.5, -0.5), cmap="viridis", interpolation="bilinear")
+    fig.colorbar(im, ax=ax, label="distortion |q − q_pinhole| (px)")
+    k = max(1, int(round(64 / step)))
+    ax.quiver(q[::k, ::k, 0], q[::k, ::k, 1], d[::k, ::k, 0], d[::k, ::k, 1], color="w", angles="xy",
+              scale_units="xy", scale=max(mag.max() / 40.0, 1e-9), width=0.002)
+    u = s.get("uncertainty") or {}
+    label = []
+    if "stdev_px" in u:
+        st = np.array(u["stdev_px"], dtype=float)
+        if np.nanmin(st) < 1.0 < np.nanmax(st):
+            ax.contour(np.array(u["grid_x_px"]), np.array(u["grid_y_px"]), st, levels=[1.0], colors="r", linewidths=1.5)
+            label.append("red: projection uncertainty 1 px")
+        elif np.nanmax(st) <= 1.0:
+            label.append(f"projection uncertainty under 1 px everywhere (max {np.nanmax(st):.2f} px)")
+    try:
+        r = mrcal.cameramodel(f"{outdir}/camera.cameramodel").valid_intrinsics_region()
+    except Exception:
+        r = None
+    if r is not None and len(r) > 2:
+        ax.plot(r[:, 0], r[:, 1], "m-", lw=1.5)
+        label.append("magenta: mrcal's valid-intrinsics region")
+    ax.set_xlim(-0.5, W - 0.5)
+    ax.set_ylim(H - 0.5, -0.5)
+    ax.set_aspect("equal")
+    ax.set_xlabel("x (px)")
+    ax.set_ylabel("y (px)")
+    ax.set_title(f"{lens.replace('LENSMODEL_', '')}: distortion against the pinhole, max {mag.max():.1f} px"
+                 + ("\n" + "; ".join(label) if label else ""), fontsize=10)
+    fig.tight_layout()
+    fig.savefig(f"{outdir}/distortion.png", dpi=90)
+    plt.close(fig)
+
+
 def plots(geometry_path, solution_path, outdir):
     import matplotlib
     matplotlib.use("Agg")
@@ -344,12 +433,13 @@ def plots(geometry_path, solution_path, outdir):
     fig, ax = plt.subplots(figsize=(9, 7.5))
     mag = np.hypot(res[:, 0], res[:, 1])
     scale = 100.0
-    ax.quiver(obs[:, 0], obs[:, 1], res[:, 0] * scale, res[:, 1] * scale, mag, angles="xy", scale_units="xy",
-              scale=1, cmap="viridis", width=0.002)
+    qv = ax.quiver(obs[:, 0], obs[:, 1], res[:, 0] * scale, res[:, 1] * scale, mag, angles="xy", scale_units="xy",
+                   scale=1, cmap="viridis", width=0.002)
+    fig.colorbar(qv, ax=ax, label="|residual| (px)", shrink=0.8)
     ax.set_xlim(0, W)
     ax.set_ylim(H, 0)
     ax.set_aspect("equal")
-    ax.set_title(f"reprojection residuals x{scale:g} (colour: |residual| px), {len(s['images'])} images")
+    ax.set_title(f"reprojection residuals, arrows x{scale:g}, {len(s['images'])} images")
     ax.set_xlabel("x (px)")
     ax.set_ylabel("y (px)")
     fig.tight_layout()
@@ -372,18 +462,23 @@ def plots(geometry_path, solution_path, outdir):
     ax.set_xticks(range(len(vals)))
     ax.set_xticklabels(names, rotation=90, fontsize=6)
     ax.set_ylabel("RMS residual (px)")
+    ax.set_xlabel("image")
     ax.set_title("RMS reprojection residual per image")
     fig.tight_layout()
     fig.savefig(f"{outdir}/residuals_per_image.png", dpi=90)
     plt.close(fig)
+    worst_views(plt, s, W, H, outdir)
+    distortion(plt, s, W, H, outdir)
     # uncertainty
     u = s["uncertainty"]
     if "stdev_px" in u:
         fig, ax = plt.subplots(figsize=(8, 6.5))
         im = ax.imshow(np.array(u["stdev_px"]), extent=(u["grid_x_px"][0], u["grid_x_px"][-1],
                        u["grid_y_px"][-1], u["grid_y_px"][0]), cmap="magma", interpolation="bilinear")
-        fig.colorbar(im, ax=ax, label="px")
+        fig.colorbar(im, ax=ax, label="projection uncertainty, 1 sigma (px)")
         ax.plot(obs[:, 0], obs[:, 1], ",", color="#66ccee", alpha=0.5)
+        ax.set_xlabel("x (px)")
+        ax.set_ylabel("y (px)")
         ax.set_title(f"projection uncertainty at {u['distance_mm']:g} mm (worst direction, 1 sigma)")
         fig.tight_layout()
         fig.savefig(f"{outdir}/uncertainty.png", dpi=90)
@@ -394,8 +489,23 @@ def plots(geometry_path, solution_path, outdir):
     comps += [("lean against splined", c) for c in (xv.get("lean_vs_splined") or {}).get("cameras", [])[:1]]
     comps = [(n, json.load(open(c["details"]))) for n, c in comps if c.get("details")]
     if comps:
-        fig, axs = plt.subplots(1, len(comps), figsize=(6 * len(comps), 4.6), squeeze=False)
+        fig, axs = plt.subplots(2, len(comps), figsize=(6.4 * len(comps), 9.4), squeeze=False)
+        for a, (name, c) in zip(axs[1], comps):
+            d = np.array(c["diff_px"], dtype=float)
+            im = a.imshow(d, extent=(c["grid_x_px"][0], c["grid_x_px"][-1], c["grid_y_px"][-1], c["grid_y_px"][0]),
+                          cmap="magma", vmin=0, interpolation="nearest")
+            a.contour(np.array(c["grid_x_px"]), np.array(c["grid_y_px"]), np.array(c["observed_mask"]), levels=[0.5],
+                      colors="c", linewidths=0.8)
+            short = name.replace("LENSMODEL_", "").split("_order")[0]
+            a.set_title(f"{short}: projection difference of the two halves at {c['distance_mm']:g} mm\n"
+                        f"RMS {c['observed']['diff_rms_px']:.3f} px observed (inside the cyan line), "
+                        f"{c['imager']['diff_rms_px']:.3f} px imager", fontsize=9)
+            a.set_xlabel("x (px)")
+            a.set_ylabel("y (px)")
+            fig.colorbar(im, ax=a, label="|difference| (px)")
         for a, (name, c) in zip(axs[0], comps):
+            a.set_xlabel("x (px)")
+            a.set_ylabel("y (px)")
             ratio = np.array(c["diff_px"]) / np.array(c["predicted_px"])
             im = a.imshow(ratio, extent=(c["grid_x_px"][0], c["grid_x_px"][-1], c["grid_y_px"][-1], c["grid_y_px"][0]),
                           cmap="viridis", vmin=0, vmax=3, interpolation="nearest")

@@ -114,8 +114,9 @@ def main():
         img = np.array(det["crop"], dtype=float).reshape(det["h"], det["w"])
         x0, y0 = det["x0"], det["y0"]
         vmax = max(1.0, np.percentile(img, 99.9))
-        ax.imshow(np.sqrt(np.clip(img, 0, None)), cmap="gray", vmin=0, vmax=np.sqrt(vmax),
-                  extent=(x0 - 0.5, x0 + det["w"] - 0.5, y0 + det["h"] - 0.5, y0 - 0.5))
+        hi = ax.imshow(np.sqrt(np.clip(img, 0, None)), cmap="gray", vmin=0, vmax=np.sqrt(vmax),
+                       extent=(x0 - 0.5, x0 + det["w"] - 0.5, y0 + det["h"] - 0.5, y0 - 0.5))
+        fig.colorbar(hi, ax=ax, label="sqrt(DN above dark)", shrink=0.8)
         q = det["sphere_q"]
         t = np.linspace(0, 2 * np.pi, 200)
         ax.plot(q[0] + det["sphere_radius_px"] * np.cos(t), q[1] + det["sphere_radius_px"] * np.sin(t), "c-", lw=0.7,
@@ -126,7 +127,7 @@ def main():
                 ax.plot(h["q"][0], h["q"][1], "o", mfc="none", mec=col, ms=14, mew=1.5,
                         label="%s (%s, %.0f DN)" % (h["lamp"], h["file"], h["peak_dn"]))
         ax.set_title("highlights at turntable angle %.2f deg (sqrt of DN above dark, max over lamps)"
-                     % det["angle_deg"])
+                     % (round(det["angle_deg"], 2) + 0.0))   # + 0.0: no "-0.00"
         ax.legend(fontsize=7, loc="lower right")
     ax.set_xlabel("x (px)")
     ax.set_ylabel("y (px)")

@@ -1,7 +1,7 @@
 #!/usr/bin/python3
 # scripts/demo_chain.py OUTDIR TRUTH.ini — the calibration and fitting chain of
 # `make demo` against the virtual rig's ground truth: writes OUTDIR/chain.html
-# (an HTML fragment: OUTDIR/chain.json's table of every figure with its value,
+# (a page of its own, linked from the demo's index.html: OUTDIR/chain.json's table of every figure with its value,
 # truth, stated sigma and z, computed by refl chain; then tables of calibrated
 # vs true values by calibration) and OUTDIR/lobes.png
 # (the fitted material's in-plane lobes against the truth's, at several
@@ -36,7 +36,10 @@ def row(cells, head=False):
 
 
 def f(x, n=4):
-    return f"{x:.{n}g}" if isinstance(x, (int, float)) else str(x)
+    if not isinstance(x, (int, float)):
+        return str(x)
+    t = f"{x:.{n}g}"
+    return t[1:] if t.startswith("-") and not any(c in "123456789" for c in t.split("e")[0]) else t   # no "-0"
 
 
 parts = []
@@ -147,7 +150,8 @@ def choice(m):
 pj = load(out, "priors_glossy.json")
 m = pj["materials"][0]
 tmat = ini["material " + m["name"]] if ("material " + m["name"]) in ini else None
-parts.append(f"<h3>Material: {html.escape(m['name'])} (refl fit material &rarr; priors_glossy.json)</h3>\n"
+parts.append(f"<h3>Material: {html.escape(m['name'])} (refl fit material &rarr; priors_glossy.json, "
+             "<a href=\"fit_glossy/report.html\">fit report</a>)</h3>\n"
              f"<p>Chosen model <b>{html.escape(m['model'])}</b> ({choice(m)}); "
              f"RMS of R {f(m['rms'], 3)} 1/sr over {m['n_samples']} samples"
              + (f"; the sensor's noise alone would give {f(m['noise_rms_expected'], 3)} 1/sr "
@@ -271,8 +275,21 @@ if any(os.path.exists(os.path.join(out, d, "verify.json")) for d, _, _ in ver):
                      + f"<td><a href=\"{d}/index.html\">{d}/index.html</a></td></tr>\n")
     parts.append("</table>\n")
 
-with open(os.path.join(out, "chain.html"), "w") as fh:
-    fh.write("".join(parts))
+HEAD = ("<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\"><title>refl demo: the chain against the "
+        "truth</title>\n<style>\nbody { font-family: sans-serif; margin: 1.5em; max-width: 1600px; }\n"
+        "table { border-collapse: collapse; margin: 1em 0; }\n"
+        "td, th { border: 1px solid #bbb; padding: 0.25em 0.6em; text-align: left; vertical-align: top; }\n"
+        "th { background: #eee; }\nimg { max-width: 100%; border: 1px solid #ccc; }\n</style></head><body>\n"
+        "<p><a href=\"index.html\">&larr; the demo's index</a></p>\n"
+        "<h1>The chain against the truth: capture &rarr; calibrate &rarr; fit &rarr; priors &rarr; verify</h1>\n"
+        f"<p>Every calibrated and fitted figure of the lab day in <code>{html.escape(os.path.abspath(out))}</code> "
+        "against the virtual rig's truth "
+        f"(<code>{html.escape(os.path.basename(truth_path))}</code>). The virtual rig's physics is richer than the "
+        "fitter's (finite lamps, Monte Carlo interreflection, texture, sensor noise and fixed patterns), so the "
+        "differences are what the chain costs.</p>\n")
+with open(os.path.join(out, "chain.html") + ".part", "w") as fh:
+    fh.write(HEAD + "".join(parts) + "</body></html>\n")
+os.replace(os.path.join(out, "chain.html") + ".part", os.path.join(out, "chain.html"))
 
 
 # ---- lobes: GGX (the truth's model) in the plane of incidence -------------

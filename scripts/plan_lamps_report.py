@@ -538,6 +538,20 @@ def fig_views(d, views):
     plt.close(fig)
 
 
+def edge_warnings(raw, configs, chosen_us):
+    """plan.json's "warnings" (sentences), or, in a file without them, the one this script can see itself: the
+    chosen exposure at the edge of the searched ones (the best may lie beyond them)."""
+    w = raw.get("warnings")
+    if isinstance(w, list):
+        return [str(x) for x in w]
+    ex = sorted({k["exposure_us"] for k in configs})
+    if len(ex) > 1 and chosen_us in (ex[0], ex[-1]):
+        side = "longest" if chosen_us == ex[-1] else "shortest"
+        return [f"the chosen exposure {chosen_us:g} us is the {side} of those searched ({ex[0]:g}..{ex[-1]:g} us): "
+                f"a {'longer' if side == 'longest' else 'shorter'} one may be better; search beyond it"]
+    return []
+
+
 def write_html(d, p, have):
     raw, ch, chk = p["raw"], p["chosen"], p["check"]
     prov = raw.get("provenance")
@@ -558,6 +572,8 @@ def write_html(d, p, have):
              f"reference points; {ch['glare_pix']} glare and {ch['saturated_pix']} saturated of "
              f"{ch['object_pix']} object pixels (step-2 grid)"
              + (f"<br>{e(ch['note'])}" if ch["note"] else "") + "</small></div>")
+    for w in edge_warnings(raw, p["configs"], ch["exposure_us"]):
+        L.append(f'<div class="banner warn">Warning<small>{e(w)}.</small></div>')
     notes = []
     ci = [i for i, k in enumerate(p["configs"]) if same_config(k, ch)]
     if not ci:
@@ -793,6 +809,13 @@ def report_views(d, raw):
                      f'<a href="{e(vd)}/index.html">{e(vd)}/</a>'])
         cls.append("" if feasible else "miss")
         vj = load_json(os.path.join(d, vd, "plan.json"))
+        vw = v.get("warnings") if isinstance(v.get("warnings"), list) else None
+        if vw is None and isinstance(vj, dict) and isinstance(vj.get("configurations"), list):
+            vw = edge_warnings(vj, [k for k in vj["configurations"] if isinstance(k, dict) and is_num(k.get("exposure_us"))],
+                               c.num(v, "exposure_us", w))
+        rows[-1].append("<br>".join(e(x.split(":")[0]) for x in (vw or [])) or "none")
+        if vw:
+            cls[-1] = cls[-1] or "surprise"
         vchk = vj.get("virtual_rig_check") if isinstance(vj, dict) else None
         target = vchk.get("target") if isinstance(vchk, dict) and is_num(vchk.get("target")) else None
         figv.append((c.num(v, "turntable_deg", w), c.num(v, "detectable_length_px", w),
@@ -807,8 +830,8 @@ def report_views(d, raw):
                 else "; it does NOT bind to the virtual rig of the check") + '. Data: <a href="plan.json">plan.json</a>.</p>')
     L.append(table(["turntable (deg)", "lamps", "exposure (µs)", "feasible", "detectable segments",
                     "detectable length (px)", "usable points", "glare px", "saturated px", "check agreement",
-                    "report"], rows, cls,
-                   [True, False, True, False, True, True, True, True, True, True, False]))
+                    "report", "warnings"], rows, cls,
+                   [True, False, True, False, True, True, True, True, True, True, False, False]))
     L.append('<img src="views.png" alt="detectable edge length and check agreement per view">')
     L.append('<p class="note">Left: the predicted length of detectable edges per view, with its chosen lamps. Right: '
              'the virtual-rig check (when run): the share of segments whose detection on the rendered frame agrees '

@@ -100,10 +100,11 @@ def e(s):
 
 
 def fmt(x, spec=".4g", none="n/a"):
-    """x formatted by spec; none for None, NaN and the infinities."""
+    """x formatted by spec; none for None, NaN and the infinities; a negative zero ("-0.00") without its sign."""
     if x is None or (isinstance(x, float) and not math.isfinite(x)):
         return none
-    return format(x, spec)
+    t = format(x, spec)
+    return t[1:] if t.startswith("-") and not any(c in "123456789" for c in t.split("e")[0]) else t
 
 
 def table(header, rows, classes=None, numeric=None):

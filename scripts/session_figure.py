@@ -39,7 +39,7 @@ def main():
         pix = np.asarray(Image.open(os.path.join(sdir, f)))
         im = ax.imshow(pix, cmap="gray", vmin=0, vmax=vmax)
         ax.set_title("step %d: %.1f deg, lamps %s\n%g us, %s, mean %.0f DN" %
-                     (step, ang, lamps or "none", exp_us, fmt, mean), fontsize=9)
+                     (step, round(ang, 1) + 0.0, lamps or "none", exp_us, fmt, mean), fontsize=9)   # no "-0.0"
         ax.set_xticks([])
         ax.set_yticks([])
     for ax in list(axes.flat)[len(rows):]:

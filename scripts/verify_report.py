@@ -334,7 +334,7 @@ def fig_views(d, v):
         div = plt.get_cmap("RdBu_r").copy()
         div.set_bad(NAN_DIFF)
         a0, a1, a2 = axs[m]
-        title = f"{os.path.basename(im['name'])}, turntable {fmt(im['turntable_deg'], 'g')} deg"
+        title = f"{os.path.basename(im['name'])}, turntable {fmt(im['turntable_deg'], '.2f')} deg"
         h0 = a0.imshow(act, cmap=grey, vmin=lo, vmax=hi)
         a0.set_title(f"{title}\nactual", fontsize=10)
         h1 = a1.imshow(syn, cmap=grey, vmin=lo, vmax=hi)
@@ -394,7 +394,7 @@ def fig_zmap(d, v, p, info):
         ax.set_ylim(H - 0.5, -0.5)
         ax.set_aspect("equal")
         im = v["images"][m]
-        ax.set_title(f"{os.path.basename(im['name'])}, turntable {fmt(im['turntable_deg'], 'g')} deg\n"
+        ax.set_title(f"{os.path.basename(im['name'])}, turntable {fmt(im['turntable_deg'], '.2f')} deg\n"
                      f"{int(zok.sum())} points with z, {int(fl.sum())} flagged", fontsize=9)
         ax.set_xlabel("x (px)")
         ax.set_ylabel("y (px)")
@@ -505,7 +505,7 @@ def write_html(d, v, p, info, nused):
            "robust σ (DN)", "rms z", "median |z|"]
     rows, cls = [], []
     for s in v["residue_per_image"] + [dict(v["residue"], image="all", turntable_deg=math.nan)]:
-        rows.append([e(s["image"]), fmt(s["turntable_deg"], "g", ""), str(s["n_points"]),
+        rows.append([e(s["image"]), fmt(s["turntable_deg"], ".2f", ""), str(s["n_points"]),
                      fmt(s["max_abs_diff_dn"], ".4g"), fmt(s["mean_abs_diff_dn"], ".4g"),
                      fmt(s["std_abs_diff_dn"], ".4g"), fmt(s["robust_sigma_dn"], ".4g"), fmt(s["rms_z"], ".3g"),
                      fmt(s["median_abs_z"], ".3g")])
@@ -522,7 +522,7 @@ def write_html(d, v, p, info, nused):
     for im in v["images"]:
         lamps = im["lamps_on"]
         lamps = ", ".join(map(str, lamps)) if isinstance(lamps, list) else ("" if lamps is None else str(lamps))
-        rows.append([e(im["name"]), e(im["file"]), fmt(im["turntable_deg"], "g"), e(lamps),
+        rows.append([e(im["name"]), e(im["file"]), fmt(im["turntable_deg"], ".2f"), e(lamps),
                      fmt(im["exposure_us"], "g"), f'<a href="{e(im["actual_tiff"])}">{e(im["actual_tiff"])}</a>',
                      f'<a href="{e(im["synthetic_tiff"])}">{e(im["synthetic_tiff"])}</a>'])
     L.append(table(["image", "file", "turntable (deg)", "lamps on", "exposure (us)", "actual (float32 TIFF, DN)",

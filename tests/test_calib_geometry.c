@@ -303,6 +303,10 @@ TEST(calib_geometry_synthetic_mrcal)
         CHECK(json_real_value(json_object_get(u, "median_px")) > 0);
         CHECK(json_real_value(json_object_get(u, "median_px")) < 0.1);
         CHECK(exists_in(dir, "report.html") && exists_in(dir, "residuals_vectors.png"));
+        CHECK(exists_in(dir, "worst_views.png") && exists_in(dir, "distortion.png"));
+        // the command as typed, so it can be run again (not "refl geometry ...")
+        const char *cmd = json_string_value(json_object_get(json_object_get(g, "provenance"), "command"));
+        CHECK_MSG(cmd && g_str_has_prefix(cmd, "refl calib geometry --corners "), "command: %s", cmd ? cmd : "");
     }
     json_decref(g);
     free(b);

@@ -173,6 +173,22 @@ TEST(lightplan_virtual_rig_agreement)
     }
     CHECK(json_array_size(json_object_get(chk, "configurations")) >= 4);
     CHECK(json_array_size(json_object_get(j, "faces")) >= 6);
+    // the warning when the chosen exposure is at an edge of the searched ones (the default list)
+    double ex = json_number_value(json_object_get(ch, "exposure_us")), lo = INFINITY, hi = -INFINITY;
+    json_t *cfs = json_object_get(j, "configurations");
+    for (size_t c = 0; c < json_array_size(cfs); c++) {
+        double x = json_number_value(json_object_get(json_array_get(cfs, c), "exposure_us"));
+        lo = fmin(lo, x), hi = fmax(hi, x);
+    }
+    const char *edge = json_string_value(json_object_get(ch, "exposure_at_edge"));
+    json_t *warn = json_object_get(j, "warnings");
+    CHECK(json_is_array(warn));
+    if (ex == hi || ex == lo) {
+        CHECK(edge && !strcmp(edge, ex == hi ? "longest" : "shortest"));
+        CHECK_CONTAINS(json_string_value(json_array_get(warn, 0)), ex == hi ? "is the longest" : "is the shortest");
+    } else {
+        CHECK(edge == NULL);
+    }
     // the one view's capture plan: angle 0, the chosen lamps and exposure, bound to the virtual rig
     char *pp = g_strdup_printf("%s/capture_plan.ini", dir);
     rig_plan_t *p = rig_plan_load(pp);
@@ -199,6 +215,20 @@ TEST(lightplan_virtual_rig_agreement)
     CHECK_CONTAINS(err, "--exposures-us");
     g_free(out);
     g_free(err);
+    // two exposures only: the chosen one is at an edge, said on stderr and in plan.json
+    const char *dir2 = test_path("plan2");
+    rc = test_refl_run(300, &out, &err, "plan", "lamps", scene, "--camera", cam, "--lamps", lamps, "--kc-per-us", kc,
+                       "--materials", mats, "--exposures-us", "4000,8000", "--no-report", "-o", dir2, NULL);
+    CHECK_MSG(rc == 0, "rc %d: %s", rc, err);
+    CHECK_CONTAINS(err, "warning: the chosen exposure");
+    g_free(out);
+    g_free(err);
+    jp = g_strdup_printf("%s/plan.json", dir2);
+    j = json_load_file(jp, 0, NULL);
+    g_free(jp);
+    CHECK(j && json_string_value(json_object_get(json_object_get(j, "chosen"), "exposure_at_edge")));
+    CHECK(j && json_array_size(json_object_get(j, "warnings")) >= 1);
+    json_decref(j);
 }
 
 // `refl demo` runs scripts/demo (the whole lab day; make demo runs it): its
