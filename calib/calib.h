@@ -158,16 +158,18 @@ void   calib_drift_free(calib_drift_t *d);
 // image's edge (the steepest fall from the coupon to the background along the
 // edge's normal) is found; least squares (model/lsq.h) of those distances over
 // the pose, with the nominal wedge pose as a Gaussian prior, search and fit
-// repeated three times (8, 3, 2 px). The pose's parameters p[5]:
+// repeated three times (8, 3, 2 px). The pose's parameters p[6]:
 //   tilt_deg, tilt_azimuth_deg  the wedge (model_scene_wedge_pose: the normal)
 //   dx_mm, dy_mm                the in-plane offset, in the sample's own frame
 //                               (the wedge's face) before the wedge's rotation
 //   dz_mm                       the height, along the rig's z
-// x = Rw (x0 + (dx, dy, 0)) + tw + (0, 0, dz) with Rw, tw the wedge's pose of
-// tilt and azimuth; the nominal: the plan's wedge, 0, 0, 0. The covariance is
-// (J^T J)^-1 with the residuals scaled by their RMS (px).
+//   turn_deg                    a turn about the sample's own z through its
+//                               centre (the middle of its bounding box in x, y)
+// x = Rw (Rz(turn) (x0 - c) + c + (dx, dy, 0)) + tw + (0, 0, dz) with Rw, tw
+// the wedge's pose of tilt and azimuth; the nominal: the plan's wedge, 0, 0,
+// 0, 0. The covariance is (J^T J)^-1 with the residuals scaled by their RMS (px).
 typedef struct {
-    double sigma_deg;     // the prior's std of tilt and azimuth (default 1 deg: the fixture's)
+    double sigma_deg;     // the prior's std of tilt, azimuth and turn (default 1 deg: the fixture's)
     double sigma_mm;      // of the offsets and the height (default 2 mm)
     int    min_samples;   // fewer edge samples found: the nominal is kept (default 60)
     bool   verbose;
@@ -177,11 +179,11 @@ typedef struct {
     bool   tried;          // a fit was asked for
     bool   fitted;         // p is the fit's (false: the nominal is kept; note says why)
     bool   at_prior_edge;  // a parameter ended more than 2.5 prior std from the nominal (warning)
-    double nominal[5];     // the plan's: tilt, azimuth, 0, 0, 0
-    double p[5], sd[5];    // the pose used and its std (prior std when not fitted)
-    double cov[25];
+    double nominal[6];     // the plan's: tilt, azimuth, 0, 0, 0, 0
+    double p[6], sd[6];    // the pose used and its std (prior std when not fitted)
+    double cov[36];
     double normal[3];      // the sample's +z in the rig frame at angle 0 (the pose used)
-    double prior_sd[5];
+    double prior_sd[6];
     int    nsamples, nangles;   // edge samples (and angles) that entered the fit
     double rms_px;         // their residual RMS
     char   note[600];      // why the nominal was kept, or the warning; "" when none
@@ -190,7 +192,7 @@ typedef struct {
 calib_sample_pose_options_t calib_sample_pose_defaults(void);
 // The pose's rigid move of the sample's scene (its own frame, at angle 0
 // before any wedge): x = R x0 + t.
-void calib_sample_pose_Rt(const model_scene_t *scene, const double p[5], double R[9], double t[3]);
+void calib_sample_pose_Rt(const model_scene_t *scene, const double p[6], double R[9], double t[3]);
 // Fit the pose of scene (unposed) in session s (its plan p) through cal's
 // camera. Weak or missing edges, a failed solve or a singular covariance
 // keep the nominal (out->fitted false, out->note why): true. false + message

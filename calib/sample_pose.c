@@ -12,23 +12,40 @@
 #include "model/lsq.h"
 #include "model/vec.h"
 
-#define NPOSE 5
+#define NPOSE 6
 #define MAX_SAMPLES_PER_ANGLE 600
 #define EDGE_STEP_MM 0.5
 #define MIN_CONTRAST_NOISE 10.0   // an edge's step over the image's noise std, at least
 
-static const char *const pose_names[NPOSE] = { "tilt_deg", "tilt_azimuth_deg", "dx_mm", "dy_mm", "dz_mm" };
+static const char *const pose_names[NPOSE] = { "tilt_deg", "tilt_azimuth_deg", "dx_mm", "dy_mm", "dz_mm", "turn_deg" };
 
 calib_sample_pose_options_t calib_sample_pose_defaults(void)
 {
     return (calib_sample_pose_options_t){ .sigma_deg = 1, .sigma_mm = 2, .min_samples = 60 };
 }
 
-void calib_sample_pose_Rt(const model_scene_t *scene, const double p[5], double R[9], double t[3])
+void calib_sample_pose_Rt(const model_scene_t *scene, const double p[6], double R[9], double t[3])
 {
-    double tw[3];
-    model_scene_wedge_pose(scene, p[0], p[1], R, tw);
-    for (int r = 0; r < 3; r++) t[r] = tw[r] + R[3 * r] * p[2] + R[3 * r + 1] * p[3];
+    // the turn's centre: the middle of the scene's bounding box in x and y
+    double lo[2] = { INFINITY, INFINITY }, hi[2] = { -INFINITY, -INFINITY };
+    for (int i = 0; i < scene->nvertices; i++) {
+        lo[0] = fmin(lo[0], scene->vertices[i].x), hi[0] = fmax(hi[0], scene->vertices[i].x);
+        lo[1] = fmin(lo[1], scene->vertices[i].y), hi[1] = fmax(hi[1], scene->vertices[i].y);
+    }
+    double cx = isfinite(lo[0]) ? (lo[0] + hi[0]) / 2 : 0, cy = isfinite(lo[1]) ? (lo[1] + hi[1]) / 2 : 0;
+    double a = p[5] * M_PI / 180, c = cos(a), s = sin(a);
+    // Rz(turn) (x0 - c) + c + d = Rz x0 + u
+    const double Rz[9] = { c, -s, 0, s, c, 0, 0, 0, 1 };
+    const double u[3] = { cx - (c * cx - s * cy) + p[2], cy - (s * cx + c * cy) + p[3], 0 };
+    double Rw[9], tw[3];
+    model_scene_wedge_pose(scene, p[0], p[1], Rw, tw);
+    for (int r = 0; r < 3; r++) {
+        t[r] = tw[r];
+        for (int k = 0; k < 3; k++) {
+            R[3 * r + k] = Rw[3 * r] * Rz[k] + Rw[3 * r + 1] * Rz[3 + k] + Rw[3 * r + 2] * Rz[6 + k];
+            t[r] += Rw[3 * r + k] * u[k];
+        }
+    }
     t[2] += p[4];
 }
 
@@ -373,6 +390,29 @@ static bool measure(pose_fit_t *F, const double *p, double reach)
     return true;
 }
 
+// The residuals r (of the used samples, in order along the edges) are not
+// independent: the edge found wanders with the pixel grid over several
+// pixels. The covariance's factor for it, by batch means: blocks of
+// CORR_BLOCK consecutive samples of one angle; the mean square of their
+// means times the block size over the residuals' mean square ms (at least 1).
+#define CORR_BLOCK 8
+static double correlation_factor(const pose_fit_t *F, const double *r, double ms)
+{
+    double sb = 0;
+    int nb = 0;
+    for (int k = 0; k + CORR_BLOCK <= F->nuse;) {
+        int a = F->s[F->use[k]].angle, m = 0;
+        double sum = 0;
+        while (m < CORR_BLOCK && F->s[F->use[k + m]].angle == a) sum += r[k + m], m++;
+        if (m == CORR_BLOCK) {
+            sb += sum * sum / CORR_BLOCK;
+            nb++;
+        }
+        k += m;
+    }
+    return nb > 0 && ms > 0 ? fmax(1, sb / nb / ms) : 1;
+}
+
 // One least-squares solve of the pose p over the used samples with the
 // prior (nominal, prior_sd); cov (may be NULL) its covariance. *rms_px the
 // data residuals' RMS after it. false: no usable solution (or covariance).
@@ -393,6 +433,10 @@ static bool solve(pose_fit_t *F, double *p, const double *nominal, const double 
     ok = r && residuals_at(F, p, r);
     for (int k = 0; ok && k < F->nuse; k++) ss += r[k] * r[k];
     if (ok) *rms_px = F->sigma_px * sqrt(ss / F->nuse);
+    if (ok && cov) {
+        double f = correlation_factor(F, r, ss / F->nuse);
+        for (int j = 0; j < NPOSE * NPOSE; j++) cov[j] *= f;
+    }
     // samples beyond 4 RMS (another edge found) leave the fit
     int nu = 0;
     for (int k = 0; ok && k < F->nuse; k++)
@@ -439,8 +483,8 @@ static void fit_rounds(pose_fit_t *F, calib_sample_pose_t *out, int min_samples,
         out->nangles = na;
         if (verbose)
             fprintf(stderr, "  sample pose: reach %g px: %d edge samples at %d angles, RMS %.3f px (weight %.3f); "
-                    "tilt %.3f az %.3f dx %.3f dy %.3f dz %.3f\n", reach[r], F->nuse, na, rms, prev, p[0], p[1], p[2],
-                    p[3], p[4]);
+                    "tilt %.3f az %.3f dx %.3f dy %.3f dz %.3f turn %.3f\n", reach[r], F->nuse, na, rms, prev, p[0],
+                    p[1], p[2], p[3], p[4], p[5]);
     }
     memcpy(out->p, p, sizeof p);
     out->rms_px = rms;
@@ -453,10 +497,10 @@ bool calib_sample_pose_fit(const rig_session_t *s, const rig_plan_t *plan, const
     calib_sample_pose_options_t o = opt ? *opt : calib_sample_pose_defaults();
     memset(out, 0, sizeof *out);
     out->tried = true;
-    const double nom[NPOSE] = { plan->tilt_deg, plan->tilt_azimuth_deg, 0, 0, 0 };
+    const double nom[NPOSE] = { plan->tilt_deg, plan->tilt_azimuth_deg, 0, 0, 0, 0 };
     memcpy(out->nominal, nom, sizeof nom);
     memcpy(out->p, nom, sizeof nom);
-    for (int j = 0; j < NPOSE; j++) out->prior_sd[j] = out->sd[j] = j < 2 ? o.sigma_deg : o.sigma_mm;
+    for (int j = 0; j < NPOSE; j++) out->prior_sd[j] = out->sd[j] = j < 2 || j == 5 ? o.sigma_deg : o.sigma_mm;
     eimage_t *im = NULL;
     int nim = 0;
     pose_fit_t F = { .scene = scene, .cam = cal->cam, .W = cal->W, .H = cal->H };
@@ -520,10 +564,10 @@ void calib_sample_pose_print(FILE *f, const calib_sample_pose_t *ps)
         return;
     }
     fprintf(f, "  sample pose fitted from %d edge samples at %d angles (RMS %.3f px): tilt %.3f +- %.3f deg (%+.3f), "
-            "hinge azimuth %.3f +- %.3f deg (%+.3f), offset %+.3f +- %.3f, %+.3f +- %.3f mm, height %+.3f +- %.3f mm "
-            "(differences from the nominal)\n", ps->nsamples, ps->nangles, ps->rms_px, ps->p[0], ps->sd[0],
-            ps->p[0] - ps->nominal[0], ps->p[1], ps->sd[1], ps->p[1] - ps->nominal[1], ps->p[2], ps->sd[2], ps->p[3],
-            ps->sd[3], ps->p[4], ps->sd[4]);
+            "hinge azimuth %.3f +- %.3f deg (%+.3f), offset %+.3f +- %.3f, %+.3f +- %.3f mm, height %+.3f +- %.3f mm, "
+            "turn %+.3f +- %.3f deg (differences from the nominal)\n", ps->nsamples, ps->nangles, ps->rms_px,
+            ps->p[0], ps->sd[0], ps->p[0] - ps->nominal[0], ps->p[1], ps->sd[1], ps->p[1] - ps->nominal[1], ps->p[2],
+            ps->sd[2], ps->p[3], ps->sd[3], ps->p[4], ps->sd[4], ps->p[5], ps->sd[5]);
     if (ps->note[0]) fprintf(f, "  warning: sample pose: %s\n", ps->note);
 }
 
@@ -539,7 +583,7 @@ json_t *calib_sample_pose_json(const calib_sample_pose_t *ps)
         json_object_set_new(e, "value", json_real(ps->p[k]));
         json_object_set_new(e, "std", ps->fitted ? json_real(ps->sd[k]) : json_null());
         json_object_set_new(e, "difference", json_real(ps->p[k] - ps->nominal[k]));
-        json_object_set_new(e, "prior_std", json_real(ps->prior_sd[k]));
+        json_object_set_new(e, "prior_std", ps->tried ? json_real(ps->prior_sd[k]) : json_null());
         json_array_append_new(pa, e);
     }
     json_object_set_new(j, "parameters", pa);
@@ -552,9 +596,10 @@ json_t *calib_sample_pose_json(const calib_sample_pose_t *ps)
     json_object_set_new(j, "at_prior_edge", json_boolean(ps->at_prior_edge));
     json_object_set_new(j, "note", json_string(ps->note));
     json_object_set_new(j, "convention",
-                        json_string("x = Rw (x0 + (dx, dy, 0)) + tw + (0, 0, dz): x0 the sample's scene, Rw and tw its "
-                                    "wedge's pose of tilt_deg about the hinge at tilt_azimuth_deg; dx, dy in the "
-                                    "wedge's face, dz along the rig's z; std from the fit's covariance (residuals "
-                                    "scaled by their RMS), the nominal wedge pose the prior (prior_std)"));
+                        json_string("x = Rw (Rz(turn) (x0 - c) + c + (dx, dy, 0)) + tw + (0, 0, dz): x0 the sample's "
+                                    "scene, c the middle of its bounding box in x and y, Rw and tw its wedge's pose "
+                                    "of tilt_deg about the hinge at tilt_azimuth_deg; dx, dy in the wedge's face, dz "
+                                    "along the rig's z; std from the fit's covariance (residuals scaled by their "
+                                    "RMS), the nominal wedge pose the prior (prior_std)"));
     return j;
 }
