@@ -475,15 +475,16 @@ static void fit_rounds(pose_fit_t *F, calib_sample_pose_t *out, int min_samples,
         }
         F->sigma_px = fmax(rms, 0.02);
         double prev = rms;
+        int nused = F->nuse;   // solve drops the outliers after it
         if (!solve(F, p, out->nominal, out->prior_sd, r == 2 ? out->cov : NULL, &rms)) {
             snprintf(why, wn, "the fit failed (%s)", model_last_error());
             return;
         }
-        out->nsamples = F->nuse;
+        out->nsamples = nused;
         out->nangles = na;
         if (verbose)
             fprintf(stderr, "  sample pose: reach %g px: %d edge samples at %d angles, RMS %.3f px (weight %.3f); "
-                    "tilt %.3f az %.3f dx %.3f dy %.3f dz %.3f turn %.3f\n", reach[r], F->nuse, na, rms, prev, p[0],
+                    "tilt %.3f az %.3f dx %.3f dy %.3f dz %.3f turn %.3f\n", reach[r], nused, na, rms, prev, p[0],
                     p[1], p[2], p[3], p[4], p[5]);
     }
     memcpy(out->p, p, sizeof p);
