@@ -147,7 +147,8 @@ static void check_pose(json_t *doc, const double truth[6])
 // operator step): the fitted pose holds
 // the truth within 3 std with std < 0.3 deg / 0.5 mm, and the material fitted
 // through it is closer to the truth's GGX (kd 0.35, alpha 0.05, ks 0.6) than
-// through the nominal pose.
+// through the nominal pose. With a prior tighter than the placement (0.3 deg)
+// the fit is warned of as at the prior's edge.
 TEST_LONG(calib_sample_pose_placed_off)
 {
     const char *tf = fx_truth_variant("virtual-truth.ini", "truth.ini", NULL,
@@ -180,6 +181,16 @@ TEST_LONG(calib_sample_pose_placed_off)
         check_pose(df, t);
         CHECK(!strcmp(json_string_value(json_object_get(json_object_get(entry(df), "sample_pose"), "mode")), "fit"));
     }
+    // a fixture's tolerance tighter than the placement (0.3 deg for 1.5): warned of
+    char *scene = src_file("examples/samples/coupon_glossy_plastic.d3d");
+    rc = test_refl_run(300, &out, &err, "fit", "material", s, "--calib", cal, "--scene", scene, "--model", "ggx",
+                       "--pose-sigma-deg", "0.3", "-o", test_path("pt.json"), NULL);
+    CHECK_MSG(rc == 0, "%s", err);
+    CHECK_CONTAINS(out, "warning: sample pose: the fitted pose is at the edge of the fixture's tolerance");
+    CHECK_CONTAINS(err, "the fitted pose is at the edge of the fixture's tolerance");
+    g_free(scene);
+    g_free(out);
+    g_free(err);
     rc = fit(s, cal, "nominal", "pn.json", &out, &err, &dn);
     CHECK_MSG(rc == 0 && dn, "%s", err);
     CHECK_CONTAINS(out, "the plan's nominal wedge (tilt 40 deg");
