@@ -104,6 +104,7 @@ CALIB_SRC := \
     calib/capture.c \
     calib/calset.c \
     calib/observe.c \
+    calib/sample_pose.c \
     calib/geometry.c \
     calib/geometry_diff.c \
     calib/lamps.c \
@@ -182,6 +183,7 @@ TEST_SRC := \
     tests/test_calib_gain.c \
     tests/test_calib_gain_emva.c \
     tests/test_calib_white.c \
+    tests/test_calib_sample_pose.c \
     tests/test_calib_geometry.c \
     tests/test_calib_lamps.c \
     tests/test_calib_export.c \

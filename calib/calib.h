@@ -147,12 +147,72 @@ bool   calib_drift_measure(const rig_session_t *s, const rig_plan_t *p, const ca
 double calib_drift_factor(const calib_drift_t *d, int lamp, double t_s);
 void   calib_drift_free(calib_drift_t *d);
 
+// ---------------------------------------------------------------------------
+// The sample's pose fitted from its own frames (calib/sample_pose.c)
+//
+// A coupon on its wedge is placed by hand: the wedge's angle, the coupon not
+// flush, a millimetre off. Its pose is fitted from the session's frames: at
+// each turntable angle the frames lit by one lamp are summed, the coupon's
+// outline (model_edges_predict at the nominal pose: the edges with the
+// background on one side) is sampled every ~0.5 mm, and at each sample the
+// image's edge (the steepest fall from the coupon to the background along the
+// edge's normal) is found; least squares (model/lsq.h) of those distances over
+// the pose, with the nominal wedge pose as a Gaussian prior, search and fit
+// repeated three times (8, 3, 2 px). The pose's parameters p[6]:
+//   tilt_deg, tilt_azimuth_deg  the wedge (model_scene_wedge_pose: the normal)
+//   dx_mm, dy_mm                the in-plane offset, in the sample's own frame
+//                               (the wedge's face) before the wedge's rotation
+//   dz_mm                       the height, along the rig's z
+//   turn_deg                    a turn about the sample's own z through its
+//                               centre (the middle of its bounding box in x, y)
+// x = Rw (Rz(turn) (x0 - c) + c + (dx, dy, 0)) + tw + (0, 0, dz) with Rw, tw
+// the wedge's pose of tilt and azimuth; the nominal: the plan's wedge, 0, 0,
+// 0, 0. The covariance is (J^T J)^-1 with the residuals scaled by their RMS (px).
+typedef struct {
+    double sigma_deg;     // the prior's std of tilt, azimuth and turn (default 1 deg: the fixture's)
+    double sigma_mm;      // of the offsets and the height (default 2 mm)
+    int    min_samples;   // fewer edge samples found: the nominal is kept (default 60)
+    bool   verbose;
+} calib_sample_pose_options_t;
+
+typedef struct {
+    bool   tried;          // a fit was asked for
+    bool   fitted;         // p is the fit's (false: the nominal is kept; note says why)
+    bool   at_prior_edge;  // a parameter ended more than 2.5 prior std from the nominal (warning)
+    double nominal[6];     // the plan's: tilt, azimuth, 0, 0, 0, 0
+    double p[6], sd[6];    // the pose used and its std (prior std when not fitted)
+    double cov[36];
+    double normal[3];      // the sample's +z in the rig frame at angle 0 (the pose used)
+    double prior_sd[6];
+    int    nsamples, nangles;   // edge samples (and angles) that entered the fit
+    double rms_px;         // their residual RMS
+    char   note[600];      // why the nominal was kept, or the warning; "" when none
+} calib_sample_pose_t;
+
+calib_sample_pose_options_t calib_sample_pose_defaults(void);
+// The pose's rigid move of the sample's scene (its own frame, at angle 0
+// before any wedge): x = R x0 + t.
+void calib_sample_pose_Rt(const model_scene_t *scene, const double p[6], double R[9], double t[3]);
+// Fit the pose of scene (unposed) in session s (its plan p) through cal's
+// camera. Weak or missing edges, a failed solve or a singular covariance
+// keep the nominal (out->fitted false, out->note why): true. false + message
+// (kept) only for a frame that cannot be read.
+bool calib_sample_pose_fit(const rig_session_t *s, const rig_plan_t *p, const calib_set_t *cal,
+                           const model_scene_t *scene, const calib_sample_pose_options_t *o,
+                           calib_sample_pose_t *out);
+// One line (and the note on a second), for a command's output.
+void    calib_sample_pose_print(FILE *f, const calib_sample_pose_t *ps);
+// The pose as JSON: mode, parameters with nominal, value, std and
+// difference, the normal, the edge samples, the note.
+json_t *calib_sample_pose_json(const calib_sample_pose_t *ps);
+
 typedef struct {
     int        n, cap;
     calib_obs_t *o;
     calib_drift_t drift;         // the session's lamp drift (nvisits 0: none measured)
     int        frames_used, frames_skipped;
     char       sample[64], material[64];
+    calib_sample_pose_t pose;    // the sample's pose used (pose.tried: fitted from the frames, else the nominal)
 } calib_obs_set_t;
 
 typedef struct {
@@ -163,6 +223,9 @@ typedef struct {
     int         window;         // window size, pixels (default 5)
     int         step;           // grid step between windows, pixels (default 8)
     double      min_signal_dn;  // windows below this (after dark) are dropped (default 20)
+    bool        fit_pose;       // the sample's pose fitted from the frames (calib_sample_pose_fit); false
+                                // (default): the plan's nominal wedge
+    calib_sample_pose_options_t pose;   // its options (calib_sample_pose_defaults)
     bool        verbose;
 } calib_observe_options_t;
 

@@ -18,7 +18,8 @@
 
 calib_observe_options_t calib_observe_defaults(void)
 {
-    return (calib_observe_options_t){ .window = 5, .step = 8, .min_signal_dn = 20 };
+    return (calib_observe_options_t){ .window = 5, .step = 8, .min_signal_dn = 20,
+                                      .pose = calib_sample_pose_defaults() };
 }
 
 void calib_obs_free(calib_obs_set_t *s)
@@ -44,11 +45,14 @@ static bool obs_add(calib_obs_set_t *s, const calib_obs_t *o)
 
 // The sample's scene (opt->scene_path: a capture plan's [sample] names no
 // scene, and the virtual rig's truth is no default for a measurement), posed
-// on the plan's wedge, and the index of the material to observe (named in
+// on the plan's wedge or (o->fit_pose) at its pose fitted from the session's
+// frames (out->pose), and the index of the material to observe (named in
 // out->material, or the scene's only one).
-static model_scene_t *observe_scene(const rig_session_t *s, const rig_plan_t *plan, const char *scene_path,
-                                    double unit_mm, calib_obs_set_t *out, int *mat)
+static model_scene_t *observe_scene(const rig_session_t *s, const rig_plan_t *plan, const calib_set_t *cal,
+                                    const calib_observe_options_t *o, calib_obs_set_t *out, int *mat)
 {
+    const char *scene_path = o->scene_path;
+    double unit_mm = o->scene_unit_mm;
     if (!scene_path) {
         model_error_set(s->dir, 0, "the session records no scene of its sample %s (a capture plan's [sample] names "
                         "none): give the sample's scene (--scene FILE) and its material (--material NAME)",
@@ -71,9 +75,15 @@ static model_scene_t *observe_scene(const rig_session_t *s, const rig_plan_t *pl
                         scene->nmaterials);
     }
     model_scene_t *posed = NULL;
-    if (*mat >= 0) {
+    out->pose = (calib_sample_pose_t){ .nominal = { plan->tilt_deg, plan->tilt_azimuth_deg },
+                                       .p = { plan->tilt_deg, plan->tilt_azimuth_deg } };
+    bool ok = *mat >= 0 && (!o->fit_pose || calib_sample_pose_fit(s, plan, cal, scene, &o->pose, &out->pose));
+    if (ok && out->pose.tried && (!out->pose.fitted || out->pose.at_prior_edge))   // a warning, said at once
+        fprintf(stderr, "refl: %s: sample pose: %s\n", s->dir, out->pose.note);
+    if (ok) {
         double R[9], t[3];
-        model_scene_wedge_pose(scene, plan->tilt_deg, plan->tilt_azimuth_deg, R, t);
+        calib_sample_pose_Rt(scene, out->pose.p, R, t);
+        for (int r = 0; r < 3; r++) out->pose.normal[r] = R[3 * r + 2];
         posed = model_scene_transformed(scene, R, t);
     }
     model_scene_free(scene);
@@ -376,7 +386,7 @@ bool calib_observe(const char *session_dir, const calib_set_t *cal, const calib_
     if (!(plan = rig_plan_parse(s->plan_text, strlen(s->plan_text), session_dir))) goto done;
     snprintf(out->sample, sizeof out->sample, "%s", plan->sample);
     if (o.material) snprintf(out->material, sizeof out->material, "%s", o.material);
-    if (!(scene = observe_scene(s, plan, o.scene_path, o.scene_unit_mm, out, &ob.mat))) goto done;
+    if (!(scene = observe_scene(s, plan, cal, &o, out, &ob.mat))) goto done;
     if (!calib_drift_measure(s, plan, cal, &out->drift)) goto done;
     for (int l = 0; o.verbose && l < out->drift.nlamps; l++)
         if (out->drift.nvisits[l] > 1) {

@@ -240,6 +240,7 @@ static void print_material(const fit_material_opts_t *o, const fit_material_resu
            r->frames_used, r->frames_skipped);
     for (int k = 0; r->ncameras > 1 && k < r->ncameras; k++)
         printf("  camera %s: %d observations\n", r->cameras[k], r->nobs_camera[k]);
+    calib_sample_pose_print(stdout, &r->pose);
     if (r->have_gain) {
         printf("  expected residual RMS from the sensor's noise alone: %.4g 1/sr\n", r->noise_rms);
         if (r->lin.kind == MODEL_LIN_MONOTONE)
@@ -273,6 +274,7 @@ static void print_material(const fit_material_opts_t *o, const fit_material_resu
 int fit_cmd_material(int argc, char **argv)
 {
     fit_material_opts_t o = fit_material_defaults();
+    const char *pose_mode = "fit";
     model_opt_t opts[] = {
         MODEL_OPT_STRING("--calib", "DIR", "the calibrations: camera.cameramodel, lamps.json, white.json, optionally "
                          "gain.json and its maps (DIR or DIR/geometry, DIR/lamps, DIR/white, DIR/gain)", &o.calib, true),
@@ -297,6 +299,11 @@ int fit_cmd_material(int argc, char **argv)
                         false),
         MODEL_OPT_VALUE("--window", "N", "windows of N x N pixels (default 5)", false),
         MODEL_OPT_VALUE("--step", "N", "on a grid of N pixels (default 8)", false),
+        MODEL_OPT_STRING("--sample-pose", "fit|nominal", "the sample's pose: fitted from its outline in the frames "
+                         "with the plan's wedge as prior (default fit), or the plan's nominal wedge", &pose_mode, false),
+        MODEL_OPT_VALUE("--pose-sigma-deg", "DEG", "the pose prior's std of the wedge's tilt and azimuth (default 1)",
+                        false),
+        MODEL_OPT_VALUE("--pose-sigma-mm", "MM", "its std of the offset and height (default 2)", false),
         MODEL_OPT_STRING("--report", "DIR", "write an HTML report there", &o.report, false),
         MODEL_OPT_VALUE("--albedo", "A", "(an option of refl calib white)", false),
         MODEL_OPT_FLAG("-v", "--verbose", "print every angle", &o.verbose),
@@ -321,7 +328,12 @@ int fit_cmd_material(int argc, char **argv)
                  "together with the parameters; the priors then hold the mean material and the factors' spread.\n"
                  "Observations are windows of N x N pixels (--window, default 5) on a grid of N pixels (--step, 8).\n"
                  "A session of several cameras: every camera's frames in one fit, each camera's through its own\n"
-                 "calibrations in DIR (refl calib gain / white / geometry of that camera); --camera NAME takes one.",
+                 "calibrations in DIR (refl calib gain / white / geometry of that camera); --camera NAME takes one.\n"
+                 "The sample's pose (its wedge's tilt and hinge azimuth, its offset on the wedge's face and height) is\n"
+                 "fitted first from its outline in the frames (each angle's lamps summed; --sample-pose fit, the\n"
+                 "default), the plan's nominal wedge the prior (std --pose-sigma-deg 1, --pose-sigma-mm 2); printed\n"
+                 "with its std and difference from the nominal and written to the priors (sample_pose). Edges too weak\n"
+                 "keep the nominal, said so; --sample-pose nominal takes the plan's wedge as it is.",
     };
     int rc = model_cli_parse(&cli, argc, argv);
     if (rc != MODEL_CLI_OK) return rc;
@@ -329,8 +341,13 @@ int fit_cmd_material(int argc, char **argv)
     if ((rc = calib_cli_window_step(&cli, &o.window, &o.step)) != MODEL_CLI_OK) return rc;
     if ((rc = model_cli_units(&cli, &o.scene_unit_mm))) return rc;
     if (number_opt(&cli, "--k-sigma", false, &o.k_sigma) || number_opt(&cli, "--systematic", true, &o.sys_rel) ||
-        number_opt(&cli, "--albedo-cells", true, &o.cell_mm) || cv_opts(&cli, &o.cv_folds, &o.cv_seed))
+        number_opt(&cli, "--albedo-cells", true, &o.cell_mm) || cv_opts(&cli, &o.cv_folds, &o.cv_seed) ||
+        number_opt(&cli, "--pose-sigma-deg", false, &o.pose_sigma_deg) ||
+        number_opt(&cli, "--pose-sigma-mm", false, &o.pose_sigma_mm))
         return MODEL_CLI_USAGE;
+    if (strcmp(pose_mode, "fit") && strcmp(pose_mode, "nominal"))
+        return model_cli_error(&cli, "--sample-pose: fit or nominal, not '%s'", pose_mode);
+    o.pose_nominal = !strcmp(pose_mode, "nominal");
     model_brdf_t models[MODEL_BRDF_COUNT];
     int nm;
     if (!fit_brdf_model_list(o.model, models, &nm)) return model_cli_error(&cli, "--model: unknown model %s", o.model);

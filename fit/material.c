@@ -428,7 +428,10 @@ static bool material_samples(const fit_material_opts_t *o, calib_set_t **cal, ca
     co.scene_path = o->scene;
     co.scene_unit_mm = o->scene_unit_mm;
     co.material = o->material;
-    co.verbose = o->verbose;
+    co.verbose = co.pose.verbose = o->verbose;
+    co.fit_pose = !o->pose_nominal;
+    if (o->pose_sigma_deg > 0) co.pose.sigma_deg = o->pose_sigma_deg;
+    if (o->pose_sigma_mm > 0) co.pose.sigma_mm = o->pose_sigma_mm;
     if (o->window > 0) co.window = o->window;
     if (o->step > 0) co.step = o->step;
     memset(obs, 0, sizeof *obs);
@@ -453,6 +456,7 @@ static bool material_samples(const fit_material_opts_t *o, calib_set_t **cal, ca
             r->nobs_camera[k] = ob.n;
             r->ncameras = k + 1;
             all_gain &= ck->gain_dn_per_e > 0;
+            if (k == 0) r->pose = ob.pose;
             ok = obs_append(obs, &ob);
         }
         calib_obs_free(&ob);
@@ -553,6 +557,7 @@ static json_t *material_priors(const fit_material_opts_t *o, const calib_set_t *
     json_object_set_new(e, "model_choice", fit_brdf_choice_json(m));
     json_object_set_new(e, "session", json_string(o->session));
     json_object_set_new(e, "sample", json_string(r->sample));
+    json_object_set_new(e, "sample_pose", calib_sample_pose_json(&r->pose));
     json_object_set_new(e, "noise_rms_expected", isfinite(r->noise_rms) ? json_real(r->noise_rms) : json_null());
     // the residual per degree of freedom (the cells' factors take one each)
     double dof = (double)best->n - best->nfree - r->n_cells;

@@ -13,6 +13,7 @@
 #include <jansson.h>
 #include <stdbool.h>
 
+#include "calib/calib.h"
 #include "fit/fit.h"
 #include "model/model.h"
 
@@ -39,6 +40,9 @@ typedef struct {
     uint64_t    cv_seed;    // the folds' shuffle (default 1)
     int         window;     // observation windows, pixels (0: calib_observe's default)
     int         step;       // their grid step, pixels (0: the default)
+    bool        pose_nominal;   // the plan's nominal wedge pose; false (default): the sample's pose fitted
+                                // from its frames (calib_sample_pose_fit), the nominal its prior
+    double      pose_sigma_deg, pose_sigma_mm;   // that prior's std (defaults 1 deg, 2 mm)
     bool        verbose;    // calib_observe prints each angle on stderr
     int         argc;       // the command line for the provenance (argv[0] "refl"; may be 0)
     char      **argv;
@@ -70,6 +74,7 @@ typedef struct {
     fit_brdf_models_t models;           // the final fits (a copy of first without cells)
     double            rms_over_noise;   // residual per degree of freedom over noise_rms (NAN: unknown)
     bool              written;          // the priors file is written (its material: o->name, else material[])
+    calib_sample_pose_t pose;           // the sample's pose used (the first camera's; README "refl fit material")
 } fit_material_result_t;
 
 // The material fit (`refl fit material`): observations of o->session through
