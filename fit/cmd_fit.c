@@ -76,8 +76,8 @@ static held_out_t held_out(const fit_brdf_result_t *r)
 
 static int cmd_brdf(int argc, char **argv)
 {
-    const char *out = NULL, *model = "all", *name = NULL, *weights = "solid-angle", *channel = "luma";
-    double k_sigma = 3, noise = 0, sys_rel = 0;
+    const char *out = NULL, *model = "all", *name = NULL, *weights = "solid-angle", *channel = "luma", *loss = "l2";
+    double k_sigma = 3, noise = 0, sys_rel = 0, loss_scale = 2;
     model_opt_t opts[] = {
         MODEL_OPT_STRING("-o", "PRIORS.json", "the priors file to write", &out, true),
         MODEL_OPT_STRING("--model", "M", MODEL_NAMES " (default all: chosen by cross-validation)", &model, false),
@@ -93,6 +93,10 @@ static int cmd_brdf(int argc, char **argv)
                          &weights, false),
         MODEL_OPT_STRING("--channel", "luma|r|g|b", "MERL and RGL colour: Rec. 709 luma (0.2126 R + 0.7152 G + "
                          "0.0722 B; default; spectral RGL: CIE Y) or one channel", &channel, false),
+        MODEL_OPT_STRING("--loss", "l2|huber|cauchy", "least squares (default) or a robust loss on each sample's "
+                         "weighted residual", &loss, false),
+        MODEL_OPT_DOUBLE("--loss-scale", "S", "where the robust loss starts, in units of the residuals' robust std "
+                         "(1.4826 median |r| of a least-squares fit; default 2)", &loss_scale, 0.01, 1e6),
     };
     model_cli_t cli = {
         .cmd = "fit brdf", .synopsis = "FILE", .opts = opts, .nopts = MODEL_NOPTS(opts),
@@ -149,6 +153,8 @@ static int cmd_brdf(int argc, char **argv)
     }
     fit_brdf_options_t o = fit_brdf_defaults();
     o.noise_sigma = noise;
+    if (!fit_loss_parse(loss, &o.loss)) return model_cli_error(&cli, "--loss: l2, huber or cauchy, not '%s'", loss);
+    o.loss_scale = loss_scale;
     if (cv_opts(&cli, &o.cv_folds, &o.cv_seed)) {
         fit_samples_free(s);
         return MODEL_CLI_USAGE;
@@ -256,8 +262,13 @@ static void print_material(const fit_material_opts_t *o, const fit_material_resu
                r->cell_iterations, model_brdf_name(r->cells_model));
         print_models(&r->models);
     }
+    if (r->observed)
+        printf("  %s%s\n", r->noise_weighted ? "weighted by each sample's noise (1/sigma^2 from the gain calibration)"
+                                              : "weights uniform (no gain calibration, or --weights uniform)",
+               o->loss != LSQ_LOSS_NONE ? (o->loss == LSQ_LOSS_HUBER ? "; Huber loss" : "; Cauchy loss") : "");
     if (isfinite(r->rms_over_noise))
-        printf("  residual per degree of freedom over the noise: %.3f\n", r->rms_over_noise);
+        printf("  residual per degree of freedom over the noise: %.3f%s\n", r->rms_over_noise,
+               r->noise_weighted ? " (sqrt(chi^2 / dof))" : "");
     if (r->written) {
         const fit_brdf_models_t *m = &r->models;
         if (m->nres < 2)
@@ -273,6 +284,7 @@ static void print_material(const fit_material_opts_t *o, const fit_material_resu
 int fit_cmd_material(int argc, char **argv)
 {
     fit_material_opts_t o = fit_material_defaults();
+    const char *weights = "noise", *loss = "l2";
     model_opt_t opts[] = {
         MODEL_OPT_STRING("--calib", "DIR", "the calibrations: camera.cameramodel, lamps.json, white.json, optionally "
                          "gain.json and its maps (DIR or DIR/geometry, DIR/lamps, DIR/white, DIR/gain)", &o.calib, true),
@@ -298,6 +310,12 @@ int fit_cmd_material(int argc, char **argv)
         MODEL_OPT_VALUE("--window", "N", "windows of N x N pixels (default 5)", false),
         MODEL_OPT_VALUE("--step", "N", "on a grid of N pixels (default 8)", false),
         MODEL_OPT_STRING("--report", "DIR", "write an HTML report there", &o.report, false),
+        MODEL_OPT_STRING("--weights", "noise|uniform", "each sample weighted by 1/sigma^2 of its own noise from the "
+                         "gain calibration (default; uniform without one) or all alike", &weights, false),
+        MODEL_OPT_STRING("--loss", "l2|huber|cauchy", "least squares (default) or a robust loss on each sample's "
+                         "residual in units of its sigma", &loss, false),
+        MODEL_OPT_DOUBLE("--loss-scale", "S", "where the robust loss starts, in sigma (default 2)", &o.loss_scale,
+                         0.01, 1e6),
         MODEL_OPT_VALUE("--albedo", "A", "(an option of refl calib white)", false),
         MODEL_OPT_FLAG("-v", "--verbose", "print every angle", &o.verbose),
     };
@@ -321,7 +339,12 @@ int fit_cmd_material(int argc, char **argv)
                  "together with the parameters; the priors then hold the mean material and the factors' spread.\n"
                  "Observations are windows of N x N pixels (--window, default 5) on a grid of N pixels (--step, 8).\n"
                  "A session of several cameras: every camera's frames in one fit, each camera's through its own\n"
-                 "calibrations in DIR (refl calib gain / white / geometry of that camera); --camera NAME takes one.",
+                 "calibrations in DIR (refl calib gain / white / geometry of that camera); --camera NAME takes one.\n"
+                 "Each sample is weighted by its own noise (--weights noise, the default): sigma of R from the gain\n"
+                 "calibration (K, read noise, quantisation at its linearised signal, exposure and gain, carried to R\n"
+                 "like the sample), the fit minimising sum ((model - R)/sigma)^2; rms_over_noise is then\n"
+                 "sqrt(chi^2 / dof) (about 1 when the model fits to the noise). --loss huber|cauchy down-weights\n"
+                 "samples beyond --loss-scale sigma (outliers: a speck, a reflection of the fixture).",
     };
     int rc = model_cli_parse(&cli, argc, argv);
     if (rc != MODEL_CLI_OK) return rc;
@@ -331,6 +354,10 @@ int fit_cmd_material(int argc, char **argv)
     if (number_opt(&cli, "--k-sigma", false, &o.k_sigma) || number_opt(&cli, "--systematic", true, &o.sys_rel) ||
         number_opt(&cli, "--albedo-cells", true, &o.cell_mm) || cv_opts(&cli, &o.cv_folds, &o.cv_seed))
         return MODEL_CLI_USAGE;
+    if (strcmp(weights, "noise") && strcmp(weights, "uniform"))
+        return model_cli_error(&cli, "--weights: noise or uniform, not '%s'", weights);
+    o.noise_weights = !strcmp(weights, "noise");
+    if (!fit_loss_parse(loss, &o.loss)) return model_cli_error(&cli, "--loss: l2, huber or cauchy, not '%s'", loss);
     model_brdf_t models[MODEL_BRDF_COUNT];
     int nm;
     if (!fit_brdf_model_list(o.model, models, &nm)) return model_cli_error(&cli, "--model: unknown model %s", o.model);

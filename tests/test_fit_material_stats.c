@@ -8,6 +8,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include <glib.h>
 #include <jansson.h>
 
 #include "fit/fit.h"
@@ -75,5 +76,124 @@ TEST(fit_ashikhmin_shirley_no_plateau_on_matte)
     double sharp[3] = { 0.5, 1e-4, 2000 };
     CHECK(fit_brdf_from(s, MODEL_BRDF_ASHIKHMIN_SHIRLEY, NULL, sharp, &t));
     CHECK_MSG(t.rms > 1.001 * r.rms && t.p[1] < 1e-3, "plateau rms %.5g vs %.5g", t.rms, r.rms);
+    fit_samples_free(s);
+}
+
+// Hall samples (kd 0.12, ks 0.05, ns 40) as a bracketed capture: every other
+// sample from a short exposure, noisier by 10 (sigma 0.01 against 0.001 of R).
+static const double hall_t[] = { 0.12, 0.05, 40 };
+
+static fit_samples_t *bracketed(uint64_t seed, bool weighted)
+{
+    fit_samples_t *s = grid(MODEL_BRDF_HALL, hall_t, 5, 80);
+    model_rng_t rng = model_rng(seed, 2);
+    for (int i = 0; i < s->n; i++) {
+        double sig = i % 2 ? 0.01 : 0.001;
+        s->R[i] += sig * model_rng_gauss(&rng);
+        s->w[i] = weighted ? 1 / (sig * sig) : 1;
+    }
+    s->noise_weighted = weighted;
+    return s;
+}
+
+static double rel_err(const fit_brdf_result_t *r)
+{
+    double e = 0;
+    for (int j = 0; j < 3; j++) e += pow((r->p[j] - hall_t[j]) / hall_t[j], 2);
+    return sqrt(e);
+}
+
+// Weighted by each sample's noise, the parameters come out nearer the truth
+// than unweighted (over several noise draws), the weighted residuals are in
+// sigma (chi^2 / dof about 1 on pure noise) and the stated std covers the error.
+TEST(fit_noise_weights_bracketed)
+{
+    double ew = 0, eu = 0;
+    for (int k = 0; k < 6; k++) {
+        fit_samples_t *sw = bracketed(40 + k, true), *su = bracketed(40 + k, false);
+        fit_brdf_result_t rw, ru;
+        CHECK(fit_brdf(sw, MODEL_BRDF_HALL, NULL, &rw));
+        CHECK(fit_brdf(su, MODEL_BRDF_HALL, NULL, &ru));
+        ew += rel_err(&rw) / 6;
+        eu += rel_err(&ru) / 6;
+        CHECK_MSG(fabs(rw.chi2_dof - 1) < 0.06, "chi2/dof %.4f", rw.chi2_dof);
+        CHECK(isnan(ru.chi2_dof));
+        for (int j = 0; j < 3; j++)
+            CHECK_MSG(fabs(rw.p[j] - hall_t[j]) < 4 * rw.std[j], "%s %.6g +- %.3g", model_brdf_param_name(MODEL_BRDF_HALL, j),
+                      rw.p[j], rw.std[j]);
+        fit_samples_free(sw);
+        fit_samples_free(su);
+    }
+    CHECK_MSG(ew < 0.7 * eu, "weighted error %.4g, unweighted %.4g", ew, eu);
+}
+
+// Outliers in 5 % of the samples (a speck, a fixture's reflection: R + 0.3):
+// least squares is pulled off, Huber and Cauchy with scale 2 sigma recover.
+TEST(fit_robust_loss_outliers)
+{
+    fit_samples_t *s = grid(MODEL_BRDF_HALL, hall_t, 5, 80);
+    model_rng_t rng = model_rng(77, 2);
+    int nout = 0;
+    for (int i = 0; i < s->n; i++) {
+        s->R[i] += 0.002 * model_rng_gauss(&rng);
+        s->w[i] = 1 / (0.002 * 0.002);
+        if (model_rng_uniform(&rng) < 0.05) {
+            s->R[i] += 0.3;
+            nout++;
+        }
+    }
+    s->noise_weighted = true;
+    double err[3];
+    const lsq_loss_t losses[] = { LSQ_LOSS_NONE, LSQ_LOSS_HUBER, LSQ_LOSS_CAUCHY };
+    for (int k = 0; k < 3; k++) {
+        fit_brdf_options_t o = fit_brdf_defaults();
+        o.loss = losses[k];
+        fit_brdf_result_t r;
+        CHECK_MSG(fit_brdf(s, MODEL_BRDF_HALL, &o, &r), "%s", model_last_error());
+        err[k] = rel_err(&r);
+        printf("%s: error %.4g\n", fit_loss_name(losses[k]), err[k]);
+        if (k > 0) {
+            CHECK_MSG(err[k] < 0.05, "%s: relative error %.4g", fit_loss_name(losses[k]), err[k]);
+            CHECK_NEAR(r.loss_scale, 2, 1e-12);   // 2 sigma of noise-weighted samples
+            // the planted ones and the Gaussian's 4.6 % beyond 2 sigma
+            CHECK_MSG(r.n_downweighted >= nout && r.n_downweighted < nout + 0.06 * s->n,
+                      "%d beyond the scale, %d planted of %d", r.n_downweighted, nout, s->n);
+        }
+    }
+    CHECK_MSG(err[0] > 0.1, "least squares error %.4g: the outliers should pull it", err[0]);
+    fit_samples_free(s);
+}
+
+// ---------------------------------------------------------------------------
+// The priors' covariance
+
+// The priors entry's "prior_covariance": its diagonal is each std^2, the
+// amplitudes (kd, ks) share the photometric scale fully, the shape parameter
+// (ns) gets its systematic part alone.
+TEST(fit_priors_covariance_systematic)
+{
+    const double hall[] = { 0.12, 0.05, 40 };
+    fit_samples_t *s = grid(MODEL_BRDF_HALL, hall, 5, 80);
+    model_rng_t rng = model_rng(9, 2);
+    for (int i = 0; i < s->n; i++) s->R[i] += 0.002 * model_rng_gauss(&rng);
+    fit_brdf_result_t r;
+    CHECK(fit_brdf(s, MODEL_BRDF_HALL, NULL, &r));
+    json_t *e = fit_priors_material("m", &r, NULL, 0, 3, 0.03);
+    json_t *pc = json_object_get(e, "prior_covariance"), *mat = json_object_get(pc, "matrix");
+    CHECK(!strcmp(json_string_value(json_array_get(json_object_get(pc, "parameters"), 2)), "ns"));
+    CHECK_CONTAINS(json_string_value(json_object_get(pc, "model")), "fully correlated");
+    double C[3][3];
+    for (int a = 0; a < 3; a++)
+        for (int b = 0; b < 3; b++) C[a][b] = json_number_value(json_array_get(json_array_get(mat, a), b));
+    json_t *ps = json_object_get(e, "parameters");
+    for (int a = 0; a < 3; a++) {
+        double sd = json_number_value(json_object_get(json_array_get(ps, a), "std"));
+        CHECK_REL(C[a][a], sd * sd, 1e-12);
+        for (int b = 0; b < 3; b++) CHECK_NEAR(C[a][b], C[b][a], 1e-18);
+    }
+    // kd-ks: the statistical covariance plus 0.03^2 kd ks; kd-ns: the statistical alone
+    CHECK_REL(C[0][1], r.cov[1] + 0.03 * 0.03 * r.p[0] * r.p[1], 1e-12);
+    CHECK_REL(C[0][2], r.cov[2], 1e-12);
+    json_decref(e);
     fit_samples_free(s);
 }
