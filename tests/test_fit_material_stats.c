@@ -165,7 +165,10 @@ TEST(fit_robust_loss_outliers)
 }
 
 // ---------------------------------------------------------------------------
-// The priors' covariance
+// The priors' covariance and the verification's multivariate prior
+
+#include "fit/verify.h"
+#include "fit/verify_lab.h"
 
 // The priors entry's "prior_covariance": its diagonal is each std^2, the
 // amplitudes (kd, ks) share the photometric scale fully, the shape parameter
@@ -196,4 +199,145 @@ TEST(fit_priors_covariance_systematic)
     CHECK_REL(C[0][2], r.cov[2], 1e-12);
     json_decref(e);
     fit_samples_free(s);
+}
+
+// verify_mvprior: |r|^2 is the Mahalanobis distance (against a direct
+// solve), the analytic Jacobian matches central differences, a held
+// parameter is left out, and the parser reads the matrix and refuses a bad one.
+TEST(verify_mvprior_residual_and_parser)
+{
+    verify_prior_t P = { .model = MODEL_BRDF_GGX, .np = 4, .has_cov = true };
+    const double mean[4] = { 0.4, 0.3, 0.1, 0.5 }, sd[4] = { 0.02, 0.05, 0.01, 0.1 };
+    const double rho[4][4] = { { 1, 0.9, -0.3, 0.2 }, { 0.9, 1, -0.2, 0.1 }, { -0.3, -0.2, 1, 0 }, { 0.2, 0.1, 0, 1 } };
+    for (int a = 0; a < 4; a++) {
+        P.mean[a] = mean[a];
+        P.std[a] = sd[a];
+        for (int b = 0; b < 4; b++) P.cov[a * 4 + b] = rho[a][b] * sd[a] * sd[b];
+    }
+    bool use[4] = { true, true, true, false };   // F0 held
+    verify_mvprior_t mv;
+    CHECK(verify_mvprior_make(&P, use, &mv));
+    CHECK(mv.n == 3);
+    double x[4] = { 0.43, 0.25, 0.105, 0.9 }, r[3];
+    const double *px[] = { x };
+    CHECK(verify_mvprior_residual(&mv, px, r, NULL));
+    double A[9], d[3] = { x[0] - mean[0], x[1] - mean[1], x[2] - mean[2] }, y[3];
+    for (int a = 0; a < 3; a++)
+        for (int b = 0; b < 3; b++) A[a * 3 + b] = P.cov[a * 4 + b];
+    memcpy(y, d, sizeof y);
+    CHECK(model_solve_linear(A, y, 3));
+    CHECK_REL(r[0] * r[0] + r[1] * r[1] + r[2] * r[2], d[0] * y[0] + d[1] * y[1] + d[2] * y[2], 1e-10);
+    int sizes[] = { 4 };
+    double *blocks[] = { x }, err = 0;
+    CHECK(lsq_check_jacobian(verify_mvprior_residual, &mv, 3, 1, sizes, blocks, 1e-6, 1e-8, 1e-6, &err));
+    // not positive definite: refused (the caller keeps independent priors)
+    verify_prior_t Q = P;
+    Q.cov[1] = Q.cov[4] = 1.5 * sd[0] * sd[1];
+    CHECK(!verify_mvprior_make(&Q, use, &mv));
+    // the file: read back; a wrong parameter order refused naming the file
+    const char *good = "{\"format\":\"refl priors 1\",\"materials\":[{\"name\":\"m\",\"model\":\"lambert\","
+                       "\"parameters\":[{\"name\":\"kd\",\"mean\":0.1,\"std\":0.01}]},{\"name\":\"h\",\"model\":\"hall\","
+                       "\"parameters\":[{\"name\":\"kd\",\"mean\":0.1,\"std\":0.01},{\"name\":\"ks\",\"mean\":0.05,"
+                       "\"std\":0.01},{\"name\":\"ns\",\"mean\":40,\"std\":4}],\"prior_covariance\":{\"parameters\":"
+                       "[\"kd\",\"ks\",\"ns\"],\"matrix\":[[1e-4,5e-5,0],[5e-5,1e-4,0],[0,0,16]]}}]}";
+    verify_priors_t pr = { 0 };
+    CHECK_MSG(verify_priors_parse(&pr, good, strlen(good), "good.json"), "%s", model_last_error());
+    const verify_prior_t *m = verify_priors_find(&pr, "m"), *h = verify_priors_find(&pr, "h");
+    CHECK(m && !m->has_cov);   // an entry without one: independent std, as before
+    CHECK(h && h->has_cov && h->cov[1] == 5e-5 && h->cov[8] == 16);
+    verify_priors_free(&pr);
+    char *bad = g_strdup(good);
+    char *at = strstr(bad, "[\"kd\",\"ks\",\"ns\"]");
+    memcpy(at, "[\"ks\",\"kd\",\"ns\"]", 16);
+    bool q = model_error_quiet_thread(true);
+    CHECK(!verify_priors_parse(&pr, bad, strlen(bad), "bad.json"));
+    model_error_quiet_thread(q);
+    CHECK_CONTAINS(model_last_error(), "bad.json");
+    CHECK_CONTAINS(model_last_error(), "prior_covariance");
+    verify_priors_free(&pr);
+    g_free(bad);
+}
+
+// A verification on the virtual rig's T-stiffener whose plywood prior has ks
+// 50 % high (1 sigma, loose) and kd tight at the truth: the images pull ks
+// back near the truth; with the prior's covariance holding kd and ks
+// correlated (rho 0.9) kd is pulled along with it (down, by about
+// rho sd_kd / sd_ks times ks's move), where independent priors leave kd.
+TEST(verify_prior_pulled_along_correlation)
+{
+    static const double ang[2] = { 0, 180 };
+    char truth[4096];
+    snprintf(truth, sizeof truth, "%s/examples/virtual-truth.ini", test_srcdir());
+    verify_lab_t *L = verify_lab_open(truth, "t_stiffener", ang, 2, 6000, 0, false);
+    CHECK_MSG(L != NULL, "lab: %s", model_last_error());
+    if (!L) return;
+    int W = verify_lab_width(L), H = verify_lab_height(L);
+    float *img[2];
+    verify_image_t im[2];
+    for (int a = 0; a < 2; a++) {
+        img[a] = malloc((size_t)W * H * sizeof(float));
+        CHECK(verify_lab_image(L, a, 0xf, NULL, 1, 7 + a, img[a]));
+        im[a] = (verify_image_t){ .P = img[a], .W = W, .H = H, .angle_deg = ang[a], .lamps_on = 0xf,
+                                  .exposure_us = 6000 };
+        snprintf(im[a].name, sizeof im[a].name, "view%d", a);
+    }
+    const model_materials_t *mt = verify_lab_materials(L);
+    model_stiffener_t d0 = model_stiffener_default();
+    model_scene_t *sc = model_stiffener_scene(&d0, "t");
+    double ks_fit[2] = { NAN, NAN }, kd_fit[2] = { NAN, NAN }, kd0 = NAN, ks0 = NAN, sd_ks = NAN, sd_kd = NAN;
+    for (int c = 0; c < 2 && sc; c++) {
+        verify_priors_t pr = { 0 };
+        model_material_t ply = *model_materials_find(mt, "plywood");   // thesis_fit: ks, ns, kd
+        CHECK(verify_priors_add(&pr, &ply, 0.1, 1e-4, 3));
+        CHECK(verify_priors_add(&pr, model_materials_find(mt, "painted_steel"), 0.1, 1e-4, 3));
+        verify_prior_t *P = &pr.m[0];
+        kd0 = P->mean[2], ks0 = P->mean[0];
+        P->mean[0] = 1.5 * ks0;   // ks's prior 1 sigma high, loose: the images measure ks (to ~0.1 sigma)
+        P->std[0] = 0.5 * ks0;
+        P->lo[0] = 0, P->hi[0] = 4 * ks0;
+        P->std[2] = 0.03 * kd0;   // kd's tight (the images measure it to ~7 %): the prior holds it
+        sd_ks = P->std[0];
+        sd_kd = P->std[2];
+        if (c == 1) {
+            P->has_cov = true;
+            for (int a = 0; a < 3; a++)
+                for (int b = 0; b < 3; b++) P->cov[a * 3 + b] = a == b ? P->std[a] * P->std[a] : 0;
+            P->cov[0 * 3 + 2] = P->cov[2 * 3 + 0] = 0.9 * P->std[0] * P->std[2];
+        }
+        const model_material_t *mats[8];
+        const verify_prior_t *pp[8];
+        model_material_t mm[8];
+        CHECK(verify_match_priors(sc, &pr, pp));
+        for (int k = 0; k < sc->nmaterials; k++) {
+            memset(&mm[k], 0, sizeof mm[k]);
+            mm[k].model = pp[k]->model;
+            memcpy(mm[k].p, pp[k]->mean, sizeof mm[k].p);
+            mats[k] = &mm[k];
+        }
+        verify_options_t opt = verify_defaults();
+        verify_view_t *views[2];
+        for (int a = 0; a < 2; a++) views[a] = verify_view_new(sc, verify_lab_camera(L), ang[a], verify_lab_lamps(L), mats, &opt);
+        verify_result_t r;
+        bool ok = verify_run(sc, &pr, verify_lab_camera(L), 1, verify_lab_lamps(L), verify_lab_A(L), im, 2, views, &opt, &r);
+        CHECK_MSG(ok, "verify_run: %s", model_last_error());
+        for (int k = 0; ok && k < sc->nmaterials; k++)
+            if (!strcmp(sc->material_names[k], "plywood")) {
+                ks_fit[c] = r.mats[k].p[0];
+                kd_fit[c] = r.mats[k].p[2];
+            }
+        if (ok) verify_result_free(&r);
+        for (int a = 0; a < 2; a++) verify_view_free(views[a]);
+        verify_priors_free(&pr);
+    }
+    fprintf(stderr, "  kd truth %.4g: independent %.4g, correlated %.4g; ks truth %.4g (prior std %.3g): independent "
+            "%.4g, correlated %.4g\n", kd0, kd_fit[0], kd_fit[1], ks0, sd_ks, ks_fit[0], ks_fit[1]);
+    // ks comes back near the truth either way; kd follows it down only with the correlation
+    CHECK(fabs(ks_fit[0] - ks0) < 0.3 * sd_ks && fabs(ks_fit[1] - ks0) < 0.3 * sd_ks);
+    CHECK_MSG(fabs(kd_fit[0] - kd0) < 0.5 * sd_kd, "kd independent %.4g", kd_fit[0]);
+    double pred = 0.9 * sd_kd / sd_ks * (ks_fit[1] - 1.5 * ks0);   // the prior's conditional mean's move
+    CHECK_MSG(kd_fit[1] - kd_fit[0] < 0.4 * pred, "kd correlated %.4g, independent %.4g (the conditional mean moves "
+              "%.3g)", kd_fit[1], kd_fit[0], pred);
+    model_scene_free(sc);
+    for (int a = 0; a < 2; a++) free(img[a]);
+    verify_lab_free(L);
 }
