@@ -165,6 +165,11 @@ typedef struct {
     double        aic, bic;                       // N ln(RSS/N) + 2k, N ln(RSS/N) + k ln N
     double        fresnel_variation;              // largest relative change of F over the samples
                                                   // (< 0.05: only ks*F0 is measured; F0 held)
+    // held parameters that change R nowhere over the samples (ggx2's alpha2
+    // with ks2 0): any value in [free_lo, free_hi] fits alike; held at its
+    // middle with a uniform's std (uncorrelated in cov)
+    bool          held_free[MODEL_BRDF_MAX_PARAMS];
+    double        free_lo[MODEL_BRDF_MAX_PARAMS], free_hi[MODEL_BRDF_MAX_PARAMS];
     bool          f0_unmeasured;                  // F0 held at the middle of [f0_lo, f0_hi], where
     double        f0_lo, f0_hi;                   // ks*F0 and the ranges put it; std[F0] = the
                                                   // uniform's, in cov along ks*F0 = const

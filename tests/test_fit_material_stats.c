@@ -341,3 +341,40 @@ TEST(verify_prior_pulled_along_correlation)
     for (int a = 0; a < 2; a++) free(img[a]);
     verify_lab_free(L);
 }
+
+// Non-identifiable parameters held with a stated interval: ggx2 fitted to
+// one-lobe (ggx) samples puts ks2 at 0, where alpha2 changes R nowhere: it is
+// held at the middle of [alpha, 1] with a uniform's std, said so in the
+// priors; ashikhmin_shirley on its own samples holds nothing.
+TEST(fit_held_parameters_stated_interval)
+{
+    const double ggx[] = { 0.35, 0.6, 0.1, 0.3 };
+    fit_samples_t *s = grid(MODEL_BRDF_GGX, ggx, 5, 80);
+    fit_brdf_result_t r;
+    CHECK_MSG(fit_brdf(s, MODEL_BRDF_GGX2, NULL, &r), "%s", model_last_error());
+    int ja = model_brdf_param_index(MODEL_BRDF_GGX2, "alpha"), j2 = model_brdf_param_index(MODEL_BRDF_GGX2, "alpha2");
+    int jk2 = model_brdf_param_index(MODEL_BRDF_GGX2, "ks2");
+    CHECK_MSG(r.p[jk2] < 1e-6, "ks2 %.3g", r.p[jk2]);
+    CHECK(r.fixed[j2] && r.held_free[j2]);
+    CHECK_NEAR(r.free_lo[j2], r.p[ja], 1e-12);
+    CHECK_NEAR(r.free_hi[j2], 1, 1e-12);
+    CHECK_NEAR(r.p[j2], 0.5 * (r.p[ja] + 1), 1e-12);
+    CHECK_REL(r.std[j2], (1 - r.p[ja]) / sqrt(12), 1e-9);
+    CHECK(r.rms < 1e-6);   // held there, R is unchanged
+    json_t *e = fit_priors_material("m", &r, NULL, 0, 3, 0.03);
+    json_t *p = json_array_get(json_object_get(e, "parameters"), (size_t)j2);
+    CHECK_CONTAINS(json_string_value(json_object_get(p, "held")), "any value in [lo, hi]");
+    CHECK_NEAR(json_number_value(json_object_get(p, "lo")), r.p[ja], 1e-12);
+    CHECK_NEAR(json_number_value(json_object_get(p, "hi")), 1, 1e-12);
+    CHECK_REL(json_number_value(json_object_get(p, "std")), r.std[j2], 1e-12);
+    json_t *row = json_array_get(json_object_get(json_object_get(e, "prior_covariance"), "matrix"), (size_t)j2);
+    CHECK_REL(json_number_value(json_array_get(row, (size_t)j2)), r.std[j2] * r.std[j2], 1e-12);
+    CHECK(json_number_value(json_array_get(row, (size_t)ja)) == 0);
+    json_decref(e);
+    fit_samples_free(s);
+    const double as[] = { 0.5, 0.2, 40 };
+    s = grid(MODEL_BRDF_ASHIKHMIN_SHIRLEY, as, 5, 80);
+    CHECK(fit_brdf(s, MODEL_BRDF_ASHIKHMIN_SHIRLEY, NULL, &r));
+    for (int j = 0; j < 3; j++) CHECK(!r.fixed[j] && !r.held_free[j]);
+    fit_samples_free(s);
+}
