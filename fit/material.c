@@ -64,6 +64,12 @@ static bool material_report(const char *dir, const calib_obs_set_t *obs, const f
                                                                                                  : "the lowest BIC",
                     json_string_value(json_object_get(ch, "note")),
                     json_string_value(json_object_get(ch, "lowest_bic")));
+    json_t *rn = json_object_get(entry, "rms_over_noise");
+    char rnb[32] = "unknown";
+    if (json_is_number(rn)) snprintf(rnb, sizeof rnb, "%.3f", json_number_value(rn));
+    model_html_para(h, "Weighting: %s. Loss: %s. Residual over the noise: %s.",
+                    json_string_value(json_object_get(entry, "weighting")),
+                    json_string_value(json_object_get(entry, "loss")), rnb);
     model_html_heading(h, "Parameters");
     json_t *ps = json_object_get(entry, "parameters");
     char **rows = calloc(json_array_size(ps) + 1, sizeof *rows);
