@@ -910,7 +910,6 @@ void fit_prior_covariance(const fit_brdf_result_t *best, double sys_rel, double 
             bool fb = (best->f0_unmeasured && !strcmp(nb, "F0")) || best->held_free[b];
             bool ha = best->fixed[a] && !fa, hb = best->fixed[b] && !fb;
             double c = ha || hb ? 0 : best->cov[a * np + b];
-            if (!isfinite(c)) c = a == b ? INFINITY : 0;
             if (!ha && !hb && !fa && !fb) {
                 double ma = best->p[a], mb = best->p[b];
                 if (a == b) c += sys_rel * sys_rel * ma * ma;
@@ -925,12 +924,13 @@ static json_t *prior_covariance_json(const fit_brdf_result_t *best, double sys_r
     int np = best->nparams;
     double C[MODEL_BRDF_MAX_PARAMS * MODEL_BRDF_MAX_PARAMS];
     fit_prior_covariance(best, sys_rel, C);
+    for (int a = 0; a < np * np; a++)
+        if (!isfinite(C[a])) return NULL;   // no covariance from the fit: the std alone (independent)
     json_t *o = json_object(), *names = json_array(), *mat = json_array();
     for (int a = 0; a < np; a++) {
         json_array_append_new(names, json_string(model_brdf_param_name(best->model, a)));
         json_t *row = json_array();
-        for (int b = 0; b < np; b++)
-            json_array_append_new(row, isfinite(C[a * np + b]) ? json_real(C[a * np + b]) : json_null());
+        for (int b = 0; b < np; b++) json_array_append_new(row, json_real(C[a * np + b]));
         json_array_append_new(mat, row);
     }
     json_object_set_new(o, "parameters", names);
@@ -1000,7 +1000,8 @@ json_t *fit_priors_material(const char *name, const fit_brdf_result_t *best, con
         json_array_append_new(cov, row);
     }
     json_object_set_new(o, "covariance", cov);
-    json_object_set_new(o, "prior_covariance", prior_covariance_json(best, sys_rel));
+    json_t *pc = prior_covariance_json(best, sys_rel);
+    if (pc) json_object_set_new(o, "prior_covariance", pc);
     json_object_set_new(o, "bounds_k_sigma", json_real(k_sigma));
     json_object_set_new(o, "systematic_rel", json_real(sys_rel));
     int jF = model_brdf_param_index(m, "F0"), jk = model_brdf_param_index(m, "ks");

@@ -198,6 +198,11 @@ TEST(fit_priors_covariance_systematic)
     CHECK_REL(C[0][1], r.cov[1] + 0.03 * 0.03 * r.p[0] * r.p[1], 1e-12);
     CHECK_REL(C[0][2], r.cov[2], 1e-12);
     json_decref(e);
+    // without the fit's covariance there is none (the std alone, independent)
+    r.cov[1] = r.cov[3] = NAN;
+    e = fit_priors_material("m", &r, NULL, 0, 3, 0.03);
+    CHECK(json_object_get(e, "prior_covariance") == NULL);
+    json_decref(e);
     fit_samples_free(s);
 }
 
