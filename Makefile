@@ -192,6 +192,7 @@ TEST_SRC := \
     tests/test_fit_export.c \
     tests/test_fit_lightplan.c \
     tests/test_fit_material.c \
+    tests/test_fit_material_stats.c \
     tests/test_fit_verify.c \
     tests/test_fit_verify_study.c \
     tests/test_fit_verify_register.c \

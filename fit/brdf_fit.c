@@ -188,7 +188,38 @@ static bool block_res(void *ctx, const double *const *p, double *r, double **J)
 fit_brdf_options_t fit_brdf_defaults(void)
 {
     return (fit_brdf_options_t){ .threads = 0, .starts = 3, .noise_sigma = 0, .verbose = false, .cv_folds = 5,
-                                 .cv_seed = 1 };
+                                 .cv_seed = 1, .loss = LSQ_LOSS_NONE, .loss_scale = 2 };
+}
+
+bool fit_loss_parse(const char *s, lsq_loss_t *out)
+{
+    if (!strcmp(s, "l2")) *out = LSQ_LOSS_NONE;
+    else if (!strcmp(s, "huber")) *out = LSQ_LOSS_HUBER;
+    else if (!strcmp(s, "cauchy")) *out = LSQ_LOSS_CAUCHY;
+    else return false;
+    return true;
+}
+
+const char *fit_loss_name(lsq_loss_t l)
+{
+    return l == LSQ_LOSS_HUBER ? "huber" : l == LSQ_LOSS_CAUCHY ? "cauchy" : l == LSQ_LOSS_SOFT_L1 ? "soft_l1" : "l2";
+}
+
+// 1.4826 median |sqrt(w) (R_model - R)| at p: the weighted residuals' std,
+// robust to outliers (1 for noise-weighted samples would be their model's).
+static double robust_std(const fit_samples_t *s, model_brdf_t m, const double *p)
+{
+    double *a = malloc((size_t)(s->n ? s->n : 1) * sizeof *a), Rb[256];
+    if (!a) return NAN;
+    for (int i0 = 0; i0 < s->n; i0 += 256) {
+        int cnt = s->n - i0 < 256 ? s->n - i0 : 256;
+        fit_samples_eval_n(s, m, p, i0, cnt, Rb, NULL);
+        for (int k = 0; k < cnt; k++) a[i0 + k] = sqrt(s->w[i0 + k]) * fabs(Rb[k] - s->R[i0 + k]);
+    }
+    qsort(a, (size_t)s->n, sizeof *a, model_cmp_double);
+    double med = s->n ? (s->n % 2 ? a[s->n / 2] : 0.5 * (a[s->n / 2 - 1] + a[s->n / 2])) : NAN;
+    free(a);
+    return 1.4826 * med;
 }
 
 // The diffuse level: the median of R / n.l away from the mirror direction.
@@ -214,7 +245,13 @@ static double clampd(double x, double lo, double hi) { return x < lo ? lo : x > 
 // Starting point number `start` for model m.
 static void start_point(const fit_samples_t *s, model_brdf_t m, int start, double kd_thesis, double *p)
 {
-    static const double ns0[] = { 20, 200, 2000, 5 }, rough0[] = { 0.05, 0.15, 0.4, 0.8 };
+    static const double ns_phong[] = { 20, 200, 2000, 5 }, rough0[] = { 0.05, 0.15, 0.4, 0.8 };
+    // Ashikhmin-Shirley starts with a broad lobe: its Rs is also the lobe's
+    // weight, and from a sharp lobe on a matte sample Rs falls to its bound 0,
+    // where ns has no gradient and the fit stops on that plateau (the demo's
+    // plywood: rms 0.021 there, 0.014 at the optimum from ns 2)
+    static const double ns_as[] = { 2, 30, 300, 3000 };
+    const double *ns0 = m == MODEL_BRDF_ASHIKHMIN_SHIRLEY ? ns_as : ns_phong;
     static const double rough2[] = { 0.3, 0.6, 0.9, 0.2 };   // ggx2's second lobe: broader than the first
     int np = model_brdf_nparams(m);
     double peak = 0;
@@ -231,17 +268,22 @@ static void start_point(const fit_samples_t *s, model_brdf_t m, int start, doubl
         else if (!strcmp(n, "ks2")) v = 0.1;
         else if (!strcmp(n, "alpha2")) v = fmax(rough2[start % 4], 2 * rough0[start % 4]);
         else if (!strcmp(n, "Rd")) v = kd_thesis * M_PI;
-        else if (!strcmp(n, "Rs")) v = fmax(peak, 1e-3) * 8 * M_PI / (ns0[start % 4] + 1);
+        else if (!strcmp(n, "Rs")) v = fmax(0.05, fmax(peak, 1e-3) * 8 * M_PI / (ns0[start % 4] + 1));
         double span = isfinite(hi) ? hi - lo : 1;
         p[j] = clampd(v, lo + 1e-6 * span, isfinite(hi) ? hi - 1e-6 * span : v);
     }
 }
 
-static bool solve_once(const fit_samples_t *s, model_brdf_t m, const fit_brdf_options_t *o, double *p,
-                       const bool *fixed, lsq_summary_t *sum, lsq_problem_t **keep, block_t **keep_blocks)
+// One solve from p. With a robust loss (o->loss, loss_abs its scale in the
+// weighted residuals' units) each sample is a residual block of its own (the
+// loss acts per sample); else blocks of BLOCK samples, folded.
+static bool solve_once(const fit_samples_t *s, model_brdf_t m, const fit_brdf_options_t *o, double loss_abs,
+                       double *p, const bool *fixed, lsq_summary_t *sum, lsq_problem_t **keep, block_t **keep_blocks)
 {
     int np = model_brdf_nparams(m);
-    int nb = (s->n + BLOCK - 1) / BLOCK;
+    bool robust = o->loss != LSQ_LOSS_NONE && loss_abs > 0;
+    int bs = robust ? 1 : BLOCK;
+    int nb = (s->n + bs - 1) / bs;
     block_t *blocks = calloc((size_t)nb, sizeof *blocks);
     lsq_problem_t *pr = lsq_problem_new();
     bool ok = blocks && pr && lsq_add_parameters(pr, p, np);
@@ -257,8 +299,9 @@ static bool solve_once(const fit_samples_t *s, model_brdf_t m, const fit_brdf_op
     }
     double *bl[] = { p };
     for (int b = 0; ok && b < nb; b++) {
-        blocks[b] = (block_t){ s, b * BLOCK, s->n - b * BLOCK < BLOCK ? s->n - b * BLOCK : BLOCK, m, np };
-        ok = lsq_add_residual_folded(pr, block_res, &blocks[b], blocks[b].cnt, 1, bl);
+        blocks[b] = (block_t){ s, b * bs, s->n - b * bs < bs ? s->n - b * bs : bs, m, np };
+        ok = robust ? lsq_add_residual(pr, block_res, &blocks[b], 1, 1, bl, o->loss, loss_abs)
+                    : lsq_add_residual_folded(pr, block_res, &blocks[b], blocks[b].cnt, 1, bl);
     }
     lsq_options_t fo = lsq_defaults();
     fo.threads = o->threads;
@@ -281,6 +324,7 @@ static bool begin_result(const fit_samples_t *s, model_brdf_t m, fit_brdf_result
     out->model = m;
     out->nparams = model_brdf_nparams(m);
     out->cv_rms = out->cv_se = NAN;   // set by fit_brdf_models' cross-validation
+    out->chi2_dof = NAN;
     if (!s || s->n < out->nparams + 1) {
         model_error(s ? s->source : "samples", 0, "%d samples: too few to fit %s (%d parameters)", s ? s->n : 0,
                     model_brdf_name(m), out->nparams);
@@ -301,16 +345,36 @@ bool fit_brdf(const fit_samples_t *s, model_brdf_t m, const fit_brdf_options_t *
         has_rough |= !strcmp(n, "ns") || !strcmp(n, "m") || !strcmp(n, "alpha") || !strcmp(n, "alpha2");
     }
     int starts = has_rough ? (o.starts > 0 ? o.starts : 1) : 1;
+    if (m == MODEL_BRDF_ASHIKHMIN_SHIRLEY && starts < 4) starts = 4;   // broad to sharp lobes (start_point)
     double best[MODEL_BRDF_MAX_PARAMS], best_cost = INFINITY;
     lsq_summary_t best_sum;
     memset(&best_sum, 0, sizeof best_sum);
     int iters = 0;
-    for (int st = 0; st < starts; st++) {
+    // ggx2 contains ggx (ks2 = 0): one more start from the one-lobe fit, so
+    // that ggx2 never fits worse than ggx (from the generic starts it could
+    // stop with two lobes sharing a single one's highlight, rms 0.022 on
+    // exact ggx samples)
+    double from_ggx[MODEL_BRDF_MAX_PARAMS];
+    bool have_ggx = false;
+    if (m == MODEL_BRDF_GGX2) {
+        fit_brdf_result_t *g = malloc(sizeof *g);
+        bool q = model_error_quiet_thread(true);
+        if (g && fit_brdf(s, MODEL_BRDF_GGX, &o, g)) {   // kd, ks, alpha, F0
+            double a2 = fmin(1.0, fmax(3 * g->p[2], 0.3));
+            double v[] = { g->p[0], g->p[1], g->p[2], 1e-3, a2, g->p[3] };
+            memcpy(from_ggx, v, sizeof v);
+            have_ggx = true;
+        }
+        model_error_quiet_thread(q);
+        free(g);
+    }
+    for (int st = 0; st < starts + have_ggx; st++) {
         double p[MODEL_BRDF_MAX_PARAMS];
-        start_point(s, m, st, kd0, p);
+        if (st < starts) start_point(s, m, st, kd0, p);
+        else memcpy(p, from_ggx, sizeof p);
         lsq_summary_t sum;
         bool q = model_error_quiet_thread(true);
-        bool ok = solve_once(s, m, &o, p, NULL, &sum, NULL, NULL);
+        bool ok = solve_once(s, m, &o, 0, p, NULL, &sum, NULL, NULL);   // least squares; the loss in the polish
         model_error_quiet_thread(q);
         iters += sum.iterations;
         if (ok && sum.final_cost < best_cost) {
@@ -378,13 +442,57 @@ static bool hold_f0(const fit_samples_t *s, model_brdf_t m, const fit_brdf_optio
     *pr = NULL;
     *blocks = NULL;
     lsq_summary_t s2;
-    if (!solve_once(s, m, o, out->p, out->fixed, &s2, pr, blocks)) {
+    if (!solve_once(s, m, o, out->loss_scale, out->p, out->fixed, &s2, pr, blocks)) {
         model_error(s->source, 0, "fitting %s with F0 held failed: %s", model_brdf_name(m), model_last_error());
         return false;
     }
     s2.iterations += out->summary.iterations;
     out->summary = s2;
     return true;
+}
+
+// Held parameters (other than F0 over its interval) that do not change R at
+// all over the samples (ggx2's second lobe's alpha2 when ks2 is 0; a lobe's
+// roughness when its weight is 0): any value in their interval fits alike,
+// [alpha, hi] for alpha2 (the lobes are ordered), else the physical range.
+// Each is stated as that interval (free_lo, free_hi), held at its middle with
+// a uniform's std (variance on the covariance's diagonal, uncorrelated);
+// the others keep their best value, std 0.
+static void state_free_intervals(const fit_samples_t *s, model_brdf_t m, fit_brdf_result_t *out)
+{
+    int np = out->nparams, cand = 0;
+    for (int j = 0; j < np; j++) {
+        out->held_free[j] = false;
+        cand += out->fixed[j] && !(out->f0_unmeasured && !strcmp(model_brdf_param_name(m, j), "F0"));
+    }
+    if (!cand || !out->cov_ok) return;
+    double g[MODEL_BRDF_MAX_PARAMS] = { 0 }, r2 = 0, Rb[64], Jb[64 * MODEL_BRDF_MAX_PARAMS];
+    for (int i0 = 0; i0 < s->n; i0 += 64) {
+        int cnt = s->n - i0 < 64 ? s->n - i0 : 64;
+        fit_samples_eval_n(s, m, out->p, i0, cnt, Rb, Jb);
+        for (int k = 0; k < cnt; k++) {
+            r2 += s->w[i0 + k] * Rb[k] * Rb[k];
+            for (int j = 0; j < np; j++) g[j] += s->w[i0 + k] * Jb[k * np + j] * Jb[k * np + j];
+        }
+    }
+    int ja = model_brdf_param_index(m, "alpha");
+    for (int j = 0; j < np; j++) {
+        const char *n = model_brdf_param_name(m, j);
+        if (!out->fixed[j] || (out->f0_unmeasured && !strcmp(n, "F0"))) continue;
+        double lo, hi;
+        model_brdf_param_range(m, j, &lo, &hi);
+        if (!strcmp(n, "alpha2") && ja >= 0) lo = out->p[ja];
+        if (!isfinite(hi) || !(hi > lo)) continue;
+        // the largest change of R it could make over its interval, against R's size
+        if (!(sqrt(g[j]) * (hi - lo) <= 1e-9 * sqrt(r2) + 1e-300)) continue;
+        out->held_free[j] = true;
+        out->free_lo[j] = lo;
+        out->free_hi[j] = hi;
+        out->p[j] = 0.5 * (lo + hi);
+        out->std[j] = (hi - lo) / sqrt(12);
+        for (int b = 0; b < np; b++) out->cov[j * np + b] = out->cov[b * np + j] = 0;
+        out->cov[j * np + j] = out->std[j] * out->std[j];
+    }
 }
 
 // The fit's figures and covariance at out->p (pr: the solved problem).
@@ -396,6 +504,7 @@ static void finish(const fit_samples_t *s, model_brdf_t m, const fit_brdf_option
 {
     int np = out->nparams;
     double sw = 0, rss = 0, rss_f = 0, Rb[256];
+    out->n_downweighted = 0;
     for (int i0 = 0; i0 < s->n; i0 += 256) {
         int cnt = s->n - i0 < 256 ? s->n - i0 : 256;
         fit_samples_eval_n(s, m, out->p, i0, cnt, Rb, NULL);
@@ -405,6 +514,7 @@ static void finish(const fit_samples_t *s, model_brdf_t m, const fit_brdf_option
             sw += s->w[i];
             rss += s->w[i] * e * e;
             rss_f += s->w[i] * (e / s->c[i].nl) * (e / s->c[i].nl);
+            out->n_downweighted += out->loss_scale > 0 && s->w[i] * e * e > out->loss_scale * out->loss_scale;
         }
     }
     out->n = s->n;
@@ -439,7 +549,13 @@ static void finish(const fit_samples_t *s, model_brdf_t m, const fit_brdf_option
     out->nfree = np;
     for (int j = 0; j < np; j++) out->nfree -= out->fixed[j];
     double dof = N - out->nfree;
+    out->chi2_dof = s->noise_weighted && dof > 0 ? rss / dof : NAN;
     double s2 = o->noise_sigma > 0 ? o->noise_sigma * o->noise_sigma : (dof > 0 ? rss / dof : 0);
+    if (out->loss != LSQ_LOSS_NONE && !(o->noise_sigma > 0)) {
+        // robust: the residual scale without the outliers' squares
+        double rs = robust_std(s, m, out->p);
+        if (isfinite(rs)) s2 = rs * rs;
+    }
     out->sigma = sqrt(s2);
     out->cov_ok = cov_ok;
     for (int a = 0; a < np * np; a++) out->cov[a] = cov_ok ? out->cov[a] * s2 : NAN;
@@ -455,6 +571,7 @@ static void finish(const fit_samples_t *s, model_brdf_t m, const fit_brdf_option
             for (int b = 0; b < np; b++) out->cov[a * np + b] += J[a] * J[b] * var_u;
     }
     for (int j = 0; j < np; j++) out->std[j] = cov_ok ? sqrt(fmax(out->cov[j * np + j], 0)) : NAN;
+    state_free_intervals(s, m, out);
 }
 
 // ggx2's two lobes are interchangeable: the first is made the sharper
@@ -485,7 +602,20 @@ bool fit_brdf_from(const fit_samples_t *s, model_brdf_t m, const fit_brdf_option
         model_brdf_param_range(m, j, &lo, &hi);
         out->p[j] = clampd(out->p[j], lo, hi);
     }
-    if (!solve_once(s, m, &o, out->p, NULL, &out->summary, &pr, &blocks)) {
+    out->loss = o.loss;
+    if (o.loss != LSQ_LOSS_NONE) {
+        // the loss's scale in the weighted residuals' units: sigma itself for
+        // noise-weighted samples, else the robust std of a least-squares fit
+        double unit = 1;
+        if (!s->noise_weighted) {
+            lsq_summary_t s0;
+            bool q = model_error_quiet_thread(true);
+            if (solve_once(s, m, &o, 0, out->p, NULL, &s0, NULL, NULL)) unit = robust_std(s, m, out->p);
+            model_error_quiet_thread(q);
+        }
+        out->loss_scale = (o.loss_scale > 0 ? o.loss_scale : 2) * (isfinite(unit) && unit > 0 ? unit : 1);
+    }
+    if (!solve_once(s, m, &o, out->loss_scale, out->p, NULL, &out->summary, &pr, &blocks)) {
         model_error(s->source, 0, "fitting %s failed: %s", model_brdf_name(m), model_last_error());
         return false;
     }
@@ -600,6 +730,7 @@ static fit_samples_t *cv_subset(const fit_samples_t *s, const int *fold, int f, 
     fit_samples_t *t = fit_samples_new();
     if (!t) return NULL;
     snprintf(t->source, sizeof t->source, "%s", s->source);
+    t->noise_weighted = s->noise_weighted;
     for (int i = 0; i < s->n; i++) {
         if ((fold[i] == f) != keep) continue;
         const model_cosines_t *disc = s->disc_at && s->disc_at[i] >= 0 ? s->disc + s->disc_at[i] : NULL;
@@ -762,6 +893,58 @@ json_t *fit_brdf_choice_json(const fit_brdf_models_t *m)
     return o;
 }
 
+// A parameter the photometric scale multiplies (R linear in it): kd, ks, ks2, Rd.
+static bool amplitude_param(const char *n)
+{
+    return !strcmp(n, "kd") || !strcmp(n, "ks") || !strcmp(n, "ks2") || !strcmp(n, "Rd");
+}
+
+void fit_prior_covariance(const fit_brdf_result_t *best, double sys_rel, double *C)
+{
+    model_brdf_t m = best->model;
+    int np = best->nparams;
+    for (int a = 0; a < np; a++)
+        for (int b = 0; b < np; b++) {
+            const char *na = model_brdf_param_name(m, a), *nb = model_brdf_param_name(m, b);
+            bool fa = (best->f0_unmeasured && !strcmp(na, "F0")) || best->held_free[a];
+            bool fb = (best->f0_unmeasured && !strcmp(nb, "F0")) || best->held_free[b];
+            bool ha = best->fixed[a] && !fa, hb = best->fixed[b] && !fb;
+            double c = ha || hb ? 0 : best->cov[a * np + b];
+            if (!ha && !hb && !fa && !fb) {
+                double ma = best->p[a], mb = best->p[b];
+                if (a == b) c += sys_rel * sys_rel * ma * ma;
+                else if (amplitude_param(na) && amplitude_param(nb)) c += sys_rel * sys_rel * ma * mb;
+            }
+            C[a * np + b] = c;
+        }
+}
+
+static json_t *prior_covariance_json(const fit_brdf_result_t *best, double sys_rel)
+{
+    int np = best->nparams;
+    double C[MODEL_BRDF_MAX_PARAMS * MODEL_BRDF_MAX_PARAMS];
+    fit_prior_covariance(best, sys_rel, C);
+    for (int a = 0; a < np * np; a++)
+        if (!isfinite(C[a])) return NULL;   // no covariance from the fit: the std alone (independent)
+    json_t *o = json_object(), *names = json_array(), *mat = json_array();
+    for (int a = 0; a < np; a++) {
+        json_array_append_new(names, json_string(model_brdf_param_name(best->model, a)));
+        json_t *row = json_array();
+        for (int b = 0; b < np; b++) json_array_append_new(row, json_real(C[a * np + b]));
+        json_array_append_new(mat, row);
+    }
+    json_object_set_new(o, "parameters", names);
+    json_object_set_new(o, "matrix", mat);
+    json_object_set_new(o, "model", json_string(
+        "the fit's covariance (\"covariance\", statistical) plus the systematic part: one photometric scale "
+        "(kc*I, the white) shared by every sample multiplies R, so the parameters R is linear in (kd, ks, ks2, Rd) "
+        "move together: systematic_rel^2 mean_a mean_b between them (fully correlated); every other parameter "
+        "gets (systematic_rel mean)^2 on its diagonal alone (geometric errors: pose, lamp positions). A held "
+        "parameter has 0 rows and columns; F0 held over its interval keeps its uniform's variance along "
+        "ks*F0 = const. The diagonal is each parameter's std^2"));
+    return o;
+}
+
 json_t *fit_priors_material(const char *name, const fit_brdf_result_t *best, const fit_brdf_result_t *cand,
                             int ncand, double k_sigma, double sys_rel)
 {
@@ -774,12 +957,13 @@ json_t *fit_priors_material(const char *name, const fit_brdf_result_t *best, con
     json_t *ps = json_array();
     for (int j = 0; j < np; j++) {
         json_t *p = json_object();
-        bool f0u = best->f0_unmeasured && !strcmp(model_brdf_param_name(m, j), "F0");
-        double lo, hi, mean = best->p[j], sd_stat = best->fixed[j] && !f0u ? 0 : best->std[j];
-        double sd = f0u ? sd_stat
+        bool f0u = best->f0_unmeasured && !strcmp(model_brdf_param_name(m, j), "F0"), hf = best->held_free[j];
+        double lo, hi, mean = best->p[j], sd_stat = best->fixed[j] && !f0u && !hf ? 0 : best->std[j];
+        double sd = f0u || hf ? sd_stat
                   : best->fixed[j] ? 0 : sqrt(sd_stat * sd_stat + (sys_rel * mean) * (sys_rel * mean));
         model_brdf_param_range(m, j, &lo, &hi);
         if (f0u) lo = best->f0_lo, hi = best->f0_hi;
+        if (hf) lo = best->free_lo[j], hi = best->free_hi[j];
         double blo = isfinite(sd) ? fmax(lo, mean - k_sigma * sd) : lo;
         double bhi = isfinite(sd) ? fmin(hi, mean + k_sigma * sd) : hi;
         json_object_set_new(p, "name", json_string(model_brdf_param_name(m, j)));
@@ -796,6 +980,10 @@ json_t *fit_priors_material(const char *name, const fit_brdf_result_t *best, con
                                                        "F0 lies in [lo, hi] (ks at most its maximum), mean and "
                                                        "std are a uniform's over it, ks = ks*F0 / F0; a fitter "
                                                        "holds it at mean"));
+        else if (hf)
+            json_object_set_new(p, "held", json_string("no effect on R over these samples (as ggx2's alpha2 when "
+                                                       "ks2 is 0): any value in [lo, hi] fits alike; mean and std "
+                                                       "are a uniform's over it; a fitter holds it at mean"));
         else if (best->fixed[j])
             json_object_set_new(p, "held", json_string("not separable from the other parameters by these samples; "
                                                        "held at its best value (std 0)"));
@@ -812,6 +1000,8 @@ json_t *fit_priors_material(const char *name, const fit_brdf_result_t *best, con
         json_array_append_new(cov, row);
     }
     json_object_set_new(o, "covariance", cov);
+    json_t *pc = prior_covariance_json(best, sys_rel);
+    if (pc) json_object_set_new(o, "prior_covariance", pc);
     json_object_set_new(o, "bounds_k_sigma", json_real(k_sigma));
     json_object_set_new(o, "systematic_rel", json_real(sys_rel));
     int jF = model_brdf_param_index(m, "F0"), jk = model_brdf_param_index(m, "ks");

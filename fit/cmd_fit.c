@@ -76,8 +76,8 @@ static held_out_t held_out(const fit_brdf_result_t *r)
 
 static int cmd_brdf(int argc, char **argv)
 {
-    const char *out = NULL, *model = "all", *name = NULL, *weights = "solid-angle", *channel = "luma";
-    double k_sigma = 3, noise = 0, sys_rel = 0;
+    const char *out = NULL, *model = "all", *name = NULL, *weights = "solid-angle", *channel = "luma", *loss = "l2";
+    double k_sigma = 3, noise = 0, sys_rel = 0, loss_scale = 2;
     model_opt_t opts[] = {
         MODEL_OPT_STRING("-o", "PRIORS.json", "the priors file to write", &out, true),
         MODEL_OPT_STRING("--model", "M", MODEL_NAMES " (default all: chosen by cross-validation)", &model, false),
@@ -93,6 +93,10 @@ static int cmd_brdf(int argc, char **argv)
                          &weights, false),
         MODEL_OPT_STRING("--channel", "luma|r|g|b", "MERL and RGL colour: Rec. 709 luma (0.2126 R + 0.7152 G + "
                          "0.0722 B; default; spectral RGL: CIE Y) or one channel", &channel, false),
+        MODEL_OPT_STRING("--loss", "l2|huber|cauchy", "least squares (default) or a robust loss on each sample's "
+                         "weighted residual", &loss, false),
+        MODEL_OPT_DOUBLE("--loss-scale", "S", "where the robust loss starts, in units of the residuals' robust std "
+                         "(1.4826 median |r| of a least-squares fit; default 2)", &loss_scale, 0.01, 1e6),
     };
     model_cli_t cli = {
         .cmd = "fit brdf", .synopsis = "FILE", .opts = opts, .nopts = MODEL_NOPTS(opts),
@@ -149,6 +153,8 @@ static int cmd_brdf(int argc, char **argv)
     }
     fit_brdf_options_t o = fit_brdf_defaults();
     o.noise_sigma = noise;
+    if (!fit_loss_parse(loss, &o.loss)) return model_cli_error(&cli, "--loss: l2, huber or cauchy, not '%s'", loss);
+    o.loss_scale = loss_scale;
     if (cv_opts(&cli, &o.cv_folds, &o.cv_seed)) {
         fit_samples_free(s);
         return MODEL_CLI_USAGE;
@@ -257,8 +263,13 @@ static void print_material(const fit_material_opts_t *o, const fit_material_resu
                r->cell_iterations, model_brdf_name(r->cells_model));
         print_models(&r->models);
     }
+    if (r->observed)
+        printf("  %s%s\n", r->noise_weighted ? "weighted by each sample's noise (1/sigma^2 from the gain calibration)"
+                                              : "weights uniform (no gain calibration, or --weights uniform)",
+               o->loss != LSQ_LOSS_NONE ? (o->loss == LSQ_LOSS_HUBER ? "; Huber loss" : "; Cauchy loss") : "");
     if (isfinite(r->rms_over_noise))
-        printf("  residual per degree of freedom over the noise: %.3f\n", r->rms_over_noise);
+        printf("  residual per degree of freedom over the noise: %.3f%s\n", r->rms_over_noise,
+               r->noise_weighted ? " (sqrt(chi^2 / dof))" : "");
     if (r->written) {
         const fit_brdf_models_t *m = &r->models;
         if (m->nres < 2)
@@ -275,6 +286,7 @@ int fit_cmd_material(int argc, char **argv)
 {
     fit_material_opts_t o = fit_material_defaults();
     const char *pose_mode = "fit";
+    const char *weights = "noise", *loss = "l2";
     model_opt_t opts[] = {
         MODEL_OPT_STRING("--calib", "DIR", "the calibrations: camera.cameramodel, lamps.json, white.json, optionally "
                          "gain.json and its maps (DIR or DIR/geometry, DIR/lamps, DIR/white, DIR/gain)", &o.calib, true),
@@ -305,6 +317,12 @@ int fit_cmd_material(int argc, char **argv)
                         false),
         MODEL_OPT_VALUE("--pose-sigma-mm", "MM", "its std of the offset and height (default 2)", false),
         MODEL_OPT_STRING("--report", "DIR", "write an HTML report there", &o.report, false),
+        MODEL_OPT_STRING("--weights", "noise|uniform", "each sample weighted by 1/sigma^2 of its own noise from the "
+                         "gain calibration (default; uniform without one) or all alike", &weights, false),
+        MODEL_OPT_STRING("--loss", "l2|huber|cauchy", "least squares (default) or a robust loss on each sample's "
+                         "residual in units of its sigma", &loss, false),
+        MODEL_OPT_DOUBLE("--loss-scale", "S", "where the robust loss starts, in sigma (default 2)", &o.loss_scale,
+                         0.01, 1e6),
         MODEL_OPT_VALUE("--albedo", "A", "(an option of refl calib white)", false),
         MODEL_OPT_FLAG("-v", "--verbose", "print every angle", &o.verbose),
     };
@@ -333,7 +351,12 @@ int fit_cmd_material(int argc, char **argv)
                  "fitted first from its outline in the frames (each angle's lamps summed; --sample-pose fit, the\n"
                  "default), the plan's nominal wedge the prior (std --pose-sigma-deg 1, --pose-sigma-mm 2); printed\n"
                  "with its std and difference from the nominal and written to the priors (sample_pose). Edges too weak\n"
-                 "keep the nominal, said so; --sample-pose nominal takes the plan's wedge as it is.",
+                 "keep the nominal, said so; --sample-pose nominal takes the plan's wedge as it is.\n"
+                 "Each sample is weighted by its own noise (--weights noise, the default): sigma of R from the gain\n"
+                 "calibration (K, read noise, quantisation at its linearised signal, exposure and gain, carried to R\n"
+                 "like the sample), the fit minimising sum ((model - R)/sigma)^2; rms_over_noise is then\n"
+                 "sqrt(chi^2 / dof) (about 1 when the model fits to the noise). --loss huber|cauchy down-weights\n"
+                 "samples beyond --loss-scale sigma (outliers: a speck, a reflection of the fixture).",
     };
     int rc = model_cli_parse(&cli, argc, argv);
     if (rc != MODEL_CLI_OK) return rc;
@@ -348,6 +371,10 @@ int fit_cmd_material(int argc, char **argv)
     if (strcmp(pose_mode, "fit") && strcmp(pose_mode, "nominal"))
         return model_cli_error(&cli, "--sample-pose: fit or nominal, not '%s'", pose_mode);
     o.pose_nominal = !strcmp(pose_mode, "nominal");
+    if (strcmp(weights, "noise") && strcmp(weights, "uniform"))
+        return model_cli_error(&cli, "--weights: noise or uniform, not '%s'", weights);
+    o.noise_weights = !strcmp(weights, "noise");
+    if (!fit_loss_parse(loss, &o.loss)) return model_cli_error(&cli, "--loss: l2, huber or cauchy, not '%s'", loss);
     model_brdf_t models[MODEL_BRDF_COUNT];
     int nm;
     if (!fit_brdf_model_list(o.model, models, &nm)) return model_cli_error(&cli, "--model: unknown model %s", o.model);

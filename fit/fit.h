@@ -63,6 +63,11 @@ typedef struct {
     double           omega_sr2;    // solid-angle weights: their sum before scaling to mean 1, sr^2 (else 0)
     const char      *omega_how;    // and how: "cells" (MERL), "grid" (RGL), "rings", "k-nearest" (CSV); else NULL
     int              n_negative;   // samples with f_r < 0 (kept: measurements within noise)
+    // Weighted by each sample's noise: w = 1 / sigma_R^2 (sigma_R its std of R,
+    // 1/sr; refl fit material from the gain calibration), so the weighted
+    // residuals are in units of sigma and their sum of squares is chi^2
+    // (fit_brdf_result_t.chi2_dof); the robust losses' scale is then in sigma.
+    bool             noise_weighted;
 } fit_samples_t;
 
 fit_samples_t *fit_samples_new(void);
@@ -124,7 +129,17 @@ typedef struct {
     uint64_t    cv_seed;
     const int  *cv_unit;
     const char *cv_unit_name;   // what a unit is, for the outputs ("frame", ...; NULL: "block of samples")
+    // A robust loss on each sample's weighted residual r (Ceres's, model/lsq.h):
+    // LSQ_LOSS_NONE (least squares, default), HUBER or CAUCHY with loss_scale
+    // (default 2) in units of sigma: the samples' own (noise_weighted), else the
+    // residuals' robust std (1.4826 median |r|) of a least-squares fit first.
+    lsq_loss_t  loss;
+    double      loss_scale;
 } fit_brdf_options_t;
+
+// "l2" (none), "huber" or "cauchy"; false (no message) for another name.
+bool        fit_loss_parse(const char *s, lsq_loss_t *out);
+const char *fit_loss_name(lsq_loss_t l);
 
 fit_brdf_options_t fit_brdf_defaults(void);
 
@@ -142,9 +157,19 @@ typedef struct {
     double        ngan_error;                     // sqrt(sum w ((f_model - f) cos th_i)^2 / sum w) = rms
     double        rms_fr;                         // sqrt(sum w (f_model - f)^2 / sum w), 1/sr
     double        sigma;                          // residual std used for the covariance
+    double        chi2_dof;                       // rss / (N - free) of noise-weighted samples (else NAN)
+    lsq_loss_t    loss;                           // the loss fitted with, and its scale in the
+    double        loss_scale;                     // weighted residuals' units (sigma of R times
+                                                  // loss_scale; 0 for least squares)
+    int           n_downweighted;                 // robust: samples beyond the loss's scale
     double        aic, bic;                       // N ln(RSS/N) + 2k, N ln(RSS/N) + k ln N
     double        fresnel_variation;              // largest relative change of F over the samples
                                                   // (< 0.05: only ks*F0 is measured; F0 held)
+    // held parameters that change R nowhere over the samples (ggx2's alpha2
+    // with ks2 0): any value in [free_lo, free_hi] fits alike; held at its
+    // middle with a uniform's std (uncorrelated in cov)
+    bool          held_free[MODEL_BRDF_MAX_PARAMS];
+    double        free_lo[MODEL_BRDF_MAX_PARAMS], free_hi[MODEL_BRDF_MAX_PARAMS];
     bool          f0_unmeasured;                  // F0 held at the middle of [f0_lo, f0_hi], where
     double        f0_lo, f0_hi;                   // ks*F0 and the ranges put it; std[F0] = the
                                                   // uniform's, in cov along ks*F0 = const
@@ -212,6 +237,13 @@ const char *fit_param_convention(model_brdf_t m, int i);
 // model, the lowest BIC's and the lowest cv_rms's (written into a priors entry
 // as "model_choice").
 json_t *fit_brdf_choice_json(const fit_brdf_models_t *m);
+// The priors' covariance (np x np, row-major, the model's parameter order;
+// written as "prior_covariance"): the fit's plus the systematic part, a
+// photometric scale of std sys_rel shared by every sample (the parameters R
+// is linear in, kd ks ks2 Rd, fully correlated: sys_rel^2 mean_a mean_b),
+// (sys_rel mean)^2 on the diagonal of the others; held parameters 0, F0 held
+// over its interval its uniform's. Its diagonal is the entry's std^2.
+void    fit_prior_covariance(const fit_brdf_result_t *best, double sys_rel, double *C);
 json_t *fit_priors_material(const char *name, const fit_brdf_result_t *best, const fit_brdf_result_t *candidates,
                             int ncandidates, double k_sigma, double sys_rel);
 

@@ -106,8 +106,9 @@ static bool material_report(const char *dir, const calib_obs_set_t *obs, const f
                     json_string_value(json_object_get(ch, "lowest_bic")));
     json_t *ron = json_object_get(entry, "rms_over_noise"), *cj = json_object_get(entry, "albedo_cells");
     if (ron)
-        model_html_para(h, "Residual: RMS of R %.4g 1/sr = %.3g × the %.4g 1/sr the sensor's temporal "
-                        "noise alone gives (rms_over_noise; near 1: the model explains the data down to the noise).",
+        model_html_para(h, "Residual: RMS of R %.4g 1/sr; over the sensor's temporal noise %.3g (rms_over_noise: "
+                        "sqrt(chi^2/dof) with each sample weighted by its noise; near 1: the model explains the data "
+                        "down to the noise; the noise alone gives an RMS of %.4g 1/sr).",
                         json_number_value(json_object_get(entry, "rms")), json_number_value(ron),
                         json_number_value(json_object_get(entry, "noise_rms_expected")));
     else
@@ -121,6 +122,8 @@ static bool material_report(const char *dir, const calib_obs_set_t *obs, const f
                         json_integer_value(json_object_get(cj, "observations_in_cells")),
                         json_integer_value(json_object_get(cj, "observations")),
                         100 * json_number_value(json_object_get(cj, "factor_rel_std")));
+    model_html_para(h, "Weighting: %s. Loss: %s.", json_string_value(json_object_get(entry, "weighting")),
+                    json_string_value(json_object_get(entry, "loss")));
     model_html_heading(h, "Parameters");
     json_t *ps = json_object_get(entry, "parameters");
     char **rows = calloc(json_array_size(ps) + 1, sizeof *rows);
@@ -262,10 +265,11 @@ static fit_samples_t *cells_samples(const fit_samples_t *smp, const albedo_cells
     fit_samples_t *out = fit_samples_new();
     if (!out) return NULL;
     snprintf(out->source, sizeof out->source, "%s", smp->source);
+    out->noise_weighted = smp->noise_weighted;   // R/c has the std sigma/c: weight c^2 / sigma^2
     for (int i = 0; i < smp->n; i++) {
         double c = ac->cell[i] >= 0 ? ac->factor[ac->cell[i]] : 1;
         const model_cosines_t *disc = smp->disc_at && smp->disc_at[i] >= 0 ? smp->disc + smp->disc_at[i] : NULL;
-        if (!fit_samples_add_disc(out, &smp->c[i], disc, smp->R[i] / c, c * c)) {
+        if (!fit_samples_add_disc(out, &smp->c[i], disc, smp->R[i] / c, smp->w[i] * c * c)) {
             fit_samples_free(out);
             model_error_set(NULL, 0, "sample %d: albedo factor %g gives no usable sample", i, c);
             return NULL;
@@ -342,7 +346,8 @@ static bool cells_fit(const fit_samples_t *smp, albedo_cells_t *ac, fit_brdf_res
 
 fit_material_opts_t fit_material_defaults(void)
 {
-    return (fit_material_opts_t){ .model = "all", .k_sigma = 3, .sys_rel = 0.03, .cv_folds = 5, .cv_seed = 1 };
+    return (fit_material_opts_t){ .model = "all", .k_sigma = 3, .sys_rel = 0.03, .cv_folds = 5, .cv_seed = 1,
+                                  .noise_weights = true, .loss = LSQ_LOSS_NONE, .loss_scale = 2 };
 }
 
 void fit_material_result_free(fit_material_result_t *r)
@@ -379,20 +384,28 @@ static int material_cameras(const fit_material_opts_t *o, const char *names[8], 
 }
 
 // One camera's observations (through c) as BRDF samples R = s d^2 / kcI into
-// smp; *v2 += the squares of their expected noise.
-static bool camera_samples(const calib_set_t *c, const calib_obs_set_t *ob, fit_samples_t *smp, double *v2)
+// smp, each weighted by its noise: sigma_R = s_std d^2 / kcI, s_std the
+// temporal noise calib_observe gives the window's mean (shot noise K S at its
+// linearised signal S, read noise, quantisation, at the frame's exposure and
+// gain, through the same flat field, emission and drift division as s), so
+// w = 1 / sigma_R^2; *v2 += sigma_R^2, *missing += samples without a sigma
+// (no gain calibration: weight 1).
+static bool camera_samples(const calib_set_t *c, const calib_obs_set_t *ob, fit_samples_t *smp, double *v2,
+                           int *missing)
 {
     for (int i = 0; i < ob->n; i++) {
         const calib_obs_t *b = &ob->o[i];
+        double sr = b->s_std * b->d_mm * b->d_mm / c->kcI_per_us[b->lamp];
+        bool has = sr > 0 && isfinite(sr);
+        *missing += !has;
         if (!fit_samples_add_disc(smp, &b->c, b->has_disc ? b->disc : NULL,
-                                  b->s_dn_per_us * b->d_mm * b->d_mm / c->kcI_per_us[b->lamp], 1)) {
+                                  b->s_dn_per_us * b->d_mm * b->d_mm / c->kcI_per_us[b->lamp], has ? 1 / (sr * sr) : 1)) {
             model_error_set(NULL, 0, "observation %d (step %d%s%s) gives no usable sample (kc*I of lamp %s is %g)",
                             i, b->step, c->camera[0] ? ", camera " : "", c->camera, c->lamps->lamps[b->lamp].name,
                             c->kcI_per_us[b->lamp]);
             return false;
         }
-        double sr = b->s_std * b->d_mm * b->d_mm / c->kcI_per_us[b->lamp];
-        *v2 += sr * sr;
+        *v2 += has ? sr * sr : 0;
     }
     return true;
 }
@@ -446,11 +459,12 @@ static bool material_samples(const fit_material_opts_t *o, calib_set_t **cal, ca
     snprintf((*smp)->source, sizeof (*smp)->source, "%s", o->session);
     double v2 = 0;
     bool all_gain = true;
+    int missing = 0;
     for (int k = 0; k < nc; k++) {
         calib_set_t *ck = NULL;
         calib_obs_set_t ob;
         bool ok = calib_observe_session(o->session, o->calib, names[k], true, &co, &ck, &ob) &&
-                  camera_samples(ck, &ob, *smp, &v2);
+                  camera_samples(ck, &ob, *smp, &v2, &missing);
         if (ok) {
             snprintf(r->cameras[k], sizeof r->cameras[k], "%s", store[k]);
             r->nobs_camera[k] = ob.n;
@@ -479,6 +493,11 @@ static bool material_samples(const fit_material_opts_t *o, calib_set_t **cal, ca
         r->noise_rms = sqrt(v2 / obs->n);
         r->lin = c->lin;
     }
+    // weighted by each sample's noise when every sample has one (and not --weights uniform)
+    (*smp)->noise_weighted = o->noise_weights && missing == 0 && (*smp)->n > 0;
+    r->noise_weighted = (*smp)->noise_weighted;
+    if (!(*smp)->noise_weighted)
+        for (int i = 0; i < (*smp)->n; i++) (*smp)->w[i] = 1;
     return true;
 }
 
@@ -491,6 +510,8 @@ static fit_brdf_options_t material_fit_options(const fit_material_opts_t *o, con
     fit_brdf_options_t fo = fit_brdf_defaults();
     fo.cv_folds = o->cv_folds;
     fo.cv_seed = o->cv_seed;
+    fo.loss = o->loss;
+    fo.loss_scale = o->loss_scale;
     if (unit) {
         for (int i = 0; i < obs->n; i++) unit[i] = obs->o[i].step;
         fo.cv_unit = unit;
@@ -562,9 +583,24 @@ static json_t *material_priors(const fit_material_opts_t *o, const calib_set_t *
     // the residual per degree of freedom (the cells' factors take one each)
     double dof = (double)best->n - best->nfree - r->n_cells;
     double rms_dof = dof > 0 ? sqrt(best->rss / dof) : NAN;
-    if (isfinite(r->noise_rms) && r->noise_rms > 0 && isfinite(rms_dof)) {
+    if (r->noise_weighted && isfinite(rms_dof)) {
+        r->rms_over_noise = rms_dof;   // sqrt(chi^2 / dof): the weighted residuals are in sigma
+        json_object_set_new(e, "rms_over_noise", json_real(r->rms_over_noise));
+    } else if (isfinite(r->noise_rms) && r->noise_rms > 0 && isfinite(rms_dof)) {
         r->rms_over_noise = rms_dof / r->noise_rms;
         json_object_set_new(e, "rms_over_noise", json_real(r->rms_over_noise));
+    }
+    json_object_set_new(e, "weighting", json_string(
+        r->noise_weighted ? "weighted by each sample's noise: w = 1/sigma_R^2, sigma_R from the gain calibration (K, "
+                            "read noise, quantisation at the window's linearised signal, exposure and gain) carried "
+                            "to R = f_r cos(theta_i) like the sample; rms and cv_rms are the weighted RMS of R, "
+                            "rms_over_noise = sqrt(chi^2 / (N - parameters - cells))"
+                          : "uniform (no gain calibration, or --weights uniform): rms_over_noise = residual per "
+                            "degree of freedom over noise_rms_expected"));
+    json_object_set_new(e, "loss", json_string(fit_loss_name(best->loss)));
+    if (best->loss != LSQ_LOSS_NONE) {
+        json_object_set_new(e, "loss_scale_sigma", json_real(o->loss_scale));
+        json_object_set_new(e, "n_downweighted", json_integer(best->n_downweighted));
     }
     if (r->cells_done) json_object_set_new(e, "albedo_cells", cells_json(o, r));
     json_array_append_new(mats, e);

@@ -43,6 +43,10 @@ typedef struct {
     bool        pose_nominal;   // the plan's nominal wedge pose; false (default): the sample's pose fitted
                                 // from its frames (calib_sample_pose_fit), the nominal its prior
     double      pose_sigma_deg, pose_sigma_mm;   // that prior's std (defaults 1 deg, 2 mm)
+    bool        noise_weights;  // each sample weighted by 1/sigma^2 of its noise (default true; needs a gain
+                                // calibration, else uniform)
+    lsq_loss_t  loss;       // robust loss (fit_brdf_options_t; default LSQ_LOSS_NONE)
+    double      loss_scale; // its scale in units of each sample's sigma (default 2)
     bool        verbose;    // calib_observe prints each angle on stderr
     int         argc;       // the command line for the provenance (argv[0] "refl"; may be 0)
     char      **argv;
@@ -63,6 +67,7 @@ typedef struct {
     bool              have_gain;
     double            noise_rms;
     model_lin_t       lin;
+    bool              noise_weighted;   // the samples are weighted by their noise (fit_samples_t)
     // every model fitted to the samples as they are (first.ntried > 0: tried)
     fit_brdf_models_t first;
     // albedo cells (opts cell_mm > 0; cells_done: fitted): the factors' spread, then
@@ -72,7 +77,8 @@ typedef struct {
     double            cells_rel_std;
     model_brdf_t      cells_model;      // the model the factors were fitted with
     fit_brdf_models_t models;           // the final fits (a copy of first without cells)
-    double            rms_over_noise;   // residual per degree of freedom over noise_rms (NAN: unknown)
+    double            rms_over_noise;   // noise-weighted: sqrt(chi^2 / dof); else the residual per degree of
+                                        // freedom over noise_rms (NAN: unknown)
     bool              written;          // the priors file is written (its material: o->name, else material[])
     calib_sample_pose_t pose;           // the sample's pose used (the first camera's; README "refl fit material")
 } fit_material_result_t;

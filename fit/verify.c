@@ -103,6 +103,93 @@ bool verify_priors_parse(verify_priors_t *pr, const char *text, size_t len, cons
     return ok;
 }
 
+// The entry's "prior_covariance" (absent: independent std, as files before
+// it): its parameters in the model's order and an np x np symmetric matrix
+// of finite numbers with a non-negative diagonal. false + message.
+static bool prior_cov_from_json(verify_prior_t *p, json_t *pc, const char *path)
+{
+    p->has_cov = false;
+    if (!pc) return true;
+    json_t *names = json_object_get(pc, "parameters"), *mat = json_object_get(pc, "matrix");
+    int np = p->np;
+    bool ok = json_is_array(names) && json_is_array(mat) && (int)json_array_size(names) == np &&
+              (int)json_array_size(mat) == np;
+    for (int a = 0; ok && a < np; a++) {
+        const char *n = json_string_value(json_array_get(names, a));
+        json_t *row = json_array_get(mat, a);
+        ok = n && !strcmp(n, model_brdf_param_name(p->model, a)) && json_is_array(row) &&
+             (int)json_array_size(row) == np;
+        for (int b = 0; ok && b < np; b++) {
+            json_t *v = json_array_get(row, b);
+            ok = json_is_number(v) && isfinite(json_number_value(v));
+            if (ok) p->cov[a * np + b] = json_number_value(v);
+        }
+    }
+    for (int a = 0; ok && a < np; a++) {
+        ok = p->cov[a * np + a] >= 0;
+        for (int b = 0; ok && b < a; b++)
+            ok = fabs(p->cov[a * np + b] - p->cov[b * np + a]) <=
+                 1e-9 * (fabs(p->cov[a * np + b]) + fabs(p->cov[b * np + a])) + 1e-300;
+    }
+    if (!ok) {
+        model_error(path, 0, "material %s: \"prior_covariance\" must hold \"parameters\" (the %s model's, in its order) "
+                    "and \"matrix\", %d x %d symmetric finite numbers with a diagonal >= 0", p->name,
+                    model_brdf_name(p->model), np, np);
+        return false;
+    }
+    p->has_cov = true;
+    return true;
+}
+
+bool verify_mvprior_make(const verify_prior_t *P, const bool *use, verify_mvprior_t *out)
+{
+    memset(out, 0, sizeof *out);
+    if (!P->has_cov) return false;
+    out->np = P->np;
+    for (int j = 0; j < P->np; j++)
+        if (use[j]) {
+            out->idx[out->n] = j;
+            out->mean[out->n++] = P->mean[j];
+        }
+    int n = out->n;
+    if (n < 2) return false;
+    // Cholesky of Sigma_S, then L^-1 by forward substitution
+    double L[MODEL_BRDF_MAX_PARAMS * MODEL_BRDF_MAX_PARAMS] = { 0 };
+    for (int a = 0; a < n; a++)
+        for (int b = 0; b <= a; b++) {
+            double s = P->cov[out->idx[a] * P->np + out->idx[b]];
+            for (int k = 0; k < b; k++) s -= L[a * n + k] * L[b * n + k];
+            if (a == b) {
+                if (!(s > 1e-12 * fmax(P->cov[out->idx[a] * P->np + out->idx[a]], 1e-300))) return false;
+                L[a * n + a] = sqrt(s);
+            } else {
+                L[a * n + b] = s / L[b * n + b];
+            }
+        }
+    for (int c = 0; c < n; c++)
+        for (int a = c; a < n; a++) {
+            double s = a == c ? 1 : 0;
+            for (int k = c; k < a; k++) s -= L[a * n + k] * out->Linv[k * n + c];
+            out->Linv[a * n + c] = s / L[a * n + a];
+        }
+    return true;
+}
+
+bool verify_mvprior_residual(void *ctx, const double *const *p, double *r, double **J)
+{
+    const verify_mvprior_t *m = ctx;
+    for (int a = 0; a < m->n; a++) {
+        double s = 0;
+        for (int b = 0; b <= a; b++) s += m->Linv[a * m->n + b] * (p[0][m->idx[b]] - m->mean[b]);
+        r[a] = s;
+        if (J && J[0]) {
+            for (int q = 0; q < m->np; q++) J[0][a * m->np + q] = 0;
+            for (int b = 0; b <= a; b++) J[0][a * m->np + m->idx[b]] = m->Linv[a * m->n + b];
+        }
+    }
+    return true;
+}
+
 static bool priors_from_json(verify_priors_t *pr, json_t *root, const char *path, const char *sha)
 {
     bool ok = false;
@@ -175,6 +262,7 @@ static bool priors_from_json(verify_priors_t *pr, json_t *root, const char *path
             // could not measure, e.g. F0 known only to lie in [lo, hi])
             p->held[j] = sd == 0 || json_is_string(json_object_get(e, "held"));
         }
+        if (!prior_cov_from_json(p, json_object_get(m, "prior_covariance"), path)) goto done;
     }
     ok = true;
 done:
@@ -722,6 +810,7 @@ typedef struct {
     int    i;
     double prior_mean, prior_std, lo, hi;
     bool   fixed;
+    bool   mv;      // its prior is in a material's multivariate prior (F->mvp), not alone
 } pdesc_t;
 
 // The working state that verify_run's stages share. The inputs are borrowed;
@@ -755,6 +844,8 @@ typedef struct {
     int              ngroups, nused;
     pdesc_t         *pd;                // npd parameters
     int              npd;
+    verify_mvprior_t *mvp;              // nm: the materials' multivariate priors (n 0: none)
+    int              *mvp_pd;           // nm: the index in pd of each material's first parameter
     lsq_problem_t   *prob;
     verify_result_t *out;
 } fit_t;
@@ -774,6 +865,8 @@ static void fit_free(fit_t *F)
     free(F->groups);
     free(F->gidx);
     free(F->pd);
+    free(F->mvp);
+    free(F->mvp_pd);
 }
 
 // The inputs agree (priors for every material, image sizes, cameras, lamp
@@ -1151,9 +1244,13 @@ static bool fit_parameters(fit_t *F)
         if (F->pt[k].mat >= 0 && F->pt[k].mat < F->nm && out->points[F->ptidx[k]].status == VERIFY_PT_USED)
             mat_used[F->pt[k].mat] = true;
     bool ok = true;
+    F->mvp = calloc((size_t)F->nm + 1, sizeof *F->mvp);
+    F->mvp_pd = calloc((size_t)F->nm + 1, sizeof *F->mvp_pd);
+    if (!F->mvp || !F->mvp_pd) ok = false;
     for (int k = 0; k < F->nm && ok; k++) {
         const verify_prior_t *P = F->prior[k];
         double *x = &F->mp[k * MODEL_BRDF_MAX_PARAMS];
+        F->mvp_pd[k] = F->npd;
         if (!(ok = lsq_add_parameters(F->prob, x, P->np))) break;
         for (int j = 0; j < P->np; j++) {
             double lo, hi;
@@ -1164,6 +1261,11 @@ static bool fit_parameters(fit_t *F)
                           up ? P->hi[j] : hi, fixed);
             snprintf(d->name, sizeof d->name, "%s.%s", P->name, pn);
         }
+        // with the priors' covariance: one multivariate Gaussian over the free ones
+        bool use[MODEL_BRDF_MAX_PARAMS] = { 0 };
+        for (int j = 0; j < P->np; j++) use[j] = !F->pd[F->mvp_pd[k] + j].fixed && F->pd[F->mvp_pd[k] + j].prior_std > 0;
+        if (up && verify_mvprior_make(P, use, &F->mvp[k]))
+            for (int j = 0; j < P->np; j++) F->pd[F->mvp_pd[k] + j].mv = use[j];
         F->rcs[k] = (res_ctx_t){ .pt = F->pt, .cs = F->cs, .w = F->wv, .b = F->bv, .lamp = F->lampv,
                                  .model = P->model, .np = P->np, .nl_all = F->nl ? F->nl : 1,
                                  .reference = opt->reference_eval };
@@ -1183,7 +1285,13 @@ static bool fit_bounds_and_masks(fit_t *F)
         const pdesc_t *d = &pd[k];
         if (d->fixed) continue;
         if ((isfinite(d->lo) || isfinite(d->hi)) && !lsq_set_bounds(prob, d->x, d->i, d->lo, d->hi)) return false;
-        if (d->prior_std > 0 && !lsq_add_prior(prob, d->x, d->i, d->prior_mean, d->prior_std)) return false;
+        if (d->prior_std > 0 && !d->mv && !lsq_add_prior(prob, d->x, d->i, d->prior_mean, d->prior_std)) return false;
+    }
+    for (int k = 0; k < F->nm; k++) {   // the materials' multivariate priors
+        double *x = &F->mp[k * MODEL_BRDF_MAX_PARAMS];
+        if (F->mvp[k].n > 0 &&
+            !lsq_add_residual(prob, verify_mvprior_residual, &F->mvp[k], F->mvp[k].n, 1, &x, LSQ_LOSS_NONE, 0))
+            return false;
     }
     // masks per block
     bool fx[MAX_LAMPS];
@@ -1356,8 +1464,18 @@ static void fit_covariance(fit_t *F)
     bool cok = col && JtJ && inv && ev && jb && nf > 0;
     for (int gi = 0; gi < F->ngroups && cok; gi++) cok = covariance_add_group(F, &F->groups[gi], col, nf, jb, JtJ);
     for (int k = 0; k < npd && cok; k++)
-        if (col[k] >= 0 && pd[k].prior_std > 0)
+        if (col[k] >= 0 && pd[k].prior_std > 0 && !pd[k].mv)
             JtJ[(size_t)col[k] * nf + col[k]] += 1 / (pd[k].prior_std * pd[k].prior_std);
+    for (int m = 0; m < F->nm && cok; m++) {   // multivariate priors: Sigma_S^-1 = L^-T L^-1
+        const verify_mvprior_t *v = &F->mvp[m];
+        for (int a = 0; a < v->n; a++)
+            for (int b = 0; b < v->n; b++) {
+                int ca = col[F->mvp_pd[m] + v->idx[a]], cb = col[F->mvp_pd[m] + v->idx[b]];
+                double s = 0;
+                for (int r = 0; r < v->n; r++) s += v->Linv[r * v->n + a] * v->Linv[r * v->n + b];
+                if (ca >= 0 && cb >= 0) JtJ[(size_t)ca * nf + cb] += s;
+            }
+    }
     for (int c = 0; c < nf && cok; c++) {
         double *A2 = malloc((size_t)nf * nf * sizeof *A2);
         if (!A2) {

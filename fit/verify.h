@@ -52,9 +52,32 @@ typedef struct {
     double       mean[MODEL_BRDF_MAX_PARAMS], std[MODEL_BRDF_MAX_PARAMS];
     double       lo[MODEL_BRDF_MAX_PARAMS], hi[MODEL_BRDF_MAX_PARAMS];
     bool         held[MODEL_BRDF_MAX_PARAMS];   // std 0: fixed
+    // The priors' full covariance ("prior_covariance", np x np in parameter
+    // order; has_cov false for files without one: independent std).
+    bool         has_cov;
+    double       cov[MODEL_BRDF_MAX_PARAMS * MODEL_BRDF_MAX_PARAMS];
     char         source[512];
     char         sha256[65];
 } verify_prior_t;
+
+// A material's prior as a multivariate Gaussian over its free parameters
+// (idx[0..n-1] of its np): residuals r = L^-1 (p_S - mean_S), Sigma_S = L L^T
+// (the prior's covariance over them), so |r|^2 is the Mahalanobis distance.
+typedef struct {
+    int    n, np;
+    int    idx[MODEL_BRDF_MAX_PARAMS];
+    double mean[MODEL_BRDF_MAX_PARAMS];
+    double Linv[MODEL_BRDF_MAX_PARAMS * MODEL_BRDF_MAX_PARAMS];   // n x n, lower triangular
+} verify_mvprior_t;
+
+// Build it over the parameters with use[j] (held ones left out by the
+// caller). false (no message) when P has no covariance, fewer than 2 are
+// used, or their covariance is not positive definite (the caller then keeps
+// independent priors).
+bool verify_mvprior_make(const verify_prior_t *P, const bool *use, verify_mvprior_t *out);
+// The residual block (model/lsq.h's lsq_residual_fn; ctx a verify_mvprior_t,
+// one parameter block: the material's np parameters; n residuals).
+bool verify_mvprior_residual(void *ctx, const double *const *p, double *r, double **J);
 
 typedef struct {
     int             n;
