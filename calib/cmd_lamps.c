@@ -255,7 +255,8 @@ static const char PATTERN_EPILOG[] =
 
 int calib_cmd_pattern(int argc, char **argv)
 {
-    const char *calib_dir = NULL, *out = NULL, *camera = NULL;
+    const char *calib_dir = NULL, *out = NULL, *camera = NULL, *report = NULL;
+    bool no_report = false;
     calib_observe_options_t o = calib_observe_defaults();
     double albedo = 0.99;
     model_opt_t opts[] = {
@@ -272,6 +273,9 @@ int calib_cmd_pattern(int argc, char **argv)
                          &o.material, false),
         MODEL_OPT_VALUE("--window", "N", "windows of N x N pixels (default 5)", false),
         MODEL_OPT_VALUE("--step", "N", "on a grid of N pixels (default 8)", false),
+        MODEL_OPT_STRING("--report", "DIR", "the report's directory (default: pattern/ beside the -o file): "
+                         "report.html, pattern.png, pattern_windows.csv", &report, false),
+        MODEL_OPT_FLAG("--no-report", NULL, "skip the report", &no_report),
         MODEL_OPT_FLAG("-v", "--verbose", "print every frame", &o.verbose),
     };
     model_cli_t cli = { .cmd = "calib pattern", .synopsis = "SESSION", .about = PATTERN_ABOUT,
@@ -302,6 +306,13 @@ int calib_cmd_pattern(int argc, char **argv)
         prov = calib_observe_provenance(argc + 1, argv - 1, session, cal);
         ok = calib_lamps_pattern_write(cal, pat, session, out, prov);
     }
+    char *rdir = NULL;
+    if (ok && !no_report) {
+        char *od = g_path_get_dirname(out);
+        rdir = report ? g_strdup(report) : g_build_filename(od, "pattern", NULL);
+        g_free(od);
+        ok = calib_lamps_pattern_report(&obs, cal, albedo, pat, rdir, prov);
+    }
     model_error_quiet_thread(q);
     if (ok) {
         printf("%-8s %6s %6s %9s %8s %8s %6s %7s %7s\n", "lamp", "n", "n_std", "tilt_deg", "axis_std", "cone_deg",
@@ -318,7 +329,9 @@ int calib_cmd_pattern(int argc, char **argv)
                    P->nwindows);
         }
         printf("%s\n", out);
+        if (rdir) printf("%s/report.html\n", rdir);
     }
+    g_free(rdir);
     rc = ok ? 0 : model_error_report("calib pattern");
     free(pat);
     json_decref(prov);

@@ -357,6 +357,12 @@ bool calib_lamps_pattern_fit(const calib_obs_set_t *obs, const calib_set_t *cal,
 // the same file; atomic). false + message.
 bool calib_lamps_pattern_write(const calib_set_t *cal, const calib_lamps_pattern_t *pat, const char *session,
                                const char *out_json, json_t *provenance);
+// The report of the fit in dir (made): pattern_windows.csv (per window: lamp,
+// angle from the fitted axis in degrees, irradiance relative to the on-axis
+// value, the fitted pattern there, relative noise), pattern.png
+// (scripts/calib_pattern_report.py) and report.html. false + message.
+bool calib_lamps_pattern_report(const calib_obs_set_t *obs, const calib_set_t *cal, double albedo,
+                                const calib_lamps_pattern_t *pat, const char *dir, const json_t *provenance);
 
 #ifdef __cplusplus
 }

@@ -211,6 +211,25 @@ static bool pat_fit(pat_data_t *D, const model_lamp_t *L, calib_lamps_pattern_t 
     return ok;
 }
 
+// Observation b as a window of lamp l (L): the unit direction *u from the
+// lamp, the irradiance *y = s d^2 / (kd n.l) (s the raw signal: the loaded
+// pattern divided back in) and its relative noise *rel (floor 0.1 %: the
+// target's and the model's own). false: another lamp's, or no signal.
+static bool pat_window(const calib_obs_t *b, int l, const model_lamp_t *L, double kd, model_vec3_t *u, double *y,
+                       double *rel)
+{
+    double s = b->s_dn_per_us * b->emission;
+    if (b->lamp != l || !(s > 0) || !(b->c.nl > 0)) return false;
+    double ca = cos(b->angle_deg * M_PI / 180), sa = sin(b->angle_deg * M_PI / 180);
+    model_vec3_t p = v3(ca * b->p0_mm[0] - sa * b->p0_mm[1], sa * b->p0_mm[0] + ca * b->p0_mm[1], b->p0_mm[2]);
+    double d = v3_norm(v3_sub(p, L->position_mm));
+    *u = v3_unit(v3_sub(p, L->position_mm));
+    *y = s * d * d / (kd * b->c.nl);
+    double r = b->s_std > 0 ? b->s_std * b->emission / s : 0;
+    *rel = sqrt(r * r + 1e-6);
+    return true;
+}
+
 bool calib_lamps_pattern_fit(const calib_obs_set_t *obs, const calib_set_t *cal, double albedo,
                              calib_lamps_pattern_t *out)
 {
@@ -232,19 +251,12 @@ bool calib_lamps_pattern_fit(const calib_obs_set_t *obs, const calib_set_t *cal,
         }
         model_vec3_t sum = v3(0, 0, 0);
         for (int i = 0; ok && i < obs->n; i++) {
-            const calib_obs_t *b = &obs->o[i];
-            double s = b->s_dn_per_us * b->emission;   // the raw signal (the loaded pattern divided back in)
-            if (b->lamp != l || !(s > 0) || !(b->c.nl > 0)) continue;
-            double ca = cos(b->angle_deg * M_PI / 180), sa = sin(b->angle_deg * M_PI / 180);
-            model_vec3_t p = v3(ca * b->p0_mm[0] - sa * b->p0_mm[1], sa * b->p0_mm[0] + ca * b->p0_mm[1],
-                                b->p0_mm[2]);
-            model_vec3_t u = v3_unit(v3_sub(p, L->position_mm));
-            double d = v3_norm(v3_sub(p, L->position_mm));
+            model_vec3_t u;
+            double y, rel;
+            if (!pat_window(&obs->o[i], l, L, kd, &u, &y, &rel)) continue;
             D.u[D.n] = u;
-            D.ly[D.n] = log(s * d * d / (kd * b->c.nl));
-            // relative noise of the window, with a floor of 0.1 % (the target's and the model's own)
-            double rel = b->s_std > 0 ? b->s_std * b->emission / s : 0;
-            D.sig[D.n] = sqrt(rel * rel + 1e-6);
+            D.ly[D.n] = log(y);
+            D.sig[D.n] = rel;
             D.used[D.n] = true;
             sum = v3_add(sum, u);
             D.n++;
@@ -306,5 +318,64 @@ bool calib_lamps_pattern_write(const calib_set_t *cal, const calib_lamps_pattern
     json_object_set_new(doc, "emission_provenance", json_incref(provenance));
     bool ok = model_write_json(out_json, doc);
     json_decref(doc);
+    return ok;
+}
+
+bool calib_lamps_pattern_report(const calib_obs_set_t *obs, const calib_set_t *cal, double albedo,
+                                const calib_lamps_pattern_t *pat, const char *dir, const json_t *provenance)
+{
+    if (!model_mkdir_p(dir)) return false;
+    char *csv = g_strdup_printf("%s/pattern_windows.csv", dir), *png = g_strdup_printf("%s/pattern.png", dir);
+    char *html = g_strdup_printf("%s/report.html", dir);
+    GString *t = g_string_new("lamp,angle_from_axis_deg,irradiance_rel,pattern_rel,sigma_rel\n");
+    const double kd = albedo / M_PI;
+    for (int l = 0; l < cal->lamps->n; l++) {
+        const calib_lamps_pattern_t *P = &pat[l];
+        if (!P->fitted) continue;
+        for (int i = 0; i < obs->n; i++) {
+            model_vec3_t u;
+            double y, rel;
+            if (!pat_window(&obs->o[i], l, &cal->lamps->lamps[l], kd, &u, &y, &rel)) continue;
+            double au = v3_dot(P->axis, u);
+            g_string_append_printf(t, "%s,%.4f,%.6g,%.6g,%.4g\n", P->name, acos(fmax(-1, fmin(1, au))) * 180 / M_PI,
+                                   y / P->kcI_axis_per_us, au > 0 ? pow(au, P->n) : 0, rel);
+        }
+    }
+    bool ok = model_write_file_atomic(csv, t->str) && model_run_script("calib_pattern_report.py", csv, png, NULL) == 0;
+    g_string_free(t, TRUE);
+    FILE *f = ok ? model_html_begin(html, "refl calib pattern: the lamps' emission patterns", provenance) : NULL;
+    if (f) {
+        model_html_heading(f, "Emission patterns");
+        model_html_para(f, "Each window of the flat target (albedo %g) lit by one lamp: its irradiance y = s d^2 / (kd "
+                        "n.l) relative to the lamp's fitted on-axis value, against the angle between the direction "
+                        "from the lamp and the fitted emission axis; the pattern max(0, a.u)^n fitted to the log of "
+                        "y, each window weighted by its noise (pattern_windows.csv: the windows and the fitted "
+                        "pattern at each).", albedo);
+        const char **rows = calloc((size_t)cal->lamps->n + 1, sizeof *rows);
+        int nr = 0;
+        for (int l = 0; rows && l < cal->lamps->n; l++) {
+            const calib_lamps_pattern_t *P = &pat[l];
+            rows[nr++] = P->fitted ? g_strdup_printf("%s|%.2f ± %.2f|%.2f|%.2f|%.1f|%.2f|%.2f|%d (%d dropped)", P->name,
+                                                     P->n, P->n_std, P->tilt_deg, P->axis_std_deg,
+                                                     P->cone_half_angle_deg, 100 * P->rms_rel,
+                                                     100 * P->irradiance_std_rel, P->nwindows, P->rejected)
+                                   : g_strdup_printf("%s|not measured (%d windows, need 20)||||||", P->name,
+                                                     P->nwindows);
+        }
+        model_html_table(f, "lamp|cos power n ± 1σ|axis tilt from the rig origin (deg)|axis 1σ (deg)|measured cone "
+                         "half-angle (deg)|residual RMS (%)|irradiance 1σ (%)|windows", rows, nr);
+        for (int k = 0; k < nr; k++) g_free((char *)rows[k]);
+        free(rows);
+        model_html_figure(f, "pattern.png", "Each lamp's windows: irradiance relative to the on-axis value against "
+                          "the angle from the fitted emission axis (points), the fitted pattern max(0, cos)^n (line) "
+                          "and the windows' relative residuals (%) below; a lamp taken as isotropic would be a flat "
+                          "line at 1");
+        ok = model_html_end(f, html);
+    } else {
+        ok = false;
+    }
+    g_free(csv);
+    g_free(png);
+    g_free(html);
     return ok;
 }

@@ -914,6 +914,52 @@ static double irradiance_error(const model_lamp_t *ml, double kcI, const model_l
     return worst;
 }
 
+// The report of refl calib pattern beside LAMPS.json (DIR/pattern): the page
+// and its figure, and pattern_windows.csv: every fitted lamp's windows (at
+// least those in its fit), each with the fitted pattern max(0, cos)^n at its
+// angle from the axis (n from lamps.json).
+static void pattern_report_check(const char *cal, const char *lj)
+{
+    char *html = g_strdup_printf("%s/pattern/report.html", cal), *png = g_strdup_printf("%s/pattern/pattern.png", cal);
+    char *csv = g_strdup_printf("%s/pattern/pattern_windows.csv", cal), *text = NULL, *page = NULL;
+    CHECK(g_file_get_contents(html, &page, NULL, NULL) && strstr(page, "pattern.png") && strstr(page, "cos power"));
+    CHECK(g_file_test(png, G_FILE_TEST_EXISTS));
+    json_t *doc = json_load_file(lj, 0, NULL);
+    CHECK(g_file_get_contents(csv, &text, NULL, NULL) && doc);
+    if (text && doc) {
+        static const char hdr[] = "lamp,angle_from_axis_deg,irradiance_rel,pattern_rel,sigma_rel\n";
+        CHECK(!strncmp(text, hdr, strlen(hdr)));
+        size_t l;
+        json_t *e;
+        json_array_foreach(json_object_get(doc, "lamps"), l, e) {
+            const char *name = json_string_value(json_object_get(e, "name"));
+            double n = json_number_value(json_object_get(e, "emission_cos_power"));
+            long rows = 0, bad = 0;
+            char want[80];
+            snprintf(want, sizeof want, "\n%s,", name ? name : "?");
+            for (const char *p = strstr(text, want); p; p = strstr(p + 1, want)) {
+                double ang = NAN, y = NAN, pat = NAN;
+                if (sscanf(p + strlen(want), "%lf,%lf,%lf", &ang, &y, &pat) != 3) {
+                    bad++;
+                    continue;
+                }
+                rows++;
+                double c = cos(ang * M_PI / 180);
+                bad += !(fabs(pat - (c > 0 ? pow(c, n) : 0)) < 1e-4 && y > 0);
+            }
+            long windows = json_integer_value(json_object_get(json_object_get(e, "emission"), "windows"));
+            CHECK_MSG(rows >= windows && windows > 0 && bad == 0, "lamp %s: %ld rows (%ld windows fitted), %ld "
+                      "inconsistent", name, rows, windows, bad);
+        }
+    }
+    json_decref(doc);
+    g_free(text);
+    g_free(page);
+    g_free(html);
+    g_free(png);
+    g_free(csv);
+}
+
 // The white session on the virtual rig (its lamps with PAT_TRUE's patterns
 // when patterns, else isotropic), refl calib white before and after refl
 // calib pattern: *worst and *worst_iso the largest irradiance error over the
@@ -952,8 +998,10 @@ static void pattern_run(bool patterns, double *worst, double *worst_iso)
     CHECK_MSG(rc == 0, "%s", e);
     fprintf(stderr, "%s", o ? o : "");
     CHECK_CONTAINS(o, "irr_std%");
+    CHECK_CONTAINS(o, "/pattern/report.html");
     g_free(o);
     g_free(e);
+    pattern_report_check(cal, lj);
     // the white again through the patterns: kc*I is the on-axis intensity's
     rc = test_refl_run(300, &o, &e, "calib", "white", ws, "--calib", cal, "--scene", wsc, "-o", wj, NULL);
     CHECK_MSG(rc == 0, "%s", e);
@@ -962,7 +1010,8 @@ static void pattern_run(bool patterns, double *worst, double *worst_iso)
     white_kcI(wj, tl, kcI);
     // the patterns again through the directory's patterns: the same (the loaded pattern is divided back in)
     char *lj2 = g_strdup_printf("%s/lamps2.json", test_tmpdir());
-    rc = test_refl_run(300, &o, &e, "calib", "pattern", ws, "--calib", cal, "--scene", wsc, "-o", lj2, NULL);
+    rc = test_refl_run(300, &o, &e, "calib", "pattern", ws, "--calib", cal, "--scene", wsc, "-o", lj2, "--no-report",
+                       NULL);
     CHECK_MSG(rc == 0, "%s", e);
     g_free(o);
     g_free(e);
