@@ -57,6 +57,11 @@ def calib_rows(out):
     rows.append(["lamp positions (refl calib lamps)", link(out, "calib/lamps/report.html", "lamps report"),
                  f"{len(lamps)} lamps: " + ", ".join(e(str(m.get("name"))) for m in lamps if isinstance(m, dict))
                  if isinstance(lamps, list) else "missing"])
+    pats = [m for m in lamps if isinstance(m, dict) and "emission_cos_power" in m] if isinstance(lamps, list) else []
+    rows.append(["lamp emission patterns (refl calib pattern)",
+                 link(out, "calib/lamps/pattern/report.html", "pattern report"),
+                 ", ".join(f"{e(str(m.get('name')))} n {fmt(m.get('emission_cos_power'), '.2f')}" for m in pats)
+                 if pats else "missing"])
     gn = jload(out, "calib/gain/gain.json")
     rows.append(["sensitivity, EMVA 1288 (refl calib gain)", link(out, "calib/gain/report.html", "gain report"),
                  f"K {fmt(gn.get('system_gain_dn_per_e'), '.4g')} DN/e-, read noise {fmt(gn.get('read_noise_e'), '.3g')}"
