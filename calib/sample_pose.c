@@ -138,18 +138,6 @@ static bool pose_residuals(void *ctx, const double *const *params, double *res, 
     return ok && residuals_at(F, params[0], res);
 }
 
-static double bilinear(const float *P, int W, int H, double x, double y, bool *inside)
-{
-    if (!(x >= 0 && y >= 0 && x <= W - 1.001 && y <= H - 1.001)) {
-        *inside = false;
-        return 0;
-    }
-    int x0 = (int)x, y0 = (int)y;
-    double fx = x - x0, fy = y - y0;
-    const float *r0 = P + (size_t)y0 * W + x0, *r1 = r0 + W;
-    return (1 - fy) * ((1 - fx) * r0[0] + fx * r0[1]) + fy * ((1 - fx) * r1[0] + fx * r1[1]);
-}
-
 // The image's edge near q along dir (from the sample to the background)
 // within +-reach px: the steepest fall of the profile (averaged over 3 px
 // along the edge), refined by a parabola; its step (the means 3 px either
@@ -166,7 +154,7 @@ static bool find_edge(const eimage_t *im, int W, int H, const double q[2], const
     for (int i = -ns; i <= ns; i++) {
         double s = (double)i / SUB, v = 0;
         for (int k = -1; k <= 1; k++)
-            v += bilinear(im->img, W, H, q[0] + s * dir[0] + k * tg[0], q[1] + s * dir[1] + k * tg[1], &inside);
+            v += model_image_bilinear(im->img, W, H, q[0] + s * dir[0] + k * tg[0], q[1] + s * dir[1] + k * tg[1], &inside);
         prof[i + ns] = v / 3;
     }
     if (!inside) return false;

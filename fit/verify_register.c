@@ -74,18 +74,6 @@ static model_vec3_t pose_point(const reg_t *R, model_vec3_t p, const double pose
     return (model_vec3_t){ cb * x - sb * y, sb * x + cb * y, p.z };
 }
 
-static double bilinear(const float *P, int W, int H, double x, double y, bool *inside)
-{
-    if (!(x >= 0 && y >= 0 && x <= W - 1.001 && y <= H - 1.001)) {
-        *inside = false;
-        return 0;
-    }
-    int x0 = (int)x, y0 = (int)y;
-    double fx = x - x0, fy = y - y0;
-    const float *r0 = P + (size_t)y0 * W + x0, *r1 = r0 + W;
-    return (1 - fy) * ((1 - fx) * r0[0] + fx * r0[1]) + fy * ((1 - fx) * r1[0] + fx * r1[1]);
-}
-
 // The score of a pose (coarse: on the blurred images, d 5 px; else d 2 px).
 static double pose_score(const reg_t *R, const double pose[3], bool coarse)
 {
@@ -102,8 +90,8 @@ static double pose_score(const reg_t *R, const double pose[3], bool coarse)
         double rx = -e->t_img[1], ry = e->t_img[0];
         const float *P = coarse ? R->blur[e->image] : im->P;
         bool in = true;
-        double m = bilinear(P, im->W, im->H, q[0] + d * rx, q[1] + d * ry, &in) -
-                   bilinear(P, im->W, im->H, q[0] - d * rx, q[1] - d * ry, &in);
+        double m = model_image_bilinear(P, im->W, im->H, q[0] + d * rx, q[1] + d * ry, &in) -
+                   model_image_bilinear(P, im->W, im->H, q[0] - d * rx, q[1] - d * ry, &in);
         if (!in) continue;
         double ratio = fmax(-1, fmin(2, m / e->c));
         sum += fabs(e->c) * ratio;

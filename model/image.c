@@ -380,3 +380,15 @@ done:
     free(names);
     return ok;
 }
+
+double model_image_bilinear(const float *P, int W, int H, double x, double y, bool *inside)
+{
+    if (!(x >= 0 && y >= 0 && x <= W - 1.001 && y <= H - 1.001)) {
+        *inside = false;
+        return 0;
+    }
+    int x0 = (int)x, y0 = (int)y;
+    double fx = x - x0, fy = y - y0;
+    const float *r0 = P + (size_t)y0 * W + x0, *r1 = r0 + W;
+    return (1 - fy) * ((1 - fx) * r0[0] + fx * r0[1]) + fy * ((1 - fx) * r1[0] + fx * r1[1]);
+}

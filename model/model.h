@@ -906,6 +906,10 @@ float *model_image_decode(const void *data, size_t len, const char *name, model_
 float *model_image_read(const char *path, model_channel_t ch, int *width, int *height, model_meta_t *meta);
 // model_image_read with model_image_channel() and no metadata.
 float *model_image_read_float(const char *path, int *width, int *height);
+// The W x H image P (row-major) at (x, y) in pixels (pixel centres at whole
+// numbers), interpolated bilinearly; outside the image: 0 and *inside false
+// (*inside is left as it was otherwise).
+double model_image_bilinear(const float *P, int W, int H, double x, double y, bool *inside);
 // The same as *pix (free it); false on error.
 bool model_tiff_read_float(const char *path, int *width, int *height, float **pix);
 // The same as 16-bit values (grey values kept; colour mixed, rounded and
