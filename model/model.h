@@ -715,6 +715,8 @@ typedef struct {
     bool   finite_lamps;        // MC: sample each lamp's sphere (radius_mm) for soft shadows
     uint64_t seed;              // MC: reproducible for a given seed, whatever the thread count
     int    nthreads;            // <= 0: model_default_threads()
+    const uint8_t *pixel_mask;  // width*height: render only the pixels where it is non-zero (the others of
+                                //   P_out, face_out and lit_out are left as they are); NULL: every pixel
 } model_shading_t;
 
 // Defaults: kc 1, Pa 0, no gain map, no interreflection, rho 0.05, 9 thesis
