@@ -126,6 +126,7 @@ FIT_SRC := \
     fit/plan_lamps.c \
     fit/plan_capture.c \
     fit/verify.c \
+    fit/verify_footprint.c \
     fit/verify_files.c \
     fit/verify_lab.c \
     fit/verify_study.c \

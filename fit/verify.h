@@ -110,6 +110,10 @@ typedef struct {
                                     // offset (model_linearise), applied before the fit (NULL: linear)
     double          kc_rel;         // its sensitivity relative to the lamps' scale kc*I (its own white's over
                                     // the one given; 0 or 1: the same camera), a factor on its signal
+    double          psf_sigma_px;   // the optics' blur: an isotropic Gaussian PSF's sigma, px, beside the
+                                    // pixel's own footprint (calib_set_t.psf_sigma_px; 0: none known)
+    double          pixel_fill;     // the pixel's footprint: a square of this side, px (1: the whole pixel,
+                                    // a real sensor's; 0: a point, a renderer's one ray a pixel)
 } verify_camera_t;
 
 typedef struct {
@@ -140,7 +144,12 @@ typedef struct {
     double boundary_margin_px;  // and face/shadow changes this far beyond the window (default 4)
     double edge_k;              // window std above sqrt(edge_k^2 var_noise + (edge_rel S)^2) says edge (3)
     double edge_rel;            // (0.05)
-    int    ir_samples;          // interreflection rays per point (default 16; 0: none)
+    bool   edge_windows;        // model the windows near edges with the pixels' footprint and the blur
+                                //   (fit/verify_footprint.h; default true); false: skip them
+    int    edge_subsamples;     // sub-cells per px side of a window's mixed cells (odd; default 5)
+    double edge_position_sigma_px;   // 1-sigma of where an edge lies in the image (camera model, placement,
+                                //   blur), px: a window near an edge gets sigma^2 += (this |dM/dc|)^2 (0.1)
+    int    ir_samples;          // interreflection rays per point (default 64; 0: none)
     bool   use_priors;          // bounded by the priors (default true); false: the thesis's fit
     bool   use_flat;            // use the cameras' flat fields and offset maps (default true)
     double model_rel;           // relative model tolerance in sigma (default 0.04)
@@ -193,6 +202,7 @@ typedef enum {
     VERIFY_PT_BOUNDARY,        // the window's corners see another face or another shadow state
     VERIFY_PT_SATURATED,
     VERIFY_PT_EDGE_MEASURED,   // the window's spread says edge where none is predicted (a flag)
+    // (a window near an edge that is modelled with its footprint and blur is USED, verify_point_t.footprint)
     VERIFY_PT_NSTATUS
 } verify_pt_status_t;
 
@@ -203,6 +213,7 @@ typedef struct {
     float   q[2];
     int32_t face;          // face of the description (-1 background)
     uint8_t status;        // verify_pt_status_t
+    bool    footprint;     // a window near an edge, modelled with the pixels' footprint and the blur
     bool    flag;
     int     region;        // index into regions or -1
     float   meas, model;   // DN (meas after the offset map)
@@ -342,6 +353,8 @@ typedef struct {
     const char *out;                               // output directory (created)
     double      placement_tol_mm, placement_tol_deg;   // the part's placement registered within these
                                                    //   (verify_register) before the fit; 0 and 0: as described
+    double      psf_sigma_px, pixel_fill;          // over every camera's calibration (NAN: the calibration's;
+                                                   //   without one: 0 px and 1, the whole pixel)
     verify_options_t opt;
     json_t     *provenance;                        // borrowed: the inputs are added, verify.json carries it
 } verify_files_opts_t;
