@@ -224,7 +224,8 @@ int verify_cmd(int argc, char **argv)
         MODEL_OPT_DOUBLE("--pixel-fill", "F", "the pixel's footprint, a square of F px (default: the "
                          "calibration's, else 1: the whole pixel)", &o.pixel_fill, 0, 1),
         MODEL_OPT_INT("--interreflection-samples", "N", "(64; 0 none)", &op->ir_samples, 0, 1024),
-        MODEL_OPT_DOUBLE("--model-rel", "R", "relative model tolerance in sigma (0.04)", &op->model_rel, 0, 10),
+        MODEL_OPT_DOUBLE("--model-rel", "R", "relative model error of every window, over the priors' "
+                         "window_rel_std (default: the priors', else 0.04)", &op->model_rel, 0, 10),
         MODEL_OPT_DOUBLE("--robust-scale", "Z", "Cauchy loss scale in z (3; 0 plain least squares)",
                          &op->robust_scale, 0, 1e6),
         MODEL_OPT_DOUBLE("--lamp-sigma", "S", "prior std of the lamps' intensities (0.1)", &op->lamp_sigma, 1e-6,
@@ -269,6 +270,7 @@ int verify_cmd(int argc, char **argv)
     op->use_priors = !model_cli_opt(&cli, "--no-priors")->given;
     op->use_flat = !model_cli_opt(&cli, "--no-gain-maps")->given;
     op->edge_windows = !model_cli_opt(&cli, "--skip-edge-windows")->given;
+    op->model_rel_given = model_cli_opt(&cli, "--model-rel")->given;
     o.have_angle = model_cli_opt(&cli, "--angle-deg")->given;
     o.have_exposure = model_cli_opt(&cli, "--exposure-us")->given;
     o.have_gain = model_cli_opt(&cli, "--gain-db")->given;

@@ -267,6 +267,17 @@ static bool priors_from_json(verify_priors_t *pr, json_t *root, const char *path
             p->held[j] = sd == 0 || json_is_string(json_object_get(e, "held"));
         }
         if (!prior_cov_from_json(p, json_object_get(m, "prior_covariance"), path)) goto done;
+        // a window's relative spread about the model (refl fit material; absent or null: not known)
+        json_t *wr = json_object_get(m, "window_rel_std");
+        p->window_rel = NAN;
+        if (wr && !json_is_null(wr)) {
+            if (!json_is_number(wr) || !(json_number_value(wr) >= 0) || json_number_value(wr) > 10) {
+                model_error(path, 0, "material %s: window_rel_std must be a number in [0, 10] (a relative spread)",
+                            name);
+                goto done;
+            }
+            p->window_rel = json_number_value(wr);
+        }
     }
     ok = true;
 done:
@@ -284,6 +295,7 @@ bool verify_priors_add(verify_priors_t *pr, const model_material_t *mat, double 
     snprintf(p->name, sizeof p->name, "%s", mat->name);
     snprintf(p->source, sizeof p->source, "(known values, std %g %%)", rel * 100);
     p->model = mat->model;
+    p->window_rel = NAN;
     p->np = model_brdf_nparams(mat->model);
     for (int j = 0; j < p->np; j++) {
         double lo, hi;
@@ -324,6 +336,7 @@ struct verify_view {
     model_lamp_sample_t *ls;    // gw*gh*nl
     uint8_t *status;            // geometric status (USED, BACKGROUND, NEAR_EDGE, BOUNDARY)
     float *B;                   // gw*gh*nl: interreflection basis per unit A_i
+    float *Bsd;                 // gw*gh*nl: its Monte Carlo estimate's standard error
     verify_footprints_t fp;     // the windows near edges modelled with footprint and blur (USED, fp.first >= 0)
     int nusable;
     double time_s;
@@ -341,6 +354,7 @@ void verify_view_free(verify_view_t *v)
     free(v->ls);
     free(v->status);
     free(v->B);
+    free(v->Bsd);
     verify_footprints_free(&v->fp);
     free(v);
 }
@@ -371,6 +385,7 @@ typedef struct {
     const int *idx;   // indices into pi (NULL: 0..n-1)
     float *B;         // per index into pi: nl values
     uint64_t seed;
+    float *Bsd;       // as B: the estimate's standard error (NULL: not wanted)
 } ir_ctx_t;
 
 static double radical_inverse2(uint32_t i)
@@ -394,8 +409,9 @@ static void ir_rows(void *vctx, int begin, int end, int thread)
     for (int k = begin; k < end; k++) {
         int g = c->idx ? c->idx[k] : k;
         const model_pixel_info_t *pi = &c->pi[g];
-        float *B = &c->B[(size_t)g * nl];
+        float *B = &c->B[(size_t)g * nl], *Bsd = c->Bsd ? &c->Bsd[(size_t)g * nl] : NULL;
         for (int i = 0; i < nl; i++) B[i] = 0;
+        for (int i = 0; Bsd && i < nl; i++) Bsd[i] = 0;
         if (pi->face < 0 || pi->material < 0) continue;
         const model_material_t *mx = c->mats[pi->material];
         model_vec3_t n = pi->n, a = fabs(n.x) < 0.9 ? v3(1, 0, 0) : v3(0, 1, 0);
@@ -403,7 +419,7 @@ static void ir_rows(void *vctx, int begin, int end, int thread)
         model_vec3_t b = v3_cross(n, a);
         model_rng_t rng = model_rng(c->seed, (uint64_t)g);
         double rot = model_rng_uniform(&rng);
-        double acc[MAX_LAMPS] = { 0 };
+        double acc[MAX_LAMPS] = { 0 }, acc2[MAX_LAMPS] = { 0 };
         model_vec3_t org = v3_add(pi->p_mm, v3_scale(n, eps));
         for (int j = 0; j < N; j++) {
             double u = (j + 0.5) / N, ph = 2 * M_PI * (radical_inverse2((uint32_t)j) + rot);
@@ -424,18 +440,30 @@ static void ir_rows(void *vctx, int begin, int end, int thread)
                 model_cosines_t cy = model_cosines(y.n, l, vy);
                 if (cy.nl <= 0 || cy.nv <= 0) continue;
                 if (!model_tracer_visible_from(c->t, y.p_mm, y.n, c->lamps->lamps[i].position_mm)) continue;
-                acc[i] += fx * model_brdf_eval(my->model, my->p, &cy, NULL) / (dd * dd) *
-                          model_lamp_emission(&c->lamps->lamps[i], y.p_mm);
+                double t = fx * model_brdf_eval(my->model, my->p, &cy, NULL) / (dd * dd) *
+                           model_lamp_emission(&c->lamps->lamps[i], y.p_mm);
+                acc[i] += t;
+                acc2[i] += t * t;
             }
         }
         for (int i = 0; i < nl; i++) B[i] = (float)(M_PI / N * acc[i]);
+        // the mean's standard error over the rays: pi sqrt((mean a^2 - mean^2) / (N - 1))
+        for (int i = 0; Bsd && N > 1 && i < nl; i++)
+            Bsd[i] = (float)(M_PI * sqrt(fmax(acc2[i] / N - (acc[i] / N) * (acc[i] / N), 0) / (N - 1)));
     }
 }
 
 void verify_interreflection(const model_tracer_t *t, const model_lamps_t *lamps, const model_material_t *const *mats,
                             const model_pixel_info_t *pi, int n, int samples, int threads, float *B)
 {
-    ir_ctx_t ic = { t, lamps, mats, samples, pi, NULL, B, 0x1e5f };
+    verify_interreflection_sd(t, lamps, mats, pi, n, samples, threads, B, NULL);
+}
+
+void verify_interreflection_sd(const model_tracer_t *t, const model_lamps_t *lamps,
+                               const model_material_t *const *mats, const model_pixel_info_t *pi, int n, int samples,
+                               int threads, float *B, float *Bsd)
+{
+    ir_ctx_t ic = { t, lamps, mats, samples, pi, NULL, B, 0x1e5f, Bsd };
     model_parallel_for(n, 64, threads > 0 ? threads : model_default_threads(), ir_rows, &ic);
 }
 
@@ -576,9 +604,10 @@ verify_view_t *verify_view_new(const model_scene_t *scene, const verify_camera_t
     v->ls = malloc((size_t)n * (nl ? nl : 1) * sizeof *v->ls);
     v->status = calloc((size_t)n, 1);
     v->B = calloc((size_t)n * (nl ? nl : 1), sizeof *v->B);
+    v->Bsd = calloc((size_t)n * (nl ? nl : 1), sizeof *v->Bsd);
     double *q = malloc((size_t)n * 2 * sizeof *q);
     int *cand = malloc((size_t)n * sizeof *cand);
-    if (!v->t || !v->pi || !v->ls || !v->status || !v->B || !q || !cand) {
+    if (!v->t || !v->pi || !v->ls || !v->status || !v->B || !v->Bsd || !q || !cand) {
         if (v->t) model_error(NULL, 0, "out of memory for %d reference points", n);
         goto fail;
     }
@@ -620,7 +649,7 @@ verify_view_t *verify_view_new(const model_scene_t *scene, const verify_camera_t
         if (!(v->fp.first && v->fp.first[g] >= 0)) cand[ncand++] = g;   // (a window's parts have their own)
     }
     if (opt->ir_samples > 0 && ncand && nl) {
-        ir_ctx_t ic = { v->t, lamps, mats, opt->ir_samples, v->pi, cand, v->B, 0x1e5f };
+        ir_ctx_t ic = { v->t, lamps, mats, opt->ir_samples, v->pi, cand, v->B, 0x1e5f, v->Bsd };
         model_parallel_for(ncand, 64, threads, ir_rows, &ic);
     }
     free(cand);
@@ -1155,12 +1184,28 @@ static bool measure_windows(fit_t *F, int m, int first_pt, double *Pa0, double *
     return true;
 }
 
+// A point's relative model error: its material's window spread (the priors'
+// window_rel_std) unless model_rel is given or the priors state none; of two
+// materials the larger.
+static double point_model_rel(const fit_t *F, const pt_t *q)
+{
+    double rel = 0;
+    for (int k = 0; k < 2; k++) {
+        int mat = k ? q->mat2 : q->mat;
+        if (mat < 0) continue;
+        double wr = F->prior[mat]->window_rel;
+        rel = fmax(rel, F->opt->model_rel_given || !isfinite(wr) ? F->opt->model_rel : wr);
+    }
+    return rel;
+}
+
 // The terms of grid point g of image m's window near an edge (its parts,
 // verify_footprint.h) from *e on, into q (mat, mat2, nl); *gx, *gy: the
 // model's slope per unit E g across the window's centre (per px) at the
-// priors' means (kc = s = 1; the direct light). false (nothing written) when
-// the window sees more than two materials.
-static bool footprint_terms(fit_t *F, int m, int g, pt_t *q, size_t *e, double *gx, double *gy)
+// priors' means (kc = s = 1; the direct light); *bsd += its interreflection
+// basis's Monte Carlo error per unit E g. false (nothing written) when the
+// window sees more than two materials.
+static bool footprint_terms(fit_t *F, int m, int g, pt_t *q, size_t *e, double *gx, double *gy, double *bsd)
 {
     const verify_view_t *v = F->views[m];
     const verify_image_t *im = &F->imgs[m];
@@ -1179,7 +1224,7 @@ static bool footprint_terms(fit_t *F, int m, int g, pt_t *q, size_t *e, double *
     for (int j = 0; j < np; j++) {
         const verify_part_t *P = &fp->parts[P0 + j];
         const float *wl = &fp->wl[(size_t)(P0 + j) * nl * 3];
-        const float *B = &fp->B[(size_t)(P0 + j) * nl];
+        const float *B = &fp->B[(size_t)(P0 + j) * nl], *Bsd = &fp->Bsd[(size_t)(P0 + j) * nl];
         const int pm = P->material;
         const double *mp = &F->mp[pm * MODEL_BRDF_MAX_PARAMS];
         for (int i = 0; i < F->nl; i++) {
@@ -1195,6 +1240,7 @@ static bool footprint_terms(fit_t *F, int m, int g, pt_t *q, size_t *e, double *
             F->lampv[*e] = i;
             F->secv[*e] = mat2 >= 0 && pm == mat2;
             double R = model_brdf_eval(F->prior[pm]->model, mp, &c, NULL);
+            *bsd += F->A[i] * P->W * Bsd[i];
             *gx += F->A[i] * em * wl[3 * i + 1] * R;
             *gy += F->A[i] * em * wl[3 * i + 2] * R;
             (*e)++;
@@ -1228,7 +1274,7 @@ static void image_fit_points(fit_t *F, int m, int first_pt, double Pa0, double v
             p->status = VERIFY_PT_EDGE_MEASURED;
             p->z = (float)(opt->z_flag * wstd / sqrt(thr2));
         }
-        double sig2 = var_px / ((double)w * w) + (opt->model_rel * S) * (opt->model_rel * S);
+        double sig2 = var_px / ((double)w * w);
         // the fit's point (edge-measured ones are predicted too, not fitted)
         pt_t *q = &F->pt[F->nfit];
         q->meas = p->meas;
@@ -1238,9 +1284,10 @@ static void image_fit_points(fit_t *F, int m, int first_pt, double Pa0, double v
         q->first = (int)*e;
         q->nl = 0;
         q->r_last = q->rr_last = NAN;
+        double bsd = 0;   // the interreflection basis's Monte Carlo error, per unit E g
         if (foot) {
             double gx, gy;
-            if (!footprint_terms(F, m, g, q, e, &gx, &gy)) {   // more than two materials in the window
+            if (!footprint_terms(F, m, g, q, e, &gx, &gy, &bsd)) {   // more than two materials in the window
                 p->status = VERIFY_PT_NEAR_EDGE;
                 continue;
             }
@@ -1261,10 +1308,16 @@ static void image_fit_points(fit_t *F, int m, int first_pt, double Pa0, double v
                 F->bv[*e] = F->A[i] * v->B[(size_t)g * v->nl + i];
                 F->lampv[*e] = i;
                 F->secv[*e] = 0;
+                bsd += F->A[i] * v->Bsd[(size_t)g * v->nl + i];
                 (*e)++;
                 q->nl++;
             }
         }
+        // what the model lacks: the material's window spread (its priors' window_rel_std, else model_rel;
+        // a window of two materials the larger), and the interreflection basis's Monte Carlo error
+        double rel = point_model_rel(F, q);
+        double sb = opt->ir_samples > 0 ? q->Eg * bsd : 0;
+        sig2 += (rel * S) * (rel * S) + sb * sb;
         q->sigma = sqrt(sig2);
         p->sigma = (float)q->sigma;
         p->model = 0;
@@ -1908,6 +1961,13 @@ json_t *verify_result_json(const verify_result_t *r, const model_scene_t *scene,
     json_object_set_new(op, "priors", json_boolean(opt->use_priors));
     json_object_set_new(op, "gain_maps", json_boolean(opt->use_flat));
     json_object_set_new(op, "model_rel", json_real(opt->model_rel));
+    json_object_set_new(op, "model_rel_source",
+                        json_string(opt->model_rel_given ? "model_rel for every material (--model-rel)"
+                                                         : "each material's priors' window_rel_std; model_rel for "
+                                                           "materials whose priors state none"));
+    json_object_set_new(op, "edge_windows", json_boolean(opt->edge_windows));
+    json_object_set_new(op, "edge_subsamples", json_integer(opt->edge_subsamples));
+    json_object_set_new(op, "edge_position_sigma_px", json_real(opt->edge_position_sigma_px));
     json_object_set_new(op, "lamp_sigma", json_real(opt->lamp_sigma));
     json_object_set_new(op, "camera_sigma", json_real(opt->camera_sigma));
     json_object_set_new(op, "robust_scale", json_real(opt->robust_scale));

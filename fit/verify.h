@@ -20,7 +20,13 @@
 // Residual (P_k - P_meas,k) / sigma_k (reported as z_k = (P_meas,k - P_k) /
 // sigma_k, the sign of the difference images) with sigma_k^2 = the window mean's
 // sensor noise (from the gain calibration's K and read noise; else from the
-// windows' own spread) + (model_rel * signal)^2. Fitted with a robust (Cauchy)
+// windows' own spread) + (rel * signal)^2 + the interreflection basis's Monte
+// Carlo error^2 (E kc sum_i A_i Bsd_i) + for a window near an edge
+// (edge_position_sigma_px * its slope across the edge)^2; rel is the
+// material's window_rel_std from its priors (the spread of a window's R about
+// the model on its coupon, beyond noise), else model_rel. A window near an
+// edge (a face's outline, a shadow's) is modelled with the pixels' footprint
+// and the optics' blur (fit/verify_footprint.h). Fitted with a robust (Cauchy)
 // loss so that a region the description gets wrong does not bend the
 // parameters, then judged: points with |z| > z_flag, and windows that show an
 // edge the description does not predict, are flags; 8-connected flags on an
@@ -56,6 +62,8 @@ typedef struct {
     // order; has_cov false for files without one: independent std).
     bool         has_cov;
     double       cov[MODEL_BRDF_MAX_PARAMS * MODEL_BRDF_MAX_PARAMS];
+    double       window_rel;        // "window_rel_std": a window's relative spread about the model beyond its
+                                    //   noise (texture, what the model lacks); NAN: not known
     char         source[512];
     char         sha256[65];
 } verify_prior_t;
@@ -152,7 +160,9 @@ typedef struct {
     int    ir_samples;          // interreflection rays per point (default 64; 0: none)
     bool   use_priors;          // bounded by the priors (default true); false: the thesis's fit
     bool   use_flat;            // use the cameras' flat fields and offset maps (default true)
-    double model_rel;           // relative model tolerance in sigma (default 0.04)
+    double model_rel;           // relative model tolerance in sigma (default 0.04) for materials whose priors
+                                //   state no window_rel_std
+    bool   model_rel_given;     // model_rel for every material, over the priors' window_rel_std
     double lamp_sigma;          // prior std of s_i (default 0.1)
     double camera_sigma;        // prior std of kc_c (default 0.1)
     double pa_sigma_dn;         // prior std of Pa with an offset map (default 5; ambient light)
@@ -193,6 +203,11 @@ double verify_view_time_s(const verify_view_t *v);
 // lamps (shadow rays). Points with face < 0 get 0.
 void verify_interreflection(const model_tracer_t *t, const model_lamps_t *lamps, const model_material_t *const *mats,
                             const model_pixel_info_t *pi, int n, int samples, int threads, float *B);
+// The same and each value's standard error as a Monte Carlo estimate (Bsd:
+// n x lamps->n, may be NULL): pi sqrt(var of a ray's term / (samples - 1)).
+void verify_interreflection_sd(const model_tracer_t *t, const model_lamps_t *lamps,
+                               const model_material_t *const *mats, const model_pixel_info_t *pi, int n, int samples,
+                               int threads, float *B, float *Bsd);
 
 // Status of a grid point.
 typedef enum {

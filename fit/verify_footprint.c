@@ -62,6 +62,7 @@ void verify_footprints_free(verify_footprints_t *f)
     free(f->parts);
     free(f->wl);
     free(f->B);
+    free(f->Bsd);
     memset(f, 0, sizeof *f);
 }
 
@@ -354,8 +355,9 @@ bool verify_footprints_make(const model_tracer_t *t, const model_camera_t *cam, 
         out->parts = malloc((size_t)(np ? np : 1) * sizeof *out->parts);
         out->wl = calloc((size_t)(np ? np : 1) * (nl ? nl : 1) * 3, sizeof *out->wl);
         out->B = calloc((size_t)(np ? np : 1) * (nl ? nl : 1), sizeof *out->B);
+        out->Bsd = calloc((size_t)(np ? np : 1) * (nl ? nl : 1), sizeof *out->Bsd);
         model_pixel_info_t *pi = malloc((size_t)(np ? np : 1) * sizeof *pi);
-        ok = out->parts && out->wl && out->B && pi;
+        ok = out->parts && out->wl && out->B && out->Bsd && pi;
         if (!ok) model_error(NULL, 0, "out of memory for %d window parts", np);
         int p = 0;
         for (int k = 0; ok && k < ncand; k++) {
@@ -379,7 +381,8 @@ bool verify_footprints_make(const model_tracer_t *t, const model_camera_t *cam, 
             }
         }
         out->nparts_all = p;
-        if (ok && ir_samples > 0 && p && nl) verify_interreflection(t, lamps, mats, pi, p, ir_samples, threads, out->B);
+        if (ok && ir_samples > 0 && p && nl)
+            verify_interreflection_sd(t, lamps, mats, pi, p, ir_samples, threads, out->B, out->Bsd);
         free(pi);
     }
     free(cand);

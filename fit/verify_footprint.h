@@ -53,6 +53,7 @@ typedef struct {
     float         *wl;           // nparts_all x nl x 3: wl_i, d wl_i / d c_x, d wl_i / d c_y (1/mm^2, 1/(mm^2 px))
     float         *B;            // nparts_all x nl: the interreflection basis at the part's mean point
                                  //   (verify_interreflection), per unit kc*I
+    float         *Bsd;          // nparts_all x nl: its Monte Carlo estimate's standard error
     double         background_max;   // a window whose kernel falls on the background by more is not modelled
     int            ss;           // sub-cells per px side (odd)
     double         sigma_px, fill;
