@@ -197,6 +197,7 @@ TEST_SRC := \
     tests/test_fit_verify.c \
     tests/test_fit_verify_study.c \
     tests/test_fit_verify_register.c \
+    tests/test_fit_verify_footprint.c \
     tests/test_fit_verify_speed.c
 BENCH_SRC := tests/bench.c
 FUZZ_SRC  := tests/fuzz_parsers.c

@@ -172,6 +172,7 @@ verify_lab_t *verify_lab_open(const char *truth_path, const char *sample, const 
     L->cam.read_noise_e = L->sensor.read_noise_e;
     L->cam.saturation_dn = (1 << L->sensor.bits) - 1;
     L->cam.lin = &L->lin;
+    rig_virtual_pixel_response(L->v, &L->cam.pixel_fill, &L->cam.psf_sigma_px);   // as a PSF calibration finds them
     return L;
 fail:
     verify_lab_free(L);

@@ -1300,6 +1300,14 @@ model_sensor_t rig_virtual_sensor_params(const rig_virtual_t *v) { return v->sen
 model_camera_t *rig_virtual_camera_model(rig_virtual_t *v) { return v ? v->cam : NULL; }
 const model_lamps_t *rig_virtual_lamps_truth(const rig_virtual_t *v) { return v ? v->lamps : NULL; }
 
+void rig_virtual_pixel_response(const rig_virtual_t *v, double *fill, double *sigma_px)
+{
+    *fill = v->optics.rays_per_pixel > 1 ? 1 : 0;
+    *sigma_px = v->optics.psf == RIG_PSF_GAUSSIAN ? v->optics.psf_sigma_px
+              : v->optics.psf == RIG_PSF_DISC     ? v->optics.psf_radius_px / 2
+                                                  : 0;
+}
+
 // ---------------------------------------------------------------------------
 // The truth file
 
