@@ -458,6 +458,12 @@ static bool material_samples(const fit_material_opts_t *o, calib_set_t **cal, ca
         return false;
     }
     snprintf((*smp)->source, sizeof (*smp)->source, "%s", o->session);
+    // every camera's calibrations first, so that one missing fails before the others' observations
+    for (int k = 0; k < nc; k++)
+        if (names[k] && !calib_set_has_camera(o->calib, names[k])) {
+            calib_set_free(calib_set_load_camera(o->calib, names[k], true));   // its message: what is missing
+            return false;
+        }
     double v2 = 0;
     bool all_gain = true;
     int missing = 0;
