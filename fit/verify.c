@@ -536,7 +536,7 @@ static bool view_boundaries(verify_view_t *v, const verify_camera_t *cam, const 
                 qc[2 * (k * NC + m)] = q[2 * cand[k]] + off[m][0] * c;
                 qc[2 * (k * NC + m) + 1] = q[2 * cand[k] + 1] + off[m][1] * c;
             }
-        ok = model_pixel_info(v->t, cam->cam, lamps, qc, ncand * NC, pc, lc, threads);
+        ok = model_pixel_info_table(v->t, cam->cam, lamps, qc, ncand * NC, pc, lc, threads);
     }
     if (ok)
         for (int k = 0; k < ncand; k++) {
@@ -617,7 +617,7 @@ verify_view_t *verify_view_new(const model_scene_t *scene, const verify_camera_t
             q[2 * (j * v->gw + i)] = v->x0 + i * v->sp;
             q[2 * (j * v->gw + i) + 1] = v->y0 + j * v->sp;
         }
-    if (!model_pixel_info(v->t, cam->cam, lamps, q, n, v->pi, v->ls, threads)) goto fail;
+    if (!model_pixel_info_table(v->t, cam->cam, lamps, q, n, v->pi, v->ls, threads)) goto fail;
     for (int g = 0; g < n; g++)
         if (v->pi[g].face < 0) v->status[g] = VERIFY_PT_BACKGROUND;
     // a blurred edge reaches 3 sigma further

@@ -68,7 +68,7 @@ void verify_footprints_free(verify_footprints_t *f)
 
 // The share of lamp L's disc (its sphere seen from p) that p on a face of
 // normal nrm sees: FP_DISC stratified points of the disc facing p.
-#define FP_DISC 12
+#define FP_DISC 8
 static double disc_visible(const model_tracer_t *t, const model_lamp_t *L, model_vec3_t p, model_vec3_t nrm)
 {
     model_vec3_t d = v3_sub(L->position_mm, p);
@@ -162,6 +162,12 @@ typedef struct {
     long                  rays;
 } fp_ctx_t;
 
+// pixel_info of n sub-pixel positions q, one thread (the camera's ray table).
+static void fp_trace(const fp_ctx_t *c, const double *q, int n, model_pixel_info_t *pi, model_lamp_sample_t *ls)
+{
+    model_pixel_info_table(c->t, (model_camera_t *)c->cam, c->lamps, q, n, pi, ls, 1);
+}
+
 // Each lamp's share seen from n traced samples (pi, ls): the centre ray's
 // visibility, or for a finite lamp whose shadow changes among them (soft[i])
 // the disc's share (disc_visible). V: n x nl.
@@ -208,10 +214,7 @@ static void fp_rows(void *vctx, int begin, int end, int thread)
                 qn[2 * (j * nn + i)] = cx - A - 0.5 + i;
                 qn[2 * (j * nn + i) + 1] = cy - A - 0.5 + j;
             }
-        if (!model_pixel_info(c->t, c->cam, c->lamps, qn, nnode, pn, ln, 1)) {
-            acc->overflow = true;
-            continue;
-        }
+        fp_trace(c, qn, nnode, pn, ln);
         long rays = nnode;
         // the finite lamps whose shadow changes within the window
         bool soft[FP_MAX_LAMPS] = { false };
@@ -259,10 +262,7 @@ static void fp_rows(void *vctx, int begin, int end, int thread)
                         qs[2 * (sj * ss + si)] = cx + (a - A) - 0.5 + (si + 0.5) / ss;
                         qs[2 * (sj * ss + si) + 1] = cy + (b - A) - 0.5 + (sj + 0.5) / ss;
                     }
-                if (!model_pixel_info(c->t, c->cam, c->lamps, qs, ss * ss, ps, lsb, 1)) {
-                    acc->overflow = true;
-                    continue;
-                }
+                fp_trace(c, qs, ss * ss, ps, lsb);
                 rays += ss * ss;
                 samples_visibility(c, ps, lsb, ss * ss, soft, vs);
                 for (int sj = 0; sj < ss; sj++)
@@ -343,6 +343,11 @@ bool verify_footprints_make(const model_tracer_t *t, const model_camera_t *cam, 
             out->first[g] = -1;
             if (want[g]) cand[ncand++] = g;
         }
+        const model_vec3_t *rays = model_camera_ray_table((model_camera_t *)cam, NULL);   // made once, kept
+        if (!rays) {
+            ok = false;
+            goto out;
+        }
         fp_ctx_t fc = { .t = t, .cam = cam, .lamps = lamps, .q = q, .cand = cand, .w = window_px, .A = A,
                         .ss = ss, .nl = nl, .kx = kx, .dkx = dkx, .ksub = ksub,
                         .dksub = dksub, .acc = acc };
@@ -385,6 +390,7 @@ bool verify_footprints_make(const model_tracer_t *t, const model_camera_t *cam, 
             verify_interreflection_sd(t, lamps, mats, pi, p, ir_samples, threads, out->B, out->Bsd);
         free(pi);
     }
+out:
     free(cand);
     free(acc);
     free(kx);
