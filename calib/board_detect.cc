@@ -95,7 +95,7 @@ int detect_chessboard(const calib_board_t *b, const cv::Mat &img, double *q, cha
         say(why, whyn, t);
         return 0;
     }
-    // (its corners are sub-pixel already: 0.02 px on tests/test_calib_boards.c's synthetic image; cornerSubPix
+    // (its corners are sub-pixel already: 0.03 px on tests/test_calib_boards.c's synthetic image; cornerSubPix
     // after it made them worse on the virtual rig's frames, whose edges are sampled at pixel centres)
     double ax = c[1].x - c[0].x, ay = c[1].y - c[0].y, bx = c[W].x - c[0].x, by = c[W].y - c[0].y;
     bool flip = ax * by - ay * bx < 0;

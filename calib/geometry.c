@@ -2219,6 +2219,14 @@ bool calib_geometry_report(const calib_geometry_opts_t *o, const calib_geometry_
                         "of %d points.", s->lensmodel, s->W, s->H, json_array_size(json_object_get(sol, "images")),
                         s->views.v->len, s->rms_px, outliers,
                         (int)json_integer_value(json_object_get(sol, "points")) + outliers);
+        const calib_board_t *bd = &o->board;
+        char marker[96] = "";
+        if (bd->kind == CALIB_BOARD_CHARUCO)
+            snprintf(marker, sizeof marker, ", markers %g mm of %s", bd->marker_mm, bd->dict);
+        model_html_para(f, "Board: %s of %d x %d inner corners %g mm apart%s; corners by %s.",
+                        calib_board_kind_name(bd->kind), bd->width_n, bd->height_n, bd->spacing_mm, marker,
+                        o->corners ? "the corners file" : calib_geometry_detector(o->detector, bd) ==
+                        CALIB_DETECTOR_MRGINGHAM ? "mrgingham" : "OpenCV");
         model_html_para(f, "Intrinsics fx, fy, cx, cy: %.3f, %.3f, %.3f, %.3f px.",
                         json_real_value(json_array_get(intr, 0)), json_real_value(json_array_get(intr, 1)),
                         json_real_value(json_array_get(intr, 2)), json_real_value(json_array_get(intr, 3)));
