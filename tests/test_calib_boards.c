@@ -18,7 +18,7 @@
 //   rendered, found by OpenCV and calibrated through `refl calib geometry
 //   --rig`, against the truth camera as calib_geometry_virtual_rig judges it
 //   (the mrcal-style projection difference at 900 mm over the imager).
-// - Usage errors of the board options.
+// - Usage errors of the board options (exit 2, the option named).
 #define _GNU_SOURCE
 #include <glib.h>
 #include <jansson.h>
@@ -548,4 +548,41 @@ TEST_LONG(calib_boards_virtual_rig_charuco)
         CHECK_CONTAINS(json_string_value(json_object_get(axj, "method")), "jointly");
     }
     json_decref(g);
+}
+
+// The board options' usage errors (exit 2, the option named).
+TEST(calib_boards_bad_arguments)
+{
+    const char *c = test_write("c.vnl", "# filename x y level\na.png 1 2 0\n");
+    struct { const char *a[6]; const char *says; } cases[] = {
+        { { "--board", "wood" }, "--board wood: give chessboard or charuco" },
+        { { "--object-height-n", "1" }, "--object-height-n 1" },
+        { { "--object-width-n", "8", "--object-height-n", "6", "--detector", "mrgingham" },
+          "--detector mrgingham finds square chessboards only" },
+        { { "--detector", "eyes" }, "--detector eyes" },
+        { { "--board", "charuco", "--charuco-dict", "DICT_9X9_1" }, "--charuco-dict DICT_9X9_1" },
+        { { "--charuco-dict", "DICT_4X4_50" }, "give --board charuco" },
+        { { "--board", "charuco", "--gridn", "10" }, "needs 60: give the board's dictionary" },
+        { { "--board", "charuco", "--square-mm", "20", "--charuco-marker-mm", "25" }, "--charuco-marker-mm 25" },
+        { { "--min-corners", "2" }, "--min-corners 2" },
+    };
+    for (size_t k = 0; k < sizeof cases / sizeof cases[0]; k++) {
+        const char *argv[24] = { test_refl(), "calib", "geometry", "--corners", c, "--imagersize", "640", "480", "-o",
+                                 test_path("x") };
+        int n = 10;
+        for (int i = 0; i < 6 && cases[k].a[i]; i++) argv[n++] = cases[k].a[i];
+        char *out = NULL, *err = NULL;
+        int rc = test_run(argv, 30, &out, &err);
+        CHECK_MSG(rc == 2, "case %zu: exit %d", k, rc);
+        CHECK_CONTAINS(err, cases[k].says);
+        free(out);
+        free(err);
+    }
+    // --help names the board options
+    char *out = NULL, *err = NULL;
+    CHECK(test_refl_run(30, &out, &err, "calib", "geometry", "--help", NULL) == 0);
+    CHECK_CONTAINS(out, "--object-height-n");
+    CHECK_CONTAINS(out, "--charuco-dict");
+    free(out);
+    free(err);
 }
