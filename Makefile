@@ -19,6 +19,10 @@ CXX   ?= c++
 PKGS := glib-2.0 libpng libjpeg libtiff-4 jansson libftdi1 libusb-1.0 libgpiod aravis-0.8 sqlite3 zlib
 # Only the tests link libumockdev (the simulated USB device of the APT tests).
 TEST_PKGS := umockdev-1.0
+# OpenCV 4 (calib/board_detect.cc only): its flags, and of its libraries the
+# four refl calls (pkg-config lists every module of the contrib build).
+OPENCV_PKG := opencv4
+OPENCV_MODULES := -lopencv_aruco -lopencv_calib3d -lopencv_imgproc -lopencv_core
 # Ceres Solver ships a CMake config only: its headers need Eigen's include path.
 LIBS_NOPC := -lembree3 -lmrcal -lceres -lglog -lstdc++
 CERES_CFLAGS := -I/usr/include/eigen3
@@ -33,7 +37,9 @@ $(BUILD)/config.mk: Makefile scripts/install-deps
 	@{ echo "PKG_CFLAGS := $$(pkg-config --cflags $(PKGS))"; \
 	   echo "PKG_LIBS := $$(pkg-config --libs $(PKGS))"; \
 	   echo "TEST_PKG_CFLAGS := $$(pkg-config --cflags $(TEST_PKGS))"; \
-	   echo "TEST_PKG_LIBS := $$(pkg-config --libs $(TEST_PKGS))"; } > $@.tmp && mv $@.tmp $@
+	   echo "TEST_PKG_LIBS := $$(pkg-config --libs $(TEST_PKGS))"; \
+	   echo "OPENCV_CFLAGS := $$(pkg-config --cflags $(OPENCV_PKG))"; \
+	   echo "OPENCV_LIBS := $$(pkg-config --libs-only-L $(OPENCV_PKG)) $(OPENCV_MODULES)"; } > $@.tmp && mv $@.tmp $@
 
 WARN := -Wall -Wextra -Wshadow -Wno-unused-parameter
 ifeq ($(WERROR),1)
@@ -43,7 +49,7 @@ OPT ?= -O2 -g
 CFLAGS_ALL   = -std=gnu11 $(OPT) $(WARN) -pthread -MMD -MP -I. $(PKG_CFLAGS) $(EXTRA_CFLAGS)
 CXXFLAGS_ALL = -std=c++17 $(OPT) $(WARN) -pthread -MMD -MP -I. $(CERES_CFLAGS) $(EXTRA_CFLAGS)
 LDFLAGS_ALL  = -pthread $(EXTRA_LDFLAGS)
-LDLIBS_ALL   = $(PKG_LIBS) $(LIBS_NOPC) -lm
+LDLIBS_ALL   = $(PKG_LIBS) $(OPENCV_LIBS) $(LIBS_NOPC) -lm
 
 # ---- sources (explicit lists) ---------------------------------------------
 # One file a line, by layer (model -> rig -> calib -> fit; README: Architecture).
@@ -139,6 +145,7 @@ FIT_SRC := \
     fit/cmd_plan.c \
     fit/cmd_verify.c
 MODEL_CXX_SRC := model/lsq.cc
+CALIB_CXX_SRC := calib/board_detect.cc
 LIB_SRC   := $(MODEL_SRC) $(RIG_SRC) $(CALIB_SRC) $(FIT_SRC)
 
 MAIN_SRC  := fit/main.c
@@ -186,6 +193,7 @@ TEST_SRC := \
     tests/test_calib_white.c \
     tests/test_calib_sample_pose.c \
     tests/test_calib_geometry.c \
+    tests/test_calib_boards.c \
     tests/test_calib_lamps.c \
     tests/test_calib_export.c \
     tests/test_fit_brdf.c \
@@ -203,7 +211,7 @@ BENCH_SRC := tests/bench.c
 FUZZ_SRC  := tests/fuzz_parsers.c
 
 obj = $(patsubst %.c,$(BUILD)/%.o,$(1))
-LIB_OBJ   := $(call obj,$(LIB_SRC)) $(patsubst %.cc,$(BUILD)/%.o,$(MODEL_CXX_SRC))
+LIB_OBJ   := $(call obj,$(LIB_SRC)) $(patsubst %.cc,$(BUILD)/%.o,$(MODEL_CXX_SRC) $(CALIB_CXX_SRC))
 LIB       := $(BUILD)/librefl.a
 
 .PHONY: all check demo study bench asan fuzz clean
@@ -230,6 +238,7 @@ $(BIN)/refl-tests: $(call obj,$(TEST_SRC)) $(LIB)
 	$(CC) $(LDFLAGS_ALL) -o $@ $^ $(LDLIBS_ALL)
 
 $(BUILD)/tests/apt_sim.o: CFLAGS_ALL += $(TEST_PKG_CFLAGS)
+$(BUILD)/calib/board_detect.o: CXXFLAGS_ALL += $(OPENCV_CFLAGS)
 # model_brdf_eval_n's GGX loop vectorises (sqrt and selects; model/brdf_batch.c)
 $(BUILD)/model/brdf_batch.o: CFLAGS_ALL += -ftree-loop-vectorize -fvect-cost-model=dynamic -fno-math-errno -fno-trapping-math
 $(BUILD)/model/sensor.o: CFLAGS_ALL += -ftree-loop-vectorize -fvect-cost-model=dynamic -fno-math-errno -fno-trapping-math -ffp-contract=off

@@ -21,7 +21,11 @@
     "  --rig RIG.ini -o DIR                    capture here, one session per tilt\n"                           \
     "  --session DIR1 [--session DIR2 ...]     capture sessions made elsewhere\n"                               \
     "  --images 'GLOB'|DIR                     images captured elsewhere (PNG, JPEG, TIFF; others skipped)\n"   \
-    "  --corners CORNERS.vnl --imagersize W H  mrgingham's corners"
+    "  --corners CORNERS.vnl --imagersize W H  corners found elsewhere (mrgingham's format, as mrcal reads it)\n"  \
+    "The board: a chessboard of W x H inner corners (--object-width-n, --object-height-n; --gridn N:\n"      \
+    "N x N), found by mrgingham when square, else by OpenCV (findChessboardCornersSB, the whole board);\n"  \
+    "or a ChArUco board (--board charuco: OpenCV's, W x H inner corners, markers of --charuco-dict),\n"      \
+    "found by OpenCV in part too (a corner not seen is '- -' in DIR/corners.vnl, as mrcal takes it)."
 
 #define EPILOG                                                                                                 \
     "Rig frame: z along the fitted turntable axis (counter-clockwise angles positive seen from\n"              \
@@ -37,7 +41,9 @@
     "facing the camera): Enter on a terminal, --yes or --operator-input FILE answers it; with stdin\n"      \
     "not a terminal and neither option the command pauses there (exit 3; run it again to continue).\n"     \
     "mrcal-calibrate-cameras' names are accepted: --object-spacing (metres unless a unit is given),\n"  \
-    "--object-width-n (--gridn), --corners-cache (--corners), --focal (--focal-px). The camera\n"      \
+    "--object-width-n (--gridn), --object-height-n, --corners-cache (--corners), --focal (--focal-px).\n" \
+    "A view with fewer than --min-corners corners (a ChArUco board mostly out of view) is left out\n"     \
+    "with the reason, as a view without a board is. The camera\n"                                        \
     "models keep mrcal's optimization_inputs with refl's extrinsics: mrcal's tools run on them.\n"      \
     "Cross-validation (every run): the views split into two halves (alternate frames), each solved\n"        \
     "alone; their projections differ over the imager by D against the predicted s0 + s1 (mrcal's\n"         \
@@ -101,17 +107,48 @@ static int object_spacing(model_cli_t *c, calib_geometry_opts_t *o)
     if (!model_parse_double(num, &d) || !(d * scale >= 1e-3 && d * scale <= 1e4))
         return model_cli_error(c, "--object-spacing %s: give the corner spacing in metres (as mrcal does, e.g. "
                                "0.03) or with its unit (30mm, 3cm, 0.03m), 0.001 mm .. 10 m", v);
-    o->square_mm = d * scale;
+    o->board.spacing_mm = d * scale;
+    return 0;
+}
+
+// --board, --charuco-dict, --detector (words).
+static int board_options(model_cli_t *c, calib_geometry_opts_t *o)
+{
+    const char *v;
+    if ((v = model_cli_value(c, "--board")) && !calib_board_kind_parse(v, &o->board.kind))
+        return model_cli_error(c, "--board %s: give chessboard or charuco", v);
+    if ((v = model_cli_value(c, "--charuco-dict"))) {
+        if (strlen(v) >= sizeof o->board.dict || !calib_board_dict_size(v))
+            return model_cli_error(c, "--charuco-dict %s: give one of OpenCV's predefined dictionaries (DICT_4X4_50 "
+                                   ".. DICT_7X7_1000, DICT_ARUCO_ORIGINAL, DICT_APRILTAG_16h5 .. DICT_APRILTAG_36h11)", v);
+        snprintf(o->board.dict, sizeof o->board.dict, "%s", v);
+    }
+    if (o->board.kind != CALIB_BOARD_CHARUCO && (model_cli_value(c, "--charuco-dict") ||
+                                                 model_cli_value(c, "--charuco-marker-mm")))
+        return model_cli_error(c, "--charuco-dict and --charuco-marker-mm describe a ChArUco board: give --board "
+                               "charuco");
+    static const struct { const char *word; calib_detector_t d; } dets[] = {
+        { "auto", CALIB_DETECTOR_AUTO }, { "mrgingham", CALIB_DETECTOR_MRGINGHAM }, { "opencv", CALIB_DETECTOR_OPENCV }
+    };
+    if ((v = model_cli_value(c, "--detector"))) {
+        size_t k = 0;
+        while (k < sizeof dets / sizeof dets[0] && strcmp(dets[k].word, v)) k++;
+        if (k == sizeof dets / sizeof dets[0]) return model_cli_error(c, "--detector %s: give auto, mrgingham or opencv", v);
+        o->detector = dets[k].d;
+    }
     return 0;
 }
 
 // The numbers, then the checks of the whole (one source, its needs).
 static int check_options(model_cli_t *c, const model_opt_list_t *imsize, calib_geometry_opts_t *o)
 {
-    double gridn = o->gridn, min_views = 0;
+    double width_n = o->board.width_n, height_n = NAN, min_views = 0, min_corners = 0, marker_mm = NAN;
     int rc;
-    if ((rc = number(c, "--gridn", 2, 100, true, "give an integer 2..100", &gridn)) ||
-        (rc = number(c, "--square-mm", 1e-3, 1e4, false, "give a length in mm > 0", &o->square_mm)) ||
+    if ((rc = number(c, "--gridn", 2, 100, true, "give an integer 2..100", &width_n)) ||
+        (rc = number(c, "--object-height-n", 2, 100, true, "give an integer 2..100", &height_n)) ||
+        (rc = number(c, "--charuco-marker-mm", 1e-3, 1e4, false, "give a length in mm > 0", &marker_mm)) ||
+        (rc = number(c, "--min-corners", 4, 1e5, true, "give an integer >= 4", &min_corners)) ||
+        (rc = number(c, "--square-mm", 1e-3, 1e4, false, "give a length in mm > 0", &o->board.spacing_mm)) ||
         (rc = number(c, "--board-height-mm", -1e4, 1e4, false, "give a length in mm", &o->board_height_mm)) ||
         (rc = number(c, "--exposure-us", 1, 1e8, false, "give microseconds > 0", &o->exposure_us)) ||
         (rc = number(c, "--focal-px", 1, 1e6, false, "give a focal length in px > 0", &o->focal_px)) ||
@@ -119,9 +156,18 @@ static int check_options(model_cli_t *c, const model_opt_list_t *imsize, calib_g
         (rc = number(c, "--min-views", 1, 1e5, true, "give an integer >= 1", &min_views)) ||
         (rc = imagersize(c, imsize, o)))
         return rc;
-    if ((rc = object_spacing(c, o))) return rc;
-    o->gridn = (int)gridn;
+    if ((rc = object_spacing(c, o)) || (rc = board_options(c, o))) return rc;
+    o->board.width_n = (int)width_n;
+    o->board.height_n = isfinite(height_n) ? (int)height_n : (int)width_n;   // mrcal's default: square
+    o->board.marker_mm = isfinite(marker_mm) ? marker_mm : CALIB_BOARD_DEFAULT_MARKER_RATIO * o->board.spacing_mm;
     o->min_views = (int)min_views;
+    o->min_corners = (int)min_corners;
+    if (!calib_board_check(&o->board)) return model_cli_error(c, "%s", model_last_error());
+    if (o->detector == CALIB_DETECTOR_MRGINGHAM &&
+        (o->board.kind != CALIB_BOARD_CHESSBOARD || o->board.width_n != o->board.height_n))
+        return model_cli_error(c, "--detector mrgingham finds square chessboards only (--gridn N); a %dx%d %s needs "
+                               "--detector opencv (the default for it)", o->board.width_n, o->board.height_n,
+                               calib_board_kind_name(o->board.kind));
     int nsrc = (o->rig != NULL) + (o->nsessions > 0) + (o->images != NULL) + (o->corners != NULL);
     if (nsrc != 1)
         return model_cli_error(c, "%s", nsrc ? "give only one of --rig, --session, --images, --corners"
@@ -173,11 +219,22 @@ int calib_cmd_geometry(int argc, char **argv)
         MODEL_OPT_STRING("--lensmodel", "NAME", "LENSMODEL_OPENCV8 (default), LENSMODEL_OPENCV4, ..., "
                          "LENSMODEL_SPLINED_STEREOGRAPHIC_order=3_Nx=16_Ny=12_fov_x_deg=50, or auto (the lean "
                          "OPENCV8 unless it fails the checks below, then the splined model)", &o.lensmodel, false),
-        { "--gridn", "--object-width-n", "N", "inner corners per side (mrgingham --gridn; default 10)",
-          MODEL_OPT_KIND_STRING, NULL, 0, 0, false, false, NULL },
-        MODEL_OPT_VALUE("--square-mm", "S", "corner spacing (default 30)", false),
+        MODEL_OPT_VALUE("--board", "KIND", "chessboard (default) or charuco (OpenCV's ChArUco board)", false),
+        { "--gridn", "--object-width-n", "W", "inner corners along the board's x (default 10; with --gridn and no\n"
+          "                             --object-height-n also along y: a square board)", MODEL_OPT_KIND_STRING, NULL,
+          0, 0, false, false, NULL },
+        MODEL_OPT_VALUE("--object-height-n", "H", "inner corners along the board's y (default: the same as along x)",
+                        false),
+        MODEL_OPT_VALUE("--square-mm", "S", "corner spacing, a square's side (default 30)", false),
         MODEL_OPT_VALUE("--object-spacing", "S[m|cm|mm]", "corner spacing as mrcal-calibrate-cameras takes it: in "
                         "metres,\n                             or with a unit (0.03, 0.03m, 3cm, 30mm)", false),
+        MODEL_OPT_VALUE("--charuco-dict", "NAME", "ChArUco: the markers' dictionary, OpenCV's name (default "
+                        CALIB_BOARD_DEFAULT_DICT ")", false),
+        MODEL_OPT_VALUE("--charuco-marker-mm", "M", "ChArUco: a marker's side (default 0.75 x the square's)", false),
+        MODEL_OPT_VALUE("--detector", "NAME", "who finds the corners: auto (default: mrgingham for a square "
+                        "chessboard,\n                             else OpenCV), mrgingham or opencv", false),
+        MODEL_OPT_VALUE("--min-corners", "N", "a view with fewer corners is left out, with the reason (default 12, "
+                        "at most\n                             the board's)", false),
         MODEL_OPT_VALUE("--board-height-mm", "H", "height of the corner plane above the table top at tilt 0 "
                         "(default 5)", false),
         { "--focal-px", "--focal", "F", "seed focal length for mrcal in px (default 1.4 x imager width)",

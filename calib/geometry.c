@@ -6,7 +6,9 @@
 // Flow: capture (one session per board tilt, all lamps on) or sessions /
 // images / a corners file captured elsewhere → 8-bit copies of the frames in
 // DIR/images (mrgingham reads 8-bit; frames are Mono12 in 16-bit PNG) →
-// mrgingham --gridn N → DIR/corners.vnl → mrcal-calibrate-cameras →
+// mrgingham --gridn N (a square chessboard) or OpenCV (calib/board_detect.h:
+// any chessboard, ChArUco boards whole or in part) → DIR/corners.vnl (a corner
+// not seen "- -", as mrcal reads it) → mrcal-calibrate-cameras →
 // DIR/mrcal/camera-0.cameramodel → scripts/calib_geometry_report.py solution
 // (mrcal's board poses, residuals, projection uncertainty) → the axis fit and
 // the rig frame here → DIR/camera.cameramodel, DIR/geometry.json,
@@ -25,9 +27,11 @@
 // vector r_ij ≈ Δθ_ij a; a = normalise(Σ Δθ r). The point c on the axis solves
 // (I - R_rel) c = t_j - R_rel t_i for every pair in the least-squares sense
 // (plus a·c = 0 to fix it along the axis). mrgingham orders the corners of a
-// square grid up to a quarter turn about the board's centre; each pose is
-// made consistent with its tilt group's first pose by the quarter turn whose
-// relative rotation angle matches the turntable's.
+// square grid up to a quarter turn about the board's centre (OpenCV those of
+// another chessboard up to a half turn; a ChArUco board's carry their ids);
+// each pose is made consistent with its tilt group's first pose by the turn
+// whose relative rotation angle matches the turntable's. A partial view's
+// corners not seen are NAN in its q and left out of every fit.
 #define _GNU_SOURCE
 #include <errno.h>
 #include <glib.h>
@@ -358,51 +362,78 @@ bool calib_geometry_add_images(calib_geometry_views_t *vs, const char *pattern, 
     return ok;
 }
 
-// Parse mrgingham's output (name x y [level]; "name - -" when no board).
-bool calib_geometry_parse_corners(calib_geometry_views_t *vs, const char *text, const char *path, int gridn,
-                                  bool create)
+// A view's block of corner lines ends: it is the board when every corner has
+// its line and one is seen, no board when it is one "- -" line; any other
+// count is an error naming the block's first line.
+static bool corners_block_end(calib_geometry_view_t *v, int nlines, int line0, const char *path,
+                              const calib_board_t *b)
 {
-    int N = gridn * gridn;
+    int N = b->width_n * b->height_n;
+    if (!v) return true;
+    v->ncorners = 0;
+    for (int k = 0; v->q && nlines == N && k < N; k++) v->ncorners += isfinite(v->q[2 * k]);
+    v->found = nlines == N && v->ncorners > 0;
+    if (nlines == N || (nlines == 1 && v->ncorners == 0)) return true;
+    model_error_set(path, line0, "%s: %d corner lines; a %dx%d board has %d, one a corner in the board's order ('- -' "
+                    "for one not seen), or one line 'NAME - -' for no board: is the board %dx%d (--object-width-n "
+                    "--object-height-n)?", v->name, nlines, b->width_n, b->height_n, N, b->width_n, b->height_n);
+    return false;
+}
+
+// Parse corners text (name x y [level]; "- -" or level "-" for a corner not
+// seen; one line "name - -" when no board).
+bool calib_geometry_parse_corners(calib_geometry_views_t *vs, const char *text, const char *path,
+                                  const calib_board_t *b, bool create)
+{
+    int N = b->width_n * b->height_n;
     char **lines = g_strsplit(text, "\n", -1);
     bool ok = true;
     calib_geometry_view_t *cur = NULL;
-    int ncur = 0;
+    int ncur = 0, line0 = 0;
     for (int li = 0; lines[li] && ok; li++) {
         char *l = g_strstrip(lines[li]);
         if (!*l || *l == '#') continue;
-        char name[1024], xs[64], ys[64];
-        if (sscanf(l, "%1023s %63s %63s", name, xs, ys) != 3) {
+        char name[1024], xs[64], ys[64], lev[64] = "";
+        if (sscanf(l, "%1023s %63s %63s %63s", name, xs, ys, lev) < 3) {
             model_error_set(path, li + 1, "expected 'FILENAME X Y [LEVEL]' (mrgingham's output), got '%s'", l);
             ok = false;
             break;
         }
         calib_geometry_view_t *v = calib_geometry_view_find(vs, name);
         if (!v && create) v = view_add(vs, name, name, NULL, -1, NAN, NAN, NAN);
-        if (!v) continue;     // not one of ours
         if (v != cur) {
+            if (!(ok = corners_block_end(cur, ncur, line0, path, b))) break;
             cur = v;
             ncur = 0;
+            line0 = li + 1;
+            if (v) {
+                free(v->q);
+                v->q = malloc((size_t)N * 2 * sizeof(double));
+                for (int k = 0; k < 2 * N; k++) v->q[k] = NAN;
+            }
         }
-        if (!strcmp(xs, "-")) continue;
-        char *e1, *e2;
-        double x = strtod(xs, &e1), y = strtod(ys, &e2);
-        if (*e1 || *e2 || !isfinite(x) || !isfinite(y)) {
-            model_error_set(path, li + 1, "'%s %s' is not a pixel position", xs, ys);
-            ok = false;
-            break;
-        }
-        if (!v->q) v->q = calloc((size_t)N * 2, sizeof(double));
+        if (!v) continue;     // not one of ours
         if (ncur >= N) {
-            model_error_set(path, li + 1, "%s: more than %d corners: is the board %dx%d (--gridn %d)?", name, N, gridn,
-                            gridn, gridn);
+            model_error_set(path, li + 1, "%s: more than %d corners: is the board %dx%d (--object-width-n %d "
+                            "--object-height-n %d)?", name, N, b->width_n, b->height_n, b->width_n, b->height_n);
             ok = false;
             break;
         }
-        v->q[2 * ncur] = x;
-        v->q[2 * ncur + 1] = y;
-        ncur++;
-        v->found = ncur == N;
+        int k = ncur++;
+        if (!strcmp(xs, "-") || !strcmp(ys, "-") || !strcmp(lev, "-")) continue;   // not seen
+        char *e1, *e2, *e3;
+        double x = strtod(xs, &e1), y = strtod(ys, &e2), lv = *lev ? strtod(lev, &e3) : 0;
+        if (*e1 || *e2 || !isfinite(x) || !isfinite(y) || (*lev && *e3)) {
+            model_error_set(path, li + 1, "'%s %s%s%s' is not a pixel position (and decimation level)", xs, ys,
+                            *lev ? " " : "", lev);
+            ok = false;
+            break;
+        }
+        if (x < 0 || y < 0 || lv < 0) continue;   // mrcal's "not seen" too
+        v->q[2 * k] = x;
+        v->q[2 * k + 1] = y;
     }
+    if (ok) ok = corners_block_end(cur, ncur, line0, path, b);
     g_strfreev(lines);
     return ok;
 }
@@ -422,11 +453,28 @@ int calib_geometry_default_min_views(const char *lensmodel)
 
 static void pose_R(double R[9], const calib_geometry_view_t *v) { R_from_r(R, v->rt_cam_board); }
 
-// Turn a pose's board frame a quarter turn k times about the grid centre.
-static void quarter_turn(double rt[6], int k, int gridn, double square_mm)
+// The board's centre in its frame (mm).
+static void board_centre(const calib_board_t *b, double c[3])
 {
-    double R[9], Rz[9], rz[3] = { 0, 0, k * M_PI / 2 }, c[3] = { (gridn - 1) * square_mm / 2,
-                                                              (gridn - 1) * square_mm / 2, 0 };
+    c[0] = (b->width_n - 1) * b->spacing_mm / 2;
+    c[1] = (b->height_n - 1) * b->spacing_mm / 2;
+    c[2] = 0;
+}
+
+// The quarter turns that map the board's corner grid onto itself and so may
+// stand between two detections' corner orders: 1 (every quarter turn) for a
+// square chessboard, 2 (half turns) for another, 4 (none) for ChArUco.
+static int board_turn_step(const calib_board_t *b)
+{
+    if (b->kind == CALIB_BOARD_CHARUCO) return 4;
+    return b->width_n == b->height_n ? 1 : 2;
+}
+
+// Turn a pose's board frame a quarter turn k times about the grid centre.
+static void quarter_turn(double rt[6], int k, const calib_board_t *b)
+{
+    double R[9], Rz[9], rz[3] = { 0, 0, k * M_PI / 2 }, c[3];
+    board_centre(b, c);
     R_from_r(R, rt);
     R_from_r(Rz, rz);
     double Rzc[3], d[3], Rd[3];
@@ -506,8 +554,9 @@ static int view_pairs(const calib_geometry_views_t *vs, view_pair_t **out, int *
     return np;
 }
 
-bool calib_geometry_fit_axis(calib_geometry_views_t *vs, int gridn, double square_mm, calib_geometry_axis_t *ax)
+bool calib_geometry_fit_axis(calib_geometry_views_t *vs, const calib_board_t *bd, calib_geometry_axis_t *ax)
 {
+    int step = board_turn_step(bd);
     memset(ax, 0, sizeof *ax);
     // 1. quarter turns within each group
     for (int g = 0; g < vs->ngroups; g++) {
@@ -518,10 +567,10 @@ bool calib_geometry_fit_axis(calib_geometry_views_t *vs, int gridn, double squar
         for (int m = 1; m < n; m++) {
             double d = fabs(wrap_deg(l[m]->angle_deg - l[0]->angle_deg)), best = 1e9;
             int bk = 0;
-            for (int k = 0; k < 4; k++) {
+            for (int k = 0; k < 4; k += step) {
                 double rt[6];
                 memcpy(rt, l[m]->rt_cam_board, sizeof rt);
-                quarter_turn(rt, k, gridn, square_mm);
+                quarter_turn(rt, k, bd);
                 double R[9], Rrel[9], r[3];
                 R_from_r(R, rt);
                 mat_mul_bt(Rrel, R, Rref);
@@ -532,7 +581,7 @@ bool calib_geometry_fit_axis(calib_geometry_views_t *vs, int gridn, double squar
                     bk = k;
                 }
             }
-            quarter_turn(l[m]->rt_cam_board, bk, gridn, square_mm);
+            quarter_turn(l[m]->rt_cam_board, bk, bd);
             l[m]->quarter_turns = bk;
             if (best > 2.0) {
                 fprintf(stderr, "refl calib geometry: %s: its pose turns %.2f deg more or less than the turntable "
@@ -657,7 +706,7 @@ typedef struct {
     double          dtheta;              // rad: the view's angle minus its group's first
     int             n;                   // corners
     model_vec3_t   *b;                   // the board point of each observed corner
-    double         *q;                   // observed corners (2 n)
+    double         *q;                   // observed corners (2 n; owned)
     double          inv_sigma;
     model_vec3_t   *x;                   // scratch (n)
     double         *qp;                  // scratch (2 n)
@@ -742,41 +791,52 @@ static bool axj_residual(void *ctx, const double *const *params, double *res, do
     return ok;
 }
 
-// The board point each observed corner of v is (nearest projection of the
-// grid under v's pose, within a third of the spacing, one to one); false when
-// they do not match.
-static bool axj_match(const calib_geometry_view_t *v, model_camera_t *cam, int gridn, double square_mm,
-                      model_vec3_t *b)
+// The board point of each corner v observed (nearest projection of the grid
+// under v's pose, within a third of the spacing, one to one): b[k], q[2 k] for
+// the k-th corner seen (ncorners of them; the order of v's q, those not seen
+// left out). false when they do not match.
+static bool axj_match(const calib_geometry_view_t *v, model_camera_t *cam, const calib_board_t *bd, model_vec3_t *b,
+                      double *q)
 {
-    int N = gridn * gridn;
+    int N = bd->width_n * bd->height_n, W = bd->width_n;
+    double s = bd->spacing_mm;
     model_vec3_t *p = malloc(N * sizeof *p);
     double *qg = malloc(2 * N * sizeof *qg), R[9], spacing = INFINITY;
-    int *used = calloc(N, sizeof *used);
+    int *used = calloc(N, sizeof *used), n = 0;
     R_from_r(R, v->rt_cam_board);
     for (int j = 0; j < N; j++) {
-        double bb[3] = { (j % gridn) * square_mm, (j / gridn) * square_mm, 0 }, x[3];
+        double bb[3] = { (j % W) * s, (j / W) * s, 0 }, x[3];
         mat_vec(x, R, bb);
         p[j] = (model_vec3_t){ x[0] + v->rt_cam_board[3], x[1] + v->rt_cam_board[4], x[2] + v->rt_cam_board[5] };
     }
     bool ok = model_camera_project(cam, p, N, qg);
-    for (int j = 1; ok && j < N; j++) spacing = fmin(spacing, hypot(qg[2 * j] - qg[0], qg[2 * j + 1] - qg[1]));
+    for (int j = 0; ok && j < N; j++)   // the grid's spacing in the image: its nearest neighbours
+        if (j % W) spacing = fmin(spacing, hypot(qg[2 * j] - qg[2 * j - 2], qg[2 * j + 1] - qg[2 * j - 1]));
+    for (int j = W; ok && j < N; j++)
+        spacing = fmin(spacing, hypot(qg[2 * j] - qg[2 * (j - W)], qg[2 * j + 1] - qg[2 * (j - W) + 1]));
     for (int i = 0; ok && i < N; i++) {
+        if (!isfinite(v->q[2 * i])) continue;
         int best = -1;
-        double bd = INFINITY;
+        double bd2 = INFINITY;
         for (int j = 0; j < N; j++) {
             double d = hypot(qg[2 * j] - v->q[2 * i], qg[2 * j + 1] - v->q[2 * i + 1]);
-            if (d < bd) {
-                bd = d;
+            if (d < bd2) {
+                bd2 = d;
                 best = j;
             }
         }
-        ok = best >= 0 && bd < spacing / 3 && !used[best]++;
-        if (ok) b[i] = (model_vec3_t){ (best % gridn) * square_mm, (best / gridn) * square_mm, 0 };
+        ok = best >= 0 && bd2 < spacing / 3 && !used[best]++;
+        if (ok) {
+            b[n] = (model_vec3_t){ (best % W) * s, (best / W) * s, 0 };
+            q[2 * n] = v->q[2 * i];
+            q[2 * n + 1] = v->q[2 * i + 1];
+            n++;
+        }
     }
     free(p);
     free(qg);
     free(used);
-    return ok;
+    return ok && n == v->ncorners;
 }
 
 
@@ -798,11 +858,11 @@ static void axj_frame(const double a0[3], double e1[3], double e2[3])
 }
 
 // One group's views into the problem (w: its n views, filled); false + message.
-static bool axj_group(lsq_problem_t *p, calib_geometry_view_t **l, int n, int gridn, double square_mm,
+static bool axj_group(lsq_problem_t *p, calib_geometry_view_t **l, int n, const calib_board_t *bd,
                       model_camera_t *cam, double sigma_px, axj_view_t *frame, double *rt_g, axj_view_t *w,
                       int *nused)
 {
-    int N = gridn * gridn;
+    int N = bd->width_n * bd->height_n;
     memcpy(rt_g, l[0]->rt_cam_board, 6 * sizeof(double));
     if (!lsq_add_parameters(p, rt_g, 6)) return false;
     for (int i = 0; i < n; i++) {
@@ -813,9 +873,10 @@ static bool axj_group(lsq_problem_t *p, calib_geometry_view_t **l, int n, int gr
         w[i].b = malloc(N * sizeof *w[i].b);
         w[i].x = malloc(N * sizeof *w[i].x);
         w[i].qp = malloc(2 * N * sizeof *w[i].qp);
-        w[i].q = l[i]->q;
+        w[i].q = malloc(2 * N * sizeof *w[i].q);
         w[i].inv_sigma = 1 / sigma_px;
-        if (!l[i]->q || !axj_match(l[i], cam, gridn, square_mm, w[i].b)) {
+        if (l[i]->q) w[i].n = l[i]->ncorners;
+        if (!l[i]->q || !axj_match(l[i], cam, bd, w[i].b, w[i].q)) {
             fprintf(stderr, "refl calib geometry: %s: its corners do not match its pose; left out of the joint "
                     "axis fit\n", l[i]->name);
             w[i].n = 0;
@@ -878,7 +939,7 @@ static bool axj_add(lsq_problem_t *p, int ng, const int *cnt, axj_view_t **ws, c
 
 // One joint fit of the views group_views gives; *worst: the view of the
 // largest corner RMS (px) *wrms, *med the views' median RMS.
-static bool refine_once(calib_geometry_views_t *vs, int gridn, double square_mm, model_camera_t *cam,
+static bool refine_once(calib_geometry_views_t *vs, const calib_board_t *bd, model_camera_t *cam,
                         double sigma_px, calib_geometry_axis_t *ax, calib_geometry_view_t **worst, double *wrms,
                         double *med)
 {
@@ -898,7 +959,7 @@ static bool refine_once(calib_geometry_views_t *vs, int gridn, double square_mm,
         cnt[g] = group_views(vs, g, &lists[g]);
         if (cnt[g] < 1) continue;   // a group of one view: its pose only (the rig frame's sigma from it)
         ws[g] = calloc(cnt[g], sizeof *ws[g]);
-        ok = axj_group(p, lists[g], cnt[g], gridn, square_mm, cam, sigma_px, &frame, &rt[6 * g], ws[g], &nused);
+        ok = axj_group(p, lists[g], cnt[g], bd, cam, sigma_px, &frame, &rt[6 * g], ws[g], &nused);
         if (g0 < 0 && fabs(vs->group_tilt[g]) < 1e-9) g0 = g;
     }
     if (ok) ok = axj_add(p, ng, cnt, ws, lists, axp, rt, sigma_px, &nused);
@@ -962,6 +1023,7 @@ static bool refine_once(calib_geometry_views_t *vs, int gridn, double square_mm,
     for (int g = 0; g < ng; g++) {
         for (int i = 0; ws && ws[g] && i < cnt[g]; i++) {
             free(ws[g][i].b);
+            free(ws[g][i].q);
             free(ws[g][i].x);
             free(ws[g][i].qp);
         }
@@ -976,7 +1038,7 @@ static bool refine_once(calib_geometry_views_t *vs, int gridn, double square_mm,
     return ok;
 }
 
-bool calib_geometry_refine_axis(calib_geometry_views_t *vs, int gridn, double square_mm, model_camera_t *cam,
+bool calib_geometry_refine_axis(calib_geometry_views_t *vs, const calib_board_t *bd, model_camera_t *cam,
                                 double sigma_px, calib_geometry_axis_t *ax)
 {
     if (!ax->ok || !(sigma_px > 0)) return false;
@@ -994,7 +1056,7 @@ bool calib_geometry_refine_axis(calib_geometry_views_t *vs, int gridn, double sq
                    6 * sizeof *rt0);
         calib_geometry_view_t *worst = NULL;
         double wrms = 0, med = 0;
-        if (!(ok = refine_once(vs, gridn, square_mm, cam, sigma_px, ax, &worst, &wrms, &med))) {
+        if (!(ok = refine_once(vs, bd, cam, sigma_px, ax, &worst, &wrms, &med))) {
             failed = true;
             break;
         }
@@ -1102,9 +1164,10 @@ static void invert(double out[6], const double rt[6])
 
 // Why a view in a group with poses has no board: predict the board's pose from
 // the group's first pose turned about the axis, and look at it.
-void calib_geometry_explain_missing(calib_geometry_views_t *vs, int gridn, double square_mm,
+void calib_geometry_explain_missing(calib_geometry_views_t *vs, const calib_board_t *bd,
                                     const calib_geometry_axis_t *ax, model_camera_t *cam, int W, int H)
 {
+    const double square_mm = bd->spacing_mm;
     // the sign of normal . (to camera) on the found views
     double sgn = 0;
     for (guint i = 0; i < vs->v->len && sgn == 0; i++) {
@@ -1113,7 +1176,8 @@ void calib_geometry_explain_missing(calib_geometry_views_t *vs, int gridn, doubl
         double R[9];
         pose_R(R, v);
         double n[3] = { R[2], R[5], R[8] };
-        double c[3] = { (gridn - 1) * square_mm / 2, (gridn - 1) * square_mm / 2, 0 }, p[3];
+        double c[3], p[3];
+        board_centre(bd, c);
         mat_vec(p, R, c);
         for (int k = 0; k < 3; k++) p[k] = -(p[k] + v->rt_cam_board[3 + k]);
         sgn = dot3(n, p) > 0 ? 1 : -1;
@@ -1121,7 +1185,8 @@ void calib_geometry_explain_missing(calib_geometry_views_t *vs, int gridn, doubl
     for (guint i = 0; i < vs->v->len; i++) {
         calib_geometry_view_t *v = g_ptr_array_index(vs->v, i);
         if (v->found) continue;
-        snprintf(v->why, sizeof v->why, "mrgingham found no %dx%d board", gridn, gridn);
+        if (!v->why[0])
+            snprintf(v->why, sizeof v->why, "no %dx%d board found", bd->width_n, bd->height_n);
         if (!ax || !ax->ok || v->group < 0 || v->camera != 0 || !isfinite(v->angle_deg)) continue;
         calib_geometry_view_t **l;
         int n = group_views(vs, v->group, &l);
@@ -1140,14 +1205,14 @@ void calib_geometry_explain_missing(calib_geometry_views_t *vs, int gridn, doubl
         mat_vec(t, Rrot, tc);
         for (int k = 0; k < 3; k++) t[k] += ax->c[k];
         // the squares' corners, outer edge included (mrgingham needs every square)
-        int ne = gridn + 2, M = ne * ne;
+        int nex = bd->width_n + 2, ney = bd->height_n + 2, M = nex * ney;
         model_vec3_t *p = malloc(M * sizeof *p);
         double *q = malloc(2 * M * sizeof *q);
-        for (int jj = 0; jj < ne; jj++)
-            for (int ii = 0; ii < ne; ii++) {
+        for (int jj = 0; jj < ney; jj++)
+            for (int ii = 0; ii < nex; ii++) {
                 double b[3] = { (ii - 1) * square_mm, (jj - 1) * square_mm, 0 }, x[3];
                 mat_vec(x, R, b);
-                p[jj * ne + ii] = (model_vec3_t){ x[0] + t[0], x[1] + t[1], x[2] + t[2] };
+                p[jj * nex + ii] = (model_vec3_t){ x[0] + t[0], x[1] + t[1], x[2] + t[2] };
             }
         int outside = 0;
         bool behind = false;
@@ -1155,24 +1220,32 @@ void calib_geometry_explain_missing(calib_geometry_views_t *vs, int gridn, doubl
         if (!behind && model_camera_project(cam, p, M, q))
             for (int k = 0; k < M; k++)
                 if (!(q[2 * k] >= 0 && q[2 * k] <= W - 1 && q[2 * k + 1] >= 0 && q[2 * k + 1] <= H - 1)) outside++;
-        double nb[3] = { R[2], R[5], R[8] }, cc[3] = { (gridn - 1) * square_mm / 2,
-                                                       (gridn - 1) * square_mm / 2, 0 }, pc[3];
+        double nb[3] = { R[2], R[5], R[8] }, cc[3], pc[3];
+        board_centre(bd, cc);
         mat_vec(pc, R, cc);
         for (int k = 0; k < 3; k++) pc[k] = -(pc[k] + t[k]);
         double cs = sgn * dot3(nb, pc) / norm3(pc);
         double obl = acos(cs > 1 ? 1 : cs < -1 ? -1 : cs) / DEG;
+        char pred[sizeof v->why];
         if (behind || outside)
-            snprintf(v->why, sizeof v->why, "board partly outside the image (predicted from the axis fit: %d of "
+            snprintf(pred, sizeof pred, "board partly outside the image (predicted from the axis fit: %d of "
                      "its %d square corners outside)", behind ? M : outside, M);
         else if (cs <= 0)
-            snprintf(v->why, sizeof v->why, "board seen from behind (predicted from the axis fit: %.0f deg between "
+            snprintf(pred, sizeof pred, "board seen from behind (predicted from the axis fit: %.0f deg between "
                      "its normal and the view direction)", obl);
         else if (obl > 65)
-            snprintf(v->why, sizeof v->why, "board too oblique (predicted from the axis fit: %.0f deg between its "
+            snprintf(pred, sizeof pred, "board too oblique (predicted from the axis fit: %.0f deg between its "
                      "normal and the view direction)", obl);
         else
-            snprintf(v->why, sizeof v->why, "mrgingham found no board although it is predicted fully in view at "
-                     "%.0f deg obliquity (dark, blurred, glare or occluded?)", obl);
+            snprintf(pred, sizeof pred, "%s found no board although it is predicted fully in view at "
+                     "%.0f deg obliquity (dark, blurred, glare or occluded?)", v->ncorners ? "the detector" :
+                     strncmp(v->why, "mrgingham", 9) ? "OpenCV" : "mrgingham", obl);
+        if (v->ncorners > 0) {   // a partial view left out: its reason, and the prediction
+            size_t len = strlen(v->why);
+            snprintf(v->why + len, sizeof v->why - len, "; %s", pred);
+        } else {
+            memcpy(v->why, pred, sizeof pred);
+        }
         free(p);
         free(q);
     }
@@ -1306,41 +1379,44 @@ char *calib_geometry_tilt_plan(const char *spec, const calib_geometry_opts_t *o,
     return plan;
 }
 
-// The corners: from --corners, or mrgingham on the 8-bit images (kept as
-// DIR/corners.vnl). Marks the views without a board and fails when fewer than
-// the lens model needs were found.
-static bool corners_from_file(const calib_geometry_opts_t *o, calib_geometry_state_t *s)
+calib_detector_t calib_geometry_detector(calib_detector_t d, const calib_board_t *b)
+{
+    if (d != CALIB_DETECTOR_AUTO) return d;
+    return b->kind == CALIB_BOARD_CHESSBOARD && b->width_n == b->height_n ? CALIB_DETECTOR_MRGINGHAM
+                                                                          : CALIB_DETECTOR_OPENCV;
+}
+
+// The corners: from --corners (*text: the file's), mrgingham's on the 8-bit
+// images, or OpenCV's (calib/board_detect.h) in mrgingham's format; then
+// calib_geometry_find_corners leaves out the views of too few corners and
+// writes DIR/corners.vnl for mrcal.
+static bool corners_from_file(const calib_geometry_opts_t *o, calib_geometry_state_t *s, char **text)
 {
     if (!model_provenance_input(s->prov, "corners", o->corners)) return false;
-    char *text = NULL;
     GError *err = NULL;
-    if (!g_file_get_contents(o->corners, &text, NULL, &err)) {
+    if (!g_file_get_contents(o->corners, text, NULL, &err)) {
         model_error_set(o->corners, 0, "cannot read: %s", err->message);
         g_error_free(err);
         return false;
     }
-    bool ok = calib_geometry_parse_corners(&s->views, text, o->corners, o->gridn, true);
-    g_free(text);
-    if (!ok) return false;
-    char *abs = realpath(o->corners, NULL);
-    g_free(s->cornpath);
-    s->cornpath = g_strdup(abs);
-    free(abs);
+    if (!calib_geometry_parse_corners(&s->views, *text, o->corners, &o->board, true)) return false;
+    for (guint k = 0; k < s->views.v->len; k++) {
+        calib_geometry_view_t *v = g_ptr_array_index(s->views.v, k);
+        if (!v->found)
+            snprintf(v->why, sizeof v->why, "no %dx%d board in the corners file", o->board.width_n,
+                     o->board.height_n);
+    }
     return true;
 }
 
-static bool corners_mrgingham(const calib_geometry_opts_t *o, calib_geometry_state_t *s)
+static bool corners_mrgingham(const calib_geometry_opts_t *o, calib_geometry_state_t *s, char **text)
 {
     calib_geometry_views_t *vs = &s->views;
-    if (vs->v->len == 0) {
-        model_error_set(o->out, 0, "no frames or images to calibrate from");
-        return false;
-    }
-    fprintf(stderr, "refl calib geometry: finding the %dx%d corners of %u images (mrgingham)\n", o->gridn, o->gridn,
-            vs->v->len);
+    fprintf(stderr, "refl calib geometry: finding the %dx%d corners of %u images (mrgingham)\n", o->board.width_n,
+            o->board.height_n, vs->v->len);
     GPtrArray *args = g_ptr_array_new();
     char gn[16];
-    snprintf(gn, sizeof gn, "%d", o->gridn);
+    snprintf(gn, sizeof gn, "%d", o->board.width_n);
     g_ptr_array_add(args, "mrgingham");
     g_ptr_array_add(args, "--gridn");
     g_ptr_array_add(args, gn);
@@ -1349,29 +1425,140 @@ static bool corners_mrgingham(const calib_geometry_opts_t *o, calib_geometry_sta
     for (guint k = 0; k < vs->v->len; k++)
         g_ptr_array_add(args, ((calib_geometry_view_t *)g_ptr_array_index(vs->v, k))->name);
     g_ptr_array_add(args, NULL);
-    char *text = NULL, *log = g_strdup_printf("%s/mrgingham.log", s->mdir);
-    int e = run_tool(s->imgdir, (char **)args->pdata, log, &text);
+    char *log = g_strdup_printf("%s/mrgingham.log", s->mdir);
+    int e = run_tool(s->imgdir, (char **)args->pdata, log, text);
     g_ptr_array_free(args, TRUE);
     g_free(log);
     if (e != 0) {
-        if (e < 0) {    // did not run: run_tool's message says why
-            g_free(text);
-            return false;
-        }
-        model_error_set(s->imgdir, 0, "mrgingham failed (exit status %d) on the images here; see %s/mrgingham.log", e,
-                        s->mdir);
-        g_free(text);
+        if (e > 0)    // else it did not run: run_tool's message says why
+            model_error_set(s->imgdir, 0, "mrgingham failed (exit status %d) on the images here; see %s/mrgingham.log",
+                            e, s->mdir);
         return false;
     }
-    bool ok = calib_geometry_parse_corners(vs, text, s->cornpath, o->gridn, false);
-    if (ok) {
-        FILE *f = fopen(s->cornpath, "w");
-        ok = f && fputs(text, f) >= 0;
-        if (f && fclose(f) != 0) ok = false;
-        if (!ok) model_error_set(s->cornpath, 0, "cannot write: %s", strerror(errno));
+    if (!calib_geometry_parse_corners(vs, *text, s->cornpath, &o->board, false)) return false;
+    for (guint k = 0; k < vs->v->len; k++) {
+        calib_geometry_view_t *v = g_ptr_array_index(vs->v, k);
+        if (!v->found)
+            snprintf(v->why, sizeof v->why, "mrgingham found no %dx%d board", o->board.width_n, o->board.height_n);
     }
-    g_free(text);
+    return true;
+}
+
+// One view's image (DIR/images/NAME, 8 bits) through the OpenCV detector:
+// its lines of corners text into t (one "NAME - -" for no board, and then
+// v->why). false + message.
+static bool detect_view(const calib_geometry_opts_t *o, calib_geometry_state_t *s, calib_geometry_view_t *v,
+                        double *q, GString *t)
+{
+    int w = 0, h = 0, N = o->board.width_n * o->board.height_n;
+    char *path = g_strdup_printf("%s/%s", s->imgdir, v->name);
+    float *img = model_image_read_float(path, &w, &h);
+    unsigned char *u8 = img ? malloc((size_t)w * h) : NULL;
+    g_free(path);
+    if (!u8) {
+        free(img);
+        return false;
+    }
+    for (size_t k = 0; k < (size_t)w * h; k++) u8[k] = img[k] <= 0 ? 0 : img[k] >= 255 ? 255 : (unsigned char)img[k];
+    free(img);
+    char why[256] = "";
+    int n = calib_board_detect(&o->board, u8, w, h, q, why, sizeof why);
+    free(u8);
+    if (n < 0) return false;
+    if (n == 0) {
+        g_string_append_printf(t, "%s - -\n", v->name);
+        snprintf(v->why, sizeof v->why, "%s", why);
+        return true;
+    }
+    for (int k = 0; k < N; k++)
+        if (isfinite(q[2 * k])) g_string_append_printf(t, "%s %.4f %.4f 0\n", v->name, q[2 * k], q[2 * k + 1]);
+        else g_string_append_printf(t, "%s - -\n", v->name);
+    return true;
+}
+
+static bool corners_opencv(const calib_geometry_opts_t *o, calib_geometry_state_t *s, char **text)
+{
+    calib_geometry_views_t *vs = &s->views;
+    if (!calib_board_check(&o->board)) return false;
+    fprintf(stderr, "refl calib geometry: finding the %dx%d corners of the %s in %u images (OpenCV)\n",
+            o->board.width_n, o->board.height_n, calib_board_kind_name(o->board.kind), vs->v->len);
+    GString *t = g_string_new("# filename x y level\n");
+    double *q = malloc((size_t)2 * o->board.width_n * o->board.height_n * sizeof *q);
+    bool ok = q != NULL;
+    for (guint k = 0; ok && k < vs->v->len; k++) ok = detect_view(o, s, g_ptr_array_index(vs->v, k), q, t);
+    free(q);
+    *text = g_string_free(t, FALSE);
+    return ok && calib_geometry_parse_corners(vs, *text, s->cornpath, &o->board, false);
+}
+
+// A view's corners all on one row or one column of the board: no pose.
+static bool corners_on_a_line(const calib_geometry_view_t *v, const calib_board_t *b)
+{
+    int i0 = -1, j0 = -1;
+    bool row = true, col = true;
+    for (int k = 0; k < b->width_n * b->height_n; k++) {
+        if (!isfinite(v->q[2 * k])) continue;
+        int i = k % b->width_n, j = k / b->width_n;
+        if (i0 < 0) i0 = i, j0 = j;
+        row = row && j == j0;
+        col = col && i == i0;
+    }
+    return row || col;
+}
+
+// The corners text for mrcal: text's lines, but a view not found as one line
+// "NAME - -" (written to path). false + message.
+static bool corners_write(const calib_geometry_views_t *vs, const char *text, const char *path)
+{
+    GString *out = g_string_new("");
+    GHashTable *done = g_hash_table_new(g_direct_hash, g_direct_equal);
+    char **lines = g_strsplit(text, "\n", -1);
+    for (int i = 0; lines[i]; i++) {
+        char name[1024];
+        const char *l = lines[i];
+        if (*l == '#' || sscanf(l, "%1023s", name) != 1) {
+            if (*l) g_string_append_printf(out, "%s\n", l);
+            continue;
+        }
+        calib_geometry_view_t *v = calib_geometry_view_find((calib_geometry_views_t *)vs, name);
+        if (v && !v->found) {
+            if (!g_hash_table_contains(done, v)) g_string_append_printf(out, "%s - -\n", name);
+            g_hash_table_add(done, v);
+            continue;
+        }
+        g_string_append_printf(out, "%s\n", l);
+    }
+    g_strfreev(lines);
+    g_hash_table_destroy(done);
+    GError *err = NULL;
+    bool ok = g_file_set_contents(path, out->str, (gssize)out->len, &err);
+    if (!ok) {
+        model_error_set(path, 0, "cannot write: %s", err->message);
+        g_error_free(err);
+    }
+    g_string_free(out, TRUE);
     return ok;
+}
+
+// The views of too few corners (or all on one line) left out, with the reason.
+static void corners_enough(const calib_geometry_opts_t *o, calib_geometry_state_t *s)
+{
+    int N = o->board.width_n * o->board.height_n;
+    int minc = o->min_corners > 0 ? o->min_corners : CALIB_GEOMETRY_MIN_CORNERS;
+    minc = minc > N ? N : minc < 4 ? 4 : minc;
+    for (guint k = 0; k < s->views.v->len; k++) {
+        calib_geometry_view_t *v = g_ptr_array_index(s->views.v, k);
+        if (!v->found) continue;
+        if (v->ncorners < minc)
+            snprintf(v->why, sizeof v->why, "only %d of the board's %d corners found, fewer than %d (--min-corners)",
+                     v->ncorners, N, minc);
+        else if (corners_on_a_line(v, &o->board))
+            snprintf(v->why, sizeof v->why, "its %d corners all lie on one row or column of the board (no pose from "
+                     "them)", v->ncorners);
+        else
+            continue;
+        v->found = false;
+    }
 }
 
 bool calib_geometry_find_corners(const calib_geometry_opts_t *o, calib_geometry_state_t *s)
@@ -1379,14 +1566,28 @@ bool calib_geometry_find_corners(const calib_geometry_opts_t *o, calib_geometry_
     calib_geometry_views_t *vs = &s->views;
     g_free(s->cornpath);
     s->cornpath = g_strdup_printf("%s/corners.vnl", s->outdir);
-    if (!(o->corners ? corners_from_file(o, s) : corners_mrgingham(o, s))) return false;
+    if (!o->corners && vs->v->len == 0) {
+        model_error_set(o->out, 0, "no frames or images to calibrate from");
+        return false;
+    }
+    char *text = NULL;
+    bool ok = o->corners ? corners_from_file(o, s, &text)
+            : calib_geometry_detector(o->detector, &o->board) == CALIB_DETECTOR_MRGINGHAM ? corners_mrgingham(o, s, &text)
+                                                                                          : corners_opencv(o, s, &text);
+    if (ok) corners_enough(o, s);
+    ok = ok && corners_write(vs, text, s->cornpath);
+    g_free(text);
+    if (!ok) return false;
     s->nfound = 0;
+    int partial = 0;
     for (guint k = 0; k < vs->v->len; k++) {
         calib_geometry_view_t *v = g_ptr_array_index(vs->v, k);
-        if (v->found) s->nfound++;
-        else snprintf(v->why, sizeof v->why, "mrgingham found no %dx%d board", o->gridn, o->gridn);
+        s->nfound += v->found;
+        partial += v->found && v->ncorners < o->board.width_n * o->board.height_n;
     }
-    fprintf(stderr, "refl calib geometry: the board was found in %d of %u images\n", s->nfound, vs->v->len);
+    fprintf(stderr, "refl calib geometry: the board was found in %d of %u images", s->nfound, vs->v->len);
+    if (partial) fprintf(stderr, " (%d of them in part)", partial);
+    fprintf(stderr, "\n");
     const char *lens0 = calib_geometry_is_auto(o->lensmodel) ? CALIB_GEOMETRY_LEAN_LENSMODEL : o->lensmodel;
     int min_views = o->min_views ? o->min_views : calib_geometry_default_min_views(lens0);
     if (s->nfound < min_views) {
@@ -1423,9 +1624,9 @@ bool calib_geometry_find_corners(const calib_geometry_opts_t *o, calib_geometry_
 // DIR/corners-joint.vnl; views left out get their reason. false + message.
 static bool align_corners(const calib_geometry_opts_t *o, calib_geometry_state_t *s, char **joint)
 {
-    char gn[16], sp[32], *spec[RIG_CAMERAS_MAX] = { 0 };
-    snprintf(gn, sizeof gn, "%d", o->gridn);
-    snprintf(sp, sizeof sp, "%.9g", o->square_mm);
+    char gn[32], sp[32], *spec[RIG_CAMERAS_MAX] = { 0 };
+    snprintf(gn, sizeof gn, "%dx%d", o->board.width_n, o->board.height_n);
+    snprintf(sp, sizeof sp, "%.9g", o->board.spacing_mm);
     for (int k = 0; k < RIG_CAMERAS_MAX; k++)
         if (k < s->ncams)
             spec[k] = g_strdup_printf("%s:%d:%d:%.6g", s->camnames[k], s->camw[k], s->camh[k],
@@ -1464,29 +1665,30 @@ static bool align_corners(const calib_geometry_opts_t *o, calib_geometry_state_t
 bool calib_geometry_mrcal(const calib_geometry_opts_t *o, calib_geometry_state_t *s, const char *lensmodel,
                           const char *corners, const char *mdir, int nviews, json_t **sol)
 {
-    char focal[160], spacing[32], wn[16], ws[16], hs[16];
+    char focal[160], spacing[32], wn[16], hn[16], ws[16], hs[16];
     *sol = NULL;
     snprintf(focal, sizeof focal, "%.6g", isfinite(o->focal_px) ? o->focal_px : 1.4 * s->W);
-    snprintf(spacing, sizeof spacing, "%.9g", o->square_mm);
-    snprintf(wn, sizeof wn, "%d", o->gridn);
+    snprintf(spacing, sizeof spacing, "%.9g", o->board.spacing_mm);
+    snprintf(wn, sizeof wn, "%d", o->board.width_n);
+    snprintf(hn, sizeof hn, "%d", o->board.height_n);
     snprintf(ws, sizeof ws, "%d", s->W);
     snprintf(hs, sizeof hs, "%d", s->H);
     if (!model_mkdir_p(mdir)) return false;
     char *cwd = o->corners ? g_path_get_dirname(s->cornpath) : g_strdup(s->imgdir);
     char *argv_m[] = { "mrcal-calibrate-cameras", "--corners-cache", (char *)corners, "--lensmodel",
                        (char *)lensmodel, "--focal", focal, "--object-spacing", spacing, "--object-width-n", wn,
-                       "--imagersize", ws, hs, "--outdir", (char *)mdir, "*", NULL, NULL, NULL, NULL, NULL, NULL, NULL,
-                       NULL };
+                       "--object-height-n", hn, "--imagersize", ws, hs, "--outdir", (char *)mdir, "*", NULL, NULL,
+                       NULL, NULL, NULL, NULL, NULL, NULL };
     if (s->ncams > 1) {    // one glob and seed focal length per camera, each its own imager size
         GString *fl = g_string_new("");
         for (int k = 0; k < s->ncams; k++)
             g_string_append_printf(fl, "%s%.6g", k ? "," : "", isfinite(o->focal_px) ? o->focal_px : 1.4 * s->camw[k]);
         snprintf(focal, sizeof focal, "%s", fl->str);
         g_string_free(fl, TRUE);
-        argv_m[11] = "--outdir";
-        argv_m[12] = (char *)mdir;
-        for (int k = 0; k < s->ncams; k++) argv_m[13 + k] = g_strdup_printf("%s/*.png", s->camnames[k]);
-        argv_m[13 + s->ncams] = NULL;
+        argv_m[13] = "--outdir";   // no --imagersize: each camera's own, from its images
+        argv_m[14] = (char *)mdir;
+        for (int k = 0; k < s->ncams; k++) argv_m[15 + k] = g_strdup_printf("%s/*.png", s->camnames[k]);
+        argv_m[15 + s->ncams] = NULL;
     }
     // mrcal-calibrate-cameras runs under Debian's Python (its shebang)
     fprintf(stderr, "refl calib geometry: solving %s from %d views (mrcal-calibrate-cameras)\n", lensmodel, nviews);
@@ -1496,7 +1698,7 @@ bool calib_geometry_mrcal(const calib_geometry_opts_t *o, calib_geometry_state_t
     int e = run_tool(cwd, argv_m, log, NULL);
     g_free(cwd);
     if (s->ncams > 1)
-        for (int k = 0; k < s->ncams; k++) g_free(argv_m[13 + k]);
+        for (int k = 0; k < s->ncams; k++) g_free(argv_m[15 + k]);
     if (e != 0 || access(model0, R_OK) != 0) {
         if (e >= 0)
             model_error_set(mdir, 0, "mrcal-calibrate-cameras failed (exit status %d) on %s with %s; see %s (a bad "
@@ -1526,8 +1728,8 @@ bool calib_geometry_solve(const calib_geometry_opts_t *o, calib_geometry_state_t
 {
     g_free(s->solvecorners);
     s->solvecorners = NULL;
-    if (s->ncams > 1) {    // the corner order made to agree across the cameras first
-        if (!align_corners(o, s, &s->solvecorners)) return false;
+    if (s->ncams > 1 && o->board.kind != CALIB_BOARD_CHARUCO) {   // the corner order made to agree across the
+        if (!align_corners(o, s, &s->solvecorners)) return false;    // cameras first (ChArUco's corners have ids)
     } else {
         s->solvecorners = g_strdup(s->cornpath);
     }
@@ -1734,14 +1936,14 @@ static void axis_and_rig_frame(const calib_geometry_opts_t *o, calib_geometry_st
     snprintf(s->rigwhy, sizeof s->rigwhy, "no turntable angles in the input (--images / --corners)");
     if (s->views.ngroups > 0) {
         fprintf(stderr, "refl calib geometry: fitting the turntable axis\n");
-        if (!calib_geometry_fit_axis(&s->views, o->gridn, o->square_mm, ax)) {
+        if (!calib_geometry_fit_axis(&s->views, &o->board, ax)) {
             snprintf(s->rigwhy, sizeof s->rigwhy, "too few board poses at different angles of one tilt for the "
                      "axis (need 2 views 5..175 deg apart)");
             fprintf(stderr, "refl calib geometry: no axis: %s\n", s->rigwhy);
         } else {
             fprintf(stderr, "refl calib geometry: the axis fitted with the board poses as turns about it (from the "
                     "closed form: direction +- %.4f deg)\n", ax->dir_unc_deg);
-            if (!calib_geometry_refine_axis(&s->views, o->gridn, o->square_mm, s->cam, s->rms_px / sqrt(2), ax))
+            if (!calib_geometry_refine_axis(&s->views, &o->board, s->cam, s->rms_px / sqrt(2), ax))
                 fprintf(stderr, "refl calib geometry: the joint axis fit failed (%s); the closed-form axis is kept\n",
                         model_last_error());
             else
@@ -1758,7 +1960,7 @@ static void axis_and_rig_frame(const calib_geometry_opts_t *o, calib_geometry_st
                     ax->off_axis_rms_deg);
         }
     }
-    calib_geometry_explain_missing(&s->views, o->gridn, o->square_mm, ax->ok ? ax : NULL, s->cam, s->W, s->H);
+    calib_geometry_explain_missing(&s->views, &o->board, ax->ok ? ax : NULL, s->cam, s->W, s->H);
     for (guint k = 0; k < s->views.v->len; k++) {
         calib_geometry_view_t *v = g_ptr_array_index(s->views.v, k);
         bool same = !strcmp(v->name, v->source);   // the source named once
@@ -1835,6 +2037,27 @@ static json_t *axis_json(const calib_geometry_state_t *s)
     return aj;
 }
 
+// geometry.json: the board (kind, corners, spacing; the detector and the least corners a view needs).
+static json_t *board_json(const calib_geometry_opts_t *o)
+{
+    const calib_board_t *b = &o->board;
+    int N = b->width_n * b->height_n, minc = o->min_corners > 0 ? o->min_corners : CALIB_GEOMETRY_MIN_CORNERS;
+    json_t *j = json_pack("{s:s,s:i,s:i,s:f,s:f,s:f,s:s}", "kind", calib_board_kind_name(b->kind), "width_n",
+                          b->width_n, "height_n", b->height_n, "spacing_mm", b->spacing_mm, "square_mm", b->spacing_mm,
+                          "height_at_tilt0_mm", o->board_height_mm, "sample", o->sample);
+    if (b->width_n == b->height_n) json_object_set_new(j, "gridn", json_integer(b->width_n));
+    if (b->kind == CALIB_BOARD_CHARUCO) {
+        json_object_set_new(j, "marker_mm", json_real(b->marker_mm));
+        json_object_set_new(j, "dictionary", json_string(b->dict));
+    }
+    json_object_set_new(j, "detector", json_string(o->corners ? "corners file"
+                        : calib_geometry_detector(o->detector, b) == CALIB_DETECTOR_MRGINGHAM ? "mrgingham" : "opencv"));
+    json_object_set_new(j, "min_corners", json_integer(minc > N ? N : minc < 4 ? 4 : minc));
+    json_object_set_new(j, "frame", json_string("corner (i, j), i = 0..width_n-1, j = 0..height_n-1, at (i, j) "
+                        "spacing_mm, z = 0 (mrcal's); corners.vnl lists corner (i, j) at j width_n + i"));
+    return j;
+}
+
 // geometry.json: one view.
 static json_t *view_json(const calib_geometry_state_t *s, const calib_geometry_view_t *v)
 {
@@ -1849,6 +2072,7 @@ static json_t *view_json(const calib_geometry_state_t *s, const calib_geometry_v
         json_object_set_new(im, "tilt_azimuth_deg", json_real(v->tilt_azimuth_deg));
     }
     json_object_set_new(im, "board_found", json_boolean(v->found));
+    if (v->q) json_object_set_new(im, "corners_found", json_integer(v->ncorners));
     if (v->why[0]) json_object_set_new(im, "why", json_string(v->why));
     if (isfinite(v->rms_px)) {     // mrcal solved a pose for it
         json_object_set_new(im, "rms_residual_px", json_real(v->rms_px));
@@ -1891,8 +2115,7 @@ json_t *calib_geometry_json(const calib_geometry_opts_t *o, calib_geometry_state
     json_object_set_new(out, "outliers", json_incref(json_object_get(sol, "outliers")));
     json_object_set_new(out, "projection_uncertainty", json_deep_copy(json_object_get(sol, "uncertainty")));
     json_object_set_new(out, "cross_validation", s->xv ? json_incref(s->xv) : json_null());
-    json_object_set_new(out, "board", json_pack("{s:i,s:f,s:f,s:s}", "gridn", o->gridn, "square_mm", o->square_mm,
-                                                "height_at_tilt0_mm", o->board_height_mm, "sample", o->sample));
+    json_object_set_new(out, "board", board_json(o));
     json_object_set_new(out, "rig_frame", json_string(s->have_rig
         ? "origin on the fitted turntable axis at the table top (board_height_mm below the board's corner plane at "
           "tilt 0); z up along the axis (counter-clockwise turntable angles positive seen from +z); x the board's "
@@ -1996,6 +2219,14 @@ bool calib_geometry_report(const calib_geometry_opts_t *o, const calib_geometry_
                         "of %d points.", s->lensmodel, s->W, s->H, json_array_size(json_object_get(sol, "images")),
                         s->views.v->len, s->rms_px, outliers,
                         (int)json_integer_value(json_object_get(sol, "points")) + outliers);
+        const calib_board_t *bd = &o->board;
+        char marker[96] = "";
+        if (bd->kind == CALIB_BOARD_CHARUCO)
+            snprintf(marker, sizeof marker, ", markers %g mm of %s", bd->marker_mm, bd->dict);
+        model_html_para(f, "Board: %s of %d x %d inner corners %g mm apart%s; corners by %s.",
+                        calib_board_kind_name(bd->kind), bd->width_n, bd->height_n, bd->spacing_mm, marker,
+                        o->corners ? "the corners file" : calib_geometry_detector(o->detector, bd) ==
+                        CALIB_DETECTOR_MRGINGHAM ? "mrgingham" : "OpenCV");
         model_html_para(f, "Intrinsics fx, fy, cx, cy: %.3f, %.3f, %.3f, %.3f px.",
                         json_real_value(json_array_get(intr, 0)), json_real_value(json_array_get(intr, 1)),
                         json_real_value(json_array_get(intr, 2)), json_real_value(json_array_get(intr, 3)));
@@ -2163,8 +2394,11 @@ static bool outputs(const calib_geometry_opts_t *o, calib_geometry_state_t *s)
 calib_geometry_opts_t calib_geometry_defaults(void)
 {
     return (calib_geometry_opts_t){ .lensmodel = "LENSMODEL_OPENCV8", .tilts = CALIB_GEOMETRY_DEFAULT_TILTS,
-                                    .angles = CALIB_GEOMETRY_DEFAULT_ANGLES, .sample = "calib_board", .gridn = 10,
-                                    .square_mm = 30, .board_height_mm = 5, .exposure_us = 6000, .focal_px = NAN,
+                                    .angles = CALIB_GEOMETRY_DEFAULT_ANGLES, .sample = "calib_board",
+                                    .board = { .kind = CALIB_BOARD_CHESSBOARD, .width_n = 10, .height_n = 10,
+                                               .spacing_mm = 30, .marker_mm = 30 * CALIB_BOARD_DEFAULT_MARKER_RATIO,
+                                               .dict = CALIB_BOARD_DEFAULT_DICT },
+                                    .board_height_mm = 5, .exposure_us = 6000, .focal_px = NAN,
                                     .distance_mm = 900, .progress = 0 };
 }
 

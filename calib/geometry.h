@@ -9,7 +9,9 @@
 //   1. views: calib_geometry_capture (--rig: one session per tilt), then
 //      calib_geometry_add_session / calib_geometry_add_images (8-bit copies in
 //      DIR/images) or calib_geometry_parse_corners (--corners);
-//   2. corners: calib_geometry_find_corners (mrgingham → DIR/corners.vnl);
+//   2. corners: calib_geometry_find_corners (mrgingham for a square
+//      chessboard, else OpenCV through calib/board_detect.h → DIR/corners.vnl;
+//      views with fewer than min_corners corners left out with the reason);
 //   3. solve: calib_geometry_solve (mrcal-calibrate-cameras and
 //      scripts/calib_geometry_report.py solution) and
 //      calib_geometry_apply_solution (poses into the views, the camera);
@@ -43,6 +45,7 @@
 #include <stdbool.h>
 #include <stddef.h>
 
+#include "calib/board_detect.h"
 #include "model/model.h"
 #include "rig/rig.h"
 #include "rig/session.h"
@@ -76,6 +79,14 @@ extern "C" {
 // text is itself.
 const char *calib_geometry_tilts_expand(const char *tilts);
 
+// Who finds the corners: auto is mrgingham for a square chessboard (it finds
+// nothing else), OpenCV for the others (calib/board_detect.h).
+typedef enum { CALIB_DETECTOR_AUTO = 0, CALIB_DETECTOR_MRGINGHAM, CALIB_DETECTOR_OPENCV } calib_detector_t;
+// The detector auto (or d) comes to for board b.
+calib_detector_t calib_geometry_detector(calib_detector_t d, const calib_board_t *b);
+// The corners a view needs by default (--min-corners): 12, at most the board's.
+#define CALIB_GEOMETRY_MIN_CORNERS 12
+
 // What to calibrate from (exactly one of rig, sessions, images, corners) and how.
 typedef struct {
     const char  *rig;              // capture on this rig file (one session per tilt), or NULL
@@ -90,8 +101,10 @@ typedef struct {
     const char  *camera;           // --rig, sessions: the camera (rig file name) whose frames are used;
                                    // NULL: the first camera
     double       exposure_us;      // --rig: the capture's exposure
-    int          gridn;            // inner corners per side
-    double       square_mm;        // corner spacing
+    calib_board_t board;           // the board: kind, inner corners width_n x height_n, spacing_mm (the
+                                   // squares'), charuco marker_mm and dict
+    calib_detector_t detector;     // who finds the corners (auto: mrgingham for square chessboards)
+    int          min_corners;      // a view with fewer corners is left out (the reason said); 0: the default
     double       board_height_mm;  // corner plane above the table top at tilt 0
     double       focal_px;         // mrcal's seed focal length; NAN: 1.4 x the imager width
     double       distance_mm;      // distance of the projection-uncertainty figure
@@ -103,8 +116,9 @@ typedef struct {
     char       **argv;
 } calib_geometry_opts_t;
 
-// The defaults above, LENSMODEL_OPENCV8, board calib_board with 10x10 corners
-// 30 mm apart 5 mm above the table, 6000 us, distance 900 mm.
+// The defaults above, LENSMODEL_OPENCV8, board calib_board: a chessboard of
+// 10x10 corners 30 mm apart 5 mm above the table (ChArUco: marker 0.75 of the
+// square, DICT_4X4_50), detector auto, 6000 us, distance 900 mm.
 calib_geometry_opts_t calib_geometry_defaults(void);
 
 // Views a lens model needs at least (a rule of thumb: 20 splined, 4 pinhole,
@@ -119,9 +133,11 @@ typedef struct {
     int     group;           // tilt group (session index), -1 none
     double  angle_deg;       // turntable angle (measured), NAN unknown
     double  tilt_deg, tilt_azimuth_deg;   // NAN unknown
-    bool    found;           // mrgingham found the N x N board
+    bool    found;           // the board was found (at least min_corners of its corners)
     char    why[320];        // why not found / not used
-    double *q;               // gridn*gridn*2 corners, px (found)
+    double *q;               // width_n*height_n*2 corners, px, in the board's order (corner (i, j) at
+                             // 2 (j width_n + i)); NAN where not seen (a partial view); NULL: none
+    int     ncorners;        // corners seen (not NAN) in q
     bool    solved;          // mrcal has a pose for it
     double  rt_cam_board[6]; // mrcal's pose (corner order as mrgingham's), then quarter-turn corrected
     int     quarter_turns;
@@ -220,13 +236,18 @@ bool calib_geometry_add_session(calib_geometry_views_t *vs, const char *sdir, co
                                 int *w, int *h);
 // Images matching pattern → 8-bit images in imgdir and views without a group.
 bool calib_geometry_add_images(calib_geometry_views_t *vs, const char *pattern, const char *imgdir, int *w, int *h);
-// mrgingham's output text ("name x y [level]"; "name - -": no board) into the
-// views (create: add views for unknown names). path names the text in messages.
-bool calib_geometry_parse_corners(calib_geometry_views_t *vs, const char *text, const char *path, int gridn,
-                                  bool create);
-// The corners: from o->corners, or mrgingham on s->imgdir (kept as
-// DIR/corners.vnl); s->cornpath, s->nfound. Fails when fewer than o->min_views
-// views have a board (and lists the others).
+// Corners text as mrgingham writes it and mrcal reads it ("name x y [level]",
+// one line per corner of the board in its order, "name - -" or a level of
+// "-" for a corner not seen; one line "name - -": no board) into the views
+// (create: add views for unknown names): q, ncorners, found (every corner has
+// its line and at least one is seen). path names the text in messages.
+bool calib_geometry_parse_corners(calib_geometry_views_t *vs, const char *text, const char *path,
+                                  const calib_board_t *b, bool create);
+// The corners: from o->corners, or the detector on s->imgdir; views with
+// fewer than o->min_corners corners (or all on one line of the board) are
+// left out with the reason; DIR/corners.vnl (s->cornpath: the text for mrcal,
+// a view left out as one "name - -" line), s->nfound. Fails when fewer than
+// o->min_views views have a board (and lists the others).
 bool calib_geometry_find_corners(const calib_geometry_opts_t *o, calib_geometry_state_t *s);
 // mrcal-calibrate-cameras on the corners (model and log in DIR/mrcal), then
 // the solution (board poses, residuals, projection uncertainty) as JSON into
@@ -242,7 +263,10 @@ bool calib_geometry_apply_solution(const calib_geometry_opts_t *o, calib_geometr
 // The axis from the poses of each tilt group at different angles (quarter
 // turns of mrgingham's corner order made consistent first; inconsistent views
 // lose their pose). false when too few pairs.
-bool calib_geometry_fit_axis(calib_geometry_views_t *vs, int gridn, double square_mm, calib_geometry_axis_t *ax);
+// The turns that make a pose's corner order agree: quarter turns for a square
+// chessboard, half turns for another, none for a ChArUco board (its corners
+// carry their ids).
+bool calib_geometry_fit_axis(calib_geometry_views_t *vs, const calib_board_t *b, calib_geometry_axis_t *ax);
 // The axis refined jointly with the board poses (after calib_geometry_fit_axis,
 // from its axis): each tilt group's board one pose, turned about the axis by
 // the turntable's measured angles in its views, fitted with the axis to the
@@ -250,13 +274,14 @@ bool calib_geometry_fit_axis(calib_geometry_views_t *vs, int gridn, double squar
 // Sets ax's joint fields and a, c, dir_unc_deg, point_unc_mm from the fit's
 // covariance, and the views' rt_cam_board to the constrained poses. false +
 // message (ax and the views unchanged).
-bool calib_geometry_refine_axis(calib_geometry_views_t *vs, int gridn, double square_mm, model_camera_t *cam,
+bool calib_geometry_refine_axis(calib_geometry_views_t *vs, const calib_board_t *b, model_camera_t *cam,
                                 double sigma_px, calib_geometry_axis_t *ax);
 // rt_cam_rig from the axis and the tilt-0 group's first pose; false + why.
 bool calib_geometry_rig_frame(calib_geometry_views_t *vs, double board_height_mm, const calib_geometry_axis_t *ax,
                               double rt_cam_rig[6], char *why, size_t whyn);
-// Why each view without a board has none (predicted from the axis when ax).
-void calib_geometry_explain_missing(calib_geometry_views_t *vs, int gridn, double square_mm,
+// Why each view without a board has none (predicted from the axis when ax;
+// a view left out for too few corners keeps that reason, the prediction added).
+void calib_geometry_explain_missing(calib_geometry_views_t *vs, const calib_board_t *b,
                                     const calib_geometry_axis_t *ax, model_camera_t *cam, int W, int H);
 // mrcal's .cameramodel (intrinsics intr, imager W x H, extrinsics rt_cam_ref;
 // rig: ref is the rig frame, else the camera), written atomically.

@@ -174,7 +174,8 @@ bool calib_geometry_splined_name(const model_camera_t *cam, int W, int H, char *
 
 // The corners file in two halves: alternate frames (a view's base name: the
 // views of one frame in every camera stay together) in the file's order;
-// views[h][k]: the views of camera k in half h. Lines without a board are left out.
+// views[h][k]: the views of camera k in half h. Views without a board are
+// left out; a partial view keeps its lines of corners not seen ("- -").
 static bool split_corners(const calib_geometry_state_t *s, const char *in, const char *out[2],
                           int views[2][RIG_CAMERAS_MAX])
 {
@@ -190,10 +191,18 @@ static bool split_corners(const calib_geometry_state_t *s, const char *in, const
     GString *g[2] = { g_string_new("# filename x y level\n"), g_string_new("# filename x y level\n") };
     memset(views, 0, sizeof(int) * 2 * RIG_CAMERAS_MAX);
     char **lines = g_strsplit(text, "\n", -1);
+    GHashTable *board = g_hash_table_new_full(g_str_hash, g_str_equal, g_free, NULL);   // views with a corner seen
+    for (int i = 0; lines[i]; i++) {
+        char name[1024], xs[64];
+        if (lines[i][0] != '#' && sscanf(lines[i], "%1023s %63s", name, xs) == 2 && strcmp(xs, "-") &&
+            !g_hash_table_contains(board, name))
+            g_hash_table_add(board, g_strdup(name));
+    }
     int nkeys = 0;
     for (int i = 0; lines[i]; i++) {
         char name[1024], xs[64];
-        if (lines[i][0] == '#' || sscanf(lines[i], "%1023s %63s", name, xs) != 2 || !strcmp(xs, "-")) continue;
+        if (lines[i][0] == '#' || sscanf(lines[i], "%1023s %63s", name, xs) != 2 || !g_hash_table_contains(board, name))
+            continue;
         const char *b = strrchr(name, '/');
         b = b ? b + 1 : name;
         gpointer hv;
@@ -224,6 +233,7 @@ static bool split_corners(const calib_geometry_state_t *s, const char *in, const
     g_string_free(g[1], TRUE);
     g_hash_table_destroy(half);
     g_hash_table_destroy(seen);
+    g_hash_table_destroy(board);
     g_free(text);
     return ok;
 }

@@ -18,12 +18,17 @@
 #       intrinsics, imager size, RMS residual, projection uncertainty and the
 #       pose rt_cam_cam0 (mrcal's extrinsics) with its standard deviation (from
 #       the solve's J^T J and the residuals' RMS per component).
-#   align CORNERS_IN CORNERS_OUT OUT.json GRIDN SPACING_MM DIR:W:H:FOCAL...
+#       A corner the detector did not see (a partial view: "- -" in the
+#       corners file, which mrcal keeps as (-1, -1) with a negative weight) is
+#       neither a point nor an outlier; observed_px and residuals_px list the
+#       corners seen, corner_index their index in the board's order.
+#   align CORNERS_IN CORNERS_OUT OUT.json N|WxH SPACING_MM DIR:W:H:FOCAL...
 #       Several cameras: mrgingham orders a square board's corners up to a
-#       quarter turn, independently in each camera's image, while a joint solve
+#       quarter turn (OpenCV a W x H chessboard's up to a half turn),
+#       independently in each camera's image, while a joint solve
 #       needs one order per frame (DIR/fNNN.png of every camera: one frame).
 #       Estimates each view's board pose (pinhole seed, every quarter turn of
-#       its corner order), camera k's pose relative to camera 0 as the one most
+#       its corner order; the corners it saw), camera k's pose relative to camera 0 as the one most
 #       shared frames agree on, and turns each view's corners so that its pose
 #       agrees with the first camera seeing that frame; a view no turn makes
 #       agree (within 5 deg) is left out. Writes CORNERS_OUT and, per view, the
@@ -45,6 +50,17 @@ import sys
 import numpy as np
 
 
+def finite(x):
+    """x for JSON: every NaN or infinity (mrcal's uncertainty where no corner constrains it) as null."""
+    if isinstance(x, float):
+        return x if np.isfinite(x) else None
+    if isinstance(x, dict):
+        return {k: finite(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [finite(v) for v in x]
+    return x
+
+
 def solution(model_path, out_path, distance_mm):
     import mrcal
     m = mrcal.cameramodel(model_path)
@@ -54,6 +70,8 @@ def solution(model_path, out_path, distance_mm):
     lensmodel, intrinsics = m.intrinsics()
     W, H = (int(x) for x in m.imagersize())
     obs = oi["observations_board"]                    # (Nobs, Ny, Nx, 3): x, y, weight
+    # a corner not seen: mrcal's (-1, -1, -1); an outlier keeps its x, y with a weight <= 0
+    seen = ~((obs[..., 0] == -1.0) & (obs[..., 1] == -1.0) & (obs[..., 2] <= 0))
     idx = oi["indices_frame_camintrinsics_camextrinsics"]
     frames = oi["frames_rt_toref"]
     paths = oi.get("imagepaths")
@@ -70,6 +88,7 @@ def solution(model_path, out_path, distance_mm):
     for i in range(obs.shape[0]):
         o = ok[i]
         rr = ru[i][o]
+        sv = seen[i].ravel()
         rt = frames[idx[i, 0]]
         if idx[i, 2] >= 0:
             rt = mrcal.compose_rt(extr[idx[i, 2]], rt)
@@ -77,9 +96,10 @@ def solution(model_path, out_path, distance_mm):
             "path": str(paths[i]) if paths is not None else f"observation {i}",
             "rt_cam_board": [float(v) for v in rt],
             "rms_px": float(np.sqrt(np.mean(np.sum(rr * rr, axis=-1)))) if rr.size else None,
-            "outliers": int(np.sum(~o)),
-            "residuals_px": [[float(a), float(b)] for a, b in ru[i].reshape(-1, 2)],
-            "observed_px": [[float(a), float(b)] for a, b in obs[i, ..., :2].reshape(-1, 2)],
+            "outliers": int(np.sum(~o & seen[i])),
+            "residuals_px": [[float(a), float(b)] for a, b in ru[i].reshape(-1, 2)[sv]],
+            "observed_px": [[float(a), float(b)] for a, b in obs[i, ..., :2].reshape(-1, 2)[sv]],
+            "corner_index": [int(k) for k in np.flatnonzero(sv)],
         }
         if ncam > 1:
             im["camera"] = int(idx[i, 1])
@@ -99,12 +119,13 @@ def solution(model_path, out_path, distance_mm):
     out = {"lensmodel": lensmodel, "intrinsics": [float(v) for v in intrinsics], "imagersize": [W, H],
            "intrinsics_core_stdev": core_sd,
            "rms_px": float(np.sqrt(np.mean(np.sum(allr * allr, axis=-1)))),
-           "observations": int(obs.shape[0]), "points": int(np.sum(ok)), "outliers": int(np.sum(~ok)),
+           "observations": int(obs.shape[0]), "points": int(np.sum(ok)), "outliers": int(np.sum(~ok & seen)),
+           "not_seen": int(np.sum(~seen)),
            "images": images, "uncertainty": uncertainty(m, distance_mm)}
     if ncam > 1:
         out["cameras"] = cameras(model_path, oi, idx, ru, ok, ncam, distance_mm)
     with open(out_path, "w") as f:
-        json.dump(out, f)
+        json.dump(finite(out), f)
 
 
 def cameras(model_path, oi, idx, ru, ok, ncam, distance_mm):
@@ -234,10 +255,10 @@ def compare(model_a, model_b, out_path, distance_mm):
            "diff_px": d.reshape(len(gy), len(gx)).tolist(), "predicted_px": pred.reshape(len(gy), len(gx)).tolist(),
            "observed_mask": near.reshape(len(gy), len(gx)).astype(int).tolist()}
     with open(out_path, "w") as f:
-        json.dump(out, f)
+        json.dump(finite(out), f)
 
 
-def align(corners_in, corners_out, out_path, gridn, spacing, camspecs):
+def align(corners_in, corners_out, out_path, size, spacing, camspecs):
     import re
     import mrcal
     cams = []
@@ -253,22 +274,24 @@ def align(corners_in, corners_out, out_path, gridn, spacing, camspecs):
             rows[name] = []
             order.append(name)
         rows[name].append(line.rstrip("\n"))
-    N = gridn
-    views = []                                     # (name, icam, frame, obs N x N x 3)
+    Wn, Hn = (int(x) for x in (size.lower().split("x") * 2)[:2])
+    turns_ok = [0, 1, 2, 3] if Wn == Hn else [0, 2]  # the turns that map the grid onto itself
+    views = []                                     # (name, icam, frame, obs Hn x Wn x 3)
     for name in order:
         d, _, base = name.rpartition("/")
         icam = next((k for k, c in enumerate(cams) if c[0] == d), None)
         digits = re.sub(r"\D", "", base)
-        if icam is None or not digits or len(rows[name]) != N * N:
+        if icam is None or not digits or len(rows[name]) != Wn * Hn:
             continue
         q = []
         for line in rows[name]:
             f = line.split()
             q.append([float(f[1]), float(f[2]), 1.0] if f[1] != "-" and f[2] != "-" else [-1.0, -1.0, -1.0])
-        views.append((name, icam, int(digits), np.array(q).reshape(N, N, 3)))
-    # every view's pose for each quarter turn of its corner order
+        views.append((name, icam, int(digits), np.array(q).reshape(Hn, Wn, 3)))
+    # every view's pose for each quarter turn of its corner order (a turn that does not map the grid onto itself:
+    # a copy of the unturned one, never chosen)
     ifc = np.array([[4 * i + j, v[1]] for i, v in enumerate(views) for j in range(4)], dtype=np.int32)
-    ob = np.array([np.rot90(v[3], j, axes=(0, 1)) for v in views for j in range(4)])
+    ob = np.array([np.rot90(v[3], j if j in turns_ok else 0, axes=(0, 1)) for v in views for j in range(4)])
     seeds = [("LENSMODEL_PINHOLE", np.array([c[3], c[3], (c[1] - 1) / 2, (c[2] - 1) / 2])) for c in cams]
     Rt = mrcal.estimate_monocular_calobject_poses_Rt_tocam(ifc, ob, spacing, seeds)
     rt = mrcal.rt_from_Rt(Rt).reshape(len(views), 4, 6)
@@ -287,7 +310,7 @@ def align(corners_in, corners_out, out_path, gridn, spacing, camspecs):
         cand = []
         for f, vs in byframe.items():
             if 0 in vs and k in vs:
-                cand.append([mrcal.compose_rt(rt[vs[k], j], mrcal.invert_rt(rt[vs[0], 0])) for j in range(4)])
+                cand.append([mrcal.compose_rt(rt[vs[k], j], mrcal.invert_rt(rt[vs[0], 0])) for j in turns_ok])
         if not cand:
             err = f"camera {k} ({cams[k][0]}) sees the board in no frame that camera 0 ({cams[0][0]}) sees: " \
                   "the joint solve needs views of the board by both"
@@ -312,9 +335,9 @@ def align(corners_in, corners_out, out_path, gridn, spacing, camspecs):
                 if k == ref:
                     continue
                 pred = mrcal.compose_rt(T[k], rref)
-                d = [rdiff(pred, rt[i, j]) for j in range(4)]
+                d = [rdiff(pred, rt[i, j]) for j in turns_ok]
                 j = int(np.argmin(d))
-                turns[i] = (j, d[j])
+                turns[i] = (turns_ok[j], d[j])
         for i, v in enumerate(views):
             j, d = turns[i]
             res["views"][v[0]] = {"camera": v[1], "frame": v[2], "quarter_turns": j, "mismatch_deg": d,
@@ -327,11 +350,11 @@ def align(corners_in, corners_out, out_path, gridn, spacing, camspecs):
             if info and info["dropped"]:
                 continue
             if info and info["quarter_turns"]:
-                perm = np.rot90(np.arange(N * N).reshape(N, N), info["quarter_turns"]).ravel()
+                perm = np.rot90(np.arange(Wn * Hn).reshape(Hn, Wn), info["quarter_turns"]).ravel()
                 r = [r[p] for p in perm]
             fo.write("\n".join(r) + "\n")
     with open(out_path, "w") as f:
-        json.dump(res, f)
+        json.dump(finite(res), f)
 
 
 def worst_views(plt, s, W, H, outdir, n=3):
@@ -473,7 +496,7 @@ def plots(geometry_path, solution_path, outdir):
     u = s["uncertainty"]
     if "stdev_px" in u:
         fig, ax = plt.subplots(figsize=(8, 6.5))
-        im = ax.imshow(np.array(u["stdev_px"]), extent=(u["grid_x_px"][0], u["grid_x_px"][-1],
+        im = ax.imshow(np.array(u["stdev_px"], dtype=float), extent=(u["grid_x_px"][0], u["grid_x_px"][-1],
                        u["grid_y_px"][-1], u["grid_y_px"][0]), cmap="magma", interpolation="bilinear")
         fig.colorbar(im, ax=ax, label="projection uncertainty, 1 sigma (px)")
         ax.plot(obs[:, 0], obs[:, 1], ",", color="#66ccee", alpha=0.5)
@@ -506,7 +529,7 @@ def plots(geometry_path, solution_path, outdir):
         for a, (name, c) in zip(axs[0], comps):
             a.set_xlabel("x (px)")
             a.set_ylabel("y (px)")
-            ratio = np.array(c["diff_px"]) / np.array(c["predicted_px"])
+            ratio = np.array(c["diff_px"], dtype=float) / np.array(c["predicted_px"], dtype=float)
             im = a.imshow(ratio, extent=(c["grid_x_px"][0], c["grid_x_px"][-1], c["grid_y_px"][-1], c["grid_y_px"][0]),
                           cmap="viridis", vmin=0, vmax=3, interpolation="nearest")
             a.contour(np.array(c["grid_x_px"]), np.array(c["grid_y_px"]), np.array(c["observed_mask"]), levels=[0.5],
@@ -539,7 +562,7 @@ def plots(geometry_path, solution_path, outdir):
 
 if __name__ == "__main__":
     if len(sys.argv) >= 8 and sys.argv[1] == "align":
-        align(sys.argv[2], sys.argv[3], sys.argv[4], int(sys.argv[5]), float(sys.argv[6]), sys.argv[7:])
+        align(sys.argv[2], sys.argv[3], sys.argv[4], sys.argv[5], float(sys.argv[6]), sys.argv[7:])
     elif len(sys.argv) == 5 and sys.argv[1] == "solution":
         solution(sys.argv[2], sys.argv[3], float(sys.argv[4]))
     elif len(sys.argv) == 6 and sys.argv[1] == "compare":
@@ -549,4 +572,4 @@ if __name__ == "__main__":
     else:
         sys.exit("usage: calib_geometry_report.py solution MODEL OUT.json DISTANCE_MM | "
                  "plots GEOMETRY.json SOLUTION.json OUTDIR | compare MODEL_A MODEL_B OUT.json DISTANCE_MM | "
-                 "align CORNERS_IN CORNERS_OUT OUT.json GRIDN SPACING_MM DIR:W:H:FOCAL...")
+                 "align CORNERS_IN CORNERS_OUT OUT.json N|WxH SPACING_MM DIR:W:H:FOCAL...")

@@ -651,7 +651,8 @@ TEST(calib_geometry_axis_stage)
         g_ptr_array_add(vs.v, v);
     }
     calib_geometry_axis_t ax;
-    CHECK(calib_geometry_fit_axis(&vs, 10, 30, &ax));
+    const calib_board_t board = { .kind = CALIB_BOARD_CHESSBOARD, .width_n = 10, .height_n = 10, .spacing_mm = 30 };
+    CHECK(calib_geometry_fit_axis(&vs, &board, &ax));
     CHECK(ax.ok && ax.npairs > 0);
     double dot = ax.a[0] * u[0] + ax.a[1] * u[1] + ax.a[2] * u[2];
     CHECK_NEAR(dot, 1, 1e-9);
@@ -1213,6 +1214,7 @@ TEST(calib_geometry_axis_joint)
             CHECK(model_camera_project(cam, P, gridn * gridn, Q));
             v->q = malloc(200 * sizeof(double));
             for (int k = 0; k < 200; k++) v->q[k] = Q[k] + 0.1 * nrand();
+            v->ncorners = 100;
             // the pose as a free solve has it
             for (int k = 0; k < 3; k++) v->rt_cam_board[k] = rt_true[k] + 0.03 * DEG * nrand();
             for (int k = 3; k < 6; k++) v->rt_cam_board[k] = rt_true[k] + 0.3 * nrand();
@@ -1226,10 +1228,11 @@ TEST(calib_geometry_axis_joint)
             g_ptr_array_add(vs.v, v);
         }
     calib_geometry_axis_t ax;
-    CHECK(calib_geometry_fit_axis(&vs, gridn, sq, &ax));
+    const calib_board_t board = { .kind = CALIB_BOARD_CHESSBOARD, .width_n = gridn, .height_n = gridn, .spacing_mm = sq };
+    CHECK(calib_geometry_fit_axis(&vs, &board, &ax));
     double e_closed = acos(fmin(1, fabs(ax.a[0] * u[0] + ax.a[1] * u[1] + ax.a[2] * u[2]))) / DEG;
     double s_closed = ax.dir_unc_deg;
-    CHECK(calib_geometry_refine_axis(&vs, gridn, sq, cam, 0.1, &ax));
+    CHECK(calib_geometry_refine_axis(&vs, &board, cam, 0.1, &ax));
     double e_joint = acos(fmin(1, fabs(ax.a[0] * u[0] + ax.a[1] * u[1] + ax.a[2] * u[2]))) / DEG;
     double pc[3] = { ax.c[0] - c[0], ax.c[1] - c[1], ax.c[2] - c[2] };
     double along = pc[0] * u[0] + pc[1] * u[1] + pc[2] * u[2];
