@@ -279,8 +279,11 @@ TEST_LONG(verify_study_registered_placement_sharded)
     char *dir[3] = { g_strdup(test_path("reg1")), g_strdup(test_path("reg2")), g_strdup(test_path("regm")) };
     char *err = NULL;
     for (int k = 0; k < 2; k++) {
+        // (the windows near edges skipped: each registered description's views are made anew, and what is
+        // tested here is the registration and the merge)
         const char *a[] = { "--study", "--cases", "2", "--configs", "priors+maps", "--placement-tolerance-mm", "3",
-                            "--placement-tolerance-deg", "2", "--shard", k ? "2/2" : "1/2", "-o", dir[k], NULL };
+                            "--placement-tolerance-deg", "2", "--skip-edge-windows", "--shard", k ? "2/2" : "1/2",
+                            "-o", dir[k], NULL };
         int rc = verify(&err, a);
         CHECK_MSG(rc == 0, "shard %d: %s", k + 1, err);
         g_free(err);
