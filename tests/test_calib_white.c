@@ -111,8 +111,8 @@ TEST(calib_white_table_recovers_kc)
     char *text = white_table_text();
     calib_white_table_t *t = calib_white_table_parse(text, strlen(text), "white.csv");
     char *out = g_strdup_printf("%s/white.json", test_tmpdir()), *outl = g_strdup_printf("%s/lam.json", test_tmpdir());
-    CHECK(t && calib_white(&obs, &cal, 0.99, t, out, NULL));
-    CHECK(calib_white(&obs, &cal, white_R(0, 0), NULL, outl, NULL));
+    CHECK(t && calib_white(&obs, &cal, 0.99, t, NULL, out, NULL));
+    CHECK(calib_white(&obs, &cal, white_R(0, 0), NULL, NULL, outl, NULL));
     json_t *j = json_load_file(out, 0, NULL), *jl = json_load_file(outl, 0, NULL);
     CHECK(j && jl);
     for (int l = 0; j && jl && l < 2; l++) {
