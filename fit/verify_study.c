@@ -620,7 +620,8 @@ static const char conditions[] =
 // The design (what a shard must share with the others to be merged): cases,
 // configurations, conditions, threshold and the inputs' hashes (no paths: the
 // shards may run on other machines).
-static json_t *design_json(const table_t *T, const json_t *inputs, const verify_study_opts_t *o)
+static json_t *design_json(const table_t *T, const json_t *inputs, const verify_study_opts_t *o,
+                           const verify_lab_t *lab)
 {
     json_t *d = json_object(), *cf = json_array(), *cd = json_array(), *in = json_array();
     json_object_set_new(d, "cases", json_integer(T->cases));
@@ -634,6 +635,11 @@ static json_t *design_json(const table_t *T, const json_t *inputs, const verify_
             json_object_set_new(e, "placed_off", json_pack("{s:f, s:f, s:f}", "turn_deg", place_deg[c->place - 1],
                                                            "dx_mm", mm * cos(az), "dy_mm", mm * sin(az)));
         }
+        // the truth's own placement error of the part in these images ([placement]: one draw per placement)
+        double tu, dx, dy;
+        if (lab && verify_lab_placement_draw(lab, c->place, &tu, &dx, &dy))
+            json_object_set_new(e, "truth_placement_error", json_pack("{s:f, s:f, s:f}", "turn_deg", tu, "dx_mm", dx,
+                                                                      "dy_mm", dy));
         json_array_append_new(cd, e);
     }
     json_object_set_new(d, "descriptions", cd);
@@ -813,7 +819,7 @@ bool verify_study_run(const verify_study_opts_t *o, verify_study_result_t *r)
         goto done;
     }
     inputs = study_inputs(&S, o);
-    design = design_json(&T, inputs, o);
+    design = design_json(&T, inputs, o, S.lab);
     if (o->shard_n > 0)
         shard = json_pack("{s:i, s:i, s:s}", "k", sk, "n", sn, "cases", "c with c mod n = k - 1 (c from 0)");
     json_object_set_new(o->provenance, "wall_seconds", json_real(model_now_s() - S.t0));
