@@ -68,6 +68,7 @@ MODEL_SRC := \
     model/shade.c \
     model/sensor.c \
     model/edges.c \
+    model/edge_profile.c \
     model/workpiece.c \
     model/render_file.c \
     model/edges_file.c \
@@ -154,6 +155,7 @@ TEST_SRC := \
     tests/test_model_config.c \
     tests/test_model_corpus.c \
     tests/test_model_edges.c \
+    tests/test_model_edge_profile.c \
     tests/test_model_image.c \
     tests/test_model_lsq.c \
     tests/test_model_opts.c \
