@@ -108,6 +108,7 @@ CALIB_SRC := \
     calib/sample_pose.c \
     calib/geometry.c \
     calib/geometry_diff.c \
+    calib/psf.c \
     calib/lamps.c \
     calib/lamps_pattern.c \
     calib/lamps_drift.c \
@@ -187,6 +188,7 @@ TEST_SRC := \
     tests/test_calib_white.c \
     tests/test_calib_sample_pose.c \
     tests/test_calib_geometry.c \
+    tests/test_calib_psf.c \
     tests/test_calib_lamps.c \
     tests/test_calib_export.c \
     tests/test_fit_brdf.c \

@@ -102,6 +102,15 @@ bool         calib_set_has_camera(const char *dir, const char *camera);
 calib_set_t *calib_set_load_files(const char *camera, const char *lamps_json, const char *gain_json,
                                   const char *white_json);
 void         calib_set_free(calib_set_t *c);
+// The lens's blur of the geometry calibration that wrote camera_model: the
+// "psf" of geometry.json in the model's directory (calib/psf.c writes it;
+// camera NAME of several: its cameras[].psf, else the top level's, the first
+// camera's; camera NULL: the model file's name, NAME.cameramodel). true with
+// the optics' Gaussian sigma and its 1-sigma (px; the pixel's footprint is
+// not in it) and the file's path (g_free; geometry_json may be NULL); false
+// (no message) when there is no such file or it has no estimate.
+bool calib_psf_read(const char *camera_model, const char *camera, double *sigma_px, double *sigma_std_px,
+                    char **geometry_json);
 
 typedef struct {
     int             lamp;           // index in calib lamps
