@@ -77,6 +77,10 @@ typedef struct {
     bool            have_white;
     double          kcI_per_us[32]; // white.json: kc I per lamp (DN/us at 0 dB per (1/sr)/mm^2)
     double          lamp_radius_mm[32]; // lamps.json radius_mm per lamp (0 absent: a point lamp)
+    bool            have_psf;       // the geometry run estimated the lens's blur (geometry.json beside the camera
+                                    // model; calib_psf_read): false when it did not or the file is absent
+    double          psf_sigma_px;   // the optics' Gaussian PSF sigma (the pixel's 1 px footprint apart), px
+    double          psf_sigma_std_px;   // its 1-sigma
     json_t         *inputs;         // [{role, path, sha256}] of every file read
 } calib_set_t;
 

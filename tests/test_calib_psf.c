@@ -1,5 +1,5 @@
 // tests/test_calib_psf.c — the lens's blur from the board's edges
-// (calib/psf.h):
+// (calib/psf.h) and the calibration set's reading of it:
 // - synthetic chessboards (squares of 40 px turned 4, 19 and 33 deg) blurred
 //   by a known Gaussian (0.5, 0.8, 1.2 px), each pixel the mean of 8 x 8
 //   samples over its footprint, each at a random place in its cell (on
@@ -8,6 +8,8 @@
 //   noise on 3000 DN of contrast, rounded to whole DN, corners with 0.05 px of
 //   noise: sigma is recovered within 0.005 px and the stated 1-sigma covers
 //   the error (|error| <= 3 sigma);
+// - geometry.json's psf read back by calib_set_load_files and, per camera,
+//   by calib_set_load_camera; without it have_psf is false.
 // (The geometry run's stage on the virtual rig: tests/test_calib_geometry.c.)
 #define _GNU_SOURCE
 #include <glib.h>
@@ -142,4 +144,64 @@ TEST(calib_psf_synthetic_edges)
     CHECK(json_is_null(json_object_get(j, "model")));
     json_decref(j);
     calib_psf_acc_free(a);
+}
+
+// The calibration set reads the blur from the geometry.json beside its camera
+// model: the top level's, or camera NAME's of several.
+TEST(calib_psf_calibration_set)
+{
+    char cam[4096];
+    snprintf(cam, sizeof cam, "%s/examples/camera.cameramodel", test_srcdir());
+    gchar *text = NULL;
+    gsize len = 0;
+    CHECK(g_file_get_contents(cam, &text, &len, NULL));
+    g_mkdir_with_parents(test_path("cal/geometry"), 0755);
+    CHECK(g_file_set_contents(test_path("cal/geometry/camera.cameramodel"), text, (gssize)len, NULL));
+    CHECK(g_file_set_contents(test_path("cal/geometry/right.cameramodel"), text, (gssize)len, NULL));
+    g_free(text);
+    test_write("cal/lamps.json", "{\"lamps\": [{\"name\": \"east\", \"position_mm\": [500, 0, 400]}]}");
+    // no geometry.json: no blur, no error
+    calib_set_t *c = calib_set_load(test_path("cal"), false);
+    CHECK(c && !c->have_psf && c->psf_sigma_px == 0);
+    calib_set_free(c);
+    // one without an estimate
+    test_write("cal/geometry/geometry.json", "{\"psf\": {\"model\": null, \"why\": \"no images\"}}");
+    c = calib_set_load(test_path("cal"), false);
+    CHECK(c && !c->have_psf);
+    calib_set_free(c);
+    // the top level's, and camera right's own
+    test_write("cal/geometry/geometry.json",
+               "{\"psf\": {\"model\": \"gaussian\", \"sigma_px\": 0.81, \"sigma_std_px\": 0.012},\n"
+               " \"cameras\": [{\"name\": \"left\", \"psf\": {\"model\": \"gaussian\", \"sigma_px\": 0.81, "
+               "\"sigma_std_px\": 0.012}},\n"
+               "             {\"name\": \"right\", \"psf\": {\"model\": \"gaussian\", \"sigma_px\": 1.1, "
+               "\"sigma_std_px\": 0.02}}]}");
+    c = calib_set_load(test_path("cal"), false);
+    CHECK(c && c->have_psf);
+    if (c) {
+        CHECK_NEAR(c->psf_sigma_px, 0.81, 1e-12);
+        CHECK_NEAR(c->psf_sigma_std_px, 0.012, 1e-12);
+        bool listed = false;
+        size_t i;
+        json_t *e;
+        json_array_foreach(c->inputs, i, e) listed |= !strcmp(json_string_value(json_object_get(e, "role")),
+                                                              "geometry");
+        CHECK(listed);
+    }
+    calib_set_free(c);
+    c = calib_set_load_camera(test_path("cal"), "right", false);
+    CHECK_MSG(c != NULL, "%s", model_last_error());
+    if (c) {
+        CHECK(c->have_psf);
+        CHECK_NEAR(c->psf_sigma_px, 1.1, 1e-12);
+        CHECK_NEAR(c->psf_sigma_std_px, 0.02, 1e-12);
+    }
+    calib_set_free(c);
+    double s, sd;
+    char *gj = NULL;
+    CHECK(calib_psf_read(test_path("cal/geometry/right.cameramodel"), NULL, &s, &sd, &gj));   // by the file's name
+    CHECK_NEAR(s, 1.1, 1e-12);
+    CHECK(gj && g_str_has_suffix(gj, "cal/geometry/geometry.json"));
+    g_free(gj);
+    CHECK(!calib_psf_read(test_path("nowhere/camera.cameramodel"), NULL, &s, &sd, NULL) && isnan(s));
 }
