@@ -69,8 +69,7 @@ static void set_psf(calib_set_t *c, const char *cam, const char *camera)
     bool listed = false;
     size_t i;
     json_t *e;
-    json_array_foreach(c->inputs, i, e) if (gj && !g_strcmp0(json_string_value(json_object_get(e, "role")), "geometry"))
-        listed = true;
+    json_array_foreach(c->inputs, i, e) listed |= !g_strcmp0(json_string_value(json_object_get(e, "role")), "geometry");
     if (gj && !listed) add_input(c, "geometry", gj);
     g_free(gj);
 }

@@ -57,12 +57,6 @@ void calib_psf_acc_free(calib_psf_acc_t *a)
     free(a);
 }
 
-const calib_psf_edge_t *calib_psf_edges(const calib_psf_acc_t *a, int *n)
-{
-    *n = (int)a->edges->len;
-    return (const calib_psf_edge_t *)(void *)a->edges->data;
-}
-
 // ---------------------------------------------------------------------------
 // One edge
 
@@ -582,7 +576,7 @@ static void fit_views(const calib_geometry_opts_t *o, calib_geometry_state_t *s,
         nv += v->found && v->q && v->source;
     }
     int total = 2 * o->gridn * (o->gridn - 1), cap = nv ? EDGES_TARGET / nv : total;
-    cap = cap < 12 ? 12 : cap > total ? total : cap;
+    cap = cap < 6 ? 6 : cap > total ? total : cap;
     fprintf(stderr, "refl calib geometry: the lens's blur from the board's edges (%d views, up to %d edges each)\n",
             nv, cap);
     for (guint k = 0; k < s->views.v->len; k++) {

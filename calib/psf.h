@@ -87,8 +87,6 @@ int calib_psf_add_view(calib_psf_acc_t *a, const float *img, int W, int H, const
                        int max_edges);
 // The estimate of a camera from its edges so far (marks the outliers).
 void calib_psf_estimate(calib_psf_acc_t *a, int camera, calib_psf_t *out);
-// Its edges (every camera's, in the order fitted) and their number.
-const calib_psf_edge_t *calib_psf_edges(const calib_psf_acc_t *a, int *n);
 // The estimate as geometry.json's "psf": model, sigma_px, sigma_std_px,
 // edges_used, footprint, method ... (new reference; when not estimated, model
 // null and why).

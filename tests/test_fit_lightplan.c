@@ -384,7 +384,8 @@ TEST(lightplan_psf_in_the_sobel_prediction)
     char path[4096];
     snprintf(path, sizeof path, "%s/examples/camera.cameramodel", test_srcdir());
     model_camera_t *cam = model_camera_load(path);
-    const char *scene_txt = "1 -150 -150 0\n2 150 -150 0\n3 150 150 0\n4 -150 150 0\nFaces:\n@material matte\n1 2 3 4.\n";
+    const char *scene_txt =
+        "1 -150 -150 0\n2 150 -150 0\n3 150 150 0\n4 -150 150 0\nFaces:\n@material matte\n1 2 3 4.\n";
     const char *mt = "[material matte]\nmodel = lambert\nkd = 0.2\n";
     const char *lt = "[lamp side]\nposition_mm = 400 -300 600\nintensity = 3e9\n";
     model_scene_t *sc = model_scene_parse_d3d(scene_txt, strlen(scene_txt), "plate.d3d", NULL);

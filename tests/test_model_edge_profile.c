@@ -73,7 +73,7 @@ TEST(model_edge_sobel_sharp_step)
     CHECK_NEAR(a.best, 4.0, 1e-12);
     CHECK_NEAR(a.worst, 4.0, 1e-12);   // any phase: the pixels beside an axis-aligned step see all of it
     CHECK_NEAR(d.best, 3 * M_SQRT2, 1e-9);
-    // the edge half-way between the diagonal's pixel centres (0.354 px from each): gx = gy = 3 - 2 (1/8) . 2 ...
+    // the edge half-way between the diagonal's pixel centres (0.354 px from each): gx = gy = 3 - 2 c^2 = 2.75
     CHECK_NEAR(d.worst, 2.75 * M_SQRT2, 1e-9);
     for (int k = 0; k < 8; k++) {   // symmetric under the image's quarter turns and mirrors, continuous in sigma
         double th = k * M_PI / 4;
@@ -94,14 +94,17 @@ TEST(model_edge_sobel_sharp_step)
 // dE/du and dE/dsigma against central differences.
 TEST(model_edge_spread_derivatives)
 {
-    const double thetas[] = { 0, 1e-7, 0.2, M_PI / 4, 1.3 }, sigmas[] = { 0.2, 0.6, 1.5 }, us[] = { -1.3, -0.2, 0, 0.45, 2 };
+    const double thetas[] = { 0, 1e-7, 0.2, M_PI / 4, 1.3 }, sigmas[] = { 0.2, 0.6, 1.5 };
+    const double us[] = { -1.3, -0.2, 0, 0.45, 2 };
     for (int a = 0; a < 5; a++)
         for (int b = 0; b < 3; b++)
             for (int k = 0; k < 5; k++) {
                 double th = thetas[a], s = sigmas[b], u = us[k], du, ds, h = 1e-5;
                 model_edge_spread(u, th, s, &du, &ds);
-                double fu = (model_edge_spread(u + h, th, s, NULL, NULL) - model_edge_spread(u - h, th, s, NULL, NULL)) / (2 * h);
-                double fs = (model_edge_spread(u, th, s + h, NULL, NULL) - model_edge_spread(u, th, s - h, NULL, NULL)) / (2 * h);
+                double fu = (model_edge_spread(u + h, th, s, NULL, NULL) - model_edge_spread(u - h, th, s, NULL, NULL)) /
+                            (2 * h);
+                double fs = (model_edge_spread(u, th, s + h, NULL, NULL) - model_edge_spread(u, th, s - h, NULL, NULL)) /
+                            (2 * h);
                 CHECK_MSG(fabs(du - fu) < 1e-6 && fabs(ds - fs) < 1e-6, "theta %g sigma %g u %g: dE/du %.9f (fd %.9f), "
                           "dE/dsigma %.9f (fd %.9f)", th, s, u, du, fu, ds, fs);
             }
