@@ -64,8 +64,8 @@ static float *read_map(calib_set_t *c, const char *path, const char *role)
 static void set_psf(calib_set_t *c, const char *cam, const char *camera)
 {
     char *gj = NULL;
-    c->have_psf = calib_psf_read(cam, camera, &c->psf_sigma_px, &c->psf_sigma_std_px, &gj);
-    if (!c->have_psf) c->psf_sigma_px = c->psf_sigma_std_px = 0;
+    c->have_psf = calib_psf_read(cam, camera, &c->psf_sigma_px, &c->psf_sigma_std_px, &c->psf_pixel_fill, &gj);
+    if (!c->have_psf) c->psf_sigma_px = c->psf_sigma_std_px = 0, c->psf_pixel_fill = 1;
     bool listed = false;
     size_t i;
     json_t *e;

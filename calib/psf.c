@@ -34,16 +34,17 @@ typedef struct {
 } psf_sample_t;
 
 struct calib_psf_acc {
-    int               gridn;
+    int               nw, nh;    // the board's inner corners along its rows and columns
     GArray           *edges;     // calib_psf_edge_t
     GArray           *samples;   // psf_sample_t of the used edges' pixels
 };
 
-calib_psf_acc_t *calib_psf_acc_new(int gridn)
+calib_psf_acc_t *calib_psf_acc_new(int width_n, int height_n)
 {
     calib_psf_acc_t *a = calloc(1, sizeof *a);
     if (!a) return NULL;
-    a->gridn = gridn;
+    a->nw = width_n;
+    a->nh = height_n;
     a->edges = g_array_new(FALSE, TRUE, sizeof(calib_psf_edge_t));
     a->samples = g_array_new(FALSE, FALSE, sizeof(psf_sample_t));
     return a;
@@ -65,6 +66,7 @@ typedef struct {
     double *x, *y, *P;     // pixel centres and grey values
     bool   *keep;
     double  M[2], u[2], nrm[2], theta;
+    bool    point;         // the pixels sample a point at their centre (no footprint): the step blurred only
 } edge_pixels_t;
 
 // The model at the pixel k for parameters p: value, and the Jacobian row J (may be NULL).
@@ -74,8 +76,15 @@ static double edge_model(const edge_pixels_t *E, int k, const double *p, double 
     double rx = E->x[k] - E->M[0], ry = E->y[k] - E->M[1];
     double nx = E->nrm[0] * ca - E->u[0] * sa, ny = E->nrm[1] * ca - E->u[1] * sa;
     double d = nx * rx + ny * ry - p[2];
-    double s = sqrt(p[4]), dEdu, dEds;
-    double e = model_edge_spread(d, E->theta, s, &dEdu, &dEds);
+    double s = sqrt(p[4]), dEdu, dEds, e;
+    if (E->point) {   // Phi(d / s)
+        double z = d / s, g = exp(-0.5 * z * z) / sqrt(2 * M_PI);
+        e = 0.5 * erfc(-z / M_SQRT2);
+        dEdu = g / s;
+        dEds = -z * g / s;
+    } else {
+        e = model_edge_spread(d, E->theta, s, &dEdu, &dEds);
+    }
     double c = p[1] - p[0];
     if (J) {
         double dd_dturn = (-E->nrm[0] * sa - E->u[0] * ca) * rx + (-E->nrm[1] * sa - E->u[1] * ca) * ry;
@@ -310,6 +319,21 @@ static bool fit_edge(calib_psf_acc_t *a, const float *img, int W, int H, const d
         snprintf(r->why, sizeof r->why, "sigma %.2f px above %g px", r->sigma_px, MAX_SIGMA_PX);
     else
         r->used = true;
+    // the same pixels as seen by points at the pixels' centres: which footprint the edges show
+    r->rss_square = ok ? cost : NAN;
+    r->rss_point = NAN;
+    r->sigma_point_px = NAN;
+    if (r->used) {
+        double q[NP];
+        memcpy(q, p, sizeof q);
+        q[4] = fmax(p[4] + 1.0 / 12, MIN_V);   // the square's variance into the blur's
+        E.point = true;
+        if (edge_lm(&E, q)) {
+            r->rss_point = edge_cost(&E, q, NULL);
+            r->sigma_point_px = q[4] <= MIN_V * (1 + 1e-9) ? 0 : sqrt(q[4]);
+        }
+        E.point = false;
+    }
     if (r->used) {
         int idx = (int)a->edges->len;   // r is appended next
         for (int k = 0; k < E.n; k++) {
@@ -327,22 +351,25 @@ static bool fit_edge(calib_psf_acc_t *a, const float *img, int W, int H, const d
 int calib_psf_add_view(calib_psf_acc_t *a, const float *img, int W, int H, const double *q, int camera, int view,
                        int max_edges)
 {
-    const int g = a->gridn, total = 2 * g * (g - 1);
+    const int nw = a->nw, nh = a->nh, nrow = nh * (nw - 1), total = nrow + nw * (nh - 1);
     int want = max_edges > 0 && max_edges < total ? max_edges : total, fitted = 0;
     for (int k = 0; k < want; k++) {
         int e = (int)((k + 0.5) * total / want);
-        // edges 0 .. g(g-1)-1 along the rows (i, j) - (i+1, j), then along the columns (i, j) - (i, j+1)
+        // edges 0 .. nh (nw-1) - 1 along the rows (i, j) - (i+1, j), then along the columns (i, j) - (i, j+1)
         int c0, c1;
-        if (e < g * (g - 1)) {
-            int j = e / (g - 1), i = e % (g - 1);
-            c0 = j * g + i;
+        if (e < nrow) {
+            int j = e / (nw - 1), i = e % (nw - 1);
+            c0 = j * nw + i;
             c1 = c0 + 1;
         } else {
-            e -= g * (g - 1);
-            int i = e / (g - 1), j = e % (g - 1);
-            c0 = j * g + i;
-            c1 = c0 + g;
+            e -= nrow;
+            int i = e / (nh - 1), j = e % (nh - 1);
+            c0 = j * nw + i;
+            c1 = c0 + nw;
         }
+        // a corner not seen (a partial view): no edge
+        if (!isfinite(q[2 * c0]) || !isfinite(q[2 * c1]) || !isfinite(q[2 * c0 + 1]) || !isfinite(q[2 * c1 + 1]))
+            continue;
         calib_psf_edge_t r = { .camera = camera, .view = view, .c0 = c0, .c1 = c1 };
         if (!fit_edge(a, img, W, H, q + 2 * c0, q + 2 * c1, &r)) return -1;
         g_array_append_val(a->edges, r);
@@ -388,6 +415,28 @@ void calib_psf_estimate(calib_psf_acc_t *a, int camera, calib_psf_t *out)
         if (e->camera != camera) continue;
         out->edges_tried++;
         if (e->npix > 0) out->edges_fitted++;
+    }
+    // the footprint the edges show: the pixel's square, or a point at its centre (a renderer's one ray a pixel,
+    // sharper than a square allows) when that fits the used edges' pixels better by more than 5 %
+    double rss_sq = 0, rss_pt = 0;
+    int nboth = 0;
+    for (guint k = 0; k < a->edges->len; k++) {
+        const calib_psf_edge_t *e = &g_array_index(a->edges, calib_psf_edge_t, k);
+        if (!e->used || e->camera != camera || !isfinite(e->rss_point) || !isfinite(e->rss_square)) continue;
+        rss_sq += e->rss_square;
+        rss_pt += e->rss_point;
+        nboth++;
+    }
+    out->pixel_fill = 1;
+    out->rss_point_over_square = nboth ? rss_pt / rss_sq : NAN;
+    if (nboth && rss_pt < 0.95 * rss_sq) {
+        out->pixel_fill = 0;
+        for (guint k = 0; k < a->edges->len; k++) {
+            calib_psf_edge_t *e = &g_array_index(a->edges, calib_psf_edge_t, k);
+            if (e->camera != camera) continue;
+            if (isfinite(e->sigma_point_px)) e->sigma_px = e->sigma_point_px;
+            else e->used = false;
+        }
     }
     int n = edges_median(a, camera, -1, &med, &mad);
     if (n < 10) {
@@ -473,12 +522,20 @@ json_t *calib_psf_json(const calib_psf_t *p)
     json_object_set_new(j, "outliers", json_integer(p->outliers));
     json_object_set_new(j, "views_used", json_integer(p->views_used));
     json_object_set_new(j, "residual_rms_over_contrast", json_real(p->rms_rel));
-    json_object_set_new(j, "footprint", json_string("1 px box, integrated separately"));
+    json_object_set_new(j, "pixel_fill", json_real(p->pixel_fill));
+    json_object_set_new(j, "footprint", json_string(p->pixel_fill > 0 ? "the pixel's 1 x 1 px square, integrated "
+                                                                         "separately"
+                                                                       : "a point at the pixel's centre: the edges "
+                                                                         "are sharper than a square footprint allows "
+                                                                         "(a renderer's one ray a pixel)"));
+    json_object_set_new(j, "rss_point_over_square", isfinite(p->rss_point_over_square)
+                                                        ? json_real(p->rss_point_over_square) : json_null());
     json_object_set_new(j, "method", json_string(
         "slanted edge (ISO 12233's idea) on the board's square edges between adjacent found corners: the pixels of "
         "each edge's middle (a fifth of its length, at least 6 px, from either corner; within 6 px or 0.3 of its "
         "length of the line) fitted by least squares with a step convolved with an isotropic Gaussian of sigma and "
-        "integrated over the pixel's 1 x 1 px footprint (closed form, model_edge_spread), with the edge's own dark "
+        "integrated over the pixel's 1 x 1 px footprint (closed form, model_edge_spread; and again with a point at "
+        "the pixel's centre: pixel_fill 0 when that fits the edges' pixels better by more than 5 %), with the edge's own dark "
         "and light levels and the line's offset and turn; sigma = the median over the edges (outliers beyond 4 "
         "robust std dropped; an edge at the lower bound, 0.01 px, counts as 0); sigma_std_px = the larger of the "
         "median's standard error from the edges' scatter or their fits' own 1-sigma (sigma_std_edges_px) and the "
@@ -503,7 +560,9 @@ void calib_psf_esf_csv(const calib_psf_acc_t *a, int camera, const char *name, c
         int b = (int)floor((s->u + DMAX_PX) / BIN_PX);
         if (b < 0 || b >= NB) continue;
         sm[b] += s->e;
-        sd[b] += model_edge_spread(s->u, e->theta_rad, p->sigma_px, NULL, NULL);
+        sd[b] += p->pixel_fill > 0 ? model_edge_spread(s->u, e->theta_rad, p->sigma_px, NULL, NULL)
+                 : p->sigma_px > 0 ? 0.5 * erfc(-s->u / (p->sigma_px * M_SQRT2))
+                                   : (s->u > 0) + 0.5 * (s->u == 0);   // a point footprint: the blur alone
         cnt[b]++;
     }
     double em[NB], ed[NB];
@@ -575,7 +634,8 @@ static void fit_views(const calib_geometry_opts_t *o, calib_geometry_state_t *s,
         const calib_geometry_view_t *v = g_ptr_array_index(s->views.v, k);
         nv += v->found && v->q && v->source;
     }
-    int total = 2 * o->gridn * (o->gridn - 1), cap = nv ? EDGES_TARGET / nv : total;
+    const int nw = o->board.width_n, nh = o->board.height_n;
+    int total = nh * (nw - 1) + nw * (nh - 1), cap = nv ? EDGES_TARGET / nv : total;
     cap = cap < 6 ? 6 : cap > total ? total : cap;
     fprintf(stderr, "refl calib geometry: the lens's blur from the board's edges (%d views, up to %d edges each)\n",
             nv, cap);
@@ -604,7 +664,11 @@ bool calib_psf_geometry(const calib_geometry_opts_t *o, calib_geometry_state_t *
         for (int c = 0; c < ncams; c++)
             snprintf(est[c].why, sizeof est[c].why, "no images: the corners came from --corners (the blur needs "
                      "the frames)");
-    } else if (!(a = calib_psf_acc_new(o->gridn))) {
+    } else if (o->board.kind == CALIB_BOARD_CHARUCO) {
+        for (int c = 0; c < ncams; c++)
+            snprintf(est[c].why, sizeof est[c].why, "a ChArUco board: its markers come within a few pixels of the "
+                     "squares' edges (the blur needs a chessboard's clear squares)");
+    } else if (!(a = calib_psf_acc_new(o->board.width_n, o->board.height_n))) {
         model_error_set(s->outdir, 0, "out of memory");
         return false;
     } else {
@@ -683,9 +747,10 @@ void calib_psf_report(FILE *f, const calib_geometry_state_t *s)
 // The calibration set's reader (calib/calib.h)
 
 bool calib_psf_read(const char *camera_model, const char *camera, double *sigma_px, double *sigma_std_px,
-                    char **geometry_json)
+                    double *pixel_fill, char **geometry_json)
 {
     *sigma_px = *sigma_std_px = NAN;
+    if (pixel_fill) *pixel_fill = 1;
     if (geometry_json) *geometry_json = NULL;
     char *dir = g_path_get_dirname(camera_model), *path = g_strdup_printf("%s/geometry.json", dir);
     g_free(dir);
@@ -711,6 +776,9 @@ bool calib_psf_read(const char *camera_model, const char *camera, double *sigma_
     if (ok) {
         *sigma_px = json_number_value(s);
         *sigma_std_px = json_number_value(sd);
+        json_t *f = json_object_get(p, "pixel_fill");
+        if (pixel_fill && json_is_number(f) && json_number_value(f) >= 0 && json_number_value(f) <= 1)
+            *pixel_fill = json_number_value(f);
         if (geometry_json) *geometry_json = g_strdup(path);
     }
     json_decref(g);

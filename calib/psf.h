@@ -49,7 +49,7 @@ extern "C" {
 // One edge's fit.
 typedef struct {
     int    camera, view;            // the view's camera (index) and its number
-    int    c0, c1;                  // its end corners (index j * gridn + i of the view's corners)
+    int    c0, c1;                  // its end corners (index j * width_n + i of the view's corners)
     double theta_rad;               // the edge's normal (a quarter turn from corner c0 toward c1) from +x
     double length_px;               // between the corners
     int    npix;                    // pixels fitted (after the outliers of the fit)
@@ -57,6 +57,9 @@ typedef struct {
     double offset_px, turn_rad;     // the fitted line against the corners' segment
     double sigma_px, sigma_std_px;  // the optics' Gaussian sigma and its 1-sigma from the fit
     double rms_dn;                  // the fit's residual RMS
+    double rss_square, rss_point;   // the fit's sum of squares with the pixel's square footprint, and refitted
+                                    // with a point at its centre (a used edge; else NAN)
+    double sigma_point_px;          // sigma of that point fit (NAN: none)
     bool   used;                    // in the estimate
     char   why[120];                // why not ("" when used)
 } calib_psf_edge_t;
@@ -71,17 +74,21 @@ typedef struct {
     double spread_px;               // the edges' robust std (1.4826 MAD): how much the edges differ
     int    edges_used, edges_fitted, edges_tried, outliers, views_used;
     double rms_rel;                 // median of the edges' residual RMS over their contrast
+    double pixel_fill;              // the footprint the edges show: 1 the pixel's square, 0 a point at its centre
+                                    // (the point fits the used edges' pixels better by more than 5 %)
+    double rss_point_over_square;   // the two footprints' sums of squares over the used edges
 } calib_psf_t;
 
 // The edges and their pixels, gathered view by view.
 typedef struct calib_psf_acc calib_psf_acc_t;
 
-// gridn: inner corners per side of the board. NULL on out of memory.
-calib_psf_acc_t *calib_psf_acc_new(int gridn);
+// width_n x height_n: the board's inner corners along its rows and columns. NULL on out of memory.
+calib_psf_acc_t *calib_psf_acc_new(int width_n, int height_n);
 void             calib_psf_acc_free(calib_psf_acc_t *a);   // accepts NULL
-// Fit the edges of one view: img (W x H grey values), its gridn x gridn corners
-// q (x, y pairs, px, row by row as mrgingham gives them); at most max_edges of
-// its 2 gridn (gridn - 1) edges, spread evenly over them (0: all). The number
+// Fit the edges of one view: img (W x H grey values), its width_n x height_n
+// corners q (x, y pairs, px, row by row; NAN where not seen: no edge there);
+// at most max_edges of its height_n (width_n - 1) + width_n (height_n - 1)
+// edges, spread evenly over them (0: all). The number
 // of edges fitted (used or not), -1 on out of memory.
 int calib_psf_add_view(calib_psf_acc_t *a, const float *img, int W, int H, const double *q, int camera, int view,
                        int max_edges);

@@ -219,7 +219,7 @@ static void resolve_psf(lightplan_lamps_opts_t *oo, plan_inputs_t *in, lightplan
     if (isfinite(oo->opt.psf_sigma_px)) {
         r->psf_sigma_px = oo->opt.psf_sigma_px;
         snprintf(r->psf_source, sizeof r->psf_source, "--psf-sigma-px");
-    } else if (calib_psf_read(oo->camera, NULL, &s, &sd, &gj)) {
+    } else if (calib_psf_read(oo->camera, NULL, &s, &sd, NULL, &gj)) {
         r->psf_sigma_px = s;
         r->psf_sigma_std_px = sd;
         snprintf(r->psf_source, sizeof r->psf_source, "%s (refl calib geometry's psf)", gj);

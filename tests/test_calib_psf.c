@@ -74,7 +74,7 @@ enum { SW = 400, SH = 400, GRIDN = 7, SUB = 8 };
 // A chessboard turned psi_deg about (cx, cy), blurred by sigma, each pixel
 // its footprint's mean (SUB x SUB samples, jittered in their cells), 300 + 3000 c DN plus noise,
 // rounded; its GRIDN x GRIDN inner corners (with 0.05 px of noise) in q.
-static float *synthetic_board(double sigma, double psi_deg, double cx, double cy, double *q)
+static float *synthetic_board_as(double sigma, double psi_deg, double cx, double cy, double *q, bool point)
 {
     table_t t = { .x0 = -400, .h = 1.0 / 32 };
     t.n = (int)(800 / t.h) + 2;
@@ -85,13 +85,15 @@ static float *synthetic_board(double sigma, double psi_deg, double cx, double cy
     for (int y = 0; y < SH; y++)
         for (int x = 0; x < SW; x++) {
             double sum = 0;
-            for (int j = 0; j < SUB; j++)
-                for (int i = 0; i < SUB; i++) {
-                    double dx = x - 0.5 + (i + urand()) / SUB - cx, dy = y - 0.5 + (j + urand()) / SUB - cy;
+            const int ns = point ? 1 : SUB;   // a point: the pixel's centre alone
+            for (int j = 0; j < ns; j++)
+                for (int i = 0; i < ns; i++) {
+                    double dx = point ? x - cx : x - 0.5 + (i + urand()) / SUB - cx;
+                    double dy = point ? y - cy : y - 0.5 + (j + urand()) / SUB - cy;
                     double u = dx * c + dy * s, v = -dx * s + dy * c;
                     sum += 0.5 + 0.5 * table_at(&t, u) * table_at(&t, v);
                 }
-            img[(size_t)y * SW + x] = (float)rint(300 + 3000 * sum / (SUB * SUB) + 12 * nrand());
+            img[(size_t)y * SW + x] = (float)rint(300 + 3000 * sum / (ns * ns) + 12 * nrand());
         }
     for (int j = 0; j < GRIDN; j++)
         for (int i = 0; i < GRIDN; i++) {
@@ -103,11 +105,16 @@ static float *synthetic_board(double sigma, double psi_deg, double cx, double cy
     return img;
 }
 
+static float *synthetic_board(double sigma, double psi_deg, double cx, double cy, double *q)
+{
+    return synthetic_board_as(sigma, psi_deg, cx, cy, q, false);
+}
+
 TEST(calib_psf_synthetic_edges)
 {
     const double sigmas[] = { 0.5, 0.8, 1.2 }, psis[] = { 4, 19, 33 };
     for (int k = 0; k < 3; k++) {
-        calib_psf_acc_t *a = calib_psf_acc_new(GRIDN);
+        calib_psf_acc_t *a = calib_psf_acc_new(GRIDN, GRIDN);
         double q[2 * GRIDN * GRIDN];
         for (int v = 0; v < 3; v++) {
             float *img = synthetic_board(sigmas[k], psis[v], 200.3 + 3 * v, 199.6 - 2 * v, q);
@@ -128,14 +135,14 @@ TEST(calib_psf_synthetic_edges)
         CHECK(p.sigma_std_px > 0 && p.sigma_std_px < 0.02);
         json_t *j = calib_psf_json(&p);
         CHECK(!strcmp(json_string_value(json_object_get(j, "model")), "gaussian"));
-        CHECK(!strcmp(json_string_value(json_object_get(j, "footprint")), "1 px box, integrated separately"));
+        CHECK(p.pixel_fill == 1 && json_number_value(json_object_get(j, "pixel_fill")) == 1);
         CHECK_NEAR(json_number_value(json_object_get(j, "sigma_px")), p.sigma_px, 1e-12);
         CHECK(json_integer_value(json_object_get(j, "edges_used")) == p.edges_used);
         json_decref(j);
         calib_psf_acc_free(a);
     }
     // too few edges: not estimated, and said why
-    calib_psf_acc_t *a = calib_psf_acc_new(GRIDN);
+    calib_psf_acc_t *a = calib_psf_acc_new(GRIDN, GRIDN);
     calib_psf_t p;
     calib_psf_estimate(a, 0, &p);
     CHECK(!p.estimated);
@@ -199,9 +206,43 @@ TEST(calib_psf_calibration_set)
     calib_set_free(c);
     double s, sd;
     char *gj = NULL;
-    CHECK(calib_psf_read(test_path("cal/geometry/right.cameramodel"), NULL, &s, &sd, &gj));   // by the file's name
+    CHECK(calib_psf_read(test_path("cal/geometry/right.cameramodel"), NULL, &s, &sd, NULL, &gj));   // by the file's name
     CHECK_NEAR(s, 1.1, 1e-12);
     CHECK(gj && g_str_has_suffix(gj, "cal/geometry/geometry.json"));
     g_free(gj);
-    CHECK(!calib_psf_read(test_path("nowhere/camera.cameramodel"), NULL, &s, &sd, NULL) && isnan(s));
+    CHECK(!calib_psf_read(test_path("nowhere/camera.cameramodel"), NULL, &s, &sd, NULL, NULL) && isnan(s));
+}
+
+// Pixels that sample a point at their centre (a renderer's one ray a pixel):
+// a sharp board's edges are sharper than a square footprint allows, the
+// estimate says so (pixel_fill 0) and its sigma is 0 (within 0.015 px); a
+// blurred one (0.6 px) is as well fitted by either footprint (the square
+// with sigma sqrt(0.6^2 - 1/12)): the pixel's response, sigma^2 + fill^2/12,
+// is 0.6^2 within 3 %.
+TEST(calib_psf_point_footprint)
+{
+    const double sigmas[] = { 0, 0.6 };
+    for (int k = 0; k < 2; k++) {
+        calib_psf_acc_t *a = calib_psf_acc_new(GRIDN, GRIDN);
+        double q[2 * GRIDN * GRIDN];
+        for (int v = 0; v < 3; v++) {
+            float *img = synthetic_board_as(sigmas[k], 7 + 11 * v, 200.3 + 3 * v, 199.6 - 2 * v, q, true);
+            calib_psf_add_view(a, img, SW, SH, q, 0, v, 0);
+            free(img);
+        }
+        calib_psf_t p;
+        calib_psf_estimate(a, 0, &p);
+        printf("  point footprint, sigma %.1f: fill %.0f (point/square sums of squares %.3f), sigma %.4f +- %.4f from %d "
+               "edges\n", sigmas[k], p.pixel_fill, p.rss_point_over_square, p.sigma_px, p.sigma_std_px, p.edges_used);
+        CHECK_MSG(p.estimated, "%s", p.why);
+        if (sigmas[k] == 0) {
+            CHECK(p.pixel_fill == 0);
+            CHECK_MSG(fabs(p.sigma_px) < 0.015, "sigma %.4f for a sharp board", p.sigma_px);
+        } else {
+            double m2 = p.sigma_px * p.sigma_px + p.pixel_fill * p.pixel_fill / 12;
+            CHECK_MSG(fabs(m2 / (sigmas[k] * sigmas[k]) - 1) < 0.03, "fill %g sigma %.4f: second moment %.4f for %.4f",
+                      p.pixel_fill, p.sigma_px, m2, sigmas[k] * sigmas[k]);
+        }
+        calib_psf_acc_free(a);
+    }
 }
