@@ -99,6 +99,12 @@ typedef struct {
     calib_lamp_sigma_t lamp_sigma[32];  // lamps.json: each lamp's stated 1-sigmas (position, pattern)
     double          flat_pixel_std_rel; // gain.json flat_field.pixel_std_rel: the flat map's noise per pixel,
                                     // relative (NAN: not stated)
+    bool            have_psf;       // the geometry run estimated the lens's blur (geometry.json beside the camera
+                                    // model; calib_psf_read): false when it did not or the file is absent
+    double          psf_sigma_px;   // the optics' Gaussian PSF sigma (the pixel's 1 px footprint apart), px
+    double          psf_sigma_std_px;   // its 1-sigma
+    double          psf_pixel_fill; // the footprint the board's edges showed: 1 the pixel's square, 0 a point at its
+                                    // centre (a renderer's one ray a pixel); 1 without an estimate
     json_t         *inputs;         // [{role, path, sha256}] of every file read
 } calib_set_t;
 
@@ -124,6 +130,17 @@ bool         calib_set_has_camera(const char *dir, const char *camera);
 calib_set_t *calib_set_load_files(const char *camera, const char *lamps_json, const char *gain_json,
                                   const char *white_json);
 void         calib_set_free(calib_set_t *c);
+// The lens's blur of the geometry calibration that wrote camera_model: the
+// "psf" of geometry.json in the model's directory (calib/psf.c writes it;
+// camera NAME of several: its cameras[].psf, else the top level's, the first
+// camera's; camera NULL: the model file's name, NAME.cameramodel). true with
+// the optics' Gaussian sigma and its 1-sigma (px; the pixel's footprint is
+// not in it), the footprint the edges showed (*pixel_fill: 1 the pixel's
+// square, 0 a point at its centre; 1 in files without it; may be NULL) and
+// the file's path (g_free; geometry_json may be NULL); false (no message)
+// when there is no such file or it has no estimate.
+bool calib_psf_read(const char *camera_model, const char *camera, double *sigma_px, double *sigma_std_px,
+                    double *pixel_fill, char **geometry_json);
 
 typedef struct {
     int             lamp;           // index in calib lamps

@@ -58,6 +58,22 @@ static float *read_map(calib_set_t *c, const char *path, const char *role)
     return m;
 }
 
+// The lens's blur from the geometry.json beside the camera model (of camera
+// NAME when given): c->have_psf, psf_sigma_px, psf_sigma_std_px; the file
+// among the inputs once.
+static void set_psf(calib_set_t *c, const char *cam, const char *camera)
+{
+    char *gj = NULL;
+    c->have_psf = calib_psf_read(cam, camera, &c->psf_sigma_px, &c->psf_sigma_std_px, &c->psf_pixel_fill, &gj);
+    if (!c->have_psf) c->psf_sigma_px = c->psf_sigma_std_px = 0, c->psf_pixel_fill = 1;
+    bool listed = false;
+    size_t i;
+    json_t *e;
+    json_array_foreach(c->inputs, i, e) listed |= !g_strcmp0(json_string_value(json_object_get(e, "role")), "geometry");
+    if (gj && !listed) add_input(c, "geometry", gj);
+    g_free(gj);
+}
+
 calib_set_t *calib_set_load(const char *dir, bool need_white)
 {
     char *cam = find_in(dir, "geometry", "camera.cameramodel"), *lamps = find_in(dir, "lamps", "lamps.json");
@@ -151,8 +167,10 @@ calib_set_t *calib_set_load_camera(const char *dir, const char *camera, bool nee
     else if (!white && need_white)
         model_error(dir, 0, "no %s/white.json (nor white/%s/white.json): run refl calib white --camera %s on a "
                     "reference-white session", camera, camera, camera);
-    else if ((c = calib_set_load_files(cam, lamps, gain, white)))
+    else if ((c = calib_set_load_files(cam, lamps, gain, white))) {
         snprintf(c->camera, sizeof c->camera, "%s", camera);
+        set_psf(c, cam, camera);   // the camera's own when the geometry run stored it per camera
+    }
     g_free(cam);
     g_free(lamps);
     g_free(gain);
@@ -256,6 +274,7 @@ calib_set_t *calib_set_load_files(const char *cam, const char *lamps, const char
     snprintf(c->cal_gain_unit, sizeof c->cal_gain_unit, "dB");
     if (!(c->cam = model_camera_load(cam))) goto fail;
     add_input(c, "camera", cam);
+    set_psf(c, cam, NULL);
     c->W = model_camera_width(c->cam);
     c->H = model_camera_height(c->cam);
     if (!(lj = json_load_file(lamps, 0, &je))) {
