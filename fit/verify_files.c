@@ -243,11 +243,11 @@ static void vf_camera_fill(vf_t *V, int c, const calib_set_t *cal, const calib_s
     vc->saturation_dn = g->saturation_dn;
     vc->lin = &g->lin;
     vc->kc_rel = 1;
-    // the pixels' footprint and the optics' blur (fit/verify_footprint.h): the options', else the whole pixel
-    // and no blur
+    // the pixels' footprint and the optics' blur (fit/verify_footprint.h): the options', else the geometry
+    // calibration's (calib/psf.c), else the whole pixel and no blur
     const verify_files_opts_t *o = V->o;
-    vc->psf_sigma_px = isfinite(o->psf_sigma_px) ? o->psf_sigma_px : 0;
-    vc->pixel_fill = isfinite(o->pixel_fill) ? o->pixel_fill : 1;
+    vc->psf_sigma_px = isfinite(o->psf_sigma_px) ? o->psf_sigma_px : cal->have_psf ? cal->psf_sigma_px : 0;
+    vc->pixel_fill = isfinite(o->pixel_fill) ? o->pixel_fill : cal->have_psf ? cal->psf_pixel_fill : 1;
     V->cal_gain[c] = g->cal_gain;
     snprintf(V->cal_unit[c], sizeof V->cal_unit[c], "%s", g->cal_gain_unit);
 }

@@ -397,7 +397,10 @@ static bool calibs_of_chain(study_t *S, const verify_study_opts_t *o)
     S->cam = (verify_camera_t){ .cam = cal->cam, .offset_dn = cal->offset_dn, .flat = cal->flat,
                                 .K_dn_per_e = cal->gain_dn_per_e, .read_noise_e = cal->read_noise_e,
                                 .saturation_dn = cal->saturation_dn, .lin = &cal->lin,
-                                .kc_rel = 1 };
+                                .kc_rel = 1,
+                                // the geometry calibration's pixel response, else the whole pixel, no blur
+                                .psf_sigma_px = cal->have_psf ? cal->psf_sigma_px : 0,
+                                .pixel_fill = cal->have_psf ? cal->psf_pixel_fill : 1 };
     snprintf(S->cam.name, sizeof S->cam.name, "%s", cal->camera[0] ? cal->camera : "camera");
     S->lamps = cal->lamps;
     S->A = cal->kcI_per_us;
