@@ -614,8 +614,9 @@ static const char conditions[] =
     "0 dB, 12-bit sensor with its noise; per case (seeds of the case number only): each lamp's intensity x U(0.9, "
     "1.1), the camera's sensitivity x U(0.95, 1.05), new sensor noise; descriptions: the correct one and 13 "
     "corruptions on the part as placed, and the correct one on the part placed off by 1 mm / 0.5 deg, 2 mm / 1 deg "
-    "and 3 mm / 2 deg (shift along 30 deg from x, turn about the part's centre, same drifts, new noise; expected "
-    "'placed': correct once verification tolerates placement); priors: the chain's (--priors) or the truth's "
+    "and 3 mm / 2 deg (shift along 30 deg from x, turn about the part's centre, same drifts, new noise; a truth "
+    "with [placement] adds a draw of its own to each placement: design.descriptions[].truth_placement_error; "
+    "expected 'placed': a rightly made part, to pass when registration finds it within the tolerance); priors: the chain's (--priors) or the truth's "
     "materials +- 10 %, bounds 3 sigma; no-priors: the thesis's fit (physical bounds only, lamps fixed, kc free); "
     "+maps: the offset map, flat field and linearisation of the gain calibration; calibrations: the chain's "
     "(--calib) or the lab's (the truth's camera, lamps and kc*I, maps measured noise-free)";
