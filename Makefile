@@ -1,6 +1,7 @@
 # refl — one non-recursive Makefile.
 #   make          build bin/refl (installs missing Debian packages first)
-#   make check    fast tests (prints "N passed, N failed")
+#   make check    the tests but the long end-to-end ones, under 10 minutes on 2 cores ("N passed, N failed")
+#   make check-long  the long ones: a lab day, calibrations and fits on the virtual rig (CI runs both)
 #   make demo     the main job on the virtual rig
 #   make study    the verification detection study through the lab day's calibrations and priors
 #   make bench    performance figures, one "NAME: VALUE UNIT" line each
@@ -218,7 +219,7 @@ obj = $(patsubst %.c,$(BUILD)/%.o,$(1))
 LIB_OBJ   := $(call obj,$(LIB_SRC)) $(patsubst %.cc,$(BUILD)/%.o,$(MODEL_CXX_SRC) $(CALIB_CXX_SRC))
 LIB       := $(BUILD)/librefl.a
 
-.PHONY: all check demo study bench asan fuzz clean
+.PHONY: all check check-long demo study bench asan fuzz clean
 all: $(BIN)/refl
 
 $(BUILD)/%.o: %.c | $(BUILD)/config.mk
@@ -272,10 +273,16 @@ $(BIN)/refl-bench: $(call obj,$(BENCH_SRC)) $(LIB)
 	@mkdir -p $(@D)
 	$(CC) $(LDFLAGS_ALL) -o $@ $^ $(LDLIBS_ALL)
 
+TEST_ENV = REFL=$(BIN)/refl REFL_FAKE_GPIOD=$(FAKE_GPIOD) REFL_LAMP_CHILD=$(LAMP_CHILD) REFL_ENOSPC_SHIM=$(ENOSPC_SHIM) \
+  REFL_SCRIPTS_DIR=$(CURDIR)/scripts
+
 check: $(BIN)/refl $(BIN)/refl-tests $(FAKE_GPIOD) $(LAMP_CHILD) $(ENOSPC_SHIM)
 	scripts/check-layers
-	REFL=$(BIN)/refl REFL_FAKE_GPIOD=$(FAKE_GPIOD) REFL_LAMP_CHILD=$(LAMP_CHILD) REFL_ENOSPC_SHIM=$(ENOSPC_SHIM) \
-	  REFL_SCRIPTS_DIR=$(CURDIR)/scripts $(BIN)/refl-tests
+	$(TEST_ENV) REFL_TEST_SET=short $(BIN)/refl-tests
+
+# the TEST_LONG tests (tests/test.h): each a minute or more on the virtual rig (each limited to 20 minutes)
+check-long: $(BIN)/refl $(BIN)/refl-tests $(FAKE_GPIOD) $(LAMP_CHILD) $(ENOSPC_SHIM)
+	$(TEST_ENV) REFL_TEST_SET=long REFL_TEST_TIMEOUT=$${REFL_TEST_TIMEOUT:-1200} $(BIN)/refl-tests
 
 demo: $(BIN)/refl
 	rm -rf $(BUILD)/demo/session* $(BUILD)/demo/calib   # a fresh lab day (scripts/demo keeps and resumes sessions)

@@ -468,12 +468,26 @@ static void report(slot_t *s, const char *how, double dt, int *passed, int *fail
     fflush(stdout);
 }
 
+// Which tests run by their length: $REFL_TEST_SET = short (all but the
+// TEST_LONG ones: make check), long (only those: make check-long) or all (the
+// default). 0 all, 1 short, 2 long; -1: not one of these (said).
+static int test_set(void)
+{
+    const char *s = getenv("REFL_TEST_SET");
+    if (!s || !*s || !strcmp(s, "all")) return 0;
+    if (!strcmp(s, "short")) return 1;
+    if (!strcmp(s, "long")) return 2;
+    fprintf(stderr, "REFL_TEST_SET=%s: want short, long or all\n", s);
+    return -1;
+}
+
 int main(int argc, char **argv)
 {
     const char *filter = argc > 1 ? argv[1] : NULL;
-    int passed = 0, failed = 0, skipped = 0, inner = 0;
+    int passed = 0, failed = 0, skipped = 0, inner = 0, other_set = 0;
     double limit_s = timeout_s();
-    int njobs = jobs();
+    int njobs = jobs(), set = test_set();
+    if (set < 0) return 2;
     model_error_quiet(true);
 
     // The tests to run, in order.
@@ -483,6 +497,10 @@ int main(int argc, char **argv)
         if (filter && !strstr(tests[i].name, filter) && !strstr(tests[i].file, filter)) continue;
         if (tests[i].only_if && !tests[i].only_if()) {
             inner++;
+            continue;
+        }
+        if ((set == 1 && tests[i].long_) || (set == 2 && !tests[i].long_)) {
+            other_set++;
             continue;
         }
         todo[ntodo++] = &tests[i];
@@ -521,6 +539,7 @@ int main(int argc, char **argv)
     fflush(stdout);
 
     double t_all = model_now_s();
+    struct { const char *name; double dt; } slow[6] = { { 0 } };
     bool started[1024] = { false };
     int next = 0, running = 0, alone_running = 0;
     while (next < ntodo || running > 0) {
@@ -563,11 +582,26 @@ int main(int argc, char **argv)
             running--;
             if (slots[j].t->alone) alone_running = 0;
             report(&slots[j], how, dt, &passed, &failed, &skipped);
+            // the slowest five, for the time budget (README: tests)
+            for (int k = 0; k < 5; k++)
+                if (!slow[k].name || dt > slow[k].dt) {
+                    memmove(&slow[k + 1], &slow[k], (size_t)(4 - k) * sizeof slow[0]);
+                    slow[k].name = slots[j].t->name, slow[k].dt = dt;
+                    break;
+                }
         }
     }
     sigprocmask(SIG_SETMASK, &old, NULL);
     tmp_cleanup(rundir);
     if (inner) printf("(%d tests run only inside the test that hosts them)\n", inner);
+    if (other_set)
+        printf(set == 1 ? "(%d long tests left to make check-long)\n" : "(%d short tests left to make check)\n",
+               other_set);
+    if (slow[0].name) {
+        printf("(slowest:");
+        for (int k = 0; k < 5 && slow[k].name; k++) printf("%s %s %.0f s", k ? "," : "", slow[k].name, slow[k].dt);
+        printf(")\n");
+    }
     printf("(%.1f s)\n%d passed, %d failed", model_now_s() - t_all, passed, failed);
     if (skipped) printf(", %d skipped", skipped);
     printf("\n");

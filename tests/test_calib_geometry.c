@@ -619,7 +619,9 @@ static json_t *psf_run(const char *tag, const char *optics, double *sigma, doubl
     CHECK(p && !strcmp(json_string_value(json_object_get(p, "model")) ?: "", "gaussian"));
     *sigma = json_number_value(json_object_get(p, "sigma_px"));
     *sd = json_number_value(json_object_get(p, "sigma_std_px"));
-    CHECK(!strcmp(json_string_value(json_object_get(p, "footprint")) ?: "", "1 px box, integrated separately"));
+    // the rig's 4 x 4 rays a pixel: the footprint is the pixel's square
+    CHECK_CONTAINS(json_string_value(json_object_get(p, "footprint")) ?: "", "the pixel's 1 x 1 px square");
+    CHECK(json_number_value(json_object_get(p, "pixel_fill")) > 0);
     CHECK(json_integer_value(json_object_get(p, "edges_used")) >= 300);
     CHECK(*sd > 0);
     CHECK(exists_in(out_dir, "psf_esf.csv") && exists_in(out_dir, "psf_edges.csv") && exists_in(out_dir, "psf.png"));
