@@ -102,6 +102,42 @@ void fit_samples_eval_n(const fit_samples_t *s, model_brdf_t m, const double *p,
     }
 }
 
+double fit_samples_rms(const fit_samples_t *s, model_brdf_t m, const double *p)
+{
+    double sw = 0, ss = 0, Rb[256];
+    for (int i0 = 0; i0 < s->n; i0 += 256) {
+        int cnt = s->n - i0 < 256 ? s->n - i0 : 256;
+        fit_samples_eval_n(s, m, p, i0, cnt, Rb, NULL);
+        for (int k = 0; k < cnt; k++) {
+            double e = Rb[k] - s->R[i0 + k];
+            sw += s->w[i0 + k];
+            ss += s->w[i0 + k] * e * e;
+        }
+    }
+    return sw > 0 ? sqrt(ss / sw) : NAN;
+}
+
+double fit_samples_rms_of_cov(const fit_samples_t *s, model_brdf_t m, const double *p, const double *C)
+{
+    int np = model_brdf_nparams(m);
+    for (int a = 0; a < np * np; a++)
+        if (!isfinite(C[a])) return NAN;
+    double sw = 0, tr = 0, Rb[256], Jb[256 * MODEL_BRDF_MAX_PARAMS];
+    for (int i0 = 0; i0 < s->n; i0 += 256) {
+        int cnt = s->n - i0 < 256 ? s->n - i0 : 256;
+        fit_samples_eval_n(s, m, p, i0, cnt, Rb, Jb);
+        for (int k = 0; k < cnt; k++) {
+            const double *J = Jb + k * np;
+            double q = 0;   // J^T C J
+            for (int a = 0; a < np; a++)
+                for (int b = 0; b < np; b++) q += J[a] * C[a * np + b] * J[b];
+            sw += s->w[i0 + k];
+            tr += s->w[i0 + k] * q;
+        }
+    }
+    return sw > 0 ? sqrt(fmax(tr, 0) / sw) : NAN;
+}
+
 double fit_samples_eval(const fit_samples_t *s, model_brdf_t m, const double *p, int i)
 {
     double r;

@@ -114,6 +114,30 @@ bool fit_solid_angles(int n, const double *ang, double *w);
 // of the ball reaching each sample's 8th nearest neighbour over 8, in
 // (cos theta_i, omega_o turned by -phi_i) where it is 2 pi du d omega_o.
 bool fit_solid_angles_knn(int n, const double *ang, double *w);
+// Samples of a BRDF for Ngan et al.'s (2005) error, the RMS over both
+// hemispheres of (f_model - f) cos theta_i: one sample at the centre of every
+// cell of the MERL grid (model_brdf_table_cell: theta_h square-root mapped,
+// so a sharp lobe is resolved; theta_d and phi_d every stride-th cell, stride
+// >= 1, each standing for its stride x stride block) with both directions
+// within FIT_NGAN_THETA_MAX_DEG of the normal, R = R(ctx, cosines) (f_r cos
+// theta_i, 1/sr), weighted by the cells' solid angle in (omega_i, omega_o)
+// (weights scaled to mean 1; their sum, sr^2, in omega_sr2). A fit's rms on
+// them is the Ngan error. NULL + message when R is not finite somewhere.
+enum { FIT_NGAN_THETA_MAX_DEG = 85 };
+fit_samples_t *fit_samples_ngan(double (*R)(const void *ctx, const model_cosines_t *c), const void *ctx, int stride);
+// A mixture of materials for fit_samples_ngan (ctx: a fit_mixture_t): R = sum_k weight[k] R_k
+// (model_material_eval: a table or a model). One material of weight 1 is that material.
+typedef struct {
+    int                            n;
+    const model_material_t *const *mat;
+    const double                  *weight;
+} fit_mixture_t;
+double fit_mixture_R(const void *ctx, const model_cosines_t *c);
+// Over samples s: sqrt(sum w (R_model(p) - R)^2 / sum w), 1/sr (on fit_samples_ngan's samples: the Ngan error
+// of model m with parameters p); and sqrt(trace(C H) / sum w), H = sum w J J^T at p (J = dR/dp): the RMS change
+// of R that parameters of covariance C (np x np) make, to first order (NAN when C has a non-finite element).
+double fit_samples_rms(const fit_samples_t *s, model_brdf_t m, const double *p);
+double fit_samples_rms_of_cov(const fit_samples_t *s, model_brdf_t m, const double *p, const double *C);
 
 typedef struct {
     int     threads;            // 0: all cores
