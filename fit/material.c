@@ -567,10 +567,12 @@ static json_t *cells_json(const fit_material_opts_t *o, const fit_material_resul
 // and smp sample for sample): frames (a camera's step), places (cells of
 // r->place_mm of the sample's surface at angle 0) and each camera's lamps as
 // photometric groups of relative std o->lamp_rel. The chosen result in
-// r->models is updated; its record for the priors entry (the lamps' shifts
-// dp, the clusters) is returned (NULL: out of memory).
-static json_t *material_shared(const fit_material_opts_t *o, const calib_set_t *cal, const calib_obs_set_t *obs,
-                               const fit_samples_t *smp, fit_material_result_t *r)
+// r->models is updated; *out its record for the priors entry (the lamps'
+// shifts dp, the clusters; a shared covariance that could not be computed
+// leaves the fit's own, said in it). false + message: out of memory, or
+// places too small for the sample.
+static bool material_shared(const fit_material_opts_t *o, const calib_set_t *cal, const calib_obs_set_t *obs,
+                            const fit_samples_t *smp, fit_material_result_t *r, json_t **out)
 {
     fit_brdf_result_t *b = &r->models.res[r->models.best];
     int n = obs->n, nl = cal->lamps->n, nc = r->ncameras > 0 ? r->ncameras : 1, ng = nc * nl, np = b->nparams;
@@ -578,21 +580,32 @@ static json_t *material_shared(const fit_material_opts_t *o, const calib_set_t *
     int *group = malloc((size_t)(n ? n : 1) * sizeof *group), *count = calloc((size_t)ng, sizeof *count);
     double *rel = malloc((size_t)ng * sizeof *rel), *dp = calloc((size_t)ng * np, sizeof *dp);
     json_t *j = NULL;
-    if (!frame || !place || !group || !count || !rel || !dp || n != smp->n) goto done;
+    *out = NULL;
+    if (!frame || !place || !group || !count || !rel || !dp || n != smp->n) {
+        model_error_set(NULL, 0, n != smp->n ? "%d observations for %d samples" : "out of memory", n, smp->n);
+        goto done;
+    }
     // the places: cells of the sample's surface at angle 0
     double lo[3] = { INFINITY, INFINITY, INFINITY }, hi[3] = { -INFINITY, -INFINITY, -INFINITY }, ext = 0;
     for (int i = 0; i < n; i++)
         for (int k = 0; k < 3; k++) lo[k] = fmin(lo[k], obs->o[i].p0_mm[k]), hi[k] = fmax(hi[k], obs->o[i].p0_mm[k]);
     for (int k = 0; k < 3; k++) ext = fmax(ext, hi[k] - lo[k]);
     r->place_mm = o->place_mm > 0 ? o->place_mm : fmax(1.0, ext / 6);
+    long long nxyz[3];
+    for (int k = 0; k < 3; k++) nxyz[k] = n ? (long long)floor((hi[k] - lo[k]) / r->place_mm) + 1 : 1;
+    if ((double)nxyz[0] * (double)nxyz[1] * (double)nxyz[2] > 1e9) {
+        model_error_set(NULL, 0, "--place-mm %g: %lld x %lld x %lld places over the sample's %.0f mm; give a larger "
+                        "--place-mm", r->place_mm, nxyz[0], nxyz[1], nxyz[2], ext);
+        goto done;
+    }
     for (int i = 0, cam = 0, left = r->nobs_camera[0]; i < n; i++) {
         while (left == 0 && cam + 1 < nc) left = r->nobs_camera[++cam];
         left--;
         const calib_obs_t *ob = &obs->o[i];
         frame[i] = cam * 1000000 + ob->step;
-        int c[3];
-        for (int k = 0; k < 3; k++) c[k] = (int)floor((ob->p0_mm[k] - lo[k]) / r->place_mm);
-        place[i] = (c[0] * 1024 + c[1]) * 1024 + c[2];
+        long long c[3];
+        for (int k = 0; k < 3; k++) c[k] = (long long)floor((ob->p0_mm[k] - lo[k]) / r->place_mm);
+        place[i] = (int)((c[0] * nxyz[1] + c[1]) * nxyz[2] + c[2]);
         group[i] = ob->lamp >= 0 && ob->lamp < nl ? cam * nl + ob->lamp : -1;
         if (group[i] >= 0) count[group[i]]++;
     }
@@ -643,6 +656,7 @@ static json_t *material_shared(const fit_material_opts_t *o, const calib_set_t *
     r->shared_done = ok && b->shared_done;
     r->clusters_frame = b->clusters_frame;
     r->clusters_place = b->clusters_place;
+    *out = j;
 done:
     free(frame);
     free(place);
@@ -650,7 +664,7 @@ done:
     free(count);
     free(rel);
     free(dp);
-    return j;
+    return *out != NULL;
 }
 
 // The priors document (format "refl priors 1") of the final fits; *entry
@@ -733,12 +747,11 @@ bool fit_material_run(const fit_material_opts_t *o, fit_material_result_t *r)
     } else {
         r->models = r->first;
     }
-    json_t *shared = material_shared(o, cal, &obs, csmp ? csmp : smp, r);
+    json_t *shared = NULL;
+    if (!material_shared(o, cal, &obs, csmp ? csmp : smp, r, &shared)) goto done;
     top = material_priors(o, cal, r, &entry);
-    if (shared) {
-        json_object_update(entry, shared);
-        json_decref(shared);
-    }
+    json_object_update(entry, shared);
+    json_decref(shared);
     char *od = g_path_get_dirname(o->out);
     bool made = model_mkdir_p(od);
     g_free(od);
