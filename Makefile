@@ -74,6 +74,7 @@ MODEL_SRC := \
     model/shade.c \
     model/sensor.c \
     model/edges.c \
+    model/edge_profile.c \
     model/workpiece.c \
     model/render_file.c \
     model/edges_file.c \
@@ -113,6 +114,7 @@ CALIB_SRC := \
     calib/sample_pose.c \
     calib/geometry.c \
     calib/geometry_diff.c \
+    calib/psf.c \
     calib/lamps.c \
     calib/lamps_pattern.c \
     calib/lamps_drift.c \
@@ -132,6 +134,7 @@ FIT_SRC := \
     fit/plan_lamps.c \
     fit/plan_capture.c \
     fit/verify.c \
+    fit/verify_footprint.c \
     fit/verify_files.c \
     fit/verify_lab.c \
     fit/verify_study.c \
@@ -161,6 +164,7 @@ TEST_SRC := \
     tests/test_model_config.c \
     tests/test_model_corpus.c \
     tests/test_model_edges.c \
+    tests/test_model_edge_profile.c \
     tests/test_model_image.c \
     tests/test_model_lsq.c \
     tests/test_model_opts.c \
@@ -193,6 +197,7 @@ TEST_SRC := \
     tests/test_calib_sample_pose.c \
     tests/test_calib_geometry.c \
     tests/test_calib_boards.c \
+    tests/test_calib_psf.c \
     tests/test_calib_lamps.c \
     tests/test_calib_export.c \
     tests/test_fit_brdf.c \
@@ -204,6 +209,7 @@ TEST_SRC := \
     tests/test_fit_verify.c \
     tests/test_fit_verify_study.c \
     tests/test_fit_verify_register.c \
+    tests/test_fit_verify_footprint.c \
     tests/test_fit_verify_speed.c
 BENCH_SRC := tests/bench.c
 FUZZ_SRC  := tests/fuzz_parsers.c

@@ -13,6 +13,7 @@
 
 #include <jansson.h>
 #include <stdbool.h>
+#include <stdint.h>
 #include <stdio.h>
 
 #include "model/opts.h"
@@ -59,6 +60,24 @@ int calib_capture(const char *rig_path, const char *dir, const char *name, const
 //   reference white of albedo a (Lambertian, kd = a/pi): kcI_i = s d^2 / (kd n.l)
 //   a material: R = s d^2 / kcI_i  (f_r cos theta_i, 1/sr)
 
+// A lamp's stated uncertainties in lamps.json (calib/calset.c reads them; the
+// white's uncertainty propagates them, calib_white): the position's
+// covariance (covariance_mm2, else std_mm squared on the diagonal) and the
+// emission pattern's: the covariance of (n, t1, t2) with axis_per_t the
+// axis's change per unit t_k (rig frame; emission.covariance_n_t1_t2 and
+// emission.axis_per_t1/_t2 of refl calib pattern, else cos_power_std and
+// axis_std_deg as independent, the t_k tilts in radians across the axis).
+// d ln E(u) = dn ln(a.u) + n sum_k dt_k (axis_per_t[k] . u) / (a.u).
+typedef struct {
+    bool         have_position;
+    double       position_cov_mm2[9];
+    bool         have_pattern;
+    double       n;                   // the pattern's n and axis (also where n = 0: isotropic)
+    model_vec3_t axis;
+    double       pattern_cov[9];      // (n, t1, t2)
+    model_vec3_t axis_per_t[2];
+} calib_lamp_sigma_t;
+
 // The calibration set a measurement uses (loaded from a calibration directory;
 // calib/calset.c).
 typedef struct {
@@ -77,6 +96,15 @@ typedef struct {
     bool            have_white;
     double          kcI_per_us[32]; // white.json: kc I per lamp (DN/us at 0 dB per (1/sr)/mm^2)
     double          lamp_radius_mm[32]; // lamps.json radius_mm per lamp (0 absent: a point lamp)
+    calib_lamp_sigma_t lamp_sigma[32];  // lamps.json: each lamp's stated 1-sigmas (position, pattern)
+    double          flat_pixel_std_rel; // gain.json flat_field.pixel_std_rel: the flat map's noise per pixel,
+                                    // relative (NAN: not stated)
+    bool            have_psf;       // the geometry run estimated the lens's blur (geometry.json beside the camera
+                                    // model; calib_psf_read): false when it did not or the file is absent
+    double          psf_sigma_px;   // the optics' Gaussian PSF sigma (the pixel's 1 px footprint apart), px
+    double          psf_sigma_std_px;   // its 1-sigma
+    double          psf_pixel_fill; // the footprint the board's edges showed: 1 the pixel's square, 0 a point at its
+                                    // centre (a renderer's one ray a pixel); 1 without an estimate
     json_t         *inputs;         // [{role, path, sha256}] of every file read
 } calib_set_t;
 
@@ -102,6 +130,17 @@ bool         calib_set_has_camera(const char *dir, const char *camera);
 calib_set_t *calib_set_load_files(const char *camera, const char *lamps_json, const char *gain_json,
                                   const char *white_json);
 void         calib_set_free(calib_set_t *c);
+// The lens's blur of the geometry calibration that wrote camera_model: the
+// "psf" of geometry.json in the model's directory (calib/psf.c writes it;
+// camera NAME of several: its cameras[].psf, else the top level's, the first
+// camera's; camera NULL: the model file's name, NAME.cameramodel). true with
+// the optics' Gaussian sigma and its 1-sigma (px; the pixel's footprint is
+// not in it), the footprint the edges showed (*pixel_fill: 1 the pixel's
+// square, 0 a point at its centre; 1 in files without it; may be NULL) and
+// the file's path (g_free; geometry_json may be NULL); false (no message)
+// when there is no such file or it has no estimate.
+bool calib_psf_read(const char *camera_model, const char *camera, double *sigma_px, double *sigma_std_px,
+                    double *pixel_fill, char **geometry_json);
 
 typedef struct {
     int             lamp;           // index in calib lamps
@@ -124,6 +163,7 @@ typedef struct {
     int             face;           // the scene face the window lies on
     double          p0_mm[3];       // the window centre's surface point, rig frame at angle 0 (it
                                     // turns with the table: the same point of the sample at every angle)
+    double          n0[3];          // the surface's unit normal there, rig frame at angle 0
 } calib_obs_t;
 
 // Lamp drift (calib/lamps_drift.c): a plan whose [angles] list has an angle
@@ -211,6 +251,7 @@ typedef struct {
     calib_obs_t *o;
     calib_drift_t drift;         // the session's lamp drift (nvisits 0: none measured)
     int        frames_used, frames_skipped;
+    int        window_px;        // the windows' size (N x N pixels)
     char       sample[64], material[64];
     calib_sample_pose_t pose;    // the sample's pose used (pose.tried: fitted from the frames, else the nominal)
 } calib_obs_set_t;
@@ -248,10 +289,13 @@ void calib_obs_free(calib_obs_set_t *s);
 // BRDF is R/pi; azimuth not resolved), in (0, 2]. The rows form a full grid
 // (every theta_i with every theta_r; a single theta_r value: a table by
 // incidence only); '#' lines and blank lines are skipped.
+// A fourth column factor_std (header theta_i_deg,theta_r_deg,factor,factor_std)
+// gives the certificate's 1-sigma of each factor.
 typedef struct {
     int     ni, nr;          // grid sizes
     double *ti, *tr;         // the angles, ascending (degrees)
     double *f;               // f[i * nr + r]
+    double *fs;              // its 1-sigma (NULL: the table states none)
     char    path[4096];
     char    sha256[65];
 } calib_white_table_t;
@@ -265,6 +309,64 @@ void                 calib_white_table_free(calib_white_table_t *t);
 double calib_white_table_factor(const calib_white_table_t *t, double theta_i_deg, double theta_r_deg,
                                 bool *outside);
 
+// The factor's 1-sigma at (theta_i, theta_r) as calib_white_table_factor
+// interpolates the factor; NAN when the table states none.
+double calib_white_table_factor_std(const calib_white_table_t *t, double theta_i_deg, double theta_r_deg);
+
+// The samples' region (where coupons lie on the table, rig frame at angle 0):
+// x, y within +-60 mm, z 5 and 50 mm, on a grid of 20 mm (7 x 7 x 2 points);
+// white.json states each lamp's irradiance uncertainty there and refl chain
+// compares the lamps' light there.
+#define CALIB_REGION_HALF_MM 60.0
+#define CALIB_REGION_STEP_MM 20.0
+#define CALIB_REGION_Z0_MM   5.0
+#define CALIB_REGION_Z1_MM   50.0
+// The region's grid points into q (at most CALIB_REGION_MAX); their number.
+#define CALIB_REGION_MAX 128
+int calib_region_points(model_vec3_t *q);
+
+// The white's uncertainty: every part a relative 1-sigma of kc*I from a stated
+// input (NAN: that input states none), the total their quadrature sum.
+enum { CALIB_WHITE_STAT, CALIB_WHITE_POSITION, CALIB_WHITE_PATTERN, CALIB_WHITE_ALBEDO, CALIB_WHITE_FLAT,
+       CALIB_WHITE_NPARTS };
+extern const char *const calib_white_part_names[CALIB_WHITE_NPARTS];
+
+typedef struct {
+    double albedo_std;   // the certificate's 1-sigma of the albedo (or of every factor of a table without a
+                         // factor_std column); NAN: none stated
+    int    draws;        // draws of each sampled input (default 400)
+    uint64_t seed;       // of the draws (default 1)
+} calib_white_options_t;
+calib_white_options_t calib_white_defaults(void);
+
+typedef struct {
+    char   name[64];
+    int    n;                                  // observations
+    double kcI_per_us, kcI_lambertian_per_us;  // the median (and with the Lambertian assumption)
+    double spread_rel;                         // scaled MAD / median
+    double part_rel[CALIB_WHITE_NPARTS];       // relative 1-sigma of kc*I per part (NAN: not stated)
+    double std_rel;                            // their quadrature sum
+    // the irradiance kc*I E(q) / |q - L|^2 over the samples' region: the
+    // largest total relative 1-sigma, where, and its parts there
+    double irr_std_rel, irr_part_rel[CALIB_WHITE_NPARTS];
+    model_vec3_t irr_worst_mm;
+} calib_white_lamp_t;
+
+// kc*I and its uncertainty per lamp of cal (out: cal->lamps->n) from obs, as
+// calib_white writes them. The statistical part is the median's standard
+// error (1.2533 MAD / sqrt(n)); the lamp position's and the pattern's are
+// sampled through the same computation (o.draws draws of the position from
+// its covariance, each observation's d, n.l, table factor and emission
+// recomputed; draws of the pattern's (n, t1, t2) from its covariance, ln E
+// moved linearly); the albedo's is the certificate's relative 1-sigma (a
+// table's factor_std: its mean relative value over the observations, taken
+// as fully correlated); the flat field's is its per-pixel noise over
+// sqrt(window pixels x distinct windows), x 1.2533 for the median. false +
+// message (model_error) for a lamp with fewer than 10 observations.
+bool calib_white_compute(const calib_obs_set_t *obs, const calib_set_t *cal, double albedo,
+                         const calib_white_table_t *table, const calib_white_options_t *o, calib_white_lamp_t *out,
+                         const char *out_json);
+
 // Reference white: kc*I per lamp (median over its observations) and the
 // relative spread; writes DIR/white.json (with the camera, cal->camera, when
 // it has one). table NULL: a Lambertian standard of albedo (e.g. 0.99), kd =
@@ -273,8 +375,11 @@ double calib_white_table_factor(const calib_white_table_t *t, double theta_i_deg
 // the white's departure from Lambertian over the observed geometries and
 // what the Lambertian assumption (the table's factor nearest the normal)
 // would have given.
+// Each lamp's kc_I_std_per_us, std_rel and sigma_parts_rel (calib_white_compute;
+// o NULL: calib_white_defaults) and its irradiance_samples_region.
 bool calib_white(const calib_obs_set_t *obs, const calib_set_t *cal, double albedo,
-                 const calib_white_table_t *table, const char *out_json, json_t *provenance);
+                 const calib_white_table_t *table, const calib_white_options_t *o, const char *out_json,
+                 json_t *provenance);
 
 // The calibration set of calib_dir for camera (calib_set_load_camera; NULL:
 // calib_set_load) and the observations of the session through it

@@ -58,6 +58,22 @@ static float *read_map(calib_set_t *c, const char *path, const char *role)
     return m;
 }
 
+// The lens's blur from the geometry.json beside the camera model (of camera
+// NAME when given): c->have_psf, psf_sigma_px, psf_sigma_std_px; the file
+// among the inputs once.
+static void set_psf(calib_set_t *c, const char *cam, const char *camera)
+{
+    char *gj = NULL;
+    c->have_psf = calib_psf_read(cam, camera, &c->psf_sigma_px, &c->psf_sigma_std_px, &c->psf_pixel_fill, &gj);
+    if (!c->have_psf) c->psf_sigma_px = c->psf_sigma_std_px = 0, c->psf_pixel_fill = 1;
+    bool listed = false;
+    size_t i;
+    json_t *e;
+    json_array_foreach(c->inputs, i, e) listed |= !g_strcmp0(json_string_value(json_object_get(e, "role")), "geometry");
+    if (gj && !listed) add_input(c, "geometry", gj);
+    g_free(gj);
+}
+
 calib_set_t *calib_set_load(const char *dir, bool need_white)
 {
     char *cam = find_in(dir, "geometry", "camera.cameramodel"), *lamps = find_in(dir, "lamps", "lamps.json");
@@ -151,8 +167,10 @@ calib_set_t *calib_set_load_camera(const char *dir, const char *camera, bool nee
     else if (!white && need_white)
         model_error(dir, 0, "no %s/white.json (nor white/%s/white.json): run refl calib white --camera %s on a "
                     "reference-white session", camera, camera, camera);
-    else if ((c = calib_set_load_files(cam, lamps, gain, white)))
+    else if ((c = calib_set_load_files(cam, lamps, gain, white))) {
         snprintf(c->camera, sizeof c->camera, "%s", camera);
+        set_psf(c, cam, camera);   // the camera's own when the geometry run stored it per camera
+    }
     g_free(cam);
     g_free(lamps);
     g_free(gain);
@@ -190,6 +208,58 @@ static bool lamp_emission(json_t *e, const char *path, size_t i, model_lamp_t *l
     return true;
 }
 
+// The numbers of a JSON array of n numbers into v; false when it is not one.
+static bool json_numbers(const json_t *a, double *v, size_t n)
+{
+    if (json_array_size(a) != n) return false;
+    for (size_t k = 0; k < n; k++) {
+        const json_t *x = json_array_get(a, k);
+        if (!json_is_number(x)) return false;
+        v[k] = json_number_value(x);
+    }
+    return true;
+}
+
+// A lamp's stated 1-sigmas of lamps.json (calib_lamp_sigma_t): what is absent
+// stays unstated.
+static void lamp_sigma(const json_t *e, calib_lamp_sigma_t *s)
+{
+    memset(s, 0, sizeof *s);
+    double v[9];
+    if (json_numbers(json_object_get(e, "covariance_mm2"), s->position_cov_mm2, 9))
+        s->have_position = true;
+    else if (json_numbers(json_object_get(e, "std_mm"), v, 3)) {
+        for (int k = 0; k < 3; k++) s->position_cov_mm2[4 * k] = v[k] * v[k];
+        s->have_position = true;
+    }
+    const json_t *em = json_object_get(e, "emission"), *n = json_object_get(e, "emission_cos_power");
+    double a[3];
+    if (!json_is_number(n) || !json_numbers(json_object_get(e, "emission_axis"), a, 3)) return;
+    double len = sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2]);
+    if (!(len > 0)) return;
+    s->n = json_number_value(n);
+    s->axis = v3(a[0] / len, a[1] / len, a[2] / len);
+    double d1[3], d2[3];
+    if (json_numbers(json_object_get(em, "covariance_n_t1_t2"), s->pattern_cov, 9) &&
+        json_numbers(json_object_get(em, "axis_per_t1"), d1, 3) && json_numbers(json_object_get(em, "axis_per_t2"), d2, 3)) {
+        s->axis_per_t[0] = v3(d1[0], d1[1], d1[2]);
+        s->axis_per_t[1] = v3(d2[0], d2[1], d2[2]);
+        s->have_pattern = true;
+        return;
+    }
+    const json_t *ns = json_object_get(em, "cos_power_std"), *as = json_object_get(em, "axis_std_deg");
+    if (!json_is_number(ns) || !json_is_number(as)) return;
+    // independent: n, and two tilts (radians) across the axis
+    memset(s->pattern_cov, 0, sizeof s->pattern_cov);
+    double sa = json_number_value(as) * M_PI / 180;
+    s->pattern_cov[0] = json_number_value(ns) * json_number_value(ns);
+    s->pattern_cov[4] = s->pattern_cov[8] = sa * sa;
+    model_vec3_t h = fabs(s->axis.z) < 0.9 ? v3(0, 0, 1) : v3(1, 0, 0);
+    s->axis_per_t[0] = v3_unit(v3_cross(h, s->axis));
+    s->axis_per_t[1] = v3_cross(s->axis, s->axis_per_t[0]);
+    s->have_pattern = true;
+}
+
 calib_set_t *calib_set_load_files(const char *cam, const char *lamps, const char *gain, const char *white)
 {
     calib_set_t *c = calloc(1, sizeof *c);
@@ -200,9 +270,11 @@ calib_set_t *calib_set_load_files(const char *cam, const char *lamps, const char
     const char *dir = cam;
     if (!c) return NULL;
     c->inputs = json_array();
+    c->flat_pixel_std_rel = NAN;
     snprintf(c->cal_gain_unit, sizeof c->cal_gain_unit, "dB");
     if (!(c->cam = model_camera_load(cam))) goto fail;
     add_input(c, "camera", cam);
+    set_psf(c, cam, NULL);
     c->W = model_camera_width(c->cam);
     c->H = model_camera_height(c->cam);
     if (!(lj = json_load_file(lamps, 0, &je))) {
@@ -240,6 +312,7 @@ calib_set_t *calib_set_load_files(const char *cam, const char *lamps, const char
         }
         c->lamp_radius_mm[i] = rad ? json_number_value(rad) : 0;
         if (!lamp_emission(e, lamps, i, l)) goto fail;
+        lamp_sigma(e, &c->lamp_sigma[i]);
         c->lamps->n = (int)i + 1;
     }
     add_input(c, "lamps", lamps);
@@ -257,6 +330,8 @@ calib_set_t *calib_set_load_files(const char *cam, const char *lamps, const char
             c->read_noise_e = json_number_value(rn);
         }
         if (!calib_gain_lin_from_json(gj, gain, &c->lin)) goto fail;
+        json_t *fs = json_object_get(json_object_get(gj, "flat_field"), "pixel_std_rel");
+        if (json_is_number(fs)) c->flat_pixel_std_rel = json_number_value(fs);
         json_t *gdb = json_object_get(gj, "gain_db"), *gu = json_object_get(gj, "gain_unit");
         if ((gdb && !json_is_number(gdb)) || (gu && !json_is_string(gu))) {
             model_error(gain, 0, "gain_db must be a number and gain_unit a string (the gain the calibration was "

@@ -76,8 +76,11 @@ int calib_cmd_white(int argc, char **argv)
                          "cameras: NAME.cameramodel, NAME/gain.json; write -o DIR/NAME/white.json)", &camera, false),
         MODEL_OPT_VALUE("--albedo", "A", "a Lambertian standard's albedo (default 0.99)", false),
         MODEL_OPT_STRING("--reflectance-table", "CSV", "the standard's reflectance factor by incidence and viewing "
-                         "angle (its certificate; columns theta_i_deg,theta_r_deg,factor, a full grid) instead of "
-                         "--albedo", &table_path, false),
+                         "angle (its certificate; columns theta_i_deg,theta_r_deg,factor[,factor_std], a full grid) "
+                         "instead of --albedo", &table_path, false),
+        MODEL_OPT_VALUE("--albedo-std", "S", "the certificate's 1-sigma of the albedo (or of every factor of a "
+                        "table without factor_std): the albedo's part of kc*I's uncertainty (default: not stated)",
+                        false),
         MODEL_OPT_STRING("--scene", "FILE", "the standard's scene, D3D, OBJ, STL or PLY (needed: a session records "
                          "no scene)", &o.scene_path, false),
         MODEL_OPT_UNITS,
@@ -95,7 +98,9 @@ int calib_cmd_white(int argc, char **argv)
                  "of albedo A, default 0.99): every lit window of the standard gives (P - Pa) d^2 / (g t kd n.l),\n"
                  "kd = A/pi; the median per lamp is written. Windows lie wholly on one face of the material.\n"
                  "With --reflectance-table the standard's BRDF is its reflectance factor at each window's\n"
-                 "incidence and viewing angles over pi, and white.json states its departure from Lambertian.",
+                 "incidence and viewing angles over pi, and white.json states its departure from Lambertian.\n"
+                 "Each kc*I carries its 1-sigma and its parts (statistical, lamp position, emission pattern,\n"
+                 "albedo, flat field) and the irradiance's 1-sigma over the samples' region.",
     };
     int rc = model_cli_parse(&cli, argc, argv);
     if (rc != MODEL_CLI_OK) return rc;
@@ -108,6 +113,10 @@ int calib_cmd_white(int argc, char **argv)
         return model_cli_error(&cli, "--albedo needs a number > 0, not '%s'", av);
     if (albedo > 1) return model_cli_error(&cli, "--albedo %g: an albedo is at most 1", albedo);
     if (av && table_path) return model_cli_error(&cli, "give --albedo or --reflectance-table, not both");
+    calib_white_options_t wo = calib_white_defaults();
+    const char *as = model_cli_value(&cli, "--albedo-std");
+    if (as && !(model_parse_double(as, &wo.albedo_std) && wo.albedo_std >= 0 && wo.albedo_std < 1))
+        return model_cli_error(&cli, "--albedo-std needs the albedo's 1-sigma, a number in [0, 1), not '%s'", as);
     calib_white_table_t *table = NULL;
     if (table_path) {
         bool q0 = model_error_quiet_thread(true);
@@ -126,7 +135,7 @@ int calib_cmd_white(int argc, char **argv)
         printf("refl calib white: %d observations of %s in %d frames (%d skipped)\n", obs.n, obs.material,
                obs.frames_used, obs.frames_skipped);
         prov = calib_observe_provenance(argc + 1, argv - 1, session, cal);
-        ok = calib_white(&obs, cal, albedo, table, out, prov);
+        ok = calib_white(&obs, cal, albedo, table, &wo, out, prov);
     }
     model_error_quiet_thread(q);
     if (ok) printf("%s\n", out);

@@ -59,6 +59,45 @@ bool calib_gain_polyfit(const double *x, const double *y, int n, int degree, dou
     return true;
 }
 
+bool calib_gain_polyfit_se(const double *x, const double *y, int n, int degree, double *c, double *se)
+{
+    if (!calib_gain_polyfit(x, y, n, degree, c)) return false;
+    int m = degree + 1;
+    if (n <= m) return false;
+    double sx = 0;
+    for (int i = 0; i < n; i++) sx = fmax(sx, fabs(x[i]));
+    // (X^T X)^-1 in the scaled powers (columns solved one at a time)
+    double A[9] = { 0 }, Ai[9], h[3];
+    for (int i = 0; i < n; i++) {
+        double p[3] = { 1, x[i] / sx, (x[i] / sx) * (x[i] / sx) };
+        for (int r = 0; r < m; r++)
+            for (int k = 0; k < m; k++) A[r * m + k] += p[r] * p[k];
+    }
+    for (int k = 0; k < m; k++) {
+        double B[9], b[3] = { 0 };
+        memcpy(B, A, sizeof B);
+        b[k] = 1;
+        if (!model_solve_linear(B, b, m)) return false;
+        for (int r = 0; r < m; r++) Ai[r * m + k] = b[r];
+    }
+    // the sandwich (X^T X)^-1 X^T diag(e_i^2 / (1 - h_i)^2) X (X^T X)^-1 (HC3)
+    double S[9] = { 0 };
+    for (int i = 0; i < n; i++) {
+        double p[3] = { 1, x[i] / sx, (x[i] / sx) * (x[i] / sx) }, fit = 0, hi = 0;
+        for (int r = 0; r < m; r++) fit += c[r] * pow(x[i], r);
+        for (int r = 0; r < m; r++) {
+            h[r] = 0;
+            for (int k = 0; k < m; k++) h[r] += Ai[r * m + k] * p[k];
+            hi += p[r] * h[r];
+        }
+        double e = (y[i] - fit) / fmax(1 - hi, 1e-3);
+        for (int r = 0; r < m; r++)
+            for (int k = 0; k < m; k++) S[r * m + k] += e * e * h[r] * h[k];
+    }
+    for (int r = 0; r < m; r++) se[r] = sqrt(fmax(S[r * m + r], 0)) / pow(sx, r);
+    return true;
+}
+
 // Half the range of the relative deviations 100 (mu - line) / line, %, over
 // the points with mu in [lo_dn, hi_dn] (and mu > 0 when positive); each
 // point's deviation into dev_pct (NAN outside the range) when given.
@@ -241,8 +280,9 @@ bool calib_gain_ptc(const double *t, const double *mu, const double *var, const 
             y[m] = var[i];
             m++;
         }
-    double c2[3], c1[3];
+    double c2[3], c1[3], se2[3];
     bool ok = m >= 5 && calib_gain_polyfit(x, y, m, 2, c2) && calib_gain_polyfit(x, y, m, 1, c1);
+    o->system_gain_std_dn_per_e = ok && calib_gain_polyfit_se(x, y, m, 2, c2, se2) ? se2[1] : NAN;
     free(x);
     free(y);
     if (!ok || !(c2[1] > 0)) {
@@ -606,10 +646,13 @@ bool calib_gain_analyse(calib_gain_data_t *d, double gain_db, int min_steps, dou
         a->dark_t_min_us = fmin(a->dark_t_min_us, dt[i]);
         a->dark_t_max_us = fmax(a->dark_t_max_us, dt[i]);
     }
-    double c[3];
+    double c[3], cse[3];
+    a->dark_slope_std_dn_per_us = NAN;
+    a->var_dark_std_dn2 = NAN;
     if (a->dark_t_max_us > a->dark_t_min_us && calib_gain_polyfit(dt, dm, nd, 1, c)) {
         a->dark_intercept_dn = c[0];
         a->dark_slope_dn_per_us = c[1];
+        if (nd >= 3 && calib_gain_polyfit_se(dt, dm, nd, 1, c, cse)) a->dark_slope_std_dn_per_us = cse[1];
     } else {
         double s = 0;
         for (int i = 0; i < nd; i++) s += dm[i];
@@ -626,11 +669,16 @@ bool calib_gain_analyse(calib_gain_data_t *d, double gain_db, int min_steps, dou
         }
         dv_fit = ndv >= 3 && tmax > tmin && calib_gain_polyfit(dtv, dv, ndv, 1, dvc);
         a->dark_var_slope_dn2_per_us = dv_fit ? dvc[1] : NAN;
-        if (dv_fit) a->var_dark_dn2 = dvc[0];
-        else {
-            double s = 0;
+        double dvse[3];
+        if (dv_fit) {
+            a->var_dark_dn2 = dvc[0];
+            if (calib_gain_polyfit_se(dtv, dv, ndv, 1, dvc, dvse)) a->var_dark_std_dn2 = dvse[0];
+        } else {
+            double s = 0, ss = 0;
             for (int i = 0; i < ndv; i++) s += dv[i];
             a->var_dark_dn2 = s / ndv;
+            for (int i = 0; i < ndv; i++) ss += (dv[i] - a->var_dark_dn2) * (dv[i] - a->var_dark_dn2);
+            if (ndv >= 2) a->var_dark_std_dn2 = sqrt(ss / (ndv - 1) / ndv);
         }
     }
     if (nl < min_steps) {
@@ -672,6 +720,15 @@ bool calib_gain_analyse(calib_gain_data_t *d, double gain_db, int min_steps, dou
         model_error_set(NULL, 0, "gain %g dB: %s", gain_db, m);
         g_free(m);
         goto done;
+    }
+    // the 1-sigmas of read noise and dark current: K's and the dark fits' in quadrature (relative)
+    {
+        const calib_gain_ptc_t *p = &a->ptc;
+        double kr = p->system_gain_std_dn_per_e / p->system_gain_dn_per_e;
+        double rr = p->read_noise_dn > 0 ? a->var_dark_std_dn2 / (2 * p->read_noise_dn * p->read_noise_dn) : NAN;
+        a->read_noise_std_e = p->read_noise_e * hypot(rr, kr);
+        a->dark_current_std_e_per_s = 1e6 / p->system_gain_dn_per_e *
+                                      hypot(a->dark_slope_std_dn_per_us, a->dark_slope_dn_per_us * kr);
     }
     calib_gain_linearity_r4(a->t, a->mu, nl, a->ptc.saturation_dn, 0.05, 0.95, NULL, NULL, NULL, a->dev_pct);
     if (!analyse_linearisation(a)) {   // consumers fall back to the parametric form
@@ -752,6 +809,12 @@ static double roi_mean_var(const calib_gain_data_t *d, const float *m, int w, in
     double mean = s / np;
     if (var) *var = ss / np - mean * mean;
     return mean;
+}
+
+double calib_gain_spatial_std(double s, double tau, double npix)
+{
+    if (!(s > 0) || !(npix > 1) || !(tau >= 0)) return NAN;
+    return sqrt((4 * s * s * tau + 2 * tau * tau) / npix) / (2 * s);
 }
 
 bool calib_gain_make_maps(calib_gain_data_t *d, const calib_gain_an_t *a, calib_gain_maps_t *m)
@@ -836,18 +899,32 @@ bool calib_gain_make_maps(calib_gain_data_t *d, const calib_gain_an_t *a, calib_
     double dshift = m->dark_same_exposure ? 0 : a->dark_slope_dn_per_us * (flat->exposure_us - dark->exposure_us);
     double dvar;
     double dmean = roi_mean_var(d, m->offset, w, h, &dvar);
+    int roi[4];
+    roi_of(d, w, h, roi);
+    const double npix = (double)roi[2] * roi[3];
     m->dark_var_dn2 = isfinite(dark->var_dn2) ? dark->var_dn2 : a->var_dark_dn2;
     m->dsnu_total_raw_dn = sqrt(fmax(dvar, 0));
-    double d2 = dvar - m->dark_var_dn2 / dark->n;
+    double dtau = m->dark_var_dn2 / dark->n, d2 = dvar - dtau;
     m->dsnu_dn = sqrt(fmax(d2, 0));
+    m->dsnu_std_dn = calib_gain_spatial_std(m->dsnu_dn, dtau, npix);
+    // the signal, linearised as every consumer linearises it (the PRNU of the
+    // linear signal: a compressive response would flatten it)
+    bool lin = a->lin.kind != MODEL_LIN_NONE && a->lin.n >= 2;
+    double slope2 = 0;
     for (size_t i = 0; i < n; i++) {
-        m->prnu[i] -= (float)(m->offset[i] + dshift);   // signal
+        double sg = m->prnu[i] - (m->offset[i] + dshift), sl = 1;
+        if (lin) sg = model_linearise(&a->lin, sg, 1, &sl);
+        slope2 += sl * sl;
+        m->prnu[i] = (float)sg;   // signal
         m->dsnu[i] = (float)(m->offset[i] - dmean);
     }
+    slope2 /= (double)n;
+    m->flat_linearised = lin;
     double svar, smean = roi_mean_var(d, m->prnu, w, h, &svar);
     m->flat_var_dn2 = isfinite(flat->var_dn2) ? flat->var_dn2 : NAN;
-    double tvar = (isfinite(m->flat_var_dn2) ? m->flat_var_dn2 / flat->n : 0) + m->dark_var_dn2 / dark->n;
+    double tvar = ((isfinite(m->flat_var_dn2) ? m->flat_var_dn2 / flat->n : 0) + m->dark_var_dn2 / dark->n) * slope2;
     m->signal_temporal_var_dn2 = tvar;
+    m->flat_pixel_std_rel = sqrt(tvar) / smean;
     m->prnu_total_pct = 100 * sqrt(fmax(svar - tvar, 0)) / smean;
     if (!calib_gain_highpass(m->prnu, w, h, m->prnu_hp)) {
         model_error_set(NULL, 0, "flat field: the smooth-surface fit is singular (%dx%d frames)", w, h);
@@ -858,6 +935,7 @@ bool calib_gain_make_maps(calib_gain_data_t *d, const calib_gain_an_t *a, calib_
     roi_mean_var(d, m->prnu_hp, w, h, &hvar);
     double hp2 = hvar - tvar / (smean * smean);
     m->prnu_pct = 100 * sqrt(fmax(hp2, 0));
+    m->prnu_std_pct = 100 * calib_gain_spatial_std(m->prnu_pct / 100, tvar / (smean * smean), npix);
     // the total map normalised to mean 1 (over the whole frame)
     double s = 0;
     for (size_t i = 0; i < n; i++) s += m->prnu[i];
@@ -1342,7 +1420,8 @@ static json_t *conventions_json(const calib_gain_opts_t *o, const calib_gain_dat
         "below 90 % of saturation. method: what the consumers apply. linearity_error_linearised_pct: the "
         "Release 4.0 LE of the sweep's signal through the table (its own check; _parametric_pct: through S(1 - aS))"));
     json_object_set_new(cv, "prnu_pct", json_string(
-        "std of the flat field (light minus dark averages) divided by its quadratic smooth surface (vignetting "
+        "std of the flat field (light minus dark averages, each pixel's signal through the linearisation as every "
+        "consumer applies it: flat_field.linearised) divided by its quadratic smooth surface (vignetting "
         "and illumination fall-off removed), temporal noise of the averages subtracted (EMVA 1288 variance "
         "correction); prnu_total_pct: the same without removing the smooth part (vignetting included)"));
     json_object_set_new(cv, "dsnu_dn", json_string("std of the averaged dark frame, temporal noise of the average "
@@ -1504,7 +1583,25 @@ json_t *calib_gain_json(const calib_gain_opts_t *o, const calib_gain_data_t *d, 
     json_object_set_new(f, "dark_exposure_us", json_real(maps->dark_exposure_us));
     json_object_set_new(f, "width", json_integer(maps->w));
     json_object_set_new(f, "height", json_integer(maps->h));
+    json_object_set_new(f, "linearised", json_boolean(maps->flat_linearised));
+    json_object_set_new(f, "pixel_std_rel", jreal(maps->flat_pixel_std_rel));
     json_object_set_new(root, "flat_field", f);
+    json_t *sd = json_object();
+    json_object_set_new(sd, "system_gain_dn_per_e", jreal(a->ptc.system_gain_std_dn_per_e));
+    json_object_set_new(sd, "read_noise_e", jreal(a->read_noise_std_e));
+    json_object_set_new(sd, "dsnu_dn", jreal(maps->dsnu_std_dn));
+    json_object_set_new(sd, "prnu_pct", jreal(maps->prnu_std_pct));
+    json_object_set_new(sd, "dark_current_e_per_s", jreal(a->dark_current_std_e_per_s));
+    json_object_set_new(root, "std", sd);
+    json_object_set_new(root, "std_method", json_string(
+        "1-sigma of the figures of the same name, from the fits' statistics (units as theirs): "
+        "system_gain_dn_per_e: the standard error of the linear coefficient of the photon-transfer quadratic "
+        "(heteroscedasticity-consistent sandwich, HC3: each point's own residual, since a variance's scatter grows "
+        "with it); read_noise_e: the dark variance's intercept standard error (of its fit against exposure, HC3) "
+        "over 2 sigma^2_d and K's relative 1-sigma in quadrature; dark_current_e_per_s: the dark mean's slope "
+        "standard error (HC3) and K's in quadrature; dsnu_dn and prnu_pct: the temporal noise tau left in the "
+        "averaged frames, a fixed pattern of std s over N pixels giving var(s^2) = (4 s^2 tau + 2 tau^2) / N, "
+        "1-sigma = sqrt of that / (2 s) (the pattern itself is the sensor's, not a sample of it)"));
     json_object_set_new(root, "maps", json_pack("{s:s, s:s, s:s, s:s, s:s}", "offset_dn", "offset_dn.tiff", "dsnu_dn",
                                                 "dsnu_dn.tiff", "prnu_gain", "prnu_gain.tiff", "prnu_highpass",
                                                 "prnu_highpass.tiff", "defects", "defects.tiff"));

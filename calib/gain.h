@@ -38,6 +38,15 @@ extern "C" {
 // Least-squares polynomial y = c[0] + c[1] x (+ c[2] x^2) of degree 1 or 2
 // through n points (n > degree). false when the system is singular.
 bool calib_gain_polyfit(const double *x, const double *y, int n, int degree, double *c);
+// The same with the coefficients' standard errors se[degree + 1]: the
+// heteroscedasticity-consistent sandwich (HC3: each point's residual over
+// 1 - its leverage), for data whose scatter differs from point to point.
+// false when the fit fails or n <= degree + 1.
+bool calib_gain_polyfit_se(const double *x, const double *y, int n, int degree, double *c, double *se);
+// The 1-sigma of a fixed pattern's std s measured over npix pixels of an
+// average whose temporal noise variance tau is left in it (and subtracted):
+// sqrt((4 s^2 tau + 2 tau^2) / npix) / (2 s); NAN for s <= 0.
+double calib_gain_spatial_std(double s, double tau, double npix);
 
 // Photon transfer of one gain setting, from n exposure steps sorted by
 // exposure. In: exposure_us[n], mu[n], var[n] (dark-subtracted, see above),
@@ -50,6 +59,7 @@ typedef struct {
     double system_gain_linear_dn_per_e;   // EMVA 1288's straight-line fit over the same range (biased low
                                           // by a compressive non-linearity)
     int    n_ptc_fit;              // points in the K fit
+    double system_gain_std_dn_per_e;   // K's 1-sigma: the fit's standard error (calib_gain_polyfit_se)
     double read_noise_dn;          // sqrt(var_dark - quant^2/12)
     double read_noise_e;           // read_noise_dn / K
     double saturation_capacity_e;  // saturation_dn / K
@@ -383,6 +393,10 @@ typedef struct {
     double le_linearised_pct;   // Release 4.0 LE of the linearised signal (the table's own check)
     double le_linearised_param_pct;   // the same through S(1 - aS)
     double dark_var_slope_dn2_per_us; // slope of sigma^2_y.dark against exposure (NAN: not fitted)
+    double var_dark_std_dn2;          // var_dark_dn2's 1-sigma (its fit's standard error)
+    double dark_slope_std_dn_per_us;  // dark_slope_dn_per_us's 1-sigma (NAN: not fitted)
+    double read_noise_std_e;          // read noise's 1-sigma (var_dark's and K's)
+    double dark_current_std_e_per_s;  // dark current's 1-sigma (the slope's and K's)
     calib_gain_photon_t ph;           // the photon axis (calib_gain_photon_axis)
     double *mu_p;                     // photons per pixel of each step (NAN: not measured)
 } calib_gain_an_t;
@@ -404,6 +418,9 @@ typedef struct {
     bool    dark_same_exposure;
     double  prnu_mean_dn;            // the flat minus dark's whole-frame mean (prnu * it: the signal, DN)
     double  signal_temporal_var_dn2; // temporal variance left in the averaged signal
+    double  dsnu_std_dn, prnu_std_pct;   // their 1-sigma (calib_gain_spatial_std)
+    double  flat_pixel_std_rel;      // the flat map's temporal noise per pixel, relative to its mean
+    bool    flat_linearised;         // the flat's signal went through the response linearisation
     calib_gain_spatial_t sp;         // calib_gain_make_spatial
 } calib_gain_maps_t;
 

@@ -49,6 +49,7 @@
 #include "calib/calib.h"
 #include "calib/export.h"
 #include "calib/geometry.h"
+#include "calib/psf.h"
 #include "model/lsq.h"
 #include "model/model.h"
 #include "model/report.h"
@@ -2248,6 +2249,7 @@ bool calib_geometry_report(const calib_geometry_opts_t *o, const calib_geometry_
             model_html_figure(f, "uncertainty.png", "Projection uncertainty (dots: observed corners)");
         }
         report_crossvalidation(f, s);
+        calib_psf_report(f, s);
         json_t *cams = json_object_get(s->out, "cameras");
         if (json_array_size(cams) > 1) {
             model_html_heading(f, "Cameras (one joint solve)");
@@ -2377,6 +2379,7 @@ static bool outputs(const calib_geometry_opts_t *o, calib_geometry_state_t *s)
     g_free(m0);
     if (!kept || !(s->out = calib_geometry_json(o, s))) return false;
     if (s->ncams > 1 && !camera_outputs(o, s)) return false;
+    if (!calib_psf_geometry(o, s)) return false;   // the lens's blur from the board's edges (calib/psf.c)
     for (int k = 0; k < s->ncams && s->ncams > 1 && kept; k++) {
         char *mk = g_strdup_printf("%s/camera-%d.cameramodel", s->soldir, k);
         char *pk = g_strdup_printf("%s/%s.cameramodel", s->outdir, s->camnames[k]);

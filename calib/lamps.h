@@ -345,6 +345,8 @@ typedef struct {
     double       kcI_axis_per_us;     // the on-axis kc*I the albedo implies (DN/us at 0 dB per (1/sr)/mm^2)
     double       rms_rel;             // RMS relative residual of the windows
     double       irradiance_std_rel;  // the largest relative 1-sigma of the fitted irradiance over the windows
+    double       cov_n_t[9];          // the fit's covariance of (n, t1, t2): the axis is b / |b|, b = the cone
+    model_vec3_t axis_per_t[2];       // centre + t1 e1 + t2 e2; axis_per_t[k] = d axis / d t_k (rig frame)
 } calib_lamps_pattern_t;
 
 // Each lamp of cal (out: cal->lamps->n) from obs (calib_observe of the target

@@ -204,6 +204,10 @@ static bool pat_fit(pat_data_t *D, const model_lamp_t *L, calib_lamps_pattern_t 
     out->kcI_axis_per_us = exp(x[0]);
     out->rms_rel = sqrt(rms / m);
     out->irradiance_std_rel = worst;
+    for (int p = 0; p < 3; p++)
+        for (int q = 0; q < 3; q++) out->cov_n_t[3 * p + q] = C[4 * (p + 1) + q + 1];
+    out->axis_per_t[0] = da[0];
+    out->axis_per_t[1] = da[1];
     out->fitted = ok;
     free(J), free(r), free(tmp);
     if (!ok) model_error_set(NULL, 0, "lamp %s: the pattern's fit is singular (the windows' directions do not "
@@ -277,11 +281,19 @@ bool calib_lamps_pattern_fit(const calib_obs_set_t *obs, const calib_set_t *cal,
 // The "emission" object of one lamp's fit.
 static json_t *pattern_json(const calib_lamps_pattern_t *P)
 {
-    return json_pack("{s:f,s:f,s:f,s:[fff],s:f,s:i,s:i,s:f,s:f,s:f}", "cos_power_std", P->n_std, "axis_std_deg",
-                     P->axis_std_deg, "tilt_from_origin_deg", P->tilt_deg, "measured_cone_centre", P->cone_centre.x,
-                     P->cone_centre.y, P->cone_centre.z, "measured_cone_half_angle_deg", P->cone_half_angle_deg,
-                     "windows", P->nwindows, "windows_rejected", P->rejected, "rms_residual_pct", 100 * P->rms_rel,
-                     "irradiance_std_pct", 100 * P->irradiance_std_rel, "kc_I_axis_per_us", P->kcI_axis_per_us);
+    json_t *e = json_pack("{s:f,s:f,s:f,s:[fff],s:f,s:i,s:i,s:f,s:f,s:f}", "cos_power_std", P->n_std,
+                          "axis_std_deg", P->axis_std_deg, "tilt_from_origin_deg", P->tilt_deg,
+                          "measured_cone_centre", P->cone_centre.x, P->cone_centre.y, P->cone_centre.z,
+                          "measured_cone_half_angle_deg", P->cone_half_angle_deg, "windows", P->nwindows,
+                          "windows_rejected", P->rejected, "rms_residual_pct", 100 * P->rms_rel,
+                          "irradiance_std_pct", 100 * P->irradiance_std_rel, "kc_I_axis_per_us", P->kcI_axis_per_us);
+    json_t *c = json_array();
+    for (int k = 0; k < 9; k++) json_array_append_new(c, json_real(P->cov_n_t[k]));
+    json_object_set_new(e, "covariance_n_t1_t2", c);
+    for (int k = 0; k < 2; k++)
+        json_object_set_new(e, k ? "axis_per_t2" : "axis_per_t1",
+                            json_pack("[fff]", P->axis_per_t[k].x, P->axis_per_t[k].y, P->axis_per_t[k].z));
+    return e;
 }
 
 bool calib_lamps_pattern_write(const calib_set_t *cal, const calib_lamps_pattern_t *pat, const char *session,
@@ -313,7 +325,10 @@ bool calib_lamps_pattern_write(const calib_set_t *cal, const calib_lamps_pattern
         "tilt_from_origin_deg (the axis against the direction from the lamp to the rig origin), windows and "
         "windows_rejected (beyond 5 robust std), rms_residual_pct (the windows' irradiance about the fitted "
         "pattern), irradiance_std_pct (the largest 1-sigma of the fitted irradiance over the measured cone), "
-        "kc_I_axis_per_us (the on-axis kc*I the target's albedo implies; DN/us at 0 dB per (1/sr)/mm^2)"));
+        "kc_I_axis_per_us (the on-axis kc*I the target's albedo implies; DN/us at 0 dB per (1/sr)/mm^2), "
+        "covariance_n_t1_t2 (3 x 3, row-major: the fit's covariance of n and the axis's two tilt parameters t1, "
+        "t2, dimensionless) with axis_per_t1 and axis_per_t2 (the axis's change per unit t1, t2, rig frame): "
+        "d ln(pattern toward u) = dn ln(a.u) + n (dt1 axis_per_t1 + dt2 axis_per_t2).u / (a.u)"));
     json_object_set_new(doc, "emission_session", json_string(session));
     json_object_set_new(doc, "emission_provenance", json_incref(provenance));
     bool ok = model_write_json(out_json, doc);

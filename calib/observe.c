@@ -246,6 +246,9 @@ static bool window_observation(const observe_t *ob, const rig_frame_row_t *r, in
     obs->p0_mm[0] = ca * pp.x - sa * pp.y;
     obs->p0_mm[1] = sa * pp.x + ca * pp.y;
     obs->p0_mm[2] = pp.z;
+    obs->n0[0] = ca * p->n.x - sa * p->n.y;
+    obs->n0[1] = sa * p->n.x + ca * p->n.y;
+    obs->n0[2] = p->n.z;
     if (cal->gain_dn_per_e > 0) {
         // per pixel: shot noise K*signal (K scales with the gain), read noise, quantisation
         double K = cal->gain_dn_per_e * gf, rd = K * cal->read_noise_e;
@@ -385,6 +388,7 @@ bool calib_observe(const char *session_dir, const calib_set_t *cal, const calib_
     ob.s = s;
     if (!(plan = rig_plan_parse(s->plan_text, strlen(s->plan_text), session_dir))) goto done;
     snprintf(out->sample, sizeof out->sample, "%s", plan->sample);
+    out->window_px = o.window;
     if (o.material) snprintf(out->material, sizeof out->material, "%s", o.material);
     if (!(scene = observe_scene(s, plan, cal, &o, out, &ob.mat))) goto done;
     if (!calib_drift_measure(s, plan, cal, &out->drift)) goto done;

@@ -8,6 +8,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "calib/calib.h"
 #include "calib/geometry.h"
 #include "fit/chain.h"
 #include "fit/fit.h"
@@ -92,6 +93,29 @@ static double uncertainty_rms(const json_t *pu)
     return n ? sqrt(s / n) : NAN;
 }
 
+// The intrinsics core's (fx, fy, cx, cy) 1-sigma of mrcal's solve, which
+// the geometry step keeps in DIR/calib/geometry/mrcal/solution.json
+// (intrinsics_core_stdev, its first camera's) when its intrinsics are the
+// camera's (cam's "intrinsics" equal). false: none.
+static bool intrinsics_stdev(chain_t *c, const json_t *cam, double sd[4])
+{
+    char *p = g_build_filename(c->dir, "calib", "geometry", "mrcal", "solution.json", NULL);
+    json_error_t je;
+    json_t *sol = g_file_test(p, G_FILE_TEST_EXISTS) ? json_load_file(p, 0, &je) : NULL;
+    const json_t *s = json_object_get(sol, "intrinsics_core_stdev"), *a = json_object_get(sol, "intrinsics"),
+                 *b = json_object_get(cam, "intrinsics");
+    bool ok = json_array_size(s) == 4 && json_array_size(a) >= 4 && json_array_size(b) >= 4;
+    for (int k = 0; ok && k < 4; k++) {
+        sd[k] = json_number_value(json_array_get(s, k));
+        double x = json_number_value(json_array_get(a, k)), y = json_number_value(json_array_get(b, k));
+        ok = sd[k] > 0 && fabs(x - y) <= 1e-6 * fmax(1, fabs(y));
+    }
+    if (ok) model_provenance_input(c->prov, "geometry_solution", p);
+    json_decref(sol);
+    g_free(p);
+    return ok;
+}
+
 static void chain_camera(chain_t *c, const json_t *cam, const char *model_path, const char *truth_sec,
                          const char *label)
 {
@@ -107,10 +131,15 @@ static void chain_camera(chain_t *c, const json_t *cam, const char *model_path, 
     }
     model_provenance_input(c->prov, "camera_model", model_path);
     static const char *const in[4] = { "fx", "fy", "cx", "cy" };
+    double isd[4];
+    bool have_sd = intrinsics_stdev(c, cam, isd);
     for (int k = 0; k < 4; k++) {
         snprintf(name, sizeof name, "%s.%s", label, in[k]);
-        add(c, "camera geometry", name, b->intrinsics[k], t->intrinsics[k], NAN, "px",
-            "the intrinsics' own sigma is not stated (their correlations make it misleading alone)");
+        add(c, "camera geometry", name, b->intrinsics[k], t->intrinsics[k], have_sd ? isd[k] : NAN, "px",
+            have_sd ? "sigma: mrcal's solve, the marginal 1-sigma (geometry's mrcal/solution.json "
+                      "intrinsics_core_stdev: (J^T J)^-1 scaled by the residuals' RMS^2; the intrinsics are "
+                      "correlated, so a single one's z alone says little of the projection)"
+                    : "no sigma stated (geometry's mrcal/solution.json has no intrinsics_core_stdev for it)");
     }
     calib_projection_diff_t d;
     const json_t *pu = json_object_get(cam, "projection_uncertainty");
@@ -139,11 +168,17 @@ static void chain_camera(chain_t *c, const json_t *cam, const char *model_path, 
     double rt_ref_cam[6], R[9];
     mrcal_invert_rt(rt_ref_cam, NULL, NULL, t->rt_cam_ref);
     const json_t *cc = json_object_get(cam, "camera_centre_rig_mm");
+    double ccs = num(json_object_get(json_object_get(cam, "axis"), "rig_frame_sigma"), "camera_centre_mm");
     for (int k = 0; cc && k < 3; k++) {
         snprintf(name, sizeof name, "%s.centre_rig.%c", label, "xyz"[k]);
-        add(c, "camera geometry", name, json_number_value(json_array_get(cc, k)), rt_ref_cam[3 + k], NAN, "mm",
-            "the camera's centre in the rig frame (the calibration's frame rests on the flat board's placement: "
-            "its azimuth and origin carry that placement's error); no sigma stated");
+        add(c, "camera geometry", name, json_number_value(json_array_get(cc, k)), rt_ref_cam[3 + k], ccs, "mm",
+            isfinite(ccs) ? "the camera's centre in the rig frame; sigma: geometry.json axis.rig_frame_sigma."
+                            "camera_centre_mm (the rig frame's origin and turn as the axis fit determines them, at "
+                            "the camera's distance; one figure for the centre, taken for each coordinate). The "
+                            "frame's azimuth rests on the flat board's placement, which no fit of these views sees"
+                          : "the camera's centre in the rig frame (the calibration's frame rests on the flat "
+                            "board's placement: its azimuth and origin carry that placement's error); no sigma "
+                            "stated");
     }
     const json_t *ax = json_object_get(cam, "axis");
     const json_t *dc = json_object_get(ax, "direction_cam");
@@ -256,12 +291,15 @@ static void chain_gain(chain_t *c, const json_t *g)
         { "prnu_pct", "prnu_pct", "%" },
         { "dark_current_e_per_s", "dark_current_e_per_s", "e-/s" },
     };
+    const json_t *sd = json_object_get(g, "std");
     for (size_t i = 0; i < sizeof k / sizeof k[0]; i++) {
-        char name[96];
+        char name[96], note[300];
         snprintf(name, sizeof name, "sensor.%s", k[i].key);
-        double t = ini_num(c, "sensor", k[i].truth);
+        double t = ini_num(c, "sensor", k[i].truth), s = num(sd, k[i].key);
         if (!isfinite(t)) continue;
-        add(c, "sensor (EMVA 1288)", name, num(g, k[i].key), t, NAN, k[i].unit, "no sigma stated");
+        snprintf(note, sizeof note, isfinite(s) ? "sigma: gain.json std.%s (from the fit's statistics; gain.json "
+                 "std_method)" : "no sigma stated (gain.json has no std.%s)", k[i].key);
+        add(c, "sensor (EMVA 1288)", name, num(g, k[i].key), t, s, k[i].unit, note);
     }
 }
 
@@ -278,18 +316,27 @@ static void chain_white(chain_t *c, const json_t *w, const json_t *g)
         double I = ini_num(c, sec, "intensity"), v = num(l, "kc_I_per_us");
         if (!isfinite(I) || !isfinite(kc)) continue;
         snprintf(name, sizeof name, "white.kc_I_%s", n);
-        add(c, "reference white", name, v, kc * I * gmean, v * num(l, "std_of_median_rel"),
+        double sr = num(l, "std_rel");
+        bool total = isfinite(sr);
+        add(c, "reference white", name, v, kc * I * gmean, v * (total ? sr : num(l, "std_of_median_rel")),
             "DN/us per (1/sr)/mm^2",
-            "truth: kc_per_us * I * mean(g), mean(g) the flat field's mean from the gain calibration's "
-            "small-signal kc; sigma: the median's standard error");
+            total ? "truth: kc_per_us * I * mean(g), mean(g) the flat field's mean from the gain calibration's "
+                    "small-signal kc; sigma: white.json's total (std_rel: statistical, lamp position, emission "
+                    "pattern, albedo, flat field in quadrature; sigma_parts_rel)"
+                  : "truth: kc_per_us * I * mean(g), mean(g) the flat field's mean from the gain calibration's "
+                    "small-signal kc; sigma: the median's standard error (white.json states no total)");
     }
 }
 
-// Each lamp's light over the samples' region (x, y in [-60, 60] mm, z 5 and
-// 50 mm): the calibrated kc*I (white.json) times the calibrated emission
-// pattern (lamps.json; isotropic without one) against the truth's kc I mean(g)
-// times its pattern: the largest relative error (%), truth 0; sigma the
-// pattern's stated irradiance_std_pct (none without a measured pattern).
+// Each lamp's light over the samples' region (calib_region_points: x, y in
+// [-60, 60] mm, z 5 and 50 mm): the irradiance of the calibrated lamp, kc*I
+// (white.json) times the emission pattern (lamps.json; isotropic without one)
+// over its squared distance from the calibrated position, against the truth's
+// kc I mean(g) times its pattern over the squared distance from the true
+// position: the largest relative error (%), truth 0. sigma: white.json's
+// irradiance_samples_region.std_max_pct (the white's kc*I with the lamp's
+// position and pattern through the same draws); without it, the pattern's
+// irradiance_std_pct and the white's std_rel in quadrature.
 static void chain_lamp_irradiance(chain_t *c, const json_t *lj, const json_t *w, const json_t *g)
 {
     double kc = ini_num(c, "camera", "kc_per_us"), ks = num(g, "kc_small_signal_per_us");
@@ -300,9 +347,16 @@ static void chain_lamp_irradiance(chain_t *c, const json_t *lj, const json_t *w,
     json_array_foreach(json_object_get(lj, "lamps"), i, l) {
         const char *n = json_string_value(json_object_get(l, "name"));
         int k = n && tl ? model_lamps_find(tl, n) : -1;
-        double v = NAN;
+        double v = NAN, sig = NAN;
         json_array_foreach(json_object_get(w, "lamps"), j, e)
-            if (n && !g_strcmp0(json_string_value(json_object_get(e, "name")), n)) v = num(e, "kc_I_per_us");
+            if (n && !g_strcmp0(json_string_value(json_object_get(e, "name")), n)) {
+                v = num(e, "kc_I_per_us");
+                sig = num(json_object_get(e, "irradiance_samples_region"), "std_max_pct");
+                if (!isfinite(sig)) {
+                    double ps = num(json_object_get(l, "emission"), "irradiance_std_pct"), ws = num(e, "std_rel");
+                    sig = isfinite(ws) && isfinite(ps) ? hypot(ps, 100 * ws) : ps;
+                }
+            }
         const json_t *p = json_object_get(l, "position_mm"), *ax = json_object_get(l, "emission_axis");
         if (k < 0 || !isfinite(v) || !isfinite(kc) || json_array_size(p) != 3) continue;
         model_lamp_t M = { .position_mm = v3(json_number_value(json_array_get(p, 0)),
@@ -316,18 +370,21 @@ static void chain_lamp_irradiance(chain_t *c, const json_t *lj, const json_t *w,
         }
         const model_lamp_t *T = &tl->lamps[k];
         double worst = 0;
-        for (int ix = -3; ix <= 3; ix++)
-            for (int iy = -3; iy <= 3; iy++)
-                for (int iz = 0; iz < 2; iz++) {
-                    model_vec3_t q = v3(20 * ix, 20 * iy, iz ? 50 : 5);
-                    double m = v * model_lamp_emission(&M, q), t = kc * T->intensity * gmean * model_lamp_emission(T, q);
-                    worst = fmax(worst, fabs(m / t - 1));
-                }
+        model_vec3_t q[CALIB_REGION_MAX];
+        int nq = calib_region_points(q);
+        for (int iq = 0; iq < nq; iq++) {
+            model_vec3_t dm = v3_sub(q[iq], M.position_mm), dt = v3_sub(q[iq], T->position_mm);
+            double m = v * model_lamp_emission(&M, q[iq]) / v3_dot(dm, dm);
+            double t = kc * T->intensity * gmean * model_lamp_emission(T, q[iq]) / v3_dot(dt, dt);
+            worst = fmax(worst, fabs(m / t - 1));
+        }
         char name[160];
         snprintf(name, sizeof name, "lamp_%s.irradiance_max_err", n);
-        add(c, "lamps", name, 100 * worst, 0, num(json_object_get(l, "emission"), "irradiance_std_pct"), "%",
-            "the calibrated kc*I (white) times the emission pattern (lamps.json; isotropic without one) against the "
-            "truth's over the samples' region (x, y within 60 mm, z 5 and 50 mm): the largest relative error");
+        add(c, "lamps", name, 100 * worst, 0, sig, "%",
+            "the calibrated lamp's irradiance, kc*I (white) times the emission pattern (lamps.json; isotropic "
+            "without one) over the squared distance from its calibrated position, against the truth's over the "
+            "samples' region (x, y within 60 mm, z 5 and 50 mm): the largest relative error; sigma: white.json's "
+            "irradiance_samples_region.std_max_pct");
     }
     model_lamps_free(tl);
 }

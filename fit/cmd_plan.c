@@ -61,9 +61,12 @@ static void print_view(const lightplan_lamps_opts_t *o, const lightplan_view_t *
 
 static void print_plan(const lightplan_lamps_opts_t *o, const lightplan_lamps_result_t *r)
 {
-    if (r->ncandidates)
+    if (r->ncandidates) {
         fprintf(stderr, "refl plan lamps: %d candidate lamps, %d exposures, %d view%s\n", r->ncandidates, o->nexp,
                 o->nangles > 0 ? o->nangles : 1, o->nangles > 1 ? "s" : "");
+        fprintf(stderr, "refl plan lamps: edges blurred by a Gaussian PSF of sigma %.3g px (from %s) and the "
+                "pixel's 1 px footprint\n", r->psf_sigma_px, r->psf_source);
+    }
     for (int k = 0; k < r->nviews; k++) print_view(o, &r->views[k]);
     if (r->capture_plan)
         printf("capture plan: %s%s\n", r->capture_plan,
@@ -118,6 +121,9 @@ static int plan_lamps(int argc, char **argv)
         MODEL_OPT_STRING("--sample", "NAME", "the sample: the capture plan's and the virtual rig's for the check "
                          "(the scene file's name)", &o.sample, false),
         MODEL_OPT_STRING("--pixel-format", "FMT", "the capture plan's pixel format (Mono12)", &o.pixel_format, false),
+        MODEL_OPT_DOUBLE("--psf-sigma-px", "S", "the optics' Gaussian blur (px) of the edges' predicted Sobel "
+                         "response (default: the geometry calibration's, geometry.json beside --camera; else 0)",
+                         &op->psf_sigma_px, 0, 10),
         MODEL_OPT_INT("--threads", "N", "threads (0: all cores)", &op->threads, 0, 1024),
         MODEL_OPT_FLAG("--no-report", NULL, "no index.html", &no_report),
         MODEL_OPT_UNITS,

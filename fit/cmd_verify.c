@@ -10,6 +10,7 @@
 // verify_study_run (fit/verify.h) and prints the residue table and verdict.
 #define _GNU_SOURCE
 #include <glib.h>
+#include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -162,7 +163,8 @@ static void print_result(const verify_files_opts_t *o, const verify_files_result
 int verify_cmd(int argc, char **argv)
 {
     // the placement tolerance of a part laid on the turntable by hand against a stop (README: refl verify)
-    verify_files_opts_t o = { .opt = verify_defaults(), .placement_tol_mm = 3, .placement_tol_deg = 2 };
+    verify_files_opts_t o = { .opt = verify_defaults(), .placement_tol_mm = 3, .placement_tol_deg = 2,
+                              .psf_sigma_px = NAN, .pixel_fill = NAN };
     verify_options_t *op = &o.opt;
     const char *fixed = NULL, *truth = NULL, *shard = NULL, *configs = NULL;
     bool no_report = false, fail_on_incorrect = false, do_study = false, do_merge = false;
@@ -211,8 +213,19 @@ int verify_cmd(int argc, char **argv)
         MODEL_OPT_DOUBLE("--edge-k", "K", "window std > sqrt(K^2 var_noise + (R S)^2): an edge (3)", &op->edge_k,
                          0.1, 1e6),
         MODEL_OPT_DOUBLE("--edge-rel", "R", "(0.05)", &op->edge_rel, 0, 10),
-        MODEL_OPT_INT("--interreflection-samples", "N", "(16; 0 none)", &op->ir_samples, 0, 1024),
-        MODEL_OPT_DOUBLE("--model-rel", "R", "relative model tolerance in sigma (0.04)", &op->model_rel, 0, 10),
+        MODEL_OPT_FLAG("--skip-edge-windows", NULL, "skip the windows near edges (default: modelled with the "
+                       "pixels' footprint and the blur)", NULL),
+        MODEL_OPT_INT("--edge-subsamples", "N", "sub-cells per px side of a window's cells that see two faces "
+                      "(5; odd)", &op->edge_subsamples, 1, 15),
+        MODEL_OPT_DOUBLE("--edge-position-sigma-px", "S", "1-sigma of where an edge lies in the image (0.1 px)",
+                         &op->edge_position_sigma_px, 0, 100),
+        MODEL_OPT_DOUBLE("--psf-sigma-px", "S", "the optics' blur, a Gaussian's sigma in px (default: the "
+                         "calibration's, else 0)", &o.psf_sigma_px, 0, 10),
+        MODEL_OPT_DOUBLE("--pixel-fill", "F", "the pixel's footprint, a square of F px (default: the "
+                         "calibration's, else 1: the whole pixel)", &o.pixel_fill, 0, 1),
+        MODEL_OPT_INT("--interreflection-samples", "N", "(64; 0 none)", &op->ir_samples, 0, 1024),
+        MODEL_OPT_DOUBLE("--model-rel", "R", "relative model error of every window, over the priors' "
+                         "window_rel_std (default: the priors', else 0.04)", &op->model_rel, 0, 10),
         MODEL_OPT_DOUBLE("--robust-scale", "Z", "Cauchy loss scale in z (3; 0 plain least squares)",
                          &op->robust_scale, 0, 1e6),
         MODEL_OPT_DOUBLE("--lamp-sigma", "S", "prior std of the lamps' intensities (0.1)", &op->lamp_sigma, 1e-6,
@@ -256,6 +269,8 @@ int verify_cmd(int argc, char **argv)
     // the flags that turn defaults off
     op->use_priors = !model_cli_opt(&cli, "--no-priors")->given;
     op->use_flat = !model_cli_opt(&cli, "--no-gain-maps")->given;
+    op->edge_windows = !model_cli_opt(&cli, "--skip-edge-windows")->given;
+    op->model_rel_given = model_cli_opt(&cli, "--model-rel")->given;
     o.have_angle = model_cli_opt(&cli, "--angle-deg")->given;
     o.have_exposure = model_cli_opt(&cli, "--exposure-us")->given;
     o.have_gain = model_cli_opt(&cli, "--gain-db")->given;

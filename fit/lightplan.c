@@ -17,7 +17,7 @@ lightplan_options_t lightplan_defaults(void)
         .glare_cone_deg = 15, .sobel_threshold = 250,              // glare cone, Sobel detector
         .floor_snr = 10, .floor_dn = 20, .saturation_frac = 0.95,   // the usable range
         .max_bad_frac = 0.001, .max_lamps = 0,
-        .spacing_px = 8, .ir_samples = 64,
+        .spacing_px = 8, .ir_samples = 64, .psf_sigma_px = 0,
     };
 }
 
@@ -36,11 +36,12 @@ void lightplan_result_free(lightplan_result_t *r)
     memset(r, 0, sizeof *r);
 }
 
-// Sobel magnitude of an ideal step edge of contrast 1 along direction theta.
-static double sobel_factor(const double q0[2], const double q1[2])
+// The Sobel response per unit contrast of a segment from q0 to q1: its step
+// blurred by the PSF and the pixel's footprint, at the best phase.
+static double sobel_factor(const double q0[2], const double q1[2], double psf_sigma_px)
 {
-    double th = atan2(q1[1] - q0[1], q1[0] - q0[0]);
-    return 4.0 + 0.24 * fabs(sin(2 * th));
+    double normal = atan2(q1[1] - q0[1], q1[0] - q0[0]) + M_PI / 2;
+    return model_edge_sobel_step(normal, psf_sigma_px).best;
 }
 
 void lightplan_segments_for(const lightplan_result_t *r, uint32_t mask, double exposure_us,
@@ -51,7 +52,7 @@ void lightplan_segments_for(const lightplan_result_t *r, uint32_t mask, double e
         lightplan_segment_t *g = &segs[s];
         *g = r->segments[s];
         int a = r->seg_first[s], n = r->seg_first[s + 1] - a;
-        double f = sobel_factor(g->q0, g->q1), sum = 0;
+        double f = g->sobel_factor, sum = 0;
         for (int k = 0; k < n && v; k++) {
             double d = 0;
             for (int i = 0; i < r->nlamps; i++)
@@ -158,6 +159,7 @@ static bool plan_segments(plan_t *P)
             memcpy(g->q0, sg->q0, sizeof g->q0);
             memcpy(g->q1, sg->q1, sizeof g->q1);
             g->length_px = sg->length_px;
+            g->sobel_factor = sobel_factor(sg->q0, sg->q1, P->opt->psf_sigma_px);
             g->face_side[0] = sg->face_side[0];
             g->face_side[1] = sg->face_side[1];
             double L = hypot(sg->q1[0] - sg->q0[0], sg->q1[1] - sg->q0[1]);
@@ -430,6 +432,11 @@ bool lightplan_run(const model_scene_t *scene, model_camera_t *cam, const model_
     }
     if (nexp < 1) {
         model_error(NULL, 0, "light planning: no exposure to try");
+        return false;
+    }
+    if (!(opt->psf_sigma_px >= 0 && opt->psf_sigma_px <= 10)) {
+        model_error(NULL, 0, "light planning: the PSF's sigma %g px is not in [0, 10] px (0: a sharp step)",
+                    opt->psf_sigma_px);
         return false;
     }
     plan_t P = { .scene = scene, .cam = cam, .cands = cands, .A = A, .mats = mats, .sensor = sensor,

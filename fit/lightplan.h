@@ -18,8 +18,12 @@
 //   (the signal 2 px to either side: direct light plus one diffuse bounce,
 //   which lights shadowed concave corners) and whether a Sobel detector with
 //   threshold sobel_threshold fires: the median along the segment of
-//   f(theta) |dP|, f = 4.0 for an axis-aligned edge, 4.24 for a diagonal one
-//   (4 + 0.24 |sin 2 theta|), reaches it;
+//   f |dP| reaches it, f the Sobel response per unit contrast of the step
+//   blurred by the optics' Gaussian PSF of psf_sigma_px and integrated over
+//   the pixel's 1 px footprint, at the segment's direction and the edge's best
+//   sub-pixel phase (model_edge_sobel_step's best: the edge through a pixel
+//   centre); sigma 0 gives the sharp step's 4.0 axis-aligned and 4.24
+//   diagonal (4.30 at most between them), 0.8 px 3.04 and 2.96;
 // and chooses the feasible configuration (saturated and glare pixels at most
 // max_bad_frac of the object's pixels) with the longest detectable edge
 // length, then the most usable reference points (usable pixels off glare, per
@@ -51,6 +55,7 @@ typedef struct {
     int    spacing_px;          // 8: verification grid, for the usable reference points
     int    ir_samples;          // 64: rays of one diffuse bounce at the edge points (0: direct light only)
     int    threads;
+    double psf_sigma_px;        // the optics' Gaussian PSF (0: a sharp step, the pixel's footprint alone)
 } lightplan_options_t;
 
 lightplan_options_t lightplan_defaults(void);
@@ -87,6 +92,7 @@ typedef struct {
     double q0[2], q1[2], length_px;
     double dP;                  // predicted contrast, DN (mean along the segment; chosen configuration)
     double gradient;            // predicted Sobel response, DN (median along the segment)
+    double sobel_factor;        // f: the Sobel response per DN of contrast at its direction (see above)
     bool   detectable;
     int    face_side[2];
 } lightplan_segment_t;
@@ -155,7 +161,8 @@ typedef struct {
     int                nangles;         // on its own, outputs in out/view_ANGLE/, a summary in out
     const double      *exposures_us;    // the exposures to try
     int                nexp;
-    lightplan_options_t opt;
+    lightplan_options_t opt;            // opt.psf_sigma_px NAN: the geometry calibration's (calib_psf_read
+                                        // beside the camera model), else 0
     const char        *check_truth;     // the virtual rig's truth file: check the plan there (NULL: no check)
     const char        *sample;          // the capture plan's [sample] name and the virtual rig's sample
                                         // for the check (NULL: the scene file's name without extension)
@@ -205,6 +212,9 @@ typedef struct {
     lightplan_view_t  *views;
     char              *capture_plan;    // out/capture_plan.ini once written
     bool               plan_bound;      // with check_truth: the capture plan binds to the virtual rig
+    double             psf_sigma_px;    // the PSF's sigma the plan used (px) and where it came from
+    double             psf_sigma_std_px;   // its 1-sigma (NAN: given, not measured)
+    char               psf_source[512];
 } lightplan_lamps_result_t;
 
 // Load the inputs, plan each view (lightplan_run at its angle), check it on

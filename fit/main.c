@@ -50,12 +50,14 @@ static void usage(FILE *f)
     fprintf(f, "\nrefl %s\n", REFL_VERSION);
 }
 
-// `refl demo [-o DIR] [--rig RIG.ini | --truth TRUTH.ini] [--yes | --operator-input FILE] [--until STAGE]`: scripts/demo with this
+// `refl demo [-o DIR] [--rig RIG.ini | --truth TRUTH.ini] [--yes | --operator-input FILE] [--until STAGE]
+// [--white-table CSV]`: scripts/demo with this
 // binary (the scripts beside it:
 // $REFL_SCRIPTS_DIR, else ../scripts or ../../scripts of the executable).
 static int demo_cmd(int argc, char **argv)
 {
-    const char *out = "refl-demo", *rig = NULL, *truth = NULL, *operator_input = NULL, *until = NULL;
+    const char *out = "refl-demo", *rig = NULL, *truth = NULL, *operator_input = NULL, *until = NULL,
+               *white_table = NULL;
     bool yes = false;
     model_opt_t opts[] = {
         MODEL_OPT_STRING("-o", "DIR", "output directory (default refl-demo)", &out, false),
@@ -67,6 +69,9 @@ static int demo_cmd(int argc, char **argv)
         MODEL_OPT_STRING("--until", "STAGE", "end the day after this stage: calibrations, or captures (the "
                          "calibrations and the coupon sessions: the rig's work before the offline fits); default all",
                          &until, false),
+        MODEL_OPT_STRING("--white-table", "CSV", "the reference white's certificate (refl calib white "
+                         "--reflectance-table; default: Lambertian, albedo 0.99; the adversarial rig's: "
+                         "examples/virtual-white-certificate.csv)", &white_table, false),
         RIG_OPERATOR_OPTS(&yes, &operator_input),
     };
     model_cli_t cli = {
@@ -111,7 +116,7 @@ static int demo_cmd(int argc, char **argv)
         if (k == 0) snprintf(script, sizeof script, "%s/demo", cands[k]);
         else snprintf(script, sizeof script, "%s%s/demo", dir, cands[k]);
         if (access(script, R_OK) == 0) {
-            char *args[12] = { (char *)"/bin/bash", script, exe, (char *)out };
+            char *args[16] = { (char *)"/bin/bash", script, exe, (char *)out };
             int na = 4;
             if (rig) {
                 args[na++] = (char *)"--rig";
@@ -129,6 +134,10 @@ static int demo_cmd(int argc, char **argv)
             if (until) {
                 args[na++] = (char *)"--until";
                 args[na++] = (char *)until;
+            }
+            if (white_table) {
+                args[na++] = (char *)"--white-table";
+                args[na++] = (char *)white_table;
             }
             args[na] = NULL;
             execv("/bin/bash", args);

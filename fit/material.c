@@ -12,6 +12,7 @@
 
 #include "calib/calib.h"
 #include "fit/material.h"
+#include "fit/verify.h"
 #include "rig/session.h"
 #include "model/report.h"
 #include "model/vec.h"
@@ -457,6 +458,12 @@ static bool material_samples(const fit_material_opts_t *o, calib_set_t **cal, ca
         return false;
     }
     snprintf((*smp)->source, sizeof (*smp)->source, "%s", o->session);
+    // every camera's calibrations first, so that one missing fails before the others' observations
+    for (int k = 0; k < nc; k++)
+        if (names[k] && !calib_set_has_camera(o->calib, names[k])) {
+            calib_set_free(calib_set_load_camera(o->calib, names[k], true));   // its message: what is missing
+            return false;
+        }
     double v2 = 0;
     bool all_gain = true;
     int missing = 0;
@@ -667,6 +674,39 @@ done:
     return *out != NULL;
 }
 
+double fit_material_window_spread(const fit_samples_t *smp, model_brdf_t m, const double *p, double noise_rms,
+                                  int *n)
+{
+    *n = 0;
+    double *f = malloc((size_t)(smp->n ? smp->n : 1) * sizeof *f);
+    double *e = malloc((size_t)(smp->n ? smp->n : 1) * sizeof *e);
+    double *u = malloc((size_t)(smp->n ? smp->n : 1) * sizeof *u);
+    double fmax_ = 0, rel = NAN;
+    if (!f || !e || !u) goto done;
+    for (int i = 0; i < smp->n; i++) {
+        f[i] = fit_samples_eval(smp, m, p, i);
+        if (isfinite(f[i]) && f[i] > fmax_) fmax_ = f[i];
+    }
+    for (int i = 0; i < smp->n; i++) {
+        double sig = smp->noise_weighted ? (smp->w[i] > 0 ? 1 / sqrt(smp->w[i]) : NAN) : noise_rms;
+        if (!(f[i] >= 0.1 * fmax_) || !(fmax_ > 0) || !isfinite(sig)) continue;
+        e[*n] = smp->R[i] / f[i] - 1;
+        u[*n] = (sig / f[i]) * (sig / f[i]);
+        (*n)++;
+    }
+    if (*n >= 20) {
+        double med = verify_median(e, *n);
+        for (int k = 0; k < *n; k++) e[k] = fabs(e[k] - med);
+        double mad = 1.4826 * verify_median(e, *n), un = verify_median(u, *n);
+        rel = sqrt(fmax(mad * mad - un, 0));
+    }
+done:
+    free(f);
+    free(e);
+    free(u);
+    return rel;
+}
+
 // The priors document (format "refl priors 1") of the final fits; *entry
 // (borrowed) is its material's entry. Sets r->rms_over_noise.
 static json_t *material_priors(const fit_material_opts_t *o, const calib_set_t *cal, fit_material_result_t *r,
@@ -707,6 +747,14 @@ static json_t *material_priors(const fit_material_opts_t *o, const calib_set_t *
         json_object_set_new(e, "n_downweighted", json_integer(best->n_downweighted));
     }
     if (r->cells_done) json_object_set_new(e, "albedo_cells", cells_json(o, r));
+    // how far a window of the material strays from the model beyond its noise (refl verify's sigma)
+    json_object_set_new(e, "window_rel_std", isfinite(r->window_rel_std) ? json_real(r->window_rel_std) : json_null());
+    json_object_set_new(e, "window_rel_std_convention", json_string(
+        "the relative spread of a window's R about the model (the final parameters, no albedo factors) beyond its "
+        "temporal noise: over the samples whose model R is at least 10 % of the largest, sqrt((1.4826 MAD(R/R_model "
+        "- 1))^2 - median((sigma_R/R_model)^2)), at least 0; texture from place to place and what the model lacks, "
+        "at the session's window size; refl verify takes it as each window's relative model error"));
+    json_object_set_new(e, "window_rel_std_samples", json_integer(r->window_rel_n));
     json_array_append_new(mats, e);
     json_object_set_new(top, "materials", mats);
     char *argv0[] = { "refl", NULL };
@@ -719,7 +767,7 @@ static json_t *material_priors(const fit_material_opts_t *o, const calib_set_t *
 bool fit_material_run(const fit_material_opts_t *o, fit_material_result_t *r)
 {
     memset(r, 0, sizeof *r);
-    r->noise_rms = r->rms_over_noise = NAN;
+    r->noise_rms = r->rms_over_noise = r->window_rel_std = NAN;
     r->first.best = r->models.best = -1;
     bool quiet = model_error_quiet_thread(true);   // the caller reports the message
     bool ok = false;
@@ -749,6 +797,10 @@ bool fit_material_run(const fit_material_opts_t *o, fit_material_result_t *r)
     }
     json_t *shared = NULL;
     if (!material_shared(o, cal, &obs, csmp ? csmp : smp, r, &shared)) goto done;
+    {
+        const fit_brdf_result_t *b = &r->models.res[r->models.best];
+        r->window_rel_std = fit_material_window_spread(smp, b->model, b->p, r->noise_rms, &r->window_rel_n);
+    }
     top = material_priors(o, cal, r, &entry);
     json_object_update(entry, shared);
     json_decref(shared);

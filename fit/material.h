@@ -88,6 +88,10 @@ typedef struct {
     bool              shared_done;
     int               clusters_frame, clusters_place;
     double            place_mm;
+    double            window_rel_std;   // a window's R about the final model beyond its temporal noise, relative
+                                        // (texture from place to place and what the model lacks; NAN: unknown;
+                                        // fit_material_window_spread)
+    int               window_rel_n;     // the samples it is from
     bool              written;          // the priors file is written (its material: o->name, else material[])
     calib_sample_pose_t pose;           // the sample's pose used (the first camera's; README "refl fit material")
 } fit_material_result_t;
@@ -110,6 +114,16 @@ typedef struct {
 // the report (samples.csv, plots by scripts/fit_material_report.py,
 // report.html). false + message (model_last_error(), not printed: the caller
 // reports it); *r holds what was done up to the failure either way.
+// The spread of the samples' R about the model m(p), relative to it, beyond
+// each sample's temporal noise (sigma_R = 1/sqrt(w) when noise-weighted, else
+// noise_rms): over the samples whose model R is at least 10 % of the largest,
+// e = R / R_model - 1 and u = sigma_R / R_model; rel^2 = (1.4826 MAD(e))^2 -
+// median(u^2), at least 0. The samples as observed (no albedo factors): what
+// a verification window of the material differs from the model by. NAN when
+// fewer than 20 samples qualify; *n: their number.
+double fit_material_window_spread(const fit_samples_t *smp, model_brdf_t m, const double *p, double noise_rms,
+                                  int *n);
+
 bool fit_material_run(const fit_material_opts_t *o, fit_material_result_t *r);
 void fit_material_result_free(fit_material_result_t *r);
 

@@ -18,8 +18,9 @@
 
 lightplan_lamps_opts_t lightplan_lamps_defaults(void)
 {
-    return (lightplan_lamps_opts_t){ .saturation_dn = 4095, .opt = lightplan_defaults(),
-                                     .report = true };
+    lightplan_lamps_opts_t o = { .saturation_dn = 4095, .opt = lightplan_defaults(), .report = true };
+    o.opt.psf_sigma_px = NAN;   // the geometry calibration's
+    return o;
 }
 
 void lightplan_lamps_result_free(lightplan_lamps_result_t *r)
@@ -60,9 +61,10 @@ static json_t *segments_json(const lightplan_segment_t *sg, int n, const model_s
     char b0[32], b1[32];
     for (int k = 0; k < n; k++) {
         const lightplan_segment_t *g = &sg[k];
-        json_t *e = json_pack("{s:i,s:i,s:i,s:[f,f],s:[f,f],s:f,s:f,s:f,s:b,s:s,s:s}", "index", k, "edge", g->edge,
-                              "edge_segment", g->segment, "q0_px", g->q0[0],
+        json_t *e = json_pack("{s:i,s:i,s:i,s:[f,f],s:[f,f],s:f,s:f,s:f,s:f,s:b,s:s,s:s}", "index", k, "edge",
+                              g->edge, "edge_segment", g->segment, "q0_px", g->q0[0],
                               g->q0[1], "q1_px", g->q1[0], g->q1[1], "length_px", g->length_px, "dP_dn", g->dP,
+                              "sobel_factor", g->sobel_factor,
                               "sobel_predicted_dn", g->gradient, "detectable", g->detectable, "face_side0",
                               face_name(s, g->face_side[0], b0, sizeof b0), "face_side1",
                               face_name(s, g->face_side[1], b1, sizeof b1));
@@ -90,6 +92,8 @@ typedef struct {
     verify_priors_t           pr;
     double                    A[MAXL_PLAN];
     lightplan_sensor_t        sensor;
+    double                    psf_sigma_std_px;   // the PSF's 1-sigma (NAN: given, not measured)
+    char                      psf_source[512];    // where its sigma came from
 } plan_inputs_t;
 
 static void inputs_free(plan_inputs_t *in)
@@ -202,6 +206,33 @@ static bool load_sensor(const lightplan_lamps_opts_t *o, plan_inputs_t *in)
     }
     in->sensor.flat = gc->flat;
     return true;
+}
+
+// The PSF's sigma of the edges' Sobel response: --psf-sigma-px, else the
+// geometry calibration's beside the camera model, else 0 (a sharp step):
+// into oo->opt and r.
+static void resolve_psf(lightplan_lamps_opts_t *oo, plan_inputs_t *in, lightplan_lamps_result_t *r)
+{
+    double s, sd;
+    char *gj = NULL;
+    r->psf_sigma_std_px = NAN;
+    if (isfinite(oo->opt.psf_sigma_px)) {
+        r->psf_sigma_px = oo->opt.psf_sigma_px;
+        snprintf(r->psf_source, sizeof r->psf_source, "--psf-sigma-px");
+    } else if (calib_psf_read(oo->camera, NULL, &s, &sd, NULL, &gj)) {
+        r->psf_sigma_px = s;
+        r->psf_sigma_std_px = sd;
+        snprintf(r->psf_source, sizeof r->psf_source, "%s (refl calib geometry's psf)", gj);
+        model_provenance_input(in->prov, "geometry", gj);
+    } else {
+        r->psf_sigma_px = 0;
+        snprintf(r->psf_source, sizeof r->psf_source, "none: no lens blur beside the camera model (geometry.json's "
+                 "psf of refl calib geometry) nor --psf-sigma-px; a sharp step, the pixel's footprint alone");
+    }
+    g_free(gj);
+    oo->opt.psf_sigma_px = r->psf_sigma_px;
+    in->psf_sigma_std_px = r->psf_sigma_std_px;
+    snprintf(in->psf_source, sizeof in->psf_source, "%s", r->psf_source);
 }
 
 static bool load_inputs(const lightplan_lamps_opts_t *o, plan_inputs_t *in)
@@ -468,6 +499,28 @@ static void tables_json(const plan_inputs_t *in, const lightplan_result_t *res, 
     json_object_set_new(doc, "faces", fa);
 }
 
+// plan.json's "psf": the blur the edges' Sobel response was predicted with.
+static json_t *psf_json(const lightplan_lamps_opts_t *o, const plan_inputs_t *in)
+{
+    const double sig = o->opt.psf_sigma_px, std = in->psf_sigma_std_px;
+    json_t *j = json_pack("{s:f,s:o,s:s,s:s,s:s}", "sigma_px", sig, "sigma_std_px",
+                          isfinite(std) ? json_real(std) : json_null(), "source", in->psf_source,
+                          "model", "the step convolved with an isotropic Gaussian of sigma_px (the optics) and "
+                          "integrated over the pixel's 1 x 1 px footprint (model_edge_sobel_step)", "phase",
+                          "best: the edge through a pixel centre (sigma 0: 4.0 axis-aligned, 4.24 diagonal); the "
+                          "factors at the mean and worst phase (the edge half-way between pixel centres) are given "
+                          "for comparison");
+    const char *names[2] = { "axis_aligned", "diagonal" };
+    json_t *f = json_object();
+    for (int k = 0; k < 2; k++) {
+        model_sobel_step_t s = model_edge_sobel_step(k ? M_PI / 4 : 0, sig);
+        json_object_set_new(f, names[k], json_pack("{s:f,s:f,s:f}", "best", s.best, "mean", s.mean, "worst",
+                                                   s.worst));
+    }
+    json_object_set_new(j, "sobel_factor", f);
+    return j;
+}
+
 // plan.json's document (check: the virtual rig's record or NULL).
 static json_t *plan_json(const lightplan_lamps_opts_t *o, const plan_inputs_t *in, lightplan_view_t *r,
                          json_t *check)
@@ -482,8 +535,10 @@ static json_t *plan_json(const lightplan_lamps_opts_t *o, const plan_inputs_t *i
                                     "values with the dark offset (sensor.offset_dn), direct light only; dP_dn = the "
                                     "signal (offset excluded, direct light plus one diffuse bounce) 2 px to side 0 "
                                     "minus side 1 of a segment, side 0 to the right of q0 -> q1 (y down), mean along "
-                                    "it; sobel_predicted_dn = the median along it of f |dP|, f = 4.0 axis-aligned .. "
-                                    "4.24 diagonal"));
+                                    "it; sobel_predicted_dn = the median along it of f |dP|, f the Sobel response per "
+                                    "unit contrast of the step blurred by the PSF and the pixel's footprint at the "
+                                    "segment's direction (psf: sigma, phase, f axis-aligned and diagonal)"));
+    json_object_set_new(doc, "psf", psf_json(o, in));
     json_object_set_new(doc, "chosen", chosen_json(o, in, r));
     json_object_set_new(doc, "warnings", warnings_json(o, r));
     json_object_set_new(doc, "chosen_index", json_integer(res->best));
@@ -628,6 +683,7 @@ bool lightplan_lamps_run(const lightplan_lamps_opts_t *o, lightplan_lamps_result
                 goto done;
             }
     if (!load_inputs(&oo, &in)) goto done;
+    resolve_psf(&oo, &in, r);
     r->ncandidates = in.lamps->n;
     if (o->check_truth && !model_provenance_input(in.prov, "virtual_rig_truth", o->check_truth)) goto done;
     int nv = o->nangles > 0 ? o->nangles : 1;

@@ -9,6 +9,7 @@
 
 #include "fit/fit.h"
 #include "fit/verify.h"
+#include "fit/verify_footprint.h"
 #include "model/vec.h"
 
 #define MAX_LAMPS 32
@@ -22,7 +23,10 @@ verify_options_t verify_defaults(void)
         .boundary_margin_px = 4,
         .edge_k = 3,
         .edge_rel = 0.05,
-        .ir_samples = 16,
+        .edge_windows = true,
+        .edge_subsamples = 5,
+        .edge_position_sigma_px = 0.1,
+        .ir_samples = 64,
         .use_priors = true,
         .use_flat = true,
         .model_rel = 0.04,
@@ -263,6 +267,17 @@ static bool priors_from_json(verify_priors_t *pr, json_t *root, const char *path
             p->held[j] = sd == 0 || json_is_string(json_object_get(e, "held"));
         }
         if (!prior_cov_from_json(p, json_object_get(m, "prior_covariance"), path)) goto done;
+        // a window's relative spread about the model (refl fit material; absent or null: not known)
+        json_t *wr = json_object_get(m, "window_rel_std");
+        p->window_rel = NAN;
+        if (wr && !json_is_null(wr)) {
+            if (!json_is_number(wr) || !(json_number_value(wr) >= 0) || json_number_value(wr) > 10) {
+                model_error(path, 0, "material %s: window_rel_std must be a number in [0, 10] (a relative spread)",
+                            name);
+                goto done;
+            }
+            p->window_rel = json_number_value(wr);
+        }
     }
     ok = true;
 done:
@@ -280,6 +295,7 @@ bool verify_priors_add(verify_priors_t *pr, const model_material_t *mat, double 
     snprintf(p->name, sizeof p->name, "%s", mat->name);
     snprintf(p->source, sizeof p->source, "(known values, std %g %%)", rel * 100);
     p->model = mat->model;
+    p->window_rel = NAN;
     p->np = model_brdf_nparams(mat->model);
     for (int j = 0; j < p->np; j++) {
         double lo, hi;
@@ -320,6 +336,8 @@ struct verify_view {
     model_lamp_sample_t *ls;    // gw*gh*nl
     uint8_t *status;            // geometric status (USED, BACKGROUND, NEAR_EDGE, BOUNDARY)
     float *B;                   // gw*gh*nl: interreflection basis per unit A_i
+    float *Bsd;                 // gw*gh*nl: its Monte Carlo estimate's standard error
+    verify_footprints_t fp;     // the windows near edges modelled with footprint and blur (USED, fp.first >= 0)
     int nusable;
     double time_s;
 };
@@ -336,6 +354,8 @@ void verify_view_free(verify_view_t *v)
     free(v->ls);
     free(v->status);
     free(v->B);
+    free(v->Bsd);
+    verify_footprints_free(&v->fp);
     free(v);
 }
 
@@ -365,6 +385,7 @@ typedef struct {
     const int *idx;   // indices into pi (NULL: 0..n-1)
     float *B;         // per index into pi: nl values
     uint64_t seed;
+    float *Bsd;       // as B: the estimate's standard error (NULL: not wanted)
 } ir_ctx_t;
 
 static double radical_inverse2(uint32_t i)
@@ -388,8 +409,9 @@ static void ir_rows(void *vctx, int begin, int end, int thread)
     for (int k = begin; k < end; k++) {
         int g = c->idx ? c->idx[k] : k;
         const model_pixel_info_t *pi = &c->pi[g];
-        float *B = &c->B[(size_t)g * nl];
+        float *B = &c->B[(size_t)g * nl], *Bsd = c->Bsd ? &c->Bsd[(size_t)g * nl] : NULL;
         for (int i = 0; i < nl; i++) B[i] = 0;
+        for (int i = 0; Bsd && i < nl; i++) Bsd[i] = 0;
         if (pi->face < 0 || pi->material < 0) continue;
         const model_material_t *mx = c->mats[pi->material];
         model_vec3_t n = pi->n, a = fabs(n.x) < 0.9 ? v3(1, 0, 0) : v3(0, 1, 0);
@@ -397,7 +419,7 @@ static void ir_rows(void *vctx, int begin, int end, int thread)
         model_vec3_t b = v3_cross(n, a);
         model_rng_t rng = model_rng(c->seed, (uint64_t)g);
         double rot = model_rng_uniform(&rng);
-        double acc[MAX_LAMPS] = { 0 };
+        double acc[MAX_LAMPS] = { 0 }, acc2[MAX_LAMPS] = { 0 };
         model_vec3_t org = v3_add(pi->p_mm, v3_scale(n, eps));
         for (int j = 0; j < N; j++) {
             double u = (j + 0.5) / N, ph = 2 * M_PI * (radical_inverse2((uint32_t)j) + rot);
@@ -418,18 +440,30 @@ static void ir_rows(void *vctx, int begin, int end, int thread)
                 model_cosines_t cy = model_cosines(y.n, l, vy);
                 if (cy.nl <= 0 || cy.nv <= 0) continue;
                 if (!model_tracer_visible_from(c->t, y.p_mm, y.n, c->lamps->lamps[i].position_mm)) continue;
-                acc[i] += fx * model_brdf_eval(my->model, my->p, &cy, NULL) / (dd * dd) *
-                          model_lamp_emission(&c->lamps->lamps[i], y.p_mm);
+                double t = fx * model_brdf_eval(my->model, my->p, &cy, NULL) / (dd * dd) *
+                           model_lamp_emission(&c->lamps->lamps[i], y.p_mm);
+                acc[i] += t;
+                acc2[i] += t * t;
             }
         }
         for (int i = 0; i < nl; i++) B[i] = (float)(M_PI / N * acc[i]);
+        // the mean's standard error over the rays: pi sqrt((mean a^2 - mean^2) / (N - 1))
+        for (int i = 0; Bsd && N > 1 && i < nl; i++)
+            Bsd[i] = (float)(M_PI * sqrt(fmax(acc2[i] / N - (acc[i] / N) * (acc[i] / N), 0) / (N - 1)));
     }
 }
 
 void verify_interreflection(const model_tracer_t *t, const model_lamps_t *lamps, const model_material_t *const *mats,
                             const model_pixel_info_t *pi, int n, int samples, int threads, float *B)
 {
-    ir_ctx_t ic = { t, lamps, mats, samples, pi, NULL, B, 0x1e5f };
+    verify_interreflection_sd(t, lamps, mats, pi, n, samples, threads, B, NULL);
+}
+
+void verify_interreflection_sd(const model_tracer_t *t, const model_lamps_t *lamps,
+                               const model_material_t *const *mats, const model_pixel_info_t *pi, int n, int samples,
+                               int threads, float *B, float *Bsd)
+{
+    ir_ctx_t ic = { t, lamps, mats, samples, pi, NULL, B, 0x1e5f, Bsd };
     model_parallel_for(n, 64, threads > 0 ? threads : model_default_threads(), ir_rows, &ic);
 }
 
@@ -502,7 +536,7 @@ static bool view_boundaries(verify_view_t *v, const verify_camera_t *cam, const 
                 qc[2 * (k * NC + m)] = q[2 * cand[k]] + off[m][0] * c;
                 qc[2 * (k * NC + m) + 1] = q[2 * cand[k] + 1] + off[m][1] * c;
             }
-        ok = model_pixel_info(v->t, cam->cam, lamps, qc, ncand * NC, pc, lc, threads);
+        ok = model_pixel_info_table(v->t, cam->cam, lamps, qc, ncand * NC, pc, lc, threads);
     }
     if (ok)
         for (int k = 0; k < ncand; k++) {
@@ -570,9 +604,10 @@ verify_view_t *verify_view_new(const model_scene_t *scene, const verify_camera_t
     v->ls = malloc((size_t)n * (nl ? nl : 1) * sizeof *v->ls);
     v->status = calloc((size_t)n, 1);
     v->B = calloc((size_t)n * (nl ? nl : 1), sizeof *v->B);
+    v->Bsd = calloc((size_t)n * (nl ? nl : 1), sizeof *v->Bsd);
     double *q = malloc((size_t)n * 2 * sizeof *q);
     int *cand = malloc((size_t)n * sizeof *cand);
-    if (!v->t || !v->pi || !v->ls || !v->status || !v->B || !q || !cand) {
+    if (!v->t || !v->pi || !v->ls || !v->status || !v->B || !v->Bsd || !q || !cand) {
         if (v->t) model_error(NULL, 0, "out of memory for %d reference points", n);
         goto fail;
     }
@@ -582,20 +617,39 @@ verify_view_t *verify_view_new(const model_scene_t *scene, const verify_camera_t
             q[2 * (j * v->gw + i)] = v->x0 + i * v->sp;
             q[2 * (j * v->gw + i) + 1] = v->y0 + j * v->sp;
         }
-    if (!model_pixel_info(v->t, cam->cam, lamps, q, n, v->pi, v->ls, threads)) goto fail;
+    if (!model_pixel_info_table(v->t, cam->cam, lamps, q, n, v->pi, v->ls, threads)) goto fail;
     for (int g = 0; g < n; g++)
         if (v->pi[g].face < 0) v->status[g] = VERIFY_PT_BACKGROUND;
-    double reach = (opt->window_px / 2) * M_SQRT2 + opt->edge_margin_px;
+    // a blurred edge reaches 3 sigma further
+    double sigma_px = cam->psf_sigma_px > 0 ? cam->psf_sigma_px : 0;
+    double reach = (opt->window_px / 2) * M_SQRT2 + opt->edge_margin_px + 3 * sigma_px;
     if (!view_near_edges(v, cam, lamps, mats, q, reach, threads) ||
-        !view_boundaries(v, cam, lamps, q, c, threads, cand))
+        !view_boundaries(v, cam, lamps, q, c + (int)ceil(3 * sigma_px), threads, cand))
         goto fail;
+    // the windows near edges: modelled with the pixels' footprint and the blur where they see only the description
+    if (opt->edge_windows) {
+        bool *want = calloc((size_t)n, sizeof *want);
+        if (!want) goto fail;
+        for (int g = 0; g < n; g++)
+            want[g] = v->status[g] == VERIFY_PT_NEAR_EDGE || v->status[g] == VERIFY_PT_BOUNDARY;
+        bool fok = verify_footprints_make(v->t, cam->cam, lamps, mats, q, want, n, opt->window_px,
+                                          fmin(fmax(cam->pixel_fill, 0), 1), sigma_px,
+                                          opt->edge_subsamples, opt->ir_samples, threads, &v->fp);
+        free(want);
+        if (!fok) goto fail;
+        for (int g = 0; g < n; g++)
+            if (v->fp.first[g] >= 0) v->status[g] = VERIFY_PT_USED;
+    }
     // the interreflection basis at the usable points
     int ncand = 0;
-    for (int g = 0; g < n; g++)
-        if (v->status[g] == VERIFY_PT_USED) cand[ncand++] = g;
-    v->nusable = ncand;
+    v->nusable = 0;
+    for (int g = 0; g < n; g++) {
+        if (v->status[g] != VERIFY_PT_USED) continue;
+        v->nusable++;
+        if (!(v->fp.first && v->fp.first[g] >= 0)) cand[ncand++] = g;   // (a window's parts have their own)
+    }
     if (opt->ir_samples > 0 && ncand && nl) {
-        ir_ctx_t ic = { v->t, lamps, mats, opt->ir_samples, v->pi, cand, v->B, 0x1e5f };
+        ir_ctx_t ic = { v->t, lamps, mats, opt->ir_samples, v->pi, cand, v->B, 0x1e5f, v->Bsd };
         model_parallel_for(ncand, 64, threads, ir_rows, &ic);
     }
     free(cand);
@@ -614,8 +668,8 @@ fail:
 
 typedef struct {
     double meas, sigma, Eg;   // measured DN (after the offset map), sigma DN, E * g
-    int    mat;               // scene material
-    int    nl;                // lamps on
+    int    mat, mat2;         // scene material; a window near an edge may see a second one (else -1)
+    int    nl;                // its terms: (lamp on) for a plain point, (part, lamp on) for a window near an edge
     int    first;             // into the lamp arrays
     double r_last, rr_last;   // the robust transform's last residual and its image (group_fn; NAN: none)
 } pt_t;
@@ -626,53 +680,61 @@ typedef struct {
     const double *w;             // A_i V / d^2
     const double *b;             // A_i B_i
     const int    *lamp;          // lamp index
+    const uint8_t *sec;          // 1: the term is of the point's second material (mat2)
     model_brdf_t  model;         // of the point's material
     int           np, nl_all;
     bool          reference;     // model_brdf_eval on cs[].c, no kept robust images (reference_eval)
 } res_ctx_t;
 
 typedef struct {
-    res_ctx_t *rc;
+    res_ctx_t *rc, *rc2;         // the point's material's and its second's (NULL: none)
     int        k;
 } res_item_t;
 
-// One point's residual and its Jacobian rows (each j may be NULL).
-// blocks: kc (1), s (nl_all), Pa (1), p (np), rho (1)
-static double point_eval(const res_ctx_t *rc, int k, const double *const *par, double *j0, double *j1, double *j2,
-                         double *j3, double *j4)
+// One point's residual and its Jacobian rows (each jac[b] may be NULL).
+// blocks: kc (1), s (nl_all), Pa (1), p (np), rho (1), and with a second
+// material (rc2) its p2 (rc2->np).
+static double point_eval(const res_ctx_t *rc, const res_ctx_t *rc2, int k, const double *const *par,
+                         double *const *jac)
 {
     const pt_t *p = &rc->pt[k];
     double kc = par[0][0], Pa = par[2][0], rho = par[4][0];
-    const double *s = par[1], *mp = par[3];
-    double S = 0, T = 0, dS_dp[MODEL_BRDF_MAX_PARAMS] = { 0 }, dR[MODEL_BRDF_MAX_PARAMS];
-    double dS_ds[MAX_LAMPS] = { 0 };
+    const double *s = par[1], *mp = par[3], *mp2 = rc2 ? par[5] : NULL;
+    double *j3 = jac ? jac[3] : NULL, *j5 = jac && rc2 ? jac[5] : NULL;
+    double S = 0, T = 0, dS_dp[MODEL_BRDF_MAX_PARAMS] = { 0 }, dS_dp2[MODEL_BRDF_MAX_PARAMS] = { 0 };
+    double dR[MODEL_BRDF_MAX_PARAMS], dS_ds[MAX_LAMPS] = { 0 };
     for (int j = 0; j < p->nl; j++) {
         int e = p->first + j, i = rc->lamp[e];
-        double R = rc->reference ? model_brdf_eval(rc->model, mp, &rc->cs[e].c, j3 ? dR : NULL)
-                                  : model_brdf_eval_prepared(rc->model, mp, &rc->cs[e], j3 ? dR : NULL);
+        bool second = rc2 && rc->sec[e];
+        const res_ctx_t *r = second ? rc2 : rc;
+        double *dsp = second ? dS_dp2 : dS_dp;
+        bool want = second ? j5 != NULL : j3 != NULL;
+        double R = rc->reference ? model_brdf_eval(r->model, second ? mp2 : mp, &rc->cs[e].c, want ? dR : NULL)
+                                  : model_brdf_eval_prepared(r->model, second ? mp2 : mp, &rc->cs[e], want ? dR : NULL);
         double wr = rc->w[e] * R;
         S += s[i] * wr;
         T += s[i] * rc->b[e];
-        dS_ds[i] = wr + rho * rc->b[e];
-        if (j3)
-            for (int q = 0; q < rc->np; q++) dS_dp[q] += s[i] * rc->w[e] * dR[q];
+        dS_ds[i] += wr + rho * rc->b[e];
+        if (want)
+            for (int q = 0; q < r->np; q++) dsp[q] += s[i] * rc->w[e] * dR[q];
     }
     double inv = 1 / p->sigma, ec = p->Eg * kc;
-    if (j0) j0[0] = p->Eg * (S + rho * T) * inv;
-    if (j1)
-        for (int i = 0; i < rc->nl_all; i++) j1[i] = ec * dS_ds[i] * inv;
-    if (j2) j2[0] = inv;
+    if (jac && jac[0]) jac[0][0] = p->Eg * (S + rho * T) * inv;
+    if (jac && jac[1])
+        for (int i = 0; i < rc->nl_all; i++) jac[1][i] = ec * dS_ds[i] * inv;
+    if (jac && jac[2]) jac[2][0] = inv;
     if (j3)
         for (int q = 0; q < rc->np; q++) j3[q] = ec * dS_dp[q] * inv;
-    if (j4) j4[0] = ec * T * inv;
+    if (jac && jac[4]) jac[4][0] = ec * T * inv;
+    if (j5)
+        for (int q = 0; q < rc2->np; q++) j5[q] = ec * dS_dp2[q] * inv;
     return (Pa + ec * (S + rho * T) - p->meas) * inv;
 }
 
 static bool residual_fn(void *vctx, const double *const *par, double *res, double **jac)
 {
     const res_item_t *it = vctx;
-    res[0] = point_eval(it->rc, it->k, par, jac ? jac[0] : NULL, jac ? jac[1] : NULL, jac ? jac[2] : NULL,
-                        jac ? jac[3] : NULL, jac ? jac[4] : NULL);
+    res[0] = point_eval(it->rc, it->rc2, it->k, par, jac);
     return isfinite(res[0]);
 }
 
@@ -681,7 +743,7 @@ static bool residual_fn(void *vctx, const double *const *par, double *res, doubl
 // r' = sign(r) sqrt(b ln(1 + r^2/b)), so its Gauss-Newton step is the
 // loss's iteratively reweighted one (b = robust_scale^2; 0: plain).
 typedef struct {
-    res_ctx_t *rc;
+    res_ctx_t *rc, *rc2;   // the points' material's and their second material's (NULL: none; 6 blocks)
     const int *k;
     int        n;
     double     b;
@@ -690,12 +752,12 @@ typedef struct {
 static bool group_fn(void *vctx, const double *const *par, double *res, double **jac)
 {
     const res_group_t *g = vctx;
-    const int nl = g->rc->nl_all, np = g->rc->np;
-    const int size[5] = { 1, nl, 1, np, 1 };
+    const int nl = g->rc->nl_all, np = g->rc->np, nb = g->rc2 ? 6 : 5;
+    const int size[6] = { 1, nl, 1, np, 1, g->rc2 ? g->rc2->np : 0 };
     for (int t = 0; t < g->n; t++) {
-        double *row[5];
-        for (int b = 0; b < 5; b++) row[b] = jac && jac[b] ? jac[b] + (size_t)t * size[b] : NULL;
-        double r = point_eval(g->rc, g->k[t], par, row[0], row[1], row[2], row[3], row[4]);
+        double *row[6] = { NULL };
+        for (int b = 0; b < nb; b++) row[b] = jac && jac[b] ? jac[b] + (size_t)t * size[b] : NULL;
+        double r = point_eval(g->rc, g->rc2, g->k[t], par, row);
         if (!isfinite(r)) return false;
         if (g->b > 0) {
             // the same r again (the solver's Jacobian at an accepted candidate): its image is kept
@@ -705,7 +767,7 @@ static bool group_fn(void *vctx, const double *const *par, double *res, double *
             p->r_last = r;
             p->rr_last = rr;
             double f = fabs(r) > 1e-12 ? r / (1 + s2 / g->b) / rr : 1;
-            for (int b = 0; b < 5; b++)
+            for (int b = 0; b < nb; b++)
                 if (row[b])
                     for (int q = 0; q < size[b]; q++) row[b][q] *= f;
             r = rr;
@@ -837,6 +899,7 @@ typedef struct {
     model_brdf_prep_t *cs;              // per (fit point, lamp on)
     double          *wv, *bv;           // A_i V / d^2 and A_i B_i, per (fit point, lamp on)
     int             *lampv;             // lamp index, per (fit point, lamp on)
+    uint8_t         *secv;              // per (fit point, lamp on): the term is of the point's second material
     double          *mp;                // nm x MODEL_BRDF_MAX_PARAMS: the materials' parameters
     res_ctx_t       *rcs;               // nm
     res_group_t     *groups;            // ngroups residual blocks; their indices in gidx
@@ -860,6 +923,7 @@ static void fit_free(fit_t *F)
     free(F->wv);
     free(F->bv);
     free(F->lampv);
+    free(F->secv);
     free(F->mp);
     free(F->rcs);
     free(F->groups);
@@ -910,8 +974,13 @@ static bool fit_alloc(fit_t *F)
     verify_result_t *out = F->out;
     const int npts = F->npts, nimgs = F->nimgs, nm = F->nm, nl = F->nl, ncams = F->ncams;
     size_t n1 = (size_t)(npts ? npts : 1), nle = 0;
-    for (int m = 0; m < nimgs; m++)
-        nle += (size_t)F->views[m]->gw * F->views[m]->gh * (size_t)__builtin_popcount(F->imgs[m].lamps_on);
+    for (int m = 0; m < nimgs; m++) {
+        const verify_view_t *v = F->views[m];
+        size_t terms = (size_t)v->gw * v->gh;   // a plain point's: one per lamp on; a window's near an edge: per part
+        for (int g = 0; v->fp.first && g < v->gw * v->gh; g++)
+            if (v->fp.first[g] >= 0) terms += (size_t)v->fp.nparts[g] - 1;
+        nle += terms * (size_t)__builtin_popcount(F->imgs[m].lamps_on);
+    }
     if (!nle) nle = 1;
     out->points = calloc(n1, sizeof *out->points);
     out->per_image = calloc((size_t)(nimgs ? nimgs : 1), sizeof *out->per_image);
@@ -926,6 +995,7 @@ static bool fit_alloc(fit_t *F)
     F->wv = malloc(nle * sizeof *F->wv);
     F->bv = malloc(nle * sizeof *F->bv);
     F->lampv = malloc(nle * sizeof *F->lampv);
+    F->secv = calloc(nle, sizeof *F->secv);
     F->mp = calloc((size_t)(nm ? nm : 1) * MODEL_BRDF_MAX_PARAMS, sizeof *F->mp);
     F->rcs = calloc((size_t)(nm ? nm : 1), sizeof *F->rcs);
     F->groups = malloc(n1 * sizeof *F->groups);
@@ -933,7 +1003,7 @@ static bool fit_alloc(fit_t *F)
     F->pd = calloc((size_t)(ncams + nl + nimgs + 1 + nm * MODEL_BRDF_MAX_PARAMS), sizeof *F->pd);
     F->prob = lsq_problem_new();
     if (!out->points || !out->per_image || !out->kc || !out->s || !out->Pa || !out->mats || !F->pt || !F->ptidx ||
-        !F->cs || !F->wv || !F->bv || !F->lampv || !F->mp || !F->rcs || !F->groups || !F->gidx || !F->pd ||
+        !F->cs || !F->wv || !F->bv || !F->lampv || !F->secv || !F->mp || !F->rcs || !F->groups || !F->gidx || !F->pd ||
         !F->prob) {
         model_error(NULL, 0, "out of memory for %d reference points", npts);
         return false;
@@ -1114,6 +1184,72 @@ static bool measure_windows(fit_t *F, int m, int first_pt, double *Pa0, double *
     return true;
 }
 
+// A point's relative model error: its material's window spread (the priors'
+// window_rel_std) unless model_rel is given or the priors state none; of two
+// materials the larger.
+static double point_model_rel(const fit_t *F, const pt_t *q)
+{
+    double rel = 0;
+    for (int k = 0; k < 2; k++) {
+        int mat = k ? q->mat2 : q->mat;
+        if (mat < 0) continue;
+        double wr = F->prior[mat]->window_rel;
+        rel = fmax(rel, F->opt->model_rel_given || !isfinite(wr) ? F->opt->model_rel : wr);
+    }
+    return rel;
+}
+
+// The terms of grid point g of image m's window near an edge (its parts,
+// verify_footprint.h) from *e on, into q (mat, mat2, nl); *gx, *gy: the
+// model's slope per unit E g across the window's centre (per px) at the
+// priors' means (kc = s = 1; the direct light); *bsd += its interreflection
+// basis's Monte Carlo error per unit E g. false (nothing written) when the
+// window sees more than two materials.
+static bool footprint_terms(fit_t *F, int m, int g, pt_t *q, size_t *e, double *gx, double *gy, double *bsd)
+{
+    const verify_view_t *v = F->views[m];
+    const verify_image_t *im = &F->imgs[m];
+    const verify_footprints_t *fp = &v->fp;
+    const int P0 = fp->first[g], np = fp->nparts[g], nl = fp->nl;
+    int mat = fp->parts[P0].material, mat2 = -1;
+    for (int j = 1; j < np; j++) {
+        int mj = fp->parts[P0 + j].material;
+        if (mj == mat || mj == mat2) continue;
+        if (mat2 >= 0) return false;
+        mat2 = mj;
+    }
+    q->mat = mat;
+    q->mat2 = mat2;
+    *gx = *gy = 0;
+    for (int j = 0; j < np; j++) {
+        const verify_part_t *P = &fp->parts[P0 + j];
+        const float *wl = &fp->wl[(size_t)(P0 + j) * nl * 3];
+        const float *B = &fp->B[(size_t)(P0 + j) * nl], *Bsd = &fp->Bsd[(size_t)(P0 + j) * nl];
+        const int pm = P->material;
+        const double *mp = &F->mp[pm * MODEL_BRDF_MAX_PARAMS];
+        for (int i = 0; i < F->nl; i++) {
+            if (!((im->lamps_on >> i) & 1)) continue;
+            if (!(wl[3 * i] > 0) && !(B[i] > 0)) continue;
+            model_vec3_t d = v3_sub(F->lamps->lamps[i].position_mm, P->p_mm);
+            model_vec3_t l = v3_unit(d);
+            model_cosines_t c = model_cosines(P->n, l, P->v);
+            double em = model_lamp_emission(&F->lamps->lamps[i], P->p_mm);
+            F->cs[*e] = model_brdf_prepare(&c);
+            F->wv[*e] = F->A[i] * em * wl[3 * i];
+            F->bv[*e] = F->A[i] * P->W * B[i];
+            F->lampv[*e] = i;
+            F->secv[*e] = mat2 >= 0 && pm == mat2;
+            double R = model_brdf_eval(F->prior[pm]->model, mp, &c, NULL);
+            *bsd += F->A[i] * P->W * Bsd[i];
+            *gx += F->A[i] * em * wl[3 * i + 1] * R;
+            *gy += F->A[i] * em * wl[3 * i + 2] * R;
+            (*e)++;
+            q->nl++;
+        }
+    }
+    return true;
+}
+
 // Image m's usable points after measure_windows: the measured-edge test,
 // sigma, and the fit's points with their per-lamp terms (from *e on).
 static void image_fit_points(fit_t *F, int m, int first_pt, double Pa0, double var_px_fallback, size_t *e)
@@ -1132,37 +1268,59 @@ static void image_fit_points(fit_t *F, int m, int first_pt, double Pa0, double v
         double S = fmax(p->meas - Pa0, 0), wstd = p->sigma, gmean = p->model;
         double var_px = Kg > 0 ? Kg * S + Kg * Kg * cm->read_noise_e * cm->read_noise_e + 1.0 / 12
                                : var_px_fallback;
+        bool foot = v->fp.first && v->fp.first[g] >= 0;
         double thr2 = opt->edge_k * opt->edge_k * var_px + (opt->edge_rel * S) * (opt->edge_rel * S);
-        if (wstd * wstd > thr2) {
+        if (!foot && wstd * wstd > thr2) {   // (a window near an edge has its spread from the edge)
             p->status = VERIFY_PT_EDGE_MEASURED;
             p->z = (float)(opt->z_flag * wstd / sqrt(thr2));
         }
-        double sig = sqrt(var_px / ((double)w * w) + (opt->model_rel * S) * (opt->model_rel * S));
-        p->sigma = (float)sig;
-        p->model = 0;
+        double sig2 = var_px / ((double)w * w);
         // the fit's point (edge-measured ones are predicted too, not fitted)
         pt_t *q = &F->pt[F->nfit];
         q->meas = p->meas;
-        q->sigma = sig;
         q->Eg = E * gmean;
         q->mat = v->pi[g].material;
+        q->mat2 = -1;
         q->first = (int)*e;
         q->nl = 0;
         q->r_last = q->rr_last = NAN;
-        const model_lamp_sample_t *ls = &v->ls[(size_t)g * v->nl];
-        for (int i = 0; i < F->nl; i++) {
-            if (!((im->lamps_on >> i) & 1)) continue;
-            model_cosines_t c = model_cosines(v->pi[g].n, ls[i].l, v->pi[g].v);
-            F->cs[*e] = model_brdf_prepare(&c);
-            // the lamp's emission pattern toward the point (exactly 1 for an isotropic lamp)
-            F->wv[*e] = ls[i].d_mm > 0 ? F->A[i] * ls[i].V / (ls[i].d_mm * ls[i].d_mm) *
-                                             model_lamp_emission(&F->lamps->lamps[i], v->pi[g].p_mm)
-                                       : 0;
-            F->bv[*e] = F->A[i] * v->B[(size_t)g * v->nl + i];
-            F->lampv[*e] = i;
-            (*e)++;
-            q->nl++;
+        double bsd = 0;   // the interreflection basis's Monte Carlo error, per unit E g
+        if (foot) {
+            double gx, gy;
+            if (!footprint_terms(F, m, g, q, e, &gx, &gy, &bsd)) {   // more than two materials in the window
+                p->status = VERIFY_PT_NEAR_EDGE;
+                continue;
+            }
+            p->footprint = true;
+            // where the edge lies is known to edge_position_sigma_px: the model's slope across it
+            double se = opt->edge_position_sigma_px * q->Eg * hypot(gx, gy);
+            sig2 += se * se;
+        } else {
+            const model_lamp_sample_t *ls = &v->ls[(size_t)g * v->nl];
+            for (int i = 0; i < F->nl; i++) {
+                if (!((im->lamps_on >> i) & 1)) continue;
+                model_cosines_t c = model_cosines(v->pi[g].n, ls[i].l, v->pi[g].v);
+                F->cs[*e] = model_brdf_prepare(&c);
+                // the lamp's emission pattern toward the point (exactly 1 for an isotropic lamp)
+                F->wv[*e] = ls[i].d_mm > 0 ? F->A[i] * ls[i].V / (ls[i].d_mm * ls[i].d_mm) *
+                                                 model_lamp_emission(&F->lamps->lamps[i], v->pi[g].p_mm)
+                                           : 0;
+                F->bv[*e] = F->A[i] * v->B[(size_t)g * v->nl + i];
+                F->lampv[*e] = i;
+                F->secv[*e] = 0;
+                bsd += F->A[i] * v->Bsd[(size_t)g * v->nl + i];
+                (*e)++;
+                q->nl++;
+            }
         }
+        // what the model lacks: the material's window spread (its priors' window_rel_std, else model_rel;
+        // a window of two materials the larger), and the interreflection basis's Monte Carlo error
+        double rel = point_model_rel(F, q);
+        double sb = opt->ir_samples > 0 ? q->Eg * bsd : 0;
+        sig2 += (rel * S) * (rel * S) + sb * sb;
+        q->sigma = sqrt(sig2);
+        p->sigma = (float)q->sigma;
+        p->model = 0;
         F->ptidx[F->nfit] = k;
         F->nfit++;
     }
@@ -1241,8 +1399,10 @@ static bool fit_parameters(fit_t *F)
     bool *mat_used = calloc((size_t)F->nm + 1, sizeof *mat_used);
     if (!mat_used) return false;
     for (int k = 0; k < F->nfit; k++)
-        if (F->pt[k].mat >= 0 && F->pt[k].mat < F->nm && out->points[F->ptidx[k]].status == VERIFY_PT_USED)
+        if (F->pt[k].mat >= 0 && F->pt[k].mat < F->nm && out->points[F->ptidx[k]].status == VERIFY_PT_USED) {
             mat_used[F->pt[k].mat] = true;
+            if (F->pt[k].mat2 >= 0 && F->pt[k].mat2 < F->nm) mat_used[F->pt[k].mat2] = true;
+        }
     bool ok = true;
     F->mvp = calloc((size_t)F->nm + 1, sizeof *F->mvp);
     F->mvp_pd = calloc((size_t)F->nm + 1, sizeof *F->mvp_pd);
@@ -1266,7 +1426,7 @@ static bool fit_parameters(fit_t *F)
         for (int j = 0; j < P->np; j++) use[j] = !F->pd[F->mvp_pd[k] + j].fixed && F->pd[F->mvp_pd[k] + j].prior_std > 0;
         if (up && verify_mvprior_make(P, use, &F->mvp[k]))
             for (int j = 0; j < P->np; j++) F->pd[F->mvp_pd[k] + j].mv = use[j];
-        F->rcs[k] = (res_ctx_t){ .pt = F->pt, .cs = F->cs, .w = F->wv, .b = F->bv, .lamp = F->lampv,
+        F->rcs[k] = (res_ctx_t){ .pt = F->pt, .cs = F->cs, .w = F->wv, .b = F->bv, .lamp = F->lampv, .sec = F->secv,
                                  .model = P->model, .np = P->np, .nl_all = F->nl ? F->nl : 1,
                                  .reference = opt->reference_eval };
     }
@@ -1315,14 +1475,17 @@ static bool fit_bounds_and_masks(fit_t *F)
     return true;
 }
 
-// The parameter blocks of a point of image m and material mat: kc, s, Pa, p, rho.
-static void fit_blocks(const fit_t *F, int m, int mat, double *blocks[5])
+// The parameter blocks of a point of image m and material mat: kc, s, Pa, p,
+// rho, and with a second material mat2 (>= 0) its p. Returns their number.
+static int fit_blocks(const fit_t *F, int m, int mat, int mat2, double *blocks[6])
 {
     blocks[0] = &F->out->kc[F->imgs[m].camera];
     blocks[1] = F->out->s;
     blocks[2] = &F->out->Pa[m];
     blocks[3] = &F->mp[mat * MODEL_BRDF_MAX_PARAMS];
     blocks[4] = &F->out->rho;
+    blocks[5] = mat2 >= 0 ? &F->mp[mat2 * MODEL_BRDF_MAX_PARAMS] : NULL;
+    return mat2 >= 0 ? 6 : 5;
 }
 
 // The residual blocks: groups of up to 64 used points of one image and material.
@@ -1332,28 +1495,31 @@ static bool fit_residuals(fit_t *F)
     int gpos = 0;
     F->nused = F->ngroups = 0;
     for (int m = 0; m < F->nimgs; m++)
-        for (int mat = 0; mat < F->nm; mat++) {
-            int cur = -1;
-            for (int k = 0; k < F->nfit; k++) {
-                const verify_point_t *p = &F->out->points[F->ptidx[k]];
-                if (p->image != m || F->pt[k].mat != mat || p->status != VERIFY_PT_USED) continue;
-                F->nused++;
-                if (cur < 0 || F->groups[cur].n == 64) {
-                    cur = F->ngroups++;
-                    F->groups[cur].rc = &F->rcs[mat];
-                    F->groups[cur].k = &F->gidx[gpos];
-                    F->groups[cur].n = 0;
-                    F->groups[cur].b = opt->robust_scale > 0 ? opt->robust_scale * opt->robust_scale : 0;
+        for (int mat = 0; mat < F->nm; mat++)
+            for (int mat2 = -1; mat2 < F->nm; mat2++) {
+                int cur = -1;
+                for (int k = 0; k < F->nfit; k++) {
+                    const verify_point_t *p = &F->out->points[F->ptidx[k]];
+                    if (p->image != m || F->pt[k].mat != mat || F->pt[k].mat2 != mat2 || p->status != VERIFY_PT_USED)
+                        continue;
+                    F->nused++;
+                    if (cur < 0 || F->groups[cur].n == 64) {
+                        cur = F->ngroups++;
+                        F->groups[cur].rc = &F->rcs[mat];
+                        F->groups[cur].rc2 = mat2 >= 0 ? &F->rcs[mat2] : NULL;
+                        F->groups[cur].k = &F->gidx[gpos];
+                        F->groups[cur].n = 0;
+                        F->groups[cur].b = opt->robust_scale > 0 ? opt->robust_scale * opt->robust_scale : 0;
+                    }
+                    F->gidx[gpos++] = k;   // a group's indices are contiguous in gidx
+                    F->groups[cur].n++;
                 }
-                F->gidx[gpos++] = k;   // a group's indices are contiguous in gidx
-                F->groups[cur].n++;
             }
-        }
     for (int gi = 0; gi < F->ngroups; gi++) {
-        const verify_point_t *p = &F->out->points[F->ptidx[F->groups[gi].k[0]]];
-        double *blocks[5];
-        fit_blocks(F, p->image, F->pt[F->groups[gi].k[0]].mat, blocks);
-        if (!lsq_add_residual(F->prob, group_fn, &F->groups[gi], F->groups[gi].n, 5, blocks, LSQ_LOSS_NONE, 0))
+        const pt_t *q = &F->pt[F->groups[gi].k[0]];
+        double *blocks[6];
+        int nb = fit_blocks(F, F->out->points[F->ptidx[F->groups[gi].k[0]]].image, q->mat, q->mat2, blocks);
+        if (!lsq_add_residual(F->prob, group_fn, &F->groups[gi], F->groups[gi].n, nb, blocks, LSQ_LOSS_NONE, 0))
             return false;
     }
     return true;
@@ -1418,13 +1584,13 @@ static bool covariance_add_group(const fit_t *F, const res_group_t *g, const int
 {
     const pdesc_t *pd = F->pd;
     const verify_point_t *p = &F->out->points[F->ptidx[g->k[0]]];
-    int mat = F->pt[g->k[0]].mat;
-    double *blocks[5], rbuf[64];
-    fit_blocks(F, p->image, mat, blocks);
-    const int size[5] = { 1, F->nl ? F->nl : 1, 1, F->rcs[mat].np, 1 };
-    double *jac[5];
-    int off = 0, gcol[5][MAX_LAMPS];
-    for (int b = 0; b < 5; b++) {
+    int mat = F->pt[g->k[0]].mat, mat2 = F->pt[g->k[0]].mat2;
+    double *blocks[6], rbuf[64];
+    const int nb = fit_blocks(F, p->image, mat, mat2, blocks);
+    const int size[6] = { 1, F->nl ? F->nl : 1, 1, F->rcs[mat].np, 1, mat2 >= 0 ? F->rcs[mat2].np : 0 };
+    double *jac[6] = { NULL };
+    int off = 0, gcol[6][MAX_LAMPS];
+    for (int b = 0; b < nb; b++) {
         jac[b] = jb + (size_t)off * 64;
         off += size[b];
         for (int q = 0; q < size[b]; q++) {
@@ -1437,7 +1603,7 @@ static bool covariance_add_group(const fit_t *F, const res_group_t *g, const int
     for (int t = 0; t < g->n; t++) {
         double row[64];
         int rc_[64], nr = 0;
-        for (int b = 0; b < 5; b++)
+        for (int b = 0; b < nb; b++)
             for (int q = 0; q < size[b]; q++)
                 if (gcol[b][q] >= 0 && nr < 64) {
                     row[nr] = jac[b][(size_t)t * size[b] + q];
@@ -1460,7 +1626,7 @@ static void fit_covariance(fit_t *F)
     for (int k = 0; col && k < npd; k++) col[k] = pd[k].fixed ? -1 : nf++;
     double *JtJ = calloc((size_t)nf * nf + 1, sizeof *JtJ), *inv = calloc((size_t)nf * nf + 1, sizeof *inv);
     double *ev = malloc(((size_t)nf + 1) * sizeof *ev);
-    double *jb = malloc((size_t)64 * (3 + nl + MODEL_BRDF_MAX_PARAMS) * sizeof *jb);
+    double *jb = malloc((size_t)64 * (3 + nl + 2 * MODEL_BRDF_MAX_PARAMS) * sizeof *jb);
     bool cok = col && JtJ && inv && ev && jb && nf > 0;
     for (int gi = 0; gi < F->ngroups && cok; gi++) cok = covariance_add_group(F, &F->groups[gi], col, nf, jb, JtJ);
     for (int k = 0; k < npd && cok; k++)
@@ -1505,9 +1671,9 @@ static void fit_residue(fit_t *F)
     verify_result_t *out = F->out;
     for (int k = 0; k < F->nfit; k++) {
         verify_point_t *p = &out->points[F->ptidx[k]];
-        double r, *blocks[5];
-        res_item_t it = { &F->rcs[F->pt[k].mat], k };
-        fit_blocks(F, p->image, F->pt[k].mat, blocks);
+        double r, *blocks[6];
+        res_item_t it = { &F->rcs[F->pt[k].mat], F->pt[k].mat2 >= 0 ? &F->rcs[F->pt[k].mat2] : NULL, k };
+        fit_blocks(F, p->image, F->pt[k].mat, F->pt[k].mat2, blocks);
         residual_fn(&it, (const double *const *)blocks, &r, NULL);
         p->model = (float)(F->pt[k].meas + r * F->pt[k].sigma);
         if (p->status == VERIFY_PT_USED) {
@@ -1795,6 +1961,13 @@ json_t *verify_result_json(const verify_result_t *r, const model_scene_t *scene,
     json_object_set_new(op, "priors", json_boolean(opt->use_priors));
     json_object_set_new(op, "gain_maps", json_boolean(opt->use_flat));
     json_object_set_new(op, "model_rel", json_real(opt->model_rel));
+    json_object_set_new(op, "model_rel_source",
+                        json_string(opt->model_rel_given ? "model_rel for every material (--model-rel)"
+                                                         : "each material's priors' window_rel_std; model_rel for "
+                                                           "materials whose priors state none"));
+    json_object_set_new(op, "edge_windows", json_boolean(opt->edge_windows));
+    json_object_set_new(op, "edge_subsamples", json_integer(opt->edge_subsamples));
+    json_object_set_new(op, "edge_position_sigma_px", json_real(opt->edge_position_sigma_px));
     json_object_set_new(op, "lamp_sigma", json_real(opt->lamp_sigma));
     json_object_set_new(op, "camera_sigma", json_real(opt->camera_sigma));
     json_object_set_new(op, "robust_scale", json_real(opt->robust_scale));
@@ -1807,47 +1980,64 @@ json_t *verify_result_json(const verify_result_t *r, const model_scene_t *scene,
 // ---------------------------------------------------------------------------
 // Self check of the residual's Jacobian (tests)
 
+// Parameters of model m for the Jacobian check: its defaults, moved off the bounds.
+static void check_params(model_brdf_t m, double *mp)
+{
+    for (int j = 0; j < model_brdf_nparams(m); j++) {
+        double lo, hi;
+        model_brdf_param_range(m, j, &lo, &hi);
+        double dflt = model_brdf_param_default(m, j);
+        const char *pn = model_brdf_param_name(m, j);
+        mp[j] = isfinite(dflt) ? dflt : 0.3;
+        if (mp[j] <= lo) mp[j] = lo + 0.1;
+        if (!strcmp(pn, "ns")) mp[j] = 12;
+        if (!strcmp(pn, "alpha") || !strcmp(pn, "m")) mp[j] = 0.3;
+        if (!strcmp(pn, "F0")) mp[j] = 0.05;
+    }
+}
+
+// For every model: a plain point (3 lamps) and a window near an edge with a
+// second material (the next model; two parts, so each lamp twice).
 bool verify_check_jacobian(double *max_abs_err)
 {
     model_rng_t rng = model_rng(77, 1);
     bool ok = true;
     if (max_abs_err) *max_abs_err = 0;
-    for (int m = 0; m < MODEL_BRDF_COUNT; m++) {
-        const int nl = 3;
-        pt_t p = { .meas = 900, .sigma = 3, .Eg = 6000 * 1.02, .mat = 0, .nl = nl, .first = 0, .r_last = NAN };
-        model_brdf_prep_t cs[3];
-        double w[3], b[3];
-        int lamp[3] = { 0, 1, 2 };
-        for (int i = 0; i < nl; i++) {
-            model_vec3_t n = v3(0, 0, 1);
-            double a = 2 * M_PI * model_rng_uniform(&rng), t = 0.1 + 1.2 * model_rng_uniform(&rng);
-            model_vec3_t l = v3(sin(t) * cos(a), sin(t) * sin(a), cos(t)), v = v3_unit(v3(0.3, -0.2, 0.9));
-            model_cosines_t c = model_cosines(n, l, v);
-            cs[i] = model_brdf_prepare(&c);
-            w[i] = 3e5 * 1e-6 * (0.5 + model_rng_uniform(&rng));
-            b[i] = 0.02 * model_rng_uniform(&rng);
+    for (int m = 0; m < MODEL_BRDF_COUNT; m++)
+        for (int mixed = 0; mixed < 2; mixed++) {
+            const int nl = 3, nt = mixed ? 2 * nl : nl;
+            model_brdf_t m1 = (model_brdf_t)m, m2 = (model_brdf_t)((m + 1) % MODEL_BRDF_COUNT);
+            pt_t p = { .meas = 900, .sigma = 3, .Eg = 6000 * 1.02, .mat = 0, .mat2 = mixed ? 1 : -1, .nl = nt,
+                       .first = 0, .r_last = NAN };
+            model_brdf_prep_t cs[6];
+            double w[6], b[6];
+            int lamp[6] = { 0, 1, 2, 0, 1, 2 };
+            uint8_t sec[6] = { 0, 0, 0, 1, 1, 1 };
+            for (int i = 0; i < nt; i++) {
+                model_vec3_t n = i < nl ? v3(0, 0, 1) : v3_unit(v3(0.2, 0, 1));
+                double a = 2 * M_PI * model_rng_uniform(&rng), t = 0.1 + 1.2 * model_rng_uniform(&rng);
+                model_vec3_t l = v3(sin(t) * cos(a), sin(t) * sin(a), cos(t)), v = v3_unit(v3(0.3, -0.2, 0.9));
+                model_cosines_t c = model_cosines(n, l, v);
+                cs[i] = model_brdf_prepare(&c);
+                w[i] = 3e5 * 1e-6 * (0.5 + model_rng_uniform(&rng)) * (mixed ? 0.5 : 1);
+                b[i] = 0.02 * model_rng_uniform(&rng);
+            }
+            res_ctx_t rc = { .pt = &p, .cs = cs, .w = w, .b = b, .lamp = lamp, .sec = sec, .model = m1,
+                             .np = model_brdf_nparams(m1), .nl_all = nl };
+            res_ctx_t rc2 = rc;
+            rc2.model = m2;
+            rc2.np = model_brdf_nparams(m2);
+            int k[1] = { 0 };
+            res_group_t g = { .rc = &rc, .rc2 = mixed ? &rc2 : NULL, .k = k, .n = 1, .b = 9 };
+            double kc = 0.97, s[3] = { 1.02, 0.95, 1.1 }, Pa = 3, rho = 0.8;
+            double mp[MODEL_BRDF_MAX_PARAMS], mp2[MODEL_BRDF_MAX_PARAMS];
+            check_params(m1, mp);
+            check_params(m2, mp2);
+            double *blocks[6] = { &kc, s, &Pa, mp, &rho, mp2 };
+            int sizes[6] = { 1, nl, 1, rc.np, 1, rc2.np };
+            double err = 0;
+            ok = lsq_check_jacobian(group_fn, &g, 1, mixed ? 6 : 5, sizes, blocks, 1e-6, 1e-6, 1e-4, &err) && ok;
+            if (max_abs_err && err > *max_abs_err) *max_abs_err = err;
         }
-        res_ctx_t rc = { &p, cs, w, b, lamp, (model_brdf_t)m, model_brdf_nparams((model_brdf_t)m), nl, false };
-        int k[1] = { 0 };
-        res_group_t g = { &rc, k, 1, 9 };
-        double kc = 0.97, s[3] = { 1.02, 0.95, 1.1 }, Pa = 3, rho = 0.8, mp[MODEL_BRDF_MAX_PARAMS];
-        for (int j = 0; j < rc.np; j++) {
-            double lo, hi;
-            model_brdf_param_range((model_brdf_t)m, j, &lo, &hi);
-            double dflt = model_brdf_param_default((model_brdf_t)m, j);
-            mp[j] = isfinite(dflt) ? dflt : 0.3;
-            if (mp[j] <= lo) mp[j] = lo + 0.1;
-            if (!strcmp(model_brdf_param_name((model_brdf_t)m, j), "ns")) mp[j] = 12;
-            if (!strcmp(model_brdf_param_name((model_brdf_t)m, j), "alpha") ||
-                !strcmp(model_brdf_param_name((model_brdf_t)m, j), "m"))
-                mp[j] = 0.3;
-            if (!strcmp(model_brdf_param_name((model_brdf_t)m, j), "F0")) mp[j] = 0.05;
-        }
-        double *blocks[5] = { &kc, s, &Pa, mp, &rho };
-        int sizes[5] = { 1, nl, 1, rc.np, 1 };
-        double err = 0;
-        ok = lsq_check_jacobian(group_fn, &g, 1, 5, sizes, blocks, 1e-6, 1e-6, 1e-4, &err) && ok;
-        if (max_abs_err && err > *max_abs_err) *max_abs_err = err;
-    }
     return ok;
 }

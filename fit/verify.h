@@ -20,7 +20,13 @@
 // Residual (P_k - P_meas,k) / sigma_k (reported as z_k = (P_meas,k - P_k) /
 // sigma_k, the sign of the difference images) with sigma_k^2 = the window mean's
 // sensor noise (from the gain calibration's K and read noise; else from the
-// windows' own spread) + (model_rel * signal)^2. Fitted with a robust (Cauchy)
+// windows' own spread) + (rel * signal)^2 + the interreflection basis's Monte
+// Carlo error^2 (E kc sum_i A_i Bsd_i) + for a window near an edge
+// (edge_position_sigma_px * its slope across the edge)^2; rel is the
+// material's window_rel_std from its priors (the spread of a window's R about
+// the model on its coupon, beyond noise), else model_rel. A window near an
+// edge (a face's outline, a shadow's) is modelled with the pixels' footprint
+// and the optics' blur (fit/verify_footprint.h). Fitted with a robust (Cauchy)
 // loss so that a region the description gets wrong does not bend the
 // parameters, then judged: points with |z| > z_flag, and windows that show an
 // edge the description does not predict, are flags; 8-connected flags on an
@@ -56,6 +62,8 @@ typedef struct {
     // order; has_cov false for files without one: independent std).
     bool         has_cov;
     double       cov[MODEL_BRDF_MAX_PARAMS * MODEL_BRDF_MAX_PARAMS];
+    double       window_rel;        // "window_rel_std": a window's relative spread about the model beyond its
+                                    //   noise (texture, what the model lacks); NAN: not known
     char         source[512];
     char         sha256[65];
 } verify_prior_t;
@@ -110,6 +118,10 @@ typedef struct {
                                     // offset (model_linearise), applied before the fit (NULL: linear)
     double          kc_rel;         // its sensitivity relative to the lamps' scale kc*I (its own white's over
                                     // the one given; 0 or 1: the same camera), a factor on its signal
+    double          psf_sigma_px;   // the optics' blur: an isotropic Gaussian PSF's sigma, px, beside the
+                                    // pixel's own footprint (calib_set_t.psf_sigma_px; 0: none known)
+    double          pixel_fill;     // the pixel's footprint: a square of this side, px (1: the whole pixel,
+                                    // a real sensor's; 0: a point, a renderer's one ray a pixel)
 } verify_camera_t;
 
 typedef struct {
@@ -140,10 +152,17 @@ typedef struct {
     double boundary_margin_px;  // and face/shadow changes this far beyond the window (default 4)
     double edge_k;              // window std above sqrt(edge_k^2 var_noise + (edge_rel S)^2) says edge (3)
     double edge_rel;            // (0.05)
-    int    ir_samples;          // interreflection rays per point (default 16; 0: none)
+    bool   edge_windows;        // model the windows near edges with the pixels' footprint and the blur
+                                //   (fit/verify_footprint.h; default true); false: skip them
+    int    edge_subsamples;     // sub-cells per px side of a window's mixed cells (odd; default 5)
+    double edge_position_sigma_px;   // 1-sigma of where an edge lies in the image (camera model, placement,
+                                //   blur), px: a window near an edge gets sigma^2 += (this |dM/dc|)^2 (0.1)
+    int    ir_samples;          // interreflection rays per point (default 64; 0: none)
     bool   use_priors;          // bounded by the priors (default true); false: the thesis's fit
     bool   use_flat;            // use the cameras' flat fields and offset maps (default true)
-    double model_rel;           // relative model tolerance in sigma (default 0.04)
+    double model_rel;           // relative model tolerance in sigma (default 0.04) for materials whose priors
+                                //   state no window_rel_std
+    bool   model_rel_given;     // model_rel for every material, over the priors' window_rel_std
     double lamp_sigma;          // prior std of s_i (default 0.1)
     double camera_sigma;        // prior std of kc_c (default 0.1)
     double pa_sigma_dn;         // prior std of Pa with an offset map (default 5; ambient light)
@@ -184,6 +203,11 @@ double verify_view_time_s(const verify_view_t *v);
 // lamps (shadow rays). Points with face < 0 get 0.
 void verify_interreflection(const model_tracer_t *t, const model_lamps_t *lamps, const model_material_t *const *mats,
                             const model_pixel_info_t *pi, int n, int samples, int threads, float *B);
+// The same and each value's standard error as a Monte Carlo estimate (Bsd:
+// n x lamps->n, may be NULL): pi sqrt(var of a ray's term / (samples - 1)).
+void verify_interreflection_sd(const model_tracer_t *t, const model_lamps_t *lamps,
+                               const model_material_t *const *mats, const model_pixel_info_t *pi, int n, int samples,
+                               int threads, float *B, float *Bsd);
 
 // Status of a grid point.
 typedef enum {
@@ -193,6 +217,7 @@ typedef enum {
     VERIFY_PT_BOUNDARY,        // the window's corners see another face or another shadow state
     VERIFY_PT_SATURATED,
     VERIFY_PT_EDGE_MEASURED,   // the window's spread says edge where none is predicted (a flag)
+    // (a window near an edge that is modelled with its footprint and blur is USED, verify_point_t.footprint)
     VERIFY_PT_NSTATUS
 } verify_pt_status_t;
 
@@ -203,6 +228,7 @@ typedef struct {
     float   q[2];
     int32_t face;          // face of the description (-1 background)
     uint8_t status;        // verify_pt_status_t
+    bool    footprint;     // a window near an edge, modelled with the pixels' footprint and the blur
     bool    flag;
     int     region;        // index into regions or -1
     float   meas, model;   // DN (meas after the offset map)
@@ -342,6 +368,8 @@ typedef struct {
     const char *out;                               // output directory (created)
     double      placement_tol_mm, placement_tol_deg;   // the part's placement registered within these
                                                    //   (verify_register) before the fit; 0 and 0: as described
+    double      psf_sigma_px, pixel_fill;          // over every camera's calibration (NAN: the calibration's;
+                                                   //   without one: 0 px and 1, the whole pixel)
     verify_options_t opt;
     json_t     *provenance;                        // borrowed: the inputs are added, verify.json carries it
 } verify_files_opts_t;

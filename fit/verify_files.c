@@ -243,6 +243,11 @@ static void vf_camera_fill(vf_t *V, int c, const calib_set_t *cal, const calib_s
     vc->saturation_dn = g->saturation_dn;
     vc->lin = &g->lin;
     vc->kc_rel = 1;
+    // the pixels' footprint and the optics' blur (fit/verify_footprint.h): the options', else the geometry
+    // calibration's (calib/psf.c), else the whole pixel and no blur
+    const verify_files_opts_t *o = V->o;
+    vc->psf_sigma_px = isfinite(o->psf_sigma_px) ? o->psf_sigma_px : cal->have_psf ? cal->psf_sigma_px : 0;
+    vc->pixel_fill = isfinite(o->pixel_fill) ? o->pixel_fill : cal->have_psf ? cal->psf_pixel_fill : 1;
     V->cal_gain[c] = g->cal_gain;
     snprintf(V->cal_unit[c], sizeof V->cal_unit[c], "%s", g->cal_gain_unit);
 }
@@ -637,6 +642,48 @@ static bool synthetic_interreflection(const vf_t *V, const verify_result_t *res,
 // The synthetic image of image m: the fitted model's direct term at every
 // pixel and its interreflection term (synthetic_interreflection; W*H into
 // synth), NaN where the description has no surface.
+// A separable Gaussian of sigma px over the finite pixels of img (W x H), in
+// place: each pixel the kernel-weighted mean of its finite neighbours (NaN
+// stays NaN: no surface is not blurred into). false: out of memory.
+static bool blur_surfaces(float *img, int W, int H, double sigma)
+{
+    int r = (int)ceil(3 * sigma);
+    double *k = malloc((size_t)(2 * r + 1) * sizeof *k);
+    float *tmp = malloc((size_t)W * H * sizeof *tmp);
+    if (!k || !tmp) {
+        free(k);
+        free(tmp);
+        model_error(NULL, 0, "out of memory for the synthetic image's blur");
+        return false;
+    }
+    for (int j = -r; j <= r; j++) k[j + r] = exp(-0.5 * j * j / (sigma * sigma));
+    for (int pass = 0; pass < 2; pass++) {
+        const float *src = pass ? tmp : img;
+        float *dst = pass ? img : tmp;
+        for (int y = 0; y < H; y++)
+            for (int x = 0; x < W; x++) {
+                size_t i = (size_t)y * W + x;
+                if (!isfinite(src[i])) {
+                    dst[i] = src[i];
+                    continue;
+                }
+                double s = 0, ws = 0;
+                for (int j = -r; j <= r; j++) {
+                    int xx = pass ? x : x + j, yy = pass ? y + j : y;
+                    if (xx < 0 || yy < 0 || xx >= W || yy >= H) continue;
+                    float v = src[(size_t)yy * W + xx];
+                    if (!isfinite(v)) continue;
+                    s += k[j + r] * v;
+                    ws += k[j + r];
+                }
+                dst[i] = (float)(s / ws);
+            }
+    }
+    free(k);
+    free(tmp);
+    return true;
+}
+
 static bool synthetic_image(const vf_t *V, const verify_result_t *res, int m, float *synth)
 {
     const verify_image_t *im = &V->imgs[m];
@@ -670,6 +717,10 @@ static bool synthetic_image(const vf_t *V, const verify_result_t *res, int m, fl
     if (ok)
         for (size_t q = 0; q < npx; q++)
             if (face[q] < 0) synth[q] = NAN;   // no surface of the description: nothing predicted
+    // the pixels' footprint and the optics' blur, as the fit models them near edges: a Gaussian of the same
+    // second moment (sigma^2 + fill^2 / 12) over the surfaces
+    double sb = sqrt(vc->psf_sigma_px * vc->psf_sigma_px + vc->pixel_fill * vc->pixel_fill / 12);
+    if (ok && sb > 0.05) ok = blur_surfaces(synth, im->W, im->H, sb);
     free(face);
     model_tracer_free(t);
     model_scene_free(rot);
@@ -721,15 +772,16 @@ static bool write_points_csv(const vf_t *V, const verify_result_t *res)
         model_error(cp, 0, "cannot write: %s", strerror(errno));
         goto done;
     }
-    fprintf(f, "image,x_px,y_px,face,status,flag,region,measured_dn,model_dn,sigma_dn,z\n");
+    fprintf(f, "image,x_px,y_px,face,status,flag,region,measured_dn,model_dn,sigma_dn,z,footprint\n");
     for (int k = 0; k < res->npoints; k++) {
         const verify_point_t *p = &res->points[k];
         int face = p->face >= 0 && p->face < scene->nfaces ? scene->faces[p->face].number : p->face;
         if (p->status == VERIFY_PT_USED || p->status == VERIFY_PT_EDGE_MEASURED)
-            fprintf(f, "%d,%.1f,%.1f,%d,%s,%d,%d,%.3f,%.3f,%.4f,%.4f\n", p->image, p->q[0], p->q[1], face,
-                    verify_pt_status_name(p->status), p->flag, p->region, p->meas, p->model, p->sigma, p->z);
+            fprintf(f, "%d,%.1f,%.1f,%d,%s,%d,%d,%.3f,%.3f,%.4f,%.4f,%d\n", p->image, p->q[0], p->q[1], face,
+                    verify_pt_status_name(p->status), p->flag, p->region, p->meas, p->model, p->sigma, p->z,
+                    p->footprint);
         else
-            fprintf(f, "%d,%.1f,%.1f,%d,%s,0,-1,,,,\n", p->image, p->q[0], p->q[1], face,
+            fprintf(f, "%d,%.1f,%.1f,%d,%s,0,-1,,,,,0\n", p->image, p->q[0], p->q[1], face,
                     verify_pt_status_name(p->status));
     }
     ok = fclose(f) == 0;

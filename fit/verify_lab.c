@@ -30,6 +30,7 @@ struct verify_lab {
     double *A;                 // kc_per_us * I
     model_materials_t *mats;   // the truth's materials
     char truth[4096];
+    double draw[32][3];        // per placement set: the truth's placement error drawn for it (turn deg, dx, dy mm)
 };
 
 static int fail_rig(int r, const char *what)
@@ -163,6 +164,8 @@ verify_lab_t *verify_lab_open(const char *truth_path, const char *sample, const 
         goto fail;
     }
     L->nplace = 1;
+    if (!rig_virtual_last_placement(L->v, &L->draw[0][0], &L->draw[0][1], &L->draw[0][2]))
+        L->draw[0][0] = L->draw[0][1] = L->draw[0][2] = 0;
     if (!render_planes(L, 0, verbose)) goto fail;
     snprintf(L->cam.name, sizeof L->cam.name, "virtual");
     L->cam.cam = cam;
@@ -172,6 +175,7 @@ verify_lab_t *verify_lab_open(const char *truth_path, const char *sample, const 
     L->cam.read_noise_e = L->sensor.read_noise_e;
     L->cam.saturation_dn = (1 << L->sensor.bits) - 1;
     L->cam.lin = &L->lin;
+    rig_virtual_pixel_response(L->v, &L->cam.pixel_fill, &L->cam.psf_sigma_px);   // as a PSF calibration finds them
     return L;
 fail:
     verify_lab_free(L);
@@ -188,11 +192,17 @@ int verify_lab_height(const verify_lab_t *L) { return L->H; }
 
 int verify_lab_add_placement(verify_lab_t *L, double turn_deg, double dx_mm, double dy_mm, bool verbose)
 {
+    if (L->nplace >= 32) {
+        model_error(NULL, 0, "verify lab: at most 31 placements");
+        return -1;
+    }
     int r = rig_virtual_set_sample_offset(L->v, L->sample, turn_deg, dx_mm, dy_mm);
     if (r) {
         fail_rig(r, L->sample);
         return -1;
     }
+    double *d = L->draw[L->nplace];
+    if (!rig_virtual_last_placement(L->v, &d[0], &d[1], &d[2])) d[0] = d[1] = d[2] = 0;
     size_t per = (size_t)L->nang * L->nl;
     float **grown = realloc(L->L, (size_t)(L->nplace + 1) * per * sizeof *grown);
     if (!grown) {
@@ -206,6 +216,15 @@ int verify_lab_add_placement(verify_lab_t *L, double turn_deg, double dx_mm, dou
 }
 
 int verify_lab_nplacements(const verify_lab_t *L) { return L->nplace; }
+
+bool verify_lab_placement_draw(const verify_lab_t *L, int place, double *turn_deg, double *dx_mm, double *dy_mm)
+{
+    if (place < 0 || place >= L->nplace) return false;
+    *turn_deg = L->draw[place][0];
+    *dx_mm = L->draw[place][1];
+    *dy_mm = L->draw[place][2];
+    return true;
+}
 
 bool verify_lab_image(verify_lab_t *L, int angle_index, uint32_t lamps_on, const double *lamp_scale,
                       double kc_scale, uint64_t seed, float *out)

@@ -44,6 +44,11 @@ bool verify_lab_image(verify_lab_t *L, int angle_index, uint32_t lamps_on, const
 // the sample as opened), or -1 + message.
 int  verify_lab_add_placement(verify_lab_t *L, double turn_deg, double dx_mm, double dy_mm, bool verbose);
 int  verify_lab_nplacements(const verify_lab_t *L);
+// The truth's own placement error of placement set `place` ([placement]: a
+// draw for every placement, so a placed-off set has its own on top of the
+// offset asked for): turn about the centre (deg) and shift (mm). 0 without
+// [placement]; false for a set that does not exist.
+bool verify_lab_placement_draw(const verify_lab_t *L, int place, double *turn_deg, double *dx_mm, double *dy_mm);
 // verify_lab_image of placement set `place`.
 bool verify_lab_image_placed(verify_lab_t *L, int place, int angle_index, uint32_t lamps_on, const double *lamp_scale,
                              double kc_scale, uint64_t seed, float *out);

@@ -63,6 +63,7 @@ typedef struct {
     signed char *verdict;   // 1: verdict correct, 0: incorrect, -1: not run here (another shard)
     double *secs;        // wall time of the fit (timing.csv; not part of the results)
     int    *iters;
+    double *rmsz, *medz; // the fit's RMS z and median |z| over its used points (the z calibration)
     bool    reg;         // the placement registered (placement.csv)
     float  *pose;        // [case][cond][4]: dx mm, dy mm, turn deg, edge agreement (NAN: not here)
 } table_t;
@@ -76,10 +77,12 @@ static bool table_alloc(table_t *T)
     T->verdict = malloc(n);
     T->secs = calloc(n, sizeof *T->secs);
     T->iters = calloc(n, sizeof *T->iters);
+    T->rmsz = calloc(n, sizeof *T->rmsz);
+    T->medz = calloc(n, sizeof *T->medz);
     size_t np = (size_t)T->cases * T->ncond * 4;
     T->pose = T->reg ? malloc(np * sizeof *T->pose) : NULL;
     for (size_t i = 0; T->pose && i < np; i++) T->pose[i] = NAN;
-    if (!T->score || !T->verdict || !T->secs || !T->iters || (T->reg && !T->pose)) {
+    if (!T->score || !T->verdict || !T->secs || !T->iters || !T->rmsz || !T->medz || (T->reg && !T->pose)) {
         model_error(NULL, 0, "verify study: out of memory for %d cases", T->cases);
         return false;
     }
@@ -93,6 +96,8 @@ static void table_free(table_t *T)
     free(T->verdict);
     free(T->secs);
     free(T->iters);
+    free(T->rmsz);
+    free(T->medz);
     free(T->pose);
 }
 
@@ -271,6 +276,8 @@ static bool run_condition(study_t *S, int c, int d, const verify_image_t *im)
             T->verdict[i] = r.correct ? 1 : 0;
             T->secs[i] = model_now_s() - t0;
             T->iters[i] = r.summary.iterations;
+            T->rmsz[i] = r.all.rms_z;
+            T->medz[i] = r.all.median_abs_z;
         }
         verify_result_free(&r);
     }
@@ -390,7 +397,10 @@ static bool calibs_of_chain(study_t *S, const verify_study_opts_t *o)
     S->cam = (verify_camera_t){ .cam = cal->cam, .offset_dn = cal->offset_dn, .flat = cal->flat,
                                 .K_dn_per_e = cal->gain_dn_per_e, .read_noise_e = cal->read_noise_e,
                                 .saturation_dn = cal->saturation_dn, .lin = &cal->lin,
-                                .kc_rel = 1 };
+                                .kc_rel = 1,
+                                // the geometry calibration's pixel response, else the whole pixel, no blur
+                                .psf_sigma_px = cal->have_psf ? cal->psf_sigma_px : 0,
+                                .pixel_fill = cal->have_psf ? cal->psf_pixel_fill : 1 };
     snprintf(S->cam.name, sizeof S->cam.name, "%s", cal->camera[0] ? cal->camera : "camera");
     S->lamps = cal->lamps;
     S->A = cal->kcI_per_us;
@@ -535,6 +545,34 @@ static json_t *config_summary(const table_t *T, int k, double *neg, double *pos,
     return rows;
 }
 
+// The z calibration: per configuration, over the cases of the correct
+// description (and of the part placed off when the study registers), the
+// mean and range of each fit's RMS z and median |z| (N(0, 1): 1 and 0.674).
+static json_t *z_calibration(const table_t *T)
+{
+    json_t *a = json_array();
+    for (int k = 0; k < T->nconf; k++)
+        for (int d = 0; d < T->ncond; d++) {
+            bool placed = !strcmp(T->cond[d].expected, "placed");
+            if (strcmp(T->cond[d].expected, "correct") && !(placed && T->reg)) continue;
+            double sr = 0, sm = 0, rlo = INFINITY, rhi = -INFINITY, mlo = INFINITY, mhi = -INFINITY;
+            int n = 0;
+            for (int c = 0; c < T->cases; c++) {
+                size_t i = at(T, c, k, d);
+                if (T->verdict[i] < 0 || !isfinite(T->rmsz[i]) || !isfinite(T->medz[i])) continue;
+                sr += T->rmsz[i], sm += T->medz[i], n++;
+                rlo = fmin(rlo, T->rmsz[i]), rhi = fmax(rhi, T->rmsz[i]);
+                mlo = fmin(mlo, T->medz[i]), mhi = fmax(mhi, T->medz[i]);
+            }
+            if (!n) continue;
+            json_array_append_new(a, json_pack("{s:s, s:s, s:i, s:f, s:[f,f], s:f, s:[f,f]}", "config", T->conf[k],
+                                               "description", T->cond[d].label, "n", n, "rms_z_mean", sr / n,
+                                               "rms_z_range", rlo, rhi, "median_abs_z_mean", sm / n,
+                                               "median_abs_z_range", mlo, mhi));
+        }
+    return a;
+}
+
 // {"summary": [...], "roc": [...]}: per configuration and condition other than
 // the correct description (negatives: the correct description's rows of the
 // same configuration).
@@ -558,6 +596,7 @@ static json_t *study_results(const table_t *T)
     json_t *o = json_object();
     json_object_set_new(o, "summary", summ);
     json_object_set_new(o, "roc", roc);
+    json_object_set_new(o, "z_calibration", z_calibration(T));
     return o;
 }
 
@@ -566,7 +605,8 @@ static json_t *study_results(const table_t *T)
 
 static const char units[] =
     "score: refl verify's score of the fit (dimensionless, >= 0; higher = more likely wrong; the verdict calls a "
-    "description incorrect above score_threshold); rates: fractions 0..1 of the rows of a configuration and "
+    "description incorrect above score_threshold); rms_z, median_abs_z: over the fit's used reference points, z = "
+    "(measured - model) / sigma (for N(0, 1) 1 and 0.674: the stated sigma calibrated); rates: fractions 0..1 of the rows of a configuration and "
     "description; seconds: wall time of one fit on one thread; angles deg, lengths mm";
 
 static const char conditions[] =
@@ -574,8 +614,9 @@ static const char conditions[] =
     "0 dB, 12-bit sensor with its noise; per case (seeds of the case number only): each lamp's intensity x U(0.9, "
     "1.1), the camera's sensitivity x U(0.95, 1.05), new sensor noise; descriptions: the correct one and 13 "
     "corruptions on the part as placed, and the correct one on the part placed off by 1 mm / 0.5 deg, 2 mm / 1 deg "
-    "and 3 mm / 2 deg (shift along 30 deg from x, turn about the part's centre, same drifts, new noise; expected "
-    "'placed': correct once verification tolerates placement); priors: the chain's (--priors) or the truth's "
+    "and 3 mm / 2 deg (shift along 30 deg from x, turn about the part's centre, same drifts, new noise; a truth "
+    "with [placement] adds a draw of its own to each placement: design.descriptions[].truth_placement_error; "
+    "expected 'placed': a rightly made part, to pass when registration finds it within the tolerance); priors: the chain's (--priors) or the truth's "
     "materials +- 10 %, bounds 3 sigma; no-priors: the thesis's fit (physical bounds only, lamps fixed, kc free); "
     "+maps: the offset map, flat field and linearisation of the gain calibration; calibrations: the chain's "
     "(--calib) or the lab's (the truth's camera, lamps and kc*I, maps measured noise-free)";
@@ -583,7 +624,8 @@ static const char conditions[] =
 // The design (what a shard must share with the others to be merged): cases,
 // configurations, conditions, threshold and the inputs' hashes (no paths: the
 // shards may run on other machines).
-static json_t *design_json(const table_t *T, const json_t *inputs, const verify_study_opts_t *o)
+static json_t *design_json(const table_t *T, const json_t *inputs, const verify_study_opts_t *o,
+                           const verify_lab_t *lab)
 {
     json_t *d = json_object(), *cf = json_array(), *cd = json_array(), *in = json_array();
     json_object_set_new(d, "cases", json_integer(T->cases));
@@ -597,6 +639,11 @@ static json_t *design_json(const table_t *T, const json_t *inputs, const verify_
             json_object_set_new(e, "placed_off", json_pack("{s:f, s:f, s:f}", "turn_deg", place_deg[c->place - 1],
                                                            "dx_mm", mm * cos(az), "dy_mm", mm * sin(az)));
         }
+        // the truth's own placement error of the part in these images ([placement]: one draw per placement)
+        double tu, dx, dy;
+        if (lab && verify_lab_placement_draw(lab, c->place, &tu, &dx, &dy))
+            json_object_set_new(e, "truth_placement_error", json_pack("{s:f, s:f, s:f}", "turn_deg", tu, "dx_mm", dx,
+                                                                      "dy_mm", dy));
         json_array_append_new(cd, e);
     }
     json_object_set_new(d, "descriptions", cd);
@@ -618,15 +665,15 @@ static json_t *design_json(const table_t *T, const json_t *inputs, const verify_
 // study.csv and timing.csv: the rows run here, configuration by configuration, description by description, case by case.
 static bool write_tables(const char *out, const table_t *T)
 {
-    GString *st = g_string_new("config,description,expected,case,score,verdict_correct\n");
+    GString *st = g_string_new("config,description,expected,case,score,verdict_correct,rms_z,median_abs_z\n");
     GString *tm = g_string_new("config,description,case,seconds,iterations\n");
     for (int k = 0; k < T->nconf; k++)
         for (int d = 0; d < T->ncond; d++)
             for (int c = 0; c < T->cases; c++) {
                 size_t i = at(T, c, k, d);
                 if (T->verdict[i] < 0) continue;
-                g_string_append_printf(st, "%s,%s,%s,%d,%.17g,%d\n", T->conf[k], T->cond[d].label, T->cond[d].expected,
-                                       c, T->score[i], T->verdict[i]);
+                g_string_append_printf(st, "%s,%s,%s,%d,%.17g,%d,%.17g,%.17g\n", T->conf[k], T->cond[d].label,
+                                       T->cond[d].expected, c, T->score[i], T->verdict[i], T->rmsz[i], T->medz[i]);
                 g_string_append_printf(tm, "%s,%s,%d,%.4f,%d\n", T->conf[k], T->cond[d].label, c, T->secs[i],
                                        T->iters[i]);
             }
@@ -776,7 +823,7 @@ bool verify_study_run(const verify_study_opts_t *o, verify_study_result_t *r)
         goto done;
     }
     inputs = study_inputs(&S, o);
-    design = design_json(&T, inputs, o);
+    design = design_json(&T, inputs, o, S.lab);
     if (o->shard_n > 0)
         shard = json_pack("{s:i, s:i, s:s}", "k", sk, "n", sn, "cases", "c with c mod n = k - 1 (c from 0)");
     json_object_set_new(o->provenance, "wall_seconds", json_real(model_now_s() - S.t0));
@@ -904,7 +951,7 @@ static bool row_key(const table_t *T, char **f, int ci, const char *path, int li
 // DIR/study.csv (required) or DIR/timing.csv into the table. false + message naming the file and line.
 static bool read_rows(const char *dir, table_t *T, bool timing)
 {
-    static const char *hs = "config,description,expected,case,score,verdict_correct",
+    static const char *hs = "config,description,expected,case,score,verdict_correct,rms_z,median_abs_z",
                       *ht = "config,description,case,seconds,iterations";
     char *path = g_strdup_printf("%s/%s", dir, timing ? "timing.csv" : "study.csv"), *text = NULL;
     GError *ge = NULL;
@@ -917,9 +964,9 @@ static bool read_rows(const char *dir, table_t *T, bool timing)
         if (!lines[ln][0] && !lines[ln + 1]) break;
         char **f = g_strsplit(lines[ln], ",", -1);
         int k, d, c, nf = (int)g_strv_length(f);
-        if (nf != (timing ? 5 : 6)) {
+        if (nf != (timing ? 5 : 8)) {
             ok = false;
-            model_error(path, ln + 1, "%d fields: want %d", nf, timing ? 5 : 6);
+            model_error(path, ln + 1, "%d fields: want %d", nf, timing ? 5 : 8);
         } else if ((ok = row_key(T, f, timing ? 2 : 3, path, ln + 1, &k, &d, &c))) {
             size_t i = at(T, c, k, d);
             char *end;
@@ -938,8 +985,17 @@ static bool read_rows(const char *dir, table_t *T, bool timing)
                 model_error(path, ln + 1, "%s, %s, case %d: already in another shard (the same shard given twice?)",
                             f[0], f[1], c);
             } else {
+                double rz = strtod(f[6], &end);
+                char *end2;
+                double mz = strtod(f[7], &end2);
+                if (*end || *end2) {
+                    ok = false;
+                    model_error(path, ln + 1, "a bad value (%s: rms_z and median_abs_z are numbers)", lines[ln]);
+                }
                 T->score[i] = v;
                 T->verdict[i] = (signed char)(f[5][0] - '0');
+                T->rmsz[i] = rz;
+                T->medz[i] = mz;
             }
         }
         g_strfreev(f);

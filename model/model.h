@@ -652,6 +652,13 @@ bool model_tracer_visible(const model_tracer_t *t, model_vec3_t p, model_vec3_t 
 bool model_pixel_info(const model_tracer_t *t, const model_camera_t *cam,
                       const model_lamps_t *lamps, const double *q_xy, int n,
                       model_pixel_info_t *out, model_lamp_sample_t *lamp_out, int nthreads);
+// The same with the rays from the camera's ray table (model_camera_ray_table:
+// made once per camera and kept; exact to its bound at pixel centres, bilinear
+// between them, where a lens changes by far less than that bound): many times
+// faster than exact unprojection for many positions.
+bool model_pixel_info_table(const model_tracer_t *t, model_camera_t *cam, const model_lamps_t *lamps,
+                            const double *q_xy, int n, model_pixel_info_t *out, model_lamp_sample_t *lamp_out,
+                            int nthreads);
 
 // Offset (mm) used to keep secondary rays off the surface they start from
 // (relative to the scene's size: about 4e-6 x its extent and distance from the origin).
@@ -715,6 +722,8 @@ typedef struct {
     bool   finite_lamps;        // MC: sample each lamp's sphere (radius_mm) for soft shadows
     uint64_t seed;              // MC: reproducible for a given seed, whatever the thread count
     int    nthreads;            // <= 0: model_default_threads()
+    const uint8_t *pixel_mask;  // width*height: render only the pixels where it is non-zero (the others of
+                                //   P_out, face_out and lit_out are left as they are); NULL: every pixel
 } model_shading_t;
 
 // Defaults: kc 1, Pa 0, no gain map, no interreflection, rho 0.05, 9 thesis
@@ -961,6 +970,41 @@ model_edges_t *model_edges_predict(const model_scene_t *scene,
                                    const model_material_t *const *mats,
                                    const model_shading_t *sh, double feature_angle_deg);
 void model_edges_free(model_edges_t *e);
+
+// ---------------------------------------------------------------------------
+// A straight step edge as the pixels see it (model/edge_profile.c): the step
+// convolved with an isotropic Gaussian point-spread function of sigma_px (the
+// optics' blur alone; 0: none) and integrated over each pixel's footprint,
+// its own 1 x 1 px square (a separate, known part of the model). theta_rad:
+// the edge's normal from the image's +x axis (x right, y down); the
+// footprint projected onto the normal is a box of 1 px at 0 and a triangle of
+// base sqrt 2 px at 45 deg. Closed forms (no sampling); see the .c file.
+
+// The edge spread function: the grey value, 0 on the dark side and 1 on the
+// bright one, of a pixel whose centre lies u_px from the edge (u > 0 toward
+// the bright side, along the normal). Derivatives may be NULL: dE_du (the line
+// spread function), dE_dsigma (0 at sigma 0, where E depends on sigma^2).
+double model_edge_spread(double u_px, double theta_rad, double sigma_px, double *dE_du, double *dE_dsigma);
+
+// The 3 x 3 Sobel gradient magnitude (kernel 1 2 1 across 1 0 -1, in x and y;
+// sqrt(gx^2 + gy^2)) per unit contrast of that edge at the pixel whose centre
+// lies u_px from it. A sharp step (sigma 0) seen by a pixel whose centre the
+// edge passes through: 4 axis-aligned, 3 sqrt 2 = 4.243 diagonal.
+double model_edge_sobel(double u_px, double theta_rad, double sigma_px);
+
+// The detector's peak response across the edge (the largest of the pixels
+// next to it) per unit contrast, over the edge's sub-pixel phase: the
+// distance ph of the nearest pixel centre from the edge, the pixels across it
+// at ph + k sp, sp = max(|cos theta|, |sin theta|) (one pixel column or row
+// crossing the edge), ph uniform in [0, sp/2]. best: the edge through a pixel
+// centre (ph = 0), the phase at which sigma 0 gives the sharp step's 4.0
+// (axis-aligned, every phase) and 4.243 (diagonal); mean over the phases;
+// worst (ph = sp/2: the edge half-way between pixel centres; 3.89 diagonal at
+// sigma 0).
+typedef struct {
+    double best, mean, worst;
+} model_sobel_step_t;
+model_sobel_step_t model_edge_sobel_step(double theta_rad, double sigma_px);
 
 // ---------------------------------------------------------------------------
 // The reference workpiece (model/workpiece.c; thesis ch. 6): a base plate

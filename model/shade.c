@@ -372,6 +372,7 @@ static void fill_background(render_ctx_t *c, int x0, int x1, int y0, int y1)
     for (int y = y0; y < y1; y++)
         for (int x = x0; x < x1; x++) {
             size_t i = (size_t)y * c->W + x;
+            if (c->sh->pixel_mask && !c->sh->pixel_mask[i]) continue;
             c->P[i] = (float)c->sh->Pa;
             if (c->face) c->face[i] = -1;
             if (c->lit)
@@ -403,6 +404,7 @@ static void render_packet(render_ctx_t *c, packet_t *pk, int bx, int by)
     int m = 0;
     for (int y = by * BLK; y < by * BLK + BLK && y < H; y++)
         for (int x = bx * BLK; x < bx * BLK + BLK && x < W; x++) {
+            if (sh->pixel_mask && !sh->pixel_mask[(size_t)y * W + x]) continue;
             pk->pix[m] = (size_t)y * W + x;
             pk->dirs[m] = c->rays[pk->pix[m]];
             m++;
@@ -559,7 +561,10 @@ static void render_rows(void *vctx, int begin, int end, int thread)
             int x1 = x0 + TILE < W ? x0 + TILE : W, y1 = y0 + TILE < H ? y0 + TILE : H;
             int tm = 0;
             for (int y = y0; y < y1; y++)
-                for (int x = x0; x < x1; x++) tdirs[tm++] = c->rays[(size_t)y * W + x];
+                for (int x = x0; x < x1; x++)
+                    if (!c->sh->pixel_mask || c->sh->pixel_mask[(size_t)y * W + x])
+                        tdirs[tm++] = c->rays[(size_t)y * W + x];
+            if (!tm) continue;   // no pixel of the mask
             if (model_tracer_rays_miss(c->t, c->o, tdirs, tm)) {
                 fill_background(c, x0, x1, y0, y1);
                 continue;

@@ -749,9 +749,26 @@ typedef struct {
     model_pixel_info_t   *out;
     model_lamp_sample_t  *lamp_out;
     model_vec3_t          centre;
+    const model_vec3_t   *table;        // the ray table (model_pixel_info_table), or NULL: exact unprojection
+    int                   W, H;
     atomic_bool           failed;
     char                  err[1024];
 } pinfo_ctx_t;
+
+// The ray through pixel position (x, y) from the ray table: bilinear between
+// the four pixel centres around it (clamped to the imager).
+static model_vec3_t table_ray(const model_vec3_t *tab, int W, int H, double x, double y)
+{
+    int x0 = (int)floor(x), y0 = (int)floor(y);
+    if (x0 < 0) x0 = 0;
+    if (y0 < 0) y0 = 0;
+    if (x0 > W - 2) x0 = W - 2;
+    if (y0 > H - 2) y0 = H - 2;
+    double fx = x - x0, fy = y - y0;
+    const model_vec3_t *r = tab + (size_t)y0 * W + x0;
+    return v3_add(v3_add(v3_scale(r[0], (1 - fx) * (1 - fy)), v3_scale(r[1], fx * (1 - fy))),
+                  v3_add(v3_scale(r[W], (1 - fx) * fy), v3_scale(r[W + 1], fx * fy)));
+}
 
 #define PINFO_CHUNK 256
 
@@ -764,7 +781,10 @@ static void pinfo_worker(void *vctx, int begin, int end, int thread)
     for (int b = begin; b < end; b += PINFO_CHUNK) {
         int m = end - b < PINFO_CHUNK ? end - b : PINFO_CHUNK;
         if (atomic_load(&c->failed)) return;
-        if (!model_camera_unproject(c->cam, c->q + 2 * (size_t)b, m, dirs)) {
+        if (c->table) {
+            for (int k = 0; k < m; k++)
+                dirs[k] = table_ray(c->table, c->W, c->H, c->q[2 * (size_t)(b + k)], c->q[2 * (size_t)(b + k) + 1]);
+        } else if (!model_camera_unproject(c->cam, c->q + 2 * (size_t)b, m, dirs)) {
             if (!atomic_exchange(&c->failed, true))
                 snprintf(c->err, sizeof c->err, "%s", model_last_error());
             return;
@@ -796,9 +816,29 @@ static void pinfo_worker(void *vctx, int begin, int end, int thread)
     }
 }
 
+static bool pixel_info_run(const model_tracer_t *t, const model_camera_t *cam, const model_vec3_t *table,
+                           const model_lamps_t *lamps, const double *q_xy, int n, model_pixel_info_t *out,
+                           model_lamp_sample_t *lamp_out, int nthreads);
+
 bool model_pixel_info(const model_tracer_t *t, const model_camera_t *cam,
                       const model_lamps_t *lamps, const double *q_xy, int n,
                       model_pixel_info_t *out, model_lamp_sample_t *lamp_out, int nthreads)
+{
+    return pixel_info_run(t, cam, NULL, lamps, q_xy, n, out, lamp_out, nthreads);
+}
+
+bool model_pixel_info_table(const model_tracer_t *t, model_camera_t *cam, const model_lamps_t *lamps,
+                            const double *q_xy, int n, model_pixel_info_t *out, model_lamp_sample_t *lamp_out,
+                            int nthreads)
+{
+    const model_vec3_t *table = cam ? model_camera_ray_table(cam, NULL) : NULL;
+    if (cam && !table) return false;
+    return pixel_info_run(t, cam, table, lamps, q_xy, n, out, lamp_out, nthreads);
+}
+
+static bool pixel_info_run(const model_tracer_t *t, const model_camera_t *cam, const model_vec3_t *table,
+                           const model_lamps_t *lamps, const double *q_xy, int n, model_pixel_info_t *out,
+                           model_lamp_sample_t *lamp_out, int nthreads)
 {
     if (!t || !cam || (n > 0 && (!q_xy || !out)) || n < 0) {
         MODEL_FAIL("model_pixel_info: missing tracer, camera, pixel list or output");
@@ -821,6 +861,9 @@ bool model_pixel_info(const model_tracer_t *t, const model_camera_t *cam,
     c->out = out;
     c->lamp_out = lamp_out;
     c->centre = model_camera_centre_world(cam);
+    c->table = table;
+    c->W = model_camera_width(cam);
+    c->H = model_camera_height(cam);
     atomic_init(&c->failed, false);
     if (nthreads <= 0) nthreads = model_default_threads();
     model_parallel_for(n, PINFO_CHUNK, nthreads, pinfo_worker, c);

@@ -59,8 +59,12 @@
 //                        of the resolution with a camera of scaled intrinsics,
 //                        minus the direct term there (so only the
 //                        interreflection stays), and upsampled bilinearly from
-//                        the low-resolution pixels that see the same face
-//                        (edge-aware: no light leaks across silhouettes)
+//                        the four low-resolution pixels around a pixel when
+//                        all four see its face; the pixels where they do not
+//                        (within ~ds pixels of a face's edge, where the
+//                        indirect light changes fastest) get theirs at full
+//                        resolution (no light leaks across silhouettes, none
+//                        is lost toward a concave corner)
 //             Interreflection is smooth, so its low resolution costs little
 //             accuracy and keeps a new state's rendering near 100 ms on 2 cores.
 //             thesis / none: one full-resolution model_render.
@@ -636,11 +640,15 @@ static bool make_texture(rig_virtual_t *v, tracer_slot_t *slot, const int32_t *f
 }
 
 // Add the low-resolution indirect term (A_lr - B_lr) to L, bilinearly from the
-// neighbours that see the pixel's face (the nearest such one in a 3x3 window
-// when none of the four does; nothing when none at all).
+// four low-resolution neighbours of the pixel when all four see the pixel's
+// face. A pixel where they do not (within about ds pixels of a face's edge,
+// where the indirect light changes fastest: it rises toward a concave corner)
+// is marked in `full` instead and gets its indirect term at full resolution
+// (indirect_full).
 typedef struct {
     const rig_virtual_t *v;
     float               *L;
+    uint8_t             *full;
 } ind_job_t;
 
 static void indirect_rows(void *ctx, int begin, int end, int thread)
@@ -655,12 +663,14 @@ static void indirect_rows(void *ctx, int begin, int end, int thread)
         double wy = fy - y0;
         for (int x = 0; x < v->W; x++) {
             size_t i = (size_t)y * v->W + x;
+            J->full[i] = 0;
             int32_t face = v->face[i];
             if (face < 0) continue;
             double fx = (x + 0.5) / f - 0.5;
             int x0 = (int)floor(fx);
             double wx = fx - x0;
             double sum = 0, wsum = 0;
+            int same = 0;
             for (int k = 0; k < 4; k++) {
                 int xx = x0 + (k & 1), yy = y0 + (k >> 1);
                 if (xx < 0 || yy < 0 || xx >= Wl || yy >= Hl) continue;
@@ -669,33 +679,66 @@ static void indirect_rows(void *ctx, int begin, int end, int thread)
                 double w = ((k & 1) ? wx : 1 - wx) * ((k >> 1) ? wy : 1 - wy) + 1e-9;
                 sum += w * (v->A_lr[j] - v->B_lr[j]);
                 wsum += w;
+                same++;
             }
-            if (wsum == 0) {
-                double best = INFINITY;
-                for (int yy = y0 - 1; yy <= y0 + 2; yy++)
-                    for (int xx = x0 - 1; xx <= x0 + 2; xx++) {
-                        if (xx < 0 || yy < 0 || xx >= Wl || yy >= Hl) continue;
-                        size_t j = (size_t)yy * Wl + xx;
-                        double d2 = (xx - fx) * (xx - fx) + (yy - fy) * (yy - fy);
-                        if (v->face_lr[j] == face && d2 < best) {
-                            best = d2;
-                            sum = v->A_lr[j] - v->B_lr[j];
-                            wsum = 1;
-                        }
-                    }
-            }
-            if (wsum > 0) L[i] += (float)(sum / wsum);
+            if (same < 4) J->full[i] = 1;
+            else L[i] += (float)(sum / wsum);
         }
     }
 }
 
-// Render the radiance image of lamp `lamp` alone into L (cache_lock held).
-
-static void add_indirect(rig_virtual_t *v, float *L)
+// The low-resolution indirect term A_lr - B_lr, into A_lr, averaged over each
+// pixel's 3 x 3 neighbours that see its face: the indirect light is smooth
+// within a face, its Monte Carlo noise is not (mc_samples paths a pixel). false: out of memory.
+static bool indirect_smooth(rig_virtual_t *v)
 {
-    ind_job_t J = { v, L };
-    model_parallel_for(v->H, 16, model_default_threads(), indirect_rows, &J);
+    const int Wl = v->Wl, Hl = v->Hl;
+    float *D = malloc((size_t)Wl * Hl * sizeof *D);
+    if (!D) return false;
+    for (size_t j = 0; j < (size_t)Wl * Hl; j++) D[j] = v->A_lr[j] - v->B_lr[j];
+    for (int y = 0; y < Hl; y++)
+        for (int x = 0; x < Wl; x++) {
+            size_t j = (size_t)y * Wl + x;
+            int32_t f = v->face_lr[j];
+            double sum = 0;
+            int n = 0;
+            for (int yy = y - 1; yy <= y + 1; yy++)
+                for (int xx = x - 1; xx <= x + 1; xx++) {
+                    if (xx < 0 || yy < 0 || xx >= Wl || yy >= Hl) continue;
+                    size_t k = (size_t)yy * Wl + xx;
+                    if (v->face_lr[k] != f) continue;
+                    sum += D[k];
+                    n++;
+                }
+            v->A_lr[j] = (float)(sum / n);
+            v->B_lr[j] = 0;
+        }
+    free(D);
+    return true;
 }
+
+// The indirect term of the pixels marked in full, at full resolution: the
+// shadings ind (MC, point lamps) and base (direct only) of those pixels, their
+// difference added to L. false + message.
+static bool indirect_full(rig_virtual_t *v, model_tracer_t *t, const model_lamps_t *one,
+                          const model_material_t *const *mats, const model_shading_t *ind,
+                          const model_shading_t *base, const uint8_t *full, float *L)
+{
+    size_t npx = (size_t)v->W * v->H;
+    float *A = malloc(npx * sizeof *A), *B = malloc(npx * sizeof *B);
+    model_shading_t si = *ind, sb = *base;
+    si.pixel_mask = sb.pixel_mask = full;
+    bool ok = A && B && model_render(t, v->cam, one, mats, &si, A, NULL, NULL) &&
+              model_render(t, v->cam, one, mats, &sb, B, NULL, NULL);
+    if (!A || !B) model_error(v->truth_path, 0, "out of memory for the indirect light near edges");
+    for (size_t i = 0; ok && i < npx; i++)
+        if (full[i]) L[i] += A[i] - B[i];
+    free(A);
+    free(B);
+    return ok;
+}
+
+// Render the radiance image of lamp `lamp` alone into L (cache_lock held).
 
 static bool render_layers(rig_virtual_t *v, model_tracer_t *t, int sample, int lamp,
                           const model_material_t *const *mats, float *L);
@@ -784,8 +827,17 @@ static bool render_layers(rig_virtual_t *v, model_tracer_t *t, int sample, int l
     if (!model_render(t, v->cam_lr, &one, mats, &ind, v->A_lr, NULL, NULL) ||
         !model_render(t, v->cam_lr, &one, mats, &base, v->B_lr, v->face_lr, NULL))
         return false;
-    add_indirect(v, L);
-    return true;
+    uint8_t *full = malloc((size_t)v->W * v->H);
+    if (!full || !indirect_smooth(v)) {
+        free(full);
+        model_error(v->truth_path, 0, "out of memory for the indirect light");
+        return false;
+    }
+    ind_job_t J = { v, L, full };
+    model_parallel_for(v->H, 16, model_default_threads(), indirect_rows, &J);
+    bool ok = indirect_full(v, t, &one, mats, &ind, &base, full, L);
+    free(full);
+    return ok;
 }
 
 // The radiance image of one lamp; cache_lock held. NULL on error.
@@ -1247,6 +1299,14 @@ double rig_virtual_kc_per_us(const rig_virtual_t *v) { return v ? v->kc_per_us :
 model_sensor_t rig_virtual_sensor_params(const rig_virtual_t *v) { return v->sensor; }
 model_camera_t *rig_virtual_camera_model(rig_virtual_t *v) { return v ? v->cam : NULL; }
 const model_lamps_t *rig_virtual_lamps_truth(const rig_virtual_t *v) { return v ? v->lamps : NULL; }
+
+void rig_virtual_pixel_response(const rig_virtual_t *v, double *fill, double *sigma_px)
+{
+    *fill = v->optics.rays_per_pixel > 1 ? 1 : 0;
+    *sigma_px = v->optics.psf == RIG_PSF_GAUSSIAN ? v->optics.psf_sigma_px
+              : v->optics.psf == RIG_PSF_DISC     ? v->optics.psf_radius_px / 2
+                                                  : 0;
+}
 
 // ---------------------------------------------------------------------------
 // The truth file

@@ -137,6 +137,12 @@ double               rig_virtual_kc_per_us(const rig_virtual_t *v);
 model_sensor_t       rig_virtual_sensor_params(const rig_virtual_t *v);
 model_camera_t      *rig_virtual_camera_model(rig_virtual_t *v);
 const model_lamps_t *rig_virtual_lamps_truth(const rig_virtual_t *v);
+// Truth: the pixels' footprint and the optics' blur of [optics], as
+// verification models them (fit/verify_footprint.h): *fill 1 when each pixel
+// integrates rays over its square (rays_per_pixel > 1), 0 for one ray at its
+// centre; *sigma_px the Gaussian PSF's sigma (a disc of radius R: R / 2, its
+// second moment), 0 without.
+void                 rig_virtual_pixel_response(const rig_virtual_t *v, double *fill, double *sigma_px);
 // Frames the camera handed out that the pre-render thread had computed ahead
 // of their triggers (speculation; see rig/virtual.c), since the rig opened.
 long                 rig_virtual_frames_ahead(rig_virtual_t *v);

@@ -41,7 +41,8 @@
 #       projection difference (px) and |difference| / (s0 + s1) maps
 #       (crossvalidation.png), the worst images' residuals over the image
 #       (worst_views.png) and the lens distortion against the pinhole with
-#       the valid-intrinsics region (distortion.png).
+#       the valid-intrinsics region (distortion.png); the lens blur's ESF and
+#       LSF (psf.png, scripts/calib_psf_report.py).
 #   compare MODEL_A MODEL_B OUT.json DISTANCE_MM
 #       Two models of one lens differenced over A's imager (see compare()).
 import json
@@ -558,6 +559,8 @@ def plots(geometry_path, solution_path, outdir):
         fig.tight_layout()
         fig.savefig(f"{outdir}/axis_fit.png", dpi=90)
         plt.close(fig)
+    import calib_psf_report   # the lens blur's figure (psf.png), when the run estimated it (calib/psf.c)
+    calib_psf_report.plot(plt, outdir)
 
 
 if __name__ == "__main__":

@@ -115,12 +115,12 @@ parts.append("</table>\n")
 gj = load(cal, "gain", "gain.json")
 s = ini["sensor"]
 parts.append("<h3>Sensitivity (refl calib gain, EMVA 1288 style)</h3>\n<table>\n")
-parts.append(row(["figure", "calibrated", "truth"], True))
+parts.append(row(["figure", "calibrated", "1-sigma (gain.json std)", "truth"], True))
 for key, tkey, unit in [("system_gain_dn_per_e", "system_gain_dn_per_e", "DN/e-"), ("read_noise_e", "read_noise_e", "e-"),
                         ("dsnu_dn", "dsnu_dn", "DN"), ("prnu_pct", "prnu_pct", "%"),
                         ("dark_current_e_per_s", "dark_current_e_per_s", "e-/s"),
                         ("linearity_error_pct", "nonlinearity_pct", "% (truth: compression at full well)")]:
-    parts.append(row([f"{key} ({unit})", f(gj.get(key)), s.get(tkey, "")]))
+    parts.append(row([f"{key} ({unit})", f(gj.get(key)), f((gj.get("std") or {}).get(key, "")), s.get(tkey, "")]))
 parts.append("</table>\n")
 
 # ---- reference white ---------------------------------------------------------
@@ -129,11 +129,16 @@ kc = float(ini["camera"]["kc_per_us"])
 parts.append("<h3>Reference white: kc&middot;I per lamp (refl calib white)</h3>\n"
              "<p>Relative to the flat field g(x,y) of the gain calibration (mean 1), so the truth column is "
              "kc_per_us &middot; I &middot; mean(g) with mean(g) from the calibrated response.</p>\n<table>\n")
-parts.append(row(["lamp", "kc*I (DN/us per (1/sr)/mm^2)", "truth kc*I*mean(g)", "ratio"], True))
+parts.append(row(["lamp", "kc*I (DN/us per (1/sr)/mm^2)", "1-sigma (%)", "its parts (%)", "truth kc*I*mean(g)",
+                  "ratio"], True))
 gmean = gj.get("kc_small_signal_per_us", kc) / kc if gj.get("kc_small_signal_per_us") else 1.0
 for l in wj["lamps"]:
     t = kc * float(ini["lamp " + l["name"]]["intensity"]) * gmean
-    parts.append(row([l["name"], f(l["kc_I_per_us"], 6), f(t, 6), f(l["kc_I_per_us"] / t, 4)]))
+    sp = l.get("sigma_parts_rel") or {}
+    pt = ", ".join(f"{k} {100 * v:.3g}" for k, v in sp.items() if isinstance(v, (int, float)))
+    sr = l.get("std_rel")
+    parts.append(row([l["name"], f(l["kc_I_per_us"], 6), f(100 * sr, 3) if isinstance(sr, (int, float)) else "",
+                      pt, f(t, 6), f(l["kc_I_per_us"] / t, 4)]))
 parts.append("</table>\n")
 
 # ---- material ----------------------------------------------------------------

@@ -12,8 +12,10 @@ feasible, detectable_length_px, n_detectable, usable_points, glare_pix,
 saturated_pix}), "faces" (the chosen configuration's grey values per face:
 {face, material?, pixels_step2, P_min_dn, P_median_dn, P_max_dn, usable_frac,
 glare_pix, saturated_pix}), "segments" (the chosen configuration's visible edge
-segments: {edge, q0_px, q1_px, length_px, dP_dn, sobel_predicted_dn,
-detectable, face_side0, face_side1}), "options", "sensor", "provenance" and,
+segments: {edge, q0_px, q1_px, length_px, dP_dn, sobel_factor, sobel_predicted_dn,
+detectable, face_side0, face_side1}), "psf" (the blur of the Sobel prediction:
+{sigma_px, sigma_std_px, source, model, phase, sobel_factor: {axis_aligned,
+diagonal: {best, mean, worst}}}), "options", "sensor", "provenance" and,
 with --check-virtual, "virtual_rig_check" ({agreement (0..1 or null), target,
 rule, truth, configurations: [{lamps, agreement, segments_judged,
 segments_agreeing, segments: as above plus sobel_measured_dn and found, null
@@ -552,6 +554,29 @@ def edge_warnings(raw, configs, chosen_us):
     return []
 
 
+def psf_note(raw):
+    """The blur the edges' Sobel response was predicted with (plan.json's psf), one paragraph."""
+    psf = raw.get("psf")
+    if not isinstance(psf, dict) or not is_num(psf.get("sigma_px")):
+        return '<p class="note"><b>Edges:</b> plan.json names no PSF (a sharp step: f = 4.0 axis-aligned, 4.24 ' \
+               'diagonal).</p>'
+    f = psf.get("sobel_factor") if isinstance(psf.get("sobel_factor"), dict) else {}
+    ax = f.get("axis_aligned") if isinstance(f.get("axis_aligned"), dict) else {}
+    dg = f.get("diagonal") if isinstance(f.get("diagonal"), dict) else {}
+    sd = psf.get("sigma_std_px")
+
+    def num(o, k):
+        return o.get(k) if is_num(o.get(k)) else None
+    return (f'<p class="note"><b>Edges:</b> the predicted Sobel response of a segment is f &times; |dP|, f the '
+            f"response per unit contrast of a step blurred by a Gaussian PSF of sigma {fmt(psf['sigma_px'], '.3f')} px"
+            + (f" &plusmn; {fmt(sd, '.3f')}" if is_num(sd) else "")
+            + f" (from {e(str(psf.get('source', 'an unnamed source')))}) and integrated over the pixel's 1 px "
+            f"footprint, at the segment's direction and the best sub-pixel phase: f = {fmt(num(ax, 'best'), '.3f')} "
+            f"axis-aligned, {fmt(num(dg, 'best'), '.3f')} diagonal (mean phase {fmt(num(ax, 'mean'), '.3f')} and "
+            f"{fmt(num(dg, 'mean'), '.3f')}, worst {fmt(num(ax, 'worst'), '.3f')} and {fmt(num(dg, 'worst'), '.3f')}; "
+            "a sharp step: 4.0 and 4.24).</p>")
+
+
 def write_html(d, p, have):
     raw, ch, chk = p["raw"], p["chosen"], p["check"]
     prov = raw.get("provenance")
@@ -582,6 +607,7 @@ def write_html(d, p, have):
         notes.append(f"chosen.n_segments is {nseg}, the segments list has {len(p['segments'])}")
     for n in notes:
         L.append(f'<p class="note"><b>Note:</b> {e(n)}.</p>')
+    L.append(psf_note(raw))
 
     # the check
     if chk:

@@ -14,9 +14,10 @@ relative to DIR; the synthetic one is the fitted model, NaN where the
 description has no surface), "scene", "provenance", "options" (z_flag,
 spacing_px), "fit".
 DIR/points.csv: image,x_px,y_px,face,status,flag,region,measured_dn,model_dn,
-sigma_dn,z (image: index into "images"; pixels in the mrcal convention, (0,0)
-the centre of the top-left pixel, y down; the last four empty where nothing was
-measured).
+sigma_dn,z,footprint (image: index into "images"; pixels in the mrcal
+convention, (0,0) the centre of the top-left pixel, y down; measured_dn ..
+z empty where nothing was measured; footprint 1: a window near an edge,
+modelled with the pixels' footprint and the blur).
 
 Writes into DIR: views.png (actual | synthetic | actual - synthetic per image),
 zmap.png (z at the reference points), residue.png (histogram of z) and
@@ -46,7 +47,7 @@ STATUS_MEANING = {
     "edge_measured": "the window's spread says edge where none is predicted (a flag)",
 }
 POINT_COLUMNS = ["image", "x_px", "y_px", "face", "status", "flag", "region",
-                 "measured_dn", "model_dn", "sigma_dn", "z"]
+                 "measured_dn", "model_dn", "sigma_dn", "z", "footprint"]
 Z_CLIP = 8.0
 DIFF_CLIP = 5.0
 BOX_COLOUR = "#00b000"
@@ -228,9 +229,9 @@ def load_points(d, nimages):
                 val[k] = math.nan   # refl leaves them empty at points without a measurement
                 continue
             try:
-                val[k] = int(t) if k in ("image", "face", "flag", "region") else float(t)
+                val[k] = int(t) if k in ("image", "face", "flag", "region", "footprint") else float(t)
             except ValueError:
-                kind = "an integer" if k in ("image", "face", "flag", "region") else "a number"
+                kind = "an integer" if k in ("image", "face", "flag", "region", "footprint") else "a number"
                 raise Bad(ppath, f"line {line}: {k} {t!r} is not {kind}")
         img, x, y, flag = val["image"], val["x_px"], val["y_px"], val["flag"]
         status = row["status"]
@@ -544,7 +545,9 @@ def write_html(d, v, p, info, nused):
     rows.append(["all", str(tot), "100 %" if tot else "n/a", str(len(p["status"])), ""])
     L.append(table(["status", "points", "share", "rows in points.csv", "meaning"], rows,
                    [""] * (len(rows) - 1) + ["all"], [False, True, True, True, False]))
-    L.append(f'<p class="note">{int(np.sum(p["flag"]))} of the points in points.csv are flagged.</p>')
+    L.append(f'<p class="note">{int(np.sum(p["flag"]))} of the points in points.csv are flagged; '
+             f'{int(np.sum(p["footprint"]))} of the used ones are windows near edges, modelled with the pixels\' '
+             f'footprint and the camera\'s blur.</p>')
 
     # parameters
     L.append('<h2 id="parameters">Parameters</h2>')

@@ -187,7 +187,7 @@ def fig_placed(d, configs, placed, by):
     ax.set_ylim(0, 100)
     ax.set_ylabel("correct description flagged by the verdict (%)")
     ax.set_xlabel("the part placed off (shift, turn)")
-    ax.set_title("Placed-off parts called wrong (they should pass once verification tolerates placement)")
+    ax.set_title("Placed-off parts called wrong (within the registration's tolerance they should pass)")
     ax.grid(axis="y", alpha=0.3)
     ax.legend(fontsize=8, loc="upper left")
     fig.savefig(os.path.join(d, "placed.png"), dpi=80)
@@ -222,6 +222,22 @@ def write_html(d, doc, configs, summ):
              "called wrong at the 1 % threshold / by the verdict:</p>")
     L.append(grid(configs, placed, by, lambda s: f"{f3(s.get('auc'))} ({pct(s.get('flagged_at_1pct_fa'))} / "
                                                   f"{pct(s.get('flagged_verdict'))})"))
+    zc = (doc.get("results") or {}).get("z_calibration") or []
+    if zc:
+        L.append('<h2 id="zcal">The stated sigma, checked</h2>')
+        L.append("<p>Over the cases, each fit's RMS z and median |z| at its used reference points, z = (measured "
+                 "&minus; model)/&sigma;: 1 and 0.674 when the stated &sigma; is right (smaller: &sigma; too large, "
+                 "larger: too small).</p>")
+        rows = ["<table>", "<tr><th>config</th><th>description</th><th>cases</th><th>RMS z (mean)</th>"
+                "<th>range</th><th>median |z| (mean)</th><th>range</th></tr>"]
+        for z in zc:
+            rr, mr = z.get("rms_z_range") or [math.nan] * 2, z.get("median_abs_z_range") or [math.nan] * 2
+            rows.append(f'<tr><td class="l">{e(z.get("config"))}</td><td class="l">{e(z.get("description"))}</td>'
+                        f'<td class="n">{z.get("n")}</td><td class="n">{f3(z.get("rms_z_mean"))}</td>'
+                        f'<td class="n">{f3(rr[0])}..{f3(rr[1])}</td><td class="n">{f3(z.get("median_abs_z_mean"))}</td>'
+                        f'<td class="n">{f3(mr[0])}..{f3(mr[1])}</td></tr>')
+        rows.append("</table>")
+        L.append("\n".join(rows))
     L.append("<h2 id=\"all\">All figures</h2>")
     hdr = ["config", "description", "expected", "correct cases", "cases", "AUC", "above the 1 % threshold",
            "threshold (score)", "flagged by the verdict", "false alarms of the verdict"]

@@ -729,9 +729,9 @@ static void remove_dir(const char *dir)
     if (system(cmd) != 0) fprintf(stderr, "refl-bench: could not remove %s\n", dir);
 }
 
-// Two runs' study.csv (config,description,expected,case,score,verdict_correct)
-// row by row: the largest relative score difference and the rows whose verdict
-// differs. false: unreadable or not the same rows.
+// Two runs' study.csv (config,description,expected,case,score,verdict_correct,
+// rms_z,median_abs_z) row by row: the largest relative score difference and
+// the rows whose verdict differs. false: unreadable or not the same rows.
 static bool study_compare(const char *a, const char *b, double *max_rel, char worst[160], int *verdicts, int *rows)
 {
     char pa[1100], pb[1100], la[512], lb[512];
@@ -742,21 +742,33 @@ static bool study_compare(const char *a, const char *b, double *max_rel, char wo
     *max_rel = 0;
     *verdicts = *rows = 0;
     worst[0] = 0;
+    bool header = true;
     while (ok && fgets(la, sizeof la, fa)) {
         if (!fgets(lb, sizeof lb, fb)) {
             ok = false;
             break;
         }
-        char *ca = strrchr(la, ','), *cb = strrchr(lb, ',');
-        if (!ca || !cb) continue;
-        *verdicts += atoi(ca + 1) != atoi(cb + 1);
-        *ca = *cb = 0;
-        ca = strrchr(la, ',');
-        cb = strrchr(lb, ',');
+        if (header) {
+            header = false;
+            continue;
+        }
+        // the fourth comma ends the key (config, description, expected, case); then score, verdict
+        char *ca = la, *cb = lb;
+        for (int k = 0; k < 4 && ca && cb; k++) {
+            ca = strchr(ca, ',');
+            cb = strchr(cb, ',');
+            if (ca) ca++;
+            if (cb) cb++;
+        }
         double x, y;
-        if (!ca || !cb || sscanf(ca + 1, "%lf", &x) != 1 || sscanf(cb + 1, "%lf", &y) != 1) continue;   // header
-        *ca = *cb = 0;
+        int va, vb;
+        if (!ca || !cb || sscanf(ca, "%lf,%d", &x, &va) != 2 || sscanf(cb, "%lf,%d", &y, &vb) != 2) {
+            ok = false;
+            break;
+        }
+        ca[-1] = cb[-1] = 0;
         ok = !strcmp(la, lb);   // the same config, description, expected, case
+        *verdicts += va != vb;
         double d = fabs(x - y) / fmax(fmax(fabs(x), fabs(y)), 1e-300);
         if (d > *max_rel) {
             *max_rel = d;

@@ -21,6 +21,7 @@
 #include "calib/calib.h"
 #include "calib/gain.h"
 #include "model/model.h"
+#include "model/vec.h"
 #include "rig/rig.h"
 #include "tests/test.h"
 
@@ -163,6 +164,15 @@ TEST_LONG(calib_gain_virtual)
     CHECK_REL(jnum(j, "dsnu_dn"), s.dsnu_dn, 0.05);
     CHECK_REL(jnum(j, "prnu_pct"), s.prnu_pct, 0.10);
     CHECK(jnum(j, "prnu_total_pct") > 1.5 * jnum(j, "prnu_pct"));   // vignetting in the total
+    // every figure's stated 1-sigma (gain.json std), and each within 4 of them of the truth
+    static const char *const fig[] = { "system_gain_dn_per_e", "read_noise_e", "dark_current_e_per_s", "dsnu_dn",
+                                       "prnu_pct" };
+    const double tru[] = { s.system_gain_dn_per_e, s.read_noise_e, s.dark_current_e_per_s, s.dsnu_dn, s.prnu_pct };
+    for (int k = 0; k < 5; k++) {
+        double sd = jnum(json_object_get(j, "std"), fig[k]), z = (jnum(j, fig[k]) - tru[k]) / sd;
+        fprintf(stderr, "  %s: 1-sigma %.3g, z %+.2f\n", fig[k], sd, z);
+        CHECK_MSG(sd > 0 && fabs(z) < 4, "%s: sigma %g, z %g", fig[k], sd, z);
+    }
     CHECK_REL(jnum(j, "dark_level_dn"), s.dark_offset_dn, 0.01);
     CHECK(jnum(j, "snr_max") > 100 && jnum(j, "snr_max") < sqrt(s.full_well_e) * 1.05);
 
@@ -978,4 +988,103 @@ TEST(calib_gain_lin_json_compat)
     CHECK(!calib_gain_lin_from_json(old, "bad/gain.json", &L));
     CHECK_CONTAINS(model_last_error(), "knot 3");
     json_decref(old);
+}
+
+// The stated 1-sigmas of the EMVA figures against their scatter over
+// repeated synthetic frame sets (within 20 %): K from photon transfer
+// (calib_gain_ptc's standard error), the dark fits' slope and intercept
+// (calib_gain_polyfit_se, whose points scatter unequally), and a fixed
+// pattern's std through the temporal noise of an average
+// (calib_gain_spatial_std: DSNU and PRNU).
+static double gs_std(const double *x, int n, double *mean)
+{
+    double m = 0, v = 0;
+    for (int i = 0; i < n; i++) m += x[i] / n;
+    for (int i = 0; i < n; i++) v += (x[i] - m) * (x[i] - m);
+    if (mean) *mean = m;
+    return sqrt(v / (n - 1));
+}
+
+TEST(calib_gain_sigmas_scatter)
+{
+    enum { SETS = 200, NPIX = 1024, NT = 50, NLOW = 16, NS = NT + NLOW };
+    const double K = 0.25, rn_dn = 1.5, fw = 16000, full = 4095;
+    model_rng_t r = model_rng(21, 1);
+    double t[NS];
+    int ns = calib_gain_sweep_exposures(10000, NT, NLOW, t);
+    CHECK(ns == NS);
+    double k[SETS], ks[SETS];
+    for (int set = 0; set < SETS; set++) {
+        double mu[NS], var[NS], vd = 0;
+        for (int i = 0; i < ns; i++) {
+            double me = fw * 1.2 * t[i] / t[ns - 1];   // electrons: the sweep reaches 1.2 x the well
+            double sa = 0, sd = 0, sda = 0, sdd = 0;
+            for (int p = 0; p < NPIX; p++) {
+                double a = fmin(full, K * (me + sqrt(me) * model_rng_gauss(&r)) + rn_dn * model_rng_gauss(&r));
+                double b = fmin(full, K * (me + sqrt(me) * model_rng_gauss(&r)) + rn_dn * model_rng_gauss(&r));
+                double da = rn_dn * model_rng_gauss(&r), db = rn_dn * model_rng_gauss(&r);
+                sa += a + b, sd += (a - b) * (a - b), sda += da + db, sdd += (da - db) * (da - db);
+            }
+            mu[i] = (sa - sda) / (2 * NPIX);
+            var[i] = (sd - sdd) / (2 * NPIX);
+            vd += sdd / (2 * NPIX) / ns;
+        }
+        calib_gain_ptc_t p;
+        CHECK(calib_gain_ptc(t, mu, var, NULL, ns, vd, 0, &p));
+        k[set] = p.system_gain_dn_per_e;
+        ks[set] = p.system_gain_std_dn_per_e;
+    }
+    double km, ksm, s = gs_std(k, SETS, &km);
+    gs_std(ks, SETS, &ksm);
+    fprintf(stderr, "  K %.5f (truth %.3f): scatter %.3g over %d frame sets, stated %.3g (mean)\n", km, K, s, SETS,
+            ksm);
+    CHECK_MSG(fabs(ksm / s - 1) < 0.2, "K: stated %.4g, scatter %.4g", ksm, s);
+    CHECK(fabs(km - K) < 3 * s);
+
+    // the dark fits: mean and temporal variance of a dark pair against exposure
+    // (dark current 20 e-/s, exposures 0.1 .. 2 s and the sweep's short ones)
+    enum { ND = 40, FITS = 400 };
+    double dt[ND], slope[FITS], slope_se[FITS], icpt[FITS], icpt_se[FITS];
+    for (int i = 0; i < ND; i++) dt[i] = i < 20 ? 100.0 * (i + 1) : 1e5 * (i - 19);
+    for (int f = 0; f < FITS; f++) {
+        double dm[ND], dv[ND], c[3], se[3];
+        for (int i = 0; i < ND; i++) {
+            double ve = rn_dn * rn_dn + K * K * 20e-6 * dt[i];   // DN^2
+            dm[i] = 64 + K * 20e-6 * dt[i] + sqrt(ve / NPIX) * model_rng_gauss(&r);
+            dv[i] = ve * (1 + sqrt(2.0 / NPIX) * model_rng_gauss(&r));
+        }
+        CHECK(calib_gain_polyfit_se(dt, dm, ND, 1, c, se));
+        slope[f] = c[1], slope_se[f] = se[1];
+        CHECK(calib_gain_polyfit_se(dt, dv, ND, 1, c, se));
+        icpt[f] = c[0], icpt_se[f] = se[0];
+    }
+    double a, b;
+    double ss = gs_std(slope, FITS, NULL), si = gs_std(icpt, FITS, NULL);
+    gs_std(slope_se, FITS, &a);
+    gs_std(icpt_se, FITS, &b);
+    fprintf(stderr, "  dark current slope: scatter %.3g DN/us, stated %.3g; dark variance at 0: scatter %.3g DN^2, "
+            "stated %.3g\n", ss, a, si, b);
+    CHECK_MSG(fabs(a / ss - 1) < 0.2, "slope: stated %.4g, scatter %.4g", a, ss);
+    CHECK_MSG(fabs(b / si - 1) < 0.2, "intercept: stated %.4g, scatter %.4g", b, si);
+
+    // a fixed pattern of std 1.5 DN under the temporal noise of 16 averaged frames of 1.6 DN
+    enum { NP = 4096, AVG = 400 };
+    static double pat[NP];
+    double pm = 0, pv = 0;
+    for (int i = 0; i < NP; i++) pat[i] = model_rng_gauss(&r), pm += pat[i] / NP;
+    for (int i = 0; i < NP; i++) pv += (pat[i] - pm) * (pat[i] - pm) / NP;
+    for (int i = 0; i < NP; i++) pat[i] = 1.5 * (pat[i] - pm) / sqrt(pv);   // exactly 1.5 DN
+    const double tau = 1.6 * 1.6 / 16;
+    double est[AVG];
+    for (int k2 = 0; k2 < AVG; k2++) {
+        double m = 0, v = 0, x[NP];
+        for (int i = 0; i < NP; i++) x[i] = pat[i] + sqrt(tau) * model_rng_gauss(&r), m += x[i] / NP;
+        for (int i = 0; i < NP; i++) v += (x[i] - m) * (x[i] - m) / NP;
+        est[k2] = sqrt(v - tau);
+    }
+    double em, es = gs_std(est, AVG, &em), st = calib_gain_spatial_std(1.5, tau, NP);
+    fprintf(stderr, "  fixed pattern 1.5 DN: %.5f, scatter %.3g over %d averages, stated %.3g\n", em, es, AVG, st);
+    CHECK_MSG(fabs(st / es - 1) < 0.2, "pattern: stated %.4g, scatter %.4g", st, es);
+    CHECK(fabs(em - 1.5) < 3 * es);
+    CHECK(isnan(calib_gain_spatial_std(0, tau, NP)));
 }

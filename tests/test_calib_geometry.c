@@ -43,6 +43,7 @@
 #include "calib/geometry.h"
 #include "model/model.h"
 #include "model/report.h"
+#include "tests/fixtures.h"
 #include "tests/test.h"
 
 #define DEG (M_PI / 180.0)
@@ -454,6 +455,17 @@ TEST_LONG(calib_geometry_virtual_rig)
         json_t *prov = json_object_get(g, "provenance");
         CHECK(json_array_size(json_object_get(prov, "inputs")) >= 3);
         CHECK(exists_in(dir, "report.html") && exists_in(dir, "axis_fit.png") && exists_in(dir, "uncertainty.png"));
+        // the lens's blur: the matched rig takes one ray at each pixel's centre and has no PSF, so its edges are
+        // as sharp as the footprint alone or sharper: sigma 0 (calib/psf.c; tests/test_calib_psf.c)
+        json_t *psf = json_object_get(g, "psf");
+        fprintf(stderr, "  virtual rig lens blur: sigma %.4f +- %.4f px from %lld edges\n",
+                json_number_value(json_object_get(psf, "sigma_px")),
+                json_number_value(json_object_get(psf, "sigma_std_px")),
+                json_integer_value(json_object_get(psf, "edges_used")));
+        CHECK(!strcmp(json_string_value(json_object_get(psf, "model")) ?: "", "gaussian"));
+        CHECK(json_number_value(json_object_get(psf, "sigma_px")) < 0.05);
+        CHECK(json_integer_value(json_object_get(psf, "edges_used")) >= 300);
+        CHECK(exists_in(dir, "psf.png"));
     }
 
     // The same sessions again through --session: the same frames, the same
@@ -533,6 +545,10 @@ TEST_LONG(calib_geometry_virtual_rig)
     CHECK(gi != NULL);
     if (gi) {
         CHECK(json_is_null(json_object_get(gi, "axis")));
+        // images from elsewhere (here the 8-bit copies) go through the same blur estimate
+        json_t *psf = json_object_get(gi, "psf");
+        CHECK(!strcmp(json_string_value(json_object_get(psf, "model")) ?: "", "gaussian"));
+        CHECK(json_number_value(json_object_get(psf, "sigma_px")) < 0.05);
         json_t *miss = json_object_get(gi, "images_without_board");
         bool seen = false;
         size_t i;
@@ -560,6 +576,76 @@ TEST_LONG(calib_geometry_virtual_rig)
     free(b);
     free(out);
     free(err);
+}
+
+// The lens's blur on the virtual rig (calib/psf.c): a truth with 4 x 4 rays
+// over each pixel's footprint and a Gaussian PSF of 0.8 px, then the same
+// without the PSF; kept short (one lamp, no interreflection, point lamps,
+// three views, OPENCV4). The rig's PSF is a kernel on the pixel grid
+// (weights at whole pixels) and its footprint 4 x 4 points: the Gaussian
+// fitted to its edges comes out a little narrower than 0.8 px (0.798 on
+// noise-free synthetic views of the same rendering), within 0.02 px; without
+// the PSF, sigma is 0 within 0.05 px (the footprint alone).
+static json_t *psf_run(const char *tag, const char *optics, double *sigma, double *sd)
+{
+    char name[64], rig[2 * PATH_MAX], dir[64];
+    snprintf(name, sizeof name, "truth-%s.ini", tag);
+    const char *rep[] = { "interreflection = mc", "interreflection = none", "finite_lamps = 1", "finite_lamps = 0",
+                          "[lamp south]\nposition_mm = -52.3 -597.7 480\nintensity = 2.9e9\nradius_mm = 15\n", "",
+                          "[lamp west]\nposition_mm = -526.2 -191.5 520\nintensity = 3.1e9\nradius_mm = 15\n", "",
+                          "[lamp north]\nposition_mm = 98.4 367.1 700\nintensity = 3.6e9\nradius_mm = 15\n", "",
+                          "[lamp rim]\nposition_mm = -619.8 65.1 219.6\nintensity = 2.6e9\nradius_mm = 15\n", "",
+                          NULL };
+    char truth[PATH_MAX];
+    snprintf(truth, sizeof truth, "%s", fx_truth_variant("virtual-truth.ini", name, rep, optics));
+    snprintf(rig, sizeof rig, "[rig]\nbackend = virtual\ntruth = %s\nserve = inprocess\ntime_scale = 0.01\n"
+             "noise_seed = 7\n", truth);
+    snprintf(name, sizeof name, "rig-%s.ini", tag);
+    char rigp[PATH_MAX];
+    snprintf(rigp, sizeof rigp, "%s", test_write(name, rig));
+    snprintf(dir, sizeof dir, "geo-%s", tag);
+    char *out_dir = g_strdup(test_path(dir));
+    char *out = NULL, *err = NULL;
+    double t0 = model_realtime_s();
+    int rc = test_refl_run(300, &out, &err, "calib", "geometry", "--yes", "--rig", rigp, "--tilts", "20@0:0,40,320",
+                           "--exposure-us", "20000", "--lensmodel", "LENSMODEL_OPENCV4", "--min-views", "3", "-o",
+                           out_dir, NULL);
+    fprintf(stderr, "  %s: %.1f s\n", tag, model_realtime_s() - t0);
+    CHECK_MSG(rc == 0, "refl calib geometry (%s): exit %d\n%s", tag, rc, err ? err : "");
+    CHECK_CONTAINS(err, "lens blur: Gaussian PSF sigma");
+    free(out);
+    free(err);
+    json_t *g = load_json(out_dir, "geometry.json"), *p = json_object_get(g, "psf");
+    CHECK(p && !strcmp(json_string_value(json_object_get(p, "model")) ?: "", "gaussian"));
+    *sigma = json_number_value(json_object_get(p, "sigma_px"));
+    *sd = json_number_value(json_object_get(p, "sigma_std_px"));
+    CHECK(!strcmp(json_string_value(json_object_get(p, "footprint")) ?: "", "1 px box, integrated separately"));
+    CHECK(json_integer_value(json_object_get(p, "edges_used")) >= 300);
+    CHECK(*sd > 0);
+    CHECK(exists_in(out_dir, "psf_esf.csv") && exists_in(out_dir, "psf_edges.csv") && exists_in(out_dir, "psf.png"));
+    char *html = NULL, *hp = g_strdup_printf("%s/report.html", out_dir);
+    CHECK(g_file_get_contents(hp, &html, NULL, NULL));
+    CHECK_CONTAINS(html, "Lens blur");
+    g_free(html);
+    g_free(hp);
+    g_free(out_dir);
+    fprintf(stderr, "  %s: lens blur sigma %.4f +- %.4f px from %lld edges of %lld views (spread %.4f px)\n", tag,
+            *sigma, *sd, json_integer_value(json_object_get(p, "edges_used")),
+            json_integer_value(json_object_get(p, "views_used")),
+            json_number_value(json_object_get(p, "sigma_spread_px")));
+    return g;
+}
+
+TEST_LONG(calib_geometry_psf_virtual_rig)
+{
+    double s, sd;
+    json_t *g = psf_run("psf08", "[optics]\nrays_per_pixel = 4\npsf = gaussian\npsf_sigma_px = 0.8\n", &s, &sd);
+    fprintf(stderr, "  truth 0.8 px: error %+.4f px (z %+.1f)\n", s - 0.8, (s - 0.8) / sd);
+    CHECK(fabs(s - 0.8) < 0.02);
+    json_decref(g);
+    g = psf_run("nopsf", "[optics]\nrays_per_pixel = 4\npsf = none\n", &s, &sd);
+    CHECK(s < 0.05);
+    json_decref(g);
 }
 
 TEST(calib_geometry_bad_arguments)

@@ -424,3 +424,78 @@ TEST(chain_lamp_irradiance)
     g_free(truth);
     g_free(cam);
 }
+
+// The stated sigmas the chain reads: the intrinsics' from the geometry's mrcal
+// solve (solution.json, when its intrinsics are the camera's), the camera
+// centre's from geometry.json's rig_frame_sigma, the EMVA figures' from
+// gain.json's std, the white's total std_rel and its irradiance sigma over
+// the samples' region; each z = error / sigma.
+TEST(chain_stated_sigmas)
+{
+    char *truth = example("virtual-truth.ini"), *cam = example("camera.cameramodel");
+    char *model_text = NULL;
+    CHECK(g_file_get_contents(cam, &model_text, NULL, NULL));
+    mrcal_cameramodel_t *m = mrcal_read_cameramodel_file(cam);
+    CHECK(m != NULL);
+    if (!m) return;
+    put("calib/geometry/camera.cameramodel", model_text ? model_text : "");
+    double rt_ref_cam[6];
+    mrcal_invert_rt(rt_ref_cam, NULL, NULL, m->rt_cam_ref);
+    char g[2048], s[1024];
+    snprintf(g, sizeof g, "{\"intrinsics\": [%.17g, %.17g, %.17g, %.17g], \"camera_centre_rig_mm\": [%.17g, %.17g, "
+             "%.17g], \"axis\": {\"rig_frame_sigma\": {\"camera_centre_mm\": 0.5}}}", m->intrinsics[0],
+             m->intrinsics[1], m->intrinsics[2], m->intrinsics[3], rt_ref_cam[3] + 1.0, rt_ref_cam[4], rt_ref_cam[5]);
+    put("calib/geometry/geometry.json", g);
+    snprintf(s, sizeof s, "{\"intrinsics\": [%.17g, %.17g, %.17g, %.17g, 0], \"intrinsics_core_stdev\": [2, 2, 0.5, "
+             "0.25]}", m->intrinsics[0], m->intrinsics[1], m->intrinsics[2], m->intrinsics[3]);
+    put("calib/geometry/mrcal/solution.json", s);
+    put("calib/lamps/lamps.json", "{\"lamps\": [{\"name\": \"east\", \"position_mm\": [488.6, 177.9, 600]}]}");
+    put("calib/gain/gain.json", "{\"system_gain_dn_per_e\": 0.251, \"read_noise_e\": 6.02, \"dark_current_e_per_s\": "
+        "19, \"std\": {\"system_gain_dn_per_e\": 0.0005, \"read_noise_e\": 0.01, \"dark_current_e_per_s\": 0.25}}");
+    // kc 1e-4 per us, east's I 3.2e9: kc*I 3.2e5 (mean(g) 1 without the small-signal kc)
+    put("calib/white/white.json", "{\"lamps\": [{\"name\": \"east\", \"kc_I_per_us\": 3.232e5, \"std_rel\": 0.005, "
+        "\"std_of_median_rel\": 0.0001, \"irradiance_samples_region\": {\"std_max_pct\": 0.4}}]}");
+    json_t *prov = model_provenance(0, NULL);
+    json_t *doc = fit_chain_compare(test_path("day"), truth, prov);
+    CHECK_MSG(doc != NULL, "%s", model_last_error());
+    if (doc) {
+        // the same model: every intrinsic error 0 with its stated sigma
+        const double sd[4] = { 2, 2, 0.5, 0.25 };
+        static const char *const in[4] = { "camera.fx", "camera.fy", "camera.cx", "camera.cy" };
+        for (int k = 0; k < 4; k++) {
+            const json_t *e = entry(doc, in[k]);
+            CHECK_NEAR(field(e, "sigma"), sd[k], 1e-12);
+            CHECK_NEAR(field(e, "z"), 0, 1e-9);
+        }
+        CHECK_NEAR(field(entry(doc, "camera.centre_rig.x"), "z"), 2.0, 1e-6);
+        CHECK_NEAR(field(entry(doc, "camera.centre_rig.y"), "sigma"), 0.5, 1e-12);
+        CHECK_NEAR(field(entry(doc, "sensor.system_gain_dn_per_e"), "z"), 2.0, 1e-6);
+        CHECK_NEAR(field(entry(doc, "sensor.read_noise_e"), "z"), 2.0, 1e-6);
+        CHECK_NEAR(field(entry(doc, "sensor.dark_current_e_per_s"), "z"), -4.0, 1e-6);
+        CHECK(json_is_null(json_object_get(entry(doc, "sensor.dsnu_dn"), "sigma")));
+        const json_t *e = entry(doc, "white.kc_I_east");
+        CHECK_NEAR(field(e, "sigma"), 3.232e5 * 0.005, 1e-6);
+        CHECK_NEAR(field(e, "z"), 0.01 / 1.01 / 0.005, 1e-6);
+        e = entry(doc, "lamp_east.irradiance_max_err");   // isotropic, at its true place: kc*I's 1 %
+        CHECK_NEAR(field(e, "value"), 1.0, 1e-9);
+        CHECK_NEAR(field(e, "sigma"), 0.4, 1e-12);
+        const json_t *over = json_object_get(json_object_get(doc, "summary"), "z_over_3"), *n;
+        size_t i;
+        int nover = 0;
+        json_array_foreach(over, i, n) nover++;
+        CHECK(nover == 1);   // the dark current (z -4) alone
+    }
+    // a solve of other intrinsics (another camera's) gives no sigma
+    snprintf(s, sizeof s, "{\"intrinsics\": [%.17g, 1, 1, 1], \"intrinsics_core_stdev\": [2, 2, 0.5, 0.25]}",
+             m->intrinsics[0] + 1);
+    put("calib/geometry/mrcal/solution.json", s);
+    json_decref(doc);
+    doc = fit_chain_compare(test_path("day"), truth, prov);
+    CHECK(doc && json_is_null(json_object_get(entry(doc, "camera.fx"), "sigma")));
+    json_decref(doc);
+    json_decref(prov);
+    mrcal_free_cameramodel(&m);
+    g_free(model_text);
+    g_free(truth);
+    g_free(cam);
+}

@@ -6,6 +6,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <unistd.h>
 
 #include <glib.h>
 #include <jansson.h>
@@ -370,4 +371,117 @@ TEST(lightplan_views_capture_plan)
     g_free(sess);
     g_free(pp);
     g_free(dir);
+}
+
+// The lens's blur in the Sobel prediction: each segment's factor is the
+// blurred, footprint-integrated step's (model_edge_sobel_step, best phase),
+// so a PSF of 0.8 px scales every predicted response by that factor's ratio
+// and leaves the contrast alone; refl plan lamps takes sigma from the
+// geometry.json beside --camera (refl calib geometry's psf), --psf-sigma-px
+// overrides it, and plan.json and the report say which.
+TEST(lightplan_psf_in_the_sobel_prediction)
+{
+    char path[4096];
+    snprintf(path, sizeof path, "%s/examples/camera.cameramodel", test_srcdir());
+    model_camera_t *cam = model_camera_load(path);
+    const char *scene_txt =
+        "1 -150 -150 0\n2 150 -150 0\n3 150 150 0\n4 -150 150 0\nFaces:\n@material matte\n1 2 3 4.\n";
+    const char *mt = "[material matte]\nmodel = lambert\nkd = 0.2\n";
+    const char *lt = "[lamp side]\nposition_mm = 400 -300 600\nintensity = 3e9\n";
+    model_scene_t *sc = model_scene_parse_d3d(scene_txt, strlen(scene_txt), "plate.d3d", NULL);
+    model_materials_t *mm = model_materials_parse(mt, strlen(mt), "m.ini");
+    model_lamps_t *l = model_lamps_parse(lt, strlen(lt), "l.ini");
+    CHECK(cam && sc && mm && l);
+    if (!(cam && sc && mm && l)) return;
+    const model_material_t *mats[1];
+    CHECK(model_resolve_materials(sc, mm, mats));
+    double A[1] = { 1e-4 * 3e9 }, exps[1] = { 2000 };
+    lightplan_sensor_t s = { .offset_dn = 64, .saturation_dn = 4095 };
+    lightplan_options_t o = lightplan_defaults();
+    o.ir_samples = 0;
+    lightplan_result_t r0, r8;
+    CHECK(lightplan_run(sc, cam, l, A, mats, &s, exps, 1, &o, &r0));
+    o.psf_sigma_px = 0.8;
+    CHECK(lightplan_run(sc, cam, l, A, mats, &s, exps, 1, &o, &r8));
+    CHECK(r0.nsegments >= 4 && r0.nsegments == r8.nsegments);
+    for (int k = 0; k < r0.nsegments && k < r8.nsegments; k++) {
+        const lightplan_segment_t *a = &r0.segments[k], *b = &r8.segments[k];
+        double normal = atan2(a->q1[1] - a->q0[1], a->q1[0] - a->q0[0]) + M_PI / 2;
+        CHECK_NEAR(a->sobel_factor, model_edge_sobel_step(normal, 0).best, 1e-12);
+        CHECK_NEAR(b->sobel_factor, model_edge_sobel_step(normal, 0.8).best, 1e-12);
+        CHECK(a->sobel_factor >= 4.0 - 1e-9 && a->sobel_factor <= 4.31);
+        CHECK(b->sobel_factor > 2.9 && b->sobel_factor < 3.1);
+        CHECK_NEAR(a->dP, b->dP, 1e-9 * fabs(a->dP) + 1e-12);
+        CHECK_NEAR(b->gradient / a->gradient, b->sobel_factor / a->sobel_factor, 1e-9);
+    }
+    lightplan_result_free(&r0);
+    lightplan_result_free(&r8);
+    o.psf_sigma_px = -1;
+    CHECK(!lightplan_run(sc, cam, l, A, mats, &s, exps, 1, &o, &r0));
+    CHECK_CONTAINS(model_last_error(), "sigma");
+    model_lamps_free(l);
+    model_materials_free(mm);
+    model_scene_free(sc);
+    model_camera_free(cam);
+
+    // refl plan lamps: sigma from the geometry calibration beside --camera, or --psf-sigma-px
+    gchar *text = NULL;
+    gsize len = 0;
+    CHECK(g_file_get_contents(path, &text, &len, NULL));
+    g_mkdir_with_parents(test_path("cal/geometry"), 0755);
+    char *camp = g_strdup(test_path("cal/geometry/camera.cameramodel"));
+    CHECK(g_file_set_contents(camp, text, (gssize)len, NULL));
+    g_free(text);
+    test_write("cal/geometry/geometry.json", "{\"psf\": {\"model\": \"gaussian\", \"sigma_px\": 0.8, "
+               "\"sigma_std_px\": 0.01}}");
+    char *scp = g_strdup(test_write("plate.d3d", scene_txt)), *mp = g_strdup(test_write("m.ini", mt));
+    char *lp = g_strdup(test_write("l.ini", lt));
+    const char *dirs[3] = { "plan_cal", "plan_opt", "plan_none" };
+    for (int k = 0; k < 3; k++) {
+        char *dir = g_strdup(test_path(dirs[k])), *out = NULL, *err = NULL;
+        if (k == 2) unlink(test_path("cal/geometry/geometry.json"));
+        // the first with its report, the second with --psf-sigma-px 0.5, the third without geometry.json
+        const char *argv[] = { test_refl(), "plan", "lamps", scp, "--camera", camp, "--lamps", lp, "--kc-per-us",
+                               "1e-4", "--materials", mp, "--exposures-us", "2000", "-o", dir, NULL, NULL, NULL, NULL };
+        const char *tail[3][3] = { { NULL }, { "--psf-sigma-px", "0.5", "--no-report" }, { "--no-report" } };
+        memcpy(&argv[16], tail[k], sizeof tail[k]);
+        int rc = test_run(argv, 120, &out, &err);
+        CHECK_MSG(rc == 0, "%s: rc %d: %s", dirs[k], rc, err);
+        CHECK_CONTAINS(err, "edges blurred by a Gaussian PSF of sigma");
+        char *jp = g_strdup_printf("%s/plan.json", dir);
+        json_t *j = json_load_file(jp, 0, NULL), *psf = json_object_get(j, "psf");
+        CHECK(psf != NULL);
+        const double want[3] = { 0.8, 0.5, 0 };
+        CHECK_NEAR(json_number_value(json_object_get(psf, "sigma_px")), want[k], 1e-12);
+        const char *src = json_string_value(json_object_get(psf, "source"));
+        CHECK_CONTAINS(src, k == 0 ? "geometry.json" : k == 1 ? "--psf-sigma-px" : "none");
+        CHECK(k != 0 || json_number_value(json_object_get(psf, "sigma_std_px")) == 0.01);
+        CHECK(k == 0 || json_is_null(json_object_get(psf, "sigma_std_px")));
+        json_t *sf = json_object_get(json_object_get(psf, "sobel_factor"), "axis_aligned");
+        CHECK_NEAR(json_number_value(json_object_get(sf, "best")), model_edge_sobel_step(0, want[k]).best, 1e-9);
+        json_t *sg = json_array_get(json_object_get(j, "segments"), 0);
+        CHECK(json_number_value(json_object_get(sg, "sobel_factor")) > 0);
+        if (k == 0) {   // the geometry calibration is an input; the report says sigma
+            bool listed = false;
+            size_t i;
+            json_t *e;
+            json_array_foreach(json_object_get(json_object_get(j, "provenance"), "inputs"), i, e)
+                listed |= !strcmp(json_string_value(json_object_get(e, "role")) ?: "", "geometry");
+            CHECK(listed);
+            char *hp = g_strdup_printf("%s/index.html", dir), *html = NULL;
+            CHECK(g_file_get_contents(hp, &html, NULL, NULL));
+            CHECK_CONTAINS(html, "Gaussian PSF of sigma 0.800 px");
+            g_free(html);
+            g_free(hp);
+        }
+        json_decref(j);
+        g_free(jp);
+        g_free(out);
+        g_free(err);
+        g_free(dir);
+    }
+    g_free(camp);
+    g_free(scp);
+    g_free(mp);
+    g_free(lp);
 }

@@ -12,6 +12,7 @@
 #include <jansson.h>
 
 #include "fit/fit.h"
+#include "fit/material.h"
 #include "model/internal.h"
 #include "tests/test.h"
 
@@ -475,4 +476,66 @@ TEST(fit_shared_covariance_covers_misfit)
     free(frame);
     free(place);
     free(group);
+}
+
+// The window spread (fit_material_window_spread, the priors' window_rel_std):
+// samples of GGX times a place-to-place factor 1 + N(0, 0.02) with noise of
+// 1 % of R (weighted by it), and the factor alone without noise weights (the
+// noise given as noise_rms): the spread beyond the noise is 0.02 within 10 %;
+// noise alone gives about 0; fewer than 20 samples NAN.
+TEST(fit_window_spread_known)
+{
+    const double p[4] = { 0.3, 0.5, 0.2, 0.05 };
+    for (int weighted = 0; weighted < 2; weighted++)
+        for (int texture = 0; texture < 2; texture++) {
+            fit_samples_t *s = grid(MODEL_BRDF_GGX, p, 5, 80);
+            model_rng_t rng = model_rng(11 + weighted, 2 + texture);
+            double noise = weighted ? NAN : 0.001;
+            for (int i = 0; i < s->n; i++) {
+                double f = s->R[i], sig = weighted ? 0.01 * f : 0.001;
+                s->R[i] = f * (1 + (texture ? 0.02 * model_rng_gauss(&rng) : 0)) + sig * model_rng_gauss(&rng);
+                s->w[i] = weighted ? 1 / (sig * sig) : 1;
+            }
+            s->noise_weighted = weighted;
+            int n = 0;
+            double rel = fit_material_window_spread(s, MODEL_BRDF_GGX, p, noise, &n);
+            CHECK(n >= 20);
+            if (texture) CHECK_MSG(fabs(rel - 0.02) < 0.002, "weighted %d: window spread %.5f for 0.02", weighted, rel);
+            else CHECK_MSG(rel < 0.004, "weighted %d: noise alone gives a spread %.5f", weighted, rel);
+            fit_samples_free(s);
+        }
+    fit_samples_t *few = grid(MODEL_BRDF_GGX, p, 60, 80);
+    int n = 0;
+    CHECK(isnan(fit_material_window_spread(few, MODEL_BRDF_GGX, p, 0.001, &n)) && n < 20);
+    fit_samples_free(few);
+}
+
+// The priors' window_rel_std: read into window_rel (absent or null: NAN), a
+// negative or non-numeric one refused naming the file and the material.
+TEST(verify_priors_window_rel)
+{
+    const char *t = "{\"format\":\"refl priors 1\",\"materials\":[{\"name\":\"a\",\"model\":\"lambert\",\"parameters\":"
+                    "[{\"name\":\"kd\",\"mean\":0.1,\"std\":0.01}],\"window_rel_std\":0.023},{\"name\":\"b\",\"model\":"
+                    "\"lambert\",\"parameters\":[{\"name\":\"kd\",\"mean\":0.1,\"std\":0.01}],\"window_rel_std\":null},"
+                    "{\"name\":\"c\",\"model\":\"lambert\",\"parameters\":[{\"name\":\"kd\",\"mean\":0.1,\"std\":0.01}]}]}";
+    verify_priors_t pr = { 0 };
+    CHECK_MSG(verify_priors_parse(&pr, t, strlen(t), "w.json"), "%s", model_last_error());
+    const verify_prior_t *a = verify_priors_find(&pr, "a"), *b = verify_priors_find(&pr, "b"),
+                         *c = verify_priors_find(&pr, "c");
+    CHECK(a && a->window_rel == 0.023);
+    CHECK(b && isnan(b->window_rel) && c && isnan(c->window_rel));
+    verify_priors_free(&pr);
+    const char *bad[] = { "-0.1", "\"x\"" };
+    for (int k = 0; k < 2; k++) {
+        char *txt = g_strdup_printf("{\"format\":\"refl priors 1\",\"materials\":[{\"name\":\"q\",\"model\":\"lambert\","
+                                    "\"parameters\":[{\"name\":\"kd\",\"mean\":0.1,\"std\":0.01}],\"window_rel_std\":%s}]}",
+                                    bad[k]);
+        bool q = model_error_quiet_thread(true);
+        CHECK(!verify_priors_parse(&pr, txt, strlen(txt), "badw.json"));
+        model_error_quiet_thread(q);
+        CHECK_CONTAINS(model_last_error(), "badw.json");
+        CHECK_CONTAINS(model_last_error(), "window_rel_std");
+        verify_priors_free(&pr);
+        g_free(txt);
+    }
 }
