@@ -102,6 +102,42 @@ void fit_samples_eval_n(const fit_samples_t *s, model_brdf_t m, const double *p,
     }
 }
 
+double fit_samples_rms(const fit_samples_t *s, model_brdf_t m, const double *p)
+{
+    double sw = 0, ss = 0, Rb[256];
+    for (int i0 = 0; i0 < s->n; i0 += 256) {
+        int cnt = s->n - i0 < 256 ? s->n - i0 : 256;
+        fit_samples_eval_n(s, m, p, i0, cnt, Rb, NULL);
+        for (int k = 0; k < cnt; k++) {
+            double e = Rb[k] - s->R[i0 + k];
+            sw += s->w[i0 + k];
+            ss += s->w[i0 + k] * e * e;
+        }
+    }
+    return sw > 0 ? sqrt(ss / sw) : NAN;
+}
+
+double fit_samples_rms_of_cov(const fit_samples_t *s, model_brdf_t m, const double *p, const double *C)
+{
+    int np = model_brdf_nparams(m);
+    for (int a = 0; a < np * np; a++)
+        if (!isfinite(C[a])) return NAN;
+    double sw = 0, tr = 0, Rb[256], Jb[256 * MODEL_BRDF_MAX_PARAMS];
+    for (int i0 = 0; i0 < s->n; i0 += 256) {
+        int cnt = s->n - i0 < 256 ? s->n - i0 : 256;
+        fit_samples_eval_n(s, m, p, i0, cnt, Rb, Jb);
+        for (int k = 0; k < cnt; k++) {
+            const double *J = Jb + k * np;
+            double q = 0;   // J^T C J
+            for (int a = 0; a < np; a++)
+                for (int b = 0; b < np; b++) q += J[a] * C[a * np + b] * J[b];
+            sw += s->w[i0 + k];
+            tr += s->w[i0 + k] * q;
+        }
+    }
+    return sw > 0 ? sqrt(fmax(tr, 0) / sw) : NAN;
+}
+
 double fit_samples_eval(const fit_samples_t *s, model_brdf_t m, const double *p, int i)
 {
     double r;
@@ -495,6 +531,23 @@ static void state_free_intervals(const fit_samples_t *s, model_brdf_t m, fit_brd
     }
 }
 
+// F0 held over its interval (f0_unmeasured): its uniform's variance added to
+// out->cov along the line ks*F0 = const, J J^T var_u with J = d(params)/dF0 =
+// (ks: -ks/F0, ks2: -ks2/F0, F0: 1); F0's other rows and columns are 0.
+static void add_f0_uniform(model_brdf_t m, fit_brdf_result_t *out)
+{
+    int np = out->nparams, jF = model_brdf_param_index(m, "F0"), jk = model_brdf_param_index(m, "ks");
+    if (!out->f0_unmeasured || jF < 0 || jk < 0 || !(out->p[jF] > 0)) return;
+    double J[MODEL_BRDF_MAX_PARAMS] = { 0 }, w = out->f0_hi - out->f0_lo, var_u = w * w / 12;
+    J[jF] = 1;
+    J[jk] = -out->p[jk] / out->p[jF];
+    int j2 = model_brdf_param_index(m, "ks2");
+    if (j2 >= 0) J[j2] = -out->p[j2] / out->p[jF];
+    for (int a = 0; a < np; a++) out->cov[a * np + jF] = out->cov[jF * np + a] = 0;
+    for (int a = 0; a < np; a++)
+        for (int b = 0; b < np; b++) out->cov[a * np + b] += J[a] * J[b] * var_u;
+}
+
 // The fit's figures and covariance at out->p (pr: the solved problem).
 // Parameters the samples cannot separate are held (F0 first). With F0
 // unmeasured, the covariance gets its interval's uniform along the line
@@ -559,17 +612,7 @@ static void finish(const fit_samples_t *s, model_brdf_t m, const fit_brdf_option
     out->sigma = sqrt(s2);
     out->cov_ok = cov_ok;
     for (int a = 0; a < np * np; a++) out->cov[a] = cov_ok ? out->cov[a] * s2 : NAN;
-    int jF = model_brdf_param_index(m, "F0"), jk = model_brdf_param_index(m, "ks");
-    if (cov_ok && out->f0_unmeasured && jF >= 0 && jk >= 0 && out->p[jF] > 0) {
-        double J[MODEL_BRDF_MAX_PARAMS] = { 0 }, w = out->f0_hi - out->f0_lo, var_u = w * w / 12;
-        J[jF] = 1;
-        J[jk] = -out->p[jk] / out->p[jF];
-        int j2 = model_brdf_param_index(m, "ks2");
-        if (j2 >= 0) J[j2] = -out->p[j2] / out->p[jF];
-        for (int a = 0; a < np; a++) out->cov[a * np + jF] = out->cov[jF * np + a] = 0;
-        for (int a = 0; a < np; a++)
-            for (int b = 0; b < np; b++) out->cov[a * np + b] += J[a] * J[b] * var_u;
-    }
+    if (cov_ok) add_f0_uniform(m, out);
     for (int j = 0; j < np; j++) out->std[j] = cov_ok ? sqrt(fmax(out->cov[j * np + j], 0)) : NAN;
     state_free_intervals(s, m, out);
 }
@@ -652,6 +695,280 @@ bool fit_brdf_from(const fit_samples_t *s, model_brdf_t m, const fit_brdf_option
     free(blocks);
     return ok;
 }
+// ---------------------------------------------------------------------------
+// What the samples share: the cluster-robust covariance and the photometric
+// groups' systematic part (fit_brdf_shared_covariance)
+
+typedef struct {
+    long long key;
+    int       i;
+} keyed_t;
+
+static int cmp_keyed(const void *a, const void *b)
+{
+    long long x = ((const keyed_t *)a)->key, y = ((const keyed_t *)b)->key;
+    return (x > y) - (x < y);
+}
+
+// key[i] numbered 0..G-1 into id[i] (equal keys alike, in key order); G, or
+// -1 when out of memory.
+static int number_keys(int n, const long long *key, int *id)
+{
+    keyed_t *k = malloc((size_t)(n > 0 ? n : 1) * sizeof *k);
+    if (!k) return -1;
+    for (int i = 0; i < n; i++) k[i] = (keyed_t){ key[i], i };
+    qsort(k, (size_t)n, sizeof *k, cmp_keyed);
+    int g = -1;
+    for (int i = 0; i < n; i++) {
+        if (i == 0 || k[i].key != k[i - 1].key) g++;
+        id[k[i].i] = g;
+    }
+    free(k);
+    return g + 1;
+}
+
+// The inverse of the symmetric positive definite n x n A (row-major) by its
+// Cholesky factor; false when A is not positive definite.
+static bool spd_inverse(int n, const double *A, double *Ai)
+{
+    double L[MODEL_BRDF_MAX_PARAMS * MODEL_BRDF_MAX_PARAMS] = { 0 };
+    for (int i = 0; i < n; i++)
+        for (int j = 0; j <= i; j++) {
+            double v = A[i * n + j];
+            for (int k = 0; k < j; k++) v -= L[i * n + k] * L[j * n + k];
+            if (i == j) {
+                if (!(v > 1e-300 * (fabs(A[i * n + i]) + 1e-300)) || !isfinite(v)) return false;
+                L[i * n + i] = sqrt(v);
+            } else {
+                L[i * n + j] = v / L[j * n + j];
+            }
+        }
+    // columns of A^-1: solve L L^T x = e_c
+    for (int c = 0; c < n; c++) {
+        double y[MODEL_BRDF_MAX_PARAMS];
+        for (int i = 0; i < n; i++) {
+            double v = i == c;
+            for (int k = 0; k < i; k++) v -= L[i * n + k] * y[k];
+            y[i] = v / L[i * n + i];
+        }
+        for (int i = n - 1; i >= 0; i--) {
+            double v = y[i];
+            for (int k = i + 1; k < n; k++) v -= L[k * n + i] * Ai[k * n + c];
+            Ai[i * n + c] = v / L[i * n + i];
+        }
+    }
+    return true;
+}
+
+// The symmetric n x n A with its negative eigenvalues set to 0 (cyclic Jacobi
+// rotations; A = V diag(max(lambda, 0)) V^T).
+static void psd_clip(int n, double *A)
+{
+    double V[MODEL_BRDF_MAX_PARAMS * MODEL_BRDF_MAX_PARAMS] = { 0 }, D[MODEL_BRDF_MAX_PARAMS * MODEL_BRDF_MAX_PARAMS];
+    memcpy(D, A, (size_t)(n * n) * sizeof *D);
+    for (int i = 0; i < n; i++) V[i * n + i] = 1;
+    for (int sweep = 0; sweep < 50; sweep++) {
+        double off = 0, tot = 0;
+        for (int i = 0; i < n; i++)
+            for (int j = 0; j < n; j++) {
+                if (i == j) tot += D[i * n + j] * D[i * n + j];
+                else off += D[i * n + j] * D[i * n + j];
+            }
+        if (off <= 1e-30 * (tot + off) || off == 0) break;
+        for (int p = 0; p < n; p++)
+            for (int q = p + 1; q < n; q++) {
+                if (D[p * n + q] == 0) continue;
+                double th = 0.5 * atan2(2 * D[p * n + q], D[q * n + q] - D[p * n + p]);
+                double c = cos(th), sn = sin(th);
+                for (int k = 0; k < n; k++) {   // D <- G^T D G, rotation in the (p, q) plane
+                    double a = D[k * n + p], b = D[k * n + q];
+                    D[k * n + p] = c * a - sn * b;
+                    D[k * n + q] = sn * a + c * b;
+                }
+                for (int k = 0; k < n; k++) {
+                    double a = D[p * n + k], b = D[q * n + k];
+                    D[p * n + k] = c * a - sn * b;
+                    D[q * n + k] = sn * a + c * b;
+                }
+                for (int k = 0; k < n; k++) {
+                    double a = V[k * n + p], b = V[k * n + q];
+                    V[k * n + p] = c * a - sn * b;
+                    V[k * n + q] = sn * a + c * b;
+                }
+            }
+    }
+    for (int i = 0; i < n; i++)
+        for (int j = 0; j < n; j++) {
+            double v = 0;
+            for (int k = 0; k < n; k++) v += V[i * n + k] * fmax(D[k * n + k], 0) * V[j * n + k];
+            A[i * n + j] = v;
+        }
+}
+
+// V += sign * G/(G-1) H^-1 (sum_g u_g u_g^T) H^-1 over the G clusters' scores u (G x nf).
+static void add_sandwich(int nf, const double *Hi, const double *u, int G, double sign, double *V)
+{
+    double M[MODEL_BRDF_MAX_PARAMS * MODEL_BRDF_MAX_PARAMS] = { 0 }, T[MODEL_BRDF_MAX_PARAMS * MODEL_BRDF_MAX_PARAMS];
+    for (int g = 0; g < G; g++)
+        for (int a = 0; a < nf; a++)
+            for (int b = 0; b < nf; b++) M[a * nf + b] += u[g * nf + a] * u[g * nf + b];
+    double f = sign * (double)G / (G - 1);
+    for (int a = 0; a < nf; a++)
+        for (int b = 0; b < nf; b++) {
+            double v = 0;
+            for (int k = 0; k < nf; k++) v += Hi[a * nf + k] * M[k * nf + b];
+            T[a * nf + b] = v;
+        }
+    for (int a = 0; a < nf; a++)
+        for (int b = 0; b < nf; b++) {
+            double v = 0;
+            for (int k = 0; k < nf; k++) v += T[a * nf + k] * Hi[k * nf + b];
+            V[a * nf + b] += f * v;
+        }
+}
+
+// The clusters of one way (ids, NULL: none) numbered into *out (freed by the
+// caller); their number, 0 when none, -1 when out of memory.
+static int clusters_of(int n, const int *ids, long long *key, int **out)
+{
+    *out = NULL;
+    if (!ids) return 0;
+    if (!(*out = malloc((size_t)(n > 0 ? n : 1) * sizeof **out))) return -1;
+    for (int i = 0; i < n; i++) key[i] = ids[i];
+    return number_keys(n, key, *out);
+}
+
+// The scores u of each way's clusters and the groups' b = sum w J R, and H,
+// over the free parameters fi (nf of them) at r->p.
+typedef struct {
+    int     nf, fi[MODEL_BRDF_MAX_PARAMS];
+    int    *id[3], G[3];           // frame, place, frame & place
+    double *u[3], *b;
+    double  H[MODEL_BRDF_MAX_PARAMS * MODEL_BRDF_MAX_PARAMS];
+} shared_sums_t;
+
+static void shared_accumulate(const fit_samples_t *s, const fit_shared_t *sh, const fit_brdf_result_t *r,
+                              shared_sums_t *a)
+{
+    int np = r->nparams, nf = a->nf;
+    double Rb[256], Jb[256 * MODEL_BRDF_MAX_PARAMS];
+    for (int i0 = 0; i0 < s->n; i0 += 256) {
+        int cnt = s->n - i0 < 256 ? s->n - i0 : 256;
+        fit_samples_eval_n(s, r->model, r->p, i0, cnt, Rb, Jb);
+        for (int k = 0; k < cnt; k++) {
+            int i = i0 + k;
+            double w = s->w[i], e = Rb[k] - s->R[i], J[MODEL_BRDF_MAX_PARAMS];
+            for (int x = 0; x < nf; x++) J[x] = Jb[k * np + a->fi[x]];
+            for (int x = 0; x < nf; x++)
+                for (int y = 0; y < nf; y++) a->H[x * nf + y] += w * J[x] * J[y];
+            for (int way = 0; way < 3; way++)
+                if (a->u[way])
+                    for (int x = 0; x < nf; x++) a->u[way][a->id[way][i] * nf + x] += w * e * J[x];
+            if (a->b && sh->group[i] >= 0 && sh->group[i] < sh->ngroups)
+                for (int x = 0; x < nf; x++) a->b[sh->group[i] * nf + x] += w * s->R[i] * J[x];
+        }
+    }
+}
+
+// r's statistical covariance from the sandwich V (nf x nf over fi): the held
+// parameters' stated parts kept (F0 over its interval, the free intervals).
+static void shared_set_cov(const shared_sums_t *a, const double *V, fit_brdf_result_t *r)
+{
+    int np = r->nparams;
+    for (int j = 0; j < np; j++) r->std_chi2[j] = r->std[j];
+    for (int x = 0; x < np * np; x++) r->cov[x] = 0;
+    for (int x = 0; x < a->nf; x++)
+        for (int y = 0; y < a->nf; y++) r->cov[a->fi[x] * np + a->fi[y]] = V[x * a->nf + y];
+    add_f0_uniform(r->model, r);
+    for (int j = 0; j < np; j++)
+        if (r->held_free[j]) r->cov[j * np + j] = (r->free_hi[j] - r->free_lo[j]) * (r->free_hi[j] - r->free_lo[j]) / 12;
+    for (int j = 0; j < np; j++) r->std[j] = sqrt(fmax(r->cov[j * np + j], 0));
+    r->cov_ok = true;
+}
+
+bool fit_brdf_shared_covariance(const fit_samples_t *s, const fit_shared_t *sh, fit_brdf_result_t *r, double *dp)
+{
+    int np = r->nparams, n = s->n;
+    shared_sums_t a = { 0 };
+    for (int j = 0; j < np; j++)
+        if (!r->fixed[j]) a.fi[a.nf++] = j;
+    if (a.nf == 0 || n <= a.nf) {
+        model_error(s->source, 0, "%s: no free parameter or too few samples for the shared covariance",
+                    model_brdf_name(r->model));
+        return false;
+    }
+    long long *key = malloc((size_t)n * sizeof *key);
+    bool ok = key != NULL;
+    if (ok) {
+        a.G[0] = clusters_of(n, sh->frame, key, &a.id[0]);
+        a.G[1] = clusters_of(n, sh->place, key, &a.id[1]);
+        ok = a.G[0] >= 0 && a.G[1] >= 0;
+    }
+    bool use[3] = { ok && a.G[0] >= FIT_MIN_CLUSTERS, ok && a.G[1] >= FIT_MIN_CLUSTERS, false };
+    use[2] = use[0] && use[1];
+    if (use[2]) {
+        a.id[2] = malloc((size_t)n * sizeof *a.id[2]);
+        for (int i = 0; a.id[2] && i < n; i++) key[i] = (long long)a.id[0][i] * a.G[1] + a.id[1][i];
+        a.G[2] = a.id[2] ? number_keys(n, key, a.id[2]) : -1;
+        ok = a.G[2] > 0;
+    }
+    bool robust = ok && r->loss == LSQ_LOSS_NONE && (use[0] || use[1]);
+    for (int way = 0; ok && robust && way < 3; way++)
+        if (use[way] && !(a.u[way] = calloc((size_t)a.G[way] * a.nf, sizeof *a.u[way]))) ok = false;
+    bool groups = ok && sh->group && sh->group_rel && sh->ngroups > 0;
+    if (groups && !(a.b = calloc((size_t)sh->ngroups * a.nf, sizeof *a.b))) ok = false;
+    double Hi[MODEL_BRDF_MAX_PARAMS * MODEL_BRDF_MAX_PARAMS];
+    if (!ok) model_error(s->source, 0, "out of memory for the shared covariance");
+    if (ok) {
+        shared_accumulate(s, sh, r, &a);
+        if (!(ok = spd_inverse(a.nf, a.H, Hi)))
+            model_error(s->source, 0, "%s: the normal matrix is singular; the shared covariance is not computed",
+                        model_brdf_name(r->model));
+    }
+    if (ok && robust) {
+        double V[MODEL_BRDF_MAX_PARAMS * MODEL_BRDF_MAX_PARAMS] = { 0 };
+        double floor_var[MODEL_BRDF_MAX_PARAMS] = { 0 };
+        for (int way = 0; way < 3; way++)
+            if (a.u[way]) {
+                double W[MODEL_BRDF_MAX_PARAMS * MODEL_BRDF_MAX_PARAMS] = { 0 };
+                add_sandwich(a.nf, Hi, a.u[way], a.G[way], 1, W);
+                for (int x = 0; x < a.nf * a.nf; x++) V[x] += (way == 2 ? -1 : 1) * W[x];
+                for (int x = 0; x < a.nf; x++) floor_var[x] = fmax(floor_var[x], W[x * a.nf + x]);
+            }
+        // the two-way difference can cancel below every one-way clustering (where the model's misfit
+        // varies with the geometry, sums over large clusters cancel): each variance is at least the
+        // largest one-way clustering's (a diagonal added: still positive semi-definite)
+        psd_clip(a.nf, V);
+        for (int x = 0; x < a.nf; x++) V[x * a.nf + x] = fmax(V[x * a.nf + x], floor_var[x]);
+        shared_set_cov(&a, V, r);
+        r->shared_done = true;
+        r->clusters_frame = use[0] ? a.G[0] : 0;
+        r->clusters_place = use[1] ? a.G[1] : 0;
+    }
+    if (ok && groups) {
+        for (int x = 0; x < np * np; x++) r->cov_groups[x] = 0;
+        for (int g = 0; g < sh->ngroups; g++) {
+            double d[MODEL_BRDF_MAX_PARAMS] = { 0 };
+            for (int x = 0; x < a.nf; x++) {
+                double v = 0;
+                for (int y = 0; y < a.nf; y++) v += Hi[x * a.nf + y] * a.b[g * a.nf + y];
+                d[a.fi[x]] = v * sh->group_rel[g];
+            }
+            for (int x = 0; x < np; x++)
+                for (int y = 0; y < np; y++) r->cov_groups[x * np + y] += d[x] * d[y];
+            if (dp) memcpy(dp + (size_t)g * np, d, (size_t)np * sizeof *d);
+        }
+        r->groups_ok = true;
+    }
+    for (int way = 0; way < 3; way++) {
+        free(a.id[way]);
+        free(a.u[way]);
+    }
+    free(a.b);
+    free(key);
+    return ok;
+}
+
 // ---------------------------------------------------------------------------
 // Priors
 
@@ -915,8 +1232,21 @@ void fit_prior_covariance(const fit_brdf_result_t *best, double sys_rel, double 
                 if (a == b) c += sys_rel * sys_rel * ma * ma;
                 else if (amplitude_param(na) && amplitude_param(nb)) c += sys_rel * sys_rel * ma * mb;
             }
+            if (!ha && !hb && best->groups_ok) c += best->cov_groups[a * np + b];
             C[a * np + b] = c;
         }
+}
+
+double fit_prior_std(const fit_brdf_result_t *best, double sys_rel, int j)
+{
+    model_brdf_t m = best->model;
+    int np = best->nparams;
+    bool f0u = best->f0_unmeasured && !strcmp(model_brdf_param_name(m, j), "F0"), hf = best->held_free[j];
+    if (best->fixed[j] && !f0u && !hf) return 0;
+    double sd_stat = best->std[j], mean = best->p[j];
+    double var_lamps = best->groups_ok ? best->cov_groups[j * np + j] : 0;
+    double shared = f0u || hf ? 0 : sys_rel * mean;
+    return sqrt(sd_stat * sd_stat + shared * shared + var_lamps);
 }
 
 static json_t *prior_covariance_json(const fit_brdf_result_t *best, double sys_rel)
@@ -939,9 +1269,11 @@ static json_t *prior_covariance_json(const fit_brdf_result_t *best, double sys_r
         "the fit's covariance (\"covariance\", statistical) plus the systematic part: one photometric scale "
         "(kc*I, the white) shared by every sample multiplies R, so the parameters R is linear in (kd, ks, ks2, Rd) "
         "move together: systematic_rel^2 mean_a mean_b between them (fully correlated); every other parameter "
-        "gets (systematic_rel mean)^2 on its diagonal alone (geometric errors: pose, lamp positions). A held "
-        "parameter has 0 rows and columns; F0 held over its interval keeps its uniform's variance along "
-        "ks*F0 = const. The diagonal is each parameter's std^2"));
+        "gets (systematic_rel mean)^2 on its diagonal alone (geometric errors: pose, lamp positions); with "
+        "lamp_systematic, each lamp's own photometric scale (its kc*I, emission pattern and position) of relative "
+        "std lamp_systematic.rel carried through the fit (sum over the lamps of dp dp^T, dp the parameters' change "
+        "when that lamp's samples alone scale by rel). A held parameter has 0 rows and columns; F0 held over its "
+        "interval keeps its uniform's variance along ks*F0 = const. The diagonal is each parameter's std^2"));
     return o;
 }
 
@@ -959,8 +1291,8 @@ json_t *fit_priors_material(const char *name, const fit_brdf_result_t *best, con
         json_t *p = json_object();
         bool f0u = best->f0_unmeasured && !strcmp(model_brdf_param_name(m, j), "F0"), hf = best->held_free[j];
         double lo, hi, mean = best->p[j], sd_stat = best->fixed[j] && !f0u && !hf ? 0 : best->std[j];
-        double sd = f0u || hf ? sd_stat
-                  : best->fixed[j] ? 0 : sqrt(sd_stat * sd_stat + (sys_rel * mean) * (sys_rel * mean));
+        double var_lamps = best->groups_ok && !(best->fixed[j] && !f0u && !hf) ? best->cov_groups[j * np + j] : 0;
+        double sd = fit_prior_std(best, sys_rel, j);
         model_brdf_param_range(m, j, &lo, &hi);
         if (f0u) lo = best->f0_lo, hi = best->f0_hi;
         if (hf) lo = best->free_lo[j], hi = best->free_hi[j];
@@ -972,6 +1304,18 @@ json_t *fit_priors_material(const char *name, const fit_brdf_result_t *best, con
         json_object_set_new(p, "mean", json_real(mean));
         json_object_set_new(p, "std", isfinite(sd) ? json_real(sd) : json_null());
         json_object_set_new(p, "std_statistical", isfinite(sd_stat) ? json_real(sd_stat) : json_null());
+        if (best->shared_done || best->groups_ok) {
+            // sd^2 = the parts' squares summed
+            json_t *parts = json_object();
+            bool held = best->fixed[j] && !f0u && !hf;
+            json_object_set_new(parts, "statistical", isfinite(sd_stat) ? json_real(sd_stat) : json_null());
+            json_object_set_new(parts, "lamps", json_real(sqrt(var_lamps)));
+            json_object_set_new(parts, "shared", json_real(held || f0u || hf ? 0 : fabs(sys_rel * mean)));
+            if (best->shared_done)
+                json_object_set_new(parts, "statistical_chi2_scaled",
+                                    isfinite(best->std_chi2[j]) && !held ? json_real(best->std_chi2[j]) : json_null());
+            json_object_set_new(p, "std_parts", parts);
+        }
         json_object_set_new(p, "lo", json_real(blo));
         json_object_set_new(p, "hi", isfinite(bhi) ? json_real(bhi) : json_null());
         if (f0u)

@@ -583,3 +583,50 @@ fit_samples_t *fit_samples_read_merl(const char *path)
     o.weights = FIT_WEIGHTS_UNIFORM;
     return load_merl(path, &o);
 }
+
+// ---------------------------------------------------------------------------
+// Samples over Ngan et al.'s (2005) integral
+
+fit_samples_t *fit_samples_ngan(double (*R)(const void *ctx, const model_cosines_t *c), const void *ctx, int stride)
+{
+    if (stride < 1) stride = 1;
+    fit_samples_t *s = fit_samples_new();
+    if (!s) {
+        model_error(NULL, 0, "out of memory for the reference samples");
+        return NULL;
+    }
+    snprintf(s->source, sizeof s->source, "Ngan reference samples (MERL cells, every %d in theta_d and phi_d)", stride);
+    const double cmin = cos(FIT_NGAN_THETA_MAX_DEG * M_PI / 180);
+    for (int i = 0; i < MODEL_MERL_TH; i++)
+        for (int j = stride / 2; j < MODEL_MERL_TD; j += stride)
+            for (int k = stride / 2; k < MODEL_MERL_PD; k += stride) {
+                model_cosines_t c;
+                model_brdf_table_cell(i, j, k, &c);
+                if (!(c.nl >= cmin && c.nv >= cmin)) continue;
+                double v = R(ctx, &c);
+                // every stride x stride block of (theta_d, phi_d) cells stands for the whole block
+                double w = model_brdf_table_cell_solid_angle(i, j, k) * stride * stride;
+                if (!isfinite(v)) {
+                    model_error(NULL, 0, "the reference BRDF is not finite at theta_h cell %d, theta_d %d, phi_d %d", i,
+                                j, k);
+                    fit_samples_free(s);
+                    return NULL;
+                }
+                if (!fit_samples_add(s, &c, v, w)) {
+                    model_error(NULL, 0, "out of memory for the reference samples");
+                    fit_samples_free(s);
+                    return NULL;
+                }
+            }
+    s->omega_how = "cells";
+    normalise(s, true);
+    return s;
+}
+
+double fit_mixture_R(const void *ctx, const model_cosines_t *c)
+{
+    const fit_mixture_t *m = ctx;
+    double R = 0;
+    for (int k = 0; k < m->n; k++) R += m->weight[k] * model_material_eval(m->mat[k], c);
+    return R;
+}

@@ -16,6 +16,7 @@
 #include "model/report.h"
 #include "model/vec.h"
 #include "rig/truth.h"
+#include "rig/virtual_materials.h"
 
 typedef struct {
     const char *dir;
@@ -391,68 +392,103 @@ static void chain_lamp_irradiance(chain_t *c, const json_t *lj, const json_t *w,
 // ---------------------------------------------------------------------------
 // Materials and verdicts
 
-// Dense samples of a material's f_r over pairs of directions uniform in solid
-// angle (cos theta uniform; the light in the plane phi = 0, the material being
-// isotropic), theta below 85 deg: R = f_r cos theta_i, each of weight 1, so a
-// fit's RMS is the Ngan et al. (2005) error of the model against the material.
-static fit_samples_t *dense_samples(const model_material_t *mat)
-{
-    enum { NI = 12, NO = 24, NP = 48 };
-    fit_samples_t *s = fit_samples_new();
-    const double cmin = cos(85 * M_PI / 180);
-    for (int i = 0; s && i < NI; i++) {
-        double ci = 1 - (i + 0.5) / NI * (1 - cmin), si = sqrt(1 - ci * ci);
-        model_vec3_t n = { 0, 0, 1 }, l = { si, 0, ci };
-        for (int o = 0; o < NO; o++) {
-            double co = 1 - (o + 0.5) / NO * (1 - cmin), so = sqrt(1 - co * co);
-            for (int k = 0; k < NP; k++) {
-                double ph = 2 * M_PI * (k + 0.5) / NP;
-                model_vec3_t v = { so * cos(ph), so * sin(ph), co };
-                model_cosines_t c = model_cosines(n, l, v);
-                double f = model_material_eval(mat, &c);
-                if (isfinite(f)) fit_samples_add(s, &c, f * ci, 1);
-            }
-        }
-    }
-    return s;
-}
-
-// A fitted material whose truth is a table (none of the fitted models): its
-// Ngan error against the table, and that of the best fit of the same model to
-// the table itself (refl fit brdf on dense samples of it).
-static void chain_table_material(chain_t *c, const json_t *m, const model_material_t *truth)
+// A fitted material against its best fit: where the truth is a table
+// (tabulated physics), a material whose roughness varies from place to place
+// ([texture NAME] roughness_amplitude a: the virtual rig renders a per-pixel
+// mixture (1 - w) f_smooth + w f_rough of rig_vmat_variants' two populations,
+// w = 0.5 + 0.5 value noise of mean 0, so the material's mean BRDF is 0.5
+// f_smooth + 0.5 f_rough), or a model other than the fitted one, no parameter
+// of the fitted model is the truth's: the fair comparison is with the best fit
+// of the fitted model to the truth's (mean) BRDF over Ngan et al.'s (2005)
+// integral (fit_samples_ngan, every other theta_d and phi_d cell of the MERL
+// grid). Entries: each parameter against the best fit's, with its std; the
+// Ngan error of the fitted parameters with the best fit's as truth and their
+// ratio (null where the best fit reproduces the truth to 1e-3 of its RMS: a
+// ratio to ~0 says nothing); the excess sqrt(e^2 - e_best^2) with the RMS
+// change of R the priors' covariance implies as sigma. false: none of these
+// apply (the caller compares each parameter with the truth's own).
+static bool chain_material_best_fit(chain_t *c, const json_t *m, const model_material_t *tm)
 {
     const char *n = json_string_value(json_object_get(m, "name"));
     int model = model_brdf_from_name(json_string_value(json_object_get(m, "model")));
-    const json_t *ps = json_object_get(m, "parameters");
-    if (model < 0 || (int)json_array_size(ps) != model_brdf_nparams((model_brdf_t)model)) return;
-    double p[MODEL_BRDF_MAX_PARAMS];
-    for (size_t i = 0; i < json_array_size(ps); i++) p[i] = num(json_array_get(ps, i), "mean");
-    fit_samples_t *s = dense_samples(truth);
-    fit_brdf_options_t o = fit_brdf_defaults();
-    fit_brdf_result_t best;
-    if (s && s->n > 0 && fit_brdf(s, (model_brdf_t)model, &o, &best)) {
-        double ss = 0;
-        for (int i = 0; i < s->n; i++) {
-            double d = fit_samples_eval(s, (model_brdf_t)model, p, i) - s->R[i];
-            ss += d * d;
+    const json_t *ps = json_object_get(m, "parameters"), *pc = json_object_get(m, "prior_covariance");
+    char tsec[96], name[200], note[400], what[160];
+    snprintf(tsec, sizeof tsec, "texture %s", n ? n : "");
+    double amp = ini_num(c, tsec, "roughness_amplitude");
+    bool rough = !tm || tm->table ? false : isfinite(amp) && amp > 0;
+    if (!tm || !n || model < 0 || (int)json_array_size(ps) != model_brdf_nparams((model_brdf_t)model)) return false;
+    if (!tm->table && !rough && tm->model == (model_brdf_t)model) return false;
+    int np = model_brdf_nparams((model_brdf_t)model);
+    double p[MODEL_BRDF_MAX_PARAMS], sd[MODEL_BRDF_MAX_PARAMS], C[MODEL_BRDF_MAX_PARAMS * MODEL_BRDF_MAX_PARAMS];
+    const json_t *mat = json_object_get(pc, "matrix");
+    for (int a = 0; a < np; a++) {
+        p[a] = num(json_array_get(ps, (size_t)a), "mean");
+        sd[a] = num(json_array_get(ps, (size_t)a), "std");
+        for (int b = 0; b < np; b++) {   // the priors' full covariance, else the std alone (independent)
+            const json_t *v = json_array_get(json_array_get(mat, (size_t)a), (size_t)b);
+            C[a * np + b] = json_array_size(mat) == (size_t)np ? (json_is_number(v) ? json_number_value(v) : NAN)
+                          : a == b ? sd[a] * sd[a] : 0;
         }
-        double e = sqrt(ss / s->n);
-        char name[200], note[300];
-        snprintf(name, sizeof name, "material_%s.ngan_error", n);
-        snprintf(note, sizeof note, "the fitted %s against the truth's table (Ngan et al. 2005: RMS of (f_model - "
-                 "f) cos theta_i over the hemisphere); truth column: the best fit of %s to the table itself",
-                 model_brdf_name((model_brdf_t)model), model_brdf_name((model_brdf_t)model));
-        add(c, "materials", name, e, best.ngan_error, NAN, "1/sr", note);
-        snprintf(name, sizeof name, "material_%s.ngan_error_ratio", n);
-        add(c, "materials", name, best.ngan_error > 0 ? e / best.ngan_error : NAN, 1, NAN, "1",
-            "the chain's error over the best fit's (the chain should come within 1.2)");
+    }
+    model_material_t *store = NULL;
+    const model_material_t *mats[2] = { tm, tm }, *rr = NULL, *ss = NULL;
+    double wts[2] = { 1, 0 };
+    if (rough && rig_vmat_variants(1, &tm, &amp, rig_truth_path(c->truth), model_ini_section_line(c->ini, tsec),
+                                   &store, &rr, &ss)) {
+        mats[0] = ss, mats[1] = rr, wts[0] = wts[1] = 0.5;
+        snprintf(what, sizeof what, "the mean of its two roughness populations (alpha or m scaled by 1 -+ %g, ns "
+                 "by 1/(1 -+ %g)^2; half each)", amp, amp);
     } else {
-        char note[300];
-        snprintf(note, sizeof note, "material %s: the best fit to the truth's table failed: %s", n, model_last_error());
+        snprintf(what, sizeof what, "%s", tm->table ? "its table" : "the truth's own model");
+    }
+    fit_mixture_t mix = { 2, mats, wts };
+    fit_samples_t *s = !rough || store ? fit_samples_ngan(fit_mixture_R, &mix, 2) : NULL;
+    fit_brdf_result_t *best = malloc(sizeof *best);
+    fit_brdf_options_t o = fit_brdf_defaults();
+    bool ok = s && best && fit_brdf(s, (model_brdf_t)model, &o, best);
+    if (ok) {
+        double e = fit_samples_rms(s, (model_brdf_t)model, p), eb = best->ngan_error;
+        double rms_R = 0, sw = 0;
+        for (int i = 0; i < s->n; i++) rms_R += s->w[i] * s->R[i] * s->R[i], sw += s->w[i];
+        rms_R = sqrt(rms_R / sw);
+        double e_sigma = fit_samples_rms_of_cov(s, (model_brdf_t)model, p, C);
+        snprintf(name, sizeof name, "material_%s.ngan_error", n);
+        snprintf(note, sizeof note, "the fitted %s against %s, the Ngan et al. (2005) error (RMS of (f_model - f) "
+                 "cos theta_i over both hemispheres within %d deg of the normal, MERL cells); truth column: the best "
+                 "fit of %s to it", model_brdf_name((model_brdf_t)model), what, FIT_NGAN_THETA_MAX_DEG,
+                 model_brdf_name((model_brdf_t)model));
+        add(c, "materials", name, e, eb, NAN, "1/sr", note);
+        snprintf(name, sizeof name, "material_%s.ngan_error_ratio", n);
+        bool within = !(eb > 1e-3 * rms_R);
+        add(c, "materials", name, within ? NAN : e / eb, 1, NAN, "1",
+            within ? "null: the best fit reproduces the truth (its Ngan error is below 1e-3 of the BRDF's RMS), so no "
+                     "fit comes within a ratio of it; see ngan_error_excess and the parameters' z"
+                   : "the chain's Ngan error over the best fit's (the chain should come within 1.2)");
+        snprintf(name, sizeof name, "material_%s.ngan_error_excess", n);
+        add(c, "materials", name, sqrt(fmax(0, e * e - eb * eb)), 0, e_sigma, "1/sr",
+            "sqrt(ngan_error^2 - best^2): what the fitted parameters add to the best fit's error; sigma: the RMS "
+            "change of R over the same integral that the priors' covariance (prior_covariance, else the std) "
+            "implies, sqrt(trace(C H) / sum w) with H = sum w J J^T");
+        snprintf(note, sizeof note, "truth: the best fit of %s to %s over Ngan's integral (the truth has no %s "
+                 "parameters of its own); sigma: the priors' std", model_brdf_name((model_brdf_t)model), what,
+                 model_brdf_name((model_brdf_t)model));
+    } else {
+        snprintf(note, sizeof note, "material %s: the best fit to the truth (%s) failed: %s", n, what,
+                 model_last_error());
         json_array_append_new(c->missing, json_string(note));
+        snprintf(note, sizeof note, "no truth: the best fit of the model to the truth failed");
+    }
+    for (int a = 0; a < np; a++) {
+        const json_t *pj = json_array_get(ps, (size_t)a);
+        const char *pn = json_string_value(json_object_get(pj, "name"));
+        const char *unit = json_string_value(json_object_get(pj, "unit"));
+        snprintf(name, sizeof name, "material_%s.%s", n, pn ? pn : "?");
+        add(c, "materials", name, p[a], ok ? best->p[a] : NAN, sd[a], unit ? unit : "", note);
     }
     fit_samples_free(s);
+    free(best);
+    free(store);
+    return true;
 }
 
 static void chain_priors(chain_t *c, const json_t *pj)
@@ -470,7 +506,7 @@ static void chain_priors(chain_t *c, const json_t *pj)
                  : "fitted model %s, the truth's is %s: no truth per parameter", model ? model : "?",
                  tmodel ? tmodel : "none");
         const model_material_t *tm = c->mats && n ? model_materials_find(c->mats, n) : NULL;
-        if (tm && tm->table) chain_table_material(c, m, tm);
+        if (chain_material_best_fit(c, m, tm)) continue;   // a table, varying roughness, another model
         json_array_foreach(json_object_get(m, "parameters"), j, p) {
             const char *pn = json_string_value(json_object_get(p, "name"));
             const char *unit = json_string_value(json_object_get(p, "unit"));

@@ -272,6 +272,17 @@ static void print_material(const fit_material_opts_t *o, const fit_material_resu
                r->noise_weighted ? " (sqrt(chi^2 / dof))" : "");
     if (r->written) {
         const fit_brdf_models_t *m = &r->models;
+        const fit_brdf_result_t *b = &m->res[m->best];
+        printf("  %s: std = statistical (%s) + each lamp's %g %% + shared %g %%:\n", model_brdf_name(b->model),
+               !r->shared_done ? "chi^2/dof-scaled"
+               : r->clusters_frame && r->clusters_place ? "clustered by frames and places"
+               : r->clusters_frame ? "clustered by frames" : "clustered by places",
+               100 * o->lamp_rel, 100 * o->sys_rel);
+        for (int j = 0; j < b->nparams; j++) {
+            double lamps = b->groups_ok ? sqrt(fmax(b->cov_groups[j * b->nparams + j], 0)) : 0;
+            printf("    %-7s %.5g +- %.3g  (statistical %.3g, lamps %.3g)\n", model_brdf_param_name(b->model, j),
+                   b->p[j], fit_prior_std(b, o->sys_rel, j), b->std[j], lamps);
+        }
         if (m->nres < 2)
             printf("%s: %s, model %s (the only model fitted)\n", o->out, o->name ? o->name : r->material,
                    model_brdf_name(m->res[m->best].model));
@@ -307,6 +318,10 @@ int fit_cmd_material(int argc, char **argv)
         MODEL_OPT_STRING("--name", "NAME", "the material's name in the priors (default: the scene's)", &o.name, false),
         MODEL_OPT_VALUE("--k-sigma", "K", "prior bounds mean +- K std (default 3)", false),
         MODEL_OPT_VALUE("--systematic", "REL", "std adds REL * mean (default 0.03)", false),
+        MODEL_OPT_VALUE("--lamp-systematic", "REL", "each lamp's own photometric scale has the relative std REL, "
+                        "carried through the fit into the std (default 0.03; 0: none)", false),
+        MODEL_OPT_VALUE("--place-mm", "MM", "places on the sample for the cluster-robust std: cubes of MM mm (default "
+                        "a sixth of the sample's observed extent)", false),
         MODEL_OPT_VALUE("--albedo-cells", "MM", "albedo cells of MM mm for a textured material (default 0: none)",
                         false),
         MODEL_OPT_VALUE("--window", "N", "windows of N x N pixels (default 5)", false),
@@ -337,9 +352,11 @@ int fit_cmd_material(int argc, char **argv)
                  "5; a frame's windows are held out together): the fewest parameters within one standard error of the\n"
                  "lowest held-out RMS; BIC and AIC are reported beside it (--cv-folds 0 chooses the lowest BIC).\n"
                  "The sample's scene is given with --scene (a session records none), its material with --material\n"
-                 "when the scene has several. Each parameter's std adds REL * mean (default 0.03) to the statistical\n"
-                 "one, for the calibrations' shared errors (on the virtual rig kc*I comes out within ~3 % and the lamp\n"
-                 "positions within ~8 mm); the prior bounds are mean +- K std (default 3). --report DIR writes an HTML\n"
+                 "when the scene has several. Each parameter's std is the statistical one, cluster-robust over the\n"
+                 "frames and the places on the sample (--place-mm), each lamp's own photometric scale of relative std\n"
+                 "--lamp-systematic (default 0.03) carried through the fit, and REL * mean (--systematic, default\n"
+                 "0.03) for the calibrations' shared errors; the prior bounds are mean +- K std (default 3). --report\n"
+                 "DIR writes an HTML\n"
                  "report there: measured vs fitted lobes, residual maps, the parameters and the model comparison.\n"
                  "--albedo-cells MM (textured materials: wood, paint): the sample's surface is cut into cells of MM mm,\n"
                  "each with its own albedo factor on the whole reflectance (mean 1 over the observations), fitted\n"
@@ -364,6 +381,7 @@ int fit_cmd_material(int argc, char **argv)
     if ((rc = calib_cli_window_step(&cli, &o.window, &o.step)) != MODEL_CLI_OK) return rc;
     if ((rc = model_cli_units(&cli, &o.scene_unit_mm))) return rc;
     if (number_opt(&cli, "--k-sigma", false, &o.k_sigma) || number_opt(&cli, "--systematic", true, &o.sys_rel) ||
+        number_opt(&cli, "--lamp-systematic", true, &o.lamp_rel) || number_opt(&cli, "--place-mm", false, &o.place_mm) ||
         number_opt(&cli, "--albedo-cells", true, &o.cell_mm) || cv_opts(&cli, &o.cv_folds, &o.cv_seed) ||
         number_opt(&cli, "--pose-sigma-deg", false, &o.pose_sigma_deg) ||
         number_opt(&cli, "--pose-sigma-mm", false, &o.pose_sigma_mm))

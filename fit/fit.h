@@ -114,6 +114,30 @@ bool fit_solid_angles(int n, const double *ang, double *w);
 // of the ball reaching each sample's 8th nearest neighbour over 8, in
 // (cos theta_i, omega_o turned by -phi_i) where it is 2 pi du d omega_o.
 bool fit_solid_angles_knn(int n, const double *ang, double *w);
+// Samples of a BRDF for Ngan et al.'s (2005) error, the RMS over both
+// hemispheres of (f_model - f) cos theta_i: one sample at the centre of every
+// cell of the MERL grid (model_brdf_table_cell: theta_h square-root mapped,
+// so a sharp lobe is resolved; theta_d and phi_d every stride-th cell, stride
+// >= 1, each standing for its stride x stride block) with both directions
+// within FIT_NGAN_THETA_MAX_DEG of the normal, R = R(ctx, cosines) (f_r cos
+// theta_i, 1/sr), weighted by the cells' solid angle in (omega_i, omega_o)
+// (weights scaled to mean 1; their sum, sr^2, in omega_sr2). A fit's rms on
+// them is the Ngan error. NULL + message when R is not finite somewhere.
+enum { FIT_NGAN_THETA_MAX_DEG = 85 };
+fit_samples_t *fit_samples_ngan(double (*R)(const void *ctx, const model_cosines_t *c), const void *ctx, int stride);
+// A mixture of materials for fit_samples_ngan (ctx: a fit_mixture_t): R = sum_k weight[k] R_k
+// (model_material_eval: a table or a model). One material of weight 1 is that material.
+typedef struct {
+    int                            n;
+    const model_material_t *const *mat;
+    const double                  *weight;
+} fit_mixture_t;
+double fit_mixture_R(const void *ctx, const model_cosines_t *c);
+// Over samples s: sqrt(sum w (R_model(p) - R)^2 / sum w), 1/sr (on fit_samples_ngan's samples: the Ngan error
+// of model m with parameters p); and sqrt(trace(C H) / sum w), H = sum w J J^T at p (J = dR/dp): the RMS change
+// of R that parameters of covariance C (np x np) make, to first order (NAN when C has a non-finite element).
+double fit_samples_rms(const fit_samples_t *s, model_brdf_t m, const double *p);
+double fit_samples_rms_of_cov(const fit_samples_t *s, model_brdf_t m, const double *p, const double *C);
 
 typedef struct {
     int     threads;            // 0: all cores
@@ -179,6 +203,17 @@ typedef struct {
     // the spread of the folds' mean squares; NAN when not done or a fold failed.
     double        cv_rms, cv_se;
     lsq_summary_t summary;
+    // What the samples share (fit_brdf_shared_covariance, refl fit material):
+    // when shared_done, cov and std above are the cluster-robust statistical
+    // covariance and std_chi2 the model-based std it replaced (the covariance
+    // scaled by rss / (N - free)); clusters_frame, clusters_place the clusters
+    // it used (0: that way not used). groups_ok: cov_groups is the systematic
+    // covariance of the photometric groups' (each lamp's) scales.
+    bool          shared_done;
+    int           clusters_frame, clusters_place;
+    double        std_chi2[MODEL_BRDF_MAX_PARAMS];
+    bool          groups_ok;
+    double        cov_groups[MODEL_BRDF_MAX_PARAMS * MODEL_BRDF_MAX_PARAMS];
 } fit_brdf_result_t;
 
 // Fit model m to the samples. false with a message when no usable fit.
@@ -186,6 +221,41 @@ bool fit_brdf(const fit_samples_t *s, model_brdf_t m, const fit_brdf_options_t *
 // The same from one given starting point (no multi-start; clamped into the bounds).
 bool fit_brdf_from(const fit_samples_t *s, model_brdf_t m, const fit_brdf_options_t *opt, const double *start,
                    fit_brdf_result_t *out);
+
+// What the samples of a fit share, for its covariance (refl fit material;
+// README "refl fit material", the parameters' uncertainty). Per sample (NULL:
+// none): frame[i] the frame it was measured in (its exposure, lamp state and
+// pose shared), place[i] its place on the sample (any int: the samples of a
+// place share what the material does there), group[i] in 0..ngroups-1 its
+// photometric group (a lamp seen by a camera: the calibration's kc*I of that
+// lamp, its emission pattern and position scale every sample of it alike),
+// whose scale has the relative std group_rel[group].
+typedef struct {
+    const int    *frame, *place, *group;
+    int           ngroups;
+    const double *group_rel;
+} fit_shared_t;
+enum { FIT_MIN_CLUSTERS = 10 };   // a way of clustering with fewer clusters is not used
+// The fit r of samples s (at r->p, with r's held parameters) given what its
+// samples share:
+//  - the statistical covariance, cluster-robust (the sandwich H^-1 M H^-1,
+//    H = sum w J J^T over the free parameters, M = sum over clusters of
+//    u u^T, u = sum over the cluster's samples of w (R_model - R) J, times
+//    G/(G-1)), two-way by frames and places (Cameron, Gelbach & Miller 2011:
+//    V_frame + V_place - V_frame&place, negative eigenvalues set to 0), one-way
+//    when only one of them has FIT_MIN_CLUSTERS clusters: residuals that
+//    frames or places share (a frame's exposure, a model's misfit over a
+//    frame's geometry, the material's variation from place to place) count
+//    once per cluster, not once per sample. It replaces r->cov and r->std for
+//    the free parameters (F0 held over its interval and the other held
+//    parameters keep their stated parts); the former std goes to std_chi2.
+//    Without frames and places (or with a robust loss), r is left as it is.
+//  - the groups' systematic covariance: each group's scale changed by its
+//    group_rel moves the parameters by dp_g = H^-1 sum_g w J R group_rel[g]
+//    (the linearised refit); cov_groups = sum_g dp_g dp_g^T, independent
+//    groups. dp (ngroups x nparams, row-major; NULL: not wanted) gets each dp_g.
+// false + message when H is singular (r unchanged).
+bool fit_brdf_shared_covariance(const fit_samples_t *s, const fit_shared_t *sh, fit_brdf_result_t *r, double *dp);
 
 // Several models fitted to the same samples (refl fit brdf, refl fit
 // material): the results of those that could be fitted, in the order tried,
@@ -241,9 +311,14 @@ json_t *fit_brdf_choice_json(const fit_brdf_models_t *m);
 // written as "prior_covariance"): the fit's plus the systematic part, a
 // photometric scale of std sys_rel shared by every sample (the parameters R
 // is linear in, kd ks ks2 Rd, fully correlated: sys_rel^2 mean_a mean_b),
-// (sys_rel mean)^2 on the diagonal of the others; held parameters 0, F0 held
-// over its interval its uniform's. Its diagonal is the entry's std^2.
+// (sys_rel mean)^2 on the diagonal of the others, and the photometric groups'
+// (each lamp's) cov_groups when groups_ok; held parameters 0, F0 held over its
+// interval its uniform's. Its diagonal is the entry's std^2.
 void    fit_prior_covariance(const fit_brdf_result_t *best, double sys_rel, double *C);
+// Parameter j's std in the priors: sqrt(std^2 + (sys_rel mean)^2 + cov_groups_jj) (the statistical part, the
+// shared photometric scale or geometric part, the lamps'), a held parameter's stated one (0, or its interval's
+// uniform std). The diagonal of fit_prior_covariance is its square.
+double  fit_prior_std(const fit_brdf_result_t *best, double sys_rel, int j);
 json_t *fit_priors_material(const char *name, const fit_brdf_result_t *best, const fit_brdf_result_t *candidates,
                             int ncandidates, double k_sigma, double sys_rel);
 

@@ -347,8 +347,8 @@ static bool cells_fit(const fit_samples_t *smp, albedo_cells_t *ac, fit_brdf_res
 
 fit_material_opts_t fit_material_defaults(void)
 {
-    return (fit_material_opts_t){ .model = "all", .k_sigma = 3, .sys_rel = 0.03, .cv_folds = 5, .cv_seed = 1,
-                                  .noise_weights = true, .loss = LSQ_LOSS_NONE, .loss_scale = 2 };
+    return (fit_material_opts_t){ .model = "all", .k_sigma = 3, .sys_rel = 0.03, .lamp_rel = 0.03, .cv_folds = 5,
+                                  .cv_seed = 1, .noise_weights = true, .loss = LSQ_LOSS_NONE, .loss_scale = 2 };
 }
 
 void fit_material_result_free(fit_material_result_t *r)
@@ -570,6 +570,110 @@ static json_t *cells_json(const fit_material_opts_t *o, const fit_material_resul
     return jc;
 }
 
+// What the samples of the chosen fit share (fit_brdf_shared_covariance; obs
+// and smp sample for sample): frames (a camera's step), places (cells of
+// r->place_mm of the sample's surface at angle 0) and each camera's lamps as
+// photometric groups of relative std o->lamp_rel. The chosen result in
+// r->models is updated; *out its record for the priors entry (the lamps'
+// shifts dp, the clusters; a shared covariance that could not be computed
+// leaves the fit's own, said in it). false + message: out of memory, or
+// places too small for the sample.
+static bool material_shared(const fit_material_opts_t *o, const calib_set_t *cal, const calib_obs_set_t *obs,
+                            const fit_samples_t *smp, fit_material_result_t *r, json_t **out)
+{
+    fit_brdf_result_t *b = &r->models.res[r->models.best];
+    int n = obs->n, nl = cal->lamps->n, nc = r->ncameras > 0 ? r->ncameras : 1, ng = nc * nl, np = b->nparams;
+    int *frame = malloc((size_t)(n ? n : 1) * sizeof *frame), *place = malloc((size_t)(n ? n : 1) * sizeof *place);
+    int *group = malloc((size_t)(n ? n : 1) * sizeof *group), *count = calloc((size_t)ng, sizeof *count);
+    double *rel = malloc((size_t)ng * sizeof *rel), *dp = calloc((size_t)ng * np, sizeof *dp);
+    json_t *j = NULL;
+    *out = NULL;
+    if (!frame || !place || !group || !count || !rel || !dp || n != smp->n) {
+        model_error_set(NULL, 0, n != smp->n ? "%d observations for %d samples" : "out of memory", n, smp->n);
+        goto done;
+    }
+    // the places: cells of the sample's surface at angle 0
+    double lo[3] = { INFINITY, INFINITY, INFINITY }, hi[3] = { -INFINITY, -INFINITY, -INFINITY }, ext = 0;
+    for (int i = 0; i < n; i++)
+        for (int k = 0; k < 3; k++) lo[k] = fmin(lo[k], obs->o[i].p0_mm[k]), hi[k] = fmax(hi[k], obs->o[i].p0_mm[k]);
+    for (int k = 0; k < 3; k++) ext = fmax(ext, hi[k] - lo[k]);
+    r->place_mm = o->place_mm > 0 ? o->place_mm : fmax(1.0, ext / 6);
+    long long nxyz[3];
+    for (int k = 0; k < 3; k++) nxyz[k] = n ? (long long)floor((hi[k] - lo[k]) / r->place_mm) + 1 : 1;
+    if ((double)nxyz[0] * (double)nxyz[1] * (double)nxyz[2] > 1e9) {
+        model_error_set(NULL, 0, "--place-mm %g: %lld x %lld x %lld places over the sample's %.0f mm; give a larger "
+                        "--place-mm", r->place_mm, nxyz[0], nxyz[1], nxyz[2], ext);
+        goto done;
+    }
+    for (int i = 0, cam = 0, left = r->nobs_camera[0]; i < n; i++) {
+        while (left == 0 && cam + 1 < nc) left = r->nobs_camera[++cam];
+        left--;
+        const calib_obs_t *ob = &obs->o[i];
+        frame[i] = cam * 1000000 + ob->step;
+        long long c[3];
+        for (int k = 0; k < 3; k++) c[k] = (long long)floor((ob->p0_mm[k] - lo[k]) / r->place_mm);
+        place[i] = (int)((c[0] * nxyz[1] + c[1]) * nxyz[2] + c[2]);
+        group[i] = ob->lamp >= 0 && ob->lamp < nl ? cam * nl + ob->lamp : -1;
+        if (group[i] >= 0) count[group[i]]++;
+    }
+    for (int g = 0; g < ng; g++) rel[g] = o->lamp_rel;
+    fit_shared_t sh = { .frame = frame, .place = place, .group = o->lamp_rel > 0 ? group : NULL, .ngroups = ng,
+                        .group_rel = rel };
+    bool ok = fit_brdf_shared_covariance(smp, &sh, b, dp);
+    j = json_object();
+    json_t *sc = json_object();
+    json_object_set_new(sc, "method", json_string(
+        !ok ? "the fit's own (chi^2/dof-scaled): the shared covariance could not be computed (see note)"
+        : b->shared_done ? (b->clusters_frame && b->clusters_place
+                                ? "cluster-robust, two-way by frames and places (V_frame + V_place - V_frame&place)"
+                                : b->clusters_frame ? "cluster-robust by frames" : "cluster-robust by places")
+                         : "the fit's own (chi^2/dof-scaled): too few frames and places to cluster, or a robust loss"));
+    if (!ok) json_object_set_new(sc, "note", json_string(model_last_error()));
+    json_object_set_new(sc, "frames", json_integer(b->clusters_frame));
+    json_object_set_new(sc, "places", json_integer(b->clusters_place));
+    json_object_set_new(sc, "place_mm", json_real(r->place_mm));
+    json_object_set_new(sc, "convention", json_string(
+        "std_statistical is the sandwich H^-1 M H^-1 over the free parameters (H = sum w J J^T, M = sum over "
+        "clusters of u u^T with u = sum w (R_model - R) J over the cluster's samples, times G/(G-1)): residuals a "
+        "frame (a camera's turntable step: exposure, lamp state, pose, and the model's misfit over its geometry) or "
+        "a place on the sample (cubes of place_mm mm of the surface at angle 0: what the material does there) "
+        "shares count once per cluster; std_parts.statistical_chi2_scaled is the covariance scaled by chi^2/dof "
+        "it replaced. A way with fewer than 10 clusters is not used"));
+    json_object_set_new(j, "statistical_covariance", sc);
+    json_t *ls = json_object(), *arr = json_array();
+    json_object_set_new(ls, "rel", json_real(o->lamp_rel));
+    for (int g = 0; ok && b->groups_ok && g < ng; g++) {
+        if (!count[g]) continue;
+        json_t *e = json_object(), *d = json_object();
+        if (r->ncameras > 1) json_object_set_new(e, "camera", json_string(r->cameras[g / nl]));
+        json_object_set_new(e, "lamp", json_string(cal->lamps->lamps[g % nl].name));
+        json_object_set_new(e, "samples", json_integer(count[g]));
+        for (int k = 0; k < np; k++) json_object_set_new(d, model_brdf_param_name(b->model, k), json_real(dp[g * np + k]));
+        json_object_set_new(e, "dp", d);
+        json_array_append_new(arr, e);
+    }
+    json_object_set_new(ls, "lamps", arr);
+    json_object_set_new(ls, "convention", json_string(
+        "each lamp of each camera scales its samples alike (its kc*I from the white, its emission pattern and "
+        "position over the sample), independently of the other lamps: dp is the parameters' change (their units) "
+        "when that lamp's samples alone scale by 1 + rel (the linearised refit H^-1 sum w J R rel); the priors add "
+        "sum dp dp^T to the covariance (std_parts.lamps). A parameter that one lamp alone measures (F0 through the "
+        "rim lamp's highlights near grazing) carries that lamp's calibration in full"));
+    json_object_set_new(j, "lamp_systematic", ls);
+    r->shared_done = ok && b->shared_done;
+    r->clusters_frame = b->clusters_frame;
+    r->clusters_place = b->clusters_place;
+    *out = j;
+done:
+    free(frame);
+    free(place);
+    free(group);
+    free(count);
+    free(rel);
+    free(dp);
+    return *out != NULL;
+}
+
 double fit_material_window_spread(const fit_samples_t *smp, model_brdf_t m, const double *p, double noise_rms,
                                   int *n)
 {
@@ -691,11 +795,15 @@ bool fit_material_run(const fit_material_opts_t *o, fit_material_result_t *r)
     } else {
         r->models = r->first;
     }
+    json_t *shared = NULL;
+    if (!material_shared(o, cal, &obs, csmp ? csmp : smp, r, &shared)) goto done;
     {
         const fit_brdf_result_t *b = &r->models.res[r->models.best];
         r->window_rel_std = fit_material_window_spread(smp, b->model, b->p, r->noise_rms, &r->window_rel_n);
     }
     top = material_priors(o, cal, r, &entry);
+    json_object_update(entry, shared);
+    json_decref(shared);
     char *od = g_path_get_dirname(o->out);
     bool made = model_mkdir_p(od);
     g_free(od);

@@ -35,6 +35,10 @@ typedef struct {
     const char *report;     // a directory for the HTML report; NULL: none
     double      k_sigma;    // prior bounds mean +- k_sigma std (default 3)
     double      sys_rel;    // systematic std relative to the mean (default 0.03)
+    double      lamp_rel;   // each lamp's own photometric scale (kc*I, emission pattern, position): relative std
+                            // carried through the fit into the parameters' std (default 0.03; 0: none)
+    double      place_mm;   // places on the sample for the cluster-robust covariance, cells of place_mm mm of its
+                            // surface at angle 0 (0, the default: a sixth of the observed points' largest extent)
     double      cell_mm;    // albedo cells of cell_mm mm (0: none)
     int         cv_folds;   // model choice by cross-validation over the frames, folds (default 5; 0: BIC)
     uint64_t    cv_seed;    // the folds' shuffle (default 1)
@@ -79,6 +83,11 @@ typedef struct {
     fit_brdf_models_t models;           // the final fits (a copy of first without cells)
     double            rms_over_noise;   // noise-weighted: sqrt(chi^2 / dof); else the residual per degree of
                                         // freedom over noise_rms (NAN: unknown)
+    // the chosen model's covariance from what its samples share (fit_brdf_shared_covariance): clusters of
+    // frames and places used (0: that way not used), the place cells' size (mm); false: the chi^2-scaled one kept
+    bool              shared_done;
+    int               clusters_frame, clusters_place;
+    double            place_mm;
     double            window_rel_std;   // a window's R about the final model beyond its temporal noise, relative
                                         // (texture from place to place and what the model lacks; NAN: unknown;
                                         // fit_material_window_spread)
@@ -87,6 +96,12 @@ typedef struct {
     calib_sample_pose_t pose;           // the sample's pose used (the first camera's; README "refl fit material")
 } fit_material_result_t;
 
+// The parameters' uncertainty (README "refl fit material"): the chosen
+// model's statistical covariance is cluster-robust over the frames (a
+// camera's turntable step: its exposure, lamp and pose shared) and the places
+// on the sample (cells of o->place_mm), and each lamp of each camera adds its
+// photometric scale's relative std o->lamp_rel through the fit
+// (fit_brdf_shared_covariance); the priors' std adds the shared o->sys_rel.
 // The material fit (`refl fit material`): observations of o->session through
 // the calibrations of o->calib (calib_observe_session; of several cameras:
 // every camera's, each through its own camera model, gain and white, in one

@@ -1,5 +1,6 @@
 // rig/virtual_materials.h — the virtual rig's spatially varying roughness
-// (rig/virtual_materials.c), used by rig/virtual.c only.
+// (rig/virtual_materials.c): rig/virtual.c renders with it; fit/chain.c
+// compares a fitted material with the mean of its two populations.
 #pragma once
 
 #include <stdbool.h>

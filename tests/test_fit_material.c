@@ -185,6 +185,19 @@ TEST_LONG(fit_material_chain_virtual_rig)
         CHECK(json_object_get(json_array_get(ps, 3), "held") == NULL);
         CHECK_MSG(fabs(f0 / 0.045 - 1) < 0.10 && fabs(f0 - 0.045) < 2 * f0sd, "F0 %.4g +- %.2g vs truth 0.045", f0,
                   f0sd);
+        // the std's parts (README "refl fit material"): the statistical one clustered by frames and places,
+        // each of the five lamps' 3 % carried through the fit, the shared 3 %: std^2 their squares' sum
+        json_t *sc = json_object_get(m, "statistical_covariance"), *ls = json_object_get(m, "lamp_systematic");
+        CHECK(json_integer_value(json_object_get(sc, "frames")) >= 10 &&
+              json_integer_value(json_object_get(sc, "places")) >= 10);
+        CHECK(json_array_size(json_object_get(ls, "lamps")) == 5);
+        for (size_t k = 0; k < json_array_size(ps); k++) {
+            json_t *q = json_array_get(ps, k), *pt = json_object_get(q, "std_parts");
+            double a = json_number_value(json_object_get(pt, "statistical")), b = json_number_value(json_object_get(pt, "lamps"));
+            double c = json_number_value(json_object_get(pt, "shared")), sd = json_number_value(json_object_get(q, "std"));
+            CHECK_MSG(fabs(sqrt(a * a + b * b + c * c) - sd) <= 1e-9 * sd, "%s: std %.6g, parts %.3g %.3g %.3g",
+                      json_string_value(json_object_get(q, "name")), sd, a, b, c);
+        }
         CHECK_CONTAINS(json_string_value(json_object_get(json_object_get(p, "provenance"), "command")),
                        "fit material");
         CHECK(json_array_size(json_object_get(json_object_get(p, "provenance"), "inputs")) >= 4);
@@ -220,6 +233,18 @@ TEST_LONG(fit_material_chain_virtual_rig)
                        "-o", pj, NULL);
     CHECK(rc == 2);
     CHECK_CONTAINS(err, "--systematic needs a number >= 0");
+    g_free(out);
+    g_free(err);
+    rc = test_refl_run(60, &out, &err, "fit", "material", gs, "--scene", gsc, "--calib", cal, "--lamp-systematic",
+                       "-0.01", "-o", pj, NULL);
+    CHECK(rc == 2);
+    CHECK_CONTAINS(err, "--lamp-systematic needs a number >= 0");
+    g_free(out);
+    g_free(err);
+    rc = test_refl_run(60, &out, &err, "fit", "material", gs, "--scene", gsc, "--calib", cal, "--place-mm", "0",
+                       "-o", pj, NULL);
+    CHECK(rc == 2);
+    CHECK_CONTAINS(err, "--place-mm needs a number > 0");
     g_free(out);
     g_free(err);
     // windows of whole pixels 1..64; albedo cells >= 0 and only for fit material

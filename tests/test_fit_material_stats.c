@@ -385,6 +385,99 @@ TEST(fit_held_parameters_stated_interval)
     fit_samples_free(s);
 }
 
+// A lab day's material in miniature, with known answers: 5 lamps (their
+// elevations 25..80 deg) at 12 turntable angles are 60 frames, each seeing
+// 5 x 5 places of 6 samples. The material's roughness varies from place to
+// place: each place a mixture (1 - w) GGX(alpha 0.7 a) + w GGX(alpha 1.3 a), w
+// drawn per place in [0.1, 0.9]; each lamp's scale is off by 3 % (one draw per
+// lamp), each frame's by 0.5 %; noise 0.001 + 1 % of R. The truth is the best
+// GGX fit to the mean material (w = 0.5 everywhere, no scale errors, no
+// noise) at the same geometry and weights. Over six draws every parameter's
+// std from fit_brdf_shared_covariance (clustered by frames and places, each
+// lamp's 3 % carried through) covers its error (|z| <= 3); the former std
+// (chi^2/dof-scaled, what the fit alone states) does not. The same six draws
+// without the lamps' errors: the clustered statistical std alone covers.
+enum { SH_LAMPS = 5, SH_ANGLES = 12, SH_PLACES = 25, SH_PER_PLACE = 6 };
+
+static double sh_mixture(const double *p0, double w, const model_cosines_t *c)
+{
+    double a[4], b[4];
+    memcpy(a, p0, sizeof a);
+    memcpy(b, p0, sizeof b);
+    a[2] *= 0.7;
+    b[2] *= 1.3;
+    return (1 - w) * model_brdf_eval(MODEL_BRDF_GGX, a, c, NULL) + w * model_brdf_eval(MODEL_BRDF_GGX, b, c, NULL);
+}
+
+TEST(fit_shared_covariance_covers_misfit)
+{
+    const double p0[4] = { 0.5, 0.25, 0.15, 0.04 }, elev[SH_LAMPS] = { 25, 40, 55, 70, 80 }, d = M_PI / 180;
+    const int n = SH_LAMPS * SH_ANGLES * SH_PLACES * SH_PER_PLACE;
+    int *frame = malloc(n * sizeof *frame), *place = malloc(n * sizeof *place), *group = malloc(n * sizeof *group);
+    double rel[SH_LAMPS] = { 0.03, 0.03, 0.03, 0.03, 0.03 }, worst = 0, worst_chi2 = 0;
+    int over_chi2 = 0;
+    for (int draw = 0; draw < 12; draw++) {
+        int seed = 1 + draw % 6;
+        bool lamps = draw < 6;   // the lamps' errors, and their std
+        model_rng_t rng = model_rng((uint64_t)seed, 41);
+        double wp[SH_PLACES], sl[SH_LAMPS];
+        for (int p = 0; p < SH_PLACES; p++) wp[p] = 0.1 + 0.8 * model_rng_uniform(&rng);
+        for (int k = 0; k < SH_LAMPS; k++) sl[k] = 1 + (lamps ? 0.03 : 0) * model_rng_gauss(&rng);
+        fit_samples_t *s = fit_samples_new(), *ref = fit_samples_new();
+        s->noise_weighted = ref->noise_weighted = true;
+        int i = 0;
+        for (int k = 0; k < SH_LAMPS; k++)
+            for (int t = 0; t < SH_ANGLES; t++) {
+                double sf = sl[k] * (1 + 0.005 * model_rng_gauss(&rng));
+                model_vec3_t l = v3(sin(elev[k] * d) * cos(t * 30 * d), sin(elev[k] * d) * sin(t * 30 * d),
+                                    cos(elev[k] * d));
+                for (int p = 0; p < SH_PLACES; p++)
+                    for (int q = 0; q < SH_PER_PLACE; q++) {
+                        double tv = (35 + 4 * (p % 5) + 0.5 * q) * d, pv = (180 + 5 * (p / 5 - 2) + 0.7 * q) * d;
+                        model_cosines_t c = model_cosines(v3(0, 0, 1), l, v3(sin(tv) * cos(pv), sin(tv) * sin(pv), cos(tv)));
+                        double Rm = sh_mixture(p0, 0.5, &c), R = sh_mixture(p0, wp[p], &c) * sf;
+                        double sig = 0.001 + 0.01 * Rm;
+                        CHECK(fit_samples_add(s, &c, R + sig * model_rng_gauss(&rng), 1 / (sig * sig)));
+                        CHECK(fit_samples_add(ref, &c, Rm, 1 / (sig * sig)));
+                        frame[i] = k * SH_ANGLES + t;
+                        place[i] = p;
+                        group[i] = k;
+                        i++;
+                    }
+            }
+        fit_brdf_result_t r, t0;
+        CHECK_MSG(fit_brdf(ref, MODEL_BRDF_GGX, NULL, &t0), "%s", model_last_error());
+        CHECK_MSG(fit_brdf(s, MODEL_BRDF_GGX, NULL, &r), "%s", model_last_error());
+        fit_shared_t sh = { frame, place, lamps ? group : NULL, SH_LAMPS, rel };
+        double dp[SH_LAMPS * 4];
+        CHECK_MSG(fit_brdf_shared_covariance(s, &sh, &r, dp), "%s", model_last_error());
+        CHECK(r.shared_done && r.groups_ok == lamps && r.clusters_frame == SH_LAMPS * SH_ANGLES &&
+              r.clusters_place == SH_PLACES);
+        fprintf(stderr, "  draw %d%s (rms/noise %.2f):", seed, lamps ? "" : " without the lamps' errors",
+                sqrt(r.chi2_dof));
+        for (int j = 0; j < 4; j++) {
+            double sd = fit_prior_std(&r, 0, j), z = (r.p[j] - t0.p[j]) / sd, z2 = (r.p[j] - t0.p[j]) / r.std_chi2[j];
+            fprintf(stderr, " %s %.4g (truth %.4g) z %+.2f (chi2-scaled %+.1f)", model_brdf_param_name(MODEL_BRDF_GGX, j),
+                    r.p[j], t0.p[j], z, z2);
+            worst = fmax(worst, fabs(z));
+            worst_chi2 = fmax(worst_chi2, fabs(z2));
+            over_chi2 += fabs(z2) > 3;
+            // the statistical part alone is at least the chi^2-scaled one's order
+            CHECK(r.std[j] > 0.5 * r.std_chi2[j]);
+        }
+        fprintf(stderr, "\n");
+        fit_samples_free(s);
+        fit_samples_free(ref);
+    }
+    fprintf(stderr, "  largest |z|: %.2f with the shared covariance, %.1f chi^2-scaled (%d of 48 over 3)\n", worst,
+            worst_chi2, over_chi2);
+    CHECK_MSG(worst <= 3, "largest |z| %.2f", worst);
+    CHECK_MSG(over_chi2 > 0, "the chi^2-scaled std covered every error (largest |z| %.2f)", worst_chi2);
+    free(frame);
+    free(place);
+    free(group);
+}
+
 // The window spread (fit_material_window_spread, the priors' window_rel_std):
 // samples of GGX times a place-to-place factor 1 + N(0, 0.02) with noise of
 // 1 % of R (weighted by it), and the factor alone without noise weights (the
