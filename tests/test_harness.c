@@ -143,7 +143,7 @@ TEST(harness_jobs_side_by_side_and_alone)
     self[n] = 0;
     char env_dir[1200];
     snprintf(env_dir, sizeof env_dir, "REFL_TEST_HARNESS_DIR=%s", test_tmpdir());
-    const char *argv[] = { "env", env_dir, "REFL_TEST_JOBS=2", self, "harness_inner_span_", NULL };
+    const char *argv[] = { "env", env_dir, "REFL_TEST_JOBS=2", "REFL_TEST_SET=all", self, "harness_inner_span_", NULL };
     char *out = NULL, *err = NULL;
     int rc = test_run(argv, 60, &out, &err);
     CHECK_MSG(rc == 0 && out && strstr(out, "4 passed, 0 failed"), "exit %d\n%s%s", rc, out ? out : "", err ? err : "");

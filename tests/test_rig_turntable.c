@@ -608,7 +608,7 @@ TEST_ALONE(turntable_apt_under_umockdev)
     const char *ao = getenv("ASAN_OPTIONS");
     snprintf(asan, sizeof asan, "ASAN_OPTIONS=%s%sverify_asan_link_order=0", ao ? ao : "", ao && *ao ? ":" : "");
     // One at a time: the inner tests share the wrapper's one test bed.
-    const char *argv[] = { "env", asan, "REFL_TEST_JOBS=1", "umockdev-wrapper", self, "apt_umock_", NULL };
+    const char *argv[] = { "env", asan, "REFL_TEST_JOBS=1", "REFL_TEST_SET=all", "umockdev-wrapper", self, "apt_umock_", NULL };
     char *out = NULL, *err = NULL;
     int rc = test_run(argv, 60, &out, &err);
     char want[64];
