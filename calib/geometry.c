@@ -1725,6 +1725,62 @@ bool calib_geometry_mrcal(const calib_geometry_opts_t *o, calib_geometry_state_t
     return *sol != NULL;
 }
 
+// A solve that failed with partial views in it (a ChArUco board seen in part,
+// whose corners mrcal's outlier rejection can thin until a view's pose or a
+// lens parameter is no longer held: "not positive definite") is tried once
+// more without them: their lines left out of a copy of the corners file, each
+// such view told why. false + the first failure's message when there are none
+// or the second solve fails too.
+static bool solve_without_partial_views(const calib_geometry_opts_t *o, calib_geometry_state_t *s)
+{
+    char *first = g_strdup(model_last_error());
+    int N = o->board.width_n * o->board.height_n, npart = 0;
+    GHashTable *drop = g_hash_table_new(g_str_hash, g_str_equal);
+    for (guint i = 0; i < s->views.v->len; i++) {
+        calib_geometry_view_t *v = g_ptr_array_index(s->views.v, i);
+        if (v->found && !v->why[0] && v->ncorners < N) g_hash_table_add(drop, v->name), npart++;
+    }
+    bool ok = false;
+    char *txt = NULL, *path = NULL;
+    if (npart > 0 && s->nfound - npart >= 3 && g_file_get_contents(s->solvecorners, &txt, NULL, NULL)) {
+        GString *out = g_string_new("");
+        char **lines = g_strsplit(txt, "\n", -1);
+        for (int k = 0; lines[k]; k++) {
+            if (!lines[k][0]) continue;
+            char name[512] = "";
+            if (lines[k][0] != '#' && sscanf(lines[k], "%511s", name) == 1 && g_hash_table_contains(drop, name))
+                continue;
+            g_string_append_printf(out, "%s\n", lines[k]);
+        }
+        g_strfreev(lines);
+        path = g_strdup_printf("%s/corners-whole-views.vnl", s->outdir);
+        fprintf(stderr, "refl calib geometry: the solve failed (%s); solving again without the %d partial views\n",
+                first, npart);
+        ok = g_file_set_contents(path, out->str, (gssize)out->len, NULL);
+        g_string_free(out, TRUE);
+        json_decref(s->sol);
+        s->sol = NULL;
+        ok = ok && calib_geometry_mrcal(o, s, s->lensmodel, path, s->mdir, s->nfound - npart, &s->sol);
+        if (ok) {
+            for (guint i = 0; i < s->views.v->len; i++) {
+                calib_geometry_view_t *v = g_ptr_array_index(s->views.v, i);
+                if (g_hash_table_contains(drop, v->name))
+                    snprintf(v->why, sizeof v->why, "left out of the solve: a partial view (%d of %d corners), and "
+                             "the solve with the partial views failed", v->ncorners, N);
+            }
+            g_free(s->solvecorners);
+            s->solvecorners = path;
+            path = NULL;
+        }
+    }
+    if (!ok) model_error_set(NULL, 0, "%s", first);
+    g_free(txt);
+    g_free(path);
+    g_free(first);
+    g_hash_table_destroy(drop);
+    return ok;
+}
+
 bool calib_geometry_solve(const calib_geometry_opts_t *o, calib_geometry_state_t *s)
 {
     g_free(s->solvecorners);
@@ -1739,7 +1795,9 @@ bool calib_geometry_solve(const calib_geometry_opts_t *o, calib_geometry_state_t
     g_free(s->soldir);
     s->soldir = g_strdup(s->mdir);
     json_decref(s->sol);
-    return calib_geometry_mrcal(o, s, s->lensmodel, s->solvecorners, s->mdir, s->nfound, &s->sol);
+    s->sol = NULL;
+    if (calib_geometry_mrcal(o, s, s->lensmodel, s->solvecorners, s->mdir, s->nfound, &s->sol)) return true;
+    return solve_without_partial_views(o, s);
 }
 
 bool calib_geometry_apply_solution(const calib_geometry_opts_t *o, calib_geometry_state_t *s)
