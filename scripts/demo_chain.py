@@ -68,7 +68,9 @@ if os.path.exists(cj_path):
                  "" if e.get("error") is None else f(e["error"], 3),
                  "" if z is None else f"{z:+.2f}", e.get("unit", ""), e.get("note", "")]
         tr = "<tr style=\"background:#fdd\">" if bad else "<tr>"
-        parts.append(tr + "".join(f"<td>{html.escape(str(c))}</td>" for c in cells) + "</tr>\n")
+        # a long figure name may break after its dots
+        parts.append(tr + "".join(f"<td>{html.escape(str(c)).replace('.', '.<wbr>') if k == 0 else html.escape(str(c))}</td>"
+                                  for k, c in enumerate(cells)) + "</tr>\n")
     parts.append("</table>\n")
 
 # ---- geometry ---------------------------------------------------------------
@@ -284,6 +286,7 @@ HEAD = ("<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\"><title
         "truth</title>\n<style>\nbody { font-family: sans-serif; margin: 1.5em; max-width: 1600px; }\n"
         "table { border-collapse: collapse; margin: 1em 0; }\n"
         "td, th { border: 1px solid #bbb; padding: 0.25em 0.6em; text-align: left; vertical-align: top; }\n"
+        "td:last-child { overflow-wrap: anywhere; min-width: 16em; }\n"
         "th { background: #eee; }\nimg { max-width: 100%; border: 1px solid #ccc; }\n</style></head><body>\n"
         "<p><a href=\"index.html\">&larr; the demo's index</a></p>\n"
         "<h1>The chain against the truth: capture &rarr; calibrate &rarr; fit &rarr; priors &rarr; verify</h1>\n"
