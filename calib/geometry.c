@@ -1691,6 +1691,8 @@ bool calib_geometry_mrcal(const calib_geometry_opts_t *o, calib_geometry_state_t
         for (int k = 0; k < s->ncams; k++) argv_m[15 + k] = g_strdup_printf("%s/*.png", s->camnames[k]);
         argv_m[15 + s->ncams] = NULL;
     }
+    if (s->no_outlier_rejection)   // after the globs: argparse takes options anywhere
+        argv_m[s->ncams > 1 ? 15 + s->ncams : 19] = "--skip-outlier-rejection";
     // mrcal-calibrate-cameras runs under Debian's Python (its shebang)
     fprintf(stderr, "refl calib geometry: solving %s from %d views (mrcal-calibrate-cameras)\n", lensmodel, nviews);
     char *log = g_strdup_printf("%s/mrcal-calibrate-cameras.log", mdir);
@@ -1727,13 +1729,32 @@ bool calib_geometry_mrcal(const calib_geometry_opts_t *o, calib_geometry_state_t
 
 // A solve that failed with partial views in it (a ChArUco board seen in part,
 // whose corners mrcal's outlier rejection can thin until a view's pose or a
-// lens parameter is no longer held: "not positive definite") is tried once
-// more without them: their lines left out of a copy of the corners file, each
-// such view told why. false + the first failure's message when there are none
-// or the second solve fails too.
-static bool solve_without_partial_views(const calib_geometry_opts_t *o, calib_geometry_state_t *s)
+// lens parameter is no longer held: "not positive definite", "factorization
+// computation failed") is tried again: first with every corner (mrcal's
+// --skip-outlier-rejection; the outliers' residuals then weigh in, and the
+// command says so), then without the partial views (their lines
+// left out of a copy of the corners file, each such view told why). false +
+// the first failure's message when there are none or every solve fails.
+static bool solve_again(const calib_geometry_opts_t *o, calib_geometry_state_t *s)
 {
     char *first = g_strdup(model_last_error());
+    int N0 = o->board.width_n * o->board.height_n, np0 = 0;
+    for (guint i = 0; i < s->views.v->len; i++) {
+        calib_geometry_view_t *v = g_ptr_array_index(s->views.v, i);
+        np0 += v->found && !v->why[0] && v->ncorners < N0;
+    }
+    if (np0 > 0) {
+        fprintf(stderr, "refl calib geometry: the solve failed (%s); solving again with every corner (mrcal's "
+                "outlier rejection off)\n", first);
+        s->no_outlier_rejection = true;
+        json_decref(s->sol);
+        s->sol = NULL;
+        if (calib_geometry_mrcal(o, s, s->lensmodel, s->solvecorners, s->mdir, s->nfound, &s->sol)) {
+            g_free(first);
+            return true;
+        }
+        s->no_outlier_rejection = false;
+    }
     int N = o->board.width_n * o->board.height_n, npart = 0;
     GHashTable *drop = g_hash_table_new(g_str_hash, g_str_equal);
     for (guint i = 0; i < s->views.v->len; i++) {
@@ -1797,7 +1818,7 @@ bool calib_geometry_solve(const calib_geometry_opts_t *o, calib_geometry_state_t
     json_decref(s->sol);
     s->sol = NULL;
     if (calib_geometry_mrcal(o, s, s->lensmodel, s->solvecorners, s->mdir, s->nfound, &s->sol)) return true;
-    return solve_without_partial_views(o, s);
+    return solve_again(o, s);
 }
 
 bool calib_geometry_apply_solution(const calib_geometry_opts_t *o, calib_geometry_state_t *s)

@@ -203,6 +203,8 @@ typedef struct {
     char           *solvecorners;   // the corners file mrcal solves from (cornpath, or the joint one) (g_free)
     char           *soldir;         // the chosen solution's directory (DIR/mrcal or DIR/mrcal/splined) (g_free)
     json_t         *xv;             // cross-validation and lens choice (calib/geometry_diff.c), or NULL (owned)
+    bool            no_outlier_rejection;   // mrcal solves with --skip-outlier-rejection (a solve that
+                                            // failed with it: calib_geometry_solve)
 } calib_geometry_state_t;
 
 void calib_geometry_state_free(calib_geometry_state_t *s);
