@@ -906,28 +906,7 @@ static double cond_sym(const double *m, int n)
 {
     double a[49];
     memcpy(a, m, sizeof *a * (size_t)(n * n));
-    for (int sweep = 0; sweep < 50; sweep++) {
-        double off = 0;
-        for (int i = 0; i < n; i++)
-            for (int j = i + 1; j < n; j++) off += a[i * n + j] * a[i * n + j];
-        if (off < 1e-30) break;
-        for (int p = 0; p < n; p++)
-            for (int q = p + 1; q < n; q++) {
-                if (fabs(a[p * n + q]) < 1e-300) continue;
-                double th = 0.5 * atan2(2 * a[p * n + q], a[q * n + q] - a[p * n + p]);
-                double c = cos(th), sn = sin(th);
-                for (int k = 0; k < n; k++) {
-                    double akp = a[k * n + p], akq = a[k * n + q];
-                    a[k * n + p] = c * akp - sn * akq;
-                    a[k * n + q] = sn * akp + c * akq;
-                }
-                for (int k = 0; k < n; k++) {
-                    double apk = a[p * n + k], aqk = a[q * n + k];
-                    a[p * n + k] = c * apk - sn * aqk;
-                    a[q * n + k] = sn * apk + c * aqk;
-                }
-            }
-    }
+    model_sym_eigen(n, a, NULL);
     double lo = INFINITY, hi = 0;
     for (int i = 0; i < n; i++) {
         lo = fmin(lo, a[i * n + i]);

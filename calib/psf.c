@@ -381,13 +381,6 @@ int calib_psf_add_view(calib_psf_acc_t *a, const float *img, int W, int H, const
 // ---------------------------------------------------------------------------
 // The estimate
 
-static double median_of(double *v, int n)
-{
-    if (n <= 0) return NAN;
-    qsort(v, (size_t)n, sizeof *v, model_cmp_double);
-    return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
-}
-
 // Median and 1.4826 MAD of the used edges of camera (all of view when view >= 0).
 static int edges_median(const calib_psf_acc_t *a, int camera, int view, double *med, double *mad)
 {
@@ -398,9 +391,9 @@ static int edges_median(const calib_psf_acc_t *a, int camera, int view, double *
         const calib_psf_edge_t *e = &g_array_index(a->edges, calib_psf_edge_t, k);
         if (e->used && e->camera == camera && (view < 0 || e->view == view)) v[n++] = e->sigma_px;
     }
-    *med = median_of(v, n);
+    *med = model_median(v, n);
     for (int k = 0; k < n; k++) v[k] = fabs(v[k] - *med);
-    *mad = 1.4826 * median_of(v, n);
+    *mad = 1.4826 * model_median(v, n);
     free(v);
     return n;
 }
@@ -465,7 +458,7 @@ void calib_psf_estimate(calib_psf_acc_t *a, int camera, calib_psf_t *out)
         const calib_psf_edge_t *e = &g_array_index(a->edges, calib_psf_edge_t, k);
         if (e->used && e->camera == camera) fs[m++] = e->sigma_std_px;
     }
-    double fit_sd = fs ? median_of(fs, m) : 0;
+    double fit_sd = fs ? model_median(fs, m) : 0;
     free(fs);
     out->sigma_std_edges_px = 1.2533 * fmax(mad, fit_sd) / sqrt(n);
     // the views' medians
@@ -496,7 +489,7 @@ void calib_psf_estimate(calib_psf_acc_t *a, int camera, calib_psf_t *out)
         const calib_psf_edge_t *e = &g_array_index(a->edges, calib_psf_edge_t, k);
         if (e->used && e->camera == camera) rr[m++] = e->rms_dn / fabs(e->level_pos_dn - e->level_neg_dn);
     }
-    out->rms_rel = rr ? median_of(rr, m) : NAN;
+    out->rms_rel = rr ? model_median(rr, m) : NAN;
     free(rr);
     out->estimated = true;
 }

@@ -265,29 +265,6 @@ static double median_mad(double *v, int n, double *mad)
     return med;
 }
 
-// The median of v[n] (v reordered): the element at n / 2 in order, as median_mad's.
-static double median_of(double *v, int n)
-{
-    int lo = 0, hi = n - 1, k = n / 2;
-    while (lo < hi) {   // quickselect
-        double pv = v[(lo + hi) / 2];
-        int i = lo, j = hi;
-        while (i <= j) {
-            while (v[i] < pv) i++;
-            while (v[j] > pv) j--;
-            if (i <= j) {
-                double t = v[i];
-                v[i++] = v[j];
-                v[j--] = t;
-            }
-        }
-        if (k <= j) hi = j;
-        else if (k >= i) lo = i;
-        else break;
-    }
-    return v[k];
-}
-
 // The standard's BRDF at incidence cosine nl and viewing cosine nv: the
 // table's factor / pi, or albedo / pi.
 static double white_brdf_at(double nl, double nv, double albedo, const calib_white_table_t *t, bool *outside)
@@ -428,7 +405,7 @@ static void sample_part(const white_draws_t *W, int part, const calib_white_opti
                        ? moved_kcI(G, L, Lp, &W->obs->o[W->idx[i]], W->albedo, W->table)
                        : G->kcI * exp(-(x[0] * G->g[0] + x[1] * G->g[1] + x[2] * G->g[2]));
         }
-        k[d] = median_of(v, W->n);
+        k[d] = model_kth(v, W->n, W->n / 2);   // the element at n / 2, as median_mad's
         for (int j = 0; j < W->nq; j++) {
             double e;
             if (part == CALIB_WHITE_POSITION) {

@@ -760,43 +760,12 @@ static bool spd_inverse(int n, const double *A, double *Ai)
     return true;
 }
 
-// The symmetric n x n A with its negative eigenvalues set to 0 (cyclic Jacobi
-// rotations; A = V diag(max(lambda, 0)) V^T).
+// The symmetric n x n A with its negative eigenvalues set to 0 (A = V diag(max(lambda, 0)) V^T).
 static void psd_clip(int n, double *A)
 {
-    double V[MODEL_BRDF_MAX_PARAMS * MODEL_BRDF_MAX_PARAMS] = { 0 }, D[MODEL_BRDF_MAX_PARAMS * MODEL_BRDF_MAX_PARAMS];
+    double V[MODEL_BRDF_MAX_PARAMS * MODEL_BRDF_MAX_PARAMS], D[MODEL_BRDF_MAX_PARAMS * MODEL_BRDF_MAX_PARAMS];
     memcpy(D, A, (size_t)(n * n) * sizeof *D);
-    for (int i = 0; i < n; i++) V[i * n + i] = 1;
-    for (int sweep = 0; sweep < 50; sweep++) {
-        double off = 0, tot = 0;
-        for (int i = 0; i < n; i++)
-            for (int j = 0; j < n; j++) {
-                if (i == j) tot += D[i * n + j] * D[i * n + j];
-                else off += D[i * n + j] * D[i * n + j];
-            }
-        if (off <= 1e-30 * (tot + off) || off == 0) break;
-        for (int p = 0; p < n; p++)
-            for (int q = p + 1; q < n; q++) {
-                if (D[p * n + q] == 0) continue;
-                double th = 0.5 * atan2(2 * D[p * n + q], D[q * n + q] - D[p * n + p]);
-                double c = cos(th), sn = sin(th);
-                for (int k = 0; k < n; k++) {   // D <- G^T D G, rotation in the (p, q) plane
-                    double a = D[k * n + p], b = D[k * n + q];
-                    D[k * n + p] = c * a - sn * b;
-                    D[k * n + q] = sn * a + c * b;
-                }
-                for (int k = 0; k < n; k++) {
-                    double a = D[p * n + k], b = D[q * n + k];
-                    D[p * n + k] = c * a - sn * b;
-                    D[q * n + k] = sn * a + c * b;
-                }
-                for (int k = 0; k < n; k++) {
-                    double a = V[k * n + p], b = V[k * n + q];
-                    V[k * n + p] = c * a - sn * b;
-                    V[k * n + q] = sn * a + c * b;
-                }
-            }
-    }
+    model_sym_eigen(n, D, V);
     for (int i = 0; i < n; i++)
         for (int j = 0; j < n; j++) {
             double v = 0;

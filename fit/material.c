@@ -695,9 +695,9 @@ double fit_material_window_spread(const fit_samples_t *smp, model_brdf_t m, cons
         (*n)++;
     }
     if (*n >= 20) {
-        double med = verify_median(e, *n);
+        double med = model_median(e, *n);
         for (int k = 0; k < *n; k++) e[k] = fabs(e[k] - med);
-        double mad = 1.4826 * verify_median(e, *n), un = verify_median(u, *n);
+        double mad = 1.4826 * model_median(e, *n), un = model_median(u, *n);
         rel = sqrt(fmax(mad * mad - un, 0));
     }
 done:

@@ -792,47 +792,6 @@ void verify_result_free(verify_result_t *r)
     memset(r, 0, sizeof *r);
 }
 
-// v[k] after sorting v[lo..hi] (Hoare's selection; v is reordered): the
-// same value a full sort puts there. No NaN in v.
-static double select_kth(double *v, int lo, int hi, int k)
-{
-    while (lo < hi) {
-        double piv = v[lo + (hi - lo) / 2];
-        int i = lo, j = hi;
-        while (i <= j) {
-            while (v[i] < piv) i++;
-            while (v[j] > piv) j--;
-            if (i <= j) {
-                double t = v[i];
-                v[i++] = v[j];
-                v[j--] = t;
-            }
-        }
-        if (k <= j) hi = j;
-        else if (k >= i) lo = i;
-        else return v[k];
-    }
-    return v[k];
-}
-
-// The median of v[0..n) (v is reordered), equal to the sorted middle.
-double verify_median(double *v, int n)
-{
-    if (n <= 0) return NAN;
-    for (int i = 0; i < n; i++)
-        if (isnan(v[i])) {
-            qsort(v, (size_t)n, sizeof *v, model_cmp_double);
-            return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
-        }
-    double hi = select_kth(v, 0, n - 1, n / 2);
-    if (n % 2) return hi;
-    // the largest value below position n/2
-    double lo = v[0];
-    for (int i = 1; i < n / 2; i++)
-        if (v[i] > lo) lo = v[i];
-    return 0.5 * (lo + hi);
-}
-
 static void stats_of(const verify_point_t *pts, int n, int image, verify_stats_t *st)
 {
     memset(st, 0, sizeof *st);
@@ -856,10 +815,10 @@ static void stats_of(const verify_point_t *pts, int n, int image, verify_stats_t
         st->mean_abs = s1 / m;
         st->std_abs = sqrt(fmax(s2 / m - st->mean_abs * st->mean_abs, 0));
         st->rms_z = sqrt(zz / m);
-        st->median_abs_z = verify_median(z, m);
-        double med = verify_median(d, m);
+        st->median_abs_z = model_median(z, m);
+        double med = model_median(d, m);
         for (int k = 0; k < m; k++) d[k] = fabs(d[k] - med);
-        st->robust_sigma = 1.4826 * verify_median(d, m);
+        st->robust_sigma = 1.4826 * model_median(d, m);
     }
     free(d);
     free(z);
@@ -1162,7 +1121,7 @@ static bool measure_windows(fit_t *F, int m, int first_pt, double *Pa0, double *
     *Pa0 = 0;
     if (!off) {
         if (nt >= 10) {
-            *Pa0 = verify_median(tmp, nt);
+            *Pa0 = model_median(tmp, nt);
         } else {
             *Pa0 = INFINITY;
             for (int k = first_pt; k < first_pt + n; k++)
@@ -1176,7 +1135,7 @@ static bool measure_windows(fit_t *F, int m, int first_pt, double *Pa0, double *
         for (int k = first_pt; k < first_pt + n; k++)
             if (F->out->points[k].status == VERIFY_PT_USED)
                 tmp[nt++] = (double)F->out->points[k].sigma * F->out->points[k].sigma;
-        *var_px_fallback = nt ? verify_median(tmp, nt) : 1;
+        *var_px_fallback = nt ? model_median(tmp, nt) : 1;
         if (!(*var_px_fallback > 0)) *var_px_fallback = 1;
     }
     free(tmp);

@@ -336,10 +336,6 @@ bool verify_match_priors(const model_scene_t *scene, const verify_priors_t *pr, 
 // Tests: the fit's residual Jacobian (with the robust transform, every
 // reflection model) against central differences.
 bool verify_check_jacobian(double *max_abs_err);
-// The median of v[0..n) (NAN when n <= 0; v is reordered), by selection:
-// the same value as the middle (or the mean of the two middle values) of
-// v sorted with model_cmp_double.
-double verify_median(double *v, int n);
 
 // ---------------------------------------------------------------------------
 // Verification of files (fit/verify_files.c): `refl verify` without its

@@ -79,6 +79,16 @@ void model_parallel_for(int n, int chunk, int nthreads,
                         void *ctx);
 // qsort comparator of doubles, ascending (NaN last).
 int model_cmp_double(const void *a, const void *b);
+// v[k] of v[0..n) sorted ascending, by selection (v is reordered; no NaN in v).
+double model_kth(double *v, int n, int k);
+// The median of v[0..n) (NAN when n <= 0; v is reordered), by selection:
+// the same value as the middle (or the mean of the two middle values) of v
+// sorted with model_cmp_double (a v with NaN is sorted).
+double model_median(double *v, int n);
+// The eigen-decomposition of the symmetric n x n A (row-major) by cyclic
+// Jacobi rotations: A becomes diagonal (the eigenvalues on it), and V (n x n,
+// NULL: not wanted) the eigenvectors as columns, so A_in = V diag(A) V^T.
+void model_sym_eigen(int n, double *A, double *V);
 // Monotonic wall clock in seconds.
 double model_now_s(void);
 // Host real-time clock (CLOCK_REALTIME), seconds since 1970 UTC.

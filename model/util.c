@@ -365,3 +365,81 @@ int model_cmp_double(const void *a, const void *b)
     return x < y ? -1 : x > y;
 }
 
+// Hoare's selection on v[lo..hi].
+double model_kth(double *v, int n, int k)
+{
+    int lo = 0, hi = n - 1;
+    while (lo < hi) {
+        double piv = v[lo + (hi - lo) / 2];
+        int i = lo, j = hi;
+        while (i <= j) {
+            while (v[i] < piv) i++;
+            while (v[j] > piv) j--;
+            if (i <= j) {
+                double t = v[i];
+                v[i++] = v[j];
+                v[j--] = t;
+            }
+        }
+        if (k <= j) hi = j;
+        else if (k >= i) lo = i;
+        else return v[k];
+    }
+    return v[k];
+}
+
+void model_sym_eigen(int n, double *A, double *V)
+{
+    if (V) {
+        memset(V, 0, (size_t)n * n * sizeof *V);
+        for (int i = 0; i < n; i++) V[i * n + i] = 1;
+    }
+    for (int sweep = 0; sweep < 50; sweep++) {
+        double off = 0, tot = 0;
+        for (int i = 0; i < n; i++)
+            for (int j = 0; j < n; j++) {
+                if (i == j) tot += A[i * n + j] * A[i * n + j];
+                else off += A[i * n + j] * A[i * n + j];
+            }
+        if (off == 0 || off <= 1e-30 * (tot + off)) break;
+        for (int p = 0; p < n; p++)
+            for (int q = p + 1; q < n; q++) {
+                if (A[p * n + q] == 0) continue;
+                double th = 0.5 * atan2(2 * A[p * n + q], A[q * n + q] - A[p * n + p]);
+                double c = cos(th), sn = sin(th);
+                for (int k = 0; k < n; k++) {   // A <- G^T A G, the rotation in the (p, q) plane
+                    double a = A[k * n + p], b = A[k * n + q];
+                    A[k * n + p] = c * a - sn * b;
+                    A[k * n + q] = sn * a + c * b;
+                }
+                for (int k = 0; k < n; k++) {
+                    double a = A[p * n + k], b = A[q * n + k];
+                    A[p * n + k] = c * a - sn * b;
+                    A[q * n + k] = sn * a + c * b;
+                }
+                for (int k = 0; V && k < n; k++) {
+                    double a = V[k * n + p], b = V[k * n + q];
+                    V[k * n + p] = c * a - sn * b;
+                    V[k * n + q] = sn * a + c * b;
+                }
+            }
+    }
+}
+
+double model_median(double *v, int n)
+{
+    if (n <= 0) return NAN;
+    for (int i = 0; i < n; i++)
+        if (isnan(v[i])) {
+            qsort(v, (size_t)n, sizeof *v, model_cmp_double);
+            return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
+        }
+    double hi = model_kth(v, n, n / 2);
+    if (n % 2) return hi;
+    // the largest value below position n/2
+    double lo = v[0];
+    for (int i = 1; i < n / 2; i++)
+        if (v[i] > lo) lo = v[i];
+    return 0.5 * (lo + hi);
+}
+

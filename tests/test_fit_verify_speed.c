@@ -122,7 +122,7 @@ TEST(brdf_prepared_kept_factors_follow_the_parameters)
 
 static int cmp_sorted(const void *a, const void *b) { return model_cmp_double(a, b); }
 
-TEST(verify_median_equals_sorted_middle)
+TEST(model_median_equals_sorted_middle)
 {
     for (int t = 0; t < 3000; t++) {
         int n = 1 + (int)(urand() * (t % 10 == 0 ? 2000 : 40));
@@ -140,13 +140,13 @@ TEST(verify_median_equals_sorted_middle)
         if (t % 50 == 7) v[n / 2] = s[n / 2] = NAN;   // NaN sorts last, as model_cmp_double has it
         qsort(s, (size_t)n, sizeof *s, cmp_sorted);
         double want = n % 2 ? s[n / 2] : 0.5 * (s[n / 2 - 1] + s[n / 2]);
-        double got = verify_median(v, n);
+        double got = model_median(v, n);
         CHECK_MSG(same_bits(want, got) || (isnan(want) && isnan(got)), "n %d kind %d: %.17g, sorted %.17g", n, kind,
                   got, want);
         free(v);
         free(s);
     }
-    CHECK(isnan(verify_median(NULL, 0)));
+    CHECK(isnan(model_median(NULL, 0)));
 }
 
 // verify_run with the normal equations, the prepared terms and kept robust

@@ -499,3 +499,48 @@ TEST(lsq_covariance_equals_ceres_dense_svd)
         lsq_problem_free(p);
     }
 }
+
+// model_sym_eigen: a symmetric matrix of known eigenvalues (Q diag(lambda)
+// Q^T with Q a rotation) comes back diagonal with those eigenvalues, and
+// V diag V^T rebuilds it; without V the diagonal is the same.
+TEST(model_sym_eigen_known_answer)
+{
+    const int n = 4;
+    const double lambda[4] = { 3.0, -0.5, 1e-6, 12.0 };
+    // Q: a product of rotations in three planes
+    double Q[16] = { 0 };
+    for (int i = 0; i < n; i++) Q[i * n + i] = 1;
+    const int planes[3][2] = { { 0, 1 }, { 1, 3 }, { 0, 2 } };
+    const double ang[3] = { 0.3, -1.1, 0.7 };
+    for (int r = 0; r < 3; r++) {
+        int p = planes[r][0], q = planes[r][1];
+        double c = cos(ang[r]), s = sin(ang[r]);
+        for (int k = 0; k < n; k++) {
+            double a = Q[k * n + p], b = Q[k * n + q];
+            Q[k * n + p] = c * a - s * b;
+            Q[k * n + q] = s * a + c * b;
+        }
+    }
+    double A[16], A0[16], B[16], V[16];
+    for (int i = 0; i < n; i++)
+        for (int j = 0; j < n; j++) {
+            double v = 0;
+            for (int k = 0; k < n; k++) v += Q[i * n + k] * lambda[k] * Q[j * n + k];
+            A[i * n + j] = A0[i * n + j] = B[i * n + j] = v;
+        }
+    model_sym_eigen(n, A, V);
+    double got[4], want[4];
+    for (int i = 0; i < n; i++) got[i] = A[i * n + i], want[i] = lambda[i];
+    qsort(got, 4, sizeof *got, model_cmp_double);
+    qsort(want, 4, sizeof *want, model_cmp_double);
+    for (int i = 0; i < n; i++) CHECK_NEAR(got[i], want[i], 1e-12);
+    for (int i = 0; i < n; i++)
+        for (int j = 0; j < n; j++) {
+            if (i != j) CHECK_NEAR(A[i * n + j], 0, 1e-12);
+            double v = 0;
+            for (int k = 0; k < n; k++) v += V[i * n + k] * A[k * n + k] * V[j * n + k];
+            CHECK_NEAR(v, A0[i * n + j], 1e-12);
+        }
+    model_sym_eigen(n, B, NULL);
+    for (int i = 0; i < n; i++) CHECK_NEAR(B[i * n + i], A[i * n + i], 1e-12);
+}
