@@ -172,9 +172,9 @@ typedef struct {
 // there (grouped by angle, exposure and gain; the group of the most visits)
 // against its first visit: the median over the lit (above a fifth of the
 // brightest), unsaturated pixels of (P_k - dark) / (P_0 - dark) is the lamp's
-// intensity at that time relative to the first visit. Between visits linear
-// in time (the frames' trigger time), constant before the first and after the
-// last. calib_observe divides every observation of the lamp by it.
+// intensity at that time relative to the first visit. Between visits a
+// monotone cubic in time through every visit (PCHIP; the frames' trigger
+// time), constant before the first and after the last. calib_observe divides every observation of the lamp by it.
 typedef struct {
     int    nlamps;
     int    nvisits[32];               // per lamp of the calibration set (< 2: no correction)

@@ -883,7 +883,7 @@ static int format_bits(const char *pf)
 // The ideal grey value P of the whole sensor into v->frame and the sensor of
 // that frame; cache_lock held.
 static int ideal_frame(rig_virtual_t *v, int sample, double angle_deg, uint32_t mask, double exposure_us,
-                       double gain_db, model_sensor_t *s_out, float *out)
+                       double gain_db, int64_t trigger_ns, model_sensor_t *s_out, float *out)
 {
     size_t n = (size_t)v->W * v->H;
     // The virtual sensor's own physics: its camera's Gain is in dB (GenICam
@@ -893,10 +893,10 @@ static int ideal_frame(rig_virtual_t *v, int sample, double angle_deg, uint32_t 
     double kc = v->kc_per_us * exposure_us * gf;
     const double Pa = v->sensor.dark_offset_dn;
     bool first = true;
-    double lf[32];   // each lamp's warm-up and drift now (exactly 1 without them)
+    double lf[32];   // each lamp's warm-up and drift at the trigger (exactly 1 without them)
     const float *pl[32];
     int np = 0;
-    rig_vlamps_factors(&v->lamp_fx, v->state->lamps_dev, lf);
+    rig_vlamps_factors(&v->lamp_fx, v->state->lamps_dev, trigger_ns, lf);
     for (int l = 0; l < v->lamps->n && l < 32; l++) {
         if (!((mask >> l) & 1)) continue;
         const float *L = plane_for(v, sample, angle_deg, l);
@@ -946,10 +946,10 @@ static bool plane_cached(const rig_virtual_t *v, int sample, double angle_deg, i
 
 // The noisy sensor values of a frame into out (cache_lock held).
 static int noisy_frame(rig_virtual_t *v, int sample, double angle_deg, uint32_t mask, double exposure_us,
-                       double gain_db, uint64_t seed, float *out)
+                       double gain_db, uint64_t seed, int64_t trigger_ns, float *out)
 {
     model_sensor_t s;
-    int r = ideal_frame(v, sample, angle_deg, mask, exposure_us, gain_db, &s, out);
+    int r = ideal_frame(v, sample, angle_deg, mask, exposure_us, gain_db, trigger_ns, &s, out);
     if (r) return r;
     s.noise_seed = seed;
     model_sensor_apply_patterns(&s, v->W, v->H, v->prnu, v->dsnu, out);
@@ -997,7 +997,7 @@ static bool speculate_one(rig_virtual_t *v, int sample, double angle_deg, uint32
         if (!free_slot->img) return false;
         free_slot->valid = false;
         bool q = model_error_quiet_thread(true);   // errors show at the trigger
-        int r = noisy_frame(v, sample, angle_deg, mask, sh->exposure_us, sh->gain_db, seed, free_slot->img);
+        int r = noisy_frame(v, sample, angle_deg, mask, sh->exposure_us, sh->gain_db, seed, 0, free_slot->img);
         model_error_quiet_thread(q);
         if (r) {   // no more speculation until the next frame (which reports the error)
             v->ncur = v->nprev = 0;
@@ -1079,7 +1079,7 @@ static int speculate_angle(rig_virtual_t *v, int sample, double angle_deg, uint6
         if (!free_slot->img) return 0;
         free_slot->valid = false;
         bool q = model_error_quiet_thread(true);   // errors show at the trigger
-        int r = noisy_frame(v, sample, angle_deg, pred[j].mask, pred[j].exposure_us, pred[j].gain_db, seed,
+        int r = noisy_frame(v, sample, angle_deg, pred[j].mask, pred[j].exposure_us, pred[j].gain_db, seed, 0,
                             free_slot->img);
         model_error_quiet_thread(q);
         if (r) {   // no more speculation until the next frame (which reports the error)
@@ -1145,6 +1145,11 @@ static void *prerender_main(void *arg)
 static int render_cb(void *ctx, const rig_frame_meta_t *m, uint16_t *pix)
 {
     rig_virtual_t *v = ctx, *sv = v->state;
+    // the exposure starts now: the lamps' warm-up is theirs at this time,
+    // however long the frame waits for the renderer
+    struct timespec tnow;
+    clock_gettime(CLOCK_MONOTONIC, &tnow);
+    int64_t trigger_ns = (int64_t)tnow.tv_sec * 1000000000 + tnow.tv_nsec;
     rig_turntable_status_t st;
     pthread_mutex_lock(&sv->state_lock);
     // A stage that disconnected leaves the sample where it was: the camera
@@ -1205,7 +1210,7 @@ static int render_cb(void *ctx, const rig_frame_meta_t *m, uint16_t *pix)
     }
     if (img) v->frames_ahead++;
     if (!img) {
-        r = noisy_frame(v, sample, st.angle_deg, mask, m->exposure_us, m->gain, seed, v->frame);
+        r = noisy_frame(v, sample, st.angle_deg, mask, m->exposure_us, m->gain, seed, trigger_ns, v->frame);
         img = v->frame;
     }
     for (int k = 0; k < NSPEC; k++)
@@ -1249,7 +1254,7 @@ int rig_virtual_expected(rig_virtual_t *v, double angle_deg, uint32_t lamp_mask,
     pthread_mutex_unlock(&v->state_lock);
     pthread_mutex_lock(&v->cache_lock);
     model_sensor_t s;
-    int r = ideal_frame(v, sample, angle_deg, lamp_mask, exposure_us, gain_db, &s, v->frame);
+    int r = ideal_frame(v, sample, angle_deg, lamp_mask, exposure_us, gain_db, 0, &s, v->frame);
     if (!r) {
         model_sensor_mean(&s, v->W, v->H, v->prnu, v->dsnu, v->frame);
         for (int y = 0; y < height; y++)

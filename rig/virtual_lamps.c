@@ -58,13 +58,16 @@ double rig_vlamps_curve(const rig_vlamps_t *fx, int lamp, double t_on_s)
     return f;
 }
 
-void rig_vlamps_factors(const rig_vlamps_t *fx, const rig_lamps_t *dev, double f[32])
+void rig_vlamps_factors(const rig_vlamps_t *fx, const rig_lamps_t *dev, int64_t at_ns, double f[32])
 {
     for (int i = 0; i < 32; i++) f[i] = 1.0;
     if (!fx || !fx->timed || !dev) return;
-    struct timespec now;
-    clock_gettime(CLOCK_MONOTONIC, &now);
-    int64_t now_ns = (int64_t)now.tv_sec * 1000000000 + now.tv_nsec;
+    int64_t now_ns = at_ns;
+    if (now_ns <= 0) {
+        struct timespec now;
+        clock_gettime(CLOCK_MONOTONIC, &now);
+        now_ns = (int64_t)now.tv_sec * 1000000000 + now.tv_nsec;
+    }
     uint32_t on = rig_lamps_on_mask(dev);
     for (int i = 0; i < fx->n; i++) {
         int64_t since = rig_lamps_on_since_ns(dev, i);

@@ -36,9 +36,11 @@ bool   rig_vlamps_parse(rig_vlamps_t *fx, const model_ini_t *ini, const model_la
 // f(t) of lamp i at t_on_s simulated seconds after its switch-on (exactly 1
 // without [lamp_drift]).
 double rig_vlamps_curve(const rig_vlamps_t *fx, int lamp, double t_on_s);
-// Each lamp's factor now, from when dev switched it on (all exactly 1 when
-// nothing is timed or dev is NULL).
-void   rig_vlamps_factors(const rig_vlamps_t *fx, const rig_lamps_t *dev, double f[32]);
+// Each lamp's factor at at_ns (CLOCK_MONOTONIC ns; <= 0: now), from when dev
+// switched it on (all exactly 1 when nothing is timed or dev is NULL). A
+// frame's is that of its trigger: the exposure starts then, however long the
+// frame then waits to be rendered.
+void   rig_vlamps_factors(const rig_vlamps_t *fx, const rig_lamps_t *dev, int64_t at_ns, double f[32]);
 // The stray light of a frame added to out (n pixels): kc (ambient_radiance +
 // veiling_glare * mean of sum_k f[k] planes[k]) at every pixel; nothing when
 // both are 0.
