@@ -568,7 +568,8 @@ bool calib_gain_frame_stats(calib_gain_data_t *d)
 
 void calib_gain_an_free(calib_gain_an_t *a)
 {
-    double *arrays[] = { a->t, a->mu_y, a->var_y, a->mu_d, a->var_d, a->mu, a->var, a->dev_pct, a->snr, a->mu_p };
+    double *arrays[] = { a->t, a->mu_y, a->var_y, a->mu_d, a->var_d, a->mu, a->var, a->dev_pct, a->snr, a->mu_p,
+                         a->dark_t_us };
     for (size_t i = 0; i < sizeof arrays / sizeof arrays[0]; i++) free(arrays[i]);
 }
 
@@ -640,6 +641,8 @@ bool calib_gain_analyse(calib_gain_data_t *d, double gain_db, int min_steps, dou
         goto done;
     }
     a->ndark = nd;
+    a->dark_t_us = malloc(sizeof(double) * nd);
+    if (a->dark_t_us) memcpy(a->dark_t_us, dt, sizeof(double) * nd);
     a->dark_t_min_us = INFINITY;
     a->dark_t_max_us = -INFINITY;
     for (int i = 0; i < nd; i++) {
@@ -935,7 +938,24 @@ bool calib_gain_make_maps(calib_gain_data_t *d, const calib_gain_an_t *a, calib_
     roi_mean_var(d, m->prnu_hp, w, h, &hvar);
     double hp2 = hvar - tvar / (smean * smean);
     m->prnu_pct = 100 * sqrt(fmax(hp2, 0));
-    m->prnu_std_pct = 100 * calib_gain_spatial_std(m->prnu_pct / 100, tvar / (smean * smean), npix);
+    m->prnu_std_stat_pct = 100 * calib_gain_spatial_std(m->prnu_pct / 100, tvar / (smean * smean), npix);
+    // The PRNU of the linear signal scales with the linearisation's log-slope
+    // d ln S / d ln S_m at the flat's level, which the sweep fixes only as
+    // well as two linearisations of it agree there (the monotone table in use
+    // and the parametric S(1 - aS) of the same sweep): their relative
+    // difference times the PRNU, a systematic part in quadrature.
+    m->prnu_std_lin_pct = 0;
+    if (lin && a->lin.kind == MODEL_LIN_MONOTONE && isfinite(a->lin_a_per_dn) && m->flat_level_dn > 0) {
+        model_lin_t par = { .kind = MODEL_LIN_PARAMETRIC, .a_per_dn = a->lin_a_per_dn };
+        double L = m->flat_level_dn, dm, dp;
+        double s1 = model_linearise(&a->lin, L, 1, &dm), s2 = model_linearise(&par, L, 1, &dp);
+        if (s1 > 0 && s2 > 0 && dm > 0 && dp > 0) {
+            m->flat_log_slope = dm * L / s1;
+            m->flat_log_slope_parametric = dp * L / s2;
+            m->prnu_std_lin_pct = m->prnu_pct * fabs(m->flat_log_slope / m->flat_log_slope_parametric - 1);
+        }
+    }
+    m->prnu_std_pct = hypot(m->prnu_std_stat_pct, m->prnu_std_lin_pct);
     // the total map normalised to mean 1 (over the whole frame)
     double s = 0;
     for (size_t i = 0; i < n; i++) s += m->prnu[i];
@@ -1253,6 +1273,15 @@ static json_t *jarray(const double *v, int n)
     return a;
 }
 
+
+// The exposures of the dark groups the dark level and dark current were
+// fitted over (us, one per group); null when unknown.
+static json_t *dark_exposures_json(const calib_gain_an_t *a)
+{
+    if (!(a->ndark > 0) || !a->dark_t_us) return json_null();
+    return jarray(a->dark_t_us, a->ndark);
+}
+
 static json_t *gain_json(const calib_gain_an_t *a)
 {
     json_t *o = json_object();
@@ -1284,6 +1313,7 @@ static json_t *gain_json(const calib_gain_an_t *a)
     json_object_set_new(o, "dark_current_dn_per_s", jreal(a->dark_slope_dn_per_us * 1e6));
     json_object_set_new(o, "dark_current_e_per_s", jreal(a->dark_slope_dn_per_us * 1e6 / p->system_gain_dn_per_e));
     json_object_set_new(o, "dark_level_dn", jreal(a->dark_intercept_dn));
+    json_object_set_new(o, "dark_exposures_us", dark_exposures_json(a));
     json_object_set_new(o, "dark_current_from_variance_e_per_s",
                         jreal(a->dark_var_slope_dn2_per_us * 1e6 / (p->system_gain_dn_per_e * p->system_gain_dn_per_e)));
     const calib_gain_photon_t *ph = &a->ph;
@@ -1438,7 +1468,9 @@ static json_t *conventions_json(const calib_gain_opts_t *o, const calib_gain_dat
                                                           "only (not used in the figures)"));
     json_object_set_new(cv, "dark_current", json_string("slope of the mean dark level against exposure; "
                                                         "dark_current_from_variance_e_per_s: slope of the dark "
-                                                        "temporal variance against exposure / K^2"));
+                                                        "temporal variance against exposure / K^2; "
+                                                        "dark_exposures_us: the exposures (us) of the dark groups "
+                                                        "both were fitted over, one per group"));
     json_object_set_new(cv, "emva1288", json_string("the EMVA 1288 Release 4.0 Linear datasheet, each row with its "
                                                     "definition; quantum_efficiency etc. \"not measured\" without "
                                                     "--irradiance"));
@@ -1566,6 +1598,7 @@ json_t *calib_gain_json(const calib_gain_opts_t *o, const calib_gain_data_t *d, 
     json_object_set_new(root, "dark_current_e_per_s", jreal(a->dark_slope_dn_per_us * 1e6 / K));
     json_object_set_new(root, "dark_current_dn_per_s", jreal(a->dark_slope_dn_per_us * 1e6));
     json_object_set_new(root, "dark_level_dn", jreal(a->dark_intercept_dn));
+    json_object_set_new(root, "dark_exposures_us", dark_exposures_json(a));
     json_object_set_new(root, "saturation_capacity_e", jreal(a->ptc.saturation_capacity_e));
     json_object_set_new(root, "snr_max", jreal(a->ptc.snr_max));
     json_object_set_new(root, "snr_max_db", jreal(20 * log10(a->ptc.snr_max)));
@@ -1591,6 +1624,10 @@ json_t *calib_gain_json(const calib_gain_opts_t *o, const calib_gain_data_t *d, 
     json_object_set_new(sd, "read_noise_e", jreal(a->read_noise_std_e));
     json_object_set_new(sd, "dsnu_dn", jreal(maps->dsnu_std_dn));
     json_object_set_new(sd, "prnu_pct", jreal(maps->prnu_std_pct));
+    json_t *pp = json_object();
+    json_object_set_new(pp, "statistical", jreal(maps->prnu_std_stat_pct));
+    json_object_set_new(pp, "linearisation_slope", jreal(maps->prnu_std_lin_pct));
+    json_object_set_new(sd, "prnu_pct_parts", pp);
     json_object_set_new(sd, "dark_current_e_per_s", jreal(a->dark_current_std_e_per_s));
     json_object_set_new(root, "std", sd);
     json_object_set_new(root, "std_method", json_string(
@@ -1601,7 +1638,10 @@ json_t *calib_gain_json(const calib_gain_opts_t *o, const calib_gain_data_t *d, 
         "over 2 sigma^2_d and K's relative 1-sigma in quadrature; dark_current_e_per_s: the dark mean's slope "
         "standard error (HC3) and K's in quadrature; dsnu_dn and prnu_pct: the temporal noise tau left in the "
         "averaged frames, a fixed pattern of std s over N pixels giving var(s^2) = (4 s^2 tau + 2 tau^2) / N, "
-        "1-sigma = sqrt of that / (2 s) (the pattern itself is the sensor's, not a sample of it)"));
+        "1-sigma = sqrt of that / (2 s) (the pattern itself is the sensor's, not a sample of it); prnu_pct "
+        "besides: the linearisation's log-slope d ln S / d ln S_m at the flat's level, the monotone table's "
+        "against the parametric S(1 - aS)'s of the same sweep, their relative difference times prnu_pct, in "
+        "quadrature (prnu_pct_parts: statistical, linearisation_slope)"));
     json_object_set_new(root, "maps", json_pack("{s:s, s:s, s:s, s:s, s:s}", "offset_dn", "offset_dn.tiff", "dsnu_dn",
                                                 "dsnu_dn.tiff", "prnu_gain", "prnu_gain.tiff", "prnu_highpass",
                                                 "prnu_highpass.tiff", "defects", "defects.tiff"));

@@ -381,6 +381,7 @@ typedef struct {
     double dark_slope_dn_per_us, dark_intercept_dn;
     double dark_t_min_us, dark_t_max_us;
     int    ndark;               // dark exposures used for the dark current
+    double *dark_t_us;          // their exposures (us; ndark, in the groups' order)
     double radiance;            // total radiance of the light frames (NAN unknown)
     double radiance_truth;      // the virtual rig's truth of it, for comparison (NAN unknown)
     double kc_per_us;           // response / radiance
@@ -418,7 +419,11 @@ typedef struct {
     bool    dark_same_exposure;
     double  prnu_mean_dn;            // the flat minus dark's whole-frame mean (prnu * it: the signal, DN)
     double  signal_temporal_var_dn2; // temporal variance left in the averaged signal
-    double  dsnu_std_dn, prnu_std_pct;   // their 1-sigma (calib_gain_spatial_std)
+    double  dsnu_std_dn, prnu_std_pct;   // their 1-sigma (PRNU's: the two parts in quadrature)
+    double  prnu_std_stat_pct;       // PRNU's statistical part (calib_gain_spatial_std)
+    double  prnu_std_lin_pct;        // its linearisation part: prnu_pct x |flat_log_slope /
+                                     // flat_log_slope_parametric - 1| (0 without a monotone table)
+    double  flat_log_slope, flat_log_slope_parametric;   // d ln S / d ln S_m at the flat's level (0: none)
     double  flat_pixel_std_rel;      // the flat map's temporal noise per pixel, relative to its mean
     bool    flat_linearised;         // the flat's signal went through the response linearisation
     calib_gain_spatial_t sp;         // calib_gain_make_spatial

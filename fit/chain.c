@@ -292,13 +292,40 @@ static void chain_gain(chain_t *c, const json_t *g)
         { "dark_current_e_per_s", "dark_current_e_per_s", "e-/s" },
     };
     const json_t *sd = json_object_get(g, "std");
-    for (size_t i = 0; i < sizeof k / sizeof k[0]; i++) {
-        char name[96], note[300];
+    // The read noise and dark current as EMVA 1288 defines them (the temporal
+    // dark noise at exposure 0, the mean dark level's slope) are what the
+    // truth's sensor delivers: its read noise through the response's low end
+    // plus its row noise; its dark current (hot pixels' included) through the
+    // same response, over the dark frames' exposures. With a response linear
+    // at 0 and neither row noise nor hot pixels, these are its parameters.
+    model_sensor_t ts;
+    double rn_m = NAN, dc_m = NAN, dt[256];
+    int nt = 0;
+    const json_t *jt = json_object_get(g, "dark_exposures_us"), *x;
+    size_t i;
+    json_array_foreach(jt, i, x) if (nt < 256 && json_is_number(x)) dt[nt++] = json_number_value(x);
+    if (model_sensor_from_ini(c->ini, &ts)) {
+        if (!model_sensor_dark_measurand(&ts, NULL, 0, &rn_m, NULL)) rn_m = NAN;
+        if (!model_sensor_dark_measurand(&ts, dt, nt, NULL, &dc_m)) dc_m = NAN;   // (an older gain.json: none)
+    }
+    for (i = 0; i < sizeof k / sizeof k[0]; i++) {
+        char name[96], note[600];
         snprintf(name, sizeof name, "sensor.%s", k[i].key);
         double t = ini_num(c, "sensor", k[i].truth), s = num(sd, k[i].key);
         if (!isfinite(t)) continue;
         snprintf(note, sizeof note, isfinite(s) ? "sigma: gain.json std.%s (from the fit's statistics; gain.json "
                  "std_method)" : "no sigma stated (gain.json has no std.%s)", k[i].key);
+        bool rn = !strcmp(k[i].key, "read_noise_e"), dc = !strcmp(k[i].key, "dark_current_e_per_s");
+        double tm = rn ? rn_m : dc ? dc_m : NAN;
+        if (isfinite(tm) && fabs(tm - t) > 1e-4 * fabs(t)) {
+            size_t l = strlen(note);
+            snprintf(note + l, sizeof note - l, "; truth: as EMVA 1288 defines it, what the truth's sensor "
+                     "delivers (%s; model_sensor_dark_measurand): %.4g %s, its [sensor] %s being %.4g",
+                     rn ? "the read noise through the response's low end, with the row noise"
+                        : "through the response's low end, hot pixels included, over the dark frames' exposures",
+                     tm, k[i].unit, k[i].truth, t);
+            t = tm;
+        }
         add(c, "sensor (EMVA 1288)", name, num(g, k[i].key), t, s, k[i].unit, note);
     }
 }

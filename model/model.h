@@ -797,6 +797,21 @@ void model_sensor_apply_patterns(const model_sensor_t *s, int width, int height,
 void model_sensor_mean(const model_sensor_t *s, int width, int height, const float *prnu_gain,
                        const float *dsnu_dn, float *img);
 
+// What a measurement to EMVA 1288's definitions reads from this sensor's dark
+// frames (model/sensor.c): read_noise_e, the temporal dark noise at exposure 0
+// (sigma_y.dark / K without the rounding's q^2/12: the read noise through the
+// response's low end, plus the row noise), and dark_current_e_per_s, the
+// least-squares slope of the mean dark level against exposure over the nt
+// exposures t_us (us), divided by K (e-/s; hot pixels included, through the
+// same response). Both the sensor's own read_noise_e and dark_current_e_per_s
+// when its response is linear near 0 and it has neither row noise nor hot
+// pixels. Either output may be NULL (the exposures are needed only for the
+// dark current); false + message when K or the full well is not positive or
+// the exposures are fewer than 2 different ones >= 0. Exact sums over the
+// Poisson dark electrons and a quadrature over the read noise (no draws).
+bool model_sensor_dark_measurand(const model_sensor_t *s, const double *t_us, int nt, double *read_noise_e,
+                                 double *dark_current_e_per_s);
+
 // A camera's gain as a signal factor (model/sensor.c), the one conversion of a
 // recorded gain. unit is the camera's own (GenICam <Unit> of its Gain feature,
 // recorded with every frame): "dB" -> 10^(gain/20); "x", "times", "linear" or

@@ -605,6 +605,113 @@ void model_sensor_mean(const model_sensor_t *s, int width, int height, const flo
 }
 
 // ---------------------------------------------------------------------------
+// What a measurement to EMVA 1288's definitions reads from the dark frames
+
+// A pixel's DN above the offset (no DSNU, no rounding) for e electrons in the
+// well (signal + read noise): the same chain as row_dn's.
+static double dark_dn_of(const model_sensor_t *s, double e)
+{
+    if (response_on(s)) e = response(s, e);
+    const double FW = s->full_well_e, c = s->nonlinearity_pct / 100.0;
+    e = e < FW ? e : FW;
+    e *= 1.0 - c / FW * e;
+    return e * s->system_gain_dn_per_e;
+}
+
+// E and E[x^2] over the read noise of dark_dn_of(n + sigma z): the trapezoid
+// rule on z in [-10, 10] at 1/200 (the response bends at e = 0 and at the
+// low end's top; the rule's error there is of order h^2 of the bend).
+static void dark_moments(const model_sensor_t *s, double n, double *m1, double *m2)
+{
+    const double sr = s->read_noise_e > 0 ? s->read_noise_e : 0;
+    if (!(sr > 0)) {
+        double f = dark_dn_of(s, n);
+        *m1 = f;
+        *m2 = f * f;
+        return;
+    }
+    const int N = 4000;
+    const double h = 20.0 / N;
+    double a = 0, b = 0, wsum = 0;
+    for (int i = 0; i <= N; i++) {
+        double z = -10 + i * h, w = exp(-0.5 * z * z) * (i == 0 || i == N ? 0.5 : 1);
+        double f = dark_dn_of(s, n + sr * z);
+        a += w * f;
+        b += w * f * f;
+        wsum += w;
+    }
+    *m1 = a / wsum;
+    *m2 = b / wsum;
+}
+
+// The mean DN above the offset of a dark pixel with mu electrons of dark
+// signal (Poisson, its terms in logs: mu may be thousands) and the read
+// noise; var: its temporal variance.
+static void dark_pixel(const model_sensor_t *s, double mu, double *mean, double *var)
+{
+    double e1 = 0, e2 = 0;
+    if (!(mu > 0)) {
+        dark_moments(s, 0, &e1, &e2);
+    } else {
+        int lo = (int)fmax(0, floor(mu - 12 * sqrt(mu) - 12)), hi = (int)ceil(mu + 12 * sqrt(mu) + 12);
+        double ps = 0;
+        for (int n = lo; n <= hi; n++) {
+            double p = exp(n * log(mu) - mu - lgamma(n + 1.0));
+            if (!(p > 1e-17)) continue;
+            double m1, m2;
+            dark_moments(s, n, &m1, &m2);
+            e1 += p * m1;
+            e2 += p * m2;
+            ps += p;
+        }
+        e1 /= ps;
+        e2 /= ps;
+    }
+    *mean = e1;
+    *var = fmax(e2 - e1 * e1, 0);
+}
+
+bool model_sensor_dark_measurand(const model_sensor_t *s, const double *t_us, int nt, double *read_noise_e,
+                                 double *dark_current_e_per_s)
+{
+    const double K = s->system_gain_dn_per_e;
+    double tmin = INFINITY, tmax = -INFINITY;
+    for (int i = 0; t_us && i < nt; i++) {
+        if (!(t_us[i] >= 0 && t_us[i] < 1e12)) tmin = NAN;
+        tmin = fmin(tmin, t_us[i]);
+        tmax = fmax(tmax, t_us[i]);
+    }
+    if (!(K > 0) || !(s->full_well_e > 0) || (dark_current_e_per_s && !(nt >= 2 && tmax > tmin && tmin >= 0))) {
+        model_error_set(NULL, 0, "dark measurand: K %g DN/e- and full well %g e- must be > 0, and the dark current "
+                        "needs at least 2 different exposures >= 0 (%d given)", K, s->full_well_e, nt);
+        return false;
+    }
+    double m0, v0;
+    dark_pixel(s, 0, &m0, &v0);
+    double row = s->row_noise_dn > 0 ? s->row_noise_dn : 0;
+    if (read_noise_e) *read_noise_e = sqrt(v0 + row * row) / K;
+    if (dark_current_e_per_s) {
+        // the mean dark level at each exposure (hot pixels' share added), and
+        // its least-squares line against exposure, as the calibration fits it
+        const double dc = fmax(s->dark_current_e_per_s, 0);
+        const double h = s->hot_pixel_fraction > 0 && s->hot_pixel_dark_current_e_per_s > 0 ? s->hot_pixel_fraction : 0;
+        double st = 0, sy = 0, stt = 0, sty = 0;
+        for (int i = 0; i < nt; i++) {
+            double t = t_us[i] * 1e-6, m, v, mh = 0, vh;
+            dark_pixel(s, dc * t, &m, &v);
+            if (h > 0) dark_pixel(s, (dc + s->hot_pixel_dark_current_e_per_s) * t, &mh, &vh);
+            double y = (1 - h) * m + h * mh;
+            st += t;
+            sy += y;
+            stt += t * t;
+            sty += t * y;
+        }
+        *dark_current_e_per_s = (nt * sty - st * sy) / (nt * stt - st * st) / K;
+    }
+    return true;
+}
+
+// ---------------------------------------------------------------------------
 // Gain units
 
 typedef enum { GAIN_DB, GAIN_LINEAR, GAIN_OTHER } gain_unit_t;

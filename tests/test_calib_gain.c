@@ -540,6 +540,33 @@ TEST(calib_gain_manifest)
     CHECK_NEAR(jnum(ff, "light_frames"), 16, 0);
     // every frame is an input with its hash
     CHECK(json_array_size(json_object_get(json_object_get(j, "provenance"), "inputs")) == (size_t)(1 + 50 * 4 + 32));
+    // PRNU's 1-sigma: its statistical part and the linearisation's, in quadrature; the
+    // latter recomputed here from gain.json's own table and a at the flat's level
+    json_t *sd = json_object_get(j, "std"), *pp = json_object_get(sd, "prnu_pct_parts");
+    double st = jnum(pp, "statistical"), sl = jnum(pp, "linearisation_slope");
+    CHECK(st > 0 && sl >= 0);
+    CHECK_NEAR(jnum(sd, "prnu_pct"), hypot(st, sl), 1e-12);
+    json_t *lj = json_object_get(j, "linearisation"), *jm = json_object_get(lj, "measured_dn"),
+           *js = json_object_get(lj, "linear_dn");
+    int nk = (int)json_array_size(jm);
+    CHECK(nk >= 2 && nk <= MODEL_LIN_MAX && json_array_size(js) == (size_t)nk);
+    if (nk >= 2 && nk <= MODEL_LIN_MAX && json_array_size(js) == (size_t)nk) {
+        double km[MODEL_LIN_MAX], ks[MODEL_LIN_MAX];
+        for (int k = 0; k < nk; k++) {
+            km[k] = json_number_value(json_array_get(jm, k));
+            ks[k] = json_number_value(json_array_get(js, k));
+        }
+        model_lin_t tab, par = { .kind = MODEL_LIN_PARAMETRIC, .a_per_dn = jnum(lj, "a_per_dn") };
+        CHECK(model_lin_knots(km, ks, nk, &tab));
+        double L = jnum(ff, "level_dn"), dm, dp;
+        double lm = model_linearise(&tab, L, 1, &dm), lp = model_linearise(&par, L, 1, &dp);
+        double want = jnum(j, "prnu_pct") * fabs((dm * L / lm) / (dp * L / lp) - 1);
+        fprintf(stderr, "  PRNU's 1-sigma: statistical %.3g %%, linearisation %.3g %% (recomputed %.3g %%)\n", st, sl,
+                want);
+        CHECK_NEAR(sl, want, 1e-6 * jnum(j, "prnu_pct"));
+    }
+    // the dark exposures the dark current was fitted over
+    CHECK(json_array_size(json_object_get(j, "dark_exposures_us")) >= 2);
     json_decref(j);
     // the same frames with the radiance given: kc per us
     const char *out2 = test_path("out-manifest2");

@@ -493,6 +493,34 @@ TEST(chain_stated_sigmas)
     doc = fit_chain_compare(test_path("day"), truth, prov);
     CHECK(doc && json_is_null(json_object_get(entry(doc, "camera.fx"), "sigma")));
     json_decref(doc);
+    // A sensor whose response bends at the low end and has row noise and hot
+    // pixels (the adversarial truth's): the read noise and dark current are
+    // compared with what EMVA 1288's definitions read from it, over the dark
+    // exposures gain.json names, and the note says so
+    put("calib/gain/gain.json", "{\"system_gain_dn_per_e\": 0.25, \"read_noise_e\": 6.088, \"dark_current_e_per_s\": "
+        "19.12, \"dark_exposures_us\": [100000, 500000, 1000000, 2000000], \"std\": {\"read_noise_e\": 0.0124, "
+        "\"dark_current_e_per_s\": 0.124}}");
+    char *adv = example("virtual-truth-adversarial.ini");
+    model_ini_t *ini = model_ini_load(adv);
+    model_sensor_t ts;
+    double rn = NAN, dc = NAN, t4[4] = { 100000, 500000, 1000000, 2000000 };
+    CHECK(ini && model_sensor_from_ini(ini, &ts) && model_sensor_dark_measurand(&ts, t4, 4, &rn, &dc));
+    doc = fit_chain_compare(test_path("day"), adv, prov);
+    CHECK_MSG(doc != NULL, "%s", model_last_error());
+    if (doc) {
+        const json_t *e = entry(doc, "sensor.read_noise_e");
+        CHECK_NEAR(field(e, "truth"), rn, 1e-9);
+        CHECK(rn < 6.1 && rn > 6.0);   // 6 e- through the low end's gamma (4 % less), with 2 e- of row noise
+        CHECK_CONTAINS(json_string_value(json_object_get(e, "note")), "as EMVA 1288 defines it");
+        CHECK_NEAR(field(e, "z"), (6.088 - rn) / 0.0124, 1e-6);
+        e = entry(doc, "sensor.dark_current_e_per_s");
+        CHECK_NEAR(field(e, "truth"), dc, 1e-9);
+        CHECK(dc < 19.5 && dc > 18.5);   // 20 e-/s (+ 0.2 of hot pixels) through the same low end
+        CHECK_NEAR(field(entry(doc, "sensor.system_gain_dn_per_e"), "truth"), 0.25, 1e-12);
+    }
+    json_decref(doc);
+    model_ini_free(ini);
+    g_free(adv);
     json_decref(prov);
     mrcal_free_cameramodel(&m);
     g_free(model_text);

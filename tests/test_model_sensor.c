@@ -551,3 +551,81 @@ TEST(sensor_adversary_row_noise)
     CHECK(b[0] == 100 && b[N - 1] == 100);
     free(b);
 }
+
+// What EMVA 1288's dark figures read from a sensor (model_sensor_dark_measurand):
+// the sensor's own read noise and dark current when the response is linear at
+// 0 and there is no row noise; with row noise, their sum in quadrature; with
+// the adversary's low-end gamma and hot pixels, what frames drawn from the
+// sensor itself show (pairs of 1024 x 1024 frames: var(A - B) / 2 less
+// q^2/12 at exposure 0, and the mean's rise with exposure).
+TEST(sensor_dark_measurand_known_answer)
+{
+    model_sensor_t s = model_sensor_default();
+    s.dark_current_e_per_s = 20;
+    double rn = 0, dc = 0, t2[2] = { 0, 10000 }, t4[4] = { 100000, 500000, 1000000, 2000000 };
+    CHECK(model_sensor_dark_measurand(&s, t2, 2, &rn, &dc));
+    CHECK_NEAR(rn, 6, 6e-6);
+    CHECK_NEAR(dc, 20, 20e-4);   // (the 2 % compression at full well: 1 - 0.02 e / FW near 0)
+    s.row_noise_dn = 0.5;
+    CHECK(model_sensor_dark_measurand(&s, NULL, 0, &rn, NULL));
+    CHECK_NEAR(rn, sqrt(36 + 4), 1e-5);   // 0.5 DN at 0.25 DN/e- is 2 e-
+    CHECK(!model_sensor_dark_measurand(&s, t2, 1, &rn, &dc));   // one exposure: no slope
+    CHECK_CONTAINS(model_last_error(), "at least 2 different exposures");
+    CHECK(model_sensor_dark_measurand(&s, t4, 4, NULL, &dc));   // 40 e- in 2 s: still linear
+    CHECK_NEAR(dc, 20, 20e-4);
+    // the adversary's sensor: the low end's gamma compresses the read noise
+    s.low_end_gamma = 1.02;
+    s.low_end_e = 800;
+    s.hot_pixel_fraction = 1e-4;
+    s.hot_pixel_dark_current_e_per_s = 2000;
+    s.prnu_pct = 0;
+    s.dsnu_dn = 0;
+    s.vignetting = 0;
+    CHECK(model_sensor_dark_measurand(&s, t4, 4, &rn, &dc));
+    fprintf(stderr, "  adversarial sensor: read noise %.4f e- (nominal %.4f), dark current %.3f e-/s (nominal 20 + "
+            "hot 0.2)\n", rn, sqrt(40.0), dc);
+    CHECK(rn < 0.98 * sqrt(40.0));
+    CHECK(dc < 0.98 * 20.2);
+    const int w = 1024, h = 1024;
+    const size_t n = (size_t)w * h;
+    float *a = malloc(n * sizeof *a), *b = malloc(n * sizeof *b);
+    CHECK(a && b);
+    if (!a || !b) goto out;
+    // read noise: exposure 0
+    s.exposure_us = 0;
+    double v = 0;
+    for (int rep = 0; rep < 2; rep++) {
+        for (size_t i = 0; i < n; i++) a[i] = b[i] = (float)s.dark_offset_dn;
+        s.noise_seed = 11 + 2 * rep;
+        model_sensor_apply_patterns(&s, w, h, NULL, NULL, a);
+        s.noise_seed = 12 + 2 * rep;
+        model_sensor_apply_patterns(&s, w, h, NULL, NULL, b);
+        for (size_t i = 0; i < n; i++) v += (double)(a[i] - b[i]) * (a[i] - b[i]) / 2;
+    }
+    double rn_mc = sqrt(v / (2.0 * n) - 1.0 / 12) / s.system_gain_dn_per_e;
+    fprintf(stderr, "  frames: read noise %.4f e-\n", rn_mc);
+    CHECK_MSG(fabs(rn_mc / rn - 1) < 0.004, "read noise %.4f e- from frames, %.4f computed", rn_mc, rn);
+    // dark current: a high one (20 e- in 1 ms, within the low end) and no row noise, so
+    // the frames' means are precise to 0.03 %
+    s.row_noise_dn = 0;
+    s.dark_current_e_per_s = 20000;
+    double t1[2] = { 0, 1000 };
+    CHECK(model_sensor_dark_measurand(&s, t1, 2, NULL, &dc));
+    double m[2];
+    for (int k = 0; k < 2; k++) {
+        s.exposure_us = k ? 1000 : 0;
+        s.noise_seed = 21 + k;
+        for (size_t i = 0; i < n; i++) a[i] = (float)s.dark_offset_dn;
+        model_sensor_apply_patterns(&s, w, h, NULL, NULL, a);
+        double sum = 0;
+        for (size_t i = 0; i < n; i++) sum += a[i];
+        m[k] = sum / n;
+    }
+    double dc_mc = (m[1] - m[0]) / 1e-3 / s.system_gain_dn_per_e;
+    fprintf(stderr, "  dark current %.1f e-/s computed, %.1f from frames (nominal 20000 + hot 0.2)\n", dc, dc_mc);
+    CHECK_MSG(fabs(dc_mc / dc - 1) < 0.002, "dark current %.1f e-/s from frames, %.1f computed", dc_mc, dc);
+    CHECK(dc < 0.97 * 20000);
+out:
+    free(a);
+    free(b);
+}
