@@ -238,43 +238,11 @@ int calib_gain_spectrogram(const float *img, int w, int h, const int roi[4], boo
     return nk;
 }
 
-// The k-th smallest of v[n] (reorders v): Hoare's selection, O(n) expected.
-static float select_k(float *v, size_t n, size_t k)
-{
-    size_t lo = 0, hi = n - 1;
-    while (lo < hi) {
-        float pivot = v[lo + (hi - lo) / 2];
-        size_t i = lo, j = hi;
-        while (i <= j) {
-            while (v[i] < pivot) i++;
-            while (v[j] > pivot) j--;
-            if (i <= j) {
-                float t = v[i];
-                v[i] = v[j];
-                v[j] = t;
-                i++;
-                if (j == 0) break;
-                j--;
-            }
-        }
-        if (k <= j) hi = j;
-        else if (k >= i) lo = i;
-        else break;
-    }
-    return v[k];
-}
-
-static double median_of(float *v, size_t n)
-{
-    double a = select_k(v, n, (n - 1) / 2);
-    return n % 2 ? a : 0.5 * (a + select_k(v, n, n / 2));
-}
-
 // Median and robust std (1.4826 MAD) of the roi of m (NaN values left out).
 static bool robust(const float *m, int w, const int r[4], double *med, double *sigma)
 {
-    size_t n = 0;
-    float *v = malloc(sizeof(float) * ((size_t)r[2] * r[3] + 1));
+    int n = 0;
+    double *v = malloc(sizeof(double) * ((size_t)r[2] * r[3] + 1));
     if (!v) return false;
     for (int y = 0; y < r[3]; y++)
         for (int x = 0; x < r[2]; x++) {
@@ -283,9 +251,9 @@ static bool robust(const float *m, int w, const int r[4], double *med, double *s
         }
     *med = *sigma = NAN;
     if (n) {
-        *med = median_of(v, n);
-        for (size_t i = 0; i < n; i++) v[i] = fabsf(v[i] - (float)*med);
-        *sigma = 1.4826 * median_of(v, n);
+        *med = model_median(v, n);
+        for (int i = 0; i < n; i++) v[i] = fabs(v[i] - *med);
+        *sigma = 1.4826 * model_median(v, n);
     }
     free(v);
     return true;

@@ -168,51 +168,29 @@ bool calib_drift_measure(const rig_session_t *s, const rig_plan_t *p, const cali
     return true;
 }
 
-// Between two visits the lamp's intensity follows a monotone cubic through
-// every visit (Fritsch & Carlson 1980, the PCHIP tangents: the harmonic mean of
-// the neighbouring slopes where they agree in sign, 0 where they do not).
-// A warm-up is smooth and monotone; a straight line between visits cuts its
-// bend (1 % at 0.7 s between visits of an 8 % warm-up), the cubic follows it
-// and never overshoots the visits' range.
-static double pchip_tangent(const double *t, const double *f, int n, int k)
-{
-    if (n < 3) return (f[1] - f[0]) / (t[1] - t[0]);
-    if (k == 0 || k == n - 1) {   // the end: the three-point slope, kept in the data's sign
-        int a = k == 0 ? 0 : n - 3;
-        double h0 = t[a + 1] - t[a], h1 = t[a + 2] - t[a + 1];
-        double d0 = (f[a + 1] - f[a]) / h0, d1 = (f[a + 2] - f[a + 1]) / h1;
-        double m = k == 0 ? ((2 * h0 + h1) * d0 - h0 * d1) / (h0 + h1) : ((2 * h1 + h0) * d1 - h1 * d0) / (h0 + h1);
-        double dk = k == 0 ? d0 : d1, dn = k == 0 ? d1 : d0;
-        if (m * dk <= 0) return 0;
-        if (dk * dn < 0 && fabs(m) > fabs(3 * dk)) return 3 * dk;
-        return m;
-    }
-    double h0 = t[k] - t[k - 1], h1 = t[k + 1] - t[k];
-    double d0 = (f[k] - f[k - 1]) / h0, d1 = (f[k + 1] - f[k]) / h1;
-    if (d0 * d1 <= 0) return 0;
-    double w0 = 2 * h1 + h0, w1 = h1 + 2 * h0;
-    return (w0 + w1) / (w0 / d0 + w1 / d1);
-}
-
+// Between two visits the lamp's intensity follows the monotone cubic through
+// every visit (model_pchip_slopes). A warm-up is smooth and monotone; a
+// straight line between visits cuts its bend (1 % at 0.7 s between visits of
+// an 8 % warm-up), the cubic follows it and never overshoots the visits.
 double calib_drift_factor(const calib_drift_t *d, int lamp, double t_s)
 {
     if (!d || lamp < 0 || lamp >= d->nlamps || d->nvisits[lamp] < 2) return 1.0;
     const double *t = d->t_s[lamp], *f = d->f[lamp];
     int n = d->nvisits[lamp];
     if (t_s <= t[0]) return f[0];
-    for (int k = 1; k < n; k++) {
-        if (t_s > t[k]) continue;
-        double h = t[k] - t[k - 1];
-        if (!(h > 0)) return f[k];
-        // visits out of time order or at one time (never from a session): the straight line
-        for (int j = 1; j < n; j++)
-            if (!(t[j] > t[j - 1])) return f[k - 1] + (f[k] - f[k - 1]) * (t_s - t[k - 1]) / h;
-        double m0 = pchip_tangent(t, f, n, k - 1), m1 = pchip_tangent(t, f, n, k);
-        double u = (t_s - t[k - 1]) / h, u2 = u * u, u3 = u2 * u;
-        return (2 * u3 - 3 * u2 + 1) * f[k - 1] + (u3 - 2 * u2 + u) * h * m0 + (-2 * u3 + 3 * u2) * f[k] +
-               (u3 - u2) * h * m1;
+    if (t_s >= t[n - 1]) return f[n - 1];
+    bool ordered = true;   // (visits out of time order or at one time never come from a session)
+    for (int j = 1; j < n; j++) ordered = ordered && t[j] > t[j - 1];
+    double *sl = ordered ? malloc(sizeof(double) * (size_t)n) : NULL;
+    if (!sl) {   // the straight line of the first pair around t_s
+        int k = 1;
+        while (k < n - 1 && t_s > t[k]) k++;
+        return t[k] > t[k - 1] ? f[k - 1] + (f[k] - f[k - 1]) * (t_s - t[k - 1]) / (t[k] - t[k - 1]) : f[k];
     }
-    return f[n - 1];
+    model_pchip_slopes(t, f, n, sl);
+    double v = model_pchip_eval(t, f, sl, n, t_s, NULL);
+    free(sl);
+    return v;
 }
 
 void calib_drift_free(calib_drift_t *d)

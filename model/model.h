@@ -89,6 +89,16 @@ double model_median(double *v, int n);
 // Jacobi rotations: A becomes diagonal (the eigenvalues on it), and V (n x n,
 // NULL: not wanted) the eigenvectors as columns, so A_in = V diag(A) V^T.
 void model_sym_eigen(int n, double *A, double *V);
+// The monotone piecewise cubic through (x[k], y[k]), k = 0..n-1 (x strictly
+// increasing, n >= 2): model_pchip_slopes gives its knot derivatives d[n]
+// (Fritsch & Butland's weighted harmonic mean of the neighbouring secants, 0 at
+// a local extremum; the one-sided three-point ends limited to 3 secants; then
+// Fritsch & Carlson's alpha^2 + beta^2 <= 9), so that it is monotone wherever
+// the data are and never overshoots them; model_pchip_eval its value at
+// x[0] <= t <= x[n-1] (the cubic Hermite form; *slope, may be NULL, gets its
+// derivative). Beyond the ends, callers choose (a constant, the end slope).
+void   model_pchip_slopes(const double *x, const double *y, int n, double *d);
+double model_pchip_eval(const double *x, const double *y, const double *d, int n, double t, double *slope);
 // Monotonic wall clock in seconds.
 double model_now_s(void);
 // Host real-time clock (CLOCK_REALTIME), seconds since 1970 UTC.

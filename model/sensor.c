@@ -774,18 +774,7 @@ static double lin_table(const model_lin_t *L, double x, double *slope)
         *slope = L->d[n - 1];
         return L->s[n - 1] + L->d[n - 1] * (x - L->m[n - 1]);
     }
-    int lo = 0, hi = n - 1;   // m[lo] <= x < m[hi]
-    while (hi - lo > 1) {
-        int mid = (lo + hi) / 2;
-        if (L->m[mid] <= x) lo = mid;
-        else hi = mid;
-    }
-    double h = L->m[hi] - L->m[lo], u = (x - L->m[lo]) / h, u2 = u * u, u3 = u2 * u;
-    double y0 = L->s[lo], y1 = L->s[hi], d0 = L->d[lo] * h, d1 = L->d[hi] * h;
-    // cubic Hermite basis and its derivative
-    double v = (2 * u3 - 3 * u2 + 1) * y0 + (u3 - 2 * u2 + u) * d0 + (-2 * u3 + 3 * u2) * y1 + (u3 - u2) * d1;
-    *slope = ((6 * u2 - 6 * u) * y0 + (3 * u2 - 4 * u + 1) * d0 + (-6 * u2 + 6 * u) * y1 + (3 * u2 - 2 * u) * d1) / h;
-    return v;
+    return model_pchip_eval(L->m, L->s, L->d, n, x, slope);
 }
 
 double model_linearise(const model_lin_t *L, double s_m, double gf, double *slope)
@@ -812,35 +801,7 @@ double model_linearise(const model_lin_t *L, double s_m, double gf, double *slop
 // (|d| <= 3 secant): the interpolant is monotone on every interval.
 static void lin_derivatives(model_lin_t *L)
 {
-    const int n = L->n;
-    double h[MODEL_LIN_MAX], del[MODEL_LIN_MAX];
-    for (int k = 0; k < n - 1; k++) {
-        h[k] = L->m[k + 1] - L->m[k];
-        del[k] = (L->s[k + 1] - L->s[k]) / h[k];
-    }
-    if (n == 2) {
-        L->d[0] = L->d[1] = del[0];
-        return;
-    }
-    for (int k = 1; k < n - 1; k++) {
-        double w1 = 2 * h[k] + h[k - 1], w2 = h[k] + 2 * h[k - 1];
-        L->d[k] = del[k - 1] * del[k] > 0 ? (w1 + w2) / (w1 / del[k - 1] + w2 / del[k]) : 0;
-    }
-    for (int e = 0; e < 2; e++) {   // the ends
-        int k0 = e ? n - 2 : 0, k1 = e ? n - 3 : 1, kd = e ? n - 1 : 0;
-        double d = ((2 * h[k0] + h[k1]) * del[k0] - h[k0] * del[k1]) / (h[k0] + h[k1]);
-        if (d * del[k0] <= 0) d = 0;
-        else if (del[k0] * del[k1] <= 0 && fabs(d) > 3 * fabs(del[k0])) d = 3 * del[k0];
-        L->d[kd] = d;
-    }
-    for (int k = 0; k < n - 1; k++) {   // Fritsch & Carlson's monotonicity condition alpha^2 + beta^2 <= 9
-        double al = L->d[k] / del[k], be = L->d[k + 1] / del[k], r = al * al + be * be;
-        if (r > 9) {
-            double tau = 3 / sqrt(r);
-            L->d[k] = tau * al * del[k];
-            L->d[k + 1] = tau * be * del[k];
-        }
-    }
+    model_pchip_slopes(L->m, L->s, L->n, L->d);
 }
 
 bool model_lin_monotone(const double *m, const double *s, int n, model_lin_t *out)

@@ -443,3 +443,57 @@ double model_median(double *v, int n)
     return 0.5 * (lo + hi);
 }
 
+
+void model_pchip_slopes(const double *x, const double *y, int n, double *d)
+{
+#define H(k)   (x[(k) + 1] - x[(k)])
+#define DEL(k) ((y[(k) + 1] - y[(k)]) / H(k))
+    if (n < 2) return;
+    if (n == 2) {
+        d[0] = d[1] = DEL(0);
+        return;
+    }
+    for (int k = 1; k < n - 1; k++) {
+        double w1 = 2 * H(k) + H(k - 1), w2 = H(k) + 2 * H(k - 1), a = DEL(k - 1), b = DEL(k);
+        d[k] = a * b > 0 ? (w1 + w2) / (w1 / a + w2 / b) : 0;
+    }
+    for (int e = 0; e < 2; e++) {   // the ends
+        int k0 = e ? n - 2 : 0, k1 = e ? n - 3 : 1, kd = e ? n - 1 : 0;
+        double h0 = H(k0), h1 = H(k1), a = DEL(k0), b = DEL(k1);
+        double s = ((2 * h0 + h1) * a - h0 * b) / (h0 + h1);
+        if (s * a <= 0) s = 0;
+        else if (a * b <= 0 && fabs(s) > 3 * fabs(a)) s = 3 * a;
+        d[kd] = s;
+    }
+    for (int k = 0; k < n - 1; k++) {   // Fritsch & Carlson's monotonicity condition
+        double del = DEL(k);
+        if (del == 0) {   // a flat interval stays flat
+            d[k] = d[k + 1] = 0;
+            continue;
+        }
+        double al = d[k] / del, be = d[k + 1] / del, r = al * al + be * be;
+        if (r > 9) {
+            double tau = 3 / sqrt(r);
+            d[k] = tau * al * del;
+            d[k + 1] = tau * be * del;
+        }
+    }
+#undef H
+#undef DEL
+}
+
+double model_pchip_eval(const double *x, const double *y, const double *d, int n, double t, double *slope)
+{
+    int lo = 0, hi = n - 1;   // x[lo] <= t < x[hi]
+    while (hi - lo > 1) {
+        int mid = (lo + hi) / 2;
+        if (x[mid] <= t) lo = mid;
+        else hi = mid;
+    }
+    double h = x[hi] - x[lo], u = (t - x[lo]) / h, u2 = u * u, u3 = u2 * u;
+    double y0 = y[lo], y1 = y[hi], d0 = d[lo] * h, d1 = d[hi] * h;
+    // the cubic Hermite basis and its derivative
+    if (slope)
+        *slope = ((6 * u2 - 6 * u) * y0 + (3 * u2 - 4 * u + 1) * d0 + (-6 * u2 + 6 * u) * y1 + (3 * u2 - 2 * u) * d1) / h;
+    return (2 * u3 - 3 * u2 + 1) * y0 + (u3 - 2 * u2 + u) * d0 + (-2 * u3 + 3 * u2) * y1 + (u3 - u2) * d1;
+}
