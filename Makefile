@@ -20,7 +20,7 @@ CXX   ?= c++
 PKGS := glib-2.0 libpng libjpeg libtiff-4 jansson libftdi1 libusb-1.0 libgpiod aravis-0.8 sqlite3 zlib
 # Only the tests link libumockdev (the simulated USB device of the APT tests).
 TEST_PKGS := umockdev-1.0
-# OpenCV 4 (calib/board_detect.cc only): its flags, and of its libraries the
+# OpenCV 4 (calib/geometry/board_detect.cc only): its flags, and of its libraries the
 # four refl calls (pkg-config lists every module of the contrib build).
 OPENCV_PKG := opencv4
 OPENCV_MODULES := -lopencv_aruco -lopencv_calib3d -lopencv_imgproc -lopencv_core
@@ -54,101 +54,125 @@ LDLIBS_ALL   = $(PKG_LIBS) $(OPENCV_LIBS) $(LIBS_NOPC) -lm
 
 # ---- sources (explicit lists) ---------------------------------------------
 # One file a line, by layer (model -> rig -> calib -> fit; README: Architecture).
-MODEL_SRC := \
-    model/util.c \
-    model/ini.c \
-    model/opts.c \
-    model/report.c \
-    model/image.c \
-    model/image_read.c \
-    model/scene.c \
-    model/scene_mesh.c \
+# One block per subsystem (a folder), so each folder's files are listed together.
+MODEL_BASE_SRC := \
+    model/base/util.c \
+    model/base/ini.c \
+    model/base/opts.c \
+    model/base/report.c
+MODEL_IMAGE_SRC := \
+    model/image/write.c \
+    model/image/read.c
+MODEL_SCENE_SRC := \
+    model/scene/scene.c \
+    model/scene/mesh.c \
+    model/scene/workpiece.c
+MODEL_BRDF_SRC := \
+    model/brdf/brdf.c \
+    model/brdf/batch.c \
+    model/brdf/table.c \
+    model/brdf/rgl.c \
+    model/brdf/gen.c
+MODEL_RENDER_SRC := \
+    model/render/trace.c \
+    model/render/shade.c \
+    model/render/file.c
+MODEL_EDGES_SRC := \
+    model/edges/edges.c \
+    model/edges/profile.c \
+    model/edges/file.c
+MODEL_SRC := $(MODEL_BASE_SRC) $(MODEL_IMAGE_SRC) $(MODEL_SCENE_SRC) $(MODEL_BRDF_SRC) $(MODEL_RENDER_SRC) \
+    $(MODEL_EDGES_SRC) \
     model/config.c \
-    model/brdf.c \
-    model/brdf_batch.c \
-    model/brdf_table.c \
-    model/brdf_rgl.c \
-    model/brdf_gen.c \
-    model/cmd_brdf.c \
     model/camera.c \
-    model/trace.c \
-    model/shade.c \
     model/sensor.c \
-    model/edges.c \
-    model/edge_profile.c \
-    model/workpiece.c \
-    model/render_file.c \
-    model/edges_file.c \
-    model/cmd.c
-RIG_SRC := \
+    model/cmd.c \
+    model/cmd_brdf.c
+MODEL_CXX_SRC := model/base/lsq.cc
+
+RIG_TURNTABLE_SRC := \
+    rig/turntable/turntable.c \
+    rig/turntable/apt.c \
+    rig/turntable/sim.c
+RIG_LAMPS_SRC := \
+    rig/lamps/lamps.c \
+    rig/lamps/state.c \
+    rig/lamps/gpiod.c \
+    rig/lamps/sim.c
+RIG_CAMERA_SRC := \
+    rig/camera/camera.c \
+    rig/camera/aravis.c \
+    rig/camera/pixfmt.c
+RIG_SESSION_SRC := \
+    rig/session/plan.c \
+    rig/session/plan_views.c \
+    rig/session/operator.c \
+    rig/session/journal.c \
+    rig/session/reader.c \
+    rig/session/capture.c
+RIG_VIRTUAL_SRC := \
+    rig/virtual/truth.c \
+    rig/virtual/virtual.c \
+    rig/virtual/gv_camera.c \
+    rig/virtual/lamps.c \
+    rig/virtual/optics.c \
+    rig/virtual/materials.c \
+    rig/virtual/place.c
+RIG_SRC := $(RIG_TURNTABLE_SRC) $(RIG_LAMPS_SRC) $(RIG_CAMERA_SRC) $(RIG_SESSION_SRC) $(RIG_VIRTUAL_SRC) \
     rig/error.c \
-    rig/turntable.c \
-    rig/turntable_apt.c \
-    rig/turntable_sim.c \
-    rig/lamps.c \
-    rig/lamps_state.c \
-    rig/lamps_gpiod.c \
-    rig/lamps_sim.c \
-    rig/camera.c \
-    rig/camera_aravis.c \
-    rig/pixfmt.c \
-    rig/gv_camera.c \
     rig/config.c \
-    rig/plan.c \
-    rig/operator.c \
-    rig/plan_views.c \
-    rig/journal.c \
-    rig/session.c \
-    rig/capture.c \
-    rig/truth.c \
-    rig/virtual.c \
-    rig/virtual_lamps.c \
-    rig/virtual_optics.c \
-    rig/virtual_materials.c \
-    rig/virtual_place.c \
     rig/cmd_rig.c \
     rig/cmd_capture.c
-CALIB_SRC := \
+
+CALIB_GEOMETRY_SRC := \
+    calib/geometry/geometry.c \
+    calib/geometry/diff.c \
+    calib/geometry/psf.c \
+    calib/geometry/export.c
+CALIB_LAMPS_SRC := \
+    calib/lamps/lamps.c \
+    calib/lamps/pattern.c \
+    calib/lamps/drift.c
+CALIB_GAIN_SRC := \
+    calib/gain/gain.c \
+    calib/gain/emva.c
+CALIB_SRC := $(CALIB_GEOMETRY_SRC) $(CALIB_LAMPS_SRC) $(CALIB_GAIN_SRC) \
     calib/capture.c \
     calib/calset.c \
     calib/observe.c \
     calib/sample_pose.c \
-    calib/geometry.c \
-    calib/geometry_diff.c \
-    calib/psf.c \
-    calib/lamps.c \
-    calib/lamps_pattern.c \
-    calib/lamps_drift.c \
-    calib/gain.c \
-    calib/gain_emva.c \
     calib/white.c \
-    calib/export.c \
     calib/cmd_calib.c \
     calib/cmd_geometry.c \
     calib/cmd_lamps.c \
     calib/cmd_gain.c
-FIT_SRC := \
-    fit/brdf_fit.c \
-    fit/brdf_samples.c \
-    fit/material.c \
-    fit/lightplan.c \
-    fit/plan_lamps.c \
-    fit/plan_capture.c \
-    fit/verify.c \
-    fit/verify_footprint.c \
-    fit/verify_files.c \
-    fit/verify_lab.c \
-    fit/verify_study.c \
-    fit/verify_register.c \
-    fit/chain.c \
-    fit/export_material.c \
+CALIB_CXX_SRC := calib/geometry/board_detect.cc
+
+FIT_BRDF_SRC := \
+    fit/brdf/fit.c \
+    fit/brdf/samples.c
+FIT_MATERIAL_SRC := \
+    fit/material/material.c \
+    fit/material/export.c
+FIT_VERIFY_SRC := \
+    fit/verify/verify.c \
+    fit/verify/footprint.c \
+    fit/verify/files.c \
+    fit/verify/register.c
+FIT_LIGHTPLAN_SRC := \
+    fit/lightplan/lightplan.c \
+    fit/lightplan/files.c \
+    fit/lightplan/capture_plan.c
+FIT_EVAL_SRC := \
+    fit/eval/lab.c \
+    fit/eval/study.c \
+    fit/eval/chain.c
+FIT_SRC := $(FIT_BRDF_SRC) $(FIT_MATERIAL_SRC) $(FIT_VERIFY_SRC) $(FIT_LIGHTPLAN_SRC) $(FIT_EVAL_SRC) \
     fit/cmd_chain.c \
     fit/cmd_fit.c \
     fit/cmd_export.c \
     fit/cmd_plan.c \
     fit/cmd_verify.c
-MODEL_CXX_SRC := model/lsq.cc
-CALIB_CXX_SRC := calib/board_detect.cc
 LIB_SRC   := $(MODEL_SRC) $(RIG_SRC) $(CALIB_SRC) $(FIT_SRC)
 
 MAIN_SRC  := fit/main.c
@@ -243,9 +267,9 @@ $(BIN)/refl-tests: $(call obj,$(TEST_SRC)) $(LIB)
 	$(CC) $(LDFLAGS_ALL) -o $@ $^ $(LDLIBS_ALL)
 
 $(BUILD)/tests/apt_sim.o: CFLAGS_ALL += $(TEST_PKG_CFLAGS)
-$(BUILD)/calib/board_detect.o: CXXFLAGS_ALL += $(OPENCV_CFLAGS)
-# model_brdf_eval_n's GGX loop vectorises (sqrt and selects; model/brdf_batch.c)
-$(BUILD)/model/brdf_batch.o: CFLAGS_ALL += -ftree-loop-vectorize -fvect-cost-model=dynamic -fno-math-errno -fno-trapping-math
+$(BUILD)/calib/geometry/board_detect.o: CXXFLAGS_ALL += $(OPENCV_CFLAGS)
+# model_brdf_eval_n's GGX loop vectorises (sqrt and selects; model/brdf/batch.c)
+$(BUILD)/model/brdf/batch.o: CFLAGS_ALL += -ftree-loop-vectorize -fvect-cost-model=dynamic -fno-math-errno -fno-trapping-math
 $(BUILD)/model/sensor.o: CFLAGS_ALL += -ftree-loop-vectorize -fvect-cost-model=dynamic -fno-math-errno -fno-trapping-math -ffp-contract=off
 $(BIN)/refl-tests: LDLIBS_ALL += $(TEST_PKG_LIBS)
 

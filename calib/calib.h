@@ -16,7 +16,7 @@
 #include <stdint.h>
 #include <stdio.h>
 
-#include "model/opts.h"
+#include "model/base/opts.h"
 #include "rig/rig.h"
 
 #ifdef __cplusplus
@@ -131,7 +131,7 @@ calib_set_t *calib_set_load_files(const char *camera, const char *lamps_json, co
                                   const char *white_json);
 void         calib_set_free(calib_set_t *c);
 // The lens's blur of the geometry calibration that wrote camera_model: the
-// "psf" of geometry.json in the model's directory (calib/psf.c writes it;
+// "psf" of geometry.json in the model's directory (calib/geometry/psf.c writes it;
 // camera NAME of several: its cameras[].psf, else the top level's, the first
 // camera's; camera NULL: the model file's name, NAME.cameramodel). true with
 // the optics' Gaussian sigma and its 1-sigma (px; the pixel's footprint is
@@ -166,7 +166,7 @@ typedef struct {
     double          n0[3];          // the surface's unit normal there, rig frame at angle 0
 } calib_obs_t;
 
-// Lamp drift (calib/lamps_drift.c): a plan whose [angles] list has an angle
+// Lamp drift (calib/lamps/drift.c): a plan whose [angles] list has an angle
 // more than once (list = 0 30 60 0 90 120 0 ...) takes every lamp set and
 // exposure there again: the reference, revisited. Each lamp alone's frames
 // there (grouped by angle, exposure and gain; the group of the most visits)
@@ -196,7 +196,7 @@ void   calib_drift_free(calib_drift_t *d);
 // outline (model_edges_predict at the nominal pose: the edges with the
 // background on one side) is sampled every ~0.5 mm, and at each sample the
 // image's edge (the steepest fall from the coupon to the background along the
-// edge's normal) is found; least squares (model/lsq.h) of those distances over
+// edge's normal) is found; least squares (model/base/lsq.h) of those distances over
 // the pose, with the nominal wedge pose as a Gaussian prior, search and fit
 // repeated three times (8, 3, 2 px). The pose's parameters p[6]:
 //   tilt_deg, tilt_azimuth_deg  the wedge (model_scene_wedge_pose: the normal)

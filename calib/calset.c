@@ -11,9 +11,9 @@
 #include <unistd.h>
 
 #include "calib/calib.h"
-#include "calib/gain.h"
-#include "model/report.h"
-#include "model/vec.h"
+#include "calib/gain/gain.h"
+#include "model/base/report.h"
+#include "model/base/vec.h"
 #include "rig/rig.h"
 
 

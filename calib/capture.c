@@ -13,7 +13,7 @@
 
 #include "calib/calib.h"
 #include "model/model.h"
-#include "model/report.h"
+#include "model/base/report.h"
 
 // ---------------------------------------------------------------------------
 // Capture

@@ -1,13 +1,13 @@
 // calib/cmd_calib.c — `refl calib geometry|lamps|pattern|gain|white`: dispatches to the
-// calibrations (calib/geometry.c, calib/lamps.c, calib/gain.c, calib/white.c).
+// calibrations (calib/geometry/geometry.c, calib/lamps/lamps.c, calib/gain/gain.c, calib/white.c).
 #include <math.h>
 #include <stdio.h>
 #include <string.h>
 
 #include "calib/calib.h"
-#include "calib/export.h"
+#include "calib/geometry/export.h"
 #include "model/model.h"
-#include "model/opts.h"
+#include "model/base/opts.h"
 
 static const struct {
     const char *name;

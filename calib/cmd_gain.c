@@ -1,5 +1,5 @@
-// calib/cmd_gain.c — `refl calib gain`: parses the options (model/opts.h),
-// runs calib_gain_run (calib/gain.h) and prints the reference gain's figures.
+// calib/cmd_gain.c — `refl calib gain`: parses the options (model/base/opts.h),
+// runs calib_gain_run (calib/gain/gain.h) and prints the reference gain's figures.
 // Exit: 0 done, 1 error (printed once here), 2 usage, 3 paused (an operator step).
 #include <math.h>
 #include <stdio.h>
@@ -7,9 +7,9 @@
 #include <string.h>
 
 #include "calib/calib.h"
-#include "calib/gain.h"
+#include "calib/gain/gain.h"
 #include "model/model.h"
-#include "model/opts.h"
+#include "model/base/opts.h"
 
 #define ABOUT                                                                                                  \
     "Sensitivity of a camera, EMVA 1288 Release 4.0 Linear: photon transfer (system gain K, temporal dark\n"  \

@@ -1,5 +1,5 @@
 // calib/cmd_geometry.c — `refl calib geometry`: parses the options
-// (model/opts.h), runs calib_geometry_run (calib/geometry.h) and prints the
+// (model/base/opts.h), runs calib_geometry_run (calib/geometry/geometry.h) and prints the
 // outputs. Exit: 0 done, 1 error (the library's message, printed once here),
 // 2 usage.
 #include <math.h>
@@ -9,9 +9,9 @@
 #include <unistd.h>
 
 #include "calib/calib.h"
-#include "calib/geometry.h"
+#include "calib/geometry/geometry.h"
 #include "model/model.h"
-#include "model/opts.h"
+#include "model/base/opts.h"
 
 #define ABOUT                                                                                                  \
     "Camera model by mrgingham (corners) and mrcal (mrcal-calibrate-cameras), the turntable axis\n"             \

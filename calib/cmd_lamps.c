@@ -1,5 +1,5 @@
-// calib/cmd_lamps.c — `refl calib lamps`: parses its options (model/opts.h)
-// into a calib_lamps_opts_t, runs calib_lamps_run (calib/lamps.c) and prints
+// calib/cmd_lamps.c — `refl calib lamps`: parses its options (model/base/opts.h)
+// into a calib_lamps_opts_t, runs calib_lamps_run (calib/lamps/lamps.c) and prints
 // the lamps' table.
 #define _GNU_SOURCE
 #include <glib.h>
@@ -8,9 +8,9 @@
 #include <string.h>
 
 #include "calib/calib.h"
-#include "calib/lamps.h"
+#include "calib/lamps/lamps.h"
 #include "model/model.h"
-#include "model/opts.h"
+#include "model/base/opts.h"
 
 static const char ABOUT[] =
     "Lamp positions from the highlights of a mirror (chrome) sphere of known radius carried round by the\n"

@@ -9,8 +9,8 @@
 #include <string.h>
 
 #include "calib/calib.h"
-#include "model/lsq.h"
-#include "model/vec.h"
+#include "model/base/lsq.h"
+#include "model/base/vec.h"
 
 #define NPOSE 6
 #define MAX_SAMPLES_PER_ANGLE 600

@@ -12,8 +12,8 @@
 #include <unistd.h>
 
 #include "calib/calib.h"
-#include "model/report.h"
-#include "model/vec.h"
+#include "model/base/report.h"
+#include "model/base/vec.h"
 #include "rig/rig.h"
 
 // ---------------------------------------------------------------------------

@@ -1,15 +1,15 @@
 // fit/cmd_chain.c — `refl chain DIR --truth TRUTH.ini [-o FILE]`: a lab day's
-// figures against the virtual rig's truth (fit/chain.h), printed as a table
+// figures against the virtual rig's truth (fit/eval/chain.h), printed as a table
 // and written to chain.json.
 #include <glib.h>
 #include <math.h>
 #include <stdio.h>
 #include <string.h>
 
-#include "fit/chain.h"
+#include "fit/eval/chain.h"
 #include "model/model.h"
-#include "model/opts.h"
-#include "model/report.h"
+#include "model/base/opts.h"
+#include "model/base/report.h"
 
 static void print_entry(const json_t *e)
 {

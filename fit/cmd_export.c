@@ -1,12 +1,12 @@
 // fit/cmd_export.c — `refl export material`: a priors file's materials as
-// glTF 2.0, Mitsuba 3 or MERL (fit/export_material.c), each conversion's
+// glTF 2.0, Mitsuba 3 or MERL (fit/material/export.c), each conversion's
 // error printed and written beside the file.
 #include <stdio.h>
 #include <string.h>
 
-#include "fit/export.h"
-#include "model/opts.h"
-#include "model/report.h"
+#include "fit/material/export.h"
+#include "model/base/opts.h"
+#include "model/base/report.h"
 
 #define ABOUT                                                                                                  \
     "Writes the materials of a priors file (refl fit material, refl fit brdf) for a renderer:\n"               \

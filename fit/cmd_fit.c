@@ -1,7 +1,7 @@
 // fit/cmd_fit.c — `refl fit brdf FILE [--model M|all] -o PRIORS.json` (fit the
 // reflection models to BRDF samples from a file and write the priors file,
 // README "Priors file") and `refl fit material SESSION --calib DIR ...`
-// (fit_material_run, fit/material.h): arguments (model/opts.h), the library
+// (fit_material_run, fit/material/material.h): arguments (model/base/opts.h), the library
 // call, the printed lines.
 #define _GNU_SOURCE
 #include <math.h>
@@ -10,11 +10,11 @@
 #include <string.h>
 
 #include "calib/calib.h"
-#include "fit/fit.h"
-#include "fit/material.h"
+#include "fit/brdf/brdf.h"
+#include "fit/material/material.h"
 #include "model/model.h"
-#include "model/opts.h"
-#include "model/report.h"
+#include "model/base/opts.h"
+#include "model/base/report.h"
 
 #define MODEL_NAMES "all|lambert|hall|torrance_sparrow|thesis_fit|cook_torrance|ggx|ashikhmin_shirley|ggx2"
 

@@ -1,6 +1,6 @@
 // fit/cmd_plan.c — `refl plan lamps`: choose lamps and exposure for one view
-// or several (lightplan_lamps_run, fit/lightplan.h), optionally checked on the
-// virtual rig, and the capture plan of the views: arguments (model/opts.h),
+// or several (lightplan_lamps_run, fit/lightplan/lightplan.h), optionally checked on the
+// virtual rig, and the capture plan of the views: arguments (model/base/opts.h),
 // the library call, the printed lines.
 #define _GNU_SOURCE
 #include <math.h>
@@ -8,10 +8,10 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "fit/lightplan.h"
+#include "fit/lightplan/lightplan.h"
 #include "model/model.h"
-#include "model/opts.h"
-#include "rig/pixfmt.h"
+#include "model/base/opts.h"
+#include "rig/camera/pixfmt.h"
 
 enum { MAX_MATERIAL_FILES = 8, MAX_EXPOSURES = 64, MAX_VIEWS = 360 };
 

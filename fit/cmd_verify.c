@@ -4,10 +4,10 @@
 //               [--calib DIR] [--cameras CAM...] [--lamps LAMPS] [--gain-calib DIR...]
 //               [--white WHITE.json | --kc-per-us X] [options]
 //   refl verify --study -o DIR [--truth FILE] [--calib CAL --priors P...] [--cases N] [--shard K/N]
-//   refl verify --study-merge DIR... -o OUT                      (fit/verify_study.c)
+//   refl verify --study-merge DIR... -o OUT                      (fit/eval/study.c)
 //
-// Parses the arguments (model/opts.h), calls verify_files_run or
-// verify_study_run (fit/verify.h) and prints the residue table and verdict.
+// Parses the arguments (model/base/opts.h), calls verify_files_run or
+// verify_study_run (fit/verify/verify.h) and prints the residue table and verdict.
 #define _GNU_SOURCE
 #include <glib.h>
 #include <math.h>
@@ -15,9 +15,9 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "fit/verify.h"
-#include "model/opts.h"
-#include "model/report.h"
+#include "fit/verify/verify.h"
+#include "model/base/opts.h"
+#include "model/base/report.h"
 
 static const char about[] =
     "Fits the imaging model of the description SCENE (D3D or OBJ, rig frame, mm) to reference points of\n"

@@ -7,14 +7,14 @@
 #include <unistd.h>
 
 #include "model/model.h"
-#include "model/report.h"
+#include "model/base/report.h"
 #include "calib/calib.h"
-#include "fit/chain.h"
-#include "fit/export.h"
-#include "fit/fit.h"
-#include "fit/verify.h"
-#include "fit/lightplan.h"
-#include "model/opts.h"
+#include "fit/eval/chain.h"
+#include "fit/material/export.h"
+#include "fit/brdf/brdf.h"
+#include "fit/verify/verify.h"
+#include "fit/lightplan/lightplan.h"
+#include "model/base/opts.h"
 #include "rig/rig.h"
 
 typedef struct {

@@ -1,5 +1,5 @@
 // model/cmd.c — the `refl render` and `refl edges` commands (refl render's work
-// is model_render_file, model/render_file.c).
+// is model_render_file, model/render/file.c).
 //
 // Both parse their options strictly (an unknown option, a missing value, a
 // bad number or a missing required option is a usage error: exit 2), load the
@@ -21,7 +21,7 @@
 #include <time.h>
 
 #include "model/internal.h"
-#include "model/opts.h"
+#include "model/base/opts.h"
 
 #define UNITS_P        MODEL_UNITS_P
 #define PIXEL_CONV     MODEL_PIXEL_CONV

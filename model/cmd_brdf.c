@@ -1,12 +1,12 @@
 // model/cmd_brdf.c — `refl brdf tabulate`: a reflection model that is none of
-// refl's fitted ones (model/brdf_gen.c) written as a MERL binary table
-// (model/brdf_table.c), for [material NAME] model = table and refl fit brdf.
+// refl's fitted ones (model/brdf/gen.c) written as a MERL binary table
+// (model/brdf/table.c), for [material NAME] model = table and refl fit brdf.
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
 #include "model/internal.h"
-#include "model/opts.h"
+#include "model/base/opts.h"
 
 static int cmd_tabulate(int argc, char **argv)
 {

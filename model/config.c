@@ -1,4 +1,4 @@
-// model/config.c — materials, lamps and sensor files (INI, see model/ini.c).
+// model/config.c — materials, lamps and sensor files (INI, see model/base/ini.c).
 #define _GNU_SOURCE
 #include <errno.h>
 #include <stddef.h>

@@ -4,7 +4,7 @@
 #include <math.h>
 #include "model/model.h"
 
-#include "model/vec.h"
+#include "model/base/vec.h"
 
 // Error with the C source location (for internal failures, not input errors).
 #define MODEL_FAIL(...) model_error(__FILE__, __LINE__, __VA_ARGS__)
@@ -16,7 +16,7 @@
                           "right-handed), mm; the camera model's rt_cam_ref is rt_cam_world; the scene is " \
                           "rotated by the turntable angle about world z before rendering"
 
-// The inputs of refl render and refl edges (model/render_file.c).
+// The inputs of refl render and refl edges (model/render/file.c).
 // An input file: role, path and its sha256.
 typedef struct {
     const char *role;
@@ -46,8 +46,8 @@ void  model_meta_add_inputs(model_meta_t *m, const model_input_t *in, int nin);
 // "name: model(p=...) [convention]; ..." of the scene's materials (g_free).
 char *model_material_conventions(const model_scene_t *scene, const model_material_t *const *mats);
 
-// Mesh scenes (model/scene_mesh.c reads STL and PLY into a mesh;
-// model_scene_from_mesh_ in model/scene.c checks its faces and builds the scene).
+// Mesh scenes (model/scene/mesh.c reads STL and PLY into a mesh;
+// model_scene_from_mesh_ in model/scene/scene.c checks its faces and builds the scene).
 typedef struct {
     double *v;         // x, y, z per vertex, in the file's unit
     int     nv;

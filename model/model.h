@@ -32,7 +32,7 @@ extern "C" {
 typedef struct { double x, y, z; } model_vec3_t;
 
 // ---------------------------------------------------------------------------
-// Errors and small utilities (model/util.c)
+// Errors and small utilities (model/base/util.c)
 
 // Report an error. where_file may be NULL (then only the message is shown);
 // where_line <= 0 omits the line. The text goes to stderr unless quiet mode is
@@ -40,7 +40,7 @@ typedef struct { double x, y, z; } model_vec3_t;
 void model_error(const char *where_file, int where_line, const char *fmt, ...)
     __attribute__((format(printf, 3, 4)));
 // The same, but only kept (never printed): for code whose caller adds context
-// and reports the message itself (the least-squares solver, model/lsq.h).
+// and reports the message itself (the least-squares solver, model/base/lsq.h).
 void model_error_set(const char *where_file, int where_line, const char *fmt, ...)
     __attribute__((format(printf, 3, 4)));
 const char *model_last_error(void);
@@ -116,7 +116,7 @@ char  *model_command_line(int argc, char **argv);
 void   model_set_command_line(int argc, char **argv);
 // A command-line usage error: "refl CMD: <message>" and "(refl CMD --help for
 // the options)" on stderr; returns 2, the exit status of a usage error. The
-// same printer as model_cli_error (model/opts.c), for errors found without the
+// same printer as model_cli_error (model/base/opts.c), for errors found without the
 // command's option table at hand.
 int    model_usage_error(const char *cmd, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
 // Solve A x = b (n x n, row-major; A and b overwritten, x in b) by Gaussian
@@ -124,7 +124,7 @@ int    model_usage_error(const char *cmd, const char *fmt, ...) __attribute__((f
 bool   model_solve_linear(double *A, double *b, int n);
 
 // ---------------------------------------------------------------------------
-// INI files (model/ini.c): "[section]" or "[kind NAME]" headers, "key = value"
+// INI files (model/base/ini.c): "[section]" or "[kind NAME]" headers, "key = value"
 // lines, '#' or ';' comments, blank lines. Keys before any section, a
 // duplicate key in one section, or a duplicate section header are errors.
 
@@ -181,7 +181,7 @@ bool model_ini_vec3(const model_ini_t *ini, const char *section, const char *key
                     const char *what);
 
 // ---------------------------------------------------------------------------
-// Scenes (model/scene.c)
+// Scenes (model/scene/scene.c)
 //
 // D3D (Ammeraal 1988, the thesis's format):
 //     # comment
@@ -199,7 +199,7 @@ bool model_ini_vec3(const model_ini_t *ini, const char *section, const char *key
 // Wavefront OBJ: v, f (v, v/vt, v/vt/vn, v//vn, negative indices), usemtl;
 // vn, vt, o, g, s, mtllib, l are ignored; other statements are errors.
 // Faces without a material get the material "default".
-// STL (binary or ASCII; model/scene_mesh.c): triangles, their repeated
+// STL (binary or ASCII; model/scene/mesh.c): triangles, their repeated
 // corners merged into shared vertices (equal bit for bit), facet normals
 // ignored (the corner order gives the normal); every face "default".
 // PLY (ascii or binary_little_endian): element vertex (x, y, z; other
@@ -289,7 +289,7 @@ void model_scene_wedge_pose(const model_scene_t *scene, double tilt_deg, double 
                             double t[3]);
 
 // ---------------------------------------------------------------------------
-// Reflection models (model/brdf.c)
+// Reflection models (model/brdf/brdf.c)
 //
 // R = f_r * (n.l), evaluated from the four cosines. One X-macro list is the
 // single source of the models, their names and parameters.
@@ -378,14 +378,14 @@ typedef struct {
 } model_brdf_prep_t;
 model_brdf_prep_t model_brdf_prepare(const model_cosines_t *c);
 double model_brdf_eval_prepared(model_brdf_t m, const double *p, model_brdf_prep_t *pc, double *dR_dp);
-// The same for n cosines (model/brdf_batch.c): R[i], and dR_dp (may be
+// The same for n cosines (model/brdf/batch.c): R[i], and dR_dp (may be
 // NULL) n x nparams row-major. Equal to model_brdf_eval sample by sample to
 // rounding (1e-9 relative); GGX, the fitters' inner loop, is vectorised.
 void model_brdf_eval_n(model_brdf_t m, const double *p, const model_cosines_t *c, int n, double *R,
                        double *dR_dp);
 
 // ---------------------------------------------------------------------------
-// Tabulated isotropic BRDFs (model/brdf_table.c), MERL's binary layout: 3
+// Tabulated isotropic BRDFs (model/brdf/table.c), MERL's binary layout: 3
 // int32 dims 90 90 180 (theta_h square-root mapped, theta_d, phi_d), then the
 // red, green and blue channels of doubles, each f_r divided by MERL's channel
 // scale (1/1500, 1.15/1500, 1.66/1500); negative = missing. refl reads the
@@ -423,7 +423,7 @@ double model_brdf_directional_albedo(double (*f)(const void *ctx, const model_co
                                      double theta_i, int n);
 double model_brdf_table_albedo(const model_brdf_table_t *t, double theta_i, int n);
 
-// Measured BRDFs in the RGL ".bsdf" tensor format (model/brdf_rgl.c, the one
+// Measured BRDFs in the RGL ".bsdf" tensor format (model/brdf/rgl.c, the one
 // owner; Dupuy & Jakob 2018): rgb or spectral, isotropic or not. Detected by
 // content (the magic "tensor_file\0"); the file's description and evaluation
 // are in the .c file's head. NULL and "FILE: ..." for what is not a valid one.
@@ -449,7 +449,7 @@ bool   model_brdf_rgl_channel_weights(const model_brdf_rgl_t *r, int ch /* model
 // in the surface frame (z = normal); 0 when either is below the surface.
 double model_brdf_rgl_eval(const model_brdf_rgl_t *r, model_vec3_t wi, model_vec3_t wo, const double *chw);
 
-// Generators (model/brdf_gen.c): "NAME key=value ..." with NAME oren-nayar,
+// Generators (model/brdf/gen.c): "NAME key=value ..." with NAME oren-nayar,
 // ggx2, retro, ggx-ms, ptfe or ggx (model_brdf_recipe_models lists the keys
 // and defaults); reciprocal and energy conserving within their ranges.
 enum { MODEL_BRDF_RECIPE_MAX = 8, MODEL_BRDF_RECIPE_NE = 65 };
@@ -569,13 +569,13 @@ model_materials_t *model_materials_from_ini(const model_ini_t *ini);   // [mater
 model_lamps_t     *model_lamps_from_ini(const model_ini_t *ini);       // [lamp NAME]
 // The factor of lamp L's emission pattern toward point p: max(0, a . u)^n, u
 // the unit direction from the lamp to p, a its emission axis; exactly 1 when
-// emission_cos_power is 0 (isotropic), 0 at the lamp itself. (model/shade.c)
+// emission_cos_power is 0 (isotropic), 0 at the lamp itself. (model/render/shade.c)
 double             model_lamp_emission(const model_lamp_t *L, model_vec3_t p);
 // The 4 quadrature directions of a spherical lamp of radius radius_mm seen at
 // distance d_mm in unit direction l: the mean of R over them is R averaged over
 // the lamp's disc to its second moments (at r/sqrt(2) from the centre along
 // two orthogonal axes; the material fit's finite lamps). false when the lamp
-// is a point (radius 0) or the point lies inside it (model/shade.c).
+// is a point (radius 0) or the point lies inside it (model/render/shade.c).
 bool model_lamp_disc_dirs(model_vec3_t l, double d_mm, double radius_mm, model_vec3_t out[4]);
 bool               model_sensor_from_ini(const model_ini_t *ini, model_sensor_t *out);  // [sensor]
 // The keys of one more section (as in [sensor]) applied over *s: a sensor that
@@ -617,7 +617,7 @@ bool model_camera_unproject(const model_camera_t *cam, const double *q_xy, int n
 const model_vec3_t *model_camera_ray_table(model_camera_t *cam, double *err_px);
 
 // ---------------------------------------------------------------------------
-// Ray casting (model/trace.c): Embree over the scene's faces and spheres.
+// Ray casting (model/render/trace.c): Embree over the scene's faces and spheres.
 //
 // Spheres are an Embree user geometry with an exact ray-sphere intersection;
 // a primary hit is recomputed in double precision from the ray and the
@@ -713,7 +713,7 @@ bool model_tracer_visible_from(const model_tracer_t *t, model_vec3_t p, model_ve
                                model_vec3_t target);
 
 // ---------------------------------------------------------------------------
-// Grey values and rendering (model/shade.c)
+// Grey values and rendering (model/render/shade.c)
 //
 //   P(x,y) = Pa + kc * g(x,y) * [ sum_i V_i I_i R_i / d_i^2  + interreflection ]
 //
@@ -837,7 +837,7 @@ bool model_gain_factor(double gain, const char *unit, double cal_gain, const cha
 
 // The sensor's response linearisation (model/sensor.c): a measured signal
 // above dark S_m (DN) -> the linear signal S (DN), as the gain calibration
-// (calib/gain.c, gain.json "linearisation") measured it at its gain. The one
+// (calib/gain/gain.c, gain.json "linearisation") measured it at its gain. The one
 // function every consumer applies (calibrated observations, the white, the
 // material fit, verification) is model_linearise.
 //   MODEL_LIN_NONE        S = S_m
@@ -880,7 +880,7 @@ bool model_lin_monotone(const double *m, const double *s, int n, model_lin_t *ou
 bool model_lin_knots(const double *m, const double *s, int n, model_lin_t *out);
 
 // ---------------------------------------------------------------------------
-// Image files (model/image.c). Text metadata is a NULL-terminated list of
+// Image files (model/image/write.c). Text metadata is a NULL-terminated list of
 // key, value, key, value, ..., NULL (may be NULL): PNG tEXt chunks, TIFF
 // ImageDescription (as "key: value" lines).
 
@@ -917,7 +917,7 @@ bool model_tiff_write_float(const char *path, int width, int height, const float
 bool model_tiff_write_info(const char *path, int width, int height, const float *P,
                            const int32_t *face, const uint8_t *lit, int nlamps,
                            const char *const *lamp_names, const char *const *meta);
-// Reading (model/image_read.c): one reader for every command that takes
+// Reading (model/image/read.c): one reader for every command that takes
 // images. The format is told by the first bytes, never by the name: PNG
 // (grey, grey+alpha, RGB(A), palette; 1 to 16 bits), JPEG (libjpeg-turbo;
 // grey or YCbCr/RGB; CMYK refused) and TIFF (first page, strips; grey or
@@ -969,7 +969,7 @@ bool model_image_list(const char *spec, char ***paths, int *n);
 void model_image_list_free(char **paths, int n);
 
 // ---------------------------------------------------------------------------
-// Edge query (model/edges.c; thesis 1.6, PREMIO)
+// Edge query (model/edges/edges.c; thesis 1.6, PREMIO)
 
 typedef struct {
     double q0[2], q1[2];        // image end points, pixels
@@ -1007,7 +1007,7 @@ model_edges_t *model_edges_predict(const model_scene_t *scene,
 void model_edges_free(model_edges_t *e);
 
 // ---------------------------------------------------------------------------
-// A straight step edge as the pixels see it (model/edge_profile.c): the step
+// A straight step edge as the pixels see it (model/edges/profile.c): the step
 // convolved with an isotropic Gaussian point-spread function of sigma_px (the
 // optics' blur alone; 0: none) and integrated over each pixel's footprint,
 // its own 1 x 1 px square (a separate, known part of the model). theta_rad:
@@ -1042,7 +1042,7 @@ typedef struct {
 model_sobel_step_t model_edge_sobel_step(double theta_rad, double sigma_px);
 
 // ---------------------------------------------------------------------------
-// The reference workpiece (model/workpiece.c; thesis ch. 6): a base plate
+// The reference workpiece (model/scene/workpiece.c; thesis ch. 6): a base plate
 // with a welded stiffener, and the wrong descriptions verification is tested
 // with. Plate: x -px/2..px/2, y -py/2..py/2, z 0..pz. Stiffener along y,
 // centred on the plate, its top at pz + height_mm * height_scale; T: a web of
@@ -1077,7 +1077,7 @@ model_scene_t *model_stiffener_scene(const model_stiffener_t *p, const char *nam
 
 // ---------------------------------------------------------------------------
 // Commands (model/cmd.c): argv[0] is the subcommand name. Return the exit code.
-// A scene rendered to an image file (refl render's work; model/render_file.c).
+// A scene rendered to an image file (refl render's work; model/render/file.c).
 typedef struct {
     const char     *scene, *camera, *lamps, *materials;   // inputs (required)
     const char     *gain_map;        // per-pixel sensitivity g(x,y): float TIFF, camera size, mean 1 (NULL: 1)
@@ -1105,7 +1105,7 @@ typedef struct {
 bool model_render_file(const model_render_file_opts_t *o, model_render_file_result_t *r);
 
 // A scene's predicted edges for a camera and lamps (refl edges's work;
-// model/edges_file.c).
+// model/edges/file.c).
 typedef struct {
     const char     *scene, *camera, *lamps, *materials;   // inputs (required)
     model_shading_t shading;

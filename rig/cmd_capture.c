@@ -1,6 +1,6 @@
 // rig/cmd_capture.c — `refl capture` (run, dry-run or resume a capture
 // session) and `refl session` (check, export). Usage errors exit 2, runtime
-// errors 1, a paused session 3 (see rig/session.h).
+// errors 1, a paused session 3 (see rig/session/session.h).
 #define _GNU_SOURCE
 #include <errno.h>
 #include <glib.h>
@@ -11,14 +11,14 @@
 #include <sys/stat.h>
 
 #include "model/model.h"
-#include "model/opts.h"
+#include "model/base/opts.h"
 #include "rig/rig.h"
 
 static const char capture_about[] =
     "also:  refl capture PLAN.ini --rig RIG.ini --dry-run\n"
     "       refl capture --resume DIR [--rig RIG.ini] [--allow-changed]\n"
     "\n"
-    "Runs the plan (see examples/plans/ and rig/session.h) into the session directory DIR: a SQLite\n"
+    "Runs the plan (see examples/plans/ and rig/session/session.h) into the session directory DIR: a SQLite\n"
     "journal (session.sqlite) and 16-bit PNG frames (frames/). --dry-run prints the steps, the\n"
     "estimated duration and disk use and checks the plan against the rig; nothing moves.\n"
     "--calib DIR records the calibrations in use (their paths and sha256; with several cameras also\n"

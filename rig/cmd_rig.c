@@ -24,15 +24,15 @@
 #include <unistd.h>
 
 #include "model/model.h"
-#include "model/opts.h"
-#include "rig/pixfmt.h"
+#include "model/base/opts.h"
+#include "rig/camera/pixfmt.h"
 #include "rig/rig.h"
 
 #define CAPTURE_TIMEOUT_S 20.0     // beyond the exposure: render time of the virtual camera, transfer
 #define CAPTURE_RETRIES   1
 
 // ---------------------------------------------------------------------------
-// Options (model/opts.h), and the actions each option is for
+// Options (model/base/opts.h), and the actions each option is for
 
 static const char rig_about[] =
     "actions:\n"

@@ -16,7 +16,7 @@
 #include <string.h>
 
 #include "model/model.h"
-#include "rig/pixfmt.h"
+#include "rig/camera/pixfmt.h"
 #include "rig/rig.h"
 
 #define MAX_LAMPS 32
@@ -169,7 +169,7 @@ static const model_ini_entry_t *get(const spec_t *s, const char *section, const 
     return model_ini_get(s->ini, section, key);
 }
 
-// Optional typed values (model/ini.c reports them with file:line); absent
+// Optional typed values (model/base/ini.c reports them with file:line); absent
 // keeps *out. 0 or RIG_ERR_INVALID.
 static int get_double(const spec_t *s, const char *section, const char *key, double *out, double lo, bool lo_open,
                       double hi, const char *range_text)

@@ -188,7 +188,7 @@ int rig_lamps_open_gpiod(rig_lamps_t **out, const rig_lamp_line_t *lamps, int n)
 // [0, 3.6e6]; *out is NULL on error.
 // Simulated lamps (state only; the virtual rig reads on_mask).
 int rig_lamps_open_sim(rig_lamps_t **out, const rig_lamp_line_t *lamps, int n);
-// The lamp-state file (rig/lamps_state.c): records which lamps are on, flushed
+// The lamp-state file (rig/lamps/state.c): records which lamps are on, flushed
 // before one turns on, so that after a death no handler sees (kill -9, the OOM
 // killer, a power cut) the next open of the same lamps reports on stderr "refl:
 // the last session (pid N, started T) died with lamps A, B on; switching them
@@ -217,7 +217,7 @@ void rig_lamps_close(rig_lamps_t *l);
 // file then says so) before the process ends; the signals then re-raise with
 // the default action, so the process still dies by that signal (with its core)
 // (a signal the process ignores stays ignored). Later sigaction calls for
-// these signals replace this (rig/capture.c's SIGINT handler calls it on).
+// these signals replace this (rig/session/capture.c's SIGINT handler calls it on).
 // Idempotent. Lamp sets register themselves on open (at most 32 open at once)
 // and deregister on close.
 void rig_safety_install(void);// The lamps of a set: how many (0 for NULL), lamp i's line as opened (NULL
@@ -235,7 +235,7 @@ const char            *rig_lamps_backend(const rig_lamps_t *l);
 typedef struct {
     int      width, height;
     int      offset_x, offset_y;     // region origin on the sensor, pixels
-    char     pixel_format[16];       // "Mono8", "Mono12", "Mono16", "Mono12p", ... (rig/pixfmt.h)
+    char     pixel_format[16];       // "Mono8", "Mono12", "Mono16", "Mono12p", ... (rig/camera/pixfmt.h)
     int      bits;                   // significant bits of a pixel value (8, 10, 12, 16)
     double   exposure_us;
     double   gain;                   // as the camera states it (dB for GenICam Gain)
@@ -244,7 +244,7 @@ typedef struct {
     double   system_time_s;          // host CLOCK_REALTIME when the frame arrived
     double   temperature_c;          // sensor temperature, NAN where the camera has none
     char     vendor[64], model[64], serial[64];
-    // Radiometric state, read back when the camera was opened or changed (rig/camera_aravis.c):
+    // Radiometric state, read back when the camera was opened or changed (rig/camera/aravis.c):
     char     gain_unit[16];          // the gain feature's GenICam <Unit> ("dB", "x"); "raw" when it states none
     double   black_level;            // BlackLevel as read back, NAN where the camera has none
     double   gamma;                  // the gamma in effect: 1 with gamma off or absent
@@ -263,14 +263,14 @@ void rig_frame_free(rig_frame_t *f);  // frees pix; accepts NULL
 typedef struct rig_camera rig_camera_t;
 // Aravis (GigE Vision, USB3 Vision). id: an IP address (opened directly, no
 // discovery), "inprocess:SERIAL" (the in-process virtual camera of this
-// process, rig/gv_camera.h: no network), or a serial number / device name
+// process, rig/virtual/gv_camera.h: no network), or a serial number / device name
 // (which makes Aravis enumerate devices: never used in tests). Fails with
 // RIG_ERR_NO_DEVICE naming id.
 // Opening sets TriggerMode On / TriggerSource Software. A camera that stops
 // answering makes calls fail with RIG_ERR_DISCONNECTED (after Aravis's control
 // time-out, 5 x 500 ms) and every later call at once; closing it then takes up
 // to ~10 s. Use one camera handle from one thread at a time.
-// The virtual GigE Vision camera for tests and the virtual rig: rig/gv_camera.h.
+// The virtual GigE Vision camera for tests and the virtual rig: rig/virtual/gv_camera.h.
 int rig_camera_open_aravis(rig_camera_t **out, const char *id);
 int  rig_camera_set_pixel_format(rig_camera_t *c, const char *format);
 int  rig_camera_set_exposure_us(rig_camera_t *c, double exposure_us);

@@ -52,7 +52,7 @@ struct rig_lamps {
     uint32_t        on_mask;
     int64_t         on_since_ns[32];    // CLOCK_MONOTONIC when lamp i last turned on (the virtual rig's warm-up)
     void           *impl;
-    // The lamp-state file (rig/lamps_state.c); state_fd -1: none kept.
+    // The lamp-state file (rig/lamps/state.c); state_fd -1: none kept.
     int             state_fd;
     char           *state_path;
     char           *state_off;          // the record "no lamp on", written by the signal handler
@@ -63,7 +63,7 @@ struct rig_lamps {
 };
 
 // When lamp i last turned on (CLOCK_MONOTONIC ns; 0 never), for the virtual
-// rig's lamp warm-up (rig/virtual_lamps.c); safe beside rig_lamps_set.
+// rig's lamp warm-up (rig/virtual/lamps.c); safe beside rig_lamps_set.
 int64_t rig_lamps_on_since_ns(const rig_lamps_t *l, int i);
 
 // Lamp sets: at most RIG_LAMPS_MAX lamps each, at most RIG_LAMPS_SAFETY_SLOTS
@@ -71,13 +71,13 @@ int64_t rig_lamps_on_since_ns(const rig_lamps_t *l, int i);
 #define RIG_LAMPS_MAX 32
 #define RIG_LAMPS_SAFETY_SLOTS 32
 // Checks a lamp list (names, times) and allocates the set with ops: *made
-// (NULL on error). For the backends' opens (rig/lamps.c).
+// (NULL on error). For the backends' opens (rig/lamps/lamps.c).
 int  rig_lamps_new(rig_lamps_t **out, rig_lamps_t **made, const rig_lamps_ops_t *ops,
                    const rig_lamp_line_t *lamps, int n);
 // Enter an open set in the safety registry (switched off on signals and
 // exit); false when RIG_LAMPS_SAFETY_SLOTS sets are already open.
 bool rig_lamps_safety_register(rig_lamps_t *l);
-// The lamp-state file (rig/lamps_state.c, its format there). state_open, for
+// The lamp-state file (rig/lamps/state.c, its format there). state_open, for
 // the backends' opens once the lines are held (all off): path NULL or "" = the
 // default per-user file named after the hardware; takes the lock (RIG_ERR_BUSY
 // naming the live refl that holds it), reports and switches off what a dead

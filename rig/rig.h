@@ -1,7 +1,7 @@
 // rig/rig.h — the hardware layer of refl: the rig file (rig_t, rig_open),
 // and through the headers it includes, the devices (rig/devices.h: turntable,
-// lamps, cameras, the error convention), the virtual rig (rig/virtual.h) and
-// capture sessions (rig/session.h).
+// lamps, cameras, the error convention), the virtual rig (rig/virtual/virtual.h) and
+// capture sessions (rig/session/session.h).
 #pragma once
 
 #include <stdbool.h>
@@ -10,8 +10,8 @@
 
 #include "model/model.h"
 #include "rig/devices.h"
-#include "rig/session.h"
-#include "rig/virtual.h"
+#include "rig/session/session.h"
+#include "rig/virtual/virtual.h"
 
 #ifdef __cplusplus
 extern "C" {
@@ -25,7 +25,7 @@ extern "C" {
 //                backend = aravis; address = A (IPv4, opened directly) | serial = S | name = N
 //                (exactly one); optional camera settings applied at open:
 //                pixel_format = Mono8|Mono12|Mono16 (or Mono10, the packed Mono10p|Mono12p|
-//                Mono10Packed|Mono12Packed: rig/pixfmt.h); exposure_us = ...; gain = ... (the camera's unit);
+//                Mono10Packed|Mono12Packed: rig/camera/pixfmt.h); exposure_us = ...; gain = ... (the camera's unit);
 //                packet_size = BYTES (GigE Vision GevSCPSPacketSize, 576..16384 and the
 //                camera's range), packet_delay = TICKS (GevSCPD, 0..4294967295 and the camera's
 //                range): set and read back at open (rig_camera_set_stream_packets)
@@ -38,7 +38,7 @@ extern "C" {
 //                warmup_ms, settle_ms. All lamps use one backend; NAME without ',' and not
 //                "all"/"none" (refl rig --lamps NAME,NAME|all|none); at most 32 lamps.
 //   [lamps]      state_file = PATH (relative to the rig file's directory): the lamp-state file
-//                (rig/lamps_state.c; default: per user, named after the chips and lines; sim
+//                (rig/lamps/state.c; default: per user, named after the chips and lines; sim
 //                lamps keep one only when given this)
 // or, for the whole rig (no other section):
 //   [rig]        backend = virtual; truth = FILE (relative to the rig file's directory);
@@ -51,7 +51,7 @@ extern "C" {
 //                busy_wait_s = 0 (wait for another virtual camera on the address);
 //                pixel_format, exposure_us, gain, packet_size, packet_delay (as in [camera], for every
 //                camera). The cameras are the truth file's [camera] or [camera NAME] sections
-//                (rig/virtual.h), named so here.
+//                (rig/virtual/virtual.h), named so here.
 // Every section but [rig] is optional (a rig without [camera] moves and switches
 // lamps but takes no pictures). Unknown sections and keys, missing keys and bad
 // values are errors naming file and line and saying what to write instead.

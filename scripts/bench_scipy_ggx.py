@@ -3,7 +3,7 @@
 #
 # The SciPy side of `make bench`'s GGX fit (tests/bench.c): reads the samples
 # refl-bench wrote (float64 rows n.l n.v n.h v.h R, little-endian), fits the
-# GGX model of model/brdf.c (R = [kd/pi + ks D G2 F/(4 n.l n.v)] n.l, GGX D,
+# GGX model of model/brdf/brdf.c (R = [kd/pi + ks D G2 F/(4 n.l n.v)] n.l, GGX D,
 # height-correlated Smith G2, Schlick F) from the same start with
 # scipy.optimize.least_squares (trust region reflective, analytic Jacobian,
 # the models' bounds), and prints the fit time and the result.

@@ -1,6 +1,6 @@
 #!/usr/bin/python3
 # scripts/calib_cameramodel_merge.py — one .cameramodel with both mrcal's
-# optimization_inputs and refl's rig-frame extrinsics (calib/export.c runs it,
+# optimization_inputs and refl's rig-frame extrinsics (calib/geometry/export.c runs it,
 # through model_run_script, for refl calib geometry).
 #
 #   MRCAL_MODEL REFL_MODEL OUT

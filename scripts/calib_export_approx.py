@@ -1,7 +1,7 @@
 #!/usr/bin/python3
 # scripts/calib_export_approx.py — an OpenCV lens model fitted to a camera model
 # OpenCV cannot hold (a splined one), for `refl calib export --approximate`
-# (calib/export.c runs it through model_run_script).
+# (calib/geometry/export.c runs it through model_run_script).
 #
 #   SRC.cameramodel LENSMODEL OUT.cameramodel OUT.json
 #       Unprojects a grid of 48 x 40 pixels spanning the whole imager (corners

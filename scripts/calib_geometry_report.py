@@ -1,6 +1,6 @@
 #!/usr/bin/python3
 # scripts/calib_geometry_report.py — the mrcal side of `refl calib geometry`
-# (calib/geometry.c runs it through calib_python with /usr/bin/python3).
+# (calib/geometry/geometry.c runs it through calib_python with /usr/bin/python3).
 #
 #   solution MODEL OUT.json DISTANCE_MM
 #       Reads the camera model mrcal-calibrate-cameras wrote (with its
@@ -559,7 +559,7 @@ def plots(geometry_path, solution_path, outdir):
         fig.tight_layout()
         fig.savefig(f"{outdir}/axis_fit.png", dpi=90)
         plt.close(fig)
-    import calib_psf_report   # the lens blur's figure (psf.png), when the run estimated it (calib/psf.c)
+    import calib_psf_report   # the lens blur's figure (psf.png), when the run estimated it (calib/geometry/psf.c)
     calib_psf_report.plot(plt, outdir)
 
 

@@ -1,5 +1,5 @@
 #!/usr/bin/python3
-"""Plots of refl calib lamps (calib/lamps.c writes the data; nothing is computed here
+"""Plots of refl calib lamps (calib/lamps/lamps.c writes the data; nothing is computed here
 but the drawing).
 
 usage: calib_lamps_report.py REPORT_DATA.json TRIANGULATION.png DETECTIONS.png

@@ -1,5 +1,5 @@
 #!/usr/bin/python3
-"""Plot of refl calib pattern (calib/lamps_pattern.c computes every value; this only draws).
+"""Plot of refl calib pattern (calib/lamps/pattern.c computes every value; this only draws).
 
 usage: calib_pattern_report.py PATTERN_WINDOWS.csv PATTERN.png
 

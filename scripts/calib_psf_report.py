@@ -1,5 +1,5 @@
 #!/usr/bin/python3
-"""The lens blur's figure of `refl calib geometry`'s report (calib/psf.c computes; this only plots):
+"""The lens blur's figure of `refl calib geometry`'s report (calib/geometry/psf.c computes; this only plots):
 scripts/calib_geometry_report.py plots imports it and calls plot(plt, outdir).
 
 Reads OUTDIR/psf_esf.csv (camera,u_px,samples,esf_measured,esf_model,lsf_measured_per_px,lsf_model_per_px:

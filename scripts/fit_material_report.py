@@ -1,6 +1,6 @@
 #!/usr/bin/python3
 # scripts/fit_material_report.py DIR MODEL P1,P2,... — the plots of `refl fit
-# material --report DIR` (fit/material.c): reads DIR/samples.csv (window
+# material --report DIR` (fit/material/material.c): reads DIR/samples.csv (window
 # centre px, step, lamp and its name, theta_i/theta_o/theta_h and the azimuth
 # phi in deg, R measured and fitted and the expected noise sigma_R, 1/sr, the
 # albedo cell's factor and the sample point at angle 0, mm) and writes

@@ -1,5 +1,5 @@
 #!/usr/bin/python3
-"""Report of `refl plan lamps` (fit/lightplan.c computes every number; this
+"""Report of `refl plan lamps` (fit/lightplan/lightplan.c computes every number; this
 script only draws and lays out what refl wrote).
 
 usage: plan_lamps_report.py DIR

@@ -1,5 +1,5 @@
 #!/usr/bin/python3
-"""Report of `refl verify` (fit/verify.c computes every number; this script only
+"""Report of `refl verify` (fit/verify/verify.c computes every number; this script only
 draws and lays out what refl wrote).
 
 usage: verify_report.py DIR
@@ -277,7 +277,7 @@ def robust_sigma(a):
 
 
 def z_sign_text(p):
-    """The z convention as the data shows it (fit/verify.h: z = (model - measured)/sigma)."""
+    """The z convention as the data shows it (fit/verify/verify.h: z = (model - measured)/sigma)."""
     ok = np.isfinite(p["z"]) & np.isfinite(p["model_dn"]) & np.isfinite(p["measured_dn"])
     s = float(np.sum(p["z"][ok] * (p["model_dn"][ok] - p["measured_dn"][ok]))) if ok.any() else 1.0
     return "z = (model &minus; measured)/&sigma;" if s >= 0 else "z = (measured &minus; model)/&sigma;"

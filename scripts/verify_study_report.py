@@ -4,7 +4,7 @@ summary that refl computed (scripts only plot).
 
 usage: verify_study_report.py DIR
 
-DIR/study.json (written by refl, fit/verify_study.c): "units", "conditions", "design"
+DIR/study.json (written by refl, fit/eval/study.c): "units", "conditions", "design"
 (cases, configurations, descriptions with their expected class: correct, wrong,
 placed), "complete", and when complete "results": "summary" (one entry per
 configuration and description other than the correct one: auc, threshold_1pct,

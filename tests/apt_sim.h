@@ -1,5 +1,5 @@
 // tests/apt_sim.h — a simulated Thorlabs APT controller behind an FTDI chip,
-// served to the unmodified libusb/libftdi1 code of rig/turntable_apt.c through
+// served to the unmodified libusb/libftdi1 code of rig/turntable/apt.c through
 // libumockdev (a test fixture, not product code).
 //
 // The process must run under `umockdev-wrapper` (LD_PRELOAD of

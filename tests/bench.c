@@ -28,11 +28,11 @@
 #include <string.h>
 #include <time.h>
 
-#include "fit/fit.h"
-#include "fit/verify.h"
-#include "fit/verify_lab.h"
+#include "fit/brdf/brdf.h"
+#include "fit/verify/verify.h"
+#include "fit/eval/lab.h"
 #include "model/internal.h"
-#include "rig/gv_camera.h"
+#include "rig/virtual/gv_camera.h"
 #include "rig/rig.h"
 
 #define NRUNS 7
@@ -593,7 +593,7 @@ static int bench_capture(void)
 }
 
 // The GGX fit of 1,000,000 BRDF samples (a noisy GGX material on random
-// directions): refl's fit (fit/brdf_fit.c on Ceres, both cores, one start)
+// directions): refl's fit (fit/brdf/fit.c on Ceres, both cores, one start)
 // and, in the same run on the same samples from the same start, SciPy's
 // least_squares (scripts/bench_scipy_ggx.py, analytic Jacobian).
 static int bench_fit_ggx(void)

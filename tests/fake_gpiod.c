@@ -1,5 +1,5 @@
 // tests/fake_gpiod.c — a fake libgpiod v1 (1.6 API) for LD_PRELOAD: the calls
-// rig/lamps.c makes, and a few neighbours, backed by simulated chips.
+// rig/lamps/lamps.c makes, and a few neighbours, backed by simulated chips.
 //
 // Environment
 //   FAKE_GPIOCHIP=gpiochip0:32,gpiochip1:8   the chips present (name:lines)

@@ -13,7 +13,7 @@
 #include <stdbool.h>
 
 #include "model/model.h"
-#include "rig/gv_camera.h"
+#include "rig/virtual/gv_camera.h"
 #include "rig/rig.h"
 #include "tests/apt_sim.h"
 

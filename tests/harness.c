@@ -329,7 +329,7 @@ static bool start_child(slot_t *s, char *how, size_t how_len)
             dup2(s->out_fd, 2);
             setvbuf(stdout, NULL, _IOLBF, 0);
         }
-        // Lamp-state files (rig/lamps_state.c) of tests running side by side
+        // Lamp-state files (rig/lamps/state.c) of tests running side by side
         // never meet, nor touch the user's own.
         if (s->state_dir[0]) setenv("XDG_STATE_HOME", s->state_dir, 1);
         cur = s->r;

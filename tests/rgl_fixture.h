@@ -1,5 +1,5 @@
 // tests/rgl_fixture.h — a small RGL .bsdf tensor file written by the tests
-// (the container as model/brdf_rgl.c describes it), with known linear data.
+// (the container as model/brdf/rgl.c describes it), with known linear data.
 #pragma once
 
 #include <glib.h>
@@ -8,7 +8,7 @@
 #include <string.h>
 
 // ---------------------------------------------------------------------------
-// A tensor file writer (the container as described in model/brdf_rgl.c)
+// A tensor file writer (the container as described in model/brdf/rgl.c)
 
 typedef struct {
     const char *name;

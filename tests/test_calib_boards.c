@@ -1,7 +1,7 @@
 // tests/test_calib_boards.c — boards other than mrgingham's square
 // chessboard (issue 20, item 2): W x H chessboards and ChArUco boards.
 //
-// - The detector (calib/board_detect.h, OpenCV) on synthetic images with known
+// - The detector (calib/geometry/board_detect.h, OpenCV) on synthetic images with known
 //   corners: a board rendered through a homography (calib_board_render, 8 x 8
 //   samples a pixel, a little blur and noise), every corner found checked
 //   against its true position (sub-pixel: stated tolerance below); a ChArUco
@@ -28,8 +28,8 @@
 #include <stdlib.h>
 #include <unistd.h>
 
-#include "calib/board_detect.h"
-#include "calib/geometry.h"
+#include "calib/geometry/board_detect.h"
+#include "calib/geometry/geometry.h"
 #include "model/model.h"
 #include "tests/fixtures.h"
 #include "tests/test.h"

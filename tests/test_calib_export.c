@@ -1,4 +1,4 @@
-// tests/test_calib_export.c — `refl calib export` (calib/export.c) and mrcal's
+// tests/test_calib_export.c — `refl calib export` (calib/geometry/export.c) and mrcal's
 // option names on `refl calib geometry`.
 //
 // - OpenCV YAML read back by OpenCV (python3 cv2.FileStorage): the same K,
@@ -15,7 +15,7 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
-#include "calib/export.h"
+#include "calib/geometry/export.h"
 #include "model/model.h"
 #include "tests/test.h"
 

@@ -19,9 +19,9 @@
 #include <unistd.h>
 
 #include "calib/calib.h"
-#include "calib/gain.h"
+#include "calib/gain/gain.h"
 #include "model/model.h"
-#include "model/vec.h"
+#include "model/base/vec.h"
 #include "rig/rig.h"
 #include "tests/test.h"
 

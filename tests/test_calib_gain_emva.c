@@ -1,5 +1,5 @@
 // tests/test_calib_gain_emva.c — EMVA 1288 Release 4.0 Linear figures of
-// `refl calib gain` (calib/gain_emva.c) on small synthetic frames with known
+// `refl calib gain` (calib/gain/emva.c) on small synthetic frames with known
 // answers:
 // calib_gain_emva_photon_axis: noise-free sweep of known eta, K, dark noise:
 //   the photon count, R, eta, mu_e.min, mu_p.min, mu_p.sat by hand.
@@ -24,9 +24,9 @@
 #include <stdlib.h>
 #include <unistd.h>
 
-#include "calib/gain.h"
+#include "calib/gain/gain.h"
 #include "model/model.h"
-#include "model/vec.h"
+#include "model/base/vec.h"
 #include "tests/test.h"
 
 TEST(calib_gain_emva_photon_axis)

@@ -40,9 +40,9 @@
 #include <stdlib.h>
 #include <unistd.h>
 
-#include "calib/geometry.h"
+#include "calib/geometry/geometry.h"
 #include "model/model.h"
-#include "model/report.h"
+#include "model/base/report.h"
 #include "tests/fixtures.h"
 #include "tests/test.h"
 
@@ -456,7 +456,7 @@ TEST_LONG(calib_geometry_virtual_rig)
         CHECK(json_array_size(json_object_get(prov, "inputs")) >= 3);
         CHECK(exists_in(dir, "report.html") && exists_in(dir, "axis_fit.png") && exists_in(dir, "uncertainty.png"));
         // the lens's blur: the matched rig takes one ray at each pixel's centre and has no PSF, so its edges are
-        // as sharp as the footprint alone or sharper: sigma 0 (calib/psf.c; tests/test_calib_psf.c)
+        // as sharp as the footprint alone or sharper: sigma 0 (calib/geometry/psf.c; tests/test_calib_psf.c)
         json_t *psf = json_object_get(g, "psf");
         fprintf(stderr, "  virtual rig lens blur: sigma %.4f +- %.4f px from %lld edges\n",
                 json_number_value(json_object_get(psf, "sigma_px")),
@@ -578,7 +578,7 @@ TEST_LONG(calib_geometry_virtual_rig)
     free(err);
 }
 
-// The lens's blur on the virtual rig (calib/psf.c): a truth with 4 x 4 rays
+// The lens's blur on the virtual rig (calib/geometry/psf.c): a truth with 4 x 4 rays
 // over each pixel's footprint and a Gaussian PSF of 0.8 px, then the same
 // without the PSF; kept short (one lamp, no interreflection, point lamps,
 // three views, OPENCV4). The rig's PSF is a kernel on the pixel grid

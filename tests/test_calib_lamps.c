@@ -1,4 +1,4 @@
-// tests/test_calib_lamps.c — `refl calib lamps` (calib/lamps.c): the
+// tests/test_calib_lamps.c — `refl calib lamps` (calib/lamps/lamps.c): the
 // triangulation on synthetic rays with a known answer, the highlight finder
 // on a synthetic image, the whole calibration on the virtual rig against its
 // truth (fixed seeds), and the bad inputs: a lamp whose highlight is missing
@@ -21,10 +21,10 @@
 #include <stdlib.h>
 
 #include "calib/calib.h"
-#include "calib/lamps.h"
-#include "model/lsq.h"
+#include "calib/lamps/lamps.h"
+#include "model/base/lsq.h"
 #include "model/model.h"
-#include "model/vec.h"
+#include "model/base/vec.h"
 #include "tests/test.h"
 
 #define CAMERA "/examples/camera.cameramodel"

@@ -1,5 +1,5 @@
 // tests/test_calib_psf.c — the lens's blur from the board's edges
-// (calib/psf.h) and the calibration set's reading of it:
+// (calib/geometry/psf.h) and the calibration set's reading of it:
 // - synthetic chessboards (squares of 40 px turned 4, 19 and 33 deg) blurred
 //   by a known Gaussian (0.5, 0.8, 1.2 px), each pixel the mean of 8 x 8
 //   samples over its footprint, each at a random place in its cell (on
@@ -20,9 +20,9 @@
 #include <string.h>
 
 #include "calib/calib.h"
-#include "calib/psf.h"
+#include "calib/geometry/psf.h"
 #include "model/model.h"
-#include "model/report.h"
+#include "model/base/report.h"
 #include "tests/test.h"
 
 static uint64_t rng = 0x9e3779b97f4a7c15ull;

@@ -9,7 +9,7 @@
 
 #include "calib/calib.h"
 #include "model/model.h"
-#include "model/vec.h"
+#include "model/base/vec.h"
 #include "tests/test.h"
 
 // The synthetic white's reflectance factor (not separable in the two angles,

@@ -11,7 +11,7 @@
 #include <glib.h>
 #include <jansson.h>
 
-#include "fit/fit.h"
+#include "fit/brdf/brdf.h"
 #include "model/internal.h"
 #include "tests/rgl_fixture.h"
 #include "tests/test.h"
@@ -604,7 +604,7 @@ TEST(fit_lamp_disc_quadrature)
 }
 
 // ---------------------------------------------------------------------------
-// Sample files: weights, channels, robust CSV (fit/brdf_samples.c)
+// Sample files: weights, channels, robust CSV (fit/brdf/samples.c)
 
 // A CSV of f_r on a theta/phi grid: theta_i and theta_o at 2.5, 7.5, ..., 87.5
 // deg (phi_i 0), phi_o every 10 deg; f_r of the recipe (NULL: 0.1).

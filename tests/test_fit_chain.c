@@ -1,5 +1,5 @@
-// tests/test_fit_chain.c — the lab day against the truth (fit/chain.h,
-// calib_projection_diff in calib/geometry_diff.c): projection differences
+// tests/test_fit_chain.c — the lab day against the truth (fit/eval/chain.h,
+// calib_projection_diff in calib/geometry/diff.c): projection differences
 // with known answers; chain.json of a made-up day whose every error and z is
 // known; refl chain's and refl demo --truth's errors.
 #include <glib.h>
@@ -10,12 +10,12 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "calib/geometry.h"
-#include "fit/chain.h"
-#include "fit/fit.h"
+#include "calib/geometry/geometry.h"
+#include "fit/eval/chain.h"
+#include "fit/brdf/brdf.h"
 #include "model/model.h"
-#include "model/report.h"
-#include "rig/truth.h"
+#include "model/base/report.h"
+#include "rig/virtual/truth.h"
 #include "tests/fixtures.h"
 #include "tests/test.h"
 

@@ -1,6 +1,6 @@
-// tests/test_fit_export.c — `refl export material` (fit/export_material.c).
+// tests/test_fit_export.c — `refl export material` (fit/material/export.c).
 //
-// - MERL: written, read back by refl's reader (model/brdf_table.c): every cell
+// - MERL: written, read back by refl's reader (model/brdf/table.c): every cell
 //   equals the model's f_r at the cell's centre; the stated error is the
 //   table's interpolation against the model (small, not zero).
 // - glTF: the file has the schema's required fields (asset.version "2.0";
@@ -23,7 +23,7 @@
 #include <stdlib.h>
 #include <unistd.h>
 
-#include "fit/export.h"
+#include "fit/material/export.h"
 #include "model/model.h"
 #include "tests/test.h"
 
@@ -109,7 +109,7 @@ static double gltf_brdf(double base, double rough, double s, double col, double 
 }
 
 // The Ngan error of the file's material against refl's model, over the
-// directions fit/export.h describes (16 x 32 x 64, below 85 deg).
+// directions fit/material/export.h describes (16 x 32 x 64, below 85 deg).
 static double gltf_error(json_t *mat, model_brdf_t model, const double *p)
 {
     json_t *pbr = json_object_get(mat, "pbrMetallicRoughness"), *ext = json_object_get(mat, "extensions");

@@ -1,4 +1,4 @@
-// tests/test_fit_lightplan.c — light planning (fit/lightplan.h): the Sobel
+// tests/test_fit_lightplan.c — light planning (fit/lightplan/lightplan.h): the Sobel
 // response of known steps, glare and saturation steering the choice, the
 // prediction against a Sobel detector on the virtual rig's frames, and the
 // capture plan of several views captured on the virtual rig.
@@ -11,8 +11,8 @@
 #include <glib.h>
 #include <jansson.h>
 
-#include "fit/lightplan.h"
-#include "fit/verify_lab.h"
+#include "fit/lightplan/lightplan.h"
+#include "fit/eval/lab.h"
 #include "model/model.h"
 #include "rig/rig.h"
 #include "tests/test.h"

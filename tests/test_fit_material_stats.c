@@ -11,8 +11,8 @@
 #include <glib.h>
 #include <jansson.h>
 
-#include "fit/fit.h"
-#include "fit/material.h"
+#include "fit/brdf/brdf.h"
+#include "fit/material/material.h"
 #include "model/internal.h"
 #include "tests/test.h"
 
@@ -168,8 +168,8 @@ TEST(fit_robust_loss_outliers)
 // ---------------------------------------------------------------------------
 // The priors' covariance and the verification's multivariate prior
 
-#include "fit/verify.h"
-#include "fit/verify_lab.h"
+#include "fit/verify/verify.h"
+#include "fit/eval/lab.h"
 
 // The priors entry's "prior_covariance": its diagonal is each std^2, the
 // amplitudes (kd, ks) share the photometric scale fully, the shape parameter

@@ -1,5 +1,5 @@
 // tests/test_fit_verify.c — the verification fitter on fixed-seed virtual-rig
-// images of the T-stiffener (fit/verify_lab.h): the correct description
+// images of the T-stiffener (fit/eval/lab.h): the correct description
 // passes, each kind of wrong description fails, a wrong material prior is
 // flagged as pinned, and malformed inputs give clear errors.
 #include <math.h>
@@ -10,10 +10,10 @@
 #include <glib.h>
 #include <jansson.h>
 
-#include "fit/verify.h"
-#include "fit/verify_lab.h"
+#include "fit/verify/verify.h"
+#include "fit/eval/lab.h"
 #include "model/model.h"
-#include "rig/session.h"
+#include "rig/session/session.h"
 #include "tests/test.h"
 
 static double v3dot(model_vec3_t a, model_vec3_t b) { return a.x * b.x + a.y * b.y + a.z * b.z; }
@@ -680,7 +680,7 @@ TEST(verify_priors_parser_mutations)
 // predicts the virtual rig's frames (Monte Carlo interreflection, finite
 // lamps, texture, sensor) within 2 % on the plate's top and 6 % on the
 // painted steel, bin by bin of the predicted grey value, away from edges and
-// in the windows near edges (their footprint integrated; fit/verify_footprint.h);
+// in the windows near edges (their footprint integrated; fit/verify/footprint.h);
 // without the interreflection term the shaded steel is off by more than 20 %.
 static void bias_bins(int ir_samples, bool edges, double *worst_plate, double *worst_steel)
 {

@@ -1,5 +1,5 @@
 // tests/test_fit_verify_footprint.c — the windows near edges with the
-// pixels' footprint and the blur (fit/verify_footprint.c): the kernel's
+// pixels' footprint and the blur (fit/verify/footprint.c): the kernel's
 // integrals against their closed forms and a numerical integration, and the
 // model of each window near an edge against the virtual rig's own noise-free
 // radiance planes (point lamps, no interreflection, no texture: only the
@@ -11,11 +11,11 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "fit/verify.h"
-#include "fit/verify_footprint.h"
+#include "fit/verify/verify.h"
+#include "fit/verify/footprint.h"
 #include "model/model.h"
 #include "rig/rig.h"
-#include "rig/truth.h"
+#include "rig/virtual/truth.h"
 #include "tests/fixtures.h"
 #include "tests/test.h"
 

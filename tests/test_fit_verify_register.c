@@ -1,5 +1,5 @@
 // tests/test_fit_verify_register.c — the part's placement as a nuisance
-// (fit/verify_register.c): on the virtual rig's lab, the correct description
+// (fit/verify/register.c): on the virtual rig's lab, the correct description
 // of a part placed 2 mm / 1 deg off is registered to where the part lies and
 // then passes, while it fails at the nominal pose; a stiffener made 2 mm off
 // on its plate is still detected (the plate's edges hold the pose).
@@ -8,8 +8,8 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "fit/verify.h"
-#include "fit/verify_lab.h"
+#include "fit/verify/verify.h"
+#include "fit/eval/lab.h"
 #include "model/model.h"
 #include "tests/test.h"
 

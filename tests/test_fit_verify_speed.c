@@ -11,8 +11,8 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "fit/verify.h"
-#include "fit/verify_lab.h"
+#include "fit/verify/verify.h"
+#include "fit/eval/lab.h"
 #include "model/model.h"
 #include "tests/test.h"
 

@@ -1,5 +1,5 @@
 // tests/test_fit_verify_study.c — `refl verify --study` through a chain's
-// calibrations and priors, in shards, and `--study-merge` (fit/verify_study.c):
+// calibrations and priors, in shards, and `--study-merge` (fit/eval/study.c):
 // the merged shards equal the unsharded run exactly; bad merges are refused
 // with the directory or file:line named.
 #define _GNU_SOURCE

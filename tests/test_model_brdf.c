@@ -71,7 +71,7 @@ TEST(brdf_known_values_new_models)
         double ra = model_brdf_eval(MODEL_BRDF_GGX, a, &c, NULL), rb = model_brdf_eval(MODEL_BRDF_GGX, b, &c, NULL);
         CHECK_REL(model_brdf_eval(MODEL_BRDF_GGX2, g2, &c, NULL), ra + rb, 1e-13);
     }
-    // the ggx2 model and the ggx2 generator (model/brdf_gen.c) are the same f_r
+    // the ggx2 model and the ggx2 generator (model/brdf/gen.c) are the same f_r
     model_brdf_recipe_t r;
     CHECK(model_brdf_recipe_parse("ggx2 albedo=0.2 ks1=0.3 alpha1=0.1 ks2=0.25 alpha2=0.5 F0=0.04", "t", 1, &r));
     const double g2[] = { 0.2, 0.3, 0.1, 0.25, 0.5, 0.04 };

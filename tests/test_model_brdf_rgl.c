@@ -1,4 +1,4 @@
-// tests/test_model_brdf_rgl.c — the RGL .bsdf reader (model/brdf_rgl.c): a
+// tests/test_model_brdf_rgl.c — the RGL .bsdf reader (model/brdf/rgl.c): a
 // small tensor file written here, its evaluation against values computed
 // here from the format's description (CDFs of linear densities in closed
 // form), and bad files refused with their reason.

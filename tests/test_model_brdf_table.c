@@ -1,5 +1,5 @@
-// tests/test_model_brdf_table.c — tabulated BRDFs (model/brdf_table.c) and
-// their generators (model/brdf_gen.c): reciprocity and energy of every
+// tests/test_model_brdf_table.c — tabulated BRDFs (model/brdf/table.c) and
+// their generators (model/brdf/gen.c): reciprocity and energy of every
 // generated model, a tabulated GGX against the analytic one, the MERL round
 // trip, bad files, table materials in INI files and in the renderer.
 #include <stdint.h>

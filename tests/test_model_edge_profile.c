@@ -1,5 +1,5 @@
 // tests/test_model_edge_profile.c — a step edge as the pixels see it
-// (model/edge_profile.c): the closed forms against a numerically rendered
+// (model/edges/profile.c): the closed forms against a numerically rendered
 // step (each pixel the mean of 48 x 48 points of its footprint, each point the
 // Gaussian-blurred step's value there) run through a 3 x 3 Sobel, the sharp
 // step's known responses (4.0 axis-aligned, 3 sqrt 2 = 4.24 diagonal), and the

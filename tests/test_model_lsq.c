@@ -1,4 +1,4 @@
-// tests/test_model_lsq.c — model/lsq.h (Ceres behind a C header) on problems with
+// tests/test_model_lsq.c — model/base/lsq.h (Ceres behind a C header) on problems with
 // known answers: a straight line (exact solution and its textbook
 // covariance), an exponential decay, bounds, fixed parameters, Gaussian
 // priors (the precision-weighted mean), a robust loss against an outlier,
@@ -7,7 +7,7 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "model/lsq.h"
+#include "model/base/lsq.h"
 #include "model/internal.h"
 #include "tests/test.h"
 

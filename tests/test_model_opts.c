@@ -1,4 +1,4 @@
-// tests/test_model_opts.c — the one option parser (model/opts.h): values,
+// tests/test_model_opts.c — the one option parser (model/base/opts.h): values,
 // ranges, flags, lists (repeated and greedy), positionals, required options,
 // and the usage errors' exit status.
 #include <math.h>
@@ -6,7 +6,7 @@
 #include <unistd.h>
 
 #include "model/model.h"
-#include "model/opts.h"
+#include "model/base/opts.h"
 #include "tests/test.h"
 
 // Parse argv (NULL-terminated) with stderr silenced; returns model_cli_parse's result.

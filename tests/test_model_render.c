@@ -1,5 +1,5 @@
-// tests/test_model_render.c — ray casting (model/trace.c) and grey values /
-// rendering (model/shade.c) against analytic answers.
+// tests/test_model_render.c — ray casting (model/render/trace.c) and grey values /
+// rendering (model/render/shade.c) against analytic answers.
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>

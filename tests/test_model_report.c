@@ -1,4 +1,4 @@
-// tests/test_model_report.c — what every command's output shares (model/report.c, the dispatcher): the
+// tests/test_model_report.c — what every command's output shares (model/base/report.c, the dispatcher): the
 // provenance's command as typed, no empty output directory left by a failed run, one message naming the file
 // once; and the demo's summary page (scripts/demo_index.py) on a small OUTDIR made here.
 #include <glib.h>
@@ -11,8 +11,8 @@
 #include <sys/stat.h>
 
 #include "model/model.h"
-#include "model/report.h"
-#include "model/vec.h"
+#include "model/base/report.h"
+#include "model/base/vec.h"
 #include "tests/test.h"
 
 static int count(const char *hay, const char *needle)

@@ -1,5 +1,5 @@
-// tests/test_model_sphere.c — the exact sphere primitive: D3D '@sphere' (model/scene.c),
-// ray casting, shadows and highlights (model/trace.c, model/shade.c) against
+// tests/test_model_sphere.c — the exact sphere primitive: D3D '@sphere' (model/scene/scene.c),
+// ray casting, shadows and highlights (model/render/trace.c, model/render/shade.c) against
 // analytic answers.
 #define _GNU_SOURCE
 #include <glib.h>

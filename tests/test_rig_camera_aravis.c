@@ -1,5 +1,5 @@
 // tests/test_rig_camera_aravis.c — the Aravis camera backend over the real GigE
-// Vision path on 127.0.0.1, against the virtual camera of rig/gv_camera.c
+// Vision path on 127.0.0.1, against the virtual camera of rig/virtual/gv_camera.c
 // served by this process: settings, pixel values, metadata, frame ids, lost
 // frames, a camera that disappears, no camera at all, the GenICam features and
 // free running seen by an independent client, the server's responsiveness
@@ -22,7 +22,7 @@
 #include <unistd.h>
 
 #include "model/model.h"
-#include "rig/gv_camera.h"
+#include "rig/virtual/gv_camera.h"
 #include "rig/rig.h"
 #include "tests/fixtures.h"
 #include "tests/test.h"
@@ -161,7 +161,7 @@ done:
     fx_gv_close(&F);
 }
 
-// Mono10 and the packed formats (rig/pixfmt.h): the server packs, the backend
+// Mono10 and the packed formats (rig/camera/pixfmt.h): the server packs, the backend
 // unpacks; every pixel is the pattern's value, unscaled (0..1023, 0..4095).
 TEST(aravis_gv_mono10_and_packed_formats)
 {
@@ -637,7 +637,7 @@ done:
 TEST_ALONE(aravis_open_nothing_there)
 {
     int session = test_camera_lock();
-    // Also hold the lock of refl's servers on the address (rig/gv_camera.h):
+    // Also hold the lock of refl's servers on the address (rig/virtual/gv_camera.h):
     // no virtual camera of a demo may appear meanwhile.
     char name[64];
     snprintf(name, sizeof name, "refl-gvcam-%s.lock", ADDR);
@@ -664,7 +664,7 @@ TEST(aravis_plain_aravis_fake_camera)
 {
     int session = test_camera_lock();
     char name[64];
-    snprintf(name, sizeof name, "refl-gvcam-%s.lock", ADDR);   // the address is ours (rig/gv_camera.h)
+    snprintf(name, sizeof name, "refl-gvcam-%s.lock", ADDR);   // the address is ours (rig/virtual/gv_camera.h)
     int fd = lock_file(name);
     CHECK(fd >= 0);
     ArvGvFakeCamera *gv = arv_gv_fake_camera_new(ADDR, "PLAIN-7");

@@ -1,5 +1,5 @@
 // tests/test_rig_camera_settings.c — the camera settings refl enforces and
-// records (rig/camera_aravis.c): the virtual camera's automatics (ExposureAuto,
+// records (rig/camera/aravis.c): the virtual camera's automatics (ExposureAuto,
 // GainAuto, BalanceWhiteAuto), gamma and LUT are on at start, as on real
 // cameras; refl switches them off at open, reads them back and records them with
 // every frame (metadata, PNG text, journal columns, session export, session
@@ -9,7 +9,7 @@
 // switch ExposureAuto off cannot be opened (the error names the feature and the
 // camera); BalanceWhiteAuto on a mono camera is only a warning.
 //
-// The cameras are in-process (rig/gv_camera.h: no network, no lock on
+// The cameras are in-process (rig/virtual/gv_camera.h: no network, no lock on
 // 127.0.0.1), each with a serial of its own, so these tests run beside others.
 #define _GNU_SOURCE
 #include <arv.h>
@@ -23,7 +23,7 @@
 #include <string.h>
 
 #include "model/model.h"
-#include "rig/gv_camera.h"
+#include "rig/virtual/gv_camera.h"
 #include "rig/rig.h"
 #include "tests/fixtures.h"
 #include "tests/test.h"

@@ -16,8 +16,8 @@
 #include <unistd.h>
 
 #include "model/model.h"
-#include "calib/geometry.h"
-#include "rig/gv_camera.h"
+#include "calib/geometry/geometry.h"
+#include "rig/virtual/gv_camera.h"
 #include "rig/rig.h"
 #include "tests/fixtures.h"
 #include "tests/test.h"

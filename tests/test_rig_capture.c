@@ -30,7 +30,7 @@
 #include <unistd.h>
 
 #include "model/model.h"
-#include "rig/gv_camera.h"
+#include "rig/virtual/gv_camera.h"
 #include "rig/rig.h"
 #include "tests/test.h"
 

@@ -1,4 +1,4 @@
-// tests/test_rig_lamps.c — lamps (rig/lamps.c): settle times and checks on the sim
+// tests/test_rig_lamps.c — lamps (rig/lamps/lamps.c): settle times and checks on the sim
 // backend in-process; the gpiod backend through tests/lamp_child.c run under
 // LD_PRELOAD of the fake libgpiod (tests/fake_gpiod.c), whose log records the
 // physical level of every request/set/release. `make check` passes the two
@@ -16,7 +16,7 @@
 #include <unistd.h>
 
 #include "model/model.h"
-#include "model/report.h"
+#include "model/base/report.h"
 #include "rig/rig.h"
 #include "tests/test.h"
 
@@ -583,7 +583,7 @@ TEST_ALONE(lamps_gpiod_error_same_line_twice)
 }
 
 // ---------------------------------------------------------------------------
-// The lamp-state file (rig/lamps_state.c): deaths no handler sees
+// The lamp-state file (rig/lamps/state.c): deaths no handler sees
 
 // kill -9 with lamps on leaves the state file naming them; the next open of
 // the same lamps reports the dead session, switches them off and clears it.

@@ -1,4 +1,4 @@
-// tests/test_rig_operator.c — operator steps (rig/session.h, rig/operator.c):
+// tests/test_rig_operator.c — operator steps (rig/session/session.h, rig/session/operator.c):
 // the plan's operator steps and their instructions; a session pausing (exit 3)
 // at its operator step when stdin is not a terminal; --yes; --operator-input
 // answers consumed in order across sessions ('q' pauses at the next session's

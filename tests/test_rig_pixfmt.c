@@ -1,10 +1,10 @@
-// tests/test_rig_pixfmt.c — the pixel formats refl records (rig/pixfmt.h):
+// tests/test_rig_pixfmt.c — the pixel formats refl records (rig/camera/pixfmt.h):
 // hand-packed buffers unpack bit-exactly, pack is their inverse, and a frame of
 // the wrong size is refused with its sizes named.
 #include <stdlib.h>
 
 #include "model/model.h"
-#include "rig/pixfmt.h"
+#include "rig/camera/pixfmt.h"
 #include "tests/test.h"
 
 TEST(pixfmt_names_and_codes)

@@ -1,4 +1,4 @@
-// tests/test_rig_plan.c — capture plans (rig/plan.c): the step list of a valid
+// tests/test_rig_plan.c — capture plans (rig/session/plan.c): the step list of a valid
 // plan (order, dark frames, repeats, auto bracketing longest first), the
 // hardware floor against a hand computation, the example plans, and malformed
 // plans, each with its message naming the line.

@@ -1,5 +1,5 @@
-// tests/test_rig_plan_text.c — a plan as text (rig_plan_text, rig/plan.c) and
-// the plan's [view NAME] sections (rig/plan_views.c): every example plan and
+// tests/test_rig_plan_text.c — a plan as text (rig_plan_text, rig/session/plan.c) and
+// the plan's [view NAME] sections (rig/session/plan_views.c): every example plan and
 // plans with every field read back to the same steps and fields; views select
 // each angle's lamp sets and exposures; malformed views name their line.
 #include <glib.h>

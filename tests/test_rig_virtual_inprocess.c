@@ -21,7 +21,7 @@
 #include <unistd.h>
 
 #include "model/model.h"
-#include "rig/gv_camera.h"
+#include "rig/virtual/gv_camera.h"
 #include "tests/fixtures.h"
 #include "rig/rig.h"
 #include "tests/test.h"
@@ -333,7 +333,7 @@ TEST(virtual_inprocess_lifecycle)
     rig_virtual_close(v);
 }
 
-// The in-process server on its own (rig/gv_camera.h) with a known pattern:
+// The in-process server on its own (rig/virtual/gv_camera.h) with a known pattern:
 // exact pixels through the Aravis path, one render per trigger; a failed
 // render or a dropped trigger gives no frame (the capture times out, its
 // buffer waits for the next trigger) and the next capture works again.

@@ -1,5 +1,5 @@
 // tests/test_rig_virtual_lamps.c — the virtual rig's lamps outside the
-// fitters' model (rig/virtual_lamps.c, issue 18): warm-up and drift follow
+// fitters' model (rig/virtual/lamps.c, issue 18): warm-up and drift follow
 // the configured curve in successive frames, stray light adds its configured
 // level with the lamps off and on, and without these sections a frame is
 // exactly the documented sum (bit for bit).
@@ -19,9 +19,9 @@
 #include <time.h>
 
 #include "model/model.h"
-#include "model/vec.h"
+#include "model/base/vec.h"
 #include "rig/rig.h"
-#include "rig/virtual_lamps.h"
+#include "rig/virtual/lamps.h"
 #include "tests/fixtures.h"
 #include "tests/test.h"
 

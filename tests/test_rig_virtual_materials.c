@@ -1,6 +1,6 @@
 // tests/test_rig_virtual_materials.c — materials outside the fitted models in
 // the virtual rig: spatially varying roughness ([texture MATERIAL]
-// roughness_amplitude, rig/virtual_materials.c) and tabulated materials
+// roughness_amplitude, rig/virtual/materials.c) and tabulated materials
 // ([material NAME] model = table) in its frames.
 #define _GNU_SOURCE
 #include <limits.h>

@@ -1,5 +1,5 @@
 // tests/test_rig_virtual_optics.c — the virtual rig's optics outside the
-// fitters' model (rig/virtual_optics.c, [optics] of the truth file): the PSF
+// fitters' model (rig/virtual/optics.c, [optics] of the truth file): the PSF
 // widens an edge by the configured width, N x N rays make an edge pixel its
 // area fraction and converge, the rig's planes carry both, and the example
 // truth file (no [optics]) renders what an explicit "off" does.
@@ -14,7 +14,7 @@
 
 #include "model/model.h"
 #include "rig/rig.h"
-#include "rig/virtual_optics.h"
+#include "rig/virtual/optics.h"
 #include "tests/fixtures.h"
 #include "tests/test.h"
 

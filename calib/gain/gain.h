@@ -1,0 +1,463 @@
+// calib/gain/gain.h — `refl calib gain` (EMVA 1288 style) as a library, public
+// within calib/ and to the tests: the numerics, the stages of a run and
+// calib_gain_run. The command (argument parsing, calib/cmd_gain.c) is
+// calib_cmd_gain (calib/calib.h).
+//
+// A run, in order: frames (calib_gain_capture on a rig, calib_gain_add_session,
+// calib_gain_read_manifest) → calib_gain_make_groups (one group per exposure,
+// gain, dark/light and role) → calib_gain_frame_stats (each group's mean and
+// temporal variance) → per gain calib_gain_analyse (dark model, photon
+// transfer, linearity, response) → calib_gain_make_maps (offset, DSNU, PRNU
+// of the flat field at the first gain) → calib_gain_make_spatial (EMVA 1288
+// Release 4.0 Linear: row/column/pixel split, spectrograms, profiles,
+// defects; calib/gain/emva.c) → calib_gain_write_maps, calib_gain_write_defects,
+// calib_gain_json (gain.json, with "emva1288"), calib_gain_report (plots,
+// report.html), calib_gain_datasheet_html (datasheet.html). The photon axis
+// (calib_gain_an_photons) follows each gain's calib_gain_analyse.
+// Errors: false / NULL with the message kept by model_error_set
+// (model_last_error), not printed: the caller prints it once. Progress lines
+// go to stderr ("refl calib gain: ...").
+//
+// Units: grey values in DN of the frames' pixel format, exposures in us,
+// variances in DN^2, electrons e-. "mu" is always the mean grey value minus
+// the mean dark grey value at the same exposure (EMVA 1288: mu_y - mu_y.dark),
+// "var" the temporal variance from frame pairs, var(A - B) / 2, minus its dark
+// counterpart (sigma^2_y - sigma^2_y.dark).
+#pragma once
+
+#include <jansson.h>
+#include <stdbool.h>
+
+#include "model/model.h"
+#include "rig/session/session.h"
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+// Least-squares polynomial y = c[0] + c[1] x (+ c[2] x^2) of degree 1 or 2
+// through n points (n > degree). false when the system is singular.
+bool calib_gain_polyfit(const double *x, const double *y, int n, int degree, double *c);
+// The same with the coefficients' standard errors se[degree + 1]: the
+// heteroscedasticity-consistent sandwich (HC3: each point's residual over
+// 1 - its leverage), for data whose scatter differs from point to point.
+// false when the fit fails or n <= degree + 1.
+bool calib_gain_polyfit_se(const double *x, const double *y, int n, int degree, double *c, double *se);
+// The 1-sigma of a fixed pattern's std s measured over npix pixels of an
+// average whose temporal noise variance tau is left in it (and subtracted):
+// sqrt((4 s^2 tau + 2 tau^2) / npix) / (2 s); NAN for s <= 0.
+double calib_gain_spatial_std(double s, double tau, double npix);
+
+// Photon transfer of one gain setting, from n exposure steps sorted by
+// exposure. In: exposure_us[n], mu[n], var[n] (dark-subtracted, see above),
+// var_dark_dn2 (sigma^2_y.dark at short exposure), quant_dn (the quantisation
+// step, 1 for data at the sensor's own bit depth). Out: the figures below.
+typedef struct {
+    int    i_sat;                  // index of the variance maximum (the saturation point)
+    double saturation_dn;          // mu at the variance maximum (above dark)
+    double system_gain_dn_per_e;   // K: slope at mu -> 0 of a quadratic fit var(mu) over 0..70 % of saturation
+    double system_gain_linear_dn_per_e;   // EMVA 1288's straight-line fit over the same range (biased low
+                                          // by a compressive non-linearity)
+    int    n_ptc_fit;              // points in the K fit
+    double system_gain_std_dn_per_e;   // K's 1-sigma: the fit's standard error (calib_gain_polyfit_se)
+    double read_noise_dn;          // sqrt(var_dark - quant^2/12)
+    double read_noise_e;           // read_noise_dn / K
+    double saturation_capacity_e;  // saturation_dn / K
+    double dynamic_range;          // saturation_capacity_e / read_noise_e
+    double linearity_error_pct;    // EMVA 1288 Release 4.0, see calib_gain_linearity_r4
+    double linearity_error_r3_pct; // the Release 3 figure (unweighted line), kept for comparison
+    double response_dn_per_us;     // slope of the linearity line
+    double response_offset_dn;     // its intercept
+    int    n_lin_fit;
+    double snr_max;                // max of mu / sqrt(var_y) below saturation (var_y incl. dark)
+} calib_gain_ptc_t;
+
+// false (message set) when there are fewer than 6 points, the variance has no
+// maximum followed by a drop (the sweep does not reach saturation), or a fit
+// fails. var_y (not dark-subtracted) is used for the SNR; may be NULL (then var).
+bool calib_gain_ptc(const double *exposure_us, const double *mu, const double *var, const double *var_y, int n,
+                    double var_dark_dn2, double quant_dn, calib_gain_ptc_t *out);
+
+// Linearity error as EMVA 1288 Release 4.0 defines it (section "Linearity"):
+// the line mu = a0 + a1 t through the points with lo*sat <= mu <= hi*sat (lo
+// 0.05, hi 0.95) that minimises the sum of the squared relative deviations,
+// sum ((mu_i - (a0 + a1 t_i)) / mu_i)^2 (Release 4's weighting; Release 3 took
+// the plain least-squares line); delta_i = 100 (mu_i - line_i) / line_i; LE =
+// (max delta - min delta) / 2 over the fitted points. Arguments and return as
+// calib_gain_linearity's.
+double calib_gain_linearity_r4(const double *t, const double *mu, int n, double sat_dn, double lo, double hi,
+                               double *slope, double *offset, int *nfit, double *dev_pct);
+
+// Linearity error (EMVA 1288 release 3): a least-squares line mu = a + b t
+// through the points with lo*sat <= mu <= hi*sat (lo 0.05, hi 0.95); the
+// relative deviations dev_pct[i] = 100 (mu_i - line_i) / line_i; LE = (max dev
+// - min dev) / 2 over the fitted points. dev_pct (may be NULL) gets n values
+// (NAN outside the range). Returns LE in %, NAN when fewer than 3 points fit.
+double calib_gain_linearity(const double *t, const double *mu, int n, double sat_dn, double lo, double hi,
+                            double *slope, double *offset, int *nfit, double *dev_pct);
+
+// The response linearisation from the sweep (t[n] us ascending, mu[n] DN above
+// dark, sat_dn the saturation): the linear signal is anchored to the
+// small-signal response, a quadratic least-squares fit mu = c0 + r t + q t^2
+// over 5..70 % of saturation, L(t) = c0 + r t (*anchor_slope = r DN/us,
+// *anchor_offset = c0 DN); the monotone table maps each step's mu (up to
+// saturation) to L (model_lin_monotone); *a_per_dn gets the parametric
+// S_m = S (1 - a S) of the same curve (calib_gain_parametric_a). false +
+// message when the fit or the table fails.
+bool calib_gain_linearisation(const double *t, const double *mu, int n, double sat_dn, model_lin_t *table,
+                              double *a_per_dn, double *anchor_slope, double *anchor_offset);
+// a (per DN) of S_m = S (1 - a S): linear least squares of S_m = u t + v - a S_m^2
+// over the steps below 90 % of saturation; 0 when there are fewer than 5 or
+// the curve says no compression.
+double calib_gain_parametric_a(const double *t, const double *mu, int n, double sat_dn);
+// The linearisation a gain.json (path, for messages) records: its
+// "linearisation" (method monotone: the table; parametric: a), else (files
+// from before it) the parametric a of its reference gain's curves, else none.
+// false + message (model_error, naming the file) when "linearisation" is malformed.
+bool calib_gain_lin_from_json(json_t *gj, const char *path, model_lin_t *out);
+
+// Pearson correlation of two maps of n values (NAN when one is constant).
+double calib_gain_correlation(const float *a, const float *b, long n);
+
+// Divide a map (w x h) by its least-squares smooth surface, a quadratic in x
+// and y (removes vignetting and illumination fall-off, keeps the pixel,
+// column and row patterns): out = in / surface (mean ~1). in == out allowed.
+// false when the fit is singular.
+bool calib_gain_highpass(const float *in, int w, int h, float *out);
+
+
+// ---------------------------------------------------------------------------
+// EMVA 1288 Release 4.0 Linear: the photon axis, the spatial split,
+// spectrograms, defect pixels (calib/gain/emva.c). The definitions with their
+// formulas are in gain.json's "emva1288" "definitions" and README.
+
+// Mean photons per pixel during t_us: mu_p = A E t lambda / (h c), A the
+// pixel area (um^2), E the irradiance at the sensor (uW/cm^2), lambda (nm).
+double calib_gain_photons(double irradiance_uw_cm2, double pixel_area_um2, double wavelength_nm, double t_us);
+// The irradiance (uW/cm^2) a photodiode in the sensor's place reads: its
+// current I (nA) over its responsivity R (A/W) at the wavelength and its
+// area S (mm^2): E = I / (R S) = 0.1 I / (R S) uW/cm^2.
+double calib_gain_photodiode_irradiance(double current_na, double responsivity_a_per_w, double area_mm2);
+
+// The photon axis of one gain. measured false: no irradiance given (the
+// photon figures are NAN and stated "not measured"); the electron figures
+// (mu_e_min, mu_e_sat, the dynamic range) need only K.
+typedef struct {
+    bool   measured;
+    double irradiance_uw_cm2, pixel_area_um2, wavelength_nm;
+    double responsivity_dn_per_photon;   // R: slope of mu_y - mu_y.dark against mu_p (0..70 % of saturation)
+    double responsivity_offset_dn;       // its intercept
+    int    n_fit;
+    double qe;                           // eta = R / K
+    double mu_e_min, mu_p_min;           // absolute sensitivity threshold (SNR = 1), e-, photons
+    double mu_e_sat, mu_p_sat;           // saturation capacity, e-, photons
+    double dynamic_range;                // mu_p.sat / mu_p.min (= mu_e.sat / mu_e.min)
+    double dark_noise_e;                 // sigma_y.dark / K (incl. quantisation), the SNR model's
+} calib_gain_photon_t;
+
+// From the sweep t[n] (us), mu[n] (DN above dark), the saturation sat_dn, K,
+// the dark temporal variance sigma^2_y.dark (DN^2) and the irradiance etc.
+// (NAN irradiance: not measured). false + message when the fit of R fails.
+bool calib_gain_photon_axis(const double *t, const double *mu, int n, double sat_dn, double K, double var_dark_dn2,
+                            double irradiance_uw_cm2, double pixel_area_um2, double wavelength_nm,
+                            calib_gain_photon_t *out);
+// The linear model's SNR at mu_p photons: eta mu_p / sqrt(sigma^2_y.dark / K^2 + eta mu_p).
+double calib_gain_snr_model(const calib_gain_photon_t *p, double mu_p);
+
+// The row/column/pixel split of the spatial variance of an averaged frame
+// (w x h, statistics over roi x y w h), temporal_var the temporal variance
+// left in the average (sigma^2 / L). Model y = mu + r[row] + c[col] + p + e:
+// the variances of the row means Vr, column means Vc and of all values V,
+// each less its temporal part, give s2_pixel = (V - Vr - Vc) / (1 - 1/M - 1/N)
+// (M columns averaged in a row mean, N rows in a column mean), s2_row = Vr -
+// s2_pixel / M, s2_col = Vc - s2_pixel / N. The figures are standard
+// deviations (sqrt of max(0, .)), in the map's units times scale.
+typedef struct {
+    double total, row, col, pixel;
+} calib_gain_split_t;
+void calib_gain_spatial_split(const float *img, int w, int h, const int roi[4], double temporal_var, double scale,
+                              calib_gain_split_t *out);
+
+// Spectrogram: horizontal (vertical false): the DFT Y(k) of every row of the
+// roi after removing the roi's mean, s(k) = sqrt(mean over rows |Y(k)|^2 / N),
+// k = 0..N/2 (N the row length; frequency k / N cycles per pixel); vertical:
+// the same along the columns. White noise of std sigma gives s(k) ~ sigma.
+// spec gets N/2 + 1 values times scale; returns their number (0: no memory).
+int calib_gain_spectrogram(const float *img, int w, int h, const int roi[4], bool vertical, double scale,
+                           double *spec);
+
+// Defect pixels of the averaged dark (DN) and the relative light map (mean ~1,
+// the high-pass flat field): deviations from the median beyond nsigma robust
+// standard deviations (1.4826 MAD, at least the temporal std of the average):
+// hot (dark above), dead (light below), bright (light above). map (w x h, may
+// be NULL): 0 good, 1 hot, 2 dead, 3 bright (hot wins). The first
+// CALIB_GAIN_MAX_DEFECT_LIST of each kind are listed (x, y). dark_quantum:
+// the step between the averaged dark's values (q / frames; 0 unknown), for
+// bins of whole steps.
+#define CALIB_GAIN_MAX_DEFECT_LIST 64
+#define CALIB_GAIN_HIST_BINS 128
+typedef struct {
+    int    hot, dead, bright;
+    double nsigma;                                                 // the threshold in robust stds
+    double dark_median_dn, dark_sigma_dn, dark_threshold_dn;      // hot: dark > median + threshold
+    double light_sigma, light_threshold;                           // relative; dead/bright: |light - median| > it
+    double light_median;
+    int    nlist[3], list[3][CALIB_GAIN_MAX_DEFECT_LIST][2];         // hot, dead, bright: x, y
+    // logarithmic histograms of the deviations from the median: dark (DN), light (%)
+    double dark_lo, dark_hi, light_lo, light_hi;
+    long   dark_hist[CALIB_GAIN_HIST_BINS], light_hist[CALIB_GAIN_HIST_BINS];
+    int    dark_nbins, light_nbins;                                  // bins used (<= CALIB_GAIN_HIST_BINS)
+} calib_gain_defects_t;
+bool calib_gain_defects(const float *dark, const float *light, int w, int h, const int roi[4], double nsigma,
+                        double dark_temporal_std, double light_temporal_std, double dark_quantum, unsigned char *map,
+                        calib_gain_defects_t *out);
+
+// The spatial analysis of the reference gain's flat field (calib_gain_maps_t).
+typedef struct {
+    calib_gain_split_t dsnu, prnu;          // DN; % of the mean signal
+    calib_gain_split_t prnu_hp;             // % of the high-pass flat (vignetting removed)
+    int     nh, nv;                          // spectrogram lengths (roi w / 2 + 1, h / 2 + 1)
+    double *spec_h_dark, *spec_v_dark;       // DN
+    double *spec_h_light, *spec_v_light;     // % of the mean signal
+    int     pw, ph;                          // profile lengths (roi w, h)
+    double *col_dark, *row_dark, *col_light, *row_light;   // means of the roi's columns / rows, DN
+    calib_gain_defects_t defects;
+    unsigned char *defect_map;               // whole frame, codes as calib_gain_defects
+    double  signal_mean_dn;                  // roi mean of the flat minus dark
+} calib_gain_spatial_t;
+
+// ---------------------------------------------------------------------------
+// A run
+
+// Options of calib_gain_run: exactly one source of frames (rig, frames, sessions).
+typedef struct {
+    const char  *rig;                // capture on this rig file, or NULL
+    const char  *frames;             // a manifest "file,exposure_us,kind" (kind dark|light), or NULL
+    const char *const *sessions;     // capture sessions made elsewhere (nsessions), or NULL
+    int          nsessions;
+    const char  *out;                // the output directory (created)
+    const char  *camera;             // rig or sessions: calibrate this camera only (NULL: every camera)
+    const double *gains_db;          // rig: the gains to sweep, the first the reference; frames: its one label
+    int          ngains;
+    const double *dark_exposures_us; // rig: the long dark exposures (dark current)
+    int          ndark_exposures;
+    const char  *sample, *lamps, *pixel_format;   // rig: the plan's sample, lamp set, pixel format
+    int          steps;              // rig: exposure steps of each sweep (equally spaced)
+    int          low_steps;          // rig: and geometric steps at the low end (calib_gain_sweep_exposures)
+    int          flat_frames;        // rig: light and dark frames of the flat field
+    int          progress;           // calib_capture's progress mode
+    rig_operator_t *op;             // who answers the operator steps (calib_capture)
+    double       probe_us;           // rig: first probe exposure
+    double       max_us;             // rig: longest sweep exposure; NAN: 1.2 x the probe's full-scale estimate
+    int          min_steps;          // fewest sweep steps accepted
+    double       radiance;           // the source's radiance with the lamps on; NAN unknown (no kc)
+    int          roi[4];             // x y w h of the statistics, px (w 0: the whole frame)
+    int          max_dn;             // full scale of manifest frames, DN
+    double       quant_dn;           // quantisation step, DN
+    int          linearisation;      // what gain.json's consumers apply: MODEL_LIN_MONOTONE (the table,
+                                     // default) or MODEL_LIN_PARAMETRIC (S_m = S (1 - a S)); both are written
+    double       irradiance_uw_cm2;  // at the sensor, uW/cm^2, constant over the sweep (NAN: not measured)
+    double       pixel_area_um2;     // the pixel's area, um^2 (NAN: not given)
+    double       wavelength_nm;      // the light's (centre) wavelength, nm (NAN: not given)
+    double       photodiode_na, photodiode_a_per_w, photodiode_mm2;   // instead of irradiance_uw_cm2: a
+                                     // photodiode's reading (NAN: none), calib_gain_photodiode_irradiance
+    double       defect_sigma;       // defect threshold, robust standard deviations (default 6)
+    bool         report;             // the plots and report.html
+    int          argc;               // the command line, for the provenance (may be 0)
+    char       **argv;
+} calib_gain_opts_t;
+
+// The sweep's exposures up to tmax (us): steps equally spaced (tmax/steps ..
+// tmax) and low_steps geometric ones from 0.2 % to 12 % of tmax (the low end,
+// where a response departs most from linear in relative terms and the
+// linearisation needs its knots close), sorted (duplicates kept) into t
+// (steps + low_steps values); returns their number.
+int calib_gain_sweep_exposures(double tmax, int steps, int low_steps, double *t);
+
+// Gains {0}, dark exposures 1e5, 5e5, 1e6, 2e6 us, sample flat_field, lamps
+// all, Mono12, 50 steps and 16 low steps, 16 flat frames, probe 1000 us, min_steps 50, radiance
+// NAN, max_dn 65535, quant_dn 1, report.
+calib_gain_opts_t calib_gain_defaults(void);
+
+// The reference gain's figures (the first of the run) of one camera.
+typedef struct {
+    char   camera[32];               // the camera's name ("" for a manifest's frames)
+    char   dir[4096];                // where its gain.json is
+    double system_gain_dn_per_e, read_noise_e, saturation_dn, linearity_error_pct, dsnu_dn, prnu_pct;
+} calib_gain_result_t;
+
+#define CALIB_GAIN_MAX_CAMERAS 8
+
+// The whole calibration: gain.json, the maps and the report of every camera
+// (o->camera NULL) or of o->camera. The sessions' frames of one camera go to
+// o->out itself; of several, camera NAME's to o->out/NAME/ (gain.json, maps,
+// report.html), and the first camera's gain.json and maps also to o->out (the
+// layout of one camera, which a calibration set reads without a camera
+// selector). r gets up to max cameras' figures (*n of them). false + message.
+bool calib_gain_run(const calib_gain_opts_t *o, calib_gain_result_t *r, int max, int *n);
+
+// ---------------------------------------------------------------------------
+// Stages
+
+// The role of a session's frames.
+enum { CALIB_GAIN_SET_ANY, CALIB_GAIN_SET_SWEEP, CALIB_GAIN_SET_DARK, CALIB_GAIN_SET_FLAT };
+
+// One frame of the input.
+typedef struct {
+    char  *path;          // full path
+    char   sha256[65];    // expected ("" = not checked: manifest)
+    char  *where;         // manifest path, or session directory
+    int    line;          // manifest line (0: a session frame)
+    int    step;          // session step
+    double exposure_us, gain_db;
+    bool   dark;
+    int    set;           // CALIB_GAIN_SET_*
+    int    max_dn;        // full scale of the frame's pixel format
+    int    nlamps;        // lamps on (session frames: from the lamp set; -1 unknown)
+} calib_gain_frame_t;
+
+// A session of the run and the role of its frames (calib_gain_capture).
+typedef struct {
+    char *dir;
+    int   set;            // CALIB_GAIN_SET_*
+    const char *role;     // its provenance role (static)
+} calib_gain_source_t;
+
+// The frames of one exposure, gain, kind and role.
+typedef struct {
+    double exposure_us, gain_db;
+    bool   dark;
+    int    set;
+    int   *idx;           // frames (indices into calib_gain_data_t.f)
+    int    n;
+    // calib_gain_frame_stats
+    double mean_dn;       // spatial mean (ROI) of the frames' average
+    double var_dn2;       // temporal variance var(A - B) / 2 averaged over pairs (NAN: a single frame)
+    double sat_frac;      // fraction of ROI pixels at full scale (first frame)
+    int    width, height;
+    char  *error;
+} calib_gain_group_t;
+
+typedef struct {
+    calib_gain_frame_t *f;
+    int                 nf;
+    calib_gain_group_t *g;
+    int                 ng;
+    int                 roi[4];     // x y w h (w 0: whole frame)
+    char                camera[32]; // the frames' camera ("": a manifest)
+    char                gain_unit[16];   // the unit of the frames' gain (GenICam's; "dB" for a manifest)
+} calib_gain_data_t;
+
+void calib_gain_data_free(calib_gain_data_t *d);
+// Frames of a manifest (gain 0; max_dn their full scale). false + message (file:line).
+bool calib_gain_read_manifest(const char *path, int max_dn, calib_gain_data_t *d);
+// Frames of camera `camera` (NULL: the session's first) of a session; set:
+// their role (CALIB_GAIN_SET_ANY: dark = no lamp on). d->camera and
+// d->gain_unit are set from them (frames of another gain unit than d's
+// earlier ones: an error). *facts_out (may be NULL) gets the first session's
+// facts (a reference).
+bool calib_gain_add_session(calib_gain_data_t *d, const char *dir, const char *camera, int set,
+                            json_t **facts_out);
+// Capture on o->rig: per gain a probe and a sweep, then at the first gain the
+// flat field and long darks, into o->out; the sessions into *src (*nsrc; free
+// with calib_gain_sources_free) and prov. With several cameras the sweep's
+// exposures are the union of each camera's (each reaching 1.2 x its own
+// full-scale estimate) and the flat field is near 50 % of full scale for the
+// most sensitive. false + message.
+bool calib_gain_capture(const calib_gain_opts_t *o, json_t *prov, calib_gain_source_t **src, int *nsrc);
+void calib_gain_sources_free(calib_gain_source_t *src, int n);
+// Group the frames (exposure, gain, dark, role).
+void calib_gain_make_groups(calib_gain_data_t *d);
+// Every group's mean and temporal variance (reads every frame, in threads).
+bool calib_gain_frame_stats(calib_gain_data_t *d);
+
+// The analysis of one gain (arrays of n sweep steps, sorted by exposure).
+typedef struct {
+    double gain_db;
+    int    n;
+    double *t, *mu_y, *var_y, *mu_d, *var_d, *mu, *var, *dev_pct, *snr;   // us, DN, DN^2, %, 1
+    calib_gain_ptc_t ptc;
+    double var_dark_dn2;        // sigma^2_y.dark (intercept at exposure 0)
+    double dark_slope_dn_per_us, dark_intercept_dn;
+    double dark_t_min_us, dark_t_max_us;
+    int    ndark;               // dark exposures used for the dark current
+    double *dark_t_us;          // their exposures (us; ndark, in the groups' order)
+    double radiance;            // total radiance of the light frames (NAN unknown)
+    double radiance_truth;      // the virtual rig's truth of it, for comparison (NAN unknown)
+    double kc_per_us;           // response / radiance
+    double response0_dn_per_us; // small-signal response: slope at 0 of a quadratic in exposure (0..70 % of sat)
+    double kc0_per_us;          // response0 / radiance
+    // the response linearisation (calib_gain_linearisation)
+    model_lin_t lin;            // the monotone table (n 0: none could be made)
+    double lin_a_per_dn;        // the parametric a of the same curve
+    double lin_anchor_dn_per_us, lin_anchor_offset_dn;
+    double le_linearised_pct;   // Release 4.0 LE of the linearised signal (the table's own check)
+    double le_linearised_param_pct;   // the same through S(1 - aS)
+    double dark_var_slope_dn2_per_us; // slope of sigma^2_y.dark against exposure (NAN: not fitted)
+    double var_dark_std_dn2;          // var_dark_dn2's 1-sigma (its fit's standard error)
+    double dark_slope_std_dn_per_us;  // dark_slope_dn_per_us's 1-sigma (NAN: not fitted)
+    double read_noise_std_e;          // read noise's 1-sigma (var_dark's and K's)
+    double dark_current_std_e_per_s;  // dark current's 1-sigma (the slope's and K's)
+    calib_gain_photon_t ph;           // the photon axis (calib_gain_photon_axis)
+    double *mu_p;                     // photons per pixel of each step (NAN: not measured)
+} calib_gain_an_t;
+
+void calib_gain_an_free(calib_gain_an_t *a);
+// Dark model, photon transfer, linearity and small-signal response of gain_db.
+bool calib_gain_analyse(calib_gain_data_t *d, double gain_db, int min_steps, double quant_dn, calib_gain_an_t *a);
+
+// The maps of the reference gain (w x h floats each).
+typedef struct {
+    int     w, h;
+    float  *offset, *dsnu, *prnu, *prnu_hp;   // DN, DN, 1 (mean 1), 1 (mean ~1)
+    double  flat_exposure_us, flat_level_dn, flat_sat_frac;
+    int     flat_frames, dark_frames;
+    double  dark_exposure_us;
+    double  dsnu_dn, dsnu_total_raw_dn;
+    double  prnu_pct, prnu_total_pct;
+    double  flat_var_dn2, dark_var_dn2;
+    bool    dark_same_exposure;
+    double  prnu_mean_dn;            // the flat minus dark's whole-frame mean (prnu * it: the signal, DN)
+    double  signal_temporal_var_dn2; // temporal variance left in the averaged signal
+    double  dsnu_std_dn, prnu_std_pct;   // their 1-sigma (PRNU's: the two parts in quadrature)
+    double  prnu_std_stat_pct;       // PRNU's statistical part (calib_gain_spatial_std)
+    double  prnu_std_lin_pct;        // its linearisation part: prnu_pct x |flat_log_slope /
+                                     // flat_log_slope_parametric - 1| (0 without a monotone table)
+    double  flat_log_slope, flat_log_slope_parametric;   // d ln S / d ln S_m at the flat's level (0: none)
+    double  flat_pixel_std_rel;      // the flat map's temporal noise per pixel, relative to its mean
+    bool    flat_linearised;         // the flat's signal went through the response linearisation
+    calib_gain_spatial_t sp;         // calib_gain_make_spatial
+} calib_gain_maps_t;
+
+void calib_gain_maps_free(calib_gain_maps_t *m);
+// The flat field (and its dark) of a's gain → offset, DSNU and PRNU maps.
+// false + message when the flat is missing, saturated or too dark.
+bool calib_gain_make_maps(calib_gain_data_t *d, const calib_gain_an_t *a, calib_gain_maps_t *m);
+// DIR/offset_dn.tiff, dsnu_dn.tiff, prnu_gain.tiff, prnu_highpass.tiff.
+bool calib_gain_write_maps(const char *dir, const calib_gain_maps_t *m);
+// The EMVA 1288 spatial analysis of m's averaged dark and flat (m->sp): the
+// row/column/pixel split, spectrograms, profiles, defects (nsigma) over d's
+// roi. false + message (no memory).
+bool calib_gain_make_spatial(const calib_gain_data_t *d, calib_gain_maps_t *m, double nsigma, double quant_dn);
+// The photon axis of a (o's irradiance, area, wavelength): a->ph, a->mu_p.
+bool calib_gain_an_photons(const calib_gain_opts_t *o, calib_gain_an_t *a);
+// gain.json's "emva1288": the datasheet rows, definitions, the spatial
+// analysis and its curves (an[0] the reference gain).
+json_t *calib_gain_emva_json(const calib_gain_opts_t *o, const calib_gain_an_t *an, const calib_gain_maps_t *m);
+// DIR/defects.tiff (codes 0 good, 1 hot, 2 dead, 3 bright) and DIR/datasheet.html.
+bool calib_gain_write_defects(const char *dir, const calib_gain_maps_t *m);
+bool calib_gain_datasheet_html(const char *dir, json_t *emva, json_t *prov);
+// The radiance per lamp of the sample of a virtual rig's session facts
+// (virtual_rig.truth, .sample), for the comparison with the truth only: false
+// when there is none. *truth_path (may be NULL) points into facts.
+bool calib_gain_truth_radiance(json_t *facts, const char **truth_path, double *radiance_per_lamp);
+// gain.json's document (new reference): an[0] the reference gain, then every gain.
+json_t *calib_gain_json(const calib_gain_opts_t *o, const calib_gain_data_t *d, const calib_gain_an_t *an, int ngains,
+                        const calib_gain_maps_t *maps, const char *truth, json_t *prov);
+// The plots (scripts/calib_gain_report.py) and DIR/report.html.
+bool calib_gain_report(const char *dir, const calib_gain_an_t *an, int ngains, const calib_gain_maps_t *maps,
+                       json_t *prov);
+
+#ifdef __cplusplus
+}
+#endif
