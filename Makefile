@@ -57,6 +57,8 @@ LDLIBS_ALL   = $(PKG_LIBS) $(OPENCV_LIBS) $(LIBS_NOPC) -lm
 # One block per subsystem (a folder), so each folder's files are listed together.
 MODEL_BASE_SRC := \
     model/base/util.c \
+    model/base/notice.c \
+    model/base/run.c \
     model/base/ini.c \
     model/base/opts.c \
     model/base/report.c
@@ -181,6 +183,7 @@ TEST_SRC := \
     tests/fixtures.c \
     tests/apt_sim.c \
     tests/test_harness.c \
+    tests/test_model_base.c \
     tests/test_model_brdf.c \
     tests/test_model_brdf_table.c \
     tests/test_model_brdf_rgl.c \

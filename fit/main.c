@@ -166,6 +166,15 @@ int main(int argc, char **argv)
     }
     for (size_t i = 0; i < sizeof commands / sizeof commands[0]; i++) {
         if (strcmp(argv[1], commands[i].name)) continue;
+        // the library's notes and warnings are named by the command as typed:
+        // "refl calib geometry: ...", "refl verify: ..."
+        static const char *const with_sub[] = { "rig", "calib", "fit", "session", "brdf", "export", "plan" };
+        char prefix[128];
+        snprintf(prefix, sizeof prefix, "refl %s", argv[1]);
+        for (size_t k = 0; k < sizeof with_sub / sizeof with_sub[0]; k++)
+            if (!strcmp(argv[1], with_sub[k]) && argc > 2 && argv[2][0] != '-')
+                snprintf(prefix, sizeof prefix, "refl %s %s", argv[1], argv[2]);
+        model_notice_prefix(prefix);
         int rc = commands[i].run(argc - 1, argv + 1);
         // a failed run leaves no empty output directory (3, a paused session, is resumed later)
         if (rc != 0 && rc != 3) model_remove_made_empty_dirs();

@@ -60,6 +60,47 @@ bool model_error_quiet_thread(bool quiet);
 // itself, which a command's quiet thread still shows, follow it).
 bool model_error_quiet_global(void);
 
+// ---------------------------------------------------------------------------
+// Notices (model/base/notice.c): what library code tells its user while it
+// works. Library code never prints a command's name and never writes progress
+// to stderr itself: it calls these, and the command decides where they go.
+// The default sink writes "PREFIX: text" lines to stderr, PREFIX being what
+// the dispatcher set (model_notice_prefix("refl calib geometry")); a warning
+// reads "PREFIX: warning: text"; a progress line overwrites itself on a
+// terminal and is a line of its own elsewhere. Text after a newline is
+// printed as it is (continuation lines). Quiet mode (model_error_quiet, as in
+// the tests) drops every notice.
+typedef enum {
+    MODEL_NOTICE_NOTE,          // what is happening ("solving from 40 views")
+    MODEL_NOTICE_WARNING,       // something the user should look at; the work goes on
+    MODEL_NOTICE_PROGRESS,      // the state of a long step ("step 12/288, ETA 40 s")
+    MODEL_NOTICE_PROGRESS_END,  // the progress line is finished (text "")
+} model_notice_kind_t;
+void model_note(const char *fmt, ...) __attribute__((format(printf, 1, 2)));
+void model_warning(const char *fmt, ...) __attribute__((format(printf, 1, 2)));
+void model_progress(const char *fmt, ...) __attribute__((format(printf, 1, 2)));
+void model_progress_end(void);
+// The prefix of the default sink's lines (at most 127 characters; NULL or "": "refl").
+void model_notice_prefix(const char *prefix);
+const char *model_notice_prefix_text(void);
+// Send every notice to fn(ctx, kind, text) instead (calls are serialised);
+// fn NULL restores the default sink.
+typedef void (*model_notice_fn)(void *ctx, model_notice_kind_t kind, const char *text);
+void model_notice_sink(model_notice_fn fn, void *ctx);
+
+// ---------------------------------------------------------------------------
+// Subprocesses (model/base/run.c)
+
+// Run argv (argv[0] looked up in PATH) in cwd (NULL: here) and wait. Its
+// stdout and stderr are captured: written to log_path (NULL: not kept) with
+// the command line, and stdout returned in *out (NULL: dropped; g_free).
+// install_hint names what to install when it cannot start ("Debian: apt
+// install mrcal"; may be NULL). Returns its exit status (128 + signal when a
+// signal ended it), or -1 + message when it could not run. A non-zero status
+// leaves the tail of its stderr in model_last_error().
+int model_run_tool(const char *cwd, char *const *argv, const char *log_path, char **out,
+                   const char *install_hint);
+
 // Read a whole file into a NUL-terminated buffer (caller frees). *len may be
 // NULL. Reports "path: reason" on failure.
 char *model_read_file(const char *path, size_t *len);
@@ -899,6 +940,9 @@ typedef struct {
 // under path or its temporary name.
 bool model_png16_write_opts(const char *path, int width, int height, const uint16_t *pix,
                             const char *const *meta, const model_png_options_t *opt);
+// An 8-bit greyscale PNG (previews, masks, pictures for reports), written
+// atomically like the 16-bit one; zlib level 1.
+bool model_png8_write(const char *path, int width, int height, const uint8_t *pix, const char *const *meta);
 
 // A growing list of metadata (key, value) for the writers above.
 typedef struct model_meta model_meta_t;

@@ -2,6 +2,7 @@
 // atomic files and JSON, provenance, the plotting scripts and HTML report pages.
 #define _GNU_SOURCE
 #include <errno.h>
+#include <math.h>
 #include <fcntl.h>
 #include <glib.h>
 #include <stdarg.h>
@@ -82,6 +83,8 @@ bool model_write_file_atomic(const char *path, const char *text)
     g_free(tmp);
     return ok;
 }
+
+json_t *model_json_number(double x) { return isfinite(x) ? json_real(x) : json_null(); }
 
 bool model_write_json(const char *path, json_t *o)
 {

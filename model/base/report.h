@@ -25,6 +25,10 @@ bool    model_provenance_input(json_t *prov, const char *role, const char *path)
 // The same entry appended to an array of inputs.
 bool    model_inputs_add(json_t *inputs, const char *role, const char *path);
 
+// A JSON number, or null where x is not finite (NaN: not measured, not
+// defined; JSON has no NaN or infinity). A new reference.
+json_t *model_json_number(double x);
+
 // Write JSON to path atomically (temporary name, fsync, rename). false + message.
 bool model_write_json(const char *path, json_t *o);
 // Make a directory and its parents (mode 0755); false + message naming it.

@@ -104,15 +104,17 @@ bool model_png16_write(const char *path, int width, int height, const uint16_t *
     return model_png16_write_opts(path, width, height, pix, meta, NULL);
 }
 
-// The PNG stream itself (libpng's longjmp lands here). false with *err set.
-static bool png16_stream(FILE *f, const char *path, int width, int height, const uint16_t *pix,
-                         const char *const *meta, int level, bool fast_filter, int *err)
+// The PNG stream itself (libpng's longjmp lands here): 16-bit pixels from
+// pix16, or 8-bit ones from pix8. false with *err set.
+static bool png_stream(FILE *f, const char *path, int width, int height, const uint16_t *pix16,
+                       const uint8_t *pix8, const char *const *meta, int level, bool fast_filter, int *err)
 {
     volatile int ntext = 0;   // read after setjmp()
     for (int i = 0; meta && meta[i]; i += 2) ntext++;
     png_ctx_t ctx = { "" };
     png_structp png = png_create_write_struct(PNG_LIBPNG_VER_STRING, &ctx, png_err_fn, png_warn_fn);
     png_infop info = png ? png_create_info_struct(png) : NULL;
+    int bits = pix16 ? 16 : 8;
     png_bytep row = malloc((size_t)width * 2);
     png_textp text = calloc((size_t)ntext + 1, sizeof *text);
     volatile bool ok = false;
@@ -128,7 +130,7 @@ static bool png16_stream(FILE *f, const char *path, int width, int height, const
         goto done;
     }
     png_init_io(png, f);
-    png_set_IHDR(png, info, (png_uint_32)width, (png_uint_32)height, 16, PNG_COLOR_TYPE_GRAY,
+    png_set_IHDR(png, info, (png_uint_32)width, (png_uint_32)height, bits, PNG_COLOR_TYPE_GRAY,
                  PNG_INTERLACE_NONE, PNG_COMPRESSION_TYPE_DEFAULT, PNG_FILTER_TYPE_DEFAULT);
     if (level >= 0) png_set_compression_level(png, level);
     if (fast_filter) png_set_filter(png, PNG_FILTER_TYPE_BASE, PNG_FILTER_SUB);
@@ -140,8 +142,9 @@ static bool png16_stream(FILE *f, const char *path, int width, int height, const
     }
     if (ntext) png_set_text(png, info, text, ntext);
     png_write_info(png, info);
-    for (int y = 0; y < height; y++) {
-        const uint16_t *src = pix + (size_t)y * width;
+    for (int y = 0; y < height && !pix16; y++) png_write_row(png, (png_const_bytep)(pix8 + (size_t)y * width));
+    for (int y = 0; y < height && pix16; y++) {
+        const uint16_t *src = pix16 + (size_t)y * width;
         for (int x = 0; x < width; x++) {   // PNG is big-endian
             row[2 * x] = (png_byte)(src[x] >> 8);
             row[2 * x + 1] = (png_byte)(src[x] & 0xff);
@@ -157,8 +160,23 @@ done:
     return ok;
 }
 
+static bool png_write_file(const char *path, int width, int height, const uint16_t *pix16, const uint8_t *pix8,
+                           const char *const *meta, const model_png_options_t *opt);
+
 bool model_png16_write_opts(const char *path, int width, int height, const uint16_t *pix,
                             const char *const *meta, const model_png_options_t *opt)
+{
+    return png_write_file(path, width, height, pix, NULL, meta, opt);
+}
+
+bool model_png8_write(const char *path, int width, int height, const uint8_t *pix, const char *const *meta)
+{
+    const model_png_options_t fast = { .compression_level = 1 };
+    return png_write_file(path, width, height, NULL, pix, meta, &fast);
+}
+
+static bool png_write_file(const char *path, int width, int height, const uint16_t *pix16, const uint8_t *pix8,
+                           const char *const *meta, const model_png_options_t *opt)
 {
     const model_png_options_t defaults = { .compression_level = -1 };
     if (!opt) opt = &defaults;
@@ -171,7 +189,7 @@ bool model_png16_write_opts(const char *path, int width, int height, const uint1
         err = EINVAL;
         goto done;
     }
-    if (!pix) {
+    if (!pix16 && !pix8) {
         MODEL_FAIL("model_png16_write: no pixels");
         err = EINVAL;
         goto done;
@@ -183,7 +201,7 @@ bool model_png16_write_opts(const char *path, int width, int height, const uint1
         model_error(path, 0, "cannot create %s: %s", tmp ? tmp : "a temporary file", strerror(err));
         goto done;
     }
-    ok = png16_stream(f, path, width, height, pix, meta, opt->compression_level, opt->fast_filter, &err);
+    ok = png_stream(f, path, width, height, pix16, pix8, meta, opt->compression_level, opt->fast_filter, &err);
     if (ok && (fflush(f) != 0 || ferror(f) || (opt->fsync && fsync(fileno(f)) != 0))) {
         err = errno ? errno : EIO;
         model_error(path, 0, "write error: %s", strerror(err));
