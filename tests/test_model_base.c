@@ -138,3 +138,25 @@ TEST(model_m3_known_answers)
     double sing[9] = { 1, 2, 3, 2, 4, 6, 0, 0, 1 };
     CHECK(!m3_inv(ai, sing));
 }
+
+TEST(model_json_format_versions)
+{
+    json_t *o = json_object();
+    model_json_set_format(o, "refl-gain", 2);
+    int v = 0;
+    CHECK(model_json_format_check(o, "g.json", "refl-gain", 2, &v) && v == 2);
+    CHECK(!model_json_format_check(o, "g.json", "refl-gain", 1, &v));   // newer than this reader
+    CHECK_CONTAINS(model_last_error(), "g.json: refl-gain version 2, written by a newer refl");
+    CHECK(!model_json_format_check(o, "g.json", "refl-lamps", 3, &v));  // another format
+    CHECK_CONTAINS(model_last_error(), "a refl-gain file, not refl-lamps");
+    json_t *bare = json_pack("{s:f}", "k_dn_per_e", 0.5);               // before formats named themselves
+    CHECK(model_json_format_check(bare, "old.json", "refl-gain", 2, &v) && v == 1);
+    json_object_set_new(bare, "format", json_string("refl-gain"));      // a format without its version
+    CHECK(!model_json_format_check(bare, "old.json", "refl-gain", 2, &v));
+    CHECK_CONTAINS(model_last_error(), "\"version\" is missing");
+    json_t *arr = json_array();
+    CHECK(!model_json_format_check(arr, "a.json", "refl-gain", 2, NULL));
+    json_decref(o);
+    json_decref(bare);
+    json_decref(arr);
+}

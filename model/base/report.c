@@ -86,6 +86,44 @@ bool model_write_file_atomic(const char *path, const char *text)
 
 json_t *model_json_number(double x) { return isfinite(x) ? json_real(x) : json_null(); }
 
+void model_json_set_format(json_t *root, const char *format, int version)
+{
+    json_object_set_new(root, "format", json_string(format));
+    json_object_set_new(root, "version", json_integer(version));
+}
+
+bool model_json_format_check(const json_t *root, const char *path, const char *format, int max_version,
+                             int *version)
+{
+    if (version) *version = 0;
+    if (!json_is_object(root)) {
+        model_error_set(path, 0, "not a %s file (its top level is not a JSON object)", format);
+        return false;
+    }
+    const json_t *f = json_object_get(root, "format"), *v = json_object_get(root, "version");
+    if (f && (!json_is_string(f) || strcmp(json_string_value(f), format))) {
+        model_error_set(path, 0, "a %s file, not %s", json_is_string(f) ? json_string_value(f) : "(format not a "
+                        "string)", format);
+        return false;
+    }
+    long ver = 1;
+    if (v || f) {
+        if (!json_is_integer(v) || json_integer_value(v) < 1) {
+            model_error_set(path, 0, "%s: \"version\" is %s (a whole number from 1)", format,
+                            v ? "not a whole number >= 1" : "missing");
+            return false;
+        }
+        ver = (long)json_integer_value(v);
+    }
+    if (ver > max_version) {
+        model_error_set(path, 0, "%s version %ld, written by a newer refl (this refl reads versions 1 to %d)", format,
+                        ver, max_version);
+        return false;
+    }
+    if (version) *version = (int)ver;
+    return true;
+}
+
 bool model_write_json(const char *path, json_t *o)
 {
     char *s = json_dumps(o, JSON_INDENT(2) | JSON_PRESERVE_ORDER | JSON_REAL_PRECISION(10));

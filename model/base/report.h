@@ -29,6 +29,18 @@ bool    model_inputs_add(json_t *inputs, const char *role, const char *path);
 // defined; JSON has no NaN or infinity). A new reference.
 json_t *model_json_number(double x);
 
+// Every JSON file refl writes names its format and the version of its layout
+// at its root: {"format": "refl-gain", "version": 2, ...}. A writer calls
+// model_json_set_format on the root object; a reader calls
+// model_json_format_check on the parsed root: a file of another format is
+// refused naming both, a version above max_version is refused as written by
+// a newer refl, a file without the keys is read as version 1 (the layout
+// before it named itself); *version (may be NULL) gets the version read.
+// false + model_error_set naming path.
+void model_json_set_format(json_t *root, const char *format, int version);
+bool model_json_format_check(const json_t *root, const char *path, const char *format, int max_version,
+                             int *version);
+
 // Write JSON to path atomically (temporary name, fsync, rename). false + message.
 bool model_write_json(const char *path, json_t *o);
 // Make a directory and its parents (mode 0755); false + message naming it.
