@@ -90,6 +90,17 @@ void rig_close(rig_t *r);
 // file's path, used in messages and to resolve [rig] truth, which is not read):
 // 0, or RIG_ERR_INVALID with the file:line message of rig_open. Opens nothing.
 int  rig_config_parse(const char *text, size_t len, const char *name);
+// Questions about a rig file that open no device (rig/config.c).
+// The truth file of a rig file: *truth_path is the resolved path (caller
+// g_free's) of [rig] truth = FILE when [rig] backend = virtual, else NULL.
+// false + message when the rig file cannot be read or a virtual rig names no
+// truth file.
+bool rig_file_truth_path(const char *rig_path, char **truth_path);
+// The lamp names of a rig file in file order: [lamp NAME] sections of the rig
+// file, or of its truth file for a virtual rig. *names is a NULL-terminated
+// array (g_strfreev). false + message.
+bool rig_file_lamp_names(const char *rig_path, char ***names, int *n);
+
 // The index in r->cameras of the camera named name, or -1.
 int  rig_camera_find(const rig_t *r, const char *name);
 

@@ -39,52 +39,6 @@ void rig_truth_free(rig_truth_t *t)
 const char *rig_truth_path(const rig_truth_t *t) { return t->path; }
 const model_ini_t *rig_truth_ini(const rig_truth_t *t) { return t->ini; }
 
-bool rig_file_truth_path(const char *rig_path, char **truth_path)
-{
-    *truth_path = NULL;
-    model_ini_t *ini = model_ini_load(rig_path);
-    if (!ini) return false;
-    bool ok = true;
-    const model_ini_entry_t *be = model_ini_get(ini, "rig", "backend");
-    if (be && !strcmp(be->value, "virtual")) {
-        const model_ini_entry_t *t = model_ini_get(ini, "rig", "truth");
-        if (!t) {
-            model_error(rig_path, be->line, "[rig] backend = virtual without truth = FILE");
-            ok = false;
-        } else if (t->value[0] == '/') {
-            *truth_path = g_strdup(t->value);
-        } else {
-            char *d = g_path_get_dirname(rig_path);
-            *truth_path = g_build_filename(d, t->value, NULL);
-            g_free(d);
-        }
-    }
-    model_ini_free(ini);
-    return ok;
-}
-
-static void lamp_sections(const model_ini_t *ini, GPtrArray *names)
-{
-    for (int s = 0; s < ini->nsections; s++)
-        if (!strncmp(ini->sections[s], "lamp ", 5)) g_ptr_array_add(names, g_strdup(ini->sections[s] + 5));
-}
-
-bool rig_file_lamp_names(const char *rig_path, char ***names, int *n)
-{
-    char *truth = NULL;
-    if (!rig_file_truth_path(rig_path, &truth)) return false;
-    model_ini_t *ini = model_ini_load(truth ? truth : rig_path);
-    g_free(truth);
-    if (!ini) return false;
-    GPtrArray *a = g_ptr_array_new();
-    lamp_sections(ini, a);
-    model_ini_free(ini);
-    *n = (int)a->len;
-    g_ptr_array_add(a, NULL);
-    *names = (char **)g_ptr_array_free(a, FALSE);
-    return true;
-}
-
 model_lamps_t *rig_truth_lamps(const rig_truth_t *t) { return model_lamps_from_ini(t->ini); }
 model_materials_t *rig_truth_materials(const rig_truth_t *t) { return model_materials_from_ini(t->ini); }
 

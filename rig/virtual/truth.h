@@ -29,16 +29,6 @@ const char  *rig_truth_path(const rig_truth_t *t);
 // The INI as parsed (for the virtual rig's own sections).
 const model_ini_t *rig_truth_ini(const rig_truth_t *t);
 
-// The truth file of a rig file: *truth_path is the resolved path (caller
-// g_free's) of [rig] truth = FILE when [rig] backend = virtual, else NULL.
-// false + message when the rig file cannot be read or a virtual rig names no
-// truth file.
-bool rig_file_truth_path(const char *rig_path, char **truth_path);
-// The lamp names of a rig file in file order: [lamp NAME] sections of the rig
-// file, or of its truth file for a virtual rig. *names is a NULL-terminated
-// array (g_strfreev). false + message.
-bool rig_file_lamp_names(const char *rig_path, char ***names, int *n);
-
 // Lamps (positions, intensities, radii) and materials of the truth. NULL + message.
 model_lamps_t     *rig_truth_lamps(const rig_truth_t *t);
 model_materials_t *rig_truth_materials(const rig_truth_t *t);
