@@ -7,6 +7,8 @@
 #   make bench    performance figures, one "NAME: VALUE UNIT" line each
 #   make asan     the tests under AddressSanitizer + UndefinedBehaviorSanitizer
 #   make fuzz     fuzz the parsers with libFuzzer (FUZZ_SECONDS=60)
+#   make man      the manual pages from the commands' --help (build/man/man1)
+#   make install  refl, its scripts, examples and manual pages under $(DESTDIR)$(PREFIX) (default /usr/local)
 # WERROR=1 turns warnings into errors (CI sets it).
 
 .DEFAULT_GOAL := all
@@ -59,6 +61,7 @@ MODEL_BASE_SRC := \
     model/base/util.c \
     model/base/notice.c \
     model/base/run.c \
+    model/base/paths.c \
     model/base/ini.c \
     model/base/opts.c \
     model/base/report.c
@@ -246,7 +249,7 @@ obj = $(patsubst %.c,$(BUILD)/%.o,$(1))
 LIB_OBJ   := $(call obj,$(LIB_SRC)) $(patsubst %.cc,$(BUILD)/%.o,$(MODEL_CXX_SRC) $(CALIB_CXX_SRC))
 LIB       := $(BUILD)/librefl.a
 
-.PHONY: all check check-long demo study bench asan fuzz clean
+.PHONY: all check check-long demo study bench asan fuzz man install uninstall clean
 all: $(BIN)/refl
 
 $(BUILD)/%.o: %.c | $(BUILD)/config.mk
@@ -305,6 +308,7 @@ TEST_ENV = REFL=$(BIN)/refl REFL_FAKE_GPIOD=$(FAKE_GPIOD) REFL_LAMP_CHILD=$(LAMP
 
 check: $(BIN)/refl $(BIN)/refl-tests $(FAKE_GPIOD) $(LAMP_CHILD) $(ENOSPC_SHIM)
 	scripts/check-layers
+	MAKE="$(MAKE) BUILD=$(BUILD) BIN=$(BIN)" scripts/check-install
 	$(TEST_ENV) REFL_TEST_SET=short $(BIN)/refl-tests
 
 # the TEST_LONG tests (tests/test.h): each a minute or more on the virtual rig (each limited to 20 minutes)
@@ -341,6 +345,28 @@ fuzz: | $(BUILD)/config.mk
 	  $(PKG_LIBS) $(LIBS_NOPC) -lm -pthread
 	$(BUILD)/fuzz/fuzz_parsers -max_total_time=$(FUZZ_SECONDS) -max_len=4096 -timeout=10 \
 	  -print_final_stats=1 -artifact_prefix=$(BUILD)/fuzz/ $(BUILD)/fuzz/corpus tests/corpus
+
+# ---- manual pages and installation ------------------------------------------
+PREFIX  ?= /usr/local
+DESTDIR ?=
+MAN_DIR := $(BUILD)/man/man1
+SHARE   := $(DESTDIR)$(PREFIX)/share/refl
+
+man: $(BIN)/refl
+	scripts/make-man $(BIN)/refl $(MAN_DIR)
+
+# refl finds its scripts and examples in PREFIX/share/refl (model_share_path)
+install: $(BIN)/refl man
+	install -d $(DESTDIR)$(PREFIX)/bin $(SHARE)/scripts $(SHARE)/examples $(DESTDIR)$(PREFIX)/share/man/man1
+	install -m 0755 $(BIN)/refl $(DESTDIR)$(PREFIX)/bin/refl
+	tar -C scripts --exclude=__pycache__ -cf - . | tar -C $(SHARE)/scripts -xf -
+	tar -C examples -cf - . | tar -C $(SHARE)/examples -xf -
+	install -m 0644 $(MAN_DIR)/*.1 $(DESTDIR)$(PREFIX)/share/man/man1/
+
+uninstall:
+	rm -f $(DESTDIR)$(PREFIX)/bin/refl $(DESTDIR)$(PREFIX)/share/man/man1/refl.1 \
+	  $(DESTDIR)$(PREFIX)/share/man/man1/refl-*.1
+	rm -rf $(SHARE)
 
 clean:
 	rm -rf build build-asan bin

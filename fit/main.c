@@ -1,6 +1,7 @@
 // fit/main.c — bin/refl: the command dispatcher, above every layer (fit is the
 // top floor, so the dispatcher lives in its folder: it includes every layer and
 // none includes it).
+#include <glib.h>
 #include <stdio.h>
 #include <errno.h>
 #include <string.h>
@@ -46,14 +47,13 @@ static void usage(FILE *f)
 {
     fprintf(f, "usage: refl COMMAND [ARGS...]   (refl COMMAND --help for its options)\n\ncommands:\n");
     for (size_t i = 0; i < sizeof commands / sizeof commands[0]; i++)
-        fprintf(f, "  %-8s %s\n", commands[i].name, commands[i].summary);
+        fprintf(f, "  %-10s %s\n", commands[i].name, commands[i].summary);
     fprintf(f, "\nrefl %s\n", REFL_VERSION);
 }
 
 // `refl demo [-o DIR] [--rig RIG.ini | --truth TRUTH.ini] [--yes | --operator-input FILE] [--until STAGE]
-// [--white-table CSV]`: scripts/demo with this
-// binary (the scripts beside it:
-// $REFL_SCRIPTS_DIR, else ../scripts or ../../scripts of the executable).
+// [--white-table CSV]`: scripts/demo with this binary (found by model_share_path: a build tree's scripts/, or an
+// installation's share/refl/scripts/).
 static int demo_cmd(int argc, char **argv)
 {
     const char *out = "refl-demo", *rig = NULL, *truth = NULL, *operator_input = NULL, *until = NULL,
@@ -105,47 +105,38 @@ static int demo_cmd(int argc, char **argv)
         return 1;
     }
     exe[n] = 0;
-    char dir[4096], script[4200];
-    snprintf(dir, sizeof dir, "%s", exe);
-    char *slash = strrchr(dir, '/');
-    if (slash) *slash = 0;
-    const char *env = getenv("REFL_SCRIPTS_DIR");
-    const char *cands[3] = { env, "/../scripts", "/../../scripts" };
-    for (int k = 0; k < 3; k++) {
-        if (!cands[k]) continue;
-        if (k == 0) snprintf(script, sizeof script, "%s/demo", cands[k]);
-        else snprintf(script, sizeof script, "%s%s/demo", dir, cands[k]);
-        if (access(script, R_OK) == 0) {
-            char *args[16] = { (char *)"/bin/bash", script, exe, (char *)out };
-            int na = 4;
-            if (rig) {
-                args[na++] = (char *)"--rig";
-                args[na++] = (char *)rig;
-            }
-            if (truth) {
-                args[na++] = (char *)"--truth";
-                args[na++] = (char *)truth;
-            }
-            if (yes) args[na++] = (char *)"--yes";
-            if (operator_input) {
-                args[na++] = (char *)"--operator-input";
-                args[na++] = (char *)operator_input;
-            }
-            if (until) {
-                args[na++] = (char *)"--until";
-                args[na++] = (char *)until;
-            }
-            if (white_table) {
-                args[na++] = (char *)"--white-table";
-                args[na++] = (char *)white_table;
-            }
-            args[na] = NULL;
-            execv("/bin/bash", args);
-            fprintf(stderr, "refl demo: cannot run /bin/bash %s: %s\n", script, strerror(errno));
-            return 1;
-        }
+    char *script = model_share_path("scripts", "demo");
+    if (!script) {
+        fprintf(stderr, "refl demo: %s\n", model_last_error());
+        return 1;
     }
-    fprintf(stderr, "refl demo: scripts/demo not found beside %s (set REFL_SCRIPTS_DIR to refl's scripts/)\n", exe);
+    char *args[16] = { (char *)"/bin/bash", script, exe, (char *)out };
+    int na = 4;
+    if (rig) {
+        args[na++] = (char *)"--rig";
+        args[na++] = (char *)rig;
+    }
+    if (truth) {
+        args[na++] = (char *)"--truth";
+        args[na++] = (char *)truth;
+    }
+    if (yes) args[na++] = (char *)"--yes";
+    if (operator_input) {
+        args[na++] = (char *)"--operator-input";
+        args[na++] = (char *)operator_input;
+    }
+    if (until) {
+        args[na++] = (char *)"--until";
+        args[na++] = (char *)until;
+    }
+    if (white_table) {
+        args[na++] = (char *)"--white-table";
+        args[na++] = (char *)white_table;
+    }
+    args[na] = NULL;
+    execv("/bin/bash", args);
+    fprintf(stderr, "refl demo: cannot run /bin/bash %s: %s\n", script, strerror(errno));
+    g_free(script);
     return 1;
 }
 

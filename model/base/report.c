@@ -189,35 +189,11 @@ bool model_provenance_input(json_t *prov, const char *role, const char *path)
 // ---------------------------------------------------------------------------
 // Scripts
 
-static char *script_path(const char *name)
-{
-    const char *env = getenv("REFL_SCRIPTS_DIR");
-    if (env && *env) return g_strdup_printf("%s/%s", env, name);
-    char exe[4096];
-    ssize_t n = readlink("/proc/self/exe", exe, sizeof exe - 1);
-    if (n <= 0) return g_strdup_printf("scripts/%s", name);
-    exe[n] = 0;
-    // bin/refl -> ../scripts; a build directory's binary (build-x/bin/refl) -> ../../scripts
-    char *d = g_path_get_dirname(exe);
-    char *p = NULL;
-    for (int up = 1; up <= 3 && !p; up++) {
-        GString *s = g_string_new(d);
-        for (int k = 0; k < up; k++) g_string_append(s, "/..");
-        g_string_append_printf(s, "/scripts/%s", name);
-        if (access(s->str, R_OK) == 0) p = g_string_free(s, FALSE);
-        else g_string_free(s, TRUE);
-    }
-    if (!p) p = g_strdup_printf("%s/../scripts/%s", d, name);
-    g_free(d);
-    return p;
-}
-
 int model_run_script(const char *script, ...)
 {
-    char *path = script_path(script);
-    if (access(path, R_OK) != 0) {
-        model_error(path, 0, "the plotting script is missing (set REFL_SCRIPTS_DIR to refl's scripts/ directory)");
-        g_free(path);
+    char *path = model_share_path("scripts", script);
+    if (!path) {
+        model_error(NULL, 0, "the plotting script is missing: %s", model_last_error());
         return -1;
     }
     GPtrArray *args = g_ptr_array_new();

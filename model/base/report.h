@@ -54,9 +54,16 @@ bool model_mkdir_p(const char *path);
 // (fit/main.c) calls it when a command exits with an error.
 int  model_remove_made_empty_dirs(void);
 
+// The path of refl's own file DIR/NAME (DIR "scripts" or "examples"; g_free),
+// the first that exists of: $REFL_SCRIPTS_DIR/NAME (scripts) or
+// $REFL_SCRIPTS_DIR/../DIR/NAME; EXE/../DIR/NAME, EXE/../../DIR/NAME and
+// EXE/../../../DIR/NAME (a build tree, EXE the running binary's directory); EXE/../share/refl/DIR/NAME
+// (an installation: PREFIX/bin/refl, PREFIX/share/refl/). NULL +
+// model_error_set naming where it looked.
+char *model_share_path(const char *dir, const char *name);
+
 // Run scripts/NAME with /usr/bin/python3 and the arguments (NULL-terminated);
-// scripts are found in $REFL_SCRIPTS_DIR, else ../scripts of the running
-// executable's directory. Its output goes to stderr. 0, or -1 with a message
+// scripts are found by model_share_path. Its output goes to stderr. 0, or -1 with a message
 // (script missing, failed: its exit status).
 int model_run_script(const char *script, ...) __attribute__((sentinel));
 
