@@ -12,6 +12,7 @@
 #include "calib/calib.h"
 #include "fit/brdf/brdf.h"
 #include "fit/material/material.h"
+#include "fit/priors.h"
 #include "model/model.h"
 #include "model/base/opts.h"
 #include "model/base/report.h"

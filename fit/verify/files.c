@@ -47,22 +47,6 @@ calib_set_t *verify_load_camera_gain(const char *camera, const char *gain_dir, c
     return cal;
 }
 
-bool verify_priors_means(const model_scene_t *scene, const verify_priors_t *pr, model_material_t *mm,
-                         const model_material_t **mats)
-{
-    const verify_prior_t **pp = calloc((size_t)scene->nmaterials + 1, sizeof *pp);
-    bool ok = pp && verify_match_priors(scene, pr, pp);
-    for (int k = 0; ok && k < scene->nmaterials; k++) {
-        memset(&mm[k], 0, sizeof mm[k]);
-        snprintf(mm[k].name, sizeof mm[k].name, "%s", pp[k]->name);
-        mm[k].model = pp[k]->model;
-        memcpy(mm[k].p, pp[k]->mean, sizeof mm[k].p);
-        mats[k] = &mm[k];
-    }
-    free(pp);
-    return ok;
-}
-
 // ---------------------------------------------------------------------------
 // Inputs
 
