@@ -152,6 +152,9 @@ CALIB_CXX_SRC := calib/geometry/board_detect.cc
 
 FIT_BRDF_SRC := \
     fit/brdf/fit.c \
+    fit/brdf/sample_set.c \
+    fit/brdf/covariance.c \
+    fit/brdf/compare.c \
     fit/brdf/samples.c
 FIT_MATERIAL_SRC := \
     fit/material/material.c \
