@@ -181,9 +181,7 @@ static int cmd_brdf(int argc, char **argv)
     base_name(file, base, sizeof base);
     const char *mat = name ? name : base;
     const fit_brdf_result_t *best = &fm->res[fm->best];
-    json_t *top = json_object();
-    json_object_set_new(top, "format", json_string("refl priors 1"));
-    json_object_set_new(top, "units", json_string("R = f_r cos(theta_i) in 1/sr; parameter units per parameter"));
+    json_t *top = fit_priors_document();
     json_t *mats = json_array();
     json_t *entry = fit_priors_material(mat, best, fm->res, fm->nres, k_sigma, sys_rel);
     json_t *src = json_object();

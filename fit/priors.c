@@ -9,6 +9,7 @@
 #include <string.h>
 
 #include "fit/priors.h"
+#include "model/base/report.h"
 
 // ---------------------------------------------------------------------------
 // Priors
@@ -157,15 +158,29 @@ bool verify_mvprior_residual(void *ctx, const double *const *p, double *r, doubl
     return true;
 }
 
+// The file's format version (fit/priors.h): "format" "refl-priors" with its
+// "version", the name "refl priors 1" or no "format" at all: version 1; a
+// newer version or another format is refused. false + message.
+static bool priors_version(const json_t *root, const char *path, int *version)
+{
+    const char *fmt = json_string_value(json_object_get(root, "format"));
+    if (json_is_object(root) && fmt && !strcmp(fmt, FIT_PRIORS_FORMAT_V1_NAME)) {
+        *version = 1;
+        return true;
+    }
+    if (!model_json_format_check(root, path, FIT_PRIORS_FORMAT, FIT_PRIORS_VERSION, version)) {
+        model_error(NULL, 0, "%s", model_last_error());
+        return false;
+    }
+    return true;
+}
+
 static bool priors_from_json(verify_priors_t *pr, json_t *root, const char *path, const char *sha)
 {
     bool ok = false;
     json_t *mats = json_object_get(root, "materials");
-    const char *fmt = json_string_value(json_object_get(root, "format"));
-    if (fmt && strcmp(fmt, "refl priors 1")) {
-        model_error(path, 0, "format '%s' is not 'refl priors 1'", fmt);
-        goto done;
-    }
+    int version = 0;
+    if (!priors_version(root, path, &version)) goto done;
     if (!json_is_array(mats) || !json_array_size(mats)) {
         model_error(path, 0, "no \"materials\" list: not a refl priors file (refl fit material / refl fit brdf "
                     "write them)");
@@ -199,6 +214,7 @@ static bool priors_from_json(verify_priors_t *pr, json_t *root, const char *path
         snprintf(p->name, sizeof p->name, "%s", name);
         snprintf(p->source, sizeof p->source, "%s", path);
         snprintf(p->sha256, sizeof p->sha256, "%s", sha);
+        p->version = version;
         p->model = (model_brdf_t)mi;
         p->np = model_brdf_nparams(p->model);
         for (int j = 0; j < p->np; j++) {
@@ -341,7 +357,15 @@ const char *fit_param_convention(model_brdf_t m, int i)
 }
 
 // ---------------------------------------------------------------------------
-// Writing: a material's entry from a BRDF fit
+// Writing: the document, and a material's entry from a BRDF fit
+
+json_t *fit_priors_document(void)
+{
+    json_t *top = json_object();
+    model_json_set_format(top, FIT_PRIORS_FORMAT, FIT_PRIORS_VERSION);
+    json_object_set_new(top, "units", json_string("R = f_r cos(theta_i) in 1/sr; parameter units per parameter"));
+    return top;
+}
 
 // A parameter the photometric scale multiplies (R linear in it): kd, ks, ks2, Rd.
 static bool amplitude_param(const char *n)

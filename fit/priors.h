@@ -1,5 +1,39 @@
 // fit/priors.h — the priors file: each material's reflection model and the
-// prior of its parameters (README "Priors file"); its one reader and writer.
+// prior of its parameters; its one reader and writer (fit/priors.c).
+//
+// The priors file ("refl-priors", JSON; README "refl fit brdf" has the table)
+// is what the offline fits (refl fit brdf, refl fit material) hand the
+// verification fitter (refl verify), the lamp planner, the exporter and the
+// studies:
+//   "format": "refl-priors", "version": 1
+//   "units": R = f_r cos(theta_i) in 1/sr; each parameter names its own
+//   "materials": [ one entry per material:
+//     "name" (under 64 characters; the description's material name),
+//     "model" (model_brdf_name: lambert, hall, torrance_sparrow, thesis_fit,
+//       cook_torrance, ggx, ashikhmin_shirley, ggx2), "convention" (its formula),
+//     "parameters": [ in the model's parameter order:
+//       "name" (model_brdf_param_name), "unit" and "convention" (fit_param_unit,
+//       fit_param_convention: e.g. kd is albedo/pi in the thesis's models, the
+//       albedo in the physical ones; alpha is GGX alpha, not perceptual roughness),
+//       "mean" (within the physical range and [lo, hi]),
+//       "std" (>= 0; null or absent: unknown, no prior; 0: held),
+//       "std_statistical", "std_parts" (how std was made; not read),
+//       "lo", "hi" (the prior's bounds, mean +- k std within the physical range;
+//         absent or null: the physical range),
+//       "held" (a note: the samples could not measure it; a fitter holds it at mean) ],
+//     "covariance" (the fit's statistical np x np, null where not available; not read),
+//     "prior_covariance" (optional: "parameters" in the model's order and
+//       "matrix", np x np symmetric with a diagonal >= 0, units of the parameters;
+//       its diagonal is each std^2; without it the parameters are independent),
+//     "window_rel_std" (optional, null: not known; a window's relative spread
+//       about the model beyond its noise, in [0, 10]),
+//     and what the fit reports, not read here: "model_choice", "candidates",
+//     "rms", "ngan_error", "aic", "bic", "cv_rms", "samples" or "session" ... ]
+//   "provenance": refl's version, the date, the command, the inputs' SHA-256.
+// Version 1 is the only layout; a file naming no format, or naming itself
+// "refl priors 1" (FIT_PRIORS_FORMAT_V1_NAME), is read as version 1. A file of
+// a newer version is refused, naming the version it has and the ones this refl
+// reads.
 #pragma once
 
 #include <jansson.h>
@@ -11,6 +45,10 @@
 #ifdef __cplusplus
 extern "C" {
 #endif
+
+#define FIT_PRIORS_FORMAT         "refl-priors"
+#define FIT_PRIORS_FORMAT_V1_NAME "refl priors 1"   // the name version 1 files may carry instead
+enum { FIT_PRIORS_VERSION = 1 };                   // the version written, the newest read
 
 typedef struct {
     char         name[64];
@@ -27,6 +65,7 @@ typedef struct {
                                     //   noise (texture, what the model lacks); NAN: not known
     char         source[512];
     char         sha256[65];
+    int          version;           // the format version of the file it was read from (0: not from a file)
 } verify_prior_t;
 
 // A material's prior as a multivariate Gaussian over its free parameters
@@ -72,6 +111,11 @@ bool verify_match_priors(const model_scene_t *scene, const verify_priors_t *pr, 
 // for each of scene->nmaterials. false + message naming a material without priors.
 bool verify_priors_means(const model_scene_t *scene, const verify_priors_t *pr, model_material_t *mm,
                          const model_material_t **mats);
+
+// A priors document to write: {"format": "refl-priors", "version": 1,
+// "units": ...}; the writer adds "materials" (entries of fit_priors_material
+// and what its fit reports) and "provenance". A new reference.
+json_t *fit_priors_document(void);
 
 // Units and convention of parameter i of model m ("1/sr", "albedo", ...).
 const char *fit_param_unit(model_brdf_t m, int i);

@@ -675,6 +675,43 @@ TEST(verify_priors_parser_mutations)
     free(buf);
 }
 
+// The priors file names its format and version (fit/priors.h): refl fit's
+// documents are "refl-priors" version 1; a file naming itself "refl priors 1",
+// or naming no format, reads as version 1; a newer version and another
+// format are refused, naming the file and the versions.
+TEST(verify_priors_format_version)
+{
+    json_t *doc = fit_priors_document();
+    CHECK(!strcmp(json_string_value(json_object_get(doc, "format")), "refl-priors"));
+    CHECK(json_integer_value(json_object_get(doc, "version")) == FIT_PRIORS_VERSION);
+    json_decref(doc);
+    const char *mats = "\"materials\": [{\"name\": \"x\", \"model\": \"lambert\", \"parameters\": "
+                       "[{\"name\": \"kd\", \"mean\": 0.2, \"std\": 0.01}]}]}";
+    static const struct {
+        const char *head, *error;
+    } cases[] = {
+        { "{\"format\": \"refl-priors\", \"version\": 1, ", NULL },
+        { "{\"format\": \"refl priors 1\", ", NULL },
+        { "{", NULL },
+        { "{\"format\": \"refl-priors\", \"version\": 2, ", "version 2, written by a newer refl" },
+        { "{\"format\": \"refl-priors\", ", "\"version\" is missing" },
+        { "{\"format\": \"refl-gain\", \"version\": 1, ", "a refl-gain file, not refl-priors" },
+    };
+    for (size_t c = 0; c < sizeof cases / sizeof cases[0]; c++) {
+        char *text = g_strconcat(cases[c].head, mats, NULL);
+        verify_priors_t pr = { 0 };
+        bool ok = verify_priors_parse(&pr, text, strlen(text), "v.json");
+        CHECK_MSG(ok == !cases[c].error, "case %zu: %s", c, ok ? "accepted" : model_last_error());
+        if (ok) CHECK(pr.n == 1 && pr.m[0].version == 1);
+        if (!ok && cases[c].error) {
+            CHECK_CONTAINS(model_last_error(), "v.json");
+            CHECK_CONTAINS(model_last_error(), cases[c].error);
+        }
+        verify_priors_free(&pr);
+        g_free(text);
+    }
+}
+
 // With the truth's parameters held (lamps, camera, materials, rho = 1, Pa =
 // 0), the fitter's model — direct light plus its one diffuse bounce —
 // predicts the virtual rig's frames (Monte Carlo interreflection, finite
