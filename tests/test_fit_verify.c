@@ -13,6 +13,7 @@
 #include "fit/verify/verify.h"
 #include "fit/eval/lab.h"
 #include "model/model.h"
+#include "model/base/report.h"
 #include "rig/session/session.h"
 #include "tests/test.h"
 
@@ -428,6 +429,8 @@ TEST(verify_cli_end_to_end)
     CHECK(j != NULL);
     if (j) {
         CHECK(!strcmp(json_string_value(json_object_get(j, "verdict")), "correct"));
+        CHECK(!strcmp(json_string_value(json_object_get(j, "format")), "refl-verify"));
+        CHECK(json_integer_value(json_object_get(j, "version")) == VERIFY_JSON_VERSION);
         CHECK(json_array_size(json_object_get(j, "images")) == NANG);
         json_t *prov = json_object_get(j, "provenance");
         char *txt = json_dumps(prov, 0);
@@ -480,6 +483,11 @@ TEST(verify_cli_end_to_end)
     CHECK_CONTAINS(out, "placement: as described");
     json_t *j2 = json_load_file(jp2, 0, NULL);
     CHECK(j2 && !json_object_get(j2, "placement"));
+    if (j2) {   // the report refuses a verify.json of a newer version
+        json_object_set_new(j2, "version", json_integer(VERIFY_JSON_VERSION + 1));
+        CHECK(model_write_json(jp2, j2));
+        CHECK(model_run_script("verify_report.py", dir, NULL) != 0);
+    }
     json_decref(j2);
     g_free(out);
     g_free(err);

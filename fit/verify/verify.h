@@ -271,7 +271,12 @@ bool verify_register(const model_scene_t *scene, const verify_camera_t *cams, co
 // The description moved to placement p (a new scene; NULL + message).
 model_scene_t *verify_placed_scene(const model_scene_t *scene, const verify_placement_t *p);
 
-// The result as JSON (units and conventions named).
+// The result as JSON (units and conventions named): the body of verify.json,
+// which names its format, "format": "refl-verify", "version": 1 (one layout;
+// a file without the keys is version 1 to its readers, scripts/verify_report.py
+// and refl chain).
+#define VERIFY_JSON_FORMAT "refl-verify"
+enum { VERIFY_JSON_VERSION = 1 };
 json_t *verify_result_json(const verify_result_t *r, const model_scene_t *scene, const verify_image_t *imgs,
                            const model_lamps_t *lamps, const verify_options_t *opt);
 
