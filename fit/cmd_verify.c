@@ -42,6 +42,10 @@ static const char epilog[] =
 static int parse_fix(model_cli_t *cli, const char *list, verify_options_t *opt)
 {
     char *dup = strdup(list), *save = NULL;
+    if (!dup) {
+        fprintf(stderr, "refl verify: out of memory\n");
+        return 1;
+    }
     int rc = MODEL_CLI_OK;
     for (char *t = strtok_r(dup, ",", &save); t && rc == MODEL_CLI_OK; t = strtok_r(NULL, ",", &save)) {
         if (!strcmp(t, "lamps")) opt->fix_lamps = true;

@@ -71,9 +71,9 @@ bool verify_priors_parse(verify_priors_t *pr, const char *text, size_t len, cons
     return ok;
 }
 
-// The entry's "prior_covariance" (absent: independent std, as files before
-// it): its parameters in the model's order and an np x np symmetric matrix
-// of finite numbers with a non-negative diagonal. false + message.
+// The entry's "prior_covariance" (absent: independent std): its parameters
+// in the model's order and an np x np symmetric matrix of finite numbers with
+// a non-negative diagonal. false + message.
 static bool prior_cov_from_json(verify_prior_t *p, json_t *pc, const char *path)
 {
     p->has_cov = false;
@@ -270,7 +270,10 @@ bool verify_priors_add(verify_priors_t *pr, const model_material_t *mat, double 
         return false;
     }
     verify_prior_t *p = priors_push(pr);
-    if (!p) return false;
+    if (!p) {
+        model_error(NULL, 0, "priors: out of memory");
+        return false;
+    }
     snprintf(p->name, sizeof p->name, "%s", mat->name);
     snprintf(p->source, sizeof p->source, "(known values, std %g %%)", rel * 100);
     p->model = mat->model;
@@ -308,6 +311,7 @@ bool verify_priors_means(const model_scene_t *scene, const verify_priors_t *pr, 
                          const model_material_t **mats)
 {
     const verify_prior_t **pp = calloc((size_t)scene->nmaterials + 1, sizeof *pp);
+    if (!pp) model_error(NULL, 0, "out of memory");
     bool ok = pp && verify_match_priors(scene, pr, pp);
     for (int k = 0; ok && k < scene->nmaterials; k++) {
         memset(&mm[k], 0, sizeof mm[k]);

@@ -150,6 +150,12 @@ static void cv_choose(const fit_samples_t *s, const fit_brdf_options_t *o, fit_b
     }
     int *fold = malloc((size_t)s->n * sizeof *fold);
     int nu = fold ? cv_folds_of(s, o, k, fold) : 0;
+    if (nu == 0) {   // (there is a unit when there is a sample)
+        model_error_set(s->source, 0, "out of memory for the cross-validation");
+        snprintf(out->cv_note, sizeof out->cv_note, "out of memory for the cross-validation; the lowest BIC");
+        free(fold);
+        return;
+    }
     if (nu < 2) {
         snprintf(out->cv_note, sizeof out->cv_note, "%d %s(s): too few to cross-validate; the lowest BIC", nu,
                  out->cv_unit_name);

@@ -64,14 +64,16 @@ const char *fit_loss_name(lsq_loss_t l)
 static double robust_std(const fit_samples_t *s, model_brdf_t m, const double *p)
 {
     double *a = malloc((size_t)(s->n ? s->n : 1) * sizeof *a), Rb[256];
-    if (!a) return NAN;
+    if (!a) {
+        model_error_set(s->source, 0, "out of memory");
+        return NAN;
+    }
     for (int i0 = 0; i0 < s->n; i0 += 256) {
         int cnt = s->n - i0 < 256 ? s->n - i0 : 256;
         fit_samples_eval_n(s, m, p, i0, cnt, Rb, NULL);
         for (int k = 0; k < cnt; k++) a[i0 + k] = sqrt(s->w[i0 + k]) * fabs(Rb[k] - s->R[i0 + k]);
     }
-    qsort(a, (size_t)s->n, sizeof *a, model_cmp_double);
-    double med = s->n ? (s->n % 2 ? a[s->n / 2] : 0.5 * (a[s->n / 2 - 1] + a[s->n / 2])) : NAN;
+    double med = model_median(a, s->n);
     free(a);
     return 1.4826 * med;
 }
@@ -79,8 +81,11 @@ static double robust_std(const fit_samples_t *s, model_brdf_t m, const double *p
 // The diffuse level: the median of R / n.l away from the mirror direction.
 static double diffuse_level(const fit_samples_t *s)
 {
-    double *v = malloc((size_t)s->n * sizeof *v);
-    if (!v) return 0.1;
+    double *v = malloc((size_t)(s->n ? s->n : 1) * sizeof *v);
+    if (!v) {
+        model_error_set(s->source, 0, "out of memory");
+        return 0.1;
+    }
     int k = 0;
     for (int i = 0; i < s->n; i++)
         if (s->c[i].nh < 0.9) v[k++] = s->R[i] / s->c[i].nl;
@@ -88,8 +93,7 @@ static double diffuse_level(const fit_samples_t *s)
         k = 0;
         for (int i = 0; i < s->n; i++) v[k++] = s->R[i] / s->c[i].nl;
     }
-    qsort(v, (size_t)k, sizeof *v, model_cmp_double);
-    double med = k ? v[k / 2] : 0.1;
+    double med = k ? model_kth(v, k, k / 2) : 0.1;
     free(v);
     return med;
 }
@@ -140,6 +144,7 @@ static bool solve_once(const fit_samples_t *s, model_brdf_t m, const fit_brdf_op
     int nb = (s->n + bs - 1) / bs;
     block_t *blocks = calloc((size_t)nb, sizeof *blocks);
     lsq_problem_t *pr = lsq_problem_new();
+    if (!blocks || !pr) model_error_set(s->source, 0, "out of memory for %d blocks of samples", nb);
     bool ok = blocks && pr && lsq_add_parameters(pr, p, np);
     for (int j = 0; ok && j < np; j++) {
         double lo, hi;

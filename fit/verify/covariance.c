@@ -47,8 +47,8 @@ static bool covariance_add_group(const fit_t *F, const res_group_t *g, const int
 
 // The parameters' standard deviations: (J^T J + priors)^-1 over the free
 // parameters at the solution, J of the loss-scaled residuals (as Ceres's).
-// They stay NAN when it cannot be had.
-void verify_fit_covariance(fit_t *F)
+// They stay NAN when it cannot be had; false + message: out of memory.
+bool verify_fit_covariance(fit_t *F)
 {
     const int npd = F->npd, nl = F->nl;
     const pdesc_t *pd = F->pd;
@@ -57,7 +57,7 @@ void verify_fit_covariance(fit_t *F)
     double *JtJ = calloc((size_t)nf * nf + 1, sizeof *JtJ), *inv = calloc((size_t)nf * nf + 1, sizeof *inv);
     double *ev = malloc(((size_t)nf + 1) * sizeof *ev);
     double *jb = malloc((size_t)64 * (3 + nl + 2 * MODEL_BRDF_MAX_PARAMS) * sizeof *jb);
-    bool cok = col && JtJ && inv && ev && jb && nf > 0;
+    bool mem = col && JtJ && inv && ev && jb, cok = mem && nf > 0;
     for (int gi = 0; gi < F->ngroups && cok; gi++) cok = covariance_add_group(F, &F->groups[gi], col, nf, jb, JtJ);
     for (int k = 0; k < npd && cok; k++)
         if (col[k] >= 0 && pd[k].prior_std > 0 && !pd[k].mv)
@@ -75,7 +75,7 @@ void verify_fit_covariance(fit_t *F)
     for (int c = 0; c < nf && cok; c++) {
         double *A2 = malloc((size_t)nf * nf * sizeof *A2);
         if (!A2) {
-            cok = false;
+            cok = mem = false;
             break;
         }
         memcpy(A2, JtJ, (size_t)nf * nf * sizeof *A2);
@@ -92,4 +92,6 @@ void verify_fit_covariance(fit_t *F)
     free(inv);
     free(ev);
     free(jb);
+    if (!mem) model_error(NULL, 0, "out of memory for the covariance of %d parameters", nf);
+    return mem;
 }

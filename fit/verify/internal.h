@@ -136,10 +136,12 @@ const wsum_t *verify_window_sums(const verify_image_t *im, const verify_view_t *
 
 // Every image's reference points and windows (fit/verify/points.c). false: out of memory.
 bool verify_fit_measure(fit_t *F);
-// The parameters' standard deviations (fit/verify/covariance.c); NAN when they cannot be had.
-void verify_fit_covariance(fit_t *F);
+// The parameters' standard deviations (fit/verify/covariance.c); NAN when
+// they cannot be had (no free parameter, a singular system). false + message:
+// out of memory.
+bool verify_fit_covariance(fit_t *F);
 // The residue: the fitted model at every measured point, z and the flags, the
 // status counts and the statistics; then the change regions and the score
-// (fit/verify/regions.c).
-void verify_fit_residue(fit_t *F);
-void verify_fit_regions(fit_t *F);
+// (fit/verify/regions.c). false + message: out of memory.
+bool verify_fit_residue(fit_t *F);
+bool verify_fit_regions(fit_t *F);

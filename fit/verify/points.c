@@ -41,6 +41,7 @@ static bool measure_windows(fit_t *F, int m, int first_pt, double *Pa0, double *
     if (!tmp || !ws) {
         free(tmp);
         if (owned) free((void *)ws);
+        model_error(im->name, 0, "out of memory for %d reference points", n);
         return false;
     }
     for (int g = 0; g < n; g++) {
@@ -235,7 +236,7 @@ static void image_fit_points(fit_t *F, int m, int first_pt, double Pa0, double v
     }
 }
 
-// Every image's reference points and windows. false: out of memory.
+// Every image's reference points and windows. false + message: out of memory.
 bool verify_fit_measure(fit_t *F)
 {
     int np = 0;

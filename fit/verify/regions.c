@@ -8,18 +8,24 @@
 
 #include "fit/verify/internal.h"
 
-static void stats_of(const verify_point_t *pts, int n, int image, verify_stats_t *st)
+// The residue statistics of image's used points (image -1: of every image). false: out of memory.
+static bool stats_of(const verify_point_t *pts, int n, int image, verify_stats_t *st)
 {
     memset(st, 0, sizeof *st);
     double *d = malloc((size_t)(n ? n : 1) * sizeof *d), *z = malloc((size_t)(n ? n : 1) * sizeof *z);
+    if (!d || !z) {
+        free(d);
+        free(z);
+        return false;
+    }
     double s1 = 0, s2 = 0, zz = 0;
     int m = 0;
     for (int k = 0; k < n; k++) {
         const verify_point_t *p = &pts[k];
         if (p->status != VERIFY_PT_USED || (image >= 0 && p->image != image)) continue;
         double diff = p->meas - p->model, a = fabs(diff);
-        if (d) d[m] = diff;
-        if (z) z[m] = fabs(p->z);
+        d[m] = diff;
+        z[m] = fabs(p->z);
         m++;
         s1 += a;
         s2 += a * a;
@@ -27,7 +33,7 @@ static void stats_of(const verify_point_t *pts, int n, int image, verify_stats_t
         if (a > st->max_abs) st->max_abs = a;
     }
     st->npoints = m;
-    if (m && d && z) {
+    if (m) {
         st->mean_abs = s1 / m;
         st->std_abs = sqrt(fmax(s2 / m - st->mean_abs * st->mean_abs, 0));
         st->rms_z = sqrt(zz / m);
@@ -38,11 +44,12 @@ static void stats_of(const verify_point_t *pts, int n, int image, verify_stats_t
     }
     free(d);
     free(z);
+    return true;
 }
 
 // The residue: the fitted model at every measured point (used and
 // edge-measured), z and the flags; the status counts and the statistics.
-void verify_fit_residue(fit_t *F)
+bool verify_fit_residue(fit_t *F)
 {
     verify_result_t *out = F->out;
     for (int k = 0; k < F->nfit; k++) {
@@ -61,8 +68,10 @@ void verify_fit_residue(fit_t *F)
     }
     for (int k = 0; k < F->npts; k++) out->nstatus[out->points[k].status]++;
     out->npoints = F->npts;
-    stats_of(out->points, F->npts, -1, &out->all);
-    for (int m = 0; m < F->nimgs; m++) stats_of(out->points, F->npts, m, &out->per_image[m]);
+    bool ok = stats_of(out->points, F->npts, -1, &out->all);
+    for (int m = 0; ok && m < F->nimgs; m++) ok = stats_of(out->points, F->npts, m, &out->per_image[m]);
+    if (!ok) model_error(NULL, 0, "out of memory for the residue of %d reference points", F->npts);
+    return ok;
 }
 
 // Grow region rid from grid point g0 of image m (points from base on) over
@@ -125,12 +134,13 @@ static void grow_region(verify_result_t *out, const verify_view_t *v, int m, int
 
 // Change detection: 8-connected flags on each image's grid are regions; the
 // score sums the excess chi^2 of those of at least min_region points.
-void verify_fit_regions(fit_t *F)
+bool verify_fit_regions(fit_t *F)
 {
     verify_result_t *out = F->out;
     int base = 0, cap = 0;
     int *stack = malloc((size_t)(F->npts ? F->npts : 1) * sizeof *stack);
-    for (int m = 0; m < F->nimgs && stack; m++) {
+    bool ok = stack != NULL;
+    for (int m = 0; m < F->nimgs && ok; m++) {
         const verify_view_t *v = F->views[m];
         int n = v->gw * v->gh;
         for (int g0 = 0; g0 < n; g0++) {
@@ -139,7 +149,7 @@ void verify_fit_regions(fit_t *F)
             if (out->nregions == cap) {
                 cap = cap ? 2 * cap : 64;
                 verify_region_t *nr = realloc(out->regions, (size_t)cap * sizeof *nr);
-                if (!nr) break;
+                if (!(ok = nr != NULL)) break;
                 out->regions = nr;
             }
             int rid = out->nregions++;
@@ -149,4 +159,6 @@ void verify_fit_regions(fit_t *F)
         base += n;
     }
     free(stack);
+    if (!ok) model_error(NULL, 0, "out of memory for the change regions");
+    return ok;
 }

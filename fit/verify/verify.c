@@ -85,7 +85,11 @@ static bool fit_check(fit_t *F, const verify_priors_t *pr)
         return false;
     }
     F->prior = calloc((size_t)(F->nm ? F->nm : 1), sizeof *F->prior);
-    if (!F->prior || !verify_match_priors(F->scene, pr, F->prior)) return false;
+    if (!F->prior) {
+        model_error(NULL, 0, "out of memory");
+        return false;
+    }
+    if (!verify_match_priors(F->scene, pr, F->prior)) return false;
     F->npts = 0;
     for (int m = 0; m < F->nimgs; m++) {
         const verify_view_t *v = F->views[m];
@@ -219,7 +223,10 @@ static bool fit_parameters(fit_t *F)
     snprintf(d->name, sizeof d->name, "rho");
     if (!lsq_add_parameters(F->prob, d->x, 1)) return false;
     bool *mat_used = calloc((size_t)F->nm + 1, sizeof *mat_used);
-    if (!mat_used) return false;
+    if (!mat_used) {
+        model_error_set(NULL, 0, "out of memory");
+        return false;
+    }
     for (int k = 0; k < F->nfit; k++)
         if (F->pt[k].mat >= 0 && F->pt[k].mat < F->nm && out->points[F->ptidx[k]].status == VERIFY_PT_USED) {
             mat_used[F->pt[k].mat] = true;
@@ -228,7 +235,10 @@ static bool fit_parameters(fit_t *F)
     bool ok = true;
     F->mvp = calloc((size_t)F->nm + 1, sizeof *F->mvp);
     F->mvp_pd = calloc((size_t)F->nm + 1, sizeof *F->mvp_pd);
-    if (!F->mvp || !F->mvp_pd) ok = false;
+    if (!F->mvp || !F->mvp_pd) {
+        model_error_set(NULL, 0, "out of memory");
+        ok = false;
+    }
     for (int k = 0; k < F->nm && ok; k++) {
         const verify_prior_t *P = F->prior[k];
         double *x = &F->mp[k * MODEL_BRDF_MAX_PARAMS];
@@ -362,7 +372,7 @@ static bool fit_solve(fit_t *F)
     fo.function_tolerance = 1e-8;
     fo.parameter_tolerance = 1e-8;
     fo.verbose = opt->verbose;
-    fo.normal_equations = !opt->reference_eval;   // the reference: QR, as before the speed work
+    fo.normal_equations = !opt->reference_eval;   // the reference: QR on the residuals
     if (!lsq_solve(F->prob, &fo, &F->out->summary)) {
         model_error(NULL, 0, "verify: the fit failed: %s (%s)", F->out->summary.termination, F->out->summary.message);
         return false;
@@ -375,7 +385,10 @@ static bool fit_collect_params(fit_t *F)
 {
     verify_result_t *out = F->out;
     out->params = calloc((size_t)F->npd, sizeof *out->params);
-    if (!out->params) return false;
+    if (!out->params) {
+        model_error(NULL, 0, "out of memory for %d parameters", F->npd);
+        return false;
+    }
     out->nparams = F->npd;
     for (int k = 0; k < F->npd; k++) {
         const pdesc_t *d = &F->pd[k];
@@ -419,12 +432,15 @@ bool verify_param_warning(const verify_param_t *p, char *buf, size_t n)
 }
 
 // The fit's warnings: its parameters' (verify_param_warning; the lamps off
-// in every image are held, not fitted: fixed, no warning). false: out of memory.
+// in every image are held, not fitted: fixed, no warning). false + message: out of memory.
 static bool fit_warnings(fit_t *F)
 {
     verify_result_t *out = F->out;
     out->warnings = calloc((size_t)out->nparams + 1, sizeof *out->warnings);
-    if (!out->warnings) return false;
+    if (!out->warnings) {
+        model_error(NULL, 0, "out of memory for the warnings");
+        return false;
+    }
     for (int k = 0; k < out->nparams; k++)
         if (verify_param_warning(&out->params[k], out->warnings[out->nwarnings], sizeof out->warnings[0]))
             out->nwarnings++;
@@ -446,11 +462,9 @@ bool verify_run(const model_scene_t *scene, const verify_priors_t *pr, const ver
         goto done;
     }
     if (!fit_solve(&F) || !fit_collect_params(&F)) goto done;
-    if (!opt->no_covariance) verify_fit_covariance(&F);
-    if (!fit_warnings(&F)) goto done;
+    if ((!opt->no_covariance && !verify_fit_covariance(&F)) || !fit_warnings(&F)) goto done;
     for (int k = 0; k < F.nm; k++) memcpy(out->mats[k].p, &F.mp[k * MODEL_BRDF_MAX_PARAMS], sizeof out->mats[k].p);
-    verify_fit_residue(&F);
-    verify_fit_regions(&F);
+    if (!verify_fit_residue(&F) || !verify_fit_regions(&F)) goto done;
     // the verdict
     out->correct = out->score <= opt->score_threshold;
     out->time_fit_s = model_now_s() - t0;

@@ -87,7 +87,7 @@ typedef struct {
 // against every description and configuration, whose reference grids are the
 // same. The caller clears it when the pixels change; one thread at a time.
 typedef struct verify_windows verify_windows_t;
-verify_windows_t *verify_windows_new(void);
+verify_windows_t *verify_windows_new(void);   // NULL + message: out of memory
 void              verify_windows_clear(verify_windows_t *w);
 void              verify_windows_free(verify_windows_t *w);
 
@@ -326,7 +326,8 @@ typedef struct {
 
 // Load the inputs, trace the views, fit and judge (verify_run), write
 // o->out/verify.json, points.csv, imgN_actual.tiff and imgN_synthetic.tiff.
-// Progress lines on stderr. false + message (printed through model_error).
+// Notes and progress through model_note and model_progress. false + message
+// (model_error).
 bool verify_files_run(const verify_files_opts_t *o, verify_files_result_t *r);
 void verify_files_result_free(verify_files_result_t *r);
 

@@ -105,6 +105,7 @@ static bool view_boundaries(verify_view_t *v, const verify_camera_t *cam, const 
     model_pixel_info_t *pc = malloc((size_t)ncand * NC * sizeof *pc);
     model_lamp_sample_t *lc = malloc((size_t)ncand * NC * (nl ? nl : 1) * sizeof *lc);
     bool ok = qc && pc && lc;
+    if (!ok) model_error(NULL, 0, "out of memory for %d points near face and shadow boundaries", ncand);
     if (ok) {
         static const int off[8][2] = { { -1, -1 }, { 1, -1 }, { -1, 1 }, { 1, 1 },
                                        { 0, -1 }, { 0, 1 }, { -1, 0 }, { 1, 0 } };
@@ -163,7 +164,10 @@ verify_view_t *verify_view_new(const model_scene_t *scene, const verify_camera_t
         return NULL;
     }
     verify_view_t *v = calloc(1, sizeof *v);
-    if (!v) return NULL;
+    if (!v) {
+        model_error(NULL, 0, "out of memory");
+        return NULL;
+    }
     v->W = model_camera_width(cam->cam);
     v->H = model_camera_height(cam->cam);
     v->sp = opt->spacing_px;
@@ -206,7 +210,10 @@ verify_view_t *verify_view_new(const model_scene_t *scene, const verify_camera_t
     // the windows near edges: modelled with the pixels' footprint and the blur where they see only the description
     if (opt->edge_windows) {
         bool *want = calloc((size_t)n, sizeof *want);
-        if (!want) goto fail;
+        if (!want) {
+            model_error(NULL, 0, "out of memory for %d reference points", n);
+            goto fail;
+        }
         for (int g = 0; g < n; g++)
             want[g] = v->status[g] == VERIFY_PT_NEAR_EDGE || v->status[g] == VERIFY_PT_BOUNDARY;
         bool fok = verify_footprints_make(v->t, cam->cam, lamps, mats, q, want, n, opt->window_px,

@@ -18,7 +18,12 @@ struct verify_windows {
     int next;
 };
 
-verify_windows_t *verify_windows_new(void) { return calloc(1, sizeof(verify_windows_t)); }
+verify_windows_t *verify_windows_new(void)
+{
+    verify_windows_t *W = calloc(1, sizeof *W);
+    if (!W) model_error(NULL, 0, "out of memory");
+    return W;
+}
 
 void verify_windows_clear(verify_windows_t *W)
 {
