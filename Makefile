@@ -155,12 +155,24 @@ CALIB_CXX_SRC := calib/geometry/board_detect.cc
 
 FIT_BRDF_SRC := \
     fit/brdf/fit.c \
+    fit/brdf/sample_set.c \
+    fit/brdf/covariance.c \
+    fit/brdf/compare.c \
     fit/brdf/samples.c
 FIT_MATERIAL_SRC := \
     fit/material/material.c \
     fit/material/export.c
 FIT_VERIFY_SRC := \
     fit/verify/verify.c \
+    fit/verify/views.c \
+    fit/verify/interreflection.c \
+    fit/verify/residuals.c \
+    fit/verify/windows.c \
+    fit/verify/points.c \
+    fit/verify/covariance.c \
+    fit/verify/regions.c \
+    fit/verify/result_json.c \
+    fit/verify/selfcheck.c \
     fit/verify/footprint.c \
     fit/verify/files.c \
     fit/verify/register.c
@@ -177,7 +189,8 @@ FIT_SRC := $(FIT_BRDF_SRC) $(FIT_MATERIAL_SRC) $(FIT_VERIFY_SRC) $(FIT_LIGHTPLAN
     fit/cmd_fit.c \
     fit/cmd_export.c \
     fit/cmd_plan.c \
-    fit/cmd_verify.c
+    fit/cmd_verify.c \
+    fit/priors.c
 LIB_SRC   := $(MODEL_SRC) $(RIG_SRC) $(CALIB_SRC) $(FIT_SRC)
 
 MAIN_SRC  := fit/main.c

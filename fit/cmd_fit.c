@@ -12,6 +12,7 @@
 #include "calib/calib.h"
 #include "fit/brdf/brdf.h"
 #include "fit/material/material.h"
+#include "fit/priors.h"
 #include "model/model.h"
 #include "model/base/opts.h"
 #include "model/base/report.h"
@@ -74,29 +75,43 @@ static held_out_t held_out(const fit_brdf_result_t *r)
 // ---------------------------------------------------------------------------
 // refl fit brdf
 
-static int cmd_brdf(int argc, char **argv)
+// The arguments of refl fit brdf, parsed and converted.
+typedef struct {
+    const char        *out, *model, *name, *weights, *channel, *loss, *file;
+    double             k_sigma, sys_rel;
+    model_brdf_t       models[MODEL_BRDF_COUNT];
+    int                nmodels;
+    fit_read_opts_t    ro;
+    model_channel_t    ch;
+    fit_brdf_options_t o;
+} brdf_args_t;
+
+// Parse refl fit brdf's arguments into *a: MODEL_CLI_OK, or the exit status
+// (help, a usage error said).
+static int brdf_parse(int argc, char **argv, brdf_args_t *a)
 {
-    const char *out = NULL, *model = "all", *name = NULL, *weights = "solid-angle", *channel = "luma", *loss = "l2";
-    double k_sigma = 3, noise = 0, sys_rel = 0, loss_scale = 2;
+    *a = (brdf_args_t){ .model = "all", .weights = "solid-angle", .channel = "luma", .loss = "l2", .k_sigma = 3,
+                        .ro = fit_read_defaults(), .o = fit_brdf_defaults() };
+    a->o.loss_scale = 2;
     model_opt_t opts[] = {
-        MODEL_OPT_STRING("-o", "PRIORS.json", "the priors file to write", &out, true),
-        MODEL_OPT_STRING("--model", "M", MODEL_NAMES " (default all: chosen by cross-validation)", &model, false),
+        MODEL_OPT_STRING("-o", "PRIORS.json", "the priors file to write", &a->out, true),
+        MODEL_OPT_STRING("--model", "M", MODEL_NAMES " (default all: chosen by cross-validation)", &a->model, false),
         MODEL_OPT_VALUE("--cv-folds", "K", "folds of the model choice's cross-validation (default 5; 0: lowest BIC)",
                         false),
         MODEL_OPT_VALUE("--cv-seed", "N", "seed of the folds' shuffle (default 1)", false),
-        MODEL_OPT_STRING("--name", "MATERIAL", "the material's name (default: the file's base name)", &name, false),
+        MODEL_OPT_STRING("--name", "MATERIAL", "the material's name (default: the file's base name)", &a->name, false),
         MODEL_OPT_VALUE("--k-sigma", "K", "prior bounds mean +- K std (default 3)", false),
         MODEL_OPT_VALUE("--noise-sigma", "S", "known std of R, 1/sr (default 0: from the residuals)", false),
         MODEL_OPT_VALUE("--systematic", "REL", "std adds REL * mean for errors the samples share (default 0)", false),
         MODEL_OPT_STRING("--weights", "solid-angle|uniform|column", "each sample's weight on its squared residual: "
                          "the solid angle it stands for in (omega_i, omega_o) (default), 1, or the CSV's 6th field",
-                         &weights, false),
+                         &a->weights, false),
         MODEL_OPT_STRING("--channel", "luma|r|g|b", "MERL and RGL colour: Rec. 709 luma (0.2126 R + 0.7152 G + "
-                         "0.0722 B; default; spectral RGL: CIE Y) or one channel", &channel, false),
+                         "0.0722 B; default; spectral RGL: CIE Y) or one channel", &a->channel, false),
         MODEL_OPT_STRING("--loss", "l2|huber|cauchy", "least squares (default) or a robust loss on each sample's "
-                         "weighted residual", &loss, false),
+                         "weighted residual", &a->loss, false),
         MODEL_OPT_DOUBLE("--loss-scale", "S", "where the robust loss starts, in units of the residuals' robust std "
-                         "(1.4826 median |r| of a least-squares fit; default 2)", &loss_scale, 0.01, 1e6),
+                         "(1.4826 median |r| of a least-squares fit; default 2)", &a->o.loss_scale, 0.01, 1e6),
     };
     model_cli_t cli = {
         .cmd = "fit brdf", .synopsis = "FILE", .opts = opts, .nopts = MODEL_NOPTS(opts),
@@ -119,24 +134,28 @@ static int cmd_brdf(int argc, char **argv)
     };
     int rc = model_cli_parse(&cli, argc, argv);
     if (rc != MODEL_CLI_OK) return rc;
-    if (number_opt(&cli, "--k-sigma", false, &k_sigma) || number_opt(&cli, "--systematic", true, &sys_rel) ||
-        number_opt(&cli, "--noise-sigma", true, &noise))
+    if (number_opt(&cli, "--k-sigma", false, &a->k_sigma) || number_opt(&cli, "--systematic", true, &a->sys_rel) ||
+        number_opt(&cli, "--noise-sigma", true, &a->o.noise_sigma))
         return MODEL_CLI_USAGE;
-    model_brdf_t models[MODEL_BRDF_COUNT];
-    int nm = 0;
-    if (!fit_brdf_model_list(model, models, &nm)) return model_cli_error(&cli, "--model: unknown model %s", model);
-    fit_read_opts_t ro = fit_read_defaults();
-    model_channel_t ch;
-    if (!fit_weights_parse(weights, &ro.weights))
-        return model_cli_error(&cli, "--weights: solid-angle, uniform or column, not '%s'", weights);
-    if (!model_channel_parse(channel, &ch)) return model_cli_error(&cli, "--channel: luma, r, g or b, not '%s'", channel);
-    ro.channel = (int)ch;
-    const char *file = cli.positional[0];
-    bool quiet = model_error_quiet_thread(true);   // reported once, below
-    fit_samples_t *s = fit_samples_load(file, &ro);
-    model_error_quiet_thread(quiet);
-    if (!s) return model_error_report("fit brdf");
-    fprintf(stderr, "refl fit brdf: %d samples from %s (%s, weights %s", s->n, file, model_channel_name(ch), weights);
+    if (!fit_brdf_model_list(a->model, a->models, &a->nmodels))
+        return model_cli_error(&cli, "--model: unknown model %s", a->model);
+    if (!fit_weights_parse(a->weights, &a->ro.weights))
+        return model_cli_error(&cli, "--weights: solid-angle, uniform or column, not '%s'", a->weights);
+    if (!model_channel_parse(a->channel, &a->ch))
+        return model_cli_error(&cli, "--channel: luma, r, g or b, not '%s'", a->channel);
+    a->ro.channel = (int)a->ch;
+    if (!fit_loss_parse(a->loss, &a->o.loss))
+        return model_cli_error(&cli, "--loss: l2, huber or cauchy, not '%s'", a->loss);
+    if (cv_opts(&cli, &a->o.cv_folds, &a->o.cv_seed)) return MODEL_CLI_USAGE;
+    a->file = cli.positional[0];
+    return MODEL_CLI_OK;
+}
+
+// What was read: the samples, their weights, the negative f_r kept (stderr).
+static void brdf_print_samples(const brdf_args_t *a, const fit_samples_t *s)
+{
+    fprintf(stderr, "refl fit brdf: %d samples from %s (%s, weights %s", s->n, a->file, model_channel_name(a->ch),
+            a->weights);
     if (s->omega_sr2 > 0)
         fprintf(stderr, " by %s: %.4g sr^2, %.1f %% of (2 pi)^2", s->omega_how ? s->omega_how : "?", s->omega_sr2,
                 100 * s->omega_sr2 / (4 * M_PI * M_PI));
@@ -151,18 +170,11 @@ static int cmd_brdf(int argc, char **argv)
         fprintf(stderr, "refl fit brdf: %d samples with f_r < 0 kept as measurements (down to %.3g 1/sr; the largest "
                 "f_r %.3g)\n", s->n_negative, lo, hi);
     }
-    fit_brdf_options_t o = fit_brdf_defaults();
-    o.noise_sigma = noise;
-    if (!fit_loss_parse(loss, &o.loss)) return model_cli_error(&cli, "--loss: l2, huber or cauchy, not '%s'", loss);
-    o.loss_scale = loss_scale;
-    if (cv_opts(&cli, &o.cv_folds, &o.cv_seed)) {
-        fit_samples_free(s);
-        return MODEL_CLI_USAGE;
-    }
-    fit_brdf_models_t *fm = malloc(sizeof *fm);
-    rc = 1;
-    if (!fm) goto done;
-    fit_brdf_models(s, models, nm, &o, fm);
+}
+
+// One line per model tried (stderr).
+static void brdf_print_models(const fit_brdf_models_t *fm)
+{
     for (int t = 0; t < fm->ntried; t++) {
         const fit_brdf_result_t *r = fm->at[t] >= 0 ? &fm->res[fm->at[t]] : NULL;
         if (!r)
@@ -172,24 +184,20 @@ static int cmd_brdf(int argc, char **argv)
                     r->rms, held_out(r).s, r->bic, r->summary.iterations, fm->time_s[t],
                     r->cov_ok ? "" : "  covariance: not available");
     }
-    if (fm->best < 0) {
-        fprintf(stderr, "refl fit brdf: no model could be fitted to %s\n", file);
-        goto done;
-    }
-    char base[256];
-    base_name(file, base, sizeof base);
-    const char *mat = name ? name : base;
-    const fit_brdf_result_t *best = &fm->res[fm->best];
-    json_t *top = json_object();
-    json_object_set_new(top, "format", json_string("refl priors 1"));
-    json_object_set_new(top, "units", json_string("R = f_r cos(theta_i) in 1/sr; parameter units per parameter"));
+}
+
+// The priors document of the chosen model of material mat (fit_priors_document).
+static json_t *brdf_priors(const brdf_args_t *a, const char *mat, const fit_samples_t *s, const fit_brdf_models_t *fm,
+                           int argc, char **argv)
+{
+    json_t *top = fit_priors_document();
     json_t *mats = json_array();
-    json_t *entry = fit_priors_material(mat, best, fm->res, fm->nres, k_sigma, sys_rel);
+    json_t *entry = fit_priors_material(mat, &fm->res[fm->best], fm->res, fm->nres, a->k_sigma, a->sys_rel);
     json_t *src = json_object();
-    json_object_set_new(src, "path", json_string(file));
+    json_object_set_new(src, "path", json_string(a->file));
     json_object_set_new(src, "sha256", json_string(s->sha256));
-    json_object_set_new(src, "channel", json_string(model_channel_name(ch)));
-    json_object_set_new(src, "weights", json_string(weights));
+    json_object_set_new(src, "channel", json_string(model_channel_name(a->ch)));
+    json_object_set_new(src, "weights", json_string(a->weights));
     if (s->omega_sr2 > 0) {
         json_object_set_new(src, "solid_angle_sr2", json_real(s->omega_sr2));
         json_object_set_new(src, "solid_angle_by", json_string(s->omega_how ? s->omega_how : ""));
@@ -200,17 +208,53 @@ static int cmd_brdf(int argc, char **argv)
     json_array_append_new(mats, entry);
     json_object_set_new(top, "materials", mats);
     json_t *prov = model_provenance(argc + 1, argv - 1);
-    model_provenance_input(prov, "brdf_samples", file);
+    model_provenance_input(prov, "brdf_samples", a->file);
     json_object_set_new(top, "provenance", prov);
-    if (model_write_json(out, top)) {
-        char how[160];
-        if (fm->nres < 2) snprintf(how, sizeof how, "the only model fitted");
-        else snprintf(how, sizeof how, "%s of %d; lowest BIC: %s", fm->by_cv ? "cross-validated" : "lowest BIC",
-                      fm->nres, model_brdf_name(fm->res[fm->best_bic].model));
-        printf("%s: %s, model %s (%s), rms %.4g 1/sr", out, mat, model_brdf_name(best->model), how, best->rms);
-        if (fm->by_cv) printf(", held-out rms %.4g 1/sr (%s)\n", best->cv_rms, fm->cv_note);
-        else if (fm->nres > 1) printf("\n  model choice: %s\n", fm->cv_note);
-        else printf("\n");
+    return top;
+}
+
+// The line of the written priors: the material, the model and how it was chosen.
+static void brdf_print_result(const brdf_args_t *a, const char *mat, const fit_brdf_models_t *fm)
+{
+    const fit_brdf_result_t *best = &fm->res[fm->best];
+    char how[160];
+    if (fm->nres < 2) snprintf(how, sizeof how, "the only model fitted");
+    else snprintf(how, sizeof how, "%s of %d; lowest BIC: %s", fm->by_cv ? "cross-validated" : "lowest BIC",
+                  fm->nres, model_brdf_name(fm->res[fm->best_bic].model));
+    printf("%s: %s, model %s (%s), rms %.4g 1/sr", a->out, mat, model_brdf_name(best->model), how, best->rms);
+    if (fm->by_cv) printf(", held-out rms %.4g 1/sr (%s)\n", best->cv_rms, fm->cv_note);
+    else if (fm->nres > 1) printf("\n  model choice: %s\n", fm->cv_note);
+    else printf("\n");
+}
+
+static int cmd_brdf(int argc, char **argv)
+{
+    brdf_args_t a;
+    int rc = brdf_parse(argc, argv, &a);
+    if (rc != MODEL_CLI_OK) return rc;
+    bool quiet = model_error_quiet_thread(true);   // reported once, below
+    fit_samples_t *s = fit_samples_load(a.file, &a.ro);
+    model_error_quiet_thread(quiet);
+    if (!s) return model_error_report("fit brdf");
+    brdf_print_samples(&a, s);
+    fit_brdf_models_t *fm = malloc(sizeof *fm);
+    rc = 1;
+    if (!fm) {
+        fprintf(stderr, "refl fit brdf: out of memory\n");
+        goto done;
+    }
+    fit_brdf_models(s, a.models, a.nmodels, &a.o, fm);
+    brdf_print_models(fm);
+    if (fm->best < 0) {
+        fprintf(stderr, "refl fit brdf: no model could be fitted to %s\n", a.file);
+        goto done;
+    }
+    char base[256];
+    base_name(a.file, base, sizeof base);
+    const char *mat = a.name ? a.name : base;
+    json_t *top = brdf_priors(&a, mat, s, fm, argc, argv);
+    if (model_write_json(a.out, top)) {
+        brdf_print_result(&a, mat, fm);
         rc = 0;
     }
     json_decref(top);

@@ -42,6 +42,10 @@ static const char epilog[] =
 static int parse_fix(model_cli_t *cli, const char *list, verify_options_t *opt)
 {
     char *dup = strdup(list), *save = NULL;
+    if (!dup) {
+        fprintf(stderr, "refl verify: out of memory\n");
+        return 1;
+    }
     int rc = MODEL_CLI_OK;
     for (char *t = strtok_r(dup, ",", &save); t && rc == MODEL_CLI_OK; t = strtok_r(NULL, ",", &save)) {
         if (!strcmp(t, "lamps")) opt->fix_lamps = true;
@@ -160,169 +164,203 @@ static void print_result(const verify_files_opts_t *o, const verify_files_result
            res->score, o->opt.score_threshold);
 }
 
+// refl verify's arguments, as parsed.
+typedef struct {
+    verify_files_opts_t o;
+    const char         *fixed, *truth, *shard, *configs;
+    bool                no_report, fail_on_incorrect, do_study, do_merge;
+    int                 cases;
+    model_opt_list_t    images, priors, cameras, gains;
+} verify_args_t;
+
+// After parsing: the lists' counts, the flags that turn defaults off, the
+// checks every mode shares. MODEL_CLI_OK or the exit status (usage said).
+static int verify_settle(model_cli_t *cli, verify_args_t *a)
+{
+    verify_files_opts_t *o = &a->o;
+    verify_options_t *op = &o->opt;
+    int rc;
+    if ((rc = model_cli_units(cli, &o->scene_unit_mm)) || (rc = model_cli_channel(cli))) return rc;
+    o->nimages = a->images.n;
+    o->npriors = a->priors.n;
+    o->ncameras = a->cameras.n;
+    o->ngain = a->gains.n;
+    // the flags that turn defaults off
+    op->use_priors = !model_cli_opt(cli, "--no-priors")->given;
+    op->use_flat = !model_cli_opt(cli, "--no-gain-maps")->given;
+    op->edge_windows = !model_cli_opt(cli, "--skip-edge-windows")->given;
+    op->model_rel_given = model_cli_opt(cli, "--model-rel")->given;
+    o->have_angle = model_cli_opt(cli, "--angle-deg")->given;
+    o->have_exposure = model_cli_opt(cli, "--exposure-us")->given;
+    o->have_gain = model_cli_opt(cli, "--gain-db")->given;
+    o->scene = cli->npositional ? cli->positional[0] : NULL;
+    if (op->window_px % 2 == 0) return model_cli_error(cli, "--window-px must be odd");
+    if (!o->out) return model_cli_error(cli, "missing -o DIR");
+    return MODEL_CLI_OK;
+}
+
+// --study: the study's options from the arguments, then the study.
+static int verify_study_cmd(model_cli_t *cli, verify_args_t *a, int argc, char **argv)
+{
+    const verify_files_opts_t *o = &a->o;
+    verify_study_opts_t so = { .out = o->out, .cases = a->cases, .opt = o->opt, .calib = o->calib,
+                               .priors = (const char *const *)o->priors, .npriors = o->npriors,
+                               .configs = a->configs };
+    // the study registers only when asked (each case's descriptions then get their own views: slower)
+    if (model_cli_opt(cli, "--placement-tolerance-mm")->given || model_cli_opt(cli, "--placement-tolerance-deg")->given) {
+        so.placement_tol_mm = o->placement_tol_mm;
+        so.placement_tol_deg = o->placement_tol_deg;
+    }
+    if (cli->npositional) return model_cli_error(cli, "--study takes no SCENE (its scenes are the truth's)");
+    int rc;
+    if (a->shard && (rc = parse_shard(cli, a->shard, &so.shard_k, &so.shard_n)) != MODEL_CLI_OK) return rc;
+    if (so.shard_n > a->cases)
+        return model_cli_error(cli, "--shard %s: more shards than the %d cases", a->shard, a->cases);
+    return study(&so, a->truth, a->no_report, argc, argv);
+}
+
+// The verification of SCENE against the images: the checks, the run, the
+// printed table and the report. The exit status.
+static int verify_files_cmd(model_cli_t *cli, verify_args_t *a, int argc, char **argv)
+{
+    verify_files_opts_t *o = &a->o;
+    int rc;
+    if (!o->scene) return model_cli_error(cli, "missing SCENE");
+    if (cli->npositional > 1) return model_cli_error(cli, "one SCENE, not %d", cli->npositional);
+    if (!o->nimages) return model_cli_error(cli, "missing --images IMG...");
+    if (!o->npriors) return model_cli_error(cli, "missing --priors PRIORS.json");
+    if (!o->calib && !o->ncameras) return model_cli_error(cli, "missing --cameras (or --calib DIR)");
+    if (!o->calib && !o->lamps) return model_cli_error(cli, "missing --lamps (or --calib DIR)");
+    if (o->ncameras > 1 && o->ncameras != o->nimages)
+        return model_cli_error(cli, "%d cameras for %d images: give one camera, or one per image", o->ncameras,
+                               o->nimages);
+    if (a->fixed && (rc = parse_fix(cli, a->fixed, &o->opt)) != MODEL_CLI_OK) return rc;
+
+    o->provenance = model_provenance(argc, argv);
+    verify_files_result_t r;
+    int exit_code = 1;
+    if (verify_files_run(o, &r)) {
+        print_result(o, &r);
+        exit_code = a->fail_on_incorrect && !r.fit.correct ? 3 : 0;
+        if (!a->no_report) {
+            if (model_run_script("verify_report.py", o->out, NULL) != 0) {
+                fprintf(stderr, "refl verify: the report failed (the JSON, CSV and TIFF outputs are written)\n");
+                exit_code = 1;
+            } else {
+                printf("report: %s/index.html\n", o->out);
+            }
+        }
+    }
+    verify_files_result_free(&r);
+    json_decref(o->provenance);
+    return exit_code;
+}
+
 int verify_cmd(int argc, char **argv)
 {
     // the placement tolerance of a part laid on the turntable by hand against a stop (README: refl verify)
-    verify_files_opts_t o = { .opt = verify_defaults(), .placement_tol_mm = 3, .placement_tol_deg = 2,
-                              .psf_sigma_px = NAN, .pixel_fill = NAN };
-    verify_options_t *op = &o.opt;
-    const char *fixed = NULL, *truth = NULL, *shard = NULL, *configs = NULL;
-    bool no_report = false, fail_on_incorrect = false, do_study = false, do_merge = false;
-    int cases = 200;
-    model_opt_list_t images = { o.images, 0, VERIFY_FILES_MAX }, priors = { o.priors, 0, VERIFY_FILES_MAX },
-                     cameras = { o.cameras, 0, VERIFY_FILES_MAX }, gains = { o.gain, 0, VERIFY_FILES_MAX };
+    verify_args_t a = { .o = { .opt = verify_defaults(), .placement_tol_mm = 3, .placement_tol_deg = 2,
+                               .psf_sigma_px = NAN, .pixel_fill = NAN },
+                        .cases = 200 };
+    a.images = (model_opt_list_t){ a.o.images, 0, VERIFY_FILES_MAX };
+    a.priors = (model_opt_list_t){ a.o.priors, 0, VERIFY_FILES_MAX };
+    a.cameras = (model_opt_list_t){ a.o.cameras, 0, VERIFY_FILES_MAX };
+    a.gains = (model_opt_list_t){ a.o.gain, 0, VERIFY_FILES_MAX };
     model_opt_t opts[] = {
         MODEL_OPT_LIST("--images", "IMG...", "16-bit PNG frames of refl capture / refl rig snap (angle, lamps, "
-                       "exposure and gain from their text chunks), or float TIFFs (give the options below)", &images,
+                       "exposure and gain from their text chunks), or float TIFFs (give the options below)", &a.images,
                        true, false),
         MODEL_OPT_LIST("--priors", "FILE...", "priors files of refl fit material / refl fit brdf (every material "
-                       "of SCENE)", &priors, true, false),
-        { "-o", "--out", "DIR", "the output directory", MODEL_OPT_KIND_STRING, &o.out, 0, 0, false, false, NULL },
+                       "of SCENE)", &a.priors, true, false),
+        { "-o", "--out", "DIR", "the output directory", MODEL_OPT_KIND_STRING, &a.o.out, 0, 0, false, false, NULL },
         MODEL_OPT_STRING("--calib", "DIR", "a calibration directory: camera.cameramodel, lamps.json, gain.json + "
                          "maps, white.json (or in geometry/ lamps/ gain/ white/); the options below override",
-                         &o.calib, false),
+                         &a.o.calib, false),
         MODEL_OPT_LIST("--cameras", "CAM...", "camera models (mrcal, extrinsics in the rig frame): one, or one per "
-                       "image", &cameras, true, false),
+                       "image", &a.cameras, true, false),
         MODEL_OPT_STRING("--lamps", "FILE", "lamps.json of refl calib lamps, or a lamps INI ([lamp NAME] "
-                         "position_mm, intensity: then kc*I = X * intensity with --kc-per-us X)", &o.lamps, false),
+                         "position_mm, intensity: then kc*I = X * intensity with --kc-per-us X)", &a.o.lamps, false),
         MODEL_OPT_LIST("--gain-calib", "DIR...", "gain calibrations (gain.json, offset_dn.tiff, prnu_gain.tiff): "
-                       "one per camera", &gains, true, false),
+                       "one per camera", &a.gains, true, false),
         MODEL_OPT_STRING("--white", "FILE", "white.json of refl calib white: kc*I per lamp per us at 0 dB",
-                         &o.white, false),
+                         &a.o.white, false),
         MODEL_OPT_DOUBLE("--kc-per-us", "X", "without a white calibration: kc per us of exposure (lamps INI "
-                         "intensities)", &o.kc_per_us, 1e-300, 1e300),
-        MODEL_OPT_DOUBLE("--angle-deg", "A", "turntable angle of every image (over the metadata)", &o.angle_deg,
+                         "intensities)", &a.o.kc_per_us, 1e-300, 1e300),
+        MODEL_OPT_DOUBLE("--angle-deg", "A", "turntable angle of every image (over the metadata)", &a.o.angle_deg,
                          -1e4, 1e4),
-        MODEL_OPT_STRING("--lamps-on", "NAMES", "lamps on in every image (east+west, all)", &o.lamps_on, false),
-        MODEL_OPT_DOUBLE("--exposure-us", "T", "exposure of every image", &o.exposure_us, 1e-3, 1e9),
+        MODEL_OPT_STRING("--lamps-on", "NAMES", "lamps on in every image (east+west, all)", &a.o.lamps_on, false),
+        MODEL_OPT_DOUBLE("--exposure-us", "T", "exposure of every image", &a.o.exposure_us, 1e-3, 1e9),
         MODEL_OPT_DOUBLE("--gain-db", "G", "gain of every image, dB (taken relative to the gain calibration's)",
-                         &o.gain_db, 0, 60),
+                         &a.o.gain_db, 0, 60),
         MODEL_OPT_UNITS,
         MODEL_OPT_CHANNEL,
         MODEL_OPT_DOUBLE("--placement-tolerance-mm", "D", "the part's placement is registered to the images "
                          "within +-D mm in x and y before the fit (3; 0 with --placement-tolerance-deg 0: as "
-                         "described)", &o.placement_tol_mm, 0, 50),
+                         "described)", &a.o.placement_tol_mm, 0, 50),
         MODEL_OPT_DOUBLE("--placement-tolerance-deg", "A", "and within +-A deg about the part's centre (2)",
-                         &o.placement_tol_deg, 0, 30),
-        MODEL_OPT_INT("--spacing-px", "N", "grid step of the reference points (8)", &op->spacing_px, 1, 1000),
-        MODEL_OPT_INT("--window-px", "N", "window side, odd (5)", &op->window_px, 1, 99),
+                         &a.o.placement_tol_deg, 0, 30),
+        MODEL_OPT_INT("--spacing-px", "N", "grid step of the reference points (8)", &a.o.opt.spacing_px, 1, 1000),
+        MODEL_OPT_INT("--window-px", "N", "window side, odd (5)", &a.o.opt.window_px, 1, 99),
         MODEL_OPT_DOUBLE("--edge-margin-px", "D", "skip windows this close to predicted edges (2)",
-                         &op->edge_margin_px, 0, 100),
+                         &a.o.opt.edge_margin_px, 0, 100),
         MODEL_OPT_DOUBLE("--boundary-margin-px", "D", "and face/shadow changes this far beyond the window (4)",
-                         &op->boundary_margin_px, 0, 100),
-        MODEL_OPT_DOUBLE("--edge-k", "K", "window std > sqrt(K^2 var_noise + (R S)^2): an edge (3)", &op->edge_k,
+                         &a.o.opt.boundary_margin_px, 0, 100),
+        MODEL_OPT_DOUBLE("--edge-k", "K", "window std > sqrt(K^2 var_noise + (R S)^2): an edge (3)", &a.o.opt.edge_k,
                          0.1, 1e6),
-        MODEL_OPT_DOUBLE("--edge-rel", "R", "(0.05)", &op->edge_rel, 0, 10),
+        MODEL_OPT_DOUBLE("--edge-rel", "R", "(0.05)", &a.o.opt.edge_rel, 0, 10),
         MODEL_OPT_FLAG("--skip-edge-windows", NULL, "skip the windows near edges (default: modelled with the "
                        "pixels' footprint and the blur)", NULL),
         MODEL_OPT_INT("--edge-subsamples", "N", "sub-cells per px side of a window's cells that see two faces "
-                      "(5; odd)", &op->edge_subsamples, 1, 15),
+                      "(5; odd)", &a.o.opt.edge_subsamples, 1, 15),
         MODEL_OPT_DOUBLE("--edge-position-sigma-px", "S", "1-sigma of where an edge lies in the image (0.1 px)",
-                         &op->edge_position_sigma_px, 0, 100),
+                         &a.o.opt.edge_position_sigma_px, 0, 100),
         MODEL_OPT_DOUBLE("--psf-sigma-px", "S", "the optics' blur, a Gaussian's sigma in px (default: the "
-                         "calibration's, else 0)", &o.psf_sigma_px, 0, 10),
+                         "calibration's, else 0)", &a.o.psf_sigma_px, 0, 10),
         MODEL_OPT_DOUBLE("--pixel-fill", "F", "the pixel's footprint, a square of F px (default: the "
-                         "calibration's, else 1: the whole pixel)", &o.pixel_fill, 0, 1),
-        MODEL_OPT_INT("--interreflection-samples", "N", "(64; 0 none)", &op->ir_samples, 0, 1024),
+                         "calibration's, else 1: the whole pixel)", &a.o.pixel_fill, 0, 1),
+        MODEL_OPT_INT("--interreflection-samples", "N", "(64; 0 none)", &a.o.opt.ir_samples, 0, 1024),
         MODEL_OPT_DOUBLE("--model-rel", "R", "relative model error of every window, over the priors' "
-                         "window_rel_std (default: the priors', else 0.04)", &op->model_rel, 0, 10),
+                         "window_rel_std (default: the priors', else 0.04)", &a.o.opt.model_rel, 0, 10),
         MODEL_OPT_DOUBLE("--robust-scale", "Z", "Cauchy loss scale in z (3; 0 plain least squares)",
-                         &op->robust_scale, 0, 1e6),
-        MODEL_OPT_DOUBLE("--lamp-sigma", "S", "prior std of the lamps' intensities (0.1)", &op->lamp_sigma, 1e-6,
+                         &a.o.opt.robust_scale, 0, 1e6),
+        MODEL_OPT_DOUBLE("--lamp-sigma", "S", "prior std of the lamps' intensities (0.1)", &a.o.opt.lamp_sigma, 1e-6,
                          10),
-        MODEL_OPT_DOUBLE("--camera-sigma", "S", "prior std of the cameras' sensitivities (0.1)", &op->camera_sigma,
+        MODEL_OPT_DOUBLE("--camera-sigma", "S", "prior std of the cameras' sensitivities (0.1)", &a.o.opt.camera_sigma,
                          1e-6, 10),
         MODEL_OPT_DOUBLE("--pa-sigma-dn", "S", "prior std of the offset left after the offset map (5: ambient "
-                         "light)", &op->pa_sigma_dn, 1e-6, 1e6),
-        MODEL_OPT_DOUBLE("--z-flag", "Z", "(4)", &op->z_flag, 0.1, 1e6),
-        MODEL_OPT_INT("--min-region", "N", "(3)", &op->min_region, 1, 1000000),
-        MODEL_OPT_DOUBLE("--score-threshold", "T", "(400)", &op->score_threshold, 0, 1e300),
+                         "light)", &a.o.opt.pa_sigma_dn, 1e-6, 1e6),
+        MODEL_OPT_DOUBLE("--z-flag", "Z", "(4)", &a.o.opt.z_flag, 0.1, 1e6),
+        MODEL_OPT_INT("--min-region", "N", "(3)", &a.o.opt.min_region, 1, 1000000),
+        MODEL_OPT_DOUBLE("--score-threshold", "T", "(400)", &a.o.opt.score_threshold, 0, 1e300),
         MODEL_OPT_FLAG("--no-priors", NULL, "the thesis's fit: physical bounds only, lamps fixed, kc free",
                        NULL),
         MODEL_OPT_FLAG("--no-gain-maps", NULL, "ignore the offset maps and flat fields", NULL),
         MODEL_OPT_STRING("--fix", "NAMES", "hold parameters: comma list of lamps, cameras, offset, rho, materials",
-                         &fixed, false),
-        MODEL_OPT_INT("--threads", "N", "worker threads (0: REFL_THREADS or all)", &op->threads, 0, 1024),
-        MODEL_OPT_FLAG("--verbose", NULL, "the solver's progress", &op->verbose),
-        MODEL_OPT_FLAG("--no-report", NULL, "no index.html", &no_report),
-        MODEL_OPT_FLAG("--fail-on-incorrect", NULL, "exit 3 when the verdict is incorrect", &fail_on_incorrect),
-        MODEL_OPT_FLAG("--study", NULL, "the detection study on the virtual rig (no SCENE)", &do_study),
+                         &a.fixed, false),
+        MODEL_OPT_INT("--threads", "N", "worker threads (0: REFL_THREADS or all)", &a.o.opt.threads, 0, 1024),
+        MODEL_OPT_FLAG("--verbose", NULL, "the solver's progress", &a.o.opt.verbose),
+        MODEL_OPT_FLAG("--no-report", NULL, "no index.html", &a.no_report),
+        MODEL_OPT_FLAG("--fail-on-incorrect", NULL, "exit 3 when the verdict is incorrect", &a.fail_on_incorrect),
+        MODEL_OPT_FLAG("--study", NULL, "the detection study on the virtual rig (no SCENE)", &a.do_study),
         MODEL_OPT_STRING("--truth", "TRUTH.ini", "--study: the virtual rig's truth (default "
-                         "examples/virtual-truth.ini)", &truth, false),
-        MODEL_OPT_INT("--cases", "N", "--study: cases per condition (200)", &cases, 1, 100000),
+                         "examples/virtual-truth.ini)", &a.truth, false),
+        MODEL_OPT_INT("--cases", "N", "--study: cases per condition (200)", &a.cases, 1, 100000),
         MODEL_OPT_STRING("--shard", "K/N", "--study: run the K-th of N disjoint slices of the cases (the cases c "
-                         "with c mod N = K - 1, each with its own seeds as in the whole study)", &shard, false),
+                         "with c mod N = K - 1, each with its own seeds as in the whole study)", &a.shard, false),
         MODEL_OPT_STRING("--configs", "NAMES", "--study: the configurations, comma-separated (priors+maps, "
-                         "priors, no-priors+maps, no-priors; default all)", &configs, false),
+                         "priors, no-priors+maps, no-priors; default all)", &a.configs, false),
         MODEL_OPT_FLAG("--study-merge", NULL, "merge the output directories DIR... of a study's shards into -o OUT "
-                       "(equal to the unsharded run)", &do_merge),
+                       "(equal to the unsharded run)", &a.do_merge),
     };
     model_cli_t cli = { .cmd = "verify", .synopsis = "SCENE", .about = about, .epilog = epilog, .opts = opts,
                         .nopts = MODEL_NOPTS(opts), .min_positional = 0, .max_positional = MODEL_CLI_POSITIONAL_MAX, .repeat_ok = true };
     int rc = model_cli_parse(&cli, argc, argv);
     if (rc != MODEL_CLI_OK) return rc;
-    if ((rc = model_cli_units(&cli, &o.scene_unit_mm)) || (rc = model_cli_channel(&cli))) return rc;
-    o.nimages = images.n;
-    o.npriors = priors.n;
-    o.ncameras = cameras.n;
-    o.ngain = gains.n;
-    // the flags that turn defaults off
-    op->use_priors = !model_cli_opt(&cli, "--no-priors")->given;
-    op->use_flat = !model_cli_opt(&cli, "--no-gain-maps")->given;
-    op->edge_windows = !model_cli_opt(&cli, "--skip-edge-windows")->given;
-    op->model_rel_given = model_cli_opt(&cli, "--model-rel")->given;
-    o.have_angle = model_cli_opt(&cli, "--angle-deg")->given;
-    o.have_exposure = model_cli_opt(&cli, "--exposure-us")->given;
-    o.have_gain = model_cli_opt(&cli, "--gain-db")->given;
-    o.scene = cli.npositional ? cli.positional[0] : NULL;
-    if (op->window_px % 2 == 0) return model_cli_error(&cli, "--window-px must be odd");
-    if (!o.out) return model_cli_error(&cli, "missing -o DIR");
-    if (do_merge) {
+    if ((rc = verify_settle(&cli, &a)) != MODEL_CLI_OK) return rc;
+    if (a.do_merge) {
         if (!cli.npositional) return model_cli_error(&cli, "--study-merge: give the shards' directories DIR...");
-        return study_merge((const char *const *)cli.positional, cli.npositional, o.out, no_report, argc, argv);
+        return study_merge((const char *const *)cli.positional, cli.npositional, a.o.out, a.no_report, argc, argv);
     }
-    if (do_study) {
-        verify_study_opts_t so = { .out = o.out, .cases = cases, .opt = *op, .calib = o.calib,
-                                   .priors = (const char *const *)o.priors, .npriors = o.npriors,
-                                   .configs = configs };
-        // the study registers only when asked (each case's descriptions then get their own views: slower)
-        if (model_cli_opt(&cli, "--placement-tolerance-mm")->given || model_cli_opt(&cli, "--placement-tolerance-deg")->given) {
-            so.placement_tol_mm = o.placement_tol_mm;
-            so.placement_tol_deg = o.placement_tol_deg;
-        }
-        if (cli.npositional) return model_cli_error(&cli, "--study takes no SCENE (its scenes are the truth's)");
-        if (shard && (rc = parse_shard(&cli, shard, &so.shard_k, &so.shard_n)) != MODEL_CLI_OK) return rc;
-        if (so.shard_n > cases)
-            return model_cli_error(&cli, "--shard %s: more shards than the %d cases", shard, cases);
-        return study(&so, truth, no_report, argc, argv);
-    }
-    if (!o.scene) return model_cli_error(&cli, "missing SCENE");
-    if (cli.npositional > 1) return model_cli_error(&cli, "one SCENE, not %d", cli.npositional);
-    if (!o.nimages) return model_cli_error(&cli, "missing --images IMG...");
-    if (!o.npriors) return model_cli_error(&cli, "missing --priors PRIORS.json");
-    if (!o.calib && !o.ncameras) return model_cli_error(&cli, "missing --cameras (or --calib DIR)");
-    if (!o.calib && !o.lamps) return model_cli_error(&cli, "missing --lamps (or --calib DIR)");
-    if (o.ncameras > 1 && o.ncameras != o.nimages)
-        return model_cli_error(&cli, "%d cameras for %d images: give one camera, or one per image", o.ncameras,
-                               o.nimages);
-    if (fixed && (rc = parse_fix(&cli, fixed, op)) != MODEL_CLI_OK) return rc;
-
-    o.provenance = model_provenance(argc, argv);
-    verify_files_result_t r;
-    int exit_code = 1;
-    if (verify_files_run(&o, &r)) {
-        print_result(&o, &r);
-        exit_code = fail_on_incorrect && !r.fit.correct ? 3 : 0;
-        if (!no_report) {
-            if (model_run_script("verify_report.py", o.out, NULL) != 0) {
-                fprintf(stderr, "refl verify: the report failed (the JSON, CSV and TIFF outputs are written)\n");
-                exit_code = 1;
-            } else {
-                printf("report: %s/index.html\n", o.out);
-            }
-        }
-    }
-    verify_files_result_free(&r);
-    json_decref(o.provenance);
-    return exit_code;
+    if (a.do_study) return verify_study_cmd(&cli, &a, argc, argv);
+    return verify_files_cmd(&cli, &a, argc, argv);
 }

@@ -4,7 +4,7 @@ draws and lays out what refl wrote).
 
 usage: verify_report.py DIR
 
-DIR/verify.json: "verdict" (correct|incorrect), "score", "score_threshold",
+DIR/verify.json ("format" "refl-verify", "version" 1): "verdict" (correct|incorrect), "score", "score_threshold",
 "residue" and "residue_per_image" (|measured - model| at the reference points,
 DN, and z), "reference_points" (counts per status), "change_regions" ({image,
 n_points, area_px, excess_chi2, max_abs_z, bbox_px [x0,y0,x1,y1], faces}),
@@ -120,6 +120,14 @@ def load_verify(d):
     jpath = os.path.join(d, "verify.json")
     raw = load_json(jpath)
     c = Checker(jpath)
+    # "format": "refl-verify", "version" 1 (a file without the keys is version 1)
+    fmt_, ver = raw.get("format"), raw.get("version", 1 if "format" not in raw else None)
+    if fmt_ is not None and fmt_ != "refl-verify":
+        c.bad("format", f"a {json.dumps(fmt_)} file, not refl-verify")
+    if not isinstance(ver, int) or isinstance(ver, bool) or ver < 1:
+        c.bad("version", f"expected a whole number from 1, got {json.dumps(ver)}")
+    if ver > 1:
+        c.bad("version", f"refl-verify version {ver}, written by a newer refl (this script reads version 1)")
     v = {"raw": raw}
     v["verdict"] = c.get(raw, "verdict", "", "str")
     if v["verdict"] not in ("correct", "incorrect"):

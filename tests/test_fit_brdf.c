@@ -12,6 +12,7 @@
 #include <jansson.h>
 
 #include "fit/brdf/brdf.h"
+#include "fit/priors.h"
 #include "model/internal.h"
 #include "tests/rgl_fixture.h"
 #include "tests/test.h"

@@ -13,6 +13,7 @@
 #include "fit/verify/verify.h"
 #include "fit/eval/lab.h"
 #include "model/model.h"
+#include "model/base/report.h"
 #include "rig/session/session.h"
 #include "tests/test.h"
 
@@ -428,6 +429,8 @@ TEST(verify_cli_end_to_end)
     CHECK(j != NULL);
     if (j) {
         CHECK(!strcmp(json_string_value(json_object_get(j, "verdict")), "correct"));
+        CHECK(!strcmp(json_string_value(json_object_get(j, "format")), "refl-verify"));
+        CHECK(json_integer_value(json_object_get(j, "version")) == VERIFY_JSON_VERSION);
         CHECK(json_array_size(json_object_get(j, "images")) == NANG);
         json_t *prov = json_object_get(j, "provenance");
         char *txt = json_dumps(prov, 0);
@@ -480,6 +483,11 @@ TEST(verify_cli_end_to_end)
     CHECK_CONTAINS(out, "placement: as described");
     json_t *j2 = json_load_file(jp2, 0, NULL);
     CHECK(j2 && !json_object_get(j2, "placement"));
+    if (j2) {   // the report refuses a verify.json of a newer version
+        json_object_set_new(j2, "version", json_integer(VERIFY_JSON_VERSION + 1));
+        CHECK(model_write_json(jp2, j2));
+        CHECK(model_run_script("verify_report.py", dir, NULL) != 0);
+    }
     json_decref(j2);
     g_free(out);
     g_free(err);
@@ -673,6 +681,43 @@ TEST(verify_priors_parser_mutations)
     }
     CHECK_MSG(accepted > 0 && accepted < 3000, "%d of 3000 mutated files accepted", accepted);
     free(buf);
+}
+
+// The priors file names its format and version (fit/priors.h): refl fit's
+// documents are "refl-priors" version 1; a file naming itself "refl priors 1",
+// or naming no format, reads as version 1; a newer version and another
+// format are refused, naming the file and the versions.
+TEST(verify_priors_format_version)
+{
+    json_t *doc = fit_priors_document();
+    CHECK(!strcmp(json_string_value(json_object_get(doc, "format")), "refl-priors"));
+    CHECK(json_integer_value(json_object_get(doc, "version")) == FIT_PRIORS_VERSION);
+    json_decref(doc);
+    const char *mats = "\"materials\": [{\"name\": \"x\", \"model\": \"lambert\", \"parameters\": "
+                       "[{\"name\": \"kd\", \"mean\": 0.2, \"std\": 0.01}]}]}";
+    static const struct {
+        const char *head, *error;
+    } cases[] = {
+        { "{\"format\": \"refl-priors\", \"version\": 1, ", NULL },
+        { "{\"format\": \"refl priors 1\", ", NULL },
+        { "{", NULL },
+        { "{\"format\": \"refl-priors\", \"version\": 2, ", "version 2, written by a newer refl" },
+        { "{\"format\": \"refl-priors\", ", "\"version\" is missing" },
+        { "{\"format\": \"refl-gain\", \"version\": 1, ", "a refl-gain file, not refl-priors" },
+    };
+    for (size_t c = 0; c < sizeof cases / sizeof cases[0]; c++) {
+        char *text = g_strconcat(cases[c].head, mats, NULL);
+        verify_priors_t pr = { 0 };
+        bool ok = verify_priors_parse(&pr, text, strlen(text), "v.json");
+        CHECK_MSG(ok == !cases[c].error, "case %zu: %s", c, ok ? "accepted" : model_last_error());
+        if (ok) CHECK(pr.n == 1 && pr.m[0].version == 1);
+        if (!ok && cases[c].error) {
+            CHECK_CONTAINS(model_last_error(), "v.json");
+            CHECK_CONTAINS(model_last_error(), cases[c].error);
+        }
+        verify_priors_free(&pr);
+        g_free(text);
+    }
 }
 
 // With the truth's parameters held (lamps, camera, materials, rho = 1, Pa =

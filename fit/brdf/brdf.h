@@ -1,4 +1,4 @@
-// fit/brdf/brdf.h — fitting reflection models to BRDF samples and writing priors.
+// fit/brdf/brdf.h — fitting reflection models to BRDF samples and choosing among them.
 //
 // Samples: R = f_r * cos(theta_i) (1/sr; what model_brdf_eval returns) with
 // the four cosines (n.l, n.v, n.h, v.h) of their geometry, and a weight.
@@ -294,33 +294,14 @@ bool fit_brdf_model_list(const char *name, model_brdf_t models[MODEL_BRDF_COUNT]
 bool fit_brdf_models(const fit_samples_t *s, const model_brdf_t *models, int nmodels, const fit_brdf_options_t *opt,
                      fit_brdf_models_t *out);
 
-// Units and convention of parameter i of model m ("1/sr", "albedo", ...).
-const char *fit_param_unit(model_brdf_t m, int i);
-const char *fit_param_convention(model_brdf_t m, int i);
-
-// The priors entry of one material (see README, "Priors file"): std =
-// sqrt(std_statistical^2 + (sys_rel * mean)^2) (the statistical part alone
-// shrinks with the sample count; sys_rel covers the calibrations' systematic
-// errors, which every sample shares), bounds mean +- k_sigma * std clipped to
-// the physical range; candidates (may be NULL) are every model tried.
 // The model choice of *m as JSON: the rule, folds, units, seed, the chosen
 // model, the lowest BIC's and the lowest cv_rms's (written into a priors entry
 // as "model_choice").
 json_t *fit_brdf_choice_json(const fit_brdf_models_t *m);
-// The priors' covariance (np x np, row-major, the model's parameter order;
-// written as "prior_covariance"): the fit's plus the systematic part, a
-// photometric scale of std sys_rel shared by every sample (the parameters R
-// is linear in, kd ks ks2 Rd, fully correlated: sys_rel^2 mean_a mean_b),
-// (sys_rel mean)^2 on the diagonal of the others, and the photometric groups'
-// (each lamp's) cov_groups when groups_ok; held parameters 0, F0 held over its
-// interval its uniform's. Its diagonal is the entry's std^2.
-void    fit_prior_covariance(const fit_brdf_result_t *best, double sys_rel, double *C);
-// Parameter j's std in the priors: sqrt(std^2 + (sys_rel mean)^2 + cov_groups_jj) (the statistical part, the
-// shared photometric scale or geometric part, the lamps'), a held parameter's stated one (0, or its interval's
-// uniform std). The diagonal of fit_prior_covariance is its square.
-double  fit_prior_std(const fit_brdf_result_t *best, double sys_rel, int j);
-json_t *fit_priors_material(const char *name, const fit_brdf_result_t *best, const fit_brdf_result_t *candidates,
-                            int ncandidates, double k_sigma, double sys_rel);
+
+// A material's priors entry from its fit, the priors' std and covariance and
+// the parameters' units and conventions: fit/priors.h (fit_priors_material,
+// fit_prior_std, fit_prior_covariance, fit_param_unit, fit_param_convention).
 
 // `refl fit brdf|material` (fit/cmd_fit.c).
 int fit_cmd(int argc, char **argv);

@@ -80,9 +80,15 @@ static double ring_dphi(const double *ph, int n, int k)
 }
 
 // Solid angles (sr) of the distinct directions d[0..n) sorted by (theta, phi): area[k].
-static void ring_areas(const dir_t *d, int n, double *area)
+// false: out of memory.
+static bool ring_areas(const dir_t *d, int n, double *area)
 {
-    double *rth = malloc((size_t)n * sizeof *rth), *ph = malloc((size_t)n * sizeof *ph);
+    double *rth = malloc((size_t)(n > 0 ? n : 1) * sizeof *rth), *ph = malloc((size_t)(n > 0 ? n : 1) * sizeof *ph);
+    if (!rth || !ph) {
+        free(rth);
+        free(ph);
+        return false;
+    }
     int nr = 0;
     for (int k = 0; k < n; k++)
         if (k == 0 || !same(d[k].th, d[k - 1].th)) rth[nr++] = d[k].th;
@@ -97,6 +103,7 @@ static void ring_areas(const dir_t *d, int n, double *area)
     }
     free(rth);
     free(ph);
+    return true;
 }
 
 static double wrap_phi(double p)
@@ -126,7 +133,12 @@ static bool areas_of(const double *ang, const int *idx, int n, int off, double *
     int m = 0;
     for (int k = 0; k < n; k++)
         if (k == 0 || !same(d[k].th, d[k - 1].th) || !same(d[k].ph, d[k - 1].ph)) u[m++] = d[k];
-    ring_areas(u, m, a);
+    if (!ring_areas(u, m, a)) {
+        free(d);
+        free(a);
+        free(u);
+        return false;
+    }
     for (int k = 0, q = -1; k < n; k++) {
         if (k == 0 || !same(d[k].th, d[k - 1].th) || !same(d[k].ph, d[k - 1].ph)) q++;
         int e = k;

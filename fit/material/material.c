@@ -707,16 +707,14 @@ done:
     return rel;
 }
 
-// The priors document (format "refl priors 1") of the final fits; *entry
+// The priors document (fit_priors_document) of the final fits; *entry
 // (borrowed) is its material's entry. Sets r->rms_over_noise.
 static json_t *material_priors(const fit_material_opts_t *o, const calib_set_t *cal, fit_material_result_t *r,
                                json_t **entry)
 {
     const fit_brdf_models_t *m = &r->models;
     const fit_brdf_result_t *best = &m->res[m->best];
-    json_t *top = json_object();
-    json_object_set_new(top, "format", json_string("refl priors 1"));
-    json_object_set_new(top, "units", json_string("R = f_r cos(theta_i) in 1/sr; parameter units per parameter"));
+    json_t *top = fit_priors_document();
     json_t *mats = json_array();
     json_t *e = fit_priors_material(o->name ? o->name : r->material, best, m->res, m->nres, o->k_sigma, o->sys_rel);
     json_object_set_new(e, "model_choice", fit_brdf_choice_json(m));

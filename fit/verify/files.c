@@ -47,22 +47,6 @@ calib_set_t *verify_load_camera_gain(const char *camera, const char *gain_dir, c
     return cal;
 }
 
-bool verify_priors_means(const model_scene_t *scene, const verify_priors_t *pr, model_material_t *mm,
-                         const model_material_t **mats)
-{
-    const verify_prior_t **pp = calloc((size_t)scene->nmaterials + 1, sizeof *pp);
-    bool ok = pp && verify_match_priors(scene, pr, pp);
-    for (int k = 0; ok && k < scene->nmaterials; k++) {
-        memset(&mm[k], 0, sizeof mm[k]);
-        snprintf(mm[k].name, sizeof mm[k].name, "%s", pp[k]->name);
-        mm[k].model = pp[k]->model;
-        memcpy(mm[k].p, pp[k]->mean, sizeof mm[k].p);
-        mats[k] = &mm[k];
-    }
-    free(pp);
-    return ok;
-}
-
 // ---------------------------------------------------------------------------
 // Inputs
 
@@ -128,7 +112,11 @@ static bool vf_scene_priors(vf_t *V)
     // the materials at the priors' means (the interreflection basis)
     V->mean_mats = calloc((size_t)V->scene->nmaterials + 1, sizeof *V->mean_mats);
     V->mats = calloc((size_t)V->scene->nmaterials + 1, sizeof *V->mats);
-    if (!V->mean_mats || !V->mats || !verify_priors_means(V->scene, &V->pr, V->mean_mats, V->mats)) return false;
+    if (!V->mean_mats || !V->mats) {
+        model_error(NULL, 0, "out of memory");
+        return false;
+    }
+    if (!verify_priors_means(V->scene, &V->pr, V->mean_mats, V->mats)) return false;
     for (int k = 0; k < V->pr.n; k++)
         if (model_scene_material_index(V->scene, V->pr.m[k].name) < 0) {
             model_error(V->pr.m[k].source, 0, "priors for material '%s', which no face of %s has: check that the "
@@ -360,6 +348,10 @@ static bool lamp_mask(const char *s, const model_lamps_t *lamps, uint32_t *mask,
         return true;
     }
     char *dup = strdup(s), *save = NULL;
+    if (!dup) {
+        model_error(where, 0, "out of memory");
+        return false;
+    }
     bool ok = true;
     for (char *t = strtok_r(dup, "+,", &save); t && ok; t = strtok_r(NULL, "+,", &save)) {
         int i = model_lamps_find(lamps, t);
@@ -388,6 +380,7 @@ static float *read_pixels(const char *path, int *W, int *H, model_meta_t *meta)
     uint16_t *pix = NULL;
     if (!model_png_read_meta(path, W, H, &pix, meta)) return NULL;
     float *px = malloc((size_t)*W * *H * sizeof(float));
+    if (!px) model_error(path, 0, "out of memory for a %dx%d image", *W, *H);
     for (size_t p = 0; px && p < (size_t)*W * *H; p++) px[p] = pix[p];
     free(pix);
     return px;
@@ -395,8 +388,8 @@ static float *read_pixels(const char *path, int *W, int *H, model_meta_t *meta)
 
 // The gain of the metadata, in dB relative to the gain calibration's gain
 // (cal_gain in cal_unit): "gain" ("6", or "6 UNIT") in the unit of
-// "gain_unit" (else the one after the number; neither: dB, as refl wrote
-// frames before it kept the unit), converted by model_gain_factor. false +
+// "gain_unit" (else the one after the number; neither: dB, the unit of
+// frames whose metadata names none), converted by model_gain_factor. false +
 // message naming the image.
 static bool meta_gain_db(const char *path, const char *ga, const char *unit, double cal_gain, const char *cal_unit,
                          double *gain_db)
@@ -511,8 +504,7 @@ static bool vf_register(vf_t *V)
 {
     const verify_files_opts_t *o = V->o;
     if (!(o->placement_tol_mm > 0) && !(o->placement_tol_deg > 0)) return true;
-    fprintf(stderr, "refl verify: registering the placement (within %g mm, %g deg)\n", o->placement_tol_mm,
-            o->placement_tol_deg);
+    model_note("registering the placement (within %g mm, %g deg)", o->placement_tol_mm, o->placement_tol_deg);
     if (!verify_register(V->scene, V->vcs, V->lamps, V->A, V->mats, V->imgs, o->nimages, o->placement_tol_mm,
                          o->placement_tol_deg, &V->placement))
         return false;
@@ -566,12 +558,15 @@ static bool vf_views(vf_t *V)
                         model_camera_height(cam));
             return false;
         }
-        fprintf(stderr, "refl verify: view %d/%d (%s, %.4g deg)\n", m + 1, n, im->name, im->angle_deg);
+        model_progress("view %d/%d (%s, %.4g deg)", m + 1, n, im->name, im->angle_deg);
         if (!(V->views[m] = verify_view_new(V->scene, &V->vcs[im->camera], im->angle_deg, V->lamps, V->mats,
-                                            &V->o->opt)))
+                                            &V->o->opt))) {
+            model_progress_end();
             return false;
+        }
     }
-    fprintf(stderr, "refl verify: fitting %d images (views %.2f s)\n", n, model_now_s() - t0);
+    model_progress_end();
+    model_note("fitting %d images (views %.2f s)", n, model_now_s() - t0);
     return true;
 }
 
@@ -710,6 +705,7 @@ static bool synthetic_image(const vf_t *V, const verify_result_t *res, int m, fl
     model_scene_t *rot = model_scene_rotated_z(scene, im->angle_deg);
     model_tracer_t *t = rot ? model_tracer_new(rot) : NULL;
     int32_t *face = malloc(npx * sizeof *face);
+    if (t && (!face || !fm)) model_error(im->name, 0, "out of memory for the synthetic image");
     bool ok = t && face && fm && model_render(t, vc->cam, &L, fm, &sh, synth, face, NULL);
     free(fm);
     if (ok && V->o->opt.ir_samples > 0 && res->rho != 0)
@@ -740,6 +736,7 @@ static bool write_image_pair(const vf_t *V, const verify_result_t *res, int m, j
     float *act = malloc(npx * sizeof(float)), *synth = malloc(npx * sizeof(float));
     bool maps = V->o->opt.use_flat;
     bool ok = act && synth;
+    if (!ok) model_error(im->name, 0, "out of memory for the actual and synthetic images");
     for (size_t p = 0; ok && p < npx; p++) act[p] = im->P[p] - (maps && vc->offset_dn ? vc->offset_dn[p] : 0);
     ok = ok && synthetic_image(V, res, m, synth) &&
          write_tiff(dir, an, im->W, im->H, act, "the image minus the offset map (when given)") &&
@@ -832,7 +829,10 @@ bool verify_files_run(const verify_files_opts_t *o, verify_files_result_t *r)
         return false;
     }
     vf_t *V = calloc(1, sizeof *V);
-    if (!V) return false;
+    if (!V) {
+        model_error(NULL, 0, "out of memory");
+        return false;
+    }
     V->o = o;
     V->prov = o->provenance;
     bool ok = vf_scene_priors(V);
@@ -848,7 +848,10 @@ bool verify_files_run(const verify_files_opts_t *o, verify_files_result_t *r)
     if (ok && V->placement.at_limit) {
         // the part may lie further off than the fixture allows: say so with the fit's warnings
         char (*w)[256] = realloc(r->fit.warnings, (size_t)(r->fit.nwarnings + 1) * sizeof *w);
-        if (w) {
+        if (!w) {
+            model_error(NULL, 0, "out of memory");
+            ok = false;
+        } else {
             r->fit.warnings = w;
             snprintf(w[r->fit.nwarnings++], sizeof w[0], "the placement (%.2f, %.2f) mm, %.2f deg is at the edge of "
                      "the tolerance (%g mm, %g deg): the part may lie further off, or the description is wrong",

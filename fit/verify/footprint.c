@@ -160,6 +160,7 @@ typedef struct {
     const double         *ksub, *dksub;   // (2A+1) x ss: over sub-cell s of cell a
     fp_acc_t             *acc;         // per candidate
     long                  rays;
+    int                   failed;      // a worker could not allocate its buffers (set atomically)
 } fp_ctx_t;
 
 // pixel_info of n sub-pixel positions q, one thread (the camera's ray table).
@@ -203,7 +204,10 @@ static void fp_rows(void *vctx, int begin, int end, int thread)
     model_pixel_info_t *ps = malloc((size_t)ss * ss * sizeof *ps);
     model_lamp_sample_t *lsb = malloc((size_t)ss * ss * nl1 * sizeof *lsb);
     float *vs = malloc((size_t)ss * ss * nl1 * sizeof *vs);
-    if (!qn || !pn || !ln || !vn || !qs || !ps || !lsb || !vs) goto done;
+    if (!qn || !pn || !ln || !vn || !qs || !ps || !lsb || !vs) {
+        __atomic_store_n(&c->failed, 1, __ATOMIC_RELAXED);
+        goto done;
+    }
     for (int k = begin; k < end; k++) {
         int g = c->cand[k];
         double cx = c->q[2 * g], cy = c->q[2 * g + 1];
@@ -352,6 +356,11 @@ bool verify_footprints_make(const model_tracer_t *t, const model_camera_t *cam, 
                         .ss = ss, .nl = nl, .kx = kx, .dkx = dkx, .ksub = ksub,
                         .dksub = dksub, .acc = acc };
         model_parallel_for(ncand, 8, threads > 0 ? threads : model_default_threads(), fp_rows, &fc);
+        if (fc.failed) {
+            model_error(NULL, 0, "out of memory for the windows near edges");
+            ok = false;
+            goto out;
+        }
         out->samples = fc.rays;
         int np = 0;
         for (int k = 0; k < ncand; k++)

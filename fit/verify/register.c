@@ -194,7 +194,10 @@ static bool image_samples(reg_t *R, const model_scene_t *scene, const model_lamp
                     continue;   // hidden here, or near the segment's ends (a corner)
                 if (R->n == *cap) {
                     esample_t *grown = realloc(R->s, (size_t)(*cap = *cap ? 2 * *cap : 1024) * sizeof *grown);
-                    if (!grown) goto done;
+                    if (!grown) {
+                        model_error(NULL, 0, "verify: registering %s: out of memory", im->name);
+                        goto done;
+                    }
                     R->s = grown;
                 }
                 double b = -im->angle_deg * M_PI / 180, cb = cos(b), sb = sin(b);
@@ -265,7 +268,10 @@ bool verify_register(const model_scene_t *scene, const verify_camera_t *cams, co
     int cap = 0;
     bool ok = false;
     R.blur = calloc((size_t)nimgs, sizeof *R.blur);
-    if (!R.blur) goto done;
+    if (!R.blur) {
+        model_error(NULL, 0, "verify: registering the placement: out of memory");
+        goto done;
+    }
     for (int m = 0; m < nimgs; m++)
         if (!image_samples(&R, scene, lamps, A, mats, m, &cap)) goto done;
     for (int k = 0; k < R.n; k++) R.wsum += fabs(R.s[k].c);
@@ -277,7 +283,10 @@ bool verify_register(const model_scene_t *scene, const verify_camera_t *cams, co
         goto done;
     }
     for (int m = 0; m < nimgs; m++)
-        if (!(R.blur[m] = gauss_blur(imgs[m].P, imgs[m].W, imgs[m].H, 3))) goto done;
+        if (!(R.blur[m] = gauss_blur(imgs[m].P, imgs[m].W, imgs[m].H, 3))) {
+            model_error(imgs[m].name, 0, "verify: registering the placement: out of memory");
+            goto done;
+        }
     // the coarse grid (about 1 mm and 0.5 deg apart), then the pattern search
     const double z[3] = { 0, 0, 0 };
     out->score_nominal = pose_score(&R, z, false);

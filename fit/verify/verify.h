@@ -41,67 +41,13 @@
 #include <stdint.h>
 
 #include "calib/calib.h"
+#include "fit/priors.h"
 #include "model/base/lsq.h"
 #include "model/model.h"
 
 #ifdef __cplusplus
 extern "C" {
 #endif
-
-// ---------------------------------------------------------------------------
-// Priors ("refl priors 1", README)
-
-typedef struct {
-    char         name[64];
-    model_brdf_t model;
-    int          np;
-    double       mean[MODEL_BRDF_MAX_PARAMS], std[MODEL_BRDF_MAX_PARAMS];
-    double       lo[MODEL_BRDF_MAX_PARAMS], hi[MODEL_BRDF_MAX_PARAMS];
-    bool         held[MODEL_BRDF_MAX_PARAMS];   // std 0: fixed
-    // The priors' full covariance ("prior_covariance", np x np in parameter
-    // order; has_cov false for files without one: independent std).
-    bool         has_cov;
-    double       cov[MODEL_BRDF_MAX_PARAMS * MODEL_BRDF_MAX_PARAMS];
-    double       window_rel;        // "window_rel_std": a window's relative spread about the model beyond its
-                                    //   noise (texture, what the model lacks); NAN: not known
-    char         source[512];
-    char         sha256[65];
-} verify_prior_t;
-
-// A material's prior as a multivariate Gaussian over its free parameters
-// (idx[0..n-1] of its np): residuals r = L^-1 (p_S - mean_S), Sigma_S = L L^T
-// (the prior's covariance over them), so |r|^2 is the Mahalanobis distance.
-typedef struct {
-    int    n, np;
-    int    idx[MODEL_BRDF_MAX_PARAMS];
-    double mean[MODEL_BRDF_MAX_PARAMS];
-    double Linv[MODEL_BRDF_MAX_PARAMS * MODEL_BRDF_MAX_PARAMS];   // n x n, lower triangular
-} verify_mvprior_t;
-
-// Build it over the parameters with use[j] (held ones left out by the
-// caller). false (no message) when P has no covariance, fewer than 2 are
-// used, or their covariance is not positive definite (the caller then keeps
-// independent priors).
-bool verify_mvprior_make(const verify_prior_t *P, const bool *use, verify_mvprior_t *out);
-// The residual block (model/base/lsq.h's lsq_residual_fn; ctx a verify_mvprior_t,
-// one parameter block: the material's np parameters; n residuals).
-bool verify_mvprior_residual(void *ctx, const double *const *p, double *r, double **J);
-
-typedef struct {
-    int             n;
-    verify_prior_t *m;
-} verify_priors_t;
-
-// Append the materials of a priors file (a material already present is an
-// error naming both files). false + "file: message".
-bool verify_priors_load(verify_priors_t *pr, const char *path);
-// The same from text (len bytes, not NUL-terminated; name for messages).
-bool verify_priors_parse(verify_priors_t *pr, const char *text, size_t len, const char *name);
-// A prior from known values (tests, studies): std = rel * |mean| (at least
-// abs_min), bounds mean +- k std within the physical range.
-bool verify_priors_add(verify_priors_t *pr, const model_material_t *mat, double rel, double abs_min, double k);
-const verify_prior_t *verify_priors_find(const verify_priors_t *pr, const char *name);
-void verify_priors_free(verify_priors_t *pr);
 
 // ---------------------------------------------------------------------------
 // Inputs
@@ -141,7 +87,7 @@ typedef struct {
 // against every description and configuration, whose reference grids are the
 // same. The caller clears it when the pixels change; one thread at a time.
 typedef struct verify_windows verify_windows_t;
-verify_windows_t *verify_windows_new(void);
+verify_windows_t *verify_windows_new(void);   // NULL + message: out of memory
 void              verify_windows_clear(verify_windows_t *w);
 void              verify_windows_free(verify_windows_t *w);
 
@@ -325,13 +271,14 @@ bool verify_register(const model_scene_t *scene, const verify_camera_t *cams, co
 // The description moved to placement p (a new scene; NULL + message).
 model_scene_t *verify_placed_scene(const model_scene_t *scene, const verify_placement_t *p);
 
-// The result as JSON (units and conventions named).
+// The result as JSON (units and conventions named): the body of verify.json,
+// which names its format, "format": "refl-verify", "version": 1 (one layout;
+// a file without the keys is version 1 to its readers, scripts/verify_report.py
+// and refl chain).
+#define VERIFY_JSON_FORMAT "refl-verify"
+enum { VERIFY_JSON_VERSION = 1 };
 json_t *verify_result_json(const verify_result_t *r, const model_scene_t *scene, const verify_image_t *imgs,
                            const model_lamps_t *lamps, const verify_options_t *opt);
-
-// Scene material k -> its prior (NULL + message naming the material when the
-// priors lack one).
-bool verify_match_priors(const model_scene_t *scene, const verify_priors_t *pr, const verify_prior_t **out);
 
 // Tests: the fit's residual Jacobian (with the robust transform, every
 // reflection model) against central differences.
@@ -379,7 +326,8 @@ typedef struct {
 
 // Load the inputs, trace the views, fit and judge (verify_run), write
 // o->out/verify.json, points.csv, imgN_actual.tiff and imgN_synthetic.tiff.
-// Progress lines on stderr. false + message (printed through model_error).
+// Notes and progress through model_note and model_progress. false + message
+// (model_error).
 bool verify_files_run(const verify_files_opts_t *o, verify_files_result_t *r);
 void verify_files_result_free(verify_files_result_t *r);
 
@@ -391,11 +339,6 @@ void verify_files_result_free(verify_files_result_t *r);
 // created) and removed. NULL + message. Free with calib_set_free.
 calib_set_t *verify_load_camera_gain(const char *camera, const char *gain_dir, const model_lamps_t *lamps,
                                      const char *tmp_dir, int tag);
-// The scene's materials at their priors' means: mm[k] and mats[k] = &mm[k]
-// for each of scene->nmaterials. false + message naming a material without priors.
-bool verify_priors_means(const model_scene_t *scene, const verify_priors_t *pr, model_material_t *mm,
-                         const model_material_t **mats);
-
 // ---------------------------------------------------------------------------
 // The detection study on the virtual rig (fit/eval/study.c; refl verify
 // --study, --study-merge): the truth's T-stiffener, fixed-seed cases, the
