@@ -25,6 +25,7 @@
 #include <strings.h>
 
 #include "model/internal.h"
+#include "model/scene/internal.h"
 
 #define MAX_ITEMS (INT_MAX / 2)
 #define MAXTOK    64   // tokens of an ASCII line: a PLY face of up to 62 vertices
@@ -343,7 +344,7 @@ static size_t psize(ptype_t t)
     return t == T_I8 || t == T_U8 ? 1 : t == T_I16 || t == T_U16 ? 2 : t == T_F64 ? 8 : 4;
 }
 
-static double pread(const unsigned char *p, ptype_t t)
+static double ply_value(const unsigned char *p, ptype_t t)
 {
     switch (t) {
     case T_I8: return (int8_t)p[0];
@@ -573,7 +574,7 @@ static bool ply_binary(mb_t *b, const unsigned char *d, size_t len, const ply_t 
                 double cnt = 1;
                 if (pp->count_type != T_NONE) {
                     if (len - off < psize(pp->count_type)) goto truncated;
-                    cnt = pread(d + off, pp->count_type);
+                    cnt = ply_value(d + off, pp->count_type);
                     off += psize(pp->count_type);
                     if (cnt < 0 || cnt > 1e6) {
                         model_error(nm, 0, "byte offset %zu: %s %ld: list count %g", off, e->name, r + 1, cnt);
@@ -587,7 +588,7 @@ static bool ply_binary(mb_t *b, const unsigned char *d, size_t len, const ply_t 
                     goto done;
                 }
                 for (long c = 0; c < (long)cnt; c++, off += psize(pp->type)) {
-                    double v = pread(d + off, pp->type);
+                    double v = ply_value(d + off, pp->type);
                     if (!isfinite(v) || fabs(v) > 1e150) {
                         model_error(nm, 0, "byte offset %zu: %s %ld: property %s is not a finite number", off, e->name,
                                     r + 1, pp->name);
