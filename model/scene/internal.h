@@ -12,6 +12,10 @@
 
 #define SCENE_MAX_ITEMS (INT_MAX / 2)   // vertices, faces, face-vertex references
 
+// Make room for need elements of elem bytes in *p (capacity *cap, doubled
+// from 64 until it fits). false when out of memory (*p and *cap unchanged).
+bool scene_grow(void **p, size_t *cap, size_t need, size_t elem);
+
 // ---------------------------------------------------------------------------
 // Tokens and lines (model/scene/lex.c)
 

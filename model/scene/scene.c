@@ -25,7 +25,7 @@
 // ---------------------------------------------------------------------------
 // Scene builder
 
-static bool grow(void **p, size_t *cap, size_t need, size_t elem)
+bool scene_grow(void **p, size_t *cap, size_t need, size_t elem)
 {
     if (need <= *cap) return true;
     size_t nc = *cap ? *cap : 64;
@@ -56,8 +56,8 @@ bool scene_add_vertex(scene_builder_t *b, int line, model_vec3_t p, int number)
         model_error(b->name, line, "too many vertices (more than %d)", SCENE_MAX_ITEMS);
         return false;
     }
-    if (!grow((void **)&b->v, &b->cap_v, (size_t)b->nv + 1, sizeof *b->v) ||
-        !grow((void **)&b->vnum, &b->cap_vnum, (size_t)b->nv + 1, sizeof *b->vnum))
+    if (!scene_grow((void **)&b->v, &b->cap_v, (size_t)b->nv + 1, sizeof *b->v) ||
+        !scene_grow((void **)&b->vnum, &b->cap_vnum, (size_t)b->nv + 1, sizeof *b->vnum))
         goto oom;
     b->v[b->nv] = v3_scale(p, b->unit_mm);
     b->vnum[b->nv] = number;
@@ -74,7 +74,7 @@ bool scene_add_ref(scene_builder_t *b, int line, int index)
         model_error(b->name, line, "too many face vertices (more than %d)", SCENE_MAX_ITEMS);
         return false;
     }
-    if (!grow((void **)&b->idx, &b->cap_idx, b->nidx + 1, sizeof *b->idx)) {
+    if (!scene_grow((void **)&b->idx, &b->cap_idx, b->nidx + 1, sizeof *b->idx)) {
         model_error(b->name, line, "out of memory");
         return false;
     }
@@ -87,7 +87,7 @@ static int material_of(scene_builder_t *b, const char *name, int line)
 {
     int known = GPOINTER_TO_INT(g_hash_table_lookup(b->mat_index, name));
     if (known > 0) return known - 1;
-    if (!grow((void **)&b->mat, &b->cap_mat, (size_t)b->nmat + 1, sizeof *b->mat)) goto oom;
+    if (!scene_grow((void **)&b->mat, &b->cap_mat, (size_t)b->nmat + 1, sizeof *b->mat)) goto oom;
     char *s = strdup(name);
     if (!s) goto oom;
     b->mat[b->nmat] = s;
@@ -105,8 +105,8 @@ bool scene_begin_face(scene_builder_t *b, int line)
         model_error(b->name, line, "too many faces (more than %d)", SCENE_MAX_ITEMS);
         return false;
     }
-    if (!grow((void **)&b->f, &b->cap_f, (size_t)b->nf + 1, sizeof *b->f) ||
-        !grow((void **)&b->fstart, &b->cap_fstart, (size_t)b->nf + 1, sizeof *b->fstart))
+    if (!scene_grow((void **)&b->f, &b->cap_f, (size_t)b->nf + 1, sizeof *b->f) ||
+        !scene_grow((void **)&b->fstart, &b->cap_fstart, (size_t)b->nf + 1, sizeof *b->fstart))
         goto oom;
     int m = b->cur_mat;
     if (m < 0 && (m = material_of(b, "default", line)) < 0) return false;
@@ -291,7 +291,7 @@ bool scene_add_sphere(scene_builder_t *b, const scene_lexer_t *lx)
     }
     int m = b->cur_mat;
     if (m < 0 && (m = material_of(b, "default", lx->line)) < 0) return false;
-    if (!grow((void **)&b->sph, &b->cap_sph, (size_t)b->nsph + 1, sizeof *b->sph)) {
+    if (!scene_grow((void **)&b->sph, &b->cap_sph, (size_t)b->nsph + 1, sizeof *b->sph)) {
         model_error(b->name, lx->line, "out of memory");
         return false;
     }
