@@ -93,7 +93,7 @@ typedef struct {
     uint64_t pattern_seed;           // fixed patterns (DSNU, PRNU)
     uint64_t noise_seed;             // temporal noise of this frame
     // Outside the fitters' linearised response S(1 - aS) (the virtual rig's
-    // adversary, issue 18; all off by default, see model/sensor.c):
+    // adversary; all off by default, see model/sensor.c):
     double   knee_e;                 // soft clip toward full well above this many e- (0 = off)
     double   low_end_gamma;          // e' = low_end_e (e / low_end_e)^gamma below low_end_e (1 = off)
     double   low_end_e;

@@ -55,8 +55,8 @@ bool model_sensor_dark_measurand(const model_sensor_t *s, const double *t_us, in
 // A camera's gain as a signal factor (model/sensor.c), the one conversion of a
 // recorded gain. unit is the camera's own (GenICam <Unit> of its Gain feature,
 // recorded with every frame): "dB" -> 10^(gain/20); "x", "times", "linear" or
-// "factor" -> gain itself; NULL or "" -> dB (frames of sessions recorded before
-// refl kept the unit: their gain was GenICam's Gain, in dB). Any other unit
+// "factor" -> gain itself; NULL or "" -> dB (a frame recorded without a unit:
+// its gain is GenICam's Gain, in dB). Any other unit
 // ("raw", a vendor's) has no known scale: such a frame is usable only at the
 // gain its calibration was made at (cal_gain, cal_unit), and its factor is then
 // that of the calibration. *factor is relative to the calibration's gain (for
@@ -71,8 +71,9 @@ bool model_gain_factor(double gain, const char *unit, double cal_gain, const cha
 // function every consumer applies (calibrated observations, the white, the
 // material fit, verification) is model_linearise.
 //   MODEL_LIN_NONE        S = S_m
-//   MODEL_LIN_PARAMETRIC  S_m = S (1 - a S) (a per DN; files from before the
-//                         table, or refl calib gain --linearisation parametric)
+//   MODEL_LIN_PARAMETRIC  S_m = S (1 - a S) (a per DN; a gain.json without a
+//                         "linearisation" table, or refl calib gain
+//                         --linearisation parametric)
 //   MODEL_LIN_MONOTONE    a monotone piecewise-cubic Hermite interpolant
 //                         (Fritsch & Carlson, SIAM J. Numer. Anal. 17, 1980;
 //                         knot derivatives by Fritsch & Butland's weighted

@@ -56,7 +56,7 @@ private:
 // residuals [Q^T r; |(I - Q Q^T) r|] with Jacobian [R; 0]. At every point
 // this has the same cost, gradient J^T r and Gauss-Newton matrix J^T J as
 // the block itself, so the trust-region steps and the covariance are the
-// block's; Ceres's work no longer grows with m. Without Jacobians (a cost
+// block's; Ceres's work does not grow with m. Without Jacobians (a cost
 // evaluation) it returns [0 ... 0; |r|], the same cost.
 class FoldedCost : public ceres::CostFunction {
 public:
