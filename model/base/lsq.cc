@@ -476,7 +476,7 @@ bool lsq_solve(lsq_problem_t *p, const lsq_options_t *opt, lsq_summary_t *s)
     ceres::Solver::Summary sum;
     try {
         ceres::Solve(so, &p->problem, &sum);
-        if (o.verbose) fprintf(stderr, "%s\n", sum.FullReport().c_str());
+        if (o.verbose) model_note("%s", sum.FullReport().c_str());
     } catch (const std::exception &e) {
         if (s) *s = out;
         return fail("lsq_solve: %s", e.what());

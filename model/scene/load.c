@@ -43,7 +43,7 @@ static void units_warning(model_scene_t *s, const model_scene_options_t *opt)
     snprintf(s->warning, sizeof s->warning, "the whole scene spans %.3g mm (the largest side of its bounding box), "
              "read in mm as no --units was given: if its coordinates are metres or inches, give --units m or "
              "--units in", ext);
-    if (!model_error_quiet_global()) fprintf(stderr, "%s: warning: %s\n", s->path, s->warning);
+    model_warning("%s: %s", s->path, s->warning);
 }
 
 model_scene_t *model_scene_load(const char *path, const model_scene_options_t *opt)

@@ -74,7 +74,7 @@ typedef struct {
     int           *vert_storage_; // private
     int            nspheres;     // exact spheres (D3D @sphere); 0 for OBJ
     model_sphere_t *spheres;     // sphere k is "face" nfaces + k in pixel_info
-    char           warning[320]; // model_scene_load: a warning it printed ("" none), e.g. the units'
+    char           warning[320]; // model_scene_load: a warning it gave ("" none), e.g. the units'
 } model_scene_t;
 
 typedef struct {
@@ -93,8 +93,8 @@ bool model_units_parse(const char *s, double *unit_mm);
 // Load a scene file: STL and PLY told by their content (a .stl name also
 // makes a damaged STL read as one, for its error), D3D and OBJ by the name
 // (.d3d, .obj, case-insensitive). opt may be NULL. An OBJ/STL/PLY scene under
-// MODEL_SCENE_SMALL_MM with opt->unit_mm 0 gets scene->warning, printed on
-// stderr as "PATH: warning: ..." (unless the process-wide quiet mode is on).
+// MODEL_SCENE_SMALL_MM with opt->unit_mm 0 gets scene->warning, also given
+// to model_warning as "PATH: ...".
 model_scene_t *model_scene_load(const char *path, const model_scene_options_t *opt);
 model_scene_t *model_scene_parse_d3d(const char *text, size_t len, const char *name,
                                      const model_scene_options_t *opt);
