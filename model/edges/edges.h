@@ -106,7 +106,8 @@ void                model_edges_file_free(model_edges_file_t *f);   // accepts N
 // The table: one line per visible image segment (3D and image end points,
 // faces, lamps lighting each side, predicted grey values and contrast).
 void model_edges_file_print(FILE *out, const model_edges_file_t *f, const model_edges_file_opts_t *o);
-// The edges, their units and conventions and the provenance as JSON. false + message.
+// The edges, their units and conventions and the provenance as JSON, format
+// "refl-edges" version 1 (model_json_set_format). false + message.
 bool model_edges_file_write_json(const model_edges_file_t *f, const model_edges_file_opts_t *o, const char *path);
 
 #ifdef __cplusplus
