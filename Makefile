@@ -70,6 +70,11 @@ MODEL_IMAGE_SRC := \
     model/image/read.c
 MODEL_SCENE_SRC := \
     model/scene/scene.c \
+    model/scene/lex.c \
+    model/scene/d3d.c \
+    model/scene/obj.c \
+    model/scene/load.c \
+    model/scene/transform.c \
     model/scene/mesh.c \
     model/scene/workpiece.c
 MODEL_BRDF_SRC := \

@@ -45,26 +45,3 @@ bool  model_inputs_hash(model_input_t *in, int n);
 void  model_meta_add_inputs(model_meta_t *m, const model_input_t *in, int nin);
 // "name: model(p=...) [convention]; ..." of the scene's materials (g_free).
 char *model_material_conventions(const model_scene_t *scene, const model_material_t *const *mats);
-
-// Mesh scenes (model/scene/mesh.c reads STL and PLY into a mesh;
-// model_scene_from_mesh_ in model/scene/scene.c checks its faces and builds the scene).
-typedef struct {
-    double *v;         // x, y, z per vertex, in the file's unit
-    int     nv;
-    int    *idx;       // face-vertex references, 0-based
-    size_t  nidx;
-    size_t *fstart;    // face k: idx[fstart[k] .. fstart[k + 1]) (nf + 1 entries)
-    int    *floc;      // face k's line (text) or byte offset (binary), for messages
-    int     nf;
-    bool    binary;
-} model_mesh_t;
-typedef enum { MODEL_MESH_NONE, MODEL_MESH_PLY, MODEL_MESH_STL_BINARY, MODEL_MESH_STL_ASCII } model_mesh_format_t;
-// The mesh format of a file's bytes: "ply" first; binary STL (size 84 + 50 x
-// its count); ASCII STL ("solid" first, and with strict a "facet" in the
-// first 4 KiB); else NONE.
-model_mesh_format_t model_mesh_format_(const char *text, size_t len, bool strict);
-// stl: STL (binary or ASCII by content), else PLY. false + model_error.
-bool model_mesh_parse_(const char *text, size_t len, const char *name, bool stl, model_mesh_t *out);
-void model_mesh_free_(model_mesh_t *m);
-model_scene_t *model_scene_from_mesh_(const model_mesh_t *m, const char *name, const char *text, size_t len,
-                                      const model_scene_options_t *opt);

@@ -16,7 +16,7 @@
 //           c*100 % below linear at e = FW, 0 at e = 0)
 //   DN    = round(e_nl * K + dark_offset_dn + dsnu(x,y)), clipped to [0, 2^bits - 1]
 // Beyond that model (the virtual rig's adversary; all off by default, and then
-// every value is what it was without them):
+// every value is that of the model above):
 //   hot pixels  a fixed share hot_pixel_fraction of the pixels (chosen by
 //               pattern_seed) add hot_pixel_dark_current_e_per_s * exposure to mu;
 //   response    applied to e before the well's clip: first a gamma at the low
@@ -228,8 +228,8 @@ static double zig_slow(row_rng_t *g, int i, double z, bool neg)
 
 // ln k! for k >= 0: a table below 64 (lgamma once), Stirling's series for
 // ln Gamma(n), n = k + 1, above (error below 1e-14 there). The acceptance
-// test of PTRS needs it per rejected-fast-path draw; lgamma_r was a tenth of
-// the sensor stage.
+// test of PTRS needs it per rejected-fast-path draw, where lgamma_r would
+// take a tenth of the sensor stage's time.
 enum { LOGFACT_N = 64 };
 static double logfact_tab[LOGFACT_N];
 static pthread_once_t logfact_once = PTHREAD_ONCE_INIT;
@@ -718,7 +718,7 @@ typedef enum { GAIN_DB, GAIN_LINEAR, GAIN_OTHER } gain_unit_t;
 
 static gain_unit_t gain_unit_kind(const char *unit)
 {
-    if (!unit || !*unit || !strcasecmp(unit, "dB")) return GAIN_DB;   // "": sessions before units were kept
+    if (!unit || !*unit || !strcasecmp(unit, "dB")) return GAIN_DB;   // "": a frame without a unit, GenICam's Gain
     static const char *const linear[] = { "x", "times", "linear", "factor" };
     for (size_t i = 0; i < sizeof linear / sizeof linear[0]; i++)
         if (!strcasecmp(unit, linear[i])) return GAIN_LINEAR;

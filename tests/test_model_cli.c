@@ -145,6 +145,8 @@ TEST(cli_edges_json)
     json_t *root = json_load_file(js, 0, &jerr);
     CHECK_MSG(root != NULL, "%s: %s", js, jerr.text);
     if (root) {
+        CHECK(!strcmp(json_string_value(json_object_get(root, "format")) ?: "", "refl-edges"));
+        CHECK(json_integer_value(json_object_get(root, "version")) == 1);
         json_t *edges = json_object_get(root, "edges");
         CHECK(json_is_array(edges));
         // plate 12 edges, web 4 vertical + 4 bottom + 4 top boundary, flange 12

@@ -804,7 +804,8 @@ TEST(scene_render_units_cli)
     int rc = test_refl_run(120, &out, &err, "render", pply, "--camera", cam, "--lamps", lamps, "--materials", mats,
                            "--threads", "2", "-o", test_path("box_tiny.png"), NULL);
     CHECK(rc == 0);
-    CHECK_CONTAINS(err, "box.ply: warning: the whole scene spans 0.1 mm");
+    CHECK_CONTAINS(err, "refl render: warning: ");
+    CHECK_CONTAINS(err, "box.ply: the whole scene spans 0.1 mm");
     CHECK_CONTAINS(err, "--units m");
     free(out);
     free(err);

@@ -52,20 +52,12 @@ static void cut_comment(char *v)
         }
 }
 
-model_ini_t *model_ini_parse(const char *text, size_t len, const char *name)
+// The parsed file's one allocation (see the head of this file) for a text
+// of len bytes: the arrays sized for one entry and one section per line,
+// the name and the text copied (*buf: the copy). NULL + message when out
+// of memory.
+static model_ini_t *ini_alloc(const char *text, size_t len, const char *name, char **buf)
 {
-    if (!name) name = "<text>";
-    if (!text) len = 0;
-
-    // NUL bytes would silently truncate lines: refuse them.
-    const char *nul = len ? memchr(text, 0, len) : NULL;
-    if (nul) {
-        int line = 1;
-        for (const char *p = text; p < nul; p++) line += *p == '\n';
-        model_error(name, line, "NUL byte in the text (is this a binary file?); INI files are plain text");
-        return NULL;
-    }
-
     size_t nlines = 1;
     for (size_t i = 0; i < len; i++) nlines += text[i] == '\n';
 
@@ -94,17 +86,113 @@ model_ini_t *model_ini_parse(const char *text, size_t len, const char *name)
     ini->section_count = (int *)(block + off_scount);
     ini->path = block + off_name;
     memcpy(ini->path, name, name_len + 1);
-    char *buf = block + off_text;
-    if (len) memcpy(buf, text, len);
-    buf[len] = 0;
+    *buf = block + off_text;
+    if (len) memcpy(*buf, text, len);
+    (*buf)[len] = 0;
+    return ini;
+}
 
-    const char *section = NULL;
-    // Duplicate checks in constant time: section name -> index + 1, and the
-    // keys of the current section -> entry index + 1 (entries of one section
-    // are contiguous, so that table restarts at every header).
-    GHashTable *sections_seen = g_hash_table_new(g_str_hash, g_str_equal);
-    GHashTable *keys_seen = g_hash_table_new(g_str_hash, g_str_equal);
-    char *p = buf;
+// Duplicate checks in constant time: section name -> index + 1, and the
+// keys of the current section -> entry index + 1 (entries of one section
+// are contiguous, so that table restarts at every header).
+typedef struct {
+    GHashTable *sections_seen;
+    GHashTable *keys_seen;
+    const char *section;   // the current section (NULL before the first header)
+} ini_state_t;
+
+// A section header line s ("[...]", trimmed), cut in place.
+static bool ini_section(model_ini_t *ini, ini_state_t *st, const char *name, int line, char *s)
+{
+    char *close = strchr(s, ']');
+    if (!close) {
+        model_error(name, line, "unterminated '[' in section header '%s'; write [section] or [kind NAME]", s);
+        return false;
+    }
+    char *rest = trim(close + 1);
+    if (*rest && *rest != '#' && *rest != ';') {
+        model_error(name, line, "unexpected text '%s' after the section header; put comments on their own line or after '#'", rest);
+        return false;
+    }
+    *close = 0;
+    char *sec = trim(s + 1);
+    collapse_blanks(sec);
+    if (!*sec) {
+        model_error(name, line, "empty section name '[]'; write [section] or [kind NAME]");
+        return false;
+    }
+    if (strchr(sec, '[')) {
+        model_error(name, line, "'[' inside the section header [%s]", sec);
+        return false;
+    }
+    int first = GPOINTER_TO_INT(g_hash_table_lookup(st->sections_seen, sec));
+    if (first) {
+        model_error(name, line, "duplicate section [%s] (first at line %d); merge them or rename one",
+                    sec, ini->section_lines[first - 1]);
+        return false;
+    }
+    ini->sections[ini->nsections] = sec;
+    ini->section_lines[ini->nsections] = line;
+    ini->section_first[ini->nsections] = ini->nentries;
+    ini->section_count[ini->nsections] = 0;
+    ini->nsections++;
+    g_hash_table_insert(st->sections_seen, sec, GINT_TO_POINTER(ini->nsections));
+    g_hash_table_remove_all(st->keys_seen);
+    st->section = sec;
+    return true;
+}
+
+// A "key = value" line s (trimmed), cut in place.
+static bool ini_entry(model_ini_t *ini, ini_state_t *st, const char *name, int line, char *s)
+{
+    char *eq = strchr(s, '=');
+    if (!eq) {
+        model_error(name, line, "expected 'key = value' or '[section]', got '%s'", s);
+        return false;
+    }
+    *eq = 0;
+    char *key = trim(s);
+    char *value = eq + 1;
+    cut_comment(value);
+    value = trim(value);
+    if (!*key) {
+        model_error(name, line, "empty key before '='; write 'key = value'");
+        return false;
+    }
+    if (!st->section) {
+        model_error(name, line, "key '%s' before any section; put it under a [section] header", key);
+        return false;
+    }
+    int prev = GPOINTER_TO_INT(g_hash_table_lookup(st->keys_seen, key));
+    if (prev) {
+        model_error(name, line, "duplicate key '%s' in [%s] (first at line %d); keep one",
+                    key, st->section, ini->entries[prev - 1].line);
+        return false;
+    }
+    ini->entries[ini->nentries++] = (model_ini_entry_t){ st->section, key, value, line };
+    ini->section_count[ini->nsections - 1]++;
+    g_hash_table_insert(st->keys_seen, key, GINT_TO_POINTER(ini->nentries));
+    return true;
+}
+
+model_ini_t *model_ini_parse(const char *text, size_t len, const char *name)
+{
+    if (!name) name = "<text>";
+    if (!text) len = 0;
+
+    // NUL bytes would silently truncate lines: refuse them.
+    const char *nul = len ? memchr(text, 0, len) : NULL;
+    if (nul) {
+        int line = 1;
+        for (const char *p = text; p < nul; p++) line += *p == '\n';
+        model_error(name, line, "NUL byte in the text (is this a binary file?); INI files are plain text");
+        return NULL;
+    }
+
+    char *p;
+    model_ini_t *ini = ini_alloc(text, len, name, &p);
+    if (!ini) return NULL;
+    ini_state_t st = { g_hash_table_new(g_str_hash, g_str_equal), g_hash_table_new(g_str_hash, g_str_equal), NULL };
     for (int line = 1; p; line++) {
         char *eol = strchr(p, '\n');
         if (eol) *eol = 0;
@@ -112,83 +200,16 @@ model_ini_t *model_ini_parse(const char *text, size_t len, const char *name)
         p = eol ? eol + 1 : NULL;
 
         if (!*s || *s == '#' || *s == ';') continue;
-
-        if (*s == '[') {
-            char *close = strchr(s, ']');
-            if (!close) {
-                model_error(name, line, "unterminated '[' in section header '%s'; write [section] or [kind NAME]", s);
-                goto fail;
-            }
-            char *rest = trim(close + 1);
-            if (*rest && *rest != '#' && *rest != ';') {
-                model_error(name, line, "unexpected text '%s' after the section header; put comments on their own line or after '#'", rest);
-                goto fail;
-            }
-            *close = 0;
-            char *sec = trim(s + 1);
-            collapse_blanks(sec);
-            if (!*sec) {
-                model_error(name, line, "empty section name '[]'; write [section] or [kind NAME]");
-                goto fail;
-            }
-            if (strchr(sec, '[')) {
-                model_error(name, line, "'[' inside the section header [%s]", sec);
-                goto fail;
-            }
-            int first = GPOINTER_TO_INT(g_hash_table_lookup(sections_seen, sec));
-            if (first) {
-                model_error(name, line, "duplicate section [%s] (first at line %d); merge them or rename one",
-                            sec, ini->section_lines[first - 1]);
-                goto fail;
-            }
-            ini->sections[ini->nsections] = sec;
-            ini->section_lines[ini->nsections] = line;
-            ini->section_first[ini->nsections] = ini->nentries;
-            ini->section_count[ini->nsections] = 0;
-            ini->nsections++;
-            g_hash_table_insert(sections_seen, sec, GINT_TO_POINTER(ini->nsections));
-            g_hash_table_remove_all(keys_seen);
-            section = sec;
-            continue;
+        if (!(*s == '[' ? ini_section(ini, &st, name, line, s) : ini_entry(ini, &st, name, line, s))) {
+            g_hash_table_destroy(st.sections_seen);
+            g_hash_table_destroy(st.keys_seen);
+            free(ini->storage_);
+            return NULL;
         }
-
-        char *eq = strchr(s, '=');
-        if (!eq) {
-            model_error(name, line, "expected 'key = value' or '[section]', got '%s'", s);
-            goto fail;
-        }
-        *eq = 0;
-        char *key = trim(s);
-        char *value = eq + 1;
-        cut_comment(value);
-        value = trim(value);
-        if (!*key) {
-            model_error(name, line, "empty key before '='; write 'key = value'");
-            goto fail;
-        }
-        if (!section) {
-            model_error(name, line, "key '%s' before any section; put it under a [section] header", key);
-            goto fail;
-        }
-        int prev = GPOINTER_TO_INT(g_hash_table_lookup(keys_seen, key));
-        if (prev) {
-            model_error(name, line, "duplicate key '%s' in [%s] (first at line %d); keep one",
-                        key, section, ini->entries[prev - 1].line);
-            goto fail;
-        }
-        ini->entries[ini->nentries++] = (model_ini_entry_t){ section, key, value, line };
-        ini->section_count[ini->nsections - 1]++;
-        g_hash_table_insert(keys_seen, key, GINT_TO_POINTER(ini->nentries));
     }
-    ini->index_ = sections_seen;   // kept for model_ini_get (its keys live in the block)
-    g_hash_table_destroy(keys_seen);
+    ini->index_ = st.sections_seen;   // kept for model_ini_get (its keys live in the block)
+    g_hash_table_destroy(st.keys_seen);
     return ini;
-
-fail:
-    g_hash_table_destroy(sections_seen);
-    g_hash_table_destroy(keys_seen);
-    free(block);
-    return NULL;
 }
 
 model_ini_t *model_ini_load(const char *path)

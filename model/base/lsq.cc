@@ -56,7 +56,7 @@ private:
 // residuals [Q^T r; |(I - Q Q^T) r|] with Jacobian [R; 0]. At every point
 // this has the same cost, gradient J^T r and Gauss-Newton matrix J^T J as
 // the block itself, so the trust-region steps and the covariance are the
-// block's; Ceres's work no longer grows with m. Without Jacobians (a cost
+// block's; Ceres's work does not grow with m. Without Jacobians (a cost
 // evaluation) it returns [0 ... 0; |r|], the same cost.
 class FoldedCost : public ceres::CostFunction {
 public:
@@ -314,19 +314,13 @@ static int cores(void)
     return n > 0 ? (int)n : 1;
 }
 
-bool lsq_solve(lsq_problem_t *p, const lsq_options_t *opt, lsq_summary_t *s)
+// Ceres's options for o; *nparam gets the parameters of every block.
+static ceres::Solver::Options solver_options(const lsq_problem_t *p, const lsq_options_t &o, int *nparam)
 {
-    lsq_options_t o = opt ? *opt : lsq_defaults();
-    lsq_summary_t out;
-    memset(&out, 0, sizeof out);
-    if (!p) {
-        if (s) *s = out;
-        return fail("lsq_solve: NULL problem");
-    }
     ceres::Solver::Options so;
-    int nparam = 0;
-    for (auto &kv : p->sizes) nparam += kv.second;
-    so.linear_solver_type = nparam > 400            ? ceres::SPARSE_NORMAL_CHOLESKY
+    *nparam = 0;
+    for (auto &kv : p->sizes) *nparam += kv.second;
+    so.linear_solver_type = *nparam > 400           ? ceres::SPARSE_NORMAL_CHOLESKY
                             : o.normal_equations ? ceres::DENSE_NORMAL_CHOLESKY
                                                  : ceres::DENSE_QR;
     std::string why;
@@ -339,18 +333,12 @@ bool lsq_solve(lsq_problem_t *p, const lsq_options_t *opt, lsq_summary_t *s)
     so.num_threads = o.threads > 0 ? o.threads : cores();
     so.minimizer_progress_to_stdout = o.verbose;
     so.logging_type = o.verbose ? ceres::PER_MINIMIZER_ITERATION : ceres::SILENT;
-    ceres::Solver::Summary sum;
-    try {
-        ceres::Solve(so, &p->problem, &sum);
-        if (o.verbose) fprintf(stderr, "%s\n", sum.FullReport().c_str());
-    } catch (const std::exception &e) {
-        if (s) *s = out;
-        return fail("lsq_solve: %s", e.what());
-    }
-    // Ceres projects steps onto the bounds, which stalls the free parameters
-    // while one sits at an active bound. Fix the parameters at an active
-    // bound (the cost falls outward), solve the rest again, then free them.
-    // The gradient is only needed when a free parameter sits at a bound.
+    return so;
+}
+
+// Whether a free parameter sits at one of its bounds.
+static bool any_at_bound(lsq_problem_t *p)
+{
     bool at_bound = false;
     for (auto &kv : p->sizes) {
         double *x = kv.first;
@@ -361,81 +349,100 @@ bool lsq_solve(lsq_problem_t *p, const lsq_options_t *opt, lsq_summary_t *s)
             at_bound |= !p->fixed[x][i] && (x[i] <= lo + tol || x[i] >= hi - tol);
         }
     }
-    if (sum.IsSolutionUsable() && at_bound) {
-        std::vector<double *> order;
-        for (auto &kv : p->sizes) order.push_back(kv.first);
-        ceres::Problem::EvaluateOptions eo;
-        eo.parameter_blocks = order;
-        double cost = 0;
-        std::vector<double> grad;
-        bool any = false;
-        std::map<double *, std::vector<int>> active;
-        // The gradient is in the blocks' tangent coordinates: a block with
-        // fixed parameters (a subset manifold) has one entry per free
-        // parameter, in order.
-        size_t total = 0;
-        for (double *x : order) total += (size_t)p->problem.ParameterBlockTangentSize(x);
-        if (p->problem.Evaluate(eo, &cost, nullptr, &grad, nullptr) && grad.size() == total) {
-            size_t off = 0;
-            for (double *x : order) {
-                int n = p->sizes[x], tn = p->problem.ParameterBlockTangentSize(x);
-                if (!p->problem.IsParameterBlockConstant(x)) {
-                    int j = 0;
-                    for (int i = 0; i < n; i++) {
-                        bool fixed_i = tn < n && p->fixed[x][i];
-                        if (fixed_i) continue;
-                        int gi = tn < n ? j++ : i;
-                        if (p->fixed[x][i] || gi >= tn) continue;
-                        double lo = p->problem.GetParameterLowerBound(x, i), hi = p->problem.GetParameterUpperBound(x, i);
-                        double g = grad[off + (size_t)gi], tol = 1e-12 * std::fmax(1.0, std::fabs(x[i]));
-                        if ((x[i] <= lo + tol && g > 0) || (x[i] >= hi - tol && g < 0)) {
-                            active[x].push_back(i);
-                            any = true;
-                        }
+    return at_bound;
+}
+
+// The free parameters at a bound where the cost falls outward (the gradient
+// points out of the box), by block; false when there is none.
+static bool active_bounds(lsq_problem_t *p, std::map<double *, std::vector<int>> &active)
+{
+    std::vector<double *> order;
+    for (auto &kv : p->sizes) order.push_back(kv.first);
+    ceres::Problem::EvaluateOptions eo;
+    eo.parameter_blocks = order;
+    double cost = 0;
+    std::vector<double> grad;
+    bool any = false;
+    // The gradient is in the blocks' tangent coordinates: a block with
+    // fixed parameters (a subset manifold) has one entry per free
+    // parameter, in order.
+    size_t total = 0;
+    for (double *x : order) total += (size_t)p->problem.ParameterBlockTangentSize(x);
+    if (p->problem.Evaluate(eo, &cost, nullptr, &grad, nullptr) && grad.size() == total) {
+        size_t off = 0;
+        for (double *x : order) {
+            int n = p->sizes[x], tn = p->problem.ParameterBlockTangentSize(x);
+            if (!p->problem.IsParameterBlockConstant(x)) {
+                int j = 0;
+                for (int i = 0; i < n; i++) {
+                    bool fixed_i = tn < n && p->fixed[x][i];
+                    if (fixed_i) continue;
+                    int gi = tn < n ? j++ : i;
+                    if (p->fixed[x][i] || gi >= tn) continue;
+                    double lo = p->problem.GetParameterLowerBound(x, i), hi = p->problem.GetParameterUpperBound(x, i);
+                    double g = grad[off + (size_t)gi], tol = 1e-12 * std::fmax(1.0, std::fabs(x[i]));
+                    if ((x[i] <= lo + tol && g > 0) || (x[i] >= hi - tol && g < 0)) {
+                        active[x].push_back(i);
+                        any = true;
                     }
                 }
-                off += (size_t)tn;
             }
-        }
-        if (any) {
-            for (auto &kv : active) {
-                double *x = kv.first;
-                int n = p->sizes[x];
-                std::vector<int> idx;
-                for (int i = 0; i < n; i++)
-                    if (p->fixed[x][i] || std::find(kv.second.begin(), kv.second.end(), i) != kv.second.end())
-                        idx.push_back(i);
-                if ((int)idx.size() == n) p->problem.SetParameterBlockConstant(x);
-                else p->problem.SetManifold(x, new ceres::SubsetManifold(n, idx));
-            }
-            ceres::Solver::Summary sum2;
-            try {
-                ceres::Solve(so, &p->problem, &sum2);
-            } catch (const std::exception &e) {
-                if (s) *s = out;
-                return fail("lsq_solve: %s", e.what());
-            }
-            for (auto &kv : active) {   // restore the caller's masks
-                double *x = kv.first;
-                std::vector<bool> f = p->fixed[x];
-                bool all = true;
-                for (bool b : f) all = all && b;
-                if (all) continue;
-                p->problem.SetParameterBlockVariable(x);
-                std::vector<int> idx;
-                for (int i = 0; i < (int)f.size(); i++)
-                    if (f[i]) idx.push_back(i);
-                p->problem.SetManifold(x, idx.empty() ? nullptr : new ceres::SubsetManifold((int)f.size(), idx));
-            }
-            double t = sum.total_time_in_seconds + sum2.total_time_in_seconds;
-            size_t it = sum.iterations.size() + sum2.iterations.size();
-            double c0 = sum.initial_cost;
-            sum = sum2;
-            sum.initial_cost = c0;
-            sum.total_time_in_seconds = t;
-            sum.iterations.resize(it);
+            off += (size_t)tn;
         }
     }
+    return any;
+}
+
+// Solve again with the active parameters fixed, then restore the caller's
+// masks; sum becomes the second solve's summary with the first's initial
+// cost, and the two solves' time and iterations. false + message when
+// Ceres throws.
+static bool solve_with_active_fixed(lsq_problem_t *p, const ceres::Solver::Options &so,
+                                    const std::map<double *, std::vector<int>> &active, ceres::Solver::Summary &sum)
+{
+    for (auto &kv : active) {
+        double *x = kv.first;
+        int n = p->sizes[x];
+        std::vector<int> idx;
+        for (int i = 0; i < n; i++)
+            if (p->fixed[x][i] || std::find(kv.second.begin(), kv.second.end(), i) != kv.second.end())
+                idx.push_back(i);
+        if ((int)idx.size() == n) p->problem.SetParameterBlockConstant(x);
+        else p->problem.SetManifold(x, new ceres::SubsetManifold(n, idx));
+    }
+    ceres::Solver::Summary sum2;
+    try {
+        ceres::Solve(so, &p->problem, &sum2);
+    } catch (const std::exception &e) {
+        return fail("lsq_solve: %s", e.what());
+    }
+    for (auto &kv : active) {   // restore the caller's masks
+        double *x = kv.first;
+        std::vector<bool> f = p->fixed[x];
+        bool all = true;
+        for (bool b : f) all = all && b;
+        if (all) continue;
+        p->problem.SetParameterBlockVariable(x);
+        std::vector<int> idx;
+        for (int i = 0; i < (int)f.size(); i++)
+            if (f[i]) idx.push_back(i);
+        p->problem.SetManifold(x, idx.empty() ? nullptr : new ceres::SubsetManifold((int)f.size(), idx));
+    }
+    double t = sum.total_time_in_seconds + sum2.total_time_in_seconds;
+    size_t it = sum.iterations.size() + sum2.iterations.size();
+    double c0 = sum.initial_cost;
+    sum = sum2;
+    sum.initial_cost = c0;
+    sum.total_time_in_seconds = t;
+    sum.iterations.resize(it);
+    return true;
+}
+
+// The summary the caller gets from Ceres's.
+static lsq_summary_t summary_of(lsq_problem_t *p, const ceres::Solver::Summary &sum, int nparam)
+{
+    lsq_summary_t out;
+    memset(&out, 0, sizeof out);
     out.iterations = (int)sum.iterations.size();
     out.initial_cost = sum.initial_cost;
     out.final_cost = sum.final_cost;
@@ -452,6 +459,40 @@ bool lsq_solve(lsq_problem_t *p, const lsq_options_t *opt, lsq_summary_t *s)
     snprintf(out.termination, sizeof out.termination, "%s", ceres::TerminationTypeToString(sum.termination_type));
     snprintf(out.message, sizeof out.message, "%s", sum.message.c_str());
     out.time_s = sum.total_time_in_seconds;
+    return out;
+}
+
+bool lsq_solve(lsq_problem_t *p, const lsq_options_t *opt, lsq_summary_t *s)
+{
+    lsq_options_t o = opt ? *opt : lsq_defaults();
+    lsq_summary_t out;
+    memset(&out, 0, sizeof out);
+    if (!p) {
+        if (s) *s = out;
+        return fail("lsq_solve: NULL problem");
+    }
+    int nparam;
+    ceres::Solver::Options so = solver_options(p, o, &nparam);
+    ceres::Solver::Summary sum;
+    try {
+        ceres::Solve(so, &p->problem, &sum);
+        if (o.verbose) model_note("%s", sum.FullReport().c_str());
+    } catch (const std::exception &e) {
+        if (s) *s = out;
+        return fail("lsq_solve: %s", e.what());
+    }
+    // Ceres projects steps onto the bounds, which stalls the free parameters
+    // while one sits at an active bound. Fix the parameters at an active
+    // bound (the cost falls outward), solve the rest again, then free them.
+    // The gradient is only needed when a free parameter sits at a bound.
+    if (sum.IsSolutionUsable() && any_at_bound(p)) {
+        std::map<double *, std::vector<int>> active;
+        if (active_bounds(p, active) && !solve_with_active_fixed(p, so, active, sum)) {
+            if (s) *s = out;
+            return false;
+        }
+    }
+    out = summary_of(p, sum, nparam);
     if (s) *s = out;
     if (!out.usable) return fail("lsq_solve: no usable solution (%s: %s)", out.termination, out.message);
     return true;

@@ -69,7 +69,7 @@ typedef struct {
     double parameter_tolerance; // default 1e-10
     double gradient_tolerance;  // default 1e-12
     int    threads;             // default 0 = the machine's cores
-    bool   verbose;             // Ceres's per-iteration lines on stderr
+    bool   verbose;             // Ceres's per-iteration lines (Ceres prints them) and its full report (model_note)
     // Small problems (<= 400 parameters): the normal equations by Cholesky
     // instead of QR of the Jacobian. Faster (the step's linear algebra costs
     // N p^2 / 2 instead of 2 N p^2) at a squared condition number; the steps

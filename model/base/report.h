@@ -34,8 +34,8 @@ json_t *model_json_number(double x);
 // model_json_set_format on the root object; a reader calls
 // model_json_format_check on the parsed root: a file of another format is
 // refused naming both, a version above max_version is refused as written by
-// a newer refl, a file without the keys is read as version 1 (the layout
-// before it named itself); *version (may be NULL) gets the version read.
+// a newer refl, a file without the keys is read as version 1 (each format's
+// first layout); *version (may be NULL) gets the version read.
 // false + model_error_set naming path.
 void model_json_set_format(json_t *root, const char *format, int version);
 bool model_json_format_check(const json_t *root, const char *path, const char *format, int max_version,

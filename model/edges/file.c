@@ -8,6 +8,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "model/base/report.h"
 #include "model/internal.h"
 
 struct model_edges_file {
@@ -167,6 +168,7 @@ bool model_edges_file_write_json(const model_edges_file_t *f, const model_edges_
         "lamps", lamps, "edges", edges_json(f));
     g_free(conv);
     bool ok = root != NULL;
+    if (ok) model_json_set_format(root, "refl-edges", 1);
     if (!ok) MODEL_FAIL("cannot build the JSON document");
     if (ok && json_dump_file(root, path, JSON_INDENT(1) | JSON_REAL_PRECISION(10)) != 0) {
         model_error(path, 0, "cannot write the JSON file: check the directory exists and is writable");

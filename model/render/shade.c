@@ -393,14 +393,27 @@ typedef struct {
     const model_material_t *mat[16];
 } packet_t;
 
-// Render the BLK x BLK pixels of block (bx, by): one primary packet, one
-// shadow packet per lamp, then the sums (and the interreflection terms).
-static void render_packet(render_ctx_t *c, packet_t *pk, int bx, int by)
+// Lane k's shadow segment from the surface point p (normal n) along dl to
+// about eps short of its end (inv = 1 / |dl|): from p + eps n to p + dl.
+static void shadow_lane(model_shadow_packet_t *sp, int k, model_vec3_t p, model_vec3_t n, model_vec3_t dl,
+                        double eps, double inv)
+{
+    sp->org_x[k] = (float)(p.x + eps * n.x);
+    sp->org_y[k] = (float)(p.y + eps * n.y);
+    sp->org_z[k] = (float)(p.z + eps * n.z);
+    sp->dir_x[k] = (float)(dl.x - eps * n.x);
+    sp->dir_y[k] = (float)(dl.y - eps * n.y);
+    sp->dir_z[k] = (float)(dl.z - eps * n.z);
+    sp->tfar[k] = (float)(1 - eps * inv);
+    sp->active[k] = 1;
+}
+
+// The pixels of block (bx, by) to render (the mask's), their indices and
+// rays into the packet; returns their number.
+static int packet_gather(const render_ctx_t *c, packet_t *pk, int bx, int by)
 {
     const model_shading_t *sh = c->sh;
-    const int W = c->W, H = c->H, nl = c->nl;
-    const size_t npix = (size_t)W * H;
-    const double eps = c->eps;
+    const int W = c->W, H = c->H;
     int m = 0;
     for (int y = by * BLK; y < by * BLK + BLK && y < H; y++)
         for (int x = bx * BLK; x < bx * BLK + BLK && x < W; x++) {
@@ -409,13 +422,15 @@ static void render_packet(render_ctx_t *c, packet_t *pk, int bx, int by)
             pk->dirs[m] = c->rays[pk->pix[m]];
             m++;
         }
-    if (!m) return;
-    model_pixel_info_t *pi = pk->pi;
-    if (!model_tracer_cast_packet(c->t, c->o, pk->dirs, m, pi)) {
-        fill_background(c, bx * BLK, bx * BLK + BLK < W ? bx * BLK + BLK : W, by * BLK,
-                        by * BLK + BLK < H ? by * BLK + BLK : H);
-        return;
-    }
+    return m;
+}
+
+// After the primary packet: each lane's material (hit: a face with a known
+// material), point, normal and n.v, the face ids written; S cleared.
+// Returns the number of lanes that hit.
+static int packet_hits(render_ctx_t *c, packet_t *pk, int m)
+{
+    const model_pixel_info_t *pi = pk->pi;
     int nhit = 0;
     for (int k = 0; k < 16; k++) {
         pk->S[k] = 0;
@@ -428,8 +443,17 @@ static void render_packet(render_ctx_t *c, packet_t *pk, int bx, int by)
         pk->nv[k] = v3_dot(pi[k].n, pi[k].v);
         if (c->face) c->face[pk->pix[k]] = pi[k].face;
     }
-    // Direct light of the lamps' centres (point lamps), a shadow packet per lamp.
-    for (int i = 0; i < nl; i++) {
+    return nhit;
+}
+
+// Direct light of the lamps' centres (point lamps; finite lamps under MC are
+// sampled by packet_finite_lamps), a shadow packet per lamp, added to S.
+static void packet_point_lamps(render_ctx_t *c, packet_t *pk, int m, int nhit)
+{
+    const size_t npix = (size_t)c->W * c->H;
+    const double eps = c->eps;
+    const model_pixel_info_t *pi = pk->pi;
+    for (int i = 0; i < c->nl; i++) {
         const model_lamp_t *L = &c->lamps->lamps[i];
         bool sampled = c->mc_finite && L->radius_mm > 0;   // done by mc_term
         if (!nhit || sampled) {
@@ -453,15 +477,7 @@ static void render_packet(render_ctx_t *c, packet_t *pk, int bx, int by)
             pk->nl[k] = ndl * inv;
             pk->w[k] = I * inv * inv;
             if (L->emission_cos_power > 0) pk->w[k] *= model_lamp_emission(L, pk->pts[k]);
-            // from p + eps n to about eps short of the lamp
-            sp->org_x[k] = (float)(pk->pts[k].x + eps * n.x);
-            sp->org_y[k] = (float)(pk->pts[k].y + eps * n.y);
-            sp->org_z[k] = (float)(pk->pts[k].z + eps * n.z);
-            sp->dir_x[k] = (float)(dl.x - eps * n.x);
-            sp->dir_y[k] = (float)(dl.y - eps * n.y);
-            sp->dir_z[k] = (float)(dl.z - eps * n.z);
-            sp->tfar[k] = (float)(1 - eps * inv);
-            sp->active[k] = 1;
+            shadow_lane(sp, k, pk->pts[k], n, dl, eps, inv);
             nact++;
         }
         if (nact)
@@ -475,12 +491,20 @@ static void render_packet(render_ctx_t *c, packet_t *pk, int bx, int by)
             pk->S[k] += pk->w[k] * brdf_value(pk->mat[k], &cs);
         }
     }
-    // Finite lamps (MC): mc_samples directions per lamp and pixel, drawn from
-    // the pixel's own random stream (model_rng(seed, pixel index)), shadow rays
-    // in packets.
+}
+
+// Finite lamps (MC): mc_samples directions per lamp and pixel, drawn from
+// the pixel's own random stream (model_rng(seed, pixel index)), shadow rays
+// in packets, added to S.
+static void packet_finite_lamps(render_ctx_t *c, packet_t *pk, int m, int nhit)
+{
+    const model_shading_t *sh = c->sh;
+    const size_t npix = (size_t)c->W * c->H;
+    const double eps = c->eps;
+    const model_pixel_info_t *pi = pk->pi;
     if (sh->interreflection == MODEL_INTERREFLECTION_MC)
         for (int k = 0; k < m; k++) pk->rng[k] = model_rng(sh->seed, pk->pix[k]);
-    for (int i = 0; c->mc_finite && nhit && i < nl; i++) {
+    for (int i = 0; c->mc_finite && nhit && i < c->nl; i++) {
         if (!(c->lamps->lamps[i].radius_mm > 0)) continue;
         model_shadow_packet_t *sp = &pk->sp;
         int nvis[16] = { 0 };
@@ -500,14 +524,7 @@ static void render_packet(render_ctx_t *c, packet_t *pk, int bx, int by)
                 pk->w[k] = wt * R * inv_samples;
                 model_vec3_t n = pk->nrm[k], dl = v3_sub(target, pk->pts[k]);
                 double inv = 1.0 / sqrt(v3_dot(dl, dl));
-                sp->org_x[k] = (float)(pk->pts[k].x + eps * n.x);
-                sp->org_y[k] = (float)(pk->pts[k].y + eps * n.y);
-                sp->org_z[k] = (float)(pk->pts[k].z + eps * n.z);
-                sp->dir_x[k] = (float)(dl.x - eps * n.x);
-                sp->dir_y[k] = (float)(dl.y - eps * n.y);
-                sp->dir_z[k] = (float)(dl.z - eps * n.z);
-                sp->tfar[k] = (float)(1 - eps * inv);
-                sp->active[k] = 1;
+                shadow_lane(sp, k, pk->pts[k], n, dl, eps, inv);
                 nact++;
             }
             if (!nact) continue;
@@ -521,23 +538,49 @@ static void render_packet(render_ctx_t *c, packet_t *pk, int bx, int by)
         if (c->lit)
             for (int k = 0; k < m; k++) c->lit[i * npix + pk->pix[k]] = 2 * nvis[k] > sh->mc_samples;
     }
+}
+
+// Each pixel's grey value: S with the interreflection term, Pa + kc g S; a
+// lane without a material is background.
+static void packet_finish(render_ctx_t *c, packet_t *pk, int m)
+{
+    const model_shading_t *sh = c->sh;
+    const size_t npix = (size_t)c->W * c->H;
     for (int k = 0; k < m; k++) {
         size_t i = pk->pix[k];
         if (!pk->mat[k]) {
             c->P[i] = (float)sh->Pa;
             if (c->lit && c->mc_finite)
-                for (int a = 0; a < nl; a++) c->lit[a * npix + i] = 0;
+                for (int a = 0; a < c->nl; a++) c->lit[a * npix + i] = 0;
             continue;
         }
         double S = pk->S[k];
         if (sh->interreflection == MODEL_INTERREFLECTION_THESIS && sh->rho != 0) {
-            S += thesis_term(c, pk->mat[k], pk->pts[k], pk->nrm[k], pi[k].v);
+            S += thesis_term(c, pk->mat[k], pk->pts[k], pk->nrm[k], pk->pi[k].v);
         } else if (sh->interreflection == MODEL_INTERREFLECTION_MC && sh->mc_bounces > 0) {
-            S += mc_term(c, pk->mat[k], &pi[k], &pk->rng[k]);
+            S += mc_term(c, pk->mat[k], &pk->pi[k], &pk->rng[k]);
         }
         double g = sh->gain_map ? sh->gain_map[i] : 1.0;
         c->P[i] = (float)(sh->Pa + sh->kc * g * S);
     }
+}
+
+// Render the BLK x BLK pixels of block (bx, by): one primary packet, one
+// shadow packet per lamp, then the sums (and the interreflection terms).
+static void render_packet(render_ctx_t *c, packet_t *pk, int bx, int by)
+{
+    const int W = c->W, H = c->H;
+    int m = packet_gather(c, pk, bx, by);
+    if (!m) return;
+    if (!model_tracer_cast_packet(c->t, c->o, pk->dirs, m, pk->pi)) {
+        fill_background(c, bx * BLK, bx * BLK + BLK < W ? bx * BLK + BLK : W, by * BLK,
+                        by * BLK + BLK < H ? by * BLK + BLK : H);
+        return;
+    }
+    int nhit = packet_hits(c, pk, m);
+    packet_point_lamps(c, pk, m, nhit);
+    packet_finite_lamps(c, pk, m, nhit);
+    packet_finish(c, pk, m);
 }
 
 // Rows of tiles [begin, end): a tile whose cone of rays misses the scene's

@@ -282,31 +282,14 @@ static void sphere_occluded_cb(const struct RTCOccludedFunctionNArguments *args)
 
 // ---------------------------------------------------------------------------
 
-model_tracer_t *model_tracer_new(const model_scene_t *scene)
+// The scene's spheres, checked, copied into t->spheres.
+static bool tracer_spheres(model_tracer_t *t, const model_scene_t *scene, const char *where)
 {
-    model_tracer_t *t = NULL;
-    int *local = NULL;
-    pt2_t *pts = NULL;
-    unsigned *tris = NULL;
-    RTCGeometry geom = NULL;
-    bool ok = false;
-    const char *where = scene && scene->path ? scene->path : "scene";
-
-    if (!scene || scene->nfaces < 0 || scene->nvertices < 0 || scene->nspheres < 0 ||
-        (scene->nspheres > 0 && !scene->spheres)) {
-        MODEL_FAIL("model_tracer_new: no scene");
-        return NULL;
-    }
-    t = calloc(1, sizeof *t);
-    if (!t) goto oom;
-    t->nfaces = scene->nfaces;
-    t->tri_geom = t->sph_geom = RTC_INVALID_GEOMETRY_ID;
-    if (scene->nspheres > INT32_MAX - scene->nfaces) {
-        model_error(where, 0, "too many faces and spheres (%d + %d)", scene->nfaces, scene->nspheres);
-        goto done;
-    }
     t->spheres = malloc((size_t)(scene->nspheres + 1) * sizeof *t->spheres);
-    if (!t->spheres) goto oom;
+    if (!t->spheres) {
+        model_error(where, 0, "out of memory building the ray tracer");
+        return false;
+    }
     for (int i = 0; i < scene->nspheres; i++) {
         const model_sphere_t *sp = &scene->spheres[i];
         model_vec3_t c = sp->centre_mm;
@@ -314,40 +297,43 @@ model_tracer_t *model_tracer_new(const model_scene_t *scene)
             !(sp->radius_mm > 0)) {
             model_error(where, sp->line, "sphere %d: centre (%g, %g, %g) mm, radius %g mm: give a "
                         "finite centre and a radius > 0", i + 1, c.x, c.y, c.z, sp->radius_mm);
-            goto done;
+            return false;
         }
         t->spheres[i] = (sphere_t){ { c.x, c.y, c.z }, sp->radius_mm, sp->material };
     }
     t->nspheres = scene->nspheres;
-    int maxv = 3, maxtri = 0;
+    return true;
+}
+
+// Every face has at least 3 vertices, all of the scene; *maxv: the most
+// vertices of a face (at least 3), *maxtri: the triangles of all faces.
+static bool tracer_check_faces(const model_scene_t *scene, const char *where, int *maxv, int *maxtri)
+{
+    *maxv = 3;
+    *maxtri = 0;
     for (int i = 0; i < scene->nfaces; i++) {
         const model_face_t *f = &scene->faces[i];
         if (f->nverts < 3) {
             model_error(where, f->line, "face %d has %d vertices; a face needs at least 3",
                         f->number, f->nverts);
-            goto done;
+            return false;
         }
         for (int k = 0; k < f->nverts; k++)
             if (f->verts[k] < 0 || f->verts[k] >= scene->nvertices) {
                 model_error(where, f->line, "face %d refers to vertex index %d, outside 0..%d",
                             f->number, f->verts[k], scene->nvertices - 1);
-                goto done;
+                return false;
             }
-        if (f->nverts > maxv) maxv = f->nverts;
-        maxtri += f->nverts - 2;
+        if (f->nverts > *maxv) *maxv = f->nverts;
+        *maxtri += f->nverts - 2;
     }
-    t->face_normal = malloc((size_t)(scene->nfaces + 1) * sizeof *t->face_normal);
-    t->face_offset = malloc((size_t)(scene->nfaces + 1) * sizeof *t->face_offset);
-    t->face_material = malloc((size_t)(scene->nfaces + 1) * sizeof *t->face_material);
-    t->prim_face = malloc((size_t)(maxtri + 1) * sizeof *t->prim_face);
-    tris = malloc((size_t)(3 * maxtri + 3) * sizeof *tris);
-    local = malloc((size_t)maxv * sizeof *local);
-    pts = malloc((size_t)maxv * sizeof *pts);
-    if (!t->face_normal || !t->face_offset || !t->face_material || !t->prim_face || !tris ||
-        !local || !pts)
-        goto oom;
+    return true;
+}
 
-    // Scene size -> epsilon for secondary rays.
+// The bounding box of the vertices and spheres, and from the scene's size
+// the epsilon of secondary rays.
+static bool tracer_bounds(model_tracer_t *t, const model_scene_t *scene, const char *where)
+{
     double lo[3] = { INFINITY, INFINITY, INFINITY }, hi[3] = { -INFINITY, -INFINITY, -INFINITY };
     double maxabs = 0;
     for (int i = 0; i < scene->nvertices; i++) {
@@ -356,7 +342,7 @@ model_tracer_t *model_tracer_new(const model_scene_t *scene)
         for (int k = 0; k < 3; k++) {
             if (!isfinite(c[k])) {
                 model_error(where, 0, "vertex %d has a non-finite coordinate", i + 1);
-                goto done;
+                return false;
             }
             lo[k] = fmin(lo[k], c[k]);
             hi[k] = fmax(hi[k], c[k]);
@@ -379,7 +365,15 @@ model_tracer_t *model_tracer_new(const model_scene_t *scene)
         t->lo[k] = lo[k];
         t->hi[k] = hi[k];
     }
+    return true;
+}
 
+// Each face's plane and material, and its triangles (3 vertex indices each)
+// into tris, t->prim_face their faces; local and pts: scratch of the most
+// vertices of a face. The number of triangles, or -1 + message.
+static int tracer_triangulate(model_tracer_t *t, const model_scene_t *scene, const char *where, int *local,
+                              pt2_t *pts, unsigned *tris)
+{
     int ntri = 0;
     for (int i = 0; i < scene->nfaces; i++) {
         const model_face_t *f = &scene->faces[i];
@@ -392,13 +386,20 @@ model_tracer_t *model_tracer_new(const model_scene_t *scene)
             model_error(where, f->line,
                         "face %d cannot be triangulated (its outline crosses itself?); "
                         "fix the order of its vertices", f->number);
-            goto done;
+            return -1;
         }
         for (int j = 0; j < k; j++) t->prim_face[ntri + j] = i;
         ntri += k;
     }
-    t->ntriangles = ntri;
+    return ntri;
+}
 
+// The Embree device and scene: the triangle mesh (ntri triangles tris over
+// the scene's vertices) and the spheres' user geometry, committed.
+static bool tracer_embree(model_tracer_t *t, const model_scene_t *scene, const unsigned *tris, int ntri)
+{
+    RTCGeometry geom = NULL;
+    bool ok = false;
     t->device = rtcNewDevice(NULL);
     if (!t->device) {
         model_error("embree", 0, "rtcNewDevice failed: %s (is libembree3 usable on this CPU?)",
@@ -447,11 +448,55 @@ model_tracer_t *model_tracer_new(const model_scene_t *scene)
     rtcCommitScene(t->scene);
     if (rtc_failed(t->device, "rtcCommitScene")) goto done;
     ok = true;
+done:
+    if (geom) rtcReleaseGeometry(geom);
+    return ok;
+}
+
+model_tracer_t *model_tracer_new(const model_scene_t *scene)
+{
+    model_tracer_t *t = NULL;
+    int *local = NULL;
+    pt2_t *pts = NULL;
+    unsigned *tris = NULL;
+    bool ok = false;
+    const char *where = scene && scene->path ? scene->path : "scene";
+
+    if (!scene || scene->nfaces < 0 || scene->nvertices < 0 || scene->nspheres < 0 ||
+        (scene->nspheres > 0 && !scene->spheres)) {
+        MODEL_FAIL("model_tracer_new: no scene");
+        return NULL;
+    }
+    t = calloc(1, sizeof *t);
+    if (!t) goto oom;
+    t->nfaces = scene->nfaces;
+    t->tri_geom = t->sph_geom = RTC_INVALID_GEOMETRY_ID;
+    if (scene->nspheres > INT32_MAX - scene->nfaces) {
+        model_error(where, 0, "too many faces and spheres (%d + %d)", scene->nfaces, scene->nspheres);
+        goto done;
+    }
+    if (!tracer_spheres(t, scene, where)) goto done;
+    int maxv, maxtri;
+    if (!tracer_check_faces(scene, where, &maxv, &maxtri)) goto done;
+    t->face_normal = malloc((size_t)(scene->nfaces + 1) * sizeof *t->face_normal);
+    t->face_offset = malloc((size_t)(scene->nfaces + 1) * sizeof *t->face_offset);
+    t->face_material = malloc((size_t)(scene->nfaces + 1) * sizeof *t->face_material);
+    t->prim_face = malloc((size_t)(maxtri + 1) * sizeof *t->prim_face);
+    tris = malloc((size_t)(3 * maxtri + 3) * sizeof *tris);
+    local = malloc((size_t)maxv * sizeof *local);
+    pts = malloc((size_t)maxv * sizeof *pts);
+    if (!t->face_normal || !t->face_offset || !t->face_material || !t->prim_face || !tris ||
+        !local || !pts)
+        goto oom;
+    if (!tracer_bounds(t, scene, where)) goto done;
+    int ntri = tracer_triangulate(t, scene, where, local, pts, tris);
+    if (ntri < 0) goto done;
+    t->ntriangles = ntri;
+    ok = tracer_embree(t, scene, tris, ntri);
     goto done;
 oom:
     model_error(where, 0, "out of memory building the ray tracer");
 done:
-    if (geom) rtcReleaseGeometry(geom);
     free(local);
     free(pts);
     free(tris);

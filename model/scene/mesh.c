@@ -25,24 +25,12 @@
 #include <strings.h>
 
 #include "model/internal.h"
+#include "model/scene/internal.h"
 
-#define MAX_ITEMS (INT_MAX / 2)
 #define MAXTOK    64   // tokens of an ASCII line: a PLY face of up to 62 vertices
 
 // ---------------------------------------------------------------------------
 // The mesh being built
-
-static bool mesh_grow(void **p, size_t *cap, size_t need, size_t elem)
-{
-    if (need <= *cap) return true;
-    size_t nc = *cap ? *cap : 64;
-    while (nc < need) nc *= 2;
-    void *np = realloc(*p, nc * elem);
-    if (!np) return false;
-    *p = np;
-    *cap = nc;
-    return true;
-}
 
 typedef struct {
     model_mesh_t m;
@@ -75,11 +63,11 @@ static bool mb_oom(mb_t *b)
 
 static bool mb_vertex(mb_t *b, const double p[3], int loc)
 {
-    if (b->m.nv >= MAX_ITEMS) {
-        model_error(b->name, b->m.binary ? 0 : loc, "too many vertices (more than %d)", MAX_ITEMS);
+    if (b->m.nv >= SCENE_MAX_ITEMS) {
+        model_error(b->name, b->m.binary ? 0 : loc, "too many vertices (more than %d)", SCENE_MAX_ITEMS);
         return false;
     }
-    if (!mesh_grow((void **)&b->m.v, &b->cap_v, 3 * ((size_t)b->m.nv + 1), sizeof(double))) return mb_oom(b);
+    if (!scene_grow((void **)&b->m.v, &b->cap_v, 3 * ((size_t)b->m.nv + 1), sizeof(double))) return mb_oom(b);
     memcpy(b->m.v + 3 * (size_t)b->m.nv, p, 3 * sizeof(double));
     b->m.nv++;
     return true;
@@ -87,12 +75,12 @@ static bool mb_vertex(mb_t *b, const double p[3], int loc)
 
 static bool mb_face(mb_t *b, int loc)
 {
-    if (b->m.nf >= MAX_ITEMS) {
-        model_error(b->name, b->m.binary ? 0 : loc, "too many faces (more than %d)", MAX_ITEMS);
+    if (b->m.nf >= SCENE_MAX_ITEMS) {
+        model_error(b->name, b->m.binary ? 0 : loc, "too many faces (more than %d)", SCENE_MAX_ITEMS);
         return false;
     }
-    if (!mesh_grow((void **)&b->m.fstart, &b->cap_f, (size_t)b->m.nf + 2, sizeof(size_t)) ||
-        !mesh_grow((void **)&b->m.floc, &b->cap_loc, (size_t)b->m.nf + 1, sizeof(int)))
+    if (!scene_grow((void **)&b->m.fstart, &b->cap_f, (size_t)b->m.nf + 2, sizeof(size_t)) ||
+        !scene_grow((void **)&b->m.floc, &b->cap_loc, (size_t)b->m.nf + 1, sizeof(int)))
         return mb_oom(b);
     b->m.fstart[b->m.nf] = b->m.nidx;
     b->m.floc[b->m.nf] = loc;
@@ -103,11 +91,11 @@ static bool mb_face(mb_t *b, int loc)
 
 static bool mb_ref(mb_t *b, int index)
 {
-    if (b->m.nidx >= MAX_ITEMS) {
-        model_error(b->name, 0, "too many face vertices (more than %d)", MAX_ITEMS);
+    if (b->m.nidx >= SCENE_MAX_ITEMS) {
+        model_error(b->name, 0, "too many face vertices (more than %d)", SCENE_MAX_ITEMS);
         return false;
     }
-    if (!mesh_grow((void **)&b->m.idx, &b->cap_idx, b->m.nidx + 1, sizeof(int))) return mb_oom(b);
+    if (!scene_grow((void **)&b->m.idx, &b->cap_idx, b->m.nidx + 1, sizeof(int))) return mb_oom(b);
     b->m.idx[b->m.nidx++] = index;
     b->m.fstart[b->m.nf] = b->m.nidx;
     return true;
@@ -343,7 +331,7 @@ static size_t psize(ptype_t t)
     return t == T_I8 || t == T_U8 ? 1 : t == T_I16 || t == T_U16 ? 2 : t == T_F64 ? 8 : 4;
 }
 
-static double pread(const unsigned char *p, ptype_t t)
+static double ply_value(const unsigned char *p, ptype_t t)
 {
     switch (t) {
     case T_I8: return (int8_t)p[0];
@@ -411,8 +399,8 @@ static bool ply_header(mb_t *b, const char *text, size_t len, ply_t *h)
             continue;
         } else if (!strcmp(k, "element")) {
             long c;
-            if (L.ntok != 3 || strlen(L.tok[1]) >= 32 || !model_parse_int(L.tok[2], &c) || c < 0 || c > MAX_ITEMS)
-                return model_error(nm, L.line, "expected 'element NAME COUNT' (a count of 0 to %d)", MAX_ITEMS), false;
+            if (L.ntok != 3 || strlen(L.tok[1]) >= 32 || !model_parse_int(L.tok[2], &c) || c < 0 || c > SCENE_MAX_ITEMS)
+                return model_error(nm, L.line, "expected 'element NAME COUNT' (a count of 0 to %d)", SCENE_MAX_ITEMS), false;
             if (h->nel == PLY_MAXEL) return model_error(nm, L.line, "more than %d elements", PLY_MAXEL), false;
             elem_t *e = &h->el[h->nel++];
             snprintf(e->name, sizeof e->name, "%s", L.tok[1]);
@@ -573,7 +561,7 @@ static bool ply_binary(mb_t *b, const unsigned char *d, size_t len, const ply_t 
                 double cnt = 1;
                 if (pp->count_type != T_NONE) {
                     if (len - off < psize(pp->count_type)) goto truncated;
-                    cnt = pread(d + off, pp->count_type);
+                    cnt = ply_value(d + off, pp->count_type);
                     off += psize(pp->count_type);
                     if (cnt < 0 || cnt > 1e6) {
                         model_error(nm, 0, "byte offset %zu: %s %ld: list count %g", off, e->name, r + 1, cnt);
@@ -582,12 +570,12 @@ static bool ply_binary(mb_t *b, const unsigned char *d, size_t len, const ply_t 
                 }
                 if ((len - off) / psize(pp->type) < (size_t)cnt) goto truncated;
                 if (e->role == 2 && pi == e->plist &&
-                    !mesh_grow((void **)&ix, &cap, (size_t)cnt + 1, sizeof *ix)) {
+                    !scene_grow((void **)&ix, &cap, (size_t)cnt + 1, sizeof *ix)) {
                     mb_oom(b);
                     goto done;
                 }
                 for (long c = 0; c < (long)cnt; c++, off += psize(pp->type)) {
-                    double v = pread(d + off, pp->type);
+                    double v = ply_value(d + off, pp->type);
                     if (!isfinite(v) || fabs(v) > 1e150) {
                         model_error(nm, 0, "byte offset %zu: %s %ld: property %s is not a finite number", off, e->name,
                                     r + 1, pp->name);
