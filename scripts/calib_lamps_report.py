@@ -4,8 +4,8 @@ but the drawing).
 
 usage: calib_lamps_report.py REPORT_DATA.json TRIANGULATION.png DETECTIONS.png
 
-REPORT_DATA.json: {"lamps": [{"name", "position_mm", "std_mm", "truth_mm" (virtual
-rig only), "rays": [{"p", "d", "used", "dist_mm", "angle_deg"}]}], "detections":
+REPORT_DATA.json: {"lamps": [{"name", "position_mm", "std_mm", "rays": [{"p", "d", "used",
+"dist_mm", "angle_deg"}]}], "detections":
 {"angle_deg", "x0", "y0", "w", "h", "crop" (w*h DN, row-major), "highlights":
 [{"lamp", "file", "found", "q"}], "sphere_q", "sphere_radius_px"},
 "camera_centre_mm", "sphere_centre_angle0_mm", "sphere_radius_mm", "sphere_joint_fit" (optional:
@@ -53,9 +53,6 @@ def main():
                 ax.plot([p[i], e[i]], [p[j], e[j]], "-", color=col if r["used"] else "0.6", lw=0.6,
                         alpha=0.8 if r["used"] else 0.5)
             ax.plot(x[i], x[j], "x", color=col, ms=10, mew=2, label=lp["name"])
-            if "truth_mm" in lp:
-                tt = lp["truth_mm"]
-                ax.plot(tt[i], tt[j], "+", color="k", ms=12, mew=1)
         ax.set_xlabel("xyz"[i] + " (mm)")
         ax.set_ylabel("xyz"[j] + " (mm)")
         ax.set_title(title)
@@ -79,15 +76,12 @@ def main():
     ax.set_title("per-ray residuals (open: outliers left out)")
     ax.grid(True, lw=0.3)
     ax.legend(fontsize=7)
-    # position and uncertainty (and truth error) per lamp
+    # uncertainty per lamp
     ax = fig.add_subplot(2, 3, 5)
     names = [lp["name"] for lp in lamps]
     xs = np.arange(len(lamps))
     for k, lab in enumerate("xyz"):
         ax.bar(xs + (k - 1) * 0.25, [lp["std_mm"][k] for lp in lamps], 0.25, label="std " + lab)
-    if all("truth_mm" in lp for lp in lamps):
-        err = [np.linalg.norm(np.array(lp["position_mm"]) - np.array(lp["truth_mm"])) for lp in lamps]
-        ax.plot(xs, err, "kD", label="|error| vs virtual truth")
     ax.set_xticks(xs)
     ax.set_xticklabels(names)
     ax.set_ylabel("mm")

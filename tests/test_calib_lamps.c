@@ -800,11 +800,12 @@ TEST(calib_lamps_bad_arguments)
     CHECK_CONTAINS(e, "not a capture session");
     g_free(o);
     g_free(e);
-    // a real rig without sphere facts: asked for
+    // a rig without sphere facts: asked for before anything is captured
     const char *real = test_write("real.ini", "[lamp a]\nbackend = sim\n");
     rc = test_refl_run(30, &o, &e, "calib", "lamps", "--yes", "--rig", real, "--camera", cam, "-o", out, NULL);
     CHECK(rc == 1);
-    CHECK_CONTAINS(e, "is not a virtual rig: give --sphere-centre-mm X,Y,Z and --sphere-radius-mm R");
+    CHECK_CONTAINS(e, "real.ini: give --sphere-centre-mm X,Y,Z and --sphere-radius-mm R (the sphere's facts) before "
+                   "anything is captured");
     g_free(o);
     g_free(e);
     g_free(cam);

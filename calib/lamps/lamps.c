@@ -59,7 +59,6 @@
 #include "model/model.h"
 #include "model/base/report.h"
 #include "rig/rig.h"
-#include "rig/virtual/truth.h"
 
 // ---------------------------------------------------------------------------
 // Small linear algebra
@@ -1108,7 +1107,6 @@ static bool names_are_lamps(char *const *names)
 static bool capture(const calib_lamps_opts_t *o, calib_lamps_result_t *r, char ***names)
 {
     int n = 0;
-    if (!rig_file_truth_path(o->rig, &r->truth_path)) return false;
     if (o->lamps) {
         *names = g_strdupv((char **)o->lamps);
         n = (int)g_strv_length(*names);
@@ -1121,10 +1119,8 @@ static bool capture(const calib_lamps_opts_t *o, calib_lamps_result_t *r, char *
     }
     if (!names_are_lamps(*names)) return false;
     if (!o->sphere_given) {
-        model_error_set(NULL, 0, r->truth_path ? "%s: give --sphere-centre-mm X,Y,Z and --sphere-radius-mm R (the "
-                        "sphere's facts) before anything is captured" : "%s is not a virtual rig: give "
-                        "--sphere-centre-mm X,Y,Z and --sphere-radius-mm R (the sphere's facts) before anything is "
-                        "captured", o->rig);
+        model_error_set(NULL, 0, "%s: give --sphere-centre-mm X,Y,Z and --sphere-radius-mm R (the sphere's facts) "
+                        "before anything is captured", o->rig);
         return false;
     }
     char *pt = calib_lamps_plan_text(o->sample, o->sphere_centre_mm, o->sphere_radius_mm, o->angles_deg, o->nangles, *names, n, o->exposures_us,
@@ -1262,10 +1258,6 @@ bool calib_lamps_open(const calib_lamps_opts_t *o, calib_lamps_result_t *r)
     r->plan = rig_plan_parse(r->session->plan_text, strlen(r->session->plan_text), "session plan");
     if (!r->plan) goto done;
     r->nangles = r->plan->nangles;
-    if (!r->truth_path && r->session->facts) {
-        const char *t = json_string_value(json_object_get(json_object_get(r->session->facts, "virtual_rig"), "truth"));
-        if (t) r->truth_path = g_strdup(t);
-    }
     if (!o->sphere_given) {
         model_error_set(NULL, 0, "%s: give --sphere-centre-mm X,Y,Z and --sphere-radius-mm R (the sphere's facts)",
                         r->session_dir);
@@ -1573,33 +1565,6 @@ bool calib_lamps_joint_fit(const calib_lamps_opts_t *o, calib_lamps_result_t *r)
     return ok;
 }
 
-// The virtual rig's truth for the comparison (never an input): each lamp's
-// true position and the RMS error. Silent when there is no truth to read.
-static void compare_truth(calib_lamps_result_t *r)
-{
-    if (!r->truth_path) return;
-    bool q = model_error_quiet_thread(true);
-    rig_truth_t *t = rig_truth_load(r->truth_path);
-    model_lamps_t *tl = t ? rig_truth_lamps(t) : NULL;
-    model_error_quiet_thread(q);
-    model_error_clear();
-    r->have_truth = tl != NULL;
-    double se2 = 0;
-    for (int l = 0; tl && l < r->nlamps; l++) {
-        calib_lamps_lamp_t *lp = &r->lamps[l];
-        int ti = model_lamps_find(tl, lp->name);
-        if (ti < 0) continue;
-        lp->has_truth = true;
-        lp->truth_mm = tl->lamps[ti].position_mm;
-        model_vec3_t e = vsub(v3(lp->fit.x_mm[0], lp->fit.x_mm[1], lp->fit.x_mm[2]), lp->truth_mm);
-        se2 += vdot(e, e);
-        r->ntruth++;
-    }
-    r->truth_rms_mm = r->ntruth ? sqrt(se2 / r->ntruth) : NAN;
-    model_lamps_free(tl);
-    rig_truth_free(t);
-}
-
 // The provenance of the outputs (once): the command line, the camera model,
 // the session and the rig file.
 static bool provenance(const calib_lamps_opts_t *o, calib_lamps_result_t *r)
@@ -1643,13 +1608,6 @@ static json_t *lamp_json(const calib_lamps_result_t *r, const calib_lamps_lamp_t
     }
     json_object_set_new(j, "n_outliers", json_integer(nout));
     json_object_set_new(j, "frames_missing", miss);
-    if (lp->has_truth) {
-        model_vec3_t tp = lp->truth_mm;
-        double e[3] = { x[0] - tp.x, x[1] - tp.y, x[2] - tp.z };
-        json_object_set_new(j, "virtual_truth", json_pack("{s:[fff],s:[fff],s:f}", "position_mm", tp.x, tp.y, tp.z,
-                                                          "error_mm", e[0], e[1], e[2], "error_norm_mm",
-                                                          sqrt(e[0] * e[0] + e[1] * e[1] + e[2] * e[2])));
-    }
     return j;
 }
 
@@ -1781,8 +1739,6 @@ static json_t *report_json(const calib_lamps_opts_t *o, const calib_lamps_result
         json_object_set_new(j, "name", json_string(lp->name));
         json_object_set_new(j, "position_mm", json_pack("[fff]", x[0], x[1], x[2]));
         json_object_set_new(j, "std_mm", json_pack("[fff]", sqrt(cv[0]), sqrt(cv[4]), sqrt(cv[8])));
-        if (lp->has_truth)
-            json_object_set_new(j, "truth_mm", json_pack("[fff]", lp->truth_mm.x, lp->truth_mm.y, lp->truth_mm.z));
         for (int a = 0; a < r->nangles; a++) {
             if (!lp->has_ray[a]) continue;
             const calib_lamps_highlight_t *hl = &lp->hl[a];
@@ -1823,18 +1779,13 @@ static void report_table(FILE *f, const calib_lamps_result_t *r)
     for (int l = 0; rows && l < r->nlamps; l++) {
         const calib_lamps_lamp_t *lp = &r->lamps[l];
         const double *x = lp->fit.x_mm, *cv = lp->fit.cov_mm2;
-        char te[64] = "-";
-        if (lp->has_truth) {
-            model_vec3_t e = vsub(v3(x[0], x[1], x[2]), lp->truth_mm);
-            snprintf(te, sizeof te, "%.2f", sqrt(vdot(e, e)));
-        }
-        rows[l] = g_strdup_printf("%s|%.2f|%.2f|%.2f|%.2f / %.2f / %.2f|%.2f|%d of %d|%d|%s", lp->name, x[0], x[1],
+        rows[l] = g_strdup_printf("%s|%.2f|%.2f|%.2f|%.2f / %.2f / %.2f|%.2f|%d of %d|%d", lp->name, x[0], x[1],
                                   x[2], sqrt(cv[0]), sqrt(cv[4]), sqrt(cv[8]), lp->fit.rms_mm, lp->fit.n_used,
-                                  r->nangles, lp->nmissing, te);
+                                  r->nangles, lp->nmissing);
     }
     if (rows)
-        model_html_table(f, "lamp|x mm|y mm|z mm|std x / y / z mm|RMS ray distance mm|rays used|frames missing|"
-                            "error vs virtual truth mm", rows, r->nlamps);
+        model_html_table(f, "lamp|x mm|y mm|z mm|std x / y / z mm|RMS ray distance mm|rays used|frames missing",
+                         rows, r->nlamps);
     for (int l = 0; rows && l < r->nlamps; l++) g_free((char *)rows[l]);
     free(rows);
 }
@@ -1877,8 +1828,8 @@ static bool report_html(const calib_lamps_opts_t *o, const calib_lamps_result_t 
         g_free(t);
     }
     model_html_figure(f, "lamps_triangulation.png", "Triangulation: the rays reflected off the sphere (one per "
-                      "turntable angle; grey: left out as outliers) and the fitted lamp positions (x; + virtual "
-                      "truth where known), top (x-y) and side (x-z, y-z) views, mm, rig frame; ray residuals");
+                      "turntable angle; grey: left out as outliers) and the fitted lamp positions (x), top (x-y) "
+                      "and side (x-z, y-z) views, mm, rig frame; ray residuals");
     model_html_figure(f, "lamps_detections.png", "Highlight detections at the first angle: the per-pixel maximum "
                       "of every lamp's frame minus dark around the sphere's predicted image (circle), the found "
                       "highlights marked");
@@ -1970,7 +1921,6 @@ bool calib_lamps_run(const calib_lamps_opts_t *o, calib_lamps_result_t *r)
     r->have_typed = true;
     memcpy(r->typed_mm, o->sphere_centre_mm, sizeof r->typed_mm);
     if (!rounds(&oc, r)) return false;
-    compare_truth(r);
     return calib_lamps_write_json(&oc, r) && calib_lamps_write_report(&oc, r);
 }
 
@@ -1995,7 +1945,6 @@ void calib_lamps_result_free(calib_lamps_result_t *r)
     rig_session_free(r->session);
     model_camera_free(r->cam);
     g_free(r->session_dir);
-    g_free(r->truth_path);
     memset(r, 0, sizeof *r);
     r->first_angle = -1;
 }

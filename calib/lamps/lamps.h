@@ -245,8 +245,6 @@ typedef struct {
     double       *dist_mm;         // the ray's distance from the fitted position
     int           nmissing;        // angles without a ray
     calib_lamps_fit_t fit;         // the position: per-lamp triangulation, then the joint fit's
-    bool          has_truth;       // truth_mm set: the virtual rig's truth, for the comparison only
-    model_vec3_t  truth_mm;
 } calib_lamps_lamp_t;
 
 typedef struct {
@@ -274,16 +272,11 @@ typedef struct {
     int                 rounds;         // rounds of highlights and fits
     double              found_mm[3];    // base + the joint fit's offset: the centre the images give
     double              found_cov_mm2[9];
-    char               *truth_path;     // the virtual rig's truth file (comparison only; NULL: none)
-    bool                have_truth;     // its lamps were read
-    int                 ntruth;         // lamps compared with the truth
-    double              truth_rms_mm;   // their RMS position error
     json_t             *provenance;
 } calib_lamps_result_t;
 
 // The whole calibration: the stages below in order (the joint fit when
-// o->joint), the comparison with the truth when there is one, lamps.json and
-// the report in o->out. false + message. r is filled as far as the run got;
+// o->joint), lamps.json and the report in o->out. false + message. r is filled as far as the run got;
 // free it with calib_lamps_result_free either way.
 bool calib_lamps_run(const calib_lamps_opts_t *o, calib_lamps_result_t *r);
 void calib_lamps_result_free(calib_lamps_result_t *r);   // accepts a zeroed result
