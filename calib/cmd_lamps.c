@@ -204,7 +204,6 @@ int calib_cmd_lamps(int argc, char **argv)
     // the command as typed (refl calib lamps ...) for the provenance
     o.argc = argc + 1;
     o.argv = argv - 1;
-    o.log = stderr;
     if (!(o.op = rig_operator_open(yes, operator_input))) {
         rc = yes ? model_cli_error(&cli, "give --yes or --operator-input FILE, not both")
                  : model_error_report("calib lamps");
@@ -215,7 +214,7 @@ int calib_cmd_lamps(int argc, char **argv)
     bool ok = calib_lamps_run(&o, &r);
     model_error_quiet_thread(q);
     if (ok) print_lamps(&r);
-    else fprintf(stderr, "refl calib lamps: %s\n", model_last_error());
+    else model_error_report("calib lamps");
     calib_lamps_result_free(&r);
     rc = ok ? 0 : rig_operator_paused(o.op) ? 3 : 1;
     rig_operator_close(o.op);

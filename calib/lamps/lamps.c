@@ -47,7 +47,6 @@
 #include <glib.h>
 #include <limits.h>
 #include <math.h>
-#include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -1042,18 +1041,6 @@ calib_lamps_opts_t calib_lamps_defaults(void)
     return o;
 }
 
-// A line of progress or a note: "refl calib lamps: " and the text (which
-// ends its own lines).
-__attribute__((format(printf, 2, 3))) static void note(const calib_lamps_opts_t *o, const char *fmt, ...)
-{
-    if (!o->log) return;
-    va_list ap;
-    va_start(ap, fmt);
-    fprintf(o->log, "refl calib lamps: ");
-    vfprintf(o->log, fmt, ap);
-    va_end(ap);
-}
-
 static double full_scale(const char *pf)
 {
     if (!strcmp(pf, "Mono8")) return 255;
@@ -1125,7 +1112,7 @@ static bool capture(const calib_lamps_opts_t *o, calib_lamps_result_t *r, char *
     }
     char *pt = calib_lamps_plan_text(o->sample, o->sphere_centre_mm, o->sphere_radius_mm, o->angles_deg, o->nangles, *names, n, o->exposures_us,
                                      o->nexposures);
-    note(o, "capturing %d angles x %d lamps + dark into %s/capture\n", o->nangles, n, o->out);
+    model_note("capturing %d angles x %d lamps + dark into %s/capture", o->nangles, n, o->out);
     int crc = calib_capture(o->rig, o->out, "capture", pt, o->progress, o->op);
     g_free(pt);
     if (crc) return false;
@@ -1329,7 +1316,7 @@ static bool angle_highlights(const calib_lamps_opts_t *o, calib_lamps_result_t *
 {
     double ang = r->angle_deg[a];
     r->centre_mm[a] = centre_at(o->sphere_centre_mm, ang);
-    note(o, "angle %d/%d (%.3f deg): finding highlights\n", a + 1, r->nangles, ang);
+    model_progress("angle %d/%d (%.3f deg): finding highlights", a + 1, r->nangles, ang);
     calib_lamps_sphere_image_t *sph = calib_lamps_sphere_image(r->cam, r->centre_mm[a], o->sphere_radius_mm);
     if (!sph) {
         model_error_set(NULL, 0, "angle %.3f deg: %s", ang, model_last_error());
@@ -1356,9 +1343,10 @@ done:
 
 bool calib_lamps_find_highlights(const calib_lamps_opts_t *o, calib_lamps_result_t *r)
 {
-    for (int a = 0; a < r->nangles; a++)
-        if (!angle_highlights(o, r, a)) return false;
-    return true;
+    bool ok = true;
+    for (int a = 0; ok && a < r->nangles; a++) ok = angle_highlights(o, r, a);
+    model_progress_end();
+    return ok;
 }
 
 // The frame of lamp lp at angle a: its file ("(none)") and step (-1).
@@ -1406,7 +1394,7 @@ static bool triangulate_lamp(const calib_lamps_opts_t *o, calib_lamps_result_t *
     const int NA = r->nangles, nm = lp->nmissing, nr = NA - nm;
     if (nm) {
         char *t = missing_text(r, lp);
-        note(o, "lamp %s: no highlight in %d of %d frames:\n%s", lp->name, nm, NA, t);
+        model_note("lamp %s: no highlight in %d of %d frames:\n%s", lp->name, nm, NA, t);
         g_free(t);
     }
     if (nr < 3) {
@@ -1417,7 +1405,7 @@ static bool triangulate_lamp(const calib_lamps_opts_t *o, calib_lamps_result_t *
                         c0[1], c0[2], o->sphere_radius_mm);
         return false;
     }
-    if (nm) note(o, "lamp %s: fitted from the other %d frames\n", lp->name, nr);
+    if (nm) model_note("lamp %s: fitted from the other %d frames", lp->name, nr);
     for (int pass = 0; pass < 2; pass++) {
         if (pass == 1) {
             // the lamp's finite size (its disk of angular radius asin(r / distance) as seen from
@@ -1433,9 +1421,9 @@ static bool triangulate_lamp(const calib_lamps_opts_t *o, calib_lamps_result_t *
     }
     for (int a = 0; a < NA; a++)
         if (lp->has_ray[a] && !lp->used[a])
-            note(o, "lamp %s: the ray of %s (%.3f deg) is an outlier (%.1f mm from the fit, RMS %.2f mm) and was "
-                 "left out\n", lp->name, r->session->rows[lp->frame[a]].file, r->plan->angles_deg[a], lp->dist_mm[a],
-                 lp->fit.rms_mm);
+            model_note("lamp %s: the ray of %s (%.3f deg) is an outlier (%.1f mm from the fit, RMS %.2f mm) and was "
+                       "left out", lp->name, r->session->rows[lp->frame[a]].file, r->plan->angles_deg[a],
+                       lp->dist_mm[a], lp->fit.rms_mm);
     return true;
 }
 
@@ -1518,8 +1506,8 @@ bool calib_lamps_joint_fit(const calib_lamps_opts_t *o, calib_lamps_result_t *r)
     for (int attempt = 0; ok && attempt < 2; attempt++) {
         if (attempt) {
             if (!(bs.offset_prior_mm > 1)) break;
-            note(o, "the joint fit with the sphere's offset free within %g mm failed (%s); fitting again with it "
-                 "within 1 mm of the typed centre\n", bs.offset_prior_mm, model_last_error());
+            model_note("the joint fit with the sphere's offset free within %g mm failed (%s); fitting again with it "
+                       "within 1 mm of the typed centre", bs.offset_prior_mm, model_last_error());
             bs.offset_prior_mm = 1;
         }
         for (int l = 0; l < nl; l++) memcpy(x + 3 * l, r->lamps[l].fit.x_mm, sizeof r->lamps[l].fit.x_mm);
@@ -1554,10 +1542,10 @@ bool calib_lamps_joint_fit(const calib_lamps_opts_t *o, calib_lamps_result_t *r)
     if (ok) {
         r->have_joint = true;
         const double *gg = r->joint.sphere, *gc = r->joint.sphere_cov;
-        note(o, "joint fit of %d lamps and the sphere's path over %d highlights: sphere offset %.3f %.3f %.3f mm "
-             "(std %.3f %.3f %.3f), shift %.3f %.3f mm (std %.3f %.3f), tilt %.3f %.3f mrad (std %.3f %.3f); "
-             "condition %.3g\n", nl, r->joint_nobs, gg[0], gg[1], gg[2], sqrt(gc[0]), sqrt(gc[8]), sqrt(gc[16]),
-             gg[3], gg[4], sqrt(gc[24]), sqrt(gc[32]), gg[5], gg[6], sqrt(gc[40]), sqrt(gc[48]), r->joint.cond);
+        model_note("joint fit of %d lamps and the sphere's path over %d highlights: sphere offset %.3f %.3f %.3f mm "
+                   "(std %.3f %.3f %.3f), shift %.3f %.3f mm (std %.3f %.3f), tilt %.3f %.3f mrad (std %.3f %.3f); "
+                   "condition %.3g", nl, r->joint_nobs, gg[0], gg[1], gg[2], sqrt(gc[0]), sqrt(gc[8]), sqrt(gc[16]),
+                   gg[3], gg[4], sqrt(gc[24]), sqrt(gc[32]), gg[5], gg[6], sqrt(gc[40]), sqrt(gc[48]), r->joint.cond);
     }
     free(ob);
     free(x);
@@ -1680,7 +1668,7 @@ bool calib_lamps_write_json(const calib_lamps_opts_t *o, calib_lamps_result_t *r
     json_object_set_new(doc, "provenance", json_incref(r->provenance));
     char *path = g_strdup_printf("%s/lamps.json", o->out);
     bool ok = model_write_json(path, doc);
-    if (ok) note(o, "wrote %s\n", path);
+    if (ok) model_note("wrote %s", path);
     g_free(path);
     json_decref(doc);
     return ok;
@@ -1846,11 +1834,11 @@ bool calib_lamps_write_report(const calib_lamps_opts_t *o, calib_lamps_result_t 
     char *html = g_strdup_printf("%s/report.html", o->out);
     bool ok = model_write_json(path, rep);
     if (ok) {
-        note(o, "plotting\n");
+        model_note("plotting");
         ok = model_run_script("calib_lamps_report.py", path, png1, png2, NULL) == 0;
     }
     if (ok) ok = report_html(o, r, html);
-    if (ok) note(o, "wrote %s\n", html);
+    if (ok) model_note("wrote %s", html);
     json_decref(rep);
     g_free(path);
     g_free(png1);
@@ -1896,19 +1884,20 @@ static bool rounds(calib_lamps_opts_t *oc, calib_lamps_result_t *r)
         }
         double moved = sqrt(g[0] * g[0] + g[1] * g[1] + g[2] * g[2]);
         if (!(oc->offset_prior_mm > 0) || moved <= 0.2 || r->rounds == 3) break;
-        note(oc, "the sphere's centre from its highlights: %.2f, %.2f, %.2f mm (%.2f mm from where they were found, "
-             "%.2f mm from the typed); finding them again there\n", r->found_mm[0], r->found_mm[1], r->found_mm[2],
-             moved, sqrt(pow(r->found_mm[0] - r->typed_mm[0], 2) + pow(r->found_mm[1] - r->typed_mm[1], 2) +
-                         pow(r->found_mm[2] - r->typed_mm[2], 2)));
+        model_note("the sphere's centre from its highlights: %.2f, %.2f, %.2f mm (%.2f mm from where they were "
+                   "found, %.2f mm from the typed); finding them again there", r->found_mm[0], r->found_mm[1],
+                   r->found_mm[2], moved, sqrt(pow(r->found_mm[0] - r->typed_mm[0], 2) +
+                                               pow(r->found_mm[1] - r->typed_mm[1], 2) +
+                                               pow(r->found_mm[2] - r->typed_mm[2], 2)));
         memcpy(oc->sphere_centre_mm, r->found_mm, sizeof r->found_mm);
     }
     double off = 0;
     for (int k = 0; k < 3; k++) off += pow(r->found_mm[k] - r->typed_mm[k], 2);
     off = sqrt(off);
     if (oc->joint && oc->offset_prior_mm > 0 && off > 2 * oc->offset_prior_mm)
-        note(oc, "the typed sphere centre is %.2f mm from the one its highlights give (%.2f, %.2f, %.2f mm), more "
-             "than twice its std (--sphere-offset-prior-mm %g): check the ball's placement and --sphere-centre-mm\n",
-             off, r->found_mm[0], r->found_mm[1], r->found_mm[2], oc->offset_prior_mm);
+        model_warning("the typed sphere centre is %.2f mm from the one its highlights give (%.2f, %.2f, %.2f mm), "
+                      "more than twice its std (--sphere-offset-prior-mm %g): check the ball's placement and "
+                      "--sphere-centre-mm", off, r->found_mm[0], r->found_mm[1], r->found_mm[2], oc->offset_prior_mm);
     return true;
 }
 

@@ -187,6 +187,10 @@ bool calib_lamps_bundle_residual(void *ctx, const double *const *params, double 
 // (model_last_error()); the functions it calls in model/ and rig/ print theirs
 // through model_error unless this thread is quiet (model_error_quiet_thread:
 // the command runs the calibration quiet and prints the one message).
+// Progress (one line per angle) and notes (capture, frames without a
+// highlight, outliers, the joint fit, files written) go through
+// model_progress and model_note, the check of the typed sphere centre through
+// model_warning.
 
 typedef enum {
     CALIB_LAMPS_CENTROID = 0,   // the highlight's intensity-weighted centroid, reflected
@@ -225,7 +229,6 @@ typedef struct {
     rig_operator_t *op;             // who answers the operator steps (calib_capture)
     int          argc;             // the command line for the provenance (may be 0, NULL)
     char       **argv;
-    FILE        *log;              // progress and notes, each line "refl calib lamps: ..." (NULL: none)
 } calib_lamps_opts_t;
 
 // The defaults above; rig/session, camera, out and the sphere's facts unset.
