@@ -1155,12 +1155,6 @@ TEST(calib_lamps_pattern_bad_input)
 // white whose plan revisits 0 deg every third angle; the observations
 // corrected by the revisits against the frames' raw ones.
 
-static int cmp_double(const void *a, const void *b)
-{
-    double x = *(const double *)a, y = *(const double *)b;
-    return x < y ? -1 : x > y;
-}
-
 // The drift between visits: a warm-up f(t) = 0.9 + 0.1 exp(-t / 1 s) seen
 // at 5 visits about a time constant apart. The monotone cubic passes through
 // every visit, never leaves their range, and follows the bend between them
@@ -1276,7 +1270,7 @@ TEST_LONG(calib_lamps_drift_reference)
             }
             if (n > 100) {
                 for (int c = 0; c < 2; c++) {
-                    qsort(v[c], (size_t)n, sizeof(double), cmp_double);
+                    qsort(v[c], (size_t)n, sizeof(double), model_cmp_double);
                     med[c][nst] = v[c][n / 2];
                 }
                 nst++;

@@ -11,12 +11,6 @@
 
 #include "calib/calib.h"
 
-static int cmp_dbl(const void *a, const void *b)
-{
-    double x = *(const double *)a, y = *(const double *)b;
-    return x < y ? -1 : x > y;
-}
-
 // The plan's angle of a frame's step (NAN: none, e.g. an operator step).
 static double plan_angle(const rig_plan_t *p, const rig_frame_row_t *r, int *ai)
 {
@@ -69,10 +63,7 @@ static double frame_ratio(const float *base, const float *img, const float *dark
         if (b > 0.2 * top && base[i] < sat && img[i] < sat) v[m++] = (img[i] - dark[i]) / b;
     }
     double r = NAN;
-    if (m >= 100) {
-        qsort(v, m, sizeof *v, cmp_dbl);
-        r = m % 2 ? v[m / 2] : 0.5 * (v[m / 2 - 1] + v[m / 2]);
-    }
+    if (m >= 100) r = model_median(v, (int)m);
     free(v);
     return r;
 }

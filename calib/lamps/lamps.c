@@ -57,59 +57,8 @@
 #include "model/base/lsq.h"
 #include "model/model.h"
 #include "model/base/report.h"
+#include "model/base/vec.h"
 #include "rig/rig.h"
-
-// ---------------------------------------------------------------------------
-// Small linear algebra
-
-static model_vec3_t v3(double x, double y, double z) { return (model_vec3_t){ x, y, z }; }
-static model_vec3_t vsub(model_vec3_t a, model_vec3_t b) { return v3(a.x - b.x, a.y - b.y, a.z - b.z); }
-static model_vec3_t vadd(model_vec3_t a, model_vec3_t b) { return v3(a.x + b.x, a.y + b.y, a.z + b.z); }
-static model_vec3_t vscale(model_vec3_t a, double s) { return v3(a.x * s, a.y * s, a.z * s); }
-static double vdot(model_vec3_t a, model_vec3_t b) { return a.x * b.x + a.y * b.y + a.z * b.z; }
-
-
-// Inverse of a 3x3 matrix; false when singular.
-static bool inv3(const double *m, double *out)
-{
-    double c00 = m[4] * m[8] - m[5] * m[7], c01 = m[5] * m[6] - m[3] * m[8], c02 = m[3] * m[7] - m[4] * m[6];
-    double det = m[0] * c00 + m[1] * c01 + m[2] * c02;
-    if (!(fabs(det) > 1e-300)) return false;
-    double id = 1 / det;
-    out[0] = c00 * id;
-    out[1] = (m[2] * m[7] - m[1] * m[8]) * id;
-    out[2] = (m[1] * m[5] - m[2] * m[4]) * id;
-    out[3] = c01 * id;
-    out[4] = (m[0] * m[8] - m[2] * m[6]) * id;
-    out[5] = (m[2] * m[3] - m[0] * m[5]) * id;
-    out[6] = c02 * id;
-    out[7] = (m[1] * m[6] - m[0] * m[7]) * id;
-    out[8] = (m[0] * m[4] - m[1] * m[3]) * id;
-    return true;
-}
-
-// Smallest eigenvalue of a symmetric 3x3 matrix (trigonometric method).
-static double min_eig3(const double *a)
-{
-    double p1 = a[1] * a[1] + a[2] * a[2] + a[5] * a[5];
-    double q = (a[0] + a[4] + a[8]) / 3;
-    if (p1 == 0) return fmin(a[0], fmin(a[4], a[8]));
-    double p2 = (a[0] - q) * (a[0] - q) + (a[4] - q) * (a[4] - q) + (a[8] - q) * (a[8] - q) + 2 * p1;
-    double p = sqrt(p2 / 6), B[9];
-    for (int i = 0; i < 9; i++) B[i] = (a[i] - (i % 4 == 0 ? q : 0)) / p;
-    double detB = B[0] * (B[4] * B[8] - B[5] * B[7]) - B[1] * (B[3] * B[8] - B[5] * B[6]) +
-                  B[2] * (B[3] * B[7] - B[4] * B[6]);
-    double r = fmax(-1, fmin(1, detB / 2));
-    double phi = acos(r) / 3;
-    return q + 2 * p * cos(phi + 2 * M_PI / 3);
-}
-
-static double median(double *v, int n)
-{
-    if (n <= 0) return NAN;
-    qsort(v, (size_t)n, sizeof *v, model_cmp_double);
-    return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
-}
 
 // ---------------------------------------------------------------------------
 // The sphere's image
@@ -124,8 +73,8 @@ void calib_lamps_sphere_image_free(calib_lamps_sphere_image_t *s)
 // Distance along the unit ray (o, d) to the sphere's near surface; NAN on a miss.
 static double ray_sphere(model_vec3_t o, model_vec3_t d, model_vec3_t c, double r)
 {
-    model_vec3_t oc = vsub(o, c);
-    double b = vdot(d, oc), cc = vdot(oc, oc) - r * r, disc = b * b - cc;
+    model_vec3_t oc = v3_sub(o, c);
+    double b = v3_dot(d, oc), cc = v3_dot(oc, oc) - r * r, disc = b * b - cc;
     if (disc < 0) return NAN;
     double t = -b - sqrt(disc);
     return t > 0 ? t : NAN;
@@ -135,27 +84,27 @@ calib_lamps_sphere_image_t *calib_lamps_sphere_image(const model_camera_t *cam, 
 {
     const int W = model_camera_width(cam), H = model_camera_height(cam);
     model_vec3_t C = model_camera_centre_world(cam);
-    model_vec3_t cc = vsub(c, C);
-    double dist = sqrt(vdot(cc, cc));
+    model_vec3_t cc = v3_sub(c, C);
+    double dist = sqrt(v3_dot(cc, cc));
     if (!(dist > r * 1.01)) {
         model_error_set(NULL, 0, "the sphere (centre %.1f %.1f %.1f mm, radius %g mm) contains the camera centre", c.x,
                         c.y, c.z, r);
         return NULL;
     }
     // silhouette: points of the sphere's tangent cone from the camera centre
-    model_vec3_t a = vscale(cc, 1 / dist);
+    model_vec3_t a = v3_scale(cc, 1 / dist);
     model_vec3_t u = fabs(a.z) < 0.9 ? v3(0, 0, 1) : v3(1, 0, 0);
-    model_vec3_t e1 = vsub(u, vscale(a, vdot(u, a)));
-    e1 = vscale(e1, 1 / sqrt(vdot(e1, e1)));
-    model_vec3_t e2 = v3(a.y * e1.z - a.z * e1.y, a.z * e1.x - a.x * e1.z, a.x * e1.y - a.y * e1.x);
+    model_vec3_t e1 = v3_sub(u, v3_scale(a, v3_dot(u, a)));
+    e1 = v3_scale(e1, 1 / sqrt(v3_dot(e1, e1)));
+    model_vec3_t e2 = v3_cross(a, e1);
     double sa = r / dist, ca = sqrt(1 - sa * sa);
     enum { NS = 72 };
     model_vec3_t pts[NS + 1];
     for (int k = 0; k < NS; k++) {
         double ph = 2 * M_PI * k / NS;
         // a tangent point: centre - r (sa a - ca (cos e1 + sin e2))
-        model_vec3_t rad = vadd(vscale(e1, cos(ph)), vscale(e2, sin(ph)));
-        pts[k] = vadd(c, vscale(vsub(vscale(rad, ca), vscale(a, sa)), r));
+        model_vec3_t rad = v3_add(v3_scale(e1, cos(ph)), v3_scale(e2, sin(ph)));
+        pts[k] = v3_add(c, v3_scale(v3_sub(v3_scale(rad, ca), v3_scale(a, sa)), r));
     }
     pts[NS] = c;
     double q[2 * (NS + 1)];
@@ -304,9 +253,9 @@ void calib_lamps_find_highlight(const float *img, const float *dark, int W, int 
         if (!sph->on[i]) tmp[nb++] = D[i];
     if (nb < 8)
         for (int i = 0; i < w * h; i++) tmp[nb++] = D[i];
-    double bg = median(tmp, nb);
+    double bg = model_median(tmp, nb);
     for (int i = 0; i < nb; i++) tmp[i] = fabs(tmp[i] - bg);
-    double noise = 1.4826 * median(tmp, nb);
+    double noise = 1.4826 * model_median(tmp, nb);
     if (!(noise > 0.5)) noise = 0.5;   // quantisation floor (integer DN)
     for (int i = 0; i < w * h; i++) D[i] -= bg;
     o->noise_dn = noise;
@@ -430,10 +379,10 @@ bool calib_lamps_reflect(const model_camera_t *cam, const double q[2], model_vec
                         "radius %g mm)", q[0], q[1], c.x, c.y, c.z, r);
         return false;
     }
-    *p = vadd(C, vscale(d, t));
-    model_vec3_t n = vscale(vsub(*p, c), 1 / r);
-    *dir = vsub(d, vscale(n, 2 * vdot(d, n)));
-    *dir = vscale(*dir, 1 / sqrt(vdot(*dir, *dir)));
+    *p = v3_add(C, v3_scale(d, t));
+    model_vec3_t n = v3_scale(v3_sub(*p, c), 1 / r);
+    *dir = v3_sub(d, v3_scale(n, 2 * v3_dot(d, n)));
+    *dir = v3_scale(*dir, 1 / sqrt(v3_dot(*dir, *dir)));
     return true;
 }
 
@@ -459,17 +408,17 @@ static void disk_points(double pts[NDISK][2])
 // The mirror point on the sphere for reflection toward direction u (from camera C).
 static model_vec3_t mirror_point(model_vec3_t C, model_vec3_t c, double r, model_vec3_t u)
 {
-    model_vec3_t cc = vsub(C, c);
-    model_vec3_t p = vadd(c, vscale(cc, r / sqrt(vdot(cc, cc))));
+    model_vec3_t cc = v3_sub(C, c);
+    model_vec3_t p = v3_add(c, v3_scale(cc, r / sqrt(v3_dot(cc, cc))));
     for (int it = 0; it < 100; it++) {
-        model_vec3_t v = vsub(C, p);
-        v = vscale(v, 1 / sqrt(vdot(v, v)));
-        model_vec3_t hh = vadd(v, u);
-        hh = vscale(hh, 1 / sqrt(vdot(hh, hh)));
-        model_vec3_t pn = vadd(c, vscale(hh, r));
-        model_vec3_t dp = vsub(pn, p);
+        model_vec3_t v = v3_sub(C, p);
+        v = v3_scale(v, 1 / sqrt(v3_dot(v, v)));
+        model_vec3_t hh = v3_add(v, u);
+        hh = v3_scale(hh, 1 / sqrt(v3_dot(hh, hh)));
+        model_vec3_t pn = v3_add(c, v3_scale(hh, r));
+        model_vec3_t dp = v3_sub(pn, p);
         p = pn;
-        if (vdot(dp, dp) < 1e-16) break;
+        if (v3_dot(dp, dp) < 1e-16) break;
     }
     return p;
 }
@@ -494,16 +443,16 @@ static double dir_model(const dirfit_t *f, const double *p, int i)
 {
     double al2 = p[3] * p[3], sum = 0;
     int nd = f->rho > 0 ? NDISK : 1;
-    model_vec3_t u = vadd(f->u0, vadd(vscale(f->e1, p[1]), vscale(f->e2, p[2])));
-    u = vscale(u, 1 / sqrt(vdot(u, u)));
+    model_vec3_t u = v3_add(f->u0, v3_add(v3_scale(f->e1, p[1]), v3_scale(f->e2, p[2])));
+    u = v3_scale(u, 1 / sqrt(v3_dot(u, u)));
     for (int k = 0; k < nd; k++) {
         model_vec3_t w = u;
         if (nd > 1) {
-            w = vadd(u, vadd(vscale(f->e1, f->rho * f->disk[k][0]), vscale(f->e2, f->rho * f->disk[k][1])));
-            w = vscale(w, 1 / sqrt(vdot(w, w)));
+            w = v3_add(u, v3_add(v3_scale(f->e1, f->rho * f->disk[k][0]), v3_scale(f->e2, f->rho * f->disk[k][1])));
+            w = v3_scale(w, 1 / sqrt(v3_dot(w, w)));
         }
-        model_vec3_t h = vadd(w, f->v[i]);
-        double c = vdot(f->nrm[i], h) / sqrt(vdot(h, h));
+        model_vec3_t h = v3_add(w, f->v[i]);
+        double c = v3_dot(f->nrm[i], h) / sqrt(v3_dot(h, h));
         double den = c * c * (al2 - 1) + 1;
         sum += al2 * al2 / (den * den);
     }
@@ -527,9 +476,9 @@ bool calib_lamps_fit_direction(const model_camera_t *cam, const calib_lamps_high
     model_vec3_t p0, u0;
     if (!calib_lamps_reflect(cam, hl->q_centroid, c, r, &p0, &u0)) return false;
     model_vec3_t e1 = fabs(u0.z) < 0.9 ? v3(0, 0, 1) : v3(1, 0, 0);
-    e1 = vsub(e1, vscale(u0, vdot(e1, u0)));
-    e1 = vscale(e1, 1 / sqrt(vdot(e1, e1)));
-    model_vec3_t e2 = v3(u0.y * e1.z - u0.z * e1.y, u0.z * e1.x - u0.x * e1.z, u0.x * e1.y - u0.y * e1.x);
+    e1 = v3_sub(e1, v3_scale(u0, v3_dot(e1, u0)));
+    e1 = v3_scale(e1, 1 / sqrt(v3_dot(e1, e1)));
+    model_vec3_t e2 = v3_cross(u0, e1);
     dirfit_t f = { .rho = rho, .u0 = u0, .e1 = e1, .e2 = e2 };
     disk_points(f.disk);
     double q[2 * 81];
@@ -548,11 +497,11 @@ bool calib_lamps_fit_direction(const model_camera_t *cam, const calib_lamps_high
     for (int k = 0; k < m; k++) {
         double t = ray_sphere(C, d[k], c, r);
         if (!isfinite(t)) continue;
-        model_vec3_t pp = vadd(C, vscale(d[k], t)), n = vscale(vsub(pp, c), 1 / r);
-        double nv = -vdot(n, d[k]);
+        model_vec3_t pp = v3_add(C, v3_scale(d[k], t)), n = v3_scale(v3_sub(pp, c), 1 / r);
+        double nv = -v3_dot(n, d[k]);
         if (!(nv > 0.05)) continue;
         f.nrm[f.n] = n;
-        f.v[f.n] = vscale(d[k], -1);
+        f.v[f.n] = v3_scale(d[k], -1);
         f.inv_nv[f.n] = 1 / nv;
         f.val[f.n] = hl->win[idx[k]];
         f.wt[f.n] = 1;
@@ -627,8 +576,8 @@ bool calib_lamps_fit_direction(const model_camera_t *cam, const calib_lamps_high
         model_error_set(NULL, 0, "the direction fit moved %.3f rad from the centroid's direction", hypot(p[1], p[2]));
         return false;
     }
-    model_vec3_t u = vadd(u0, vadd(vscale(e1, p[1]), vscale(e2, p[2])));
-    u = vscale(u, 1 / sqrt(vdot(u, u)));
+    model_vec3_t u = v3_add(u0, v3_add(v3_scale(e1, p[1]), v3_scale(e2, p[2])));
+    u = v3_scale(u, 1 / sqrt(v3_dot(u, u)));
     *dir_out = u;
     *p_out = mirror_point(C, c, r, u);
     if (lobe_rad) *lobe_rad = p[3];
@@ -637,6 +586,34 @@ bool calib_lamps_fit_direction(const model_camera_t *cam, const calib_lamps_high
 
 // ---------------------------------------------------------------------------
 // Triangulation
+
+// Inverse of a 3x3 matrix; false when singular.
+static bool inv3(const double *m, double *out)
+{
+    double c00 = m[4] * m[8] - m[5] * m[7], c01 = m[5] * m[6] - m[3] * m[8], c02 = m[3] * m[7] - m[4] * m[6];
+    double det = m[0] * c00 + m[1] * c01 + m[2] * c02;
+    if (!(fabs(det) > 1e-300)) return false;
+    double id = 1 / det;
+    out[0] = c00 * id;
+    out[1] = (m[2] * m[7] - m[1] * m[8]) * id;
+    out[2] = (m[1] * m[5] - m[2] * m[4]) * id;
+    out[3] = c01 * id;
+    out[4] = (m[0] * m[8] - m[2] * m[6]) * id;
+    out[5] = (m[2] * m[3] - m[0] * m[5]) * id;
+    out[6] = c02 * id;
+    out[7] = (m[1] * m[6] - m[0] * m[7]) * id;
+    out[8] = (m[0] * m[4] - m[1] * m[3]) * id;
+    return true;
+}
+
+// The smallest eigenvalue of the symmetric 3x3 a.
+static double min_eig(const double a[9])
+{
+    double e[9];
+    memcpy(e, a, sizeof e);
+    model_sym_eigen(3, e, NULL);
+    return fmin(e[0], fmin(e[4], e[8]));
+}
 
 static bool fit_once(const model_vec3_t *p, const model_vec3_t *d, int n, const bool *used, calib_lamps_fit_t *o)
 {
@@ -654,7 +631,7 @@ static bool fit_once(const model_vec3_t *p, const model_vec3_t *d, int n, const 
         m++;
     }
     o->n_used = m;
-    o->min_eig = min_eig3(A);
+    o->min_eig = min_eig(A);
     double Ai[9];
     if (m < 3 || !inv3(A, Ai)) return false;
     for (int r = 0; r < 3; r++) o->x_mm[r] = Ai[r * 3] * b[0] + Ai[r * 3 + 1] * b[1] + Ai[r * 3 + 2] * b[2];
@@ -664,9 +641,9 @@ static bool fit_once(const model_vec3_t *p, const model_vec3_t *d, int n, const 
 
 static double ray_dist(model_vec3_t p, model_vec3_t d, const double x[3])
 {
-    model_vec3_t e = vsub(v3(x[0], x[1], x[2]), p);
-    model_vec3_t perp = vsub(e, vscale(d, vdot(e, d)));
-    return sqrt(vdot(perp, perp));
+    model_vec3_t e = v3_sub(v3(x[0], x[1], x[2]), p);
+    model_vec3_t perp = v3_sub(e, v3_scale(d, v3_dot(e, d)));
+    return sqrt(v3_dot(perp, perp));
 }
 
 bool calib_lamps_triangulate(const model_vec3_t *p, const model_vec3_t *d, int n, double reject_sigma,
@@ -702,7 +679,7 @@ bool calib_lamps_triangulate(const model_vec3_t *p, const model_vec3_t *d, int n
             used[i] = true;
             tmp[m++] = del[i];
         }
-        double scale = 1.4826 * median(tmp, m);
+        double scale = 1.4826 * model_median(tmp, m);
         double lim = fmax(reject_sigma * scale, floor_mm);
         int worst = -1;
         for (int i = 0; i < n; i++)
@@ -1378,8 +1355,8 @@ static void refit_highlights(const calib_lamps_opts_t *o, calib_lamps_result_t *
 {
     for (int a = 0; a < r->nangles; a++) {
         if (!lp->has_ray[a]) continue;
-        model_vec3_t e = vsub(v3(x_mm[0], x_mm[1], x_mm[2]), lp->p_mm[a]);
-        double dist = sqrt(vdot(e, e));
+        model_vec3_t e = v3_sub(v3(x_mm[0], x_mm[1], x_mm[2]), lp->p_mm[a]);
+        double dist = sqrt(v3_dot(e, e));
         double rho = lp->lamp_radius_mm > 0 && dist > lp->lamp_radius_mm ? asin(lp->lamp_radius_mm / dist) : 0;
         bool q = model_error_quiet_thread(true);
         calib_lamps_fit_direction(r->cam, &lp->hl[a], r->centre_mm[a], o->sphere_radius_mm, rho, &lp->p_mm[a],
@@ -1451,10 +1428,10 @@ static int joint_obs(const calib_lamps_result_t *r, model_vec3_t Cc, calib_lamps
         for (int a = 0; a < r->nangles; a++) {
             const calib_lamps_lamp_t *lp = &r->lamps[l];
             if (!lp->has_ray[a] || !lp->used[a]) continue;
-            model_vec3_t ray = vsub(lp->p_mm[a], Cc);
+            model_vec3_t ray = v3_sub(lp->p_mm[a], Cc);
             ob[k].lamp = l;
             ob[k].angle_deg = r->angle_deg[a];
-            ob[k].ray = vscale(ray, 1 / sqrt(vdot(ray, ray)));
+            ob[k].ray = v3_scale(ray, 1 / sqrt(v3_dot(ray, ray)));
             k++;
         }
     return k;
@@ -1475,13 +1452,13 @@ static void rays_at_path(const calib_lamps_opts_t *o, calib_lamps_result_t *r, c
             if (!lp->has_ray[a]) continue;
             r->centre_mm[a] = c;
             if (pass == 0 && o->method == CALIB_LAMPS_MODEL) continue;   // refit_highlights below
-            model_vec3_t dd = vsub(lp->p_mm[a], bs->camera_mm);
-            dd = vscale(dd, 1 / sqrt(vdot(dd, dd)));
+            model_vec3_t dd = v3_sub(lp->p_mm[a], bs->camera_mm);
+            dd = v3_scale(dd, 1 / sqrt(v3_dot(dd, dd)));
             double t = ray_sphere(bs->camera_mm, dd, c, R);
             if (!isfinite(t)) continue;
-            lp->p_mm[a] = vadd(bs->camera_mm, vscale(dd, t));
-            model_vec3_t nn = vscale(vsub(lp->p_mm[a], c), 1 / R);
-            lp->d[a] = vsub(dd, vscale(nn, 2 * vdot(dd, nn)));
+            lp->p_mm[a] = v3_add(bs->camera_mm, v3_scale(dd, t));
+            model_vec3_t nn = v3_scale(v3_sub(lp->p_mm[a], c), 1 / R);
+            lp->d[a] = v3_sub(dd, v3_scale(nn, 2 * v3_dot(dd, nn)));
         }
     }
     if (pass == 0 && o->method == CALIB_LAMPS_MODEL)
@@ -1569,7 +1546,7 @@ static bool provenance(const calib_lamps_opts_t *o, calib_lamps_result_t *r)
 static json_t *vec_json(const double *v, int n)
 {
     json_t *a = json_array();
-    for (int k = 0; k < n; k++) json_array_append_new(a, json_real(v[k]));
+    for (int k = 0; k < n; k++) json_array_append_new(a, model_json_number(v[k]));
     return a;
 }
 
@@ -1582,8 +1559,8 @@ static json_t *lamp_json(const calib_lamps_result_t *r, const calib_lamps_lamp_t
     json_object_set_new(j, "position_mm", json_pack("[fff]", x[0], x[1], x[2]));
     json_object_set_new(j, "std_mm", json_pack("[fff]", sqrt(cv[0]), sqrt(cv[4]), sqrt(cv[8])));
     json_object_set_new(j, "covariance_mm2", vec_json(cv, 9));
-    json_object_set_new(j, "rms_ray_distance_mm", json_real(lp->fit.rms_mm));
-    json_object_set_new(j, "radius_mm", json_real(lp->lamp_radius_mm));
+    json_object_set_new(j, "rms_ray_distance_mm", model_json_number(lp->fit.rms_mm));
+    json_object_set_new(j, "radius_mm", model_json_number(lp->lamp_radius_mm));
     json_object_set_new(j, "n_frames", json_integer(lp->fit.n_used));
     int nout = 0;
     for (int a = 0; a < r->nangles; a++) {
@@ -1605,7 +1582,7 @@ static json_t *joint_json(const calib_lamps_opts_t *o, const calib_lamps_result_
     const calib_lamps_bundle_t *jf = &r->joint;
     const double *gc = jf->sphere_cov;
     json_t *jj = json_object(), *js = json_array();
-    for (int l = 0; l < r->nlamps; l++) json_array_append_new(js, json_real(jf->sigma_rad[l] * 1e3));
+    for (int l = 0; l < r->nlamps; l++) json_array_append_new(js, model_json_number(jf->sigma_rad[l] * 1e3));
     json_object_set_new(jj, "offset_mm", json_pack("[fff]", jf->sphere[0], jf->sphere[1], jf->sphere[2]));
     json_object_set_new(jj, "shift_mm", json_pack("[ff]", jf->sphere[3], jf->sphere[4]));
     json_object_set_new(jj, "tilt_mrad", json_pack("[ff]", jf->sphere[5], jf->sphere[6]));
@@ -1615,7 +1592,7 @@ static json_t *joint_json(const calib_lamps_opts_t *o, const calib_lamps_result_
     json_object_set_new(jj, "prior_std", json_pack("{s:f,s:f,s:f}", "offset_mm", o->offset_prior_mm, "shift_mm",
                                                    o->shift_prior_mm, "tilt_mrad", o->tilt_prior_mrad));
     json_object_set_new(jj, "ray_sigma_mrad", js);
-    json_object_set_new(jj, "condition", json_real(jf->cond));
+    json_object_set_new(jj, "condition", model_json_number(jf->cond));
     json_object_set_new(jj, "model", json_string(
         "sphere centre at angle a = s0 + tilt x s0 + (shift_mm, 0), s0 = Rz(a) (centre_at_angle0_mm + "
         "offset_mm), tilt = (tilt_mrad, 0) 1e-3, fitted jointly with the lamps over every highlight (each a "
@@ -1645,7 +1622,7 @@ bool calib_lamps_write_json(const calib_lamps_opts_t *o, calib_lamps_result_t *r
                                                  model_camera_sha256(r->cam)));
     json_object_set_new(sj, "sample", json_string(r->plan->sample));
     json_object_set_new(sj, "centre_at_angle0_mm", json_pack("[fff]", c0[0], c0[1], c0[2]));
-    json_object_set_new(sj, "radius_mm", json_real(o->sphere_radius_mm));
+    json_object_set_new(sj, "radius_mm", model_json_number(o->sphere_radius_mm));
     json_object_set_new(sj, "motion", json_string("centre at turntable angle a: Rz(a) centre_at_angle0_mm (the "
                                                   "journal's measured angle)"));
     if (r->have_joint) {
@@ -1656,7 +1633,7 @@ bool calib_lamps_write_json(const calib_lamps_opts_t *o, calib_lamps_result_t *r
         json_object_set_new(sj, "centre_typed_mm", json_pack("[fff]", t[0], t[1], t[2]));
         json_object_set_new(sj, "centre_found_mm", json_pack("[fff]", f[0], f[1], f[2]));
         json_object_set_new(sj, "centre_found_std_mm", json_pack("[fff]", sqrt(fc[0]), sqrt(fc[4]), sqrt(fc[8])));
-        json_object_set_new(sj, "centre_typed_off_mm", json_real(sqrt(pow(f[0] - t[0], 2) + pow(f[1] - t[1], 2) +
+        json_object_set_new(sj, "centre_typed_off_mm", model_json_number(sqrt(pow(f[0] - t[0], 2) + pow(f[1] - t[1], 2) +
                                                                       pow(f[2] - t[2], 2))));
         json_object_set_new(sj, "rounds", json_integer(r->rounds));
         json_object_set_new(sj, "joint_fit", joint_json(o, r));
@@ -1706,7 +1683,7 @@ static json_t *detections_json(const calib_lamps_opts_t *o, const calib_lamps_re
                                              r->session->rows[fr].file, "found", hl->found, "q", hl->q[0], hl->q[1],
                                              "peak_dn", hl->peak_dn));
     }
-    for (int i = 0; acc && i < sph->w * sph->h; i++) json_array_append_new(crop, json_real(acc[i]));
+    for (int i = 0; acc && i < sph->w * sph->h; i++) json_array_append_new(crop, model_json_number(acc[i]));
     json_t *out = json_pack("{s:f,s:i,s:i,s:i,s:i,s:o,s:o,s:[ff],s:f}", "angle_deg", ang, "x0", sph->x0, "y0",
                             sph->y0, "w", sph->w, "h", sph->h, "crop", crop, "highlights", det, "sphere_q",
                             sph->q_centre[0], sph->q_centre[1], "sphere_radius_px", sph->radius_px);
@@ -1748,7 +1725,7 @@ static json_t *report_json(const calib_lamps_opts_t *o, const calib_lamps_result
     const double *c0 = o->sphere_centre_mm;
     json_object_set_new(rep, "camera_centre_mm", json_pack("[fff]", Cw.x, Cw.y, Cw.z));
     json_object_set_new(rep, "sphere_centre_angle0_mm", json_pack("[fff]", c0[0], c0[1], c0[2]));
-    json_object_set_new(rep, "sphere_radius_mm", json_real(o->sphere_radius_mm));
+    json_object_set_new(rep, "sphere_radius_mm", model_json_number(o->sphere_radius_mm));
     if (r->have_joint) {
         const double *g = r->joint.sphere, *gc = r->joint.sphere_cov;
         json_object_set_new(rep, "sphere_joint_fit", json_pack("{s:[fff],s:[ff],s:[ff],s:[fffffff]}", "offset_mm",
