@@ -324,6 +324,12 @@ TEST(calib_lamps_highlight_synthetic)
     CHECK_NEAR(h.sigma_px[0], s, 0.05);
     CHECK(h.peak_dn > 1500);
     CHECK(!h.saturated);
+    // the steps' figures: the noise of the difference (uniform +-1 and +-2 DN: std 1.3 DN), the blob
+    // (>= 20 % of the peak of a Gaussian of sigma 1.1 px: ~ 2 pi 1.1^2 ln 5 = 12 pixels), the window
+    CHECK_MSG(h.noise_dn > 1.0 && h.noise_dn < 1.6, "noise %.2f DN", h.noise_dn);
+    CHECK_MSG(h.blob_px >= 8 && h.blob_px <= 16, "blob %d px", h.blob_px);
+    CHECK_NEAR(h.q_centroid[0], qx, 0.1);
+    CHECK_NEAR(h.win[40], h.peak_dn, 1e-9);   // the window's centre: the brightest pixel
     // a ray through it: starts on the sphere, leaves it outward
     model_vec3_t p, d;
     CHECK(calib_lamps_reflect(cam, h.q, c, 25, &p, &d));

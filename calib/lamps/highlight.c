@@ -60,7 +60,7 @@ static bool gauss_fit(const double *xs, const double *ys, const double *v, int n
     }
     *rms = sqrt(cost / (n > 5 ? n - 5 : 1));
     // standard error of the centre from the residuals: s^2 (J^T J)^-1
-    double I[25] = { 0 }, A[25];
+    double A[25];
     double s2 = cost / (n > 5 ? n - 5 : 1), var[2];
     for (int k = 1; k <= 2; k++) {
         memcpy(A, JTJ, sizeof A);
@@ -69,32 +69,24 @@ static bool gauss_fit(const double *xs, const double *ys, const double *v, int n
         if (!model_solve_linear(A, e, 5)) return false;
         var[k - 1] = s2 * e[k];
     }
-    (void)I;
     *q_std = sqrt(fmax(0, var[0]) + fmax(0, var[1]));
     return true;
 }
 
-void calib_lamps_find_highlight(const float *img, const float *dark, int W, int H,
-                                const calib_lamps_sphere_image_t *sph, double min_snr, double min_peak_dn,
-                                int max_blob_px, double sat_dn, calib_lamps_highlight_t *o)
+// The difference img - dark (dark may be NULL) over the sphere's box into D
+// (w*h), less the background: the median of the difference off the sphere
+// (the box's margin and corners; all of it when fewer than 8 such pixels).
+// Returns the noise: the difference's MAD off the sphere, at least 0.5 DN
+// (the quantisation floor of integer DN). tmp: room for w*h.
+static double subtract_background(const float *img, const float *dark, int W, const calib_lamps_sphere_image_t *sph,
+                                  double *D, double *tmp)
 {
-    memset(o, 0, sizeof *o);
     const int w = sph->w, h = sph->h, x0 = sph->x0, y0 = sph->y0;
-    double *D = malloc(sizeof *D * (size_t)w * h), *tmp = malloc(sizeof *tmp * (size_t)w * h);
-    int *stack = malloc(sizeof *stack * (size_t)w * h);
-    unsigned char *blob = calloc((size_t)w * h, 1);
-    if (!D || !tmp || !stack || !blob) {
-        snprintf(o->why, sizeof o->why, "out of memory");
-        goto done;
-    }
-    (void)H;
     for (int y = 0; y < h; y++)
         for (int x = 0; x < w; x++) {
             size_t k = (size_t)(y0 + y) * W + (x0 + x);
             D[y * w + x] = img[k] - (dark ? dark[k] : 0);
         }
-    // background: median of the difference off the sphere (the box's margin and
-    // corners); noise: its MAD
     int nb = 0;
     for (int i = 0; i < w * h; i++)
         if (!sph->on[i]) tmp[nb++] = D[i];
@@ -103,27 +95,24 @@ void calib_lamps_find_highlight(const float *img, const float *dark, int W, int 
     double bg = model_median(tmp, nb);
     for (int i = 0; i < nb; i++) tmp[i] = fabs(tmp[i] - bg);
     double noise = 1.4826 * model_median(tmp, nb);
-    if (!(noise > 0.5)) noise = 0.5;   // quantisation floor (integer DN)
+    if (!(noise > 0.5)) noise = 0.5;
     for (int i = 0; i < w * h; i++) D[i] -= bg;
-    o->noise_dn = noise;
+    return noise;
+}
+
+// The brightest pixel of D on the sphere's image (box index; -1: none).
+static int brightest_on_sphere(const calib_lamps_sphere_image_t *sph, const double *D)
+{
     int best = -1;
-    for (int i = 0; i < w * h; i++)
+    for (int i = 0; i < sph->w * sph->h; i++)
         if (sph->on[i] && (best < 0 || D[i] > D[best])) best = i;
-    if (best < 0) {
-        snprintf(o->why, sizeof o->why, "no pixel of the sphere's predicted image is on the imager");
-        goto done;
-    }
-    o->peak_dn = D[best];
-    size_t kbest = (size_t)(y0 + best / w) * W + (x0 + best % w);
-    o->saturated = img[kbest] >= sat_dn;
-    double need = fmax(min_snr * noise, min_peak_dn);
-    if (!(o->peak_dn >= need)) {
-        snprintf(o->why, sizeof o->why, "brightest pixel on the sphere's image is %.1f DN above the background "
-                 "(noise %.1f DN; a highlight needs %.0f DN)", o->peak_dn, noise, need);
-        goto done;
-    }
-    // the blob: 8-connected pixels >= 20 % of the peak
-    double thr = 0.2 * o->peak_dn;
+    return best;
+}
+
+// The blob of best: the 8-connected pixels of D (w x h) at or above thr,
+// marked in blob (zeroed, w*h). stack: room for w*h. Returns its pixels.
+static int grow_blob(const double *D, int w, int h, int best, double thr, int *stack, unsigned char *blob)
+{
     int ns = 0, nblob = 0;
     stack[ns++] = best;
     blob[best] = 1;
@@ -142,16 +131,16 @@ void calib_lamps_find_highlight(const float *img, const float *dark, int W, int 
                 }
             }
     }
-    o->blob_px = nblob;
-    if (nblob > max_blob_px) {
-        snprintf(o->why, sizeof o->why, "the brightest spot on the sphere's image is a broad patch of %d pixels "
-                 "(>= 20 %% of its peak %.0f DN), not a lamp's highlight (at most %d pixels)", nblob, o->peak_dn,
-                 max_blob_px);
-        goto done;
-    }
-    // centroid of the blob grown by one pixel (the dim wings carry position too)
+    return nblob;
+}
+
+// The intensity-weighted centroid q (px) of the blob grown by one pixel (the
+// dim wings carry position too), within 3 pixels of best.
+static void blob_centroid(const calib_lamps_sphere_image_t *sph, const double *D, int best, const unsigned char *blob,
+                          double q[2])
+{
+    const int w = sph->w, h = sph->h, bxp = best % w, byp = best / w;
     double sw = 0, sx = 0, sy = 0;
-    int bxp = best % w, byp = best / w;
     for (int y = byp - 3; y <= byp + 3; y++)
         for (int x = bxp - 3; x <= bxp + 3; x++) {
             if (x < 0 || y < 0 || x >= w || y >= h) continue;
@@ -164,16 +153,21 @@ void calib_lamps_find_highlight(const float *img, const float *dark, int W, int 
             if (!near) continue;
             double v = fmax(0, D[y * w + x]);
             sw += v;
-            sx += v * (x0 + x);
-            sy += v * (y0 + y);
+            sx += v * (sph->x0 + x);
+            sy += v * (sph->y0 + y);
         }
-    o->q_centroid[0] = sx / sw;
-    o->q_centroid[1] = sy / sw;
-    o->q[0] = o->q_centroid[0];
-    o->q[1] = o->q_centroid[1];
-    o->q_std_px = NAN;
-    // Gaussian fit on the 7x7 window (pixels of the sphere only; saturated
-    // pixels left out: their value is clipped)
+    q[0] = sx / sw;
+    q[1] = sy / sw;
+}
+
+// The 2-D Gaussian fit on the 7x7 window around best (pixels of the box; the
+// saturated ones left out: their value is clipped), started at the centroid:
+// where it converges near the centroid with a plausible width, o->q, sigma_px,
+// q_std_px and fit_used.
+static void gauss_refine(const float *img, int W, const calib_lamps_sphere_image_t *sph, const double *D, int best,
+                         double sat_dn, calib_lamps_highlight_t *o)
+{
+    const int w = sph->w, h = sph->h, x0 = sph->x0, y0 = sph->y0, bxp = best % w, byp = best / w;
     double xs[49], ys[49], vs[49];
     int n = 0;
     for (int y = byp - 3; y <= byp + 3; y++)
@@ -187,8 +181,9 @@ void calib_lamps_find_highlight(const float *img, const float *dark, int W, int 
             n++;
         }
     double p[5] = { o->peak_dn, o->q_centroid[0], o->q_centroid[1], 0.7, 0.7 }, rms = 0, qs = NAN;
-    if (n >= 9 && gauss_fit(xs, ys, vs, n, p, &rms, &qs) && hypot(p[1] - o->q_centroid[0], p[2] - o->q_centroid[1]) < 1.0 &&
-        p[3] > 0.15 && p[3] < 4 && p[4] > 0.15 && p[4] < 4) {
+    if (n >= 9 && gauss_fit(xs, ys, vs, n, p, &rms, &qs) &&
+        hypot(p[1] - o->q_centroid[0], p[2] - o->q_centroid[1]) < 1.0 && p[3] > 0.15 && p[3] < 4 && p[4] > 0.15 &&
+        p[4] < 4) {
         o->q[0] = p[1];
         o->q[1] = p[2];
         o->sigma_px[0] = p[3];
@@ -196,7 +191,14 @@ void calib_lamps_find_highlight(const float *img, const float *dark, int W, int 
         o->q_std_px = qs;
         o->fit_used = true;
     }
-    // the window for the direction-space fit
+}
+
+// o->win: the 9x9 window around best for the direction-space fit (NAN off
+// the sphere, off the box and where saturated).
+static void direction_window(const float *img, int W, const calib_lamps_sphere_image_t *sph, const double *D,
+                             int best, double sat_dn, calib_lamps_highlight_t *o)
+{
+    const int w = sph->w, h = sph->h, x0 = sph->x0, y0 = sph->y0, bxp = best % w, byp = best / w;
     o->win_x0 = x0 + bxp - 4;
     o->win_y0 = y0 + byp - 4;
     for (int i = 0; i < 81; i++) {
@@ -206,6 +208,49 @@ void calib_lamps_find_highlight(const float *img, const float *dark, int W, int 
         if (img[(size_t)(y0 + y) * W + (x0 + x)] >= sat_dn) continue;
         o->win[i] = D[y * w + x];
     }
+}
+
+void calib_lamps_find_highlight(const float *img, const float *dark, int W, int H,
+                                const calib_lamps_sphere_image_t *sph, double min_snr, double min_peak_dn,
+                                int max_blob_px, double sat_dn, calib_lamps_highlight_t *o)
+{
+    memset(o, 0, sizeof *o);
+    const int w = sph->w, h = sph->h;
+    double *D = malloc(sizeof *D * (size_t)w * h), *tmp = malloc(sizeof *tmp * (size_t)w * h);
+    int *stack = malloc(sizeof *stack * (size_t)w * h);
+    unsigned char *blob = calloc((size_t)w * h, 1);
+    if (!D || !tmp || !stack || !blob) {
+        snprintf(o->why, sizeof o->why, "out of memory");
+        goto done;
+    }
+    (void)H;
+    double noise = o->noise_dn = subtract_background(img, dark, W, sph, D, tmp);
+    int best = brightest_on_sphere(sph, D);
+    if (best < 0) {
+        snprintf(o->why, sizeof o->why, "no pixel of the sphere's predicted image is on the imager");
+        goto done;
+    }
+    o->peak_dn = D[best];
+    o->saturated = img[(size_t)(sph->y0 + best / w) * W + (sph->x0 + best % w)] >= sat_dn;
+    double need = fmax(min_snr * noise, min_peak_dn);
+    if (!(o->peak_dn >= need)) {
+        snprintf(o->why, sizeof o->why, "brightest pixel on the sphere's image is %.1f DN above the background "
+                 "(noise %.1f DN; a highlight needs %.0f DN)", o->peak_dn, noise, need);
+        goto done;
+    }
+    int nblob = o->blob_px = grow_blob(D, w, h, best, 0.2 * o->peak_dn, stack, blob);
+    if (nblob > max_blob_px) {
+        snprintf(o->why, sizeof o->why, "the brightest spot on the sphere's image is a broad patch of %d pixels "
+                 "(>= 20 %% of its peak %.0f DN), not a lamp's highlight (at most %d pixels)", nblob, o->peak_dn,
+                 max_blob_px);
+        goto done;
+    }
+    blob_centroid(sph, D, best, blob, o->q_centroid);
+    o->q[0] = o->q_centroid[0];
+    o->q[1] = o->q_centroid[1];
+    o->q_std_px = NAN;
+    gauss_refine(img, W, sph, D, best, sat_dn, o);
+    direction_window(img, W, sph, D, best, sat_dn, o);
     o->found = true;
 done:
     free(D);
