@@ -11,7 +11,8 @@ REPORT_DATA.json: {"lamps": [{"name", "position_mm", "std_mm", "rays": [{"p", "d
 "camera_centre_mm", "sphere_centre_angle0_mm", "sphere_radius_mm", "sphere_joint_fit" (optional:
 {"offset_mm", "shift_mm", "tilt_mrad", "std"} of the joint fit of lamps and sphere path; the rays are
 then reflected off the fitted path)}.
-Units mm (rig frame), pixels.
+Units mm (rig frame), pixels. Its root names the format: "format": "refl-lamps-report-data",
+"version": 1 (this script reads version 1; a file without the keys is version 1).
 """
 import json
 import sys
@@ -29,6 +30,11 @@ def main():
         return 2
     with open(sys.argv[1]) as f:
         data = json.load(f)
+    fmt, ver = data.get("format", "refl-lamps-report-data"), data.get("version", 1)
+    if fmt != "refl-lamps-report-data" or not isinstance(ver, int) or ver > 1:
+        sys.stderr.write("%s: %s version %s: this script reads refl-lamps-report-data versions 1 to 1\n"
+                         % (sys.argv[1], fmt, ver))
+        return 2
     lamps = data["lamps"]
     colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
 

@@ -474,6 +474,9 @@ TEST_LONG(calib_lamps_virtual_rig_accuracy)
     CHECK(tl && tl->n == 5);
     if (doc && tl) {
         CHECK_CONTAINS(json_string_value(json_object_get(doc, "units")), "mm");
+        int ver = 0;
+        CHECK(!strcmp(json_string_value(json_object_get(doc, "format")), "refl-lamps"));
+        CHECK(calib_lamps_json_check(doc, jp, &ver) && ver == CALIB_LAMPS_JSON_VERSION);
         CHECK_CONTAINS(json_string_value(json_object_get(doc, "conventions")), "rig frame");
         json_t *lamps = json_object_get(doc, "lamps");
         CHECK(json_array_size(lamps) == 5);
@@ -1153,6 +1156,82 @@ TEST(calib_lamps_pattern_bad_input)
     }
     calib_set_free(c);
     g_free(cam);
+}
+
+// lamps.json's format and version: a file without them is version 1, a newer
+// version or another format is refused (calib_lamps_json_check, and refl calib
+// pattern before it writes the patterns into it); report_data.json's plotter
+// refuses a newer version too.
+TEST(calib_lamps_json_version)
+{
+    static const char *lamps = "\"lamps\": [{\"name\": \"east\", \"position_mm\": [500, 0, 500]}]";
+    char text[300];
+    int ver = -1;
+    json_t *doc = json_loads("{\"lamps\": []}", 0, NULL);
+    CHECK(calib_lamps_json_check(doc, "old.json", &ver) && ver == 1);
+    json_decref(doc);
+    doc = json_loads("{\"format\": \"refl-lamps\", \"version\": 1}", 0, NULL);
+    CHECK(calib_lamps_json_check(doc, "v1.json", &ver) && ver == 1);
+    json_decref(doc);
+    doc = json_loads("{\"format\": \"refl-gain\", \"version\": 1}", 0, NULL);
+    CHECK(!calib_lamps_json_check(doc, "gain.json", &ver));
+    CHECK_CONTAINS(model_last_error(), "a refl-gain file, not refl-lamps");
+    json_decref(doc);
+    snprintf(text, sizeof text, "{\"format\": \"refl-lamps\", \"version\": 2, %s}\n", lamps);
+    const char *lj = test_write("v2.json", text);
+    doc = json_load_file(lj, 0, NULL);
+    model_error_clear();
+    CHECK(doc && !calib_lamps_json_check(doc, lj, &ver));
+    CHECK_CONTAINS(model_last_error(), "v2.json");
+    CHECK_CONTAINS(model_last_error(), "refl-lamps version 2, written by a newer refl");
+    json_decref(doc);
+    // refl calib pattern does not write its patterns into a newer lamps.json
+    char *cam = src(CAMERA);
+    calib_set_t *cal = calib_set_load_files(cam, lj, NULL, NULL);
+    CHECK(cal);
+    if (cal) {
+        calib_lamps_pattern_t *pat = calloc((size_t)cal->lamps->n, sizeof *pat);
+        const char *out = test_path("out.json");
+        bool q = model_error_quiet_thread(true);
+        CHECK(pat && !calib_lamps_pattern_write(cal, pat, "session", out, NULL));
+        model_error_quiet_thread(q);
+        CHECK_CONTAINS(model_last_error(), "refl-lamps version 2, written by a newer refl");
+        CHECK(access(out, F_OK) != 0);
+        free(pat);
+    }
+    calib_set_free(cal);
+    // version 1 (without the keys): the patterns written, the format named
+    snprintf(text, sizeof text, "{%s}\n", lamps);
+    const char *l1 = test_write("v1.json", text);
+    cal = calib_set_load_files(cam, l1, NULL, NULL);
+    CHECK(cal);
+    if (cal) {
+        calib_lamps_pattern_t pat[1] = { { .fitted = true, .n = 2, .axis = { 0, 0, -1 } } };
+        const char *out = test_path("out1.json");
+        json_t *prov = json_object();
+        CHECK_MSG(calib_lamps_pattern_write(cal, pat, "session", out, prov), "%s", model_last_error());
+        json_decref(prov);
+        doc = json_load_file(out, 0, NULL);
+        CHECK(doc && calib_lamps_json_check(doc, out, &ver) && ver == 1);
+        CHECK(!strcmp(json_string_value(json_object_get(doc, "format")), "refl-lamps"));
+        CHECK_NEAR(json_number_value(json_object_get(json_array_get(json_object_get(doc, "lamps"), 0),
+                                                     "emission_cos_power")), 2, 1e-12);
+        json_decref(doc);
+    }
+    calib_set_free(cal);
+    g_free(cam);
+    // the plotter of report_data.json
+    const char *rd = test_write("report_data.json", "{\"format\": \"refl-lamps-report-data\", \"version\": 2, "
+                                "\"lamps\": []}\n");
+    char *script = src("/scripts/calib_lamps_report.py");
+    const char *argv[] = { "/usr/bin/python3", script, rd, test_path("a.png"), test_path("b.png"), NULL };
+    char *o = NULL, *e = NULL;
+    int rc = test_run(argv, 60, &o, &e);
+    CHECK_MSG(rc == 2, "rc %d: %s", rc, e);
+    CHECK_CONTAINS(e, "refl-lamps-report-data version 2: this script reads refl-lamps-report-data versions 1 to 1");
+    g_free(o);
+    g_free(e);
+    g_free(script);
 }
 
 // ---------------------------------------------------------------------------

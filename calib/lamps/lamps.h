@@ -311,6 +311,21 @@ bool calib_lamps_triangulate_lamps(const calib_lamps_opts_t *o, calib_lamps_resu
 bool calib_lamps_joint_fit(const calib_lamps_opts_t *o, calib_lamps_result_t *r);
 // Stage 5: o->out/lamps.json (units mm, rig frame, provenance).
 bool calib_lamps_write_json(const calib_lamps_opts_t *o, calib_lamps_result_t *r);
+
+// lamps.json names its format at its root: "format": "refl-lamps",
+// "version": 1. Version 1: "lamps" (per lamp name, position_mm, std_mm,
+// covariance_mm2, rms_ray_distance_mm, radius_mm, n_frames, n_outliers,
+// frames_missing; `refl calib pattern` adds emission_cos_power,
+// emission_axis and emission), "units", "conventions", "camera", "sphere",
+// "session", "provenance" (and emission_conventions, emission_session,
+// emission_provenance from `refl calib pattern`). A file without "format"
+// and "version" reads as version 1.
+#define CALIB_LAMPS_JSON_FORMAT "refl-lamps"
+enum { CALIB_LAMPS_JSON_VERSION = 1 };
+// Every reader of a lamps.json calls this on its parsed root (path for the
+// message): false + model_error_set when it is another format or a version
+// newer than this refl reads; *version (may be NULL) gets the version read.
+bool calib_lamps_json_check(const json_t *root, const char *path, int *version);
 // Stage 6: o->out/report_data.json, its plots (scripts/calib_lamps_report.py)
 // and o->out/report.html.
 bool calib_lamps_write_report(const calib_lamps_opts_t *o, calib_lamps_result_t *r);

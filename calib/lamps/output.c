@@ -85,6 +85,7 @@ bool calib_lamps_write_json(const calib_lamps_opts_t *o, calib_lamps_result_t *r
     if (!lamps_provenance(o, r)) return false;
     const double *c0 = o->sphere_centre_mm;
     json_t *doc = json_object(), *ja = json_array(), *sj = json_object();
+    model_json_set_format(doc, CALIB_LAMPS_JSON_FORMAT, CALIB_LAMPS_JSON_VERSION);
     json_object_set_new(doc, "units", json_string("lengths in mm; angles in degrees; pixels with (0,0) at the "
                                                   "centre of the top-left pixel"));
     json_object_set_new(doc, "conventions", json_string(
@@ -111,8 +112,8 @@ bool calib_lamps_write_json(const calib_lamps_opts_t *o, calib_lamps_result_t *r
         json_object_set_new(sj, "centre_typed_mm", json_pack("[fff]", t[0], t[1], t[2]));
         json_object_set_new(sj, "centre_found_mm", json_pack("[fff]", f[0], f[1], f[2]));
         json_object_set_new(sj, "centre_found_std_mm", json_pack("[fff]", sqrt(fc[0]), sqrt(fc[4]), sqrt(fc[8])));
-        json_object_set_new(sj, "centre_typed_off_mm", model_json_number(sqrt(pow(f[0] - t[0], 2) + pow(f[1] - t[1], 2) +
-                                                                      pow(f[2] - t[2], 2))));
+        double off = sqrt(pow(f[0] - t[0], 2) + pow(f[1] - t[1], 2) + pow(f[2] - t[2], 2));
+        json_object_set_new(sj, "centre_typed_off_mm", model_json_number(off));
         json_object_set_new(sj, "rounds", json_integer(r->rounds));
         json_object_set_new(sj, "joint_fit", joint_json(o, r));
     } else {
@@ -127,4 +128,9 @@ bool calib_lamps_write_json(const calib_lamps_opts_t *o, calib_lamps_result_t *r
     g_free(path);
     json_decref(doc);
     return ok;
+}
+
+bool calib_lamps_json_check(const json_t *root, const char *path, int *version)
+{
+    return model_json_format_check(root, path, CALIB_LAMPS_JSON_FORMAT, CALIB_LAMPS_JSON_VERSION, version);
 }

@@ -294,6 +294,11 @@ bool calib_lamps_pattern_write(const calib_set_t *cal, const calib_lamps_pattern
         model_error_set(in, je.line, "not valid JSON: %s", je.text);
         return false;
     }
+    if (!calib_lamps_json_check(doc, in, NULL)) {
+        json_decref(doc);
+        return false;
+    }
+    model_json_set_format(doc, CALIB_LAMPS_JSON_FORMAT, CALIB_LAMPS_JSON_VERSION);
     json_t *arr = json_object_get(doc, "lamps");
     for (int l = 0; l < cal->lamps->n; l++) {
         const calib_lamps_pattern_t *P = &pat[l];

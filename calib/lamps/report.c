@@ -56,6 +56,7 @@ static json_t *detections_json(const calib_lamps_opts_t *o, const calib_lamps_re
 static json_t *report_json(const calib_lamps_opts_t *o, const calib_lamps_result_t *r)
 {
     json_t *rep = json_object(), *rl = json_array();
+    model_json_set_format(rep, "refl-lamps-report-data", 1);
     for (int l = 0; l < r->nlamps; l++) {
         const calib_lamps_lamp_t *lp = &r->lamps[l];
         const double *x = lp->fit.x_mm, *cv = lp->fit.cov_mm2;
