@@ -316,7 +316,7 @@ TEST(calib_lamps_highlight_synthetic)
             img[k] = (float)(64 + v + g_rand_double_range(g, -2, 2));
         }
     calib_lamps_highlight_t h;
-    calib_lamps_find_highlight(img, dark, W, H, sph, 12, 80, 40, 4095, &h);
+    CHECK(calib_lamps_find_highlight(img, dark, W, H, sph, 12, 80, 40, 4095, &h));   // false: out of memory only
     CHECK_MSG(h.found, "%s", h.why);
     CHECK_NEAR(h.q[0], qx, 0.02);
     CHECK_NEAR(h.q[1], qy, 0.02);

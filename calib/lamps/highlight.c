@@ -210,7 +210,7 @@ static void direction_window(const float *img, int W, const calib_lamps_sphere_i
     }
 }
 
-void calib_lamps_find_highlight(const float *img, const float *dark, int W, int H,
+bool calib_lamps_find_highlight(const float *img, const float *dark, int W, int H,
                                 const calib_lamps_sphere_image_t *sph, double min_snr, double min_peak_dn,
                                 int max_blob_px, double sat_dn, calib_lamps_highlight_t *o)
 {
@@ -219,8 +219,10 @@ void calib_lamps_find_highlight(const float *img, const float *dark, int W, int 
     double *D = malloc(sizeof *D * (size_t)w * h), *tmp = malloc(sizeof *tmp * (size_t)w * h);
     int *stack = malloc(sizeof *stack * (size_t)w * h);
     unsigned char *blob = calloc((size_t)w * h, 1);
-    if (!D || !tmp || !stack || !blob) {
+    bool ok = D && tmp && stack && blob;
+    if (!ok) {
         snprintf(o->why, sizeof o->why, "out of memory");
+        model_error_set(NULL, 0, "out of memory");
         goto done;
     }
     (void)H;
@@ -257,4 +259,5 @@ done:
     free(tmp);
     free(stack);
     free(blob);
+    return ok;
 }

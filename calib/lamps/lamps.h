@@ -64,8 +64,9 @@ typedef struct {
 // the intensity-weighted centroid, then a 2-D Gaussian fit (amplitude, centre,
 // widths) on the 7x7 window. Found when the peak exceeds min_snr times the
 // noise and min_peak_dn. sat_dn: the saturation level of the frame. img and
-// dark are width x height.
-void calib_lamps_find_highlight(const float *img, const float *dark, int width, int height,
+// dark are width x height. false (message set) only when out of memory; a
+// highlight not found is out->found false with out->why.
+bool calib_lamps_find_highlight(const float *img, const float *dark, int width, int height,
                                 const calib_lamps_sphere_image_t *sph, double min_snr, double min_peak_dn,
                                 int max_blob_px, double sat_dn, calib_lamps_highlight_t *out);
 

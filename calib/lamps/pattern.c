@@ -360,6 +360,7 @@ bool calib_lamps_pattern_report(const calib_obs_set_t *obs, const calib_set_t *c
                         "y, each window weighted by its noise (pattern_windows.csv: the windows and the fitted "
                         "pattern at each).", albedo);
         const char **rows = calloc((size_t)cal->lamps->n + 1, sizeof *rows);
+        bool table = rows != NULL;
         int nr = 0;
         for (int l = 0; rows && l < cal->lamps->n; l++) {
             const calib_lamps_pattern_t *P = &pat[l];
@@ -370,8 +371,9 @@ bool calib_lamps_pattern_report(const calib_obs_set_t *obs, const calib_set_t *c
                                    : g_strdup_printf("%s|not measured (%d windows, need 20)||||||", P->name,
                                                      P->nwindows);
         }
-        model_html_table(f, "lamp|cos power n ± 1σ|axis tilt from the rig origin (deg)|axis 1σ (deg)|measured cone "
-                         "half-angle (deg)|residual RMS (%)|irradiance 1σ (%)|windows", rows, nr);
+        if (table)
+            model_html_table(f, "lamp|cos power n ± 1σ|axis tilt from the rig origin (deg)|axis 1σ (deg)|measured "
+                             "cone half-angle (deg)|residual RMS (%)|irradiance 1σ (%)|windows", rows, nr);
         for (int k = 0; k < nr; k++) g_free((char *)rows[k]);
         free(rows);
         model_html_figure(f, "pattern.png", "Each lamp's windows: irradiance relative to the on-axis value against "
@@ -379,6 +381,8 @@ bool calib_lamps_pattern_report(const calib_obs_set_t *obs, const calib_set_t *c
                           "and the windows' relative residuals (%) below; a lamp taken as isotropic would be a flat "
                           "line at 1");
         ok = model_html_end(f, html);
+        if (ok && !table) model_error_set(html, 0, "out of memory");
+        ok = ok && table;
     } else {
         ok = false;
     }

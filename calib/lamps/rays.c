@@ -32,7 +32,8 @@ float *lamps_load_frame(const calib_lamps_opts_t *o, const calib_lamps_result_t 
 
 // Lamp lp's highlight at angle a in its frame and the ray toward it: the
 // direction-space model (pass 1: a point lamp), else the reflection at the
-// sub-pixel position. false only when the frame cannot be read.
+// sub-pixel position. false (message set) only when the frame cannot be read
+// or out of memory.
 static bool lamp_ray(const calib_lamps_opts_t *o, calib_lamps_result_t *r, calib_lamps_lamp_t *lp, int a,
                      const calib_lamps_sphere_image_t *sph, const float *dark)
 {
@@ -41,9 +42,10 @@ static bool lamp_ray(const calib_lamps_opts_t *o, calib_lamps_result_t *r, calib
     float *img = lamps_load_frame(o, r, fr);
     if (!img) return false;
     double fs = lamps_full_scale(r->session->rows[fr].pixel_format);
-    calib_lamps_find_highlight(img, dark, model_camera_width(r->cam), model_camera_height(r->cam), sph, o->min_snr,
-                               0.02 * fs, 40, fs, hl);
+    bool mem = calib_lamps_find_highlight(img, dark, model_camera_width(r->cam), model_camera_height(r->cam), sph,
+                                          o->min_snr, 0.02 * fs, 40, fs, hl);
     free(img);
+    if (!mem) return false;
     if (!hl->found) return true;
     bool ok = false;
     if (o->method == CALIB_LAMPS_MODEL) {

@@ -12,19 +12,26 @@
 
 // report_data.json's detections: at the first angle with a ray, the per-pixel
 // maximum over the lamp frames (dark subtracted) around the sphere's image and
-// the highlights found. NULL when there is nothing to show.
-static json_t *detections_json(const calib_lamps_opts_t *o, const calib_lamps_result_t *r)
+// the highlights found. *out NULL when there is nothing to show; false (message
+// set) when out of memory.
+static bool detections_json(const calib_lamps_opts_t *o, const calib_lamps_result_t *r, json_t **out)
 {
     const int a = r->first_angle, W = model_camera_width(r->cam);
-    if (a < 0) return NULL;
+    *out = NULL;
+    if (a < 0) return true;
     const double ang = r->angle_deg[a];
     calib_lamps_sphere_image_t *sph = calib_lamps_sphere_image(r->cam, lamps_centre_at(o->sphere_centre_mm, ang),
                                                                o->sphere_radius_mm);
-    if (!sph) return NULL;
+    if (!sph) return true;
     float *acc = calloc((size_t)sph->w * sph->h, sizeof *acc);
+    if (!acc) {
+        calib_lamps_sphere_image_free(sph);
+        model_error_set(NULL, 0, "out of memory");
+        return false;
+    }
     float *dark = r->dark_row[a] >= 0 ? lamps_load_frame(o, r, r->dark_row[a]) : NULL;
     json_t *det = json_array(), *crop = json_array();
-    for (int l = 0; acc && l < r->nlamps; l++) {
+    for (int l = 0; l < r->nlamps; l++) {
         const calib_lamps_lamp_t *lp = &r->lamps[l];
         int fr = lp->frame[a], w = 0, h = 0;
         if (fr < 0) continue;
@@ -42,17 +49,18 @@ static json_t *detections_json(const calib_lamps_opts_t *o, const calib_lamps_re
                                              r->session->rows[fr].file, "found", hl->found, "q", hl->q[0], hl->q[1],
                                              "peak_dn", hl->peak_dn));
     }
-    for (int i = 0; acc && i < sph->w * sph->h; i++) json_array_append_new(crop, model_json_number(acc[i]));
-    json_t *out = json_pack("{s:f,s:i,s:i,s:i,s:i,s:o,s:o,s:[ff],s:f}", "angle_deg", ang, "x0", sph->x0, "y0",
+    for (int i = 0; i < sph->w * sph->h; i++) json_array_append_new(crop, model_json_number(acc[i]));
+    *out = json_pack("{s:f,s:i,s:i,s:i,s:i,s:o,s:o,s:[ff],s:f}", "angle_deg", ang, "x0", sph->x0, "y0",
                             sph->y0, "w", sph->w, "h", sph->h, "crop", crop, "highlights", det, "sphere_q",
                             sph->q_centre[0], sph->q_centre[1], "sphere_radius_px", sph->radius_px);
     free(acc);
     free(dark);
     calib_lamps_sphere_image_free(sph);
-    return out;
+    return true;
 }
 
-// report_data.json for the plotting script: rays, fits, one angle's detections.
+// report_data.json for the plotting script: rays, fits, one angle's
+// detections. NULL + message when out of memory.
 static json_t *report_json(const calib_lamps_opts_t *o, const calib_lamps_result_t *r)
 {
     json_t *rep = json_object(), *rl = json_array();
@@ -79,7 +87,11 @@ static json_t *report_json(const calib_lamps_opts_t *o, const calib_lamps_result
         json_array_append_new(rl, j);
     }
     json_object_set_new(rep, "lamps", rl);
-    json_t *det = detections_json(o, r);
+    json_t *det;
+    if (!detections_json(o, r, &det)) {
+        json_decref(rep);
+        return NULL;
+    }
     if (det) json_object_set_new(rep, "detections", det);
     model_vec3_t Cw = model_camera_centre_world(r->cam);
     const double *c0 = o->sphere_centre_mm;
@@ -97,22 +109,23 @@ static json_t *report_json(const calib_lamps_opts_t *o, const calib_lamps_result
     return rep;
 }
 
-// report.html's table: one row per lamp.
-static void report_table(FILE *f, const calib_lamps_result_t *r)
+// report.html's table: one row per lamp. false when out of memory.
+static bool report_table(FILE *f, const calib_lamps_result_t *r)
 {
-    const char **rows = calloc((size_t)r->nlamps, sizeof *rows);
-    for (int l = 0; rows && l < r->nlamps; l++) {
+    const char **rows = calloc((size_t)r->nlamps + 1, sizeof *rows);
+    if (!rows) return false;
+    for (int l = 0; l < r->nlamps; l++) {
         const calib_lamps_lamp_t *lp = &r->lamps[l];
         const double *x = lp->fit.x_mm, *cv = lp->fit.cov_mm2;
         rows[l] = g_strdup_printf("%s|%.2f|%.2f|%.2f|%.2f / %.2f / %.2f|%.2f|%d of %d|%d", lp->name, x[0], x[1],
                                   x[2], sqrt(cv[0]), sqrt(cv[4]), sqrt(cv[8]), lp->fit.rms_mm, lp->fit.n_used,
                                   r->nangles, lp->nmissing);
     }
-    if (rows)
-        model_html_table(f, "lamp|x mm|y mm|z mm|std x / y / z mm|RMS ray distance mm|rays used|frames missing",
-                         rows, r->nlamps);
-    for (int l = 0; rows && l < r->nlamps; l++) g_free((char *)rows[l]);
+    model_html_table(f, "lamp|x mm|y mm|z mm|std x / y / z mm|RMS ray distance mm|rays used|frames missing", rows,
+                     r->nlamps);
+    for (int l = 0; l < r->nlamps; l++) g_free((char *)rows[l]);
     free(rows);
+    return true;
 }
 
 static bool report_html(const calib_lamps_opts_t *o, const calib_lamps_result_t *r, const char *path)
@@ -145,7 +158,7 @@ static bool report_html(const calib_lamps_opts_t *o, const calib_lamps_result_t 
                         sqrt(pow(fm[0] - t[0], 2) + pow(fm[1] - t[1], 2) + pow(fm[2] - t[2], 2)), r->rounds,
                         r->rounds == 1 ? "" : "s");
     }
-    report_table(f, r);
+    bool table = report_table(f, r);
     for (int l = 0; l < r->nlamps; l++) {
         if (!r->lamps[l].nmissing) continue;
         char *t = lamps_missing_text(r, &r->lamps[l]);
@@ -158,13 +171,16 @@ static bool report_html(const calib_lamps_opts_t *o, const calib_lamps_result_t 
     model_html_figure(f, "lamps_detections.png", "Highlight detections at the first angle: the per-pixel maximum "
                       "of every lamp's frame minus dark around the sphere's predicted image (circle), the found "
                       "highlights marked");
-    return model_html_end(f, path);
+    bool ok = model_html_end(f, path);
+    if (ok && !table) model_error_set(path, 0, "out of memory");
+    return ok && table;
 }
 
 bool calib_lamps_write_report(const calib_lamps_opts_t *o, calib_lamps_result_t *r)
 {
     if (!lamps_provenance(o, r)) return false;
     json_t *rep = report_json(o, r);
+    if (!rep) return false;
     char *path = g_strdup_printf("%s/report_data.json", o->out);
     char *png1 = g_strdup_printf("%s/lamps_triangulation.png", o->out);
     char *png2 = g_strdup_printf("%s/lamps_detections.png", o->out);

@@ -84,6 +84,10 @@ bool calib_lamps_triangulate(const model_vec3_t *p, const model_vec3_t *d, int n
     double *del = malloc(sizeof *del * (size_t)n);
     bool ok = false;
     int max_drop = navail / 3, dropped = 0;
+    if (!dist || !tmp || !del) {
+        model_error_set(NULL, 0, "out of memory");
+        goto done;
+    }
     for (;;) {
         if (!fit_once(p, d, n, used, o) || !(o->min_eig > 1e-4)) {
             model_error_set(NULL, 0, "the %d rays are (nearly) parallel (smallest spread %.2g): they do not fix a "
