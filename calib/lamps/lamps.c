@@ -17,9 +17,12 @@
 // (calib_lamps_bundle: the path's offset, shift and tilt with priors, the
 // highlights fitted again at the fitted path, the joint fit again) ->
 // DIR/lamps.json, DIR/report.html (plots by scripts/calib_lamps_report.py).
-// calib_lamps_run does it in stages (calib/lamps/lamps.h): calib_lamps_open (the
-// capture or the session, the frames), _find_highlights, _triangulate_lamps,
-// _joint_fit, _write_json, _write_report; `refl calib lamps` is
+// calib_lamps_run does it in stages (calib/lamps/lamps.h), each in its file:
+// calib_lamps_open (capture.c: the capture or the session, the frames),
+// _find_highlights (rays.c, with sphere.c, highlight.c and direction.c),
+// _triangulate_lamps (triangulate.c), _joint_fit (joint.c, the fit itself in
+// bundle.c), _write_json (output.c), _write_report (report.c); this file
+// keeps the run, its rounds and the result's lifetime. `refl calib lamps` is
 // calib/cmd_lamps.c.
 //
 // Measured on the virtual rig (tests/test_calib_lamps.c): the centroid alone

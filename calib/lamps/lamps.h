@@ -1,5 +1,5 @@
-// calib/lamps/lamps.h — the lamp calibration (calib/lamps/lamps.c): lamp positions from
-// the highlights of a mirror sphere carried round by the turntable. The whole
+// calib/lamps/lamps.h — the lamp calibration (calib/lamps/, run by lamps.c): lamp positions
+// from the highlights of a mirror sphere carried round by the turntable. The whole
 // calibration is calib_lamps_run (options in, result out), made of the stages
 // declared at the end; below them the parts the stages use: the sub-pixel
 // highlight finder, the ray toward a lamp, the triangulation and the joint fit
