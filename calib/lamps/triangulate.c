@@ -11,25 +11,6 @@
 #include "calib/lamps/internal.h"
 #include "model/base/vec.h"
 
-// Inverse of a 3x3 matrix; false when singular.
-static bool inv3(const double *m, double *out)
-{
-    double c00 = m[4] * m[8] - m[5] * m[7], c01 = m[5] * m[6] - m[3] * m[8], c02 = m[3] * m[7] - m[4] * m[6];
-    double det = m[0] * c00 + m[1] * c01 + m[2] * c02;
-    if (!(fabs(det) > 1e-300)) return false;
-    double id = 1 / det;
-    out[0] = c00 * id;
-    out[1] = (m[2] * m[7] - m[1] * m[8]) * id;
-    out[2] = (m[1] * m[5] - m[2] * m[4]) * id;
-    out[3] = c01 * id;
-    out[4] = (m[0] * m[8] - m[2] * m[6]) * id;
-    out[5] = (m[2] * m[3] - m[0] * m[5]) * id;
-    out[6] = c02 * id;
-    out[7] = (m[1] * m[6] - m[0] * m[7]) * id;
-    out[8] = (m[0] * m[4] - m[1] * m[3]) * id;
-    return true;
-}
-
 // The smallest eigenvalue of the symmetric 3x3 a.
 static double min_eig(const double a[9])
 {
@@ -57,7 +38,7 @@ static bool fit_once(const model_vec3_t *p, const model_vec3_t *d, int n, const 
     o->n_used = m;
     o->min_eig = min_eig(A);
     double Ai[9];
-    if (m < 3 || !inv3(A, Ai)) return false;
+    if (m < 3 || !m3_inv(Ai, A)) return false;
     for (int r = 0; r < 3; r++) o->x_mm[r] = Ai[r * 3] * b[0] + Ai[r * 3 + 1] * b[1] + Ai[r * 3 + 2] * b[2];
     memcpy(o->cov_mm2, Ai, sizeof Ai);
     return true;
