@@ -141,6 +141,16 @@ CALIB_GEOMETRY_SRC := \
     calib/geometry/export.c
 CALIB_LAMPS_SRC := \
     calib/lamps/lamps.c \
+    calib/lamps/capture.c \
+    calib/lamps/sphere.c \
+    calib/lamps/highlight.c \
+    calib/lamps/direction.c \
+    calib/lamps/rays.c \
+    calib/lamps/triangulate.c \
+    calib/lamps/bundle.c \
+    calib/lamps/joint.c \
+    calib/lamps/output.c \
+    calib/lamps/report.c \
     calib/lamps/pattern.c \
     calib/lamps/drift.c
 CALIB_GAIN_SRC := \

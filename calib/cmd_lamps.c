@@ -19,8 +19,8 @@ static const char ABOUT[] =
     "Either --rig RIG.ini (capture into DIR/capture) or --session DIR (a session captured elsewhere).";
 
 static const char EPILOG[] =
-    "The sphere's facts (--sphere-centre-mm, --sphere-radius-mm) are required, on a virtual rig too (its truth\n"
-    "file is read only to compare: the truth_err_mm column and lamps.json's virtual_truth). The centre typed is\n"
+    "The sphere's facts (--sphere-centre-mm, --sphere-radius-mm) are required, on a virtual rig too (a\n"
+    "measurement never reads the virtual rig's truth; refl chain compares the lamps with it). The centre typed is\n"
     "a prior (std --sphere-offset-prior-mm, default 3 mm) and a check: the joint fit finds the centre from the\n"
     "highlights across the turntable's angles, and while it moves by more than 0.2 mm the highlights are found\n"
     "again at the moved centre (at most 3 rounds); lamps.json's sphere.centre_found_mm and its std, and a note\n"
@@ -134,25 +134,16 @@ static int read_options(model_cli_t *cli, calib_lamps_opts_t *o, char ***lamps)
     return 0;
 }
 
-// The lamps' table on stdout, with the error against the virtual rig's truth
-// where there is one.
+// The lamps' table on stdout.
 static void print_lamps(const calib_lamps_result_t *r)
 {
-    printf("lamp       x_mm      y_mm      z_mm    std_x  std_y  std_z  rms_mm  frames");
-    if (r->have_truth) printf("  truth_err_mm");
-    printf("\n");
+    printf("lamp       x_mm      y_mm      z_mm    std_x  std_y  std_z  rms_mm  frames\n");
     for (int l = 0; l < r->nlamps; l++) {
         const calib_lamps_lamp_t *lp = &r->lamps[l];
         const double *x = lp->fit.x_mm, *cv = lp->fit.cov_mm2;
-        printf("%-8s %9.2f %9.2f %9.2f  %6.2f %6.2f %6.2f  %6.2f  %2d/%d", lp->name, x[0], x[1], x[2], sqrt(cv[0]),
+        printf("%-8s %9.2f %9.2f %9.2f  %6.2f %6.2f %6.2f  %6.2f  %2d/%d\n", lp->name, x[0], x[1], x[2], sqrt(cv[0]),
                sqrt(cv[4]), sqrt(cv[8]), lp->fit.rms_mm, lp->fit.n_used, r->nangles);
-        if (lp->has_truth) {
-            double e[3] = { x[0] - lp->truth_mm.x, x[1] - lp->truth_mm.y, x[2] - lp->truth_mm.z };
-            printf("  %8.2f", sqrt(e[0] * e[0] + e[1] * e[1] + e[2] * e[2]));
-        }
-        printf("\n");
     }
-    if (r->ntruth) printf("virtual rig: RMS position error %.2f mm over %d lamps\n", r->truth_rms_mm, r->ntruth);
     if (r->have_joint && r->have_typed) {
         const double *f = r->found_mm, *t = r->typed_mm, *c = r->found_cov_mm2;
         printf("sphere centre at angle 0 from the highlights: %.2f %.2f %.2f mm (std %.2f %.2f %.2f), typed %g %g %g "
@@ -213,7 +204,6 @@ int calib_cmd_lamps(int argc, char **argv)
     // the command as typed (refl calib lamps ...) for the provenance
     o.argc = argc + 1;
     o.argv = argv - 1;
-    o.log = stderr;
     if (!(o.op = rig_operator_open(yes, operator_input))) {
         rc = yes ? model_cli_error(&cli, "give --yes or --operator-input FILE, not both")
                  : model_error_report("calib lamps");
@@ -224,7 +214,7 @@ int calib_cmd_lamps(int argc, char **argv)
     bool ok = calib_lamps_run(&o, &r);
     model_error_quiet_thread(q);
     if (ok) print_lamps(&r);
-    else fprintf(stderr, "refl calib lamps: %s\n", model_last_error());
+    else model_error_report("calib lamps");
     calib_lamps_result_free(&r);
     rc = ok ? 0 : rig_operator_paused(o.op) ? 3 : 1;
     rig_operator_close(o.op);

@@ -4,14 +4,15 @@ but the drawing).
 
 usage: calib_lamps_report.py REPORT_DATA.json TRIANGULATION.png DETECTIONS.png
 
-REPORT_DATA.json: {"lamps": [{"name", "position_mm", "std_mm", "truth_mm" (virtual
-rig only), "rays": [{"p", "d", "used", "dist_mm", "angle_deg"}]}], "detections":
+REPORT_DATA.json: {"lamps": [{"name", "position_mm", "std_mm", "rays": [{"p", "d", "used",
+"dist_mm", "angle_deg"}]}], "detections":
 {"angle_deg", "x0", "y0", "w", "h", "crop" (w*h DN, row-major), "highlights":
 [{"lamp", "file", "found", "q"}], "sphere_q", "sphere_radius_px"},
 "camera_centre_mm", "sphere_centre_angle0_mm", "sphere_radius_mm", "sphere_joint_fit" (optional:
 {"offset_mm", "shift_mm", "tilt_mrad", "std"} of the joint fit of lamps and sphere path; the rays are
 then reflected off the fitted path)}.
-Units mm (rig frame), pixels.
+Units mm (rig frame), pixels. Its root names the format: "format": "refl-lamps-report-data",
+"version": 1 (this script reads version 1; a file without the keys is version 1).
 """
 import json
 import sys
@@ -29,6 +30,11 @@ def main():
         return 2
     with open(sys.argv[1]) as f:
         data = json.load(f)
+    fmt, ver = data.get("format", "refl-lamps-report-data"), data.get("version", 1)
+    if fmt != "refl-lamps-report-data" or not isinstance(ver, int) or ver > 1:
+        sys.stderr.write("%s: %s version %s: this script reads refl-lamps-report-data versions 1 to 1\n"
+                         % (sys.argv[1], fmt, ver))
+        return 2
     lamps = data["lamps"]
     colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
 
@@ -53,9 +59,6 @@ def main():
                 ax.plot([p[i], e[i]], [p[j], e[j]], "-", color=col if r["used"] else "0.6", lw=0.6,
                         alpha=0.8 if r["used"] else 0.5)
             ax.plot(x[i], x[j], "x", color=col, ms=10, mew=2, label=lp["name"])
-            if "truth_mm" in lp:
-                tt = lp["truth_mm"]
-                ax.plot(tt[i], tt[j], "+", color="k", ms=12, mew=1)
         ax.set_xlabel("xyz"[i] + " (mm)")
         ax.set_ylabel("xyz"[j] + " (mm)")
         ax.set_title(title)
@@ -79,15 +82,12 @@ def main():
     ax.set_title("per-ray residuals (open: outliers left out)")
     ax.grid(True, lw=0.3)
     ax.legend(fontsize=7)
-    # position and uncertainty (and truth error) per lamp
+    # uncertainty per lamp
     ax = fig.add_subplot(2, 3, 5)
     names = [lp["name"] for lp in lamps]
     xs = np.arange(len(lamps))
     for k, lab in enumerate("xyz"):
         ax.bar(xs + (k - 1) * 0.25, [lp["std_mm"][k] for lp in lamps], 0.25, label="std " + lab)
-    if all("truth_mm" in lp for lp in lamps):
-        err = [np.linalg.norm(np.array(lp["position_mm"]) - np.array(lp["truth_mm"])) for lp in lamps]
-        ax.plot(xs, err, "kD", label="|error| vs virtual truth")
     ax.set_xticks(xs)
     ax.set_xticklabels(names)
     ax.set_ylabel("mm")

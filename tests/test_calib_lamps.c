@@ -316,7 +316,7 @@ TEST(calib_lamps_highlight_synthetic)
             img[k] = (float)(64 + v + g_rand_double_range(g, -2, 2));
         }
     calib_lamps_highlight_t h;
-    calib_lamps_find_highlight(img, dark, W, H, sph, 12, 80, 40, 4095, &h);
+    CHECK(calib_lamps_find_highlight(img, dark, W, H, sph, 12, 80, 40, 4095, &h));   // false: out of memory only
     CHECK_MSG(h.found, "%s", h.why);
     CHECK_NEAR(h.q[0], qx, 0.02);
     CHECK_NEAR(h.q[1], qy, 0.02);
@@ -324,6 +324,12 @@ TEST(calib_lamps_highlight_synthetic)
     CHECK_NEAR(h.sigma_px[0], s, 0.05);
     CHECK(h.peak_dn > 1500);
     CHECK(!h.saturated);
+    // the steps' figures: the noise of the difference (uniform +-1 and +-2 DN: std 1.3 DN), the blob
+    // (>= 20 % of the peak of a Gaussian of sigma 1.1 px: ~ 2 pi 1.1^2 ln 5 = 12 pixels), the window
+    CHECK_MSG(h.noise_dn > 1.0 && h.noise_dn < 1.6, "noise %.2f DN", h.noise_dn);
+    CHECK_MSG(h.blob_px >= 8 && h.blob_px <= 16, "blob %d px", h.blob_px);
+    CHECK_NEAR(h.q_centroid[0], qx, 0.1);
+    CHECK_NEAR(h.win[40], h.peak_dn, 1e-9);   // the window's centre: the brightest pixel
     // a ray through it: starts on the sphere, leaves it outward
     model_vec3_t p, d;
     CHECK(calib_lamps_reflect(cam, h.q, c, 25, &p, &d));
@@ -468,6 +474,9 @@ TEST_LONG(calib_lamps_virtual_rig_accuracy)
     CHECK(tl && tl->n == 5);
     if (doc && tl) {
         CHECK_CONTAINS(json_string_value(json_object_get(doc, "units")), "mm");
+        int ver = 0;
+        CHECK(!strcmp(json_string_value(json_object_get(doc, "format")), "refl-lamps"));
+        CHECK(calib_lamps_json_check(doc, jp, &ver) && ver == CALIB_LAMPS_JSON_VERSION);
         CHECK_CONTAINS(json_string_value(json_object_get(doc, "conventions")), "rig frame");
         json_t *lamps = json_object_get(doc, "lamps");
         CHECK(json_array_size(lamps) == 5);
@@ -800,11 +809,12 @@ TEST(calib_lamps_bad_arguments)
     CHECK_CONTAINS(e, "not a capture session");
     g_free(o);
     g_free(e);
-    // a real rig without sphere facts: asked for
+    // a rig without sphere facts: asked for before anything is captured
     const char *real = test_write("real.ini", "[lamp a]\nbackend = sim\n");
     rc = test_refl_run(30, &o, &e, "calib", "lamps", "--yes", "--rig", real, "--camera", cam, "-o", out, NULL);
     CHECK(rc == 1);
-    CHECK_CONTAINS(e, "is not a virtual rig: give --sphere-centre-mm X,Y,Z and --sphere-radius-mm R");
+    CHECK_CONTAINS(e, "real.ini: give --sphere-centre-mm X,Y,Z and --sphere-radius-mm R (the sphere's facts) before "
+                   "anything is captured");
     g_free(o);
     g_free(e);
     g_free(cam);
@@ -1148,17 +1158,87 @@ TEST(calib_lamps_pattern_bad_input)
     g_free(cam);
 }
 
+// lamps.json's format and version: a file without them is version 1, a newer
+// version or another format is refused (calib_lamps_json_check, and refl calib
+// pattern before it writes the patterns into it); report_data.json's plotter
+// refuses a newer version too.
+TEST(calib_lamps_json_version)
+{
+    static const char *lamps = "\"lamps\": [{\"name\": \"east\", \"position_mm\": [500, 0, 500]}]";
+    char text[300];
+    int ver = -1;
+    json_t *doc = json_loads("{\"lamps\": []}", 0, NULL);
+    CHECK(calib_lamps_json_check(doc, "old.json", &ver) && ver == 1);
+    json_decref(doc);
+    doc = json_loads("{\"format\": \"refl-lamps\", \"version\": 1}", 0, NULL);
+    CHECK(calib_lamps_json_check(doc, "v1.json", &ver) && ver == 1);
+    json_decref(doc);
+    doc = json_loads("{\"format\": \"refl-gain\", \"version\": 1}", 0, NULL);
+    CHECK(!calib_lamps_json_check(doc, "gain.json", &ver));
+    CHECK_CONTAINS(model_last_error(), "a refl-gain file, not refl-lamps");
+    json_decref(doc);
+    snprintf(text, sizeof text, "{\"format\": \"refl-lamps\", \"version\": 2, %s}\n", lamps);
+    const char *lj = test_write("v2.json", text);
+    doc = json_load_file(lj, 0, NULL);
+    model_error_clear();
+    CHECK(doc && !calib_lamps_json_check(doc, lj, &ver));
+    CHECK_CONTAINS(model_last_error(), "v2.json");
+    CHECK_CONTAINS(model_last_error(), "refl-lamps version 2, written by a newer refl");
+    json_decref(doc);
+    // refl calib pattern does not write its patterns into a newer lamps.json
+    char *cam = src(CAMERA);
+    calib_set_t *cal = calib_set_load_files(cam, lj, NULL, NULL);
+    CHECK(cal);
+    if (cal) {
+        calib_lamps_pattern_t *pat = calloc((size_t)cal->lamps->n, sizeof *pat);
+        const char *out = test_path("out.json");
+        bool q = model_error_quiet_thread(true);
+        CHECK(pat && !calib_lamps_pattern_write(cal, pat, "session", out, NULL));
+        model_error_quiet_thread(q);
+        CHECK_CONTAINS(model_last_error(), "refl-lamps version 2, written by a newer refl");
+        CHECK(access(out, F_OK) != 0);
+        free(pat);
+    }
+    calib_set_free(cal);
+    // version 1 (without the keys): the patterns written, the format named
+    snprintf(text, sizeof text, "{%s}\n", lamps);
+    const char *l1 = test_write("v1.json", text);
+    cal = calib_set_load_files(cam, l1, NULL, NULL);
+    CHECK(cal);
+    if (cal) {
+        calib_lamps_pattern_t pat[1] = { { .fitted = true, .n = 2, .axis = { 0, 0, -1 } } };
+        const char *out = test_path("out1.json");
+        json_t *prov = json_object();
+        CHECK_MSG(calib_lamps_pattern_write(cal, pat, "session", out, prov), "%s", model_last_error());
+        json_decref(prov);
+        doc = json_load_file(out, 0, NULL);
+        CHECK(doc && calib_lamps_json_check(doc, out, &ver) && ver == 1);
+        CHECK(!strcmp(json_string_value(json_object_get(doc, "format")), "refl-lamps"));
+        CHECK_NEAR(json_number_value(json_object_get(json_array_get(json_object_get(doc, "lamps"), 0),
+                                                     "emission_cos_power")), 2, 1e-12);
+        json_decref(doc);
+    }
+    calib_set_free(cal);
+    g_free(cam);
+    // the plotter of report_data.json
+    const char *rd = test_write("report_data.json", "{\"format\": \"refl-lamps-report-data\", \"version\": 2, "
+                                "\"lamps\": []}\n");
+    char *script = src("/scripts/calib_lamps_report.py");
+    const char *argv[] = { "/usr/bin/python3", script, rd, test_path("a.png"), test_path("b.png"), NULL };
+    char *o = NULL, *e = NULL;
+    int rc = test_run(argv, 60, &o, &e);
+    CHECK_MSG(rc == 2, "rc %d: %s", rc, e);
+    CHECK_CONTAINS(e, "refl-lamps-report-data version 2: this script reads refl-lamps-report-data versions 1 to 1");
+    g_free(o);
+    g_free(e);
+    g_free(script);
+}
+
 // ---------------------------------------------------------------------------
 // Lamp drift: lamp east warms up (brightest at switch-on, -8 %, tau 200 s)
 // and drifts (-5 %/h) while it stays on through a session of the reference
 // white whose plan revisits 0 deg every third angle; the observations
 // corrected by the revisits against the frames' raw ones.
-
-static int cmp_double(const void *a, const void *b)
-{
-    double x = *(const double *)a, y = *(const double *)b;
-    return x < y ? -1 : x > y;
-}
 
 // The drift between visits: a warm-up f(t) = 0.9 + 0.1 exp(-t / 1 s) seen
 // at 5 visits about a time constant apart. The monotone cubic passes through
@@ -1275,7 +1355,7 @@ TEST_LONG(calib_lamps_drift_reference)
             }
             if (n > 100) {
                 for (int c = 0; c < 2; c++) {
-                    qsort(v[c], (size_t)n, sizeof(double), cmp_double);
+                    qsort(v[c], (size_t)n, sizeof(double), model_cmp_double);
                     med[c][nst] = v[c][n / 2];
                 }
                 nst++;

@@ -11,12 +11,6 @@
 
 #include "calib/calib.h"
 
-static int cmp_dbl(const void *a, const void *b)
-{
-    double x = *(const double *)a, y = *(const double *)b;
-    return x < y ? -1 : x > y;
-}
-
 // The plan's angle of a frame's step (NAN: none, e.g. an operator step).
 static double plan_angle(const rig_plan_t *p, const rig_frame_row_t *r, int *ai)
 {
@@ -56,35 +50,42 @@ static float *dark_of(const rig_session_t *s, const calib_set_t *cal, const rig_
     return rig_session_frame(s, best, &w, &h);
 }
 
-// The median over the lit, unsaturated pixels of (img - dark) / (base - dark)
-// (lit: base - dark above a fifth of its largest). NAN when too few.
-static double frame_ratio(const float *base, const float *img, const float *dark, size_t n, double sat)
+// *ratio: the median over the lit, unsaturated pixels of (img - dark) /
+// (base - dark) (lit: base - dark above a fifth of its largest); NAN when too
+// few. false (message set) when out of memory.
+static bool frame_ratio(const float *base, const float *img, const float *dark, size_t n, double sat, double *ratio)
 {
     double top = 0;
     for (size_t i = 0; i < n; i++) top = fmax(top, base[i] - dark[i]);
     double *v = malloc(sizeof *v * (n / 2 + 1));
+    *ratio = NAN;
+    if (!v) {
+        model_error_set(NULL, 0, "out of memory");
+        return false;
+    }
     size_t m = 0;
-    for (size_t i = 0; v && i < n; i += 2) {
+    for (size_t i = 0; i < n; i += 2) {
         double b = base[i] - dark[i];
         if (b > 0.2 * top && base[i] < sat && img[i] < sat) v[m++] = (img[i] - dark[i]) / b;
     }
-    double r = NAN;
-    if (m >= 100) {
-        qsort(v, m, sizeof *v, cmp_dbl);
-        r = m % 2 ? v[m / 2] : 0.5 * (v[m / 2 - 1] + v[m / 2]);
-    }
+    if (m >= 100) *ratio = model_median(v, (int)m);
     free(v);
-    return r;
+    return true;
 }
 
 // Lamp l's visits: the frames of it alone at revisited angles, grouped by
 // (plan angle, exposure, gain); the group with the most visits is used.
-// rows (out): its frames in time order. Their count.
+// rows (out): its frames in time order. Their count; -1 (message set) when
+// out of memory.
 static int lamp_visits(const rig_session_t *s, const rig_plan_t *p, const calib_set_t *cal, int l, int *rows)
 {
     int best = 0;
     int *tmp = malloc(sizeof *tmp * (size_t)(s->n + 1));
-    for (int f0 = 0; tmp && f0 < s->n; f0++) {
+    if (!tmp) {
+        model_error_set(NULL, 0, "out of memory");
+        return -1;
+    }
+    for (int f0 = 0; f0 < s->n; f0++) {
         const rig_frame_row_t *r0 = &s->rows[f0];
         int ai;
         double a0 = plan_angle(p, r0, &ai);
@@ -116,17 +117,23 @@ static int lamp_visits(const rig_session_t *s, const rig_plan_t *p, const calib_
 // Lamp l's visits measured into d (its own arrays). false + message.
 static bool lamp_drift(const rig_session_t *s, const rig_plan_t *p, const calib_set_t *cal, int l, calib_drift_t *d)
 {
-    int *rows = malloc(sizeof *rows * (size_t)(s->n + 1)), n = rows ? lamp_visits(s, p, cal, l, rows) : 0;
-    bool ok = rows != NULL;
+    int *rows = malloc(sizeof *rows * (size_t)(s->n + 1)), n = rows ? lamp_visits(s, p, cal, l, rows) : -1;
+    bool ok = n >= 0;
     float *base = NULL;
+    if (!rows) model_error_set(NULL, 0, "out of memory");
     if (n < 2) goto done;
     d->t_s[l] = malloc(sizeof(double) * (size_t)n);
     d->f[l] = malloc(sizeof(double) * (size_t)n);
+    if (!d->t_s[l] || !d->f[l]) {
+        model_error_set(NULL, 0, "out of memory");
+        ok = false;
+        goto done;
+    }
     int w, h;
     const rig_frame_row_t *r0 = &s->rows[rows[0]];
     bool own = false;
     float *dark = dark_of(s, cal, r0, &own);
-    ok = dark && d->t_s[l] && d->f[l] && (base = rig_session_frame(s, rows[0], &w, &h));
+    ok = dark && (base = rig_session_frame(s, rows[0], &w, &h));
     size_t npx = (size_t)cal->W * cal->H;
     ok = ok && (size_t)w * h == npx;
     const char *pf = r0->pixel_format;
@@ -136,8 +143,13 @@ static bool lamp_drift(const rig_session_t *s, const rig_plan_t *p, const calib_
              p->steps[r0->step].angle_deg, r0->exposure_us);
     for (int k = 0; ok && k < n; k++) {
         float *img = k ? rig_session_frame(s, rows[k], &w, &h) : base;
-        double f = img && (size_t)w * h == npx ? frame_ratio(base, img, dark, npx, sat) : NAN;
+        double f = NAN;
+        bool mem = !(img && (size_t)w * h == npx) || frame_ratio(base, img, dark, npx, sat, &f);
         if (k) free(img);
+        if (!mem) {
+            ok = false;
+            break;
+        }
         if (!isfinite(f) || !(f > 0)) {
             model_error_set(s->dir, 0, "lamp drift: lamp %s's reference frame %s (step %d) cannot be compared with "
                             "its first visit %s (too few lit, unsaturated pixels, or unreadable)", r0->lamps,

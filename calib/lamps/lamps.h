@@ -1,5 +1,5 @@
-// calib/lamps/lamps.h — the lamp calibration (calib/lamps/lamps.c): lamp positions from
-// the highlights of a mirror sphere carried round by the turntable. The whole
+// calib/lamps/lamps.h — the lamp calibration (calib/lamps/, run by lamps.c): lamp positions
+// from the highlights of a mirror sphere carried round by the turntable. The whole
 // calibration is calib_lamps_run (options in, result out), made of the stages
 // declared at the end; below them the parts the stages use: the sub-pixel
 // highlight finder, the ray toward a lamp, the triangulation and the joint fit
@@ -64,8 +64,9 @@ typedef struct {
 // the intensity-weighted centroid, then a 2-D Gaussian fit (amplitude, centre,
 // widths) on the 7x7 window. Found when the peak exceeds min_snr times the
 // noise and min_peak_dn. sat_dn: the saturation level of the frame. img and
-// dark are width x height.
-void calib_lamps_find_highlight(const float *img, const float *dark, int width, int height,
+// dark are width x height. false (message set) only when out of memory; a
+// highlight not found is out->found false with out->why.
+bool calib_lamps_find_highlight(const float *img, const float *dark, int width, int height,
                                 const calib_lamps_sphere_image_t *sph, double min_snr, double min_peak_dn,
                                 int max_blob_px, double sat_dn, calib_lamps_highlight_t *out);
 
@@ -187,6 +188,10 @@ bool calib_lamps_bundle_residual(void *ctx, const double *const *params, double 
 // (model_last_error()); the functions it calls in model/ and rig/ print theirs
 // through model_error unless this thread is quiet (model_error_quiet_thread:
 // the command runs the calibration quiet and prints the one message).
+// Progress (one line per angle) and notes (capture, frames without a
+// highlight, outliers, the joint fit, files written) go through
+// model_progress and model_note, the check of the typed sphere centre through
+// model_warning.
 
 typedef enum {
     CALIB_LAMPS_CENTROID = 0,   // the highlight's intensity-weighted centroid, reflected
@@ -225,7 +230,6 @@ typedef struct {
     rig_operator_t *op;             // who answers the operator steps (calib_capture)
     int          argc;             // the command line for the provenance (may be 0, NULL)
     char       **argv;
-    FILE        *log;              // progress and notes, each line "refl calib lamps: ..." (NULL: none)
 } calib_lamps_opts_t;
 
 // The defaults above; rig/session, camera, out and the sphere's facts unset.
@@ -245,8 +249,6 @@ typedef struct {
     double       *dist_mm;         // the ray's distance from the fitted position
     int           nmissing;        // angles without a ray
     calib_lamps_fit_t fit;         // the position: per-lamp triangulation, then the joint fit's
-    bool          has_truth;       // truth_mm set: the virtual rig's truth, for the comparison only
-    model_vec3_t  truth_mm;
 } calib_lamps_lamp_t;
 
 typedef struct {
@@ -274,16 +276,11 @@ typedef struct {
     int                 rounds;         // rounds of highlights and fits
     double              found_mm[3];    // base + the joint fit's offset: the centre the images give
     double              found_cov_mm2[9];
-    char               *truth_path;     // the virtual rig's truth file (comparison only; NULL: none)
-    bool                have_truth;     // its lamps were read
-    int                 ntruth;         // lamps compared with the truth
-    double              truth_rms_mm;   // their RMS position error
     json_t             *provenance;
 } calib_lamps_result_t;
 
 // The whole calibration: the stages below in order (the joint fit when
-// o->joint), the comparison with the truth when there is one, lamps.json and
-// the report in o->out. false + message. r is filled as far as the run got;
+// o->joint), lamps.json and the report in o->out. false + message. r is filled as far as the run got;
 // free it with calib_lamps_result_free either way.
 bool calib_lamps_run(const calib_lamps_opts_t *o, calib_lamps_result_t *r);
 void calib_lamps_result_free(calib_lamps_result_t *r);   // accepts a zeroed result
@@ -315,6 +312,21 @@ bool calib_lamps_triangulate_lamps(const calib_lamps_opts_t *o, calib_lamps_resu
 bool calib_lamps_joint_fit(const calib_lamps_opts_t *o, calib_lamps_result_t *r);
 // Stage 5: o->out/lamps.json (units mm, rig frame, provenance).
 bool calib_lamps_write_json(const calib_lamps_opts_t *o, calib_lamps_result_t *r);
+
+// lamps.json names its format at its root: "format": "refl-lamps",
+// "version": 1. Version 1: "lamps" (per lamp name, position_mm, std_mm,
+// covariance_mm2, rms_ray_distance_mm, radius_mm, n_frames, n_outliers,
+// frames_missing; `refl calib pattern` adds emission_cos_power,
+// emission_axis and emission), "units", "conventions", "camera", "sphere",
+// "session", "provenance" (and emission_conventions, emission_session,
+// emission_provenance from `refl calib pattern`). A file without "format"
+// and "version" reads as version 1.
+#define CALIB_LAMPS_JSON_FORMAT "refl-lamps"
+enum { CALIB_LAMPS_JSON_VERSION = 1 };
+// Every reader of a lamps.json calls this on its parsed root (path for the
+// message): false + model_error_set when it is another format or a version
+// newer than this refl reads; *version (may be NULL) gets the version read.
+bool calib_lamps_json_check(const json_t *root, const char *path, int *version);
 // Stage 6: o->out/report_data.json, its plots (scripts/calib_lamps_report.py)
 // and o->out/report.html.
 bool calib_lamps_write_report(const calib_lamps_opts_t *o, calib_lamps_result_t *r);

@@ -113,18 +113,6 @@ static double pat_solve(const pat_data_t *D, double x[4], double *J, double *r, 
     return cost;
 }
 
-// The median of v (n > 0; v reordered).
-static int cmp_dbl(const void *a, const void *b)
-{
-    double x = *(const double *)a, y = *(const double *)b;
-    return x < y ? -1 : x > y;
-}
-static double median(double *v, int n)
-{
-    qsort(v, (size_t)n, sizeof *v, cmp_dbl);
-    return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
-}
-
 // The fit of one lamp's windows: starts at several n, the best kept; then
 // windows beyond 5 robust std dropped and fitted again; the covariance and the
 // figures of out.
@@ -152,7 +140,7 @@ static bool pat_fit(pat_data_t *D, const model_lamp_t *L, calib_lamps_pattern_t 
         memcpy(x, xb, sizeof x);
         pat_eval(D, x, NULL, r);
         for (int k = 0; k < m; k++) tmp[k] = fabs(r[k]);
-        double scale = 1.4826 * median(tmp, m);
+        double scale = 1.4826 * model_median(tmp, m);
         if (round) break;
         int k = 0, drop = 0;
         for (int i = 0; i < D->n; i++) {
@@ -288,7 +276,7 @@ static json_t *pattern_json(const calib_lamps_pattern_t *P)
                           "windows_rejected", P->rejected, "rms_residual_pct", 100 * P->rms_rel,
                           "irradiance_std_pct", 100 * P->irradiance_std_rel, "kc_I_axis_per_us", P->kcI_axis_per_us);
     json_t *c = json_array();
-    for (int k = 0; k < 9; k++) json_array_append_new(c, json_real(P->cov_n_t[k]));
+    for (int k = 0; k < 9; k++) json_array_append_new(c, model_json_number(P->cov_n_t[k]));
     json_object_set_new(e, "covariance_n_t1_t2", c);
     for (int k = 0; k < 2; k++)
         json_object_set_new(e, k ? "axis_per_t2" : "axis_per_t1",
@@ -306,12 +294,17 @@ bool calib_lamps_pattern_write(const calib_set_t *cal, const calib_lamps_pattern
         model_error_set(in, je.line, "not valid JSON: %s", je.text);
         return false;
     }
+    if (!calib_lamps_json_check(doc, in, NULL)) {
+        json_decref(doc);
+        return false;
+    }
+    model_json_set_format(doc, CALIB_LAMPS_JSON_FORMAT, CALIB_LAMPS_JSON_VERSION);
     json_t *arr = json_object_get(doc, "lamps");
     for (int l = 0; l < cal->lamps->n; l++) {
         const calib_lamps_pattern_t *P = &pat[l];
         json_t *e = json_array_get(arr, (size_t)l);
         if (!P->fitted || !e) continue;
-        json_object_set_new(e, "emission_cos_power", json_real(P->n));
+        json_object_set_new(e, "emission_cos_power", model_json_number(P->n));
         json_object_set_new(e, "emission_axis", json_pack("[fff]", P->axis.x, P->axis.y, P->axis.z));
         json_object_set_new(e, "emission", pattern_json(P));
     }
@@ -367,6 +360,7 @@ bool calib_lamps_pattern_report(const calib_obs_set_t *obs, const calib_set_t *c
                         "y, each window weighted by its noise (pattern_windows.csv: the windows and the fitted "
                         "pattern at each).", albedo);
         const char **rows = calloc((size_t)cal->lamps->n + 1, sizeof *rows);
+        bool table = rows != NULL;
         int nr = 0;
         for (int l = 0; rows && l < cal->lamps->n; l++) {
             const calib_lamps_pattern_t *P = &pat[l];
@@ -377,8 +371,9 @@ bool calib_lamps_pattern_report(const calib_obs_set_t *obs, const calib_set_t *c
                                    : g_strdup_printf("%s|not measured (%d windows, need 20)||||||", P->name,
                                                      P->nwindows);
         }
-        model_html_table(f, "lamp|cos power n ± 1σ|axis tilt from the rig origin (deg)|axis 1σ (deg)|measured cone "
-                         "half-angle (deg)|residual RMS (%)|irradiance 1σ (%)|windows", rows, nr);
+        if (table)
+            model_html_table(f, "lamp|cos power n ± 1σ|axis tilt from the rig origin (deg)|axis 1σ (deg)|measured "
+                             "cone half-angle (deg)|residual RMS (%)|irradiance 1σ (%)|windows", rows, nr);
         for (int k = 0; k < nr; k++) g_free((char *)rows[k]);
         free(rows);
         model_html_figure(f, "pattern.png", "Each lamp's windows: irradiance relative to the on-axis value against "
@@ -386,6 +381,8 @@ bool calib_lamps_pattern_report(const calib_obs_set_t *obs, const calib_set_t *c
                           "and the windows' relative residuals (%) below; a lamp taken as isotropic would be a flat "
                           "line at 1");
         ok = model_html_end(f, html);
+        if (ok && !table) model_error_set(html, 0, "out of memory");
+        ok = ok && table;
     } else {
         ok = false;
     }
