@@ -74,7 +74,7 @@ typedef struct {
     // Motion parameters for time estimates and time-outs: apt reads them from
     // the controller (MOT_GET_VELPARAMS, MOT_GET_HOMEPARAMS; params_from
     // "controller"), or takes rig_stage_models' when it does not answer
-    // ("table", with a note on stderr); sim: its own ("sim", real time).
+    // ("table", with a note: model_note); sim: its own ("sim", real time).
     double speed_deg_s, accel_deg_s2;
     double home_speed_deg_s;
     double home_time_s;        // the longest homing: a full turn to the switch plus the offset

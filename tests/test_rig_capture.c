@@ -644,8 +644,8 @@ TEST(session_check_incomplete_and_resume)
     CHECK(count_frames(dir) == 2);
     truth_copy("REFL-VIRT01", false);
 
-    // resume (in-process, its progress lines on stderr into a file); the first
-    // step of the run is slow
+    // resume (in-process, its progress notes on stderr into a file, named as
+    // the dispatcher names them); the first step of the run is slow
     const char *log = test_path("progress.txt");
     fflush(stderr);
     int saved = dup(2), fd = open(log, O_WRONLY | O_CREAT | O_TRUNC, 0644);
@@ -654,7 +654,11 @@ TEST(session_check_incomplete_and_resume)
     slow_calls = 0;
     o.resume = true;
     o.before_step = slow_first_step;
+    bool quiet = model_error_quiet(false);
+    model_notice_prefix("refl capture");
     rc = rig_capture_run(&o);
+    model_error_quiet(quiet);
+    model_notice_prefix(NULL);
     rig_operator_close(o.op);
     fflush(stderr);
     dup2(saved, 2);

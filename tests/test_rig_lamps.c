@@ -610,7 +610,7 @@ static void check_kill9(bool sim)
     int rc = test_run(c.argv, 20, NULL, &err);
     CHECK_MSG(rc == 0, "exit %d, stderr: %s", rc, err);
     char want[160];
-    snprintf(want, sizeof want, "refl: the last session (pid %ld, started 20", (long)pid);
+    snprintf(want, sizeof want, "refl: warning: the last session (pid %ld, started 20", (long)pid);
     CHECK_CONTAINS(err, want);
     CHECK_CONTAINS(err, "died with lamps key, back on; switching them off\n");
     free(err);

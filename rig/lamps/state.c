@@ -196,11 +196,11 @@ static int recover(rig_lamps_t *l, const char *text)
     if (!record_value(text, "started", started, sizeof started) || !started[0])
         snprintf(started, sizeof started, "unknown");
     if (has_on)
-        fprintf(stderr, "refl: the last session (pid %s, started %s) died with lamps %s on; switching them "
-                "off\n", pid, started, on);
+        model_warning("the last session (pid %s, started %s) died with lamps %s on; switching them off", pid, started,
+                      on);
     else
-        fprintf(stderr, "refl: the lamp-state file %s is unreadable (the last session, pid %s, started %s, "
-                "may have died while writing it); switching every lamp off\n", l->state_path, pid, started);
+        model_warning("the lamp-state file %s is unreadable (the last session, pid %s, started %s, may have died "
+                      "while writing it); switching every lamp off", l->state_path, pid, started);
     int err = l->ops->set(l, 0);
     if (err && l->ops->emergency_off) l->ops->emergency_off(l);
     l->on_mask = 0;

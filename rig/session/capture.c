@@ -32,45 +32,6 @@
 #include "rig/session/internal.h"
 
 // ---------------------------------------------------------------------------
-// Dry run
-
-static void print_dry_run(const rig_plan_t *p, const rig_t *r)
-{
-    rig_frame_meta_t m = { 0 };
-    rig_camera_settings(r->camera, &m);
-    printf("plan: %s (sha256 %s)\nsample: %s (%s)\nrig: %s\n", p->path, p->sha256, p->sample, p->sample_kind,
-           r->path);
-    int nframes = 0;
-    for (int i = 0; i < p->nsteps; i++) nframes += p->steps[i].kind != RIG_STEP_OPERATOR;
-    printf("steps: %d (%d operator step%s; %d frames: %d angles x %d lamp sets x %d exposures x %d repeats%s%s%s)\n",
-           p->nsteps, p->nsteps - nframes, p->nsteps - nframes == 1 ? "" : "s", nframes, p->nangles, p->nlamp_sets,
-           p->nexposures, p->repeats, p->nviews ? ", as the [view] sections choose" : "",
-           p->dark_every ? ", dark frames" : "", p->auto_exposure ? "; auto bracketing: at most" : "");
-    if (r->ncameras > 1) {
-        printf("cameras: %d, each step triggers every one in this order (%d frames in all):", r->ncameras,
-               nframes * r->ncameras);
-        for (int k = 0; k < r->ncameras; k++) printf(" %s", r->camera_names[k]);
-        printf("\n");
-    }
-    for (int i = 0; i < p->nsteps; i++) {
-        const rig_step_t *s = &p->steps[i];
-        if (s->kind == RIG_STEP_OPERATOR) {
-            printf("  %6d  operator: %s\n", i, p->ops[s->op].instruction);
-            continue;
-        }
-        printf("  %6d  %-5s angle %10.4f deg  lamps %-20s exposure %10.6g us  gain %g%s\n", i,
-               s->kind == RIG_STEP_DARK ? "dark" : "light", s->angle_deg, s->lamps, s->exposure_us, s->gain,
-               s->repeat ? " (repeat)" : "");
-    }
-    double floor_s = rig_plan_floor_s(p, r, 0);
-    double bytes = (double)nframes * m.width * m.height * 2.0;
-    printf("estimated_duration_s: %.1f (hardware floor: motions, settles, exposures; plus homing)\n", floor_s);
-    printf("estimated_disk_bytes: %.0f (at most: %d frames of %d x %d 16-bit; PNG compresses them)\n", bytes,
-           nframes, m.width, m.height);
-    printf("check: plan matches the rig (lamps exist, angles within range, the camera accepts every exposure)\n");
-}
-
-// ---------------------------------------------------------------------------
 
 int capture_fault_stop(rig_t *r, rig_journal_t *j, int step, const char *state, const char *kind, const char *msg)
 {
@@ -138,7 +99,7 @@ static int run_plan(run_t *x)
     char state[32] = "";
     rig_journal_state(x->j, state, sizeof state);
     if (!strcmp(state, "complete")) {
-        printf("refl capture: %s is complete: nothing to resume (refl session check %s)\n", o->dir, o->dir);
+        x->was_complete = true;
         x->exit_code = 0;
         return RUN_DONE;
     }
@@ -151,7 +112,7 @@ static int run_plan(run_t *x)
         char *what = g_strdup_printf("%s%s%s%s%s", plan_same ? "" : "the plan file ", plan_same ? "" : pp,
                                      !plan_same && !rig_same ? " and " : "", rig_same ? "" : "the rig file ",
                                      rig_same ? "" : x->rig_path);
-        x->rc = rig_fail(RIG_ERR_INVALID, "refl capture --resume %s: %s changed since the session started "
+        x->rc = rig_fail(RIG_ERR_INVALID, "--resume %s: %s changed since the session started "
                          "(sha256 differs from the journal's, or the file is gone): resume with the original "
                          "files, or add --allow-changed to continue the stored step list anyway", o->dir, what);
         g_free(what);
@@ -168,22 +129,17 @@ static int run_plan(run_t *x)
     return RUN_ON;
 }
 
-// The rig (opened, the plan bound to it; a dry run ends here), the session
+// The rig (opened, the plan bound to it), the session
 // directory and journal (created, or on --resume its frames recovered), the
 // steps' status.
 static int run_session(run_t *x)
 {
     const rig_capture_opts_t *o = x->o;
     rig_plan_t *p = x->p;
-    fprintf(stderr, "refl capture: opening the rig %s\n", x->rig_path);
+    model_note("opening the rig %s", x->rig_path);
     if ((x->rc = rig_open(&x->r, x->rig_path))) return RUN_DONE;
     if (o->resume && (x->rc = capture_check_camera(x))) return RUN_DONE;
     if ((x->rc = rig_plan_bind(p, x->r))) return RUN_DONE;
-    if (o->dry_run) {
-        print_dry_run(p, x->r);
-        x->exit_code = 0;
-        return RUN_DONE;
-    }
     size_t rlen = 0;
     if (!(x->rig_text = model_read_file(x->rig_path, &rlen))) {
         x->rc = RIG_ERR_IO;
@@ -213,8 +169,9 @@ static int run_session(run_t *x)
     if (nstored != p->nsteps) {
         bool before_operator = nstored > 0 && stored_kind0 != RIG_STEP_OPERATOR;
         x->rc = rig_fail(RIG_ERR_INVALID, "journal %s: %d steps stored, the plan makes %d%s", o->dir, nstored,
-                         p->nsteps, before_operator ? " (a session of a refl without operator steps: its frames "
-                         "stay readable; capture the rest into a new session)" : "");
+                         p->nsteps, before_operator ? " (the stored steps begin without the plan's operator step: "
+                         "the session cannot continue under this plan; its frames stay readable; capture the rest "
+                         "into a new session)" : "");
         return RUN_DONE;
     }
     if (o->resume) {
@@ -224,7 +181,7 @@ static int run_session(run_t *x)
         for (int i = 0; i < nstored; i++) pend += x->status[i] == 'p';
         rig_journal_event(x->j, -1, "resume", "resumed: %d of %d steps pending (%d frames recovered, %d temporary "
                           "files removed)", pend, nstored, relinked, removed);
-        fprintf(stderr, "refl capture: resuming %s: %d of %d steps to go\n", o->dir, pend, nstored);
+        model_note("resuming %s: %d of %d steps to go", o->dir, pend, nstored);
         rig_journal_set_state(x->j, "running");
         if (capture_replay_operator(x) != RUN_ON) return RUN_DONE;
     }
@@ -245,10 +202,7 @@ static int run_start(run_t *x)
         return RUN_DONE;
     }
     x->writer_running = true;
-    capture_sigint = 0;
-    struct sigaction sa = { .sa_handler = capture_on_sigint };
-    sigemptyset(&sa.sa_mask);
-    sigaction(SIGINT, &sa, &capture_old_sigint);
+    capture_sigint_install();
     x->sig_installed = true;
     return RUN_ON;
 }
@@ -265,8 +219,7 @@ static int run_hardware(run_t *x)
             return RUN_DONE;
     x->full = cam.bits >= 16 ? 65535 : (double)((1u << cam.bits) - 1);
 
-    x->pg = (progress_t){ .bar = x->o->progress == 1 || (x->o->progress < 0 && isatty(2)), .t0 = model_now_s(),
-                          .total = p->nsteps, .done0 = 0 };
+    x->pg = (progress_t){ .bar = capture_progress_bar(x->o), .t0 = model_now_s(), .total = p->nsteps, .done0 = 0 };
     x->first = 0;
     while (x->first < p->nsteps && x->status[x->first] != 'p') x->first++;
     x->pg.done0 = x->first;
@@ -288,26 +241,27 @@ static int run_hardware(run_t *x)
     for (int i = 0; i < p->nsteps; i++) ngroups = p->steps[i].group + 1 > ngroups ? p->steps[i].group + 1 : ngroups;
     x->satisfied = calloc((size_t)ngroups + 1, 1);
     x->cam_done = calloc((size_t)p->nsteps + 1, sizeof *x->cam_done);
-    if (!x->satisfied || !x->cam_done) {
-        x->rc = rig_fail(RIG_ERR_NO_MEM, "refl capture: out of memory");
+    uint32_t *low = calloc((size_t)p->nsteps + 1, sizeof *low);
+    if (!x->satisfied || !x->cam_done || !low) {
+        free(low);
+        x->rc = rig_fail(RIG_ERR_NO_MEM, "out of memory for the steps' state (%d steps)", p->nsteps);
         return RUN_DONE;
     }
     rig_frame_row_t *rows = NULL;
     int nr = 0;
     if (!rig_journal_frames(x->j, &rows, &nr)) {
         // a group is satisfied by a step whose every camera's frame is at or below the target
-        uint32_t *low = calloc((size_t)p->nsteps + 1, sizeof *low);
         uint32_t all = r->ncameras >= 32 ? 0xffffffffu : (1u << r->ncameras) - 1;
         for (int i = 0; i < nr; i++) {
             int k = rig_camera_find(r, rows[i].camera);
             if (k < 0 || rows[i].step < 0 || rows[i].step >= p->nsteps) continue;
             x->cam_done[rows[i].step] |= 1u << k;
-            if (low && rows[i].roi_max <= p->target_fraction * x->full) low[rows[i].step] |= 1u << k;
+            if (rows[i].roi_max <= p->target_fraction * x->full) low[rows[i].step] |= 1u << k;
         }
-        for (int i = 0; low && p->auto_exposure && i < p->nsteps; i++)
+        for (int i = 0; p->auto_exposure && i < p->nsteps; i++)
             if (p->steps[i].group >= 0 && low[i] == all) x->satisfied[p->steps[i].group] = true;
-        free(low);
     }
+    free(low);
     free(rows);
     return RUN_ON;
 }
@@ -319,15 +273,12 @@ static int run_end(run_t *x)
     const rig_capture_opts_t *o = x->o;
     rig_plan_t *p = x->p;
     capture_writer_close(x);
-    if (x->pg.bar) fprintf(stderr, "\n");
+    if (x->pg.bar) model_progress_end();
     // the operator's time is not the rig's, nor homing (before the first frame, as before operator steps)
-    double wall = model_now_s() - x->t_start - x->t_operator - x->t_homing;
-    if (o->wall_s) *o->wall_s = wall;
-    if (o->floor_s) *o->floor_s = x->floor_s;
-    if (o->frames_written) *o->frames_written = x->w.written;
+    x->wall_s = model_now_s() - x->t_start - x->t_operator - x->t_homing;
     if (capture_writer_error(&x->w, x->msg, sizeof x->msg)) {
         capture_fault_stop(x->r, x->j, x->step, "stopped", "fault", x->msg);
-        rig_fail(RIG_ERR_IO, "refl capture: %s", x->msg);
+        rig_fail(RIG_ERR_IO, "%s", x->msg);
         x->exit_code = 1;
         return RUN_DONE;
     }
@@ -340,25 +291,20 @@ static int run_end(run_t *x)
             capture_fault_stop(x->r, x->j, x->step, "paused", "pause", x->msg);
         }
         if (x->paused == 4) {
-            rig_fail(x->rc ? x->rc : RIG_ERR_INVALID, "refl capture: %s", x->msg);
+            rig_fail(x->rc ? x->rc : RIG_ERR_INVALID, "%s", x->msg);
             x->exit_code = 1;
             return RUN_DONE;
         }
-        fprintf(stderr, "refl capture: %s\n", x->paused != 2 ? x->msg : "session paused (camera not answering)");
-        if (x->paused == 2) rig_fail(RIG_ERR_TIMEOUT, "refl capture: %s", x->msg);
+        // a pause is no error: the note says why and how to go on (camera not answering: also the error text)
+        model_note("%s", x->msg);
+        if (x->paused == 2) model_error_set(NULL, 0, "%s", x->msg);
         x->exit_code = 3;
         return RUN_DONE;
     }
     if (x->r->lamps) rig_lamps_all_off(x->r->lamps);
     rig_journal_event(x->j, -1, "complete", "session complete: %d frames this run, wall %.3f s, hardware floor %.3f "
-                      "s", x->w.written, wall, x->floor_s);
+                      "s", x->w.written, x->wall_s, x->floor_s);
     rig_journal_set_state(x->j, "complete");
-    int total_frames = x->frames_before + x->w.written;
-    printf("refl capture: session %s complete\n  steps: %d, frames: %d (%d this run)%s\n  wall time: %.1f s, hardware "
-           "floor: %.1f s (ratio %.3f); in the camera (trigger to frame in hand): %.1f s; "
-           "waiting for the writer: %.1f s\n  check: refl session check %s\n",
-           o->dir, p->nsteps, total_frames, x->w.written, p->auto_exposure ? " (auto bracketing skips the rest)" : "",
-           wall, x->floor_s, x->floor_s > 0 ? wall / x->floor_s : 0, x->T_cap, x->T_push, o->dir);
     x->exit_code = 0;
     return RUN_DONE;
 }
@@ -379,13 +325,13 @@ static void run_fault(run_t *x, bool turntable)
                  "--resume %s", x->step, model_last_error(), x->o->dir);
     }
     if (x->j) capture_fault_stop(x->r, x->j, x->step, "fault", "fault", x->msg);
-    rig_fail(x->rc, "refl capture: %s", x->msg);
+    rig_fail(x->rc, "%s", x->msg);
 }
 
 static void run_cleanup(run_t *x)
 {
     if (x->writer_running) capture_writer_close(x);
-    if (x->sig_installed) sigaction(SIGINT, &capture_old_sigint, NULL);
+    if (x->sig_installed) capture_sigint_restore();
     if (x->r && x->r->lamps && rig_lamps_on_mask(x->r->lamps)) {
         bool q = model_error_quiet_thread(true);
         rig_lamps_all_off(x->r->lamps);
@@ -410,12 +356,23 @@ static void run_cleanup(run_t *x)
     pthread_cond_destroy(&x->w.cv);
 }
 
+// What the run did, for the command's summary.
+static void summarise(const run_t *x, rig_capture_summary_t *s)
+{
+    *s = (rig_capture_summary_t){
+        .complete = x->exit_code == 0, .was_complete = x->was_complete, .steps = x->p ? x->p->nsteps : 0,
+        .frames = x->frames_before + x->w.written, .frames_run = x->w.written,
+        .auto_exposure = x->p && x->p->auto_exposure, .wall_s = x->wall_s, .floor_s = x->floor_s,
+        .camera_s = x->T_cap, .writer_wait_s = x->T_push,
+    };
+}
+
 int rig_capture_run(const rig_capture_opts_t *o)
 {
     // run_t holds the writer's 10 kB message and the run's own: on the heap.
     run_t *x = calloc(1, sizeof *x);
     if (!x) {
-        rig_fail(RIG_ERR_NO_MEM, "refl capture: out of memory");
+        rig_fail(RIG_ERR_NO_MEM, "out of memory");
         return 1;
     }
     x->o = o;
@@ -435,7 +392,12 @@ int rig_capture_run(const rig_capture_opts_t *o)
     if (k == RUN_ON) k = capture_run_steps(x);
     if (k == RUN_ON || k == RUN_BREAK) k = run_end(x);   // RUN_BREAK: paused while homing
     if (k == RUN_FAULT_TT || k == RUN_FAULT_CAM) run_fault(x, k == RUN_FAULT_TT);
+    if (o->summary) summarise(x, o->summary);
+    // the run's message outlives the cleanup (closing the devices may leave messages of its own)
+    char *msg = x->exit_code == 1 || x->paused == 2 ? g_strdup(model_last_error()) : NULL;
     run_cleanup(x);
+    if (msg) model_error_set(NULL, 0, "%s", msg);
+    g_free(msg);
     int exit_code = x->exit_code;
     if (exit_code == 3) rig_operator_set_paused(o->op);
     free(x);

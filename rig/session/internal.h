@@ -23,12 +23,14 @@
 #define QUEUE_BYTES ((size_t)128 << 20)
 
 // ---------------------------------------------------------------------------
-// Signals (motion.c): the first SIGINT counts (capture_sigint), a second one
-// hands over to the handler installed before (capture_old_sigint)
+// Signals (motion.c): from capture_sigint_install on, the first SIGINT is
+// counted (the session pauses), a second one hands over to the handler
+// installed before, rig_safety_install's (lamps off, the process ends);
+// capture_sigint_restore puts that handler back.
 
-extern volatile sig_atomic_t capture_sigint;
-extern struct sigaction capture_old_sigint;
-void capture_on_sigint(int sig);
+void capture_sigint_install(void);
+void capture_sigint_restore(void);
+bool capture_interrupted(void);
 
 // ---------------------------------------------------------------------------
 // The writer thread (writer.c)
@@ -63,7 +65,6 @@ typedef struct {
     const char     *cmdline;
 } writer_t;
 
-double capture_realtime_s(void);
 void   capture_frame_stats(const rig_frame_t *f, const int roi[4], double *mean, double *max, double *roi_max,
                            double *sat);
 void  *capture_writer_main(void *arg);
@@ -83,6 +84,8 @@ typedef struct {
 } progress_t;
 
 void capture_progress(progress_t *pg, int done, const rig_step_t *s, int remaining, double remaining_floor_s);
+// Whether the progress is a bar (o->progress 1, or -1 on a terminal) or a note a step.
+bool capture_progress_bar(const rig_capture_opts_t *o);
 
 // ---------------------------------------------------------------------------
 // The run (capture.c)
@@ -127,6 +130,8 @@ typedef struct {
     double      t_operator;      // waiting for the operator (not in the wall time)
     double      t_homing;        // homing after the operator's first steps (not in the wall time either)
     double      T_cap, T_push;   // time in the camera (trigger to frame in hand), waiting for the writer
+    double      wall_s;          // the run's wall time without the operator's and homing (run_end)
+    bool        was_complete;    // --resume of a complete session: nothing to do
 } run_t;
 
 int  capture_fault_stop(rig_t *r, rig_journal_t *j, int step, const char *state, const char *kind, const char *msg);

@@ -13,8 +13,6 @@
 #include <math.h>
 #include <signal.h>
 #include <stdio.h>
-#include <string.h>
-#include <unistd.h>
 
 #include "model/model.h"
 #include "rig/rig.h"
@@ -23,25 +21,38 @@
 // ---------------------------------------------------------------------------
 // Signals
 
-volatile sig_atomic_t capture_sigint;
+static volatile sig_atomic_t g_sigint;      // SIGINTs since capture_sigint_install
 static volatile sig_atomic_t g_in_motion;   // a watched turntable wait runs (it sees the second SIGINT)
-struct sigaction capture_old_sigint;
+static struct sigaction g_old_int;          // the handler before (rig_safety_install's)
 
 static void sigint_hand_over(int sig)
 {
-    sigaction(SIGINT, &capture_old_sigint, NULL);
-    if (capture_old_sigint.sa_handler != SIG_IGN && capture_old_sigint.sa_handler != SIG_DFL && capture_old_sigint.sa_handler)
-        capture_old_sigint.sa_handler(sig);
+    sigaction(SIGINT, &g_old_int, NULL);
+    if (g_old_int.sa_handler != SIG_IGN && g_old_int.sa_handler != SIG_DFL && g_old_int.sa_handler)
+        g_old_int.sa_handler(sig);
     else
         raise(sig);
 }
 
-void capture_on_sigint(int sig)
+static void on_sigint(int sig)
 {
-    if (++capture_sigint >= 2 && !g_in_motion) sigint_hand_over(sig);
+    if (++g_sigint >= 2 && !g_in_motion) sigint_hand_over(sig);
 }
 
-// Homing progress: "homing ... 4 s of ~15 s (ETA 11 s) at 123.4 deg".
+void capture_sigint_install(void)
+{
+    g_sigint = 0;
+    struct sigaction sa = { .sa_handler = on_sigint };
+    sigemptyset(&sa.sa_mask);
+    sigaction(SIGINT, &sa, &g_old_int);
+}
+
+void capture_sigint_restore(void) { sigaction(SIGINT, &g_old_int, NULL); }
+
+bool capture_interrupted(void) { return g_sigint > 0; }
+
+// Homing progress: "homing... 4 s of ~15 s (ETA 11 s) at 123.4 deg", a
+// progress line (bar) or a note.
 typedef struct {
     bool        bar;
     const char *what;
@@ -55,8 +66,8 @@ static void motion_progress(void *ctx, double elapsed_s, double angle_deg)
     char eta[64] = "";
     if (isfinite(m->eta_s) && m->eta_s > 0)
         snprintf(eta, sizeof eta, " of ~%.0f s (ETA %.0f s)", m->eta_s, fmax(0, m->eta_s - elapsed_s));
-    fprintf(stderr, "%srefl capture: %s... %.0f s%s at %.1f deg%s", m->bar ? "\r" : "", m->what, elapsed_s, eta,
-            angle_deg, m->bar ? "   " : "\n");
+    if (m->bar) model_progress("%s... %.0f s%s at %.1f deg", m->what, elapsed_s, eta, angle_deg);
+    else model_note("%s... %.0f s%s at %.1f deg", m->what, elapsed_s, eta, angle_deg);
     m->printed = true;
 }
 
@@ -70,7 +81,7 @@ int capture_watched_motion(rig_t *r, bool home, double angle_deg, double timeout
     else snprintf(what, sizeof what, "the move to %.4g deg", angle_deg);
     motion_progress_t mp = { .bar = bar, .what = what, .eta_s = eta_s };
     rig_turntable_watch_t w = {
-        .interrupt = &capture_sigint, .what = what, .stop_s = r->speed_deg_s / r->accel_deg_s2,
+        .interrupt = &g_sigint, .what = what, .stop_s = r->speed_deg_s / r->accel_deg_s2,
         // homing always shows progress; a move only once it runs long
         .progress = motion_progress, .ctx = &mp, .period_s = home ? (bar ? 0.5 : 5) : 5,
     };
@@ -78,10 +89,10 @@ int capture_watched_motion(rig_t *r, bool home, double angle_deg, double timeout
     int rc = home ? rig_turntable_start_home(r->turntable) : rig_turntable_start_move_abs_deg(r->turntable, angle_deg);
     if (!rc) rc = rig_turntable_wait_watched(r->turntable, timeout_s, &w);
     g_in_motion = 0;
-    if (mp.printed && bar) fprintf(stderr, "\n");
-    if (rc == RIG_ERR_INTERRUPTED && capture_sigint >= 2) {
-        fprintf(stderr, "refl capture: second interrupt: %s; ending now (lamps off; refl capture --resume "
-                "continues)\n", model_last_error());
+    if (mp.printed && bar) model_progress_end();
+    if (rc == RIG_ERR_INTERRUPTED && g_sigint >= 2) {
+        model_note("second interrupt: %s; ending now (lamps off; refl capture --resume continues)",
+                   model_last_error());
         sigint_hand_over(SIGINT);
     }
     return rc;
@@ -98,8 +109,6 @@ int capture_motion_paused(run_t *x, const char *during, const char *resume_does)
     return RUN_BREAK;
 }
 
-// Home the turntable when needed, set the camera up, and the steps' state
-// (first pending step, progress, groups an earlier run already satisfied).
 // Homes the turntable unless it is homed (Ctrl-C stops it: the session pauses).
 int capture_home_turntable(run_t *x)
 {
@@ -111,9 +120,9 @@ int capture_home_turntable(run_t *x)
     if (st.homed) return RUN_ON;
     char up_to[48] = "";
     if (isfinite(r->home_time_s)) snprintf(up_to, sizeof up_to, "up to %.0f s; ", r->home_time_s);
-    fprintf(stderr, "refl capture: homing %s (%sCtrl-C stops it)\n", rig_turntable_name(r->turntable), up_to);
+    model_note("homing %s (%sCtrl-C stops it)", rig_turntable_name(r->turntable), up_to);
     double tmo = 1.5 * (isfinite(r->home_time_s) ? r->home_time_s : 120) + 5;
-    bool bar = x->o->progress == 1 || (x->o->progress < 0 && isatty(2));
+    bool bar = capture_progress_bar(x->o);
     double t0 = model_now_s();
     x->rc = capture_watched_motion(r, true, 0, tmo, r->home_time_s, bar);
     x->t_homing += model_now_s() - t0;

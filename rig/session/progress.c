@@ -1,6 +1,8 @@
-// rig/session/progress.c — the capture's progress line: the step, its angle,
-// lamps and exposure, and the ETA.
+// rig/session/progress.c — the capture's progress: after each step its
+// position, angle, lamps and exposure, and the ETA; a bar (model_progress: it
+// overwrites itself on a terminal) or a note a step.
 #include <stdio.h>
+#include <unistd.h>
 
 #include "model/model.h"
 #include "rig/rig.h"
@@ -21,10 +23,15 @@ void capture_progress(progress_t *pg, int done, const rig_step_t *s, int remaini
         char bar[64];
         for (int i = 0; i < width; i++) bar[i] = i < fill ? '#' : '.';
         bar[width] = 0;
-        fprintf(stderr, "\r[%s] %d/%d ETA %4.0fs  %8.3f deg  %-16.16s %9.6g us ", bar, done, pg->total, eta,
-                s->angle_deg, s->lamps, s->exposure_us);
+        model_progress("[%s] %d/%d ETA %4.0fs  %8.3f deg  %-16.16s %9.6g us", bar, done, pg->total, eta,
+                       s->angle_deg, s->lamps, s->exposure_us);
     } else {
-        fprintf(stderr, "refl capture: step %d/%d angle %.4g deg lamps %s exposure %.6g us%s (ETA %.0f s)\n", done,
-                pg->total, s->angle_deg, s->lamps, s->exposure_us, s->kind == RIG_STEP_DARK ? " dark" : "", eta);
+        model_note("step %d/%d angle %.4g deg lamps %s exposure %.6g us%s (ETA %.0f s)", done, pg->total,
+                   s->angle_deg, s->lamps, s->exposure_us, s->kind == RIG_STEP_DARK ? " dark" : "", eta);
     }
+}
+
+bool capture_progress_bar(const rig_capture_opts_t *o)
+{
+    return o->progress == 1 || (o->progress < 0 && isatty(2));
 }

@@ -92,7 +92,7 @@ int capture_check_camera(run_t *x)
         rig_frame_meta_t m;
         if (!was || !was[0] || (rc = rig_camera_settings(x->r->cameras[k], &m)) || !strcmp(was, m.serial)) continue;
         if (!x->o->allow_changed)
-            rc = rig_fail(RIG_ERR_INVALID, "refl capture --resume %s: the camera changed: %s%s%sserial %s now, the "
+            rc = rig_fail(RIG_ERR_INVALID, "--resume %s: the camera changed: %s%s%sserial %s now, the "
                           "session started with serial %s: connect that camera, or add --allow-changed to continue "
                           "with this one", x->o->dir, x->r->ncameras > 1 ? "camera " : "",
                           x->r->ncameras > 1 ? x->r->camera_names[k] : "", x->r->ncameras > 1 ? ": " : "", m.serial,

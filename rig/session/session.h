@@ -310,26 +310,40 @@ void             rig_session_free(rig_session_t *s);
 float           *rig_session_frame(const rig_session_t *s, int i, int *width, int *height);
 
 
+// What a run did (rig_capture_run fills it when asked): the command prints it.
+typedef struct {
+    bool   complete;            // the session is complete (exit 0)
+    bool   was_complete;        // --resume found it complete: nothing was done
+    int    steps;               // the plan's steps
+    int    frames, frames_run;  // the session's frames, those written by this run
+    bool   auto_exposure;       // auto bracketing (the steps it skips take no frame)
+    double wall_s;              // this run, without the operator's time and homing
+    double floor_s;             // the hardware floor of the steps this run carried out
+    double camera_s;            // in the camera: trigger to frame in hand, summed
+    double writer_wait_s;       // waiting for the writer's queue, summed
+} rig_capture_summary_t;
+
 // Run (or continue) a session. Exit codes of refl capture: 0 complete, 1 error
-// or fault (stopped), 3 paused (SIGINT or camera not answering: resume later).
+// or fault (stopped; model_last_error says why), 3 paused (SIGINT, an operator
+// step not answered or the camera not answering: a note says why; resume
+// later). Progress, homing, resume and pause go through model_note /
+// model_progress (the command's prefix); nothing is printed on stdout.
 typedef struct {
     const char *plan_path, *rig_path, *dir;
-    bool        resume, allow_changed, dry_run;
+    bool        resume, allow_changed;
     const char *operator_name, *notes;
     const char *command_line;
     // A calibration directory (refl calib ... -o DIR, or one holding geometry/,
     // lamps/, gain/, white/): its files are recorded in the session facts by
     // path and sha256 (NULL: none). Frames stay raw.
     const char *calib_dir;
-    int         progress;           // -1 auto (bar on a TTY), 0 plain lines, 1 bar
+    int         progress;           // -1 auto (bar on a TTY), 0 a note a step, 1 bar (model_progress)
     // Called before each step is carried out (after the rig is open): for
     // tests (fault injection) and instrumentation; may be NULL.
     void      (*before_step)(void *ctx, rig_t *r, int step);
     void       *hook_ctx;
-    // Out (may be NULL): the session's wall time, the hardware floor of the
-    // steps run, the number of frames written in this run.
-    double     *wall_s, *floor_s;
-    int        *frames_written;
+    // Out (may be NULL): what the run did.
+    rig_capture_summary_t *summary;
     // Who answers the operator steps (NULL: the terminal, or a pause when
     // stdin is not one). Shared by the sessions of one command.
     rig_operator_t *op;

@@ -13,6 +13,15 @@
 #include "rig/rig.h"
 #include "rig/session/internal.h"
 
+// The lamps failed (x->rc): the session stops, the message is the run's error.
+static int lamps_fault(run_t *x)
+{
+    snprintf(x->msg, sizeof x->msg, "lamps: %s", model_last_error());
+    capture_fault_stop(x->r, x->j, x->step, "fault", "fault", x->msg);
+    rig_fail(x->rc, "%s", x->msg);
+    return RUN_DONE;
+}
+
 // A step's motion, then its exposure and lamps during the settle; waits out
 // the settle.
 static int step_setup(run_t *x, const rig_step_t *s)
@@ -44,11 +53,7 @@ static int step_setup(run_t *x, const rig_step_t *s)
     double lamp_t = 0;
     if (r->lamps && s->lamp_mask != x->mask) {
         lamp_t = rig_lamps_settle_s(r->lamps, x->mask, s->lamp_mask) + 1e-3 * p->lamp_settle_ms;
-        if ((x->rc = rig_lamps_set(r->lamps, s->lamp_mask))) {
-            snprintf(x->msg, sizeof x->msg, "lamps: %s", model_last_error());
-            capture_fault_stop(r, x->j, x->step, "fault", "fault", x->msg);
-            return RUN_DONE;
-        }
+        if ((x->rc = rig_lamps_set(r->lamps, s->lamp_mask))) return lamps_fault(x);
         x->mask = s->lamp_mask;
         if (p->lamp_settle_ms > 0) g_usleep((gulong)(1e3 * p->lamp_settle_ms));
     }
@@ -67,17 +72,16 @@ static int capture_camera(run_t *x, const rig_step_t *s, int k, job_t *jb)
     int step = x->step, tries = 0;
     const char *cn = r->ncameras > 1 ? r->camera_names[k] : "";
     for (;;) {
-        jb->t_trigger_s = capture_realtime_s();
+        jb->t_trigger_s = model_realtime_s();
         bool q = model_error_quiet_thread(true);
         x->rc = rig_camera_capture(r->cameras[k], p->frame_timeout_s + 2e-6 * s->exposure_us, 0, &jb->f);
         model_error_quiet_thread(q);
         if (!x->rc) return RUN_ON;
-        if (x->rc != RIG_ERR_TIMEOUT || tries >= p->retries || capture_sigint) break;
+        if (x->rc != RIG_ERR_TIMEOUT || tries >= p->retries || capture_interrupted()) break;
         tries++;
         rig_journal_event(x->j, step, "retry", "camera %stime-out (%s): retry %d of %d", r->ncameras > 1 ? cn : "",
                           model_last_error(), tries, p->retries);
-        fprintf(stderr, "refl capture: camera %s%stime-out at step %d: retry %d of %d\n", cn, *cn ? " " : "", step,
-                tries, p->retries);
+        model_note("camera %s%stime-out at step %d: retry %d of %d", cn, *cn ? " " : "", step, tries, p->retries);
     }
     if (x->rc == RIG_ERR_TIMEOUT || x->rc == RIG_ERR_DISCONNECTED) {
         snprintf(x->msg, sizeof x->msg, "camera %s did not answer at step %d after %d retries (%s): session "
@@ -106,7 +110,7 @@ static int step_capture(run_t *x, const rig_step_t *s)
         double T_cap0 = model_now_s();
         job_t *jb = calloc(1, sizeof *jb);
         if (!jb) {
-            x->rc = rig_fail(RIG_ERR_NO_MEM, "refl capture: out of memory");
+            x->rc = rig_fail(RIG_ERR_NO_MEM, "out of memory at step %d", step);
             return RUN_FAULT_CAM;
         }
         int c = capture_camera(x, s, k, jb);
@@ -147,14 +151,10 @@ static int step_operator(run_t *x, const rig_step_t *s)
     rig_t *r = x->r;
     int step = x->step;
     if (r->lamps && x->mask) {
-        if ((x->rc = rig_lamps_all_off(r->lamps))) {
-            snprintf(x->msg, sizeof x->msg, "lamps: %s", model_last_error());
-            capture_fault_stop(r, x->j, step, "fault", "fault", x->msg);
-            return RUN_DONE;
-        }
+        if ((x->rc = rig_lamps_all_off(r->lamps))) return lamps_fault(x);
         x->mask = 0;
     }
-    if (x->pg.bar) fprintf(stderr, "\n");
+    if (x->pg.bar) model_progress_end();
     char how[1024], what[512];
     const char *dir = x->o->dir;
     double t0 = model_now_s();
@@ -182,7 +182,7 @@ static int step_operator(run_t *x, const rig_step_t *s)
         return RUN_BREAK;
     }
     x->status[step] = 'd';
-    fprintf(stderr, "refl capture: operator step %d done; %s\n", step, what);
+    model_note("operator step %d done; %s", step, what);
     return RUN_ON;
 }
 
@@ -193,7 +193,7 @@ int capture_run_steps(run_t *x)
     for (x->step = x->first; x->step < p->nsteps; x->step++) {
         const rig_step_t *s = &p->steps[x->step];
         if (x->status[x->step] != 'p') continue;
-        if (capture_sigint) {
+        if (capture_interrupted()) {
             x->paused = 1;
             break;
         }

@@ -17,7 +17,6 @@
 #include <stdlib.h>
 #include <string.h>
 #include <sys/stat.h>
-#include <time.h>
 #include <unistd.h>
 
 #include "model/model.h"
@@ -26,13 +25,6 @@
 
 // ---------------------------------------------------------------------------
 // Writer thread
-
-double capture_realtime_s(void)
-{
-    struct timespec ts;
-    clock_gettime(CLOCK_REALTIME, &ts);
-    return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
-}
 
 void capture_frame_stats(const rig_frame_t *f, const int roi[4], double *mean, double *max, double *roi_max,
                         double *sat)
@@ -148,7 +140,7 @@ static int write_frame(writer_t *w, job_t *jb)
         goto done;
     }
     row.t_trigger_utc_s = jb->t_trigger_s;
-    row.t_written_utc_s = capture_realtime_s();
+    row.t_written_utc_s = model_realtime_s();
     row.commanded_deg = jb->step.angle_deg;
     row.measured_deg = jb->measured_deg;
     snprintf(row.lamps, sizeof row.lamps, "%s", jb->step.lamps);
@@ -190,9 +182,12 @@ done:
     return rc;
 }
 
+// The thread: its errors are kept in w->msg (the main thread reports them),
+// never printed from here.
 void *capture_writer_main(void *arg)
 {
     writer_t *w = arg;
+    model_error_quiet_thread(true);
     for (;;) {
         pthread_mutex_lock(&w->m);
         while (!w->head && !w->closing) pthread_cond_wait(&w->cv, &w->m);
