@@ -23,7 +23,9 @@ typedef struct rig_operator rig_operator_t;   // the operator's answers (below)
 // Capture sessions (rig/session/plan.c, rig/session/journal.c, rig/session/capture.c, rig/cmd_capture.c)
 //
 // A plan file (INI, see examples/plans/) says what to capture:
-//   [plan]     name = TEXT; operator = TEXT; notes = TEXT (all optional)
+//   [plan]     name = TEXT; operator = TEXT; notes = TEXT (all optional); format_version =
+//              the plan format's version (RIG_PLAN_FORMAT_VERSION, which rig_plan_text
+//              writes; absent: 1; a higher one than this refl reads is refused)
 //   [sample]   name = NAME (on a virtual rig: a [sample NAME] of its truth file, put on the
 //              table); kind = material_coupon | reference_white | chessboard | mirror_sphere |
 //              workpiece | uniform_source; tilt_deg = the wedge the sample stands on (-80..80,
@@ -117,8 +119,11 @@ typedef struct {
     bool    *exposures;             // nexposures (auto: the sorted ladder's order)
 } rig_plan_view_t;
 
+#define RIG_PLAN_FORMAT_VERSION 1   // the plan format written and read (versions 1 to this)
+
 typedef struct {
     char    *path, *text;           // file name, contents
+    int      format_version;        // [plan] format_version as read (1 when absent)
     char     sha256[65];
     char     name[128], operator_name[128], notes[512];
     char     sample[64], sample_kind[32];
@@ -172,7 +177,8 @@ int rig_plan_operator_pose(const rig_plan_t *p, rig_t *r, int step, char *what, 
 double rig_plan_floor_s(const rig_plan_t *p, const rig_t *r, int from_step);
 
 // The plan as a plan file's text (rig/session/plan.c, at its end): every section with
-// every value (angles as a list, [view NAME] sections as held), that
+// every value ([plan] format_version = RIG_PLAN_FORMAT_VERSION first, angles as a
+// list, [view NAME] sections as held), that
 // rig_plan_parse reads back to the same steps. comment (may be NULL): lines
 // written first as '# ' comments. NULL (model_error) when a text field holds
 // what a plan file cannot (a line break, '#' after a blank, ';' in a lamp set).
