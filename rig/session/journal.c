@@ -339,9 +339,17 @@ int rig_journal_source(rig_journal_t *j, const char *which, char **path, char **
     if (sqlite3_prepare_v2(j->db, sql, -1, &s, NULL) != SQLITE_OK || sqlite3_step(s) != SQLITE_ROW) {
         rc = jfail(j, "cannot read the session");
     } else {
-        if (path) *path = col_text(s, 0);
-        if (text) *text = col_text(s, 1);
-        if (sha256) *sha256 = col_text(s, 2);
+        char *v[3] = { col_text(s, 0), col_text(s, 1), col_text(s, 2) };
+        if (!v[0] || !v[1] || !v[2]) {
+            rc = rig_fail(RIG_ERR_NO_MEM, "journal %s: out of memory", j->path);
+            for (int i = 0; i < 3; i++) free(v[i]);
+        } else {
+            char **out[3] = { path, text, sha256 };
+            for (int i = 0; i < 3; i++) {
+                if (out[i]) *out[i] = v[i];
+                else free(v[i]);
+            }
+        }
     }
     sqlite3_finalize(s);
     pthread_mutex_unlock(&j->lock);
@@ -356,8 +364,8 @@ int rig_journal_facts(rig_journal_t *j, char **json)
     if (sqlite3_prepare_v2(j->db, "SELECT facts_json FROM session", -1, &s, NULL) != SQLITE_OK ||
         sqlite3_step(s) != SQLITE_ROW)
         rc = jfail(j, "cannot read the session");
-    else
-        *json = col_text(s, 0);
+    else if (!(*json = col_text(s, 0)))
+        rc = rig_fail(RIG_ERR_NO_MEM, "journal %s: out of memory", j->path);
     sqlite3_finalize(s);
     pthread_mutex_unlock(&j->lock);
     return rc;
@@ -412,6 +420,11 @@ int rig_journal_steps(rig_journal_t *j, rig_step_t **steps, char **status, int *
     if (total < 0) return jfail(j, "cannot read the steps");
     rig_step_t *st = calloc((size_t)total + 1, sizeof *st);
     char *stat = calloc((size_t)total + 1, 1);
+    if (!st || !stat) {
+        free(st);
+        free(stat);
+        return rig_fail(RIG_ERR_NO_MEM, "journal %s: out of memory for %d steps", j->path, total);
+    }
     sqlite3_stmt *s = NULL;
     int rc = 0, k = 0;
     pthread_mutex_lock(&j->lock);
