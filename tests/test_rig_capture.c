@@ -705,3 +705,44 @@ TEST(session_check_incomplete_and_resume)
     free(rig_text);
     test_camera_unlock(lk);
 }
+
+// A journal of a newer schema version (3; this refl writes 2 and reads 1 and
+// 2) is refused by every reader, naming the versions; one without a version
+// too.
+TEST(session_journal_newer_schema_refused)
+{
+    const char *dir = test_path("newer");
+    CHECK(mkdir(dir, 0777) == 0);
+    char db[4200];
+    snprintf(db, sizeof db, "%s/session.sqlite", dir);
+    sqlite3 *d = NULL;
+    CHECK(sqlite3_open(db, &d) == SQLITE_OK);
+    CHECK(sqlite3_exec(d, "CREATE TABLE schema_version(version INTEGER NOT NULL); "
+                       "INSERT INTO schema_version VALUES(3);", NULL, NULL, NULL) == SQLITE_OK);
+    sqlite3_close(d);
+    rig_journal_t *j = NULL;
+    CHECK(rig_journal_open(&j, dir) == RIG_ERR_PROTOCOL);
+    CHECK(j == NULL);
+    CHECK_CONTAINS(model_last_error(), "schema version 3, written by a newer refl (this refl reads versions 1 to 2)");
+    CHECK(rig_session_open(dir) == NULL);
+    CHECK_CONTAINS(model_last_error(), "schema version 3, written by a newer refl");
+    char *out = NULL, *err = NULL;
+    int rc = refl(&out, &err, "session", "check", dir, NULL);
+    CHECK(rc == 1);
+    CHECK_CONTAINS(err, "schema version 3, written by a newer refl (this refl reads versions 1 to 2)");
+    g_free(out);
+    g_free(err);
+    rc = refl(&out, &err, "capture", "--yes", "--resume", dir, NULL);
+    CHECK(rc == 1);
+    CHECK_CONTAINS(err, "refl capture: journal ");
+    CHECK_CONTAINS(err, "schema version 3, written by a newer refl");
+    g_free(out);
+    g_free(err);
+
+    CHECK(sqlite3_open(db, &d) == SQLITE_OK);
+    CHECK(sqlite3_exec(d, "DELETE FROM schema_version;", NULL, NULL, NULL) == SQLITE_OK);
+    sqlite3_close(d);
+    CHECK(rig_journal_open(&j, dir) == RIG_ERR_PROTOCOL);
+    CHECK_CONTAINS(model_last_error(), "no schema version (not a refl session journal?)");
+}
+

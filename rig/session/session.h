@@ -79,9 +79,11 @@ typedef struct rig_operator rig_operator_t;   // the operator's answers (below)
 // file's camera name): each step triggers every camera, one after the other
 // in the rig file's order, at the step's angle and lamps; a step is done when
 // every camera's frame is committed, and --resume takes the missing
-// (step, camera) frames only. Journal schema version 2 (frames keyed by
-// (step, camera)); a version-1 journal (one camera) is migrated when opened:
-// its frames become camera "camera". A frame is
+// (step, camera) frames only. The journal's schema versions (table
+// schema_version; rig/session/journal.c): 1, frames keyed by step (one
+// camera); 2, frames keyed by (step, camera), written by this refl. Versions 1
+// and 2 are read (a version-1 journal is migrated to 2 when opened: its frames
+// become camera "camera"); a higher version is refused. A frame is
 // written to frames/.sNNNNNN.png.part, fsync'ed, hashed, committed with its row
 // (one transaction), then linked to its name (link(2): nothing is overwritten)
 // and the temporary name removed; --resume re-links committed frames whose link
@@ -197,12 +199,13 @@ typedef struct rig_journal rig_journal_t;
 // reading the database; not in the struct, not exported). `file` is relative
 // to the session directory. The camera's radiometric state (rig_frame_meta_t):
 // gain_unit (the unit of `gain`, GenICam's <Unit>: "dB", "x", or "raw" when
-// the camera states none; model_gain_factor converts; empty in sessions of
-// older refl, whose gains were dB), black_level and temperature_c (NULL in
-// the database where the camera has none; read back as 0), gamma (1 when
+// the camera states none; model_gain_factor converts; empty where the journal
+// lacks the column, whose gains are dB), black_level and temperature_c (NULL
+// in the database where the camera has none; read back as 0), gamma (1 when
 // off), firmware, camera_settings (the automatics, gamma, LUT and transport
-// settings refl found, switched off and read back). Journals of an older refl
-// lack the later columns: they read as NULL, and a resume adds them.
+// settings refl found, switched off and read back). A version-1 journal may
+// lack gain_unit .. camera_settings: they read as NULL, and the first frame
+// written (a resume) adds them.
 // A frame's key is (step, camera): `camera` (last,
 // so that readers of the CSV by position keep their columns) is the
 // rig file's name of the camera that took it ("camera" for a plain [camera]
