@@ -301,10 +301,14 @@ static int session_export(const char *dir, const char *format, const char *out)
     if (!strcmp(format, "csv")) {
         rig_frame_rows_write_csv(f, rows, n);
     } else {
-        json_t *a = rig_frame_rows_json(rows, n);
-        json_dumpf(a, f, JSON_INDENT(1));
+        json_t *doc = rig_frame_rows_json(rows, n);
+        if (!doc || json_dumpf(doc, f, JSON_INDENT(1))) {
+            json_decref(doc);
+            rig_fail(RIG_ERR_NO_MEM, "refl session export: out of memory for %d frames", n);
+            goto done;
+        }
         fputc('\n', f);
-        json_decref(a);
+        json_decref(doc);
     }
     rc = 0;
     if (out && fclose(f) != 0) {

@@ -242,6 +242,7 @@ TEST(capture_kill9_resume_equals_uninterrupted)
     rc = refl(&out, &err, "session", "export", ref, "--format", "json", NULL);
     CHECK(rc == 0);
     CHECK_CONTAINS(out, "\"file\": \"frames/s000024.png\"");
+    CHECK_CONTAINS(out, "\"format\": \"refl-session-frames\",\n \"version\": 1,\n \"frames\": [");
     g_free(out);
     g_free(err);
 
@@ -746,3 +747,33 @@ TEST(session_journal_newer_schema_refused)
     CHECK_CONTAINS(model_last_error(), "no schema version (not a refl session journal?)");
 }
 
+// The session facts name their format (refl-session-facts); facts without the
+// keys read as version 1; a higher version is refused by the session reader.
+TEST(session_facts_newer_version_refused)
+{
+    const char *text = SMALL_PLAN;
+    rig_plan_t *p = rig_plan_parse(text, strlen(text), "plan.ini");
+    CHECK_MSG(p != NULL, "%s", model_last_error());
+    if (!p) return;
+    static const char *const facts[] = { "{\"refl_version\": \"x\"}",
+                                         "{\"format\": \"refl-session-facts\", \"version\": 1}",
+                                         "{\"format\": \"refl-session-facts\", \"version\": 2}" };
+    for (int k = 0; k < 3; k++) {
+        char name[32];
+        snprintf(name, sizeof name, "facts%d", k);
+        const char *dir = test_path(name);
+        CHECK(mkdir(dir, 0777) == 0);
+        rig_journal_t *j = NULL;
+        CHECK(rig_journal_create(&j, dir, p, "rig.ini", "[rig]\n", "0", facts[k]) == 0);
+        rig_journal_close(j);
+        rig_session_t *s = rig_session_open(dir);
+        if (k < 2) {
+            CHECK_MSG(s != NULL && s->facts != NULL, "%s: %s", facts[k], model_last_error());
+        } else {
+            CHECK(s == NULL);
+            CHECK_CONTAINS(model_last_error(), "refl-session-facts version 2, written by a newer refl");
+        }
+        rig_session_free(s);
+    }
+    rig_plan_free(p);
+}

@@ -156,6 +156,10 @@ static int run_session(run_t *x)
         }
         x->facts = capture_session_facts(x->r, p, o->command_line, cal);
         json_decref(cal);
+        if (!x->facts) {
+            x->rc = rig_fail(RIG_ERR_NO_MEM, "out of memory for the session facts");
+            return RUN_DONE;
+        }
         if ((x->rc = rig_journal_create(&x->j, o->dir, p, x->rig_path, x->rig_text, x->r->sha256, x->facts)))
             return RUN_DONE;
         rig_journal_event(x->j, -1, "start", "session started: %d steps, plan %s, rig %s", p->nsteps, p->path,

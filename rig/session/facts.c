@@ -12,6 +12,7 @@
 #include <jansson.h>
 
 #include "model/model.h"
+#include "model/base/report.h"
 #include "rig/rig.h"
 #include "rig/session/internal.h"
 
@@ -84,13 +85,14 @@ json_t *capture_calibration_files(const char *dir, const rig_t *r)
 char *capture_session_facts(rig_t *r, const rig_plan_t *p, const char *cmdline, json_t *calibrations)
 {
     json_t *o = json_object();
+    model_json_set_format(o, RIG_SESSION_FACTS_FORMAT, RIG_SESSION_FACTS_VERSION);
     json_object_set_new(o, "refl_version", json_string(REFL_VERSION));
     json_object_set_new(o, "command_line", json_string(cmdline ? cmdline : ""));
     json_object_set_new(o, "operator", json_string(p->operator_name));
     json_object_set_new(o, "notes", json_string(p->notes));
     // the calibrations in use (by path and hash; frames are stored raw)
     json_object_set_new(o, "calibrations", calibrations ? json_incref(calibrations) : json_array());
-    // "camera": the first camera (as before several cameras), "cameras": every one
+    // "camera": the first camera (a session of one camera has only it), "cameras": every one
     json_t *cams = json_array();
     for (int k = 0; k < r->ncameras; k++) {
         rig_frame_meta_t m;

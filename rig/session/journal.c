@@ -736,20 +736,32 @@ void rig_frame_rows_write_csv(FILE *f, const rig_frame_row_t *rows, int n)
 
 json_t *rig_frame_rows_json(const rig_frame_row_t *rows, int n)
 {
-    json_t *a = json_array();
-    for (int i = 0; a && i < n; i++) {
+    json_t *doc = json_object(), *a = json_array();
+    if (!doc || !a) {
+        json_decref(doc);
+        json_decref(a);
+        return NULL;
+    }
+    model_json_set_format(doc, RIG_SESSION_FRAMES_FORMAT, RIG_SESSION_FRAMES_VERSION);
+    if (json_object_set_new(doc, "frames", a)) {   // (takes a, also when it fails)
+        json_decref(doc);
+        return NULL;
+    }
+    for (int i = 0; i < n; i++) {
         const rig_frame_row_t *r = &rows[i];
         json_t *o = json_object();
-        if (!o) break;
+        if (!o || json_array_append_new(a, o)) {
+            json_decref(doc);
+            return NULL;
+        }
 #define JSON_INT(name)  json_object_set_new(o, #name, json_integer(r->name));
-#define JSON_REAL(name) json_object_set_new(o, #name, isfinite(r->name) ? json_real(r->name) : json_null());
+#define JSON_REAL(name) json_object_set_new(o, #name, model_json_number(r->name));
 #define JSON_TEXT(name) json_object_set_new(o, #name, json_string(r->name));
 #define JSON_U64(name)  json_object_set_new(o, #name, json_integer((json_int_t)r->name));
 #define JSON_UTC(name)
 #define JSON_(kind, name, column, decl, csv, size) JSON_##kind(name)
         RIG_FRAME_COLUMNS(JSON_)
 #undef JSON_
-        json_array_append_new(a, o);
     }
-    return a;
+    return doc;
 }

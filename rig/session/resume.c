@@ -72,13 +72,9 @@ int capture_recover_frames(rig_journal_t *j, const char *dir, int *relinked, int
 // --allow-changed (then the event log says so).
 int capture_check_camera(run_t *x)
 {
-    char *facts = NULL;
-    if (!x->r->camera || rig_journal_facts(x->j, &facts)) {
-        free(facts);
-        return 0;
-    }
-    json_t *f = facts[0] ? json_loads(facts, 0, NULL) : NULL;
-    free(facts);
+    json_t *f = NULL;
+    if (!x->r->camera) return 0;
+    if (!rig_journal_facts_read(x->j, &f)) return RIG_ERR_PROTOCOL;   // a newer version (or unreadable)
     json_t *cams = json_object_get(f, "cameras");
     int rc = 0;
     for (int k = 0; k < x->r->ncameras && !rc; k++) {

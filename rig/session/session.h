@@ -251,13 +251,21 @@ typedef struct {
 } rig_frame_row_t;
 
 // `refl session export`: the rows as CSV (a header line with the field names,
-// then one line per row) or as a JSON array of objects (NULL: out of memory).
+// then one line per row) or as a JSON document (NULL: out of memory):
+//   {"format": "refl-session-frames", "version": 1, "frames": [{FIELD: VALUE, ...}, ...]}
+// (a REAL that is not finite is null).
+#define RIG_SESSION_FRAMES_FORMAT  "refl-session-frames"
+#define RIG_SESSION_FRAMES_VERSION 1
 void    rig_frame_rows_write_csv(FILE *f, const rig_frame_row_t *rows, int n);
 json_t *rig_frame_rows_json(const rig_frame_row_t *rows, int n);
 
 // Create DIR/session.sqlite (fails when it exists) with the session and every
 // step pending. session_json: a JSON object of session facts (camera serials,
-// settings snapshot, calibrations, versions, operator notes).
+// settings snapshot, calibrations, versions, operator notes), format
+// RIG_SESSION_FACTS_FORMAT version RIG_SESSION_FACTS_VERSION (model_json_set_format;
+// facts without the keys read as version 1; readers refuse a higher version).
+#define RIG_SESSION_FACTS_FORMAT  "refl-session-facts"
+#define RIG_SESSION_FACTS_VERSION 1
 int  rig_journal_create(rig_journal_t **out, const char *dir, const rig_plan_t *p, const char *rig_path,
                         const char *rig_text, const char *rig_sha256, const char *session_json);
 int  rig_journal_open(rig_journal_t **out, const char *dir);
@@ -267,6 +275,10 @@ int  rig_journal_source(rig_journal_t *j, const char *which, char **path, char *
 int  rig_journal_nsteps(rig_journal_t *j);
 // The session facts (JSON object text, as given at create). Caller frees.
 int  rig_journal_facts(rig_journal_t *j, char **json);
+// The session facts parsed (rig/session/reader.c): *facts NULL when there are
+// none or they are not JSON. false (model_error_set naming the journal) when
+// they cannot be read or are of a version above RIG_SESSION_FACTS_VERSION.
+bool rig_journal_facts_read(rig_journal_t *j, json_t **facts);
 // SQLite's PRAGMA integrity_check on the journal: *result (caller frees with
 // g_free) is "ok" when the database is intact, else SQLite's findings (joined
 // by "; "). 0, or a RIG_ERR_* when the check cannot run.
