@@ -128,9 +128,11 @@ int rig_operator_ask(rig_operator_t *op, int step, const char *instruction, char
         model_progress("press Enter when done, q to pause: ");
         errno = 0;
         bool got = read_answer(stdin, a, sizeof a);
+        int read_errno = errno;
         model_progress_end();
         if (!got) {
-            snprintf(how, size, "%s", errno == EINTR ? "interrupted (Ctrl-C) at the prompt" : "end of input on the terminal");
+            snprintf(how, size, "%s",
+                     read_errno == EINTR ? "interrupted (Ctrl-C) at the prompt" : "end of input on the terminal");
             clearerr(stdin);
             return RIG_OPERATOR_PAUSE;
         }
