@@ -119,7 +119,13 @@ RIG_SESSION_SRC := \
     rig/session/operator.c \
     rig/session/journal.c \
     rig/session/reader.c \
-    rig/session/capture.c
+    rig/session/capture.c \
+    rig/session/facts.c \
+    rig/session/motion.c \
+    rig/session/progress.c \
+    rig/session/resume.c \
+    rig/session/steps.c \
+    rig/session/writer.c
 RIG_VIRTUAL_SRC := \
     rig/virtual/truth.c \
     rig/virtual/virtual.c \

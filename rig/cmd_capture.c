@@ -46,11 +46,79 @@ static char *join_args(int argc, char **argv)
     return g_string_free(s, FALSE);
 }
 
+// --dry-run: the steps, the estimates, and the plan checked against the rig (nothing moves).
+static void print_dry_run(const rig_plan_t *p, const rig_t *r)
+{
+    rig_frame_meta_t m = { 0 };
+    rig_camera_settings(r->camera, &m);
+    printf("plan: %s (sha256 %s)\nsample: %s (%s)\nrig: %s\n", p->path, p->sha256, p->sample, p->sample_kind,
+           r->path);
+    int nframes = 0;
+    for (int i = 0; i < p->nsteps; i++) nframes += p->steps[i].kind != RIG_STEP_OPERATOR;
+    printf("steps: %d (%d operator step%s; %d frames: %d angles x %d lamp sets x %d exposures x %d repeats%s%s%s)\n",
+           p->nsteps, p->nsteps - nframes, p->nsteps - nframes == 1 ? "" : "s", nframes, p->nangles, p->nlamp_sets,
+           p->nexposures, p->repeats, p->nviews ? ", as the [view] sections choose" : "",
+           p->dark_every ? ", dark frames" : "", p->auto_exposure ? "; auto bracketing: at most" : "");
+    if (r->ncameras > 1) {
+        printf("cameras: %d, each step triggers every one in this order (%d frames in all):", r->ncameras,
+               nframes * r->ncameras);
+        for (int k = 0; k < r->ncameras; k++) printf(" %s", r->camera_names[k]);
+        printf("\n");
+    }
+    for (int i = 0; i < p->nsteps; i++) {
+        const rig_step_t *s = &p->steps[i];
+        if (s->kind == RIG_STEP_OPERATOR) {
+            printf("  %6d  operator: %s\n", i, p->ops[s->op].instruction);
+            continue;
+        }
+        printf("  %6d  %-5s angle %10.4f deg  lamps %-20s exposure %10.6g us  gain %g%s\n", i,
+               s->kind == RIG_STEP_DARK ? "dark" : "light", s->angle_deg, s->lamps, s->exposure_us, s->gain,
+               s->repeat ? " (repeat)" : "");
+    }
+    double floor_s = rig_plan_floor_s(p, r, 0);
+    double bytes = (double)nframes * m.width * m.height * 2.0;
+    printf("estimated_duration_s: %.1f (hardware floor: motions, settles, exposures; plus homing)\n", floor_s);
+    printf("estimated_disk_bytes: %.0f (at most: %d frames of %d x %d 16-bit; PNG compresses them)\n", bytes,
+           nframes, m.width, m.height);
+    printf("check: plan matches the rig (lamps exist, angles within range, the camera accepts every exposure)\n");
+}
+
+static int dry_run(const rig_capture_opts_t *o)
+{
+    rig_plan_t *p = rig_plan_load(o->plan_path);
+    if (!p) return 1;
+    model_note("opening the rig %s", o->rig_path);
+    rig_t *r = NULL;
+    int rc = rig_open(&r, o->rig_path);
+    if (!rc) rc = rig_plan_bind(p, r);
+    if (!rc) print_dry_run(p, r);
+    char *msg = rc ? g_strdup(model_last_error()) : NULL;
+    rig_close(r);
+    rig_plan_free(p);
+    if (msg) model_error_set(NULL, 0, "%s", msg);
+    g_free(msg);
+    return rc ? 1 : 0;
+}
+
+// The end of a complete run, on stdout.
+static void print_summary(const char *dir, const rig_capture_summary_t *s)
+{
+    if (s->was_complete) {
+        printf("refl capture: %s is complete: nothing to resume (refl session check %s)\n", dir, dir);
+        return;
+    }
+    printf("refl capture: session %s complete\n  steps: %d, frames: %d (%d this run)%s\n  wall time: %.1f s, hardware "
+           "floor: %.1f s (ratio %.3f); in the camera (trigger to frame in hand): %.1f s; "
+           "waiting for the writer: %.1f s\n  check: refl session check %s\n",
+           dir, s->steps, s->frames, s->frames_run, s->auto_exposure ? " (auto bracketing skips the rest)" : "",
+           s->wall_s, s->floor_s, s->floor_s > 0 ? s->wall_s / s->floor_s : 0, s->camera_s, s->writer_wait_s, dir);
+}
+
 int rig_cmd_capture(int argc, char **argv)
 {
     rig_capture_opts_t o = { .progress = -1 };
     const char *out_dir = NULL, *resume_dir = NULL, *progress = NULL;
-    bool dry_run = false, allow_changed = false, yes = false;
+    bool dry = false, allow_changed = false, yes = false;
     const char *operator_input = NULL;
     model_opt_t opts[] = {
         MODEL_OPT_STRING("--rig", "RIG.ini", "the rig description file", &o.rig_path, false),
@@ -62,7 +130,7 @@ int rig_cmd_capture(int argc, char **argv)
         MODEL_OPT_STRING("--progress", "bar|lines", "progress display (default: bar on a terminal)", &progress,
                          false),
         MODEL_OPT_FLAG("--dry-run", NULL, "print the steps and check the plan against the rig; nothing moves",
-                       &dry_run),
+                       &dry),
         MODEL_OPT_STRING("--resume", "DIR", "continue the session in DIR where it stopped", &resume_dir, false),
         MODEL_OPT_FLAG("--allow-changed", NULL, "--resume: continue although the plan, rig file or camera changed",
                        &allow_changed),
@@ -73,7 +141,6 @@ int rig_cmd_capture(int argc, char **argv)
     int rc = model_cli_parse(&c, argc, argv);
     if (rc != MODEL_CLI_OK) return rc == MODEL_CLI_HELP ? 0 : rc;
     o.plan_path = c.npositional ? c.positional[0] : NULL;
-    o.dry_run = dry_run;
     o.allow_changed = allow_changed;
     o.resume = resume_dir != NULL;
     o.dir = resume_dir ? resume_dir : out_dir;
@@ -83,24 +150,34 @@ int rig_cmd_capture(int argc, char **argv)
         else return model_cli_error(&c, "option --progress: write bar or lines, not %s", progress);
     }
     if (o.resume) {
-        if (o.dry_run) return model_cli_error(&c, "--dry-run and --resume do not go together");
+        if (dry) return model_cli_error(&c, "--dry-run and --resume do not go together");
     } else {
         if (!o.plan_path)
             return model_cli_error(&c, "missing the plan file (refl capture PLAN.ini --rig RIG.ini -o DIR)");
         if (!o.rig_path) return model_cli_error(&c, "missing required option --rig RIG.ini");
-        if (!o.dir && !o.dry_run) return model_cli_error(&c, "missing -o DIR (the session directory)");
+        if (!o.dir && !dry) return model_cli_error(&c, "missing -o DIR (the session directory)");
         if (o.allow_changed) return model_cli_error(&c, "--allow-changed is for --resume");
     }
-    if (!(o.op = rig_operator_open(yes, operator_input))) {
-        if (yes && operator_input) return model_cli_error(&c, "give --yes or --operator-input FILE, not both");
-        return model_error_report("capture");
+    if (yes && operator_input) return model_cli_error(&c, "give --yes or --operator-input FILE, not both");
+    // the library's error is printed once, here; its notes and progress carry the command's name
+    bool q = model_error_quiet_thread(true);
+    if (dry) {
+        rc = dry_run(&o);
+    } else if (!(o.op = rig_operator_open(yes, operator_input))) {
+        rc = 1;
+    } else {
+        rig_capture_summary_t sum = { 0 };
+        char *cl = join_args(argc, argv);
+        o.command_line = cl;
+        o.summary = &sum;
+        rc = rig_capture_run(&o);
+        g_free(cl);
+        rig_operator_close(o.op);
+        if (rc == 0) print_summary(o.dir, &sum);
     }
-    char *cl = join_args(argc, argv);
-    o.command_line = cl;
-    rc = rig_capture_run(&o);
-    g_free(cl);
-    rig_operator_close(o.op);
+    model_error_quiet_thread(q);
     fflush(stdout);
+    if (rc == 1) model_error_report("capture");
     return rc;
 }
 
@@ -224,10 +301,14 @@ static int session_export(const char *dir, const char *format, const char *out)
     if (!strcmp(format, "csv")) {
         rig_frame_rows_write_csv(f, rows, n);
     } else {
-        json_t *a = rig_frame_rows_json(rows, n);
-        json_dumpf(a, f, JSON_INDENT(1));
+        json_t *doc = rig_frame_rows_json(rows, n);
+        if (!doc || json_dumpf(doc, f, JSON_INDENT(1))) {
+            json_decref(doc);
+            rig_fail(RIG_ERR_NO_MEM, "refl session export: out of memory for %d frames", n);
+            goto done;
+        }
         fputc('\n', f);
-        json_decref(a);
+        json_decref(doc);
     }
     rc = 0;
     if (out && fclose(f) != 0) {

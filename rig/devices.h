@@ -74,7 +74,7 @@ typedef struct {
     // Motion parameters for time estimates and time-outs: apt reads them from
     // the controller (MOT_GET_VELPARAMS, MOT_GET_HOMEPARAMS; params_from
     // "controller"), or takes rig_stage_models' when it does not answer
-    // ("table", with a note on stderr); sim: its own ("sim", real time).
+    // ("table", with a note: model_note); sim: its own ("sim", real time).
     double speed_deg_s, accel_deg_s2;
     double home_speed_deg_s;
     double home_time_s;        // the longest homing: a full turn to the switch plus the offset
@@ -190,10 +190,12 @@ int rig_lamps_open_gpiod(rig_lamps_t **out, const rig_lamp_line_t *lamps, int n)
 int rig_lamps_open_sim(rig_lamps_t **out, const rig_lamp_line_t *lamps, int n);
 // The lamp-state file (rig/lamps/state.c): records which lamps are on, flushed
 // before one turns on, so that after a death no handler sees (kill -9, the OOM
-// killer, a power cut) the next open of the same lamps reports on stderr "refl:
-// the last session (pid N, started T) died with lamps A, B on; switching them
+// killer, a power cut) the next open of the same lamps warns (model_warning)
+// "the last session (pid N, started T) died with lamps A, B on; switching them
 // off" and does. The open set holds an exclusive flock on it: an open while
-// another live process holds it fails with RIG_ERR_BUSY naming that pid.
+// another live process holds it fails with RIG_ERR_BUSY naming that pid. The
+// file says format_version = 1; a file of a higher version is refused
+// (RIG_ERR_PROTOCOL, the lamps are not opened).
 // gpiod: state_file NULL or "" = $XDG_STATE_HOME/refl (~/.local/state/refl)/
 // gpiod-CHIP-LINE....state, named after the chips and lines; rig_lamps_open_gpiod
 // uses that. sim: a file only when state_file is given (rig_lamps_open_sim: none).

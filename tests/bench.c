@@ -554,10 +554,9 @@ static int capture_run(const char *name, const char *ratio_name, const char *ran
                "[lamps]\nsets = east; south; west; north\n[exposure]\nmode = fixed\nlist_us = 1000 2000 4000\n"
                "[capture]\nlamp_settle_ms = %d\n", range, settle_ms);   // + the truth's 20 ms warm-up x time_scale
     fclose(f);
-    double wall = 0, floor_s = 0;
-    int frames = 0;
-    rig_capture_opts_t o = { .plan_path = plan, .rig_path = rig, .dir = sess, .progress = 0, .wall_s = &wall,
-                             .floor_s = &floor_s, .frames_written = &frames, .op = rig_operator_open(true, NULL) };
+    rig_capture_summary_t sum = { 0 };
+    rig_capture_opts_t o = { .plan_path = plan, .rig_path = rig, .dir = sess, .progress = 0, .summary = &sum,
+                             .op = rig_operator_open(true, NULL) };
     // progress lines and the session summary off (this output is NAME: VALUE lines)
     fflush(stdout);
     int saved_err = dup(2), saved_out = dup(1), null = open("/dev/null", O_WRONLY);
@@ -575,6 +574,8 @@ static int capture_run(const char *name, const char *ratio_name, const char *ran
         fprintf(stderr, "refl-bench: capture: %s\n", model_last_error());
         return 1;
     }
+    double wall = sum.wall_s, floor_s = sum.floor_s;
+    int frames = sum.frames_run;
     printf("capture_%s_frames: %d count\n", name, frames);
     printf("capture_%s_wall_time_scale_%g: %.2f s\n", name, time_scale, wall);
     printf("capture_%s_hardware_floor_time_scale_%g: %.2f s\n", name, time_scale, floor_s);

@@ -116,7 +116,7 @@ int main(int argc, char **argv)
         if (!lamps[i].chip[0]) sim = true;
         else if (sim) return usage();
     }
-    model_error_quiet(true);
+    model_error_quiet_thread(true);   // errors: fail() prints them once; notes and warnings show
 
     bool safety = !strcmp(mode, "hold") || !strcmp(mode, "exit") || faults;
     if (getenv("LAMP_CHILD_CRASH_HANDLER")) {

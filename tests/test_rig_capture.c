@@ -242,6 +242,7 @@ TEST(capture_kill9_resume_equals_uninterrupted)
     rc = refl(&out, &err, "session", "export", ref, "--format", "json", NULL);
     CHECK(rc == 0);
     CHECK_CONTAINS(out, "\"file\": \"frames/s000024.png\"");
+    CHECK_CONTAINS(out, "\"format\": \"refl-session-frames\",\n \"version\": 1,\n \"frames\": [");
     g_free(out);
     g_free(err);
 
@@ -644,8 +645,8 @@ TEST(session_check_incomplete_and_resume)
     CHECK(count_frames(dir) == 2);
     truth_copy("REFL-VIRT01", false);
 
-    // resume (in-process, its progress lines on stderr into a file); the first
-    // step of the run is slow
+    // resume (in-process, its progress notes on stderr into a file, named as
+    // the dispatcher names them); the first step of the run is slow
     const char *log = test_path("progress.txt");
     fflush(stderr);
     int saved = dup(2), fd = open(log, O_WRONLY | O_CREAT | O_TRUNC, 0644);
@@ -654,7 +655,11 @@ TEST(session_check_incomplete_and_resume)
     slow_calls = 0;
     o.resume = true;
     o.before_step = slow_first_step;
+    bool quiet = model_error_quiet(false);
+    model_notice_prefix("refl capture");
     rc = rig_capture_run(&o);
+    model_error_quiet(quiet);
+    model_notice_prefix(NULL);
     rig_operator_close(o.op);
     fflush(stderr);
     dup2(saved, 2);
@@ -700,4 +705,75 @@ TEST(session_check_incomplete_and_resume)
     g_free(err);
     free(rig_text);
     test_camera_unlock(lk);
+}
+
+// A journal of a newer schema version (3; this refl writes 2 and reads 1 and
+// 2) is refused by every reader, naming the versions; one without a version
+// too.
+TEST(session_journal_newer_schema_refused)
+{
+    const char *dir = test_path("newer");
+    CHECK(mkdir(dir, 0777) == 0);
+    char db[4200];
+    snprintf(db, sizeof db, "%s/session.sqlite", dir);
+    sqlite3 *d = NULL;
+    CHECK(sqlite3_open(db, &d) == SQLITE_OK);
+    CHECK(sqlite3_exec(d, "CREATE TABLE schema_version(version INTEGER NOT NULL); "
+                       "INSERT INTO schema_version VALUES(3);", NULL, NULL, NULL) == SQLITE_OK);
+    sqlite3_close(d);
+    rig_journal_t *j = NULL;
+    CHECK(rig_journal_open(&j, dir) == RIG_ERR_PROTOCOL);
+    CHECK(j == NULL);
+    CHECK_CONTAINS(model_last_error(), "schema version 3, written by a newer refl (this refl reads versions 1 to 2)");
+    CHECK(rig_session_open(dir) == NULL);
+    CHECK_CONTAINS(model_last_error(), "schema version 3, written by a newer refl");
+    char *out = NULL, *err = NULL;
+    int rc = refl(&out, &err, "session", "check", dir, NULL);
+    CHECK(rc == 1);
+    CHECK_CONTAINS(err, "schema version 3, written by a newer refl (this refl reads versions 1 to 2)");
+    g_free(out);
+    g_free(err);
+    rc = refl(&out, &err, "capture", "--yes", "--resume", dir, NULL);
+    CHECK(rc == 1);
+    CHECK_CONTAINS(err, "refl capture: journal ");
+    CHECK_CONTAINS(err, "schema version 3, written by a newer refl");
+    g_free(out);
+    g_free(err);
+
+    CHECK(sqlite3_open(db, &d) == SQLITE_OK);
+    CHECK(sqlite3_exec(d, "DELETE FROM schema_version;", NULL, NULL, NULL) == SQLITE_OK);
+    sqlite3_close(d);
+    CHECK(rig_journal_open(&j, dir) == RIG_ERR_PROTOCOL);
+    CHECK_CONTAINS(model_last_error(), "no schema version (not a refl session journal?)");
+}
+
+// The session facts name their format (refl-session-facts); facts without the
+// keys read as version 1; a higher version is refused by the session reader.
+TEST(session_facts_newer_version_refused)
+{
+    const char *text = SMALL_PLAN;
+    rig_plan_t *p = rig_plan_parse(text, strlen(text), "plan.ini");
+    CHECK_MSG(p != NULL, "%s", model_last_error());
+    if (!p) return;
+    static const char *const facts[] = { "{\"refl_version\": \"x\"}",
+                                         "{\"format\": \"refl-session-facts\", \"version\": 1}",
+                                         "{\"format\": \"refl-session-facts\", \"version\": 2}" };
+    for (int k = 0; k < 3; k++) {
+        char name[32];
+        snprintf(name, sizeof name, "facts%d", k);
+        const char *dir = test_path(name);
+        CHECK(mkdir(dir, 0777) == 0);
+        rig_journal_t *j = NULL;
+        CHECK(rig_journal_create(&j, dir, p, "rig.ini", "[rig]\n", "0", facts[k]) == 0);
+        rig_journal_close(j);
+        rig_session_t *s = rig_session_open(dir);
+        if (k < 2) {
+            CHECK_MSG(s != NULL && s->facts != NULL, "%s: %s", facts[k], model_last_error());
+        } else {
+            CHECK(s == NULL);
+            CHECK_CONTAINS(model_last_error(), "refl-session-facts version 2, written by a newer refl");
+        }
+        rig_session_free(s);
+    }
+    rig_plan_free(p);
 }

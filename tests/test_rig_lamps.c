@@ -610,7 +610,7 @@ static void check_kill9(bool sim)
     int rc = test_run(c.argv, 20, NULL, &err);
     CHECK_MSG(rc == 0, "exit %d, stderr: %s", rc, err);
     char want[160];
-    snprintf(want, sizeof want, "refl: the last session (pid %ld, started 20", (long)pid);
+    snprintf(want, sizeof want, "refl: warning: the last session (pid %ld, started 20", (long)pid);
     CHECK_CONTAINS(err, want);
     CHECK_CONTAINS(err, "died with lamps key, back on; switching them off\n");
     free(err);
@@ -742,4 +742,34 @@ TEST(lamps_rig_file_state_file_key)
     CHECK_CONTAINS(err, "bad.ini:5: [lamps]: unknown key 'state_fil'; known keys: state_file");
     free(out);
     free(err);
+}
+
+// The lamp-state file names its format (format_version = 1); a file of a
+// higher version is refused (the lamps stay closed, the file as it was); a
+// file without the key reads as version 1.
+TEST(lamps_state_file_newer_version_refused)
+{
+    static const rig_lamp_line_t lamps[] = { { .name = "key" }, { .name = "fill" } };
+    const char *state = test_path("lamps.state");
+    rig_lamps_t *l = NULL;
+    CHECK(rig_lamps_open_sim_state(&l, lamps, 2, state) == 0);
+    rig_lamps_close(l);
+    char *st = model_read_file(state, NULL);
+    CHECK_CONTAINS(st, "\nformat_version = 1\npid = ");
+    free(st);
+
+    const char *newer = "format_version = 2\npid = 1\nstarted = 2030-01-01T00:00:00.000Z\non = key\n";
+    test_write("lamps.state", newer);
+    l = NULL;
+    CHECK(rig_lamps_open_sim_state(&l, lamps, 2, state) == RIG_ERR_PROTOCOL);
+    CHECK(l == NULL);
+    CHECK_CONTAINS(model_last_error(), "lamps.state has format_version 2, written by a newer refl (this refl reads "
+                                       "version 1)");
+    st = model_read_file(state, NULL);
+    CHECK(st && !strcmp(st, newer));
+    free(st);
+
+    test_write("lamps.state", "pid = 1\nstarted = 2030-01-01T00:00:00.000Z\non =\n");   // version 1, all off
+    CHECK(rig_lamps_open_sim_state(&l, lamps, 2, state) == 0);
+    rig_lamps_close(l);
 }

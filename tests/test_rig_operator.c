@@ -452,7 +452,7 @@ TEST(operator_resume_of_an_older_session_is_refused_clearly)
     sqlite3_close(d);
     rc = test_refl_run(120, &out, &err, "capture", "--resume", dir, "--yes", NULL);
     CHECK(rc == 1);
-    CHECK_CONTAINS(err, "2 steps stored, the plan makes 3 (a session of a refl without operator steps");
+    CHECK_CONTAINS(err, "2 steps stored, the plan makes 3 (the stored steps begin without the plan's operator step");
     g_free(out);
     g_free(err);
 }

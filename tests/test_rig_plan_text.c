@@ -161,3 +161,29 @@ TEST(plan_views_malformed)
     bad(BASE REST "[view x]\nangle_deg = 0\n[view y]\nangle_deg = 0\n", "plan.ini:14", "[view x] (line 11) already");
     bad(BASE REST "[views]\nangle_deg = 0\n", "plan.ini:11", "unknown section [views]");
 }
+
+// A plan names its format: rig_plan_text writes [plan] format_version = 1; a
+// plan without the key reads as version 1; a higher version is refused,
+// naming the line.
+TEST(plan_format_version)
+{
+    const char *body = BASE "[angles]\nlist = 0\n[lamps]\nsets = east\n[exposure]\nmode = fixed\nlist_us = 100\n";
+    rig_plan_t *p = parse(body);
+    CHECK_MSG(p != NULL, "%s", model_last_error());
+    if (!p) return;
+    CHECK(p->format_version == 1);
+    char *t = rig_plan_text(p, NULL);
+    CHECK_CONTAINS(t, "[plan]\nformat_version = 1\n");
+    rig_plan_t *q = t ? parse(t) : NULL;
+    CHECK(q && q->format_version == 1);
+    rig_plan_free(q);
+    free(t);
+    rig_plan_free(p);
+    char *newer = g_strdup_printf("[plan]\nname = n\nformat_version = 2\n%s", body);
+    bool quiet = model_error_quiet_thread(true);
+    CHECK(parse(newer) == NULL);
+    model_error_quiet_thread(quiet);
+    CHECK_CONTAINS(model_last_error(), "plan.ini:3: [plan] format_version = 2: a plan of a newer refl (this refl "
+                                       "reads format_version up to 1)");
+    g_free(newer);
+}

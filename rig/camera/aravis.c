@@ -245,8 +245,8 @@ static int read_exposure_gain(rig_camera_t *c)
 // and done goes into a->settings ("ExposureAuto=Off (was Continuous) ..."),
 // recorded with every frame.
 
-static void note(aravis_cam_t *a, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
-static void note(aravis_cam_t *a, const char *fmt, ...)
+static void settings_add(aravis_cam_t *a, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
+static void settings_add(aravis_cam_t *a, const char *fmt, ...)
 {
     size_t len = strlen(a->settings);
     if (len + 2 >= sizeof a->settings) return;
@@ -302,7 +302,7 @@ static int auto_off(rig_camera_t *c, const char *name, bool mono)
     char was[64];
     snprintf(was, sizeof was, "%s", v ? v : "?");
     if (!strcmp(was, "Off")) {
-        note(a, "%s=Off", name);
+        settings_add(a, "%s=Off", name);
         return 0;
     }
     if (has_off) arv_gc_enumeration_set_string_value(en, "Off", &e);
@@ -313,11 +313,11 @@ static int auto_off(rig_camera_t *c, const char *name, bool mono)
     v = arv_gc_enumeration_get_string_value(en, &e);
     g_clear_error(&e);
     if (v && !strcmp(v, "Off")) {
-        note(a, "%s=Off (was %s)", name, was);
+        settings_add(a, "%s=Off (was %s)", name, was);
         return 0;
     }
     if (mono && !strcmp(name, "BalanceWhiteAuto")) {   // harmless: no colour channels to balance
-        note(a, "%s=%s (warning: cannot be switched off%s; harmless on a mono camera)", name, v ? v : was, why);
+        settings_add(a, "%s=%s (warning: cannot be switched off%s; harmless on a mono camera)", name, v ? v : was, why);
         return 0;
     }
     return rig_fail(RIG_ERR_NOT_SUPPORTED, "%s: cannot switch %s off (it reads %s%s): refl needs the sensor's own "
@@ -344,7 +344,7 @@ static int bool_off(rig_camera_t *c, const char *name)
         return rig_fail(RIG_ERR_NOT_SUPPORTED, "%s: cannot switch %s off (it reads true%s): refl needs the sensor's "
                         "own linear response; switch it off with the camera's own tool or use another camera",
                         c->name, name, why);
-    note(a, was ? "%s=0 (was 1)" : "%s=0", name);
+    settings_add(a, was ? "%s=0 (was 1)" : "%s=0", name);
     return 0;
 }
 
@@ -371,7 +371,7 @@ static int gamma_off(rig_camera_t *c)
     a->gamma = 1;
     ArvGcNode *n = feature(a, "Gamma");
     if (feature(a, "GammaEnable") || !n || !ARV_IS_GC_FLOAT(n)) {
-        if (n) note(a, "Gamma=%.6g (not in effect)", number_feature(a, "Gamma"));
+        if (n) settings_add(a, "Gamma=%.6g (not in effect)", number_feature(a, "Gamma"));
         return 0;
     }
     GError *e = NULL;
@@ -384,7 +384,7 @@ static int gamma_off(rig_camera_t *c)
     if (fabs(a->gamma - 1) > 1e-6)
         return rig_fail(RIG_ERR_NOT_SUPPORTED, "%s: cannot set Gamma to 1 (it reads %.6g) and the camera has no "
                         "GammaEnable: refl needs the sensor's own linear response", c->name, a->gamma);
-    note(a, was != 1 ? "Gamma=1 (was %.6g)" : "Gamma=1", was);
+    settings_add(a, was != 1 ? "Gamma=1 (was %.6g)" : "Gamma=1", was);
     return 0;
 }
 
@@ -440,16 +440,16 @@ static int switch_off_automatics(rig_camera_t *c)
     if (rc) return rc;
     read_gain_unit(a);
     a->black_level = number_feature(a, "BlackLevel");
-    if (isfinite(a->black_level)) note(a, "BlackLevel=%.10g", a->black_level);
+    if (isfinite(a->black_level)) settings_add(a, "BlackLevel=%.10g", a->black_level);
     ArvGcNode *fw = feature(a, "DeviceFirmwareVersion");
     const char *s = fw && ARV_IS_GC_STRING(fw) ? arv_gc_string_get_value(ARV_GC_STRING(fw), NULL) : NULL;
     snprintf(a->firmware, sizeof a->firmware, "%s", s ? s : "");
     static const char *const transport[] = { "GevSCPSPacketSize", "GevSCPD" };
     for (size_t i = 0; i < sizeof transport / sizeof transport[0]; i++) {
         double v = number_feature(a, transport[i]);
-        if (isfinite(v)) note(a, "%s=%.0f", transport[i], v);
+        if (isfinite(v)) settings_add(a, "%s=%.0f", transport[i], v);
     }
-    if (!a->settings[0]) note(a, "(no automatics, gamma or LUT found)");
+    if (!a->settings[0]) settings_add(a, "(no automatics, gamma or LUT found)");
     return 0;
 }
 
@@ -465,7 +465,7 @@ static void note_set(aravis_cam_t *a, const char *name, long value)
         size_t len = strlen(a->settings);
         if (len && a->settings[len - 1] == ' ') a->settings[len - 1] = 0;
     }
-    note(a, "%s=%ld", name, value);
+    settings_add(a, "%s=%ld", name, value);
 }
 
 // Copy the radiometric state into a frame's metadata.

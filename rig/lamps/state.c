@@ -6,6 +6,7 @@
 //
 // The file (text, one "key = value" a line; '#' comments):
 //   # refl lamp state ...
+//   format_version = 1                      (this layout; a file without it is version 1)
 //   pid = 4242
 //   started = 2026-11-24T23:14:30.123Z      (when that process opened the lamps)
 //   hardware = gpiod gpiochip0:3 gpiochip0:5 gpiochip1:2
@@ -17,6 +18,9 @@
 // (not to be touched) and an unlocked one with lamps on to a dead one. The
 // file is never removed (removing a locked file would let a third process lock
 // a new one beside it); a clean close leaves "on =" empty.
+// The reader reads version 1; a file of a higher format_version is refused
+// (the lamps are not opened: it may record lamps on that only the refl that
+// wrote it reads).
 // Where: [lamps] state_file in the rig file, else $XDG_STATE_HOME/refl (default
 // ~/.local/state/refl) / <backend>-<chip>-<lines>....state, named after the
 // hardware (the sim backend keeps a file only when given one).
@@ -35,6 +39,7 @@
 #include "rig/internal.h"
 
 #define STATE_MAX 16384    // a record is below 3 KB (32 names of 63 characters)
+#define STATE_FORMAT_VERSION 1
 
 // ---------------------------------------------------------------------------
 // The default path: named after the hardware
@@ -113,8 +118,8 @@ static size_t format_record(const rig_lamps_t *l, uint32_t on, char *out, size_t
     size_t n = (size_t)snprintf(out, size,
                                 "# refl lamp state (rig/lamps/state.c): the lamps this process has on. "
                                 "Locked while it runs;\n# a later refl that finds lamps on here switches "
-                                "them off.\npid = %ld\nstarted = %s\nhardware = %s",
-                                (long)l->state_pid, l->state_started, l->ops->backend);
+                                "them off.\nformat_version = %d\npid = %ld\nstarted = %s\nhardware = %s",
+                                STATE_FORMAT_VERSION, (long)l->state_pid, l->state_started, l->ops->backend);
     for (int i = 0; i < l->n && n < size; i++)
         n += l->lamps[i].chip[0]
                  ? (size_t)snprintf(out + n, size - n, " %s:%u", l->lamps[i].chip, l->lamps[i].line)
@@ -186,6 +191,20 @@ static bool record_value(const char *text, const char *key, char *out, size_t si
     return false;
 }
 
+// A record of a newer format_version is refused (a value that is no whole
+// number: the record is damaged, and recover switches every lamp off).
+static int check_version(const rig_lamps_t *l, const char *text)
+{
+    char v[32];
+    if (!record_value(text, "format_version", v, sizeof v)) return RIG_ERR_OK;   // version 1
+    char *end;
+    long n = strtol(v, &end, 10);
+    if (end == v || *end || n <= STATE_FORMAT_VERSION) return RIG_ERR_OK;
+    return rig_fail(RIG_ERR_PROTOCOL, "%s lamps: the lamp-state file %s has format_version %ld, written by a newer "
+                    "refl (this refl reads version %d): its lamps may be on; open them with that refl, or give the "
+                    "rig file's [lamps] state_file = PATH", l->ops->backend, l->state_path, n, STATE_FORMAT_VERSION);
+}
+
 // A dead process's record with lamps on: report it and switch every lamp off.
 static int recover(rig_lamps_t *l, const char *text)
 {
@@ -196,11 +215,11 @@ static int recover(rig_lamps_t *l, const char *text)
     if (!record_value(text, "started", started, sizeof started) || !started[0])
         snprintf(started, sizeof started, "unknown");
     if (has_on)
-        fprintf(stderr, "refl: the last session (pid %s, started %s) died with lamps %s on; switching them "
-                "off\n", pid, started, on);
+        model_warning("the last session (pid %s, started %s) died with lamps %s on; switching them off", pid, started,
+                      on);
     else
-        fprintf(stderr, "refl: the lamp-state file %s is unreadable (the last session, pid %s, started %s, "
-                "may have died while writing it); switching every lamp off\n", l->state_path, pid, started);
+        model_warning("the lamp-state file %s is unreadable (the last session, pid %s, started %s, may have died "
+                      "while writing it); switching every lamp off", l->state_path, pid, started);
     int err = l->ops->set(l, 0);
     if (err && l->ops->emergency_off) l->ops->emergency_off(l);
     l->on_mask = 0;
@@ -253,7 +272,7 @@ int rig_lamps_state_open(rig_lamps_t *l, const char *path)
     char text[STATE_MAX];
     ssize_t r = pread(fd, text, sizeof text - 1, 0);
     text[r > 0 ? r : 0] = 0;
-    if (r > 0 && (err = recover(l, text))) return err;
+    if (r > 0 && ((err = check_version(l, text)) || (err = recover(l, text)))) return err;
 
     l->state_pid = getpid();
     model_utc_text(model_realtime_s(), l->state_started);

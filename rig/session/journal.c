@@ -1,7 +1,19 @@
-// rig/session/journal.c — the session journal: DIR/session.sqlite (see rig/rig.h,
-// "Capture sessions"). WAL mode, synchronous = FULL, one transaction per frame;
-// a schema_version table; calls are serialised by a mutex (the capture's main
+// rig/session/journal.c — the session journal: DIR/session.sqlite (see
+// rig/session/session.h, "Capture sessions"). WAL mode, synchronous = FULL, one
+// transaction per frame; calls are serialised by a mutex (the capture's main
 // thread logs events while the writer thread commits frames).
+//
+// The schema's version is the one row of table schema_version:
+//   1  frames keyed by step (a session of one camera), without the camera
+//      column; the columns gain_unit, black_level, gamma, temperature_c,
+//      firmware and camera_settings may be missing.
+//   2  frames keyed by (step, camera), with the camera column (the rig file's
+//      name of the camera) and every column of RIG_FRAME_COLUMNS. Written
+//      by this refl.
+// The reader reads versions 1 and 2. A version-1 journal is migrated to 2 when
+// opened (one transaction: its frames become camera "camera"). A frame column
+// a journal lacks reads as NULL ("" or 0), and writing a frame adds it. A
+// journal of a higher version, or without one, is refused naming both.
 #define _GNU_SOURCE
 #include <errno.h>
 #include <glib.h>
@@ -17,9 +29,10 @@
 #include <time.h>
 
 #include "model/model.h"
+#include "model/base/report.h"
 #include "rig/rig.h"
 
-#define SCHEMA_VERSION 2   // 2: frames keyed by (step, camera); 1 is migrated on open
+#define SCHEMA_VERSION 2   // the version written; versions 1 to SCHEMA_VERSION are read
 
 struct rig_journal {
     sqlite3        *db;
@@ -62,8 +75,8 @@ static const struct {
 
 typedef enum { FRAMES_CREATE, FRAMES_INSERT, FRAMES_SELECT } frames_sql_t;
 
-// Does the journal's frames table have this column? (Journals of an older refl
-// lack the later ones: gain_unit, black_level, ...)
+// Does the journal's frames table have this column? (A version-1 journal may
+// lack gain_unit .. camera_settings.)
 static bool frames_has_column(sqlite3 *db, const char *column)
 {
     sqlite3_stmt *s = NULL;
@@ -79,14 +92,14 @@ static bool frames_has_column(sqlite3 *db, const char *column)
 
 // "CREATE TABLE frames(...);", "INSERT INTO frames VALUES(?,...)" or
 // "SELECT ... FROM frames ORDER BY step" (the columns rig_frame_row_t holds;
-// with db, a column an older journal lacks reads as NULL: "" or 0).
+// with db, a column the journal lacks reads as NULL: "" or 0).
 // Caller g_free()s.
 static char *frames_sql(frames_sql_t what, sqlite3 *db)
 {
     GString *q = g_string_new(what == FRAMES_CREATE   ? "CREATE TABLE frames("
                               : what == FRAMES_INSERT ? "INSERT INTO frames("
                                                       : "SELECT ");
-    if (what == FRAMES_INSERT) {   // by name: a journal of an older refl has its columns in another order
+    if (what == FRAMES_INSERT) {   // by name: a journal with added columns has them in another order
         for (int i = 0; i < NFRAME_COLUMNS; i++)
             g_string_append_printf(q, "%s%s", i ? "," : "", frame_columns[i].column);
         g_string_append(q, ") VALUES(");
@@ -146,7 +159,7 @@ static int jfail(rig_journal_t *j, const char *what)
 {
     int code = j && j->db ? sqlite3_extended_errcode(j->db) : SQLITE_ERROR;
     bool full = (code & 0xff) == SQLITE_FULL;
-    return rig_fail(full ? RIG_ERR_IO : RIG_ERR_IO, "journal %s: %s: %s%s", j && j->path ? j->path : "?", what,
+    return rig_fail(RIG_ERR_IO, "journal %s: %s: %s%s", j && j->path ? j->path : "?", what,
                     j && j->db ? sqlite3_errmsg(j->db) : "out of memory",
                     full ? " (disk full: free space, then refl capture --resume)" : "");
 }
@@ -157,7 +170,7 @@ static int jfail(rig_journal_t *j, const char *what)
 static int migrate_v1(rig_journal_t *j)
 {
     GString *cols = g_string_new("");
-    for (int i = 0; i < NFRAME_COLUMNS; i++)   // the columns it has (an older refl's lack the later ones)
+    for (int i = 0; i < NFRAME_COLUMNS; i++)   // the columns it has (a version-1 journal may lack some)
         if (strcmp(frame_columns[i].column, "camera") && frames_has_column(j->db, frame_columns[i].column))
             g_string_append_printf(cols, "%s%s", cols->len ? "," : "", frame_columns[i].column);
     char *create = frames_sql(FRAMES_CREATE, NULL);
@@ -213,13 +226,17 @@ static int open_db(rig_journal_t **out, const char *dir, bool create)
             sqlite3_step(s) == SQLITE_ROW)
             v = sqlite3_column_int(s, 0);
         sqlite3_finalize(s);
-        if (v == 1 && (rc = migrate_v1(j))) goto fail;
-        if (v == 1) v = SCHEMA_VERSION;
-        if (v != SCHEMA_VERSION) {
-            rc = rig_fail(RIG_ERR_PROTOCOL, "journal %s: schema version %d, this refl reads version %d", j->path, v,
-                          SCHEMA_VERSION);
+        if (v < 1) {
+            rc = rig_fail(RIG_ERR_PROTOCOL, "journal %s: no schema version (not a refl session journal?); this "
+                          "refl reads versions 1 to %d", j->path, SCHEMA_VERSION);
             goto fail;
         }
+        if (v > SCHEMA_VERSION) {
+            rc = rig_fail(RIG_ERR_PROTOCOL, "journal %s: schema version %d, written by a newer refl (this refl "
+                          "reads versions 1 to %d)", j->path, v, SCHEMA_VERSION);
+            goto fail;
+        }
+        if (v == 1 && (rc = migrate_v1(j))) goto fail;
     }
     *out = j;
     return 0;
@@ -339,9 +356,17 @@ int rig_journal_source(rig_journal_t *j, const char *which, char **path, char **
     if (sqlite3_prepare_v2(j->db, sql, -1, &s, NULL) != SQLITE_OK || sqlite3_step(s) != SQLITE_ROW) {
         rc = jfail(j, "cannot read the session");
     } else {
-        if (path) *path = col_text(s, 0);
-        if (text) *text = col_text(s, 1);
-        if (sha256) *sha256 = col_text(s, 2);
+        char *v[3] = { col_text(s, 0), col_text(s, 1), col_text(s, 2) };
+        if (!v[0] || !v[1] || !v[2]) {
+            rc = rig_fail(RIG_ERR_NO_MEM, "journal %s: out of memory", j->path);
+            for (int i = 0; i < 3; i++) free(v[i]);
+        } else {
+            char **out[3] = { path, text, sha256 };
+            for (int i = 0; i < 3; i++) {
+                if (out[i]) *out[i] = v[i];
+                else free(v[i]);
+            }
+        }
     }
     sqlite3_finalize(s);
     pthread_mutex_unlock(&j->lock);
@@ -356,8 +381,8 @@ int rig_journal_facts(rig_journal_t *j, char **json)
     if (sqlite3_prepare_v2(j->db, "SELECT facts_json FROM session", -1, &s, NULL) != SQLITE_OK ||
         sqlite3_step(s) != SQLITE_ROW)
         rc = jfail(j, "cannot read the session");
-    else
-        *json = col_text(s, 0);
+    else if (!(*json = col_text(s, 0)))
+        rc = rig_fail(RIG_ERR_NO_MEM, "journal %s: out of memory", j->path);
     sqlite3_finalize(s);
     pthread_mutex_unlock(&j->lock);
     return rc;
@@ -412,6 +437,11 @@ int rig_journal_steps(rig_journal_t *j, rig_step_t **steps, char **status, int *
     if (total < 0) return jfail(j, "cannot read the steps");
     rig_step_t *st = calloc((size_t)total + 1, sizeof *st);
     char *stat = calloc((size_t)total + 1, 1);
+    if (!st || !stat) {
+        free(st);
+        free(stat);
+        return rig_fail(RIG_ERR_NO_MEM, "journal %s: out of memory for %d steps", j->path, total);
+    }
     sqlite3_stmt *s = NULL;
     int rc = 0, k = 0;
     pthread_mutex_lock(&j->lock);
@@ -489,8 +519,8 @@ int rig_journal_frames(rig_journal_t *j, rig_frame_row_t **rows, int *n)
     return 0;
 }
 
-// A journal of an older refl, resumed: the frame columns it lacks are added
-// (its earlier frames hold NULL there). Within the frame's transaction.
+// A journal without some frame columns, written to: they are added (its
+// earlier frames hold NULL there). Within the frame's transaction.
 static int add_frame_columns(rig_journal_t *j)
 {
     if (j->frame_columns_ok) return 0;
@@ -500,7 +530,7 @@ static int add_frame_columns(rig_journal_t *j)
                                     (int)strcspn(frame_columns[i].decl, " "), frame_columns[i].decl);
         int ok = sqlite3_exec(j->db, sql, NULL, NULL, NULL);
         g_free(sql);
-        if (ok != SQLITE_OK) return jfail(j, "cannot add a frame column to an older journal");
+        if (ok != SQLITE_OK) return jfail(j, "cannot add a missing frame column");
     }
     j->frame_columns_ok = true;
     return 0;
@@ -706,20 +736,32 @@ void rig_frame_rows_write_csv(FILE *f, const rig_frame_row_t *rows, int n)
 
 json_t *rig_frame_rows_json(const rig_frame_row_t *rows, int n)
 {
-    json_t *a = json_array();
-    for (int i = 0; a && i < n; i++) {
+    json_t *doc = json_object(), *a = json_array();
+    if (!doc || !a) {
+        json_decref(doc);
+        json_decref(a);
+        return NULL;
+    }
+    model_json_set_format(doc, RIG_SESSION_FRAMES_FORMAT, RIG_SESSION_FRAMES_VERSION);
+    if (json_object_set_new(doc, "frames", a)) {   // (takes a, also when it fails)
+        json_decref(doc);
+        return NULL;
+    }
+    for (int i = 0; i < n; i++) {
         const rig_frame_row_t *r = &rows[i];
         json_t *o = json_object();
-        if (!o) break;
+        if (!o || json_array_append_new(a, o)) {
+            json_decref(doc);
+            return NULL;
+        }
 #define JSON_INT(name)  json_object_set_new(o, #name, json_integer(r->name));
-#define JSON_REAL(name) json_object_set_new(o, #name, isfinite(r->name) ? json_real(r->name) : json_null());
+#define JSON_REAL(name) json_object_set_new(o, #name, model_json_number(r->name));
 #define JSON_TEXT(name) json_object_set_new(o, #name, json_string(r->name));
 #define JSON_U64(name)  json_object_set_new(o, #name, json_integer((json_int_t)r->name));
 #define JSON_UTC(name)
 #define JSON_(kind, name, column, decl, csv, size) JSON_##kind(name)
         RIG_FRAME_COLUMNS(JSON_)
 #undef JSON_
-        json_array_append_new(a, o);
     }
-    return a;
+    return doc;
 }

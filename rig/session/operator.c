@@ -33,9 +33,12 @@ rig_operator_t *rig_operator_open(bool yes, const char *input)
     }
     op->yes = yes;
     if (input) {
-        op->path = strdup(input);
-        op->f = fopen(input, "r");
-        if (!op->f || !op->path) {
+        if (!(op->path = strdup(input))) {
+            rig_fail(RIG_ERR_NO_MEM, "operator: out of memory");
+            rig_operator_close(op);
+            return NULL;
+        }
+        if (!(op->f = fopen(input, "r"))) {
             rig_fail(RIG_ERR_IO, "--operator-input %s: cannot read it: %s", input, strerror(errno));
             rig_operator_close(op);
             return NULL;
@@ -90,9 +93,9 @@ int rig_operator_ask(rig_operator_t *op, int step, const char *instruction, char
 {
     char now[40];
     model_utc_text(model_realtime_s(), now);
-    fprintf(stderr, "\nrefl: OPERATOR STEP %d: %s\n", step, instruction);
+    model_note("OPERATOR STEP %d: %s", step, instruction);
     if (op && op->yes) {
-        fprintf(stderr, "refl: answered done (--yes)\n");
+        model_note("answered done (--yes)");
         snprintf(how, size, "done: --yes, %s", now);
         return RIG_OPERATOR_DONE;
     }
@@ -105,7 +108,7 @@ int rig_operator_ask(rig_operator_t *op, int step, const char *instruction, char
         }
         op->line++;
         if (is_done(a)) {
-            fprintf(stderr, "refl: answered done (--operator-input %s:%d)\n", op->path, op->line);
+            model_note("answered done (--operator-input %s:%d)", op->path, op->line);
             snprintf(how, size, "done: --operator-input %s:%d, %s", op->path, op->line, now);
             return RIG_OPERATOR_DONE;
         }
@@ -121,11 +124,15 @@ int rig_operator_ask(rig_operator_t *op, int step, const char *instruction, char
         return RIG_OPERATOR_PAUSE;
     }
     for (;;) {
-        fprintf(stderr, "refl: press Enter when done, q to pause: ");
-        fflush(stderr);
+        // the prompt: a progress line stays open on a terminal, the answer is typed after it
+        model_progress("press Enter when done, q to pause: ");
         errno = 0;
-        if (!read_answer(stdin, a, sizeof a)) {
-            snprintf(how, size, "%s", errno == EINTR ? "interrupted (Ctrl-C) at the prompt" : "end of input on the terminal");
+        bool got = read_answer(stdin, a, sizeof a);
+        int read_errno = errno;
+        model_progress_end();
+        if (!got) {
+            snprintf(how, size, "%s",
+                     read_errno == EINTR ? "interrupted (Ctrl-C) at the prompt" : "end of input on the terminal");
             clearerr(stdin);
             return RIG_OPERATOR_PAUSE;
         }
@@ -138,7 +145,6 @@ int rig_operator_ask(rig_operator_t *op, int step, const char *instruction, char
             snprintf(how, size, "the operator answered '%s' on the terminal", a);
             return RIG_OPERATOR_PAUSE;
         }
-        fprintf(stderr, "refl: '%s' is not an answer: Enter (or done, y, yes) when done, q (or pause, stop) to "
-                "pause\n", a);
+        model_note("'%s' is not an answer: Enter (or done, y, yes) when done, q (or pause, stop) to pause", a);
     }
 }

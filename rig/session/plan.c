@@ -20,7 +20,7 @@
 
 static const char *const sections[] = { "plan", "sample", "angles", "lamps", "exposure", "capture", "operator" };
 static const char *const keys[] = {
-    "plan: name operator notes", "sample: name kind tilt_deg tilt_azimuth_deg instruction", "angles: list range",
+    "plan: format_version name operator notes", "sample: name kind tilt_deg tilt_azimuth_deg instruction", "angles: list range",
     "lamps: sets", "operator: end",
     "exposure: mode list_us target_fraction roi gain pixel_format",
     "capture: repeats dark_every settle_ms lamp_settle_ms frame_timeout_s retries",
@@ -112,6 +112,20 @@ static bool check_keys(const model_ini_t *ini)
             }
         }
     }
+    return true;
+}
+
+// [plan] format_version: 1 when absent; a higher one than this refl reads is refused.
+static bool parse_format_version(rig_plan_t *p, const model_ini_t *ini)
+{
+    double v = 1;
+    if (!get_number(ini, "plan", "format_version", &v, 1, 1e6, true)) return false;
+    if (v > RIG_PLAN_FORMAT_VERSION) {
+        model_error(ini->path, get(ini, "plan", "format_version")->line, "[plan] format_version = %.0f: a plan "
+                    "of a newer refl (this refl reads format_version up to %d)", v, RIG_PLAN_FORMAT_VERSION);
+        return false;
+    }
+    p->format_version = (int)v;
     return true;
 }
 
@@ -387,6 +401,7 @@ rig_plan_t *rig_plan_parse(const char *text, size_t len, const char *name)
             goto done;
         }
     }
+    if (!parse_format_version(p, ini)) goto done;
     copy_text(ini, "plan", "name", p->name, sizeof p->name);
     copy_text(ini, "plan", "operator", p->operator_name, sizeof p->operator_name);
     copy_text(ini, "plan", "notes", p->notes, sizeof p->notes);
@@ -709,7 +724,7 @@ char *rig_plan_text(const rig_plan_t *p, const char *comment)
         for (int i = 0; lines[i]; i++) g_string_append_printf(t, "#%s%s\n", lines[i][0] ? " " : "", lines[i]);
         g_strfreev(lines);
     }
-    g_string_append(t, "[plan]\n");
+    g_string_append_printf(t, "[plan]\nformat_version = %d\n", RIG_PLAN_FORMAT_VERSION);
     bool ok = put_text(t, "name", p->name, true) && put_text(t, "operator", p->operator_name, true) &&
               put_text(t, "notes", p->notes, true);
     g_string_append(t, "\n[sample]\n");

@@ -12,6 +12,7 @@
 #include <unistd.h>
 
 #include "model/model.h"
+#include "model/base/report.h"
 #include "rig/rig.h"
 
 
@@ -25,11 +26,27 @@ void rig_session_free(rig_session_t *s)
     free(s);
 }
 
+bool rig_journal_facts_read(rig_journal_t *j, json_t **facts)
+{
+    *facts = NULL;
+    char *text = NULL;
+    if (rig_journal_facts(j, &text)) return false;
+    json_t *f = text[0] ? json_loads(text, 0, NULL) : NULL;
+    free(text);
+    if (f && !model_json_format_check(f, rig_journal_path(j), RIG_SESSION_FACTS_FORMAT, RIG_SESSION_FACTS_VERSION,
+                                      NULL)) {
+        json_decref(f);
+        return false;
+    }
+    *facts = f;
+    return true;
+}
+
 rig_session_t *rig_session_open(const char *dir)
 {
     rig_session_t *s = calloc(1, sizeof *s);
     rig_journal_t *j = NULL;
-    char *psha = NULL, *rsha = NULL, *facts = NULL;
+    char *psha = NULL, *rsha = NULL;
     if (!s || !(s->dir = strdup(dir))) goto oom;
     bool q = model_error_quiet_thread(true);
     int e = rig_journal_open(&j, dir);
@@ -51,10 +68,12 @@ rig_session_t *rig_session_open(const char *dir)
     }
     snprintf(s->plan_sha256, sizeof s->plan_sha256, "%s", psha);
     snprintf(s->rig_sha256, sizeof s->rig_sha256, "%s", rsha);
-    if (!rig_journal_facts(j, &facts) && facts[0]) s->facts = json_loads(facts, 0, NULL);
+    if (!rig_journal_facts_read(j, &s->facts)) {
+        model_error(dir, 0, "cannot read the session's facts: %s", model_last_error());
+        goto fail;
+    }
     free(psha);
     free(rsha);
-    free(facts);
     rig_journal_close(j);
     return s;
 oom:
@@ -62,7 +81,6 @@ oom:
 fail:
     free(psha);
     free(rsha);
-    free(facts);
     rig_journal_close(j);
     rig_session_free(s);
     return NULL;

@@ -23,7 +23,9 @@ typedef struct rig_operator rig_operator_t;   // the operator's answers (below)
 // Capture sessions (rig/session/plan.c, rig/session/journal.c, rig/session/capture.c, rig/cmd_capture.c)
 //
 // A plan file (INI, see examples/plans/) says what to capture:
-//   [plan]     name = TEXT; operator = TEXT; notes = TEXT (all optional)
+//   [plan]     name = TEXT; operator = TEXT; notes = TEXT (all optional); format_version =
+//              the plan format's version (RIG_PLAN_FORMAT_VERSION, which rig_plan_text
+//              writes; absent: 1; a higher one than this refl reads is refused)
 //   [sample]   name = NAME (on a virtual rig: a [sample NAME] of its truth file, put on the
 //              table); kind = material_coupon | reference_white | chessboard | mirror_sphere |
 //              workpiece | uniform_source; tilt_deg = the wedge the sample stands on (-80..80,
@@ -77,9 +79,11 @@ typedef struct rig_operator rig_operator_t;   // the operator's answers (below)
 // file's camera name): each step triggers every camera, one after the other
 // in the rig file's order, at the step's angle and lamps; a step is done when
 // every camera's frame is committed, and --resume takes the missing
-// (step, camera) frames only. Journal schema version 2 (frames keyed by
-// (step, camera)); a version-1 journal (one camera) is migrated when opened:
-// its frames become camera "camera". A frame is
+// (step, camera) frames only. The journal's schema versions (table
+// schema_version; rig/session/journal.c): 1, frames keyed by step (one
+// camera); 2, frames keyed by (step, camera), written by this refl. Versions 1
+// and 2 are read (a version-1 journal is migrated to 2 when opened: its frames
+// become camera "camera"); a higher version is refused. A frame is
 // written to frames/.sNNNNNN.png.part, fsync'ed, hashed, committed with its row
 // (one transaction), then linked to its name (link(2): nothing is overwritten)
 // and the temporary name removed; --resume re-links committed frames whose link
@@ -117,8 +121,11 @@ typedef struct {
     bool    *exposures;             // nexposures (auto: the sorted ladder's order)
 } rig_plan_view_t;
 
+#define RIG_PLAN_FORMAT_VERSION 1   // the plan format written and read (versions 1 to this)
+
 typedef struct {
     char    *path, *text;           // file name, contents
+    int      format_version;        // [plan] format_version as read (1 when absent)
     char     sha256[65];
     char     name[128], operator_name[128], notes[512];
     char     sample[64], sample_kind[32];
@@ -172,7 +179,8 @@ int rig_plan_operator_pose(const rig_plan_t *p, rig_t *r, int step, char *what, 
 double rig_plan_floor_s(const rig_plan_t *p, const rig_t *r, int from_step);
 
 // The plan as a plan file's text (rig/session/plan.c, at its end): every section with
-// every value (angles as a list, [view NAME] sections as held), that
+// every value ([plan] format_version = RIG_PLAN_FORMAT_VERSION first, angles as a
+// list, [view NAME] sections as held), that
 // rig_plan_parse reads back to the same steps. comment (may be NULL): lines
 // written first as '# ' comments. NULL (model_error) when a text field holds
 // what a plan file cannot (a line break, '#' after a blank, ';' in a lamp set).
@@ -191,12 +199,13 @@ typedef struct rig_journal rig_journal_t;
 // reading the database; not in the struct, not exported). `file` is relative
 // to the session directory. The camera's radiometric state (rig_frame_meta_t):
 // gain_unit (the unit of `gain`, GenICam's <Unit>: "dB", "x", or "raw" when
-// the camera states none; model_gain_factor converts; empty in sessions of
-// older refl, whose gains were dB), black_level and temperature_c (NULL in
-// the database where the camera has none; read back as 0), gamma (1 when
+// the camera states none; model_gain_factor converts; empty where the journal
+// lacks the column, whose gains are dB), black_level and temperature_c (NULL
+// in the database where the camera has none; read back as 0), gamma (1 when
 // off), firmware, camera_settings (the automatics, gamma, LUT and transport
-// settings refl found, switched off and read back). Journals of an older refl
-// lack the later columns: they read as NULL, and a resume adds them.
+// settings refl found, switched off and read back). A version-1 journal may
+// lack gain_unit .. camera_settings: they read as NULL, and the first frame
+// written (a resume) adds them.
 // A frame's key is (step, camera): `camera` (last,
 // so that readers of the CSV by position keep their columns) is the
 // rig file's name of the camera that took it ("camera" for a plain [camera]
@@ -242,13 +251,21 @@ typedef struct {
 } rig_frame_row_t;
 
 // `refl session export`: the rows as CSV (a header line with the field names,
-// then one line per row) or as a JSON array of objects (NULL: out of memory).
+// then one line per row) or as a JSON document (NULL: out of memory):
+//   {"format": "refl-session-frames", "version": 1, "frames": [{FIELD: VALUE, ...}, ...]}
+// (a REAL that is not finite is null).
+#define RIG_SESSION_FRAMES_FORMAT  "refl-session-frames"
+#define RIG_SESSION_FRAMES_VERSION 1
 void    rig_frame_rows_write_csv(FILE *f, const rig_frame_row_t *rows, int n);
 json_t *rig_frame_rows_json(const rig_frame_row_t *rows, int n);
 
 // Create DIR/session.sqlite (fails when it exists) with the session and every
 // step pending. session_json: a JSON object of session facts (camera serials,
-// settings snapshot, calibrations, versions, operator notes).
+// settings snapshot, calibrations, versions, operator notes), format
+// RIG_SESSION_FACTS_FORMAT version RIG_SESSION_FACTS_VERSION (model_json_set_format;
+// facts without the keys read as version 1; readers refuse a higher version).
+#define RIG_SESSION_FACTS_FORMAT  "refl-session-facts"
+#define RIG_SESSION_FACTS_VERSION 1
 int  rig_journal_create(rig_journal_t **out, const char *dir, const rig_plan_t *p, const char *rig_path,
                         const char *rig_text, const char *rig_sha256, const char *session_json);
 int  rig_journal_open(rig_journal_t **out, const char *dir);
@@ -258,6 +275,10 @@ int  rig_journal_source(rig_journal_t *j, const char *which, char **path, char *
 int  rig_journal_nsteps(rig_journal_t *j);
 // The session facts (JSON object text, as given at create). Caller frees.
 int  rig_journal_facts(rig_journal_t *j, char **json);
+// The session facts parsed (rig/session/reader.c): *facts NULL when there are
+// none or they are not JSON. false (model_error_set naming the journal) when
+// they cannot be read or are of a version above RIG_SESSION_FACTS_VERSION.
+bool rig_journal_facts_read(rig_journal_t *j, json_t **facts);
 // SQLite's PRAGMA integrity_check on the journal: *result (caller frees with
 // g_free) is "ok" when the database is intact, else SQLite's findings (joined
 // by "; "). 0, or a RIG_ERR_* when the check cannot run.
@@ -310,26 +331,40 @@ void             rig_session_free(rig_session_t *s);
 float           *rig_session_frame(const rig_session_t *s, int i, int *width, int *height);
 
 
+// What a run did (rig_capture_run fills it when asked): the command prints it.
+typedef struct {
+    bool   complete;            // the session is complete (exit 0)
+    bool   was_complete;        // --resume found it complete: nothing was done
+    int    steps;               // the plan's steps
+    int    frames, frames_run;  // the session's frames, those written by this run
+    bool   auto_exposure;       // auto bracketing (the steps it skips take no frame)
+    double wall_s;              // this run, without the operator's time and homing
+    double floor_s;             // the hardware floor of the steps this run carried out
+    double camera_s;            // in the camera: trigger to frame in hand, summed
+    double writer_wait_s;       // waiting for the writer's queue, summed
+} rig_capture_summary_t;
+
 // Run (or continue) a session. Exit codes of refl capture: 0 complete, 1 error
-// or fault (stopped), 3 paused (SIGINT or camera not answering: resume later).
+// or fault (stopped; model_last_error says why), 3 paused (SIGINT, an operator
+// step not answered or the camera not answering: a note says why; resume
+// later). Progress, homing, resume and pause go through model_note /
+// model_progress (the command's prefix); nothing is printed on stdout.
 typedef struct {
     const char *plan_path, *rig_path, *dir;
-    bool        resume, allow_changed, dry_run;
+    bool        resume, allow_changed;
     const char *operator_name, *notes;
     const char *command_line;
     // A calibration directory (refl calib ... -o DIR, or one holding geometry/,
     // lamps/, gain/, white/): its files are recorded in the session facts by
     // path and sha256 (NULL: none). Frames stay raw.
     const char *calib_dir;
-    int         progress;           // -1 auto (bar on a TTY), 0 plain lines, 1 bar
+    int         progress;           // -1 auto (bar on a TTY), 0 a note a step, 1 bar (model_progress)
     // Called before each step is carried out (after the rig is open): for
     // tests (fault injection) and instrumentation; may be NULL.
     void      (*before_step)(void *ctx, rig_t *r, int step);
     void       *hook_ctx;
-    // Out (may be NULL): the session's wall time, the hardware floor of the
-    // steps run, the number of frames written in this run.
-    double     *wall_s, *floor_s;
-    int        *frames_written;
+    // Out (may be NULL): what the run did.
+    rig_capture_summary_t *summary;
     // Who answers the operator steps (NULL: the terminal, or a pause when
     // stdin is not one). Shared by the sessions of one command.
     rig_operator_t *op;

@@ -799,7 +799,7 @@ static int ask_params(rig_turntable_t *t, unsigned req, unsigned rep, const char
 // offset (MOT_GET_HOMEPARAMS: channel, direction, limit switch u16; velocity,
 // offset distance i32), for time estimates and time-outs. A controller that
 // does not answer, or answers nonsense, leaves the stage table's values (a
-// note on stderr says so).
+// note says so).
 static int read_motion_params(rig_turntable_t *t)
 {
     apt_t *a = A(t);
@@ -822,10 +822,11 @@ static int read_motion_params(rig_turntable_t *t)
     bool ok = !r && speed > 1e-3 && speed < 1e4 && accel > 1e-3 && accel < 1e6 && home > 1e-3 && home < 1e4 &&
               fabs(offset) < 360;
     if (!ok) {
-        fprintf(stderr, "%s: note: %s; time estimates and time-outs use the stage table's %g deg/s, %g deg/s^2\n",
-                t->name, r == RIG_ERR_TIMEOUT ? "no reply to MOT_REQ_VELPARAMS/MOT_REQ_HOMEPARAMS"
-                : r ? "a short VELPARAMS/HOMEPARAMS reply" : "the controller's VELPARAMS/HOMEPARAMS are out of range",
-                a->speed_deg_s, a->accel_deg_s2);
+        model_note("%s: %s; time estimates and time-outs use the stage table's %g deg/s, %g deg/s^2", t->name,
+                   r == RIG_ERR_TIMEOUT ? "no reply to MOT_REQ_VELPARAMS/MOT_REQ_HOMEPARAMS"
+                   : r                  ? "a short VELPARAMS/HOMEPARAMS reply"
+                                        : "the controller's VELPARAMS/HOMEPARAMS are out of range",
+                   a->speed_deg_s, a->accel_deg_s2);
         return drain(t);
     }
     a->speed_deg_s = speed;
