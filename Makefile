@@ -141,6 +141,8 @@ CALIB_GAIN_SRC := \
     calib/gain/input.c \
     calib/gain/capture.c \
     calib/gain/analyse.c \
+    calib/gain/dark.c \
+    calib/gain/sweep.c \
     calib/gain/fit.c \
     calib/gain/ptc.c \
     calib/gain/linearity.c \

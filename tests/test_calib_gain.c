@@ -23,6 +23,7 @@
 #include "model/model.h"
 #include "model/base/vec.h"
 #include "rig/rig.h"
+#include "rig/virtual/truth.h"
 #include "tests/test.h"
 
 static const char *truth_path(void)
@@ -719,24 +720,24 @@ TEST(calib_gain_numerics)
     CHECK(calib_gain_correlation(out, pat, W * H) > 0.99);
 }
 
-// calib_gain_truth_radiance, the comparison's only reader of the truth: the
-// flat-field source's radiance per lamp from a virtual rig's session facts;
-// nothing without them.
-TEST(calib_gain_truth_radiance_stage)
+// calib_gain_radiance_of_truth: the radiance these tests give refl calib gain
+// (--radiance 5000) is the truth's: its flat-field source's radiance per lamp
+// (1000) times its 5 lamps. The calibration itself never reads the truth.
+TEST(calib_gain_radiance_of_truth)
 {
-    json_t *facts = json_pack("{s:{s:s, s:s}}", "virtual_rig", "truth", truth_path(), "sample", "flat_field");
-    const char *tp = NULL;
+    rig_truth_t *t = rig_truth_load(truth_path());
+    CHECK(t != NULL);
+    if (!t) return;
     double r = 0;
-    CHECK(calib_gain_truth_radiance(facts, &tp, &r));
+    CHECK(rig_truth_uniform_radiance(t, "flat_field", &r));
     CHECK_NEAR(r, 1000, 1e-9);
-    CHECK(tp && !strcmp(tp, truth_path()));
-    json_decref(facts);
-    facts = json_pack("{s:{s:s, s:s}}", "virtual_rig", "truth", truth_path(), "sample", "calib_board");
-    CHECK(!calib_gain_truth_radiance(facts, NULL, &r));   // not a uniform source
-    CHECK(isnan(r));
-    json_decref(facts);
-    CHECK(!calib_gain_truth_radiance(NULL, &tp, &r));
-    CHECK(tp == NULL && isnan(r));
+    model_lamps_t *lamps = rig_truth_lamps(t);
+    CHECK(lamps && lamps->n == 5);
+    model_lamps_free(lamps);
+    bool q = model_error_quiet_thread(true);
+    CHECK(!rig_truth_uniform_radiance(t, "calib_board", &r));   // not a uniform source
+    model_error_quiet_thread(q);
+    rig_truth_free(t);
 }
 
 // calib_set_camera_layouts: the calibration set of one camera of a directory
@@ -756,7 +757,7 @@ TEST(calib_set_camera_layouts)
     static const char *const dirs[] = { "one", "two/geometry", "two/right", "two/lamps", "two/gain/right",
                                         "two/white/right", "two/left" };
     for (size_t k = 0; k < sizeof dirs / sizeof dirs[0]; k++) g_mkdir_with_parents(test_path(dirs[k]), 0755);
-    // one camera, as before: no camera, the gain calibration's gain 0 dB
+    // one camera, a version 1 gain.json without camera, gain or unit: 0 dB
     test_write("one/camera.cameramodel", cm);
     test_write("one/lamps.json", lamps);
     test_write("one/gain.json", "{\"camera\": \"camera\", \"system_gain_dn_per_e\": 0.25, \"read_noise_e\": 6}\n");
@@ -812,8 +813,60 @@ TEST(calib_set_camera_layouts)
     free(cm);
 }
 
+// calib_gain_analyse_phases: the dark model, the sweep and photon transfer
+// of one gain on groups with known statistics (no frames): dark level 100 DN
+// + 0.001 DN/us, dark variance 4 DN^2 + 1e-4 DN^2/us, measured at four
+// exposures of their own (every sweep step takes the dark model); signal
+// 0.5 DN/us with variance K = 0.25 DN/e- times it up to 2800 DN, then
+// saturated. Missing darks and too few steps are errors.
+TEST(calib_gain_analyse_phases)
+{
+    enum { NS = 60, ND = 4 };
+    calib_gain_group_t g[NS + ND];
+    static const double tdark[ND] = { 150, 2050, 4050, 8050 };
+    for (int i = 0; i < ND; i++)
+        g[i] = (calib_gain_group_t){ .exposure_us = tdark[i], .dark = true, .set = CALIB_GAIN_SET_DARK, .n = 2,
+                                     .mean_dn = 100 + 0.001 * tdark[i], .var_dn2 = 4 + 1e-4 * tdark[i] };
+    for (int i = 0; i < NS; i++) {
+        double t = 100.0 * (i + 1), mu = 0.5 * t;
+        bool sat = mu > 2800;
+        g[ND + i] = (calib_gain_group_t){ .exposure_us = t, .set = CALIB_GAIN_SET_SWEEP, .n = 2,
+                                          .mean_dn = 100 + 0.001 * t + (sat ? 2800 : mu),
+                                          .var_dn2 = 4 + 1e-4 * t + (sat ? 1 : 0.25 * mu) };
+    }
+    calib_gain_data_t d = { .g = g, .ng = NS + ND };
+    calib_gain_an_t a;
+    bool q = model_error_quiet_thread(true);
+    CHECK_MSG(calib_gain_analyse(&d, 0, 50, 1, &a), "%s", model_last_error());
+    CHECK(a.n == NS && a.ndark == ND);
+    CHECK_NEAR(a.dark_intercept_dn, 100, 1e-9);
+    CHECK_NEAR(a.dark_slope_dn_per_us, 0.001, 1e-12);
+    CHECK_NEAR(a.var_dark_dn2, 4, 1e-9);
+    CHECK_NEAR(a.dark_var_slope_dn2_per_us, 1e-4, 1e-12);
+    CHECK(a.dark_t_min_us == 150 && a.dark_t_max_us == 8050);
+    for (int i = 0; i < NS; i++) {
+        CHECK_NEAR(a.t[i], 100.0 * (i + 1), 0);
+        CHECK_NEAR(a.mu[i], fmin(0.5 * a.t[i], 2800), 1e-9);
+        CHECK_NEAR(a.var_d[i], 4 + 1e-4 * a.t[i], 1e-9);
+    }
+    CHECK_NEAR(a.ptc.saturation_dn, 2800, 1e-9);
+    CHECK_REL(a.ptc.system_gain_dn_per_e, 0.25, 1e-9);
+    CHECK_REL(a.ptc.read_noise_e, sqrt(4 - 1.0 / 12) / 0.25, 1e-9);
+    CHECK_REL(a.response0_dn_per_us, 0.5, 1e-9);
+    calib_gain_an_free(&a);
+    CHECK(!calib_gain_analyse(&d, 0, NS + 1, 1, &a));
+    CHECK_CONTAINS(model_last_error(), "too few sweep steps: 60 exposures");
+    calib_gain_an_free(&a);
+    d.g = g + ND;
+    d.ng = NS;
+    CHECK(!calib_gain_analyse(&d, 0, 50, 1, &a));
+    CHECK_CONTAINS(model_last_error(), "no dark frame pairs");
+    calib_gain_an_free(&a);
+    model_error_quiet_thread(q);
+}
+
 // ---------------------------------------------------------------------------
-// The response linearisation (issue 19): a known monotone response that is
+// The response linearisation: a known monotone response that is
 // not of the form S (1 - a S) (a gamma at the low end, an exponential knee
 // toward full well), swept as refl calib gain sweeps (calib_gain_sweep_exposures:
 // 50 equal steps up to 1.2 x saturation and 16 geometric ones at the low end).

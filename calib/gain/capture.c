@@ -32,8 +32,7 @@ static int run_plan(const calib_gain_opts_t *c, const char *name, const char *la
                     int repeats)
 {
     char *p = plan_text(c, name, lamps, list, gain, repeats);
-    fprintf(stderr, "refl calib gain: capturing %s (%s, lamps %s, %d repeats)\n", name, gain > 0 ? "gain" : "0 dB",
-            lamps, repeats);
+    model_note("capturing %s (%s, lamps %s, %d repeats)", name, gain > 0 ? "gain" : "0 dB", lamps, repeats);
     int rc = calib_capture(c->rig, c->out, name, p, c->progress, c->op);
     g_free(p);
     return rc;
@@ -54,7 +53,7 @@ static int probe_levels(const char *dir, double *light, double *dark, double *ma
             if (strcmp(names[k], s->rows[i].camera)) continue;
             if (!strcmp(s->rows[i].lamps, "none")) dark[k] = s->rows[i].mean;
             else light[k] = s->rows[i].mean;
-            max_dn[k] = gain_format_max(s->rows[i].pixel_format);
+            max_dn[k] = calib_full_scale_dn(s->rows[i].pixel_format);
         }
     for (int k = 0; k < nc; k++)
         if (!(isfinite(light[k]) && isfinite(dark[k]))) {
@@ -64,12 +63,6 @@ static int probe_levels(const char *dir, double *light, double *dark, double *ma
     if (nc == 0 && s->n == 0) model_error_set(dir, 0, "the probe session has no frames");
     rig_session_free(s);
     return nc;
-}
-
-static int cmp_double(const void *a, const void *b)
-{
-    double x = *(const double *)a, y = *(const double *)b;
-    return (x > y) - (x < y);
 }
 
 static char *exposure_list(const double *t, int n)
@@ -95,19 +88,21 @@ static bool probe_next(const double *l, const double *dk, const double *mx, int 
     return over || under;
 }
 
-// Probe and sweep at one gain; t_sat_us[k]: camera k's estimated exposure of
-// full scale (*ncam cameras).
 int calib_gain_sweep_exposures(double tmax, int steps, int low_steps, double *t)
 {
     int n = 0;
     for (int i = 0; i < low_steps; i++)
         t[n++] = tmax * (low_steps > 1 ? 0.002 * pow(0.12 / 0.002, (double)i / (low_steps - 1)) : 0.002);
     for (int i = 0; i < steps; i++) t[n++] = tmax * (i + 1) / steps;
-    qsort(t, n, sizeof *t, cmp_double);
+    qsort(t, n, sizeof *t, model_cmp_double);
     return n;
 }
 
-static bool capture_sweep(const calib_gain_opts_t *c, double gain, char **sweep_dir, double *t_sat_us, int *ncam)
+// The probe at one gain: single frames, light and dark, at exposures from
+// c->probe_us (x 8 or / 8) until every camera's light is between 2 % and 60 %
+// of its full scale; t_sat_us[k]: camera k's estimated exposure of full
+// scale (*ncam cameras). false + message.
+static bool probe_full_scale(const calib_gain_opts_t *c, double gain, double *t_sat_us, int *ncam)
 {
     double probe = c->probe_us, l[CALIB_GAIN_MAX_CAMERAS], dk[CALIB_GAIN_MAX_CAMERAS], mx[CALIB_GAIN_MAX_CAMERAS];
     bool more = true;
@@ -124,8 +119,7 @@ static bool capture_sweep(const calib_gain_opts_t *c, double gain, char **sweep_
         g_free(dir);
         if (!*ncam) return false;
         for (int k = 0; k < *ncam; k++)
-            fprintf(stderr, "refl calib gain: probe at %.0f us: light %.1f DN, dark %.1f DN (camera %d)\n", probe,
-                    l[k], dk[k], k + 1);
+            model_note("probe at %.0f us: light %.1f DN, dark %.1f DN (camera %d)", probe, l[k], dk[k], k + 1);
         more = probe_next(l, dk, mx, *ncam, &probe, t_sat_us);
     }
     if (more) {
@@ -133,16 +127,29 @@ static bool capture_sweep(const calib_gain_opts_t *c, double gain, char **sweep_
                         "field for every camera (lamps %s): check the lamps and the source", gain, c->lamps);
         return false;
     }
-    // each camera's steps up to 1.2 x its full scale (or --max-exposure-us), merged
+    return true;
+}
+
+// The probe and the sweep at one gain (frame pairs, light and dark): each
+// camera's steps up to 1.2 x its full scale (or --max-exposure-us), merged;
+// *sweep_dir (g_free) its session; t_sat_us[k]: camera k's estimated
+// exposure of full scale (*ncam cameras). false + message.
+static bool capture_sweep(const calib_gain_opts_t *c, double gain, char **sweep_dir, double *t_sat_us, int *ncam)
+{
+    if (!probe_full_scale(c, gain, t_sat_us, ncam)) return false;
     int nt = 0;
-    double *t = malloc(sizeof(double) * (c->steps + c->low_steps) * *ncam);
+    double *t = malloc(sizeof(double) * ((size_t)(c->steps + c->low_steps) * *ncam + 1));
+    if (!t) {
+        model_error_set(c->rig, 0, "gain %g dB: out of memory for the sweep's exposures", gain);
+        return false;
+    }
     for (int k = 0; k < *ncam; k++) {
         double tmax = isfinite(c->max_us) ? c->max_us : 1.2 * t_sat_us[k];
         int n = calib_gain_sweep_exposures(tmax, c->steps, c->low_steps, t + nt);
         for (int i = 0; i < n; i++) t[nt + i] = fmax(10, round(t[nt + i]));
         nt += n;
     }
-    qsort(t, nt, sizeof *t, cmp_double);
+    qsort(t, nt, sizeof *t, model_cmp_double);
     int nu = 0;
     for (int i = 0; i < nt; i++)
         if (!nu || t[i] != t[nu - 1]) t[nu++] = t[i];
@@ -166,8 +173,13 @@ static bool capture_sweep(const calib_gain_opts_t *c, double gain, char **sweep_
 static bool add_source(const calib_gain_opts_t *o, json_t *prov, calib_gain_source_t **src, int *nsrc,
                        const char *name, int set, const char *role)
 {
+    calib_gain_source_t *ns = realloc(*src, sizeof **src * (*nsrc + 1));
+    if (!ns) {
+        model_error_set(o->out, 0, "out of memory for the sessions");
+        return false;
+    }
     char *dir = g_strdup_printf("%s/%s", o->out, name);
-    *src = realloc(*src, sizeof **src * (*nsrc + 1));
+    *src = ns;
     (*src)[(*nsrc)++] = (calib_gain_source_t){ dir, set, role };
     return model_provenance_input(prov, role, dir);
 }
@@ -210,6 +222,6 @@ bool calib_gain_capture(const calib_gain_opts_t *o, json_t *prov, calib_gain_sou
     r1 = run_plan(o, "dark", "none", dl, o->gains_db[0], 2);
     g_free(dl);
     if (r1 || !add_source(o, prov, src, nsrc, "dark", CALIB_GAIN_SET_DARK, "dark")) return false;
-    fprintf(stderr, "refl calib gain: capture done in %.1f s\n", model_now_s() - t_start);
+    model_note("capture done in %.1f s", model_now_s() - t_start);
     return true;
 }

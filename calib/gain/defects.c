@@ -115,7 +115,10 @@ bool calib_gain_write_defects(const char *dir, const calib_gain_maps_t *m)
 {
     size_t n = (size_t)m->w * m->h;
     float *f = malloc(sizeof(float) * (n + 1));
-    if (!f) return false;
+    if (!f) {
+        model_error_set(dir, 0, "out of memory for defects.tiff (%dx%d)", m->w, m->h);
+        return false;
+    }
     for (size_t i = 0; i < n; i++) f[i] = m->sp.defect_map ? m->sp.defect_map[i] : 0;
     char *path = g_build_filename(dir, "defects.tiff", NULL);
     const char *meta[] = { "content", "defect pixels: 0 good, 1 hot (dark), 2 dead (light, low), 3 bright (light, "

@@ -4,7 +4,6 @@
 // analysis, spatial.c; the defect pixels, defects.c) and datasheet.html.
 // Where the standard's own equation numbers are not known here, none are
 // cited.
-
 #define _GNU_SOURCE
 #include <glib.h>
 #include <math.h>
@@ -12,18 +11,9 @@
 #include <string.h>
 #include <stdio.h>
 
-#include "calib/gain/gain.h"
+#include "calib/gain/internal.h"
 #include "model/model.h"
 #include "model/base/report.h"
-
-static json_t *jnum(double x) { return isfinite(x) ? json_real(x) : json_null(); }
-
-static json_t *jvec(const double *v, int n)
-{
-    json_t *a = json_array();
-    for (int i = 0; v && i < n; i++) json_array_append_new(a, jnum(v[i]));
-    return a;
-}
 
 // One datasheet row; value NAN with photons false: not computable (null);
 // photons true and the photon axis not measured: "not measured".
@@ -33,7 +23,7 @@ static void row(json_t *rows, const char *quantity, const char *symbol, double v
     json_t *r = json_object();
     json_object_set_new(r, "quantity", json_string(quantity));
     json_object_set_new(r, "symbol", json_string(symbol));
-    json_object_set_new(r, "value", photons && !measured ? json_string("not measured") : jnum(value));
+    json_object_set_new(r, "value", photons && !measured ? json_string("not measured") : model_json_number(value));
     json_object_set_new(r, "unit", json_string(unit));
     json_object_set_new(r, "definition", json_string(definition));
     json_array_append_new(rows, r);
@@ -41,8 +31,8 @@ static void row(json_t *rows, const char *quantity, const char *symbol, double v
 
 static json_t *split_json(const calib_gain_split_t *s)
 {
-    return json_pack("{s:o, s:o, s:o, s:o}", "total", jnum(s->total), "row", jnum(s->row), "column", jnum(s->col),
-                     "pixel", jnum(s->pixel));
+    return json_pack("{s:o, s:o, s:o, s:o}", "total", model_json_number(s->total), "row", model_json_number(s->row), "column", model_json_number(s->col),
+                     "pixel", model_json_number(s->pixel));
 }
 
 static json_t *datasheet_rows(const calib_gain_an_t *a, const calib_gain_maps_t *m)
@@ -111,7 +101,7 @@ static json_t *hist_json(double lo, double hi, const long *h, int nb, const char
 {
     json_t *c = json_array();
     for (int i = 0; i < nb; i++) json_array_append_new(c, json_integer(h[i]));
-    return json_pack("{s:o, s:o, s:s, s:o}", "lo", jnum(lo), "hi", jnum(hi), "unit", unit, "counts", c);
+    return json_pack("{s:o, s:o, s:s, s:o}", "lo", model_json_number(lo), "hi", model_json_number(hi), "unit", unit, "counts", c);
 }
 
 static json_t *defects_json(const calib_gain_defects_t *d, double nsigma)
@@ -123,12 +113,12 @@ static json_t *defects_json(const calib_gain_defects_t *d, double nsigma)
     json_object_set_new(o, "hot", json_integer(d->hot));
     json_object_set_new(o, "dead", json_integer(d->dead));
     json_object_set_new(o, "bright", json_integer(d->bright));
-    json_object_set_new(o, "dark_median_dn", jnum(d->dark_median_dn));
-    json_object_set_new(o, "dark_sigma_dn", jnum(d->dark_sigma_dn));
-    json_object_set_new(o, "hot_threshold_dn", jnum(d->dark_threshold_dn));
-    json_object_set_new(o, "light_median", jnum(d->light_median));
-    json_object_set_new(o, "light_sigma", jnum(d->light_sigma));
-    json_object_set_new(o, "light_threshold", jnum(d->light_threshold));
+    json_object_set_new(o, "dark_median_dn", model_json_number(d->dark_median_dn));
+    json_object_set_new(o, "dark_sigma_dn", model_json_number(d->dark_sigma_dn));
+    json_object_set_new(o, "hot_threshold_dn", model_json_number(d->dark_threshold_dn));
+    json_object_set_new(o, "light_median", model_json_number(d->light_median));
+    json_object_set_new(o, "light_sigma", model_json_number(d->light_sigma));
+    json_object_set_new(o, "light_threshold", model_json_number(d->light_threshold));
     const char *names[3] = { "hot_pixels", "dead_pixels", "bright_pixels" };
     for (int k = 0; k < 3; k++) {
         json_t *l = json_array();
@@ -145,30 +135,27 @@ static json_t *defects_json(const calib_gain_defects_t *d, double nsigma)
 
 static json_t *spectro_json(int n, int len, const double *dark, const double *light)
 {
-    double *f = malloc(sizeof(double) * (n + 1));
-    for (int k = 0; f && k < n; k++) f[k] = (double)k / len;
-    json_t *o = json_pack("{s:o, s:o, s:o}", "frequency_cycles_per_px", jvec(f, n), "dark_dn", jvec(dark, n),
-                          "light_pct", jvec(light, n));
-    free(f);
-    return o;
+    json_t *f = json_array();
+    for (int k = 0; k < n; k++) json_array_append_new(f, model_json_number((double)k / len));
+    return json_pack("{s:o, s:o, s:o}", "frequency_cycles_per_px", f, "dark_dn", gain_json_numbers(dark, n), "light_pct",
+                     gain_json_numbers(light, n));
 }
 
 static json_t *snr_json(const calib_gain_an_t *a)
 {
-    json_t *o = json_object();
-    double *m = malloc(sizeof(double) * (a->n + 1)), *id = malloc(sizeof(double) * (a->n + 1));
-    for (int i = 0; m && id && i < a->n; i++) {
+    json_t *o = json_object(), *m = json_array(), *id = json_array();
+    for (int i = 0; i < a->n; i++) {
         double mp = a->mu_p ? a->mu_p[i] : NAN;
-        m[i] = a->ph.measured ? calib_gain_snr_model(&a->ph, mp) : NAN;
-        id[i] = a->ph.measured ? sqrt(mp) : NAN;
+        json_array_append_new(m, model_json_number(a->ph.measured ? calib_gain_snr_model(&a->ph, mp) : NAN));
+        json_array_append_new(id, model_json_number(a->ph.measured ? sqrt(mp) : NAN));
     }
-    json_object_set_new(o, "photons", jvec(a->mu_p, a->n));
+    json_object_set_new(o, "photons", gain_json_numbers(a->mu_p, a->n));
     json_object_set_new(o, "electrons", json_array());
     for (int i = 0; i < a->n; i++)
-        json_array_append_new(json_object_get(o, "electrons"), jnum(a->mu[i] / a->ptc.system_gain_dn_per_e));
-    json_object_set_new(o, "snr_measured", jvec(a->snr, a->n));
-    json_object_set_new(o, "snr_model", jvec(m, a->n));
-    json_object_set_new(o, "snr_ideal", jvec(id, a->n));
+        json_array_append_new(json_object_get(o, "electrons"), model_json_number(a->mu[i] / a->ptc.system_gain_dn_per_e));
+    json_object_set_new(o, "snr_measured", gain_json_numbers(a->snr, a->n));
+    json_object_set_new(o, "snr_model", m);
+    json_object_set_new(o, "snr_ideal", id);
     // the model and the ideal on a grid from half the threshold to saturation (the plot's lines)
     if (a->ph.measured && a->ph.mu_p_min > 0 && a->ph.mu_p_sat > a->ph.mu_p_min) {
         enum { NG = 64 };
@@ -178,15 +165,13 @@ static json_t *snr_json(const calib_gain_an_t *a)
             gm[i] = calib_gain_snr_model(&a->ph, g[i]);
             gi[i] = sqrt(g[i]);
         }
-        json_object_set_new(o, "grid_photons", jvec(g, NG));
-        json_object_set_new(o, "grid_snr_model", jvec(gm, NG));
-        json_object_set_new(o, "grid_snr_ideal", jvec(gi, NG));
+        json_object_set_new(o, "grid_photons", gain_json_numbers(g, NG));
+        json_object_set_new(o, "grid_snr_model", gain_json_numbers(gm, NG));
+        json_object_set_new(o, "grid_snr_ideal", gain_json_numbers(gi, NG));
     }
     json_object_set_new(o, "definition", json_string(
         "grid_*: the same on 64 photon counts from mu_p.min / 2 to mu_p.sat; measured: (mu_y - mu_y.dark) / sigma_y; model: eta mu_p / sqrt(sigma^2_y.dark / K^2 + eta mu_p); ideal: "
         "sqrt(mu_p) (eta = 1, no dark noise); photons null when the photon axis is not measured"));
-    free(m);
-    free(id);
     return o;
 }
 
@@ -206,8 +191,8 @@ json_t *calib_gain_emva_json(const calib_gain_opts_t *o, const calib_gain_an_t *
         json_object_set_new(c, "photodiode", json_pack("{s:f, s:f, s:f, s:s}", "current_na", o->photodiode_na,
                                                        "responsivity_a_per_w", o->photodiode_a_per_w, "area_mm2",
                                                        o->photodiode_mm2, "irradiance", "E = I / (R S)"));
-    json_object_set_new(c, "pixel_area_um2", jnum(o->pixel_area_um2));
-    json_object_set_new(c, "wavelength_nm", jnum(o->wavelength_nm));
+    json_object_set_new(c, "pixel_area_um2", model_json_number(o->pixel_area_um2));
+    json_object_set_new(c, "wavelength_nm", model_json_number(o->wavelength_nm));
     json_object_set_new(c, "gain_db", json_real(a->gain_db));
     json_object_set_new(c, "photons", json_string("mu_p = A E t_exp lambda / (h c), h = 6.62607015e-34 J s, "
                                                   "c = 299792458 m/s"));
@@ -216,14 +201,14 @@ json_t *calib_gain_emva_json(const calib_gain_opts_t *o, const calib_gain_an_t *
         json_object_set_new(e, "warning", json_string("quantum efficiency above 100 %: check the irradiance (uW/cm^2 "
                                                       "at the sensor), the pixel area and the wavelength"));
     json_object_set_new(e, "datasheet", datasheet_rows(a, m));
-    json_object_set_new(e, "responsivity_offset_dn", a->ph.measured ? jnum(a->ph.responsivity_offset_dn)
+    json_object_set_new(e, "responsivity_offset_dn", a->ph.measured ? model_json_number(a->ph.responsivity_offset_dn)
                                                                     : json_string("not measured"));
     json_object_set_new(e, "snr_curve", snr_json(a));
     json_t *s = json_object();
     json_object_set_new(s, "dsnu_dn", split_json(&sp->dsnu));
     json_object_set_new(s, "prnu_pct", split_json(&sp->prnu));
     json_object_set_new(s, "prnu_highpass_pct", split_json(&sp->prnu_hp));
-    json_object_set_new(s, "signal_mean_dn", jnum(sp->signal_mean_dn));
+    json_object_set_new(s, "signal_mean_dn", model_json_number(sp->signal_mean_dn));
     json_object_set_new(s, "definition", json_string(
         "averaged frame y = mu + r[row] + c[column] + p + e; V, Vr, Vc the variances of all values, of the row means "
         "and of the column means, less the temporal variance of the average (sigma^2/L, /M, /N); s2_pixel = (V - Vr "
@@ -241,10 +226,10 @@ json_t *calib_gain_emva_json(const calib_gain_opts_t *o, const calib_gain_an_t *
         "of the mean signal"));
     json_object_set_new(e, "spectrograms", sg);
     json_t *pr = json_object();
-    json_object_set_new(pr, "column_dark_dn", jvec(sp->col_dark, sp->pw));
-    json_object_set_new(pr, "column_signal_dn", jvec(sp->col_light, sp->pw));
-    json_object_set_new(pr, "row_dark_dn", jvec(sp->row_dark, sp->ph));
-    json_object_set_new(pr, "row_signal_dn", jvec(sp->row_light, sp->ph));
+    json_object_set_new(pr, "column_dark_dn", gain_json_numbers(sp->col_dark, sp->pw));
+    json_object_set_new(pr, "column_signal_dn", gain_json_numbers(sp->col_light, sp->pw));
+    json_object_set_new(pr, "row_dark_dn", gain_json_numbers(sp->row_dark, sp->ph));
+    json_object_set_new(pr, "row_signal_dn", gain_json_numbers(sp->row_light, sp->ph));
     json_object_set_new(pr, "definition", json_string("means of the statistics region's columns (horizontal "
                                                       "profile) and rows (vertical profile) of the averaged dark "
                                                       "and flat minus dark"));
@@ -255,9 +240,17 @@ json_t *calib_gain_emva_json(const calib_gain_opts_t *o, const calib_gain_an_t *
 
 bool calib_gain_datasheet_html(const char *dir, json_t *emva, json_t *prov)
 {
+    json_t *rows = json_object_get(emva, "datasheet");
+    size_t n = json_array_size(rows);
+    char **rs = calloc(n + 1, sizeof *rs);
+    if (!rs) {
+        model_error_set(dir, 0, "out of memory for the datasheet (%zu rows)", n);
+        return false;
+    }
     char *hp = g_build_filename(dir, "datasheet.html", NULL);
     FILE *f = model_html_begin(hp, "refl calib gain: EMVA 1288 Release 4.0 Linear summary datasheet", prov);
     if (!f) {
+        free(rs);
         g_free(hp);
         return false;
     }
@@ -271,10 +264,7 @@ bool calib_gain_datasheet_html(const char *dir, json_t *emva, json_t *prov)
                     json_number_value(json_object_get(c, "pixel_area_um2")),
                     json_number_value(json_object_get(c, "wavelength_nm")),
                     json_number_value(json_object_get(c, "gain_db")));
-    json_t *rows = json_object_get(emva, "datasheet");
-    size_t n = json_array_size(rows);
-    char **rs = calloc(n + 1, sizeof *rs);
-    for (size_t i = 0; rs && i < n; i++) {
+    for (size_t i = 0; i < n; i++) {
         json_t *r = json_array_get(rows, i), *v = json_object_get(r, "value");
         char *val = json_is_number(v) ? g_strdup_printf("%.5g", json_number_value(v))
                                       : g_strdup(json_is_string(v) ? json_string_value(v) : "n/a");
@@ -285,8 +275,8 @@ bool calib_gain_datasheet_html(const char *dir, json_t *emva, json_t *prov)
         g_free(val);
     }
     model_html_heading(f, "Datasheet");
-    model_html_table(f, "quantity|symbol|value|unit|definition", (const char *const *)rs, rs ? (int)n : 0);
-    for (size_t i = 0; rs && i < n; i++) g_free(rs[i]);
+    model_html_table(f, "quantity|symbol|value|unit|definition", (const char *const *)rs, (int)n);
+    for (size_t i = 0; i < n; i++) g_free(rs[i]);
     free(rs);
     static const char *const figs[][3] = {
         { "SNR", "snr_photons.png", "SNR against photons per pixel (or electrons when not measured): measured up to "

@@ -57,9 +57,9 @@ fail:;
     return NULL;
 }
 
-void gain_roi(const calib_gain_data_t *d, int w, int h, int r[4])
+void gain_region(int w, int h, const int roi[4], int r[4])
 {
-    if (d->roi[2] > 0) memcpy(r, d->roi, sizeof d->roi);
+    if (roi && roi[2] > 0) memcpy(r, roi, sizeof(int) * 4);
     else {
         r[0] = r[1] = 0;
         r[2] = w;
@@ -67,28 +67,37 @@ void gain_roi(const calib_gain_data_t *d, int w, int h, int r[4])
     }
 }
 
+// The group of (exposure, gain, dark, role), made when new; -1 (out of memory).
 static int group_find(calib_gain_data_t *d, double exposure_us, double gain_db, bool dark, int set)
 {
     for (int i = 0; i < d->ng; i++) {
         calib_gain_group_t *g = &d->g[i];
         if (g->exposure_us == exposure_us && g->gain_db == gain_db && g->dark == dark && g->set == set) return i;
     }
-    d->g = realloc(d->g, sizeof *d->g * (d->ng + 1));
+    calib_gain_group_t *ng = realloc(d->g, sizeof *d->g * (d->ng + 1));
+    if (!ng) return -1;
+    d->g = ng;
     d->g[d->ng] = (calib_gain_group_t){ .exposure_us = exposure_us, .gain_db = gain_db, .dark = dark, .set = set,
                               .var_dn2 = NAN };
     return d->ng++;
 }
 
-void calib_gain_make_groups(calib_gain_data_t *d)
+bool calib_gain_make_groups(calib_gain_data_t *d)
 {
     for (int i = 0; i < d->nf; i++) {
         const calib_gain_frame_t *f = &d->f[i];
         int set = f->set == CALIB_GAIN_SET_ANY ? CALIB_GAIN_SET_SWEEP : f->set;
         int gi = group_find(d, f->exposure_us, f->gain_db, f->dark, set);
+        int *idx = gi >= 0 ? realloc(d->g[gi].idx, sizeof(int) * (d->g[gi].n + 1)) : NULL;
+        if (!idx) {
+            model_error_set(NULL, 0, "out of memory for the exposure groups (%d frames)", d->nf);
+            return false;
+        }
         calib_gain_group_t *g = &d->g[gi];
-        g->idx = realloc(g->idx, sizeof(int) * (g->n + 1));
+        g->idx = idx;
         g->idx[g->n++] = i;
     }
+    return true;
 }
 
 typedef struct {
@@ -127,7 +136,7 @@ static void pass1_rows(void *ctx, int begin, int end, int thread)
                 break;
             }
             int r[4];
-            gain_roi(d, w, h, r);
+            gain_region(w, h, d->roi, r);
             if (r[0] + r[2] > w || r[1] + r[3] > h) {
                 g->error = g_strdup_printf("%s: the region %d,%d,%d,%d does not fit the %dx%d frame",
                                            gain_frame_name(f, nb, sizeof nb), r[0], r[1], r[2], r[3], w, h);
@@ -168,7 +177,7 @@ static void pass1_rows(void *ctx, int begin, int end, int thread)
         }
         int done = __atomic_add_fetch(&P->done, g->n, __ATOMIC_ACQ_REL);
         if (P->total > 100 && (done * 10 / P->total) != ((done - g->n) * 10 / P->total))
-            fprintf(stderr, "refl calib gain: read %d/%d frames (%.0f s)\n", done, P->total, model_now_s() - P->t0);
+            model_progress("read %d/%d frames (%.0f s)", done, P->total, model_now_s() - P->t0);
     }
 }
 
@@ -176,6 +185,7 @@ bool calib_gain_frame_stats(calib_gain_data_t *d)
 {
     pass1_t P = { d, 0, d->nf, model_now_s() };
     model_parallel_for(d->ng, 1, model_default_threads(), pass1_rows, &P);
+    if (P.total > 100) model_progress_end();
     for (int i = 0; i < d->ng; i++)
         if (d->g[i].error) {
             model_error_set(NULL, 0, "%s", d->g[i].error);

@@ -14,9 +14,9 @@
 // Analysis per gain (EMVA 1288 definitions, see calib/gain/gain.h): photon transfer
 // (K, read noise, saturation, SNR, dynamic range), linearity error, response
 // (DN/us, and kc per us per unit radiance when the source's radiance is
-// given: a virtual rig's truth of it is only recorded beside it, for
-// comparison, never used in its place); at the first gain also the dark
-// current, the offset and DSNU maps and the PRNU map (flat field).
+// given; a virtual rig's truth of it is never read here: refl chain compares
+// with it); at the first gain also the dark current, the offset and DSNU
+// maps and the PRNU map (flat field).
 // Output: DIR/gain.json, DIR/offset_dn.tiff, DIR/dsnu_dn.tiff,
 // DIR/prnu_gain.tiff (total: vignetting included, mean 1),
 // DIR/prnu_highpass.tiff (smooth part removed, mean 1), DIR/report.html + PNGs.
@@ -72,8 +72,12 @@ static bool manifest_frames(const calib_gain_opts_t *o, calib_gain_data_t *d, js
 static bool gather_sources(const calib_gain_opts_t *o, json_t *prov, calib_gain_source_t **src, int *nsrc)
 {
     if (o->rig) return calib_gain_capture(o, prov, src, nsrc);
-    *src = calloc(o->nsessions, sizeof **src);
+    *src = calloc(o->nsessions ? o->nsessions : 1, sizeof **src);
     *nsrc = 0;
+    if (!*src) {
+        model_error_set(NULL, 0, "out of memory for %d sessions", o->nsessions);
+        return false;
+    }
     for (int i = 0; i < o->nsessions; i++) {
         (*src)[(*nsrc)++] = (calib_gain_source_t){ g_strdup(o->sessions[i]), CALIB_GAIN_SET_ANY, "session" };
         if (!model_provenance_input(prov, "session", o->sessions[i])) return false;
@@ -113,11 +117,15 @@ static int run_cameras(const calib_gain_opts_t *o, const calib_gain_source_t *sr
 
 // Every gain present (rig: in the order asked; else in order of appearance):
 // *an gets *ngains analyses (even on failure: the ones made).
-static bool analyse_all(const calib_gain_opts_t *o, calib_gain_data_t *d, json_t *facts, calib_gain_an_t **an,
-                        int *ngains)
+static bool analyse_all(const calib_gain_opts_t *o, calib_gain_data_t *d, calib_gain_an_t **an, int *ngains)
 {
-    double *gl = malloc(sizeof(double) * (d->ng + o->ngains));
+    double *gl = malloc(sizeof(double) * (d->ng + o->ngains + 1));
     int ng = 0;
+    *an = NULL;
+    if (!gl) {
+        model_error_set(NULL, 0, "out of memory for the gains");
+        return false;
+    }
     if (o->rig)
         for (int i = 0; i < o->ngains; i++) gl[ng++] = o->gains_db[i];
     else
@@ -126,20 +134,14 @@ static bool analyse_all(const calib_gain_opts_t *o, calib_gain_data_t *d, json_t
             for (int k = 0; k < ng; k++) seen |= gl[k] == d->g[i].gain_db;
             if (!seen) gl[ng++] = d->g[i].gain_db;
         }
-    double truth_per_lamp;
-    calib_gain_truth_radiance(facts, NULL, &truth_per_lamp);
-    *an = calloc(ng, sizeof **an);
-    bool ok = true;
+    *an = calloc(ng ? ng : 1, sizeof **an);
+    bool ok = *an != NULL;
+    if (!ok) model_error_set(NULL, 0, "out of memory for the analyses of %d gains", ng);
     for (int i = 0; i < ng && ok; i++) {
         calib_gain_an_t *a = &(*an)[i];
         *ngains = i + 1;
         if (!(ok = calib_gain_analyse(d, gl[i], o->min_steps, o->quant_dn, a))) break;
-        // radiance of the light frames: given; the truth's for the comparison
-        int nl = -1;
-        for (int k = 0; k < d->nf; k++)
-            if (d->f[k].gain_db == gl[i] && !d->f[k].dark) nl = d->f[k].nlamps;
-        a->radiance = o->radiance;
-        a->radiance_truth = nl > 0 ? truth_per_lamp * nl : NAN;
+        a->radiance = o->radiance;   // of the light frames, as given (NAN: unknown)
         a->kc_per_us = a->ptc.response_dn_per_us / a->radiance;
         a->kc0_per_us = a->response0_dn_per_us / a->radiance;
         if (!(ok = calib_gain_an_photons(o, a))) {
@@ -148,8 +150,7 @@ static bool analyse_all(const calib_gain_opts_t *o, calib_gain_data_t *d, json_t
             g_free(m);
             break;
         }
-        fprintf(stderr, "refl calib gain: gain %g dB: K %.5g DN/e-, read noise %.4g e-, saturation %.1f DN, LE %.3f "
-                "%%, %d steps\n", gl[i], a->ptc.system_gain_dn_per_e, a->ptc.read_noise_e, a->ptc.saturation_dn,
+        model_note("gain %g dB: K %.5g DN/e-, read noise %.4g e-, saturation %.1f DN, LE %.3f %%, %d steps", gl[i], a->ptc.system_gain_dn_per_e, a->ptc.read_noise_e, a->ptc.saturation_dn,
                 a->ptc.linearity_error_pct, a->n);
     }
     free(gl);
@@ -158,28 +159,24 @@ static bool analyse_all(const calib_gain_opts_t *o, calib_gain_data_t *d, json_t
 
 // One camera's frames (d) analysed into dir: gain.json, the maps and the
 // report; top (may be NULL): gain.json and the maps also there.
-static bool run_one(const calib_gain_opts_t *o, calib_gain_data_t *d, json_t *facts, json_t *prov, const char *dir,
-                    const char *top, calib_gain_result_t *r)
+static bool run_one(const calib_gain_opts_t *o, calib_gain_data_t *d, json_t *prov, const char *dir, const char *top,
+                    calib_gain_result_t *r)
 {
     calib_gain_an_t *an = NULL;
     int ngains = 0;
     calib_gain_maps_t maps = { 0 };
     json_t *root = NULL;
     bool ok = false;
-    const char *truth = NULL;
-    double truth_per_lamp;
-    if (!model_mkdir_p(dir)) return false;
-    calib_gain_make_groups(d);
-    fprintf(stderr, "refl calib gain: analysing %d frames (%d exposure groups)%s%s\n", d->nf, d->ng,
-            d->camera[0] ? " of camera " : "", d->camera);
-    if (!calib_gain_frame_stats(d) || !analyse_all(o, d, facts, &an, &ngains)) goto done;
+    if (!model_mkdir_p(dir) || !calib_gain_make_groups(d)) return false;
+    model_note("analysing %d frames (%d exposure groups)%s%s", d->nf, d->ng, d->camera[0] ? " of camera " : "",
+               d->camera);
+    if (!calib_gain_frame_stats(d) || !analyse_all(o, d, &an, &ngains)) goto done;
     if (!calib_gain_make_maps(d, &an[0], &maps) || !calib_gain_make_spatial(d, &maps, o->defect_sigma, o->quant_dn) ||
         !calib_gain_write_maps(dir, &maps) || !calib_gain_write_defects(dir, &maps))
         goto done;
     if (top && !(calib_gain_write_maps(top, &maps) && calib_gain_write_defects(top, &maps))) goto done;
-    calib_gain_truth_radiance(facts, &truth, &truth_per_lamp);
-    root = calib_gain_json(o, d, an, ngains, &maps, truth, prov);
-    ok = true;
+    root = calib_gain_json(o, d, an, ngains, &maps, prov);
+    ok = root != NULL;
     for (int k = 0; k < (top ? 2 : 1) && ok; k++) {
         char *jp = g_build_filename(k ? top : dir, "gain.json", NULL);
         ok = model_write_json(jp, root);
@@ -214,7 +211,7 @@ bool calib_gain_run(const calib_gain_opts_t *o, calib_gain_result_t *r, int max,
     calib_gain_source_t *src = NULL;
     int nsrc = 0, nc = 0;
     char names[CALIB_GAIN_MAX_CAMERAS][32];
-    json_t *facts = NULL, *prov = NULL;
+    json_t *prov = NULL;
     bool ok = false;
     double t_start = model_now_s();
     if (!model_mkdir_p(o->out)) return false;
@@ -222,7 +219,7 @@ bool calib_gain_run(const calib_gain_opts_t *o, calib_gain_result_t *r, int max,
     if (o->frames) {
         calib_gain_data_t d = { 0 };
         memcpy(d.roi, o->roi, sizeof d.roi);
-        ok = manifest_frames(o, &d, prov) && max > 0 && run_one(o, &d, NULL, prov, o->out, NULL, &r[0]);
+        ok = manifest_frames(o, &d, prov) && max > 0 && run_one(o, &d, prov, o->out, NULL, &r[0]);
         calib_gain_data_free(&d);
         *n = ok;
         goto done;
@@ -232,18 +229,17 @@ bool calib_gain_run(const calib_gain_opts_t *o, calib_gain_result_t *r, int max,
     for (int k = 0; k < nc && ok; k++) {
         calib_gain_data_t d = { 0 };
         memcpy(d.roi, o->roi, sizeof d.roi);
-        for (int i = 0; i < nsrc && ok; i++) ok = calib_gain_add_session(&d, src[i].dir, names[k], src[i].set, &facts);
+        for (int i = 0; i < nsrc && ok; i++) ok = calib_gain_add_session(&d, src[i].dir, names[k], src[i].set, NULL);
         char *dir = nc > 1 ? g_build_filename(o->out, names[k], NULL) : g_strdup(o->out);
         calib_gain_result_t rk;
-        ok = ok && run_one(o, &d, facts, prov, dir, nc > 1 && k == 0 ? o->out : NULL, &rk);
+        ok = ok && run_one(o, &d, prov, dir, nc > 1 && k == 0 ? o->out : NULL, &rk);
         if (ok && *n < max) r[(*n)++] = rk;
         g_free(dir);
         calib_gain_data_free(&d);
     }
 done:
-    if (ok) fprintf(stderr, "refl calib gain: wrote %s/gain.json (%.1f s)\n", o->out, model_now_s() - t_start);
+    if (ok) model_note("wrote %s/gain.json (%.1f s)", o->out, model_now_s() - t_start);
     calib_gain_sources_free(src, nsrc);
-    json_decref(facts);
     json_decref(prov);
     return ok;
 }

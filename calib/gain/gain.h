@@ -15,8 +15,8 @@
 // report.html), calib_gain_datasheet_html (datasheet.html). The photon axis
 // (calib_gain_an_photons) follows each gain's calib_gain_analyse.
 // Errors: false / NULL with the message kept by model_error_set
-// (model_last_error), not printed: the caller prints it once. Progress lines
-// go to stderr ("refl calib gain: ...").
+// (model_last_error), not printed: the caller prints it once. What a run is
+// doing goes out as notices (model_note, model_progress, model_warning).
 //
 // Units: grey values in DN of the frames' pixel format, exposures in us,
 // variances in DN^2, electrons e-. "mu" is always the mean grey value minus
@@ -171,11 +171,12 @@ double calib_gain_snr_model(const calib_gain_photon_t *p, double mu_p);
 // each less its temporal part, give s2_pixel = (V - Vr - Vc) / (1 - 1/M - 1/N)
 // (M columns averaged in a row mean, N rows in a column mean), s2_row = Vr -
 // s2_pixel / M, s2_col = Vc - s2_pixel / N. The figures are standard
-// deviations (sqrt of max(0, .)), in the map's units times scale.
+// deviations (sqrt of max(0, .)), in the map's units times scale. false +
+// message (out of memory; the figures NAN).
 typedef struct {
     double total, row, col, pixel;
 } calib_gain_split_t;
-void calib_gain_spatial_split(const float *img, int w, int h, const int roi[4], double temporal_var, double scale,
+bool calib_gain_spatial_split(const float *img, int w, int h, const int roi[4], double temporal_var, double scale,
                               calib_gain_split_t *out);
 
 // Spectrogram: horizontal (vertical false): the DFT Y(k) of every row of the
@@ -366,8 +367,8 @@ bool calib_gain_add_session(calib_gain_data_t *d, const char *dir, const char *c
 // most sensitive. false + message.
 bool calib_gain_capture(const calib_gain_opts_t *o, json_t *prov, calib_gain_source_t **src, int *nsrc);
 void calib_gain_sources_free(calib_gain_source_t *src, int n);
-// Group the frames (exposure, gain, dark, role).
-void calib_gain_make_groups(calib_gain_data_t *d);
+// Group the frames (exposure, gain, dark, role). false + message (out of memory).
+bool calib_gain_make_groups(calib_gain_data_t *d);
 // Every group's mean and temporal variance (reads every frame, in threads).
 bool calib_gain_frame_stats(calib_gain_data_t *d);
 
@@ -382,8 +383,7 @@ typedef struct {
     double dark_t_min_us, dark_t_max_us;
     int    ndark;               // dark exposures used for the dark current
     double *dark_t_us;          // their exposures (us; ndark, in the groups' order)
-    double radiance;            // total radiance of the light frames (NAN unknown)
-    double radiance_truth;      // the virtual rig's truth of it, for comparison (NAN unknown)
+    double radiance;            // total radiance of the light frames, as given (NAN unknown)
     double kc_per_us;           // response / radiance
     double response0_dn_per_us; // small-signal response: slope at 0 of a quadratic in exposure (0..70 % of sat)
     double kc0_per_us;          // response0 / radiance
@@ -447,13 +447,9 @@ json_t *calib_gain_emva_json(const calib_gain_opts_t *o, const calib_gain_an_t *
 // DIR/defects.tiff (codes 0 good, 1 hot, 2 dead, 3 bright) and DIR/datasheet.html.
 bool calib_gain_write_defects(const char *dir, const calib_gain_maps_t *m);
 bool calib_gain_datasheet_html(const char *dir, json_t *emva, json_t *prov);
-// The radiance per lamp of the sample of a virtual rig's session facts
-// (virtual_rig.truth, .sample), for the comparison with the truth only: false
-// when there is none. *truth_path (may be NULL) points into facts.
-bool calib_gain_truth_radiance(json_t *facts, const char **truth_path, double *radiance_per_lamp);
 // gain.json's document (new reference): an[0] the reference gain, then every gain.
 json_t *calib_gain_json(const calib_gain_opts_t *o, const calib_gain_data_t *d, const calib_gain_an_t *an, int ngains,
-                        const calib_gain_maps_t *maps, const char *truth, json_t *prov);
+                        const calib_gain_maps_t *maps, json_t *prov);
 // The plots (scripts/calib_gain_report.py) and DIR/report.html.
 bool calib_gain_report(const char *dir, const calib_gain_an_t *an, int ngains, const calib_gain_maps_t *maps,
                        json_t *prov);

@@ -7,14 +7,24 @@
 #include <string.h>
 #include <unistd.h>
 
+#include "calib/calib.h"
 #include "calib/gain/internal.h"
 #include "model/model.h"
-#include "rig/virtual/truth.h"
 
-static void add_frame(calib_gain_data_t *d, const calib_gain_frame_t *f)
+// f appended to d's frames (d owns its strings then). false + message (out
+// of memory; f's strings freed).
+static bool add_frame(calib_gain_data_t *d, const calib_gain_frame_t *f)
 {
-    d->f = realloc(d->f, sizeof *d->f * (d->nf + 1));
+    calib_gain_frame_t *nf = realloc(d->f, sizeof *d->f * (d->nf + 1));
+    if (!nf) {
+        g_free(f->path);
+        g_free(f->where);
+        model_error_set(NULL, 0, "out of memory for the frames (%d)", d->nf + 1);
+        return false;
+    }
+    d->f = nf;
     d->f[d->nf++] = *f;
+    return true;
 }
 
 static char *trim(char *s)
@@ -76,7 +86,7 @@ bool calib_gain_read_manifest(const char *path, int max_dn, calib_gain_data_t *d
             g_free(fr.where);
             goto done;
         }
-        add_frame(d, &fr);
+        if (!add_frame(d, &fr)) goto done;
         nframes++;
     }
     if (!nframes) {
@@ -88,13 +98,6 @@ done:
     g_free(dir);
     free(text);
     return ok;
-}
-
-int gain_format_max(const char *pf)
-{
-    if (!strcmp(pf, "Mono8")) return 255;
-    if (!strcmp(pf, "Mono12")) return 4095;
-    return 65535;
 }
 
 static int lamps_on(const char *lamps, int nlamps_rig)
@@ -118,7 +121,7 @@ bool calib_gain_add_session(calib_gain_data_t *d, const char *dir, const char *c
     bool ok = true;
     for (int i = 0; i < s->n && ok; i++) {
         const rig_frame_row_t *r = &s->rows[i];
-        const char *unit = r->gain_unit[0] ? r->gain_unit : "dB";   // an older session's gain: dB
+        const char *unit = r->gain_unit[0] ? r->gain_unit : "dB";   // a session that records no unit: dB
         if (!d->gain_unit[0]) snprintf(d->gain_unit, sizeof d->gain_unit, "%s", unit);
         if (strcmp(d->gain_unit, unit)) {
             model_error_set(dir, 0, "frame %s: gain unit '%s', the run's other frames '%s': one calibration needs "
@@ -130,28 +133,11 @@ bool calib_gain_add_session(calib_gain_data_t *d, const char *dir, const char *c
         int on = lamps_on(r->lamps, nlr);
         calib_gain_frame_t f = { .path = g_strdup_printf("%s/%s", dir, r->file), .where = g_strdup(dir), .line = 0,
                        .step = r->step, .exposure_us = r->exposure_us, .gain_db = r->gain, .dark = on == 0,
-                       .set = set, .max_dn = gain_format_max(r->pixel_format), .nlamps = on };
+                       .set = set, .max_dn = calib_full_scale_dn(r->pixel_format), .nlamps = on };
         snprintf(f.sha256, sizeof f.sha256, "%s", r->sha256);
-        add_frame(d, &f);
+        ok = add_frame(d, &f);
     }
     if (ok && facts_out && !*facts_out && s->facts) *facts_out = json_incref(s->facts);
     rig_session_free(s);
-    return ok;
-}
-
-bool calib_gain_truth_radiance(json_t *facts, const char **truth_path, double *radiance_per_lamp)
-{
-    json_t *v = facts ? json_object_get(facts, "virtual_rig") : NULL;
-    const char *truth = json_string_value(json_object_get(v, "truth"));
-    const char *sample = json_string_value(json_object_get(v, "sample"));
-    if (truth_path) *truth_path = truth;
-    *radiance_per_lamp = NAN;
-    if (!truth || !sample) return false;
-    bool q = model_error_quiet_thread(true);   // a comparison: no truth, no column
-    rig_truth_t *t = rig_truth_load(truth);
-    bool ok = t && rig_truth_uniform_radiance(t, sample, radiance_per_lamp);
-    rig_truth_free(t);
-    model_error_quiet_thread(q);
-    if (!ok) *radiance_per_lamp = NAN;
     return ok;
 }

@@ -98,8 +98,11 @@ bool gain_analyse_linearisation(calib_gain_an_t *a)
         g_free(m);
         return false;
     }
-    double *v = malloc(sizeof(double) * a->n);
-    if (!v) return false;
+    double *v = malloc(sizeof(double) * (a->n + 1));
+    if (!v) {
+        model_error_set(NULL, 0, "gain %g dB: out of memory for the linearisation's check", a->gain_db);
+        return false;
+    }
     model_lin_t par = { .kind = MODEL_LIN_PARAMETRIC, .a_per_dn = a->lin_a_per_dn };
     for (int k = 0; k < 2; k++) {
         const model_lin_t *L = k ? &par : &a->lin;
@@ -129,7 +132,10 @@ bool calib_gain_lin_from_json(json_t *gj, const char *path, model_lin_t *out)
         size_t n = json_array_size(t);
         if (n != json_array_size(S) || n < 5 || n > 100000) return true;
         double *tv = malloc(sizeof(double) * n * 2), *sv = tv + n;
-        if (!tv) return true;
+        if (!tv) {
+            model_error(path, 0, "out of memory for the reference gain's curves (%zu steps)", n);
+            return false;
+        }
         for (size_t i = 0; i < n; i++) {
             tv[i] = json_is_number(json_array_get(t, i)) ? json_number_value(json_array_get(t, i)) : NAN;
             sv[i] = json_is_number(json_array_get(S, i)) ? json_number_value(json_array_get(S, i)) : NAN;

@@ -30,8 +30,16 @@ static double deviation_half_range(double c0, double c1, const double *t, const 
 double calib_gain_linearity(const double *t, const double *mu, int n, double sat_dn, double lo, double hi,
                             double *slope, double *offset, int *nfit, double *dev_pct)
 {
-    double *x = malloc(sizeof(double) * (n + 1)), *y = malloc(sizeof(double) * (n + 1));
+    double *x = malloc(sizeof(double) * ((size_t)n + 1) * 2), *y = x ? x + n + 1 : NULL;
     int m = 0;
+    if (!x) {   // no line, no figure
+        model_error_set(NULL, 0, "linearity: out of memory for %d steps", n);
+        for (int i = 0; dev_pct && i < n; i++) dev_pct[i] = NAN;
+        if (slope) *slope = NAN;
+        if (offset) *offset = NAN;
+        if (nfit) *nfit = 0;
+        return NAN;
+    }
     for (int i = 0; i < n; i++)
         if (mu[i] >= lo * sat_dn && mu[i] <= hi * sat_dn) {
             x[m] = t[i];
@@ -47,7 +55,6 @@ double calib_gain_linearity(const double *t, const double *mu, int n, double sat
     if (offset) *offset = c[0];
     if (nfit) *nfit = m;
     free(x);
-    free(y);
     return le;
 }
 

@@ -10,22 +10,19 @@
 #include "model/model.h"
 #include "model/base/report.h"
 
-static json_t *jreal(double x) { return isfinite(x) ? json_real(x) : json_null(); }
-
-static json_t *jarray(const double *v, int n)
+json_t *gain_json_numbers(const double *v, int n)
 {
     json_t *a = json_array();
-    for (int i = 0; i < n; i++) json_array_append_new(a, jreal(v[i]));
+    for (int i = 0; v && i < n; i++) json_array_append_new(a, model_json_number(v[i]));
     return a;
 }
-
 
 // The exposures of the dark groups the dark level and dark current were
 // fitted over (us, one per group); null when unknown.
 static json_t *dark_exposures_json(const calib_gain_an_t *a)
 {
     if (!(a->ndark > 0) || !a->dark_t_us) return json_null();
-    return jarray(a->dark_t_us, a->ndark);
+    return gain_json_numbers(a->dark_t_us, a->ndark);
 }
 
 static json_t *gain_json(const calib_gain_an_t *a)
@@ -33,62 +30,61 @@ static json_t *gain_json(const calib_gain_an_t *a)
     json_t *o = json_object();
     const calib_gain_ptc_t *p = &a->ptc;
     json_object_set_new(o, "gain_db", json_real(a->gain_db));
-    json_object_set_new(o, "system_gain_dn_per_e", jreal(p->system_gain_dn_per_e));
-    json_object_set_new(o, "system_gain_linear_fit_dn_per_e", jreal(p->system_gain_linear_dn_per_e));
-    json_object_set_new(o, "read_noise_e", jreal(p->read_noise_e));
-    json_object_set_new(o, "read_noise_dn", jreal(p->read_noise_dn));
-    json_object_set_new(o, "dark_temporal_variance_dn2", jreal(a->var_dark_dn2));
-    json_object_set_new(o, "saturation_dn", jreal(p->saturation_dn));
-    json_object_set_new(o, "saturation_exposure_us", jreal(a->t[p->i_sat]));
-    json_object_set_new(o, "saturation_capacity_e", jreal(p->saturation_capacity_e));
-    json_object_set_new(o, "linearity_error_pct", jreal(p->linearity_error_pct));
-    json_object_set_new(o, "linearity_error_r3_pct", jreal(p->linearity_error_r3_pct));
-    json_object_set_new(o, "linearity_error_linearised_pct", jreal(a->le_linearised_pct));
-    json_object_set_new(o, "linearity_error_linearised_parametric_pct", jreal(a->le_linearised_param_pct));
-    json_object_set_new(o, "snr_max", jreal(p->snr_max));
-    json_object_set_new(o, "snr_max_db", jreal(20 * log10(p->snr_max)));
-    json_object_set_new(o, "dynamic_range", jreal(p->dynamic_range));
-    json_object_set_new(o, "dynamic_range_db", jreal(20 * log10(p->dynamic_range)));
-    json_object_set_new(o, "response_dn_per_us", jreal(p->response_dn_per_us));
-    json_object_set_new(o, "response_offset_dn", jreal(p->response_offset_dn));
-    json_object_set_new(o, "radiance", jreal(a->radiance));
-    if (isfinite(a->radiance_truth)) json_object_set_new(o, "radiance_truth", json_real(a->radiance_truth));
-    json_object_set_new(o, "kc_per_us", jreal(a->kc_per_us));
-    json_object_set_new(o, "response_small_signal_dn_per_us", jreal(a->response0_dn_per_us));
-    json_object_set_new(o, "kc_small_signal_per_us", jreal(a->kc0_per_us));
-    json_object_set_new(o, "dark_current_dn_per_s", jreal(a->dark_slope_dn_per_us * 1e6));
-    json_object_set_new(o, "dark_current_e_per_s", jreal(a->dark_slope_dn_per_us * 1e6 / p->system_gain_dn_per_e));
-    json_object_set_new(o, "dark_level_dn", jreal(a->dark_intercept_dn));
+    json_object_set_new(o, "system_gain_dn_per_e", model_json_number(p->system_gain_dn_per_e));
+    json_object_set_new(o, "system_gain_linear_fit_dn_per_e", model_json_number(p->system_gain_linear_dn_per_e));
+    json_object_set_new(o, "read_noise_e", model_json_number(p->read_noise_e));
+    json_object_set_new(o, "read_noise_dn", model_json_number(p->read_noise_dn));
+    json_object_set_new(o, "dark_temporal_variance_dn2", model_json_number(a->var_dark_dn2));
+    json_object_set_new(o, "saturation_dn", model_json_number(p->saturation_dn));
+    json_object_set_new(o, "saturation_exposure_us", model_json_number(a->t[p->i_sat]));
+    json_object_set_new(o, "saturation_capacity_e", model_json_number(p->saturation_capacity_e));
+    json_object_set_new(o, "linearity_error_pct", model_json_number(p->linearity_error_pct));
+    json_object_set_new(o, "linearity_error_r3_pct", model_json_number(p->linearity_error_r3_pct));
+    json_object_set_new(o, "linearity_error_linearised_pct", model_json_number(a->le_linearised_pct));
+    json_object_set_new(o, "linearity_error_linearised_parametric_pct", model_json_number(a->le_linearised_param_pct));
+    json_object_set_new(o, "snr_max", model_json_number(p->snr_max));
+    json_object_set_new(o, "snr_max_db", model_json_number(20 * log10(p->snr_max)));
+    json_object_set_new(o, "dynamic_range", model_json_number(p->dynamic_range));
+    json_object_set_new(o, "dynamic_range_db", model_json_number(20 * log10(p->dynamic_range)));
+    json_object_set_new(o, "response_dn_per_us", model_json_number(p->response_dn_per_us));
+    json_object_set_new(o, "response_offset_dn", model_json_number(p->response_offset_dn));
+    json_object_set_new(o, "radiance", model_json_number(a->radiance));
+    json_object_set_new(o, "kc_per_us", model_json_number(a->kc_per_us));
+    json_object_set_new(o, "response_small_signal_dn_per_us", model_json_number(a->response0_dn_per_us));
+    json_object_set_new(o, "kc_small_signal_per_us", model_json_number(a->kc0_per_us));
+    json_object_set_new(o, "dark_current_dn_per_s", model_json_number(a->dark_slope_dn_per_us * 1e6));
+    json_object_set_new(o, "dark_current_e_per_s", model_json_number(a->dark_slope_dn_per_us * 1e6 / p->system_gain_dn_per_e));
+    json_object_set_new(o, "dark_level_dn", model_json_number(a->dark_intercept_dn));
     json_object_set_new(o, "dark_exposures_us", dark_exposures_json(a));
     json_object_set_new(o, "dark_current_from_variance_e_per_s",
-                        jreal(a->dark_var_slope_dn2_per_us * 1e6 / (p->system_gain_dn_per_e * p->system_gain_dn_per_e)));
+                        model_json_number(a->dark_var_slope_dn2_per_us * 1e6 / (p->system_gain_dn_per_e * p->system_gain_dn_per_e)));
     const calib_gain_photon_t *ph = &a->ph;
-#define PHOTON(key, v) json_object_set_new(o, key, ph->measured ? jreal(v) : json_string("not measured"))
+#define PHOTON(key, v) json_object_set_new(o, key, ph->measured ? model_json_number(v) : json_string("not measured"))
     PHOTON("quantum_efficiency", ph->qe);
     PHOTON("responsivity_dn_per_photon", ph->responsivity_dn_per_photon);
     PHOTON("absolute_sensitivity_threshold_photons", ph->mu_p_min);
     PHOTON("saturation_capacity_photons", ph->mu_p_sat);
 #undef PHOTON
-    json_object_set_new(o, "absolute_sensitivity_threshold_e", jreal(ph->mu_e_min));
-    json_object_set_new(o, "dynamic_range_r4", jreal(ph->dynamic_range));
+    json_object_set_new(o, "absolute_sensitivity_threshold_e", model_json_number(ph->mu_e_min));
+    json_object_set_new(o, "dynamic_range_r4", model_json_number(ph->dynamic_range));
     json_object_set_new(o, "n_steps", json_integer(a->n));
     json_object_set_new(o, "n_ptc_fit", json_integer(p->n_ptc_fit));
     json_object_set_new(o, "n_linearity_fit", json_integer(p->n_lin_fit));
     json_t *c = json_object();
-    json_object_set_new(c, "exposure_us", jarray(a->t, a->n));
-    json_object_set_new(c, "mean_dn", jarray(a->mu_y, a->n));
-    json_object_set_new(c, "dark_mean_dn", jarray(a->mu_d, a->n));
-    json_object_set_new(c, "signal_dn", jarray(a->mu, a->n));
-    json_object_set_new(c, "variance_dn2", jarray(a->var_y, a->n));
-    json_object_set_new(c, "dark_variance_dn2", jarray(a->var_d, a->n));
-    json_object_set_new(c, "signal_variance_dn2", jarray(a->var, a->n));
-    json_object_set_new(c, "snr", jarray(a->snr, a->n));
-    json_object_set_new(c, "linearity_deviation_pct", jarray(a->dev_pct, a->n));
-    if (a->mu_p) json_object_set_new(c, "photons", jarray(a->mu_p, a->n));
-    double *kc = malloc(sizeof(double) * (a->n + 1));
-    for (int i = 0; i < a->n; i++) kc[i] = isfinite(a->radiance) ? a->mu[i] / a->radiance : NAN;
-    json_object_set_new(c, "kc", jarray(kc, a->n));
-    free(kc);
+    json_object_set_new(c, "exposure_us", gain_json_numbers(a->t, a->n));
+    json_object_set_new(c, "mean_dn", gain_json_numbers(a->mu_y, a->n));
+    json_object_set_new(c, "dark_mean_dn", gain_json_numbers(a->mu_d, a->n));
+    json_object_set_new(c, "signal_dn", gain_json_numbers(a->mu, a->n));
+    json_object_set_new(c, "variance_dn2", gain_json_numbers(a->var_y, a->n));
+    json_object_set_new(c, "dark_variance_dn2", gain_json_numbers(a->var_d, a->n));
+    json_object_set_new(c, "signal_variance_dn2", gain_json_numbers(a->var, a->n));
+    json_object_set_new(c, "snr", gain_json_numbers(a->snr, a->n));
+    json_object_set_new(c, "linearity_deviation_pct", gain_json_numbers(a->dev_pct, a->n));
+    if (a->mu_p) json_object_set_new(c, "photons", gain_json_numbers(a->mu_p, a->n));
+    json_t *kc = json_array();
+    for (int i = 0; i < a->n; i++)
+        json_array_append_new(kc, model_json_number(isfinite(a->radiance) ? a->mu[i] / a->radiance : NAN));
+    json_object_set_new(c, "kc", kc);
     json_object_set_new(o, "curves", c);
     return o;
 }
@@ -138,8 +134,6 @@ static json_t *conventions_json(const calib_gain_opts_t *o, const calib_gain_dat
     json_object_set_new(cv, "kc_small_signal_per_us", json_string(
         "slope at exposure 0 of a quadratic least-squares fit of the signal against exposure over 0..70 % of "
         "saturation, per unit radiance (free of the non-linearity's compression)"));
-    json_object_set_new(cv, "radiance_truth", json_string("the virtual rig's truth of the radiance, for comparison "
-                                                          "only (not used in the figures)"));
     json_object_set_new(cv, "dark_current", json_string("slope of the mean dark level against exposure; "
                                                         "dark_current_from_variance_e_per_s: slope of the dark "
                                                         "temporal variance against exposure / K^2; "
@@ -165,18 +159,18 @@ static json_t *lin_json(const calib_gain_opts_t *o, const calib_gain_an_t *a)
     json_object_set_new(l, "method", json_string(mono ? "monotone" : "parametric"));
     json_object_set_new(l, "a_per_dn", json_real(a->lin_a_per_dn));
     if (table) {
-        json_object_set_new(l, "measured_dn", jarray(a->lin.m, a->lin.n));
-        json_object_set_new(l, "linear_dn", jarray(a->lin.s, a->lin.n));
+        json_object_set_new(l, "measured_dn", gain_json_numbers(a->lin.m, a->lin.n));
+        json_object_set_new(l, "linear_dn", gain_json_numbers(a->lin.s, a->lin.n));
     }
-    json_object_set_new(l, "anchor_response_dn_per_us", jreal(a->lin_anchor_dn_per_us));
-    json_object_set_new(l, "anchor_offset_dn", jreal(a->lin_anchor_offset_dn));
-    json_object_set_new(l, "linearity_error_linearised_pct", jreal(a->le_linearised_pct));
-    json_object_set_new(l, "linearity_error_linearised_parametric_pct", jreal(a->le_linearised_param_pct));
+    json_object_set_new(l, "anchor_response_dn_per_us", model_json_number(a->lin_anchor_dn_per_us));
+    json_object_set_new(l, "anchor_offset_dn", model_json_number(a->lin_anchor_offset_dn));
+    json_object_set_new(l, "linearity_error_linearised_pct", model_json_number(a->le_linearised_pct));
+    json_object_set_new(l, "linearity_error_linearised_parametric_pct", model_json_number(a->le_linearised_param_pct));
     return l;
 }
 
 json_t *calib_gain_json(const calib_gain_opts_t *o, const calib_gain_data_t *d, const calib_gain_an_t *an, int ngains,
-                        const calib_gain_maps_t *maps, const char *truth, json_t *prov)
+                        const calib_gain_maps_t *maps, json_t *prov)
 {
     const calib_gain_an_t *a = &an[0];
     const double K = a->ptc.system_gain_dn_per_e;
@@ -185,50 +179,50 @@ json_t *calib_gain_json(const calib_gain_opts_t *o, const calib_gain_data_t *d, 
     if (d->camera[0]) json_object_set_new(root, "camera", json_string(d->camera));
     json_object_set_new(root, "gain_db", json_real(a->gain_db));
     json_object_set_new(root, "gain_unit", json_string(d->gain_unit[0] ? d->gain_unit : "dB"));
-    json_object_set_new(root, "system_gain_dn_per_e", jreal(K));
-    json_object_set_new(root, "read_noise_e", jreal(a->ptc.read_noise_e));
-    json_object_set_new(root, "saturation_dn", jreal(a->ptc.saturation_dn));
-    json_object_set_new(root, "linearity_error_pct", jreal(a->ptc.linearity_error_pct));
-    json_object_set_new(root, "linearity_error_r3_pct", jreal(a->ptc.linearity_error_r3_pct));
+    json_object_set_new(root, "system_gain_dn_per_e", model_json_number(K));
+    json_object_set_new(root, "read_noise_e", model_json_number(a->ptc.read_noise_e));
+    json_object_set_new(root, "saturation_dn", model_json_number(a->ptc.saturation_dn));
+    json_object_set_new(root, "linearity_error_pct", model_json_number(a->ptc.linearity_error_pct));
+    json_object_set_new(root, "linearity_error_r3_pct", model_json_number(a->ptc.linearity_error_r3_pct));
     json_object_set_new(root, "linearisation", lin_json(o, a));
-    json_object_set_new(root, "dsnu_dn", jreal(maps->dsnu_dn));
-    json_object_set_new(root, "dsnu_e", jreal(maps->dsnu_dn / K));
-    json_object_set_new(root, "prnu_pct", jreal(maps->prnu_pct));
-    json_object_set_new(root, "prnu_total_pct", jreal(maps->prnu_total_pct));
-    json_object_set_new(root, "dark_current_e_per_s", jreal(a->dark_slope_dn_per_us * 1e6 / K));
-    json_object_set_new(root, "dark_current_dn_per_s", jreal(a->dark_slope_dn_per_us * 1e6));
-    json_object_set_new(root, "dark_level_dn", jreal(a->dark_intercept_dn));
+    json_object_set_new(root, "dsnu_dn", model_json_number(maps->dsnu_dn));
+    json_object_set_new(root, "dsnu_e", model_json_number(maps->dsnu_dn / K));
+    json_object_set_new(root, "prnu_pct", model_json_number(maps->prnu_pct));
+    json_object_set_new(root, "prnu_total_pct", model_json_number(maps->prnu_total_pct));
+    json_object_set_new(root, "dark_current_e_per_s", model_json_number(a->dark_slope_dn_per_us * 1e6 / K));
+    json_object_set_new(root, "dark_current_dn_per_s", model_json_number(a->dark_slope_dn_per_us * 1e6));
+    json_object_set_new(root, "dark_level_dn", model_json_number(a->dark_intercept_dn));
     json_object_set_new(root, "dark_exposures_us", dark_exposures_json(a));
-    json_object_set_new(root, "saturation_capacity_e", jreal(a->ptc.saturation_capacity_e));
-    json_object_set_new(root, "snr_max", jreal(a->ptc.snr_max));
-    json_object_set_new(root, "snr_max_db", jreal(20 * log10(a->ptc.snr_max)));
-    json_object_set_new(root, "dynamic_range", jreal(a->ptc.dynamic_range));
-    json_object_set_new(root, "dynamic_range_db", jreal(20 * log10(a->ptc.dynamic_range)));
-    json_object_set_new(root, "kc_per_us", jreal(a->kc_per_us));
-    json_object_set_new(root, "kc_small_signal_per_us", jreal(a->kc0_per_us));
-    json_object_set_new(root, "response_dn_per_us", jreal(a->ptc.response_dn_per_us));
+    json_object_set_new(root, "saturation_capacity_e", model_json_number(a->ptc.saturation_capacity_e));
+    json_object_set_new(root, "snr_max", model_json_number(a->ptc.snr_max));
+    json_object_set_new(root, "snr_max_db", model_json_number(20 * log10(a->ptc.snr_max)));
+    json_object_set_new(root, "dynamic_range", model_json_number(a->ptc.dynamic_range));
+    json_object_set_new(root, "dynamic_range_db", model_json_number(20 * log10(a->ptc.dynamic_range)));
+    json_object_set_new(root, "kc_per_us", model_json_number(a->kc_per_us));
+    json_object_set_new(root, "kc_small_signal_per_us", model_json_number(a->kc0_per_us));
+    json_object_set_new(root, "response_dn_per_us", model_json_number(a->ptc.response_dn_per_us));
     json_t *f = json_object();
     json_object_set_new(f, "exposure_us", json_real(maps->flat_exposure_us));
     json_object_set_new(f, "level_dn", json_real(maps->flat_level_dn));
-    json_object_set_new(f, "level_of_saturation", jreal(maps->flat_level_dn / a->ptc.saturation_dn));
+    json_object_set_new(f, "level_of_saturation", model_json_number(maps->flat_level_dn / a->ptc.saturation_dn));
     json_object_set_new(f, "light_frames", json_integer(maps->flat_frames));
     json_object_set_new(f, "dark_frames", json_integer(maps->dark_frames));
     json_object_set_new(f, "dark_exposure_us", json_real(maps->dark_exposure_us));
     json_object_set_new(f, "width", json_integer(maps->w));
     json_object_set_new(f, "height", json_integer(maps->h));
     json_object_set_new(f, "linearised", json_boolean(maps->flat_linearised));
-    json_object_set_new(f, "pixel_std_rel", jreal(maps->flat_pixel_std_rel));
+    json_object_set_new(f, "pixel_std_rel", model_json_number(maps->flat_pixel_std_rel));
     json_object_set_new(root, "flat_field", f);
     json_t *sd = json_object();
-    json_object_set_new(sd, "system_gain_dn_per_e", jreal(a->ptc.system_gain_std_dn_per_e));
-    json_object_set_new(sd, "read_noise_e", jreal(a->read_noise_std_e));
-    json_object_set_new(sd, "dsnu_dn", jreal(maps->dsnu_std_dn));
-    json_object_set_new(sd, "prnu_pct", jreal(maps->prnu_std_pct));
+    json_object_set_new(sd, "system_gain_dn_per_e", model_json_number(a->ptc.system_gain_std_dn_per_e));
+    json_object_set_new(sd, "read_noise_e", model_json_number(a->read_noise_std_e));
+    json_object_set_new(sd, "dsnu_dn", model_json_number(maps->dsnu_std_dn));
+    json_object_set_new(sd, "prnu_pct", model_json_number(maps->prnu_std_pct));
     json_t *pp = json_object();
-    json_object_set_new(pp, "statistical", jreal(maps->prnu_std_stat_pct));
-    json_object_set_new(pp, "linearisation_slope", jreal(maps->prnu_std_lin_pct));
+    json_object_set_new(pp, "statistical", model_json_number(maps->prnu_std_stat_pct));
+    json_object_set_new(pp, "linearisation_slope", model_json_number(maps->prnu_std_lin_pct));
     json_object_set_new(sd, "prnu_pct_parts", pp);
-    json_object_set_new(sd, "dark_current_e_per_s", jreal(a->dark_current_std_e_per_s));
+    json_object_set_new(sd, "dark_current_e_per_s", model_json_number(a->dark_current_std_e_per_s));
     json_object_set_new(root, "std", sd);
     json_object_set_new(root, "std_method", json_string(
         "1-sigma of the figures of the same name, from the fits' statistics (units as theirs): "
@@ -245,13 +239,12 @@ json_t *calib_gain_json(const calib_gain_opts_t *o, const calib_gain_data_t *d, 
     json_object_set_new(root, "maps", json_pack("{s:s, s:s, s:s, s:s, s:s}", "offset_dn", "offset_dn.tiff", "dsnu_dn",
                                                 "dsnu_dn.tiff", "prnu_gain", "prnu_gain.tiff", "prnu_highpass",
                                                 "prnu_highpass.tiff", "defects", "defects.tiff"));
-    json_object_set_new(root, "quantum_efficiency", a->ph.measured ? jreal(a->ph.qe) : json_string("not measured"));
+    json_object_set_new(root, "quantum_efficiency", a->ph.measured ? model_json_number(a->ph.qe) : json_string("not measured"));
     json_object_set_new(root, "emva1288", calib_gain_emva_json(o, an, maps));
     json_t *pg = json_array();
     for (int i = 0; i < ngains; i++) json_array_append_new(pg, gain_json(&an[i]));
     json_object_set_new(root, "gains", pg);
     json_object_set_new(root, "conventions", conventions_json(o, d));
-    if (truth) json_object_set_new(root, "virtual_truth", json_string(truth));
     json_object_set_new(root, "provenance", json_incref(prov));
     return root;
 }

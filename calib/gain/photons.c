@@ -67,8 +67,8 @@ bool calib_gain_photon_axis(const double *t, const double *mu, int n, double sat
     o->responsivity_offset_dn = c[0];
     o->qe = c[1] / K;
     if (o->qe > 1)
-        fprintf(stderr, "refl calib gain: warning: quantum efficiency %.3g %% is above 100 %%: check --irradiance "
-                "(uW/cm^2 at the sensor), the pixel area and the wavelength\n", 100 * o->qe);
+        model_warning("quantum efficiency %.3g %% is above 100 %%: check --irradiance (uW/cm^2 at the sensor), the "
+                      "pixel area and the wavelength", 100 * o->qe);
     o->mu_p_min = o->mu_e_min / o->qe;
     o->mu_p_sat = o->mu_e_sat / o->qe;
     return true;
@@ -90,7 +90,10 @@ bool calib_gain_an_photons(const calib_gain_opts_t *o, calib_gain_an_t *a)
         return false;
     free(a->mu_p);
     a->mu_p = malloc(sizeof(double) * (a->n + 1));
-    if (!a->mu_p) return false;
+    if (!a->mu_p) {
+        model_error_set(NULL, 0, "out of memory for the photon axis");
+        return false;
+    }
     for (int i = 0; i < a->n; i++)
         a->mu_p[i] = a->ph.measured ? calib_gain_photons(E, o->pixel_area_um2, o->wavelength_nm, a->t[i]) : NAN;
     return true;

@@ -30,7 +30,11 @@ bool calib_gain_ptc(const double *t, const double *mu, const double *var, const 
     }
     o->i_sat = imax;
     o->saturation_dn = mu[imax];
-    double *x = malloc(sizeof(double) * n), *y = malloc(sizeof(double) * n);
+    double *x = malloc(sizeof(double) * (size_t)n * 2), *y = x ? x + n : NULL;
+    if (!x) {
+        model_error_set(NULL, 0, "photon transfer: out of memory for %d steps", n);
+        return false;
+    }
     int m = 0;
     for (int i = 0; i < n; i++)
         if (mu[i] > 0 && mu[i] <= 0.7 * o->saturation_dn) {
@@ -42,7 +46,6 @@ bool calib_gain_ptc(const double *t, const double *mu, const double *var, const 
     bool ok = m >= 5 && calib_gain_polyfit(x, y, m, 2, c2) && calib_gain_polyfit(x, y, m, 1, c1);
     o->system_gain_std_dn_per_e = ok && calib_gain_polyfit_se(x, y, m, 2, c2, se2) ? se2[1] : NAN;
     free(x);
-    free(y);
     if (!ok || !(c2[1] > 0)) {
         model_error_set(NULL, 0, "photon transfer: %d points below 70 %% of saturation (%.6g DN); the fit of the "
                         "variance against the mean failed (at least 5 are needed, with a rising variance)",

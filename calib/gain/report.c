@@ -67,9 +67,6 @@ static int summary_rows(const calib_gain_an_t *an, int ngains, const calib_gain_
                                      an[i].ptc.system_gain_dn_per_e, an[i].ptc.read_noise_e, an[i].ptc.saturation_dn,
                                      an[i].ptc.linearity_error_pct, an[i].ptc.response_dn_per_us, an[i].kc_per_us,
                                      an[i].kc0_per_us);
-    if (nr < max && isfinite(a->radiance_truth))
-        rows[nr++] = g_strdup_printf("radiance (comparison)|%.6g given|the virtual rig's truth: %.6g", a->radiance,
-                                     a->radiance_truth);
     return nr;
 }
 
@@ -77,7 +74,7 @@ bool calib_gain_report(const char *dir, const calib_gain_an_t *an, int ngains, c
                        json_t *prov)
 {
     char *jp = g_build_filename(dir, "gain.json", NULL);
-    fprintf(stderr, "refl calib gain: plotting\n");
+    model_note("plotting");
     int pr = model_run_script("calib_gain_report.py", jp, dir, NULL);
     g_free(jp);
     if (pr) return false;

@@ -9,37 +9,32 @@
 #include "calib/gain/internal.h"
 #include "model/model.h"
 
-void gain_region(int w, int h, const int roi[4], int r[4])
-{
-    if (roi && roi[2] > 0) memcpy(r, roi, sizeof(int) * 4);
-    else {
-        r[0] = r[1] = 0;
-        r[2] = w;
-        r[3] = h;
-    }
-}
-
-void calib_gain_spatial_split(const float *img, int w, int h, const int roi[4], double tvar, double scale,
+bool calib_gain_spatial_split(const float *img, int w, int h, const int roi[4], double tvar, double scale,
                               calib_gain_split_t *o)
 {
     int r[4];
     gain_region(w, h, roi, r);
     const int N = r[3], M = r[2];   // N rows, M columns
-    double *colsum = calloc(M, sizeof(double)), s = 0, ss = 0, rs = 0, rss = 0;
+    double *colsum = calloc(M > 0 ? M : 1, sizeof(double)), s = 0, ss = 0, rs = 0, rss = 0;
+    if (!colsum) {
+        *o = (calib_gain_split_t){ NAN, NAN, NAN, NAN };
+        model_error_set(NULL, 0, "out of memory for the spatial split (%d columns)", M);
+        return false;
+    }
     for (int y = 0; y < N; y++) {
         const float *row = img + (size_t)(r[1] + y) * w + r[0];
         double t = 0;
         for (int x = 0; x < M; x++) {
             t += row[x];
             ss += (double)row[x] * row[x];
-            if (colsum) colsum[x] += row[x];
+            colsum[x] += row[x];
         }
         s += t;
         rs += t / M;
         rss += (t / M) * (t / M);
     }
     double mean = s / ((double)M * N), cs = 0, css = 0;
-    for (int x = 0; colsum && x < M; x++) {
+    for (int x = 0; x < M; x++) {
         double c = colsum[x] / N;
         cs += c;
         css += c * c;
@@ -55,6 +50,7 @@ void calib_gain_spatial_split(const float *img, int w, int h, const int roi[4], 
     o->row = scale * sqrt(fmax(r2, 0));
     o->col = scale * sqrt(fmax(c2, 0));
     o->pixel = scale * sqrt(fmax(p2, 0));
+    return true;
 }
 
 // Mixed-radix decimation-in-time DFT of in[j * stride] (j < n) into out[n]:
@@ -183,11 +179,11 @@ bool calib_gain_make_spatial(const calib_gain_data_t *d, calib_gain_maps_t *m, d
     smean /= (double)r[2] * r[3];
     sp->signal_mean_dn = smean;
     const double rel = 100 / smean, dtv = m->dark_var_dn2 / m->dark_frames;
-    calib_gain_spatial_split(m->offset, m->w, m->h, r, dtv, 1, &sp->dsnu);
-    calib_gain_spatial_split(sig, m->w, m->h, r, m->signal_temporal_var_dn2, rel, &sp->prnu);
-    calib_gain_spatial_split(m->prnu_hp, m->w, m->h, r, m->signal_temporal_var_dn2 / (smean * smean), 100,
-                             &sp->prnu_hp);
-    bool ok = calib_gain_spectrogram(m->offset, m->w, m->h, r, false, 1, sp->spec_h_dark) &&
+    bool ok = calib_gain_spatial_split(m->offset, m->w, m->h, r, dtv, 1, &sp->dsnu) &&
+              calib_gain_spatial_split(sig, m->w, m->h, r, m->signal_temporal_var_dn2, rel, &sp->prnu) &&
+              calib_gain_spatial_split(m->prnu_hp, m->w, m->h, r, m->signal_temporal_var_dn2 / (smean * smean), 100,
+                                       &sp->prnu_hp) &&
+              calib_gain_spectrogram(m->offset, m->w, m->h, r, false, 1, sp->spec_h_dark) &&
               calib_gain_spectrogram(m->offset, m->w, m->h, r, true, 1, sp->spec_v_dark) &&
               calib_gain_spectrogram(sig, m->w, m->h, r, false, rel, sp->spec_h_light) &&
               calib_gain_spectrogram(sig, m->w, m->h, r, true, rel, sp->spec_v_light);
@@ -200,7 +196,7 @@ bool calib_gain_make_spatial(const calib_gain_data_t *d, calib_gain_maps_t *m, d
     ok = ok && sp->col_dark && sp->row_dark && sp->col_light && sp->row_light;
     free(sig);
     if (!ok) {
-        model_error_set(NULL, 0, "out of memory for the spectrograms (%dx%d)", m->w, m->h);
+        model_error_set(NULL, 0, "out of memory for the spatial split and spectrograms (%dx%d)", m->w, m->h);
         return false;
     }
     // defects: the dark average and the high-pass flat (vignetting removed)
