@@ -21,6 +21,7 @@
 #include "calib/calib.h"
 #include "calib/gain/gain.h"
 #include "model/model.h"
+#include "model/base/report.h"
 #include "model/base/vec.h"
 #include "rig/rig.h"
 #include "rig/virtual/truth.h"
@@ -813,6 +814,74 @@ TEST(calib_set_camera_layouts)
     free(cm);
 }
 
+// calib_set_format_versions: the calibration set checks each JSON file's
+// format and version: a file that names none reads as version 1, a version
+// this refl knows is read and recorded, a newer version or another format is
+// refused naming the file.
+TEST(calib_set_format_versions)
+{
+    char src[PATH_MAX + 64], top[PATH_MAX];
+    if (!realpath(test_srcdir(), top)) snprintf(top, sizeof top, "%s", test_srcdir());
+    snprintf(src, sizeof src, "%s/examples/camera.cameramodel", top);
+    char *cm = model_read_file(src, NULL);
+    CHECK(cm != NULL);
+    if (!cm) return;
+    g_mkdir_with_parents(test_path("fv"), 0755);
+    char cam[PATH_MAX], lamps[PATH_MAX], gain[PATH_MAX], white[PATH_MAX];
+    snprintf(cam, sizeof cam, "%s", test_write("fv/camera.cameramodel", cm));
+    snprintf(lamps, sizeof lamps, "%s", test_path("fv/lamps.json"));
+    snprintf(gain, sizeof gain, "%s", test_path("fv/gain.json"));
+    snprintf(white, sizeof white, "%s", test_path("fv/white.json"));
+    const char *lamp = "\"lamps\": [{\"name\": \"east\", \"position_mm\": [400, 0, 600]}]";
+    const char *lin = "\"linearisation\": {\"method\": \"parametric\", \"a_per_dn\": 0}";
+    char buf[512];
+    snprintf(buf, sizeof buf, "{%s}\n", lamp);
+    test_write("fv/lamps.json", buf);
+    test_write("fv/gain.json", "{\"system_gain_dn_per_e\": 0.25, \"read_noise_e\": 6}\n");
+    test_write("fv/white.json", "{\"lamps\": [{\"name\": \"east\", \"kc_I_per_us\": 480}]}\n");
+    bool q = model_error_quiet_thread(true);
+    calib_set_t *c = calib_set_load_files(cam, lamps, gain, white);
+    CHECK_MSG(c != NULL, "%s", model_last_error());
+    if (c) CHECK(c->lamps_version == 1 && c->gain_version == 1 && c->white_version == 1);
+    calib_set_free(c);
+    // the versions refl writes
+    snprintf(buf, sizeof buf, "{\"format\": \"refl-lamps\", \"version\": 1, %s}\n", lamp);
+    test_write("fv/lamps.json", buf);
+    snprintf(buf, sizeof buf, "{\"format\": \"refl-gain\", \"version\": %d, \"gain_db\": 0, \"gain_unit\": \"dB\", %s}\n",
+             CALIB_GAIN_FORMAT_VERSION, lin);
+    test_write("fv/gain.json", buf);
+    test_write("fv/white.json", "{\"format\": \"refl-white\", \"version\": 1, \"lamps\": [{\"name\": \"east\", "
+                                "\"kc_I_per_us\": 480}]}\n");
+    c = calib_set_load_files(cam, lamps, gain, white);
+    CHECK_MSG(c != NULL, "%s", model_last_error());
+    if (c) CHECK(c->gain_version == CALIB_GAIN_FORMAT_VERSION && c->have_white && c->kcI_per_us[0] == 480);
+    calib_set_free(c);
+    // newer versions are refused, naming the file
+    snprintf(buf, sizeof buf, "{\"format\": \"refl-gain\", \"version\": %d, %s}\n", CALIB_GAIN_FORMAT_VERSION + 1, lin);
+    test_write("fv/gain.json", buf);
+    CHECK(calib_set_load_files(cam, lamps, gain, white) == NULL);
+    CHECK_CONTAINS(model_last_error(), "fv/gain.json");
+    CHECK_CONTAINS(model_last_error(), "written by a newer refl");
+    c = calib_set_load_files(cam, lamps, NULL, NULL);   // the camera and lamps alone load
+    CHECK(c != NULL);
+    calib_set_free(c);
+    test_write("fv/white.json", "{\"format\": \"refl-white\", \"version\": 2, \"lamps\": []}\n");
+    CHECK(calib_set_load_files(cam, lamps, NULL, white) == NULL);
+    CHECK_CONTAINS(model_last_error(), "fv/white.json");
+    CHECK_CONTAINS(model_last_error(), "refl-white version 2");
+    snprintf(buf, sizeof buf, "{\"format\": \"refl-lamps\", \"version\": 2, %s}\n", lamp);
+    test_write("fv/lamps.json", buf);
+    CHECK(calib_set_load_files(cam, lamps, NULL, NULL) == NULL);
+    CHECK_CONTAINS(model_last_error(), "fv/lamps.json");
+    CHECK_CONTAINS(model_last_error(), "written by a newer refl");
+    // another format in a file's place
+    test_write("fv/lamps.json", "{\"format\": \"refl-gain\", \"version\": 1}\n");
+    CHECK(calib_set_load_files(cam, lamps, NULL, NULL) == NULL);
+    CHECK_CONTAINS(model_last_error(), "a refl-gain file, not refl-lamps");
+    model_error_quiet_thread(q);
+    free(cm);
+}
+
 // calib_gain_analyse_phases: the dark model, the sweep and photon transfer
 // of one gain on groups with known statistics (no frames): dark level 100 DN
 // + 0.001 DN/us, dark variance 4 DN^2 + 1e-4 DN^2/us, measured at four
@@ -1021,14 +1090,16 @@ TEST(calib_gain_linearity_r4_hand)
     CHECK_NEAR(calib_gain_linearity(t, mu, 3, 310, 0.05, 0.95, NULL, NULL, NULL, NULL), 4.8809523810, 1e-8);
 }
 
-// An old gain.json (before the table: no "linearisation") still loads and
-// applies S(1 - aS) of its curves; a new one applies its table, and its method
-// "parametric" the a; a malformed one is an error naming the file.
+// A refl-gain version 1 file without "linearisation" loads and applies
+// S(1 - aS) of its curves; a file with the table applies it, and its method
+// "parametric" the a; a malformed one is an error naming the file. A version
+// 2 file needs its "linearisation"; a newer version or another format is
+// refused.
 TEST(calib_gain_lin_json_compat)
 {
     double t[LIN_N], mu[LIN_N];
     double sat = lin_sweep(t, mu, 0);
-    // the old layout: gains[0].curves at gain_db 0
+    // version 1 without the table: gains[0].curves at gain_db 0
     json_t *cv = json_object(), *et = json_array(), *es = json_array();
     for (int i = 0; i < LIN_N; i++) {
         json_array_append_new(et, json_real(t[i]));
@@ -1043,7 +1114,21 @@ TEST(calib_gain_lin_json_compat)
     CHECK(L.kind == MODEL_LIN_PARAMETRIC);
     CHECK_REL(L.a_per_dn, calib_gain_parametric_a(t, mu, LIN_N, sat), 1e-12);
     CHECK(L.a_per_dn > 0);
-    // the new layout
+    // version 2 names itself and always has the table
+    json_t *v2 = json_deep_copy(old);
+    json_object_set_new(v2, "format", json_string("refl-gain"));
+    json_object_set_new(v2, "version", json_integer(2));
+    CHECK(!calib_gain_lin_from_json(v2, "v2/gain.json", &L));
+    CHECK_CONTAINS(model_last_error(), "v2/gain.json");
+    CHECK_CONTAINS(model_last_error(), "without its \"linearisation\"");
+    json_object_set_new(v2, "version", json_integer(CALIB_GAIN_FORMAT_VERSION + 1));
+    CHECK(!calib_gain_lin_from_json(v2, "v3/gain.json", &L));
+    CHECK_CONTAINS(model_last_error(), "written by a newer refl");
+    json_object_set_new(v2, "format", json_string("refl-white"));
+    CHECK(!calib_gain_lin_from_json(v2, "w/gain.json", &L));
+    CHECK_CONTAINS(model_last_error(), "not refl-gain");
+    json_decref(v2);
+    // with the table
     model_lin_t T;
     double a, r, c0;
     CHECK(calib_gain_linearisation(t, mu, LIN_N, sat, &T, &a, &r, &c0));
@@ -1054,6 +1139,10 @@ TEST(calib_gain_lin_json_compat)
     }
     json_object_set_new(old, "linearisation", json_pack("{s:s, s:f, s:o, s:o}", "method", "monotone", "a_per_dn", a,
                                                         "measured_dn", jm, "linear_dn", js));
+    CHECK(calib_gain_lin_from_json(old, "new/gain.json", &L));
+    CHECK(L.kind == MODEL_LIN_MONOTONE && L.n == T.n);
+    json_object_set_new(old, "format", json_string("refl-gain"));
+    json_object_set_new(old, "version", json_integer(2));
     CHECK(calib_gain_lin_from_json(old, "new/gain.json", &L));
     CHECK(L.kind == MODEL_LIN_MONOTONE && L.n == T.n);
     CHECK_REL(model_linearise(&L, 0.9 * sat, 1, NULL), model_linearise(&T, 0.9 * sat, 1, NULL), 1e-12);

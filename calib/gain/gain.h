@@ -111,9 +111,11 @@ bool calib_gain_linearisation(const double *t, const double *mu, int n, double s
 // the curve says no compression.
 double calib_gain_parametric_a(const double *t, const double *mu, int n, double sat_dn);
 // The linearisation a gain.json (path, for messages) records: its
-// "linearisation" (method monotone: the table; parametric: a), else (files
-// from before it) the parametric a of its reference gain's curves, else none.
-// false + message (model_error, naming the file) when "linearisation" is malformed.
+// "linearisation" (method monotone: the table; parametric: a); a version 1
+// file without it: the parametric a of its reference gain's curves, else
+// none. false + message (model_error, naming the file) when "linearisation"
+// is malformed or missing from a version 2 file, or the file is not a
+// refl-gain file this reader knows (model_json_format_check).
 bool calib_gain_lin_from_json(json_t *gj, const char *path, model_lin_t *out);
 
 // Pearson correlation of two maps of n values (NAN when one is constant).
@@ -447,6 +449,17 @@ json_t *calib_gain_emva_json(const calib_gain_opts_t *o, const calib_gain_an_t *
 // DIR/defects.tiff (codes 0 good, 1 hot, 2 dead, 3 bright) and DIR/datasheet.html.
 bool calib_gain_write_defects(const char *dir, const calib_gain_maps_t *m);
 bool calib_gain_datasheet_html(const char *dir, json_t *emva, json_t *prov);
+// gain.json names its format, "refl-gain", and version (model_json_set_format):
+//   version 1  every gain.json that names no format. Of its keys these may be
+//              absent: camera, gain_db and gain_unit (readers take 0 dB),
+//              linearisation (readers take the parametric a of the reference
+//              gain's curves), flat_field.pixel_std_rel and .linearised, std
+//              and std_method (no stated 1-sigmas), dark_exposures_us.
+//   version 2  names itself; always has gain_db, gain_unit, linearisation,
+//              flat_field.pixel_std_rel and .linearised, std, std_method and
+//              dark_exposures_us (null where a figure is unknown).
+#define CALIB_GAIN_FORMAT         "refl-gain"
+#define CALIB_GAIN_FORMAT_VERSION 2
 // gain.json's document (new reference): an[0] the reference gain, then every gain.
 json_t *calib_gain_json(const calib_gain_opts_t *o, const calib_gain_data_t *d, const calib_gain_an_t *an, int ngains,
                         const calib_gain_maps_t *maps, json_t *prov);

@@ -9,6 +9,7 @@
 
 #include "calib/gain/internal.h"
 #include "model/model.h"
+#include "model/base/report.h"
 
 double calib_gain_parametric_a(const double *t, const double *mu, int n, double sat)
 {
@@ -118,8 +119,20 @@ bool gain_analyse_linearisation(calib_gain_an_t *a)
 bool calib_gain_lin_from_json(json_t *gj, const char *path, model_lin_t *out)
 {
     memset(out, 0, sizeof *out);
+    int version = 1;
+    if (!model_json_format_check(gj, path, CALIB_GAIN_FORMAT, CALIB_GAIN_FORMAT_VERSION, &version)) {
+        char *e = g_strdup(model_last_error());
+        model_error(NULL, 0, "%s", e);
+        g_free(e);
+        return false;
+    }
     json_t *l = json_object_get(gj, "linearisation");
-    if (!l) {   // a file from before the table: the parametric form of its reference gain's curves
+    if (!l && version >= 2) {
+        model_error(path, 0, "refl-gain version %d without its \"linearisation\" (refl calib gain writes it; run it "
+                    "again)", version);
+        return false;
+    }
+    if (!l) {   // version 1 without it: the parametric form of its reference gain's curves
         json_t *gains = json_object_get(gj, "gains"), *g0 = NULL;
         for (size_t k = 0; k < json_array_size(gains); k++) {
             json_t *e = json_array_get(gains, k);

@@ -175,6 +175,7 @@ json_t *calib_gain_json(const calib_gain_opts_t *o, const calib_gain_data_t *d, 
     const calib_gain_an_t *a = &an[0];
     const double K = a->ptc.system_gain_dn_per_e;
     json_t *root = json_object();
+    model_json_set_format(root, CALIB_GAIN_FORMAT, CALIB_GAIN_FORMAT_VERSION);
     json_object_set_new(root, "calibration", json_string("gain (EMVA 1288 style)"));
     if (d->camera[0]) json_object_set_new(root, "camera", json_string(d->camera));
     json_object_set_new(root, "gain_db", json_real(a->gain_db));
