@@ -3,17 +3,22 @@
 // calib_gain_run. The command (argument parsing, calib/cmd_gain.c) is
 // calib_cmd_gain (calib/calib.h).
 //
-// A run, in order: frames (calib_gain_capture on a rig, calib_gain_add_session,
-// calib_gain_read_manifest) → calib_gain_make_groups (one group per exposure,
-// gain, dark/light and role) → calib_gain_frame_stats (each group's mean and
-// temporal variance) → per gain calib_gain_analyse (dark model, photon
-// transfer, linearity, response) → calib_gain_make_maps (offset, DSNU, PRNU
-// of the flat field at the first gain) → calib_gain_make_spatial (EMVA 1288
-// Release 4.0 Linear: row/column/pixel split, spectrograms, profiles,
-// defects; calib/gain/emva.c) → calib_gain_write_maps, calib_gain_write_defects,
-// calib_gain_json (gain.json, with "emva1288"), calib_gain_report (plots,
-// report.html), calib_gain_datasheet_html (datasheet.html). The photon axis
-// (calib_gain_an_photons) follows each gain's calib_gain_analyse.
+// A run, in order (calib/gain/gain.c): frames (calib_gain_capture on a rig,
+// capture.c; calib_gain_add_session, calib_gain_read_manifest, input.c) →
+// calib_gain_make_groups (one group per exposure, gain, dark/light and role)
+// → calib_gain_frame_stats (each group's mean and temporal variance;
+// frames.c) → per gain calib_gain_analyse (analyse.c: the dark model,
+// dark.c; the sweep, sweep.c; photon transfer, ptc.c; linearity,
+// linearity.c; the linearisation, linearisation.c; the response) →
+// calib_gain_make_maps (offset, DSNU, PRNU of the flat field at the first
+// gain; maps.c) → calib_gain_make_spatial (EMVA 1288 Release 4.0 Linear:
+// row/column/pixel split, spectrograms, profiles, spatial.c; defects,
+// defects.c) → calib_gain_write_maps, calib_gain_write_defects,
+// calib_gain_json (gain.json, with "emva1288"; output.c, emva.c),
+// calib_gain_report (plots, report.html; report.c),
+// calib_gain_datasheet_html (datasheet.html; emva.c). The photon axis
+// (calib_gain_an_photons, photons.c) follows each gain's calib_gain_analyse.
+// The least-squares fits the phases share: fit.c.
 // Errors: false / NULL with the message kept by model_error_set
 // (model_last_error), not printed: the caller prints it once. What a run is
 // doing goes out as notices (model_note, model_progress, model_warning).
@@ -129,9 +134,10 @@ bool calib_gain_highpass(const float *in, int w, int h, float *out);
 
 
 // ---------------------------------------------------------------------------
-// EMVA 1288 Release 4.0 Linear: the photon axis, the spatial split,
-// spectrograms, defect pixels (calib/gain/emva.c). The definitions with their
-// formulas are in gain.json's "emva1288" "definitions" and README.
+// EMVA 1288 Release 4.0 Linear: the photon axis (photons.c), the spatial
+// split and spectrograms (spatial.c), defect pixels (defects.c), the
+// datasheet (emva.c). Each figure's definition with its formula is in its
+// row of gain.json's "emva1288" datasheet (and README).
 
 // Mean photons per pixel during t_us: mu_p = A E t lambda / (h c), A the
 // pixel area (um^2), E the irradiance at the sensor (uW/cm^2), lambda (nm).
