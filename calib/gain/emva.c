@@ -31,7 +31,8 @@ static void row(json_t *rows, const char *quantity, const char *symbol, double v
 
 static json_t *split_json(const calib_gain_split_t *s)
 {
-    return json_pack("{s:o, s:o, s:o, s:o}", "total", model_json_number(s->total), "row", model_json_number(s->row), "column", model_json_number(s->col),
+    return json_pack("{s:o, s:o, s:o, s:o}", "total", model_json_number(s->total), "row", model_json_number(s->row),
+                     "column", model_json_number(s->col),
                      "pixel", model_json_number(s->pixel));
 }
 
@@ -101,7 +102,8 @@ static json_t *hist_json(double lo, double hi, const long *h, int nb, const char
 {
     json_t *c = json_array();
     for (int i = 0; i < nb; i++) json_array_append_new(c, json_integer(h[i]));
-    return json_pack("{s:o, s:o, s:s, s:o}", "lo", model_json_number(lo), "hi", model_json_number(hi), "unit", unit, "counts", c);
+    return json_pack("{s:o, s:o, s:s, s:o}", "lo", model_json_number(lo), "hi", model_json_number(hi), "unit", unit,
+                     "counts", c);
 }
 
 static json_t *defects_json(const calib_gain_defects_t *d, double nsigma)
@@ -137,8 +139,8 @@ static json_t *spectro_json(int n, int len, const double *dark, const double *li
 {
     json_t *f = json_array();
     for (int k = 0; k < n; k++) json_array_append_new(f, model_json_number((double)k / len));
-    return json_pack("{s:o, s:o, s:o}", "frequency_cycles_per_px", f, "dark_dn", gain_json_numbers(dark, n), "light_pct",
-                     gain_json_numbers(light, n));
+    return json_pack("{s:o, s:o, s:o}", "frequency_cycles_per_px", f, "dark_dn", gain_json_numbers(dark, n),
+                     "light_pct", gain_json_numbers(light, n));
 }
 
 static json_t *snr_json(const calib_gain_an_t *a)
@@ -152,7 +154,8 @@ static json_t *snr_json(const calib_gain_an_t *a)
     json_object_set_new(o, "photons", gain_json_numbers(a->mu_p, a->n));
     json_object_set_new(o, "electrons", json_array());
     for (int i = 0; i < a->n; i++)
-        json_array_append_new(json_object_get(o, "electrons"), model_json_number(a->mu[i] / a->ptc.system_gain_dn_per_e));
+        json_array_append_new(json_object_get(o, "electrons"),
+                              model_json_number(a->mu[i] / a->ptc.system_gain_dn_per_e));
     json_object_set_new(o, "snr_measured", gain_json_numbers(a->snr, a->n));
     json_object_set_new(o, "snr_model", m);
     json_object_set_new(o, "snr_ideal", id);
@@ -170,7 +173,8 @@ static json_t *snr_json(const calib_gain_an_t *a)
         json_object_set_new(o, "grid_snr_ideal", gain_json_numbers(gi, NG));
     }
     json_object_set_new(o, "definition", json_string(
-        "grid_*: the same on 64 photon counts from mu_p.min / 2 to mu_p.sat; measured: (mu_y - mu_y.dark) / sigma_y; model: eta mu_p / sqrt(sigma^2_y.dark / K^2 + eta mu_p); ideal: "
+        "grid_*: the same on 64 photon counts from mu_p.min / 2 to mu_p.sat; measured: (mu_y - mu_y.dark) / "
+        "sigma_y; model: eta mu_p / sqrt(sigma^2_y.dark / K^2 + eta mu_p); ideal: "
         "sqrt(mu_p) (eta = 1, no dark noise); photons null when the photon axis is not measured"));
     return o;
 }

@@ -150,8 +150,9 @@ static bool analyse_all(const calib_gain_opts_t *o, calib_gain_data_t *d, calib_
             g_free(m);
             break;
         }
-        model_note("gain %g dB: K %.5g DN/e-, read noise %.4g e-, saturation %.1f DN, LE %.3f %%, %d steps", gl[i], a->ptc.system_gain_dn_per_e, a->ptc.read_noise_e, a->ptc.saturation_dn,
-                a->ptc.linearity_error_pct, a->n);
+        model_note("gain %g dB: K %.5g DN/e-, read noise %.4g e-, saturation %.1f DN, LE %.3f %%, %d steps", gl[i],
+                   a->ptc.system_gain_dn_per_e, a->ptc.read_noise_e, a->ptc.saturation_dn, a->ptc.linearity_error_pct,
+                   a->n);
     }
     free(gl);
     return ok;

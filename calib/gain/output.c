@@ -53,11 +53,13 @@ static json_t *gain_json(const calib_gain_an_t *a)
     json_object_set_new(o, "response_small_signal_dn_per_us", model_json_number(a->response0_dn_per_us));
     json_object_set_new(o, "kc_small_signal_per_us", model_json_number(a->kc0_per_us));
     json_object_set_new(o, "dark_current_dn_per_s", model_json_number(a->dark_slope_dn_per_us * 1e6));
-    json_object_set_new(o, "dark_current_e_per_s", model_json_number(a->dark_slope_dn_per_us * 1e6 / p->system_gain_dn_per_e));
+    json_object_set_new(o, "dark_current_e_per_s",
+                        model_json_number(a->dark_slope_dn_per_us * 1e6 / p->system_gain_dn_per_e));
     json_object_set_new(o, "dark_level_dn", model_json_number(a->dark_intercept_dn));
     json_object_set_new(o, "dark_exposures_us", dark_exposures_json(a));
     json_object_set_new(o, "dark_current_from_variance_e_per_s",
-                        model_json_number(a->dark_var_slope_dn2_per_us * 1e6 / (p->system_gain_dn_per_e * p->system_gain_dn_per_e)));
+                        model_json_number(a->dark_var_slope_dn2_per_us * 1e6 /
+                                          (p->system_gain_dn_per_e * p->system_gain_dn_per_e)));
     const calib_gain_photon_t *ph = &a->ph;
 #define PHOTON(key, v) json_object_set_new(o, key, ph->measured ? model_json_number(v) : json_string("not measured"))
     PHOTON("quantum_efficiency", ph->qe);
@@ -240,7 +242,8 @@ json_t *calib_gain_json(const calib_gain_opts_t *o, const calib_gain_data_t *d, 
     json_object_set_new(root, "maps", json_pack("{s:s, s:s, s:s, s:s, s:s}", "offset_dn", "offset_dn.tiff", "dsnu_dn",
                                                 "dsnu_dn.tiff", "prnu_gain", "prnu_gain.tiff", "prnu_highpass",
                                                 "prnu_highpass.tiff", "defects", "defects.tiff"));
-    json_object_set_new(root, "quantum_efficiency", a->ph.measured ? model_json_number(a->ph.qe) : json_string("not measured"));
+    json_object_set_new(root, "quantum_efficiency",
+                        a->ph.measured ? model_json_number(a->ph.qe) : json_string("not measured"));
     json_object_set_new(root, "emva1288", calib_gain_emva_json(o, an, maps));
     json_t *pg = json_array();
     for (int i = 0; i < ngains; i++) json_array_append_new(pg, gain_json(&an[i]));
