@@ -161,7 +161,23 @@ CALIB_LAMPS_SRC := \
     calib/lamps/drift.c
 CALIB_GAIN_SRC := \
     calib/gain/gain.c \
-    calib/gain/emva.c
+    calib/gain/frames.c \
+    calib/gain/input.c \
+    calib/gain/capture.c \
+    calib/gain/analyse.c \
+    calib/gain/dark.c \
+    calib/gain/sweep.c \
+    calib/gain/fit.c \
+    calib/gain/ptc.c \
+    calib/gain/linearity.c \
+    calib/gain/linearisation.c \
+    calib/gain/maps.c \
+    calib/gain/photons.c \
+    calib/gain/spatial.c \
+    calib/gain/defects.c \
+    calib/gain/emva.c \
+    calib/gain/output.c \
+    calib/gain/report.c
 CALIB_SRC := $(CALIB_GEOMETRY_SRC) $(CALIB_LAMPS_SRC) $(CALIB_GAIN_SRC) \
     calib/capture.c \
     calib/calset.c \

@@ -42,6 +42,9 @@ int calib_cmd_gain(int argc, char **argv);
 // 0, or -1 with the reason in model_last_error().
 int calib_capture(const char *rig_path, const char *dir, const char *name, const char *plan_text, int progress,
                   rig_operator_t *op);
+// The full scale (DN) a calibration takes for a session frame's pixel
+// format: Mono8 255, Mono12 4095, any other 65535.
+int calib_full_scale_dn(const char *pixel_format);
 
 // ---------------------------------------------------------------------------
 // The calibration set and calibrated observations (calib/calset.c,
@@ -88,7 +91,7 @@ typedef struct {
     double          saturation_dn;  // 0: from the frame's bits
     char            camera[32];     // the camera of the set ("": a calibration of one camera, no selector)
     double          cal_gain;       // the gain the gain calibration was made at (gain.json gain_db; 0 without)
-    char            cal_gain_unit[16];  // its unit (gain.json gain_unit; "dB" without, or from before the unit)
+    char            cal_gain_unit[16];  // its unit (gain.json gain_unit; "dB" without: a version 1 file may lack it)
     double          gain_dn_per_e;  // gain calibration's K at its gain (0: unknown)
     double          read_noise_e;   // its read noise
     model_lin_t     lin;            // the gain calibration's response linearisation at its gain (model_linearise)
@@ -106,12 +109,18 @@ typedef struct {
     double          psf_pixel_fill; // the footprint the board's edges showed: 1 the pixel's square, 0 a point at its
                                     // centre (a renderer's one ray a pixel); 1 without an estimate
     json_t         *inputs;         // [{role, path, sha256}] of every file read
+    int             lamps_version, gain_version, white_version;   // the format versions read (0: no such file)
 } calib_set_t;
 
 // Load DIR: camera.cameramodel (or geometry/camera.cameramodel), lamps.json
 // (or lamps/lamps.json), optionally gain.json with offset_dn.tiff and
 // flat_field.tiff or prnu_gain.tiff (or gain/...), and white.json (or
-// white/white.json). need_white: white.json is required. NULL + message.
+// white/white.json). need_white: white.json is required. Each JSON file's
+// format and version is checked (model_json_format_check): lamps.json
+// "refl-lamps" version 1, gain.json CALIB_GAIN_FORMAT up to
+// CALIB_GAIN_FORMAT_VERSION (calib/gain/gain.h), white.json
+// CALIB_WHITE_FORMAT up to CALIB_WHITE_FORMAT_VERSION; a file of another
+// format or a newer version is refused. NULL + message.
 calib_set_t *calib_set_load(const char *dir, bool need_white);
 // The calibration set of camera NAME of a calibration directory of several
 // cameras (camera NULL: calib_set_load). Its camera model: DIR/NAME.cameramodel,
@@ -376,10 +385,16 @@ bool calib_white_compute(const calib_obs_set_t *obs, const calib_set_t *cal, dou
 // what the Lambertian assumption (the table's factor nearest the normal)
 // would have given.
 // Each lamp's kc_I_std_per_us, std_rel and sigma_parts_rel (calib_white_compute;
-// o NULL: calib_white_defaults) and its irradiance_samples_region.
+// o NULL: calib_white_defaults) and its irradiance_samples_region. lamps_out
+// (may be NULL) gets every lamp's figures (cal->lamps->n), for the command
+// to print. false + message (model_error).
+// white.json names its format, "refl-white", and version (model_json_set_format):
+//   version 1  the layout above; a file that names no format reads as it.
+#define CALIB_WHITE_FORMAT         "refl-white"
+#define CALIB_WHITE_FORMAT_VERSION 1
 bool calib_white(const calib_obs_set_t *obs, const calib_set_t *cal, double albedo,
                  const calib_white_table_t *table, const calib_white_options_t *o, const char *out_json,
-                 json_t *provenance);
+                 json_t *provenance, calib_white_lamp_t *lamps_out);
 
 // The calibration set of calib_dir for camera (calib_set_load_camera; NULL:
 // calib_set_load) and the observations of the session through it

@@ -260,43 +260,52 @@ static void lamp_sigma(const json_t *e, calib_lamp_sigma_t *s)
     s->have_pattern = true;
 }
 
-calib_set_t *calib_set_load_files(const char *cam, const char *lamps, const char *gain, const char *white)
+// A JSON file of format (a version up to max_version, into *version);
+// NULL + message (model_error) when it is not valid JSON or another format or
+// version.
+static json_t *load_json(const char *path, const char *format, int max_version, int *version)
 {
-    calib_set_t *c = calloc(1, sizeof *c);
-    char *off = NULL, *flat = NULL;
-    json_t *lj = NULL, *gj = NULL, *wj = NULL;
     json_error_t je;
-    bool ok = false;
-    const char *dir = cam;
-    if (!c) return NULL;
-    c->inputs = json_array();
-    c->flat_pixel_std_rel = NAN;
-    snprintf(c->cal_gain_unit, sizeof c->cal_gain_unit, "dB");
-    if (!(c->cam = model_camera_load(cam))) goto fail;
-    add_input(c, "camera", cam);
-    set_psf(c, cam, NULL);
-    c->W = model_camera_width(c->cam);
-    c->H = model_camera_height(c->cam);
-    if (!(lj = json_load_file(lamps, 0, &je))) {
-        model_error(lamps, je.line, "not valid JSON: %s", je.text);
-        goto fail;
+    json_t *j = json_load_file(path, 0, &je);
+    if (!j) {
+        model_error(path, je.line, "not valid JSON: %s", je.text);
+        return NULL;
     }
+    if (!model_json_format_check(j, path, format, max_version, version)) {
+        char *e = g_strdup(model_last_error());
+        model_error(NULL, 0, "%s", e);
+        g_free(e);
+        json_decref(j);
+        return NULL;
+    }
+    return j;
+}
+
+// lamps.json: every lamp's name, position, radius, emission pattern and
+// stated 1-sigmas into c->lamps (intensity 1). false + message.
+static bool load_lamps(calib_set_t *c, const char *lamps)
+{
+    json_t *lj = load_json(lamps, "refl-lamps", 1, &c->lamps_version);
+    if (!lj) return false;
+    bool ok = false;
     json_t *arr = json_object_get(lj, "lamps");
     size_t nl = json_array_size(arr);
     if (!nl || nl > 32) {
         model_error(lamps, 0, "'lamps' must list 1 to 32 lamps (has %zu)", nl);
-        goto fail;
+        goto done;
     }
     c->lamps = calloc(1, sizeof *c->lamps);
-    if (!c->lamps || !(c->lamps->lamps = calloc(nl, sizeof *c->lamps->lamps))) goto oom;
-    c->lamps->path = strdup(lamps);
+    if (!c->lamps || !(c->lamps->lamps = calloc(nl, sizeof *c->lamps->lamps)) || !(c->lamps->path = strdup(lamps))) {
+        model_error(lamps, 0, "out of memory");
+        goto done;
+    }
     for (size_t i = 0; i < nl; i++) {
         json_t *e = json_array_get(arr, i), *p = json_object_get(e, "position_mm");
         const char *name = json_string_value(json_object_get(e, "name"));
         if (!name || json_array_size(p) != 3 || !json_is_number(json_array_get(p, 0)) ||
             !json_is_number(json_array_get(p, 1)) || !json_is_number(json_array_get(p, 2))) {
             model_error(lamps, 0, "lamps[%zu] needs a name and position_mm = [x, y, z]", i);
-            goto fail;
+            goto done;
         }
         model_lamp_t *l = &c->lamps->lamps[i];
         snprintf(l->name, sizeof l->name, "%s", name);
@@ -308,88 +317,118 @@ calib_set_t *calib_set_load_files(const char *cam, const char *lamps, const char
         json_t *rad = json_object_get(e, "radius_mm");
         if (rad && !(json_is_number(rad) && json_number_value(rad) >= 0 && json_number_value(rad) < 1000)) {
             model_error(lamps, 0, "lamps[%zu] (%s): radius_mm must be a number of mm in [0, 1000)", i, name);
-            goto fail;
+            goto done;
         }
         c->lamp_radius_mm[i] = rad ? json_number_value(rad) : 0;
-        if (!lamp_emission(e, lamps, i, l)) goto fail;
+        if (!lamp_emission(e, lamps, i, l)) goto done;
         lamp_sigma(e, &c->lamp_sigma[i]);
         c->lamps->n = (int)i + 1;
     }
     add_input(c, "lamps", lamps);
-    if (gain) {
-        if (!(gj = json_load_file(gain, 0, &je))) {
-            model_error(gain, je.line, "not valid JSON: %s", je.text);
-            goto fail;
-        }
-        add_input(c, "gain", gain);
-        json_t *sat = json_object_get(gj, "saturation_dn");
-        if (json_is_number(sat)) c->saturation_dn = json_number_value(sat);
-        json_t *K = json_object_get(gj, "system_gain_dn_per_e"), *rn = json_object_get(gj, "read_noise_e");
-        if (json_is_number(K) && json_is_number(rn)) {
-            c->gain_dn_per_e = json_number_value(K);
-            c->read_noise_e = json_number_value(rn);
-        }
-        if (!calib_gain_lin_from_json(gj, gain, &c->lin)) goto fail;
-        json_t *fs = json_object_get(json_object_get(gj, "flat_field"), "pixel_std_rel");
-        if (json_is_number(fs)) c->flat_pixel_std_rel = json_number_value(fs);
-        json_t *gdb = json_object_get(gj, "gain_db"), *gu = json_object_get(gj, "gain_unit");
-        if ((gdb && !json_is_number(gdb)) || (gu && !json_is_string(gu))) {
-            model_error(gain, 0, "gain_db must be a number and gain_unit a string (the gain the calibration was "
-                        "made at)");
-            goto fail;
-        }
-        c->cal_gain = gdb ? json_number_value(gdb) : 0;
-        snprintf(c->cal_gain_unit, sizeof c->cal_gain_unit, "%s", gu ? json_string_value(gu) : "dB");
-        char *gd = g_path_get_dirname(gain);
-        off = g_strdup_printf("%s/offset_dn.tiff", gd);
-        flat = g_strdup_printf("%s/flat_field.tiff", gd);
-        if (access(flat, R_OK) != 0) {
-            g_free(flat);
-            flat = g_strdup_printf("%s/prnu_gain.tiff", gd);
-        }
-        g_free(gd);
-        if (access(off, R_OK) == 0 && !(c->offset_dn = read_map(c, off, "offset map"))) goto fail;
-        if (access(flat, R_OK) == 0 && !(c->flat = read_map(c, flat, "flat field"))) goto fail;
-    }
-    if (white) {
-        if (!(wj = json_load_file(white, 0, &je))) {
-            model_error(white, je.line, "not valid JSON: %s", je.text);
-            goto fail;
-        }
-        json_t *wl = json_object_get(wj, "lamps");
-        for (int i = 0; i < c->lamps->n; i++) {
-            bool found = false;
-            for (size_t k = 0; k < json_array_size(wl); k++) {
-                json_t *e = json_array_get(wl, k);
-                const char *n = json_string_value(json_object_get(e, "name"));
-                json_t *v = json_object_get(e, "kc_I_per_us");
-                if (n && !strcmp(n, c->lamps->lamps[i].name) && json_is_number(v)) {
-                    c->kcI_per_us[i] = json_number_value(v);
-                    found = true;
-                }
-            }
-            if (!found) {
-                model_error(white, 0, "no kc_I_per_us for lamp '%s' (of %s): run refl calib white with that lamp",
-                            c->lamps->lamps[i].name, lamps);
-                goto fail;
-            }
-        }
-        c->have_white = true;
-        add_input(c, "white", white);
-    }
     ok = true;
-    goto done;
-oom:
-    model_error(dir, 0, "out of memory");
-fail:
+done:
+    json_decref(lj);
+    return ok;
+}
+
+// gain.json (CALIB_GAIN_FORMAT, calib/gain/gain.h): saturation, K and read
+// noise, the linearisation, the flat map's noise, the gain and its unit
+// (version 1 without them: 0 dB), and the maps beside it: offset_dn.tiff,
+// flat_field.tiff or else prnu_gain.tiff. false + message.
+static bool load_gain(calib_set_t *c, const char *gain)
+{
+    json_t *gj = load_json(gain, CALIB_GAIN_FORMAT, CALIB_GAIN_FORMAT_VERSION, &c->gain_version);
+    if (!gj) return false;
+    bool ok = false;
+    char *off = NULL, *flat = NULL;
+    add_input(c, "gain", gain);
+    json_t *sat = json_object_get(gj, "saturation_dn");
+    if (json_is_number(sat)) c->saturation_dn = json_number_value(sat);
+    json_t *K = json_object_get(gj, "system_gain_dn_per_e"), *rn = json_object_get(gj, "read_noise_e");
+    if (json_is_number(K) && json_is_number(rn)) {
+        c->gain_dn_per_e = json_number_value(K);
+        c->read_noise_e = json_number_value(rn);
+    }
+    if (!calib_gain_lin_from_json(gj, gain, &c->lin)) goto done;
+    json_t *fs = json_object_get(json_object_get(gj, "flat_field"), "pixel_std_rel");
+    if (json_is_number(fs)) c->flat_pixel_std_rel = json_number_value(fs);
+    json_t *gdb = json_object_get(gj, "gain_db"), *gu = json_object_get(gj, "gain_unit");
+    if ((gdb && !json_is_number(gdb)) || (gu && !json_is_string(gu))) {
+        model_error(gain, 0, "gain_db must be a number and gain_unit a string (the gain the calibration was "
+                    "made at)");
+        goto done;
+    }
+    c->cal_gain = gdb ? json_number_value(gdb) : 0;
+    snprintf(c->cal_gain_unit, sizeof c->cal_gain_unit, "%s", gu ? json_string_value(gu) : "dB");
+    char *gd = g_path_get_dirname(gain);
+    off = g_strdup_printf("%s/offset_dn.tiff", gd);
+    flat = g_strdup_printf("%s/flat_field.tiff", gd);
+    if (access(flat, R_OK) != 0) {
+        g_free(flat);
+        flat = g_strdup_printf("%s/prnu_gain.tiff", gd);
+    }
+    g_free(gd);
+    if (access(off, R_OK) == 0 && !(c->offset_dn = read_map(c, off, "offset map"))) goto done;
+    if (access(flat, R_OK) == 0 && !(c->flat = read_map(c, flat, "flat field"))) goto done;
+    ok = true;
 done:
     g_free(off);
     g_free(flat);
-    json_decref(lj);
     json_decref(gj);
+    return ok;
+}
+
+// white.json (CALIB_WHITE_FORMAT, calib/calib.h): kc_I_per_us of every lamp
+// of c (lamps: lamps.json's path, for the message). false + message.
+static bool load_white(calib_set_t *c, const char *white, const char *lamps)
+{
+    json_t *wj = load_json(white, CALIB_WHITE_FORMAT, CALIB_WHITE_FORMAT_VERSION, &c->white_version);
+    if (!wj) return false;
+    json_t *wl = json_object_get(wj, "lamps");
+    bool ok = true;
+    for (int i = 0; ok && i < c->lamps->n; i++) {
+        bool found = false;
+        for (size_t k = 0; k < json_array_size(wl); k++) {
+            json_t *e = json_array_get(wl, k);
+            const char *n = json_string_value(json_object_get(e, "name"));
+            json_t *v = json_object_get(e, "kc_I_per_us");
+            if (n && !strcmp(n, c->lamps->lamps[i].name) && json_is_number(v)) {
+                c->kcI_per_us[i] = json_number_value(v);
+                found = true;
+            }
+        }
+        if (!found) {
+            model_error(white, 0, "no kc_I_per_us for lamp '%s' (of %s): run refl calib white with that lamp",
+                        c->lamps->lamps[i].name, lamps);
+            ok = false;
+        }
+    }
     json_decref(wj);
+    if (!ok) return false;
+    c->have_white = true;
+    add_input(c, "white", white);
+    return true;
+}
+
+calib_set_t *calib_set_load_files(const char *cam, const char *lamps, const char *gain, const char *white)
+{
+    calib_set_t *c = calloc(1, sizeof *c);
+    if (!c) {
+        model_error(cam, 0, "out of memory");
+        return NULL;
+    }
+    c->inputs = json_array();
+    c->flat_pixel_std_rel = NAN;
+    snprintf(c->cal_gain_unit, sizeof c->cal_gain_unit, "dB");
+    bool ok = (c->cam = model_camera_load(cam)) != NULL;
+    if (ok) {
+        add_input(c, "camera", cam);
+        set_psf(c, cam, NULL);
+        c->W = model_camera_width(c->cam);
+        c->H = model_camera_height(c->cam);
+    }
+    ok = ok && load_lamps(c, lamps) && (!gain || load_gain(c, gain)) && (!white || load_white(c, white, lamps));
     if (ok) return c;
     calib_set_free(c);
     return NULL;
 }
-

@@ -15,8 +15,12 @@
 #include "model/model.h"
 #include "model/base/report.h"
 
-// ---------------------------------------------------------------------------
-// Capture
+int calib_full_scale_dn(const char *pixel_format)
+{
+    if (!strcmp(pixel_format, "Mono8")) return 255;
+    if (!strcmp(pixel_format, "Mono12")) return 4095;
+    return 65535;
+}
 
 int calib_capture(const char *rig_path, const char *dir, const char *name, const char *plan_text, int progress,
                   rig_operator_t *op)
@@ -50,11 +54,11 @@ int calib_capture(const char *rig_path, const char *dir, const char *name, const
             goto done;
         }
         if (!strcmp(state, "complete")) {
-            fprintf(stderr, "refl calib: %s is complete; using its frames\n", sdir);
+            model_note("%s is complete; using its frames", sdir);
             rc = 0;
             goto done;
         }
-        fprintf(stderr, "refl calib: resuming the %s session %s\n", state, sdir);
+        model_note("resuming the %s session %s", state, sdir);
     } else if (!model_write_file_atomic(plan_path, plan_text)) {
         goto done;
     }

@@ -62,6 +62,20 @@ int calib_cli_window_step(model_cli_t *cli, int *window, int *step)
     return MODEL_CLI_OK;
 }
 
+// Each lamp's kc*I with its 1-sigma, one line each.
+static void print_white(const calib_white_lamp_t *wl, int n, const calib_white_table_t *table)
+{
+    for (int l = 0; l < n; l++) {
+        const calib_white_lamp_t *w = &wl[l];
+        printf("  %-12s kc*I = %.6g DN/us per (1/sr)/mm^2 +- %.3f %% (statistical %.3f %%; spread %.2f %%, %d "
+               "windows)", w->name, w->kcI_per_us, 100 * w->std_rel, 100 * w->part_rel[CALIB_WHITE_STAT],
+               100 * w->spread_rel, w->n);
+        if (table)
+            printf("; Lambertian at %.4g: %+.2f %%", table->f[0], 100 * (w->kcI_lambertian_per_us / w->kcI_per_us - 1));
+        printf("\n");
+    }
+}
+
 int calib_cmd_white(int argc, char **argv)
 {
     const char *calib_dir = NULL, *out = NULL, *camera = NULL, *table_path = NULL;
@@ -129,15 +143,17 @@ int calib_cmd_white(int argc, char **argv)
     calib_set_t *cal = NULL;
     calib_obs_set_t obs;
     json_t *prov = NULL;
+    calib_white_lamp_t wl[32];
     bool q = model_error_quiet_thread(true);
     bool ok = calib_observe_session(session, calib_dir, camera, false, &o, &cal, &obs);
     if (ok) {
         printf("refl calib white: %d observations of %s in %d frames (%d skipped)\n", obs.n, obs.material,
                obs.frames_used, obs.frames_skipped);
         prov = calib_observe_provenance(argc + 1, argv - 1, session, cal);
-        ok = calib_white(&obs, cal, albedo, table, &wo, out, prov);
+        ok = calib_white(&obs, cal, albedo, table, &wo, out, prov, wl);
     }
     model_error_quiet_thread(q);
+    if (ok) print_white(wl, cal->lamps->n, table);
     if (ok) printf("%s\n", out);
     rc = ok ? 0 : model_error_report("calib white");
     json_decref(prov);

@@ -34,26 +34,41 @@
     "  --session DIR [--session DIR ...] -o DIR  sessions captured elsewhere (light = lamps on, dark = none)"
 
 #define EPILOG                                                                                                 \
-    "kc needs the source's radiance (--radiance); a virtual rig's truth is only shown beside it, for\n"       \
-    "comparison. With --rig each session begins with an operator step (the flat-field source in front\n"    \
-    "of the lens; for the dark frames its lamps off, the lens shaded): Enter on a terminal, --yes or\n"     \
-    "--operator-input FILE answers it; with stdin not a terminal and neither option the command\n"          \
-    "pauses there (exit 3; run it again to continue). Exit: 0 done, 1 error, 2 usage, 3 paused."
+    "kc needs the source's radiance (--radiance); a virtual rig's truth is never read (refl chain\n"         \
+    "compares the calibration with it). With --rig each session begins with an operator step (the\n"       \
+    "flat-field source in front of the lens; for the dark frames its lamps off, the lens shaded): Enter\n"  \
+    "on a terminal, --yes or --operator-input FILE answers it; with stdin not a terminal and neither\n"     \
+    "option the command pauses there (exit 3; run it again to continue). Exit: 0 done, 1 error, 2 usage,\n" \
+    "3 paused."
 
-// A comma-separated list of numbers (malloc'ed); false when empty or not numbers.
-static bool parse_list(const char *s, double **out, int *n)
+// The exit status of an allocation that failed, said once.
+static int out_of_memory(void)
+{
+    model_error_set(NULL, 0, "out of memory");
+    return model_error_report("calib gain");
+}
+
+// A comma-separated list of numbers (malloc'ed); false when empty or not
+// numbers, or out of memory (*oom set).
+static bool parse_list(const char *s, double **out, int *n, bool *oom)
 {
     *n = 0;
     *out = NULL;
     char *c = strdup(s), *save = NULL;
-    bool ok = true;
-    for (char *p = strtok_r(c, ", ", &save); p; p = strtok_r(NULL, ", ", &save)) {
-        double v;
+    bool ok = c != NULL;
+    *oom = !c;
+    for (char *p = c ? strtok_r(c, ", ", &save) : NULL; p; p = strtok_r(NULL, ", ", &save)) {
+        double v, *g;
         if (!model_parse_double(p, &v)) {
             ok = false;
             break;
         }
-        *out = realloc(*out, sizeof(double) * (*n + 1));
+        if (!(g = realloc(*out, sizeof(double) * (*n + 1)))) {
+            ok = false;
+            *oom = true;
+            break;
+        }
+        *out = g;
         (*out)[(*n)++] = v;
     }
     free(c);
@@ -135,10 +150,13 @@ static int check_options(model_cli_t *c, calib_gain_opts_t *o, double **gains, d
     if (roi && (sscanf(roi, "%d,%d,%d,%d", &r[0], &r[1], &r[2], &r[3]) != 4 || r[0] < 0 || r[1] < 0 || r[2] < 2 ||
                 r[3] < 2))
         return model_cli_error(c, "--roi '%s' must be X,Y,W,H (W, H >= 2)", roi);
-    if (gs && !parse_list(gs, gains, &o->ngains))
-        return model_cli_error(c, "--gains '%s' must be a comma-separated list of numbers (dB)", gs);
-    if (ds && !parse_list(ds, darks, &o->ndark_exposures))
-        return model_cli_error(c, "--dark-exposures-us '%s' must be a comma-separated list of us", ds);
+    bool oom = false;
+    if (gs && !parse_list(gs, gains, &o->ngains, &oom))
+        return oom ? out_of_memory() : model_cli_error(c, "--gains '%s' must be a comma-separated list of numbers (dB)",
+                                                       gs);
+    if (ds && !parse_list(ds, darks, &o->ndark_exposures, &oom))
+        return oom ? out_of_memory()
+                   : model_cli_error(c, "--dark-exposures-us '%s' must be a comma-separated list of us", ds);
     const char *ls = model_cli_value(c, "--low-steps");
     long lv;
     if (ls && (!model_parse_int(ls, &lv) || lv < 0 || lv > 1000))

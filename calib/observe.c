@@ -79,7 +79,7 @@ static model_scene_t *observe_scene(const rig_session_t *s, const rig_plan_t *pl
                                        .p = { plan->tilt_deg, plan->tilt_azimuth_deg } };
     bool ok = *mat >= 0 && (!o->fit_pose || calib_sample_pose_fit(s, plan, cal, scene, &o->pose, &out->pose));
     if (ok && out->pose.tried && (!out->pose.fitted || out->pose.at_prior_edge))   // a warning, said at once
-        fprintf(stderr, "refl: %s: sample pose: %s\n", s->dir, out->pose.note);
+        model_warning("%s: sample pose: %s", s->dir, out->pose.note);
     if (ok) {
         double R[9], t[3];
         calib_sample_pose_Rt(scene, out->pose.p, R, t);
@@ -100,13 +100,6 @@ static int cmp_exposure_desc(const void *a, const void *b, void *ctx)
     const rig_frame_row_t *r = ctx;
     double x = r[*(const int *)a].exposure_us, y = r[*(const int *)b].exposure_us;
     return (x < y) - (x > y);
-}
-
-static double bits_full(const char *pf)
-{
-    if (!strcmp(pf, "Mono8")) return 255;
-    if (!strcmp(pf, "Mono12")) return 4095;
-    return 65535;
 }
 
 // One observation run: the session, the calibrations, the posed scene and
@@ -293,7 +286,7 @@ static bool observe_frame(observe_t *ob, int f, const model_pixel_info_t *pw, co
                         cal->W, cal->H);
         goto done;
     }
-    double sat = 0.95 * (cal->saturation_dn > 0 ? cal->saturation_dn : bits_full(r->pixel_format));
+    double sat = 0.95 * (cal->saturation_dn > 0 ? cal->saturation_dn : calib_full_scale_dn(r->pixel_format));
     // the gain as a factor relative to the gain calibration's gain (gain.json
     // gain_db and gain_unit), by the frame's unit (model_gain_factor)
     char what[512];
@@ -335,8 +328,8 @@ static bool observe_angle(observe_t *ob, const int *order, int nf, double deg)
     model_tracer_t *tr = rot ? model_tracer_new(rot) : NULL;
     if (!tr || !material_windows(ob, tr)) goto done;
     if (ob->nw == 0) {
-        fprintf(stderr, "refl: %s: at %.3f deg no window of %dx%d pixels lies on material %s\n", ob->session_dir,
-                deg, ob->o->window, ob->o->window, ob->out->material);
+        model_warning("%s: at %.3f deg no window of %dx%d pixels lies on material %s", ob->session_dir, deg,
+                      ob->o->window, ob->o->window, ob->out->material);
         ob->out->frames_skipped += nf;
         ok = true;
         goto done;
@@ -358,8 +351,8 @@ static bool observe_angle(observe_t *ob, const int *order, int nf, double deg)
     for (int a = 0; a < nf; a++)
         if (!observe_frame(ob, order[a], pw, ls, taken)) goto done;
     if (ob->o->verbose)
-        fprintf(stderr, "  %s: angle %.2f deg: %d windows, %d observations so far\n", ob->session_dir, deg, ob->nw,
-                ob->out->n);
+        model_note("%s: angle %.2f deg: %d windows, %d observations so far", ob->session_dir, deg, ob->nw,
+                   ob->out->n);
     ok = true;
 done:
     free(qw);
@@ -397,8 +390,8 @@ bool calib_observe(const char *session_dir, const calib_set_t *cal, const calib_
             double lo = INFINITY, hi = -INFINITY;
             for (int k = 0; k < out->drift.nvisits[l]; k++)
                 lo = fmin(lo, out->drift.f[l][k]), hi = fmax(hi, out->drift.f[l][k]);
-            fprintf(stderr, "  %s: lamp drift of %s from %d visits of %s: %.4f .. %.4f of the first\n", session_dir,
-                    cal->lamps->lamps[l].name, out->drift.nvisits[l], out->drift.angle_ref[l], lo, hi);
+            model_note("%s: lamp drift of %s from %d visits of %s: %.4f .. %.4f of the first", session_dir,
+                       cal->lamps->lamps[l].name, out->drift.nvisits[l], out->drift.angle_ref[l], lo, hi);
         }
     ob.scene = scene;
     ob.nx = (cal->W - o.window) / o.step + 1;

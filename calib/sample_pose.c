@@ -39,12 +39,10 @@ void calib_sample_pose_Rt(const model_scene_t *scene, const double p[6], double 
     const double u[3] = { cx - (c * cx - s * cy) + p[2], cy - (s * cx + c * cy) + p[3], 0 };
     double Rw[9], tw[3];
     model_scene_wedge_pose(scene, p[0], p[1], Rw, tw);
+    m3_mul(R, Rw, Rz);
     for (int r = 0; r < 3; r++) {
         t[r] = tw[r];
-        for (int k = 0; k < 3; k++) {
-            R[3 * r + k] = Rw[3 * r] * Rz[k] + Rw[3 * r + 1] * Rz[3 + k] + Rw[3 * r + 2] * Rz[6 + k];
-            t[r] += Rw[3 * r + k] * u[k];
-        }
+        for (int k = 0; k < 3; k++) t[r] += Rw[3 * r + k] * u[k];
     }
     t[2] += p[4];
 }
@@ -123,7 +121,10 @@ static bool pose_residuals(void *ctx, const double *const *params, double *res, 
     if (!residuals_at(F, params[0], res)) return false;
     if (!jac || !jac[0]) return true;
     double *rp = malloc(2 * (size_t)F->nuse * sizeof *rp), *rm = rp ? rp + F->nuse : NULL;
-    if (!rp) return false;
+    if (!rp) {
+        model_error_set(NULL, 0, "out of memory for the pose's Jacobian");
+        return false;
+    }
     bool ok = true;
     for (int j = 0; j < NPOSE && ok; j++) {
         double p[NPOSE], h = 1e-4;
@@ -183,23 +184,17 @@ static bool find_edge(const eimage_t *im, int W, int H, const double q[2], const
     return true;
 }
 
-static int cmp_double(const void *a, const void *b)
-{
-    double x = *(const double *)a, y = *(const double *)b;
-    return (x > y) - (x < y);
-}
-
 // The noise std of an image (DN): the median absolute difference of
 // horizontal neighbours on a sparse grid (mostly background), over sqrt 2;
-// at least half a DN.
+// at least half a DN. NAN: out of memory.
 static double image_noise(const float *P, int W, int H)
 {
     int n = 0, cap = (W / 4 + 1) * (H / 4 + 1);
     double *d = malloc((size_t)cap * sizeof *d);
-    if (!d) return 1;
+    if (!d) return NAN;
     for (int y = 0; y < H; y += 4)
         for (int x = 0; x + 1 < W; x += 4) d[n++] = fabs((double)P[(size_t)y * W + x + 1] - P[(size_t)y * W + x]);
-    qsort(d, (size_t)n, sizeof *d, cmp_double);
+    qsort(d, (size_t)n, sizeof *d, model_cmp_double);
     double med = n ? d[n / 2] : 0;
     free(d);
     return fmax(1.4826 * med / sqrt(2), 0.5);
@@ -253,6 +248,7 @@ static bool angle_images(const rig_session_t *s, const calib_set_t *cal, eimage_
         if (!sum) continue;   // no frame lit by one lamp at this angle
         v[*nim] = (eimage_t){ .deg = r0->measured_deg, .img = sum, .noise = image_noise(sum, cal->W, cal->H) };
         (*nim)++;
+        if (isnan(v[*nim - 1].noise)) goto oom;
     }
     ok = true;
     goto fail;
@@ -302,6 +298,10 @@ static bool outline_samples(const model_scene_t *scene, const calib_set_t *cal, 
     bool ok = false;
     int first = *n;
     model_vec3_t eye = model_camera_centre_world(cal->cam);
+    if (tr && !mats) {
+        model_error_set(NULL, 0, "out of memory for the sample's predicted edges");
+        goto done;
+    }
     for (int e = 0; E && e < E->nedges; e++) {
         const model_edge_t *ed = &E->edges[e];
         model_vec3_t v0 = sc->vertices[ed->v0], v1 = sc->vertices[ed->v1];
@@ -418,6 +418,7 @@ static bool solve(pose_fit_t *F, double *p, const double *nominal, const double 
     if (ok && cov) ok = lsq_covariance(P, p, cov);
     lsq_problem_free(P);
     double *r = ok ? malloc((size_t)F->nuse * sizeof *r) : NULL, ss = 0;
+    if (ok && !r) model_error_set(NULL, 0, "out of memory for the pose's residuals");
     ok = r && residuals_at(F, p, r);
     for (int k = 0; ok && k < F->nuse; k++) ss += r[k] * r[k];
     if (ok) *rms_px = F->sigma_px * sqrt(ss / F->nuse);
@@ -471,9 +472,9 @@ static void fit_rounds(pose_fit_t *F, calib_sample_pose_t *out, int min_samples,
         out->nsamples = nused;
         out->nangles = na;
         if (verbose)
-            fprintf(stderr, "  sample pose: reach %g px: %d edge samples at %d angles, RMS %.3f px (weight %.3f); "
-                    "tilt %.3f az %.3f dx %.3f dy %.3f dz %.3f turn %.3f\n", reach[r], nused, na, rms, prev, p[0],
-                    p[1], p[2], p[3], p[4], p[5]);
+            model_note("sample pose: reach %g px: %d edge samples at %d angles, RMS %.3f px (weight %.3f); tilt %.3f "
+                       "az %.3f dx %.3f dy %.3f dz %.3f turn %.3f", reach[r], nused, na, rms, prev, p[0], p[1], p[2],
+                       p[3], p[4], p[5]);
     }
     memcpy(out->p, p, sizeof p);
     out->rms_px = rms;

@@ -379,24 +379,24 @@ typedef struct {
     int                    nq;
 } white_draws_t;
 
-static void sample_part(const white_draws_t *W, int part, const calib_white_options_t *o, double *v, double *kc_rel,
+static bool sample_part(const white_draws_t *W, int part, const calib_white_options_t *o, double *v, double *kc_rel,
                         double *irr_rel)
 {
     const model_lamp_t *L = &W->cal->lamps->lamps[W->l];
     const calib_lamp_sigma_t *S = &W->cal->lamp_sigma[W->l];
     int nd = o->draws > 1 ? o->draws : 2;
     double *k = malloc(sizeof *k * (size_t)nd * (1 + (size_t)W->nq)), *ir = k ? k + nd : NULL, Lc[9], x[3];
-    if (!k) {
-        *kc_rel = NAN;
-        for (int j = 0; j < W->nq; j++) irr_rel[j] = NAN;
-        return;
+    double (*gq)[3] = k ? malloc(sizeof *gq * (size_t)(W->nq ? W->nq : 1)) : NULL;
+    if (!gq) {
+        free(k);
+        model_error_set(NULL, 0, "out of memory for %d draws of lamp %s", nd, L->name);
+        return false;
     }
     chol3(part == CALIB_WHITE_POSITION ? S->position_cov_mm2 : S->pattern_cov, Lc);
     model_rng_t rng = model_rng(o->seed, 1000 * (uint64_t)W->l + (uint64_t)part);
     // the region's gradients of ln E for the pattern's draws
-    double (*gq)[3] = malloc(sizeof *gq * (size_t)(W->nq ? W->nq : 1));
-    for (int j = 0; gq && j < W->nq; j++) pattern_gradient(S, v3_unit(v3_sub(W->q[j], L->position_mm)), gq[j]);
-    for (int d = 0; gq && d < nd; d++) {
+    for (int j = 0; j < W->nq; j++) pattern_gradient(S, v3_unit(v3_sub(W->q[j], L->position_mm)), gq[j]);
+    for (int d = 0; d < nd; d++) {
         draw3(&rng, Lc, x);
         model_vec3_t Lp = v3_add(L->position_mm, v3(x[0], x[1], x[2]));
         for (int i = 0; i < W->n; i++) {
@@ -422,10 +422,11 @@ static void sample_part(const white_draws_t *W, int part, const calib_white_opti
         }
     }
     for (int d = 0; d < nd; d++) k[d] /= W->kcI;
-    *kc_rel = gq ? std_of(k, nd) : NAN;
-    for (int j = 0; j < W->nq; j++) irr_rel[j] = gq ? std_of(&ir[(size_t)j * nd], nd) : NAN;
+    *kc_rel = std_of(k, nd);
+    for (int j = 0; j < W->nq; j++) irr_rel[j] = std_of(&ir[(size_t)j * nd], nd);
     free(gq);
     free(k);
+    return true;
 }
 
 // The albedo's part: the certificate's relative 1-sigma (a table's
@@ -456,8 +457,9 @@ static double quad_sum(const double *p, int n)
     return sqrt(s);
 }
 
-// One lamp's kc*I and uncertainty into out (its observations idx[n], geometry geo).
-static void white_lamp(const calib_obs_set_t *obs, const calib_set_t *cal, int l, double albedo,
+// One lamp's kc*I and uncertainty into out (its observations idx[n], geometry
+// geo). false + message (out of memory).
+static bool white_lamp(const calib_obs_set_t *obs, const calib_set_t *cal, int l, double albedo,
                        const calib_white_table_t *table, const calib_white_options_t *o, white_geo_t *geo,
                        const int *idx, int n, double *v, calib_white_lamp_t *out)
 {
@@ -493,8 +495,9 @@ static void white_lamp(const calib_obs_set_t *obs, const calib_set_t *cal, int l
     white_draws_t W = { .obs = obs, .cal = cal, .geo = geo, .idx = idx, .n = n, .l = l, .albedo = albedo,
                         .kcI = out->kcI_per_us, .table = table, .q = q, .irr0 = irr0, .nq = nq };
     for (int j = 0; j < nq; j++) irr[0][j] = irr[1][j] = NAN;
-    if (S->have_position) sample_part(&W, CALIB_WHITE_POSITION, o, v, &out->part_rel[CALIB_WHITE_POSITION], irr[0]);
-    if (S->have_pattern) sample_part(&W, CALIB_WHITE_PATTERN, o, v, &out->part_rel[CALIB_WHITE_PATTERN], irr[1]);
+    if ((S->have_position && !sample_part(&W, CALIB_WHITE_POSITION, o, v, &out->part_rel[CALIB_WHITE_POSITION], irr[0])) ||
+        (S->have_pattern && !sample_part(&W, CALIB_WHITE_PATTERN, o, v, &out->part_rel[CALIB_WHITE_PATTERN], irr[1])))
+        return false;
     out->std_rel = quad_sum(out->part_rel, CALIB_WHITE_NPARTS);
     out->irr_std_rel = -1;
     for (int j = 0; j < nq; j++) {
@@ -509,6 +512,7 @@ static void white_lamp(const calib_obs_set_t *obs, const calib_set_t *cal, int l
             out->irr_worst_mm = q[j];
         }
     }
+    return true;
 }
 
 bool calib_white_compute(const calib_obs_set_t *obs, const calib_set_t *cal, double albedo,
@@ -551,7 +555,12 @@ bool calib_white_compute(const calib_obs_set_t *obs, const calib_set_t *cal, dou
             ok = false;
             break;
         }
-        white_lamp(obs, cal, l, albedo, table, &o, geo, idx, n, v, &out[l]);
+        if (!white_lamp(obs, cal, l, albedo, table, &o, geo, idx, n, v, &out[l])) {
+            char *e = g_strdup(model_last_error());
+            model_error(out_json, 0, "%s", e);
+            g_free(e);
+            ok = false;
+        }
     }
     free(v);
     free(idx);
@@ -595,7 +604,7 @@ static json_t *parts_json(const double *p, double scale)
 {
     json_t *j = json_object();
     for (int k = 0; k < CALIB_WHITE_NPARTS; k++)
-        json_object_set_new(j, calib_white_part_names[k], isfinite(p[k]) ? json_real(scale * p[k]) : json_null());
+        json_object_set_new(j, calib_white_part_names[k], model_json_number(scale * p[k]));
     return j;
 }
 
@@ -653,7 +662,7 @@ static json_t *uncertainty_json(const calib_white_table_t *t, const calib_white_
 }
 
 bool calib_white(const calib_obs_set_t *obs, const calib_set_t *cal, double albedo, const calib_white_table_t *table,
-                 const calib_white_options_t *opt, const char *out_json, json_t *prov)
+                 const calib_white_options_t *opt, const char *out_json, json_t *prov, calib_white_lamp_t *lamps_out)
 {
     calib_white_options_t o = opt ? *opt : calib_white_defaults();
     calib_white_lamp_t *wl = calloc((size_t)cal->lamps->n, sizeof *wl);
@@ -666,6 +675,7 @@ bool calib_white(const calib_obs_set_t *obs, const calib_set_t *cal, double albe
         return false;
     }
     json_t *top = json_object();
+    model_json_set_format(top, CALIB_WHITE_FORMAT, CALIB_WHITE_FORMAT_VERSION);
     json_object_set_new(top, "calibration", json_string("reference white: kc*I per lamp"));
     json_object_set_new(top, "units", json_string("kc_I_per_us, kc_I_std_per_us: DN per microsecond of exposure at 0 "
                                                   "dB gain per (R in 1/sr / d^2 in mm^2), so P - Pa = kc_I_per_us * "
@@ -679,15 +689,8 @@ bool calib_white(const calib_obs_set_t *obs, const calib_set_t *cal, double albe
     if (cal->camera[0]) json_object_set_new(top, "camera", json_string(cal->camera));
     json_object_set_new(top, "sample", json_string(obs->sample));
     json_t *arr = json_array();
-    for (int l = 0; l < cal->lamps->n; l++) {
-        const calib_white_lamp_t *w = &wl[l];
-        json_array_append_new(arr, lamp_json(w, table != NULL));
-        printf("  %-12s kc*I = %.6g DN/us per (1/sr)/mm^2 +- %.3f %% (statistical %.3f %%; spread %.2f %%, %d "
-               "windows)", w->name, w->kcI_per_us, 100 * w->std_rel, 100 * w->part_rel[CALIB_WHITE_STAT],
-               100 * w->spread_rel, w->n);
-        if (table) printf("; Lambertian at %.4g: %+.2f %%", table->f[0], 100 * (w->kcI_lambertian_per_us / w->kcI_per_us - 1));
-        printf("\n");
-    }
+    for (int l = 0; l < cal->lamps->n; l++) json_array_append_new(arr, lamp_json(&wl[l], table != NULL));
+    if (lamps_out) memcpy(lamps_out, wl, sizeof *wl * (size_t)cal->lamps->n);
     free(wl);
     json_object_set_new(top, "lamps", arr);
     if (prov) json_object_set_new(top, "provenance", json_incref(prov));

@@ -21,8 +21,10 @@
 #include "calib/calib.h"
 #include "calib/gain/gain.h"
 #include "model/model.h"
+#include "model/base/report.h"
 #include "model/base/vec.h"
 #include "rig/rig.h"
+#include "rig/virtual/truth.h"
 #include "tests/test.h"
 
 static const char *truth_path(void)
@@ -719,24 +721,24 @@ TEST(calib_gain_numerics)
     CHECK(calib_gain_correlation(out, pat, W * H) > 0.99);
 }
 
-// calib_gain_truth_radiance, the comparison's only reader of the truth: the
-// flat-field source's radiance per lamp from a virtual rig's session facts;
-// nothing without them.
-TEST(calib_gain_truth_radiance_stage)
+// calib_gain_radiance_of_truth: the radiance these tests give refl calib gain
+// (--radiance 5000) is the truth's: its flat-field source's radiance per lamp
+// (1000) times its 5 lamps. The calibration itself never reads the truth.
+TEST(calib_gain_radiance_of_truth)
 {
-    json_t *facts = json_pack("{s:{s:s, s:s}}", "virtual_rig", "truth", truth_path(), "sample", "flat_field");
-    const char *tp = NULL;
+    rig_truth_t *t = rig_truth_load(truth_path());
+    CHECK(t != NULL);
+    if (!t) return;
     double r = 0;
-    CHECK(calib_gain_truth_radiance(facts, &tp, &r));
+    CHECK(rig_truth_uniform_radiance(t, "flat_field", &r));
     CHECK_NEAR(r, 1000, 1e-9);
-    CHECK(tp && !strcmp(tp, truth_path()));
-    json_decref(facts);
-    facts = json_pack("{s:{s:s, s:s}}", "virtual_rig", "truth", truth_path(), "sample", "calib_board");
-    CHECK(!calib_gain_truth_radiance(facts, NULL, &r));   // not a uniform source
-    CHECK(isnan(r));
-    json_decref(facts);
-    CHECK(!calib_gain_truth_radiance(NULL, &tp, &r));
-    CHECK(tp == NULL && isnan(r));
+    model_lamps_t *lamps = rig_truth_lamps(t);
+    CHECK(lamps && lamps->n == 5);
+    model_lamps_free(lamps);
+    bool q = model_error_quiet_thread(true);
+    CHECK(!rig_truth_uniform_radiance(t, "calib_board", &r));   // not a uniform source
+    model_error_quiet_thread(q);
+    rig_truth_free(t);
 }
 
 // calib_set_camera_layouts: the calibration set of one camera of a directory
@@ -756,7 +758,7 @@ TEST(calib_set_camera_layouts)
     static const char *const dirs[] = { "one", "two/geometry", "two/right", "two/lamps", "two/gain/right",
                                         "two/white/right", "two/left" };
     for (size_t k = 0; k < sizeof dirs / sizeof dirs[0]; k++) g_mkdir_with_parents(test_path(dirs[k]), 0755);
-    // one camera, as before: no camera, the gain calibration's gain 0 dB
+    // one camera, a version 1 gain.json without camera, gain or unit: 0 dB
     test_write("one/camera.cameramodel", cm);
     test_write("one/lamps.json", lamps);
     test_write("one/gain.json", "{\"camera\": \"camera\", \"system_gain_dn_per_e\": 0.25, \"read_noise_e\": 6}\n");
@@ -812,8 +814,128 @@ TEST(calib_set_camera_layouts)
     free(cm);
 }
 
+// calib_set_format_versions: the calibration set checks each JSON file's
+// format and version: a file that names none reads as version 1, a version
+// this refl knows is read and recorded, a newer version or another format is
+// refused naming the file.
+TEST(calib_set_format_versions)
+{
+    char src[PATH_MAX + 64], top[PATH_MAX];
+    if (!realpath(test_srcdir(), top)) snprintf(top, sizeof top, "%s", test_srcdir());
+    snprintf(src, sizeof src, "%s/examples/camera.cameramodel", top);
+    char *cm = model_read_file(src, NULL);
+    CHECK(cm != NULL);
+    if (!cm) return;
+    g_mkdir_with_parents(test_path("fv"), 0755);
+    char cam[PATH_MAX], lamps[PATH_MAX], gain[PATH_MAX], white[PATH_MAX];
+    snprintf(cam, sizeof cam, "%s", test_write("fv/camera.cameramodel", cm));
+    snprintf(lamps, sizeof lamps, "%s", test_path("fv/lamps.json"));
+    snprintf(gain, sizeof gain, "%s", test_path("fv/gain.json"));
+    snprintf(white, sizeof white, "%s", test_path("fv/white.json"));
+    const char *lamp = "\"lamps\": [{\"name\": \"east\", \"position_mm\": [400, 0, 600]}]";
+    const char *lin = "\"linearisation\": {\"method\": \"parametric\", \"a_per_dn\": 0}";
+    char buf[512];
+    snprintf(buf, sizeof buf, "{%s}\n", lamp);
+    test_write("fv/lamps.json", buf);
+    test_write("fv/gain.json", "{\"system_gain_dn_per_e\": 0.25, \"read_noise_e\": 6}\n");
+    test_write("fv/white.json", "{\"lamps\": [{\"name\": \"east\", \"kc_I_per_us\": 480}]}\n");
+    bool q = model_error_quiet_thread(true);
+    calib_set_t *c = calib_set_load_files(cam, lamps, gain, white);
+    CHECK_MSG(c != NULL, "%s", model_last_error());
+    if (c) CHECK(c->lamps_version == 1 && c->gain_version == 1 && c->white_version == 1);
+    calib_set_free(c);
+    // the versions refl writes
+    snprintf(buf, sizeof buf, "{\"format\": \"refl-lamps\", \"version\": 1, %s}\n", lamp);
+    test_write("fv/lamps.json", buf);
+    snprintf(buf, sizeof buf, "{\"format\": \"refl-gain\", \"version\": %d, \"gain_db\": 0, \"gain_unit\": \"dB\", %s}\n",
+             CALIB_GAIN_FORMAT_VERSION, lin);
+    test_write("fv/gain.json", buf);
+    test_write("fv/white.json", "{\"format\": \"refl-white\", \"version\": 1, \"lamps\": [{\"name\": \"east\", "
+                                "\"kc_I_per_us\": 480}]}\n");
+    c = calib_set_load_files(cam, lamps, gain, white);
+    CHECK_MSG(c != NULL, "%s", model_last_error());
+    if (c) CHECK(c->gain_version == CALIB_GAIN_FORMAT_VERSION && c->have_white && c->kcI_per_us[0] == 480);
+    calib_set_free(c);
+    // newer versions are refused, naming the file
+    snprintf(buf, sizeof buf, "{\"format\": \"refl-gain\", \"version\": %d, %s}\n", CALIB_GAIN_FORMAT_VERSION + 1, lin);
+    test_write("fv/gain.json", buf);
+    CHECK(calib_set_load_files(cam, lamps, gain, white) == NULL);
+    CHECK_CONTAINS(model_last_error(), "fv/gain.json");
+    CHECK_CONTAINS(model_last_error(), "written by a newer refl");
+    c = calib_set_load_files(cam, lamps, NULL, NULL);   // the camera and lamps alone load
+    CHECK(c != NULL);
+    calib_set_free(c);
+    test_write("fv/white.json", "{\"format\": \"refl-white\", \"version\": 2, \"lamps\": []}\n");
+    CHECK(calib_set_load_files(cam, lamps, NULL, white) == NULL);
+    CHECK_CONTAINS(model_last_error(), "fv/white.json");
+    CHECK_CONTAINS(model_last_error(), "refl-white version 2");
+    snprintf(buf, sizeof buf, "{\"format\": \"refl-lamps\", \"version\": 2, %s}\n", lamp);
+    test_write("fv/lamps.json", buf);
+    CHECK(calib_set_load_files(cam, lamps, NULL, NULL) == NULL);
+    CHECK_CONTAINS(model_last_error(), "fv/lamps.json");
+    CHECK_CONTAINS(model_last_error(), "written by a newer refl");
+    // another format in a file's place
+    test_write("fv/lamps.json", "{\"format\": \"refl-gain\", \"version\": 1}\n");
+    CHECK(calib_set_load_files(cam, lamps, NULL, NULL) == NULL);
+    CHECK_CONTAINS(model_last_error(), "a refl-gain file, not refl-lamps");
+    model_error_quiet_thread(q);
+    free(cm);
+}
+
+// calib_gain_analyse_phases: the dark model, the sweep and photon transfer
+// of one gain on groups with known statistics (no frames): dark level 100 DN
+// + 0.001 DN/us, dark variance 4 DN^2 + 1e-4 DN^2/us, measured at four
+// exposures of their own (every sweep step takes the dark model); signal
+// 0.5 DN/us with variance K = 0.25 DN/e- times it up to 2800 DN, then
+// saturated. Missing darks and too few steps are errors.
+TEST(calib_gain_analyse_phases)
+{
+    enum { NS = 60, ND = 4 };
+    calib_gain_group_t g[NS + ND];
+    static const double tdark[ND] = { 150, 2050, 4050, 8050 };
+    for (int i = 0; i < ND; i++)
+        g[i] = (calib_gain_group_t){ .exposure_us = tdark[i], .dark = true, .set = CALIB_GAIN_SET_DARK, .n = 2,
+                                     .mean_dn = 100 + 0.001 * tdark[i], .var_dn2 = 4 + 1e-4 * tdark[i] };
+    for (int i = 0; i < NS; i++) {
+        double t = 100.0 * (i + 1), mu = 0.5 * t;
+        bool sat = mu > 2800;
+        g[ND + i] = (calib_gain_group_t){ .exposure_us = t, .set = CALIB_GAIN_SET_SWEEP, .n = 2,
+                                          .mean_dn = 100 + 0.001 * t + (sat ? 2800 : mu),
+                                          .var_dn2 = 4 + 1e-4 * t + (sat ? 1 : 0.25 * mu) };
+    }
+    calib_gain_data_t d = { .g = g, .ng = NS + ND };
+    calib_gain_an_t a;
+    bool q = model_error_quiet_thread(true);
+    CHECK_MSG(calib_gain_analyse(&d, 0, 50, 1, &a), "%s", model_last_error());
+    CHECK(a.n == NS && a.ndark == ND);
+    CHECK_NEAR(a.dark_intercept_dn, 100, 1e-9);
+    CHECK_NEAR(a.dark_slope_dn_per_us, 0.001, 1e-12);
+    CHECK_NEAR(a.var_dark_dn2, 4, 1e-9);
+    CHECK_NEAR(a.dark_var_slope_dn2_per_us, 1e-4, 1e-12);
+    CHECK(a.dark_t_min_us == 150 && a.dark_t_max_us == 8050);
+    for (int i = 0; i < NS; i++) {
+        CHECK_NEAR(a.t[i], 100.0 * (i + 1), 0);
+        CHECK_NEAR(a.mu[i], fmin(0.5 * a.t[i], 2800), 1e-9);
+        CHECK_NEAR(a.var_d[i], 4 + 1e-4 * a.t[i], 1e-9);
+    }
+    CHECK_NEAR(a.ptc.saturation_dn, 2800, 1e-9);
+    CHECK_REL(a.ptc.system_gain_dn_per_e, 0.25, 1e-9);
+    CHECK_REL(a.ptc.read_noise_e, sqrt(4 - 1.0 / 12) / 0.25, 1e-9);
+    CHECK_REL(a.response0_dn_per_us, 0.5, 1e-9);
+    calib_gain_an_free(&a);
+    CHECK(!calib_gain_analyse(&d, 0, NS + 1, 1, &a));
+    CHECK_CONTAINS(model_last_error(), "too few sweep steps: 60 exposures");
+    calib_gain_an_free(&a);
+    d.g = g + ND;
+    d.ng = NS;
+    CHECK(!calib_gain_analyse(&d, 0, 50, 1, &a));
+    CHECK_CONTAINS(model_last_error(), "no dark frame pairs");
+    calib_gain_an_free(&a);
+    model_error_quiet_thread(q);
+}
+
 // ---------------------------------------------------------------------------
-// The response linearisation (issue 19): a known monotone response that is
+// The response linearisation: a known monotone response that is
 // not of the form S (1 - a S) (a gamma at the low end, an exponential knee
 // toward full well), swept as refl calib gain sweeps (calib_gain_sweep_exposures:
 // 50 equal steps up to 1.2 x saturation and 16 geometric ones at the low end).
@@ -968,14 +1090,16 @@ TEST(calib_gain_linearity_r4_hand)
     CHECK_NEAR(calib_gain_linearity(t, mu, 3, 310, 0.05, 0.95, NULL, NULL, NULL, NULL), 4.8809523810, 1e-8);
 }
 
-// An old gain.json (before the table: no "linearisation") still loads and
-// applies S(1 - aS) of its curves; a new one applies its table, and its method
-// "parametric" the a; a malformed one is an error naming the file.
+// A refl-gain version 1 file without "linearisation" loads and applies
+// S(1 - aS) of its curves; a file with the table applies it, and its method
+// "parametric" the a; a malformed one is an error naming the file. A version
+// 2 file needs its "linearisation"; a newer version or another format is
+// refused.
 TEST(calib_gain_lin_json_compat)
 {
     double t[LIN_N], mu[LIN_N];
     double sat = lin_sweep(t, mu, 0);
-    // the old layout: gains[0].curves at gain_db 0
+    // version 1 without the table: gains[0].curves at gain_db 0
     json_t *cv = json_object(), *et = json_array(), *es = json_array();
     for (int i = 0; i < LIN_N; i++) {
         json_array_append_new(et, json_real(t[i]));
@@ -990,7 +1114,21 @@ TEST(calib_gain_lin_json_compat)
     CHECK(L.kind == MODEL_LIN_PARAMETRIC);
     CHECK_REL(L.a_per_dn, calib_gain_parametric_a(t, mu, LIN_N, sat), 1e-12);
     CHECK(L.a_per_dn > 0);
-    // the new layout
+    // version 2 names itself and always has the table
+    json_t *v2 = json_deep_copy(old);
+    json_object_set_new(v2, "format", json_string("refl-gain"));
+    json_object_set_new(v2, "version", json_integer(2));
+    CHECK(!calib_gain_lin_from_json(v2, "v2/gain.json", &L));
+    CHECK_CONTAINS(model_last_error(), "v2/gain.json");
+    CHECK_CONTAINS(model_last_error(), "without its \"linearisation\"");
+    json_object_set_new(v2, "version", json_integer(CALIB_GAIN_FORMAT_VERSION + 1));
+    CHECK(!calib_gain_lin_from_json(v2, "v3/gain.json", &L));
+    CHECK_CONTAINS(model_last_error(), "written by a newer refl");
+    json_object_set_new(v2, "format", json_string("refl-white"));
+    CHECK(!calib_gain_lin_from_json(v2, "w/gain.json", &L));
+    CHECK_CONTAINS(model_last_error(), "not refl-gain");
+    json_decref(v2);
+    // with the table
     model_lin_t T;
     double a, r, c0;
     CHECK(calib_gain_linearisation(t, mu, LIN_N, sat, &T, &a, &r, &c0));
@@ -1001,6 +1139,10 @@ TEST(calib_gain_lin_json_compat)
     }
     json_object_set_new(old, "linearisation", json_pack("{s:s, s:f, s:o, s:o}", "method", "monotone", "a_per_dn", a,
                                                         "measured_dn", jm, "linear_dn", js));
+    CHECK(calib_gain_lin_from_json(old, "new/gain.json", &L));
+    CHECK(L.kind == MODEL_LIN_MONOTONE && L.n == T.n);
+    json_object_set_new(old, "format", json_string("refl-gain"));
+    json_object_set_new(old, "version", json_integer(2));
     CHECK(calib_gain_lin_from_json(old, "new/gain.json", &L));
     CHECK(L.kind == MODEL_LIN_MONOTONE && L.n == T.n);
     CHECK_REL(model_linearise(&L, 0.9 * sat, 1, NULL), model_linearise(&T, 0.9 * sat, 1, NULL), 1e-12);

@@ -9,6 +9,7 @@
 
 #include "calib/calib.h"
 #include "model/model.h"
+#include "model/base/report.h"
 #include "model/base/vec.h"
 #include "tests/test.h"
 
@@ -111,10 +112,14 @@ TEST(calib_white_table_recovers_kc)
     char *text = white_table_text();
     calib_white_table_t *t = calib_white_table_parse(text, strlen(text), "white.csv");
     char *out = g_strdup_printf("%s/white.json", test_tmpdir()), *outl = g_strdup_printf("%s/lam.json", test_tmpdir());
-    CHECK(t && calib_white(&obs, &cal, 0.99, t, NULL, out, NULL));
-    CHECK(calib_white(&obs, &cal, white_R(0, 0), NULL, NULL, outl, NULL));
+    calib_white_lamp_t wl[2];
+    CHECK(t && calib_white(&obs, &cal, 0.99, t, NULL, out, NULL, wl));
+    CHECK(calib_white(&obs, &cal, white_R(0, 0), NULL, NULL, outl, NULL, NULL));
     json_t *j = json_load_file(out, 0, NULL), *jl = json_load_file(outl, 0, NULL);
     CHECK(j && jl);
+    // white.json names its format; the figures returned are the file's
+    int ver = 0;
+    CHECK(j && model_json_format_check(j, out, "refl-white", 1, &ver) && ver == 1);
     for (int l = 0; j && jl && l < 2; l++) {
         json_t *e = json_array_get(json_object_get(j, "lamps"), l), *el = json_array_get(json_object_get(jl, "lamps"), l);
         double k = json_number_value(json_object_get(e, "kc_I_per_us"));
@@ -122,6 +127,8 @@ TEST(calib_white_table_recovers_kc)
         fprintf(stderr, "  lamp %d: kc*I with the table %+.3f %%, Lambertian %+.3f %%\n", l, 100 * (k / kcI[l] - 1),
                 100 * (kl / kcI[l] - 1));
         CHECK(fabs(k / kcI[l] - 1) < 0.005);
+        CHECK(!strcmp(wl[l].name, l ? "right" : "left"));
+        CHECK_REL(wl[l].kcI_per_us, k, 1e-9);
         CHECK(fabs(kl / kcI[l] - 1) > 0.005);
         // white.json states the Lambertian figure beside it
         CHECK_REL(json_number_value(json_object_get(e, "kc_I_lambertian_per_us")), kl, 1e-9);

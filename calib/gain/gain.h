@@ -3,20 +3,25 @@
 // calib_gain_run. The command (argument parsing, calib/cmd_gain.c) is
 // calib_cmd_gain (calib/calib.h).
 //
-// A run, in order: frames (calib_gain_capture on a rig, calib_gain_add_session,
-// calib_gain_read_manifest) → calib_gain_make_groups (one group per exposure,
-// gain, dark/light and role) → calib_gain_frame_stats (each group's mean and
-// temporal variance) → per gain calib_gain_analyse (dark model, photon
-// transfer, linearity, response) → calib_gain_make_maps (offset, DSNU, PRNU
-// of the flat field at the first gain) → calib_gain_make_spatial (EMVA 1288
-// Release 4.0 Linear: row/column/pixel split, spectrograms, profiles,
-// defects; calib/gain/emva.c) → calib_gain_write_maps, calib_gain_write_defects,
-// calib_gain_json (gain.json, with "emva1288"), calib_gain_report (plots,
-// report.html), calib_gain_datasheet_html (datasheet.html). The photon axis
-// (calib_gain_an_photons) follows each gain's calib_gain_analyse.
+// A run, in order (calib/gain/gain.c): frames (calib_gain_capture on a rig,
+// capture.c; calib_gain_add_session, calib_gain_read_manifest, input.c) →
+// calib_gain_make_groups (one group per exposure, gain, dark/light and role)
+// → calib_gain_frame_stats (each group's mean and temporal variance;
+// frames.c) → per gain calib_gain_analyse (analyse.c: the dark model,
+// dark.c; the sweep, sweep.c; photon transfer, ptc.c; linearity,
+// linearity.c; the linearisation, linearisation.c; the response) →
+// calib_gain_make_maps (offset, DSNU, PRNU of the flat field at the first
+// gain; maps.c) → calib_gain_make_spatial (EMVA 1288 Release 4.0 Linear:
+// row/column/pixel split, spectrograms, profiles, spatial.c; defects,
+// defects.c) → calib_gain_write_maps, calib_gain_write_defects,
+// calib_gain_json (gain.json, with "emva1288"; output.c, emva.c),
+// calib_gain_report (plots, report.html; report.c),
+// calib_gain_datasheet_html (datasheet.html; emva.c). The photon axis
+// (calib_gain_an_photons, photons.c) follows each gain's calib_gain_analyse.
+// The least-squares fits the phases share: fit.c.
 // Errors: false / NULL with the message kept by model_error_set
-// (model_last_error), not printed: the caller prints it once. Progress lines
-// go to stderr ("refl calib gain: ...").
+// (model_last_error), not printed: the caller prints it once. What a run is
+// doing goes out as notices (model_note, model_progress, model_warning).
 //
 // Units: grey values in DN of the frames' pixel format, exposures in us,
 // variances in DN^2, electrons e-. "mu" is always the mean grey value minus
@@ -111,9 +116,11 @@ bool calib_gain_linearisation(const double *t, const double *mu, int n, double s
 // the curve says no compression.
 double calib_gain_parametric_a(const double *t, const double *mu, int n, double sat_dn);
 // The linearisation a gain.json (path, for messages) records: its
-// "linearisation" (method monotone: the table; parametric: a), else (files
-// from before it) the parametric a of its reference gain's curves, else none.
-// false + message (model_error, naming the file) when "linearisation" is malformed.
+// "linearisation" (method monotone: the table; parametric: a); a version 1
+// file without it: the parametric a of its reference gain's curves, else
+// none. false + message (model_error, naming the file) when "linearisation"
+// is malformed or missing from a version 2 file, or the file is not a
+// refl-gain file this reader knows (model_json_format_check).
 bool calib_gain_lin_from_json(json_t *gj, const char *path, model_lin_t *out);
 
 // Pearson correlation of two maps of n values (NAN when one is constant).
@@ -127,9 +134,10 @@ bool calib_gain_highpass(const float *in, int w, int h, float *out);
 
 
 // ---------------------------------------------------------------------------
-// EMVA 1288 Release 4.0 Linear: the photon axis, the spatial split,
-// spectrograms, defect pixels (calib/gain/emva.c). The definitions with their
-// formulas are in gain.json's "emva1288" "definitions" and README.
+// EMVA 1288 Release 4.0 Linear: the photon axis (photons.c), the spatial
+// split and spectrograms (spatial.c), defect pixels (defects.c), the
+// datasheet (emva.c). Each figure's definition with its formula is in its
+// row of gain.json's "emva1288" datasheet (and README).
 
 // Mean photons per pixel during t_us: mu_p = A E t lambda / (h c), A the
 // pixel area (um^2), E the irradiance at the sensor (uW/cm^2), lambda (nm).
@@ -171,11 +179,12 @@ double calib_gain_snr_model(const calib_gain_photon_t *p, double mu_p);
 // each less its temporal part, give s2_pixel = (V - Vr - Vc) / (1 - 1/M - 1/N)
 // (M columns averaged in a row mean, N rows in a column mean), s2_row = Vr -
 // s2_pixel / M, s2_col = Vc - s2_pixel / N. The figures are standard
-// deviations (sqrt of max(0, .)), in the map's units times scale.
+// deviations (sqrt of max(0, .)), in the map's units times scale. false +
+// message (out of memory; the figures NAN).
 typedef struct {
     double total, row, col, pixel;
 } calib_gain_split_t;
-void calib_gain_spatial_split(const float *img, int w, int h, const int roi[4], double temporal_var, double scale,
+bool calib_gain_spatial_split(const float *img, int w, int h, const int roi[4], double temporal_var, double scale,
                               calib_gain_split_t *out);
 
 // Spectrogram: horizontal (vertical false): the DFT Y(k) of every row of the
@@ -366,8 +375,8 @@ bool calib_gain_add_session(calib_gain_data_t *d, const char *dir, const char *c
 // most sensitive. false + message.
 bool calib_gain_capture(const calib_gain_opts_t *o, json_t *prov, calib_gain_source_t **src, int *nsrc);
 void calib_gain_sources_free(calib_gain_source_t *src, int n);
-// Group the frames (exposure, gain, dark, role).
-void calib_gain_make_groups(calib_gain_data_t *d);
+// Group the frames (exposure, gain, dark, role). false + message (out of memory).
+bool calib_gain_make_groups(calib_gain_data_t *d);
 // Every group's mean and temporal variance (reads every frame, in threads).
 bool calib_gain_frame_stats(calib_gain_data_t *d);
 
@@ -382,8 +391,7 @@ typedef struct {
     double dark_t_min_us, dark_t_max_us;
     int    ndark;               // dark exposures used for the dark current
     double *dark_t_us;          // their exposures (us; ndark, in the groups' order)
-    double radiance;            // total radiance of the light frames (NAN unknown)
-    double radiance_truth;      // the virtual rig's truth of it, for comparison (NAN unknown)
+    double radiance;            // total radiance of the light frames, as given (NAN unknown)
     double kc_per_us;           // response / radiance
     double response0_dn_per_us; // small-signal response: slope at 0 of a quadratic in exposure (0..70 % of sat)
     double kc0_per_us;          // response0 / radiance
@@ -447,13 +455,20 @@ json_t *calib_gain_emva_json(const calib_gain_opts_t *o, const calib_gain_an_t *
 // DIR/defects.tiff (codes 0 good, 1 hot, 2 dead, 3 bright) and DIR/datasheet.html.
 bool calib_gain_write_defects(const char *dir, const calib_gain_maps_t *m);
 bool calib_gain_datasheet_html(const char *dir, json_t *emva, json_t *prov);
-// The radiance per lamp of the sample of a virtual rig's session facts
-// (virtual_rig.truth, .sample), for the comparison with the truth only: false
-// when there is none. *truth_path (may be NULL) points into facts.
-bool calib_gain_truth_radiance(json_t *facts, const char **truth_path, double *radiance_per_lamp);
+// gain.json names its format, "refl-gain", and version (model_json_set_format):
+//   version 1  every gain.json that names no format. Of its keys these may be
+//              absent: camera, gain_db and gain_unit (readers take 0 dB),
+//              linearisation (readers take the parametric a of the reference
+//              gain's curves), flat_field.pixel_std_rel and .linearised, std
+//              and std_method (no stated 1-sigmas), dark_exposures_us.
+//   version 2  names itself; always has gain_db, gain_unit, linearisation,
+//              flat_field.pixel_std_rel and .linearised, std, std_method and
+//              dark_exposures_us (null where a figure is unknown).
+#define CALIB_GAIN_FORMAT         "refl-gain"
+#define CALIB_GAIN_FORMAT_VERSION 2
 // gain.json's document (new reference): an[0] the reference gain, then every gain.
 json_t *calib_gain_json(const calib_gain_opts_t *o, const calib_gain_data_t *d, const calib_gain_an_t *an, int ngains,
-                        const calib_gain_maps_t *maps, const char *truth, json_t *prov);
+                        const calib_gain_maps_t *maps, json_t *prov);
 // The plots (scripts/calib_gain_report.py) and DIR/report.html.
 bool calib_gain_report(const char *dir, const calib_gain_an_t *an, int ngains, const calib_gain_maps_t *maps,
                        json_t *prov);
