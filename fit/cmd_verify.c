@@ -15,6 +15,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "fit/eval/study.h"
 #include "fit/verify/verify.h"
 #include "model/base/opts.h"
 #include "model/base/report.h"

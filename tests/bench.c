@@ -30,6 +30,7 @@
 
 #include "fit/brdf/brdf.h"
 #include "fit/verify/verify.h"
+#include "fit/eval/study.h"
 #include "fit/eval/lab.h"
 #include "model/internal.h"
 #include "rig/virtual/gv_camera.h"

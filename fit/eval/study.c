@@ -34,6 +34,7 @@
 #include <string.h>
 
 #include "calib/calib.h"
+#include "fit/eval/study.h"
 #include "fit/verify/verify.h"
 #include "fit/eval/lab.h"
 #include "model/base/report.h"
