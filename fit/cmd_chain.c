@@ -31,7 +31,7 @@ static void print_entry(const json_t *e)
            json_string_value(json_object_get(e, "unit")), flag ? "  <-- |z| > 3, wrong, or over 1.2x the best" : "");
 }
 
-int chain_cmd(int argc, char **argv)
+int eval_chain_cmd(int argc, char **argv)
 {
     const char *truth = NULL, *out = NULL;
     bool quiet = false;
@@ -56,7 +56,7 @@ int chain_cmd(int argc, char **argv)
     const char *dir = cli.positional[0];
     char *path = out ? g_strdup(out) : g_build_filename(dir, "chain.json", NULL);
     json_t *prov = model_provenance(argc, argv);
-    json_t *doc = fit_chain_compare(dir, truth, prov);
+    json_t *doc = eval_chain_compare(dir, truth, prov);
     rc = 1;
     if (doc && model_write_json(path, doc)) {
         const json_t *e, *s = json_object_get(doc, "summary");

@@ -7,7 +7,7 @@
 //   refl verify --study-merge DIR... -o OUT                      (fit/eval/study.c)
 //
 // Parses the arguments (model/base/opts.h), calls verify_files_run or
-// verify_study_run (fit/verify/verify.h) and prints the residue table and verdict.
+// eval_study_run (fit/eval/study.h) and prints the residue table and verdict.
 #define _GNU_SOURCE
 #include <glib.h>
 #include <math.h>
@@ -78,7 +78,7 @@ static char *study_truth(const char *truth)
 }
 
 // --study: the study (or one shard of it), then its report when every case is in.
-static int study(verify_study_opts_t *so, const char *truth, bool no_report, int argc, char **argv)
+static int study(eval_study_opts_t *so, const char *truth, bool no_report, int argc, char **argv)
 {
     char *truth_path = study_truth(truth);
     if (!truth_path) {
@@ -87,9 +87,9 @@ static int study(verify_study_opts_t *so, const char *truth, bool no_report, int
     }
     so->truth = truth_path;
     so->provenance = model_provenance(argc, argv);
-    verify_study_result_t sr;
+    eval_study_result_t sr;
     int rc = 1;
-    if (verify_study_run(so, &sr)) {
+    if (eval_study_run(so, &sr)) {
         rc = 0;
         if (!sr.complete)
             printf("refl verify --study: shard %d/%d: %d of %d cases x %d descriptions x %d configurations in %s; "
@@ -110,9 +110,9 @@ static int study(verify_study_opts_t *so, const char *truth, bool no_report, int
 static int study_merge(const char *const *dirs, int n, const char *out, bool no_report, int argc, char **argv)
 {
     json_t *prov = model_provenance(argc, argv);
-    verify_study_result_t sr;
+    eval_study_result_t sr;
     int rc = 1;
-    if (!verify_study_merge(dirs, n, out, prov, &sr)) rc = 1;   // the library printed why
+    if (!eval_study_merge(dirs, n, out, prov, &sr)) rc = 1;   // the library printed why
     else if (no_report || model_run_script("verify_study_report.py", out, NULL) == 0) {
         printf("refl verify --study-merge: %d shard(s), %d cases x %d descriptions x %d configurations%s%s%s\n", n,
                sr.cases, sr.ndescriptions, sr.nconfigurations, no_report ? "" : "; report: ", no_report ? "" : out,
@@ -283,7 +283,7 @@ int verify_cmd(int argc, char **argv)
         return study_merge((const char *const *)cli.positional, cli.npositional, o.out, no_report, argc, argv);
     }
     if (do_study) {
-        verify_study_opts_t so = { .out = o.out, .cases = cases, .opt = *op, .calib = o.calib,
+        eval_study_opts_t so = { .out = o.out, .cases = cases, .opt = *op, .calib = o.calib,
                                    .priors = (const char *const *)o.priors, .npriors = o.npriors,
                                    .configs = configs };
         // the study registers only when asked (each case's descriptions then get their own views: slower)

@@ -123,11 +123,11 @@ TEST(lightplan_virtual_rig_agreement)
     snprintf(truth, sizeof truth, "%s/examples/virtual-truth.ini", test_srcdir());
     // the gain calibration a lab would have (the rig's own maps, noise-free)
     const double a0 = 0;
-    verify_lab_t *L = verify_lab_open(truth, "t_stiffener", &a0, 1, 1000, 0, false);
+    eval_lab_t *L = eval_lab_open(truth, "t_stiffener", &a0, 1, 1000, 0, false);
     CHECK_MSG(L != NULL, "verify lab: %s", model_last_error());
     if (!L) return;
-    const verify_camera_t *vc = verify_lab_camera(L);
-    int W = verify_lab_width(L), H = verify_lab_height(L);
+    const verify_camera_t *vc = eval_lab_camera(L);
+    int W = eval_lab_width(L), H = eval_lab_height(L);
     char *gdir = g_strdup(test_path("gain"));
     g_mkdir_with_parents(gdir, 0755);
     char buf[256], kc[64];
@@ -137,8 +137,8 @@ TEST(lightplan_virtual_rig_agreement)
     CHECK(model_tiff_write_float(test_path("gain/offset_dn.tiff"), W, H, vc->offset_dn, NULL));
     CHECK(model_tiff_write_float(test_path("gain/prnu_gain.tiff"), W, H, vc->flat, NULL));
     // kc*I as a white calibration through this flat field measures it
-    snprintf(kc, sizeof kc, "%.12g", verify_lab_A(L)[0] / verify_lab_lamps(L)->lamps[0].intensity);
-    verify_lab_free(L);
+    snprintf(kc, sizeof kc, "%.12g", eval_lab_A(L)[0] / eval_lab_lamps(L)->lamps[0].intensity);
+    eval_lab_free(L);
     const char *dir = test_path("plan");
     char *out = NULL, *err = NULL;
     int rc = test_refl_run(300, &out, &err, "plan", "lamps", scene, "--camera", cam, "--lamps", lamps, "--kc-per-us",

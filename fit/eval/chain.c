@@ -652,7 +652,7 @@ static json_t *summary(const json_t *entries)
     return s;
 }
 
-json_t *fit_chain_compare(const char *dir, const char *truth_path, json_t *prov)
+json_t *eval_chain_compare(const char *dir, const char *truth_path, json_t *prov)
 {
     chain_t c = { .dir = dir, .prov = prov };
     c.truth = rig_truth_load(truth_path);

@@ -29,9 +29,9 @@ extern "C" {
 // when dir has no calibration to compare (calib/geometry/geometry.json) or
 // the truth cannot be read; parts missing from dir are left out with a note
 // in "missing".
-json_t *fit_chain_compare(const char *dir, const char *truth_path, json_t *prov);
+json_t *eval_chain_compare(const char *dir, const char *truth_path, json_t *prov);
 
-int chain_cmd(int argc, char **argv);
+int eval_chain_cmd(int argc, char **argv);
 
 #ifdef __cplusplus
 }

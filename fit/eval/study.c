@@ -185,7 +185,7 @@ static bool study_configs(table_t *T, const char *list, int *which)
 // Running the cases
 
 typedef struct {
-    verify_lab_t     *lab;
+    eval_lab_t     *lab;
     table_t          *T;
     model_scene_t    *scenes[NDESC];
     verify_view_t    *views[NDESC * NANG];
@@ -212,10 +212,10 @@ typedef struct {
 static bool case_images(study_t *S, int c, int place, const double *ls, double kc, float **img,
                         verify_windows_t **win, verify_image_t *im)
 {
-    int W = verify_lab_width(S->lab), H = verify_lab_height(S->lab), nl = verify_lab_nlamps(S->lab);
+    int W = eval_lab_width(S->lab), H = eval_lab_height(S->lab), nl = eval_lab_nlamps(S->lab);
     for (int a = 0; a < NANG; a++) {
         uint64_t seed = 1000003ull * (uint64_t)c + a + 7919ull * (uint64_t)place;
-        if (!img[a] || !verify_lab_image_placed(S->lab, place, a, (1u << nl) - 1, ls, kc, seed, img[a])) return false;
+        if (!img[a] || !eval_lab_image_placed(S->lab, place, a, (1u << nl) - 1, ls, kc, seed, img[a])) return false;
         memset(&im[a], 0, sizeof im[a]);
         snprintf(im[a].name, sizeof im[a].name, "case%d_place%d_view%d", c, place, a);
         im[a].P = img[a];
@@ -291,7 +291,7 @@ static bool run_condition(study_t *S, int c, int d, const verify_image_t *im)
 static bool run_case(study_t *S, int c, float **img, verify_windows_t **win)
 {
     table_t *T = S->T;
-    int nl = verify_lab_nlamps(S->lab);
+    int nl = eval_lab_nlamps(S->lab);
     model_rng_t rng = model_rng(20261121, (uint64_t)c);
     double ls[32];
     for (int i = 0; i < nl && i < 32; i++) ls[i] = 0.9 + 0.2 * model_rng_uniform(&rng);
@@ -313,9 +313,9 @@ static void case_rows(void *vctx, int begin, int end, int thread)
 {
     (void)thread;
     study_t *S = vctx;
-    // a failed case's message is kept (S->err) and reported once by verify_study_run
+    // a failed case's message is kept (S->err) and reported once by eval_study_run
     bool quiet = model_error_quiet_thread(true);
-    size_t npx = (size_t)verify_lab_width(S->lab) * verify_lab_height(S->lab);
+    size_t npx = (size_t)eval_lab_width(S->lab) * eval_lab_height(S->lab);
     float *img[NANG] = { 0 };
     verify_windows_t *win[NANG] = { 0 };
     for (int a = 0; a < NANG; a++) {
@@ -365,26 +365,26 @@ static void study_configurations(study_t *S, const verify_options_t *opt, const 
 // The lab's own: the truth's camera, lamps and kc*I, its noise-free maps.
 static void calibs_of_lab(study_t *S)
 {
-    S->cam = *verify_lab_camera(S->lab);
-    S->lamps = verify_lab_lamps(S->lab);
-    S->A = verify_lab_A(S->lab);
-    S->lamps_on = (1u << verify_lab_nlamps(S->lab)) - 1;
+    S->cam = *eval_lab_camera(S->lab);
+    S->lamps = eval_lab_lamps(S->lab);
+    S->A = eval_lab_A(S->lab);
+    S->lamps_on = (1u << eval_lab_nlamps(S->lab)) - 1;
     S->gain_db = 0;
 }
 
 // The chain's calibration directory: its camera model, gain calibration and
 // maps, lamps.json and white.json; every lamp of the truth must be in it.
-static bool calibs_of_chain(study_t *S, const verify_study_opts_t *o)
+static bool calibs_of_chain(study_t *S, const eval_study_opts_t *o)
 {
     if (!(S->cal = calib_set_load(o->calib, true))) return false;
     const calib_set_t *cal = S->cal;
-    if (cal->W != verify_lab_width(S->lab) || cal->H != verify_lab_height(S->lab)) {
+    if (cal->W != eval_lab_width(S->lab) || cal->H != eval_lab_height(S->lab)) {
         model_error(o->calib, 0, "its camera model is %dx%d but the truth's camera (%s) is %dx%d: give the "
-                    "calibrations of this rig", cal->W, cal->H, o->truth, verify_lab_width(S->lab),
-                    verify_lab_height(S->lab));
+                    "calibrations of this rig", cal->W, cal->H, o->truth, eval_lab_width(S->lab),
+                    eval_lab_height(S->lab));
         return false;
     }
-    const model_lamps_t *tl = verify_lab_lamps(S->lab);
+    const model_lamps_t *tl = eval_lab_lamps(S->lab);
     S->lamps_on = 0;
     for (int i = 0; i < tl->n; i++) {
         int j = model_lamps_find(cal->lamps, tl->lamps[i].name);
@@ -412,12 +412,12 @@ static bool calibs_of_chain(study_t *S, const verify_study_opts_t *o)
 }
 
 // The priors: --priors files, else the truth's plywood and painted steel +- 10 % (bounds 3 sigma).
-static bool study_priors(study_t *S, const verify_study_opts_t *o)
+static bool study_priors(study_t *S, const eval_study_opts_t *o)
 {
     for (int k = 0; k < o->npriors; k++)
         if (!verify_priors_load(&S->pr, o->priors[k])) return false;
     if (o->npriors) return true;
-    const model_materials_t *mm = verify_lab_materials(S->lab);
+    const model_materials_t *mm = eval_lab_materials(S->lab);
     const model_material_t *ply = model_materials_find(mm, "plywood"), *st = model_materials_find(mm, "painted_steel");
     if (!ply || !st || !verify_priors_add(&S->pr, ply, 0.1, 1e-4, 3) || !verify_priors_add(&S->pr, st, 0.1, 1e-4, 3)) {
         model_error(o->truth, 0, "the study needs the materials plywood and painted_steel");
@@ -625,8 +625,8 @@ static const char conditions[] =
 // The design (what a shard must share with the others to be merged): cases,
 // configurations, conditions, threshold and the inputs' hashes (no paths: the
 // shards may run on other machines).
-static json_t *design_json(const table_t *T, const json_t *inputs, const verify_study_opts_t *o,
-                           const verify_lab_t *lab)
+static json_t *design_json(const table_t *T, const json_t *inputs, const eval_study_opts_t *o,
+                           const eval_lab_t *lab)
 {
     json_t *d = json_object(), *cf = json_array(), *cd = json_array(), *in = json_array();
     json_object_set_new(d, "cases", json_integer(T->cases));
@@ -642,7 +642,7 @@ static json_t *design_json(const table_t *T, const json_t *inputs, const verify_
         }
         // the truth's own placement error of the part in these images ([placement]: one draw per placement)
         double tu, dx, dy;
-        if (lab && verify_lab_placement_draw(lab, c->place, &tu, &dx, &dy))
+        if (lab && eval_lab_placement_draw(lab, c->place, &tu, &dx, &dy))
             json_object_set_new(e, "truth_placement_error", json_pack("{s:f, s:f, s:f}", "turn_deg", tu, "dx_mm", dx,
                                                                       "dy_mm", dy));
         json_array_append_new(cd, e);
@@ -747,15 +747,15 @@ static bool write_study_json(const char *out, const table_t *T, json_t *design, 
 // The run
 
 // The lab, its placed-off sets, the calibrations, priors, views and table. false + message.
-static bool study_setup(study_t *S, const verify_study_opts_t *o, const model_stiffener_t *D, const int *which)
+static bool study_setup(study_t *S, const eval_study_opts_t *o, const model_stiffener_t *D, const int *which)
 {
     fprintf(stderr, "refl verify --study: rendering the T-stiffener at 4 angles x each lamp on the virtual rig (%s)\n",
             o->truth);
-    if (!(S->lab = verify_lab_open(o->truth, "t_stiffener", angles, NANG, 6000, 0, true))) return false;
+    if (!(S->lab = eval_lab_open(o->truth, "t_stiffener", angles, NANG, 6000, 0, true))) return false;
     for (int p = 0; p < NPLACE; p++) {
         double az = PLACE_AZIMUTH_DEG * M_PI / 180;
         fprintf(stderr, "refl verify --study: the part placed off by %g mm, %g deg\n", place_mm[p], place_deg[p]);
-        if (verify_lab_add_placement(S->lab, place_deg[p], place_mm[p] * cos(az), place_mm[p] * sin(az), true) < 0)
+        if (eval_lab_add_placement(S->lab, place_deg[p], place_mm[p] * cos(az), place_mm[p] * sin(az), true) < 0)
             return false;
     }
     if (o->calib ? !calibs_of_chain(S, o) : (calibs_of_lab(S), false)) return false;
@@ -765,7 +765,7 @@ static bool study_setup(study_t *S, const verify_study_opts_t *o, const model_st
 }
 
 // The inputs (truth, calibration files, priors) into the provenance and a list for the design.
-static json_t *study_inputs(const study_t *S, const verify_study_opts_t *o)
+static json_t *study_inputs(const study_t *S, const eval_study_opts_t *o)
 {
     json_t *in = json_array();
     model_inputs_add(in, "truth", o->truth);
@@ -791,11 +791,11 @@ static void study_free(study_t *S)
     for (int k = 0; k < NDESC * NANG; k++) verify_view_free(S->views[k]);
     for (int k = 0; k < NDESC; k++) model_scene_free(S->scenes[k]);
     calib_set_free(S->cal);
-    verify_lab_free(S->lab);
+    eval_lab_free(S->lab);
     pthread_mutex_destroy(&S->lock);
 }
 
-bool verify_study_run(const verify_study_opts_t *o, verify_study_result_t *r)
+bool eval_study_run(const eval_study_opts_t *o, eval_study_result_t *r)
 {
     memset(r, 0, sizeof *r);
     table_t T = { .cases = o->cases, .reg = o->placement_tol_mm > 0 || o->placement_tol_deg > 0 };
@@ -1021,8 +1021,8 @@ static bool check_complete(const table_t *T)
     return true;
 }
 
-bool verify_study_merge(const char *const *dirs, int ndirs, const char *out, json_t *provenance,
-                        verify_study_result_t *r)
+bool eval_study_merge(const char *const *dirs, int ndirs, const char *out, json_t *provenance,
+                      eval_study_result_t *r)
 {
     memset(r, 0, sizeof *r);
     table_t T = { 0 };

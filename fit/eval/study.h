@@ -30,22 +30,22 @@ typedef struct {
                                    // images (verify_register) and verified there (placement.csv); 0: as described
     verify_options_t    opt;       // the base options (threads: the cases in parallel)
     json_t             *provenance;   // borrowed: the inputs are added, study.json carries it
-} verify_study_opts_t;
+} eval_study_opts_t;
 
 typedef struct {
     int  cases, cases_run, ndescriptions, nconfigurations;
     bool complete;   // every case's rows are in (an unsharded run, a merge): study.json has the results
-} verify_study_result_t;
+} eval_study_result_t;
 
 // Run the study (or one shard) and write its tables (progress on stderr). false + message.
-bool verify_study_run(const verify_study_opts_t *o, verify_study_result_t *r);
+bool eval_study_run(const eval_study_opts_t *o, eval_study_result_t *r);
 // Merge the output directories of the shards of one study (the same design:
 // cases, configurations, descriptions, threshold, inputs' hashes; every case
 // in exactly one) into out, as the unsharded run writes it: study.csv and the
 // results of study.json equal that run's. The shards' provenance goes to
 // provenance's "merged_from". false + message naming the directory or file:line.
-bool verify_study_merge(const char *const *dirs, int ndirs, const char *out, json_t *provenance,
-                        verify_study_result_t *r);
+bool eval_study_merge(const char *const *dirs, int ndirs, const char *out, json_t *provenance,
+                      eval_study_result_t *r);
 
 #ifdef __cplusplus
 }

@@ -251,7 +251,7 @@ static bool load_inputs(const lightplan_lamps_opts_t *o, plan_inputs_t *in)
 // The check on the virtual rig
 
 typedef struct {
-    verify_lab_t        *lab;
+    eval_lab_t        *lab;
     int                  map[MAXL_PLAN];   // candidate -> the rig's lamp
     float               *frame;
     bool                *found;
@@ -261,7 +261,7 @@ typedef struct {
 
 static void check_free(plan_check_t *c)
 {
-    verify_lab_free(c->lab);
+    eval_lab_free(c->lab);
     free(c->frame);
     free(c->found);
     free(c->meas);
@@ -275,9 +275,9 @@ static bool check_open(const lightplan_lamps_opts_t *o, const plan_inputs_t *in,
 {
     const lightplan_config_t *b = &res->configs[res->best];
     double angle = o->angle_deg;
-    if (!(c->lab = verify_lab_open(o->check_truth, o->sample, &angle, 1, b->exposure_us, 0, false)))
+    if (!(c->lab = eval_lab_open(o->check_truth, o->sample, &angle, 1, b->exposure_us, 0, false)))
         return false;
-    const model_lamps_t *tl = verify_lab_lamps(c->lab);
+    const model_lamps_t *tl = eval_lab_lamps(c->lab);
     for (int i = 0; i < in->lamps->n; i++) {
         c->map[i] = model_lamps_find(tl, in->lamps->lamps[i].name);
         if (c->map[i] < 0) {
@@ -325,7 +325,7 @@ static json_t *check_config(const lightplan_lamps_opts_t *o, const plan_inputs_t
     uint32_t tm = 0;
     for (int i = 0; i < in->lamps->n; i++)
         if ((m >> i) & 1) tm |= 1u << c->map[i];
-    if (!verify_lab_image(c->lab, 0, tm, NULL, 1, seed, c->frame)) return NULL;
+    if (!eval_lab_image(c->lab, 0, tm, NULL, 1, seed, c->frame)) return NULL;
     lightplan_segments_for(res, m, exposure, &o->opt, c->sg);
     ck->agreement = lightplan_sobel_check(c->sg, ns, c->frame, res->W, res->H, o->opt.sobel_threshold, c->found,
                                           c->meas);
