@@ -53,13 +53,13 @@ typedef struct {
     char expected[16];   // "correct", "wrong", "placed" (the correct description, the part placed off)
     int  desc;           // the description's index (its scene and views)
     int  place;          // the lab's placement set
-} cond_t;
+} study_cond_t;
 
 // The study's table: one row per (case, configuration, condition).
 typedef struct {
     int     cases, nconf, ncond;
     char    conf[NCONF][32];
-    cond_t  cond[NCOND];
+    study_cond_t  cond[NCOND];
     double *score;       // [case][conf][cond]
     signed char *verdict;   // 1: verdict correct, 0: incorrect, -1: not run here (another shard)
     double *secs;        // wall time of the fit (timing.csv; not part of the results)
@@ -67,11 +67,14 @@ typedef struct {
     double *rmsz, *medz; // the fit's RMS z and median |z| over its used points (the z calibration)
     bool    reg;         // the placement registered (placement.csv)
     float  *pose;        // [case][cond][4]: dx mm, dy mm, turn deg, edge agreement (NAN: not here)
-} table_t;
+} study_table_t;
 
-static size_t at(const table_t *T, int c, int k, int d) { return ((size_t)c * T->nconf + k) * T->ncond + d; }
+static size_t study_row(const study_table_t *T, int c, int k, int d)
+{
+    return ((size_t)c * T->nconf + k) * T->ncond + d;
+}
 
-static bool table_alloc(table_t *T)
+static bool study_table_alloc(study_table_t *T)
 {
     size_t n = (size_t)T->cases * T->nconf * T->ncond;
     T->score = calloc(n, sizeof *T->score);
@@ -91,7 +94,7 @@ static bool table_alloc(table_t *T)
     return true;
 }
 
-static void table_free(table_t *T)
+static void study_table_free(study_table_t *T)
 {
     free(T->score);
     free(T->verdict);
@@ -102,7 +105,7 @@ static void table_free(table_t *T)
     free(T->pose);
 }
 
-static float *pose_at(const table_t *T, int c, int d) { return T->pose + ((size_t)c * T->ncond + d) * 4; }
+static float *study_pose(const study_table_t *T, int c, int d) { return T->pose + ((size_t)c * T->ncond + d) * 4; }
 
 static const double angles[NANG] = { 0, 90, 180, 270 };
 // the placed-off cases: turn (deg) about the part's centre, shift (mm) along
@@ -111,7 +114,7 @@ static const double place_mm[NPLACE] = { 1, 2, 3 }, place_deg[NPLACE] = { 0.5, 1
 #define PLACE_AZIMUTH_DEG 30.0
 
 // The descriptions (d: room for NDESC) and the conditions of the table.
-static void study_design(table_t *T, model_stiffener_t *d)
+static void study_design(study_table_t *T, model_stiffener_t *d)
 {
     static const char *labels[NDESC] = { "correct", "I-stiffener", "missing", "shift 1 mm", "shift 2 mm",
                                          "shift 5 mm", "shift 10 mm", "rotate 1 deg", "rotate 2 deg", "rotate 5 deg",
@@ -126,14 +129,14 @@ static void study_design(table_t *T, model_stiffener_t *d)
     for (int k = 0; k < 4; k++) d[10 + k].height_scale = 1 + hs[k] / 100;
     T->ncond = NCOND;
     for (int k = 0; k < NDESC; k++) {
-        cond_t *c = &T->cond[k];
+        study_cond_t *c = &T->cond[k];
         snprintf(c->label, sizeof c->label, "%s", labels[k]);
         snprintf(c->expected, sizeof c->expected, "%s", k ? "wrong" : "correct");
         c->desc = k;
         c->place = 0;
     }
     for (int p = 0; p < NPLACE; p++) {
-        cond_t *c = &T->cond[NDESC + p];
+        study_cond_t *c = &T->cond[NDESC + p];
         snprintf(c->label, sizeof c->label, "placed %g mm %g deg", place_mm[p], place_deg[p]);
         snprintf(c->expected, sizeof c->expected, "placed");
         c->desc = 0;
@@ -150,7 +153,7 @@ static const struct {
 
 // The configurations of the run: list (comma-separated names; NULL: all), in
 // the canonical order. false + message naming the unknown one.
-static bool study_configs(table_t *T, const char *list, int *which)
+static bool study_configs(study_table_t *T, const char *list, int *which)
 {
     T->nconf = 0;
     for (int k = 0; k < NCONF; k++) {
@@ -186,7 +189,7 @@ static bool study_configs(table_t *T, const char *list, int *which)
 
 typedef struct {
     eval_lab_t     *lab;
-    table_t          *T;
+    study_table_t          *T;
     model_scene_t    *scenes[NDESC];
     verify_view_t    *views[NDESC * NANG];
     verify_priors_t   pr;
@@ -251,8 +254,8 @@ static bool registered_views(study_t *S, int desc, const verify_image_t *im, ver
 // Condition d of case c on its images im: every configuration (registered first when the study registers).
 static bool run_condition(study_t *S, int c, int d, const verify_image_t *im)
 {
-    table_t *T = S->T;
-    const cond_t *cd = &T->cond[d];
+    study_table_t *T = S->T;
+    const study_cond_t *cd = &T->cond[d];
     verify_view_t *own[NANG] = { 0 }, **views = &S->views[cd->desc * NANG];
     model_scene_t *placed = NULL;
     const model_scene_t *scene = S->scenes[cd->desc];
@@ -261,7 +264,7 @@ static bool run_condition(study_t *S, int c, int d, const verify_image_t *im)
         verify_placement_t p;
         ok = registered_views(S, cd->desc, im, &p, &placed, own);
         if (ok) {
-            float *q = pose_at(T, c, d);
+            float *q = study_pose(T, c, d);
             q[0] = (float)p.dx_mm, q[1] = (float)p.dy_mm, q[2] = (float)p.turn_deg, q[3] = (float)p.score;
         }
         views = own;
@@ -271,7 +274,7 @@ static bool run_condition(study_t *S, int c, int d, const verify_image_t *im)
         verify_result_t r;
         double t0 = model_now_s();
         ok = verify_run(scene, &S->pr, &S->cam, 1, S->lamps, S->A, im, NANG, views, &S->opt[k], &r);
-        size_t i = at(T, c, k, d);
+        size_t i = study_row(T, c, k, d);
         if (ok) {
             T->score[i] = r.score;
             T->verdict[i] = r.correct ? 1 : 0;
@@ -290,7 +293,7 @@ static bool run_condition(study_t *S, int c, int d, const verify_image_t *im)
 // Case c: its drifts, then its images at each placement and every fit on them.
 static bool run_case(study_t *S, int c, float **img, verify_windows_t **win)
 {
-    table_t *T = S->T;
+    study_table_t *T = S->T;
     int nl = eval_lab_nlamps(S->lab);
     model_rng_t rng = model_rng(20261121, (uint64_t)c);
     double ls[32];
@@ -300,7 +303,7 @@ static bool run_case(study_t *S, int c, float **img, verify_windows_t **win)
     for (int place = 0; place <= NPLACE; place++) {
         if (!case_images(S, c, place, ls, kc, img, win, im)) return false;
         for (int d = 0; d < T->ncond; d++) {
-            const cond_t *cd = &T->cond[d];
+            const study_cond_t *cd = &T->cond[d];
             if (cd->place != place) continue;
             if (!run_condition(S, c, d, im)) return false;
         }
@@ -498,12 +501,12 @@ static json_t *roc_json(const double *neg, int nn, const double *pos, int np)
 }
 
 // The scores and flags of condition d under configuration k (sorted scores; n rows).
-static int cond_scores(const table_t *T, int k, int d, double *sc, int *flagged)
+static int cond_scores(const study_table_t *T, int k, int d, double *sc, int *flagged)
 {
     int n = 0;
     *flagged = 0;
     for (int c = 0; c < T->cases; c++) {
-        size_t i = at(T, c, k, d);
+        size_t i = study_row(T, c, k, d);
         if (T->verdict[i] < 0) continue;
         sc[n++] = T->score[i];
         *flagged += T->verdict[i] == 0;
@@ -512,7 +515,7 @@ static int cond_scores(const table_t *T, int k, int d, double *sc, int *flagged)
     return n;
 }
 
-static json_t *config_summary(const table_t *T, int k, double *neg, double *pos, json_t *roc)
+static json_t *config_summary(const study_table_t *T, int k, double *neg, double *pos, json_t *roc)
 {
     int nfl, nn = cond_scores(T, k, 0, neg, &nfl);
     double thr = nn ? neg[nn - 1 - nn / 100] : NAN;
@@ -549,7 +552,7 @@ static json_t *config_summary(const table_t *T, int k, double *neg, double *pos,
 // The z calibration: per configuration, over the cases of the correct
 // description (and of the part placed off when the study registers), the
 // mean and range of each fit's RMS z and median |z| (N(0, 1): 1 and 0.674).
-static json_t *z_calibration(const table_t *T)
+static json_t *z_calibration(const study_table_t *T)
 {
     json_t *a = json_array();
     for (int k = 0; k < T->nconf; k++)
@@ -559,7 +562,7 @@ static json_t *z_calibration(const table_t *T)
             double sr = 0, sm = 0, rlo = INFINITY, rhi = -INFINITY, mlo = INFINITY, mhi = -INFINITY;
             int n = 0;
             for (int c = 0; c < T->cases; c++) {
-                size_t i = at(T, c, k, d);
+                size_t i = study_row(T, c, k, d);
                 if (T->verdict[i] < 0 || !isfinite(T->rmsz[i]) || !isfinite(T->medz[i])) continue;
                 sr += T->rmsz[i], sm += T->medz[i], n++;
                 rlo = fmin(rlo, T->rmsz[i]), rhi = fmax(rhi, T->rmsz[i]);
@@ -577,7 +580,7 @@ static json_t *z_calibration(const table_t *T)
 // {"summary": [...], "roc": [...]}: per configuration and condition other than
 // the correct description (negatives: the correct description's rows of the
 // same configuration).
-static json_t *study_results(const table_t *T)
+static json_t *study_results(const study_table_t *T)
 {
     double *neg = malloc((size_t)(T->cases ? T->cases : 1) * sizeof *neg);
     double *pos = malloc((size_t)(T->cases ? T->cases : 1) * sizeof *pos);
@@ -625,7 +628,7 @@ static const char conditions[] =
 // The design (what a shard must share with the others to be merged): cases,
 // configurations, conditions, threshold and the inputs' hashes (no paths: the
 // shards may run on other machines).
-static json_t *design_json(const table_t *T, const json_t *inputs, const eval_study_opts_t *o,
+static json_t *design_json(const study_table_t *T, const json_t *inputs, const eval_study_opts_t *o,
                            const eval_lab_t *lab)
 {
     json_t *d = json_object(), *cf = json_array(), *cd = json_array(), *in = json_array();
@@ -633,7 +636,7 @@ static json_t *design_json(const table_t *T, const json_t *inputs, const eval_st
     for (int k = 0; k < T->nconf; k++) json_array_append_new(cf, json_string(T->conf[k]));
     json_object_set_new(d, "configurations", cf);
     for (int k = 0; k < T->ncond; k++) {
-        const cond_t *c = &T->cond[k];
+        const study_cond_t *c = &T->cond[k];
         json_t *e = json_pack("{s:s, s:s}", "description", c->label, "expected", c->expected);
         if (c->place > 0) {
             double az = PLACE_AZIMUTH_DEG * M_PI / 180, mm = place_mm[c->place - 1];
@@ -664,14 +667,14 @@ static json_t *design_json(const table_t *T, const json_t *inputs, const eval_st
 }
 
 // study.csv and timing.csv: the rows run here, configuration by configuration, description by description, case by case.
-static bool write_tables(const char *out, const table_t *T)
+static bool study_write_tables(const char *out, const study_table_t *T)
 {
     GString *st = g_string_new("config,description,expected,case,score,verdict_correct,rms_z,median_abs_z\n");
     GString *tm = g_string_new("config,description,case,seconds,iterations\n");
     for (int k = 0; k < T->nconf; k++)
         for (int d = 0; d < T->ncond; d++)
             for (int c = 0; c < T->cases; c++) {
-                size_t i = at(T, c, k, d);
+                size_t i = study_row(T, c, k, d);
                 if (T->verdict[i] < 0) continue;
                 g_string_append_printf(st, "%s,%s,%s,%d,%.17g,%d,%.17g,%.17g\n", T->conf[k], T->cond[d].label,
                                        T->cond[d].expected, c, T->score[i], T->verdict[i], T->rmsz[i], T->medz[i]);
@@ -687,7 +690,7 @@ static bool write_tables(const char *out, const table_t *T)
         GString *pl = g_string_new("description,case,dx_mm,dy_mm,turn_deg,edge_agreement\n");
         for (int d = 0; d < T->ncond; d++)
             for (int c = 0; c < T->cases; c++) {
-                const float *q = pose_at(T, c, d);
+                const float *q = study_pose(T, c, d);
                 if (isfinite(q[3]))
                     g_string_append_printf(pl, "%s,%d,%.9g,%.9g,%.9g,%.9g\n", T->cond[d].label, c, q[0], q[1], q[2],
                                            q[3]);
@@ -702,7 +705,7 @@ static bool write_tables(const char *out, const table_t *T)
     return ok;
 }
 
-static bool table_complete(const table_t *T)
+static bool study_table_complete(const study_table_t *T)
 {
     size_t n = (size_t)T->cases * T->nconf * T->ncond;
     for (size_t i = 0; i < n; i++)
@@ -711,14 +714,15 @@ static bool table_complete(const table_t *T)
 }
 
 // study.json: units, conditions, design, the shard (when one), the results (when complete), timing, provenance.
-static bool write_study_json(const char *out, const table_t *T, json_t *design, json_t *shard, json_t *provenance)
+static bool study_write_json(const char *out, const study_table_t *T, json_t *design, json_t *shard,
+                             json_t *provenance)
 {
     json_t *doc = json_object();
     json_object_set_new(doc, "units", json_string(units));
     json_object_set_new(doc, "conditions", json_string(conditions));
     json_object_set(doc, "design", design);
     if (shard) json_object_set(doc, "shard", shard);
-    bool complete = table_complete(T);
+    bool complete = study_table_complete(T);
     json_object_set_new(doc, "complete", json_boolean(complete));
     if (complete) {
         json_t *res = study_results(T);
@@ -759,7 +763,7 @@ static bool study_setup(study_t *S, const eval_study_opts_t *o, const model_stif
             return false;
     }
     if (o->calib ? !calibs_of_chain(S, o) : (calibs_of_lab(S), false)) return false;
-    if (!study_priors(S, o) || !table_alloc(S->T)) return false;
+    if (!study_priors(S, o) || !study_table_alloc(S->T)) return false;
     study_configurations(S, &o->opt, which);
     return study_views(S, D, &o->opt);
 }
@@ -798,7 +802,7 @@ static void study_free(study_t *S)
 bool eval_study_run(const eval_study_opts_t *o, eval_study_result_t *r)
 {
     memset(r, 0, sizeof *r);
-    table_t T = { .cases = o->cases, .reg = o->placement_tol_mm > 0 || o->placement_tol_deg > 0 };
+    study_table_t T = { .cases = o->cases, .reg = o->placement_tol_mm > 0 || o->placement_tol_deg > 0 };
     model_stiffener_t D[NDESC];
     int which[NCONF];
     study_design(&T, D);
@@ -828,19 +832,19 @@ bool eval_study_run(const eval_study_opts_t *o, eval_study_result_t *r)
     if (o->shard_n > 0)
         shard = json_pack("{s:i, s:i, s:s}", "k", sk, "n", sn, "cases", "c with c mod n = k - 1 (c from 0)");
     json_object_set_new(o->provenance, "wall_seconds", json_real(model_now_s() - S.t0));
-    if (!write_tables(o->out, &T) || !write_study_json(o->out, &T, design, shard, o->provenance)) goto done;
+    if (!study_write_tables(o->out, &T) || !study_write_json(o->out, &T, design, shard, o->provenance)) goto done;
     r->cases = o->cases;
     r->cases_run = S.ncases_here;
     r->ndescriptions = T.ncond;
     r->nconfigurations = T.nconf;
-    r->complete = table_complete(&T);
+    r->complete = study_table_complete(&T);
     ok = true;
 done:
     json_decref(inputs);
     json_decref(design);
     json_decref(shard);
     study_free(&S);
-    table_free(&T);
+    study_table_free(&T);
     return ok;
 }
 
@@ -848,7 +852,7 @@ done:
 // Merging shards
 
 // The table's shape from a shard's design. false + message.
-static bool table_from_design(table_t *T, const json_t *design, const char *path)
+static bool table_from_design(study_table_t *T, const json_t *design, const char *path)
 {
     json_t *cf = json_object_get(design, "configurations"), *cd = json_object_get(design, "descriptions");
     json_int_t cases = json_integer_value(json_object_get(design, "cases"));
@@ -882,13 +886,13 @@ static bool table_from_design(table_t *T, const json_t *design, const char *path
         snprintf(T->cond[k].expected, sizeof T->cond[k].expected, "%s", x);
     }
     T->reg = json_object_get(design, "placement_tolerance") != NULL;
-    return table_alloc(T);
+    return study_table_alloc(T);
 }
 
 static int find_label(const char *s, const char *base, int n, size_t stride);
 
 // DIR/placement.csv (a study that registers) into the table. false + message naming the file and line.
-static bool read_placement(const char *dir, table_t *T)
+static bool study_read_placement(const char *dir, study_table_t *T)
 {
     static const char *h = "description,case,dx_mm,dy_mm,turn_deg,edge_agreement";
     char *path = g_strdup_printf("%s/placement.csv", dir), *text = NULL;
@@ -912,7 +916,7 @@ static bool read_placement(const char *dir, table_t *T)
             model_error(path, ln + 1, "a bad row (%s): want description,case,dx_mm,dy_mm,turn_deg,edge_agreement",
                         lines[ln]);
         } else {
-            float *q = pose_at(T, (int)c, d);
+            float *q = study_pose(T, (int)c, d);
             for (int k = 0; k < 4; k++) q[k] = (float)v[k];
         }
         g_strfreev(f);
@@ -932,7 +936,7 @@ static int find_label(const char *s, const char *base, int n, size_t stride)
 }
 
 // A row's configuration, description and case (the first three of f, case at f[ci]). false + message (path:line).
-static bool row_key(const table_t *T, char **f, int ci, const char *path, int line, int *k, int *d, int *c)
+static bool row_key(const study_table_t *T, char **f, int ci, const char *path, int line, int *k, int *d, int *c)
 {
     long cv;
     *k = find_label(f[0], T->conf[0], T->nconf, sizeof T->conf[0]);
@@ -950,7 +954,7 @@ static bool row_key(const table_t *T, char **f, int ci, const char *path, int li
 }
 
 // DIR/study.csv (required) or DIR/timing.csv into the table. false + message naming the file and line.
-static bool read_rows(const char *dir, table_t *T, bool timing)
+static bool study_read_rows(const char *dir, study_table_t *T, bool timing)
 {
     static const char *hs = "config,description,expected,case,score,verdict_correct,rms_z,median_abs_z",
                       *ht = "config,description,case,seconds,iterations";
@@ -969,7 +973,7 @@ static bool read_rows(const char *dir, table_t *T, bool timing)
             ok = false;
             model_error(path, ln + 1, "%d fields: want %d", nf, timing ? 5 : 8);
         } else if ((ok = row_key(T, f, timing ? 2 : 3, path, ln + 1, &k, &d, &c))) {
-            size_t i = at(T, c, k, d);
+            size_t i = study_row(T, c, k, d);
             char *end;
             double v = strtod(f[timing ? 3 : 4], &end);
             if (*end || !isfinite(v) || (!timing && (strcmp(f[2], T->cond[d].expected) ||
@@ -1008,12 +1012,12 @@ static bool read_rows(const char *dir, table_t *T, bool timing)
 }
 
 // The first case (configuration, description) no shard has: false + message.
-static bool check_complete(const table_t *T)
+static bool check_complete(const study_table_t *T)
 {
     for (int c = 0; c < T->cases; c++)
         for (int k = 0; k < T->nconf; k++)
             for (int d = 0; d < T->ncond; d++)
-                if (T->verdict[at(T, c, k, d)] < 0) {
+                if (T->verdict[study_row(T, c, k, d)] < 0) {
                     model_error(NULL, 0, "verify study merge: case %d (%s, %s) is in none of the shards given: "
                                 "give every shard K/N of the study", c, T->conf[k], T->cond[d].label);
                     return false;
@@ -1025,7 +1029,7 @@ bool eval_study_merge(const char *const *dirs, int ndirs, const char *out, json_
                       eval_study_result_t *r)
 {
     memset(r, 0, sizeof *r);
-    table_t T = { 0 };
+    study_table_t T = { 0 };
     json_t *design = NULL, *from = json_array();
     bool ok = ndirs > 0;
     if (!ok) model_error(NULL, 0, "verify study merge: no shard directory given");
@@ -1052,11 +1056,11 @@ bool eval_study_merge(const char *const *dirs, int ndirs, const char *out, json_
             json_array_append_new(from, json_pack("{s:s, s:O?, s:O?}", "dir", dirs[s], "shard",
                                                   json_object_get(doc, "shard"), "provenance",
                                                   json_object_get(doc, "provenance")));
-            ok = read_rows(dirs[s], &T, false);
+            ok = study_read_rows(dirs[s], &T, false);
             char *tp = g_strdup_printf("%s/timing.csv", dirs[s]);
-            if (ok && g_file_test(tp, G_FILE_TEST_EXISTS)) ok = read_rows(dirs[s], &T, true);
+            if (ok && g_file_test(tp, G_FILE_TEST_EXISTS)) ok = study_read_rows(dirs[s], &T, true);
             g_free(tp);
-            if (ok && T.reg) ok = read_placement(dirs[s], &T);
+            if (ok && T.reg) ok = study_read_placement(dirs[s], &T);
         }
         json_decref(doc);
         g_free(jp);
@@ -1064,7 +1068,7 @@ bool eval_study_merge(const char *const *dirs, int ndirs, const char *out, json_
     ok = ok && check_complete(&T) && model_mkdir_p(out);
     if (ok) {
         json_object_set_new(provenance, "merged_from", json_incref(from));
-        ok = write_tables(out, &T) && write_study_json(out, &T, design, NULL, provenance);
+        ok = study_write_tables(out, &T) && study_write_json(out, &T, design, NULL, provenance);
     }
     if (ok) {
         r->cases = r->cases_run = T.cases;
@@ -1074,6 +1078,6 @@ bool eval_study_merge(const char *const *dirs, int ndirs, const char *out, json_
     }
     json_decref(from);
     json_decref(design);
-    table_free(&T);
+    study_table_free(&T);
     return ok;
 }
