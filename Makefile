@@ -168,6 +168,9 @@ FIT_LIGHTPLAN_SRC := \
 FIT_EVAL_SRC := \
     fit/eval/lab.c \
     fit/eval/study.c \
+    fit/eval/study_results.c \
+    fit/eval/study_files.c \
+    fit/eval/study_merge.c \
     fit/eval/chain.c
 FIT_SRC := $(FIT_BRDF_SRC) $(FIT_MATERIAL_SRC) $(FIT_VERIFY_SRC) $(FIT_LIGHTPLAN_SRC) $(FIT_EVAL_SRC) \
     fit/cmd_chain.c \
