@@ -155,6 +155,7 @@ FIT_BRDF_SRC := \
     fit/brdf/samples.c
 FIT_MATERIAL_SRC := \
     fit/material/material.c \
+    fit/material/report.c \
     fit/material/export.c
 FIT_VERIFY_SRC := \
     fit/verify/verify.c \
