@@ -38,24 +38,24 @@ static bool lobes_fit_csv(const char *dir, const fit_brdf_result_t *r)
     return ok;
 }
 
-bool fit_material_report(const char *dir, const calib_obs_set_t *obs, const fit_samples_t *smp,
-                         const fit_brdf_result_t *res, int nres, int best, const json_t *entry, const json_t *prov,
-                         const calib_set_t *cal, const int *cell, const double *factor)
+// DIR/samples.csv: every sample with its geometry, lamp, measured R and R of
+// the chosen fit r, noise, albedo factor and point on the sample.
+static bool samples_csv(const char *dir, const calib_obs_set_t *obs, const fit_samples_t *smp,
+                        const fit_brdf_result_t *r, const calib_set_t *cal, const int *cell, const double *factor)
 {
-    if (!model_mkdir_p(dir)) return false;
-    char *csv = g_strdup_printf("%s/samples.csv", dir), *html = g_strdup_printf("%s/report.html", dir);
-    bool ok = false;
+    char *csv = g_strdup_printf("%s/samples.csv", dir);
     FILE *f = fopen(csv, "w");
     if (!f) {
         model_error_set(csv, 0, "cannot write: %s", strerror(errno));
-        goto done;
+        g_free(csv);
+        return false;
     }
     fprintf(f, "# refl fit material samples: window centre (px), step, lamp, angles (deg: incidence, view, half "
                "vector from the normal; phi: azimuth of the view from the incidence's, 180 = the plane of incidence "
                "forward), R measured and fitted by %s (1/sr, R = f_r cos theta_i), sigma_R its expected temporal "
                "noise (0: unknown), the albedo cell's factor (1: none) and the point on the sample at angle 0 "
                "(mm, rig frame)\n",
-            model_brdf_name(res[best].model));
+            model_brdf_name(r->model));
     fprintf(f, "x_px,y_px,step,lamp,theta_i_deg,theta_o_deg,theta_h_deg,R_meas,R_fit,lamp_name,phi_deg,sigma_R,"
                "albedo_factor,x0_mm,y0_mm,z0_mm\n");
     const double d = 180 / M_PI;
@@ -69,27 +69,86 @@ bool fit_material_report(const char *dir, const calib_obs_set_t *obs, const fit_
         const char *ln = cal && ob->lamp >= 0 && ob->lamp < cal->lamps->n ? cal->lamps->lamps[ob->lamp].name : "";
         fprintf(f, "%.1f,%.1f,%d,%d,%.4f,%.4f,%.4f,%.6g,%.6g,%s,%.3f,%.4g,%.5g,%.3f,%.3f,%.3f\n", ob->q[0], ob->q[1],
                 ob->step, ob->lamp, ti * d, to * d, acos(fmin(1, c->nh)) * d, smp->R[i],
-                fit_samples_eval(smp, res[best].model, res[best].p, i), ln, phi * d, sig, fac, ob->p0_mm[0],
+                fit_samples_eval(smp, r->model, r->p, i), ln, phi * d, sig, fac, ob->p0_mm[0],
                 ob->p0_mm[1], ob->p0_mm[2]);
     }
-    if (fclose(f) != 0) {
-        model_error_set(csv, 0, "cannot write: %s", strerror(errno));
-        goto done;
-    }
-    if (!lobes_fit_csv(dir, &res[best])) goto done;
+    bool ok = fclose(f) == 0;
+    if (!ok) model_error_set(csv, 0, "cannot write: %s", strerror(errno));
+    g_free(csv);
+    return ok;
+}
+
+// The plots of scripts/fit_material_report.py from DIR's csv files and the chosen fit r.
+static bool report_plots(const char *dir, const fit_brdf_result_t *r)
+{
     char pbuf[256] = "";
     size_t o = 0;
-    for (int j = 0; j < res[best].nparams; j++)
-        o += (size_t)snprintf(pbuf + o, sizeof pbuf - o, "%s%.6g", j ? "," : "", res[best].p[j]);
-    if (model_run_script("fit_material_report.py", dir, model_brdf_name(res[best].model), pbuf, (char *)NULL) != 0)
-        goto done;
-    FILE *h = model_html_begin(html, "refl fit material", prov);
-    if (!h) goto done;
+    for (int j = 0; j < r->nparams; j++)
+        o += (size_t)snprintf(pbuf + o, sizeof pbuf - o, "%s%.6g", j ? "," : "", r->p[j]);
+    return model_run_script("fit_material_report.py", dir, model_brdf_name(r->model), pbuf, (char *)NULL) == 0;
+}
+
+static void rows_free(char **rows, int n)
+{
+    for (int j = 0; rows && j < n; j++) g_free(rows[j]);
+    free(rows);
+}
+
+// The parameter table's rows of the priors entry (*n of them). NULL + message (out of memory).
+static char **param_rows(const json_t *entry, int *n)
+{
+    json_t *ps = json_object_get(entry, "parameters");
+    *n = (int)json_array_size(ps);
+    char **rows = calloc((size_t)*n + 1, sizeof *rows);
+    if (!rows) {
+        model_error_set(NULL, 0, "out of memory");
+        return NULL;
+    }
+    for (size_t j = 0; j < json_array_size(ps); j++) {
+        json_t *p = json_array_get(ps, j);
+        rows[j] = g_strdup_printf("%s|%s|%.6g|%.3g|%.3g|%.6g .. %.6g|%s|%s", json_string_value(json_object_get(p, "name")),
+                                  json_string_value(json_object_get(p, "unit")),
+                                  json_number_value(json_object_get(p, "mean")),
+                                  json_number_value(json_object_get(p, "std")),
+                                  json_number_value(json_object_get(p, "std_statistical")),
+                                  json_number_value(json_object_get(p, "lo")),
+                                  json_number_value(json_object_get(p, "hi")),
+                                  json_string_value(json_object_get(p, "convention")),
+                                  json_object_get(p, "held") ? json_string_value(json_object_get(p, "held")) : "");
+    }
+    return rows;
+}
+
+// The model comparison's rows: every model fitted (res[nres]), res[best] the chosen. NULL + message.
+static char **model_rows(const fit_brdf_result_t *res, int nres, int best)
+{
+    char **mr = calloc((size_t)nres + 1, sizeof *mr);
+    if (!mr) {
+        model_error_set(NULL, 0, "out of memory");
+        return NULL;
+    }
+    for (int k = 0; k < nres; k++) {
+        GString *g = g_string_new("");
+        g_string_append_printf(g, "%s%s|%.4g|%.4g|%.4g|%.4g|%.8g|%.8g|", model_brdf_name(res[k].model),
+                               k == best ? " (chosen)" : "", res[k].rms, res[k].cv_rms, res[k].cv_se, res[k].rms_fr,
+                               res[k].aic, res[k].bic);
+        for (int j = 0; j < res[k].nparams; j++)
+            g_string_append_printf(g, "%s%s %.4g", j ? ", " : "", model_brdf_param_name(res[k].model, j), res[k].p[j]);
+        mr[k] = g_string_free(g, FALSE);
+    }
+    return mr;
+}
+
+// The page's opening paragraphs: the material and the model chosen, the
+// residual against the noise, the albedo cells, weighting and loss.
+static void html_summary(FILE *h, const calib_obs_set_t *obs, const fit_samples_t *smp, const fit_brdf_result_t *r,
+                         const json_t *entry)
+{
     json_t *ch = json_object_get(entry, "model_choice");
     model_html_para(h, "Material %s of sample %s: %d BRDF samples (windows of %d frames lit by one lamp each). "
                     "Chosen model: %s by %s (%s; lowest BIC: %s). R = f_r cos(theta_i) in 1/sr.",
                     json_string_value(json_object_get(entry, "name")), obs->sample, smp->n, obs->frames_used,
-                    model_brdf_name(res[best].model),
+                    model_brdf_name(r->model),
                     !strcmp(json_string_value(json_object_get(ch, "criterion")), "cv_rms")
                         ? "the held-out RMS (the fewest parameters within one standard error of the lowest)"
                     : !strcmp(json_string_value(json_object_get(ch, "criterion")), "only_model") ? "--model"
@@ -116,25 +175,11 @@ bool fit_material_report(const char *dir, const calib_obs_set_t *obs, const fit_
                         100 * json_number_value(json_object_get(cj, "factor_rel_std")));
     model_html_para(h, "Weighting: %s. Loss: %s.", json_string_value(json_object_get(entry, "weighting")),
                     json_string_value(json_object_get(entry, "loss")));
-    model_html_heading(h, "Parameters");
-    json_t *ps = json_object_get(entry, "parameters");
-    char **rows = calloc(json_array_size(ps) + 1, sizeof *rows);
-    for (size_t j = 0; j < json_array_size(ps); j++) {
-        json_t *p = json_array_get(ps, j);
-        rows[j] = g_strdup_printf("%s|%s|%.6g|%.3g|%.3g|%.6g .. %.6g|%s|%s", json_string_value(json_object_get(p, "name")),
-                                  json_string_value(json_object_get(p, "unit")),
-                                  json_number_value(json_object_get(p, "mean")),
-                                  json_number_value(json_object_get(p, "std")),
-                                  json_number_value(json_object_get(p, "std_statistical")),
-                                  json_number_value(json_object_get(p, "lo")),
-                                  json_number_value(json_object_get(p, "hi")),
-                                  json_string_value(json_object_get(p, "convention")),
-                                  json_object_get(p, "held") ? json_string_value(json_object_get(p, "held")) : "");
-    }
-    model_html_table(h, "parameter|unit|mean|std|std (statistical)|prior bounds|convention|note",
-                     (const char *const *)rows, (int)json_array_size(ps));
-    for (size_t j = 0; j < json_array_size(ps); j++) g_free(rows[j]);
-    free(rows);
+}
+
+// The figures of measured against fitted R (and the albedo cells' with cells).
+static void html_fit_figures(FILE *h, bool cells)
+{
     model_html_heading(h, "Measured vs fitted");
     model_html_figure(h, "polar.png", "lobes in the plane of incidence (samples within 15 deg of it), one panel per "
                       "band of incidence: R measured (mean ± its spread, and ± the expected noise "
@@ -142,30 +187,40 @@ bool fit_material_report(const char *dir, const calib_obs_set_t *obs, const fit_
     model_html_figure(h, "lobes.png", "R against the half-vector angle, measured (dots, coloured by incidence) "
                       "and fitted (the model at the same geometry), per lamp");
     model_html_figure(h, "residual_maps.png", "residual R_meas - R_fit at each window, for four frames");
-    if (cell) {
+    if (cells) {
         model_html_heading(h, "Albedo cells");
         model_html_figure(h, "albedo_cells.png", "each cell's albedo factor on the sample (the point at angle 0, "
                           "mm in the rig frame), and their histogram");
     }
-    model_html_heading(h, "Model comparison");
-    char **mr = calloc((size_t)nres + 1, sizeof *mr);
-    for (int k = 0; k < nres; k++) {
-        GString *g = g_string_new("");
-        g_string_append_printf(g, "%s%s|%.4g|%.4g|%.4g|%.4g|%.8g|%.8g|", model_brdf_name(res[k].model),
-                               k == best ? " (chosen)" : "", res[k].rms, res[k].cv_rms, res[k].cv_se, res[k].rms_fr,
-                               res[k].aic, res[k].bic);
-        for (int j = 0; j < res[k].nparams; j++)
-            g_string_append_printf(g, "%s%s %.4g", j ? ", " : "", model_brdf_param_name(res[k].model, j), res[k].p[j]);
-        mr[k] = g_string_free(g, FALSE);
+}
+
+bool fit_material_report(const char *dir, const calib_obs_set_t *obs, const fit_samples_t *smp,
+                         const fit_brdf_result_t *res, int nres, int best, const json_t *entry, const json_t *prov,
+                         const calib_set_t *cal, const int *cell, const double *factor)
+{
+    if (!model_mkdir_p(dir) || !samples_csv(dir, obs, smp, &res[best], cal, cell, factor) ||
+        !lobes_fit_csv(dir, &res[best]) || !report_plots(dir, &res[best]))
+        return false;
+    int np = 0;
+    char **rows = param_rows(entry, &np), **mr = rows ? model_rows(res, nres, best) : NULL;
+    char *html = g_strdup_printf("%s/report.html", dir);
+    FILE *h = mr ? model_html_begin(html, "refl fit material", prov) : NULL;
+    bool ok = false;
+    if (h) {
+        html_summary(h, obs, smp, &res[best], entry);
+        model_html_heading(h, "Parameters");
+        model_html_table(h, "parameter|unit|mean|std|std (statistical)|prior bounds|convention|note",
+                         (const char *const *)rows, np);
+        html_fit_figures(h, cell != NULL);
+        model_html_heading(h, "Model comparison");
+        model_html_table(h, "model|RMS of R (1/sr)|held-out RMS of R (1/sr)|its standard error (1/sr)|RMS of f_r "
+                            "(1/sr)|AIC|BIC|parameters", (const char *const *)mr, nres);
+        model_html_figure(h, "models.png", "residuals of the chosen model: histogram, and relative to R against the "
+                          "half-vector angle");
+        ok = model_html_end(h, html);
     }
-    model_html_table(h, "model|RMS of R (1/sr)|held-out RMS of R (1/sr)|its standard error (1/sr)|RMS of f_r (1/sr)|"
-                        "AIC|BIC|parameters", (const char *const *)mr, nres);
-    for (int k = 0; k < nres; k++) g_free(mr[k]);
-    free(mr);
-    model_html_figure(h, "models.png", "residuals of the chosen model: histogram, and relative to R against the half-vector angle");
-    ok = model_html_end(h, html);
-done:
-    g_free(csv);
+    rows_free(rows, np);
+    rows_free(mr, nres);
     g_free(html);
     return ok;
 }
