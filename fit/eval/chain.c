@@ -37,12 +37,12 @@ static void add(chain_t *c, const char *group, const char *name, double value, d
     double err = value - truth, z = err / sigma;
     json_object_set_new(e, "name", json_string(name));
     json_object_set_new(e, "group", json_string(group));
-    json_object_set_new(e, "value", isfinite(value) ? json_real(value) : json_null());
-    json_object_set_new(e, "truth", isfinite(truth) ? json_real(truth) : json_null());
-    json_object_set_new(e, "sigma", isfinite(sigma) && sigma > 0 ? json_real(sigma) : json_null());
+    json_object_set_new(e, "value", model_json_number(value));
+    json_object_set_new(e, "truth", model_json_number(truth));
+    json_object_set_new(e, "sigma", sigma > 0 ? model_json_number(sigma) : json_null());
     json_object_set_new(e, "unit", json_string(unit));
-    json_object_set_new(e, "error", isfinite(err) ? json_real(err) : json_null());
-    json_object_set_new(e, "z", isfinite(z) && sigma > 0 ? json_real(z) : json_null());
+    json_object_set_new(e, "error", model_json_number(err));
+    json_object_set_new(e, "z", sigma > 0 ? model_json_number(z) : json_null());
     if (note && *note) json_object_set_new(e, "note", json_string(note));
     json_array_append_new(c->entries, e);
 }

@@ -9,12 +9,8 @@
 #include <string.h>
 
 #include "fit/eval/internal.h"
-
-static int cmp_d(const void *a, const void *b)
-{
-    double x = *(const double *)a, y = *(const double *)b;
-    return x < y ? -1 : x > y;
-}
+#include "model/model.h"
+#include "model/base/report.h"
 
 // Mann-Whitney AUC: P(pos > neg) + P(pos == neg) / 2 (neg sorted).
 static double auc_mw(const double *neg, int nn, const double *pos, int np)
@@ -33,8 +29,6 @@ static double auc_mw(const double *neg, int nn, const double *pos, int np)
     }
     return s / ((double)np * nn);
 }
-
-static json_t *jnum(double x) { return isfinite(x) ? json_real(x) : json_null(); }
 
 // The ROC of the rule score >= t over every distinct score, from (0, 0) to (1, 1) (both sorted).
 static json_t *roc_json(const double *neg, int nn, const double *pos, int np)
@@ -70,7 +64,7 @@ static int cond_scores(const study_table_t *T, int k, int d, double *sc, int *fl
         sc[n++] = T->score[i];
         *flagged += T->verdict[i] == 0;
     }
-    qsort(sc, (size_t)n, sizeof *sc, cmp_d);
+    qsort(sc, (size_t)n, sizeof *sc, model_cmp_double);
     return n;
 }
 
@@ -91,8 +85,8 @@ static json_t *config_summary(const study_table_t *T, int k, double *neg, double
         json_object_set_new(s, "expected", json_string(T->cond[d].expected));
         json_object_set_new(s, "n_correct", json_integer(nn));
         json_object_set_new(s, "n", json_integer(np));
-        json_object_set_new(s, "auc", nn ? jnum(auc_mw(neg, nn, pos, np)) : json_null());
-        json_object_set_new(s, "threshold_1pct", jnum(thr));
+        json_object_set_new(s, "auc", nn ? model_json_number(auc_mw(neg, nn, pos, np)) : json_null());
+        json_object_set_new(s, "threshold_1pct", model_json_number(thr));
         json_object_set_new(s, placed ? "flagged_at_1pct_fa" : "det_at_1pct_fa",
                             nn ? json_real((double)above / np) : json_null());
         json_object_set_new(s, placed ? "flagged_verdict" : "det_verdict", json_real((double)pfl / np));

@@ -69,7 +69,7 @@ static json_t *segments_json(const lightplan_segment_t *sg, int n, const model_s
                               face_name(s, g->face_side[0], b0, sizeof b0), "face_side1",
                               face_name(s, g->face_side[1], b1, sizeof b1));
         if (found && measured) {
-            json_object_set_new(e, "sobel_measured_dn", isfinite(measured[k]) ? json_real(measured[k]) : json_null());
+            json_object_set_new(e, "sobel_measured_dn", model_json_number(measured[k]));
             json_object_set_new(e, "found", isfinite(measured[k]) ? json_boolean(found[k]) : json_null());
         }
         json_array_append_new(arr, e);
@@ -338,7 +338,7 @@ static json_t *check_config(const lightplan_lamps_opts_t *o, const plan_inputs_t
         }
     mask_names(in->lamps, m, ck->lamps, sizeof ck->lamps);
     json_t *e = json_pack("{s:s,s:f,s:o,s:i,s:i}", "lamps", ck->lamps, "exposure_us", exposure, "agreement",
-                          isfinite(ck->agreement) ? json_real(ck->agreement) : json_null(), "segments_judged",
+                          model_json_number(ck->agreement), "segments_judged",
                           ck->judged, "segments_agreeing", ck->agreeing);
     json_object_set_new(e, "segments", segments_json(c->sg, ns, in->scene, c->found, c->meas));
     return e;
@@ -373,7 +373,7 @@ static bool check_virtual(const lightplan_lamps_opts_t *o, plan_inputs_t *in, li
     }
     r->check_agreement = r->check_judged ? (double)agree / r->check_judged : NAN;
     double overall = r->check_agreement;
-    json_object_set_new(*check, "agreement", isfinite(overall) ? json_real(overall) : json_null());
+    json_object_set_new(*check, "agreement", model_json_number(overall));
     json_object_set_new(*check, "target", json_real(0.95));
     json_object_set_new(*check, "rule",
                         json_string("a segment is found when the median, over points every 2 px along it (2 px "
@@ -402,10 +402,7 @@ static void noise_response(const lightplan_lamps_opts_t *o, const lightplan_sens
     for (size_t p = 0; sv && p < (size_t)res->W * res->H; p += 4)
         if (res->face_id[p] >= 0) sv[n++] = res->predicted[p] - sensor->offset_dn;
     double med = 0;
-    if (n) {
-        qsort(sv, (size_t)n, sizeof *sv, model_cmp_double);
-        med = sv[n / 2];
-    }
+    if (n) med = model_kth(sv, n, n / 2);
     free(sv);
     double sig = sensor->K_dn_per_e > 0
                      ? sqrt(sensor->K_dn_per_e * fmax(med, 0) + pow(sensor->K_dn_per_e * sensor->read_noise_e, 2) +
@@ -416,7 +413,7 @@ static void noise_response(const lightplan_lamps_opts_t *o, const lightplan_sens
     r->threshold_near_noise = isfinite(r->sobel_noise_dn) && o->opt.sobel_threshold < 1.5 * r->sobel_noise_dn;
     json_object_set_new(chosen, "median_object_signal_dn", json_real(med));
     json_object_set_new(chosen, "sobel_noise_response_dn",
-                        isfinite(r->sobel_noise_dn) ? json_real(r->sobel_noise_dn) : json_null());
+                        model_json_number(r->sobel_noise_dn));
 }
 
 // The chosen configuration's record.
@@ -504,7 +501,7 @@ static json_t *psf_json(const lightplan_lamps_opts_t *o, const plan_inputs_t *in
 {
     const double sig = o->opt.psf_sigma_px, std = in->psf_sigma_std_px;
     json_t *j = json_pack("{s:f,s:o,s:s,s:s,s:s}", "sigma_px", sig, "sigma_std_px",
-                          isfinite(std) ? json_real(std) : json_null(), "source", in->psf_source,
+                          model_json_number(std), "source", in->psf_source,
                           "model", "the step convolved with an isotropic Gaussian of sigma_px (the optics) and "
                           "integrated over the pixel's 1 x 1 px footprint (model_edge_sobel_step)", "phase",
                           "best: the edge through a pixel centre (sigma 0: 4.0 axis-aligned, 4.24 diagonal); the "
@@ -641,8 +638,7 @@ static bool write_summary(const lightplan_lamps_opts_t *o, const plan_inputs_t *
                               b->detectable_length_px, "usable_points", b->usable_points, "glare_pix", b->glare_pix,
                               "saturated_pix", b->saturated_pix);
         g_free(base);
-        json_object_set_new(e, "check_agreement", v->checked && isfinite(v->check_agreement)
-                                                      ? json_real(v->check_agreement) : json_null());
+        json_object_set_new(e, "check_agreement", v->checked ? model_json_number(v->check_agreement) : json_null());
         json_object_set_new(e, "warnings", warnings_json(o, v));
         json_array_append_new(views, e);
     }

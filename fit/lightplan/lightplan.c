@@ -62,12 +62,7 @@ void lightplan_segments_for(const lightplan_result_t *r, uint32_t mask, double e
             sum += exposure_us * d;
         }
         g->dP = n ? sum / n : 0;
-        if (n && v) {
-            qsort(v, (size_t)n, sizeof *v, model_cmp_double);
-            g->gradient = n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
-        } else {
-            g->gradient = 0;
-        }
+        g->gradient = n && v ? model_median(v, n) : 0;
         g->detectable = g->gradient >= opt->sobel_threshold;
     }
     free(v);
@@ -394,8 +389,7 @@ static bool plan_faces(plan_t *P)
         }
         F->npix = nv;
         if (nv) {
-            qsort(vals, (size_t)nv, sizeof *vals, model_cmp_double);
-            F->P_median = nv % 2 ? vals[nv / 2] : 0.5 * (vals[nv / 2 - 1] + vals[nv / 2]);
+            F->P_median = model_median(vals, nv);
             F->usable_frac = (double)nu / nv;
         } else {
             F->P_min = F->P_max = F->P_median = NAN;
@@ -527,8 +521,7 @@ double lightplan_sobel_check(const lightplan_segment_t *segs, int nseg, const fl
                 }
                 v[k] = best;
             }
-            qsort(v, (size_t)m, sizeof *v, model_cmp_double);
-            med = m % 2 ? v[m / 2] : 0.5 * (v[m / 2 - 1] + v[m / 2]);
+            med = model_median(v, m);
             free(v);
         }
         bool f = med >= threshold;

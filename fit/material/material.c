@@ -562,7 +562,7 @@ static json_t *material_priors(const fit_material_opts_t *o, const calib_set_t *
     json_object_set_new(e, "session", json_string(o->session));
     json_object_set_new(e, "sample", json_string(r->sample));
     json_object_set_new(e, "sample_pose", calib_sample_pose_json(&r->pose));
-    json_object_set_new(e, "noise_rms_expected", isfinite(r->noise_rms) ? json_real(r->noise_rms) : json_null());
+    json_object_set_new(e, "noise_rms_expected", model_json_number(r->noise_rms));
     // the residual per degree of freedom (the cells' factors take one each)
     double dof = (double)best->n - best->nfree - r->n_cells;
     double rms_dof = dof > 0 ? sqrt(best->rss / dof) : NAN;
@@ -587,7 +587,7 @@ static json_t *material_priors(const fit_material_opts_t *o, const calib_set_t *
     }
     if (r->cells_done) json_object_set_new(e, "albedo_cells", cells_json(o, r));
     // how far a window of the material strays from the model beyond its noise (refl verify's sigma)
-    json_object_set_new(e, "window_rel_std", isfinite(r->window_rel_std) ? json_real(r->window_rel_std) : json_null());
+    json_object_set_new(e, "window_rel_std", model_json_number(r->window_rel_std));
     json_object_set_new(e, "window_rel_std_convention", json_string(
         "the relative spread of a window's R about the model (the final parameters, no albedo factors) beyond its "
         "temporal noise: over the samples whose model R is at least 10 % of the largest, sqrt((1.4826 MAD(R/R_model "
