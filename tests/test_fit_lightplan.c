@@ -27,20 +27,22 @@ TEST(lightplan_sobel_known_steps)
     for (int y = 0; y < H; y++)
         for (int x = 0; x < W; x++) f[y * W + x] = x < 100 ? 100 : 150;   // step between x = 99 and 100
     lightplan_segment_t s = { .q0 = { 99.5, 20 }, .q1 = { 99.5, 180 }, .length_px = 160, .detectable = true };
-    double m;
+    double m, agreement = NAN;
     bool found;
-    CHECK_NEAR(lightplan_sobel_check(&s, 1, f, W, H, 199, &found, &m), 1, 0);
+    CHECK(lightplan_sobel_check(&s, 1, f, W, H, 199, &found, &m, &agreement));
+    CHECK_NEAR(agreement, 1, 0);
     CHECK_NEAR(m, 200, 1e-9);
     CHECK(found);
-    CHECK_NEAR(lightplan_sobel_check(&s, 1, f, W, H, 201, &found, &m), 0, 0);   // below the threshold: disagrees
+    CHECK(lightplan_sobel_check(&s, 1, f, W, H, 201, &found, &m, &agreement));
+    CHECK_NEAR(agreement, 0, 0);   // below the threshold: disagrees
     for (int y = 0; y < H; y++)
         for (int x = 0; x < W; x++) f[y * W + x] = x + y < 200 ? 100 : 150;
     lightplan_segment_t d = { .q0 = { 30, 170 }, .q1 = { 170, 30 }, .length_px = 198, .detectable = true };
-    lightplan_sobel_check(&d, 1, f, W, H, 0, &found, &m);
+    CHECK(lightplan_sobel_check(&d, 1, f, W, H, 0, &found, &m, &agreement));
     CHECK_REL(m, 4.24 * 50, 0.03);
     // too short to judge
     lightplan_segment_t t = { .q0 = { 99.5, 20 }, .q1 = { 99.5, 25 }, .length_px = 5 };
-    CHECK(isnan(lightplan_sobel_check(&t, 1, f, W, H, 0, &found, &m)));
+    CHECK(lightplan_sobel_check(&t, 1, f, W, H, 0, &found, &m, &agreement) && isnan(agreement));
     free(f);
 }
 

@@ -471,6 +471,7 @@ static bool chain_material_best_fit(chain_t *c, const json_t *m, const model_mat
     fit_mixture_t mix = { 2, mats, wts };
     fit_samples_t *s = !rough || store ? fit_samples_ngan(fit_mixture_R, &mix, 2) : NULL;
     fit_brdf_result_t *best = malloc(sizeof *best);
+    if (!best) model_error_set(NULL, 0, "out of memory");
     fit_brdf_options_t o = fit_brdf_defaults();
     bool ok = s && best && fit_brdf(s, (model_brdf_t)model, &o, best);
     if (ok) {

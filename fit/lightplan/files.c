@@ -165,7 +165,11 @@ static bool load_materials(const lightplan_lamps_opts_t *o, plan_inputs_t *in)
         model_provenance_input(in->prov, "materials", o->materials[k]);
     }
     const verify_prior_t **pm = calloc((size_t)scene->nmaterials + 1, sizeof *pm);
-    bool ok = pm && verify_match_priors(scene, &in->pr, pm);
+    if (!pm) {
+        model_error_set(NULL, 0, "out of memory");
+        return false;
+    }
+    bool ok = verify_match_priors(scene, &in->pr, pm);
     for (int k = 0; ok && k < scene->nmaterials; k++) {
         snprintf(in->mm[k].name, sizeof in->mm[k].name, "%s", pm[k]->name);
         in->mm[k].model = pm[k]->model;
@@ -326,9 +330,10 @@ static json_t *check_config(const lightplan_lamps_opts_t *o, const plan_inputs_t
     for (int i = 0; i < in->lamps->n; i++)
         if ((m >> i) & 1) tm |= 1u << c->map[i];
     if (!eval_lab_image(c->lab, 0, tm, NULL, 1, seed, c->frame)) return NULL;
-    lightplan_segments_for(res, m, exposure, &o->opt, c->sg);
-    ck->agreement = lightplan_sobel_check(c->sg, ns, c->frame, res->W, res->H, o->opt.sobel_threshold, c->found,
-                                          c->meas);
+    if (!lightplan_segments_for(res, m, exposure, &o->opt, c->sg) ||
+        !lightplan_sobel_check(c->sg, ns, c->frame, res->W, res->H, o->opt.sobel_threshold, c->found, c->meas,
+                               &ck->agreement))
+        return NULL;
     ck->exposure_us = exposure;
     ck->judged = ck->agreeing = 0;
     for (int s = 0; s < ns; s++)
@@ -393,13 +398,18 @@ done:
 // The detector's response to the sensor's noise alone at the object's median
 // signal (the check's rule: the largest |Sobel| of 7 positions across,
 // median along: about 8.7 sigma) into r and the chosen configuration's record.
-static void noise_response(const lightplan_lamps_opts_t *o, const lightplan_sensor_t *sensor,
+// false + message: out of memory.
+static bool noise_response(const lightplan_lamps_opts_t *o, const lightplan_sensor_t *sensor,
                            lightplan_view_t *r, json_t *chosen)
 {
     const lightplan_result_t *res = &r->res;
     double *sv = malloc((size_t)res->W * res->H * sizeof *sv);
+    if (!sv) {
+        model_error_set(NULL, 0, "out of memory");
+        return false;
+    }
     int n = 0;
-    for (size_t p = 0; sv && p < (size_t)res->W * res->H; p += 4)
+    for (size_t p = 0; p < (size_t)res->W * res->H; p += 4)
         if (res->face_id[p] >= 0) sv[n++] = res->predicted[p] - sensor->offset_dn;
     double med = 0;
     if (n) med = model_kth(sv, n, n / 2);
@@ -414,9 +424,10 @@ static void noise_response(const lightplan_lamps_opts_t *o, const lightplan_sens
     json_object_set_new(chosen, "median_object_signal_dn", json_real(med));
     json_object_set_new(chosen, "sobel_noise_response_dn",
                         model_json_number(r->sobel_noise_dn));
+    return true;
 }
 
-// The chosen configuration's record.
+// The chosen configuration's record. NULL + message: out of memory.
 static json_t *chosen_json(const lightplan_lamps_opts_t *o, const plan_inputs_t *in, lightplan_view_t *r)
 {
     const lightplan_config_t *b = &r->res.configs[r->res.best];
@@ -429,7 +440,10 @@ static json_t *chosen_json(const lightplan_lamps_opts_t *o, const plan_inputs_t 
         json_object_set_new(chosen, "note", json_string("no configuration is free of glare and saturation; this one "
                                                         "has the fewest such pixels"));
     json_object_set_new(chosen, "index", json_integer(r->res.best));
-    noise_response(o, &in->sensor, r, chosen);
+    if (!noise_response(o, &in->sensor, r, chosen)) {
+        json_decref(chosen);
+        return NULL;
+    }
     // at the edge of the searched exposures: the best may lie beyond them
     double lo = INFINITY, hi = -INFINITY;
     for (int k = 0; k < o->nexp; k++) lo = fmin(lo, o->exposures_us[k]), hi = fmax(hi, o->exposures_us[k]);
@@ -518,7 +532,7 @@ static json_t *psf_json(const lightplan_lamps_opts_t *o, const plan_inputs_t *in
     return j;
 }
 
-// plan.json's document (check: the virtual rig's record or NULL).
+// plan.json's document (check: the virtual rig's record or NULL). NULL + message: out of memory.
 static json_t *plan_json(const lightplan_lamps_opts_t *o, const plan_inputs_t *in, lightplan_view_t *r,
                          json_t *check)
 {
@@ -536,7 +550,12 @@ static json_t *plan_json(const lightplan_lamps_opts_t *o, const plan_inputs_t *i
                                     "unit contrast of the step blurred by the PSF and the pixel's footprint at the "
                                     "segment's direction (psf: sigma, phase, f axis-aligned and diagonal)"));
     json_object_set_new(doc, "psf", psf_json(o, in));
-    json_object_set_new(doc, "chosen", chosen_json(o, in, r));
+    json_t *chosen = chosen_json(o, in, r);
+    if (!chosen) {
+        json_decref(doc);
+        return NULL;
+    }
+    json_object_set_new(doc, "chosen", chosen);
     json_object_set_new(doc, "warnings", warnings_json(o, r));
     json_object_set_new(doc, "chosen_index", json_integer(res->best));
     tables_json(in, res, doc);
@@ -571,6 +590,7 @@ static bool write_images(const lightplan_lamps_opts_t *o, const plan_inputs_t *i
     model_meta_free(mt);
     g_free(tp);
     float *gm = ok ? malloc((size_t)res->W * res->H * sizeof *gm) : NULL;
+    if (ok && !gm) model_error_set(NULL, 0, "out of memory");
     if (!gm) return false;
     for (size_t p = 0; p < (size_t)res->W * res->H; p++) gm[p] = (float)res->glare[p];
     char *gp = g_strdup_printf("%s/glare.tiff", o->out);
@@ -608,7 +628,7 @@ static bool plan_view(const lightplan_lamps_opts_t *o, plan_inputs_t *in, lightp
     mask_names(in->lamps, v->res.configs[v->res.best].mask, v->chosen, sizeof v->chosen);
     if (o->check_truth && !check_virtual(&ov, in, v, &check)) goto done;
     if (!model_mkdir_p(v->dir)) goto done;
-    doc = plan_json(&ov, in, v, check);
+    if (!(doc = plan_json(&ov, in, v, check))) goto done;
     char *jp = g_strdup_printf("%s/plan.json", v->dir);
     bool wok = model_write_json(jp, doc);
     g_free(jp);

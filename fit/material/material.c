@@ -103,7 +103,10 @@ oom:
 static fit_samples_t *cells_samples(const fit_samples_t *smp, const albedo_cells_t *ac)
 {
     fit_samples_t *out = fit_samples_new();
-    if (!out) return NULL;
+    if (!out) {
+        model_error_set(NULL, 0, "out of memory");
+        return NULL;
+    }
     snprintf(out->source, sizeof out->source, "%s", smp->source);
     out->noise_weighted = smp->noise_weighted;   // R/c has the std sigma/c: weight c^2 / sigma^2
     for (int i = 0; i < smp->n; i++) {
@@ -124,6 +127,7 @@ static bool cells_fit(const fit_samples_t *smp, albedo_cells_t *ac, fit_brdf_res
     double *num = calloc((size_t)(ac->n_cells ? ac->n_cells : 1), sizeof *num);
     double *den = calloc((size_t)(ac->n_cells ? ac->n_cells : 1), sizeof *den);
     bool ok = num && den;
+    if (!ok) model_error_set(NULL, 0, "out of memory for the albedo cells");
     ac->iterations = 0;
     for (int it = 0; ok && it < 20; it++) {
         ac->iterations = it + 1;   // rounds done (reported)
@@ -521,7 +525,11 @@ double fit_material_window_spread(const fit_samples_t *smp, model_brdf_t m, cons
     double *e = malloc((size_t)(smp->n ? smp->n : 1) * sizeof *e);
     double *u = malloc((size_t)(smp->n ? smp->n : 1) * sizeof *u);
     double fmax_ = 0, rel = NAN;
-    if (!f || !e || !u) goto done;
+    if (!f || !e || !u) {
+        model_error_set(NULL, 0, "out of memory");
+        *n = -1;
+        goto done;
+    }
     for (int i = 0; i < smp->n; i++) {
         f[i] = fit_samples_eval(smp, m, p, i);
         if (isfinite(f[i]) && f[i] > fmax_) fmax_ = f[i];
@@ -639,6 +647,10 @@ bool fit_material_run(const fit_material_opts_t *o, fit_material_result_t *r)
     {
         const fit_brdf_result_t *b = &r->models.res[r->models.best];
         r->window_rel_std = fit_material_window_spread(smp, b->model, b->p, r->noise_rms, &r->window_rel_n);
+    }
+    if (r->window_rel_n < 0) {
+        json_decref(shared);
+        goto done;
     }
     top = material_priors(o, cal, r, &entry);
     json_object_update(entry, shared);
