@@ -46,8 +46,8 @@ static bool render_planes(eval_lab_t *L, int place, bool verbose)
     for (int a = 0; a < L->nang; a++)
         for (int i = 0; i < L->nl; i++) {
             if (verbose)
-                fprintf(stderr, "\rverify lab: rendering %s at %g deg, lamp %s (%d/%d)   ", L->sample, L->angles[a],
-                        L->lamps->lamps[i].name, a * L->nl + i + 1, L->nang * L->nl);
+                model_progress("rendering %s on the virtual rig at %g deg, lamp %s (%d/%d)", L->sample, L->angles[a],
+                               L->lamps->lamps[i].name, a * L->nl + i + 1, L->nang * L->nl);
             float *P = malloc(npx * sizeof(float));
             if (!P) {
                 model_error(NULL, 0, "verify lab: out of memory for the radiance planes");
@@ -60,7 +60,7 @@ static bool render_planes(eval_lab_t *L, int place, bool verbose)
                 return false;
             }
         }
-    if (verbose) fprintf(stderr, "\n");
+    if (verbose) model_progress_end();
     return true;
 }
 
@@ -84,7 +84,10 @@ eval_lab_t *eval_lab_open(const char *truth_path, const char *sample, const doub
                           double exposure_us, double gain_db, bool verbose)
 {
     eval_lab_t *L = calloc(1, sizeof *L);
-    if (!L) return NULL;
+    if (!L) {
+        model_error(NULL, 0, "verify lab: out of memory");
+        return NULL;
+    }
     snprintf(L->truth, sizeof L->truth, "%s", truth_path);
     snprintf(L->sample, sizeof L->sample, "%s", sample);
     // several labs may live in one process: each camera its own serial
@@ -125,12 +128,19 @@ eval_lab_t *eval_lab_open(const char *truth_path, const char *sample, const doub
     // the flat field's source radiance (for the flat field's mean below)
     bool have_radiance = L->mats && rig_truth_uniform_radiance(truth, "flat_field", &radiance);
     rig_truth_free(truth);
-    if (!have_radiance || !L->angles || !L->L || !L->offset || !L->flat || !L->A) goto fail;
+    if (!L->angles || !L->L || !L->offset || !L->flat || !L->A) {
+        model_error(NULL, 0, "verify lab: out of memory for a %dx%d camera", L->W, L->H);
+        goto fail;
+    }
+    if (!have_radiance) goto fail;
     for (int i = 0; i < L->nl; i++) L->A[i] = L->kc_per_us * L->lamps->lamps[i].intensity;
     memcpy(L->angles, angles, (size_t)nang * sizeof *angles);
     // the flat field and the offset map, as a gain calibration measures them (noise-free here)
     float *tmp = malloc(npx * sizeof(float));
-    if (!tmp) goto fail;
+    if (!tmp) {
+        model_error(NULL, 0, "verify lab: out of memory for a %dx%d camera", L->W, L->H);
+        goto fail;
+    }
     const double flat_us = 20000;
     if ((r = rig_virtual_set_sample(L->v, "flat_field")) ||
         (r = rig_virtual_expected(L->v, 0, 1, flat_us, 0, "Mono12", L->W, L->H, tmp)) ||

@@ -288,14 +288,17 @@ static void case_rows(void *vctx, int begin, int end, int thread)
     size_t npx = (size_t)eval_lab_width(S->lab) * eval_lab_height(S->lab);
     float *img[NANG] = { 0 };
     verify_windows_t *win[NANG] = { 0 };
+    bool have = true;
     for (int a = 0; a < NANG; a++) {
         img[a] = malloc(npx * sizeof(float));
         win[a] = verify_windows_new();
+        have &= img[a] && win[a];
     }
+    if (!have) model_error_set(NULL, 0, "out of memory for the case's images");
     for (int j = begin; j < end; j++) {
         if (S->failed) break;
         int c = S->shard_k - 1 + j * S->shard_n;
-        bool ok = run_case(S, c, img, win);
+        bool ok = have && run_case(S, c, img, win);
         pthread_mutex_lock(&S->lock);
         if (!ok && !S->failed) {
             S->failed = true;
@@ -303,8 +306,8 @@ static void case_rows(void *vctx, int begin, int end, int thread)
         }
         S->done++;
         double el = model_now_s() - S->t0;
-        fprintf(stderr, "\rrefl verify --study: case %d/%d (%.0f s, ETA %.0f s)   ", S->done, S->ncases_here, el,
-                el / S->done * (S->ncases_here - S->done));
+        model_progress("study: case %d/%d (%.0f s, ETA %.0f s)", S->done, S->ncases_here, el,
+                       el / S->done * (S->ncases_here - S->done));
         pthread_mutex_unlock(&S->lock);
     }
     for (int a = 0; a < NANG; a++) {
@@ -409,9 +412,9 @@ static bool study_views(study_t *S, const model_stiffener_t *D, const verify_opt
             if (!(S->views[d * NANG + a] = verify_view_new(S->scenes[d], &S->cam, angles[a], S->lamps, mats, &vo)))
                 return false;
         }
-        fprintf(stderr, "\rrefl verify --study: views of description %d/%d   ", d + 1, NDESC);
+        model_progress("study: views of description %d/%d", d + 1, NDESC);
     }
-    fprintf(stderr, "\n");
+    model_progress_end();
     return true;
 }
 
@@ -462,12 +465,11 @@ static json_t *design_json(const study_table_t *T, const json_t *inputs, const e
 // The lab, its placed-off sets, the calibrations, priors, views and table. false + message.
 static bool study_setup(study_t *S, const eval_study_opts_t *o, const model_stiffener_t *D, const int *which)
 {
-    fprintf(stderr, "refl verify --study: rendering the T-stiffener at 4 angles x each lamp on the virtual rig (%s)\n",
-            o->truth);
+    model_note("study: rendering the T-stiffener at 4 angles x each lamp on the virtual rig (%s)", o->truth);
     if (!(S->lab = eval_lab_open(o->truth, "t_stiffener", angles, NANG, 6000, 0, true))) return false;
     for (int p = 0; p < NPLACE; p++) {
         double az = PLACE_AZIMUTH_DEG * M_PI / 180;
-        fprintf(stderr, "refl verify --study: the part placed off by %g mm, %g deg\n", place_mm[p], place_deg[p]);
+        model_note("study: the part placed off by %g mm, %g deg", place_mm[p], place_deg[p]);
         if (eval_lab_add_placement(S->lab, place_deg[p], place_mm[p] * cos(az), place_mm[p] * sin(az), true) < 0)
             return false;
     }
@@ -531,7 +533,7 @@ bool eval_study_run(const eval_study_opts_t *o, eval_study_result_t *r)
     S.t0 = model_now_s();
     int threads = o->opt.threads > 0 ? o->opt.threads : model_default_threads();
     model_parallel_for(S.ncases_here, 1, threads, case_rows, &S);
-    fprintf(stderr, "\n");
+    model_progress_end();
     if (S.failed) {
         model_error(NULL, 0, "verify study: %s", S.err);
         goto done;
