@@ -191,6 +191,8 @@ TEST(chain_known_errors_and_z)
     json_error_t je;
     json_t *j = json_load_file(cj, 0, &je);
     CHECK(j && json_is_object(json_object_get(j, "provenance")));
+    int version = 0;
+    CHECK_MSG(model_json_format_check(j, cj, "refl-chain", 1, &version) && version == 1, "%s", model_last_error());
     json_decref(j);
     g_free(cj);
     g_free(out);

@@ -14,6 +14,7 @@
 #include "fit/lightplan/lightplan.h"
 #include "fit/eval/lab.h"
 #include "model/model.h"
+#include "model/base/report.h"
 #include "rig/rig.h"
 #include "tests/test.h"
 
@@ -156,6 +157,7 @@ TEST(lightplan_virtual_rig_agreement)
     g_free(jp);
     CHECK(j != NULL);
     if (!j) return;
+    CHECK_MSG(model_json_format_check(j, "plan.json", "refl-lightplan", 1, NULL), "%s", model_last_error());
     json_t *ch = json_object_get(j, "chosen");
     CHECK(json_is_true(json_object_get(ch, "feasible")));
     CHECK(json_integer_value(json_object_get(ch, "n_detectable")) >= 15);
@@ -286,6 +288,9 @@ TEST(lightplan_views_capture_plan)
     CHECK(j != NULL);
     json_t *views = json_object_get(j, "views");
     CHECK(json_array_size(views) == 2);
+    int version = 0;
+    CHECK_MSG(model_json_format_check(j, "plan.json", "refl-lightplan", 1, &version) && version == 1, "%s",
+              model_last_error());
     CHECK(json_is_true(json_object_get(j, "capture_plan_binds_to_virtual_rig")));
     char want_lamps[2][512] = { "", "" };
     double want_us[2] = { 0, 0 };

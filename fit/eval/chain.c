@@ -685,6 +685,7 @@ json_t *eval_chain_compare(const char *dir, const char *truth_path, json_t *prov
     json_decref(gj);
     json_decref(wj);
     doc = json_object();
+    model_json_set_format(doc, "refl-chain", 1);
     json_object_set_new(doc, "chain", json_string("refl chain: the lab day's calibrated and fitted figures against "
                                                   "the truth of the virtual rig it ran on"));
     json_object_set_new(doc, "dir", json_string(dir));

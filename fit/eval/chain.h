@@ -4,7 +4,8 @@
 // truth file of the virtual rig it ran on, with the uncertainty refl states
 // for it, into DIR/chain.json (refl chain). The one owner of chain.json.
 //
-// chain.json: {"chain": "...", "truth": path, "dir": path,
+// chain.json (format "refl-chain", version 1): {"format", "version",
+//   "chain": "...", "truth": path, "dir": path,
 //   "units_and_conventions": {...},
 //   "entries": [{"name", "group", "value", "truth", "sigma", "unit", "error",
 //                "z", "note"}...],

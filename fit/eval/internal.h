@@ -8,6 +8,10 @@
 #include <stdbool.h>
 #include <stddef.h>
 
+// study.json's format and the version this refl writes (and reads up to).
+#define STUDY_FORMAT "refl-study"
+#define STUDY_FORMAT_VERSION 1
+
 #define NANG 4
 #define NCONF 4
 #define NDESC 14
@@ -66,6 +70,11 @@ json_t *study_results(const study_table_t *T);
 bool study_write_tables(const char *out, const study_table_t *T);
 bool study_write_json(const char *out, const study_table_t *T, json_t *design, json_t *shard,
                       json_t *provenance);
+// A study.json read back (path): NULL + message (printed through model_error)
+// when it cannot be read or is not a refl-study file of a version this refl
+// reads; *version the version read (a file without "format" and "version":
+// 1).
+json_t *study_read_json(const char *path, int *version);
 // DIR/study.csv (timing false) or DIR/timing.csv, and DIR/placement.csv, read
 // into T (its shape from the design). false + message naming the file and line.
 bool study_read_rows(const char *dir, study_table_t *T, bool timing);

@@ -4,6 +4,14 @@
 // part placed off, four configurations. Writes study.csv (one row per fit:
 // config, description, expected, case, score, verdict_correct), timing.csv and
 // study.json (units, design, and when every case is in: the summary and ROC).
+//
+// study.json names its format "refl-study", version 1; the CSV tables carry
+// their layout in their header line (study.csv: config, description,
+// expected, case, score, verdict_correct, rms_z, median_abs_z; timing.csv:
+// config, description, case, seconds, iterations; placement.csv:
+// description, case, dx_mm, dy_mm, turn_deg, edge_agreement). A merge reads
+// each shard's study.json up to version 1 (a file without "format" and
+// "version" is version 1) and refuses a newer one.
 #pragma once
 
 #include <jansson.h>
@@ -42,8 +50,9 @@ bool eval_study_run(const eval_study_opts_t *o, eval_study_result_t *r);
 // Merge the output directories of the shards of one study (the same design:
 // cases, configurations, descriptions, threshold, inputs' hashes; every case
 // in exactly one) into out, as the unsharded run writes it: study.csv and the
-// results of study.json equal that run's. The shards' provenance goes to
-// provenance's "merged_from". false + message naming the directory or file:line.
+// results of study.json equal that run's. The shards' provenance (and the
+// version of each one's study.json) goes to provenance's "merged_from". false
+// + message naming the directory or file:line.
 bool eval_study_merge(const char *const *dirs, int ndirs, const char *out, json_t *provenance,
                       eval_study_result_t *r);
 

@@ -84,6 +84,7 @@ bool study_write_json(const char *out, const study_table_t *T, json_t *design, j
                              json_t *provenance)
 {
     json_t *doc = json_object();
+    model_json_set_format(doc, STUDY_FORMAT, STUDY_FORMAT_VERSION);
     json_object_set_new(doc, "units", json_string(units));
     json_object_set_new(doc, "conditions", json_string(conditions));
     json_object_set(doc, "design", design);
@@ -111,6 +112,24 @@ bool study_write_json(const char *out, const study_table_t *T, json_t *design, j
     g_free(jp);
     json_decref(doc);
     return ok;
+}
+
+json_t *study_read_json(const char *path, int *version)
+{
+    json_error_t je;
+    json_t *doc = json_load_file(path, 0, &je);
+    if (!doc) {
+        model_error(path, je.line, "%s", je.text);
+        return NULL;
+    }
+    if (!model_json_format_check(doc, path, STUDY_FORMAT, STUDY_FORMAT_VERSION, version)) {
+        char *msg = g_strdup(model_last_error());
+        model_error(NULL, 0, "%s", msg);
+        g_free(msg);
+        json_decref(doc);
+        return NULL;
+    }
+    return doc;
 }
 
 static int find_label(const char *s, const char *base, int n, size_t stride);

@@ -73,11 +73,10 @@ bool eval_study_merge(const char *const *dirs, int ndirs, const char *out, json_
     if (!ok) model_error(NULL, 0, "verify study merge: no shard directory given");
     for (int s = 0; ok && s < ndirs; s++) {
         char *jp = g_strdup_printf("%s/study.json", dirs[s]);
-        json_error_t je;
-        json_t *doc = json_load_file(jp, 0, &je), *d = json_object_get(doc, "design");
+        int version = 0;
+        json_t *doc = study_read_json(jp, &version), *d = json_object_get(doc, "design");
         if (!doc) {
             ok = false;
-            model_error(jp, je.line, "%s", je.text);
         } else if (!json_is_object(d)) {
             ok = false;
             model_error(jp, 0, "no design: not a study of refl verify --study");
@@ -91,8 +90,8 @@ bool eval_study_merge(const char *const *dirs, int ndirs, const char *out, json_
         }
         if (ok) {
             model_provenance_input(provenance, "shard", jp);
-            json_array_append_new(from, json_pack("{s:s, s:O?, s:O?}", "dir", dirs[s], "shard",
-                                                  json_object_get(doc, "shard"), "provenance",
+            json_array_append_new(from, json_pack("{s:s, s:i, s:O?, s:O?}", "dir", dirs[s], "version", version,
+                                                  "shard", json_object_get(doc, "shard"), "provenance",
                                                   json_object_get(doc, "provenance")));
             ok = study_read_rows(dirs[s], &T, false);
             char *tp = g_strdup_printf("%s/timing.csv", dirs[s]);

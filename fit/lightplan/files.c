@@ -538,6 +538,7 @@ static json_t *plan_json(const lightplan_lamps_opts_t *o, const plan_inputs_t *i
 {
     const lightplan_result_t *res = &r->res;
     json_t *doc = json_object();
+    model_json_set_format(doc, "refl-lightplan", 1);
     json_object_set_new(doc, "scene", json_string(o->scene));
     json_object_set_new(doc, "turntable_deg", json_real(o->angle_deg));
     json_object_set_new(doc, "units_and_conventions",
@@ -662,9 +663,11 @@ static bool write_summary(const lightplan_lamps_opts_t *o, const plan_inputs_t *
         json_object_set_new(e, "warnings", warnings_json(o, v));
         json_array_append_new(views, e);
     }
-    json_t *doc = json_pack("{s:s,s:o,s:s,s:o}", "scene", o->scene, "views", views, "capture_plan",
-                            "capture_plan.ini", "capture_plan_binds_to_virtual_rig",
-                            o->check_truth ? json_boolean(r->plan_bound) : json_null());
+    json_t *doc = json_object();
+    model_json_set_format(doc, "refl-lightplan", 1);
+    json_object_update_new(doc, json_pack("{s:s,s:o,s:s,s:o}", "scene", o->scene, "views", views, "capture_plan",
+                                          "capture_plan.ini", "capture_plan_binds_to_virtual_rig",
+                                          o->check_truth ? json_boolean(r->plan_bound) : json_null()));
     json_object_set_new(doc, "provenance", json_incref((json_t *)in->prov));
     char *jp = g_strdup_printf("%s/plan.json", o->out);
     bool ok = model_write_json(jp, doc);

@@ -143,6 +143,12 @@ bool lightplan_segments_for(const lightplan_result_t *r, uint32_t mask, double e
 
 // ---------------------------------------------------------------------------
 // The plan of a view from files (`refl plan lamps`, fit/lightplan/files.c)
+//
+// plan.json (format "refl-lightplan", version 1; read by
+// scripts/plan_lamps_report.py): a view's plan ("scene", "turntable_deg",
+// "chosen", "configurations", "faces", "segments", "virtual_rig_check", ...),
+// or, with several views, their summary in out ("views": each one's choice
+// and directory, "capture_plan").
 
 typedef struct {
     const char        *scene;           // D3D, OBJ, STL or PLY description (rig frame)

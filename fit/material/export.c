@@ -628,7 +628,7 @@ bool fit_export_materials(const char *priors, const char *only, fit_export_forma
     ok = ok && write_target(&pr, fmt, out, res);
     if (ok) {
         json_t *side = json_object(), *list = json_array();
-        json_object_set_new(side, "format", json_string("refl export 1"));
+        model_json_set_format(side, "refl-export", 1);
         json_object_set_new(side, "file", json_string(out));
         for (int i = 0; i < res->n; i++) json_array_append_new(list, conversion_json(&res->m[i]));
         json_object_set_new(side, "materials", list);
