@@ -109,13 +109,13 @@ TEST(lightplan_glare_and_saturation_steer_the_choice)
 // glare and saturation, and a Sobel detector on the rig's frames (the chosen
 // set and each single lamp, richer physics than the prediction) agrees with
 // the predicted detectability on at least 94 % of the segments (the
-// disagreements are printed; REFL_TEST_VERBOSE=1 prints every segment). It
-// was 95 % (96.0 % measured) until the rig rendered the indirect light near
-// face edges at full resolution: the concave junctions of web and plate
-// (faces 2/7, 2/8, 13/7, 13/8, 14/8, 14/12) now measure 1.3 to 6 times the
-// planner's one-bounce prediction, which puts two more weak edges above the
-// threshold (94.4 %); the planner's light at concave junctions is an open
-// question (README: refl plan lamps).
+// disagreements are printed; REFL_TEST_VERBOSE=1 prints every segment). The
+// rig renders the indirect light near face edges at full resolution: at the
+// concave junctions of web and plate (faces 2/7, 2/8, 13/7, 13/8, 14/8,
+// 14/12) it measures 1.3 to 6 times the planner's one-bounce prediction,
+// which puts two weak edges above the threshold the planner predicts below it
+// (94.4 %); the planner's light at concave junctions is an open question
+// (README: refl plan lamps).
 TEST(lightplan_virtual_rig_agreement)
 {
     char scene[4096], cam[4096], lamps[4096], mats[4096], truth[4096];

@@ -249,7 +249,7 @@ TEST(verify_mvprior_residual_and_parser)
     verify_priors_t pr = { 0 };
     CHECK_MSG(verify_priors_parse(&pr, good, strlen(good), "good.json"), "%s", model_last_error());
     const verify_prior_t *m = verify_priors_find(&pr, "m"), *h = verify_priors_find(&pr, "h");
-    CHECK(m && !m->has_cov);   // an entry without one: independent std, as before
+    CHECK(m && !m->has_cov);   // an entry without one: independent std
     CHECK(h && h->has_cov && h->cov[1] == 5e-5 && h->cov[8] == 16);
     verify_priors_free(&pr);
     char *bad = g_strdup(good);

@@ -306,7 +306,7 @@ static void chain_gain(chain_t *c, const json_t *g)
     json_array_foreach(jt, i, x) if (nt < 256 && json_is_number(x)) dt[nt++] = json_number_value(x);
     if (model_sensor_from_ini(c->ini, &ts)) {
         if (!model_sensor_dark_measurand(&ts, NULL, 0, &rn_m, NULL)) rn_m = NAN;
-        if (!model_sensor_dark_measurand(&ts, dt, nt, NULL, &dc_m)) dc_m = NAN;   // (an older gain.json: none)
+        if (!model_sensor_dark_measurand(&ts, dt, nt, NULL, &dc_m)) dc_m = NAN;   // (no dark_exposures_us: none)
     }
     for (i = 0; i < sizeof k / sizeof k[0]; i++) {
         char name[96], note[600];

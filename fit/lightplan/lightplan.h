@@ -1,4 +1,4 @@
-// fit/lightplan/lightplan.h — model-based light placement (seed 001, PREMIO): which
+// fit/lightplan/lightplan.h — model-based light placement (PREMIO): which
 // lamps and exposure make a workpiece's edges detectable and give the
 // verification fitter the most usable reference points, without glare or
 // saturation?
