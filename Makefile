@@ -198,6 +198,7 @@ FIT_BRDF_SRC := \
     fit/brdf/samples.c
 FIT_MATERIAL_SRC := \
     fit/material/material.c \
+    fit/material/report.c \
     fit/material/export.c
 FIT_VERIFY_SRC := \
     fit/verify/verify.c \
@@ -220,6 +221,9 @@ FIT_LIGHTPLAN_SRC := \
 FIT_EVAL_SRC := \
     fit/eval/lab.c \
     fit/eval/study.c \
+    fit/eval/study_results.c \
+    fit/eval/study_files.c \
+    fit/eval/study_merge.c \
     fit/eval/chain.c
 FIT_SRC := $(FIT_BRDF_SRC) $(FIT_MATERIAL_SRC) $(FIT_VERIFY_SRC) $(FIT_LIGHTPLAN_SRC) $(FIT_EVAL_SRC) \
     fit/cmd_chain.c \

@@ -31,7 +31,7 @@ static void print_entry(const json_t *e)
            json_string_value(json_object_get(e, "unit")), flag ? "  <-- |z| > 3, wrong, or over 1.2x the best" : "");
 }
 
-int chain_cmd(int argc, char **argv)
+int eval_chain_cmd(int argc, char **argv)
 {
     const char *truth = NULL, *out = NULL;
     bool quiet = false;
@@ -56,9 +56,12 @@ int chain_cmd(int argc, char **argv)
     const char *dir = cli.positional[0];
     char *path = out ? g_strdup(out) : g_build_filename(dir, "chain.json", NULL);
     json_t *prov = model_provenance(argc, argv);
-    json_t *doc = fit_chain_compare(dir, truth, prov);
+    bool q = model_error_quiet_thread(true);   // the message is printed once, below
+    json_t *doc = eval_chain_compare(dir, truth, prov);
+    bool written = doc && model_write_json(path, doc);
+    model_error_quiet_thread(q);
     rc = 1;
-    if (doc && model_write_json(path, doc)) {
+    if (written) {
         const json_t *e, *s = json_object_get(doc, "summary");
         size_t i;
         if (!quiet) {
@@ -78,7 +81,7 @@ int chain_cmd(int argc, char **argv)
         printf("%s\n", path);
         rc = 0;
     } else
-        model_error_report("refl chain");
+        model_error_report("chain");
     json_decref(doc);
     json_decref(prov);
     g_free(path);

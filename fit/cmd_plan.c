@@ -177,7 +177,10 @@ static int plan_lamps(int argc, char **argv)
     o.argc = argc + 1;   // the provenance's command: refl plan lamps ...
     o.argv = argv - 1;
     lightplan_lamps_result_t *r = malloc(sizeof *r);
-    if (!r) return model_error_report("plan lamps");
+    if (!r) {
+        model_error_set(NULL, 0, "out of memory");
+        return model_error_report("plan lamps");
+    }
     bool ok = lightplan_lamps_run(&o, r);
     print_plan(&o, r);
     if (ok && o.report) printf("report: %s/index.html\n", o.out);

@@ -7,7 +7,7 @@
 //   refl verify --study-merge DIR... -o OUT                      (fit/eval/study.c)
 //
 // Parses the arguments (model/base/opts.h), calls verify_files_run or
-// verify_study_run (fit/verify/verify.h) and prints the residue table and verdict.
+// eval_study_run (fit/eval/study.h) and prints the residue table and verdict.
 #define _GNU_SOURCE
 #include <glib.h>
 #include <math.h>
@@ -15,6 +15,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "fit/eval/study.h"
 #include "fit/verify/verify.h"
 #include "model/base/opts.h"
 #include "model/base/report.h"
@@ -59,29 +60,19 @@ static int parse_fix(model_cli_t *cli, const char *list, verify_options_t *opt)
     return rc;
 }
 
-// The truth file of the study: --truth, else examples/virtual-truth.ini beside
-// the scripts or the executable (g_free; NULL: none found).
+// The truth file of the study: --truth, else refl's examples/virtual-truth.ini
+// (model_share_path: a build tree's or an installation's; g_free; NULL: none).
 static char *study_truth(const char *truth)
 {
     if (truth) return g_strdup(truth);
-    const char *sd = getenv("REFL_SCRIPTS_DIR");
-    char *exe = g_file_read_link("/proc/self/exe", NULL);
-    char *exedir = exe ? g_path_get_dirname(exe) : g_strdup(".");
-    char *cands[3] = { sd ? g_strdup_printf("%s/../examples/virtual-truth.ini", sd) : NULL,
-                       g_strdup_printf("%s/../examples/virtual-truth.ini", exedir),
-                       g_strdup_printf("%s/../../examples/virtual-truth.ini", exedir) };
-    char *path = NULL;
-    for (int i = 0; i < 3; i++) {
-        if (!path && cands[i] && g_file_test(cands[i], G_FILE_TEST_EXISTS)) path = g_strdup(cands[i]);
-        g_free(cands[i]);
-    }
-    g_free(exe);
-    g_free(exedir);
+    bool q = model_error_quiet_thread(true);
+    char *path = model_share_path("examples", "virtual-truth.ini");
+    model_error_quiet_thread(q);
     return path;
 }
 
 // --study: the study (or one shard of it), then its report when every case is in.
-static int study(verify_study_opts_t *so, const char *truth, bool no_report, int argc, char **argv)
+static int study(eval_study_opts_t *so, const char *truth, bool no_report, int argc, char **argv)
 {
     char *truth_path = study_truth(truth);
     if (!truth_path) {
@@ -90,9 +81,9 @@ static int study(verify_study_opts_t *so, const char *truth, bool no_report, int
     }
     so->truth = truth_path;
     so->provenance = model_provenance(argc, argv);
-    verify_study_result_t sr;
+    eval_study_result_t sr;
     int rc = 1;
-    if (verify_study_run(so, &sr)) {
+    if (eval_study_run(so, &sr)) {
         rc = 0;
         if (!sr.complete)
             printf("refl verify --study: shard %d/%d: %d of %d cases x %d descriptions x %d configurations in %s; "
@@ -113,9 +104,9 @@ static int study(verify_study_opts_t *so, const char *truth, bool no_report, int
 static int study_merge(const char *const *dirs, int n, const char *out, bool no_report, int argc, char **argv)
 {
     json_t *prov = model_provenance(argc, argv);
-    verify_study_result_t sr;
+    eval_study_result_t sr;
     int rc = 1;
-    if (!verify_study_merge(dirs, n, out, prov, &sr)) rc = 1;   // the library printed why
+    if (!eval_study_merge(dirs, n, out, prov, &sr)) rc = 1;   // the library printed why
     else if (no_report || model_run_script("verify_study_report.py", out, NULL) == 0) {
         printf("refl verify --study-merge: %d shard(s), %d cases x %d descriptions x %d configurations%s%s%s\n", n,
                sr.cases, sr.ndescriptions, sr.nconfigurations, no_report ? "" : "; report: ", no_report ? "" : out,
@@ -203,9 +194,9 @@ static int verify_settle(model_cli_t *cli, verify_args_t *a)
 static int verify_study_cmd(model_cli_t *cli, verify_args_t *a, int argc, char **argv)
 {
     const verify_files_opts_t *o = &a->o;
-    verify_study_opts_t so = { .out = o->out, .cases = a->cases, .opt = o->opt, .calib = o->calib,
-                               .priors = (const char *const *)o->priors, .npriors = o->npriors,
-                               .configs = a->configs };
+    eval_study_opts_t so = { .out = o->out, .cases = a->cases, .opt = o->opt, .calib = o->calib,
+                             .priors = (const char *const *)o->priors, .npriors = o->npriors,
+                             .configs = a->configs };
     // the study registers only when asked (each case's descriptions then get their own views: slower)
     if (model_cli_opt(cli, "--placement-tolerance-mm")->given || model_cli_opt(cli, "--placement-tolerance-deg")->given) {
         so.placement_tol_mm = o->placement_tol_mm;

@@ -38,7 +38,7 @@ static const command_t commands[] = {
     { "fit",     fit_cmd,         "fit reflection models to BRDF samples and write priors" },
     { "verify",  verify_cmd,      "verify a scene description against images: fit within the priors, residue, changes, verdict" },
     { "demo",    demo_cmd,        "the whole lab day on the virtual rig: calibrations, materials, light planning, verification" },
-    { "chain",   chain_cmd,       "compare a lab day's calibrated and fitted figures with the virtual rig's truth: chain.json" },
+    { "chain",   eval_chain_cmd,  "compare a lab day's calibrated and fitted figures with the virtual rig's truth: chain.json" },
     { "export",  fit_cmd_export,  "a priors file's materials as glTF 2.0, Mitsuba 3 or MERL, with the conversion error" },
     { "plan",    lightplan_cmd,   "plan lamps: choose the lamp set and exposure for detectable edges, no glare or saturation" },
 };

@@ -4,7 +4,8 @@ summary that refl computed (scripts only plot).
 
 usage: verify_study_report.py DIR
 
-DIR/study.json (written by refl, fit/eval/study.c): "units", "conditions", "design"
+DIR/study.json (written by refl, fit/eval/study_files.c; format "refl-study", version 1,
+a file without "format" and "version" being version 1): "units", "conditions", "design"
 (cases, configurations, descriptions with their expected class: correct, wrong,
 placed), "complete", and when complete "results": "summary" (one entry per
 configuration and description other than the correct one: auc, threshold_1pct,
@@ -38,7 +39,12 @@ RULE = ("Detection at 1 % false alarms: per configuration, the threshold is the 
 
 def load(d):
     doc = load_json(os.path.join(d, "study.json"))
-    if not isinstance(doc, dict) or not isinstance(doc.get("design"), dict):
+    fmt, ver = doc.get("format", "refl-study"), doc.get("version", 1)
+    if fmt != "refl-study":
+        raise Bad(os.path.join(d, "study.json"), f"a {fmt} file, not refl-study")
+    if not isinstance(ver, int) or isinstance(ver, bool) or not 1 <= ver <= 1:
+        raise Bad(os.path.join(d, "study.json"), f"refl-study version {ver}: this script reads version 1")
+    if not isinstance(doc.get("design"), dict):
         raise Bad(os.path.join(d, "study.json"), "no design: not a study of refl verify --study")
     if not doc.get("complete") or not isinstance(doc.get("results"), dict):
         raise Bad(os.path.join(d, "study.json"), "not complete (a shard?): merge the shards with "

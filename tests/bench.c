@@ -30,6 +30,7 @@
 
 #include "fit/brdf/brdf.h"
 #include "fit/verify/verify.h"
+#include "fit/eval/study.h"
 #include "fit/eval/lab.h"
 #include "model/internal.h"
 #include "rig/virtual/gv_camera.h"
@@ -683,7 +684,7 @@ static double process_cpu_s(void)
     return ts.tv_sec + 1e-9 * ts.tv_nsec;
 }
 
-// The detection study (verify_study_run, 2 threads, the cases in parallel)
+// The detection study (eval_study_run, 2 threads, the cases in parallel)
 // on `cases` cases into dir (made fresh): its wall and CPU time and the mean
 // of timing.csv's per-fit seconds. false + message.
 static bool study_once(const char *truth, int cases, bool reference, char *dir, double *wall_s, double *cpu_s,
@@ -692,13 +693,13 @@ static bool study_once(const char *truth, int cases, bool reference, char *dir, 
     char csv[1100];
     strcpy(dir, "/tmp/refl-bench-study-XXXXXX");
     if (!mkdtemp(dir)) return false;
-    verify_study_opts_t o = { .out = dir, .truth = truth, .cases = cases, .opt = verify_defaults() };
+    eval_study_opts_t o = { .out = dir, .truth = truth, .cases = cases, .opt = verify_defaults() };
     o.opt.threads = 2;
     o.opt.reference_eval = reference;
     o.provenance = json_object();
-    verify_study_result_t r;
+    eval_study_result_t r;
     double t0 = model_now_s(), c0 = process_cpu_s();
-    bool ok = verify_study_run(&o, &r);
+    bool ok = eval_study_run(&o, &r);
     *wall_s = model_now_s() - t0;
     *cpu_s = process_cpu_s() - c0;
     json_decref(o.provenance);
@@ -844,19 +845,19 @@ static int bench_verify(void)
     char truth[1024];
     src_path(truth, sizeof truth, "examples/virtual-truth.ini");
     const double angle = 30;
-    verify_lab_t *L = verify_lab_open(truth, "t_stiffener", &angle, 1, 6000, 0, false);
+    eval_lab_t *L = eval_lab_open(truth, "t_stiffener", &angle, 1, 6000, 0, false);
     if (!L) {
         fprintf(stderr, "refl-bench verify: %s\n", model_last_error());
         return 1;
     }
-    int W = verify_lab_width(L), H = verify_lab_height(L);
+    int W = eval_lab_width(L), H = eval_lab_height(L);
     float *img = malloc((size_t)W * H * sizeof(float));
-    verify_lab_image(L, 0, 0xf, NULL, 1, 7, img);
+    eval_lab_image(L, 0, 0xf, NULL, 1, 7, img);
     verify_image_t im = { .P = img, .W = W, .H = H, .camera = 0, .angle_deg = angle, .lamps_on = 0xf,
                           .exposure_us = 6000 };
     snprintf(im.name, sizeof im.name, "bench");
     verify_priors_t pr = { 0 };
-    const model_materials_t *mm = verify_lab_materials(L);
+    const model_materials_t *mm = eval_lab_materials(L);
     const model_material_t *ply = model_materials_find(mm, "plywood"), *st = model_materials_find(mm, "painted_steel");
     verify_priors_add(&pr, ply, 0.1, 1e-4, 3);
     verify_priors_add(&pr, st, 0.1, 1e-4, 3);
@@ -869,10 +870,10 @@ static int bench_verify(void)
     int npts = 0, rc = 0;
     for (int k = 0; k < 5 && !rc; k++) {
         double t0 = model_now_s();
-        verify_view_t *v = verify_view_new(sc, verify_lab_camera(L), angle, verify_lab_lamps(L), mats, &opt);
+        verify_view_t *v = verify_view_new(sc, eval_lab_camera(L), angle, eval_lab_lamps(L), mats, &opt);
         double t1 = model_now_s();
         verify_result_t r;
-        bool ok = v && verify_run(sc, &pr, verify_lab_camera(L), 1, verify_lab_lamps(L), verify_lab_A(L), &im, 1, &v,
+        bool ok = v && verify_run(sc, &pr, eval_lab_camera(L), 1, eval_lab_lamps(L), eval_lab_A(L), &im, 1, &v,
                                   &opt, &r);
         double t2 = model_now_s();
         if (!ok) {
@@ -896,6 +897,6 @@ static int bench_verify(void)
     model_scene_free(sc);
     verify_priors_free(&pr);
     free(img);
-    verify_lab_free(L);
+    eval_lab_free(L);
     return rc;
 }

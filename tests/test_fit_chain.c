@@ -135,7 +135,7 @@ TEST(chain_known_errors_and_z)
     put("verify_i/verify.json", v);
     const char *day = test_path("day");
     json_t *prov = model_provenance(0, NULL);
-    json_t *doc = fit_chain_compare(day, truth, prov);
+    json_t *doc = eval_chain_compare(day, truth, prov);
     CHECK_MSG(doc != NULL, "%s", model_last_error());
     if (doc) {
         const json_t *e = entry(doc, "camera.projection_error_rms");
@@ -191,6 +191,8 @@ TEST(chain_known_errors_and_z)
     json_error_t je;
     json_t *j = json_load_file(cj, 0, &je);
     CHECK(j && json_is_object(json_object_get(j, "provenance")));
+    int version = 0;
+    CHECK_MSG(model_json_format_check(j, cj, "refl-chain", 1, &version) && version == 1, "%s", model_last_error());
     json_decref(j);
     g_free(cj);
     g_free(out);
@@ -217,7 +219,7 @@ TEST(chain_table_material_ngan_ratio)
         "[{\"name\": \"kd\", \"mean\": 0.35, \"std\": 0.01}, {\"name\": \"ks\", \"mean\": 0.6, \"std\": 0.01},"
         "{\"name\": \"alpha\", \"mean\": 0.05, \"std\": 0.001}, {\"name\": \"F0\", \"mean\": 0.045, \"std\": 0.001}]}]}");
     json_t *prov = model_provenance(0, NULL);
-    json_t *doc = fit_chain_compare(test_path("day"), tp, prov);
+    json_t *doc = eval_chain_compare(test_path("day"), tp, prov);
     CHECK_MSG(doc != NULL, "%s", model_last_error());
     if (doc) {
         const json_t *e = entry(doc, "material_glossy_plastic.ngan_error");
@@ -257,7 +259,7 @@ TEST(chain_table_within_the_model)
         "[{\"name\": \"kd\", \"mean\": 0.35, \"std\": 0.01}, {\"name\": \"ks\", \"mean\": 0.6, \"std\": 0.01},"
         "{\"name\": \"alpha\", \"mean\": 0.08, \"std\": 0.001}, {\"name\": \"F0\", \"mean\": 0.045, \"std\": 0.001}]}]}");
     json_t *prov = model_provenance(0, NULL);
-    json_t *doc = fit_chain_compare(test_path("day"), tp, prov);
+    json_t *doc = eval_chain_compare(test_path("day"), tp, prov);
     CHECK_MSG(doc != NULL, "%s", model_last_error());
     if (doc) {
         const double want[4] = { 0.35, 0.6, 0.08, 0.045 };
@@ -295,7 +297,7 @@ TEST(chain_roughness_mixture_best_fit)
         "\"std\": 0.01}, {\"name\": \"alpha\", \"mean\": 0.15, \"std\": 0.002}, {\"name\": \"F0\", \"mean\": 0.04, "
         "\"std\": 0.002}]}]}");
     json_t *prov = model_provenance(0, NULL);
-    json_t *doc = fit_chain_compare(test_path("day"), tp, prov);
+    json_t *doc = eval_chain_compare(test_path("day"), tp, prov);
     CHECK_MSG(doc != NULL, "%s", model_last_error());
     if (doc) {
         const double p0[4] = { 0.5, 0.25, 0.15, 0.04 };
@@ -400,7 +402,7 @@ TEST(chain_lamp_irradiance)
     put("calib/white/white.json", "{\"lamps\": [{\"name\": \"east\", \"kc_I_per_us\": 3.2e5}, "
         "{\"name\": \"south\", \"kc_I_per_us\": 2.9e5}]}");
     json_t *prov = model_provenance(0, NULL);
-    json_t *doc = fit_chain_compare(test_path("day"), truth, prov);
+    json_t *doc = eval_chain_compare(test_path("day"), truth, prov);
     CHECK_MSG(doc != NULL, "%s", model_last_error());
     if (doc) {
         double worst = 0, len = sqrt(488.6 * 488.6 + 177.9 * 177.9 + 600 * 600);
@@ -456,7 +458,7 @@ TEST(chain_stated_sigmas)
     put("calib/white/white.json", "{\"lamps\": [{\"name\": \"east\", \"kc_I_per_us\": 3.232e5, \"std_rel\": 0.005, "
         "\"std_of_median_rel\": 0.0001, \"irradiance_samples_region\": {\"std_max_pct\": 0.4}}]}");
     json_t *prov = model_provenance(0, NULL);
-    json_t *doc = fit_chain_compare(test_path("day"), truth, prov);
+    json_t *doc = eval_chain_compare(test_path("day"), truth, prov);
     CHECK_MSG(doc != NULL, "%s", model_last_error());
     if (doc) {
         // the same model: every intrinsic error 0 with its stated sigma
@@ -490,7 +492,7 @@ TEST(chain_stated_sigmas)
              m->intrinsics[0] + 1);
     put("calib/geometry/mrcal/solution.json", s);
     json_decref(doc);
-    doc = fit_chain_compare(test_path("day"), truth, prov);
+    doc = eval_chain_compare(test_path("day"), truth, prov);
     CHECK(doc && json_is_null(json_object_get(entry(doc, "camera.fx"), "sigma")));
     json_decref(doc);
     // A sensor whose response bends at the low end and has row noise and hot
@@ -505,7 +507,7 @@ TEST(chain_stated_sigmas)
     model_sensor_t ts;
     double rn = NAN, dc = NAN, t4[4] = { 100000, 500000, 1000000, 2000000 };
     CHECK(ini && model_sensor_from_ini(ini, &ts) && model_sensor_dark_measurand(&ts, t4, 4, &rn, &dc));
-    doc = fit_chain_compare(test_path("day"), adv, prov);
+    doc = eval_chain_compare(test_path("day"), adv, prov);
     CHECK_MSG(doc != NULL, "%s", model_last_error());
     if (doc) {
         const json_t *e = entry(doc, "sensor.read_noise_e");

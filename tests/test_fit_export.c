@@ -25,6 +25,7 @@
 
 #include "fit/material/export.h"
 #include "model/model.h"
+#include "model/base/report.h"
 #include "tests/test.h"
 
 static const char PRIORS[] =
@@ -93,6 +94,8 @@ TEST(fit_export_merl_read_back_by_refl)
     fprintf(stderr, "  MERL: stated interpolation error %.3g 1/sr (%.3f %%)\n", err, 100 * rel);
     CHECK(err > 0 && rel < 0.01);
     CHECK(json_is_object(json_object_get(j, "provenance")));
+    int version = 0;
+    CHECK_MSG(model_json_format_check(j, side, "refl-export", 1, &version) && version == 1, "%s", model_last_error());
     json_decref(j);
 }
 

@@ -249,7 +249,7 @@ TEST(verify_mvprior_residual_and_parser)
     verify_priors_t pr = { 0 };
     CHECK_MSG(verify_priors_parse(&pr, good, strlen(good), "good.json"), "%s", model_last_error());
     const verify_prior_t *m = verify_priors_find(&pr, "m"), *h = verify_priors_find(&pr, "h");
-    CHECK(m && !m->has_cov);   // an entry without one: independent std, as before
+    CHECK(m && !m->has_cov);   // an entry without one: independent std
     CHECK(h && h->has_cov && h->cov[1] == 5e-5 && h->cov[8] == 16);
     verify_priors_free(&pr);
     char *bad = g_strdup(good);
@@ -274,20 +274,20 @@ TEST(verify_prior_pulled_along_correlation)
     static const double ang[2] = { 0, 180 };
     char truth[4096];
     snprintf(truth, sizeof truth, "%s/examples/virtual-truth.ini", test_srcdir());
-    verify_lab_t *L = verify_lab_open(truth, "t_stiffener", ang, 2, 6000, 0, false);
+    eval_lab_t *L = eval_lab_open(truth, "t_stiffener", ang, 2, 6000, 0, false);
     CHECK_MSG(L != NULL, "lab: %s", model_last_error());
     if (!L) return;
-    int W = verify_lab_width(L), H = verify_lab_height(L);
+    int W = eval_lab_width(L), H = eval_lab_height(L);
     float *img[2];
     verify_image_t im[2];
     for (int a = 0; a < 2; a++) {
         img[a] = malloc((size_t)W * H * sizeof(float));
-        CHECK(verify_lab_image(L, a, 0xf, NULL, 1, 7 + a, img[a]));
+        CHECK(eval_lab_image(L, a, 0xf, NULL, 1, 7 + a, img[a]));
         im[a] = (verify_image_t){ .P = img[a], .W = W, .H = H, .angle_deg = ang[a], .lamps_on = 0xf,
                                   .exposure_us = 6000 };
         snprintf(im[a].name, sizeof im[a].name, "view%d", a);
     }
-    const model_materials_t *mt = verify_lab_materials(L);
+    const model_materials_t *mt = eval_lab_materials(L);
     model_stiffener_t d0 = model_stiffener_default();
     model_scene_t *sc = model_stiffener_scene(&d0, "t");
     double ks_fit[2] = { NAN, NAN }, kd_fit[2] = { NAN, NAN }, kd0 = NAN, ks0 = NAN, sd_ks = NAN, sd_kd = NAN;
@@ -322,9 +322,9 @@ TEST(verify_prior_pulled_along_correlation)
         }
         verify_options_t opt = verify_defaults();
         verify_view_t *views[2];
-        for (int a = 0; a < 2; a++) views[a] = verify_view_new(sc, verify_lab_camera(L), ang[a], verify_lab_lamps(L), mats, &opt);
+        for (int a = 0; a < 2; a++) views[a] = verify_view_new(sc, eval_lab_camera(L), ang[a], eval_lab_lamps(L), mats, &opt);
         verify_result_t r;
-        bool ok = verify_run(sc, &pr, verify_lab_camera(L), 1, verify_lab_lamps(L), verify_lab_A(L), im, 2, views, &opt, &r);
+        bool ok = verify_run(sc, &pr, eval_lab_camera(L), 1, eval_lab_lamps(L), eval_lab_A(L), im, 2, views, &opt, &r);
         CHECK_MSG(ok, "verify_run: %s", model_last_error());
         for (int k = 0; ok && k < sc->nmaterials; k++)
             if (!strcmp(sc->material_names[k], "plywood")) {
@@ -345,7 +345,7 @@ TEST(verify_prior_pulled_along_correlation)
               "%.3g)", kd_fit[1], kd_fit[0], pred);
     model_scene_free(sc);
     for (int a = 0; a < 2; a++) free(img[a]);
-    verify_lab_free(L);
+    eval_lab_free(L);
 }
 
 // Non-identifiable parameters held with a stated interval: ggx2 fitted to

@@ -21,14 +21,14 @@ static double v3dot(model_vec3_t a, model_vec3_t b) { return a.x * b.x + a.y * b
 
 #define NANG 4
 static const double angles[NANG] = { 0, 90, 180, 270 };
-static verify_lab_t *lab;
+static eval_lab_t *lab;
 
-static verify_lab_t *get_lab(void)
+static eval_lab_t *get_lab(void)
 {
     if (lab) return lab;
     char truth[4096];
     snprintf(truth, sizeof truth, "%s/examples/virtual-truth.ini", test_srcdir());
-    lab = verify_lab_open(truth, "t_stiffener", angles, NANG, 6000, 0, false);
+    lab = eval_lab_open(truth, "t_stiffener", angles, NANG, 6000, 0, false);
     CHECK_MSG(lab != NULL, "lab: %s", model_last_error());
     return lab;
 }
@@ -40,11 +40,11 @@ typedef struct {
 
 static void images_make(images_t *I, const double *lamp_scale, double kc_scale, uint64_t seed)
 {
-    verify_lab_t *L = get_lab();
-    int W = verify_lab_width(L), H = verify_lab_height(L);
+    eval_lab_t *L = get_lab();
+    int W = eval_lab_width(L), H = eval_lab_height(L);
     for (int a = 0; a < NANG; a++) {
         I->img[a] = malloc((size_t)W * H * sizeof(float));
-        CHECK(verify_lab_image(L, a, 0xf, lamp_scale, kc_scale, seed * 16 + a, I->img[a]));
+        CHECK(eval_lab_image(L, a, 0xf, lamp_scale, kc_scale, seed * 16 + a, I->img[a]));
         verify_image_t *m = &I->im[a];
         memset(m, 0, sizeof *m);
         snprintf(m->name, sizeof m->name, "view%d", a);
@@ -65,7 +65,7 @@ static void images_free(images_t *I)
 static bool run_desc(const model_stiffener_t *d, const images_t *I, const verify_options_t *opt,
                      const verify_priors_t *pr, verify_result_t *res)
 {
-    verify_lab_t *L = get_lab();
+    eval_lab_t *L = get_lab();
     model_scene_t *sc = model_stiffener_scene(d, "desc");
     CHECK(sc != NULL);
     if (!sc) return false;
@@ -81,10 +81,10 @@ static bool run_desc(const model_stiffener_t *d, const images_t *I, const verify
     }
     verify_view_t *views[NANG];
     for (int a = 0; a < NANG; a++) {
-        views[a] = verify_view_new(sc, verify_lab_camera(L), angles[a], verify_lab_lamps(L), mats, opt);
+        views[a] = verify_view_new(sc, eval_lab_camera(L), angles[a], eval_lab_lamps(L), mats, opt);
         CHECK(views[a] != NULL);
     }
-    bool ok = verify_run(sc, pr, verify_lab_camera(L), 1, verify_lab_lamps(L), verify_lab_A(L), I->im, NANG,
+    bool ok = verify_run(sc, pr, eval_lab_camera(L), 1, eval_lab_lamps(L), eval_lab_A(L), I->im, NANG,
                          views, opt, res);
     CHECK_MSG(ok, "verify_run: %s", model_last_error());
     for (int a = 0; a < NANG; a++) verify_view_free(views[a]);
@@ -94,7 +94,7 @@ static bool run_desc(const model_stiffener_t *d, const images_t *I, const verify
 
 static void truth_priors(verify_priors_t *pr)
 {
-    const model_materials_t *m = verify_lab_materials(get_lab());
+    const model_materials_t *m = eval_lab_materials(get_lab());
     CHECK(verify_priors_add(pr, model_materials_find(m, "plywood"), 0.1, 1e-4, 3));
     CHECK(verify_priors_add(pr, model_materials_find(m, "painted_steel"), 0.1, 1e-4, 3));
 }
@@ -178,7 +178,7 @@ TEST(verify_follows_lamp_and_gain_drift)
         CHECK_REL(fit_mean * kd, true_mean * 0.16, 0.03);
         CHECK(r.all.median_abs_z < 1);
         // the lamps off in every image (0xf: the fifth and on) are held, not fitted; the lit ones are fitted
-        const model_lamps_t *ll = verify_lab_lamps(get_lab());
+        const model_lamps_t *ll = eval_lab_lamps(get_lab());
         int off = 0, lit = 0;
         for (int i = 0; i < ll->n; i++) {
             char name[96];
@@ -210,7 +210,7 @@ TEST(verify_swapped_priors_pinned)
 {
     images_t I;
     images_make(&I, NULL, 1, 1);
-    const model_materials_t *m = verify_lab_materials(get_lab());
+    const model_materials_t *m = eval_lab_materials(get_lab());
     model_material_t ply = *model_materials_find(m, "plywood"), st = *model_materials_find(m, "painted_steel");
     snprintf(ply.name, sizeof ply.name, "painted_steel");
     snprintf(st.name, sizeof st.name, "plywood");
@@ -223,7 +223,7 @@ TEST(verify_swapped_priors_pinned)
     model_scene_t *sc = model_stiffener_scene(&d0, "t");
     if (run_desc(&d0, &I, &opt, &pr, &r)) {
         CHECK_MSG(r.npinned >= 2, "%d pinned", r.npinned);
-        json_t *j = verify_result_json(&r, sc, I.im, verify_lab_lamps(get_lab()), &opt);
+        json_t *j = verify_result_json(&r, sc, I.im, eval_lab_lamps(get_lab()), &opt);
         char *txt = json_dumps(j, 0);
         CHECK_CONTAINS(txt, "pinned at its bound");
         free(txt);
@@ -333,9 +333,9 @@ TEST(verify_workpiece_generator)
 // outputs carry units and provenance.
 static char *write_inputs(const images_t *I, char **gain_dir, char **priors)
 {
-    verify_lab_t *L = get_lab();
-    int W = verify_lab_width(L), H = verify_lab_height(L);
-    const verify_camera_t *vc = verify_lab_camera(L);
+    eval_lab_t *L = get_lab();
+    int W = eval_lab_width(L), H = eval_lab_height(L);
+    const verify_camera_t *vc = eval_lab_camera(L);
     GString *list = g_string_new("");
     uint16_t *pix = malloc((size_t)W * H * sizeof *pix);
     for (int a = 0; a < NANG; a++) {
@@ -379,8 +379,8 @@ static int run_verify(const char *scene, char **imgs, const char *gain, const ch
                       char **out, char **err, const char *extra, const char *extra2)
 {
     char kc[64];
-    verify_lab_t *L = get_lab();
-    snprintf(kc, sizeof kc, "%.12g", verify_lab_A(L)[0] / verify_lab_lamps(L)->lamps[0].intensity);
+    eval_lab_t *L = get_lab();
+    snprintf(kc, sizeof kc, "%.12g", eval_lab_A(L)[0] / eval_lab_lamps(L)->lamps[0].intensity);
     char cam[4096], lamps[4096];
     snprintf(cam, sizeof cam, "%s/examples/camera.cameramodel", test_srcdir());
     snprintf(lamps, sizeof lamps, "%s/examples/lamps.ini", test_srcdir());
@@ -529,7 +529,7 @@ TEST(verify_cli_errors)
     const char *cam2 = test_write("small.cameramodel", ct ? ct : "");
     free(ct);
     char kc[64];
-    snprintf(kc, sizeof kc, "%.12g", verify_lab_A(get_lab())[0] / verify_lab_lamps(get_lab())->lamps[0].intensity);
+    snprintf(kc, sizeof kc, "%.12g", eval_lab_A(get_lab())[0] / eval_lab_lamps(get_lab())->lamps[0].intensity);
     char lamps[4096];
     snprintf(lamps, sizeof lamps, "%s/examples/lamps.ini", test_srcdir());
     int rc = test_refl_run(120, &out, &err, "verify", t, "--images", imgs[0], "--cameras", cam2, "--lamps", lamps,
@@ -782,34 +782,34 @@ TEST(verify_model_matches_rig_at_truth)
 // second camera's images are 8 % more sensitive; the fit finds the ratio.
 TEST(verify_two_cameras)
 {
-    verify_lab_t *L = get_lab();
-    int W = verify_lab_width(L), H = verify_lab_height(L);
+    eval_lab_t *L = get_lab();
+    int W = eval_lab_width(L), H = eval_lab_height(L);
     images_t I;
     images_make(&I, NULL, 1, 5);
     // views 1 and 3 again, from "camera B" with kc x 1.08
     float *b1 = malloc((size_t)W * H * sizeof(float)), *b3 = malloc((size_t)W * H * sizeof(float));
-    CHECK(verify_lab_image(L, 1, 0xf, NULL, 1.08, 501, b1));
-    CHECK(verify_lab_image(L, 3, 0xf, NULL, 1.08, 503, b3));
+    CHECK(eval_lab_image(L, 1, 0xf, NULL, 1.08, 501, b1));
+    CHECK(eval_lab_image(L, 3, 0xf, NULL, 1.08, 503, b3));
     verify_image_t im[NANG];
     memcpy(im, I.im, sizeof im);
     im[1].P = b1;
     im[1].camera = 1;
     im[3].P = b3;
     im[3].camera = 1;
-    verify_camera_t cams[2] = { *verify_lab_camera(L), *verify_lab_camera(L) };
+    verify_camera_t cams[2] = { *eval_lab_camera(L), *eval_lab_camera(L) };
     snprintf(cams[1].name, sizeof cams[1].name, "B");
     verify_priors_t pr = { 0 };
     truth_priors(&pr);
     verify_options_t opt = verify_defaults();
     model_stiffener_t d0 = model_stiffener_default();
     model_scene_t *sc = model_stiffener_scene(&d0, "t");
-    const model_materials_t *mm = verify_lab_materials(L);
+    const model_materials_t *mm = eval_lab_materials(L);
     const model_material_t *mats[2] = { model_materials_find(mm, "plywood"), model_materials_find(mm, "painted_steel") };
     verify_view_t *views[NANG];
     for (int a = 0; a < NANG; a++)
-        views[a] = verify_view_new(sc, &cams[im[a].camera], angles[a], verify_lab_lamps(L), mats, &opt);
+        views[a] = verify_view_new(sc, &cams[im[a].camera], angles[a], eval_lab_lamps(L), mats, &opt);
     verify_result_t r;
-    if (verify_run(sc, &pr, cams, 2, verify_lab_lamps(L), verify_lab_A(L), im, NANG, views, &opt, &r)) {
+    if (verify_run(sc, &pr, cams, 2, eval_lab_lamps(L), eval_lab_A(L), im, NANG, views, &opt, &r)) {
         CHECK(r.correct);
         CHECK_REL(r.kc[1] / r.kc[0], 1.08, 0.01);
         bool named = false;
@@ -1097,10 +1097,10 @@ TEST(verify_two_camera_session)
 // predicts the rig's frames on the plate's top at the truth within 2 % (as
 // verify_model_matches_rig_at_truth on isotropic lamps); given the same lamps
 // as isotropic, it is off by far more.
-static double plate_bias(verify_lab_t *L, const model_lamps_t *lamps, const images_t *I)
+static double plate_bias(eval_lab_t *L, const model_lamps_t *lamps, const images_t *I)
 {
     verify_priors_t pr = { 0 };
-    const model_materials_t *m = verify_lab_materials(L);
+    const model_materials_t *m = eval_lab_materials(L);
     CHECK(verify_priors_add(&pr, model_materials_find(m, "plywood"), 0.1, 1e-4, 3));
     CHECK(verify_priors_add(&pr, model_materials_find(m, "painted_steel"), 0.1, 1e-4, 3));
     verify_options_t opt = verify_defaults();
@@ -1118,10 +1118,10 @@ static double plate_bias(verify_lab_t *L, const model_lamps_t *lamps, const imag
         mats[k] = &mm[k];
     }
     verify_view_t *views[NANG] = { 0 };
-    for (int a = 0; sc && a < NANG; a++) views[a] = verify_view_new(sc, verify_lab_camera(L), angles[a], lamps, mats, &opt);
+    for (int a = 0; sc && a < NANG; a++) views[a] = verify_view_new(sc, eval_lab_camera(L), angles[a], lamps, mats, &opt);
     verify_result_t r;
     double worst = INFINITY;
-    if (sc && verify_run(sc, &pr, verify_lab_camera(L), 1, lamps, verify_lab_A(L), I->im, NANG, views, &opt, &r)) {
+    if (sc && verify_run(sc, &pr, eval_lab_camera(L), 1, lamps, eval_lab_A(L), I->im, NANG, views, &opt, &r)) {
         double sr[20] = { 0 };
         int nb[20] = { 0 };
         for (int k = 0; k < r.npoints; k++) {
@@ -1185,14 +1185,14 @@ TEST(verify_lamp_emission_pattern)
     free(text);
     model_lamps_free(tl);
     model_ini_free(ti);
-    verify_lab_t *L = verify_lab_open(tp, "t_stiffener", angles, NANG, 6000, 0, false);
+    eval_lab_t *L = eval_lab_open(tp, "t_stiffener", angles, NANG, 6000, 0, false);
     CHECK_MSG(L != NULL, "lab: %s", model_last_error());
     if (!L) return;
     images_t I;
-    int W = verify_lab_width(L), H = verify_lab_height(L);
+    int W = eval_lab_width(L), H = eval_lab_height(L);
     for (int a = 0; a < NANG; a++) {
         I.img[a] = malloc((size_t)W * H * sizeof(float));
-        CHECK(verify_lab_image(L, a, 0xf, NULL, 1, 16 + a, I.img[a]));
+        CHECK(eval_lab_image(L, a, 0xf, NULL, 1, 16 + a, I.img[a]));
         verify_image_t *m = &I.im[a];
         memset(m, 0, sizeof *m);
         snprintf(m->name, sizeof m->name, "view%d", a);
@@ -1203,7 +1203,7 @@ TEST(verify_lamp_emission_pattern)
         m->lamps_on = 0xf;
         m->exposure_us = 6000;
     }
-    const model_lamps_t *lp = verify_lab_lamps(L);
+    const model_lamps_t *lp = eval_lab_lamps(L);
     CHECK(lp->lamps[0].emission_cos_power == 4.8);
     model_lamp_t iso[32];
     model_lamps_t li = *lp;
@@ -1219,7 +1219,7 @@ TEST(verify_lamp_emission_pattern)
     CHECK_MSG(with < 0.02, "with the patterns the plate is %.2f %% off", 100 * with);
     CHECK_MSG(without > 0.05, "as isotropic lamps the plate is only %.2f %% off", 100 * without);
     images_free(&I);
-    verify_lab_free(L);
+    eval_lab_free(L);
 }
 
 // The stated sigma from the priors' window_rel_std (the window spread the

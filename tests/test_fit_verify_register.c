@@ -21,12 +21,12 @@ typedef struct {
     verify_image_t im[NANG];
 } images_t;
 
-static void images_make(verify_lab_t *L, int place, uint64_t seed, images_t *I)
+static void images_make(eval_lab_t *L, int place, uint64_t seed, images_t *I)
 {
-    int W = verify_lab_width(L), H = verify_lab_height(L);
+    int W = eval_lab_width(L), H = eval_lab_height(L);
     for (int a = 0; a < NANG; a++) {
         I->img[a] = malloc((size_t)W * H * sizeof(float));
-        CHECK(I->img[a] && verify_lab_image_placed(L, place, a, 0xf, NULL, 1, seed * 16 + a, I->img[a]));
+        CHECK(I->img[a] && eval_lab_image_placed(L, place, a, 0xf, NULL, 1, seed * 16 + a, I->img[a]));
         verify_image_t *m = &I->im[a];
         memset(m, 0, sizeof *m);
         snprintf(m->name, sizeof m->name, "place%d_view%d", place, a);
@@ -45,7 +45,7 @@ static void images_free(images_t *I)
 }
 
 // Verify scene (as placed by p, or as given when p is NULL) on images I: the score (NAN: failed).
-static double verify_at(verify_lab_t *L, const model_scene_t *scene, const verify_placement_t *p, const images_t *I,
+static double verify_at(eval_lab_t *L, const model_scene_t *scene, const verify_placement_t *p, const images_t *I,
                         const verify_priors_t *pr, const model_material_t *const *mats)
 {
     model_scene_t *sc = p ? verify_placed_scene(scene, p) : NULL;
@@ -56,9 +56,9 @@ static double verify_at(verify_lab_t *L, const model_scene_t *scene, const verif
     double score = NAN;
     bool ok = use != NULL;
     for (int a = 0; a < NANG && ok; a++)
-        ok = (views[a] = verify_view_new(use, verify_lab_camera(L), angles[a], verify_lab_lamps(L), mats, &opt)) != NULL;
+        ok = (views[a] = verify_view_new(use, eval_lab_camera(L), angles[a], eval_lab_lamps(L), mats, &opt)) != NULL;
     verify_result_t r;
-    if (ok && verify_run(use, pr, verify_lab_camera(L), 1, verify_lab_lamps(L), verify_lab_A(L), I->im, NANG, views,
+    if (ok && verify_run(use, pr, eval_lab_camera(L), 1, eval_lab_lamps(L), eval_lab_A(L), I->im, NANG, views,
                          &opt, &r)) {
         score = r.score;
         verify_result_free(&r);
@@ -73,18 +73,18 @@ TEST_LONG(verify_register_placed_part_passes_wrong_part_fails)
 {
     char truth[4096];
     snprintf(truth, sizeof truth, "%s/examples/virtual-truth.ini", test_srcdir());
-    verify_lab_t *L = verify_lab_open(truth, "t_stiffener", angles, NANG, 6000, 0, false);
+    eval_lab_t *L = eval_lab_open(truth, "t_stiffener", angles, NANG, 6000, 0, false);
     CHECK_MSG(L != NULL, "%s", model_last_error());
     if (!L) return;
     // placed off: 1 deg about its centre, 2 mm along 30 deg from x
     const double turn = 1, dx = 2 * cos(M_PI / 6), dy = 2 * sin(M_PI / 6);
-    int place = verify_lab_add_placement(L, turn, dx, dy, false);
+    int place = eval_lab_add_placement(L, turn, dx, dy, false);
     CHECK_MSG(place == 1, "%s", model_last_error());
     images_t nominal, placed;
     images_make(L, 0, 3, &nominal);
     images_make(L, place, 3, &placed);
     verify_priors_t pr = { 0 };
-    const model_materials_t *mm = verify_lab_materials(L);
+    const model_materials_t *mm = eval_lab_materials(L);
     const model_material_t *ply = model_materials_find(mm, "plywood"), *st = model_materials_find(mm, "painted_steel");
     CHECK(ply && st && verify_priors_add(&pr, ply, 0.1, 1e-4, 3) && verify_priors_add(&pr, st, 0.1, 1e-4, 3));
     const model_material_t *mats[2] = { ply, st };
@@ -97,7 +97,7 @@ TEST_LONG(verify_register_placed_part_passes_wrong_part_fails)
 
     // the placed part: registered where it lies, and then correct (not at the nominal pose)
     verify_placement_t p;
-    bool ok = verify_register(correct, verify_lab_camera(L), verify_lab_lamps(L), verify_lab_A(L), mats, placed.im,
+    bool ok = verify_register(correct, eval_lab_camera(L), eval_lab_lamps(L), eval_lab_A(L), mats, placed.im,
                               NANG, 3, 2, &p);
     CHECK_MSG(ok, "%s", model_last_error());
     fprintf(stderr, "  placed 2 mm / 1 deg off: registered (%.3f, %.3f) mm, %.3f deg (truth (%.3f, %.3f), %.3f); "
@@ -115,7 +115,7 @@ TEST_LONG(verify_register_placed_part_passes_wrong_part_fails)
 
     // the part in place: registered near (0, 0, 0)
     verify_placement_t p0;
-    CHECK(verify_register(correct, verify_lab_camera(L), verify_lab_lamps(L), verify_lab_A(L), mats, nominal.im, NANG,
+    CHECK(verify_register(correct, eval_lab_camera(L), eval_lab_lamps(L), eval_lab_A(L), mats, nominal.im, NANG,
                           3, 2, &p0));
     fprintf(stderr, "  in place: registered (%.3f, %.3f) mm, %.3f deg\n", p0.dx_mm, p0.dy_mm, p0.turn_deg);
     CHECK(fabs(p0.dx_mm) < 0.1 && fabs(p0.dy_mm) < 0.1 && fabs(p0.turn_deg) < 0.05);
@@ -126,7 +126,7 @@ TEST_LONG(verify_register_placed_part_passes_wrong_part_fails)
     // that of the unregistered fit, above the right part's (the default threshold itself does
     // not catch 2 mm: the study's 1 % false-alarm threshold does)
     verify_placement_t ps;
-    CHECK(verify_register(shifted, verify_lab_camera(L), verify_lab_lamps(L), verify_lab_A(L), mats, nominal.im, NANG,
+    CHECK(verify_register(shifted, eval_lab_camera(L), eval_lab_lamps(L), eval_lab_A(L), mats, nominal.im, NANG,
                           3, 2, &ps));
     double s_wrong = verify_at(L, shifted, &ps, &nominal, &pr, mats), s_unreg = verify_at(L, shifted, NULL, &nominal,
                                                                                         &pr, mats);
@@ -140,7 +140,7 @@ TEST_LONG(verify_register_placed_part_passes_wrong_part_fails)
 
     // no tolerance: nothing registered
     verify_placement_t pz;
-    CHECK(verify_register(correct, verify_lab_camera(L), verify_lab_lamps(L), verify_lab_A(L), mats, placed.im, NANG,
+    CHECK(verify_register(correct, eval_lab_camera(L), eval_lab_lamps(L), eval_lab_A(L), mats, placed.im, NANG,
                           0, 0, &pz));
     CHECK(pz.dx_mm == 0 && pz.dy_mm == 0 && pz.turn_deg == 0 && pz.nsamples == 0);
 
@@ -149,5 +149,5 @@ TEST_LONG(verify_register_placed_part_passes_wrong_part_fails)
     verify_priors_free(&pr);
     images_free(&nominal);
     images_free(&placed);
-    verify_lab_free(L);
+    eval_lab_free(L);
 }

@@ -162,17 +162,17 @@ TEST(verify_run_prepared_equals_reference)
     char truth[4096];
     snprintf(truth, sizeof truth, "%s/examples/virtual-truth.ini", test_srcdir());
     const double angle = 30;
-    verify_lab_t *L = verify_lab_open(truth, "t_stiffener", &angle, 1, 6000, 0, false);
+    eval_lab_t *L = eval_lab_open(truth, "t_stiffener", &angle, 1, 6000, 0, false);
     CHECK_MSG(L != NULL, "%s", model_last_error());
     if (!L) return;
-    int W = verify_lab_width(L), H = verify_lab_height(L);
+    int W = eval_lab_width(L), H = eval_lab_height(L);
     float *img = malloc((size_t)W * H * sizeof(float));
-    CHECK(img && verify_lab_image(L, 0, 0xf, NULL, 1, 7, img));
+    CHECK(img && eval_lab_image(L, 0, 0xf, NULL, 1, 7, img));
     verify_image_t im = { .P = img, .W = W, .H = H, .camera = 0, .angle_deg = angle, .lamps_on = 0xf,
                           .exposure_us = 6000 };
     snprintf(im.name, sizeof im.name, "speed");
     verify_priors_t pr = { 0 };
-    const model_materials_t *mm = verify_lab_materials(L);
+    const model_materials_t *mm = eval_lab_materials(L);
     const model_material_t *ply = model_materials_find(mm, "plywood"), *st = model_materials_find(mm, "painted_steel");
     CHECK(ply && st && verify_priors_add(&pr, ply, 0.1, 1e-4, 3) && verify_priors_add(&pr, st, 0.1, 1e-4, 3));
     const model_material_t *mats[2] = { ply, st };
@@ -185,7 +185,7 @@ TEST(verify_run_prepared_equals_reference)
         model_scene_t *sc = model_stiffener_scene(&d, "t_stiffener");
         verify_options_t opt = verify_defaults();
         opt.threads = 1;
-        verify_view_t *v = sc ? verify_view_new(sc, verify_lab_camera(L), angle, verify_lab_lamps(L), mats, &opt) : NULL;
+        verify_view_t *v = sc ? verify_view_new(sc, eval_lab_camera(L), angle, eval_lab_lamps(L), mats, &opt) : NULL;
         CHECK_MSG(v != NULL, "%s", model_last_error());
         for (int k = 0; v && k < 4; k++) {
             opt.use_priors = k < 2;
@@ -198,7 +198,7 @@ TEST(verify_run_prepared_equals_reference)
                 // configuration and description (bit for bit as 0)
                 opt.reference_eval = ref == 1;
                 im.windows = ref == 2 ? win : NULL;
-                ok[ref] = verify_run(sc, &pr, verify_lab_camera(L), 1, verify_lab_lamps(L), verify_lab_A(L), &im, 1, &v,
+                ok[ref] = verify_run(sc, &pr, eval_lab_camera(L), 1, eval_lab_lamps(L), eval_lab_A(L), &im, 1, &v,
                                      &opt, &r[ref]);
             }
             CHECK_MSG(ok[0] && ok[1] && ok[2], "%s", model_last_error());
@@ -240,5 +240,5 @@ TEST(verify_run_prepared_equals_reference)
     verify_windows_free(win);
     verify_priors_free(&pr);
     free(img);
-    verify_lab_free(L);
+    eval_lab_free(L);
 }

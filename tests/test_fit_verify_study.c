@@ -337,3 +337,64 @@ TEST_LONG(verify_study_registered_placement_sharded)
     g_free(pm);
     for (int k = 0; k < 3; k++) g_free(dir[k]);
 }
+
+// A shard of one case (one configuration, the correct description and one
+// corruption) in DIR: study.json with the design (head: what precedes it,
+// e.g. its format and version) and study.csv.
+static const char *tiny_shard(const char *dir, const char *head)
+{
+    const char *d = test_path(dir);
+    g_mkdir_with_parents(d, 0755);
+    char *j = g_strdup_printf("%s/study.json", d), *c = g_strdup_printf("%s/study.csv", d);
+    char *text = g_strdup_printf("{%s\"design\": {\"cases\": 1, \"configurations\": [\"priors\"], \"descriptions\": "
+                                 "[{\"description\": \"correct\", \"expected\": \"correct\"}, {\"description\": "
+                                 "\"missing\", \"expected\": \"wrong\"}]}}", head);
+    CHECK(g_file_set_contents(j, text, -1, NULL));
+    CHECK(g_file_set_contents(c, "config,description,expected,case,score,verdict_correct,rms_z,median_abs_z\n"
+                                 "priors,correct,correct,0,1.5,1,1.02,0.7\n"
+                                 "priors,missing,wrong,0,900,1,3.5,2.1\n", -1, NULL));
+    g_free(text);
+    g_free(j);
+    g_free(c);
+    return d;
+}
+
+// study.json names its format: a shard without "format" and "version" reads
+// as version 1 and merges (merged_from records the version), the merged
+// study.json says refl-study 1; a newer version or another format is refused
+// with both named.
+TEST(verify_study_merge_format_versions)
+{
+    char *err = NULL, *out1 = g_strdup(test_path("out1")), *out2 = g_strdup(test_path("out2"));
+    char *v1 = g_strdup(tiny_shard("v1", ""));
+    const char *a1[] = { "--study-merge", v1, "-o", out1, "--no-report", NULL };
+    int rc = verify(&err, a1);
+    CHECK_MSG(rc == 0, "%s", err);
+    g_free(err);
+    char *p = g_strdup_printf("%s/study.json", out1);
+    json_t *doc = json_load_file(p, 0, NULL);
+    CHECK(doc && !g_strcmp0(json_string_value(json_object_get(doc, "format")), "refl-study") &&
+          json_integer_value(json_object_get(doc, "version")) == 1 && json_is_true(json_object_get(doc, "complete")));
+    json_t *from = json_object_get(json_object_get(doc, "provenance"), "merged_from");
+    CHECK(json_integer_value(json_object_get(json_array_get(from, 0), "version")) == 1);
+    json_decref(doc);
+    g_free(p);
+    char *v2 = g_strdup(tiny_shard("v2", "\"format\": \"refl-study\", \"version\": 2, "));
+    const char *a2[] = { "--study-merge", v2, "-o", out2, "--no-report", NULL };
+    rc = verify(&err, a2);
+    CHECK(rc != 0);
+    CHECK_CONTAINS(err, "refl-study version 2");
+    CHECK_CONTAINS(err, "versions 1 to 1");
+    g_free(err);
+    char *other = g_strdup(tiny_shard("other", "\"format\": \"refl-chain\", \"version\": 1, "));
+    const char *a3[] = { "--study-merge", other, "-o", out2, "--no-report", NULL };
+    rc = verify(&err, a3);
+    CHECK(rc != 0);
+    CHECK_CONTAINS(err, "a refl-chain file, not refl-study");
+    g_free(err);
+    g_free(v1);
+    g_free(v2);
+    g_free(other);
+    g_free(out1);
+    g_free(out2);
+}

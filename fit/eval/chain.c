@@ -37,12 +37,12 @@ static void add(chain_t *c, const char *group, const char *name, double value, d
     double err = value - truth, z = err / sigma;
     json_object_set_new(e, "name", json_string(name));
     json_object_set_new(e, "group", json_string(group));
-    json_object_set_new(e, "value", isfinite(value) ? json_real(value) : json_null());
-    json_object_set_new(e, "truth", isfinite(truth) ? json_real(truth) : json_null());
-    json_object_set_new(e, "sigma", isfinite(sigma) && sigma > 0 ? json_real(sigma) : json_null());
+    json_object_set_new(e, "value", model_json_number(value));
+    json_object_set_new(e, "truth", model_json_number(truth));
+    json_object_set_new(e, "sigma", sigma > 0 ? model_json_number(sigma) : json_null());
     json_object_set_new(e, "unit", json_string(unit));
-    json_object_set_new(e, "error", isfinite(err) ? json_real(err) : json_null());
-    json_object_set_new(e, "z", isfinite(z) && sigma > 0 ? json_real(z) : json_null());
+    json_object_set_new(e, "error", model_json_number(err));
+    json_object_set_new(e, "z", sigma > 0 ? model_json_number(z) : json_null());
     if (note && *note) json_object_set_new(e, "note", json_string(note));
     json_array_append_new(c->entries, e);
 }
@@ -306,7 +306,7 @@ static void chain_gain(chain_t *c, const json_t *g)
     json_array_foreach(jt, i, x) if (nt < 256 && json_is_number(x)) dt[nt++] = json_number_value(x);
     if (model_sensor_from_ini(c->ini, &ts)) {
         if (!model_sensor_dark_measurand(&ts, NULL, 0, &rn_m, NULL)) rn_m = NAN;
-        if (!model_sensor_dark_measurand(&ts, dt, nt, NULL, &dc_m)) dc_m = NAN;   // (an older gain.json: none)
+        if (!model_sensor_dark_measurand(&ts, dt, nt, NULL, &dc_m)) dc_m = NAN;   // (no dark_exposures_us: none)
     }
     for (i = 0; i < sizeof k / sizeof k[0]; i++) {
         char name[96], note[600];
@@ -471,6 +471,7 @@ static bool chain_material_best_fit(chain_t *c, const json_t *m, const model_mat
     fit_mixture_t mix = { 2, mats, wts };
     fit_samples_t *s = !rough || store ? fit_samples_ngan(fit_mixture_R, &mix, 2) : NULL;
     fit_brdf_result_t *best = malloc(sizeof *best);
+    if (!best) model_error_set(NULL, 0, "out of memory");
     fit_brdf_options_t o = fit_brdf_defaults();
     bool ok = s && best && fit_brdf(s, (model_brdf_t)model, &o, best);
     if (ok) {
@@ -652,7 +653,7 @@ static json_t *summary(const json_t *entries)
     return s;
 }
 
-json_t *fit_chain_compare(const char *dir, const char *truth_path, json_t *prov)
+json_t *eval_chain_compare(const char *dir, const char *truth_path, json_t *prov)
 {
     chain_t c = { .dir = dir, .prov = prov };
     c.truth = rig_truth_load(truth_path);
@@ -684,6 +685,7 @@ json_t *fit_chain_compare(const char *dir, const char *truth_path, json_t *prov)
     json_decref(gj);
     json_decref(wj);
     doc = json_object();
+    model_json_set_format(doc, "refl-chain", 1);
     json_object_set_new(doc, "chain", json_string("refl chain: the lab day's calibrated and fitted figures against "
                                                   "the truth of the virtual rig it ran on"));
     json_object_set_new(doc, "dir", json_string(dir));

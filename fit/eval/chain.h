@@ -4,7 +4,8 @@
 // truth file of the virtual rig it ran on, with the uncertainty refl states
 // for it, into DIR/chain.json (refl chain). The one owner of chain.json.
 //
-// chain.json: {"chain": "...", "truth": path, "dir": path,
+// chain.json (format "refl-chain", version 1): {"format", "version",
+//   "chain": "...", "truth": path, "dir": path,
 //   "units_and_conventions": {...},
 //   "entries": [{"name", "group", "value", "truth", "sigma", "unit", "error",
 //                "z", "note"}...],
@@ -29,9 +30,9 @@ extern "C" {
 // when dir has no calibration to compare (calib/geometry/geometry.json) or
 // the truth cannot be read; parts missing from dir are left out with a note
 // in "missing".
-json_t *fit_chain_compare(const char *dir, const char *truth_path, json_t *prov);
+json_t *eval_chain_compare(const char *dir, const char *truth_path, json_t *prov);
 
-int chain_cmd(int argc, char **argv);
+int eval_chain_cmd(int argc, char **argv);
 
 #ifdef __cplusplus
 }

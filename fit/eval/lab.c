@@ -15,9 +15,9 @@
 #include "rig/rig.h"
 #include "rig/virtual/truth.h"
 
-struct verify_lab {
+struct eval_lab {
     rig_virtual_t *v;
-    int W, H, nang, nl, nplace;   // nplace: sets of planes (0: as opened; then each verify_lab_add_placement)
+    int W, H, nang, nl, nplace;   // nplace: sets of planes (0: as opened; then each eval_lab_add_placement)
     double *angles;
     double exposure_us, gain_db, kc_per_us;
     float **L;                 // nplace * nang * nl radiance planes
@@ -40,14 +40,14 @@ static int fail_rig(int r, const char *what)
 }
 
 // The radiance planes of placement set `place` (L->L[place * nang * nl ...]) for the current sample.
-static bool render_planes(verify_lab_t *L, int place, bool verbose)
+static bool render_planes(eval_lab_t *L, int place, bool verbose)
 {
     size_t npx = (size_t)L->W * L->H;
     for (int a = 0; a < L->nang; a++)
         for (int i = 0; i < L->nl; i++) {
             if (verbose)
-                fprintf(stderr, "\rverify lab: rendering %s at %g deg, lamp %s (%d/%d)   ", L->sample, L->angles[a],
-                        L->lamps->lamps[i].name, a * L->nl + i + 1, L->nang * L->nl);
+                model_progress("rendering %s on the virtual rig at %g deg, lamp %s (%d/%d)", L->sample, L->angles[a],
+                               L->lamps->lamps[i].name, a * L->nl + i + 1, L->nang * L->nl);
             float *P = malloc(npx * sizeof(float));
             if (!P) {
                 model_error(NULL, 0, "verify lab: out of memory for the radiance planes");
@@ -60,11 +60,11 @@ static bool render_planes(verify_lab_t *L, int place, bool verbose)
                 return false;
             }
         }
-    if (verbose) fprintf(stderr, "\n");
+    if (verbose) model_progress_end();
     return true;
 }
 
-void verify_lab_free(verify_lab_t *L)
+void eval_lab_free(eval_lab_t *L)
 {
     if (!L) return;
     if (L->L)
@@ -80,11 +80,14 @@ void verify_lab_free(verify_lab_t *L)
     free(L);
 }
 
-verify_lab_t *verify_lab_open(const char *truth_path, const char *sample, const double *angles, int nang,
-                              double exposure_us, double gain_db, bool verbose)
+eval_lab_t *eval_lab_open(const char *truth_path, const char *sample, const double *angles, int nang,
+                          double exposure_us, double gain_db, bool verbose)
 {
-    verify_lab_t *L = calloc(1, sizeof *L);
-    if (!L) return NULL;
+    eval_lab_t *L = calloc(1, sizeof *L);
+    if (!L) {
+        model_error(NULL, 0, "verify lab: out of memory");
+        return NULL;
+    }
     snprintf(L->truth, sizeof L->truth, "%s", truth_path);
     snprintf(L->sample, sizeof L->sample, "%s", sample);
     // several labs may live in one process: each camera its own serial
@@ -125,12 +128,19 @@ verify_lab_t *verify_lab_open(const char *truth_path, const char *sample, const 
     // the flat field's source radiance (for the flat field's mean below)
     bool have_radiance = L->mats && rig_truth_uniform_radiance(truth, "flat_field", &radiance);
     rig_truth_free(truth);
-    if (!have_radiance || !L->angles || !L->L || !L->offset || !L->flat || !L->A) goto fail;
+    if (!L->angles || !L->L || !L->offset || !L->flat || !L->A) {
+        model_error(NULL, 0, "verify lab: out of memory for a %dx%d camera", L->W, L->H);
+        goto fail;
+    }
+    if (!have_radiance) goto fail;
     for (int i = 0; i < L->nl; i++) L->A[i] = L->kc_per_us * L->lamps->lamps[i].intensity;
     memcpy(L->angles, angles, (size_t)nang * sizeof *angles);
     // the flat field and the offset map, as a gain calibration measures them (noise-free here)
     float *tmp = malloc(npx * sizeof(float));
-    if (!tmp) goto fail;
+    if (!tmp) {
+        model_error(NULL, 0, "verify lab: out of memory for a %dx%d camera", L->W, L->H);
+        goto fail;
+    }
     const double flat_us = 20000;
     if ((r = rig_virtual_set_sample(L->v, "flat_field")) ||
         (r = rig_virtual_expected(L->v, 0, 1, flat_us, 0, "Mono12", L->W, L->H, tmp)) ||
@@ -178,19 +188,19 @@ verify_lab_t *verify_lab_open(const char *truth_path, const char *sample, const 
     rig_virtual_pixel_response(L->v, &L->cam.pixel_fill, &L->cam.psf_sigma_px);   // as a PSF calibration finds them
     return L;
 fail:
-    verify_lab_free(L);
+    eval_lab_free(L);
     return NULL;
 }
 
-int                    verify_lab_nlamps(const verify_lab_t *L) { return L->nl; }
-const verify_camera_t *verify_lab_camera(const verify_lab_t *L) { return &L->cam; }
-const model_lamps_t   *verify_lab_lamps(const verify_lab_t *L) { return L->lamps; }
-const double          *verify_lab_A(const verify_lab_t *L) { return L->A; }
-const model_materials_t *verify_lab_materials(const verify_lab_t *L) { return L->mats; }
-int verify_lab_width(const verify_lab_t *L) { return L->W; }
-int verify_lab_height(const verify_lab_t *L) { return L->H; }
+int                    eval_lab_nlamps(const eval_lab_t *L) { return L->nl; }
+const verify_camera_t *eval_lab_camera(const eval_lab_t *L) { return &L->cam; }
+const model_lamps_t   *eval_lab_lamps(const eval_lab_t *L) { return L->lamps; }
+const double          *eval_lab_A(const eval_lab_t *L) { return L->A; }
+const model_materials_t *eval_lab_materials(const eval_lab_t *L) { return L->mats; }
+int eval_lab_width(const eval_lab_t *L) { return L->W; }
+int eval_lab_height(const eval_lab_t *L) { return L->H; }
 
-int verify_lab_add_placement(verify_lab_t *L, double turn_deg, double dx_mm, double dy_mm, bool verbose)
+int eval_lab_add_placement(eval_lab_t *L, double turn_deg, double dx_mm, double dy_mm, bool verbose)
 {
     if (L->nplace >= 32) {
         model_error(NULL, 0, "verify lab: at most 31 placements");
@@ -215,9 +225,9 @@ int verify_lab_add_placement(verify_lab_t *L, double turn_deg, double dx_mm, dou
     return render_planes(L, place, verbose) ? place : -1;
 }
 
-int verify_lab_nplacements(const verify_lab_t *L) { return L->nplace; }
+int eval_lab_nplacements(const eval_lab_t *L) { return L->nplace; }
 
-bool verify_lab_placement_draw(const verify_lab_t *L, int place, double *turn_deg, double *dx_mm, double *dy_mm)
+bool eval_lab_placement_draw(const eval_lab_t *L, int place, double *turn_deg, double *dx_mm, double *dy_mm)
 {
     if (place < 0 || place >= L->nplace) return false;
     *turn_deg = L->draw[place][0];
@@ -226,14 +236,14 @@ bool verify_lab_placement_draw(const verify_lab_t *L, int place, double *turn_de
     return true;
 }
 
-bool verify_lab_image(verify_lab_t *L, int angle_index, uint32_t lamps_on, const double *lamp_scale,
-                      double kc_scale, uint64_t seed, float *out)
+bool eval_lab_image(eval_lab_t *L, int angle_index, uint32_t lamps_on, const double *lamp_scale,
+                    double kc_scale, uint64_t seed, float *out)
 {
-    return verify_lab_image_placed(L, 0, angle_index, lamps_on, lamp_scale, kc_scale, seed, out);
+    return eval_lab_image_placed(L, 0, angle_index, lamps_on, lamp_scale, kc_scale, seed, out);
 }
 
-bool verify_lab_image_placed(verify_lab_t *L, int place, int angle_index, uint32_t lamps_on, const double *lamp_scale,
-                             double kc_scale, uint64_t seed, float *out)
+bool eval_lab_image_placed(eval_lab_t *L, int place, int angle_index, uint32_t lamps_on, const double *lamp_scale,
+                           double kc_scale, uint64_t seed, float *out)
 {
     if (angle_index < 0 || angle_index >= L->nang || place < 0 || place >= L->nplace) {
         model_error(NULL, 0, "verify lab: angle index %d or placement %d out of range", angle_index, place);

@@ -42,7 +42,10 @@ static rig_plan_t *views_plan(const lightplan_lamps_opts_t *o, const lightplan_l
 {
     const int nv = r->nviews;
     rig_plan_t *p = calloc(1, sizeof *p);
-    if (!p) return NULL;
+    if (!p) {
+        model_error_set(NULL, 0, "out of memory");
+        return NULL;
+    }
     snprintf(p->name, sizeof p->name, "%s: lamps and exposure per view (refl plan lamps)", o->sample);
     snprintf(p->notes, sizeof p->notes, "each view lit as refl plan lamps chose it; the command and its inputs "
              "with sha256 are in the comments at the top");

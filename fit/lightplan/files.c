@@ -69,7 +69,7 @@ static json_t *segments_json(const lightplan_segment_t *sg, int n, const model_s
                               face_name(s, g->face_side[0], b0, sizeof b0), "face_side1",
                               face_name(s, g->face_side[1], b1, sizeof b1));
         if (found && measured) {
-            json_object_set_new(e, "sobel_measured_dn", isfinite(measured[k]) ? json_real(measured[k]) : json_null());
+            json_object_set_new(e, "sobel_measured_dn", model_json_number(measured[k]));
             json_object_set_new(e, "found", isfinite(measured[k]) ? json_boolean(found[k]) : json_null());
         }
         json_array_append_new(arr, e);
@@ -165,7 +165,11 @@ static bool load_materials(const lightplan_lamps_opts_t *o, plan_inputs_t *in)
         model_provenance_input(in->prov, "materials", o->materials[k]);
     }
     const verify_prior_t **pm = calloc((size_t)scene->nmaterials + 1, sizeof *pm);
-    bool ok = pm && verify_match_priors(scene, &in->pr, pm);
+    if (!pm) {
+        model_error_set(NULL, 0, "out of memory");
+        return false;
+    }
+    bool ok = verify_match_priors(scene, &in->pr, pm);
     for (int k = 0; ok && k < scene->nmaterials; k++) {
         snprintf(in->mm[k].name, sizeof in->mm[k].name, "%s", pm[k]->name);
         in->mm[k].model = pm[k]->model;
@@ -251,7 +255,7 @@ static bool load_inputs(const lightplan_lamps_opts_t *o, plan_inputs_t *in)
 // The check on the virtual rig
 
 typedef struct {
-    verify_lab_t        *lab;
+    eval_lab_t        *lab;
     int                  map[MAXL_PLAN];   // candidate -> the rig's lamp
     float               *frame;
     bool                *found;
@@ -261,7 +265,7 @@ typedef struct {
 
 static void check_free(plan_check_t *c)
 {
-    verify_lab_free(c->lab);
+    eval_lab_free(c->lab);
     free(c->frame);
     free(c->found);
     free(c->meas);
@@ -275,9 +279,9 @@ static bool check_open(const lightplan_lamps_opts_t *o, const plan_inputs_t *in,
 {
     const lightplan_config_t *b = &res->configs[res->best];
     double angle = o->angle_deg;
-    if (!(c->lab = verify_lab_open(o->check_truth, o->sample, &angle, 1, b->exposure_us, 0, false)))
+    if (!(c->lab = eval_lab_open(o->check_truth, o->sample, &angle, 1, b->exposure_us, 0, false)))
         return false;
-    const model_lamps_t *tl = verify_lab_lamps(c->lab);
+    const model_lamps_t *tl = eval_lab_lamps(c->lab);
     for (int i = 0; i < in->lamps->n; i++) {
         c->map[i] = model_lamps_find(tl, in->lamps->lamps[i].name);
         if (c->map[i] < 0) {
@@ -325,10 +329,11 @@ static json_t *check_config(const lightplan_lamps_opts_t *o, const plan_inputs_t
     uint32_t tm = 0;
     for (int i = 0; i < in->lamps->n; i++)
         if ((m >> i) & 1) tm |= 1u << c->map[i];
-    if (!verify_lab_image(c->lab, 0, tm, NULL, 1, seed, c->frame)) return NULL;
-    lightplan_segments_for(res, m, exposure, &o->opt, c->sg);
-    ck->agreement = lightplan_sobel_check(c->sg, ns, c->frame, res->W, res->H, o->opt.sobel_threshold, c->found,
-                                          c->meas);
+    if (!eval_lab_image(c->lab, 0, tm, NULL, 1, seed, c->frame)) return NULL;
+    if (!lightplan_segments_for(res, m, exposure, &o->opt, c->sg) ||
+        !lightplan_sobel_check(c->sg, ns, c->frame, res->W, res->H, o->opt.sobel_threshold, c->found, c->meas,
+                               &ck->agreement))
+        return NULL;
     ck->exposure_us = exposure;
     ck->judged = ck->agreeing = 0;
     for (int s = 0; s < ns; s++)
@@ -338,7 +343,7 @@ static json_t *check_config(const lightplan_lamps_opts_t *o, const plan_inputs_t
         }
     mask_names(in->lamps, m, ck->lamps, sizeof ck->lamps);
     json_t *e = json_pack("{s:s,s:f,s:o,s:i,s:i}", "lamps", ck->lamps, "exposure_us", exposure, "agreement",
-                          isfinite(ck->agreement) ? json_real(ck->agreement) : json_null(), "segments_judged",
+                          model_json_number(ck->agreement), "segments_judged",
                           ck->judged, "segments_agreeing", ck->agreeing);
     json_object_set_new(e, "segments", segments_json(c->sg, ns, in->scene, c->found, c->meas));
     return e;
@@ -373,7 +378,7 @@ static bool check_virtual(const lightplan_lamps_opts_t *o, plan_inputs_t *in, li
     }
     r->check_agreement = r->check_judged ? (double)agree / r->check_judged : NAN;
     double overall = r->check_agreement;
-    json_object_set_new(*check, "agreement", isfinite(overall) ? json_real(overall) : json_null());
+    json_object_set_new(*check, "agreement", model_json_number(overall));
     json_object_set_new(*check, "target", json_real(0.95));
     json_object_set_new(*check, "rule",
                         json_string("a segment is found when the median, over points every 2 px along it (2 px "
@@ -393,19 +398,21 @@ done:
 // The detector's response to the sensor's noise alone at the object's median
 // signal (the check's rule: the largest |Sobel| of 7 positions across,
 // median along: about 8.7 sigma) into r and the chosen configuration's record.
-static void noise_response(const lightplan_lamps_opts_t *o, const lightplan_sensor_t *sensor,
+// false + message: out of memory.
+static bool noise_response(const lightplan_lamps_opts_t *o, const lightplan_sensor_t *sensor,
                            lightplan_view_t *r, json_t *chosen)
 {
     const lightplan_result_t *res = &r->res;
     double *sv = malloc((size_t)res->W * res->H * sizeof *sv);
+    if (!sv) {
+        model_error_set(NULL, 0, "out of memory");
+        return false;
+    }
     int n = 0;
-    for (size_t p = 0; sv && p < (size_t)res->W * res->H; p += 4)
+    for (size_t p = 0; p < (size_t)res->W * res->H; p += 4)
         if (res->face_id[p] >= 0) sv[n++] = res->predicted[p] - sensor->offset_dn;
     double med = 0;
-    if (n) {
-        qsort(sv, (size_t)n, sizeof *sv, model_cmp_double);
-        med = sv[n / 2];
-    }
+    if (n) med = model_kth(sv, n, n / 2);
     free(sv);
     double sig = sensor->K_dn_per_e > 0
                      ? sqrt(sensor->K_dn_per_e * fmax(med, 0) + pow(sensor->K_dn_per_e * sensor->read_noise_e, 2) +
@@ -416,10 +423,11 @@ static void noise_response(const lightplan_lamps_opts_t *o, const lightplan_sens
     r->threshold_near_noise = isfinite(r->sobel_noise_dn) && o->opt.sobel_threshold < 1.5 * r->sobel_noise_dn;
     json_object_set_new(chosen, "median_object_signal_dn", json_real(med));
     json_object_set_new(chosen, "sobel_noise_response_dn",
-                        isfinite(r->sobel_noise_dn) ? json_real(r->sobel_noise_dn) : json_null());
+                        model_json_number(r->sobel_noise_dn));
+    return true;
 }
 
-// The chosen configuration's record.
+// The chosen configuration's record. NULL + message: out of memory.
 static json_t *chosen_json(const lightplan_lamps_opts_t *o, const plan_inputs_t *in, lightplan_view_t *r)
 {
     const lightplan_config_t *b = &r->res.configs[r->res.best];
@@ -432,7 +440,10 @@ static json_t *chosen_json(const lightplan_lamps_opts_t *o, const plan_inputs_t 
         json_object_set_new(chosen, "note", json_string("no configuration is free of glare and saturation; this one "
                                                         "has the fewest such pixels"));
     json_object_set_new(chosen, "index", json_integer(r->res.best));
-    noise_response(o, &in->sensor, r, chosen);
+    if (!noise_response(o, &in->sensor, r, chosen)) {
+        json_decref(chosen);
+        return NULL;
+    }
     // at the edge of the searched exposures: the best may lie beyond them
     double lo = INFINITY, hi = -INFINITY;
     for (int k = 0; k < o->nexp; k++) lo = fmin(lo, o->exposures_us[k]), hi = fmax(hi, o->exposures_us[k]);
@@ -504,7 +515,7 @@ static json_t *psf_json(const lightplan_lamps_opts_t *o, const plan_inputs_t *in
 {
     const double sig = o->opt.psf_sigma_px, std = in->psf_sigma_std_px;
     json_t *j = json_pack("{s:f,s:o,s:s,s:s,s:s}", "sigma_px", sig, "sigma_std_px",
-                          isfinite(std) ? json_real(std) : json_null(), "source", in->psf_source,
+                          model_json_number(std), "source", in->psf_source,
                           "model", "the step convolved with an isotropic Gaussian of sigma_px (the optics) and "
                           "integrated over the pixel's 1 x 1 px footprint (model_edge_sobel_step)", "phase",
                           "best: the edge through a pixel centre (sigma 0: 4.0 axis-aligned, 4.24 diagonal); the "
@@ -521,12 +532,13 @@ static json_t *psf_json(const lightplan_lamps_opts_t *o, const plan_inputs_t *in
     return j;
 }
 
-// plan.json's document (check: the virtual rig's record or NULL).
+// plan.json's document (check: the virtual rig's record or NULL). NULL + message: out of memory.
 static json_t *plan_json(const lightplan_lamps_opts_t *o, const plan_inputs_t *in, lightplan_view_t *r,
                          json_t *check)
 {
     const lightplan_result_t *res = &r->res;
     json_t *doc = json_object();
+    model_json_set_format(doc, "refl-lightplan", 1);
     json_object_set_new(doc, "scene", json_string(o->scene));
     json_object_set_new(doc, "turntable_deg", json_real(o->angle_deg));
     json_object_set_new(doc, "units_and_conventions",
@@ -539,7 +551,12 @@ static json_t *plan_json(const lightplan_lamps_opts_t *o, const plan_inputs_t *i
                                     "unit contrast of the step blurred by the PSF and the pixel's footprint at the "
                                     "segment's direction (psf: sigma, phase, f axis-aligned and diagonal)"));
     json_object_set_new(doc, "psf", psf_json(o, in));
-    json_object_set_new(doc, "chosen", chosen_json(o, in, r));
+    json_t *chosen = chosen_json(o, in, r);
+    if (!chosen) {
+        json_decref(doc);
+        return NULL;
+    }
+    json_object_set_new(doc, "chosen", chosen);
     json_object_set_new(doc, "warnings", warnings_json(o, r));
     json_object_set_new(doc, "chosen_index", json_integer(res->best));
     tables_json(in, res, doc);
@@ -574,6 +591,7 @@ static bool write_images(const lightplan_lamps_opts_t *o, const plan_inputs_t *i
     model_meta_free(mt);
     g_free(tp);
     float *gm = ok ? malloc((size_t)res->W * res->H * sizeof *gm) : NULL;
+    if (ok && !gm) model_error_set(NULL, 0, "out of memory");
     if (!gm) return false;
     for (size_t p = 0; p < (size_t)res->W * res->H; p++) gm[p] = (float)res->glare[p];
     char *gp = g_strdup_printf("%s/glare.tiff", o->out);
@@ -611,7 +629,7 @@ static bool plan_view(const lightplan_lamps_opts_t *o, plan_inputs_t *in, lightp
     mask_names(in->lamps, v->res.configs[v->res.best].mask, v->chosen, sizeof v->chosen);
     if (o->check_truth && !check_virtual(&ov, in, v, &check)) goto done;
     if (!model_mkdir_p(v->dir)) goto done;
-    doc = plan_json(&ov, in, v, check);
+    if (!(doc = plan_json(&ov, in, v, check))) goto done;
     char *jp = g_strdup_printf("%s/plan.json", v->dir);
     bool wok = model_write_json(jp, doc);
     g_free(jp);
@@ -641,14 +659,15 @@ static bool write_summary(const lightplan_lamps_opts_t *o, const plan_inputs_t *
                               b->detectable_length_px, "usable_points", b->usable_points, "glare_pix", b->glare_pix,
                               "saturated_pix", b->saturated_pix);
         g_free(base);
-        json_object_set_new(e, "check_agreement", v->checked && isfinite(v->check_agreement)
-                                                      ? json_real(v->check_agreement) : json_null());
+        json_object_set_new(e, "check_agreement", v->checked ? model_json_number(v->check_agreement) : json_null());
         json_object_set_new(e, "warnings", warnings_json(o, v));
         json_array_append_new(views, e);
     }
-    json_t *doc = json_pack("{s:s,s:o,s:s,s:o}", "scene", o->scene, "views", views, "capture_plan",
-                            "capture_plan.ini", "capture_plan_binds_to_virtual_rig",
-                            o->check_truth ? json_boolean(r->plan_bound) : json_null());
+    json_t *doc = json_object();
+    model_json_set_format(doc, "refl-lightplan", 1);
+    json_object_update_new(doc, json_pack("{s:s,s:o,s:s,s:o}", "scene", o->scene, "views", views, "capture_plan",
+                                          "capture_plan.ini", "capture_plan_binds_to_virtual_rig",
+                                          o->check_truth ? json_boolean(r->plan_bound) : json_null()));
     json_object_set_new(doc, "provenance", json_incref((json_t *)in->prov));
     char *jp = g_strdup_printf("%s/plan.json", o->out);
     bool ok = model_write_json(jp, doc);

@@ -11,6 +11,12 @@
 
 #define MAXL MAXL_PLAN
 
+static bool no_memory(void)
+{
+    model_error(NULL, 0, "light planning: out of memory");
+    return false;
+}
+
 lightplan_options_t lightplan_defaults(void)
 {
     return (lightplan_options_t){
@@ -44,16 +50,17 @@ static double sobel_factor(const double q0[2], const double q1[2], double psf_si
     return model_edge_sobel_step(normal, psf_sigma_px).best;
 }
 
-void lightplan_segments_for(const lightplan_result_t *r, uint32_t mask, double exposure_us,
+bool lightplan_segments_for(const lightplan_result_t *r, uint32_t mask, double exposure_us,
                             const lightplan_options_t *opt, lightplan_segment_t *segs)
 {
     double *v = malloc((size_t)(r->npoints ? r->npoints : 1) * sizeof *v);
+    if (!v) return no_memory();
     for (int s = 0; s < r->nsegments; s++) {
         lightplan_segment_t *g = &segs[s];
         *g = r->segments[s];
         int a = r->seg_first[s], n = r->seg_first[s + 1] - a;
         double f = g->sobel_factor, sum = 0;
-        for (int k = 0; k < n && v; k++) {
+        for (int k = 0; k < n; k++) {
             double d = 0;
             for (int i = 0; i < r->nlamps; i++)
                 if ((mask >> i) & 1)
@@ -62,15 +69,11 @@ void lightplan_segments_for(const lightplan_result_t *r, uint32_t mask, double e
             sum += exposure_us * d;
         }
         g->dP = n ? sum / n : 0;
-        if (n && v) {
-            qsort(v, (size_t)n, sizeof *v, model_cmp_double);
-            g->gradient = n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
-        } else {
-            g->gradient = 0;
-        }
+        g->gradient = n ? model_median(v, n) : 0;
         g->detectable = g->gradient >= opt->sobel_threshold;
     }
     free(v);
+    return true;
 }
 
 // The smallest signal with the wanted SNR: S^2 = snr^2 (K S + K^2 rn^2).
@@ -147,7 +150,7 @@ static bool plan_segments(plan_t *P)
     out->seg_first = calloc((size_t)ns + 1, sizeof *out->seg_first);
     if (!out->segments || !out->seg_first) {
         model_edges_free(E0);
-        return false;
+        return no_memory();
     }
     int np = 0, k = 0;
     for (int e = 0; e < E0->nedges; e++)
@@ -205,8 +208,10 @@ static bool plan_side_signals(plan_t *P)
     out->Sside = calloc((size_t)nl * n1 * 2, sizeof *out->Sside);
     bool ok = qs && ps && lss && out->Sside;
     if (ok) side_points(out, qs);
+    else no_memory();
     ok = ok && model_pixel_info(P->t, P->cam, P->cands, qs, 2 * np, ps, lss, P->threads);
     float *Bs = ok && P->opt->ir_samples > 0 ? malloc(n1 * 2 * nl * sizeof *Bs) : NULL;
+    if (ok && P->opt->ir_samples > 0 && !Bs) ok = no_memory();
     if (Bs) verify_interreflection(P->t, P->cands, P->mats, ps, 2 * np, P->opt->ir_samples, P->threads, Bs);
     for (int j = 0; j < 2 * np && ok; j++) {
         const model_pixel_info_t *p = &ps[j];
@@ -237,7 +242,7 @@ static bool plan_side_signals(plan_t *P)
 static bool plan_glare(plan_t *P)
 {
     double *q = malloc(P->ng * 2 * sizeof *q);
-    if (!q) return false;
+    if (!q) return no_memory();
     for (int j = 0; j < P->gh; j++)
         for (int i = 0; i < P->gw; i++) {
             q[2 * ((size_t)j * P->gw + i)] = 2 * i;
@@ -262,8 +267,8 @@ static bool plan_glare(plan_t *P)
 
 // Configuration cf (its mask and exposure set): the grid's object, saturated,
 // glare and usable pixels, the detectable segments (tmp: scratch of
-// nsegments), feasibility.
-static void plan_config(const plan_t *P, lightplan_config_t *cf, lightplan_segment_t *tmp)
+// nsegments), feasibility. false + message (out of memory).
+static bool plan_config(const plan_t *P, lightplan_config_t *cf, lightplan_segment_t *tmp)
 {
     const lightplan_result_t *out = P->out;
     const uint32_t m = cf->mask;
@@ -289,7 +294,7 @@ static void plan_config(const plan_t *P, lightplan_config_t *cf, lightplan_segme
         if (!bad && S >= P->floor_s) usable++;
     }
     cf->usable_points = usable * 4.0 / (P->opt->spacing_px * P->opt->spacing_px);
-    lightplan_segments_for(out, m, cf->exposure_us, P->opt, tmp);
+    if (!lightplan_segments_for(out, m, cf->exposure_us, P->opt, tmp)) return false;
     cf->n_segments = out->nsegments;
     for (int s = 0; s < out->nsegments; s++)
         if (tmp[s].detectable) {
@@ -298,6 +303,7 @@ static void plan_config(const plan_t *P, lightplan_config_t *cf, lightplan_segme
         }
     double limit = P->opt->max_bad_frac * cf->object_pix;
     cf->feasible = cf->saturated_pix <= limit && cf->glare_pix <= limit;
+    return true;
 }
 
 // Configuration c better than b: feasible first; among infeasible ones the
@@ -326,7 +332,7 @@ static bool plan_configs(plan_t *P)
     lightplan_segment_t *tmp = malloc((size_t)(out->nsegments ? out->nsegments : 1) * sizeof *tmp);
     if (!out->configs || !tmp) {
         free(tmp);
-        return false;
+        return no_memory();
     }
     int c = 0, best = -1;
     for (uint32_t m = 1; m < (1u << nl); m++) {
@@ -335,17 +341,20 @@ static bool plan_configs(plan_t *P)
             lightplan_config_t *cf = &out->configs[c];
             cf->mask = m;
             cf->exposure_us = P->exposures[x];
-            plan_config(P, cf, tmp);
+            if (!plan_config(P, cf, tmp)) {
+                free(tmp);
+                return false;
+            }
             if (best < 0 || config_better(cf, &out->configs[best])) best = c;
         }
     }
     out->best = best;
     out->best_feasible = out->configs[best].feasible;
     const lightplan_config_t *b = &out->configs[best];
-    lightplan_segments_for(out, b->mask, b->exposure_us, P->opt, tmp);
-    memcpy(out->segments, tmp, (size_t)out->nsegments * sizeof *tmp);
+    bool ok = lightplan_segments_for(out, b->mask, b->exposure_us, P->opt, tmp);
+    if (ok) memcpy(out->segments, tmp, (size_t)out->nsegments * sizeof *tmp);
     free(tmp);
-    return true;
+    return ok;
 }
 
 // The chosen configuration's predicted image (direct light, clipped at saturation).
@@ -372,7 +381,7 @@ static bool plan_faces(plan_t *P)
     double *vals = malloc(P->ng * sizeof *vals);
     if (!out->faces || !vals) {
         free(vals);
-        return false;
+        return no_memory();
     }
     out->nfaces = nf;
     for (int f = 0; f < nf; f++) {
@@ -394,8 +403,7 @@ static bool plan_faces(plan_t *P)
         }
         F->npix = nv;
         if (nv) {
-            qsort(vals, (size_t)nv, sizeof *vals, model_cmp_double);
-            F->P_median = nv % 2 ? vals[nv / 2] : 0.5 * (vals[nv / 2 - 1] + vals[nv / 2]);
+            F->P_median = model_median(vals, nv);
             F->usable_frac = (double)nu / nv;
         } else {
             F->P_min = F->P_max = F->P_median = NAN;
@@ -410,7 +418,7 @@ static bool plan_glare_image(plan_t *P)
 {
     lightplan_result_t *out = P->out;
     out->glare = malloc(P->npx * sizeof *out->glare);
-    if (!out->glare) return false;
+    if (!out->glare) return no_memory();
     for (int y = 0; y < P->H; y++)
         for (int x = 0; x < P->W; x++) {
             int gx = (x + 1) / 2 < P->gw ? (x + 1) / 2 : P->gw - 1, gy = (y + 1) / 2 < P->gh ? (y + 1) / 2 : P->gh - 1;
@@ -500,10 +508,19 @@ static double sobel_at(const float *f, int W, int H, int x, int y)
 }
 
 
-double lightplan_sobel_check(const lightplan_segment_t *segs, int nseg, const float *frame, int W, int H,
-                             double threshold, bool *found, double *measured)
+// The points judged along a segment of length L (px): every 2 px, 2 px kept from its ends.
+static int judged_points(double L) { return (int)((L - 4) / 2) + 1; }
+
+bool lightplan_sobel_check(const lightplan_segment_t *segs, int nseg, const float *frame, int W, int H,
+                           double threshold, bool *found, double *measured, double *agreement)
 {
-    int agree = 0, n = 0;
+    int agree = 0, n = 0, most = 1;
+    for (int s = 0; s < nseg; s++) {
+        double dx = segs[s].q1[0] - segs[s].q0[0], dy = segs[s].q1[1] - segs[s].q0[1], L = sqrt(dx * dx + dy * dy);
+        if (L >= 8 && judged_points(L) > most) most = judged_points(L);
+    }
+    double *v = malloc((size_t)most * sizeof *v);
+    if (!v) return no_memory();
     for (int s = 0; s < nseg; s++) {
         const lightplan_segment_t *g = &segs[s];
         double dx = g->q1[0] - g->q0[0], dy = g->q1[1] - g->q0[1], L = sqrt(dx * dx + dy * dy);
@@ -515,9 +532,7 @@ double lightplan_sobel_check(const lightplan_segment_t *segs, int nseg, const fl
         }
         {
             double ux = dx / L, uy = dy / L, nx = -uy, ny = ux;
-            int m = (int)((L - 4) / 2) + 1;
-            double *v = malloc((size_t)m * sizeof *v);
-            if (!v) continue;
+            int m = judged_points(L);
             for (int k = 0; k < m; k++) {
                 double t = 2 + 2.0 * k;
                 double best = 0;
@@ -527,9 +542,7 @@ double lightplan_sobel_check(const lightplan_segment_t *segs, int nseg, const fl
                 }
                 v[k] = best;
             }
-            qsort(v, (size_t)m, sizeof *v, model_cmp_double);
-            med = m % 2 ? v[m / 2] : 0.5 * (v[m / 2 - 1] + v[m / 2]);
-            free(v);
+            med = model_median(v, m);
         }
         bool f = med >= threshold;
         if (found) found[s] = f;
@@ -537,5 +550,7 @@ double lightplan_sobel_check(const lightplan_segment_t *segs, int nseg, const fl
         agree += f == g->detectable;
         n++;
     }
-    return n ? (double)agree / n : NAN;
+    free(v);
+    *agreement = n ? (double)agree / n : NAN;
+    return true;
 }

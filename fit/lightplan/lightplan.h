@@ -1,4 +1,4 @@
-// fit/lightplan/lightplan.h — model-based light placement (seed 001, PREMIO): which
+// fit/lightplan/lightplan.h — model-based light placement (PREMIO): which
 // lamps and exposure make a workpiece's edges detectable and give the
 // verification fitter the most usable reference points, without glare or
 // saturation?
@@ -130,18 +130,25 @@ void lightplan_result_free(lightplan_result_t *r);
 // segment, the median over points every 2 px along it (2 px kept from its ends)
 // of the largest Sobel magnitude within 1.5 px across; found when it reaches
 // the threshold. Segments shorter than 8 px are not judged. found and
-// measured (out, nsegments) may be NULL. Returns the agreement rate (found ==
-// predicted) over the judged segments, or NAN when there are none.
-double lightplan_sobel_check(const lightplan_segment_t *segs, int nseg, const float *frame, int W, int H,
-                             double threshold, bool *found, double *measured);
+// measured (out, nsegments) may be NULL. *agreement: the rate found ==
+// predicted over the judged segments, or NAN when there are none. false +
+// message: out of memory.
+bool lightplan_sobel_check(const lightplan_segment_t *segs, int nseg, const float *frame, int W, int H,
+                           double threshold, bool *found, double *measured, double *agreement);
 // The segments' predicted contrast and detectability for any configuration
 // (mask, exposure) of the same run (segs: r->nsegments, geometry copied from
-// r->segments).
-void lightplan_segments_for(const lightplan_result_t *r, uint32_t mask, double exposure_us,
+// r->segments). false + message: out of memory.
+bool lightplan_segments_for(const lightplan_result_t *r, uint32_t mask, double exposure_us,
                             const lightplan_options_t *opt, lightplan_segment_t *segs);
 
 // ---------------------------------------------------------------------------
 // The plan of a view from files (`refl plan lamps`, fit/lightplan/files.c)
+//
+// plan.json (format "refl-lightplan", version 1; read by
+// scripts/plan_lamps_report.py): a view's plan ("scene", "turntable_deg",
+// "chosen", "configurations", "faces", "segments", "virtual_rig_check", ...),
+// or, with several views, their summary in out ("views": each one's choice
+// and directory, "capture_plan").
 
 typedef struct {
     const char        *scene;           // D3D, OBJ, STL or PLY description (rig frame)

@@ -229,11 +229,19 @@ static bool to_ggx(const verify_prior_t *m, const ngan_t *s, double ggx[4], doub
     if (m->model == MODEL_BRDF_LAMBERT) {
         ggx[0] = fmin(M_PI * m->mean[0], 1), ggx[1] = 0, ggx[2] = 0.5, ggx[3] = 0.04;
     } else {
+        // every sample is in front of the surface: fit_samples_add fails only for a non-finite R (skipped)
+        // or out of memory
         fit_samples_t *fs = fit_samples_new();
-        for (int i = 0; fs && i < s->n; i++) fit_samples_add(fs, &s->c[i], s->R[i], 1);
+        bool grown = fs != NULL;
+        for (int i = 0; grown && i < s->n; i++) grown = fit_samples_add(fs, &s->c[i], s->R[i], 1) || !isfinite(s->R[i]);
+        if (!grown) {
+            fit_samples_free(fs);
+            model_error(NULL, 0, "out of memory");
+            return false;
+        }
         fit_brdf_options_t o = fit_brdf_defaults();
         fit_brdf_result_t r;
-        bool ok = fs && fit_brdf(fs, MODEL_BRDF_GGX, &o, &r);
+        bool ok = fit_brdf(fs, MODEL_BRDF_GGX, &o, &r);
         fit_samples_free(fs);
         if (!ok) {
             model_error(NULL, 0, "material %s: no ggx could be fitted to its %s: %s", m->name,
@@ -276,8 +284,8 @@ static void set_q(fit_export_material_t *e, const char *target, int nq, const ch
     for (int k = 0; k < nq; k++) e->qname[k] = names[k], e->q[k] = q[k];
 }
 
-// glTF: everything from the ggx but the base colour, which is fitted.
-static void convert_gltf(fit_export_material_t *e, const ngan_t *s)
+// glTF: everything from the ggx but the base colour, which is fitted. false + message (out of memory).
+static bool convert_gltf(fit_export_material_t *e, const ngan_t *s)
 {
     static const char *const names[G_NQ] = { "baseColorFactor", "metallicFactor", "roughnessFactor",
                                              "specularFactor", "specularColorFactor", "ior" };
@@ -287,16 +295,23 @@ static void convert_gltf(fit_export_material_t *e, const ngan_t *s)
     set_q(e, "gltf", G_NQ, names, q);
     // R = base A + (specular part): base by least squares
     double *A = malloc((size_t)s->n * sizeof *A), *y = malloc((size_t)s->n * sizeof *y);
-    for (int i = 0; A && y && i < s->n; i++) {
+    if (!A || !y) {
+        free(A);
+        free(y);
+        model_error(NULL, 0, "out of memory");
+        return false;
+    }
+    for (int i = 0; i < s->n; i++) {
         const model_cosines_t *c = &s->c[i];
         double F = gltf_fresnel(e->q, c->vh);
         A[i] = (1 - F) / M_PI * c->nl;
         y[i] = s->R[i] - F * gltf_dv(c, e->q[G_ROUGH] * e->q[G_ROUGH]) * c->nl;
     }
-    if (A && y) ls2(A, NULL, y, s->n, 1, &e->q[G_BASE], NULL);
+    ls2(A, NULL, y, s->n, 1, &e->q[G_BASE], NULL);
     free(A);
     free(y);
     e->error = target_error(e, s);
+    return true;
 }
 
 // Mitsuba: one plugin's parameters for a given alpha and ior, the
@@ -351,14 +366,21 @@ static void mitsuba_line(mfit_t *f, int which, double lo, double hi)
 
 // Mitsuba: roughplastic and roughconductor from the ggx's alpha and F0, then
 // alpha and the ior searched (Mitsuba's separable G and exact Fresnel differ
-// from the ggx's), and the diffuse plugin: the closest is chosen.
-static void convert_mitsuba(fit_export_material_t *e, const ngan_t *s)
+// from the ggx's), and the diffuse plugin: the closest is chosen. false +
+// message (out of memory).
+static bool convert_mitsuba(fit_export_material_t *e, const ngan_t *s)
 {
     mfit_t f = { .s = s };
     f.A = malloc((size_t)s->n * sizeof *f.A);
     f.B = malloc((size_t)s->n * sizeof *f.B);
+    if (!f.A || !f.B) {
+        free(f.A);
+        free(f.B);
+        model_error(NULL, 0, "out of memory");
+        return false;
+    }
     fit_export_material_t cand[3];
-    for (int k = 0; k < 3 && f.A && f.B; k++) {
+    for (int k = 0; k < 3; k++) {
         f.kind = k;
         f.e = f.best = *e;
         f.best.error = INFINITY;
@@ -371,10 +393,6 @@ static void convert_mitsuba(fit_export_material_t *e, const ngan_t *s)
     }
     free(f.A);
     free(f.B);
-    if (!(f.A && f.B)) {
-        e->error = NAN;
-        return;
-    }
     int b = 0, o = -1;
     for (int k = 1; k < 3; k++)
         if (cand[k].error < cand[b].error) b = k;
@@ -383,6 +401,7 @@ static void convert_mitsuba(fit_export_material_t *e, const ngan_t *s)
     *e = cand[b];
     snprintf(e->alt_target, sizeof e->alt_target, "%s", cand[o].target);
     e->alt_error = cand[o].error;
+    return true;
 }
 
 bool fit_export_convert(const verify_prior_t *m, fit_export_format_t fmt, fit_export_material_t *e)
@@ -395,8 +414,8 @@ bool fit_export_convert(const verify_prior_t *m, fit_export_format_t fmt, fit_ex
     ngan_t s;
     if (!ngan_samples(m->model, m->mean, &s)) return false;
     bool ok = to_ggx(m, &s, e->ggx, &e->ggx_error);
-    if (ok && fmt == FIT_EXPORT_GLTF) convert_gltf(e, &s);
-    if (ok && fmt == FIT_EXPORT_MITSUBA) convert_mitsuba(e, &s);
+    if (ok && fmt == FIT_EXPORT_GLTF) ok = convert_gltf(e, &s);
+    if (ok && fmt == FIT_EXPORT_MITSUBA) ok = convert_mitsuba(e, &s);
     if (ok && fmt == FIT_EXPORT_MERL) {
         snprintf(e->target, sizeof e->target, "merl");
         model_brdf_table_t *t = fit_export_tabulate(m);
@@ -609,7 +628,7 @@ bool fit_export_materials(const char *priors, const char *only, fit_export_forma
     ok = ok && write_target(&pr, fmt, out, res);
     if (ok) {
         json_t *side = json_object(), *list = json_array();
-        json_object_set_new(side, "format", json_string("refl export 1"));
+        model_json_set_format(side, "refl-export", 1);
         json_object_set_new(side, "file", json_string(out));
         for (int i = 0; i < res->n; i++) json_array_append_new(list, conversion_json(&res->m[i]));
         json_object_set_new(side, "materials", list);

@@ -77,8 +77,10 @@ double fit_export_eval(const fit_export_material_t *e, const model_cosines_t *c)
 
 // The materials of the priors file (only: one material's name, NULL every one;
 // MERL holds one material, so a file of several needs only) written to out in
-// the format, and out.conversion.json (the conversions, their errors and prov,
-// which may be NULL). *res (caller frees res->m) the conversions. false + message.
+// the format, and out.conversion.json (format "refl-export", version 1:
+// {"format", "version", "file", "materials": [each conversion, its errors],
+// "provenance": prov, left out when NULL}). *res (caller frees res->m) the
+// conversions. false + message.
 typedef struct {
     int                    n;
     fit_export_material_t *m;

@@ -11,173 +11,12 @@
 #include <unistd.h>
 
 #include "calib/calib.h"
+#include "fit/material/internal.h"
 #include "fit/material/material.h"
 #include "fit/verify/verify.h"
 #include "rig/session/session.h"
 #include "model/base/report.h"
 #include "model/base/vec.h"
-
-// The report of a material fit: DIR/samples.csv (every sample with its
-// geometry, lamp, measured and fitted R, noise and albedo cell), DIR/lobes_fit.csv,
-// plots by scripts/fit_material_report.py, and DIR/report.html with the
-// residual over the noise, the parameter table and the model comparison.
-
-// DIR/lobes_fit.csv: the chosen model in the plane of incidence, for the report's polar lobes: R at every
-// incidence 0..89 deg and view -89..89 deg (negative: the incidence's side), 1 deg apart.
-static bool lobes_fit_csv(const char *dir, const fit_brdf_result_t *r)
-{
-    char *path = g_strdup_printf("%s/lobes_fit.csv", dir);
-    FILE *f = fopen(path, "w");
-    bool ok = f != NULL;
-    if (f) {
-        fprintf(f, "theta_i_deg,theta_o_deg,R_fit\n");
-        const model_vec3_t n = { 0, 0, 1 };
-        for (int ti = 0; ti < 90; ti++)
-            for (int to = -89; to <= 89; to++) {
-                double a = ti * M_PI / 180, b = to * M_PI / 180;
-                model_vec3_t l = { -sin(a), 0, cos(a) }, v = { sin(b), 0, cos(b) };
-                model_cosines_t c = model_cosines(n, l, v);
-                fprintf(f, "%d,%d,%.6g\n", ti, to, model_brdf_eval(r->model, r->p, &c, NULL));
-            }
-        ok = fclose(f) == 0;
-    }
-    if (!ok) model_error_set(path, 0, "cannot write: %s", strerror(errno));
-    g_free(path);
-    return ok;
-}
-
-// cell, factor: the albedo cells (--albedo-cells) per observation and per cell, NULL without.
-static bool material_report(const char *dir, const calib_obs_set_t *obs, const fit_samples_t *smp,
-                            const fit_brdf_result_t *res, int nres, int best, const json_t *entry, const json_t *prov,
-                            const calib_set_t *cal, const int *cell, const double *factor)
-{
-    if (!model_mkdir_p(dir)) return false;
-    char *csv = g_strdup_printf("%s/samples.csv", dir), *html = g_strdup_printf("%s/report.html", dir);
-    bool ok = false;
-    FILE *f = fopen(csv, "w");
-    if (!f) {
-        model_error_set(csv, 0, "cannot write: %s", strerror(errno));
-        goto done;
-    }
-    fprintf(f, "# refl fit material samples: window centre (px), step, lamp, angles (deg: incidence, view, half "
-               "vector from the normal; phi: azimuth of the view from the incidence's, 180 = the plane of incidence "
-               "forward), R measured and fitted by %s (1/sr, R = f_r cos theta_i), sigma_R its expected temporal "
-               "noise (0: unknown), the albedo cell's factor (1: none) and the point on the sample at angle 0 "
-               "(mm, rig frame)\n",
-            model_brdf_name(res[best].model));
-    fprintf(f, "x_px,y_px,step,lamp,theta_i_deg,theta_o_deg,theta_h_deg,R_meas,R_fit,lamp_name,phi_deg,sigma_R,"
-               "albedo_factor,x0_mm,y0_mm,z0_mm\n");
-    const double d = 180 / M_PI;
-    for (int i = 0; i < smp->n; i++) {
-        const model_cosines_t *c = &smp->c[i];
-        const calib_obs_t *ob = &obs->o[i];
-        double ti = acos(fmin(1, c->nl)), to = acos(fmin(1, c->nv)), lv = 2 * c->vh * c->vh - 1;
-        double ss = sin(ti) * sin(to), phi = ss > 1e-9 ? acos(fmax(-1, fmin(1, (lv - c->nl * c->nv) / ss))) : 0;
-        double sig = ob->s_dn_per_us > 0 ? smp->R[i] * ob->s_std / ob->s_dn_per_us : 0;
-        double fac = cell && cell[i] >= 0 ? factor[cell[i]] : 1;
-        const char *ln = cal && ob->lamp >= 0 && ob->lamp < cal->lamps->n ? cal->lamps->lamps[ob->lamp].name : "";
-        fprintf(f, "%.1f,%.1f,%d,%d,%.4f,%.4f,%.4f,%.6g,%.6g,%s,%.3f,%.4g,%.5g,%.3f,%.3f,%.3f\n", ob->q[0], ob->q[1],
-                ob->step, ob->lamp, ti * d, to * d, acos(fmin(1, c->nh)) * d, smp->R[i],
-                fit_samples_eval(smp, res[best].model, res[best].p, i), ln, phi * d, sig, fac, ob->p0_mm[0],
-                ob->p0_mm[1], ob->p0_mm[2]);
-    }
-    if (fclose(f) != 0) {
-        model_error_set(csv, 0, "cannot write: %s", strerror(errno));
-        goto done;
-    }
-    if (!lobes_fit_csv(dir, &res[best])) goto done;
-    char pbuf[256] = "";
-    size_t o = 0;
-    for (int j = 0; j < res[best].nparams; j++)
-        o += (size_t)snprintf(pbuf + o, sizeof pbuf - o, "%s%.6g", j ? "," : "", res[best].p[j]);
-    if (model_run_script("fit_material_report.py", dir, model_brdf_name(res[best].model), pbuf, (char *)NULL) != 0)
-        goto done;
-    FILE *h = model_html_begin(html, "refl fit material", prov);
-    if (!h) goto done;
-    json_t *ch = json_object_get(entry, "model_choice");
-    model_html_para(h, "Material %s of sample %s: %d BRDF samples (windows of %d frames lit by one lamp each). "
-                    "Chosen model: %s by %s (%s; lowest BIC: %s). R = f_r cos(theta_i) in 1/sr.",
-                    json_string_value(json_object_get(entry, "name")), obs->sample, smp->n, obs->frames_used,
-                    model_brdf_name(res[best].model),
-                    !strcmp(json_string_value(json_object_get(ch, "criterion")), "cv_rms")
-                        ? "the held-out RMS (the fewest parameters within one standard error of the lowest)"
-                    : !strcmp(json_string_value(json_object_get(ch, "criterion")), "only_model") ? "--model"
-                                                                                                 : "the lowest BIC",
-                    json_string_value(json_object_get(ch, "note")),
-                    json_string_value(json_object_get(ch, "lowest_bic")));
-    json_t *ron = json_object_get(entry, "rms_over_noise"), *cj = json_object_get(entry, "albedo_cells");
-    if (ron)
-        model_html_para(h, "Residual: RMS of R %.4g 1/sr; over the sensor's temporal noise %.3g (rms_over_noise: "
-                        "sqrt(chi^2/dof) with each sample weighted by its noise; near 1: the model explains the data "
-                        "down to the noise; the noise alone gives an RMS of %.4g 1/sr).",
-                        json_number_value(json_object_get(entry, "rms")), json_number_value(ron),
-                        json_number_value(json_object_get(entry, "noise_rms_expected")));
-    else
-        model_html_para(h, "Residual: RMS of R %.4g 1/sr (no gain calibration: the noise it would be compared with "
-                        "is unknown).", json_number_value(json_object_get(entry, "rms")));
-    if (cj)
-        model_html_para(h, "Albedo cells of %.3g mm: %lld cells hold %lld of %lld observations; the albedo's spread "
-                        "from place to place is %.3g %% (std of the cells' factors, mean 1).",
-                        json_number_value(json_object_get(cj, "cell_mm")),
-                        json_integer_value(json_object_get(cj, "cells")),
-                        json_integer_value(json_object_get(cj, "observations_in_cells")),
-                        json_integer_value(json_object_get(cj, "observations")),
-                        100 * json_number_value(json_object_get(cj, "factor_rel_std")));
-    model_html_para(h, "Weighting: %s. Loss: %s.", json_string_value(json_object_get(entry, "weighting")),
-                    json_string_value(json_object_get(entry, "loss")));
-    model_html_heading(h, "Parameters");
-    json_t *ps = json_object_get(entry, "parameters");
-    char **rows = calloc(json_array_size(ps) + 1, sizeof *rows);
-    for (size_t j = 0; j < json_array_size(ps); j++) {
-        json_t *p = json_array_get(ps, j);
-        rows[j] = g_strdup_printf("%s|%s|%.6g|%.3g|%.3g|%.6g .. %.6g|%s|%s", json_string_value(json_object_get(p, "name")),
-                                  json_string_value(json_object_get(p, "unit")),
-                                  json_number_value(json_object_get(p, "mean")),
-                                  json_number_value(json_object_get(p, "std")),
-                                  json_number_value(json_object_get(p, "std_statistical")),
-                                  json_number_value(json_object_get(p, "lo")),
-                                  json_number_value(json_object_get(p, "hi")),
-                                  json_string_value(json_object_get(p, "convention")),
-                                  json_object_get(p, "held") ? json_string_value(json_object_get(p, "held")) : "");
-    }
-    model_html_table(h, "parameter|unit|mean|std|std (statistical)|prior bounds|convention|note",
-                     (const char *const *)rows, (int)json_array_size(ps));
-    for (size_t j = 0; j < json_array_size(ps); j++) g_free(rows[j]);
-    free(rows);
-    model_html_heading(h, "Measured vs fitted");
-    model_html_figure(h, "polar.png", "lobes in the plane of incidence (samples within 15 deg of it), one panel per "
-                      "band of incidence: R measured (mean ± its spread, and ± the expected noise "
-                      "σ) and fitted, against the view angle (negative: the incidence's side)");
-    model_html_figure(h, "lobes.png", "R against the half-vector angle, measured (dots, coloured by incidence) "
-                      "and fitted (the model at the same geometry), per lamp");
-    model_html_figure(h, "residual_maps.png", "residual R_meas - R_fit at each window, for four frames");
-    if (cell) {
-        model_html_heading(h, "Albedo cells");
-        model_html_figure(h, "albedo_cells.png", "each cell's albedo factor on the sample (the point at angle 0, "
-                          "mm in the rig frame), and their histogram");
-    }
-    model_html_heading(h, "Model comparison");
-    char **mr = calloc((size_t)nres + 1, sizeof *mr);
-    for (int k = 0; k < nres; k++) {
-        GString *g = g_string_new("");
-        g_string_append_printf(g, "%s%s|%.4g|%.4g|%.4g|%.4g|%.8g|%.8g|", model_brdf_name(res[k].model),
-                               k == best ? " (chosen)" : "", res[k].rms, res[k].cv_rms, res[k].cv_se, res[k].rms_fr,
-                               res[k].aic, res[k].bic);
-        for (int j = 0; j < res[k].nparams; j++)
-            g_string_append_printf(g, "%s%s %.4g", j ? ", " : "", model_brdf_param_name(res[k].model, j), res[k].p[j]);
-        mr[k] = g_string_free(g, FALSE);
-    }
-    model_html_table(h, "model|RMS of R (1/sr)|held-out RMS of R (1/sr)|its standard error (1/sr)|RMS of f_r (1/sr)|"
-                        "AIC|BIC|parameters", (const char *const *)mr, nres);
-    for (int k = 0; k < nres; k++) g_free(mr[k]);
-    free(mr);
-    model_html_figure(h, "models.png", "residuals of the chosen model: histogram, and relative to R against the half-vector angle");
-    ok = model_html_end(h, html);
-done:
-    g_free(csv);
-    g_free(html);
-    return ok;
-}
 
 // ---------------------------------------------------------------------------
 // Albedo cells (--albedo-cells MM): a textured material (wood, a painted
@@ -264,7 +103,10 @@ oom:
 static fit_samples_t *cells_samples(const fit_samples_t *smp, const albedo_cells_t *ac)
 {
     fit_samples_t *out = fit_samples_new();
-    if (!out) return NULL;
+    if (!out) {
+        model_error_set(NULL, 0, "out of memory");
+        return NULL;
+    }
     snprintf(out->source, sizeof out->source, "%s", smp->source);
     out->noise_weighted = smp->noise_weighted;   // R/c has the std sigma/c: weight c^2 / sigma^2
     for (int i = 0; i < smp->n; i++) {
@@ -285,6 +127,7 @@ static bool cells_fit(const fit_samples_t *smp, albedo_cells_t *ac, fit_brdf_res
     double *num = calloc((size_t)(ac->n_cells ? ac->n_cells : 1), sizeof *num);
     double *den = calloc((size_t)(ac->n_cells ? ac->n_cells : 1), sizeof *den);
     bool ok = num && den;
+    if (!ok) model_error_set(NULL, 0, "out of memory for the albedo cells");
     ac->iterations = 0;
     for (int it = 0; ok && it < 20; it++) {
         ac->iterations = it + 1;   // rounds done (reported)
@@ -682,7 +525,11 @@ double fit_material_window_spread(const fit_samples_t *smp, model_brdf_t m, cons
     double *e = malloc((size_t)(smp->n ? smp->n : 1) * sizeof *e);
     double *u = malloc((size_t)(smp->n ? smp->n : 1) * sizeof *u);
     double fmax_ = 0, rel = NAN;
-    if (!f || !e || !u) goto done;
+    if (!f || !e || !u) {
+        model_error_set(NULL, 0, "out of memory");
+        *n = -1;
+        goto done;
+    }
     for (int i = 0; i < smp->n; i++) {
         f[i] = fit_samples_eval(smp, m, p, i);
         if (isfinite(f[i]) && f[i] > fmax_) fmax_ = f[i];
@@ -721,7 +568,7 @@ static json_t *material_priors(const fit_material_opts_t *o, const calib_set_t *
     json_object_set_new(e, "session", json_string(o->session));
     json_object_set_new(e, "sample", json_string(r->sample));
     json_object_set_new(e, "sample_pose", calib_sample_pose_json(&r->pose));
-    json_object_set_new(e, "noise_rms_expected", isfinite(r->noise_rms) ? json_real(r->noise_rms) : json_null());
+    json_object_set_new(e, "noise_rms_expected", model_json_number(r->noise_rms));
     // the residual per degree of freedom (the cells' factors take one each)
     double dof = (double)best->n - best->nfree - r->n_cells;
     double rms_dof = dof > 0 ? sqrt(best->rss / dof) : NAN;
@@ -746,7 +593,7 @@ static json_t *material_priors(const fit_material_opts_t *o, const calib_set_t *
     }
     if (r->cells_done) json_object_set_new(e, "albedo_cells", cells_json(o, r));
     // how far a window of the material strays from the model beyond its noise (refl verify's sigma)
-    json_object_set_new(e, "window_rel_std", isfinite(r->window_rel_std) ? json_real(r->window_rel_std) : json_null());
+    json_object_set_new(e, "window_rel_std", model_json_number(r->window_rel_std));
     json_object_set_new(e, "window_rel_std_convention", json_string(
         "the relative spread of a window's R about the model (the final parameters, no albedo factors) beyond its "
         "temporal noise: over the samples whose model R is at least 10 % of the largest, sqrt((1.4826 MAD(R/R_model "
@@ -799,6 +646,10 @@ bool fit_material_run(const fit_material_opts_t *o, fit_material_result_t *r)
         const fit_brdf_result_t *b = &r->models.res[r->models.best];
         r->window_rel_std = fit_material_window_spread(smp, b->model, b->p, r->noise_rms, &r->window_rel_n);
     }
+    if (r->window_rel_n < 0) {
+        json_decref(shared);
+        goto done;
+    }
     top = material_priors(o, cal, r, &entry);
     json_object_update(entry, shared);
     json_decref(shared);
@@ -809,8 +660,8 @@ bool fit_material_run(const fit_material_opts_t *o, fit_material_result_t *r)
     r->written = true;
     if (o->report) {
         const fit_brdf_models_t *m = &r->models;
-        if (!material_report(o->report, &obs, csmp ? csmp : smp, m->res, m->nres, m->best, entry,
-                             json_object_get(top, "provenance"), cal, ac.n_cells > 0 ? ac.cell : NULL, ac.factor)) {
+        if (!fit_material_report(o->report, &obs, csmp ? csmp : smp, m->res, m->nres, m->best, entry,
+                                 json_object_get(top, "provenance"), cal, ac.n_cells > 0 ? ac.cell : NULL, ac.factor)) {
             char msg[1600];
             snprintf(msg, sizeof msg, "%s", model_last_error());
             model_error_set(NULL, 0, "the report: %s", msg);

@@ -120,7 +120,8 @@ typedef struct {
 // e = R / R_model - 1 and u = sigma_R / R_model; rel^2 = (1.4826 MAD(e))^2 -
 // median(u^2), at least 0. The samples as observed (no albedo factors): what
 // a verification window of the material differs from the model by. NAN when
-// fewer than 20 samples qualify; *n: their number.
+// fewer than 20 samples qualify; *n: their number (-1 and NAN: out of memory,
+// the message in model_last_error()).
 double fit_material_window_spread(const fit_samples_t *smp, model_brdf_t m, const double *p, double noise_rms,
                                   int *n);
 

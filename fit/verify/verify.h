@@ -339,45 +339,6 @@ void verify_files_result_free(verify_files_result_t *r);
 // created) and removed. NULL + message. Free with calib_set_free.
 calib_set_t *verify_load_camera_gain(const char *camera, const char *gain_dir, const model_lamps_t *lamps,
                                      const char *tmp_dir, int tag);
-// ---------------------------------------------------------------------------
-// The detection study on the virtual rig (fit/eval/study.c; refl verify
-// --study, --study-merge): the truth's T-stiffener, fixed-seed cases, the
-// correct description and its corruptions, the correct one on the part placed
-// off, four configurations. Writes study.csv (one row per fit: config,
-// description, expected, case, score, verdict_correct), timing.csv and
-// study.json (units, design, and when every case is in: the summary and ROC).
-
-typedef struct {
-    const char         *out;       // output directory (created)
-    const char         *truth;     // the virtual rig's truth file (its sample t_stiffener, lamps, materials)
-    const char         *calib;     // the chain's calibration directory (camera model, lamps.json, gain, white.json);
-                                   // NULL: the lab's (the truth's camera, lamps, kc*I; maps measured noise-free)
-    const char *const  *priors;    // the chain's priors files; none: the truth's materials +- 10 %
-    int                 npriors;
-    int                 cases;     // of the whole study
-    const char         *configs;   // comma-separated configurations (priors+maps, priors, no-priors+maps,
-                                   // no-priors); NULL: all four
-    int                 shard_k, shard_n;   // run the cases c with c mod shard_n = shard_k - 1 (shard_n 0: all)
-    double              placement_tol_mm, placement_tol_deg;   // > 0: each case's description registered to its
-                                   // images (verify_register) and verified there (placement.csv); 0: as described
-    verify_options_t    opt;       // the base options (threads: the cases in parallel)
-    json_t             *provenance;   // borrowed: the inputs are added, study.json carries it
-} verify_study_opts_t;
-
-typedef struct {
-    int  cases, cases_run, ndescriptions, nconfigurations;
-    bool complete;   // every case's rows are in (an unsharded run, a merge): study.json has the results
-} verify_study_result_t;
-
-// Run the study (or one shard) and write its tables (progress on stderr). false + message.
-bool verify_study_run(const verify_study_opts_t *o, verify_study_result_t *r);
-// Merge the output directories of the shards of one study (the same design:
-// cases, configurations, descriptions, threshold, inputs' hashes; every case
-// in exactly one) into out, as the unsharded run writes it: study.csv and the
-// results of study.json equal that run's. The shards' provenance goes to
-// provenance's "merged_from". false + message naming the directory or file:line.
-bool verify_study_merge(const char *const *dirs, int ndirs, const char *out, json_t *provenance,
-                        verify_study_result_t *r);
 
 // `refl verify` (fit/cmd_verify.c).
 int verify_cmd(int argc, char **argv);
