@@ -19,18 +19,6 @@
 
 #include "calib/geometry/internal.h"
 
-// Invert a symmetric 3x3 matrix; false when singular.
-static bool inv3(double o[9], const double m[9])
-{
-    double c[9] = { m[4] * m[8] - m[5] * m[7], m[2] * m[7] - m[1] * m[8], m[1] * m[5] - m[2] * m[4],
-                    m[5] * m[6] - m[3] * m[8], m[0] * m[8] - m[2] * m[6], m[2] * m[3] - m[0] * m[5],
-                    m[3] * m[7] - m[4] * m[6], m[1] * m[6] - m[0] * m[7], m[0] * m[4] - m[1] * m[3] };
-    double det = m[0] * c[0] + m[1] * c[3] + m[2] * c[6];
-    if (!(fabs(det) > 1e-300)) return false;
-    for (int i = 0; i < 9; i++) o[i] = c[i] / det;
-    return true;
-}
-
 // The quarter turns that map the board's corner grid onto itself and so may
 // stand between two detections' corner orders: 1 (every quarter turn) for a
 // square chessboard, 2 (half turns) for another, 4 (none) for ChArUco.
@@ -48,11 +36,11 @@ static void quarter_turn(double rt[6], int k, const calib_board_t *b)
     R_from_r(R, rt);
     R_from_r(Rz, rz);
     double Rzc[3], d[3], Rd[3];
-    mat_vec(Rzc, Rz, c);
+    m3_vec(Rzc, Rz, c);
     for (int i = 0; i < 3; i++) d[i] = c[i] - Rzc[i];
-    mat_vec(Rd, R, d);
+    m3_vec(Rd, R, d);
     double Rn[9];
-    mat_mul(Rn, R, Rz);
+    m3_mul(Rn, R, Rz);
     r_from_R(rt, Rn);
     for (int i = 0; i < 3; i++) rt[3 + i] += Rd[i];
 }
@@ -114,7 +102,7 @@ static int view_pairs(const calib_geometry_views_t *vs, view_pair_t **out, int *
                 e->vi = l[i];
                 e->vj = l[j];
                 e->d = d;
-                mat_mul_bt(e->Rrel, Rj, Ri);
+                m3_mul_bt(e->Rrel, Rj, Ri);
                 r_from_R(e->r, e->Rrel);
             }
         if (n >= 2) *nviews += n;
@@ -143,7 +131,7 @@ bool calib_geometry_fit_axis(calib_geometry_views_t *vs, const calib_board_t *bd
                 quarter_turn(rt, k, bd);
                 double R[9], Rrel[9], r[3];
                 R_from_r(R, rt);
-                mat_mul_bt(Rrel, R, Rref);
+                m3_mul_bt(Rrel, R, Rref);
                 r_from_R(r, Rrel);
                 double cost = fabs(norm3(r) / DEG - d);
                 if (cost < best) {
@@ -187,7 +175,7 @@ bool calib_geometry_fit_axis(calib_geometry_views_t *vs, const calib_board_t *bd
         wsum += d * d;
         double M[9], rhs[3], Rti[3];
         for (int k = 0; k < 9; k++) M[k] = (k % 4 == 0 ? 1.0 : 0.0) - Rrel[k];
-        mat_vec(Rti, Rrel, &vi->rt_cam_board[3]);
+        m3_vec(Rti, Rrel, &vi->rt_cam_board[3]);
         for (int k = 0; k < 3; k++) rhs[k] = vj->rt_cam_board[3 + k] - Rti[k];
         for (int p = 0; p < 3; p++) {
             for (int c = 0; c < 3; c++)
@@ -197,8 +185,8 @@ bool calib_geometry_fit_axis(calib_geometry_views_t *vs, const calib_board_t *bd
     }
     free(pairs);
     double Ai[9];
-    if (!inv3(Ai, A)) return false;
-    mat_vec(ax->c, Ai, b);
+    if (!m3_inv(Ai, A)) return false;
+    m3_vec(ax->c, Ai, b);
     // residuals of the point equations, and per-view rotation about / off the axis
     double e2 = 0;
     int ne = 0;
@@ -214,7 +202,7 @@ bool calib_geometry_fit_axis(calib_geometry_views_t *vs, const calib_board_t *bd
         for (int i = 0; i < n; i++) {
             double Ri[9], Rrel[9], r[3];
             pose_R(Ri, l[i]);
-            mat_mul_bt(Rrel, Ri, Rref);
+            m3_mul_bt(Rrel, Ri, Rref);
             r_from_R(r, Rrel);
             double along = dot3(r, ax->a);
             double perp[3] = { r[0] - along * ax->a[0], r[1] - along * ax->a[1], r[2] - along * ax->a[2] };
@@ -223,8 +211,8 @@ bool calib_geometry_fit_axis(calib_geometry_views_t *vs, const calib_board_t *bd
                 noff++;
                 double M[9], Mc[3], Rti[3];
                 for (int k = 0; k < 9; k++) M[k] = (k % 4 == 0 ? 1.0 : 0.0) - Rrel[k];
-                mat_vec(Mc, M, ax->c);
-                mat_vec(Rti, Rrel, &l[0]->rt_cam_board[3]);
+                m3_vec(Mc, M, ax->c);
+                m3_vec(Rti, Rrel, &l[0]->rt_cam_board[3]);
                 for (int k = 0; k < 3; k++) {
                     double e = Mc[k] - (l[i]->rt_cam_board[3 + k] - Rti[k]);
                     e2 += e * e;
@@ -252,7 +240,7 @@ bool calib_geometry_fit_axis(calib_geometry_views_t *vs, const calib_board_t *bd
     ax->dir_unc_deg = (wsum > 0 ? sqrt(dev2 / wsum) : 0) / sqrt(dof > 1 ? dof : 1) / DEG;
     ax->point_rms_mm = ne ? sqrt(e2 / (3.0 * ne)) : 0;
     double tr = Ai[0] + Ai[4] + Ai[8], aAa = 0, Aa[3];
-    mat_vec(Aa, Ai, ax->a);
+    m3_vec(Aa, Ai, ax->a);
     aAa = dot3(ax->a, Aa);
     ax->point_unc_mm = ax->point_rms_mm * sqrt(fmax(tr - aAa, 0) / 2);
     ax->ok = true;

@@ -145,13 +145,15 @@ static bool corners_mrgingham(const calib_geometry_opts_t *o, calib_geometry_sta
         g_ptr_array_add(args, ((calib_geometry_view_t *)g_ptr_array_index(vs->v, k))->name);
     g_ptr_array_add(args, NULL);
     char *log = g_strdup_printf("%s/mrgingham.log", s->mdir);
-    int e = geo_run_tool(s->imgdir, (char **)args->pdata, log, text);
+    int e = model_run_tool(s->imgdir, (char *const *)args->pdata, log, text, GEO_INSTALL_HINT);
     g_ptr_array_free(args, TRUE);
     g_free(log);
     if (e != 0) {
-        if (e > 0)    // else it did not run: run_tool's message says why
+        if (e > 0) {   // the tail of its messages, then what failed (else it did not run: that message says why)
+            model_warning("%s", model_last_error());
             model_error_set(s->imgdir, 0, "mrgingham failed (exit status %d) on the images here; see %s/mrgingham.log",
                             e, s->mdir);
+        }
         return false;
     }
     if (!calib_geometry_parse_corners(vs, *text, s->cornpath, &o->board, false)) return false;

@@ -52,7 +52,7 @@ bool calib_geometry_rig_frame(calib_geometry_views_t *vs, double board_height_mm
     for (int c = 0; c < 2; c++)
         for (int sgn = -1; sgn <= 1; sgn += 2) {
             double u[3] = { sgn * R[c], sgn * R[3 + c], sgn * R[6 + c] }, u0[3];
-            mat_vec(u0, Rb, u);
+            m3_vec(u0, Rb, u);
             double ua = dot3(u0, ax->a);
             for (int k = 0; k < 3; k++) u0[k] -= ua * ax->a[k];
             double un = norm3(u0);
@@ -77,8 +77,8 @@ void geo_rt_compose(double out[6], const double ab[6], const double bc[6])
     double Rab[9], Rbc[9], R[9], t[3];
     R_from_r(Rab, ab);
     R_from_r(Rbc, bc);
-    mat_mul(R, Rab, Rbc);
-    mat_vec(t, Rab, &bc[3]);
+    m3_mul(R, Rab, Rbc);
+    m3_vec(t, Rab, &bc[3]);
     r_from_R(out, R);
     for (int k = 0; k < 3; k++) out[3 + k] = t[k] + ab[3 + k];
 }
@@ -86,9 +86,8 @@ void geo_rt_invert(double out[6], const double rt[6])
 {
     double R[9], Rt[9], t[3];
     R_from_r(R, rt);
-    for (int i = 0; i < 3; i++)
-        for (int j = 0; j < 3; j++) Rt[i * 3 + j] = R[j * 3 + i];
-    mat_vec(t, Rt, &rt[3]);
+    m3_transpose(Rt, R);
+    m3_vec(t, Rt, &rt[3]);
     r_from_R(out, Rt);
     for (int k = 0; k < 3; k++) out[3 + k] = -t[k];
 }

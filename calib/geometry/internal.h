@@ -9,32 +9,15 @@
 #include <string.h>
 
 #include "calib/geometry/geometry.h"
+#include "model/base/vec.h"
 
 #define DEG (M_PI / 180.0)
+// What model_run_tool names when mrgingham or mrcal's programs cannot start.
+#define GEO_INSTALL_HINT "is it installed? Debian: apt install mrgingham mrcal"
 
-// Small vector helpers (3-vectors, row-major 3x3)
+// Small vector helpers: 3-vectors as double[3] here; 3x3 matrices are
+// model/base/vec.h's m3_* (row-major, the output first).
 
-static inline void mat_mul(double out[9], const double a[9], const double b[9])
-{
-    double t[9];
-    for (int i = 0; i < 3; i++)
-        for (int j = 0; j < 3; j++) t[i * 3 + j] = a[i * 3] * b[j] + a[i * 3 + 1] * b[3 + j] + a[i * 3 + 2] * b[6 + j];
-    memcpy(out, t, sizeof t);
-}
-static inline void mat_mul_bt(double out[9], const double a[9], const double b[9])   // a b^T
-{
-    double t[9];
-    for (int i = 0; i < 3; i++)
-        for (int j = 0; j < 3; j++)
-            t[i * 3 + j] = a[i * 3] * b[j * 3] + a[i * 3 + 1] * b[j * 3 + 1] + a[i * 3 + 2] * b[j * 3 + 2];
-    memcpy(out, t, sizeof t);
-}
-static inline void mat_vec(double out[3], const double m[9], const double v[3])
-{
-    double t[3];
-    for (int i = 0; i < 3; i++) t[i] = m[i * 3] * v[0] + m[i * 3 + 1] * v[1] + m[i * 3 + 2] * v[2];
-    memcpy(out, t, sizeof t);
-}
 static inline double dot3(const double a[3], const double b[3]) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
 static inline double norm3(const double a[3]) { return sqrt(dot3(a, a)); }
 static inline void cross3(double o[3], const double a[3], const double b[3])
@@ -62,11 +45,6 @@ calib_geometry_view_t *geo_view_add(calib_geometry_views_t *vs, const char *name
                                     const char *session, int group, double angle, double tilt, double az);
 // Stage 1: the views of the sessions (given or captured) or the images.
 bool geo_collect_views(const calib_geometry_opts_t *o, calib_geometry_state_t *s);
-
-// mrcal.c
-// Run argv in cwd; stdout and stderr into log_path (may be NULL); stdout also
-// to *out (may be NULL). The exit status, -1 when it could not run.
-int geo_run_tool(const char *cwd, char **argv, const char *log_path, char **out);
 
 // axis.c
 // The views of group g with a pose, sorted by angle; returns the count (*out: free).

@@ -22,7 +22,7 @@ void calib_geometry_explain_missing(calib_geometry_views_t *vs, const calib_boar
         double n[3] = { R[2], R[5], R[8] };
         double c[3], p[3];
         board_centre(bd, c);
-        mat_vec(p, R, c);
+        m3_vec(p, R, c);
         for (int k = 0; k < 3; k++) p[k] = -(p[k] + v->rt_cam_board[3 + k]);
         sgn = dot3(n, p) > 0 ? 1 : -1;
     }
@@ -44,9 +44,9 @@ void calib_geometry_explain_missing(calib_geometry_views_t *vs, const calib_boar
         double r[3] = { d * ax->a[0], d * ax->a[1], d * ax->a[2] }, Rrot[9], Rref[9], R[9], t[3], tc[3];
         R_from_r(Rrot, r);
         pose_R(Rref, ref);
-        mat_mul(R, Rrot, Rref);
+        m3_mul(R, Rrot, Rref);
         for (int k = 0; k < 3; k++) tc[k] = ref->rt_cam_board[3 + k] - ax->c[k];
-        mat_vec(t, Rrot, tc);
+        m3_vec(t, Rrot, tc);
         for (int k = 0; k < 3; k++) t[k] += ax->c[k];
         // the squares' corners, outer edge included (mrgingham needs every square)
         int nex = bd->width_n + 2, ney = bd->height_n + 2, M = nex * ney;
@@ -55,7 +55,7 @@ void calib_geometry_explain_missing(calib_geometry_views_t *vs, const calib_boar
         for (int jj = 0; jj < ney; jj++)
             for (int ii = 0; ii < nex; ii++) {
                 double b[3] = { (ii - 1) * square_mm, (jj - 1) * square_mm, 0 }, x[3];
-                mat_vec(x, R, b);
+                m3_vec(x, R, b);
                 p[jj * nex + ii] = (model_vec3_t){ x[0] + t[0], x[1] + t[1], x[2] + t[2] };
             }
         int outside = 0;
@@ -66,7 +66,7 @@ void calib_geometry_explain_missing(calib_geometry_views_t *vs, const calib_boar
                 if (!(q[2 * k] >= 0 && q[2 * k] <= W - 1 && q[2 * k + 1] >= 0 && q[2 * k + 1] <= H - 1)) outside++;
         double nb[3] = { R[2], R[5], R[8] }, cc[3], pc[3];
         board_centre(bd, cc);
-        mat_vec(pc, R, cc);
+        m3_vec(pc, R, cc);
         for (int k = 0; k < 3; k++) pc[k] = -(pc[k] + t[k]);
         double cs = sgn * dot3(nb, pc) / norm3(pc);
         double obl = acos(cs > 1 ? 1 : cs < -1 ? -1 : cs) / DEG;

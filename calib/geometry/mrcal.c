@@ -7,48 +7,12 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-#include <sys/wait.h>
 #include <unistd.h>
 
 #include "calib/calib.h"
 #include "calib/geometry/internal.h"
 #include "model/model.h"
 #include "model/base/report.h"
-
-// Run argv in cwd; stdout and stderr into log_path (may be NULL); stdout also
-// to *out (may be NULL). The exit status, -1 when it could not run.
-int geo_run_tool(const char *cwd, char **argv, const char *log_path, char **out)
-{
-    GError *err = NULL;
-    char *so = NULL, *se = NULL;
-    gint status = 0;
-    fflush(stderr);
-    if (!g_spawn_sync(cwd, argv, NULL, G_SPAWN_SEARCH_PATH, NULL, NULL, &so, &se, &status, &err)) {
-        model_error_set(argv[0], 0, "cannot run: %s (is it installed? Debian: apt install mrgingham mrcal)",
-                        err ? err->message : "?");
-        if (err) g_error_free(err);
-        return -1;
-    }
-    if (log_path) {
-        FILE *f = fopen(log_path, "w");
-        if (f) {
-            fprintf(f, "# %s", argv[0]);
-            for (int i = 1; argv[i]; i++) fprintf(f, " '%s'", argv[i]);
-            fprintf(f, "\n# (in %s)\n# stdout:\n%s\n# stderr:\n%s\n", cwd ? cwd : ".", so ? so : "", se ? se : "");
-            fclose(f);
-        }
-    }
-    int rc = WIFEXITED(status) ? WEXITSTATUS(status) : 128 + (WIFSIGNALED(status) ? WTERMSIG(status) : 0);
-    if (rc != 0 && se) {
-        // the tail of its messages
-        size_t n = strlen(se);
-        fprintf(stderr, "%s: exit status %d; its last messages:\n%s\n", argv[0], rc, se + (n > 1500 ? n - 1500 : 0));
-    }
-    if (out) *out = so;
-    else g_free(so);
-    g_free(se);
-    return rc;
-}
 
 // Several cameras: mrgingham's corner order made to agree across the cameras
 // of each frame (scripts/calib_geometry_report.py align) into
@@ -128,12 +92,13 @@ bool calib_geometry_mrcal(const calib_geometry_opts_t *o, calib_geometry_state_t
     char *log = g_strdup_printf("%s/mrcal-calibrate-cameras.log", mdir);
     char *model0 = g_strdup_printf("%s/camera-0.cameramodel", mdir);
     unlink(model0);
-    int e = geo_run_tool(cwd, argv_m, log, NULL);
+    int e = model_run_tool(cwd, argv_m, log, NULL, GEO_INSTALL_HINT);
     g_free(cwd);
     if (s->ncams > 1)
         for (int k = 0; k < s->ncams; k++) g_free(argv_m[15 + k]);
     if (e != 0 || access(model0, R_OK) != 0) {
-        if (e >= 0)
+        if (e > 0) model_warning("%s", model_last_error());   // the tail of its messages
+        if (e >= 0)   // else it did not run: model_run_tool's message says why
             model_error_set(mdir, 0, "mrcal-calibrate-cameras failed (exit status %d) on %s with %s; see %s (a bad "
                             "seed? give --focal-px)", e, corners, lensmodel, log);
         g_free(log);

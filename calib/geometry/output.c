@@ -80,9 +80,9 @@ static json_t *rig_sigma_json(const calib_geometry_state_t *s)
     double o2 = ax->point_unc_mm * ax->point_unc_mm + (isfinite(os) ? os * os : 0);
     json_t *j = json_object();
     json_object_set_new(j, "z_direction_deg", json_real(ax->dir_unc_deg));
-    json_object_set_new(j, "x_direction_deg", isfinite(xs) ? json_real(xs) : json_null());
+    json_object_set_new(j, "x_direction_deg", model_json_number(xs));
     json_object_set_new(j, "origin_across_axis_mm", json_real(ax->point_unc_mm));
-    json_object_set_new(j, "origin_along_axis_mm", isfinite(os) ? json_real(os) : json_null());
+    json_object_set_new(j, "origin_along_axis_mm", model_json_number(os));
     json_object_set_new(j, "camera_centre_mm", json_real(sqrt(o2 + d * d * rot * rot)));
     json_object_set_new(j, "note", json_string("1-sigma of the rig frame as the axis fit determines it (the "
                         "camera's intrinsics fixed); camera_centre_mm: sqrt(origin^2 + (distance x rotation)^2)"));
@@ -110,8 +110,8 @@ static json_t *axis_json(const calib_geometry_state_t *s)
                             "quadrature"));
         json_object_set_new(aj, "joint_views", json_integer(ax->joint_views));
         json_object_set_new(aj, "direction_uncertainty_fit_deg", json_real(ax->dir_unc_fit_deg));
-        json_object_set_new(aj, "direction_uncertainty_intrinsics_deg", isfinite(ax->dir_unc_intrinsics_deg)
-                            ? json_real(ax->dir_unc_intrinsics_deg) : json_null());
+        json_object_set_new(aj, "direction_uncertainty_intrinsics_deg",
+                            model_json_number(ax->dir_unc_intrinsics_deg));
         json_object_set_new(aj, "joint_rms_residual_px", json_real(ax->joint_rms_px));
         json_object_set_new(aj, "joint_chi2_per_dof", json_real(ax->joint_chi2));
     } else {

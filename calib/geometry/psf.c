@@ -506,8 +506,7 @@ json_t *calib_psf_json(const calib_psf_t *p)
     json_object_set_new(j, "sigma_px", json_real(p->sigma_px));
     json_object_set_new(j, "sigma_std_px", json_real(p->sigma_std_px));
     json_object_set_new(j, "sigma_std_edges_px", json_real(p->sigma_std_edges_px));
-    json_object_set_new(j, "sigma_std_views_px",
-                        isfinite(p->sigma_std_views_px) ? json_real(p->sigma_std_views_px) : json_null());
+    json_object_set_new(j, "sigma_std_views_px", model_json_number(p->sigma_std_views_px));
     json_object_set_new(j, "sigma_spread_px", json_real(p->spread_px));
     json_object_set_new(j, "edges_used", json_integer(p->edges_used));
     json_object_set_new(j, "edges_fitted", json_integer(p->edges_fitted));
@@ -521,8 +520,7 @@ json_t *calib_psf_json(const calib_psf_t *p)
                                                                        : "a point at the pixel's centre: the edges "
                                                                          "are sharper than a square footprint allows "
                                                                          "(a renderer's one ray a pixel)"));
-    json_object_set_new(j, "rss_point_over_square", isfinite(p->rss_point_over_square)
-                                                        ? json_real(p->rss_point_over_square) : json_null());
+    json_object_set_new(j, "rss_point_over_square", model_json_number(p->rss_point_over_square));
     json_object_set_new(j, "method", json_string(
         "slanted edge (ISO 12233's idea) on the board's square edges between adjacent found corners: the pixels of "
         "each edge's middle (a fifth of its length, at least 6 px, from either corner; within 6 px or 0.3 of its "

@@ -48,9 +48,9 @@ static void axj_pose(const axj_view_t *w, const double *p, const double *rt_g, d
     double r[3] = { w->dtheta * a[0], w->dtheta * a[1], w->dtheta * a[2] };
     R_from_r(Rot, r);
     R_from_r(Rg, rt_g);
-    mat_mul(R, Rot, Rg);
+    m3_mul(R, Rot, Rg);
     for (int k = 0; k < 3; k++) d[k] = rt_g[3 + k] - c[k];
-    mat_vec(t, Rot, d);
+    m3_vec(t, Rot, d);
     for (int k = 0; k < 3; k++) t[k] += c[k];
 }
 
@@ -60,7 +60,7 @@ static bool axj_eval(const axj_view_t *w, const double *p, const double *rt_g, d
     axj_pose(w, p, rt_g, R, t);
     for (int i = 0; i < w->n; i++) {
         double b[3] = { w->b[i].x, w->b[i].y, w->b[i].z }, x[3];
-        mat_vec(x, R, b);
+        m3_vec(x, R, b);
         w->x[i] = (model_vec3_t){ x[0] + t[0], x[1] + t[1], x[2] + t[2] };
         if (!(w->x[i].z > 0)) return false;
     }
@@ -124,7 +124,7 @@ static bool axj_match(const calib_geometry_view_t *v, model_camera_t *cam, const
     R_from_r(R, v->rt_cam_board);
     for (int j = 0; j < N; j++) {
         double bb[3] = { (j % W) * s, (j / W) * s, 0 }, x[3];
-        mat_vec(x, R, bb);
+        m3_vec(x, R, bb);
         p[j] = (model_vec3_t){ x[0] + v->rt_cam_board[3], x[1] + v->rt_cam_board[4], x[2] + v->rt_cam_board[5] };
     }
     bool ok = model_camera_project(cam, p, N, qg);
@@ -157,12 +157,6 @@ static bool axj_match(const calib_geometry_view_t *v, model_camera_t *cam, const
     return ok && n == v->ncorners;
 }
 
-
-static int cmp_double(const void *a, const void *b)
-{
-    double x = *(const double *)a, y = *(const double *)b;
-    return (x > y) - (x < y);
-}
 
 // Axis-frame vectors across a0.
 static void axj_frame(const double a0[3], double e1[3], double e2[3])
@@ -221,7 +215,7 @@ static bool axj_add(lsq_problem_t *p, int ng, const int *cnt, axj_view_t **ws, c
             rv[nr] = sorted[nr] = axj_view_rms(&ws[g][i], axp, &rt[6 * g], sigma_px);
             nr++;
         }
-    qsort(sorted, nr, sizeof *sorted, cmp_double);
+    qsort(sorted, nr, sizeof *sorted, model_cmp_double);
     double med = nr ? sorted[nr / 2] : 0, limit = fmax(2.0, 10 * med);
     bool ok = rv && sorted;
     nr = 0;
@@ -327,7 +321,7 @@ static bool refine_once(calib_geometry_views_t *vs, const calib_board_t *bd, mod
                 }
                 nr++;
             }
-        qsort(rv, nr, sizeof *rv, cmp_double);
+        qsort(rv, nr, sizeof *rv, model_cmp_double);
         *med = nr ? rv[nr / 2] : 0;
         free(rv);
         for (int g = 0; g < ng; g++)   // the poses as the fit has them: turned about the axis

@@ -3,7 +3,6 @@
 // step) or of images captured elsewhere, in DIR/images for the corner finders.
 #include <errno.h>
 #include <glib.h>
-#include <png.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -11,33 +10,6 @@
 #include "calib/geometry/internal.h"
 #include "model/model.h"
 #include "model/base/report.h"
-
-static bool png8_write(const char *path, int w, int h, const unsigned char *pix)
-{
-    FILE *f = fopen(path, "wb");
-    if (!f) {
-        model_error_set(path, 0, "cannot create: %s", strerror(errno));
-        return false;
-    }
-    png_structp p = png_create_write_struct(PNG_LIBPNG_VER_STRING, NULL, NULL, NULL);
-    png_infop info = p ? png_create_info_struct(p) : NULL;
-    bool ok = false;
-    if (!p || !info) goto done;
-    if (setjmp(png_jmpbuf(p))) goto done;
-    png_init_io(p, f);
-    png_set_compression_level(p, 1);
-    png_set_IHDR(p, info, (png_uint_32)w, (png_uint_32)h, 8, PNG_COLOR_TYPE_GRAY, PNG_INTERLACE_NONE,
-                 PNG_COMPRESSION_TYPE_DEFAULT, PNG_FILTER_TYPE_DEFAULT);
-    png_write_info(p, info);
-    for (int y = 0; y < h; y++) png_write_row(p, (png_const_bytep)(pix + (size_t)y * w));
-    png_write_end(p, NULL);
-    ok = true;
-done:
-    png_destroy_write_struct(&p, &info);
-    if (fclose(f) != 0) ok = false;
-    if (!ok) model_error_set(path, 0, "cannot write the 8-bit PNG");
-    return ok;
-}
 
 // Scale DN to 8 bits (full_scale -> 255) and write DIR/images/name.
 static bool write_8bit(const char *path, const float *img, int w, int h, double full_scale)
@@ -51,7 +23,7 @@ static bool write_8bit(const char *path, const float *img, int w, int h, double 
         double v = img[i] * 255.0 / full_scale + 0.5;
         b[i] = v <= 0 ? 0 : v >= 255 ? 255 : (unsigned char)v;
     }
-    bool ok = png8_write(path, w, h, b);
+    bool ok = model_png8_write(path, w, h, b, NULL);
     free(b);
     return ok;
 }
