@@ -112,45 +112,53 @@ static int view_pairs(const calib_geometry_views_t *vs, view_pair_t **out, int *
     return np;
 }
 
-bool calib_geometry_fit_axis(calib_geometry_views_t *vs, const calib_board_t *bd, calib_geometry_axis_t *ax)
+// Step 1: group g's poses made consistent with its first by the turn of the
+// board's corner order (k quarter turns, k a multiple of step) whose rotation
+// relative to the first matches the turntable's angle; a view no turn makes
+// consistent (by 2 deg) loses its pose.
+static void align_group_turns(calib_geometry_views_t *vs, int g, const calib_board_t *bd, int step)
 {
-    int step = board_turn_step(bd);
-    memset(ax, 0, sizeof *ax);
-    // 1. quarter turns within each group
-    for (int g = 0; g < vs->ngroups; g++) {
-        calib_geometry_view_t **l;
-        int n = geo_group_views(vs, g, &l);
-        double Rref[9];
-        if (n > 0) pose_R(Rref, l[0]);
-        for (int m = 1; m < n; m++) {
-            double d = fabs(wrap_deg(l[m]->angle_deg - l[0]->angle_deg)), best = 1e9;
-            int bk = 0;
-            for (int k = 0; k < 4; k += step) {
-                double rt[6];
-                memcpy(rt, l[m]->rt_cam_board, sizeof rt);
-                quarter_turn(rt, k, bd);
-                double R[9], Rrel[9], r[3];
-                R_from_r(R, rt);
-                m3_mul_bt(Rrel, R, Rref);
-                r_from_R(r, Rrel);
-                double cost = fabs(norm3(r) / DEG - d);
-                if (cost < best) {
-                    best = cost;
-                    bk = k;
-                }
-            }
-            quarter_turn(l[m]->rt_cam_board, bk, bd);
-            l[m]->quarter_turns = bk;
-            if (best > 2.0) {
-                fprintf(stderr, "refl calib geometry: %s: its pose turns %.2f deg more or less than the turntable "
-                        "(%.3f deg) relative to %s; left out of the axis fit\n", l[m]->name, best, d, l[0]->name);
-                snprintf(l[m]->why, sizeof l[m]->why, "pose inconsistent with the turntable angle by %.2f deg", best);
-                l[m]->solved = false;
+    calib_geometry_view_t **l;
+    int n = geo_group_views(vs, g, &l);
+    double Rref[9];
+    if (n > 0) pose_R(Rref, l[0]);
+    for (int m = 1; m < n; m++) {
+        double d = fabs(wrap_deg(l[m]->angle_deg - l[0]->angle_deg)), best = 1e9;
+        int bk = 0;
+        for (int k = 0; k < 4; k += step) {
+            double rt[6];
+            memcpy(rt, l[m]->rt_cam_board, sizeof rt);
+            quarter_turn(rt, k, bd);
+            double R[9], Rrel[9], r[3];
+            R_from_r(R, rt);
+            m3_mul_bt(Rrel, R, Rref);
+            r_from_R(r, Rrel);
+            double cost = fabs(norm3(r) / DEG - d);
+            if (cost < best) {
+                best = cost;
+                bk = k;
             }
         }
-        free(l);
+        quarter_turn(l[m]->rt_cam_board, bk, bd);
+        l[m]->quarter_turns = bk;
+        if (best > 2.0) {
+            fprintf(stderr, "refl calib geometry: %s: its pose turns %.2f deg more or less than the turntable "
+                    "(%.3f deg) relative to %s; left out of the axis fit\n", l[m]->name, best, d, l[0]->name);
+            snprintf(l[m]->why, sizeof l[m]->why, "pose inconsistent with the turntable angle by %.2f deg", best);
+            l[m]->solved = false;
+        }
     }
-    // 2. direction and point from all pairs
+    free(l);
+}
+
+// Step 2: the direction (the pairs' rotation vectors weighted by their steps)
+// and the point (the pairs' equations and a . c = 0, normal equations A c = b;
+// Ai = A^-1) from every pair; *dev2, *wsum: the pairs' squared deviations from
+// the direction, weighted, and the weights. false when there is no pair or A
+// is singular.
+static bool axis_from_pairs(calib_geometry_views_t *vs, calib_geometry_axis_t *ax, double Ai[9], double *dev2,
+                            double *wsum)
+{
     view_pair_t *pairs = NULL;
     ax->npairs = view_pairs(vs, &pairs, &ax->nviews);
     if (ax->npairs == 0) {
@@ -162,7 +170,7 @@ bool calib_geometry_fit_axis(calib_geometry_views_t *vs, const calib_board_t *bd
         for (int k = 0; k < 3; k++) S[k] += pairs[q].d * pairs[q].r[k];
     double sn = norm3(S);
     for (int k = 0; k < 3; k++) ax->a[k] = S[k] / sn;
-    double A[9] = { 0 }, b[3] = { 0 }, wsum = 0, dev2 = 0;
+    double A[9] = { 0 }, b[3] = { 0 };
     for (int i = 0; i < 3; i++)
         for (int j = 0; j < 3; j++) A[i * 3 + j] = ax->a[i] * ax->a[j];
     for (int q = 0; q < ax->npairs; q++) {
@@ -171,8 +179,8 @@ bool calib_geometry_fit_axis(calib_geometry_views_t *vs, const calib_board_t *bd
         double ap[3] = { r[0] / d, r[1] / d, r[2] / d }, an = norm3(ap);
         double cs = dot3(ap, ax->a) / an;
         double dv = acos(cs > 1 ? 1 : cs < -1 ? -1 : cs);
-        dev2 += d * d * dv * dv;
-        wsum += d * d;
+        *dev2 += d * d * dv * dv;
+        *wsum += d * d;
         double M[9], rhs[3], Rti[3];
         for (int k = 0; k < 9; k++) M[k] = (k % 4 == 0 ? 1.0 : 0.0) - Rrel[k];
         m3_vec(Rti, Rrel, &vi->rt_cam_board[3]);
@@ -184,57 +192,72 @@ bool calib_geometry_fit_axis(calib_geometry_views_t *vs, const calib_board_t *bd
         }
     }
     free(pairs);
-    double Ai[9];
     if (!m3_inv(Ai, A)) return false;
     m3_vec(ax->c, Ai, b);
-    // residuals of the point equations, and per-view rotation about / off the axis
-    double e2 = 0;
-    int ne = 0;
-    double off2 = 0;
-    int noff = 0;
-    ax->fit = json_array();
-    for (int g = 0; g < vs->ngroups; g++) {
-        calib_geometry_view_t **l;
-        int n = geo_group_views(vs, g, &l);
-        json_t *ang = json_array(), *rot = json_array();
-        double Rref[9];
-        if (n) pose_R(Rref, l[0]);
-        for (int i = 0; i < n; i++) {
-            double Ri[9], Rrel[9], r[3];
-            pose_R(Ri, l[i]);
-            m3_mul_bt(Rrel, Ri, Rref);
-            r_from_R(r, Rrel);
-            double along = dot3(r, ax->a);
-            double perp[3] = { r[0] - along * ax->a[0], r[1] - along * ax->a[1], r[2] - along * ax->a[2] };
-            if (i > 0) {
-                off2 += dot3(perp, perp);
-                noff++;
-                double M[9], Mc[3], Rti[3];
-                for (int k = 0; k < 9; k++) M[k] = (k % 4 == 0 ? 1.0 : 0.0) - Rrel[k];
-                m3_vec(Mc, M, ax->c);
-                m3_vec(Rti, Rrel, &l[0]->rt_cam_board[3]);
-                for (int k = 0; k < 3; k++) {
-                    double e = Mc[k] - (l[i]->rt_cam_board[3 + k] - Rti[k]);
-                    e2 += e * e;
-                }
-                ne++;
+    return true;
+}
+
+// Step 3, one group: each view's rotation about the axis relative to the
+// group's first (into ax->fit when the group has two views or more), the
+// rotation off the axis (*off2, *noff) and the point equations' residuals
+// (*e2, *ne).
+static void group_residuals(calib_geometry_views_t *vs, int g, calib_geometry_axis_t *ax, double *off2, int *noff,
+                            double *e2, int *ne)
+{
+    calib_geometry_view_t **l;
+    int n = geo_group_views(vs, g, &l);
+    json_t *ang = json_array(), *rot = json_array();
+    double Rref[9];
+    if (n) pose_R(Rref, l[0]);
+    for (int i = 0; i < n; i++) {
+        double Ri[9], Rrel[9], r[3];
+        pose_R(Ri, l[i]);
+        m3_mul_bt(Rrel, Ri, Rref);
+        r_from_R(r, Rrel);
+        double along = dot3(r, ax->a);
+        double perp[3] = { r[0] - along * ax->a[0], r[1] - along * ax->a[1], r[2] - along * ax->a[2] };
+        if (i > 0) {
+            *off2 += dot3(perp, perp);
+            (*noff)++;
+            double M[9], Mc[3], Rti[3];
+            for (int k = 0; k < 9; k++) M[k] = (k % 4 == 0 ? 1.0 : 0.0) - Rrel[k];
+            m3_vec(Mc, M, ax->c);
+            m3_vec(Rti, Rrel, &l[0]->rt_cam_board[3]);
+            for (int k = 0; k < 3; k++) {
+                double e = Mc[k] - (l[i]->rt_cam_board[3 + k] - Rti[k]);
+                *e2 += e * e;
             }
-            json_array_append_new(ang, json_real(l[i]->angle_deg));
-            json_array_append_new(rot, json_real(l[0]->angle_deg + along / DEG));
+            (*ne)++;
         }
-        if (n >= 2) {
-            json_t *gj = json_object();
-            json_object_set_new(gj, "tilt_deg", json_real(vs->group_tilt[g]));
-            json_object_set_new(gj, "tilt_azimuth_deg", json_real(vs->group_az[g]));
-            json_object_set_new(gj, "angle_deg", ang);
-            json_object_set_new(gj, "rotation_about_axis_deg", rot);
-            json_array_append_new(ax->fit, gj);
-        } else {
-            json_decref(ang);
-            json_decref(rot);
-        }
-        free(l);
+        json_array_append_new(ang, json_real(l[i]->angle_deg));
+        json_array_append_new(rot, json_real(l[0]->angle_deg + along / DEG));
     }
+    if (n >= 2) {
+        json_t *gj = json_object();
+        json_object_set_new(gj, "tilt_deg", json_real(vs->group_tilt[g]));
+        json_object_set_new(gj, "tilt_azimuth_deg", json_real(vs->group_az[g]));
+        json_object_set_new(gj, "angle_deg", ang);
+        json_object_set_new(gj, "rotation_about_axis_deg", rot);
+        json_array_append_new(ax->fit, gj);
+    } else {
+        json_decref(ang);
+        json_decref(rot);
+    }
+    free(l);
+}
+
+bool calib_geometry_fit_axis(calib_geometry_views_t *vs, const calib_board_t *bd, calib_geometry_axis_t *ax)
+{
+    int step = board_turn_step(bd);
+    memset(ax, 0, sizeof *ax);
+    for (int g = 0; g < vs->ngroups; g++) align_group_turns(vs, g, bd, step);
+    double Ai[9], wsum = 0, dev2 = 0;
+    if (!axis_from_pairs(vs, ax, Ai, &dev2, &wsum)) return false;
+    // step 3: residuals of the point equations, and per-view rotation about / off the axis
+    double e2 = 0, off2 = 0;
+    int ne = 0, noff = 0;
+    ax->fit = json_array();
+    for (int g = 0; g < vs->ngroups; g++) group_residuals(vs, g, ax, &off2, &noff, &e2, &ne);
     int dof = ax->nviews - vs->ngroups;
     ax->off_axis_rms_deg = noff ? sqrt(off2 / noff) / DEG : 0;
     ax->dir_unc_deg = (wsum > 0 ? sqrt(dev2 / wsum) : 0) / sqrt(dof > 1 ? dof : 1) / DEG;
