@@ -142,8 +142,8 @@ static void align_group_turns(calib_geometry_views_t *vs, int g, const calib_boa
         quarter_turn(l[m]->rt_cam_board, bk, bd);
         l[m]->quarter_turns = bk;
         if (best > 2.0) {
-            fprintf(stderr, "refl calib geometry: %s: its pose turns %.2f deg more or less than the turntable "
-                    "(%.3f deg) relative to %s; left out of the axis fit\n", l[m]->name, best, d, l[0]->name);
+            model_warning("%s: its pose turns %.2f deg more or less than the turntable "
+                          "(%.3f deg) relative to %s; left out of the axis fit", l[m]->name, best, d, l[0]->name);
             snprintf(l[m]->why, sizeof l[m]->why, "pose inconsistent with the turntable angle by %.2f deg", best);
             l[m]->solved = false;
         }

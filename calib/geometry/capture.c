@@ -111,7 +111,7 @@ bool calib_geometry_capture(const calib_geometry_opts_t *o, calib_geometry_state
     s->sessions = g_new0(char *, plans->len + 1);
     for (guint k = 0; k < plans->len && ok; k++) {
         const char *name = g_ptr_array_index(names, k);
-        fprintf(stderr, "refl calib geometry: capturing %s (%u of %u)\n", name, k + 1, plans->len);
+        model_note("capturing %s (%u of %u)", name, k + 1, plans->len);
         ok = calib_capture(o->rig, capdir, name, g_ptr_array_index(plans, k), o->progress, o->op) == 0;
         if (ok) s->sessions[k] = g_strdup_printf("%s/%s", capdir, name);
     }

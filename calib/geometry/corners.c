@@ -131,8 +131,8 @@ static bool corners_from_file(const calib_geometry_opts_t *o, calib_geometry_sta
 static bool corners_mrgingham(const calib_geometry_opts_t *o, calib_geometry_state_t *s, char **text)
 {
     calib_geometry_views_t *vs = &s->views;
-    fprintf(stderr, "refl calib geometry: finding the %dx%d corners of %u images (mrgingham)\n", o->board.width_n,
-            o->board.height_n, vs->v->len);
+    model_note("finding the %dx%d corners of %u images (mrgingham)", o->board.width_n,
+               o->board.height_n, vs->v->len);
     GPtrArray *args = g_ptr_array_new();
     char gn[16];
     snprintf(gn, sizeof gn, "%d", o->board.width_n);
@@ -201,8 +201,8 @@ static bool corners_opencv(const calib_geometry_opts_t *o, calib_geometry_state_
 {
     calib_geometry_views_t *vs = &s->views;
     if (!calib_board_check(&o->board)) return false;
-    fprintf(stderr, "refl calib geometry: finding the %dx%d corners of the %s in %u images (OpenCV)\n",
-            o->board.width_n, o->board.height_n, calib_board_kind_name(o->board.kind), vs->v->len);
+    model_note("finding the %dx%d corners of the %s in %u images (OpenCV)",
+               o->board.width_n, o->board.height_n, calib_board_kind_name(o->board.kind), vs->v->len);
     GString *t = g_string_new("# filename x y level\n");
     double *q = malloc((size_t)2 * o->board.width_n * o->board.height_n * sizeof *q);
     bool ok = q != NULL;
@@ -306,9 +306,9 @@ bool calib_geometry_find_corners(const calib_geometry_opts_t *o, calib_geometry_
         s->nfound += v->found;
         partial += v->found && v->ncorners < o->board.width_n * o->board.height_n;
     }
-    fprintf(stderr, "refl calib geometry: the board was found in %d of %u images", s->nfound, vs->v->len);
-    if (partial) fprintf(stderr, " (%d of them in part)", partial);
-    fprintf(stderr, "\n");
+    char part[48] = "";
+    if (partial) snprintf(part, sizeof part, " (%d of them in part)", partial);
+    model_note("the board was found in %d of %u images%s", s->nfound, vs->v->len, part);
     const char *lens0 = calib_geometry_is_auto(o->lensmodel) ? CALIB_GEOMETRY_LEAN_LENSMODEL : o->lensmodel;
     int min_views = o->min_views ? o->min_views : calib_geometry_default_min_views(lens0);
     if (s->nfound < min_views) {
@@ -316,10 +316,13 @@ bool calib_geometry_find_corners(const calib_geometry_opts_t *o, calib_geometry_
                         "images, the solve needs at least %d (%d more views; tilt the board and turn the table so the "
                         "corners cover the imager)", lens0, s->nfound, vs->v->len, min_views,
                         min_views - s->nfound);
+        GString *l = g_string_new("the images without a board:");
         for (guint k = 0; k < vs->v->len; k++) {
             calib_geometry_view_t *v = g_ptr_array_index(vs->v, k);
-            if (!v->found) fprintf(stderr, "  %s (%s): %s\n", v->name, v->source, v->why);
+            if (!v->found) g_string_append_printf(l, "\n  %s (%s): %s", v->name, v->source, v->why);
         }
+        model_note("%s", l->str);
+        g_string_free(l, TRUE);
         return false;
     }
     for (int c = 0; c < s->ncams && s->ncams > 1; c++) {
@@ -329,7 +332,7 @@ bool calib_geometry_find_corners(const calib_geometry_opts_t *o, calib_geometry_
             nv += v->camera == c;
             nf += v->camera == c && v->found;
         }
-        fprintf(stderr, "refl calib geometry: camera %s: the board in %d of %d images\n", s->camnames[c], nf, nv);
+        model_note("camera %s: the board in %d of %d images", s->camnames[c], nf, nv);
         if (nf < min_views) {
             model_error_set(o->out, 0, "too few views for %s of camera %s: the board was found in %d of its %d images, "
                             "the solve needs at least %d (tilt the board towards it, or give --tilts with poses "

@@ -57,29 +57,29 @@ static void axis_and_rig_frame(const calib_geometry_opts_t *o, calib_geometry_st
     calib_geometry_axis_t *ax = &s->axis;
     snprintf(s->rigwhy, sizeof s->rigwhy, "no turntable angles in the input (--images / --corners)");
     if (s->views.ngroups > 0) {
-        fprintf(stderr, "refl calib geometry: fitting the turntable axis\n");
+        model_note("fitting the turntable axis");
         if (!calib_geometry_fit_axis(&s->views, &o->board, ax)) {
             snprintf(s->rigwhy, sizeof s->rigwhy, "too few board poses at different angles of one tilt for the "
                      "axis (need 2 views 5..175 deg apart)");
-            fprintf(stderr, "refl calib geometry: no axis: %s\n", s->rigwhy);
+            model_warning("no axis: %s", s->rigwhy);
         } else {
-            fprintf(stderr, "refl calib geometry: the axis fitted with the board poses as turns about it (from the "
-                    "closed form: direction +- %.4f deg)\n", ax->dir_unc_deg);
+            model_note("the axis fitted with the board poses as turns about it (from the "
+                       "closed form: direction +- %.4f deg)", ax->dir_unc_deg);
             if (!calib_geometry_refine_axis(&s->views, &o->board, s->cam, s->rms_px / sqrt(2), ax))
-                fprintf(stderr, "refl calib geometry: the joint axis fit failed (%s); the closed-form axis is kept\n",
-                        model_last_error());
+                model_warning("the joint axis fit failed (%s); the closed-form axis is kept",
+                              model_last_error());
             else
-                fprintf(stderr, "refl calib geometry: joint axis fit: %d views, corner RMS %.4f px (chi^2/dof %.2f)\n",
-                        ax->joint_views, ax->joint_rms_px, ax->joint_chi2);
+                model_note("joint axis fit: %d views, corner RMS %.4f px (chi^2/dof %.2f)",
+                           ax->joint_views, ax->joint_rms_px, ax->joint_chi2);
             axis_intrinsics_sigma(s);
             s->have_rig = calib_geometry_rig_frame(&s->views, o->board_height_mm, ax, s->rt_cam_rig, s->rigwhy,
                                                    sizeof s->rigwhy);
             if (!s->have_rig)
-                fprintf(stderr, "refl calib geometry: no rig frame: %s; the extrinsics are the camera's own frame\n",
-                        s->rigwhy);
-            fprintf(stderr, "refl calib geometry: axis direction (camera frame) %.6f %.6f %.6f +- %.4f deg, %d pairs, "
-                    "off-axis rotation RMS %.4f deg\n", ax->a[0], ax->a[1], ax->a[2], ax->dir_unc_deg, ax->npairs,
-                    ax->off_axis_rms_deg);
+                model_warning("no rig frame: %s; the extrinsics are the camera's own frame",
+                              s->rigwhy);
+            model_note("axis direction (camera frame) %.6f %.6f %.6f +- %.4f deg, %d pairs, "
+                       "off-axis rotation RMS %.4f deg", ax->a[0], ax->a[1], ax->a[2], ax->dir_unc_deg, ax->npairs,
+                       ax->off_axis_rms_deg);
         }
     }
     calib_geometry_explain_missing(&s->views, &o->board, ax->ok ? ax : NULL, s->cam, s->W, s->H);
@@ -87,8 +87,8 @@ static void axis_and_rig_frame(const calib_geometry_opts_t *o, calib_geometry_st
         calib_geometry_view_t *v = g_ptr_array_index(s->views.v, k);
         bool same = !strcmp(v->name, v->source);   // the source named once
         if (!v->found)
-            fprintf(stderr, "refl calib geometry: no board in %s%s%s%s: %s\n", v->name, same ? "" : " (",
-                    same ? "" : v->source, same ? "" : ")", v->why);
+            model_note("no board in %s%s%s%s: %s", v->name, same ? "" : " (",
+                       same ? "" : v->source, same ? "" : ")", v->why);
     }
 }
 

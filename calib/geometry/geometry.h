@@ -35,8 +35,10 @@
 // (0, 0) the centre of the top-left pixel. Poses are mrcal's rt (r: rotation
 // vector, rad; t: mm); rt_a_b maps coordinates in frame b to frame a.
 // Errors: false / NULL with the message kept by model_error_set
-// (model_last_error), not printed: the caller prints it once. Progress and
-// the views without a board go to stderr ("refl calib geometry: ...").
+// (model_last_error), not printed: the caller prints it once. What the run
+// does, the views without a board and why, and the views left out of a fit
+// are notes and warnings (model_note, model_warning: the dispatcher names
+// the command); a failed tool's last messages are a warning before its error.
 #pragma once
 
 #include <glib.h>

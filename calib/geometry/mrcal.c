@@ -28,7 +28,7 @@ static bool align_corners(const calib_geometry_opts_t *o, calib_geometry_state_t
                                       isfinite(o->focal_px) ? o->focal_px : 1.4 * s->camw[k]);
     *joint = g_strdup_printf("%s/corners-joint.vnl", s->outdir);
     char *ajson = g_strdup_printf("%s/align.json", s->mdir);
-    fprintf(stderr, "refl calib geometry: making the corner order agree across the cameras\n");
+    model_note("making the corner order agree across the cameras");
     int e = model_run_script("calib_geometry_report.py", "align", s->cornpath, *joint, ajson, gn, sp, spec[0],
                              spec[1], spec[2], spec[3], spec[4], spec[5], spec[6], spec[7], NULL);
     for (int k = 0; k < RIG_CAMERAS_MAX; k++) g_free(spec[k]);
@@ -88,7 +88,7 @@ bool calib_geometry_mrcal(const calib_geometry_opts_t *o, calib_geometry_state_t
     if (s->no_outlier_rejection)   // after the globs: argparse takes options anywhere
         argv_m[s->ncams > 1 ? 15 + s->ncams : 19] = "--skip-outlier-rejection";
     // mrcal-calibrate-cameras runs under Debian's Python (its shebang)
-    fprintf(stderr, "refl calib geometry: solving %s from %d views (mrcal-calibrate-cameras)\n", lensmodel, nviews);
+    model_note("solving %s from %d views (mrcal-calibrate-cameras)", lensmodel, nviews);
     char *log = g_strdup_printf("%s/mrcal-calibrate-cameras.log", mdir);
     char *model0 = g_strdup_printf("%s/camera-0.cameramodel", mdir);
     unlink(model0);
@@ -108,7 +108,7 @@ bool calib_geometry_mrcal(const calib_geometry_opts_t *o, calib_geometry_state_t
     g_free(log);
     char *solpath = g_strdup_printf("%s/solution.json", mdir), dist[32];
     snprintf(dist, sizeof dist, "%g", o->distance_mm);
-    fprintf(stderr, "refl calib geometry: residuals and projection uncertainty (mrcal)\n");
+    model_note("residuals and projection uncertainty (mrcal)");
     e = model_run_script("calib_geometry_report.py", "solution", model0, solpath, dist, NULL);
     g_free(model0);
     if (e == 0) {
@@ -139,8 +139,8 @@ static bool solve_again(const calib_geometry_opts_t *o, calib_geometry_state_t *
         np0 += v->found && !v->why[0] && v->ncorners < N0;
     }
     if (np0 > 0) {
-        fprintf(stderr, "refl calib geometry: the solve failed (%s); solving again with every corner (mrcal's "
-                "outlier rejection off)\n", first);
+        model_warning("the solve failed (%s); solving again with every corner (mrcal's "
+                      "outlier rejection off)", first);
         s->no_outlier_rejection = true;
         json_decref(s->sol);
         s->sol = NULL;
@@ -170,8 +170,8 @@ static bool solve_again(const calib_geometry_opts_t *o, calib_geometry_state_t *
         }
         g_strfreev(lines);
         path = g_strdup_printf("%s/corners-whole-views.vnl", s->outdir);
-        fprintf(stderr, "refl calib geometry: the solve failed (%s); solving again without the %d partial views\n",
-                first, npart);
+        model_warning("the solve failed (%s); solving again without the %d partial views",
+                      first, npart);
         ok = g_file_set_contents(path, out->str, (gssize)out->len, NULL);
         g_string_free(out, TRUE);
         json_decref(s->sol);
@@ -245,7 +245,7 @@ bool calib_geometry_apply_solution(const calib_geometry_opts_t *o, calib_geometr
     free(ip);
     if (!s->cam) return false;
     s->rms_px = json_real_value(json_object_get(s->sol, "rms_px"));
-    fprintf(stderr, "refl calib geometry: RMS reprojection residual %.4f px, %d outliers\n", s->rms_px,
-            (int)json_integer_value(json_object_get(s->sol, "outliers")));
+    model_note("RMS reprojection residual %.4f px, %d outliers", s->rms_px,
+               (int)json_integer_value(json_object_get(s->sol, "outliers")));
     return true;
 }

@@ -628,15 +628,15 @@ static void fit_views(const calib_geometry_opts_t *o, calib_geometry_state_t *s,
     const int nw = o->board.width_n, nh = o->board.height_n;
     int total = nh * (nw - 1) + nw * (nh - 1), cap = nv ? EDGES_TARGET / nv : total;
     cap = cap < 6 ? 6 : cap > total ? total : cap;
-    fprintf(stderr, "refl calib geometry: the lens's blur from the board's edges (%d views, up to %d edges each)\n",
-            nv, cap);
+    model_note("the lens's blur from the board's edges (%d views, up to %d edges each)",
+               nv, cap);
     for (guint k = 0; k < s->views.v->len; k++) {
         const calib_geometry_view_t *v = g_ptr_array_index(s->views.v, k);
         if (!v->found || !v->q || !v->source) continue;
         int w = 0, h = 0;
         float *img = model_image_read_float(v->source, &w, &h);
         if (!img) {
-            fprintf(stderr, "refl calib geometry: the blur leaves out %s: %s\n", v->source, model_last_error());
+            model_warning("the blur leaves out %s: %s", v->source, model_last_error());
             continue;
         }
         calib_psf_add_view(a, img, w, h, v->q, v->camera, (int)k, cap);
@@ -683,11 +683,11 @@ bool calib_psf_geometry(const calib_geometry_opts_t *o, calib_geometry_state_t *
         char cam[RIG_CAMERA_NAME_MAX + 16] = "";
         if (ncams > 1) snprintf(cam, sizeof cam, " of %s", s->camnames[c]);
         if (p->estimated)
-            fprintf(stderr, "refl calib geometry: lens blur%s: Gaussian PSF sigma %.3f +- %.3f px (the optics' alone; "
-                    "the pixel's footprint apart) from %d edges of %d views\n", cam, p->sigma_px, p->sigma_std_px,
-                    p->edges_used, p->views_used);
+            model_note("lens blur%s: Gaussian PSF sigma %.3f +- %.3f px (the optics' alone; "
+                       "the pixel's footprint apart) from %d edges of %d views", cam, p->sigma_px, p->sigma_std_px,
+                       p->edges_used, p->views_used);
         else
-            fprintf(stderr, "refl calib geometry: lens blur%s not estimated: %s\n", cam, p->why);
+            model_note("lens blur%s not estimated: %s", cam, p->why);
     }
     if (ncams > 1)
         json_object_set_new(s->out, "psf_note", json_string("the lens blur per camera in cameras[].psf; the top "

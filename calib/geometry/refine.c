@@ -189,8 +189,8 @@ static bool axj_group(lsq_problem_t *p, calib_geometry_view_t **l, int n, const 
         w[i].inv_sigma = 1 / sigma_px;
         if (l[i]->q) w[i].n = l[i]->ncorners;
         if (!l[i]->q || !axj_match(l[i], cam, bd, w[i].b, w[i].q)) {
-            fprintf(stderr, "refl calib geometry: %s: its corners do not match its pose; left out of the joint "
-                    "axis fit\n", l[i]->name);
+            model_warning("%s: its corners do not match its pose; left out of the joint "
+                          "axis fit", l[i]->name);
             w[i].n = 0;
             continue;
         }
@@ -224,9 +224,9 @@ static bool axj_add(lsq_problem_t *p, int ng, const int *cnt, axj_view_t **ws, c
         for (int i = 0; ok && ws[g] && i < cnt[g]; i++) {
             if (!ws[g][i].n) continue;
             if (rv[nr] > limit) {
-                fprintf(stderr, "refl calib geometry: %s: its corners are %.1f px RMS from its group's board turned "
-                        "to its turntable angle (%.3f deg; the views' median %.3f px): left out of the axis fit\n",
-                        lists[g][i]->name, rv[nr], lists[g][i]->angle_deg, med);
+                model_warning("%s: its corners are %.1f px RMS from its group's board turned "
+                              "to its turntable angle (%.3f deg; the views' median %.3f px): left out of the axis fit",
+                              lists[g][i]->name, rv[nr], lists[g][i]->angle_deg, med);
                 snprintf(lists[g][i]->why, sizeof lists[g][i]->why, "left out of the axis fit: its corners %.1f px "
                          "RMS from the board turned to its turntable angle (another angle than its journal says?)",
                          rv[nr]);
@@ -376,9 +376,9 @@ bool calib_geometry_refine_axis(calib_geometry_views_t *vs, const calib_board_t 
         // board moved between frames) leaves, and the fit is done again without it
         double limit = fmax(0.5, 5 * med);
         if (!worst || wrms <= limit) break;
-        fprintf(stderr, "refl calib geometry: %s: its corners are %.2f px RMS from the joint axis fit (the views' "
-                "median %.3f px): its board is not where the turntable's angle puts it; left out of the axis fit\n",
-                worst->name, wrms, med);
+        model_warning("%s: its corners are %.2f px RMS from the joint axis fit (the views' "
+                      "median %.3f px): its board is not where the turntable's angle puts it; left out of the axis fit",
+                      worst->name, wrms, med);
         snprintf(worst->why, sizeof worst->why, "left out of the joint axis fit: its corners %.2f px RMS from the "
                  "board turned to its turntable angle", wrms);
         worst->solved = false;

@@ -77,7 +77,7 @@ bool calib_geometry_report(const calib_geometry_opts_t *o, const calib_geometry_
     json_t *sol = s->sol, *intr = json_object_get(sol, "intrinsics");
     char *solpath = g_strdup_printf("%s/solution.json", s->soldir);
     char *hpath = g_strdup_printf("%s/report.html", s->outdir);
-    fprintf(stderr, "refl calib geometry: plots\n");
+    model_note("plots");
     bool ok = model_run_script("calib_geometry_report.py", "plots", jpath, solpath, s->outdir, NULL) == 0;
     FILE *f = ok ? model_html_begin(hpath, "refl calib geometry", s->prov) : NULL;
     if (f) {

@@ -108,7 +108,7 @@ static bool add_session_camera(calib_geometry_views_t *vs, const char *sdir, con
     }
     char *base = g_path_get_basename(sdir);
     bool ok = true;
-    if (s->n == 0) fprintf(stderr, "refl calib geometry: %s has no frames\n", sdir);
+    if (s->n == 0) model_warning("%s has no frames", sdir);
     for (int i = 0; i < s->n && ok; i++) {
         const rig_frame_row_t *r = &s->rows[i];
         int fw = 0, fh = 0;
@@ -162,7 +162,7 @@ bool calib_geometry_add_images(calib_geometry_views_t *vs, const char *pattern, 
         int fw = 0, fh = 0;
         float *img = model_image_read_float(src, &fw, &fh);
         if (!img) {   // not an image, or damaged: skipped, as views without a board are
-            fprintf(stderr, "refl calib geometry: skipped %s\n", model_last_error());
+            model_warning("skipped %s", model_last_error());
             continue;
         }
         nread++;
@@ -262,7 +262,7 @@ bool geo_collect_views(const calib_geometry_opts_t *o, calib_geometry_state_t *s
     if (!session_cameras(o, s, n ? (s->sessions ? s->sessions[0] : o->sessions[0]) : NULL)) return false;
     for (int k = 0; k < n; k++) {
         const char *sd = s->sessions ? s->sessions[k] : o->sessions[k];
-        fprintf(stderr, "refl calib geometry: reading the frames of %s\n", sd);
+        model_note("reading the frames of %s", sd);
         if (!(s->ncams > 1 ? add_session_cameras(s, sd)
                            : calib_geometry_add_session(&s->views, sd, o->camera, s->imgdir, &s->W, &s->H)) ||
             !model_provenance_input(s->prov, "session", sd))
@@ -271,15 +271,17 @@ bool geo_collect_views(const calib_geometry_opts_t *o, calib_geometry_state_t *s
     if (s->ncams > 1) {
         s->W = s->camw[0];
         s->H = s->camh[0];
-        fprintf(stderr, "refl calib geometry: %d cameras (", s->ncams);
-        for (int k = 0; k < s->ncams; k++) fprintf(stderr, "%s%s %dx%d", k ? ", " : "", s->camnames[k], s->camw[k],
-                                                   s->camh[k]);
-        fprintf(stderr, "), calibrated together; the rig frame from %s's views\n", s->camnames[0]);
+        GString *l = g_string_new("");
+        for (int k = 0; k < s->ncams; k++)
+            g_string_append_printf(l, "%s%s %dx%d", k ? ", " : "", s->camnames[k], s->camw[k], s->camh[k]);
+        model_note("%d cameras (%s), calibrated together; the rig frame from %s's views", s->ncams, l->str,
+                   s->camnames[0]);
+        g_string_free(l, TRUE);
     }
     if (o->images) {
         // said after reading: a failure's message names the path, once
         if (!calib_geometry_add_images(&s->views, o->images, s->imgdir, &s->W, &s->H)) return false;
-        fprintf(stderr, "refl calib geometry: %u images from %s\n", s->views.v->len, o->images);
+        model_note("%u images from %s", s->views.v->len, o->images);
         for (guint k = 0; k < s->views.v->len; k++) {
             calib_geometry_view_t *v = g_ptr_array_index(s->views.v, k);
             if (!model_provenance_input(s->prov, "image", v->source)) return false;
