@@ -51,17 +51,20 @@ static int cmp_angle(const void *a, const void *b)
     return (x->angle_deg > y->angle_deg) - (x->angle_deg < y->angle_deg);
 }
 
-// The views of group g with a pose, sorted by angle; returns the count.
 int geo_group_views(const calib_geometry_views_t *vs, int g, calib_geometry_view_t ***out)
 {
     calib_geometry_view_t **l = malloc(vs->v->len * sizeof *l + 1);
     int n = 0;
+    *out = l;
+    if (!l) {
+        model_error_set(NULL, 0, "out of memory");
+        return -1;
+    }
     for (guint i = 0; i < vs->v->len; i++) {
         calib_geometry_view_t *v = g_ptr_array_index(vs->v, i);
         if (v->group == g && v->camera == 0 && v->solved && isfinite(v->angle_deg)) l[n++] = v;
     }
     qsort(l, n, sizeof *l, cmp_angle);
-    *out = l;
     return n;
 }
 
@@ -73,14 +76,19 @@ typedef struct {
 } view_pair_t;
 
 // Every such pair of every group (caller frees *out); *nviews: the views of
-// groups with two or more.
+// groups with two or more. -1 + message when out of memory.
 static int view_pairs(const calib_geometry_views_t *vs, view_pair_t **out, int *nviews)
 {
     int np = 0, cap = 0;
     view_pair_t *p = NULL;
+    *out = NULL;
     for (int g = 0; g < vs->ngroups; g++) {
         calib_geometry_view_t **l;
         int n = geo_group_views(vs, g, &l);
+        if (n < 0) {
+            free(p);
+            return -1;
+        }
         for (int i = 0; i < n; i++)
             for (int j = i + 1; j < n; j++) {
                 double d = wrap_deg(l[j]->angle_deg - l[i]->angle_deg) * DEG;
@@ -89,9 +97,10 @@ static int view_pairs(const calib_geometry_views_t *vs, view_pair_t **out, int *
                     cap = cap ? 2 * cap : 64;
                     view_pair_t *q = realloc(p, (size_t)cap * sizeof *q);
                     if (!q) {
+                        model_error_set(NULL, 0, "out of memory");
                         free(l);
-                        *out = p;
-                        return np;
+                        free(p);
+                        return -1;
                     }
                     p = q;
                 }
@@ -115,11 +124,12 @@ static int view_pairs(const calib_geometry_views_t *vs, view_pair_t **out, int *
 // Step 1: group g's poses made consistent with its first by the turn of the
 // board's corner order (k quarter turns, k a multiple of step) whose rotation
 // relative to the first matches the turntable's angle; a view no turn makes
-// consistent (by 2 deg) loses its pose.
-static void align_group_turns(calib_geometry_views_t *vs, int g, const calib_board_t *bd, int step)
+// consistent (by 2 deg) loses its pose. false + message when out of memory.
+static bool align_group_turns(calib_geometry_views_t *vs, int g, const calib_board_t *bd, int step)
 {
     calib_geometry_view_t **l;
     int n = geo_group_views(vs, g, &l);
+    if (n < 0) return false;
     double Rref[9];
     if (n > 0) pose_R(Rref, l[0]);
     for (int m = 1; m < n; m++) {
@@ -149,19 +159,21 @@ static void align_group_turns(calib_geometry_views_t *vs, int g, const calib_boa
         }
     }
     free(l);
+    return true;
 }
 
 // Step 2: the direction (the pairs' rotation vectors weighted by their steps)
 // and the point (the pairs' equations and a . c = 0, normal equations A c = b;
 // Ai = A^-1) from every pair; *dev2, *wsum: the pairs' squared deviations from
 // the direction, weighted, and the weights. false when there is no pair or A
-// is singular.
+// is singular, false + message when out of memory.
 static bool axis_from_pairs(calib_geometry_views_t *vs, calib_geometry_axis_t *ax, double Ai[9], double *dev2,
                             double *wsum)
 {
     view_pair_t *pairs = NULL;
     ax->npairs = view_pairs(vs, &pairs, &ax->nviews);
-    if (ax->npairs == 0) {
+    if (ax->npairs <= 0) {
+        ax->npairs = 0;
         free(pairs);
         return false;
     }
@@ -200,12 +212,13 @@ static bool axis_from_pairs(calib_geometry_views_t *vs, calib_geometry_axis_t *a
 // Step 3, one group: each view's rotation about the axis relative to the
 // group's first (into ax->fit when the group has two views or more), the
 // rotation off the axis (*off2, *noff) and the point equations' residuals
-// (*e2, *ne).
-static void group_residuals(calib_geometry_views_t *vs, int g, calib_geometry_axis_t *ax, double *off2, int *noff,
+// (*e2, *ne). false + message when out of memory.
+static bool group_residuals(calib_geometry_views_t *vs, int g, calib_geometry_axis_t *ax, double *off2, int *noff,
                             double *e2, int *ne)
 {
     calib_geometry_view_t **l;
     int n = geo_group_views(vs, g, &l);
+    if (n < 0) return false;
     json_t *ang = json_array(), *rot = json_array();
     double Rref[9];
     if (n) pose_R(Rref, l[0]);
@@ -244,20 +257,23 @@ static void group_residuals(calib_geometry_views_t *vs, int g, calib_geometry_ax
         json_decref(rot);
     }
     free(l);
+    return true;
 }
 
 bool calib_geometry_fit_axis(calib_geometry_views_t *vs, const calib_board_t *bd, calib_geometry_axis_t *ax)
 {
     int step = board_turn_step(bd);
     memset(ax, 0, sizeof *ax);
-    for (int g = 0; g < vs->ngroups; g++) align_group_turns(vs, g, bd, step);
+    for (int g = 0; g < vs->ngroups; g++)
+        if (!align_group_turns(vs, g, bd, step)) return false;
     double Ai[9], wsum = 0, dev2 = 0;
     if (!axis_from_pairs(vs, ax, Ai, &dev2, &wsum)) return false;
     // step 3: residuals of the point equations, and per-view rotation about / off the axis
     double e2 = 0, off2 = 0;
     int ne = 0, noff = 0;
     ax->fit = json_array();
-    for (int g = 0; g < vs->ngroups; g++) group_residuals(vs, g, ax, &off2, &noff, &e2, &ne);
+    for (int g = 0; g < vs->ngroups; g++)
+        if (!group_residuals(vs, g, ax, &off2, &noff, &e2, &ne)) return false;
     int dof = ax->nviews - vs->ngroups;
     ax->off_axis_rms_deg = noff ? sqrt(off2 / noff) / DEG : 0;
     ax->dir_unc_deg = (wsum > 0 ? sqrt(dev2 / wsum) : 0) / sqrt(dof > 1 ? dof : 1) / DEG;

@@ -50,7 +50,10 @@ bool calib_geometry_parse_corners(calib_geometry_views_t *vs, const char *text, 
             break;
         }
         calib_geometry_view_t *v = calib_geometry_view_find(vs, name);
-        if (!v && create) v = geo_view_add(vs, name, name, NULL, -1, NAN, NAN, NAN);
+        if (!v && create && !(v = geo_view_add(vs, name, name, NULL, -1, NAN, NAN, NAN))) {
+            ok = false;
+            break;
+        }
         if (v != cur) {
             if (!(ok = corners_block_end(cur, ncur, line0, path, b))) break;
             cur = v;
@@ -58,7 +61,11 @@ bool calib_geometry_parse_corners(calib_geometry_views_t *vs, const char *text, 
             line0 = li + 1;
             if (v) {
                 free(v->q);
-                v->q = malloc((size_t)N * 2 * sizeof(double));
+                if (!(v->q = malloc((size_t)N * 2 * sizeof(double)))) {
+                    model_error_set(path, li + 1, "out of memory");
+                    ok = false;
+                    break;
+                }
                 for (int k = 0; k < 2 * N; k++) v->q[k] = NAN;
             }
         }
@@ -175,6 +182,7 @@ static bool detect_view(const calib_geometry_opts_t *o, calib_geometry_state_t *
     char *path = g_strdup_printf("%s/%s", s->imgdir, v->name);
     float *img = model_image_read_float(path, &w, &h);
     unsigned char *u8 = img ? malloc((size_t)w * h) : NULL;
+    if (img && !u8) model_error_set(path, 0, "out of memory");
     g_free(path);
     if (!u8) {
         free(img);
@@ -206,6 +214,7 @@ static bool corners_opencv(const calib_geometry_opts_t *o, calib_geometry_state_
     GString *t = g_string_new("# filename x y level\n");
     double *q = malloc((size_t)2 * o->board.width_n * o->board.height_n * sizeof *q);
     bool ok = q != NULL;
+    if (!q) model_error_set(s->imgdir, 0, "out of memory");
     for (guint k = 0; ok && k < vs->v->len; k++) ok = detect_view(o, s, g_ptr_array_index(vs->v, k), q, t);
     free(q);
     *text = g_string_free(t, FALSE);

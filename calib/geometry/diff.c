@@ -80,6 +80,7 @@ bool calib_projection_diff(const mrcal_cameramodel_t *a, const mrcal_cameramodel
     mrcal_point3_t *v = calloc(N, sizeof *v);
     lsq_problem_t *p = lsq_problem_new();
     bool ok = pts && q && v && p;
+    if (p && !ok) model_error(NULL, 0, "projection difference: out of memory");   // (else lsq_problem_new's)
     for (int j = 0; ok && j < GY; j++)
         for (int i = 0; i < GX; i++)
             q[j * GX + i] = (mrcal_point2_t){ .xy = { margin_px + i * (W - 1) / (GX - 1),

@@ -28,9 +28,9 @@ bool calib_geometry_rig_frame(calib_geometry_views_t *vs, double board_height_mm
     }
     calib_geometry_view_t **l;
     int n = geo_group_views(vs, g0, &l);
-    if (n == 0) {
+    if (n <= 0) {
         free(l);
-        snprintf(why, whyn, "no board found at tilt 0");
+        snprintf(why, whyn, "%s", n < 0 ? model_last_error() : "no board found at tilt 0");
         return false;
     }
     calib_geometry_view_t *v = l[0];

@@ -51,14 +51,18 @@ static void axis_intrinsics_sigma(calib_geometry_state_t *s)
     ax->dir_unc_deg = hypot(ax->dir_unc_fit_deg, ax->dir_unc_intrinsics_deg);
 }
 
-// Stage 4: the axis, the rig frame and why views have no board.
-static void axis_and_rig_frame(const calib_geometry_opts_t *o, calib_geometry_state_t *s)
+// Stage 4: the axis, the rig frame and why views have no board. false +
+// message only when out of memory (without an axis or a rig frame the run
+// goes on, and says why).
+static bool axis_and_rig_frame(const calib_geometry_opts_t *o, calib_geometry_state_t *s)
 {
     calib_geometry_axis_t *ax = &s->axis;
     snprintf(s->rigwhy, sizeof s->rigwhy, "no turntable angles in the input (--images / --corners)");
     if (s->views.ngroups > 0) {
         model_note("fitting the turntable axis");
+        model_error_clear();
         if (!calib_geometry_fit_axis(&s->views, &o->board, ax)) {
+            if (*model_last_error()) return false;   // out of memory
             snprintf(s->rigwhy, sizeof s->rigwhy, "too few board poses at different angles of one tilt for the "
                      "axis (need 2 views 5..175 deg apart)");
             model_warning("no axis: %s", s->rigwhy);
@@ -82,7 +86,7 @@ static void axis_and_rig_frame(const calib_geometry_opts_t *o, calib_geometry_st
                        ax->off_axis_rms_deg);
         }
     }
-    calib_geometry_explain_missing(&s->views, &o->board, ax->ok ? ax : NULL, s->cam, s->W, s->H);
+    if (!calib_geometry_explain_missing(&s->views, &o->board, ax->ok ? ax : NULL, s->cam, s->W, s->H)) return false;
     for (guint k = 0; k < s->views.v->len; k++) {
         calib_geometry_view_t *v = g_ptr_array_index(s->views.v, k);
         bool same = !strcmp(v->name, v->source);   // the source named once
@@ -90,6 +94,7 @@ static void axis_and_rig_frame(const calib_geometry_opts_t *o, calib_geometry_st
             model_note("no board in %s%s%s%s: %s", v->name, same ? "" : " (",
                        same ? "" : v->source, same ? "" : ")", v->why);
     }
+    return true;
 }
 
 // Stage 5: camera.cameramodel, geometry.json, the report.
@@ -176,8 +181,7 @@ bool calib_geometry_run(const calib_geometry_opts_t *o, calib_geometry_result_t 
     if (!geo_collect_views(o, &s) || !calib_geometry_find_corners(o, &s) || !calib_geometry_solve(o, &s) ||
         !calib_geometry_apply_solution(o, &s) || !calib_geometry_validate_lens(o, &s))
         goto done;
-    axis_and_rig_frame(o, &s);
-    if (!outputs(o, &s)) goto done;
+    if (!axis_and_rig_frame(o, &s) || !outputs(o, &s)) goto done;
     r->camera_model = g_strdup(s.campath);
     r->outdir = g_strdup(s.outdir);
     r->rms_px = s.rms_px;

@@ -266,7 +266,8 @@ bool calib_geometry_mrcal(const calib_geometry_opts_t *o, calib_geometry_state_t
 bool calib_geometry_apply_solution(const calib_geometry_opts_t *o, calib_geometry_state_t *s);
 // The axis from the poses of each tilt group at different angles (quarter
 // turns of mrgingham's corner order made consistent first; inconsistent views
-// lose their pose). false when too few pairs.
+// lose their pose). false when too few pairs (no message), false + message
+// when out of memory.
 // The turns that make a pose's corner order agree: quarter turns for a square
 // chessboard, half turns for another, none for a ChArUco board (its corners
 // carry their ids).
@@ -285,7 +286,8 @@ bool calib_geometry_rig_frame(calib_geometry_views_t *vs, double board_height_mm
                               double rt_cam_rig[6], char *why, size_t whyn);
 // Why each view without a board has none (predicted from the axis when ax;
 // a view left out for too few corners keeps that reason, the prediction added).
-void calib_geometry_explain_missing(calib_geometry_views_t *vs, const calib_board_t *b,
+// false + message when out of memory.
+bool calib_geometry_explain_missing(calib_geometry_views_t *vs, const calib_board_t *b,
                                     const calib_geometry_axis_t *ax, model_camera_t *cam, int W, int H);
 // mrcal's .cameramodel (intrinsics intr, imager W x H, extrinsics rt_cam_ref;
 // rig: ref is the rig frame, else the camera), written atomically.

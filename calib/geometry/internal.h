@@ -40,14 +40,15 @@ static inline void board_centre(const calib_board_t *b, double c[3])
 }
 
 // views.c
-// A new view (calloc'd, owned by vs).
+// A new view (owned by vs); NULL + message when out of memory.
 calib_geometry_view_t *geo_view_add(calib_geometry_views_t *vs, const char *name, const char *source,
                                     const char *session, int group, double angle, double tilt, double az);
 // Stage 1: the views of the sessions (given or captured) or the images.
 bool geo_collect_views(const calib_geometry_opts_t *o, calib_geometry_state_t *s);
 
 // axis.c
-// The views of group g with a pose, sorted by angle; returns the count (*out: free).
+// The views of camera 0 in group g with a pose, sorted by angle; returns the
+// count (*out: free), -1 + message when out of memory.
 int geo_group_views(const calib_geometry_views_t *vs, int g, calib_geometry_view_t ***out);
 
 // frame.c

@@ -8,10 +8,16 @@
 
 // Why a view in a group with poses has no board: predict the board's pose from
 // the group's first pose turned about the axis, and look at it.
-void calib_geometry_explain_missing(calib_geometry_views_t *vs, const calib_board_t *bd,
+bool calib_geometry_explain_missing(calib_geometry_views_t *vs, const calib_board_t *bd,
                                     const calib_geometry_axis_t *ax, model_camera_t *cam, int W, int H)
 {
     const double square_mm = bd->spacing_mm;
+    // the squares' corners, outer edge included (mrgingham needs every square)
+    int nex = bd->width_n + 2, ney = bd->height_n + 2, M = nex * ney;
+    model_vec3_t *p = malloc(M * sizeof *p);
+    double *q = malloc(2 * M * sizeof *q);
+    bool ok = p && q;
+    if (!ok) model_error_set(NULL, 0, "out of memory");
     // the sign of normal . (to camera) on the found views
     double sgn = 0;
     for (guint i = 0; i < vs->v->len && sgn == 0; i++) {
@@ -20,13 +26,13 @@ void calib_geometry_explain_missing(calib_geometry_views_t *vs, const calib_boar
         double R[9];
         pose_R(R, v);
         double n[3] = { R[2], R[5], R[8] };
-        double c[3], p[3];
+        double c[3], tc[3];
         board_centre(bd, c);
-        m3_vec(p, R, c);
-        for (int k = 0; k < 3; k++) p[k] = -(p[k] + v->rt_cam_board[3 + k]);
-        sgn = dot3(n, p) > 0 ? 1 : -1;
+        m3_vec(tc, R, c);
+        for (int k = 0; k < 3; k++) tc[k] = -(tc[k] + v->rt_cam_board[3 + k]);
+        sgn = dot3(n, tc) > 0 ? 1 : -1;
     }
-    for (guint i = 0; i < vs->v->len; i++) {
+    for (guint i = 0; ok && i < vs->v->len; i++) {
         calib_geometry_view_t *v = g_ptr_array_index(vs->v, i);
         if (v->found) continue;
         if (!v->why[0])
@@ -34,7 +40,8 @@ void calib_geometry_explain_missing(calib_geometry_views_t *vs, const calib_boar
         if (!ax || !ax->ok || v->group < 0 || v->camera != 0 || !isfinite(v->angle_deg)) continue;
         calib_geometry_view_t **l;
         int n = geo_group_views(vs, v->group, &l);
-        if (n == 0) {
+        ok = n >= 0;
+        if (n <= 0) {
             free(l);
             continue;
         }
@@ -48,10 +55,6 @@ void calib_geometry_explain_missing(calib_geometry_views_t *vs, const calib_boar
         for (int k = 0; k < 3; k++) tc[k] = ref->rt_cam_board[3 + k] - ax->c[k];
         m3_vec(t, Rrot, tc);
         for (int k = 0; k < 3; k++) t[k] += ax->c[k];
-        // the squares' corners, outer edge included (mrgingham needs every square)
-        int nex = bd->width_n + 2, ney = bd->height_n + 2, M = nex * ney;
-        model_vec3_t *p = malloc(M * sizeof *p);
-        double *q = malloc(2 * M * sizeof *q);
         for (int jj = 0; jj < ney; jj++)
             for (int ii = 0; ii < nex; ii++) {
                 double b[3] = { (ii - 1) * square_mm, (jj - 1) * square_mm, 0 }, x[3];
@@ -90,7 +93,8 @@ void calib_geometry_explain_missing(calib_geometry_views_t *vs, const calib_boar
         } else {
             memcpy(v->why, pred, sizeof pred);
         }
-        free(p);
-        free(q);
     }
+    free(p);
+    free(q);
+    return ok;
 }

@@ -238,6 +238,10 @@ bool calib_geometry_apply_solution(const calib_geometry_opts_t *o, calib_geometr
         v->outliers = (int)json_integer_value(json_object_get(im, "outliers"));
     }
     double *ip = malloc((json_array_size(intr) + 1) * sizeof *ip);
+    if (!ip) {
+        model_error_set(s->mdir, 0, "out of memory");
+        return false;
+    }
     for (k = 0; k < json_array_size(intr); k++) ip[k] = json_real_value(json_array_get(intr, k));
     double zero[6] = { 0 };
     model_camera_free(s->cam);

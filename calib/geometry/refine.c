@@ -26,8 +26,9 @@ typedef struct {
     model_vec3_t   *b;                   // the board point of each observed corner
     double         *q;                   // observed corners (2 n; owned)
     double          inv_sigma;
-    model_vec3_t   *x;                   // scratch (n)
-    double         *qp;                  // scratch (2 n)
+    model_vec3_t   *x;                   // scratch (n; the grid's points while matching)
+    double         *qp;                  // scratch (2 n; the grid's projections while matching)
+    double         *res;                 // scratch (6 n: a residual vector and the Jacobian's two)
 } axj_view_t;
 
 static void axj_axis(const axj_view_t *w, const double *p, double a[3], double c[3])
@@ -75,12 +76,11 @@ static bool axj_eval(const axj_view_t *w, const double *p, const double *rt_g, d
 // A view's corner RMS (px) at axis p and group pose rt_g (INFINITY: not evaluable).
 static double axj_view_rms(const axj_view_t *w, const double *p, const double *rt_g, double sigma_px)
 {
-    double *res = malloc(2 * w->n * sizeof *res), ss = 0;
-    if (res && axj_eval(w, p, rt_g, res))
+    double *res = w->res, ss = 0;
+    if (axj_eval(w, p, rt_g, res))
         for (int k = 0; k < 2 * w->n; k++) ss += res[k] * res[k];
     else
         ss = INFINITY;
-    free(res);
     return sqrt(ss / w->n) * sigma_px;
 }
 
@@ -90,8 +90,8 @@ static bool axj_residual(void *ctx, const double *const *params, double *res, do
     if (!axj_eval(w, params[0], params[1], res)) return false;
     if (!J) return true;
     int nr = 2 * w->n, sizes[2] = { 4, 6 };
-    double *rp = malloc(2 * nr * sizeof *rp), *rm = rp + nr, pp[2][6];
-    bool ok = rp != NULL;
+    double *rp = w->res + nr, *rm = rp + nr, pp[2][6];
+    bool ok = true;
     for (int blk = 0; ok && blk < 2; blk++) {
         if (!J[blk]) continue;
         for (int i = 0; ok && i < sizes[blk]; i++) {
@@ -105,22 +105,24 @@ static bool axj_residual(void *ctx, const double *const *params, double *res, do
             for (int r = 0; ok && r < nr; r++) J[blk][r * sizes[blk] + i] = (rp[r] - rm[r]) / (2 * h);
         }
     }
-    free(rp);
     return ok;
 }
 
 // The board point of each corner v observed (nearest projection of the grid
-// under v's pose, within a third of the spacing, one to one): b[k], q[2 k] for
-// the k-th corner seen (ncorners of them; the order of v's q, those not seen
-// left out). false when they do not match.
-static bool axj_match(const calib_geometry_view_t *v, model_camera_t *cam, const calib_board_t *bd, model_vec3_t *b,
-                      double *q)
+// under v's pose, within a third of the spacing, one to one): w->b[k],
+// w->q[2 k] for the k-th corner seen (ncorners of them; the order of v's q,
+// those not seen left out; w's scratch holds the grid). 1 when they match, 0
+// when not, -1 + message when out of memory.
+static int axj_match(const calib_geometry_view_t *v, model_camera_t *cam, const calib_board_t *bd, axj_view_t *w)
 {
     int N = bd->width_n * bd->height_n, W = bd->width_n;
-    double s = bd->spacing_mm;
-    model_vec3_t *p = malloc(N * sizeof *p);
-    double *qg = malloc(2 * N * sizeof *qg), R[9], spacing = INFINITY;
+    double s = bd->spacing_mm, *q = w->q, *qg = w->qp, R[9], spacing = INFINITY;
+    model_vec3_t *b = w->b, *p = w->x;
     int *used = calloc(N, sizeof *used), n = 0;
+    if (!used) {
+        model_error_set(v->name, 0, "out of memory");
+        return -1;
+    }
     R_from_r(R, v->rt_cam_board);
     for (int j = 0; j < N; j++) {
         double bb[3] = { (j % W) * s, (j / W) * s, 0 }, x[3];
@@ -151,8 +153,6 @@ static bool axj_match(const calib_geometry_view_t *v, model_camera_t *cam, const
             n++;
         }
     }
-    free(p);
-    free(qg);
     free(used);
     return ok && n == v->ncorners;
 }
@@ -186,9 +186,16 @@ static bool axj_group(lsq_problem_t *p, calib_geometry_view_t **l, int n, const 
         w[i].x = malloc(N * sizeof *w[i].x);
         w[i].qp = malloc(2 * N * sizeof *w[i].qp);
         w[i].q = malloc(2 * N * sizeof *w[i].q);
+        w[i].res = malloc(6 * N * sizeof *w[i].res);
+        if (!w[i].b || !w[i].x || !w[i].qp || !w[i].q || !w[i].res) {
+            model_error_set(NULL, 0, "out of memory");
+            return false;
+        }
         w[i].inv_sigma = 1 / sigma_px;
         if (l[i]->q) w[i].n = l[i]->ncorners;
-        if (!l[i]->q || !axj_match(l[i], cam, bd, w[i].b, w[i].q)) {
+        int match = l[i]->q ? axj_match(l[i], cam, bd, &w[i]) : 0;
+        if (match < 0) return false;
+        if (!match) {
             model_warning("%s: its corners do not match its pose; left out of the joint "
                           "axis fit", l[i]->name);
             w[i].n = 0;
@@ -209,6 +216,7 @@ static bool axj_add(lsq_problem_t *p, int ng, const int *cnt, axj_view_t **ws, c
 {
     double *rv = calloc(*nused + 1, sizeof *rv), *sorted = calloc(*nused + 1, sizeof *sorted);
     int nr = 0;
+    if (!rv || !sorted) model_error_set(NULL, 0, "out of memory");
     for (int g = 0; rv && sorted && g < ng; g++)
         for (int i = 0; ws[g] && i < cnt[g]; i++) {
             if (!ws[g][i].n) continue;
@@ -249,6 +257,53 @@ static bool axj_add(lsq_problem_t *p, int ng, const int *cnt, axj_view_t **ws, c
     return ok;
 }
 
+// After the fit: each view's corner RMS (px); *worst: the view of the largest,
+// *wrms, *med the views' median. false + message when out of memory.
+static bool views_rms(int ng, const int *cnt, axj_view_t **ws, calib_geometry_view_t ***lists, const double *axp,
+                      const double *rt, double sigma_px, int nused, calib_geometry_view_t **worst, double *wrms,
+                      double *med)
+{
+    double *rv = calloc(nused + 1, sizeof *rv);
+    if (!rv) {
+        model_error_set(NULL, 0, "out of memory");
+        return false;
+    }
+    int nr = 0;
+    *worst = NULL;
+    *wrms = 0;
+    for (int g = 0; g < ng; g++)
+        for (int i = 0; ws[g] && i < cnt[g]; i++) {
+            if (!ws[g][i].n) continue;
+            rv[nr] = axj_view_rms(&ws[g][i], axp, &rt[6 * g], sigma_px);
+            if (rv[nr] > *wrms) {
+                *wrms = rv[nr];
+                *worst = lists[g][i];
+            }
+            nr++;
+        }
+    qsort(rv, nr, sizeof *rv, model_cmp_double);
+    *med = nr ? rv[nr / 2] : 0;
+    free(rv);
+    return true;
+}
+
+static void groups_free(int ng, const int *cnt, axj_view_t **ws, calib_geometry_view_t ***lists)
+{
+    for (int g = 0; g < ng; g++) {
+        for (int i = 0; ws && ws[g] && i < cnt[g]; i++) {
+            free(ws[g][i].b);
+            free(ws[g][i].q);
+            free(ws[g][i].x);
+            free(ws[g][i].qp);
+            free(ws[g][i].res);
+        }
+        if (ws) free(ws[g]);
+        if (lists) free(lists[g]);
+    }
+    free(ws);
+    free(lists);
+}
+
 // One joint fit of the views group_views gives; *worst: the view of the
 // largest corner RMS (px) *wrms, *med the views' median RMS.
 static bool refine_once(calib_geometry_views_t *vs, const calib_board_t *bd, model_camera_t *cam,
@@ -266,11 +321,18 @@ static bool refine_once(calib_geometry_views_t *vs, const calib_board_t *bd, mod
     calib_geometry_view_t ***lists = calloc(ng ? ng : 1, sizeof *lists);
     int *cnt = calloc(ng ? ng : 1, sizeof *cnt);
     axj_view_t **ws = calloc(ng ? ng : 1, sizeof *ws);
-    bool ok = p && rt && lists && cnt && ws && lsq_add_parameters(p, axp, 4);
+    bool ok = p && rt && lists && cnt && ws;
+    if (p && !ok) model_error_set(NULL, 0, "out of memory");   // (else lsq_problem_new's message)
+    ok = ok && lsq_add_parameters(p, axp, 4);
     for (int g = 0; ok && g < ng; g++) {
         cnt[g] = geo_group_views(vs, g, &lists[g]);
+        ok = cnt[g] >= 0;
         if (cnt[g] < 1) continue;   // a group of one view: its pose only (the rig frame's sigma from it)
-        ws[g] = calloc(cnt[g], sizeof *ws[g]);
+        if (!(ws[g] = calloc(cnt[g], sizeof *ws[g]))) {
+            model_error_set(NULL, 0, "out of memory");
+            ok = false;
+            break;
+        }
         ok = axj_group(p, lists[g], cnt[g], bd, cam, sigma_px, &frame, &rt[6 * g], ws[g], &nused);
         if (g0 < 0 && fabs(vs->group_tilt[g]) < 1e-9) g0 = g;
     }
@@ -307,23 +369,9 @@ static bool refine_once(calib_geometry_views_t *vs, const calib_board_t *bd, mod
             ax->rig_x_unc_deg = sqrt(k2 * fmax(vr, 0)) / DEG;
             ax->rig_origin_along_mm = sqrt(k2 * fmax(vt, 0));
         }
-        double *rv = calloc(nused + 1, sizeof *rv);
-        int nr = 0;
-        *worst = NULL;
-        *wrms = 0;
-        for (int g = 0; rv && g < ng; g++)   // each view's corner RMS
-            for (int i = 0; ws[g] && i < cnt[g]; i++) {
-                if (!ws[g][i].n) continue;
-                rv[nr] = axj_view_rms(&ws[g][i], axp, &rt[6 * g], sigma_px);
-                if (rv[nr] > *wrms) {
-                    *wrms = rv[nr];
-                    *worst = lists[g][i];
-                }
-                nr++;
-            }
-        qsort(rv, nr, sizeof *rv, model_cmp_double);
-        *med = nr ? rv[nr / 2] : 0;
-        free(rv);
+        ok = views_rms(ng, cnt, ws, lists, axp, rt, sigma_px, nused, worst, wrms, med);
+    }
+    if (ok) {
         for (int g = 0; g < ng; g++)   // the poses as the fit has them: turned about the axis
             for (int i = 0; ws[g] && i < cnt[g]; i++) {
                 double R[9], t[3];
@@ -332,18 +380,7 @@ static bool refine_once(calib_geometry_views_t *vs, const calib_board_t *bd, mod
                 memcpy(&lists[g][i]->rt_cam_board[3], t, sizeof t);
             }
     }
-    for (int g = 0; g < ng; g++) {
-        for (int i = 0; ws && ws[g] && i < cnt[g]; i++) {
-            free(ws[g][i].b);
-            free(ws[g][i].q);
-            free(ws[g][i].x);
-            free(ws[g][i].qp);
-        }
-        if (ws) free(ws[g]);
-        if (lists) free(lists[g]);
-    }
-    free(ws);
-    free(lists);
+    groups_free(cnt ? ng : 0, cnt, ws, lists);
     free(cnt);
     free(rt);
     lsq_problem_free(p);
@@ -358,6 +395,10 @@ bool calib_geometry_refine_axis(calib_geometry_views_t *vs, const calib_board_t 
     calib_geometry_axis_t ax0 = *ax;
     guint n = vs->v->len;
     double *rt0 = malloc((size_t)6 * (n ? n : 1) * sizeof *rt0);
+    if (!rt0) {
+        model_error_set(NULL, 0, "out of memory");
+        return false;
+    }
     for (guint k = 0; k < n; k++)
         memcpy(&rt0[6 * k], ((calib_geometry_view_t *)g_ptr_array_index(vs->v, k))->rt_cam_board, 6 * sizeof *rt0);
     bool ok = false, failed = false;

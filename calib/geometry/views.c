@@ -29,10 +29,13 @@ static bool write_8bit(const char *path, const float *img, int w, int h, double 
 }
 
 calib_geometry_view_t *geo_view_add(calib_geometry_views_t *vs, const char *name, const char *source,
-                                       const char *session, int group,
-                        double angle, double tilt, double az)
+                                    const char *session, int group, double angle, double tilt, double az)
 {
     calib_geometry_view_t *v = calloc(1, sizeof *v);
+    if (!v) {
+        model_error_set(name, 0, "out of memory");
+        return NULL;
+    }
     v->name = g_strdup(name);
     v->source = g_strdup(source);
     v->session = g_strdup(session);
@@ -43,6 +46,24 @@ calib_geometry_view_t *geo_view_add(calib_geometry_views_t *vs, const char *name
     v->tilt_azimuth_deg = az;
     g_ptr_array_add(vs->v, v);
     return v;
+}
+
+// A new tilt group of the views (its tilt and hinge azimuth, deg): its index,
+// -1 + message when out of memory.
+static int group_add(calib_geometry_views_t *vs, double tilt, double az)
+{
+    double *gt = realloc(vs->group_tilt, (vs->ngroups + 1) * sizeof *gt);
+    if (gt) vs->group_tilt = gt;
+    double *ga = gt ? realloc(vs->group_az, (vs->ngroups + 1) * sizeof *ga) : NULL;
+    if (ga) vs->group_az = ga;
+    if (!ga) {
+        model_error_set(NULL, 0, "out of memory");
+        return -1;
+    }
+    int g = vs->ngroups++;
+    vs->group_tilt[g] = tilt;
+    vs->group_az[g] = az;
+    return g;
 }
 
 static void view_free(gpointer p)
@@ -99,12 +120,10 @@ static bool add_session_camera(calib_geometry_views_t *vs, const char *sdir, con
         rig_session_free(s);
         return false;
     }
-    if (!sub) {
-        g = vs->ngroups++;
-        vs->group_tilt = realloc(vs->group_tilt, vs->ngroups * sizeof(double));
-        vs->group_az = realloc(vs->group_az, vs->ngroups * sizeof(double));
-        vs->group_tilt[g] = p->tilt_deg;
-        vs->group_az[g] = p->tilt_azimuth_deg;
+    if (!sub && (g = group_add(vs, p->tilt_deg, p->tilt_azimuth_deg)) < 0) {
+        rig_plan_free(p);
+        rig_session_free(s);
+        return false;
     }
     char *base = g_path_get_basename(sdir);
     bool ok = true;
@@ -131,7 +150,10 @@ static bool add_session_camera(calib_geometry_views_t *vs, const char *sdir, con
             *w = fw;
             *h = fh;
             ok = write_8bit(dst, img, fw, fh, full);
-            if (ok) geo_view_add(vs, name, src, sdir, g, r->measured_deg, p->tilt_deg, p->tilt_azimuth_deg)->camera = cam;
+            calib_geometry_view_t *v =
+                ok ? geo_view_add(vs, name, src, sdir, g, r->measured_deg, p->tilt_deg, p->tilt_azimuth_deg) : NULL;
+            if (v) v->camera = cam;
+            else ok = false;
         }
         free(img);
         g_free(fb);
@@ -185,7 +207,7 @@ bool calib_geometry_add_images(calib_geometry_views_t *vs, const char *pattern, 
         char *name = g_strdup_printf("%03d-%s.png", i, b);
         char *dst = g_strdup_printf("%s/%s", imgdir, name);
         ok = write_8bit(dst, img, fw, fh, full);
-        if (ok) geo_view_add(vs, name, src, NULL, -1, NAN, NAN, NAN);
+        if (ok) ok = geo_view_add(vs, name, src, NULL, -1, NAN, NAN, NAN) != NULL;
         free(img);
         g_free(b);
         g_free(name);
@@ -241,16 +263,10 @@ static bool add_session_cameras(calib_geometry_state_t *s, const char *sd)
     }
     rig_session_t *rs = rig_session_open_camera(sd, s->camnames[0]);
     rig_plan_t *p = rs ? rig_plan_parse(rs->plan_text, strlen(rs->plan_text), sd) : NULL;
-    if (p) {
-        vs->ngroups++;
-        vs->group_tilt = realloc(vs->group_tilt, vs->ngroups * sizeof(double));
-        vs->group_az = realloc(vs->group_az, vs->ngroups * sizeof(double));
-        vs->group_tilt[g] = p->tilt_deg;
-        vs->group_az[g] = p->tilt_azimuth_deg;
-    }
+    bool ok = p && group_add(vs, p->tilt_deg, p->tilt_azimuth_deg) == g;
     rig_plan_free(p);
     rig_session_free(rs);
-    return p != NULL;
+    return ok;
 }
 
 // Stage 1: the views of the sessions (given or captured) or the images.
