@@ -295,6 +295,16 @@ bool calib_geometry_write_cameramodel(const char *path, const char *lensmodel, j
                                       const double rt[6], bool rig, double rms);
 // geometry.json's document from the state (new reference).
 json_t *calib_geometry_json(const calib_geometry_opts_t *o, calib_geometry_state_t *s);
+// geometry.json names its format: {"format": "refl-geometry", "version": 1,
+// ...}. Version 1 is the layout described here and in calib/geometry/psf.h
+// (a file without the two keys reads as version 1). Its readers (the lens
+// blur, calib_psf_read; the lab day's comparison) check the parsed root with
+// calib_geometry_json_check: true for a geometry.json of a version this refl
+// reads (*version, may be NULL, gets it); false + message (model_error_set,
+// naming path) for another format or a newer version.
+#define CALIB_GEOMETRY_JSON_FORMAT  "refl-geometry"
+#define CALIB_GEOMETRY_JSON_VERSION 1
+bool calib_geometry_json_check(const json_t *root, const char *path, int *version);
 // The plots (scripts/calib_geometry_report.py plots) and DIR/report.html.
 bool calib_geometry_report(const calib_geometry_opts_t *o, const calib_geometry_state_t *s, const char *jpath);
 

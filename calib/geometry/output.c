@@ -186,10 +186,16 @@ static json_t *view_json(const calib_geometry_state_t *s, const calib_geometry_v
     return im;
 }
 
+bool calib_geometry_json_check(const json_t *root, const char *path, int *version)
+{
+    return model_json_format_check(root, path, CALIB_GEOMETRY_JSON_FORMAT, CALIB_GEOMETRY_JSON_VERSION, version);
+}
+
 json_t *calib_geometry_json(const calib_geometry_opts_t *o, calib_geometry_state_t *s)
 {
     json_t *sol = s->sol, *intr = json_object_get(sol, "intrinsics");
     json_t *out = json_object();
+    model_json_set_format(out, CALIB_GEOMETRY_JSON_FORMAT, CALIB_GEOMETRY_JSON_VERSION);
     json_object_set_new(out, "units", json_string("lengths mm, angles deg (rotation vectors r in rad), pixels px with "
                                                   "(0, 0) the centre of the top-left pixel"));
     json_object_set_new(out, "camera_model", json_string(s->campath));

@@ -787,6 +787,11 @@ bool calib_psf_read(const char *camera_model, const char *camera, double *sigma_
     char *dir = g_path_get_dirname(camera_model), *path = g_strdup_printf("%s/geometry.json", dir);
     g_free(dir);
     json_t *g = access(path, R_OK) == 0 ? json_load_file(path, 0, NULL) : NULL, *p = NULL;
+    if (g && !calib_geometry_json_check(g, path, NULL)) {   // a newer refl's: refused, and said (the callers go on)
+        model_warning("%s; its lens blur is not used", model_last_error());
+        json_decref(g);
+        g = NULL;
+    }
     char *base = g_path_get_basename(camera_model);
     if (!camera && g_str_has_suffix(base, ".cameramodel")) {   // DIR/NAME.cameramodel of several cameras
         base[strlen(base) - strlen(".cameramodel")] = 0;
