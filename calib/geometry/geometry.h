@@ -195,7 +195,7 @@ typedef struct {
     calib_geometry_axis_t axis;
     bool            have_rig;
     double          rt_cam_rig[6];
-    int             ncams;          // cameras calibrated together (1: one, as always before)
+    int             ncams;          // cameras calibrated together (1: a single camera)
     char            camnames[RIG_CAMERAS_MAX][RIG_CAMERA_NAME_MAX];
     int             camw[RIG_CAMERAS_MAX], camh[RIG_CAMERAS_MAX];   // each camera's imager, px
     char            rigwhy[256];    // why there is no rig frame

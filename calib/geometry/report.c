@@ -63,7 +63,7 @@ static void report_crossvalidation(FILE *f, const calib_geometry_state_t *s)
                     json_string_value(json_object_get(json_object_get(x, "lens_choice"), "why")));
 }
 
-// A figure of the plots script when it wrote it (older scripts or a missing mrcal leave some out).
+// A figure of the plots script when it wrote it (it leaves out what it cannot draw, e.g. without mrcal).
 static void report_figure_if(FILE *f, const char *outdir, const char *png, const char *caption)
 {
     char *p = g_strdup_printf("%s/%s", outdir, png);
