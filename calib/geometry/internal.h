@@ -1,5 +1,5 @@
 // calib/geometry/internal.h — inside calib/geometry/: the helpers and stages the
-// files of `refl calib geometry` share (3x3 matrices and mrcal's rotation
+// files of `refl calib geometry` share (3-vectors and mrcal's rotation
 // vectors, the views of a tilt group, the rig-frame algebra). Included only
 // by calib/geometry/*.c; the public interface is calib/geometry/geometry.h.
 #pragma once
