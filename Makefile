@@ -142,6 +142,16 @@ RIG_SRC := $(RIG_TURNTABLE_SRC) $(RIG_LAMPS_SRC) $(RIG_CAMERA_SRC) $(RIG_SESSION
 
 CALIB_GEOMETRY_SRC := \
     calib/geometry/geometry.c \
+    calib/geometry/views.c \
+    calib/geometry/capture.c \
+    calib/geometry/corners.c \
+    calib/geometry/mrcal.c \
+    calib/geometry/axis.c \
+    calib/geometry/refine.c \
+    calib/geometry/frame.c \
+    calib/geometry/missing.c \
+    calib/geometry/output.c \
+    calib/geometry/report.c \
     calib/geometry/diff.c \
     calib/geometry/psf.c \
     calib/geometry/export.c

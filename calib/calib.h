@@ -147,7 +147,9 @@ void         calib_set_free(calib_set_t *c);
 // not in it), the footprint the edges showed (*pixel_fill: 1 the pixel's
 // square, 0 a point at its centre; 1 in files without it; may be NULL) and
 // the file's path (g_free; geometry_json may be NULL); false (no message)
-// when there is no such file or it has no estimate.
+// when there is no such file or it has no estimate; false + a warning
+// (model_warning; the message kept, model_last_error) when the file is of
+// another format or a newer version (calib_geometry_json_check).
 bool calib_psf_read(const char *camera_model, const char *camera, double *sigma_px, double *sigma_std_px,
                     double *pixel_fill, char **geometry_json);
 

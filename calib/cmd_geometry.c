@@ -273,7 +273,7 @@ int calib_cmd_geometry(int argc, char **argv)
                r.outdir, r.outdir);
         rc = 0;
     } else {
-        fprintf(stderr, "refl calib geometry: %s\n", model_last_error());
+        model_error_report("calib geometry");
         if (r.usage) model_cli_usage(&cli, stderr);
         rc = r.usage ? 2 : rig_operator_paused(o.op) ? 3 : 1;
     }

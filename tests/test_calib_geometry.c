@@ -293,6 +293,8 @@ TEST(calib_geometry_synthetic_mrcal)
         // 0.1 px per coordinate: RMS of the 2-vector residual ~ 0.1 sqrt(2) less the fitted parameters
         CHECK(rms > 0.11 && rms < 0.16);
         CHECK(json_integer_value(json_object_get(g, "views_used")) == 24);
+        CHECK(!strcmp(json_string_value(json_object_get(g, "format")) ?: "", "refl-geometry"));
+        CHECK(json_integer_value(json_object_get(g, "version")) == 1);
         CHECK(json_is_null(json_object_get(g, "axis")));
         CHECK(json_is_null(json_object_get(g, "rt_cam_rig")));
         for (int k = 0; k < 4; k++) CHECK_NEAR(b->intrinsics[k], t->intrinsics[k], 1.0);

@@ -213,6 +213,49 @@ TEST(calib_psf_calibration_set)
     CHECK(!calib_psf_read(test_path("nowhere/camera.cameramodel"), NULL, &s, &sd, NULL, NULL) && isnan(s));
 }
 
+// geometry.json names its format and version; the reader takes version 1 (and
+// a file without the keys), and refuses a newer version or another format
+// with a message naming the file (the calibration set goes on without the blur).
+TEST(calib_psf_geometry_json_version)
+{
+    char cam[4096];
+    snprintf(cam, sizeof cam, "%s/examples/camera.cameramodel", test_srcdir());
+    gchar *text = NULL;
+    gsize len = 0;
+    CHECK(g_file_get_contents(cam, &text, &len, NULL));
+    g_mkdir_with_parents(test_path("v/geometry"), 0755);
+    CHECK(g_file_set_contents(test_path("v/geometry/camera.cameramodel"), text, (gssize)len, NULL));
+    g_free(text);
+    const char *model = test_path("v/geometry/camera.cameramodel");
+    const char *psf = "\"psf\": {\"model\": \"gaussian\", \"sigma_px\": 0.7, \"sigma_std_px\": 0.01}}";
+    double s, sd;
+    char *doc = g_strdup_printf("{\"format\": \"refl-geometry\", \"version\": 1, %s", psf);
+    test_write("v/geometry/geometry.json", doc);
+    g_free(doc);
+    CHECK(calib_psf_read(model, NULL, &s, &sd, NULL, NULL));
+    CHECK_NEAR(s, 0.7, 1e-12);
+    doc = g_strdup_printf("{\"format\": \"refl-geometry\", \"version\": 2, %s", psf);
+    test_write("v/geometry/geometry.json", doc);
+    g_free(doc);
+    CHECK(!calib_psf_read(model, NULL, &s, &sd, NULL, NULL) && isnan(s));
+    CHECK_CONTAINS(model_last_error(), "geometry.json");
+    CHECK_CONTAINS(model_last_error(), "refl-geometry version 2, written by a newer refl");
+    doc = g_strdup_printf("{\"format\": \"refl-gain\", \"version\": 1, %s", psf);
+    test_write("v/geometry/geometry.json", doc);
+    g_free(doc);
+    CHECK(!calib_psf_read(model, NULL, &s, &sd, NULL, NULL));
+    CHECK_CONTAINS(model_last_error(), "a refl-gain file, not refl-geometry");
+    // the check itself
+    json_t *root = json_object();
+    int v = 0;
+    CHECK(calib_geometry_json_check(root, "g.json", &v) && v == 1);   // without the keys: version 1
+    model_json_set_format(root, CALIB_GEOMETRY_JSON_FORMAT, CALIB_GEOMETRY_JSON_VERSION);
+    CHECK(calib_geometry_json_check(root, "g.json", &v) && v == CALIB_GEOMETRY_JSON_VERSION);
+    json_object_set_new(root, "version", json_integer(CALIB_GEOMETRY_JSON_VERSION + 1));
+    CHECK(!calib_geometry_json_check(root, "g.json", &v));
+    json_decref(root);
+}
+
 // Pixels that sample a point at their centre (a renderer's one ray a pixel):
 // a sharp board's edges are sharper than a square footprint allows, the
 // estimate says so (pixel_fill 0) and its sigma is 0 (within 0.015 px); a

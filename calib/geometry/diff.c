@@ -80,6 +80,7 @@ bool calib_projection_diff(const mrcal_cameramodel_t *a, const mrcal_cameramodel
     mrcal_point3_t *v = calloc(N, sizeof *v);
     lsq_problem_t *p = lsq_problem_new();
     bool ok = pts && q && v && p;
+    if (p && !ok) model_error(NULL, 0, "projection difference: out of memory");   // (else lsq_problem_new's)
     for (int j = 0; ok && j < GY; j++)
         for (int i = 0; i < GX; i++)
             q[j * GX + i] = (mrcal_point2_t){ .xy = { margin_px + i * (W - 1) / (GX - 1),
@@ -290,18 +291,18 @@ static bool compare_cameras(const calib_geometry_state_t *s, const char *dir_a, 
     return ok;
 }
 
-// One line of figures to stderr (and the report): camera 0's observed region.
+// One note of figures (and the report's): camera 0's observed region.
 static void xv_print(const char *what, const json_t *r)
 {
     json_t *c0 = json_array_get(json_object_get(r, "cameras"), 0), *f = json_object_get(c0, "observed");
-    fprintf(stderr, "refl calib geometry: %s: differ by RMS %.4f px (worst %.4f) where the views were, predicted "
-            "s0 + s1 RMS %.4f px (worst %.4f); ratio %.2f: %s (criterion: ratio <= %.1f)\n", what,
-            json_number_value(json_object_get(f, "diff_rms_px")),
-            json_number_value(json_object_get(f, "diff_worst_px")),
-            json_number_value(json_object_get(f, "predicted_rms_px")),
-            json_number_value(json_object_get(f, "predicted_worst_px")),
-            json_number_value(json_object_get(r, "ratio")),
-            json_is_true(json_object_get(r, "pass")) ? "passes" : "FAILS", CALIB_GEOMETRY_XV_MAX_RATIO);
+    model_note("%s: differ by RMS %.4f px (worst %.4f) where the views were, predicted "
+               "s0 + s1 RMS %.4f px (worst %.4f); ratio %.2f: %s (criterion: ratio <= %.1f)", what,
+               json_number_value(json_object_get(f, "diff_rms_px")),
+               json_number_value(json_object_get(f, "diff_worst_px")),
+               json_number_value(json_object_get(f, "predicted_rms_px")),
+               json_number_value(json_object_get(f, "predicted_worst_px")),
+               json_number_value(json_object_get(r, "ratio")),
+               json_is_true(json_object_get(r, "pass")) ? "passes" : "FAILS", CALIB_GEOMETRY_XV_MAX_RATIO);
 }
 
 json_t *calib_geometry_crossvalidate(const calib_geometry_opts_t *o, calib_geometry_state_t *s,
@@ -328,12 +329,12 @@ json_t *calib_geometry_crossvalidate(const calib_geometry_opts_t *o, calib_geome
     if (ok && why[0]) {
         json_object_set_new(r, "done", json_false());
         json_object_set_new(r, "why", json_string(why));
-        fprintf(stderr, "refl calib geometry: no cross-validation: %s\n", why);
+        model_warning("no cross-validation: %s", why);
     }
     // a half that cannot be solved or compared is said, not fatal: the calibration of all the views stands
     for (int h = 0; ok && !why[0] && h < 2; h++) {
         json_t *sol = NULL;
-        fprintf(stderr, "refl calib geometry: cross-validation of %s, half %d\n", lensmodel, h);
+        model_note("cross-validation of %s, half %d", lensmodel, h);
         if (!calib_geometry_mrcal(o, s, lensmodel, hc[h], hd[h], n[h], &sol))
             snprintf(why, sizeof why, "half %d could not be solved: %.250s", h, model_last_error());
         json_decref(sol);
@@ -349,7 +350,7 @@ json_t *calib_geometry_crossvalidate(const calib_geometry_opts_t *o, calib_geome
     if (ok && why[0] && !json_is_false(json_object_get(r, "done"))) {
         json_object_set_new(r, "done", json_false());
         json_object_set_new(r, "why", json_string(why));
-        fprintf(stderr, "refl calib geometry: no cross-validation of %s: %s\n", lensmodel, why);
+        model_warning("no cross-validation of %s: %s", lensmodel, why);
     }
     for (int h = 0; h < 2; h++) {
         g_free(hc[h]);
@@ -402,7 +403,7 @@ static bool choose_lens(const calib_geometry_opts_t *o, calib_geometry_state_t *
         !compare_cameras(s, s->mdir, sdir, "lean-splined", o->distance_mm, bias)) {
         char *w = g_strdup_printf("%s kept: the splined model could not be fitted or compared (%s)%s", leanname,
                                   model_last_error(), lean_xv ? "" : "; its cross-validation FAILS");
-        fprintf(stderr, "refl calib geometry: %s\n", w);
+        model_warning("%s", w);
         json_object_set_new(choice, "chosen", json_string(leanname));
         json_object_set_new(choice, "why", json_string(w));
         g_free(w);
@@ -484,7 +485,7 @@ bool calib_geometry_validate_lens(const calib_geometry_opts_t *o, calib_geometry
                                                         s->lensmodel, "why", why));
     }
     if (ok)
-        fprintf(stderr, "refl calib geometry: lens model: %s\n",
-                json_string_value(json_object_get(json_object_get(x, "lens_choice"), "why")));
+        model_note("lens model: %s",
+                   json_string_value(json_object_get(json_object_get(x, "lens_choice"), "why")));
     return ok;
 }

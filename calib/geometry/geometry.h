@@ -35,8 +35,10 @@
 // (0, 0) the centre of the top-left pixel. Poses are mrcal's rt (r: rotation
 // vector, rad; t: mm); rt_a_b maps coordinates in frame b to frame a.
 // Errors: false / NULL with the message kept by model_error_set
-// (model_last_error), not printed: the caller prints it once. Progress and
-// the views without a board go to stderr ("refl calib geometry: ...").
+// (model_last_error), not printed: the caller prints it once. What the run
+// does, the views without a board and why, and the views left out of a fit
+// are notes and warnings (model_note, model_warning: the dispatcher names
+// the command); a failed tool's last messages are a warning before its error.
 #pragma once
 
 #include <glib.h>
@@ -193,7 +195,7 @@ typedef struct {
     calib_geometry_axis_t axis;
     bool            have_rig;
     double          rt_cam_rig[6];
-    int             ncams;          // cameras calibrated together (1: one, as always before)
+    int             ncams;          // cameras calibrated together (1: a single camera)
     char            camnames[RIG_CAMERAS_MAX][RIG_CAMERA_NAME_MAX];
     int             camw[RIG_CAMERAS_MAX], camh[RIG_CAMERAS_MAX];   // each camera's imager, px
     char            rigwhy[256];    // why there is no rig frame
@@ -264,7 +266,8 @@ bool calib_geometry_mrcal(const calib_geometry_opts_t *o, calib_geometry_state_t
 bool calib_geometry_apply_solution(const calib_geometry_opts_t *o, calib_geometry_state_t *s);
 // The axis from the poses of each tilt group at different angles (quarter
 // turns of mrgingham's corner order made consistent first; inconsistent views
-// lose their pose). false when too few pairs.
+// lose their pose). false when too few pairs (no message), false + message
+// when out of memory.
 // The turns that make a pose's corner order agree: quarter turns for a square
 // chessboard, half turns for another, none for a ChArUco board (its corners
 // carry their ids).
@@ -283,7 +286,8 @@ bool calib_geometry_rig_frame(calib_geometry_views_t *vs, double board_height_mm
                               double rt_cam_rig[6], char *why, size_t whyn);
 // Why each view without a board has none (predicted from the axis when ax;
 // a view left out for too few corners keeps that reason, the prediction added).
-void calib_geometry_explain_missing(calib_geometry_views_t *vs, const calib_board_t *b,
+// false + message when out of memory.
+bool calib_geometry_explain_missing(calib_geometry_views_t *vs, const calib_board_t *b,
                                     const calib_geometry_axis_t *ax, model_camera_t *cam, int W, int H);
 // mrcal's .cameramodel (intrinsics intr, imager W x H, extrinsics rt_cam_ref;
 // rig: ref is the rig frame, else the camera), written atomically.
@@ -291,6 +295,16 @@ bool calib_geometry_write_cameramodel(const char *path, const char *lensmodel, j
                                       const double rt[6], bool rig, double rms);
 // geometry.json's document from the state (new reference).
 json_t *calib_geometry_json(const calib_geometry_opts_t *o, calib_geometry_state_t *s);
+// geometry.json names its format: {"format": "refl-geometry", "version": 1,
+// ...}. Version 1 is the layout described here and in calib/geometry/psf.h
+// (a file without the two keys reads as version 1). Its readers (the lens
+// blur, calib_psf_read; the lab day's comparison) check the parsed root with
+// calib_geometry_json_check: true for a geometry.json of a version this refl
+// reads (*version, may be NULL, gets it); false + message (model_error_set,
+// naming path) for another format or a newer version.
+#define CALIB_GEOMETRY_JSON_FORMAT  "refl-geometry"
+#define CALIB_GEOMETRY_JSON_VERSION 1
+bool calib_geometry_json_check(const json_t *root, const char *path, int *version);
 // The plots (scripts/calib_geometry_report.py plots) and DIR/report.html.
 bool calib_geometry_report(const calib_geometry_opts_t *o, const calib_geometry_state_t *s, const char *jpath);
 

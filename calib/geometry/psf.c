@@ -225,6 +225,7 @@ static bool edge_collect(const float *img, int W, int H, const double A[2], cons
     E->keep = malloc(cap * sizeof *E->keep);
     if (!E->x || !E->y || !E->P || !E->keep) {
         snprintf(why, whyn, "out of memory");
+        model_error_set(NULL, 0, "out of memory");
         return false;
     }
     for (int y = y0; y <= y1; y++)
@@ -381,12 +382,16 @@ int calib_psf_add_view(calib_psf_acc_t *a, const float *img, int W, int H, const
 // ---------------------------------------------------------------------------
 // The estimate
 
-// Median and 1.4826 MAD of the used edges of camera (all of view when view >= 0).
+// Median and 1.4826 MAD of the used edges of camera (all of view when view >=
+// 0): their count, -1 + message when out of memory.
 static int edges_median(const calib_psf_acc_t *a, int camera, int view, double *med, double *mad)
 {
     int n = 0;
     double *v = malloc((a->edges->len + 1) * sizeof *v);
-    if (!v) return 0;
+    if (!v) {
+        model_error_set(NULL, 0, "out of memory");
+        return -1;
+    }
     for (guint k = 0; k < a->edges->len; k++) {
         const calib_psf_edge_t *e = &g_array_index(a->edges, calib_psf_edge_t, k);
         if (e->used && e->camera == camera && (view < 0 || e->view == view)) v[n++] = e->sigma_px;
@@ -396,6 +401,42 @@ static int edges_median(const calib_psf_acc_t *a, int camera, int view, double *
     *mad = 1.4826 * model_median(v, n);
     free(v);
     return n;
+}
+
+// An estimate that ran out of memory: not estimated, and why.
+static void estimate_oom(calib_psf_t *out)
+{
+    out->estimated = false;
+    snprintf(out->why, sizeof out->why, "out of memory");
+    model_error_set(NULL, 0, "out of memory");
+}
+
+// The scatter of the views' medians (views of 5 edges or more, at least 3 of
+// them): out->sigma_std_views_px, and out->views_used. false when out of memory.
+static bool views_scatter(const calib_psf_acc_t *a, int camera, calib_psf_t *out)
+{
+    int maxview = -1;
+    for (guint k = 0; k < a->edges->len; k++) {
+        const calib_psf_edge_t *e = &g_array_index(a->edges, calib_psf_edge_t, k);
+        if (e->camera == camera && e->view > maxview) maxview = e->view;
+    }
+    double sv = 0, svv = 0;
+    int nv = 0;
+    for (int v = 0; v <= maxview; v++) {
+        double vm, vd;
+        int c = edges_median(a, camera, v, &vm, &vd);
+        if (c < 0) return false;
+        if (c > 0) out->views_used++;
+        if (c < 5) continue;
+        sv += vm;
+        svv += vm * vm;
+        nv++;
+    }
+    if (nv >= 3) {
+        double mean = sv / nv, var = fmax(0, (svv - nv * mean * mean) / (nv - 1));
+        out->sigma_std_views_px = sqrt(var / nv);
+    }
+    return true;
 }
 
 void calib_psf_estimate(calib_psf_acc_t *a, int camera, calib_psf_t *out)
@@ -432,6 +473,10 @@ void calib_psf_estimate(calib_psf_acc_t *a, int camera, calib_psf_t *out)
         }
     }
     int n = edges_median(a, camera, -1, &med, &mad);
+    if (n < 0) {
+        estimate_oom(out);
+        return;
+    }
     if (n < 10) {
         snprintf(out->why, sizeof out->why, "%d usable edges of %d (at least 10 are needed: a board of squares of "
                  "20 px or more in view, sharp and unsaturated)", n, out->edges_tried);
@@ -447,49 +492,36 @@ void calib_psf_estimate(calib_psf_acc_t *a, int camera, calib_psf_t *out)
         out->outliers++;
     }
     n = edges_median(a, camera, -1, &med, &mad);
+    double *fs = n < 0 ? NULL : malloc(((size_t)n + 1) * sizeof *fs);
+    if (!fs) {
+        estimate_oom(out);
+        return;
+    }
     out->sigma_px = med;
     out->spread_px = mad;
     out->edges_used = n;
     // the median's standard error: from the edges' scatter, or from their own fits' 1-sigma when larger
     // (edges at the bound scatter none)
-    double *fs = malloc((size_t)n * sizeof *fs);
     int m = 0;
-    for (guint k = 0; k < a->edges->len && fs; k++) {
+    for (guint k = 0; k < a->edges->len; k++) {
         const calib_psf_edge_t *e = &g_array_index(a->edges, calib_psf_edge_t, k);
         if (e->used && e->camera == camera) fs[m++] = e->sigma_std_px;
     }
-    double fit_sd = fs ? model_median(fs, m) : 0;
+    double fit_sd = model_median(fs, m);
     free(fs);
     out->sigma_std_edges_px = 1.2533 * fmax(mad, fit_sd) / sqrt(n);
-    // the views' medians
-    int maxview = -1;
-    for (guint k = 0; k < a->edges->len; k++) {
-        const calib_psf_edge_t *e = &g_array_index(a->edges, calib_psf_edge_t, k);
-        if (e->camera == camera && e->view > maxview) maxview = e->view;
-    }
-    double sv = 0, svv = 0;
-    int nv = 0;
-    for (int v = 0; v <= maxview; v++) {
-        double vm, vd;
-        int c = edges_median(a, camera, v, &vm, &vd);
-        if (c > 0) out->views_used++;
-        if (c < 5) continue;
-        sv += vm;
-        svv += vm * vm;
-        nv++;
-    }
-    if (nv >= 3) {
-        double mean = sv / nv, var = fmax(0, (svv - nv * mean * mean) / (nv - 1));
-        out->sigma_std_views_px = sqrt(var / nv);
+    double *rr = views_scatter(a, camera, out) ? malloc(((size_t)n + 1) * sizeof *rr) : NULL;
+    if (!rr) {
+        estimate_oom(out);
+        return;
     }
     out->sigma_std_px = fmax(out->sigma_std_edges_px, isfinite(out->sigma_std_views_px) ? out->sigma_std_views_px : 0);
-    double *rr = malloc((size_t)n * sizeof *rr);
     m = 0;
-    for (guint k = 0; k < a->edges->len && rr; k++) {
+    for (guint k = 0; k < a->edges->len; k++) {
         const calib_psf_edge_t *e = &g_array_index(a->edges, calib_psf_edge_t, k);
         if (e->used && e->camera == camera) rr[m++] = e->rms_dn / fabs(e->level_pos_dn - e->level_neg_dn);
     }
-    out->rms_rel = rr ? model_median(rr, m) : NAN;
+    out->rms_rel = model_median(rr, m);
     free(rr);
     out->estimated = true;
 }
@@ -506,8 +538,7 @@ json_t *calib_psf_json(const calib_psf_t *p)
     json_object_set_new(j, "sigma_px", json_real(p->sigma_px));
     json_object_set_new(j, "sigma_std_px", json_real(p->sigma_std_px));
     json_object_set_new(j, "sigma_std_edges_px", json_real(p->sigma_std_edges_px));
-    json_object_set_new(j, "sigma_std_views_px",
-                        isfinite(p->sigma_std_views_px) ? json_real(p->sigma_std_views_px) : json_null());
+    json_object_set_new(j, "sigma_std_views_px", model_json_number(p->sigma_std_views_px));
     json_object_set_new(j, "sigma_spread_px", json_real(p->spread_px));
     json_object_set_new(j, "edges_used", json_integer(p->edges_used));
     json_object_set_new(j, "edges_fitted", json_integer(p->edges_fitted));
@@ -521,8 +552,7 @@ json_t *calib_psf_json(const calib_psf_t *p)
                                                                        : "a point at the pixel's centre: the edges "
                                                                          "are sharper than a square footprint allows "
                                                                          "(a renderer's one ray a pixel)"));
-    json_object_set_new(j, "rss_point_over_square", isfinite(p->rss_point_over_square)
-                                                        ? json_real(p->rss_point_over_square) : json_null());
+    json_object_set_new(j, "rss_point_over_square", model_json_number(p->rss_point_over_square));
     json_object_set_new(j, "method", json_string(
         "slanted edge (ISO 12233's idea) on the board's square edges between adjacent found corners: the pixels of "
         "each edge's middle (a fifth of its length, at least 6 px, from either corner; within 6 px or 0.3 of its "
@@ -619,8 +649,9 @@ static bool esf_csv(const calib_psf_acc_t *a, const calib_geometry_state_t *s, c
     return ok;
 }
 
-// The views' edges into a (a few per view: about EDGES_TARGET in all).
-static void fit_views(const calib_geometry_opts_t *o, calib_geometry_state_t *s, calib_psf_acc_t *a)
+// The views' edges into a (a few per view: about EDGES_TARGET in all). false +
+// message when out of memory.
+static bool fit_views(const calib_geometry_opts_t *o, calib_geometry_state_t *s, calib_psf_acc_t *a)
 {
     int nv = 0;
     for (guint k = 0; k < s->views.v->len; k++) {
@@ -630,20 +661,25 @@ static void fit_views(const calib_geometry_opts_t *o, calib_geometry_state_t *s,
     const int nw = o->board.width_n, nh = o->board.height_n;
     int total = nh * (nw - 1) + nw * (nh - 1), cap = nv ? EDGES_TARGET / nv : total;
     cap = cap < 6 ? 6 : cap > total ? total : cap;
-    fprintf(stderr, "refl calib geometry: the lens's blur from the board's edges (%d views, up to %d edges each)\n",
-            nv, cap);
+    model_note("the lens's blur from the board's edges (%d views, up to %d edges each)",
+               nv, cap);
     for (guint k = 0; k < s->views.v->len; k++) {
         const calib_geometry_view_t *v = g_ptr_array_index(s->views.v, k);
         if (!v->found || !v->q || !v->source) continue;
         int w = 0, h = 0;
         float *img = model_image_read_float(v->source, &w, &h);
         if (!img) {
-            fprintf(stderr, "refl calib geometry: the blur leaves out %s: %s\n", v->source, model_last_error());
+            model_warning("the blur leaves out %s: %s", v->source, model_last_error());
             continue;
         }
-        calib_psf_add_view(a, img, w, h, v->q, v->camera, (int)k, cap);
+        int n = calib_psf_add_view(a, img, w, h, v->q, v->camera, (int)k, cap);
         free(img);
+        if (n < 0) {
+            model_error_set(v->source, 0, "out of memory");
+            return false;
+        }
     }
+    return true;
 }
 
 bool calib_psf_geometry(const calib_geometry_opts_t *o, calib_geometry_state_t *s)
@@ -665,7 +701,10 @@ bool calib_psf_geometry(const calib_geometry_opts_t *o, calib_geometry_state_t *
         model_error_set(s->outdir, 0, "out of memory");
         return false;
     } else {
-        fit_views(o, s, a);
+        if (!fit_views(o, s, a)) {
+            calib_psf_acc_free(a);
+            return false;
+        }
         for (int c = 0; c < ncams; c++) calib_psf_estimate(a, c, &est[c]);
         char *ep = g_strdup_printf("%s/psf_edges.csv", s->outdir), *sp = g_strdup_printf("%s/psf_esf.csv", s->outdir);
         ok = edges_csv(a, s, ep) && esf_csv(a, s, est, ncams, sp);
@@ -685,11 +724,11 @@ bool calib_psf_geometry(const calib_geometry_opts_t *o, calib_geometry_state_t *
         char cam[RIG_CAMERA_NAME_MAX + 16] = "";
         if (ncams > 1) snprintf(cam, sizeof cam, " of %s", s->camnames[c]);
         if (p->estimated)
-            fprintf(stderr, "refl calib geometry: lens blur%s: Gaussian PSF sigma %.3f +- %.3f px (the optics' alone; "
-                    "the pixel's footprint apart) from %d edges of %d views\n", cam, p->sigma_px, p->sigma_std_px,
-                    p->edges_used, p->views_used);
+            model_note("lens blur%s: Gaussian PSF sigma %.3f +- %.3f px (the optics' alone; "
+                       "the pixel's footprint apart) from %d edges of %d views", cam, p->sigma_px, p->sigma_std_px,
+                       p->edges_used, p->views_used);
         else
-            fprintf(stderr, "refl calib geometry: lens blur%s not estimated: %s\n", cam, p->why);
+            model_note("lens blur%s not estimated: %s", cam, p->why);
     }
     if (ncams > 1)
         json_object_set_new(s->out, "psf_note", json_string("the lens blur per camera in cameras[].psf; the top "
@@ -748,6 +787,11 @@ bool calib_psf_read(const char *camera_model, const char *camera, double *sigma_
     char *dir = g_path_get_dirname(camera_model), *path = g_strdup_printf("%s/geometry.json", dir);
     g_free(dir);
     json_t *g = access(path, R_OK) == 0 ? json_load_file(path, 0, NULL) : NULL, *p = NULL;
+    if (g && !calib_geometry_json_check(g, path, NULL)) {   // a newer refl's: refused, and said (the callers go on)
+        model_warning("%s; its lens blur is not used", model_last_error());
+        json_decref(g);
+        g = NULL;
+    }
     char *base = g_path_get_basename(camera_model);
     if (!camera && g_str_has_suffix(base, ".cameramodel")) {   // DIR/NAME.cameramodel of several cameras
         base[strlen(base) - strlen(".cameramodel")] = 0;
