@@ -1,0 +1,273 @@
+// rig/virtual/internal.h — inside the virtual rig (rig/virtual/): its state
+// (struct rig_virtual), samples, textures and caches, and the functions its
+// files share: virtual.c (open, close, the turntable seen by users), render.c
+// (planes and frames), texture.c, prerender.c (pre-rendering and speculation),
+// pose.c (the sample on the table), truth_rig.c and truth_samples.c (the truth
+// file read into a rig).
+#pragma once
+
+#include <pthread.h>
+#include <stdbool.h>
+#include <stddef.h>
+#include <stdint.h>
+
+#include "model/model.h"
+#include "rig/internal.h"
+#include "rig/rig.h"
+#include "rig/virtual/gv_camera.h"
+#include "rig/virtual/lamps.h"
+#include "rig/virtual/materials.h"
+#include "rig/virtual/optics.h"
+#include "rig/virtual/place.h"
+#include "rig/virtual/truth.h"
+#include "rig/virtual/virtual.h"
+
+#define NPLANES  12   // cached radiance images (5 MB each at 1280x1024)
+#define NTRACERS 3    // cached (sample, angle) tracers
+#define NSPEC    16   // speculative frames (see spec_t; 5 MB each at 1280x1024, made when first used)
+#define NSEQ     16   // exposures remembered per state
+#define NASEQ    64   // frames remembered per angle (lamps and exposures)
+
+// An albedo texture of a material (simulator only: the fitter's model has
+// none): R at the first hit is multiplied by 1 + amplitude * n(u, v), n a
+// smooth value noise in [-1, 1] (three octaves, quintic interpolation) of the
+// hit point's coordinates in its face's own frame (origin at the face's first
+// vertex, u along its first edge, v = normal x u; scaled by 1/scale_mm), seeded
+// by the seed and the face number: it moves with the sample.
+typedef struct {
+    char     material[64];
+    double   amplitude, scale_mm;
+    uint64_t seed;
+    double   roughness_amplitude;   // 0: none (rig/virtual/materials.c)
+} texture_t;
+
+typedef struct {
+    char   name[64];
+    char   kind[32];
+    char  *scene_path;
+    int    line;
+    model_scene_t *scene;
+    const model_material_t **mats;    // scene->nmaterials
+    const texture_t **tex;            // scene->nmaterials, NULL = untextured
+    bool   textured;
+    // roughness variation (rig/virtual/materials.c): the materials' rough and
+    // smooth variants, blended per pixel by the slot's rough map
+    bool   rough;
+    const model_material_t **mats_rough, **mats_smooth;
+    model_material_t *rough_store;
+    int    direct_samples;            // 0: the [render] value
+    // uniform_source: no scene; every lamp that is on adds `radiance` at every pixel
+    bool   uniform;
+    double radiance;
+    // A posed copy of sample `base` (rig_virtual_set_sample_pose): its scene is
+    // the base scene moved by x' = R x + t; mats and tex are the base's (not owned).
+    bool   variant;
+    int    base;
+    double tilt_deg, tilt_azimuth_deg;
+    double R[9], t[3];
+    bool   placed;                    // with a placement error (rig/virtual/place.h): never shared
+} sample_t;
+
+#define MAX_POSES 32   // posed copies of samples one rig can hold
+
+typedef struct {
+    float   *L;        // W*H radiance (kc 1, Pa 0); NULL = empty slot
+    int      sample, lamp;
+    double   angle_deg;
+    uint64_t used;
+} plane_t;
+
+// A frame computed ahead of its trigger by the pre-render thread: the noisy
+// sensor values (DN of the sensor's bits, whole sensor) of a state, exposure,
+// gain and noise seed. A trigger with exactly these inputs (its state, its
+// registers and the seed it draws) takes it instead of computing the same
+// values again, so the frame is the one the trigger would have made; any
+// other trigger discards the speculative frames of seeds it used up.
+typedef struct {
+    float   *img;      // W*H; NULL until first used
+    bool     valid;
+    int      sample;
+    double   angle_deg;
+    uint32_t mask;
+    double   exposure_us, gain_db;
+    uint64_t seed;
+} spec_t;
+
+// One frame's settings, as the camera asked for them.
+typedef struct {
+    double exposure_us, gain_db;
+} shot_t;
+
+// One frame of an angle's sequence: its lamps and settings.
+typedef struct {
+    uint32_t mask;
+    double   exposure_us, gain_db;
+} ashot_t;
+
+typedef struct {
+    model_tracer_t *t;
+    model_scene_t  *rot;      // the rotated scene
+    float          *tex;      // W*H texture factors (textured samples; NULL until made)
+    float          *rough;    // W*H roughness mixture weights in [0, 1] (samples with roughness variation)
+    int      sample;
+    double   angle_deg;
+    uint64_t used;
+} tracer_slot_t;
+
+#define VIRTUAL_CAMERAS_MAX 8
+
+struct rig_virtual {
+    char   *truth_path;
+    char    address[64];
+    // Cameras: one rig_virtual_t per [camera NAME] of the truth file, in file
+    // order. The first is the rig (it owns the stage, the lamps and the
+    // others, views[1..]); the others render the first's state (angle, lamps),
+    // have a camera server, a model, a sensor and caches of their own, the
+    // same samples (rig_virtual_set_sample* reaches every camera) and no
+    // pre-render thread.
+    char    cam_sec[80], cam_name[32], serial[32];     // "camera" / "camera NAME"; "camera" / NAME
+    rig_virtual_t *state;                  // the rig whose stage and lamps a frame shows (itself for the first)
+    rig_virtual_t *views[VIRTUAL_CAMERAS_MAX];
+    int     nviews;
+    model_camera_t    *cam;
+    char   *cam_path;
+    int     W, H;
+    double  kc_per_us;
+    model_sensor_t     sensor;
+    float  *prnu, *dsnu;              // fixed patterns of the whole sensor
+    model_shading_t    shading;
+    int     direct_samples;           // mc: finite-lamp samples of the direct light, full resolution
+    int     ds;                       // mc: the indirect light is rendered at 1/ds resolution (1: full)
+    model_camera_t    *cam_lr;        // that camera (NULL when ds = 1)
+    rig_optics_t       optics;        // [optics] (rig/virtual/optics.c)
+    model_camera_t    *cam_hr;        // rays_per_pixel N > 1: the camera of N times the resolution
+    int32_t           *face_hr;       // its face ids and plane (cache_lock)
+    float             *L_hr;
+    int     Wl, Hl;
+    int32_t *face, *face_lr;          // scratch of the renders (cache_lock)
+    float   *A_lr, *B_lr;
+    model_lamps_t     *lamps;
+    rig_vlamps_t       lamp_fx;       // warm-up, drift, stray light (rig/virtual/lamps.c; off by default)
+    model_materials_t *mats;
+    texture_t         *textures;
+    int                ntextures;
+    sample_t *samples;
+    int       nsamples, nbase_samples;   // base samples of the truth file, then posed copies
+    rig_virtual_place_t place;        // placement and axis errors (rig/virtual/place.h)
+    long     *place_count;            // placements of each base sample (the rig's, state)
+    int       place_next;             // the next posed copy to reuse when all are taken
+    double    place_last[3];          // the current sample's placement error: turn deg, dx, dy mm
+    bool      place_last_set;         // (state_lock)
+
+    // state_lock guards: cur_sample, the inner turntable, next_seed.
+    pthread_mutex_t state_lock;
+    int       cur_sample;
+    uint64_t  next_seed;
+    double    last_angle_deg;         // the stage's last known angle (a disconnected stage keeps it)
+    bool      stage_gone;             // the stage disconnected: the camera and pre-render stop asking it
+    rig_turntable_t *tt_sim;          // the simulated stage
+    rig_turntable_t  tt;              // what users get: tt_sim behind state_lock
+    rig_lamps_t     *lamps_dev;
+
+    // cache_lock guards the caches and the frame buffer (held while rendering).
+    pthread_mutex_t cache_lock;
+    plane_t       planes[NPLANES];
+    tracer_slot_t tracers[NTRACERS];
+    uint64_t      tick;
+    float        *frame;              // W*H work image
+    // Speculation (prerender >= 1): the exposures of the frames taken in the
+    // previous state (prev) and so far in the current one (cur, state key
+    // cur_*) predict those of the next frames: a plan repeats its exposure
+    // list in every state.
+    spec_t        spec[NSPEC];
+    shot_t        prev[NSEQ], cur[NSEQ];
+    int           nprev, ncur;
+    int           cur_key_sample;
+    double        cur_key_angle;
+    uint32_t      cur_key_mask;
+    bool          cur_key_set;
+    // The frames (lamps, exposure, gain) taken at the angle before the
+    // previous one (aprev2), at the previous angle (aprev) and so far at the
+    // current one (acur, key akey_*) predict those at the next angle: a plan
+    // repeats its lamp sets and exposures at every angle. A sequence is only
+    // repeated once it has repeated (two angles alike), so that a client that
+    // does something else each time costs no speculation. n > NASEQ: too
+    // many to repeat (no prediction).
+    ashot_t       aprev2[NASEQ], aprev[NASEQ], acur[NASEQ];
+    int           naprev2, naprev, nacur;
+    int           akey_sample;
+    double        akey_angle;
+    bool          akey_set;
+
+    rig_gv_camera_t *gv;
+
+    // Pre-rendering: a thread that renders the planes of the current state
+    // as soon as the stage stands still and the lamps are switched (before
+    // their warm-up ends), and with prerender = 2 then those of the other
+    // lamps (a lamp switch then finds its plane ready, but a trigger that
+    // comes at once may wait for a speculative rendering).
+    int       prerender;              // 0 off, 1 the lamps that are on, 2 all lamps
+    pthread_t pre_thread;
+    bool      pre_running;
+    int       pre_stop;               // atomic
+    int       waiting;                // atomic: frames waiting for cache_lock
+    long      frames_ahead;           // frames taken from speculation (cache_lock)
+};
+
+// ---------------------------------------------------------------------------
+// virtual.c
+
+// Sleep s seconds.
+void rig_vsleep_s(double s);
+
+// ---------------------------------------------------------------------------
+// render.c (cache_lock held where noted)
+
+void rig_vslot_free(tracer_slot_t *s);
+// The radiance image of one lamp; cache_lock held. NULL on error.
+const float *rig_vplane_for(rig_virtual_t *v, int sample, double angle_deg, int lamp);
+// Is the plane cached? (cache_lock held)
+bool rig_vplane_cached(const rig_virtual_t *v, int sample, double angle_deg, int lamp);
+// The noisy sensor values of a frame into out (cache_lock held).
+int rig_vnoisy_frame(rig_virtual_t *v, int sample, double angle_deg, uint32_t mask, double exposure_us,
+                     double gain_db, uint64_t seed, int64_t trigger_ns, float *out);
+// The camera server's render callback (rig_gv_render_fn): a triggered frame.
+int rig_vrender_cb(void *ctx, const rig_frame_meta_t *m, uint16_t *pix);
+
+// ---------------------------------------------------------------------------
+// texture.c
+
+// The texture factors of a slot's view from the full-resolution face ids.
+bool rig_vtexture_make(rig_virtual_t *v, tracer_slot_t *slot, const int32_t *face);
+
+// ---------------------------------------------------------------------------
+// prerender.c
+
+bool rig_vspec_is(const spec_t *p, int sample, double angle_deg, uint32_t mask, double exposure_us,
+                  double gain_db, uint64_t seed);
+// The pre-render thread (arg: the rig).
+void *rig_vprerender_main(void *arg);
+
+// ---------------------------------------------------------------------------
+// pose.c
+
+// The index of base sample `name`, -1 when none.
+int  rig_vsample_find(const rig_virtual_t *v, const char *name);
+// The base samples' names, ", "-separated, into buf.
+void rig_vsample_list(const rig_virtual_t *v, char *buf, size_t size);
+
+// ---------------------------------------------------------------------------
+// truth_rig.c, truth_samples.c
+
+int         rig_vtruth_line(const model_ini_t *ini, const char *sec, const char *key);
+bool        rig_vtruth_double(const model_ini_t *ini, const char *sec, const char *key, double lo, double hi,
+                              bool required, double *out);
+bool        rig_vtruth_int(const model_ini_t *ini, const char *sec, const char *key, long lo, long hi, long *out);
+const char *rig_vtruth_str(const model_ini_t *ini, const char *sec, const char *key, const char *def);
+char       *rig_vtruth_relpath(const char *truth, const char *p);
+int         rig_vtruth_camera_sections(const model_ini_t *ini, const char *secs[], int *line_over);
+bool        rig_vtruth_parse(rig_virtual_t *v, const model_ini_t *ini, const char **default_sample,
+                             rig_turntable_sim_params_t *tp, double *warmup_ms, double *settle_ms,
+                             rig_gv_camera_params_t *gp);
+bool        rig_vtruth_textures(rig_virtual_t *v, const model_ini_t *ini);
+bool        rig_vtruth_samples(rig_virtual_t *v, const model_ini_t *ini);
