@@ -122,6 +122,9 @@ RIG_VIRTUAL_SRC := \
     rig/virtual/prerender.c \
     rig/virtual/pose.c \
     rig/virtual/gv_camera.c \
+    rig/virtual/gv_render.c \
+    rig/virtual/gv_stream.c \
+    rig/virtual/gv_xml.c \
     rig/virtual/lamps.c \
     rig/virtual/optics.c \
     rig/virtual/materials.c \

@@ -3,10 +3,13 @@
 // files share: virtual.c (open, close, the turntable seen by users), render.c
 // (planes and frames), texture.c, prerender.c (pre-rendering and speculation),
 // pose.c (the sample on the table), truth_rig.c and truth_samples.c (the truth
-// file read into a rig).
+// file read into a rig); and the virtual GigE Vision camera's server
+// (gv_camera.c, gv_render.c, gv_stream.c, gv_xml.c).
 #pragma once
 
+#include <arv.h>
 #include <pthread.h>
+#include <stdatomic.h>
 #include <stdbool.h>
 #include <stddef.h>
 #include <stdint.h>
@@ -271,3 +274,92 @@ bool        rig_vtruth_parse(rig_virtual_t *v, const model_ini_t *ini, const cha
                              rig_gv_camera_params_t *gp);
 bool        rig_vtruth_textures(rig_virtual_t *v, const model_ini_t *ini);
 bool        rig_vtruth_samples(rig_virtual_t *v, const model_ini_t *ini);
+
+// ---------------------------------------------------------------------------
+// The virtual GigE Vision camera (gv_camera.c, gv_render.c, gv_stream.c, gv_xml.c)
+
+// GigE Vision bootstrap registers (GigE Vision 2.0, table 28).
+#define GVBS_MANUFACTURER_NAME 0x0048   // 32 bytes
+#define GVBS_MODEL_NAME        0x0068   // 32 bytes
+#define GVBS_STRING_SIZE       32
+#define GVBS_SCPS0             0x0d04   // stream channel 0 packet size (bits 0-15)
+#define GVSP_PACKET_SIZE       8192     // loopback has a 64 KiB MTU: jumbo packets
+#define GVCP_PORT              3956
+#define GV_TICK_HZ             10.0     // Aravis's GV thread's trigger check (see rig/virtual/gv_camera.c)
+
+// Registers our XML adds (inside the fake camera's 64 KiB register memory).
+#define REG_TRIGGER            0xa000   // TriggerSoftware as the client sees it
+#define REG_EXPOSURE_US        0xa008   // float64 big-endian
+#define REG_GAIN_DB            0xa010   // float64 big-endian
+#define REG_TEMPERATURE_C      0xa018   // float64 big-endian, read-only to clients
+#define REG_EXPOSURE_AUTO      0xa020   // ExposureAuto: 0 Off, 1 Once, 2 Continuous
+#define REG_BALANCE_WHITE_AUTO 0xa024   // BalanceWhiteAuto: the same values (a mono sensor ignores it)
+#define REG_GAMMA_ENABLE       0xa028   // GammaEnable: 0 / 1
+#define REG_LUT_ENABLE         0xa02c   // LUTEnable: 0 / 1
+#define REG_GAMMA              0xa030   // float64 big-endian
+#define REG_BLACK_LEVEL        0xa038   // float64 big-endian, DN added to every pixel
+#define REG_FIRMWARE           0xa040   // DeviceFirmwareVersion, 32 bytes (to 0xa05f)
+#define REG_CONTRAST_AUTO      0xa060   // ContrastAuto, a vendor automatic: 0 Off, 1 Once, 2 Continuous
+#define REG_GAIN_AUTO          0x0114   // GainAuto of Aravis's fake camera XML: 1 Off, 3 Once, 2 Continuous
+#define GAIN_AUTO_OFF          1
+#define GVBS_SCPD0             0x0d08   // stream channel 0 packet delay, timestamp ticks
+
+#define EXPOSURE_MIN_US 10.0
+#define EXPOSURE_MAX_US 10e6
+#define GAIN_MAX_DB     24.0
+// What the camera's own automatics do while on (so a client that leaves them on
+// gets frames unlike the settings it asked for): ExposureAuto 1.5 x the set
+// exposure, GainAuto 6 dB more than the set gain (within the ranges).
+#define AUTO_EXPOSURE_FACTOR 1.5
+#define AUTO_GAIN_DB         6.0
+#define GAMMA_DEFAULT        0.45
+
+struct rig_gv_camera {
+    rig_gv_camera_params_t p;
+    char address[64], serial[16], vendor[GVBS_STRING_SIZE], model[GVBS_STRING_SIZE];
+    char gain_unit[16], firmware[GVBS_STRING_SIZE], refuse_off[32];
+    ArvGvFakeCamera *gv;
+    ArvDevice       *dev;         // in-process: the ArvFakeDevice (our reference)
+    ArvFakeCamera   *fake;
+    GThread         *thread;
+    atomic_bool      stop;
+    int              lock_fd;     // flock on the address's lock file, -1 when none
+    int              gvsp_fd;     // our GVSP sender (UDP, bound to address:0); -1 in-process
+
+    GMutex lock;                 // front frame, stats, drop counter, render_error
+    GCond  cond;
+    uint8_t *front;              // packed wire-format frame ready to send
+    size_t   front_cap, front_size;
+    int      front_w, front_h;
+    guint32  front_pf;
+    bool     front_ready;
+    rig_gv_camera_stats_t stats;
+    guint16  block_id;           // of the last frame sent (GVSP)
+    int      drop_triggers;
+    char     render_error[512];
+
+    GMutex    render_lock;       // the render callback and the scratch buffers below
+    uint16_t *pix;
+    size_t    pix_cap;
+    uint8_t  *back;
+    size_t    back_cap;
+    uint64_t  n_renders;
+};
+
+// Registers (gv_render.c): 4- and 8-byte copies of the fake camera's memory.
+guint32 rig_gv_reg_get(rig_gv_camera_t *g, guint32 addr);
+double  rig_gv_reg_get_double(rig_gv_camera_t *g, guint32 addr);
+void    rig_gv_reg_set_double(rig_gv_camera_t *g, guint32 addr, double d);
+void    rig_gv_reg_set_string(rig_gv_camera_t *g, guint32 addr, const char *s, size_t size);
+// Aravis's fill callback (ArvFakeCameraFillPattern; data: the server).
+void     rig_gv_fill_cb(ArvBuffer *buffer, void *data, guint32 exposure_us_int, guint32 gain_raw, ArvPixelFormat pf);
+// The render thread (data: the server).
+gpointer rig_gv_render_thread(gpointer data);
+// The next GVSP block id (g->lock held): 1, 2, ... 65535, 1, ...
+guint16  rig_gv_next_block_id(rig_gv_camera_t *g);
+// Send the published frame (gv_stream.c; render thread): it leaves `front` at once.
+void     rig_gv_send_front(rig_gv_camera_t *g, const rig_frame_meta_t *m, guint32 pf);
+// Our XML as a new string, or NULL with a message (gv_xml.c).
+char      *rig_gv_xml_make(const char *gain_unit, const char *refuse_off);
+// The ArvFakeDevice of an in-process server, with our XML.
+ArvDevice *rig_gv_xml_fake_device(const char *serial, const char *xml_path, char *err, size_t errsize);
