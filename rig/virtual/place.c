@@ -18,14 +18,6 @@ static void rot_axis(double ux, double uy, double uz, double a_rad, double R[9])
     memcpy(R, M, sizeof M);
 }
 
-static void mat_mul(const double A[9], const double B[9], double out[9])
-{
-    double M[9];
-    for (int r = 0; r < 3; r++)
-        for (int c = 0; c < 3; c++) M[3 * r + c] = A[3 * r] * B[c] + A[3 * r + 1] * B[3 + c] + A[3 * r + 2] * B[6 + c];
-    memcpy(out, M, sizeof M);
-}
-
 bool rig_virtual_place_parse(const model_ini_t *ini, rig_virtual_place_t *out)
 {
     *out = (rig_virtual_place_t){ 0 };
@@ -94,8 +86,8 @@ void rig_virtual_place_table_R(const rig_virtual_place_t *p, double angle_deg, d
     rot_axis(0, 0, 1, angle_deg * M_PI / 180, Z);
     // Wb: the platter's normal leans towards the platter's +x (about its y)
     rot_axis(0, 1, 0, p->wobble_deg * M_PI / 180, Wb);
-    mat_mul(Z, Wb, R);
-    mat_mul(A, R, R);
+    m3_mul(R, Z, Wb);
+    m3_mul(R, A, R);
 }
 
 model_scene_t *rig_virtual_place_rotated(const rig_virtual_place_t *p, const model_scene_t *scene,

@@ -6,6 +6,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "model/base/vec.h"
 #include "rig/virtual/internal.h"
 
 int rig_vsample_find(const rig_virtual_t *v, const char *name)
@@ -49,6 +50,19 @@ static void forget_sample(rig_virtual_t *v, int slot)
     model_scene_free(v->samples[slot].scene);
 }
 
+// The rigid move x -> A (B x + tb) + ta as R, t (R may be A or B, t ta or tb).
+static void rigid_compose(const double A[9], const double ta[3], const double B[9], const double tb[3], double R[9],
+                          double t[3])
+{
+    double u[3];
+    for (int r = 0; r < 3; r++) {
+        u[r] = ta[r];
+        for (int c = 0; c < 3; c++) u[r] += A[3 * r + c] * tb[c];
+    }
+    m3_mul(R, A, B);
+    memcpy(t, u, sizeof u);
+}
+
 // A new posed copy of base sample i (the wedge's pose after the placement
 // error dR, dt when dR is not NULL); its index, or a RIG_ERR_* code.
 static int new_pose(rig_virtual_t *v, int i, double tilt_deg, double tilt_azimuth_deg, const double *dR,
@@ -73,18 +87,7 @@ static int new_pose(rig_virtual_t *v, int i, double tilt_deg, double tilt_azimut
     sm.placed = dR != NULL;
     sm.scene_path = strdup(b->scene_path);
     model_scene_wedge_pose(b->scene, tilt_deg, tilt_azimuth_deg, sm.R, sm.t);
-    if (dR) {   // x = Rw (dR x0 + dt) + tw
-        double R[9], t[3];
-        for (int r = 0; r < 3; r++) {
-            t[r] = sm.t[r];
-            for (int c = 0; c < 3; c++) {
-                R[3 * r + c] = sm.R[3 * r] * dR[c] + sm.R[3 * r + 1] * dR[3 + c] + sm.R[3 * r + 2] * dR[6 + c];
-                t[r] += sm.R[3 * r + c] * dt[c];
-            }
-        }
-        memcpy(sm.R, R, sizeof R);
-        memcpy(sm.t, t, sizeof t);
-    }
+    if (dR) rigid_compose(sm.R, sm.t, dR, dt, sm.R, sm.t);   // x = Rw (dR x0 + dt) + tw
     sm.scene = model_scene_transformed(b->scene, sm.R, sm.t);
     if (!sm.scene || !sm.scene_path) {
         model_scene_free(sm.scene);
@@ -165,21 +168,13 @@ static int set_sample(rig_virtual_t *v, const char *name, double tilt_deg, doubl
     if (off && b >= 0) {
         if (r->samples[b].uniform)
             return rig_fail(RIG_ERR_INVALID, "virtual rig: sample '%s' is a uniform source: it is not placed", name);
-        double oR[9], ot[3], R[9], t[3];
+        double oR[9], ot[3];
         rig_virtual_place_about_centre(r->samples[b].scene, off[0] * M_PI / 180, off[1], off[2], oR, ot);
         if (!placed) {
             memcpy(dR, oR, sizeof oR);
             memcpy(dt, ot, sizeof ot);
         } else {   // off (dR x + dt) = oR dR x + oR dt + ot
-            for (int i = 0; i < 3; i++) {
-                t[i] = ot[i];
-                for (int j = 0; j < 3; j++) {
-                    R[3 * i + j] = oR[3 * i] * dR[j] + oR[3 * i + 1] * dR[3 + j] + oR[3 * i + 2] * dR[6 + j];
-                    t[i] += oR[3 * i + j] * dt[j];
-                }
-            }
-            memcpy(dR, R, sizeof R);
-            memcpy(dt, t, sizeof t);
+            rigid_compose(oR, ot, dR, dt, dR, dt);
         }
     }
     bool moved = placed || (off && b >= 0);

@@ -3,20 +3,13 @@
 #include <math.h>
 #include <stdlib.h>
 
+#include "model/base/vec.h"
 #include "rig/virtual/internal.h"
-
-static inline uint64_t mix64(uint64_t x)
-{
-    x += 0x9e3779b97f4a7c15ULL;
-    x = (x ^ (x >> 30)) * 0xbf58476d1ce4e5b9ULL;
-    x = (x ^ (x >> 27)) * 0x94d049bb133111ebULL;
-    return x ^ (x >> 31);
-}
 
 // Lattice value in [-1, 1).
 static inline double lattice(uint64_t seed, int64_t ix, int64_t iy)
 {
-    uint64_t h = mix64(seed ^ ((uint64_t)ix * 0x632be59bd9b4e019ULL) ^ ((uint64_t)iy * 0xd1b54a32d192ed03ULL));
+    uint64_t h = model_mix64(seed ^ ((uint64_t)ix * 0x632be59bd9b4e019ULL) ^ ((uint64_t)iy * 0xd1b54a32d192ed03ULL));
     return (double)(h >> 11) * 0x1.0p-52 - 1.0;
 }
 
@@ -48,7 +41,7 @@ static double value_noise(cell_cache_t *cc, uint64_t seed, double u, double w)
 // The seed of a face's texture.
 static uint64_t texture_seed(const texture_t *tx, int face_number)
 {
-    return mix64(tx->seed ^ mix64((uint64_t)face_number));
+    return model_mix64(tx->seed ^ model_mix64((uint64_t)face_number));
 }
 
 // The texture's noise n(u, w) in [-1, 1] (u, w in mm in the face's frame;
@@ -106,7 +99,7 @@ static void texture_rows(void *ctx, int begin, int end, int thread)
         double u = q.x * e1.x + q.y * e1.y + q.z * e1.z, w = q.x * e2.x + q.y * e2.y + q.z * e2.z;
         *out = (float)(1.0 + fr->tx->amplitude * texture_noise(cc, fr->tx, fr->seed, u, w));
         if (J->slot->rough && fr->tx->roughness_amplitude > 0)
-            J->slot->rough[i] = (float)(0.5 + 0.5 * texture_noise(cr, fr->tx, mix64(fr->seed ^ 0x70756768ULL), u, w));
+            J->slot->rough[i] = (float)(0.5 + 0.5 * texture_noise(cr, fr->tx, model_mix64(fr->seed ^ 0x70756768ULL), u, w));
     }
 }
 
