@@ -114,6 +114,7 @@ RIG_SESSION_SRC := \
     rig/session/capture.c
 RIG_VIRTUAL_SRC := \
     rig/virtual/truth.c \
+    rig/virtual/truth_figures.c \
     rig/virtual/truth_rig.c \
     rig/virtual/truth_samples.c \
     rig/virtual/virtual.c \

@@ -252,28 +252,74 @@ bool rig_vspec_is(const spec_t *p, int sample, double angle_deg, uint32_t mask, 
 void *rig_vprerender_main(void *arg);
 
 // ---------------------------------------------------------------------------
-// pose.c
+// The truth file read for the virtual rig (truth.c, truth_rig.c, truth_samples.c)
 
-// The index of base sample `name`, -1 when none.
-int  rig_vsample_find(const rig_virtual_t *v, const char *name);
-// The base samples' names, ", "-separated, into buf.
-void rig_vsample_list(const rig_virtual_t *v, char *buf, size_t size);
+// What the truth file says for one camera of the virtual rig: the camera
+// ([camera] / [camera NAME]: cam_sec, cam_name "camera" / NAME), its render
+// settings, sensor, lamps, materials, textures and samples (room for
+// MAX_POSES more), and the devices' parameters (gp: the camera server's
+// identity and size, tp: the stage, the lamps' timing). Owned (rig_vtruth_free):
+// cam, cam_path, lamps, mats, textures, samples; the strings of gp and
+// default_sample are the truth file's (valid while it is).
+typedef struct {
+    char    cam_sec[80], cam_name[32];
+    model_camera_t *cam;
+    char   *cam_path;
+    int     W, H;
+    double  kc_per_us;
+    model_sensor_t  sensor;
+    model_shading_t shading;
+    int     direct_samples, ds, prerender;
+    model_lamps_t     *lamps;
+    rig_vlamps_t       lamp_fx;
+    model_materials_t *mats;
+    texture_t         *textures;
+    int                ntextures;
+    sample_t          *samples;
+    int                nsamples;
+    rig_optics_t        optics;
+    rig_virtual_place_t place;
+    rig_gv_camera_params_t     gp;
+    rig_turntable_sim_params_t tp;
+    double      warmup_ms, settle_ms;
+    const char *default_sample;   // [virtual] sample; NULL: none
+} rig_vtruth_t;
 
-// ---------------------------------------------------------------------------
-// truth_rig.c, truth_samples.c
-
+// The file's INI (for the truth reader's files only).
+const model_ini_t *rig_truth_ini(const rig_truth_t *t);
+// A path of the truth file resolved against its directory (absolute: as it
+// is); free it. NULL: out of memory.
+char *rig_truth_resolve(const rig_truth_t *t, const char *rel);
+// Every section and key is one a truth file has. false + message (file:line).
+bool  rig_truth_check_sections(const rig_truth_t *t);
+// Typed values of a section (model/base/ini.c reports them with file:line);
+// rig_vtruth_line: the line of a key, else of its section.
 int         rig_vtruth_line(const model_ini_t *ini, const char *sec, const char *key);
 bool        rig_vtruth_double(const model_ini_t *ini, const char *sec, const char *key, double lo, double hi,
                               bool required, double *out);
 bool        rig_vtruth_int(const model_ini_t *ini, const char *sec, const char *key, long lo, long hi, long *out);
 const char *rig_vtruth_str(const model_ini_t *ini, const char *sec, const char *key, const char *def);
-char       *rig_vtruth_relpath(const char *truth, const char *p);
-int         rig_vtruth_camera_sections(const model_ini_t *ini, const char *secs[], int *line_over);
-bool        rig_vtruth_parse(rig_virtual_t *v, const model_ini_t *ini, const char **default_sample,
-                             rig_turntable_sim_params_t *tp, double *warmup_ms, double *settle_ms,
-                             rig_gv_camera_params_t *gp);
-bool        rig_vtruth_textures(rig_virtual_t *v, const model_ini_t *ini);
-bool        rig_vtruth_samples(rig_virtual_t *v, const model_ini_t *ini);
+
+// The file's cameras; -1 + message when it has more than VIRTUAL_CAMERAS_MAX.
+int  rig_vtruth_cameras(const rig_truth_t *t);
+// The truth for camera k (0: the first camera section; with none, [camera],
+// which then lacks its model). false + message (file:line), *out freed.
+bool rig_vtruth_read(const rig_truth_t *t, int k, rig_vtruth_t *out);
+void rig_vtruth_free(rig_vtruth_t *c);
+// [texture MATERIAL] and [sample NAME] into c (its materials read). false + message.
+bool rig_vtruth_textures(const rig_truth_t *t, rig_vtruth_t *c);
+bool rig_vtruth_samples(const rig_truth_t *t, rig_vtruth_t *c);
+// A mirror sphere's sphere_radius_mm and sphere_centre_mm in section sec of
+// sample `name`. false + message.
+bool rig_vtruth_sphere_facts(const model_ini_t *ini, const char *sec, const char *name, double centre_mm[3],
+                             double *radius_mm);
+
+// The index of base sample `name` among n samples, -1 when none.
+int  rig_vsample_find(const sample_t *samples, int n, const char *name);
+// The base samples' names, ", "-separated, into buf.
+void rig_vsample_list(const sample_t *samples, int n, char *buf, size_t size);
+// Free n samples (a posed copy's materials are its base's) and the array.
+void rig_vsamples_free(sample_t *samples, int n);
 
 // ---------------------------------------------------------------------------
 // The virtual GigE Vision camera (gv_camera.c, gv_render.c, gv_stream.c, gv_xml.c)

@@ -9,21 +9,6 @@
 #include "model/base/vec.h"
 #include "rig/virtual/internal.h"
 
-int rig_vsample_find(const rig_virtual_t *v, const char *name)
-{
-    for (int i = 0; i < v->nsamples; i++)
-        if (!v->samples[i].variant && !strcmp(v->samples[i].name, name)) return i;
-    return -1;
-}
-
-void rig_vsample_list(const rig_virtual_t *v, char *buf, size_t size)
-{
-    size_t n = 0;
-    buf[0] = 0;
-    for (int i = 0; i < v->nsamples && n < size; i++)
-        if (!v->samples[i].variant) n += snprintf(buf + n, size - n, "%s%s", i ? ", " : "", v->samples[i].name);
-}
-
 const char *rig_virtual_sample(const rig_virtual_t *v)
 {
     if (!v) return NULL;
@@ -107,11 +92,11 @@ static int new_pose(rig_virtual_t *v, int i, double tilt_deg, double tilt_azimut
 static int pose_check(rig_virtual_t *v, const char *name, double tilt_deg, double tilt_azimuth_deg, bool placed,
                       int *i, int *j)
 {
-    *i = rig_vsample_find(v, name);
+    *i = rig_vsample_find(v->samples, v->nsamples, name);
     *j = -1;
     if (*i < 0) {
         char list[512];
-        rig_vsample_list(v, list, sizeof list);
+        rig_vsample_list(v->samples, v->nsamples, list, sizeof list);
         return rig_fail(RIG_ERR_INVALID, "virtual rig: %s has no sample '%s'; samples: %s", v->truth_path, name, list);
     }
     if (!isfinite(tilt_deg) || fabs(tilt_deg) > 80 || !isfinite(tilt_azimuth_deg))
@@ -158,7 +143,7 @@ static int set_sample(rig_virtual_t *v, const char *name, double tilt_deg, doubl
     // a placement error (the same for every camera): the count-th placement of this sample
     double dR[9], dt[3], err[3];
     bool placed = false;
-    int b = rig_vsample_find(r, name);
+    int b = rig_vsample_find(r->samples, r->nsamples, name);
     if (r->place.on && b >= 0 && !r->samples[b].uniform) {
         if (!r->place_count && !(r->place_count = calloc((size_t)r->nbase_samples, sizeof *r->place_count)))
             return rig_fail(RIG_ERR_NO_MEM, "virtual rig: out of memory");

@@ -99,7 +99,8 @@ static void texture_rows(void *ctx, int begin, int end, int thread)
         double u = q.x * e1.x + q.y * e1.y + q.z * e1.z, w = q.x * e2.x + q.y * e2.y + q.z * e2.z;
         *out = (float)(1.0 + fr->tx->amplitude * texture_noise(cc, fr->tx, fr->seed, u, w));
         if (J->slot->rough && fr->tx->roughness_amplitude > 0)
-            J->slot->rough[i] = (float)(0.5 + 0.5 * texture_noise(cr, fr->tx, model_mix64(fr->seed ^ 0x70756768ULL), u, w));
+            J->slot->rough[i] =
+                (float)(0.5 + 0.5 * texture_noise(cr, fr->tx, model_mix64(fr->seed ^ 0x70756768ULL), u, w));
     }
 }
 

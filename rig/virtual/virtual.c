@@ -258,63 +258,26 @@ static int fail_model(int err)
     return rig_fail(err, "virtual rig: %s", msg);
 }
 
-// Parse-only check of a truth file's text (rig.h): parse_truth on a rig that
-// starts nothing (no camera server, stage, lamps or render thread).
+// Parse-only check of a truth file's text (rig.h): the truth read for each
+// camera, as rig_virtual_open reads it, starting nothing (no camera server,
+// stage, lamps or render thread).
 int rig_virtual_check_truth(const char *text, size_t len, const char *name, const char *base_dir)
 {
     if (!text || !name || !base_dir) return rig_fail(RIG_ERR_INVALID, "virtual rig: check truth: NULL argument");
-    int err = RIG_ERR_INVALID;
     char *path = NULL;
-    model_ini_t *ini = NULL;
-    rig_virtual_t *v = calloc(1, sizeof *v);
-    if (!v || asprintf(&path, "%s/%s", base_dir, name) < 0) {
-        path = NULL;
-        err = rig_fail(RIG_ERR_NO_MEM, "virtual rig: out of memory");
-        goto done;
-    }
-    pthread_mutex_init(&v->state_lock, NULL);
-    pthread_mutex_init(&v->cache_lock, NULL);
-    const char *def_sample = NULL;
-    rig_turntable_sim_params_t tp = rig_turntable_sim_defaults();
-    double warmup_ms, settle_ms;
-    rig_gv_camera_params_t gp = rig_gv_camera_defaults();
-    if (!(ini = model_ini_parse(text, len, path)) ||
-        !rig_vtruth_parse(v, ini, &def_sample, &tp, &warmup_ms, &settle_ms, &gp)) {
-        err = fail_model(RIG_ERR_INVALID);
-        goto done;
-    }
-    // every further camera: its [camera NAME] and [sensor NAME]
-    const char *secs[VIRTUAL_CAMERAS_MAX];
-    int over = 0, ncams = rig_vtruth_camera_sections(ini, secs, &over);
-    if (over) {
-        model_error(ini->path, over, "more than %d cameras: the virtual rig serves at most %d", VIRTUAL_CAMERAS_MAX,
-                    VIRTUAL_CAMERAS_MAX);
-        err = fail_model(RIG_ERR_INVALID);
-        goto done;
-    }
-    for (int k = 1; k < ncams; k++) {
-        rig_virtual_t *w = calloc(1, sizeof *w);
-        if (!w) {
-            err = rig_fail(RIG_ERR_NO_MEM, "virtual rig: out of memory");
-            goto done;
-        }
-        pthread_mutex_init(&w->state_lock, NULL);
-        pthread_mutex_init(&w->cache_lock, NULL);
-        snprintf(w->cam_sec, sizeof w->cam_sec, "%s", secs[k]);
-        rig_gv_camera_params_t gk = rig_gv_camera_defaults();
-        bool ok = rig_vtruth_parse(w, ini, &def_sample, &tp, &warmup_ms, &settle_ms, &gk);
-        rig_virtual_close(w);
-        if (!ok) {
-            err = fail_model(RIG_ERR_INVALID);
-            goto done;
-        }
-    }
-    err = RIG_ERR_OK;
-done:
-    model_ini_free(ini);
-    rig_virtual_close(v);
+    if (asprintf(&path, "%s/%s", base_dir, name) < 0) return rig_fail(RIG_ERR_NO_MEM, "virtual rig: out of memory");
+    rig_truth_t *t = rig_truth_parse(text, len, path);
     free(path);
-    return err;
+    rig_vtruth_t c;
+    bool ok = t && rig_vtruth_read(t, 0, &c);
+    if (ok) rig_vtruth_free(&c);
+    // every further camera: its [camera NAME] and [sensor NAME]
+    int ncams = ok ? rig_vtruth_cameras(t) : -1;
+    ok = ncams >= 0;
+    for (int k = 1; ok && k < ncams; k++)
+        if ((ok = rig_vtruth_read(t, k, &c))) rig_vtruth_free(&c);
+    rig_truth_free(t);
+    return ok ? RIG_ERR_OK : fail_model(RIG_ERR_INVALID);
 }
 
 // The camera of the low-resolution indirect term: intrinsics scaled by 1/ds
@@ -340,7 +303,6 @@ static int make_lowres(rig_virtual_t *v)
     return err;
 }
 
-
 // rays_per_pixel N > 1: the camera of N times the resolution and its buffers.
 static int make_highres(rig_virtual_t *v)
 {
@@ -354,7 +316,6 @@ static int make_highres(rig_virtual_t *v)
         return rig_fail(RIG_ERR_NO_MEM, "virtual rig: out of memory for %d x %d rays per pixel", N, N);
     return 0;
 }
-
 
 // Camera k's loopback address: the k-th of the space-separated list, else
 // the address after camera k-1's (last byte + 1). false when none is left.
@@ -380,12 +341,184 @@ static bool camera_address(const char *list, int k, char out[64])
     return ok;
 }
 
+// The options of camera k, checked, into *o, and its address.
+static int check_options(const rig_virtual_options_t *opt, int k, rig_virtual_options_t *o, char addr[64])
+{
+    *o = opt ? *opt : rig_virtual_defaults();
+    if (!o->address) o->address = "127.0.0.1";
+    if (!camera_address(o->address, k, addr))
+        return rig_fail(RIG_ERR_INVALID, "virtual rig: address '%s': no loopback address for camera %d", o->address,
+                        k + 1);
+    if (!(isfinite(o->time_scale) && o->time_scale > 0))
+        return rig_fail(RIG_ERR_INVALID, "virtual rig: time_scale %g must be > 0", o->time_scale);
+    if (strlen(addr) >= 64 - 1) return rig_fail(RIG_ERR_INVALID, "virtual rig: address '%s' is too long", addr);
+    if (o->serve != RIG_VIRTUAL_SERVE_GIGE && o->serve != RIG_VIRTUAL_SERVE_INPROCESS)
+        return rig_fail(RIG_ERR_INVALID, "virtual rig: serve = %d is neither RIG_VIRTUAL_SERVE_GIGE nor "
+                        "RIG_VIRTUAL_SERVE_INPROCESS", (int)o->serve);
+    return 0;
+}
+
+// A rig (or a view of parent) that holds nothing yet. NULL: out of memory.
+static rig_virtual_t *new_rig(const char *truth_path, const char *addr, uint64_t noise_seed, int k,
+                              rig_virtual_t *parent)
+{
+    rig_virtual_t *v = calloc(1, sizeof *v);
+    if (!v) return NULL;
+    pthread_mutex_init(&v->state_lock, NULL);
+    pthread_mutex_init(&v->cache_lock, NULL);
+    v->truth_path = strdup(truth_path);
+    snprintf(v->address, sizeof v->address, "%s", addr);
+    v->next_seed = noise_seed + (uint64_t)k * 1000003u;   // each camera its own noise
+    v->state = parent ? parent : v;
+    v->views[v->nviews++] = v;
+    if (!v->truth_path) {
+        rig_virtual_close(v);
+        return NULL;
+    }
+    return v;
+}
+
+// What the truth says for the rig's camera, taken over from c (the rest of c,
+// the devices' parameters, stays with the caller).
+static void take_truth(rig_virtual_t *v, rig_vtruth_t *c)
+{
+    snprintf(v->cam_sec, sizeof v->cam_sec, "%s", c->cam_sec);
+    snprintf(v->cam_name, sizeof v->cam_name, "%s", c->cam_name);
+    v->cam = c->cam;
+    v->cam_path = c->cam_path;
+    v->W = c->W;
+    v->H = c->H;
+    v->kc_per_us = c->kc_per_us;
+    v->sensor = c->sensor;
+    v->shading = c->shading;
+    v->direct_samples = c->direct_samples;
+    v->ds = c->ds;
+    v->prerender = c->prerender;
+    v->lamps = c->lamps;
+    v->lamp_fx = c->lamp_fx;
+    v->mats = c->mats;
+    v->textures = c->textures;
+    v->ntextures = c->ntextures;
+    v->samples = c->samples;
+    v->nsamples = v->nbase_samples = c->nsamples;
+    v->optics = c->optics;
+    v->place = c->place;
+    c->cam = NULL;
+    c->cam_path = NULL;
+    c->lamps = NULL;
+    c->mats = NULL;
+    c->textures = NULL;
+    c->samples = NULL;
+    c->nsamples = c->ntextures = 0;
+}
+
+// The rig's options over the truth's (time scale, pre-rendering, serial) and
+// the sample it opens with.
+static int take_options(rig_virtual_t *v, const rig_virtual_options_t *o, rig_vtruth_t *c, bool view, int k)
+{
+    v->lamp_fx.time_scale = o->time_scale;
+    if (o->prerender >= 0) {
+        if (o->prerender > 2) return rig_fail(RIG_ERR_INVALID, "virtual rig: prerender %d outside 0..2", o->prerender);
+        v->prerender = o->prerender;
+    }
+    if (o->serial && k == 0) c->gp.serial = o->serial;
+    if (view) v->prerender = 0;
+    const char *sample = o->sample ? o->sample : c->default_sample ? c->default_sample : v->samples[0].name;
+    v->cur_sample = rig_vsample_find(v->samples, v->nsamples, sample);
+    if (v->cur_sample < 0) {
+        char list[512];
+        rig_vsample_list(v->samples, v->nsamples, list, sizeof list);
+        return rig_fail(RIG_ERR_INVALID, "virtual rig: %s has no sample '%s'; samples: %s", v->truth_path, sample,
+                        list);
+    }
+    return 0;
+}
+
+// The render cameras and buffers: the low- and high-resolution cameras, the
+// sensor's fixed patterns, the frame and face buffers, the ray table.
+static int make_buffers(rig_virtual_t *v)
+{
+    int err = 0;
+    if (v->shading.interreflection == MODEL_INTERREFLECTION_MC && v->ds > 1 && (err = make_lowres(v))) return err;
+    if (v->optics.rays_per_pixel > 1 && (err = make_highres(v))) return err;
+    size_t n = (size_t)v->W * v->H;
+    v->prnu = malloc(n * sizeof(float));
+    v->dsnu = malloc(n * sizeof(float));
+    v->frame = malloc(n * sizeof(float));
+    v->face = malloc(n * sizeof *v->face);
+    if (!v->prnu || !v->dsnu || !v->frame || !v->face)
+        return rig_fail(RIG_ERR_NO_MEM, "virtual rig: out of memory for %dx%d images", v->W, v->H);
+    model_sensor_patterns(&v->sensor, v->W, v->H, v->prnu, v->dsnu);
+    return model_camera_ray_table(v->cam, NULL) ? 0 : fail_model(RIG_ERR_IO);
+}
+
+// The rig's devices: the simulated stage (behind state_lock) and lamps.
+static int open_devices(rig_virtual_t *v, const rig_vtruth_t *c, double time_scale)
+{
+    rig_turntable_sim_params_t tp = c->tp;
+    tp.time_scale = time_scale;
+    int err = rig_turntable_open_sim(&v->tt_sim, &tp);
+    if (err) return err;
+    v->tt.ops = &virtual_tt_ops;
+    v->tt.impl = v;
+    snprintf(v->tt.name, sizeof v->tt.name, "virtual turntable (sim, seed %llu)", (unsigned long long)tp.seed);
+    rig_lamp_line_t lines[32];
+    memset(lines, 0, sizeof lines);
+    for (int i = 0; i < v->lamps->n; i++) {
+        snprintf(lines[i].name, sizeof lines[i].name, "%s", v->lamps->lamps[i].name);
+        snprintf(lines[i].chip, sizeof lines[i].chip, "virtual");
+        lines[i].line = (unsigned)i;
+        lines[i].warmup_ms = c->warmup_ms * time_scale;
+        lines[i].settle_ms = c->settle_ms * time_scale;
+    }
+    return rig_lamps_open_sim(&v->lamps_dev, lines, v->lamps->n);
+}
+
+// The camera server (its serial unique among the rig's cameras) and the
+// pre-render thread.
+static int start_camera(rig_virtual_t *v, rig_gv_camera_params_t *gp, const rig_virtual_options_t *o,
+                        const rig_virtual_t *parent)
+{
+    snprintf(v->serial, sizeof v->serial, "%s", gp->serial ? gp->serial : "");
+    for (int d = 0; parent && d < parent->nviews; d++)
+        if (!strcmp(parent->views[d]->serial, v->serial))
+            return rig_fail(RIG_ERR_INVALID, "virtual rig: %s: [%s] and [%s] have the same serial '%s': give each "
+                            "camera its own 'serial ='", v->truth_path, parent->views[d]->cam_sec, v->cam_sec,
+                            v->serial);
+    gp->address = v->address;
+    gp->busy_wait_s = o->busy_wait_s;
+    gp->render = rig_vrender_cb;
+    gp->render_ctx = v;
+    gp->inprocess = o->serve == RIG_VIRTUAL_SERVE_INPROCESS;
+    if (gp->inprocess)   // the id rig_camera_open_aravis takes
+        snprintf(v->address, sizeof v->address, "%s%s", RIG_GV_INPROCESS_PREFIX, gp->serial ? gp->serial : "");
+    int err = rig_gv_camera_start(&v->gv, gp);
+    if (err) return err;
+    if (v->prerender) {
+        if (pthread_create(&v->pre_thread, NULL, rig_vprerender_main, v))
+            return rig_fail(RIG_ERR_IO, "virtual rig: cannot start the pre-render thread");
+        v->pre_running = true;
+    }
+    return 0;
+}
+
 static int open_camera(rig_virtual_t **out, const char *truth_path, const rig_virtual_options_t *opt,
                        rig_virtual_t *parent, int k);
 
 int rig_virtual_open(rig_virtual_t **out, const char *truth_path, const rig_virtual_options_t *opt)
 {
     return open_camera(out, truth_path, opt, NULL, 0);
+}
+
+// The truth file (*truth, for the caller to free) read for camera k into v
+// and *c; *ncams: the file's cameras.
+static int read_truth(rig_virtual_t *v, const char *truth_path, int k, rig_truth_t **truth, rig_vtruth_t *c,
+                      int *ncams)
+{
+    *truth = rig_truth_load(truth_path);   // the truth file's one reader (rig/virtual/truth.h)
+    bool ok = *truth && (*ncams = rig_vtruth_cameras(*truth)) >= 0 && rig_vtruth_read(*truth, k, c);
+    if (ok) take_truth(v, c);
+    return ok ? 0 : fail_model(RIG_ERR_INVALID);
 }
 
 // Camera k of the truth file: the rig itself (k = 0, parent NULL: the stage,
@@ -396,149 +529,31 @@ static int open_camera(rig_virtual_t **out, const char *truth_path, const rig_vi
     if (!out) return rig_fail(RIG_ERR_INVALID, "virtual rig: NULL output handle");
     *out = NULL;
     if (!truth_path) return rig_fail(RIG_ERR_INVALID, "virtual rig: no truth file given");
-    rig_virtual_options_t o = opt ? *opt : rig_virtual_defaults();
-    if (!o.address) o.address = "127.0.0.1";
+    rig_virtual_options_t o;
     char addr[64];
-    if (!camera_address(o.address, k, addr))
-        return rig_fail(RIG_ERR_INVALID, "virtual rig: address '%s': no loopback address for camera %d", o.address,
-                        k + 1);
-    if (!(isfinite(o.time_scale) && o.time_scale > 0))
-        return rig_fail(RIG_ERR_INVALID, "virtual rig: time_scale %g must be > 0", o.time_scale);
-    if (strlen(addr) >= 64 - 1)
-        return rig_fail(RIG_ERR_INVALID, "virtual rig: address '%s' is too long", addr);
-    if (o.serve != RIG_VIRTUAL_SERVE_GIGE && o.serve != RIG_VIRTUAL_SERVE_INPROCESS)
-        return rig_fail(RIG_ERR_INVALID, "virtual rig: serve = %d is neither RIG_VIRTUAL_SERVE_GIGE nor "
-                        "RIG_VIRTUAL_SERVE_INPROCESS", (int)o.serve);
-    int err = RIG_ERR_OK;
-    rig_truth_t *truth = NULL;
-    const model_ini_t *ini = NULL;
-    rig_virtual_t *v = calloc(1, sizeof *v);
+    int err = check_options(opt, k, &o, addr);
+    if (err) return err;
+    rig_virtual_t *v = new_rig(truth_path, addr, o.noise_seed, k, parent);
     if (!v) return rig_fail(RIG_ERR_NO_MEM, "virtual rig: out of memory");
-    pthread_mutex_init(&v->state_lock, NULL);
-    pthread_mutex_init(&v->cache_lock, NULL);
-    v->truth_path = strdup(truth_path);
-    snprintf(v->address, sizeof v->address, "%s", addr);
-    v->next_seed = o.noise_seed + (uint64_t)k * 1000003u;   // each camera its own noise
-    v->state = parent ? parent : v;
-    v->views[v->nviews++] = v;
-    if (!v->truth_path) {
-        err = rig_fail(RIG_ERR_NO_MEM, "virtual rig: out of memory");
-        goto fail;
-    }
-    truth = rig_truth_load(truth_path);   // the truth file's one reader (rig/virtual/truth.h)
-    if (!truth || !(ini = rig_truth_ini(truth))) {
-        err = fail_model(RIG_ERR_INVALID);
-        goto fail;
-    }
-    const char *def_sample = NULL;
-    rig_turntable_sim_params_t tp = rig_turntable_sim_defaults();
-    double warmup_ms, settle_ms;
-    rig_gv_camera_params_t gp = rig_gv_camera_defaults();
-    const char *secs[VIRTUAL_CAMERAS_MAX];
-    int over = 0, ncams = rig_vtruth_camera_sections(ini, secs, &over);
-    if (over) {
-        model_error(ini->path, over, "more than %d cameras: the virtual rig serves at most %d", VIRTUAL_CAMERAS_MAX,
-                    VIRTUAL_CAMERAS_MAX);
-        err = fail_model(RIG_ERR_INVALID);
-        goto fail;
-    }
-    if (k < ncams) {
-        snprintf(v->cam_sec, sizeof v->cam_sec, "%s", secs[k]);
-        snprintf(v->cam_name, sizeof v->cam_name, "%s", strcmp(secs[k], "camera") ? secs[k] + 7 : "camera");
-    }
-    if (!rig_vtruth_parse(v, ini, &def_sample, &tp, &warmup_ms, &settle_ms, &gp)) {
-        err = fail_model(RIG_ERR_INVALID);
-        goto fail;
-    }
-    v->lamp_fx.time_scale = o.time_scale;
-    if (o.prerender >= 0) {
-        if (o.prerender > 2) {
-            err = rig_fail(RIG_ERR_INVALID, "virtual rig: prerender %d outside 0..2", o.prerender);
-            goto fail;
-        }
-        v->prerender = o.prerender;
-    }
-    if (o.serial && k == 0) gp.serial = o.serial;
-    if (parent) v->prerender = 0;
-    const char *sample = o.sample ? o.sample : def_sample ? def_sample : v->samples[0].name;
-    v->cur_sample = rig_vsample_find(v, sample);
-    if (v->cur_sample < 0) {
-        char list[512];
-        rig_vsample_list(v, list, sizeof list);
-        err = rig_fail(RIG_ERR_INVALID, "virtual rig: %s has no sample '%s'; samples: %s", truth_path, sample, list);
-        goto fail;
-    }
-    if (v->shading.interreflection == MODEL_INTERREFLECTION_MC && v->ds > 1 && (err = make_lowres(v)))
-        goto fail;
-    if (v->optics.rays_per_pixel > 1 && (err = make_highres(v))) goto fail;
-    // fixed patterns and buffers
-    size_t n = (size_t)v->W * v->H;
-    v->prnu = malloc(n * sizeof(float));
-    v->dsnu = malloc(n * sizeof(float));
-    v->frame = malloc(n * sizeof(float));
-    v->face = malloc(n * sizeof *v->face);
-    if (!v->prnu || !v->dsnu || !v->frame || !v->face) {
-        err = rig_fail(RIG_ERR_NO_MEM, "virtual rig: out of memory for %dx%d images", v->W, v->H);
-        goto fail;
-    }
-    model_sensor_patterns(&v->sensor, v->W, v->H, v->prnu, v->dsnu);
-    if (!model_camera_ray_table(v->cam, NULL)) {
-        err = fail_model(RIG_ERR_IO);
-        goto fail;
-    }
-    // devices (the rig's; a view shows its parent's)
-    if (parent) goto camera;
-    tp.time_scale = o.time_scale;
-    if ((err = rig_turntable_open_sim(&v->tt_sim, &tp))) goto fail;
-    v->tt.ops = &virtual_tt_ops;
-    v->tt.impl = v;
-    snprintf(v->tt.name, sizeof v->tt.name, "virtual turntable (sim, seed %llu)", (unsigned long long)tp.seed);
-    rig_lamp_line_t lines[32];
-    memset(lines, 0, sizeof lines);
-    for (int i = 0; i < v->lamps->n; i++) {
-        snprintf(lines[i].name, sizeof lines[i].name, "%s", v->lamps->lamps[i].name);
-        snprintf(lines[i].chip, sizeof lines[i].chip, "virtual");
-        lines[i].line = (unsigned)i;
-        lines[i].warmup_ms = warmup_ms * o.time_scale;
-        lines[i].settle_ms = settle_ms * o.time_scale;
-    }
-    if ((err = rig_lamps_open_sim(&v->lamps_dev, lines, v->lamps->n))) goto fail;
-camera:
-    snprintf(v->serial, sizeof v->serial, "%s", gp.serial ? gp.serial : "");
-    for (int d = 0; parent && d < parent->nviews; d++)
-        if (!strcmp(parent->views[d]->serial, v->serial)) {
-            err = rig_fail(RIG_ERR_INVALID, "virtual rig: %s: [%s] and [%s] have the same serial '%s': give each "
-                           "camera its own 'serial ='", truth_path, parent->views[d]->cam_sec, v->cam_sec, v->serial);
-            goto fail;
-        }
-    gp.address = v->address;
-    gp.busy_wait_s = o.busy_wait_s;
-    gp.render = rig_vrender_cb;
-    gp.render_ctx = v;
-    gp.inprocess = o.serve == RIG_VIRTUAL_SERVE_INPROCESS;
-    if (gp.inprocess)   // the id rig_camera_open_aravis takes
-        snprintf(v->address, sizeof v->address, "%s%s", RIG_GV_INPROCESS_PREFIX, gp.serial ? gp.serial : "");
-    if ((err = rig_gv_camera_start(&v->gv, &gp))) goto fail;
-    if (v->prerender) {
-        if (pthread_create(&v->pre_thread, NULL, rig_vprerender_main, v)) {
-            err = rig_fail(RIG_ERR_IO, "virtual rig: cannot start the pre-render thread");
-            goto fail;
-        }
-        v->pre_running = true;
-    }
-    for (int c = 1; !parent && c < ncams; c++) {
+    rig_truth_t *truth = NULL;   // the strings of c.gp are its
+    rig_vtruth_t c = { 0 };
+    int ncams = 0;
+    if (!(err = read_truth(v, truth_path, k, &truth, &c, &ncams)) &&
+        !(err = take_options(v, &o, &c, parent != NULL, k)) && !(err = make_buffers(v)) &&
+        (parent || !(err = open_devices(v, &c, o.time_scale))))
+        err = start_camera(v, &c.gp, &o, parent);
+    for (int cam = 1; !err && !parent && cam < ncams; cam++) {
         rig_virtual_t *w = NULL;
-        if ((err = open_camera(&w, truth_path, &o, v, c))) goto fail;
-        v->views[v->nviews++] = w;
+        if (!(err = open_camera(&w, truth_path, &o, v, cam))) v->views[v->nviews++] = w;
     }
-    if (!parent && v->place.on && (err = rig_virtual_set_sample(v, v->samples[v->cur_sample].name))) goto fail;
+    if (!err && !parent && v->place.on) err = rig_virtual_set_sample(v, v->samples[v->cur_sample].name);
     rig_truth_free(truth);
+    if (err) {
+        rig_virtual_close(v);
+        return err;
+    }
     *out = v;
     return 0;
-fail:
-    rig_truth_free(truth);
-    rig_virtual_close(v);
-    return err ? err : RIG_ERR_IO;
 }
 
 void rig_virtual_close(rig_virtual_t *v)
@@ -554,17 +569,7 @@ void rig_virtual_close(rig_virtual_t *v)
     rig_turntable_close(v->tt_sim);
     for (int i = 0; i < NPLANES; i++) free(v->planes[i].L);
     for (int i = 0; i < NTRACERS; i++) rig_vslot_free(&v->tracers[i]);
-    for (int i = 0; i < v->nsamples; i++) {
-        free(v->samples[i].scene_path);
-        model_scene_free(v->samples[i].scene);
-        if (v->samples[i].variant) continue;
-        free(v->samples[i].mats);
-        free(v->samples[i].tex);
-        free(v->samples[i].mats_rough);
-        free(v->samples[i].mats_smooth);
-        free(v->samples[i].rough_store);
-    }
-    free(v->samples);
+    rig_vsamples_free(v->samples, v->nsamples);
     free(v->place_count);
     model_lamps_free(v->lamps);
     model_materials_free(v->mats);
