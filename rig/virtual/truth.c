@@ -1,8 +1,9 @@
-// rig/virtual/truth.c — the virtual rig's truth file: loaded or parsed, the
-// sections and keys it may have, and its relative paths (the one reader of
-// the file with truth_figures.c, truth_rig.c and truth_samples.c;
+// rig/virtual/truth.c — the virtual rig's truth file: loaded or parsed, its format
+// version, the sections and keys it may have, and its relative paths (the one
+// reader of the file with truth_figures.c, truth_rig.c and truth_samples.c;
 // rig/virtual/truth.h).
 #define _GNU_SOURCE
+#include <errno.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -12,7 +13,31 @@
 struct rig_truth {
     char        *path;
     model_ini_t *ini;
+    int          format_version;
 };
+
+// [virtual] format_version: 1 without it; a newer one than this refl reads is refused.
+static bool read_format_version(rig_truth_t *t)
+{
+    t->format_version = 1;
+    const model_ini_entry_t *e = model_ini_get(t->ini, "virtual", "format_version");
+    if (!e) return true;
+    char *end;
+    errno = 0;
+    long v = strtol(e->value, &end, 10);
+    if (end == e->value || *end || errno || v < 1) {
+        model_error(t->path, e->line, "[virtual] format_version = '%s': give the file's format version, a whole "
+                    "number from 1", e->value);
+        return false;
+    }
+    if (v > RIG_TRUTH_FORMAT_VERSION) {
+        model_error(t->path, e->line, "[virtual] format_version = %ld: a truth file of a newer refl (this refl "
+                    "reads truth files up to format version %d)", v, RIG_TRUTH_FORMAT_VERSION);
+        return false;
+    }
+    t->format_version = (int)v;
+    return true;
+}
 
 // The truth of an INI (taken over, freed on failure).
 static rig_truth_t *truth_of(model_ini_t *ini, const char *path)
@@ -26,6 +51,10 @@ static rig_truth_t *truth_of(model_ini_t *ini, const char *path)
         return NULL;
     }
     t->ini = ini;
+    if (!read_format_version(t)) {
+        rig_truth_free(t);
+        return NULL;
+    }
     return t;
 }
 
@@ -45,6 +74,7 @@ void rig_truth_free(rig_truth_t *t)
 }
 
 const char *rig_truth_path(const rig_truth_t *t) { return t->path; }
+int rig_truth_format_version(const rig_truth_t *t) { return t->format_version; }
 const model_ini_t *rig_truth_ini(const rig_truth_t *t) { return t->ini; }
 
 model_lamps_t *rig_truth_lamps(const rig_truth_t *t) { return model_lamps_from_ini(t->ini); }
@@ -69,7 +99,7 @@ typedef struct {
 } allowed_t;
 
 static const allowed_t allowed[] = {
-    { "virtual", { "sample", "lamp_warmup_ms", "lamp_settle_ms" } },
+    { "virtual", { "format_version", "sample", "lamp_warmup_ms", "lamp_settle_ms" } },
     { "camera", { "model", "model_sha256", "kc_per_us", "serial", "vendor", "model_name", "temperature_c" } },
     { "render", { "interreflection", "mc_samples", "mc_bounces", "thesis_samples", "thesis_cone_deg", "rho_sr",
                   "finite_lamps", "seed", "direct_samples", "indirect_downsample", "prerender" } },

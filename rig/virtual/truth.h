@@ -1,12 +1,16 @@
 // rig/virtual/truth.h — the virtual rig's truth file (examples/virtual-truth.ini),
-// read in one place: rig/virtual/truth.c (the file, its sections and keys),
-// truth_figures.c (the figures below), truth_rig.c and truth_samples.c (the
-// file read into a virtual rig, rig/virtual/internal.h).
+// read in one place: rig/virtual/truth.c (the file, its format version, its
+// sections and keys), truth_figures.c (the figures below), truth_rig.c and
+// truth_samples.c (the file read into a virtual rig, rig/virtual/internal.h).
 // The virtual rig renders from it; every other layer reaches it only to
 // compare a measurement with the truth (the demo's tables, a test's tolerance,
 // a report's "truth" column), never as a default for a measurement: a
 // calibration or fit takes its inputs from the user (options, plans,
 // calibration files) exactly as on a real rig.
+//
+// Format version: [virtual] format_version = N (optional; a file without it
+// is version 1). This refl reads version 1 (RIG_TRUTH_FORMAT_VERSION) and
+// refuses a file of a newer version, naming both.
 //
 // Sections read here: [camera] / [camera NAME] (model, kc_per_us), [sensor],
 // [lamp NAME] (position, intensity, radius), [material NAME], [texture
@@ -26,6 +30,8 @@
 extern "C" {
 #endif
 
+#define RIG_TRUTH_FORMAT_VERSION 1
+
 typedef struct rig_truth rig_truth_t;
 
 // Load a truth file. NULL + message. Free with rig_truth_free (accepts NULL).
@@ -35,6 +41,8 @@ rig_truth_t *rig_truth_load(const char *path);
 rig_truth_t *rig_truth_parse(const char *text, size_t len, const char *path);
 void         rig_truth_free(rig_truth_t *t);
 const char  *rig_truth_path(const rig_truth_t *t);
+// The format version the file states (1 when it states none).
+int          rig_truth_format_version(const rig_truth_t *t);
 
 // Lamps (positions, intensities, radii) and materials of the truth. NULL + message.
 model_lamps_t     *rig_truth_lamps(const rig_truth_t *t);

@@ -3,7 +3,8 @@
 // frames are rendered by model/ from the state of the simulated devices.
 //
 // Ground truth: one INI file (examples/virtual-truth.ini documents every key):
-//   [virtual]    sample (default sample), lamp_warmup_ms, lamp_settle_ms
+//   [virtual]    format_version (optional, 1; rig/virtual/truth.h), sample
+//                (default sample), lamp_warmup_ms, lamp_settle_ms
 //   [camera]     model (mrcal .cameramodel, relative to the truth file),
 //                model_sha256 (checked), kc_per_us, serial, vendor, model_name,
 //                temperature_c
