@@ -309,6 +309,8 @@ void rig_vtruth_free(rig_vtruth_t *c);
 // [texture MATERIAL] and [sample NAME] into c (its materials read). false + message.
 bool rig_vtruth_textures(const rig_truth_t *t, rig_vtruth_t *c);
 bool rig_vtruth_samples(const rig_truth_t *t, rig_vtruth_t *c);
+// [lamp_drift NAME] and [stray] into fx (rig/virtual/lamps.h). false + message.
+bool rig_vtruth_lamp_effects(const rig_truth_t *t, const model_lamps_t *lamps, rig_vlamps_t *fx);
 // A mirror sphere's sphere_radius_mm and sphere_centre_mm in section sec of
 // sample `name`. false + message.
 bool rig_vtruth_sphere_facts(const model_ini_t *ini, const char *sec, const char *name, double centre_mm[3],

@@ -8,6 +8,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <strings.h>
 
 #include "rig/virtual/internal.h"
 
@@ -196,6 +197,105 @@ static bool read_virtual(const model_ini_t *ini, rig_vtruth_t *c)
     return true;
 }
 
+// An optional number of the truth in a range, its text for messages.
+static bool get(const model_ini_t *ini, const char *sec, const char *key, double lo, bool lo_open, double hi,
+                const char *range, double *out)
+{
+    return model_ini_double_in(ini, sec, key, out, false, lo, lo_open, hi, range);
+}
+
+bool rig_vtruth_lamp_effects(const rig_truth_t *t, const model_lamps_t *lamps, rig_vlamps_t *fx)
+{
+    const model_ini_t *ini = rig_truth_ini(t);
+    memset(fx, 0, sizeof *fx);
+    fx->n = lamps->n < 32 ? lamps->n : 32;
+    fx->time_scale = 1;
+    for (int s = 0; s < ini->nsections; s++) {
+        const char *sec = ini->sections[s];
+        if (strncmp(sec, "lamp_drift ", 11)) continue;
+        int i = model_lamps_find(lamps, sec + 11);
+        if (i < 0 || i >= 32) {
+            model_error(ini->path, ini->section_lines[s], "[%s] names no [lamp %s] of this truth file", sec, sec + 11);
+            return false;
+        }
+        double a = 0, tau = 0, d = 0;
+        if (!get(ini, sec, "warmup_fraction", -0.5, false, 0.5,
+                 "-0.5..0.5 (deficit at switch-on; < 0: brighter, as a heating LED)", &a) ||
+            !get(ini, sec, "warmup_tau_s", 0, true, 1e5, "> 0 and <= 1e5 s", &tau) ||
+            !get(ini, sec, "drift_pct_per_h", -10, false, 10, "-10..10 %/h", &d))
+            return false;
+        if ((a != 0) != (tau > 0)) {
+            const model_ini_entry_t *e = model_ini_get(ini, sec, a != 0 ? "warmup_fraction" : "warmup_tau_s");
+            model_error(ini->path, e ? e->line : ini->section_lines[s], "[%s]: a warm-up needs both "
+                        "warmup_fraction (not 0) and warmup_tau_s", sec);
+            return false;
+        }
+        fx->warmup_fraction[i] = a;
+        fx->warmup_tau_s[i] = tau;
+        fx->drift_pct_per_h[i] = d;
+        if (a != 0 || d != 0) fx->timed = true;
+    }
+    return get(ini, "stray", "ambient_radiance", 0, false, 1e12, ">= 0 (radiance units)", &fx->ambient_radiance) &&
+           get(ini, "stray", "veiling_glare", 0, false, 0.2, "0..0.2 (a fraction of the mean image radiance)",
+               &fx->veiling_glare);
+}
+
+// [optics]: rays over each pixel and the point-spread function (rig/virtual/optics.h;
+// 1 ray, no PSF when the section is absent).
+static bool read_optics(const model_ini_t *ini, rig_optics_t *o)
+{
+    *o = (rig_optics_t){ .rays_per_pixel = 1, .psf = RIG_PSF_NONE };
+    const char *sec = "optics";
+    long n = 1;
+    if (!model_ini_int(ini, sec, "rays_per_pixel", &n, false, 1, 8)) return false;
+    o->rays_per_pixel = (int)n;
+    const char *psf = model_ini_text(ini, sec, "psf", "none");
+    const model_ini_entry_t *e = model_ini_get(ini, sec, "psf");
+    int line = e ? e->line : model_ini_section_line(ini, sec);
+    if (!strcasecmp(psf, "none")) o->psf = RIG_PSF_NONE;
+    else if (!strcasecmp(psf, "gaussian")) o->psf = RIG_PSF_GAUSSIAN;
+    else if (!strcasecmp(psf, "disc")) o->psf = RIG_PSF_DISC;
+    else {
+        model_error(ini->path, line, "[optics] psf = %s: use none, gaussian (with psf_sigma_px) or disc (with "
+                    "psf_radius_px)", psf);
+        return false;
+    }
+    bool has_sigma = model_ini_get(ini, sec, "psf_sigma_px") != NULL;
+    bool has_radius = model_ini_get(ini, sec, "psf_radius_px") != NULL;
+    if (!model_ini_double_in(ini, sec, "psf_sigma_px", &o->psf_sigma_px, o->psf == RIG_PSF_GAUSSIAN, 0, true, 10,
+                             "0 < sigma <= 10 px") ||
+        !model_ini_double_in(ini, sec, "psf_radius_px", &o->psf_radius_px, o->psf == RIG_PSF_DISC, 0, true, 10,
+                             "0 < radius <= 10 px"))
+        return false;
+    if ((has_sigma && o->psf != RIG_PSF_GAUSSIAN) || (has_radius && o->psf != RIG_PSF_DISC)) {
+        const char *k = has_sigma && o->psf != RIG_PSF_GAUSSIAN ? "psf_sigma_px" : "psf_radius_px";
+        model_error(ini->path, model_ini_get(ini, sec, k)->line, "[optics] %s is given but psf = %s: write psf = %s "
+                    "or remove the key", k, psf, has_sigma && o->psf != RIG_PSF_GAUSSIAN ? "gaussian" : "disc");
+        return false;
+    }
+    return true;
+}
+
+// [placement] and the [turntable] axis keys (rig/virtual/place.h).
+static bool read_placement(const model_ini_t *ini, rig_virtual_place_t *out)
+{
+    *out = (rig_virtual_place_t){ 0 };
+    long seed = 1;
+    if (!model_ini_double_in(ini, "placement", "position_sigma_mm", &out->position_sigma_mm, false, 0, false, 50,
+                             NULL) ||
+        !model_ini_double_in(ini, "placement", "angle_sigma_deg", &out->angle_sigma_deg, false, 0, false, 20, NULL) ||
+        !model_ini_int(ini, "placement", "seed", &seed, false, 0, LONG_MAX) ||
+        !model_ini_double_in(ini, "turntable", "axis_tilt_deg", &out->axis_tilt_deg, false, 0, false, 10, NULL) ||
+        !model_ini_double_in(ini, "turntable", "axis_tilt_azimuth_deg", &out->axis_tilt_azimuth_deg, false, -360,
+                             false, 360, NULL) ||
+        !model_ini_double_in(ini, "turntable", "wobble_deg", &out->wobble_deg, false, 0, false, 5, NULL))
+        return false;
+    out->seed = (uint64_t)seed;
+    out->on = out->position_sigma_mm > 0 || out->angle_sigma_deg > 0;
+    out->axis_on = out->axis_tilt_deg != 0 || out->wobble_deg != 0;
+    return true;
+}
+
 // The default sample is one of the samples.
 static bool check_default_sample(const model_ini_t *ini, const rig_vtruth_t *c)
 {
@@ -218,8 +318,8 @@ bool rig_vtruth_read(const rig_truth_t *t, int k, rig_vtruth_t *c)
     if (k < n) snprintf(c->cam_name, sizeof c->cam_name, "%s", strcmp(secs[k], "camera") ? secs[k] + 7 : "camera");
     bool ok = read_camera(t, c) && read_render(ini, c) && read_models(t, c) && read_turntable(ini, &c->tp) &&
               read_virtual(ini, c) && rig_vtruth_textures(t, c) && rig_vtruth_samples(t, c) &&
-              rig_vlamps_parse(&c->lamp_fx, ini, c->lamps) && rig_optics_parse(ini, &c->optics) &&
-              rig_virtual_place_parse(ini, &c->place) && check_default_sample(ini, c);
+              rig_vtruth_lamp_effects(t, c->lamps, &c->lamp_fx) && read_optics(ini, &c->optics) &&
+              read_placement(ini, &c->place) && check_default_sample(ini, c);
     if (!ok) rig_vtruth_free(c);
     return ok;
 }

@@ -244,6 +244,33 @@ static bool check_kind_keys(const model_ini_t *ini, const char *sec, sample_t *s
     return true;
 }
 
+// [sample NAME] flex_mm of a sample of kind `kind`: *scene replaced by its
+// bent copy (rig/virtual/place.h; unchanged without the key or at 0).
+static bool flex_sample(const model_ini_t *ini, const char *sec, const char *name, const char *kind,
+                        model_scene_t **scene)
+{
+    const model_ini_entry_t *e = model_ini_get(ini, sec, "flex_mm");
+    if (!e) return true;
+    double flex = 0;
+    if (!model_ini_double_in(ini, sec, "flex_mm", &flex, true, -5, false, 5, NULL)) return false;
+    if (strcmp(kind, "chessboard") != 0) {
+        model_error(ini->path, e->line, "sample '%s': flex_mm bends a chessboard (a calibration board), not a "
+                    "sample of kind %s", name, kind);
+        return false;
+    }
+    if (flex == 0) return true;
+    model_scene_t *f = rig_virtual_place_flexed(*scene, flex);
+    if (!f) {
+        char msg[1024];
+        snprintf(msg, sizeof msg, "%s", model_last_error());
+        model_error(ini->path, e->line, "sample '%s': flex_mm: %s", name, msg);
+        return false;
+    }
+    model_scene_free(*scene);
+    *scene = f;
+    return true;
+}
+
 // The sample's scene: loaded (resolved against the truth file), bent by flex_mm.
 static bool load_scene(const rig_truth_t *t, const char *sec, sample_t *sm, const char *scene)
 {
@@ -257,7 +284,7 @@ static bool load_scene(const rig_truth_t *t, const char *sec, sample_t *sm, cons
                     sm->scene_path, msg);
         return false;
     }
-    return rig_virtual_place_flex_sample(ini, sec, sm->name, sm->kind, &sm->scene);
+    return flex_sample(ini, sec, sm->name, sm->kind, &sm->scene);
 }
 
 // The scene's materials (the truth's), their textures and roughness variants.
