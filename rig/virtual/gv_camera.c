@@ -157,121 +157,122 @@ static int open_gvsp_socket(rig_gv_camera_t *g, const struct in_addr *ia)
     return 0;
 }
 
-int rig_gv_camera_start(rig_gv_camera_t **out, const rig_gv_camera_params_t *p)
-{
-    int rc = 0, lock_fd = -1;
-    char *xml = NULL, *xml_path = NULL;
-    rig_gv_camera_t *g = NULL;
-    if (!out || !p) return rig_fail(RIG_ERR_INVALID, "gv camera: NULL argument");
-    *out = NULL;
-    rig_gv_camera_params_t d = rig_gv_camera_defaults();
-    const char *address = p->address ? p->address : d.address;
-    const char *serial = p->serial ? p->serial : d.serial;
-    const char *vendor = p->vendor ? p->vendor : d.vendor;
-    const char *model = p->model ? p->model : d.model;
-    const char *firmware = p->firmware ? p->firmware : "refl-gv 1.0";
-    const char *gain_unit = p->gain_unit ? p->gain_unit : "dB";
-    const char *refuse_off = p->refuse_off ? p->refuse_off : "";
+// The parameters with their defaults, and where the server serves.
+typedef struct {
+    const char    *address, *serial, *vendor, *model, *firmware, *gain_unit, *refuse_off;
     struct in_addr ia;
+} names_t;
+
+// p's parameters checked, their defaults filled in *n.
+static int check_params(const rig_gv_camera_params_t *p, names_t *n)
+{
+    rig_gv_camera_params_t d = rig_gv_camera_defaults();
+    *n = (names_t){ p->address ? p->address : d.address, p->serial ? p->serial : d.serial,
+                    p->vendor ? p->vendor : d.vendor, p->model ? p->model : d.model,
+                    p->firmware ? p->firmware : "refl-gv 1.0", p->gain_unit ? p->gain_unit : "dB",
+                    p->refuse_off ? p->refuse_off : "", { 0 } };
+    const char *serial = n->serial;
     if (!p->render) return rig_fail(RIG_ERR_INVALID, "gv camera: no render callback given");
-    if (!p->inprocess && (inet_pton(AF_INET, address, &ia) != 1 || (ntohl(ia.s_addr) >> 24) != 127))
+    if (!p->inprocess && (inet_pton(AF_INET, n->address, &n->ia) != 1 || (ntohl(n->ia.s_addr) >> 24) != 127))
         return rig_fail(RIG_ERR_INVALID, "gv camera: address '%s' is not a loopback IPv4 address (127.x.y.z); "
-                        "the virtual camera only serves on loopback", address);
+                        "the virtual camera only serves on loopback", n->address);
     if (!*serial || strlen(serial) >= 16)
         return rig_fail(RIG_ERR_INVALID, "gv camera: serial '%s' must have 1 to 15 characters", serial);
-    if (strlen(vendor) >= GVBS_STRING_SIZE || strlen(model) >= GVBS_STRING_SIZE)
+    if (strlen(n->vendor) >= GVBS_STRING_SIZE || strlen(n->model) >= GVBS_STRING_SIZE)
         return rig_fail(RIG_ERR_INVALID, "gv camera %s: vendor and model must be shorter than %d characters",
                         serial, GVBS_STRING_SIZE);
-    if (strlen(firmware) >= GVBS_STRING_SIZE || strlen(gain_unit) >= 16)
+    if (strlen(n->firmware) >= GVBS_STRING_SIZE || strlen(n->gain_unit) >= 16)
         return rig_fail(RIG_ERR_INVALID, "gv camera %s: firmware must be shorter than %d characters, the gain "
                         "unit than 16", serial, GVBS_STRING_SIZE);
-    if (*refuse_off && strcmp(refuse_off, "ExposureAuto") && strcmp(refuse_off, "GainAuto") &&
-        strcmp(refuse_off, "BalanceWhiteAuto"))
+    if (*n->refuse_off && strcmp(n->refuse_off, "ExposureAuto") && strcmp(n->refuse_off, "GainAuto") &&
+        strcmp(n->refuse_off, "BalanceWhiteAuto"))
         return rig_fail(RIG_ERR_INVALID, "gv camera %s: refuse_off '%s' is not ExposureAuto, GainAuto or "
-                        "BalanceWhiteAuto", serial, refuse_off);
+                        "BalanceWhiteAuto", serial, n->refuse_off);
     if (p->sensor_width < 1 || p->sensor_width > 4096 || p->sensor_height < 1 || p->sensor_height > 4096)
         return rig_fail(RIG_ERR_INVALID, "gv camera %s: sensor size %dx%d outside 1..4096", serial,
                         p->sensor_width, p->sensor_height);
     if (!(p->trigger_poll_hz > 0 && p->trigger_poll_hz <= 100000))
-        return rig_fail(RIG_ERR_INVALID, "gv camera %s: trigger_poll_hz %g outside (0, 100000]", serial, p->trigger_poll_hz);
+        return rig_fail(RIG_ERR_INVALID, "gv camera %s: trigger_poll_hz %g outside (0, 100000]", serial,
+                        p->trigger_poll_hz);
     if (!isfinite(p->temperature_c))
         return rig_fail(RIG_ERR_INVALID, "gv camera %s: temperature is not finite", serial);
     if (!(p->busy_wait_s >= 0 && p->busy_wait_s <= 3600))
         return rig_fail(RIG_ERR_INVALID, "gv camera %s: busy_wait_s %g outside 0..3600", serial, p->busy_wait_s);
     if (p->inprocess) {
-        bool taken;
         g_mutex_lock(&registry_lock);
-        taken = registry_find(serial) != NULL;
+        bool taken = registry_find(serial) != NULL;
         g_mutex_unlock(&registry_lock);
         if (taken)
             return rig_fail(RIG_ERR_BUSY, "gv camera %s: this process already serves an in-process camera with "
                             "serial %s; stop it first or give this one another serial", serial, serial);
     }
+    return 0;
+}
 
-    int err_no = 0;
-    if (p->inprocess) goto make_xml;   // no socket, no lock file
-    // Take turns with other refl servers on this address.
+// Take turns with other refl servers on the address (its lock file, held in
+// *lock_fd while serving), and find its GVCP port free.
+static int take_address(const names_t *n, double busy_wait_s, int *lock_fd)
+{
     char lock_path[512];
-    snprintf(lock_path, sizeof lock_path, "%s/refl-gvcam-%s.lock", g_get_tmp_dir(), address);
-    lock_fd = open(lock_path, O_RDONLY | O_CREAT | O_CLOEXEC, 0666);
-    if (lock_fd < 0)
-        return rig_fail(RIG_ERR_IO, "gv camera %s: cannot open %s: %s", serial, lock_path, strerror(errno));
+    snprintf(lock_path, sizeof lock_path, "%s/refl-gvcam-%s.lock", g_get_tmp_dir(), n->address);
+    *lock_fd = open(lock_path, O_RDONLY | O_CREAT | O_CLOEXEC, 0666);
+    if (*lock_fd < 0)
+        return rig_fail(RIG_ERR_IO, "gv camera %s: cannot open %s: %s", n->serial, lock_path, strerror(errno));
     for (double waited = 0;; waited += 0.05) {
-        if (flock(lock_fd, LOCK_EX | LOCK_NB) == 0) break;
-        if (errno != EWOULDBLOCK || waited >= p->busy_wait_s) {
-            rc = rig_fail(RIG_ERR_BUSY, "gv camera %s: another refl virtual camera serves on %s (lock %s%s); "
-                          "stop it first", serial, address, lock_path, p->busy_wait_s > 0 ? ", waited" : "");
-            goto done;
-        }
+        if (flock(*lock_fd, LOCK_EX | LOCK_NB) == 0) break;
+        if (errno != EWOULDBLOCK || waited >= busy_wait_s)
+            return rig_fail(RIG_ERR_BUSY, "gv camera %s: another refl virtual camera serves on %s (lock %s%s); "
+                            "stop it first", n->serial, n->address, lock_path, busy_wait_s > 0 ? ", waited" : "");
         g_usleep(50000);
     }
-    rc = probe_port(address, &err_no);
-    if (rc == RIG_ERR_BUSY) {
+    int err_no = 0, rc = probe_port(n->address, &err_no);
+    if (rc == RIG_ERR_BUSY)
         rig_fail(rc, "gv camera %s: %s:%d is already in use (another GigE Vision program?); stop it first",
-                 serial, address, GVCP_PORT);
-        goto done;
-    }
-    if (rc < 0) {
-        rig_fail(rc, "gv camera %s: cannot bind %s:%d: %s", serial, address, GVCP_PORT, strerror(err_no));
-        goto done;
-    }
-make_xml:
-    if (!(xml = rig_gv_xml_make(gain_unit, refuse_off))) {
-        rc = RIG_ERR_IO;
-        goto done;
-    }
-    GError *gerr = NULL;
-    int fd = g_file_open_tmp("refl-gvcam-XXXXXX.xml", &xml_path, &gerr);
-    if (fd < 0) {
-        rc = rig_fail(RIG_ERR_IO, "gv camera %s: cannot write its GenICam XML: %s", serial, gerr->message);
-        g_error_free(gerr);
-        goto done;
-    }
-    close(fd);
-    if (!g_file_set_contents(xml_path, xml, -1, &gerr)) {
-        rc = rig_fail(RIG_ERR_IO, "gv camera %s: cannot write %s: %s", serial, xml_path, gerr->message);
-        g_error_free(gerr);
-        goto done;
-    }
+                 n->serial, n->address, GVCP_PORT);
+    else if (rc < 0)
+        rig_fail(rc, "gv camera %s: cannot bind %s:%d: %s", n->serial, n->address, GVCP_PORT, strerror(err_no));
+    return rc;
+}
 
-    g = calloc(1, sizeof *g);
-    if (!g) {
-        rc = rig_fail(RIG_ERR_NO_MEM, "gv camera %s: out of memory", serial);
-        goto done;
+// Our GenICam XML in a temporary file (*xml_path: its name, for the caller to
+// unlink and g_free).
+static int write_xml(const names_t *n, char **xml_path)
+{
+    char *xml = rig_gv_xml_make(n->gain_unit, n->refuse_off);
+    if (!xml) return RIG_ERR_IO;
+    GError *gerr = NULL;
+    int rc = 0, fd = g_file_open_tmp("refl-gvcam-XXXXXX.xml", xml_path, &gerr);
+    if (fd < 0) {
+        rc = rig_fail(RIG_ERR_IO, "gv camera %s: cannot write its GenICam XML: %s", n->serial, gerr->message);
+        g_error_free(gerr);
+    } else {
+        close(fd);
+        if (!g_file_set_contents(*xml_path, xml, -1, &gerr)) {
+            rc = rig_fail(RIG_ERR_IO, "gv camera %s: cannot write %s: %s", n->serial, *xml_path, gerr->message);
+            g_error_free(gerr);
+        }
     }
+    g_free(xml);
+    return rc;
+}
+
+// A server of these parameters that serves nothing yet. NULL: out of memory.
+static rig_gv_camera_t *new_server(const rig_gv_camera_params_t *p, const names_t *n)
+{
+    rig_gv_camera_t *g = calloc(1, sizeof *g);
+    if (!g) return NULL;
     g->p = *p;
     g->gvsp_fd = -1;
+    g->lock_fd = -1;
     g->block_id = 65399;   // the first frame is 65400, as Aravis's fake camera's: clients meet the wrap early
-    g->lock_fd = lock_fd;
-    lock_fd = -1;
     snprintf(g->address, sizeof g->address, "%s%s", p->inprocess ? RIG_GV_INPROCESS_PREFIX : "",
-             p->inprocess ? serial : address);
-    snprintf(g->serial, sizeof g->serial, "%s", serial);
-    snprintf(g->vendor, sizeof g->vendor, "%s", vendor);
-    snprintf(g->model, sizeof g->model, "%s", model);
-    snprintf(g->firmware, sizeof g->firmware, "%s", firmware);
-    snprintf(g->gain_unit, sizeof g->gain_unit, "%s", gain_unit);
-    snprintf(g->refuse_off, sizeof g->refuse_off, "%s", refuse_off);
+             p->inprocess ? n->serial : n->address);
+    snprintf(g->serial, sizeof g->serial, "%s", n->serial);
+    snprintf(g->vendor, sizeof g->vendor, "%s", n->vendor);
+    snprintf(g->model, sizeof g->model, "%s", n->model);
+    snprintf(g->firmware, sizeof g->firmware, "%s", n->firmware);
+    snprintf(g->gain_unit, sizeof g->gain_unit, "%s", n->gain_unit);
+    snprintf(g->refuse_off, sizeof g->refuse_off, "%s", n->refuse_off);
     g->p.address = g->address;
     g->p.serial = g->serial;
     g->p.vendor = g->vendor;
@@ -279,31 +280,39 @@ make_xml:
     g_mutex_init(&g->lock);
     g_mutex_init(&g->render_lock);
     g_cond_init(&g->cond);
+    return g;
+}
 
-    if (p->inprocess) {
+// The fake camera with our XML: an in-process ArvFakeDevice, or Aravis's
+// GigE Vision server on the address (its port then taken) and our GVSP socket.
+static int serve(rig_gv_camera_t *g, const names_t *n, const char *xml_path)
+{
+    if (g->p.inprocess) {
         char msg[512];
-        if (!(g->dev = rig_gv_xml_fake_device(serial, xml_path, msg, sizeof msg))) {
-            rc = rig_fail(RIG_ERR_IO, "gv camera %s: Aravis could not make an in-process fake device: %s", serial, msg);
-            goto done;
-        }
+        if (!(g->dev = rig_gv_xml_fake_device(n->serial, xml_path, msg, sizeof msg)))
+            return rig_fail(RIG_ERR_IO, "gv camera %s: Aravis could not make an in-process fake device: %s",
+                            n->serial, msg);
         g->fake = arv_fake_device_get_fake_camera(ARV_FAKE_DEVICE(g->dev));
-        goto registers;
+        return 0;
     }
-    g->gv = arv_gv_fake_camera_new_full(address, serial, xml_path);   // reads the XML file now
-    if (!g->gv || !arv_gv_fake_camera_is_running(g->gv)) {
-        rc = rig_fail(RIG_ERR_IO, "gv camera %s: Aravis could not start a GigE Vision server on %s "
-                      "(no network interface with that address?)", serial, address);
-        goto done;
-    }
+    g->gv = arv_gv_fake_camera_new_full(n->address, n->serial, xml_path);   // reads the XML file now
+    if (!g->gv || !arv_gv_fake_camera_is_running(g->gv))
+        return rig_fail(RIG_ERR_IO, "gv camera %s: Aravis could not start a GigE Vision server on %s "
+                        "(no network interface with that address?)", n->serial, n->address);
     // Aravis reports running even when its bind failed: check the port is now taken.
-    if (probe_port(address, &err_no) != RIG_ERR_BUSY) {
-        rc = rig_fail(RIG_ERR_BUSY, "gv camera %s: Aravis did not get %s:%d (taken meanwhile?)", serial,
-                      address, GVCP_PORT);
-        goto done;
-    }
+    int err_no = 0;
+    if (probe_port(n->address, &err_no) != RIG_ERR_BUSY)
+        return rig_fail(RIG_ERR_BUSY, "gv camera %s: Aravis did not get %s:%d (taken meanwhile?)", n->serial,
+                        n->address, GVCP_PORT);
     g->fake = arv_gv_fake_camera_get_fake_camera(g->gv);
-    if ((rc = open_gvsp_socket(g, &ia))) goto done;
-registers:
+    return open_gvsp_socket(g, &n->ia);
+}
+
+// The registers as a camera starts (identity, full sensor, automatics on),
+// the trigger check's rate and our fill callback.
+static void init_registers(rig_gv_camera_t *g)
+{
+    const rig_gv_camera_params_t *p = &g->p;
     rig_gv_reg_set_string(g, GVBS_MANUFACTURER_NAME, g->vendor, GVBS_STRING_SIZE);
     rig_gv_reg_set_string(g, GVBS_MODEL_NAME, g->model, GVBS_STRING_SIZE);
     arv_fake_camera_write_register(g->fake, ARV_FAKE_CAMERA_REGISTER_SENSOR_WIDTH, (guint32)p->sensor_width);
@@ -333,28 +342,56 @@ registers:
 #else
     arv_fake_camera_set_fill_pattern(g->fake, rig_gv_fill_cb, g);
 #endif
+}
+
+// The render thread, and an in-process server's entry in the registry.
+static int start_threads(rig_gv_camera_t *g)
+{
+    GError *gerr = NULL;
     g->thread = g_thread_try_new("refl-gvcam-render", rig_gv_render_thread, g, &gerr);
     if (!g->thread) {
-        rc = rig_fail(RIG_ERR_IO, "gv camera %s: cannot start its render thread: %s", serial, gerr->message);
+        int rc = rig_fail(RIG_ERR_IO, "gv camera %s: cannot start its render thread: %s", g->serial, gerr->message);
         g_error_free(gerr);
-        goto done;
+        return rc;
     }
-    if (p->inprocess && (rc = registry_add(g))) {
-        rig_fail(rc, "gv camera %s: %s", serial, rc == RIG_ERR_BUSY ? "another in-process camera of this process "
-                 "took the serial meanwhile" : "too many in-process cameras (16) in this process");
-        goto done;
+    int rc = g->p.inprocess ? registry_add(g) : 0;
+    if (rc)
+        rig_fail(rc, "gv camera %s: %s", g->serial, rc == RIG_ERR_BUSY ? "another in-process camera of this "
+                 "process took the serial meanwhile" : "too many in-process cameras (16) in this process");
+    return rc;
+}
+
+int rig_gv_camera_start(rig_gv_camera_t **out, const rig_gv_camera_params_t *p)
+{
+    if (!out || !p) return rig_fail(RIG_ERR_INVALID, "gv camera: NULL argument");
+    *out = NULL;
+    names_t n;
+    int rc = check_params(p, &n), lock_fd = -1;
+    if (rc) return rc;
+    char *xml_path = NULL;
+    rig_gv_camera_t *g = NULL;
+    if (!p->inprocess) rc = take_address(&n, p->busy_wait_s, &lock_fd);   // in-process: no socket, no lock file
+    if (!rc) rc = write_xml(&n, &xml_path);
+    if (!rc && !(g = new_server(p, &n))) rc = rig_fail(RIG_ERR_NO_MEM, "gv camera %s: out of memory", n.serial);
+    if (g) {
+        g->lock_fd = lock_fd;   // the server holds the lock now
+        lock_fd = -1;
     }
-    *out = g;
-    g = NULL;
-done:
+    if (!rc && !(rc = serve(g, &n, xml_path))) {
+        init_registers(g);
+        rc = start_threads(g);
+    }
     if (xml_path) {
         unlink(xml_path);
         g_free(xml_path);
     }
-    g_free(xml);
-    rig_gv_camera_stop(g);
     if (lock_fd >= 0) close(lock_fd);   // releases the lock
-    return rc;
+    if (rc) {
+        rig_gv_camera_stop(g);
+        return rc;
+    }
+    *out = g;
+    return 0;
 }
 
 void rig_gv_camera_stop(rig_gv_camera_t *g)

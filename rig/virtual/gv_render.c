@@ -187,12 +187,16 @@ static int render_and_pack(rig_gv_camera_t *g, rig_frame_meta_t *m, uint8_t *dst
     return 0;
 }
 
+// A frame that could not be made: counted, kept for
+// rig_gv_camera_last_render_error and told as a warning (the client only sees
+// no frame come).
 static void note_render_error(rig_gv_camera_t *g, const char *msg)
 {
     g_mutex_lock(&g->lock);
     g->stats.render_errors++;
     snprintf(g->render_error, sizeof g->render_error, "%s", msg);
     g_mutex_unlock(&g->lock);
+    model_warning("virtual camera %s: no frame: %s", g->serial, msg);
 }
 
 // ---------------------------------------------------------------------------
@@ -274,6 +278,7 @@ void rig_gv_fill_cb(ArvBuffer *buffer, void *data, guint32 exposure_us_int, guin
     guint32 pf_reg;
     char err[256] = "";
     int rc = RIG_ERR_INVALID;
+    bool quiet = model_error_quiet_thread(true);   // Aravis's thread: the error is noted below
     g_mutex_lock(&g->render_lock);
     if (!snapshot_settings(g, &m, &pf_reg, err, sizeof err)) {
         // err says why
@@ -284,6 +289,7 @@ void rig_gv_fill_cb(ArvBuffer *buffer, void *data, guint32 exposure_us_int, guin
         if (rc < 0) snprintf(err, sizeof err, "%s", model_last_error());
     }
     g_mutex_unlock(&g->render_lock);
+    model_error_quiet_thread(quiet);
     if (rc < 0) {
         memset(dst, 0, size);
         note_render_error(g, err);
@@ -343,6 +349,7 @@ static bool render_publish(rig_gv_camera_t *g, rig_frame_meta_t *mp, guint32 *pf
 gpointer rig_gv_render_thread(gpointer data)
 {
     rig_gv_camera_t *g = data;
+    model_error_quiet_thread(true);   // a render's error is noted (note_render_error), not printed
     gint64 period_us = (gint64)(1e6 / g->p.trigger_poll_hz);
     if (period_us < 10) period_us = 10;
     while (!atomic_load(&g->stop)) {

@@ -147,4 +147,5 @@ void rig_gv_send_front(rig_gv_camera_t *g, const rig_frame_meta_t *m, guint32 pf
     }
     g_cond_broadcast(&g->cond);
     g_mutex_unlock(&g->lock);
+    if (!ok) model_warning("virtual camera %s: frame %u not sent: %s", g->serial, (unsigned)block, err);
 }

@@ -131,7 +131,7 @@ static int speculate_angle(rig_virtual_t *v, int sample, double angle_deg, uint6
         free_slot->valid = false;
         bool q = model_error_quiet_thread(true);   // errors show at the trigger
         int r = rig_vnoisy_frame(v, sample, angle_deg, pred[j].mask, pred[j].exposure_us, pred[j].gain_db, seed, 0,
-                            free_slot->img);
+                                 free_slot->img);
         model_error_quiet_thread(q);
         if (r) {   // no more speculation until the next frame (which reports the error)
             v->nacur = v->naprev = v->naprev2 = NASEQ + 1;
@@ -147,6 +147,7 @@ static int speculate_angle(rig_virtual_t *v, int sample, double angle_deg, uint6
 void *rig_vprerender_main(void *arg)
 {
     rig_virtual_t *v = arg;
+    model_error_quiet_thread(true);   // its errors show at the trigger that needs the frame
     while (!__atomic_load_n(&v->pre_stop, __ATOMIC_ACQUIRE)) {
         rig_turntable_status_t st;
         pthread_mutex_lock(&v->state_lock);
