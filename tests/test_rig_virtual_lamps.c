@@ -1,5 +1,5 @@
 // tests/test_rig_virtual_lamps.c — the virtual rig's lamps outside the
-// fitters' model (rig/virtual/lamps.c, issue 18): warm-up and drift follow
+// fitters' model (rig/virtual/lamps.c): warm-up and drift follow
 // the configured curve in successive frames, stray light adds its configured
 // level with the lamps off and on, and without these sections a frame is
 // exactly the documented sum (bit for bit).
@@ -137,7 +137,7 @@ TEST(virtual_lamps_truth_errors)
 }
 
 // Without the new sections a frame is exactly Pa + kc L_1 + kc L_2 in float,
-// lamp by lamp (the arithmetic before issue 18), through the sensor's mean.
+// lamp by lamp (the arithmetic of a rig without drift or stray light), through the sensor's mean.
 TEST(virtual_lamps_defaults_bit_exact)
 {
     rig_virtual_t *v = open_truth(truth_with("plain.ini", ""), "REFL-LAMPS-A");

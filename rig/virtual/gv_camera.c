@@ -12,7 +12,7 @@
 // frequency, polling its sockets with a timeout in whole milliseconds, so it
 // spins through the last millisecond of every period. At a 1 kHz check that is
 // a whole core spinning while frames render on the others; at a lower rate
-// each frame waits up to a period. Its tick is now GV_TICK_HZ (it only answers
+// each frame waits up to a period. So its tick is GV_TICK_HZ (it only answers
 // GVCP and free running), and a triggered frame leaves as soon as it is made.
 // Block ids (16-bit, 0 invalid) are ours for every frame (fill_cb sets them on
 // Aravis's free-running frames too), so a client sees one increasing sequence;

@@ -116,7 +116,7 @@ static const char xml_radiometric[] =
 static GMutex xml_name_lock;
 
 // PixelFormat entries after Mono16: the formats of rig/camera/pixfmt.h the built-in
-// XML lacks (Mono12 goes after Mono8, as before). false when Mono16 is missing.
+// XML lacks (Mono12 goes after Mono8, in rig_gv_xml_make). false when Mono16 is missing.
 static bool xml_add_formats(GString *x)
 {
     GString *e = g_string_new("</EnumEntry>");

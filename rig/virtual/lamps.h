@@ -1,5 +1,5 @@
 // rig/virtual/lamps.h — the virtual rig's lamps and stray light outside the
-// fitters' model (issue 18): each lamp's warm-up and drift in time, and stray
+// fitters' model: each lamp's warm-up and drift in time, and stray
 // light (room light into the lens, the lens's veiling glare). Truth-file
 // sections (read by rig/virtual/truth_rig.c; examples/virtual-truth.ini
 // documents them; all off by default):

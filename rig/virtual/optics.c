@@ -1,5 +1,5 @@
 // rig/virtual/optics.c — the virtual rig's optics outside the fitters' model
-// (issue 18; examples/virtual-truth.ini documents [optics]):
+// (examples/virtual-truth.ini documents [optics]):
 //   rays_per_pixel = N   the radiance plane is rendered by a camera of N times
 //                        the resolution (rig_optics_scaled_camera) and its N x N
 //                        blocks averaged: N x N rays spread evenly over each

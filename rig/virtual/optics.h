@@ -1,5 +1,5 @@
-// rig/virtual/optics.h — the virtual rig's optics outside the fitters' model
-// (issue 18): rays over each pixel's footprint and a point-spread function,
+// rig/virtual/optics.h — the virtual rig's optics outside the fitters' model:
+// rays over each pixel's footprint and a point-spread function,
 // from the truth file's [optics] section (read by rig/virtual/truth_rig.c).
 // Internal to rig/ (rig/virtual/ and the tests).
 #ifndef RIG_VIRTUAL_OPTICS_H

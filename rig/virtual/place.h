@@ -1,5 +1,5 @@
 // rig/virtual/place.h — the virtual rig's placement and turntable-axis errors
-// (rig/virtual/place.c; issue 18: physics outside the fitted models). Off by
+// (rig/virtual/place.c; physics outside the fitted models). Off by
 // default: without [placement] and the [turntable] axis keys nothing changes.
 // The truth reader (rig/virtual/truth_rig.c, truth_samples.c) reads these keys:
 //
