@@ -250,6 +250,15 @@ bool rig_vspec_is(const spec_t *p, int sample, double angle_deg, uint32_t mask, 
                   double gain_db, uint64_t seed);
 // The pre-render thread (arg: the rig).
 void *rig_vprerender_main(void *arg);
+// A triggered frame's state and settings, remembered: they predict the next
+// frames (cache_lock held).
+void rig_vspec_note(rig_virtual_t *v, int sample, double angle_deg, uint32_t mask, double exposure_us,
+                    double gain_db);
+// The frame computed ahead for exactly these inputs (NULL: none; its buffer
+// stays while cache_lock is held); the speculative frames of seeds up to this
+// one are used up (cache_lock held).
+const float *rig_vspec_take(rig_virtual_t *v, int sample, double angle_deg, uint32_t mask, double exposure_us,
+                            double gain_db, uint64_t seed);
 
 // ---------------------------------------------------------------------------
 // The truth file read for the virtual rig (truth.c, truth_rig.c, truth_samples.c)

@@ -4,6 +4,7 @@
 #include <math.h>
 #include <pthread.h>
 #include <stdlib.h>
+#include <string.h>
 
 #include "rig/virtual/internal.h"
 
@@ -142,6 +143,54 @@ static int speculate_angle(rig_virtual_t *v, int sample, double angle_deg, uint6
         return 1;
     }
     return 0;
+}
+
+void rig_vspec_note(rig_virtual_t *v, int sample, double angle_deg, uint32_t mask, double exposure_us,
+                    double gain_db)
+{
+    // The exposures of this state so far (the prediction of speculate_one).
+    if (!(v->cur_key_set && v->cur_key_sample == sample && v->cur_key_angle == angle_deg &&
+          v->cur_key_mask == mask)) {
+        if (v->ncur > 0) {
+            memcpy(v->prev, v->cur, sizeof v->cur);
+            v->nprev = v->ncur;
+        }
+        v->ncur = 0;
+        v->cur_key_set = true;
+        v->cur_key_sample = sample;
+        v->cur_key_angle = angle_deg;
+        v->cur_key_mask = mask;
+    }
+    if (v->ncur < NSEQ) v->cur[v->ncur++] = (shot_t){ exposure_us, gain_db };
+    // ... and of this angle
+    if (!(v->akey_set && v->akey_sample == sample && v->akey_angle == angle_deg)) {
+        memcpy(v->aprev2, v->aprev, sizeof v->aprev);
+        v->naprev2 = v->naprev;
+        memcpy(v->aprev, v->acur, sizeof v->acur);
+        v->naprev = v->nacur;
+        v->nacur = 0;
+        if (!v->akey_set || v->akey_sample != sample) v->naprev = v->naprev2 = NASEQ + 1;   // another sample
+        v->akey_set = true;
+        v->akey_sample = sample;
+        v->akey_angle = angle_deg;
+    }
+    if (v->nacur < NASEQ) v->acur[v->nacur++] = (ashot_t){ mask, exposure_us, gain_db };
+    else v->nacur = NASEQ + 1;
+}
+
+const float *rig_vspec_take(rig_virtual_t *v, int sample, double angle_deg, uint32_t mask, double exposure_us,
+                            double gain_db, uint64_t seed)
+{
+    const float *img = NULL;
+    for (int k = 0; k < NSPEC; k++) {
+        spec_t *p = &v->spec[k];
+        if (rig_vspec_is(p, sample, angle_deg, mask, exposure_us, gain_db, seed)) img = p->img;
+        if (p->seed < seed) p->valid = false;   // its seed is used up
+    }
+    if (img) v->frames_ahead++;
+    for (int k = 0; k < NSPEC; k++)
+        if (v->spec[k].seed == seed) v->spec[k].valid = false;   // taken (its buffer is read under cache_lock)
+    return img;
 }
 
 void *rig_vprerender_main(void *arg)

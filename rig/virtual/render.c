@@ -364,29 +364,52 @@ int rig_vnoisy_frame(rig_virtual_t *v, int sample, double angle_deg, uint32_t ma
     return 0;
 }
 
+// The state a trigger sees: the stage's angle (a stage that disconnected
+// leaves the sample where it was: the camera keeps seeing it at the last known
+// angle), the sample on the table and the frame's noise seed (drawn).
+static double trigger_state(rig_virtual_t *v, int *sample, uint64_t *seed)
+{
+    rig_virtual_t *sv = v->state;
+    rig_turntable_status_t st;
+    pthread_mutex_lock(&sv->state_lock);
+    if (!sv->stage_gone) {
+        if (rig_turntable_status(sv->tt_sim, &st) == 0) sv->last_angle_deg = st.angle_deg;
+        else sv->stage_gone = true;
+    }
+    double angle_deg = sv->last_angle_deg;
+    pthread_mutex_unlock(&sv->state_lock);
+    pthread_mutex_lock(&v->state_lock);
+    *sample = v->cur_sample;
+    *seed = v->next_seed++;
+    pthread_mutex_unlock(&v->state_lock);
+    return angle_deg;
+}
+
+// The sensor's values (integers in [0, 2^bits - 1]) of the frame's region,
+// shifted to the pixel format's fb bits.
+static void to_pixels(const rig_virtual_t *v, const rig_frame_meta_t *m, int fb, const float *img, uint16_t *pix)
+{
+    const int bits = v->sensor.bits;
+    int up = fb >= bits ? fb - bits : 0, down = fb < bits ? bits - fb : 0;
+    for (int y = 0; y < m->height; y++) {
+        const float *row = img + (size_t)(y + m->offset_y) * v->W + m->offset_x;
+        uint16_t *o = pix + (size_t)y * m->width;
+        for (int x = 0; x < m->width; x++) o[x] = (uint16_t)((((uint32_t)row[x]) >> down) << up);
+    }
+}
+
 int rig_vrender_cb(void *ctx, const rig_frame_meta_t *m, uint16_t *pix)
 {
-    rig_virtual_t *v = ctx, *sv = v->state;
+    rig_virtual_t *v = ctx;
     // the exposure starts now: the lamps' warm-up is theirs at this time,
     // however long the frame waits for the renderer
     struct timespec tnow;
     clock_gettime(CLOCK_MONOTONIC, &tnow);
     int64_t trigger_ns = (int64_t)tnow.tv_sec * 1000000000 + tnow.tv_nsec;
-    rig_turntable_status_t st;
-    pthread_mutex_lock(&sv->state_lock);
-    // A stage that disconnected leaves the sample where it was: the camera
-    // keeps seeing it at the last known angle.
-    if (!sv->stage_gone) {
-        if (rig_turntable_status(sv->tt_sim, &st) == 0) sv->last_angle_deg = st.angle_deg;
-        else sv->stage_gone = true;
-    }
-    st.angle_deg = sv->last_angle_deg;
-    pthread_mutex_unlock(&sv->state_lock);
-    pthread_mutex_lock(&v->state_lock);
-    int sample = v->cur_sample;
-    uint64_t seed = v->next_seed++;
-    pthread_mutex_unlock(&v->state_lock);
-    uint32_t mask = __atomic_load_n(&sv->lamps_dev->on_mask, __ATOMIC_ACQUIRE);
+    int sample;
+    uint64_t seed;
+    double angle_deg = trigger_state(v, &sample, &seed);
+    uint32_t mask = __atomic_load_n(&v->state->lamps_dev->on_mask, __ATOMIC_ACQUIRE);
     int fb = format_bits(m->pixel_format);
     if (!fb || m->offset_x + m->width > v->W || m->offset_y + m->height > v->H)
         return rig_fail(RIG_ERR_INVALID, "virtual rig: frame %s %dx%d at (%d,%d) does not fit the %dx%d sensor",
@@ -394,59 +417,15 @@ int rig_vrender_cb(void *ctx, const rig_frame_meta_t *m, uint16_t *pix)
     __atomic_add_fetch(&v->waiting, 1, __ATOMIC_ACQ_REL);
     pthread_mutex_lock(&v->cache_lock);
     __atomic_sub_fetch(&v->waiting, 1, __ATOMIC_ACQ_REL);
-    // The exposures of this state so far (the prediction of speculate_one).
-    if (!(v->cur_key_set && v->cur_key_sample == sample && v->cur_key_angle == st.angle_deg &&
-          v->cur_key_mask == mask)) {
-        if (v->ncur > 0) {
-            memcpy(v->prev, v->cur, sizeof v->cur);
-            v->nprev = v->ncur;
-        }
-        v->ncur = 0;
-        v->cur_key_set = true;
-        v->cur_key_sample = sample;
-        v->cur_key_angle = st.angle_deg;
-        v->cur_key_mask = mask;
-    }
-    if (v->ncur < NSEQ) v->cur[v->ncur++] = (shot_t){ m->exposure_us, m->gain };
-    // ... and of this angle
-    if (!(v->akey_set && v->akey_sample == sample && v->akey_angle == st.angle_deg)) {
-        memcpy(v->aprev2, v->aprev, sizeof v->aprev);
-        v->naprev2 = v->naprev;
-        memcpy(v->aprev, v->acur, sizeof v->acur);
-        v->naprev = v->nacur;
-        v->nacur = 0;
-        if (!v->akey_set || v->akey_sample != sample) v->naprev = v->naprev2 = NASEQ + 1;   // another sample
-        v->akey_set = true;
-        v->akey_sample = sample;
-        v->akey_angle = st.angle_deg;
-    }
-    if (v->nacur < NASEQ) v->acur[v->nacur++] = (ashot_t){ mask, m->exposure_us, m->gain };
-    else v->nacur = NASEQ + 1;
+    rig_vspec_note(v, sample, angle_deg, mask, m->exposure_us, m->gain);
     // A frame computed ahead for exactly these inputs, or compute it now.
-    const float *img = NULL;
+    const float *img = rig_vspec_take(v, sample, angle_deg, mask, m->exposure_us, m->gain, seed);
     int r = 0;
-    for (int k = 0; k < NSPEC; k++) {
-        spec_t *p = &v->spec[k];
-        if (rig_vspec_is(p, sample, st.angle_deg, mask, m->exposure_us, m->gain, seed)) img = p->img;
-        if (p->seed < seed) p->valid = false;   // its seed is used up
-    }
-    if (img) v->frames_ahead++;
     if (!img) {
-        r = rig_vnoisy_frame(v, sample, st.angle_deg, mask, m->exposure_us, m->gain, seed, trigger_ns, v->frame);
+        r = rig_vnoisy_frame(v, sample, angle_deg, mask, m->exposure_us, m->gain, seed, trigger_ns, v->frame);
         img = v->frame;
     }
-    for (int k = 0; k < NSPEC; k++)
-        if (v->spec[k].seed == seed) v->spec[k].valid = false;   // taken (its buffer is read below, under cache_lock)
-    if (!r) {
-        // The sensor's values are integers in [0, 2^bits - 1]: shift them.
-        const int bits = v->sensor.bits;
-        int up = fb >= bits ? fb - bits : 0, down = fb < bits ? bits - fb : 0;
-        for (int y = 0; y < m->height; y++) {
-            const float *row = img + (size_t)(y + m->offset_y) * v->W + m->offset_x;
-            uint16_t *o = pix + (size_t)y * m->width;
-            for (int x = 0; x < m->width; x++) o[x] = (uint16_t)((((uint32_t)row[x]) >> down) << up);
-        }
-    }
+    if (!r) to_pixels(v, m, fb, img, pix);
     pthread_mutex_unlock(&v->cache_lock);
     return r;
 }
