@@ -2,9 +2,10 @@
 // (struct rig_virtual), samples, textures and caches, and the functions its
 // files share: virtual.c (open, close, the turntable seen by users), render.c
 // (planes and frames), texture.c, prerender.c (pre-rendering and speculation),
-// pose.c (the sample on the table), truth_rig.c and truth_samples.c (the truth
-// file read into a rig); and the virtual GigE Vision camera's server
-// (gv_camera.c, gv_render.c, gv_stream.c, gv_xml.c).
+// pose.c (the sample on the table), the truth file's reader (truth.c,
+// truth_figures.c, truth_rig.c, truth_samples.c; rig/virtual/truth.h) and the
+// virtual GigE Vision camera's server (gv_camera.c, gv_render.c, gv_stream.c,
+// gv_xml.c).
 #pragma once
 
 #include <arv.h>
