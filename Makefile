@@ -128,8 +128,18 @@ RIG_SESSION_SRC := \
     rig/session/writer.c
 RIG_VIRTUAL_SRC := \
     rig/virtual/truth.c \
+    rig/virtual/truth_figures.c \
+    rig/virtual/truth_rig.c \
+    rig/virtual/truth_samples.c \
     rig/virtual/virtual.c \
+    rig/virtual/render.c \
+    rig/virtual/texture.c \
+    rig/virtual/prerender.c \
+    rig/virtual/pose.c \
     rig/virtual/gv_camera.c \
+    rig/virtual/gv_render.c \
+    rig/virtual/gv_stream.c \
+    rig/virtual/gv_xml.c \
     rig/virtual/lamps.c \
     rig/virtual/optics.c \
     rig/virtual/materials.c \

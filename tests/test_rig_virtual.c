@@ -19,6 +19,7 @@
 
 #include "model/model.h"
 #include "rig/rig.h"
+#include "rig/virtual/truth.h"
 #include "tests/fixtures.h"
 #include "tests/test.h"
 #include "tests/virtual_stats.h"
@@ -269,6 +270,27 @@ TEST(virtual_truth_errors)
     CHECK(rig_virtual_open(&v, "/nonexistent/truth.ini", NULL) == RIG_ERR_INVALID);
     CHECK_CONTAINS(model_last_error(), "/nonexistent/truth.ini");
     CHECK(v == NULL);
+}
+
+// The truth file's format version ([virtual] format_version): a file without
+// one is version 1; a newer one is refused by every reader of the file
+// (rig_truth_load as rig_virtual_open), naming the versions.
+TEST(virtual_truth_format_version)
+{
+    rig_truth_t *t = rig_truth_load(truth_path());
+    CHECK_MSG(t && rig_truth_format_version(t) == 1, "%s", model_last_error());
+    rig_truth_free(t);
+    char path[1200];
+    snprintf(path, sizeof path, "%s", truth_variant("[virtual]", "[virtual]\nformat_version = 1"));
+    t = rig_truth_load(path);
+    CHECK_MSG(t && rig_truth_format_version(t) == 1, "%s", model_last_error());
+    rig_truth_free(t);
+    snprintf(path, sizeof path, "%s", truth_variant("[virtual]", "[virtual]\nformat_version = 2"));
+    CHECK(rig_truth_load(path) == NULL);
+    CHECK_CONTAINS(model_last_error(), "format_version = 2: a truth file of a newer refl");
+    CHECK_CONTAINS(model_last_error(), "up to format version 1");
+    expect_error("[virtual]", "[virtual]\nformat_version = 2", "format_version", "a truth file of a newer refl");
+    expect_error("[virtual]", "[virtual]\nformat_version = two", "format_version", "a whole number from 1");
 }
 
 // The albedo texture of the truth file's plywood (amplitude 0.08): the

@@ -1,5 +1,5 @@
 // tests/test_rig_virtual_lamps.c — the virtual rig's lamps outside the
-// fitters' model (rig/virtual/lamps.c, issue 18): warm-up and drift follow
+// fitters' model (rig/virtual/lamps.c): warm-up and drift follow
 // the configured curve in successive frames, stray light adds its configured
 // level with the lamps off and on, and without these sections a frame is
 // exactly the documented sum (bit for bit).
@@ -21,7 +21,7 @@
 #include "model/model.h"
 #include "model/base/vec.h"
 #include "rig/rig.h"
-#include "rig/virtual/lamps.h"
+#include "rig/virtual/internal.h"
 #include "tests/fixtures.h"
 #include "tests/test.h"
 
@@ -82,11 +82,11 @@ TEST(virtual_lamps_curve_known_values)
     const char *text = "[lamp a]\nposition_mm = 0 0 500\nintensity = 1\n[lamp b]\nposition_mm = 0 0 500\n"
                        "intensity = 1\n[lamp_drift b]\nwarmup_fraction = 0.04\nwarmup_tau_s = 120\n"
                        "drift_pct_per_h = -0.5\n[stray]\nveiling_glare = 0.01\n";
-    model_ini_t *ini = model_ini_parse(text, strlen(text), "t.ini");
-    model_lamps_t *l = ini ? model_lamps_from_ini(ini) : NULL;
+    rig_truth_t *t = rig_truth_parse(text, strlen(text), "t.ini");
+    model_lamps_t *l = t ? rig_truth_lamps(t) : NULL;
     CHECK(l && l->n == 2);
     rig_vlamps_t fx;
-    if (!l || !rig_vlamps_parse(&fx, ini, l)) {
+    if (!l || !rig_vtruth_lamp_effects(t, l, &fx)) {
         CHECK_MSG(false, "parse: %s", model_last_error());
         goto done;
     }
@@ -109,7 +109,7 @@ TEST(virtual_lamps_curve_known_values)
     for (int i = 0; i < 4; i++) CHECK_NEAR(out[i], i + 1 + add, 1e-6);
 done:
     model_lamps_free(l);
-    model_ini_free(ini);
+    rig_truth_free(t);
 }
 
 // Errors name the file and line.
@@ -137,7 +137,7 @@ TEST(virtual_lamps_truth_errors)
 }
 
 // Without the new sections a frame is exactly Pa + kc L_1 + kc L_2 in float,
-// lamp by lamp (the arithmetic before issue 18), through the sensor's mean.
+// lamp by lamp (the arithmetic of a rig without drift or stray light), through the sensor's mean.
 TEST(virtual_lamps_defaults_bit_exact)
 {
     rig_virtual_t *v = open_truth(truth_with("plain.ini", ""), "REFL-LAMPS-A");

@@ -1,5 +1,5 @@
 // tests/test_rig_virtual_place.c — the virtual rig's placement errors and its
-// imperfect turntable axis (rig/virtual/place.h; issue 18): known answers from
+// imperfect turntable axis (rig/virtual/place.h): known answers from
 // the truth file's magnitudes, reproducibility, and nothing changed when off.
 // The rig serves its camera in-process (no socket, no lock on 127.0.0.1).
 #define _GNU_SOURCE

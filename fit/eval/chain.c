@@ -22,8 +22,6 @@ typedef struct {
     const char *dir;
     rig_truth_t *truth;
     model_materials_t *mats;   // the truth's materials (tables generated), or NULL
-    const model_ini_t *ini;
-    char *truth_dir;
     json_t *entries, *missing, *prov;
     bool   cams;                            // the first camera's poses (rig -> camera), calibrated and true
     double rt_cam_rig_cal[6], rt_cam_rig_truth[6];
@@ -62,14 +60,6 @@ static double num(const json_t *o, const char *key)
 {
     const json_t *v = json_object_get(o, key);
     return json_is_number(v) ? json_number_value(v) : NAN;
-}
-
-static double ini_num(const chain_t *c, const char *sec, const char *key)
-{
-    const char *t = model_ini_text(c->ini, sec, key, NULL);
-    char *end;
-    double v = t ? strtod(t, &end) : NAN;
-    return t && end != t ? v : NAN;
 }
 
 // ---------------------------------------------------------------------------
@@ -116,11 +106,10 @@ static bool intrinsics_stdev(chain_t *c, const json_t *cam, double sd[4])
     return ok;
 }
 
-static void chain_camera(chain_t *c, const json_t *cam, const char *model_path, const char *truth_sec,
+static void chain_camera(chain_t *c, const json_t *cam, const char *model_path, const char *truth_cam,
                          const char *label)
 {
-    const char *tm = model_ini_text(c->ini, truth_sec, "model", NULL);
-    char *tpath = !tm ? NULL : g_path_is_absolute(tm) ? g_strdup(tm) : g_build_filename(c->truth_dir, tm, NULL);
+    char *tpath = rig_truth_camera_model_path(c->truth, truth_cam);
     mrcal_cameramodel_t *t = tpath ? mrcal_read_cameramodel_file(tpath) : NULL;
     mrcal_cameramodel_t *b = mrcal_read_cameramodel_file(model_path);
     char name[160], note[200];
@@ -206,7 +195,7 @@ static void chain_geometry(chain_t *c, const json_t *geo)
     size_t i;
     if (json_array_size(cams) == 0) {
         char *p = g_build_filename(c->dir, "calib", "geometry", "camera.cameramodel", NULL);
-        chain_camera(c, geo, p, "camera", "camera");
+        chain_camera(c, geo, p, NULL, "camera");
         g_free(p);
         return;
     }
@@ -224,7 +213,7 @@ static void chain_geometry(chain_t *c, const json_t *geo)
             if (!json_object_get(merged, "camera_centre_rig_mm"))
                 json_object_set(merged, "camera_centre_rig_mm", json_object_get(geo, "camera_centre_rig_mm"));
         }
-        chain_camera(c, merged, p, model_ini_section_line(c->ini, sec) > 0 ? sec : "camera", label);
+        chain_camera(c, merged, p, rig_truth_has_camera(c->truth, n) ? n : NULL, label);
         json_decref(merged);
         g_free(p);
         g_free(file);
@@ -264,11 +253,9 @@ static void chain_lamps(chain_t *c, const json_t *lj)
     size_t i;
     json_array_foreach(json_object_get(lj, "lamps"), i, l) {
         const char *n = json_string_value(json_object_get(l, "name"));
-        char sec[96], name[160];
-        snprintf(sec, sizeof sec, "lamp %s", n ? n : "");
-        const char *tp = n ? model_ini_text(c->ini, sec, "position_mm", NULL) : NULL;
+        char name[160];
         double t[3];
-        if (!tp || sscanf(tp, "%lf %lf %lf", &t[0], &t[1], &t[2]) != 3) continue;
+        if (!n || !rig_truth_lamp_position(c->truth, n, t)) continue;
         const json_t *p = json_object_get(l, "position_mm"), *s = json_object_get(l, "std_mm");
         double v[3];
         for (int k = 0; k < 3; k++) {
@@ -304,14 +291,14 @@ static void chain_gain(chain_t *c, const json_t *g)
     const json_t *jt = json_object_get(g, "dark_exposures_us"), *x;
     size_t i;
     json_array_foreach(jt, i, x) if (nt < 256 && json_is_number(x)) dt[nt++] = json_number_value(x);
-    if (model_sensor_from_ini(c->ini, &ts)) {
+    if (rig_truth_sensor(c->truth, NULL, &ts)) {
         if (!model_sensor_dark_measurand(&ts, NULL, 0, &rn_m, NULL)) rn_m = NAN;
         if (!model_sensor_dark_measurand(&ts, dt, nt, NULL, &dc_m)) dc_m = NAN;   // (no dark_exposures_us: none)
     }
     for (i = 0; i < sizeof k / sizeof k[0]; i++) {
         char name[96], note[600];
         snprintf(name, sizeof name, "sensor.%s", k[i].key);
-        double t = ini_num(c, "sensor", k[i].truth), s = num(sd, k[i].key);
+        double t = rig_truth_sensor_value(c->truth, k[i].truth), s = num(sd, k[i].key);
         if (!isfinite(t)) continue;
         snprintf(note, sizeof note, isfinite(s) ? "sigma: gain.json std.%s (from the fit's statistics; gain.json "
                  "std_method)" : "no sigma stated (gain.json has no std.%s)", k[i].key);
@@ -332,15 +319,14 @@ static void chain_gain(chain_t *c, const json_t *g)
 
 static void chain_white(chain_t *c, const json_t *w, const json_t *g)
 {
-    double kc = ini_num(c, "camera", "kc_per_us"), ks = num(g, "kc_small_signal_per_us");
+    double kc = rig_truth_kc_per_us(c->truth, NULL), ks = num(g, "kc_small_signal_per_us");
     double gmean = isfinite(ks) && kc > 0 ? ks / kc : 1;
     const json_t *l;
     size_t i;
     json_array_foreach(json_object_get(w, "lamps"), i, l) {
         const char *n = json_string_value(json_object_get(l, "name"));
-        char sec[96], name[160];
-        snprintf(sec, sizeof sec, "lamp %s", n ? n : "");
-        double I = ini_num(c, sec, "intensity"), v = num(l, "kc_I_per_us");
+        char name[160];
+        double I = rig_truth_lamp_intensity(c->truth, n ? n : ""), v = num(l, "kc_I_per_us");
         if (!isfinite(I) || !isfinite(kc)) continue;
         snprintf(name, sizeof name, "white.kc_I_%s", n);
         double sr = num(l, "std_rel");
@@ -366,9 +352,9 @@ static void chain_white(chain_t *c, const json_t *w, const json_t *g)
 // irradiance_std_pct and the white's std_rel in quadrature.
 static void chain_lamp_irradiance(chain_t *c, const json_t *lj, const json_t *w, const json_t *g)
 {
-    double kc = ini_num(c, "camera", "kc_per_us"), ks = num(g, "kc_small_signal_per_us");
+    double kc = rig_truth_kc_per_us(c->truth, NULL), ks = num(g, "kc_small_signal_per_us");
     double gmean = isfinite(ks) && kc > 0 ? ks / kc : 1;
-    model_lamps_t *tl = model_lamps_from_ini(c->ini);
+    model_lamps_t *tl = rig_truth_lamps(c->truth);
     const json_t *l, *e;
     size_t i, j;
     json_array_foreach(json_object_get(lj, "lamps"), i, l) {
@@ -439,9 +425,8 @@ static bool chain_material_best_fit(chain_t *c, const json_t *m, const model_mat
     const char *n = json_string_value(json_object_get(m, "name"));
     int model = model_brdf_from_name(json_string_value(json_object_get(m, "model")));
     const json_t *ps = json_object_get(m, "parameters"), *pc = json_object_get(m, "prior_covariance");
-    char tsec[96], name[200], note[400], what[160];
-    snprintf(tsec, sizeof tsec, "texture %s", n ? n : "");
-    double amp = ini_num(c, tsec, "roughness_amplitude");
+    char name[200], note[400], what[160];
+    double amp = rig_truth_roughness_amplitude(c->truth, n ? n : "");
     bool rough = !tm || tm->table ? false : isfinite(amp) && amp > 0;
     if (!tm || !n || model < 0 || (int)json_array_size(ps) != model_brdf_nparams((model_brdf_t)model)) return false;
     if (!tm->table && !rough && tm->model == (model_brdf_t)model) return false;
@@ -460,7 +445,7 @@ static bool chain_material_best_fit(chain_t *c, const json_t *m, const model_mat
     model_material_t *store = NULL;
     const model_material_t *mats[2] = { tm, tm }, *rr = NULL, *ss = NULL;
     double wts[2] = { 1, 0 };
-    if (rough && rig_vmat_variants(1, &tm, &amp, rig_truth_path(c->truth), model_ini_section_line(c->ini, tsec),
+    if (rough && rig_vmat_variants(1, &tm, &amp, rig_truth_path(c->truth), rig_truth_texture_line(c->truth, n),
                                    &store, &rr, &ss)) {
         mats[0] = ss, mats[1] = rr, wts[0] = wts[1] = 0.5;
         snprintf(what, sizeof what, "the mean of its two roughness populations (alpha or m scaled by 1 -+ %g, ns "
@@ -526,9 +511,8 @@ static void chain_priors(chain_t *c, const json_t *pj)
     json_array_foreach(json_object_get(pj, "materials"), i, m) {
         const char *n = json_string_value(json_object_get(m, "name"));
         const char *model = json_string_value(json_object_get(m, "model"));
-        char sec[96], name[200], note[200];
-        snprintf(sec, sizeof sec, "material %s", n ? n : "");
-        const char *tmodel = model_ini_text(c->ini, sec, "model", NULL);
+        char name[200], note[200];
+        const char *tmodel = rig_truth_material_model(c->truth, n ? n : "");
         bool same = model && tmodel && !strcmp(model, tmodel);
         snprintf(note, sizeof note, same ? "the truth's model (%s); sigma: the fit's"
                  : "fitted model %s, the truth's is %s: no truth per parameter", model ? model : "?",
@@ -540,8 +524,8 @@ static void chain_priors(chain_t *c, const json_t *pj)
             const char *unit = json_string_value(json_object_get(p, "unit"));
             if (!pn) continue;
             snprintf(name, sizeof name, "material_%s.%s", n, pn);
-            add(c, "materials", name, num(p, "mean"), same ? ini_num(c, sec, pn) : NAN, num(p, "std"),
-                unit ? unit : "", note);
+            add(c, "materials", name, num(p, "mean"), same ? rig_truth_material_param(c->truth, n, pn) : NAN,
+                num(p, "std"), unit ? unit : "", note);
         }
     }
 }
@@ -555,13 +539,11 @@ static void chain_verdict(chain_t *c, const char *sub, const json_t *v)
     char sha[65] = "", tsha[65];
     if (!scene || !verdict || !model_sha256_file(scene, sha)) return;
     bool expect_correct = false;
-    for (int s = 0; s < c->ini->nsections && !expect_correct; s++) {
-        const char *sec = c->ini->sections[s];
-        if (strncmp(sec, "sample ", 7) || !model_ini_text(c->ini, sec, "scene", NULL)) continue;
-        char *sp = NULL;
-        if (rig_truth_sample_scene(c->truth, sec + 7, &sp, NULL, 0) && sp && model_sha256_file(sp, tsha))
-            expect_correct = !strcmp(sha, tsha);
-        g_free(sp);
+    const char *sn;
+    for (int s = 0; (sn = rig_truth_sample_name(c->truth, s)) && !expect_correct; s++) {
+        char *sp = rig_truth_sample_scene_path(c->truth, sn);
+        if (sp && model_sha256_file(sp, tsha)) expect_correct = !strcmp(sha, tsha);
+        free(sp);
     }
     model_error_clear();
     const char *want = expect_correct ? "correct" : "incorrect";
@@ -658,9 +640,7 @@ json_t *eval_chain_compare(const char *dir, const char *truth_path, json_t *prov
     chain_t c = { .dir = dir, .prov = prov };
     c.truth = rig_truth_load(truth_path);
     if (!c.truth) return NULL;
-    c.ini = rig_truth_ini(c.truth);
     c.mats = rig_truth_materials(c.truth);
-    c.truth_dir = g_path_get_dirname(truth_path);
     c.entries = json_array();
     c.missing = json_array();
     model_provenance_input(prov, "truth", truth_path);
@@ -708,6 +688,5 @@ done:
     json_decref(c.missing);
     model_materials_free(c.mats);
     rig_truth_free(c.truth);
-    g_free(c.truth_dir);
     return doc;
 }

@@ -2,52 +2,10 @@
 // light (see rig/virtual/lamps.h; rig/virtual/virtual.c calls these where a frame sums
 // its lamps).
 #include <math.h>
-#include <stdio.h>
-#include <string.h>
 #include <time.h>
 
 #include "rig/internal.h"
 #include "rig/virtual/lamps.h"
-
-static bool get(const model_ini_t *ini, const char *sec, const char *key, double lo, bool lo_open, double hi,
-                const char *range, double *out)
-{
-    return model_ini_double_in(ini, sec, key, out, false, lo, lo_open, hi, range);
-}
-
-bool rig_vlamps_parse(rig_vlamps_t *fx, const model_ini_t *ini, const model_lamps_t *lamps)
-{
-    memset(fx, 0, sizeof *fx);
-    fx->n = lamps->n < 32 ? lamps->n : 32;
-    fx->time_scale = 1;
-    for (int s = 0; s < ini->nsections; s++) {
-        const char *sec = ini->sections[s];
-        if (strncmp(sec, "lamp_drift ", 11)) continue;
-        int i = model_lamps_find(lamps, sec + 11);
-        if (i < 0 || i >= 32) {
-            model_error(ini->path, ini->section_lines[s], "[%s] names no [lamp %s] of this truth file", sec, sec + 11);
-            return false;
-        }
-        double a = 0, tau = 0, d = 0;
-        if (!get(ini, sec, "warmup_fraction", -0.5, false, 0.5, "-0.5..0.5 (deficit at switch-on; < 0: brighter, as a heating LED)", &a) ||
-            !get(ini, sec, "warmup_tau_s", 0, true, 1e5, "> 0 and <= 1e5 s", &tau) ||
-            !get(ini, sec, "drift_pct_per_h", -10, false, 10, "-10..10 %/h", &d))
-            return false;
-        if ((a != 0) != (tau > 0)) {
-            const model_ini_entry_t *e = model_ini_get(ini, sec, a != 0 ? "warmup_fraction" : "warmup_tau_s");
-            model_error(ini->path, e ? e->line : ini->section_lines[s], "[%s]: a warm-up needs both "
-                        "warmup_fraction (not 0) and warmup_tau_s", sec);
-            return false;
-        }
-        fx->warmup_fraction[i] = a;
-        fx->warmup_tau_s[i] = tau;
-        fx->drift_pct_per_h[i] = d;
-        if (a != 0 || d != 0) fx->timed = true;
-    }
-    return get(ini, "stray", "ambient_radiance", 0, false, 1e12, ">= 0 (radiance units)", &fx->ambient_radiance) &&
-           get(ini, "stray", "veiling_glare", 0, false, 0.2, "0..0.2 (a fraction of the mean image radiance)",
-               &fx->veiling_glare);
-}
 
 double rig_vlamps_curve(const rig_vlamps_t *fx, int lamp, double t_on_s)
 {

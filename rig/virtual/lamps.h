@@ -1,7 +1,8 @@
 // rig/virtual/lamps.h — the virtual rig's lamps and stray light outside the
-// fitters' model (issue 18): each lamp's warm-up and drift in time, and stray
+// fitters' model: each lamp's warm-up and drift in time, and stray
 // light (room light into the lens, the lens's veiling glare). Truth-file
-// sections (examples/virtual-truth.ini documents them; all off by default):
+// sections (read by rig/virtual/truth_rig.c; examples/virtual-truth.ini
+// documents them; all off by default):
 //   [lamp_drift NAME]  (NAME a [lamp NAME]) warmup_fraction = a (-0.5..0.5;
 //                      < 0: brighter at switch-on, as an LED whose junction heats),
 //                      warmup_tau_s = tau (> 0), drift_pct_per_h = d (-10..10):
@@ -29,10 +30,6 @@ typedef struct {
     double time_scale;                         // the rig's (rig_virtual_options_t.time_scale)
 } rig_vlamps_t;
 
-// The truth's [lamp_drift NAME] and [stray] sections into fx (keys were
-// checked against the truth file's table); false with a message naming the
-// file and line.
-bool   rig_vlamps_parse(rig_vlamps_t *fx, const model_ini_t *ini, const model_lamps_t *lamps);
 // f(t) of lamp i at t_on_s simulated seconds after its switch-on (exactly 1
 // without [lamp_drift]).
 double rig_vlamps_curve(const rig_vlamps_t *fx, int lamp, double t_on_s);

@@ -1,5 +1,5 @@
 // rig/virtual/optics.c — the virtual rig's optics outside the fitters' model
-// (issue 18; examples/virtual-truth.ini documents [optics]):
+// (examples/virtual-truth.ini documents [optics]):
 //   rays_per_pixel = N   the radiance plane is rendered by a camera of N times
 //                        the resolution (rig_optics_scaled_camera) and its N x N
 //                        blocks averaged: N x N rays spread evenly over each
@@ -18,46 +18,11 @@
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
-#include <strings.h>
 
 #include <mrcal/mrcal.h>
 
 #include "rig/devices.h"
 #include "rig/virtual/optics.h"
-
-bool rig_optics_parse(const model_ini_t *ini, rig_optics_t *o)
-{
-    *o = (rig_optics_t){ .rays_per_pixel = 1, .psf = RIG_PSF_NONE };
-    const char *sec = "optics";
-    long n = 1;
-    if (!model_ini_int(ini, sec, "rays_per_pixel", &n, false, 1, 8)) return false;
-    o->rays_per_pixel = (int)n;
-    const char *psf = model_ini_text(ini, sec, "psf", "none");
-    const model_ini_entry_t *e = model_ini_get(ini, sec, "psf");
-    int line = e ? e->line : model_ini_section_line(ini, sec);
-    if (!strcasecmp(psf, "none")) o->psf = RIG_PSF_NONE;
-    else if (!strcasecmp(psf, "gaussian")) o->psf = RIG_PSF_GAUSSIAN;
-    else if (!strcasecmp(psf, "disc")) o->psf = RIG_PSF_DISC;
-    else {
-        model_error(ini->path, line, "[optics] psf = %s: use none, gaussian (with psf_sigma_px) or disc (with "
-                    "psf_radius_px)", psf);
-        return false;
-    }
-    bool has_sigma = model_ini_get(ini, sec, "psf_sigma_px") != NULL;
-    bool has_radius = model_ini_get(ini, sec, "psf_radius_px") != NULL;
-    if (!model_ini_double_in(ini, sec, "psf_sigma_px", &o->psf_sigma_px, o->psf == RIG_PSF_GAUSSIAN, 0, true, 10,
-                             "0 < sigma <= 10 px") ||
-        !model_ini_double_in(ini, sec, "psf_radius_px", &o->psf_radius_px, o->psf == RIG_PSF_DISC, 0, true, 10,
-                             "0 < radius <= 10 px"))
-        return false;
-    if ((has_sigma && o->psf != RIG_PSF_GAUSSIAN) || (has_radius && o->psf != RIG_PSF_DISC)) {
-        const char *k = has_sigma && o->psf != RIG_PSF_GAUSSIAN ? "psf_sigma_px" : "psf_radius_px";
-        model_error(ini->path, model_ini_get(ini, sec, k)->line, "[optics] %s is given but psf = %s: write psf = %s "
-                    "or remove the key", k, psf, has_sigma && o->psf != RIG_PSF_GAUSSIAN ? "gaussian" : "disc");
-        return false;
-    }
-    return true;
-}
 
 static inline float finite_or_0(float x) { return isfinite(x) ? x : 0.0f; }
 

@@ -1,7 +1,7 @@
-// rig/virtual/optics.h — the virtual rig's optics outside the fitters' model
-// (issue 18): rays over each pixel's footprint and a point-spread function,
-// from the truth file's [optics] section. Internal to rig/ (rig/virtual/virtual.c and
-// the tests).
+// rig/virtual/optics.h — the virtual rig's optics outside the fitters' model:
+// rays over each pixel's footprint and a point-spread function,
+// from the truth file's [optics] section (read by rig/virtual/truth_rig.c).
+// Internal to rig/ (rig/virtual/ and the tests).
 #ifndef RIG_VIRTUAL_OPTICS_H
 #define RIG_VIRTUAL_OPTICS_H
 
@@ -17,10 +17,6 @@ typedef struct {
     double    psf_sigma_px;     // gaussian: standard deviation (px)
     double    psf_radius_px;    // disc: radius (px), a defocus blur
 } rig_optics_t;
-
-// [optics] of a truth file into *o (defaults: 1 ray, no PSF, when the section
-// is absent). false with "file:line: ..." (model_error) on a bad value.
-bool rig_optics_parse(const model_ini_t *ini, rig_optics_t *o);
 
 // The PSF applied in place to a W x H radiance plane (borders: the edge
 // pixel repeated; non-finite values count as 0). false on out of memory.

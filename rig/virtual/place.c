@@ -1,9 +1,7 @@
 // rig/virtual/place.c — placement errors and the turntable's axis of the
 // virtual rig (see rig/virtual/place.h).
 #include <glib.h>
-#include <limits.h>
 #include <math.h>
-#include <stdio.h>
 #include <string.h>
 
 #include "model/base/vec.h"
@@ -16,33 +14,6 @@ static void rot_axis(double ux, double uy, double uz, double a_rad, double R[9])
                     uy * ux * C + uz * s, c + uy * uy * C, uy * uz * C - ux * s,
                     uz * ux * C - uy * s, uz * uy * C + ux * s, c + uz * uz * C };
     memcpy(R, M, sizeof M);
-}
-
-static void mat_mul(const double A[9], const double B[9], double out[9])
-{
-    double M[9];
-    for (int r = 0; r < 3; r++)
-        for (int c = 0; c < 3; c++) M[3 * r + c] = A[3 * r] * B[c] + A[3 * r + 1] * B[3 + c] + A[3 * r + 2] * B[6 + c];
-    memcpy(out, M, sizeof M);
-}
-
-bool rig_virtual_place_parse(const model_ini_t *ini, rig_virtual_place_t *out)
-{
-    *out = (rig_virtual_place_t){ 0 };
-    long seed = 1;
-    if (!model_ini_double_in(ini, "placement", "position_sigma_mm", &out->position_sigma_mm, false, 0, false, 50,
-                             NULL) ||
-        !model_ini_double_in(ini, "placement", "angle_sigma_deg", &out->angle_sigma_deg, false, 0, false, 20, NULL) ||
-        !model_ini_int(ini, "placement", "seed", &seed, false, 0, LONG_MAX) ||
-        !model_ini_double_in(ini, "turntable", "axis_tilt_deg", &out->axis_tilt_deg, false, 0, false, 10, NULL) ||
-        !model_ini_double_in(ini, "turntable", "axis_tilt_azimuth_deg", &out->axis_tilt_azimuth_deg, false, -360,
-                             false, 360, NULL) ||
-        !model_ini_double_in(ini, "turntable", "wobble_deg", &out->wobble_deg, false, 0, false, 5, NULL))
-        return false;
-    out->seed = (uint64_t)seed;
-    out->on = out->position_sigma_mm > 0 || out->angle_sigma_deg > 0;
-    out->axis_on = out->axis_tilt_deg != 0 || out->wobble_deg != 0;
-    return true;
 }
 
 static uint64_t name_hash(const char *s)
@@ -94,8 +65,8 @@ void rig_virtual_place_table_R(const rig_virtual_place_t *p, double angle_deg, d
     rot_axis(0, 0, 1, angle_deg * M_PI / 180, Z);
     // Wb: the platter's normal leans towards the platter's +x (about its y)
     rot_axis(0, 1, 0, p->wobble_deg * M_PI / 180, Wb);
-    mat_mul(Z, Wb, R);
-    mat_mul(A, R, R);
+    m3_mul(R, Z, Wb);
+    m3_mul(R, A, R);
 }
 
 model_scene_t *rig_virtual_place_rotated(const rig_virtual_place_t *p, const model_scene_t *scene,
@@ -142,29 +113,4 @@ model_scene_t *rig_virtual_place_flexed(const model_scene_t *sc, double flex_mm)
     model_scene_t *r = model_scene_parse_obj(s->str, s->len, sc->path, NULL);
     g_string_free(s, TRUE);
     return r;
-}
-
-bool rig_virtual_place_flex_sample(const model_ini_t *ini, const char *sec, const char *name, const char *kind,
-                                   model_scene_t **scene)
-{
-    const model_ini_entry_t *e = model_ini_get(ini, sec, "flex_mm");
-    if (!e) return true;
-    double flex = 0;
-    if (!model_ini_double_in(ini, sec, "flex_mm", &flex, true, -5, false, 5, NULL)) return false;
-    if (strcmp(kind, "chessboard") != 0) {
-        model_error(ini->path, e->line, "sample '%s': flex_mm bends a chessboard (a calibration board), not a "
-                    "sample of kind %s", name, kind);
-        return false;
-    }
-    if (flex == 0) return true;
-    model_scene_t *f = rig_virtual_place_flexed(*scene, flex);
-    if (!f) {
-        char msg[1024];
-        snprintf(msg, sizeof msg, "%s", model_last_error());
-        model_error(ini->path, e->line, "sample '%s': flex_mm: %s", name, msg);
-        return false;
-    }
-    model_scene_free(*scene);
-    *scene = f;
-    return true;
 }

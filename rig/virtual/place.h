@@ -1,6 +1,7 @@
 // rig/virtual/place.h — the virtual rig's placement and turntable-axis errors
-// (rig/virtual/place.c; issue 18: physics outside the fitted models). Off by
+// (rig/virtual/place.c; physics outside the fitted models). Off by
 // default: without [placement] and the [turntable] axis keys nothing changes.
+// The truth reader (rig/virtual/truth_rig.c, truth_samples.c) reads these keys:
 //
 //   [placement]  position_sigma_mm, angle_sigma_deg, seed: every placement of a
 //                sample (rig_virtual_set_sample*, the operator's step; also the
@@ -40,8 +41,6 @@ typedef struct {
     double   axis_tilt_deg, axis_tilt_azimuth_deg, wobble_deg;
 } rig_virtual_place_t;
 
-// [placement] and the [turntable] axis keys of a truth file. false + message (file:line).
-bool rig_virtual_place_parse(const model_ini_t *ini, rig_virtual_place_t *out);
 // The placement error of sample `name` (its scene in the sample's own frame,
 // before any wedge pose) at its count-th placement: x' = dR x + dt; err (may
 // be NULL): the turn (deg) and the shift dx, dy (mm) drawn.
@@ -60,7 +59,3 @@ model_scene_t *rig_virtual_place_rotated(const rig_virtual_place_t *p, const mod
                                          double angle_deg);
 // A copy of scene bent by flex_mm (see above). NULL + message.
 model_scene_t *rig_virtual_place_flexed(const model_scene_t *scene, double flex_mm);
-// [sample NAME] flex_mm of a sample of kind `kind`: *scene replaced by its
-// bent copy (unchanged without the key or at 0). false + message (file:line).
-bool rig_virtual_place_flex_sample(const model_ini_t *ini, const char *sec, const char *name, const char *kind,
-                                   model_scene_t **scene);
