@@ -1185,10 +1185,19 @@ TEST(calib_lamps_json_version)
     CHECK_CONTAINS(model_last_error(), "v2.json");
     CHECK_CONTAINS(model_last_error(), "refl-lamps version 2, written by a newer refl");
     json_decref(doc);
-    // refl calib pattern does not write its patterns into a newer lamps.json
+    // the calibration set refuses a newer lamps.json, and refl calib pattern
+    // does not write its patterns into one that became newer since it was read
     char *cam = src(CAMERA);
+    bool q0 = model_error_quiet_thread(true);
+    CHECK(!calib_set_load_files(cam, lj, NULL, NULL));
+    model_error_quiet_thread(q0);
+    CHECK_CONTAINS(model_last_error(), "refl-lamps version 2, written by a newer refl");
+    snprintf(text, sizeof text, "{\"format\": \"refl-lamps\", \"version\": 1, %s}\n", lamps);
+    lj = test_write("v2.json", text);
     calib_set_t *cal = calib_set_load_files(cam, lj, NULL, NULL);
     CHECK(cal);
+    snprintf(text, sizeof text, "{\"format\": \"refl-lamps\", \"version\": 2, %s}\n", lamps);
+    lj = test_write("v2.json", text);
     if (cal) {
         calib_lamps_pattern_t *pat = calloc((size_t)cal->lamps->n, sizeof *pat);
         const char *out = test_path("out.json");
