@@ -158,17 +158,19 @@ bool verify_mvprior_residual(void *ctx, const double *const *p, double *r, doubl
     return true;
 }
 
-// The file's format version (fit/priors.h): "format" "refl-priors" with its
-// "version", the name "refl priors 1" or no "format" at all: version 1; a
-// newer version or another format is refused. false + message.
-static bool priors_version(const json_t *root, const char *path, int *version)
+bool fit_priors_check_format(const json_t *root, const char *path, int *version)
 {
     const char *fmt = json_string_value(json_object_get(root, "format"));
     if (json_is_object(root) && fmt && !strcmp(fmt, FIT_PRIORS_FORMAT_V1_NAME)) {
         *version = 1;
         return true;
     }
-    if (!model_json_format_check(root, path, FIT_PRIORS_FORMAT, FIT_PRIORS_VERSION, version)) {
+    return model_json_format_check(root, path, FIT_PRIORS_FORMAT, FIT_PRIORS_VERSION, version);
+}
+
+static bool priors_version(const json_t *root, const char *path, int *version)
+{
+    if (!fit_priors_check_format(root, path, version)) {
         model_error(NULL, 0, "%s", model_last_error());
         return false;
     }

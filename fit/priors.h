@@ -115,6 +115,10 @@ bool verify_priors_means(const model_scene_t *scene, const verify_priors_t *pr, 
 // A priors document to write: {"format": "refl-priors", "version": 1,
 // "units": ...}; the writer adds "materials" (entries of fit_priors_material
 // and what its fit reports) and "provenance". A new reference.
+// The format version of a parsed priors file: "format" "refl-priors" with its
+// "version", the name "refl priors 1" or no "format" at all: version 1; a newer
+// version or another format is refused. false + model_error_set naming path.
+bool fit_priors_check_format(const json_t *root, const char *path, int *version);
 json_t *fit_priors_document(void);
 
 // Units and convention of parameter i of model m ("1/sr", "albedo", ...).

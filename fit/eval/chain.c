@@ -9,9 +9,13 @@
 #include <string.h>
 
 #include "calib/calib.h"
+#include "calib/gain/gain.h"
 #include "calib/geometry/geometry.h"
+#include "calib/lamps/lamps.h"
 #include "fit/eval/chain.h"
 #include "fit/brdf/brdf.h"
+#include "fit/priors.h"
+#include "fit/verify/verify.h"
 #include "model/model.h"
 #include "model/base/report.h"
 #include "model/base/vec.h"
@@ -45,13 +49,37 @@ static void add(chain_t *c, const char *group, const char *name, double value, d
     json_array_append_new(c->entries, e);
 }
 
+// A file of the lab day's formats checked as its reader checks it: another
+// format or a newer version is a note in "missing" and the file is not used.
+static bool format_ok(const char *role, const json_t *j, const char *path)
+{
+    int v;
+    if (!strcmp(role, "geometry")) return calib_geometry_json_check(j, path, &v);
+    if (!strcmp(role, "lamps")) return calib_lamps_json_check(j, path, &v);
+    if (!strcmp(role, "gain")) return model_json_format_check(j, path, CALIB_GAIN_FORMAT, CALIB_GAIN_FORMAT_VERSION, &v);
+    if (!strcmp(role, "white")) return model_json_format_check(j, path, CALIB_WHITE_FORMAT, CALIB_WHITE_FORMAT_VERSION,
+                                                               &v);
+    if (!strcmp(role, "priors")) return fit_priors_check_format(j, path, &v);
+    if (!strcmp(role, "verify")) return model_json_format_check(j, path, VERIFY_JSON_FORMAT, VERIFY_JSON_VERSION, &v);
+    return true;
+}
+
 static json_t *load(chain_t *c, const char *role, const char *rel)
 {
     char *p = g_build_filename(c->dir, rel, NULL);
     json_error_t je;
     json_t *j = g_file_test(p, G_FILE_TEST_EXISTS) ? json_load_file(p, 0, &je) : NULL;
-    if (j) model_provenance_input(c->prov, role, p);
-    else json_array_append_new(c->missing, json_string(rel));
+    if (j && !format_ok(role, j, p)) {
+        char *why = g_strdup_printf("%s (%s)", rel, model_last_error());
+        json_array_append_new(c->missing, json_string(why));
+        g_free(why);
+        json_decref(j);
+        j = NULL;
+    } else if (j) {
+        model_provenance_input(c->prov, role, p);
+    } else {
+        json_array_append_new(c->missing, json_string(rel));
+    }
     g_free(p);
     return j;
 }
