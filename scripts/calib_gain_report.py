@@ -21,6 +21,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 from PIL import Image  # noqa: E402
+from report_common import Bad, check_format  # noqa: E402
 
 
 def arr(v):
@@ -39,6 +40,11 @@ def main():
     jpath, out = sys.argv[1], sys.argv[2]
     with open(jpath) as f:
         g = json.load(f)
+    try:
+        check_format(g, jpath, "refl-gain")
+    except Bad as b:
+        sys.stderr.write(f"calib_gain_report.py: {b.path}: {b.msg}\n")
+        return 1
     base = os.path.dirname(os.path.abspath(jpath))
     gains = g["gains"]
     ref = gains[0]

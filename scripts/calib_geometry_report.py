@@ -449,6 +449,11 @@ def plots(geometry_path, solution_path, outdir):
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     g = json.load(open(geometry_path))
+    from report_common import Bad, check_format
+    try:
+        check_format(g, geometry_path, "refl-geometry")
+    except Bad as b:
+        sys.exit(f"calib_geometry_report.py: {b.path}: {b.msg}")
     s = json.load(open(solution_path))
     W, H = s["imagersize"]
     obs = np.array([p for im in s["images"] for p in im["observed_px"]])

@@ -18,6 +18,7 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
+from report_common import Bad, check_format  # noqa: E402
 
 out, truth_path = sys.argv[1], sys.argv[2]
 cal = os.path.join(out, "calib")
@@ -25,9 +26,25 @@ ini = configparser.ConfigParser(inline_comment_prefixes=None, strict=False)
 ini.read(truth_path)
 
 
+FORMAT_OF = {"geometry.json": "refl-geometry", "lamps.json": "refl-lamps", "gain.json": "refl-gain",
+             "white.json": "refl-white", "verify.json": "refl-verify", "chain.json": "refl-chain",
+             "plan.json": "refl-lightplan"}
+
+
 def load(*p):
-    with open(os.path.join(*p)) as f:
-        return json.load(f)
+    """A refl JSON file, checked against its format (report_common.check_format): another format or a newer
+    version than this refl reads ends the page with the file's name."""
+    path = os.path.join(*p)
+    with open(path) as f:
+        doc = json.load(f)
+    base = os.path.basename(path)
+    name = "refl-priors" if base.startswith("priors") else FORMAT_OF.get(base)
+    if name and isinstance(doc, dict):
+        try:
+            check_format(doc, path, name)
+        except Bad as b:
+            sys.exit(f"demo_chain.py: {b.path}: {b.msg}")
+    return doc
 
 
 def row(cells, head=False):

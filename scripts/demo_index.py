@@ -11,7 +11,7 @@ import sys
 import time
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from report_common import Bad, e, fmt, table  # noqa: E402
+from report_common import Bad, check_format, e, fmt, table  # noqa: E402
 
 STYLE = """<style>
 body { font-family: sans-serif; margin: 1.5em; max-width: 1400px; }
@@ -24,13 +24,26 @@ img { max-width: 100%; border: 1px solid #ccc; }
 </style>"""
 
 
+# refl's file names and their formats (report_common.FORMATS)
+FORMAT_OF = {"geometry.json": "refl-geometry", "lamps.json": "refl-lamps", "gain.json": "refl-gain",
+             "white.json": "refl-white", "verify.json": "refl-verify", "chain.json": "refl-chain",
+             "plan.json": "refl-lightplan", "study.json": "refl-study"}
+
+
 def jload(out, rel):
-    """The JSON object OUTDIR/rel, or None when it is missing or not JSON (the page says "missing")."""
+    """The JSON object OUTDIR/rel, or None when it is missing, not JSON, or of another format or a newer version
+    than this refl reads (the page says "missing")."""
     try:
         with open(os.path.join(out, rel), encoding="utf-8") as f:
             o = json.load(f)
-        return o if isinstance(o, dict) else None
-    except (OSError, ValueError):
+        if not isinstance(o, dict):
+            return None
+        base = os.path.basename(rel)
+        fmt_name = "refl-priors" if base.startswith("priors") else FORMAT_OF.get(base)
+        if fmt_name:
+            check_format(o, rel, fmt_name)
+        return o
+    except (OSError, ValueError, Bad):
         return None
 
 

@@ -54,7 +54,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 from matplotlib.lines import Line2D  # noqa: E402
-from report_common import (Bad, dict_table, e, fmt, is_num, load_json, provenance_head,  # noqa: E402
+from report_common import (Bad, check_format, dict_table, e, fmt, is_num, load_json, provenance_head,  # noqa: E402
                            provenance_section, read_float_tiff, run_report, table, write_page)
 
 PROG = "plan_lamps_report.py"
@@ -174,6 +174,7 @@ def read_config(c, o, where, chosen=False):
 def load_plan(d):
     path = os.path.join(d, "plan.json")
     raw = load_json(path)
+    check_format(raw, path, "refl-lightplan")
     c = Plan(path)
     p = {"raw": raw}
     p["scene"] = c.str(raw, "scene", "")

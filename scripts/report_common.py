@@ -68,6 +68,34 @@ def load_json(path):
     return doc
 
 
+# The formats refl writes and the newest version of each these pages read
+# (the C readers' own limits: calib/gain/gain.h, fit/priors.h, ...).
+FORMATS = {
+    "refl-geometry": 1, "refl-lamps": 1, "refl-gain": 2, "refl-white": 1, "refl-priors": 1,
+    "refl-verify": 1, "refl-chain": 1, "refl-lightplan": 1, "refl-study": 1,
+}
+# a version-1 priors file may name itself so
+FORMAT_ALIASES = {"refl priors 1": ("refl-priors", 1)}
+
+
+def check_format(doc, path, fmt):
+    """The version of the refl file doc (parsed from path) of format fmt: a file naming no format is version 1;
+    another format, or a version newer than this refl reads (FORMATS), is a Bad naming path and both."""
+    name = doc.get("format")
+    if name in FORMAT_ALIASES and FORMAT_ALIASES[name][0] == fmt:
+        return FORMAT_ALIASES[name][1]
+    if name is None and "version" not in doc:
+        return 1
+    if name != fmt:
+        raise Bad(path, f"a {name} file, not {fmt}")
+    v = doc.get("version")
+    if not isinstance(v, int) or isinstance(v, bool) or v < 1:
+        raise Bad(path, f"{fmt}: \"version\" is not a whole number >= 1")
+    if v > FORMATS[fmt]:
+        raise Bad(path, f"{fmt} version {v}, written by a newer refl (this refl reads versions 1 to {FORMATS[fmt]})")
+    return v
+
+
 def is_num(v):
     """A JSON number: int or float, not bool."""
     return isinstance(v, (int, float)) and not isinstance(v, bool)
