@@ -150,8 +150,15 @@ static int rm_cb(const char *p, const struct stat *sb, int flag, struct FTW *ftw
     return remove(p);
 }
 
+// REFL_TEST_KEEP=1 keeps every test's directory (its path is printed) to
+// look into after the run.
 static void tmp_cleanup(const char *dir)
 {
+    const char *keep = getenv("REFL_TEST_KEEP");
+    if (keep && *keep && strcmp(keep, "0")) {
+        if (dir[0]) fprintf(stderr, "  (kept %s)\n", dir);
+        return;
+    }
     if (dir[0]) nftw(dir, rm_cb, 16, FTW_DEPTH | FTW_PHYS);
 }
 
