@@ -18,8 +18,8 @@
 #       intrinsics, imager size, RMS residual, projection uncertainty and the
 #       pose rt_cam_cam0 (mrcal's extrinsics) with its standard deviation (from
 #       the solve's J^T J and the residuals' RMS per component).
-#       A corner the detector did not see (a partial view: "- -" in the
-#       corners file, which mrcal keeps as (-1, -1) with a negative weight) is
+#       A corner the detector did not see (a partial view: "nan nan -" in
+#       the corners file, which mrcal keeps as NaN with a negative weight) is
 #       neither a point nor an outlier; observed_px and residuals_px list the
 #       corners seen, corner_index their index in the board's order.
 #   align CORNERS_IN CORNERS_OUT OUT.json N|WxH SPACING_MM DIR:W:H:FOCAL...
@@ -71,8 +71,10 @@ def solution(model_path, out_path, distance_mm):
     lensmodel, intrinsics = m.intrinsics()
     W, H = (int(x) for x in m.imagersize())
     obs = oi["observations_board"]                    # (Nobs, Ny, Nx, 3): x, y, weight
-    # a corner not seen: mrcal's (-1, -1, -1); an outlier keeps its x, y with a weight <= 0
-    seen = ~((obs[..., 0] == -1.0) & (obs[..., 1] == -1.0) & (obs[..., 2] <= 0))
+    # a corner not seen: (-1, -1) or NaN with weight -1 (refl writes "nan nan -"); an outlier keeps its x, y with
+    # a weight <= 0
+    unseen_xy = ((obs[..., 0] == -1.0) & (obs[..., 1] == -1.0)) | ~np.isfinite(obs[..., 0]) | ~np.isfinite(obs[..., 1])
+    seen = ~(unseen_xy & (obs[..., 2] <= 0))
     idx = oi["indices_frame_camintrinsics_camextrinsics"]
     frames = oi["frames_rt_toref"]
     paths = oi.get("imagepaths")
@@ -287,7 +289,9 @@ def align(corners_in, corners_out, out_path, size, spacing, camspecs):
         q = []
         for line in rows[name]:
             f = line.split()
-            q.append([float(f[1]), float(f[2]), 1.0] if f[1] != "-" and f[2] != "-" else [-1.0, -1.0, -1.0])
+            seen = f[1] != "-" and f[2] != "-" and (len(f) < 4 or f[3] != "-")
+            # NaN for a corner not seen: estimate_monocular_calobject_poses_Rt_tocam drops NaN, not weight -1
+            q.append([float(f[1]), float(f[2]), 1.0] if seen else [np.nan, np.nan, -1.0])
         views.append((name, icam, int(digits), np.array(q).reshape(Hn, Wn, 3)))
     # every view's pose for each quarter turn of its corner order (a turn that does not map the grid onto itself:
     # a copy of the unturned one, never chosen)

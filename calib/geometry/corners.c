@@ -236,8 +236,22 @@ static bool corners_on_a_line(const calib_geometry_view_t *v, const calib_board_
     return row || col;
 }
 
+// A corner line that says "not seen": "- -", a level "-" or a negative
+// coordinate or level, as the parser above reads them.
+static bool corner_line_unseen(const char *l)
+{
+    char name[1024], xs[64], ys[64], lev[64] = "";
+    if (sscanf(l, "%1023s %63s %63s %63s", name, xs, ys, lev) < 3) return false;
+    if (!strcmp(xs, "-") || !strcmp(ys, "-") || !strcmp(lev, "-")) return true;
+    return strtod(xs, NULL) < 0 || strtod(ys, NULL) < 0 || (*lev && strtod(lev, NULL) < 0);
+}
+
 // The corners text for mrcal: text's lines, but a view not found as one line
-// "NAME - -" (written to path). false + message.
+// "NAME - -", and a corner a partial view does not show as "NAME nan nan -"
+// (written to path). mrcal reads both as "not seen" (weight -1), but its seed
+// (one solvePnP per view) keeps a "- -" corner at pixel (-1, -1), where a
+// partial view's seed goes wrong and the solve may not recover; it drops NaN.
+// false + message.
 static bool corners_write(const calib_geometry_views_t *vs, const char *text, const char *path)
 {
     GString *out = g_string_new("");
@@ -256,7 +270,8 @@ static bool corners_write(const calib_geometry_views_t *vs, const char *text, co
             g_hash_table_add(done, v);
             continue;
         }
-        g_string_append_printf(out, "%s\n", l);
+        if (v && corner_line_unseen(l)) g_string_append_printf(out, "%s nan nan -\n", name);
+        else g_string_append_printf(out, "%s\n", l);
     }
     g_strfreev(lines);
     g_hash_table_destroy(done);

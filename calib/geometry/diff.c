@@ -176,7 +176,7 @@ bool calib_geometry_splined_name(const model_camera_t *cam, int W, int H, char *
 // The corners file in two halves: alternate frames (a view's base name: the
 // views of one frame in every camera stay together) in the file's order;
 // views[h][k]: the views of camera k in half h. Views without a board are
-// left out; a partial view keeps its lines of corners not seen ("- -").
+// left out; a partial view keeps its lines of corners not seen ("nan nan -").
 static bool split_corners(const calib_geometry_state_t *s, const char *in, const char *out[2],
                           int views[2][RIG_CAMERAS_MAX])
 {

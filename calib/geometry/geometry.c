@@ -8,7 +8,7 @@
 // DIR/images (mrgingham reads 8-bit; frames are Mono12 in 16-bit PNG) →
 // mrgingham --gridn N (a square chessboard) or OpenCV (calib/geometry/board_detect.h:
 // any chessboard, ChArUco boards whole or in part) → DIR/corners.vnl (a corner
-// not seen "- -", as mrcal reads it) → mrcal-calibrate-cameras →
+// a partial view does not show "nan nan -", as mrcal reads it) → mrcal-calibrate-cameras →
 // DIR/mrcal/camera-0.cameramodel → scripts/calib_geometry_report.py solution
 // (mrcal's board poses, residuals, projection uncertainty) → the axis fit and
 // the rig frame here → DIR/camera.cameramodel, DIR/geometry.json,
