@@ -1,5 +1,5 @@
 # scripts/adversarial_lens.py — the virtual rig's adversarial lens, written by
-# `scripts/make-example-camera --adversarial` (issue 18: a lens outside the
+# `scripts/make-example-camera --adversarial` (a lens outside the
 # OPENCV8 model refl's geometry calibration fits).
 #
 # The truth lens maps a ray's pinhole coordinates (x, y) = (X/Z, Y/Z) to pixels

@@ -1,5 +1,5 @@
 // tests/test_calib_boards.c — boards other than mrgingham's square
-// chessboard (issue 20, item 2): W x H chessboards and ChArUco boards.
+// chessboard: W x H chessboards and ChArUco boards.
 //
 // - The detector (calib/geometry/board_detect.h, OpenCV) on synthetic images with known
 //   corners: a board rendered through a homography (calib_board_render, 8 x 8
@@ -541,7 +541,7 @@ TEST_LONG(calib_boards_virtual_rig_charuco)
                 json_number_value(json_object_get(g, "rms_residual_px")),
                 json_integer_value(json_object_get(g, "outliers")), d, worst, ax,
                 json_number_value(json_object_get(axj, "direction_uncertainty_deg")));
-        CHECK(partial >= 2);   // 3 of 18 (2026-11-28)
+        CHECK(partial >= 2);   // 3 of 18 views partly out of the image
         CHECK(turned == 0);    // a ChArUco corner carries its id: no turn
         CHECK(json_integer_value(json_object_get(g, "views_used")) >= 12);
         CHECK(json_number_value(json_object_get(g, "rms_residual_px")) < 0.3);

@@ -767,7 +767,7 @@ done:
 }
 
 // ---------------------------------------------------------------------------
-// The lamps' emission pattern (outside the fitters' model, issue 18): a
+// The lamps' emission pattern (outside the fitters' model, the adversarial rig's): a
 // Lambertian plane under a lamp of pattern cos^n about a tilted axis. Every
 // pixel's light, over that of the same lamp isotropic, is (a . u)^n, u the
 // unit direction from the lamp to the plane point: in the direct renderer, in

@@ -398,7 +398,7 @@ TEST(sensor_gain_factor_units)
 }
 
 // ---------------------------------------------------------------------------
-// The adversary's sensor effects (issue 18): outside the fitters' S(1 - aS).
+// The adversary's sensor effects: outside the fitters' S(1 - aS).
 
 // The photon transfer curve with a soft knee: mean vs exposure is linear below
 // knee_e (0.1 %) and follows k + (FW - k) tanh((e - k)/(FW - k)) above it,

@@ -342,7 +342,7 @@ TEST(camera_settings_in_session_and_status)
     g_free(out);
     g_free(err);
 
-    // A journal of an older refl (no gain_unit ... camera_settings columns)
+    // A journal of schema version 1 (no gain_unit ... camera_settings columns)
     // still reads: the missing columns are empty (a gain without unit is dB).
     d = NULL;
     CHECK(sqlite3_open(db, &d) == SQLITE_OK);
@@ -380,7 +380,7 @@ TEST(camera_settings_in_session_and_status)
     g_free(err);
     rc = test_refl_run(60, &out, &err, "session", "export", dir, "--format", "csv", NULL);
     CHECK_MSG(rc == 0, "export: %s", err);
-    CHECK_CONTAINS(out, ",,0,0,0.00,,,camera\n");                                   // step 2: as the older refl wrote it
+    CHECK_CONTAINS(out, ",,0,0,0.00,,,camera\n");                                   // step 2: as schema 1 holds it
     CHECK_CONTAINS(out, ",dB,0,1,");                                          // step 1: this refl's
     CHECK_CONTAINS(out, ",refl-gv 1.0,ExposureAuto=Off (was Continuous)");
     g_free(out);
