@@ -25,6 +25,7 @@
 #include <stdlib.h>
 #include <string.h>
 #include <sys/prctl.h>
+#include <sys/random.h>
 #include <sys/socket.h>
 #include <sys/stat.h>
 #include <sys/wait.h>
@@ -215,11 +216,9 @@ static const char *munged_up(cluster_t *c, char *why, size_t len)
     snprintf(pid, sizeof pid, "%s/munged.pid", c->dir);
     snprintf(seed, sizeof seed, "%s/munged.seed", c->dir);
     unsigned char k[1024];
-    for (size_t i = 0; i < sizeof k; i += 4) {
-        guint32 r = g_random_int();
-        memcpy(k + i, &r, 4);
-    }
-    int fd = open(key, O_WRONLY | O_CREAT | O_EXCL, 0400);
+    size_t got = 0;
+    for (ssize_t r; got < sizeof k && (r = getrandom(k + got, sizeof k - got, 0)) > 0;) got += (size_t)r;
+    int fd = got == sizeof k ? open(key, O_WRONLY | O_CREAT | O_EXCL, 0400) : -1;
     bool ok = fd >= 0 && write(fd, k, sizeof k) == (ssize_t)sizeof k;
     if (fd >= 0) close(fd);
     if (!ok) return snprintf(why, len, "cannot write the munge key %s", key), why;
