@@ -313,6 +313,7 @@ TEST_SRC := \
     tests/test_fit_material_stats.c \
     tests/test_fit_verify.c \
     tests/test_fit_verify_study.c \
+    tests/test_fit_study_slurm.c \
     tests/test_fit_verify_register.c \
     tests/test_fit_verify_footprint.c \
     tests/test_fit_verify_speed.c

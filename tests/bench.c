@@ -18,6 +18,10 @@
 // time, the 200-case projection, the mean per fit, beside the reference fit
 // (QR, plain BRDF evaluation) in the same run, and the two runs' results
 // compared.
+// The lab day (`refl-bench demo [DIR]`, and in the whole run when
+// build/demo/demo.log is there): each step's wall time from DIR/demo.log.
+// `make check` (`refl-bench check`, or REFL_BENCH_CHECK=1 in the whole run):
+// its wall time and its tests passed and failed.
 #include <embree3/rtcore.h>
 #include <fcntl.h>
 #include <glib.h>
@@ -267,6 +271,135 @@ done:
     return rc;
 }
 
+// ---------------------------------------------------------------------------
+// The lab day's steps and `make check` (each its own part; not timed here)
+
+// A step's name as a figure's: "NN_" and its words in lower case joined by
+// "_" (at most 48 characters, cut at a word).
+static void step_slug(int n, const char *what, char *out, size_t len)
+{
+    int k = snprintf(out, len, "%02d_", n);
+    bool sep = false;
+    for (const char *p = what; *p && k + 2 < (int)len && k < 51; p++) {
+        if (g_ascii_isalnum(*p)) {
+            if (sep && out[k - 1] != '_') out[k++] = '_';
+            out[k++] = g_ascii_tolower(*p);
+            sep = false;
+        } else
+            sep = true;
+    }
+    out[k] = 0;
+    if (k >= 51) {   // cut at the last whole word
+        char *u = strrchr(out + 3, '_');
+        if (u) *u = 0;
+    }
+}
+
+// demo_steps_s: each step's wall time as scripts/demo records it in
+// DIR/demo.log ("$ (done in T s: STEP)" after the step's output; "$ (the lab
+// day done in T s)" at the end). 0, or 1 when the log is missing or holds no
+// step time (the message says what to do).
+static int bench_demo_steps(const char *dir)
+{
+    char *path = g_build_filename(dir, "demo.log", NULL), *text = NULL;
+    if (!g_file_get_contents(path, &text, NULL, NULL)) {
+        fprintf(stderr, "refl-bench: cannot read %s: run make demo (or refl demo -o DIR) first\n", path);
+        g_free(path);
+        return 1;
+    }
+    char **lines = g_strsplit(text, "\n", -1);
+    int n = 0;
+    double sum = 0, total = NAN;
+    for (int i = 0; lines[i]; i++) {
+        double t;
+        int at = 0;
+        if (sscanf(lines[i], "$ (done in %lf s: %n", &t, &at) == 1 && at > 0) {
+            char *what = lines[i] + at, name[64];
+            size_t len = strlen(what);
+            if (len && what[len - 1] == ')') what[len - 1] = 0;
+            step_slug(++n, what, name, sizeof name);
+            printf("demo_steps_s.%s: %.1f s\n", name, t);
+            sum += t;
+        } else
+            sscanf(lines[i], "$ (the lab day done in %lf s)", &total);
+    }
+    if (n > 0) printf("demo_steps_s.sum: %.1f s (%d refl steps)\n", sum, n);
+    if (isfinite(total)) printf("demo_total_s: %.1f s\n", total);
+    if (n == 0)
+        fprintf(stderr, "refl-bench: %s holds no step times (\"$ (done in T s: STEP)\" lines): run make demo again\n",
+                path);
+    g_strfreev(lines);
+    g_free(text);
+    g_free(path);
+    return n > 0 ? 0 : 1;
+}
+
+// check_s: the wall time of `make check` in the source top directory (it builds
+// what is out of date first), its output in a temporary file (kept when it
+// fails); the tests passed and failed from its "N passed, N failed" line.
+static int bench_check(void)
+{
+    const char *top = getenv("REFL_SRCDIR");
+    char log[] = "/tmp/refl-bench-check-XXXXXX";
+    int fd = mkstemp(log);
+    if (fd < 0) {
+        fprintf(stderr, "refl-bench: cannot make a temporary file for make check's output\n");
+        return 1;
+    }
+    close(fd);
+    // a make of its own, not the jobserver of a make that may have started this bench
+    char **env = g_get_environ();
+    env = g_environ_unsetenv(env, "MAKEFLAGS");
+    env = g_environ_unsetenv(env, "MFLAGS");
+    env = g_environ_unsetenv(env, "MAKELEVEL");
+    char *argv[] = { "/bin/sh", "-c", "exec make check > \"$0\" 2>&1", log, NULL };
+    int status = -1;
+    GError *gerr = NULL;
+    fprintf(stderr, "refl-bench: make check (several minutes; its output in %s) ...\n", log);
+    double t0 = model_now_s();
+    bool ran = g_spawn_sync(top && *top ? top : ".", argv, env, G_SPAWN_DEFAULT, NULL, NULL, NULL, NULL, &status,
+                            &gerr);
+    double t = model_now_s() - t0;
+    g_strfreev(env);
+    if (!ran) {
+        fprintf(stderr, "refl-bench: cannot run make check: %s\n", gerr->message);
+        g_error_free(gerr);
+        return 1;
+    }
+    int passed = -1, failed = -1;
+    char *text = NULL;
+    g_file_get_contents(log, &text, NULL, NULL);
+    for (const char *p = text; p && *p; p = strchr(p, '\n') ? strchr(p, '\n') + 1 : "") {
+        int a, b;
+        if (sscanf(p, "%d passed, %d failed", &a, &b) == 2) passed = a, failed = b;
+    }
+    g_free(text);
+    bool ok = WIFEXITED(status) && WEXITSTATUS(status) == 0;
+    printf("check_s: %.1f s%s\n", t, ok ? "" : " (make check failed)");
+    if (passed >= 0) printf("check_tests_passed: %d count\ncheck_tests_failed: %d count\n", passed, failed);
+    if (!ok) {
+        fprintf(stderr, "refl-bench: make check failed: its output is in %s\n", log);
+        return 1;
+    }
+    unlink(log);
+    return 0;
+}
+
+// In the whole run: the lab day's steps when build/demo/demo.log is there
+// (else a note), and make check's time when REFL_BENCH_CHECK=1.
+static int bench_day_and_check(void)
+{
+    char dir[1024], log[1100];
+    src_path(dir, sizeof dir, "build/demo");
+    snprintf(log, sizeof log, "%s/demo.log", dir);
+    if (access(log, R_OK) == 0) bench_demo_steps(dir);
+    else fprintf(stderr, "refl-bench: no %s: demo_steps_s after make demo (refl-bench demo DIR)\n", log);
+    const char *c = getenv("REFL_BENCH_CHECK");
+    if (c && !strcmp(c, "1")) return bench_check();
+    fprintf(stderr, "refl-bench: check_s not measured (REFL_BENCH_CHECK=1, or refl-bench check)\n");
+    return 0;
+}
+
 static int bench_capture(void);
 static int bench_virtual_rig(void);
 static int bench_fit_ggx(void);
@@ -276,6 +409,10 @@ static int bench_capture(void);
 
 int main(int argc, char **argv)
 {
+    // `refl-bench demo [DIR]`: the lab day's step times from DIR/demo.log (default build/demo)
+    if (argc > 1 && !strcmp(argv[1], "demo")) return bench_demo_steps(argc > 2 ? argv[2] : "build/demo");
+    // `refl-bench check`: the wall time of make check
+    if (argc > 1 && !strcmp(argv[1], "check")) return bench_check();
     // `refl-bench fit`: only the GGX fit comparison
     if (argc > 1 && !strcmp(argv[1], "fit")) return bench_fit_ggx() ? 1 : 0;
     // `refl-bench rig`: only the virtual rig's frame rates and changed-state latency
@@ -305,6 +442,7 @@ int main(int argc, char **argv)
     size_t npix = (size_t)W * H;
     int nthreads = model_default_threads();
     printf("threads: %d count\n", nthreads);
+    if (bench_day_and_check()) return 1;
 
     // Ray table (cold, fresh camera objects).
     double err_px = 0;
