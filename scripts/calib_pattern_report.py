@@ -5,7 +5,9 @@ usage: calib_pattern_report.py PATTERN_WINDOWS.csv PATTERN.png
 
 PATTERN_WINDOWS.csv: lamp, angle_from_axis_deg (the window's direction from the lamp against the fitted
 emission axis), irradiance_rel (the window's irradiance over the lamp's fitted on-axis value), pattern_rel (the
-fitted pattern max(0, cos)^n there), sigma_rel (the window's relative noise).
+fitted pattern max(0, cos)^n there), sigma_rel (the window's relative noise) and, when present, cos_power and
+cos_power_std (the lamp's fitted n and its 1-sigma) and isotropic (1: refl found the lamp isotropic, n within 3
+sigma of 0, so its axis is not determined: the panel says so and names no axis).
 """
 import csv
 import sys
@@ -21,12 +23,14 @@ def main():
     if len(sys.argv) != 3:
         sys.stderr.write(__doc__)
         return 2
-    lamps = {}
+    lamps, fits = {}, {}
     with open(sys.argv[1]) as f:
         for row in csv.DictReader(f):
             d = lamps.setdefault(row["lamp"], ([], [], [], []))
             for k, key in enumerate(("angle_from_axis_deg", "irradiance_rel", "pattern_rel", "sigma_rel")):
                 d[k].append(float(row[key]))
+            if row.get("cos_power") not in (None, ""):
+                fits[row["lamp"]] = (float(row["cos_power"]), float(row["cos_power_std"]), row.get("isotropic") == "1")
     if not lamps:
         sys.stderr.write("calib_pattern_report.py: no fitted lamp in %s\n" % sys.argv[1])
         return 1
@@ -43,8 +47,12 @@ def main():
         lo, hi = np.percentile(y, [0.5, 99.5])
         pad = max(0.1 * (hi - lo), 0.002)
         ax.set_ylim(min(lo, fit.min()) - pad, max(hi, fit.max(), 1.0) + pad)
-        ax.set_title("lamp %s (outside the plot: %d of %d)" % (name, np.sum((y < lo - pad) | (y > hi + pad)), len(y)))
-        ax.set_xlabel("angle from the emission axis (deg)")
+        n_, sd_, iso = fits.get(name, (None, None, False))
+        ax.set_title("lamp %s%s\n(outside the plot: %d of %d)" % (
+            name, "" if n_ is None else ": isotropic, n = %.2f ± %.2f" % (n_, sd_) if iso else
+            ": n = %.2f ± %.2f" % (n_, sd_), np.sum((y < lo - pad) | (y > hi + pad)), len(y)), fontsize=10)
+        ax.set_xlabel("angle from the fitted axis (deg; isotropic: no axis)" if iso else
+                      "angle from the emission axis (deg)")
         ax.set_ylabel("irradiance / on-axis (1)")
         ax.grid(alpha=0.3)
         if k == 0:
@@ -55,7 +63,8 @@ def main():
         band = 100.0 * np.median(sig)
         ax.axhspan(-band, band, color="tab:green", alpha=0.15, label="median window noise ±1σ")
         ax.axhline(0, color="0.4", lw=0.8)
-        ax.set_xlabel("angle from the emission axis (deg)")
+        ax.set_xlabel("angle from the fitted axis (deg; isotropic: no axis)" if iso else
+                      "angle from the emission axis (deg)")
         ax.set_ylabel("residual (%)")
         lim = max(1.0, np.nanpercentile(np.abs(res), 99) * 1.2) if np.isfinite(res).any() else 1.0
         ax.set_ylim(-lim, lim)

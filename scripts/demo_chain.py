@@ -18,7 +18,7 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
-from report_common import Bad, check_format  # noqa: E402
+from report_common import Bad, check_format, headline  # noqa: E402
 
 out, truth_path = sys.argv[1], sys.argv[2]
 cal = os.path.join(out, "calib")
@@ -75,6 +75,20 @@ if os.path.exists(cj_path):
                  + f"; wrong verdicts: {sm.get('wrong_verdicts', 0)}; materials whose fitted model is over 1.2 "
                  f"&times; the best fit's Ngan error against a tabulated truth: "
                  f"{len(sm.get('ngan_ratio_over_1_2', []))}.</p>\n<table>\n")
+    # a note several figures share is written once under the table and referred to by its number
+    uses = {}
+    for e in cj["entries"]:
+        uses[e.get("note", "")] = uses.get(e.get("note", ""), 0) + 1
+    shared = [n for n in uses if n and uses[n] > 1]
+    num = {n: k + 1 for k, n in enumerate(shared)}
+    zs = sorted((abs(e["z"]), e["name"], e["z"]) for e in cj["entries"] if isinstance(e.get("z"), (int, float)))
+    hl = [("!" if over else "") + f"{sm['entries']} figures against the truth, {sm['with_sigma']} with a stated "
+          f"1-sigma: " + (f"{len(over)} off by more than 3 sigma ({', '.join(html.escape(n) for n in over)})" if over
+                          else "every stated 1-sigma covers its error (|z| &le; 3)"),
+          ("!" if sm.get("wrong_verdicts") else "") + f"wrong verdicts: {sm.get('wrong_verdicts', 0)}"]
+    if zs:
+        hl.append("largest |z|: " + ", ".join(f"{html.escape(n)} {z:+.2f}" for _, n, z in zs[::-1][:3]))
+    parts.insert(len(parts) - 1, headline(hl))
     parts.append(row(["figure", "value", "truth", "sigma", "error", "z", "unit", "note"], True))
     for e in cj["entries"]:
         z = e.get("z")
@@ -85,10 +99,16 @@ if os.path.exists(cj_path):
                  "" if e.get("error") is None else f(e["error"], 3),
                  "" if z is None else f"{z:+.2f}", e.get("unit", ""), e.get("note", "")]
         tr = "<tr style=\"background:#fdd\">" if bad else "<tr>"
-        # a long figure name may break after its dots
-        parts.append(tr + "".join(f"<td>{html.escape(str(c)).replace('.', '.<wbr>') if k == 0 else html.escape(str(c))}</td>"
-                                  for k, c in enumerate(cells)) + "</tr>\n")
+        # a long figure name may break after its dots; a shared note is its number
+        tds = [html.escape(str(c)).replace('.', '.<wbr>') if k == 0 else html.escape(str(c))
+               for k, c in enumerate(cells)]
+        if cells[-1] in num:
+            tds[-1] = f'<a href="#note{num[cells[-1]]}">note {num[cells[-1]]}</a>'
+        parts.append(tr + "".join(f"<td>{c}</td>" for c in tds) + "</tr>\n")
     parts.append("</table>\n")
+    if shared:
+        parts.append("<p>Notes shared by several figures:</p>\n<ol>\n" + "".join(
+            f'<li id="note{num[n]}">{html.escape(n)}</li>\n' for n in shared) + "</ol>\n")
 
 # ---- geometry ---------------------------------------------------------------
 geo = load(cal, "geometry", "geometry.json")

@@ -11,7 +11,7 @@ import sys
 import time
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from report_common import Bad, check_format, e, fmt, table  # noqa: E402
+from report_common import Bad, check_format, e, fmt, headline, table  # noqa: E402
 
 STYLE = """<style>
 body { font-family: sans-serif; margin: 1.5em; max-width: 1400px; }
@@ -120,6 +120,121 @@ def verify_rows(out):
     return rows, classes
 
 
+LOOSE = 0.30   # a parameter is barely constrained when its 1-sigma exceeds this share of |value| or of its bounds
+
+
+def headline_verdicts(out, ent):
+    """The verdicts, each against the expected one where chain.json has it (a wrong one is a miss)."""
+    items = []
+    for d in sorted(glob.glob(os.path.join(out, "verify_*"))):
+        rel = os.path.basename(d)
+        v = jload(out, rel + "/verify.json") if os.path.isdir(d) else None
+        if not v:
+            continue
+        x = ent.get(rel + ".verdict") or {}
+        want = x.get("truth")
+        right = want is None or want == v.get("verdict")
+        items.append(("" if right else "!") + f"{e(os.path.basename(str(v.get('scene'))))}: verdict "
+                     f"<b>{e(v.get('verdict'))}</b> (score {fmt(v.get('score'), '.4g')}, threshold "
+                     f"{fmt(v.get('score_threshold'), '.4g')})"
+                     + ("" if want is None else ", as expected" if right else f", expected {e(want)}"))
+    return items
+
+
+def headline_calib(out):
+    """The calibrations' figures with their 1-sigma."""
+    items = []
+    g = jload(out, "calib/geometry/geometry.json")
+    if g:
+        pu = g.get("projection_uncertainty") if isinstance(g.get("projection_uncertainty"), dict) else {}
+        items.append(f"camera: residual {fmt(g.get('rms_residual_px'), '.3f')} px RMS over {g.get('views_used')} "
+                     f"views; projection 1-sigma at {fmt(pu.get('distance_mm'), 'g')} mm {fmt(pu.get('centre_px'), '.3f')}"
+                     f" px at the centre, {fmt(pu.get('max_px'), '.3f')} px worst")
+    lp = jload(out, "calib/lamps/lamps.json")
+    lamps = [m for m in (lp or {}).get("lamps", []) if isinstance(m, dict)]
+    sds = [max(m["std_mm"]) for m in lamps if isinstance(m.get("std_mm"), list) and m["std_mm"]]
+    if lamps:
+        items.append(f"lamps: {len(lamps)} positions, 1-sigma at most {fmt(max(sds), '.2f')} mm per axis" if sds
+                     else f"lamps: {len(lamps)} positions")
+    gn = jload(out, "calib/gain/gain.json")
+    if gn:
+        sd = gn.get("std") if isinstance(gn.get("std"), dict) else {}
+        items.append(f"sensor: K {fmt(gn.get('system_gain_dn_per_e'), '.4g')} ± {fmt(sd.get('system_gain_dn_per_e'), '.2g')} "
+                     f"DN/e-, read noise {fmt(gn.get('read_noise_e'), '.3g')} ± {fmt(sd.get('read_noise_e'), '.2g')} e-")
+    w = jload(out, "calib/white/white.json")
+    wl = [m for m in (w or {}).get("lamps", []) if isinstance(m, dict)]
+    if wl:
+        items.append("absolute scale kc·I: " + ", ".join(
+            f"{e(m.get('name'))} {fmt(m.get('kc_I_per_us'), '.4g')} ± {fmt(100 * (m.get('std_rel') or float('nan')), '.2g')} %"
+            for m in wl) + " (DN/µs at 0 dB per (1/sr)/mm²)")
+    return items
+
+
+def headline_materials(out):
+    """Each material's model and residual; a barely constrained parameter is a miss."""
+    items = []
+    for p in sorted(glob.glob(os.path.join(out, "priors_*.json"))):
+        d = jload(out, os.path.basename(p))
+        m = (d.get("materials") or [None])[0] if d else None
+        if not isinstance(m, dict):
+            continue
+        ron = m.get("rms_over_noise")
+        items.append(f"{e(m.get('name'))}: model {e(m.get('model'))}"
+                     + (f", residual {fmt(ron, '.2f')} × the noise" if ron is not None else ""))
+        for q in m.get("parameters") or []:
+            try:
+                mean, sd, width = float(q["mean"]), float(q["std"]), float(q["hi"]) - float(q["lo"])
+            except (KeyError, TypeError, ValueError):
+                continue
+            if sd > 0 and (sd > LOOSE * abs(mean) or (width > 0 and sd > LOOSE * width)):
+                items.append(f"!{e(m.get('name'))}: {e(q.get('name'))} = {mean:.4g} ± {sd:.2g} barely constrained "
+                             f"(1-sigma {100 * sd / abs(mean) if mean else float('inf'):.0f} % of the value, "
+                             f"{100 * sd / width if width > 0 else float('nan'):.0f} % of the bounds' width; the rule: "
+                             f"over {100 * LOOSE:.0f} % of either)")
+    return items
+
+
+def headline_plan(out):
+    """The light plan's virtual-rig check against its target, each view that misses it in words."""
+    pl = jload(out, "plan_lamps/plan.json")
+    miss, n, tg = [], 0, None
+    for v in (pl or {}).get("views", []):
+        if not isinstance(v, dict) or not isinstance(v.get("check_agreement"), (int, float)):
+            continue
+        vj = jload(out, f"plan_lamps/{v.get('dir')}/plan.json") or {}
+        ck = vj.get("virtual_rig_check") if isinstance(vj.get("virtual_rig_check"), dict) else {}
+        t = ck.get("target")
+        if not isinstance(t, (int, float)):
+            continue
+        n, tg = n + 1, t
+        if v["check_agreement"] < t:
+            miss.append(f"{fmt(v.get('turntable_deg'), 'g')}°: {100 * v['check_agreement']:.1f} %, "
+                        f"{100 * (t - v['check_agreement']):.1f} points short")
+    if not n:
+        return []
+    if miss:
+        return [f"!light plan: {n - len(miss)} of {n} views reach the virtual-rig check's target {100 * tg:.0f} % "
+                "(segments detected as predicted); " + "; ".join(miss)]
+    return [f"light plan: every view reaches the virtual-rig check's target {100 * tg:.0f} %"]
+
+
+def headline_items(out):
+    c = jload(out, "chain.json")
+    ent = {x.get("name"): x for x in (c or {}).get("entries", []) if isinstance(x, dict)}
+    items = headline_verdicts(out, ent)
+    if c and isinstance(c.get("summary"), dict):
+        s = c["summary"]
+        z3 = s.get("z_over_3") or []
+        items.append(("!" if z3 or s.get("wrong_verdicts") else "")
+                     + f"against the truth: {s.get('entries')} figures, {s.get('with_sigma')} with a stated 1-sigma; "
+                     + (f"{len(z3)} off by more than 3 sigma ({', '.join(e(x) for x in z3)})" if z3
+                        else "none off by more than 3 sigma")
+                     + f"; {s.get('wrong_verdicts')} wrong verdicts")
+    elif c is None:
+        items.append("!against the truth: chain.json missing")
+    return items + headline_calib(out) + headline_materials(out) + headline_plan(out)
+
+
 def chain_line(out):
     c = jload(out, "chain.json")
     if not c or not isinstance(c.get("summary"), dict):
@@ -156,6 +271,7 @@ def make(out, version):
          "the lamps of four views of the T-stiffener, capture them and verify the correct description and wrong "
          "ones. Lengths mm in the rig frame (origin at the turntable top centre, z up); pixels as mrcal's; grey "
          f"values DN. The commands and their output: {link(out, 'demo.log')}.</p>"]
+    L.append(headline(headline_items(out)))
     if os.path.exists(os.path.join(out, "figure.png")):
         L.append('<img src="figure.png" alt="rendered images, wrong descriptions and differences" '
                  'style="max-width: 900px">')

@@ -167,13 +167,32 @@ def provenance_head(prov):
 
 
 def provenance_section(prov, name):
-    """The page's Provenance section: prov (JSON) as indented JSON, or a sentence that the file name has
-    none when prov is None."""
+    """The page's Provenance section: prov (JSON) as indented JSON, folded (a click opens it), or a sentence
+    that the file name has none when prov is None."""
     if prov is None:
         body = f"<p>{e(name)} has no provenance.</p>"
     else:
-        body = f"<pre>{e(json.dumps(prov, indent=2, ensure_ascii=False))}</pre>"
+        n = len(prov.get("inputs") or []) if isinstance(prov, dict) else 0
+        body = (f"<details><summary>the command, refl's version and date, and {n} inputs with their sha256 "
+                f"(from {e(name)})</summary><pre style=\"white-space: pre-wrap; overflow-wrap: anywhere\">"
+                f"{e(json.dumps(prov, indent=2, ensure_ascii=False))}</pre></details>")
     return '<h2 id="provenance">Provenance</h2>\n' + body
+
+
+def headline(items, title="Headline"):
+    """The box a page opens with: one line per item (HTML already escaped by the caller); an item that begins
+    with "!" is a miss (what missed its target and by how much), drawn in red without the "!". The same look
+    as the C reports' (model_html_headline)."""
+    li = []
+    for it in items:
+        if not it:
+            continue
+        miss = it.startswith("!")
+        li.append(('<li style="color:#b00020;font-weight:bold">' if miss else "<li>") + (it[1:] if miss else it)
+                  + "</li>")
+    return ('<div class="headline" id="headline" style="border:2px solid #888;border-radius:6px;padding:0.4em 1em;'
+            f'margin:0.8em 0;background:#fafafa"><h2 style="margin:0.2em 0 0.4em 0">{e(title)}</h2><ul '
+            'style="margin:0.2em 0;padding-left:1.3em">' + "\n".join(li) + "</ul></div>")
 
 
 def write_page(d, lines):

@@ -462,6 +462,7 @@ CSS = ("body{font-family:sans-serif;max-width:1200px;margin:1em auto;padding:0 1
        "code{font-size:90%}pre{background:#f6f6f6;border:1px solid #ddd;padding:0.6em;overflow-x:auto;"
        "font-size:85%}.verdict{font-size:160%;font-weight:bold;color:#fff;padding:0.7em 1em;margin:0.8em 0;"
        "border-radius:6px}.verdict small{display:block;font-size:55%;font-weight:normal;margin-top:0.3em}"
+       "td.path{overflow-wrap:anywhere;font-size:80%}"
        ".correct{background:#1e8e3e}.incorrect{background:#c5221f}ul.warn li{color:#8a4b00}.note{color:#555}")
 
 
@@ -508,13 +509,17 @@ def write_html(d, v, p, info, nused):
     if isinstance(raw.get("score_definition"), str):
         L.append(f'<p class="note">Score: {e(raw["score_definition"])}.</p>')
 
+    # images by their file names where those tell them apart (the full paths in the Images table)
+    bases = [os.path.basename(str(im["name"])) for im in v["images"]]
+    short = ({str(im["name"]): b for im, b in zip(v["images"], bases)} if len(set(bases)) == len(bases) else {})
+
     # residue
     L.append('<h2 id="residue">Residue</h2>')
     hdr = ["image", "turntable (deg)", "n points", "max |diff| (DN)", "mean |diff| (DN)", "std |diff| (DN)",
            "robust σ (DN)", "rms z", "median |z|"]
     rows, cls = [], []
     for s in v["residue_per_image"] + [dict(v["residue"], image="all", turntable_deg=math.nan)]:
-        rows.append([e(s["image"]), fmt(s["turntable_deg"], ".2f", ""), str(s["n_points"]),
+        rows.append([e(short.get(str(s["image"]), s["image"])), fmt(s["turntable_deg"], ".2f", ""), str(s["n_points"]),
                      fmt(s["max_abs_diff_dn"], ".4g"), fmt(s["mean_abs_diff_dn"], ".4g"),
                      fmt(s["std_abs_diff_dn"], ".4g"), fmt(s["robust_sigma_dn"], ".4g"), fmt(s["rms_z"], ".3g"),
                      fmt(s["median_abs_z"], ".3g")])
@@ -531,11 +536,12 @@ def write_html(d, v, p, info, nused):
     for im in v["images"]:
         lamps = im["lamps_on"]
         lamps = ", ".join(map(str, lamps)) if isinstance(lamps, list) else ("" if lamps is None else str(lamps))
-        rows.append([e(im["name"]), e(im["file"]), fmt(im["turntable_deg"], ".2f"), e(lamps),
+        rows.append([e(short.get(str(im["name"]), im["name"])), e(im["file"]),
+                     fmt(im["turntable_deg"], ".2f"), e(lamps),
                      fmt(im["exposure_us"], "g"), f'<a href="{e(im["actual_tiff"])}">{e(im["actual_tiff"])}</a>',
                      f'<a href="{e(im["synthetic_tiff"])}">{e(im["synthetic_tiff"])}</a>'])
     L.append(table(["image", "file", "turntable (deg)", "lamps on", "exposure (us)", "actual (float32 TIFF, DN)",
-                    "synthetic (float32 TIFF, DN)"], rows, numeric=[False, False, True, False, True, False, False]))
+                    "synthetic (float32 TIFF, DN)"], rows, numeric=[False, "path", True, False, True, False, False]))
 
     # reference points
     L.append('<h2 id="reference-points">Reference points</h2>')

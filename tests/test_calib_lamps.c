@@ -933,11 +933,15 @@ static void pattern_report_check(const char *cal, const char *lj)
     char *html = g_strdup_printf("%s/pattern/report.html", cal), *png = g_strdup_printf("%s/pattern/pattern.png", cal);
     char *csv = g_strdup_printf("%s/pattern/pattern_windows.csv", cal), *text = NULL, *page = NULL;
     CHECK(g_file_get_contents(html, &page, NULL, NULL) && strstr(page, "pattern.png") && strstr(page, "cos power"));
+    // the page opens with its headline, before the first section
+    CHECK(page && strstr(page, "id=\"headline\"") && strstr(page, "<h2>Emission patterns") &&
+          strstr(page, "id=\"headline\"") < strstr(page, "<h2>Emission patterns"));
     CHECK(g_file_test(png, G_FILE_TEST_EXISTS));
     json_t *doc = json_load_file(lj, 0, NULL);
     CHECK(g_file_get_contents(csv, &text, NULL, NULL) && doc);
     if (text && doc) {
-        static const char hdr[] = "lamp,angle_from_axis_deg,irradiance_rel,pattern_rel,sigma_rel\n";
+        static const char hdr[] = "lamp,angle_from_axis_deg,irradiance_rel,pattern_rel,sigma_rel,cos_power,"
+                                  "cos_power_std,isotropic\n";
         CHECK(!strncmp(text, hdr, strlen(hdr)));
         size_t l;
         json_t *e;
@@ -957,6 +961,15 @@ static void pattern_report_check(const char *cal, const char *lj)
                 double c = cos(ang * M_PI / 180);
                 bad += !(fabs(pat - (c > 0 ? pow(c, n) : 0)) < 1e-4 && y > 0);
             }
+            // the headline names each lamp; an isotropic one (n within 3 sigma of 0) with no axis tilt
+            json_t *em = json_object_get(e, "emission");
+            double nsd = json_number_value(json_object_get(em, "cos_power_std"));
+            bool iso = n <= 3 * nsd;
+            CHECK_MSG(json_is_boolean(json_object_get(em, "isotropic")) &&
+                      json_is_true(json_object_get(em, "isotropic")) == iso, "lamp %s: isotropic flag", name);
+            char hl[160];
+            snprintf(hl, sizeof hl, iso ? "<li>%s: isotropic" : "<li>%s: cos power n = ", name ? name : "?");
+            CHECK_MSG(page && strstr(page, hl), "lamp %s: headline '%s' missing", name, hl);
             long windows = json_integer_value(json_object_get(json_object_get(e, "emission"), "windows"));
             CHECK_MSG(rows >= windows && windows > 0 && bad == 0, "lamp %s: %ld rows (%ld windows fitted), %ld "
                       "inconsistent", name, rows, windows, bad);

@@ -313,6 +313,31 @@ TEST(lightplan_views_capture_plan)
         g_free(vp);
         CHECK(strchr(want_lamps[k], '+') == NULL || strchr(strchr(want_lamps[k], '+') + 1, '+') == NULL);  // max 2
     }
+    // the summary page's headline says in words which views miss the virtual-rig check's target and by how much
+    int below = 0;
+    GString *want = g_string_new("");
+    for (size_t k = 0; k < json_array_size(views) && k < 2; k++) {
+        json_t *v = json_array_get(views, k);
+        char *vp = g_strdup_printf("%s/%s/plan.json", dir, json_string_value(json_object_get(v, "dir")));
+        json_t *vj = json_load_file(vp, 0, NULL);
+        double ag = json_number_value(json_object_get(v, "check_agreement"));
+        double tg = json_number_value(json_object_get(json_object_get(vj, "virtual_rig_check"), "target"));
+        if (ag < tg) {
+            g_string_append_printf(want, "%s%g°: %.1f %%, %.1f points short", below ? "; " : "",
+                                   json_number_value(json_object_get(v, "turntable_deg")), 100 * ag, 100 * (tg - ag));
+            below++;
+        }
+        json_decref(vj);
+        g_free(vp);
+    }
+    CHECK(model_run_script("plan_lamps_report.py", dir, NULL) == 0);
+    char *hp = g_strdup_printf("%s/index.html", dir), *html = model_read_file(hp, NULL);
+    CHECK(html && strstr(html, "id=\"headline\""));
+    if (html && below) CHECK_MSG(strstr(html, want->str) != NULL, "headline lacks '%s'", want->str);
+    if (html && !below) CHECK_CONTAINS(html, "virtual-rig check: every view reaches the target");
+    free(html);
+    g_free(hp);
+    g_string_free(want, TRUE);
     json_decref(j);
     // the capture plan: those angles, each view's lamps and exposure
     char *pp = g_strdup_printf("%s/capture_plan.ini", dir);

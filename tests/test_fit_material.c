@@ -160,6 +160,25 @@ TEST_LONG(fit_material_chain_virtual_rig)
         CHECK_CONTAINS(page, "held-out RMS of R (1/sr)");
         CHECK_CONTAINS(page, "lowest BIC: ");
         CHECK_CONTAINS(page, "not perceptual roughness");
+        // the headline first; a parameter is flagged barely constrained exactly when its 1-sigma exceeds 30 % of
+        // its value's magnitude or of its bounds' width (each priors parameter's row)
+        CHECK(strstr(page, "id=\"headline\"") && strstr(page, "<h2>Parameters") &&
+              strstr(page, "id=\"headline\"") < strstr(page, "<h2>Parameters"));
+        json_t *pdoc = json_load_file(pj, 0, NULL), *ps0 = json_object_get(json_array_get(json_object_get(pdoc, "materials"), 0), "parameters");
+        int nloose = 0;
+        for (size_t k = 0; k < json_array_size(ps0); k++) {
+            json_t *q = json_array_get(ps0, k);
+            double m = json_number_value(json_object_get(q, "mean")), sd = json_number_value(json_object_get(q, "std"));
+            double bw = json_number_value(json_object_get(q, "hi")) - json_number_value(json_object_get(q, "lo"));
+            bool loose = sd > 0 && (sd > 0.3 * fabs(m) || (bw > 0 && sd > 0.3 * bw));
+            char want[160];
+            snprintf(want, sizeof want, "<li class=\"miss\">%s barely constrained", json_string_value(json_object_get(q, "name")));
+            CHECK_MSG(!!strstr(page, want) == loose, "%s: %.4g +- %.2g (bounds width %.4g): flagged %d, rule %d",
+                      json_string_value(json_object_get(q, "name")), m, sd, bw, !!strstr(page, want), loose);
+            nloose += loose;
+        }
+        CHECK(!!strstr(page, "no parameter barely constrained") == (nloose == 0));
+        json_decref(pdoc);
         free(page);
     }
     static const char *const pngs[] = { "lobes.png", "residual_maps.png", "models.png", "samples.csv" };

@@ -133,8 +133,11 @@ TEST(model_demo_index_summary)
     static const char *const mats[] = { "glossy", "plywood", "steel" };
     for (int k = 0; k < 3; k++) {
         char *name = g_strdup_printf("priors_%s.json", mats[k]);
+        // steel's ks barely constrained (1-sigma 59 % of its value), glossy's tight
         char *text = g_strdup_printf("{\"materials\": [{\"name\": \"%s\", \"model\": \"ggx\", \"rms\": 0.001, "
-                                     "\"rms_over_noise\": %.2f}]}", mats[k], 1.1 + k);
+                                     "\"rms_over_noise\": %.2f, \"parameters\": [{\"name\": \"ks\", \"mean\": %s, "
+                                     "\"std\": %s, \"lo\": 0, \"hi\": 0.684}]}]}", mats[k], 1.1 + k,
+                                     k == 2 ? "0.2474" : "0.5", k == 2 ? "0.1456" : "0.01");
         p = g_build_filename(d, name, NULL);
         CHECK(g_file_set_contents(p, text, -1, NULL));
         g_free(p), g_free(name), g_free(text);
@@ -171,6 +174,13 @@ TEST(model_demo_index_summary)
     CHECK(!strstr(html, "log line 1999"));
     CHECK_CONTAINS(html, "1 off by more than 3 sigma (lamp_x)");
     CHECK_CONTAINS(html, "3.10 &times; the noise");
+    // the page opens with its headline: the miss against the truth and the barely constrained parameter in red
+    CHECK(strstr(html, "id=\"headline\"") && strstr(html, "<h2>Calibrations") &&
+          strstr(html, "id=\"headline\"") < strstr(html, "<h2>Calibrations"));
+    CHECK_CONTAINS(html, "font-weight:bold\">against the truth: 7 figures, 5 with a stated 1-sigma; 1 off by more than "
+                         "3 sigma (lamp_x)");
+    CHECK_CONTAINS(html, "font-weight:bold\">steel: ks = 0.2474 ± 0.15 barely constrained (1-sigma 59 % of the value");
+    CHECK(!strstr(html, "glossy: ks = 0.5 ± 0.01 barely"));
     free(html);
     free(out);
     free(err);
@@ -246,5 +256,31 @@ TEST(model_html_no_negative_zero)
     CHECK_CONTAINS(html, "angle 0.00 deg, tilt 0.0 deg, offset 0 px, -0.50 mm, on 2026-00-01, x-0, 1e-00");
     CHECK_CONTAINS(html, "<td>0.000</td><td>-0.25</td>");
     CHECK_CONTAINS(html, "<figcaption>turned 0.0 deg</figcaption>");
+    g_free(html);
+}
+
+// The headline box: its items in order, a "!" item a miss (red, the "!" dropped), text escaped; the
+// provenance's inputs folded under a summary that counts them.
+TEST(model_html_headline_and_folded_inputs)
+{
+    const char *path = test_path("headline.html");
+    json_t *prov = json_pack("{s:s,s:s,s:s,s:[{s:s,s:s,s:s},{s:s,s:s,s:s}]}", "refl_version", "9.9", "date_utc",
+                             "x", "command", "refl t", "inputs", "role", "a", "path", "/p/a", "sha256", "00",
+                             "role", "b", "path", "/p/b", "sha256", "11");
+    FILE *f = model_html_begin(path, "t", prov);
+    json_decref(prov);
+    CHECK(f != NULL);
+    if (!f) return;
+    const char *items[] = { "K = 0.25 ± 0.001 DN/e-", "!view 90°: 90.0 %, 5.0 points short of 95 %", "a < b" };
+    model_html_headline(f, "Headline", items, 3);
+    CHECK(model_html_end(f, path));
+    char *html = NULL;
+    CHECK(g_file_get_contents(path, &html, NULL, NULL));
+    CHECK_CONTAINS(html, "<details><summary>2 inputs: paths and sha256</summary>");
+    CHECK_CONTAINS(html, "<li>K = 0.25 ± 0.001 DN/e-</li>");
+    CHECK_CONTAINS(html, "<li class=\"miss\">view 90°: 90.0 %, 5.0 points short of 95 %</li>");
+    CHECK_CONTAINS(html, "<li>a &lt; b</li>");
+    CHECK(strstr(html, "</details>") && strstr(html, "id=\"headline\"") &&
+          strstr(html, "</details>") < strstr(html, "id=\"headline\""));
     g_free(html);
 }

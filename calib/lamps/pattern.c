@@ -266,6 +266,17 @@ bool calib_lamps_pattern_fit(const calib_obs_set_t *obs, const calib_set_t *cal,
     return ok;
 }
 
+// A fitted lamp is isotropic when its cos power is within PAT_ISO_SIGMAS of its 1-sigma of 0: its axis is then
+// not determined, and the report shows no tilt.
+#define PAT_ISO_SIGMAS 3
+#define PAT_ISO_RULE "isotropic when the fitted cos power n is within 3 of its 1-sigma of 0 (n <= 3 sigma_n): " \
+                     "its axis is then not determined and no tilt is shown"
+
+static bool pat_isotropic(const calib_lamps_pattern_t *P)
+{
+    return P->fitted && P->n <= PAT_ISO_SIGMAS * P->n_std;
+}
+
 // The "emission" object of one lamp's fit.
 static json_t *pattern_json(const calib_lamps_pattern_t *P)
 {
@@ -278,6 +289,7 @@ static json_t *pattern_json(const calib_lamps_pattern_t *P)
     json_t *c = json_array();
     for (int k = 0; k < 9; k++) json_array_append_new(c, model_json_number(P->cov_n_t[k]));
     json_object_set_new(e, "covariance_n_t1_t2", c);
+    json_object_set_new(e, "isotropic", json_boolean(pat_isotropic(P)));
     for (int k = 0; k < 2; k++)
         json_object_set_new(e, k ? "axis_per_t2" : "axis_per_t1",
                             json_pack("[fff]", P->axis_per_t[k].x, P->axis_per_t[k].y, P->axis_per_t[k].z));
@@ -315,7 +327,8 @@ bool calib_lamps_pattern_write(const calib_set_t *cal, const calib_lamps_pattern
         "pattern from a flat Lambertian target lit by each lamp alone, over the directions of its windows (a cone "
         "about emission.measured_cone_centre of half-angle emission.measured_cone_half_angle_deg; beyond it the "
         "pattern is extrapolated). emission: cos_power_std (1-sigma), axis_std_deg (1-sigma, degrees), "
-        "tilt_from_origin_deg (the axis against the direction from the lamp to the rig origin), windows and "
+        "tilt_from_origin_deg (the axis against the direction from the lamp to the rig origin), isotropic (true when "
+        "emission_cos_power is within 3 cos_power_std of 0: the axis and its tilt are then not determined), windows and "
         "windows_rejected (beyond 5 robust std), rms_residual_pct (the windows' irradiance about the fitted "
         "pattern), irradiance_std_pct (the largest 1-sigma of the fitted irradiance over the measured cone), "
         "kc_I_axis_per_us (the on-axis kc*I the target's albedo implies; DN/us at 0 dB per (1/sr)/mm^2), "
@@ -329,13 +342,38 @@ bool calib_lamps_pattern_write(const calib_set_t *cal, const calib_lamps_pattern
     return ok;
 }
 
+// The report's headline: each lamp's cos power with its 1-sigma, isotropic or its axis's tilt; a lamp not
+// measured is a miss.
+static void pattern_headline(FILE *f, const calib_set_t *cal, const calib_lamps_pattern_t *pat)
+{
+    char **it = calloc((size_t)cal->lamps->n + 1, sizeof *it);
+    if (!it) return;   // the page goes on without it (the table follows)
+    int n = 0;
+    for (int l = 0; l < cal->lamps->n; l++) {
+        const calib_lamps_pattern_t *P = &pat[l];
+        if (!P->fitted)
+            it[n++] = g_strdup_printf("!%s: not measured (%d windows, 20 needed)", P->name, P->nwindows);
+        else if (pat_isotropic(P))
+            it[n++] = g_strdup_printf("%s: isotropic, cos power n = %.2f ± %.2f (within 3 sigma of 0: no axis)",
+                                      P->name, P->n, P->n_std);
+        else
+            it[n++] = g_strdup_printf("%s: cos power n = %.2f ± %.2f, its axis %.2f ± %.2f deg from the direction to "
+                                      "the rig origin", P->name, P->n, P->n_std, P->tilt_deg, P->axis_std_deg);
+    }
+    it[n++] = g_strdup(PAT_ISO_RULE);
+    model_html_headline(f, "Headline", (const char *const *)it, n);
+    for (int k = 0; k < n; k++) g_free(it[k]);
+    free(it);
+}
+
 bool calib_lamps_pattern_report(const calib_obs_set_t *obs, const calib_set_t *cal, double albedo,
                                 const calib_lamps_pattern_t *pat, const char *dir, const json_t *provenance)
 {
     if (!model_mkdir_p(dir)) return false;
     char *csv = g_strdup_printf("%s/pattern_windows.csv", dir), *png = g_strdup_printf("%s/pattern.png", dir);
     char *html = g_strdup_printf("%s/report.html", dir);
-    GString *t = g_string_new("lamp,angle_from_axis_deg,irradiance_rel,pattern_rel,sigma_rel\n");
+    GString *t = g_string_new("lamp,angle_from_axis_deg,irradiance_rel,pattern_rel,sigma_rel,cos_power,"
+                              "cos_power_std,isotropic\n");
     const double kd = albedo / M_PI;
     for (int l = 0; l < cal->lamps->n; l++) {
         const calib_lamps_pattern_t *P = &pat[l];
@@ -345,14 +383,16 @@ bool calib_lamps_pattern_report(const calib_obs_set_t *obs, const calib_set_t *c
             double y, rel;
             if (!pat_window(&obs->o[i], l, &cal->lamps->lamps[l], kd, &u, &y, &rel)) continue;
             double au = v3_dot(P->axis, u);
-            g_string_append_printf(t, "%s,%.4f,%.6g,%.6g,%.4g\n", P->name, acos(fmax(-1, fmin(1, au))) * 180 / M_PI,
-                                   y / P->kcI_axis_per_us, au > 0 ? pow(au, P->n) : 0, rel);
+            g_string_append_printf(t, "%s,%.4f,%.6g,%.6g,%.4g,%.4g,%.3g,%d\n", P->name,
+                                   acos(fmax(-1, fmin(1, au))) * 180 / M_PI, y / P->kcI_axis_per_us,
+                                   au > 0 ? pow(au, P->n) : 0, rel, P->n, P->n_std, pat_isotropic(P));
         }
     }
     bool ok = model_write_file_atomic(csv, t->str) && model_run_script("calib_pattern_report.py", csv, png, NULL) == 0;
     g_string_free(t, TRUE);
     FILE *f = ok ? model_html_begin(html, "refl calib pattern: the lamps' emission patterns", provenance) : NULL;
     if (f) {
+        pattern_headline(f, cal, pat);
         model_html_heading(f, "Emission patterns");
         model_html_para(f, "Each window of the flat target (albedo %g) lit by one lamp: its irradiance y = s d^2 / (kd "
                         "n.l) relative to the lamp's fitted on-axis value, against the angle between the direction "
@@ -364,12 +404,16 @@ bool calib_lamps_pattern_report(const calib_obs_set_t *obs, const calib_set_t *c
         int nr = 0;
         for (int l = 0; rows && l < cal->lamps->n; l++) {
             const calib_lamps_pattern_t *P = &pat[l];
-            rows[nr++] = P->fitted ? g_strdup_printf("%s|%.2f ± %.2f|%.2f|%.2f|%.1f|%.2f|%.2f|%d (%d dropped)", P->name,
-                                                     P->n, P->n_std, P->tilt_deg, P->axis_std_deg,
-                                                     P->cone_half_angle_deg, 100 * P->rms_rel,
-                                                     100 * P->irradiance_std_rel, P->nwindows, P->rejected)
-                                   : g_strdup_printf("%s|not measured (%d windows, need 20)||||||", P->name,
-                                                     P->nwindows);
+            rows[nr++] = pat_isotropic(P)
+                             ? g_strdup_printf("%s|%.2f ± %.2f: isotropic|none (isotropic)||%.1f|%.2f|%.2f|%d (%d "
+                                               "dropped)", P->name, P->n, P->n_std, P->cone_half_angle_deg,
+                                               100 * P->rms_rel, 100 * P->irradiance_std_rel, P->nwindows, P->rejected)
+                         : P->fitted ? g_strdup_printf("%s|%.2f ± %.2f|%.2f|%.2f|%.1f|%.2f|%.2f|%d (%d dropped)", P->name,
+                                                       P->n, P->n_std, P->tilt_deg, P->axis_std_deg,
+                                                       P->cone_half_angle_deg, 100 * P->rms_rel,
+                                                       100 * P->irradiance_std_rel, P->nwindows, P->rejected)
+                                     : g_strdup_printf("%s|not measured (%d windows, need 20)||||||", P->name,
+                                                       P->nwindows);
         }
         if (table)
             model_html_table(f, "lamp|cos power n ± 1σ|axis tilt from the rig origin (deg)|axis 1σ (deg)|measured "

@@ -94,6 +94,30 @@ static void rows_free(char **rows, int n)
     free(rows);
 }
 
+// A fitted parameter is barely constrained when its 1-sigma exceeds this share of its value's magnitude or of
+// its bounds' width.
+#define LOOSE_SHARE 0.30
+#define LOOSE_RULE "barely constrained: its 1-sigma exceeds 30 % of its value's magnitude or of its bounds' width"
+
+// The parameter p's 1-sigma as a share of its value's magnitude and of its bounds' width (NAN where not
+// defined); true when it is barely constrained (LOOSE_RULE). A held parameter (std 0) never is.
+static bool param_loose(const json_t *p, double *of_value, double *of_width)
+{
+    double m = json_number_value(json_object_get(p, "mean")), sd = json_number_value(json_object_get(p, "std")),
+           w = json_number_value(json_object_get(p, "hi")) - json_number_value(json_object_get(p, "lo"));
+    *of_value = m != 0 ? sd / fabs(m) : NAN;
+    *of_width = w > 0 ? sd / w : NAN;
+    return isfinite(sd) && sd > 0 && (sd > LOOSE_SHARE * fabs(m) || (w > 0 && sd > LOOSE_SHARE * w));
+}
+
+// x as a percentage ("59 %"), "n/a" where not finite; into buf.
+static const char *pct_text(char *buf, size_t n, double x)
+{
+    if (isfinite(x)) snprintf(buf, n, "%.0f %%", 100 * x);
+    else snprintf(buf, n, "n/a");
+    return buf;
+}
+
 // The parameter table's rows of the priors entry (*n of them). NULL + message (out of memory).
 static char **param_rows(const json_t *entry, int *n)
 {
@@ -106,10 +130,15 @@ static char **param_rows(const json_t *entry, int *n)
     }
     for (size_t j = 0; j < json_array_size(ps); j++) {
         json_t *p = json_array_get(ps, j);
-        rows[j] = g_strdup_printf("%s|%s|%.6g|%.3g|%.3g|%.6g .. %.6g|%s|%s", json_string_value(json_object_get(p, "name")),
+        double rv, rw;
+        bool lz = param_loose(p, &rv, &rw);
+        char rel[96], b1[32], b2[32];
+        snprintf(rel, sizeof rel, "%s, %s%s", pct_text(b1, sizeof b1, rv), pct_text(b2, sizeof b2, rw),
+                 lz ? ": BARELY CONSTRAINED" : "");
+        rows[j] = g_strdup_printf("%s|%s|%.6g|%.3g|%s|%.3g|%.6g .. %.6g|%s|%s", json_string_value(json_object_get(p, "name")),
                                   json_string_value(json_object_get(p, "unit")),
                                   json_number_value(json_object_get(p, "mean")),
-                                  json_number_value(json_object_get(p, "std")),
+                                  json_number_value(json_object_get(p, "std")), rel,
                                   json_number_value(json_object_get(p, "std_statistical")),
                                   json_number_value(json_object_get(p, "lo")),
                                   json_number_value(json_object_get(p, "hi")),
@@ -177,6 +206,52 @@ static void html_summary(FILE *h, const calib_obs_set_t *obs, const fit_samples_
                     json_string_value(json_object_get(entry, "loss")));
 }
 
+// The page's headline: the material and its model, the residual against the noise, every parameter with its
+// 1-sigma, the barely constrained ones as misses.
+static void html_headline(FILE *h, const fit_brdf_result_t *r, const json_t *entry)
+{
+    json_t *ps = json_object_get(entry, "parameters"), *ron = json_object_get(entry, "rms_over_noise");
+    size_t np = json_array_size(ps);
+    char **it = calloc(np + 3, sizeof *it);
+    if (!it) return;   // the page goes on without it (the tables follow)
+    int n = 0;
+    it[n++] = ron ? g_strdup_printf("%s: model %s, RMS of R %.4g 1/sr = %.3g × the sensor's noise",
+                                    json_string_value(json_object_get(entry, "name")), model_brdf_name(r->model),
+                                    json_number_value(json_object_get(entry, "rms")), json_number_value(ron))
+                  : g_strdup_printf("%s: model %s, RMS of R %.4g 1/sr (the noise is unknown without a gain "
+                                    "calibration)", json_string_value(json_object_get(entry, "name")),
+                                    model_brdf_name(r->model), json_number_value(json_object_get(entry, "rms")));
+    GString *g = g_string_new("parameters (mean ± 1-sigma): ");
+    int nloose = 0;
+    for (size_t j = 0; j < np; j++) {
+        json_t *p = json_array_get(ps, j);
+        double rv, rw;
+        nloose += param_loose(p, &rv, &rw);
+        g_string_append_printf(g, "%s%s = %.4g ± %.2g %s", j ? "; " : "", json_string_value(json_object_get(p, "name")),
+                               json_number_value(json_object_get(p, "mean")),
+                               json_number_value(json_object_get(p, "std")),
+                               json_string_value(json_object_get(p, "unit")));
+    }
+    it[n++] = g_string_free(g, FALSE);
+    for (size_t j = 0; j < np; j++) {
+        json_t *p = json_array_get(ps, j);
+        double rv, rw;
+        char b1[32], b2[32];
+        if (param_loose(p, &rv, &rw))
+            it[n++] = g_strdup_printf("!%s barely constrained: %.4g ± %.2g, the 1-sigma %s of the value, %s of the "
+                                      "bounds' width %.4g .. %.4g", json_string_value(json_object_get(p, "name")),
+                                      json_number_value(json_object_get(p, "mean")),
+                                      json_number_value(json_object_get(p, "std")), pct_text(b1, sizeof b1, rv),
+                                      pct_text(b2, sizeof b2, rw),
+                                      json_number_value(json_object_get(p, "lo")),
+                                      json_number_value(json_object_get(p, "hi")));
+    }
+    if (!nloose) it[n++] = g_strdup_printf("no parameter barely constrained (%s)", LOOSE_RULE);
+    model_html_headline(h, "Headline", (const char *const *)it, n);
+    for (int k = 0; k < n; k++) g_free(it[k]);
+    free(it);
+}
+
 // The figures of measured against fitted R (and the albedo cells' with cells).
 static void html_fit_figures(FILE *h, bool cells)
 {
@@ -207,10 +282,12 @@ bool fit_material_report(const char *dir, const calib_obs_set_t *obs, const fit_
     FILE *h = mr ? model_html_begin(html, "refl fit material", prov) : NULL;
     bool ok = false;
     if (h) {
+        html_headline(h, &res[best], entry);
         html_summary(h, obs, smp, &res[best], entry);
         model_html_heading(h, "Parameters");
-        model_html_table(h, "parameter|unit|mean|std|std (statistical)|prior bounds|convention|note",
-                         (const char *const *)rows, np);
+        model_html_table(h, "parameter|unit|mean|std|std / magnitude of mean, std / bounds' width|std "
+                            "(statistical)|prior bounds|convention|note", (const char *const *)rows, np);
+        model_html_para(h, "std: the 1-sigma the priors carry; %s (flagged BARELY CONSTRAINED).", LOOSE_RULE);
         html_fit_figures(h, cell != NULL);
         model_html_heading(h, "Model comparison");
         model_html_table(h, "model|RMS of R (1/sr)|held-out RMS of R (1/sr)|its standard error (1/sr)|RMS of f_r "

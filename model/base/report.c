@@ -274,8 +274,11 @@ FILE *model_html_begin(const char *path, const char *title, const json_t *prov)
     fputs("</title>\n<style>body{font-family:sans-serif;max-width:1100px;margin:1em auto;padding:0 1em;color:#222}"
           "table{border-collapse:collapse;margin:0.5em 0}td,th{border:1px solid #bbb;padding:3px 8px;"
           "text-align:left;font-size:90%}th{background:#eee}figure{margin:1em 0}img{max-width:100%;"
-          "border:1px solid #ddd}figcaption{font-size:90%;color:#555}code{font-size:90%}</style>\n</head><body>\n<h1>",
-          f);
+          "border:1px solid #ddd}figcaption{font-size:90%;color:#555}code{font-size:90%}"
+          ".headline{border:2px solid #888;border-radius:6px;padding:0.4em 1em;margin:0.8em 0;background:#fafafa}"
+          ".headline h2{margin:0.2em 0 0.4em 0;font-size:120%}.headline ul{margin:0.2em 0;padding-left:1.3em}"
+          ".headline li.miss{color:#b00020;font-weight:bold}summary{cursor:pointer;color:#555}"
+          "</style>\n</head><body>\n<h1>", f);
     esc(f, title);
     fputs("</h1>\n", f);
     if (prov) {
@@ -285,7 +288,11 @@ FILE *model_html_begin(const char *path, const char *title, const json_t *prov)
         esc(f, json_string_value(json_object_get(prov, "date_utc")));
         fputs("<br><code>", f);
         esc(f, json_string_value(json_object_get(prov, "command")));
-        fputs("</code></p>\n<table><tr><th>input</th><th>path</th><th>sha256</th></tr>\n", f);
+        fputs("</code></p>\n", f);
+        // the inputs' paths and hashes folded: the page opens with its headline
+        fprintf(f, "<details><summary>%zu inputs: paths and sha256</summary>\n"
+                   "<table><tr><th>input</th><th>path</th><th>sha256</th></tr>\n",
+                json_array_size(json_object_get(prov, "inputs")));
         size_t i;
         json_t *in;
         json_array_foreach(json_object_get(prov, "inputs"), i, in) {
@@ -297,7 +304,7 @@ FILE *model_html_begin(const char *path, const char *title, const json_t *prov)
             esc(f, json_string_value(json_object_get(in, "sha256")));
             fputs("</code></td></tr>\n", f);
         }
-        fputs("</table>\n", f);
+        fputs("</table></details>\n", f);
     }
     return f;
 }
@@ -319,6 +326,21 @@ void model_html_para(FILE *f, const char *fmt, ...)
     esc_text(f, s);
     fputs("</p>\n", f);
     g_free(s);
+}
+
+void model_html_headline(FILE *f, const char *title, const char *const *items, int nitems)
+{
+    fputs("<div class=\"headline\" id=\"headline\"><h2>", f);
+    esc_text(f, title);
+    fputs("</h2><ul>\n", f);
+    for (int i = 0; i < nitems; i++) {
+        if (!items[i] || !*items[i]) continue;
+        bool miss = items[i][0] == '!';
+        fputs(miss ? "<li class=\"miss\">" : "<li>", f);
+        esc_text(f, items[i] + miss);
+        fputs("</li>\n", f);
+    }
+    fputs("</ul></div>\n", f);
 }
 
 void model_html_figure(FILE *f, const char *src, const char *caption)

@@ -72,6 +72,10 @@ int model_run_script(const char *script, ...) __attribute__((sentinel));
 FILE *model_html_begin(const char *path, const char *title, const json_t *provenance);
 void  model_html_heading(FILE *f, const char *text);
 void  model_html_para(FILE *f, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
+// The page's headline, written first after model_html_begin: a box titled title with one line per item
+// (the verdicts, the figures with their sigma, what missed its target and by how much); an item that begins
+// with "!" is a miss, drawn in red without the "!".
+void  model_html_headline(FILE *f, const char *title, const char *const *items, int nitems);
 // An image (relative path) with a caption.
 void  model_html_figure(FILE *f, const char *src, const char *caption);
 // A table: header cells separated by '|', then rows (each a '|'-separated
