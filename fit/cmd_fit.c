@@ -160,6 +160,10 @@ static void brdf_print_samples(const brdf_args_t *a, const fit_samples_t *s)
         fprintf(stderr, " by %s: %.4g sr^2, %.1f %% of (2 pi)^2", s->omega_how ? s->omega_how : "?", s->omega_sr2,
                 100 * s->omega_sr2 / (4 * M_PI * M_PI));
     fprintf(stderr, ")\n");
+    if (s->nodes_total)
+        fprintf(stderr, "refl fit brdf: sampled where the file measured: %d of its %d nodes (%.1f %%; the others "
+                "reflect below the surface or stand for no solid angle); the largest f_r read %.4g 1/sr\n", s->nodes_used,
+                s->nodes_total, 100.0 * s->nodes_used / s->nodes_total, s->fr_max);
     if (s->n_negative) {   // measurements (dark-subtracted noise): kept, and how far below 0 they reach
         double lo = 0, hi = 0;
         for (int k = 0; k < s->n; k++) {
@@ -203,6 +207,11 @@ static json_t *brdf_priors(const brdf_args_t *a, const char *mat, const fit_samp
         json_object_set_new(src, "solid_angle_by", json_string(s->omega_how ? s->omega_how : ""));
     }
     if (s->n_negative) json_object_set_new(src, "negative_f_r_kept", json_integer(s->n_negative));
+    if (s->nodes_total) {   // a tabulated file sampled at its nodes: how much of it, and its largest f_r
+        json_object_set_new(src, "nodes_used", json_integer(s->nodes_used));
+        json_object_set_new(src, "nodes_total", json_integer(s->nodes_total));
+        json_object_set_new(src, "f_r_max_per_sr", json_real(s->fr_max));
+    }
     json_object_set_new(entry, "samples", src);
     json_object_set_new(entry, "model_choice", fit_brdf_choice_json(fm));
     json_array_append_new(mats, entry);

@@ -61,8 +61,13 @@ typedef struct {
     char             source[512];
     char             sha256[65];
     double           omega_sr2;    // solid-angle weights: their sum before scaling to mean 1, sr^2 (else 0)
-    const char      *omega_how;    // and how: "cells" (MERL), "grid" (RGL), "rings", "k-nearest" (CSV); else NULL
+    const char      *omega_how;    // and how: "cells" (MERL), "nodes" (RGL), "rings", "k-nearest" (CSV); else NULL
     int              n_negative;   // samples with f_r < 0 (kept: measurements within noise)
+    // A tabulated file sampled at its own nodes (RGL): the nodes of the slices
+    // read, those used (w_o above the surface, density positive), and the
+    // largest f_r read (1/sr); 0 for other sources.
+    int              nodes_total, nodes_used;
+    double           fr_max;
     // Weighted by each sample's noise: w = 1 / sigma_R^2 (sigma_R its std of R,
     // 1/sr; refl fit material from the gain calibration), so the weighted
     // residuals are in units of sigma and their sum of squares is chi^2

@@ -486,14 +486,34 @@ static fit_samples_t *load_merl(const char *path, const fit_read_opts_t *o)
     return s;
 }
 
-enum { RGL_NT = 32, RGL_NP = 64 };   // outgoing grid per incident direction: uniform in cos(theta_o) and phi_o
 
-// An RGL file: every measured incident direction (isotropic: the first phi_i)
-// with outgoing directions at the centres of a 32 x 64 grid uniform in
-// cos(theta_o) and phi_o (cells of equal solid angle, 2 pi / 2048 sr);
-// f_r = the evaluation / cos(theta_o). Solid-angle weight: the outgoing
-// cell's times the incident ring's (theta_i between midpoints, ring_edges;
-// its phi_i share 2 pi / the phi_i measured).
+// An RGL file at the directions it measured: every measured incident
+// direction (isotropic: the first phi_i) with the outgoing directions of its
+// value grid's nodes (model_brdf_rgl_nodes: where the file holds a value, so a
+// narrow specular peak is sampled as densely as the file measured it);
+// f_r = the evaluation / cos(theta_o). Solid-angle weight: the node's outgoing
+// solid angle times the incident ring's (theta_i between midpoints,
+// ring_edges; its phi_i share 2 pi / the phi_i measured).
+static bool rgl_slice(fit_samples_t *s, const model_brdf_rgl_t *r, const double *chw, const fit_read_opts_t *o,
+                      int a, int b, double w_in, model_vec3_t *wo, double *dw)
+{
+    model_vec3_t wi;
+    int n = model_brdf_rgl_nodes(r, a, b, &wi, wo, dw);
+    s->nodes_total += model_brdf_rgl_nodes_max(r);
+    if (!(wi.z > 0)) return true;
+    for (int k = 0; k < n; k++) {
+        double fr = model_brdf_rgl_eval(r, wi, wo[k], chw) / wo[k].z;
+        model_cosines_t c = model_cosines(v3(0, 0, 1), wi, wo[k]);
+        double w = o->weights == FIT_WEIGHTS_SOLID_ANGLE ? w_in * dw[k] : 1;
+        s->fr_max = fmax(s->fr_max, fr);
+        if (!(w > 0)) continue;   // a node on the square's u_theta = 0 edge: no solid angle
+        if (!fit_samples_add(s, &c, fr * c.nl, w)) return false;
+        s->nodes_used++;
+        s->n_negative += fr < 0;
+    }
+    return true;
+}
+
 static fit_samples_t *load_rgl(const char *path, const fit_read_opts_t *o)
 {
     if (o->weights == FIT_WEIGHTS_COLUMN) {
@@ -502,44 +522,35 @@ static fit_samples_t *load_rgl(const char *path, const fit_read_opts_t *o)
     }
     model_brdf_rgl_t *r = model_brdf_rgl_load(path);
     if (!r) return NULL;
-    double *chw = malloc((size_t)model_brdf_rgl_channels(r) * sizeof *chw);
-    fit_samples_t *s = chw ? fit_samples_new() : NULL;
+    int nt = model_brdf_rgl_ntheta(r), np = model_brdf_rgl_isotropic(r) ? 1 : model_brdf_rgl_nphi(r);
+    int nmax = model_brdf_rgl_nodes_max(r);
+    double *chw = malloc((size_t)model_brdf_rgl_channels(r) * sizeof *chw), *th = malloc((size_t)nt * sizeof *th);
+    double *dw = malloc((size_t)nmax * sizeof *dw);
+    model_vec3_t *wo = malloc((size_t)nmax * sizeof *wo);
+    fit_samples_t *s = chw && th && dw && wo ? fit_samples_new() : NULL;
     bool ok = s && model_brdf_rgl_channel_weights(r, o->channel, chw, path);
     if (s) {
         snprintf(s->source, sizeof s->source, "%s", path);
         snprintf(s->sha256, sizeof s->sha256, "%s", model_brdf_rgl_sha256(r));
+        s->omega_how = "nodes";
     } else {
         model_error(path, 0, "out of memory");
     }
-    int nt = model_brdf_rgl_ntheta(r), np = model_brdf_rgl_isotropic(r) ? 1 : model_brdf_rgl_nphi(r);
-    double *th = malloc((size_t)nt * sizeof *th);
-    ok = ok && th;
     for (int b = 0; ok && b < nt; b++) th[b] = model_brdf_rgl_theta_i(r, b);
     for (int a = 0; ok && a < np; a++)
         for (int b = 0; ok && b < nt; b++) {
-            double lo, hi, pi = model_brdf_rgl_phi_i(r, a), ti = th[b];
+            double lo, hi;
             ring_edges(th, nt, b, &lo, &hi);
-            double w_in = (cos(lo) - cos(hi)) * 2 * M_PI / np, w_out = (1.0 / RGL_NT) * (2 * M_PI / RGL_NP);
-            model_vec3_t wi = v3(sin(ti) * cos(pi), sin(ti) * sin(pi), cos(ti));
-            if (!(wi.z > 0)) continue;
-            for (int q = 0; ok && q < RGL_NT; q++)
-                for (int p = 0; ok && p < RGL_NP; p++) {
-                    double co = (q + 0.5) / RGL_NT, so = sqrt(1 - co * co), po = pi + (p + 0.5) / RGL_NP * 2 * M_PI;
-                    model_vec3_t wo = v3(so * cos(po), so * sin(po), co);
-                    double fr = model_brdf_rgl_eval(r, wi, wo, chw) / co;
-                    model_cosines_t c = model_cosines(v3(0, 0, 1), wi, wo);
-                    double w = o->weights == FIT_WEIGHTS_SOLID_ANGLE ? w_in * w_out : 1;
-                    s->omega_how = "grid";
-                    ok = fit_samples_add(s, &c, fr * c.nl, w);
-                    if (!ok) model_error(path, 0, "out of memory");
-                    s->n_negative += fr < 0;
-                }
+            if (!(ok = rgl_slice(s, r, chw, o, a, b, (cos(lo) - cos(hi)) * 2 * M_PI / np, wo, dw)))
+                model_error(path, 0, "out of memory");
         }
     free(th);
     free(chw);
+    free(dw);
+    free(wo);
     model_brdf_rgl_free(r);
     if (ok && s->n == 0) {
-        model_error(path, 0, "RGL file: no incident direction above the surface");
+        model_error(path, 0, "RGL file: no measured direction above the surface");
         ok = false;
     }
     if (!ok) {

@@ -174,6 +174,20 @@ bool   model_brdf_rgl_channel_weights(const model_brdf_rgl_t *r, int ch /* model
 // f_r cos(theta_o) of the channels weighted by chw, for unit directions wi, wo
 // in the surface frame (z = normal); 0 when either is below the surface.
 double model_brdf_rgl_eval(const model_brdf_rgl_t *r, model_vec3_t wi, model_vec3_t wo, const double *chw);
+// The directions the file measured: incident slice (iphi, itheta)'s value
+// grid, every node of the warped square mapped back through the slice's VNDF
+// warp to a microfacet normal m and the outgoing direction w_i reflects into
+// about it. model_brdf_rgl_nodes_max is the count per slice (the value grid's
+// nodes); model_brdf_rgl_nodes writes those whose w_o is above the surface
+// (wi once, wo[k], domega_sr[k]: the outgoing solid angle the node stands
+// for: its cell of the warped square, halved at each edge, over the VNDF's
+// density there, times the (u_theta, u_phi) -> m Jacobian 2 pi^2 u_theta
+// sin(theta_m) and the reflection's 4 (w_i . m); 0 where the density is 0,
+// as on the square's u_theta = 0 edge, whose nodes hold the mirror
+// direction's value) and returns their count.
+int model_brdf_rgl_nodes_max(const model_brdf_rgl_t *r);
+int model_brdf_rgl_nodes(const model_brdf_rgl_t *r, int iphi, int itheta, model_vec3_t *wi, model_vec3_t *wo,
+                         double *domega_sr);
 
 // Generators (model/brdf/gen.c): "NAME key=value ..." with NAME oren-nayar,
 // ggx2, retro, ggx-ms, ptfe or ggx (model_brdf_recipe_models lists the keys

@@ -490,6 +490,65 @@ double model_brdf_rgl_eval(const model_brdf_rgl_t *r, model_vec3_t wi, model_vec
     return v;
 }
 
+// The root in [0, 1] of a t^2 + b t = c (b >= 0, c >= 0: a cell's cumulative
+// of a linear density), the stable form of the quadratic formula.
+static double cell_root(double a, double b, double c)
+{
+    double d = b * b + 4 * a * c;
+    double t = d > 0 ? 2 * c / (b + sqrt(d)) : (a != 0 ? -b / (2 * a) : 0);
+    return fmin(1, fmax(0, t));
+}
+
+// The warp of slice sl forward: the uniform variates s (s[0] the conditional
+// CDF of x in row y, s[1] the marginal of y) to the point u of the square,
+// inverting the bilinear density's CDFs (invert above) cell by cell.
+static void warp(const model_brdf_rgl_t *r, int sl, const double s[2], double u[2])
+{
+    int W = r->vw, H = r->vh;
+    double dx = 1.0 / (W - 1), dy = 1.0 / (H - 1);
+    const double *v = r->vndf + (size_t)sl * H * W, *R = r->rowint + (size_t)sl * H;
+    const double *M = r->margcdf + (size_t)sl * H, *C = r->condcdf + (size_t)sl * H * W;
+    int i = 0;
+    while (i < H - 2 && M[i + 1] <= s[1]) i++;
+    double fy = cell_root(0.5 * dy * (R[i + 1] - R[i]), dy * R[i], fmax(0, s[1] - M[i]));
+    double den = (1 - fy) * R[i] + fy * R[i + 1], t = s[0] * den;
+    int j = 0;
+    while (j < W - 2 && (1 - fy) * C[i * W + j + 1] + fy * C[(i + 1) * W + j + 1] <= t) j++;
+    double v0 = (1 - fy) * v[i * W + j] + fy * v[(i + 1) * W + j];
+    double v1 = (1 - fy) * v[i * W + j + 1] + fy * v[(i + 1) * W + j + 1];
+    double base = (1 - fy) * C[i * W + j] + fy * C[(i + 1) * W + j];
+    double fx = cell_root(0.5 * dx * (v1 - v0), dx * v0, fmax(0, t - base));
+    u[0] = (j + fx) * dx;
+    u[1] = (i + fy) * dy;
+}
+
+int model_brdf_rgl_nodes_max(const model_brdf_rgl_t *r) { return r->sw * r->sh; }
+
+int model_brdf_rgl_nodes(const model_brdf_rgl_t *r, int iphi, int itheta, model_vec3_t *wi, model_vec3_t *wo,
+                         double *domega_sr)
+{
+    double ti = r->theta_i[itheta], pi = r->nphi ? r->phi_i[iphi] : 0;
+    *wi = (model_vec3_t){ sin(ti) * cos(pi), sin(ti) * sin(pi), cos(ti) };
+    int sl = iphi * r->ntheta + itheta, n = 0, W = r->vw, H = r->vh;
+    const double *v = r->vndf + (size_t)sl * H * W;
+    for (int a = 0; a < r->sh; a++)
+        for (int b = 0; b < r->sw; b++) {
+            double s[2] = { (double)b / (r->sw - 1), (double)a / (r->sh - 1) }, u[2];
+            warp(r, sl, s, u);
+            double p = bilerp(v, W, H, u[0], u[1]);
+            double th = 0.5 * M_PI * u[0] * u[0], ph = 2 * M_PI * u[1] - M_PI + (r->isotropic ? pi : 0);
+            model_vec3_t m = { sin(th) * cos(ph), sin(th) * sin(ph), cos(th) };
+            double im = wi->x * m.x + wi->y * m.y + wi->z * m.z;
+            model_vec3_t o = { 2 * im * m.x - wi->x, 2 * im * m.y - wi->y, 2 * im * m.z - wi->z };
+            if (!(im > 0) || !(o.z > 0)) continue;
+            double cell = (b == 0 || b == r->sw - 1 ? 0.5 : 1) * (a == 0 || a == r->sh - 1 ? 0.5 : 1) /
+                          ((double)(r->sw - 1) * (r->sh - 1));
+            wo[n] = o;
+            domega_sr[n++] = p > 0 ? cell / p * 2 * M_PI * M_PI * u[0] * sin(th) * 4 * im : 0;
+        }
+    return n;
+}
+
 // CIE 1931 y-bar by the multi-lobe Gaussian fit of Wyman, Sloan and Shirley
 // (2013), for the luminance of spectral files.
 static double ybar(double nm)
