@@ -288,11 +288,26 @@ TEST(calib_gain_descriptor_round_trip)
         calib_gain_descriptor_free(&d);
     }
     free(text);
+    // read back, and written again beside the frames (paths below the file's directory)
+    char *inside = g_build_filename(dir, "inside.txt", NULL);
     rc = test_refl_run(180, &so, &se, "calib", "gain", "--emva-descriptor", dp, "-o", out2, "--no-report",
-                       "--min-steps", "20", "--pixel-area-um2", "25", "--wavelength-nm", "550", NULL);
+                       "--min-steps", "20", "--pixel-area-um2", "25", "--wavelength-nm", "550",
+                       "--write-emva-descriptor", inside, NULL);
     CHECK_MSG(rc == 0, "refl calib gain --emva-descriptor (written): %d\n%s", rc, se ? se : "");
     free(so);
     free(se);
+    text = model_read_file(inside, &n);
+    CHECK(text != NULL);
+    if (text) {
+        calib_gain_descriptor_t d;
+        CHECK(calib_gain_descriptor_parse(text, n, inside, &d));
+        CHECK(d.npaths == DSTEPS * 4 + 2 * DLSP);
+        for (int i = 0; i < d.npaths; i++)
+            CHECK_MSG(!strncmp(d.paths[i], "images/f", 8) || !strncmp(d.paths[i], "more/f", 6), "%s", d.paths[i]);
+        calib_gain_descriptor_free(&d);
+    }
+    free(text);
+    g_free(inside);
     json_t *a = load(out1), *b = load(out2);
     if (a && b) {
         json_t *ra = json_object_get(json_object_get(a, "emva1288"), "datasheet");

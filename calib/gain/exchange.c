@@ -78,15 +78,16 @@ static char *relative_path(const char *dir, const char *file)
                         "to a path without blanks)");
         goto done;
     }
-    size_t common = 0, i = 0;   // the longest common prefix ending at a directory boundary
+    // the longest common prefix ending at a directory boundary: rf[0 .. common), the rest of rd its directories
+    size_t common = 0, i = 0, dir_rest;
     for (; rd[i] && rd[i] == rf[i]; i++)
         if (rd[i] == '/') common = i + 1;
-    if (!rd[i] && rf[i] == '/') common = i + 1;
+    dir_rest = common;
+    if (!rd[i] && rf[i] == '/') common = dir_rest = i + 1;   // the file lies under the directory
+    if (dir_rest > i) dir_rest = i;
     GString *g = g_string_new("");
-    for (const char *p = rd + common; *p; p++)
-        if (p == rd + common || p[-1] == '/') {
-            if (*p != '/') g_string_append(g, "../");
-        }
+    for (const char *p = rd + dir_rest; *p; p++)
+        if ((p == rd + dir_rest || p[-1] == '/') && *p != '/') g_string_append(g, "../");
     g_string_append(g, rf + common);
     out = g_string_free(g, FALSE);
 done:
