@@ -20,7 +20,9 @@
 // maps and the PRNU map (flat field).
 // Output: DIR/gain.json, DIR/offset_dn.tiff, DIR/dsnu_dn.tiff,
 // DIR/prnu_gain.tiff (total: vignetting included, mean 1),
-// DIR/prnu_highpass.tiff (smooth part removed, mean 1), DIR/report.html + PNGs.
+// DIR/prnu_highpass.tiff (smooth part removed, mean 1), DIR/report.html + PNGs,
+// DIR/datasheet.html (EMVA 1288 by the standard's definitions); with
+// --write-emva-descriptor an EMVA 1288 descriptor of the frames.
 #define _GNU_SOURCE
 #include <glib.h>
 #include <math.h>

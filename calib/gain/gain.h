@@ -11,13 +11,18 @@
 // dark.c; the sweep, sweep.c; photon transfer, ptc.c; linearity,
 // linearity.c; the linearisation, linearisation.c; the response) →
 // calib_gain_make_maps (offset, DSNU, PRNU of the flat field at the first
-// gain; maps.c) → calib_gain_make_spatial (EMVA 1288 Release 4.0 Linear:
-// row/column/pixel split, spectrograms, profiles, spatial.c; defects,
-// defects.c) → calib_gain_write_maps, calib_gain_write_defects,
-// calib_gain_json (gain.json, with "emva1288"; output.c, emva.c),
+// gain, and the standard's DSNU1288/PRNU1288 of its stacks; maps.c,
+// nonuniformity.c) → calib_gain_make_spatial (refl's high-pass split,
+// spectrograms, profiles, spatial.c; defects, defects.c) →
+// calib_gain_write_maps, calib_gain_write_defects, calib_gain_json
+// (gain.json, with "emva1288"; output.c, emva.c, datasheet.c),
 // calib_gain_report (plots, report.html; report.c),
-// calib_gain_datasheet_html (datasheet.html; emva.c). The photon axis
-// (calib_gain_an_photons, photons.c) follows each gain's calib_gain_analyse.
+// calib_gain_datasheet_html (datasheet.html; emva.c),
+// calib_gain_write_descriptor (an EMVA 1288 descriptor; exchange.c). The
+// photon axis (calib_gain_an_photons, photons.c) and the standard's figures
+// (calib_gain_an_emva, standard.c) follow each gain's calib_gain_analyse.
+// Frames also come from an EMVA 1288 descriptor (calib_gain_read_descriptor;
+// its grammar descriptor.c).
 // The least-squares fits the phases share: fit.c.
 // Errors: false / NULL with the message kept by model_error_set
 // (model_last_error), not printed: the caller prints it once. What a run is

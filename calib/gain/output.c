@@ -165,7 +165,8 @@ static json_t *conventions_json(const calib_gain_opts_t *o, const calib_gain_dat
                                                     "dsnu_dn, prnu_pct) are refl's; quantum_efficiency and the "
                                                     "gains' photon figures the standard's (\"not measured\" without "
                                                     "a photon axis)"));
-    json_object_set_new(cv, "dynamic_range", json_string("saturation_capacity_e / read_noise_e"));
+    json_object_set_new(cv, "dynamic_range", json_string("refl's: saturation_capacity_e / read_noise_e (both with "
+                                                         "the small-signal K; the standard's DR is emva1288's row)"));
     json_object_set_new(cv, "statistics_region", d->roi[2] > 0 ? json_pack("[iiii]", d->roi[0], d->roi[1], d->roi[2],
                                                                            d->roi[3])
                                                                : json_string("whole frame"));
