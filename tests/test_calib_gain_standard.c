@@ -11,6 +11,9 @@
 //   (a compression S (1 - a S)): every row within 1e-9 of the definitions,
 //   the parts' variances adding up to the totals, and the small-signal
 //   quadratic K (refl's) at least 2 % from the standard's.
+// calib_gain_standard_known_answers: a linear sensor with a full well: every
+//   row against the sensor's own K, eta, read noise, dark current, full
+//   well, DSNU and PRNU parts.
 // calib_gain_standard_variances: the stacks' split on patterns of known
 //   variance, the identity of the parts, a negative estimate reported as a
 //   negative value (not 0).
@@ -43,13 +46,21 @@ typedef struct {
     uint16_t light[NSTEP][2][P], dark[NSTEP][2][P], slight[LSP][P], sdark[LSP][P];
 } frames_t;
 
-static void frame(const frames_t *F, double t_us, bool dark, model_rng_t *r, uint16_t *pix)
+// The sensor's response: the compression a (per DN) and the full well (e-, the photo-electrons with their shot
+// noise clipped to it; 0: none, the 12 bits clip).
+typedef struct {
+    double a, fw_e;
+} response_t;
+
+static void frame(const frames_t *F, response_t rs, double t_us, bool dark, model_rng_t *r, uint16_t *pix)
 {
     double mp = photons(t_us);
     for (int i = 0; i < P; i++) {
         double e = (dark ? 0 : S_ETA * mp * F->gain[i]) + S_DC * t_us * 1e-6;
-        e += sqrt(e) * model_rng_gauss(r) + S_RN * model_rng_gauss(r);
-        double S = S_K * e, v = floor(F->dsnu[i] + S * (1 - S_A * S) + 0.5);
+        e += sqrt(e) * model_rng_gauss(r);
+        if (rs.fw_e > 0 && e > rs.fw_e) e = rs.fw_e;
+        e += S_RN * model_rng_gauss(r);
+        double S = S_K * e, v = floor(F->dsnu[i] + S * (1 - rs.a * S) + 0.5);
         pix[i] = (uint16_t)(v < 0 ? 0 : v > 4095 ? 4095 : v);
     }
 }
@@ -61,7 +72,7 @@ static double step_us(int i)
 
 // The frames, written as PNGs with their manifest (the sweep: a light and a dark pair per exposure; the
 // spatial set: LSP light and LSP dark frames at SPATIAL_US); returns the manifest's path.
-static const char *make_frames(frames_t *F)
+static const char *make_frames(frames_t *F, response_t rs)
 {
     const char *dir = test_path("frames");
     g_mkdir_with_parents(dir, 0755);
@@ -80,7 +91,7 @@ static const char *make_frames(frames_t *F)
                 uint16_t *pix = s == NSTEP ? (dark ? F->sdark[rep] : F->slight[rep])
                                            : (dark ? F->dark[s][rep] : F->light[s][rep]);
                 double t = s == NSTEP ? SPATIAL_US : step_us(s);
-                frame(F, t, dark, &r, pix);
+                frame(F, rs, t, dark, &r, pix);
                 char name[32];
                 snprintf(name, sizeof name, "f%04d.png", k++);
                 char *path = g_build_filename(dir, name, NULL);
@@ -199,6 +210,10 @@ static void definitions(frames_t *F, want_t *w, int *n)
         best = vy[i];
         is = i;
     }
+    int top = 0;   // a walk ending below half the largest variance: the largest
+    for (int i = 1; i < NSTEP; i++)
+        if (vy[i] > vy[top]) top = i;
+    if (vy[is] < 0.5 * vy[top]) is = top;
     int last = 0;
     for (int i = 0; i < NSTEP; i++)
         if (Y[i] <= 0.7 * Y[is]) last = i;
@@ -267,7 +282,7 @@ static json_t *row_of(json_t *rows, const char *symbol, const char *unit)
 TEST(calib_gain_standard_rows)
 {
     frames_t *F = calloc(1, sizeof *F);
-    const char *m = make_frames(F);
+    const char *m = make_frames(F, (response_t){ S_A, 0 });
     const char *out = test_path("out");
     char *so = NULL, *se = NULL;
     int rc = test_refl_run(180, &so, &se, "calib", "gain", "--frames", m, "-o", out, "--no-report", "--max-dn",
@@ -368,4 +383,150 @@ TEST(calib_gain_standard_variances)
     CHECK_NEAR(nu.prnu_pct[1], 100 * -sqrt(-0.5 * v.s2_row) / 100, 1e-12);
     CHECK(calib_gain_signed_sqrt(-4) == -2 && calib_gain_signed_sqrt(9) == 3 && isnan(calib_gain_signed_sqrt(NAN)));
     free(img);
+}
+
+// The variance (divisor n) of n values v[i * stride].
+static double var_of(const double *v, int n, int stride)
+{
+    double m = 0, s = 0;
+    for (int i = 0; i < n; i++) m += v[i * stride];
+    m /= n;
+    for (int i = 0; i < n; i++) s += (v[i * stride] - m) * (v[i * stride] - m);
+    return s / n;
+}
+
+// The sensor's own figures (the truth of this test's frames): its DSNU's and PRNU's parts from the patterns it
+// was made of (row 1.2 sin(2 pi y / 10), column 1.8 cos(2 pi 5 x / W), pixel the rest; gain column 0.006 sin(2 pi
+// x / 7), pixel the rest, no row part): the pixel part the variance of the rest; the row and column parts the
+// variances of the pattern's own row and column means less the pixel part's share in them (its variance over the
+// W or H pixels averaged), as this instance of the patterns holds them (a random pixel pattern's row means
+// correlate with the row pattern by chance).
+typedef struct {
+    double dsnu_dn[4], prnu_pct[4];   // total, row, column, pixel
+} truth_nu_t;
+
+static truth_nu_t nonuniformity_truth(const frames_t *F)
+{
+    double *dp = malloc(sizeof(double) * P * 4), *gp = dp + P, *d = dp + 2 * P, *g = dp + 3 * P, rw[H], cl[W], gc[W];
+    for (int y = 0; y < H; y++) rw[y] = 1.2 * sin(2 * M_PI * y / 10);
+    for (int x = 0; x < W; x++) {
+        cl[x] = 1.8 * cos(2 * M_PI * 5 * x / W);
+        gc[x] = 0.006 * sin(2 * M_PI * x / 7);
+    }
+    double gm = 0, rm[H] = { 0 }, cm[W] = { 0 }, gcm[W] = { 0 };
+    for (int i = 0; i < P; i++) gm += F->gain[i] / P;
+    for (int y = 0; y < H; y++)
+        for (int x = 0; x < W; x++) {
+            rm[y] += F->dsnu[y * W + x] / W;
+            cm[x] += F->dsnu[y * W + x] / H;
+            gcm[x] += F->gain[y * W + x] / gm / H;
+        }
+    for (int y = 0; y < H; y++)
+        for (int x = 0; x < W; x++) {
+            int i = y * W + x;
+            d[i] = F->dsnu[i];
+            g[i] = F->gain[i] / gm;
+            dp[i] = F->dsnu[i] - 100 - rw[y] - cl[x];
+            gp[i] = F->gain[i] - 1 - gc[x];
+        }
+    truth_nu_t t;
+    t.dsnu_dn[0] = sqrt(var_of(d, P, 1) * P / (P - 1.0));
+    const double vp = var_of(dp, P, 1), gvp = var_of(gp, P, 1) / (gm * gm);
+    t.dsnu_dn[1] = sqrt(var_of(rm, H, 1) - vp / W);
+    t.dsnu_dn[2] = sqrt(var_of(cm, W, 1) - vp / H);
+    t.dsnu_dn[3] = sqrt(vp);
+    t.prnu_pct[0] = 100 * sqrt(var_of(g, P, 1) * P / (P - 1.0));
+    t.prnu_pct[1] = 0;
+    t.prnu_pct[2] = 100 * sqrt(var_of(gcm, W, 1) - gvp / H);
+    t.prnu_pct[3] = 100 * sqrt(gvp);
+    free(dp);
+    return t;
+}
+
+static double row_value(json_t *rows, const char *symbol, const char *unit)
+{
+    json_t *r = row_of(rows, symbol, unit);
+    CHECK_MSG(r != NULL, "no datasheet row %s (%s)", symbol, unit);
+    return r ? json_number_value(json_object_get(r, "value")) : NAN;
+}
+
+// Known answers: a linear sensor (no compression) whose photo-electrons clip at a full well of 7000 e- (3500 DN
+// above the offset, below the 12 bits' end): every standard row against the sensor's own K 0.5 DN/e-, eta 0.6,
+// read noise 4 e-, dark current 3e4 e-/s, full well, DSNU and PRNU parts. The tolerances are several times each
+// figure's statistical scatter on these frames (K: 30 steps of 12,288 pixel pairs, about 0.3 %; the spatial
+// totals from 12-frame stacks, about 0.4 %); the saturation capacity is the standard's (the step where the
+// variance peaks, below the well by the spread of the pixels' charge there, and by up to one step of 166 e-).
+TEST(calib_gain_standard_known_answers)
+{
+    const double FW = 7000;
+    frames_t *F = calloc(1, sizeof *F);
+    const char *m = make_frames(F, (response_t){ 0, FW });
+    const char *out = test_path("out");
+    char *so = NULL, *se = NULL;
+    int rc = test_refl_run(180, &so, &se, "calib", "gain", "--frames", m, "-o", out, "--no-report", "--max-dn",
+                           "4095", "--min-steps", "20", "--irradiance", "100", "--pixel-pitch-um", "5",
+                           "--wavelength-nm", "550", NULL);
+    CHECK_MSG(rc == 0, "refl calib gain: %d\n%s", rc, se ? se : "");
+    free(so);
+    free(se);
+    char *jp = g_build_filename(out, "gain.json", NULL);
+    json_t *j = json_load_file(jp, 0, NULL);
+    g_free(jp);
+    CHECK(j != NULL);
+    if (!j) {
+        free(F);
+        return;
+    }
+    json_t *rows = json_object_get(json_object_get(j, "emva1288"), "datasheet");
+    const double K = row_value(rows, "K", "DN/e-"), eta = row_value(rows, "eta", "%") / 100;
+    const double sd = row_value(rows, "sigma_d", "e-"), esat = row_value(rows, "mu_e.sat", "e-");
+    const double le = row_value(rows, "LE", "%"), dc = row_value(rows, "mu_I.mean", "e-/s");
+    const double dcv = row_value(rows, "mu_I.var", "e-/s"), emin = row_value(rows, "mu_e.min", "e-");
+    fprintf(stderr, "  K %.5f DN/e- (0.5), eta %.4f (0.6), sigma_d %.4f e- (4), mu_e.sat %.0f e- (full well %.0f), "
+            "LE %.3f %%, dark current %.4g / %.4g e-/s (3e4)\n", K, eta, sd, esat, FW, le, dc, dcv);
+    CHECK_REL(K, S_K, 0.02);
+    CHECK_REL(row_value(rows, "1/K", "e-/DN"), 1 / S_K, 0.02);
+    CHECK_REL(eta, S_ETA, 0.02);
+    CHECK_REL(row_value(rows, "R", "DN/photon"), S_K * S_ETA, 0.01);
+    CHECK_REL(sd, S_RN, 0.02);
+    // sigma_y.dark^2 = K^2 sigma_d^2 + q^2 / 12 (the noise dithers the quantisation)
+    CHECK_REL(row_value(rows, "sigma_y.dark", "DN"), sqrt(S_K * S_K * S_RN * S_RN + 1.0 / 12), 0.02);
+    CHECK_REL(emin, sqrt(S_RN * S_RN + 1.0 / 12 / (S_K * S_K)) + 0.5, 0.02);
+    // the standard's saturation, the step where the temporal variance peaks: below the well by one to three
+    // times the spread of the pixels' charge there (shot noise 84 e-, PRNU 1.09 % of 7000 e- 76 e-: 113 e-) and
+    // by up to one step (166 e-) more, never above it by more than a step
+    CHECK(esat > FW - 3 * 113 - 166 && esat < FW + 166);
+    // past the full well only the dark noise is left: the walk from the brightest step ends on that plateau
+    json_t *fit = json_object_get(json_object_get(j, "emva1288"), "photon_transfer");
+    CHECK_MSG(json_is_true(json_object_get(fit, "saturation_past_full_well_plateau")), "no plateau flag in %s",
+              json_dumps(fit, JSON_COMPACT) ?: "");
+    CHECK_REL(row_value(rows, "SNR_max", "1"), sqrt(esat), 1e-9);
+    CHECK_REL(row_value(rows, "DR", "1"), esat / emin, 1e-9);
+    CHECK_REL(row_value(rows, "mu_p.sat", "photons"), esat / eta, 1e-9);
+    CHECK(le >= 0 && le < 0.25);
+    CHECK_REL(dc, S_DC, 0.03);
+    CHECK_REL(dcv, S_DC, 0.15);
+    truth_nu_t t = nonuniformity_truth(F);
+    static const char *part[4] = { "", ".row", ".col", ".pixel" };
+    for (int k = 0; k < 4; k++) {
+        char sym[32];
+        snprintf(sym, sizeof sym, "DSNU1288%s", part[k]);
+        double v = row_value(rows, sym, "e-");
+        fprintf(stderr, "  %-15s %.4f e- (the pattern's %.4f)\n", sym, v, t.dsnu_dn[k] / S_K);
+        CHECK_REL(v, t.dsnu_dn[k] / S_K, 0.03);
+    }
+    CHECK_REL(row_value(rows, "DSNU1288", "DN"), t.dsnu_dn[0], 0.03);
+    for (int k = 0; k < 4; k++) {
+        char sym[32];
+        snprintf(sym, sizeof sym, "PRNU1288%s", part[k]);
+        double v = row_value(rows, sym, "%");
+        fprintf(stderr, "  %-15s %.4f %% (the pattern's %.4f)\n", sym, v, t.prnu_pct[k]);
+        if (k == 1)   // no row pattern: an estimate near 0, of either sign (pixel variance leaking into 128-pixel
+                      // row means, about 0.03 %)
+            CHECK(fabs(v) < 0.1);
+        else
+            CHECK_REL(v, t.prnu_pct[k], 0.03);
+    }
+    json_decref(j);
+    free(F);
 }

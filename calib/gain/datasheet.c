@@ -82,7 +82,7 @@ static void ptc_rows(json_t *r, const calib_gain_opts_t *o, const calib_gain_an_
         "mu_e.min / eta");
     row(r, "saturation capacity", "mu_p.sat", e->mu_p_sat, "photons", S_SAT, T_SAT, true, ms, false,
         "mu_p at the saturation step: the maximum of sigma^2_y, walking from the brightest step back until the "
-        "variance falls on both sides");
+        "variance falls on both sides (the largest sigma^2_y where the walk ends on a plateau below half of it)");
     row(r, "saturation capacity", "mu_e.sat", e->mu_e_sat, "e-", S_SAT, T_SAT, false, true, false,
         ms ? "eta mu_p.sat" : "eta mu_p.sat = R' t_sat / K, R' the slope through the origin of mu_y - mu_y.dark "
              "against exposure over the same steps (mu_p proportional to the exposure: constant irradiance)");

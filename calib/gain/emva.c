@@ -144,6 +144,7 @@ static json_t *ptc_json(const calib_gain_an_t *a)
                                                          "for mu_p: constant irradiance)"));
     json_object_set_new(o, "steps", json_integer(e->n));
     json_object_set_new(o, "saturation_step", json_integer(e->i_sat));
+    json_object_set_new(o, "saturation_past_full_well_plateau", json_boolean(e->sat_plateau));
     json_object_set_new(o, "saturation_signal_dn", model_json_number(e->mu_y_sat_dn));
     json_object_set_new(o, "saturation_x", model_json_number(e->x_sat));
     json_object_set_new(o, "fit_steps", json_integer(e->n_fit));
@@ -161,7 +162,8 @@ static json_t *ptc_json(const calib_gain_an_t *a)
     json_object_set_new(o, "steps_without_their_dark_pair", json_integer(a->n_dark_modelled));
     json_object_set_new(o, "definition", json_string(
         "steps indexed from 0 in gain.json's curves order (exposure, then photons); saturation_step: the maximum "
-        "of sigma^2_y walking from the brightest step back; fit_steps: 0 .. fit_last_step, the last with mu_y - "
+        "of sigma^2_y walking from the brightest step back (saturation_past_full_well_plateau: the walk ended on a "
+        "plateau below half the largest sigma^2_y, past a full well, and the largest is the saturation); fit_steps: 0 .. fit_last_step, the last with mu_y - "
         "mu_y.dark <= 0.7 of its value at saturation_step; linearity_steps: the first with >= 5 % .. the last "
         "with <= 95 %; steps_without_their_dark_pair: steps whose dark is refl's dark model (the standard "
         "takes the dark pair at each exposure)"));

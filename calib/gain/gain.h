@@ -186,6 +186,8 @@ typedef struct {
     bool   photons;            // x is the photon count (else the exposure stands in: photon figures NAN)
     int    i_sat;              // saturation: the maximum of sigma^2_y, walking from the brightest step back
                                // until the variance falls on both sides
+    bool   sat_plateau;        // the walk ended on a plateau below half the largest sigma^2_y (past a full
+                               // well): the largest sigma^2_y taken instead
     double mu_y_sat_dn;        // Y at saturation
     int    i_fit_last, n_fit;  // K and R fitted over the steps 0 .. i_fit_last, the last with Y <= 0.7 Y_sat
     double K, inv_K;           // K: slope of V against Y through the origin, DN/e-

@@ -21,11 +21,16 @@ double calib_gain_signed_sqrt(double v)
 
 // The saturation step: walking from the brightest step back, the variance's
 // maximum where it first falls on both sides (a single lower step on the way
-// does not end the walk): the reference implementation's index_u_ysat.
-static int saturation_index(const double *var_y, int n)
+// does not end the walk): the reference implementation's index_u_ysat. The
+// standard's saturation is the maximum of the variance: where the walk ends
+// below half the sweep's largest sigma^2_y it stopped on a noisy plateau
+// past saturation (a full well reached before the converter's end leaves
+// the dark noise there), and the largest sigma^2_y is the saturation
+// (*plateau true).
+static int saturation_index(const double *var_y, int n, bool *plateau)
 {
-    double vmax = 0;
-    int imax = 0;
+    double vmax = 0, top = -INFINITY;
+    int imax = 0, itop = 0;
     for (int i = n - 1; i >= 0; i--) {
         double prev = var_y[i > 0 ? i - 1 : 1 < n ? 1 : 0];
         if (var_y[i] >= vmax || prev >= vmax) {
@@ -34,7 +39,13 @@ static int saturation_index(const double *var_y, int n)
         } else if (var_y[i] < vmax && prev < vmax)
             break;
     }
-    return imax;
+    for (int i = 0; i < n; i++)
+        if (var_y[i] > top) {
+            top = var_y[i];
+            itop = i;
+        }
+    *plateau = var_y[imax] < 0.5 * top;
+    return *plateau ? itop : imax;
 }
 
 // The slope of y = s x through the origin over i = 0..last: sum x y / sum x^2.
@@ -155,7 +166,7 @@ bool calib_gain_emva(const calib_gain_emva_in_t *in, calib_gain_emva_t *o)
         Y[i] = in->mu_y[i] - in->mu_d[i];
         V[i] = in->var_y[i] - in->var_d[i];
     }
-    o->i_sat = saturation_index(in->var_y, n);
+    o->i_sat = saturation_index(in->var_y, n, &o->sat_plateau);
     o->mu_y_sat_dn = Y[o->i_sat];
     o->i_fit_last = -1;
     for (int i = 0; i < n; i++)
