@@ -109,7 +109,8 @@ bool calib_gain_report(const char *dir, const calib_gain_an_t *an, int ngains, c
     fprintf(f, "<p><b><a href=\"datasheet.html\">EMVA 1288 Release 4.0 Linear summary datasheet</a></b> "
             "(gain.json \"emva1288\": every figure with its definition)</p>\n");
     model_html_heading(f, "Photon transfer");
-    model_html_figure(f, "ptc.png", "temporal variance against signal (dark subtracted), with the K fit");
+    model_html_figure(f, "ptc.png", "temporal variance against signal (dark subtracted), with EMVA 1288's K (the line through the "
+                      "origin, solid) and refl's small-signal K0 (dashed)");
     model_html_heading(f, "Linearity");
     model_html_figure(f, "linearity.png", "signal against exposure with the line of EMVA 1288 Release 4.0 (least "
                       "squared relative deviations), and the relative deviation from it (5..95 % of saturation)");
