@@ -193,9 +193,14 @@ CALIB_GAIN_SRC := \
     calib/gain/linearisation.c \
     calib/gain/maps.c \
     calib/gain/photons.c \
+    calib/gain/standard.c \
+    calib/gain/nonuniformity.c \
+    calib/gain/descriptor.c \
+    calib/gain/exchange.c \
     calib/gain/spatial.c \
     calib/gain/defects.c \
     calib/gain/emva.c \
+    calib/gain/datasheet.c \
     calib/gain/output.c \
     calib/gain/report.c
 CALIB_SRC := $(CALIB_GEOMETRY_SRC) $(CALIB_LAMPS_SRC) $(CALIB_GAIN_SRC) \
@@ -298,6 +303,8 @@ TEST_SRC := \
     tests/test_rig_virtual_place.c \
     tests/test_calib_gain.c \
     tests/test_calib_gain_emva.c \
+    tests/test_calib_gain_standard.c \
+    tests/test_calib_gain_descriptor.c \
     tests/test_calib_white.c \
     tests/test_calib_sample_pose.c \
     tests/test_calib_geometry.c \
@@ -318,7 +325,7 @@ TEST_SRC := \
     tests/test_fit_verify_footprint.c \
     tests/test_fit_verify_speed.c
 BENCH_SRC := tests/bench.c
-FUZZ_SRC  := tests/fuzz_parsers.c
+FUZZ_SRC  := tests/fuzz_parsers.c calib/gain/descriptor.c
 
 obj = $(patsubst %.c,$(BUILD)/%.o,$(1))
 LIB_OBJ   := $(call obj,$(LIB_SRC)) $(patsubst %.cc,$(BUILD)/%.o,$(MODEL_CXX_SRC) $(CALIB_CXX_SRC))

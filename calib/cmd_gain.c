@@ -31,7 +31,14 @@
     "                                            spatial set, many frames at one level (DSNU, PRNU, defects;\n" \
     "                                            aliases spatial-light|spatial-dark); optional header line;\n"  \
     "                                            paths relative to the manifest; PNG, JPEG or TIFF\n"           \
-    "  --session DIR [--session DIR ...] -o DIR  sessions captured elsewhere (light = lamps on, dark = none)"
+    "  --session DIR [--session DIR ...] -o DIR  sessions captured elsewhere (light = lamps on, dark = none)\n"    \
+    "  --emva-descriptor FILE -o DIR             an EMVA 1288 descriptor (the standard's data exchange: v, n,\n"  \
+    "                                            b EXPOSURE_NS PHOTONS, d EXPOSURE_NS and i PATH lines): its\n"   \
+    "                                            photon counts are the photon axis, no irradiance needed\n"       \
+    "                                            (--pixel-area-um2: the per-area rows too)\n"                    \
+    "The datasheet's rows are the standard's definitions (gain.json \"emva1288\", with each row's section);\n" \
+    "the top-level figures and \"refl_rows\" are refl's own (the small-signal K, the high-pass PRNU, the\n"  \
+    "linearisation). --write-emva-descriptor FILE writes a descriptor of the run's frames for other tools."
 
 #define EPILOG                                                                                                 \
     "kc needs the source's radiance (--radiance); a virtual rig's truth is never read (refl chain\n"         \
@@ -124,6 +131,15 @@ static int photon_options(model_cli_t *c, calib_gain_opts_t *o)
     o->photodiode_a_per_w = v[6];
     o->photodiode_mm2 = v[7];
     double area = isfinite(v[1]) ? v[1] : v[2] * v[2];
+    if (o->descriptor) {   // its photon counts are the photon axis: the area and wavelength only stated
+        if (isfinite(v[0]))
+            return model_cli_error(c, "--emva-descriptor gives each step's photon count: no --irradiance or "
+                                   "photodiode reading");
+        o->pixel_area_um2 = area;
+        o->wavelength_nm = v[3];
+        if (isfinite(v[4])) o->defect_sigma = v[4];
+        return 0;
+    }
     int given = isfinite(v[0]) + isfinite(area) + isfinite(v[3]);
     if (given && given != 3)
         return model_cli_error(c, "the photon axis needs all of --irradiance, --pixel-area-um2 (or "
@@ -140,8 +156,10 @@ static int check_options(model_cli_t *c, calib_gain_opts_t *o, double **gains, d
 {
     int rc = numbers(c, o);
     if (rc) return rc;
-    if (!o->out || (!!o->rig + !!o->frames + (o->nsessions > 0)) != 1)
-        return model_cli_error(c, "give -o DIR and exactly one of --rig, --frames, --session");
+    if (!o->out || (!!o->rig + !!o->frames + (o->nsessions > 0) + !!o->descriptor) != 1)
+        return model_cli_error(c, "give -o DIR and exactly one of --rig, --frames, --session, --emva-descriptor");
+    if (o->descriptor && o->camera)
+        return model_cli_error(c, "--camera selects a camera of a rig or sessions, not of --emva-descriptor");
     if (o->frames && o->camera)
         return model_cli_error(c, "--camera selects a camera of a rig or sessions, not of --frames");
     const char *roi = model_cli_value(c, "--roi"), *gs = model_cli_value(c, "--gains");
@@ -168,6 +186,9 @@ static int check_options(model_cli_t *c, calib_gain_opts_t *o, double **gains, d
     if (lin) o->linearisation = strcmp(lin, "monotone") ? MODEL_LIN_PARAMETRIC : MODEL_LIN_MONOTONE;
     rc = photon_options(c, o);
     if (rc) return rc;
+    if (o->write_descriptor && !o->descriptor && !isfinite(o->irradiance_uw_cm2))
+        return model_cli_error(c, "--write-emva-descriptor needs each step's photon count: give --irradiance (or a "
+                               "photodiode reading), --pixel-area-um2 and --wavelength-nm");
     if (*gains) o->gains_db = *gains;
     if (*darks) o->dark_exposures_us = *darks;
     return 0;
@@ -184,6 +205,11 @@ int calib_cmd_gain(int argc, char **argv)
     model_opt_t opts[] = {
         MODEL_OPT_STRING("--rig", "RIG", "capture on this rig", &o.rig, false),
         MODEL_OPT_STRING("--frames", "MANIFEST.csv", "frames listed in a manifest", &o.frames, false),
+        MODEL_OPT_STRING("--emva-descriptor", "FILE", "frames of an EMVA 1288 descriptor file (exposures in ns, each "
+                         "step's photon count, image paths relative to the file, '/' or '\\')", &o.descriptor, false),
+        MODEL_OPT_STRING("--write-emva-descriptor", "FILE", "also write an EMVA 1288 descriptor of the run's frames "
+                         "(the sweep's pairs and the spatial set; paths relative to FILE; needs the photon counts)",
+                         &o.write_descriptor, false),
         MODEL_OPT_LIST("--session", "DIR", "a session captured elsewhere; repeat it for more", &sessions, false,
                        false),
         { "-o", "--output", "DIR", "the output directory", MODEL_OPT_KIND_STRING, &o.out, 0, 0, false, false, NULL },

@@ -54,15 +54,24 @@ def main():
     for e in gains:
         c = e["curves"]
         mu, var = arr(c["signal_dn"]), arr(c["signal_variance_dn2"])
-        ax.plot(mu, var, "o", ms=3, label="%g dB" % e["gain_db"])
-        K = e["system_gain_dn_per_e"]
+        pts = ax.plot(mu, var, "o", ms=3, label="%g dB" % e["gain_db"])
+        K0 = e["system_gain_dn_per_e"]
         sat = e["saturation_dn"]
         x = np.linspace(0, 0.7 * sat, 50)
-        ax.plot(x, K * x, "-", lw=0.8, label="K = %.4g DN/e- (%g dB)" % (K, e["gain_db"]))
+        std = e.get("emva1288", {})
+        K = std.get("system_gain_dn_per_e")
+        i_sat = std.get("saturation_step")
+        if isinstance(K, (int, float)) and isinstance(i_sat, int) and 0 <= i_sat < len(mu):
+            xs = np.linspace(0, 0.7 * mu[i_sat], 50)
+            ax.plot(xs, K * xs, "-", lw=1, color=pts[0].get_color(),
+                    label="EMVA 1288 K = %.4g DN/e- (%g dB): through the origin, 0..70 %% of saturation"
+                    % (K, e["gain_db"]))
+        ax.plot(x, K0 * x, "--", lw=0.8, color=pts[0].get_color(),
+                label="refl's K0 = %.4g DN/e- (%g dB): small-signal slope of a quadratic" % (K0, e["gain_db"]))
         ax.axvline(sat, ls=":", lw=0.8, color="grey")
     ax.set_xlabel("signal mu_y - mu_y.dark (DN)")
     ax.set_ylabel("temporal variance sigma^2_y - sigma^2_y.dark (DN^2)")
-    ax.set_title("Photon transfer (dotted: saturation)")
+    ax.set_title("Photon transfer (dotted: refl's saturation)")
     ax.legend(fontsize=8)
     ax.grid(alpha=0.3)
     fig.tight_layout()

@@ -71,7 +71,7 @@ def load_json(path):
 # The formats refl writes and the newest version of each these pages read
 # (the C readers' own limits: calib/gain/gain.h, fit/priors.h, ...).
 FORMATS = {
-    "refl-geometry": 1, "refl-lamps": 1, "refl-gain": 2, "refl-white": 1, "refl-priors": 1,
+    "refl-geometry": 1, "refl-lamps": 1, "refl-gain": 3, "refl-white": 1, "refl-priors": 1,
     "refl-verify": 1, "refl-chain": 1, "refl-lightplan": 1, "refl-study": 1,
 }
 # a version-1 priors file may name itself so

@@ -5,7 +5,8 @@
 // (rig_virtual_check_truth), 'i' an image file's bytes (model_image_decode:
 // PNG, JPEG, TIFF by content), 'l' an STL scene (model_scene_parse_stl), 'y' a
 // PLY scene (model_scene_parse_ply), 'b' an RGL .bsdf tensor file
-// (model_brdf_rgl_parse, evaluated once when it parses); any other byte b selects b % 6: 0 D3D scene,
+// (model_brdf_rgl_parse, evaluated once when it parses), 'e' an EMVA 1288
+// descriptor (calib_gain_descriptor_parse); any other byte b selects b % 6: 0 D3D scene,
 // 1 OBJ scene, 2 INI, 3 materials, 4 lamps, 5 sensor (seeds use '0'..'5'; the
 // corpus was written with that rule, which is why the newer parsers have
 // letters). The rest of the input is the text (not NUL-terminated, so reads
@@ -25,6 +26,7 @@
 #include <stdint.h>
 #include <stdlib.h>
 
+#include "calib/gain/gain.h"
 #include "model/model.h"
 #include "rig/rig.h"
 
@@ -35,7 +37,9 @@
 enum { REFL_FUZZ_D3D, REFL_FUZZ_OBJ, REFL_FUZZ_INI, REFL_FUZZ_MATERIALS, REFL_FUZZ_LAMPS,
        REFL_FUZZ_SENSOR, REFL_FUZZ_NMOD,   // selected by first byte % REFL_FUZZ_NMOD
        REFL_FUZZ_PLAN = REFL_FUZZ_NMOD, REFL_FUZZ_RIG, REFL_FUZZ_TRUTH, REFL_FUZZ_IMAGE, REFL_FUZZ_STL,
-       REFL_FUZZ_PLY, REFL_FUZZ_RGL, REFL_FUZZ_NPARSERS };
+       REFL_FUZZ_PLY, REFL_FUZZ_RGL,
+       REFL_FUZZ_EMVA,
+       REFL_FUZZ_NPARSERS };
 
 // The parser a first byte selects (REFL_FUZZ_*).
 static inline int refl_fuzz_selector(uint8_t b)
@@ -48,6 +52,7 @@ static inline int refl_fuzz_selector(uint8_t b)
     case 'l': return REFL_FUZZ_STL;
     case 'y': return REFL_FUZZ_PLY;
     case 'b': return REFL_FUZZ_RGL;
+    case 'e': return REFL_FUZZ_EMVA;
     default: return b % REFL_FUZZ_NMOD;
     }
 }
@@ -103,6 +108,12 @@ static inline bool refl_fuzz_parse_in(const uint8_t *data, size_t len, const cha
         }
         model_brdf_rgl_free(r);
         return r != NULL;
+    }
+    case REFL_FUZZ_EMVA: {
+        calib_gain_descriptor_t d;
+        bool ok = calib_gain_descriptor_parse(text, n, "fuzz-descriptor.txt", &d);
+        if (ok) calib_gain_descriptor_free(&d);
+        return ok;
     }
     case REFL_FUZZ_D3D: {
         model_scene_t *s = model_scene_parse_d3d(text, n, "fuzz.d3d", NULL);

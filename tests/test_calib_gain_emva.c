@@ -1,8 +1,10 @@
 // tests/test_calib_gain_emva.c — EMVA 1288 Release 4.0 Linear figures of
 // `refl calib gain` (calib/gain/emva.c) on small synthetic frames with known
 // answers:
-// calib_gain_emva_photon_axis: noise-free sweep of known eta, K, dark noise:
-//   the photon count, R, eta, mu_e.min, mu_p.min, mu_p.sat by hand.
+// calib_gain_emva_photon_axis: the photon count of an irradiance and a
+//   photodiode; a noise-free sweep of known eta, K, dark noise: the
+//   standard's K, R, eta, sigma_d, mu_e.min, mu_p.min, mu_p.sat, SNR_max, DR
+//   by hand, with photon counts and with the exposure standing in.
 // calib_gain_emva_split: a row pattern, a column pattern and pixel noise of
 //   known standard deviations (and temporal noise to remove) recovered.
 // calib_gain_emva_spectrogram: the transform against a plain DFT computed here
@@ -38,30 +40,50 @@ TEST(calib_gain_emva_photon_axis)
     CHECK_NEAR(one, 629.2639, 1e-3);
     // a photodiode of 0.3 A/W and 1 mm^2 reading 5 nA: 5e-9 / 0.3 W on 0.01 cm^2 = 1.6667 uW/cm^2
     CHECK_NEAR(calib_gain_photodiode_irradiance(5, 0.3, 1), 5e-9 / 0.3 / 0.01 * 1e6, 1e-12);
-    // a sweep of eta 0.55, K 0.4 DN/e-, saturation at 4000 DN: mu = K eta mu_p up to saturation
+    // a noise-free sweep of eta 0.55, K 0.4 DN/e-, sigma^2_y.dark 9 DN^2, saturation at 4000 DN (the variance
+    // collapses there): the standard's figures by hand
     const double eta = 0.55, K = 0.4, E = 3, A = 16, L = 620, var_dark = 9;
-    double t[30], mu[30];
+    double mp[30], mu_y[30], var_y[30], mu_d[30], var_d[30];
+    int isat = -1;
     for (int i = 0; i < 30; i++) {
-        t[i] = 100.0 * (i + 1);
-        mu[i] = fmin(K * eta * calib_gain_photons(E, A, L, t[i]), 4000);
+        mp[i] = calib_gain_photons(E, A, L, 100.0 * (i + 1));
+        double Y = K * eta * mp[i];
+        mu_d[i] = 100;
+        var_d[i] = var_dark;
+        mu_y[i] = 100 + fmin(Y, 4000);
+        var_y[i] = Y < 4000 ? var_dark + K * Y : 2;
+        if (Y < 4000) isat = i;
     }
-    calib_gain_photon_t p;
-    CHECK(calib_gain_photon_axis(t, mu, 30, 4000, K, var_dark, E, A, L, &p));
-    CHECK(p.measured);
-    CHECK_REL(p.qe, eta, 1e-9);
-    CHECK_REL(p.responsivity_dn_per_photon, K * eta, 1e-9);
-    CHECK_NEAR(p.responsivity_offset_dn, 0, 1e-6);
-    // SNR = 1: x^2 = 9 / 0.16 + x, x = 1/2 + sqrt(56.25 + 1/4) = 8.016620...
-    CHECK_NEAR(p.mu_e_min, 0.5 + sqrt(56.5), 1e-12);
-    CHECK_NEAR(p.mu_p_min, (0.5 + sqrt(56.5)) / eta, 1e-9);
-    CHECK_NEAR(p.mu_e_sat, 10000, 1e-9);
-    CHECK_NEAR(p.mu_p_sat, 10000 / eta, 1e-6);
-    CHECK_NEAR(calib_gain_snr_model(&p, p.mu_p_min), 1, 1e-12);
-    // no irradiance: the photon figures are not measured (NAN), the electron ones are
-    CHECK(calib_gain_photon_axis(t, mu, 30, 4000, K, var_dark, NAN, A, L, &p));
-    CHECK(!p.measured);
-    CHECK(isnan(p.qe) && isnan(p.mu_p_min) && isnan(p.mu_p_sat));
-    CHECK_NEAR(p.mu_e_min, 0.5 + sqrt(56.5), 1e-12);
+    const double dt[3] = { 100, 1000, 3000 }, dm[3] = { 100, 100, 100 }, dv[3] = { 9, 9, 9 };
+    calib_gain_emva_in_t in = { 30, mp, mu_y, var_y, mu_d, var_d, true, 3, dt, dm, dv, 1 };
+    calib_gain_emva_t e;
+    CHECK(calib_gain_emva(&in, &e));
+    CHECK(e.i_sat == isat);
+    CHECK_REL(e.K, K, 1e-12);
+    CHECK_REL(e.R, K * eta, 1e-12);
+    CHECK_REL(e.qe, eta, 1e-12);
+    CHECK_NEAR(e.var_y_dark_dn2, 9, 1e-9);
+    CHECK_NEAR(e.sigma_d_e, sqrt(9 - 1.0 / 12) / K, 1e-9);
+    CHECK_NEAR(e.mu_e_min, 3 / K + 0.5, 1e-9);   // sigma_y.dark / K + 1/2 = 8
+    CHECK_NEAR(e.mu_p_min, 8 / eta, 1e-9);
+    CHECK_REL(e.mu_p_sat, mp[isat], 1e-12);
+    CHECK_REL(e.mu_e_sat, K * eta * mp[isat] / K, 1e-12);
+    CHECK_REL(e.snr_max, sqrt(e.mu_e_sat), 1e-12);
+    CHECK_REL(e.dr, e.mu_e_sat / 8, 1e-9);
+    CHECK_NEAR(e.le_pct, 0, 1e-9);               // a straight line
+    CHECK_NEAR(e.dark_current_e_per_s, 0, 1e-9);
+    // the same sweep without photon counts (exposure standing in): the photon figures NAN, the electron ones equal
+    double t[30];
+    for (int i = 0; i < 30; i++) t[i] = 100.0 * (i + 1);
+    calib_gain_emva_in_t in2 = in;
+    in2.x = t;
+    in2.photons = false;
+    calib_gain_emva_t e2;
+    CHECK(calib_gain_emva(&in2, &e2));
+    CHECK(isnan(e2.qe) && isnan(e2.mu_p_min) && isnan(e2.mu_p_sat));
+    CHECK_REL(e2.mu_e_sat, e.mu_e_sat, 1e-12);
+    CHECK_REL(e2.dr, e.dr, 1e-12);
+    CHECK_REL(e2.K, e.K, 1e-12);
 }
 
 TEST(calib_gain_emva_split)
@@ -326,15 +348,15 @@ TEST(calib_gain_emva_frames)
     double sat_e = json_number_value(datasheet_row(e, "mu_e.sat", "e-"));
     CHECK(sat_e > 7000 && sat_e < 8400);
     CHECK_REL(json_number_value(datasheet_row(e, "mu_p.sat", "photons")), sat_e / qe, 1e-9);
-    // threshold: sigma_y.dark^2 = K^2 4^2 + 1/12 DN^2
-    double se_min = 0.5 + sqrt((F_K * F_K * 16 + 1.0 / 12) / (F_K * F_K) + 0.25);
+    // threshold: sigma_y.dark / K + 1/2, sigma_y.dark^2 = K^2 4^2 + 1/12 DN^2
+    double se_min = 0.5 + sqrt((F_K * F_K * 16 + 1.0 / 12) / (F_K * F_K));
     CHECK_REL(json_number_value(datasheet_row(e, "mu_e.min", "e-")), se_min, 0.08);
     // dark current from the mean (K mu_I t) and from the variance (K^2 mu_I t)
     json_t *g0 = json_array_get(json_object_get(j, "gains"), 0);
     fprintf(stderr, "  dark current %.4g e-/s (mean), %.4g e-/s (variance), truth %.4g\n",
             json_number_value(json_object_get(g0, "dark_current_e_per_s")),
             json_number_value(json_object_get(g0, "dark_current_from_variance_e_per_s")), F_DARK);
-    CHECK_REL(json_number_value(datasheet_row(e, "mu_I", "e-/s")), F_DARK, 0.05);
+    CHECK_REL(json_number_value(datasheet_row(e, "mu_I.mean", "e-/s")), F_DARK, 0.05);
     CHECK_REL(json_number_value(datasheet_row(e, "mu_I.var", "e-/s")), F_DARK, 0.15);
     // the spatial set (kind flat / flat-dark): 16 frames each, the DSNU's row and column parts
     json_t *ff = json_object_get(j, "flat_field");

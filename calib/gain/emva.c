@@ -1,9 +1,8 @@
 // calib/gain/emva.c — the EMVA 1288 Release 4.0 Linear summary datasheet of
-// `refl calib gain` (calib/gain/gain.h): gain.json's "emva1288" (every row
-// with its definition and formula; the photon axis, photons.c; the spatial
-// analysis, spatial.c; the defect pixels, defects.c) and datasheet.html.
-// Where the standard's own equation numbers are not known here, none are
-// cited.
+// `refl calib gain` (calib/gain/gain.h): gain.json's "emva1288" (the rows,
+// datasheet.c, of the standard's figures, standard.c and nonuniformity.c;
+// the photon axis, photons.c; the spatial analysis, spatial.c; the defect
+// pixels, defects.c) and datasheet.html.
 #define _GNU_SOURCE
 #include <glib.h>
 #include <math.h>
@@ -15,87 +14,35 @@
 #include "model/model.h"
 #include "model/base/report.h"
 
-// One datasheet row; value NAN with photons false: not computable (null);
-// photons true and the photon axis not measured: "not measured".
-static void row(json_t *rows, const char *quantity, const char *symbol, double value, const char *unit, bool photons,
-                bool measured, const char *definition)
-{
-    json_t *r = json_object();
-    json_object_set_new(r, "quantity", json_string(quantity));
-    json_object_set_new(r, "symbol", json_string(symbol));
-    json_object_set_new(r, "value", photons && !measured ? json_string("not measured") : model_json_number(value));
-    json_object_set_new(r, "unit", json_string(unit));
-    json_object_set_new(r, "definition", json_string(definition));
-    json_array_append_new(rows, r);
-}
-
 static json_t *split_json(const calib_gain_split_t *s)
 {
     return json_pack("{s:o, s:o, s:o, s:o}", "total", model_json_number(s->total), "row", model_json_number(s->row),
-                     "column", model_json_number(s->col),
-                     "pixel", model_json_number(s->pixel));
+                     "column", model_json_number(s->col), "pixel", model_json_number(s->pixel));
 }
 
-static json_t *datasheet_rows(const calib_gain_an_t *a, const calib_gain_maps_t *m)
+static json_t *four_json(const double *v, double scale)
 {
-    const calib_gain_photon_t *p = &a->ph;
-    const double K = a->ptc.system_gain_dn_per_e;
-    const bool ms = p->measured;
-    json_t *r = json_array();
-    row(r, "quantum efficiency", "eta", 100 * p->qe, "%", true, ms,
-        "eta = R / K, R the slope of the least-squares line of mu_y - mu_y.dark against mu_p over the steps up to "
-        "70 % of saturation; mu_p = A E t_exp lambda / (h c)");
-    row(r, "responsivity", "R", p->responsivity_dn_per_photon, "DN/photon", true, ms, "R = eta K (the slope above)");
-    row(r, "system gain", "K", K, "DN/e-", false, true, "slope at zero signal of the photon transfer "
-        "sigma^2_y - sigma^2_y.dark against mu_y - mu_y.dark (quadratic fit over 0..70 % of saturation)");
-    row(r, "inverse system gain", "1/K", 1 / K, "e-/DN", false, true, "1 / K");
-    row(r, "temporal dark noise", "sigma_d", a->ptc.read_noise_e, "e-", false, true,
-        "sqrt(sigma^2_y.dark - q^2/12) / K, sigma^2_y.dark at exposure 0");
-    row(r, "temporal dark noise", "sigma_y.dark", sqrt(a->var_dark_dn2), "DN", false, true,
-        "sqrt(sigma^2_y.dark), quantisation included");
-    row(r, "absolute sensitivity threshold", "mu_e.min", p->mu_e_min, "e-", false, true,
-        "SNR = 1 of the linear model: mu_e.min = 1/2 + sqrt(sigma^2_y.dark / K^2 + 1/4)");
-    row(r, "absolute sensitivity threshold", "mu_p.min", p->mu_p_min, "photons", true, ms, "mu_e.min / eta");
-    row(r, "saturation capacity", "mu_e.sat", p->mu_e_sat, "e-", false, true,
-        "mu_y.sat / K, mu_y.sat the signal (above dark) where the temporal variance peaks");
-    row(r, "saturation capacity", "mu_p.sat", p->mu_p_sat, "photons", true, ms, "mu_e.sat / eta");
-    row(r, "maximum SNR", "SNR_max", sqrt(p->mu_e_sat), "1", false, true, "sqrt(mu_e.sat)");
-    row(r, "maximum SNR", "SNR_max", 20 * log10(sqrt(p->mu_e_sat)), "dB", false, true, "20 log10 SNR_max");
-    row(r, "dynamic range", "DR", p->dynamic_range, "1", false, true, "mu_p.sat / mu_p.min = mu_e.sat / mu_e.min");
-    row(r, "dynamic range", "DR", 20 * log10(p->dynamic_range), "dB", false, true, "20 log10 DR");
-    row(r, "linearity error", "LE", a->ptc.linearity_error_pct, "%", false, true,
-        "Release 4.0 Linear: the line a0 + a1 t through the steps in 5..95 % of saturation minimising "
-        "sum((mu_i - a0 - a1 t_i) / mu_i)^2; delta_i = 100 (mu_i - line_i) / line_i; LE = (max delta - min delta) "
-        "/ 2 (exposure stands in for the irradiation: the irradiance is constant over the sweep)");
-    row(r, "linearity error (Release 3)", "LE_R3", a->ptc.linearity_error_r3_pct, "%", false, true,
-        "the same deviations from the unweighted least-squares line");
-    row(r, "dark current (from the mean)", "mu_I", a->dark_slope_dn_per_us * 1e6 / K, "e-/s", false, true,
-        "slope of mu_y.dark against exposure / K");
-    row(r, "dark current (from the variance)", "mu_I.var", a->dark_var_slope_dn2_per_us * 1e6 / (K * K), "e-/s",
-        false, true, "slope of sigma^2_y.dark against exposure / K^2 (shot noise of the dark current)");
-    const calib_gain_spatial_t *sp = &m->sp;
-    const char *parts[4] = { "total", "row", "column", "pixel" };
-    const double dv[4] = { sp->dsnu.total, sp->dsnu.row, sp->dsnu.col, sp->dsnu.pixel },
-                 pv[4] = { sp->prnu.total, sp->prnu.row, sp->prnu.col, sp->prnu.pixel };
-    for (int k = 0; k < 4; k++) {
-        char q[64], sym[32];
-        snprintf(q, sizeof q, "DSNU (%s)", parts[k]);
-        snprintf(sym, sizeof sym, "DSNU.%s", parts[k]);
-        row(r, q, sym, dv[k] / K, "e-", false, true, k ? "std of the averaged dark frame's part (row/column/pixel "
-            "split, temporal noise removed) / K" : "std of the averaged dark frame, temporal noise removed, / K");
-        snprintf(q, sizeof q, "PRNU (%s)", parts[k]);
-        snprintf(sym, sizeof sym, "PRNU.%s", parts[k]);
-        row(r, q, sym, pv[k], "%", false, true, "std of the averaged flat minus dark (its part), temporal noise "
-            "removed, / its mean");
-    }
-    const calib_gain_defects_t *df = &sp->defects;
-    row(r, "hot pixels", "n_hot", df->hot, "pixels", false, true, "averaged dark above its median by more than "
-        "the threshold (nsigma robust stds)");
-    row(r, "dead pixels", "n_dead", df->dead, "pixels", false, true, "high-pass flat below its median by more than "
-        "the threshold");
-    row(r, "bright pixels", "n_bright", df->bright, "pixels", false, true, "high-pass flat above its median by more "
-        "than the threshold");
-    return r;
+    return json_pack("{s:o, s:o, s:o, s:o}", "total", model_json_number(v[0] * scale), "row",
+                     model_json_number(v[1] * scale), "column", model_json_number(v[2] * scale), "pixel",
+                     model_json_number(v[3] * scale));
+}
+
+static json_t *stack_json(const calib_gain_stack_var_t *v)
+{
+    json_t *o = json_object();
+    json_object_set_new(o, "frames_L", json_integer(v->L));
+    json_object_set_new(o, "rows_M", json_integer(v->M));
+    json_object_set_new(o, "columns_N", json_integer(v->N));
+    json_object_set_new(o, "mean_dn", model_json_number(v->mean));
+    json_object_set_new(o, "s2_measured", model_json_number(v->s2_measured));
+    json_object_set_new(o, "sigma2_stack", model_json_number(v->stack_var));
+    json_object_set_new(o, "s2", model_json_number(v->s2));
+    json_object_set_new(o, "s2_cav", model_json_number(v->s2_cav));
+    json_object_set_new(o, "s2_rav", model_json_number(v->s2_rav));
+    json_object_set_new(o, "s2_row", model_json_number(v->s2_row));
+    json_object_set_new(o, "s2_col", model_json_number(v->s2_col));
+    json_object_set_new(o, "s2_pixel", model_json_number(v->s2_pixel));
+    return o;
 }
 
 static json_t *hist_json(double lo, double hi, const long *h, int nb, const char *unit)
@@ -143,29 +90,37 @@ static json_t *spectro_json(int n, int len, const double *dark, const double *li
                      "light_pct", gain_json_numbers(light, n));
 }
 
+// The linear model's SNR at mu_p photons (the standard's eta, K and sigma_y.dark):
+// eta mu_p / sqrt(sigma^2_y.dark / K^2 + eta mu_p).
+static double snr_model(const calib_gain_emva_t *e, double mu_p)
+{
+    const double x = e->qe * mu_p, s = e->sigma_y_dark_dn / e->K;
+    return x / sqrt(s * s + x);
+}
+
 static json_t *snr_json(const calib_gain_an_t *a)
 {
-    json_t *o = json_object(), *m = json_array(), *id = json_array();
+    const calib_gain_emva_t *e = &a->emva;
+    const bool ms = e->photons;
+    json_t *o = json_object(), *m = json_array(), *id = json_array(), *el = json_array();
     for (int i = 0; i < a->n; i++) {
-        double mp = a->mu_p ? a->mu_p[i] : NAN;
-        json_array_append_new(m, model_json_number(a->ph.measured ? calib_gain_snr_model(&a->ph, mp) : NAN));
-        json_array_append_new(id, model_json_number(a->ph.measured ? sqrt(mp) : NAN));
+        double mp = ms ? a->mu_p[i] : NAN;
+        json_array_append_new(m, model_json_number(ms ? snr_model(e, mp) : NAN));
+        json_array_append_new(id, model_json_number(ms ? sqrt(mp) : NAN));
+        json_array_append_new(el, model_json_number(a->mu[i] / e->K));
     }
     json_object_set_new(o, "photons", gain_json_numbers(a->mu_p, a->n));
-    json_object_set_new(o, "electrons", json_array());
-    for (int i = 0; i < a->n; i++)
-        json_array_append_new(json_object_get(o, "electrons"),
-                              model_json_number(a->mu[i] / a->ptc.system_gain_dn_per_e));
+    json_object_set_new(o, "electrons", el);
     json_object_set_new(o, "snr_measured", gain_json_numbers(a->snr, a->n));
     json_object_set_new(o, "snr_model", m);
     json_object_set_new(o, "snr_ideal", id);
     // the model and the ideal on a grid from half the threshold to saturation (the plot's lines)
-    if (a->ph.measured && a->ph.mu_p_min > 0 && a->ph.mu_p_sat > a->ph.mu_p_min) {
+    if (ms && e->mu_p_min > 0 && e->mu_p_sat > e->mu_p_min) {
         enum { NG = 64 };
-        double g[NG], gm[NG], gi[NG], lo = log(0.5 * a->ph.mu_p_min), hi = log(a->ph.mu_p_sat);
+        double g[NG], gm[NG], gi[NG], lo = log(0.5 * e->mu_p_min), hi = log(e->mu_p_sat);
         for (int i = 0; i < NG; i++) {
             g[i] = exp(lo + (hi - lo) * i / (NG - 1));
-            gm[i] = calib_gain_snr_model(&a->ph, g[i]);
+            gm[i] = snr_model(e, g[i]);
             gi[i] = sqrt(g[i]);
         }
         json_object_set_new(o, "grid_photons", gain_json_numbers(g, NG));
@@ -174,23 +129,86 @@ static json_t *snr_json(const calib_gain_an_t *a)
     }
     json_object_set_new(o, "definition", json_string(
         "grid_*: the same on 64 photon counts from mu_p.min / 2 to mu_p.sat; measured: (mu_y - mu_y.dark) / "
-        "sigma_y; model: eta mu_p / sqrt(sigma^2_y.dark / K^2 + eta mu_p); ideal: "
-        "sqrt(mu_p) (eta = 1, no dark noise); photons null when the photon axis is not measured"));
+        "sigma_y; model: eta mu_p / sqrt(sigma^2_y.dark / K^2 + eta mu_p) (the datasheet's eta, K, sigma_y.dark); "
+        "ideal: sqrt(mu_p) (eta = 1, no dark noise); electrons (mu_y - mu_y.dark) / K; photons null when the photon "
+        "axis is not measured"));
     return o;
 }
 
-json_t *calib_gain_emva_json(const calib_gain_opts_t *o, const calib_gain_an_t *an, const calib_gain_maps_t *m)
+// The standard's fit ranges and intermediate figures of the photon transfer.
+static json_t *ptc_json(const calib_gain_an_t *a)
 {
-    const calib_gain_an_t *a = &an[0];
-    const calib_gain_spatial_t *sp = &m->sp;
-    json_t *e = json_object();
-    json_object_set_new(e, "standard", json_string("EMVA 1288 Release 4.0 Linear (definitions as stated per row; "
-                                                   "equation numbers of the standard not cited)"));
-    json_object_set_new(e, "photon_axis", json_string(a->ph.measured ? "measured" : "not measured (give "
-                                                      "--irradiance, --pixel-area-um2 and --wavelength-nm)"));
+    const calib_gain_emva_t *e = &a->emva;
+    json_t *o = json_object();
+    json_object_set_new(o, "x", json_string(e->photons ? "mu_p, photons per pixel" : "exposure in us (standing in "
+                                                         "for mu_p: constant irradiance)"));
+    json_object_set_new(o, "steps", json_integer(e->n));
+    json_object_set_new(o, "saturation_step", json_integer(e->i_sat));
+    json_object_set_new(o, "saturation_past_full_well_plateau", json_boolean(e->sat_plateau));
+    json_object_set_new(o, "saturation_signal_dn", model_json_number(e->mu_y_sat_dn));
+    json_object_set_new(o, "saturation_x", model_json_number(e->x_sat));
+    json_object_set_new(o, "fit_steps", json_integer(e->n_fit));
+    json_object_set_new(o, "fit_last_step", json_integer(e->i_fit_last));
+    json_object_set_new(o, "responsivity", model_json_number(e->R));
+    json_object_set_new(o, "linearity_steps", json_pack("[ii]", e->i_lin_first, e->i_lin_last));
+    json_object_set_new(o, "linearity_slope", model_json_number(e->lin_slope));
+    json_object_set_new(o, "linearity_offset_dn", model_json_number(e->lin_offset));
+    json_object_set_new(o, "dark_variance_dn2", model_json_number(e->var_y_dark_dn2));
+    json_object_set_new(o, "dark_exposures", json_integer(e->n_dark));
+    json_object_set_new(o, "dark_variance_fitted", json_boolean(e->dark_fitted));
+    json_object_set_new(o, "dark_variance_raised_to_0.24q2", json_boolean(e->dark_floored));
+    json_object_set_new(o, "dark_current_dn_per_s", model_json_number(e->dark_current_dn_per_s));
+    json_object_set_new(o, "dark_current_var_dn2_per_s", model_json_number(e->dark_current_var_dn2_per_s));
+    json_object_set_new(o, "steps_without_their_dark_pair", json_integer(a->n_dark_modelled));
+    json_object_set_new(o, "definition", json_string(
+        "steps indexed from 0 in gain.json's curves order (exposure, then photons); saturation_step: the maximum "
+        "of sigma^2_y walking from the brightest step back (saturation_past_full_well_plateau: the walk ended on a "
+        "plateau below half the largest sigma^2_y, past a full well, and the largest is the saturation); fit_steps: 0 .. fit_last_step, the last with mu_y - "
+        "mu_y.dark <= 0.7 of its value at saturation_step; linearity_steps: the first with >= 5 % .. the last "
+        "with <= 95 %; steps_without_their_dark_pair: steps whose dark is refl's dark model (the standard "
+        "takes the dark pair at each exposure)"));
+    return o;
+}
+
+// The standard's spatial block (and refl's high-pass split beside it).
+static json_t *spatial_json(const calib_gain_an_t *a, const calib_gain_maps_t *m)
+{
+    const calib_gain_nonuni_t *nu = &m->nu;
+    json_t *s = json_object();
+    json_object_set_new(s, "dsnu_dn", four_json(nu->dsnu_dn, 1));
+    json_object_set_new(s, "dsnu_e", four_json(nu->dsnu_dn, 1 / a->emva.K));
+    json_object_set_new(s, "prnu_pct", four_json(nu->prnu_pct, 1));
+    json_object_set_new(s, "dsnu_variance_dn2", four_json(nu->dsnu_var_dn2, 1));
+    json_object_set_new(s, "prnu_variance_dn2", four_json(nu->prnu_var_dn2, 1));
+    json_object_set_new(s, "variances_dn2", json_pack("{s:o, s:o}", "dark", stack_json(&nu->dark), "light",
+                                                      stack_json(&nu->light)));
+    json_object_set_new(s, "signal_dn", model_json_number(nu->signal_dn));
+    json_object_set_new(s, "dark_at_light_exposure", json_boolean(nu->same_exposure));
+    json_object_set_new(s, "prnu_highpass_pct", split_json(&m->sp.prnu_hp));
+    json_object_set_new(s, "signal_mean_dn", model_json_number(m->sp.signal_mean_dn));
+    json_object_set_new(s, "definition", json_string(
+        "EMVA 1288 Release 4.0 Linear sections 4 and 8, per stack of L frames averaged, over the statistics "
+        "region's M rows and N columns: s2_measured the variance of the average (divisor MN - 1), sigma2_stack the "
+        "mean of each pixel's temporal variance (divisor L - 1), s2 = s2_measured - sigma2_stack / L, s2_cav and "
+        "s2_rav the variances of the N column means and of the M row means less sigma2_stack / (L M) and / (L N), "
+        "D = MN - M - N, s2_col = (MN - M) / D s2_cav - N / D (s2 - s2_rav), s2_row = (MN - N) / D s2_rav - M / D "
+        "(s2 - s2_cav), s2_pixel = MN / D (s2 - s2_cav - s2_rav): the parts add up to s2. dsnu: the dark stack's "
+        "(DN; e- over K), prnu: 100 sqrt(light's - dark's) / (mu_y - mu_y.dark), raw frames (vignetting "
+        "included); a negative variance estimate v gives -sqrt(-v) (the *_variance_dn2 keep it). "
+        "prnu_highpass_pct: refl's split of the linearised flat divided by its quadratic smooth surface "
+        "(signed roots)"));
+    return s;
+}
+
+// gain.json "emva1288" "conditions".
+static json_t *conditions_json(const calib_gain_opts_t *o, const calib_gain_an_t *a)
+{
     json_t *c = json_object();
-    json_object_set_new(c, "irradiance_uw_cm2", a->ph.measured ? json_real(a->ph.irradiance_uw_cm2)
-                                                                : json_string("not measured"));
+    const double E = calib_gain_opts_irradiance(o);
+    const bool from_e = a->photon_source && strcmp(a->photon_source, "descriptor");
+    json_object_set_new(c, "photon_source", a->photon_source ? json_string(a->photon_source) : json_null());
+    json_object_set_new(c, "irradiance_uw_cm2", from_e ? model_json_number(E) : json_string(
+                            a->photon_source ? "not given (the descriptor's photon counts)" : "not measured"));
     if (isfinite(o->photodiode_na))
         json_object_set_new(c, "photodiode", json_pack("{s:f, s:f, s:f, s:s}", "current_na", o->photodiode_na,
                                                        "responsivity_a_per_w", o->photodiode_a_per_w, "area_mm2",
@@ -198,28 +216,34 @@ json_t *calib_gain_emva_json(const calib_gain_opts_t *o, const calib_gain_an_t *
     json_object_set_new(c, "pixel_area_um2", model_json_number(o->pixel_area_um2));
     json_object_set_new(c, "wavelength_nm", model_json_number(o->wavelength_nm));
     json_object_set_new(c, "gain_db", json_real(a->gain_db));
-    json_object_set_new(c, "photons", json_string("mu_p = A E t_exp lambda / (h c), h = 6.62607015e-34 J s, "
-                                                  "c = 299792458 m/s"));
-    json_object_set_new(e, "conditions", c);
-    if (a->ph.measured && a->ph.qe > 1)
-        json_object_set_new(e, "warning", json_string("quantum efficiency above 100 %: check the irradiance (uW/cm^2 "
-                                                      "at the sensor), the pixel area and the wavelength"));
-    json_object_set_new(e, "datasheet", datasheet_rows(a, m));
-    json_object_set_new(e, "responsivity_offset_dn", a->ph.measured ? model_json_number(a->ph.responsivity_offset_dn)
-                                                                    : json_string("not measured"));
+    json_object_set_new(c, "quantisation_step_dn", json_real(o->quant_dn));
+    json_object_set_new(c, "photons", json_string(from_e ? "mu_p = A E t_exp lambda / (h c), h = 6.62607015e-34 J "
+                                                           "s, c = 299792458 m/s" : a->photon_source ? "each step's "
+                                                           "count as the EMVA 1288 descriptor gives it" : "none"));
+    return c;
+}
+
+json_t *calib_gain_emva_json(const calib_gain_opts_t *o, const calib_gain_an_t *an, const calib_gain_maps_t *m)
+{
+    const calib_gain_an_t *a = &an[0];
+    const calib_gain_spatial_t *sp = &m->sp;
+    json_t *e = json_object();
+    json_object_set_new(e, "standard", json_string("EMVA 1288 Release 4.0 Linear: every datasheet row as the "
+                                                   "standard defines it, with its section, the ranges and points "
+                                                   "of the EMVA 1288 reference implementation; refl's own figures "
+                                                   "in refl_rows"));
+    json_object_set_new(e, "photon_axis", json_string(a->photon_source ? "measured" : "not measured (give "
+                                                      "--irradiance, --pixel-area-um2 and --wavelength-nm, or "
+                                                      "--emva-descriptor)"));
+    json_object_set_new(e, "conditions", conditions_json(o, a));
+    if (a->emva.photons && a->emva.qe > 1)
+        json_object_set_new(e, "warning", json_string("quantum efficiency above 100 %: check the photon counts (the "
+                                                      "irradiance at the sensor, the pixel area, the wavelength)"));
+    json_object_set_new(e, "datasheet", gain_datasheet_rows(o, a, m));
+    json_object_set_new(e, "refl_rows", gain_refl_rows(a, m));
+    json_object_set_new(e, "photon_transfer", ptc_json(a));
     json_object_set_new(e, "snr_curve", snr_json(a));
-    json_t *s = json_object();
-    json_object_set_new(s, "dsnu_dn", split_json(&sp->dsnu));
-    json_object_set_new(s, "prnu_pct", split_json(&sp->prnu));
-    json_object_set_new(s, "prnu_highpass_pct", split_json(&sp->prnu_hp));
-    json_object_set_new(s, "signal_mean_dn", model_json_number(sp->signal_mean_dn));
-    json_object_set_new(s, "definition", json_string(
-        "averaged frame y = mu + r[row] + c[column] + p + e; V, Vr, Vc the variances of all values, of the row means "
-        "and of the column means, less the temporal variance of the average (sigma^2/L, /M, /N); s2_pixel = (V - Vr "
-        "- Vc) / (1 - 1/M - 1/N), s2_row = Vr - s2_pixel / M, s2_col = Vc - s2_pixel / N (M columns, N rows); "
-        "DSNU of the averaged dark (DN), PRNU of the averaged flat minus dark, % of its mean, vignetting included; "
-        "prnu_highpass_pct: the same of the flat divided by its quadratic smooth surface (vignetting removed)"));
-    json_object_set_new(e, "spatial", s);
+    json_object_set_new(e, "spatial", spatial_json(a, m));
     json_t *sg = json_object();
     json_object_set_new(sg, "horizontal", spectro_json(sp->nh, sp->pw, sp->spec_h_dark, sp->spec_h_light));
     json_object_set_new(sg, "vertical", spectro_json(sp->nv, sp->ph, sp->spec_v_dark, sp->spec_v_light));
@@ -242,46 +266,61 @@ json_t *calib_gain_emva_json(const calib_gain_opts_t *o, const calib_gain_an_t *
     return e;
 }
 
-bool calib_gain_datasheet_html(const char *dir, json_t *emva, json_t *prov)
+// A table of rows (quantity, symbol, value, unit, [section,] definition). false + message (out of memory).
+static bool table(FILE *f, json_t *rows, bool sections)
 {
-    json_t *rows = json_object_get(emva, "datasheet");
     size_t n = json_array_size(rows);
     char **rs = calloc(n + 1, sizeof *rs);
     if (!rs) {
-        model_error_set(dir, 0, "out of memory for the datasheet (%zu rows)", n);
+        model_error_set(NULL, 0, "out of memory for the datasheet (%zu rows)", n);
         return false;
     }
+    for (size_t i = 0; i < n; i++) {
+        json_t *r = json_array_get(rows, i), *v = json_object_get(r, "value");
+        char *val = json_is_number(v) ? g_strdup_printf("%.5g%s", json_number_value(v),
+                                                        json_is_true(json_object_get(r, "negative_estimate"))
+                                                            ? " (negative variance)" : "")
+                                      : g_strdup(json_is_string(v) ? json_string_value(v) : "n/a");
+        const char *sec = json_string_value(json_object_get(r, "section"));
+        rs[i] = g_strdup_printf("%s|%s|%s|%s|%s%s%s", json_string_value(json_object_get(r, "quantity")),
+                                json_string_value(json_object_get(r, "symbol")), val,
+                                json_string_value(json_object_get(r, "unit")), sections ? (sec ? sec : "") : "",
+                                sections ? "|" : "", json_string_value(json_object_get(r, "definition")));
+        g_free(val);
+    }
+    model_html_table(f, sections ? "quantity|symbol|value|unit|section|definition" : "quantity|symbol|value|unit|"
+                     "definition", (const char *const *)rs, (int)n);
+    for (size_t i = 0; i < n; i++) g_free(rs[i]);
+    free(rs);
+    return true;
+}
+
+bool calib_gain_datasheet_html(const char *dir, json_t *emva, json_t *prov)
+{
     char *hp = g_build_filename(dir, "datasheet.html", NULL);
     FILE *f = model_html_begin(hp, "refl calib gain: EMVA 1288 Release 4.0 Linear summary datasheet", prov);
     if (!f) {
-        free(rs);
         g_free(hp);
         return false;
     }
     json_t *c = json_object_get(emva, "conditions");
     json_t *irr = json_object_get(c, "irradiance_uw_cm2");
-    char ib[64];
-    if (json_is_number(irr)) snprintf(ib, sizeof ib, "%.6g", json_number_value(irr));
-    else snprintf(ib, sizeof ib, "not measured");
-    model_html_para(f, "Photon axis: %s. Irradiance %s uW/cm^2, pixel area %.6g um^2, wavelength %.6g nm, gain %g.",
-                    json_string_value(json_object_get(emva, "photon_axis")), ib,
+    char ib[96];
+    if (json_is_number(irr)) snprintf(ib, sizeof ib, "%.6g uW/cm^2", json_number_value(irr));
+    else snprintf(ib, sizeof ib, "%s", json_string_value(irr) ? json_string_value(irr) : "not measured");
+    model_html_para(f, "Photon axis: %s (%s). Irradiance %s, pixel area %.6g um^2, wavelength %.6g nm, gain %g.",
+                    json_string_value(json_object_get(emva, "photon_axis")),
+                    json_is_string(json_object_get(c, "photon_source"))
+                        ? json_string_value(json_object_get(c, "photon_source")) : "none", ib,
                     json_number_value(json_object_get(c, "pixel_area_um2")),
                     json_number_value(json_object_get(c, "wavelength_nm")),
                     json_number_value(json_object_get(c, "gain_db")));
-    for (size_t i = 0; i < n; i++) {
-        json_t *r = json_array_get(rows, i), *v = json_object_get(r, "value");
-        char *val = json_is_number(v) ? g_strdup_printf("%.5g", json_number_value(v))
-                                      : g_strdup(json_is_string(v) ? json_string_value(v) : "n/a");
-        rs[i] = g_strdup_printf("%s|%s|%s|%s|%s", json_string_value(json_object_get(r, "quantity")),
-                                json_string_value(json_object_get(r, "symbol")), val,
-                                json_string_value(json_object_get(r, "unit")),
-                                json_string_value(json_object_get(r, "definition")));
-        g_free(val);
-    }
-    model_html_heading(f, "Datasheet");
-    model_html_table(f, "quantity|symbol|value|unit|definition", (const char *const *)rs, (int)n);
-    for (size_t i = 0; i < n; i++) g_free(rs[i]);
-    free(rs);
+    model_html_heading(f, "Datasheet (EMVA 1288 Release 4.0 Linear)");
+    model_html_para(f, "Each figure as the standard defines it; the section column names the standard's sections "
+                    "(the chapter defining it, the one evaluating it).");
+    bool ok = table(f, json_object_get(emva, "datasheet"), true);
+    model_html_heading(f, "refl's own figures (not EMVA 1288)");
+    ok = ok && table(f, json_object_get(emva, "refl_rows"), false);
     static const char *const figs[][3] = {
         { "SNR", "snr_photons.png", "SNR against photons per pixel (or electrons when not measured): measured up to "
                                     "saturation, the linear model and the ideal sqrt(mu_p)" },
@@ -300,7 +339,7 @@ bool calib_gain_datasheet_html(const char *dir, json_t *emva, json_t *prov)
         model_html_figure(f, figs[i][1], figs[i][2]);
     }
     fprintf(f, "<p><a href=\"report.html\">the full report</a>; figures and curves: gain.json \"emva1288\"</p>\n");
-    bool ok = model_html_end(f, hp);
+    ok = model_html_end(f, hp) && ok;
     g_free(hp);
     return ok;
 }

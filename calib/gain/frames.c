@@ -1,6 +1,7 @@
 // calib/gain/frames.c — the frames of a gain calibration: loading (checked
 // against the journal's hash), their groups (exposure, gain, dark/light,
-// role) and each group's mean and temporal variance (calib/gain/gain.h).
+// role, photon count) and each group's mean and temporal variance
+// (calib/gain/gain.h).
 #include <glib.h>
 #include <math.h>
 #include <stdlib.h>
@@ -67,18 +68,21 @@ void gain_region(int w, int h, const int roi[4], int r[4])
     }
 }
 
-// The group of (exposure, gain, dark, role), made when new; -1 (out of memory).
-static int group_find(calib_gain_data_t *d, double exposure_us, double gain_db, bool dark, int set)
+// The group of f's (exposure, gain, dark, role, photon count), made when new; -1 (out of memory).
+static int group_find(calib_gain_data_t *d, const calib_gain_frame_t *f, int set)
 {
     for (int i = 0; i < d->ng; i++) {
         calib_gain_group_t *g = &d->g[i];
-        if (g->exposure_us == exposure_us && g->gain_db == gain_db && g->dark == dark && g->set == set) return i;
+        if (g->exposure_us == f->exposure_us && g->gain_db == f->gain_db && g->dark == f->dark && g->set == set &&
+            g->has_photons == f->has_photons && (!f->has_photons || g->photons == f->photons))
+            return i;
     }
     calib_gain_group_t *ng = realloc(d->g, sizeof *d->g * (d->ng + 1));
     if (!ng) return -1;
     d->g = ng;
-    d->g[d->ng] = (calib_gain_group_t){ .exposure_us = exposure_us, .gain_db = gain_db, .dark = dark, .set = set,
-                              .var_dn2 = NAN };
+    d->g[d->ng] = (calib_gain_group_t){ .exposure_us = f->exposure_us, .gain_db = f->gain_db,
+                                        .has_photons = f->has_photons, .photons = f->has_photons ? f->photons : NAN,
+                                        .dark = f->dark, .set = set, .var_dn2 = NAN };
     return d->ng++;
 }
 
@@ -87,7 +91,7 @@ bool calib_gain_make_groups(calib_gain_data_t *d)
     for (int i = 0; i < d->nf; i++) {
         const calib_gain_frame_t *f = &d->f[i];
         int set = f->set == CALIB_GAIN_SET_ANY ? CALIB_GAIN_SET_SWEEP : f->set;
-        int gi = group_find(d, f->exposure_us, f->gain_db, f->dark, set);
+        int gi = group_find(d, f, set);
         int *idx = gi >= 0 ? realloc(d->g[gi].idx, sizeof(int) * (d->g[gi].n + 1)) : NULL;
         if (!idx) {
             model_error_set(NULL, 0, "out of memory for the exposure groups (%d frames)", d->nf);

@@ -11,6 +11,7 @@
 //                      and a flat field (many frames at ~50 % of saturation)
 //   --session DIR      a session captured elsewhere (light = lamps on, dark = "none")
 //   --frames CSV       a manifest "file,exposure_us,kind" (kind dark|light)
+//   --emva-descriptor F  an EMVA 1288 descriptor (exposures, photon counts, images)
 // Analysis per gain (EMVA 1288 definitions, see calib/gain/gain.h): photon transfer
 // (K, read noise, saturation, SNR, dynamic range), linearity error, response
 // (DN/us, and kc per us per unit radiance when the source's radiance is
@@ -19,7 +20,9 @@
 // maps and the PRNU map (flat field).
 // Output: DIR/gain.json, DIR/offset_dn.tiff, DIR/dsnu_dn.tiff,
 // DIR/prnu_gain.tiff (total: vignetting included, mean 1),
-// DIR/prnu_highpass.tiff (smooth part removed, mean 1), DIR/report.html + PNGs.
+// DIR/prnu_highpass.tiff (smooth part removed, mean 1), DIR/report.html + PNGs,
+// DIR/datasheet.html (EMVA 1288 by the standard's definitions); with
+// --write-emva-descriptor an EMVA 1288 descriptor of the frames.
 #define _GNU_SOURCE
 #include <glib.h>
 #include <math.h>
@@ -66,6 +69,41 @@ static bool manifest_frames(const calib_gain_opts_t *o, calib_gain_data_t *d, js
         }
     }
     return true;
+}
+
+// The frames of an EMVA 1288 descriptor into d (and the provenance: the file
+// and every frame).
+static bool descriptor_frames(const calib_gain_opts_t *o, calib_gain_data_t *d, json_t *prov)
+{
+    if (!calib_gain_read_descriptor(o->descriptor, o->max_dn, d) ||
+        !model_provenance_input(prov, "emva1288 descriptor", o->descriptor))
+        return false;
+    if (o->ngains != 1) {
+        model_error_set(o->descriptor, 0, "a descriptor holds frames of one gain: give at most one --gains value (its "
+                        "label)");
+        return false;
+    }
+    snprintf(d->gain_unit, sizeof d->gain_unit, "dB");
+    for (int i = 0; i < d->nf; i++) {
+        char role[64];
+        d->f[i].gain_db = o->gains_db[0];
+        snprintf(role, sizeof role, "image line %d", d->f[i].line);
+        if (!model_provenance_input(prov, role, d->f[i].path)) {
+            char *m = g_strdup(model_last_error());
+            model_error_set(o->descriptor, d->f[i].line, "image %s: %s", d->f[i].path, m);
+            g_free(m);
+            return false;
+        }
+    }
+    return true;
+}
+
+// path with "-NAME" before its extension (a camera's descriptor of several).
+static char *camera_path(const char *path, const char *name)
+{
+    const char *slash = strrchr(path, '/'), *dot = strrchr(path, '.');
+    if (!dot || (slash && dot < slash)) return g_strdup_printf("%s-%s", path, name);
+    return g_strdup_printf("%.*s-%s%s", (int)(dot - path), path, name, dot);
 }
 
 // The sessions of the run: captured on o->rig, or given (and the provenance).
@@ -150,18 +188,20 @@ static bool analyse_all(const calib_gain_opts_t *o, calib_gain_data_t *d, calib_
             g_free(m);
             break;
         }
-        model_note("gain %g dB: K %.5g DN/e-, read noise %.4g e-, saturation %.1f DN, LE %.3f %%, %d steps", gl[i],
-                   a->ptc.system_gain_dn_per_e, a->ptc.read_noise_e, a->ptc.saturation_dn, a->ptc.linearity_error_pct,
-                   a->n);
+        if (!(ok = calib_gain_an_emva(d, o->quant_dn, a))) break;
+        model_note("gain %g dB: EMVA 1288 K %.5g DN/e-, sigma_d %.4g e-, mu_e.sat %.6g e-, LE %.3f %%; refl's "
+                   "small-signal K %.5g DN/e-, saturation %.1f DN; %d steps", gl[i], a->emva.K, a->emva.sigma_d_e,
+                   a->emva.mu_e_sat, a->emva.le_pct, a->ptc.system_gain_dn_per_e, a->ptc.saturation_dn, a->n);
     }
     free(gl);
     return ok;
 }
 
 // One camera's frames (d) analysed into dir: gain.json, the maps and the
-// report; top (may be NULL): gain.json and the maps also there.
+// report; top (may be NULL): gain.json and the maps also there; desc (may be
+// NULL): an EMVA 1288 descriptor of the frames there.
 static bool run_one(const calib_gain_opts_t *o, calib_gain_data_t *d, json_t *prov, const char *dir, const char *top,
-                    calib_gain_result_t *r)
+                    const char *desc, calib_gain_result_t *r)
 {
     calib_gain_an_t *an = NULL;
     int ngains = 0;
@@ -186,6 +226,7 @@ static bool run_one(const calib_gain_opts_t *o, calib_gain_data_t *d, json_t *pr
     if (ok && o->report)
         ok = calib_gain_report(dir, an, ngains, &maps, prov) &&
              calib_gain_datasheet_html(dir, json_object_get(root, "emva1288"), prov);
+    if (ok && desc) ok = calib_gain_write_descriptor(desc, o, d, &an[0], &maps);
     if (!ok) goto done;
     *r = (calib_gain_result_t){ .system_gain_dn_per_e = an[0].ptc.system_gain_dn_per_e,
                                 .read_noise_e = an[0].ptc.read_noise_e, .saturation_dn = an[0].ptc.saturation_dn,
@@ -217,10 +258,11 @@ bool calib_gain_run(const calib_gain_opts_t *o, calib_gain_result_t *r, int max,
     double t_start = model_now_s();
     if (!model_mkdir_p(o->out)) return false;
     prov = model_provenance(o->argc, o->argv);
-    if (o->frames) {
+    if (o->frames || o->descriptor) {
         calib_gain_data_t d = { 0 };
         memcpy(d.roi, o->roi, sizeof d.roi);
-        ok = manifest_frames(o, &d, prov) && max > 0 && run_one(o, &d, prov, o->out, NULL, &r[0]);
+        ok = (o->frames ? manifest_frames(o, &d, prov) : descriptor_frames(o, &d, prov)) && max > 0 &&
+             run_one(o, &d, prov, o->out, NULL, o->write_descriptor, &r[0]);
         calib_gain_data_free(&d);
         *n = ok;
         goto done;
@@ -232,8 +274,11 @@ bool calib_gain_run(const calib_gain_opts_t *o, calib_gain_result_t *r, int max,
         memcpy(d.roi, o->roi, sizeof d.roi);
         for (int i = 0; i < nsrc && ok; i++) ok = calib_gain_add_session(&d, src[i].dir, names[k], src[i].set, NULL);
         char *dir = nc > 1 ? g_build_filename(o->out, names[k], NULL) : g_strdup(o->out);
+        char *desc = o->write_descriptor && nc > 1 ? camera_path(o->write_descriptor, names[k])
+                                                   : g_strdup(o->write_descriptor);
         calib_gain_result_t rk;
-        ok = ok && run_one(o, &d, prov, dir, nc > 1 && k == 0 ? o->out : NULL, &rk);
+        ok = ok && run_one(o, &d, prov, dir, nc > 1 && k == 0 ? o->out : NULL, desc, &rk);
+        g_free(desc);
         if (ok && *n < max) r[(*n)++] = rk;
         g_free(dir);
         calib_gain_data_free(&d);

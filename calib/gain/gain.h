@@ -11,13 +11,18 @@
 // dark.c; the sweep, sweep.c; photon transfer, ptc.c; linearity,
 // linearity.c; the linearisation, linearisation.c; the response) →
 // calib_gain_make_maps (offset, DSNU, PRNU of the flat field at the first
-// gain; maps.c) → calib_gain_make_spatial (EMVA 1288 Release 4.0 Linear:
-// row/column/pixel split, spectrograms, profiles, spatial.c; defects,
-// defects.c) → calib_gain_write_maps, calib_gain_write_defects,
-// calib_gain_json (gain.json, with "emva1288"; output.c, emva.c),
+// gain, and the standard's DSNU1288/PRNU1288 of its stacks; maps.c,
+// nonuniformity.c) → calib_gain_make_spatial (refl's high-pass split,
+// spectrograms, profiles, spatial.c; defects, defects.c) →
+// calib_gain_write_maps, calib_gain_write_defects, calib_gain_json
+// (gain.json, with "emva1288"; output.c, emva.c, datasheet.c),
 // calib_gain_report (plots, report.html; report.c),
-// calib_gain_datasheet_html (datasheet.html; emva.c). The photon axis
-// (calib_gain_an_photons, photons.c) follows each gain's calib_gain_analyse.
+// calib_gain_datasheet_html (datasheet.html; emva.c),
+// calib_gain_write_descriptor (an EMVA 1288 descriptor; exchange.c). The
+// photon axis (calib_gain_an_photons, photons.c) and the standard's figures
+// (calib_gain_an_emva, standard.c) follow each gain's calib_gain_analyse.
+// Frames also come from an EMVA 1288 descriptor (calib_gain_read_descriptor;
+// its grammar descriptor.c).
 // The least-squares fits the phases share: fit.c.
 // Errors: false / NULL with the message kept by model_error_set
 // (model_last_error), not printed: the caller prints it once. What a run is
@@ -147,40 +152,111 @@ double calib_gain_photons(double irradiance_uw_cm2, double pixel_area_um2, doubl
 // area S (mm^2): E = I / (R S) = 0.1 I / (R S) uW/cm^2.
 double calib_gain_photodiode_irradiance(double current_na, double responsivity_a_per_w, double area_mm2);
 
-// The photon axis of one gain. measured false: no irradiance given (the
-// photon figures are NAN and stated "not measured"); the electron figures
-// (mu_e_min, mu_e_sat, the dynamic range) need only K.
+// ---------------------------------------------------------------------------
+// EMVA 1288 Release 4.0 Linear by the standard's definitions, with the
+// ranges and points of the EMVA 1288 working group's reference
+// implementation (github.com/EMVA1288/emva1288): the temporal figures
+// (standard.c), the spatial nonuniformity (nonuniformity.c). Sections of the
+// standard: gain.json "emva1288" per row, and calib/README.md.
+
+// The square root with the sign of v: -sqrt(-v) for a negative variance
+// estimate (reported as such, not clamped); NAN for NAN.
+double calib_gain_signed_sqrt(double v);
+
+// The sweep as the standard sees it: n steps sorted by exposure (then photon
+// count), each with x (the photon count mu_p per pixel when photons, else
+// the exposure in us standing in for it: the irradiance is constant over the
+// sweep), mu_y, sigma^2_y (the frame pair's var(A - B) / 2), mu_y.dark,
+// sigma^2_y.dark (the dark pair at its exposure); the temporal darks: nd
+// exposures (us, each once) with their mean and variance; quant_dn the
+// quantisation step q (sigma^2_q = q^2 / 12; 1 for data at its own bit depth).
 typedef struct {
-    bool   measured;
-    double irradiance_uw_cm2, pixel_area_um2, wavelength_nm;
-    double responsivity_dn_per_photon;   // R: slope of mu_y - mu_y.dark against mu_p (0..70 % of saturation)
-    double responsivity_offset_dn;       // its intercept
-    int    n_fit;
-    double qe;                           // eta = R / K
-    double mu_e_min, mu_p_min;           // absolute sensitivity threshold (SNR = 1), e-, photons
-    double mu_e_sat, mu_p_sat;           // saturation capacity, e-, photons
-    double dynamic_range;                // mu_p.sat / mu_p.min (= mu_e.sat / mu_e.min)
-    double dark_noise_e;                 // sigma_y.dark / K (incl. quantisation), the SNR model's
-} calib_gain_photon_t;
+    int           n;
+    const double *x, *mu_y, *var_y, *mu_d, *var_d;
+    bool          photons;
+    int           nd;
+    const double *dark_t_us, *dark_mu, *dark_var;
+    double        quant_dn;
+} calib_gain_emva_in_t;
 
-// From the sweep t[n] (us), mu[n] (DN above dark), the saturation sat_dn, K,
-// the dark temporal variance sigma^2_y.dark (DN^2) and the irradiance etc.
-// (NAN irradiance: not measured). false + message when the fit of R fails.
-bool calib_gain_photon_axis(const double *t, const double *mu, int n, double sat_dn, double K, double var_dark_dn2,
-                            double irradiance_uw_cm2, double pixel_area_um2, double wavelength_nm,
-                            calib_gain_photon_t *out);
-// The linear model's SNR at mu_p photons: eta mu_p / sqrt(sigma^2_y.dark / K^2 + eta mu_p).
-double calib_gain_snr_model(const calib_gain_photon_t *p, double mu_p);
+// Each figure as the standard defines it (Y = mu_y - mu_y.dark, V = sigma^2_y -
+// sigma^2_y.dark):
+typedef struct {
+    int    n;
+    bool   photons;            // x is the photon count (else the exposure stands in: photon figures NAN)
+    int    i_sat;              // saturation: the maximum of sigma^2_y, walking from the brightest step back
+                               // until the variance falls on both sides
+    bool   sat_plateau;        // the walk ended on a plateau below half the largest sigma^2_y (past a full
+                               // well): the largest sigma^2_y taken instead
+    double mu_y_sat_dn;        // Y at saturation
+    int    i_fit_last, n_fit;  // K and R fitted over the steps 0 .. i_fit_last, the last with Y <= 0.7 Y_sat
+    double K, inv_K;           // K: slope of V against Y through the origin, DN/e-
+    double R;                  // slope of Y against x through the origin: DN/photon (DN/us as a stand-in)
+    double qe;                 // eta = R / K (NAN without photons)
+    double var_y_dark_dn2;     // sigma^2_y.dark: the shortest dark exposure's (two exposures or fewer) or the
+                               // intercept at exposure 0 of the least-squares line against exposure
+    int    n_dark;
+    bool   dark_fitted, dark_floored;   // the line was fitted; below 0.24 q^2 it was raised to it
+    double sigma_y_dark_dn;    // sqrt(max(sigma^2_y.dark, 0.24 q^2))
+    double sigma_d_e;          // sqrt(sigma_y.dark^2 - q^2/12) / K
+    double x_sat;              // x at saturation
+    double mu_e_sat, mu_p_sat; // eta mu_p.sat = R x_sat / K; mu_p.sat = x_sat (NAN without photons)
+    double mu_e_min, mu_p_min; // sigma_y.dark / K + 1/2; mu_e.min / eta
+    double snr_max, dr;        // sqrt(mu_e.sat); mu_p.sat / mu_p.min = mu_e.sat / mu_e.min
+    int    i_lin_first, i_lin_last;   // linearity: the first step with Y >= 0.05 Y_sat .. the last with <= 0.95
+    double lin_slope, lin_offset;     // the line a x + b minimising sum ((Y - a x - b) / Y)^2 over them
+    double le_min_pct, le_max_pct, le_pct;   // min, max of 100 (Y - line) / line; LE = (max - min) / 2
+    double dark_current_dn_per_s, dark_current_var_dn2_per_s;   // slopes of mu_y.dark, sigma^2_y.dark against
+                                                                // exposure (more than two exposures; the
+                                                                // variance's NAN when negative)
+    double dark_current_e_per_s, dark_current_var_e_per_s;      // / K, / K^2
+} calib_gain_emva_t;
 
-// The row/column/pixel split of the spatial variance of an averaged frame
-// (w x h, statistics over roi x y w h), temporal_var the temporal variance
-// left in the average (sigma^2 / L). Model y = mu + r[row] + c[col] + p + e:
-// the variances of the row means Vr, column means Vc and of all values V,
-// each less its temporal part, give s2_pixel = (V - Vr - Vc) / (1 - 1/M - 1/N)
-// (M columns averaged in a row mean, N rows in a column mean), s2_row = Vr -
-// s2_pixel / M, s2_col = Vc - s2_pixel / N. The figures are standard
-// deviations (sqrt of max(0, .)), in the map's units times scale. false +
-// message (out of memory; the figures NAN).
+// false + message when there are fewer than 2 steps or no dark, or K or R is
+// not positive.
+bool calib_gain_emva(const calib_gain_emva_in_t *in, calib_gain_emva_t *out);
+
+// The spatial variances of one averaged stack of L frames over the region's
+// M rows and N columns (DN^2): mean; s2_measured the variance of the average
+// (divisor MN - 1); stack_var sigma^2_y.stack, the mean over pixels of each
+// pixel's temporal variance (divisor L - 1); s2 = s2_measured - stack / L;
+// s2_cav, s2_rav the variances of the column means (N of them, divisor N)
+// and of the row means (M, divisor M) less stack / (L M), stack / (L N);
+// s2_col = (MN - M) / D s2_cav - N / D (s2 - s2_rav), s2_row = (MN - N) / D
+// s2_rav - M / D (s2 - s2_cav), s2_pixel = MN / D (s2 - s2_cav - s2_rav),
+// D = MN - M - N: s2_col + s2_row + s2_pixel = s2 exactly. NAN figures for
+// one frame or a region of one row or column; false + message (out of memory).
+typedef struct {
+    int    L, M, N;
+    double mean, s2_measured, stack_var, s2, s2_cav, s2_rav, s2_col, s2_row, s2_pixel;
+} calib_gain_stack_var_t;
+bool calib_gain_stack_variances(const double *avg, int w, int h, const int roi[4], int L, double stack_var,
+                                calib_gain_stack_var_t *out);
+
+// DSNU1288 and PRNU1288 with their parts from the dark and the light stack
+// (index 0 total, 1 row, 2 column, 3 pixel): dsnu_var_dn2 the dark's s2
+// (total, row, column, pixel); prnu_var_dn2 the light's less the dark's;
+// dsnu_dn = signed root of dsnu_var_dn2 (DN; / K: e-), prnu_pct = 100 signed
+// root of prnu_var_dn2 / (mu_y - mu_y.dark). The parts' variances add up to
+// the total's.
+typedef struct {
+    calib_gain_stack_var_t dark, light;
+    bool   same_exposure;      // the dark stack is at the light stack's exposure (as the standard has it)
+    double signal_dn;          // mu_y - mu_y.dark of the stacks
+    double dsnu_var_dn2[4], prnu_var_dn2[4], dsnu_dn[4], prnu_pct[4];
+} calib_gain_nonuni_t;
+void calib_gain_nonuniformity(calib_gain_nonuni_t *nu);
+
+// refl's row/column/pixel split of one map (the high-pass PRNU's: w x h,
+// statistics over roi x y w h), temporal_var the temporal variance left in
+// it. Model y = mu + r[row] + c[col] + p + e: the variances of the row means
+// Vr, column means Vc and of all values V (divisor the count), each less its
+// temporal part, give s2_pixel = (V - Vr - Vc) / (1 - 1/M - 1/N) (M columns
+// averaged in a row mean, N rows in a column mean), s2_row = Vr - s2_pixel /
+// M, s2_col = Vc - s2_pixel / N, so that s2_row + s2_col + s2_pixel = V. The
+// figures are the signed roots (calib_gain_signed_sqrt: a negative estimate
+// stays negative) in the map's units times scale. false + message (out of
+// memory; the figures NAN).
 typedef struct {
     double total, row, col, pixel;
 } calib_gain_split_t;
@@ -223,8 +299,8 @@ bool calib_gain_defects(const float *dark, const float *light, int w, int h, con
 
 // The spatial analysis of the reference gain's flat field (calib_gain_maps_t).
 typedef struct {
-    calib_gain_split_t dsnu, prnu;          // DN; % of the mean signal
-    calib_gain_split_t prnu_hp;             // % of the high-pass flat (vignetting removed)
+    calib_gain_split_t dsnu, prnu;          // the standard's (maps' nu): DN; % of mu_y - mu_y.dark (signed)
+    calib_gain_split_t prnu_hp;             // refl's: % of the high-pass flat (vignetting removed)
     int     nh, nv;                          // spectrogram lengths (roi w / 2 + 1, h / 2 + 1)
     double *spec_h_dark, *spec_v_dark;       // DN
     double *spec_h_light, *spec_v_light;     // % of the mean signal
@@ -238,10 +314,13 @@ typedef struct {
 // ---------------------------------------------------------------------------
 // A run
 
-// Options of calib_gain_run: exactly one source of frames (rig, frames, sessions).
+// Options of calib_gain_run: exactly one source of frames (rig, frames, sessions, descriptor).
 typedef struct {
     const char  *rig;                // capture on this rig file, or NULL
     const char  *frames;             // a manifest "file,exposure_us,kind" (kind dark|light), or NULL
+    const char  *descriptor;         // an EMVA 1288 descriptor file (its photon counts: the photon axis), or NULL
+    const char  *write_descriptor;   // write an EMVA 1288 descriptor of the run's frames here (NULL: none;
+                                     // several cameras: NAME inserted before the extension)
     const char *const *sessions;     // capture sessions made elsewhere (nsessions), or NULL
     int          nsessions;
     const char  *out;                // the output directory (created)
@@ -275,6 +354,10 @@ typedef struct {
     int          argc;               // the command line, for the provenance (may be 0)
     char       **argv;
 } calib_gain_opts_t;
+
+// The irradiance o gives (uW/cm^2): irradiance_uw_cm2, or the photodiode's
+// reading (calib_gain_photodiode_irradiance); NAN: none.
+double calib_gain_opts_irradiance(const calib_gain_opts_t *o);
 
 // The sweep's exposures up to tmax (us): steps equally spaced (tmax/steps ..
 // tmax) and low_steps geometric ones from 0.2 % to 12 % of tmax (the low end,
@@ -319,6 +402,8 @@ typedef struct {
     int    line;          // manifest line (0: a session frame)
     int    step;          // session step
     double exposure_us, gain_db;
+    bool   has_photons;   // photons known (an EMVA 1288 descriptor's count)
+    double photons;       // mean photons per pixel during the frame (0: dark)
     bool   dark;
     int    set;           // CALIB_GAIN_SET_*
     int    max_dn;        // full scale of the frame's pixel format
@@ -332,9 +417,11 @@ typedef struct {
     const char *role;     // its provenance role (static)
 } calib_gain_source_t;
 
-// The frames of one exposure, gain, kind and role.
+// The frames of one exposure, gain, kind, role and photon count.
 typedef struct {
     double exposure_us, gain_db;
+    bool   has_photons;
+    double photons;
     bool   dark;
     int    set;
     int   *idx;           // frames (indices into calib_gain_data_t.f)
@@ -360,6 +447,34 @@ typedef struct {
 void calib_gain_data_free(calib_gain_data_t *d);
 // Frames of a manifest (gain 0; max_dn their full scale). false + message (file:line).
 bool calib_gain_read_manifest(const char *path, int max_dn, calib_gain_data_t *d);
+
+// An EMVA 1288 descriptor file (descriptor.c has its grammar, the reference
+// implementation's): each set of images, a bright one ("b EXPOSURE_NS
+// PHOTONS") or a dark one ("d EXPOSURE_NS": photons 0), and its images.
+typedef struct {
+    double exposure_ns, photons;   // photons 0: dark
+    int    line;                   // its b or d line
+    int    first, nimages;         // its images: paths[first .. first + nimages - 1]
+    bool   spatial;                // more than two images: the spatial set; two: a temporal step
+} calib_gain_desc_set_t;
+typedef struct {
+    char   version[32];            // the "v" line's ("" none)
+    int    bits, width, height, n_line;   // the "n" line's (n_line 0: none)
+    calib_gain_desc_set_t *sets;
+    int    nsets;
+    char **paths;                  // as written, '\' turned '/' (relative to the file unless they begin with '/')
+    int   *path_line;
+    int    npaths;
+} calib_gain_descriptor_t;
+// Parse a descriptor's text (n bytes, no NUL needed; path for messages):
+// false + message naming path:line when it is malformed (*d empty then).
+bool calib_gain_descriptor_parse(const char *text, size_t n, const char *path, calib_gain_descriptor_t *d);
+void calib_gain_descriptor_free(calib_gain_descriptor_t *d);
+// Frames of a descriptor file (exposures ns -> us, gain 0, the photon
+// counts; temporal sets the sweep, spatial ones the flat set; full scale 2^bits
+// - 1, or max_dn without an "n" line): every image must exist and have the
+// "n" line's size. false + message (file:line).
+bool calib_gain_read_descriptor(const char *path, int max_dn, calib_gain_data_t *d);
 // Frames of camera `camera` (NULL: the session's first) of a session; set:
 // their role (CALIB_GAIN_SET_ANY: dark = no lamp on). d->camera and
 // d->gain_unit are set from them (frames of another gain unit than d's
@@ -406,8 +521,11 @@ typedef struct {
     double dark_slope_std_dn_per_us;  // dark_slope_dn_per_us's 1-sigma (NAN: not fitted)
     double read_noise_std_e;          // read noise's 1-sigma (var_dark's and K's)
     double dark_current_std_e_per_s;  // dark current's 1-sigma (the slope's and K's)
-    calib_gain_photon_t ph;           // the photon axis (calib_gain_photon_axis)
+    int    n_dark_modelled;           // sweep steps without a dark pair at their exposure (the dark model's)
     double *mu_p;                     // photons per pixel of each step (NAN: not measured)
+    const char *photon_source;        // of mu_p: "irradiance", "photodiode", "descriptor"; NULL: not measured
+    calib_gain_emva_t emva;           // the standard's figures (calib_gain_an_emva)
+    double snr_exact_mu_e_min;        // refl's: the exact SNR = 1 root 1/2 + sqrt(sigma^2_y.dark / K^2 + 1/4), e-
 } calib_gain_an_t;
 
 void calib_gain_an_free(calib_gain_an_t *a);
@@ -434,6 +552,9 @@ typedef struct {
     double  flat_log_slope, flat_log_slope_parametric;   // d ln S / d ln S_m at the flat's level (0: none)
     double  flat_pixel_std_rel;      // the flat map's temporal noise per pixel, relative to its mean
     bool    flat_linearised;         // the flat's signal went through the response linearisation
+    int     flat_group, dark_group;  // the groups of the flat and its dark (indices into d->g)
+    calib_gain_nonuni_t nu;          // the standard's DSNU1288 and PRNU1288 of the two stacks (raw, not
+                                     // linearised)
     calib_gain_spatial_t sp;         // calib_gain_make_spatial
 } calib_gain_maps_t;
 
@@ -447,11 +568,32 @@ bool calib_gain_write_maps(const char *dir, const calib_gain_maps_t *m);
 // row/column/pixel split, spectrograms, profiles, defects (nsigma) over d's
 // roi. false + message (no memory).
 bool calib_gain_make_spatial(const calib_gain_data_t *d, calib_gain_maps_t *m, double nsigma, double quant_dn);
-// The photon axis of a (o's irradiance, area, wavelength): a->ph, a->mu_p.
+// The photon axis of a: a->mu_p from the sweep's photon counts (a
+// descriptor's) or o's irradiance, pixel area and wavelength, and
+// a->photon_source (NULL: not measured). false + message (out of memory;
+// the descriptor's counts with an irradiance too).
 bool calib_gain_an_photons(const calib_gain_opts_t *o, calib_gain_an_t *a);
+// The standard's figures of a (calib_gain_emva): its sweep, its x the photon
+// counts when measured, and the temporal darks of its gain (the dark pairs
+// of the sweep and of the dark set, one per exposure, the most frames). false
+// + message.
+bool calib_gain_an_emva(const calib_gain_data_t *d, double quant_dn, calib_gain_an_t *a);
+// A group's frames (all w x h) averaged into avg (w x h doubles) with the
+// mean over d's region of each pixel's temporal variance (divisor L - 1;
+// NAN for one frame) into *stack_var. false + message.
+bool calib_gain_stack_average(const calib_gain_data_t *d, const calib_gain_group_t *g, int w, int h, double *avg,
+                              double *stack_var);
 // gain.json's "emva1288": the datasheet rows, definitions, the spatial
 // analysis and its curves (an[0] the reference gain).
 json_t *calib_gain_emva_json(const calib_gain_opts_t *o, const calib_gain_an_t *an, const calib_gain_maps_t *m);
+// An EMVA 1288 descriptor of d's frames at a's gain, the standard's data
+// exchange: every sweep step with a dark pair at its exposure (its first two
+// light and dark frames), then the spatial set (the flat and its dark of m,
+// when both have more than two frames at one exposure); paths relative to
+// the file's directory; photons from the frames' counts or o's irradiance,
+// pixel area and wavelength (an error without). false + message.
+bool calib_gain_write_descriptor(const char *path, const calib_gain_opts_t *o, const calib_gain_data_t *d,
+                                 const calib_gain_an_t *a, const calib_gain_maps_t *m);
 // DIR/defects.tiff (codes 0 good, 1 hot, 2 dead, 3 bright) and DIR/datasheet.html.
 bool calib_gain_write_defects(const char *dir, const calib_gain_maps_t *m);
 bool calib_gain_datasheet_html(const char *dir, json_t *emva, json_t *prov);
@@ -464,8 +606,16 @@ bool calib_gain_datasheet_html(const char *dir, json_t *emva, json_t *prov);
 //   version 2  names itself; always has gain_db, gain_unit, linearisation,
 //              flat_field.pixel_std_rel and .linearised, std, std_method and
 //              dark_exposures_us (null where a figure is unknown).
+//   version 3  the same top level; "emva1288" by the standard's definitions:
+//              its "datasheet" rows name their "section" of the standard
+//              (a negative variance estimate a negative value with
+//              "negative_estimate"), refl's own figures in "refl_rows", the
+//              spatial block the standard's variances ("variances_dn2") and
+//              the temporal block its fit ranges ("photon_transfer"); every
+//              gain's "emva1288" figures. Readers of the top level read all
+//              three versions alike.
 #define CALIB_GAIN_FORMAT         "refl-gain"
-#define CALIB_GAIN_FORMAT_VERSION 2
+#define CALIB_GAIN_FORMAT_VERSION 3
 // gain.json's document (new reference): an[0] the reference gain, then every gain.
 json_t *calib_gain_json(const calib_gain_opts_t *o, const calib_gain_data_t *d, const calib_gain_an_t *an, int ngains,
                         const calib_gain_maps_t *maps, json_t *prov);

@@ -11,9 +11,7 @@
 #include "calib/gain/internal.h"
 #include "model/model.h"
 
-// f appended to d's frames (d owns its strings then). false + message (out
-// of memory; f's strings freed).
-static bool add_frame(calib_gain_data_t *d, const calib_gain_frame_t *f)
+bool gain_add_frame(calib_gain_data_t *d, const calib_gain_frame_t *f)
 {
     calib_gain_frame_t *nf = realloc(d->f, sizeof *d->f * (d->nf + 1));
     if (!nf) {
@@ -86,7 +84,7 @@ bool calib_gain_read_manifest(const char *path, int max_dn, calib_gain_data_t *d
             g_free(fr.where);
             goto done;
         }
-        if (!add_frame(d, &fr)) goto done;
+        if (!gain_add_frame(d, &fr)) goto done;
         nframes++;
     }
     if (!nframes) {
@@ -135,7 +133,7 @@ bool calib_gain_add_session(calib_gain_data_t *d, const char *dir, const char *c
                        .step = r->step, .exposure_us = r->exposure_us, .gain_db = r->gain, .dark = on == 0,
                        .set = set, .max_dn = calib_full_scale_dn(r->pixel_format), .nlamps = on };
         snprintf(f.sha256, sizeof f.sha256, "%s", r->sha256);
-        ok = add_frame(d, &f);
+        ok = gain_add_frame(d, &f);
     }
     if (ok && facts_out && !*facts_out && s->facts) *facts_out = json_incref(s->facts);
     rig_session_free(s);

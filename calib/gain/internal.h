@@ -19,8 +19,17 @@ float      *gain_frame_load(const calib_gain_frame_t *f, int *w, int *h);
 const char *gain_frame_name(const calib_gain_frame_t *f, char *buf, size_t size);
 void        gain_region(int w, int h, const int roi[4], int r[4]);
 
+// input.c: f appended to d's frames (d owns its strings then). false +
+// message (out of memory; f's strings freed).
+bool gain_add_frame(calib_gain_data_t *d, const calib_gain_frame_t *f);
+
 // output.c: a JSON array of n numbers (NaN and infinities: null; v NULL: empty).
 json_t *gain_json_numbers(const double *v, int n);
+
+// datasheet.c: gain.json "emva1288" "datasheet" (the standard's rows, each
+// with its section) and "refl_rows" (refl's own figures) of a's gain and m.
+json_t *gain_datasheet_rows(const calib_gain_opts_t *o, const calib_gain_an_t *a, const calib_gain_maps_t *m);
+json_t *gain_refl_rows(const calib_gain_an_t *a, const calib_gain_maps_t *m);
 
 // dark.c: the dark model of a->gain_db (a's dark_* and var_dark_* figures,
 // ndark, dark_t_us); *var_fitted: the dark variance's line against exposure

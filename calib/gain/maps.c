@@ -63,30 +63,6 @@ void calib_gain_maps_free(calib_gain_maps_t *m)
     free(sp->defect_map);
 }
 
-// Average of a group's frames (full frame) into out (w*h doubles summed then divided).
-static bool group_average(const calib_gain_data_t *d, const calib_gain_group_t *g, int w, int h, float *out)
-{
-    size_t n = (size_t)w * h;
-    double *sum = calloc(n, sizeof(double));
-    if (!sum) {
-        model_error_set(NULL, 0, "out of memory for the average of %d frames (%dx%d)", g->n, w, h);
-        return false;
-    }
-    for (int k = 0; k < g->n; k++) {
-        int fw, fh;
-        float *img = gain_frame_load(&d->f[g->idx[k]], &fw, &fh);
-        if (!img) {
-            free(sum);
-            return false;
-        }
-        for (size_t i = 0; i < n; i++) sum[i] += img[i];
-        free(img);
-    }
-    for (size_t i = 0; i < n; i++) out[i] = (float)(sum[i] / g->n);
-    free(sum);
-    return true;
-}
-
 static double roi_mean_var(const calib_gain_data_t *d, const float *m, int w, int h, double *var)
 {
     int r[4];
@@ -131,16 +107,18 @@ static const calib_gain_group_t *flat_group(const calib_gain_data_t *d, const ca
     return flat;
 }
 
-// The flat's dark: the dark group at its exposure with the most frames
-// (*same true), else the dark group with the most frames.
+// The flat's dark: the dark group at its exposure (of the flat's set, else
+// any) with the most frames (*same true), else the dark group with the most
+// frames.
 static const calib_gain_group_t *flat_dark_group(const calib_gain_data_t *d, const calib_gain_an_t *a,
                                                  const calib_gain_group_t *flat, bool *same)
 {
     const calib_gain_group_t *dark = NULL;
     for (int i = 0; i < d->ng; i++) {
         const calib_gain_group_t *g = &d->g[i];
-        if (g->gain_db == a->gain_db && g->dark && g->exposure_us == flat->exposure_us && (!dark || g->n > dark->n))
-            dark = g;
+        if (g->gain_db != a->gain_db || !g->dark || g->exposure_us != flat->exposure_us) continue;
+        bool mine = g->set == flat->set, best_mine = dark && dark->set == flat->set;
+        if (!dark || (mine && !best_mine) || (mine == best_mine && g->n > dark->n)) dark = g;
     }
     *same = dark != NULL;
     if (!dark)
@@ -184,8 +162,20 @@ static bool flat_level(const calib_gain_data_t *d, const calib_gain_an_t *a, con
     return true;
 }
 
+// One stack averaged (calib_gain_stack_average) into out (floats) with the
+// standard's spatial variances over d's region into *sv. false + message.
+static bool stack_map(const calib_gain_data_t *d, const calib_gain_group_t *g, int w, int h, double *avg,
+                      float *out, calib_gain_stack_var_t *sv)
+{
+    double stack_var;
+    if (!calib_gain_stack_average(d, g, w, h, avg, &stack_var)) return false;
+    for (size_t i = 0; i < (size_t)w * h; i++) out[i] = (float)avg[i];
+    return calib_gain_stack_variances(avg, w, h, d->roi, g->n, stack_var, sv);
+}
+
 // m's four maps allocated (the flat's size); the averaged dark into offset,
-// the averaged flat into prnu. false + message.
+// the averaged flat into prnu, the standard's DSNU1288 and PRNU1288 of the
+// two stacks (raw) into m->nu. false + message.
 static bool average_maps(const calib_gain_data_t *d, const calib_gain_an_t *a, const calib_gain_group_t *flat,
                          const calib_gain_group_t *dark, calib_gain_maps_t *m)
 {
@@ -197,14 +187,24 @@ static bool average_maps(const calib_gain_data_t *d, const calib_gain_an_t *a, c
     m->dsnu = malloc(n * sizeof(float));
     m->prnu = malloc(n * sizeof(float));
     m->prnu_hp = malloc(n * sizeof(float));
-    if (!m->offset || !m->dsnu || !m->prnu || !m->prnu_hp) {
+    double *avg = malloc(n * sizeof(double));
+    if (!m->offset || !m->dsnu || !m->prnu || !m->prnu_hp || !avg) {
+        free(avg);
         model_error_set(NULL, 0, "out of memory for the maps (%dx%d)", w, h);
         return false;
     }
     model_note("flat field: %d light frames at %.6g us (%.0f DN above dark, %.0f %% of saturation), %d dark frames "
                "at %.6g us", flat->n, flat->exposure_us, m->flat_level_dn, 100 * m->flat_level_dn /
                a->ptc.saturation_dn, dark->n, dark->exposure_us);
-    if (!group_average(d, dark, w, h, m->offset) || !group_average(d, flat, w, h, m->prnu)) return false;
+    bool ok = stack_map(d, dark, w, h, avg, m->offset, &m->nu.dark) && stack_map(d, flat, w, h, avg, m->prnu,
+                                                                                    &m->nu.light);
+    free(avg);
+    if (!ok) return false;
+    if (dark->n < 2 || flat->n < 2)
+        model_warning("the flat field has %d light and %d dark frames: DSNU1288 and PRNU1288 need two or more of "
+                      "each (L >= 2; the standard asks for many)", flat->n, dark->n);
+    m->nu.same_exposure = dark->exposure_us == flat->exposure_us;
+    calib_gain_nonuniformity(&m->nu);
     m->dark_frames = dark->n;
     m->dark_exposure_us = dark->exposure_us;
     return true;
@@ -306,6 +306,12 @@ bool calib_gain_make_maps(calib_gain_data_t *d, const calib_gain_an_t *a, calib_
         return false;
     }
     const calib_gain_group_t *dark = flat_dark_group(d, a, flat, &m->dark_same_exposure);
+    m->flat_group = (int)(flat - d->g);
+    m->dark_group = dark ? (int)(dark - d->g) : -1;
+    if (!dark) {
+        model_error_set(NULL, 0, "gain %g dB: no dark frames for the flat field", a->gain_db);
+        return false;
+    }
     double slope2;
     if (!flat_level(d, a, flat, m) || !average_maps(d, a, flat, dark, m)) return false;
     dsnu_and_signal(d, a, flat, dark, m, &slope2);

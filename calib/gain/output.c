@@ -60,15 +60,31 @@ static json_t *gain_json(const calib_gain_an_t *a)
     json_object_set_new(o, "dark_current_from_variance_e_per_s",
                         model_json_number(a->dark_var_slope_dn2_per_us * 1e6 /
                                           (p->system_gain_dn_per_e * p->system_gain_dn_per_e)));
-    const calib_gain_photon_t *ph = &a->ph;
-#define PHOTON(key, v) json_object_set_new(o, key, ph->measured ? model_json_number(v) : json_string("not measured"))
-    PHOTON("quantum_efficiency", ph->qe);
-    PHOTON("responsivity_dn_per_photon", ph->responsivity_dn_per_photon);
-    PHOTON("absolute_sensitivity_threshold_photons", ph->mu_p_min);
-    PHOTON("saturation_capacity_photons", ph->mu_p_sat);
+    const calib_gain_emva_t *e = &a->emva;
+#define PHOTON(key, v) json_object_set_new(o, key, e->photons ? model_json_number(v) : json_string("not measured"))
+    PHOTON("quantum_efficiency", e->qe);
+    PHOTON("responsivity_dn_per_photon", e->R);
+    PHOTON("absolute_sensitivity_threshold_photons", e->mu_p_min);
+    PHOTON("saturation_capacity_photons", e->mu_p_sat);
 #undef PHOTON
-    json_object_set_new(o, "absolute_sensitivity_threshold_e", model_json_number(ph->mu_e_min));
-    json_object_set_new(o, "dynamic_range_r4", model_json_number(ph->dynamic_range));
+    json_object_set_new(o, "absolute_sensitivity_threshold_e", model_json_number(e->mu_e_min));
+    json_object_set_new(o, "dynamic_range_r4", model_json_number(e->dr));
+    json_t *s = json_object();   // this gain's figures by the standard's definitions (the datasheet's rows)
+    json_object_set_new(s, "system_gain_dn_per_e", model_json_number(e->K));
+    json_object_set_new(s, "temporal_dark_noise_e", model_json_number(e->sigma_d_e));
+    json_object_set_new(s, "temporal_dark_noise_dn", model_json_number(e->sigma_y_dark_dn));
+    json_object_set_new(s, "saturation_capacity_e", model_json_number(e->mu_e_sat));
+    json_object_set_new(s, "absolute_sensitivity_threshold_e", model_json_number(e->mu_e_min));
+    json_object_set_new(s, "snr_max", model_json_number(e->snr_max));
+    json_object_set_new(s, "dynamic_range", model_json_number(e->dr));
+    json_object_set_new(s, "linearity_error_pct", model_json_number(e->le_pct));
+    json_object_set_new(s, "linearity_error_min_pct", model_json_number(e->le_min_pct));
+    json_object_set_new(s, "linearity_error_max_pct", model_json_number(e->le_max_pct));
+    json_object_set_new(s, "dark_current_e_per_s", model_json_number(e->dark_current_e_per_s));
+    json_object_set_new(s, "dark_current_from_variance_e_per_s", model_json_number(e->dark_current_var_e_per_s));
+    json_object_set_new(s, "saturation_step", json_integer(e->i_sat));
+    json_object_set_new(s, "fit_steps", json_integer(e->n_fit));
+    json_object_set_new(o, "emva1288", s);
     json_object_set_new(o, "n_steps", json_integer(a->n));
     json_object_set_new(o, "n_ptc_fit", json_integer(p->n_ptc_fit));
     json_object_set_new(o, "n_linearity_fit", json_integer(p->n_lin_fit));
@@ -101,9 +117,10 @@ static json_t *conventions_json(const calib_gain_opts_t *o, const calib_gain_dat
     json_object_set_new(cv, "temporal_variance", json_string("var(A - B) / 2 of a frame pair, minus its dark "
                                                              "counterpart"));
     json_object_set_new(cv, "system_gain_dn_per_e", json_string(
-        "slope at zero signal of a quadratic least-squares fit of the variance against the signal over 0..70 % of "
-        "saturation (the small-signal K; system_gain_linear_fit_dn_per_e is EMVA 1288's straight line over the "
-        "same range)"));
+        "refl's small-signal K: the slope at zero signal of a quadratic least-squares fit of the variance against "
+        "the signal over 0..70 % of saturation (what refl's measurements use; system_gain_linear_fit_dn_per_e: a "
+        "straight line with an intercept over the same range). EMVA 1288's K (through the origin, the standard's "
+        "range) is emva1288's datasheet row K and gains[].emva1288"));
     json_object_set_new(cv, "read_noise_e", json_string("sqrt(sigma^2_y.dark - q^2/12) / K, sigma^2_y.dark the "
                                                         "dark temporal variance extrapolated to exposure 0"));
     json_object_set_new(cv, "saturation_dn", json_string("signal (above dark) where the temporal variance peaks"));
@@ -141,10 +158,15 @@ static json_t *conventions_json(const calib_gain_opts_t *o, const calib_gain_dat
                                                         "temporal variance against exposure / K^2; "
                                                         "dark_exposures_us: the exposures (us) of the dark groups "
                                                         "both were fitted over, one per group"));
-    json_object_set_new(cv, "emva1288", json_string("the EMVA 1288 Release 4.0 Linear datasheet, each row with its "
-                                                    "definition; quantum_efficiency etc. \"not measured\" without "
-                                                    "--irradiance"));
-    json_object_set_new(cv, "dynamic_range", json_string("saturation_capacity_e / read_noise_e"));
+    json_object_set_new(cv, "emva1288", json_string("the EMVA 1288 Release 4.0 Linear datasheet: each row by the "
+                                                    "standard's definition with its section; refl's own figures in "
+                                                    "its refl_rows. The top-level figures (system_gain_dn_per_e, "
+                                                    "read_noise_e, saturation_capacity_e, snr_max, dynamic_range, "
+                                                    "dsnu_dn, prnu_pct) are refl's; quantum_efficiency and the "
+                                                    "gains' photon figures the standard's (\"not measured\" without "
+                                                    "a photon axis)"));
+    json_object_set_new(cv, "dynamic_range", json_string("refl's: saturation_capacity_e / read_noise_e (both with "
+                                                         "the small-signal K; the standard's DR is emva1288's row)"));
     json_object_set_new(cv, "statistics_region", d->roi[2] > 0 ? json_pack("[iiii]", d->roi[0], d->roi[1], d->roi[2],
                                                                            d->roi[3])
                                                                : json_string("whole frame"));
@@ -243,7 +265,7 @@ json_t *calib_gain_json(const calib_gain_opts_t *o, const calib_gain_data_t *d, 
                                                 "dsnu_dn.tiff", "prnu_gain", "prnu_gain.tiff", "prnu_highpass",
                                                 "prnu_highpass.tiff", "defects", "defects.tiff"));
     json_object_set_new(root, "quantum_efficiency",
-                        a->ph.measured ? model_json_number(a->ph.qe) : json_string("not measured"));
+                        a->emva.photons ? model_json_number(a->emva.qe) : json_string("not measured"));
     json_object_set_new(root, "emva1288", calib_gain_emva_json(o, an, maps));
     json_t *pg = json_array();
     for (int i = 0; i < ngains; i++) json_array_append_new(pg, gain_json(&an[i]));

@@ -1,6 +1,8 @@
 // calib/gain/spatial.c — the spatial analysis of EMVA 1288 Release 4.0
-// Linear: the row/column/pixel split of DSNU and PRNU, horizontal and
-// vertical spectrograms, row and column profiles (calib/gain/gain.h).
+// Linear around the standard's DSNU and PRNU (nonuniformity.c): refl's
+// row/column/pixel split of the high-pass PRNU, horizontal and vertical
+// spectrograms, row and column profiles, the defects' inputs
+// (calib/gain/gain.h).
 #include <complex.h>
 #include <math.h>
 #include <stdlib.h>
@@ -46,10 +48,10 @@ bool calib_gain_spatial_split(const float *img, int w, int h, const int roi[4], 
     double den = 1 - 1.0 / M - 1.0 / N;
     double p2 = den > 0 ? (V - Vr - Vc) / den : NAN;
     double r2 = Vr - p2 / M, c2 = Vc - p2 / N;
-    o->total = scale * sqrt(fmax(V, 0));
-    o->row = scale * sqrt(fmax(r2, 0));
-    o->col = scale * sqrt(fmax(c2, 0));
-    o->pixel = scale * sqrt(fmax(p2, 0));
+    o->total = scale * calib_gain_signed_sqrt(V);
+    o->row = scale * calib_gain_signed_sqrt(r2);
+    o->col = scale * calib_gain_signed_sqrt(c2);
+    o->pixel = scale * calib_gain_signed_sqrt(p2);
     return true;
 }
 
@@ -179,9 +181,10 @@ bool calib_gain_make_spatial(const calib_gain_data_t *d, calib_gain_maps_t *m, d
     smean /= (double)r[2] * r[3];
     sp->signal_mean_dn = smean;
     const double rel = 100 / smean, dtv = m->dark_var_dn2 / m->dark_frames;
-    bool ok = calib_gain_spatial_split(m->offset, m->w, m->h, r, dtv, 1, &sp->dsnu) &&
-              calib_gain_spatial_split(sig, m->w, m->h, r, m->signal_temporal_var_dn2, rel, &sp->prnu) &&
-              calib_gain_spatial_split(m->prnu_hp, m->w, m->h, r, m->signal_temporal_var_dn2 / (smean * smean), 100,
+    // DSNU and PRNU: the standard's (maps.c, nonuniformity.c); the high-pass PRNU refl's
+    sp->dsnu = (calib_gain_split_t){ m->nu.dsnu_dn[0], m->nu.dsnu_dn[1], m->nu.dsnu_dn[2], m->nu.dsnu_dn[3] };
+    sp->prnu = (calib_gain_split_t){ m->nu.prnu_pct[0], m->nu.prnu_pct[1], m->nu.prnu_pct[2], m->nu.prnu_pct[3] };
+    bool ok = calib_gain_spatial_split(m->prnu_hp, m->w, m->h, r, m->signal_temporal_var_dn2 / (smean * smean), 100,
                                        &sp->prnu_hp) &&
               calib_gain_spectrogram(m->offset, m->w, m->h, r, false, 1, sp->spec_h_dark) &&
               calib_gain_spectrogram(m->offset, m->w, m->h, r, true, 1, sp->spec_v_dark) &&
