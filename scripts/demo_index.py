@@ -53,6 +53,15 @@ def link(out, rel, text=None):
     return f'<a href="{e(rel)}">{e(text or rel)}</a>'
 
 
+def emva_row(gain, symbol):
+    """The value of gain.json's EMVA 1288 datasheet row of that symbol, or None."""
+    rows = ((gain or {}).get("emva1288") or {}).get("datasheet") or []
+    for r in rows:
+        if isinstance(r, dict) and r.get("symbol") == symbol and isinstance(r.get("value"), (int, float)):
+            return r["value"]
+    return None
+
+
 def calib_rows(out):
     rows = []
     g = jload(out, "calib/geometry/geometry.json")
@@ -76,9 +85,11 @@ def calib_rows(out):
                  ", ".join(f"{e(str(m.get('name')))} n {fmt(m.get('emission_cos_power'), '.2f')}" for m in pats)
                  if pats else "missing"])
     gn = jload(out, "calib/gain/gain.json")
+    kst = emva_row(gn, "K")
     rows.append(["sensitivity, EMVA 1288 (refl calib gain)", link(out, "calib/gain/report.html", "gain report"),
-                 f"K {fmt(gn.get('system_gain_dn_per_e'), '.4g')} DN/e-, read noise {fmt(gn.get('read_noise_e'), '.3g')}"
-                 f" e-, PRNU {fmt(gn.get('prnu_pct'), '.3g')} %" if gn else "missing"])
+                 (f"EMVA 1288 K {fmt(kst, '.4g')} DN/e-; " if kst is not None else "")
+                 + f"refl's small-signal K {fmt(gn.get('system_gain_dn_per_e'), '.4g')} DN/e-, read noise "
+                 f"{fmt(gn.get('read_noise_e'), '.3g')} e-, PRNU {fmt(gn.get('prnu_pct'), '.3g')} %" if gn else "missing"])
     w = jload(out, "calib/white/white.json")
     rows.append(["absolute scale kc&middot;I (refl calib white)", link(out, "calib/white/white.json"),
                  "written" if w else "missing"])
@@ -159,8 +170,11 @@ def headline_calib(out):
     gn = jload(out, "calib/gain/gain.json")
     if gn:
         sd = gn.get("std") if isinstance(gn.get("std"), dict) else {}
-        items.append(f"sensor: K {fmt(gn.get('system_gain_dn_per_e'), '.4g')} ± {fmt(sd.get('system_gain_dn_per_e'), '.2g')} "
-                     f"DN/e-, read noise {fmt(gn.get('read_noise_e'), '.3g')} ± {fmt(sd.get('read_noise_e'), '.2g')} e-")
+        kst = emva_row(gn, "K")
+        items.append((f"sensor: EMVA 1288 K {fmt(kst, '.4g')} DN/e-; " if kst is not None else "sensor: ")
+                     + f"refl's small-signal K {fmt(gn.get('system_gain_dn_per_e'), '.4g')} ± "
+                     f"{fmt(sd.get('system_gain_dn_per_e'), '.2g')} DN/e-, read noise {fmt(gn.get('read_noise_e'), '.3g')}"
+                     f" ± {fmt(sd.get('read_noise_e'), '.2g')} e-")
     w = jload(out, "calib/white/white.json")
     wl = [m for m in (w or {}).get("lamps", []) if isinstance(m, dict)]
     if wl:

@@ -30,9 +30,10 @@ static int summary_rows(const calib_gain_an_t *an, int ngains, const calib_gain_
     else
         rows[nr++] = g_strdup("EMVA 1288 quantum efficiency|not measured|give --irradiance, --pixel-area-um2 (or "
                               "--pixel-pitch-um) and --wavelength-nm, or --emva-descriptor");
-    char pmin[64] = "not measured";
-    if (e->photons) snprintf(pmin, sizeof pmin, "%.4g photons", e->mu_p_min);
-    rows[nr++] = g_strdup_printf("EMVA 1288 absolute sensitivity threshold|%.4g e- (%s)|sigma_y.dark / K + 1/2",
+    // measured in electrons; in photons only with the photon axis
+    char pmin[96] = "; in photons: not measured (no photon axis)";
+    if (e->photons) snprintf(pmin, sizeof pmin, " (%.4g photons)", e->mu_p_min);
+    rows[nr++] = g_strdup_printf("EMVA 1288 absolute sensitivity threshold|%.4g e-%s|sigma_y.dark / K + 1/2",
                                  e->mu_e_min, pmin);
     rows[nr++] = g_strdup_printf("EMVA 1288 SNR_max, DR|%.1f (%.1f dB), %.0f (%.1f dB)|sqrt(mu_e.sat); "
                                  "mu_p.sat / mu_p.min", e->snr_max, 20 * log10(e->snr_max), e->dr,
