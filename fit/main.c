@@ -40,7 +40,7 @@ static const command_t commands[] = {
     { "demo",    demo_cmd,        "the whole lab day on the virtual rig: calibrations, materials, light planning, verification" },
     { "chain",   eval_chain_cmd,  "compare a lab day's calibrated and fitted figures with the virtual rig's truth: chain.json" },
     { "export",  fit_cmd_export,  "a priors file's materials as glTF 2.0, Mitsuba 3 or MERL, with the conversion error" },
-    { "plan",    lightplan_cmd,   "plan lamps: choose the lamp set and exposure for detectable edges, no glare or saturation" },
+    { "plan",    lightplan_cmd,   "plan lamps: lamps and exposure for detectable edges; plan geometry: the board's poses; plan day: a lab file's plans" },
 };
 
 static void usage(FILE *f)
