@@ -17,8 +17,9 @@
 #define ABOUT                                                                                                  \
     "Proposes the board poses of refl calib geometry for one's own camera(s): the board flat and on each\n"   \
     "wedge (--wedges-deg) with its hinge at each azimuth (--azimuths-deg), at turntable angles every\n"      \
-    "--angle-step-deg; a pose counts for a camera whose imager holds every inner corner of the board\n"     \
-    "with --margin-px to spare (mrgingham finds the whole grid or none), its squares at least\n"            \
+    "--angle-step-deg; a pose counts for a camera whose imager holds the board's inner corners and half\n" \
+    "a square beyond them with --margin-px to spare (mrgingham finds the whole grid or none; the margin\n"   \
+    "is for the board's placement on its wedge), its squares at least\n"                                    \
     "--min-square-px and its obliquity at most --max-obliquity-deg. The poses\n"                             \
     "are chosen greedily for the imager's coverage by the corners, the orientations kept spread (head-on,\n"  \
     "tilted left, right, up, down in the image), as mrcal's guidance for a calibration dance asks: many\n"   \
@@ -211,7 +212,8 @@ int calib_cmd_plan_geometry(int argc, char **argv)
         MODEL_OPT_VALUE("--angle-step-deg", "S", "turntable angles tried: every S deg (default 10)", false),
         MODEL_OPT_VALUE("--max-obliquity-deg", "D", "the board's normal at most D from the camera (default 60)",
                         false),
-        MODEL_OPT_VALUE("--margin-px", "M", "every inner corner at least M px inside the imager (default 10)", false),
+        MODEL_OPT_VALUE("--margin-px", "M", "the corners and half a square beyond them at least M px inside the "
+                        "imager (default 10)", false),
         MODEL_OPT_VALUE("--min-square-px", "S", "its smallest square at least S px (default 12)", false),
         MODEL_OPT_VALUE("--max-views", "N", "views chosen per camera at most (default 30)", false),
         MODEL_OPT_STRING("--check-tilts", "SPEC", "instead: the coverage of these tilts ('T[@AZ]:A,A,... ...', as "

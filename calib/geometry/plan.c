@@ -15,6 +15,9 @@
 #define NCLASS 5
 #define CELLS_X 64
 #define HEAD_ON_DEG 15.0
+// the board's extent that must land inside the imager: half a square beyond the outer inner corners
+// (mrgingham needs the squares around the corner grid)
+#define EDGE 0.5
 static const char *const class_names[NCLASS] = { "head-on", "left", "right", "up", "down" };
 
 typedef struct {
@@ -67,15 +70,16 @@ static model_vec3_t grid_point(const plan_t *P, double i, double j, const double
     return v3(y[0] + t[0], y[1] + t[1], y[2] + t[2]);
 }
 
-// The ring of grid points (lo..hi in both) in order around the grid; n points.
-static int ring(const plan_t *P, int lo_i, int hi_i, int lo_j, int hi_j, const double R[9], const double t[3],
-                model_vec3_t *out)
+// The ring of grid points around the grid (lo..hi in both, in steps of one square from lo) in
+// order; n points.
+static int ring(const plan_t *P, double lo_i, double hi_i, double lo_j, double hi_j, const double R[9],
+                const double t[3], model_vec3_t *out)
 {
-    int n = 0;
-    for (int i = lo_i; i < hi_i; i++) out[n++] = grid_point(P, i, lo_j, R, t);
-    for (int j = lo_j; j < hi_j; j++) out[n++] = grid_point(P, hi_i, j, R, t);
-    for (int i = hi_i; i > lo_i; i--) out[n++] = grid_point(P, i, hi_j, R, t);
-    for (int j = hi_j; j > lo_j; j--) out[n++] = grid_point(P, lo_i, j, R, t);
+    int n = 0, ni = (int)lround(hi_i - lo_i), nj = (int)lround(hi_j - lo_j);
+    for (int i = 0; i < ni; i++) out[n++] = grid_point(P, lo_i + i, lo_j, R, t);
+    for (int j = 0; j < nj; j++) out[n++] = grid_point(P, hi_i, lo_j + j, R, t);
+    for (int i = 0; i < ni; i++) out[n++] = grid_point(P, hi_i - i, hi_j, R, t);
+    for (int j = 0; j < nj; j++) out[n++] = grid_point(P, lo_i, hi_j - j, R, t);
     return n;
 }
 
@@ -114,7 +118,8 @@ static bool view(plan_t *P, cand_t *c, int k)
     double R[9], t[3];
     board_pose(P, c->tilt, c->az, c->angle, R, t);
     model_vec3_t edge[nmax], inner[nmax], bc = grid_point(P, (W - 1) / 2.0, (H - 1) / 2.0, R, t);
-    int ne = ring(P, 0, W - 1, 0, H - 1, R, t, edge), ni = ring(P, 0, W - 1, 0, H - 1, R, t, inner);
+    int ne = ring(P, -EDGE, W - 1 + EDGE, -EDGE, H - 1 + EDGE, R, t, edge);
+    int ni = ring(P, 0, W - 1, 0, H - 1, R, t, inner);
     for (int i = 0; i < ne; i++) {   // in front of the camera
         double p[3] = { edge[i].x, edge[i].y, edge[i].z }, q[3];
         m3_vec(q, P->R[k], p);
@@ -249,6 +254,15 @@ static void choose(plan_t *P, cand_t *c, calib_geometry_plan_t *out)
             for (int i = 0; i < c->ncells[k]; i++) P->count[k][c->cells[k][i]]++;
 }
 
+static void unchoose(plan_t *P, cand_t *c, calib_geometry_plan_t *out)
+{
+    c->chosen = false;
+    out->nviews--;
+    for (int k = 0; k < P->o->ncams; k++)
+        if (c->usable[k])
+            for (int i = 0; i < c->ncells[k]; i++) P->count[k][c->cells[k][i]]--;
+}
+
 // The best unchosen candidate passing the filter (cls: orientation class at its first camera, -1 any;
 // tilt0: flat only; group: same tilt and azimuth as g; cam: usable by it, -1 any; shared_with0: camera 0
 // too). NULL when none adds anything.
@@ -292,13 +306,16 @@ static void greedy(plan_t *P, calib_geometry_plan_t *out)
         choose(P, pick, out);
         taken[cls]++;
     }
-    for (int i = 0; i < P->nc; i++) {   // every group two angles at least (the axis fit)
+    for (int i = 0; i < P->nc; i++) {   // every group two angles at least (the axis fit), within max_views
         cand_t *c = &P->c[i];
         if (!c->chosen) continue;
         int n = 0;
         for (int j = 0; j < P->nc; j++) n += P->c[j].chosen && P->c[j].tilt == c->tilt && P->c[j].az == c->az;
-        cand_t *m = n < 2 ? best(P, (filter_t){ .cls = -1, .group = c, .cam = -1 }) : NULL;
+        if (n >= 2) continue;
+        cand_t *m = out->nviews < o->max_views * o->ncams ? best(P, (filter_t){ .cls = -1, .group = c, .cam = -1 })
+                                                          : NULL;
         if (m) choose(P, m, out);
+        else unchoose(P, c, out);
     }
     for (int k = 0; k < o->ncams; k++) {   // each camera's views, and those it shares with camera 0
         for (;;) {

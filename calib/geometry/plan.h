@@ -6,8 +6,9 @@
 // Candidates: the board lying flat (tilt 0) or on a wedge of each given tilt with its hinge at
 // each given azimuth, at turntable angles every angle_step_deg; the board's pose is the virtual
 // rig's and the sample fit's (model_scene_wedge_pose, then the turntable's turn about z). A
-// candidate is usable by a camera when every inner corner of the chessboard projects inside the
-// imager with margin_px to spare (mrgingham finds the whole grid or none), in front of the camera, its
+// candidate is usable by a camera when the chessboard's inner corners and half a square beyond them
+// project inside the imager with margin_px to spare (mrgingham finds the whole grid, with the squares
+// around it, or none; the margin is for the board's placement on its wedge), in front of the camera, its
 // smallest square at least min_square_px across, and its obliquity (the angle between the board's
 // normal and the direction to the camera) at most max_obliquity_deg.
 //
