@@ -147,8 +147,11 @@ RIG_VIRTUAL_SRC := \
 RIG_SRC := $(RIG_TURNTABLE_SRC) $(RIG_LAMPS_SRC) $(RIG_CAMERA_SRC) $(RIG_SESSION_SRC) $(RIG_VIRTUAL_SRC) \
     rig/error.c \
     rig/config.c \
+    rig/lab.c \
+    rig/lab_day.c \
     rig/cmd_rig.c \
-    rig/cmd_capture.c
+    rig/cmd_capture.c \
+    rig/cmd_lab.c
 
 CALIB_GEOMETRY_SRC := \
     calib/geometry/geometry.c \
@@ -164,7 +167,8 @@ CALIB_GEOMETRY_SRC := \
     calib/geometry/report.c \
     calib/geometry/diff.c \
     calib/geometry/psf.c \
-    calib/geometry/export.c
+    calib/geometry/export.c \
+    calib/geometry/plan.c
 CALIB_LAMPS_SRC := \
     calib/lamps/lamps.c \
     calib/lamps/capture.c \
@@ -211,6 +215,7 @@ CALIB_SRC := $(CALIB_GEOMETRY_SRC) $(CALIB_LAMPS_SRC) $(CALIB_GAIN_SRC) \
     calib/white.c \
     calib/cmd_calib.c \
     calib/cmd_geometry.c \
+    calib/cmd_plan_geometry.c \
     calib/cmd_lamps.c \
     calib/cmd_gain.c
 CALIB_CXX_SRC := calib/geometry/board_detect.cc
@@ -289,6 +294,7 @@ TEST_SRC := \
     tests/test_rig_capture.c \
     tests/test_rig_cli.c \
     tests/test_rig_config.c \
+    tests/test_rig_lab.c \
     tests/test_rig_lamps.c \
     tests/test_rig_pixfmt.c \
     tests/test_rig_plan.c \
@@ -311,6 +317,7 @@ TEST_SRC := \
     tests/test_calib_boards.c \
     tests/test_calib_psf.c \
     tests/test_calib_lamps.c \
+    tests/test_calib_plan_geometry.c \
     tests/test_calib_export.c \
     tests/test_fit_brdf.c \
     tests/test_fit_chain.c \

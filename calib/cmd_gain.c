@@ -231,8 +231,9 @@ int calib_cmd_gain(int argc, char **argv)
                         "500000,1000000,2000000)", false),
         MODEL_OPT_STRING("--pixel-format", "F", "Mono8|Mono12|Mono16 (default Mono12)", &o.pixel_format, false),
         MODEL_OPT_VALUE("--min-steps", "N", "fewest sweep steps accepted (default 50, EMVA 1288)", false),
-        MODEL_OPT_VALUE("--radiance", "R", "radiance of the source with the lamps on (no default: without it, no kc)",
-                        false),
+        MODEL_OPT_VALUE("--radiance", "R", "radiance of the source with the lamps on, in the unit of the lab's "
+                        "meter (e.g. W/(sr m^2); a virtual rig's: its truth's radiance units): kc is DN per us per "
+                        "that unit, and every kc*I after it; no default: without it, no kc", false),
         MODEL_OPT_VALUE("--roi", "X,Y,W,H", "pixels of the statistics (default the whole frame; maps are whole)",
                         false),
         MODEL_OPT_VALUE("--max-dn", "N", "full scale of manifest frames (default 65535)", false),

@@ -8,10 +8,12 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "calib/geometry/plan.h"
 #include "fit/lightplan/lightplan.h"
 #include "model/model.h"
 #include "model/base/opts.h"
 #include "rig/camera/pixfmt.h"
+#include "rig/lab.h"
 
 enum { MAX_MATERIAL_FILES = 8, MAX_EXPOSURES = 64, MAX_VIEWS = 360 };
 
@@ -193,12 +195,16 @@ static int plan_lamps(int argc, char **argv)
 int lightplan_cmd(int argc, char **argv)
 {
     if (argc >= 2 && !strcmp(argv[1], "lamps")) return plan_lamps(argc - 1, argv + 1);
+    if (argc >= 2 && !strcmp(argv[1], "geometry")) return calib_cmd_plan_geometry(argc - 1, argv + 1);
+    if (argc >= 2 && !strcmp(argv[1], "day")) return rig_cmd_plan_day(argc - 1, argv + 1);
     if (argc >= 2 && (!strcmp(argv[1], "--help") || !strcmp(argv[1], "-h"))) {
         printf("usage: refl plan lamps SCENE --camera CAM.cameramodel --lamps CANDIDATES --materials MATS\n"
                "                       (--kc-per-us X | --white WHITE.json) [options] -o DIR   (refl plan lamps --help)\n"
+               "       refl plan geometry [--rig RIG.ini] --camera-model M [...] [options]   (the board's poses)\n"
+               "       refl plan day --rig RIG.ini --lab LAB.ini -o DIR   (a lab day's plans)\n"
                "\nrefl %s\n", REFL_VERSION);
         return 0;
     }
-    fprintf(stderr, "usage: refl plan lamps SCENE ... (refl plan lamps --help)\n");
+    fprintf(stderr, "usage: refl plan lamps|geometry|day ... (refl plan --help)\n");
     return 2;
 }

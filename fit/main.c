@@ -40,7 +40,7 @@ static const command_t commands[] = {
     { "demo",    demo_cmd,        "the whole lab day on the virtual rig: calibrations, materials, light planning, verification" },
     { "chain",   eval_chain_cmd,  "compare a lab day's calibrated and fitted figures with the virtual rig's truth: chain.json" },
     { "export",  fit_cmd_export,  "a priors file's materials as glTF 2.0, Mitsuba 3 or MERL, with the conversion error" },
-    { "plan",    lightplan_cmd,   "plan lamps: choose the lamp set and exposure for detectable edges, no glare or saturation" },
+    { "plan",    lightplan_cmd,   "plan lamps: lamps and exposure for detectable edges; plan geometry: the board's poses; plan day: a lab file's plans" },
 };
 
 static void usage(FILE *f)
@@ -51,13 +51,13 @@ static void usage(FILE *f)
     fprintf(f, "\nrefl %s\n", REFL_VERSION);
 }
 
-// `refl demo [-o DIR] [--rig RIG.ini | --truth TRUTH.ini] [--yes | --operator-input FILE] [--until STAGE]
+// `refl demo [-o DIR] [--rig RIG.ini | --truth TRUTH.ini] [--lab LAB.ini] [--yes | --operator-input FILE] [--until STAGE]
 // [--white-table CSV]`: scripts/demo with this binary (found by model_share_path: a build tree's scripts/, or an
 // installation's share/refl/scripts/).
 static int demo_cmd(int argc, char **argv)
 {
     const char *out = "refl-demo", *rig = NULL, *truth = NULL, *operator_input = NULL, *until = NULL,
-               *white_table = NULL;
+               *white_table = NULL, *lab = NULL;
     bool yes = false;
     model_opt_t opts[] = {
         MODEL_OPT_STRING("-o", "DIR", "output directory (default refl-demo)", &out, false),
@@ -66,9 +66,12 @@ static int demo_cmd(int argc, char **argv)
         MODEL_OPT_STRING("--truth", "TRUTH.ini", "the virtual rig of this truth file (default "
                          "examples/virtual-truth.ini; examples/virtual-truth-adversarial.ini: physics outside the "
                          "fitters' models)", &truth, false),
-        MODEL_OPT_STRING("--until", "STAGE", "end the day after this stage: calibrations, or captures (the "
-                         "calibrations and the coupon sessions: the rig's work before the offline fits); default all",
-                         &until, false),
+        MODEL_OPT_STRING("--lab", "LAB.ini", "the lab's own facts (examples/lab.ini documents every key): the "
+                         "day's plans are generated for the rig's lamps (refl plan day) and checked first",
+                         &lab, false),
+        MODEL_OPT_STRING("--until", "STAGE", "end the day after this stage: plans (with --lab: written and "
+                         "checked), calibrations, or captures (the calibrations and the coupon sessions: the rig's "
+                         "work before the offline fits); default all", &until, false),
         MODEL_OPT_STRING("--white-table", "CSV", "the reference white's certificate (refl calib white "
                          "--reflectance-table; default: Lambertian, albedo 0.99; the adversarial rig's: "
                          "examples/virtual-white-certificate.csv)", &white_table, false),
@@ -86,6 +89,10 @@ static int demo_cmd(int argc, char **argv)
                  "terminal. A pause ends it with exit 3: run the same command again to continue (complete\n"
                  "sessions are kept, a partial one resumed). A rig that is not virtual has no truth to\n"
                  "compare with: that part is skipped.\n"
+                 "--lab LAB.ini: the lab's own facts instead of the example virtual rig's (the ball, the\n"
+                 "lamps' size, the source's radiance, the white and its certificate, the coupons and wedges,\n"
+                 "the workpiece, its descriptions, the geometry session's tilts): refl plan day writes the\n"
+                 "day's plans for the rig's own lamps into DIR/lab/, each checked against the rig first.\n"
                  "--truth TRUTH.ini: the day on the virtual rig of that truth file. On a virtual rig every\n"
                  "calibrated and fitted figure is compared with the truth in DIR/chain.json (refl chain:\n"
                  "value, truth, the sigma refl states, error and z) and DIR/chain.html.",
@@ -96,8 +103,9 @@ static int demo_cmd(int argc, char **argv)
     if (rig && truth)
         return model_cli_error(&cli, "give --rig RIG.ini or --truth TRUTH.ini, not both (a virtual rig file names "
                                "its truth file)");
-    if (until && strcmp(until, "calibrations") && strcmp(until, "captures") && strcmp(until, "all"))
-        return model_cli_error(&cli, "--until %s: give calibrations, captures or all", until);
+    if (until && strcmp(until, "plans") && strcmp(until, "calibrations") && strcmp(until, "captures") &&
+        strcmp(until, "all"))
+        return model_cli_error(&cli, "--until %s: give plans, calibrations, captures or all", until);
     char exe[4096];
     ssize_t n = readlink("/proc/self/exe", exe, sizeof exe - 1);
     if (n <= 0) {
@@ -110,7 +118,7 @@ static int demo_cmd(int argc, char **argv)
         fprintf(stderr, "refl demo: %s\n", model_last_error());
         return 1;
     }
-    char *args[16] = { (char *)"/bin/bash", script, exe, (char *)out };
+    char *args[24] = { (char *)"/bin/bash", script, exe, (char *)out };
     int na = 4;
     if (rig) {
         args[na++] = (char *)"--rig";
@@ -119,6 +127,10 @@ static int demo_cmd(int argc, char **argv)
     if (truth) {
         args[na++] = (char *)"--truth";
         args[na++] = (char *)truth;
+    }
+    if (lab) {
+        args[na++] = (char *)"--lab";
+        args[na++] = (char *)lab;
     }
     if (yes) args[na++] = (char *)"--yes";
     if (operator_input) {

@@ -812,3 +812,21 @@ bool rig_file_lamp_names(const char *rig_path, char ***names, int *n)
     *names = (char **)g_ptr_array_free(a, FALSE);
     return true;
 }
+
+bool rig_file_camera_names(const char *rig_path, char ***names, int *n)
+{
+    char *truth = NULL;
+    if (!rig_file_truth_path(rig_path, &truth)) return false;
+    model_ini_t *ini = model_ini_load(truth ? truth : rig_path);
+    g_free(truth);
+    if (!ini) return false;
+    GPtrArray *a = g_ptr_array_new();
+    for (int s = 0; s < ini->nsections; s++)
+        if (!strcmp(ini->sections[s], "camera")) g_ptr_array_add(a, g_strdup("camera"));
+        else if (!strncmp(ini->sections[s], "camera ", 7)) g_ptr_array_add(a, g_strdup(ini->sections[s] + 7));
+    model_ini_free(ini);
+    *n = (int)a->len;
+    g_ptr_array_add(a, NULL);
+    *names = (char **)g_ptr_array_free(a, FALSE);
+    return true;
+}

@@ -100,6 +100,9 @@ bool rig_file_truth_path(const char *rig_path, char **truth_path);
 // file, or of its truth file for a virtual rig. *names is a NULL-terminated
 // array (g_strfreev). false + message.
 bool rig_file_lamp_names(const char *rig_path, char ***names, int *n);
+// The camera names of a rig file in file order: [camera] ("camera") and [camera NAME] sections of
+// the rig file, or of its truth file for a virtual rig. *names as above. false + message.
+bool rig_file_camera_names(const char *rig_path, char ***names, int *n);
 
 // The index in r->cameras of the camera named name, or -1.
 int  rig_camera_find(const rig_t *r, const char *name);
