@@ -285,6 +285,7 @@ TEST_SRC := \
     tests/test_rig_camera_settings.c \
     tests/test_rig_cameras.c \
     tests/test_rig_capture.c \
+    tests/test_rig_session_readonly.c \
     tests/test_rig_cli.c \
     tests/test_rig_config.c \
     tests/test_rig_lamps.c \
