@@ -7,6 +7,7 @@
 #   make bench    performance figures, one "NAME: VALUE UNIT" line each
 #   make asan     the tests under AddressSanitizer + UndefinedBehaviorSanitizer
 #   make fuzz     fuzz the parsers with libFuzzer (FUZZ_SECONDS=60)
+#   make fuzz-cameramodel   fuzz the .cameramodel reader alone (FUZZ_SECONDS=60)
 #   make man      the manual pages from the commands' --help (build/man/man1)
 #   make install  refl, its scripts, examples and manual pages under $(DESTDIR)$(PREFIX) (default /usr/local)
 # WERROR=1 turns warnings into errors (CI sets it).
@@ -95,6 +96,7 @@ MODEL_SRC := $(MODEL_BASE_SRC) $(MODEL_IMAGE_SRC) $(MODEL_SCENE_SRC) $(MODEL_BRD
     $(MODEL_EDGES_SRC) \
     model/config.c \
     model/camera.c \
+    model/cameramodel.c \
     model/sensor.c \
     model/cmd.c \
     model/cmd_brdf.c
@@ -275,6 +277,7 @@ TEST_SRC := \
     tests/test_model_brdf_table.c \
     tests/test_model_brdf_rgl.c \
     tests/test_model_camera.c \
+    tests/test_model_truncated.c \
     tests/test_model_cli.c \
     tests/test_model_config.c \
     tests/test_model_corpus.c \
@@ -292,6 +295,7 @@ TEST_SRC := \
     tests/test_rig_camera_settings.c \
     tests/test_rig_cameras.c \
     tests/test_rig_capture.c \
+    tests/test_rig_session_readonly.c \
     tests/test_rig_cli.c \
     tests/test_rig_config.c \
     tests/test_rig_lab.c \
@@ -338,7 +342,7 @@ obj = $(patsubst %.c,$(BUILD)/%.o,$(1))
 LIB_OBJ   := $(call obj,$(LIB_SRC)) $(patsubst %.cc,$(BUILD)/%.o,$(MODEL_CXX_SRC) $(CALIB_CXX_SRC))
 LIB       := $(BUILD)/librefl.a
 
-.PHONY: all check check-long demo study bench asan fuzz man install uninstall clean
+.PHONY: all check check-long demo study bench asan fuzz fuzz-cameramodel man install uninstall clean
 all: $(BIN)/refl
 
 $(BUILD)/%.o: %.c | $(BUILD)/config.mk
@@ -434,6 +438,18 @@ fuzz: | $(BUILD)/config.mk
 	  $(PKG_LIBS) $(LIBS_NOPC) -lm -pthread
 	$(BUILD)/fuzz/fuzz_parsers -max_total_time=$(FUZZ_SECONDS) -max_len=4096 -timeout=10 \
 	  -print_final_stats=1 -artifact_prefix=$(BUILD)/fuzz/ $(BUILD)/fuzz/corpus tests/corpus
+
+# Seeds: the example camera models and the corpus's 'c' inputs without their selector byte.
+fuzz-cameramodel: | $(BUILD)/config.mk
+	@mkdir -p $(BUILD)/fuzz/cameramodel-corpus $(BUILD)/fuzz/cameramodel-seeds
+	cp examples/*.cameramodel $(BUILD)/fuzz/cameramodel-seeds/
+	for f in tests/corpus/*cameramodel*; do tail -c +2 $$f > $(BUILD)/fuzz/cameramodel-seeds/$${f##*/}; done
+	clang -std=gnu11 -O1 -g -I. $(PKG_CFLAGS) -fsanitize=fuzzer,address,undefined \
+	  -fno-sanitize-recover=undefined -fno-omit-frame-pointer -o $(BUILD)/fuzz/fuzz_cameramodel \
+	  tests/fuzz_cameramodel.c $(MODEL_SRC) $(RIG_SRC) $(PKG_LIBS) $(LIBS_NOPC) -lm -pthread
+	$(BUILD)/fuzz/fuzz_cameramodel -max_total_time=$(FUZZ_SECONDS) -max_len=16384 -timeout=10 \
+	  -print_final_stats=1 -artifact_prefix=$(BUILD)/fuzz/cameramodel- $(BUILD)/fuzz/cameramodel-corpus \
+	  $(BUILD)/fuzz/cameramodel-seeds
 
 # ---- manual pages and installation ------------------------------------------
 PREFIX  ?= /usr/local

@@ -40,6 +40,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "model/cameramodel.h"
 #include "model/internal.h"
 
 #define RAY_TOL_PX      0.005   // required reprojection error of the ray table
@@ -140,65 +141,10 @@ fail:
     return NULL;
 }
 
-// Why mrcal could not parse a .cameramodel text: a few cheap checks so that the
-// message says what is wrong (mrcal prints its own reason on stderr).
-static void diagnose_cameramodel(const char *path, const char *text)
+model_camera_t *model_camera_parse(const char *text, size_t len, const char *name)
 {
-    const char *s = text;
-    for (;;) {   // skip blanks and '#' comment lines
-        while (*s == ' ' || *s == '\t' || *s == '\r' || *s == '\n') s++;
-        if (*s != '#') break;
-        while (*s && *s != '\n') s++;
-    }
-    if (*s != '{') {
-        model_error(path, 0, "not a readable .cameramodel: expected a '{ ... }' dictionary "
-                    "(an mrcal camera model file); check the file name");
-        return;
-    }
-    static const char *const keys[] = { "lensmodel", "intrinsics", "extrinsics", "imagersize" };
-    for (size_t i = 0; i < sizeof keys / sizeof keys[0]; i++)
-        if (!strstr(s, keys[i])) {
-            model_error(path, 0, "not a readable .cameramodel: the key '%s' is missing "
-                        "(needed: lensmodel, intrinsics, extrinsics, imagersize)", keys[i]);
-            return;
-        }
-    const char *is = strstr(s, "imagersize");
-    const char *br = is ? strchr(is, '[') : NULL;
-    if (br) {
-        char *end;
-        long w = strtol(br + 1, &end, 10);
-        while (*end == ' ' || *end == ',' || *end == '\t') end++;
-        long h = strtol(end, NULL, 10);
-        if (w <= 0 || h <= 0) {
-            model_error(path, 0, "imager size %ldx%ld: width and height must be positive "
-                        "(the 'imagersize' entry)", w, h);
-            return;
-        }
-    }
-    model_error(path, 0, "not a readable .cameramodel: mrcal could not parse it (its reason "
-                "is printed above); check the lens model name, the number of intrinsics "
-                "and the brackets");
-}
-
-model_camera_t *model_camera_load(const char *path)
-{
-    size_t len;
-    char *text = model_read_file(path, &len);   // reports "path: cannot open: ..."
-    if (!text) return NULL;
-    model_camera_t *cam = NULL;
-    if (len == 0) {
-        model_error(path, 0, "not a readable .cameramodel: the file is empty");
-        goto done;
-    }
-    if (len > INT_MAX || strlen(text) != len) {
-        model_error(path, 0, "not a readable .cameramodel: binary data or too large");
-        goto done;
-    }
-    mrcal_cameramodel_t *mm = mrcal_read_cameramodel_string(text, (int)len);
-    if (!mm) {
-        diagnose_cameramodel(path, text);
-        goto done;
-    }
+    mrcal_cameramodel_t *mm = model_cameramodel_parse(text, len, name);   // checked first
+    if (!mm) return NULL;
     // Our own copy, so that every camera owns the same kind of allocation.
     int np = mrcal_lensmodel_type_is_valid(mm->lensmodel.type)
                  ? mrcal_lensmodel_num_params(&mm->lensmodel) : 0;
@@ -206,15 +152,22 @@ model_camera_t *model_camera_load(const char *path)
     mrcal_cameramodel_t *m = malloc(sizeof *m + (size_t)np * sizeof(double));
     if (!m) {
         mrcal_free_cameramodel(&mm);
-        model_error(path, 0, "out of memory");
-        goto done;
+        model_error(name, 0, "out of memory");
+        return NULL;
     }
     memcpy(m, mm, sizeof *m + (size_t)np * sizeof(double));
     mrcal_free_cameramodel(&mm);
     char sha[65];
     model_sha256_hex(text, len, sha);
-    cam = camera_from_model(m, path, sha);
-done:
+    return camera_from_model(m, name, sha);
+}
+
+model_camera_t *model_camera_load(const char *path)
+{
+    size_t len;
+    char *text = model_read_file(path, &len);   // reports "path: cannot open: ..."
+    if (!text) return NULL;
+    model_camera_t *cam = model_camera_parse(text, len, path);
     free(text);
     return cam;
 }

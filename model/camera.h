@@ -5,6 +5,7 @@
 #pragma once
 
 #include <stdbool.h>
+#include <stddef.h>
 
 #include "model/base/base.h"
 
@@ -17,8 +18,12 @@ extern "C" {
 
 typedef struct model_camera model_camera_t;
 
-// Reads a .cameramodel with libmrcal. NULL and a message naming the file on error.
+// Reads a .cameramodel with libmrcal, its text checked first
+// (model/cameramodel.h: a damaged or cut file is an error naming the file and
+// line, never a crash). NULL and a message naming the file on error.
 model_camera_t *model_camera_load(const char *path);
+// The same from the file's bytes; name: the file, for messages.
+model_camera_t *model_camera_parse(const char *text, size_t len, const char *name);
 // From explicit parameters (lensmodel name as mrcal spells it, e.g.
 // "LENSMODEL_OPENCV8"; intrinsics fx fy cx cy + distortions; rt_cam_world = r(3) t(3), t in mm).
 model_camera_t *model_camera_new(const char *lensmodel, const double *intrinsics,

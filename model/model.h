@@ -24,6 +24,8 @@
 //   model/brdf/brdf.h      reflection models, tables, RGL files, generators
 //   model/config.h         materials, lamps and sensor files
 //   model/camera.h         cameras
+//   (model/cameramodel.h   a .cameramodel's text checked, then read by libmrcal:
+//                          included on its own, as it includes mrcal's header)
 //   model/render/render.h  ray casting, grey values, rendering, refl render's work
 //   model/sensor.h         the sensor stage and the response linearisation
 //   model/image/image.h    image files

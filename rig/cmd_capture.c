@@ -198,11 +198,12 @@ static const char session_check_about[] =
     "count, and the first 10 with their angle, lamps and exposure). Operator steps are listed with\n"
     "their instruction and whether they were answered (the answers: the journal's events 'operator').\n"
     "Exit: 0 when every frame is intact, the journal passes and no step is missing (--allow-incomplete:\n"
-    "missing steps are fine), 1 otherwise.";
+    "missing steps are fine), 1 otherwise. Reads a session it cannot write (read-only).";
 
 static const char session_export_about[] =
     "Writes the frame table of the session in DIR, one row per frame, as CSV (a header line) or JSON\n"
-    "(an array of objects), to stdout or to -o FILE.";
+    "(an array of objects), to stdout or to -o FILE. A journal that fails SQLite's PRAGMA integrity_check\n"
+    "is refused (exit 1) before anything is written. Reads a session it cannot write (read-only).";
 
 // The frames against their hashes; prints each bad one. The count of bad frames.
 static int check_frames(const char *dir, const rig_frame_row_t *rows, int nrows)
@@ -292,7 +293,7 @@ static int session_export(const char *dir, const char *format, const char *out)
     rig_frame_row_t *rows = NULL;
     int n = 0, rc = 1;
     FILE *f = NULL;
-    if (rig_journal_open(&j, dir) || rig_journal_frames(j, &rows, &n)) goto done;
+    if (rig_journal_open(&j, dir) || rig_journal_check(j) || rig_journal_frames(j, &rows, &n)) goto done;
     f = out ? fopen(out, "w") : stdout;
     if (!f) {
         rig_fail(RIG_ERR_IO, "refl session export: cannot create %s: %s", out, strerror(errno));

@@ -6,7 +6,9 @@
 // PNG, JPEG, TIFF by content), 'l' an STL scene (model_scene_parse_stl), 'y' a
 // PLY scene (model_scene_parse_ply), 'b' an RGL .bsdf tensor file
 // (model_brdf_rgl_parse, evaluated once when it parses), 'e' an EMVA 1288
-// descriptor (calib_gain_descriptor_parse); any other byte b selects b % 6: 0 D3D scene,
+// descriptor (calib_gain_descriptor_parse), 'c' an mrcal .cameramodel
+// (model_camera_parse: the text checked, then mrcal's parser; a point
+// projected and a pixel unprojected when it parses); any other byte b selects b % 6: 0 D3D scene,
 // 1 OBJ scene, 2 INI, 3 materials, 4 lamps, 5 sensor (seeds use '0'..'5'; the
 // corpus was written with that rule, which is why the newer parsers have
 // letters). The rest of the input is the text (not NUL-terminated, so reads
@@ -37,8 +39,7 @@
 enum { REFL_FUZZ_D3D, REFL_FUZZ_OBJ, REFL_FUZZ_INI, REFL_FUZZ_MATERIALS, REFL_FUZZ_LAMPS,
        REFL_FUZZ_SENSOR, REFL_FUZZ_NMOD,   // selected by first byte % REFL_FUZZ_NMOD
        REFL_FUZZ_PLAN = REFL_FUZZ_NMOD, REFL_FUZZ_RIG, REFL_FUZZ_TRUTH, REFL_FUZZ_IMAGE, REFL_FUZZ_STL,
-       REFL_FUZZ_PLY, REFL_FUZZ_RGL,
-       REFL_FUZZ_EMVA,
+       REFL_FUZZ_PLY, REFL_FUZZ_RGL, REFL_FUZZ_EMVA, REFL_FUZZ_CAMERAMODEL,
        REFL_FUZZ_NPARSERS };
 
 // The parser a first byte selects (REFL_FUZZ_*).
@@ -53,8 +54,27 @@ static inline int refl_fuzz_selector(uint8_t b)
     case 'y': return REFL_FUZZ_PLY;
     case 'b': return REFL_FUZZ_RGL;
     case 'e': return REFL_FUZZ_EMVA;
+    case 'c': return REFL_FUZZ_CAMERAMODEL;
     default: return b % REFL_FUZZ_NMOD;
     }
+}
+
+// A .cameramodel text through model_camera_parse; when it parses, one point
+// projected and the centre pixel unprojected. true when it parsed.
+static inline bool refl_fuzz_cameramodel(const char *text, size_t n)
+{
+    model_camera_t *c = model_camera_parse(text, n, "fuzz.cameramodel");
+    if (c) {
+        model_vec3_t p = model_camera_centre_world(c), d;
+        p.x += 100;
+        p.y += 50;
+        p.z -= 20;
+        double q[2] = { 0.5 * model_camera_width(c), 0.5 * model_camera_height(c) }, qp[2];
+        (void)model_camera_project(c, &p, 1, qp);
+        (void)model_camera_unproject(c, q, 1, &d);
+    }
+    model_camera_free(c);
+    return c != NULL;
 }
 
 // Parse the input with the parser its first byte selects, free the result;
@@ -115,6 +135,7 @@ static inline bool refl_fuzz_parse_in(const uint8_t *data, size_t len, const cha
         if (ok) calib_gain_descriptor_free(&d);
         return ok;
     }
+    case REFL_FUZZ_CAMERAMODEL: return refl_fuzz_cameramodel(text, n);
     case REFL_FUZZ_D3D: {
         model_scene_t *s = model_scene_parse_d3d(text, n, "fuzz.d3d", NULL);
         model_scene_free(s);

@@ -352,14 +352,14 @@ TEST(camera_load_errors)
         "  'extrinsics': [0, 0, 0, 0, 0, 0], 'imagersize': [0, 0] }\n");
     CHECK(model_camera_load(zero) == NULL);
     CHECK_CONTAINS(model_last_error(), zero);
-    CHECK_CONTAINS(model_last_error(), "imager size 0x0");
+    CHECK_CONTAINS(model_last_error(), "width and height must be 1..65535 pixels");
 
     const char *count = test_write("count.cameramodel",
         "{ 'lensmodel': 'LENSMODEL_OPENCV4', 'intrinsics': [1000, 1000, 320, 240],\n"
         "  'extrinsics': [0, 0, 0, 0, 0, 0], 'imagersize': [640, 480] }\n");
     CHECK(model_camera_load(count) == NULL);
     CHECK_CONTAINS(model_last_error(), count);
-    CHECK_CONTAINS(model_last_error(), "mrcal could not parse it");
+    CHECK_CONTAINS(model_last_error(), "4 numbers, lens model LENSMODEL_OPENCV4 has 8 parameters");
 
     const char *cahvore = test_write("cahvore.cameramodel",
         "{ 'lensmodel': 'LENSMODEL_CAHVORE_linearity=0.50',\n"

@@ -16,6 +16,7 @@
 #include "fit/brdf/brdf.h"
 #include "fit/priors.h"
 #include "fit/verify/verify.h"
+#include "model/cameramodel.h"
 #include "model/model.h"
 #include "model/base/report.h"
 #include "model/base/vec.h"
@@ -138,8 +139,8 @@ static void chain_camera(chain_t *c, const json_t *cam, const char *model_path, 
                          const char *label)
 {
     char *tpath = rig_truth_camera_model_path(c->truth, truth_cam);
-    mrcal_cameramodel_t *t = tpath ? mrcal_read_cameramodel_file(tpath) : NULL;
-    mrcal_cameramodel_t *b = mrcal_read_cameramodel_file(model_path);
+    mrcal_cameramodel_t *t = tpath ? model_cameramodel_read(tpath) : NULL;
+    mrcal_cameramodel_t *b = model_cameramodel_read(model_path);
     char name[160], note[200];
     if (!t || !b) {
         snprintf(note, sizeof note, "%s: %s", label, !b ? model_path : tpath ? tpath : "no [camera] model");

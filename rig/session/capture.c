@@ -92,7 +92,7 @@ static int run_plan(run_t *x)
         }
         return RUN_ON;
     }
-    if ((x->rc = rig_journal_open(&x->j, o->dir))) return RUN_DONE;
+    if ((x->rc = rig_journal_resume(&x->j, o->dir))) return RUN_DONE;
     if ((x->rc = rig_journal_source(x->j, "plan", &x->s_plan_path, &x->s_plan_text, &x->s_plan_sha)) ||
         (x->rc = rig_journal_source(x->j, "rig", &x->s_rig_path, &x->s_rig_text, &x->s_rig_sha)))
         return RUN_DONE;

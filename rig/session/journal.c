@@ -10,10 +10,26 @@
 //   2  frames keyed by (step, camera), with the camera column (the rig file's
 //      name of the camera) and every column of RIG_FRAME_COLUMNS. Written
 //      by this refl.
-// The reader reads versions 1 and 2. A version-1 journal is migrated to 2 when
-// opened (one transaction: its frames become camera "camera"). A frame column
-// a journal lacks reads as NULL ("" or 0), and writing a frame adds it. A
-// journal of a higher version, or without one, is refused naming both.
+// The reader reads versions 1 and 2 as they are (a version-1 journal's frames
+// read as camera "camera"); the writer continuing a version-1 journal
+// (rig_journal_resume) migrates it to 2 first (one transaction). A frame
+// column a journal lacks reads as NULL ("" or 0), and writing a frame adds it.
+// A journal of a higher version, or without one, is refused naming both.
+//
+// Readers (rig_journal_open) never write the journal: no WAL switch, no
+// migration, no checkpoint.
+// - A WAL beside the journal holds commits (a writer is at work, or died
+//   before its last checkpoint), or the journal and its directory can be
+//   written (a writer may come): SQLite's read-only open, which shares the
+//   writer's locks and reads its WAL through the -shm index (SQLite creates
+//   an empty -wal and the -shm where they are missing and may leave them).
+// - Neither (another user's session, a read-only archive, a journal without
+//   write permission): immutable (file:...?immutable=1: no lock, no file
+//   made; SQLite would read past a WAL, which is why only then).
+// - A WAL with commits that SQLite cannot read in place (the directory cannot
+//   be written and no -shm is there): the journal and its WAL are copied into
+//   a private temporary directory and read there, so no committed frame is
+//   lost; the copy is removed at close.
 #define _GNU_SOURCE
 #include <errno.h>
 #include <glib.h>
@@ -27,6 +43,7 @@
 #include <string.h>
 #include <sys/stat.h>
 #include <time.h>
+#include <unistd.h>
 
 #include "model/model.h"
 #include "model/base/report.h"
@@ -37,6 +54,7 @@
 struct rig_journal {
     sqlite3        *db;
     char           *path;
+    char           *copy_dir;           // a reader's private copy of the journal and its WAL, removed at close
     pthread_mutex_t lock;
     bool            frame_columns_ok;   // the frames table has every column (add_frame_columns)
 };
@@ -92,7 +110,8 @@ static bool frames_has_column(sqlite3 *db, const char *column)
 
 // "CREATE TABLE frames(...);", "INSERT INTO frames VALUES(?,...)" or
 // "SELECT ... FROM frames ORDER BY step" (the columns rig_frame_row_t holds;
-// with db, a column the journal lacks reads as NULL: "" or 0).
+// with db, a column the journal lacks reads as NULL: "" or 0, and camera as
+// "camera").
 // Caller g_free()s.
 static char *frames_sql(frames_sql_t what, sqlite3 *db)
 {
@@ -110,7 +129,8 @@ static char *frames_sql(frames_sql_t what, sqlite3 *db)
         if (k++) g_string_append(q, what == FRAMES_CREATE ? ", " : ",");
         if (what == FRAMES_CREATE) g_string_append_printf(q, "%s %s", frame_columns[i].column, frame_columns[i].decl);
         else if (what == FRAMES_INSERT) g_string_append(q, "?");
-        else if (db && !frames_has_column(db, frame_columns[i].column)) g_string_append(q, "NULL");
+        else if (db && !frames_has_column(db, frame_columns[i].column))   // a version-1 journal's one camera
+            g_string_append(q, strcmp(frame_columns[i].column, "camera") ? "NULL" : "'camera'");
         else g_string_append(q, frame_columns[i].column);
     }
     g_string_append(q, what == FRAMES_CREATE   ? ", PRIMARY KEY(step, camera));"
@@ -157,11 +177,13 @@ static void frame_read(sqlite3_stmt *s, rig_frame_row_t *f)
 
 static int jfail(rig_journal_t *j, const char *what)
 {
-    int code = j && j->db ? sqlite3_extended_errcode(j->db) : SQLITE_ERROR;
-    bool full = (code & 0xff) == SQLITE_FULL;
-    return rig_fail(RIG_ERR_IO, "journal %s: %s: %s%s", j && j->path ? j->path : "?", what,
-                    j && j->db ? sqlite3_errmsg(j->db) : "out of memory",
-                    full ? " (disk full: free space, then refl capture --resume)" : "");
+    int code = j && j->db ? sqlite3_extended_errcode(j->db) & 0xff : SQLITE_ERROR;
+    const char *path = j && j->path ? j->path : "?";
+    if (code == SQLITE_CORRUPT || code == SQLITE_NOTADB)
+        return rig_fail(RIG_ERR_IO, "journal %s: %s: %s (the journal is damaged: sqlite3 %s .recover > recovered.sql "
+                        "saves what can be read)", path, what, sqlite3_errmsg(j->db), path);
+    return rig_fail(RIG_ERR_IO, "journal %s: %s: %s%s", path, what, j && j->db ? sqlite3_errmsg(j->db) : "out of memory",
+                    code == SQLITE_FULL ? " (disk full: free space, then refl capture --resume)" : "");
 }
 
 // Schema 1 -> 2 in one transaction: the frames table gets its camera column
@@ -189,7 +211,161 @@ static int migrate_v1(rig_journal_t *j)
     return rc;
 }
 
-static int open_db(rig_journal_t **out, const char *dir, bool create)
+typedef enum { JOURNAL_READ, JOURNAL_CREATE, JOURNAL_RESUME } journal_open_t;
+
+// SQLite's URI of path opened immutable: every byte but unreserved ones and
+// '/' percent-encoded ("file:///abs/path" or "file:rel/path").
+static char *immutable_uri(const char *path)
+{
+    GString *u = g_string_new(path[0] == '/' ? "file://" : "file:");
+    for (const unsigned char *c = (const unsigned char *)path; *c; c++) {
+        if (g_ascii_isalnum(*c) || strchr("/-._~", *c)) g_string_append_c(u, (char)*c);
+        else g_string_append_printf(u, "%%%02X", *c);
+    }
+    g_string_append(u, "?immutable=1");
+    return g_string_free(u, FALSE);
+}
+
+static bool copy_file(const char *from, const char *to)
+{
+    FILE *in = fopen(from, "rb"), *out = in ? fopen(to, "wb") : NULL;
+    bool ok = in && out;
+    char buf[65536];
+    for (size_t n; ok && (n = fread(buf, 1, sizeof buf, in)) > 0;) ok = fwrite(buf, 1, n, out) == n;
+    ok = ok && !ferror(in);
+    if (out && fclose(out) != 0) ok = false;
+    if (in) fclose(in);
+    return ok;
+}
+
+static void remove_copy(rig_journal_t *j)
+{
+    if (!j->copy_dir) return;
+    static const char *const names[] = { "session.sqlite", "session.sqlite-wal", "session.sqlite-shm" };
+    for (size_t i = 0; i < sizeof names / sizeof names[0]; i++) {
+        char *p = g_build_filename(j->copy_dir, names[i], NULL);
+        unlink(p);
+        g_free(p);
+    }
+    rmdir(j->copy_dir);
+    g_free(j->copy_dir);
+    j->copy_dir = NULL;
+}
+
+// The journal and the WAL beside it copied into a private temporary directory
+// and opened there (SQLite rebuilds the WAL index from the WAL): a WAL that
+// holds commits the journal lacks, where SQLite cannot read it in place.
+static int open_copy(rig_journal_t *j, const char *wal)
+{
+    GError *err = NULL;
+    if (!(j->copy_dir = g_dir_make_tmp("refl-journal-XXXXXX", &err))) {
+        int rc = rig_fail(RIG_ERR_IO, "journal %s: its WAL %s holds commits the journal lacks (its writer did not "
+                          "close it), SQLite cannot read them where the directory cannot be written, and no private "
+                          "copy can be made: %s; copy the session directory to a writable place", j->path, wal,
+                          err ? err->message : "?");
+        g_clear_error(&err);
+        return rc;
+    }
+    char *db = g_build_filename(j->copy_dir, "session.sqlite", NULL);
+    char *dbwal = g_strdup_printf("%s-wal", db);
+    int rc = 0;
+    if (!copy_file(j->path, db) || !copy_file(wal, dbwal)) {
+        rc = rig_fail(RIG_ERR_IO, "journal %s: cannot copy it and its WAL into %s to read them: %s", j->path,
+                      j->copy_dir, strerror(errno));
+    } else if (sqlite3_open_v2(db, &j->db, SQLITE_OPEN_READWRITE | SQLITE_OPEN_FULLMUTEX, NULL) != SQLITE_OK ||
+               sqlite3_exec(j->db, "SELECT count(*) FROM sqlite_master", NULL, NULL, NULL) != SQLITE_OK) {
+        rc = jfail(j, "cannot read it with its WAL (a private copy)");
+    }
+    g_free(db);
+    g_free(dbwal);
+    return rc;
+}
+
+static int open_immutable(rig_journal_t *j)
+{
+    char *uri = immutable_uri(j->path);
+    int rc = 0;
+    if (sqlite3_open_v2(uri, &j->db, SQLITE_OPEN_READONLY | SQLITE_OPEN_URI | SQLITE_OPEN_FULLMUTEX, NULL) !=
+            SQLITE_OK ||
+        sqlite3_exec(j->db, "SELECT count(*) FROM sqlite_master", NULL, NULL, NULL) != SQLITE_OK)
+        rc = jfail(j, "cannot read (opened immutable: it or its directory cannot be written)");
+    g_free(uri);
+    return rc;
+}
+
+// A reader's connection (see the top of the file): SQLite's read-only open
+// where a WAL holds commits or the journal could be written (a writer may
+// come), else immutable; a WAL SQLite cannot read in place (no -shm, and none
+// can be made) through a private copy.
+static int open_read(rig_journal_t *j, const char *dir)
+{
+    struct stat st;
+    if (access(j->path, R_OK) != 0 || stat(j->path, &st) != 0)
+        return rig_fail(RIG_ERR_IO, "journal %s: cannot read: %s", j->path, strerror(errno));
+    char *wal = g_strdup_printf("%s-wal", j->path);
+    struct stat ws;
+    bool wal_commits = stat(wal, &ws) == 0 && ws.st_size > 0;
+    bool writable = access(dir, W_OK) == 0 && access(j->path, W_OK) == 0 && (st.st_mode & 0222);
+    int rc = 0;
+    if (!wal_commits && !writable) {
+        rc = open_immutable(j);
+        goto done;
+    }
+    if (sqlite3_open_v2(j->path, &j->db, SQLITE_OPEN_READONLY | SQLITE_OPEN_FULLMUTEX, NULL) == SQLITE_OK) {
+        sqlite3_busy_timeout(j->db, 10000);
+        if (sqlite3_exec(j->db, "SELECT count(*) FROM sqlite_master", NULL, NULL, NULL) == SQLITE_OK) goto done;
+    }
+    int code = j->db ? sqlite3_extended_errcode(j->db) & 0xff : SQLITE_NOMEM;
+    if (code != SQLITE_READONLY && code != SQLITE_CANTOPEN) {   // damaged, not a database, ...
+        rc = jfail(j, "cannot read");
+        goto done;
+    }
+    sqlite3_close(j->db);   // SQLite cannot create the -wal or -shm file here
+    j->db = NULL;
+    rc = wal_commits ? open_copy(j, wal) : open_immutable(j);
+done:
+    g_free(wal);
+    return rc;
+}
+
+// The writer's connection: read-write, WAL, synchronous FULL.
+static int open_write(rig_journal_t *j, const char *dir, bool create)
+{
+    if (access(dir, W_OK) != 0)
+        return rig_fail(RIG_ERR_IO, "%s cannot be written (%s): a session is captured or continued only where it "
+                        "can be written (its readers need no write access); copy it to a writable place",
+                        dir, strerror(errno));
+    if (sqlite3_open_v2(j->path, &j->db, SQLITE_OPEN_READWRITE | (create ? SQLITE_OPEN_CREATE : 0) |
+                        SQLITE_OPEN_FULLMUTEX, NULL) != SQLITE_OK)
+        return jfail(j, "cannot open");
+    sqlite3_busy_timeout(j->db, 10000);
+    if (sqlite3_exec(j->db, "PRAGMA journal_mode=WAL; PRAGMA synchronous=FULL; PRAGMA foreign_keys=ON;", NULL,
+                     NULL, NULL) != SQLITE_OK)
+        return jfail(j, "cannot set WAL mode");
+    return 0;
+}
+
+// The journal's schema version, checked: 1 .. SCHEMA_VERSION into *v.
+static int check_version(rig_journal_t *j, int *v)
+{
+    sqlite3_stmt *s = NULL;
+    *v = -1;
+    int prc = sqlite3_prepare_v2(j->db, "SELECT version FROM schema_version", -1, &s, NULL), st = SQLITE_DONE;
+    if (prc == SQLITE_OK && (st = sqlite3_step(s)) == SQLITE_ROW) *v = sqlite3_column_int(s, 0);
+    sqlite3_finalize(s);
+    int code = sqlite3_extended_errcode(j->db) & 0xff;
+    if ((prc != SQLITE_OK || (st != SQLITE_ROW && st != SQLITE_DONE)) && code != SQLITE_ERROR)
+        return jfail(j, "cannot read the schema version");   // damaged, I/O error (not: no such table)
+    if (*v < 1)
+        return rig_fail(RIG_ERR_PROTOCOL, "journal %s: no schema version (not a refl session journal?); this "
+                        "refl reads versions 1 to %d", j->path, SCHEMA_VERSION);
+    if (*v > SCHEMA_VERSION)
+        return rig_fail(RIG_ERR_PROTOCOL, "journal %s: schema version %d, written by a newer refl (this refl "
+                        "reads versions 1 to %d)", j->path, *v, SCHEMA_VERSION);
+    return 0;
+}
+
+static int open_db(rig_journal_t **out, const char *dir, journal_open_t how)
 {
     *out = NULL;
     rig_journal_t *j = calloc(1, sizeof *j);
@@ -198,46 +374,19 @@ static int open_db(rig_journal_t **out, const char *dir, bool create)
     j->path = g_strdup_printf("%s/session.sqlite", dir);
     struct stat st;
     bool exists = stat(j->path, &st) == 0;
-    int rc = 0;
-    if (create && exists) {
+    int rc = 0, v = 0;
+    if (how == JOURNAL_CREATE && exists) {
         rc = rig_fail(RIG_ERR_INVALID, "%s already holds a session: continue it with refl capture --resume %s, or "
                       "choose another -o DIR", dir, dir);
         goto fail;
     }
-    if (!create && !exists) {
+    if (how != JOURNAL_CREATE && !exists) {
         rc = rig_fail(RIG_ERR_NO_DEVICE, "%s: no session here (no session.sqlite)", dir);
         goto fail;
     }
-    if (sqlite3_open_v2(j->path, &j->db, SQLITE_OPEN_READWRITE | (create ? SQLITE_OPEN_CREATE : 0) |
-                        SQLITE_OPEN_FULLMUTEX, NULL) != SQLITE_OK) {
-        rc = jfail(j, "cannot open");
-        goto fail;
-    }
-    sqlite3_busy_timeout(j->db, 10000);
-    if (sqlite3_exec(j->db, "PRAGMA journal_mode=WAL; PRAGMA synchronous=FULL; PRAGMA foreign_keys=ON;", NULL,
-                     NULL, NULL) != SQLITE_OK) {
-        rc = jfail(j, "cannot set WAL mode");
-        goto fail;
-    }
-    if (!create) {
-        sqlite3_stmt *s = NULL;
-        int v = -1;
-        if (sqlite3_prepare_v2(j->db, "SELECT version FROM schema_version", -1, &s, NULL) == SQLITE_OK &&
-            sqlite3_step(s) == SQLITE_ROW)
-            v = sqlite3_column_int(s, 0);
-        sqlite3_finalize(s);
-        if (v < 1) {
-            rc = rig_fail(RIG_ERR_PROTOCOL, "journal %s: no schema version (not a refl session journal?); this "
-                          "refl reads versions 1 to %d", j->path, SCHEMA_VERSION);
-            goto fail;
-        }
-        if (v > SCHEMA_VERSION) {
-            rc = rig_fail(RIG_ERR_PROTOCOL, "journal %s: schema version %d, written by a newer refl (this refl "
-                          "reads versions 1 to %d)", j->path, v, SCHEMA_VERSION);
-            goto fail;
-        }
-        if (v == 1 && (rc = migrate_v1(j))) goto fail;
-    }
+    if ((rc = how == JOURNAL_READ ? open_read(j, dir) : open_write(j, dir, how == JOURNAL_CREATE))) goto fail;
+    if (how != JOURNAL_CREATE && (rc = check_version(j, &v))) goto fail;
+    if (how == JOURNAL_RESUME && v == 1 && (rc = migrate_v1(j))) goto fail;
     *out = j;
     return 0;
 fail:
@@ -245,12 +394,15 @@ fail:
     return rc;
 }
 
-int rig_journal_open(rig_journal_t **out, const char *dir) { return open_db(out, dir, false); }
+int rig_journal_open(rig_journal_t **out, const char *dir) { return open_db(out, dir, JOURNAL_READ); }
+
+int rig_journal_resume(rig_journal_t **out, const char *dir) { return open_db(out, dir, JOURNAL_RESUME); }
 
 void rig_journal_close(rig_journal_t *j)
 {
     if (!j) return;
     if (j->db) sqlite3_close(j->db);
+    remove_copy(j);
     pthread_mutex_destroy(&j->lock);
     g_free(j->path);
     free(j);
@@ -260,7 +412,7 @@ int rig_journal_create(rig_journal_t **out, const char *dir, const rig_plan_t *p
                        const char *rig_text, const char *rig_sha256, const char *session_json)
 {
     rig_journal_t *j = NULL;
-    int rc = open_db(&j, dir, true);
+    int rc = open_db(&j, dir, JOURNAL_CREATE);
     if (rc) return rc;
     sqlite3_stmt *s = NULL;
     char now[40];
@@ -416,6 +568,8 @@ int rig_journal_integrity(rig_journal_t *j, char **result)
             const unsigned char *t = sqlite3_column_text(s, 0);
             g_string_append_printf(g, "%s%s", g->len ? "; " : "", t ? (const char *)t : "");
         }
+        for (char *c = g->str; *c; c++)   // one line: SQLite's findings may hold line breaks
+            if (*c == '\n') *c = ' ';
         if (st != SQLITE_DONE) {
             g_string_append_printf(g, "%s%s", g->len ? "; " : "", sqlite3_errmsg(j->db));
         }
@@ -423,6 +577,17 @@ int rig_journal_integrity(rig_journal_t *j, char **result)
     }
     sqlite3_finalize(s);
     pthread_mutex_unlock(&j->lock);
+    return rc;
+}
+
+int rig_journal_check(rig_journal_t *j)
+{
+    char *found = NULL;
+    int rc = rig_journal_integrity(j, &found);
+    if (!rc && strcmp(found, "ok"))
+        rc = rig_fail(RIG_ERR_IO, "journal %s fails SQLite's integrity check: %s (the journal is damaged: sqlite3 %s "
+                      ".recover > recovered.sql saves what can be read)", j->path, found, j->path);
+    g_free(found);
     return rc;
 }
 

@@ -61,6 +61,10 @@ rig_session_t *rig_session_open(const char *dir)
         g_free(why);
         goto fail;
     }
+    if (rig_journal_check(j)) {
+        model_error(dir, 0, "%s", model_last_error());
+        goto fail;
+    }
     if (rig_journal_source(j, "plan", NULL, &s->plan_text, &psha) ||
         rig_journal_source(j, "rig", NULL, NULL, &rsha) || rig_journal_frames(j, &s->rows, &s->n)) {
         model_error(dir, 0, "cannot read the session's journal: %s", model_last_error());

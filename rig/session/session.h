@@ -82,8 +82,8 @@ typedef struct rig_operator rig_operator_t;   // the operator's answers (below)
 // (step, camera) frames only. The journal's schema versions (table
 // schema_version; rig/session/journal.c): 1, frames keyed by step (one
 // camera); 2, frames keyed by (step, camera), written by this refl. Versions 1
-// and 2 are read (a version-1 journal is migrated to 2 when opened: its frames
-// become camera "camera"); a higher version is refused. A frame is
+// and 2 are read (a version-1 journal's frames as camera "camera"; --resume
+// migrates it to 2 first); a higher version is refused. A frame is
 // written to frames/.sNNNNNN.png.part, fsync'ed, hashed, committed with its row
 // (one transaction), then linked to its name (link(2): nothing is overwritten)
 // and the temporary name removed; --resume re-links committed frames whose link
@@ -188,6 +188,12 @@ double rig_plan_floor_s(const rig_plan_t *p, const rig_t *r, int from_step);
 char *rig_plan_text(const rig_plan_t *p, const char *comment);
 
 // The journal: DIR/session.sqlite (WAL, one transaction per frame).
+// rig_journal_create and rig_journal_resume are the writer's (refl capture):
+// read-write, WAL; resume migrates a version-1 journal to version 2, and
+// refuses a directory it cannot write. rig_journal_open is every reader's: it
+// never writes (no WAL switch, no migration) and reads a session in a
+// directory it cannot write (another user's, a read-only archive), with the
+// commits of a WAL left beside the journal (rig/session/journal.c says how).
 typedef struct rig_journal rig_journal_t;
 
 // The frame table: one list for the rig_frame_row_t fields, the journal's
@@ -269,6 +275,7 @@ json_t *rig_frame_rows_json(const rig_frame_row_t *rows, int n);
 int  rig_journal_create(rig_journal_t **out, const char *dir, const rig_plan_t *p, const char *rig_path,
                         const char *rig_text, const char *rig_sha256, const char *session_json);
 int  rig_journal_open(rig_journal_t **out, const char *dir);
+int  rig_journal_resume(rig_journal_t **out, const char *dir);
 void rig_journal_close(rig_journal_t *j);
 // Stored plan/rig: path, text, sha256 (caller frees with free()).
 int  rig_journal_source(rig_journal_t *j, const char *which, char **path, char **text, char **sha256);
@@ -283,6 +290,9 @@ bool rig_journal_facts_read(rig_journal_t *j, json_t **facts);
 // g_free) is "ok" when the database is intact, else SQLite's findings (joined
 // by "; "). 0, or a RIG_ERR_* when the check cannot run.
 int  rig_journal_integrity(rig_journal_t *j, char **result);
+// The same as an error: 0 when intact, else RIG_ERR_IO (model_last_error names
+// the journal and SQLite's findings).
+int  rig_journal_check(rig_journal_t *j);
 // DIR/session.sqlite, as opened.
 const char *rig_journal_path(const rig_journal_t *j);
 // Steps (as stored) and their status: 'p'ending, 'd'one, 's'kipped. Caller frees both.
@@ -316,8 +326,8 @@ typedef struct {
     json_t          *facts;            // session facts (camera, virtual rig, ...); may be NULL
 } rig_session_t;
 
-// NULL on error (model_last_error names the directory). rig_session_open:
-// every frame; rig_session_open_camera: the frames of one camera (NULL: the
+// NULL on error (model_last_error names the directory; a journal that fails
+// SQLite's integrity check is an error). rig_session_open: every frame; rig_session_open_camera: the frames of one camera (NULL: the
 // session's first camera; an analysis of one camera reads a session of
 // several so), an error naming the cameras when it has none of that name.
 rig_session_t *rig_session_open(const char *dir);

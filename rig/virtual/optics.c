@@ -21,6 +21,7 @@
 
 #include <mrcal/mrcal.h>
 
+#include "model/cameramodel.h"
 #include "rig/devices.h"
 #include "rig/virtual/optics.h"
 
@@ -137,8 +138,8 @@ int rig_optics_scaled_camera(const char *cam_path, const model_camera_t *cam, do
                              model_camera_t **out)
 {
     *out = NULL;
-    mrcal_cameramodel_t *m = mrcal_read_cameramodel_file(cam_path);
-    if (!m) return rig_fail(RIG_ERR_IO, "virtual rig: mrcal cannot read %s", cam_path);
+    mrcal_cameramodel_t *m = model_cameramodel_read(cam_path);
+    if (!m) return rig_fail(RIG_ERR_IO, "virtual rig: %s", model_last_error());
     int err = RIG_ERR_OK;
     mrcal_lensmodel_metadata_t meta = mrcal_lensmodel_metadata(&m->lensmodel);
     int np = mrcal_lensmodel_num_params(&m->lensmodel);
