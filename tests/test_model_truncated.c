@@ -17,12 +17,13 @@
 #include "calib/calib.h"
 #include "model/cameramodel.h"
 #include "model/model.h"
+#include "rig/lab.h"
 #include "rig/rig.h"
 #include "rig/session/session.h"
 #include "rig/virtual/virtual.h"
 #include "tests/test.h"
 
-typedef enum { R_CAMERAMODEL, R_D3D, R_PLAN, R_RIG, R_TRUTH, R_LAMPS, R_MATERIALS, R_SENSOR, R_WHITE } reader_t;
+typedef enum { R_CAMERAMODEL, R_D3D, R_PLAN, R_RIG, R_TRUTH, R_LAMPS, R_MATERIALS, R_SENSOR, R_WHITE, R_LAB } reader_t;
 
 static bool read_as(reader_t r, const char *text, size_t n, const char *name, const char *examples)
 {
@@ -43,6 +44,11 @@ static bool read_as(reader_t r, const char *text, size_t n, const char *name, co
         return p != NULL;
     }
     case R_RIG: return rig_config_parse(text, n, name) == 0;
+    case R_LAB: {
+        rig_lab_t *l = rig_lab_parse(text, n, name);
+        rig_lab_free(l);
+        return l != NULL;
+    }
     case R_TRUTH: return rig_virtual_check_truth(text, n, name, examples) == 0;
     case R_LAMPS: {
         model_lamps_t *l = model_lamps_parse(text, n, name);
@@ -97,6 +103,7 @@ static bool cut_file(const char *dir, const char *f, const char *examples, long 
     snprintf(path, sizeof path, "%s/%s", dir, f);
     size_t len = 0;
     char *text = model_read_file(path, &len);
+    if (r == R_RIG && text && (!strncmp(text, "[lab]", 5) || strstr(text, "\n[lab]"))) r = R_LAB;   // a lab file
     const char *name = r == R_TRUTH ? f : path;   // a truth file's paths resolve in examples/
     CHECK_MSG(text != NULL, "%s", model_last_error());
     if (!text) return false;
