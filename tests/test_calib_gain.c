@@ -293,6 +293,11 @@ TEST_LONG(calib_gain_virtual)
     if (html) {
         CHECK_CONTAINS(html, "ptc.png");
         CHECK_CONTAINS(html, "prnu_hist.png");
+        // the headline first: the standard's K and refl's K0 with its 1-sigma; no photon axis here, said once
+        CHECK(strstr(html, "id=\"headline\"") && strstr(html, "<h2>Summary") &&
+              strstr(html, "id=\"headline\"") < strstr(html, "<h2>Summary"));
+        CHECK_CONTAINS(html, "<li>EMVA 1288: K ");
+        CHECK_CONTAINS(html, "<li>refl's small-signal K (what refl's measurements use) ");
     }
     free(html);
     g_free(rp);

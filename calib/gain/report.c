@@ -83,6 +83,31 @@ static int summary_rows(const calib_gain_an_t *an, int ngains, const calib_gain_
     return nr;
 }
 
+// The page's headline (g_free each; returns the count, at most 5): the standard's figures, refl's K0 with its
+// 1-sigma, and what was not measured.
+static int headline_items(const calib_gain_an_t *a, const calib_gain_maps_t *m, char **it)
+{
+    const calib_gain_emva_t *e = &a->emva;
+    const calib_gain_nonuni_t *nu = &m->nu;
+    int n = 0;
+    it[n++] = g_strdup_printf("EMVA 1288: K %.5g DN/e-, temporal dark noise %.4g e-, saturation capacity %.6g e-, "
+                              "SNR max %.1f dB, linearity error %.3f %%, DSNU1288 %.3g e-, PRNU1288 %.3g %%", e->K,
+                              e->sigma_d_e, e->mu_e_sat, 20 * log10(e->snr_max), e->le_pct, nu->dsnu_dn[0] / e->K,
+                              nu->prnu_pct[0]);
+    it[n++] = g_strdup_printf("refl's small-signal K (what refl's measurements use) %.5g ± %.2g DN/e-, read noise "
+                              "%.4g ± %.2g e-", a->ptc.system_gain_dn_per_e, a->ptc.system_gain_std_dn_per_e,
+                              a->ptc.read_noise_e, a->read_noise_std_e);
+    if (e->photons)
+        it[n++] = g_strdup_printf("quantum efficiency %.2f %% (photons: %s)", 100 * e->qe, a->photon_source);
+    else
+        it[n++] = g_strdup("not measured: the photon axis (quantum efficiency, responsivity, the thresholds in "
+                           "photons); give --irradiance, --pixel-area-um2 (or --pixel-pitch-um) and --wavelength-nm, "
+                           "or --emva-descriptor. Every figure in e- and DN is measured");
+    if (e->photons && e->qe > 1)
+        it[n++] = g_strdup("!quantum efficiency above 100 %: check the irradiance, the pixel area and the wavelength");
+    return n;
+}
+
 bool calib_gain_report(const char *dir, const calib_gain_an_t *an, int ngains, const calib_gain_maps_t *maps,
                        json_t *prov)
 {
@@ -98,6 +123,10 @@ bool calib_gain_report(const char *dir, const calib_gain_an_t *an, int ngains, c
         return false;
     }
     const calib_gain_an_t *a = &an[0];
+    char *hl[5];
+    int nh = headline_items(a, maps, hl);
+    model_html_headline(f, "Headline", (const char *const *)hl, nh);
+    for (int i = 0; i < nh; i++) g_free(hl[i]);
     model_html_heading(f, "Summary");
     char *rows[48];
     int nr = summary_rows(an, ngains, maps, rows, 48);
