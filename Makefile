@@ -319,6 +319,7 @@ TEST_SRC := \
     tests/test_calib_sample_pose.c \
     tests/test_calib_geometry.c \
     tests/test_calib_boards.c \
+    tests/test_calib_boards_photo.c \
     tests/test_calib_psf.c \
     tests/test_calib_lamps.c \
     tests/test_calib_plan_geometry.c \
@@ -335,6 +336,8 @@ TEST_SRC := \
     tests/test_fit_verify_register.c \
     tests/test_fit_verify_footprint.c \
     tests/test_fit_verify_speed.c
+# the tests' photographed-looking boards (OpenCV's blur and JPEG; refl-tests links opencv_imgcodecs)
+TEST_CXX_SRC := tests/photo_degrade.cc
 BENCH_SRC := tests/bench.c
 FUZZ_SRC  := tests/fuzz_parsers.c calib/gain/descriptor.c
 
@@ -361,7 +364,7 @@ $(BIN)/refl: $(call obj,$(MAIN_SRC)) $(LIB)
 	@mkdir -p $(@D)
 	$(CC) $(LDFLAGS_ALL) -o $@ $^ $(LDLIBS_ALL)
 
-$(BIN)/refl-tests: $(call obj,$(TEST_SRC)) $(LIB)
+$(BIN)/refl-tests: $(call obj,$(TEST_SRC)) $(patsubst %.cc,$(BUILD)/%.o,$(TEST_CXX_SRC)) $(LIB)
 	@mkdir -p $(@D)
 	$(CC) $(LDFLAGS_ALL) -o $@ $^ $(LDLIBS_ALL)
 
@@ -370,7 +373,8 @@ $(BUILD)/calib/geometry/board_detect.o: CXXFLAGS_ALL += $(OPENCV_CFLAGS)
 # model_brdf_eval_n's GGX loop vectorises (sqrt and selects; model/brdf/batch.c)
 $(BUILD)/model/brdf/batch.o: CFLAGS_ALL += -ftree-loop-vectorize -fvect-cost-model=dynamic -fno-math-errno -fno-trapping-math
 $(BUILD)/model/sensor.o: CFLAGS_ALL += -ftree-loop-vectorize -fvect-cost-model=dynamic -fno-math-errno -fno-trapping-math -ffp-contract=off
-$(BIN)/refl-tests: LDLIBS_ALL += $(TEST_PKG_LIBS)
+$(BIN)/refl-tests: LDLIBS_ALL += $(TEST_PKG_LIBS) -lopencv_imgcodecs
+$(BUILD)/tests/photo_degrade.o: CXXFLAGS_ALL += $(OPENCV_CFLAGS)
 
 # Helpers of tests/test_rig_lamps.c: a fake libgpiod v1 for LD_PRELOAD (built
 # without sanitizers so it preloads into the asan build too) and a child

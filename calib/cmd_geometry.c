@@ -232,7 +232,9 @@ int calib_cmd_geometry(int argc, char **argv)
                         CALIB_BOARD_DEFAULT_DICT ")", false),
         MODEL_OPT_VALUE("--charuco-marker-mm", "M", "ChArUco: a marker's side (default 0.75 x the square's)", false),
         MODEL_OPT_VALUE("--detector", "NAME", "who finds the corners: auto (default: mrgingham for a square "
-                        "chessboard,\n                             else OpenCV), mrgingham or opencv", false),
+                        "chessboard,\n                             else OpenCV), mrgingham or opencv (a chessboard: findChessboardCornersSB, "
+                        "then the\n                             classic detector on the image and on a contrast-normalised "
+                        "copy;\n                             geometry.json names each view's)", false),
         MODEL_OPT_VALUE("--min-corners", "N", "a view with fewer corners is left out, with the reason (default 12, "
                         "at most\n                             the board's)", false),
         MODEL_OPT_VALUE("--board-height-mm", "H", "height of the corner plane above the table top at tilt 0 "

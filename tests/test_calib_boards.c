@@ -478,12 +478,25 @@ TEST_LONG(calib_boards_virtual_rig_chessboard_8x6)
         // the half turns between two detections' corner orders: only 0 or 2 quarter turns
         size_t i;
         json_t *im;
-        int turned = 0, odd = 0;
+        int turned = 0, odd = 0, named = 0, found = 0;
         json_array_foreach(json_object_get(g, "images"), i, im) {
             json_int_t qt = json_integer_value(json_object_get(im, "quarter_turns"));
             turned += qt == 2;
             odd += qt % 2;
+            // who found the board, and each detector's outcome (the first tried: findChessboardCornersSB)
+            const char *det = json_string_value(json_object_get(im, "detector"));
+            const char *att = json_string_value(json_object_get(im, "detector_attempts"));
+            found += json_is_true(json_object_get(im, "board_found"));
+            named += json_is_true(json_object_get(im, "board_found")) && det && !strncmp(det, "opencv-", 7) && att &&
+                     !strncmp(att, "opencv-sb: ", 11) && strstr(att, det);
         }
+        CHECK_MSG(named == found && found > 0, "%d of %d views with the board name their detector", named, found);
+        char rp[PATH_MAX];
+        snprintf(rp, sizeof rp, "%s/report.html", dir);
+        char *html = NULL;
+        CHECK(g_file_get_contents(rp, &html, NULL, NULL));
+        if (html) CHECK_CONTAINS(html, "Views: who found the board");
+        g_free(html);
         fprintf(stderr, "  8x6 chessboard on the virtual rig (%.1f s): %lld of %lld views, residual RMS %.4f px; "
                 "projection difference from the truth at 900 mm RMS %.4f px (worst %.4f); axis %.4f deg from the "
                 "truth's (stated %.4f); %d views half-turned\n", dt, json_integer_value(json_object_get(g, "views_used")),

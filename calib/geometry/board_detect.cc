@@ -9,6 +9,7 @@
 #include <cstring>
 #include <exception>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include <opencv2/aruco.hpp>
@@ -60,11 +61,6 @@ cv::Ptr<cv::aruco::CharucoBoard> charuco_board(const calib_board_t *b)
                                            (float)b->marker_mm, dictionary(b));
 }
 
-void say(char *why, size_t whyn, const char *text)
-{
-    if (why && whyn) snprintf(why, whyn, "%s", text);
-}
-
 // Corners refined by cv::cornerSubPix in a window of half-width frac x their
 // spacing in the image (the least distance between two of them), 2..25 px.
 void refine(const cv::Mat &img, std::vector<cv::Point2f> &c, double frac)
@@ -78,25 +74,11 @@ void refine(const cv::Mat &img, std::vector<cv::Point2f> &c, double frac)
                      cv::TermCriteria(cv::TermCriteria::EPS + cv::TermCriteria::COUNT, 50, 1e-4));
 }
 
-// A chessboard whole (findChessboardCornersSB), its order made right-handed in
-// the image (corner 1 - corner 0 crossed with corner W - corner 0 > 0, y down).
-int detect_chessboard(const calib_board_t *b, const cv::Mat &img, double *q, char *why, size_t whyn)
+// The corners as found (the detector's row-major order, W a row) into q, the
+// order made right-handed in the image (corner 1 - corner 0 crossed with
+// corner W - corner 0 > 0, y down).
+void chessboard_order(int W, int H, const std::vector<cv::Point2f> &c, double *q)
 {
-    const int W = b->width_n, H = b->height_n;
-    std::vector<cv::Point2f> c;
-    // NORMALIZE_IMAGE (equalizeHist) loses a board on a dark background; EXHAUSTIVE only when the quick
-    // search fails
-    bool found = cv::findChessboardCornersSB(img, cv::Size(W, H), c, 0) ||
-                 cv::findChessboardCornersSB(img, cv::Size(W, H), c, cv::CALIB_CB_EXHAUSTIVE);
-    if (!found || (int)c.size() != W * H) {
-        char t[160];
-        snprintf(t, sizeof t, "OpenCV found no %dx%d chessboard (findChessboardCornersSB: the whole board is needed)",
-                 W, H);
-        say(why, whyn, t);
-        return 0;
-    }
-    // (its corners are sub-pixel already: 0.03 px on tests/test_calib_boards.c's synthetic image; cornerSubPix
-    // after it made them worse on the virtual rig's frames, whose edges are sampled at pixel centres)
     double ax = c[1].x - c[0].x, ay = c[1].y - c[0].y, bx = c[W].x - c[0].x, by = c[W].y - c[0].y;
     bool flip = ax * by - ay * bx < 0;
     for (int j = 0; j < H; j++)
@@ -105,11 +87,142 @@ int detect_chessboard(const calib_board_t *b, const cv::Mat &img, double *q, cha
             q[2 * (j * W + i)] = p.x;
             q[2 * (j * W + i) + 1] = p.y;
         }
-    return W * H;
+}
+
+// The median of n <= 4 numbers (x reordered).
+double median4(double *x, int n)
+{
+    for (int a = 1; a < n; a++)
+        for (int b = a; b > 0 && x[b] < x[b - 1]; b--) std::swap(x[b], x[b - 1]);
+    return n % 2 ? x[n / 2] : (x[n / 2 - 1] + x[n / 2]) / 2;
+}
+
+// Corners that do not sit where their neighbours put them: each corner
+// against the parallelograms of its neighbours (q(i, j) = q(i-1, j) +
+// q(i, j-1) - q(i-1, j-1) and the other three), the median of those
+// predictions more than a quarter of the local spacing away (a corner caught
+// by glare or a grid a square off). Returns how many.
+int inconsistent_corners(int W, int H, const double *q)
+{
+    int bad = 0;
+    for (int j = 0; j < H; j++)
+        for (int i = 0; i < W; i++) {
+            double px[4], py[4], sp = INFINITY;
+            int n = 0;
+            for (int di = -1; di <= 1; di += 2)
+                for (int dj = -1; dj <= 1; dj += 2) {
+                    int a = i + di, b = j + dj;
+                    if (a < 0 || a >= W || b < 0 || b >= H) continue;
+                    const double *u = &q[2 * (j * W + a)], *v = &q[2 * (b * W + i)], *d = &q[2 * (b * W + a)];
+                    px[n] = u[0] + v[0] - d[0];
+                    py[n] = u[1] + v[1] - d[1];
+                    sp = std::min(sp, std::min(std::hypot(u[0] - d[0], u[1] - d[1]),
+                                               std::hypot(v[0] - d[0], v[1] - d[1])));
+                    n++;
+                }
+            const double *c = &q[2 * (j * W + i)];
+            if (n && std::hypot(c[0] - median4(px, n), c[1] - median4(py, n)) > 0.25 * sp) bad++;
+        }
+    return bad;
+}
+
+// One attempt's outcome appended to how->attempts.
+void attempt(calib_board_how_t *how, const char *name, const char *outcome)
+{
+    if (!how) return;
+    size_t n = strlen(how->attempts);
+    snprintf(how->attempts + n, sizeof how->attempts - n, "%s%s: %s", n ? "; " : "", name, outcome);
+}
+
+// The contrast-normalised copy: CLAHE over tiles of about 8 x 8 of the
+// board's squares as large as the image allows (a gradient of light or a
+// vignette flattened, the squares' contrast kept), clip limit 3.
+cv::Mat normalised(const cv::Mat &img, int W, int H)
+{
+    int tiles = std::max(2, std::min(16, (std::max(W, H) + 1) / 2));
+    cv::Ptr<cv::CLAHE> clahe = cv::createCLAHE(3.0, cv::Size(tiles, tiles));
+    cv::Mat out;
+    clahe->apply(img, out);
+    return out;
+}
+
+// OpenCV's classic detector (adaptive threshold, normalised image) on src,
+// its corners refined by cornerSubPix on img (the image itself) in a window
+// of half-width 0.4 x their spacing (2..25 px: the neighbouring corners stay
+// outside it). false: not found (its outcome in out).
+bool classic(const cv::Mat &img, const cv::Mat &src, int W, int H, std::vector<cv::Point2f> &c, char *out,
+             size_t outn)
+{
+    bool found = cv::findChessboardCorners(src, cv::Size(W, H), c,
+                                           cv::CALIB_CB_ADAPTIVE_THRESH | cv::CALIB_CB_NORMALIZE_IMAGE);
+    if (!found || (int)c.size() != W * H) {
+        snprintf(out, outn, "no %dx%d chessboard (findChessboardCorners, adaptive threshold, normalised)", W, H);
+        return false;
+    }
+    refine(img, c, 0.4);
+    snprintf(out, outn, "found, %d corners refined by cornerSubPix", W * H);
+    return true;
+}
+
+// A detector's whole board into q (ordered) unless some of its corners are
+// inconsistent with their neighbours (q all NAN again, out says so); else
+// out = found (may be out itself).
+bool accept(int W, int H, const std::vector<cv::Point2f> &c, double *q, char *out, size_t outn, const char *found)
+{
+    chessboard_order(W, H, c, q);
+    int bad = inconsistent_corners(W, H, q);
+    if (bad) {
+        for (int k = 0; k < 2 * W * H; k++) q[k] = NAN;
+        snprintf(out, outn, "its %dx%d grid refused: %d corners more than a quarter square from where their "
+                 "neighbours put them", W, H, bad);
+        return false;
+    }
+    if (found != out) snprintf(out, outn, "%s", found);
+    return true;
+}
+
+// Who found the board: the attempt's outcome and the detector's name in how.
+int found_by(calib_board_how_t *how, const char *name, const char *out, int n)
+{
+    attempt(how, name, out);
+    if (how) snprintf(how->detector, sizeof how->detector, "%s", name);
+    return n;
+}
+
+// A chessboard whole: the detectors of mask in turn until one finds it.
+int detect_chessboard(const calib_board_t *b, const cv::Mat &img, double *q, unsigned mask, calib_board_how_t *how)
+{
+    const int W = b->width_n, H = b->height_n;
+    std::vector<cv::Point2f> c;
+    char out[200];
+    if (mask & CALIB_BOARD_DET_SB) {
+        // NORMALIZE_IMAGE (equalizeHist) loses a board on a dark background; EXHAUSTIVE only when the quick
+        // search fails. Its corners are sub-pixel already (0.03 px on tests/test_calib_boards.c's synthetic
+        // image; cornerSubPix after it made them worse on the virtual rig's frames, whose edges are sampled at
+        // pixel centres).
+        bool found = cv::findChessboardCornersSB(img, cv::Size(W, H), c, 0) ||
+                     cv::findChessboardCornersSB(img, cv::Size(W, H), c, cv::CALIB_CB_EXHAUSTIVE);
+        if (!found || (int)c.size() != W * H)
+            snprintf(out, sizeof out, "no %dx%d chessboard (findChessboardCornersSB, the whole board needed)", W, H);
+        else if (accept(W, H, c, q, out, sizeof out, "found"))
+            return found_by(how, "opencv-sb", out, W * H);
+        attempt(how, "opencv-sb", out);
+    }
+    if (mask & CALIB_BOARD_DET_CLASSIC) {
+        if (classic(img, img, W, H, c, out, sizeof out) && accept(W, H, c, q, out, sizeof out, out))
+            return found_by(how, "opencv-classic", out, W * H);
+        attempt(how, "opencv-classic", out);
+    }
+    if (mask & CALIB_BOARD_DET_CLASSIC_NORMALISED) {
+        if (classic(img, normalised(img, W, H), W, H, c, out, sizeof out) && accept(W, H, c, q, out, sizeof out, out))
+            return found_by(how, "opencv-classic-normalised", out, W * H);
+        attempt(how, "opencv-classic-normalised", out);
+    }
+    return 0;
 }
 
 // A ChArUco board, whole or in part: markers, then the corners between them.
-int detect_charuco(const calib_board_t *b, const cv::Mat &img, double *q, char *why, size_t whyn)
+int detect_charuco(const calib_board_t *b, const cv::Mat &img, double *q, calib_board_how_t *how)
 {
     cv::Ptr<cv::aruco::CharucoBoard> board = charuco_board(b);
     cv::Ptr<cv::aruco::DetectorParameters> par = cv::aruco::DetectorParameters::create();
@@ -128,7 +241,7 @@ int detect_charuco(const calib_board_t *b, const cv::Mat &img, double *q, char *
     if (mid.empty()) {
         char t[160];
         snprintf(t, sizeof t, "no ArUco marker of %s (ids 0..%d) found", b->dict, calib_board_charuco_markers(b) - 1);
-        say(why, whyn, t);
+        attempt(how, "opencv-charuco", t);
         return 0;
     }
     std::vector<cv::Point2f> cc;
@@ -138,7 +251,7 @@ int detect_charuco(const calib_board_t *b, const cv::Mat &img, double *q, char *
         char t[160];
         snprintf(t, sizeof t, "%zu ArUco markers of %s found, but no chessboard corner between two of them",
                  mid.size(), b->dict);
-        say(why, whyn, t);
+        attempt(how, "opencv-charuco", t);
         return 0;
     }
     // the interpolated corners refined in a window that stays off the markers' corners: half-width half the
@@ -154,6 +267,10 @@ int detect_charuco(const calib_board_t *b, const cv::Mat &img, double *q, char *
         q[2 * id + 1] = cc[k].y;
         n++;
     }
+    char t[96];
+    snprintf(t, sizeof t, "%d corners found between %zu markers", n, mid.size());
+    attempt(how, "opencv-charuco", t);
+    if (how && n) snprintf(how->detector, sizeof how->detector, "opencv-charuco");
     return n;
 }
 
@@ -270,19 +387,28 @@ bool calib_board_check(const calib_board_t *b)
     return true;
 }
 
-int calib_board_detect(const calib_board_t *b, const unsigned char *img, int w, int h, double *q, char *why,
-                       size_t whyn)
+int calib_board_detect_how(const calib_board_t *b, const unsigned char *img, int w, int h, double *q,
+                           unsigned mask, calib_board_how_t *how)
 {
     if (!calib_board_check(b)) return -1;
     for (int k = 0; k < 2 * b->width_n * b->height_n; k++) q[k] = NAN;
-    say(why, whyn, "");
+    if (how) how->detector[0] = how->attempts[0] = 0;
     try {
         cv::Mat m(h, w, CV_8UC1, const_cast<unsigned char *>(img));
-        return b->kind == CALIB_BOARD_CHARUCO ? detect_charuco(b, m, q, why, whyn) : detect_chessboard(b, m, q, why, whyn);
+        return b->kind == CALIB_BOARD_CHARUCO ? detect_charuco(b, m, q, how) : detect_chessboard(b, m, q, mask, how);
     } catch (const std::exception &e) {
         model_error_set(nullptr, 0, "OpenCV failed on a %dx%d image: %s", w, h, e.what());
         return -1;
     }
+}
+
+int calib_board_detect(const calib_board_t *b, const unsigned char *img, int w, int h, double *q, char *why,
+                       size_t whyn)
+{
+    calib_board_how_t how;
+    int n = calib_board_detect_how(b, img, w, h, q, CALIB_BOARD_DET_ALL, &how);
+    if (why && whyn) snprintf(why, whyn, "%s", n == 0 ? how.attempts : "");
+    return n;
 }
 
 bool calib_board_render(const calib_board_t *b, const double H[9], int w, int h, int ss, unsigned char *img)

@@ -9,8 +9,17 @@
 // (i, j) spacing_mm, z = 0; corners are listed row by row, corner (i, j) at
 // index j width_n + i (mrcal's corners.vnl order).
 // - chessboard: (width_n + 1) x (height_n + 1) squares, the square holding
-//   the board point (-spacing/2, -spacing/2) black. Found whole or not at all
-//   (cv::findChessboardCornersSB); the order comes out with the board's x
+//   the board point (-spacing/2, -spacing/2) black. Found whole or not at all,
+//   by OpenCV's detectors in turn until one finds it (calib_board_detect_how):
+//   "opencv-sb" cv::findChessboardCornersSB (sub-pixel corners of its own);
+//   "opencv-classic" cv::findChessboardCorners (CALIB_CB_ADAPTIVE_THRESH |
+//   CALIB_CB_NORMALIZE_IMAGE) then cv::cornerSubPix on the image;
+//   "opencv-classic-normalised" the same on a contrast-normalised copy
+//   (cv::CLAHE, tiles of about 8 squares), the corners refined on the image
+//   itself. A detector's grid with a corner more than a quarter of a square
+//   from where its neighbours put it (the median of the parallelograms they
+//   span) is refused and the next detector tried. Each orders the corners as
+//   the next sentence says: the order comes out with the board's x
 //   along the image rows' direction as seen (corner 1 - corner 0 crossed with
 //   corner W - corner 0 points into the image: +z away from the camera), up
 //   to a half turn (a square board: up to a quarter turn), which the caller
@@ -68,6 +77,25 @@ bool calib_board_check(const calib_board_t *b);
 // be NULL, then says why), -1 on an error (message).
 int calib_board_detect(const calib_board_t *b, const unsigned char *img, int w, int h, double *q, char *why,
                        size_t whyn);
+
+// The chessboard's detectors (a mask; ChArUco boards have one detector).
+enum {
+    CALIB_BOARD_DET_SB = 1,                // "opencv-sb"
+    CALIB_BOARD_DET_CLASSIC = 2,           // "opencv-classic"
+    CALIB_BOARD_DET_CLASSIC_NORMALISED = 4,// "opencv-classic-normalised"
+    CALIB_BOARD_DET_ALL = 7,
+};
+// Who found the board and how each detector tried fared.
+typedef struct {
+    char detector[32];     // the detector that found it ("opencv-sb", "opencv-classic",
+                           // "opencv-classic-normalised", "opencv-charuco"); "" when none did
+    char attempts[400];    // each attempt in order, "NAME: outcome", "; " between them
+} calib_board_how_t;
+// calib_board_detect with the detectors of mask tried in turn (the order
+// above) and how it went in *how (may be NULL). calib_board_detect is this
+// with every detector, its why the attempts when none found the board.
+int calib_board_detect_how(const calib_board_t *b, const unsigned char *img, int w, int h, double *q,
+                           unsigned mask, calib_board_how_t *how);
 
 // A synthetic image of the board (tests, a board to print): pixel (x, y)
 // (w x h, rows contiguous) is the mean of ss x ss samples over the pixel's

@@ -128,9 +128,9 @@ static bool corners_from_file(const calib_geometry_opts_t *o, calib_geometry_sta
     if (!calib_geometry_parse_corners(&s->views, *text, o->corners, &o->board, true)) return false;
     for (guint k = 0; k < s->views.v->len; k++) {
         calib_geometry_view_t *v = g_ptr_array_index(s->views.v, k);
-        if (!v->found)
-            snprintf(v->why, sizeof v->why, "no %dx%d board in the corners file", o->board.width_n,
-                     o->board.height_n);
+        if (v->found) snprintf(v->detector, sizeof v->detector, "corners file");
+        else snprintf(v->why, sizeof v->why, "no %dx%d board in the corners file", o->board.width_n,
+                      o->board.height_n);
     }
     return true;
 }
@@ -166,15 +166,16 @@ static bool corners_mrgingham(const calib_geometry_opts_t *o, calib_geometry_sta
     if (!calib_geometry_parse_corners(vs, *text, s->cornpath, &o->board, false)) return false;
     for (guint k = 0; k < vs->v->len; k++) {
         calib_geometry_view_t *v = g_ptr_array_index(vs->v, k);
-        if (!v->found)
-            snprintf(v->why, sizeof v->why, "mrgingham found no %dx%d board", o->board.width_n, o->board.height_n);
+        if (v->found) snprintf(v->detector, sizeof v->detector, "mrgingham");
+        else snprintf(v->why, sizeof v->why, "mrgingham found no %dx%d board", o->board.width_n, o->board.height_n);
     }
     return true;
 }
 
-// One view's image (DIR/images/NAME, 8 bits) through the OpenCV detector:
-// its lines of corners text into t (one "NAME - -" for no board, and then
-// v->why). false + message.
+// One view's image (DIR/images/NAME, 8 bits) through the OpenCV detectors
+// in turn (calib/geometry/board_detect.h): its lines of corners text into t
+// (one "NAME - -" for no board, and then v->why), who found it and each
+// attempt's outcome into v->detector, v->attempts. false + message.
 static bool detect_view(const calib_geometry_opts_t *o, calib_geometry_state_t *s, calib_geometry_view_t *v,
                         double *q, GString *t)
 {
@@ -190,13 +191,15 @@ static bool detect_view(const calib_geometry_opts_t *o, calib_geometry_state_t *
     }
     for (size_t k = 0; k < (size_t)w * h; k++) u8[k] = img[k] <= 0 ? 0 : img[k] >= 255 ? 255 : (unsigned char)img[k];
     free(img);
-    char why[256] = "";
-    int n = calib_board_detect(&o->board, u8, w, h, q, why, sizeof why);
+    calib_board_how_t how;
+    int n = calib_board_detect_how(&o->board, u8, w, h, q, CALIB_BOARD_DET_ALL, &how);
     free(u8);
     if (n < 0) return false;
+    snprintf(v->detector, sizeof v->detector, "%s", how.detector);
+    snprintf(v->attempts, sizeof v->attempts, "%s", how.attempts);
     if (n == 0) {
         g_string_append_printf(t, "%s - -\n", v->name);
-        snprintf(v->why, sizeof v->why, "%s", why);
+        snprintf(v->why, sizeof v->why, "no detector found the board: %.290s", how.attempts);
         return true;
     }
     for (int k = 0; k < N; k++)

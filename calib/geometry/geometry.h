@@ -137,6 +137,9 @@ typedef struct {
     double  tilt_deg, tilt_azimuth_deg;   // NAN unknown
     bool    found;           // the board was found (at least min_corners of its corners)
     char    why[320];        // why not found / not used
+    char    detector[32];    // who found the corners ("opencv-sb" ..., calib_board_how_t; "mrgingham",
+                             // "corners file"); "" none
+    char    attempts[400];   // the OpenCV detectors tried and each one's outcome; "" none tried
     double *q;               // width_n*height_n*2 corners, px, in the board's order (corner (i, j) at
                              // 2 (j width_n + i)); NAN where not seen (a partial view); NULL: none
     int     ncorners;        // corners seen (not NAN) in q

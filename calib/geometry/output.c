@@ -149,6 +149,10 @@ static json_t *board_json(const calib_geometry_opts_t *o)
     }
     json_object_set_new(j, "detector", json_string(o->corners ? "corners file"
                         : calib_geometry_detector(o->detector, b) == CALIB_DETECTOR_MRGINGHAM ? "mrgingham" : "opencv"));
+    if (!o->corners && calib_geometry_detector(o->detector, b) == CALIB_DETECTOR_OPENCV)
+        json_object_set_new(j, "detectors_in_turn", b->kind == CALIB_BOARD_CHARUCO
+                            ? json_pack("[s]", "opencv-charuco")
+                            : json_pack("[sss]", "opencv-sb", "opencv-classic", "opencv-classic-normalised"));
     json_object_set_new(j, "min_corners", json_integer(minc > N ? N : minc < 4 ? 4 : minc));
     json_object_set_new(j, "frame", json_string("corner (i, j), i = 0..width_n-1, j = 0..height_n-1, at (i, j) "
                         "spacing_mm, z = 0 (mrcal's); corners.vnl lists corner (i, j) at j width_n + i"));
@@ -171,6 +175,8 @@ static json_t *view_json(const calib_geometry_state_t *s, const calib_geometry_v
     json_object_set_new(im, "board_found", json_boolean(v->found));
     if (v->q) json_object_set_new(im, "corners_found", json_integer(v->ncorners));
     if (v->why[0]) json_object_set_new(im, "why", json_string(v->why));
+    if (v->detector[0]) json_object_set_new(im, "detector", json_string(v->detector));
+    if (v->attempts[0]) json_object_set_new(im, "detector_attempts", json_string(v->attempts));
     if (isfinite(v->rms_px)) {     // mrcal solved a pose for it
         json_object_set_new(im, "rms_residual_px", json_real(v->rms_px));
         json_object_set_new(im, "outliers", json_integer(v->outliers));

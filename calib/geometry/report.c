@@ -1,8 +1,10 @@
 // calib/geometry/report.c — DIR/report.html: the plots of scripts/calib_geometry_report.py
 // and the camera model, cross-validation, lens blur, cameras, axis and the
-// images without a board.
+// views: who found the board in each, and why a view was refused.
 #include <glib.h>
+#include <math.h>
 #include <stdio.h>
+#include <string.h>
 #include <unistd.h>
 
 #include "calib/calib.h"
@@ -61,6 +63,30 @@ static void report_crossvalidation(FILE *f, const calib_geometry_state_t *s)
     g_ptr_array_free(rows, TRUE);
     model_html_para(f, "Lens model: %s.",
                     json_string_value(json_object_get(json_object_get(x, "lens_choice"), "why")));
+}
+
+// The views: who found the board in each (the detector, its corners) and,
+// for a view not used, why, with each detector's outcome.
+static void report_views_table(FILE *f, const calib_geometry_state_t *s)
+{
+    model_html_heading(f, "Views: who found the board");
+    GPtrArray *rows = g_ptr_array_new_with_free_func(g_free);
+    int used = 0;
+    for (guint k = 0; k < s->views.v->len; k++) {
+        calib_geometry_view_t *v = g_ptr_array_index(s->views.v, k);
+        used += v->found;
+        char rms[32] = "";
+        if (isfinite(v->rms_px)) snprintf(rms, sizeof rms, "%.3f", v->rms_px);
+        g_ptr_array_add(rows, g_strdup_printf("%s|%s|%s|%d|%s|%s%s%s", v->name, v->found ? "used" : "refused",
+                                              v->detector[0] ? v->detector : "none", v->ncorners, rms, v->why,
+                                              v->why[0] && v->attempts[0] && !strstr(v->why, v->attempts) ? "; " : "",
+                                              strstr(v->why, v->attempts) ? "" : v->attempts));
+    }
+    model_html_para(f, "The board was used in %d of %u views; the detectors tried in turn and each one's outcome "
+                    "(a view refused: why).", used, s->views.v->len);
+    model_html_table(f, "image|view|found by|corners|RMS residual (px)|why / detectors' outcomes",
+                     (const char *const *)rows->pdata, (int)rows->len);
+    g_ptr_array_free(rows, TRUE);
 }
 
 // A figure of the plots script when it wrote it (it leaves out what it cannot draw, e.g. without mrcal).
@@ -157,17 +183,7 @@ bool calib_geometry_report(const calib_geometry_opts_t *o, const calib_geometry_
             model_html_para(f, "No axis: %s.", s->rigwhy);
         }
         model_html_para(f, "Rig frame: %s.", json_string_value(json_object_get(s->out, "rig_frame")));
-        model_html_heading(f, "Images without a board");
-        GPtrArray *rows = g_ptr_array_new_with_free_func(g_free);
-        for (guint k = 0; k < s->views.v->len; k++) {
-            calib_geometry_view_t *v = g_ptr_array_index(s->views.v, k);
-            if (!v->found) g_ptr_array_add(rows, g_strdup_printf("%s|%s|%s", v->name, v->source, v->why));
-        }
-        if (rows->len)
-            model_html_table(f, "image|source|why", (const char *const *)rows->pdata, (int)rows->len);
-        else
-            model_html_para(f, "none: the board was found in every image.");
-        g_ptr_array_free(rows, TRUE);
+        report_views_table(f, s);
         ok = model_html_end(f, hpath);
     } else {
         ok = false;
