@@ -43,17 +43,8 @@ static int numbers(model_cli_t *c, const char *name, double *v, int *n, int max,
 {
     const char *s = model_cli_value(c, name);
     if (!s) return 0;
-    gchar **w = g_strsplit_set(s, ", ", -1);
-    int k = 0;
-    bool ok = true;
-    for (int i = 0; w[i] && ok; i++) {
-        if (!w[i][0]) continue;
-        double x;
-        ok = k < max && model_parse_double(w[i], &x) && x >= lo && x <= hi;
-        if (ok) v[k++] = x;
-    }
-    g_strfreev(w);
-    if (!ok || !k) return model_cli_error(c, "%s %s: give up to %d numbers %g..%g separated by commas", name, s, max,
+    int k = model_parse_doubles(s, ", ", lo, hi, v, max);
+    if (k < 0) return model_cli_error(c, "%s %s: give up to %d numbers %g..%g separated by commas", name, s, max,
                                           lo, hi);
     *n = k;
     return 0;

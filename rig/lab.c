@@ -108,17 +108,8 @@ static bool list_of(const ctx_t *c, const char *sec, const char *key, double lo,
 {
     const model_ini_entry_t *e = model_ini_get(c->ini, sec, key);
     if (!e) return true;
-    gchar **w = g_strsplit_set(e->value, " \t,", -1);
-    int k = 0;
-    bool ok = true;
-    for (int i = 0; w[i] && ok; i++) {
-        if (!w[i][0]) continue;
-        double x;
-        ok = k < max && model_parse_double(w[i], &x) && x >= lo && x <= hi;
-        if (ok) v[k++] = x;
-    }
-    g_strfreev(w);
-    if (!ok || k == 0)
+    int k = model_parse_doubles(e->value, " \t,", lo, hi, v, max);
+    if (k < 0)
         return fail(c, e->line, "[%s] %s = %s: give %s, %g..%g each, at most %d", sec, key, e->value, what, lo, hi,
                     max);
     *n = k;

@@ -160,3 +160,16 @@ TEST(model_json_format_versions)
     json_decref(bare);
     json_decref(arr);
 }
+
+// A list of numbers: separators folded, each in range, at most max; anything else -1.
+TEST(model_parse_doubles_lists)
+{
+    double v[4];
+    CHECK(model_parse_doubles("1, 2,,3", ", ", 0, 10, v, 4) == 3 && v[0] == 1 && v[1] == 2 && v[2] == 3);
+    CHECK(model_parse_doubles(" 0.5\t-1 ", " \t,", -1, 1, v, 4) == 2 && v[1] == -1);
+    CHECK(model_parse_doubles("1,2,3,4,5", ",", 0, 10, v, 4) == -1);   // too many
+    CHECK(model_parse_doubles("1,x", ",", 0, 10, v, 4) == -1);         // not a number
+    CHECK(model_parse_doubles("1,11", ",", 0, 10, v, 4) == -1);        // out of range
+    CHECK(model_parse_doubles(" , ", ", ", 0, 10, v, 4) == -1);        // none
+    CHECK(model_parse_doubles(NULL, ",", 0, 10, v, 4) == -1);
+}

@@ -97,6 +97,10 @@ bool model_sha256_file(const char *path, char out[65]);
 // Strict number parsing: the whole string (leading/trailing blanks allowed)
 // must be one finite number.
 bool model_parse_double(const char *s, double *out);
+// A list of numbers separated by any of seps (runs of them count once), each
+// model_parse_double's and within [lo, hi], at most max, into v: their count,
+// or -1 (none, too many, or one not a number in range).
+int  model_parse_doubles(const char *s, const char *seps, double lo, double hi, double *v, int max);
 bool model_parse_int(const char *s, long *out);
 // Number of worker threads to use: REFL_THREADS if set, else the online CPUs.
 int model_default_threads(void);

@@ -140,6 +140,22 @@ bool model_parse_double(const char *s, double *out)
     return true;
 }
 
+int model_parse_doubles(const char *s, const char *seps, double lo, double hi, double *v, int max)
+{
+    if (!s) return -1;
+    gchar **w = g_strsplit_set(s, seps, -1);
+    int k = 0;
+    bool ok = true;
+    for (int i = 0; w[i] && ok; i++) {
+        if (!w[i][0]) continue;
+        double x;
+        ok = k < max && model_parse_double(w[i], &x) && x >= lo && x <= hi;
+        if (ok) v[k++] = x;
+    }
+    g_strfreev(w);
+    return ok && k > 0 ? k : -1;
+}
+
 bool model_parse_int(const char *s, long *out)
 {
     if (!s) return false;
