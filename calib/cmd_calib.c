@@ -26,6 +26,8 @@ static void usage(FILE *f)
 {
     fprintf(f, "usage: refl calib geometry|lamps|pattern|gain|white|export [ARGS...]   (refl calib NAME --help for its options)\n\n");
     for (size_t i = 0; i < sizeof subs / sizeof subs[0]; i++) fprintf(f, "  %-9s %s\n", subs[i].name, subs[i].summary);
+    fprintf(f, "\n");
+    model_cli_exit_status(f);
     fprintf(f, "\nrefl %s\n", REFL_VERSION);
 }
 

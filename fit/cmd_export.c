@@ -27,6 +27,10 @@ int fit_cmd_export(int argc, char **argv)
         fprintf(help ? stdout : stderr, "%susage: refl export material PRIORS.json --format gltf|mitsuba|merl -o FILE "
                 "[--material NAME]\n(refl export material --help for the options)\n",
                 help || argc < 2 ? "" : "refl export: unknown export (material is the one there is)\n");
+        if (help) {
+            printf("\n");
+            model_cli_exit_status(stdout);
+        }
         return help ? 0 : 2;
     }
     argc--, argv++;

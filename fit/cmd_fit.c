@@ -475,7 +475,9 @@ int fit_cmd(int argc, char **argv)
         FILE *f = argc < 2 ? stderr : stdout;
         fprintf(f, "usage: refl fit brdf FILE ... -o PRIORS.json        (refl fit brdf --help)\n"
                    "       refl fit material SESSION --calib DIR --scene FILE ... -o PRIORS.json   (refl fit material --help)\n"
-                   "\nrefl %s\n", REFL_VERSION);
+                   "\n");
+        model_cli_exit_status(f);
+        fprintf(f, "\nrefl %s\n", REFL_VERSION);
         return argc < 2 ? 2 : 0;
     }
     if (!strcmp(argv[1], "brdf")) return cmd_brdf(argc - 1, argv + 1);

@@ -202,7 +202,9 @@ int lightplan_cmd(int argc, char **argv)
                "                       (--kc-per-us X | --white WHITE.json) [options] -o DIR   (refl plan lamps --help)\n"
                "       refl plan geometry [--rig RIG.ini] --camera-model M [...] [options]   (the board's poses)\n"
                "       refl plan day --rig RIG.ini --lab LAB.ini -o DIR   (a lab day's plans)\n"
-               "\nrefl %s\n", REFL_VERSION);
+               "\n");
+        model_cli_exit_status(stdout);
+        printf("\nrefl %s\n", REFL_VERSION);
         return 0;
     }
     fprintf(stderr, "usage: refl plan lamps|geometry|day ... (refl plan --help)\n");

@@ -232,7 +232,7 @@ static int verify_files_cmd(model_cli_t *cli, verify_args_t *a, int argc, char *
     int exit_code = 1;
     if (verify_files_run(o, &r)) {
         print_result(o, &r);
-        exit_code = a->fail_on_incorrect && !r.fit.correct ? 3 : 0;
+        exit_code = a->fail_on_incorrect && !r.fit.correct ? MODEL_EXIT_INCORRECT : 0;
         if (!a->no_report) {
             if (model_run_script("verify_report.py", o->out, NULL) != 0) {
                 fprintf(stderr, "refl verify: the report failed (the JSON, CSV and TIFF outputs are written)\n");
@@ -331,7 +331,7 @@ int verify_cmd(int argc, char **argv)
         MODEL_OPT_INT("--threads", "N", "worker threads (0: REFL_THREADS or all)", &a.o.opt.threads, 0, 1024),
         MODEL_OPT_FLAG("--verbose", NULL, "the solver's progress", &a.o.opt.verbose),
         MODEL_OPT_FLAG("--no-report", NULL, "no index.html", &a.no_report),
-        MODEL_OPT_FLAG("--fail-on-incorrect", NULL, "exit 3 when the verdict is incorrect", &a.fail_on_incorrect),
+        MODEL_OPT_FLAG("--fail-on-incorrect", NULL, "exit 4 when the verdict is incorrect", &a.fail_on_incorrect),
         MODEL_OPT_FLAG("--study", NULL, "the detection study on the virtual rig (no SCENE)", &a.do_study),
         MODEL_OPT_STRING("--truth", "TRUTH.ini", "--study: the virtual rig's truth (default "
                          "examples/virtual-truth.ini)", &a.truth, false),

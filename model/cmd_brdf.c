@@ -58,6 +58,8 @@ int model_cmd_brdf(int argc, char **argv)
                       "(refl brdf tabulate --help for the options)\n";
     if (argc >= 2 && (!strcmp(argv[1], "--help") || !strcmp(argv[1], "-h"))) {
         fputs(use, stdout);
+        fputs("\n", stdout);
+        model_cli_exit_status(stdout);
         return 0;
     }
     if (argc >= 2 && !strcmp(argv[1], "tabulate")) return cmd_tabulate(argc - 1, argv + 1);

@@ -1,5 +1,6 @@
 // tests/test_model_cli.c — `refl render` and `refl edges` end to end (bin/refl on the examples).
 #define _GNU_SOURCE
+#include <glib.h>
 #include <jansson.h>
 #include <stdarg.h>
 #include <stdlib.h>
@@ -223,6 +224,49 @@ TEST(cli_usage_errors)
     CHECK(test_run(help, 10, &out, &err) == 0);
     CHECK_CONTAINS(out, "usage: refl render SCENE");
     CHECK_CONTAINS(out, "--interreflection");
+    free(out);
+    free(err);
+}
+
+// Every command's --help (every page scripts/make-man makes, and refl --help)
+// ends with the exit status every refl command shares: 0 done, 1 error,
+// 2 usage, 3 paused, 4 an incorrect verdict under --fail-on-incorrect.
+TEST(cli_help_lists_exit_status)
+{
+    char *man = NULL;
+    char path[2048];
+    snprintf(path, sizeof path, "%s/scripts/make-man", test_srcdir());
+    CHECK(g_file_get_contents(path, &man, NULL, NULL));
+    GRegex *re = g_regex_new("^\\s+\\(\"([a-z ]+)\",", G_REGEX_MULTILINE, 0, NULL);
+    GMatchInfo *mi = NULL;
+    int pages = 0;
+    for (g_regex_match(re, man, 0, &mi); g_match_info_matches(mi); g_match_info_next(mi, NULL), pages++) {
+        char *words = g_match_info_fetch(mi, 1);
+        char **w = g_strsplit(words, " ", -1);
+        const char *argv[6] = { test_refl() };
+        int n = 1;
+        for (int k = 0; w[k] && n < 4; k++) argv[n++] = w[k];
+        argv[n++] = "--help";
+        argv[n] = NULL;
+        char *out = NULL, *err = NULL;
+        int rc = test_run(argv, 30, &out, &err);
+        CHECK_MSG(rc == 0, "refl %s --help: rc %d: %s", words, rc, err);
+        CHECK_MSG(strstr(out, "exit status") && strstr(out, "  0  done") && strstr(out, "  2  a usage error") &&
+                      strstr(out, "  3  paused") && strstr(out, "  4  refl verify --fail-on-incorrect"),
+                  "refl %s --help lists no exit status:\n%s", words, out);
+        free(out);
+        free(err);
+        g_strfreev(w);
+        g_free(words);
+    }
+    g_match_info_free(mi);
+    g_regex_unref(re);
+    g_free(man);
+    CHECK_MSG(pages >= 25, "%d pages in scripts/make-man", pages);
+    char *out = NULL, *err = NULL;
+    const char *top[] = { test_refl(), "--help", NULL };
+    CHECK(test_run(top, 10, &out, &err) == 0);
+    CHECK_CONTAINS(out, "  4  refl verify --fail-on-incorrect");
     free(out);
     free(err);
 }

@@ -64,7 +64,19 @@ void model_cli_help(const model_cli_t *c, FILE *f)
     }
     fprintf(f, "  %-26s %s\n", "-h, --help", "print this help");
     if (c->epilog) fprintf(f, "\n%s\n", c->epilog);
+    fprintf(f, "\n");
+    model_cli_exit_status(f);
     fprintf(f, "\nrefl %s\n", REFL_VERSION);
+}
+
+void model_cli_exit_status(FILE *f)
+{
+    fprintf(f, "exit status (every refl command):\n"
+               "  0  done\n"
+               "  1  an error: the message names the file and line, device or option, and what to do\n"
+               "  2  a usage error (an unknown option, a missing or bad value)\n"
+               "  3  paused at an operator step or by Ctrl-C: run the same command again to continue\n"
+               "  4  refl verify --fail-on-incorrect: the verdict is \"incorrect\"\n");
 }
 
 int model_cli_error(const model_cli_t *c, const char *fmt, ...)

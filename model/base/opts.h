@@ -8,7 +8,8 @@
 //   usage: refl CMD SYNOPSIS [options]
 //   (refl CMD --help for the options)
 // and exits 2 through its return value. --help prints the synopsis, the
-// command's description and one line per option from the same table.
+// command's description, one line per option from the same table and the exit
+// status every refl command shares (model_cli_exit_status).
 //
 //   const char *calib = NULL, *out = NULL; double albedo = 0.99; bool verbose = false;
 //   model_opt_t opts[] = {
@@ -103,8 +104,13 @@ enum { MODEL_CLI_OK = -1, MODEL_CLI_HELP = 0, MODEL_CLI_USAGE = 2 };
 // MODEL_CLI_HELP after printing the help on stdout, or MODEL_CLI_USAGE (2, the
 // exit status of a usage error) after printing the error on stderr.
 int  model_cli_parse(model_cli_t *c, int argc, char **argv);
-// The help text (usage line, about, options, epilog, version).
+// The help text (usage line, about, options, epilog, exit status, version).
 void model_cli_help(const model_cli_t *c, FILE *f);
+// The exit status of every refl command (0 done, 1 error, 2 usage, 3 paused,
+// 4 an incorrect verdict under refl verify --fail-on-incorrect), as --help prints it.
+void model_cli_exit_status(FILE *f);
+enum { MODEL_EXIT_OK = 0, MODEL_EXIT_ERROR = 1, MODEL_EXIT_USAGE = 2, MODEL_EXIT_PAUSED = 3,
+       MODEL_EXIT_INCORRECT = 4 };
 // The short usage line and the --help hint (after an error of the command's own).
 void model_cli_usage(const model_cli_t *c, FILE *f);
 // A usage error found after parsing (two options that exclude each other, ...):
