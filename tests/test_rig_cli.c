@@ -548,8 +548,12 @@ TEST(rigcli_gpiod_lamps_off_on_errors)
     argv[10] = "status";
     argv[11] = NULL;
     rc = test_run(argv, 60, &out, &err);
+    // the camera nobody serves is reported on its camera_error line, the lamps still are (exit 1)
     CHECK(rc == 1);
-    CHECK_CONTAINS(err, "gpio-cam.ini:13: [camera]: aravis: no camera at '127.0.0.3'");
+    CHECK_CONTAINS(out, "lamp key: off (gpiod)\n");
+    CHECK_CONTAINS(out, "camera: not open\ncamera_error: ");
+    CHECK_CONTAINS(out, "gpio-cam.ini:13: [camera]: aravis: no camera at '127.0.0.3'");
+    CHECK_CONTAINS(err, "refl rig status: the camera did not open (its camera_error line above)");
     lg = model_read_file(log, NULL);
     CHECK_CONTAINS(lg, "request gpiochip0 3=0 consumer=refl\n");
     CHECK_CONTAINS(lg, "release gpiochip0 3=0");
@@ -598,6 +602,104 @@ TEST(rigcli_status_every_device)
     CHECK_CONTAINS(model_last_error(), "refl rig status: the turntable did not answer");
     free(out);
     rig_close(r);
+}
+
+// One device at a time: identify and status report every device though some
+// do not open (here both cameras and the lamps: named with the rig file's line,
+// the devices after them still reported; exit 1); --only opens one kind; home
+// and move open the turntable alone (they work while the cameras are away).
+TEST(rigcli_one_device_at_a_time)
+{
+    const char *rig = test_write("away.ini", "[turntable]\nbackend = sim\ntime_scale = 0.001\nseed = 4\n"
+                                 "[lamp key]\nbackend = gpiod\nchip = gpiochip-none\nline = 0\n"
+                                 "[camera left]\nbackend = aravis\nserial = inprocess:AWAY-L\n"
+                                 "[camera right]\nbackend = aravis\nserial = inprocess:AWAY-R\n");
+    char *out = NULL, *err = NULL;
+    int rc = refl(&out, &err, "rig", "--rig", rig, "identify", NULL);
+    CHECK_MSG(rc == 1, "identify: %d %s", rc, err);
+    CHECK_CONTAINS(out, "turntable_serial: sim-4\n");
+    CHECK_CONTAINS(out, "camera_name: left\ncamera: not open\ncamera_error: ");
+    CHECK_CONTAINS(out, "away.ini:9: [camera left]: ");
+    CHECK_CONTAINS(out, "camera_name: right\ncamera: not open\ncamera_error: ");
+    CHECK_CONTAINS(out, "lamps: not open\nlamps_error: ");
+    CHECK_CONTAINS(out, "away.ini:5: [lamp key]: ");
+    CHECK_CONTAINS(err, "refl rig identify: the camera left, the camera right and the lamps did not open");
+    free(out);
+    free(err);
+
+    rc = refl(&out, &err, "rig", "--rig", rig, "status", NULL);
+    CHECK_MSG(rc == 1, "status: %d %s", rc, err);
+    CHECK_CONTAINS(out, "turntable_homed: no\nturntable_moving: no\nlamps: not open\n");
+    CHECK_CONTAINS(out, "cameras: 2\ncamera_name: left\ncamera: not open\n");
+    CHECK_CONTAINS(err, "did not open (their DEVICE_error lines above)");
+    free(out);
+    free(err);
+
+    rc = refl(&out, &err, "rig", "--rig", rig, "status", "--only", "turntable", NULL);
+    CHECK_MSG(rc == 0, "status --only turntable: %d %s", rc, err);
+    CHECK_CONTAINS(out, "turntable: sim turntable (seed 4)\n");
+    CHECK(out && !strstr(out, "camera") && !strstr(out, "lamp"));
+    free(out);
+    free(err);
+    rc = refl(&out, &err, "rig", "--rig", rig, "status", "--only", "camera", NULL);
+    CHECK(rc == 1);
+    CHECK_CONTAINS(out, "camera_name: right\ncamera: not open\n");
+    CHECK(out && !strstr(out, "turntable") && !strstr(out, "lamp"));
+    CHECK_CONTAINS(err, "the camera left and the camera right did not open");
+    free(out);
+    free(err);
+    rc = refl(&out, &err, "rig", "--rig", rig, "identify", "--only", "lamps,turntable", NULL);
+    CHECK(rc == 1);
+    CHECK_CONTAINS(out, "turntable_model: K10CR1 (simulated)\n");
+    CHECK_CONTAINS(out, "lamps_error: ");
+    CHECK(out && !strstr(out, "camera"));
+    CHECK_CONTAINS(err, "the lamps did not open (its lamps_error line above)");
+    free(out);
+    free(err);
+
+    rc = refl(&out, &err, "rig", "--rig", rig, "move", "12.5", NULL);
+    CHECK_MSG(rc == 0, "move: %d %s", rc, err);
+    CHECK_CONTAINS(out, "turntable_commanded_deg: 12.5\nturntable_angle_deg: 12.5");
+    free(out);
+    free(err);
+    // A real rig's bring-up: an APT stage that is not connected, sim lamps, a camera address nobody
+    // serves. status reports all three (the lamps fine, the others on their error lines; exit 1);
+    // --only lamps opens the lamps alone and succeeds.
+    const char *bench = test_write("bench.ini", "[turntable]\nbackend = apt\nserial = 55000001\n"
+                                   "[lamp key]\nbackend = sim\n[camera]\nbackend = aravis\naddress = 127.0.0.5\n");
+    rc = refl(&out, &err, "rig", "--rig", bench, "status", NULL);
+    CHECK_MSG(rc == 1, "status: %d %s", rc, err);
+    CHECK_CONTAINS(out, "turntable: not open\nturntable_error: ");
+    CHECK_CONTAINS(out, "bench.ini:1: [turntable]: ");
+    CHECK_CONTAINS(out, "lamp key: off (sim)\n");
+    CHECK_CONTAINS(out, "camera: not open\ncamera_error: ");
+    CHECK_CONTAINS(out, "bench.ini:6: [camera]: aravis: no camera at '127.0.0.5'");
+    CHECK_CONTAINS(err, "refl rig status: the turntable and the camera did not open (their DEVICE_error lines above)");
+    free(out);
+    free(err);
+    rc = refl(&out, &err, "rig", "--rig", bench, "status", "--only", "lamps", NULL);
+    CHECK_MSG(rc == 0, "status --only lamps: %d %s", rc, err);
+    CHECK_CONTAINS(out, "lamp key: off (sim)\n");
+    CHECK(out && !strstr(out, "turntable") && !strstr(out, "camera"));
+    free(out);
+    free(err);
+    rc = refl(&out, &err, "rig", "--rig", bench, "identify", "--only", "turntable", NULL);
+    CHECK_MSG(rc == 1, "identify --only turntable: %d %s", rc, err);
+    CHECK_CONTAINS(out, "turntable_error: ");
+    CHECK(out && !strstr(out, "camera") && !strstr(out, "lamp"));
+    CHECK_CONTAINS(err, "refl rig identify: the turntable did not open (its turntable_error line above)");
+    free(out);
+    free(err);
+
+    const char *bad[][3] = { { "status", "--only", "stage" }, { "home", "--only", "turntable" } };
+    const char *want[] = { "'stage' is none of camera, turntable, lamps", "option --only is for status identify only" };
+    for (int k = 0; k < 2; k++) {
+        rc = refl(&out, &err, "rig", "--rig", rig, bad[k][0], bad[k][1], bad[k][2], NULL);
+        CHECK(rc == 2);
+        CHECK_CONTAINS(err, want[k]);
+        free(out);
+        free(err);
+    }
 }
 
 // `refl rig snap -o FILE` checks FILE before the rig is opened (nothing is
