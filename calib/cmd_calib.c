@@ -104,7 +104,6 @@ int calib_cmd_white(int argc, char **argv)
                          &o.material, false),
         MODEL_OPT_VALUE("--window", "N", "windows of N x N pixels (default 5)", false),
         MODEL_OPT_VALUE("--step", "N", "on a grid of N pixels (default 8)", false),
-        MODEL_OPT_VALUE("--albedo-cells", "MM", "(an option of refl fit material)", false),
         MODEL_OPT_FLAG("-v", "--verbose", "print every frame", &o.verbose),
     };
     model_cli_t cli = {
@@ -120,8 +119,6 @@ int calib_cmd_white(int argc, char **argv)
     };
     int rc = model_cli_parse(&cli, argc, argv);
     if (rc != MODEL_CLI_OK) return rc;
-    if (model_cli_value(&cli, "--albedo-cells"))
-        return model_cli_error(&cli, "--albedo-cells is an option of refl fit material");
     if ((rc = calib_cli_window_step(&cli, &o.window, &o.step)) != MODEL_CLI_OK) return rc;
     if ((rc = model_cli_units(&cli, &o.scene_unit_mm))) return rc;
     const char *av = model_cli_value(&cli, "--albedo");

@@ -391,7 +391,6 @@ int fit_cmd_material(int argc, char **argv)
                          "residual in units of its sigma", &loss, false),
         MODEL_OPT_DOUBLE("--loss-scale", "S", "where the robust loss starts, in sigma (default 2)", &o.loss_scale,
                          0.01, 1e6),
-        MODEL_OPT_VALUE("--albedo", "A", "(an option of refl calib white)", false),
         MODEL_OPT_FLAG("-v", "--verbose", "print every angle", &o.verbose),
     };
     model_cli_t cli = {
@@ -430,7 +429,6 @@ int fit_cmd_material(int argc, char **argv)
     };
     int rc = model_cli_parse(&cli, argc, argv);
     if (rc != MODEL_CLI_OK) return rc;
-    if (model_cli_value(&cli, "--albedo")) return model_cli_error(&cli, "--albedo is an option of refl calib white");
     if ((rc = calib_cli_window_step(&cli, &o.window, &o.step)) != MODEL_CLI_OK) return rc;
     if ((rc = model_cli_units(&cli, &o.scene_unit_mm))) return rc;
     if (number_opt(&cli, "--k-sigma", false, &o.k_sigma) || number_opt(&cli, "--systematic", true, &o.sys_rel) ||

@@ -21,8 +21,10 @@
 #include "model/base/report.h"
 
 static const char about[] =
-    "Fits the imaging model of the description SCENE (D3D or OBJ, rig frame, mm) to reference points of\n"
-    "the images, within the materials' priors, and judges whether the description is right.\n"
+    "Fits the imaging model of the description SCENE (D3D, OBJ, STL or PLY; rig frame, mm unless --units) to\n"
+    "reference points of the images, within the materials' priors, and judges whether the description is right.\n"
+    "--no-priors: the thesis's fit instead (physical bounds only, lamps fixed, kc free); --priors still gives\n"
+    "the materials' models and starting values (their means).\n"
     "Images: 16-bit PNG frames as refl capture and refl rig snap write them (their text chunks give the\n"
     "turntable angle, the lamps that were on, the exposure and the gain; --angle-deg, --lamps-on,\n"
     "--exposure-us, --gain-db override for every image), or float TIFFs with those options.\n"
@@ -37,7 +39,8 @@ static const char about[] =
 static const char epilog[] =
     "Outputs in DIR: verify.json (verdict, score, residue, change regions, parameters against their\n"
     "priors, provenance), points.csv, imgN_actual.tiff / imgN_synthetic.tiff (float DN), and index.html\n"
-    "with the figures (scripts/verify_report.py). Prints the residue table in the thesis's form.";
+    "with the figures (scripts/verify_report.py). Prints the residue table in the thesis's form.\n"
+    "With --fail-on-incorrect the exit status is 4 when the verdict is incorrect (0 when correct).";
 
 // --fix lamps,cameras,offset,rho,materials
 static int parse_fix(model_cli_t *cli, const char *list, verify_options_t *opt)
@@ -219,7 +222,10 @@ static int verify_files_cmd(model_cli_t *cli, verify_args_t *a, int argc, char *
     if (!o->scene) return model_cli_error(cli, "missing SCENE");
     if (cli->npositional > 1) return model_cli_error(cli, "one SCENE, not %d", cli->npositional);
     if (!o->nimages) return model_cli_error(cli, "missing --images IMG...");
-    if (!o->npriors) return model_cli_error(cli, "missing --priors PRIORS.json");
+    if (!o->npriors)
+        return model_cli_error(cli, o->opt.use_priors ? "missing --priors PRIORS.json"
+                                                      : "missing --priors PRIORS.json (with --no-priors too: the "
+                                                        "materials' models and starting values)");
     if (!o->calib && !o->ncameras) return model_cli_error(cli, "missing --cameras (or --calib DIR)");
     if (!o->calib && !o->lamps) return model_cli_error(cli, "missing --lamps (or --calib DIR)");
     if (o->ncameras > 1 && o->ncameras != o->nimages)
@@ -296,9 +302,10 @@ int verify_cmd(int argc, char **argv)
                          &a.o.opt.edge_margin_px, 0, 100),
         MODEL_OPT_DOUBLE("--boundary-margin-px", "D", "and face/shadow changes this far beyond the window (4)",
                          &a.o.opt.boundary_margin_px, 0, 100),
-        MODEL_OPT_DOUBLE("--edge-k", "K", "window std > sqrt(K^2 var_noise + (R S)^2): an edge (3)", &a.o.opt.edge_k,
-                         0.1, 1e6),
-        MODEL_OPT_DOUBLE("--edge-rel", "R", "(0.05)", &a.o.opt.edge_rel, 0, 10),
+        MODEL_OPT_DOUBLE("--edge-k", "K", "a window whose std exceeds sqrt(K^2 var_noise + (R S)^2) holds an edge "
+                         "the description does not predict (S: its signal; 3)", &a.o.opt.edge_k, 0.1, 1e6),
+        MODEL_OPT_DOUBLE("--edge-rel", "R", "the relative part R of that test: texture and shading across the "
+                         "window (0.05)", &a.o.opt.edge_rel, 0, 10),
         MODEL_OPT_FLAG("--skip-edge-windows", NULL, "skip the windows near edges (default: modelled with the "
                        "pixels' footprint and the blur)", NULL),
         MODEL_OPT_INT("--edge-subsamples", "N", "sub-cells per px side of a window's cells that see two faces "
@@ -309,7 +316,8 @@ int verify_cmd(int argc, char **argv)
                          "calibration's, else 0)", &a.o.psf_sigma_px, 0, 10),
         MODEL_OPT_DOUBLE("--pixel-fill", "F", "the pixel's footprint, a square of F px (default: the "
                          "calibration's, else 1: the whole pixel)", &a.o.pixel_fill, 0, 1),
-        MODEL_OPT_INT("--interreflection-samples", "N", "(64; 0 none)", &a.o.opt.ir_samples, 0, 1024),
+        MODEL_OPT_INT("--interreflection-samples", "N", "interreflection rays per reference point (64; 0: no "
+                      "interreflection)", &a.o.opt.ir_samples, 0, 1024),
         MODEL_OPT_DOUBLE("--model-rel", "R", "relative model error of every window, over the priors' "
                          "window_rel_std (default: the priors', else 0.04)", &a.o.opt.model_rel, 0, 10),
         MODEL_OPT_DOUBLE("--robust-scale", "Z", "Cauchy loss scale in z (3; 0 plain least squares)",
@@ -320,11 +328,15 @@ int verify_cmd(int argc, char **argv)
                          1e-6, 10),
         MODEL_OPT_DOUBLE("--pa-sigma-dn", "S", "prior std of the offset left after the offset map (5: ambient "
                          "light)", &a.o.opt.pa_sigma_dn, 1e-6, 1e6),
-        MODEL_OPT_DOUBLE("--z-flag", "Z", "(4)", &a.o.opt.z_flag, 0.1, 1e6),
-        MODEL_OPT_INT("--min-region", "N", "(3)", &a.o.opt.min_region, 1, 1000000),
-        MODEL_OPT_DOUBLE("--score-threshold", "T", "(400)", &a.o.opt.score_threshold, 0, 1e300),
-        MODEL_OPT_FLAG("--no-priors", NULL, "the thesis's fit: physical bounds only, lamps fixed, kc free",
-                       NULL),
+        MODEL_OPT_DOUBLE("--z-flag", "Z", "a reference point whose |z| = |measured - model| / sigma exceeds Z is "
+                         "flagged as a change (4)", &a.o.opt.z_flag, 0.1, 1e6),
+        MODEL_OPT_INT("--min-region", "N", "a region of flags (8-connected on an image's grid) counts toward the "
+                      "score from N points (3)", &a.o.opt.min_region, 1, 1000000),
+        MODEL_OPT_DOUBLE("--score-threshold", "T", "the verdict is incorrect when the score, the counted regions' "
+                         "excess chi^2 sum(min(z^2, 25 Z^2) - Z^2), exceeds T (400)", &a.o.opt.score_threshold, 0,
+                         1e300),
+        MODEL_OPT_FLAG("--no-priors", NULL, "the thesis's fit: physical bounds only, lamps fixed, kc free (--priors "
+                       "still gives the materials' models and starting values)", NULL),
         MODEL_OPT_FLAG("--no-gain-maps", NULL, "ignore the offset maps and flat fields", NULL),
         MODEL_OPT_STRING("--fix", "NAMES", "hold parameters: comma list of lamps, cameras, offset, rho, materials",
                          &a.fixed, false),

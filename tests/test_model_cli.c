@@ -271,6 +271,52 @@ TEST(cli_help_lists_exit_status)
     free(err);
 }
 
+// Help texts say what the commands do: every option of verify described, its
+// formats; options a command refuses are not in its help.
+TEST(cli_help_matches_behaviour)
+{
+    char *out = NULL, *err = NULL;
+    CHECK(refl(&out, &err, "verify", "--help", NULL) == 0);
+    CHECK_CONTAINS(out, "D3D, OBJ, STL or PLY");
+    static const char *const described[] = { "--z-flag Z", "--min-region N", "--score-threshold T", "--edge-rel R",
+                                             "--interreflection-samples N" };
+    for (size_t k = 0; k < sizeof described / sizeof described[0]; k++) {
+        const char *at = out ? strstr(out, described[k]) : NULL;
+        CHECK_MSG(at, "%s not in verify --help", described[k]);
+        // the description is more than a default in parentheses
+        if (at) {
+            at += strlen(described[k]);
+            while (*at == ' ' || *at == '\n') at++;
+            CHECK_MSG(*at != '(', "%s has no description: %.40s", described[k], at);
+        }
+    }
+    CHECK_CONTAINS(out, "exit 4 when the verdict is incorrect");
+    free(out);
+    free(err);
+    CHECK(refl(&out, &err, "calib", "white", "--help", NULL) == 0);
+    CHECK(out && !strstr(out, "--albedo-cells"));
+    free(out);
+    free(err);
+    CHECK(refl(&out, &err, "fit", "material", "--help", NULL) == 0);
+    CHECK(out && !strstr(out, "--albedo A") && strstr(out, "--albedo-cells MM"));
+    free(out);
+    free(err);
+    CHECK(refl(&out, &err, "calib", "white", "s", "--albedo-cells", "2", NULL) == 2);
+    CHECK_CONTAINS(err, "unknown option '--albedo-cells'");
+    free(out);
+    free(err);
+    CHECK(refl(&out, &err, "fit", "material", "s", "--albedo", "0.9", NULL) == 2);
+    CHECK_CONTAINS(err, "unknown option '--albedo'");
+    free(out);
+    free(err);
+    // --no-priors names what --priors still gives
+    CHECK(refl(&out, &err, "verify", ex("t_stiffener.d3d"), "--images", ex("t_stiffener.d3d"), "--no-priors",
+               "-o", test_path("v"), NULL) == 2);
+    CHECK_CONTAINS(err, "with --no-priors too: the materials' models and starting values");
+    free(out);
+    free(err);
+}
+
 TEST(cli_runtime_errors)
 {
     const char *o = test_path("x.png");
