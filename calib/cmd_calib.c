@@ -86,7 +86,7 @@ int calib_cmd_white(int argc, char **argv)
     model_opt_t opts[] = {
         MODEL_OPT_STRING("--calib", "DIR", "the calibrations: camera.cameramodel, lamps.json, optionally gain.json "
                          "and its maps (DIR or DIR/geometry, DIR/lamps, DIR/gain)", &calib_dir, true),
-        MODEL_OPT_STRING("-o", "WHITE.json", "the output (put it in DIR or DIR/white/ for refl fit material)", &out,
+        MODEL_OPT_OUT("WHITE.json", "the output (put it in DIR or DIR/white/ for refl fit material)", &out,
                          true),
         MODEL_OPT_STRING("--camera", "NAME", "camera NAME's frames with its calibrations (a directory of several "
                          "cameras: NAME.cameramodel, NAME/gain.json; write -o DIR/NAME/white.json)", &camera, false),
@@ -172,7 +172,7 @@ int calib_cmd_export(int argc, char **argv)
     model_opt_t opts[] = {
         MODEL_OPT_STRING("--format", "opencv|ros", "OpenCV FileStorage YAML (cv::FileStorage, cv2.FileStorage) or "
                          "ROS camera_info YAML (camera_calibration_parsers)", &format, true),
-        { "-o", "--out", "FILE", "the output file", MODEL_OPT_KIND_STRING, &out, 0, 0, true, false, NULL },
+        MODEL_OPT_OUT("FILE", "the output file", &out, true),
         MODEL_OPT_STRING("--camera-name", "NAME", "ROS camera_name (default: the model file's name without "
                          "extension)", &name, false),
         MODEL_OPT_FLAG("--approximate", NULL, "a model OpenCV cannot hold (splined, ...): export LENSMODEL_OPENCV8 "

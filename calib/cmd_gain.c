@@ -212,7 +212,7 @@ int calib_cmd_gain(int argc, char **argv)
                          &o.write_descriptor, false),
         MODEL_OPT_LIST("--session", "DIR", "a session captured elsewhere; repeat it for more", &sessions, false,
                        false),
-        { "-o", "--output", "DIR", "the output directory", MODEL_OPT_KIND_STRING, &o.out, 0, 0, false, false, NULL },
+        MODEL_OPT_OUT("DIR", "the output directory", &o.out, false, .old = "--output"),
         MODEL_OPT_VALUE("--gains", "LIST", "gains (camera unit, dB) to sweep, comma-separated (default 0); the first "
                         "is the reference (dark current, maps, top-level figures). With --frames: one value, the gain "
                         "the frames were taken at (a label)", false),

@@ -37,8 +37,7 @@ int fit_cmd_export(int argc, char **argv)
     const char *format = NULL, *out = NULL, *material = NULL;
     model_opt_t opts[] = {
         MODEL_OPT_STRING("--format", "gltf|mitsuba|merl", "the renderer's format", &format, true),
-        { "-o", "--out", "FILE", "the output (and FILE.conversion.json)", MODEL_OPT_KIND_STRING, &out, 0, 0, true,
-          false, NULL },
+        MODEL_OPT_OUT("FILE", "the output (and FILE.conversion.json)", &out, true),
         MODEL_OPT_STRING("--material", "NAME", "this material only (default: every one; merl: the file's only "
                          "material)", &material, false),
     };

@@ -94,7 +94,7 @@ static int brdf_parse(int argc, char **argv, brdf_args_t *a)
                         .ro = fit_read_defaults(), .o = fit_brdf_defaults() };
     a->o.loss_scale = 2;
     model_opt_t opts[] = {
-        MODEL_OPT_STRING("-o", "PRIORS.json", "the priors file to write", &a->out, true),
+        MODEL_OPT_OUT("PRIORS.json", "the priors file to write", &a->out, true),
         MODEL_OPT_STRING("--model", "M", MODEL_NAMES " (default all: chosen by cross-validation)", &a->model, false),
         MODEL_OPT_VALUE("--cv-folds", "K", "folds of the model choice's cross-validation (default 5; 0: lowest BIC)",
                         false),
@@ -354,7 +354,7 @@ int fit_cmd_material(int argc, char **argv)
     model_opt_t opts[] = {
         MODEL_OPT_STRING("--calib", "DIR", "the calibrations: camera.cameramodel, lamps.json, white.json, optionally "
                          "gain.json and its maps (DIR or DIR/geometry, DIR/lamps, DIR/white, DIR/gain)", &o.calib, true),
-        MODEL_OPT_STRING("-o", "PRIORS.json", "the priors file to write", &o.out, true),
+        MODEL_OPT_OUT("PRIORS.json", "the priors file to write", &o.out, true),
         MODEL_OPT_STRING("--camera", "NAME", "only camera NAME's frames of a session of several (default every "
                          "camera's, each with its calibrations: DIR/NAME.cameramodel, DIR/NAME/white.json, "
                          "DIR/NAME/gain.json)", &o.camera, false),

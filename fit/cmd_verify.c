@@ -1,7 +1,7 @@
 // fit/cmd_verify.c — `refl verify`: does a scene description match images?
 //
 //   refl verify SCENE --images IMG... --priors PRIORS.json... -o DIR
-//               [--calib DIR] [--cameras CAM...] [--lamps LAMPS] [--gain-calib DIR...]
+//               [--calib DIR] [--camera-model CAM...] [--lamps-file LAMPS] [--gain-calib DIR...]
 //               [--white WHITE.json | --kc-per-us X] [options]
 //   refl verify --study -o DIR [--truth FILE] [--calib CAL --priors P...] [--cases N] [--shard K/N]
 //   refl verify --study-merge DIR... -o OUT                      (fit/eval/study.c)
@@ -29,7 +29,7 @@ static const char about[] =
     "turntable angle, the lamps that were on, the exposure and the gain; --angle-deg, --lamps-on,\n"
     "--exposure-us, --gain-db override for every image), or float TIFFs with those options.\n"
     "With --calib DIR of several cameras (DIR/NAME.cameramodel, DIR/NAME/gain.json, DIR/NAME/white.json) and\n"
-    "no --cameras, each frame goes to the camera its text names (camera_name) with that camera's calibrations.\n"
+    "no --camera-model, each frame goes to the camera its text names (camera_name) with that camera's calibrations.\n"
     "\n"
     "       refl verify --study -o DIR [--truth TRUTH.ini] [--calib CAL --priors P...] [--cases N] [--shard K/N]\n"
     "       refl verify --study-merge DIR... -o OUT\n"
@@ -226,8 +226,8 @@ static int verify_files_cmd(model_cli_t *cli, verify_args_t *a, int argc, char *
         return model_cli_error(cli, o->opt.use_priors ? "missing --priors PRIORS.json"
                                                       : "missing --priors PRIORS.json (with --no-priors too: the "
                                                         "materials' models and starting values)");
-    if (!o->calib && !o->ncameras) return model_cli_error(cli, "missing --cameras (or --calib DIR)");
-    if (!o->calib && !o->lamps) return model_cli_error(cli, "missing --lamps (or --calib DIR)");
+    if (!o->calib && !o->ncameras) return model_cli_error(cli, "missing --camera-model (or --calib DIR)");
+    if (!o->calib && !o->lamps) return model_cli_error(cli, "missing --lamps-file (or --calib DIR)");
     if (o->ncameras > 1 && o->ncameras != o->nimages)
         return model_cli_error(cli, "%d cameras for %d images: give one camera, or one per image", o->ncameras,
                                o->nimages);
@@ -269,14 +269,15 @@ int verify_cmd(int argc, char **argv)
                        true, false),
         MODEL_OPT_LIST("--priors", "FILE...", "priors files of refl fit material / refl fit brdf (every material "
                        "of SCENE)", &a.priors, true, false),
-        { "-o", "--out", "DIR", "the output directory", MODEL_OPT_KIND_STRING, &a.o.out, 0, 0, false, false, NULL },
+        MODEL_OPT_OUT("DIR", "the output directory", &a.o.out, false),
         MODEL_OPT_STRING("--calib", "DIR", "a calibration directory: camera.cameramodel, lamps.json, gain.json + "
                          "maps, white.json (or in geometry/ lamps/ gain/ white/); the options below override",
                          &a.o.calib, false),
-        MODEL_OPT_LIST("--cameras", "CAM...", "camera models (mrcal, extrinsics in the rig frame): one, or one per "
-                       "image", &a.cameras, true, false),
-        MODEL_OPT_STRING("--lamps", "FILE", "lamps.json of refl calib lamps, or a lamps INI ([lamp NAME] "
-                         "position_mm, intensity: then kc*I = X * intensity with --kc-per-us X)", &a.o.lamps, false),
+        MODEL_OPT_LIST("--camera-model", "CAM...", "camera models (mrcal, extrinsics in the rig frame): one, or one "
+                       "per image", &a.cameras, true, false, .old = "--cameras"),
+        MODEL_OPT_STRING("--lamps-file", "FILE", "lamps.json of refl calib lamps, or a lamps INI ([lamp NAME] "
+                         "position_mm, intensity: then kc*I = X * intensity with --kc-per-us X)", &a.o.lamps, false,
+                         .old = "--lamps"),
         MODEL_OPT_LIST("--gain-calib", "DIR...", "gain calibrations (gain.json, offset_dn.tiff, prnu_gain.tiff): "
                        "one per camera", &a.gains, true, false),
         MODEL_OPT_STRING("--white", "FILE", "white.json of refl calib white: kc*I per lamp per us at 0 dB",
@@ -340,7 +341,8 @@ int verify_cmd(int argc, char **argv)
         MODEL_OPT_FLAG("--no-gain-maps", NULL, "ignore the offset maps and flat fields", NULL),
         MODEL_OPT_STRING("--fix", "NAMES", "hold parameters: comma list of lamps, cameras, offset, rho, materials",
                          &a.fixed, false),
-        MODEL_OPT_INT("--threads", "N", "worker threads (0: REFL_THREADS or all)", &a.o.opt.threads, 0, 1024),
+        MODEL_OPT_INT("--threads", "N", "worker threads (default 0: REFL_THREADS, else every online CPU)",
+                      &a.o.opt.threads, 0, 1024),
         MODEL_OPT_FLAG("--verbose", NULL, "the solver's progress", &a.o.opt.verbose),
         MODEL_OPT_FLAG("--no-report", NULL, "no index.html", &a.no_report),
         MODEL_OPT_FLAG("--fail-on-incorrect", NULL, "exit 4 when the verdict is incorrect", &a.fail_on_incorrect),

@@ -62,7 +62,7 @@ static int demo_cmd(int argc, char **argv)
                *white_table = NULL, *lab = NULL;
     bool yes = false;
     model_opt_t opts[] = {
-        MODEL_OPT_STRING("-o", "DIR", "output directory (default refl-demo)", &out, false),
+        MODEL_OPT_OUT("DIR", "output directory (default refl-demo)", &out, false),
         MODEL_OPT_STRING("--rig", "RIG.ini", "run the lab day on this rig (default: the virtual rig, --yes)", &rig,
                          false),
         MODEL_OPT_STRING("--truth", "TRUTH.ini", "the virtual rig of this truth file (default "

@@ -60,9 +60,10 @@ static const char rig_epilog[] =
 #define RIG_OPTS(_)                                                                                               \
     _("--rig", "RIG.ini", "the rig description file", true, NULL)                                                 \
     _("-o", "OUT.png", "snap: output image (16-bit grey PNG with metadata)", false, "snap")                        \
-    _("--angle", "DEG", "snap: move the turntable to DEG first (homes it first when needed)", false, "snap")       \
-    _("--lamps", "NAMES", "snap: lamps on during the frame: NAME,NAME,... | all | none (default none)", false,     \
-      "snap")                                                                                                     \
+    _("--angle-deg", "DEG", "snap: move the turntable to DEG first (homes it first when needed)", false, "snap",   \
+      .old = "--angle")                                                                                           \
+    _("--lamps-on", "NAMES", "snap: lamps on during the frame: NAME,NAME,... | all | none (default none)", false,  \
+      "snap", .old = "--lamps")                                                                                   \
     _("--exposure-us", "US", "snap: exposure time, us (default: the rig file's, else the camera's)", false, "snap") \
     _("--gain", "G", "snap: gain in the camera's unit (its GenICam <Unit>, recorded) (default: rig file / camera)", false, \
       "snap")                                                                                                     \
@@ -85,7 +86,7 @@ static bool word_in(const char *words, const char *w)
 // The action and its arguments, checked: 0 or MODEL_CLI_USAGE (printed).
 static int check_action(model_cli_t *c)
 {
-#define RIG_OPT_ACTIONS_(name, metavar, help, required, actions) actions,
+#define RIG_OPT_ACTIONS_(name, metavar, help, required, actions, ...) actions,
     static const char *const opt_actions[] = { RIG_OPTS(RIG_OPT_ACTIONS_) };
 #undef RIG_OPT_ACTIONS_
     if (c->npositional < 1)
@@ -224,7 +225,7 @@ static int lamps_mask(const rig_t *r, const char *spec, uint32_t *mask)
         char *nm = g_strstrip(names[i]);
         int k = rig_lamps_find(l, nm);
         if (k < 0) {
-            rc = rig_fail(RIG_ERR_INVALID, "refl rig: --lamps: the rig %s has no lamp '%s' (its lamps: %s)",
+            rc = rig_fail(RIG_ERR_INVALID, "refl rig: --lamps-on: the rig %s has no lamp '%s' (its lamps: %s)",
                           r->path, nm, known);
             break;
         }
@@ -645,7 +646,7 @@ static int do_snap(rig_t *r, const snap_t *o, const char *cmdline)
         goto done;
     }
     if (o->have_angle) {
-        if ((rc = need_turntable(r, "snap --angle")) || (rc = move_to(r, o->angle_deg))) goto done;
+        if ((rc = need_turntable(r, "snap --angle-deg")) || (rc = move_to(r, o->angle_deg))) goto done;
     }
     char on_names[1100];
     lamp_names(r->lamps, mask, on_names, sizeof on_names);
@@ -713,16 +714,16 @@ static int snap_options(model_cli_t *c, snap_t *so)
 {
     int rc;
     so->out = model_cli_value(c, "-o");
-    so->lamps = model_cli_value(c, "--lamps");
+    so->lamps = model_cli_value(c, "--lamps-on");
     so->pixel_format = model_cli_value(c, "--pixel-format");
     so->camera = model_cli_value(c, "--camera");
     size_t n = strlen(so->out);
     if (n < 4 || strcasecmp(so->out + n - 4, ".png"))
         return model_cli_error(c, "option -o: '%s' must end in .png (16-bit grey PNG)", so->out);
     if ((rc = check_out_path(so->out))) return 1;
-    if (model_cli_value(c, "--angle")) {
+    if (model_cli_value(c, "--angle-deg")) {
         so->have_angle = true;
-        if ((rc = parse_angle(c, "option --angle", model_cli_value(c, "--angle"), &so->angle_deg))) return rc;
+        if ((rc = parse_angle(c, "option --angle-deg", model_cli_value(c, "--angle-deg"), &so->angle_deg))) return rc;
     }
     if ((rc = model_cli_double(c, "--exposure-us", &so->exposure_us, 0, true, 1e8, "0 < US <= 1e8")) ||
         (rc = model_cli_double(c, "--gain", &so->gain, -100, false, 100, "-100..100")))
@@ -736,14 +737,15 @@ static int snap_options(model_cli_t *c, snap_t *so)
         bool empty = false;
         for (int i = 0; names[i]; i++) empty |= !*g_strstrip(names[i]);
         g_strfreev(names);
-        if (empty) return model_cli_error(c, "option --lamps: '%s' has an empty lamp name", so->lamps);
+        if (empty) return model_cli_error(c, "option --lamps-on: '%s' has an empty lamp name", so->lamps);
     }
     return 0;
 }
 
 int rig_cmd(int argc, char **argv)
 {
-#define RIG_OPT_(name, metavar, help, required, actions) MODEL_OPT_VALUE(name, metavar, help, required),
+#define RIG_OPT_(name, metavar, help, required, actions, ...)                                                    \
+    MODEL_OPT_VALUE(name, metavar, help, required, .alias = !strcmp(name, "-o") ? "--out" : NULL, ##__VA_ARGS__),
     model_opt_t opts[] = { RIG_OPTS(RIG_OPT_) };
 #undef RIG_OPT_
     model_cli_t c = { .cmd = "rig", .synopsis = "ACTION [DEG]", .about = rig_about,

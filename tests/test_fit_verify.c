@@ -391,9 +391,9 @@ static int run_verify(const char *scene, char **imgs, const char *gain, const ch
     argv[n++] = scene;
     argv[n++] = "--images";
     for (int k = 0; imgs[k]; k++) argv[n++] = imgs[k];
-    argv[n++] = "--cameras";
+    argv[n++] = "--camera-model";
     argv[n++] = cam;
-    argv[n++] = "--lamps";
+    argv[n++] = "--lamps-file";
     argv[n++] = lamps;
     argv[n++] = "--kc-per-us";
     argv[n++] = kc;

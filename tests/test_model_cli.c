@@ -20,7 +20,14 @@ static const char *ex(const char *name)
 
 #define refl(out, err, ...) test_refl_run(60, out, err, __VA_ARGS__)
 
-#define BASE_ARGS ex("t_stiffener.d3d"), "--camera", ex("camera.cameramodel"), "--lamps", ex("lamps.ini"), \
+static int count_of(const char *hay, const char *needle)
+{
+    int n = 0;
+    for (const char *p = hay; p && (p = strstr(p, needle)); p += strlen(needle)) n++;
+    return n;
+}
+
+#define BASE_ARGS ex("t_stiffener.d3d"), "--camera-model", ex("camera.cameramodel"), "--lamps-file", ex("lamps.ini"), \
                   "--materials", ex("materials.ini"), "--threads", "2"
 
 static bool file_contains(const char *path, const char *needle)
@@ -138,9 +145,14 @@ TEST(cli_edges_json)
 {
     char *out = NULL, *err = NULL;
     const char *js = test_path("edges.json");
+    // the old spellings --camera, --lamps: they work and each names its new one once (--threads 0: all cores)
     int rc = refl(&out, &err, "edges", ex("t_stiffener.d3d"), "--camera", ex("camera.cameramodel"), "--lamps",
-                  ex("lamps.ini"), "--materials", ex("materials.ini"), "--threads", "2", "--json", js, NULL);
+                  ex("lamps.ini"), "--materials", ex("materials.ini"), "--threads", "0", "--json", js, NULL);
     CHECK_MSG(rc == 0, "exit %d, stderr: %s", rc, err);
+    CHECK_MSG(count_of(err, "--camera CAM.cameramodel: the option is --camera-model (the old spelling still "
+                       "works)") == 1, "%s", err);
+    CHECK_MSG(count_of(err, "--lamps LAMPS.ini: the option is --lamps-file") == 1, "%s", err);
+    CHECK_MSG(count_of(err, "the old spelling") == 2, "%s", err);
     CHECK_CONTAINS(out, "segments");
     json_error_t jerr;
     json_t *root = json_load_file(js, 0, &jerr);
@@ -201,9 +213,9 @@ TEST(cli_usage_errors)
     const char *o = test_path("x.png");
     const char *unknown[] = { "render", BASE_ARGS, "-o", o, "--bogus", "1", NULL };
     expect_error(2, "unknown option '--bogus'", unknown);
-    const char *nocam[] = { "render", ex("t_stiffener.d3d"), "--lamps", ex("lamps.ini"), "--materials",
+    const char *nocam[] = { "render", ex("t_stiffener.d3d"), "--lamps-file", ex("lamps.ini"), "--materials",
                             ex("materials.ini"), "-o", o, NULL };
-    expect_error(2, "missing required option --camera", nocam);
+    expect_error(2, "missing required option --camera-model", nocam);
     const char *badir[] = { "render", BASE_ARGS, "-o", o, "--interreflection", "twice", NULL };
     expect_error(2, "unknown value 'twice'", badir);
     const char *badnum[] = { "render", BASE_ARGS, "-o", o, "--kc", "1.5x", NULL };
@@ -321,30 +333,30 @@ TEST(cli_runtime_errors)
 {
     const char *o = test_path("x.png");
     const char *missing = test_path("no_such_scene.d3d");
-    const char *noscene[] = { "render", missing, "--camera", ex("camera.cameramodel"), "--lamps", ex("lamps.ini"),
+    const char *noscene[] = { "render", missing, "--camera-model", ex("camera.cameramodel"), "--lamps-file", ex("lamps.ini"),
                               "--materials", ex("materials.ini"), "-o", o, NULL };
     expect_error(1, missing, noscene);
 
     // Malformed materials: the message names file and line.
     const char *bad = test_write("bad_mats.ini", "[material plywood]\nmodel = lambert\nkd = zero\n");
-    const char *badmats[] = { "render", ex("t_stiffener.d3d"), "--camera", ex("camera.cameramodel"), "--lamps",
+    const char *badmats[] = { "render", ex("t_stiffener.d3d"), "--camera-model", ex("camera.cameramodel"), "--lamps-file",
                               ex("lamps.ini"), "--materials", bad, "-o", o, NULL };
     expect_error(1, "bad_mats.ini:3", badmats);
 
     // A material the scene needs is missing from the file.
     const char *few = test_write("few_mats.ini", "[material plywood]\nmodel = lambert\nkd = 0.2\n");
-    const char *fewmats[] = { "render", ex("t_stiffener.d3d"), "--camera", ex("camera.cameramodel"), "--lamps",
+    const char *fewmats[] = { "render", ex("t_stiffener.d3d"), "--camera-model", ex("camera.cameramodel"), "--lamps-file",
                               ex("lamps.ini"), "--materials", few, "-o", o, NULL };
     expect_error(1, "painted_steel", fewmats);
 
     // A non-planar face (vertex 4 lifted by 2 mm).
     const char *warped = test_write("warped.d3d", "1 0 0 0\n2 100 0 0\n3 100 100 0\n4 0 100 2\nFaces:\n1 2 3 4.\n");
-    const char *nonplanar[] = { "render", warped, "--camera", ex("camera.cameramodel"), "--lamps", ex("lamps.ini"),
+    const char *nonplanar[] = { "render", warped, "--camera-model", ex("camera.cameramodel"), "--lamps-file", ex("lamps.ini"),
                                 "--materials", ex("materials.ini"), "-o", o, NULL };
     expect_error(1, "not planar", nonplanar);
     // ... accepted with a larger tolerance
     char *out = NULL, *err = NULL;
-    const char *tol[] = { test_refl(), "render", warped, "--camera", ex("camera.cameramodel"), "--lamps", ex("lamps.ini"),
+    const char *tol[] = { test_refl(), "render", warped, "--camera-model", ex("camera.cameramodel"), "--lamps-file", ex("lamps.ini"),
                           "--materials", ex("materials.ini"), "-o", o, "--planarity-tol-mm", "1", "--threads", "2",
                           NULL };
     int rc = test_run(tol, 60, &out, &err);
@@ -408,9 +420,12 @@ TEST(cli_render_gain_map_and_turntable)
     const char *t180 = test_path("t180.tiff"), *t90 = test_path("t90.tiff");
     rc = refl(&out, &err, "render", BASE_ARGS, "--offset", "10", "--turntable-deg", "180", "-o", t180, NULL);
     CHECK_MSG(rc == 0, "exit %d: %s", rc, err);
+    // the old spelling works and names the new one, once
+    CHECK_MSG(count_of(err, "--turntable-deg A: the option is --angle-deg (the old spelling still works)") == 1,
+              "%s", err);
     free(out);
     free(err);
-    rc = refl(&out, &err, "render", BASE_ARGS, "--offset", "10", "--turntable-deg", "90", "-o", t90, NULL);
+    rc = refl(&out, &err, "render", BASE_ARGS, "--offset", "10", "--angle-deg", "90", "-o", t90, NULL);
     CHECK_MSG(rc == 0, "exit %d: %s", rc, err);
     free(out);
     free(err);

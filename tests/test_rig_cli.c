@@ -94,12 +94,12 @@ TEST(rigcli_usage_errors)
         { { "--rig", rig, "snap" }, "snap needs -o" },
         { { "--rig", rig, "snap", "-o", "x.tif" }, "must end in .png" },
         { { "--rig", rig, "status", "-o", "x.png" }, "option -o is for snap only" },
-        { { "--rig", rig, "move", "5", "--angle", "3" }, "option --angle is for snap only" },
-        { { "--rig", rig, "snap", "-o", "x.png", "--angle", "north" }, "'north' is not an angle" },
+        { { "--rig", rig, "move", "5", "--angle-deg", "3" }, "option --angle-deg is for snap only" },
+        { { "--rig", rig, "snap", "-o", "x.png", "--angle-deg", "north" }, "'north' is not an angle" },
         { { "--rig", rig, "snap", "-o", "x.png", "--exposure-us", "-5" }, "--exposure-us: -5 is out of range" },
         { { "--rig", rig, "snap", "-o", "x.png", "--gain", "lots" }, "--gain: 'lots' is not a number" },
         { { "--rig", rig, "snap", "-o", "x.png", "--pixel-format", "Mono14" }, "'Mono14' is not Mono8" },
-        { { "--rig", rig, "snap", "-o", "x.png", "--lamps", "a,,b" }, "has an empty lamp name" },
+        { { "--rig", rig, "snap", "-o", "x.png", "--lamps-on", "a,,b" }, "has an empty lamp name" },
         { { "--rig", rig, "status", "--frobnicate" }, "unknown option '--frobnicate'" },
         { { "--rig", rig, "--rig", rig, "status" }, "option --rig given twice" },
         { { "--rig" }, "option --rig needs a value" },
@@ -292,7 +292,7 @@ TEST(rigcli_virtual_rig)
 
     // A lit frame at 30 deg and a dark one.
     const char *lit = test_path("lit.png"), *dark = test_path("dark.png");
-    rc = refl(&out, &err, "rig", "--rig", rig, "snap", "-o", lit, "--angle", "30", "--lamps", "east",
+    rc = refl(&out, &err, "rig", "--rig", rig, "snap", "-o", lit, "--angle-deg", "30", "--lamps-on", "east",
               "--pixel-format", "Mono12", "--exposure-us", "20000", NULL);
     CHECK_MSG(rc == 0, "snap: %d %s", rc, err);
     CHECK_CONTAINS(out, "wrote ");
@@ -300,7 +300,7 @@ TEST(rigcli_virtual_rig)
     free(out);
     free(err);
     // (Not moved: a dark frame does not depend on the angle.)
-    rc = refl(&out, &err, "rig", "--rig", rig, "snap", "-o", dark, "--lamps", "none",
+    rc = refl(&out, &err, "rig", "--rig", rig, "snap", "-o", dark, "--lamps-on", "none",
               "--pixel-format", "Mono12", "--exposure-us", "20000", NULL);
     CHECK_MSG(rc == 0, "snap dark: %d %s", rc, err);
     free(out);
@@ -321,7 +321,7 @@ TEST(rigcli_virtual_rig)
     CHECK_META(lit, "pixel_format", "Mono12 (12 significant bits)");
     CHECK_META(lit, "temperature_c", "35.");
     CHECK_META(lit, "refl_version", REFL_VERSION);
-    CHECK_META(lit, "command_line", "--lamps east");
+    CHECK_META(lit, "command_line", "--lamps-on east");
     CHECK_META(lit, "virtual_sample", "t_stiffener");
     CHECK_META(lit, "date_utc", "Z");
     CHECK_META(dark, "lamps_on", "none");
@@ -351,7 +351,7 @@ TEST(rigcli_virtual_rig)
 
     // Runtime errors: unknown lamp, unknown sample (exit 1, nothing written).
     const char *nope = test_path("nope.png");
-    rc = refl(&out, &err, "rig", "--rig", rig, "snap", "-o", nope, "--lamps", "east,nope", NULL);
+    rc = refl(&out, &err, "rig", "--rig", rig, "snap", "-o", nope, "--lamps-on", "east,nope", NULL);
     CHECK(rc == 1);
     CHECK_CONTAINS(err, "has no lamp 'nope' (its lamps: east,south,west,north,rim)");
     CHECK(access(nope, F_OK) != 0);
@@ -411,6 +411,11 @@ TEST(rigcli_virtual_rig_mono12p)
         int rc = refl(&out, &err, "rig", "--rig", rig, "snap", "-o", pngs[k], "--lamps", "east", "--exposure-us",
                       "20000", NULL);
         CHECK_MSG(rc == 0, "snap %s: %d %s", fmts[k], rc, err);
+        // --lamps, the old spelling of --lamps-on: it works and names the new one once
+        int notes = 0;
+        for (const char *p = err; p && (p = strstr(p, "the old spelling")); p++) notes++;
+        CHECK_MSG(notes == 1 && strstr(err, "--lamps NAMES: the option is --lamps-on (the old spelling still works)"),
+                  "%s", err);
         free(out);
         free(err);
         CHECK(png_bit_depth(pngs[k]) == 16);
@@ -528,7 +533,7 @@ TEST(rigcli_gpiod_lamps_off_on_errors)
 
     const char *argv[] = { "env", env_pre, "FAKE_GPIOCHIP=gpiochip0:32", env_log, env_state,
                            "ASAN_OPTIONS=verify_asan_link_order=0:detect_leaks=0", test_refl(), "rig", "--rig", rig,
-                           "snap", "-o", test_path("x.png"), "--lamps", "all", NULL };
+                           "snap", "-o", test_path("x.png"), "--lamps-on", "all", NULL };
     char *out = NULL, *err = NULL;
     int rc = test_run(argv, 60, &out, &err);
     CHECK(rc == 1);
