@@ -203,8 +203,8 @@ int calib_cmd_geometry(int argc, char **argv)
         MODEL_OPT_STRING("--tilts", "SPEC", "tilts for --rig: 'T[@AZ][:A,A,...] ...' (tilt deg, hinge azimuth deg, "
                          "turntable angles deg; default: the example rig's\n                             '"
                          CALIB_GEOMETRY_DEFAULT_TILTS "')", &o.tilts, false),
-        MODEL_OPT_STRING("--angles", "'A A ...'", "angles for tilts given without their own (default '"
-                         CALIB_GEOMETRY_DEFAULT_ANGLES "')", &o.angles, false),
+        MODEL_OPT_STRING("--angles-deg", "A,A,...", "turntable angles for tilts given without their own (default '"
+                         CALIB_GEOMETRY_DEFAULT_ANGLES "')", &o.angles, false, .old = "--angles"),
         MODEL_OPT_STRING("--sample", "NAME", "the board sample (default calib_board)", &o.sample, false),
         MODEL_OPT_STRING("--camera", "NAME", "--rig, --session: calibrate only this camera (its rig file "
                          "name; default: every camera together)", &o.camera, false),

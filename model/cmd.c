@@ -212,14 +212,24 @@ int model_cmd_workpiece(int argc, char **argv)
         MODEL_OPT_VALUE("--height-scale", "S", "scale the stiffener's height above the plate by S (default 1)", false),
         MODEL_OPT_VALUE("--plate-material", "NAME", "material of the plate (default plywood)", false),
         MODEL_OPT_VALUE("--stiffener-material", "NAME", "material of the stiffener (default painted_steel)", false),
+        MODEL_OPT_OUT("OUT.d3d", "the D3D scene to write (required; the old spelling: OUT.d3d as the argument)", NULL,
+                      false),
     };
-    model_cli_t c = { .cmd = "workpiece", .synopsis = "OUT.d3d", .opts = opts, .nopts = MODEL_NOPTS(opts), .min_positional = 1, .max_positional = 1 };
+    model_cli_t c = { .cmd = "workpiece", .synopsis = "", .opts = opts, .nopts = MODEL_NOPTS(opts),
+                      .min_positional = 0, .max_positional = 1 };
     c.about = "Writes the reference workpiece of thesis ch. 6 as a D3D scene: a 400 x 300 x 10 mm plate with\n"
               "a stiffener 88 mm high and 260 mm long along y (T: 8 mm web under a 60 x 8 mm flange). The\n"
               "defaults give examples/t_stiffener.d3d; the options make the wrong descriptions the\n"
               "verification is tested with (I-stiffener, none, shifted, rotated, wrong height).";
     int rc = model_cli_parse(&c, argc, argv);
     if (rc != MODEL_CLI_OK) return rc;
+    const char *out = model_cli_value(&c, "-o");
+    if (c.npositional && out) return model_cli_error(&c, "unexpected argument '%s' (-o %s given)", c.positional[0], out);
+    if (c.npositional) {   // the old spelling: the output as the argument
+        out = c.positional[0];
+        model_note("OUT.d3d as an argument: the option is -o, --out (the old spelling still works)");
+    }
+    if (!out) return model_cli_error(&c, "missing -o OUT.d3d");
     model_stiffener_t p = model_stiffener_default();
     const char *k = model_cli_value(&c, "--kind");
     if (k) {
@@ -247,25 +257,25 @@ int model_cmd_workpiece(int argc, char **argv)
     char *text = model_stiffener_d3d(&p);
     if (!text) return 1;
     // check that it loads (planarity, outlines) before writing it
-    model_scene_t *sc = model_scene_parse_d3d(text, strlen(text), c.positional[0], NULL);
+    model_scene_t *sc = model_scene_parse_d3d(text, strlen(text), out, NULL);
     if (!sc) {
         free(text);
         return 1;
     }
     model_scene_free(sc);
     char tmp[4096];
-    snprintf(tmp, sizeof tmp, "%s.tmp", c.positional[0]);
+    snprintf(tmp, sizeof tmp, "%s.tmp", out);
     FILE *f = fopen(tmp, "w");
     bool ok = f && fputs(text, f) >= 0;
     if (f && fclose(f) != 0) ok = false;
-    if (ok && rename(tmp, c.positional[0]) != 0) ok = false;
+    if (ok && rename(tmp, out) != 0) ok = false;
     if (!ok) {
-        fprintf(stderr, "refl workpiece: cannot write %s: %s\n", c.positional[0], strerror(errno));
+        fprintf(stderr, "refl workpiece: cannot write %s: %s\n", out, strerror(errno));
         unlink(tmp);
         free(text);
         return 1;
     }
     free(text);
-    printf("%s: %s-stiffener workpiece\n", c.positional[0], model_stiffener_kind_name(p.kind));
+    printf("%s: %s-stiffener workpiece\n", out, model_stiffener_kind_name(p.kind));
     return 0;
 }

@@ -4,6 +4,7 @@
 #include <jansson.h>
 #include <stdarg.h>
 #include <stdlib.h>
+#include <unistd.h>
 
 #include "model/model.h"
 #include "tests/test.h"
@@ -325,6 +326,37 @@ TEST(cli_help_matches_behaviour)
     CHECK(refl(&out, &err, "verify", ex("t_stiffener.d3d"), "--images", ex("t_stiffener.d3d"), "--no-priors",
                "-o", test_path("v"), NULL) == 2);
     CHECK_CONTAINS(err, "with --no-priors too: the materials' models and starting values");
+    free(out);
+    free(err);
+}
+
+// refl workpiece -o OUT.d3d; the old spelling, OUT.d3d as the argument, still
+// works and names -o once; both at once is a usage error.
+TEST(cli_workpiece_out)
+{
+    char *out = NULL, *err = NULL;
+    const char *a = test_path("a.d3d"), *b = test_path("b.d3d");
+    CHECK(refl(&out, &err, "workpiece", "-o", a, "--kind", "I", NULL) == 0);
+    CHECK(err && !strstr(err, "old spelling"));
+    CHECK(access(a, F_OK) == 0);
+    free(out);
+    free(err);
+    CHECK(refl(&out, &err, "workpiece", b, "--kind", "I", NULL) == 0);
+    CHECK_MSG(count_of(err, "OUT.d3d as an argument: the option is -o, --out (the old spelling still works)") == 1,
+              "%s", err);
+    CHECK(access(b, F_OK) == 0);
+    free(out);
+    free(err);
+    char *ta = NULL, *tb = NULL;
+    CHECK(g_file_get_contents(a, &ta, NULL, NULL) && g_file_get_contents(b, &tb, NULL, NULL) && !strcmp(ta, tb));
+    g_free(ta);
+    g_free(tb);
+    CHECK(refl(&out, &err, "workpiece", b, "-o", a, NULL) == 2);
+    CHECK_CONTAINS(err, "-o");
+    free(out);
+    free(err);
+    CHECK(refl(&out, &err, "workpiece", "--kind", "I", NULL) == 2);
+    CHECK_CONTAINS(err, "missing -o OUT.d3d");
     free(out);
     free(err);
 }

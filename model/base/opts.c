@@ -286,7 +286,7 @@ int model_cli_parse(model_cli_t *c, int argc, char **argv)
             continue;
         }
         if (c->npositional >= c->max_positional || c->npositional >= MODEL_CLI_POSITIONAL_MAX) {
-            if (c->max_positional == 1) return model_cli_error(c, "unexpected argument '%s' (one %s only)", a, c->synopsis);
+            if (c->max_positional == 1 && c->synopsis && c->synopsis[0]) return model_cli_error(c, "unexpected argument '%s' (one %s only)", a, c->synopsis);
             return model_cli_error(c, "unexpected argument '%s'", a);
         }
         c->positional[c->npositional++] = a;
