@@ -212,7 +212,7 @@ int model_cmd_workpiece(int argc, char **argv)
         MODEL_OPT_VALUE("--height-scale", "S", "scale the stiffener's height above the plate by S (default 1)", false),
         MODEL_OPT_VALUE("--plate-material", "NAME", "material of the plate (default plywood)", false),
         MODEL_OPT_VALUE("--stiffener-material", "NAME", "material of the stiffener (default painted_steel)", false),
-        MODEL_OPT_OUT("OUT.d3d", "the D3D scene to write (required; the old spelling: OUT.d3d as the argument)", NULL,
+        MODEL_OPT_OUT("OUT.d3d", "the D3D scene to write (required; also accepted as the one argument)", NULL,
                       false),
     };
     model_cli_t c = { .cmd = "workpiece", .synopsis = "", .opts = opts, .nopts = MODEL_NOPTS(opts),
