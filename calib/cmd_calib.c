@@ -26,6 +26,8 @@ static void usage(FILE *f)
 {
     fprintf(f, "usage: refl calib geometry|lamps|pattern|gain|white|export [ARGS...]   (refl calib NAME --help for its options)\n\n");
     for (size_t i = 0; i < sizeof subs / sizeof subs[0]; i++) fprintf(f, "  %-9s %s\n", subs[i].name, subs[i].summary);
+    fprintf(f, "\n");
+    model_cli_exit_status(f);
     fprintf(f, "\nrefl %s\n", REFL_VERSION);
 }
 
@@ -84,7 +86,7 @@ int calib_cmd_white(int argc, char **argv)
     model_opt_t opts[] = {
         MODEL_OPT_STRING("--calib", "DIR", "the calibrations: camera.cameramodel, lamps.json, optionally gain.json "
                          "and its maps (DIR or DIR/geometry, DIR/lamps, DIR/gain)", &calib_dir, true),
-        MODEL_OPT_STRING("-o", "WHITE.json", "the output (put it in DIR or DIR/white/ for refl fit material)", &out,
+        MODEL_OPT_OUT("WHITE.json", "the output (put it in DIR or DIR/white/ for refl fit material)", &out,
                          true),
         MODEL_OPT_STRING("--camera", "NAME", "camera NAME's frames with its calibrations (a directory of several "
                          "cameras: NAME.cameramodel, NAME/gain.json; write -o DIR/NAME/white.json)", &camera, false),
@@ -102,7 +104,6 @@ int calib_cmd_white(int argc, char **argv)
                          &o.material, false),
         MODEL_OPT_VALUE("--window", "N", "windows of N x N pixels (default 5)", false),
         MODEL_OPT_VALUE("--step", "N", "on a grid of N pixels (default 8)", false),
-        MODEL_OPT_VALUE("--albedo-cells", "MM", "(an option of refl fit material)", false),
         MODEL_OPT_FLAG("-v", "--verbose", "print every frame", &o.verbose),
     };
     model_cli_t cli = {
@@ -118,8 +119,6 @@ int calib_cmd_white(int argc, char **argv)
     };
     int rc = model_cli_parse(&cli, argc, argv);
     if (rc != MODEL_CLI_OK) return rc;
-    if (model_cli_value(&cli, "--albedo-cells"))
-        return model_cli_error(&cli, "--albedo-cells is an option of refl fit material");
     if ((rc = calib_cli_window_step(&cli, &o.window, &o.step)) != MODEL_CLI_OK) return rc;
     if ((rc = model_cli_units(&cli, &o.scene_unit_mm))) return rc;
     const char *av = model_cli_value(&cli, "--albedo");
@@ -173,7 +172,7 @@ int calib_cmd_export(int argc, char **argv)
     model_opt_t opts[] = {
         MODEL_OPT_STRING("--format", "opencv|ros", "OpenCV FileStorage YAML (cv::FileStorage, cv2.FileStorage) or "
                          "ROS camera_info YAML (camera_calibration_parsers)", &format, true),
-        { "-o", "--out", "FILE", "the output file", MODEL_OPT_KIND_STRING, &out, 0, 0, true, false, NULL },
+        MODEL_OPT_OUT("FILE", "the output file", &out, true),
         MODEL_OPT_STRING("--camera-name", "NAME", "ROS camera_name (default: the model file's name without "
                          "extension)", &name, false),
         MODEL_OPT_FLAG("--approximate", NULL, "a model OpenCV cannot hold (splined, ...): export LENSMODEL_OPENCV8 "

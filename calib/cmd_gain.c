@@ -212,7 +212,7 @@ int calib_cmd_gain(int argc, char **argv)
                          &o.write_descriptor, false),
         MODEL_OPT_LIST("--session", "DIR", "a session captured elsewhere; repeat it for more", &sessions, false,
                        false),
-        { "-o", "--output", "DIR", "the output directory", MODEL_OPT_KIND_STRING, &o.out, 0, 0, false, false, NULL },
+        MODEL_OPT_OUT("DIR", "the output directory", &o.out, false, .old = "--output"),
         MODEL_OPT_VALUE("--gains", "LIST", "gains (camera unit, dB) to sweep, comma-separated (default 0); the first "
                         "is the reference (dark current, maps, top-level figures). With --frames: one value, the gain "
                         "the frames were taken at (a label)", false),
@@ -222,7 +222,8 @@ int calib_cmd_gain(int argc, char **argv)
         MODEL_OPT_STRING("--camera", "NAME", "calibrate this camera of the rig or sessions only (default every "
                          "camera)", &o.camera, false),
         MODEL_OPT_STRING("--sample", "NAME", "the plan's sample (default flat_field)", &o.sample, false),
-        MODEL_OPT_STRING("--lamps", "SET", "lamps feeding the source (default all)", &o.lamps, false),
+        MODEL_OPT_STRING("--lamps-on", "NAMES", "lamps feeding the source: NAME,NAME,... (or NAME+NAME, as a "
+                         "plan's lamp set) or all (default all)", &o.lamps, false, .old = "--lamps"),
         MODEL_OPT_VALUE("--probe-exposure-us", "US", "first probe exposure (default 1000)", false),
         MODEL_OPT_VALUE("--max-exposure-us", "US", "longest sweep exposure (default 1.2 x the probe's full-scale "
                         "estimate)", false),
@@ -267,6 +268,12 @@ int calib_cmd_gain(int argc, char **argv)
         return rc;
     }
     double *gains = NULL, *darks = NULL;
+    char lamp_set[1024];   // --lamps-on's comma list as the plan's lamp set (NAME+NAME)
+    if (o.lamps && strchr(o.lamps, ',') && strlen(o.lamps) < sizeof lamp_set) {
+        snprintf(lamp_set, sizeof lamp_set, "%s", o.lamps);
+        for (char *p = lamp_set; (p = strchr(p, ',')); p++) *p = '+';
+        o.lamps = lamp_set;
+    }
     o.sessions = session_v;
     o.nsessions = sessions.n;
     o.report = !no_report;
@@ -290,7 +297,7 @@ int calib_cmd_gain(int argc, char **argv)
         }
         if (!ok)
             fprintf(stderr, "refl calib gain: failed: %s\n", model_last_error());
-        rc = ok ? 0 : rig_operator_paused(o.op) ? 3 : 1;
+        rc = ok ? MODEL_EXIT_OK : rig_operator_paused(o.op) ? MODEL_EXIT_PAUSED : MODEL_EXIT_ERROR;
     }
     rig_operator_close(o.op);
     free(gains);

@@ -199,12 +199,12 @@ int calib_cmd_geometry(int argc, char **argv)
     model_opt_t opts[] = {
         MODEL_OPT_STRING("--rig", "RIG.ini", "capture: one session per tilt (DIR/capture/tiltT_azA), all lamps on",
                          &o.rig, false),
-        { "-o", "--out", "DIR", "the output directory", MODEL_OPT_KIND_STRING, &o.out, 0, 0, false, false, NULL },
+        MODEL_OPT_OUT("DIR", "the output directory", &o.out, false),
         MODEL_OPT_STRING("--tilts", "SPEC", "tilts for --rig: 'T[@AZ][:A,A,...] ...' (tilt deg, hinge azimuth deg, "
                          "turntable angles deg; default: the example rig's\n                             '"
                          CALIB_GEOMETRY_DEFAULT_TILTS "')", &o.tilts, false),
-        MODEL_OPT_STRING("--angles", "'A A ...'", "angles for tilts given without their own (default '"
-                         CALIB_GEOMETRY_DEFAULT_ANGLES "')", &o.angles, false),
+        MODEL_OPT_STRING("--angles-deg", "A,A,...", "turntable angles for tilts given without their own (default '"
+                         CALIB_GEOMETRY_DEFAULT_ANGLES "')", &o.angles, false, .old = "--angles"),
         MODEL_OPT_STRING("--sample", "NAME", "the board sample (default calib_board)", &o.sample, false),
         MODEL_OPT_STRING("--camera", "NAME", "--rig, --session: calibrate only this camera (its rig file "
                          "name; default: every camera together)", &o.camera, false),
@@ -215,14 +215,14 @@ int calib_cmd_geometry(int argc, char **argv)
                          "frame); files that are no image are skipped with the reason", &o.images, false),
         MODEL_OPT_CHANNEL,
         { "--corners", "--corners-cache", "FILE.vnl", "use mrgingham's corners (no images needed; needs "
-          "--imagersize)", MODEL_OPT_KIND_STRING, &o.corners, 0, 0, false, false, NULL },
+          "--imagersize)", MODEL_OPT_KIND_STRING, &o.corners, 0, 0, false, false, NULL, NULL, 0 },
         MODEL_OPT_STRING("--lensmodel", "NAME", "LENSMODEL_OPENCV8 (default), LENSMODEL_OPENCV4, ..., "
                          "LENSMODEL_SPLINED_STEREOGRAPHIC_order=3_Nx=16_Ny=12_fov_x_deg=50, or auto (the lean "
                          "OPENCV8 unless it fails the checks below, then the splined model)", &o.lensmodel, false),
         MODEL_OPT_VALUE("--board", "KIND", "chessboard (default) or charuco (OpenCV's ChArUco board)", false),
         { "--gridn", "--object-width-n", "W", "inner corners along the board's x (default 10; with --gridn and no\n"
           "                             --object-height-n also along y: a square board)", MODEL_OPT_KIND_STRING, NULL,
-          0, 0, false, false, NULL },
+          0, 0, false, false, NULL, NULL, 0 },
         MODEL_OPT_VALUE("--object-height-n", "H", "inner corners along the board's y (default: the same as along x)",
                         false),
         MODEL_OPT_VALUE("--square-mm", "S", "corner spacing, a square's side (default 30)", false),
@@ -240,7 +240,7 @@ int calib_cmd_geometry(int argc, char **argv)
         MODEL_OPT_VALUE("--board-height-mm", "H", "height of the corner plane above the table top at tilt 0 "
                         "(default 5)", false),
         { "--focal-px", "--focal", "F", "seed focal length for mrcal in px (default 1.4 x imager width)",
-          MODEL_OPT_KIND_STRING, NULL, 0, 0, false, false, NULL },
+          MODEL_OPT_KIND_STRING, NULL, 0, 0, false, false, NULL, NULL, 0 },
         MODEL_OPT_LIST("--imagersize", "W H", "imager size (needed with --corners)", &imsize, true, false),
         MODEL_OPT_VALUE("--distance-mm", "D", "distance of the projection-uncertainty figure (default 900)", false),
         MODEL_OPT_VALUE("--min-views", "N", "views with a board the solve needs (default by lens model)", false),

@@ -108,19 +108,19 @@ static int read_options(model_cli_t *cli, calib_lamps_opts_t *o, char ***lamps)
         return rc;
     o->sphere_given = c && model_cli_value(cli, "--sphere-radius-mm");
     if (!o->out) return model_cli_error(cli, "-o DIR is required");
-    if (!o->camera) return model_cli_error(cli, "--camera CAMERA.cameramodel is required");
+    if (!o->camera) return model_cli_error(cli, "--camera-model CAMERA.cameramodel is required");
     if (!o->rig == !o->session)
         return model_cli_error(cli, o->rig ? "give --rig or --session, not both"
                                            : "give --rig RIG.ini (capture) or --session DIR");
-    const char *a = model_cli_value(cli, "--angles");
-    if (a && o->session) return model_cli_error(cli, "--angles is for a capture (--rig); a session has its own");
-    if ((rc = number_list(cli, "--angles", o->angles_deg, CALIB_LAMPS_MAX_ANGLES, &o->nangles))) return rc;
+    const char *a = model_cli_value(cli, "--angles-deg");
+    if (a && o->session) return model_cli_error(cli, "--angles-deg is for a capture (--rig); a session has its own");
+    if ((rc = number_list(cli, "--angles-deg", o->angles_deg, CALIB_LAMPS_MAX_ANGLES, &o->nangles))) return rc;
     if (a && o->nangles < 3)
-        return model_cli_error(cli, "--angles '%s': at least 3 angles are needed to triangulate", a);
+        return model_cli_error(cli, "--angles-deg '%s': at least 3 angles are needed to triangulate", a);
     if ((rc = number_list(cli, "--exposures-us", o->exposures_us, CALIB_LAMPS_MAX_EXPOSURES, &o->nexposures)))
         return rc;
     if (o->nexposures < 1) return model_cli_error(cli, "--exposures-us: give at least one exposure");
-    const char *l = model_cli_value(cli, "--lamps");
+    const char *l = model_cli_value(cli, "--lamps-on");
     if (l) {
         GPtrArray *v = g_ptr_array_new();
         char **parts = g_strsplit(l, ",", -1);
@@ -163,17 +163,18 @@ int calib_cmd_lamps(int argc, char **argv)
                          "reused)", &o.rig, false),
         MODEL_OPT_STRING("--session", "DIR", "analyse a session captured elsewhere (its plan: the sphere, each lamp "
                          "alone)", &o.session, false),
-        MODEL_OPT_STRING("--camera", "FILE", "the camera model (mrcal .cameramodel, extrinsics in the rig frame)",
-                         &o.camera, false),
-        MODEL_OPT_STRING("-o", "DIR", "output: lamps.json, report.html, plots", &o.out, false),
+        MODEL_OPT_STRING("--camera-model", "FILE", "the camera model (mrcal .cameramodel, extrinsics in the rig "
+                         "frame)", &o.camera, false, .old = "--camera"),
+        MODEL_OPT_OUT("DIR", "output: lamps.json, report.html, plots", &o.out, false),
         MODEL_OPT_VALUE("--sphere-centre-mm", "X,Y,Z", "the sphere's centre at turntable angle 0 as measured (rig "
                         "frame,\n" IND "mm; required): where the highlights are looked for first, and the prior of "
                         "the\n" IND "centre the joint fit finds from them", false),
         MODEL_OPT_VALUE("--sphere-radius-mm", "R", "the sphere's radius (mm; required)", false),
         MODEL_OPT_STRING("--sample", "NAME", "the sample of the plan (default mirror_sphere)", &o.sample, false),
-        MODEL_OPT_VALUE("--angles", "DEG,DEG,...", "turntable angles (default 24: 0,15,...,345)", false),
-        MODEL_OPT_VALUE("--lamps", "NAME,...", "the lamps (default every lamp of the rig file, or every lamp"
-                        "\n" IND "alone of the session's plan)", false),
+        MODEL_OPT_VALUE("--angles-deg", "DEG,DEG,...", "turntable angles (default 24: 0,15,...,345)", false,
+                        .old = "--angles"),
+        MODEL_OPT_VALUE("--lamps-on", "NAME,...", "the lamps (default every lamp of the rig file, or every lamp"
+                        "\n" IND "alone of the session's plan)", false, .old = "--lamps"),
         MODEL_OPT_VALUE("--exposures-us", "US,...", "auto-bracketing ladder, longest first (default 40,20,10)", false),
         MODEL_OPT_VALUE("--min-snr", "X", "a highlight's peak / noise at least (default 12)", false),
         MODEL_OPT_VALUE("--lamp-radius-mm", "R", "the lamps' emitting radius, modelled in the highlight (default 0 "
@@ -252,7 +253,7 @@ int calib_cmd_pattern(int argc, char **argv)
     model_opt_t opts[] = {
         MODEL_OPT_STRING("--calib", "DIR", "the calibrations: camera.cameramodel, lamps.json (positions), optionally "
                          "gain.json and its maps", &calib_dir, true),
-        MODEL_OPT_STRING("-o", "LAMPS.json", "the output: DIR's lamps.json with the patterns (it may be that file)",
+        MODEL_OPT_OUT("LAMPS.json", "the output: DIR's lamps.json with the patterns (it may be that file)",
                          &out, true),
         MODEL_OPT_STRING("--camera", "NAME", "camera NAME's frames with its calibrations (a directory of several "
                          "cameras)", &camera, false),

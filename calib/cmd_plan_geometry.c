@@ -210,8 +210,7 @@ int calib_cmd_plan_geometry(int argc, char **argv)
         MODEL_OPT_STRING("--check-tilts", "SPEC", "instead: the coverage of these tilts ('T[@AZ]:A,A,... ...', as "
                          "calib geometry --tilts; each entry with its angles) and the views seen whole", &a.check,
                          false),
-        { "-o", "--out", "FILE", "write the [geometry] section to FILE (default: stdout)", MODEL_OPT_KIND_STRING,
-          &a.out, 0, 0, false, false, NULL },
+        MODEL_OPT_OUT("FILE", "write the [geometry] section to FILE (default: stdout)", &a.out, false),
     };
     model_cli_t cli = { .cmd = "plan geometry", .synopsis = "", .about = ABOUT, .epilog = EPILOG, .opts = opts,
                         .nopts = MODEL_NOPTS(opts) };

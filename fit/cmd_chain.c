@@ -37,7 +37,7 @@ int eval_chain_cmd(int argc, char **argv)
     bool quiet = false;
     model_opt_t opts[] = {
         MODEL_OPT_STRING("--truth", "TRUTH.ini", "the virtual rig's truth file the day ran on", &truth, true),
-        MODEL_OPT_STRING("-o", "FILE", "write chain.json here (default DIR/chain.json)", &out, false),
+        MODEL_OPT_OUT("FILE", "write chain.json here (default DIR/chain.json)", &out, false),
         MODEL_OPT_FLAG("--quiet", NULL, "print only the summary, not the table", &quiet),
     };
     model_cli_t cli = {

@@ -27,14 +27,17 @@ int fit_cmd_export(int argc, char **argv)
         fprintf(help ? stdout : stderr, "%susage: refl export material PRIORS.json --format gltf|mitsuba|merl -o FILE "
                 "[--material NAME]\n(refl export material --help for the options)\n",
                 help || argc < 2 ? "" : "refl export: unknown export (material is the one there is)\n");
+        if (help) {
+            printf("\n");
+            model_cli_exit_status(stdout);
+        }
         return help ? 0 : 2;
     }
     argc--, argv++;
     const char *format = NULL, *out = NULL, *material = NULL;
     model_opt_t opts[] = {
         MODEL_OPT_STRING("--format", "gltf|mitsuba|merl", "the renderer's format", &format, true),
-        { "-o", "--out", "FILE", "the output (and FILE.conversion.json)", MODEL_OPT_KIND_STRING, &out, 0, 0, true,
-          false, NULL },
+        MODEL_OPT_OUT("FILE", "the output (and FILE.conversion.json)", &out, true),
         MODEL_OPT_STRING("--material", "NAME", "this material only (default: every one; merl: the file's only "
                          "material)", &material, false),
     };

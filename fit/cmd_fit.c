@@ -94,7 +94,7 @@ static int brdf_parse(int argc, char **argv, brdf_args_t *a)
                         .ro = fit_read_defaults(), .o = fit_brdf_defaults() };
     a->o.loss_scale = 2;
     model_opt_t opts[] = {
-        MODEL_OPT_STRING("-o", "PRIORS.json", "the priors file to write", &a->out, true),
+        MODEL_OPT_OUT("PRIORS.json", "the priors file to write", &a->out, true),
         MODEL_OPT_STRING("--model", "M", MODEL_NAMES " (default all: chosen by cross-validation)", &a->model, false),
         MODEL_OPT_VALUE("--cv-folds", "K", "folds of the model choice's cross-validation (default 5; 0: lowest BIC)",
                         false),
@@ -354,7 +354,7 @@ int fit_cmd_material(int argc, char **argv)
     model_opt_t opts[] = {
         MODEL_OPT_STRING("--calib", "DIR", "the calibrations: camera.cameramodel, lamps.json, white.json, optionally "
                          "gain.json and its maps (DIR or DIR/geometry, DIR/lamps, DIR/white, DIR/gain)", &o.calib, true),
-        MODEL_OPT_STRING("-o", "PRIORS.json", "the priors file to write", &o.out, true),
+        MODEL_OPT_OUT("PRIORS.json", "the priors file to write", &o.out, true),
         MODEL_OPT_STRING("--camera", "NAME", "only camera NAME's frames of a session of several (default every "
                          "camera's, each with its calibrations: DIR/NAME.cameramodel, DIR/NAME/white.json, "
                          "DIR/NAME/gain.json)", &o.camera, false),
@@ -391,7 +391,6 @@ int fit_cmd_material(int argc, char **argv)
                          "residual in units of its sigma", &loss, false),
         MODEL_OPT_DOUBLE("--loss-scale", "S", "where the robust loss starts, in sigma (default 2)", &o.loss_scale,
                          0.01, 1e6),
-        MODEL_OPT_VALUE("--albedo", "A", "(an option of refl calib white)", false),
         MODEL_OPT_FLAG("-v", "--verbose", "print every angle", &o.verbose),
     };
     model_cli_t cli = {
@@ -430,7 +429,6 @@ int fit_cmd_material(int argc, char **argv)
     };
     int rc = model_cli_parse(&cli, argc, argv);
     if (rc != MODEL_CLI_OK) return rc;
-    if (model_cli_value(&cli, "--albedo")) return model_cli_error(&cli, "--albedo is an option of refl calib white");
     if ((rc = calib_cli_window_step(&cli, &o.window, &o.step)) != MODEL_CLI_OK) return rc;
     if ((rc = model_cli_units(&cli, &o.scene_unit_mm))) return rc;
     if (number_opt(&cli, "--k-sigma", false, &o.k_sigma) || number_opt(&cli, "--systematic", true, &o.sys_rel) ||
@@ -475,7 +473,9 @@ int fit_cmd(int argc, char **argv)
         FILE *f = argc < 2 ? stderr : stdout;
         fprintf(f, "usage: refl fit brdf FILE ... -o PRIORS.json        (refl fit brdf --help)\n"
                    "       refl fit material SESSION --calib DIR --scene FILE ... -o PRIORS.json   (refl fit material --help)\n"
-                   "\nrefl %s\n", REFL_VERSION);
+                   "\n");
+        model_cli_exit_status(f);
+        fprintf(f, "\nrefl %s\n", REFL_VERSION);
         return argc < 2 ? 2 : 0;
     }
     if (!strcmp(argv[1], "brdf")) return cmd_brdf(argc - 1, argv + 1);

@@ -84,9 +84,10 @@ static int plan_lamps(int argc, char **argv)
     model_opt_list_t materials = { matfiles, 0, MAX_MATERIAL_FILES };
     bool no_report = false;
     model_opt_t opts[] = {
-        MODEL_OPT_STRING("--camera", "CAM", "camera model (mrcal; extrinsics in the rig frame)", &o.camera, true),
-        MODEL_OPT_STRING("--lamps", "FILE", "candidates: a lamps INI with --kc-per-us, or lamps.json with --white",
-                         &o.lamps, true),
+        MODEL_OPT_STRING("--camera-model", "CAM", "camera model (mrcal; extrinsics in the rig frame)", &o.camera,
+                         true, .old = "--camera"),
+        MODEL_OPT_STRING("--lamps-file", "FILE", "candidates: a lamps INI with --kc-per-us, or lamps.json with "
+                         "--white", &o.lamps, true, .old = "--lamps"),
         MODEL_OPT_LIST("--materials", "FILE...", "a materials INI, or priors JSON files (their means)", &materials,
                        true, true),
         MODEL_OPT_DOUBLE("--kc-per-us", "X", "kc*I = X * a lamps INI's intensity (DN/us)", &o.kc_per_us, 1e-300,
@@ -95,7 +96,7 @@ static int plan_lamps(int argc, char **argv)
                          false),
         MODEL_OPT_STRING("--gain-calib", "DIR", "gain.json (K, read noise, saturation), offset_dn.tiff, "
                          "prnu_gain.tiff", &o.gain_dir, false),
-        { "-o", "--out", "DIR", "the output directory", MODEL_OPT_KIND_STRING, &o.out, 0, 0, true, false, NULL },
+        MODEL_OPT_OUT("DIR", "the output directory", &o.out, true),
         MODEL_OPT_DOUBLE("--angle-deg", "A", "turntable angle of the one view (0)", &o.angle_deg, -1e4, 1e4),
         MODEL_OPT_STRING("--angles-deg", "LIST", "several views: their turntable angles (comma list), each planned "
                          "on its own", &angles, false),
@@ -126,7 +127,8 @@ static int plan_lamps(int argc, char **argv)
         MODEL_OPT_DOUBLE("--psf-sigma-px", "S", "the optics' Gaussian blur (px) of the edges' predicted Sobel "
                          "response (default: the geometry calibration's, geometry.json beside --camera; else 0)",
                          &op->psf_sigma_px, 0, 10),
-        MODEL_OPT_INT("--threads", "N", "threads (0: all cores)", &op->threads, 0, 1024),
+        MODEL_OPT_INT("--threads", "N", "worker threads (default 0: REFL_THREADS, else every online CPU)",
+                      &op->threads, 0, 1024),
         MODEL_OPT_FLAG("--no-report", NULL, "no index.html", &no_report),
         MODEL_OPT_UNITS,
     };
@@ -198,11 +200,13 @@ int lightplan_cmd(int argc, char **argv)
     if (argc >= 2 && !strcmp(argv[1], "geometry")) return calib_cmd_plan_geometry(argc - 1, argv + 1);
     if (argc >= 2 && !strcmp(argv[1], "day")) return rig_cmd_plan_day(argc - 1, argv + 1);
     if (argc >= 2 && (!strcmp(argv[1], "--help") || !strcmp(argv[1], "-h"))) {
-        printf("usage: refl plan lamps SCENE --camera CAM.cameramodel --lamps CANDIDATES --materials MATS\n"
+        printf("usage: refl plan lamps SCENE --camera-model CAM.cameramodel --lamps-file CANDIDATES --materials MATS\n"
                "                       (--kc-per-us X | --white WHITE.json) [options] -o DIR   (refl plan lamps --help)\n"
                "       refl plan geometry [--rig RIG.ini] --camera-model M [...] [options]   (the board's poses)\n"
                "       refl plan day --rig RIG.ini --lab LAB.ini -o DIR   (a lab day's plans)\n"
-               "\nrefl %s\n", REFL_VERSION);
+               "\n");
+        model_cli_exit_status(stdout);
+        printf("\nrefl %s\n", REFL_VERSION);
         return 0;
     }
     fprintf(stderr, "usage: refl plan lamps|geometry|day ... (refl plan --help)\n");

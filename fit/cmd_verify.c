@@ -1,7 +1,7 @@
 // fit/cmd_verify.c — `refl verify`: does a scene description match images?
 //
 //   refl verify SCENE --images IMG... --priors PRIORS.json... -o DIR
-//               [--calib DIR] [--cameras CAM...] [--lamps LAMPS] [--gain-calib DIR...]
+//               [--calib DIR] [--camera-model CAM...] [--lamps-file LAMPS] [--gain-calib DIR...]
 //               [--white WHITE.json | --kc-per-us X] [options]
 //   refl verify --study -o DIR [--truth FILE] [--calib CAL --priors P...] [--cases N] [--shard K/N]
 //   refl verify --study-merge DIR... -o OUT                      (fit/eval/study.c)
@@ -21,13 +21,15 @@
 #include "model/base/report.h"
 
 static const char about[] =
-    "Fits the imaging model of the description SCENE (D3D or OBJ, rig frame, mm) to reference points of\n"
-    "the images, within the materials' priors, and judges whether the description is right.\n"
+    "Fits the imaging model of the description SCENE (D3D, OBJ, STL or PLY; rig frame, mm unless --units) to\n"
+    "reference points of the images, within the materials' priors, and judges whether the description is right.\n"
+    "--no-priors: the thesis's fit instead (physical bounds only, lamps fixed, kc free); --priors still gives\n"
+    "the materials' models and starting values (their means).\n"
     "Images: 16-bit PNG frames as refl capture and refl rig snap write them (their text chunks give the\n"
     "turntable angle, the lamps that were on, the exposure and the gain; --angle-deg, --lamps-on,\n"
     "--exposure-us, --gain-db override for every image), or float TIFFs with those options.\n"
     "With --calib DIR of several cameras (DIR/NAME.cameramodel, DIR/NAME/gain.json, DIR/NAME/white.json) and\n"
-    "no --cameras, each frame goes to the camera its text names (camera_name) with that camera's calibrations.\n"
+    "no --camera-model, each frame goes to the camera its text names (camera_name) with that camera's calibrations.\n"
     "\n"
     "       refl verify --study -o DIR [--truth TRUTH.ini] [--calib CAL --priors P...] [--cases N] [--shard K/N]\n"
     "       refl verify --study-merge DIR... -o OUT\n"
@@ -37,7 +39,8 @@ static const char about[] =
 static const char epilog[] =
     "Outputs in DIR: verify.json (verdict, score, residue, change regions, parameters against their\n"
     "priors, provenance), points.csv, imgN_actual.tiff / imgN_synthetic.tiff (float DN), and index.html\n"
-    "with the figures (scripts/verify_report.py). Prints the residue table in the thesis's form.";
+    "with the figures (scripts/verify_report.py). Prints the residue table in the thesis's form.\n"
+    "With --fail-on-incorrect the exit status is 4 when the verdict is incorrect (0 when correct).";
 
 // --fix lamps,cameras,offset,rho,materials
 static int parse_fix(model_cli_t *cli, const char *list, verify_options_t *opt)
@@ -219,9 +222,12 @@ static int verify_files_cmd(model_cli_t *cli, verify_args_t *a, int argc, char *
     if (!o->scene) return model_cli_error(cli, "missing SCENE");
     if (cli->npositional > 1) return model_cli_error(cli, "one SCENE, not %d", cli->npositional);
     if (!o->nimages) return model_cli_error(cli, "missing --images IMG...");
-    if (!o->npriors) return model_cli_error(cli, "missing --priors PRIORS.json");
-    if (!o->calib && !o->ncameras) return model_cli_error(cli, "missing --cameras (or --calib DIR)");
-    if (!o->calib && !o->lamps) return model_cli_error(cli, "missing --lamps (or --calib DIR)");
+    if (!o->npriors)
+        return model_cli_error(cli, o->opt.use_priors ? "missing --priors PRIORS.json"
+                                                      : "missing --priors PRIORS.json (with --no-priors too: the "
+                                                        "materials' models and starting values)");
+    if (!o->calib && !o->ncameras) return model_cli_error(cli, "missing --camera-model (or --calib DIR)");
+    if (!o->calib && !o->lamps) return model_cli_error(cli, "missing --lamps-file (or --calib DIR)");
     if (o->ncameras > 1 && o->ncameras != o->nimages)
         return model_cli_error(cli, "%d cameras for %d images: give one camera, or one per image", o->ncameras,
                                o->nimages);
@@ -232,7 +238,7 @@ static int verify_files_cmd(model_cli_t *cli, verify_args_t *a, int argc, char *
     int exit_code = 1;
     if (verify_files_run(o, &r)) {
         print_result(o, &r);
-        exit_code = a->fail_on_incorrect && !r.fit.correct ? 3 : 0;
+        exit_code = a->fail_on_incorrect && !r.fit.correct ? MODEL_EXIT_INCORRECT : 0;
         if (!a->no_report) {
             if (model_run_script("verify_report.py", o->out, NULL) != 0) {
                 fprintf(stderr, "refl verify: the report failed (the JSON, CSV and TIFF outputs are written)\n");
@@ -263,14 +269,15 @@ int verify_cmd(int argc, char **argv)
                        true, false),
         MODEL_OPT_LIST("--priors", "FILE...", "priors files of refl fit material / refl fit brdf (every material "
                        "of SCENE)", &a.priors, true, false),
-        { "-o", "--out", "DIR", "the output directory", MODEL_OPT_KIND_STRING, &a.o.out, 0, 0, false, false, NULL },
+        MODEL_OPT_OUT("DIR", "the output directory", &a.o.out, false),
         MODEL_OPT_STRING("--calib", "DIR", "a calibration directory: camera.cameramodel, lamps.json, gain.json + "
                          "maps, white.json (or in geometry/ lamps/ gain/ white/); the options below override",
                          &a.o.calib, false),
-        MODEL_OPT_LIST("--cameras", "CAM...", "camera models (mrcal, extrinsics in the rig frame): one, or one per "
-                       "image", &a.cameras, true, false),
-        MODEL_OPT_STRING("--lamps", "FILE", "lamps.json of refl calib lamps, or a lamps INI ([lamp NAME] "
-                         "position_mm, intensity: then kc*I = X * intensity with --kc-per-us X)", &a.o.lamps, false),
+        MODEL_OPT_LIST("--camera-model", "CAM...", "camera models (mrcal, extrinsics in the rig frame): one, or one "
+                       "per image", &a.cameras, true, false, .old = "--cameras"),
+        MODEL_OPT_STRING("--lamps-file", "FILE", "lamps.json of refl calib lamps, or a lamps INI ([lamp NAME] "
+                         "position_mm, intensity: then kc*I = X * intensity with --kc-per-us X)", &a.o.lamps, false,
+                         .old = "--lamps"),
         MODEL_OPT_LIST("--gain-calib", "DIR...", "gain calibrations (gain.json, offset_dn.tiff, prnu_gain.tiff): "
                        "one per camera", &a.gains, true, false),
         MODEL_OPT_STRING("--white", "FILE", "white.json of refl calib white: kc*I per lamp per us at 0 dB",
@@ -296,9 +303,10 @@ int verify_cmd(int argc, char **argv)
                          &a.o.opt.edge_margin_px, 0, 100),
         MODEL_OPT_DOUBLE("--boundary-margin-px", "D", "and face/shadow changes this far beyond the window (4)",
                          &a.o.opt.boundary_margin_px, 0, 100),
-        MODEL_OPT_DOUBLE("--edge-k", "K", "window std > sqrt(K^2 var_noise + (R S)^2): an edge (3)", &a.o.opt.edge_k,
-                         0.1, 1e6),
-        MODEL_OPT_DOUBLE("--edge-rel", "R", "(0.05)", &a.o.opt.edge_rel, 0, 10),
+        MODEL_OPT_DOUBLE("--edge-k", "K", "a window whose std exceeds sqrt(K^2 var_noise + (R S)^2) holds an edge "
+                         "the description does not predict (S: its signal; 3)", &a.o.opt.edge_k, 0.1, 1e6),
+        MODEL_OPT_DOUBLE("--edge-rel", "R", "the relative part R of that test: texture and shading across the "
+                         "window (0.05)", &a.o.opt.edge_rel, 0, 10),
         MODEL_OPT_FLAG("--skip-edge-windows", NULL, "skip the windows near edges (default: modelled with the "
                        "pixels' footprint and the blur)", NULL),
         MODEL_OPT_INT("--edge-subsamples", "N", "sub-cells per px side of a window's cells that see two faces "
@@ -309,7 +317,8 @@ int verify_cmd(int argc, char **argv)
                          "calibration's, else 0)", &a.o.psf_sigma_px, 0, 10),
         MODEL_OPT_DOUBLE("--pixel-fill", "F", "the pixel's footprint, a square of F px (default: the "
                          "calibration's, else 1: the whole pixel)", &a.o.pixel_fill, 0, 1),
-        MODEL_OPT_INT("--interreflection-samples", "N", "(64; 0 none)", &a.o.opt.ir_samples, 0, 1024),
+        MODEL_OPT_INT("--interreflection-samples", "N", "interreflection rays per reference point (64; 0: no "
+                      "interreflection)", &a.o.opt.ir_samples, 0, 1024),
         MODEL_OPT_DOUBLE("--model-rel", "R", "relative model error of every window, over the priors' "
                          "window_rel_std (default: the priors', else 0.04)", &a.o.opt.model_rel, 0, 10),
         MODEL_OPT_DOUBLE("--robust-scale", "Z", "Cauchy loss scale in z (3; 0 plain least squares)",
@@ -320,18 +329,23 @@ int verify_cmd(int argc, char **argv)
                          1e-6, 10),
         MODEL_OPT_DOUBLE("--pa-sigma-dn", "S", "prior std of the offset left after the offset map (5: ambient "
                          "light)", &a.o.opt.pa_sigma_dn, 1e-6, 1e6),
-        MODEL_OPT_DOUBLE("--z-flag", "Z", "(4)", &a.o.opt.z_flag, 0.1, 1e6),
-        MODEL_OPT_INT("--min-region", "N", "(3)", &a.o.opt.min_region, 1, 1000000),
-        MODEL_OPT_DOUBLE("--score-threshold", "T", "(400)", &a.o.opt.score_threshold, 0, 1e300),
-        MODEL_OPT_FLAG("--no-priors", NULL, "the thesis's fit: physical bounds only, lamps fixed, kc free",
-                       NULL),
+        MODEL_OPT_DOUBLE("--z-flag", "Z", "a reference point whose |z| = |measured - model| / sigma exceeds Z is "
+                         "flagged as a change (4)", &a.o.opt.z_flag, 0.1, 1e6),
+        MODEL_OPT_INT("--min-region", "N", "a region of flags (8-connected on an image's grid) counts toward the "
+                      "score from N points (3)", &a.o.opt.min_region, 1, 1000000),
+        MODEL_OPT_DOUBLE("--score-threshold", "T", "the verdict is incorrect when the score, the counted regions' "
+                         "excess chi^2 sum(min(z^2, 25 Z^2) - Z^2), exceeds T (400)", &a.o.opt.score_threshold, 0,
+                         1e300),
+        MODEL_OPT_FLAG("--no-priors", NULL, "the thesis's fit: physical bounds only, lamps fixed, kc free (--priors "
+                       "still gives the materials' models and starting values)", NULL),
         MODEL_OPT_FLAG("--no-gain-maps", NULL, "ignore the offset maps and flat fields", NULL),
         MODEL_OPT_STRING("--fix", "NAMES", "hold parameters: comma list of lamps, cameras, offset, rho, materials",
                          &a.fixed, false),
-        MODEL_OPT_INT("--threads", "N", "worker threads (0: REFL_THREADS or all)", &a.o.opt.threads, 0, 1024),
+        MODEL_OPT_INT("--threads", "N", "worker threads (default 0: REFL_THREADS, else every online CPU)",
+                      &a.o.opt.threads, 0, 1024),
         MODEL_OPT_FLAG("--verbose", NULL, "the solver's progress", &a.o.opt.verbose),
         MODEL_OPT_FLAG("--no-report", NULL, "no index.html", &a.no_report),
-        MODEL_OPT_FLAG("--fail-on-incorrect", NULL, "exit 3 when the verdict is incorrect", &a.fail_on_incorrect),
+        MODEL_OPT_FLAG("--fail-on-incorrect", NULL, "exit 4 when the verdict is incorrect", &a.fail_on_incorrect),
         MODEL_OPT_FLAG("--study", NULL, "the detection study on the virtual rig (no SCENE)", &a.do_study),
         MODEL_OPT_STRING("--truth", "TRUTH.ini", "--study: the virtual rig's truth (default "
                          "examples/virtual-truth.ini)", &a.truth, false),

@@ -48,6 +48,8 @@ static void usage(FILE *f)
     fprintf(f, "usage: refl COMMAND [ARGS...]   (refl COMMAND --help for its options)\n\ncommands:\n");
     for (size_t i = 0; i < sizeof commands / sizeof commands[0]; i++)
         fprintf(f, "  %-10s %s\n", commands[i].name, commands[i].summary);
+    fprintf(f, "\n");
+    model_cli_exit_status(f);
     fprintf(f, "\nrefl %s\n", REFL_VERSION);
 }
 
@@ -60,7 +62,7 @@ static int demo_cmd(int argc, char **argv)
                *white_table = NULL, *lab = NULL;
     bool yes = false;
     model_opt_t opts[] = {
-        MODEL_OPT_STRING("-o", "DIR", "output directory (default refl-demo)", &out, false),
+        MODEL_OPT_OUT("DIR", "output directory (default refl-demo)", &out, false),
         MODEL_OPT_STRING("--rig", "RIG.ini", "run the lab day on this rig (default: the virtual rig, --yes)", &rig,
                          false),
         MODEL_OPT_STRING("--truth", "TRUTH.ini", "the virtual rig of this truth file (default "
@@ -179,8 +181,10 @@ int main(int argc, char **argv)
                 snprintf(prefix, sizeof prefix, "refl %s %s", argv[1], argv[2]);
         model_notice_prefix(prefix);
         int rc = commands[i].run(argc - 1, argv + 1);
-        // a failed run leaves no empty output directory (3, a paused session, is resumed later)
-        if (rc != 0 && rc != 3) model_remove_made_empty_dirs();
+        // a failed run leaves no empty output directory (3, a paused session, is resumed later; 4, an
+        // incorrect verdict, wrote its outputs)
+        if (rc != MODEL_EXIT_OK && rc != MODEL_EXIT_PAUSED && rc != MODEL_EXIT_INCORRECT)
+            model_remove_made_empty_dirs();
         return rc;
     }
     fprintf(stderr, "refl: unknown command '%s'\n", argv[1]);

@@ -42,20 +42,20 @@ static bool is_tiff_name(const char *s) { return ends_with_ci(s, ".tif") || ends
 // Options render and edges share: the scene's inputs, the grey value's
 // offset and scale, and the view (rows of a model_opt_t table).
 #define SCENE_INPUT_OPTS                                                                                           \
-    MODEL_OPT_VALUE("--camera", "CAM.cameramodel", "camera model (mrcal); its extrinsics place it in the rig frame", \
-                    true),                                                                                         \
-    MODEL_OPT_VALUE("--lamps", "LAMPS.ini",                                                                        \
+    MODEL_OPT_VALUE("--camera-model", "CAM.cameramodel", "camera model (mrcal); its extrinsics place it in the rig " \
+                    "frame", true, .old = "--camera"),                                                             \
+    MODEL_OPT_VALUE("--lamps-file", "LAMPS.ini",                                                                   \
                     "lamps: [lamp NAME] position_mm, intensity, radius_mm, emission_cos_power, emission_axis",     \
-                    true),                                                                                         \
+                    true, .old = "--lamps"),                                                                       \
     MODEL_OPT_VALUE("--materials", "MATS.ini", "materials: [material NAME] model and parameters", true),           \
     MODEL_OPT_UNITS
 #define SHADING_OPTS                                                                                               \
     MODEL_OPT_VALUE("--kc", "K", "camera parameter kc, DN per radiance unit (default 1)", false),                  \
     MODEL_OPT_VALUE("--offset", "PA", "offset Pa, DN (default 0)", false)
 #define VIEW_OPTS                                                                                                  \
-    MODEL_OPT_VALUE("--turntable-deg", "A",                                                                        \
-                    "turntable angle: the scene is rotated by A deg about the rig's z axis (default 0)", false),   \
-    MODEL_OPT_VALUE("--threads", "N", "worker threads (default: REFL_THREADS or the online CPUs)", false),         \
+    MODEL_OPT_VALUE("--angle-deg", "A", "turntable angle: the scene is rotated by A deg about the rig's z axis "   \
+                    "(default 0)", false, .old = "--turntable-deg"),                                               \
+    MODEL_OPT_VALUE("--threads", "N", "worker threads (default 0: REFL_THREADS, else every online CPU)", false),   \
     MODEL_OPT_VALUE("--planarity-tol-mm", "T", "max distance of a face's vertex from its plane, mm (default 0.01)", \
                     false)
 
@@ -66,7 +66,7 @@ int model_cmd_render(int argc, char **argv)
 {
     model_opt_t opts[] = {
         SCENE_INPUT_OPTS,
-        MODEL_OPT_VALUE("-o", "OUT", "output image: .png (16-bit, P rounded and clipped to 0..65535) or .tif/.tiff (float32 P)", true),
+        MODEL_OPT_OUT("OUT", "output image: .png (16-bit, P rounded and clipped to 0..65535) or .tif/.tiff (float32 P)", NULL, true),
         SHADING_OPTS,
         MODEL_OPT_VALUE("--gain-map", "G.tiff", "per-pixel relative sensitivity g(x,y) (float TIFF, camera size, mean 1)", false),
         MODEL_OPT_VALUE("--interreflection", "MODE", "none | thesis | mc (default none)", false),
@@ -86,7 +86,8 @@ int model_cmd_render(int argc, char **argv)
     if (rc != MODEL_CLI_OK) return rc;
 
     model_render_file_opts_t o = {
-        .scene = c.positional[0], .camera = model_cli_value(&c, "--camera"), .lamps = model_cli_value(&c, "--lamps"),
+        .scene = c.positional[0], .camera = model_cli_value(&c, "--camera-model"),
+        .lamps = model_cli_value(&c, "--lamps-file"),
         .materials = model_cli_value(&c, "--materials"), .gain_map = model_cli_value(&c, "--gain-map"),
         .sensor = model_cli_value(&c, "--sensor"), .out = model_cli_value(&c, "-o"),
         .info = model_cli_value(&c, "--info"), .shading = model_shading_default(),
@@ -100,8 +101,8 @@ int model_cmd_render(int argc, char **argv)
         (rc = model_cli_long(&c, "--mc-samples", &mc_samples, 1, 1000000)) ||
         (rc = model_cli_long(&c, "--mc-bounces", &mc_bounces, 0, 64)) ||
         (rc = model_cli_long(&c, "--seed", &seed, 0, LONG_MAX)) ||
-        (rc = model_cli_long(&c, "--threads", &threads, 1, 256)) ||
-        (rc = model_cli_double(&c, "--turntable-deg", &o.turntable_deg, -1e6, false, 1e6, "|A| <= 1e6 deg")) ||
+        (rc = model_cli_long(&c, "--threads", &threads, 0, 256)) ||
+        (rc = model_cli_double(&c, "--angle-deg", &o.turntable_deg, -1e6, false, 1e6, "|A| <= 1e6 deg")) ||
         (rc = model_cli_double(&c, "--planarity-tol-mm", &o.planarity_tol_mm, 0, false, INFINITY, "T >= 0")) ||
         (rc = model_cli_units(&c, &o.scene_unit_mm)))
         return rc;
@@ -167,7 +168,8 @@ int model_cmd_edges(int argc, char **argv)
     int rc = model_cli_parse(&c, argc, argv);
     if (rc != MODEL_CLI_OK) return rc;
     model_edges_file_opts_t o = {
-        .scene = c.positional[0], .camera = model_cli_value(&c, "--camera"), .lamps = model_cli_value(&c, "--lamps"),
+        .scene = c.positional[0], .camera = model_cli_value(&c, "--camera-model"),
+        .lamps = model_cli_value(&c, "--lamps-file"),
         .materials = model_cli_value(&c, "--materials"), .shading = model_shading_default(),
         .planarity_tol_mm = MODEL_SCENE_OPTIONS_DEFAULT.planarity_tol_mm, .feature_angle_deg = 1,
     };
@@ -175,8 +177,8 @@ int model_cmd_edges(int argc, char **argv)
     if ((rc = model_cli_double(&c, "--kc", &o.shading.kc, 0, false, INFINITY, "kc >= 0")) ||
         (rc = model_cli_double(&c, "--offset", &o.shading.Pa, -INFINITY, false, INFINITY, "finite")) ||
         (rc = model_cli_double(&c, "--feature-angle-deg", &o.feature_angle_deg, 0, false, 179.999, "0 <= A < 180")) ||
-        (rc = model_cli_double(&c, "--turntable-deg", &o.turntable_deg, -1e6, false, 1e6, "|A| <= 1e6 deg")) ||
-        (rc = model_cli_long(&c, "--threads", &threads, 1, 256)) ||
+        (rc = model_cli_double(&c, "--angle-deg", &o.turntable_deg, -1e6, false, 1e6, "|A| <= 1e6 deg")) ||
+        (rc = model_cli_long(&c, "--threads", &threads, 0, 256)) ||
         (rc = model_cli_double(&c, "--planarity-tol-mm", &o.planarity_tol_mm, 0, false, INFINITY, "T >= 0")) ||
         (rc = model_cli_units(&c, &o.scene_unit_mm)))
         return rc;
@@ -210,14 +212,24 @@ int model_cmd_workpiece(int argc, char **argv)
         MODEL_OPT_VALUE("--height-scale", "S", "scale the stiffener's height above the plate by S (default 1)", false),
         MODEL_OPT_VALUE("--plate-material", "NAME", "material of the plate (default plywood)", false),
         MODEL_OPT_VALUE("--stiffener-material", "NAME", "material of the stiffener (default painted_steel)", false),
+        MODEL_OPT_OUT("OUT.d3d", "the D3D scene to write (required; also accepted as the one argument)", NULL,
+                      false),
     };
-    model_cli_t c = { .cmd = "workpiece", .synopsis = "OUT.d3d", .opts = opts, .nopts = MODEL_NOPTS(opts), .min_positional = 1, .max_positional = 1 };
+    model_cli_t c = { .cmd = "workpiece", .synopsis = "", .opts = opts, .nopts = MODEL_NOPTS(opts),
+                      .min_positional = 0, .max_positional = 1 };
     c.about = "Writes the reference workpiece of thesis ch. 6 as a D3D scene: a 400 x 300 x 10 mm plate with\n"
               "a stiffener 88 mm high and 260 mm long along y (T: 8 mm web under a 60 x 8 mm flange). The\n"
               "defaults give examples/t_stiffener.d3d; the options make the wrong descriptions the\n"
               "verification is tested with (I-stiffener, none, shifted, rotated, wrong height).";
     int rc = model_cli_parse(&c, argc, argv);
     if (rc != MODEL_CLI_OK) return rc;
+    const char *out = model_cli_value(&c, "-o");
+    if (c.npositional && out) return model_cli_error(&c, "unexpected argument '%s' (-o %s given)", c.positional[0], out);
+    if (c.npositional) {   // the old spelling: the output as the argument
+        out = c.positional[0];
+        model_note("OUT.d3d as an argument: the option is -o, --out (the old spelling still works)");
+    }
+    if (!out) return model_cli_error(&c, "missing -o OUT.d3d");
     model_stiffener_t p = model_stiffener_default();
     const char *k = model_cli_value(&c, "--kind");
     if (k) {
@@ -245,25 +257,25 @@ int model_cmd_workpiece(int argc, char **argv)
     char *text = model_stiffener_d3d(&p);
     if (!text) return 1;
     // check that it loads (planarity, outlines) before writing it
-    model_scene_t *sc = model_scene_parse_d3d(text, strlen(text), c.positional[0], NULL);
+    model_scene_t *sc = model_scene_parse_d3d(text, strlen(text), out, NULL);
     if (!sc) {
         free(text);
         return 1;
     }
     model_scene_free(sc);
     char tmp[4096];
-    snprintf(tmp, sizeof tmp, "%s.tmp", c.positional[0]);
+    snprintf(tmp, sizeof tmp, "%s.tmp", out);
     FILE *f = fopen(tmp, "w");
     bool ok = f && fputs(text, f) >= 0;
     if (f && fclose(f) != 0) ok = false;
-    if (ok && rename(tmp, c.positional[0]) != 0) ok = false;
+    if (ok && rename(tmp, out) != 0) ok = false;
     if (!ok) {
-        fprintf(stderr, "refl workpiece: cannot write %s: %s\n", c.positional[0], strerror(errno));
+        fprintf(stderr, "refl workpiece: cannot write %s: %s\n", out, strerror(errno));
         unlink(tmp);
         free(text);
         return 1;
     }
     free(text);
-    printf("%s: %s-stiffener workpiece\n", c.positional[0], model_stiffener_kind_name(p.kind));
+    printf("%s: %s-stiffener workpiece\n", out, model_stiffener_kind_name(p.kind));
     return 0;
 }

@@ -12,7 +12,7 @@ static int cmd_tabulate(int argc, char **argv)
 {
     model_opt_t opts[] = {
         MODEL_OPT_VALUE("--model", "NAME", "oren-nayar, ggx2, retro, ggx-ms, ptfe or ggx", true),
-        MODEL_OPT_VALUE("-o", "FILE.binary", "the MERL binary to write (33 MB)", true),
+        MODEL_OPT_OUT("FILE.binary", "the MERL binary to write (33 MB)", NULL, true),
     };
     model_cli_t c = { .cmd = "brdf tabulate", .synopsis = "[KEY=VALUE ...]", .opts = opts,
                       .nopts = MODEL_NOPTS(opts), .min_positional = 0, .max_positional = MODEL_BRDF_RECIPE_MAX };
@@ -58,6 +58,8 @@ int model_cmd_brdf(int argc, char **argv)
                       "(refl brdf tabulate --help for the options)\n";
     if (argc >= 2 && (!strcmp(argv[1], "--help") || !strcmp(argv[1], "-h"))) {
         fputs(use, stdout);
+        fputs("\n", stdout);
+        model_cli_exit_status(stdout);
         return 0;
     }
     if (argc >= 2 && !strcmp(argv[1], "tabulate")) return cmd_tabulate(argc - 1, argv + 1);

@@ -122,7 +122,7 @@ int rig_cmd_capture(int argc, char **argv)
     const char *operator_input = NULL;
     model_opt_t opts[] = {
         MODEL_OPT_STRING("--rig", "RIG.ini", "the rig description file", &o.rig_path, false),
-        MODEL_OPT_STRING("-o", "DIR", "the session directory (new or empty)", &out_dir, false),
+        MODEL_OPT_OUT("DIR", "the session directory (new or empty)", &out_dir, false),
         MODEL_OPT_STRING("--operator", "NAME", "who runs the session (recorded)", &o.operator_name, false),
         MODEL_OPT_STRING("--notes", "TEXT", "notes recorded with the session", &o.notes, false),
         MODEL_OPT_STRING("--calib", "DIR", "the calibrations in use (recorded by path and sha256)", &o.calib_dir,
@@ -343,7 +343,7 @@ static int cmd_session_export(int argc, char **argv)
     const char *format = NULL, *out = NULL;
     model_opt_t opts[] = {
         MODEL_OPT_STRING("--format", "csv|json", "the output format", &format, true),
-        MODEL_OPT_STRING("-o", "FILE", "write to FILE instead of stdout", &out, false),
+        MODEL_OPT_OUT("FILE", "write to FILE instead of stdout", &out, false),
     };
     model_cli_t c = { .cmd = "session export", .synopsis = "DIR", .about = session_export_about, .opts = opts,
                       .nopts = MODEL_NOPTS(opts), .min_positional = 1, .max_positional = 1 };

@@ -22,8 +22,7 @@ int rig_cmd_plan_day(int argc, char **argv)
     model_opt_t opts[] = {
         MODEL_OPT_STRING("--rig", "RIG.ini", "the rig file: its lamps (a virtual rig's: its truth file's)", &rig, true),
         MODEL_OPT_STRING("--lab", "LAB.ini", "the lab file (examples/lab.ini)", &lab_path, true),
-        { "-o", "--out", "DIR", "the output directory (created)", MODEL_OPT_KIND_STRING, &out, 0, 0, true, false,
-          NULL },
+        MODEL_OPT_OUT("DIR", "the output directory (created)", &out, true),
     };
     model_cli_t cli = { .cmd = "plan day", .synopsis = "", .about = ABOUT, .epilog = EPILOG, .opts = opts,
                         .nopts = MODEL_NOPTS(opts) };

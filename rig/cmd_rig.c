@@ -38,8 +38,8 @@ static const char rig_about[] =
     "actions:\n"
     "  status     every device with its identity and state (the camera: gain and its unit, firmware,\n"
     "             gamma, black level, and the automatics/gamma/LUT refl switched off at open)\n"
-    "  home       home the turntable\n"
-    "  move DEG   move the turntable to DEG (absolute; homes it first when needed)\n"
+    "  home       home the turntable (the only device it opens)\n"
+    "  move DEG   move the turntable to DEG (absolute; homes it first when needed; opens only the turntable)\n"
     "  identify   model, serial and firmware of every device\n"
     "  snap       a frame of each camera to a PNG (lamps switched off again afterwards)\n"
     "  serve      virtual rigs: keep the virtual camera up on its address until SIGINT/SIGTERM";
@@ -52,14 +52,18 @@ static const char rig_epilog[] =
     "Opening a camera switches off its automatics (ExposureAuto, GainAuto, ... every *Auto*), gamma and\n"
     "LUT, or fails naming the feature; frames record what was done and the gain's unit.\n"
     "Angles in degrees (turntable frame: 0 at home, counter-clockwise seen from above).\n"
+    "status and identify report every device, also when one does not open or answer (its DEVICE_error\n"
+    "line; the exit status is then 1); --only opens and reports one kind (one device at a time at\n"
+    "bring-up: --only camera, --only turntable, --only lamps).\n"
     "Ctrl-C during homing or a move stops the stage (a second Ctrl-C: at once), then ends refl.";
 
 #define RIG_OPTS(_)                                                                                               \
     _("--rig", "RIG.ini", "the rig description file", true, NULL)                                                 \
     _("-o", "OUT.png", "snap: output image (16-bit grey PNG with metadata)", false, "snap")                        \
-    _("--angle", "DEG", "snap: move the turntable to DEG first (homes it first when needed)", false, "snap")       \
-    _("--lamps", "NAMES", "snap: lamps on during the frame: NAME,NAME,... | all | none (default none)", false,     \
-      "snap")                                                                                                     \
+    _("--angle-deg", "DEG", "snap: move the turntable to DEG first (homes it first when needed)", false, "snap",   \
+      .old = "--angle")                                                                                           \
+    _("--lamps-on", "NAMES", "snap: lamps on during the frame: NAME,NAME,... | all | none (default none)", false,  \
+      "snap", .old = "--lamps")                                                                                   \
     _("--exposure-us", "US", "snap: exposure time, us (default: the rig file's, else the camera's)", false, "snap") \
     _("--gain", "G", "snap: gain in the camera's unit (its GenICam <Unit>, recorded) (default: rig file / camera)", false, \
       "snap")                                                                                                     \
@@ -67,7 +71,9 @@ static const char rig_epilog[] =
     _("--sample", "NAME", "snap, serve (virtual rigs): put this sample of the truth file on the table", false,     \
       "snap serve")                                                                                               \
     _("--camera", "NAME", "snap: only this camera of the rig file, written to OUT.png (default all: one camera "     \
-      "writes OUT.png, several OUT_NAME.png each)", false, "snap")
+      "writes OUT.png, several OUT_NAME.png each)", false, "snap")                                                \
+    _("--only", "KIND", "status, identify: open and report only this kind of device: camera, turntable or lamps "  \
+      "(a comma list for more; default every device)", false, "status identify")
 
 static bool word_in(const char *words, const char *w)
 {
@@ -80,7 +86,7 @@ static bool word_in(const char *words, const char *w)
 // The action and its arguments, checked: 0 or MODEL_CLI_USAGE (printed).
 static int check_action(model_cli_t *c)
 {
-#define RIG_OPT_ACTIONS_(name, metavar, help, required, actions) actions,
+#define RIG_OPT_ACTIONS_(name, metavar, help, required, actions, ...) actions,
     static const char *const opt_actions[] = { RIG_OPTS(RIG_OPT_ACTIONS_) };
 #undef RIG_OPT_ACTIONS_
     if (c->npositional < 1)
@@ -99,6 +105,31 @@ static int check_action(model_cli_t *c)
             return model_cli_error(c, "option %s is for %s only, not %s", c->opts[i].name, opt_actions[i], action);
     if (!strcmp(action, "snap") && !model_cli_value(c, "-o")) return model_cli_error(c, "snap needs -o OUT.png");
     return 0;
+}
+
+// --only camera|turntable|lamps (a comma list) -> RIG_DEVICE_* (absent: kept).
+static int only_devices(model_cli_t *c, unsigned *devices)
+{
+    const char *v = model_cli_value(c, "--only");
+    if (!v) return 0;
+    static const struct { const char *word; unsigned kind; } kinds[] = {
+        { "camera", RIG_DEVICE_CAMERAS }, { "cameras", RIG_DEVICE_CAMERAS }, { "turntable", RIG_DEVICE_TURNTABLE },
+        { "lamps", RIG_DEVICE_LAMPS }, { "lamp", RIG_DEVICE_LAMPS } };
+    gchar **words = g_strsplit(v, ",", -1);
+    unsigned m = 0;
+    int rc = 0;
+    for (int i = 0; words[i] && !rc; i++) {
+        const char *w = g_strstrip(words[i]);
+        size_t k = 0;
+        while (k < sizeof kinds / sizeof kinds[0] && strcmp(kinds[k].word, w)) k++;
+        if (k == sizeof kinds / sizeof kinds[0])
+            rc = model_cli_error(c, "option --only: '%s' is none of camera, turntable, lamps", w);
+        else
+            m |= kinds[k].kind;
+    }
+    g_strfreev(words);
+    if (!rc) *devices = m;
+    return rc;
 }
 
 // Angle: finite, within the wrappers' +-10000 deg.
@@ -194,7 +225,7 @@ static int lamps_mask(const rig_t *r, const char *spec, uint32_t *mask)
         char *nm = g_strstrip(names[i]);
         int k = rig_lamps_find(l, nm);
         if (k < 0) {
-            rc = rig_fail(RIG_ERR_INVALID, "refl rig: --lamps: the rig %s has no lamp '%s' (its lamps: %s)",
+            rc = rig_fail(RIG_ERR_INVALID, "refl rig: --lamps-on: the rig %s has no lamp '%s' (its lamps: %s)",
                           r->path, nm, known);
             break;
         }
@@ -232,8 +263,81 @@ static const char *yes_no(bool b) { return b ? "yes" : "no"; }
 // ---------------------------------------------------------------------------
 // Actions
 
-// Every device is reported, also after one fails ("DEVICE_error: ..."); the
-// first failure's code is returned.
+// The devices that failed, for the closing message: "the turntable, the
+// camera left and the lamps did not open (their DEVICE_error lines above)".
+typedef struct {
+    char what[RIG_CAMERAS_MAX + 2][48];   // "the turntable", "the camera left", ...
+    char line[32];                        // the first one's DEVICE_error line
+    int  n, unopened;
+} failed_t;
+
+// The cameras of the rig file that were asked for: open or not.
+static int cameras_asked(const rig_t *r)
+{
+    int n = r->ncameras;
+    for (int i = 0; i < r->nfailed; i++) n += r->failed[i].kind == RIG_DEVICE_CAMERAS;
+    return n;
+}
+
+static void failed_add(failed_t *f, const rig_t *r, const char *kind, const char *camera, bool unopened)
+{
+    if (f->n >= (int)(sizeof f->what / sizeof f->what[0])) return;
+    if (camera && cameras_asked(r) > 1) snprintf(f->what[f->n], sizeof f->what[0], "the camera %s", camera);
+    else snprintf(f->what[f->n], sizeof f->what[0], "the %s", kind);
+    if (!f->n) snprintf(f->line, sizeof f->line, "%s_error", kind);
+    f->n++;
+    f->unopened += unopened;
+}
+
+// The closing message of status and identify when a device failed; rc unchanged.
+static int failed_report(const failed_t *f, const char *action, int rc)
+{
+    if (!f->n) return rc;
+    char list[600] = "";
+    for (int i = 0; i < f->n; i++)
+        snprintf(list + strlen(list), sizeof list - strlen(list), "%s%s", !i ? "" : i == f->n - 1 ? " and " : ", ",
+                 f->what[i]);
+    const char *verb = f->unopened == f->n ? "did not open" : f->unopened ? "did not open or answer" : "did not answer";
+    if (f->n == 1) rig_fail(rc, "refl rig %s: %s %s (its %s line above)", action, list, verb, f->line);
+    else rig_fail(rc, "refl rig %s: %s %s (their DEVICE_error lines above)", action, list, verb);
+    return rc;
+}
+
+// The device of this kind that did not open (rig_open_with keep_going), or NULL.
+static const rig_open_failure_t *open_failure(const rig_t *r, unsigned kind)
+{
+    for (int i = 0; i < r->nfailed; i++)
+        if (r->failed[i].kind == kind) return &r->failed[i];
+    return NULL;
+}
+
+// The cameras that did not open and come before open camera i (i = ncameras:
+// those after the last), each as "camera_name", "camera: not open",
+// "camera_error"; counted in *f. RIG_ERR_NO_DEVICE when there was one, else rc.
+static int report_unopened_cameras(const rig_t *r, int i, failed_t *f, int rc)
+{
+    for (int k = 0; k < r->nfailed; k++) {
+        const rig_open_failure_t *x = &r->failed[k];
+        if (x->kind != RIG_DEVICE_CAMERAS || x->before != i) continue;
+        printf("camera_name: %s\ncamera: not open\ncamera_error: %s\n", x->name, x->error);
+        failed_add(f, r, "camera", x->name, true);
+        if (!rc) rc = RIG_ERR_NO_DEVICE;
+    }
+    return rc;
+}
+
+// The lines of a kind that did not open ("turntable: not open",
+// "turntable_error: ..."): true when it did not.
+static bool report_unopened(const rig_t *r, unsigned kind, const char *name, failed_t *f, int *rc)
+{
+    const rig_open_failure_t *x = open_failure(r, kind);
+    if (!x) return false;
+    printf("%s: not open\n%s_error: %s\n", name, name, x->error);
+    failed_add(f, r, name, NULL, true);
+    if (!*rc) *rc = RIG_ERR_NO_DEVICE;
+    return true;
+}
+
 // One camera's lines of `refl rig status`: 0 or its error code (its camera_error line printed).
 static int status_camera(rig_t *r, int i)
 {
@@ -259,107 +363,135 @@ static int status_camera(rig_t *r, int i)
     return 0;
 }
 
-// Every device is reported, also after one fails ("DEVICE_error: ..."); the
-// first failure's code is returned. Each camera is a block of lines beginning
-// with its camera_name line.
+static void status_turntable(rig_t *r, failed_t *f, int *rc)
+{
+    rig_turntable_status_t st;
+    int e;
+    if (report_unopened(r, RIG_DEVICE_TURNTABLE, "turntable", f, rc)) return;
+    if (!r->turntable) {
+        printf("turntable: none\n");
+    } else if ((e = rig_turntable_status(r->turntable, &st))) {
+        printf("turntable: %s\nturntable_error: %s\n", rig_turntable_name(r->turntable), model_last_error());
+        failed_add(f, r, "turntable", NULL, false);
+        if (!*rc) *rc = e;
+    } else {
+        printf("turntable: %s\nturntable_angle_deg: %.4f\nturntable_homed: %s\nturntable_moving: %s\n",
+               rig_turntable_name(r->turntable), st.angle_deg, yes_no(st.homed), yes_no(st.moving || st.homing));
+        if (st.motion_error || st.limit_fwd || st.limit_rev)
+            printf("turntable_faults: %s%s%s\n", st.motion_error ? "motion-error " : "",
+                   st.limit_fwd ? "limit-forward " : "", st.limit_rev ? "limit-reverse" : "");
+    }
+}
+
+// Every device of the kinds asked for is reported, also after one fails or
+// did not open ("DEVICE_error: ..."); the first failure's code is returned.
+// Each camera is a block of lines beginning with its camera_name line.
 int rig_cmd_status(rig_t *r)
 {
     int rc = 0, e;
-    char failed[600] = "";
-    int nfailed = 0;
+    failed_t f = { .n = 0 };
+    unsigned dev = r->devices ? r->devices : RIG_DEVICE_ALL;
     printf("rig_file: %s\nrig_sha256: %s\n", r->path, r->sha256);
     if (r->virt)
         printf("rig_backend: virtual (truth %s, sample %s)\n", rig_virtual_truth_path(r->virt),
                rig_virtual_sample(r->virt));
     else
         printf("rig_backend: devices\n");
-    if (r->turntable) {
-        rig_turntable_status_t st;
-        if ((e = rig_turntable_status(r->turntable, &st))) {
-            printf("turntable: %s\nturntable_error: %s\n", rig_turntable_name(r->turntable), model_last_error());
-            snprintf(failed, sizeof failed, "the turntable");
-            nfailed++;
-            if (!rc) rc = e;
+    if (dev & RIG_DEVICE_TURNTABLE) status_turntable(r, &f, &rc);
+    if ((dev & RIG_DEVICE_LAMPS) && !report_unopened(r, RIG_DEVICE_LAMPS, "lamps", &f, &rc)) {
+        if (r->lamps && rig_lamps_count(r->lamps) > 0) {
+            for (int i = 0; i < rig_lamps_count(r->lamps); i++)
+                printf("lamp %s: %s (%s)\n", rig_lamps_name(r->lamps, i),
+                       (rig_lamps_on_mask(r->lamps) >> i) & 1 ? "on" : "off", rig_lamps_backend(r->lamps));
         } else {
-            printf("turntable: %s\nturntable_angle_deg: %.4f\nturntable_homed: %s\nturntable_moving: %s\n",
-                   rig_turntable_name(r->turntable), st.angle_deg, yes_no(st.homed), yes_no(st.moving || st.homing));
-            if (st.motion_error || st.limit_fwd || st.limit_rev)
-                printf("turntable_faults: %s%s%s\n", st.motion_error ? "motion-error " : "",
-                       st.limit_fwd ? "limit-forward " : "", st.limit_rev ? "limit-reverse" : "");
+            printf("lamps: none\n");
         }
-    } else {
-        printf("turntable: none\n");
     }
-    if (r->lamps && rig_lamps_count(r->lamps) > 0) {
-        for (int i = 0; i < rig_lamps_count(r->lamps); i++)
-            printf("lamp %s: %s (%s)\n", rig_lamps_name(r->lamps, i),
-                   (rig_lamps_on_mask(r->lamps) >> i) & 1 ? "on" : "off", rig_lamps_backend(r->lamps));
-    } else {
-        printf("lamps: none\n");
-    }
-    if (r->ncameras == 0) printf("camera: none\n");
-    else if (r->ncameras > 1) printf("cameras: %d\n", r->ncameras);
-    for (int i = 0; i < r->ncameras; i++) {
-        if (!(e = status_camera(r, i))) continue;
-        size_t n = strlen(failed);
-        if (r->ncameras == 1)
-            snprintf(failed + n, sizeof failed - n, "%sthe camera", n ? " and " : "");
-        else
-            snprintf(failed + n, sizeof failed - n, "%sthe camera %s", n ? " and " : "", r->camera_names[i]);
-        nfailed++;
+    if (!(dev & RIG_DEVICE_CAMERAS)) return failed_report(&f, "status", rc);
+    int ncam = cameras_asked(r);
+    if (ncam == 0) printf("camera: none\n");
+    else if (ncam > 1) printf("cameras: %d\n", ncam);
+    for (int i = 0; i <= r->ncameras; i++) {
+        rc = report_unopened_cameras(r, i, &f, rc);
+        if (i == r->ncameras || !(e = status_camera(r, i))) continue;
+        failed_add(&f, r, "camera", r->camera_names[i], false);
         if (!rc) rc = e;
     }
-    if (nfailed)
-        rig_fail(rc, "refl rig status: %s did not answer (%s above)", failed,
-                 nfailed > 1                           ? "their DEVICE_error lines"
-                 : strncmp(failed, "the camera", 10) ? "its turntable_error line"
-                                                     : "its camera_error line");
-    return rc;
+    return failed_report(&f, "status", rc);
 }
 
-static int do_identify(rig_t *r)
+static void identify_turntable(rig_t *r, failed_t *f, int *rc)
 {
-    int rc = 0;
-    printf("rig_file: %s\nrig_sha256: %s\n", r->path, r->sha256);
-    if (r->turntable) {
-        rig_turntable_info_t in;
-        if ((rc = rig_turntable_info(r->turntable, &in))) return rc;
+    rig_turntable_info_t in;
+    int e;
+    if (report_unopened(r, RIG_DEVICE_TURNTABLE, "turntable", f, rc)) return;
+    if (!r->turntable) {
+        printf("turntable: none\n");
+    } else if ((e = rig_turntable_info(r->turntable, &in))) {
+        printf("turntable: %s\nturntable_error: %s\n", rig_turntable_name(r->turntable), model_last_error());
+        failed_add(f, r, "turntable", NULL, false);
+        if (!*rc) *rc = e;
+    } else {
         printf("turntable: %s\nturntable_backend: %s\nturntable_model: %s\nturntable_serial: %s\n"
                "turntable_firmware: %s\nturntable_counts_per_deg: %.6g\n",
-               rig_turntable_name(r->turntable), rig_turntable_backend(r->turntable), in.model, in.serial, in.firmware,
-               in.counts_per_deg);
-    } else {
-        printf("turntable: none\n");
+               rig_turntable_name(r->turntable), rig_turntable_backend(r->turntable), in.model, in.serial,
+               in.firmware, in.counts_per_deg);
     }
-    if (r->ncameras == 0) printf("camera: none\n");
-    for (int i = 0; i < r->ncameras; i++) {
-        rig_camera_t *c = r->cameras[i];
-        rig_frame_meta_t m;
-        if ((rc = rig_camera_settings(c, &m))) return rc;
-        printf("camera_name: %s\ncamera: %s\ncamera_backend: %s\ncamera_vendor: %s\ncamera_model: %s\n"
-               "camera_serial: %s\ncamera_firmware: %s\ncamera_sensor_region: %d x %d\n",
-               r->camera_names[i], rig_camera_name(c), rig_camera_backend(c), m.vendor, m.model, m.serial,
-               m.firmware[0] ? m.firmware : "none (not stated)", m.width, m.height);
-    }
-    if (r->lamps && rig_lamps_count(r->lamps) > 0) {
-        for (int i = 0; i < rig_lamps_count(r->lamps); i++) {
-            const rig_lamp_line_t *a = rig_lamps_line(r->lamps, i);
-            if (!strcmp(rig_lamps_backend(r->lamps), "gpiod"))
-                printf("lamp %s: gpiod %s line %u %s, warm-up %g ms, settle %g ms\n", a->name, a->chip, a->line,
-                       a->active_low ? "active-low" : "active-high", a->warmup_ms, a->settle_ms);
-            else
-                printf("lamp %s: %s%s, warm-up %g ms, settle %g ms\n", a->name, rig_lamps_backend(r->lamps),
-                       r->virt ? " (virtual rig)" : "", a->warmup_ms, a->settle_ms);
-        }
-    } else {
+}
+
+static void identify_lamps(rig_t *r, failed_t *f, int *rc)
+{
+    if (report_unopened(r, RIG_DEVICE_LAMPS, "lamps", f, rc)) return;
+    if (!r->lamps || rig_lamps_count(r->lamps) == 0) {
         printf("lamps: none\n");
+        return;
     }
+    for (int i = 0; i < rig_lamps_count(r->lamps); i++) {
+        const rig_lamp_line_t *a = rig_lamps_line(r->lamps, i);
+        if (!strcmp(rig_lamps_backend(r->lamps), "gpiod"))
+            printf("lamp %s: gpiod %s line %u %s, warm-up %g ms, settle %g ms\n", a->name, a->chip, a->line,
+                   a->active_low ? "active-low" : "active-high", a->warmup_ms, a->settle_ms);
+        else
+            printf("lamp %s: %s%s, warm-up %g ms, settle %g ms\n", a->name, rig_lamps_backend(r->lamps),
+                   r->virt ? " (virtual rig)" : "", a->warmup_ms, a->settle_ms);
+    }
+}
+
+// Model, serial and firmware of every device of the kinds asked for, also
+// after one fails or did not open (its DEVICE_error line); the first failure's code.
+static int do_identify(rig_t *r)
+{
+    int rc = 0, e;
+    failed_t f = { .n = 0 };
+    unsigned dev = r->devices ? r->devices : RIG_DEVICE_ALL;
+    printf("rig_file: %s\nrig_sha256: %s\n", r->path, r->sha256);
+    if (dev & RIG_DEVICE_TURNTABLE) identify_turntable(r, &f, &rc);
+    if (dev & RIG_DEVICE_CAMERAS) {
+        if (r->ncameras == 0 && !open_failure(r, RIG_DEVICE_CAMERAS)) printf("camera: none\n");
+        for (int i = 0; i <= r->ncameras; i++) {
+            rc = report_unopened_cameras(r, i, &f, rc);
+            if (i == r->ncameras) continue;
+            rig_camera_t *c = r->cameras[i];
+            rig_frame_meta_t m;
+            printf("camera_name: %s\ncamera: %s\ncamera_backend: %s\n", r->camera_names[i], rig_camera_name(c),
+                   rig_camera_backend(c));
+            if ((e = rig_camera_settings(c, &m))) {
+                printf("camera_error: %s\n", model_last_error());
+                failed_add(&f, r, "camera", r->camera_names[i], false);
+                if (!rc) rc = e;
+                continue;
+            }
+            printf("camera_vendor: %s\ncamera_model: %s\ncamera_serial: %s\ncamera_firmware: %s\n"
+                   "camera_sensor_region: %d x %d\n", m.vendor, m.model, m.serial,
+                   m.firmware[0] ? m.firmware : "none (not stated)", m.width, m.height);
+        }
+    }
+    if (dev & RIG_DEVICE_LAMPS) identify_lamps(r, &f, &rc);
     if (r->virt)
         printf("virtual_truth: %s\nvirtual_sample: %s\nvirtual_camera_address: %s\n",
                rig_virtual_truth_path(r->virt), rig_virtual_sample(r->virt), rig_virtual_camera_address(r->virt));
-    return 0;
+    return failed_report(&f, "identify", rc);
 }
-
 
 typedef struct {
     bool        have_angle;
@@ -514,7 +646,7 @@ static int do_snap(rig_t *r, const snap_t *o, const char *cmdline)
         goto done;
     }
     if (o->have_angle) {
-        if ((rc = need_turntable(r, "snap --angle")) || (rc = move_to(r, o->angle_deg))) goto done;
+        if ((rc = need_turntable(r, "snap --angle-deg")) || (rc = move_to(r, o->angle_deg))) goto done;
     }
     char on_names[1100];
     lamp_names(r->lamps, mask, on_names, sizeof on_names);
@@ -577,9 +709,43 @@ static bool file_is_virtual(const char *path, bool *readable)
 
 // ---------------------------------------------------------------------------
 
+// snap's options, checked: 0 or MODEL_CLI_USAGE / 1 (printed).
+static int snap_options(model_cli_t *c, snap_t *so)
+{
+    int rc;
+    so->out = model_cli_value(c, "-o");
+    so->lamps = model_cli_value(c, "--lamps-on");
+    so->pixel_format = model_cli_value(c, "--pixel-format");
+    so->camera = model_cli_value(c, "--camera");
+    size_t n = strlen(so->out);
+    if (n < 4 || strcasecmp(so->out + n - 4, ".png"))
+        return model_cli_error(c, "option -o: '%s' must end in .png (16-bit grey PNG)", so->out);
+    if ((rc = check_out_path(so->out))) return 1;
+    if (model_cli_value(c, "--angle-deg")) {
+        so->have_angle = true;
+        if ((rc = parse_angle(c, "option --angle-deg", model_cli_value(c, "--angle-deg"), &so->angle_deg))) return rc;
+    }
+    if ((rc = model_cli_double(c, "--exposure-us", &so->exposure_us, 0, true, 1e8, "0 < US <= 1e8")) ||
+        (rc = model_cli_double(c, "--gain", &so->gain, -100, false, 100, "-100..100")))
+        return rc;
+    rig_pixfmt_t pf;
+    if (so->pixel_format && !rig_pixfmt_from_name(so->pixel_format, &pf))
+        return model_cli_error(c, "option --pixel-format: '%s' is not Mono8, Mono10, Mono12, Mono16, Mono10p, "
+                               "Mono12p, Mono10Packed or Mono12Packed", so->pixel_format);
+    if (so->lamps) {
+        gchar **names = g_strsplit(so->lamps, ",", -1);
+        bool empty = false;
+        for (int i = 0; names[i]; i++) empty |= !*g_strstrip(names[i]);
+        g_strfreev(names);
+        if (empty) return model_cli_error(c, "option --lamps-on: '%s' has an empty lamp name", so->lamps);
+    }
+    return 0;
+}
+
 int rig_cmd(int argc, char **argv)
 {
-#define RIG_OPT_(name, metavar, help, required, actions) MODEL_OPT_VALUE(name, metavar, help, required),
+#define RIG_OPT_(name, metavar, help, required, actions, ...)                                                    \
+    MODEL_OPT_VALUE(name, metavar, help, required, .alias = !strcmp(name, "-o") ? "--out" : NULL, ##__VA_ARGS__),
     model_opt_t opts[] = { RIG_OPTS(RIG_OPT_) };
 #undef RIG_OPT_
     model_cli_t c = { .cmd = "rig", .synopsis = "ACTION [DEG]", .about = rig_about,
@@ -589,37 +755,15 @@ int rig_cmd(int argc, char **argv)
     if (rc != MODEL_CLI_OK) return rc == MODEL_CLI_HELP ? 0 : rc;
     if ((rc = check_action(&c))) return rc;
     const char *rig_path = model_cli_value(&c, "--rig"), *action = c.positional[0];
+    // the devices each action opens: home and move the turntable alone, --only one kind
+    rig_open_opts_t open = { .devices = RIG_DEVICE_ALL };
+    if (!strcmp(action, "home") || !strcmp(action, "move")) open.devices = RIG_DEVICE_TURNTABLE;
+    if (!strcmp(action, "status") || !strcmp(action, "identify")) open.keep_going = true;
+    if ((rc = only_devices(&c, &open.devices))) return rc;
     double move_deg = 0;
     snap_t so = { .exposure_us = NAN, .gain = NAN };
     if (!strcmp(action, "move") && (rc = parse_angle(&c, "move", c.positional[1], &move_deg))) return rc;
-    if (!strcmp(action, "snap")) {
-        so.out = model_cli_value(&c, "-o");
-        so.lamps = model_cli_value(&c, "--lamps");
-        so.pixel_format = model_cli_value(&c, "--pixel-format");
-        so.camera = model_cli_value(&c, "--camera");
-        size_t n = strlen(so.out);
-        if (n < 4 || strcasecmp(so.out + n - 4, ".png"))
-            return model_cli_error(&c, "option -o: '%s' must end in .png (16-bit grey PNG)", so.out);
-        if ((rc = check_out_path(so.out))) return 1;
-        if (model_cli_value(&c, "--angle")) {
-            so.have_angle = true;
-            if ((rc = parse_angle(&c, "option --angle", model_cli_value(&c, "--angle"), &so.angle_deg))) return rc;
-        }
-        if ((rc = model_cli_double(&c, "--exposure-us", &so.exposure_us, 0, true, 1e8, "0 < US <= 1e8")) ||
-            (rc = model_cli_double(&c, "--gain", &so.gain, -100, false, 100, "-100..100")))
-            return rc;
-        rig_pixfmt_t pf;
-        if (so.pixel_format && !rig_pixfmt_from_name(so.pixel_format, &pf))
-            return model_cli_error(&c, "option --pixel-format: '%s' is not Mono8, Mono10, Mono12, Mono16, Mono10p, "
-                                   "Mono12p, Mono10Packed or Mono12Packed", so.pixel_format);
-        if (so.lamps) {
-            gchar **names = g_strsplit(so.lamps, ",", -1);
-            bool empty = false;
-            for (int i = 0; names[i]; i++) empty |= !*g_strstrip(names[i]);
-            g_strfreev(names);
-            if (empty) return model_cli_error(&c, "option --lamps: '%s' has an empty lamp name", so.lamps);
-        }
-    }
+    if (!strcmp(action, "snap") && (rc = snap_options(&c, &so))) return rc;
     bool serve = !strcmp(action, "serve");
     sigset_t stop_set;
     sigemptyset(&stop_set);
@@ -641,7 +785,7 @@ int rig_cmd(int argc, char **argv)
     char *cmdline = model_command_line(argc, argv);
     rig_t *r = NULL;
     fprintf(stderr, "refl rig: opening %s\n", rig_path);
-    if ((rc = rig_open(&r, rig_path))) goto done;
+    if ((rc = rig_open_with(&r, rig_path, &open))) goto done;
     const char *sample = model_cli_value(&c, "--sample");
     if (sample) {
         if (!r->virt) {

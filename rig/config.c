@@ -417,7 +417,7 @@ static int parse_lamp(spec_t *s, const char *sec, int line, const backend_def_t 
                         sizeof s->lamps[0].name - 1);
     if (strchr(name, ',') || !strcmp(name, "all") || !strcmp(name, "none"))
         return cfg_fail(s, line, "[lamp %s]: lamp names may not contain ',' or be 'all' or 'none' (they are "
-                        "written as refl rig --lamps NAME,NAME|all|none); rename it", name);
+                        "written as refl rig snap --lamps NAME,NAME|all|none); rename it", name);
     if (s->nlamps >= MAX_LAMPS)
         return cfg_fail(s, line, "[lamp %s]: more than %d lamps; a rig switches at most %d", name, MAX_LAMPS,
                         MAX_LAMPS);
@@ -602,94 +602,148 @@ static void add_camera(rig_t *r, rig_camera_t *c, const char *name)
     r->camera = r->cameras[0];
 }
 
-static int open_devices(rig_t *r, spec_t *s)
+// A device that did not open: with keep_going, recorded in r->failed (its
+// message, already composed with the file and line) and 0; else rc.
+static int open_failed(rig_t *r, int rc, unsigned kind, const char *name, bool keep_going)
 {
-    int rc = 0;
-    if (s->virt) {
-        rig_virtual_options_t o = rig_virtual_defaults();
-        o.serve = s->inprocess ? RIG_VIRTUAL_SERVE_INPROCESS : RIG_VIRTUAL_SERVE_GIGE;
-        o.address = s->address;
-        if (s->sample[0]) o.sample = s->sample;
-        o.time_scale = s->time_scale;
-        if (s->have_noise_seed) o.noise_seed = s->noise_seed;
-        o.busy_wait_s = s->busy_wait_s;
-        QUIET(rig_virtual_open(&r->virt, s->truth, &o));
-        if (rc) return device_fail(rc, s, s->rig_line, "rig");
-        r->turntable = rig_virtual_turntable(r->virt);
-        r->lamps = rig_virtual_lamps(r->virt);
-        // The stage's profile is the truth file's [turntable] (defaults of the sim stage otherwise).
-        rig_turntable_sim_params_t p = rig_turntable_sim_defaults();
-        bool q = model_error_quiet_thread(true);
-        model_ini_t *truth = model_ini_load(s->truth);
-        model_error_quiet_thread(q);
-        const model_ini_entry_t *e;
-        double v;
-        if ((e = model_ini_get(truth, "turntable", "speed_deg_s")) && model_parse_double(e->value, &v) && v > 0)
-            p.speed_deg_s = v;
-        if ((e = model_ini_get(truth, "turntable", "accel_deg_s2")) && model_parse_double(e->value, &v) && v > 0)
-            p.accel_deg_s2 = v;
-        if ((e = model_ini_get(truth, "turntable", "home_time_s")) && model_parse_double(e->value, &v) && v >= 0)
-            p.home_time_s = v;
-        model_ini_free(truth);
-        p.time_scale = s->time_scale;
-        set_profile_sim(r, &p);
-        for (int k = 0; k < rig_virtual_ncameras(r->virt); k++) {   // every camera of the truth file
-            rig_virtual_t *view = rig_virtual_camera_view(r->virt, k);
-            rig_camera_t *c = NULL;
-            QUIET(rig_camera_open_aravis(&c, rig_virtual_camera_address(view)));
-            if (rc) return device_fail(rc, s, s->rig_line, "rig");
-            add_camera(r, c, rig_virtual_camera_name(view));
-            if ((rc = apply_camera_defaults(c, s->pixel_format, s->exposure_us, s->gain, s->packet_size,
-                                            s->packet_delay, s->packet_line, s, s->rig_line, "rig")))
-                return rc;
-        }
+    if (!keep_going || r->nfailed >= (int)(sizeof r->failed / sizeof r->failed[0])) return rc;
+    rig_open_failure_t *f = &r->failed[r->nfailed++];
+    f->kind = kind;
+    snprintf(f->name, sizeof f->name, "%s", name ? name : "");
+    f->before = r->ncameras;
+    snprintf(f->error, sizeof f->error, "%s", model_last_error());
+    return 0;
+}
+
+// One camera of the file (or the virtual rig's camera at address id) opened
+// with its settings and entered in r.
+static int open_camera(rig_t *r, const spec_t *s, const char *id, const char *name, int k, bool keep_going)
+{
+    rig_camera_t *c = NULL;
+    int rc;
+    bool v = s->virt, q = model_error_quiet_thread(true);
+    model_error_quiet_thread(q || keep_going);   // a failure recorded with keep_going is not printed
+    QUIET(rig_camera_open_aravis(&c, id));
+    if (rc) rc = device_fail(rc, s, v ? s->rig_line : s->cam[k].line, v ? "rig" : s->cam[k].section);
+    else if (v)
+        rc = apply_camera_defaults(c, s->pixel_format, s->exposure_us, s->gain, s->packet_size, s->packet_delay,
+                                   s->packet_line, s, s->rig_line, "rig");
+    else
+        rc = apply_camera_defaults(c, s->cam[k].pixel_format, s->cam[k].exposure_us, s->cam[k].gain,
+                                   s->cam[k].packet_size, s->cam[k].packet_delay, s->cam[k].packet_line, s,
+                                   s->cam[k].line, s->cam[k].section);
+    model_error_quiet_thread(q);
+    if (!rc) {
+        add_camera(r, c, name);
         return 0;
     }
-    if (s->have_turntable) {
-        if (s->turntable_apt) {
-            QUIET(rig_turntable_open_apt(&r->turntable, s->apt_serial[0] ? s->apt_serial : NULL,
-                                         s->apt_stage[0] ? s->apt_stage : NULL));
-            if (!rc) {
-                rig_turntable_info_t info;
-                QUIET(rig_turntable_info(r->turntable, &info));
-                set_profile_from_stage(r, s->apt_stage[0] ? s->apt_stage : rc ? NULL : info.model);
-                if (!rc && info.speed_deg_s > 0 && info.accel_deg_s2 > 0 && info.home_time_s > 0) {
-                    // the controller's own (or the table's) speeds, as the driver found them
-                    r->speed_deg_s = info.speed_deg_s;
-                    r->accel_deg_s2 = info.accel_deg_s2;
-                    r->home_time_s = info.home_time_s;
-                }
-                rc = 0;
-            }
-        } else {
-            QUIET(rig_turntable_open_sim(&r->turntable, &s->sim));
-            set_profile_sim(r, &s->sim);
-        }
-        if (rc) return device_fail(rc, s, s->turntable_line, "turntable");
+    if (c) {   // opened, but its settings failed: closed again (keeping the message)
+        char keep[1280];
+        snprintf(keep, sizeof keep, "%s", model_last_error());
+        rig_camera_close(c);
+        q = model_error_quiet_thread(true);
+        rig_fail(rc, "%s", keep);
+        model_error_quiet_thread(q);
     }
-    if (s->nlamps > 0) {
-        if (s->lamps_gpiod) QUIET(rig_lamps_open_gpiod_state(&r->lamps, s->lamps, s->nlamps, s->lamp_state_file));
-        else QUIET(rig_lamps_open_sim_state(&r->lamps, s->lamps, s->nlamps, s->lamp_state_file));
-        if (rc) {
-            char sec[80];
-            snprintf(sec, sizeof sec, "lamp %s", s->lamps[0].name);
-            return device_fail(rc, s, s->lamp_line[0], sec);
-        }
-    }
-    for (int i = 0; i < s->ncameras; i++) {
-        rig_camera_t *c = NULL;
-        QUIET(rig_camera_open_aravis(&c, s->cam[i].id));
-        if (rc) return device_fail(rc, s, s->cam[i].line, s->cam[i].section);
-        add_camera(r, c, s->cam[i].name);
-        if ((rc = apply_camera_defaults(c, s->cam[i].pixel_format, s->cam[i].exposure_us, s->cam[i].gain,
-                                        s->cam[i].packet_size, s->cam[i].packet_delay, s->cam[i].packet_line, s,
-                                        s->cam[i].line, s->cam[i].section)))
+    return open_failed(r, rc, RIG_DEVICE_CAMERAS, name, keep_going);
+}
+
+// The virtual rig: its simulation, and its cameras when asked.
+static int open_virtual(rig_t *r, spec_t *s, unsigned devices, bool keep_going)
+{
+    int rc = 0;
+    rig_virtual_options_t o = rig_virtual_defaults();
+    o.serve = s->inprocess ? RIG_VIRTUAL_SERVE_INPROCESS : RIG_VIRTUAL_SERVE_GIGE;
+    o.address = s->address;
+    if (s->sample[0]) o.sample = s->sample;
+    o.time_scale = s->time_scale;
+    if (s->have_noise_seed) o.noise_seed = s->noise_seed;
+    o.busy_wait_s = s->busy_wait_s;
+    QUIET(rig_virtual_open(&r->virt, s->truth, &o));
+    if (rc) return device_fail(rc, s, s->rig_line, "rig");
+    if (devices & RIG_DEVICE_TURNTABLE) r->turntable = rig_virtual_turntable(r->virt);
+    if (devices & RIG_DEVICE_LAMPS) r->lamps = rig_virtual_lamps(r->virt);
+    // The stage's profile is the truth file's [turntable] (defaults of the sim stage otherwise).
+    rig_turntable_sim_params_t p = rig_turntable_sim_defaults();
+    bool q = model_error_quiet_thread(true);
+    model_ini_t *truth = model_ini_load(s->truth);
+    model_error_quiet_thread(q);
+    const model_ini_entry_t *e;
+    double v;
+    if ((e = model_ini_get(truth, "turntable", "speed_deg_s")) && model_parse_double(e->value, &v) && v > 0)
+        p.speed_deg_s = v;
+    if ((e = model_ini_get(truth, "turntable", "accel_deg_s2")) && model_parse_double(e->value, &v) && v > 0)
+        p.accel_deg_s2 = v;
+    if ((e = model_ini_get(truth, "turntable", "home_time_s")) && model_parse_double(e->value, &v) && v >= 0)
+        p.home_time_s = v;
+    model_ini_free(truth);
+    p.time_scale = s->time_scale;
+    set_profile_sim(r, &p);
+    for (int k = 0; (devices & RIG_DEVICE_CAMERAS) && k < rig_virtual_ncameras(r->virt); k++) {   // the truth file's
+        rig_virtual_t *view = rig_virtual_camera_view(r->virt, k);
+        if ((rc = open_camera(r, s, rig_virtual_camera_address(view), rig_virtual_camera_name(view), k, keep_going)))
             return rc;
     }
     return 0;
 }
 
+// The APT stage, its motion profile from the controller (or the stage table).
+static int open_apt(rig_t *r, const spec_t *s)
+{
+    int rc;
+    QUIET(rig_turntable_open_apt(&r->turntable, s->apt_serial[0] ? s->apt_serial : NULL,
+                                 s->apt_stage[0] ? s->apt_stage : NULL));
+    if (rc) return rc;
+    rig_turntable_info_t info;
+    QUIET(rig_turntable_info(r->turntable, &info));
+    set_profile_from_stage(r, s->apt_stage[0] ? s->apt_stage : rc ? NULL : info.model);
+    if (!rc && info.speed_deg_s > 0 && info.accel_deg_s2 > 0 && info.home_time_s > 0) {
+        // the controller's own (or the table's) speeds, as the driver found them
+        r->speed_deg_s = info.speed_deg_s;
+        r->accel_deg_s2 = info.accel_deg_s2;
+        r->home_time_s = info.home_time_s;
+    }
+    return 0;
+}
+
+static int open_devices(rig_t *r, spec_t *s, unsigned devices, bool keep_going)
+{
+    int rc = 0;
+    if (s->virt) return open_virtual(r, s, devices, keep_going);
+    bool q = model_error_quiet_thread(true);
+    model_error_quiet_thread(q || keep_going);   // a failure recorded with keep_going is not printed
+    if (s->have_turntable && (devices & RIG_DEVICE_TURNTABLE)) {
+        if (s->turntable_apt) {
+            rc = open_apt(r, s);
+        } else {
+            QUIET(rig_turntable_open_sim(&r->turntable, &s->sim));
+            set_profile_sim(r, &s->sim);
+        }
+        if (rc) rc = open_failed(r, device_fail(rc, s, s->turntable_line, "turntable"), RIG_DEVICE_TURNTABLE, NULL,
+                                 keep_going);
+    }
+    if (!rc && s->nlamps > 0 && (devices & RIG_DEVICE_LAMPS)) {
+        if (s->lamps_gpiod) QUIET(rig_lamps_open_gpiod_state(&r->lamps, s->lamps, s->nlamps, s->lamp_state_file));
+        else QUIET(rig_lamps_open_sim_state(&r->lamps, s->lamps, s->nlamps, s->lamp_state_file));
+        if (rc) {
+            char sec[80];
+            snprintf(sec, sizeof sec, "lamp %s", s->lamps[0].name);
+            rc = open_failed(r, device_fail(rc, s, s->lamp_line[0], sec), RIG_DEVICE_LAMPS, NULL, keep_going);
+        }
+    }
+    model_error_quiet_thread(q);
+    for (int i = 0; !rc && (devices & RIG_DEVICE_CAMERAS) && i < s->ncameras; i++)
+        rc = open_camera(r, s, s->cam[i].id, s->cam[i].name, i, keep_going);
+    return rc;
+}
+
 int rig_open(rig_t **out, const char *path)
+{
+    const rig_open_opts_t all = { .devices = RIG_DEVICE_ALL };
+    return rig_open_with(out, path, &all);
+}
+
+int rig_open_with(rig_t **out, const char *path, const rig_open_opts_t *o)
 {
     if (!out) return rig_fail(RIG_ERR_INVALID, "rig_open: NULL output");
     *out = NULL;
@@ -722,7 +776,8 @@ int rig_open(rig_t **out, const char *path)
     r->exposure_us = s.exposure_us;
     r->gain = s.gain;
     r->speed_deg_s = r->accel_deg_s2 = r->home_time_s = NAN;
-    if ((rc = open_devices(r, &s))) goto done;
+    r->devices = o->devices & RIG_DEVICE_ALL;
+    if ((rc = open_devices(r, &s, r->devices, o->keep_going))) goto done;
     *out = r;
     r = NULL;
 done:

@@ -36,7 +36,7 @@ extern "C" {
 //   [lamp NAME]  backend = gpiod: chip, line (required), active_low (true/false), warmup_ms, settle_ms
 //                | sim: position_mm = x y z (nominal position, rig frame; checked, not used),
 //                warmup_ms, settle_ms. All lamps use one backend; NAME without ',' and not
-//                "all"/"none" (refl rig --lamps NAME,NAME|all|none); at most 32 lamps.
+//                "all"/"none" (refl rig snap --lamps NAME,NAME|all|none); at most 32 lamps.
 //   [lamps]      state_file = PATH (relative to the rig file's directory): the lamp-state file
 //                (rig/lamps/state.c; default: per user, named after the chips and lines; sim
 //                lamps keep one only when given this)
@@ -59,6 +59,17 @@ extern "C" {
 #define RIG_CAMERAS_MAX 8
 #define RIG_CAMERA_NAME_MAX 32
 
+// The kinds of device of a rig file, to open a part of it (rig_open_with).
+enum { RIG_DEVICE_TURNTABLE = 1, RIG_DEVICE_LAMPS = 2, RIG_DEVICE_CAMERAS = 4, RIG_DEVICE_ALL = 7 };
+
+// A device that did not open (rig_open_with, keep_going).
+typedef struct {
+    unsigned kind;                         // RIG_DEVICE_TURNTABLE, _LAMPS or _CAMERAS
+    char     name[RIG_CAMERA_NAME_MAX];    // a camera's name in the rig file ("" for the others)
+    int      before;                       // a camera: how many open cameras come before it in the file
+    char     error[1280];                  // "FILE:LINE: [SECTION]: the driver's message"
+} rig_open_failure_t;
+
 typedef struct rig {
     char            *path;
     char             sha256[65];
@@ -75,6 +86,9 @@ typedef struct rig {
     // The turntable's motion profile, for time-outs: real seconds (a simulated
     // stage's time_scale applied). Cruise speed, acceleration, longest homing.
     double           speed_deg_s, accel_deg_s2, home_time_s;
+    unsigned         devices;       // the RIG_DEVICE_* kinds asked for (rig_open: all)
+    int              nfailed;       // rig_open_with keep_going: the devices that did not open, file order
+    rig_open_failure_t failed[RIG_CAMERAS_MAX + 2];
 } rig_t;
 
 // Parse the rig file and open every device in it (lamps off): the turntable,
@@ -86,6 +100,17 @@ typedef struct rig {
 // turntable (virtual rig) closed; accepts NULL.
 int  rig_open(rig_t **out, const char *path);
 void rig_close(rig_t *r);
+// rig_open of a part of the rig, one device at a time: only the kinds in
+// devices (RIG_DEVICE_*; the file is still parsed and checked whole; a virtual
+// rig's simulation always starts, its cameras are opened only when asked). With
+// keep_going a device that fails to open is recorded in r->failed with its
+// message (not printed) and the others are still opened: 0 and an open rig_t
+// whose r->nfailed says how many failed. Without it, as rig_open.
+typedef struct {
+    unsigned devices;
+    bool     keep_going;
+} rig_open_opts_t;
+int  rig_open_with(rig_t **out, const char *path, const rig_open_opts_t *o);
 // Only the parsing and checking rig_open does, of a rig file's text (name: the
 // file's path, used in messages and to resolve [rig] truth, which is not read):
 // 0, or RIG_ERR_INVALID with the file:line message of rig_open. Opens nothing.
@@ -109,8 +134,9 @@ int  rig_camera_find(const rig_t *r, const char *name);
 
 // `refl rig` (rig/cmd_rig.c).
 int rig_cmd(int argc, char **argv);
-// `refl rig status` of an open rig on stdout: every device, also after one
-// fails (its DEVICE_error line); 0, or the first failure's RIG_ERR_* code.
+// `refl rig status` of an open rig on stdout: every device of the kinds it
+// was opened with (r->devices), also after one fails or did not open (its
+// DEVICE_error line); 0, or the first failure's RIG_ERR_* code.
 int rig_cmd_status(rig_t *r);
 
 #ifdef __cplusplus

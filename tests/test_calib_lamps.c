@@ -768,19 +768,19 @@ TEST(calib_lamps_bad_arguments)
         int rc;
         const char *msg;
     } cases[] = {
-        { { "--rig", "r.ini", "-o", "x", NULL }, 2, "--camera CAMERA.cameramodel is required" },
-        { { "--rig", "r.ini", "--camera", "c", NULL }, 2, "-o DIR is required" },
-        { { "--camera", "c", "-o", "x", NULL }, 2, "give --rig RIG.ini (capture) or --session DIR" },
-        { { "--rig", "r", "--session", "s", "--camera", "c", "-o", "x", NULL }, 2, "not both" },
-        { { "--rig", "r", "--camera", "c", "-o", "x", "--sphere-centre-mm", "1,2", NULL }, 2, "give X,Y,Z" },
-        { { "--rig", "r", "--camera", "c", "-o", "x", "--sphere-centre-mm", "1,2,q", NULL }, 2, "'q' is not a number" },
-        { { "--rig", "r", "--camera", "c", "-o", "x", "--sphere-radius-mm", "-3", NULL }, 2, "(> 0)" },
-        { { "--rig", "r", "--camera", "c", "-o", "x", "--angles", "0,90", NULL }, 2, "at least 3 angles" },
-        { { "--rig", "r", "--camera", "c", "-o", "x", "--frobnicate", NULL }, 2, "unknown option '--frobnicate'" },
-        { { "--rig", "r", "--camera", "c", "-o", NULL }, 2, "-o needs a value" },
-        { { "--rig", "r", "--camera", "c", "-o", "x", "--highlight", "best", NULL }, 2, "write model, gauss or centroid" },
-        { { "--rig", "r", "--camera", "c", "-o", "x", "--sphere-path", "free", NULL }, 2, "write fit or fixed" },
-        { { "--rig", "r", "--camera", "c", "-o", "x", "--sphere-shift-prior-mm", "-1", NULL }, 2, "give a std >= 0" },
+        { { "--rig", "r.ini", "-o", "x", NULL }, 2, "--camera-model CAMERA.cameramodel is required" },
+        { { "--rig", "r.ini", "--camera-model", "c", NULL }, 2, "-o DIR is required" },
+        { { "--camera-model", "c", "-o", "x", NULL }, 2, "give --rig RIG.ini (capture) or --session DIR" },
+        { { "--rig", "r", "--session", "s", "--camera-model", "c", "-o", "x", NULL }, 2, "not both" },
+        { { "--rig", "r", "--camera-model", "c", "-o", "x", "--sphere-centre-mm", "1,2", NULL }, 2, "give X,Y,Z" },
+        { { "--rig", "r", "--camera-model", "c", "-o", "x", "--sphere-centre-mm", "1,2,q", NULL }, 2, "'q' is not a number" },
+        { { "--rig", "r", "--camera-model", "c", "-o", "x", "--sphere-radius-mm", "-3", NULL }, 2, "(> 0)" },
+        { { "--rig", "r", "--camera-model", "c", "-o", "x", "--angles-deg", "0,90", NULL }, 2, "at least 3 angles" },
+        { { "--rig", "r", "--camera-model", "c", "-o", "x", "--frobnicate", NULL }, 2, "unknown option '--frobnicate'" },
+        { { "--rig", "r", "--camera-model", "c", "-o", NULL }, 2, "-o needs a value" },
+        { { "--rig", "r", "--camera-model", "c", "-o", "x", "--highlight", "best", NULL }, 2, "write model, gauss or centroid" },
+        { { "--rig", "r", "--camera-model", "c", "-o", "x", "--sphere-path", "free", NULL }, 2, "write fit or fixed" },
+        { { "--rig", "r", "--camera-model", "c", "-o", "x", "--sphere-shift-prior-mm", "-1", NULL }, 2, "give a std >= 0" },
     };
     for (size_t k = 0; k < sizeof cases / sizeof cases[0]; k++) {
         const char *argv[20] = { test_refl(), "calib", "lamps" };

@@ -273,7 +273,7 @@ TEST(lightplan_views_capture_plan)
     snprintf(truth, sizeof truth, "%s/examples/virtual-truth.ini", test_srcdir());
     char *dir = g_strdup(test_path("views"));
     char *out = NULL, *err = NULL;
-    int rc = test_refl_run(300, &out, &err, "plan", "lamps", scene, "--camera", cam, "--lamps", lamps, "--kc-per-us",
+    int rc = test_refl_run(300, &out, &err, "plan", "lamps", scene, "--camera-model", cam, "--lamps-file", lamps, "--kc-per-us",
                            "1e-4", "--materials", mats, "--angles-deg", "0,135", "--exposures-us", "2000,6000",
                            "--max-lamps", "2", "--check-virtual", truth, "--no-report", "-o", dir, NULL);
     CHECK_MSG(rc == 0, "rc %d: %s", rc, err);
@@ -391,18 +391,18 @@ TEST(lightplan_views_capture_plan)
     }
     rig_session_free(s);
     // usage: one view or several, not both; angles as numbers
-    CHECK(test_refl_run(30, &out, &err, "plan", "lamps", scene, "--camera", cam, "--lamps", lamps, "--kc-per-us",
+    CHECK(test_refl_run(30, &out, &err, "plan", "lamps", scene, "--camera-model", cam, "--lamps-file", lamps, "--kc-per-us",
                         "1e-4", "--materials", mats, "--angle-deg", "0", "--angles-deg", "0,90", "-o", dir, NULL) == 2);
     CHECK_CONTAINS(err, "not both");
     g_free(out);
     g_free(err);
-    CHECK(test_refl_run(30, &out, &err, "plan", "lamps", scene, "--camera", cam, "--lamps", lamps, "--kc-per-us",
+    CHECK(test_refl_run(30, &out, &err, "plan", "lamps", scene, "--camera-model", cam, "--lamps-file", lamps, "--kc-per-us",
                         "1e-4", "--materials", mats, "--angles-deg", "0,ninety", "-o", dir, NULL) == 2);
     CHECK_CONTAINS(err, "--angles-deg");
     g_free(out);
     g_free(err);
     // a pixel format the capture plan cannot hold is a usage error
-    CHECK(test_refl_run(60, &out, &err, "plan", "lamps", scene, "--camera", cam, "--lamps", lamps, "--kc-per-us",
+    CHECK(test_refl_run(60, &out, &err, "plan", "lamps", scene, "--camera-model", cam, "--lamps-file", lamps, "--kc-per-us",
                         "1e-4", "--materials", mats, "--pixel-format", "Mono99", "-o", dir, NULL) == 2);
     CHECK_CONTAINS(err, "--pixel-format Mono99");
     g_free(out);

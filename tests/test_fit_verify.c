@@ -329,7 +329,7 @@ TEST(verify_workpiece_generator)
 
 // The command on files: PNG frames with the metadata refl capture writes, a
 // gain calibration directory, priors files. The correct description passes
-// (exit 0), the I-stiffener fails (exit 3 with --fail-on-incorrect); the
+// (exit 0), the I-stiffener fails (exit 4 with --fail-on-incorrect); the
 // outputs carry units and provenance.
 static char *write_inputs(const images_t *I, char **gain_dir, char **priors)
 {
@@ -391,9 +391,9 @@ static int run_verify(const char *scene, char **imgs, const char *gain, const ch
     argv[n++] = scene;
     argv[n++] = "--images";
     for (int k = 0; imgs[k]; k++) argv[n++] = imgs[k];
-    argv[n++] = "--cameras";
+    argv[n++] = "--camera-model";
     argv[n++] = cam;
-    argv[n++] = "--lamps";
+    argv[n++] = "--lamps-file";
     argv[n++] = lamps;
     argv[n++] = "--kc-per-us";
     argv[n++] = kc;
@@ -469,7 +469,7 @@ TEST(verify_cli_end_to_end)
     g_free(dir);
     dir = g_strdup(test_path("wrong"));
     rc = run_verify(is, imgs, gain, priors, dir, &out, &err, "--fail-on-incorrect", NULL);
-    CHECK_MSG(rc == 3, "rc %d: %s", rc, err);
+    CHECK_MSG(rc == 4, "rc %d: %s", rc, err);
     CHECK_CONTAINS(out, "description INCORRECT");
     g_free(out);
     g_free(err);
@@ -970,7 +970,7 @@ TEST(verify_two_camera_session)
             CHECK(found == 2);
             json_decref(j);
         } else {
-            CHECK_MSG(rc == 3, "rc %d: %s", rc, err);
+            CHECK_MSG(rc == 4, "rc %d: %s", rc, err);
             CHECK_CONTAINS(out, "description INCORRECT");
         }
         g_free(out);

@@ -1,8 +1,10 @@
 // tests/test_model_cli.c — `refl render` and `refl edges` end to end (bin/refl on the examples).
 #define _GNU_SOURCE
+#include <glib.h>
 #include <jansson.h>
 #include <stdarg.h>
 #include <stdlib.h>
+#include <unistd.h>
 
 #include "model/model.h"
 #include "tests/test.h"
@@ -19,7 +21,14 @@ static const char *ex(const char *name)
 
 #define refl(out, err, ...) test_refl_run(60, out, err, __VA_ARGS__)
 
-#define BASE_ARGS ex("t_stiffener.d3d"), "--camera", ex("camera.cameramodel"), "--lamps", ex("lamps.ini"), \
+static int count_of(const char *hay, const char *needle)
+{
+    int n = 0;
+    for (const char *p = hay; p && (p = strstr(p, needle)); p += strlen(needle)) n++;
+    return n;
+}
+
+#define BASE_ARGS ex("t_stiffener.d3d"), "--camera-model", ex("camera.cameramodel"), "--lamps-file", ex("lamps.ini"), \
                   "--materials", ex("materials.ini"), "--threads", "2"
 
 static bool file_contains(const char *path, const char *needle)
@@ -137,9 +146,14 @@ TEST(cli_edges_json)
 {
     char *out = NULL, *err = NULL;
     const char *js = test_path("edges.json");
+    // the old spellings --camera, --lamps: they work and each names its new one once (--threads 0: all cores)
     int rc = refl(&out, &err, "edges", ex("t_stiffener.d3d"), "--camera", ex("camera.cameramodel"), "--lamps",
-                  ex("lamps.ini"), "--materials", ex("materials.ini"), "--threads", "2", "--json", js, NULL);
+                  ex("lamps.ini"), "--materials", ex("materials.ini"), "--threads", "0", "--json", js, NULL);
     CHECK_MSG(rc == 0, "exit %d, stderr: %s", rc, err);
+    CHECK_MSG(count_of(err, "--camera CAM.cameramodel: the option is --camera-model (the old spelling still "
+                       "works)") == 1, "%s", err);
+    CHECK_MSG(count_of(err, "--lamps LAMPS.ini: the option is --lamps-file") == 1, "%s", err);
+    CHECK_MSG(count_of(err, "the old spelling") == 2, "%s", err);
     CHECK_CONTAINS(out, "segments");
     json_error_t jerr;
     json_t *root = json_load_file(js, 0, &jerr);
@@ -200,9 +214,9 @@ TEST(cli_usage_errors)
     const char *o = test_path("x.png");
     const char *unknown[] = { "render", BASE_ARGS, "-o", o, "--bogus", "1", NULL };
     expect_error(2, "unknown option '--bogus'", unknown);
-    const char *nocam[] = { "render", ex("t_stiffener.d3d"), "--lamps", ex("lamps.ini"), "--materials",
+    const char *nocam[] = { "render", ex("t_stiffener.d3d"), "--lamps-file", ex("lamps.ini"), "--materials",
                             ex("materials.ini"), "-o", o, NULL };
-    expect_error(2, "missing required option --camera", nocam);
+    expect_error(2, "missing required option --camera-model", nocam);
     const char *badir[] = { "render", BASE_ARGS, "-o", o, "--interreflection", "twice", NULL };
     expect_error(2, "unknown value 'twice'", badir);
     const char *badnum[] = { "render", BASE_ARGS, "-o", o, "--kc", "1.5x", NULL };
@@ -227,34 +241,154 @@ TEST(cli_usage_errors)
     free(err);
 }
 
+// Every command's --help (every page scripts/make-man makes, and refl --help)
+// ends with the exit status every refl command shares: 0 done, 1 error,
+// 2 usage, 3 paused, 4 an incorrect verdict under --fail-on-incorrect.
+TEST(cli_help_lists_exit_status)
+{
+    char *man = NULL;
+    char path[2048];
+    snprintf(path, sizeof path, "%s/scripts/make-man", test_srcdir());
+    CHECK(g_file_get_contents(path, &man, NULL, NULL));
+    GRegex *re = g_regex_new("^\\s+\\(\"([a-z ]+)\",", G_REGEX_MULTILINE, 0, NULL);
+    GMatchInfo *mi = NULL;
+    int pages = 0;
+    for (g_regex_match(re, man, 0, &mi); g_match_info_matches(mi); g_match_info_next(mi, NULL), pages++) {
+        char *words = g_match_info_fetch(mi, 1);
+        char **w = g_strsplit(words, " ", -1);
+        const char *argv[6] = { test_refl() };
+        int n = 1;
+        for (int k = 0; w[k] && n < 4; k++) argv[n++] = w[k];
+        argv[n++] = "--help";
+        argv[n] = NULL;
+        char *out = NULL, *err = NULL;
+        int rc = test_run(argv, 30, &out, &err);
+        CHECK_MSG(rc == 0, "refl %s --help: rc %d: %s", words, rc, err);
+        CHECK_MSG(strstr(out, "exit status") && strstr(out, "  0  done") && strstr(out, "  2  a usage error") &&
+                      strstr(out, "  3  paused") && strstr(out, "  4  refl verify --fail-on-incorrect"),
+                  "refl %s --help lists no exit status:\n%s", words, out);
+        free(out);
+        free(err);
+        g_strfreev(w);
+        g_free(words);
+    }
+    g_match_info_free(mi);
+    g_regex_unref(re);
+    g_free(man);
+    CHECK_MSG(pages >= 25, "%d pages in scripts/make-man", pages);
+    char *out = NULL, *err = NULL;
+    const char *top[] = { test_refl(), "--help", NULL };
+    CHECK(test_run(top, 10, &out, &err) == 0);
+    CHECK_CONTAINS(out, "  4  refl verify --fail-on-incorrect");
+    free(out);
+    free(err);
+}
+
+// Help texts say what the commands do: every option of verify described, its
+// formats; options a command refuses are not in its help.
+TEST(cli_help_matches_behaviour)
+{
+    char *out = NULL, *err = NULL;
+    CHECK(refl(&out, &err, "verify", "--help", NULL) == 0);
+    CHECK_CONTAINS(out, "D3D, OBJ, STL or PLY");
+    static const char *const described[] = { "--z-flag Z", "--min-region N", "--score-threshold T", "--edge-rel R",
+                                             "--interreflection-samples N" };
+    for (size_t k = 0; k < sizeof described / sizeof described[0]; k++) {
+        const char *at = out ? strstr(out, described[k]) : NULL;
+        CHECK_MSG(at, "%s not in verify --help", described[k]);
+        // the description is more than a default in parentheses
+        if (at) {
+            at += strlen(described[k]);
+            while (*at == ' ' || *at == '\n') at++;
+            CHECK_MSG(*at != '(', "%s has no description: %.40s", described[k], at);
+        }
+    }
+    CHECK_CONTAINS(out, "exit 4 when the verdict is incorrect");
+    free(out);
+    free(err);
+    CHECK(refl(&out, &err, "calib", "white", "--help", NULL) == 0);
+    CHECK(out && !strstr(out, "--albedo-cells"));
+    free(out);
+    free(err);
+    CHECK(refl(&out, &err, "fit", "material", "--help", NULL) == 0);
+    CHECK(out && !strstr(out, "--albedo A") && strstr(out, "--albedo-cells MM"));
+    free(out);
+    free(err);
+    CHECK(refl(&out, &err, "calib", "white", "s", "--albedo-cells", "2", NULL) == 2);
+    CHECK_CONTAINS(err, "unknown option '--albedo-cells'");
+    free(out);
+    free(err);
+    CHECK(refl(&out, &err, "fit", "material", "s", "--albedo", "0.9", NULL) == 2);
+    CHECK_CONTAINS(err, "unknown option '--albedo'");
+    free(out);
+    free(err);
+    // --no-priors names what --priors still gives
+    CHECK(refl(&out, &err, "verify", ex("t_stiffener.d3d"), "--images", ex("t_stiffener.d3d"), "--no-priors",
+               "-o", test_path("v"), NULL) == 2);
+    CHECK_CONTAINS(err, "with --no-priors too: the materials' models and starting values");
+    free(out);
+    free(err);
+}
+
+// refl workpiece -o OUT.d3d; the old spelling, OUT.d3d as the argument, still
+// works and names -o once; both at once is a usage error.
+TEST(cli_workpiece_out)
+{
+    char *out = NULL, *err = NULL;
+    const char *a = test_path("a.d3d"), *b = test_path("b.d3d");
+    CHECK(refl(&out, &err, "workpiece", "-o", a, "--kind", "I", NULL) == 0);
+    CHECK(err && !strstr(err, "old spelling"));
+    CHECK(access(a, F_OK) == 0);
+    free(out);
+    free(err);
+    CHECK(refl(&out, &err, "workpiece", b, "--kind", "I", NULL) == 0);
+    CHECK_MSG(count_of(err, "OUT.d3d as an argument: the option is -o, --out (the old spelling still works)") == 1,
+              "%s", err);
+    CHECK(access(b, F_OK) == 0);
+    free(out);
+    free(err);
+    char *ta = NULL, *tb = NULL;
+    CHECK(g_file_get_contents(a, &ta, NULL, NULL) && g_file_get_contents(b, &tb, NULL, NULL) && !strcmp(ta, tb));
+    g_free(ta);
+    g_free(tb);
+    CHECK(refl(&out, &err, "workpiece", b, "-o", a, NULL) == 2);
+    CHECK_CONTAINS(err, "-o");
+    free(out);
+    free(err);
+    CHECK(refl(&out, &err, "workpiece", "--kind", "I", NULL) == 2);
+    CHECK_CONTAINS(err, "missing -o OUT.d3d");
+    free(out);
+    free(err);
+}
+
 TEST(cli_runtime_errors)
 {
     const char *o = test_path("x.png");
     const char *missing = test_path("no_such_scene.d3d");
-    const char *noscene[] = { "render", missing, "--camera", ex("camera.cameramodel"), "--lamps", ex("lamps.ini"),
+    const char *noscene[] = { "render", missing, "--camera-model", ex("camera.cameramodel"), "--lamps-file", ex("lamps.ini"),
                               "--materials", ex("materials.ini"), "-o", o, NULL };
     expect_error(1, missing, noscene);
 
     // Malformed materials: the message names file and line.
     const char *bad = test_write("bad_mats.ini", "[material plywood]\nmodel = lambert\nkd = zero\n");
-    const char *badmats[] = { "render", ex("t_stiffener.d3d"), "--camera", ex("camera.cameramodel"), "--lamps",
+    const char *badmats[] = { "render", ex("t_stiffener.d3d"), "--camera-model", ex("camera.cameramodel"), "--lamps-file",
                               ex("lamps.ini"), "--materials", bad, "-o", o, NULL };
     expect_error(1, "bad_mats.ini:3", badmats);
 
     // A material the scene needs is missing from the file.
     const char *few = test_write("few_mats.ini", "[material plywood]\nmodel = lambert\nkd = 0.2\n");
-    const char *fewmats[] = { "render", ex("t_stiffener.d3d"), "--camera", ex("camera.cameramodel"), "--lamps",
+    const char *fewmats[] = { "render", ex("t_stiffener.d3d"), "--camera-model", ex("camera.cameramodel"), "--lamps-file",
                               ex("lamps.ini"), "--materials", few, "-o", o, NULL };
     expect_error(1, "painted_steel", fewmats);
 
     // A non-planar face (vertex 4 lifted by 2 mm).
     const char *warped = test_write("warped.d3d", "1 0 0 0\n2 100 0 0\n3 100 100 0\n4 0 100 2\nFaces:\n1 2 3 4.\n");
-    const char *nonplanar[] = { "render", warped, "--camera", ex("camera.cameramodel"), "--lamps", ex("lamps.ini"),
+    const char *nonplanar[] = { "render", warped, "--camera-model", ex("camera.cameramodel"), "--lamps-file", ex("lamps.ini"),
                                 "--materials", ex("materials.ini"), "-o", o, NULL };
     expect_error(1, "not planar", nonplanar);
     // ... accepted with a larger tolerance
     char *out = NULL, *err = NULL;
-    const char *tol[] = { test_refl(), "render", warped, "--camera", ex("camera.cameramodel"), "--lamps", ex("lamps.ini"),
+    const char *tol[] = { test_refl(), "render", warped, "--camera-model", ex("camera.cameramodel"), "--lamps-file", ex("lamps.ini"),
                           "--materials", ex("materials.ini"), "-o", o, "--planarity-tol-mm", "1", "--threads", "2",
                           NULL };
     int rc = test_run(tol, 60, &out, &err);
@@ -318,9 +452,12 @@ TEST(cli_render_gain_map_and_turntable)
     const char *t180 = test_path("t180.tiff"), *t90 = test_path("t90.tiff");
     rc = refl(&out, &err, "render", BASE_ARGS, "--offset", "10", "--turntable-deg", "180", "-o", t180, NULL);
     CHECK_MSG(rc == 0, "exit %d: %s", rc, err);
+    // the old spelling works and names the new one, once
+    CHECK_MSG(count_of(err, "--turntable-deg A: the option is --angle-deg (the old spelling still works)") == 1,
+              "%s", err);
     free(out);
     free(err);
-    rc = refl(&out, &err, "render", BASE_ARGS, "--offset", "10", "--turntable-deg", "90", "-o", t90, NULL);
+    rc = refl(&out, &err, "render", BASE_ARGS, "--offset", "10", "--angle-deg", "90", "-o", t90, NULL);
     CHECK_MSG(rc == 0, "exit %d: %s", rc, err);
     free(out);
     free(err);

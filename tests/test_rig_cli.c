@@ -94,12 +94,12 @@ TEST(rigcli_usage_errors)
         { { "--rig", rig, "snap" }, "snap needs -o" },
         { { "--rig", rig, "snap", "-o", "x.tif" }, "must end in .png" },
         { { "--rig", rig, "status", "-o", "x.png" }, "option -o is for snap only" },
-        { { "--rig", rig, "move", "5", "--angle", "3" }, "option --angle is for snap only" },
-        { { "--rig", rig, "snap", "-o", "x.png", "--angle", "north" }, "'north' is not an angle" },
+        { { "--rig", rig, "move", "5", "--angle-deg", "3" }, "option --angle-deg is for snap only" },
+        { { "--rig", rig, "snap", "-o", "x.png", "--angle-deg", "north" }, "'north' is not an angle" },
         { { "--rig", rig, "snap", "-o", "x.png", "--exposure-us", "-5" }, "--exposure-us: -5 is out of range" },
         { { "--rig", rig, "snap", "-o", "x.png", "--gain", "lots" }, "--gain: 'lots' is not a number" },
         { { "--rig", rig, "snap", "-o", "x.png", "--pixel-format", "Mono14" }, "'Mono14' is not Mono8" },
-        { { "--rig", rig, "snap", "-o", "x.png", "--lamps", "a,,b" }, "has an empty lamp name" },
+        { { "--rig", rig, "snap", "-o", "x.png", "--lamps-on", "a,,b" }, "has an empty lamp name" },
         { { "--rig", rig, "status", "--frobnicate" }, "unknown option '--frobnicate'" },
         { { "--rig", rig, "--rig", rig, "status" }, "option --rig given twice" },
         { { "--rig" }, "option --rig needs a value" },
@@ -292,7 +292,7 @@ TEST(rigcli_virtual_rig)
 
     // A lit frame at 30 deg and a dark one.
     const char *lit = test_path("lit.png"), *dark = test_path("dark.png");
-    rc = refl(&out, &err, "rig", "--rig", rig, "snap", "-o", lit, "--angle", "30", "--lamps", "east",
+    rc = refl(&out, &err, "rig", "--rig", rig, "snap", "-o", lit, "--angle-deg", "30", "--lamps-on", "east",
               "--pixel-format", "Mono12", "--exposure-us", "20000", NULL);
     CHECK_MSG(rc == 0, "snap: %d %s", rc, err);
     CHECK_CONTAINS(out, "wrote ");
@@ -300,7 +300,7 @@ TEST(rigcli_virtual_rig)
     free(out);
     free(err);
     // (Not moved: a dark frame does not depend on the angle.)
-    rc = refl(&out, &err, "rig", "--rig", rig, "snap", "-o", dark, "--lamps", "none",
+    rc = refl(&out, &err, "rig", "--rig", rig, "snap", "-o", dark, "--lamps-on", "none",
               "--pixel-format", "Mono12", "--exposure-us", "20000", NULL);
     CHECK_MSG(rc == 0, "snap dark: %d %s", rc, err);
     free(out);
@@ -321,7 +321,7 @@ TEST(rigcli_virtual_rig)
     CHECK_META(lit, "pixel_format", "Mono12 (12 significant bits)");
     CHECK_META(lit, "temperature_c", "35.");
     CHECK_META(lit, "refl_version", REFL_VERSION);
-    CHECK_META(lit, "command_line", "--lamps east");
+    CHECK_META(lit, "command_line", "--lamps-on east");
     CHECK_META(lit, "virtual_sample", "t_stiffener");
     CHECK_META(lit, "date_utc", "Z");
     CHECK_META(dark, "lamps_on", "none");
@@ -351,7 +351,7 @@ TEST(rigcli_virtual_rig)
 
     // Runtime errors: unknown lamp, unknown sample (exit 1, nothing written).
     const char *nope = test_path("nope.png");
-    rc = refl(&out, &err, "rig", "--rig", rig, "snap", "-o", nope, "--lamps", "east,nope", NULL);
+    rc = refl(&out, &err, "rig", "--rig", rig, "snap", "-o", nope, "--lamps-on", "east,nope", NULL);
     CHECK(rc == 1);
     CHECK_CONTAINS(err, "has no lamp 'nope' (its lamps: east,south,west,north,rim)");
     CHECK(access(nope, F_OK) != 0);
@@ -411,6 +411,11 @@ TEST(rigcli_virtual_rig_mono12p)
         int rc = refl(&out, &err, "rig", "--rig", rig, "snap", "-o", pngs[k], "--lamps", "east", "--exposure-us",
                       "20000", NULL);
         CHECK_MSG(rc == 0, "snap %s: %d %s", fmts[k], rc, err);
+        // --lamps, the old spelling of --lamps-on: it works and names the new one once
+        int notes = 0;
+        for (const char *p = err; p && (p = strstr(p, "the old spelling")); p++) notes++;
+        CHECK_MSG(notes == 1 && strstr(err, "--lamps NAMES: the option is --lamps-on (the old spelling still works)"),
+                  "%s", err);
         free(out);
         free(err);
         CHECK(png_bit_depth(pngs[k]) == 16);
@@ -528,7 +533,7 @@ TEST(rigcli_gpiod_lamps_off_on_errors)
 
     const char *argv[] = { "env", env_pre, "FAKE_GPIOCHIP=gpiochip0:32", env_log, env_state,
                            "ASAN_OPTIONS=verify_asan_link_order=0:detect_leaks=0", test_refl(), "rig", "--rig", rig,
-                           "snap", "-o", test_path("x.png"), "--lamps", "all", NULL };
+                           "snap", "-o", test_path("x.png"), "--lamps-on", "all", NULL };
     char *out = NULL, *err = NULL;
     int rc = test_run(argv, 60, &out, &err);
     CHECK(rc == 1);
@@ -548,8 +553,12 @@ TEST(rigcli_gpiod_lamps_off_on_errors)
     argv[10] = "status";
     argv[11] = NULL;
     rc = test_run(argv, 60, &out, &err);
+    // the camera nobody serves is reported on its camera_error line, the lamps still are (exit 1)
     CHECK(rc == 1);
-    CHECK_CONTAINS(err, "gpio-cam.ini:13: [camera]: aravis: no camera at '127.0.0.3'");
+    CHECK_CONTAINS(out, "lamp key: off (gpiod)\n");
+    CHECK_CONTAINS(out, "camera: not open\ncamera_error: ");
+    CHECK_CONTAINS(out, "gpio-cam.ini:13: [camera]: aravis: no camera at '127.0.0.3'");
+    CHECK_CONTAINS(err, "refl rig status: the camera did not open (its camera_error line above)");
     lg = model_read_file(log, NULL);
     CHECK_CONTAINS(lg, "request gpiochip0 3=0 consumer=refl\n");
     CHECK_CONTAINS(lg, "release gpiochip0 3=0");
@@ -598,6 +607,104 @@ TEST(rigcli_status_every_device)
     CHECK_CONTAINS(model_last_error(), "refl rig status: the turntable did not answer");
     free(out);
     rig_close(r);
+}
+
+// One device at a time: identify and status report every device though some
+// do not open (here both cameras and the lamps: named with the rig file's line,
+// the devices after them still reported; exit 1); --only opens one kind; home
+// and move open the turntable alone (they work while the cameras are away).
+TEST(rigcli_one_device_at_a_time)
+{
+    const char *rig = test_write("away.ini", "[turntable]\nbackend = sim\ntime_scale = 0.001\nseed = 4\n"
+                                 "[lamp key]\nbackend = gpiod\nchip = gpiochip-none\nline = 0\n"
+                                 "[camera left]\nbackend = aravis\nserial = inprocess:AWAY-L\n"
+                                 "[camera right]\nbackend = aravis\nserial = inprocess:AWAY-R\n");
+    char *out = NULL, *err = NULL;
+    int rc = refl(&out, &err, "rig", "--rig", rig, "identify", NULL);
+    CHECK_MSG(rc == 1, "identify: %d %s", rc, err);
+    CHECK_CONTAINS(out, "turntable_serial: sim-4\n");
+    CHECK_CONTAINS(out, "camera_name: left\ncamera: not open\ncamera_error: ");
+    CHECK_CONTAINS(out, "away.ini:9: [camera left]: ");
+    CHECK_CONTAINS(out, "camera_name: right\ncamera: not open\ncamera_error: ");
+    CHECK_CONTAINS(out, "lamps: not open\nlamps_error: ");
+    CHECK_CONTAINS(out, "away.ini:5: [lamp key]: ");
+    CHECK_CONTAINS(err, "refl rig identify: the camera left, the camera right and the lamps did not open");
+    free(out);
+    free(err);
+
+    rc = refl(&out, &err, "rig", "--rig", rig, "status", NULL);
+    CHECK_MSG(rc == 1, "status: %d %s", rc, err);
+    CHECK_CONTAINS(out, "turntable_homed: no\nturntable_moving: no\nlamps: not open\n");
+    CHECK_CONTAINS(out, "cameras: 2\ncamera_name: left\ncamera: not open\n");
+    CHECK_CONTAINS(err, "did not open (their DEVICE_error lines above)");
+    free(out);
+    free(err);
+
+    rc = refl(&out, &err, "rig", "--rig", rig, "status", "--only", "turntable", NULL);
+    CHECK_MSG(rc == 0, "status --only turntable: %d %s", rc, err);
+    CHECK_CONTAINS(out, "turntable: sim turntable (seed 4)\n");
+    CHECK(out && !strstr(out, "camera") && !strstr(out, "lamp"));
+    free(out);
+    free(err);
+    rc = refl(&out, &err, "rig", "--rig", rig, "status", "--only", "camera", NULL);
+    CHECK(rc == 1);
+    CHECK_CONTAINS(out, "camera_name: right\ncamera: not open\n");
+    CHECK(out && !strstr(out, "turntable") && !strstr(out, "lamp"));
+    CHECK_CONTAINS(err, "the camera left and the camera right did not open");
+    free(out);
+    free(err);
+    rc = refl(&out, &err, "rig", "--rig", rig, "identify", "--only", "lamps,turntable", NULL);
+    CHECK(rc == 1);
+    CHECK_CONTAINS(out, "turntable_model: K10CR1 (simulated)\n");
+    CHECK_CONTAINS(out, "lamps_error: ");
+    CHECK(out && !strstr(out, "camera"));
+    CHECK_CONTAINS(err, "the lamps did not open (its lamps_error line above)");
+    free(out);
+    free(err);
+
+    rc = refl(&out, &err, "rig", "--rig", rig, "move", "12.5", NULL);
+    CHECK_MSG(rc == 0, "move: %d %s", rc, err);
+    CHECK_CONTAINS(out, "turntable_commanded_deg: 12.5\nturntable_angle_deg: 12.5");
+    free(out);
+    free(err);
+    // A real rig's bring-up: an APT stage that is not connected, sim lamps, a camera address nobody
+    // serves. status reports all three (the lamps fine, the others on their error lines; exit 1);
+    // --only lamps opens the lamps alone and succeeds.
+    const char *bench = test_write("bench.ini", "[turntable]\nbackend = apt\nserial = 55000001\n"
+                                   "[lamp key]\nbackend = sim\n[camera]\nbackend = aravis\naddress = 127.0.0.5\n");
+    rc = refl(&out, &err, "rig", "--rig", bench, "status", NULL);
+    CHECK_MSG(rc == 1, "status: %d %s", rc, err);
+    CHECK_CONTAINS(out, "turntable: not open\nturntable_error: ");
+    CHECK_CONTAINS(out, "bench.ini:1: [turntable]: ");
+    CHECK_CONTAINS(out, "lamp key: off (sim)\n");
+    CHECK_CONTAINS(out, "camera: not open\ncamera_error: ");
+    CHECK_CONTAINS(out, "bench.ini:6: [camera]: aravis: no camera at '127.0.0.5'");
+    CHECK_CONTAINS(err, "refl rig status: the turntable and the camera did not open (their DEVICE_error lines above)");
+    free(out);
+    free(err);
+    rc = refl(&out, &err, "rig", "--rig", bench, "status", "--only", "lamps", NULL);
+    CHECK_MSG(rc == 0, "status --only lamps: %d %s", rc, err);
+    CHECK_CONTAINS(out, "lamp key: off (sim)\n");
+    CHECK(out && !strstr(out, "turntable") && !strstr(out, "camera"));
+    free(out);
+    free(err);
+    rc = refl(&out, &err, "rig", "--rig", bench, "identify", "--only", "turntable", NULL);
+    CHECK_MSG(rc == 1, "identify --only turntable: %d %s", rc, err);
+    CHECK_CONTAINS(out, "turntable_error: ");
+    CHECK(out && !strstr(out, "camera") && !strstr(out, "lamp"));
+    CHECK_CONTAINS(err, "refl rig identify: the turntable did not open (its turntable_error line above)");
+    free(out);
+    free(err);
+
+    const char *bad[][3] = { { "status", "--only", "stage" }, { "home", "--only", "turntable" } };
+    const char *want[] = { "'stage' is none of camera, turntable, lamps", "option --only is for status identify only" };
+    for (int k = 0; k < 2; k++) {
+        rc = refl(&out, &err, "rig", "--rig", rig, bad[k][0], bad[k][1], bad[k][2], NULL);
+        CHECK(rc == 2);
+        CHECK_CONTAINS(err, want[k]);
+        free(out);
+        free(err);
+    }
 }
 
 // `refl rig snap -o FILE` checks FILE before the rig is opened (nothing is

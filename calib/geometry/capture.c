@@ -40,7 +40,7 @@ char *calib_geometry_tilt_plan(const char *spec, const calib_geometry_opts_t *o,
         if (!*parts[i]) continue;
         double a;
         if (!parse_num(parts[i], -10000, 10000, &a)) {
-            model_error_set(angles ? "--tilts" : "--angles", 0, "'%s' in '%s' is not an angle in degrees", parts[i],
+            model_error_set(angles ? "--tilts" : "--angles-deg", 0, "'%s' in '%s' is not an angle in degrees", parts[i],
                             src);
             g_strfreev(parts);
             g_string_free(al, TRUE);
@@ -52,7 +52,7 @@ char *calib_geometry_tilt_plan(const char *spec, const calib_geometry_opts_t *o,
     }
     g_strfreev(parts);
     if (na == 0) {
-        model_error_set(angles ? "--tilts" : "--angles", 0, "'%s': no angles", spec);
+        model_error_set(angles ? "--tilts" : "--angles-deg", 0, "'%s': no angles", spec);
         g_string_free(al, TRUE);
         g_free(s);
         return NULL;

@@ -56,7 +56,7 @@
 extern "C" {
 #endif
 
-// The default tilts (--tilts) and angles (--angles) of the example rig (camera
+// The default tilts (--tilts) and angles (--angles-deg) of the example rig (camera
 // ~900 mm away, 35 deg above the table, board 130 mm off the axis): chosen
 // greedily for imager coverage among the poses where the whole board is in
 // view at < 45 deg obliquity, plus two flat views (tilt 0) for the rig frame.

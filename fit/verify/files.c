@@ -127,7 +127,7 @@ static bool vf_scene_priors(vf_t *V)
     return true;
 }
 
-// The first camera model's path: --cameras, else the calibration directory's (NULL: none). g_free.
+// The first camera model's path: --camera-model, else the calibration directory's (NULL: none). g_free.
 static char *vf_camera0(const vf_t *V)
 {
     if (V->o->ncameras) return g_strdup(V->o->cameras[0]);
@@ -216,7 +216,7 @@ static bool vf_scale(vf_t *V)
     return true;
 }
 
-// The cameras: --cameras (one, or one per image) with --gain-calib (none, one, or one per camera), else the
+// The cameras: --camera-model (one, or one per image) with --gain-calib (none, one, or one per camera), else the
 // calibration directory's; without --gain-calib the directory's gain calibration applies to a given camera too.
 // One camera's calibration into V->vcs[c] (g: its gain calibration's set).
 static void vf_camera_fill(vf_t *V, int c, const calib_set_t *cal, const calib_set_t *g)
@@ -290,7 +290,7 @@ static bool vf_cameras_by_name(vf_t *V)
             if (!strcmp(V->img_cam[m], V->named[c])) V->imgs[m].camera = c;
         if (V->imgs[m].camera < 0) {
             model_error(V->imgs[m].name, 0, "the image names no camera (no camera_name in its text) and the "
-                        "calibrations are of several cameras: give --cameras");
+                        "calibrations are of several cameras: give --camera-model");
             return false;
         }
     }

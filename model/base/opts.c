@@ -64,7 +64,19 @@ void model_cli_help(const model_cli_t *c, FILE *f)
     }
     fprintf(f, "  %-26s %s\n", "-h, --help", "print this help");
     if (c->epilog) fprintf(f, "\n%s\n", c->epilog);
+    fprintf(f, "\n");
+    model_cli_exit_status(f);
     fprintf(f, "\nrefl %s\n", REFL_VERSION);
+}
+
+void model_cli_exit_status(FILE *f)
+{
+    fprintf(f, "exit status (every refl command):\n"
+               "  0  done\n"
+               "  1  an error: the message names the file and line, device or option, and what to do\n"
+               "  2  a usage error (an unknown option, a missing or bad value)\n"
+               "  3  paused at an operator step or by Ctrl-C: run the same command again to continue\n"
+               "  4  refl verify --fail-on-incorrect: the verdict is \"incorrect\"\n");
 }
 
 int model_cli_error(const model_cli_t *c, const char *fmt, ...)
@@ -88,6 +100,37 @@ static model_opt_t *find_opt(model_cli_t *c, const char *name, size_t len)
 }
 
 model_opt_t *model_cli_opt(model_cli_t *c, const char *name) { return find_opt(c, name, strlen(name)); }
+
+// The option with this old spelling (*which: its index among the option's
+// old spellings), NULL when none has it.
+static model_opt_t *find_old(model_cli_t *c, const char *name, size_t len, int *which)
+{
+    for (int i = 0; i < c->nopts; i++) {
+        const char *p = c->opts[i].old;
+        for (int k = 0; p && *p; k++) {
+            while (*p == ' ') p++;
+            size_t n = strcspn(p, " ");
+            if (n && n == len && !strncmp(p, name, len)) {
+                *which = k;
+                return &c->opts[i];
+            }
+            p += n;
+        }
+    }
+    return NULL;
+}
+
+// "--camera FILE: the option is --camera-model (the old spelling still
+// works)", once a run for each old spelling.
+static void note_old(model_opt_t *o, const char *spelled, size_t len, int which)
+{
+    unsigned bit = which < 32 ? 1u << which : 0;
+    if (o->noted & bit) return;
+    o->noted |= bit;
+    const char *now = o->name[1] == '-' || !o->alias ? o->name : o->alias;
+    model_note("%.*s%s%s: the option is %s (the old spelling still works)", (int)len, spelled,
+               o->metavar ? " " : "", o->metavar ? o->metavar : "", now);
+}
 
 const char *model_cli_value(model_cli_t *c, const char *name)
 {
@@ -181,6 +224,8 @@ static int take_option(model_cli_t *c, int argc, char **argv, int *i)
     const char *eq = a[1] == '-' ? strchr(a, '=') : NULL;
     size_t len = eq ? (size_t)(eq - a) : strlen(a);
     model_opt_t *o = find_opt(c, a, len);
+    int which = 0;
+    if (!o && (o = find_old(c, a, len, &which))) note_old(o, a, len, which);
     if (!o) return model_cli_error(c, "unknown option '%.*s'", (int)len, a);
     if (o->given && !c->repeat_ok && o->kind != MODEL_OPT_KIND_LIST)
         return model_cli_error(c, "option %s given twice", o->name);
@@ -222,6 +267,7 @@ int model_cli_parse(model_cli_t *c, int argc, char **argv)
     for (int i = 0; i < c->nopts; i++) {
         c->opts[i].given = false;
         c->opts[i].value = NULL;
+        c->opts[i].noted = 0;
         if (c->opts[i].kind == MODEL_OPT_KIND_LIST) ((model_opt_list_t *)c->opts[i].dest)->n = 0;
     }
     for (int i = 1; i < argc; i++) {
@@ -240,7 +286,7 @@ int model_cli_parse(model_cli_t *c, int argc, char **argv)
             continue;
         }
         if (c->npositional >= c->max_positional || c->npositional >= MODEL_CLI_POSITIONAL_MAX) {
-            if (c->max_positional == 1) return model_cli_error(c, "unexpected argument '%s' (one %s only)", a, c->synopsis);
+            if (c->max_positional == 1 && c->synopsis && c->synopsis[0]) return model_cli_error(c, "unexpected argument '%s' (one %s only)", a, c->synopsis);
             return model_cli_error(c, "unexpected argument '%s'", a);
         }
         c->positional[c->npositional++] = a;

@@ -8,7 +8,10 @@
 //   usage: refl CMD SYNOPSIS [options]
 //   (refl CMD --help for the options)
 // and exits 2 through its return value. --help prints the synopsis, the
-// command's description and one line per option from the same table.
+// command's description, one line per option from the same table and the exit
+// status every refl command shares (model_cli_exit_status). An option's old
+// spellings (.old) are still accepted, each noted once a run with the name it
+// has now.
 //
 //   const char *calib = NULL, *out = NULL; double albedo = 0.99; bool verbose = false;
 //   model_opt_t opts[] = {
@@ -59,25 +62,39 @@ typedef struct {
     bool             required;
     bool             given;     // out: the option was on the command line
     const char      *value;     // out: its value as given ("" for a flag)
+    const char      *old;       // its old spellings, space-separated ("--camera"), or NULL: each is accepted
+                                // and noted once a run (model_note): "--camera FILE: the option is
+                                // --camera-model (the old spelling still works)"; never shown by --help
+    unsigned         noted;     // out: the old spellings noted so far (a bit each)
 } model_opt_t;
 
-#define MODEL_OPT_FLAG(name, alias, help, dest) \
-    { name, alias, NULL, help, MODEL_OPT_KIND_FLAG, dest, 0, 0, false, false, NULL }
-#define MODEL_OPT_STRING(name, metavar, help, dest, required) \
-    { name, NULL, metavar, help, MODEL_OPT_KIND_STRING, dest, 0, 0, required, false, NULL }
-#define MODEL_OPT_INT(name, metavar, help, dest, min, max) \
-    { name, NULL, metavar, help, MODEL_OPT_KIND_INT, dest, min, max, false, false, NULL }
-#define MODEL_OPT_DOUBLE(name, metavar, help, dest, min, max) \
-    { name, NULL, metavar, help, MODEL_OPT_KIND_DOUBLE, dest, min, max, false, false, NULL }
+// Each macro takes, after its own arguments, optional designated fields of
+// model_opt_t: MODEL_OPT_STRING("--camera-model", "FILE", "...", &cam, true, .old = "--camera").
+#define MODEL_OPT_FLAG(name_, alias_, help_, dest_, ...) \
+    { .name = name_, .alias = alias_, .help = help_, .kind = MODEL_OPT_KIND_FLAG, .dest = dest_, ##__VA_ARGS__ }
+#define MODEL_OPT_STRING(name_, metavar_, help_, dest_, required_, ...)                                        \
+    { .name = name_, .metavar = metavar_, .help = help_, .kind = MODEL_OPT_KIND_STRING, .dest = dest_,        \
+      .required = required_, ##__VA_ARGS__ }
+#define MODEL_OPT_INT(name_, metavar_, help_, dest_, min_, max_, ...)                                          \
+    { .name = name_, .metavar = metavar_, .help = help_, .kind = MODEL_OPT_KIND_INT, .dest = dest_,           \
+      .min = min_, .max = max_, ##__VA_ARGS__ }
+#define MODEL_OPT_DOUBLE(name_, metavar_, help_, dest_, min_, max_, ...)                                       \
+    { .name = name_, .metavar = metavar_, .help = help_, .kind = MODEL_OPT_KIND_DOUBLE, .dest = dest_,        \
+      .min = min_, .max = max_, ##__VA_ARGS__ }
 // A string option (metavar given) or a flag (metavar NULL) read after parsing
 // with model_cli_value / model_cli_double / model_cli_long.
-#define MODEL_OPT_VALUE(name, metavar, help, required) \
-    { name, NULL, metavar, help, (metavar) ? MODEL_OPT_KIND_STRING : MODEL_OPT_KIND_FLAG, NULL, 0, 0, required, \
-      false, NULL }
+#define MODEL_OPT_VALUE(name_, metavar_, help_, required_, ...)                                                \
+    { .name = name_, .metavar = metavar_, .help = help_,                                                      \
+      .kind = (metavar_) ? MODEL_OPT_KIND_STRING : MODEL_OPT_KIND_FLAG, .required = required_, ##__VA_ARGS__ }
 // A list option (see MODEL_OPT_KIND_LIST); greedy: it also takes the arguments
 // after it up to the next option.
-#define MODEL_OPT_LIST(name, metavar, help, dest, greedy, required) \
-    { name, NULL, metavar, help, MODEL_OPT_KIND_LIST, dest, (greedy) ? 1 : 0, 0, required, false, NULL }
+#define MODEL_OPT_LIST(name_, metavar_, help_, dest_, greedy_, required_, ...)                                 \
+    { .name = name_, .metavar = metavar_, .help = help_, .kind = MODEL_OPT_KIND_LIST, .dest = dest_,          \
+      .min = (greedy_) ? 1 : 0, .required = required_, ##__VA_ARGS__ }
+// The output of every command: -o, --out PATH (dest may be NULL: model_cli_value(c, "-o")).
+#define MODEL_OPT_OUT(metavar_, help_, dest_, required_, ...)                                                  \
+    { .name = "-o", .alias = "--out", .metavar = metavar_, .help = help_, .kind = MODEL_OPT_KIND_STRING,      \
+      .dest = dest_, .required = required_, ##__VA_ARGS__ }
 #define MODEL_NOPTS(table) ((int)(sizeof(table) / sizeof((table)[0])))
 
 enum { MODEL_CLI_POSITIONAL_MAX = 1024 };
@@ -103,8 +120,13 @@ enum { MODEL_CLI_OK = -1, MODEL_CLI_HELP = 0, MODEL_CLI_USAGE = 2 };
 // MODEL_CLI_HELP after printing the help on stdout, or MODEL_CLI_USAGE (2, the
 // exit status of a usage error) after printing the error on stderr.
 int  model_cli_parse(model_cli_t *c, int argc, char **argv);
-// The help text (usage line, about, options, epilog, version).
+// The help text (usage line, about, options, epilog, exit status, version).
 void model_cli_help(const model_cli_t *c, FILE *f);
+// The exit status of every refl command (0 done, 1 error, 2 usage, 3 paused,
+// 4 an incorrect verdict under refl verify --fail-on-incorrect), as --help prints it.
+void model_cli_exit_status(FILE *f);
+enum { MODEL_EXIT_OK = 0, MODEL_EXIT_ERROR = 1, MODEL_EXIT_USAGE = 2, MODEL_EXIT_PAUSED = 3,
+       MODEL_EXIT_INCORRECT = 4 };
 // The short usage line and the --help hint (after an error of the command's own).
 void model_cli_usage(const model_cli_t *c, FILE *f);
 // A usage error found after parsing (two options that exclude each other, ...):
