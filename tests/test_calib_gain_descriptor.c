@@ -20,6 +20,7 @@
 #include "calib/gain/gain.h"
 #include "model/model.h"
 #include "model/base/vec.h"
+#include "tests/gain_json.h"
 #include "tests/test.h"
 
 // A linear sensor: eta 0.55, K 0.45 DN/e-, read noise 3 e-, offset 80 DN + 0.6 DN pixel DSNU, PRNU 1 %, 12 bits;
@@ -100,27 +101,6 @@ static void dframes(const char *dir, GString *manifest, GString *desc)
     free(pat);
 }
 
-static json_t *ds_row(json_t *j, const char *symbol, const char *unit)
-{
-    json_t *rows = json_object_get(json_object_get(j, "emva1288"), "datasheet");
-    for (size_t i = 0; i < json_array_size(rows); i++) {
-        json_t *r = json_array_get(rows, i);
-        if (!strcmp(json_string_value(json_object_get(r, "symbol")) ?: "", symbol) &&
-            !strcmp(json_string_value(json_object_get(r, "unit")) ?: "", unit))
-            return json_object_get(r, "value");
-    }
-    return NULL;
-}
-
-static json_t *load(const char *dir)
-{
-    char *p = g_build_filename(dir, "gain.json", NULL);
-    json_t *j = json_load_file(p, 0, NULL);
-    CHECK_MSG(j != NULL, "no %s", p);
-    g_free(p);
-    return j;
-}
-
 TEST(calib_gain_descriptor_parse_grammar)
 {
     const char *good = "# a comment\r\nv 4.0\r\n\r\n   n 12 64 48\r\n"
@@ -193,25 +173,25 @@ TEST(calib_gain_descriptor_reader)
     CHECK_MSG(rc == 0, "refl calib gain --emva-descriptor: %d\n%s", rc, se ? se : "");
     free(so);
     free(se);
-    json_t *j = load(out);
+    json_t *j = gain_json_load(out);
     if (j) {
         json_t *e = json_object_get(j, "emva1288");
         CHECK(!strcmp(json_string_value(json_object_get(e, "photon_axis")) ?: "", "measured"));
         CHECK(!strcmp(json_string_value(json_object_get(json_object_get(e, "conditions"), "photon_source")) ?: "",
                       "descriptor"));
-        double eta = json_number_value(ds_row(j, "eta", "%")) / 100, K = json_number_value(ds_row(j, "K", "DN/e-"));
+        double eta = json_number_value(gain_sheet_value(j, "eta", "%")) / 100, K = json_number_value(gain_sheet_value(j, "K", "DN/e-"));
         fprintf(stderr, "  from the descriptor: eta %.4f (%.2f), K %.4f DN/e- (%.2f)\n", eta, D_ETA, K, D_K);
         CHECK_REL(eta, D_ETA, 0.03);
         CHECK_REL(K, D_K, 0.03);
         // mu_p.sat is one of the descriptor's counts; the per-area rows divide by 25 um^2
-        double psat = json_number_value(ds_row(j, "mu_p.sat", "photons"));
+        double psat = json_number_value(gain_sheet_value(j, "mu_p.sat", "photons"));
         bool found = false;
         for (int s = 0; s < DSTEPS; s++)   // gain.json's numbers have 10 digits
             found |= fabs(psat / calib_gain_photons(100, 25, 550, dstep_us(s)) - 1) < 1e-9;
         CHECK_MSG(found, "mu_p.sat %.10g is none of the steps' counts", psat);
-        CHECK_REL(json_number_value(ds_row(j, "mu_p.sat.area", "photons/um^2")), psat / 25, 2e-9);
-        CHECK_REL(json_number_value(ds_row(j, "mu_p.min.area", "photons/um^2")),
-                  json_number_value(ds_row(j, "mu_p.min", "photons")) / 25, 2e-9);
+        CHECK_REL(json_number_value(gain_sheet_value(j, "mu_p.sat.area", "photons/um^2")), psat / 25, 2e-9);
+        CHECK_REL(json_number_value(gain_sheet_value(j, "mu_p.min.area", "photons/um^2")),
+                  json_number_value(gain_sheet_value(j, "mu_p.min", "photons")) / 25, 2e-9);
         json_t *f = json_object_get(j, "flat_field");
         CHECK(json_integer_value(json_object_get(f, "light_frames")) == DLSP);
         json_decref(j);
@@ -308,7 +288,7 @@ TEST(calib_gain_descriptor_round_trip)
     }
     free(text);
     g_free(inside);
-    json_t *a = load(out1), *b = load(out2);
+    json_t *a = gain_json_load(out1), *b = gain_json_load(out2);
     if (a && b) {
         json_t *ra = json_object_get(json_object_get(a, "emva1288"), "datasheet");
         int compared = 0;
@@ -317,7 +297,7 @@ TEST(calib_gain_descriptor_round_trip)
             json_t *r = json_array_get(ra, i);
             const char *sym = json_string_value(json_object_get(r, "symbol")),
                        *unit = json_string_value(json_object_get(r, "unit"));
-            json_t *va = json_object_get(r, "value"), *vb = ds_row(b, sym, unit);
+            json_t *va = json_object_get(r, "value"), *vb = gain_sheet_value(b, sym, unit);
             CHECK_MSG(vb != NULL, "%s (%s) missing after the round trip", sym, unit);
             if (!json_is_number(va) || !json_is_number(vb)) {
                 CHECK_MSG(json_equal(va, vb), "%s (%s) differs after the round trip", sym, unit);

@@ -29,6 +29,7 @@
 #include "calib/gain/gain.h"
 #include "model/model.h"
 #include "model/base/vec.h"
+#include "tests/gain_json.h"
 #include "tests/test.h"
 
 TEST(calib_gain_emva_photon_axis)
@@ -300,27 +301,6 @@ static const char *frames_manifest(void)
     return mp;
 }
 
-static json_t *datasheet_row(json_t *emva, const char *symbol, const char *unit)
-{
-    json_t *rows = json_object_get(emva, "datasheet");
-    for (size_t i = 0; i < json_array_size(rows); i++) {
-        json_t *r = json_array_get(rows, i);
-        if (!strcmp(json_string_value(json_object_get(r, "symbol")) ?: "", symbol) &&
-            !strcmp(json_string_value(json_object_get(r, "unit")) ?: "", unit))
-            return json_object_get(r, "value");
-    }
-    return NULL;
-}
-
-static json_t *load_out(const char *out)
-{
-    char *jp = g_build_filename(out, "gain.json", NULL);
-    json_t *j = json_load_file(jp, 0, NULL);
-    CHECK_MSG(j != NULL, "no %s", jp);
-    g_free(jp);
-    return j;
-}
-
 TEST(calib_gain_emva_frames)
 {
     double t0 = model_now_s();
@@ -333,7 +313,7 @@ TEST(calib_gain_emva_frames)
     CHECK_MSG(rc == 0, "refl calib gain: %d\n%s", rc, se ? se : "");
     free(so);
     free(se);
-    json_t *j = load_out(out);
+    json_t *j = gain_json_load(out);
     if (!j) return;
     json_t *e = json_object_get(j, "emva1288");
     CHECK(!strcmp(json_string_value(json_object_get(e, "photon_axis")) ?: "", "measured"));
@@ -342,22 +322,22 @@ TEST(calib_gain_emva_frames)
     fprintf(stderr, "  K %.4f (0.5), eta %.4f (0.6)\n", K, qe);
     CHECK_REL(K, F_K, 0.04);
     CHECK_REL(qe, F_ETA, 0.04);
-    CHECK_REL(json_number_value(datasheet_row(e, "eta", "%")), 100 * qe, 1e-9);
-    CHECK_REL(json_number_value(datasheet_row(e, "R", "DN/photon")), F_K * F_ETA, 0.01);
+    CHECK_REL(json_number_value(gain_sheet_value(j, "eta", "%")), 100 * qe, 1e-9);
+    CHECK_REL(json_number_value(gain_sheet_value(j, "R", "DN/photon")), F_K * F_ETA, 0.01);
     // saturation: clipped at 4095 DN, 3995 DN above the offset: ~7990 e-, / eta photons
-    double sat_e = json_number_value(datasheet_row(e, "mu_e.sat", "e-"));
+    double sat_e = json_number_value(gain_sheet_value(j, "mu_e.sat", "e-"));
     CHECK(sat_e > 7000 && sat_e < 8400);
-    CHECK_REL(json_number_value(datasheet_row(e, "mu_p.sat", "photons")), sat_e / qe, 1e-9);
+    CHECK_REL(json_number_value(gain_sheet_value(j, "mu_p.sat", "photons")), sat_e / qe, 1e-9);
     // threshold: sigma_y.dark / K + 1/2, sigma_y.dark^2 = K^2 4^2 + 1/12 DN^2
     double se_min = 0.5 + sqrt((F_K * F_K * 16 + 1.0 / 12) / (F_K * F_K));
-    CHECK_REL(json_number_value(datasheet_row(e, "mu_e.min", "e-")), se_min, 0.08);
+    CHECK_REL(json_number_value(gain_sheet_value(j, "mu_e.min", "e-")), se_min, 0.08);
     // dark current from the mean (K mu_I t) and from the variance (K^2 mu_I t)
     json_t *g0 = json_array_get(json_object_get(j, "gains"), 0);
     fprintf(stderr, "  dark current %.4g e-/s (mean), %.4g e-/s (variance), truth %.4g\n",
             json_number_value(json_object_get(g0, "dark_current_e_per_s")),
             json_number_value(json_object_get(g0, "dark_current_from_variance_e_per_s")), F_DARK);
-    CHECK_REL(json_number_value(datasheet_row(e, "mu_I.mean", "e-/s")), F_DARK, 0.05);
-    CHECK_REL(json_number_value(datasheet_row(e, "mu_I.var", "e-/s")), F_DARK, 0.15);
+    CHECK_REL(json_number_value(gain_sheet_value(j, "mu_I.mean", "e-/s")), F_DARK, 0.05);
+    CHECK_REL(json_number_value(gain_sheet_value(j, "mu_I.var", "e-/s")), F_DARK, 0.15);
     // the spatial set (kind flat / flat-dark): 16 frames each, the DSNU's row and column parts
     json_t *ff = json_object_get(j, "flat_field");
     CHECK_NEAR(json_number_value(json_object_get(ff, "light_frames")), 16, 0);
@@ -396,7 +376,7 @@ TEST(calib_gain_emva_frames)
     CHECK_MSG(rc == 0, "refl calib gain --photodiode-na: %d\n%s", rc, se ? se : "");
     free(so);
     free(se);
-    j = load_out(out3);
+    j = gain_json_load(out3);
     if (!j) return;
     CHECK_REL(json_number_value(json_object_get(j, "quantum_efficiency")), qe, 1e-9);
     json_t *cond = json_object_get(json_object_get(j, "emva1288"), "conditions");
@@ -412,7 +392,7 @@ TEST(calib_gain_emva_not_measured_report)
     double t0 = model_now_s();
     const char *m = frames_manifest();
     char *so = NULL, *se = NULL;
-    json_t *j, *e;
+    json_t *j;
     int rc;
     const char *out2 = test_path("out2");
     rc = test_refl_run(120, &so, &se, "calib", "gain", "--frames", m, "-o", out2, "--max-dn", "4095", "--min-steps",
@@ -420,12 +400,11 @@ TEST(calib_gain_emva_not_measured_report)
     CHECK_MSG(rc == 0, "refl calib gain: %d\n%s", rc, se ? se : "");
     free(so);
     free(se);
-    j = load_out(out2);
+    j = gain_json_load(out2);
     if (!j) return;
-    e = json_object_get(j, "emva1288");
     CHECK(!strcmp(json_string_value(json_object_get(j, "quantum_efficiency")) ?: "", "not measured"));
-    CHECK(!strcmp(json_string_value(datasheet_row(e, "mu_p.min", "photons")) ?: "", "not measured"));
-    CHECK(json_is_number(datasheet_row(e, "mu_e.min", "e-")));
+    CHECK(!strcmp(json_string_value(gain_sheet_value(j, "mu_p.min", "photons")) ?: "", "not measured"));
+    CHECK(json_is_number(gain_sheet_value(j, "mu_e.min", "e-")));
     json_decref(j);
     char *hp = g_build_filename(out2, "datasheet.html", NULL);
     char *html = model_read_file(hp, NULL);

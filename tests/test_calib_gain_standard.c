@@ -26,6 +26,7 @@
 #include "calib/gain/gain.h"
 #include "model/model.h"
 #include "model/base/vec.h"
+#include "tests/gain_json.h"
 #include "tests/test.h"
 
 // The sensor: eta 0.6, K 0.5 DN/e-, read noise 4 e-, dark current 3e4 e-/s, a compression S_m = S (1 - a S)
@@ -268,17 +269,6 @@ static void definitions(frames_t *F, want_t *w, int *n)
             sqrt(vdark - 1.0 / 12) / K, esat, (dmax - dmin) / 2, sroot(dk.s2) / K, 100 * sroot(lt.s2 - dk.s2) / sig);
 }
 
-static json_t *row_of(json_t *rows, const char *symbol, const char *unit)
-{
-    for (size_t i = 0; i < json_array_size(rows); i++) {
-        json_t *r = json_array_get(rows, i);
-        if (!strcmp(json_string_value(json_object_get(r, "symbol")) ?: "", symbol) &&
-            !strcmp(json_string_value(json_object_get(r, "unit")) ?: "", unit))
-            return r;
-    }
-    return NULL;
-}
-
 TEST(calib_gain_standard_rows)
 {
     frames_t *F = calloc(1, sizeof *F);
@@ -306,7 +296,7 @@ TEST(calib_gain_standard_rows)
     definitions(F, w, &n);
     double worst = 0;
     for (int i = 0; i < n; i++) {
-        json_t *r = row_of(rows, w[i].symbol, w[i].unit);
+        json_t *r = gain_row(rows, w[i].symbol, w[i].unit);
         CHECK_MSG(r != NULL, "no datasheet row %s (%s)", w[i].symbol, w[i].unit);
         if (!r) continue;
         double v = json_number_value(json_object_get(r, "value"));
@@ -330,16 +320,16 @@ TEST(calib_gain_standard_rows)
     }
     // the curved photon transfer: refl's small-signal quadratic K (top level) at least 2 % above the standard's
     double K0 = json_number_value(json_object_get(j, "system_gain_dn_per_e"));
-    double K = json_number_value(json_object_get(row_of(rows, "K", "DN/e-"), "value"));
+    double K = json_number_value(json_object_get(gain_row(rows, "K", "DN/e-"), "value"));
     fprintf(stderr, "  standard K %.5f DN/e-, refl's small-signal K %.5f DN/e- (%+.2f %%), the sensor's %.3f\n", K, K0,
             100 * (K0 / K - 1), S_K);
     CHECK(K0 / K - 1 >= 0.02);
     CHECK_REL(K0, S_K, 0.04);
     // refl's own figures: labelled so, never among the standard's rows
     json_t *rr = json_object_get(e, "refl_rows");
-    CHECK_REL(json_number_value(json_object_get(row_of(rr, "K_0", "DN/e-"), "value")), K0, 1e-12);
-    CHECK(row_of(rows, "K_0", "DN/e-") == NULL && row_of(rows, "PRNU_hp", "%") == NULL);
-    CHECK(row_of(rr, "PRNU_hp", "%") != NULL && row_of(rr, "LE_lin", "%") != NULL);
+    CHECK_REL(json_number_value(json_object_get(gain_row(rr, "K_0", "DN/e-"), "value")), K0, 1e-12);
+    CHECK(gain_row(rows, "K_0", "DN/e-") == NULL && gain_row(rows, "PRNU_hp", "%") == NULL);
+    CHECK(gain_row(rr, "PRNU_hp", "%") != NULL && gain_row(rr, "LE_lin", "%") != NULL);
     json_decref(j);
     free(F);
 }
@@ -445,7 +435,7 @@ static truth_nu_t nonuniformity_truth(const frames_t *F)
 
 static double row_value(json_t *rows, const char *symbol, const char *unit)
 {
-    json_t *r = row_of(rows, symbol, unit);
+    json_t *r = gain_row(rows, symbol, unit);
     CHECK_MSG(r != NULL, "no datasheet row %s (%s)", symbol, unit);
     return r ? json_number_value(json_object_get(r, "value")) : NAN;
 }
