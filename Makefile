@@ -412,9 +412,10 @@ check: $(BIN)/refl $(BIN)/refl-tests $(FAKE_GPIOD) $(LAMP_CHILD) $(ENOSPC_SHIM)
 check-long: $(BIN)/refl $(BIN)/refl-tests $(FAKE_GPIOD) $(LAMP_CHILD) $(ENOSPC_SHIM)
 	$(TEST_ENV) REFL_TEST_SET=long REFL_TEST_TIMEOUT=$${REFL_TEST_TIMEOUT:-1200} $(BIN)/refl-tests
 
+# the lab day from the example virtual rig's lab file, the path a real lab's day takes (refl demo --lab)
 demo: $(BIN)/refl
 	rm -rf $(BUILD)/demo/session* $(BUILD)/demo/calib   # a fresh lab day (scripts/demo keeps and resumes sessions)
-	scripts/demo $(BIN)/refl $(BUILD)/demo
+	scripts/demo $(BIN)/refl $(BUILD)/demo --lab examples/lab-demo.ini
 
 # the verification detection study on the virtual rig, through the calibrations and priors of the lab
 # day (make demo runs it first when its calibrations are missing; README: refl verify)
