@@ -943,7 +943,8 @@ int rig_camera_open_aravis(rig_camera_t **out, const char *id)
         rc = rig_fail(RIG_ERR_NO_DEVICE, "aravis: no camera at '%s' (%s); %s", id, e ? e->message : "not found",
                       is_ipv4_address(id) ? "nothing answers GigE Vision control (UDP 3956) there: check the "
                       "address, power and cable"
-                      : "check the serial number or name (Aravis's arv-tool lists the cameras it finds)");
+                      : "check the serial number or name (on the camera's label, or in its "
+                      "vendor's tool; rig/README.md: bring-up)");
         g_clear_error(&e);
         goto done;
     }
