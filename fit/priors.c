@@ -481,6 +481,8 @@ json_t *fit_priors_material(const char *name, const fit_brdf_result_t *best, con
         }
         json_object_set_new(p, "lo", json_real(blo));
         json_object_set_new(p, "hi", isfinite(bhi) ? json_real(bhi) : json_null());
+        json_object_set_new(p, "barely_constrained",
+                            json_boolean(fit_priors_barely_constrained(mean, sd, blo, bhi, NULL, NULL)));
         if (f0u)
             json_object_set_new(p, "held", json_string("not measured: the samples never see Schlick's F change "
                                                        "enough (too far from grazing) and only ks*F0 is measured; "
@@ -545,4 +547,13 @@ json_t *fit_priors_material(const char *name, const fit_brdf_result_t *best, con
         json_object_set_new(o, "candidates", arr);
     }
     return o;
+}
+
+bool fit_priors_barely_constrained(double mean, double sd, double lo, double hi, double *of_value, double *of_width)
+{
+    double w = hi - lo;
+    if (of_value) *of_value = mean != 0 && isfinite(sd) ? sd / fabs(mean) : NAN;
+    if (of_width) *of_width = w > 0 && isfinite(w) && isfinite(sd) ? sd / w : NAN;
+    return isfinite(sd) && sd > 0 &&
+           (sd > FIT_PRIORS_LOOSE_SHARE * fabs(mean) || (w > 0 && isfinite(w) && sd > FIT_PRIORS_LOOSE_SHARE * w));
 }

@@ -20,7 +20,9 @@
 //       "std_statistical", "std_parts" (how std was made; not read),
 //       "lo", "hi" (the prior's bounds, mean +- k std within the physical range;
 //         absent or null: the physical range),
-//       "held" (a note: the samples could not measure it; a fitter holds it at mean) ],
+//       "held" (a note: the samples could not measure it; a fitter holds it at mean),
+//       "barely_constrained" (fit_priors_barely_constrained of mean, std, lo,
+//         hi; written for the reports, not read) ],
 //     "covariance" (the fit's statistical np x np, null where not available; not read),
 //     "prior_covariance" (optional: "parameters" in the model's order and
 //       "matrix", np x np symmetric with a diagonal >= 0, units of the parameters;
@@ -145,6 +147,16 @@ double  fit_prior_std(const fit_brdf_result_t *best, double sys_rel, int j);
 json_t *fit_priors_material(const char *name, const fit_brdf_result_t *best, const fit_brdf_result_t *candidates,
                             int ncandidates, double k_sigma, double sys_rel);
 
+// A parameter is barely constrained when its 1-sigma exceeds
+// FIT_PRIORS_LOOSE_SHARE of its mean's magnitude or of its bounds' width
+// (hi - lo); one held (std 0) or of unknown std never is. of_value, of_width
+// (may be NULL): std / |mean| and std / (hi - lo), NAN where not defined.
+#define FIT_PRIORS_LOOSE_SHARE 0.30
+#define FIT_PRIORS_LOOSE_RULE "barely constrained: its 1-sigma exceeds 30 % of its value's magnitude or of its " \
+                              "bounds' width"
+bool fit_priors_barely_constrained(double mean, double sd, double lo, double hi, double *of_value, double *of_width);
+
 #ifdef __cplusplus
 }
 #endif
+

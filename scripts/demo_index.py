@@ -11,7 +11,7 @@ import sys
 import time
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from report_common import Bad, check_format, e, fmt, headline, table  # noqa: E402
+from report_common import Bad, check_format, check_headline, e, fmt, headline, table  # noqa: E402
 
 STYLE = """<style>
 body { font-family: sans-serif; margin: 1.5em; max-width: 1400px; }
@@ -131,9 +131,6 @@ def verify_rows(out):
     return rows, classes
 
 
-LOOSE = 0.30   # a parameter is barely constrained when its 1-sigma exceeds this share of |value| or of its bounds
-
-
 def headline_verdicts(out, ent):
     """The verdicts, each against the expected one where chain.json has it (a wrong one is a miss)."""
     items = []
@@ -185,7 +182,8 @@ def headline_calib(out):
 
 
 def headline_materials(out):
-    """Each material's model and residual; a barely constrained parameter is a miss."""
+    """Each material's model and residual; a parameter the priors flag barely constrained (their
+    "barely_constrained", refl's rule: 1-sigma over 30 % of the value or of the bounds' width) is a miss."""
     items = []
     for p in sorted(glob.glob(os.path.join(out, "priors_*.json"))):
         d = jload(out, os.path.basename(p))
@@ -196,40 +194,32 @@ def headline_materials(out):
         items.append(f"{e(m.get('name'))}: model {e(m.get('model'))}"
                      + (f", residual {fmt(ron, '.2f')} × the noise" if ron is not None else ""))
         for q in m.get("parameters") or []:
+            if not isinstance(q, dict) or q.get("barely_constrained") is not True:
+                continue
             try:
                 mean, sd, width = float(q["mean"]), float(q["std"]), float(q["hi"]) - float(q["lo"])
             except (KeyError, TypeError, ValueError):
-                continue
-            if sd > 0 and (sd > LOOSE * abs(mean) or (width > 0 and sd > LOOSE * width)):
-                items.append(f"!{e(m.get('name'))}: {e(q.get('name'))} = {mean:.4g} ± {sd:.2g} barely constrained "
-                             f"(1-sigma {100 * sd / abs(mean) if mean else float('inf'):.0f} % of the value, "
-                             f"{100 * sd / width if width > 0 else float('nan'):.0f} % of the bounds' width; the rule: "
-                             f"over {100 * LOOSE:.0f} % of either)")
+                mean, sd, width = float("nan"), float("nan"), float("nan")
+            items.append(f"!{e(m.get('name'))}: {e(q.get('name'))} = {mean:.4g} ± {sd:.2g} barely constrained "
+                         f"(1-sigma {100 * sd / abs(mean) if mean else float('inf'):.0f} % of the value, "
+                         f"{100 * sd / width if width > 0 else float('nan'):.0f} % of the bounds' width; the rule: "
+                         "over 30 % of either)")
     return items
 
 
 def headline_plan(out):
     """The light plan's virtual-rig check against its target, each view that misses it in words."""
     pl = jload(out, "plan_lamps/plan.json")
-    miss, n, tg = [], 0, None
+    rows = []
     for v in (pl or {}).get("views", []):
         if not isinstance(v, dict) or not isinstance(v.get("check_agreement"), (int, float)):
             continue
         vj = jload(out, f"plan_lamps/{v.get('dir')}/plan.json") or {}
         ck = vj.get("virtual_rig_check") if isinstance(vj.get("virtual_rig_check"), dict) else {}
-        t = ck.get("target")
-        if not isinstance(t, (int, float)):
-            continue
-        n, tg = n + 1, t
-        if v["check_agreement"] < t:
-            miss.append(f"{fmt(v.get('turntable_deg'), 'g')}°: {100 * v['check_agreement']:.1f} %, "
-                        f"{100 * (t - v['check_agreement']):.1f} points short")
-    if not n:
-        return []
-    if miss:
-        return [f"!light plan: {n - len(miss)} of {n} views reach the virtual-rig check's target {100 * tg:.0f} % "
-                "(segments detected as predicted); " + "; ".join(miss)]
-    return [f"light plan: every view reaches the virtual-rig check's target {100 * tg:.0f} %"]
+        if isinstance(ck.get("target"), (int, float)):
+            rows.append((v.get("turntable_deg"), v["check_agreement"], ck["target"]))
+    item = check_headline(rows, "light plan's virtual-rig check")
+    return [item] if item else []
 
 
 def headline_items(out):

@@ -1009,3 +1009,18 @@ TEST(fit_samples_ngan_known_answers)
     CHECK_REL(fit_samples_rms_of_cov(s, MODEL_BRDF_GGX, r.p, C), 0.01 / M_PI * sqrt(u / sw), 1e-9);
     fit_samples_free(s);
 }
+
+// refl's barely-constrained rule: 1-sigma over 30 % of |mean| or of the bounds' width; held or unknown never.
+TEST(fit_priors_barely_constrained_rule)
+{
+    double v, w;
+    CHECK(fit_priors_barely_constrained(0.2474, 0.1456, 0, 0.684, &v, &w));   // 59 % of the value
+    CHECK_NEAR(v, 0.1456 / 0.2474, 1e-12);
+    CHECK_NEAR(w, 0.1456 / 0.684, 1e-12);
+    CHECK(!fit_priors_barely_constrained(0.5, 0.01, 0.4, 0.6, NULL, NULL));     // 2 %, 5 %
+    CHECK(fit_priors_barely_constrained(10, 1, 0, 3, NULL, NULL));              // 10 % of the value, 33 % of the width
+    CHECK(!fit_priors_barely_constrained(10, 2.9, 0, 10, NULL, NULL));          // 29 %, 29 %
+    CHECK(!fit_priors_barely_constrained(0.1, 0, 0, 1, NULL, NULL));            // held
+    CHECK(!fit_priors_barely_constrained(0.1, NAN, 0, 1, &v, &w) && isnan(v) && isnan(w));   // unknown std
+    CHECK(fit_priors_barely_constrained(0, 0.5, 0, INFINITY, &v, &w) && isnan(v) && isnan(w)); // mean 0: of 0
+}

@@ -171,6 +171,8 @@ TEST_LONG(fit_material_chain_virtual_rig)
             double m = json_number_value(json_object_get(q, "mean")), sd = json_number_value(json_object_get(q, "std"));
             double bw = json_number_value(json_object_get(q, "hi")) - json_number_value(json_object_get(q, "lo"));
             bool loose = sd > 0 && (sd > 0.3 * fabs(m) || (bw > 0 && sd > 0.3 * bw));
+            CHECK_MSG(json_is_true(json_object_get(q, "barely_constrained")) == loose, "%s: the priors' flag",
+                      json_string_value(json_object_get(q, "name")));
             char want[160];
             snprintf(want, sizeof want, "<li class=\"miss\">%s barely constrained", json_string_value(json_object_get(q, "name")));
             CHECK_MSG(!!strstr(page, want) == loose, "%s: %.4g +- %.2g (bounds width %.4g): flagged %d, rule %d",

@@ -136,8 +136,9 @@ TEST(model_demo_index_summary)
         // steel's ks barely constrained (1-sigma 59 % of its value), glossy's tight
         char *text = g_strdup_printf("{\"materials\": [{\"name\": \"%s\", \"model\": \"ggx\", \"rms\": 0.001, "
                                      "\"rms_over_noise\": %.2f, \"parameters\": [{\"name\": \"ks\", \"mean\": %s, "
-                                     "\"std\": %s, \"lo\": 0, \"hi\": 0.684}]}]}", mats[k], 1.1 + k,
-                                     k == 2 ? "0.2474" : "0.5", k == 2 ? "0.1456" : "0.01");
+                                     "\"std\": %s, \"lo\": 0, \"hi\": 0.684, \"barely_constrained\": %s}]}]}", mats[k],
+                                     1.1 + k, k == 2 ? "0.2474" : "0.5", k == 2 ? "0.1456" : "0.01",
+                                     k == 2 ? "true" : "false");
         p = g_build_filename(d, name, NULL);
         CHECK(g_file_set_contents(p, text, -1, NULL));
         g_free(p), g_free(name), g_free(text);

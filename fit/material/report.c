@@ -12,6 +12,7 @@
 #include <string.h>
 
 #include "fit/material/internal.h"
+#include "fit/priors.h"
 #include "model/base/report.h"
 
 // DIR/lobes_fit.csv: the chosen model in the plane of incidence, for the report's polar lobes: R at every
@@ -94,20 +95,14 @@ static void rows_free(char **rows, int n)
     free(rows);
 }
 
-// A fitted parameter is barely constrained when its 1-sigma exceeds this share of its value's magnitude or of
-// its bounds' width.
-#define LOOSE_SHARE 0.30
-#define LOOSE_RULE "barely constrained: its 1-sigma exceeds 30 % of its value's magnitude or of its bounds' width"
-
-// The parameter p's 1-sigma as a share of its value's magnitude and of its bounds' width (NAN where not
-// defined); true when it is barely constrained (LOOSE_RULE). A held parameter (std 0) never is.
+// The parameter p of a priors entry barely constrained (fit_priors_barely_constrained), and its 1-sigma's shares
+// of its value's magnitude and of its bounds' width (NAN where not defined).
 static bool param_loose(const json_t *p, double *of_value, double *of_width)
 {
-    double m = json_number_value(json_object_get(p, "mean")), sd = json_number_value(json_object_get(p, "std")),
-           w = json_number_value(json_object_get(p, "hi")) - json_number_value(json_object_get(p, "lo"));
-    *of_value = m != 0 ? sd / fabs(m) : NAN;
-    *of_width = w > 0 ? sd / w : NAN;
-    return isfinite(sd) && sd > 0 && (sd > LOOSE_SHARE * fabs(m) || (w > 0 && sd > LOOSE_SHARE * w));
+    return fit_priors_barely_constrained(json_number_value(json_object_get(p, "mean")),
+                                         json_number_value(json_object_get(p, "std")),
+                                         json_number_value(json_object_get(p, "lo")),
+                                         json_number_value(json_object_get(p, "hi")), of_value, of_width);
 }
 
 // x as a percentage ("59 %"), "n/a" where not finite; into buf.
@@ -246,7 +241,7 @@ static void html_headline(FILE *h, const fit_brdf_result_t *r, const json_t *ent
                                       json_number_value(json_object_get(p, "lo")),
                                       json_number_value(json_object_get(p, "hi")));
     }
-    if (!nloose) it[n++] = g_strdup_printf("no parameter barely constrained (%s)", LOOSE_RULE);
+    if (!nloose) it[n++] = g_strdup_printf("no parameter barely constrained (%s)", FIT_PRIORS_LOOSE_RULE);
     model_html_headline(h, "Headline", (const char *const *)it, n);
     for (int k = 0; k < n; k++) g_free(it[k]);
     free(it);
@@ -287,7 +282,7 @@ bool fit_material_report(const char *dir, const calib_obs_set_t *obs, const fit_
         model_html_heading(h, "Parameters");
         model_html_table(h, "parameter|unit|mean|std|std / magnitude of mean, std / bounds' width|std "
                             "(statistical)|prior bounds|convention|note", (const char *const *)rows, np);
-        model_html_para(h, "std: the 1-sigma the priors carry; %s (flagged BARELY CONSTRAINED).", LOOSE_RULE);
+        model_html_para(h, "std: the 1-sigma the priors carry; %s (flagged BARELY CONSTRAINED).", FIT_PRIORS_LOOSE_RULE);
         html_fit_figures(h, cell != NULL);
         model_html_heading(h, "Model comparison");
         model_html_table(h, "model|RMS of R (1/sr)|held-out RMS of R (1/sr)|its standard error (1/sr)|RMS of f_r "
