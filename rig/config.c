@@ -852,12 +852,19 @@ static void lamp_sections(const model_ini_t *ini, GPtrArray *names)
         if (!strncmp(ini->sections[s], "lamp ", 5)) g_ptr_array_add(names, g_strdup(ini->sections[s] + 5));
 }
 
-bool rig_file_lamp_names(const char *rig_path, char ***names, int *n)
+// The INI that names a rig file's devices: a virtual rig's truth file, else the rig file.
+static model_ini_t *devices_ini(const char *rig_path)
 {
     char *truth = NULL;
-    if (!rig_file_truth_path(rig_path, &truth)) return false;
+    if (!rig_file_truth_path(rig_path, &truth)) return NULL;
     model_ini_t *ini = model_ini_load(truth ? truth : rig_path);
     g_free(truth);
+    return ini;
+}
+
+bool rig_file_lamp_names(const char *rig_path, char ***names, int *n)
+{
+    model_ini_t *ini = devices_ini(rig_path);
     if (!ini) return false;
     GPtrArray *a = g_ptr_array_new();
     lamp_sections(ini, a);
@@ -870,10 +877,7 @@ bool rig_file_lamp_names(const char *rig_path, char ***names, int *n)
 
 bool rig_file_camera_names(const char *rig_path, char ***names, int *n)
 {
-    char *truth = NULL;
-    if (!rig_file_truth_path(rig_path, &truth)) return false;
-    model_ini_t *ini = model_ini_load(truth ? truth : rig_path);
-    g_free(truth);
+    model_ini_t *ini = devices_ini(rig_path);
     if (!ini) return false;
     GPtrArray *a = g_ptr_array_new();
     for (int s = 0; s < ini->nsections; s++)

@@ -66,6 +66,14 @@ if os.path.exists(cj_path):
     cj = load(cj_path)
     sm = cj["summary"]
     over = sm.get("z_over_3", [])
+    zs = sorted((abs(e["z"]), e["name"], e["z"]) for e in cj["entries"] if isinstance(e.get("z"), (int, float)))
+    hl = [("!" if over else "") + f"{sm['entries']} figures against the truth, {sm['with_sigma']} with a stated "
+          f"1-sigma: " + (f"{len(over)} off by more than 3 sigma ({', '.join(html.escape(n) for n in over)})" if over
+                          else "every stated 1-sigma covers its error (|z| &le; 3)"),
+          ("!" if sm.get("wrong_verdicts") else "") + f"wrong verdicts: {sm.get('wrong_verdicts', 0)}"]
+    if zs:
+        hl.append("largest |z|: " + ", ".join(f"{html.escape(n)} {z:+.2f}" for _, n, z in zs[::-1][:3]))
+    parts.append(headline(hl))
     parts.append("<h3>Every figure against the truth (<a href=\"chain.json\">chain.json</a>, refl chain)</h3>\n"
                  f"<p>Truth file <code>{html.escape(os.path.basename(cj['truth']))}</code>. "
                  f"{sm['entries']} figures; {sm['with_sigma']} with a stated &sigma; (1-sigma refl states for the "
@@ -81,14 +89,6 @@ if os.path.exists(cj_path):
         uses[e.get("note", "")] = uses.get(e.get("note", ""), 0) + 1
     shared = [n for n in uses if n and uses[n] > 1]
     num = {n: k + 1 for k, n in enumerate(shared)}
-    zs = sorted((abs(e["z"]), e["name"], e["z"]) for e in cj["entries"] if isinstance(e.get("z"), (int, float)))
-    hl = [("!" if over else "") + f"{sm['entries']} figures against the truth, {sm['with_sigma']} with a stated "
-          f"1-sigma: " + (f"{len(over)} off by more than 3 sigma ({', '.join(html.escape(n) for n in over)})" if over
-                          else "every stated 1-sigma covers its error (|z| &le; 3)"),
-          ("!" if sm.get("wrong_verdicts") else "") + f"wrong verdicts: {sm.get('wrong_verdicts', 0)}"]
-    if zs:
-        hl.append("largest |z|: " + ", ".join(f"{html.escape(n)} {z:+.2f}" for _, n, z in zs[::-1][:3]))
-    parts.insert(len(parts) - 1, headline(hl))
     parts.append(row(["figure", "value", "truth", "sigma", "error", "z", "unit", "note"], True))
     for e in cj["entries"]:
         z = e.get("z")

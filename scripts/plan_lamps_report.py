@@ -54,7 +54,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 from matplotlib.lines import Line2D  # noqa: E402
-from report_common import (Bad, check_format, dict_table, e, fmt, headline, is_num, load_json, provenance_head,  # noqa: E402
+from report_common import (Bad, check_format, check_headline, dict_table, e, fmt, headline, is_num, load_json, provenance_head,  # noqa: E402
                            provenance_section, read_float_tiff, run_report, table, write_page)
 
 PROG = "plan_lamps_report.py"
@@ -820,19 +820,7 @@ def views_headline(figv, rows, cls, raw, c):
     out.append(f"{len(figv)} views planned: " + "; ".join(f"{fmt(a, 'g')}°: {e(lamps)}" for a, _, _, lamps, _ in figv)
                + (f"; infeasible: {', '.join(infeasible)}" if infeasible else "; every view feasible"))
     checked = [(a, ag, tg) for a, _, ag, _, tg in figv if ag is not None and math.isfinite(ag) and tg is not None]
-    if checked:
-        miss = [(a, ag, tg) for a, ag, tg in checked if ag < tg]
-        tg0 = checked[0][2]
-        if miss:
-            out.append(f"!virtual-rig check: {len(checked) - len(miss)} of {len(checked)} views reach the target "
-                       f"{100 * tg0:.0f} % of segments detected as predicted; "
-                       + "; ".join(f"{fmt(a, 'g')}°: {100 * ag:.1f} %, {100 * (tg - ag):.1f} points short"
-                                   for a, ag, tg in miss))
-        else:
-            out.append(f"virtual-rig check: every view reaches the target {100 * tg0:.0f} % ("
-                       + ", ".join(f"{fmt(a, 'g')}°: {100 * ag:.1f} %" for a, ag, _ in checked) + ")")
-    else:
-        out.append("virtual-rig check: not run (no --check-virtual)")
+    out.append(check_headline(checked, "virtual-rig check") or "virtual-rig check: not run (no --check-virtual)")
     seen = {}
     for i, v in enumerate(raw.get("views") or []):
         for w in (v.get("warnings") if isinstance(v, dict) and isinstance(v.get("warnings"), list) else []):

@@ -179,6 +179,22 @@ def provenance_section(prov, name):
     return '<h2 id="provenance">Provenance</h2>\n' + body
 
 
+def check_headline(rows, prefix):
+    """The headline item of the light plan's virtual-rig check: rows (turntable_deg, agreement, target) of the
+    views it judged (agreement and target 0..1); each view below its target in words, by how many points, as a
+    miss. None without rows."""
+    if not rows:
+        return None
+    miss = [(a, ag, tg) for a, ag, tg in rows if ag < tg]
+    tg0 = rows[0][2]
+    if miss:
+        return (f"!{prefix}: {len(rows) - len(miss)} of {len(rows)} views reach the target {100 * tg0:.0f} % of "
+                "segments detected as predicted; "
+                + "; ".join(f"{fmt(a, 'g')}°: {100 * ag:.1f} %, {100 * (tg - ag):.1f} points short" for a, ag, tg in miss))
+    return (f"{prefix}: every view reaches the target {100 * tg0:.0f} % ("
+            + ", ".join(f"{fmt(a, 'g')}°: {100 * ag:.1f} %" for a, ag, _ in rows) + ")")
+
+
 def headline(items, title="Headline"):
     """The box a page opens with: one line per item (HTML already escaped by the caller); an item that begins
     with "!" is a miss (what missed its target and by how much), drawn in red without the "!". The same look
